@@ -1,0 +1,32 @@
+"""footprint-uq: ground position and 2x2 covariance of roadside-camera detections.
+
+Implements Kusari et al., "Object level footprint uncertainty quantification in
+infrastructure based sensing": the pan-tilt ground back-projection, its
+closed-form Jacobians, ``Cov = J Sigma J^T`` and the footprint uncertainty of
+detected objects, generalised to OpenCV cameras with distortion.
+"""
+
+from .budget import ErrorBudget, load_budget
+from .cameras.opencv import OpenCVCamera
+from .cameras.pantilt import PanTiltCamera
+from .ellipse import chi2_scale, ellipse_axes, ellipse_points
+from .errors import ConfigError, ConsistencyWarning, FootprintUQError, InputError
+from .params import PARAM_NAMES
+from .propagation import (
+    GroundEstimate,
+    JointEstimate,
+    linearity_ratio,
+    monte_carlo,
+    propagate,
+    propagate_joint,
+    unscented,
+)
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "ErrorBudget", "load_budget", "OpenCVCamera", "PanTiltCamera", "chi2_scale", "ellipse_axes",
+    "ellipse_points", "ConfigError", "ConsistencyWarning", "FootprintUQError", "InputError",
+    "PARAM_NAMES", "GroundEstimate", "JointEstimate", "linearity_ratio", "monte_carlo", "propagate",
+    "propagate_joint", "unscented", "__version__",
+]

@@ -1,0 +1,68 @@
+"""One-line input checks used at the entry of public functions."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .errors import InputError
+
+__all__ = ["as_points", "check_finite", "check_positive", "check_cov", "as_float"]
+
+
+def as_points(name: str, a, last: int) -> np.ndarray:
+    """Return ``a`` as a float64 array of shape ``(..., last)`` or raise InputError."""
+    arr = np.asarray(a, dtype=np.float64)
+    if arr.ndim == 0 or arr.shape[-1] != last:
+        raise InputError(name, getattr(a, "shape", a) if arr.ndim else a,
+                         f"an array of shape (..., {last})")
+    return arr
+
+
+def as_float(name: str, value, *, positive: bool = False, nonnegative: bool = False,
+             lo: float | None = None, hi: float | None = None) -> float:
+    """Return ``value`` as a finite float, checking the requested bounds."""
+    try:
+        x = float(value)
+    except (TypeError, ValueError):
+        raise InputError(name, value, "a number") from None
+    if not np.isfinite(x):
+        raise InputError(name, value, "a finite number")
+    if positive and not x > 0:
+        raise InputError(name, value, "a finite number > 0")
+    if nonnegative and not x >= 0:
+        raise InputError(name, value, "a finite number >= 0")
+    if lo is not None and x < lo:
+        raise InputError(name, value, f"a number >= {lo}")
+    if hi is not None and x > hi:
+        raise InputError(name, value, f"a number <= {hi}")
+    return x
+
+
+def check_finite(name: str, a: np.ndarray) -> np.ndarray:
+    if not np.all(np.isfinite(a)):
+        bad = np.argwhere(~np.isfinite(a))[0]
+        raise InputError(f"{name}[{', '.join(map(str, bad))}]", a[tuple(bad)], "a finite number")
+    return a
+
+
+def check_positive(name: str, a: np.ndarray) -> np.ndarray:
+    if not np.all(a > 0):
+        bad = np.argwhere(~(a > 0))[0]
+        raise InputError(f"{name}[{', '.join(map(str, bad))}]", a[tuple(bad)], "a number > 0")
+    return a
+
+
+def check_cov(name: str, cov, n: int, *, tol: float = 1e-12) -> np.ndarray:
+    """Check a symmetric positive semi-definite ``(..., n, n)`` covariance."""
+    c = np.asarray(cov, dtype=np.float64)
+    if c.ndim < 2 or c.shape[-2:] != (n, n):
+        raise InputError(name, getattr(cov, "shape", cov), f"a covariance of shape (..., {n}, {n})")
+    check_finite(name, c)
+    scale = np.maximum(np.abs(c).max(axis=(-2, -1), keepdims=True), 1e-300)
+    if np.any(np.abs(c - np.swapaxes(c, -1, -2)) > 1e-9 * scale):
+        raise InputError(name, "non-symmetric matrix", "a symmetric covariance matrix")
+    w = np.linalg.eigvalsh(c)
+    if np.any(w < -tol * scale[..., 0]):
+        raise InputError(name, f"min eigenvalue {w.min():.3g}",
+                         "a positive semi-definite covariance matrix")
+    return c

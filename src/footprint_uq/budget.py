@@ -1,0 +1,302 @@
+"""Error budgets: named standard deviations (or a full covariance) of every error source.
+
+Sources are grouped as in the paper's Table 1.  **Camera-level** sources
+(intrinsic and extrinsic calibration, ground plane) are shared by every point of
+an image; **per-point** sources (imaging and resolution noise, and a detector's
+own pixel covariance) are independent from point to point.  Footprints depend on
+that distinction: the corners of one object share the calibration error.
+
+Budget-file keys (YAML or JSON; a missing key means zero; units in the names):
+
+==================  ===========  =============================================
+key                 shape        meaning (1-sigma)
+==================  ===========  =============================================
+focal_px            scalar       focal length; applied to fx and fy together
+principal_point_px  [c, r]       principal point column / row
+distortion          [5]          k1, k2, p1, p2, k3 (dimensionless)
+position_m          [x, y]       camera position along world x, y
+height_m            scalar       camera height
+pan_deg             scalar       pan (heading)
+tilt_deg            scalar       tilt (pitch)
+roll_deg            scalar       roll
+ground_height_m     scalar       ground-plane height offset
+ground_slope_deg    scalar       terrain slope, each horizontal direction
+imaging_px          [c, r]       imaging noise (per point)
+resolution_px       [c, r]       resolution noise (per point)
+covariance          mapping      optional full covariance: ``names`` (from
+                                 PARAM_NAMES, or pan_deg/tilt_deg/roll_deg) and
+                                 ``matrix``; replaces the sigmas of those names
+==================  ===========  =============================================
+
+plus optional ``name`` and ``description``.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from . import params as P
+from . import presets
+from ._checks import check_cov
+from .errors import ConfigError, InputError
+
+__all__ = ["ErrorBudget", "SHARED_SOURCES", "POINT_SOURCES", "load_budget"]
+
+#: camera-level sources -> parameters they act on
+SHARED_SOURCES: dict[str, tuple[str, ...]] = {
+    "focal": ("fx_px", "fy_px"),
+    "principal_point": ("cx_px", "cy_px"),
+    "skew": ("skew_px",),
+    "distortion": ("k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6"),
+    "position": ("x_m", "y_m"),
+    "height": ("height_m",),
+    "pan": ("pan_rad",),
+    "tilt": ("tilt_rad",),
+    "roll": ("roll_rad",),
+    "ground_height": ("ground_dz_m",),
+    "ground_slope": ("ground_slope_x", "ground_slope_y"),
+}
+#: per-point sources (act on the pixel)
+POINT_SOURCES = ("imaging", "resolution", "detector")
+
+_PAIR_KEYS = ("principal_point_px", "position_m", "imaging_px", "resolution_px")
+_SCALAR_KEYS = ("focal_px", "height_m", "pan_deg", "tilt_deg", "roll_deg", "ground_height_m",
+                "ground_slope_deg")
+_ALLOWED = set(_PAIR_KEYS) | set(_SCALAR_KEYS) | {"distortion", "covariance", "name", "description"}
+_DEG_ALIASES = {"pan_deg": "pan_rad", "tilt_deg": "tilt_rad", "roll_deg": "roll_rad"}
+
+
+def _sigma(field_name: str, value, n: int | None, where: str):
+    label = f"{where}: {field_name}" if where else field_name
+    if n is None:
+        try:
+            x = float(value)
+        except (TypeError, ValueError):
+            raise ConfigError(label, value, "a standard deviation (number >= 0)") from None
+        if not np.isfinite(x) or x < 0:
+            raise ConfigError(label, value, "a finite standard deviation >= 0")
+        return x
+    if np.ndim(value) == 0:
+        value = [value] * n if n == 2 else value
+    try:
+        arr = np.asarray(value, dtype=np.float64).ravel()
+    except (TypeError, ValueError):
+        raise ConfigError(label, value, f"a list of {n} standard deviations") from None
+    if arr.size != n:
+        raise ConfigError(label, value, f"a list of {n} standard deviations")
+    if not np.all(np.isfinite(arr)) or np.any(arr < 0):
+        raise ConfigError(label, value, "finite standard deviations >= 0")
+    return tuple(float(a) for a in arr)
+
+
+@dataclass(frozen=True)
+class ErrorBudget:
+    """Standard deviations of every error source (units in the field names).
+
+    Use :meth:`preset`, :meth:`from_dict` or :func:`load_budget` to build one.
+    """
+
+    focal_px: float = 0.0
+    principal_point_px: tuple[float, float] = (0.0, 0.0)
+    distortion: tuple[float, float, float, float, float] = (0.0, 0.0, 0.0, 0.0, 0.0)
+    position_m: tuple[float, float] = (0.0, 0.0)
+    height_m: float = 0.0
+    pan_deg: float = 0.0
+    tilt_deg: float = 0.0
+    roll_deg: float = 0.0
+    ground_height_m: float = 0.0
+    ground_slope_deg: float = 0.0
+    imaging_px: tuple[float, float] = (0.0, 0.0)
+    resolution_px: tuple[float, float] = (0.0, 0.0)
+    covariance_names: tuple[str, ...] = ()
+    covariance_matrix: np.ndarray | None = field(default=None, compare=False, repr=False)
+    name: str = "custom"
+    description: str = ""
+
+    # -- construction ----------------------------------------------------------------
+    @classmethod
+    def preset(cls, name: str) -> ErrorBudget:
+        """One of :data:`footprint_uq.presets.PRESET_NAMES` (case-insensitive)."""
+        key = str(name).strip().lower()
+        if key not in presets.PAPER_TABLE2:
+            raise ConfigError("budget preset", name, f"one of {', '.join(presets.PRESET_NAMES)}")
+        return cls.from_dict(presets.preset_dict(key))
+
+    @classmethod
+    def from_dict(cls, d: dict, *, where: str = "") -> ErrorBudget:
+        """Validate a budget-file mapping; unknown keys, negative or NaN sigmas raise ConfigError."""
+        if not isinstance(d, dict):
+            raise ConfigError(where or "budget", type(d).__name__, "a mapping of budget keys")
+        unknown = sorted(set(d) - _ALLOWED)
+        if unknown:
+            raise ConfigError(f"{where}: {unknown[0]}" if where else unknown[0], d[unknown[0]],
+                              f"one of the budget keys {sorted(_ALLOWED)} (units in the key names)")
+        kw: dict = {}
+        for k in _SCALAR_KEYS:
+            if k in d and d[k] is not None:
+                kw[k] = _sigma(k, d[k], None, where)
+        for k in _PAIR_KEYS:
+            if k in d and d[k] is not None:
+                kw[k] = _sigma(k, d[k], 2, where)
+        if d.get("distortion") is not None:
+            kw["distortion"] = _sigma("distortion", d["distortion"], 5, where)
+        if d.get("covariance") is not None:
+            names, mat = _parse_covariance(d["covariance"], where)
+            kw["covariance_names"], kw["covariance_matrix"] = names, mat
+        kw["name"] = str(d.get("name", "custom"))
+        kw["description"] = str(d.get("description", ""))
+        return cls(**kw)
+
+    def to_dict(self) -> dict:
+        out = {"name": self.name}
+        if self.description:
+            out["description"] = self.description
+        out.update({
+            "focal_px": self.focal_px, "principal_point_px": list(self.principal_point_px),
+            "distortion": list(self.distortion), "position_m": list(self.position_m),
+            "height_m": self.height_m, "pan_deg": self.pan_deg, "tilt_deg": self.tilt_deg,
+            "roll_deg": self.roll_deg, "ground_height_m": self.ground_height_m,
+            "ground_slope_deg": self.ground_slope_deg, "imaging_px": list(self.imaging_px),
+            "resolution_px": list(self.resolution_px),
+        })
+        if self.covariance_matrix is not None:
+            out["covariance"] = {"names": list(self.covariance_names),
+                                 "matrix": np.asarray(self.covariance_matrix).tolist()}
+        return out
+
+    def replace(self, **changes) -> ErrorBudget:
+        d = self.to_dict()
+        d.update(changes)
+        return ErrorBudget.from_dict(d)
+
+    def scaled(self, factor: float) -> ErrorBudget:
+        """All standard deviations multiplied by ``factor`` (covariance by factor^2)."""
+        d = self.to_dict()
+        for k in _SCALAR_KEYS:
+            d[k] = d[k] * factor
+        for k in (*_PAIR_KEYS, "distortion"):
+            d[k] = [v * factor for v in d[k]]
+        if "covariance" in d:
+            d["covariance"]["matrix"] = (np.asarray(d["covariance"]["matrix"]) * factor**2).tolist()
+        d["name"] = f"{self.name} x{factor:g}"
+        return ErrorBudget.from_dict(d)
+
+    # -- covariances -------------------------------------------------------------------
+    def param_covariance(self) -> np.ndarray:
+        """Covariance (22, 22) of the shared camera parameters, in :data:`PARAM_NAMES` units."""
+        S = np.zeros((P.N_PARAMS, P.N_PARAMS))
+        I = P.IDX
+        f2 = self.focal_px**2
+        S[I["fx_px"], I["fx_px"]] = S[I["fy_px"], I["fy_px"]] = f2
+        S[I["fx_px"], I["fy_px"]] = S[I["fy_px"], I["fx_px"]] = f2  # one focal error moves both
+        diag = {
+            "cx_px": self.principal_point_px[0], "cy_px": self.principal_point_px[1],
+            "k1": self.distortion[0], "k2": self.distortion[1], "p1": self.distortion[2],
+            "p2": self.distortion[3], "k3": self.distortion[4],
+            "x_m": self.position_m[0], "y_m": self.position_m[1], "height_m": self.height_m,
+            "pan_rad": np.deg2rad(self.pan_deg), "tilt_rad": np.deg2rad(self.tilt_deg),
+            "roll_rad": np.deg2rad(self.roll_deg), "ground_dz_m": self.ground_height_m,
+            "ground_slope_x": np.tan(np.deg2rad(self.ground_slope_deg)),
+            "ground_slope_y": np.tan(np.deg2rad(self.ground_slope_deg)),
+        }
+        for k, s in diag.items():
+            S[I[k], I[k]] = s * s
+        if self.covariance_matrix is not None:
+            idx = P.param_index(self.covariance_names)
+            S[idx, :] = 0.0
+            S[:, idx] = 0.0
+            S[np.ix_(idx, idx)] = self.covariance_matrix
+        return S
+
+    def pixel_covariance(self, sources=("imaging", "resolution")) -> np.ndarray:
+        """Per-point pixel covariance (2, 2), px^2, from the imaging and resolution errors."""
+        s2 = np.zeros(2)
+        if "imaging" in sources:
+            s2 += np.square(self.imaging_px)
+        if "resolution" in sources:
+            s2 += np.square(self.resolution_px)
+        return np.diag(s2)
+
+    def shared_source_covariances(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+        """Per shared source: ``(param indices, covariance block)``, only non-zero sources."""
+        S = self.param_covariance()
+        out = {}
+        for name, names in SHARED_SOURCES.items():
+            idx = P.param_index(names)
+            block = S[np.ix_(idx, idx)]
+            if np.any(block):
+                out[name] = (idx, block)
+        return out
+
+    def table_row(self) -> dict:
+        """Flat dictionary for tables (the `presets` command, reports)."""
+        return {
+            "name": self.name, "focal_px": self.focal_px,
+            "pp_c_px": self.principal_point_px[0], "pp_r_px": self.principal_point_px[1],
+            "k1": self.distortion[0], "k2": self.distortion[1], "p1": self.distortion[2],
+            "p2": self.distortion[3], "k3": self.distortion[4],
+            "x_m": self.position_m[0], "y_m": self.position_m[1], "height_m": self.height_m,
+            "pan_deg": self.pan_deg, "tilt_deg": self.tilt_deg, "roll_deg": self.roll_deg,
+            "ground_height_m": self.ground_height_m, "ground_slope_deg": self.ground_slope_deg,
+            "imaging_px": self.imaging_px[0], "resolution_px": self.resolution_px[0],
+        }
+
+
+def _parse_covariance(c, where):
+    label = f"{where}: covariance" if where else "covariance"
+    if not isinstance(c, dict) or "names" not in c or "matrix" not in c:
+        raise ConfigError(label, c, "a mapping with 'names' and 'matrix'")
+    names = [str(n) for n in c["names"]]
+    try:
+        mat = np.asarray(c["matrix"], dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ConfigError(f"{label}.matrix", c["matrix"], "a numeric square matrix") from None
+    n = len(names)
+    if mat.shape != (n, n):
+        raise ConfigError(f"{label}.matrix", f"shape {mat.shape}", f"a {n}x{n} matrix matching 'names'")
+    if len(set(names)) != n:
+        raise ConfigError(f"{label}.names", names, "unique parameter names")
+    scale = np.ones(n)
+    out_names = []
+    for i, name in enumerate(names):
+        if name in _DEG_ALIASES:
+            scale[i] = np.pi / 180.0
+            name = _DEG_ALIASES[name]
+        if name not in P.IDX:
+            raise ConfigError(f"{label}.names", name, f"one of {list(P.PARAM_NAMES) + list(_DEG_ALIASES)}")
+        out_names.append(name)
+    try:
+        mat = check_cov(f"{label}.matrix", mat, n)
+    except InputError as e:  # re-raise as a config error with the same text
+        raise ConfigError(f"{label}.matrix", getattr(e, "value", mat), getattr(e, "expected", str(e))) from None
+    mat = mat * np.outer(scale, scale)
+    return tuple(out_names), mat
+
+
+def load_budget(spec) -> ErrorBudget:
+    """A budget from a preset name, a YAML/JSON file path, a mapping or an ErrorBudget."""
+    if isinstance(spec, ErrorBudget):
+        return spec
+    if isinstance(spec, dict):
+        return ErrorBudget.from_dict(spec)
+    s = str(spec)
+    if s.strip().lower() in presets.PAPER_TABLE2:
+        return ErrorBudget.preset(s)
+    path = Path(s)
+    if not path.exists():
+        raise ConfigError("budget", s, f"a preset ({', '.join(presets.PRESET_NAMES)}) or an existing file")
+    text = path.read_text()
+    try:
+        if path.suffix.lower() == ".json":
+            data = json.loads(text)
+        else:
+            import yaml
+
+            data = yaml.safe_load(text)
+    except Exception as e:
+        raise ConfigError(str(path), type(e).__name__, f"valid YAML/JSON ({str(e).splitlines()[0]})") from None
+    return ErrorBudget.from_dict(data, where=str(path))

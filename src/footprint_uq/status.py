@@ -1,0 +1,32 @@
+"""Status codes attached to every computed point (``reason`` arrays).
+
+A point is usable only where its code is :data:`OK`.  Codes are small integers
+so that they travel in arrays and Parquet columns; :data:`REASONS` gives the text.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+OK = 0
+ABOVE_HORIZON = 1  # ray at or above the horizon: it never meets the ground in front of the camera
+NOT_FINITE = 2  # NaN or infinite input
+UNDISTORT_FAILED = 3  # lens model not invertible at this pixel
+OUTSIDE_IMAGE = 4  # pixel outside the image (computed, but flagged)
+BEHIND_CAMERA = 5  # world point behind the camera (projection)
+
+REASONS = {
+    OK: "ok",
+    ABOVE_HORIZON: "above horizon: the ray does not meet the ground in front of the camera",
+    NOT_FINITE: "input is not finite (NaN or inf)",
+    UNDISTORT_FAILED: "undistortion did not converge (pixel outside the lens model's valid region)",
+    OUTSIDE_IMAGE: "pixel outside the image",
+    BEHIND_CAMERA: "point is behind the camera",
+}
+
+
+def reason_text(code) -> np.ndarray | str:
+    """Text of one code, or an object array of texts for an array of codes."""
+    if np.ndim(code) == 0:
+        return REASONS[int(code)]
+    return np.vectorize(lambda c: REASONS[int(c)], otypes=[object])(code)
