@@ -14,6 +14,7 @@ NOT_FINITE = 2  # NaN or infinite input
 UNDISTORT_FAILED = 3  # lens model not invertible at this pixel
 OUTSIDE_IMAGE = 4  # pixel outside the image (computed, but flagged)
 BEHIND_CAMERA = 5  # world point behind the camera (projection)
+BEYOND_RANGE = 6  # ground point farther than the requested max_range_m (maps)
 
 REASONS = {
     OK: "ok",
@@ -22,6 +23,7 @@ REASONS = {
     UNDISTORT_FAILED: "undistortion did not converge (pixel outside the lens model's valid region)",
     OUTSIDE_IMAGE: "pixel outside the image",
     BEHIND_CAMERA: "point is behind the camera",
+    BEYOND_RANGE: "ground point beyond the requested maximum range",
 }
 
 
