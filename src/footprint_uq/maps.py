@@ -1,0 +1,375 @@
+"""Per-pixel uncertainty maps: ground point, 2x2 covariance, ellipse and ground sampling distance.
+
+:func:`uncertainty_map` evaluates every ``step_px``-th pixel of an image and
+returns an :class:`UncertaintyMap`: where each pixel lands on the ground, the
+covariance of that ground point under an error budget (camera-level sources and
+per-point pixel noise, first order), its 1-sigma ellipse and the ground
+sampling distance (GSD).
+
+Ground sampling distance (definition used throughout footprint-uq)
+------------------------------------------------------------------
+A pixel is a unit square in the image.  To first order its footprint on the
+ground is the parallelogram spanned by the columns of ``dxy_duv`` (metres per
+pixel): ``a = dxy/du`` (one step to the right) and ``b = dxy/dv`` (one step
+down).  Let ``e_range`` be the horizontal unit vector from the camera's foot
+point to the ground point and ``e_cross`` the unit vector 90 deg counter-clockwise
+from it (``e_cross = z x e_range``).  Then
+
+* ``gsd_range_m = |a . e_range| + |b . e_range|``: the length of the
+  footprint projected on the range direction (metres covered by one pixel
+  along the line of sight);
+* ``gsd_cross_m = |a . e_cross| + |b . e_cross|``: the same across it.
+
+For a camera with no roll these are, near the image centre line, the ground
+length of one image row step and the ground width of one column step.  Where
+the ground point is (within 1 mm) below the camera the range direction is
+undefined and the boresight heading is used instead.  ``footprint_area_m2 =
+|det dxy_duv|`` is the ground area of one pixel.
+
+Validity: a pixel whose ray does not meet the ground, whose input is not finite
+or whose lens model cannot be inverted is NaN with ``valid`` False and the
+:mod:`footprint_uq.status` code in ``reason``.  With ``max_range_m``, pixels
+that land farther than that from the camera foot point are masked the same
+way with :data:`footprint_uq.status.BEYOND_RANGE`.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from . import params as P
+from . import status
+from ._checks import as_float
+from .budget import ErrorBudget, load_budget
+from .ellipse import chi2_scale, ellipse_axes
+from .errors import InputError
+from .propagation import propagate
+
+__all__ = ["UncertaintyMap", "uncertainty_map", "ground_sampling_distance", "GSD_DEFINITION"]
+
+#: one-line definition stored with every saved map
+GSD_DEFINITION = ("gsd_range_m = |dxy/du . e_range| + |dxy/dv . e_range|, gsd_cross_m = the same with "
+                  "e_cross = z x e_range; e_range = horizontal unit vector from the camera foot point to the "
+                  "ground point (metres covered by one pixel along and across the line of sight)")
+
+_BEYOND_RANGE = getattr(status, "BEYOND_RANGE", None)
+
+# pixels per block of the reference (numpy) path; bounds memory to ~100 MB
+_BLOCK_PX = 65_536
+
+
+@dataclass
+class UncertaintyMap:
+    """Per-pixel results on a regular pixel grid of ``H x W`` samples.
+
+    Attributes
+    ----------
+    uv_px : ndarray (H, W, 2)
+        Pixel centres sampled (u right, v down, origin at the centre of the top-left pixel).
+    xy_world_m : ndarray (H, W, 2)
+        Ground point in the world frame W (x east, y north), metres; NaN where invalid.
+    cov_m2 : ndarray (H, W, 2, 2)
+        Covariance of the ground point, m^2 (x, y order of W); NaN where invalid.
+    valid : ndarray of bool (H, W)
+    reason : ndarray of int8 (H, W)
+        :mod:`footprint_uq.status` code (0 = ok).
+    semi_major_m, semi_minor_m : ndarray (H, W)
+        1-sigma semi-axes of the ellipse of ``cov_m2``, metres.
+    orientation_deg : ndarray (H, W)
+        Major-axis angle, degrees counter-clockwise from +x (east), in (-90, 90].
+    gsd_range_m, gsd_cross_m : ndarray (H, W)
+        Ground sampling distance along and across the line of sight, metres per pixel
+        (see the module docstring for the exact definition).
+    footprint_area_m2 : ndarray (H, W)
+        Ground area covered by one pixel, ``|det dxy_duv|``, m^2.
+    range_m : ndarray (H, W)
+        Horizontal distance from the camera foot point to the ground point, metres.
+    step_px : int
+        Grid step in pixels.
+    camera, budget
+        The inputs (kept for figures and reports; not stored in the ``.npz`` arrays).
+    max_range_m : float or None
+    """
+
+    uv_px: np.ndarray
+    xy_world_m: np.ndarray
+    cov_m2: np.ndarray
+    valid: np.ndarray
+    reason: np.ndarray
+    semi_major_m: np.ndarray
+    semi_minor_m: np.ndarray
+    orientation_deg: np.ndarray
+    gsd_range_m: np.ndarray
+    gsd_cross_m: np.ndarray
+    footprint_area_m2: np.ndarray
+    range_m: np.ndarray
+    step_px: int = 1
+    camera: object = field(default=None, repr=False)
+    budget: ErrorBudget | None = field(default=None, repr=False)
+    max_range_m: float | None = None
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """``(H, W)`` of the grid."""
+        return self.valid.shape
+
+    def semi_axes(self, confidence: float | None = None):
+        """``(semi_major_m, semi_minor_m)`` scaled to ``confidence`` (2-D chi-square); 1 sigma if None."""
+        k = 1.0 if confidence is None else chi2_scale(confidence)
+        return k * self.semi_major_m, k * self.semi_minor_m
+
+    def summary(self, thresholds_m=(0.1, 0.25, 0.5, 1.0, 2.0), confidence: float | None = None) -> dict:
+        """Headline numbers for planners (JSON-serialisable).
+
+        For each threshold ``t``: the ground area (m^2) and the farthest range (m) of
+        valid pixels whose semi-major axis (1 sigma, or at ``confidence``) is below ``t``.
+        The area sums the pixel footprints ``|det dxy_duv|`` (times ``step_px^2``).
+        """
+        a, _ = self.semi_axes(confidence)
+        v = self.valid & np.isfinite(a)
+        n = int(self.valid.size)
+        out = {
+            "image_size_px": list(getattr(self.camera, "image_size_px", ())) or None,
+            "step_px": int(self.step_px),
+            "grid_shape": list(self.shape),
+            "budget": getattr(self.budget, "name", None),
+            "confidence": confidence,
+            "semi_axis_scale": 1.0 if confidence is None else chi2_scale(confidence),
+            "max_range_m": self.max_range_m,
+            "fraction_valid": float(v.sum() / n) if n else 0.0,
+            "reason_counts": {status.REASONS.get(int(c), str(int(c))): int((self.reason == c).sum())
+                              for c in np.unique(self.reason)},
+        }
+        if v.any():
+            av = a[v]
+            out.update({
+                "semi_major_m_min": float(av.min()),
+                "semi_major_m_median": float(np.median(av)),
+                "semi_major_m_p95": float(np.percentile(av, 95)),
+                "semi_major_m_max": float(av.max()),
+                "range_m_max": float(self.range_m[v].max()),
+                "gsd_range_m_median": float(np.median(self.gsd_range_m[v])),
+                "gsd_cross_m_median": float(np.median(self.gsd_cross_m[v])),
+            })
+        else:
+            out.update({k: None for k in ("semi_major_m_min", "semi_major_m_median", "semi_major_m_p95",
+                                          "semi_major_m_max", "range_m_max", "gsd_range_m_median",
+                                          "gsd_cross_m_median")})
+        area = self.footprint_area_m2 * float(self.step_px) ** 2
+        out["below_threshold"] = []
+        for t in thresholds_m:
+            m = v & (a < t)
+            out["below_threshold"].append({
+                "semi_major_below_m": float(t),
+                "ground_area_m2": float(area[m].sum()) if m.any() else 0.0,
+                "max_range_m": float(self.range_m[m].max()) if m.any() else None,
+                "fraction_of_image": float(m.sum() / n) if n else 0.0,
+            })
+        return out
+
+    def save_npz(self, path) -> Path:
+        """Write every array to a compressed ``.npz`` file, plus a ``metadata_json`` string.
+
+        The metadata holds the camera and budget (as their file dictionaries), the
+        grid step, the GSD definition and the reason-code table.
+        """
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        meta = {
+            "format": "footprint-uq uncertainty map",
+            "version": 1,
+            "step_px": int(self.step_px),
+            "max_range_m": self.max_range_m,
+            "camera": self.camera.to_dict() if hasattr(self.camera, "to_dict") else None,
+            "budget": self.budget.to_dict() if isinstance(self.budget, ErrorBudget) else None,
+            "gsd_definition": GSD_DEFINITION,
+            "orientation_convention": "degrees counter-clockwise from +x (east), in (-90, 90]",
+            "semi_axes": "1 sigma; multiply by chi2_scale(p) (2.4477 for 95 %) for a p-confidence ellipse",
+            "reasons": {str(k): v for k, v in status.REASONS.items()},
+        }
+        np.savez_compressed(
+            path, uv_px=self.uv_px, xy_world_m=self.xy_world_m, cov_m2=self.cov_m2, valid=self.valid,
+            reason=self.reason, semi_major_m=self.semi_major_m, semi_minor_m=self.semi_minor_m,
+            orientation_deg=self.orientation_deg, gsd_range_m=self.gsd_range_m, gsd_cross_m=self.gsd_cross_m,
+            footprint_area_m2=self.footprint_area_m2, range_m=self.range_m,
+            metadata_json=np.array(json.dumps(meta, default=_json_default)),
+        )
+        return path
+
+    @classmethod
+    def load_npz(cls, path) -> UncertaintyMap:
+        """Read a file written by :meth:`save_npz` (camera and budget are rebuilt when possible)."""
+        with np.load(path, allow_pickle=False) as z:
+            arrays = {k: z[k] for k in z.files if k != "metadata_json"}
+            meta = json.loads(str(z["metadata_json"])) if "metadata_json" in z.files else {}
+        camera = None
+        cam_d = meta.get("camera")
+        if cam_d and cam_d.get("model") == "pan-tilt":
+            from .cameras.pantilt import PanTiltCamera
+
+            kw = {k: v for k, v in cam_d.items() if k != "model"}
+            camera = PanTiltCamera(**kw)
+        elif cam_d and cam_d.get("model") == "opencv":
+            from .cameras.opencv import OpenCVCamera
+
+            camera = OpenCVCamera(cam_d["K"], cam_d["dist"], cam_d["R"], cam_d["t"], cam_d["image_size_px"],
+                                  cam_d.get("ground_z_m", 0.0))
+        budget = ErrorBudget.from_dict(meta["budget"]) if meta.get("budget") else None
+        return cls(**arrays, step_px=int(meta.get("step_px", 1)), camera=camera, budget=budget,
+                   max_range_m=meta.get("max_range_m"))
+
+
+def _json_default(o):
+    if isinstance(o, np.generic):
+        return o.item()
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    raise TypeError(f"not JSON serialisable: {type(o).__name__}")
+
+
+def _heading_unit(camera) -> np.ndarray:
+    """Horizontal unit vector of the boresight heading in W (x east, y north)."""
+    pan = camera.params[P.PAN]
+    return np.array([np.sin(pan), np.cos(pan)])
+
+
+def ground_sampling_distance(camera, xy_world_m, dxy_duv):
+    """GSD along and across the line of sight from the pixel Jacobian.
+
+    Parameters
+    ----------
+    camera : Camera
+        Supplies the foot point (``x_m``, ``y_m``) and, for points right below it, the heading.
+    xy_world_m : array_like (..., 2)
+        Ground points in W, metres.
+    dxy_duv : array_like (..., 2, 2)
+        ``d(x, y)/d(u, v)``, metres per pixel.
+
+    Returns
+    -------
+    gsd_range_m, gsd_cross_m, footprint_area_m2, range_m : ndarray (...)
+        See the module docstring; NaN where the inputs are NaN.
+    """
+    xy = np.asarray(xy_world_m, dtype=np.float64)
+    J = np.asarray(dxy_duv, dtype=np.float64)
+    d = xy - camera.params[P.XM:P.YM + 1]
+    rng = np.hypot(d[..., 0], d[..., 1])
+    with np.errstate(invalid="ignore", divide="ignore"):
+        e_r = d / rng[..., None]
+    near = rng < 1e-3
+    if np.any(near):
+        e_r = np.where(near[..., None], _heading_unit(camera), e_r)
+    e_c = np.stack([-e_r[..., 1], e_r[..., 0]], -1)
+    a, b = J[..., :, 0], J[..., :, 1]
+    gsd_r = np.abs((a * e_r).sum(-1)) + np.abs((b * e_r).sum(-1))
+    gsd_c = np.abs((a * e_c).sum(-1)) + np.abs((b * e_c).sum(-1))
+    area = np.abs(J[..., 0, 0] * J[..., 1, 1] - J[..., 0, 1] * J[..., 1, 0])
+    return gsd_r, gsd_c, area, rng
+
+
+def _covariance_map_kernel():
+    """``footprint_uq.kernels.covariance_map`` if available, else None."""
+    try:
+        from .kernels import covariance_map
+    except ImportError:
+        return None
+    return covariance_map
+
+
+def uncertainty_map(camera, budget, step_px: int = 1, *, max_range_m: float | None = None,
+                    use_kernel: bool = True) -> UncertaintyMap:
+    """Ground point, covariance, ellipse and GSD of every ``step_px``-th pixel of the image.
+
+    Parameters
+    ----------
+    camera : Camera
+        :class:`~footprint_uq.PanTiltCamera` or :class:`~footprint_uq.OpenCVCamera`.
+    budget : ErrorBudget, preset name, path or mapping
+        Error budget (:func:`footprint_uq.budget.load_budget`).
+    step_px : int
+        Grid step; the grid is ``camera.pixel_grid(step_px)`` (pixel centres 0, step, 2 step, ...).
+    max_range_m : float, optional
+        Mask pixels whose ground point is farther than this from the camera foot point
+        (reason :data:`footprint_uq.status.BEYOND_RANGE`).  Near the horizon the
+        ground range grows without bound; this keeps maps and figures readable.
+    use_kernel : bool
+        Use the fused ``footprint_uq.kernels.covariance_map`` when it is available;
+        False forces the reference path (:func:`footprint_uq.propagation.propagate`).
+
+    Returns
+    -------
+    UncertaintyMap
+        Arrays of shape ``(H, W, ...)`` with ``H = ceil(height / step_px)``,
+        ``W = ceil(width / step_px)``.
+    """
+    try:
+        step = int(step_px)
+    except (TypeError, ValueError):
+        raise InputError("step_px", step_px, "a positive integer") from None
+    if step != step_px or step < 1:
+        raise InputError("step_px", step_px, "a positive integer")
+    if max_range_m is not None:
+        max_range_m = as_float("max_range_m", max_range_m, positive=True)
+    budget = load_budget(budget)
+    uv = camera.pixel_grid(step)
+    H, W = uv.shape[:2]
+    flat = uv.reshape(-1, 2)
+    n = flat.shape[0]
+
+    xy = np.empty((n, 2))
+    cov = np.empty((n, 2, 2))
+    valid = np.empty(n, dtype=bool)
+    reason = np.empty(n, dtype=np.int8)
+    J = np.empty((n, 2, 2))
+
+    kernel = _covariance_map_kernel() if use_kernel else None
+    if kernel is not None:
+        kxy, kcov, kvalid = kernel(camera, budget, step)
+        kxy, kcov, kvalid = (np.asarray(a) for a in (kxy, kcov, kvalid))
+        if kxy.shape != (H, W, 2) or kcov.shape != (H, W, 2, 2) or kvalid.shape != (H, W):
+            raise RuntimeError(f"kernels.covariance_map returned shapes {kxy.shape}, {kcov.shape}, "
+                               f"{kvalid.shape}; expected ({H}, {W}, 2), ({H}, {W}, 2, 2), ({H}, {W})")
+        xy[:] = kxy.reshape(-1, 2)
+        cov[:] = kcov.reshape(-1, 2, 2)
+        kv = kvalid.reshape(-1)
+    for s in range(0, n, _BLOCK_PX):
+        blk = slice(s, min(n, s + _BLOCK_PX))
+        bp = camera.backproject(flat[blk], get_gradients=True)
+        J[blk] = bp.dxy_duv
+        reason[blk] = bp.reason
+        if kernel is None:
+            est = propagate(camera, budget, flat[blk])
+            xy[blk] = est.xy_world_m
+            cov[blk] = est.cov_m2
+            valid[blk] = est.valid
+        else:
+            valid[blk] = bp.valid & kv[blk]
+            # the kernel must agree with the reference path on validity; flag any disagreement
+            bad = bp.valid & ~kv[blk]
+            if np.any(bad):
+                reason[blk] = np.where(bad, status.NOT_FINITE, reason[blk])
+    gsd_r, gsd_c, area, rng = ground_sampling_distance(camera, xy, J)
+    if max_range_m is not None:
+        far = valid & (rng > max_range_m)
+        valid &= ~far
+        if _BEYOND_RANGE is None:  # pragma: no cover - status without the code
+            raise RuntimeError("footprint_uq.status.BEYOND_RANGE is missing")
+        reason[far] = _BEYOND_RANGE
+    inv = ~valid
+    xy[inv] = np.nan
+    cov[inv] = np.nan
+    for a in (gsd_r, gsd_c, area, rng):
+        a[inv] = np.nan
+    a_m, b_m, ang = ellipse_axes(cov)
+    sh = (H, W)
+    return UncertaintyMap(
+        uv_px=uv, xy_world_m=xy.reshape(sh + (2,)), cov_m2=cov.reshape(sh + (2, 2)), valid=valid.reshape(sh),
+        reason=reason.reshape(sh), semi_major_m=a_m.reshape(sh), semi_minor_m=b_m.reshape(sh),
+        orientation_deg=ang.reshape(sh), gsd_range_m=gsd_r.reshape(sh), gsd_cross_m=gsd_c.reshape(sh),
+        footprint_area_m2=area.reshape(sh), range_m=rng.reshape(sh), step_px=step, camera=camera,
+        budget=budget, max_range_m=max_range_m,
+    )
