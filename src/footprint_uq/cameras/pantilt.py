@@ -23,11 +23,13 @@ from __future__ import annotations
 import numpy as np
 
 from .. import params as P
-from .._checks import as_float
+from .. import status
+from .._checks import as_float, as_points
 from ..errors import InputError
+from . import general
 from .base import Camera
 
-__all__ = ["PanTiltCamera", "paper_xy", "paper_partials"]
+__all__ = ["PanTiltCamera", "paper_xy", "paper_partials", "closed_form_backproject"]
 
 
 def paper_xy(f, c, r, h, alpha, theta):
@@ -76,6 +78,119 @@ def paper_partials(f, c, r, h, alpha, theta):
     out["X0"] = (one, zero)
     out["Y0"] = (zero, one)
     return out
+
+
+def _radial_tangential_dq(xn, yn):
+    """``d(x_n, y_n)/d(dist)`` at zero nominal distortion: ``(..., 2, 8)`` (OpenCV order).
+
+    Undistortion at zero distortion is the identity, so by the implicit-function
+    theorem the derivative is minus the distortion's own derivative at ``(xn, yn)``:
+    radial ``-(x, y) r^2k`` for k1, k2, k3, ``+(x, y) r^2k`` for k4, k5, k6 (the
+    denominator), tangential ``-(2xy, r^2 + 2y^2)`` (p1) and ``-(r^2 + 2x^2, 2xy)`` (p2).
+    """
+    r2 = xn * xn + yn * yn
+    r4 = r2 * r2
+    r6 = r4 * r2
+    out = np.empty(np.shape(xn) + (2, 8))
+    for i, rr in ((0, r2), (1, r4), (4, r6)):
+        out[..., 0, i] = -xn * rr
+        out[..., 1, i] = -yn * rr
+    for i, rr in ((5, r2), (6, r4), (7, r6)):
+        out[..., 0, i] = xn * rr
+        out[..., 1, i] = yn * rr
+    out[..., 0, 2] = -2.0 * xn * yn
+    out[..., 1, 2] = -(r2 + 2.0 * yn * yn)
+    out[..., 0, 3] = -(r2 + 2.0 * xn * xn)
+    out[..., 1, 3] = -2.0 * xn * yn
+    return out
+
+
+def closed_form_backproject(params, uv_px, *, get_gradients=False) -> general.Backprojection:
+    """The paper's closed form, extended with roll, as a :class:`~.general.Backprojection`.
+
+    Requires zero nominal distortion and zero nominal ground perturbations
+    (``params[k1..k6] = params[ground_*] = 0``); any fx, fy, skew are accepted.
+
+    Method: the image point is written in the paper's pixel variables
+    ``c = u - cx - skew (v - cy) / fy`` (column) and ``r = fx (v - cy) / fy`` (row),
+    so that ``(f, c, r) = fx (1, x_n, y_n)`` with ``f = fx`` (for the paper's camera,
+    fx = fy and skew = 0, this is just ``c = u - cx``, ``r = v - cy``).  The roll
+    ``phi`` turns the image about the boresight: ``c' = cos(phi) c - sin(phi) r``,
+    ``r' = sin(phi) c + cos(phi) r``; then :func:`paper_xy` gives (X, Y) in frame G
+    and the world point is ``(x0 + Y, y0 + X)``.
+
+    Chain rule (``G = (X, Y)``; ``G_c, G_r, G_f, G_h, G_alpha, G_theta`` from :func:`paper_partials`
+    at ``(c', r')``)::
+
+        dG/dphi = -r' G_c + c' G_r
+        dG/dc   =  cos(phi) G_c + sin(phi) G_r        dG/dr = -sin(phi) G_c + cos(phi) G_r
+        dG/du   =  dG/dc                              dG/dv = -skew/fy dG/dc + fx/fy dG/dr
+        dG/dfx  =  G_f + (r/fx) dG/dr                 dG/dfy = skew (v-cy)/fy^2 dG/dc - (r/fy) dG/dr
+        dG/dcx  = -dG/dc                              dG/dcy = skew/fy dG/dc - fx/fy dG/dr
+        dG/dskew = -(v - cy)/fy dG/dc
+        dG/dk   =  fx (dG/dc dxn/dk + dG/dr dyn/dk)   (k a distortion coefficient, at zero)
+
+    Ground plane (offset ``dz``, slopes ``gx, gy`` pivoting about the camera foot):
+    with the offset ``o = (Y, X)`` in W, ``d xy/d dz = -o / h``,
+    ``d xy/d gx = -o o_x / h``, ``d xy/d gy = -o o_y / h``.
+    """
+    p = np.asarray(params, dtype=np.float64)
+    uv = np.asarray(uv_px, dtype=np.float64)
+    shape = np.broadcast_shapes(p.shape[:-1], uv.shape[:-1])
+    finite = np.broadcast_to(np.isfinite(uv).all(-1), shape) & np.broadcast_to(np.isfinite(p).all(-1), shape)
+    fx, fy, cx, cy, sk = (p[..., i] for i in range(5))
+    x0, y0, h = p[..., P.XM], p[..., P.YM], p[..., P.HM]
+    alpha, theta, phi = p[..., P.PAN], p[..., P.TILT], p[..., P.ROLL]
+    u, v = uv[..., 0], uv[..., 1]
+    dv = v - cy
+    c = u - cx - sk * dv / fy
+    r = fx * dv / fy
+    cphi, sphi = np.cos(phi), np.sin(phi)
+    c1 = cphi * c - sphi * r
+    r1 = sphi * c + cphi * r
+    X, Y, vg = paper_xy(fx, c1, r1, h, alpha, theta)
+    valid = np.broadcast_to(vg & finite, shape)
+    reason = np.full(shape, status.OK, dtype=np.int8)
+    reason[~vg] = status.ABOVE_HORIZON
+    reason[~finite] = status.NOT_FINITE
+    xy = np.stack([x0 + Y, y0 + X], -1)
+    xy = np.where(valid[..., None], xy, np.nan)
+    if not get_gradients:
+        return general.Backprojection(xy, valid, reason)
+    d = paper_partials(fx, c1, r1, h, alpha, theta)
+
+    def w(pair):  # paper (dX, dY) -> world (dx, dy) = (dY, dX)
+        return np.stack([pair[1], pair[0]], -1)
+
+    G_c, G_r = w(d["c"]), w(d["r"])
+    cphi_, sphi_ = cphi[..., None], sphi[..., None]
+    dc = cphi_ * G_c + sphi_ * G_r
+    dr = -sphi_ * G_c + cphi_ * G_r
+    col = lambda a: np.asarray(a)[..., None]  # noqa: E731
+    J = np.zeros(shape + (2, P.N_PARAMS))
+    J[..., P.FX] = w(d["f"]) + col(r / fx) * dr
+    J[..., P.FY] = col(sk * dv / fy**2) * dc - col(r / fy) * dr
+    J[..., P.CX] = -dc
+    J[..., P.CY] = col(sk / fy) * dc - col(fx / fy) * dr
+    J[..., P.SKEW] = -col(dv / fy) * dc
+    xn, yn = c / fx, dv / fy
+    dq = _radial_tangential_dq(xn, yn)  # (..., 2, 8)
+    J[..., P.DIST_SLICE] = col(fx) * (dc[..., :, None] * dq[..., 0:1, :] + dr[..., :, None] * dq[..., 1:2, :])
+    J[..., 0, P.XM] = 1.0
+    J[..., 1, P.YM] = 1.0
+    J[..., P.HM] = w(d["h"])
+    J[..., P.PAN] = w(d["alpha"])
+    J[..., P.TILT] = w(d["theta"])
+    J[..., P.ROLL] = -col(r1) * w(d["c"]) + col(c1) * w(d["r"])
+    o = np.stack([Y, X], -1)
+    J[..., P.GDZ] = -o / col(h)
+    J[..., P.GSX] = -o * col(Y / h)
+    J[..., P.GSY] = -o * col(X / h)
+    dxy_duv = np.stack([dc, -col(sk / fy) * dc + col(fx / fy) * dr], -1)
+    bad = ~valid
+    J[bad] = np.nan
+    dxy_duv = np.where(bad[..., None, None], np.nan, dxy_duv)
+    return general.Backprojection(xy, valid, reason, dxy_duv, J)
 
 
 class PanTiltCamera(Camera):
@@ -140,6 +255,24 @@ class PanTiltCamera(Camera):
         self.params = p
         self.image_size_px = (w, h)
         self.ground_z_m = as_float("ground_z_m", ground_z_m)
+
+    def backproject(self, uv_px, *, get_gradients: bool = False) -> general.Backprojection:
+        """Pixels ``(..., 2)`` -> ground points ``xy_world_m`` ``(..., 2)`` by the paper's closed form.
+
+        Same result as the general path (:func:`footprint_uq.cameras.general.backproject`),
+        computed with :func:`paper_xy` / :func:`paper_partials` extended with roll
+        (see :func:`closed_form_backproject`).  ``dxy_dp`` has all 22 columns of
+        :data:`~footprint_uq.params.PARAM_NAMES`: fx and fy separately (the focal
+        budget moves both together), distortion derivatives at zero nominal
+        distortion, ground columns as in :mod:`footprint_uq.ground`.  If the
+        parameter vector has been given non-zero nominal distortion or ground
+        perturbations, the general path is used.  :meth:`backproject_with`
+        (Monte Carlo, finite differences) always uses the general path.
+        """
+        uv = as_points("uv_px", uv_px, 2)
+        if np.any(self.params[P.DIST_SLICE]) or np.any(self.params[P.GDZ:P.GSY + 1]):
+            return general.backproject(self.params, uv, get_gradients=get_gradients)
+        return closed_form_backproject(self.params, uv, get_gradients=get_gradients)
 
     @property
     def focal_px(self) -> float:
