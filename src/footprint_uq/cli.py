@@ -1,0 +1,95 @@
+"""The ``footprint-uq`` command line: a thin registry of commands.
+
+Commands live in small modules (``cli_core`` for locate/map/presets/demo); to
+add one, define a ``click.Command`` there and register it here with one
+``main.add_command(...)`` line.
+
+Error policy: bad input (missing/unknown keys, wrong units, impossible values,
+unreadable files, bad options) prints **one line** naming the field on stderr
+and exits with status 2, never a traceback.  Warnings are printed as one line
+too.  Anything else is a bug and keeps its traceback.
+"""
+
+from __future__ import annotations
+
+import re
+import sys
+import warnings
+
+import click
+
+from .errors import FootprintUQError
+
+__all__ = ["main", "FootprintUQGroup", "EXIT_BAD_INPUT"]
+
+#: exit status of every bad-input error
+EXIT_BAD_INPUT = 2
+
+
+def _one_line(text: str) -> str:
+    return re.sub(r"\s+", " ", str(text)).strip()
+
+
+def _error(msg: str) -> None:
+    click.echo(f"footprint-uq: error: {_one_line(msg)}", err=True)
+
+
+def _showwarning(message, category, filename, lineno, file=None, line=None):
+    click.echo(f"footprint-uq: warning: {category.__name__}: {_one_line(message)}", err=True)
+
+
+class FootprintUQGroup(click.Group):
+    """A click group that turns bad-input exceptions into one-line messages and exit status 2."""
+
+    def main(self, args=None, prog_name=None, complete_var=None, standalone_mode=True, **extra):
+        if not standalone_mode:
+            return super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
+        old = warnings.showwarning
+        warnings.showwarning = _showwarning
+        try:
+            rv = super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
+        except click.exceptions.Exit as e:  # --help, --version
+            sys.exit(e.exit_code)
+        except click.Abort:
+            click.echo("footprint-uq: aborted", err=True)
+            sys.exit(1)
+        except click.UsageError as e:
+            _error(e.format_message())
+            sys.exit(EXIT_BAD_INPUT)
+        except click.ClickException as e:  # FileError and friends: bad input too
+            _error(e.format_message())
+            sys.exit(EXIT_BAD_INPUT)
+        except FootprintUQError as e:
+            _error(str(e))
+            sys.exit(EXIT_BAD_INPUT)
+        except BrokenPipeError:  # output piped into head & co.
+            sys.exit(0)
+        except OSError as e:  # unreadable / unwritable file
+            name = getattr(e, "filename", None)
+            _error(f"{name}: {e.strerror or e}" if name else str(e))
+            sys.exit(EXIT_BAD_INPUT)
+        finally:
+            warnings.showwarning = old
+        sys.exit(rv if isinstance(rv, int) else 0)
+
+
+@click.group(cls=FootprintUQGroup, context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(package_name="footprint-uq", prog_name="footprint-uq")
+def main():
+    """footprint-uq: ground position and 2x2 covariance of roadside-camera pixels and detections.
+
+    Frames and units: docs/conventions.md.  File formats: docs/file-formats.md.
+    """
+
+
+# -- the registry: one line per command -------------------------------------------------
+from .cli_core import demo_cmd, locate_cmd, map_cmd, presets_cmd  # noqa: E402
+
+main.add_command(locate_cmd)
+main.add_command(map_cmd)
+main.add_command(presets_cmd)
+main.add_command(demo_cmd)
+
+
+if __name__ == "__main__":  # pragma: no cover
+    main()
