@@ -1,0 +1,559 @@
+"""Object footprints: ground corners, their joint covariance, largest point, centroid.
+
+Implements the paper's section "Estimating uncertainty of bounding box": the
+uncertainty of a detected object is reported as
+
+* the **largest point uncertainty** -- the footprint corner with the largest 1-sigma
+  semi-major axis, the paper's upper bound on the positional uncertainty -- and
+* the **footprint centre** -- the area centroid of the convex footprint polygon
+  (shoelace formula; *not* the vertex mean, which differs for any non-parallelogram
+  quadrilateral, as the image of a rectangle under the ground back-projection is),
+  with its covariance propagated from the joint covariance of all corners through
+  the centroid's closed-form Jacobian.
+
+Inputs, one call per frame of N detections
+------------------------------------------
+(a) :func:`footprints_from_boxes2d` -- axis-aligned image boxes ``(N, 4)`` =
+    ``u_min, v_min, u_max, v_max`` (px).  The ground contact is the bottom edge ``v_max``:
+    ``contact="bottom-centre"`` uses one point ``((u_min + u_max) / 2, v_max)`` (K = 1);
+    ``contact="bottom-corners"`` the two points ``(u_min, v_max)``, ``(u_max, v_max)`` (K = 2).
+    For K = 1 the "centre" is that point; for K = 2 it is the midpoint of the two.
+(b) :func:`footprints_from_boxes3d` -- 3D boxes in the world ``(N, 7)`` =
+    ``x_m, y_m, z_m, length_m, width_m, height_m, yaw`` (centre in frame W; yaw the
+    direction of the length axis, counter-clockwise from +x (east), in radians -- column
+    ``yaw_rad`` -- or degrees with ``yaw_unit="deg"`` -- column ``yaw_deg``).  The footprint
+    is the quadrilateral of the four bottom corners, ordered counter-clockwise in W
+    starting rear-right: (-l/2, -w/2), (+l/2, -w/2), (+l/2, +w/2), (-l/2, +w/2) in the
+    box frame.  With ``bottom_on_ground=True`` (default) the bottom face is put on the
+    ground plane (``z_m`` and ``height_m`` then only place the box, not its footprint);
+    with False the corners are at ``z_m - height_m / 2``, and a bottom above the ground
+    back-projects to where its ray meets the ground (a bias, not an uncertainty).
+    The corners are projected into the image (``camera.project``) and back-projected
+    with uncertainty, so the result is what an image-based detector would report.
+(c) :func:`footprints_from_corners` -- footprint corners directly in pixels ``(N, K, 2)``,
+    in polygon order (either orientation).
+
+Detector noise (the paper: "the analysis extends to deep-learning detectors")
+-----------------------------------------------------------------------------
+``pixel_cov_px2`` is a probabilistic detector's own pixel covariance, added to the
+budget's per-point imaging and resolution noise:
+
+* ``(N, 2, 2)`` -- one covariance per detection, applied to each corner independently;
+* ``(N, K, 2, 2)`` -- one per corner, independent between corners;
+* ``(N, 2K, 2K)`` -- full, correlated between corners;
+* for 2D boxes also ``box_cov_px2`` ``(N, 4, 4)`` (or ``(N, 4)`` standard deviations) on
+  ``u_min, v_min, u_max, v_max`` as detectors with box-regression variance output it;
+  it is mapped to the contact points through the (linear) contact-point map, so the
+  two bottom corners share the ``v_max`` error.
+
+Camera-level errors (:meth:`ErrorBudget.param_covariance`) are shared by all corners of
+all objects in a frame and couple the corners (:func:`footprint_uq.propagation.propagate_joint`
+semantics); per-point noise only fills the diagonal 2x2 blocks (or the detector's
+cross terms).
+
+Partial visibility
+------------------
+Each corner carries a :mod:`footprint_uq.status` code.  ``OUTSIDE_IMAGE`` corners (not
+observed: they lie outside the image) are still back-projected -- their numbers are
+kept and finite -- but they are not *usable* unless ``allow_outside_image=True``.
+``ABOVE_HORIZON``, ``BEHIND_CAMERA`` (3D corners), ``UNDISTORT_FAILED`` and
+``NOT_FINITE`` corners are NaN.  The largest point is taken over the usable corners
+(NaN and index -1 if none); the centre needs every corner usable and a non-degenerate
+polygon, otherwise it is NaN and ``centre_reason`` says why (the code of the first
+unusable corner and its index, or :data:`DEGENERATE`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import status
+from ._checks import as_points, check_cov
+from .budget import load_budget
+from .errors import InputError
+from .v2x import cpm_fields, j2735_fields
+
+__all__ = [
+    "FootprintEstimate", "FrameProcessor", "V2X_FIELDS", "DEGENERATE", "CONTACT_MODES", "BOX3D_COLUMNS", "box2d_contact_points",
+    "box3d_bottom_corners", "polygon_centroid", "footprints_from_corners", "footprints_from_boxes2d",
+    "footprints_from_boxes3d",
+]
+
+#: centre reason code: zero-area footprint polygon (centroid undefined)
+DEGENERATE = 20
+_CENTRE_TEXT = {DEGENERATE: "footprint polygon has zero area (centroid undefined)"}
+CONTACT_MODES = ("bottom-centre", "bottom-corners")
+BOX3D_COLUMNS = ("x_m", "y_m", "z_m", "length_m", "width_m", "height_m", "yaw_rad")
+#: column order of :attr:`FootprintEstimate.v2x_codes`
+V2X_FIELDS = ("cpm_x_confidence", "cpm_y_confidence", "cpm_xy_correlation", "j2735_semi_major",
+              "j2735_semi_minor", "j2735_orientation", "j2735_position_confidence")
+
+
+@dataclass
+class FootprintEstimate:
+    """Footprints of N objects with K corners each (leading dimension N everywhere).
+
+    Attributes
+    ----------
+    corners_px : (N, K, 2)             corners in the image (u, v), px
+    corners_xy_world_m : (N, K, 2)     ground corners in W, m (NaN where not computable)
+    corners_cov_m2 : (N, K, 2, 2)      per-corner covariance, m^2
+    joint_cov_m2 : (N, 2K, 2K)         joint covariance, order x0, y0, x1, y1, ...
+    corner_reason : (N, K) int8        :mod:`footprint_uq.status` code per corner
+    corner_usable : (N, K) bool        corner enters the largest point / centre
+    largest_index : (N,) int           corner with the largest semi-major axis (-1: none usable)
+    largest_semi_major_m : (N,)        its 1-sigma semi-major axis, m (the paper's upper bound)
+    largest_xy_world_m : (N, 2), largest_cov_m2 : (N, 2, 2)
+    centre_xy_world_m : (N, 2)         area centroid (K >= 3), midpoint (K = 2), point (K = 1)
+    centre_cov_m2 : (N, 2, 2)
+    centre_valid : (N,) bool
+    centre_reason : (N,) int           0, the status code of the first unusable corner, or DEGENERATE
+    centre_bad_corner : (N,) int       index of that corner (-1 if none)
+    area_m2 : (N,)                     signed shoelace area (positive = counter-clockwise in W)
+    v2x_codes : (N, 7) int32           CPM and J2735 fields of the centre covariance, columns
+                                       :data:`V2X_FIELDS` (see :mod:`footprint_uq.v2x`); :attr:`v2x` as a dict
+    heading_offset_deg : float         used for the V2X fields
+
+    ``joint_cov_m2`` is None when a :class:`FrameProcessor` was asked not to form it.
+    """
+
+    corners_px: np.ndarray
+    corners_xy_world_m: np.ndarray
+    corners_cov_m2: np.ndarray
+    joint_cov_m2: np.ndarray
+    corner_reason: np.ndarray
+    corner_usable: np.ndarray
+    largest_index: np.ndarray
+    largest_semi_major_m: np.ndarray
+    largest_xy_world_m: np.ndarray
+    largest_cov_m2: np.ndarray
+    centre_xy_world_m: np.ndarray
+    centre_cov_m2: np.ndarray
+    centre_valid: np.ndarray
+    centre_reason: np.ndarray
+    centre_bad_corner: np.ndarray
+    area_m2: np.ndarray
+    v2x_codes: np.ndarray
+    heading_offset_deg: float = 0.0
+
+    @property
+    def v2x(self) -> dict[str, np.ndarray]:
+        """The V2X fields as a dict of (N,) int32 arrays keyed by :data:`V2X_FIELDS`."""
+        return {name: self.v2x_codes[:, i] for i, name in enumerate(V2X_FIELDS)}
+
+    def __len__(self) -> int:
+        return int(self.corners_px.shape[0])
+
+    @property
+    def n_corners(self) -> int:
+        return int(self.corners_px.shape[1])
+
+    def centre_reason_text(self) -> np.ndarray:
+        """Object array (N,) of human-readable reasons ("ok" where the centre is valid)."""
+        out = np.empty(len(self), dtype=object)
+        K = self.n_corners
+        for i, (code, k) in enumerate(zip(self.centre_reason.tolist(), self.centre_bad_corner.tolist())):
+            if code == status.OK:
+                out[i] = "ok"
+            elif code in _CENTRE_TEXT:
+                out[i] = _CENTRE_TEXT[code]
+            else:
+                out[i] = f"corner {k} of {K}: {status.REASONS[code]}"
+        return out
+
+    def centre_ellipse(self, confidence: float | None = None):
+        """``(semi_major_m, semi_minor_m, orientation_deg)`` of the centre covariance."""
+        from .ellipse import ellipse_axes
+
+        return ellipse_axes(self.centre_cov_m2, confidence=confidence)
+
+
+# -- geometry ------------------------------------------------------------------------------
+def box2d_contact_points(boxes_px, contact: str = "bottom-centre"):
+    """Ground-contact pixels of axis-aligned boxes and the linear map from the box.
+
+    Parameters
+    ----------
+    boxes_px : array_like (N, 4)
+        ``u_min, v_min, u_max, v_max`` in pixels.
+    contact : {"bottom-centre", "bottom-corners"}
+
+    Returns
+    -------
+    corners_px : (N, K, 2), K = 1 or 2
+    A : (2K, 4)
+        ``corners.reshape(N, 2K) = boxes @ A.T`` (for mapping box covariances).
+    """
+    b = as_points("boxes_px", boxes_px, 4)
+    if b.ndim != 2:
+        raise InputError("boxes_px", b.shape, "an array of shape (N, 4): u_min, v_min, u_max, v_max")
+    if contact == "bottom-centre":
+        A = np.array([[0.5, 0.0, 0.5, 0.0], [0.0, 0.0, 0.0, 1.0]])
+    elif contact == "bottom-corners":
+        A = np.array([[1.0, 0, 0, 0], [0, 0, 0, 1.0], [0, 0, 1.0, 0], [0, 0, 0, 1.0]])
+    else:
+        raise InputError("contact", contact, f"one of {CONTACT_MODES}")
+    K = A.shape[0] // 2
+    with np.errstate(invalid="ignore"):
+        bad = (b[:, 2] < b[:, 0]) | (b[:, 3] < b[:, 1])
+    if np.any(bad):
+        i = int(np.flatnonzero(bad)[0])
+        raise InputError(f"boxes_px[{i}]", b[i].tolist(), "u_min <= u_max and v_min <= v_max")
+    return (b @ A.T).reshape(-1, K, 2), A
+
+
+def box3d_bottom_corners(boxes_world, *, yaw_unit: str = "rad", bottom_on_ground: bool = True,
+                         ground_z_m: float = 0.0) -> np.ndarray:
+    """Bottom corners ``(N, 4, 3)`` of 3D boxes ``(N, 7)`` in W (order: see the module doc)."""
+    b = as_points("boxes_world", boxes_world, 7)
+    if b.ndim != 2:
+        raise InputError("boxes_world", b.shape, f"an array of shape (N, 7): {', '.join(BOX3D_COLUMNS)}")
+    if yaw_unit not in ("rad", "deg"):
+        raise InputError("yaw_unit", yaw_unit, "'rad' (column yaw_rad) or 'deg' (column yaw_deg)")
+    with np.errstate(invalid="ignore"):
+        bad = (b[:, 3] < 0) | (b[:, 4] < 0) | (b[:, 5] < 0)
+    if np.any(bad):
+        i = int(np.flatnonzero(bad)[0])
+        raise InputError(f"boxes_world[{i}] (length_m, width_m, height_m)", b[i, 3:6].tolist(), "sizes >= 0")
+    yaw = b[:, 6] if yaw_unit == "rad" else np.deg2rad(b[:, 6])
+    c, s = np.cos(yaw), np.sin(yaw)
+    hl, hw = 0.5 * b[:, 3], 0.5 * b[:, 4]
+    sl = np.array([-1.0, 1.0, 1.0, -1.0])
+    sw = np.array([-1.0, -1.0, 1.0, 1.0])
+    dl = sl[None, :] * hl[:, None]
+    dw = sw[None, :] * hw[:, None]
+    x = b[:, 0:1] + c[:, None] * dl - s[:, None] * dw
+    y = b[:, 1:2] + s[:, None] * dl + c[:, None] * dw
+    z = np.full_like(x, ground_z_m) if bottom_on_ground else np.broadcast_to(
+        (b[:, 2] - 0.5 * b[:, 5])[:, None], x.shape)
+    return np.stack([x, y, z], -1)
+
+
+def polygon_centroid(xy_m, *, get_gradients: bool = False):
+    """Area centroid of polygons ``(..., K, 2)`` (shoelace), with its Jacobian.
+
+    K = 1: the point; K = 2: the midpoint; K >= 3: ``C = sum (p_i + p_{i+1}) c_i / (6 A)``
+    with ``c_i = x_i y_{i+1} - x_{i+1} y_i`` and ``A = sum c_i / 2``.  Coordinates are
+    shifted to the vertex mean first (the centroid is translation-equivariant and its
+    Jacobian translation-invariant), which keeps far-from-origin polygons accurate.
+
+    Returns
+    -------
+    centroid : (..., 2)        NaN where the area is zero
+    area : (...)               signed area (K < 3: 0)
+    dC_dxy : (..., 2, 2K)      only with ``get_gradients``; columns x0, y0, x1, y1, ...
+    """
+    p = as_points("xy_m", xy_m, 2)
+    K = p.shape[-2]
+    lead = p.shape[:-2]
+    if K < 3:
+        C = p.mean(-2)
+        if not get_gradients:
+            return C, np.zeros(lead)
+        G = np.zeros(lead + (2, 2 * K))
+        G[..., 0, 0::2] = 1.0 / K
+        G[..., 1, 1::2] = 1.0 / K
+        return C, np.zeros(lead), G
+    m = p.mean(-2, keepdims=True)
+    q = p - m
+    x, y = q[..., 0], q[..., 1]
+    xn, yn = np.roll(x, -1, -1), np.roll(y, -1, -1)
+    xp, yp = np.roll(x, 1, -1), np.roll(y, 1, -1)
+    c = x * yn - xn * y
+    A = 0.5 * c.sum(-1)
+    Sx = ((x + xn) * c).sum(-1)
+    Sy = ((y + yn) * c).sum(-1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        deg = ~(np.abs(A) > 1e-12 * np.maximum((q * q).sum((-1, -2)), 1e-300))
+        inv6A = np.where(deg, np.nan, 1.0 / (6.0 * A))
+    C = np.stack([Sx * inv6A, Sy * inv6A], -1) + m[..., 0, :]
+    if not get_gradients:
+        return C, A
+    cp = np.roll(c, 1, -1)
+    dA_dx = 0.5 * (yn - yp)
+    dA_dy = 0.5 * (xp - xn)
+    dSx_dx = c + cp + (x + xn) * yn - (xp + x) * yp
+    dSx_dy = -(x + xn) * xn + (xp + x) * xp
+    dSy_dx = (y + yn) * yn - (yp + y) * yp
+    dSy_dy = c + cp - (y + yn) * xn + (yp + y) * xp
+    Cx_l, Cy_l = Sx * inv6A, Sy * inv6A
+    G = np.empty(lead + (2, 2 * K))
+    G[..., 0, 0::2] = (dSx_dx - 6.0 * Cx_l[..., None] * dA_dx) * inv6A[..., None]
+    G[..., 0, 1::2] = (dSx_dy - 6.0 * Cx_l[..., None] * dA_dy) * inv6A[..., None]
+    G[..., 1, 0::2] = (dSy_dx - 6.0 * Cy_l[..., None] * dA_dx) * inv6A[..., None]
+    G[..., 1, 1::2] = (dSy_dy - 6.0 * Cy_l[..., None] * dA_dy) * inv6A[..., None]
+    return C, A, G
+
+
+# -- pixel covariances -----------------------------------------------------------------------
+def _detector_joint_cov(pixel_cov_px2, N: int, K: int) -> np.ndarray | None:
+    """Detector covariance as (N, 2K, 2K) (None if not given)."""
+    if pixel_cov_px2 is None:
+        return None
+    c = np.asarray(pixel_cov_px2, dtype=np.float64)
+    if c.shape == (N, 2, 2):
+        check_cov("pixel_cov_px2", c, 2)
+        out = np.zeros((N, 2 * K, 2 * K))
+        for k in range(K):
+            out[:, 2 * k:2 * k + 2, 2 * k:2 * k + 2] = c
+        return out
+    if c.shape == (N, K, 2, 2):
+        check_cov("pixel_cov_px2", c, 2)
+        out = np.zeros((N, 2 * K, 2 * K))
+        for k in range(K):
+            out[:, 2 * k:2 * k + 2, 2 * k:2 * k + 2] = c[:, k]
+        return out
+    if c.shape == (N, 2 * K, 2 * K):
+        return check_cov("pixel_cov_px2", c, 2 * K)
+    raise InputError("pixel_cov_px2", c.shape, f"shape ({N}, 2, 2), ({N}, {K}, 2, 2) or ({N}, {2 * K}, {2 * K})")
+
+
+def _box_cov_to_corners(box_cov_px2, A: np.ndarray, N: int) -> np.ndarray:
+    c = np.asarray(box_cov_px2, dtype=np.float64)
+    if c.shape == (N, 4):
+        if not np.all(np.isfinite(c)) or np.any(c < 0):
+            raise InputError("box_cov_px2", "negative or non-finite sigma", "standard deviations >= 0 (N, 4)")
+        c = c[:, :, None] * np.eye(4) * c[:, None, :]
+    elif c.shape == (N, 4, 4):
+        check_cov("box_cov_px2", c, 4)
+    else:
+        raise InputError("box_cov_px2", c.shape, f"shape ({N}, 4, 4) (covariance) or ({N}, 4) (sigmas)")
+    return A @ c @ A.T
+
+
+# -- the reference path ----------------------------------------------------------------------
+def footprints_from_corners(camera, budget, corners_px, *, pixel_cov_px2=None, allow_outside_image: bool = False,
+                            heading_offset_deg: float = 0.0, _extra_reason=None) -> FootprintEstimate:
+    """Footprint estimates of N objects from their corners in pixels ``(N, K, 2)``.
+
+    Parameters
+    ----------
+    camera : Camera
+    budget : ErrorBudget, preset name, path or mapping
+    corners_px : array_like (N, K, 2)
+        Footprint corners (u, v) in polygon order; K = 1 and 2 are accepted (see module doc).
+    pixel_cov_px2 : array_like, optional
+        Detector pixel covariance, ``(N, 2, 2)``, ``(N, K, 2, 2)`` or ``(N, 2K, 2K)``, px^2.
+    allow_outside_image : bool
+        Let corners outside the image enter the largest point and the centre.
+    heading_offset_deg : float
+        Bearing of the world +y axis from true north, for the V2X fields.
+
+    Returns
+    -------
+    FootprintEstimate
+    """
+    budget = load_budget(budget)
+    uv = as_points("corners_px", corners_px, 2)
+    if uv.ndim != 3 or uv.shape[1] < 1:
+        raise InputError("corners_px", uv.shape, "an array of shape (N, K, 2) with K >= 1")
+    N, K = uv.shape[:2]
+    det = _detector_joint_cov(pixel_cov_px2, N, K)
+    bp = camera.backproject(uv, get_gradients=True)
+    reason = bp.reason.copy()
+    inside = camera.in_image(uv)
+    reason[(reason == status.OK) & ~inside] = status.OUTSIDE_IMAGE
+    if _extra_reason is not None:  # e.g. BEHIND_CAMERA from the 3D projection
+        reason = np.where(_extra_reason != status.OK, _extra_reason, reason).astype(np.int8)
+    computed = bp.valid & ((reason == status.OK) | (reason == status.OUTSIDE_IMAGE))
+    usable = computed & ((reason == status.OK) | allow_outside_image)
+    xy = np.where(computed[..., None], bp.xy_world_m, np.nan)
+    # joint covariance: shared camera parameters + per-point (budget) + detector
+    Sp = budget.param_covariance()
+    used = np.flatnonzero(np.any(Sp != 0, axis=0))
+    Jp = bp.dxy_dp[..., used].reshape(N, 2 * K, used.size)
+    joint = Jp @ Sp[np.ix_(used, used)] @ np.swapaxes(Jp, -1, -2)
+    Juv = np.zeros((N, 2 * K, 2 * K))
+    for k in range(K):
+        Juv[:, 2 * k:2 * k + 2, 2 * k:2 * k + 2] = bp.dxy_duv[:, k]
+    Spx = np.broadcast_to(np.kron(np.eye(K), budget.pixel_covariance()), (N, 2 * K, 2 * K))
+    if det is not None:
+        Spx = Spx + det
+    joint = joint + Juv @ Spx @ np.swapaxes(Juv, -1, -2)
+    bad_rows = np.repeat(~computed, 2, axis=1)
+    joint = np.where(bad_rows[:, :, None] | bad_rows[:, None, :], np.nan, joint)
+    idx = np.arange(K)
+    ccov = np.stack([joint[:, 2 * idx, 2 * idx], joint[:, 2 * idx, 2 * idx + 1],
+                     joint[:, 2 * idx + 1, 2 * idx], joint[:, 2 * idx + 1, 2 * idx + 1]], -1).reshape(N, K, 2, 2)
+    # largest point over the usable corners
+    a, b, d = ccov[..., 0, 0], ccov[..., 0, 1], ccov[..., 1, 1]
+    with np.errstate(invalid="ignore"):
+        semi = np.sqrt(0.5 * (a + d) + np.hypot(0.5 * (a - d), b))
+    semi_u = np.where(usable, semi, -np.inf)
+    li = np.argmax(semi_u, axis=1)
+    any_usable = usable.any(1)
+    largest_index = np.where(any_usable, li, -1)
+    rows = np.arange(N)
+    largest_semi = np.where(any_usable, semi[rows, li], np.nan)
+    largest_xy = np.where(any_usable[:, None], xy[rows, li], np.nan)
+    largest_cov = np.where(any_usable[:, None, None], ccov[rows, li], np.nan)
+    # centre
+    all_usable = usable.all(1)
+    first_bad = np.argmax(~usable, axis=1)
+    centre_bad = np.where(all_usable, -1, first_bad)
+    centre_reason = np.where(all_usable, status.OK, reason[rows, first_bad]).astype(np.int32)
+    # outside-image corners that are computed but not allowed keep the OUTSIDE_IMAGE code
+    xy_c = np.where(all_usable[:, None, None], xy, 0.0)
+    with np.errstate(invalid="ignore"):
+        C, area, G = polygon_centroid(xy_c, get_gradients=True)
+    if K >= 3:
+        degenerate = all_usable & ~np.isfinite(C).all(-1)
+        centre_reason = np.where(degenerate, DEGENERATE, centre_reason)
+    ok = centre_reason == status.OK
+    joint_c = np.where(all_usable[:, None, None], joint, 0.0)
+    G = np.where(ok[:, None, None], G, 0.0)
+    ccov_c = G @ joint_c @ np.swapaxes(G, -1, -2)
+    centre = np.where(ok[:, None], C, np.nan)
+    centre_cov = np.where(ok[:, None, None], ccov_c, np.nan)
+    area = np.where(all_usable, area, np.nan)
+    fields = {**cpm_fields(centre_cov, heading_offset_deg), **j2735_fields(centre_cov, heading_offset_deg)}
+    v2x = np.stack([fields[name] for name in V2X_FIELDS], -1).astype(np.int32)
+    return FootprintEstimate(
+        corners_px=uv, corners_xy_world_m=xy, corners_cov_m2=ccov, joint_cov_m2=joint,
+        corner_reason=reason.astype(np.int8), corner_usable=usable, largest_index=largest_index,
+        largest_semi_major_m=largest_semi, largest_xy_world_m=largest_xy, largest_cov_m2=largest_cov,
+        centre_xy_world_m=centre, centre_cov_m2=centre_cov, centre_valid=ok, centre_reason=centre_reason,
+        centre_bad_corner=np.where(ok, -1, np.where(centre_reason == DEGENERATE, -1, centre_bad)),
+        area_m2=area, v2x_codes=v2x, heading_offset_deg=float(heading_offset_deg))
+
+
+def footprints_from_boxes2d(camera, budget, boxes_px, *, contact: str = "bottom-centre", pixel_cov_px2=None,
+                            box_cov_px2=None, allow_outside_image: bool = False,
+                            heading_offset_deg: float = 0.0) -> FootprintEstimate:
+    """Footprints of axis-aligned image boxes ``(N, 4)`` (see the module doc for ``contact``).
+
+    ``pixel_cov_px2`` as in :func:`footprints_from_corners`; ``box_cov_px2`` ``(N, 4, 4)``
+    or ``(N, 4)`` sigmas on the box coordinates (not both).
+    """
+    corners, A = box2d_contact_points(boxes_px, contact)
+    N, K = corners.shape[:2]
+    if box_cov_px2 is not None:
+        if pixel_cov_px2 is not None:
+            raise InputError("box_cov_px2", "given with pixel_cov_px2", "only one detector covariance")
+        pixel_cov_px2 = _box_cov_to_corners(box_cov_px2, A, N)
+    return footprints_from_corners(camera, budget, corners, pixel_cov_px2=pixel_cov_px2,
+                                   allow_outside_image=allow_outside_image, heading_offset_deg=heading_offset_deg)
+
+
+def footprints_from_boxes3d(camera, budget, boxes_world, *, yaw_unit: str = "rad", bottom_on_ground: bool = True,
+                            pixel_cov_px2=None, allow_outside_image: bool = False,
+                            heading_offset_deg: float = 0.0) -> FootprintEstimate:
+    """Footprints of 3D world boxes ``(N, 7)``: bottom corners -> image -> ground with uncertainty.
+
+    Corners behind the camera get ``BEHIND_CAMERA`` and NaN.
+    """
+    X = box3d_bottom_corners(boxes_world, yaw_unit=yaw_unit, bottom_on_ground=bottom_on_ground,
+                             ground_z_m=camera.ground_z_m)
+    pr = camera.project(X)
+    extra = np.where(pr.valid, status.OK, pr.reason).astype(np.int8)
+    uv = np.where(pr.valid[..., None], pr.uv_px, np.nan)
+    return footprints_from_corners(camera, budget, uv, pixel_cov_px2=pixel_cov_px2,
+                                   allow_outside_image=allow_outside_image, heading_offset_deg=heading_offset_deg,
+                                   _extra_reason=extra)
+
+
+# -- the per-frame fast path ---------------------------------------------------------------------
+class FrameProcessor:
+    """Reusable per-frame processor: the same results as the reference functions, fused in numba.
+
+    Camera and budget constants (parameter vector, rotation and its derivatives, the
+    non-zero entries of the 22x22 parameter covariance, the budget's pixel covariance)
+    are prepared once; each call then runs one compiled kernel over the frame's
+    detections (see :mod:`footprint_uq.footprint_kernels`).  Results agree with
+    :func:`footprints_from_corners` / :func:`footprints_from_boxes2d` /
+    :func:`footprints_from_boxes3d` to 1e-9 relative.
+
+    Parameters
+    ----------
+    camera : Camera
+    budget : ErrorBudget, preset name, path or mapping
+    heading_offset_deg : float
+        Bearing of the world +y axis from true north (V2X fields).
+    allow_outside_image : bool
+        See :func:`footprints_from_corners`.
+    joint_cov : bool
+        Form the (N, 2K, 2K) joint corner covariance (default True).  Without it
+        ``joint_cov_m2`` is None; corner and centre covariances are unchanged.
+
+    Examples
+    --------
+    >>> proc = FrameProcessor(camera, "basler1")          # once
+    >>> est = proc.boxes3d(boxes_world)                   # every frame, (N, 7)
+    >>> est.centre_cov_m2, est.largest_semi_major_m, est.v2x["cpm_x_confidence"]
+    """
+
+    def __init__(self, camera, budget, *, heading_offset_deg: float = 0.0, allow_outside_image: bool = False,
+                 joint_cov: bool = True):
+        from . import footprint_kernels as fk
+        from ._checks import as_float
+
+        self.camera = camera
+        self.budget = load_budget(budget)
+        self.heading_offset_deg = as_float("heading_offset_deg", heading_offset_deg)
+        self.allow_outside_image = bool(allow_outside_image)
+        self.joint_cov = bool(joint_cov)
+        self._fk = fk
+        self._cam, self._dR = fk.camera_constants(camera)
+        Sp = self.budget.param_covariance()
+        si, sj = np.nonzero(Sp)
+        self._si = si.astype(np.int64)
+        self._sj = sj.astype(np.int64)
+        self._sv = np.ascontiguousarray(Sp[si, sj])
+        self._spx = np.ascontiguousarray(self.budget.pixel_covariance())
+        h = np.deg2rad(self.heading_offset_deg)
+        self._ch, self._sh = (1.0, 0.0) if h == 0.0 else (float(np.cos(h)), float(np.sin(h)))
+        self._no_det = np.zeros((1, 1, 2, 2))
+        self._no_extra = np.zeros((0, 0), dtype=np.int8)
+
+    def _det(self, pixel_cov_px2, N: int, K: int):
+        if pixel_cov_px2 is None:
+            return self._no_det, 0
+        c = np.asarray(pixel_cov_px2, dtype=np.float64)
+        if c.shape == (N, 2, 2):
+            return np.ascontiguousarray(check_cov("pixel_cov_px2", c, 2)[:, None]), 1
+        if c.shape == (N, K, 2, 2):
+            return np.ascontiguousarray(check_cov("pixel_cov_px2", c, 2)), 2
+        if c.shape == (N, 2 * K, 2 * K):
+            return np.ascontiguousarray(check_cov("pixel_cov_px2", c, 2 * K)[:, None]), 3
+        raise InputError("pixel_cov_px2", c.shape, f"shape ({N}, 2, 2), ({N}, {K}, 2, 2) or ({N}, {2 * K}, {2 * K})")
+
+    def _run(self, uv, extra, pixel_cov_px2) -> FootprintEstimate:
+        N, K = uv.shape[0], uv.shape[1]
+        det, mode = self._det(pixel_cov_px2, N, K)
+        out = self._fk.process_corners(uv, extra, self._cam, self._dR, self._si, self._sj, self._sv, self._spx,
+                                       det, mode, self.allow_outside_image, self._ch, self._sh, self.joint_cov)
+        (xy, ccov, joint, reason, usable, li, ls, lxy, lcov, centre, ccentre, creason, cbad, area, v2x) = out
+        return FootprintEstimate(uv, xy, ccov, joint if self.joint_cov else None, reason, usable, li, ls, lxy, lcov,
+                                 centre, ccentre, creason == 0, creason, cbad, area, v2x, self.heading_offset_deg)
+
+    def corners(self, corners_px, *, pixel_cov_px2=None) -> FootprintEstimate:
+        """Footprints from corners in pixels ``(N, K, 2)`` (see :func:`footprints_from_corners`)."""
+        uv = np.ascontiguousarray(corners_px, dtype=np.float64)
+        if uv.ndim != 3 or uv.shape[2] != 2 or uv.shape[1] < 1:
+            raise InputError("corners_px", uv.shape, "an array of shape (N, K, 2) with K >= 1")
+        return self._run(uv, self._no_extra, pixel_cov_px2)
+
+    def boxes2d(self, boxes_px, *, contact: str = "bottom-centre", pixel_cov_px2=None,
+                box_cov_px2=None) -> FootprintEstimate:
+        """Footprints of image boxes ``(N, 4)`` (see :func:`footprints_from_boxes2d`)."""
+        corners, A = box2d_contact_points(boxes_px, contact)
+        if box_cov_px2 is not None:
+            if pixel_cov_px2 is not None:
+                raise InputError("box_cov_px2", "given with pixel_cov_px2", "only one detector covariance")
+            pixel_cov_px2 = _box_cov_to_corners(box_cov_px2, A, corners.shape[0])
+        return self._run(np.ascontiguousarray(corners), self._no_extra, pixel_cov_px2)
+
+    def boxes3d(self, boxes_world, *, yaw_unit: str = "rad", bottom_on_ground: bool = True,
+                pixel_cov_px2=None) -> FootprintEstimate:
+        """Footprints of 3D world boxes ``(N, 7)`` (see :func:`footprints_from_boxes3d`)."""
+        b = np.ascontiguousarray(boxes_world, dtype=np.float64)
+        if b.ndim != 2 or b.shape[1] != 7:
+            raise InputError("boxes_world", b.shape, f"an array of shape (N, 7): {', '.join(BOX3D_COLUMNS)}")
+        if yaw_unit not in ("rad", "deg"):
+            raise InputError("yaw_unit", yaw_unit, "'rad' (column yaw_rad) or 'deg' (column yaw_deg)")
+        uv, code, bad = self._fk.boxes3d_to_pixels(b, self._cam, yaw_unit == "deg", bool(bottom_on_ground))
+        if bad >= 0:
+            raise InputError(f"boxes_world[{bad}] (length_m, width_m, height_m)", b[bad, 3:6].tolist(), "sizes >= 0")
+        return self._run(uv, code, pixel_cov_px2)
