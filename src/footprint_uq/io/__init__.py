@@ -11,14 +11,20 @@ Every format is described in ``docs/file-formats.md``.
 """
 
 from .camera_files import (
-           FORMATS,
-           camera_from_dict,
-           camera_to_dict,
-           detect_format,
-           load_camera,
-           save_budget,
-           save_camera,
+    FORMATS,
+    camera_from_dict,
+    camera_to_dict,
+    detect_format,
+    load_camera,
+    load_intrinsics,
+    save_budget,
+    save_camera,
 )
+from .dataset_files import read_tumtraf_calibration
+from .opencv_files import read_opencv_file
+from .pose import camera_from_intrinsics_and_pose, read_pose
+from .ros_files import read_ros_camera_info
 
-__all__ = ["FORMATS", "camera_from_dict", "camera_to_dict", "detect_format", "load_camera", "save_camera",
-           "save_budget"]
+__all__ = ["FORMATS", "camera_from_dict", "camera_to_dict", "detect_format", "load_camera", "load_intrinsics",
+           "save_budget", "save_camera", "camera_from_intrinsics_and_pose", "read_pose", "read_opencv_file",
+           "read_ros_camera_info", "read_tumtraf_calibration"]

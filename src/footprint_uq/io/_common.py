@@ -283,8 +283,9 @@ def check_projection_matrix(where: str, field: str, P_file: np.ndarray, camera, 
         warnings.warn(f"{label(where, field)} differs from K [R | t] (relative {rel:.2g}; at ground points seen at "
                       f"pixels {detail}){explained}; using K, dist, R, t", ConsistencyWarning, stacklevel=3)
         return
-    raise ConfigError(label(where, field), f"differs from K [R | t] by up to {d.max():.3g} px ({detail})",
-                      f"a projection matrix consistent with K [R | t] (within {far_px:g} px)")
+    raise ConfigError(label(where, field), f"{d.max():.3g} px away from K [R | t]",
+                      f"a projection matrix consistent with K [R | t] within {far_px:g} px (ground points seen at "
+                      f"pixels {detail})")
 
 
 def sanitize(obj):

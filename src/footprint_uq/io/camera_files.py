@@ -41,8 +41,8 @@ from ..cameras.pantilt import PanTiltCamera
 from ..errors import ConfigError, InputError
 from . import _common as C
 
-__all__ = ["load_camera", "save_camera", "save_budget", "camera_from_dict", "camera_to_dict", "FORMATS",
-           "PANTILT_KEYS", "OPENCV_KEYS"]
+__all__ = ["load_camera", "load_intrinsics", "save_camera", "save_budget", "camera_from_dict", "camera_to_dict",
+           "detect_format", "FORMATS", "PANTILT_KEYS", "OPENCV_KEYS"]
 
 #: formats understood by :func:`load_camera`
 FORMATS = ("footprint-uq", "opencv", "ros", "tumtraf")
@@ -420,3 +420,35 @@ def load_camera(path, *, format: str | None = None, ground_z_m=None, image_size_
     from .dataset_files import camera_from_tumtraf_file
 
     return camera_from_tumtraf_file(p, ground_z_m=ground_z_m, image_size_px=image_size_px, pose=pose, **options)
+
+
+def load_intrinsics(path, *, format: str | None = None):
+    """The intrinsics of any supported camera file: ``(K (3, 3), dist (n,), image_size_px or None)``.
+
+    For intrinsics-only formats (OpenCV calibration output, ROS CameraInfo, TUMTraf
+    files without extrinsics); ``dist`` has the file's length (0, 4, 5 or 8) and
+    ``image_size_px`` is None when the file does not state it.  Combine with a pose
+    via :func:`footprint_uq.io.camera_from_intrinsics_and_pose`.
+    """
+    p, text = C.read_text(path)
+    fmt = format if format is not None else detect_format(p, text)
+    if fmt == "opencv":
+        from .opencv_files import read_opencv_file
+
+        d = read_opencv_file(p)
+    elif fmt == "ros":
+        from .ros_files import read_ros_camera_info
+
+        d = read_ros_camera_info(p)
+    elif fmt == "tumtraf":
+        from .dataset_files import read_tumtraf_calibration
+
+        d = read_tumtraf_calibration(p)
+    elif fmt == "footprint-uq":
+        cam = camera_from_dict(C.parse_mapping(text, p), where=str(p))
+        dist = cam.dist
+        return cam.K, dist[: 8 if np.any(dist[5:]) else 5], tuple(cam.image_size_px)
+    else:
+        raise ConfigError("format", format, f"one of {FORMATS} or None (auto-detect)")
+    size = d["image_size_px"]
+    return d["K"].copy(), np.asarray(d["dist"], dtype=np.float64).copy(), None if size is None else tuple(size)
