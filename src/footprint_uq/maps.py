@@ -184,7 +184,7 @@ class UncertaintyMap:
             "version": 1,
             "step_px": int(self.step_px),
             "max_range_m": self.max_range_m,
-            "camera": self.camera.to_dict() if hasattr(self.camera, "to_dict") else None,
+            "camera": _camera_dict(self.camera),
             "budget": self.budget.to_dict() if isinstance(self.budget, ErrorBudget) else None,
             "gsd_definition": GSD_DEFINITION,
             "orientation_convention": "degrees counter-clockwise from +x (east), in (-90, 90]",
@@ -207,20 +207,22 @@ class UncertaintyMap:
             arrays = {k: z[k] for k in z.files if k != "metadata_json"}
             meta = json.loads(str(z["metadata_json"])) if "metadata_json" in z.files else {}
         camera = None
-        cam_d = meta.get("camera")
-        if cam_d and cam_d.get("model") == "pan-tilt":
-            from .cameras.pantilt import PanTiltCamera
+        if meta.get("camera"):
+            from .io import camera_from_dict
 
-            kw = {k: v for k, v in cam_d.items() if k != "model"}
-            camera = PanTiltCamera(**kw)
-        elif cam_d and cam_d.get("model") == "opencv":
-            from .cameras.opencv import OpenCVCamera
-
-            camera = OpenCVCamera(cam_d["K"], cam_d["dist"], cam_d["R"], cam_d["t"], cam_d["image_size_px"],
-                                  cam_d.get("ground_z_m", 0.0))
+            camera = camera_from_dict(meta["camera"], where=str(path))
         budget = ErrorBudget.from_dict(meta["budget"]) if meta.get("budget") else None
         return cls(**arrays, step_px=int(meta.get("step_px", 1)), camera=camera, budget=budget,
                    max_range_m=meta.get("max_range_m"))
+
+
+def _camera_dict(camera):
+    """The camera-file mapping (exact round trip through :func:`footprint_uq.io.camera_from_dict`)."""
+    if camera is None:
+        return None
+    from .io import camera_to_dict
+
+    return camera_to_dict(camera)
 
 
 def _json_default(o):

@@ -42,9 +42,7 @@ _BAD = "#d9d9d9"
 def _cmap(name=_CMAP):
     import matplotlib
 
-    cm = matplotlib.colormaps[name].copy()
-    cm.set_bad(_BAD)
-    return cm
+    return matplotlib.colormaps[name].with_extremes(bad=_BAD)
 
 
 def _sigma_label(confidence):

@@ -1,0 +1,193 @@
+"""Uncertainty maps: agreement with propagate, GSD against finite differences, masking, files, figures."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from footprint_uq import ErrorBudget, InputError, OpenCVCamera, PanTiltCamera, ellipse_axes, propagate, status
+from footprint_uq.maps import UncertaintyMap, ground_sampling_distance, uncertainty_map
+
+BUDGET = ErrorBudget.preset("bw-bullet1").replace(ground_height_m=0.05, ground_slope_deg=0.5, roll_deg=0.01)
+
+
+@pytest.fixture(scope="module")
+def cam():
+    # small image so that step 1 stays fast; horizon inside the image
+    return PanTiltCamera(focal_px=300.0, image_size_px=(160, 120), height_m=6.0, pan_deg=-40.0, tilt_deg=8.0,
+                         roll_deg=3.0, position_m=(5.0, -2.0))
+
+
+@pytest.fixture(scope="module")
+def cam_cv():
+    K = [[310.0, 0.4, 81.0], [0.0, 305.0, 58.0], [0.0, 0.0, 1.0]]
+    pt = PanTiltCamera(300.0, (160, 120), 6.0, 25.0, 18.0, -2.0, (1.0, 2.0))
+    T = pt.T_cam_world
+    return OpenCVCamera(K, [-0.12, 0.03, 1e-3, -5e-4, 0.0], T[:3, :3], T[:3, 3], (160, 120))
+
+
+@pytest.mark.parametrize("step", [1, 7])
+def test_reference_path_equals_propagate(cam, step):
+    m = uncertainty_map(cam, BUDGET, step, use_kernel=False)
+    uv = cam.pixel_grid(step)
+    est = propagate(cam, BUDGET, uv)
+    assert m.uv_px.shape == uv.shape and m.shape == uv.shape[:2]
+    np.testing.assert_array_equal(m.uv_px, uv)
+    np.testing.assert_array_equal(m.valid, est.valid)
+    np.testing.assert_array_equal(m.reason, est.reason)
+    assert 0 < m.valid.mean() < 1  # both sky and ground in this image
+    np.testing.assert_allclose(m.xy_world_m, est.xy_world_m, rtol=1e-14, equal_nan=True)
+    np.testing.assert_allclose(m.cov_m2, est.cov_m2, rtol=1e-14, equal_nan=True)
+    a, b, ang = ellipse_axes(est.cov_m2)
+    np.testing.assert_allclose(m.semi_major_m, a, rtol=1e-14, equal_nan=True)
+    np.testing.assert_allclose(m.semi_minor_m, b, rtol=1e-14, equal_nan=True)
+    np.testing.assert_allclose(m.orientation_deg, ang, rtol=1e-14, equal_nan=True)
+
+
+def test_default_path_equals_reference(cam, cam_cv):
+    """Whatever path is used by default (fused kernel when present) agrees with propagate."""
+    for c in (cam, cam_cv):
+        ref = uncertainty_map(c, BUDGET, 5, use_kernel=False)
+        m = uncertainty_map(c, BUDGET, 5)
+        np.testing.assert_array_equal(m.valid, ref.valid)
+        np.testing.assert_array_equal(m.reason, ref.reason)
+        v = ref.valid
+        np.testing.assert_allclose(m.xy_world_m[v], ref.xy_world_m[v], rtol=1e-9, atol=1e-9)
+        scale = np.abs(ref.cov_m2[v]).max(axis=(-2, -1), keepdims=True)
+        assert np.max(np.abs(m.cov_m2[v] - ref.cov_m2[v]) / scale) < 1e-8
+        assert np.all(np.isnan(m.cov_m2[~v]))
+
+
+def _fd_jacobian(camera, uv, h=2e-4):
+    J = np.empty(uv.shape[:-1] + (2, 2))
+    for k in range(2):
+        d = np.zeros(2)
+        d[k] = h
+        J[..., :, k] = (camera.backproject(uv + d).xy_world_m - camera.backproject(uv - d).xy_world_m) / (2 * h)
+    return J
+
+
+@pytest.mark.parametrize("which", ["pantilt", "opencv"])
+def test_gsd_against_finite_differences(which, cam, cam_cv):
+    c = cam if which == "pantilt" else cam_cv
+    # up to 1 km: beyond, pixels graze the horizon and central differences lose accuracy (error ~ h^2 / s^3)
+    m = uncertainty_map(c, BUDGET, 3, use_kernel=False, max_range_m=1000.0)
+    v = m.valid
+    uv = m.uv_px[v]
+    J = _fd_jacobian(c, uv)
+    # independent evaluation of the definition
+    d = m.xy_world_m[v] - c.params[13:15]
+    e_r = d / np.linalg.norm(d, axis=-1, keepdims=True)
+    e_c = np.stack([-e_r[:, 1], e_r[:, 0]], -1)
+    a, b = J[:, :, 0], J[:, :, 1]
+    gr = np.abs(np.einsum("ni,ni->n", a, e_r)) + np.abs(np.einsum("ni,ni->n", b, e_r))
+    gc = np.abs(np.einsum("ni,ni->n", a, e_c)) + np.abs(np.einsum("ni,ni->n", b, e_c))
+    area = np.abs(np.linalg.det(J))
+    for got, want in ((m.gsd_range_m[v], gr), (m.gsd_cross_m[v], gc), (m.footprint_area_m2[v], area)):
+        rel = np.abs(got - want) / np.abs(want)
+        assert rel.max() < 1e-5, rel.max()
+    np.testing.assert_allclose(m.range_m[v], np.linalg.norm(d, axis=-1), rtol=1e-12)
+    assert np.all(np.isnan(m.gsd_range_m[~v])) and np.all(np.isnan(m.gsd_cross_m[~v]))
+
+
+def test_gsd_hand_checked_forward_camera():
+    """At the principal point: along-range GSD = h / (f sin^2 tilt), across = h / (f sin tilt)."""
+    h, f, tilt = 7.0, 1000.0, 15.0
+    c = PanTiltCamera(f, (201, 161), h, 123.0, tilt, 0.0, (3.0, 4.0), principal_point_px=(100.0, 80.0))
+    bp = c.backproject(np.array([100.0, 80.0]), get_gradients=True)
+    gr, gc, area, rng = ground_sampling_distance(c, bp.xy_world_m, bp.dxy_duv)
+    s = np.sin(np.radians(tilt))
+    assert gr == pytest.approx(h / (f * s * s), rel=1e-12)
+    assert gc == pytest.approx(h / (f * s), rel=1e-12)
+    assert area == pytest.approx(h * h / (f * f * s**3), rel=1e-12)
+    assert rng == pytest.approx(h / np.tan(np.radians(tilt)), rel=1e-12)
+
+
+def test_gsd_nadir_camera_uses_heading_below_the_camera():
+    h, f = 10.0, 500.0
+    c = PanTiltCamera(f, (101, 81), h, 30.0, 90.0, 0.0, principal_point_px=(50.0, 40.0))
+    bp = c.backproject(np.array([50.0, 40.0]), get_gradients=True)
+    gr, gc, area, rng = ground_sampling_distance(c, bp.xy_world_m, bp.dxy_duv)
+    assert rng < 1e-9
+    assert gr == pytest.approx(h / f, rel=1e-9) and gc == pytest.approx(h / f, rel=1e-9)
+    # the whole footprint of a nadir camera is a (W h/f) x (H h/f) rectangle
+    m = uncertainty_map(c, "basler1", 1)
+    assert m.valid.all()
+    total = m.summary(thresholds_m=(1e9,))["below_threshold"][0]["ground_area_m2"]
+    assert total == pytest.approx(101 * 81 * (h / f) ** 2, rel=1e-9)
+
+
+def test_max_range_masks_with_reason(cam):
+    full = uncertainty_map(cam, BUDGET, 4, use_kernel=False)
+    r = 40.0
+    m = uncertainty_map(cam, BUDGET, 4, max_range_m=r, use_kernel=False)
+    far = full.valid & (full.range_m > r)
+    assert far.any() and (full.valid & ~far).any()
+    np.testing.assert_array_equal(m.valid, full.valid & ~far)
+    assert np.all(m.reason[far] == status.BEYOND_RANGE)
+    assert np.all(m.reason[~full.valid] == full.reason[~full.valid])
+    for arr in (m.xy_world_m, m.cov_m2, m.semi_major_m, m.gsd_range_m, m.range_m):
+        assert np.all(np.isnan(arr[far]))
+    np.testing.assert_array_equal(m.cov_m2[m.valid], full.cov_m2[m.valid])
+    s = m.summary()
+    assert s["range_m_max"] <= r
+    assert s["reason_counts"][status.REASONS[status.BEYOND_RANGE]] == int(far.sum())
+
+
+def test_summary_consistent(cam):
+    m = uncertainty_map(cam, BUDGET, 4)
+    s = m.summary(confidence=0.95)
+    a95 = m.semi_axes(0.95)[0][m.valid]
+    assert s["semi_major_m_median"] == pytest.approx(np.median(a95))
+    assert s["fraction_valid"] == pytest.approx(m.valid.mean())
+    for t in s["below_threshold"]:
+        sel = m.valid & (m.semi_axes(0.95)[0] < t["semi_major_below_m"])
+        assert t["fraction_of_image"] == pytest.approx(sel.mean())
+        assert t["ground_area_m2"] == pytest.approx((m.footprint_area_m2[sel] * 16).sum())
+    json.dumps(s, allow_nan=False)
+
+
+def test_npz_round_trip(tmp_path, cam, cam_cv):
+    for c in (cam, cam_cv):
+        m = uncertainty_map(c, BUDGET, 9, max_range_m=60)
+        p = m.save_npz(tmp_path / "sub" / "m.npz")
+        back = UncertaintyMap.load_npz(p)
+        for name in ("uv_px", "xy_world_m", "cov_m2", "valid", "reason", "semi_major_m", "gsd_range_m",
+                     "gsd_cross_m", "footprint_area_m2", "range_m", "orientation_deg"):
+            np.testing.assert_array_equal(getattr(back, name), getattr(m, name))
+        assert back.step_px == 9 and back.max_range_m == 60
+        np.testing.assert_array_equal(back.camera.params, c.params)
+        np.testing.assert_array_equal(back.budget.param_covariance(), BUDGET.param_covariance())
+        with np.load(p) as z:
+            meta = json.loads(str(z["metadata_json"]))
+        assert "e_range" in meta["gsd_definition"]
+
+
+def test_bad_input(cam):
+    for step in (0, -2, 1.5, "a"):
+        with pytest.raises(InputError, match="step_px"):
+            uncertainty_map(cam, BUDGET, step)
+    with pytest.raises(InputError, match="max_range_m"):
+        uncertainty_map(cam, BUDGET, 4, max_range_m=-1)
+    with pytest.raises(InputError, match="budget"):
+        uncertainty_map(cam, "no-such-preset", 4)
+
+
+def test_figures(tmp_path, cam):
+    from footprint_uq import viz
+
+    m = uncertainty_map(cam, BUDGET, 2, max_range_m=80)
+    fig = viz.plot_image_map(m, confidence=0.95)
+    ax = fig.axes[0]
+    img = ax.images[0].get_array()
+    want = np.ma.masked_invalid(np.where(m.valid, m.semi_axes(0.95)[0], np.nan))
+    np.testing.assert_array_equal(img.mask, want.mask)
+    np.testing.assert_allclose(img.compressed(), want.compressed())
+    assert "2.448" in fig.axes[1].get_ylabel()  # colourbar says which multiple of sigma
+    for name, f in (("img", fig), ("ground", viz.plot_ground_map(m)), ("gsd", viz.plot_gsd_maps(m)),
+                    ("prof", viz.plot_range_profile([m]))):
+        p = viz.save_figure(f, tmp_path / f"{name}.png", dpi=60)
+        assert p.stat().st_size > 5000
+        assert p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
