@@ -17,7 +17,7 @@ __all__ = ["OpenCVCamera"]
 
 def _matrix(name, value, shape):
     try:
-        a = np.asarray(value, dtype=np.float64)
+        a = np.array(value, dtype=np.float64, order="C")  # C order: results independent of the layout
     except (TypeError, ValueError):
         raise InputError(name, value, f"a numeric {shape[0]}x{shape[1]} matrix") from None
     if a.size == shape[0] * shape[1] and a.shape != shape:

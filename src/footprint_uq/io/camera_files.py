@@ -222,7 +222,7 @@ def _opencv_from_dict(d, where):
                 C.check_projection_matrix(where, "P", P, cam)
             return cam
         cam = OpenCVCamera.from_projection_matrix(P, size, dist, gz)
-        C.check_projection_matrix(where, "P vs K", P, _replace_K(cam, K))
+        C.check_projection_matrix(where, "P", P, _replace_K(cam, K))
         return _replace_K(cam, K)
     except InputError as e:
         if isinstance(e, ConfigError):
