@@ -363,6 +363,13 @@ def test_P_consistency_levels(ref):
     P = K @ np.c_[R, T]
     with strict():  # any homogeneous scale, including negative, is the same P
         same_camera(camera_from_dict(_opencv_dict(P=(-2.5 * P).tolist()), where="c.yaml"), ref)
+    six = np.vectorize(lambda x: float(f"{x:.6g}"))(P)  # P printed with 6 significant digits: < 0.05 px
+    assert np.linalg.norm(six - P) / np.linalg.norm(P) > 1e-6
+    with strict():
+        camera_from_dict(_opencv_dict(P=six.tolist()), where="c.yaml")
+    five = np.vectorize(lambda x: float(f"{x:.5g}"))(P)  # 5 digits: about 0.09 px, reported
+    with pytest.warns(ConsistencyWarning, match=r"c.yaml: P differs from K \[R \| t\]"):
+        camera_from_dict(_opencv_dict(P=five.tolist()), where="c.yaml")
     small = P.copy()
     small[0] += 0.5 * P[2]  # u + 0.5 px everywhere
     with pytest.warns(ConsistencyWarning, match=r"c.yaml: P differs from K \[R \| t\].*0.5 px"):

@@ -26,8 +26,8 @@ __all__ = [
 P_RTOL = 1e-6
 #: largest pixel discrepancy between P and K [R | t] that is only a warning; beyond it a ConfigError
 P_FAR_PX = 5.0
-#: pixel discrepancy above which a warning is issued even when the relative difference is small
-P_WARN_PX = 0.01
+#: pixel discrepancy (everywhere) below which P is taken as K [R | t] printed with fewer digits
+P_WARN_PX = 0.05
 
 
 def label(where: str, field: str) -> str:
@@ -268,7 +268,9 @@ def check_projection_matrix(where: str, field: str, P_file: np.ndarray, camera, 
         return
     uv, d = projection_discrepancy_px(Pn, P_model, camera.image_size_px, camera.position_world_m,
                                       camera.ground_z_m)
-    detail = ", ".join(f"({u:.0f}, {v:.0f}): {e:.3g} px" for (u, v), e in zip(uv, d, strict=True))
+    if d.max() <= P_WARN_PX:  # print precision of P: below 0.05 px everywhere
+        return
+    detail = ", ".join(f"({round(u)}, {round(v)}): {e:.3g} px" for (u, v), e in zip(uv, d, strict=True))
     explained = ""
     for key, K_alt in (alt_K or {}).items():
         try:
