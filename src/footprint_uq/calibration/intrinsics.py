@@ -40,6 +40,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -200,39 +201,65 @@ class BootstrapResult:
         return np.cov(self.samples, rowvar=False) if len(self.samples) > 1 else np.full((9, 9), np.nan)
 
 
+def _boot_fit(args):
+    import cv2
+
+    obj, imgs, idx_list, image_size_px, K0, d0, flags = args
+    cv2.setNumThreads(1)
+    out = []
+    for idx in idx_list:
+        try:
+            f = _calibrate(obj, [imgs[i] for i in idx], image_size_px, flags | cv2.CALIB_USE_INTRINSIC_GUESS, K0, d0)
+        except InputError:
+            out.append(None)
+            continue
+        v = np.array([f.K[0, 0], f.K[1, 1], f.K[0, 2], f.K[1, 2], *f.dist[:5]])
+        out.append(v if np.all(np.isfinite(v)) else None)
+    return out
+
+
 def bootstrap_intrinsics(obj, imgs, image_size_px, K0, d0, n: int, *, seed: int = 0, min_views: int = 3,
-                         flags: int = 0, progress: bool = False) -> BootstrapResult:
+                         flags: int = 0, workers: int = 1, progress: bool = False) -> BootstrapResult:
     """Resample views with replacement ``n`` times and recalibrate (seeded).
 
     Each resample starts from the full-data solution (``CALIB_USE_INTRINSIC_GUESS``).
     Resamples with fewer than ``min_views`` distinct views are redrawn; resamples
-    OpenCV cannot solve are counted in ``n_failed``.
+    OpenCV cannot solve are counted in ``n_failed``.  The resamples are drawn
+    up front, so the result does not depend on ``workers``.
     """
-    import cv2
+    from concurrent.futures import ProcessPoolExecutor
+
     from tqdm.auto import tqdm
 
     n = int(n)
     rng = np.random.default_rng(seed)
     m = len(imgs)
-    out = []
-    failed = 0
-    for _ in tqdm(range(n), desc="bootstrap", unit="fit", disable=not progress):
+    draws = []
+    for _ in range(n):
         for _attempt in range(100):
             idx = rng.integers(0, m, size=m)
             if np.unique(idx).size >= min(min_views, m):
                 break
-        try:
-            f = _calibrate(obj, [imgs[i] for i in idx], image_size_px, flags | cv2.CALIB_USE_INTRINSIC_GUESS,
-                           K0, d0)
-        except InputError:
-            failed += 1
-            continue
-        v = np.array([f.K[0, 0], f.K[1, 1], f.K[0, 2], f.K[1, 2], *f.dist[:5]])
-        if not np.all(np.isfinite(v)):
-            failed += 1
-            continue
-        out.append(v)
-    return BootstrapResult(np.array(out).reshape(-1, 9), n, failed, int(seed))
+        draws.append(idx)
+    imgs = [np.asarray(c, dtype=np.float64) for c in imgs]
+    chunk = 10
+    tasks = [(obj, imgs, draws[i:i + chunk], image_size_px, K0, d0, flags) for i in range(0, n, chunk)]
+    results: list = []
+    bar = tqdm(total=n, desc="bootstrap", unit="fit", disable=not progress)
+    try:
+        if int(workers) <= 1 or len(tasks) == 1:
+            for tk in tasks:
+                results.extend(_boot_fit(tk))
+                bar.update(len(tk[2]))
+        else:
+            with ProcessPoolExecutor(max_workers=int(workers)) as ex:
+                for tk, res in zip(tasks, ex.map(_boot_fit, tasks), strict=True):
+                    results.extend(res)
+                    bar.update(len(tk[2]))
+    finally:
+        bar.close()
+    ok = [v for v in results if v is not None]
+    return BootstrapResult(np.array(ok).reshape(-1, 9), n, n - len(ok), int(seed))
 
 
 def compare_sigmas(std_opencv, std_bootstrap) -> dict:
@@ -672,7 +699,7 @@ def render_report(summ: dict) -> str:
 # ------------------------------------------------------------------------------------------ drivers
 def calibrate_corners(image_points_px, board, image_size_px, *, labels=None, max_mean_reproj_px=None,
                       bootstrap: int = 0, seed: int = 0, min_views: int = 3, flags: int = 0, max_rounds: int = 50,
-                      detections=None, progress: bool = False) -> IntrinsicCalibration:
+                      detections=None, workers: int = 1, progress: bool = False) -> IntrinsicCalibration:
     """Calibrate from corner positions already detected.
 
     Parameters
@@ -697,6 +724,10 @@ def calibrate_corners(image_points_px, board, image_size_px, *, labels=None, max
         Cap on filter rounds.
     detections : list of Detection, optional
         All input frames (kept for the report).
+    workers : int
+        Processes for the bootstrap.
+    progress : bool
+        Progress bar for the bootstrap.
 
     Returns
     -------
@@ -766,7 +797,7 @@ def calibrate_corners(image_points_px, board, image_size_px, *, labels=None, max
     boot = None
     if bootstrap and int(bootstrap) > 0:
         boot = bootstrap_intrinsics(obj, used, (w, h), fit.K, fit.dist, int(bootstrap), seed=seed, min_views=mv,
-                                    flags=flags, progress=progress)
+                                    flags=flags, workers=workers, progress=progress)
     return IntrinsicCalibration(
         board=board, image_size_px=(w, h), K=fit.K, dist=fit.dist, std_opencv=fit.std9, cov_jacobian=cov,
         corner_sigma_px=sig, rms_px=fit.rms_px, labels=[labels[i] for i in active], image_points_px=used,
@@ -842,5 +873,6 @@ def calibrate_intrinsics(images, board, square_m: float | None = None, *, video_
     if not isinstance(board, Checkerboard):
         board = parse_board(board, square_m if square_m is not None else 0.025)
     dets = detect_frames(images, board, video_step=video_step, workers=workers, method=method, progress=progress)
-    return calibrate_detections(dets, board, progress=progress, **kw)
+    n_workers = (os.cpu_count() or 1) if workers is None else int(workers)
+    return calibrate_detections(dets, board, progress=progress, workers=n_workers, **kw)
 
