@@ -284,6 +284,21 @@ def test_ros_camera_info(ref, tmp_path):
         load_intrinsics(wrong)
 
 
+def test_ros_message_dump(tmp_path, ref):
+    # a sensor_msgs/CameraInfo message dumped as YAML (flat K, D, R, P; width/height)
+    msg = {"header": {"frame_id": "cam"}, "height": 1200, "width": 1920, "distortion_model": "plumb_bob",
+           "D": DIST.tolist(), "K": K.ravel().tolist(), "R": np.eye(3).ravel().tolist(),
+           "P": np.c_[K, np.zeros(3)].ravel().tolist(), "binning_x": 0, "binning_y": 0}
+    p = tmp_path / "msg.yaml"
+    p.write_text(json.dumps(msg))
+    assert detect_format(p) == "ros"
+    with strict():
+        same_camera(load_camera(p, pose=POSE), ref)
+    p.write_text(json.dumps({**msg, "height": 0, "width": 0}))
+    assert load_intrinsics(p)[2] is None
+    same_camera(load_camera(p, pose=POSE, image_size_px=SIZE), ref)
+
+
 @pytest.mark.parametrize("name, match", [
     ("broken_ros_fisheye.yaml", "distortion_model: got 'equidistant'.*not supported"),
     ("broken_ros_rows.yaml", r"camera_matrix.data: got '5 numbers', expected rows x cols = 3 x 3 = 9"),

@@ -92,12 +92,10 @@ def read_ros_camera_info(path) -> dict:
         dist = np.zeros(0)
     w = d.get("image_width", d.get("width"))
     h = d.get("image_height", d.get("height"))
-    if w is None or h is None:
+    if w is None or h is None or (w == 0 and h == 0):  # 0 x 0: size not set (an uncalibrated CameraInfo)
         size = None
     else:
         size = C.as_image_size(where, "image_width, image_height", [w, h])
-        if size == (0, 0):
-            size = None
     rkey = next((k for k in ("rectification_matrix", "R", "r") if k in d), None)
     if rkey is not None and d[rkey] is not None:
         Rr = _ros_matrix(where, rkey, d[rkey], (3, 3))
