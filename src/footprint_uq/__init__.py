@@ -11,6 +11,7 @@ from .cameras.opencv import OpenCVCamera
 from .cameras.pantilt import PanTiltCamera
 from .ellipse import chi2_scale, ellipse_axes, ellipse_points
 from .errors import ConfigError, ConsistencyWarning, FootprintUQError, InputError
+from .io import load_camera, save_budget, save_camera
 from .params import PARAM_NAMES
 from .propagation import (
     GroundEstimate,
@@ -27,6 +28,8 @@ __version__ = "0.1.0"
 __all__ = [
     "ErrorBudget", "load_budget", "OpenCVCamera", "PanTiltCamera", "chi2_scale", "ellipse_axes",
     "ellipse_points", "ConfigError", "ConsistencyWarning", "FootprintUQError", "InputError",
-    "PARAM_NAMES", "GroundEstimate", "JointEstimate", "linearity_ratio", "monte_carlo", "propagate",
+    "PARAM_NAMES",
+    "load_camera", "save_camera", "save_budget",
+    "GroundEstimate", "JointEstimate", "linearity_ratio", "monte_carlo", "propagate",
     "propagate_joint", "unscented", "__version__",
 ]
