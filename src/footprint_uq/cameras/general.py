@@ -177,4 +177,7 @@ def project(params, xyz_rel_m, *, get_gradients=False) -> Projection:
     J[..., P.DIST_SLICE] = duv_dxd @ dxd_ddist
     J[..., P.XM:P.HM + 1] = -duv_dxyz
     J[..., P.PAN:P.ROLL + 1] = duv_dpc @ np.swapaxes(dpc_dang, -1, -2)
+    # no derivative of an undefined point (the principal-point columns would otherwise read 1)
+    J[~valid] = np.nan
+    duv_dxyz = np.where(valid[..., None, None], duv_dxyz, np.nan)
     return Projection(uv, valid, reason, duv_dxyz, J)

@@ -96,9 +96,13 @@ def pan_tilt_roll_from_R_W_C(R):
     """
     R = np.asarray(R, dtype=np.float64)
     A = R_W_G.T @ R @ R_P_C.T  # = R_G_P
-    s_t = np.clip(A[..., 2, 0], -1.0, 1.0)
-    tilt = np.arcsin(s_t)
-    gimbal = np.abs(s_t) > 1.0 - 1e-12
+    # boresight in G: (cos t cos a, cos t sin a, sin t); atan2 keeps full precision near +-90 deg,
+    # where arcsin(sin t) would lose half the digits
+    c_t = np.hypot(A[..., 0, 0], A[..., 1, 0])
+    tilt = np.arctan2(A[..., 2, 0], c_t)
+    gimbal = c_t < 1e-12
+    # at tilt = +90 deg only pan + roll is defined, at -90 deg only pan - roll: both read
+    # atan2(-A01, A11) with roll = 0
     pan = np.where(gimbal, np.arctan2(-A[..., 0, 1], A[..., 1, 1]), np.arctan2(A[..., 1, 0], A[..., 0, 0]))
     roll = np.where(gimbal, 0.0, np.arctan2(A[..., 2, 1], A[..., 2, 2]))
     return pan, tilt, roll
