@@ -508,6 +508,15 @@ _FIG_CAPTIONS = {
 }
 
 
+def _circ_median(bearing_deg) -> float:
+    """Median of compass bearings (degrees), unwrapped around their circular mean."""
+    b = np.asarray(bearing_deg, dtype=float)
+    if not b.size:
+        return float("nan")
+    m = np.rad2deg(np.arctan2(np.sin(np.deg2rad(b)).mean(), np.cos(np.deg2rad(b)).mean()))
+    return float(np.mod(m + np.median((b - m + 180.0) % 360.0 - 180.0), 360.0))
+
+
 def _fmt_xy(v):
     return "&ndash;" if v is None else f"({v[0]:.1f}, {v[1]:.1f})"
 
@@ -540,33 +549,48 @@ def _findings_html(result, esc) -> str:
                          f"{verdict} ({n_hold}/{len(rows)} camera types); median σ_X/σ_Y on the entry lane "
                          f"{ent:.2f}, in the turn {trn:.2f}, on the exit lane {ext:.2f}.</li>")
     parts.append("<ul>" + "".join(items) + "</ul>")
-    # why
+    # why: line of sight and ellipse orientation, from the data
     why = []
     for cam in cams:
         r = result.rows(cam, types[0])
         ok = r["centre_valid"].to_numpy(bool)
+        camobj = result.scene.cameras[cam]
+        d = r[["box_x_m", "box_y_m"]].to_numpy() - camobj.position_world_m[:2]
+        bearing = np.mod(np.rad2deg(np.arctan2(d[:, 0], d[:, 1])), 360.0)  # compass, from the camera foot
+        seg = r["segment"].to_numpy()
+        b_txt = ", ".join(f"{name} {_circ_median(bearing[ok & (seg == k)]):.0f}°" for k, name in
+                          enumerate(("entry lane", "turn", "exit lane")) if np.any(ok & (seg == k)))
+        los_ori = np.mod(90.0 - bearing, 180.0)  # line of sight as an axis orientation, ccw from east
+        maj = np.mod(r["centre_orientation_deg"].to_numpy(), 180.0)
+        dev = np.abs((maj - los_ori + 90.0) % 180.0 - 90.0)[ok]
         sr = r["centre_sigma_X_range_m"].to_numpy()[ok]
         sc = r["centre_sigma_Y_range_m"].to_numpy()[ok]
-        share = float(np.mean(sr > sc)) if sr.size else float("nan")
         ratio = float(np.median(sr / sc)) if sr.size else float("nan")
         contrib = [c for c in r.columns if c.startswith("contrib_")]
         tot = r[contrib].sum(axis=1).to_numpy()[ok]
         shares = {c[8:-3]: float(np.nanmedian(r[c].to_numpy()[ok] / tot)) for c in contrib} if tot.size else {}
         top = sorted(shares.items(), key=lambda kv: -kv[1])[:3]
-        why.append(f"<li>{esc(cam)} ({esc(camera_type_label(types[0]))}): the ellipse is elongated along the line "
-                   f"of sight in {100 * share:.0f} % of the frames in view (median range/cross-range σ ratio "
-                   f"{ratio:.2f}); largest variance shares (median over frames): "
-                   + ", ".join(f"{esc(k)} {100 * v:.0f} %" for k, v in top) + ".</li>")
-    parts.append("<p><b>Why.</b> The footprint-centre ellipse is stretched along the camera's line of sight "
-                 "(range), because the dominant camera-level errors (height, and in general tilt and row "
-                 "errors) move a ground point along the ray; σ_X and σ_Y are that ellipse projected on two fixed "
-                 "axes. Which axis dominates therefore depends on the direction from the camera to the vehicle "
-                 "relative to the X axis, not on the manoeuvre itself. On a left turn seen from a camera at the "
-                 "far corner, the line of sight swings from the approach direction (north-south) to the exit "
-                 "direction (east-west): with X = north the paper's sequence appears; with X = east it is "
-                 "reversed; with X along the camera's pan the line of sight stays within the field of view "
-                 "around the boresight, so X (along) dominates throughout unless the vehicle passes close to "
-                 "the camera's side.</p><ul>" + "".join(why) + "</ul>")
+        cr = result.crossings(cam, types[0], "north-east")
+        cr_txt = ""
+        if cr:
+            c0 = cr[0]
+            bc = np.mod(np.rad2deg(np.arctan2(c0["x_m"] - camobj.position_world_m[0],
+                                              c0["y_m"] - camobj.position_world_m[1])), 360.0)
+            cr_txt = (f" In the north-east reading σ_X = σ_Y at ({c0['x_m']:.1f}, {c0['y_m']:.1f}) m, where the line "
+                      f"of sight has bearing {bc:.0f}° (45° off north-south would be 45°, 135°, 225° or 315°).")
+        why.append(f"<li>{esc(cam)} ({esc(camera_type_label(types[0]))}): median bearing of the line of sight "
+                   f"(camera foot to vehicle, clockwise from north): {b_txt}. The ellipse's major axis deviates from "
+                   f"the line of sight by {np.median(dev) if dev.size else float('nan'):.1f}° (median over frames; "
+                   f"σ_range/σ_cross-range median {ratio:.2f}). Largest variance shares: "
+                   + ", ".join(f"{esc(k)} {100 * v:.0f} %" for k, v in top) + "." + cr_txt + "</li>")
+    parts.append("<p><b>Why.</b> The footprint-centre ellipse is stretched along the camera's line of sight, "
+                 "because the dominant camera-level error (here the camera height; in general also tilt and "
+                 "row errors) moves a ground point along its ray; σ_X and σ_Y are that ellipse projected on two "
+                 "fixed axes. So which of the two dominates depends on the direction from the camera to the "
+                 "vehicle relative to the X axis: for an elongated ellipse X dominates while the line of sight is "
+                 "within about 45° of X, Y beyond. The paper's sequence therefore appears when the line of "
+                 "sight swings across 45° from X during the turn, which depends on where the camera stands "
+                 "and on how X is tied to the ground; the numbers per camera:</p><ul>" + "".join(why) + "</ul>")
     # statement 2
     lw = result.lane_width_statements()
     parts.append("<p><b>Paper:</b> &ldquo;the uncertainty in BW-Cube cameras being almost equivalent to the lane "
@@ -600,7 +624,11 @@ def write_case_study_report(result, out_dir, *, settings: dict | None = None, el
 
     Returns a dict with the paths (``figures``: stem -> path, ``csv``, ``summary``, ``report``).
     """
-    from .report import esc, html_page, html_table, img_tag, write_html
+    from .report import esc, html_page, img_tag, write_html
+    from .report import html_table as _html_table
+
+    def html_table(*a, **k):
+        return '<div style="overflow-x:auto">' + _html_table(*a, **k) + "</div>"
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -630,6 +658,31 @@ def write_case_study_report(result, out_dir, *, settings: dict | None = None, el
              f"<code>*_95</code> numbers are 2-D {100 * result.confidence:g} % regions "
              f"({chi2_scale(result.confidence):.4g} σ). All numbers are first-order propagation "
              f"(<code>footprint_uq.footprints.footprints_from_boxes3d</code>).</p>"]
+    parts.append(_findings_html(result, esc).replace("&nbsp;", " "))
+    parts.append("<h2>Summary per camera and camera type</h2>")
+    parts.append(html_table(summary, headers={
+        "frames_centre_valid": "frames with centre", "centre_sigma_major_median_m": "centre σ_major median [m]",
+        "centre_sigma_major_max_m": "centre σ_major max [m]",
+        "centre_semi_major_95_max_m": "centre 95 % semi-major max [m]",
+        "centre_semi_major_95_junction_median_m": "centre 95 % semi-major, junction median [m]",
+        "centre_axis_95_junction_median_over_lane": "95 % major axis / lane width (junction)",
+        "largest_sigma_major_max_m": "largest-point σ_major max [m]",
+        "frames_centre_95_over_half_lane": "frames with 95 % semi-major > half lane"}, floatfmt=".3g"))
+    parts.append("<h2>Figures</h2>")
+    for i, cam in enumerate(result.camera_names):
+        parts.append(f"<h3>{esc(cam)}</h3>")
+        for kind in ("view", "birdseye", "sigma", "contributions", "heatmap"):
+            stem = f"{cam}_{kind}"
+            cap = _FIG_CAPTIONS[kind].format(cam=cam, conf=f"{100 * result.confidence:g} %", fig=8 + i)
+            parts.append(img_tag(pngs[stem], cap))
+    parts.append("<h2>X/Y statement in detail (per camera, camera type and axis reading)</h2>")
+    st_rows = [dict(s, first_X_to_Y_crossing_xy_m=_fmt_xy(s["first_X_to_Y_crossing_xy_m"]),
+                    camera_type=camera_type_label(s["camera_type"])) for s in statements]
+    parts.append(html_table(st_rows, columns=["camera", "camera_type", "axes", "frames_entry", "frames_turn",
+                                              "frames_exit", "share_X_gt_Y_entry", "share_Y_gt_X_exit",
+                                              "median_X_over_Y_entry", "median_X_over_Y_turn",
+                                              "median_X_over_Y_exit", "first_X_to_Y_crossing_t_s",
+                                              "crossing_in_junction", "holds"], floatfmt=".3g"))
     parts.append("<h2>Settings</h2><h3>Cameras</h3>")
     cam_rows = []
     for name, cam in scene.cameras.items():
@@ -654,31 +707,6 @@ def write_case_study_report(result, out_dir, *, settings: dict | None = None, el
             flat.append({"section": "trajectory", "setting": "turn radius used [m]",
                          "value": scene.extra["turn_radius_m"]})
         parts.append(html_table(flat, floatfmt=".4g"))
-    parts.append("<h2>Summary per camera and camera type</h2>")
-    parts.append(html_table(summary, headers={
-        "frames_centre_valid": "frames with centre", "centre_sigma_major_median_m": "centre σ_major median [m]",
-        "centre_sigma_major_max_m": "centre σ_major max [m]",
-        "centre_semi_major_95_max_m": "centre 95 % semi-major max [m]",
-        "centre_semi_major_95_junction_median_m": "centre 95 % semi-major, junction median [m]",
-        "centre_axis_95_junction_median_over_lane": "95 % major axis / lane width (junction)",
-        "largest_sigma_major_max_m": "largest-point σ_major max [m]",
-        "frames_centre_95_over_half_lane": "frames with 95 % semi-major > half lane"}, floatfmt=".3g"))
-    parts.append("<h2>X/Y statement, per camera, camera type and axis reading</h2>")
-    st_rows = [dict(s, first_X_to_Y_crossing_xy_m=_fmt_xy(s["first_X_to_Y_crossing_xy_m"]),
-                    camera_type=camera_type_label(s["camera_type"])) for s in statements]
-    parts.append(html_table(st_rows, columns=["camera", "camera_type", "axes", "frames_entry", "frames_turn",
-                                              "frames_exit", "share_X_gt_Y_entry", "share_Y_gt_X_exit",
-                                              "median_X_over_Y_entry", "median_X_over_Y_turn",
-                                              "median_X_over_Y_exit", "first_X_to_Y_crossing_t_s",
-                                              "crossing_in_junction", "holds"], floatfmt=".3g"))
-    parts.append(_findings_html(result, esc).replace("&nbsp;", " "))
-    parts.append("<h2>Figures</h2>")
-    for i, cam in enumerate(result.camera_names):
-        parts.append(f"<h3>{esc(cam)}</h3>")
-        for kind in ("view", "birdseye", "sigma", "contributions", "heatmap"):
-            stem = f"{cam}_{kind}"
-            cap = _FIG_CAPTIONS[kind].format(cam=cam, conf=f"{100 * result.confidence:g} %", fig=8 + i)
-            parts.append(img_tag(pngs[stem], cap))
     parts.append(f"<h2>Files</h2><p><code>{esc(csv_path.name)}</code>: every per-frame value (one row per "
                  f"camera, camera type and frame; columns in docs/case-study.md); <code>{esc(summary_path.name)}"
                  f"</code>: the tables above; one PNG per figure.</p>")
