@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import warnings
 
 import numpy as np
 import pytest
@@ -47,10 +48,12 @@ def test_reference_path_equals_propagate(cam, step):
 
 
 def test_default_path_equals_reference(cam, cam_cv):
-    """Whatever path is used by default (fused kernel when present) agrees with propagate."""
+    """Whatever path is used by default (fused kernel when present) agrees with propagate, without fallback."""
     for c in (cam, cam_cv):
         ref = uncertainty_map(c, BUDGET, 5, use_kernel=False)
-        m = uncertainty_map(c, BUDGET, 5)
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", RuntimeWarning)
+            m = uncertainty_map(c, BUDGET, 5)
         np.testing.assert_array_equal(m.valid, ref.valid)
         np.testing.assert_array_equal(m.reason, ref.reason)
         v = ref.valid
@@ -58,6 +61,34 @@ def test_default_path_equals_reference(cam, cam_cv):
         scale = np.abs(ref.cov_m2[v]).max(axis=(-2, -1), keepdims=True)
         assert np.max(np.abs(m.cov_m2[v] - ref.cov_m2[v]) / scale) < 1e-8
         assert np.all(np.isnan(m.cov_m2[~v]))
+
+
+def test_kernel_guard_falls_back_on_disagreement(cam, monkeypatch):
+    """A kernel returning wrong numbers is detected, reported and replaced by the reference path."""
+    import footprint_uq.maps as maps_mod
+
+    def broken(camera, budget, step_px=1, *, out=None):
+        est = propagate(camera, budget, camera.pixel_grid(step_px))
+        cov = est.cov_m2.copy()
+        cov[est.valid.nonzero()[0][-1], :] *= 1.01  # one row of pixels 1 % off
+        return est.xy_world_m, cov, est.valid
+
+    monkeypatch.setattr(maps_mod, "_covariance_map_kernel", lambda: broken)
+    ref = uncertainty_map(cam, BUDGET, 4, use_kernel=False)
+    with pytest.warns(RuntimeWarning, match="disagrees with the reference path"):
+        m = uncertainty_map(cam, BUDGET, 4)
+    np.testing.assert_array_equal(m.cov_m2, ref.cov_m2)
+
+
+def test_pixel_jacobian_equals_backproject(cam, cam_cv):
+    from footprint_uq.maps import pixel_jacobian
+
+    for c in (cam, cam_cv):
+        uv = c.pixel_grid(6)
+        bp = c.backproject(uv, get_gradients=True)
+        J, valid = pixel_jacobian(c, uv)
+        np.testing.assert_array_equal(valid, bp.valid)
+        np.testing.assert_allclose(J, bp.dxy_duv, rtol=1e-12, atol=0, equal_nan=True)
 
 
 def _fd_jacobian(camera, uv, h=2e-4):

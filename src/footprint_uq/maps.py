@@ -36,6 +36,7 @@ way with :data:`footprint_uq.status.BEYOND_RANGE`.
 from __future__ import annotations
 
 import json
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -49,7 +50,7 @@ from .ellipse import chi2_scale, ellipse_axes
 from .errors import InputError
 from .propagation import propagate
 
-__all__ = ["UncertaintyMap", "uncertainty_map", "ground_sampling_distance", "GSD_DEFINITION"]
+__all__ = ["UncertaintyMap", "uncertainty_map", "ground_sampling_distance", "pixel_jacobian", "GSD_DEFINITION"]
 
 #: one-line definition stored with every saved map
 GSD_DEFINITION = ("gsd_range_m = |dxy/du . e_range| + |dxy/dv . e_range|, gsd_cross_m = the same with "
@@ -273,6 +274,67 @@ def ground_sampling_distance(camera, xy_world_m, dxy_duv):
     return gsd_r, gsd_c, area, rng
 
 
+def pixel_jacobian(camera, uv_px):
+    """``dxy_duv (..., 2, 2)`` (metres per pixel) and ``valid``, without the 22 parameter columns.
+
+    The same chain as :func:`footprint_uq.cameras.general.backproject` (pixel ->
+    normalised -> undistorted -> ray -> ground) restricted to the pixel
+    derivatives, several times cheaper than ``backproject(get_gradients=True)``
+    for whole images; ``tests/test_maps.py`` checks that both agree.  NaN where
+    the point is invalid.
+    """
+    from .cameras.distortion import undistort
+    from .cameras.pinhole import pixel_to_normalised
+    from .ground import intersect_ground
+
+    p = camera.params
+    uv = np.asarray(uv_px, dtype=np.float64)
+    xd, dxd_duv, _ = pixel_to_normalised(uv, p[P.FX], p[P.FY], p[P.CX], p[P.CY], p[P.SKEW], get_gradients=True)
+    dist = p[P.DIST_SLICE]
+    if np.any(dist):
+        xn, conv, dxn_dxd, _ = undistort(xd, dist, get_gradients=True)
+        dxn_duv = dxn_dxd @ dxd_duv
+    else:
+        xn, conv, dxn_duv = xd, np.ones(xd.shape[:-1], dtype=bool), dxd_duv
+    R = camera.R_world_cam
+    ray_w = xn @ R[:, :2].T + R[:, 2]
+    _, vg, _, dxy_dray, _ = intersect_ground(p[P.XM:P.HM + 1], ray_w, p[P.GDZ:P.GSY + 1], get_gradients=True)
+    J = dxy_dray @ R[:, :2] @ dxn_duv
+    valid = vg & conv & np.isfinite(uv).all(-1)
+    return np.where(valid[..., None, None], J, np.nan), valid
+
+
+def _kernel_disagreement(camera, budget, uv, xy, cov, valid, xy_ref, valid_ref, *, n_check: int = 256,
+                         rtol: float = 1e-6) -> str:
+    """Cheap guard on the fused kernel: '' if it agrees with the reference path, else what differs.
+
+    Checks validity and ground points everywhere, finiteness of every valid
+    covariance, and the covariance itself against :func:`propagate` at up to
+    ``n_check`` pixels spread over the image plus the farthest ones.
+    """
+    if not np.array_equal(valid, valid_ref):
+        return f"validity differs at {int((valid != valid_ref).sum())} pixels"
+    if not valid.any():
+        return ""
+    v = np.flatnonzero(valid)
+    d = np.abs(xy[v] - xy_ref[v]).max(-1)
+    tol = 1e-9 * (1.0 + np.abs(xy_ref[v]).max(-1))
+    if np.any(~(d <= tol)):
+        return f"ground points differ at {int((~(d <= tol)).sum())} pixels (max {np.nanmax(d):.3g} m)"
+    if not np.isfinite(cov[v]).all():
+        return f"non-finite covariance at {int((~np.isfinite(cov[v]).all((-1, -2))).sum())} valid pixels"
+    rng = np.hypot(*(xy[v] - camera.params[P.XM:P.YM + 1]).T)
+    pick = np.unique(np.concatenate([v[np.linspace(0, v.size - 1, min(n_check, v.size)).astype(np.intp)],
+                                     v[np.argsort(rng)[-min(32, v.size):]]]))
+    ref = propagate(camera, budget, uv[pick]).cov_m2
+    scale = np.abs(ref).max(axis=(-2, -1))
+    err = np.abs(cov[pick] - ref).max(axis=(-2, -1)) / scale
+    if np.any(~(err <= rtol)):
+        return f"covariance differs by up to {np.nanmax(err):.3g} (relative) at {int((~(err <= rtol)).sum())} " \
+               f"of {pick.size} checked pixels"
+    return ""
+
+
 def _covariance_map_kernel():
     """``footprint_uq.kernels.covariance_map`` if available, else None."""
     try:
@@ -327,33 +389,37 @@ def uncertainty_map(camera, budget, step_px: int = 1, *, max_range_m: float | No
     valid = np.empty(n, dtype=bool)
     reason = np.empty(n, dtype=np.int8)
     J = np.empty((n, 2, 2))
+    xy_ref = np.empty((n, 2))
 
     kernel = _covariance_map_kernel() if use_kernel else None
     if kernel is not None:
-        kxy, kcov, kvalid = kernel(camera, budget, step)
-        kxy, kcov, kvalid = (np.asarray(a) for a in (kxy, kcov, kvalid))
+        kxy, kcov, kvalid = (np.asarray(a) for a in kernel(camera, budget, step))
         if kxy.shape != (H, W, 2) or kcov.shape != (H, W, 2, 2) or kvalid.shape != (H, W):
             raise RuntimeError(f"kernels.covariance_map returned shapes {kxy.shape}, {kcov.shape}, "
                                f"{kvalid.shape}; expected ({H}, {W}, 2), ({H}, {W}, 2, 2), ({H}, {W})")
         xy[:] = kxy.reshape(-1, 2)
         cov[:] = kcov.reshape(-1, 2, 2)
-        kv = kvalid.reshape(-1)
+        valid[:] = kvalid.reshape(-1)
     for s in range(0, n, _BLOCK_PX):
         blk = slice(s, min(n, s + _BLOCK_PX))
-        bp = camera.backproject(flat[blk], get_gradients=True)
-        J[blk] = bp.dxy_duv
+        bp = camera.backproject(flat[blk])
+        xy_ref[blk] = bp.xy_world_m
+        J[blk] = pixel_jacobian(camera, flat[blk])[0]
         reason[blk] = bp.reason
         if kernel is None:
             est = propagate(camera, budget, flat[blk])
             xy[blk] = est.xy_world_m
             cov[blk] = est.cov_m2
             valid[blk] = est.valid
-        else:
-            valid[blk] = bp.valid & kv[blk]
-            # the kernel must agree with the reference path on validity; flag any disagreement
-            bad = bp.valid & ~kv[blk]
-            if np.any(bad):
-                reason[blk] = np.where(bad, status.NOT_FINITE, reason[blk])
+    if kernel is not None:
+        problem = _kernel_disagreement(camera, budget, flat, xy, cov, valid, xy_ref, reason == status.OK)
+        if problem:
+            warnings.warn(f"footprint_uq.kernels.covariance_map disagrees with the reference path ({problem}); "
+                          "using footprint_uq.propagation.propagate for this map", RuntimeWarning, stacklevel=2)
+            for s in range(0, n, _BLOCK_PX):
+                blk = slice(s, min(n, s + _BLOCK_PX))
+                est = propagate(camera, budget, flat[blk])
+                xy[blk], cov[blk], valid[blk] = est.xy_world_m, est.cov_m2, est.valid
     gsd_r, gsd_c, area, rng = ground_sampling_distance(camera, xy, J)
     if max_range_m is not None:
         far = valid & (rng > max_range_m)
