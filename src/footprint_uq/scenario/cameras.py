@@ -30,7 +30,7 @@ import numpy as np
 from .._checks import as_float
 from ..cameras.pantilt import PanTiltCamera
 from ..errors import ConfigError
-from .intersection import Intersection
+from .intersection import Intersection, cfg_float
 
 __all__ = ["CameraSpec", "default_camera_specs", "CAMERA_TYPES", "focal_from_hfov", "hfov_from_focal"]
 
@@ -116,7 +116,7 @@ class CameraSpec:
                 kw[k] = tuple(int(x) if k == "image_size_px" else float(x) for x in v)
         for k in ("height_m", "pan_deg", "tilt_deg", "roll_deg", "hfov_deg"):
             if k in kw:
-                kw[k] = as_float(f"{where}.{k}", kw[k])
+                kw[k] = cfg_float(f"{where}.{k}", kw[k])
         spec = cls(**kw)
         spec.build()  # validates every value with the camera's own checks
         return spec

@@ -51,7 +51,7 @@ from ..ellipse import chi2_scale, ellipse_axes
 from ..errors import ConfigError
 from ..footprints import footprints_from_boxes3d, polygon_centroid
 from .cameras import CAMERA_TYPES, CameraSpec, default_camera_specs
-from .intersection import Intersection, RoadLayout
+from .intersection import Intersection, RoadLayout, cfg_float
 from .trajectory import SEGMENTS, Vehicle, box_corners, left_turn_path, sample_trajectory
 
 __all__ = ["CaseStudyConfig", "Scene", "CaseStudyResult", "FootprintHeatmap", "load_config", "build_scene", "analyse",
@@ -102,7 +102,7 @@ class CaseStudyConfig:
     def __post_init__(self):
         if not self.cameras:
             self.cameras = default_camera_specs(self.intersection)
-        c = as_float("confidence", self.confidence)
+        c = cfg_float("confidence", self.confidence)
         if not 0 < c < 1:
             raise ConfigError("confidence", self.confidence, "a probability in (0, 1), e.g. 0.95")
 
@@ -147,7 +147,7 @@ class CaseStudyConfig:
         if bad:
             raise ConfigError(f"{where}: heatmap.{bad[0]}", h[bad[0]], f"one of {sorted(_HEAT_KEYS)}")
         heat.update(h)
-        as_float(f"{where}: heatmap.step_m", heat["step_m"], positive=True)
+        cfg_float(f"{where}: heatmap.step_m", heat["step_m"], positive=True)
         kw["heatmap"] = heat
         return cls(**kw)
 

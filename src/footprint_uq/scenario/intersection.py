@@ -26,7 +26,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from .._checks import as_float
-from ..errors import ConfigError
+from ..errors import ConfigError, InputError
 
 __all__ = ["ARMS", "Marking", "RoadLayout", "Intersection", "arm_direction", "left_of", "right_of"]
 
@@ -34,6 +34,16 @@ __all__ = ["ARMS", "Marking", "RoadLayout", "Intersection", "arm_direction", "le
 ARMS: dict[str, tuple[float, float]] = {
     "north": (0.0, 1.0), "south": (0.0, -1.0), "east": (1.0, 0.0), "west": (-1.0, 0.0),
 }
+
+
+def cfg_float(name: str, value, **kw) -> float:
+    """:func:`footprint_uq._checks.as_float` for settings: raises :class:`ConfigError`."""
+    try:
+        return as_float(name, value, **kw)
+    except ConfigError:
+        raise
+    except InputError as e:
+        raise ConfigError(e.field, e.value, e.expected) from None
 
 
 def arm_direction(arm: str) -> np.ndarray:
@@ -127,7 +137,7 @@ class RoadLayout:
             polys.append(a)
         jb = d.get("junction_box_m")
         return cls(polys, [Marking.from_dict(m) for m in d.get("markings", [])],
-                   as_float("lane_width_m", d.get("lane_width_m", 3.5), positive=True),
+                   cfg_float("lane_width_m", d.get("lane_width_m", 3.5), positive=True),
                    None if jb is None else tuple(float(v) for v in jb))
 
 
@@ -159,10 +169,10 @@ class Intersection:
         n = self.lanes_per_direction
         if not isinstance(n, int | np.integer) or isinstance(n, bool) or n < 1:
             raise ConfigError("lanes_per_direction", n, "an integer >= 1")
-        as_float("lane_width_m", self.lane_width_m, positive=True)
-        as_float("arm_length_m", self.arm_length_m, positive=True)
-        as_float("stop_line_setback_m", self.stop_line_setback_m, nonnegative=True)
-        as_float("curb_radius_m", self.curb_radius_m, nonnegative=True)
+        cfg_float("lane_width_m", self.lane_width_m, positive=True)
+        cfg_float("arm_length_m", self.arm_length_m, positive=True)
+        cfg_float("stop_line_setback_m", self.stop_line_setback_m, nonnegative=True)
+        cfg_float("curb_radius_m", self.curb_radius_m, nonnegative=True)
 
     @classmethod
     def from_dict(cls, d: dict | None) -> Intersection:

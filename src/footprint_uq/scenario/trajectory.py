@@ -25,7 +25,7 @@ import numpy as np
 
 from .._checks import as_float
 from ..errors import ConfigError, InputError
-from .intersection import Intersection, arm_direction, left_of
+from .intersection import Intersection, arm_direction, cfg_float, left_of
 
 __all__ = ["Vehicle", "LeftTurnPath", "Trajectory", "left_turn_path", "sample_trajectory", "box_corners",
            "segment_labels", "SEGMENTS"]
@@ -44,7 +44,7 @@ class Vehicle:
 
     def __post_init__(self):
         for k in ("length_m", "width_m", "height_m"):
-            as_float(f"vehicle.{k}", getattr(self, k), positive=True)
+            cfg_float(f"vehicle.{k}", getattr(self, k), positive=True)
 
     @classmethod
     def from_dict(cls, d: dict | None) -> Vehicle:
@@ -217,16 +217,17 @@ def sample_trajectory(path: LeftTurnPath, vehicle: Vehicle = Vehicle(), *, speed
 def box_corners(boxes) -> np.ndarray:
     """The 8 corners ``(..., 8, 3)`` of 3-D boxes ``(..., 7)``.
 
-    Order: bottom face front-left, front-right, rear-right, rear-left (seen from above, the
-    vehicle's nose is "front"), then the top face in the same order.  Corners 0-3 are the
-    footprint.
+    Order: the bottom face counter-clockwise seen from above starting rear-right --
+    (-l/2, -w/2), (+l/2, -w/2), (+l/2, +w/2), (-l/2, +w/2) in the box frame (x forward, y
+    left), the order of :func:`footprint_uq.footprints.box3d_bottom_corners` -- then the top
+    face in the same order.  Corners 0-3 are the footprint.
     """
     b = np.asarray(boxes, dtype=np.float64)
     if b.ndim == 0 or b.shape[-1] != 7:
         raise InputError("boxes", getattr(b, "shape", b), "an array of shape (..., 7)")
     hl, hw, hh = b[..., 3] / 2, b[..., 4] / 2, b[..., 5] / 2
-    lon = np.array([1.0, 1.0, -1.0, -1.0])
-    lat = np.array([1.0, -1.0, -1.0, 1.0])
+    lon = np.array([-1.0, 1.0, 1.0, -1.0])
+    lat = np.array([-1.0, -1.0, 1.0, 1.0])
     c, s = np.cos(b[..., 6])[..., None], np.sin(b[..., 6])[..., None]
     dx = lon * hl[..., None]
     dy = lat * hw[..., None]
