@@ -588,6 +588,8 @@ def _candidate(pts, fit, board, size, tol, thr):
     uv = np.stack([(pts - c0) @ e1, (pts - c0) @ e2], 1)
     rect0 = fit_rectangle(uv)
     ext0 = np.array(rect0.extent_m)
+    if ext0[1] > 2.0 * size[0] + 0.2:  # a board on a stand is at most about twice as tall as long
+        return None, f"patch of {len(pts)} pts, {ext0[0]:.1f} x {ext0[1]:.1f} m much larger than the board"
     if np.any(ext0 < (1 - tol) * size - 0.1):
         return None, f"patch of {len(pts)} pts, {ext0[0]:.2f} x {ext0[1]:.2f} m smaller than the board"
     rect = fit_rectangle(uv, size, tolerance_m=max(thr, 0.02))
