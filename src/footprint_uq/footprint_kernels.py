@@ -31,7 +31,9 @@ _C_R = 19  # 9 entries, row major, OpenCV camera -> world
 _C_HASDIST = 28
 _C_W, _C_HIMG = 29, 30
 _C_GROUNDZ = 31
-_C_LEN = 32
+_C_IFX, _C_IFY = 32, 33  # 1 / fx, 1 / fy
+_C_USE = 34  # 22 flags: parameter has non-zero variance (its Jacobian column is needed)
+_C_LEN = 56
 
 # status codes (footprint_uq.status) and the centre code DEGENERATE (footprints)
 _OK, _ABOVE, _NOTFIN, _UNDIST, _OUTSIDE, _BEHIND = 0, 1, 2, 3, 4, 5
@@ -44,10 +46,14 @@ _ORIENT_UNIT = 360.0 / 65535.0
 _PC_LEVELS = np.array([500.0, 200.0, 100.0, 50.0, 20.0, 10.0, 5.0, 2.0, 1.0, 0.5, 0.2, 0.1, 0.05, 0.02, 0.01])
 
 
-def camera_constants(camera) -> tuple[np.ndarray, np.ndarray]:
-    """``(cam, dR)`` for the kernels from a :class:`~footprint_uq.cameras.base.Camera`."""
-    from .cameras.rotation import R_W_C, dR_W_C
+def camera_constants(camera, param_cov=None) -> tuple[np.ndarray, np.ndarray]:
+    """``(cam, dR)`` for the kernels from a :class:`~footprint_uq.cameras.base.Camera`.
+
+    ``param_cov`` (22, 22): only the Jacobian columns of parameters with non-zero
+    variance are computed (all of them if None).
+    """
     from . import params as P
+    from .cameras.rotation import R_W_C, dR_W_C
 
     p = np.asarray(camera.params, dtype=np.float64)
     cam = np.zeros(_C_LEN)
@@ -59,11 +65,41 @@ def camera_constants(camera) -> tuple[np.ndarray, np.ndarray]:
     cam[_C_HASDIST] = 1.0 if np.any(p[P.DIST_SLICE] != 0) else 0.0
     cam[_C_W], cam[_C_HIMG] = camera.image_size_px
     cam[_C_GROUNDZ] = camera.ground_z_m
+    cam[_C_IFX], cam[_C_IFY] = 1.0 / p[0], 1.0 / p[1]
+    cam[_C_USE:_C_USE + 22] = 1.0 if param_cov is None else (np.diag(param_cov) != 0).astype(np.float64)
     dR = np.ascontiguousarray(dR_W_C(p[P.PAN], p[P.TILT], p[P.ROLL]))
     return cam, dR
 
 
-@njit(cache=True)
+def psd_factor(S: np.ndarray, *, rtol: float = 1e-14):
+    """Sparse factor of a PSD covariance: ``S = L L^T`` by diagonal-pivoted Cholesky.
+
+    Returns ``(rows, cols, vals, r)``: the non-zero entries of ``L`` (n x r) with r the
+    numerical rank.  Pivoting stops when the largest remaining diagonal is below
+    ``rtol * max(diag S)``; a diagonal S gives a diagonal L and fully correlated
+    parameters (one focal error moving fx and fy) share one column.
+    """
+    A = np.array(S, dtype=np.float64, copy=True)
+    n = A.shape[0]
+    L = np.zeros((n, n))
+    tol = rtol * max(float(np.max(np.diag(A), initial=0.0)), 0.0)
+    r = 0
+    while r < n:
+        d = np.diag(A)
+        p = int(np.argmax(d))
+        if not d[p] > tol:
+            break
+        col = A[:, p] / np.sqrt(d[p])
+        L[:, r] = col
+        A = A - np.outer(col, col)
+        A[p, :] = 0.0
+        A[:, p] = 0.0
+        r += 1
+    rows, cols = np.nonzero(L[:, :r])
+    return rows.astype(np.int64), cols.astype(np.int64), np.ascontiguousarray(L[rows, cols]), r
+
+
+@njit(cache=True, error_model="numpy")
 def _distort(x, y, cam, J, Jk, want_k):
     """Distorted (xd, yd); fills J (2, 2) and, if want_k, Jk (2, 8)."""
     k1, k2, p1, p2 = cam[_C_DIST], cam[_C_DIST + 1], cam[_C_DIST + 2], cam[_C_DIST + 3]
@@ -71,12 +107,13 @@ def _distort(x, y, cam, J, Jk, want_k):
     r2 = x * x + y * y
     num = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
     den = 1.0 + r2 * (k4 + r2 * (k5 + r2 * k6))
-    rad = num / den
+    iden = 1.0 / den
+    rad = num * iden
     xd = x * rad + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x)
     yd = y * rad + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y
     dnum = k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2)
     dden = k4 + r2 * (2.0 * k5 + 3.0 * k6 * r2)
-    drad = (dnum * den - num * dden) / (den * den)
+    drad = (dnum * den - num * dden) * (iden * iden)
     J[0, 0] = rad + x * drad * 2 * x + 2 * p1 * y + p2 * 6 * x
     J[0, 1] = x * drad * 2 * y + 2 * p1 * x + p2 * 2 * y
     J[1, 0] = y * drad * 2 * x + p1 * 2 * x + 2 * p2 * y
@@ -84,9 +121,9 @@ def _distort(x, y, cam, J, Jk, want_k):
     if want_k:
         r4 = r2 * r2
         r6 = r4 * r2
-        d2 = den * den
-        dr0, dr1, dr4 = r2 / den, r4 / den, r6 / den
-        dr5, dr6, dr7 = -num * r2 / d2, -num * r4 / d2, -num * r6 / d2
+        nd2 = -num * iden * iden
+        dr0, dr1, dr4 = r2 * iden, r4 * iden, r6 * iden
+        dr5, dr6, dr7 = nd2 * r2, nd2 * r4, nd2 * r6
         Jk[0, 0], Jk[1, 0] = x * dr0, y * dr0
         Jk[0, 1], Jk[1, 1] = x * dr1, y * dr1
         Jk[0, 2], Jk[1, 2] = 2.0 * x * y, r2 + 2.0 * y * y
@@ -98,21 +135,39 @@ def _distort(x, y, cam, J, Jk, want_k):
     return xd, yd
 
 
-@njit(cache=True)
-def _backproject(u, v, cam, dR, xy, Jp, Juv, Jd, Jk):
-    """Back-project one pixel: fills xy (2,), Jp (2, 22), Juv (2, 2); returns the status code.
+@njit(cache=True, error_model="numpy", inline="always")
+def _jk_zero(x, y, Jk):
+    """d distort / d coefficients at zero distortion (2, 8)."""
+    r2 = x * x + y * y
+    r4 = r2 * r2
+    r6 = r4 * r2
+    Jk[0, 0], Jk[1, 0] = x * r2, y * r2
+    Jk[0, 1], Jk[1, 1] = x * r4, y * r4
+    Jk[0, 2], Jk[1, 2] = 2.0 * x * y, r2 + 2.0 * y * y
+    Jk[0, 3], Jk[1, 3] = r2 + 2.0 * x * x, 2.0 * x * y
+    Jk[0, 4], Jk[1, 4] = x * r6, y * r6
+    Jk[0, 5], Jk[1, 5] = -x * r2, -y * r2
+    Jk[0, 6], Jk[1, 6] = -x * r4, -y * r4
+    Jk[0, 7], Jk[1, 7] = -x * r6, -y * r6
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _backproject(u, v, cam, dR, xy, Jp, Juv, kk, Jd, Jk):
+    """Back-project one pixel: fills xy (2,), Jp[kk, kk] (2, 22), Juv[kk, kk] (2, 2); returns the status code.
 
     Jd (2, 2) and Jk (2, 8) are scratch.  Mirrors general.backproject(get_gradients=True).
     """
-    fx, fy, cx, cy, sk = cam[0], cam[1], cam[2], cam[3], cam[4]
+    cx, cy, sk = cam[_C_CX], cam[_C_CY], cam[_C_SK]
     finite = math.isfinite(u) and math.isfinite(v)
-    yd = (v - cy) / fy
-    xd = (u - cx - sk * yd) / fx
+    ifx, ify = cam[_C_IFX], cam[_C_IFY]
+    yd = (v - cy) * ify
+    xd = (u - cx - sk * yd) * ifx
     # dxd/duv and dxd/dk (fx, fy, cx, cy, skew)
-    dxd_du, dxd_dv, dyd_dv = 1.0 / fx, -sk / fy / fx, 1.0 / fy
-    dy_dfy = -yd / fy
-    kx0, kx1, kx2, kx3, kx4 = -xd / fx, -sk / fx * dy_dfy, -1.0 / fx, sk / fy / fx, -yd / fx
-    ky1, ky3 = dy_dfy, -1.0 / fy
+    skf = sk * ify * ifx
+    dxd_du, dxd_dv, dyd_dv = ifx, -skf, ify
+    dy_dfy = -yd * ify
+    kx0, kx1, kx2, kx3, kx4 = -xd * ifx, -sk * ifx * dy_dfy, -ifx, skf, -yd * ifx
+    ky1, ky3 = dy_dfy, -ify
     # undistort
     conv = True
     xn, yn = xd, yd
@@ -123,29 +178,32 @@ def _backproject(u, v, cam, dR, xy, Jp, Juv, Jd, Jk):
             r0, r1 = fxd - xd, fyd - yd
             if max(abs(r0), abs(r1)) <= tol:
                 break
-            det = Jd[0, 0] * Jd[1, 1] - Jd[0, 1] * Jd[1, 0]
-            s0 = (Jd[1, 1] * r0 - Jd[0, 1] * r1) / det
-            s1 = (-Jd[1, 0] * r0 + Jd[0, 0] * r1) / det
+            idet = 1.0 / (Jd[0, 0] * Jd[1, 1] - Jd[0, 1] * Jd[1, 0])
+            s0 = (Jd[1, 1] * r0 - Jd[0, 1] * r1) * idet
+            s1 = (-Jd[1, 0] * r0 + Jd[0, 0] * r1) * idet
             xn, yn = xn - s0, yn - s1
         fxd, fyd = _distort(xn, yn, cam, Jd, Jk, True)
         r0, r1 = fxd - xd, fyd - yd
         det = Jd[0, 0] * Jd[1, 1] - Jd[0, 1] * Jd[1, 0]
         conv = (max(abs(r0), abs(r1)) <= tol) and det > 0
         # inverse of Jd
-        i00, i01, i10, i11 = Jd[1, 1] / det, -Jd[0, 1] / det, -Jd[1, 0] / det, Jd[0, 0] / det
+        idet = 1.0 / det
+        i00, i01, i10, i11 = Jd[1, 1] * idet, -Jd[0, 1] * idet, -Jd[1, 0] * idet, Jd[0, 0] * idet
     else:
         conv = math.isfinite(xd) and math.isfinite(yd)
-        _distort(xn, yn, cam, Jd, Jk, True)
+        _jk_zero(xn, yn, Jk)
         i00, i01, i10, i11 = 1.0, 0.0, 0.0, 1.0
     # ray in the world
-    R = cam[_C_R:_C_R + 9]
-    dx = R[0] * xn + R[1] * yn + R[2]
-    dy = R[3] * xn + R[4] * yn + R[5]
-    dz = R[6] * xn + R[7] * yn + R[8]
+    R0, R1, R2, R3, R4, R5, R6, R7, R8 = (cam[_C_R], cam[_C_R + 1], cam[_C_R + 2], cam[_C_R + 3], cam[_C_R + 4],
+                                          cam[_C_R + 5], cam[_C_R + 6], cam[_C_R + 7], cam[_C_R + 8])
+    dx = R0 * xn + R1 * yn + R2
+    dy = R3 * xn + R4 * yn + R5
+    dz = R6 * xn + R7 * yn + R8
     gdz, gx, gy = cam[_C_GDZ], cam[_C_GSX], cam[_C_GSY]
     Nn = gdz - cam[_C_H]
     Dn = dz - gx * dx - gy * dy
-    lam = Nn / Dn if Dn != 0.0 else math.nan
+    inv = 1.0 / Dn if Dn != 0.0 else math.nan
+    lam = Nn * inv
     vg = (Dn < 0.0) and (Nn < 0.0) and math.isfinite(lam)
     reason = _OK
     if not vg:
@@ -158,71 +216,74 @@ def _backproject(u, v, cam, dR, xy, Jp, Juv, Jd, Jk):
         xy[0] = math.nan
         xy[1] = math.nan
         for r in range(2):
-            Juv[r, 0] = math.nan
-            Juv[r, 1] = math.nan
+            Juv[kk, r, 0] = math.nan
+            Juv[kk, r, 1] = math.nan
             for c in range(22):
-                Jp[r, c] = math.nan
+                Jp[kk, r, c] = math.nan
         return reason
     xy[0] = cam[_C_X] + lam * dx
     xy[1] = cam[_C_Y] + lam * dy
-    inv = 1.0 / Dn
     # dxy/dray (2, 3): lam I + d_xy dlam/dray, dlam/dray = (-lam/Dn) (-gx, -gy, 1)
     f = -lam * inv
     l0, l1, l2 = -gx * f, -gy * f, f
     a00, a01, a02 = lam + dx * l0, dx * l1, dx * l2
     a10, a11, a12 = dy * l0, lam + dy * l1, dy * l2
     # dxy/dxn = dxy/dray @ R[:, :2]
-    b00 = a00 * R[0] + a01 * R[3] + a02 * R[6]
-    b01 = a00 * R[1] + a01 * R[4] + a02 * R[7]
-    b10 = a10 * R[0] + a11 * R[3] + a12 * R[6]
-    b11 = a10 * R[1] + a11 * R[4] + a12 * R[7]
+    b00 = a00 * R0 + a01 * R3 + a02 * R6
+    b01 = a00 * R1 + a01 * R4 + a02 * R7
+    b10 = a10 * R0 + a11 * R3 + a12 * R6
+    b11 = a10 * R1 + a11 * R4 + a12 * R7
     # dxy/dxd = dxy/dxn @ dxn/dxd
     c00 = b00 * i00 + b01 * i10
     c01 = b00 * i01 + b01 * i11
     c10 = b10 * i00 + b11 * i10
     c11 = b10 * i01 + b11 * i11
     # intrinsics
-    Jp[0, 0], Jp[1, 0] = c00 * kx0, c10 * kx0
-    Jp[0, 1], Jp[1, 1] = c00 * kx1 + c01 * ky1, c10 * kx1 + c11 * ky1
-    Jp[0, 2], Jp[1, 2] = c00 * kx2, c10 * kx2
-    Jp[0, 3], Jp[1, 3] = c00 * kx3 + c01 * ky3, c10 * kx3 + c11 * ky3
-    Jp[0, 4], Jp[1, 4] = c00 * kx4, c10 * kx4
+    Jp[kk, 0, 0], Jp[kk, 1, 0] = c00 * kx0, c10 * kx0
+    Jp[kk, 0, 1], Jp[kk, 1, 1] = c00 * kx1 + c01 * ky1, c10 * kx1 + c11 * ky1
+    Jp[kk, 0, 2], Jp[kk, 1, 2] = c00 * kx2, c10 * kx2
+    Jp[kk, 0, 3], Jp[kk, 1, 3] = c00 * kx3 + c01 * ky3, c10 * kx3 + c11 * ky3
+    Jp[kk, 0, 4], Jp[kk, 1, 4] = c00 * kx4, c10 * kx4
     # distortion: dxy/dxn @ (-Jd^-1 Jk)
     for k in range(8):
+        if cam[_C_USE + 5 + k] == 0.0:
+            continue
         e0 = -(i00 * Jk[0, k] + i01 * Jk[1, k])
         e1 = -(i10 * Jk[0, k] + i11 * Jk[1, k])
-        Jp[0, 5 + k] = b00 * e0 + b01 * e1
-        Jp[1, 5 + k] = b10 * e0 + b11 * e1
+        Jp[kk, 0, 5 + k] = b00 * e0 + b01 * e1
+        Jp[kk, 1, 5 + k] = b10 * e0 + b11 * e1
     # camera position
-    Jp[0, 13], Jp[0, 14], Jp[0, 15] = 1.0, 0.0, -dx * inv
-    Jp[1, 13], Jp[1, 14], Jp[1, 15] = 0.0, 1.0, -dy * inv
+    Jp[kk, 0, 13], Jp[kk, 0, 14], Jp[kk, 0, 15] = 1.0, 0.0, -dx * inv
+    Jp[kk, 1, 13], Jp[kk, 1, 14], Jp[kk, 1, 15] = 0.0, 1.0, -dy * inv
     # angles: dxy/dray @ (dR_k @ ray_c)
     for k in range(3):
+        if cam[_C_USE + 16 + k] == 0.0:
+            continue
         q0 = dR[k, 0, 0] * xn + dR[k, 0, 1] * yn + dR[k, 0, 2]
         q1 = dR[k, 1, 0] * xn + dR[k, 1, 1] * yn + dR[k, 1, 2]
         q2 = dR[k, 2, 0] * xn + dR[k, 2, 1] * yn + dR[k, 2, 2]
-        Jp[0, 16 + k] = a00 * q0 + a01 * q1 + a02 * q2
-        Jp[1, 16 + k] = a10 * q0 + a11 * q1 + a12 * q2
+        Jp[kk, 0, 16 + k] = a00 * q0 + a01 * q1 + a02 * q2
+        Jp[kk, 1, 16 + k] = a10 * q0 + a11 * q1 + a12 * q2
     # ground: d_xy dlam/dg, dlam/dg = (1/Dn, lam dx/Dn, lam dy/Dn)
-    g0, g1, g2 = inv, lam * dx * inv, lam * dy * inv
-    Jp[0, 19], Jp[0, 20], Jp[0, 21] = dx * g0, dx * g1, dx * g2
-    Jp[1, 19], Jp[1, 20], Jp[1, 21] = dy * g0, dy * g1, dy * g2
+    if cam[_C_USE + 19] != 0.0 or cam[_C_USE + 20] != 0.0 or cam[_C_USE + 21] != 0.0:
+        g0, g1, g2 = inv, lam * dx * inv, lam * dy * inv
+        Jp[kk, 0, 19], Jp[kk, 0, 20], Jp[kk, 0, 21] = dx * g0, dx * g1, dx * g2
+        Jp[kk, 1, 19], Jp[kk, 1, 20], Jp[kk, 1, 21] = dy * g0, dy * g1, dy * g2
     # dxy/duv = dxy/dxd @ dxd/duv
-    Juv[0, 0] = c00 * dxd_du
-    Juv[0, 1] = c00 * dxd_dv + c01 * dyd_dv
-    Juv[1, 0] = c10 * dxd_du
-    Juv[1, 1] = c10 * dxd_dv + c11 * dyd_dv
+    Juv[kk, 0, 0] = c00 * dxd_du
+    Juv[kk, 0, 1] = c00 * dxd_dv + c01 * dyd_dv
+    Juv[kk, 1, 0] = c10 * dxd_du
+    Juv[kk, 1, 1] = c10 * dxd_dv + c11 * dyd_dv
     return _OK
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _project(X, Y, Z, cam, uv):
     """World point (Z relative to the nominal ground) -> pixel; returns the status code (general.project)."""
-    R = cam[_C_R:_C_R + 9]
     rx, ry, rz = X - cam[_C_X], Y - cam[_C_Y], Z - cam[_C_H]
-    pcx = R[0] * rx + R[3] * ry + R[6] * rz
-    pcy = R[1] * rx + R[4] * ry + R[7] * rz
-    pcz = R[2] * rx + R[5] * ry + R[8] * rz
+    pcx = cam[_C_R + 0] * rx + cam[_C_R + 3] * ry + cam[_C_R + 6] * rz
+    pcy = cam[_C_R + 1] * rx + cam[_C_R + 4] * ry + cam[_C_R + 7] * rz
+    pcz = cam[_C_R + 2] * rx + cam[_C_R + 5] * ry + cam[_C_R + 8] * rz
     finite = math.isfinite(X) and math.isfinite(Y) and math.isfinite(Z)
     if not finite:
         uv[0] = math.nan
@@ -244,21 +305,31 @@ def _project(X, Y, Z, cam, uv):
     return _OK
 
 
-@njit(cache=True)
-def _sandwich2(Ja, Jb, si, sj, sv):
-    """``Ja S Jb^T`` for one row each (22,) with the sparse S entries."""
+@njit(cache=True, error_model="numpy", inline="always")
+def _whiten(Jp, k, Lr, Lc, Lv, r, Aw):
+    """``Aw[k] = Jp[k] L`` (2, r) with the sparse factor L of the parameter covariance."""
+    for i in range(2):
+        for c in range(r):
+            Aw[k, i, c] = 0.0
+        for e in range(Lr.shape[0]):
+            Aw[k, i, Lc[e]] += Jp[k, i, Lr[e]] * Lv[e]
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _dot(A, a, i, B, b, j, r):
+    """``A[a, i, :r] . B[b, j, :r]``."""
     s = 0.0
-    for e in range(si.shape[0]):
-        s += Ja[si[e]] * sv[e] * Jb[sj[e]]
+    for c in range(r):
+        s += A[a, i, c] * B[b, j, c]
     return s
 
 
-@njit(cache=True)
-def _v2x(c00, c01, c11, ch, sh, out):
+@njit(cache=True, error_model="numpy")
+def _v2x(c00, c01, c11, ch, sh, out, n):
     """CPM and J2735 integer fields of one 2x2 covariance (mirror of footprint_uq.v2x)."""
     if not (math.isfinite(c00) and math.isfinite(c01) and math.isfinite(c11)):
-        out[0], out[1], out[2] = 4096, 4096, 101
-        out[3], out[4], out[5], out[6] = 255, 255, 65535, 0
+        out[n, 0], out[n, 1], out[n, 2] = 4096, 4096, 101
+        out[n, 3], out[n, 4], out[n, 5], out[n, 6] = 255, 255, 65535, 0
         return
     if sh != 0.0 or ch != 1.0:  # R C R^T with R = [[ch, sh], [-sh, ch]]
         a00 = ch * c00 + sh * c01
@@ -274,47 +345,47 @@ def _v2x(c00, c01, c11, ch, sh, out):
         var = c00 if i == 0 else c11
         conf = _Z95 * math.sqrt(max(var, 0.0))
         if conf > 40.94:
-            out[i] = 4095
+            out[n, i] = 4095
         else:
-            n = math.ceil(conf / 0.01 * (1.0 - _GUARD))
-            out[i] = min(max(n, 1), 4094)
+            m = math.ceil(conf / 0.01 * (1.0 - _GUARD))
+            out[n, i] = min(max(m, 1), 4094)
     if c00 > 0.0 and c11 > 0.0:
         rho = c01 / math.sqrt(c00 * c11)
-        out[2] = int(min(max(np.rint(rho * 100.0), -100.0), 100.0))
+        out[n, 2] = int(min(max(np.rint(rho * 100.0), -100.0), 100.0))
     else:
-        out[2] = 101
+        out[n, 2] = 101
     mean = 0.5 * (c00 + c11)
-    rad = math.hypot(0.5 * (c00 - c11), c01)
+    rad = math.sqrt(0.25 * (c00 - c11) * (c00 - c11) + c01 * c01)
     a = math.sqrt(mean + rad)
     b = math.sqrt(max(mean - rad, 0.0))
     for i in range(2):
         s = a if i == 0 else b
         if s >= 12.70:
-            out[3 + i] = 254
+            out[n, 3 + i] = 254
         else:
-            n = math.ceil(s / 0.05 * (1.0 - _GUARD))
-            out[3 + i] = min(max(n, 0), 254)
+            m = math.ceil(s / 0.05 * (1.0 - _GUARD))
+            out[n, 3 + i] = min(max(m, 0), 254)
     ang = 0.5 * math.degrees(math.atan2(2.0 * c01, c00 - c11))
     bearing = 90.0 - ang
     bearing = bearing - 180.0 * math.floor(bearing / 180.0)
     if bearing >= 180.0:
         bearing -= 180.0
-    out[5] = int(np.rint(bearing / _ORIENT_UNIT))
+    out[n, 5] = int(np.rint(bearing / _ORIENT_UNIT))
     r95 = _K95_2D * a
     cnt = 0
     for lev in _PC_LEVELS:
         if lev >= r95 * (1.0 - _GUARD):
             cnt += 1
-    out[6] = cnt
+    out[n, 6] = cnt
 
 
-@njit(cache=True)
-def process_corners(uv, extra_reason, cam, dR, si, sj, sv, spx, det, det_mode, allow_outside, ch, sh,
+@njit(cache=True, error_model="numpy")
+def process_corners(uv, extra_reason, cam, dR, Lr, Lc, Lv, r, spx, det, det_mode, allow_outside, ch, sh,
                     want_joint):
     """The fused per-frame kernel on corners in pixels ``uv`` (N, K, 2).
 
     extra_reason : (N, K) int8 codes overriding OK (3D projection), or shape (0, 0)
-    si, sj, sv : sparse parameter covariance (non-zero entries)
+    Lr, Lc, Lv, r : sparse factor of the parameter covariance (:func:`psd_factor`)
     spx : (2, 2) budget pixel covariance;  det : 4-D detector covariance with det_mode
         0 none (any 4-D array), 1 (N, 1, 2, 2) per detection, 2 (N, K, 2, 2) per corner,
         3 (N, 1, 2K, 2K) full
@@ -338,70 +409,65 @@ def process_corners(uv, extra_reason, cam, dR, si, sj, sv, spx, det, det_mode, a
     area_out = np.empty(N)
     v2x = np.empty((N, 7), dtype=np.int32)
     # scratch
-    Jp = np.empty((K, 2, 22))
+    Jp = np.zeros((K, 2, 22))  # columns of zero-variance parameters stay 0
     Juv = np.empty((K, 2, 2))
     Pk = np.empty((K, 2, 2))  # per-corner pixel covariance (diagonal blocks)
     Jd = np.empty((2, 2))
     Jk = np.empty((2, 8))
     G = np.empty((2, 2 * K))
-    Jc = np.empty((2, 22))
+    Aw = np.empty((K, 2, max(r, 1)))
+    B = np.empty((1, 2, max(r, 1)))
     H = np.empty((K, 2, 2))
     q = np.empty((K, 2))
     tmp = np.empty(2)
     W, Himg = cam[_C_W], cam[_C_HIMG]
     has_extra = extra_reason.shape[0] == N and N > 0
     for n in range(N):
-        any_usable = False
         all_usable = True
         first_bad = -1
         best = -1
         best_semi = -1.0
         for k in range(K):
             u, v = uv[n, k, 0], uv[n, k, 1]
-            r = _backproject(u, v, cam, dR, tmp, Jp[k], Juv[k], Jd, Jk)
-            if r == _OK and not (u >= -0.5 and u <= W - 0.5 and v >= -0.5 and v <= Himg - 0.5):
-                r = _OUTSIDE
+            rc = _backproject(u, v, cam, dR, tmp, Jp, Juv, k, Jd, Jk)
+            if rc == _OK and not (u >= -0.5 and u <= W - 0.5 and v >= -0.5 and v <= Himg - 0.5):
+                rc = _OUTSIDE
             if has_extra and extra_reason[n, k] != _OK:
-                r = extra_reason[n, k]
-            computed = r == _OK or r == _OUTSIDE
-            us = r == _OK or (r == _OUTSIDE and allow_outside)
-            reason[n, k] = r
+                rc = extra_reason[n, k]
+            computed = rc == _OK or rc == _OUTSIDE
+            us = rc == _OK or (rc == _OUTSIDE and allow_outside)
+            reason[n, k] = rc
             usable[n, k] = us
             # per-corner pixel covariance
-            for i in range(2):
-                for j in range(2):
-                    p = spx[i, j]
-                    if det_mode == 1:
-                        p += det[n, 0, i, j]
-                    elif det_mode == 2:
-                        p += det[n, k, i, j]
-                    elif det_mode == 3:
-                        p += det[n, 0, 2 * k + i, 2 * k + j]
-                    Pk[k, i, j] = p
+            p00, p01, p10, p11 = spx[0, 0], spx[0, 1], spx[1, 0], spx[1, 1]
+            if det_mode == 1:
+                p00 += det[n, 0, 0, 0]
+                p01 += det[n, 0, 0, 1]
+                p10 += det[n, 0, 1, 0]
+                p11 += det[n, 0, 1, 1]
+            elif det_mode == 2:
+                p00 += det[n, k, 0, 0]
+                p01 += det[n, k, 0, 1]
+                p10 += det[n, k, 1, 0]
+                p11 += det[n, k, 1, 1]
+            elif det_mode == 3:
+                p00 += det[n, 0, 2 * k, 2 * k]
+                p01 += det[n, 0, 2 * k, 2 * k + 1]
+                p10 += det[n, 0, 2 * k + 1, 2 * k]
+                p11 += det[n, 0, 2 * k + 1, 2 * k + 1]
+            Pk[k, 0, 0], Pk[k, 0, 1], Pk[k, 1, 0], Pk[k, 1, 1] = p00, p01, p10, p11
             if computed:
                 xy[n, k, 0], xy[n, k, 1] = tmp[0], tmp[1]
-                J0, J1 = Jp[k, 0], Jp[k, 1]
-                c00 = _sandwich2(J0, J0, si, sj, sv)
-                c01 = _sandwich2(J0, J1, si, sj, sv)
-                c10 = _sandwich2(J1, J0, si, sj, sv)
-                c11 = _sandwich2(J1, J1, si, sj, sv)
-                A = Juv[k]
-                for i in range(2):
-                    for j in range(2):
-                        s = 0.0
-                        for a in range(2):
-                            for b in range(2):
-                                s += A[i, a] * Pk[k, a, b] * A[j, b]
-                        if i == 0 and j == 0:
-                            c00 += s
-                        elif i == 0:
-                            c01 += s
-                        elif j == 0:
-                            c10 += s
-                        else:
-                            c11 += s
+                _whiten(Jp, k, Lr, Lc, Lv, r, Aw)
+                j00, j01, j10, j11 = Juv[k, 0, 0], Juv[k, 0, 1], Juv[k, 1, 0], Juv[k, 1, 1]
+                m00, m01 = j00 * p00 + j01 * p10, j00 * p01 + j01 * p11
+                m10, m11 = j10 * p00 + j11 * p10, j10 * p01 + j11 * p11
+                c00 = _dot(Aw, k, 0, Aw, k, 0, r) + m00 * j00 + m01 * j01
+                c01 = _dot(Aw, k, 0, Aw, k, 1, r) + m00 * j10 + m01 * j11
+                c10 = c01
+                c11 = _dot(Aw, k, 1, Aw, k, 1, r) + m10 * j10 + m11 * j11
                 ccov[n, k, 0, 0], ccov[n, k, 0, 1], ccov[n, k, 1, 0], ccov[n, k, 1, 1] = c00, c01, c10, c11
-                semi = math.sqrt(0.5 * (c00 + c11) + math.hypot(0.5 * (c00 - c11), c01))
+                semi = math.sqrt(0.5 * (c00 + c11) + math.sqrt(0.25 * (c00 - c11) * (c00 - c11) + c01 * c01))
                 if us and semi > best_semi:
                     best_semi = semi
                     best = k
@@ -410,9 +476,7 @@ def process_corners(uv, extra_reason, cam, dR, si, sj, sv, spx, det, det_mode, a
                 for i in range(2):
                     for j in range(2):
                         ccov[n, k, i, j] = nan
-            if us:
-                any_usable = True
-            elif all_usable:
+            if not us and all_usable:
                 all_usable = False
                 first_bad = k
         # joint covariance (optional)
@@ -428,7 +492,7 @@ def process_corners(uv, extra_reason, cam, dR, si, sj, sv, spx, det, det_mode, a
                             elif k == l:
                                 val = ccov[n, k, i, j]
                             else:
-                                val = _sandwich2(Jp[k, i], Jp[l, j], si, sj, sv)
+                                val = _dot(Aw, k, i, Aw, l, j, r)
                                 if det_mode == 3:
                                     s = 0.0
                                     for a in range(2):
@@ -520,49 +584,55 @@ def process_corners(uv, extra_reason, cam, dR, si, sj, sv, spx, det, det_mode, a
         area_out[n] = area if all_usable else nan
         if code == _OK:
             centre[n, 0], centre[n, 1] = cx_, cy_
-            # parameter part: Jc = sum_k G_k Jp_k
-            for r in range(2):
-                for c in range(22):
-                    s = 0.0
+            # parameter part: B = sum_k G_k (Jp_k L), cov = B B^T
+            for i in range(2):
+                for c in range(r):
+                    acc = 0.0
                     for k in range(K):
-                        s += G[r, 2 * k] * Jp[k, 0, c] + G[r, 2 * k + 1] * Jp[k, 1, c]
-                    Jc[r, c] = s
-            e00 = _sandwich2(Jc[0], Jc[0], si, sj, sv)
-            e01 = _sandwich2(Jc[0], Jc[1], si, sj, sv)
-            e11 = _sandwich2(Jc[1], Jc[1], si, sj, sv)
+                        acc += G[i, 2 * k] * Aw[k, 0, c] + G[i, 2 * k + 1] * Aw[k, 1, c]
+                    B[0, i, c] = acc
+            e00 = _dot(B, 0, 0, B, 0, 0, r)
+            e01 = _dot(B, 0, 0, B, 0, 1, r)
+            e11 = _dot(B, 0, 1, B, 0, 1, r)
             # pixel part: H_k = G_k Juv_k, sum_k,l H_k P_kl H_l^T
             for k in range(K):
                 for i in range(2):
                     for j in range(2):
                         H[k, i, j] = G[i, 2 * k] * Juv[k, 0, j] + G[i, 2 * k + 1] * Juv[k, 1, j]
             for k in range(K):
-                for l in range(K):
-                    if k != l and det_mode != 3:
-                        continue
-                    for a in range(2):
-                        for b in range(2):
-                            p = Pk[k, a, b] if k == l else det[n, 0, 2 * k + a, 2 * l + b]
-                            if p == 0.0:
-                                continue
-                            e00 += H[k, 0, a] * p * H[l, 0, b]
-                            e01 += H[k, 0, a] * p * H[l, 1, b]
-                            e11 += H[k, 1, a] * p * H[l, 1, b]
+                h00, h01, h10, h11 = H[k, 0, 0], H[k, 0, 1], H[k, 1, 0], H[k, 1, 1]
+                p00, p01, p10, p11 = Pk[k, 0, 0], Pk[k, 0, 1], Pk[k, 1, 0], Pk[k, 1, 1]
+                m00, m01 = h00 * p00 + h01 * p10, h00 * p01 + h01 * p11
+                m10, m11 = h10 * p00 + h11 * p10, h10 * p01 + h11 * p11
+                e00 += m00 * h00 + m01 * h01
+                e01 += m00 * h10 + m01 * h11
+                e11 += m10 * h10 + m11 * h11
+                if det_mode == 3:  # detector cross terms between corners
+                    for l in range(K):
+                        if l == k:
+                            continue
+                        for a in range(2):
+                            for b in range(2):
+                                p = det[n, 0, 2 * k + a, 2 * l + b]
+                                e00 += H[k, 0, a] * p * H[l, 0, b]
+                                e01 += H[k, 0, a] * p * H[l, 1, b]
+                                e11 += H[k, 1, a] * p * H[l, 1, b]
             centre_cov[n, 0, 0], centre_cov[n, 0, 1] = e00, e01
             centre_cov[n, 1, 0], centre_cov[n, 1, 1] = e01, e11
-            _v2x(e00, e01, e11, ch, sh, v2x[n])
+            _v2x(e00, e01, e11, ch, sh, v2x, n)
         else:
             centre[n, 0], centre[n, 1] = nan, nan
             for i in range(2):
                 for j in range(2):
                     centre_cov[n, i, j] = nan
-            _v2x(nan, nan, nan, ch, sh, v2x[n])
+            _v2x(nan, nan, nan, ch, sh, v2x, n)
             if code == _DEGENERATE:
                 centre_bad[n] = -1
     return (xy, ccov, joint, reason, usable, largest_index, largest_semi, largest_xy, largest_cov,
             centre, centre_cov, centre_reason, centre_bad, area_out, v2x)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def boxes3d_to_pixels(boxes, cam, yaw_deg, bottom_on_ground):
     """Bottom corners of 3D boxes (N, 7) projected to pixels (N, 4, 2), their codes (N, 4),
     and the first row with a negative size (-1 if none)."""
@@ -588,3 +658,12 @@ def boxes3d_to_pixels(boxes, cam, yaw_deg, bottom_on_ground):
             Z = zb if math.isfinite(X) and math.isfinite(Y) else math.nan
             code[n, k] = _project(X, Y, Z, cam, uv[n, k])
     return uv, code, bad
+
+
+@njit(cache=True, error_model="numpy")
+def process_boxes3d(boxes, yaw_deg, bottom_on_ground, cam, dR, Lr, Lc, Lv, r, spx, det, det_mode, allow_outside,
+                    ch, sh, want_joint):
+    """:func:`boxes3d_to_pixels` then :func:`process_corners` in one dispatch; returns (bad_row, uv, results)."""
+    uv, code, bad = boxes3d_to_pixels(boxes, cam, yaw_deg, bottom_on_ground)
+    res = process_corners(uv, code, cam, dR, Lr, Lc, Lv, r, spx, det, det_mode, allow_outside, ch, sh, want_joint)
+    return bad, uv, res

@@ -76,9 +76,9 @@ from .errors import InputError
 from .v2x import cpm_fields, j2735_fields
 
 __all__ = [
-    "FootprintEstimate", "FrameProcessor", "V2X_FIELDS", "DEGENERATE", "CONTACT_MODES", "BOX3D_COLUMNS", "box2d_contact_points",
-    "box3d_bottom_corners", "polygon_centroid", "footprints_from_corners", "footprints_from_boxes2d",
-    "footprints_from_boxes3d",
+    "FootprintEstimate", "FrameProcessor", "V2X_FIELDS", "DEGENERATE", "CONTACT_MODES", "BOX3D_COLUMNS",
+    "box2d_contact_points", "box3d_bottom_corners", "polygon_centroid", "footprints_from_corners",
+    "footprints_from_boxes2d", "footprints_from_boxes3d",
 ]
 
 #: centre reason code: zero-area footprint polygon (centroid undefined)
@@ -154,7 +154,7 @@ class FootprintEstimate:
         """Object array (N,) of human-readable reasons ("ok" where the centre is valid)."""
         out = np.empty(len(self), dtype=object)
         K = self.n_corners
-        for i, (code, k) in enumerate(zip(self.centre_reason.tolist(), self.centre_bad_corner.tolist())):
+        for i, (code, k) in enumerate(zip(self.centre_reason.tolist(), self.centre_bad_corner.tolist(), strict=True)):
             if code == status.OK:
                 out[i] = "ok"
             elif code in _CENTRE_TEXT:
@@ -495,12 +495,9 @@ class FrameProcessor:
         self.allow_outside_image = bool(allow_outside_image)
         self.joint_cov = bool(joint_cov)
         self._fk = fk
-        self._cam, self._dR = fk.camera_constants(camera)
         Sp = self.budget.param_covariance()
-        si, sj = np.nonzero(Sp)
-        self._si = si.astype(np.int64)
-        self._sj = sj.astype(np.int64)
-        self._sv = np.ascontiguousarray(Sp[si, sj])
+        self._cam, self._dR = fk.camera_constants(camera, Sp)
+        self._Lr, self._Lc, self._Lv, self._r = fk.psd_factor(Sp)
         self._spx = np.ascontiguousarray(self.budget.pixel_covariance())
         h = np.deg2rad(self.heading_offset_deg)
         self._ch, self._sh = (1.0, 0.0) if h == 0.0 else (float(np.cos(h)), float(np.sin(h)))
@@ -522,8 +519,11 @@ class FrameProcessor:
     def _run(self, uv, extra, pixel_cov_px2) -> FootprintEstimate:
         N, K = uv.shape[0], uv.shape[1]
         det, mode = self._det(pixel_cov_px2, N, K)
-        out = self._fk.process_corners(uv, extra, self._cam, self._dR, self._si, self._sj, self._sv, self._spx,
+        out = self._fk.process_corners(uv, extra, self._cam, self._dR, self._Lr, self._Lc, self._Lv, self._r, self._spx,
                                        det, mode, self.allow_outside_image, self._ch, self._sh, self.joint_cov)
+        return self._pack(uv, out)
+
+    def _pack(self, uv, out) -> FootprintEstimate:
         (xy, ccov, joint, reason, usable, li, ls, lxy, lcov, centre, ccentre, creason, cbad, area, v2x) = out
         return FootprintEstimate(uv, xy, ccov, joint if self.joint_cov else None, reason, usable, li, ls, lxy, lcov,
                                  centre, ccentre, creason == 0, creason, cbad, area, v2x, self.heading_offset_deg)
@@ -553,7 +553,10 @@ class FrameProcessor:
             raise InputError("boxes_world", b.shape, f"an array of shape (N, 7): {', '.join(BOX3D_COLUMNS)}")
         if yaw_unit not in ("rad", "deg"):
             raise InputError("yaw_unit", yaw_unit, "'rad' (column yaw_rad) or 'deg' (column yaw_deg)")
-        uv, code, bad = self._fk.boxes3d_to_pixels(b, self._cam, yaw_unit == "deg", bool(bottom_on_ground))
+        det, mode = self._det(pixel_cov_px2, b.shape[0], 4)
+        bad, uv, out = self._fk.process_boxes3d(b, yaw_unit == "deg", bool(bottom_on_ground), self._cam, self._dR,
+                                                self._Lr, self._Lc, self._Lv, self._r, self._spx, det, mode,
+                                                self.allow_outside_image, self._ch, self._sh, self.joint_cov)
         if bad >= 0:
             raise InputError(f"boxes_world[{bad}] (length_m, width_m, height_m)", b[bad, 3:6].tolist(), "sizes >= 0")
-        return self._run(uv, code, pixel_cov_px2)
+        return self._pack(uv, out)
