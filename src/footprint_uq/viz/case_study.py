@@ -440,8 +440,7 @@ def plot_heatmaps(result, camera: str, heatmaps: dict | None = None, **kw) -> Fi
     axes = fig.subplots(1, len(types), squeeze=False)[0]
     import matplotlib
 
-    cmap = matplotlib.colormaps["magma_r"].copy()
-    cmap.set_bad((1, 1, 1, 0))
+    cmap = matplotlib.colormaps["magma_r"].with_extremes(bad=(1, 1, 1, 0))
     im = None
     for j, ct in enumerate(types):
         ax = axes[j]
