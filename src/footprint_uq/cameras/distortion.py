@@ -222,7 +222,7 @@ def undistort(xy_d, dist, *, tol=1e-14, max_iter=50, get_gradients=False):
         return x, conv, np.broadcast_to(np.eye(2), shape + (2, 2)).copy(), -Jk
     x = _newton(xy_d, k, tol, max_iter)
     with np.errstate(all="ignore"):
-        conv = _accept(x, xy_d, k, tol)
+        conv = np.array(_accept(x, xy_d, k, tol), dtype=bool)  # writable, also for a single point
         retry = ~conv & np.isfinite(xy_d).all(-1) & np.isfinite(k).all(-1)
         if np.any(retry):
             # Newton from x_d may land on another branch of the polynomial (past the fold)
