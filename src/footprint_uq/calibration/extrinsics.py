@@ -508,8 +508,10 @@ class ExtrinsicCalibration:
                              "pose, including per-frame LiDAR board-fit errors",
                 "jacobian": "first order s^2 (J^T J)^-1 of the joint pose: assumes independent corner errors, "
                             "blind to errors shared by a frame's corners",
-                "expected": "per_frame / sqrt(n_used) ~ bootstrap when frames are alike; jacobian <= bootstrap "
-                            "when LiDAR board-fit errors matter",
+                "expected": "bootstrap ~ jacobian when pixel noise dominates; jacobian < bootstrap when LiDAR "
+                            "board-fit errors matter.  The joint pose is usually far better than "
+                            "per_frame / sqrt(n_used): one planar board leaves translation and rotation "
+                            "strongly correlated, boards at several places break that.",
                 "per_frame_over_sqrt_n": dict(zip(POSE_NAMES, map(float, self.sigmas('per_frame') / np.sqrt(n)),
                                                   strict=True)),
             },

@@ -42,7 +42,7 @@ from .boards import PAPER_BOARD, Checkerboard
 from .pointclouds import PointCloud, write_point_cloud
 
 __all__ = ["SpinningLidar", "OS1_128", "default_rig", "simulate_scan", "image_corners", "board_corners_world",
-           "sample_board_poses", "LidarCampaign", "make_lidar_campaign", "rot_xyz"]
+           "sample_board_poses", "poses_from_camera", "LidarCampaign", "make_lidar_campaign", "rot_xyz"]
 
 
 @dataclass(frozen=True)
@@ -103,8 +103,12 @@ def rot_xyz(rx_deg=0.0, ry_deg=0.0, rz_deg=0.0) -> np.ndarray:
 def default_rig(*, lidar_height_m: float = 1.9, lidar_pitch_deg: float = 1.0, lidar_roll_deg: float = -0.5,
                 camera_position_m=(0.15, -0.25), camera_height_m: float = 1.75, pan_deg: float = 91.0,
                 tilt_deg: float = 4.0, roll_deg: float = 0.5, focal_px: float = 1400.0,
-                image_size_px=(1920, 1200), dist=(-0.08, 0.05, 0.0005, -0.0003, 0.0)):
+                image_size_px=(1920, 1200), dist=(-0.08, 0.05, 0.0005, -0.0003, 0.0), intrinsics=None):
     """A camera + LiDAR rig; returns ``(camera, T_world_lidar)``.
+
+    ``intrinsics`` (anything with ``K``, ``dist`` and ``image_size_px``, e.g. a
+    :class:`~footprint_uq.calibration.synthetic.SyntheticCamera`) replaces
+    ``focal_px``/``image_size_px``/``dist``.
 
     The LiDAR sits at ``(0, 0, lidar_height_m)`` with zero yaw (its x axis projects
     onto the world +x, east) and small pitch/roll; the camera looks east-ish (pan
@@ -114,12 +118,33 @@ def default_rig(*, lidar_height_m: float = 1.9, lidar_pitch_deg: float = 1.0, li
     T = np.eye(4)
     T[:3, :3] = rot_xyz(lidar_roll_deg, lidar_pitch_deg, 0.0)
     T[:3, 3] = (0.0, 0.0, lidar_height_m)
-    w, h = image_size_px
-    K = np.array([[focal_px, 0.0, (w - 1) / 2.0 + 3.0], [0.0, focal_px * 1.001, (h - 1) / 2.0 - 2.0], [0, 0, 1]])
+    if intrinsics is not None:
+        K = np.asarray(intrinsics.K, float)
+        dist = np.asarray(intrinsics.dist, float).ravel()
+        image_size_px = tuple(int(v) for v in intrinsics.image_size_px)
+    else:
+        w, h = image_size_px
+        K = np.array([[focal_px, 0.0, (w - 1) / 2.0 + 3.0], [0.0, focal_px * 1.001, (h - 1) / 2.0 - 2.0], [0, 0, 1]])
     R_wc = R_W_C(np.deg2rad(pan_deg), np.deg2rad(tilt_deg), np.deg2rad(roll_deg))
     C = np.array([camera_position_m[0], camera_position_m[1], camera_height_m])
     cam = OpenCVCamera(K, np.asarray(dist, float), R_wc.T, -R_wc.T @ C, image_size_px)
     return cam, T
+
+
+def poses_from_camera(camera, rvecs, tvecs) -> list:
+    """Board poses ``T_world_board`` from board -> camera poses (OpenCV ``rvec``, ``tvec``; e.g. those of
+    :func:`footprint_uq.calibration.synthetic.make_board_poses`) and the camera's pose in W, so that the
+    LiDAR scans are taken at the same board poses as the synthetic images."""
+    import cv2
+
+    T_wc = camera.T_world_cam
+    out = []
+    for rv, tv in zip(np.asarray(rvecs, float).reshape(-1, 3), np.asarray(tvecs, float).reshape(-1, 3), strict=True):
+        T_cb = np.eye(4)
+        T_cb[:3, :3] = cv2.Rodrigues(rv)[0]
+        T_cb[:3, 3] = tv
+        out.append(T_wc @ T_cb)
+    return out
 
 
 def board_corners_world(board: Checkerboard, T_world_board) -> np.ndarray:
