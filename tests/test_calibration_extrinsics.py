@@ -349,4 +349,6 @@ def test_same_board_poses_as_the_synthetic_images():
     for k in set(range(5)) - set(res.used):
         assert res.frame_status[k].startswith("no board in the cloud: no board-sized planar patch (patch of")
     err = res.pose - _truth(c)
-    assert np.all(np.abs(err[:3]) < 0.02) and np.all(np.abs(err[3:]) < 0.3), err
+    # 3 boards at ~2 m: a looser check than test_recovered_pose_matches_truth (8 boards at 3-8 m)
+    assert np.all(np.abs(err) < 3 * res.sigmas("per_frame")), (err, res.sigmas("per_frame"))
+    assert np.all(np.abs(err[:3]) < 0.05) and np.all(np.abs(err[3:]) < 0.5), err
