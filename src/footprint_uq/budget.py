@@ -72,6 +72,9 @@ _DEG_ALIASES = {"pan_deg": "pan_rad", "tilt_deg": "tilt_rad", "roll_deg": "roll_
 
 def _sigma(field_name: str, value, n: int | None, where: str):
     label = f"{where}: {field_name}" if where else field_name
+    if isinstance(value, bool | np.bool_) or (isinstance(value, list | tuple) and any(
+            isinstance(v, bool | np.bool_) for v in value)):
+        raise ConfigError(label, value, "a standard deviation (number >= 0), not a boolean")
     if n is None:
         try:
             x = float(value)
@@ -116,6 +119,22 @@ class ErrorBudget:
     covariance_matrix: np.ndarray | None = field(default=None, compare=False, repr=False)
     name: str = "custom"
     description: str = ""
+
+    def __post_init__(self):
+        # direct construction is validated like a budget file (from_dict gives checked values)
+        for k in _SCALAR_KEYS:
+            _sigma(k, getattr(self, k), None, "")
+        for k in _PAIR_KEYS:
+            _sigma(k, getattr(self, k), 2, "")
+        _sigma("distortion", self.distortion, 5, "")
+        if self.covariance_matrix is not None:
+            m = np.asarray(self.covariance_matrix)
+            n = len(self.covariance_names)
+            if m.shape != (n, n) or any(name not in P.IDX for name in self.covariance_names):
+                raise ConfigError("covariance_matrix", f"shape {m.shape}, names {list(self.covariance_names)}",
+                                  "a square matrix over PARAM_NAMES entries (use from_dict for deg aliases)")
+        elif self.covariance_names:
+            raise ConfigError("covariance_names", self.covariance_names, "no names without a covariance_matrix")
 
     # -- construction ----------------------------------------------------------------
     @classmethod
@@ -258,8 +277,6 @@ def _parse_covariance(c, where):
     n = len(names)
     if mat.shape != (n, n):
         raise ConfigError(f"{label}.matrix", f"shape {mat.shape}", f"a {n}x{n} matrix matching 'names'")
-    if len(set(names)) != n:
-        raise ConfigError(f"{label}.names", names, "unique parameter names")
     scale = np.ones(n)
     out_names = []
     for i, name in enumerate(names):
@@ -269,10 +286,12 @@ def _parse_covariance(c, where):
         if name not in P.IDX:
             raise ConfigError(f"{label}.names", name, f"one of {list(P.PARAM_NAMES) + list(_DEG_ALIASES)}")
         out_names.append(name)
+    if len(set(out_names)) != n:  # after the aliases: pan_deg and pan_rad are the same parameter
+        raise ConfigError(f"{label}.names", names, "unique parameters (pan_deg and pan_rad are the same one)")
     try:
         mat = check_cov(f"{label}.matrix", mat, n)
     except InputError as e:  # re-raise as a config error with the same text
-        raise ConfigError(f"{label}.matrix", getattr(e, "value", mat), getattr(e, "expected", str(e))) from None
+        raise ConfigError(e.field, e.value, e.expected) from None
     mat = mat * np.outer(scale, scale)
     return tuple(out_names), mat
 
