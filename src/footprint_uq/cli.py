@@ -83,12 +83,16 @@ def main():
 
 
 # -- the registry: one line per command -------------------------------------------------
+from .cli_carla import carla  # noqa: E402
+from .cli_case_study import case_study  # noqa: E402
 from .cli_core import demo_cmd, locate_cmd, map_cmd, presets_cmd  # noqa: E402
 
 main.add_command(locate_cmd)
 main.add_command(map_cmd)
 main.add_command(presets_cmd)
 main.add_command(demo_cmd)
+main.add_command(case_study)
+main.add_command(carla)
 
 
 if __name__ == "__main__":  # pragma: no cover
