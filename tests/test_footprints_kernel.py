@@ -1,0 +1,175 @@
+"""The fused numba FrameProcessor against the numpy reference path (1e-9 relative)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from footprint_uq import ErrorBudget, InputError, PanTiltCamera, status
+from footprint_uq.cameras.base import Camera
+from footprint_uq.footprint_kernels import psd_factor
+from footprint_uq.footprints import (
+    FrameProcessor,
+    footprints_from_boxes2d,
+    footprints_from_boxes3d,
+    footprints_from_corners,
+)
+
+BUDGET = ErrorBudget.preset("basler1")
+FULL_BUDGET = BUDGET.replace(roll_deg=0.02, ground_height_m=0.05, ground_slope_deg=0.5, pan_deg=0.03,
+                             tilt_deg=0.03)
+FIELDS = ("corners_px", "corners_xy_world_m", "corners_cov_m2", "joint_cov_m2", "corner_reason", "corner_usable",
+          "largest_index", "largest_semi_major_m", "largest_xy_world_m", "largest_cov_m2", "centre_xy_world_m",
+          "centre_cov_m2", "centre_valid", "centre_reason", "centre_bad_corner", "area_m2", "v2x_codes")
+
+
+def assert_same(ref, fast, rtol=1e-9):
+    for f in FIELDS:
+        a, b = getattr(ref, f), getattr(fast, f)
+        assert a.shape == b.shape, f
+        if a.dtype.kind == "f":
+            assert np.array_equal(np.isnan(a), np.isnan(b)), f
+            m = ~np.isnan(a)
+            # relative to each object's scale of that field (entries that cancel to ~0 are judged on it)
+            ax = tuple(range(1, a.ndim))
+            absa = np.nan_to_num(np.abs(a))
+            scale = absa.max(axis=ax, keepdims=True) if a.ndim > 1 else absa
+            scale = np.broadcast_to(scale, a.shape)
+            err = np.abs(a[m] - b[m]) / np.maximum(scale[m], 1e-300)
+            assert err.max(initial=0.0) <= rtol, (f, err.max())
+        else:
+            assert np.array_equal(a, b), f
+
+
+def make_boxes(camera, rng, n):
+    uv = np.column_stack([rng.uniform(-200, 2100, n), rng.uniform(300, 1200, n)])
+    bp = camera.backproject(uv)
+    xy = np.where(bp.valid[:, None], bp.xy_world_m, rng.uniform(-30, 30, (n, 2)))
+    return np.column_stack([xy, rng.uniform(0.5, 1.0, n), rng.uniform(3.5, 5.0, n), rng.uniform(1.6, 2.0, n),
+                            rng.uniform(1.3, 1.8, n), rng.uniform(-np.pi, np.pi, n)])
+
+
+def general_camera(rng, random_params):
+    """A base Camera on an arbitrary parameter vector: skew, strong distortion, tilted ground."""
+    c = Camera()
+    c.params = random_params(rng, distortion="strong", skew=True, roll=True, ground=True, tilt_deg=(15, 35))
+    c.image_size_px = (1920, 1080)
+    c.ground_z_m = 0.0
+    return c
+
+
+@pytest.fixture(params=["pantilt", "opencv", "general"])
+def camera(request, random_opencv_camera, random_params):
+    rng = np.random.default_rng(5)
+    if request.param == "pantilt":
+        return PanTiltCamera(1400.0, (1920, 1080), 8.0, 30.0, 15.0, roll_deg=2.0, position_m=(3.0, 4.0))
+    if request.param == "opencv":
+        return random_opencv_camera(rng, distortion="mild", skew=True, ground_z_m=1.5)
+    return general_camera(rng, random_params)
+
+
+@pytest.mark.parametrize("budget", [BUDGET, FULL_BUDGET], ids=["basler1", "full"])
+def test_boxes3d_agree(camera, budget, rng):
+    boxes = make_boxes(camera, rng, 60)
+    boxes[3, 0] = np.nan  # one broken row stays a broken row
+    for heading in (0.0, 23.0):
+        for outside in (False, True):
+            ref = footprints_from_boxes3d(camera, budget, boxes, allow_outside_image=outside,
+                                          heading_offset_deg=heading)
+            fast = FrameProcessor(camera, budget, allow_outside_image=outside,
+                                  heading_offset_deg=heading).boxes3d(boxes)
+            assert_same(ref, fast)
+    assert (ref.corner_reason == status.OUTSIDE_IMAGE).any() and ref.centre_valid.any()
+    assert (ref.corner_reason[3] == status.NOT_FINITE).all()
+
+
+def test_boxes3d_units_and_raised_bottom(camera, rng):
+    boxes = make_boxes(camera, rng, 20)
+    bd = boxes.copy()
+    bd[:, 6] = np.rad2deg(bd[:, 6])
+    proc = FrameProcessor(camera, BUDGET)
+    assert_same(footprints_from_boxes3d(camera, BUDGET, bd, yaw_unit="deg"), proc.boxes3d(bd, yaw_unit="deg"))
+    assert_same(footprints_from_boxes3d(camera, BUDGET, boxes, bottom_on_ground=False),
+                proc.boxes3d(boxes, bottom_on_ground=False))
+
+
+def test_corners_with_invalid_corners_and_detector_cov(camera, rng):
+    n, K = 40, 4
+    uv = rng.uniform([-100, 0], [2000, 1200], (n, K, 2))
+    uv[0, 1] = np.nan
+    uv[1, :, 1] = -200.0  # far above the image (above the horizon or outside)
+    proc = FrameProcessor(camera, BUDGET)
+    A = rng.normal(size=(n, K, 2, 2))
+    per_corner = A @ np.swapaxes(A, -1, -2) + 0.1 * np.eye(2)
+    B = rng.normal(size=(n, 2 * K, 2 * K))
+    full = B @ np.swapaxes(B, -1, -2) / K
+    for det in (None, per_corner[:, 0], per_corner, full):
+        ref = footprints_from_corners(camera, BUDGET, uv, pixel_cov_px2=det)
+        assert_same(ref, proc.corners(uv, pixel_cov_px2=det))
+    assert {status.NOT_FINITE, status.OUTSIDE_IMAGE} <= set(np.unique(ref.corner_reason).tolist())
+
+
+@pytest.mark.parametrize("K", [3, 5])
+def test_other_polygon_sizes(K, rng):
+    cam = PanTiltCamera(1200.0, (1280, 720), 6.0, -40.0, 20.0)
+    ang = np.sort(rng.uniform(0, 2 * np.pi, (10, K)), axis=1)
+    uv = np.stack([640 + 100 * np.cos(ang), 500 + 80 * np.sin(ang)], -1)
+    assert_same(footprints_from_corners(cam, BUDGET, uv), FrameProcessor(cam, BUDGET).corners(uv))
+
+
+@pytest.mark.parametrize("contact", ["bottom-centre", "bottom-corners"])
+def test_boxes2d_agree(contact, rng):
+    cam = PanTiltCamera(1400.0, (1920, 1080), 8.0, 30.0, 15.0)
+    u0 = rng.uniform(0, 1700, 25)
+    v0 = rng.uniform(300, 900, 25)
+    boxes = np.column_stack([u0, v0, u0 + rng.uniform(20, 200, 25), v0 + rng.uniform(20, 170, 25)])
+    sig = rng.uniform(0.5, 4.0, (25, 4))
+    proc = FrameProcessor(cam, BUDGET)
+    assert_same(footprints_from_boxes2d(cam, BUDGET, boxes, contact=contact),
+                proc.boxes2d(boxes, contact=contact))
+    assert_same(footprints_from_boxes2d(cam, BUDGET, boxes, contact=contact, box_cov_px2=sig),
+                proc.boxes2d(boxes, contact=contact, box_cov_px2=sig))
+
+
+def test_without_joint_covariance(rng):
+    cam = PanTiltCamera(1400.0, (1920, 1080), 8.0, 30.0, 15.0)
+    boxes = make_boxes(cam, rng, 10)
+    a = FrameProcessor(cam, BUDGET).boxes3d(boxes)
+    b = FrameProcessor(cam, BUDGET, joint_cov=False).boxes3d(boxes)
+    assert b.joint_cov_m2 is None
+    assert np.array_equal(a.centre_cov_m2, b.centre_cov_m2, equal_nan=True)
+
+
+def test_empty_frame(rng):
+    cam = PanTiltCamera(1400.0, (1920, 1080), 8.0, 30.0, 15.0)
+    est = FrameProcessor(cam, BUDGET).boxes3d(np.zeros((0, 7)))
+    assert len(est) == 0 and est.centre_cov_m2.shape == (0, 2, 2)
+
+
+def test_psd_factor_reproduces_covariance(rng):
+    for S in (BUDGET.param_covariance(), FULL_BUDGET.param_covariance()):
+        rows, cols, vals, r = psd_factor(S)
+        L = np.zeros((S.shape[0], r))
+        L[rows, cols] = vals
+        assert np.abs(L @ L.T - S).max() <= 1e-15 * np.abs(S).max()
+    # fx and fy move together: one column, not two
+    rows, cols, vals, r = psd_factor(BUDGET.param_covariance())
+    assert r == np.count_nonzero(np.diag(BUDGET.param_covariance())) - 1
+    A = rng.normal(size=(22, 5))
+    rows, cols, vals, r = psd_factor(A @ A.T)
+    assert r == 5
+
+
+def test_bad_input():
+    cam = PanTiltCamera(1400.0, (1920, 1080), 8.0, 30.0, 15.0)
+    proc = FrameProcessor(cam, BUDGET)
+    with pytest.raises(InputError, match=r"^boxes_world\[1\]"):
+        proc.boxes3d(np.array([[0, 20, 0, 4.0, 2, 1.5, 0], [0, 20, 0, 4.0, -2, 1.5, 0]]))
+    with pytest.raises(InputError, match="^boxes_world"):
+        proc.boxes3d(np.zeros((3, 6)))
+    with pytest.raises(InputError, match="^corners_px"):
+        proc.corners(np.zeros((3, 2)))
+    with pytest.raises(InputError, match="^pixel_cov_px2"):
+        proc.corners(np.full((2, 4, 2), 900.0), pixel_cov_px2=np.eye(2))
+    with pytest.raises(InputError, match="^yaw_unit"):
+        proc.boxes3d(np.zeros((1, 7)), yaw_unit="turns")
