@@ -55,7 +55,7 @@ from .. import params as P
 from ..budget import ErrorBudget
 from ..cameras import general
 from ..cameras.opencv import OpenCVCamera
-from ..cameras.rotation import pan_tilt_roll_from_R_W_C
+from ..cameras.rotation import R_W_C, pan_tilt_roll_from_R_W_C
 from ..errors import InputError
 from .boards import Checkerboard, parse_board
 from .lidar import detect_board, fit_ground_plane, ground_frame_from_plane, parse_region, transform_points
@@ -432,6 +432,9 @@ class ExtrinsicCalibration:
     ambiguous_orientation: bool = False
     ground_plane: dict = field(default_factory=dict)
     warnings: list = field(default_factory=list)
+    estimator: str = "joint"
+    pose_joint: np.ndarray | None = None
+    pose_mean: np.ndarray | None = None
 
     @property
     def used(self) -> list[int]:
@@ -498,15 +501,19 @@ class ExtrinsicCalibration:
             frames.append(row)
         return {
             "n_frames": len(self.frames), "n_used": n,
-            "pose": dict(zip(POSE_NAMES, map(float, self.pose), strict=True)),
+            "pose": dict(zip(POSE_NAMES, map(float, self.pose), strict=True)), "estimator": self.estimator,
+            "pose_joint": None if self.pose_joint is None else dict(zip(POSE_NAMES, map(float, self.pose_joint),
+                                                                        strict=True)),
+            "pose_mean_of_frames": None if self.pose_mean is None else dict(zip(POSE_NAMES, map(float, self.pose_mean),
+                                                                                strict=True)),
             "reprojection_rms_px": self.rms_px, "residual_sigma_px": self.sigma_px,
             "sigma": truthy,
             "sigma_per_frame_jacobian_mean": dict(zip(POSE_NAMES, map(float, mean_frame_jac), strict=True)),
             "notes": {
                 "per_frame": "spread of the single-frame poses (the paper's Table 3): uncertainty of a one-frame pose",
-                "bootstrap": f"{self.n_bootstrap} resamples of the frames, seed {self.seed}: uncertainty of the joint "
-                             "pose, including per-frame LiDAR board-fit errors",
-                "jacobian": "first order s^2 (J^T J)^-1 of the joint pose: assumes independent corner errors, "
+                "bootstrap": f"{self.n_bootstrap} resamples of the frames, seed {self.seed}: uncertainty of the "
+                             f"{self.estimator} pose, including per-frame LiDAR board-fit errors",
+                "jacobian": f"first order ({self.estimator} pose): s^2 (J^T J)^-1, assumes independent corner errors, "
                             "blind to errors shared by a frame's corners",
                 "expected": "bootstrap ~ jacobian when pixel noise dominates; jacobian < bootstrap when LiDAR "
                             "board-fit errors matter.  The joint pose is usually far better than "
@@ -535,7 +542,7 @@ class ExtrinsicCalibration:
             except InputError:
                 continue
             lines.append(f"{'sigma ' + src:<22}" + "".join(f"{v:>12.5g}" for v in s))
-        lines.append(f"{'pose (joint)':<22}" + "".join(f"{v:>12.5g}" for v in self.pose))
+        lines.append(f"{'pose (' + self.estimator + ')':<22}" + "".join(f"{v:>12.5g}" for v in self.pose))
         return "\n".join(lines)
 
 
@@ -549,7 +556,8 @@ def _corr(c):
 # ---------------------------------------------------------------------------------------------
 def calibrate_extrinsics(frames, intrinsics, *, T_ground_lidar=None, ground: str = "fit", ground_plane=None,
                          ransac_threshold_px: float = 4.0, bootstrap: int = 200, seed: int = 0, min_frames: int = 3,
-                         position_tol_m: float | None = None, angle_tol_deg: float = 5.0) -> ExtrinsicCalibration:
+                         position_tol_m: float | None = None, angle_tol_deg: float = 5.0,
+                         estimator: str = "joint") -> ExtrinsicCalibration:
     """Solve the camera pose against the LiDAR from frames of corner correspondences.
 
     Parameters
@@ -570,6 +578,14 @@ def calibrate_extrinsics(frames, intrinsics, *, T_ground_lidar=None, ground: str
         Seeds RANSAC and the bootstrap.
     min_frames : int
         Frames needed (>= 2; a spread from fewer than 3 frames is meaningless).
+    estimator : {"joint", "mean"}
+        The reported pose: ``joint`` minimises the reprojection error of all corners
+        of all frames at once (best when pixel noise dominates and the boards are
+        spread over several places); ``mean`` averages the single-frame poses
+        (more robust when the LiDAR's per-frame board-fit errors dominate, e.g. a
+        few boards close to the camera, where the joint fit compromises between
+        frames whose 3D corners disagree).  Both are in the summary; the bootstrap
+        and first-order covariances follow the chosen one.
 
     Raises
     ------
@@ -579,6 +595,8 @@ def calibrate_extrinsics(frames, intrinsics, *, T_ground_lidar=None, ground: str
     import cv2
 
     intr = load_intrinsics(intrinsics)
+    if estimator not in ("joint", "mean"):
+        raise InputError("estimator", estimator, "'joint' or 'mean'")
     if min_frames < 2:
         raise InputError("min_frames", min_frames, "an integer >= 2")
     warn_list = []
@@ -651,17 +669,26 @@ def calibrate_extrinsics(frames, intrinsics, *, T_ground_lidar=None, ground: str
             best = (cost, rv.ravel(), tv.ravel())
         if len(used) > 5 and k == used[2]:
             break  # three starts are plenty: they all converge to the same minimum
-    _, rvec, tvec = best
-    rms = float(np.sqrt(best[0] / len(X_all)))
-    pose = pose_in_ground(rvec, tvec, T_gl)
+    _, rvec_j, tvec_j = best
+    pose_joint = pose_in_ground(rvec_j, tvec_j, T_gl)
     per_frame = np.array([pose_in_ground(chosen[k].rvec, chosen[k].tvec, T_gl) for k in used])
-    per_frame[:, 3] = pose[3] + _wrap_deg(per_frame[:, 3] - pose[3])
+    per_frame[:, 3] = pose_joint[3] + _wrap_deg(per_frame[:, 3] - pose_joint[3])
+    pose_mean = per_frame.mean(axis=0)
     cov_pf = np.cov(per_frame, rowvar=False, ddof=1)
-    Xg_all = transform_points(T_gl, X_all)
-    cov_j, sigma_px, _ = jacobian_covariance(pose, Xg_all, U_all, intr)
     cov_jf = []
     for k, Xk, Uk in zip(used, Xs, Us, strict=True):
         cov_jf.append(jacobian_covariance(per_frame[used.index(k)], transform_points(T_gl, Xk), Uk, intr)[0])
+    cov_jf = np.array(cov_jf)
+    Xg_all = transform_points(T_gl, X_all)
+    if estimator == "joint":
+        pose, rvec, tvec = pose_joint, rvec_j, tvec_j
+        cov_j, sigma_px, _ = jacobian_covariance(pose, Xg_all, U_all, intr)
+    else:  # mean of the single-frame poses; first order: frames independent
+        pose = pose_mean
+        rvec, tvec = _rt_from_pose(pose, T_gl)
+        _, sigma_px, _ = jacobian_covariance(pose, Xg_all, U_all, intr)
+        cov_j = cov_jf.sum(axis=0) / len(used) ** 2
+    rms = float(np.sqrt(np.mean(np.sum(_reproj(rvec, tvec, X_all, U_all, intr) ** 2, axis=1))))
     cov_bs = None
     if bootstrap and bootstrap > 0:
         rng = np.random.default_rng(seed)
@@ -669,6 +696,9 @@ def calibrate_extrinsics(frames, intrinsics, *, T_ground_lidar=None, ground: str
         n = len(used)
         for b in range(int(bootstrap)):
             pick = rng.integers(0, n, n)
+            if estimator == "mean":
+                samples[b] = per_frame[pick].mean(axis=0)
+                continue
             Xb = np.concatenate([Xs[i] for i in pick])
             Ub = np.concatenate([Us[i] for i in pick])
             rv, tv = cv2.solvePnPRefineLM(Xb, Ub, intr.K, intr.dist, rvec.copy().reshape(3, 1),
@@ -680,8 +710,21 @@ def calibrate_extrinsics(frames, intrinsics, *, T_ground_lidar=None, ground: str
     for w in warn_list:
         warnings.warn(w, stacklevel=2)
     return ExtrinsicCalibration(intr, T_gl, gsrc, list(frames), poses_all, status, pose, rvec, tvec, rms, per_frame,
-                                cov_pf, cov_bs, cov_j, np.array(cov_jf), sigma_px, int(bootstrap or 0), int(seed),
-                                bool(ambiguous), plane_info, warn_list)
+                                cov_pf, cov_bs, cov_j, cov_jf, sigma_px, int(bootstrap or 0), int(seed),
+                                bool(ambiguous), plane_info, warn_list, estimator, pose_joint, pose_mean)
+
+
+def _rt_from_pose(pose6, T_ground_lidar):
+    """OpenCV LiDAR -> camera ``(rvec, tvec)`` from a pose in the paper's terms (inverse of pose_in_ground)."""
+    import cv2
+
+    T = np.asarray(T_ground_lidar, float)
+    R_gc = R_W_C(*np.deg2rad(pose6[3:]))
+    C_g = np.asarray(pose6[:3], float)
+    R_cg = R_gc.T
+    R_cl = R_cg @ T[:3, :3]
+    t_cl = R_cg @ (T[:3, 3] - C_g)
+    return cv2.Rodrigues(R_cl)[0].ravel(), t_cl
 
 
 # ---------------------------------------------------------------------------------------------
