@@ -243,6 +243,11 @@ def test_recording_without_road_and_segments(tmp_path, recording):
     out.write_text("\n".join(json.dumps(r) for r in kept) + "\n")
     sc = read_recording(out)
     assert sc.layout.markings == [] and set(np.unique(sc.segment)) == {0, 1, 2}
+    # without a junction box the turn frames stand in for "in the intersection"
+    res = analyse(sc, ["basler1"])
+    assert all(np.isfinite(s["value_m"]) for s in res.lane_width_statements())
+    assert [s["holds"] for s in res.statements()] == [s["holds"] for s in analyse(build_scene(), ["basler1"])
+                                                      .statements()]
 
 
 def test_recording_bad_lines_reported_and_skipped(tmp_path, recording):

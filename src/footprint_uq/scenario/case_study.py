@@ -378,7 +378,7 @@ class CaseStudyResult:
                 a = r["centre_semi_major_m"].to_numpy()[ok]
                 lp = r["largest_semi_major_m"].to_numpy()[r["largest_index"].to_numpy() >= 0]
                 jb = self.scene.layout.junction_box_m
-                inj = ok & _in_box(r["box_x_m"].to_numpy(), r["box_y_m"].to_numpy(), jb)
+                inj = ok & _in_junction(r, jb)
                 aj = r["centre_semi_major_m"].to_numpy()[inj]
                 row = {
                     "camera": cam, "camera_type": ct, "frames": int(len(r)), "frames_centre_valid": int(ok.sum()),
@@ -414,7 +414,7 @@ class CaseStudyResult:
             per_cam = []
             for cam in self.camera_names:
                 r = self.rows(cam, ct)
-                ok = r["centre_valid"].to_numpy(bool) & _in_box(r["box_x_m"].to_numpy(), r["box_y_m"].to_numpy(), jb)
+                ok = r["centre_valid"].to_numpy(bool) & _in_junction(r, jb)
                 a = r["centre_semi_major_m"].to_numpy()[ok]
                 per_cam.append(float(np.median(a)) if a.size else float("nan"))
             pc = np.array(per_cam)
@@ -443,6 +443,13 @@ def _in_box(x, y, box, margin: float = 0.0):
     return (x >= x0 - margin) & (x <= x1 + margin) & (y >= y0 - margin) & (y <= y1 + margin)
 
 
+def _in_junction(r, box) -> np.ndarray:
+    """Frames whose box centre is in the junction box (the turn frames if the layout has no box)."""
+    if box is None:
+        return r["segment"].to_numpy() == 1
+    return _in_box(r["box_x_m"].to_numpy(), r["box_y_m"].to_numpy(), box)
+
+
 def _crossings(r, diff, layout) -> list[dict]:
     t = r["t_s"].to_numpy()
     x = r["box_x_m"].to_numpy()
@@ -456,9 +463,10 @@ def _crossings(r, diff, layout) -> list[dict]:
         if diff[a] == 0 or np.sign(diff[a]) != np.sign(diff[b]):
             w = diff[a] / (diff[a] - diff[b]) if diff[a] != diff[b] else 0.0
             xc, yc = x[a] + w * (x[b] - x[a]), y[a] + w * (y[b] - y[a])
+            sc = int(seg[a if w < 0.5 else b])
+            in_j = _in_box(xc, yc, layout.junction_box_m) if layout.junction_box_m is not None else sc == 1
             out.append({"t_s": float(t[a] + w * (t[b] - t[a])), "x_m": float(xc), "y_m": float(yc),
-                        "segment": SEGMENTS[int(seg[a if w < 0.5 else b])],
-                        "in_junction": bool(_in_box(xc, yc, layout.junction_box_m)),
+                        "segment": SEGMENTS[sc], "in_junction": bool(in_j),
                         "direction": "X>Y to Y>X" if diff[a] > 0 else "Y>X to X>Y"})
     return out
 
@@ -619,7 +627,8 @@ class FootprintHeatmap:
 
 
 def footprint_heatmap(camera, budget, extent_m, *, vehicle_lwh_m=(4.8, 1.9, 1.5), step_m: float = 1.0,
-                      yaw_deg: float | None = None, confidence: float = 0.95) -> FootprintHeatmap:
+                      yaw_deg: float | None = None, confidence: float = 0.95,
+                      road_centre_xy_m=(0.0, 0.0)) -> FootprintHeatmap:
     """Footprint-centre uncertainty of a vehicle box centred on each node of a ground grid.
 
     Parameters
@@ -631,8 +640,10 @@ def footprint_heatmap(camera, budget, extent_m, *, vehicle_lwh_m=(4.8, 1.9, 1.5)
     step_m : float   grid step
     yaw_deg : float, optional
         Heading (ccw from east) of every placed vehicle; default: along the road of the
-        intersection -- north-south where ``|x| < |y|``, east-west elsewhere.
+        intersection -- north-south where ``|x - x_c| < |y - y_c|``, east-west elsewhere, with
+        ``(x_c, y_c) = road_centre_xy_m`` the intersection centre.
     confidence : float
+    road_centre_xy_m : (float, float)
 
     Nodes where any footprint corner is outside the image or beyond the horizon are NaN.
     """
@@ -644,7 +655,8 @@ def footprint_heatmap(camera, budget, extent_m, *, vehicle_lwh_m=(4.8, 1.9, 1.5)
         raise ConfigError("heatmap.step_m", step, f"a step giving at most 250000 nodes (got {xs.size * ys.size})")
     X, Y = np.meshgrid(xs, ys)
     if yaw_deg is None:
-        yaw = np.where(np.abs(X) < np.abs(Y), np.pi / 2, 0.0)
+        xc, yc = (float(v) for v in road_centre_xy_m)
+        yaw = np.where(np.abs(X - xc) < np.abs(Y - yc), np.pi / 2, 0.0)
     else:
         yaw = np.full(X.shape, np.deg2rad(as_float("yaw_deg", yaw_deg)))
     l, w, h = (float(v) for v in vehicle_lwh_m)

@@ -418,8 +418,15 @@ def compute_heatmaps(result, camera: str, *, step_m: float = 1.0, margin_m: floa
     x0, y0 = pts.min(0) - 8.0 - margin_m
     x1, y1 = pts.max(0) + 8.0 + margin_m
     lwh = tuple(np.median(b[:, 3:6], axis=0)) if len(b) else (4.8, 1.9, 1.5)
+    jb = scene.layout.junction_box_m
+    if jb is not None:
+        centre = (0.5 * (jb[0] + jb[2]), 0.5 * (jb[1] + jb[3]))
+    else:
+        turn = scene.segment == 1
+        centre = tuple(b[turn, :2].mean(0)) if turn.any() else (0.0, 0.0)
     return {ct: footprint_heatmap(cam, result.budgets[ct], (x0, y0, x1, y1), vehicle_lwh_m=lwh, step_m=step_m,
-                                  yaw_deg=yaw_deg, confidence=result.confidence) for ct in result.type_names}
+                                  yaw_deg=yaw_deg, confidence=result.confidence, road_centre_xy_m=centre)
+            for ct in result.type_names}
 
 
 def plot_heatmaps(result, camera: str, heatmaps: dict | None = None, **kw) -> Figure:
