@@ -173,3 +173,25 @@ def test_bad_input():
         proc.corners(np.full((2, 4, 2), 900.0), pixel_cov_px2=np.eye(2))
     with pytest.raises(InputError, match="^yaw_unit"):
         proc.boxes3d(np.zeros((1, 7)), yaw_unit="turns")
+
+
+def test_kernel_v2x_fields_match_numpy_at_boundaries(rng):
+    from footprint_uq import footprint_kernels as fk
+    from footprint_uq.footprints import V2X_FIELDS
+    from footprint_uq.v2x import cpm_fields, j2735_fields
+
+    s = np.array([0.0, 0.01 / 1.96, 0.05 / 1.96, 40.94 / 1.96, 40.95 / 1.96, 0.05, 12.65, 12.69, 12.70, 300.0])
+    covs = [np.diag([a * a, b * b]) for a in s for b in s[::3]]
+    A = rng.normal(size=(200, 2, 2)) * rng.uniform(0.01, 5, (200, 1, 1))
+    covs += list(A @ np.swapaxes(A, -1, -2))
+    covs += [np.full((2, 2), np.nan), np.zeros((2, 2)), np.array([[1.0, 1.0], [1.0, 1.0]])]
+    C = np.array(covs)
+    for heading in (0.0, 17.0, -90.0):
+        want = {**cpm_fields(C, heading), **j2735_fields(C, heading)}
+        h = np.deg2rad(heading)
+        ch, sh = (1.0, 0.0) if heading == 0.0 else (np.cos(h), np.sin(h))
+        got = np.empty((len(C), 7), dtype=np.int32)
+        for i, c in enumerate(C):
+            fk._v2x(c[0, 0], c[0, 1], c[1, 1], ch, sh, got, i)
+        for j, name in enumerate(V2X_FIELDS):
+            assert np.array_equal(got[:, j], want[name]), (heading, name)

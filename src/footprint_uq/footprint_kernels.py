@@ -370,6 +370,8 @@ def _v2x(c00, c01, c11, ch, sh, out, n):
     bearing = bearing - 180.0 * math.floor(bearing / 180.0)
     if bearing >= 180.0:
         bearing -= 180.0
+    if a * a - b * b <= 1e-9 * (a * a + b * b):  # circular: any orientation is right; report north
+        bearing = 0.0
     out[n, 5] = int(np.rint(bearing / _ORIENT_UNIT))
     r95 = _K95_2D * a
     cnt = 0

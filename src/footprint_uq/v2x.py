@@ -49,9 +49,9 @@ SAE J2735
   relative to true north (0~359.9945078786 degrees), LSB units of 360/65535 deg,
   a value of 65535 shall be used for orientation unavailable".  An ellipse axis is
   a line, so we report the bearing in [0, 180) rounded to nearest; 65535 for NaN.
-  For an exactly circular covariance every orientation is correct and the value
-  is the one of :func:`footprint_uq.ellipse.ellipse_axes` (the x axis, bearing 90 deg
-  at zero heading offset).
+  For a circular covariance (the two axes equal within 1e-9 relative) every
+  orientation is correct and the value would be decided by rounding noise; it is
+  then reported as 0 (true north), deterministically.
 * ``PositionConfidence ::= ENUMERATED {unavailable (0), a500m (1), a200m (2), a100m (3),
   a50m (4), a20m (5), a10m (6), a5m (7), a2m (8), a1m (9), a50cm (10), a20cm (11),
   a10cm (12), a5cm (13), a2cm (14), a1cm (15)}`` at the 95 % level, as used by
@@ -108,6 +108,7 @@ J2735_POSITION_CONFIDENCE_M = (np.nan, 500.0, 200.0, 100.0, 50.0, 20.0, 10.0, 5.
 J2735_POSITION_CONFIDENCE_NAMES = ("unavailable", "a500m", "a200m", "a100m", "a50m", "a20m", "a10m",
                                    "a5m", "a2m", "a1m", "a50cm", "a20cm", "a10cm", "a5cm", "a2cm", "a1cm")
 
+_CIRCULAR_RTOL = 1e-9  # axes this close: orientation reported as 0 (north)
 _STEP_GUARD = 1e-9  # relative guard against binary rounding pushing an exact step up
 
 
@@ -239,6 +240,9 @@ def j2735_fields(cov_m2, heading_offset_deg: float = 0.0) -> dict[str, np.ndarra
     with np.errstate(invalid="ignore"):
         a, b, ang = _axes(c)
     bearing = np.mod(90.0 - ang, 180.0)  # ang is ccw from east in the true east/north frame
+    with np.errstate(invalid="ignore"):
+        circular = (a * a - b * b) <= _CIRCULAR_RTOL * (a * a + b * b)
+    bearing = np.where(circular, 0.0, bearing)
     return {
         "j2735_semi_major": j2735_axis_accuracy(a),
         "j2735_semi_minor": j2735_axis_accuracy(b),
