@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 from matplotlib import colors
 from matplotlib.figure import Figure
-from matplotlib.ticker import LogFormatterSciNotation, LogLocator
+from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
 
 from .. import params as P
 from .. import status
@@ -30,10 +30,10 @@ from ..propagation import propagate
 __all__ = ["DEFAULT_LEVELS_M", "GSD_LEVELS_M", "plot_image_map", "plot_ground_map", "plot_gsd_maps",
            "plot_range_profile", "save_figure"]
 
-#: contour levels of the semi-major axis, metres
-DEFAULT_LEVELS_M = (0.1, 0.25, 0.5, 1.0, 2.0)
+#: contour levels of the semi-major axis, metres (those inside the colour range are drawn)
+DEFAULT_LEVELS_M = (0.1, 0.25, 0.5, 1.0, 2.0, 5.0, 10.0, 20.0, 50.0)
 #: contour levels of the ground sampling distance, metres per pixel
-GSD_LEVELS_M = (0.005, 0.01, 0.02, 0.05, 0.1, 0.2, 0.5)
+GSD_LEVELS_M = (0.005, 0.01, 0.02, 0.05, 0.1, 0.2, 0.5, 1.0, 2.0, 5.0)
 
 _CMAP = "viridis"
 _BAD = "#d9d9d9"
@@ -56,7 +56,7 @@ def _lognorm(values, vmin, vmax):
     if vmin is None:
         vmin = float(np.min(v)) if v.size else 1e-2
     if vmax is None:
-        vmax = float(np.max(v)) if v.size else 1.0
+        vmax = float(np.percentile(v, 99.0)) if v.size else 1.0
     vmax = max(vmax, vmin * 1.01)
     return colors.LogNorm(vmin=vmin, vmax=vmax)
 
@@ -109,15 +109,17 @@ def _contours(ax, X, Y, Z, levels, norm, fmt="%g m"):
     return cs
 
 
-def _colorbar(fig, mappable, ax, label):
-    data = np.ma.filled(mappable.get_array(), np.nan).astype(float)
+def _colorbar(fig, mappable, ax, label, data=None):
+    if data is None:
+        data = np.ma.filled(mappable.get_array(), np.nan).astype(float)
     over = bool(np.nanmax(data, initial=-np.inf) > mappable.norm.vmax * (1 + 1e-9))
     under = bool(np.nanmin(data, initial=np.inf) < mappable.norm.vmin * (1 - 1e-9))
     extend = {(True, True): "both", (True, False): "max", (False, True): "min"}.get((over, under), "neither")
     cb = fig.colorbar(mappable, ax=ax, extend=extend, pad=0.02, fraction=0.05)
     cb.set_label(label, fontsize=9)
     cb.ax.yaxis.set_major_locator(LogLocator(base=10, subs=(1.0, 2.0, 5.0)))
-    cb.ax.yaxis.set_major_formatter(LogFormatterSciNotation(base=10, labelOnlyBase=False))
+    cb.ax.yaxis.set_major_formatter(FuncFormatter(lambda x, _: f"{x:g}"))
+    cb.ax.yaxis.set_minor_formatter(NullFormatter())
     cb.ax.tick_params(labelsize=8)
     return cb
 
@@ -359,9 +361,10 @@ def plot_gsd_maps(umap, *, levels_m=GSD_LEVELS_M, vmin_m=None, vmax_m=None, titl
         ax.set_xlabel("u [px]", fontsize=9)
         ax.tick_params(labelsize=8)
     axes[0].set_ylabel("v [px]", fontsize=9)
-    cb = _colorbar(fig, im, list(axes), "ground sampling distance [m per pixel]")
+    cb = _colorbar(fig, im, list(axes), "ground sampling distance [m per pixel]", data=vals)
     cb.ax.tick_params(labelsize=8)
-    fig.suptitle(title or "Ground sampling distance (metres of ground covered by one pixel)", fontsize=10.5)
+    fig.suptitle(title or "Ground sampling distance: extent of one pixel's ground footprint along and across the "
+                 "line of sight", fontsize=10.5)
     return fig
 
 
