@@ -75,6 +75,24 @@ def test_linear_matches_monte_carlo_on_the_full_model(make_budget):
     assert np.all(np.abs(mc.xy_world_m - lin.xy_world_m) < 0.05 * sig + 5 * sig / np.sqrt(N_MC))
 
 
+def test_georeferenced_coordinates_do_not_lose_precision():
+    """A camera at UTM-like coordinates (x 5e5 m, y 5.4e6 m) gives the same covariances as at the origin.
+
+    Regression: Monte Carlo once accumulated raw sums of squares of the coordinates, whose
+    cancellation against the squared mean (~3e13 m^2) left nothing of a 0.01 m^2 variance.
+    """
+    b = ErrorBudget.from_dict({"pan_deg": 0.01, "tilt_deg": 0.01, "imaging_px": [0.2, 0.2]})
+    local = PanTiltCamera(1200.0, (1920, 1080), 8.0, 30.0, 15.0)
+    utm = PanTiltCamera(1200.0, (1920, 1080), 8.0, 30.0, 15.0, 0.0, (500_000.0, 5_400_000.0))
+    uv = PIXELS[:2]
+    np.testing.assert_allclose(propagate(utm, b, uv).cov_m2, propagate(local, b, uv).cov_m2, rtol=1e-6)
+    m_local = monte_carlo(local, b, uv, n_samples=2000, seed=1)
+    m_utm = monte_carlo(utm, b, uv, n_samples=2000, seed=1)
+    np.testing.assert_allclose(m_utm.cov_m2, m_local.cov_m2, rtol=1e-4)
+    np.testing.assert_allclose(m_utm.xy_world_m - [500_000.0, 5_400_000.0], m_local.xy_world_m, atol=1e-6)
+    np.testing.assert_allclose(unscented(utm, b, uv).cov_m2, unscented(local, b, uv).cov_m2, rtol=1e-4)
+
+
 def test_monte_carlo_is_seeded():
     cam, b = _camera(), _budget()
     a = monte_carlo(cam, b, PIXELS[:2], n_samples=500, seed=3)
@@ -167,6 +185,10 @@ def test_bad_pixel_covariance_is_an_input_error():
         propagate(cam, b, PIXELS, pixel_cov_px2=[[1.0, 0.5], [0.0, 1.0]])
     with pytest.raises(InputError, match="pixel_cov_px2"):
         propagate(cam, b, PIXELS, pixel_cov_px2=np.eye(3))
+    with pytest.raises(InputError, match="pixel_cov_px2"):  # 3 covariances for 4 points
+        propagate(cam, b, PIXELS, pixel_cov_px2=np.broadcast_to(np.eye(2), (3, 2, 2)))
+    with pytest.raises(InputError, match=r"pixel_cov_px2\[2, 0, 0\]"):  # names the offending element
+        propagate(cam, b, PIXELS, pixel_cov_px2=np.stack([np.eye(2)] * 2 + [np.full((2, 2), np.nan)] + [np.eye(2)]))
     with pytest.raises(InputError, match="uv_px"):
         propagate(cam, b, [1.0, 2.0, 3.0])
 

@@ -96,7 +96,11 @@ def _pixel_cov(budget: ErrorBudget, pixel_cov_px2, shape):
     if pixel_cov_px2 is None:
         return np.broadcast_to(S, shape + (2, 2))
     c = check_cov("pixel_cov_px2", pixel_cov_px2, 2)
-    return np.broadcast_to(S + c, shape + (2, 2))
+    try:
+        return np.broadcast_to(S + c, shape + (2, 2))
+    except ValueError:
+        raise InputError("pixel_cov_px2", f"shape {c.shape}",
+                         f"a covariance broadcastable to the points' shape {shape + (2, 2)}") from None
 
 
 def _sandwich(J, S):
@@ -141,8 +145,8 @@ def propagate(camera, budget, uv_px, *, pixel_cov_px2=None, breakdown: bool = Fa
             if np.any(S):
                 contrib[name] = _sandwich(bp.dxy_duv, S)
         if pixel_cov_px2 is not None:
-            contrib["detector"] = _sandwich(bp.dxy_duv, np.broadcast_to(
-                np.asarray(pixel_cov_px2, dtype=np.float64), shape + (2, 2)))
+            det = _pixel_cov(ErrorBudget(), pixel_cov_px2, shape)  # the detector's part alone
+            contrib["detector"] = _sandwich(bp.dxy_duv, det)
         shared_full = _sandwich(Jp, Sp[np.ix_(used, used)])
         cross = shared_full - total_shared
         if np.any(np.abs(np.nan_to_num(cross)) > 1e-15 * np.nan_to_num(np.abs(shared_full)).max(initial=0)):
@@ -201,6 +205,10 @@ def monte_carlo(camera, budget, uv_px, *, n_samples: int = 10_000, seed: int = 0
     shape = uv.shape[:-1]
     Suv = _pixel_cov(budget, pixel_cov_px2, shape)
     Luv = np.linalg.cholesky(Suv + 1e-300 * np.eye(2)) if np.all(np.linalg.eigvalsh(Suv) > 0) else None
+    # accumulate deviations from the nominal point: raw sums of squares of georeferenced
+    # coordinates (e.g. UTM northings ~5e6 m) would cancel catastrophically against the mean
+    ref = camera.backproject(uv).xy_world_m
+    ref = np.where(np.isfinite(ref), ref, np.asarray(camera.params[P.XM:P.YM + 1], dtype=np.float64))
     s1 = np.zeros(shape + (2,))
     s2 = np.zeros(shape + (2, 2))
     cnt = np.zeros(shape)
@@ -216,7 +224,7 @@ def monte_carlo(camera, budget, uv_px, *, n_samples: int = 10_000, seed: int = 0
             noise = ((V * np.sqrt(np.clip(w, 0, None))[..., None, :]) @ z[..., None])[..., 0]
         bp = camera.backproject_with(camera.params + dp, uv + noise)
         ok = bp.valid
-        xy = np.where(ok[..., None], bp.xy_world_m, 0.0)
+        xy = np.where(ok[..., None], bp.xy_world_m - ref, 0.0)
         s1 += xy.sum(0)
         s2 += np.einsum("...i,...j->...ij", xy, xy).sum(0)
         cnt += ok.sum(0)
@@ -224,7 +232,7 @@ def monte_carlo(camera, budget, uv_px, *, n_samples: int = 10_000, seed: int = 0
     with np.errstate(invalid="ignore", divide="ignore"):
         mean = s1 / cnt[..., None]
         cov = (s2 - cnt[..., None, None] * np.einsum("...i,...j->...ij", mean, mean)) / (cnt[..., None, None] - 1)
-    return MonteCarloEstimate(mean, cov, cnt / n_samples, n_samples)
+    return MonteCarloEstimate(ref + mean, cov, cnt / n_samples, n_samples)
 
 
 def unscented(camera, budget, uv_px, *, pixel_cov_px2=None) -> GroundEstimate:
