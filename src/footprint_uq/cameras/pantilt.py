@@ -157,6 +157,16 @@ def closed_form_backproject(params, uv_px, *, get_gradients=False) -> general.Ba
     xy = np.where(valid[..., None], xy, np.nan)
     if not get_gradients:
         return general.Backprojection(xy, valid, reason)
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+        J, dxy_duv = _closed_form_jacobians(fx, fy, sk, dv, c, r, c1, r1, cphi, sphi, h, alpha, theta, X, Y, shape)
+    bad = ~valid
+    J[bad] = np.nan
+    dxy_duv = np.where(bad[..., None, None], np.nan, dxy_duv)
+    return general.Backprojection(xy, valid, reason, dxy_duv, J)
+
+
+def _closed_form_jacobians(fx, fy, sk, dv, c, r, c1, r1, cphi, sphi, h, alpha, theta, X, Y, shape):
+    """``dxy_dp`` (..., 2, 22) and ``dxy_duv`` (..., 2, 2) by the chain rule of :func:`closed_form_backproject`."""
     d = paper_partials(fx, c1, r1, h, alpha, theta)
 
     def w(pair):  # paper (dX, dY) -> world (dx, dy) = (dY, dX)
@@ -187,10 +197,7 @@ def closed_form_backproject(params, uv_px, *, get_gradients=False) -> general.Ba
     J[..., P.GSX] = -o * col(Y / h)
     J[..., P.GSY] = -o * col(X / h)
     dxy_duv = np.stack([dc, -col(sk / fy) * dc + col(fx / fy) * dr], -1)
-    bad = ~valid
-    J[bad] = np.nan
-    dxy_duv = np.where(bad[..., None, None], np.nan, dxy_duv)
-    return general.Backprojection(xy, valid, reason, dxy_duv, J)
+    return J, dxy_duv
 
 
 class PanTiltCamera(Camera):
