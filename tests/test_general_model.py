@@ -284,3 +284,7 @@ def test_camera_methods_accept_single_points_and_reject_bad_shapes(random_opencv
         cam.backproject([1.0, 2.0, 3.0])
     with pytest.raises(InputError, match="xyz_world_m"):
         cam.project([1.0, 2.0])
+    with pytest.raises(InputError, match="uv_px"):
+        cam.backproject("960, 900")
+    with pytest.raises(InputError, match="uv_px"):
+        cam.backproject([[960.0, "a"]])

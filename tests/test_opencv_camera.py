@@ -163,6 +163,8 @@ def test_camera_below_ground_is_an_error():
     (dict(t=[0.0, np.inf, 1.0]), "t"),
     (dict(image_size_px=(1920, 0)), "image_size_px"),
     (dict(image_size_px="big"), "image_size_px"),
+    (dict(image_size_px=(1920.5, 1080)), "image_size_px"),
+    (dict(ground_z_m=True), "ground_z_m"),
     (dict(R=np.eye(2)), "R"),
 ])
 def test_bad_input_names_the_field(kwargs, field):

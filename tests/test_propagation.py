@@ -187,6 +187,8 @@ def test_bad_pixel_covariance_is_an_input_error():
         propagate(cam, b, PIXELS, pixel_cov_px2=np.eye(3))
     with pytest.raises(InputError, match="pixel_cov_px2"):  # 3 covariances for 4 points
         propagate(cam, b, PIXELS, pixel_cov_px2=np.broadcast_to(np.eye(2), (3, 2, 2)))
+    with pytest.raises(InputError, match=r"pixel_cov_px2\[1\]: .*positive semi-definite"):  # names the matrix
+        propagate(cam, b, PIXELS, pixel_cov_px2=np.stack([np.eye(2), np.diag([1.0, -1.0]), np.eye(2), np.eye(2)]))
     with pytest.raises(InputError, match=r"pixel_cov_px2\[2, 0, 0\]"):  # names the offending element
         propagate(cam, b, PIXELS, pixel_cov_px2=np.stack([np.eye(2)] * 2 + [np.full((2, 2), np.nan)] + [np.eye(2)]))
     with pytest.raises(InputError, match="uv_px"):

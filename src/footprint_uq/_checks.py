@@ -11,7 +11,10 @@ __all__ = ["as_points", "check_finite", "check_positive", "check_cov", "as_float
 
 def as_points(name: str, a, last: int) -> np.ndarray:
     """Return ``a`` as a float64 array of shape ``(..., last)`` or raise InputError."""
-    arr = np.asarray(a, dtype=np.float64)
+    try:
+        arr = np.asarray(a, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise InputError(name, a, f"numbers in an array of shape (..., {last})") from None
     if arr.ndim == 0 or arr.shape[-1] != last:
         raise InputError(name, getattr(a, "shape", a) if arr.ndim else a,
                          f"an array of shape (..., {last})")
@@ -21,6 +24,8 @@ def as_points(name: str, a, last: int) -> np.ndarray:
 def as_float(name: str, value, *, positive: bool = False, nonnegative: bool = False,
              lo: float | None = None, hi: float | None = None) -> float:
     """Return ``value`` as a finite float, checking the requested bounds."""
+    if isinstance(value, bool | np.bool_):
+        raise InputError(name, value, "a number, not a boolean")
     try:
         x = float(value)
     except (TypeError, ValueError):
@@ -59,10 +64,19 @@ def check_cov(name: str, cov, n: int, *, tol: float = 1e-12) -> np.ndarray:
         raise InputError(name, getattr(cov, "shape", cov), f"a covariance of shape (..., {n}, {n})")
     check_finite(name, c)
     scale = np.maximum(np.abs(c).max(axis=(-2, -1), keepdims=True), 1e-300)
-    if np.any(np.abs(c - np.swapaxes(c, -1, -2)) > 1e-9 * scale):
-        raise InputError(name, "non-symmetric matrix", "a symmetric covariance matrix")
+    asym = np.any(np.abs(c - np.swapaxes(c, -1, -2)) > 1e-9 * scale, axis=(-2, -1))
+    if np.any(asym):
+        raise InputError(_at(name, asym), "non-symmetric matrix", "a symmetric covariance matrix")
     w = np.linalg.eigvalsh(c)
-    if np.any(w < -tol * scale[..., 0]):
-        raise InputError(name, f"min eigenvalue {w.min():.3g}",
+    neg = np.any(w < -tol * scale[..., 0], axis=-1)
+    if np.any(neg):
+        raise InputError(_at(name, neg), f"min eigenvalue {w.min():.3g}",
                          "a positive semi-definite covariance matrix")
     return c
+
+
+def _at(name: str, bad: np.ndarray) -> str:
+    """``name`` with the index of the first True entry of ``bad`` (the offending matrix of a batch)."""
+    if np.ndim(bad) == 0:
+        return name
+    return f"{name}[{', '.join(map(str, np.argwhere(bad)[0]))}]"

@@ -79,7 +79,7 @@ class OpenCVCamera(Camera):
             w, h = (int(v) for v in image_size_px)
         except (TypeError, ValueError):
             raise InputError("image_size_px", image_size_px, "[width, height] in pixels") from None
-        if w <= 0 or h <= 0:
+        if w <= 0 or h <= 0 or list(image_size_px) != [w, h]:  # 1920.5 is not silently 1920
             raise InputError("image_size_px", image_size_px, "two positive integers [width, height]")
         self.image_size_px = (w, h)
         self.ground_z_m = as_float("ground_z_m", ground_z_m)
