@@ -238,7 +238,7 @@ def map_cmd(camera_path, budget_spec, out_dir, step_px, max_range_m, confidence)
                    f"{s['semi_major_m_median']:.3g} m, 95th percentile {s['semi_major_m_p95']:.3g} m, "
                    f"max {s['semi_major_m_max']:.3g} m")
     else:
-        click.echo("no pixel of this camera sees the ground", err=True)
+        click.echo("footprint-uq: warning: no pixel of this camera sees the ground", err=True)
 
 
 # -- presets --------------------------------------------------------------------------------
