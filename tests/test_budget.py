@@ -151,6 +151,11 @@ def test_full_covariance_override_with_degree_aliases():
     # round trip through to_dict keeps the matrix (now in radians)
     b2 = ErrorBudget.from_dict(b.to_dict())
     np.testing.assert_array_equal(b2.param_covariance(), S)
+    assert b2 == b and hash(b2) == hash(b)
+    # equality sees the matrix (it once compared only the sigmas)
+    b3 = ErrorBudget.from_dict({"focal_px": 0.3, "covariance": {
+        "names": ["fx_px", "height_m"], "matrix": [[0.25, 0.0], [0.0, 0.04]]}})
+    assert b3 != b
 
 
 def test_scaled_and_replace():

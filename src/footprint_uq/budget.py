@@ -136,6 +136,16 @@ class ErrorBudget:
         elif self.covariance_names:
             raise ConfigError("covariance_names", self.covariance_names, "no names without a covariance_matrix")
 
+    def __eq__(self, other):
+        # the generated __eq__ would skip the covariance matrix (an array cannot be compared with ==)
+        if other.__class__ is not self.__class__:
+            return NotImplemented
+        fields = [f.name for f in self.__dataclass_fields__.values() if f.name != "covariance_matrix"]
+        if any(getattr(self, f) != getattr(other, f) for f in fields):
+            return False
+        a, b = self.covariance_matrix, other.covariance_matrix
+        return (a is None and b is None) or (a is not None and b is not None and np.array_equal(a, b))
+
     # -- construction ----------------------------------------------------------------
     @classmethod
     def preset(cls, name: str) -> ErrorBudget:
