@@ -1,0 +1,704 @@
+"""Batch footprints: one table of detections in, one table of footprints out, every row accounted for.
+
+:class:`BatchProcessor` holds a camera, a budget and the options, and turns a
+:class:`pyarrow.Table` (or a dict of arrays) of detections into a footprint table
+(:func:`footprint_uq.batch.schema.output_schema`).  It is the single per-chunk /
+per-partition implementation used by :func:`process_table`, by
+:func:`process_file` (streaming, chunk by chunk) and by the Dask fleet path
+(:mod:`footprint_uq.batch.fleet`).
+
+Row accounting
+--------------
+Every input row gives exactly one output row, with its 0-based input index in
+``row`` and a ``status``:
+
+* ``ok`` -- the footprint centre and its covariance were computed;
+* ``partial`` -- the centre is not computable (a corner outside the image or above
+  the horizon, a degenerate polygon) but at least one corner is usable: the largest
+  point and the usable corners are given, ``reason`` says what is missing;
+* ``error`` -- nothing could be computed: a missing/NaN/non-numeric field, a negative
+  size, an inverted 2D box, a pixel covariance that is not positive semi-definite,
+  or no usable corner (e.g. the whole object above the horizon); ``reason`` says which.
+
+Bad rows never stop the batch.  Errors that concern the whole job (unknown box type,
+missing columns, bad options) raise :class:`~footprint_uq.errors.InputError`.
+"""
+
+from __future__ import annotations
+
+import os
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.compute as pc
+
+from .. import status as st
+from .._checks import as_float
+from ..budget import load_budget
+from ..ellipse import chi2_scale, ellipse_axes
+from ..errors import InputError
+from ..footprints import CONTACT_MODES, DEGENERATE, V2X_FIELDS, FrameProcessor
+from . import schema as S
+
+__all__ = ["BatchProcessor", "process_table", "process_file", "process_chunk", "Summary", "summary_path", "Reasons",
+           "PSD_TOL"]
+
+#: relative tolerance of the per-row PSD test of the detector pixel covariance (a little
+#: stricter than footprint_uq._checks.check_cov's 1e-12 so that accepted rows always pass it)
+PSD_TOL = 0.5e-12
+#: below this many rows a chunk is processed in one thread
+_MIN_ROWS_PER_THREAD = 20_000
+
+
+class Reasons:
+    """Registry of reason strings -> small integer ids (stable over a whole job)."""
+
+    def __init__(self):
+        self.texts: list[str] = []
+        self._ids: dict[str, int] = {}
+
+    def id(self, text: str) -> int:
+        i = self._ids.get(text)
+        if i is None:
+            i = self._ids[text] = len(self.texts)
+            self.texts.append(text)
+        return i
+
+    def dictionary(self) -> pa.Array:
+        return pa.array(self.texts, type=pa.string())
+
+
+def _kernel_releases_gil() -> bool:
+    from .. import footprint_kernels as fk
+
+    opts = getattr(fk.process_corners, "targetoptions", {}) or {}
+    return bool(opts.get("nogil", False))
+
+
+def _column_float(table: pa.Table, name: str) -> np.ndarray:
+    """A numeric column as float64 numpy (nulls -> NaN)."""
+    col = table.column(name)
+    if not pa.types.is_float64(col.type):
+        col = pc.cast(col, pa.float64())
+    col = col.combine_chunks() if isinstance(col, pa.ChunkedArray) else col
+    return col.to_numpy(zero_copy_only=False)
+
+
+@dataclass
+class _Result:
+    """Per-row numbers of a chunk (full length; NaN / defaults on error rows)."""
+
+    n: int
+    K: int
+    reason_id: np.ndarray
+    status_id: np.ndarray
+    centre: np.ndarray = field(default=None)
+    centre_cov: np.ndarray = field(default=None)
+    largest_index: np.ndarray = field(default=None)
+    largest_semi: np.ndarray = field(default=None)
+    largest_xy: np.ndarray = field(default=None)
+    area: np.ndarray = field(default=None)
+    v2x: np.ndarray = field(default=None)
+    corners_px: np.ndarray = field(default=None)
+    corners_xy: np.ndarray = field(default=None)
+    corners_cov: np.ndarray = field(default=None)
+    corner_reason: np.ndarray = field(default=None)
+
+
+class BatchProcessor:
+    """Turns tables of detections into footprint tables (see the module doc).
+
+    Parameters
+    ----------
+    camera : Camera
+    budget : ErrorBudget, preset name, path or mapping
+    box_type : {"2d", "3d", "corners"} or None
+        None: detected from the columns of the first table.
+    contact : {"bottom-centre", "bottom-corners"}
+        Ground contact of 2D boxes (:func:`footprint_uq.footprints.box2d_contact_points`).
+    confidence : float, optional
+        Also write ``semi_major_m``/``semi_minor_m``, the ellipse at this probability (2-D).
+    heading_offset_deg : float
+        Compass bearing of W's +y axis (V2X fields, lat/lon).
+    origin_lat_deg, origin_lon_deg : float, optional
+        WGS84 position of W's origin: adds ``lat_deg``/``lon_deg`` (needs pyproj).
+    corners : bool
+        Add the per-corner columns ``c{k}_*``.
+    allow_outside_image : bool
+        Let corners outside the image enter the centre and the largest point.
+    bottom_on_ground : bool
+        3D boxes: put the bottom face on the ground (see :func:`footprints_from_boxes3d`).
+    threads : int, optional
+        Threads for the numeric kernel on large chunks (default: up to 2; used only
+        when the compiled kernel releases the GIL).
+    """
+
+    def __init__(self, camera, budget, *, box_type: str | None = None, contact: str = "bottom-centre",
+                 confidence: float | None = None, heading_offset_deg: float = 0.0,
+                 origin_lat_deg: float | None = None, origin_lon_deg: float | None = None, corners: bool = False,
+                 allow_outside_image: bool = False, bottom_on_ground: bool = True, threads: int | None = None):
+        if box_type is not None and box_type not in S.BOX_TYPES:
+            raise InputError("box_type", box_type, f"one of {S.BOX_TYPES}")
+        if contact not in CONTACT_MODES:
+            raise InputError("contact", contact, f"one of {CONTACT_MODES}")
+        self.camera = camera
+        self.budget = load_budget(budget)
+        self.box_type = box_type
+        self.contact = contact
+        self.confidence = None if confidence is None else float(confidence)
+        self._k_conf = None if confidence is None else chi2_scale(confidence)
+        self.heading_offset_deg = as_float("heading_offset_deg", heading_offset_deg)
+        if (origin_lat_deg is None) != (origin_lon_deg is None):
+            raise InputError("origin_lat_deg/origin_lon_deg", (origin_lat_deg, origin_lon_deg),
+                             "both the latitude and the longitude of the origin, or neither")
+        self.geo = None
+        if origin_lat_deg is not None:
+            from ._geo import LocalToWGS84
+
+            self.geo = LocalToWGS84(origin_lat_deg, origin_lon_deg, self.heading_offset_deg)
+        self.corners = bool(corners)
+        self.allow_outside_image = bool(allow_outside_image)
+        self.bottom_on_ground = bool(bottom_on_ground)
+        self.threads = max(1, min(2, os.cpu_count() or 1)) if threads is None else max(1, int(threads))
+        self._parallel = self.threads > 1 and _kernel_releases_gil()
+        self.proc = FrameProcessor(camera, self.budget, heading_offset_deg=self.heading_offset_deg,
+                                   allow_outside_image=self.allow_outside_image, joint_cov=False)
+        self.reasons = Reasons()
+        self._status_dict = pa.array(list(S.STATUSES), type=pa.string())
+        self._pool = None
+        self._layout = None  # (box_type, box columns, cov columns, id fields, K) fixed by the first table
+
+    # -- layout -----------------------------------------------------------------------------------
+    def resolve(self, names, id_fields: list[pa.Field] | None = None):
+        """Fix the input layout from column names (first table); returns the output schema."""
+        names = list(names)
+        bt = self.box_type or S.detect_box_type(names)
+        if bt is None:
+            raise InputError("detections columns", sorted(names)[:12],
+                             "exactly one complete box family: 2D (u_min_px, v_min_px, u_max_px, v_max_px), 3D "
+                             "(x_m, y_m, z_m, length_m, width_m, height_m, yaw_rad|yaw_deg) or corners (u0_px, v0_px, "
+                             "...) -- or give box_type")
+        cols = S.box_columns(bt, names)
+        missing = [c for c in cols if c not in names]
+        if bt == "corners" and not cols:
+            raise InputError("detections columns", sorted(names)[:12], "corner columns u0_px, v0_px, u1_px, ...")
+        if bt == "3d" and not any(y in names for y in S.YAW_COLUMNS):
+            missing = [c for c in missing if c != "yaw_deg"] + ["yaw_rad or yaw_deg"]
+        if missing:
+            raise InputError("detections columns", f"missing {missing}", f"the {bt} box columns {list(cols)}")
+        cov = tuple(c for c in S.COV_COLUMNS if c in names)
+        if cov and len(cov) != 3:
+            raise InputError("detections columns", f"only {list(cov)}",
+                             f"all three pixel covariance columns {list(S.COV_COLUMNS)} or none")
+        if bt == "2d":
+            K = 1 if self.contact == "bottom-centre" else 2
+        elif bt == "3d":
+            K = 4
+        else:
+            K = len(cols) // 2
+        if id_fields is None:
+            id_fields = [pa.field(c, S.ID_TYPES[c]) for c in S.ID_COLUMNS if c in names]
+        self.box_type = bt
+        self._layout = (bt, cols, cov, list(id_fields), K)
+        self.schema = S.output_schema(list(id_fields), K, confidence=self._k_conf is not None,
+                                      geo=self.geo is not None, corners=self.corners)
+        return self.schema
+
+    @property
+    def n_corners(self) -> int:
+        return self._layout[4]
+
+    # -- validation ---------------------------------------------------------------------------------
+    def _validate(self, X: np.ndarray, cov: np.ndarray | None, reason_id: np.ndarray) -> None:
+        """Set ``reason_id`` (in place, -1 = fine) of rows that cannot be processed."""
+        bt, cols, covcols, _, _ = self._layout
+        fin = np.isfinite(X)
+        if not fin.all():
+            for j, name in enumerate(cols):
+                bad = ~fin[:, j] & (reason_id < 0)
+                if bad.any():
+                    reason_id[bad] = self.reasons.id(f"missing or non-finite field {name}")
+        if bt == "2d":
+            with np.errstate(invalid="ignore"):
+                for lo, hi in ((0, 2), (1, 3)):
+                    bad = (X[:, hi] < X[:, lo]) & (reason_id < 0)
+                    if bad.any():
+                        reason_id[bad] = self.reasons.id(f"inverted box: {cols[hi]} < {cols[lo]}")
+        elif bt == "3d":
+            with np.errstate(invalid="ignore"):
+                for j in (3, 4, 5):
+                    bad = (X[:, j] < 0) & (reason_id < 0)
+                    if bad.any():
+                        reason_id[bad] = self.reasons.id(f"negative size {cols[j]} (expected >= 0)")
+        if cov is not None:
+            a, b, d = cov[:, 0], cov[:, 1], cov[:, 2]
+            nan = np.isnan(cov)
+            none = nan.all(1)
+            part = nan.any(1) & ~none & (reason_id < 0)
+            if part.any():
+                reason_id[part] = self.reasons.id("incomplete pixel covariance: give cov_uu_px2, cov_uv_px2 and "
+                                                  "cov_vv_px2, or none of them")
+            inf = ~none & ~nan.any(1) & ~np.isfinite(cov).all(1) & (reason_id < 0)
+            if inf.any():
+                reason_id[inf] = self.reasons.id("pixel covariance is not finite")
+            with np.errstate(invalid="ignore"):
+                scale = np.maximum(np.maximum(np.abs(a), np.abs(d)), np.abs(b))
+                lmin = 0.5 * (a + d) - np.hypot(0.5 * (a - d), b)
+                bad = ~(lmin >= -PSD_TOL * scale) & ~nan.any(1) & np.isfinite(cov).all(1) & (reason_id < 0)
+            if bad.any():
+                reason_id[bad] = self.reasons.id("pixel covariance (cov_uu_px2, cov_uv_px2, cov_vv_px2) is not "
+                                                 "positive semi-definite")
+
+    # -- the kernel --------------------------------------------------------------------------------
+    def _kernel(self, X: np.ndarray, P: np.ndarray | None):
+        bt = self._layout[0]
+        if bt == "2d":
+            return self.proc.boxes2d(X, contact=self.contact, pixel_cov_px2=P)
+        if bt == "3d":
+            yaw_unit = "deg" if self._layout[1][-1] == "yaw_deg" else "rad"
+            return self.proc.boxes3d(X, yaw_unit=yaw_unit, bottom_on_ground=self.bottom_on_ground, pixel_cov_px2=P)
+        return self.proc.corners(X.reshape(X.shape[0], -1, 2), pixel_cov_px2=P)
+
+    def _run_kernel(self, X, P):
+        n = X.shape[0]
+        if not self._parallel or n < 2 * _MIN_ROWS_PER_THREAD:
+            return [self._kernel(X, P)], [0, n]
+        parts = self.threads
+        edges = [n * i // parts for i in range(parts + 1)]
+        if self._pool is None:
+            self._pool = ThreadPoolExecutor(self.threads, thread_name_prefix="footprint-uq-kernel")
+        futs = [self._pool.submit(self._kernel, X[a:b], None if P is None else P[a:b])
+                for a, b in zip(edges[:-1], edges[1:], strict=True)]
+        return [f.result() for f in futs], edges
+
+    def compute(self, X: np.ndarray, cov: np.ndarray | None, reason_id: np.ndarray) -> _Result:
+        """Numbers of one chunk: ``X`` (n, m) box columns, ``cov`` (n, 3) or None, ``reason_id`` (n,) pre-errors."""
+        n = X.shape[0]
+        K = self.n_corners
+        self._validate(X, cov, reason_id)
+        good = reason_id < 0
+        all_good = bool(good.all())
+        Xg = X if all_good else X[good]
+        P = None
+        if cov is not None:
+            cg = cov if all_good else cov[good]
+            cg = np.where(np.isnan(cg).all(1, keepdims=True), 0.0, cg)  # no detector covariance: budget only
+            if np.any(cg):
+                P = np.empty((cg.shape[0], 2, 2))
+                P[:, 0, 0], P[:, 0, 1], P[:, 1, 0], P[:, 1, 1] = cg[:, 0], cg[:, 1], cg[:, 1], cg[:, 2]
+        res = _Result(n=n, K=K, reason_id=reason_id, status_id=np.full(n, 2, dtype=np.int32))
+        ests, edges = self._run_kernel(Xg, P) if Xg.shape[0] else ([], [0])
+
+        def gather(attr, shape_tail, fill, dtype=np.float64):
+            if len(ests) == 1 and all_good:
+                return getattr(ests[0], attr)
+            out = np.full((n,) + shape_tail, fill, dtype=dtype)
+            if ests:
+                vals = ests[0] if len(ests) == 1 else None
+                src = getattr(vals, attr) if vals is not None else np.concatenate([getattr(e, attr) for e in ests])
+                if all_good:
+                    return src
+                out[good] = src
+            return out
+
+        res.centre = gather("centre_xy_world_m", (2,), np.nan)
+        res.centre_cov = gather("centre_cov_m2", (2, 2), np.nan)
+        res.largest_index = gather("largest_index", (), -1, np.int64)
+        res.largest_semi = gather("largest_semi_major_m", (), np.nan)
+        res.largest_xy = gather("largest_xy_world_m", (2,), np.nan)
+        res.area = gather("area_m2", (), np.nan)
+        unavailable = np.array([S.V2X_UNAVAILABLE[f] for f in V2X_FIELDS], dtype=np.int32)
+        res.v2x = gather("v2x_codes", (len(V2X_FIELDS),), 0, np.int32)
+        if not all_good:
+            res.v2x[~good] = unavailable
+        creason = gather("centre_reason", (), -1, np.int32)
+        cbad = gather("centre_bad_corner", (), -1, np.int64)
+        corner_reason = gather("corner_reason", (K,), st.NOT_FINITE, np.int8)
+        if self.corners or self.geo is not None:
+            res.corners_px = gather("corners_px", (K, 2), np.nan)
+            res.corners_xy = gather("corners_xy_world_m", (K, 2), np.nan)
+            res.corners_cov = gather("corners_cov_m2", (K, 2, 2), np.nan)
+            res.corner_reason = corner_reason
+        # status and reason of the processed rows
+        ok = good & (creason == st.OK)
+        partial = good & ~ok & (res.largest_index >= 0)
+        failed = good & ~ok & ~partial
+        res.status_id[ok] = 0
+        res.status_id[partial] = 1
+        if ok.any():
+            reason_id[ok] = self.reasons.id("ok")
+        for mask, prefix in ((partial, "no centre: "), (failed, "no usable corner: ")):
+            if not mask.any():
+                continue
+            key = creason[mask].astype(np.int64) * 64 + (cbad[mask] + 1)
+            if prefix == "no usable corner: ":  # summarise: every corner's code the same?
+                cr = corner_reason[mask]
+                same = (cr == cr[:, :1]).all(1)
+                key = np.where(same, -1 - cr[:, 0].astype(np.int64), key)
+            uk, inv = np.unique(key, return_inverse=True)
+            ids = np.empty(uk.size, dtype=np.int32)
+            for i, k in enumerate(uk.tolist()):
+                if k < 0:
+                    text = f"all {K} corners: {st.REASONS[-1 - k]}" if K > 1 else st.REASONS[-1 - k]
+                else:
+                    code, bad = divmod(k, 64)
+                    if code == DEGENERATE:
+                        text = "footprint polygon has zero area (centroid undefined)"
+                    else:
+                        text = f"corner {bad - 1} of {K}: {st.REASONS[code]}"
+                ids[i] = self.reasons.id(prefix + text)
+            reason_id[mask] = ids[inv]
+        return res
+
+    # -- tables -----------------------------------------------------------------------------------
+    def inputs_from_table(self, table: pa.Table):
+        """``(X, cov)`` float64 arrays of a table's box and covariance columns (nulls -> NaN)."""
+        _, cols, covcols, _, _ = self._layout
+        X = np.empty((table.num_rows, len(cols)))
+        for j, c in enumerate(cols):
+            X[:, j] = _column_float(table, c)
+        cov = None
+        if covcols:
+            cov = np.empty((table.num_rows, 3))
+            for j, c in enumerate(covcols):
+                cov[:, j] = _column_float(table, c)
+        return X, cov
+
+    def process(self, table, *, rows=None, pre_errors=None) -> pa.Table:
+        """Footprints of one table of detections.
+
+        Parameters
+        ----------
+        table : pyarrow.Table or dict of arrays
+            Detections (columns: :mod:`footprint_uq.batch.schema`).
+        rows : array_like (n,) of int, optional
+            Input row index of each table row (default ``0 .. n-1``).
+        pre_errors : sequence (n,) of str or None, optional
+            Rows already known to be bad (e.g. a value that is not a number), with the reason.
+
+        Returns
+        -------
+        pyarrow.Table with :attr:`schema`, one row per input row, in the same order.
+        """
+        if not isinstance(table, pa.Table):
+            table = pa.table({k: np.asarray(v) if not isinstance(v, pa.Array | pa.ChunkedArray) else v
+                              for k, v in dict(table).items()})
+        if self._layout is None:
+            self.resolve(table.column_names)
+        n = table.num_rows
+        rows = np.arange(n, dtype=np.int64) if rows is None else np.asarray(rows, dtype=np.int64)
+        if rows.shape != (n,):
+            raise InputError("rows", rows.shape, f"one row index per table row ({n},)")
+        reason_id = np.full(n, -1, dtype=np.int32)
+        if pre_errors is not None:
+            for i, text in enumerate(pre_errors):
+                if text is not None:
+                    reason_id[i] = self.reasons.id(text)
+        X, cov = self.inputs_from_table(table)
+        res = self.compute(X, cov, reason_id)
+        return self.to_table(res, table, rows)
+
+    def to_table(self, res: _Result, table: pa.Table, rows: np.ndarray) -> pa.Table:
+        """Assemble the output table of :meth:`compute`'s numbers."""
+        _, _, _, id_fields, K = self._layout
+        n = res.n
+        cols: dict[str, object] = {"row": pa.array(rows, type=pa.int64())}
+        for f in id_fields:
+            if f.name in table.column_names:
+                col = table.column(f.name)
+                cols[f.name] = col if col.type == f.type else pc.cast(col, f.type)
+            else:
+                cols[f.name] = pa.nulls(n, type=f.type)
+        cols["status"] = pa.DictionaryArray.from_arrays(pa.array(res.status_id, type=pa.int32()), self._status_dict)
+        cols["reason"] = pa.DictionaryArray.from_arrays(pa.array(res.reason_id, type=pa.int32()),
+                                                        self.reasons.dictionary())
+        C = res.centre_cov
+        cols["x_m"], cols["y_m"] = res.centre[:, 0], res.centre[:, 1]
+        cols["cov_xx_m2"], cols["cov_xy_m2"], cols["cov_yy_m2"] = C[:, 0, 0], C[:, 0, 1], C[:, 1, 1]
+        with np.errstate(invalid="ignore"):
+            a, b, ang = ellipse_axes(C)
+        cols["sigma_major_m"], cols["sigma_minor_m"], cols["orientation_deg"] = a, b, ang
+        if self._k_conf is not None:
+            cols["semi_major_m"], cols["semi_minor_m"] = self._k_conf * a, self._k_conf * b
+        cols["largest_index"] = res.largest_index.astype(np.int8)
+        cols["largest_sigma_major_m"] = res.largest_semi
+        cols["largest_x_m"], cols["largest_y_m"] = res.largest_xy[:, 0], res.largest_xy[:, 1]
+        cols["area_m2"] = res.area
+        for j, name in enumerate(V2X_FIELDS):
+            cols[name] = res.v2x[:, j]
+        if self.geo is not None:
+            cols["lat_deg"], cols["lon_deg"] = self.geo(res.centre[:, 0], res.centre[:, 1])
+        if self.corners:
+            if self.geo is not None:
+                clat, clon = self.geo(res.corners_xy[..., 0], res.corners_xy[..., 1])
+            for k in range(K):
+                cols[f"c{k}_u_px"], cols[f"c{k}_v_px"] = res.corners_px[:, k, 0], res.corners_px[:, k, 1]
+                cols[f"c{k}_x_m"], cols[f"c{k}_y_m"] = res.corners_xy[:, k, 0], res.corners_xy[:, k, 1]
+                cc = res.corners_cov[:, k]
+                cols[f"c{k}_cov_xx_m2"], cols[f"c{k}_cov_xy_m2"], cols[f"c{k}_cov_yy_m2"] = (cc[:, 0, 0], cc[:, 0, 1],
+                                                                                           cc[:, 1, 1])
+                cols[f"c{k}_reason"] = res.corner_reason[:, k].astype(np.int8)
+                if self.geo is not None:
+                    cols[f"c{k}_lat_deg"], cols[f"c{k}_lon_deg"] = clat[:, k], clon[:, k]
+        arrays = []
+        for f in self.schema:
+            v = cols[f.name]
+            if isinstance(v, np.ndarray):
+                v = pa.array(np.ascontiguousarray(v), type=f.type)
+            arrays.append(v)
+        return pa.Table.from_arrays(arrays, schema=self.schema)
+
+    def close(self) -> None:
+        if self._pool is not None:
+            self._pool.shutdown()
+            self._pool = None
+
+
+def process_table(camera, budget, table, **options) -> pa.Table:
+    """Footprints of one table of detections (a frame, a chunk, a partition).
+
+    Parameters
+    ----------
+    camera : Camera
+    budget : ErrorBudget, preset name, path or mapping
+    table : pyarrow.Table or dict of arrays
+        Detections; columns in :mod:`footprint_uq.batch.schema` / ``docs/batch.md``.
+    **options
+        ``rows``, ``pre_errors`` (see :meth:`BatchProcessor.process`) and the keyword
+        arguments of :class:`BatchProcessor` (``box_type``, ``contact``, ``confidence``,
+        ``heading_offset_deg``, ``origin_lat_deg``, ``origin_lon_deg``, ``corners``,
+        ``allow_outside_image``, ``bottom_on_ground``, ``threads``).
+
+    Returns
+    -------
+    pyarrow.Table
+        One row per input row (same order), columns :func:`footprint_uq.batch.schema.output_schema`.
+
+    Examples
+    --------
+    >>> out = process_table(cam, "basler1", {"u_min_px": [900.0], "v_min_px": [500.0],
+    ...                                      "u_max_px": [980.0], "v_max_px": [560.0]})
+    >>> out.column("x_m"), out.column("cov_xx_m2"), out.column("status")
+    """
+    rows = options.pop("rows", None)
+    pre_errors = options.pop("pre_errors", None)
+    bp = BatchProcessor(camera, budget, **options)
+    try:
+        return bp.process(table, rows=rows, pre_errors=pre_errors)
+    finally:
+        bp.close()
+
+
+# -- files ---------------------------------------------------------------------------------------------
+@dataclass
+class Summary:
+    """Row accounting of a batch job (``rows_in == rows_out == rows_ok + rows_partial + rows_error``).
+
+    ``reasons`` counts the rows of every reason other than "ok".  ``to_dict()`` is what the
+    JSON summary file holds; ``text()`` the line printed on stderr.
+    """
+
+    rows_in: int = 0
+    rows_out: int = 0
+    rows_ok: int = 0
+    rows_partial: int = 0
+    rows_error: int = 0
+    reasons: dict = field(default_factory=dict)
+    elapsed_s: float = 0.0
+    info: dict = field(default_factory=dict)
+
+    @property
+    def rows_with_errors(self) -> int:
+        return self.rows_error
+
+    def add_table(self, out: pa.Table, rows_in: int) -> None:
+        """Count one output table (``rows_in`` input rows gave it)."""
+        self.rows_in += int(rows_in)
+        self.rows_out += out.num_rows
+        s = out.column("status").combine_chunks()
+        r = out.column("reason").combine_chunks()
+        cs = np.bincount(s.indices.to_numpy(zero_copy_only=False), minlength=3)
+        self.rows_ok += int(cs[0])
+        self.rows_partial += int(cs[1])
+        self.rows_error += int(cs[2])
+        idx = r.indices.to_numpy(zero_copy_only=False)
+        texts = r.dictionary.to_pylist()
+        for i, c in enumerate(np.bincount(idx, minlength=len(texts)).tolist()):
+            if c and texts[i] != "ok":
+                self.reasons[texts[i]] = self.reasons.get(texts[i], 0) + c
+
+    def merge(self, other: Summary) -> None:
+        for name in ("rows_in", "rows_out", "rows_ok", "rows_partial", "rows_error"):
+            setattr(self, name, getattr(self, name) + getattr(other, name))
+        for k, v in other.reasons.items():
+            self.reasons[k] = self.reasons.get(k, 0) + v
+
+    @property
+    def consistent(self) -> bool:
+        return self.rows_in == self.rows_out == self.rows_ok + self.rows_partial + self.rows_error
+
+    def to_dict(self) -> dict:
+        return {"rows_in": self.rows_in, "rows_out": self.rows_out, "rows_ok": self.rows_ok,
+                "rows_partial": self.rows_partial, "rows_error": self.rows_error,
+                "rows_with_errors": self.rows_error, "consistent": self.consistent,
+                "reasons": dict(sorted(self.reasons.items(), key=lambda kv: -kv[1])),
+                "elapsed_s": round(self.elapsed_s, 6),
+                "rows_per_s": (round(self.rows_in / self.elapsed_s, 1) if self.elapsed_s > 0 else None),
+                **self.info}
+
+    def text(self) -> str:
+        return (f"rows in {self.rows_in}, rows out {self.rows_out} (ok {self.rows_ok}, partial {self.rows_partial}), "
+                f"rows with errors {self.rows_error}")
+
+
+def summary_path(out) -> Path:
+    """Where :func:`process_file` writes the JSON summary: next to the output, ``<out>.summary.json``."""
+    out = Path(out)
+    return out.with_name(out.name + ".summary.json")
+
+
+def _prefetch(iterable, depth: int = 1):
+    """Iterate ``iterable`` in a background thread, ``depth`` items ahead (pyarrow decodes without the GIL)."""
+    import queue
+    import threading
+
+    q: queue.Queue = queue.Queue(maxsize=max(1, depth))
+    done = object()
+    stop = threading.Event()
+
+    def run():
+        try:
+            for item in iterable:
+                if stop.is_set():
+                    return
+                q.put((item, None))
+            q.put((done, None))
+        except BaseException as e:  # noqa: BLE001 - re-raised in the consumer
+            q.put((done, e))
+
+    th = threading.Thread(target=run, name="footprint-uq-reader", daemon=True)
+    th.start()
+    try:
+        while True:
+            item, err = q.get()
+            if item is done:
+                if err is not None:
+                    raise err
+                return
+            yield item
+    finally:
+        stop.set()
+        while th.is_alive():  # unblock the producer
+            try:
+                q.get_nowait()
+            except queue.Empty:
+                th.join(0.05)
+
+
+def _malformed_table(bp: BatchProcessor, malformed: list) -> pa.Table:
+    """Error rows for unparseable input lines (no values, only row number and reason)."""
+    n = len(malformed)
+    rows = np.array([m[0] for m in malformed], dtype=np.int64)
+    reason_id = np.array([bp.reasons.id(m[1]) for m in malformed], dtype=np.int32)
+    X = np.full((n, len(bp._layout[1])), np.nan)
+    res = bp.compute(X, None, reason_id)
+    return bp.to_table(res, pa.table({}), rows)
+
+
+def process_chunk(bp: BatchProcessor, chunk) -> pa.Table:
+    """Output table of one :class:`~footprint_uq.batch.readers.Chunk` (rows in input order)."""
+    out = bp.process(chunk.table, rows=chunk.rows, pre_errors=chunk.pre_errors)
+    if chunk.malformed:
+        out = pa.concat_tables([out, _malformed_table(bp, chunk.malformed)])
+        out = out.take(pc.sort_indices(out.column("row")))
+    return out
+
+
+def process_file(camera, budget, detections, out, *, chunk_rows: int = 262_144, format_in: str | None = None,
+                 format_out: str | None = None, progress: bool | None = None, summary: bool = True,
+                 compression: str = "snappy", **options) -> Summary:
+    """Stream a detection file through the footprint pipeline, chunk by chunk.
+
+    Parameters
+    ----------
+    camera : Camera
+    budget : ErrorBudget, preset name, path or mapping
+    detections : path
+        CSV (``.csv``), JSON Lines (``.jsonl``/``.ndjson``) or Parquet (``.parquet``/``.pq``).
+    out : path
+        ``.parquet``/``.pq``, ``.csv``, ``.jsonl``/``.ndjson`` or ``.geojson`` (needs an origin).
+    chunk_rows : int
+        Rows per chunk; memory use is proportional to it, not to the file size
+        (about 1 kB per row in flight, three chunks in flight).
+    progress : bool, optional
+        tqdm progress bar on stderr (default: only when stderr is a terminal).
+    summary : bool
+        Write the JSON summary to :func:`summary_path` (``<out>.summary.json``).
+    compression : str
+        Parquet compression codec ("snappy", "zstd", "lz4", "none").
+    **options
+        Keyword arguments of :class:`BatchProcessor`.
+
+    Returns
+    -------
+    Summary
+    """
+    import sys
+    import time
+    from concurrent.futures import ThreadPoolExecutor as _Pool
+
+    from tqdm import tqdm
+
+    from .readers import open_detections
+    from .writers import detect_out_format, open_writer
+
+    t0 = time.perf_counter()
+    fmt_out = detect_out_format(out, format_out)
+    if fmt_out == "geojson":
+        if options.get("origin_lat_deg") is None:
+            raise InputError("out", str(out), "an origin (--origin-lat/--origin-lon) for GeoJSON output: GeoJSON "
+                             "coordinates are WGS84 longitude/latitude")
+        options["corners"] = True  # the polygon
+    reader = open_detections(detections, chunk_rows=chunk_rows, format=format_in)
+    bp = BatchProcessor(camera, budget, **options)
+    schema = bp.resolve(reader.columns, reader.id_fields)
+    reader.select(S.numeric_input_columns(bp.box_type, reader.columns))
+    if Path(out).resolve() == Path(detections).resolve():
+        raise InputError("out", str(out), "a file other than the detections")
+    summ = Summary()
+    show = sys.stderr.isatty() if progress is None else bool(progress)
+    bar = tqdm(total=reader.total, unit=reader.unit, unit_scale=True, disable=not show, file=sys.stderr,
+               desc="footprints", leave=False)
+    pool = _Pool(1, thread_name_prefix="footprint-uq-writer")
+    pending = None
+    try:
+        with open_writer(out, schema, format=fmt_out, compression=compression) as writer:
+            for chunk in _prefetch(iter(reader), 1):
+                table = process_chunk(bp, chunk)
+                summ.add_table(table, chunk.table.num_rows + len(chunk.malformed))
+                if pending is not None:
+                    pending.result()
+                pending = pool.submit(writer.write, table)
+                bar.update(chunk.progress)
+            if pending is not None:
+                pending.result()
+    finally:
+        pool.shutdown()
+        bar.close()
+        bp.close()
+    summ.elapsed_s = time.perf_counter() - t0
+    summ.info = {"detections": str(detections), "out": str(out), "format_in": reader.format, "format_out": fmt_out,
+                 "box_type": bp.box_type, "contact": bp.contact if bp.box_type == "2d" else None,
+                 "n_corners": bp.n_corners, "confidence": bp.confidence, "heading_offset_deg": bp.heading_offset_deg,
+                 "origin": bp.geo.to_dict() if bp.geo is not None else None, "chunk_rows": reader.chunk_rows,
+                 "budget": bp.budget.name if hasattr(bp.budget, "name") else None}
+    if not summ.consistent:  # pragma: no cover - a bug, not bad input
+        raise RuntimeError(f"row accounting broken: {summ.text()}")
+    if summary:
+        import json
+
+        summary_path(out).write_text(json.dumps(summ.to_dict(), indent=2) + "\n", encoding="utf-8")
+    return summ

@@ -1,0 +1,214 @@
+"""Streaming writers of footprint tables: Parquet, CSV, JSON Lines, GeoJSON (format from the extension).
+
+All writers take the output schema once and then one table per chunk.
+
+* Parquet keeps the types (``status``/``reason`` dictionary-encoded strings, NaN for
+  numbers that could not be computed);
+* CSV and JSON Lines write ``status``/``reason`` as text; CSV writes NaN as an empty field,
+  JSON Lines as ``null``;
+* GeoJSON (RFC 7946) needs WGS84 coordinates, i.e. a geodetic origin: one Feature per
+  row; geometry a Polygon of the footprint corners (K >= 3, every corner computed; exterior
+  ring counter-clockwise and closed), a Point (K = 1, or the centre / largest point when the
+  polygon is not available) or null (error rows); properties: every output column except
+  the per-corner ones, which the geometry carries.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.compute as pc
+
+from ..errors import InputError
+
+__all__ = ["OUT_FORMATS", "detect_out_format", "open_writer", "FootprintWriter", "decode_dictionaries"]
+
+OUT_FORMATS = {".csv": "csv", ".jsonl": "jsonl", ".ndjson": "jsonl", ".parquet": "parquet", ".pq": "parquet",
+               ".geojson": "geojson"}
+
+
+def detect_out_format(path, format: str | None = None) -> str:
+    if format is not None:
+        if format not in set(OUT_FORMATS.values()):
+            raise InputError("format", format, f"one of {sorted(set(OUT_FORMATS.values()))}")
+        return format
+    suffix = Path(path).suffix.lower()
+    if suffix not in OUT_FORMATS:
+        raise InputError("out", str(path), f"a file ending in one of {sorted(OUT_FORMATS)}")
+    return OUT_FORMATS[suffix]
+
+
+def decode_dictionaries(table: pa.Table) -> pa.Table:
+    """Dictionary columns -> plain strings (for text formats)."""
+    cols = []
+    for col in table.columns:
+        if pa.types.is_dictionary(col.type):
+            col = pc.cast(col, col.type.value_type)
+        cols.append(col)
+    return pa.Table.from_arrays(cols, names=table.column_names)
+
+
+def _plain_schema(schema: pa.Schema) -> pa.Schema:
+    return pa.schema([pa.field(f.name, f.type.value_type) if pa.types.is_dictionary(f.type) else f for f in schema])
+
+
+class FootprintWriter:
+    """Base class: ``write(table)`` per chunk, ``close()`` at the end (also a context manager)."""
+
+    format = ""
+
+    def __init__(self, path, schema: pa.Schema):
+        self.path = Path(path)
+        self.schema = schema
+        self.rows = 0
+
+    def write(self, table: pa.Table) -> None:
+        self._write(table)
+        self.rows += table.num_rows
+
+    def _write(self, table: pa.Table) -> None:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def close(self) -> None:
+        pass
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
+class ParquetOut(FootprintWriter):
+    format = "parquet"
+
+    def __init__(self, path, schema, *, compression: str = "snappy"):
+        import pyarrow.parquet as pq
+
+        super().__init__(path, schema)
+        strings = [f.name for f in schema if pa.types.is_dictionary(f.type) or pa.types.is_string(f.type)]
+        stats = ["row"] + [c for c in ("camera_id", "frame", "timestamp_s") if c in schema.names]
+        self._w = pq.ParquetWriter(self.path, schema, compression=compression, use_dictionary=strings,
+                                   write_statistics=stats)
+
+    def _write(self, table):
+        if table.num_rows:
+            self._w.write_table(table.cast(self.schema) if table.schema != self.schema else table)
+
+    def close(self):
+        self._w.close()
+
+
+class CsvOut(FootprintWriter):
+    format = "csv"
+
+    def __init__(self, path, schema):
+        import pyarrow.csv as pcsv
+
+        super().__init__(path, schema)
+        self._plain = _plain_schema(schema)
+        self._w = pcsv.CSVWriter(self.path, self._plain)
+
+    def _write(self, table):
+        t = decode_dictionaries(table)
+        # NaN -> null (an empty field), the CSV convention for "no value"
+        cols = [pc.if_else(pc.is_nan(c), pa.scalar(None, c.type), c) if pa.types.is_floating(c.type) else c
+                for c in t.columns]
+        self._w.write_table(pa.Table.from_arrays(cols, schema=self._plain))
+
+    def close(self):
+        self._w.close()
+
+
+class JsonlOut(FootprintWriter):
+    format = "jsonl"
+
+    def __init__(self, path, schema):
+        super().__init__(path, schema)
+        self._f = open(self.path, "w", encoding="utf-8")
+
+    def _write(self, table):
+        if not table.num_rows:
+            return
+        df = decode_dictionaries(table).to_pandas()
+        text = df.to_json(orient="records", lines=True, double_precision=15)
+        self._f.write(text if text.endswith("\n") else text + "\n")
+
+    def close(self):
+        self._f.close()
+
+
+def _num(x):
+    if isinstance(x, float) and not math.isfinite(x):
+        return None
+    return x
+
+
+class GeoJsonOut(FootprintWriter):
+    format = "geojson"
+
+    def __init__(self, path, schema):
+        super().__init__(path, schema)
+        if "lat_deg" not in schema.names:
+            raise InputError("out", str(path), "an origin (origin_lat_deg/origin_lon_deg) for GeoJSON output: "
+                             "GeoJSON coordinates are WGS84 longitude/latitude")
+        K = 0
+        while f"c{K}_lat_deg" in schema.names:
+            K += 1
+        self.K = K
+        self._props = [n for n in schema.names if not (n.startswith("c") and n[1:2].isdigit())]
+        self._f = open(self.path, "w", encoding="utf-8")
+        self._f.write('{"type": "FeatureCollection", "features": [\n')
+        self._first = True
+
+    def _write(self, table):
+        if not table.num_rows:
+            return
+        t = decode_dictionaries(table)
+        props = t.select(self._props).to_pylist()
+        K = self.K
+        if K:
+            lat = np.stack([t.column(f"c{k}_lat_deg").to_numpy(zero_copy_only=False) for k in range(K)], 1)
+            lon = np.stack([t.column(f"c{k}_lon_deg").to_numpy(zero_copy_only=False) for k in range(K)], 1)
+            cx = np.stack([t.column(f"c{k}_x_m").to_numpy(zero_copy_only=False) for k in range(K)], 1)
+            cy = np.stack([t.column(f"c{k}_y_m").to_numpy(zero_copy_only=False) for k in range(K)], 1)
+            area = 0.5 * np.sum(cx * np.roll(cy, -1, 1) - np.roll(cx, -1, 1) * cy, axis=1)
+        clat = t.column("lat_deg").to_numpy(zero_copy_only=False)
+        clon = t.column("lon_deg").to_numpy(zero_copy_only=False)
+        parts = []
+        for i, p in enumerate(props):
+            geom = None
+            if K >= 3 and np.isfinite(lat[i]).all() and np.isfinite(lon[i]).all() and area[i] != 0:
+                order = range(K) if area[i] > 0 else range(K - 1, -1, -1)  # counter-clockwise (x east, y north)
+                ring = [[float(lon[i, k]), float(lat[i, k])] for k in order]
+                ring.append(ring[0])
+                geom = {"type": "Polygon", "coordinates": [ring]}
+            elif math.isfinite(clat[i]) and math.isfinite(clon[i]):
+                geom = {"type": "Point", "coordinates": [float(clon[i]), float(clat[i])]}
+            elif K and 0 <= (k := int(p.get("largest_index", -1))) < K and math.isfinite(lat[i, k]):
+                geom = {"type": "Point", "coordinates": [float(lon[i, k]), float(lat[i, k])]}
+            feat = {"type": "Feature", "geometry": geom, "properties": {k: _num(v) for k, v in p.items()}}
+            parts.append(json.dumps(feat, allow_nan=False, default=str))
+        sep = ",\n"
+        self._f.write(("" if self._first else sep) + sep.join(parts))
+        self._first = False
+
+    def close(self):
+        self._f.write("\n]}\n")
+        self._f.close()
+
+
+def open_writer(path, schema: pa.Schema, *, format: str | None = None, compression: str = "snappy"):
+    """A :class:`FootprintWriter` for ``path`` (format from the extension)."""
+    fmt = detect_out_format(path, format)
+    if fmt == "parquet":
+        return ParquetOut(path, schema, compression=compression)
+    if fmt == "csv":
+        return CsvOut(path, schema)
+    if fmt == "jsonl":
+        return JsonlOut(path, schema)
+    return GeoJsonOut(path, schema)
