@@ -325,18 +325,18 @@ def test_capture_fails_fast_without_carla_package(tmp_path):
     assert len(lines) == 1 and "'carla' Python package is not installed" in lines[0]
 
 
-def test_export_then_case_study_on_the_recording(tmp_path):
+def test_export_command_writes_the_generator_scene(tmp_path):
     from click.testing import CliRunner
 
     from footprint_uq.cli import main
     from footprint_uq.cli_carla import carla
-    from footprint_uq.cli_case_study import run_case_study
 
     if "carla" not in main.commands:
         main.add_command(carla)
     rec = tmp_path / "ours.jsonl"
     res = CliRunner().invoke(main, ["carla", "export", "--out", str(rec)])
     assert res.exit_code == 0, res.output
-    paths = run_case_study(tmp_path / "out", recording=rec, camera_types=["basler1"], dpi=50,
-                           config=None)
-    assert paths["report"].exists() and "recording ours.jsonl" in paths["report"].read_text()
+    sc = read_recording(rec)
+    ref = build_scene()
+    np.testing.assert_allclose(sc.boxes_world, ref.boxes_world, atol=1e-12)
+    assert "recording ours.jsonl" in sc.source

@@ -206,17 +206,25 @@ def _cli():
     return main
 
 
-def test_cli_case_study(tmp_path):
+def test_cli_case_study_on_a_recording(tmp_path):
+    """The command end to end, on a recording of our own (small) scenario: same numbers as the generator."""
     from click.testing import CliRunner
 
-    cfg = tmp_path / "cfg.json"
-    cfg.write_text(json.dumps({**SMALL, "camera_types": ["basler1"]}))
-    res = CliRunner().invoke(_cli(), ["case-study", "--out", str(tmp_path / "out"), "--config", str(cfg),
-                                      "--dpi", "50"])
+    from footprint_uq.carla_bridge import scene_to_recording
+
+    cfg = CaseStudyConfig.from_dict(SMALL)
+    scene = build_scene(cfg)
+    rec = scene_to_recording(scene, tmp_path / "small.jsonl")
+    res = CliRunner().invoke(_cli(), ["case-study", "--out", str(tmp_path / "out"), "--recording", str(rec),
+                                      "--camera-type", "basler1", "--dpi", "50"])
     assert res.exit_code == 0, res.output
     assert (tmp_path / "out" / "report.html").exists()
     assert len(list((tmp_path / "out").glob("*.png"))) == 10
     assert "report:" in res.output
+    back = pd.read_csv(tmp_path / "out" / "case_study_frames.csv")
+    ref = analyse(scene, ["basler1"]).table
+    np.testing.assert_allclose(back["centre_sigma_x_m"], ref["centre_sigma_x_m"], rtol=1e-8)
+    np.testing.assert_allclose(back["contrib_height_m2"], ref["contrib_height_m2"], rtol=1e-8)
 
 
 def test_cli_case_study_bad_config(tmp_path):

@@ -643,7 +643,7 @@ def write_case_study_report(result, out_dir, *, settings: dict | None = None, el
     pngs = {}
     for stem, fig in figs.items():
         p = out / f"{stem}.png"
-        fig.savefig(p, dpi=dpi, bbox_inches="tight")
+        fig.savefig(p, dpi=dpi)  # constrained layout: no second (tight) layout pass
         paths[stem] = p
         pngs[stem] = p.read_bytes()
     csv_path = out / "case_study_frames.csv"
