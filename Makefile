@@ -16,7 +16,6 @@ $(STAMP): pyproject.toml | $(BIN)/python
 
 demo: $(STAMP)
 	$(BIN)/footprint-uq demo --out out/demo
-	@echo "report: out/demo/report.html"
 
 test: $(STAMP)
 	$(BIN)/ruff check src tests bench
