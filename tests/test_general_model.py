@@ -234,6 +234,24 @@ def test_undistortion_failure_flagged():
     assert np.isnan(bp.xy_world_m[1:]).all() and np.isnan(bp.dxy_duv[1:]).all()
 
 
+def test_projection_past_the_lens_fold_is_flagged():
+    """A ground point 70 deg off-axis would map through k1 = -0.35 to the opposite side of the image.
+
+    x_n = tan 70 = 2.75 -> r_d = 2.75 (1 - 0.35 * 2.75^2) = -4.5: the 'pixel' is meaningless.
+    """
+    p = _simple_params(tilt_deg=0.0)
+    p[P.K1] = -0.35
+    X = np.array([[10 * np.tan(np.deg2rad(70.0)), 10.0, 10.0], [1.0, 10.0, 9.0]])  # 70 deg right; near axis
+    pr = general.project(p, X, get_gradients=True)
+    assert pr.valid.tolist() == [False, True]
+    assert pr.reason.tolist() == [status.UNDISTORT_FAILED, status.OK]
+    assert np.isnan(pr.uv_px[0]).all() and np.isnan(pr.duv_dp[0]).all()
+    # without the lens model the same point is an ordinary (if far off-image) projection
+    q = p.copy()
+    q[P.K1] = 0.0
+    np.testing.assert_allclose(general.project(q, X[0]).uv_px, [960.0 + 1000 * np.tan(np.deg2rad(70.0)), 540.0])
+
+
 # --------------------------------------------------------------------------- shapes and broadcasting
 @pytest.mark.parametrize("shape", [(), (1,), (7,), (3, 5)])
 def test_batch_shapes(rng, random_params, ground_pixels, shape):

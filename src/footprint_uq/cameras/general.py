@@ -18,7 +18,7 @@ import numpy as np
 from .. import params as P
 from .. import status
 from ..ground import intersect_ground
-from .distortion import distort, undistort
+from .distortion import _branch_ok, distort, undistort
 from .pinhole import normalised_to_pixel, pixel_to_normalised
 from .rotation import R_W_C, dR_W_C
 
@@ -134,6 +134,10 @@ def project(params, xyz_rel_m, *, get_gradients=False) -> Projection:
         ground plane, metres.  The ground parameters do not enter.
     get_gradients : bool
         Fill ``duv_dxyz`` and ``duv_dp``.
+
+    Points behind the camera (``BEHIND_CAMERA``), non-finite input (``NOT_FINITE``)
+    and points outside the lens model's valid region, where the distortion
+    polynomial folds back (``UNDISTORT_FAILED``), give NaN and ``valid`` False.
     """
     p = np.asarray(params, dtype=np.float64)
     X = np.asarray(xyz_rel_m, dtype=np.float64)
@@ -155,6 +159,13 @@ def project(params, xyz_rel_m, *, get_gradients=False) -> Projection:
     reason = np.full(shape, status.OK, dtype=np.int8)
     reason[~front] = status.BEHIND_CAMERA
     reason[~finite] = status.NOT_FINITE
+    if np.any(dist):
+        # past the fold of the distortion polynomial a point maps to a meaningless pixel (possibly
+        # near the image centre, or on the opposite side): flag it like an undistortion failure
+        with np.errstate(all="ignore"):
+            lens_ok = _branch_ok(np.where(valid[..., None], xn, 0.0), dist)
+        reason[valid & ~lens_ok] = status.UNDISTORT_FAILED
+        valid = valid & lens_ok
     xn = np.where(valid[..., None], xn, np.nan)
     if not get_gradients:
         xd = distort(xn, dist)
