@@ -340,3 +340,149 @@ def test_export_command_writes_the_generator_scene(tmp_path):
     ref = build_scene()
     np.testing.assert_allclose(sc.boxes_world, ref.boxes_world, atol=1e-12)
     assert "recording ours.jsonl" in sc.source
+
+
+# -- the capture procedure against a scripted stand-in for a CARLA world -----------------------------------------
+class _FakeWorld:
+    """Just enough of carla.World/Map/Waypoint for ``cli_carla._capture``: one lane along our generator's
+    left-turn path (CARLA coordinates), a junction over the arc, blueprints and actors that store transforms."""
+
+    def __init__(self, cm, path, fps):
+        self.cm, self.path, self.frame, self.dt = cm, path, 100, 1.0 / fps
+        self.settings = type("S", (), {"synchronous_mode": False, "fixed_delta_seconds": None})()
+        self.actors, self.destroyed, self.applied = [], [], []
+        world = self
+
+        class WP:
+            def __init__(self, s):
+                self.s = float(s)
+                xy, yaw, seg = path.pose(self.s)
+                self.is_junction = bool(seg == 1)
+                self.lane_type = cm.LaneType.Driving
+                self.transform = cm.Transform(cm.Location(float(xy[0]), float(-xy[1]), 0.0),
+                                              cm.Rotation(0.0, float(-np.rad2deg(yaw)), 0.0))
+                self.road_id, self.section_id, self.lane_id, self.lane_width = 1, 0, -1, 3.5
+
+            def next(self, d):
+                return [WP(self.s + d)] if self.s + d <= path.length_m else []
+
+            def previous(self, d):
+                return [WP(self.s - d)] if self.s - d >= 0 else []
+
+            def get_junction(self):
+                bb = cm.BoundingBox(cm.Location(0.0, 0.0, 0.0), cm.Vector3D(7.0, 7.0, 1.0))
+                return type("J", (), {"id": 7, "bounding_box": bb})()
+
+        class Map:
+            name = "FakeTown"
+
+            def get_topology(self):
+                s0, s1 = path.breakpoints_m
+                return [(WP(s0 - 20.0), WP(s0)), (WP(s0 + 1e-9), WP(s1))]
+
+            def generate_waypoints(self, d):
+                return [WP(s) for s in np.arange(0.0, path.length_m, d)]
+
+        class BP:
+            def __init__(self, id_):
+                self.id, self.attrs = id_, {}
+
+            def set_attribute(self, k, v):
+                self.attrs[k] = v
+
+            def has_attribute(self, k):
+                return k == "number_of_wheels"
+
+            def get_attribute(self, k):
+                return "4"
+
+        class Lib:
+            def filter(self, pattern):
+                return [BP("vehicle.fake.car")] if pattern.startswith("vehicle") else []
+
+            def find(self, id_):
+                return BP(id_)
+
+        class Actor:
+            def __init__(self, bp, tr):
+                self.type_id, self.tr, self.id = bp.id, tr, len(world.actors) + 1
+                self.bounding_box = cm.BoundingBox(cm.Location(0.0, 0.0, 0.75), cm.Vector3D(2.4, 0.95, 0.75))
+
+            def set_simulate_physics(self, on):
+                self.physics = on
+
+            def set_transform(self, tr):
+                self.tr = tr
+
+            def get_transform(self):
+                return self.tr
+
+            def listen(self, cb):
+                self.cb = cb
+
+            def stop(self):
+                pass
+
+            def destroy(self):
+                world.destroyed.append(self.id)
+
+        self._map, self._lib, self._Actor = Map(), Lib(), Actor
+
+    def get_map(self):
+        return self._map
+
+    def get_settings(self):
+        return self.settings
+
+    def apply_settings(self, s):
+        self.applied.append((s.synchronous_mode, s.fixed_delta_seconds))
+
+    def get_blueprint_library(self):
+        return self._lib
+
+    def spawn_actor(self, bp, tr):
+        a = self._Actor(bp, tr)
+        self.actors.append(a)
+        return a
+
+    def tick(self):
+        self.frame += 1
+        return self.frame
+
+    def get_snapshot(self):
+        ts = type("T", (), {"elapsed_seconds": (self.frame - 101) * self.dt})()
+        return type("Snap", (), {"timestamp": ts})()
+
+
+def test_capture_procedure_on_a_scripted_world(tmp_path):
+    cm = pytest.importorskip("carla")
+    from footprint_uq.cli_carla import _capture
+    from footprint_uq.scenario import Intersection, default_camera_specs, left_turn_path
+
+    path = left_turn_path(Intersection())
+    world = _FakeWorld(cm, path, fps=10.0)
+    out = tmp_path / "cap.jsonl"
+    info = _capture(cm, world, out, fps=10.0, speed_mps=8.0, lead_in_m=35.0, lead_out_m=35.0,
+                    vehicle_filter="vehicle.*", images_dir=None)
+    assert info["junction_id"] == 7 and info["map"] == "FakeTown"
+    # actors destroyed, settings restored
+    assert sorted(world.destroyed) == [1, 2, 3] and world.applied[0] == (True, 0.1)
+    sc = read_recording(out)
+    assert sc.source.startswith("carla")
+    ref = build_scene()
+    for name, spec in zip(("camera1", "camera2"), default_camera_specs(), strict=True):
+        cam, want = sc.cameras[name], spec.build()
+        np.testing.assert_allclose(cam.R_world_cam, want.R_world_cam, atol=1e-6)  # carla stores float32
+        np.testing.assert_allclose(cam.position_world_m, want.position_world_m, atol=1e-5)
+    # the recorded path follows the generator's (1 m waypoints, linear interpolation: < 2 cm off the arc)
+    n = min(len(sc), len(ref))
+    assert abs(len(sc) - len(ref)) <= 1
+    d = np.linalg.norm(sc.boxes_world[:n, :2] - ref.boxes_world[:n, :2], axis=1)
+    assert d.max() < 0.05
+    np.testing.assert_allclose(sc.boxes_world[:, 3:6], np.broadcast_to([4.8, 1.9, 1.5], (len(sc), 3)), atol=1e-6)
+    assert set(np.unique(sc.segment)) == {0, 1, 2}
+    # the layout has lane strips and the junction box, and the analysis gives the generator's verdicts
+    assert sc.layout.road_polygons and sc.layout.junction_box_m == pytest.approx((-7.0, -7.0, 7.0, 7.0))
+    a = analyse(sc, ["basler1"])
+    b = analyse(ref, ["basler1"])
+    assert [s["holds"] for s in a.statements()] == [s["holds"] for s in b.statements()]
