@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["distort", "undistort"]
+__all__ = ["distort", "undistort", "in_principal_region"]
 
 
 def _fj(x, y, k, jac=True):
@@ -110,6 +110,31 @@ def _branch_ok(x, k, n_steps=16):
         _, _, rad, den, a, b, c, d = _fj(t * x[..., 0], t * x[..., 1], k)
         ok &= (a * d - b * c > 0) & (rad > 0) & (den > 0)
     return ok
+
+
+def in_principal_region(xy_n, dist, *, n_steps: int = 16) -> np.ndarray:
+    """True where undistorted normalised points lie in the lens model's principal region.
+
+    The region connected to the optical axis where the distortion map is locally
+    invertible and does not fold over: along the segment from 0 to ``xy_n`` the
+    Jacobian determinant, the radial factor and its denominator stay positive
+    (checked at ``n_steps`` evenly spaced points, the last one ``xy_n`` itself).
+    :func:`undistort` accepts only solutions in this region, and projections of
+    points outside it are flagged.
+
+    Parameters
+    ----------
+    xy_n : array_like, shape (..., 2)
+    dist : array_like, shape (..., 8)
+
+    Returns
+    -------
+    ndarray of bool, shape (...)
+    """
+    x = np.asarray(xy_n, dtype=np.float64)
+    k = np.asarray(dist, dtype=np.float64)
+    with np.errstate(all="ignore"):
+        return _branch_ok(x, k, n_steps)
 
 
 def _inv2(J):
