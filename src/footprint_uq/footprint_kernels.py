@@ -135,44 +135,43 @@ def _distort(x, y, cam, J, Jk, want_k):
     return xd, yd
 
 
-@njit(cache=True, error_model="numpy", inline="always")
-def _jk_zero(x, y, Jk):
-    """d distort / d coefficients at zero distortion (2, 8)."""
-    r2 = x * x + y * y
-    r4 = r2 * r2
-    r6 = r4 * r2
-    Jk[0, 0], Jk[1, 0] = x * r2, y * r2
-    Jk[0, 1], Jk[1, 1] = x * r4, y * r4
-    Jk[0, 2], Jk[1, 2] = 2.0 * x * y, r2 + 2.0 * y * y
-    Jk[0, 3], Jk[1, 3] = r2 + 2.0 * x * x, 2.0 * x * y
-    Jk[0, 4], Jk[1, 4] = x * r6, y * r6
-    Jk[0, 5], Jk[1, 5] = -x * r2, -y * r2
-    Jk[0, 6], Jk[1, 6] = -x * r4, -y * r4
-    Jk[0, 7], Jk[1, 7] = -x * r6, -y * r6
+@njit(cache=True, error_model="numpy")
+def _stage_undistort(U, V, m, cam, XD, YD, XN, YN, CONV, INV, JK, Jd, Jk):
+    """Pixels -> distorted (XD, YD) and undistorted (XN, YN) normalised coordinates.
 
-
-@njit(cache=True, error_model="numpy", inline="always")
-def _backproject(u, v, cam, dR, xy, Jp, Juv, kk, Jd, Jk):
-    """Back-project one pixel: fills xy (2,), Jp[kk, kk] (2, 22), Juv[kk, kk] (2, 2); returns the status code.
-
-    Jd (2, 2) and Jk (2, 8) are scratch.  Mirrors general.backproject(get_gradients=True).
+    Also fills CONV (1.0 where undistortion converged), INV (rows i00, i01, i10, i11 of
+    d(undistorted)/d(distorted)) and JK (rows 0..7: d x_d / d k, rows 8..15: d y_d / d k).
+    Without distortion the loops are straight-line and vectorise; with it each corner
+    runs the Newton iteration of :func:`footprint_uq.cameras.distortion.undistort`.
     """
     cx, cy, sk = cam[_C_CX], cam[_C_CY], cam[_C_SK]
-    finite = math.isfinite(u) and math.isfinite(v)
     ifx, ify = cam[_C_IFX], cam[_C_IFY]
-    yd = (v - cy) * ify
-    xd = (u - cx - sk * yd) * ifx
-    # dxd/duv and dxd/dk (fx, fy, cx, cy, skew)
-    skf = sk * ify * ifx
-    dxd_du, dxd_dv, dyd_dv = ifx, -skf, ify
-    dy_dfy = -yd * ify
-    kx0, kx1, kx2, kx3, kx4 = -xd * ifx, -sk * ifx * dy_dfy, -ifx, skf, -yd * ifx
-    ky1, ky3 = dy_dfy, -ify
-    # undistort
-    conv = True
-    xn, yn = xd, yd
-    if cam[_C_HASDIST] != 0.0:
+    for j in range(m):
+        yd = (V[j] - cy) * ify
+        XD[j] = (U[j] - cx - sk * yd) * ifx
+        YD[j] = yd
+    if cam[_C_HASDIST] == 0.0:
+        for j in range(m):
+            x, y = XD[j], YD[j]
+            XN[j], YN[j] = x, y
+            CONV[j] = 1.0 if (math.isfinite(x) & math.isfinite(y)) else 0.0
+            INV[0, j], INV[1, j], INV[2, j], INV[3, j] = 1.0, 0.0, 0.0, 1.0
+            r2 = x * x + y * y
+            r4 = r2 * r2
+            r6 = r4 * r2
+            JK[0, j], JK[8, j] = x * r2, y * r2
+            JK[1, j], JK[9, j] = x * r4, y * r4
+            JK[2, j], JK[10, j] = 2.0 * x * y, r2 + 2.0 * y * y
+            JK[3, j], JK[11, j] = r2 + 2.0 * x * x, 2.0 * x * y
+            JK[4, j], JK[12, j] = x * r6, y * r6
+            JK[5, j], JK[13, j] = -x * r2, -y * r2
+            JK[6, j], JK[14, j] = -x * r4, -y * r4
+            JK[7, j], JK[15, j] = -x * r6, -y * r6
+        return
+    for j in range(m):
+        xd, yd = XD[j], YD[j]
         tol = 1e-14 * max(1.0, max(abs(xd), abs(yd)))
+        xn, yn = xd, yd
         for _ in range(50):
             fxd, fyd = _distort(xn, yn, cam, Jd, Jk, False)
             r0, r1 = fxd - xd, fyd - yd
@@ -185,96 +184,99 @@ def _backproject(u, v, cam, dR, xy, Jp, Juv, kk, Jd, Jk):
         fxd, fyd = _distort(xn, yn, cam, Jd, Jk, True)
         r0, r1 = fxd - xd, fyd - yd
         det = Jd[0, 0] * Jd[1, 1] - Jd[0, 1] * Jd[1, 0]
-        conv = (max(abs(r0), abs(r1)) <= tol) and det > 0
-        # inverse of Jd
+        CONV[j] = 1.0 if ((max(abs(r0), abs(r1)) <= tol) and det > 0) else 0.0
         idet = 1.0 / det
-        i00, i01, i10, i11 = Jd[1, 1] * idet, -Jd[0, 1] * idet, -Jd[1, 0] * idet, Jd[0, 0] * idet
-    else:
-        conv = math.isfinite(xd) and math.isfinite(yd)
-        _jk_zero(xn, yn, Jk)
-        i00, i01, i10, i11 = 1.0, 0.0, 0.0, 1.0
-    # ray in the world
+        XN[j], YN[j] = xn, yn
+        INV[0, j], INV[1, j] = Jd[1, 1] * idet, -Jd[0, 1] * idet
+        INV[2, j], INV[3, j] = -Jd[1, 0] * idet, Jd[0, 0] * idet
+        for kk in range(8):
+            JK[kk, j] = Jk[0, kk]
+            JK[8 + kk, j] = Jk[1, kk]
+
+
+@njit(cache=True, error_model="numpy")
+def _stage_ground(U, V, m, cam, dR, XD, YD, XN, YN, CONV, INV, JK, X, Y, CODE, JP, JUV):
+    """Ray / ground intersection and all Jacobians, straight-line over the corners (vectorises).
+
+    Mirrors :func:`footprint_uq.cameras.general.backproject` with gradients: X, Y the ground
+    point, CODE the status, JP (44, m) = d(x, y)/d(params) (row ``i * 22 + param``),
+    JUV (4, m) = d(x, y)/d(u, v) (rows 00, 01, 10, 11).  Invalid corners carry NaN or
+    meaningless numbers here; the caller masks them by CODE.
+    """
+    sk, ifx, ify = cam[_C_SK], cam[_C_IFX], cam[_C_IFY]
+    skf = sk * ify * ifx
     R0, R1, R2, R3, R4, R5, R6, R7, R8 = (cam[_C_R], cam[_C_R + 1], cam[_C_R + 2], cam[_C_R + 3], cam[_C_R + 4],
                                           cam[_C_R + 5], cam[_C_R + 6], cam[_C_R + 7], cam[_C_R + 8])
-    dx = R0 * xn + R1 * yn + R2
-    dy = R3 * xn + R4 * yn + R5
-    dz = R6 * xn + R7 * yn + R8
     gdz, gx, gy = cam[_C_GDZ], cam[_C_GSX], cam[_C_GSY]
     Nn = gdz - cam[_C_H]
-    Dn = dz - gx * dx - gy * dy
-    inv = 1.0 / Dn if Dn != 0.0 else math.nan
-    lam = Nn * inv
-    vg = (Dn < 0.0) and (Nn < 0.0) and math.isfinite(lam)
-    reason = _OK
-    if not vg:
-        reason = _ABOVE
-    if not conv:
-        reason = _UNDIST
-    if not finite:
-        reason = _NOTFIN
-    if reason != _OK:
-        xy[0] = math.nan
-        xy[1] = math.nan
-        for r in range(2):
-            Juv[kk, r, 0] = math.nan
-            Juv[kk, r, 1] = math.nan
-            for c in range(22):
-                Jp[kk, r, c] = math.nan
-        return reason
-    xy[0] = cam[_C_X] + lam * dx
-    xy[1] = cam[_C_Y] + lam * dy
-    # dxy/dray (2, 3): lam I + d_xy dlam/dray, dlam/dray = (-lam/Dn) (-gx, -gy, 1)
-    f = -lam * inv
-    l0, l1, l2 = -gx * f, -gy * f, f
-    a00, a01, a02 = lam + dx * l0, dx * l1, dx * l2
-    a10, a11, a12 = dy * l0, lam + dy * l1, dy * l2
-    # dxy/dxn = dxy/dray @ R[:, :2]
-    b00 = a00 * R0 + a01 * R3 + a02 * R6
-    b01 = a00 * R1 + a01 * R4 + a02 * R7
-    b10 = a10 * R0 + a11 * R3 + a12 * R6
-    b11 = a10 * R1 + a11 * R4 + a12 * R7
-    # dxy/dxd = dxy/dxn @ dxn/dxd
-    c00 = b00 * i00 + b01 * i10
-    c01 = b00 * i01 + b01 * i11
-    c10 = b10 * i00 + b11 * i10
-    c11 = b10 * i01 + b11 * i11
-    # intrinsics
-    Jp[kk, 0, 0], Jp[kk, 1, 0] = c00 * kx0, c10 * kx0
-    Jp[kk, 0, 1], Jp[kk, 1, 1] = c00 * kx1 + c01 * ky1, c10 * kx1 + c11 * ky1
-    Jp[kk, 0, 2], Jp[kk, 1, 2] = c00 * kx2, c10 * kx2
-    Jp[kk, 0, 3], Jp[kk, 1, 3] = c00 * kx3 + c01 * ky3, c10 * kx3 + c11 * ky3
-    Jp[kk, 0, 4], Jp[kk, 1, 4] = c00 * kx4, c10 * kx4
-    # distortion: dxy/dxn @ (-Jd^-1 Jk)
-    for k in range(8):
-        if cam[_C_USE + 5 + k] == 0.0:
-            continue
-        e0 = -(i00 * Jk[0, k] + i01 * Jk[1, k])
-        e1 = -(i10 * Jk[0, k] + i11 * Jk[1, k])
-        Jp[kk, 0, 5 + k] = b00 * e0 + b01 * e1
-        Jp[kk, 1, 5 + k] = b10 * e0 + b11 * e1
-    # camera position
-    Jp[kk, 0, 13], Jp[kk, 0, 14], Jp[kk, 0, 15] = 1.0, 0.0, -dx * inv
-    Jp[kk, 1, 13], Jp[kk, 1, 14], Jp[kk, 1, 15] = 0.0, 1.0, -dy * inv
-    # angles: dxy/dray @ (dR_k @ ray_c)
-    for k in range(3):
-        if cam[_C_USE + 16 + k] == 0.0:
-            continue
-        q0 = dR[k, 0, 0] * xn + dR[k, 0, 1] * yn + dR[k, 0, 2]
-        q1 = dR[k, 1, 0] * xn + dR[k, 1, 1] * yn + dR[k, 1, 2]
-        q2 = dR[k, 2, 0] * xn + dR[k, 2, 1] * yn + dR[k, 2, 2]
-        Jp[kk, 0, 16 + k] = a00 * q0 + a01 * q1 + a02 * q2
-        Jp[kk, 1, 16 + k] = a10 * q0 + a11 * q1 + a12 * q2
-    # ground: d_xy dlam/dg, dlam/dg = (1/Dn, lam dx/Dn, lam dy/Dn)
-    if cam[_C_USE + 19] != 0.0 or cam[_C_USE + 20] != 0.0 or cam[_C_USE + 21] != 0.0:
-        g0, g1, g2 = inv, lam * dx * inv, lam * dy * inv
-        Jp[kk, 0, 19], Jp[kk, 0, 20], Jp[kk, 0, 21] = dx * g0, dx * g1, dx * g2
-        Jp[kk, 1, 19], Jp[kk, 1, 20], Jp[kk, 1, 21] = dy * g0, dy * g1, dy * g2
-    # dxy/duv = dxy/dxd @ dxd/duv
-    Juv[kk, 0, 0] = c00 * dxd_du
-    Juv[kk, 0, 1] = c00 * dxd_dv + c01 * dyd_dv
-    Juv[kk, 1, 0] = c10 * dxd_du
-    Juv[kk, 1, 1] = c10 * dxd_dv + c11 * dyd_dv
-    return _OK
+    X0, Y0 = cam[_C_X], cam[_C_Y]
+    for j in range(m):
+        u, v = U[j], V[j]
+        xd, yd, xn, yn = XD[j], YD[j], XN[j], YN[j]
+        i00, i01, i10, i11 = INV[0, j], INV[1, j], INV[2, j], INV[3, j]
+        finite = math.isfinite(u) & math.isfinite(v)
+        dx = R0 * xn + R1 * yn + R2
+        dy = R3 * xn + R4 * yn + R5
+        dz = R6 * xn + R7 * yn + R8
+        Dn = dz - gx * dx - gy * dy
+        inv = 1.0 / Dn
+        lam = Nn * inv
+        vg = (Dn < 0.0) & (Nn < 0.0) & math.isfinite(lam)
+        rc = _OK if vg else _ABOVE
+        rc = _UNDIST if CONV[j] == 0.0 else rc
+        rc = rc if finite else _NOTFIN
+        CODE[j] = rc
+        X[j] = X0 + lam * dx
+        Y[j] = Y0 + lam * dy
+        # dxy/dray (2, 3) = lam I + d_xy dlam/dray, dlam/dray = (-lam/Dn) (-gx, -gy, 1)
+        f = -lam * inv
+        l0, l1, l2 = -gx * f, -gy * f, f
+        a00, a01, a02 = lam + dx * l0, dx * l1, dx * l2
+        a10, a11, a12 = dy * l0, lam + dy * l1, dy * l2
+        # dxy/dxn = dxy/dray @ R[:, :2];  dxy/dxd = dxy/dxn @ dxn/dxd
+        b00 = a00 * R0 + a01 * R3 + a02 * R6
+        b01 = a00 * R1 + a01 * R4 + a02 * R7
+        b10 = a10 * R0 + a11 * R3 + a12 * R6
+        b11 = a10 * R1 + a11 * R4 + a12 * R7
+        c00 = b00 * i00 + b01 * i10
+        c01 = b00 * i01 + b01 * i11
+        c10 = b10 * i00 + b11 * i10
+        c11 = b10 * i01 + b11 * i11
+        # intrinsics: dxd/dk (fx, fy, cx, cy, skew), see pinhole.pixel_to_normalised
+        dy_dfy = -yd * ify
+        kx0, kx1, kx2, kx3, kx4 = -xd * ifx, -sk * ifx * dy_dfy, -ifx, skf, -yd * ifx
+        ky1, ky3 = dy_dfy, -ify
+        JP[0, j], JP[22, j] = c00 * kx0, c10 * kx0
+        JP[1, j], JP[23, j] = c00 * kx1 + c01 * ky1, c10 * kx1 + c11 * ky1
+        JP[2, j], JP[24, j] = c00 * kx2, c10 * kx2
+        JP[3, j], JP[25, j] = c00 * kx3 + c01 * ky3, c10 * kx3 + c11 * ky3
+        JP[4, j], JP[26, j] = c00 * kx4, c10 * kx4
+        # distortion: dxy/dxn @ (-(dxd/dxn)^-1 dxd/dk)
+        for kk in range(8):
+            jx, jy = JK[kk, j], JK[8 + kk, j]
+            e0 = -(i00 * jx + i01 * jy)
+            e1 = -(i10 * jx + i11 * jy)
+            JP[5 + kk, j] = b00 * e0 + b01 * e1
+            JP[27 + kk, j] = b10 * e0 + b11 * e1
+        # camera position
+        JP[13, j], JP[14, j], JP[15, j] = 1.0, 0.0, -dx * inv
+        JP[35, j], JP[36, j], JP[37, j] = 0.0, 1.0, -dy * inv
+        # angles: dxy/dray @ (dR_k @ ray_c)
+        for a in range(3):
+            q0 = dR[a, 0, 0] * xn + dR[a, 0, 1] * yn + dR[a, 0, 2]
+            q1 = dR[a, 1, 0] * xn + dR[a, 1, 1] * yn + dR[a, 1, 2]
+            q2 = dR[a, 2, 0] * xn + dR[a, 2, 1] * yn + dR[a, 2, 2]
+            JP[16 + a, j] = a00 * q0 + a01 * q1 + a02 * q2
+            JP[38 + a, j] = a10 * q0 + a11 * q1 + a12 * q2
+        # ground: d_xy dlam/dg, dlam/dg = (1/Dn, lam dx/Dn, lam dy/Dn)
+        g1, g2 = lam * dx * inv, lam * dy * inv
+        JP[19, j], JP[20, j], JP[21, j] = dx * inv, dx * g1, dx * g2
+        JP[41, j], JP[42, j], JP[43, j] = dy * inv, dy * g1, dy * g2
+        # dxy/duv = dxy/dxd @ dxd/duv
+        JUV[0, j] = c00 * ifx
+        JUV[1, j] = -c00 * skf + c01 * ify
+        JUV[2, j] = c10 * ifx
+        JUV[3, j] = -c10 * skf + c11 * ify
 
 
 @njit(cache=True, error_model="numpy")
@@ -305,23 +307,26 @@ def _project(X, Y, Z, cam, uv):
     return _OK
 
 
-@njit(cache=True, error_model="numpy", inline="always")
-def _whiten(Jp, k, Lr, Lc, Lv, r, Aw):
-    """``Aw[k] = Jp[k] L`` (2, r) with the sparse factor L of the parameter covariance."""
-    for i in range(2):
-        for c in range(r):
-            Aw[k, i, c] = 0.0
-        for e in range(Lr.shape[0]):
-            Aw[k, i, Lc[e]] += Jp[k, i, Lr[e]] * Lv[e]
-
-
-@njit(cache=True, error_model="numpy", inline="always")
-def _dot(A, a, i, B, b, j, r):
-    """``A[a, i, :r] . B[b, j, :r]``."""
-    s = 0.0
+@njit(cache=True, error_model="numpy")
+def _stage_whiten(m, JP, Lr, Lc, Lv, r, AW, C3):
+    """AW (2r, m) = rows of J L (row ``2 c + i``); C3 (3, m) = the parameter part of each corner's
+    covariance (c00, c01, c11) = (J L)(J L)^T."""
+    for c in range(2 * r):
+        for j in range(m):
+            AW[c, j] = 0.0
+    for e in range(Lr.shape[0]):
+        c, p, val = Lc[e], Lr[e], Lv[e]
+        for j in range(m):
+            AW[2 * c, j] += JP[p, j] * val
+            AW[2 * c + 1, j] += JP[22 + p, j] * val
+    for j in range(m):
+        C3[0, j], C3[1, j], C3[2, j] = 0.0, 0.0, 0.0
     for c in range(r):
-        s += A[a, i, c] * B[b, j, c]
-    return s
+        for j in range(m):
+            a0, a1 = AW[2 * c, j], AW[2 * c + 1, j]
+            C3[0, j] += a0 * a0
+            C3[1, j] += a0 * a1
+            C3[2, j] += a1 * a1
 
 
 @njit(cache=True, error_model="numpy")
@@ -394,7 +399,6 @@ def process_corners(uv, extra_reason, cam, dR, Lr, Lc, Lv, r, spx, det, det_mode
     ch, sh : cos, sin of the heading offset (V2X fields)
     """
     N, K = uv.shape[0], uv.shape[1]
-    nan = math.nan
     xy = np.empty((N, K, 2))
     ccov = np.empty((N, K, 2, 2))
     joint = np.empty((N if want_joint else 0, 2 * K, 2 * K))
@@ -410,226 +414,246 @@ def process_corners(uv, extra_reason, cam, dR, Lr, Lc, Lv, r, spx, det, det_mode
     centre_bad = np.empty(N, dtype=np.int64)
     area_out = np.empty(N)
     v2x = np.empty((N, 7), dtype=np.int32)
-    # scratch
-    Jp = np.zeros((K, 2, 22))  # columns of zero-variance parameters stay 0
-    Juv = np.empty((K, 2, 2))
+    # scratch: corners of CH objects at a time, structure of arrays (corner index last)
+    CH = 32
+    M = CH * K
+    U, V = np.empty(M), np.empty(M)
+    XD, YD, XN, YN, CONV = np.empty(M), np.empty(M), np.empty(M), np.empty(M), np.empty(M)
+    INV, JK = np.empty((4, M)), np.empty((16, M))
+    X, Y, CODE = np.empty(M), np.empty(M), np.empty(M, dtype=np.int64)
+    JP, JUV = np.empty((44, M)), np.empty((4, M))
+    AW, C3 = np.empty((2 * max(r, 1), M)), np.empty((3, M))
+    Jd, Jk = np.empty((2, 2)), np.empty((2, 8))
     Pk = np.empty((K, 2, 2))  # per-corner pixel covariance (diagonal blocks)
-    Jd = np.empty((2, 2))
-    Jk = np.empty((2, 8))
     G = np.empty((2, 2 * K))
-    Aw = np.empty((K, 2, max(r, 1)))
-    B = np.empty((1, 2, max(r, 1)))
     H = np.empty((K, 2, 2))
     q = np.empty((K, 2))
-    tmp = np.empty(2)
     W, Himg = cam[_C_W], cam[_C_HIMG]
+    nan = math.nan
     has_extra = extra_reason.shape[0] == N and N > 0
-    for n in range(N):
-        all_usable = True
-        first_bad = -1
-        best = -1
-        best_semi = -1.0
-        for k in range(K):
-            u, v = uv[n, k, 0], uv[n, k, 1]
-            rc = _backproject(u, v, cam, dR, tmp, Jp, Juv, k, Jd, Jk)
-            if rc == _OK and not (u >= -0.5 and u <= W - 0.5 and v >= -0.5 and v <= Himg - 0.5):
-                rc = _OUTSIDE
-            if has_extra and extra_reason[n, k] != _OK:
-                rc = extra_reason[n, k]
-            computed = rc == _OK or rc == _OUTSIDE
-            us = rc == _OK or (rc == _OUTSIDE and allow_outside)
-            reason[n, k] = rc
-            usable[n, k] = us
-            # per-corner pixel covariance
-            p00, p01, p10, p11 = spx[0, 0], spx[0, 1], spx[1, 0], spx[1, 1]
-            if det_mode == 1:
-                p00 += det[n, 0, 0, 0]
-                p01 += det[n, 0, 0, 1]
-                p10 += det[n, 0, 1, 0]
-                p11 += det[n, 0, 1, 1]
-            elif det_mode == 2:
-                p00 += det[n, k, 0, 0]
-                p01 += det[n, k, 0, 1]
-                p10 += det[n, k, 1, 0]
-                p11 += det[n, k, 1, 1]
-            elif det_mode == 3:
-                p00 += det[n, 0, 2 * k, 2 * k]
-                p01 += det[n, 0, 2 * k, 2 * k + 1]
-                p10 += det[n, 0, 2 * k + 1, 2 * k]
-                p11 += det[n, 0, 2 * k + 1, 2 * k + 1]
-            Pk[k, 0, 0], Pk[k, 0, 1], Pk[k, 1, 0], Pk[k, 1, 1] = p00, p01, p10, p11
-            if computed:
-                xy[n, k, 0], xy[n, k, 1] = tmp[0], tmp[1]
-                _whiten(Jp, k, Lr, Lc, Lv, r, Aw)
-                j00, j01, j10, j11 = Juv[k, 0, 0], Juv[k, 0, 1], Juv[k, 1, 0], Juv[k, 1, 1]
-                m00, m01 = j00 * p00 + j01 * p10, j00 * p01 + j01 * p11
-                m10, m11 = j10 * p00 + j11 * p10, j10 * p01 + j11 * p11
-                c00 = _dot(Aw, k, 0, Aw, k, 0, r) + m00 * j00 + m01 * j01
-                c01 = _dot(Aw, k, 0, Aw, k, 1, r) + m00 * j10 + m01 * j11
-                c10 = c01
-                c11 = _dot(Aw, k, 1, Aw, k, 1, r) + m10 * j10 + m11 * j11
-                ccov[n, k, 0, 0], ccov[n, k, 0, 1], ccov[n, k, 1, 0], ccov[n, k, 1, 1] = c00, c01, c10, c11
-                semi = math.sqrt(0.5 * (c00 + c11) + math.sqrt(0.25 * (c00 - c11) * (c00 - c11) + c01 * c01))
-                if us and semi > best_semi:
-                    best_semi = semi
-                    best = k
-            else:
-                xy[n, k, 0], xy[n, k, 1] = nan, nan
-                for i in range(2):
-                    for j in range(2):
-                        ccov[n, k, i, j] = nan
-            if not us and all_usable:
-                all_usable = False
-                first_bad = k
-        # joint covariance (optional)
-        if want_joint:
+    uvf = uv.reshape(N * K, 2)
+    for n0 in range(0, N, CH):
+        n1 = min(N, n0 + CH)
+        m = (n1 - n0) * K
+        for j in range(m):
+            U[j] = uvf[n0 * K + j, 0]
+            V[j] = uvf[n0 * K + j, 1]
+        _stage_undistort(U, V, m, cam, XD, YD, XN, YN, CONV, INV, JK, Jd, Jk)
+        _stage_ground(U, V, m, cam, dR, XD, YD, XN, YN, CONV, INV, JK, X, Y, CODE, JP, JUV)
+        _stage_whiten(m, JP, Lr, Lc, Lv, r, AW, C3)
+        for n in range(n0, n1):
+            # ---- per object: flags, corner covariances, joint, largest point, centroid, V2X ----
+            j0 = (n - n0) * K  # corner k of object n is column j0 + k of the stage arrays
+            nan = math.nan
+            all_usable = True
+            first_bad = -1
+            best = -1
+            best_semi = -1.0
             for k in range(K):
-                ck = reason[n, k] == _OK or reason[n, k] == _OUTSIDE
-                for l in range(k, K):
-                    cl = reason[n, l] == _OK or reason[n, l] == _OUTSIDE
+                jk = j0 + k
+                u, v = U[jk], V[jk]
+                rc = CODE[jk]
+                if rc == _OK and not (u >= -0.5 and u <= W - 0.5 and v >= -0.5 and v <= Himg - 0.5):
+                    rc = _OUTSIDE
+                if has_extra and extra_reason[n, k] != _OK:
+                    rc = extra_reason[n, k]
+                computed = rc == _OK or rc == _OUTSIDE
+                us = rc == _OK or (rc == _OUTSIDE and allow_outside)
+                reason[n, k] = rc
+                usable[n, k] = us
+                # per-corner pixel covariance
+                p00, p01, p10, p11 = spx[0, 0], spx[0, 1], spx[1, 0], spx[1, 1]
+                if det_mode == 1:
+                    p00 += det[n, 0, 0, 0]
+                    p01 += det[n, 0, 0, 1]
+                    p10 += det[n, 0, 1, 0]
+                    p11 += det[n, 0, 1, 1]
+                elif det_mode == 2:
+                    p00 += det[n, k, 0, 0]
+                    p01 += det[n, k, 0, 1]
+                    p10 += det[n, k, 1, 0]
+                    p11 += det[n, k, 1, 1]
+                elif det_mode == 3:
+                    p00 += det[n, 0, 2 * k, 2 * k]
+                    p01 += det[n, 0, 2 * k, 2 * k + 1]
+                    p10 += det[n, 0, 2 * k + 1, 2 * k]
+                    p11 += det[n, 0, 2 * k + 1, 2 * k + 1]
+                Pk[k, 0, 0], Pk[k, 0, 1], Pk[k, 1, 0], Pk[k, 1, 1] = p00, p01, p10, p11
+                if computed:
+                    xy[n, k, 0], xy[n, k, 1] = X[jk], Y[jk]
+                    j00, j01, j10, j11 = JUV[0, jk], JUV[1, jk], JUV[2, jk], JUV[3, jk]
+                    m00, m01 = j00 * p00 + j01 * p10, j00 * p01 + j01 * p11
+                    m10, m11 = j10 * p00 + j11 * p10, j10 * p01 + j11 * p11
+                    c00 = C3[0, jk] + m00 * j00 + m01 * j01
+                    c01 = C3[1, jk] + m00 * j10 + m01 * j11
+                    c10 = c01
+                    c11 = C3[2, jk] + m10 * j10 + m11 * j11
+                    ccov[n, k, 0, 0], ccov[n, k, 0, 1], ccov[n, k, 1, 0], ccov[n, k, 1, 1] = c00, c01, c10, c11
+                    semi = math.sqrt(0.5 * (c00 + c11) + math.sqrt(0.25 * (c00 - c11) * (c00 - c11) + c01 * c01))
+                    if us and semi > best_semi:
+                        best_semi = semi
+                        best = k
+                else:
+                    xy[n, k, 0], xy[n, k, 1] = nan, nan
                     for i in range(2):
                         for j in range(2):
-                            if not (ck and cl):
-                                val = nan
-                            elif k == l:
-                                val = ccov[n, k, i, j]
-                            else:
-                                val = _dot(Aw, k, i, Aw, l, j, r)
-                                if det_mode == 3:
-                                    s = 0.0
-                                    for a in range(2):
-                                        for b in range(2):
-                                            s += Juv[k, i, a] * det[n, 0, 2 * k + a, 2 * l + b] * Juv[l, j, b]
-                                    val += s
-                            joint[n, 2 * k + i, 2 * l + j] = val
-                            joint[n, 2 * l + j, 2 * k + i] = val
-        # largest point
-        largest_index[n] = best
-        if best >= 0:
-            largest_semi[n] = best_semi
-            largest_xy[n, 0], largest_xy[n, 1] = xy[n, best, 0], xy[n, best, 1]
-            for i in range(2):
-                for j in range(2):
-                    largest_cov[n, i, j] = ccov[n, best, i, j]
-        else:
-            largest_semi[n] = nan
-            largest_xy[n, 0], largest_xy[n, 1] = nan, nan
-            for i in range(2):
-                for j in range(2):
-                    largest_cov[n, i, j] = nan
-        # centre
-        code = _OK
-        bad = -1
-        area = nan
-        cx_, cy_ = nan, nan
-        if not all_usable:
-            code = reason[n, first_bad]
-            bad = first_bad
-        else:
-            if K < 3:
-                area = 0.0
-                cx_, cy_ = 0.0, 0.0
+                            ccov[n, k, i, j] = nan
+                if not us and all_usable:
+                    all_usable = False
+                    first_bad = k
+            # joint covariance (optional)
+            if want_joint:
                 for k in range(K):
-                    cx_ += xy[n, k, 0]
-                    cy_ += xy[n, k, 1]
-                cx_ /= K
-                cy_ /= K
-                for k in range(K):
-                    G[0, 2 * k], G[0, 2 * k + 1] = 1.0 / K, 0.0
-                    G[1, 2 * k], G[1, 2 * k + 1] = 0.0, 1.0 / K
-            else:
-                mx, my = 0.0, 0.0
-                for k in range(K):
-                    mx += xy[n, k, 0]
-                    my += xy[n, k, 1]
-                mx /= K
-                my /= K
-                ss = 0.0
-                for k in range(K):
-                    q[k, 0] = xy[n, k, 0] - mx
-                    q[k, 1] = xy[n, k, 1] - my
-                    ss += q[k, 0] * q[k, 0] + q[k, 1] * q[k, 1]
-                A2, Sx, Sy = 0.0, 0.0, 0.0
-                for k in range(K):
-                    kn = (k + 1) % K
-                    c = q[k, 0] * q[kn, 1] - q[kn, 0] * q[k, 1]
-                    A2 += c
-                    Sx += (q[k, 0] + q[kn, 0]) * c
-                    Sy += (q[k, 1] + q[kn, 1]) * c
-                area = 0.5 * A2
-                if not (abs(area) > 1e-12 * max(ss, 1e-300)):
-                    code = _DEGENERATE
-                else:
-                    inv6A = 1.0 / (6.0 * area)
-                    Cxl, Cyl = Sx * inv6A, Sy * inv6A
-                    cx_, cy_ = Cxl + mx, Cyl + my
-                    for k in range(K):
-                        kn = (k + 1) % K
-                        kp = (k - 1 + K) % K
-                        x, y = q[k, 0], q[k, 1]
-                        xn_, yn_ = q[kn, 0], q[kn, 1]
-                        xp, yp = q[kp, 0], q[kp, 1]
-                        c = x * yn_ - xn_ * y
-                        cp = xp * y - x * yp
-                        dA_dx = 0.5 * (yn_ - yp)
-                        dA_dy = 0.5 * (xp - xn_)
-                        dSx_dx = c + cp + (x + xn_) * yn_ - (xp + x) * yp
-                        dSx_dy = -(x + xn_) * xn_ + (xp + x) * xp
-                        dSy_dx = (y + yn_) * yn_ - (yp + y) * yp
-                        dSy_dy = c + cp - (y + yn_) * xn_ + (yp + y) * xp
-                        G[0, 2 * k] = (dSx_dx - 6.0 * Cxl * dA_dx) * inv6A
-                        G[0, 2 * k + 1] = (dSx_dy - 6.0 * Cxl * dA_dy) * inv6A
-                        G[1, 2 * k] = (dSy_dx - 6.0 * Cyl * dA_dx) * inv6A
-                        G[1, 2 * k + 1] = (dSy_dy - 6.0 * Cyl * dA_dy) * inv6A
-        centre_reason[n] = code
-        centre_bad[n] = bad
-        area_out[n] = area if all_usable else nan
-        if code == _OK:
-            centre[n, 0], centre[n, 1] = cx_, cy_
-            # parameter part: B = sum_k G_k (Jp_k L), cov = B B^T
-            for i in range(2):
-                for c in range(r):
-                    acc = 0.0
-                    for k in range(K):
-                        acc += G[i, 2 * k] * Aw[k, 0, c] + G[i, 2 * k + 1] * Aw[k, 1, c]
-                    B[0, i, c] = acc
-            e00 = _dot(B, 0, 0, B, 0, 0, r)
-            e01 = _dot(B, 0, 0, B, 0, 1, r)
-            e11 = _dot(B, 0, 1, B, 0, 1, r)
-            # pixel part: H_k = G_k Juv_k, sum_k,l H_k P_kl H_l^T
-            for k in range(K):
+                    ck = reason[n, k] == _OK or reason[n, k] == _OUTSIDE
+                    for l in range(k, K):
+                        cl = reason[n, l] == _OK or reason[n, l] == _OUTSIDE
+                        for i in range(2):
+                            for j in range(2):
+                                if not (ck and cl):
+                                    val = nan
+                                elif k == l:
+                                    val = ccov[n, k, i, j]
+                                else:
+                                    val = 0.0
+                                    for c in range(r):
+                                        val += AW[2 * c + i, j0 + k] * AW[2 * c + j, j0 + l]
+                                    if det_mode == 3:
+                                        s = 0.0
+                                        for a in range(2):
+                                            for b in range(2):
+                                                s += (JUV[2 * i + a, j0 + k] * det[n, 0, 2 * k + a, 2 * l + b]
+                                                      * JUV[2 * j + b, j0 + l])
+                                        val += s
+                                joint[n, 2 * k + i, 2 * l + j] = val
+                                joint[n, 2 * l + j, 2 * k + i] = val
+            # largest point
+            largest_index[n] = best
+            if best >= 0:
+                largest_semi[n] = best_semi
+                largest_xy[n, 0], largest_xy[n, 1] = xy[n, best, 0], xy[n, best, 1]
                 for i in range(2):
                     for j in range(2):
-                        H[k, i, j] = G[i, 2 * k] * Juv[k, 0, j] + G[i, 2 * k + 1] * Juv[k, 1, j]
-            for k in range(K):
-                h00, h01, h10, h11 = H[k, 0, 0], H[k, 0, 1], H[k, 1, 0], H[k, 1, 1]
-                p00, p01, p10, p11 = Pk[k, 0, 0], Pk[k, 0, 1], Pk[k, 1, 0], Pk[k, 1, 1]
-                m00, m01 = h00 * p00 + h01 * p10, h00 * p01 + h01 * p11
-                m10, m11 = h10 * p00 + h11 * p10, h10 * p01 + h11 * p11
-                e00 += m00 * h00 + m01 * h01
-                e01 += m00 * h10 + m01 * h11
-                e11 += m10 * h10 + m11 * h11
-                if det_mode == 3:  # detector cross terms between corners
-                    for l in range(K):
-                        if l == k:
-                            continue
-                        for a in range(2):
-                            for b in range(2):
-                                p = det[n, 0, 2 * k + a, 2 * l + b]
-                                e00 += H[k, 0, a] * p * H[l, 0, b]
-                                e01 += H[k, 0, a] * p * H[l, 1, b]
-                                e11 += H[k, 1, a] * p * H[l, 1, b]
-            centre_cov[n, 0, 0], centre_cov[n, 0, 1] = e00, e01
-            centre_cov[n, 1, 0], centre_cov[n, 1, 1] = e01, e11
-            _v2x(e00, e01, e11, ch, sh, v2x, n)
-        else:
-            centre[n, 0], centre[n, 1] = nan, nan
-            for i in range(2):
-                for j in range(2):
-                    centre_cov[n, i, j] = nan
-            _v2x(nan, nan, nan, ch, sh, v2x, n)
-            if code == _DEGENERATE:
-                centre_bad[n] = -1
+                        largest_cov[n, i, j] = ccov[n, best, i, j]
+            else:
+                largest_semi[n] = nan
+                largest_xy[n, 0], largest_xy[n, 1] = nan, nan
+                for i in range(2):
+                    for j in range(2):
+                        largest_cov[n, i, j] = nan
+            # centre
+            code = _OK
+            bad = -1
+            area = nan
+            cx_, cy_ = nan, nan
+            if not all_usable:
+                code = reason[n, first_bad]
+                bad = first_bad
+            else:
+                if K < 3:
+                    area = 0.0
+                    cx_, cy_ = 0.0, 0.0
+                    for k in range(K):
+                        cx_ += xy[n, k, 0]
+                        cy_ += xy[n, k, 1]
+                    cx_ /= K
+                    cy_ /= K
+                    for k in range(K):
+                        G[0, 2 * k], G[0, 2 * k + 1] = 1.0 / K, 0.0
+                        G[1, 2 * k], G[1, 2 * k + 1] = 0.0, 1.0 / K
+                else:
+                    mx, my = 0.0, 0.0
+                    for k in range(K):
+                        mx += xy[n, k, 0]
+                        my += xy[n, k, 1]
+                    mx /= K
+                    my /= K
+                    ss = 0.0
+                    for k in range(K):
+                        q[k, 0] = xy[n, k, 0] - mx
+                        q[k, 1] = xy[n, k, 1] - my
+                        ss += q[k, 0] * q[k, 0] + q[k, 1] * q[k, 1]
+                    A2, Sx, Sy = 0.0, 0.0, 0.0
+                    for k in range(K):
+                        kn = (k + 1) % K
+                        c = q[k, 0] * q[kn, 1] - q[kn, 0] * q[k, 1]
+                        A2 += c
+                        Sx += (q[k, 0] + q[kn, 0]) * c
+                        Sy += (q[k, 1] + q[kn, 1]) * c
+                    area = 0.5 * A2
+                    if not (abs(area) > 1e-12 * max(ss, 1e-300)):
+                        code = _DEGENERATE
+                    else:
+                        inv6A = 1.0 / (6.0 * area)
+                        Cxl, Cyl = Sx * inv6A, Sy * inv6A
+                        cx_, cy_ = Cxl + mx, Cyl + my
+                        for k in range(K):
+                            kn = (k + 1) % K
+                            kp = (k - 1 + K) % K
+                            x, y = q[k, 0], q[k, 1]
+                            xn_, yn_ = q[kn, 0], q[kn, 1]
+                            xp, yp = q[kp, 0], q[kp, 1]
+                            c = x * yn_ - xn_ * y
+                            cp = xp * y - x * yp
+                            dA_dx = 0.5 * (yn_ - yp)
+                            dA_dy = 0.5 * (xp - xn_)
+                            dSx_dx = c + cp + (x + xn_) * yn_ - (xp + x) * yp
+                            dSx_dy = -(x + xn_) * xn_ + (xp + x) * xp
+                            dSy_dx = (y + yn_) * yn_ - (yp + y) * yp
+                            dSy_dy = c + cp - (y + yn_) * xn_ + (yp + y) * xp
+                            G[0, 2 * k] = (dSx_dx - 6.0 * Cxl * dA_dx) * inv6A
+                            G[0, 2 * k + 1] = (dSx_dy - 6.0 * Cxl * dA_dy) * inv6A
+                            G[1, 2 * k] = (dSy_dx - 6.0 * Cyl * dA_dx) * inv6A
+                            G[1, 2 * k + 1] = (dSy_dy - 6.0 * Cyl * dA_dy) * inv6A
+            centre_reason[n] = code
+            centre_bad[n] = bad
+            area_out[n] = area if all_usable else nan
+            if code == _OK:
+                centre[n, 0], centre[n, 1] = cx_, cy_
+                # parameter part: B = sum_k G_k (J_k L), cov = B B^T
+                e00, e01, e11 = 0.0, 0.0, 0.0
+                for c in range(r):
+                    b0, b1 = 0.0, 0.0
+                    for k in range(K):
+                        a0, a1 = AW[2 * c, j0 + k], AW[2 * c + 1, j0 + k]
+                        b0 += G[0, 2 * k] * a0 + G[0, 2 * k + 1] * a1
+                        b1 += G[1, 2 * k] * a0 + G[1, 2 * k + 1] * a1
+                    e00 += b0 * b0
+                    e01 += b0 * b1
+                    e11 += b1 * b1
+                # pixel part: H_k = G_k Juv_k, sum_k,l H_k P_kl H_l^T
+                for k in range(K):
+                    for i in range(2):
+                        for j in range(2):
+                            H[k, i, j] = G[i, 2 * k] * JUV[j, j0 + k] + G[i, 2 * k + 1] * JUV[2 + j, j0 + k]
+                for k in range(K):
+                    h00, h01, h10, h11 = H[k, 0, 0], H[k, 0, 1], H[k, 1, 0], H[k, 1, 1]
+                    p00, p01, p10, p11 = Pk[k, 0, 0], Pk[k, 0, 1], Pk[k, 1, 0], Pk[k, 1, 1]
+                    m00, m01 = h00 * p00 + h01 * p10, h00 * p01 + h01 * p11
+                    m10, m11 = h10 * p00 + h11 * p10, h10 * p01 + h11 * p11
+                    e00 += m00 * h00 + m01 * h01
+                    e01 += m00 * h10 + m01 * h11
+                    e11 += m10 * h10 + m11 * h11
+                    if det_mode == 3:  # detector cross terms between corners
+                        for l in range(K):
+                            if l == k:
+                                continue
+                            for a in range(2):
+                                for b in range(2):
+                                    p = det[n, 0, 2 * k + a, 2 * l + b]
+                                    e00 += H[k, 0, a] * p * H[l, 0, b]
+                                    e01 += H[k, 0, a] * p * H[l, 1, b]
+                                    e11 += H[k, 1, a] * p * H[l, 1, b]
+                centre_cov[n, 0, 0], centre_cov[n, 0, 1] = e00, e01
+                centre_cov[n, 1, 0], centre_cov[n, 1, 1] = e01, e11
+                _v2x(e00, e01, e11, ch, sh, v2x, n)
+            else:
+                centre[n, 0], centre[n, 1] = nan, nan
+                for i in range(2):
+                    for j in range(2):
+                        centre_cov[n, i, j] = nan
+                _v2x(nan, nan, nan, ch, sh, v2x, n)
+                if code == _DEGENERATE:
+                    centre_bad[n] = -1
     return (xy, ccov, joint, reason, usable, largest_index, largest_semi, largest_xy, largest_cov,
             centre, centre_cov, centre_reason, centre_bad, area_out, v2x)
 
