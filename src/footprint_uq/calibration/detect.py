@@ -213,7 +213,7 @@ def detect_corners(image, board, *, method: str = "auto", subpix: bool = True) -
                 c = cv2.cornerSubPix(gray, c.reshape(-1, 1, 2), (w, w), (-1, -1), crit).reshape(-1, 2)
             return _orient(c.astype(np.float64)), "classic"
     if method in ("auto", "sb"):
-        flags = cv2.CALIB_CB_NORMALIZE_IMAGE | cv2.CALIB_CB_EXHAUSTIVE | cv2.CALIB_CB_ACCURACY
+        flags = cv2.CALIB_CB_NORMALIZE_IMAGE | cv2.CALIB_CB_ACCURACY
         ok, c = cv2.findChessboardCornersSB(gray, size, flags=flags)
         if ok and c is not None and len(c) == board.n_corners:
             return _orient(c.reshape(-1, 2).astype(np.float64)), "sb"
@@ -242,6 +242,18 @@ def _detect_one(source: FrameSource, gray, board: Checkerboard, method: str, sub
     if not np.all(np.isfinite(corners)):
         return Detection(source, False, image_size_px=size, reason="detector returned non-finite corners")
     return Detection(source, True, corners, size, "", used)
+
+
+def _mp_context():
+    """Process start method of the pools: ``spawn``.
+
+    ``fork`` deadlocks once OpenCV's thread pool (or a video decoder) has run in
+    the parent process.  With ``spawn``, a script calling these functions needs
+    the usual ``if __name__ == "__main__":`` guard.
+    """
+    import multiprocessing
+
+    return multiprocessing.get_context("spawn")
 
 
 def _worker_init():
@@ -335,7 +347,8 @@ def detect_frames(inputs, board, *, video_step: int = 1, workers: int | None = N
             for src, gray in _iter_tasks(sources, int(video_step), report):
                 report(_detect_one(src, gray, board, method, subpix))
         else:
-            with ProcessPoolExecutor(max_workers=n_workers, initializer=_worker_init) as ex:
+            with ProcessPoolExecutor(max_workers=n_workers, initializer=_worker_init,
+                                     mp_context=_mp_context()) as ex:
                 pending = {}
                 window = 4 * n_workers
                 for src, gray in _iter_tasks(sources, int(video_step), report):

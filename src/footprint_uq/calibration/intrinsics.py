@@ -49,7 +49,7 @@ import numpy as np
 
 from ..errors import InputError
 from .boards import Checkerboard, parse_board
-from .detect import Detection, FrameSource, detect_frames
+from .detect import Detection, FrameSource, _mp_context, detect_frames
 
 __all__ = ["INTRINSIC_NAMES", "PAPER_COLUMNS", "IntrinsicCalibration", "BootstrapResult", "FilterRound",
            "calibrate_intrinsics", "calibrate_detections", "calibrate_corners", "intrinsic_covariance",
@@ -252,7 +252,7 @@ def bootstrap_intrinsics(obj, imgs, image_size_px, K0, d0, n: int, *, seed: int 
                 results.extend(_boot_fit(tk))
                 bar.update(len(tk[2]))
         else:
-            with ProcessPoolExecutor(max_workers=int(workers)) as ex:
+            with ProcessPoolExecutor(max_workers=int(workers), mp_context=_mp_context()) as ex:
                 for tk, res in zip(tasks, ex.map(_boot_fit, tasks), strict=True):
                     results.extend(res)
                     bar.update(len(tk[2]))
