@@ -240,3 +240,35 @@ def test_cli_case_study_bad_config(tmp_path):
     assert p.returncode == 2
     lines = p.stderr.strip().splitlines()
     assert len(lines) == 1 and "speed_kmh" in lines[0]
+
+
+def test_contributions_with_correlated_sources_have_cross_terms():
+    from footprint_uq.scenario.case_study import centre_contributions
+
+    scene = build_scene(CaseStudyConfig.from_dict(SMALL))
+    cam = scene.cameras["camera1"]
+    budget = load_budget({"height_m": 0.2, "imaging_px": [0.1, 0.1],
+                          "covariance": {"names": ["height_m", "tilt_deg"],
+                                         "matrix": [[0.04, 0.8 * 0.2 * 0.05], [0.8 * 0.2 * 0.05, 0.0025]]}})
+    fp = footprints_from_boxes3d(cam, budget, scene.boxes_world)
+    c = centre_contributions(cam, budget, fp)
+    assert {"height", "tilt", "imaging", "cross_terms"} <= set(c)
+    np.testing.assert_allclose(sum(c.values()), fp.centre_cov_m2, rtol=1e-9, atol=1e-15)
+    assert np.abs(c["cross_terms"]).max() > 1e-3 * np.abs(fp.centre_cov_m2).max()
+
+
+def test_nothing_in_view_is_reported_not_invented(tmp_path):
+    import warnings
+
+    from footprint_uq.viz.case_study import write_case_study_report
+
+    cfg = CaseStudyConfig.from_dict({**SMALL, "camera_types": ["basler1"],
+                                     "cameras": [{"name": "away", "position_m": [9, 9], "pan_deg": 45}]})
+    res = analyse(build_scene(cfg), cfg.camera_types)
+    assert not res.table["centre_valid"].any()
+    assert res.table["centre_sigma_x_m"].isna().all() and res.table["contrib_height_m2"].isna().all()
+    assert not any(s["holds"] for s in res.statements())
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        paths = write_case_study_report(res, tmp_path, heatmap=cfg.heatmap, dpi=40)
+    assert "not testable" in paths["report"].read_text()

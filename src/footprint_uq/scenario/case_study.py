@@ -38,6 +38,7 @@ horizontal line of sight from the camera's foot to the footprint centre).
 from __future__ import annotations
 
 import json
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -308,7 +309,8 @@ def centre_contributions(camera, budget, fp) -> dict[str, np.ndarray]:
     shared_full = GJp @ Sp[np.ix_(used, used)] @ np.swapaxes(GJp, -1, -2)
     shared_sum = sum((v for k, v in out.items() if k in SHARED_SOURCES), np.zeros((N, 2, 2)))
     cross = shared_full - shared_sum
-    if np.any(np.abs(cross) > 1e-12 * max(np.abs(shared_full).max(initial=0.0), 1e-300)):
+    scale = np.abs(shared_full[ok]).max(initial=0.0) if ok.any() else 0.0
+    if ok.any() and np.any(np.abs(cross[ok]) > 1e-12 * max(scale, 1e-300)):
         out["cross_terms"] = cross
     for k in out:
         out[k] = np.where(ok[:, None, None], out[k], np.nan)
@@ -537,7 +539,8 @@ def analyse(scene: Scene, camera_types=None, *, confidence: float = 0.95):
         base["box_yaw_rad"] = boxes[:, 6]
         for j, nm in enumerate("xyz"):
             base[f"box_cam_{nm}_m"] = ctr_cam[:, j]
-        with np.errstate(invalid="ignore"):
+        with np.errstate(invalid="ignore"), warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # all corners behind the camera: NaN box
             base["bbox_u_min_px"] = np.nanmin(uv8[..., 0], 1) if N else np.zeros(0)
             base["bbox_v_min_px"] = np.nanmin(uv8[..., 1], 1) if N else np.zeros(0)
             base["bbox_u_max_px"] = np.nanmax(uv8[..., 0], 1) if N else np.zeros(0)

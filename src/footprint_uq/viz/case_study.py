@@ -390,7 +390,10 @@ def plot_contributions(result, camera: str) -> Figure:
         with np.errstate(invalid="ignore", divide="ignore"):
             S = np.where(tot > 0, V / tot, np.nan)
         _shade_turn(ax, t, r["segment"].to_numpy())
-        if cols:
+        if not cols:
+            ax.text(0.5, 0.5, "footprint centre not available\n(vehicle not fully in view)", ha="center",
+                    va="center", transform=ax.transAxes, fontsize=8, color="#555")
+        else:
             polys = ax.stackplot(t, np.nan_to_num(S), colors=[_SOURCE_COLOURS.get(n, "#999") for n in names],
                                  labels=names, lw=0)
             for n, p in zip(names, polys, strict=True):
@@ -402,8 +405,9 @@ def plot_contributions(result, camera: str) -> Figure:
         ax.tick_params(labelsize=7)
         if j == 0:
             ax.set_ylabel("share of centre variance (trace)", fontsize=8)
-    fig.legend(list(handles.values()), list(handles), loc="outside lower center", ncol=min(8, len(handles)),
-               fontsize=7, frameon=False)
+    if handles:
+        fig.legend(list(handles.values()), list(handles), loc="outside lower center", ncol=min(8, len(handles)),
+                   fontsize=7, frameon=False)
     fig.suptitle(f"{camera}: which error source dominates the footprint-centre uncertainty", fontsize=10)
     return fig
 
@@ -514,6 +518,13 @@ _FIG_CAPTIONS = {
 }
 
 
+def _nanmedian(a) -> float:
+    """Median of the finite values (NaN, silently, if there are none)."""
+    a = np.asarray(a, dtype=float)
+    a = a[np.isfinite(a)]
+    return float(np.median(a)) if a.size else float("nan")
+
+
 def _circ_median(bearing_deg) -> float:
     """Median of compass bearings (degrees), unwrapped around their circular mean."""
     b = np.asarray(bearing_deg, dtype=float)
@@ -545,9 +556,9 @@ def _findings_html(result, esc) -> str:
             rows = [s for s in st if s["camera"] == cam and s["axes"] == system]
             n_hold = sum(s["holds"] for s in rows)
             testable = all(s["frames_entry"] and s["frames_exit"] for s in rows)
-            ent = np.nanmedian([s["median_X_over_Y_entry"] for s in rows])
-            trn = np.nanmedian([s["median_X_over_Y_turn"] for s in rows])
-            ext = np.nanmedian([s["median_X_over_Y_exit"] for s in rows])
+            ent = _nanmedian([s["median_X_over_Y_entry"] for s in rows])
+            trn = _nanmedian([s["median_X_over_Y_turn"] for s in rows])
+            ext = _nanmedian([s["median_X_over_Y_exit"] for s in rows])
             verdict = ("not testable (no entry or exit frames in view)" if not testable else
                        ("<b>reproduced</b>" if n_hold == len(rows) else
                         ("partly reproduced" if n_hold else "<b>not reproduced</b>")))
@@ -574,7 +585,7 @@ def _findings_html(result, esc) -> str:
         ratio = float(np.median(sr / sc)) if sr.size else float("nan")
         contrib = [c for c in r.columns if c.startswith("contrib_")]
         tot = r[contrib].sum(axis=1).to_numpy()[ok]
-        shares = {c[8:-3]: float(np.nanmedian(r[c].to_numpy()[ok] / tot)) for c in contrib} if tot.size else {}
+        shares = {c[8:-3]: _nanmedian(r[c].to_numpy()[ok] / tot) for c in contrib} if tot.size else {}
         top = sorted(shares.items(), key=lambda kv: -kv[1])[:3]
         cr = result.crossings(cam, types[0], "north-east")
         cr_txt = ""
