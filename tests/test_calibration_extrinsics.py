@@ -88,6 +88,9 @@ def test_detect_board_rejects_wall_and_reports_missing_board(rig):
     empty = sl.simulate_scan(PAPER_BOARD, poses[0], TL, scanner=SCANNER, walls=wall, seed=3, with_board=False)
     det = lidar.detect_board(empty, PAPER_BOARD, ground=g)
     assert not det.found and "no board-sized planar patch" in det.reason
+    # no ground removal: the ground (one big plane and far-range ring arcs) is rejected by size
+    det = lidar.detect_board(cl, PAPER_BOARD, ground=None)
+    assert det.found and det.n_points > 300
     # a region that excludes the board
     det = lidar.detect_board(cl, PAPER_BOARD, ground=g, region="box:-5,-5,-1,0,5,5")
     assert not det.found

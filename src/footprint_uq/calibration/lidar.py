@@ -543,7 +543,7 @@ def detect_board(cloud, board, *, region=None, ground: PlaneFit | None = None, g
     for _ in range(max_planes):
         if rest.shape[0] < min_points:
             break
-        fit = fit_plane_ransac(rest, threshold_m=plane_threshold_m, n_iter=300, seed=rng)
+        fit = fit_plane_ransac(rest, threshold_m=plane_threshold_m, n_iter=300, seed=rng, max_points=15000)
         if fit is None or fit.n_inliers < min_points:
             break
         pts = rest[fit.inliers]
@@ -588,7 +588,7 @@ def _candidate(pts, fit, board, size, tol, thr):
     uv = np.stack([(pts - c0) @ e1, (pts - c0) @ e2], 1)
     rect0 = fit_rectangle(uv)
     ext0 = np.array(rect0.extent_m)
-    if ext0[1] > 2.0 * size[0] + 0.2:  # a board on a stand is at most about twice as tall as long
+    if ext0[1] > 2.0 * size[0] + 0.2 or ext0[0] > size[0] + 2.5:  # a board, even on a stand, is not that big
         return None, f"patch of {len(pts)} pts, {ext0[0]:.1f} x {ext0[1]:.1f} m much larger than the board"
     if np.any(ext0 < (1 - tol) * size - 0.1):
         return None, f"patch of {len(pts)} pts, {ext0[0]:.2f} x {ext0[1]:.2f} m smaller than the board"

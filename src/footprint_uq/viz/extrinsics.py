@@ -111,12 +111,12 @@ def plot_pose_spread(calibration, *, truth=None) -> Figure:
         if truth is not None:
             ax.axhline(truth[nm] - cal.pose[i], color="r", ls="--", lw=1, label="truth")
         ax.axhline(0.0, color="k", lw=0.6)
-        ax.set_title(f"{nm} (joint {cal.pose[i]:.4g})", fontsize=9)
+        ax.set_title(f"{nm} ({cal.estimator} {cal.pose[i]:.4g})", fontsize=9)
         ax.set_xticks(x)
         ax.set_xticklabels(names, rotation=90, fontsize=6)
         ax.grid(True, alpha=0.3)
         if i == 0:
             ax.legend(fontsize=6, loc="best")
-    fig.suptitle("Per-frame camera poses relative to the joint estimate (ground frame)")
+    fig.suptitle(f"Per-frame camera poses relative to the {cal.estimator} estimate (ground frame)")
     fig.tight_layout()
     return fig
