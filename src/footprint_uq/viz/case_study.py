@@ -224,6 +224,12 @@ def plot_camera_views(result, camera: str, *, ellipse_every: int = 4, box_every:
                          colour=_type_colour(ct, i),
                          title=f"({chr(97 + i)}) {camera_type_label(ct)}: footprint-centre "
                                f"{100 * result.confidence:g} % ellipses ({k:.4g} σ), every {ellipse_every} frames")
+    axes[0].legend([Line2D([], [], ls="none", marker=".", color="#222222"),
+                    Line2D([], [], color="#1b2a49", lw=0.8),
+                    Polygon([[0, 0]], fc=colors.to_rgba(_type_colour(types[0], 0), 0.18),
+                            ec=_type_colour(types[0], 0))],
+                   ["trajectory sample (box centre)", "vehicle 3-D box", f"{100 * result.confidence:g} % ellipse"],
+                   loc="upper right", fontsize=6.5, framealpha=0.85)
     fig.suptitle(f"Left turn seen by {camera} ({w}x{h} px)", fontsize=11)
     return fig
 
@@ -350,7 +356,9 @@ def plot_sigma_profiles(result, camera: str, *, systems=("north-east", "world", 
             _shade_turn(ax, t, seg)
             sx = r[f"centre_sigma_X_{system}_m"].to_numpy()
             sy = r[f"centre_sigma_Y_{system}_m"].to_numpy()
-            ax.plot(t, r["centre_semi_major_m"].to_numpy(), ":", color="#777", lw=1.0, label="semi-major")
+            ax.plot(t, r["largest_semi_major_m"].to_numpy(), "-", color="#bbbbbb", lw=0.8,
+                    label="largest point, semi-major")
+            ax.plot(t, r["centre_semi_major_m"].to_numpy(), ":", color="#555", lw=1.0, label="semi-major")
             ax.plot(t, sx, "-", color=col, lw=1.4, label=f"σ_X ({AXIS_SYSTEMS[system][0]})")
             ax.plot(t, sy, "--", color=col, lw=1.4, alpha=0.8, label=f"σ_Y ({AXIS_SYSTEMS[system][1]})")
             for c in result.crossings(camera, ct, system):
@@ -367,7 +375,7 @@ def plot_sigma_profiles(result, camera: str, *, systems=("north-east", "world", 
             if i == len(systems) - 1:
                 ax.set_xlabel("time [s] (turn shaded)", fontsize=8)
             if j == len(types) - 1:
-                ax.legend(fontsize=6.5, loc="upper right", framealpha=0.85)
+                ax.legend(fontsize=6.5, loc="upper center", framealpha=0.85)
     fig.suptitle(f"{camera}: footprint-centre uncertainty along the left turn; circles: σ_X = σ_Y", fontsize=10)
     return fig
 
@@ -706,7 +714,7 @@ def write_case_study_report(result, out_dir, *, settings: dict | None = None, el
         s = dict(scene.camera_settings.get(name, {}))
         w, h = cam.image_size_px
         cam_rows.append({"camera": name, "x_m": cam.position_world_m[0], "y_m": cam.position_world_m[1],
-                         "height_m": cam.height_m, "pan_deg": cam.pan_deg, "tilt_deg": cam.tilt_deg,
+                         "height_m": cam.height_m, "pan_deg": cam.pan_deg % 360.0, "tilt_deg": cam.tilt_deg,
                          "roll_deg": cam.roll_deg, "focal_px": float(cam.K[0, 0]),
                          "hfov_deg": float(np.rad2deg(2 * np.arctan(w / (2 * cam.K[0, 0])))),
                          "image_px": f"{w}x{h}", "where": s.get("description", "")})
