@@ -520,10 +520,19 @@ class Summary:
         self.rows_out += out.num_rows
         s = out.column("status").combine_chunks()
         r = out.column("reason").combine_chunks()
-        cs = np.bincount(s.indices.to_numpy(zero_copy_only=False), minlength=3)
-        self.rows_ok += int(cs[0])
-        self.rows_partial += int(cs[1])
-        self.rows_error += int(cs[2])
+        if not pa.types.is_dictionary(s.type):
+            s = pc.dictionary_encode(s)
+        if not pa.types.is_dictionary(r.type):
+            r = pc.dictionary_encode(r)
+        per = dict(zip(s.dictionary.to_pylist(),
+                       np.bincount(s.indices.to_numpy(zero_copy_only=False), minlength=len(s.dictionary)).tolist(),
+                       strict=True))
+        unknown = set(per) - set(S.STATUSES)
+        if unknown:  # pragma: no cover - a bug
+            raise RuntimeError(f"unknown status {sorted(unknown)}")
+        self.rows_ok += per.get(S.STATUS_OK, 0)
+        self.rows_partial += per.get(S.STATUS_PARTIAL, 0)
+        self.rows_error += per.get(S.STATUS_ERROR, 0)
         idx = r.indices.to_numpy(zero_copy_only=False)
         texts = r.dictionary.to_pylist()
         for i, c in enumerate(np.bincount(idx, minlength=len(texts)).tolist()):

@@ -1,0 +1,498 @@
+"""Fleet batch: a Parquet dataset of detections from many cameras, in-process or on Dask.
+
+Input
+-----
+* a **Parquet dataset**: a folder of ``.parquet`` files, optionally hive-partitioned
+  (``camera_id=cam07/date=2024-05-01/part-0.parquet``); the camera of a row is its
+  ``camera_id`` column or partition key; other columns as in :mod:`footprint_uq.batch.schema`;
+* a **camera registry** (:func:`load_registry`): camera id -> camera, budget and optional
+  heading offset / geodetic origin.
+
+Work
+----
+One task per input file (:func:`plan`).  :func:`process_partition` -- the one
+implementation of the per-partition work, used by both paths -- streams its file in
+chunks, groups the rows by camera, runs each camera's :class:`~.process.BatchProcessor`
+and writes ``out/camera_id=<id>/<input sub-path>`` (the input's other partition folders
+kept), through a temporary name renamed at the end, so a retried task overwrites
+rather than duplicates.  It returns a small per-camera summary.  :func:`process_fleet`
+runs the tasks in this process (no scheduler) or on Dask (``scheduler=`` an address or
+``workers=`` N for a local cluster), with ``retries``.
+
+Row accounting
+--------------
+Every input row appears once in the output with ``source`` (the input file, relative to
+the dataset root) and ``row`` (0-based row in that file): ``(source, row)`` identifies it.
+Rows whose ``camera_id`` is missing or not in the registry are error rows (under
+``camera_id=__unknown__`` when missing).  The summary (``out/_summary.json``) gives, per
+camera and in total, rows in / out / ok / partial / error, with rows_in == rows_out ==
+ok + partial + error.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+import uuid
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.compute as pc
+
+from ..errors import ConfigError, InputError
+from . import schema as S
+from .process import BatchProcessor, Summary
+
+__all__ = ["RegistryEntry", "load_registry", "plan", "Task", "process_partition", "process_fleet", "FleetSummary",
+           "UNKNOWN_CAMERA", "require_dask"]
+
+#: output folder name of rows without a camera_id
+UNKNOWN_CAMERA = "__unknown__"
+_PROCESSORS: dict = {}  # per-process cache of BatchProcessors (Dask workers keep theirs between tasks)
+
+
+def require_dask():
+    """Import dask.distributed or raise a one-line ConfigError saying how to install it."""
+    try:
+        import dask  # noqa: F401
+        import distributed
+    except ImportError:
+        raise ConfigError("--scheduler/--workers", "dask not installed",
+                          "the optional dependency: pip install 'footprint-uq[dask]' "
+                          "(dask[distributed,dataframe])") from None
+    return distributed
+
+
+# -- registry ------------------------------------------------------------------------------------
+@dataclass
+class RegistryEntry:
+    """One camera of the fleet: its loaded camera and budget and optional map tie."""
+
+    camera_id: str
+    camera: object
+    budget: object
+    heading_offset_deg: float | None = None
+    origin_lat_deg: float | None = None
+    origin_lon_deg: float | None = None
+    source: str = ""
+
+
+_REG_KEYS = {"camera_id", "camera", "budget", "heading_offset_deg", "origin_lat_deg", "origin_lon_deg"}
+
+
+def _entry(rec: dict, where: str, base: Path, default_budget) -> RegistryEntry:
+    from ..budget import load_budget
+    from ..io import load_camera
+
+    unknown = set(rec) - _REG_KEYS
+    if unknown:
+        raise ConfigError(f"{where}: {sorted(unknown)[0]}", rec[sorted(unknown)[0]], f"one of {sorted(_REG_KEYS)}")
+    cid = rec.get("camera_id")
+    if cid is None or str(cid).strip() == "":
+        raise ConfigError(f"{where}: camera_id", cid, "a camera id")
+    cam = rec.get("camera")
+    if not cam:
+        raise ConfigError(f"{where}: camera", cam, "a camera file path")
+    cpath = Path(str(cam))
+    cpath = cpath if cpath.is_absolute() else base / cpath
+    bud = rec.get("budget")
+    if bud is None or (isinstance(bud, float) and np.isnan(bud)) or str(bud).strip() == "":
+        if default_budget is None:
+            raise ConfigError(f"{where}: budget", bud, "a budget (preset or file) in the registry, or --budget")
+        budget = load_budget(default_budget)
+    else:
+        b = str(bud)
+        bp = Path(b) if Path(b).is_absolute() else base / b
+        budget = load_budget(str(bp) if bp.suffix.lower() in (".yaml", ".yml", ".json") else b)
+
+    def num(key):
+        v = rec.get(key)
+        if v is None or (isinstance(v, float) and np.isnan(v)) or (isinstance(v, str) and not v.strip()):
+            return None
+        try:
+            return float(v)
+        except (TypeError, ValueError):
+            raise ConfigError(f"{where}: {key}", v, "a number (degrees)") from None
+
+    return RegistryEntry(str(cid), load_camera(cpath), budget, num("heading_offset_deg"), num("origin_lat_deg"),
+                         num("origin_lon_deg"), str(cpath))
+
+
+def load_registry(path, *, budget=None) -> dict[str, RegistryEntry]:
+    """Read a camera registry.
+
+    Parameters
+    ----------
+    path : folder or file
+        * a **folder**: every ``<camera_id>.yaml`` / ``.yml`` / ``.json`` camera file in it
+          (budget: ``budget``, or a ``<camera_id>.budget.yaml`` next to it);
+        * a **table** -- ``.csv`` (header), ``.yaml``/``.json`` (a list of mappings, or a
+          mapping with key ``cameras``) -- with keys ``camera_id``, ``camera`` (camera file,
+          relative to the registry's folder), optional ``budget`` (preset or file; default
+          ``budget``), ``heading_offset_deg``, ``origin_lat_deg``, ``origin_lon_deg``.
+    budget : preset, path or ErrorBudget, optional
+        Default budget.
+
+    Returns
+    -------
+    dict camera_id -> RegistryEntry
+    """
+    p = Path(path)
+    if not p.exists():
+        raise ConfigError("registry", str(path), "an existing folder or file")
+    recs: list[tuple[dict, str]] = []
+    if p.is_dir():
+        base = p
+        for f in sorted(p.iterdir()):
+            if f.suffix.lower() not in (".yaml", ".yml", ".json") or ".budget." in f.name:
+                continue
+            rec = {"camera_id": f.stem, "camera": f.name}
+            for ext in (".yaml", ".yml", ".json"):
+                b = p / f"{f.stem}.budget{ext}"
+                if b.exists():
+                    rec["budget"] = b.name
+            recs.append((rec, str(f)))
+    else:
+        base = p.parent
+        suffix = p.suffix.lower()
+        if suffix == ".csv":
+            import csv
+
+            with open(p, newline="", encoding="utf-8-sig") as f:
+                recs = [({k: v for k, v in r.items() if v != ""}, f"{p}: line {i + 2}")
+                        for i, r in enumerate(csv.DictReader(f))]
+        elif suffix in (".yaml", ".yml", ".json"):
+            import yaml
+
+            data = yaml.safe_load(p.read_text(encoding="utf-8"))
+            if isinstance(data, dict) and "cameras" in data:
+                data = data["cameras"]
+            if not isinstance(data, list) or not all(isinstance(r, dict) for r in data):
+                raise ConfigError(f"{p}", type(data).__name__, "a list of camera entries (or a mapping 'cameras:')")
+            recs = [(r, f"{p}: cameras[{i}]") for i, r in enumerate(data)]
+        else:
+            raise ConfigError("registry", str(p), "a folder, or a .csv/.yaml/.json registry table")
+    out: dict[str, RegistryEntry] = {}
+    for rec, where in recs:
+        e = _entry(rec, where, base, budget)
+        if e.camera_id in out:
+            raise ConfigError(f"{where}: camera_id", e.camera_id, "unique camera ids")
+        out[e.camera_id] = e
+    if not out:
+        raise ConfigError("registry", str(path), "at least one camera")
+    return out
+
+
+# -- planning ------------------------------------------------------------------------------------
+@dataclass
+class Task:
+    """One partition: an input file and everything needed to process it (picklable)."""
+
+    index: int
+    path: str
+    rel: str
+    out_dir: str
+    cameras: dict
+    options: dict
+    chunk_rows: int
+    compression: str | None
+    partition_keys: dict = field(default_factory=dict)
+
+
+def _hive_keys(rel: str) -> dict:
+    keys = {}
+    for part in Path(rel).parent.parts:
+        if "=" in part:
+            k, v = part.split("=", 1)
+            keys[k] = v
+    return keys
+
+
+def plan(dataset, out_dir, registry: dict, *, chunk_rows: int = 262_144, compression: str | None = "snappy",
+         **options) -> list[Task]:
+    """Tasks (one per Parquet file under ``dataset``, sorted by path)."""
+    root = Path(dataset)
+    if root.is_file():
+        files = [root]
+        root = root.parent
+    elif root.is_dir():
+        files = sorted(f for f in root.rglob("*") if f.is_file() and f.suffix.lower() in (".parquet", ".pq")
+                       and not any(part.startswith((".", "_")) for part in f.relative_to(root).parts))
+    else:
+        raise InputError("detections", str(dataset), "a Parquet file or a folder of Parquet files")
+    if not files:
+        raise InputError("detections", str(dataset), "a folder holding .parquet files")
+    out = Path(out_dir)
+    if out.resolve() == root.resolve() or root.resolve() in out.resolve().parents:
+        raise InputError("out", str(out_dir), "a folder outside the detections dataset")
+    return [Task(i, str(f), f.relative_to(root).as_posix(), str(out), registry, dict(options), int(chunk_rows),
+                 compression, _hive_keys(f.relative_to(root).as_posix())) for i, f in enumerate(files)]
+
+
+# -- the per-partition work (one implementation for every path) --------------------------------------
+def _processor(entry: RegistryEntry, options: dict, names: list, id_fields: list) -> BatchProcessor:
+    """The (cached) processor of one camera for one input layout."""
+    opts = dict(options)
+    if entry.heading_offset_deg is not None:
+        opts["heading_offset_deg"] = entry.heading_offset_deg
+    if entry.origin_lat_deg is not None:
+        opts["origin_lat_deg"], opts["origin_lon_deg"] = entry.origin_lat_deg, entry.origin_lon_deg
+    key = (entry.camera_id, id(entry.camera), id(entry.budget), json.dumps(opts, sort_keys=True, default=str),
+           tuple(names), tuple(str(f) for f in id_fields))
+    bp = _PROCESSORS.get(key)
+    if bp is None:
+        bp = BatchProcessor(entry.camera, entry.budget, threads=1, **opts)
+        bp.resolve(names, id_fields)
+        if len(_PROCESSORS) > 256:
+            _PROCESSORS.clear()
+        _PROCESSORS[key] = bp
+    return bp
+
+
+def _out_path(task: Task, camera_id: str) -> Path:
+    parts = [p for p in Path(task.rel).parent.parts if not p.startswith("camera_id=")]
+    name = Path(task.rel).stem + ".parquet"
+    return Path(task.out_dir, f"camera_id={camera_id}", *parts, name)
+
+
+def process_partition(task: Task) -> dict:
+    """Process one input file: write its footprints per camera, return the per-camera counts.
+
+    Returns
+    -------
+    dict: ``{"index", "rel", "files": [...], "cameras": {camera_id: Summary.to_dict() counts}, "elapsed_s"}``
+    """
+    import pyarrow.parquet as pq
+
+    from .readers import coerce_table
+
+    t0 = time.perf_counter()
+    pf = pq.ParquetFile(task.path)
+    names = list(pf.schema_arrow.names)
+    cam_in_file = "camera_id" in names
+    part_cam = task.partition_keys.get("camera_id")
+    entries = task.cameras
+    probe = list(dict.fromkeys(names + ["camera_id"]))
+    id_fields = _id_fields(pf.schema_arrow)
+    template = _processor(next(iter(entries.values())), task.options, probe, id_fields)
+    numeric = S.numeric_input_columns(template.box_type, names)
+    read_cols = [c for c in dict.fromkeys([c for c in S.ID_COLUMNS if c in names] + list(numeric))]
+    writers: dict[str, tuple] = {}
+    counts: dict[str, Summary] = {}
+    tmp_tag = f".tmp-{uuid.uuid4().hex[:8]}"
+    start = 0
+    try:
+        for batch in pf.iter_batches(batch_size=task.chunk_rows, columns=read_cols, use_threads=False):
+            t = pa.Table.from_batches([batch])
+            n = t.num_rows
+            rows = np.arange(start, start + n, dtype=np.int64)
+            start += n
+            if cam_in_file:
+                cid = pc.cast(t.column("camera_id"), pa.string()).combine_chunks()
+                if part_cam is not None:
+                    cid = pc.fill_null(cid, part_cam)
+                t = t.drop_columns(["camera_id"])
+            else:
+                cid = pa.array([part_cam] * n, type=pa.string())
+            t = t.append_column("camera_id", cid)
+            t, pre = coerce_table(t, numeric)
+            cid_np = np.asarray(cid.to_pylist(), dtype=object) if n else np.zeros(0, dtype=object)
+            cid_key = np.where(_is_none(cid_np), UNKNOWN_CAMERA, cid_np).astype(str)
+            for cam_id in sorted(set(cid_key.tolist())):
+                sel = np.flatnonzero(cid_key == cam_id)
+                sub = t.take(pa.array(sel)) if sel.size != n else t
+                sub_pre = None if pre is None else [pre[i] for i in sel]
+                entry = entries.get(cam_id)
+                if entry is None:
+                    why = "missing camera_id" if cam_id == UNKNOWN_CAMERA else "camera_id not in the registry"
+                    sub_pre = [why] * sel.size
+                    bp = template
+                else:
+                    bp = _processor(entry, task.options, probe, id_fields)
+                out = bp.process(sub, rows=rows[sel], pre_errors=sub_pre)
+                out = out.append_column(pa.field("source", pa.string()), pa.array([task.rel] * out.num_rows,
+                                                                                    type=pa.string()))
+                out = _normalise(out)
+                if cam_id not in writers:
+                    path = _out_path(task, cam_id)
+                    path.parent.mkdir(parents=True, exist_ok=True)
+                    tmp = path.with_name(path.name + tmp_tag)
+                    writers[cam_id] = (pq.ParquetWriter(tmp, out.schema, compression=task.compression or "none"),
+                                       tmp, path)
+                    counts[cam_id] = Summary()
+                writers[cam_id][0].write_table(out)
+                counts[cam_id].add_table(out, sel.size)
+        for w, tmp, path in writers.values():
+            w.close()
+            os.replace(tmp, path)
+        writers_done = [str(p) for _, _, p in writers.values()]
+    except BaseException:
+        for w, tmp, _ in writers.values():
+            try:
+                w.close()
+            finally:
+                Path(tmp).unlink(missing_ok=True)
+        raise
+    return {"index": task.index, "rel": task.rel, "files": writers_done, "rows_in": start,
+            "cameras": {k: _counts(v) for k, v in counts.items()}, "elapsed_s": time.perf_counter() - t0}
+
+
+def _is_none(a: np.ndarray) -> np.ndarray:
+    return np.array([x is None for x in a], dtype=bool)
+
+
+def _id_fields(schema: pa.Schema) -> list[pa.Field]:
+    """Output id fields: camera_id as text, the others with their Parquet types."""
+    f = [pa.field("camera_id", pa.string())]
+    return f + [schema.field(c) for c in S.ID_COLUMNS if c != "camera_id" and c in schema.names]
+
+
+def _normalise(t: pa.Table) -> pa.Table:
+    """Status/reason as plain strings: every output file of the fleet has the same schema."""
+    cols = [pc.cast(c, pa.string()) if pa.types.is_dictionary(c.type) else c for c in t.columns]
+    return pa.Table.from_arrays(cols, names=t.column_names)
+
+
+def _counts(s: Summary) -> dict:
+    return {"rows_in": s.rows_in, "rows_out": s.rows_out, "rows_ok": s.rows_ok, "rows_partial": s.rows_partial,
+            "rows_error": s.rows_error, "reasons": dict(s.reasons)}
+
+
+# -- driver ---------------------------------------------------------------------------------------
+@dataclass
+class FleetSummary:
+    """Per-camera and total row accounting of a fleet job."""
+
+    cameras: dict = field(default_factory=dict)  # camera_id -> Summary
+    files: list = field(default_factory=list)
+    elapsed_s: float = 0.0
+    info: dict = field(default_factory=dict)
+
+    def add(self, part: dict) -> None:
+        for cid, c in part["cameras"].items():
+            s = self.cameras.setdefault(cid, Summary())
+            s.merge(Summary(c["rows_in"], c["rows_out"], c["rows_ok"], c["rows_partial"], c["rows_error"],
+                            dict(c["reasons"])))
+        self.files += part["files"]
+
+    @property
+    def total(self) -> Summary:
+        t = Summary()
+        for s in self.cameras.values():
+            t.merge(s)
+        t.elapsed_s = self.elapsed_s
+        return t
+
+    # the single-file Summary interface used by the CLI
+    def text(self) -> str:
+        return self.total.text() + f" over {len(self.cameras)} cameras"
+
+    @property
+    def rows_in(self):
+        return self.total.rows_in
+
+    @property
+    def rows_out(self):
+        return self.total.rows_out
+
+    @property
+    def rows_error(self):
+        return self.total.rows_error
+
+    @property
+    def consistent(self) -> bool:
+        return all(s.consistent for s in self.cameras.values())
+
+    def to_dict(self) -> dict:
+        tot = self.total.to_dict()
+        return {**tot, "consistent": self.consistent,
+                "cameras": {k: {**_counts(v), "consistent": v.consistent} for k, v in sorted(self.cameras.items())},
+                "files": sorted(self.files), **self.info}
+
+
+def process_fleet(registry, detections, out_dir, *, budget=None, scheduler=None, workers: int | None = None,
+                  retries: int = 2, chunk_rows: int = 262_144, compression: str | None = "snappy",
+                  progress: bool | None = None, client=None, **options) -> FleetSummary:
+    """Footprints of a multi-camera Parquet dataset, in this process or on a Dask cluster.
+
+    Parameters
+    ----------
+    registry : path or dict camera_id -> RegistryEntry  (:func:`load_registry`)
+    detections : folder (or one file) of Parquet detections
+    out_dir : output folder (partitioned Parquet ``camera_id=<id>/...``, plus ``_summary.json``)
+    budget : default budget for registry entries without one
+    scheduler : str, optional
+        Address of a running Dask scheduler (``tcp://host:8786``).
+    workers : int, optional
+        Start a local Dask cluster of this many worker processes (one thread each).
+    retries : int
+        Dask retries of a failed partition (its output files are rewritten, never duplicated).
+    client : dask.distributed.Client, optional
+        Use this client (tests, notebooks) instead of ``scheduler``/``workers``.
+    **options
+        :class:`~footprint_uq.batch.process.BatchProcessor` options (``box_type``, ``contact``,
+        ``confidence``, ``heading_offset_deg``, ``origin_lat_deg``, ``origin_lon_deg``,
+        ``corners``, ``allow_outside_image``); the registry's per-camera heading/origin win.
+
+    Returns
+    -------
+    FleetSummary
+    """
+    import sys
+
+    from tqdm import tqdm
+
+    t0 = time.perf_counter()
+    reg = registry if isinstance(registry, dict) else load_registry(registry, budget=budget)
+    geo = [e.origin_lat_deg is not None or options.get("origin_lat_deg") is not None for e in reg.values()]
+    if any(geo) and not all(geo):
+        raise ConfigError("registry", "origin given for some cameras only",
+                          "an origin for every camera (registry origin_lat_deg/origin_lon_deg, or --origin-lat/lon)")
+    options = {k: v for k, v in options.items() if v is not None or k in ("origin_lat_deg", "origin_lon_deg")}
+    tasks = plan(detections, out_dir, reg, chunk_rows=chunk_rows, compression=compression, **options)
+    Path(out_dir).mkdir(parents=True, exist_ok=True)
+    summ = FleetSummary()
+    show = sys.stderr.isatty() if progress is None else bool(progress)
+    bar = tqdm(total=len(tasks), unit="file", disable=not show, file=sys.stderr, desc="partitions", leave=False)
+    fn = process_partition  # module global: one implementation for both paths
+    own = None
+    try:
+        if client is None and scheduler is None and workers is None:
+            for t in tasks:
+                summ.add(fn(t))
+                bar.update(1)
+            mode = "in-process"
+        else:
+            distributed = require_dask()
+            if client is None:
+                if scheduler is not None:
+                    client = own = distributed.Client(scheduler)
+                else:
+                    cluster = distributed.LocalCluster(n_workers=int(workers), threads_per_worker=1, processes=True,
+                                                       dashboard_address=None)
+                    client = own = distributed.Client(cluster)
+            futs = client.map(fn, tasks, retries=int(retries), pure=False, key=[f"footprints-{uuid.uuid4().hex[:6]}-"
+                                                                              f"{t.index}" for t in tasks])
+            for fut in distributed.as_completed(futs):
+                summ.add(fut.result())
+                bar.update(1)
+            mode = "dask"
+    finally:
+        bar.close()
+        if own is not None:
+            cluster = getattr(own, "cluster", None)
+            own.close()
+            if cluster is not None:
+                cluster.close()
+    summ.elapsed_s = time.perf_counter() - t0
+    summ.info = {"detections": str(detections), "out": str(out_dir), "partitions": len(tasks), "mode": mode,
+                 "chunk_rows": int(chunk_rows), "options": {k: v for k, v in options.items()},
+                 "elapsed_s": round(summ.elapsed_s, 6)}
+    if not summ.consistent:  # pragma: no cover - a bug, not bad input
+        raise RuntimeError(f"row accounting broken: {summ.text()}")
+    Path(out_dir, "_summary.json").write_text(json.dumps(summ.to_dict(), indent=2, default=str) + "\n",
+                                              encoding="utf-8")
+    return summ
