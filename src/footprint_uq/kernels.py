@@ -801,7 +801,8 @@ def _acc_param(k, lv, yd, prm, om, buf, W, sq):
 
 
 @nb.njit(**_JIT1)
-def _row_general(v, prm, R, om, colptr, rowidx, vals, vc, has_qc, has_dist, warm, cst, Suv, buf, BQ, xr, cr, vr):
+def _row_general(v, prm, R, om, colptr, rowidx, vals, vc, colkind, Om, has_qc, has_dist, warm, cst, Suv, buf, BQ,
+                 xr, cr, vr):
     """One image row of the general kernel: Newton undistortion, then the covariance (all loops vectorise).
 
     With ``warm``, ``buf`` holds the previous row's solution: Newton then starts from its
@@ -910,10 +911,46 @@ def _row_general(v, prm, R, om, colptr, rowidx, vals, vc, has_qc, has_dist, warm
     if has_qc:
         BQ[:] = 0.0
     r = colptr.size - 1
+    # factor columns acting on the intrinsics only: dx_d = (A0 + A1 x_d, B0), summed as polynomials
+    # in x_d (row constants); with the pixel noise A Suv A^T they form the pre-M covariance C_pre
+    fx, fy, sk = prm[0], prm[1], prm[4]
+    ifx, ify, skf = 1.0 / fx, 1.0 / fy, -sk / (fx * fy)
+    S00, S01, S11 = Suv[0, 0], Suv[0, 1], Suv[1, 1]
+    c00_0 = ifx * ifx * S00 + 2.0 * ifx * skf * S01 + skf * skf * S11
+    c01_0 = ifx * ify * S01 + skf * ify * S11
+    c11_0 = ify * ify * S11
+    c00_1, c00_2, c01_1 = 0.0, 0.0, 0.0
     for j in range(r):
-        if colptr[j + 1] - colptr[j] == 1 and not has_qc:
+        if colkind[j] != 1:
+            continue
+        A0, A1, B0 = 0.0, 0.0, 0.0
+        for nz in range(colptr[j], colptr[j + 1]):
+            k = rowidx[nz]
+            lv = vals[nz]
+            if k == 0:
+                A1 -= lv / fx
+            elif k == 1:
+                A0 += lv * sk * yd / (fx * fy)
+                B0 -= lv * yd / fy
+            elif k == 2:
+                A0 -= lv / fx
+            elif k == 3:
+                A0 += lv * sk / (fx * fy)
+                B0 -= lv / fy
+            elif k == 4:
+                A0 -= lv * yd / fx
+        c00_0 += A0 * A0
+        c00_1 += 2.0 * A0 * A1
+        c00_2 += A1 * A1
+        c01_0 += A0 * B0
+        c01_1 += A1 * B0
+        c11_0 += B0 * B0
+    for j in range(r):
+        if colkind[j] != 0:
+            continue  # intrinsics-only (above) and rotation-only (Om, in the last loop) columns
+        if colptr[j + 1] - colptr[j] == 1:
             k = rowidx[colptr[j]]
-            if k < 13 or (k >= 16 and k <= 18):
+            if k < 13 or (k >= 16 and k <= 18):  # a ray parameter alone: no constant part
                 _acc_param(k, vals[colptr[j]], yd, prm, om, buf, W, True)
             continue
         v0[:] = 0.0
@@ -949,8 +986,7 @@ def _row_general(v, prm, R, om, colptr, rowidx, vals, vc, has_qc, has_dist, warm
     m00, m01, m02, m10, m11, m12, iHn = cst[20], cst[21], cst[22], cst[23], cst[24], cst[25], cst[26]
     g2 = cst[29]
     R00, R01, R02, R10, R11, R12 = R[0, 0], R[0, 1], R[0, 2], R[1, 0], R[1, 1], R[1, 2]
-    S00, S01, S11 = Suv[0, 0], Suv[0, 1], Suv[1, 1]
-    ifx, ify, skf = 1.0 / fx, 1.0 / fy, -sk / (fx * fy)
+    O00, O01, O02, O11, O12, O22 = Om[0, 0], Om[0, 1], Om[0, 2], Om[1, 1], Om[1, 2], Om[2, 2]
     nan = np.nan
     for i in range(W):
         x = xn[i]
@@ -967,18 +1003,28 @@ def _row_general(v, prm, R, om, colptr, rowidx, vals, vc, has_qc, has_dist, warm
         Q01 = w * (HR01 + ox * g1)
         Q10 = w * (HR10 + oy * g0)
         Q11 = w * (HR11 + oy * g1)
-        # pixel noise: dq/duv = M A, A = [[1/fx, -sk/(fx fy)], [0, 1/fy]]
-        B00 = M00[i] * ifx
-        B01 = M00[i] * skf + M01[i] * ify
-        B10 = M10[i] * ifx
-        B11 = M10[i] * skf + M11[i] * ify
-        T00 = B00 * S00 + B01 * S01
-        T01 = B00 * S01 + B01 * S11
-        T10 = B10 * S00 + B11 * S01
-        T11 = B10 * S01 + B11 * S11
-        a00 = q00[i] + T00 * B00 + T01 * B01
-        a01 = q01[i] + T00 * B10 + T01 * B11
-        a11 = q11[i] + T10 * B10 + T11 * B11
+        # intrinsics + pixel noise: M C_pre M^T, C_pre polynomial in x_d
+        xdi = xd[i]
+        e00 = c00_0 + xdi * (c00_1 + xdi * c00_2)
+        e01 = c01_0 + xdi * c01_1
+        e11 = c11_0
+        m00_, m01_, m10_, m11_ = M00[i], M01[i], M10[i], M11[i]
+        T00 = m00_ * e00 + m01_ * e01
+        T01 = m00_ * e01 + m01_ * e11
+        T10 = m10_ * e00 + m11_ * e01
+        T11 = m10_ * e01 + m11_ * e11
+        # rotations: dq = G omega, G = [[-x y, 1 + x^2, -y], [-(1 + y^2), x y, x]], Cov(omega) = Om
+        xy_ = x * y
+        G00, G01, G02, G10, G11, G12 = -xy_, 1.0 + x * x, -y, -(1.0 + y * y), xy_, x
+        H0 = G00 * O00 + G01 * O01 + G02 * O02
+        H1 = G00 * O01 + G01 * O11 + G02 * O12
+        H2 = G00 * O02 + G01 * O12 + G02 * O22
+        K0 = G10 * O00 + G11 * O01 + G12 * O02
+        K1 = G10 * O01 + G11 * O11 + G12 * O12
+        K2 = G10 * O02 + G11 * O12 + G12 * O22
+        a00 = q00[i] + T00 * m00_ + T01 * m01_ + H0 * G00 + H1 * G01 + H2 * G02
+        a01 = q01[i] + T00 * m10_ + T01 * m11_ + H0 * G10 + H1 * G11 + H2 * G12
+        a11 = q11[i] + T10 * m10_ + T11 * m11_ + K0 * G10 + K1 * G11 + K2 * G12
         A00 = Q00 * a00 + Q01 * a01
         A01 = Q00 * a01 + Q01 * a11
         A10 = Q10 * a00 + Q11 * a01
@@ -1036,7 +1082,8 @@ def _row_general(v, prm, R, om, colptr, rowidx, vals, vc, has_qc, has_dist, warm
 
 
 @nb.njit(**_JIT)
-def _map_general(prm, R, om, colptr, rowidx, vals, vc, has_qc, cst, Suv, step, xyf, covf, validf, W, nblk):
+def _map_general(prm, R, om, colptr, rowidx, vals, vc, colkind, Om, has_qc, cst, Suv, step, xyf, covf, validf, W,
+                 nblk):
     Hh = validf.shape[0] // W
     has_dist = False
     for i in range(5, 13):
@@ -1047,7 +1094,7 @@ def _map_general(prm, R, om, colptr, rowidx, vals, vc, has_qc, cst, Suv, step, x
         buf = np.empty((_NBUF, W))
         BQ = np.empty((12, W))
         for iv in range(blk * per, min(Hh, (blk + 1) * per)):
-            _row_general(np.float64(iv * step), prm, R, om, colptr, rowidx, vals, vc, has_qc, has_dist,
+            _row_general(np.float64(iv * step), prm, R, om, colptr, rowidx, vals, vc, colkind, Om, has_qc, has_dist,
                          iv > blk * per, cst, Suv, buf, BQ,
                          xyf[2 * W * iv:2 * W * (iv + 1)], covf[4 * W * iv:4 * W * (iv + 1)],
                          validf[W * iv:W * (iv + 1)])
@@ -1084,6 +1131,24 @@ def _points_general(uv, Suv, prm, R, om, colptr, rowidx, vals, vc, Ccc, has_qc, 
 # --------------------------------------------------------------------------------------
 # public API
 # --------------------------------------------------------------------------------------
+def _column_kinds(k: dict):
+    """Kind of each factor column (1: intrinsics only, 2: rotations only, 0: other) and the
+    covariance (3, 3) of the rotation vector from the rotation-only columns."""
+    colptr, rowidx, vals, om = k["colptr"], k["rowidx"], k["vals"], k["omega"]
+    r = colptr.size - 1
+    kind = np.zeros(r, dtype=np.int64)
+    Om = np.zeros((3, 3))
+    for j in range(r):
+        ks = rowidx[colptr[j]:colptr[j + 1]]
+        if ks.size and np.all(ks <= P.SKEW):
+            kind[j] = 1
+        elif ks.size and np.all((ks >= P.PAN) & (ks <= P.ROLL)):
+            kind[j] = 2
+            w = vals[colptr[j]:colptr[j + 1]] @ om[ks - P.PAN]
+            Om += np.outer(w, w)
+    return kind, np.ascontiguousarray(Om)
+
+
 def _check_out(out, H, W):
     if not (isinstance(out, tuple | list) and len(out) == 3):
         raise InputError("out", type(out).__name__, "a tuple (xy_world_m, cov_m2, valid) of preallocated arrays")
@@ -1152,7 +1217,8 @@ def covariance_map(camera, budget, step_px: int = 1, *, out=None):
         valid[:] = False
     elif np.any(prm[P.DIST_SLICE]):
         nblk = min(H, 4 * nb.get_num_threads())
-        _map_general(prm, k["R"], k["omega"], k["colptr"], k["rowidx"], k["vals"], k["vc"], k["has_qc"],
+        colkind, Om = _column_kinds(k)
+        _map_general(prm, k["R"], k["omega"], k["colptr"], k["rowidx"], k["vals"], k["vc"], colkind, Om, k["has_qc"],
                      _undistorted_constants(k, step), k["Suv"], step, xy.reshape(-1), cov.reshape(-1),
                      valid.reshape(-1), W, nblk)
     else:
