@@ -167,3 +167,19 @@ def test_rendered_campaign_end_to_end(tmp_path):
         ang = min(np.degrees(np.arccos(np.clip((np.trace(Rt.T @ Re) - 1) / 2, -1, 1))),
                   np.degrees(np.arccos(np.clip((np.trace((Rt @ flip).T @ Re) - 1) / 2, -1, 1))))
         assert ang < 0.5
+
+
+def test_simulate_campaigns_planning_table():
+    from footprint_uq.calibration.synthetic import simulate_campaigns
+
+    r = simulate_campaigns(CAM, PAPER_BOARD, 8, corner_noise_px=0.2, n_campaigns=6, bootstrap=5, seed=1)
+    assert r["scatter"].shape == (9,) and r["opencv"].shape == (9,) and r["bootstrap"].shape == (9,)
+    np.testing.assert_allclose(r["truth"], CAM.values)
+    assert np.all(np.abs(r["mean"] - r["truth"]) < 5 * r["opencv"])
+    assert set(r["paper"]) == {"scatter", "opencv", "bootstrap"}
+    assert r["paper"]["opencv"]["sigma_f_px"] == pytest.approx(np.hypot(*r["opencv"][:2]))
+    # more corner noise -> proportionally larger error sizes (first-order theory: linear in the noise)
+    r2 = simulate_campaigns(CAM, PAPER_BOARD, 8, corner_noise_px=0.4, n_campaigns=6, seed=1)
+    np.testing.assert_allclose(r2["opencv"] / r["opencv"], 2.0, rtol=0.25)
+    with pytest.raises(InputError):
+        simulate_campaigns(CAM, PAPER_BOARD, 8, n_campaigns=1)

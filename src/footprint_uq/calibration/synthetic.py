@@ -26,6 +26,9 @@ where, for which error sizes?").
   then 8-bit quantisation) are added afterwards.
 * :func:`noisy_corners` -- the fast path for statistics: exact corners plus
   independent Gaussian noise of a known size per coordinate.
+* :func:`simulate_campaigns` -- a planning study: the error sizes (the paper's
+  Table 2) that ``n_views`` boards with a given corner noise deliver, as the
+  scatter over repeated campaigns next to OpenCV's and the bootstrap's estimates.
 
 Board frame and corner order: see :mod:`footprint_uq.calibration.boards`.
 """
@@ -44,7 +47,7 @@ from ..errors import InputError
 from .boards import PAPER_BOARD, Checkerboard, parse_board
 
 __all__ = ["SyntheticCamera", "DEFAULT_CAMERA", "make_board_poses", "project_corners", "render_board",
-           "noisy_corners", "render_campaign", "write_campaign"]
+           "noisy_corners", "render_campaign", "write_campaign", "simulate_campaigns"]
 
 
 @dataclass(frozen=True)
@@ -402,4 +405,50 @@ def write_campaign(out_dir, camera: SyntheticCamera = DEFAULT_CAMERA, board=PAPE
              "frames": [{"image": nm, "rvec": rv.tolist(), "tvec": tv.tolist(), "corners_px": c.tolist()}
                         for nm, rv, tv, c in zip(names, rvecs, tvecs, corners, strict=True)]}
     (out / "truth.json").write_text(json.dumps(truth, indent=1))
+    return out
+
+
+def simulate_campaigns(camera: SyntheticCamera = DEFAULT_CAMERA, board=PAPER_BOARD, n_views: int = 20, *,
+                       corner_noise_px: float = 0.1, n_campaigns: int = 50, bootstrap: int = 0, seed: int = 0,
+                       pose_kw: dict | None = None) -> dict:
+    """Planning study: the intrinsic error sizes a campaign of ``n_views`` boards delivers.
+
+    One set of poses (:func:`make_board_poses`), ``n_campaigns`` repetitions of
+    independent Gaussian corner noise (``corner_noise_px`` per coordinate, the fast
+    path without rendering), one calibration each.
+
+    Returns
+    -------
+    dict
+        ``truth`` (9,), ``mean`` (9,) of the estimates, ``scatter`` (9,) their standard
+        deviation over campaigns (the true error size), ``opencv`` (9,) the RMS of
+        OpenCV's reported standard deviations, ``bootstrap`` (9,) the bootstrap
+        standard deviation of the first campaign (when ``bootstrap`` > 1), and
+        ``paper`` -- the paper's Table-2 row for each of ``scatter``, ``opencv``,
+        ``bootstrap``.  Arrays follow :data:`~footprint_uq.calibration.INTRINSIC_NAMES`.
+    """
+    from .intrinsics import INTRINSIC_NAMES, calibrate_corners, paper_sigmas
+
+    board = parse_board(board)
+    m = int(n_campaigns)
+    if m < 2:
+        raise InputError("n_campaigns", n_campaigns, "an integer >= 2")
+    rvecs, tvecs = make_board_poses(camera, board, n_views, seed=seed, **(pose_kw or {}))
+    rng = np.random.default_rng(seed + 1)
+    vals, stds, boot = [], [], None
+    for k in range(m):
+        cs = noisy_corners(camera, board, rvecs, tvecs, corner_noise_px, seed=rng)
+        cal = calibrate_corners(cs, board, camera.image_size_px, bootstrap=bootstrap if k == 0 else 0, seed=seed)
+        vals.append(cal.values)
+        stds.append(cal.std_opencv)
+        if k == 0 and cal.bootstrap is not None and len(cal.bootstrap.samples) > 1:
+            boot = cal.bootstrap.std
+    vals, stds = np.array(vals), np.array(stds)
+    out = {"names": list(INTRINSIC_NAMES), "truth": camera.values, "mean": vals.mean(0),
+           "scatter": vals.std(0, ddof=1), "opencv": np.sqrt(np.mean(stds**2, 0)), "n_views": int(n_views),
+           "n_campaigns": m, "corner_noise_px": float(corner_noise_px)}
+    out["paper"] = {"scatter": paper_sigmas(out["scatter"]), "opencv": paper_sigmas(out["opencv"])}
+    if boot is not None:
+        out["bootstrap"] = boot
+        out["paper"]["bootstrap"] = paper_sigmas(boot)
     return out
