@@ -69,7 +69,7 @@ def _budgets(rng):
     everything = basler.replace(roll_deg=0.05, ground_height_m=0.05, ground_slope_deg=0.5, pan_deg=0.05,
                                 tilt_deg=0.05)
     return {"basler1": basler, "all sources": everything, "full covariance": _full_budget(rng, everything),
-            "one source": ErrorBudget(height_m=0.2)}
+            "one source": ErrorBudget(height_m=0.2), "pixel noise only": ErrorBudget(imaging_px=(0.3, 0.2))}
 
 
 # ---------------------------------------------------------------------------------------------
@@ -85,6 +85,23 @@ def test_pantilt_map_matches_propagate(seed):
         assert got[0].shape == (41, 64, 2) and got[1].shape == (41, 64, 2, 2) and got[2].shape == (41, 64)
         _assert_same(got, ref)
         assert got[2].any(), name
+
+
+def test_pantilt_map_wide_angle():
+    """|x_n| up to ~2: the per-row polynomials (degree 14 with distortion) keep their precision."""
+    rng = np.random.default_rng(SEED + 10)
+    for _ in range(3):
+        cam = PanTiltCamera(rng.uniform(0.25, 0.4) * 96, (96, 60), rng.uniform(3, 20), rng.uniform(-180, 180),
+                            rng.uniform(30, 80), roll_deg=rng.uniform(-30, 30))
+        budget = _budgets(rng)["full covariance"]
+        _assert_same(covariance_map(cam, budget), propagate(cam, budget, cam.pixel_grid(1)))
+
+
+def test_empty_budget_gives_zero_covariance():
+    cam = PanTiltCamera(50, (32, 20), 5, 0, 30)
+    xy, cov, valid = covariance_map(cam, ErrorBudget())
+    assert valid.all() and np.all(cov == 0)
+    np.testing.assert_allclose(xy, cam.backproject(cam.pixel_grid(1)).xy_world_m, rtol=1e-12)
 
 
 def test_pantilt_map_horizon_in_view_and_steps():
