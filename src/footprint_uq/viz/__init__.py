@@ -15,10 +15,10 @@ from .maps import (
     plot_range_profile,
     save_figure,
 )
-from .report import fig_to_png_bytes, html_page, html_table, png_data_uri, write_html
+from .report import esc, fig_to_png_bytes, html_page, html_table, img_tag, png_data_uri, write_html
 
 __all__ = [
     "DEFAULT_LEVELS_M", "GSD_LEVELS_M", "plot_ground_map", "plot_gsd_maps", "plot_image_map",
     "plot_range_profile", "save_figure", "fig_to_png_bytes", "html_page", "html_table", "png_data_uri",
-    "write_html",
+    "write_html", "img_tag", "esc",
 ]
