@@ -1,14 +1,24 @@
 """Fused numba kernels for :class:`footprint_uq.footprints.FrameProcessor`.
 
-One call processes a frame: per object, its K corners are back-projected with
-their Jacobians (the math of :mod:`footprint_uq.cameras.general`, ported to scalar
-code: pinhole, OpenCV distortion with Newton undistortion and implicit-function
-Jacobians, rotation derivatives, perturbed-ground intersection), the corner and
-centre covariances are formed with only the non-zero entries of the 22x22
-parameter covariance, the centroid Jacobian is applied, the largest point picked
-and the V2X integer fields computed.  The numpy reference is
-:func:`footprint_uq.footprints.footprints_from_corners`; the tests hold the two to
-1e-9 relative.
+One call processes a frame.  The corners of up to 32 objects at a time are laid
+out structure-of-arrays (corner index last) and go through three straight-line
+stages that the compiler vectorises:
+
+1. :func:`_stage_undistort` -- pixel -> normalised coordinates, OpenCV undistortion
+   (Newton, all corners of the chunk together, each stopping when converged, as
+   :func:`footprint_uq.cameras.distortion.undistort`) and its implicit-function Jacobians;
+2. :func:`_stage_ground` -- ray in the world, perturbed-ground intersection and the full
+   d(x, y)/d(params) (2 x 22) and d(x, y)/d(u, v) Jacobians (the math of
+   :func:`footprint_uq.cameras.general.backproject`, ported to scalar code);
+3. :func:`_stage_whiten` -- ``J L`` with the sparse factor ``L L^T`` of the 22x22 parameter
+   covariance (:func:`psd_factor`: only its non-zero entries are touched) and the
+   parameter part of each corner's covariance.
+
+Then, per object: status flags (outside image, 3D projection), per-point pixel noise
+(budget + detector), the optional joint (2K x 2K) covariance, the largest point,
+the centroid and its closed-form Jacobian, the centre covariance and the V2X integer
+fields.  The numpy reference is :func:`footprint_uq.footprints.footprints_from_corners`;
+the tests hold the two to 1e-9 relative.
 
 Camera constants travel in one float64 vector ``cam`` (layout ``_C_*`` below) and
 the rotation derivatives in ``dR`` (3 angles, 3, 3), both prepared once per
@@ -32,8 +42,7 @@ _C_HASDIST = 28
 _C_W, _C_HIMG = 29, 30
 _C_GROUNDZ = 31
 _C_IFX, _C_IFY = 32, 33  # 1 / fx, 1 / fy
-_C_USE = 34  # 22 flags: parameter has non-zero variance (its Jacobian column is needed)
-_C_LEN = 56
+_C_LEN = 34
 
 # status codes (footprint_uq.status) and the centre code DEGENERATE (footprints)
 _OK, _ABOVE, _NOTFIN, _UNDIST, _OUTSIDE, _BEHIND = 0, 1, 2, 3, 4, 5
@@ -46,12 +55,8 @@ _ORIENT_UNIT = 360.0 / 65535.0
 _PC_LEVELS = np.array([500.0, 200.0, 100.0, 50.0, 20.0, 10.0, 5.0, 2.0, 1.0, 0.5, 0.2, 0.1, 0.05, 0.02, 0.01])
 
 
-def camera_constants(camera, param_cov=None) -> tuple[np.ndarray, np.ndarray]:
-    """``(cam, dR)`` for the kernels from a :class:`~footprint_uq.cameras.base.Camera`.
-
-    ``param_cov`` (22, 22): only the Jacobian columns of parameters with non-zero
-    variance are computed (all of them if None).
-    """
+def camera_constants(camera) -> tuple[np.ndarray, np.ndarray]:
+    """``(cam, dR)`` for the kernels from a :class:`~footprint_uq.cameras.base.Camera`."""
     from . import params as P
     from .cameras.rotation import R_W_C, dR_W_C
 
@@ -66,7 +71,6 @@ def camera_constants(camera, param_cov=None) -> tuple[np.ndarray, np.ndarray]:
     cam[_C_W], cam[_C_HIMG] = camera.image_size_px
     cam[_C_GROUNDZ] = camera.ground_z_m
     cam[_C_IFX], cam[_C_IFY] = 1.0 / p[0], 1.0 / p[1]
-    cam[_C_USE:_C_USE + 22] = 1.0 if param_cov is None else (np.diag(param_cov) != 0).astype(np.float64)
     dR = np.ascontiguousarray(dR_W_C(p[P.PAN], p[P.TILT], p[P.ROLL]))
     return cam, dR
 
@@ -168,25 +172,49 @@ def _stage_undistort(U, V, m, cam, XD, YD, XN, YN, CONV, INV, JK, Jd, Jk):
             JK[6, j], JK[14, j] = -x * r4, -y * r4
             JK[7, j], JK[15, j] = -x * r6, -y * r6
         return
+    # Newton on all corners at once; a corner stops moving once converged (as the reference)
+    k1, k2, p1, p2 = cam[_C_DIST], cam[_C_DIST + 1], cam[_C_DIST + 2], cam[_C_DIST + 3]
+    k3, k4, k5, k6 = cam[_C_DIST + 4], cam[_C_DIST + 5], cam[_C_DIST + 6], cam[_C_DIST + 7]
     for j in range(m):
-        xd, yd = XD[j], YD[j]
+        XN[j], YN[j] = XD[j], YD[j]
+        CONV[j] = 0.0
+    for _ in range(50):
+        n_active = 0
+        for j in range(m):
+            x, y, xd, yd = XN[j], YN[j], XD[j], YD[j]
+            tol = 1e-14 * max(1.0, max(abs(xd), abs(yd)))
+            r2 = x * x + y * y
+            num = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+            den = 1.0 + r2 * (k4 + r2 * (k5 + r2 * k6))
+            iden = 1.0 / den
+            rad = num * iden
+            r0 = x * rad + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x) - xd
+            r1 = y * rad + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y - yd
+            dnum = k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2)
+            dden = k4 + r2 * (2.0 * k5 + 3.0 * k6 * r2)
+            drad = (dnum * den - num * dden) * (iden * iden)
+            j00 = rad + x * drad * 2 * x + 2 * p1 * y + p2 * 6 * x
+            j01 = x * drad * 2 * y + 2 * p1 * x + p2 * 2 * y
+            j10 = y * drad * 2 * x + p1 * 2 * x + 2 * p2 * y
+            j11 = rad + y * drad * 2 * y + p1 * 6 * y + 2 * p2 * x
+            # converged -- or hopeless (NaN): it stays as it is and fails the final check
+            done = (max(abs(r0), abs(r1)) <= tol) | (not math.isfinite(r0 + r1))
+            idet = 1.0 / (j00 * j11 - j01 * j10)
+            s0 = (j11 * r0 - j01 * r1) * idet
+            s1 = (-j10 * r0 + j00 * r1) * idet
+            XN[j] = x if done else x - s0
+            YN[j] = y if done else y - s1
+            n_active += 0 if done else 1
+        if n_active == 0:
+            break
+    for j in range(m):
+        xn, yn, xd, yd = XN[j], YN[j], XD[j], YD[j]
         tol = 1e-14 * max(1.0, max(abs(xd), abs(yd)))
-        xn, yn = xd, yd
-        for _ in range(50):
-            fxd, fyd = _distort(xn, yn, cam, Jd, Jk, False)
-            r0, r1 = fxd - xd, fyd - yd
-            if max(abs(r0), abs(r1)) <= tol:
-                break
-            idet = 1.0 / (Jd[0, 0] * Jd[1, 1] - Jd[0, 1] * Jd[1, 0])
-            s0 = (Jd[1, 1] * r0 - Jd[0, 1] * r1) * idet
-            s1 = (-Jd[1, 0] * r0 + Jd[0, 0] * r1) * idet
-            xn, yn = xn - s0, yn - s1
         fxd, fyd = _distort(xn, yn, cam, Jd, Jk, True)
         r0, r1 = fxd - xd, fyd - yd
         det = Jd[0, 0] * Jd[1, 1] - Jd[0, 1] * Jd[1, 0]
         CONV[j] = 1.0 if ((max(abs(r0), abs(r1)) <= tol) and det > 0) else 0.0
         idet = 1.0 / det
-        XN[j], YN[j] = xn, yn
         INV[0, j], INV[1, j] = Jd[1, 1] * idet, -Jd[0, 1] * idet
         INV[2, j], INV[3, j] = -Jd[1, 0] * idet, Jd[0, 0] * idet
         for kk in range(8):

@@ -496,7 +496,7 @@ class FrameProcessor:
         self.joint_cov = bool(joint_cov)
         self._fk = fk
         Sp = self.budget.param_covariance()
-        self._cam, self._dR = fk.camera_constants(camera, Sp)
+        self._cam, self._dR = fk.camera_constants(camera)
         self._Lr, self._Lc, self._Lv, self._r = fk.psd_factor(Sp)
         self._spx = np.ascontiguousarray(self.budget.pixel_covariance())
         h = np.deg2rad(self.heading_offset_deg)
