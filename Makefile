@@ -15,7 +15,7 @@ $(STAMP): pyproject.toml | $(BIN)/python
 	touch $(STAMP)
 
 demo: $(STAMP)
-	$(BIN)/footprint-uq demo --out out/demo
+	$(BIN)/footprint-uq case-study --out out/demo
 
 test: $(STAMP)
 	$(BIN)/ruff check src tests bench
