@@ -255,10 +255,14 @@ def test_save_outputs_and_budget_roundtrip(real_cal, tmp_path):
     assert intr["model"] == "opencv" and intr["image_size_px"] == [640, 480]
     np.testing.assert_allclose(intr["K"], real_cal.K, rtol=1e-15)
     # the OpenCV file is read by the core's reader, given a pose
-    from footprint_uq.io import load_camera
+    from footprint_uq.io import load_camera, load_intrinsics
 
     cam = load_camera(tmp_path / "camera.yaml", pose={"height_m": 6.0, "pan_deg": 0.0, "tilt_deg": 20.0})
     np.testing.assert_allclose(cam.K, real_cal.K, rtol=1e-12)
+    K, dist, size = load_intrinsics(tmp_path / "camera.yaml")
+    np.testing.assert_allclose(K, real_cal.K, rtol=1e-12)
+    np.testing.assert_allclose(dist, real_cal.dist, rtol=1e-12)
+    assert tuple(size) == (640, 480)
     # full covariance: correlations from the Jacobian, scaled to the OpenCV sigmas
     bf = real_cal.to_budget(full_covariance=True)
     C = bf.param_covariance()

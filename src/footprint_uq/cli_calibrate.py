@@ -1,10 +1,11 @@
 """``footprint-uq calibrate ...``: error sizes from calibration data.
 
-The ``calibrate`` group holds one command per calibration (``intrinsics`` here;
-further commands such as ``extrinsics`` are added with
-``calibrate.add_command(cmd)`` in their own module, or by decorating with
-``@calibrate.command(...)``).  Register the group in :mod:`footprint_uq.cli`
-with ``main.add_command(calibrate)``.
+The ``calibrate`` group holds one command per calibration (``intrinsics`` here).
+To add one (e.g. ``extrinsics``): define a ``click.Command`` in its own module,
+keeping heavy imports inside the function so that ``footprint-uq --help`` stays
+fast, and register it at the bottom of this file with one
+``calibrate.add_command(cmd)`` line.  The group itself is registered in
+:mod:`footprint_uq.cli` with ``main.add_command(calibrate)``.
 
 Bad input raises :class:`footprint_uq.errors.InputError`; the top-level group
 turns it into a one-line message and exit status 2.  Frame-level problems
@@ -132,3 +133,7 @@ def intrinsics_cmd(images, board, square_m, out_dir, max_mean_reproj_px, bootstr
         click.echo(f"sigma (bootstrap, {len(cal.bootstrap.samples)} resamples): f={tb['sigma_f_px']:.4g} "
                    f"c={tb['sigma_c_px']:.4g} r={tb['sigma_r_px']:.4g} px")
     click.echo(f"wrote {len(res['files'])} files to {out_dir}")
+
+
+# -- the registry of calibrate sub-commands: one line per command ---------------------------
+# (intrinsics is defined above with @calibrate.command; others: calibrate.add_command(cmd))

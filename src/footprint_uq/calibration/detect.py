@@ -26,7 +26,7 @@ from __future__ import annotations
 import glob
 import os
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -80,7 +80,6 @@ class Detection:
     image_size_px: tuple[int, int] | None = None
     reason: str = ""
     method: str = ""
-    extra: dict = field(default_factory=dict)
 
     @property
     def label(self) -> str:

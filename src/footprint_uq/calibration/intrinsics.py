@@ -866,7 +866,8 @@ def calibrate_intrinsics(images, board, square_m: float | None = None, *, video_
 
     Examples
     --------
-    >>> cal = calibrate_intrinsics("calib/*.png", "9x6", 0.025, max_mean_reproj_px=0.5, bootstrap=200)
+    >>> cal = calibrate_intrinsics("calib/*.png", "9x6", 0.025, max_mean_reproj_px=0.5,
+    ...                            bootstrap=200)  # doctest: +SKIP
     >>> cal.to_budget()            # doctest: +SKIP
     >>> cal.save("out/")           # doctest: +SKIP
     """
