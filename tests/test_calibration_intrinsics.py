@@ -80,6 +80,12 @@ def test_real_frame_filter_drops_the_bad_frame(real_cal):
     rows = {r["label"]: r for r in cal.frames_table()}
     assert rows["right05.jpg"]["used"] is False and rows["right05.jpg"]["dropped_round"] == 0
     assert "0.3" in rows["right05.jpg"]["reason"]
+    # capped rounds: a warning, and the result is solved on the frames left (arrays consistent)
+    with pytest.warns(RuntimeWarning, match="did not settle"):
+        capped = calibrate_corners(real_cal.image_points_px, BOARD, (640, 480), labels=real_cal.labels,
+                                   max_mean_reproj_px=0.3, max_rounds=1)
+    assert "right05.jpg" not in capped.labels
+    assert len(capped.labels) == len(capped.rvecs) == len(capped.residuals_px) == len(capped.per_view_rms_px) == 12
     # a threshold nothing meets -> clear error naming the threshold
     with pytest.raises(InputError, match="max_mean_reproj_px"):
         calibrate_corners(real_cal.image_points_px, BOARD, (640, 480), max_mean_reproj_px=0.05)

@@ -788,8 +788,10 @@ def calibrate_corners(image_points_px, board, image_size_px, *, labels=None, max
             dropped.append({"label": labels[active[k]], "round": rnd, "mean_error_px": float(means[k]),
                             "reason": f"mean reprojection error {means[k]:.4f} px > {thr:g} px (round {rnd})"})
         active = keep
-    if not converged:
-        warnings.warn(f"frame filter did not settle in {max_rounds} rounds", RuntimeWarning, stacklevel=2)
+    if not converged:  # the last round dropped frames: solve once more on the remaining ones
+        warnings.warn(f"frame filter did not settle in {max_rounds} rounds; the result uses the {len(active)} "
+                      "frames left after the last round", RuntimeWarning, stacklevel=2)
+        fit = _calibrate(obj, [imgs[i] for i in active], (w, h), flags)
     used = [imgs[i] for i in active]
     residuals = [c - _project(obj, rv, tv, fit.K, fit.dist)
                  for c, rv, tv in zip(used, fit.rvecs, fit.tvecs, strict=True)]
