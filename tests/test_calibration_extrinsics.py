@@ -379,3 +379,47 @@ def test_same_board_poses_as_the_synthetic_images():
     # the mean of the single-frame poses (the joint fit compromises between frames whose 3D corners disagree)
     assert np.all(np.abs(err) < 3 * res.sigmas("per_frame")), (err, res.sigmas("per_frame"))
     assert np.all(np.abs(err[:3]) < 0.05) and np.all(np.abs(err[3:]) < 0.5), err
+
+
+def test_rendered_images_and_pcd_pairs_through_the_cli(tmp_path):
+    """Real-format inputs: rendered PNG images (the intrinsic helper's renderer, detected by the 2D corner
+    detector) paired with binary_compressed PCD scans, and an intrinsics-only camera file (no pose)."""
+    import cv2
+    import yaml
+    from click.testing import CliRunner
+
+    import footprint_uq.cli_extrinsics  # noqa: F401 - registers the command
+    from footprint_uq.calibration import synthetic as sy
+    from footprint_uq.calibration.pointclouds import write_pcd
+    from footprint_uq.cli_calibrate import calibrate
+
+    scam = sy.DEFAULT_CAMERA.scaled(0.5)
+    # the LiDAR pitched down 12 deg so that it sees the low, close boards of an intrinsic campaign too
+    cam, TL = sl.default_rig(intrinsics=scam, lidar_pitch_deg=12.0)
+    rv, tv = sy.make_board_poses(scam, PAPER_BOARD, n=4, seed=1)
+    c = sl.make_lidar_campaign(camera=cam, T_world_lidar=TL, poses=sl.poses_from_camera(cam, rv, tv),
+                               scanner=SCANNER, seed=2)
+    d = tmp_path / "pairs"
+    d.mkdir()
+    for k in range(4):
+        img, _ = sy.render_board(scam, PAPER_BOARD, rv[k], tv[k], supersample=2, seed=k)
+        cv2.imwrite(str(d / f"f{k}.png"), img)
+        write_pcd(d / f"f{k}.pcd", c.clouds[k].xyz_m, {"intensity": c.clouds[k].fields["intensity"]},
+                  data="binary_compressed")
+    (d / "f9.pcd").write_bytes(b"VERSION 0.7\nFIELDS x y z\n")  # a broken cloud, and no image for it
+    intr = {"model": "opencv", "image_size_px": list(scam.image_size_px), "K": scam.K.tolist(),
+            "dist": list(scam.dist)}
+    (tmp_path / "intrinsics.yaml").write_text(yaml.safe_dump(intr))
+    args = ["extrinsics", "--pairs", str(d), "--camera", str(tmp_path / "intrinsics.yaml"), "--board", "14x9",
+            "--square-m", "0.1", "--margin-m", "0.05", "--bootstrap", "20", "--estimator", "mean",
+            "--out", str(tmp_path / "out")]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        r = CliRunner().invoke(calibrate, args)
+    assert r.exit_code == 0, (r.output, r.exception)
+    s = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert s["n_used"] == 4 and s["frames"][4]["status"].startswith("unreadable point cloud")
+    for fr in s["frames"][:4]:
+        assert fr["rms_px"] < 0.2  # rendered corners, sub-pixel detection
+    err = np.array([s["pose"][k] for k in TRUTH_KEYS]) - _truth(c)
+    assert np.all(np.abs(err[:3]) < 0.06) and np.all(np.abs(err[3:]) < 0.5), err

@@ -110,7 +110,9 @@ def load_intrinsics(spec) -> Intrinsics:
             try:  # intrinsics-only file: any pose will do, only K and dist are used
                 cam = load_camera(spec, pose={"height_m": 1.0, "pan_deg": 0.0, "tilt_deg": 0.0})
             except InputError:
-                raise first from None
+                cam = _intrinsics_mapping(spec)
+                if cam is None:
+                    raise first from None
         spec = cam
     cam = getattr(spec, "camera", None)
     if cam is not None and not hasattr(spec, "K"):
@@ -128,6 +130,30 @@ def load_intrinsics(spec) -> Intrinsics:
         raise InputError("intrinsics dist", dist.tolist(), "at most 8 coefficients (k1 k2 p1 p2 k3 k4 k5 k6)")
     if dist.size == 8 and not np.any(dist[5:]):
         dist = dist[:5]
+    return Intrinsics(K, dist, size)
+
+
+def _intrinsics_mapping(path):
+    """Our camera-file keys without a pose (``model: opencv``, ``image_size_px``, ``K``[, ``dist``]), as
+    the intrinsic calibration writes them; None if the file is not such a mapping."""
+    import yaml
+
+    try:
+        d = yaml.safe_load(Path(path).read_text())
+    except (OSError, yaml.YAMLError, UnicodeDecodeError):
+        return None
+    if not isinstance(d, dict) or "K" not in d or "image_size_px" not in d or any(k in d for k in ("R", "t", "P")):
+        return None
+    try:
+        K = np.asarray(d["K"], dtype=np.float64).reshape(3, 3)
+        dist = np.asarray(d.get("dist") or [], dtype=np.float64).ravel()
+        size = tuple(int(v) for v in d["image_size_px"])
+    except (TypeError, ValueError):
+        raise InputError(f"{path}: K, dist, image_size_px", {k: d.get(k) for k in ("K", "dist", "image_size_px")},
+                         "a 3x3 K, 0/4/5/8 distortion coefficients and [width, height]") from None
+    if dist.size not in (0, 4, 5, 8) or len(size) != 2 or min(size) <= 0:
+        raise InputError(f"{path}: dist, image_size_px", (dist.tolist(), size),
+                         "0, 4, 5 or 8 distortion coefficients and [width, height] > 0")
     return Intrinsics(K, dist, size)
 
 

@@ -196,8 +196,12 @@ def fit_plane_ransac(xyz_m, *, threshold_m: float = 0.05, n_iter: int = 300, see
     nrm, a = nrm[ok], a[ok]
     d = -np.sum(nrm * a, axis=1)
     best, best_count = -1, -1
-    for s in range(0, nrm.shape[0], 32):
-        cnt = (np.abs(sub @ nrm[s:s + 32].T + d[s:s + 32]) < threshold_m).sum(axis=0)
+    c0 = sub.mean(axis=0)  # score in float32 about the centroid (ample for counting inliers at cm thresholds)
+    sub32 = (sub - c0).astype(np.float32)
+    nrm32 = nrm.astype(np.float32)
+    d32 = (d + nrm @ c0).astype(np.float32)
+    for s in range(0, nrm.shape[0], 64):
+        cnt = (np.abs(sub32 @ nrm32[s:s + 64].T + d32[s:s + 64]) < threshold_m).sum(axis=0)
         k = int(np.argmax(cnt))
         if cnt[k] > best_count:
             best, best_count = s + k, int(cnt[k])
