@@ -407,7 +407,7 @@ def run_demo(out_dir, *, step_px: int = 4, max_range_m: float = 120.0, presets=D
             prow.append({"budget": DISPLAY_NAMES[b.name], "u_px": r["u_px"], "v_px": r["v_px"], "x_m": r["x_m"],
                          "y_m": r["y_m"], "semi_major_m (95 %)": r["semi_major_m"],
                          "semi_minor_m (95 %)": r["semi_minor_m"], "orientation_deg": r["orientation_deg"],
-                         "status": "ok" if r["valid"] else r["reason"]})
+                         "status": "ok" if r["valid"] else r["reason"].split(":")[0]})
     parts.append(html_table(prow, floatfmt=".4g"))
 
     parts.append("<h2>Uncertainty along the image centre column</h2>")
