@@ -222,3 +222,22 @@ def test_figures(tmp_path, cam):
         p = viz.save_figure(f, tmp_path / f"{name}.png", dpi=60)
         assert p.stat().st_size > 5000
         assert p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_report_helpers(tmp_path):
+    import base64
+
+    from footprint_uq.viz.report import html_page, html_table, img_tag, write_html
+
+    t = html_table([{"a": "<b>", "b": float("nan"), "c": None, "d": 0.123456789, "e": True}], floatfmt=".3g")
+    assert "&lt;b&gt;" in t and "<b>" not in t
+    assert "<td>NaN</td>" in t and "<td>&ndash;</td>" in t and "<td>0.123</td>" in t and "<td>yes</td>" in t
+    png = b"\x89PNG\r\n\x1a\n" + b"0" * 10
+    tag = img_tag(png, "a <caption>")
+    uri = tag.split('src="')[1].split('"')[0]
+    assert base64.b64decode(uri.split(",", 1)[1]) == png
+    assert "a &lt;caption&gt;" in tag
+    page = html_page("T & T", [t, tag])
+    assert page.startswith("<!DOCTYPE html>") and "<title>T &amp; T</title>" in page
+    p = write_html(tmp_path / "x" / "r.html", page)
+    assert p.read_text(encoding="utf-8") == page
