@@ -240,6 +240,12 @@ def test_frame_without_board_is_reported_and_others_go_on(campaign, rig):
     with pytest.raises(InputError, match="budget_from"):
         res.budget("bootstrap")
     assert np.all(np.abs(res.pose - _truth(campaign))[:3] < 0.03)
+    # the paper's frame filter: frames above a reprojection threshold are dropped and reported
+    thr = float(np.median([res.frame_poses[k].rms_px for k in res.used]))
+    res2 = ex.calibrate_extrinsics(frames, cam, ground_plane=plane, bootstrap=0, max_frame_rms_px=thr)
+    dropped = [s for s in res2.frame_status if s.startswith("reprojection RMS")]
+    assert len(dropped) == sum(res.frame_poses[k].rms_px > thr for k in res.used) >= 3
+    assert all(res2.frame_poses[k].rms_px <= thr for k in res2.used)
 
 
 def test_too_few_frames(campaign):

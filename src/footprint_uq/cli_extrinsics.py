@@ -24,7 +24,7 @@ def run_extrinsics(pairs, camera, board: str, square_m: float, out_dir, *, margi
                    ground: str = "fit", bootstrap: int = 200, seed: int = 0, budget_from: str = "per_frame",
                    correlations: bool = True, ransac_px: float = 4.0, plane_threshold_m: float = 0.05,
                    cluster_radius_m: float = 0.2, min_frames: int = 3, figures: bool = True, estimator: str = "joint",
-                   echo=None) -> dict:
+                   max_frame_rms_px: float | None = None, echo=None) -> dict:
     """The ``calibrate extrinsics`` command as a function; returns ``{"calibration", "files"}``.
 
     ``pairs`` is a folder of ``<stem>.<image>`` or ``<stem>_corners.csv`` files with
@@ -64,7 +64,7 @@ def run_extrinsics(pairs, camera, board: str, square_m: float, out_dir, *, margi
                 f"{f.cloud_stats['n_zero_dropped']} (0,0,0) points of {f.cloud_stats['n_read']}")
     cal = ex.calibrate_extrinsics(frames, intr, T_ground_lidar=T_gl, ground_plane=plane, ground=ground,
                                   ransac_threshold_px=ransac_px, bootstrap=bootstrap, seed=seed, min_frames=min_frames,
-                                  estimator=estimator)
+                                  estimator=estimator, max_frame_rms_px=max_frame_rms_px)
     for k, s in enumerate(cal.frame_status):
         if s != "ok" and frames[k].ok:
             say(f"frame {frames[k].name}: {s}")
@@ -137,12 +137,14 @@ def run_extrinsics(pairs, camera, board: str, square_m: float, out_dir, *, margi
 @click.option("--plane-threshold-m", type=click.FloatRange(min=0.001), default=0.05, show_default=True,
               help="Plane inlier distance in the clouds (about 3x the range noise).")
 @click.option("--min-frames", type=click.IntRange(min=2), default=3, show_default=True)
+@click.option("--max-frame-rms-px", type=click.FloatRange(min=0.0, min_open=True), default=None, metavar="T",
+              help="Drop frames whose own reprojection RMS exceeds T px (reported in frames.csv).")
 @click.option("--estimator", type=click.Choice(["joint", "mean"]), default="joint", show_default=True,
               help="Reported pose: joint fit of all corners, or mean of the single-frame poses (more robust when "
                    "the LiDAR board fits dominate, e.g. few boards close to the camera).")
 @click.option("--out", "out_dir", required=True, metavar="DIR", help="Output directory (created).")
 def extrinsics_cmd(pairs, camera, board, square_m, margin_m, region, ground, bootstrap, seed, budget_from,
-                   no_correlations, ransac_px, plane_threshold_m, min_frames, estimator, out_dir):
+                   no_correlations, ransac_px, plane_threshold_m, min_frames, max_frame_rms_px, estimator, out_dir):
     """Extrinsic calibration against a LiDAR: pose and its error budget (position, height, pan, tilt, roll).
 
     Writes to DIR: budget.yaml (extrinsic error sizes, readable by --budget),
@@ -157,7 +159,8 @@ def extrinsics_cmd(pairs, camera, board, square_m, margin_m, region, ground, boo
     res = run_extrinsics(pairs, camera, board, square_m, out_dir, margin_m=margin_m, region=region, ground=ground,
                          bootstrap=bootstrap, seed=seed, budget_from=budget_from, correlations=not no_correlations,
                          ransac_px=ransac_px, plane_threshold_m=plane_threshold_m, min_frames=min_frames,
-                         estimator=estimator, echo=lambda m: click.echo(f"footprint-uq: {m}", err=True))
+                         estimator=estimator, max_frame_rms_px=max_frame_rms_px,
+                         echo=lambda m: click.echo(f"footprint-uq: {m}", err=True))
     cal = res["calibration"]
     click.echo(f"frames: {len(cal.frames)} input, {len(cal.used)} used; reprojection RMS {cal.rms_px:.3f} px")
     click.echo("pose: " + ", ".join(f"{n}={v:.5g}" for n, v in zip(POSE_NAMES, cal.pose, strict=True)))

@@ -339,14 +339,17 @@ def _rot_angle_deg(ra, rb):
 
 
 def resolve_orientation(candidates: list[list[FramePose]], *, position_tol_m: float | None = None,
-                        angle_tol_deg: float = 5.0):
+                        angle_tol_deg: float = 10.0):
     """Pick, for each frame, the grid placement consistent with one camera pose.
 
     ``candidates[f]`` lists the solved candidates of frame f.  Every candidate votes
     for the candidates of other frames whose camera pose (in the LiDAR frame) is
-    within ``position_tol_m`` (default: max(0.3 m, 10 % of the median board
+    within ``position_tol_m`` (default: max(0.5 m, 25 % of the median board
     distance)) and ``angle_tol_deg``; the best-supported one is the reference, and
-    each frame keeps its candidate closest to it.
+    each frame keeps its candidate closest to it.  The wrong placements differ
+    from the right one by a half turn of the board (camera poses metres and tens
+    of degrees away), so the tolerances can be generous: noisy but right frames
+    must not be thrown out, as that would shrink the per-frame spread.
 
     Returns
     -------
@@ -360,7 +363,7 @@ def resolve_orientation(candidates: list[list[FramePose]], *, position_tol_m: fl
         return [None] * len(candidates), True
     if position_tol_m is None:
         dist = [np.linalg.norm(c.tvec) for _, c in flat]
-        position_tol_m = max(0.3, 0.1 * float(np.median(dist)))
+        position_tol_m = max(0.5, 0.25 * float(np.median(dist)))
     C = np.array([c.camera_centre_lidar_m for _, c in flat])
     support = np.zeros(len(flat))
     for i, (fi, ci) in enumerate(flat):
@@ -582,8 +585,8 @@ def _corr(c):
 # ---------------------------------------------------------------------------------------------
 def calibrate_extrinsics(frames, intrinsics, *, T_ground_lidar=None, ground: str = "fit", ground_plane=None,
                          ransac_threshold_px: float = 4.0, bootstrap: int = 200, seed: int = 0, min_frames: int = 3,
-                         position_tol_m: float | None = None, angle_tol_deg: float = 5.0,
-                         estimator: str = "joint") -> ExtrinsicCalibration:
+                         position_tol_m: float | None = None, angle_tol_deg: float = 10.0,
+                         estimator: str = "joint", max_frame_rms_px: float | None = None) -> ExtrinsicCalibration:
     """Solve the camera pose against the LiDAR from frames of corner correspondences.
 
     Parameters
@@ -612,6 +615,9 @@ def calibrate_extrinsics(frames, intrinsics, *, T_ground_lidar=None, ground: str
         few boards close to the camera, where the joint fit compromises between
         frames whose 3D corners disagree).  Both are in the summary; the bootstrap
         and first-order covariances follow the chosen one.
+    max_frame_rms_px : float, optional
+        Drop frames whose own reprojection RMS (after PnP) exceeds this, as the
+        paper filters frames by reprojection error; they are reported.
 
     Raises
     ------
@@ -674,6 +680,8 @@ def calibrate_extrinsics(frames, intrinsics, *, T_ground_lidar=None, ground: str
     for k, c in enumerate(chosen):
         if status[k] == "ok" and c is None:
             status[k] = "pose inconsistent with the other frames (outlier, or board misdetected in the cloud)"
+        elif status[k] == "ok" and max_frame_rms_px is not None and c.rms_px > max_frame_rms_px:
+            status[k] = f"reprojection RMS {c.rms_px:.3g} px > max_frame_rms_px {max_frame_rms_px:g}"
     used = [k for k, s in enumerate(status) if s == "ok"]
     if len(used) < min_frames:
         bad = [f"{frames[k].name}: {status[k]}" for k in range(len(frames)) if status[k] != "ok"]
