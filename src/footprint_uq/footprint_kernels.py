@@ -529,31 +529,39 @@ def process_corners(uv, extra_reason, cam, dR, Lr, Lc, Lv, r, spx, det, det_mode
                 if not us and all_usable:
                     all_usable = False
                     first_bad = k
-            # joint covariance (optional)
+            # joint covariance (optional): diagonal blocks = corner covariances, off-diagonal
+            # blocks = shared parameter part (+ detector cross terms in the full form)
             if want_joint:
                 for k in range(K):
                     ck = reason[n, k] == _OK or reason[n, k] == _OUTSIDE
                     for l in range(k, K):
                         cl = reason[n, l] == _OK or reason[n, l] == _OUTSIDE
-                        for i in range(2):
-                            for j in range(2):
-                                if not (ck and cl):
-                                    val = nan
-                                elif k == l:
-                                    val = ccov[n, k, i, j]
-                                else:
-                                    val = 0.0
-                                    for c in range(r):
-                                        val += AW[2 * c + i, j0 + k] * AW[2 * c + j, j0 + l]
-                                    if det_mode == 3:
-                                        s = 0.0
-                                        for a in range(2):
-                                            for b in range(2):
-                                                s += (JUV[2 * i + a, j0 + k] * det[n, 0, 2 * k + a, 2 * l + b]
-                                                      * JUV[2 * j + b, j0 + l])
-                                        val += s
-                                joint[n, 2 * k + i, 2 * l + j] = val
-                                joint[n, 2 * l + j, 2 * k + i] = val
+                        if not (ck and cl):
+                            v00, v01, v10, v11 = nan, nan, nan, nan
+                        elif k == l:
+                            v00, v01 = ccov[n, k, 0, 0], ccov[n, k, 0, 1]
+                            v10, v11 = ccov[n, k, 1, 0], ccov[n, k, 1, 1]
+                        else:
+                            v00, v01, v10, v11 = 0.0, 0.0, 0.0, 0.0
+                            for c in range(r):
+                                a0k, a1k = AW[2 * c, j0 + k], AW[2 * c + 1, j0 + k]
+                                a0l, a1l = AW[2 * c, j0 + l], AW[2 * c + 1, j0 + l]
+                                v00 += a0k * a0l
+                                v01 += a0k * a1l
+                                v10 += a1k * a0l
+                                v11 += a1k * a1l
+                            if det_mode == 3:
+                                for a in range(2):
+                                    for b in range(2):
+                                        p = det[n, 0, 2 * k + a, 2 * l + b]
+                                        v00 += JUV[a, j0 + k] * p * JUV[b, j0 + l]
+                                        v01 += JUV[a, j0 + k] * p * JUV[2 + b, j0 + l]
+                                        v10 += JUV[2 + a, j0 + k] * p * JUV[b, j0 + l]
+                                        v11 += JUV[2 + a, j0 + k] * p * JUV[2 + b, j0 + l]
+                        joint[n, 2 * k, 2 * l], joint[n, 2 * k, 2 * l + 1] = v00, v01
+                        joint[n, 2 * k + 1, 2 * l], joint[n, 2 * k + 1, 2 * l + 1] = v10, v11
+                        joint[n, 2 * l, 2 * k], joint[n, 2 * l + 1, 2 * k] = v00, v01
+                        joint[n, 2 * l, 2 * k + 1], joint[n, 2 * l + 1, 2 * k + 1] = v10, v11
             # largest point
             largest_index[n] = best
             if best >= 0:
