@@ -195,3 +195,15 @@ def test_kernel_v2x_fields_match_numpy_at_boundaries(rng):
             fk._v2x(c[0, 0], c[0, 1], c[1, 1], ch, sh, got, i)
         for j, name in enumerate(V2X_FIELDS):
             assert np.array_equal(got[:, j], want[name]), (heading, name)
+
+
+def test_processor_is_thread_safe(rng):
+    from concurrent.futures import ThreadPoolExecutor
+
+    cam = PanTiltCamera(1400.0, (1920, 1080), 8.0, 30.0, 15.0)
+    proc = FrameProcessor(cam, BUDGET)
+    frames = [make_boxes(cam, rng, 50) for _ in range(8)]
+    with ThreadPoolExecutor(2) as pool:
+        results = list(pool.map(proc.boxes3d, frames))
+    for boxes, est in zip(frames, results, strict=True):
+        assert_same(footprints_from_boxes3d(cam, BUDGET, boxes), est)

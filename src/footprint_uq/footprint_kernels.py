@@ -103,7 +103,7 @@ def psd_factor(S: np.ndarray, *, rtol: float = 1e-14):
     return rows.astype(np.int64), cols.astype(np.int64), np.ascontiguousarray(L[rows, cols]), r
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", nogil=True)
 def _distort(x, y, cam, J, Jk, want_k):
     """Distorted (xd, yd); fills J (2, 2) and, if want_k, Jk (2, 8)."""
     k1, k2, p1, p2 = cam[_C_DIST], cam[_C_DIST + 1], cam[_C_DIST + 2], cam[_C_DIST + 3]
@@ -139,7 +139,7 @@ def _distort(x, y, cam, J, Jk, want_k):
     return xd, yd
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", nogil=True)
 def _stage_undistort(U, V, m, cam, XD, YD, XN, YN, CONV, INV, JK, Jd, Jk):
     """Pixels -> distorted (XD, YD) and undistorted (XN, YN) normalised coordinates.
 
@@ -222,7 +222,7 @@ def _stage_undistort(U, V, m, cam, XD, YD, XN, YN, CONV, INV, JK, Jd, Jk):
             JK[8 + kk, j] = Jk[1, kk]
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", nogil=True)
 def _stage_ground(U, V, m, cam, dR, XD, YD, XN, YN, CONV, INV, JK, X, Y, CODE, JP, JUV):
     """Ray / ground intersection and all Jacobians, straight-line over the corners (vectorises).
 
@@ -307,7 +307,7 @@ def _stage_ground(U, V, m, cam, dR, XD, YD, XN, YN, CONV, INV, JK, X, Y, CODE, J
         JUV[3, j] = -c10 * skf + c11 * ify
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", nogil=True)
 def _project(X, Y, Z, cam, uv):
     """World point (Z relative to the nominal ground) -> pixel; returns the status code (general.project)."""
     rx, ry, rz = X - cam[_C_X], Y - cam[_C_Y], Z - cam[_C_H]
@@ -335,7 +335,7 @@ def _project(X, Y, Z, cam, uv):
     return _OK
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", nogil=True)
 def _stage_whiten(m, JP, Lr, Lc, Lv, r, AW, C3):
     """AW (2r, m) = rows of J L (row ``2 c + i``); C3 (3, m) = the parameter part of each corner's
     covariance (c00, c01, c11) = (J L)(J L)^T."""
@@ -357,7 +357,7 @@ def _stage_whiten(m, JP, Lr, Lc, Lv, r, AW, C3):
             C3[2, j] += a1 * a1
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", nogil=True)
 def _v2x(c00, c01, c11, ch, sh, out, n):
     """CPM and J2735 integer fields of one 2x2 covariance (mirror of footprint_uq.v2x)."""
     if not (math.isfinite(c00) and math.isfinite(c01) and math.isfinite(c11)):
@@ -414,7 +414,7 @@ def _v2x(c00, c01, c11, ch, sh, out, n):
     out[n, 6] = cnt
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", nogil=True)
 def process_corners(uv, extra_reason, cam, dR, Lr, Lc, Lv, r, spx, det, det_mode, allow_outside, ch, sh,
                     want_joint):
     """The fused per-frame kernel on corners in pixels ``uv`` (N, K, 2).
@@ -694,7 +694,7 @@ def process_corners(uv, extra_reason, cam, dR, Lr, Lc, Lv, r, spx, det, det_mode
             centre, centre_cov, centre_reason, centre_bad, area_out, v2x)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", nogil=True)
 def boxes3d_to_pixels(boxes, cam, yaw_deg, bottom_on_ground):
     """Bottom corners of 3D boxes (N, 7) projected to pixels (N, 4, 2), their codes (N, 4),
     and the first row with a negative size (-1 if none)."""
@@ -722,7 +722,7 @@ def boxes3d_to_pixels(boxes, cam, yaw_deg, bottom_on_ground):
     return uv, code, bad
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", nogil=True)
 def process_boxes3d(boxes, yaw_deg, bottom_on_ground, cam, dR, Lr, Lc, Lv, r, spx, det, det_mode, allow_outside,
                     ch, sh, want_joint):
     """:func:`boxes3d_to_pixels` then :func:`process_corners` in one dispatch; returns (bad_row, uv, results)."""

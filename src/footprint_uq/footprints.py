@@ -477,6 +477,9 @@ class FrameProcessor:
         Form the (N, 2K, 2K) joint corner covariance (default True).  Without it
         ``joint_cov_m2`` is None; corner and centre covariances are unchanged.
 
+    A processor keeps only read-only constants and the kernels release the GIL, so
+    one processor may serve several threads at once (e.g. chunks of a batch).
+
     Examples
     --------
     >>> proc = FrameProcessor(camera, "basler1")          # once
