@@ -425,6 +425,7 @@ def test_rendered_images_and_pcd_pairs_through_the_cli(tmp_path):
     assert r.exit_code == 0, (r.output, r.exception)
     s = json.loads((tmp_path / "out" / "summary.json").read_text())
     assert s["n_used"] == 4 and s["frames"][4]["status"].startswith("unreadable point cloud")
+    assert s["frames"][4]["status"].endswith("also: no image or corners file for this frame")
     for fr in s["frames"][:4]:
         assert fr["rms_px"] < 0.2  # rendered corners, sub-pixel detection
     err = np.array([s["pose"][k] for k in TRUTH_KEYS]) - _truth(c)

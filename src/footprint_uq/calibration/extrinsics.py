@@ -896,13 +896,15 @@ def frames_from_pairs(pairs, board, *, region=None, ground="fit", plane_threshol
             why, uv = f"{len(uv)} image corners, expected {board.n_corners} ({board.label()})", None
         if uv is not None and not np.all(np.isfinite(uv)):
             why, uv = "non-finite image corners", None
+        also = f"; also: {why}" if why else ""
         if reasons[k]:
-            frames.append(FrameData(name, uv, [], False, reasons[k], stats))
+            frames.append(FrameData(name, uv, [], False, reasons[k] + also, stats))
             continue
         det = detect_board(cl, board, region=region, ground=plane, plane_threshold_m=plane_threshold_m,
                            cluster_radius_m=cluster_radius_m, seed=seed + k)
         if not det.found:
-            frames.append(FrameData(name, uv, [], False, f"no board in the cloud: {det.reason}", stats, det.to_dict()))
+            frames.append(FrameData(name, uv, [], False, f"no board in the cloud: {det.reason}{also}", stats,
+                                    det.to_dict()))
             continue
         if why:
             frames.append(FrameData(name, uv, det.corner_candidates(), False, why, stats, det.to_dict(),
