@@ -207,3 +207,22 @@ def test_processor_is_thread_safe(rng):
         results = list(pool.map(proc.boxes3d, frames))
     for boxes, est in zip(frames, results, strict=True):
         assert_same(footprints_from_boxes3d(cam, BUDGET, boxes), est)
+
+
+@pytest.mark.parametrize("budget", [ErrorBudget(), ErrorBudget(imaging_px=(0.5, 0.5))], ids=["zero", "pixel-only"])
+def test_degenerate_budgets(budget, rng):
+    cam = PanTiltCamera(1400.0, (1920, 1080), 8.0, 30.0, 15.0)
+    boxes = make_boxes(cam, rng, 20)
+    ref = footprints_from_boxes3d(cam, budget, boxes)
+    assert_same(ref, FrameProcessor(cam, budget).boxes3d(boxes))
+    ok = ref.centre_valid
+    if not np.any(budget.pixel_covariance()):
+        assert np.all(ref.centre_cov_m2[ok] == 0.0)
+        assert np.all(ref.v2x["cpm_x_confidence"][ok] == 1) and np.all(ref.v2x["cpm_xy_correlation"][ok] == 101)
+        assert np.all(ref.v2x["j2735_position_confidence"][ok] == 15)
+
+
+def test_reference_empty_frame():
+    cam = PanTiltCamera(1400.0, (1920, 1080), 8.0, 30.0, 15.0)
+    est = footprints_from_boxes3d(cam, BUDGET, np.zeros((0, 7)))
+    assert len(est) == 0 and est.joint_cov_m2.shape == (0, 8, 8) and est.v2x_codes.shape == (0, 7)
