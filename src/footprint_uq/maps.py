@@ -388,8 +388,8 @@ def uncertainty_map(camera, budget, step_px: int = 1, *, max_range_m: float | No
     cov = np.empty((n, 2, 2))
     valid = np.empty(n, dtype=bool)
     reason = np.empty(n, dtype=np.int8)
-    J = np.empty((n, 2, 2))
     xy_ref = np.empty((n, 2))
+    gsd_r, gsd_c, area, rng = (np.empty(n) for _ in range(4))
 
     kernel = _covariance_map_kernel() if use_kernel else None
     if kernel is not None:
@@ -404,8 +404,9 @@ def uncertainty_map(camera, budget, step_px: int = 1, *, max_range_m: float | No
         blk = slice(s, min(n, s + _BLOCK_PX))
         bp = camera.backproject(flat[blk])
         xy_ref[blk] = bp.xy_world_m
-        J[blk] = pixel_jacobian(camera, flat[blk])[0]
         reason[blk] = bp.reason
+        gsd_r[blk], gsd_c[blk], area[blk], rng[blk] = ground_sampling_distance(
+            camera, bp.xy_world_m, pixel_jacobian(camera, flat[blk])[0])
         if kernel is None:
             est = propagate(camera, budget, flat[blk])
             xy[blk] = est.xy_world_m
@@ -420,7 +421,6 @@ def uncertainty_map(camera, budget, step_px: int = 1, *, max_range_m: float | No
                 blk = slice(s, min(n, s + _BLOCK_PX))
                 est = propagate(camera, budget, flat[blk])
                 xy[blk], cov[blk], valid[blk] = est.xy_world_m, est.cov_m2, est.valid
-    gsd_r, gsd_c, area, rng = ground_sampling_distance(camera, xy, J)
     if max_range_m is not None:
         far = valid & (rng > max_range_m)
         valid &= ~far
