@@ -203,22 +203,22 @@ def test_synthetic_covariance_and_bootstrap():
     cam = DEFAULT_CAMERA.scaled(0.4)
     rv, tv = make_board_poses(cam, PAPER_BOARD, 12, seed=4)
     cs = noisy_corners(cam, PAPER_BOARD, rv, tv, 0.2, seed=11)
-    cal = calibrate_corners(cs, PAPER_BOARD, cam.image_size_px, bootstrap=40, seed=2)
+    cal = calibrate_corners(cs, PAPER_BOARD, cam.image_size_px, bootstrap=24, seed=2)
     np.testing.assert_allclose(cal.std_jacobian, cal.std_opencv, rtol=1e-4)
     w = np.linalg.eigvalsh(cal.cov_jacobian)
     assert w.min() > 0
     corr = cal.cov_jacobian[0, 1] / np.sqrt(cal.cov_jacobian[0, 0] * cal.cov_jacobian[1, 1])
     assert corr > 0.5  # fx and fy move together
     b = cal.bootstrap
-    assert b.samples.shape == (40, 9) and b.n_failed == 0
-    # iid noise: bootstrap over views and first-order sigmas agree within a factor 1.6 (40 resamples, 12 views)
+    assert b.samples.shape == (24, 9) and b.n_failed == 0
+    # iid noise: bootstrap over views and first-order sigmas agree within a factor 1.6 (24 resamples, 12 views)
     ratio = b.std / cal.std_opencv
     assert 1 / 1.6 < np.median(ratio) < 1.6
     # seeded and independent of the number of processes (resamples are drawn up front)
-    again = calibrate_corners(cs, PAPER_BOARD, cam.image_size_px, bootstrap=40, seed=2, workers=2)
+    again = calibrate_corners(cs, PAPER_BOARD, cam.image_size_px, bootstrap=24, seed=2, workers=2)
     # (OpenCV's thread count changes summation order: agreement to 1e-3 of the scatter, not bit for bit)
     assert np.all(np.abs(again.bootstrap.samples - b.samples) < 1e-3 * b.std)
-    other = calibrate_corners(cs, PAPER_BOARD, cam.image_size_px, bootstrap=40, seed=3)
+    other = calibrate_corners(cs, PAPER_BOARD, cam.image_size_px, bootstrap=24, seed=3)
     assert not np.allclose(other.bootstrap.samples, b.samples)
     s = cal.summary()
     assert "comparison" in s and "verdict" in s["comparison"]
