@@ -83,6 +83,8 @@ def main():
 
 
 # -- the registry: one line per command -------------------------------------------------
+from . import cli_extrinsics  # noqa: E402,F401  (adds `extrinsics` to the calibrate group)
+from .cli_calibrate import calibrate  # noqa: E402
 from .cli_carla import carla  # noqa: E402
 from .cli_case_study import case_study  # noqa: E402
 from .cli_core import demo_cmd, locate_cmd, map_cmd, presets_cmd  # noqa: E402
@@ -93,6 +95,7 @@ main.add_command(presets_cmd)
 main.add_command(demo_cmd)
 main.add_command(case_study)
 main.add_command(carla)
+main.add_command(calibrate)
 
 
 if __name__ == "__main__":  # pragma: no cover
