@@ -527,7 +527,7 @@ class IntrinsicCalibration:
 
     def save(self, out_dir, *, grid_px: float = 5.0, hull: str = "corners", budget_source: str = "opencv",
              full_covariance: bool = False, figures: bool = True) -> dict:
-        """Write camera.yaml, intrinsics.yaml, budget.yaml, summary.json, report.md, frames.csv, maps.npz, PNGs.
+        """Write camera.yaml, intrinsics.yaml, budget.yaml, summary.json, report.md/.html, frames.csv, maps.npz, PNGs.
 
         Returns
         -------
@@ -558,11 +558,15 @@ class IntrinsicCalibration:
             from ..viz.calibration import save_calibration_figures
 
             files.update(save_calibration_figures(self, out, coverage=cov, error_map=em, asymmetry=asym))
-        summ["files"] = sorted(files) + ["summary.json", "report.md"]
+        summ["files"] = sorted(files) + ["summary.json", "report.md"] + (["report.html"] if figures else [])
         (out / "summary.json").write_text(json.dumps(_jsonable(summ), indent=2))
         files["summary.json"] = str(out / "summary.json")
         (out / "report.md").write_text(render_report(summ))
         files["report.md"] = str(out / "report.md")
+        if figures:
+            from ..viz.calibration import write_calibration_html
+
+            files["report.html"] = str(write_calibration_html(summ, out))
         return files
 
     def write_opencv_yaml(self, path) -> Path:

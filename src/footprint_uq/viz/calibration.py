@@ -177,3 +177,45 @@ def save_calibration_figures(cal, out_dir, *, coverage=None, error_map=None, asy
         fig.savefig(out / name, dpi=dpi, bbox_inches="tight")
         files[name] = str(out / name)
     return files
+
+
+def write_calibration_html(summary: dict, out_dir, *, figures=("coverage.png", "reprojection_error.png",
+                                                               "asymmetry.png", "view_errors.png", "sigmas.png")):
+    """A self-contained ``report.html`` (figures embedded) from :meth:`IntrinsicCalibration.summary`."""
+    from ..calibration.intrinsics import INTRINSIC_NAMES, PAPER_COLUMNS
+    from .report import esc, html_page, html_table, img_tag, write_html
+
+    out = Path(out_dir)
+    s = summary
+    fr = s["frames"]
+    parts = [f"<p>OpenCV {esc(s['opencv_version'])}; board {s['board']['inner_corners'][0]}x"
+             f"{s['board']['inner_corners'][1]} inner corners, square {s['board']['square_m']} m; image "
+             f"{s['image_size_px'][0]}x{s['image_size_px'][1]} px. Frames: {fr['input']} input, {fr['board_found']} "
+             f"with the board, {fr['used']} used, {fr['dropped_by_filter']} dropped by the filter. RMS reprojection "
+             f"error {s['rms_reprojection_error_px']:.4f} px.</p>"]
+    rows = [{"parameter": k, "value": s["intrinsics"][k],
+             **{src: s["std"][src][k] for src in ("opencv", "jacobian", "bootstrap") if src in s["std"]}}
+            for k in INTRINSIC_NAMES]
+    parts += ["<h2>Intrinsics and standard deviations</h2>", html_table(rows, floatfmt=".6g")]
+    prow = [{"source": src, **row} for src, row in s["paper_table"].items()]
+    parts += ["<h2>The paper's Table 2</h2><p>sigma f = RSS(sigma fx, sigma fy); c, r: principal point column, "
+              "row.</p>", html_table(prow, ["source", *PAPER_COLUMNS])]
+    if "comparison" in s:
+        parts.append(f"<h2>OpenCV vs bootstrap</h2><p>Median ratio bootstrap / OpenCV "
+                     f"{s['comparison']['median_ratio']:.3g}: {esc(s['comparison']['verdict'])}.</p>")
+    f = s["filter"]
+    if f["rounds"]:
+        parts += ["<h2>Frame filter</h2>",
+                  html_table([{**r, "dropped": ", ".join(r["dropped"])} for r in f["rounds"]])]
+    bad = fr["not_found"] + [{"label": d["label"], "reason": d["reason"]} for d in f["dropped"]]
+    if bad:
+        parts += ["<h2>Frames not used</h2>", html_table(bad, ["label", "reason"])]
+    parts.append("<h2>Maps</h2>")
+    for name in figures:
+        p = out / name
+        if p.is_file():
+            parts.append(img_tag(p.read_bytes(), name))
+    a = s["maps"]["asymmetry"]
+    parts.append("<p>Asymmetry: " + esc(", ".join(f"{k} = {v:.4g}" if isinstance(v, float) else f"{k} = {v}"
+                                                  for k, v in a.items())) + "</p>")
+    return write_html(out / "report.html", html_page("Intrinsic calibration", parts))
