@@ -61,6 +61,20 @@ kept and finite -- but they are not *usable* unless ``allow_outside_image=True``
 (NaN and index -1 if none); the centre needs every corner usable and a non-degenerate
 polygon, otherwise it is NaN and ``centre_reason`` says why (the code of the first
 unusable corner and its index, or :data:`DEGENERATE`).
+
+Two paths, same numbers
+-----------------------
+The ``footprints_from_*`` functions are the readable numpy reference (built on
+``camera.backproject`` and :mod:`footprint_uq.propagation` semantics).  For every-frame
+use next to a detector, :class:`FrameProcessor` prepares the camera and budget once and
+runs one fused numba kernel per frame (:mod:`footprint_uq.footprint_kernels`); its
+results agree with the reference to 1e-9 relative.  One frame of 100 3D boxes takes
+about 75 us (pan-tilt) / 90 us (OpenCV with distortion) on the 2-core reference machine
+(``bench/bench_footprints.py``).
+
+The V2X fields describe the centre.  For the paper's conservative upper bound, apply
+:func:`footprint_uq.v2x.cpm_fields` / :func:`~footprint_uq.v2x.j2735_fields` to
+``largest_cov_m2`` instead.
 """
 
 from __future__ import annotations
