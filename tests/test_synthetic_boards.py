@@ -183,3 +183,29 @@ def test_simulate_campaigns_planning_table():
     np.testing.assert_allclose(r2["opencv"] / r["opencv"], 2.0, rtol=0.25)
     with pytest.raises(InputError):
         simulate_campaigns(CAM, PAPER_BOARD, 8, n_campaigns=1)
+
+
+def test_cli_synthetic_then_intrinsics(tmp_path):
+    from click.testing import CliRunner
+
+    from footprint_uq.cli import FootprintUQGroup
+    from footprint_uq.cli_calibrate import calibrate
+
+    cli = FootprintUQGroup(name="footprint-uq", commands={"calibrate": calibrate})
+    syn = tmp_path / "syn"
+    r = CliRunner().invoke(cli, ["calibrate", "synthetic", "--out", str(syn), "--views", "6", "--scale", "0.3",
+                                 "--supersample", "2", "--plan", "3", "--plan-bootstrap", "5", "--seed", "4"])
+    assert r.exit_code == 0, r.output
+    assert len(list(syn.glob("board_*.png"))) == 6
+    plan = json.loads((syn / "plan.json").read_text())
+    assert plan["n_views"] == 6 and len(plan["scatter"]) == 9 and "sigma_f_px" in plan["paper"]["opencv"]
+    out = tmp_path / "cal"
+    r = CliRunner().invoke(cli, ["calibrate", "intrinsics", str(syn), "--board", "14x9", "--square-m", "0.1",
+                                 "--out", str(out), "--workers", "1", "--quiet"])
+    assert r.exit_code == 0, r.output
+    summ = json.loads((out / "summary.json").read_text())
+    assert summ["frames"]["used"] == 6
+    assert abs(summ["intrinsics"]["fx_px"] - CAM.fx_px) < 5 * summ["std"]["opencv"]["fx_px"]
+    r = CliRunner().invoke(cli, ["calibrate", "synthetic", "--out", str(tmp_path / "x"), "--camera",
+                                 str(tmp_path / "missing.yaml")])
+    assert r.exit_code == 2
