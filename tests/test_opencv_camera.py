@@ -189,3 +189,23 @@ def test_dist_lengths_and_params_layout(rng):
     # the camera is exactly the general model on its parameter vector
     uv = np.array([[300.0, 900.0], [1500.0, 700.0]])
     np.testing.assert_array_equal(oc.backproject(uv).xy_world_m, general.backproject(oc.params, uv).xy_world_m)
+
+
+def test_base_class_helpers():
+    cam = _pantilt(roll_deg=4.0).to_opencv()
+    # the horizon row: just below it a ray meets the ground (far away), just above it does not
+    u = np.array([0.0, 700.0, 1919.0])
+    v_h = cam.horizon_v_px(u)
+    below = cam.backproject(np.stack([u, v_h + 0.5], -1))
+    above = cam.backproject(np.stack([u, v_h - 0.5], -1))
+    assert below.valid.all() and not above.valid.any()
+    # tilt 25 deg at 8 m: the horizon is f tan(25 deg) = 1200 * 0.4663 = 559.6 px above the principal point
+    # at the principal column (roll 0)
+    flat = _pantilt(roll_deg=0.0)
+    assert flat.horizon_v_px(955.0) == pytest.approx(545.0 - 1200.0 * np.tan(np.deg2rad(25.0)))
+    assert cam.in_image([[-0.5, -0.5], [1919.5, 1079.5], [-0.6, 0.0], [0.0, 1079.6]]).tolist() == [
+        True, True, False, False]
+    g = cam.pixel_grid(8)
+    assert g.shape == (135, 240, 2) and g[0, 0].tolist() == [0.0, 0.0] and g[-1, -1].tolist() == [1912.0, 1072.0]
+    np.testing.assert_array_equal(cam.K, [[1200.0, 0.0, 955.0], [0.0, 1200.0, 545.0], [0.0, 0.0, 1.0]])
+    assert (cam.pan_deg, cam.tilt_deg, cam.roll_deg) == pytest.approx((135.0, 25.0, 4.0))
