@@ -301,6 +301,16 @@ def test_calibrate_budget_propagate_pipeline(real_cal, tmp_path):
     np.testing.assert_allclose(est2.cov_m2, 4 * est.cov_m2, rtol=1e-9)
     # and the calibrated intrinsics' uncertainty is a few centimetres at ~10 m, not metres
     assert np.sqrt(np.linalg.eigvalsh(est.cov_m2)).max() < 1.0
+    # the same through the CLI: footprint-uq locate --camera (calibrated K, dist + pose) --budget budget.yaml
+    from footprint_uq.cli import main
+    from footprint_uq.io import save_camera
+
+    save_camera(cam, tmp_path / "cam.yaml")
+    r = CliRunner().invoke(main, ["locate", "--camera", str(tmp_path / "cam.yaml"), "--budget",
+                                  str(tmp_path / "budget.yaml"), "--pixel", "320", "400", "--format", "json"])
+    assert r.exit_code == 0, r.output
+    rec = json.loads(r.output)[0]
+    np.testing.assert_allclose(rec["cov_m2"], est.cov_m2[0], rtol=1e-6, atol=1e-12)
 
 
 # ------------------------------------------------------------------------------------------ bad input
