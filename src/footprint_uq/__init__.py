@@ -11,6 +11,15 @@ from .cameras.opencv import OpenCVCamera
 from .cameras.pantilt import PanTiltCamera
 from .ellipse import chi2_scale, ellipse_axes, ellipse_points
 from .errors import ConfigError, ConsistencyWarning, FootprintUQError, InputError
+from .footprints import (
+    FootprintEstimate,
+    FrameProcessor,
+    footprints_from_boxes2d,
+    footprints_from_boxes3d,
+    footprints_from_corners,
+)
+from .fusion import fuse_by_id
+from .geo import GeoReference, footprints_geojson
 from .io import load_camera, save_budget, save_camera
 from .params import PARAM_NAMES
 from .propagation import (
@@ -22,6 +31,7 @@ from .propagation import (
     propagate_joint,
     unscented,
 )
+from .v2x import cpm_fields, j2735_fields  # noqa: E402
 
 __version__ = "0.1.0"
 
@@ -32,4 +42,6 @@ __all__ = [
     "load_camera", "save_camera", "save_budget",
     "GroundEstimate", "JointEstimate", "linearity_ratio", "monte_carlo", "propagate",
     "propagate_joint", "unscented", "__version__",
+    "FootprintEstimate", "FrameProcessor", "footprints_from_boxes2d", "footprints_from_boxes3d",
+    "footprints_from_corners", "fuse_by_id", "GeoReference", "footprints_geojson", "cpm_fields", "j2735_fields",
 ]
