@@ -267,7 +267,7 @@ def process_partition(task: Task) -> dict:
     """
     import pyarrow.parquet as pq
 
-    from .readers import coerce_table
+    from .readers import coerce_table, iter_parquet_tables
 
     t0 = time.perf_counter()
     pf = pq.ParquetFile(task.path)
@@ -285,8 +285,7 @@ def process_partition(task: Task) -> dict:
     tmp_tag = f".tmp-{uuid.uuid4().hex[:8]}"
     start = 0
     try:
-        for batch in pf.iter_batches(batch_size=task.chunk_rows, columns=read_cols, use_threads=False):
-            t = pa.Table.from_batches([batch])
+        for t in iter_parquet_tables(pf, read_cols, task.chunk_rows, use_threads=False):
             n = t.num_rows
             rows = np.arange(start, start + n, dtype=np.int64)
             start += n
@@ -296,14 +295,20 @@ def process_partition(task: Task) -> dict:
                     cid = pc.fill_null(cid, part_cam)
                 t = t.drop_columns(["camera_id"])
             else:
-                cid = pa.array([part_cam] * n, type=pa.string())
+                cid = pa.nulls(n, pa.string()) if part_cam is None else pc.cast(
+                    pa.DictionaryArray.from_arrays(pa.array(np.zeros(n, np.int32)), pa.array([part_cam])),
+                    pa.string())
+            cid = pc.fill_null(cid, UNKNOWN_CAMERA)
             t = t.append_column("camera_id", cid)
             t, pre = coerce_table(t, numeric)
-            cid_np = np.asarray(cid.to_pylist(), dtype=object) if n else np.zeros(0, dtype=object)
-            cid_key = np.where(_is_none(cid_np), UNKNOWN_CAMERA, cid_np).astype(str)
-            for cam_id in sorted(set(cid_key.tolist())):
-                sel = np.flatnonzero(cid_key == cam_id)
-                sub = t.take(pa.array(sel)) if sel.size != n else t
+            cams = sorted(pc.unique(cid).to_pylist())
+            for cam_id in cams:
+                if len(cams) == 1:
+                    sel, sub = np.arange(n), t
+                else:
+                    mask = pc.equal(cid, cam_id)
+                    sel = np.flatnonzero(mask.to_numpy(zero_copy_only=False))
+                    sub = t.filter(mask)
                 sub_pre = None if pre is None else [pre[i] for i in sel]
                 entry = entries.get(cam_id)
                 if entry is None:
@@ -312,9 +317,13 @@ def process_partition(task: Task) -> dict:
                     bp = template
                 else:
                     bp = _processor(entry, task.options, probe, id_fields)
+                if cam_id == UNKNOWN_CAMERA:
+                    sub = sub.set_column(sub.column_names.index("camera_id"), "camera_id",
+                                         pa.nulls(sub.num_rows, pa.string()))
                 out = bp.process(sub, rows=rows[sel], pre_errors=sub_pre)
-                out = out.append_column(pa.field("source", pa.string()), pa.array([task.rel] * out.num_rows,
-                                                                                    type=pa.string()))
+                m = out.num_rows
+                src = pa.DictionaryArray.from_arrays(pa.array(np.zeros(m, np.int32)), pa.array([task.rel]))
+                out = out.append_column(pa.field("source", pa.string()), pc.cast(src, pa.string()))
                 out = _normalise(out)
                 if cam_id not in writers:
                     path = _out_path(task, cam_id)
@@ -338,10 +347,6 @@ def process_partition(task: Task) -> dict:
         raise
     return {"index": task.index, "rel": task.rel, "files": writers_done, "rows_in": start,
             "cameras": {k: _counts(v) for k, v in counts.items()}, "elapsed_s": time.perf_counter() - t0}
-
-
-def _is_none(a: np.ndarray) -> np.ndarray:
-    return np.array([x is None for x in a], dtype=bool)
 
 
 def _id_fields(schema: pa.Schema) -> list[pa.Field]:

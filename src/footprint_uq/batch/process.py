@@ -255,8 +255,16 @@ class BatchProcessor:
     # -- the kernel --------------------------------------------------------------------------------
     def _kernel(self, X: np.ndarray, P: np.ndarray | None):
         bt = self._layout[0]
-        if bt == "2d":
-            return self.proc.boxes2d(X, contact=self.contact, pixel_cov_px2=P)
+        if bt == "2d":  # the contact points of box2d_contact_points, formed here without a matrix product
+            if self.contact == "bottom-centre":
+                uv = np.empty((X.shape[0], 1, 2))
+                uv[:, 0, 0] = 0.5 * X[:, 0] + 0.5 * X[:, 2]
+                uv[:, 0, 1] = X[:, 3]
+            else:
+                uv = np.empty((X.shape[0], 2, 2))
+                uv[:, 0, 0], uv[:, 1, 0] = X[:, 0], X[:, 2]
+                uv[:, 0, 1] = uv[:, 1, 1] = X[:, 3]
+            return self.proc.corners(uv, pixel_cov_px2=P)
         if bt == "3d":
             yaw_unit = "deg" if self._layout[1][-1] == "yaw_deg" else "rad"
             return self.proc.boxes3d(X, yaw_unit=yaw_unit, bottom_on_ground=self.bottom_on_ground, pixel_cov_px2=P)

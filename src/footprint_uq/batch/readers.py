@@ -37,7 +37,8 @@ import pyarrow.compute as pc
 from ..errors import InputError
 from . import schema as S
 
-__all__ = ["Chunk", "DetectionReader", "open_detections", "detect_format", "FORMATS", "coerce_table"]
+__all__ = ["Chunk", "DetectionReader", "open_detections", "detect_format", "FORMATS", "coerce_table",
+           "iter_parquet_tables"]
 
 #: input formats by extension
 FORMATS = {".csv": "csv", ".jsonl": "jsonl", ".ndjson": "jsonl", ".parquet": "parquet", ".pq": "parquet"}
@@ -222,8 +223,7 @@ class DetectionReader:
     # parquet
     def _iter_parquet(self):
         start = 0
-        for batch in self._pf.iter_batches(batch_size=self.chunk_rows, columns=list(self.needed), use_threads=True):
-            t = pa.Table.from_batches([batch])
+        for t in iter_parquet_tables(self._pf, list(self.needed), self.chunk_rows):
             n = t.num_rows
             t, pre = coerce_table(t, self.numeric)
             yield Chunk(t, np.arange(start, start + n, dtype=np.int64), pre, [], n)
@@ -391,6 +391,30 @@ class DetectionReader:
             arrays[name] = pa.array(values, type=typ)
         return (pa.table(arrays), (pre if any(p is not None for p in pre) else None), mal,
                 np.asarray(keep, dtype=np.int64))
+
+
+def iter_parquet_tables(pf, columns: list, chunk_rows: int, *, use_threads: bool = True) -> Iterator[pa.Table]:
+    """Tables of ``chunk_rows`` rows (the last one shorter) of a ``pyarrow.parquet.ParquetFile``, in file order.
+
+    Reads one row group at a time (``iter_batches(row_groups=[i])``): iterating a whole file
+    with one ``iter_batches`` call keeps memory growing with the file in pyarrow 15-26, one
+    row group at a time does not.
+    """
+    buf: list[pa.Table] = []
+    n_buf = 0
+    for i in range(pf.num_row_groups):
+        for batch in pf.iter_batches(batch_size=chunk_rows, row_groups=[i], columns=columns,
+                                     use_threads=use_threads):
+            buf.append(pa.Table.from_batches([batch]))
+            n_buf += batch.num_rows
+            while n_buf >= chunk_rows:
+                t = pa.concat_tables(buf) if len(buf) > 1 else buf[0]
+                yield t.slice(0, chunk_rows).combine_chunks()
+                rest = t.slice(chunk_rows)
+                buf, n_buf = ([rest] if rest.num_rows else []), rest.num_rows
+    if n_buf:
+        t = pa.concat_tables(buf) if len(buf) > 1 else buf[0]
+        yield t.combine_chunks()
 
 
 def _select(table: pa.Table, names) -> pa.Table:
