@@ -493,7 +493,7 @@ def test_file_level_errors(tmp_path):
         load_camera(DATA / "pose.yaml")
     with pytest.raises(ConfigError, match="format: got 'kitti'"):
         load_camera(DATA / "pantilt.yaml", format="kitti")
-    with pytest.raises(ConfigError, match="pantilt.yaml: pose: .*our camera files contain the pose"):
+    with pytest.raises(ConfigError, match="pantilt.yaml: pose: .*pan-tilt camera files contain the pose"):
         load_camera(DATA / "pantilt.yaml", pose=POSE)
 
 
@@ -541,3 +541,25 @@ def test_fixtures_are_up_to_date(tmp_path, monkeypatch):
     mod.tumtraf_files()
     for f in sorted(tmp_path.iterdir()):
         assert f.read_text() == (DATA / f.name).read_text(), f.name
+
+
+def test_own_intrinsics_only_file_with_pose(tmp_path):
+    """`calibrate intrinsics` writes a `model: opencv` file without R, t: usable with a pose."""
+    import yaml
+
+    K = [[1400.0, 0.0, 959.5], [0.0, 1401.0, 539.5], [0.0, 0.0, 1.0]]
+    f = tmp_path / "intrinsics.yaml"
+    f.write_text(yaml.safe_dump({"model": "opencv", "image_size_px": [1920, 1080], "K": K,
+                                 "dist": [-0.1, 0.01, 0.0, 0.0, 0.0]}))
+    K2, dist, size = load_intrinsics(f)
+    assert np.array_equal(K2, np.array(K)) and size == (1920, 1080)
+    assert np.allclose(dist, [-0.1, 0.01, 0, 0, 0])
+    with pytest.raises(ConfigError, match="intrinsics.yaml: R, t: got 'missing'.*pose"):
+        load_camera(f)
+    cam = load_camera(f, pose={"height_m": 8.0, "pan_deg": 30.0, "tilt_deg": 20.0})
+    assert cam.model == "opencv"
+    assert np.isclose(cam.height_m, 8.0) and np.isclose(cam.tilt_deg, 20.0) and np.isclose(cam.pan_deg, 30.0)
+    assert np.allclose(cam.K, K) and np.allclose(cam.dist[:5], [-0.1, 0.01, 0, 0, 0])
+    # a file that has its pose refuses a second one
+    with pytest.raises(ConfigError, match="pose: got 'given as argument'"):
+        load_camera(DATA / "opencv.yaml", pose={"height_m": 8.0, "pan_deg": 30.0, "tilt_deg": 20.0})

@@ -197,18 +197,36 @@ def _pantilt_from_dict(d, where):
         raise C.rewrap(e, where) from None
 
 
-def _opencv_from_dict(d, where):
+def _opencv_intrinsics_from_dict(d, where):
+    """``(K, dist, image_size_px, ground_z_m)`` of a ``model: opencv`` mapping, pose not required."""
     _check_keys(d, where, *OPENCV_KEYS, model="opencv")
     size = C.as_image_size(where, "image_size_px", d["image_size_px"])
     K = C.check_K(where, "K", C.as_matrix(where, "K", d["K"], [(3, 3), (3, 4)]))
     dist = None if d.get("dist") is None else C.as_vector(where, "dist", d["dist"], (0, 4, 5, 8),
                                                            "distortion coefficients (k1 k2 p1 p2 [k3 [k4 k5 k6]])")
     gz = C.as_number(where, "ground_z_m", d.get("ground_z_m", 0.0), unit=" (metres)")
+    C.check_principal_point(where, K[0, 2], K[1, 2], size)
+    return K, dist, size, gz
+
+
+def _opencv_from_dict(d, where, pose=None):
+    K, dist, size, gz = _opencv_intrinsics_from_dict(d, where)
     has_rt = d.get("R") is not None or d.get("t") is not None
     P = None if d.get("P") is None else C.as_matrix(where, "P", d["P"], (3, 4))
+    if pose is not None:
+        if has_rt or P is not None:
+            raise ConfigError(C.label(where, "pose"), "given as argument",
+                              "no pose argument: the file has one (R, t or P)")
+        from .opencv_files import _with_pose
+        from .pose import read_pose
+
+        return _with_pose(K, np.zeros(0) if dist is None else dist, size, read_pose(pose),
+                          gz if "ground_z_m" in d else None, where)
     if not has_rt and P is None:
-        raise ConfigError(C.label(where, "R, t"), "missing", "the pose: R (3x3) and t (3), or P (3x4)")
-    C.check_principal_point(where, K[0, 2], K[1, 2], size)
+        from .pose import NO_POSE_HELP
+
+        raise ConfigError(C.label(where, "R, t"), "missing",
+                          "the pose: R (3x3) and t (3), or P (3x4) in the file, or " + NO_POSE_HELP)
     try:
         if has_rt:
             for k in ("R", "t"):
@@ -406,8 +424,14 @@ def load_camera(path, *, format: str | None = None, ground_z_m=None, image_size_
             raise ConfigError("load_camera options", sorted(options), "no options for our own camera files")
         data = C.parse_mapping(text, p)
         if pose is not None:
-            raise ConfigError(C.label(str(p), "pose"), "given as argument",
-                              "no pose argument: our camera files contain the pose")
+            # an intrinsics-only file of ours (e.g. `calibrate intrinsics` output) plus a pose
+            if not (isinstance(data, dict) and _MODEL_ALIASES.get(str(data.get("model", "")).strip().lower())
+                    == "opencv"):
+                raise ConfigError(C.label(str(p), "pose"), "given as argument",
+                                  "no pose argument: pan-tilt camera files contain the pose")
+            d = _merge_arg(dict(data), "ground_z_m", ground_z_m, str(p))
+            d = _merge_arg(d, "image_size_px", image_size_px, str(p))
+            return _opencv_from_dict(d, str(p), pose=pose)
         return camera_from_dict(data, where=str(p), ground_z_m=ground_z_m, image_size_px=image_size_px)
     if fmt == "opencv":
         from .opencv_files import camera_from_opencv_file
@@ -445,7 +469,11 @@ def load_intrinsics(path, *, format: str | None = None):
 
         d = read_tumtraf_calibration(p)
     elif fmt == "footprint-uq":
-        cam = camera_from_dict(C.parse_mapping(text, p), where=str(p))
+        data = C.parse_mapping(text, p)
+        if isinstance(data, dict) and _MODEL_ALIASES.get(str(data.get("model", "")).strip().lower()) == "opencv":
+            K, dist, size, _ = _opencv_intrinsics_from_dict(data, str(p))  # the pose may be absent
+            return K.copy(), np.zeros(0) if dist is None else np.asarray(dist, dtype=np.float64), tuple(size)
+        cam = camera_from_dict(data, where=str(p))
         dist = cam.dist
         return cam.K, dist[: 8 if np.any(dist[5:]) else 5], tuple(cam.image_size_px)
     else:
