@@ -1,4 +1,6 @@
 # footprint-uq: two entry points, both create .venv on first use.
+# make demo: uncertainty maps of a roadside camera under three presets + the paper's left-turn case study
+#            (out/demo/report.html, linking out/demo/case-study/report.html).
 PY ?= python3.11
 VENV := .venv
 BIN := $(VENV)/bin
@@ -15,7 +17,7 @@ $(STAMP): pyproject.toml | $(BIN)/python
 	touch $(STAMP)
 
 demo: $(STAMP)
-	$(BIN)/footprint-uq case-study --out out/demo
+	$(BIN)/footprint-uq demo --out out/demo
 
 test: $(STAMP)
 	$(BIN)/ruff check src tests bench
