@@ -216,7 +216,8 @@ class PanTiltCamera(Camera):
     tilt_deg : float
         Tilt theta: pitch of the boresight below the horizontal, degrees (positive = down).
     roll_deg : float, optional
-        Roll about the boresight, degrees (positive: image rotates clockwise... see docs/conventions.md).
+        Roll about the boresight, degrees: positive turns the camera clockwise as seen from behind it, so the
+        scene appears rotated counter-clockwise in the image (docs/conventions.md, section 3).
     position_m : (float, float), optional
         Camera foot point (x east, y north) in the world frame W, metres.
     principal_point_px : (float, float), optional
