@@ -1,7 +1,7 @@
 """Peak memory of the streaming batch at two input sizes (1x and 10x): it must not grow with the file.
 
 Each size runs in a fresh subprocess (``footprint_uq.batch.process.process_file``, Parquet ->
-Parquet) whose address space is capped with ``RLIMIT_AS`` (``--limit-mb``, default 1536 MB); the
+Parquet) whose address space is capped with ``RLIMIT_AS`` (``--limit-mb``, default 2048 MB); the
 child reports its own peak resident set size (``resource.getrusage(RUSAGE_SELF).ru_maxrss``).
 The 10x input's data (detections + footprints, decoded in memory) is several times larger
 than the cap, so finishing at all shows the streaming; the two peaks show that memory depends on
@@ -43,6 +43,10 @@ print(json.dumps({"rows_in": s.rows_in, "rows_out": s.rows_out, "rows_error": s.
 """
 
 
+# fewer malloc arenas and BLAS threads: less reserved (not used) address space under RLIMIT_AS
+_CHILD_ENV = {"PYTHONWARNINGS": "ignore", "MALLOC_ARENA_MAX": "2", "OPENBLAS_NUM_THREADS": "1"}
+
+
 def _write_input(path: Path, rows: int, block: int = 500_000) -> tuple[int, float]:
     """Write ``rows`` 3D-box detections block by block; return (bytes on disk, decoded MB)."""
     writer = None
@@ -62,7 +66,7 @@ def _write_input(path: Path, rows: int, block: int = 500_000) -> tuple[int, floa
     return path.stat().st_size, decoded / 1e6
 
 
-def run(rows: int = 1_000_000, factor: int = 10, chunk_rows: int = 131_072, limit_mb: int = 1536,
+def run(rows: int = 1_000_000, factor: int = 10, chunk_rows: int = 131_072, limit_mb: int = 2048,
         workdir: str | None = None) -> dict:
     """Peak RSS (MB) of the batch on ``rows`` and ``factor * rows`` detections."""
     res = {"chunk_rows": chunk_rows, "limit_mb": limit_mb, "sizes": []}
@@ -74,14 +78,17 @@ def run(rows: int = 1_000_000, factor: int = 10, chunk_rows: int = 131_072, limi
             size, decoded_in = _write_input(src, n)
             p = subprocess.run([sys.executable, "-c", _CHILD, str(src), str(dst), str(chunk_rows), str(limit_mb),
                                 json.dumps(CAMERA), BUDGET], capture_output=True, text=True,
-                               env={**os.environ, "PYTHONWARNINGS": "ignore", "MALLOC_ARENA_MAX": "2"})
+                               env={**os.environ, **_CHILD_ENV})
             if p.returncode != 0:
                 raise RuntimeError(f"{mult}x run failed (limit {limit_mb} MB): {p.stderr.strip()[-400:]}")
             child = json.loads(p.stdout.strip().splitlines()[-1])
-            out_rows = pq.read_metadata(dst).num_rows
+            md = pq.read_metadata(dst)
+            out_rows = md.num_rows
+            out_mb = sum(md.row_group(i).total_byte_size for i in range(md.num_row_groups)) / 1e6
             res["sizes"].append({"factor": mult, "rows": n, "input_file_mb": size / 1e6,
                                  "input_decoded_mb": decoded_in,
-                                 "output_file_mb": dst.stat().st_size / 1e6, "output_rows": out_rows, **child})
+                                 "output_file_mb": dst.stat().st_size / 1e6, "output_uncompressed_mb": out_mb,
+                                 "output_rows": out_rows, **child})
             src.unlink()
             dst.unlink()
     a, b = res["sizes"]
@@ -92,10 +99,12 @@ def run(rows: int = 1_000_000, factor: int = 10, chunk_rows: int = 131_072, limi
 def report(res: dict) -> str:
     lines = [f"streaming batch peak memory (chunk_rows {res['chunk_rows']:,}, address space capped at "
              f"{res['limit_mb']} MB)",
-             "| input | rows | input file | input decoded | peak RSS | time |", "|---|---|---|---|---|---|"]
+             "| input | rows | input file | input decoded | output uncompressed | peak RSS | time |",
+             "|---|---|---|---|---|---|---|"]
     for s in res["sizes"]:
         lines.append(f"| {s['factor']}x | {s['rows']:,} | {s['input_file_mb']:.0f} MB | "
-                     f"{s['input_decoded_mb']:.0f} MB | {s['peak_rss_mb']:.0f} MB | {s['elapsed_s']:.1f} s |")
+                     f"{s['input_decoded_mb']:.0f} MB | {s['output_uncompressed_mb']:.0f} MB | "
+                     f"{s['peak_rss_mb']:.0f} MB | {s['elapsed_s']:.1f} s |")
     lines.append(f"peak RSS {res['sizes'][1]['factor']}x / 1x = {res['peak_rss_ratio']:.2f}")
     return "\n".join(lines)
 
@@ -105,7 +114,7 @@ def main(argv=None) -> int:
     ap.add_argument("--rows", type=int, default=1_000_000)
     ap.add_argument("--factor", type=int, default=10)
     ap.add_argument("--chunk-rows", type=int, default=131_072)
-    ap.add_argument("--limit-mb", type=int, default=1536)
+    ap.add_argument("--limit-mb", type=int, default=2048)
     ap.add_argument("--json", default=None)
     a = ap.parse_args(argv)
     res = run(a.rows, a.factor, a.chunk_rows, a.limit_mb)
