@@ -6,8 +6,8 @@ and on a local ``dask.distributed`` cluster (worker processes, one thread each; 
 started before the timing).  Both write partitioned Parquet; footprints per second are
 end to end (read, compute, write), medians of ``repeats``.
 
-Run ``.venv/bin/python bench/bench_dask.py [--rows-per-file N] [--workers 2]``; :func:`run` returns
-the figures for ``bench/run.py``.  Needs the ``dask`` extra.
+Run ``.venv/bin/python bench/bench_dask.py [--rows-per-file N] [--workers 2]``; :func:`measure`
+returns the figures, :func:`run` the rows of ``bench/run.py``'s table.  Needs the ``dask`` extra.
 """
 
 from __future__ import annotations
@@ -51,8 +51,8 @@ def make_dataset(root: Path, cameras: int, files_per_camera: int, rows_per_file:
     return data, reg / "cameras.csv", total
 
 
-def run(cameras: int = 4, files_per_camera: int = 2, rows_per_file: int = 400_000, workers: int = 2,
-        repeats: int = 2, workdir: str | None = None) -> dict:
+def measure(cameras: int = 4, files_per_camera: int = 2, rows_per_file: int = 400_000, workers: int = 2,
+            repeats: int = 2, workdir: str | None = None) -> dict:
     from footprint_uq.batch import fleet
 
     distributed = fleet.require_dask()
@@ -87,6 +87,21 @@ def run(cameras: int = 4, files_per_camera: int = 2, rows_per_file: int = 400_00
     return res
 
 
+def run(quick: bool = False) -> list[dict]:
+    """Rows for ``bench/run.py`` (section ``dask``): in-process and local 2-worker cluster."""
+    res = measure(rows_per_file=100_000 if quick else 400_000, repeats=1 if quick else 2)
+    base = {"runs": res["repeats"]}
+    return [
+        {**base, "case": f"fleet in-process, {res['rows']:,} rows, {res['files']} files",
+         "median_ms": 1e3 * res["in_process_s"],
+         "notes": f"{res['in_process_footprints_per_s'] / 1e6:.2f} M footprints/s"},
+        {**base, "case": f"fleet on a local Dask cluster, {res['workers']} workers",
+         "median_ms": 1e3 * res["dask_s"],
+         "notes": f"{res['dask_footprints_per_s'] / 1e6:.2f} M footprints/s, {res['dask_speedup']:.2f}x in-process",
+         **{k: v for k, v in res.items() if k != "repeats"}},
+    ]
+
+
 def report(res: dict) -> str:
     return "\n".join([
         f"fleet batch, {res['rows']:,} detections in {res['files']} files of {res['cameras']} cameras "
@@ -106,7 +121,7 @@ def main(argv=None) -> int:
     ap.add_argument("--repeats", type=int, default=2)
     ap.add_argument("--json", default=None)
     a = ap.parse_args(argv)
-    res = run(a.cameras, a.files_per_camera, a.rows_per_file, a.workers, a.repeats)
+    res = measure(a.cameras, a.files_per_camera, a.rows_per_file, a.workers, a.repeats)
     print(report(res))
     if a.json:
         Path(a.json).write_text(json.dumps(res, indent=2) + "\n")

@@ -387,3 +387,20 @@ def test_cli_objects(cam, tmp_path):
     r = CliRunner().invoke(_cli(), ["objects", "--camera", str(camf), "--budget", BUDGET, "--detections", str(src),
                                     "--out", str(tmp_path / "o.parquet"), "--box-type", "3d"])
     assert r.exit_code == 2 and "3d box columns" in r.output
+
+
+def test_threaded_parts_equal_one_thread(cam, monkeypatch):
+    from footprint_uq.batch import process as P
+
+    d = planted_2d(cam, n=20)
+    one = BatchProcessor(cam, BUDGET, threads=1).process(d)
+    monkeypatch.setattr(P, "_MIN_ROWS_PER_THREAD", 3)
+    bp = BatchProcessor(cam, BUDGET, threads=2)
+    if not bp._parallel:
+        pytest.skip("the compiled kernel holds the GIL: no threaded path")
+    two = bp.process(d)
+    bp.close()
+    assert two.column("x_m").num_chunks == 2
+    for c in one.column_names:
+        assert two.column(c).to_pylist() == one.column(c).to_pylist() or np.array_equal(
+            two.column(c).to_numpy(), one.column(c).to_numpy(), equal_nan=True), c

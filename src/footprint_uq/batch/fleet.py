@@ -200,6 +200,7 @@ class Task:
     chunk_rows: int
     compression: str | None
     partition_keys: dict = field(default_factory=dict)
+    threads: int | None = 1  # kernel threads per task: 1 on Dask workers, None (up to 2) in-process
 
 
 def _hive_keys(rel: str) -> dict:
@@ -233,7 +234,8 @@ def plan(dataset, out_dir, registry: dict, *, chunk_rows: int = 262_144, compres
 
 
 # -- the per-partition work (one implementation for every path) --------------------------------------
-def _processor(entry: RegistryEntry, options: dict, names: list, id_fields: list) -> BatchProcessor:
+def _processor(entry: RegistryEntry, options: dict, names: list, id_fields: list, threads: int | None = 1
+               ) -> BatchProcessor:
     """The (cached) processor of one camera for one input layout."""
     opts = dict(options)
     if entry.heading_offset_deg is not None:
@@ -241,10 +243,10 @@ def _processor(entry: RegistryEntry, options: dict, names: list, id_fields: list
     if entry.origin_lat_deg is not None:
         opts["origin_lat_deg"], opts["origin_lon_deg"] = entry.origin_lat_deg, entry.origin_lon_deg
     key = (entry.camera_id, id(entry.camera), id(entry.budget), json.dumps(opts, sort_keys=True, default=str),
-           tuple(names), tuple(str(f) for f in id_fields))
+           tuple(names), tuple(str(f) for f in id_fields), threads)
     bp = _PROCESSORS.get(key)
     if bp is None:
-        bp = BatchProcessor(entry.camera, entry.budget, threads=1, **opts)
+        bp = BatchProcessor(entry.camera, entry.budget, threads=threads, **opts)
         bp.resolve(names, id_fields)
         if len(_PROCESSORS) > 256:
             _PROCESSORS.clear()
@@ -277,7 +279,7 @@ def process_partition(task: Task) -> dict:
     entries = task.cameras
     probe = list(dict.fromkeys(names + ["camera_id"]))
     id_fields = _id_fields(pf.schema_arrow)
-    template = _processor(next(iter(entries.values())), task.options, probe, id_fields)
+    template = _processor(next(iter(entries.values())), task.options, probe, id_fields, task.threads)
     numeric = S.numeric_input_columns(template.box_type, names)
     read_cols = [c for c in dict.fromkeys([c for c in S.ID_COLUMNS if c in names] + list(numeric))]
     writers: dict[str, tuple] = {}
@@ -316,7 +318,7 @@ def process_partition(task: Task) -> dict:
                     sub_pre = [why] * sel.size
                     bp = template
                 else:
-                    bp = _processor(entry, task.options, probe, id_fields)
+                    bp = _processor(entry, task.options, probe, id_fields, task.threads)
                 if cam_id == UNKNOWN_CAMERA:
                     sub = sub.set_column(sub.column_names.index("camera_id"), "camera_id",
                                          pa.nulls(sub.num_rows, pa.string()))
@@ -467,6 +469,7 @@ def process_fleet(registry, detections, out_dir, *, budget=None, scheduler=None,
     try:
         if client is None and scheduler is None and workers is None:
             for t in tasks:
+                t.threads = None
                 summ.add(fn(t))
                 bar.update(1)
             mode = "in-process"

@@ -57,14 +57,20 @@ class Reasons:
     """Registry of reason strings -> small integer ids (stable over a whole job)."""
 
     def __init__(self):
+        import threading
+
         self.texts: list[str] = []
         self._ids: dict[str, int] = {}
+        self._lock = threading.Lock()
 
     def id(self, text: str) -> int:
         i = self._ids.get(text)
         if i is None:
-            i = self._ids[text] = len(self.texts)
-            self.texts.append(text)
+            with self._lock:
+                i = self._ids.get(text)
+                if i is None:
+                    self.texts.append(text)
+                    i = self._ids[text] = len(self.texts) - 1
         return i
 
     def dictionary(self) -> pa.Array:
@@ -270,18 +276,6 @@ class BatchProcessor:
             return self.proc.boxes3d(X, yaw_unit=yaw_unit, bottom_on_ground=self.bottom_on_ground, pixel_cov_px2=P)
         return self.proc.corners(X.reshape(X.shape[0], -1, 2), pixel_cov_px2=P)
 
-    def _run_kernel(self, X, P):
-        n = X.shape[0]
-        if not self._parallel or n < 2 * _MIN_ROWS_PER_THREAD:
-            return [self._kernel(X, P)], [0, n]
-        parts = self.threads
-        edges = [n * i // parts for i in range(parts + 1)]
-        if self._pool is None:
-            self._pool = ThreadPoolExecutor(self.threads, thread_name_prefix="footprint-uq-kernel")
-        futs = [self._pool.submit(self._kernel, X[a:b], None if P is None else P[a:b])
-                for a, b in zip(edges[:-1], edges[1:], strict=True)]
-        return [f.result() for f in futs], edges
-
     def compute(self, X: np.ndarray, cov: np.ndarray | None, reason_id: np.ndarray) -> _Result:
         """Numbers of one chunk: ``X`` (n, m) box columns, ``cov`` (n, 3) or None, ``reason_id`` (n,) pre-errors."""
         n = X.shape[0]
@@ -298,18 +292,14 @@ class BatchProcessor:
                 P = np.empty((cg.shape[0], 2, 2))
                 P[:, 0, 0], P[:, 0, 1], P[:, 1, 0], P[:, 1, 1] = cg[:, 0], cg[:, 1], cg[:, 1], cg[:, 2]
         res = _Result(n=n, K=K, reason_id=reason_id, status_id=np.full(n, 2, dtype=np.int32))
-        ests, edges = self._run_kernel(Xg, P) if Xg.shape[0] else ([], [0])
+        ests = [self._kernel(Xg, P)] if Xg.shape[0] else []
 
         def gather(attr, shape_tail, fill, dtype=np.float64):
-            if len(ests) == 1 and all_good:
+            if ests and all_good:
                 return getattr(ests[0], attr)
             out = np.full((n,) + shape_tail, fill, dtype=dtype)
             if ests:
-                vals = ests[0] if len(ests) == 1 else None
-                src = getattr(vals, attr) if vals is not None else np.concatenate([getattr(e, attr) for e in ests])
-                if all_good:
-                    return src
-                out[good] = src
+                out[good] = getattr(ests[0], attr)
             return out
 
         res.centre = gather("centre_xy_world_m", (2,), np.nan)
@@ -405,6 +395,24 @@ class BatchProcessor:
             for i, text in enumerate(pre_errors):
                 if text is not None:
                     reason_id[i] = self.reasons.id(text)
+        if not self._parallel or n < 2 * _MIN_ROWS_PER_THREAD:
+            return self._process_part(table, rows, reason_id)
+        # large chunk: contiguous parts in threads (the kernel releases the GIL), then one table
+        edges = [n * i // self.threads for i in range(self.threads + 1)]
+        if self._pool is None:
+            self._pool = ThreadPoolExecutor(self.threads, thread_name_prefix="footprint-uq-batch")
+        futs = [self._pool.submit(self._process_part, table.slice(a, b - a), rows[a:b], reason_id[a:b])
+                for a, b in zip(edges[:-1], edges[1:], strict=True)]
+        parts = [f.result() for f in futs]
+        # the reason ids are global; give every part the final dictionary
+        d = self.reasons.dictionary()
+        j = self.schema.get_field_index("reason")
+        parts = [p.set_column(j, self.schema.field(j), pa.chunked_array(
+            [pa.DictionaryArray.from_arrays(c.indices, d) for c in p.column(j).chunks], type=S.REASON_TYPE))
+            for p in parts]
+        return pa.concat_tables(parts)
+
+    def _process_part(self, table: pa.Table, rows: np.ndarray, reason_id: np.ndarray) -> pa.Table:
         X, cov = self.inputs_from_table(table)
         res = self.compute(X, cov, reason_id)
         return self.to_table(res, table, rows)
@@ -526,26 +534,16 @@ class Summary:
         """Count one output table (``rows_in`` input rows gave it)."""
         self.rows_in += int(rows_in)
         self.rows_out += out.num_rows
-        s = out.column("status").combine_chunks()
-        r = out.column("reason").combine_chunks()
-        if not pa.types.is_dictionary(s.type):
-            s = pc.dictionary_encode(s)
-        if not pa.types.is_dictionary(r.type):
-            r = pc.dictionary_encode(r)
-        per = dict(zip(s.dictionary.to_pylist(),
-                       np.bincount(s.indices.to_numpy(zero_copy_only=False), minlength=len(s.dictionary)).tolist(),
-                       strict=True))
+        per = _value_counts(out.column("status"))
         unknown = set(per) - set(S.STATUSES)
         if unknown:  # pragma: no cover - a bug
             raise RuntimeError(f"unknown status {sorted(unknown)}")
         self.rows_ok += per.get(S.STATUS_OK, 0)
         self.rows_partial += per.get(S.STATUS_PARTIAL, 0)
         self.rows_error += per.get(S.STATUS_ERROR, 0)
-        idx = r.indices.to_numpy(zero_copy_only=False)
-        texts = r.dictionary.to_pylist()
-        for i, c in enumerate(np.bincount(idx, minlength=len(texts)).tolist()):
-            if c and texts[i] != "ok":
-                self.reasons[texts[i]] = self.reasons.get(texts[i], 0) + c
+        for text, c in _value_counts(out.column("reason")).items():
+            if text != "ok":
+                self.reasons[text] = self.reasons.get(text, 0) + c
 
     def merge(self, other: Summary) -> None:
         for name in ("rows_in", "rows_out", "rows_ok", "rows_partial", "rows_error"):
@@ -569,6 +567,20 @@ class Summary:
     def text(self) -> str:
         return (f"rows in {self.rows_in}, rows out {self.rows_out} (ok {self.rows_ok}, partial {self.rows_partial}), "
                 f"rows with errors {self.rows_error}")
+
+
+def _value_counts(col) -> dict[str, int]:
+    """Counts of the values of a (chunked) string or dictionary column."""
+    counts: dict[str, int] = {}
+    chunks = col.chunks if isinstance(col, pa.ChunkedArray) else [col]
+    for c in chunks:
+        if not pa.types.is_dictionary(c.type):
+            c = pc.dictionary_encode(c)
+        texts = c.dictionary.to_pylist()
+        for i, k in enumerate(np.bincount(c.indices.to_numpy(zero_copy_only=False), minlength=len(texts)).tolist()):
+            if k:
+                counts[texts[i]] = counts.get(texts[i], 0) + k
+    return counts
 
 
 def summary_path(out) -> Path:
