@@ -1,0 +1,605 @@
+"""Multi-camera fusion of footprint files (``footprint-uq fuse``), every input row accounted for.
+
+Reads the per-camera footprint outputs of ``footprint-uq objects`` (or
+:func:`footprint_uq.batch.process_table`), associates the estimates of the same
+object by a key (default ``frame, object_id``), fuses the footprint centres by
+covariance weighting in information form (:func:`footprint_uq.fusion.fuse_by_id`)
+and writes one row per (frame, object) with the fused centre, its covariance,
+ellipse, the number of cameras used, the consistency test and the CPM/J2735
+fields of the fused covariance, plus one row per input row (the *sources*)
+saying whether it was used and why not.  Full description (columns, CLI):
+``docs/uncertainty-model.md``, section "Multi-camera fusion".
+
+Association
+-----------
+**By key only**: rows with equal key values (after type normalisation: ``frame``
+as an integer, ``object_id`` and any other key column as text) are the same
+object.  The ids must therefore be shared across cameras, e.g. from a
+multi-camera tracker or a global id assigned upstream; no geometric gating is
+done (the Mahalanobis check *reports* estimates that disagree, it does not
+re-associate them).  The cameras are assumed synchronised on ``frame``.
+
+Independence
+------------
+The fusion assumes the cameras' errors are independent (separately calibrated
+cameras).  Two rows of the *same* camera for one key share that camera's
+calibration error and cannot be fused as independent: all such rows are
+rejected (``duplicate: ...``) and the object is fused from the other cameras.
+
+Rows not used (``used`` False in the sources table, first applicable reason)
+----------------------------------------------------------------------------
+``malformed CSV line ...`` / ``invalid JSON line ...`` (unparseable line),
+``field NAME is not a number`` (or ``an integer``), ``missing key field NAME``,
+``missing camera_id``, ``input status partial: ...`` / ``input status error: ...``
+(the footprint row had no centre), ``missing or non-finite field NAME``,
+``covariance not positive definite``, ``duplicate: N rows of one camera for this key``.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+
+from ._checks import as_float
+from .ellipse import ellipse_axes
+from .errors import InputError
+from .footprints import V2X_FIELDS
+from .fusion import chi2_threshold, fuse_by_id
+from .v2x import cpm_fields, j2735_fields
+
+__all__ = ["DEFAULT_KEY", "ESTIMATE_COLUMNS", "CAMERA_ID_FROM", "FuseSummary", "FusedFootprints", "fuse_footprints",
+           "fuse_files", "read_footprints", "sources_path", "summary_path"]
+
+#: default association key
+DEFAULT_KEY = ("frame", "object_id")
+#: the estimate columns every input must have (footprint centre and covariance)
+ESTIMATE_COLUMNS = ("x_m", "y_m", "cov_xx_m2", "cov_xy_m2", "cov_yy_m2")
+#: where camera ids come from
+CAMERA_ID_FROM = ("filename", "column")
+#: key types: frame an integer, anything else compared as text
+_KEY_TYPES = {"frame": pa.int64()}
+#: relative tolerance on det(C) > 0 (as fuse_by_id's positive-definiteness test)
+_STATUS_OK = "ok"
+
+
+def summary_path(out) -> Path:
+    """``<out>.summary.json``, where :func:`fuse_files` writes the summary (as ``footprint-uq objects``)."""
+    out = Path(out)
+    return out.with_name(out.name + ".summary.json")
+
+
+def sources_path(out) -> Path:
+    """Default sources table next to ``out``: ``fused.parquet`` -> ``fused.sources.parquet``."""
+    out = Path(out)
+    return out.with_name(out.stem + ".sources" + out.suffix)
+
+
+def _key_type(name: str) -> pa.DataType:
+    return _KEY_TYPES.get(name, pa.string())
+
+
+@dataclass
+class _Part:
+    """One input, normalised: a table of parsed rows plus its unparseable rows."""
+
+    name: str
+    table: pa.Table          # columns: keys, camera_id, estimates, status, reason, row (optional)
+    source_rows: np.ndarray  # (n,) 0-based row in the input
+    pre: list                # (n,) None or the reason a value did not convert
+    malformed: list          # [(row, reason)]
+    camera: str | None       # camera id for the whole input (filename mode), else None
+
+
+@dataclass
+class FuseSummary:
+    """Row and object accounting of a fusion job (``rows_in == rows_used + rows_rejected``)."""
+
+    rows_in: int = 0
+    rows_used: int = 0
+    rows_rejected: int = 0
+    objects_out: int = 0
+    objects_fused: int = 0
+    objects_single: int = 0
+    objects_unavailable: int = 0
+    objects_inconsistent: int = 0
+    sources_inconsistent: int = 0
+    reasons: dict = field(default_factory=dict)
+    inputs: list = field(default_factory=list)
+    elapsed_s: float = 0.0
+    info: dict = field(default_factory=dict)
+
+    @property
+    def consistent(self) -> bool:
+        return self.rows_in == self.rows_used + self.rows_rejected
+
+    def to_dict(self) -> dict:
+        return {"rows_in": self.rows_in, "rows_used": self.rows_used, "rows_rejected": self.rows_rejected,
+                "consistent": self.consistent, "objects_out": self.objects_out, "objects_fused": self.objects_fused,
+                "objects_single": self.objects_single, "objects_unavailable": self.objects_unavailable,
+                "objects_inconsistent": self.objects_inconsistent, "sources_inconsistent": self.sources_inconsistent,
+                "reasons": dict(sorted(self.reasons.items(), key=lambda kv: -kv[1])), "inputs": self.inputs,
+                "elapsed_s": round(self.elapsed_s, 6), **self.info}
+
+    def text(self) -> str:
+        return (f"rows in {self.rows_in}, rows used {self.rows_used}, rows rejected {self.rows_rejected}; "
+                f"objects out {self.objects_out} (fused {self.objects_fused}, single camera {self.objects_single}, "
+                f"unavailable {self.objects_unavailable}), inconsistent objects {self.objects_inconsistent}")
+
+
+@dataclass
+class FusedFootprints:
+    """Result of :func:`fuse_footprints`.
+
+    Attributes
+    ----------
+    objects : pyarrow.Table    one row per key (fused centre, covariance, ellipse, consistency, V2X fields)
+    sources : pyarrow.Table    one row per input row (used, reason, d2, inconsistent)
+    summary : FuseSummary
+    """
+
+    objects: pa.Table
+    sources: pa.Table
+    summary: FuseSummary
+
+
+# -- reading ---------------------------------------------------------------------------------------
+def _check_columns(names, key, need_camera: bool, where: str) -> None:
+    names = set(names)
+    missing = [c for c in ESTIMATE_COLUMNS if c not in names]
+    if missing:
+        raise InputError(f"{where} columns", f"missing {missing}",
+                         f"footprint columns {list(ESTIMATE_COLUMNS)} (the output of footprint-uq objects)")
+    missing = [c for c in key if c not in names]
+    if missing:
+        raise InputError(f"{where} columns", f"missing key {missing}", f"the key columns {list(key)} in every input")
+    if need_camera and "camera_id" not in names:
+        raise InputError(f"{where} columns", "no camera_id",
+                         "a camera_id column with --camera-id-from column (or use filename)")
+
+
+def _normalise(table: pa.Table, key, pre: list) -> pa.Table:
+    """Keys -> their types, camera_id/status/reason -> text, numbers -> float64 (conversion errors into ``pre``)."""
+    from .batch.readers import coerce_table
+
+    numeric = tuple(c for c in ESTIMATE_COLUMNS + ("row",) if c in table.column_names)
+    id_types = {k: _key_type(k) for k in key}
+    for c in ("camera_id", "status", "reason"):
+        if c in table.column_names and c not in id_types:
+            id_types[c] = pa.string()
+    t, pre2 = coerce_table(table, numeric, id_types=id_types)
+    if pre2 is not None:
+        for i, p in enumerate(pre2):
+            if p is not None and pre[i] is None:
+                pre[i] = p
+    return t
+
+
+def read_footprints(path, *, key=DEFAULT_KEY, camera_id_from: str = "filename", chunk_rows: int = 262_144) -> _Part:
+    """Read one footprint file (CSV, JSON Lines or Parquet) for fusion, keeping every row's number.
+
+    Unparseable lines and values that do not convert are kept with their reason
+    (they become rejected rows), row numbers as in ``docs/batch.md`` ("Row numbers").
+    """
+    from .batch.readers import open_detections
+
+    p = Path(path)
+    if not p.is_file():
+        raise InputError("INPUT", str(path), "an existing footprint file (.csv, .jsonl/.ndjson, .parquet/.pq)")
+    reader = open_detections(p, chunk_rows=chunk_rows)
+    _check_columns(reader.columns, key, camera_id_from == "column", str(p))
+    numeric = ESTIMATE_COLUMNS + (("row",) if "row" in reader.columns else ())
+    reader.select(numeric)
+    extra = [c for c in tuple(key) + ("camera_id", "status", "reason")
+             if c in reader.columns and c not in reader.needed]
+    reader.needed = tuple(reader.needed) + tuple(extra)
+    tables, rows, pre, malformed = [], [], [], []
+    for ch in reader:
+        tables.append(ch.table)
+        rows.append(ch.rows)
+        pre += ch.pre_errors if ch.pre_errors is not None else [None] * ch.table.num_rows
+        malformed += ch.malformed
+    if tables:
+        cols = list(reader.needed)
+        table = pa.concat_tables([t.select(cols) for t in tables], promote_options="permissive")
+    else:
+        table = pa.table({c: pa.array([], pa.string()) for c in reader.needed})
+    table = _normalise(table, key, pre)
+    src_rows = np.concatenate(rows) if rows else np.zeros(0, np.int64)
+    cam = p.stem if camera_id_from == "filename" else None
+    return _Part(str(p), table, src_rows, pre, sorted(malformed), cam)
+
+
+def _as_table(obj) -> pa.Table:
+    if isinstance(obj, pa.Table):
+        return obj
+    if isinstance(obj, pa.RecordBatch):
+        return pa.Table.from_batches([obj])
+    try:
+        import pandas as pd
+
+        if isinstance(obj, pd.DataFrame):
+            return pa.Table.from_pandas(obj, preserve_index=False)
+    except ImportError:  # pragma: no cover - pandas is a dependency of the dev environment only
+        pass
+    if isinstance(obj, dict):
+        return pa.table({k: (v if isinstance(v, pa.Array | pa.ChunkedArray) else np.asarray(v))
+                         for k, v in obj.items()})
+    raise InputError("tables", type(obj).__name__, "pyarrow Tables, pandas DataFrames or dicts of columns")
+
+
+# -- fusion ----------------------------------------------------------------------------------------
+def _strings(table: pa.Table, name: str, n: int) -> np.ndarray:
+    if name not in table.column_names:
+        return np.full(n, None, dtype=object)
+    return np.array(table.column(name).to_pylist(), dtype=object)
+
+
+def _floats(table: pa.Table, name: str) -> np.ndarray:
+    col = table.column(name)
+    col = col.combine_chunks() if isinstance(col, pa.ChunkedArray) else col
+    return col.to_numpy(zero_copy_only=False).astype(np.float64)
+
+
+def _codes(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Integer codes (-1 for None) of an object array and the sorted unique values."""
+    import pandas as pd
+
+    codes, uniq = pd.factorize(values, sort=True, use_na_sentinel=True)
+    return codes.astype(np.int64), np.asarray(uniq, dtype=object)
+
+
+def _fuse_parts(parts: list[_Part], key, *, confidence: float, ellipse_confidence: float | None,
+                heading_offset_deg: float) -> FusedFootprints:
+    t0 = time.perf_counter()
+    key = tuple(key)
+    thr2 = chi2_threshold(confidence, 2)  # validates confidence
+    # -- stack every row of every input (parsed rows, then the unparseable ones) ---------------------
+    inp, srow, cam, reason, det_row, keyvals = [], [], [], [], [], {k: [] for k in key}
+    X = []
+    summary = FuseSummary()
+    for i, part in enumerate(parts):
+        t = part.table
+        n = t.num_rows
+        m = len(part.malformed)
+        inp.append(np.full(n + m, i, dtype=np.int64))
+        srow.append(np.concatenate([part.source_rows.astype(np.int64),
+                                    np.asarray([r for r, _ in part.malformed], dtype=np.int64)]))
+        if part.camera is not None:
+            c = np.full(n + m, part.camera, dtype=object)
+        else:
+            c = np.concatenate([_strings(t, "camera_id", n), np.full(m, None, dtype=object)])
+        cam.append(c)
+        rs = np.empty(n + m, dtype=object)
+        rs[:n] = part.pre
+        rs[n:] = [r for _, r in part.malformed]
+        st = _strings(t, "status", n)
+        why = _strings(t, "reason", n)
+        for k in key:
+            keyvals[k].append(np.concatenate([_strings(t, k, n), np.full(m, None, dtype=object)]))
+        est = np.full((n + m, 5), np.nan)
+        for j, name in enumerate(ESTIMATE_COLUMNS):
+            est[:n, j] = _floats(t, name)
+        X.append(est)
+        dr = np.full(n + m, np.nan)
+        if "row" in t.column_names:
+            dr[:n] = _floats(t, "row")
+        det_row.append(dr)
+        # per-row reasons, first applicable wins (vectorised masks; loops over a few columns only)
+        todo = rs[:n] == None  # noqa: E711 - elementwise on an object array
+        for k in key:
+            miss = todo & (keyvals[k][-1][:n] == None)  # noqa: E711
+            rs[:n][miss] = f"missing key field {k}"
+            todo &= ~miss
+        if part.camera is None:
+            miss = todo & (c[:n] == None)  # noqa: E711
+            rs[:n][miss] = "missing camera_id"
+            todo &= ~miss
+        if "status" in t.column_names:
+            bad = todo & (st != _STATUS_OK)
+            for j in np.flatnonzero(bad):
+                rs[j] = f"input status {st[j]}: {why[j]}" if why[j] not in (None, "") else f"input status {st[j]}"
+            todo &= ~bad
+        for j, name in enumerate(ESTIMATE_COLUMNS):
+            bad = todo & ~np.isfinite(est[:n, j])
+            rs[:n][bad] = f"missing or non-finite field {name}"
+            todo &= ~bad
+        cxx, cxy, cyy = est[:n, 2], est[:n, 3], est[:n, 4]
+        with np.errstate(invalid="ignore"):
+            pd_ok = (cxx > 0) & (cyy > 0) & (cxx * cyy - cxy * cxy > 0)
+        rs[:n][todo & ~pd_ok] = "covariance not positive definite"
+        reason.append(rs)
+        summary.inputs.append({"input": part.name, "camera_id": part.camera, "rows": n + m})
+    if parts:
+        inp, srow, cam, reason = (np.concatenate(a) for a in (inp, srow, cam, reason))
+        det_row, X = np.concatenate(det_row), np.concatenate(X)
+        keyvals = {k: np.concatenate(v) for k, v in keyvals.items()}
+    else:
+        inp = srow = np.zeros(0, np.int64)
+        cam = reason = np.zeros(0, dtype=object)
+        det_row, X = np.zeros(0), np.zeros((0, 5))
+        keyvals = {k: np.zeros(0, dtype=object) for k in key}
+    R = inp.shape[0]
+    # -- association: group rows by key ------------------------------------------------------------
+    kcodes = []
+    kuniq = []
+    for k in key:
+        c, u = _codes(keyvals[k])
+        kcodes.append(c)
+        kuniq.append(u)
+    kc = np.stack(kcodes, 1) if R else np.zeros((0, len(key)), np.int64)
+    keyed = (kc >= 0).all(1)
+    groups, ginv = np.unique(kc[keyed], axis=0, return_inverse=True)
+    ginv = ginv.reshape(-1)
+    M = groups.shape[0]
+    group = np.full(R, -1, dtype=np.int64)
+    group[keyed] = ginv
+    # same camera twice for one key: shared calibration error, not independent -> reject all of them
+    camc, cam_uniq = _codes(cam)
+    cand = (reason == None) & keyed  # noqa: E711
+    if np.any(cand):
+        pairs = np.stack([group[cand], camc[cand]], 1)
+        _, pinv, pcnt = np.unique(pairs, axis=0, return_inverse=True, return_counts=True)
+        cnt = pcnt[pinv.reshape(-1)]
+        idx = np.flatnonzero(cand)[cnt > 1]
+        for j, n_dup in zip(idx.tolist(), cnt[cnt > 1].tolist(), strict=True):
+            reason[j] = f"duplicate: {n_dup} rows of one camera for this key"
+    used_in = (reason == None) & keyed  # noqa: E711
+    # -- fusion (information form) on the keyed rows; rejected rows enter as NaN (unused) -------------
+    xy = np.where(used_in[:, None], X[:, :2], np.nan)
+    C = np.empty((R, 2, 2))
+    C[:, 0, 0], C[:, 0, 1], C[:, 1, 0], C[:, 1, 1] = X[:, 2], X[:, 3], X[:, 3], X[:, 4]
+    C = np.where(used_in[:, None, None], C, np.nan)
+    d2 = np.full(R, np.nan)
+    flag = np.zeros(R, dtype=bool)
+    if M:
+        fr = fuse_by_id(group[keyed], xy[keyed], C[keyed], confidence=confidence)
+        fx, fP, nsrc = fr.xy_world_m, fr.cov_m2, fr.n_sources
+        chi2, chi2_thr, cons = fr.chi2, fr.chi2_threshold, fr.consistent
+        d2[keyed] = fr.source_d2
+        flag[keyed] = fr.source_inconsistent
+    else:
+        fx, fP = np.zeros((0, 2)), np.zeros((0, 2, 2))
+        nsrc = np.zeros(0, np.int64)
+        chi2 = chi2_thr = np.zeros(0)
+        cons = np.zeros(0, bool)
+    reason = np.where(used_in, "ok", reason).astype(object)
+    # -- per object ----------------------------------------------------------------------------------
+    n_rows = np.bincount(group[keyed], minlength=M)
+    n_incons = np.bincount(group[keyed], weights=flag[keyed], minlength=M).astype(np.int64)
+    max_d2 = np.full(M, np.nan)
+    ok_d2 = keyed & np.isfinite(d2)
+    if np.any(ok_d2):
+        np.fmax.at(max_d2, group[ok_d2], d2[ok_d2])
+    cams_used = _join_per_group(group, cam, used_in, M)
+    cams_flag = _join_per_group(group, cam, flag, M)
+    smaj, smin, ori = ellipse_axes(fP)
+    v2x = {**cpm_fields(fP, heading_offset_deg), **j2735_fields(fP, heading_offset_deg)}
+    has = nsrc > 0
+    # reasons of objects without any usable row: the (first) reason of their rows
+    obj_reason = np.full(M, "ok", dtype=object)
+    if np.any(~has):
+        first_reason = np.full(M, None, dtype=object)
+        kr = np.flatnonzero(keyed)
+        order = kr[np.argsort(group[kr], kind="stable")]
+        g_sorted = group[order]
+        firsts = order[np.r_[True, g_sorted[1:] != g_sorted[:-1]]] if order.size else order
+        first_reason[group[firsts]] = reason[firsts]
+        obj_reason[~has] = ["no usable estimate: " + str(r) for r in first_reason[~has]]
+    cols: dict[str, pa.Array] = {}
+    for j, k in enumerate(key):
+        cols[k] = pa.array(kuniq[j][groups[:, j]].tolist() if M else [], type=_key_type(k))
+    cols["status"] = pa.array(np.where(has, "ok", "error").tolist(), pa.string())
+    cols["reason"] = pa.array(obj_reason.tolist(), pa.string())
+    cols["n_cameras"] = pa.array(nsrc.astype(np.int32))
+    cols["n_rows"] = pa.array(n_rows.astype(np.int32))
+    cols["cameras"] = pa.array(cams_used, pa.string())
+    for name, v in (("x_m", fx[:, 0]), ("y_m", fx[:, 1]), ("cov_xx_m2", fP[:, 0, 0]),
+                    ("cov_xy_m2", 0.5 * (fP[:, 0, 1] + fP[:, 1, 0])), ("cov_yy_m2", fP[:, 1, 1]),
+                    ("sigma_major_m", smaj), ("sigma_minor_m", smin), ("orientation_deg", ori)):
+        cols[name] = pa.array(np.asarray(v, dtype=np.float64))
+    if ellipse_confidence is not None:
+        a, b, _ = ellipse_axes(fP, confidence=ellipse_confidence)
+        cols["semi_major_m"] = pa.array(a)
+        cols["semi_minor_m"] = pa.array(b)
+    cols["chi2"] = pa.array(np.asarray(chi2, dtype=np.float64))
+    cols["chi2_dof"] = pa.array((2 * np.maximum(nsrc - 1, 0)).astype(np.int32))
+    cols["chi2_threshold"] = pa.array(np.asarray(chi2_thr, dtype=np.float64))
+    cols["max_d2"] = pa.array(max_d2)
+    cols["consistent"] = pa.array(np.asarray(cons, dtype=bool), mask=~has)
+    cols["n_inconsistent"] = pa.array(n_incons.astype(np.int32))
+    cols["inconsistent_cameras"] = pa.array(cams_flag, pa.string())
+    for name in V2X_FIELDS:
+        cols[name] = pa.array(np.asarray(v2x[name], dtype=np.int32))
+    objects = pa.table(cols)
+    # -- per source row ------------------------------------------------------------------------------
+    names = [p.name for p in parts]
+    sc: dict[str, pa.Array] = {
+        "input": pa.array([names[i] for i in inp.tolist()], pa.string()),
+        "source_row": pa.array(srow),
+        "camera_id": pa.array(cam.tolist(), pa.string()),
+    }
+    for k in key:
+        sc[k] = pa.array(keyvals[k].tolist(), type=_key_type(k))
+    sc["detection_row"] = pa.array(np.where(np.isfinite(det_row), det_row, 0).astype(np.int64),
+                                   mask=~np.isfinite(det_row))
+    sc["used"] = pa.array(used_in)
+    sc["reason"] = pa.array(reason.tolist(), pa.string())
+    sc["d2"] = pa.array(d2)
+    sc["inconsistent"] = pa.array(flag)
+    sources = pa.table(sc)
+    # -- summary ---------------------------------------------------------------------------------------
+    summary.rows_in = R
+    summary.rows_used = int(used_in.sum())
+    summary.rows_rejected = R - summary.rows_used
+    summary.objects_out = M
+    summary.objects_fused = int((nsrc >= 2).sum())
+    summary.objects_single = int((nsrc == 1).sum())
+    summary.objects_unavailable = int((nsrc == 0).sum())
+    summary.objects_inconsistent = int(((nsrc >= 2) & ~np.asarray(cons, dtype=bool)).sum())
+    summary.sources_inconsistent = int(flag.sum())
+    rj = reason[~used_in]
+    if rj.size:
+        u, c = np.unique(rj.astype(str), return_counts=True)
+        summary.reasons = dict(zip(u.tolist(), c.tolist(), strict=True))
+    summary.info = {"key": list(key), "confidence": float(confidence), "d2_threshold": thr2,
+                    "ellipse_confidence": ellipse_confidence, "heading_offset_deg": float(heading_offset_deg)}
+    summary.elapsed_s = time.perf_counter() - t0
+    return FusedFootprints(objects, sources, summary)
+
+
+def _join_per_group(group: np.ndarray, cam: np.ndarray, mask: np.ndarray, M: int) -> list[str]:
+    """Comma-joined sorted camera ids of the rows in ``mask``, per group (empty string if none)."""
+    out = [""] * M
+    sel = np.flatnonzero(mask & (group >= 0))
+    if not sel.size:
+        return out
+    import pandas as pd
+
+    df = pd.DataFrame({"g": group[sel], "c": cam[sel].astype(str)}).sort_values(["g", "c"], kind="stable")
+    for g, s in df.groupby("g", sort=False)["c"].agg(",".join).items():
+        out[int(g)] = s
+    return out
+
+
+def _check_options(key, confidence, ellipse_confidence, heading_offset_deg):
+    key = tuple(key)
+    if not key or any(not isinstance(k, str) or not k for k in key) or len(set(key)) != len(key):
+        raise InputError("key", key, "one or more distinct column names, e.g. frame,object_id")
+    c = as_float("confidence", confidence)
+    if not 0.0 < c < 1.0:
+        raise InputError("confidence", confidence, "a probability in (0, 1), e.g. 0.99")
+    if ellipse_confidence is not None:
+        e = as_float("ellipse_confidence", ellipse_confidence)
+        if not 0.0 < e < 1.0:
+            raise InputError("ellipse_confidence", ellipse_confidence, "a probability in (0, 1), e.g. 0.95")
+    as_float("heading_offset_deg", heading_offset_deg)
+    return key
+
+
+def fuse_footprints(tables, *, camera_ids=None, key=DEFAULT_KEY, confidence: float = 0.99,
+                    ellipse_confidence: float | None = 0.95, heading_offset_deg: float = 0.0) -> FusedFootprints:
+    """Fuse in-memory footprint tables (e.g. one :func:`~footprint_uq.batch.process_table` output per camera).
+
+    Parameters
+    ----------
+    tables : sequence of pyarrow.Table, pandas.DataFrame or dict of columns
+        Footprint rows with the key columns and ``x_m, y_m, cov_xx_m2, cov_xy_m2, cov_yy_m2``
+        (``status``/``reason`` honoured when present).
+    camera_ids : sequence of str, optional
+        One camera id per table; None: each table's ``camera_id`` column.
+    key : sequence of str
+        Association columns (default ``("frame", "object_id")``).
+    confidence : float
+        Level of the chi-square consistency tests (default 0.99: d^2 > 9.21 is flagged).
+    ellipse_confidence : float or None
+        Probability of the ``semi_major_m``/``semi_minor_m`` ellipse (default 0.95); None: not written.
+    heading_offset_deg : float
+        Compass bearing of the world +y axis, for the V2X fields.
+
+    Returns
+    -------
+    FusedFootprints
+        ``objects`` (one row per key), ``sources`` (one row per input row, ``input`` is
+        ``"table <i>"``, ``source_row`` the 0-based row) and the ``summary``.
+    """
+    key = _check_options(key, confidence, ellipse_confidence, heading_offset_deg)
+    tables = list(tables)
+    if camera_ids is not None:
+        camera_ids = [str(c) for c in camera_ids]
+        if len(camera_ids) != len(tables):
+            raise InputError("camera_ids", camera_ids, f"one id per table ({len(tables)})")
+    parts = []
+    for i, obj in enumerate(tables):
+        t = _as_table(obj)
+        where = f"table {i}"
+        _check_columns(t.column_names, key, camera_ids is None, where)
+        keep = [c for c in dict.fromkeys(tuple(key) + ESTIMATE_COLUMNS + ("camera_id", "status", "reason", "row"))
+                if c in t.column_names]
+        t = t.select(keep)
+        pre = [None] * t.num_rows
+        t = _normalise(t, key, pre)
+        parts.append(_Part(where, t, np.arange(t.num_rows, dtype=np.int64), pre, [],
+                           None if camera_ids is None else camera_ids[i]))
+    return _fuse_parts(parts, key, confidence=confidence, ellipse_confidence=ellipse_confidence,
+                       heading_offset_deg=heading_offset_deg)
+
+
+def fuse_files(inputs, out, *, camera_id_from: str | None = None, key=DEFAULT_KEY, confidence: float = 0.99,
+               ellipse_confidence: float | None = 0.95, heading_offset_deg: float = 0.0, sources_out=None,
+               compression: str | None = "snappy", chunk_rows: int = 262_144) -> FuseSummary:
+    """Fuse footprint files (one per camera, or files with a ``camera_id`` column) into ``out``.
+
+    Parameters
+    ----------
+    inputs : sequence of paths
+        ``.csv``, ``.jsonl``/``.ndjson`` or ``.parquet``/``.pq`` footprint files.
+    out : path
+        Fused objects, ``.parquet``, ``.csv`` or ``.jsonl``.
+    camera_id_from : {"filename", "column"} or None
+        Camera of a row: the input's file name without extension (ids must differ), or its
+        ``camera_id`` column.  None: "column" if every input has that column, else "filename".
+    sources_out : path, optional
+        The per-row table (default :func:`sources_path` of ``out``: ``fused.sources.parquet``).
+    key, confidence, ellipse_confidence, heading_offset_deg
+        As :func:`fuse_footprints`.
+    compression : Parquet compression (None: none).
+    chunk_rows : rows read at a time (the fusion itself holds the estimate columns of all rows).
+
+    Returns
+    -------
+    FuseSummary
+        Also written to :func:`summary_path` of ``out`` (``<out>.summary.json``).
+    """
+    from .batch.readers import open_detections
+    from .batch.writers import detect_out_format, open_writer
+
+    t0 = time.perf_counter()
+    key = _check_options(key, confidence, ellipse_confidence, heading_offset_deg)
+    inputs = [Path(p) for p in inputs]
+    if not inputs:
+        raise InputError("INPUT", [], "one or more footprint files")
+    fmt = detect_out_format(out)
+    if fmt == "geojson":
+        raise InputError("out", str(out), "a .parquet, .csv or .jsonl file (GeoJSON needs footprint polygons)")
+    sources_out = sources_path(out) if sources_out is None else Path(sources_out)
+    detect_out_format(sources_out)
+    if Path(sources_out).resolve() == Path(out).resolve():
+        raise InputError("sources_out", str(sources_out), "a different file from out")
+    for p in inputs:
+        if not p.is_file():
+            raise InputError("INPUT", str(p), "an existing footprint file (.csv, .jsonl/.ndjson, .parquet/.pq)")
+        if p.resolve() in (Path(out).resolve(), Path(sources_out).resolve()):
+            raise InputError("out", str(out), f"a file that is not an input ({p})")
+    if camera_id_from is None:
+        has_col = all("camera_id" in open_detections(p).columns for p in inputs)
+        camera_id_from = "column" if has_col else "filename"
+    if camera_id_from not in CAMERA_ID_FROM:
+        raise InputError("camera_id_from", camera_id_from, f"one of {CAMERA_ID_FROM}")
+    if camera_id_from == "filename":
+        stems = [p.stem for p in inputs]
+        if len(inputs) < 2:
+            raise InputError("INPUT", [str(p) for p in inputs],
+                             "two or more files (one per camera), or one file with a camera_id column "
+                             "and --camera-id-from column")
+        dup = sorted({s for s in stems if stems.count(s) > 1})
+        if dup:
+            raise InputError("INPUT", f"camera id {dup[0]!r} from two file names",
+                             "file names (without extension) that differ between cameras")
+    parts = [read_footprints(p, key=key, camera_id_from=camera_id_from, chunk_rows=chunk_rows) for p in inputs]
+    res = _fuse_parts(parts, key, confidence=confidence, ellipse_confidence=ellipse_confidence,
+                      heading_offset_deg=heading_offset_deg)
+    comp = compression or "none"
+    for path, table in ((out, res.objects), (sources_out, res.sources)):
+        kw = {"compression": comp} if detect_out_format(path) == "parquet" else {}
+        with open_writer(path, table.schema, **kw) as w:
+            w.write(table)
+    s = res.summary
+    s.elapsed_s = time.perf_counter() - t0
+    s.info.update({"camera_id_from": camera_id_from, "out": str(out), "sources_out": str(sources_out)})
+    summary_path(out).write_text(json.dumps(s.to_dict(), indent=2) + "\n", encoding="utf-8")
+    return s
