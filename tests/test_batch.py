@@ -13,6 +13,7 @@ from click.testing import CliRunner
 
 from footprint_uq import PanTiltCamera
 from footprint_uq.batch.process import BatchProcessor, process_file, process_table, summary_path
+from footprint_uq.ellipse import ellipse_axes
 from footprint_uq.errors import InputError
 from footprint_uq.footprints import V2X_FIELDS, footprints_from_boxes2d, footprints_from_boxes3d
 from footprint_uq.io import save_camera
@@ -120,6 +121,10 @@ def test_process_table_matches_reference_3d(cam):
     for name in V2X_FIELDS:
         assert np.array_equal(out.column(name).to_numpy(), fields[name]), name
     a = out.column("sigma_major_m").to_numpy()
+    ea, eb, eang = ellipse_axes(C[:, [0, 1, 1, 2]].reshape(-1, 2, 2))
+    for name, ref_v in (("sigma_major_m", ea), ("sigma_minor_m", eb), ("orientation_deg", eang)):
+        np.testing.assert_allclose(out.column(name).to_numpy(), ref_v, rtol=1e-13, atol=1e-15, equal_nan=True)
+    assert np.isnan(a[~ok]).all()
     np.testing.assert_allclose(out.column("semi_major_m").to_numpy()[ok], 2.4477468306808166 * a[ok], rtol=1e-12)
     for k in range(4):
         np.testing.assert_allclose(out.column(f"c{k}_x_m").to_numpy()[ok], ref.corners_xy_world_m[ok, k, 0],

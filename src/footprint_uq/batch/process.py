@@ -26,6 +26,7 @@ missing columns, bad options) raise :class:`~footprint_uq.errors.InputError`.
 
 from __future__ import annotations
 
+import math
 import os
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
@@ -34,11 +35,12 @@ from pathlib import Path
 import numpy as np
 import pyarrow as pa
 import pyarrow.compute as pc
+from numba import njit
 
 from .. import status as st
 from .._checks import as_float
 from ..budget import load_budget
-from ..ellipse import chi2_scale, ellipse_axes
+from ..ellipse import chi2_scale
 from ..errors import InputError
 from ..footprints import CONTACT_MODES, DEGENERATE, V2X_FIELDS, FrameProcessor
 from . import schema as S
@@ -51,6 +53,30 @@ __all__ = ["BatchProcessor", "process_table", "process_file", "process_chunk", "
 PSD_TOL = 0.5e-12
 #: below this many rows a chunk is processed in one thread
 _MIN_ROWS_PER_THREAD = 20_000
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _centre_columns(centre, cov, largest_xy):
+    """Contiguous output columns of the centre (one pass): x, y, cov xx/xy/yy, 1-sigma ellipse, largest x/y.
+
+    The ellipse is :func:`footprint_uq.ellipse.ellipse_axes` (same formulas, NaN in -> NaN out).
+    """
+    n = centre.shape[0]
+    out = np.empty((10, n))
+    for i in range(n):
+        a, b, d = cov[i, 0, 0], 0.5 * (cov[i, 0, 1] + cov[i, 1, 0]), cov[i, 1, 1]
+        mean = 0.5 * (a + d)
+        rad = math.hypot(0.5 * (a - d), b)
+        ang = 0.5 * math.degrees(math.atan2(2.0 * b, a - d))
+        if ang <= -90.0:
+            ang += 180.0
+        out[0, i], out[1, i] = centre[i, 0], centre[i, 1]
+        out[2, i], out[3, i], out[4, i] = a, cov[i, 0, 1], d
+        out[5, i] = math.sqrt(mean + rad)
+        out[6, i] = math.sqrt(max(mean - rad, 0.0)) if mean - rad == mean - rad else math.nan
+        out[7, i] = ang
+        out[8, i], out[9, i] = largest_xy[i, 0], largest_xy[i, 1]
+    return out
 
 
 class Reasons:
@@ -431,17 +457,15 @@ class BatchProcessor:
         cols["status"] = pa.DictionaryArray.from_arrays(pa.array(res.status_id, type=pa.int32()), self._status_dict)
         cols["reason"] = pa.DictionaryArray.from_arrays(pa.array(res.reason_id, type=pa.int32()),
                                                         self.reasons.dictionary())
-        C = res.centre_cov
-        cols["x_m"], cols["y_m"] = res.centre[:, 0], res.centre[:, 1]
-        cols["cov_xx_m2"], cols["cov_xy_m2"], cols["cov_yy_m2"] = C[:, 0, 0], C[:, 0, 1], C[:, 1, 1]
-        with np.errstate(invalid="ignore"):
-            a, b, ang = ellipse_axes(C)
-        cols["sigma_major_m"], cols["sigma_minor_m"], cols["orientation_deg"] = a, b, ang
+        cc = _centre_columns(np.ascontiguousarray(res.centre), np.ascontiguousarray(res.centre_cov),
+                             np.ascontiguousarray(res.largest_xy))
+        for j, name in enumerate(S.CENTRE_COLUMNS):
+            cols[name] = cc[j]
         if self._k_conf is not None:
-            cols["semi_major_m"], cols["semi_minor_m"] = self._k_conf * a, self._k_conf * b
+            cols["semi_major_m"], cols["semi_minor_m"] = self._k_conf * cc[5], self._k_conf * cc[6]
         cols["largest_index"] = res.largest_index.astype(np.int8)
         cols["largest_sigma_major_m"] = res.largest_semi
-        cols["largest_x_m"], cols["largest_y_m"] = res.largest_xy[:, 0], res.largest_xy[:, 1]
+        cols["largest_x_m"], cols["largest_y_m"] = cc[8], cc[9]
         cols["area_m2"] = res.area
         for j, name in enumerate(V2X_FIELDS):
             cols[name] = res.v2x[:, j]
