@@ -724,6 +724,9 @@ def _point_general(u, v, S00, S01, S11, prm, R, om, colptr, rowidx, vals, vc, Cc
     return True, x0 + ox, y0 + oy, c00, c01, c11
 
 
+#: blocks of contiguous rows per thread in the general kernel (Newton warm-starts within a block)
+_ROWS_PER_BLOCK_DIV = 16
+
 # row buffers of the general map kernel
 _XD, _XN, _YN, _M00, _M01, _M10, _M11, _Q00, _Q01, _Q11, _V0, _V1, _CONV = range(13)
 _NBUF = 13
@@ -1239,16 +1242,23 @@ def covariance_map(camera, budget, step_px: int = 1, *, out=None):
         xy[:] = np.nan
         cov[:] = np.nan
         valid[:] = False
-    elif np.any(prm[P.DIST_SLICE]):
-        nblk = min(H, 4 * nb.get_num_threads())
-        colkind, Om = _column_kinds(k)
-        _map_general(prm, k["R"], k["omega"], k["colptr"], k["rowidx"], k["vals"], k["vc"], colkind, Om, k["has_qc"],
-                     _undistorted_constants(k, step), k["Suv"], step, xy.reshape(-1), cov.reshape(-1),
-                     valid.reshape(-1), W, nblk)
-    else:
-        _map_undistorted(prm, k["R"], k["omega"], k["colptr"], k["rowidx"], k["vals"], k["vc"], k["has_qc"],
-                         _pixel_cov_q(prm, k["Suv"]), _undistorted_constants(k, step), step,
-                         xy.reshape(-1), cov.reshape(-1), valid.reshape(-1), W)
+        return xy, cov, valid
+    # dynamic scheduling in small chunks: on a shared machine a descheduled thread then
+    # delays only its current chunk instead of half of the image
+    old_chunk = nb.set_parallel_chunksize(1)
+    try:
+        if np.any(prm[P.DIST_SLICE]):
+            colkind, Om = _column_kinds(k)
+            nblk = min(H, _ROWS_PER_BLOCK_DIV * nb.get_num_threads())
+            _map_general(prm, k["R"], k["omega"], k["colptr"], k["rowidx"], k["vals"], k["vc"], colkind, Om,
+                         k["has_qc"], _undistorted_constants(k, step), k["Suv"], step, xy.reshape(-1),
+                         cov.reshape(-1), valid.reshape(-1), W, nblk)
+        else:
+            _map_undistorted(prm, k["R"], k["omega"], k["colptr"], k["rowidx"], k["vals"], k["vc"], k["has_qc"],
+                             _pixel_cov_q(prm, k["Suv"]), _undistorted_constants(k, step), step,
+                             xy.reshape(-1), cov.reshape(-1), valid.reshape(-1), W)
+    finally:
+        nb.set_parallel_chunksize(old_chunk)
     return xy, cov, valid
 
 
