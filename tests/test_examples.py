@@ -1,0 +1,50 @@
+"""Every script in examples/ runs (subprocess, Agg backend, temporary output folder) and prints what it should."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
+
+# script -> (substrings its output must contain, files it must write under <out>/<name>/)
+EXPECTED = {
+    "quickstart.py": (["-> ground x = 6.780 m east, y = 11.743 m north", "95 % ellipse:", "height ",
+                       "linear    Monte Carlo   unscented", "valid=False, reason code 1"],
+                      ["quickstart/quickstart_ellipse.png"]),
+    "footprints_per_frame.py": (["cpm_x", "j_orient", "FrameProcessor.boxes3d", "with a detector covariance",
+                                 "no centre (corner"],
+                                ["footprints_per_frame/footprints.csv"]),
+    "reproduce_paper_partials.py": (["worst relative error: paper vs finite differences",
+                                     "paper J Cov(par) J^T", "library propagate"],
+                                    ["reproduce_paper_partials/partials.csv"]),
+    "plan_mount.py": (["criterion: 95 % semi-major axis <= 1.75 m", "best reach with basler1: 54.9 m",
+                       "linear/Monte-Carlo semi-major there"],
+                      ["plan_mount/plan_mount.png", "plan_mount/plan_mount.csv"]),
+}
+
+
+def test_every_example_is_listed():
+    scripts = sorted(p.name for p in EXAMPLES.glob("*.py") if not p.name.startswith("_"))
+    assert scripts == sorted(EXPECTED)
+
+
+@pytest.mark.parametrize("script", sorted(EXPECTED))
+def test_example_runs(script, tmp_path):
+    env = {**os.environ, "MPLBACKEND": "Agg", "FOOTPRINT_UQ_EXAMPLES_OUT": str(tmp_path / "env-unused")}
+    r = subprocess.run([sys.executable, str(EXAMPLES / script), "--out", str(tmp_path)], capture_output=True,
+                       text=True, env=env, timeout=300, cwd=tmp_path)
+    assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-4000:]
+    texts, files = EXPECTED[script]
+    for t in texts:
+        assert t in r.stdout, (t, r.stdout[-3000:])
+    for f in files:
+        assert (tmp_path / f).is_file() and (tmp_path / f).stat().st_size > 0, f
+    assert not (tmp_path / "env-unused").exists()  # --out wins over the environment variable
+    if script == "reproduce_paper_partials.py":
+        worst = float(r.stdout.split("paper vs finite differences ")[1].split(",")[0])
+        assert worst < 1e-6
