@@ -100,8 +100,10 @@ with open(out / "plan_mount.csv", "w", newline="") as fh:
 
 import matplotlib.pyplot as plt  # noqa: E402
 
-fig, axes = plt.subplots(1, len(BUDGETS), figsize=(4.2 * len(BUDGETS), 3.8), sharey=True)
-axes = np.atleast_1d(axes)
+ncol = 2
+nrow = -(-len(BUDGETS) // ncol)
+fig, axes = plt.subplots(nrow, ncol, figsize=(4.6 * ncol, 3.4 * nrow), squeeze=False)
+axes = axes.ravel()[:len(BUDGETS)]
 for ax, b in zip(axes, BUDGETS, strict=True):
     for j, t in enumerate(TILTS_DEG):
         rr = [r for r in rows if r["budget"] == b and r["tilt_deg"] == t]
@@ -109,7 +111,8 @@ for ax, b in zip(axes, BUDGETS, strict=True):
     ax.set_title(b)
     ax.set_xlabel("mount height (m)")
     ax.grid(alpha=0.3)
-axes[0].set_ylabel(f"reach (m): 95 % semi-major <= {LIMIT_M:.2f} m")
+for ax in axes[::ncol]:
+    ax.set_ylabel(f"reach (m): a95 <= {LIMIT_M:.2f} m")
 axes[-1].legend(fontsize=8)
 fig.suptitle(f"Reach of a lane-level (3.5 m) 95 % position, centre column, f = {FOCAL_PX:.0f} px")
 fig.tight_layout()
