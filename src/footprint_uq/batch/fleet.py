@@ -270,6 +270,7 @@ def process_partition(task: Task) -> dict:
     import pyarrow.parquet as pq
 
     from .readers import coerce_table, iter_parquet_tables
+    from .writers import parquet_options
 
     t0 = time.perf_counter()
     pf = pq.ParquetFile(task.path)
@@ -331,8 +332,8 @@ def process_partition(task: Task) -> dict:
                     path = _out_path(task, cam_id)
                     path.parent.mkdir(parents=True, exist_ok=True)
                     tmp = path.with_name(path.name + tmp_tag)
-                    writers[cam_id] = (pq.ParquetWriter(tmp, out.schema, compression=task.compression or "none"),
-                                       tmp, path)
+                    writers[cam_id] = (pq.ParquetWriter(tmp, out.schema, compression=task.compression or "none",
+                                                        **parquet_options(out.schema)), tmp, path)
                     counts[cam_id] = Summary()
                 writers[cam_id][0].write_table(out)
                 counts[cam_id].add_table(out, sel.size)

@@ -149,8 +149,7 @@ def coerce_table(table: pa.Table, numeric: tuple[str, ...], *, id_types: dict | 
 
     Returns ``(table, pre_errors)``; ``pre_errors`` is None when every value converted.
     """
-    n = table.num_rows
-    pre: list = [None] * n
+    pre = _LazyErrors(table.num_rows)
     arrays, names = [], []
     for name in table.column_names:
         col = table.column(name)
@@ -161,7 +160,26 @@ def coerce_table(table: pa.Table, numeric: tuple[str, ...], *, id_types: dict | 
         arrays.append(col)
         names.append(name)
     out = pa.Table.from_arrays(arrays, names=names)
-    return out, (pre if any(p is not None for p in pre) else None)
+    return out, pre.result()
+
+
+class _LazyErrors:
+    """Per-row reasons, allocated on the first error (most chunks have none)."""
+
+    def __init__(self, n: int):
+        self.n = n
+        self.items: list | None = None
+
+    def __getitem__(self, i):
+        return None if self.items is None else self.items[i]
+
+    def __setitem__(self, i, value):
+        if self.items is None:
+            self.items = [None] * self.n
+        self.items[i] = value
+
+    def result(self) -> list | None:
+        return self.items
 
 
 # -- readers ----------------------------------------------------------------------------------------

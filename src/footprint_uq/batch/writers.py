@@ -25,7 +25,8 @@ import pyarrow.compute as pc
 
 from ..errors import InputError
 
-__all__ = ["OUT_FORMATS", "detect_out_format", "open_writer", "FootprintWriter", "decode_dictionaries"]
+__all__ = ["OUT_FORMATS", "detect_out_format", "open_writer", "FootprintWriter", "decode_dictionaries",
+           "parquet_options"]
 
 OUT_FORMATS = {".csv": "csv", ".jsonl": "jsonl", ".ndjson": "jsonl", ".parquet": "parquet", ".pq": "parquet",
                ".geojson": "geojson"}
@@ -83,6 +84,14 @@ class FootprintWriter:
         self.close()
 
 
+def parquet_options(schema: pa.Schema) -> dict:
+    """ParquetWriter options of the footprint files: dictionary encoding for text columns only (trying it on
+    float columns costs more than the whole computation), statistics for the id columns only."""
+    strings = [f.name for f in schema if pa.types.is_dictionary(f.type) or pa.types.is_string(f.type)]
+    stats = [c for c in ("row", "camera_id", "frame", "timestamp_s", "source") if c in schema.names]
+    return {"use_dictionary": strings, "write_statistics": stats}
+
+
 class ParquetOut(FootprintWriter):
     format = "parquet"
 
@@ -90,10 +99,7 @@ class ParquetOut(FootprintWriter):
         import pyarrow.parquet as pq
 
         super().__init__(path, schema)
-        strings = [f.name for f in schema if pa.types.is_dictionary(f.type) or pa.types.is_string(f.type)]
-        stats = ["row"] + [c for c in ("camera_id", "frame", "timestamp_s") if c in schema.names]
-        self._w = pq.ParquetWriter(self.path, schema, compression=compression, use_dictionary=strings,
-                                   write_statistics=stats)
+        self._w = pq.ParquetWriter(self.path, schema, compression=compression, **parquet_options(schema))
 
     def _write(self, table):
         if table.num_rows:
