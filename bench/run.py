@@ -35,6 +35,7 @@ COLUMNS = [
     ("case", "case", "{}"),
     ("pixels", "pixels", "{:,}"),
     ("median_ms", "median [ms]", "{:.2f}"),
+    ("min_ms", "fastest [ms]", "{:.2f}"),
     ("cpu_ms", "CPU (all threads) [ms]", "{:.2f}"),
     ("runs", "runs", "{}"),
     ("mpx_per_s", "Mpx/s", "{:.1f}"),
