@@ -201,6 +201,7 @@ class Task:
     compression: str | None
     partition_keys: dict = field(default_factory=dict)
     threads: int | None = 1  # kernel threads per task: 1 on Dask workers, None (up to 2) in-process
+    template: RegistryEntry | None = None  # processes the rows of unknown cameras (all error rows)
 
 
 def _hive_keys(rel: str) -> dict:
@@ -229,8 +230,25 @@ def plan(dataset, out_dir, registry: dict, *, chunk_rows: int = 262_144, compres
     out = Path(out_dir)
     if out.resolve() == root.resolve() or root.resolve() in out.resolve().parents:
         raise InputError("out", str(out_dir), "a folder outside the detections dataset")
-    return [Task(i, str(f), f.relative_to(root).as_posix(), str(out), registry, dict(options), int(chunk_rows),
-                 compression, _hive_keys(f.relative_to(root).as_posix())) for i, f in enumerate(files)]
+    template = next(iter(registry.values()))
+    tasks = []
+    for i, f in enumerate(files):
+        rel = f.relative_to(root).as_posix()
+        keys = _hive_keys(rel)
+        cid = keys.get("camera_id")
+        # a camera_id folder: ship only that camera (a file may still name others in a column: then all)
+        cams = registry
+        if cid is not None and not _has_camera_column(f):
+            cams = {cid: registry[cid]} if cid in registry else {}
+        tasks.append(Task(i, str(f), rel, str(out), cams, dict(options), int(chunk_rows), compression, keys,
+                          template=template))
+    return tasks
+
+
+def _has_camera_column(path) -> bool:
+    import pyarrow.parquet as pq
+
+    return "camera_id" in pq.read_schema(path).names
 
 
 # -- the per-partition work (one implementation for every path) --------------------------------------
@@ -280,7 +298,8 @@ def process_partition(task: Task) -> dict:
     entries = task.cameras
     probe = list(dict.fromkeys(names + ["camera_id"]))
     id_fields = _id_fields(pf.schema_arrow)
-    template = _processor(next(iter(entries.values())), task.options, probe, id_fields, task.threads)
+    tmpl_entry = task.template if task.template is not None else next(iter(entries.values()))
+    template = _processor(tmpl_entry, task.options, probe, id_fields, task.threads)
     numeric = S.numeric_input_columns(template.box_type, names)
     read_cols = [c for c in dict.fromkeys([c for c in S.ID_COLUMNS if c in names] + list(numeric))]
     writers: dict[str, tuple] = {}
