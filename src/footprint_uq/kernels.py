@@ -728,8 +728,8 @@ def _point_general(u, v, S00, S01, S11, prm, R, om, colptr, rowidx, vals, vc, Cc
 _ROWS_PER_BLOCK_DIV = 16
 
 # row buffers of the general map kernel
-_XD, _XN, _YN, _M00, _M01, _M10, _M11, _Q00, _Q01, _Q11, _V0, _V1, _CONV = range(13)
-_NBUF = 13
+_XD, _XN, _YN, _M00, _M01, _M10, _M11, _Q00, _Q01, _Q11, _V0, _V1, _CONV, _IDEN = range(14)
+_NBUF = 14
 
 
 @nb.njit(**_JIT1)
@@ -768,7 +768,8 @@ def _acc_param(k, lv, yd, prm, om, buf, W, sq):
     elif k <= 12:  # distortion: dq = -M d distort / dk at (x_n, y_n)
         i8 = k - 5
         d = prm[5:13]
-        k1, k2, k3, k4, k5, k6 = d[0], d[1], d[4], d[5], d[6], d[7]
+        k1, k2, k3 = d[0], d[1], d[4]
+        iden_ = buf[_IDEN]  # 1 / (1 + k4 r2 + k5 r2^2 + k6 r2^3) at (x_n, y_n), from the Newton pass
         tang = i8 == 2 or i8 == 3
         n = 1 if (i8 == 0 or i8 == 5) else (2 if (i8 == 1 or i8 == 6) else 3)
         for i in range(W):
@@ -783,10 +784,12 @@ def _acc_param(k, lv, yd, prm, om, buf, W, sq):
                     e0 = r2 + 2.0 * x * x
                     e1 = 2.0 * x * y
             else:
-                num = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
-                den = 1.0 + r2 * (k4 + r2 * (k5 + r2 * k6))
                 rr = r2 if n == 1 else (r2 * r2 if n == 2 else r2 * r2 * r2)
-                dr = rr / den if i8 <= 4 else -num * rr / (den * den)
+                idn = iden_[i]
+                if i8 <= 4:
+                    dr = rr * idn
+                else:
+                    dr = -(1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))) * rr * (idn * idn)
                 e0 = x * dr
                 e1 = y * dr
             f0 = -lv * (M00[i] * e0 + M01[i] * e1)
@@ -837,10 +840,12 @@ def _row_general(v, prm, R, om, colptr, rowidx, vals, vc, colkind, Om, has_qc, h
     xd, xn, yn = buf[_XD], buf[_XN], buf[_YN]
     M00, M01, M10, M11 = buf[_M00], buf[_M01], buf[_M10], buf[_M11]
     cv = buf[_CONV]
+    idn_b = buf[_IDEN]
+    ifx_ = 1.0 / fx
     if warm and has_dist:
         # cv holds the previous row's y_d where that pixel converged, NaN elsewhere
         for i in range(W):
-            x = (np.float64(i) * stepf - cx - sk * yd) / fx
+            x = (np.float64(i) * stepf - cx - sk * yd) * ifx_
             dx = x - xd[i]
             dy = yd - cv[i]
             xd[i] = x
@@ -851,7 +856,7 @@ def _row_general(v, prm, R, om, colptr, rowidx, vals, vc, colkind, Om, has_qc, h
             yn[i] = sy if good else yd
     else:
         for i in range(W):
-            x = (np.float64(i) * stepf - cx - sk * yd) / fx
+            x = (np.float64(i) * stepf - cx - sk * yd) * ifx_
             xd[i] = x
             xn[i] = x
             yn[i] = yd
@@ -890,6 +895,7 @@ def _row_general(v, prm, R, om, colptr, rowidx, vals, vc, colkind, Om, has_qc, h
                 c = conv & (det > 0.0)
                 ok[i] = c
                 cv[i] = yd if c else nan_
+                idn_b[i] = iden
                 M00[i] = j11 * idet
                 M01[i] = -j01 * idet
                 M10[i] = -j10 * idet
@@ -918,6 +924,7 @@ def _row_general(v, prm, R, om, colptr, rowidx, vals, vc, colkind, Om, has_qc, h
             c = (max(abs(e0), abs(e1)) <= tol) & (det > 0.0)
             ok[i] = c
             cv[i] = yd if c else nan_
+            idn_b[i] = iden
             idet = 1.0 / det
             M00[i] = j11 * idet
             M01[i] = -j01 * idet
@@ -926,6 +933,7 @@ def _row_general(v, prm, R, om, colptr, rowidx, vals, vc, colkind, Om, has_qc, h
     else:
         for i in range(W):
             ok[i] = True
+            idn_b[i] = 1.0
             M00[i] = 1.0
             M01[i] = 0.0
             M10[i] = 0.0
