@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import click
 
+from .batch.schema import DEFAULT_CHUNK_ROWS
 from .footprints import CONTACT_MODES
 from .presets import PRESET_NAMES
 
@@ -33,7 +34,7 @@ __all__ = ["objects_cmd"]
               help="Box family (default: detected from the columns).")
 @click.option("--contact", type=click.Choice(list(CONTACT_MODES)), default="bottom-centre", show_default=True,
               help="Ground contact of 2D boxes: the bottom-edge centre, or its two corners.")
-@click.option("--chunk-rows", type=click.IntRange(min=1), default=262_144, show_default=True,
+@click.option("--chunk-rows", type=click.IntRange(min=1), default=DEFAULT_CHUNK_ROWS, show_default=True,
               help="Rows per chunk (memory grows with it, not with the file size).")
 @click.option("--confidence", type=float, default=None, metavar="P",
               help="Also write semi_major_m/semi_minor_m of the P-confidence ellipse (2-D chi-square).")

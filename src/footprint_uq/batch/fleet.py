@@ -213,8 +213,8 @@ def _hive_keys(rel: str) -> dict:
     return keys
 
 
-def plan(dataset, out_dir, registry: dict, *, chunk_rows: int = 262_144, compression: str | None = "snappy",
-         **options) -> list[Task]:
+def plan(dataset, out_dir, registry: dict, *, chunk_rows: int = S.DEFAULT_CHUNK_ROWS,
+         compression: str | None = "snappy", **options) -> list[Task]:
     """Tasks (one per Parquet file under ``dataset``, sorted by path)."""
     root = Path(dataset)
     if root.is_file():
@@ -441,7 +441,7 @@ class FleetSummary:
 
 
 def process_fleet(registry, detections, out_dir, *, budget=None, scheduler=None, workers: int | None = None,
-                  retries: int = 2, chunk_rows: int = 262_144, compression: str | None = "snappy",
+                  retries: int = 2, chunk_rows: int = S.DEFAULT_CHUNK_ROWS, compression: str | None = "snappy",
                   progress: bool | None = None, client=None, **options) -> FleetSummary:
     """Footprints of a multi-camera Parquet dataset, in this process or on a Dask cluster.
 

@@ -670,9 +670,9 @@ def process_chunk(bp: BatchProcessor, chunk) -> pa.Table:
     return out
 
 
-def process_file(camera, budget, detections, out, *, chunk_rows: int = 262_144, format_in: str | None = None,
-                 format_out: str | None = None, progress: bool | None = None, summary: bool = True,
-                 compression: str = "snappy", **options) -> Summary:
+def process_file(camera, budget, detections, out, *, chunk_rows: int = S.DEFAULT_CHUNK_ROWS,
+                 format_in: str | None = None, format_out: str | None = None, progress: bool | None = None,
+                 summary: bool = True, compression: str = "snappy", **options) -> Summary:
     """Stream a detection file through the footprint pipeline, chunk by chunk.
 
     Parameters
@@ -685,7 +685,7 @@ def process_file(camera, budget, detections, out, *, chunk_rows: int = 262_144, 
         ``.parquet``/``.pq``, ``.csv``, ``.jsonl``/``.ndjson`` or ``.geojson`` (needs an origin).
     chunk_rows : int
         Rows per chunk; memory use is proportional to it, not to the file size
-        (about 1 kB per row in flight, three chunks in flight).
+        (peak about 0.35 GB + 0.8 kB x chunk_rows, see docs/batch.md).
     progress : bool, optional
         tqdm progress bar on stderr (default: only when stderr is a terminal).
     summary : bool

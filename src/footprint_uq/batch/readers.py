@@ -192,7 +192,7 @@ class DetectionReader:
     unit ("rows" or "B"), id_fields (id columns present, with their output types)
     """
 
-    def __init__(self, path, *, chunk_rows: int = 262_144, format: str | None = None):
+    def __init__(self, path, *, chunk_rows: int = S.DEFAULT_CHUNK_ROWS, format: str | None = None):
         self.path = Path(path)
         if not self.path.exists():
             raise InputError("detections", str(path), "an existing file")
@@ -493,6 +493,6 @@ class _CountingFile(io.RawIOBase):
         super().close()
 
 
-def open_detections(path, *, chunk_rows: int = 262_144, format: str | None = None) -> DetectionReader:
+def open_detections(path, *, chunk_rows: int = S.DEFAULT_CHUNK_ROWS, format: str | None = None) -> DetectionReader:
     """A :class:`DetectionReader` on a CSV, JSON Lines or Parquet file (format from the extension)."""
     return DetectionReader(path, chunk_rows=chunk_rows, format=format)

@@ -32,10 +32,14 @@ import pyarrow as pa
 
 from ..footprints import V2X_FIELDS
 
-__all__ = ["ID_COLUMNS", "ID_TYPES", "BOX2D_COLUMNS", "BOX3D_COLUMNS", "YAW_COLUMNS", "COV_COLUMNS", "BOX_TYPES",
+__all__ = ["DEFAULT_CHUNK_ROWS", "ID_COLUMNS", "ID_TYPES",
+           "BOX2D_COLUMNS", "BOX3D_COLUMNS", "YAW_COLUMNS", "COV_COLUMNS", "BOX_TYPES",
            "STATUSES", "STATUS_OK", "STATUS_PARTIAL", "STATUS_ERROR", "V2X_UNAVAILABLE", "corner_columns",
            "count_corners", "detect_box_type", "box_columns", "numeric_input_columns", "output_schema",
            "corner_output_columns", "CENTRE_COLUMNS", "REASON_TYPE"]
+
+#: rows per chunk by default: peak memory about 0.35 GB + 0.8 kB x chunk_rows (docs/batch.md)
+DEFAULT_CHUNK_ROWS = 131_072
 
 #: identification columns passed through unchanged (all optional)
 ID_COLUMNS = ("camera_id", "frame", "timestamp_s", "object_id", "class")
