@@ -218,3 +218,15 @@ def test_cli_fleet(fleet_data, tmp_path):
     assert js["mode"] == "dask" and js["consistent"]
     r = CliRunner().invoke(main, args + ["--out", str(tmp_path / "c"), "--camera", "x.yaml"])
     assert r.exit_code == 2 and "--registry" in r.output
+
+
+def test_local_process_cluster(fleet_data, tmp_path):
+    """workers=2: a real local cluster of worker processes (tasks, cameras and budgets pickled)."""
+    pytest.importorskip("distributed")
+    ref_out = tmp_path / "ref"
+    fleet.process_fleet(fleet_data["registry"], fleet_data["data"], ref_out, progress=False, chunk_rows=100)
+    out = tmp_path / "procs"
+    s = fleet.process_fleet(fleet_data["registry"], fleet_data["data"], out, workers=2, progress=False,
+                            chunk_rows=100)
+    assert s.consistent and json.loads((out / "_summary.json").read_text())["mode"] == "dask"
+    _assert_equal(_read(out), _read(ref_out))
