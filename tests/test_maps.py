@@ -89,6 +89,13 @@ def test_pixel_jacobian_equals_backproject(cam, cam_cv):
         J, valid = pixel_jacobian(c, uv)
         np.testing.assert_array_equal(valid, bp.valid)
         np.testing.assert_allclose(J, bp.dxy_duv, rtol=1e-12, atol=0, equal_nan=True)
+        flat = np.concatenate([uv.reshape(-1, 2), [[np.nan, 3.0]]], 0)
+        xy, J2, valid2, reason = pixel_jacobian(c, flat, full=True)
+        ref = c.backproject(flat)
+        np.testing.assert_array_equal(reason, ref.reason)
+        assert reason[-1] == status.NOT_FINITE and (c is cam_cv or (reason == status.ABOVE_HORIZON).any())
+        np.testing.assert_allclose(xy, ref.xy_world_m, rtol=1e-12, equal_nan=True)
+        np.testing.assert_array_equal(J2[:-1], J.reshape(-1, 2, 2))
 
 
 def _fd_jacobian(camera, uv, h=2e-4):
