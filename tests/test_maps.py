@@ -49,11 +49,15 @@ def test_reference_path_equals_propagate(cam, step):
 
 def test_default_path_equals_reference(cam, cam_cv):
     """Whatever path is used by default (fused kernel when present) agrees with propagate, without fallback."""
-    for c in (cam, cam_cv):
-        ref = uncertainty_map(c, BUDGET, 5, use_kernel=False)
+    # a distorted camera whose horizon crosses the image: grazing rays reach thousands of kilometres
+    T = PanTiltCamera(300.0, (160, 120), 6.0, 25.0, 6.0, 1.5).T_cam_world
+    cam_sky = OpenCVCamera([[305.0, 0.2, 79.0], [0.0, 301.0, 61.0], [0.0, 0.0, 1.0]], [-0.25, 0.06, 1e-3, -5e-4, 0.0],
+                           T[:3, :3], T[:3, 3], (160, 120))
+    for c, step in ((cam, 5), (cam_cv, 5), (cam_sky, 1)):
+        ref = uncertainty_map(c, BUDGET, step, use_kernel=False)
         with warnings.catch_warnings():
             warnings.simplefilter("error", RuntimeWarning)
-            m = uncertainty_map(c, BUDGET, 5)
+            m = uncertainty_map(c, BUDGET, step)
         np.testing.assert_array_equal(m.valid, ref.valid)
         np.testing.assert_array_equal(m.reason, ref.reason)
         v = ref.valid
