@@ -233,10 +233,19 @@ def _as_table(obj) -> pa.Table:
 
 
 # -- fusion ----------------------------------------------------------------------------------------
-def _strings(table: pa.Table, name: str, n: int) -> np.ndarray:
-    if name not in table.column_names:
-        return np.full(n, None, dtype=object)
-    return np.array(table.column(name).to_pylist(), dtype=object)
+def _column(table: pa.Table, name: str, typ: pa.DataType, n_extra: int) -> pa.Array:
+    """Column ``name`` as one Arrow array of ``typ`` (all null if absent), plus ``n_extra`` nulls."""
+    n = table.num_rows
+    if name in table.column_names:
+        col = table.column(name)
+        col = col.combine_chunks() if isinstance(col, pa.ChunkedArray) else col
+        if col.type != typ:
+            import pyarrow.compute as pc
+
+            col = pc.cast(col, typ)
+    else:
+        col = pa.nulls(n, typ)
+    return pa.concat_arrays([col, pa.nulls(n_extra, typ)]) if n_extra else col
 
 
 def _floats(table: pa.Table, name: str) -> np.ndarray:
@@ -245,12 +254,18 @@ def _floats(table: pa.Table, name: str) -> np.ndarray:
     return col.to_numpy(zero_copy_only=False).astype(np.float64)
 
 
-def _codes(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Integer codes (-1 for None) of an object array and the sorted unique values."""
-    import pandas as pd
+def _codes(arr: pa.Array) -> tuple[np.ndarray, pa.Array]:
+    """Integer codes (-1 for null) of an Arrow array and its sorted distinct values (codes index them)."""
+    import pyarrow.compute as pc
 
-    codes, uniq = pd.factorize(values, sort=True, use_na_sentinel=True)
-    return codes.astype(np.int64), np.asarray(uniq, dtype=object)
+    enc = pc.dictionary_encode(arr)
+    values = enc.dictionary
+    order = pc.array_sort_indices(values).to_numpy()
+    rank = np.empty(len(values), dtype=np.int64)
+    rank[order] = np.arange(len(values))
+    idx = enc.indices.fill_null(-1).to_numpy(zero_copy_only=False).astype(np.int64)
+    codes = np.where(idx >= 0, rank[np.maximum(idx, 0)] if len(values) else -1, -1)
+    return codes, values.take(pa.array(order))
 
 
 def _fuse_parts(parts: list[_Part], key, *, confidence: float, ellipse_confidence: float | None,
@@ -266,21 +281,20 @@ def _fuse_parts(parts: list[_Part], key, *, confidence: float, ellipse_confidenc
         t = part.table
         n = t.num_rows
         m = len(part.malformed)
-        inp.append(np.full(n + m, i, dtype=np.int64))
+        inp.append(np.full(n + m, i, dtype=np.int32))
         srow.append(np.concatenate([part.source_rows.astype(np.int64),
                                     np.asarray([r for r, _ in part.malformed], dtype=np.int64)]))
         if part.camera is not None:
-            c = np.full(n + m, part.camera, dtype=object)
+            c = pa.DictionaryArray.from_arrays(pa.array(np.zeros(n + m, np.int32)), pa.array([part.camera]))
+            c = c.cast(pa.string())
         else:
-            c = np.concatenate([_strings(t, "camera_id", n), np.full(m, None, dtype=object)])
+            c = _column(t, "camera_id", pa.string(), m)
         cam.append(c)
         rs = np.empty(n + m, dtype=object)
         rs[:n] = part.pre
         rs[n:] = [r for _, r in part.malformed]
-        st = _strings(t, "status", n)
-        why = _strings(t, "reason", n)
         for k in key:
-            keyvals[k].append(np.concatenate([_strings(t, k, n), np.full(m, None, dtype=object)]))
+            keyvals[k].append(_column(t, k, _key_type(k), m))
         est = np.full((n + m, 5), np.nan)
         for j, name in enumerate(ESTIMATE_COLUMNS):
             est[:n, j] = _floats(t, name)
@@ -292,18 +306,26 @@ def _fuse_parts(parts: list[_Part], key, *, confidence: float, ellipse_confidenc
         # per-row reasons, first applicable wins (vectorised masks; loops over a few columns only)
         todo = rs[:n] == None  # noqa: E711 - elementwise on an object array
         for k in key:
-            miss = todo & (keyvals[k][-1][:n] == None)  # noqa: E711
+            miss = todo & keyvals[k][-1].slice(0, n).is_null().to_numpy(zero_copy_only=False)
             rs[:n][miss] = f"missing key field {k}"
             todo &= ~miss
         if part.camera is None:
-            miss = todo & (c[:n] == None)  # noqa: E711
+            miss = todo & c.slice(0, n).is_null().to_numpy(zero_copy_only=False)
             rs[:n][miss] = "missing camera_id"
             todo &= ~miss
         if "status" in t.column_names:
-            bad = todo & (st != _STATUS_OK)
-            for j in np.flatnonzero(bad):
-                rs[j] = f"input status {st[j]}: {why[j]}" if why[j] not in (None, "") else f"input status {st[j]}"
-            todo &= ~bad
+            st_col = _column(t, "status", pa.string(), 0)
+            import pyarrow.compute as pc
+
+            not_ok = pc.fill_null(pc.not_equal(st_col, _STATUS_OK), True).to_numpy(zero_copy_only=False)
+            bad = np.flatnonzero(todo & not_ok)
+            if bad.size:  # only the rows without a centre are turned into Python strings
+                st = st_col.take(pa.array(bad)).to_pylist()
+                why = (_column(t, "reason", pa.string(), 0).take(pa.array(bad)).to_pylist()
+                       if "reason" in t.column_names else [None] * bad.size)
+                for j, a, b in zip(bad.tolist(), st, why, strict=True):
+                    rs[j] = f"input status {a}: {b}" if b not in (None, "") else f"input status {a}"
+                todo[bad] = False
         for j, name in enumerate(ESTIMATE_COLUMNS):
             bad = todo & ~np.isfinite(est[:n, j])
             rs[:n][bad] = f"missing or non-finite field {name}"
@@ -315,14 +337,16 @@ def _fuse_parts(parts: list[_Part], key, *, confidence: float, ellipse_confidenc
         reason.append(rs)
         summary.inputs.append({"input": part.name, "camera_id": part.camera, "rows": n + m})
     if parts:
-        inp, srow, cam, reason = (np.concatenate(a) for a in (inp, srow, cam, reason))
+        inp, srow, reason = (np.concatenate(a) for a in (inp, srow, reason))
+        cam = pa.concat_arrays(cam)
         det_row, X = np.concatenate(det_row), np.concatenate(X)
-        keyvals = {k: np.concatenate(v) for k, v in keyvals.items()}
+        keyvals = {k: pa.concat_arrays(v) for k, v in keyvals.items()}
     else:
-        inp = srow = np.zeros(0, np.int64)
-        cam = reason = np.zeros(0, dtype=object)
+        inp, srow = np.zeros(0, np.int32), np.zeros(0, np.int64)
+        reason = np.zeros(0, dtype=object)
+        cam = pa.array([], pa.string())
         det_row, X = np.zeros(0), np.zeros((0, 5))
-        keyvals = {k: np.zeros(0, dtype=object) for k in key}
+        keyvals = {k: pa.array([], _key_type(k)) for k in key}
     R = inp.shape[0]
     # -- association: group rows by key ------------------------------------------------------------
     kcodes = []
@@ -333,8 +357,7 @@ def _fuse_parts(parts: list[_Part], key, *, confidence: float, ellipse_confidenc
         kuniq.append(u)
     kc = np.stack(kcodes, 1) if R else np.zeros((0, len(key)), np.int64)
     keyed = (kc >= 0).all(1)
-    groups, ginv = np.unique(kc[keyed], axis=0, return_inverse=True)
-    ginv = ginv.reshape(-1)
+    groups, ginv = _row_codes(kc[keyed])
     M = groups.shape[0]
     group = np.full(R, -1, dtype=np.int64)
     group[keyed] = ginv
@@ -342,9 +365,9 @@ def _fuse_parts(parts: list[_Part], key, *, confidence: float, ellipse_confidenc
     camc, cam_uniq = _codes(cam)
     cand = (reason == None) & keyed  # noqa: E711
     if np.any(cand):
-        pairs = np.stack([group[cand], camc[cand]], 1)
-        _, pinv, pcnt = np.unique(pairs, axis=0, return_inverse=True, return_counts=True)
-        cnt = pcnt[pinv.reshape(-1)]
+        pairs = np.stack([group[cand], np.maximum(camc[cand], 0)], 1)
+        _, pinv = _row_codes(pairs)
+        cnt = np.bincount(pinv)[pinv]
         idx = np.flatnonzero(cand)[cnt > 1]
         for j, n_dup in zip(idx.tolist(), cnt[cnt > 1].tolist(), strict=True):
             reason[j] = f"duplicate: {n_dup} rows of one camera for this key"
@@ -375,8 +398,8 @@ def _fuse_parts(parts: list[_Part], key, *, confidence: float, ellipse_confidenc
     ok_d2 = keyed & np.isfinite(d2)
     if np.any(ok_d2):
         np.fmax.at(max_d2, group[ok_d2], d2[ok_d2])
-    cams_used = _join_per_group(group, cam, used_in, M)
-    cams_flag = _join_per_group(group, cam, flag, M)
+    cams_used = _join_per_group(group, camc, cam_uniq, used_in, M)
+    cams_flag = _join_per_group(group, camc, cam_uniq, flag, M)
     smaj, smin, ori = ellipse_axes(fP)
     v2x = {**cpm_fields(fP, heading_offset_deg), **j2735_fields(fP, heading_offset_deg)}
     has = nsrc > 0
@@ -392,9 +415,9 @@ def _fuse_parts(parts: list[_Part], key, *, confidence: float, ellipse_confidenc
         obj_reason[~has] = ["no usable estimate: " + str(r) for r in first_reason[~has]]
     cols: dict[str, pa.Array] = {}
     for j, k in enumerate(key):
-        cols[k] = pa.array(kuniq[j][groups[:, j]].tolist() if M else [], type=_key_type(k))
+        cols[k] = kuniq[j].take(pa.array(groups[:, j])) if M else pa.array([], _key_type(k))
     cols["status"] = pa.array(np.where(has, "ok", "error").tolist(), pa.string())
-    cols["reason"] = pa.array(obj_reason.tolist(), pa.string())
+    cols["reason"] = pa.array(obj_reason, pa.string())
     cols["n_cameras"] = pa.array(nsrc.astype(np.int32))
     cols["n_rows"] = pa.array(n_rows.astype(np.int32))
     cols["cameras"] = pa.array(cams_used, pa.string())
@@ -417,18 +440,18 @@ def _fuse_parts(parts: list[_Part], key, *, confidence: float, ellipse_confidenc
         cols[name] = pa.array(np.asarray(v2x[name], dtype=np.int32))
     objects = pa.table(cols)
     # -- per source row ------------------------------------------------------------------------------
-    names = [p.name for p in parts]
+    names = pa.array([p.name for p in parts], pa.string())
     sc: dict[str, pa.Array] = {
-        "input": pa.array([names[i] for i in inp.tolist()], pa.string()),
+        "input": pa.DictionaryArray.from_arrays(pa.array(inp, pa.int32()), names),
         "source_row": pa.array(srow),
-        "camera_id": pa.array(cam.tolist(), pa.string()),
+        "camera_id": cam,
     }
     for k in key:
-        sc[k] = pa.array(keyvals[k].tolist(), type=_key_type(k))
+        sc[k] = keyvals[k]
     sc["detection_row"] = pa.array(np.where(np.isfinite(det_row), det_row, 0).astype(np.int64),
                                    mask=~np.isfinite(det_row))
     sc["used"] = pa.array(used_in)
-    sc["reason"] = pa.array(reason.tolist(), pa.string())
+    sc["reason"] = pa.array(reason, pa.string()).dictionary_encode()
     sc["d2"] = pa.array(d2)
     sc["inconsistent"] = pa.array(flag)
     sources = pa.table(sc)
@@ -452,18 +475,45 @@ def _fuse_parts(parts: list[_Part], key, *, confidence: float, ellipse_confidenc
     return FusedFootprints(objects, sources, summary)
 
 
-def _join_per_group(group: np.ndarray, cam: np.ndarray, mask: np.ndarray, M: int) -> list[str]:
-    """Comma-joined sorted camera ids of the rows in ``mask``, per group (empty string if none)."""
-    out = [""] * M
-    sel = np.flatnonzero(mask & (group >= 0))
-    if not sel.size:
-        return out
-    import pandas as pd
+def _join_per_group(group: np.ndarray, camc: np.ndarray, cam_uniq: pa.Array, mask: np.ndarray, M: int) -> list:
+    """Comma-joined sorted camera ids of the rows in ``mask``, per group (empty string if none).
 
-    df = pd.DataFrame({"g": group[sel], "c": cam[sel].astype(str)}).sort_values(["g", "c"], kind="stable")
-    for g, s in df.groupby("g", sort=False)["c"].agg(",".join).items():
-        out[int(g)] = s
-    return out
+    Vectorised with one bit per camera (``camc`` are codes into the sorted ``cam_uniq``); the
+    strings are built once per distinct camera combination, not once per object.
+    """
+    sel = np.flatnonzero(mask & (group >= 0) & (camc >= 0))
+    n_cam = len(cam_uniq)
+    if not sel.size:
+        return [""] * M
+    words = (n_cam + 62) // 63
+    bits = np.zeros((M, words), dtype=np.int64)
+    for w in range(words):  # a handful of 63-camera words
+        inw = sel[(camc[sel] // 63) == w]
+        np.bitwise_or.at(bits[:, w], group[inw], np.left_shift(1, camc[inw] % 63).astype(np.int64))
+    combos, inv = np.unique(bits, axis=0, return_inverse=True)
+    cu = [str(v) for v in cam_uniq.to_pylist()]
+    names = []
+    for row in combos:  # one string per distinct combination of cameras
+        ids = [w * 63 + b for w in range(words) for b in range(63) if (int(row[w]) >> b) & 1]
+        names.append(",".join(cu[i] for i in ids))
+    return np.asarray(names, dtype=object)[inv.reshape(-1)].tolist()
+
+
+def _row_codes(codes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Unique rows of non-negative integer codes ``(R, k)``: ``(unique (M, k), inverse (R,))``, rows sorted."""
+    R, k = codes.shape
+    if R == 0:
+        return np.zeros((0, k), np.int64), np.zeros(0, np.int64)
+    span = codes.max(0).astype(np.float64) + 1.0
+    if float(np.prod(span)) < 2.0**62:  # mixed radix into one int64: a 1-D unique (fast)
+        radix = np.ones(k, np.int64)
+        for j in range(k - 2, -1, -1):
+            radix[j] = radix[j + 1] * int(span[j + 1])
+        flat = codes @ radix
+        u, inv = np.unique(flat, return_inverse=True)
+        return np.stack([(u // radix[j]) % int(span[j]) for j in range(k)], 1), inv.reshape(-1)
+    u, inv = np.unique(codes, axis=0, return_inverse=True)
+    return u, inv.reshape(-1)
 
 
 def _check_options(key, confidence, ellipse_confidence, heading_offset_deg):
