@@ -68,7 +68,7 @@ def footprints(tmp_path_factory):
                                   ("camB", PanTiltCamera(**CAM_B), keep_b, 12)):
         det = tmp / f"det_{name}.parquet"
         pq.write_table(_detections(boxes, keep, seed), det)
-        for ext in ("parquet", "csv"):
+        for ext in ("parquet", "csv", "jsonl"):
             f = tmp / ext / f"{name}.{ext}"
             f.parent.mkdir(exist_ok=True)
             s = process_file(cam, BUDGET, det, f, progress=False)
@@ -87,6 +87,10 @@ def _cli():
 
 
 def _read(path) -> pa.Table:
+    if path.suffix == ".jsonl":
+        import pyarrow.json as pjson
+
+        return pjson.read_json(path)
     return pq.read_table(path) if path.suffix == ".parquet" else pcsv.read_csv(path)
 
 
@@ -106,7 +110,7 @@ def _row_of(t: pa.Table, frame: int, oid: str) -> int:
     return hits[0]
 
 
-@pytest.mark.parametrize("ext", ["parquet", "csv"])
+@pytest.mark.parametrize("ext", ["parquet", "csv", "jsonl"])
 def test_cli_fuses_two_cameras(footprints, tmp_path, ext):
     a, b = footprints[("camA", ext)], footprints[("camB", ext)]
     out = tmp_path / f"fused.{ext}"
