@@ -133,6 +133,11 @@ def _cast_column(col, typ: pa.DataType, name: str, pre_errors: list):
         return col
     if pa.types.is_null(col.type):
         return pa.nulls(len(col), type=typ)
+    if pa.types.is_boolean(col.type) and not pa.types.is_boolean(typ):  # true/false is not a number
+        for i in np.flatnonzero(col.is_valid().to_numpy(zero_copy_only=False)).tolist():
+            if pre_errors[i] is None:
+                pre_errors[i] = f"field {name} is not {_what(typ)}"
+        return pa.nulls(len(col), type=typ)
     try:
         return pc.cast(col, typ)
     except (pa.ArrowInvalid, pa.ArrowNotImplementedError):
