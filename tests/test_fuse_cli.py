@@ -134,8 +134,7 @@ def test_cli_fuses_two_cameras(footprints, tmp_path, ext):
         P, x = _cov(fused, i), _xy(fused, i)
         if oid in ONLY_A:  # one camera: passed through unchanged
             assert fused.column("n_cameras")[i].as_py() == 1 and fused.column("cameras")[i].as_py() == "camA"
-            np.testing.assert_allclose(P, CA, rtol=1e-12)
-            np.testing.assert_allclose(x, xa, rtol=1e-12)
+            assert np.array_equal(P, CA) and np.array_equal(x, xa)
             assert fused.column("chi2_dof")[i].as_py() == 0
             continue
         ib = _row_of(tb, frame, oid)
@@ -334,3 +333,21 @@ def test_whole_job_errors_are_one_line(footprints, tmp_path):
         fuse_footprints([pq.read_table(a)], camera_ids=["A", "B"])
     with pytest.raises(InputError, match="different file"):
         fuse_files([a, b], tmp_path / "x.csv", sources_out=tmp_path / "x.csv")
+
+
+def test_object_without_usable_estimate_is_listed_with_the_reason():
+    nan = float("nan")
+    t = {"frame": [0, 0, 1], "object_id": ["a", "b", "a"], "x_m": [1.0, 2.0, 3.0], "y_m": [1.0, 2.0, 3.0],
+         "cov_xx_m2": [0.04, nan, 0.04], "cov_xy_m2": [0.0, 0.0, 0.0], "cov_yy_m2": [0.09, 0.09, 0.09],
+         "status": ["ok", "ok", "partial"], "reason": ["ok", "ok", "no centre: corner 2 of 4: above horizon"]}
+    res = fuse_footprints([t], camera_ids=["A"])
+    o = res.objects.to_pylist()
+    assert [(r["frame"], r["object_id"], r["status"], r["n_cameras"]) for r in o] == [
+        (0, "a", "ok", 1), (0, "b", "error", 0), (1, "a", "error", 0)]
+    assert o[1]["reason"] == "no usable estimate: missing or non-finite field cov_xx_m2"
+    assert o[2]["reason"] == "no usable estimate: input status partial: no centre: corner 2 of 4: above horizon"
+    assert o[1]["consistent"] is None and np.isnan(o[1]["x_m"])
+    assert o[1]["cpm_x_confidence"] == 4096 and o[1]["j2735_semi_major"] == 255  # the messages' "unavailable"
+    assert o[0]["x_m"] == 1.0 and o[0]["cov_yy_m2"] == 0.09
+    s = res.summary
+    assert (s.rows_in, s.rows_used, s.rows_rejected, s.objects_unavailable) == (3, 1, 2, 2) and s.consistent

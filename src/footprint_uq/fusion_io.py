@@ -391,6 +391,12 @@ def _fuse_parts(parts: list[_Part], key, *, confidence: float, ellipse_confidenc
         chi2 = chi2_thr = np.zeros(0)
         cons = np.zeros(0, bool)
     reason = np.where(used_in, "ok", reason).astype(object)
+    if M:  # one usable estimate: pass it through bit for bit (the information form would round it)
+        single = used_in & (group >= 0)
+        single[single] = nsrc[group[single]] == 1
+        fx, fP = fx.copy(), fP.copy()
+        fx[group[single]] = xy[single]
+        fP[group[single]] = C[single]
     # -- per object ----------------------------------------------------------------------------------
     n_rows = np.bincount(group[keyed], minlength=M)
     n_incons = np.bincount(group[keyed], weights=flag[keyed], minlength=M).astype(np.int64)
