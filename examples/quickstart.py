@@ -39,7 +39,7 @@ for i, uv in enumerate(uv_px):
     total = np.trace(c)
     for name, contrib in sorted(est.contributions.items(), key=lambda kv: -np.trace(kv[1][i])):
         tr = np.trace(contrib[i])
-        print(f"    {name:<14s} {100.0 * tr / total:6.2f} %   sqrt(trace) {np.sqrt(max(tr, 0.0)):.4f} m")
+        print(f"    {name:<16s} {100.0 * tr / total:6.2f} %   sqrt(trace) {np.sqrt(max(tr, 0.0)):.4f} m")
 
 # linear vs Monte Carlo vs unscented (seeded)
 mc = monte_carlo(cam, budget, uv_px, n_samples=20_000, seed=1)
