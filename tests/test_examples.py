@@ -48,3 +48,30 @@ def test_example_runs(script, tmp_path):
     if script == "reproduce_paper_partials.py":
         worst = float(r.stdout.split("paper vs finite differences ")[1].split(",")[0])
         assert worst < 1e-6
+
+
+DOCS = EXAMPLES.parent / "docs"
+
+
+def _doc_lines(doc: str, prefixes: tuple[str, ...]) -> list[str]:
+    """Output lines quoted in a doc's fenced blocks that start with one of ``prefixes`` (stripped)."""
+    text = (DOCS / doc).read_text(encoding="utf-8")
+    lines = [ln.strip() for block in text.split("```")[1::2] for ln in block.splitlines()]
+    return [ln for ln in lines if ln.startswith(prefixes)]
+
+
+@pytest.mark.parametrize("script, doc, prefixes", [
+    ("plan_mount.py", "planning.md", ("basler1 ", "basler1+", "basler1,", "bw-cube1 ", "best reach", "criterion:")),
+    ("quickstart.py", "uncertainty-model.md", ("1-sigma ellipse:", "95 % ellipse:", "height ", "position ",
+                                               "principal_point ", "imaging ")),
+])
+def test_quoted_output_is_current(script, doc, prefixes, tmp_path):
+    """The outputs quoted in the docs are what the scripts print today."""
+    quoted = _doc_lines(doc, prefixes)
+    assert len(quoted) >= 6
+    r = subprocess.run([sys.executable, str(EXAMPLES / script), "--out", str(tmp_path)], capture_output=True,
+                       text=True, env={**os.environ, "MPLBACKEND": "Agg"}, timeout=300, cwd=tmp_path)
+    assert r.returncode == 0, r.stderr[-3000:]
+    printed = {ln.strip() for ln in r.stdout.splitlines()}
+    stale = [ln for ln in quoted if ln not in printed]
+    assert not stale, stale
