@@ -186,6 +186,11 @@ def test_one_object_by_hand_through_the_api(footprints):
     assert len(rows) == 2
     for j in rows:
         assert src.column("d2")[j].as_py() == pytest.approx(d2_pair, rel=1e-9)
+    # the V2X fields follow the map: W's +y axis 90 deg east of true north swaps east and north
+    turned = fuse_footprints([ta, tb], camera_ids=["A", "B"], heading_offset_deg=90.0).objects
+    ref = {**cpm_fields(P, 90.0), **j2735_fields(P, 90.0)}
+    assert all(turned.column(name)[i].as_py() == int(v) for name, v in ref.items())
+    assert turned.column("cpm_x_confidence")[i].as_py() == res.objects.column("cpm_y_confidence")[i].as_py()
 
 
 def _corner_detections(cam_true, boxes):
