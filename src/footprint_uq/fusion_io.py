@@ -53,7 +53,7 @@ from .fusion import chi2_threshold, fuse_by_id
 from .v2x import cpm_fields, j2735_fields
 
 __all__ = ["DEFAULT_KEY", "ESTIMATE_COLUMNS", "CAMERA_ID_FROM", "FuseSummary", "FusedFootprints", "fuse_footprints",
-           "fuse_files", "read_footprints", "sources_path", "summary_path"]
+           "fuse_files", "sources_path", "summary_path"]
 
 #: default association key
 DEFAULT_KEY = ("frame", "object_id")
@@ -63,7 +63,7 @@ ESTIMATE_COLUMNS = ("x_m", "y_m", "cov_xx_m2", "cov_xy_m2", "cov_yy_m2")
 CAMERA_ID_FROM = ("filename", "column")
 #: key types: frame an integer, anything else compared as text
 _KEY_TYPES = {"frame": pa.int64()}
-#: relative tolerance on det(C) > 0 (as fuse_by_id's positive-definiteness test)
+#: the footprint status of a row with a centre (footprint_uq.batch.schema.STATUS_OK)
 _STATUS_OK = "ok"
 
 
@@ -179,7 +179,7 @@ def _normalise(table: pa.Table, key, pre: list) -> pa.Table:
     return t
 
 
-def read_footprints(path, *, key=DEFAULT_KEY, camera_id_from: str = "filename", chunk_rows: int = 262_144) -> _Part:
+def _read_footprints(path, *, key=DEFAULT_KEY, camera_id_from: str = "filename", chunk_rows: int = 262_144) -> _Part:
     """Read one footprint file (CSV, JSON Lines or Parquet) for fusion, keeping every row's number.
 
     Unparseable lines and values that do not convert are kept with their reason
@@ -646,7 +646,7 @@ def fuse_files(inputs, out, *, camera_id_from: str | None = None, key=DEFAULT_KE
         if dup:
             raise InputError("INPUT", f"camera id {dup[0]!r} from two file names",
                              "file names (without extension) that differ between cameras")
-    parts = [read_footprints(p, key=key, camera_id_from=camera_id_from, chunk_rows=chunk_rows) for p in inputs]
+    parts = [_read_footprints(p, key=key, camera_id_from=camera_id_from, chunk_rows=chunk_rows) for p in inputs]
     res = _fuse_parts(parts, key, confidence=confidence, ellipse_confidence=ellipse_confidence,
                       heading_offset_deg=heading_offset_deg)
     comp = compression or "none"
