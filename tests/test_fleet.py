@@ -230,3 +230,22 @@ def test_local_process_cluster(fleet_data, tmp_path):
                             chunk_rows=100)
     assert s.consistent and json.loads((out / "_summary.json").read_text())["mode"] == "dask"
     _assert_equal(_read(out), _read(ref_out))
+
+
+def test_output_paths_never_collide(fleet_data, tmp_path):
+    """A flat file with a camera_id column next to camera_id=.../ folders of the same name."""
+    import shutil
+
+    data = tmp_path / "d"
+    shutil.copytree(fleet_data["data"], data)
+    shutil.copy(data / "extra" / "mixed.parquet", data / "camera_id=cam01" / "date=2024-05-01" / "x.parquet")
+    (data / "date=2024-05-01").mkdir()
+    shutil.copy(data / "extra" / "mixed.parquet", data / "date=2024-05-01" / "x.parquet")
+    reg = fleet.load_registry(fleet_data["registry"])
+    tasks = fleet.plan(data, tmp_path / "o", reg)
+    outs = [t.out_rel for t in tasks]
+    assert "date=2024-05-01/part-0.parquet" in outs  # the usual hive layout keeps its names
+    assert sum(o.startswith("date=2024-05-01/x.f") for o in outs) == 2
+    s = fleet.process_fleet(reg, data, tmp_path / "o", progress=False)
+    t = _read(tmp_path / "o")
+    assert t.num_rows == s.rows_in == sum(pq.read_metadata(f).num_rows for f in data.rglob("*.parquet"))

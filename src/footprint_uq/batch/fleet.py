@@ -202,6 +202,7 @@ class Task:
     partition_keys: dict = field(default_factory=dict)
     threads: int | None = 1  # kernel threads per task: 1 on Dask workers, None (up to 2) in-process
     template: RegistryEntry | None = None  # processes the rows of unknown cameras (all error rows)
+    out_rel: str = ""  # output path under camera_id=<id>/ (unique among the tasks)
 
 
 def _hive_keys(rel: str) -> dict:
@@ -231,17 +232,27 @@ def plan(dataset, out_dir, registry: dict, *, chunk_rows: int = S.DEFAULT_CHUNK_
     if out.resolve() == root.resolve() or root.resolve() in out.resolve().parents:
         raise InputError("out", str(out_dir), "a folder outside the detections dataset")
     template = next(iter(registry.values()))
-    tasks = []
+    tasks, only = [], []
     for i, f in enumerate(files):
         rel = f.relative_to(root).as_posix()
         keys = _hive_keys(rel)
         cid = keys.get("camera_id")
         # a camera_id folder: ship only that camera (a file may still name others in a column: then all)
-        cams = registry
+        cams, one = registry, None
         if cid is not None and not _has_camera_column(f):
-            cams = {cid: registry[cid]} if cid in registry else {}
+            cams, one = ({cid: registry[cid]} if cid in registry else {}), cid
         tasks.append(Task(i, str(f), rel, str(out), cams, dict(options), int(chunk_rows), compression, keys,
                           template=template))
+        only.append(one)
+    # two inputs that may write the same camera to the same path (they differ only by a camera_id
+    # folder, and one holds a camera_id column): number their outputs
+    by_path: dict[str, list[int]] = {}
+    for t in tasks:
+        by_path.setdefault(_strip_camera(t.rel), []).append(t.index)
+    for path, idx in by_path.items():
+        clash = len(idx) > 1 and (any(only[i] is None for i in idx) or len({only[i] for i in idx}) < len(idx))
+        for i in idx:
+            tasks[i].out_rel = path[:-len(".parquet")] + f".f{i}.parquet" if clash else path
     return tasks
 
 
@@ -272,10 +283,15 @@ def _processor(entry: RegistryEntry, options: dict, names: list, id_fields: list
     return bp
 
 
+def _strip_camera(rel: str) -> str:
+    """``rel`` without its ``camera_id=`` folders, with the ``.parquet`` extension."""
+    p = Path(rel)
+    parts = [x for x in p.parent.parts if not x.startswith("camera_id=")]
+    return Path(*parts, p.stem + ".parquet").as_posix()
+
+
 def _out_path(task: Task, camera_id: str) -> Path:
-    parts = [p for p in Path(task.rel).parent.parts if not p.startswith("camera_id=")]
-    name = Path(task.rel).stem + ".parquet"
-    return Path(task.out_dir, f"camera_id={camera_id}", *parts, name)
+    return Path(task.out_dir, f"camera_id={camera_id}", task.out_rel or _strip_camera(task.rel))
 
 
 def process_partition(task: Task) -> dict:
