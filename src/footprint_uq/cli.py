@@ -88,6 +88,8 @@ from .cli_calibrate import calibrate  # noqa: E402
 from .cli_carla import carla  # noqa: E402
 from .cli_case_study import case_study  # noqa: E402
 from .cli_core import demo_cmd, locate_cmd, map_cmd, presets_cmd  # noqa: E402
+from .cli_fuse import fuse_cmd  # noqa: E402
+from .cli_objects import objects_cmd  # noqa: E402
 
 main.add_command(locate_cmd)
 main.add_command(map_cmd)
@@ -96,6 +98,8 @@ main.add_command(demo_cmd)
 main.add_command(case_study)
 main.add_command(carla)
 main.add_command(calibrate)
+main.add_command(objects_cmd)
+main.add_command(fuse_cmd)
 
 
 if __name__ == "__main__":  # pragma: no cover
