@@ -35,6 +35,7 @@ import json
 import os
 import time
 import uuid
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -44,7 +45,7 @@ import pyarrow.compute as pc
 
 from ..errors import ConfigError, InputError
 from . import schema as S
-from .process import BatchProcessor, Summary
+from .process import BatchProcessor, Summary, _prefetch
 
 __all__ = ["RegistryEntry", "load_registry", "plan", "Task", "process_partition", "process_fleet", "FleetSummary",
            "UNKNOWN_CAMERA", "require_dask"]
@@ -322,8 +323,23 @@ def process_partition(task: Task) -> dict:
     counts: dict[str, Summary] = {}
     tmp_tag = f".tmp-{uuid.uuid4().hex[:8]}"
     start = 0
+    overlap = task.threads != 1  # in-process: read ahead and write in background threads, as process_file
+    tables = iter_parquet_tables(pf, read_cols, task.chunk_rows, use_threads=False)
+    if overlap:
+        tables = _prefetch(tables, 1)
+    pool = ThreadPoolExecutor(1, thread_name_prefix="footprint-uq-writer") if overlap else None
+    pending = None
+
+    def write(w, table):
+        if pool is None:
+            w.write_table(table)
+            return None
+        if pending is not None:
+            pending.result()
+        return pool.submit(w.write_table, table)
+
     try:
-        for t in iter_parquet_tables(pf, read_cols, task.chunk_rows, use_threads=False):
+        for t in tables:
             n = t.num_rows
             rows = np.arange(start, start + n, dtype=np.int64)
             start += n
@@ -370,19 +386,25 @@ def process_partition(task: Task) -> dict:
                     writers[cam_id] = (pq.ParquetWriter(tmp, out.schema, compression=task.compression or "none",
                                                         **parquet_options(out.schema)), tmp, path)
                     counts[cam_id] = Summary()
-                writers[cam_id][0].write_table(out)
+                pending = write(writers[cam_id][0], out)
                 counts[cam_id].add_table(out, sel.size)
+        if pending is not None:
+            pending.result()
         for w, tmp, path in writers.values():
             w.close()
             os.replace(tmp, path)
         writers_done = [str(p) for _, _, p in writers.values()]
     except BaseException:
+        if pool is not None:
+            pool.shutdown(wait=True)
         for w, tmp, _ in writers.values():
             try:
                 w.close()
             finally:
                 Path(tmp).unlink(missing_ok=True)
         raise
+    if pool is not None:
+        pool.shutdown()
     return {"index": task.index, "rel": task.rel, "files": writers_done, "rows_in": start,
             "cameras": {k: _counts(v) for k, v in counts.items()}, "elapsed_s": time.perf_counter() - t0}
 
