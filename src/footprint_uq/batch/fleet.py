@@ -323,7 +323,7 @@ def process_partition(task: Task) -> dict:
     counts: dict[str, Summary] = {}
     tmp_tag = f".tmp-{uuid.uuid4().hex[:8]}"
     start = 0
-    overlap = task.threads != 1  # in-process: read ahead and write in background threads, as process_file
+    overlap = True  # read ahead and write in background threads, as process_file
     tables = iter_parquet_tables(pf, read_cols, task.chunk_rows, use_threads=False)
     if overlap:
         tables = _prefetch(tables, 1)
