@@ -188,9 +188,9 @@ class BatchProcessor:
                              "both the latitude and the longitude of the origin, or neither")
         self.geo = None
         if origin_lat_deg is not None:
-            from ._geo import LocalToWGS84
+            from ..geo import GeoReference
 
-            self.geo = LocalToWGS84(origin_lat_deg, origin_lon_deg, self.heading_offset_deg)
+            self.geo = GeoReference(self.heading_offset_deg, origin_lat_deg, origin_lon_deg)
         self.corners = bool(corners)
         self.allow_outside_image = bool(allow_outside_image)
         self.bottom_on_ground = bool(bottom_on_ground)
@@ -470,10 +470,10 @@ class BatchProcessor:
         for j, name in enumerate(V2X_FIELDS):
             cols[name] = res.v2x[:, j]
         if self.geo is not None:
-            cols["lat_deg"], cols["lon_deg"] = self.geo(res.centre[:, 0], res.centre[:, 1])
+            cols["lat_deg"], cols["lon_deg"] = self.geo.to_wgs84(res.centre)
         if self.corners:
             if self.geo is not None:
-                clat, clon = self.geo(res.corners_xy[..., 0], res.corners_xy[..., 1])
+                clat, clon = self.geo.to_wgs84(res.corners_xy)
             for k in range(K):
                 cols[f"c{k}_u_px"], cols[f"c{k}_v_px"] = res.corners_px[:, k, 0], res.corners_px[:, k, 1]
                 cols[f"c{k}_x_m"], cols[f"c{k}_y_m"] = res.corners_xy[:, k, 0], res.corners_xy[:, k, 1]
@@ -746,7 +746,9 @@ def process_file(camera, budget, detections, out, *, chunk_rows: int = S.DEFAULT
     summ.info = {"detections": str(detections), "out": str(out), "format_in": reader.format, "format_out": fmt_out,
                  "box_type": bp.box_type, "contact": bp.contact if bp.box_type == "2d" else None,
                  "n_corners": bp.n_corners, "confidence": bp.confidence, "heading_offset_deg": bp.heading_offset_deg,
-                 "origin": bp.geo.to_dict() if bp.geo is not None else None, "chunk_rows": reader.chunk_rows,
+                 "origin": None if bp.geo is None else {
+                     "origin_lat_deg": bp.geo.origin_lat_deg, "origin_lon_deg": bp.geo.origin_lon_deg,
+                     "heading_offset_deg": bp.geo.heading_offset_deg}, "chunk_rows": reader.chunk_rows,
                  "budget": bp.budget.name if hasattr(bp.budget, "name") else None}
     if not summ.consistent:  # pragma: no cover - a bug, not bad input
         raise RuntimeError(f"row accounting broken: {summ.text()}")
