@@ -58,6 +58,8 @@ window.addEventListener('load', function () {
 @pytest.fixture(scope="module")
 def report(tmp_path_factory):
     if CHROMIUM is None:
+        if os.environ.get("CI"):  # .ci/run installs chromium: a missing browser in CI is a failure, not a skip
+            pytest.fail("chromium not found in CI (.ci/run should have installed it)")
         pytest.skip("chromium not installed (apt-get install -y chromium); the browser check needs it")
     from footprint_uq.cli_case_study import run_case_study
     from footprint_uq.scenario import CaseStudyConfig
