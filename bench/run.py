@@ -2,13 +2,17 @@
 
 Usage::
 
-    .venv/bin/python bench/run.py [--quick] [--sections maps,...]
+    .venv/bin/python bench/run.py [--quick] [--sections maps,...] [--out DIR]     (or: make bench)
 
-Each section is a function ``run(quick: bool) -> list[dict]`` in a module under
-``bench/`` registered in :data:`SECTIONS`; every returned row is one line of the
-results table (keys: ``section``, ``case`` and any of the measurement columns in
-:data:`COLUMNS`).  Results go to ``bench/results/latest.json`` and
-``bench/results/latest.md``.
+Each section is a function ``f(quick: bool) -> list[dict]`` registered in :data:`SECTIONS`:
+``run`` of a module under ``bench/``, or an adapter in this file where the module returns its
+figures in another shape.  Every returned row is one line of the section's table (``case`` plus
+any of the measurement columns in :data:`COLUMNS`; other keys go to the JSON only; ``notes`` are
+printed under the table).  All sections run in one process, one after the other, on the same
+machine; each reports medians and ratios to a reference measured in the same run.  Results go to
+``DIR/latest.json`` and ``DIR/latest.md`` (default ``bench/results``), with the machine (CPU
+model, cores, versions) and the load average at start and end.  A section that fails is recorded
+with its error, the others still run, and the exit status is 1.
 """
 
 from __future__ import annotations
@@ -20,32 +24,162 @@ import os
 import platform
 import sys
 import time
+import traceback
 from pathlib import Path
+
+import numpy as np
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))  # section modules live next to this file
 
-#: section name -> "module:function" (modules under bench/); add footprints, Monte Carlo, Dask here
+#: section name -> "module:function" (modules under bench/, or adapters in this file: "run:...")
 SECTIONS: dict[str, str] = {
     "maps": "bench_maps:run",
+    "uncertainties": "bench_uncertainties:run",
+    "montecarlo": "bench_montecarlo:run",
+    "footprints": "run:footprints_section",
+    "batch": "run:batch_section",
+    "dask": "run:dask_section",
+    "memory": "run:memory_section",
 }
 
-#: (key, header, format) of the table columns, in order
+#: one line per section, printed above its table
+TITLES = {
+    "maps": "Full-HD (1920x1080) per-pixel covariance map: fused kernel vs naive numpy vs a copy of the same bytes",
+    "uncertainties": "Full-HD pan-tilt map: ours vs naive numpy vs the `uncertainties` package (extrapolated) "
+                     "vs memory roofline; ratios to ours",
+    "montecarlo": "Monte Carlo vs linear propagation on the same points: time and agreement of sigma_major",
+    "footprints": "One frame of 100 objects (3D boxes, 4 corners): latency through the Python API",
+    "batch": "Batch footprints per second, Parquet -> Parquet, single process",
+    "dask": "Fleet batch (partitioned Parquet, several cameras): in-process vs a 2-worker local Dask cluster",
+    "memory": "Peak resident memory of the streaming batch at 1x and 10x input sizes",
+}
+
+#: (key, header, format) of the table columns, in order; a section's table shows the columns its rows have
 COLUMNS = [
     ("case", "case", "{}"),
     ("pixels", "pixels", "{:,}"),
-    ("median_ms", "median [ms]", "{:.2f}"),
+    ("items", "items", "{:,}"),
+    ("median_ms", "median [ms]", "{:,.2f}"),
+    ("median_us", "median [us]", "{:,.1f}"),
     ("min_ms", "fastest [ms]", "{:.2f}"),
     ("cpu_ms", "CPU (all threads) [ms]", "{:.2f}"),
     ("runs", "runs", "{}"),
-    ("mpx_per_s", "Mpx/s", "{:.1f}"),
+    ("mpx_per_s", "Mpx/s", "{:,.3g}"),
+    ("footprints_per_s", "footprints/s", "{:,.0f}"),
     ("copy_ms", "copy same bytes [ms]", "{:.2f}"),
     ("copy_ratio", "copy / ours", "{:.2f}"),
     ("naive_mpx_per_s", "numpy propagate [Mpx/s]", "{:.3f}"),
-    ("speedup_vs_naive", "speed-up", "{:,.0f}x"),
+    ("speedup_vs_naive", "speed-up vs naive", "{:,.0f}x"),
+    ("time_vs_ours", "time / ours", "{:,.3g}"),
+    ("time_vs_in_process", "time / in-process", "{:.2f}"),
+    ("speedup_vs_mc", "speed-up vs MC", "{:,.0f}x"),
+    ("sigma_ratio_median", "sigma_major lin/MC, median", "{:.4f}"),
+    ("sigma_ratio_worst", "lin/MC, worst", "{:.4f}"),
+    ("sigma_ratio_worst_near", "lin/MC, worst <= 200 m", "{:.4f}"),
+    ("within_1se", "within 1 MC s.e.", "{:.0%}"),
+    ("within_2se", "within 2 MC s.e.", "{:.0%}"),
+    ("peak_rss_mb", "peak RSS [MB]", "{:,.0f}"),
+    ("input_decoded_mb", "input data [MB]", "{:,.0f}"),
     ("target", "target", "{}"),
     ("met", "met", "{}"),
 ]
+
+
+# -- adapters: sections whose modules return something else than table rows ---------------------------------------
+
+def footprints_section(quick: bool = False) -> list[dict]:
+    """Rows from :func:`bench_footprints.run` (a dict of microseconds per frame)."""
+    import bench_footprints
+
+    res = bench_footprints.run(n_objects=100, repeats=300 if quick else 2000, naive_repeats=3 if quick else 20)
+    n = res["objects"]
+    rows = []
+    for cam in ("pan-tilt", "opencv-distortion"):
+        r = res[cam]
+        naive = r["naive_loop_median_us"]
+        common = {"items": n, "reference": "naive per-object loop"}
+        for key, what, runs, extra in (
+                ("fast_median_us", "FrameProcessor.boxes3d (fused), corners -> centroid, largest point, V2X",
+                 res["repeats"], {"target": f"<= {res['target_us']:.0f} us",
+                                  "met": r["fast_median_us"] <= res["target_us"]}),
+                ("fast_with_joint_cov_median_us", "same, with the joint (8x8) corner covariance", res["repeats"], {}),
+                ("numpy_reference_median_us", "footprints_from_boxes3d (vectorised numpy), whole frame",
+                 max(res["repeats"] // 20, 5), {}),
+                ("naive_loop_median_us", "naive per-object loop over the numpy reference", None, {})):
+            rows.append({**common, "case": f"{cam}: {what}", "median_us": r[key],
+                         "runs": runs if runs is not None else ("3" if quick else "20"),
+                         "speedup_vs_naive": naive / r[key], **extra})
+        rows[-4]["objects_with_valid_centre"] = r["objects_with_valid_centre"]
+    return rows
+
+
+def batch_section(quick: bool = False) -> list[dict]:
+    """Rows of :func:`bench_batch.run` with ``items`` and ``footprints_per_s``, plus the kernel-only floor."""
+    import bench_batch
+
+    rows = []
+    for r in bench_batch.run(quick=quick):
+        r = {**r, "items": r["rows_ok"] + r["rows_partial"] + r["rows_error"],
+             "footprints_per_s": r["batch_footprints_per_s"]}
+        rows.append(r)
+    return rows
+
+
+def dask_section(quick: bool = False) -> list[dict]:
+    """In-process vs local Dask cluster from :func:`bench_dask.measure` (smaller dataset with ``quick``)."""
+    import bench_dask
+
+    if quick:
+        res = bench_dask.measure(cameras=2, files_per_camera=1, rows_per_file=50_000, repeats=1)
+    else:
+        res = bench_dask.measure()  # its defaults: 4 cameras x 2 files x 400,000 rows, 2 workers, 2 runs
+    info = {k: v for k, v in res.items() if k != "repeats"}
+    base = {"items": res["rows"], "runs": res["repeats"], "reference": "in-process"}
+    return [
+        {**base, "case": f"in-process (embedded), {res['files']} files of {res['cameras']} cameras",
+         "median_ms": 1e3 * res["in_process_s"], "footprints_per_s": res["in_process_footprints_per_s"],
+         "time_vs_in_process": 1.0, "target": ">= 2 M footprints/s",
+         "met": res["in_process_footprints_per_s"] >= 2e6},
+        {**base, **info, "case": f"local Dask cluster, {res['workers']} worker processes x 1 thread",
+         "median_ms": 1e3 * res["dask_s"], "footprints_per_s": res["dask_footprints_per_s"],
+         "time_vs_in_process": res["dask_s"] / res["in_process_s"], "target": ">= 2 M footprints/s",
+         "met": res["dask_footprints_per_s"] >= 2e6,
+         "notes": "workers started before the timing; wall time includes task scheduling and writing the "
+                  "partitioned output"},
+    ]
+
+
+def memory_section(quick: bool = False) -> list[dict]:
+    """Peak RSS at 1x and 10x from :func:`bench_memory.measure` (``quick``: 100,000 rows, 16,384-row chunks)."""
+    import bench_memory
+
+    res = (bench_memory.measure(rows=100_000, factor=10, chunk_rows=16_384) if quick
+           else bench_memory.measure(rows=1_000_000, factor=10))
+    ratio = res["peak_rss_ratio"]
+    out = []
+    for s in res["sizes"]:
+        out.append({**s, "case": f"{s['factor']}x input, 3D boxes", "items": s["rows"],
+                    "median_ms": 1e3 * s["elapsed_s"], "runs": 1,
+                    "footprints_per_s": s["rows"] / s["elapsed_s"],
+                    "target": "peak RSS flat in the input size", "met": ratio < 1.2,
+                    "chunk_rows": res["chunk_rows"], "limit_mb": res["limit_mb"], "peak_rss_ratio": ratio,
+                    "notes": f"each size in a fresh process, address space capped at {res['limit_mb']} MB; "
+                             f"chunk_rows {res['chunk_rows']:,}; output {s['output_uncompressed_mb']:.0f} MB "
+                             f"(uncompressed); peak RSS 10x / 1x = {ratio:.2f}"})
+    return out
+
+
+def _versions(*names) -> dict:
+    from importlib import metadata
+
+    out = {}
+    for n in names:
+        try:
+            out[n] = metadata.version(n.replace("_", "-"))
+        except metadata.PackageNotFoundError:
+            out[n] = "not installed"
+    return out
 
 
 def machine_info() -> dict:
@@ -72,6 +206,7 @@ def machine_info() -> dict:
         "python": platform.python_version(),
         "numpy": np.__version__,
         "numba": numba.__version__,
+        **_versions("pyarrow", "pandas", "dask", "distributed", "uncertainties", "footprint_uq"),
         "platform": platform.platform(),
         "load_average_1_5_15min": [round(x, 2) for x in load],
         "date_utc": time.strftime("%Y-%m-%d %H:%M:%S", time.gmtime()),
@@ -81,37 +216,61 @@ def machine_info() -> dict:
 def _fmt(key, fmt, value):
     if value is None or value == "":
         return ""
+    if isinstance(value, (bool, np.bool_)):
+        return "yes" if value else "no"
     try:
         return fmt.format(value)
     except (ValueError, TypeError):
         return str(value)
 
 
-def to_markdown(results: dict) -> str:
+def section_markdown(section: str, rows: list[dict]) -> list[str]:
+    """Markdown lines of one section: title, table (the columns its rows have), notes."""
+    out = [f"## {section}", ""]
+    if section in TITLES:
+        out += [TITLES[section], ""]
+    cols = [c for c in COLUMNS if any(c[0] in r for r in rows)]
+    out.append("| " + " | ".join(h for _, h, _ in cols) + " |")
+    out.append("|" + "|".join("---" for _ in cols) + "|")
+    for r in rows:
+        out.append("| " + " | ".join(_fmt(k, f, r.get(k)) for k, _, f in cols) + " |")
+    notes = [f"- {r['case']}: {r['notes']}" for r in rows if r.get("notes")]
+    notes += [f"- ERROR {r['error']}" for r in rows if r.get("error")]
+    if notes:
+        out += ["", *notes]
+    out.append("")
+    return out
+
+
+def machine_markdown(results: dict) -> list[str]:
     m = results["machine"]
-    out = ["# footprint-uq benchmarks", "",
-           f"- date (UTC): {m['date_utc']}  mode: {'quick' if results['quick'] else 'full'}",
-           f"- CPU: {m['cpu']}, {m['cores']} cores, numba threads: {m['numba_threads']}",
-           f"- Python {m['python']}, numpy {m['numpy']}, numba {m['numba']}; {m['platform']}",
-           f"- load average at start / end (1, 5, 15 min): {m['load_average_1_5_15min']} / "
-           f"{results.get('load_average_end')}", ""]
+    return [f"- date (UTC): {m['date_utc']}, mode: {'quick (smoke run, small sizes)' if results['quick'] else 'full'}, "
+            f"total {results.get('elapsed_s', float('nan')):.0f} s",
+            f"- CPU: {m['cpu']}, {m['cores']} cores, numba threads: {m['numba_threads']}",
+            f"- Python {m['python']}, numpy {m['numpy']}, numba {m['numba']}, pyarrow {m['pyarrow']}, "
+            f"dask {m['dask']}, uncertainties {m['uncertainties']}, footprint-uq {m['footprint_uq']}; "
+            f"{m['platform']}",
+            f"- load average at start / end (1, 5, 15 min): {m['load_average_1_5_15min']} / "
+            f"{results.get('load_average_end')}"]
+
+
+def to_markdown(results: dict) -> str:
+    out = ["# footprint-uq benchmarks", "", *machine_markdown(results), ""]
     for section, rows in results["sections"].items():
-        out += [f"## {section}", ""]
-        cols = [c for c in COLUMNS if any(c[0] in r for r in rows)]
-        out.append("| " + " | ".join(h for _, h, _ in cols) + " |")
-        out.append("|" + "|".join("---" for _ in cols) + "|")
-        for r in rows:
-            out.append("| " + " | ".join(_fmt(k, f, r.get(k)) for k, _, f in cols) + " |")
-        notes = [f"- {r['case']}: {r['notes']}" for r in rows if r.get("notes")]
-        if notes:
-            out += ["", *notes]
-        out.append("")
+        out += section_markdown(section, rows)
     return "\n".join(out)
+
+
+def _section_fn(name: str):
+    mod_name, fn_name = SECTIONS[name].split(":")
+    if mod_name == "run":  # adapters in this file (also when run as __main__)
+        return globals()[fn_name]
+    return getattr(importlib.import_module(mod_name), fn_name)
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--quick", action="store_true", help="fewer runs and a smaller grid for the numpy baseline")
+    ap.add_argument("--quick", action="store_true", help="smoke run: small sizes and few runs (under a minute)")
     ap.add_argument("--sections", default=",".join(SECTIONS),
                     help=f"comma-separated subset of: {', '.join(SECTIONS)}")
     ap.add_argument("--out", default=str(HERE / "results"), help="directory for latest.json / latest.md")
@@ -120,25 +279,43 @@ def main(argv=None) -> int:
     unknown = [n for n in names if n not in SECTIONS]
     if unknown:
         ap.error(f"unknown section(s) {unknown}; available: {list(SECTIONS)}")
-    results = {"quick": args.quick, "machine": machine_info(), "sections": {}}
+    t_start = time.perf_counter()
+    results = {"quick": args.quick, "machine": machine_info(), "sections": {}, "section_seconds": {}}
     print(f"machine: {results['machine']['cpu']}, {results['machine']['cores']} cores, "
           f"load {results['machine']['load_average_1_5_15min']}", flush=True)
+    failed = []
     for name in names:
-        mod_name, fn_name = SECTIONS[name].split(":")
-        fn = getattr(importlib.import_module(mod_name), fn_name)
         print(f"== {name}", flush=True)
-        rows = fn(quick=args.quick)
+        t0 = time.perf_counter()
+        try:
+            rows = _section_fn(name)(quick=args.quick)
+        except Exception as exc:  # noqa: BLE001 -- report the failing section and go on with the others
+            traceback.print_exc()
+            rows = [{"case": "section failed", "error": f"{type(exc).__name__}: {exc}"}]
+            failed.append(name)
         results["sections"][name] = rows
+        results["section_seconds"][name] = round(time.perf_counter() - t0, 1)
+        print("\n".join(section_markdown(name, rows)), flush=True)
     results["load_average_end"] = [round(x, 2) for x in os.getloadavg()]
+    results["elapsed_s"] = round(time.perf_counter() - t_start, 1)
     out_dir = Path(args.out)
     out_dir.mkdir(parents=True, exist_ok=True)
-    (out_dir / "latest.json").write_text(json.dumps(results, indent=2, default=str) + "\n")
-    md = to_markdown(results)
-    (out_dir / "latest.md").write_text(md)
-    print()
-    print(md)
+    (out_dir / "latest.json").write_text(json.dumps(results, indent=2, default=_json_default) + "\n")
+    (out_dir / "latest.md").write_text(to_markdown(results))
+    print("\n".join(machine_markdown(results)))
     print(f"wrote {out_dir / 'latest.json'} and {out_dir / 'latest.md'}")
+    if failed:
+        print(f"FAILED sections: {', '.join(failed)}", file=sys.stderr)
+        return 1
     return 0
+
+
+def _json_default(o):
+    if isinstance(o, np.generic):
+        return o.item()
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    return str(o)
 
 
 if __name__ == "__main__":
