@@ -76,7 +76,8 @@ COLUMNS = [
     ("speedup_vs_mc", "speed-up vs MC", "{:,.0f}x"),
     ("sigma_ratio_median", "sigma_major lin/MC, median", "{:.4f}"),
     ("sigma_ratio_worst", "lin/MC, worst", "{:.4f}"),
-    ("sigma_ratio_worst_near", "lin/MC, worst <= 200 m", "{:.4f}"),
+    ("worst_at_range_m", "worst at [m]", "{:.0f}"),
+    ("sigma_ratio_worst_inner", "lin/MC, worst <= 100 m", "{:.4f}"),
     ("within_1se", "within 1 MC s.e.", "{:.0%}"),
     ("within_2se", "within 2 MC s.e.", "{:.0%}"),
     ("peak_rss_mb", "peak RSS [MB]", "{:,.0f}"),
@@ -254,8 +255,95 @@ def machine_markdown(results: dict) -> list[str]:
             f"{results.get('load_average_end')}"]
 
 
+def _find(rows, *words):
+    """First row whose case contains every word (None if absent)."""
+    for r in rows or []:
+        if all(w in r.get("case", "") for w in words):
+            return r
+    return None
+
+
+def _yes_no(v) -> str:
+    return v if isinstance(v, str) else ("yes" if v else "no")
+
+
+def summary_rows(results: dict) -> list[tuple[str, str, str, str, str, str]]:
+    """Headline figures: (benchmark, ours, reference measured in the same run, ratio, target, met)."""
+    S = results["sections"]
+    out = []
+    mp = S.get("maps", [])
+    pt, oc = _find(mp, "pan-tilt"), _find(mp, "OpenCV")
+    unc = _find(S.get("uncertainties"), "uncertainties package")
+    if pt:
+        ref = f"copy of the same {pt['copy_bytes'] / 1e6:.0f} MB: {pt['copy_ms']:.1f} ms; numpy propagate: " \
+              f"{pt['pixels'] / pt['naive_mpx_per_s'] / 1e6:.1f} s"
+        ratio = f"copy/ours {pt['copy_ratio']:.2f}; {pt['speedup_vs_naive']:,.0f}x numpy"
+        if unc:
+            ref += f"; `uncertainties` (extrapolated from {unc['measured_pixels']:,} px): " \
+                   f"{unc['median_ms'] / 3.6e6:.1f} h"
+            ratio += f"; {unc['time_vs_ours']:.1e}x `uncertainties`"
+        out.append(("full-HD covariance map, pan-tilt, all sources", f"{pt['median_ms']:.1f} ms", ref, ratio,
+                    pt["target"], _yes_no(pt["met"])))
+    if oc:
+        out.append(("full-HD covariance map, OpenCV with distortion",
+                    f"{oc['median_ms']:.1f} ms = {oc['mpx_per_s']:.0f} Mpx/s",
+                    f"copy: {oc['copy_ms']:.1f} ms; numpy propagate: {oc['naive_mpx_per_s']:.2f} Mpx/s",
+                    f"copy/ours {oc['copy_ratio']:.2f}; {oc['speedup_vs_naive']:,.0f}x numpy", oc["target"],
+                    _yes_no(oc["met"])))
+    mc_rows = S.get("montecarlo", [])
+    for cam in ("pan-tilt", "OpenCV"):
+        mc = _find(mc_rows, cam, "Monte Carlo")
+        lin = _find(mc_rows, cam, "propagate")
+        if mc and lin:
+            rng_m = mc["ground_range_m"]
+            out.append((f"{mc['points']:,} points at {rng_m[0]:.0f}-{rng_m[1]:.0f} m, {cam}: linear vs Monte Carlo "
+                        f"({mc['samples_per_point']:,} samples/point)",
+                        f"linear (numpy) {lin['median_ms']:.1f} ms",
+                        f"Monte Carlo {mc['median_ms'] / 1e3:.1f} s",
+                        f"{lin['speedup_vs_mc']:,.0f}x; sigma_major lin/MC median {mc['sigma_ratio_median']:.3f}, "
+                        f"worst {mc['sigma_ratio_worst']:.3f} (at {mc['worst_at_range_m']:.0f} m), within 100 m "
+                        f"{mc['sigma_ratio_worst_inner']:.3f}; {mc['within_1se']:.0%} within 1 MC s.e.",
+                        "agreement (no target)", ""))
+    fp = S.get("footprints", [])
+    for cam in ("pan-tilt", "opencv-distortion"):
+        fast, naive = _find(fp, cam, "FrameProcessor"), _find(fp, cam, "naive")
+        if fast and naive:
+            out.append((f"one frame of 100 objects (3D boxes), {cam}", f"{fast['median_us']:.0f} us",
+                        f"naive per-object loop: {naive['median_us'] / 1e3:.0f} ms",
+                        f"{fast['speedup_vs_naive']:,.0f}x", fast["target"], _yes_no(fast["met"])))
+    for r in S.get("batch", []):
+        if "footprints_per_s" in r:
+            out.append((r["case"].replace("batch ", "batch, single process, "),
+                        f"{r['footprints_per_s'] / 1e6:.2f} M footprints/s",
+                        f"naive per-object loop: {r['naive_loop_footprints_per_s']:,.0f} /s",
+                        f"{r['speedup_vs_naive']:,.0f}x", r["target"], _yes_no(r["met"])))
+    dk = S.get("dask", [])
+    if len(dk) == 2 and "footprints_per_s" in dk[1]:
+        a, b = dk
+        out.append((f"fleet batch, {b['rows']:,} rows of {b['cameras']} cameras: local Dask cluster, "
+                    f"{b['workers']} workers", f"{b['footprints_per_s'] / 1e6:.2f} M footprints/s",
+                    f"in-process: {a['footprints_per_s'] / 1e6:.2f} M footprints/s",
+                    f"time x{b['time_vs_in_process']:.2f}", b["target"], _yes_no(b["met"])))
+    mem = S.get("memory", [])
+    if len(mem) == 2 and "peak_rss_mb" in mem[1]:
+        a, b = mem
+        out.append((f"streaming batch peak RSS, {a['rows']:,} vs {b['rows']:,} rows",
+                    f"{b['peak_rss_mb']:.0f} MB at 10x ({b['input_decoded_mb'] + b['output_uncompressed_mb']:,.0f}"
+                    " MB of data)", f"{a['peak_rss_mb']:.0f} MB at 1x", f"10x/1x {b['peak_rss_ratio']:.2f}",
+                    a["target"], _yes_no(a["met"])))
+    return out
+
+
+def summary_markdown(results: dict) -> list[str]:
+    rows = summary_rows(results)
+    out = ["| benchmark | ours | reference, same run | ratio | target | met |", "|---|---|---|---|---|---|"]
+    out += ["| " + " | ".join(r) + " |" for r in rows]
+    return out
+
+
 def to_markdown(results: dict) -> str:
-    out = ["# footprint-uq benchmarks", "", *machine_markdown(results), ""]
+    out = ["# footprint-uq benchmarks", "", *machine_markdown(results), "", "## Summary", "",
+           *summary_markdown(results), ""]
     for section, rows in results["sections"].items():
         out += section_markdown(section, rows)
     return "\n".join(out)
@@ -274,7 +362,12 @@ def main(argv=None) -> int:
     ap.add_argument("--sections", default=",".join(SECTIONS),
                     help=f"comma-separated subset of: {', '.join(SECTIONS)}")
     ap.add_argument("--out", default=str(HERE / "results"), help="directory for latest.json / latest.md")
+    ap.add_argument("--render", metavar="JSON", default=None,
+                    help="run nothing: print the Markdown (summary and tables) of an existing results JSON")
     args = ap.parse_args(argv)
+    if args.render:
+        print(to_markdown(json.loads(Path(args.render).read_text())))
+        return 0
     names = [s.strip() for s in args.sections.split(",") if s.strip()]
     unknown = [n for n in names if n not in SECTIONS]
     if unknown:

@@ -96,6 +96,15 @@ def test_markdown_and_machine(quick_results):
         assert f"## {name}" in md
         assert f"## {name}" in stdout  # each section's table is printed as it finishes
     assert "| case |" in md and "CPU:" in md and "load average" in md
+    assert "## Summary" in md and "| benchmark | ours | reference, same run |" in md
+
+
+def test_render_reproduces_the_markdown(quick_results):
+    out, _, md, _ = quick_results
+    p = subprocess.run([sys.executable, str(RUN), "--render", str(out / "latest.json")], capture_output=True,
+                       text=True, cwd=ROOT, timeout=120)
+    assert p.returncode == 0, p.stderr
+    assert p.stdout.strip() == md.strip()
 
 
 def test_unknown_section_is_an_error(tmp_path):
