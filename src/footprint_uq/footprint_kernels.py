@@ -223,14 +223,24 @@ def _stage_undistort(U, V, m, cam, XD, YD, XN, YN, CONV, INV, JK, Jd, Jk):
 
 
 @njit(cache=True, error_model="numpy", nogil=True)
-def _stage_ground(U, V, m, cam, dR, XD, YD, XN, YN, CONV, INV, JK, X, Y, CODE, JP, JUV):
+def _stage_ground(U, V, m, cam, dR, XD, YD, XN, YN, CONV, INV, JK, X, Y, CODE, JP, JUV, need):
     """Ray / ground intersection and all Jacobians, straight-line over the corners (vectorises).
 
     Mirrors :func:`footprint_uq.cameras.general.backproject` with gradients: X, Y the ground
     point, CODE the status, JP (44, m) = d(x, y)/d(params) (row ``i * 22 + param``),
     JUV (4, m) = d(x, y)/d(u, v) (rows 00, 01, 10, 11).  Invalid corners carry NaN or
-    meaningless numbers here; the caller masks them by CODE.
+    meaningless numbers here; the caller masks them by CODE.  ``need`` (22,) bool: the
+    parameters with non-zero variance; JP rows of the others are left unwritten (never read).
     """
+    need_sk, need_k, need_k456, need_roll = need[4], need[5], need[10], need[18]
+    need_g = need[19] or need[20] or need[21]
+    dR0, dR1, dR2 = dR[0], dR[1], dR[2]
+    p00, p01, p02, p10, p11, p12, p20, p21, p22 = (dR0[0, 0], dR0[0, 1], dR0[0, 2], dR0[1, 0], dR0[1, 1], dR0[1, 2],
+                                                   dR0[2, 0], dR0[2, 1], dR0[2, 2])
+    t00, t01, t02, t10, t11, t12, t20, t21, t22 = (dR1[0, 0], dR1[0, 1], dR1[0, 2], dR1[1, 0], dR1[1, 1], dR1[1, 2],
+                                                   dR1[2, 0], dR1[2, 1], dR1[2, 2])
+    o00, o01, o02, o10, o11, o12, o20, o21, o22 = (dR2[0, 0], dR2[0, 1], dR2[0, 2], dR2[1, 0], dR2[1, 1], dR2[1, 2],
+                                                   dR2[2, 0], dR2[2, 1], dR2[2, 2])
     sk, ifx, ify = cam[_C_SK], cam[_C_IFX], cam[_C_IFY]
     skf = sk * ify * ifx
     R0, R1, R2, R3, R4, R5, R6, R7, R8 = (cam[_C_R], cam[_C_R + 1], cam[_C_R + 2], cam[_C_R + 3], cam[_C_R + 4],
@@ -278,28 +288,41 @@ def _stage_ground(U, V, m, cam, dR, XD, YD, XN, YN, CONV, INV, JK, X, Y, CODE, J
         JP[1, j], JP[23, j] = c00 * kx1 + c01 * ky1, c10 * kx1 + c11 * ky1
         JP[2, j], JP[24, j] = c00 * kx2, c10 * kx2
         JP[3, j], JP[25, j] = c00 * kx3 + c01 * ky3, c10 * kx3 + c11 * ky3
-        JP[4, j], JP[26, j] = c00 * kx4, c10 * kx4
-        # distortion: dxy/dxn @ (-(dxd/dxn)^-1 dxd/dk)
-        for kk in range(8):
-            jx, jy = JK[kk, j], JK[8 + kk, j]
-            e0 = -(i00 * jx + i01 * jy)
-            e1 = -(i10 * jx + i11 * jy)
-            JP[5 + kk, j] = b00 * e0 + b01 * e1
-            JP[27 + kk, j] = b10 * e0 + b11 * e1
+        if need_sk:
+            JP[4, j], JP[26, j] = c00 * kx4, c10 * kx4
+        # distortion: dxy/dxn @ (-(dxd/dxn)^-1 dxd/dk)  (k1 k2 p1 p2 k3, then k4 k5 k6)
+        if need_k:
+            for kk in range(8 if need_k456 else 5):
+                jx, jy = JK[kk, j], JK[8 + kk, j]
+                e0 = -(i00 * jx + i01 * jy)
+                e1 = -(i10 * jx + i11 * jy)
+                JP[5 + kk, j] = b00 * e0 + b01 * e1
+                JP[27 + kk, j] = b10 * e0 + b11 * e1
         # camera position
         JP[13, j], JP[14, j], JP[15, j] = 1.0, 0.0, -dx * inv
         JP[35, j], JP[36, j], JP[37, j] = 0.0, 1.0, -dy * inv
         # angles: dxy/dray @ (dR_k @ ray_c)
-        for a in range(3):
-            q0 = dR[a, 0, 0] * xn + dR[a, 0, 1] * yn + dR[a, 0, 2]
-            q1 = dR[a, 1, 0] * xn + dR[a, 1, 1] * yn + dR[a, 1, 2]
-            q2 = dR[a, 2, 0] * xn + dR[a, 2, 1] * yn + dR[a, 2, 2]
-            JP[16 + a, j] = a00 * q0 + a01 * q1 + a02 * q2
-            JP[38 + a, j] = a10 * q0 + a11 * q1 + a12 * q2
+        q0 = p00 * xn + p01 * yn + p02
+        q1 = p10 * xn + p11 * yn + p12
+        q2 = p20 * xn + p21 * yn + p22
+        JP[16, j] = a00 * q0 + a01 * q1 + a02 * q2
+        JP[38, j] = a10 * q0 + a11 * q1 + a12 * q2
+        q0 = t00 * xn + t01 * yn + t02
+        q1 = t10 * xn + t11 * yn + t12
+        q2 = t20 * xn + t21 * yn + t22
+        JP[17, j] = a00 * q0 + a01 * q1 + a02 * q2
+        JP[39, j] = a10 * q0 + a11 * q1 + a12 * q2
+        if need_roll:
+            q0 = o00 * xn + o01 * yn + o02
+            q1 = o10 * xn + o11 * yn + o12
+            q2 = o20 * xn + o21 * yn + o22
+            JP[18, j] = a00 * q0 + a01 * q1 + a02 * q2
+            JP[40, j] = a10 * q0 + a11 * q1 + a12 * q2
         # ground: d_xy dlam/dg, dlam/dg = (1/Dn, lam dx/Dn, lam dy/Dn)
-        g1, g2 = lam * dx * inv, lam * dy * inv
-        JP[19, j], JP[20, j], JP[21, j] = dx * inv, dx * g1, dx * g2
-        JP[41, j], JP[42, j], JP[43, j] = dy * inv, dy * g1, dy * g2
+        if need_g:
+            g1, g2 = lam * dx * inv, lam * dy * inv
+            JP[19, j], JP[20, j], JP[21, j] = dx * inv, dx * g1, dx * g2
+            JP[41, j], JP[42, j], JP[43, j] = dy * inv, dy * g1, dy * g2
         # dxy/duv = dxy/dxd @ dxd/duv
         JUV[0, j] = c00 * ifx
         JUV[1, j] = -c00 * skf + c01 * ify
@@ -460,6 +483,16 @@ def process_corners(uv, extra_reason, cam, dR, Lr, Lc, Lv, r, spx, det, det_mode
     nan = math.nan
     has_extra = extra_reason.shape[0] == N and N > 0
     uvf = uv.reshape(N * K, 2)
+    # parameters with a non-zero row in the factor; flags for groups of them: if any of k1..k6 is
+    # needed, need[5] (k1..k3, p1, p2) stands for the group, need[10] for k4..k6
+    need = np.zeros(22, dtype=np.bool_)
+    for e in range(Lr.shape[0]):
+        need[Lr[e]] = True
+    kd = False
+    for e in range(5, 13):
+        kd = kd or need[e]
+    need[5] = kd
+    need[10] = need[10] or need[11] or need[12]
     for n0 in range(0, N, CH):
         n1 = min(N, n0 + CH)
         m = (n1 - n0) * K
@@ -467,7 +500,7 @@ def process_corners(uv, extra_reason, cam, dR, Lr, Lc, Lv, r, spx, det, det_mode
             U[j] = uvf[n0 * K + j, 0]
             V[j] = uvf[n0 * K + j, 1]
         _stage_undistort(U, V, m, cam, XD, YD, XN, YN, CONV, INV, JK, Jd, Jk)
-        _stage_ground(U, V, m, cam, dR, XD, YD, XN, YN, CONV, INV, JK, X, Y, CODE, JP, JUV)
+        _stage_ground(U, V, m, cam, dR, XD, YD, XN, YN, CONV, INV, JK, X, Y, CODE, JP, JUV, need)
         _stage_whiten(m, JP, Lr, Lc, Lv, r, AW, C3)
         for n in range(n0, n1):
             # ---- per object: flags, corner covariances, joint, largest point, centroid, V2X ----
@@ -610,7 +643,7 @@ def process_corners(uv, extra_reason, cam, dR, Lr, Lc, Lv, r, spx, det, det_mode
                         ss += q[k, 0] * q[k, 0] + q[k, 1] * q[k, 1]
                     A2, Sx, Sy = 0.0, 0.0, 0.0
                     for k in range(K):
-                        kn = (k + 1) % K
+                        kn = k + 1 if k + 1 < K else 0  # (k + 1) % K without an integer division
                         c = q[k, 0] * q[kn, 1] - q[kn, 0] * q[k, 1]
                         A2 += c
                         Sx += (q[k, 0] + q[kn, 0]) * c
@@ -623,8 +656,8 @@ def process_corners(uv, extra_reason, cam, dR, Lr, Lc, Lv, r, spx, det, det_mode
                         Cxl, Cyl = Sx * inv6A, Sy * inv6A
                         cx_, cy_ = Cxl + mx, Cyl + my
                         for k in range(K):
-                            kn = (k + 1) % K
-                            kp = (k - 1 + K) % K
+                            kn = k + 1 if k + 1 < K else 0  # (k + 1) % K without an integer division
+                            kp = k - 1 if k > 0 else K - 1
                             x, y = q[k, 0], q[k, 1]
                             xn_, yn_ = q[kn, 0], q[kn, 1]
                             xp, yp = q[kp, 0], q[kp, 1]
