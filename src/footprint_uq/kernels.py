@@ -1163,6 +1163,11 @@ def _points_general(uv, Suv, prm, R, om, colptr, rowidx, vals, vc, Ccc, has_qc, 
             valid[i] = ok
 
 
+# the same kernel without threads: for small batches the thread start-up costs more than the work
+_points_general_serial = nb.njit(**_JIT1)(_points_general.py_func)
+_SERIAL_BELOW = 4096
+
+
 # --------------------------------------------------------------------------------------
 # public API
 # --------------------------------------------------------------------------------------
@@ -1306,6 +1311,7 @@ def covariance_points(camera, budget, uv_px, pixel_cov_px2=None):
     xy = np.empty((n, 2))
     cov = np.empty((n, 2, 2))
     valid = np.empty(n, dtype=np.bool_)
-    _points_general(flat, Suv, k["params"], k["R"], k["omega"], k["colptr"], k["rowidx"], k["vals"], k["vc"],
+    kernel = _points_general_serial if n < _SERIAL_BELOW else _points_general
+    kernel(flat, Suv, k["params"], k["R"], k["omega"], k["colptr"], k["rowidx"], k["vals"], k["vc"],
                     k["Ccc"], k["has_qc"], xy, cov, valid)
     return xy.reshape(lead + (2,)), cov.reshape(lead + (2, 2)), valid.reshape(lead)
