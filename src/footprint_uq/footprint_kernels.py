@@ -140,13 +140,14 @@ def _distort(x, y, cam, J, Jk, want_k):
 
 
 @njit(cache=True, error_model="numpy", nogil=True)
-def _stage_undistort(U, V, m, cam, XD, YD, XN, YN, CONV, INV, JK, Jd, Jk):
+def _stage_undistort(U, V, m, cam, XD, YD, XN, YN, CONV, INV, JK, Jd, Jk, need):
     """Pixels -> distorted (XD, YD) and undistorted (XN, YN) normalised coordinates.
 
     Also fills CONV (1.0 where undistortion converged), INV (rows i00, i01, i10, i11 of
     d(undistorted)/d(distorted)) and JK (rows 0..7: d x_d / d k, rows 8..15: d y_d / d k).
     Without distortion the loops are straight-line and vectorise; with it each corner
     runs the Newton iteration of :func:`footprint_uq.cameras.distortion.undistort`.
+    ``need`` as in :func:`_stage_ground`: without distortion, JK rows nobody reads are skipped.
     """
     cx, cy, sk = cam[_C_CX], cam[_C_CY], cam[_C_SK]
     ifx, ify = cam[_C_IFX], cam[_C_IFY]
@@ -160,17 +161,26 @@ def _stage_undistort(U, V, m, cam, XD, YD, XN, YN, CONV, INV, JK, Jd, Jk):
             XN[j], YN[j] = x, y
             CONV[j] = 1.0 if (math.isfinite(x) & math.isfinite(y)) else 0.0
             INV[0, j], INV[1, j], INV[2, j], INV[3, j] = 1.0, 0.0, 0.0, 1.0
-            r2 = x * x + y * y
-            r4 = r2 * r2
-            r6 = r4 * r2
-            JK[0, j], JK[8, j] = x * r2, y * r2
-            JK[1, j], JK[9, j] = x * r4, y * r4
-            JK[2, j], JK[10, j] = 2.0 * x * y, r2 + 2.0 * y * y
-            JK[3, j], JK[11, j] = r2 + 2.0 * x * x, 2.0 * x * y
-            JK[4, j], JK[12, j] = x * r6, y * r6
-            JK[5, j], JK[13, j] = -x * r2, -y * r2
-            JK[6, j], JK[14, j] = -x * r4, -y * r4
-            JK[7, j], JK[15, j] = -x * r6, -y * r6
+        if need[5]:
+            for j in range(m):
+                x, y = XD[j], YD[j]
+                r2 = x * x + y * y
+                r4 = r2 * r2
+                r6 = r4 * r2
+                JK[0, j], JK[8, j] = x * r2, y * r2
+                JK[1, j], JK[9, j] = x * r4, y * r4
+                JK[2, j], JK[10, j] = 2.0 * x * y, r2 + 2.0 * y * y
+                JK[3, j], JK[11, j] = r2 + 2.0 * x * x, 2.0 * x * y
+                JK[4, j], JK[12, j] = x * r6, y * r6
+        if need[10]:
+            for j in range(m):
+                x, y = XD[j], YD[j]
+                r2 = x * x + y * y
+                r4 = r2 * r2
+                r6 = r4 * r2
+                JK[5, j], JK[13, j] = -x * r2, -y * r2
+                JK[6, j], JK[14, j] = -x * r4, -y * r4
+                JK[7, j], JK[15, j] = -x * r6, -y * r6
         return
     # Newton on all corners at once; a corner stops moving once converged (as the reference)
     k1, k2, p1, p2 = cam[_C_DIST], cam[_C_DIST + 1], cam[_C_DIST + 2], cam[_C_DIST + 3]
@@ -499,7 +509,7 @@ def process_corners(uv, extra_reason, cam, dR, Lr, Lc, Lv, r, spx, det, det_mode
         for j in range(m):
             U[j] = uvf[n0 * K + j, 0]
             V[j] = uvf[n0 * K + j, 1]
-        _stage_undistort(U, V, m, cam, XD, YD, XN, YN, CONV, INV, JK, Jd, Jk)
+        _stage_undistort(U, V, m, cam, XD, YD, XN, YN, CONV, INV, JK, Jd, Jk, need)
         _stage_ground(U, V, m, cam, dR, XD, YD, XN, YN, CONV, INV, JK, X, Y, CODE, JP, JUV, need)
         _stage_whiten(m, JP, Lr, Lc, Lv, r, AW, C3)
         for n in range(n0, n1):
