@@ -235,21 +235,22 @@ def _add_ray_poly(k, lv, yn, prm, om, a, b):
 
 @nb.njit(**_JIT1)
 def _horner14(c, x):
-    r = c[14]
-    r = r * x + c[13]
-    r = r * x + c[12]
-    r = r * x + c[11]
-    r = r * x + c[10]
-    r = r * x + c[9]
-    r = r * x + c[8]
-    r = r * x + c[7]
-    r = r * x + c[6]
-    r = r * x + c[5]
-    r = r * x + c[4]
-    r = r * x + c[3]
-    r = r * x + c[2]
-    r = r * x + c[1]
-    return r * x + c[0]
+    """Degree-14 polynomial, Estrin's scheme (shorter dependency chains than Horner)."""
+    x2 = x * x
+    x4 = x2 * x2
+    x8 = x4 * x4
+    a0 = c[0] + c[1] * x
+    a1 = c[2] + c[3] * x
+    a2 = c[4] + c[5] * x
+    a3 = c[6] + c[7] * x
+    a4 = c[8] + c[9] * x
+    a5 = c[10] + c[11] * x
+    a6 = c[12] + c[13] * x
+    b0 = a0 + a1 * x2
+    b1 = a2 + a3 * x2
+    b2 = a4 + a5 * x2
+    b3 = a6 + c[14] * x2
+    return (b0 + b1 * x4) + (b2 + b3 * x4) * x8
 
 
 @nb.njit(**_JIT1)
