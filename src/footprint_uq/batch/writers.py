@@ -15,6 +15,7 @@ All writers take the output schema once and then one table per chunk.
 
 from __future__ import annotations
 
+import abc
 import json
 import math
 from pathlib import Path
@@ -57,7 +58,7 @@ def _plain_schema(schema: pa.Schema) -> pa.Schema:
     return pa.schema([pa.field(f.name, f.type.value_type) if pa.types.is_dictionary(f.type) else f for f in schema])
 
 
-class FootprintWriter:
+class FootprintWriter(abc.ABC):
     """Base class: ``write(table)`` per chunk, ``close()`` at the end (also a context manager)."""
 
     format = ""
@@ -71,11 +72,12 @@ class FootprintWriter:
         self._write(table)
         self.rows += table.num_rows
 
-    def _write(self, table: pa.Table) -> None:  # pragma: no cover - abstract
-        raise NotImplementedError
+    @abc.abstractmethod
+    def _write(self, table: pa.Table) -> None:
+        """Write one chunk (each format's own writer)."""
 
-    def close(self) -> None:
-        pass
+    def close(self) -> None:  # noqa: B027 - optional hook: writers without a file handle have nothing to close
+        """Flush and close the output (default: nothing to do)."""
 
     def __enter__(self):
         return self
