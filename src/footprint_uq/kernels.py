@@ -385,81 +385,73 @@ def _undistorted_constants(k: dict, step: int) -> np.ndarray:
     return np.array([vals[n] for n in _CST_NAMES], dtype=np.float64)
 
 
+@nb.njit(inline="always", **_JIT1)
+def _pixel_undistorted(cst, x, dx0, dy0, dn0, P00, P01, P11):
+    """Ground offset and covariance of one pixel at normalised column ``x`` of a row (shared by the row kernels).
+
+    Returns ``(ok, ox, oy, Q00, Q01, Q10, Q11, ax, ay, c00, c01, c11)``.
+    """
+    Hn = cst[2]
+    g0 = cst[3]
+    g1 = cst[4]
+    dxr = dx0 + x * cst[9]
+    dyr = dy0 + x * cst[10]
+    dn = dn0 + x * g0
+    ok = dn < 0.0
+    w = -1.0 / dn
+    lam = Hn * w
+    ox = lam * dxr
+    oy = lam * dyr
+    Q00 = w * (cst[5] + ox * g0)
+    Q01 = w * (cst[6] + ox * g1)
+    Q10 = w * (cst[7] + oy * g0)
+    Q11 = w * (cst[8] + oy * g1)
+    q00 = _horner14(P00, x)
+    q01 = _horner14(P01, x)
+    q11 = _horner14(P11, x)
+    # Q C_qq Q^T
+    A00 = Q00 * q00 + Q01 * q01
+    A01 = Q00 * q01 + Q01 * q11
+    A10 = Q10 * q00 + Q11 * q01
+    A11 = Q10 * q01 + Q11 * q11
+    c00 = A00 * Q00 + A01 * Q01 + cst[11]
+    c01 = A00 * Q10 + A01 * Q11 + cst[12]
+    c11 = A10 * Q10 + A11 * Q11 + cst[13]
+    # height / ground: a a^T rho^T C rho, a = o / Hn; position x (height, ground) cross
+    ax = ox * cst[26]
+    ay = oy * cst[26]
+    sv = cst[14] + ox * (cst[15] + cst[17] * ox + cst[18] * oy) + oy * (cst[16] + cst[19] * oy)
+    mx = cst[20] + cst[21] * ox + cst[22] * oy
+    my = cst[23] + cst[24] * ox + cst[25] * oy
+    c00 += (sv * ax + 2.0 * mx) * ax
+    c01 += sv * ax * ay + mx * ay + ax * my
+    c11 += (sv * ay + 2.0 * my) * ay
+    return ok, ox, oy, Q00, Q01, Q10, Q11, ax, ay, c00, c01, c11
+
+
+@nb.njit(inline="always", **_JIT1)
+def _store_pixel(xr, cr, vr, iu, ok, x, y, c00, c01, c11):
+    nan = np.nan
+    xr[2 * iu] = x if ok else nan
+    xr[2 * iu + 1] = y if ok else nan
+    cr[4 * iu] = c00 if ok else nan
+    cr[4 * iu + 1] = c01 if ok else nan
+    cr[4 * iu + 2] = c01 if ok else nan
+    cr[4 * iu + 3] = c11 if ok else nan
+    vr[iu] = ok
+
+
 @nb.njit(**_JIT1)
 def _row_undistorted(cst, cxs, dx0, dy0, dn0, P00, P01, P11, xr, cr, vr):
     """One image row (1-D views of the outputs, so that LLVM vectorises the pixel loop)."""
     x0 = cst[0]
     y0 = cst[1]
-    Hn = cst[2]
-    g0 = cst[3]
-    g1 = cst[4]
-    HR00 = cst[5]
-    HR01 = cst[6]
-    HR10 = cst[7]
-    HR11 = cst[8]
-    R00 = cst[9]
-    R10 = cst[10]
-    p00 = cst[11]
-    p01 = cst[12]
-    p11 = cst[13]
-    s0 = cst[14]
-    s1 = cst[15]
-    s2 = cst[16]
-    s3 = cst[17]
-    s4 = cst[18]
-    s5 = cst[19]
-    m00 = cst[20]
-    m01 = cst[21]
-    m02 = cst[22]
-    m10 = cst[23]
-    m11 = cst[24]
-    m12 = cst[25]
-    iHn = cst[26]
     stepf = cst[27]
     ifx = cst[28]
-    nan = np.nan
-    W = vr.shape[0]
-    for iu in range(W):
+    for iu in range(vr.shape[0]):
         x = (np.float64(iu) * stepf - cxs) * ifx
-        dxr = dx0 + x * R00
-        dyr = dy0 + x * R10
-        dn = dn0 + x * g0
-        ok = dn < 0.0
-        w = -1.0 / dn
-        lam = Hn * w
-        ox = lam * dxr
-        oy = lam * dyr
-        Q00 = w * (HR00 + ox * g0)
-        Q01 = w * (HR01 + ox * g1)
-        Q10 = w * (HR10 + oy * g0)
-        Q11 = w * (HR11 + oy * g1)
-        q00 = _horner14(P00, x)
-        q01 = _horner14(P01, x)
-        q11 = _horner14(P11, x)
-        # Q C_qq Q^T
-        A00 = Q00 * q00 + Q01 * q01
-        A01 = Q00 * q01 + Q01 * q11
-        A10 = Q10 * q00 + Q11 * q01
-        A11 = Q10 * q01 + Q11 * q11
-        c00 = A00 * Q00 + A01 * Q01 + p00
-        c01 = A00 * Q10 + A01 * Q11 + p01
-        c11 = A10 * Q10 + A11 * Q11 + p11
-        # height / ground: a a^T rho^T C rho, a = o / Hn; position x (height, ground) cross
-        ax = ox * iHn
-        ay = oy * iHn
-        sv = s0 + ox * (s1 + s3 * ox + s4 * oy) + oy * (s2 + s5 * oy)
-        mx = m00 + m01 * ox + m02 * oy
-        my = m10 + m11 * ox + m12 * oy
-        c00 += (sv * ax + 2.0 * mx) * ax
-        c01 += sv * ax * ay + mx * ay + ax * my
-        c11 += (sv * ay + 2.0 * my) * ay
-        xr[2 * iu] = x0 + ox if ok else nan
-        xr[2 * iu + 1] = y0 + oy if ok else nan
-        cr[4 * iu] = c00 if ok else nan
-        cr[4 * iu + 1] = c01 if ok else nan
-        cr[4 * iu + 2] = c01 if ok else nan
-        cr[4 * iu + 3] = c11 if ok else nan
-        vr[iu] = ok
+        ok, ox, oy, _, _, _, _, _, _, c00, c01, c11 = _pixel_undistorted(cst, x, dx0, dy0, dn0, P00, P01, P11)
+        _store_pixel(xr, cr, vr, iu, ok, x0 + ox, y0 + oy, c00, c01, c11)
 
 
 @nb.njit(**_JIT1)
@@ -467,71 +459,13 @@ def _row_undistorted_qc(cst, cxs, dx0, dy0, dn0, P00, P01, P11, BQ, xr, cr, vr):
     """As :func:`_row_undistorted`, with ray/position/ground cross-covariances (full budgets)."""
     x0 = cst[0]
     y0 = cst[1]
-    Hn = cst[2]
-    g0 = cst[3]
-    g1 = cst[4]
-    HR00 = cst[5]
-    HR01 = cst[6]
-    HR10 = cst[7]
-    HR11 = cst[8]
-    R00 = cst[9]
-    R10 = cst[10]
-    p00 = cst[11]
-    p01 = cst[12]
-    p11 = cst[13]
-    s0 = cst[14]
-    s1 = cst[15]
-    s2 = cst[16]
-    s3 = cst[17]
-    s4 = cst[18]
-    s5 = cst[19]
-    m00 = cst[20]
-    m01 = cst[21]
-    m02 = cst[22]
-    m10 = cst[23]
-    m11 = cst[24]
-    m12 = cst[25]
-    iHn = cst[26]
     stepf = cst[27]
     ifx = cst[28]
-    nan = np.nan
     bq = np.zeros((2, 6))
-    W = vr.shape[0]
-    bq = np.zeros((2, 6))
-    for iu in range(W):
+    for iu in range(vr.shape[0]):
         x = (np.float64(iu) * stepf - cxs) * ifx
-        dxr = dx0 + x * R00
-        dyr = dy0 + x * R10
-        dn = dn0 + x * g0
-        ok = dn < 0.0
-        w = -1.0 / dn
-        lam = Hn * w
-        ox = lam * dxr
-        oy = lam * dyr
-        Q00 = w * (HR00 + ox * g0)
-        Q01 = w * (HR01 + ox * g1)
-        Q10 = w * (HR10 + oy * g0)
-        Q11 = w * (HR11 + oy * g1)
-        q00 = _horner14(P00, x)
-        q01 = _horner14(P01, x)
-        q11 = _horner14(P11, x)
-        # Q C_qq Q^T
-        A00 = Q00 * q00 + Q01 * q01
-        A01 = Q00 * q01 + Q01 * q11
-        A10 = Q10 * q00 + Q11 * q01
-        A11 = Q10 * q01 + Q11 * q11
-        c00 = A00 * Q00 + A01 * Q01 + p00
-        c01 = A00 * Q10 + A01 * Q11 + p01
-        c11 = A10 * Q10 + A11 * Q11 + p11
-        # height / ground: a a^T rho^T C rho, a = o / Hn; position x (height, ground) cross
-        ax = ox * iHn
-        ay = oy * iHn
-        sv = s0 + ox * (s1 + s3 * ox + s4 * oy) + oy * (s2 + s5 * oy)
-        mx = m00 + m01 * ox + m02 * oy
-        my = m10 + m11 * ox + m12 * oy
-        c00 += (sv * ax + 2.0 * mx) * ax
-        c01 += sv * ax * ay + mx * ay + ax * my
-        c11 += (sv * ay + 2.0 * my) * ay
+        ok, ox, oy, Q00, Q01, Q10, Q11, ax, ay, c00, c01, c11 = _pixel_undistorted(cst, x, dx0, dy0, dn0,
+                                                                                   P00, P01, P11)
         for a_ in range(2):
             for c_ in range(6):
                 bq[a_, c_] = _horner7(BQ[a_, c_], x)
@@ -547,13 +481,7 @@ def _row_undistorted_qc(cst, cxs, dx0, dy0, dn0, P00, P01, P11, BQ, xr, cr, vr):
         c00 += 2.0 * E00 + 2.0 * n0 * ax
         c01 += E01 + E10 + n0 * ay + ax * n1
         c11 += 2.0 * E11 + 2.0 * n1 * ay
-        xr[2 * iu] = x0 + ox if ok else nan
-        xr[2 * iu + 1] = y0 + oy if ok else nan
-        cr[4 * iu] = c00 if ok else nan
-        cr[4 * iu + 1] = c01 if ok else nan
-        cr[4 * iu + 2] = c01 if ok else nan
-        cr[4 * iu + 3] = c11 if ok else nan
-        vr[iu] = ok
+        _store_pixel(xr, cr, vr, iu, ok, x0 + ox, y0 + oy, c00, c01, c11)
 
 
 @nb.njit(**_JIT)
