@@ -109,10 +109,26 @@ def test_corners_with_invalid_corners_and_detector_cov(camera, rng):
     assert {status.NOT_FINITE, status.OUTSIDE_IMAGE} <= set(np.unique(ref.corner_reason).tolist())
 
 
-@pytest.mark.parametrize("K", [3, 5])
+@pytest.mark.parametrize("K", [1, 2, 3, 5, 7, 64, 65])
 def test_other_polygon_sizes(K, rng):
+    # 50 objects: several kernel chunks (64 // K objects each) and a shorter last one
     cam = PanTiltCamera(1200.0, (1280, 720), 6.0, -40.0, 20.0)
-    ang = np.sort(rng.uniform(0, 2 * np.pi, (10, K)), axis=1)
+    ang = np.sort(rng.uniform(0, 2 * np.pi, (50, K)), axis=1)
+    uv = np.stack([640 + 100 * np.cos(ang), 500 + 80 * np.sin(ang)], -1)
+    uv[7, K // 2] = np.nan  # one object without a centre
+    ref = footprints_from_corners(cam, BUDGET, uv)
+    assert_same(ref, FrameProcessor(cam, BUDGET).corners(uv))
+    assert not ref.centre_valid[7] and ref.centre_valid.sum() >= 45
+
+
+def test_more_corners_than_the_kernel_layout_takes(rng):
+    # the fused kernel holds at most MAX_CORNERS corners per object; beyond, the processor uses the
+    # numpy reference (same results, no error)
+    from footprint_uq.footprint_kernels import MAX_CORNERS
+
+    cam = PanTiltCamera(1200.0, (1280, 720), 6.0, -40.0, 20.0)
+    K = MAX_CORNERS + 1
+    ang = np.sort(rng.uniform(0, 2 * np.pi, (3, K)), axis=1)
     uv = np.stack([640 + 100 * np.cos(ang), 500 + 80 * np.sin(ang)], -1)
     assert_same(footprints_from_corners(cam, BUDGET, uv), FrameProcessor(cam, BUDGET).corners(uv))
 

@@ -54,6 +54,34 @@ _GUARD = 1e-9
 _ORIENT_UNIT = 360.0 / 65535.0
 _PC_LEVELS = np.array([500.0, 200.0, 100.0, 50.0, 20.0, 10.0, 5.0, 2.0, 1.0, 0.5, 0.2, 0.1, 0.05, 0.02, 0.01])
 
+# Chunk scratch: ONE float64 buffer; row r of a chunk is S[r * _ST : r * _ST + m].  Every access
+# is "one base pointer + a compile-time offset", so LLVM proves the rows independent and vectorises
+# the corner loops (with a dozen separate arrays it gives up on the run-time alias checks).
+# Corner k of object i of a chunk of nob objects is column j = k * nob + i (corner-major), so the
+# per-object stages also run straight over contiguous columns.
+_ST = 264  # row stride = most corners in a chunk (not a power of two: keeps rows in different cache sets)
+_M_TARGET = 64  # corners per chunk (a chunk's working set stays in L1/L2)
+MAX_CORNERS = _ST  # footprints with more corners per object go to the numpy reference
+_U, _V, _XD, _YD, _XN, _YN, _CONV = 0, 1, 2, 3, 4, 5, 6
+_INV = 7  # 4 rows: d(undistorted)/d(distorted) 00 01 10 11
+_JK = 11  # 16 rows: d x_d / d k (8), d y_d / d k (8)
+_X, _Y, _CODE = 27, 28, 29
+_JP = 30  # 44 rows: d(x, y)/d(params), row i * 22 + param
+_JUV = 74  # 4 rows: d(x, y)/d(u, v)
+_B4 = 78  # 4 rows: d(x, y)/d(x_n)
+_AW = 82  # 2 r <= 44 rows: J L
+_C3 = 126  # 3 rows: parameter part of each corner covariance (xx, xy, yy)
+_P4 = 129  # 4 rows: pixel covariance of each corner (budget + detector)
+_CC = 133  # 3 rows: corner covariance (xx, xy, yy), NaN if not computed
+_SSEL, _RC, _US, _XX, _YY = 136, 137, 138, 139, 140  # semi-axis if usable else -1, code, usable, x, y (NaN)
+_Q, _QN, _QP = 141, 143, 145  # 2 rows each: corner minus vertex mean; the same of the next / previous corner
+_G = 147  # 4 rows: d centre / d corner (cx/x, cx/y, cy/x, cy/y)
+_T0, _T1, _T2 = 151, 152, 153  # per-corner temporaries
+# per-object rows (columns 0 .. nob - 1)
+_BEST, _BSEMI, _FBAD, _MX, _MY, _SS, _A2, _SX, _SY = 154, 155, 156, 157, 158, 159, 160, 161, 162
+_B0, _B1, _B2, _E00, _E01, _E11, _CXC, _CYC, _AREA, _DEG = 163, 164, 165, 166, 167, 168, 169, 170, 171, 172
+_NROWS = 173
+
 
 def camera_constants(camera) -> tuple[np.ndarray, np.ndarray]:
     """``(cam, dR)`` for the kernels from a :class:`~footprint_uq.cameras.base.Camera`."""
@@ -140,58 +168,58 @@ def _distort(x, y, cam, J, Jk, want_k):
 
 
 @njit(cache=True, error_model="numpy", nogil=True)
-def _stage_undistort(U, V, m, cam, XD, YD, XN, YN, CONV, INV, JK, Jd, Jk, need):
-    """Pixels -> distorted (XD, YD) and undistorted (XN, YN) normalised coordinates.
+def _stage_undistort(S, m, cam, Jd, Jk, need):
+    """Pixels (rows U, V) -> distorted (XD, YD) and undistorted (XN, YN) normalised coordinates.
 
-    Also fills CONV (1.0 where undistortion converged), INV (rows i00, i01, i10, i11 of
-    d(undistorted)/d(distorted)) and JK (rows 0..7: d x_d / d k, rows 8..15: d y_d / d k).
-    Without distortion the loops are straight-line and vectorise; with it each corner
-    runs the Newton iteration of :func:`footprint_uq.cameras.distortion.undistort`.
-    ``need`` as in :func:`_stage_ground`: without distortion, JK rows nobody reads are skipped.
+    Also fills CONV (1.0 where undistortion converged), INV (d(undistorted)/d(distorted)) and
+    JK (rows 0..7: d x_d / d k, rows 8..15: d y_d / d k).  Without distortion the loops are
+    straight-line and vectorise; with it each corner runs the Newton iteration of
+    :func:`footprint_uq.cameras.distortion.undistort`.  ``need`` as in :func:`_stage_ground`:
+    without distortion, JK rows nobody reads are skipped.
     """
     cx, cy, sk = cam[_C_CX], cam[_C_CY], cam[_C_SK]
     ifx, ify = cam[_C_IFX], cam[_C_IFY]
     for j in range(m):
-        yd = (V[j] - cy) * ify
-        XD[j] = (U[j] - cx - sk * yd) * ifx
-        YD[j] = yd
+        yd = (S[_V * _ST + j] - cy) * ify
+        S[_XD * _ST + j] = (S[_U * _ST + j] - cx - sk * yd) * ifx
+        S[_YD * _ST + j] = yd
     if cam[_C_HASDIST] == 0.0:
         for j in range(m):
-            x, y = XD[j], YD[j]
-            XN[j], YN[j] = x, y
-            CONV[j] = 1.0 if (math.isfinite(x) & math.isfinite(y)) else 0.0
-            INV[0, j], INV[1, j], INV[2, j], INV[3, j] = 1.0, 0.0, 0.0, 1.0
+            x, y = S[_XD * _ST + j], S[_YD * _ST + j]
+            S[_XN * _ST + j], S[_YN * _ST + j] = x, y
+            S[_CONV * _ST + j] = 1.0 if (math.isfinite(x) & math.isfinite(y)) else 0.0
+            S[_INV * _ST + j], S[(_INV + 1) * _ST + j] = 1.0, 0.0
+            S[(_INV + 2) * _ST + j], S[(_INV + 3) * _ST + j] = 0.0, 1.0
         if need[5]:
             for j in range(m):
-                x, y = XD[j], YD[j]
+                x, y = S[_XD * _ST + j], S[_YD * _ST + j]
                 r2 = x * x + y * y
                 r4 = r2 * r2
                 r6 = r4 * r2
-                JK[0, j], JK[8, j] = x * r2, y * r2
-                JK[1, j], JK[9, j] = x * r4, y * r4
-                JK[2, j], JK[10, j] = 2.0 * x * y, r2 + 2.0 * y * y
-                JK[3, j], JK[11, j] = r2 + 2.0 * x * x, 2.0 * x * y
-                JK[4, j], JK[12, j] = x * r6, y * r6
+                S[_JK * _ST + j], S[(_JK + 8) * _ST + j] = x * r2, y * r2
+                S[(_JK + 1) * _ST + j], S[(_JK + 9) * _ST + j] = x * r4, y * r4
+                S[(_JK + 2) * _ST + j], S[(_JK + 10) * _ST + j] = 2.0 * x * y, r2 + 2.0 * y * y
+                S[(_JK + 3) * _ST + j], S[(_JK + 11) * _ST + j] = r2 + 2.0 * x * x, 2.0 * x * y
+                S[(_JK + 4) * _ST + j], S[(_JK + 12) * _ST + j] = x * r6, y * r6
         if need[10]:
             for j in range(m):
-                x, y = XD[j], YD[j]
+                x, y = S[_XD * _ST + j], S[_YD * _ST + j]
                 r2 = x * x + y * y
                 r4 = r2 * r2
                 r6 = r4 * r2
-                JK[5, j], JK[13, j] = -x * r2, -y * r2
-                JK[6, j], JK[14, j] = -x * r4, -y * r4
-                JK[7, j], JK[15, j] = -x * r6, -y * r6
+                S[(_JK + 5) * _ST + j], S[(_JK + 13) * _ST + j] = -x * r2, -y * r2
+                S[(_JK + 6) * _ST + j], S[(_JK + 14) * _ST + j] = -x * r4, -y * r4
+                S[(_JK + 7) * _ST + j], S[(_JK + 15) * _ST + j] = -x * r6, -y * r6
         return
     # Newton on all corners at once; a corner stops moving once converged (as the reference)
     k1, k2, p1, p2 = cam[_C_DIST], cam[_C_DIST + 1], cam[_C_DIST + 2], cam[_C_DIST + 3]
     k3, k4, k5, k6 = cam[_C_DIST + 4], cam[_C_DIST + 5], cam[_C_DIST + 6], cam[_C_DIST + 7]
     for j in range(m):
-        XN[j], YN[j] = XD[j], YD[j]
-        CONV[j] = 0.0
+        S[_XN * _ST + j], S[_YN * _ST + j] = S[_XD * _ST + j], S[_YD * _ST + j]
     for _ in range(50):
         n_active = 0
         for j in range(m):
-            x, y, xd, yd = XN[j], YN[j], XD[j], YD[j]
+            x, y, xd, yd = S[_XN * _ST + j], S[_YN * _ST + j], S[_XD * _ST + j], S[_YD * _ST + j]
             tol = 1e-14 * max(1.0, max(abs(xd), abs(yd)))
             r2 = x * x + y * y
             num = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
@@ -212,38 +240,39 @@ def _stage_undistort(U, V, m, cam, XD, YD, XN, YN, CONV, INV, JK, Jd, Jk, need):
             idet = 1.0 / (j00 * j11 - j01 * j10)
             s0 = (j11 * r0 - j01 * r1) * idet
             s1 = (-j10 * r0 + j00 * r1) * idet
-            XN[j] = x if done else x - s0
-            YN[j] = y if done else y - s1
+            S[_XN * _ST + j] = x if done else x - s0
+            S[_YN * _ST + j] = y if done else y - s1
             n_active += 0 if done else 1
         if n_active == 0:
             break
     for j in range(m):
-        xn, yn, xd, yd = XN[j], YN[j], XD[j], YD[j]
+        xn, yn, xd, yd = S[_XN * _ST + j], S[_YN * _ST + j], S[_XD * _ST + j], S[_YD * _ST + j]
         tol = 1e-14 * max(1.0, max(abs(xd), abs(yd)))
         fxd, fyd = _distort(xn, yn, cam, Jd, Jk, True)
         r0, r1 = fxd - xd, fyd - yd
         det = Jd[0, 0] * Jd[1, 1] - Jd[0, 1] * Jd[1, 0]
-        CONV[j] = 1.0 if ((max(abs(r0), abs(r1)) <= tol) and det > 0) else 0.0
+        S[_CONV * _ST + j] = 1.0 if ((max(abs(r0), abs(r1)) <= tol) and det > 0) else 0.0
         idet = 1.0 / det
-        INV[0, j], INV[1, j] = Jd[1, 1] * idet, -Jd[0, 1] * idet
-        INV[2, j], INV[3, j] = -Jd[1, 0] * idet, Jd[0, 0] * idet
+        S[_INV * _ST + j], S[(_INV + 1) * _ST + j] = Jd[1, 1] * idet, -Jd[0, 1] * idet
+        S[(_INV + 2) * _ST + j], S[(_INV + 3) * _ST + j] = -Jd[1, 0] * idet, Jd[0, 0] * idet
         for kk in range(8):
-            JK[kk, j] = Jk[0, kk]
-            JK[8 + kk, j] = Jk[1, kk]
+            S[(_JK + kk) * _ST + j] = Jk[0, kk]
+            S[(_JK + 8 + kk) * _ST + j] = Jk[1, kk]
 
 
 @njit(cache=True, error_model="numpy", nogil=True)
-def _stage_ground(U, V, m, cam, dR, XD, YD, XN, YN, CONV, INV, JK, X, Y, CODE, JP, JUV, need):
-    """Ray / ground intersection and all Jacobians, straight-line over the corners (vectorises).
+def _stage_ground(S, m, cam, dR, need):
+    """Ray / ground intersection and all Jacobians over the corners of a chunk.
 
-    Mirrors :func:`footprint_uq.cameras.general.backproject` with gradients: X, Y the ground
-    point, CODE the status, JP (44, m) = d(x, y)/d(params) (row ``i * 22 + param``),
-    JUV (4, m) = d(x, y)/d(u, v) (rows 00, 01, 10, 11).  Invalid corners carry NaN or
-    meaningless numbers here; the caller masks them by CODE.  ``need`` (22,) bool: the
-    parameters with non-zero variance; JP rows of the others are left unwritten (never read).
+    Mirrors :func:`footprint_uq.cameras.general.backproject` with gradients: rows X, Y the
+    ground point, CODE the status, JP (44 rows) = d(x, y)/d(params) (row ``i * 22 + param``),
+    JUV (4 rows) = d(x, y)/d(u, v) (00, 01, 10, 11).  Invalid corners carry NaN or meaningless
+    numbers here; the caller masks them by CODE.  The main loop is branch-free straight-line
+    code (it vectorises) and writes every JP row except the distortion ones; those follow (only
+    if ``need``, the (22,) mask of parameters with variance, asks for them) in one short loop
+    per coefficient, from d(x, y)/d(x_n) kept in rows B4.
     """
-    need_sk, need_k, need_k456, need_roll = need[4], need[5], need[10], need[18]
-    need_g = need[19] or need[20] or need[21]
+    need_k, need_k456 = need[5], need[10]
     dR0, dR1, dR2 = dR[0], dR[1], dR[2]
     p00, p01, p02, p10, p11, p12, p20, p21, p22 = (dR0[0, 0], dR0[0, 1], dR0[0, 2], dR0[1, 0], dR0[1, 1], dR0[1, 2],
                                                    dR0[2, 0], dR0[2, 1], dR0[2, 2])
@@ -259,9 +288,10 @@ def _stage_ground(U, V, m, cam, dR, XD, YD, XN, YN, CONV, INV, JK, X, Y, CODE, J
     Nn = gdz - cam[_C_H]
     X0, Y0 = cam[_C_X], cam[_C_Y]
     for j in range(m):
-        u, v = U[j], V[j]
-        xd, yd, xn, yn = XD[j], YD[j], XN[j], YN[j]
-        i00, i01, i10, i11 = INV[0, j], INV[1, j], INV[2, j], INV[3, j]
+        u, v = S[_U * _ST + j], S[_V * _ST + j]
+        xd, yd, xn, yn = S[_XD * _ST + j], S[_YD * _ST + j], S[_XN * _ST + j], S[_YN * _ST + j]
+        i00, i01 = S[_INV * _ST + j], S[(_INV + 1) * _ST + j]
+        i10, i11 = S[(_INV + 2) * _ST + j], S[(_INV + 3) * _ST + j]
         finite = math.isfinite(u) & math.isfinite(v)
         dx = R0 * xn + R1 * yn + R2
         dy = R3 * xn + R4 * yn + R5
@@ -271,11 +301,11 @@ def _stage_ground(U, V, m, cam, dR, XD, YD, XN, YN, CONV, INV, JK, X, Y, CODE, J
         lam = Nn * inv
         vg = (Dn < 0.0) & (Nn < 0.0) & math.isfinite(lam)
         rc = _OK if vg else _ABOVE
-        rc = _UNDIST if CONV[j] == 0.0 else rc
+        rc = _UNDIST if S[_CONV * _ST + j] == 0.0 else rc
         rc = rc if finite else _NOTFIN
-        CODE[j] = rc
-        X[j] = X0 + lam * dx
-        Y[j] = Y0 + lam * dy
+        S[_CODE * _ST + j] = rc
+        S[_X * _ST + j] = X0 + lam * dx
+        S[_Y * _ST + j] = Y0 + lam * dy
         # dxy/dray (2, 3) = lam I + d_xy dlam/dray, dlam/dray = (-lam/Dn) (-gx, -gy, 1)
         f = -lam * inv
         l0, l1, l2 = -gx * f, -gy * f, f
@@ -286,6 +316,7 @@ def _stage_ground(U, V, m, cam, dR, XD, YD, XN, YN, CONV, INV, JK, X, Y, CODE, J
         b01 = a00 * R1 + a01 * R4 + a02 * R7
         b10 = a10 * R0 + a11 * R3 + a12 * R6
         b11 = a10 * R1 + a11 * R4 + a12 * R7
+        S[_B4 * _ST + j], S[(_B4 + 1) * _ST + j], S[(_B4 + 2) * _ST + j], S[(_B4 + 3) * _ST + j] = b00, b01, b10, b11
         c00 = b00 * i00 + b01 * i10
         c01 = b00 * i01 + b01 * i11
         c10 = b10 * i00 + b11 * i10
@@ -294,50 +325,77 @@ def _stage_ground(U, V, m, cam, dR, XD, YD, XN, YN, CONV, INV, JK, X, Y, CODE, J
         dy_dfy = -yd * ify
         kx0, kx1, kx2, kx3, kx4 = -xd * ifx, -sk * ifx * dy_dfy, -ifx, skf, -yd * ifx
         ky1, ky3 = dy_dfy, -ify
-        JP[0, j], JP[22, j] = c00 * kx0, c10 * kx0
-        JP[1, j], JP[23, j] = c00 * kx1 + c01 * ky1, c10 * kx1 + c11 * ky1
-        JP[2, j], JP[24, j] = c00 * kx2, c10 * kx2
-        JP[3, j], JP[25, j] = c00 * kx3 + c01 * ky3, c10 * kx3 + c11 * ky3
-        if need_sk:
-            JP[4, j], JP[26, j] = c00 * kx4, c10 * kx4
-        # distortion: dxy/dxn @ (-(dxd/dxn)^-1 dxd/dk)  (k1 k2 p1 p2 k3, then k4 k5 k6)
-        if need_k:
-            for kk in range(8 if need_k456 else 5):
-                jx, jy = JK[kk, j], JK[8 + kk, j]
-                e0 = -(i00 * jx + i01 * jy)
-                e1 = -(i10 * jx + i11 * jy)
-                JP[5 + kk, j] = b00 * e0 + b01 * e1
-                JP[27 + kk, j] = b10 * e0 + b11 * e1
+        S[_JP * _ST + j], S[(_JP + 22) * _ST + j] = c00 * kx0, c10 * kx0
+        S[(_JP + 1) * _ST + j], S[(_JP + 23) * _ST + j] = c00 * kx1 + c01 * ky1, c10 * kx1 + c11 * ky1
+        S[(_JP + 2) * _ST + j], S[(_JP + 24) * _ST + j] = c00 * kx2, c10 * kx2
+        S[(_JP + 3) * _ST + j], S[(_JP + 25) * _ST + j] = c00 * kx3 + c01 * ky3, c10 * kx3 + c11 * ky3
+        S[(_JP + 4) * _ST + j], S[(_JP + 26) * _ST + j] = c00 * kx4, c10 * kx4
         # camera position
-        JP[13, j], JP[14, j], JP[15, j] = 1.0, 0.0, -dx * inv
-        JP[35, j], JP[36, j], JP[37, j] = 0.0, 1.0, -dy * inv
+        S[(_JP + 13) * _ST + j], S[(_JP + 14) * _ST + j], S[(_JP + 15) * _ST + j] = 1.0, 0.0, -dx * inv
+        S[(_JP + 35) * _ST + j], S[(_JP + 36) * _ST + j], S[(_JP + 37) * _ST + j] = 0.0, 1.0, -dy * inv
         # angles: dxy/dray @ (dR_k @ ray_c)
         q0 = p00 * xn + p01 * yn + p02
         q1 = p10 * xn + p11 * yn + p12
         q2 = p20 * xn + p21 * yn + p22
-        JP[16, j] = a00 * q0 + a01 * q1 + a02 * q2
-        JP[38, j] = a10 * q0 + a11 * q1 + a12 * q2
+        S[(_JP + 16) * _ST + j] = a00 * q0 + a01 * q1 + a02 * q2
+        S[(_JP + 38) * _ST + j] = a10 * q0 + a11 * q1 + a12 * q2
         q0 = t00 * xn + t01 * yn + t02
         q1 = t10 * xn + t11 * yn + t12
         q2 = t20 * xn + t21 * yn + t22
-        JP[17, j] = a00 * q0 + a01 * q1 + a02 * q2
-        JP[39, j] = a10 * q0 + a11 * q1 + a12 * q2
-        if need_roll:
-            q0 = o00 * xn + o01 * yn + o02
-            q1 = o10 * xn + o11 * yn + o12
-            q2 = o20 * xn + o21 * yn + o22
-            JP[18, j] = a00 * q0 + a01 * q1 + a02 * q2
-            JP[40, j] = a10 * q0 + a11 * q1 + a12 * q2
+        S[(_JP + 17) * _ST + j] = a00 * q0 + a01 * q1 + a02 * q2
+        S[(_JP + 39) * _ST + j] = a10 * q0 + a11 * q1 + a12 * q2
+        q0 = o00 * xn + o01 * yn + o02
+        q1 = o10 * xn + o11 * yn + o12
+        q2 = o20 * xn + o21 * yn + o22
+        S[(_JP + 18) * _ST + j] = a00 * q0 + a01 * q1 + a02 * q2
+        S[(_JP + 40) * _ST + j] = a10 * q0 + a11 * q1 + a12 * q2
         # ground: d_xy dlam/dg, dlam/dg = (1/Dn, lam dx/Dn, lam dy/Dn)
-        if need_g:
-            g1, g2 = lam * dx * inv, lam * dy * inv
-            JP[19, j], JP[20, j], JP[21, j] = dx * inv, dx * g1, dx * g2
-            JP[41, j], JP[42, j], JP[43, j] = dy * inv, dy * g1, dy * g2
+        g1, g2 = lam * dx * inv, lam * dy * inv
+        S[(_JP + 19) * _ST + j], S[(_JP + 20) * _ST + j], S[(_JP + 21) * _ST + j] = dx * inv, dx * g1, dx * g2
+        S[(_JP + 41) * _ST + j], S[(_JP + 42) * _ST + j], S[(_JP + 43) * _ST + j] = dy * inv, dy * g1, dy * g2
         # dxy/duv = dxy/dxd @ dxd/duv
-        JUV[0, j] = c00 * ifx
-        JUV[1, j] = -c00 * skf + c01 * ify
-        JUV[2, j] = c10 * ifx
-        JUV[3, j] = -c10 * skf + c11 * ify
+        S[_JUV * _ST + j] = c00 * ifx
+        S[(_JUV + 1) * _ST + j] = -c00 * skf + c01 * ify
+        S[(_JUV + 2) * _ST + j] = c10 * ifx
+        S[(_JUV + 3) * _ST + j] = -c10 * skf + c11 * ify
+    # distortion: dxy/dxn @ (-(dxd/dxn)^-1 dxd/dk)  (k1 k2 p1 p2 k3, then k4 k5 k6)
+    if need_k:
+        for kk in range(8 if need_k456 else 5):
+            for j in range(m):
+                jx, jy = S[(_JK + kk) * _ST + j], S[(_JK + 8 + kk) * _ST + j]
+                e0 = -(S[_INV * _ST + j] * jx + S[(_INV + 1) * _ST + j] * jy)
+                e1 = -(S[(_INV + 2) * _ST + j] * jx + S[(_INV + 3) * _ST + j] * jy)
+                S[(_JP + 5 + kk) * _ST + j] = S[_B4 * _ST + j] * e0 + S[(_B4 + 1) * _ST + j] * e1
+                S[(_JP + 27 + kk) * _ST + j] = S[(_B4 + 2) * _ST + j] * e0 + S[(_B4 + 3) * _ST + j] * e1
+
+
+@njit(cache=True, error_model="numpy", nogil=True)
+def _stage_whiten(S, m, Lr, Lc, Lv, r):
+    """Rows AW (2 r) = J L (row ``2 c + i``) and C3 (3) = the parameter part of each corner's
+    covariance (xx, xy, yy) = (J L)(J L)^T; only the non-zero entries of L are touched."""
+    for c in range(2 * r):
+        for j in range(m):
+            S[(_AW + c) * _ST + j] = 0.0
+    for e in range(Lr.shape[0]):
+        c, p, val = Lc[e], Lr[e], Lv[e]
+        # row views: their indices are provably >= 0, so the loops carry no wraparound test
+        o0 = S[(_AW + 2 * c) * _ST:(_AW + 2 * c) * _ST + m]
+        o1 = S[(_AW + 2 * c + 1) * _ST:(_AW + 2 * c + 1) * _ST + m]
+        i0 = S[(_JP + p) * _ST:(_JP + p) * _ST + m]
+        i1 = S[(_JP + 22 + p) * _ST:(_JP + 22 + p) * _ST + m]
+        for j in range(m):
+            o0[j] += i0[j] * val
+        for j in range(m):
+            o1[j] += i1[j] * val
+    for j in range(m):
+        S[_C3 * _ST + j], S[(_C3 + 1) * _ST + j], S[(_C3 + 2) * _ST + j] = 0.0, 0.0, 0.0
+    for c in range(r):
+        a0 = S[(_AW + 2 * c) * _ST:(_AW + 2 * c) * _ST + m]
+        a1 = S[(_AW + 2 * c + 1) * _ST:(_AW + 2 * c + 1) * _ST + m]
+        for j in range(m):
+            S[_C3 * _ST + j] += a0[j] * a0[j]
+            S[(_C3 + 1) * _ST + j] += a0[j] * a1[j]
+            S[(_C3 + 2) * _ST + j] += a1[j] * a1[j]
 
 
 @njit(cache=True, error_model="numpy", nogil=True)
@@ -366,28 +424,6 @@ def _project(X, Y, Z, cam, uv):
     uv[0] = cam[_C_FX] * xd + cam[_C_SK] * yd + cam[_C_CX]
     uv[1] = cam[_C_FY] * yd + cam[_C_CY]
     return _OK
-
-
-@njit(cache=True, error_model="numpy", nogil=True)
-def _stage_whiten(m, JP, Lr, Lc, Lv, r, AW, C3):
-    """AW (2r, m) = rows of J L (row ``2 c + i``); C3 (3, m) = the parameter part of each corner's
-    covariance (c00, c01, c11) = (J L)(J L)^T."""
-    for c in range(2 * r):
-        for j in range(m):
-            AW[c, j] = 0.0
-    for e in range(Lr.shape[0]):
-        c, p, val = Lc[e], Lr[e], Lv[e]
-        for j in range(m):
-            AW[2 * c, j] += JP[p, j] * val
-            AW[2 * c + 1, j] += JP[22 + p, j] * val
-    for j in range(m):
-        C3[0, j], C3[1, j], C3[2, j] = 0.0, 0.0, 0.0
-    for c in range(r):
-        for j in range(m):
-            a0, a1 = AW[2 * c, j], AW[2 * c + 1, j]
-            C3[0, j] += a0 * a0
-            C3[1, j] += a0 * a1
-            C3[2, j] += a1 * a1
 
 
 @njit(cache=True, error_model="numpy", nogil=True)
@@ -448,9 +484,227 @@ def _v2x(c00, c01, c11, ch, sh, out, n):
 
 
 @njit(cache=True, error_model="numpy", nogil=True)
-def process_corners(uv, extra_reason, cam, dR, Lr, Lc, Lv, r, spx, det, det_mode, allow_outside, ch, sh,
-                    want_joint):
-    """The fused per-frame kernel on corners in pixels ``uv`` (N, K, 2).
+def _stage_corner_cov(S, m, W, Himg, allow_outside):
+    """Per corner: final code (outside the image), usable flag, covariance (C3 + J_uv P J_uv^T),
+    its semi-major axis; NaN for corners that could not be computed."""
+    nan = math.nan
+    for j in range(m):
+        u, v = S[_U * _ST + j], S[_V * _ST + j]
+        rc = S[_CODE * _ST + j]
+        inside = (u >= -0.5) & (u <= W - 0.5) & (v >= -0.5) & (v <= Himg - 0.5)
+        rc = _OUTSIDE if ((rc == _OK) & (not inside)) else rc
+        computed = (rc == _OK) | (rc == _OUTSIDE)
+        us = (rc == _OK) | ((rc == _OUTSIDE) & allow_outside)
+        S[_RC * _ST + j] = rc
+        S[_US * _ST + j] = 1.0 if us else 0.0
+        j00, j01 = S[_JUV * _ST + j], S[(_JUV + 1) * _ST + j]
+        j10, j11 = S[(_JUV + 2) * _ST + j], S[(_JUV + 3) * _ST + j]
+        p00, p01 = S[_P4 * _ST + j], S[(_P4 + 1) * _ST + j]
+        p10, p11 = S[(_P4 + 2) * _ST + j], S[(_P4 + 3) * _ST + j]
+        m00, m01 = j00 * p00 + j01 * p10, j00 * p01 + j01 * p11
+        m10, m11 = j10 * p00 + j11 * p10, j10 * p01 + j11 * p11
+        c00 = S[_C3 * _ST + j] + m00 * j00 + m01 * j01
+        c01 = S[(_C3 + 1) * _ST + j] + m00 * j10 + m01 * j11
+        c11 = S[(_C3 + 2) * _ST + j] + m10 * j10 + m11 * j11
+        semi = math.sqrt(0.5 * (c00 + c11) + math.sqrt(0.25 * (c00 - c11) * (c00 - c11) + c01 * c01))
+        S[_CC * _ST + j] = c00 if computed else nan
+        S[(_CC + 1) * _ST + j] = c01 if computed else nan
+        S[(_CC + 2) * _ST + j] = c11 if computed else nan
+        S[_XX * _ST + j] = S[_X * _ST + j] if computed else nan
+        S[_YY * _ST + j] = S[_Y * _ST + j] if computed else nan
+        S[_SSEL * _ST + j] = semi if us else -1.0
+
+
+@njit(cache=True, error_model="numpy", nogil=True)
+def _blocks(S, row, k, nob):
+    """View of the nob columns of corner k in scratch row ``row`` (indices provably >= 0)."""
+    a = row * _ST + k * nob
+    return S[a:a + nob]
+
+
+@njit(cache=True, error_model="numpy", nogil=True)
+def _sum_corners(S, src, dst, nob, K):
+    """Per object: row dst[i] = sum over corners k of row src[k * nob + i] (k in order)."""
+    d = _blocks(S, dst, 0, nob)
+    s = _blocks(S, src, 0, nob)
+    for i in range(nob):
+        d[i] = s[i]
+    for k in range(1, K):
+        s = _blocks(S, src, k, nob)
+        for i in range(nob):
+            d[i] += s[i]
+
+
+@njit(cache=True, error_model="numpy", nogil=True)
+def _to_corners(S, src, dst, nob, K, shift):
+    """Per corner: row dst[k * nob + i] = row src[((k + shift) mod K) * nob + i] if src is a corner row,
+    or src[i] (per-object row) with ``shift < 0``."""
+    for k in range(K):
+        d = _blocks(S, dst, k, nob)
+        s = _blocks(S, src, 0 if shift < 0 else (k + shift) % K, nob)
+        for i in range(nob):
+            d[i] = s[i]
+
+
+@njit(cache=True, error_model="numpy", nogil=True)
+def _stage_select(S, nob, K):
+    """Per object: the largest usable corner (BEST, BSEMI; -1 if none; first wins a tie) and the
+    first unusable corner (FBAD, -1 if all are usable)."""
+    best, bsemi, fbad = _blocks(S, _BEST, 0, nob), _blocks(S, _BSEMI, 0, nob), _blocks(S, _FBAD, 0, nob)
+    for i in range(nob):
+        best[i], bsemi[i], fbad[i] = -1.0, -1.0, -1.0
+    for k in range(K):
+        ssel, us = _blocks(S, _SSEL, k, nob), _blocks(S, _US, k, nob)
+        for i in range(nob):
+            s = ssel[i]
+            better = s > bsemi[i]
+            best[i] = k if better else best[i]
+            bsemi[i] = s if better else bsemi[i]
+            fbad[i] = k if ((fbad[i] < 0.0) & (us[i] == 0.0)) else fbad[i]
+
+
+@njit(cache=True, error_model="numpy", nogil=True)
+def _stage_centroid(S, nob, K):
+    """Per object: area centroid (CXC, CYC), AREA, DEG (zero area) and its Jacobian G (4 rows:
+    d cx/d x_k, d cx/d y_k, d cy/d x_k, d cy/d y_k).  Computed for every object; objects with an
+    unusable corner carry NaN and are masked by the caller.  K < 3: the vertex mean.
+
+    Per-object sums over corners and per-corner uses of per-object numbers go through
+    :func:`_sum_corners` / :func:`_to_corners`, so every loop runs straight over columns.
+    """
+    m = K * nob
+    _sum_corners(S, _XX, _MX, nob, K)
+    _sum_corners(S, _YY, _MY, nob, K)
+    if K < 3:
+        for i in range(nob):
+            S[_CXC * _ST + i], S[_CYC * _ST + i] = S[_MX * _ST + i] / K, S[_MY * _ST + i] / K
+            S[_AREA * _ST + i], S[_DEG * _ST + i] = 0.0, 0.0
+        for j in range(m):
+            S[_G * _ST + j], S[(_G + 1) * _ST + j] = 1.0 / K, 0.0
+            S[(_G + 2) * _ST + j], S[(_G + 3) * _ST + j] = 0.0, 1.0 / K
+        return
+    for i in range(nob):
+        S[_MX * _ST + i] /= K
+        S[_MY * _ST + i] /= K
+    # q = corner - vertex mean (the centroid is formed relative to the mean: no cancellation)
+    _to_corners(S, _MX, _T0, nob, K, -1)
+    _to_corners(S, _MY, _T1, nob, K, -1)
+    for j in range(m):
+        q0 = S[_XX * _ST + j] - S[_T0 * _ST + j]
+        q1 = S[_YY * _ST + j] - S[_T1 * _ST + j]
+        S[_Q * _ST + j], S[(_Q + 1) * _ST + j] = q0, q1
+        S[_T2 * _ST + j] = q0 * q0 + q1 * q1
+    _sum_corners(S, _T2, _SS, nob, K)
+    # shoelace terms with the next corner
+    _to_corners(S, _Q, _QN, nob, K, 1)
+    _to_corners(S, _Q + 1, _QN + 1, nob, K, 1)
+    for j in range(m):
+        x, y = S[_Q * _ST + j], S[(_Q + 1) * _ST + j]
+        xn_, yn_ = S[_QN * _ST + j], S[(_QN + 1) * _ST + j]
+        c = x * yn_ - xn_ * y
+        S[_T0 * _ST + j] = c
+        S[_T1 * _ST + j] = (x + xn_) * c
+        S[_T2 * _ST + j] = (y + yn_) * c
+    _sum_corners(S, _T0, _A2, nob, K)
+    _sum_corners(S, _T1, _SX, nob, K)
+    _sum_corners(S, _T2, _SY, nob, K)
+    for i in range(nob):
+        area = 0.5 * S[_A2 * _ST + i]
+        deg = not (abs(area) > 1e-12 * max(S[_SS * _ST + i], 1e-300))
+        inv6A = 1.0 / (6.0 * area)
+        Cxl, Cyl = S[_SX * _ST + i] * inv6A, S[_SY * _ST + i] * inv6A
+        S[_AREA * _ST + i], S[_DEG * _ST + i] = area, 1.0 if deg else 0.0
+        S[_CXC * _ST + i], S[_CYC * _ST + i] = Cxl + S[_MX * _ST + i], Cyl + S[_MY * _ST + i]
+        S[_SX * _ST + i], S[_SY * _ST + i], S[_A2 * _ST + i] = Cxl, Cyl, inv6A  # per-object inputs of G
+    _to_corners(S, _SX, _T0, nob, K, -1)
+    _to_corners(S, _SY, _T1, nob, K, -1)
+    _to_corners(S, _A2, _T2, nob, K, -1)
+    _to_corners(S, _Q, _QP, nob, K, K - 1)  # previous corner
+    _to_corners(S, _Q + 1, _QP + 1, nob, K, K - 1)
+    for j in range(m):
+        x, y = S[_Q * _ST + j], S[(_Q + 1) * _ST + j]
+        xn_, yn_ = S[_QN * _ST + j], S[(_QN + 1) * _ST + j]
+        xp, yp = S[_QP * _ST + j], S[(_QP + 1) * _ST + j]
+        Cxl, Cyl, inv6A = S[_T0 * _ST + j], S[_T1 * _ST + j], S[_T2 * _ST + j]
+        c = x * yn_ - xn_ * y
+        cp = xp * y - x * yp
+        dA_dx = 0.5 * (yn_ - yp)
+        dA_dy = 0.5 * (xp - xn_)
+        dSx_dx = c + cp + (x + xn_) * yn_ - (xp + x) * yp
+        dSx_dy = -(x + xn_) * xn_ + (xp + x) * xp
+        dSy_dx = (y + yn_) * yn_ - (yp + y) * yp
+        dSy_dy = c + cp - (y + yn_) * xn_ + (yp + y) * xp
+        S[_G * _ST + j] = (dSx_dx - 6.0 * Cxl * dA_dx) * inv6A
+        S[(_G + 1) * _ST + j] = (dSx_dy - 6.0 * Cxl * dA_dy) * inv6A
+        S[(_G + 2) * _ST + j] = (dSy_dx - 6.0 * Cyl * dA_dx) * inv6A
+        S[(_G + 3) * _ST + j] = (dSy_dy - 6.0 * Cyl * dA_dy) * inv6A
+
+
+@njit(cache=True, error_model="numpy", nogil=True)
+def _stage_centre_cov(S, nob, K, r):
+    """Per object: centre covariance E = B B^T + sum_k H_k P_k H_k^T with B = sum_k G_k (J_k L)
+    and H_k = G_k J_uv,k (detector cross terms between corners are added by the caller)."""
+    m = K * nob
+    for i in range(nob):
+        S[_E00 * _ST + i], S[_E01 * _ST + i], S[_E11 * _ST + i] = 0.0, 0.0, 0.0
+    for c in range(r):
+        a0 = S[(_AW + 2 * c) * _ST:(_AW + 2 * c) * _ST + m]
+        a1 = S[(_AW + 2 * c + 1) * _ST:(_AW + 2 * c + 1) * _ST + m]
+        for j in range(m):
+            S[_T0 * _ST + j] = S[_G * _ST + j] * a0[j] + S[(_G + 1) * _ST + j] * a1[j]
+            S[_T1 * _ST + j] = S[(_G + 2) * _ST + j] * a0[j] + S[(_G + 3) * _ST + j] * a1[j]
+        _sum_corners(S, _T0, _B0, nob, K)
+        _sum_corners(S, _T1, _B1, nob, K)
+        for i in range(nob):
+            b0, b1 = S[_B0 * _ST + i], S[_B1 * _ST + i]
+            S[_E00 * _ST + i] += b0 * b0
+            S[_E01 * _ST + i] += b0 * b1
+            S[_E11 * _ST + i] += b1 * b1
+    for j in range(m):
+        g00, g01, g10, g11 = S[_G * _ST + j], S[(_G + 1) * _ST + j], S[(_G + 2) * _ST + j], S[(_G + 3) * _ST + j]
+        u00, u01 = S[_JUV * _ST + j], S[(_JUV + 1) * _ST + j]
+        u10, u11 = S[(_JUV + 2) * _ST + j], S[(_JUV + 3) * _ST + j]
+        h00, h01 = g00 * u00 + g01 * u10, g00 * u01 + g01 * u11
+        h10, h11 = g10 * u00 + g11 * u10, g10 * u01 + g11 * u11
+        p00, p01 = S[_P4 * _ST + j], S[(_P4 + 1) * _ST + j]
+        p10, p11 = S[(_P4 + 2) * _ST + j], S[(_P4 + 3) * _ST + j]
+        m00, m01 = h00 * p00 + h01 * p10, h00 * p01 + h01 * p11
+        m10, m11 = h10 * p00 + h11 * p10, h10 * p01 + h11 * p11
+        S[_T0 * _ST + j] = m00 * h00 + m01 * h01
+        S[_T1 * _ST + j] = m00 * h10 + m01 * h11
+        S[_T2 * _ST + j] = m10 * h10 + m11 * h11
+    _sum_corners(S, _T0, _B0, nob, K)
+    _sum_corners(S, _T1, _B1, nob, K)
+    _sum_corners(S, _T2, _B2, nob, K)
+    for i in range(nob):
+        S[_E00 * _ST + i] += S[_B0 * _ST + i]
+        S[_E01 * _ST + i] += S[_B1 * _ST + i]
+        S[_E11 * _ST + i] += S[_B2 * _ST + i]
+
+
+def alloc_outputs(N: int, K: int, *, joint: bool = False, corners: bool = True, alloc=np.empty):
+    """Output arrays of :func:`process_corners` for N objects of K corners (allocated here, by numpy:
+    numba's own allocations of large arrays are fresh pages every call, ~40 % of the kernel's time).
+
+    ``corners=False`` gives (0, ...) per-corner coordinate/covariance arrays: the kernel then skips them.
+    ``alloc(shape, dtype)`` may supply the memory (default :func:`numpy.empty`).
+    """
+    nc = N if corners else 0
+    return (alloc((nc, K, 2), np.float64), alloc((nc, K, 2, 2), np.float64),
+            alloc((N if joint else 0, 2 * K, 2 * K), np.float64), alloc((N, K), np.int8), alloc((N, K), np.bool_),
+            alloc((N,), np.int64), alloc((N,), np.float64), alloc((N, 2), np.float64), alloc((nc, 2, 2), np.float64),
+            alloc((N, 2), np.float64), alloc((N, 2, 2), np.float64), alloc((N,), np.int32), alloc((N,), np.int64),
+            alloc((N,), np.float64), alloc((N, 7), np.int32))
+
+
+def scratch() -> np.ndarray:
+    """Scratch buffer of :func:`process_corners` (one per call or per thread)."""
+    return np.empty(_NROWS * _ST)
+
+
+@njit(cache=True, error_model="numpy", nogil=True)
+def process_corners(uv, extra_reason, cam, dR, Lr, Lc, Lv, r, spx, det, det_mode, allow_outside, ch, sh, out, S):
+    """The fused per-frame kernel on corners in pixels ``uv`` (N, K, 2), K <= :data:`MAX_CORNERS`.
 
     extra_reason : (N, K) int8 codes overriding OK (3D projection), or shape (0, 0)
     Lr, Lc, Lv, r : sparse factor of the parameter covariance (:func:`psd_factor`)
@@ -458,41 +712,21 @@ def process_corners(uv, extra_reason, cam, dR, Lr, Lc, Lv, r, spx, det, det_mode
         0 none (any 4-D array), 1 (N, 1, 2, 2) per detection, 2 (N, K, 2, 2) per corner,
         3 (N, 1, 2K, 2K) full
     ch, sh : cos, sin of the heading offset (V2X fields)
+    out : the arrays of :func:`alloc_outputs` (filled here): xy, ccov, joint, reason, usable,
+        largest_index, largest_semi, largest_xy, largest_cov, centre, centre_cov, centre_reason,
+        centre_bad, area, v2x.  A joint with 0 rows is not formed; xy / ccov / largest_cov with
+        0 rows are not written.
+    S : :func:`scratch`
     """
     N, K = uv.shape[0], uv.shape[1]
-    xy = np.empty((N, K, 2))
-    ccov = np.empty((N, K, 2, 2))
-    joint = np.empty((N if want_joint else 0, 2 * K, 2 * K))
-    reason = np.empty((N, K), dtype=np.int8)
-    usable = np.empty((N, K), dtype=np.bool_)
-    largest_index = np.empty(N, dtype=np.int64)
-    largest_semi = np.empty(N)
-    largest_xy = np.empty((N, 2))
-    largest_cov = np.empty((N, 2, 2))
-    centre = np.empty((N, 2))
-    centre_cov = np.empty((N, 2, 2))
-    centre_reason = np.empty(N, dtype=np.int32)
-    centre_bad = np.empty(N, dtype=np.int64)
-    area_out = np.empty(N)
-    v2x = np.empty((N, 7), dtype=np.int32)
-    # scratch: corners of CH objects at a time, structure of arrays (corner index last)
-    CH = 32
-    M = CH * K
-    U, V = np.empty(M), np.empty(M)
-    XD, YD, XN, YN, CONV = np.empty(M), np.empty(M), np.empty(M), np.empty(M), np.empty(M)
-    INV, JK = np.empty((4, M)), np.empty((16, M))
-    X, Y, CODE = np.empty(M), np.empty(M), np.empty(M, dtype=np.int64)
-    JP, JUV = np.empty((44, M)), np.empty((4, M))
-    AW, C3 = np.empty((2 * max(r, 1), M)), np.empty((3, M))
+    (xy, ccov, joint, reason, usable, largest_index, largest_semi, largest_xy, largest_cov,
+     centre, centre_cov, centre_reason, centre_bad, area_out, v2x) = out
+    want_joint = joint.shape[0] == N and N > 0
+    want_corners = xy.shape[0] == N and N > 0
     Jd, Jk = np.empty((2, 2)), np.empty((2, 8))
-    Pk = np.empty((K, 2, 2))  # per-corner pixel covariance (diagonal blocks)
-    G = np.empty((2, 2 * K))
-    H = np.empty((K, 2, 2))
-    q = np.empty((K, 2))
     W, Himg = cam[_C_W], cam[_C_HIMG]
     nan = math.nan
     has_extra = extra_reason.shape[0] == N and N > 0
-    uvf = uv.reshape(N * K, 2)
     # parameters with a non-zero row in the factor; flags for groups of them: if any of k1..k6 is
     # needed, need[5] (k1..k3, p1, p2) stands for the group, need[10] for k4..k6
     need = np.zeros(22, dtype=np.bool_)
@@ -503,92 +737,142 @@ def process_corners(uv, extra_reason, cam, dR, Lr, Lc, Lv, r, spx, det, det_mode
         kd = kd or need[e]
     need[5] = kd
     need[10] = need[10] or need[11] or need[12]
-    for n0 in range(0, N, CH):
-        n1 = min(N, n0 + CH)
-        m = (n1 - n0) * K
-        for j in range(m):
-            U[j] = uvf[n0 * K + j, 0]
-            V[j] = uvf[n0 * K + j, 1]
-        _stage_undistort(U, V, m, cam, XD, YD, XN, YN, CONV, INV, JK, Jd, Jk, need)
-        _stage_ground(U, V, m, cam, dR, XD, YD, XN, YN, CONV, INV, JK, X, Y, CODE, JP, JUV, need)
-        _stage_whiten(m, JP, Lr, Lc, Lv, r, AW, C3)
-        for n in range(n0, n1):
-            # ---- per object: flags, corner covariances, joint, largest point, centroid, V2X ----
-            j0 = (n - n0) * K  # corner k of object n is column j0 + k of the stage arrays
-            nan = math.nan
-            all_usable = True
-            first_bad = -1
-            best = -1
-            best_semi = -1.0
+    nob_max = max(1, _M_TARGET // K)
+    s00, s01, s10, s11 = spx[0, 0], spx[0, 1], spx[1, 0], spx[1, 1]
+    for n0 in range(0, N, nob_max):
+        nob = min(N - n0, nob_max)
+        m = nob * K
+        for k in range(K):
+            for i in range(nob):
+                S[_U * _ST + k * nob + i] = uv[n0 + i, k, 0]
+                S[_V * _ST + k * nob + i] = uv[n0 + i, k, 1]
+        _stage_undistort(S, m, cam, Jd, Jk, need)
+        _stage_ground(S, m, cam, dR, need)
+        _stage_whiten(S, m, Lr, Lc, Lv, r)
+        if has_extra:  # codes of the 3D projection override OK
             for k in range(K):
-                jk = j0 + k
-                u, v = U[jk], V[jk]
-                rc = CODE[jk]
-                if rc == _OK and not (u >= -0.5 and u <= W - 0.5 and v >= -0.5 and v <= Himg - 0.5):
-                    rc = _OUTSIDE
-                if has_extra and extra_reason[n, k] != _OK:
-                    rc = extra_reason[n, k]
-                computed = rc == _OK or rc == _OUTSIDE
-                us = rc == _OK or (rc == _OUTSIDE and allow_outside)
-                reason[n, k] = rc
-                usable[n, k] = us
-                # per-corner pixel covariance
-                p00, p01, p10, p11 = spx[0, 0], spx[0, 1], spx[1, 0], spx[1, 1]
-                if det_mode == 1:
-                    p00 += det[n, 0, 0, 0]
-                    p01 += det[n, 0, 0, 1]
-                    p10 += det[n, 0, 1, 0]
-                    p11 += det[n, 0, 1, 1]
-                elif det_mode == 2:
-                    p00 += det[n, k, 0, 0]
-                    p01 += det[n, k, 0, 1]
-                    p10 += det[n, k, 1, 0]
-                    p11 += det[n, k, 1, 1]
-                elif det_mode == 3:
-                    p00 += det[n, 0, 2 * k, 2 * k]
-                    p01 += det[n, 0, 2 * k, 2 * k + 1]
-                    p10 += det[n, 0, 2 * k + 1, 2 * k]
-                    p11 += det[n, 0, 2 * k + 1, 2 * k + 1]
-                Pk[k, 0, 0], Pk[k, 0, 1], Pk[k, 1, 0], Pk[k, 1, 1] = p00, p01, p10, p11
-                if computed:
-                    xy[n, k, 0], xy[n, k, 1] = X[jk], Y[jk]
-                    j00, j01, j10, j11 = JUV[0, jk], JUV[1, jk], JUV[2, jk], JUV[3, jk]
-                    m00, m01 = j00 * p00 + j01 * p10, j00 * p01 + j01 * p11
-                    m10, m11 = j10 * p00 + j11 * p10, j10 * p01 + j11 * p11
-                    c00 = C3[0, jk] + m00 * j00 + m01 * j01
-                    c01 = C3[1, jk] + m00 * j10 + m01 * j11
-                    c10 = c01
-                    c11 = C3[2, jk] + m10 * j10 + m11 * j11
-                    ccov[n, k, 0, 0], ccov[n, k, 0, 1], ccov[n, k, 1, 0], ccov[n, k, 1, 1] = c00, c01, c10, c11
-                    semi = math.sqrt(0.5 * (c00 + c11) + math.sqrt(0.25 * (c00 - c11) * (c00 - c11) + c01 * c01))
-                    if us and semi > best_semi:
-                        best_semi = semi
-                        best = k
-                else:
-                    xy[n, k, 0], xy[n, k, 1] = nan, nan
-                    for i in range(2):
-                        for j in range(2):
-                            ccov[n, k, i, j] = nan
-                if not us and all_usable:
-                    all_usable = False
-                    first_bad = k
-            # joint covariance (optional): diagonal blocks = corner covariances, off-diagonal
-            # blocks = shared parameter part (+ detector cross terms in the full form)
-            if want_joint:
+                for i in range(nob):
+                    ex = extra_reason[n0 + i, k]
+                    if ex != _OK:
+                        S[_CODE * _ST + k * nob + i] = ex
+        # per-corner pixel covariance: budget + detector
+        for j in range(m):
+            S[_P4 * _ST + j], S[(_P4 + 1) * _ST + j], S[(_P4 + 2) * _ST + j], S[(_P4 + 3) * _ST + j] = (s00, s01,
+                                                                                                       s10, s11)
+        if det_mode != 0:
+            for k in range(K):
+                for i in range(nob):
+                    j, n = k * nob + i, n0 + i
+                    if det_mode == 1:
+                        d00, d01, d10, d11 = det[n, 0, 0, 0], det[n, 0, 0, 1], det[n, 0, 1, 0], det[n, 0, 1, 1]
+                    elif det_mode == 2:
+                        d00, d01, d10, d11 = det[n, k, 0, 0], det[n, k, 0, 1], det[n, k, 1, 0], det[n, k, 1, 1]
+                    else:
+                        d00, d01 = det[n, 0, 2 * k, 2 * k], det[n, 0, 2 * k, 2 * k + 1]
+                        d10, d11 = det[n, 0, 2 * k + 1, 2 * k], det[n, 0, 2 * k + 1, 2 * k + 1]
+                    S[_P4 * _ST + j] += d00
+                    S[(_P4 + 1) * _ST + j] += d01
+                    S[(_P4 + 2) * _ST + j] += d10
+                    S[(_P4 + 3) * _ST + j] += d11
+        _stage_corner_cov(S, m, W, Himg, allow_outside)
+        _stage_select(S, nob, K)
+        _stage_centroid(S, nob, K)
+        _stage_centre_cov(S, nob, K, r)
+        # ---- outputs: corners ----
+        for k in range(K):
+            for i in range(nob):
+                j, n = k * nob + i, n0 + i
+                reason[n, k] = np.int8(S[_RC * _ST + j])
+                usable[n, k] = S[_US * _ST + j] != 0.0
+        if want_corners:
+            for k in range(K):
+                for i in range(nob):
+                    j, n = k * nob + i, n0 + i
+                    xy[n, k, 0], xy[n, k, 1] = S[_XX * _ST + j], S[_YY * _ST + j]
+                    c01 = S[(_CC + 1) * _ST + j]
+                    ccov[n, k, 0, 0], ccov[n, k, 0, 1] = S[_CC * _ST + j], c01
+                    ccov[n, k, 1, 0], ccov[n, k, 1, 1] = c01, S[(_CC + 2) * _ST + j]
+        # ---- outputs: per object ----
+        for i in range(nob):
+            n = n0 + i
+            best = int(S[_BEST * _ST + i])
+            fb = int(S[_FBAD * _ST + i])
+            largest_index[n] = best
+            if best >= 0:
+                jb = best * nob + i
+                largest_semi[n] = S[_BSEMI * _ST + i]
+                largest_xy[n, 0], largest_xy[n, 1] = S[_XX * _ST + jb], S[_YY * _ST + jb]
+                if want_corners:
+                    c01 = S[(_CC + 1) * _ST + jb]
+                    largest_cov[n, 0, 0], largest_cov[n, 0, 1] = S[_CC * _ST + jb], c01
+                    largest_cov[n, 1, 0], largest_cov[n, 1, 1] = c01, S[(_CC + 2) * _ST + jb]
+            else:
+                largest_semi[n] = nan
+                largest_xy[n, 0], largest_xy[n, 1] = nan, nan
+                if want_corners:
+                    largest_cov[n, 0, 0], largest_cov[n, 0, 1] = nan, nan
+                    largest_cov[n, 1, 0], largest_cov[n, 1, 1] = nan, nan
+            if fb >= 0:
+                code = int(S[_RC * _ST + fb * nob + i])
+                centre_bad[n] = fb
+                area_out[n] = nan
+            elif S[_DEG * _ST + i] != 0.0:
+                code = _DEGENERATE
+                centre_bad[n] = -1
+                area_out[n] = S[_AREA * _ST + i]
+            else:
+                code = _OK
+                centre_bad[n] = -1
+                area_out[n] = S[_AREA * _ST + i]
+            centre_reason[n] = code
+            if code == _OK:
+                e00, e01, e11 = S[_E00 * _ST + i], S[_E01 * _ST + i], S[_E11 * _ST + i]
+                if det_mode == 3:  # detector cross terms between corners: sum_{k != l} H_k P_kl H_l^T
+                    for k in range(K):
+                        jk = k * nob + i
+                        hk00, hk01, hk10, hk11 = _h(S, jk)
+                        for l in range(K):
+                            if l == k:
+                                continue
+                            hl00, hl01, hl10, hl11 = _h(S, l * nob + i)
+                            q00, q01 = det[n, 0, 2 * k, 2 * l], det[n, 0, 2 * k, 2 * l + 1]
+                            q10, q11 = det[n, 0, 2 * k + 1, 2 * l], det[n, 0, 2 * k + 1, 2 * l + 1]
+                            m00, m01 = hk00 * q00 + hk01 * q10, hk00 * q01 + hk01 * q11
+                            m10 = hk10 * q00 + hk11 * q10
+                            m11 = hk10 * q01 + hk11 * q11
+                            e00 += m00 * hl00 + m01 * hl01
+                            e01 += m00 * hl10 + m01 * hl11
+                            e11 += m10 * hl10 + m11 * hl11
+                centre[n, 0], centre[n, 1] = S[_CXC * _ST + i], S[_CYC * _ST + i]
+                centre_cov[n, 0, 0], centre_cov[n, 0, 1] = e00, e01
+                centre_cov[n, 1, 0], centre_cov[n, 1, 1] = e01, e11
+                _v2x(e00, e01, e11, ch, sh, v2x, n)
+            else:
+                centre[n, 0], centre[n, 1] = nan, nan
+                centre_cov[n, 0, 0], centre_cov[n, 0, 1], centre_cov[n, 1, 0], centre_cov[n, 1, 1] = (nan, nan,
+                                                                                                      nan, nan)
+                _v2x(nan, nan, nan, ch, sh, v2x, n)
+        # ---- joint covariance (optional): diagonal blocks = corner covariances, off-diagonal blocks =
+        # shared parameter part (+ detector cross terms in the full form) ----
+        if want_joint:
+            for i in range(nob):
+                n = n0 + i
                 for k in range(K):
+                    jk = k * nob + i
                     ck = reason[n, k] == _OK or reason[n, k] == _OUTSIDE
                     for l in range(k, K):
+                        jl = l * nob + i
                         cl = reason[n, l] == _OK or reason[n, l] == _OUTSIDE
                         if not (ck and cl):
                             v00, v01, v10, v11 = nan, nan, nan, nan
                         elif k == l:
-                            v00, v01 = ccov[n, k, 0, 0], ccov[n, k, 0, 1]
-                            v10, v11 = ccov[n, k, 1, 0], ccov[n, k, 1, 1]
+                            v00, v01 = S[_CC * _ST + jk], S[(_CC + 1) * _ST + jk]
+                            v10, v11 = v01, S[(_CC + 2) * _ST + jk]
                         else:
                             v00, v01, v10, v11 = 0.0, 0.0, 0.0, 0.0
                             for c in range(r):
-                                a0k, a1k = AW[2 * c, j0 + k], AW[2 * c + 1, j0 + k]
-                                a0l, a1l = AW[2 * c, j0 + l], AW[2 * c + 1, j0 + l]
+                                a0k, a1k = S[(_AW + 2 * c) * _ST + jk], S[(_AW + 2 * c + 1) * _ST + jk]
+                                a0l, a1l = S[(_AW + 2 * c) * _ST + jl], S[(_AW + 2 * c + 1) * _ST + jl]
                                 v00 += a0k * a0l
                                 v01 += a0k * a1l
                                 v10 += a1k * a0l
@@ -597,154 +881,30 @@ def process_corners(uv, extra_reason, cam, dR, Lr, Lc, Lv, r, spx, det, det_mode
                                 for a in range(2):
                                     for b in range(2):
                                         p = det[n, 0, 2 * k + a, 2 * l + b]
-                                        v00 += JUV[a, j0 + k] * p * JUV[b, j0 + l]
-                                        v01 += JUV[a, j0 + k] * p * JUV[2 + b, j0 + l]
-                                        v10 += JUV[2 + a, j0 + k] * p * JUV[b, j0 + l]
-                                        v11 += JUV[2 + a, j0 + k] * p * JUV[2 + b, j0 + l]
+                                        v00 += S[(_JUV + a) * _ST + jk] * p * S[(_JUV + b) * _ST + jl]
+                                        v01 += S[(_JUV + a) * _ST + jk] * p * S[(_JUV + 2 + b) * _ST + jl]
+                                        v10 += S[(_JUV + 2 + a) * _ST + jk] * p * S[(_JUV + b) * _ST + jl]
+                                        v11 += S[(_JUV + 2 + a) * _ST + jk] * p * S[(_JUV + 2 + b) * _ST + jl]
                         joint[n, 2 * k, 2 * l], joint[n, 2 * k, 2 * l + 1] = v00, v01
                         joint[n, 2 * k + 1, 2 * l], joint[n, 2 * k + 1, 2 * l + 1] = v10, v11
                         joint[n, 2 * l, 2 * k], joint[n, 2 * l + 1, 2 * k] = v00, v01
                         joint[n, 2 * l, 2 * k + 1], joint[n, 2 * l + 1, 2 * k + 1] = v10, v11
-            # largest point
-            largest_index[n] = best
-            if best >= 0:
-                largest_semi[n] = best_semi
-                largest_xy[n, 0], largest_xy[n, 1] = xy[n, best, 0], xy[n, best, 1]
-                for i in range(2):
-                    for j in range(2):
-                        largest_cov[n, i, j] = ccov[n, best, i, j]
-            else:
-                largest_semi[n] = nan
-                largest_xy[n, 0], largest_xy[n, 1] = nan, nan
-                for i in range(2):
-                    for j in range(2):
-                        largest_cov[n, i, j] = nan
-            # centre
-            code = _OK
-            bad = -1
-            area = nan
-            cx_, cy_ = nan, nan
-            if not all_usable:
-                code = reason[n, first_bad]
-                bad = first_bad
-            else:
-                if K < 3:
-                    area = 0.0
-                    cx_, cy_ = 0.0, 0.0
-                    for k in range(K):
-                        cx_ += xy[n, k, 0]
-                        cy_ += xy[n, k, 1]
-                    cx_ /= K
-                    cy_ /= K
-                    for k in range(K):
-                        G[0, 2 * k], G[0, 2 * k + 1] = 1.0 / K, 0.0
-                        G[1, 2 * k], G[1, 2 * k + 1] = 0.0, 1.0 / K
-                else:
-                    mx, my = 0.0, 0.0
-                    for k in range(K):
-                        mx += xy[n, k, 0]
-                        my += xy[n, k, 1]
-                    mx /= K
-                    my /= K
-                    ss = 0.0
-                    for k in range(K):
-                        q[k, 0] = xy[n, k, 0] - mx
-                        q[k, 1] = xy[n, k, 1] - my
-                        ss += q[k, 0] * q[k, 0] + q[k, 1] * q[k, 1]
-                    A2, Sx, Sy = 0.0, 0.0, 0.0
-                    for k in range(K):
-                        kn = k + 1 if k + 1 < K else 0  # (k + 1) % K without an integer division
-                        c = q[k, 0] * q[kn, 1] - q[kn, 0] * q[k, 1]
-                        A2 += c
-                        Sx += (q[k, 0] + q[kn, 0]) * c
-                        Sy += (q[k, 1] + q[kn, 1]) * c
-                    area = 0.5 * A2
-                    if not (abs(area) > 1e-12 * max(ss, 1e-300)):
-                        code = _DEGENERATE
-                    else:
-                        inv6A = 1.0 / (6.0 * area)
-                        Cxl, Cyl = Sx * inv6A, Sy * inv6A
-                        cx_, cy_ = Cxl + mx, Cyl + my
-                        for k in range(K):
-                            kn = k + 1 if k + 1 < K else 0  # (k + 1) % K without an integer division
-                            kp = k - 1 if k > 0 else K - 1
-                            x, y = q[k, 0], q[k, 1]
-                            xn_, yn_ = q[kn, 0], q[kn, 1]
-                            xp, yp = q[kp, 0], q[kp, 1]
-                            c = x * yn_ - xn_ * y
-                            cp = xp * y - x * yp
-                            dA_dx = 0.5 * (yn_ - yp)
-                            dA_dy = 0.5 * (xp - xn_)
-                            dSx_dx = c + cp + (x + xn_) * yn_ - (xp + x) * yp
-                            dSx_dy = -(x + xn_) * xn_ + (xp + x) * xp
-                            dSy_dx = (y + yn_) * yn_ - (yp + y) * yp
-                            dSy_dy = c + cp - (y + yn_) * xn_ + (yp + y) * xp
-                            G[0, 2 * k] = (dSx_dx - 6.0 * Cxl * dA_dx) * inv6A
-                            G[0, 2 * k + 1] = (dSx_dy - 6.0 * Cxl * dA_dy) * inv6A
-                            G[1, 2 * k] = (dSy_dx - 6.0 * Cyl * dA_dx) * inv6A
-                            G[1, 2 * k + 1] = (dSy_dy - 6.0 * Cyl * dA_dy) * inv6A
-            centre_reason[n] = code
-            centre_bad[n] = bad
-            area_out[n] = area if all_usable else nan
-            if code == _OK:
-                centre[n, 0], centre[n, 1] = cx_, cy_
-                # parameter part: B = sum_k G_k (J_k L), cov = B B^T
-                e00, e01, e11 = 0.0, 0.0, 0.0
-                for c in range(r):
-                    b0, b1 = 0.0, 0.0
-                    for k in range(K):
-                        a0, a1 = AW[2 * c, j0 + k], AW[2 * c + 1, j0 + k]
-                        b0 += G[0, 2 * k] * a0 + G[0, 2 * k + 1] * a1
-                        b1 += G[1, 2 * k] * a0 + G[1, 2 * k + 1] * a1
-                    e00 += b0 * b0
-                    e01 += b0 * b1
-                    e11 += b1 * b1
-                # pixel part: H_k = G_k Juv_k, sum_k,l H_k P_kl H_l^T
-                for k in range(K):
-                    for i in range(2):
-                        for j in range(2):
-                            H[k, i, j] = G[i, 2 * k] * JUV[j, j0 + k] + G[i, 2 * k + 1] * JUV[2 + j, j0 + k]
-                for k in range(K):
-                    h00, h01, h10, h11 = H[k, 0, 0], H[k, 0, 1], H[k, 1, 0], H[k, 1, 1]
-                    p00, p01, p10, p11 = Pk[k, 0, 0], Pk[k, 0, 1], Pk[k, 1, 0], Pk[k, 1, 1]
-                    m00, m01 = h00 * p00 + h01 * p10, h00 * p01 + h01 * p11
-                    m10, m11 = h10 * p00 + h11 * p10, h10 * p01 + h11 * p11
-                    e00 += m00 * h00 + m01 * h01
-                    e01 += m00 * h10 + m01 * h11
-                    e11 += m10 * h10 + m11 * h11
-                    if det_mode == 3:  # detector cross terms between corners
-                        for l in range(K):
-                            if l == k:
-                                continue
-                            for a in range(2):
-                                for b in range(2):
-                                    p = det[n, 0, 2 * k + a, 2 * l + b]
-                                    e00 += H[k, 0, a] * p * H[l, 0, b]
-                                    e01 += H[k, 0, a] * p * H[l, 1, b]
-                                    e11 += H[k, 1, a] * p * H[l, 1, b]
-                centre_cov[n, 0, 0], centre_cov[n, 0, 1] = e00, e01
-                centre_cov[n, 1, 0], centre_cov[n, 1, 1] = e01, e11
-                _v2x(e00, e01, e11, ch, sh, v2x, n)
-            else:
-                centre[n, 0], centre[n, 1] = nan, nan
-                for i in range(2):
-                    for j in range(2):
-                        centre_cov[n, i, j] = nan
-                _v2x(nan, nan, nan, ch, sh, v2x, n)
-                if code == _DEGENERATE:
-                    centre_bad[n] = -1
-    return (xy, ccov, joint, reason, usable, largest_index, largest_semi, largest_xy, largest_cov,
-            centre, centre_cov, centre_reason, centre_bad, area_out, v2x)
 
 
 @njit(cache=True, error_model="numpy", nogil=True)
-def boxes3d_to_pixels(boxes, cam, yaw_deg, bottom_on_ground):
-    """Bottom corners of 3D boxes (N, 7) projected to pixels (N, 4, 2), their codes (N, 4),
-    and the first row with a negative size (-1 if none)."""
+def _h(S, j):
+    """H = G J_uv (2 x 2) of scratch column j: d centre / d (u, v) of that corner."""
+    g00, g01, g10, g11 = S[_G * _ST + j], S[(_G + 1) * _ST + j], S[(_G + 2) * _ST + j], S[(_G + 3) * _ST + j]
+    u00, u01, u10, u11 = S[_JUV * _ST + j], S[(_JUV + 1) * _ST + j], S[(_JUV + 2) * _ST + j], S[(_JUV + 3) * _ST + j]
+    return g00 * u00 + g01 * u10, g00 * u01 + g01 * u11, g10 * u00 + g11 * u10, g10 * u01 + g11 * u11
+
+
+@njit(cache=True, error_model="numpy", nogil=True)
+def boxes3d_to_pixels(boxes, cam, yaw_deg, bottom_on_ground, uv, code):
+    """Bottom corners of 3D boxes (N, 7) projected to pixels ``uv`` (N, 4, 2) with their codes ``code``
+    (N, 4) int8 (both filled here); returns the first row with a negative size (-1 if none)."""
     N = boxes.shape[0]
     bad = -1
-    uv = np.empty((N, 4, 2))
-    code = np.empty((N, 4), dtype=np.int8)
     sl = (-1.0, 1.0, 1.0, -1.0)
     sw = (-1.0, -1.0, 1.0, 1.0)
     g0 = cam[_C_GROUNDZ]
@@ -762,13 +922,14 @@ def boxes3d_to_pixels(boxes, cam, yaw_deg, bottom_on_ground):
             Y = y0 + s * dl + c * dw
             Z = zb if math.isfinite(X) and math.isfinite(Y) else math.nan
             code[n, k] = _project(X, Y, Z, cam, uv[n, k])
-    return uv, code, bad
+    return bad
 
 
 @njit(cache=True, error_model="numpy", nogil=True)
 def process_boxes3d(boxes, yaw_deg, bottom_on_ground, cam, dR, Lr, Lc, Lv, r, spx, det, det_mode, allow_outside,
-                    ch, sh, want_joint):
-    """:func:`boxes3d_to_pixels` then :func:`process_corners` in one dispatch; returns (bad_row, uv, results)."""
-    uv, code, bad = boxes3d_to_pixels(boxes, cam, yaw_deg, bottom_on_ground)
-    res = process_corners(uv, code, cam, dR, Lr, Lc, Lv, r, spx, det, det_mode, allow_outside, ch, sh, want_joint)
-    return bad, uv, res
+                    ch, sh, uv, code, out, S):
+    """:func:`boxes3d_to_pixels` (into ``uv``, ``code``) then :func:`process_corners` (into ``out``) in
+    one dispatch; returns the first row with a negative size (-1 if none)."""
+    bad = boxes3d_to_pixels(boxes, cam, yaw_deg, bottom_on_ground, uv, code)
+    process_corners(uv, code, cam, dR, Lr, Lc, Lv, r, spx, det, det_mode, allow_outside, ch, sh, out, S)
+    return bad

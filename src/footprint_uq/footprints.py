@@ -520,6 +520,10 @@ class FrameProcessor:
         self._ch, self._sh = (1.0, 0.0) if h == 0.0 else (float(np.cos(h)), float(np.sin(h)))
         self._no_det = np.zeros((1, 1, 2, 2))
         self._no_extra = np.zeros((0, 0), dtype=np.int8)
+        # for the batch: where output memory comes from, and whether per-corner coordinates and
+        # covariances (and the largest point's covariance) are formed at all
+        self._alloc = np.empty
+        self._corner_outputs = True
 
     def _det(self, pixel_cov_px2, N: int, K: int):
         if pixel_cov_px2 is None:
@@ -535,9 +539,15 @@ class FrameProcessor:
 
     def _run(self, uv, extra, pixel_cov_px2) -> FootprintEstimate:
         N, K = uv.shape[0], uv.shape[1]
+        if K > self._fk.MAX_CORNERS:  # beyond the kernel's chunk layout: the numpy reference
+            return footprints_from_corners(self.camera, self.budget, uv, pixel_cov_px2=pixel_cov_px2,
+                                           allow_outside_image=self.allow_outside_image,
+                                           heading_offset_deg=self.heading_offset_deg,
+                                           _extra_reason=extra if extra.shape[0] == N else None)
         det, mode = self._det(pixel_cov_px2, N, K)
-        out = self._fk.process_corners(uv, extra, self._cam, self._dR, self._Lr, self._Lc, self._Lv, self._r, self._spx,
-                                       det, mode, self.allow_outside_image, self._ch, self._sh, self.joint_cov)
+        out = self._fk.alloc_outputs(N, K, joint=self.joint_cov, corners=self._corner_outputs, alloc=self._alloc)
+        self._fk.process_corners(uv, extra, self._cam, self._dR, self._Lr, self._Lc, self._Lv, self._r, self._spx,
+                                 det, mode, self.allow_outside_image, self._ch, self._sh, out, self._fk.scratch())
         return self._pack(uv, out)
 
     def _pack(self, uv, out) -> FootprintEstimate:
@@ -570,10 +580,13 @@ class FrameProcessor:
             raise InputError("boxes_world", b.shape, f"an array of shape (N, 7): {', '.join(BOX3D_COLUMNS)}")
         if yaw_unit not in ("rad", "deg"):
             raise InputError("yaw_unit", yaw_unit, "'rad' (column yaw_rad) or 'deg' (column yaw_deg)")
-        det, mode = self._det(pixel_cov_px2, b.shape[0], 4)
-        bad, uv, out = self._fk.process_boxes3d(b, yaw_unit == "deg", bool(bottom_on_ground), self._cam, self._dR,
-                                                self._Lr, self._Lc, self._Lv, self._r, self._spx, det, mode,
-                                                self.allow_outside_image, self._ch, self._sh, self.joint_cov)
+        N = b.shape[0]
+        det, mode = self._det(pixel_cov_px2, N, 4)
+        uv, code = self._alloc((N, 4, 2), np.float64), self._alloc((N, 4), np.int8)
+        out = self._fk.alloc_outputs(N, 4, joint=self.joint_cov, corners=self._corner_outputs, alloc=self._alloc)
+        bad = self._fk.process_boxes3d(b, yaw_unit == "deg", bool(bottom_on_ground), self._cam, self._dR, self._Lr,
+                                       self._Lc, self._Lv, self._r, self._spx, det, mode, self.allow_outside_image,
+                                       self._ch, self._sh, uv, code, out, self._fk.scratch())
         if bad >= 0:
             raise InputError(f"boxes_world[{bad}] (length_m, width_m, height_m)", b[bad, 3:6].tolist(), "sizes >= 0")
         return self._pack(uv, out)
