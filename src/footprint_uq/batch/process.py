@@ -110,6 +110,14 @@ def _kernel_releases_gil() -> bool:
     return bool(opts.get("nogil", False))
 
 
+def _arrow_empty(shape, dtype) -> np.ndarray:
+    """An uninitialised numpy array in memory of pyarrow's default pool."""
+    dtype = np.dtype(dtype)
+    n = int(np.prod(shape, dtype=np.int64))
+    buf = pa.allocate_buffer(max(n * dtype.itemsize, 1))
+    return np.frombuffer(buf, dtype=dtype, count=n).reshape(shape)
+
+
 def _column_float(table: pa.Table, name: str) -> np.ndarray:
     """A numeric column as float64 numpy (nulls -> NaN)."""
     col = table.column(name)
@@ -198,6 +206,11 @@ class BatchProcessor:
         self._parallel = self.threads > 1 and _kernel_releases_gil()
         self.proc = FrameProcessor(camera, self.budget, heading_offset_deg=self.heading_offset_deg,
                                    allow_outside_image=self.allow_outside_image, joint_cov=False)
+        # kernel outputs in Arrow memory: the output columns reference them without a copy, and memory
+        # of written chunks is reused (fresh pages would cost ~130 ns per row); per-corner coordinates
+        # and covariances only when written
+        self.proc._alloc = _arrow_empty
+        self.proc._corner_outputs = self.corners or self.geo is not None
         self.reasons = Reasons()
         self._status_dict = pa.array(list(S.STATUSES), type=pa.string())
         self._pool = None
@@ -672,7 +685,7 @@ def process_chunk(bp: BatchProcessor, chunk) -> pa.Table:
 
 def process_file(camera, budget, detections, out, *, chunk_rows: int = S.DEFAULT_CHUNK_ROWS,
                  format_in: str | None = None, format_out: str | None = None, progress: bool | None = None,
-                 summary: bool = True, compression: str = "snappy", **options) -> Summary:
+                 summary: bool = True, compression: str | None = "auto", **options) -> Summary:
     """Stream a detection file through the footprint pipeline, chunk by chunk.
 
     Parameters
@@ -690,8 +703,10 @@ def process_file(camera, budget, detections, out, *, chunk_rows: int = S.DEFAULT
         tqdm progress bar on stderr (default: only when stderr is a terminal).
     summary : bool
         Write the JSON summary to :func:`summary_path` (``<out>.summary.json``).
-    compression : str
-        Parquet compression codec ("snappy", "zstd", "lz4", "none").
+    compression : str or None
+        Parquet compression: "auto" (snappy, the small-integer code columns uncompressed: see
+        :func:`footprint_uq.batch.writers.parquet_options`), or one codec for every column
+        ("snappy", "zstd", "lz4", "gzip"; None or "none": uncompressed).
     **options
         Keyword arguments of :class:`BatchProcessor`.
 
