@@ -412,3 +412,30 @@ def test_threaded_parts_equal_one_thread(cam, monkeypatch):
     for c in one.column_names:
         assert two.column(c).to_pylist() == one.column(c).to_pylist() or np.array_equal(
             two.column(c).to_numpy(), one.column(c).to_numpy(), equal_nan=True), c
+
+
+def test_parquet_layout_codecs_and_nullability(cam, tmp_path):
+    """'auto': code columns bit-packed and uncompressed, the rest snappy; an explicit codec applies to all;
+    computed columns are declared non-null (and hold no nulls), id columns stay nullable."""
+    src = tmp_path / "d.parquet"
+    pq.write_table(pa.table(boxes3d(50)), src)
+    ref = process_table(cam, BUDGET, boxes3d(50), corners=True)
+    for comp in ("auto", "zstd", None):
+        out = tmp_path / f"o_{comp}.parquet"
+        process_file(cam, BUDGET, src, out, progress=False, corners=True, compression=comp)
+        pf = pq.ParquetFile(out)
+        rg = pf.metadata.row_group(0)
+        meta = {rg.column(i).path_in_schema: rg.column(i) for i in range(rg.num_columns)}
+        for name, col in meta.items():
+            code = name in V2X_FIELDS or name == "largest_index" or name.endswith("_reason") and name != "reason"
+            if comp == "auto":
+                assert col.compression == ("UNCOMPRESSED" if code else "SNAPPY"), name
+                assert ("DELTA_BINARY_PACKED" in col.encodings) == code, (name, col.encodings)
+            else:
+                assert col.compression == ("ZSTD" if comp else "UNCOMPRESSED"), name
+        t = pf.read()
+        assert t.equals(ref.cast(t.schema))
+        for f in t.schema:
+            computed = f.name not in ("frame", "object_id", "class", "timestamp_s")
+            assert f.nullable == (not computed), f.name
+            assert t.column(f.name).null_count == 0 or not computed

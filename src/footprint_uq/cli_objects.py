@@ -45,8 +45,9 @@ __all__ = ["objects_cmd"]
 @click.option("--corners", is_flag=True, help="Also write every corner's pixel, ground position and covariance.")
 @click.option("--allow-outside-image", is_flag=True,
               help="Let corners outside the image enter the centre and the largest point.")
-@click.option("--compression", type=click.Choice(["snappy", "zstd", "lz4", "gzip", "none"]), default="snappy",
-              show_default=True, help="Parquet compression.")
+@click.option("--compression", type=click.Choice(["auto", "snappy", "zstd", "lz4", "gzip", "none"]), default="auto",
+              show_default=True, help="Parquet compression: auto = snappy, small-integer code columns uncompressed; "
+                                      "else one codec for every column.")
 @click.option("--quiet", "-q", is_flag=True, help="No progress bar.")
 @click.option("--registry", "registry", default=None, metavar="FILE_OR_DIR",
               help="Fleet mode: camera registry (camera_id -> camera file, budget); docs/batch.md.")

@@ -216,7 +216,7 @@ def _hive_keys(rel: str) -> dict:
 
 
 def plan(dataset, out_dir, registry: dict, *, chunk_rows: int = S.DEFAULT_CHUNK_ROWS,
-         compression: str | None = "snappy", **options) -> list[Task]:
+         compression: str | None = "auto", **options) -> list[Task]:
     """Tasks (one per Parquet file under ``dataset``, sorted by path)."""
     root = Path(dataset)
     if root.is_file():
@@ -383,8 +383,9 @@ def process_partition(task: Task) -> dict:
                     path = _out_path(task, cam_id)
                     path.parent.mkdir(parents=True, exist_ok=True)
                     tmp = path.with_name(path.name + tmp_tag)
-                    writers[cam_id] = (pq.ParquetWriter(tmp, out.schema, compression=task.compression or "none",
-                                                        **parquet_options(out.schema)), tmp, path)
+                    writers[cam_id] = (pq.ParquetWriter(tmp, out.schema, **parquet_options(out.schema,
+                                                                                           task.compression)), tmp,
+                                       path)
                     counts[cam_id] = Summary()
                 pending = write(writers[cam_id][0], out)
                 counts[cam_id].add_table(out, sel.size)
@@ -479,7 +480,7 @@ class FleetSummary:
 
 
 def process_fleet(registry, detections, out_dir, *, budget=None, scheduler=None, workers: int | None = None,
-                  retries: int = 2, chunk_rows: int = S.DEFAULT_CHUNK_ROWS, compression: str | None = "snappy",
+                  retries: int = 2, chunk_rows: int = S.DEFAULT_CHUNK_ROWS, compression: str | None = "auto",
                   progress: bool | None = None, client=None, **options) -> FleetSummary:
     """Footprints of a multi-camera Parquet dataset, in this process or on a Dask cluster.
 

@@ -132,18 +132,22 @@ def output_schema(id_fields: list[pa.Field], n_corners: int, *, confidence: bool
     geo : add ``lat_deg``/``lon_deg`` (WGS84) of the centre (and of the corners with ``corners``)
     corners : add the per-corner columns ``c{k}_*``
     """
-    f = [pa.field("row", pa.int64(), nullable=False)] + list(id_fields)
-    f += [pa.field("status", REASON_TYPE), pa.field("reason", REASON_TYPE)]
-    f += [pa.field(c, pa.float64()) for c in CENTRE_COLUMNS]
+    # computed columns are never null ("no value" is NaN or the message's "unavailable" code); declaring them
+    # non-nullable spares the Parquet writer the definition levels (~40 ns per row of 27 columns)
+    def c(name, typ):
+        return pa.field(name, typ, nullable=False)
+
+    f = [c("row", pa.int64())] + list(id_fields)
+    f += [c("status", REASON_TYPE), c("reason", REASON_TYPE)]
+    f += [c(name, pa.float64()) for name in CENTRE_COLUMNS]
     if confidence:
-        f += [pa.field("semi_major_m", pa.float64()), pa.field("semi_minor_m", pa.float64())]
-    f += [pa.field("largest_index", pa.int8()), pa.field("largest_sigma_major_m", pa.float64()),
-          pa.field("largest_x_m", pa.float64()), pa.field("largest_y_m", pa.float64()),
-          pa.field("area_m2", pa.float64())]
-    f += [pa.field(name, pa.int32()) for name in V2X_FIELDS]
+        f += [c("semi_major_m", pa.float64()), c("semi_minor_m", pa.float64())]
+    f += [c("largest_index", pa.int8()), c("largest_sigma_major_m", pa.float64()),
+          c("largest_x_m", pa.float64()), c("largest_y_m", pa.float64()), c("area_m2", pa.float64())]
+    f += [c(name, pa.int32()) for name in V2X_FIELDS]
     if geo:
-        f += [pa.field("lat_deg", pa.float64()), pa.field("lon_deg", pa.float64())]
+        f += [c("lat_deg", pa.float64()), c("lon_deg", pa.float64())]
     if corners:
         for k in range(n_corners):
-            f += [pa.field(n, t) for n, t in corner_output_columns(k, geo)]
+            f += [c(n, t) for n, t in corner_output_columns(k, geo)]
     return pa.schema(f)
