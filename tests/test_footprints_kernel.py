@@ -206,11 +206,13 @@ def test_kernel_v2x_fields_match_numpy_at_boundaries(rng):
         want = {**cpm_fields(C, heading), **j2735_fields(C, heading)}
         h = np.deg2rad(heading)
         ch, sh = (1.0, 0.0) if heading == 0.0 else (np.cos(h), np.sin(h))
-        got = np.empty((len(C), 7), dtype=np.int32)
-        for i, c in enumerate(C):
-            fk._v2x(c[0, 0], c[0, 1], c[1, 1], ch, sh, got, i)
+        got = np.empty((7, len(C)), dtype=np.int32)
+        c00, c01, c11 = (np.ascontiguousarray(C[:, a, b]) for a, b in ((0, 0), (0, 1), (1, 1)))
+        for n0 in range(0, len(C), 16):  # in blocks, as the kernel does
+            sl = slice(n0, n0 + 16)
+            fk._v2x_block(c00[sl], c01[sl], c11[sl], ch, sh, np.empty(16), got, n0)
         for j, name in enumerate(V2X_FIELDS):
-            assert np.array_equal(got[:, j], want[name]), (heading, name)
+            assert np.array_equal(got[j], want[name]), (heading, name)
 
 
 def test_processor_is_thread_safe(rng):

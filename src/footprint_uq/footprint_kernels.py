@@ -52,7 +52,7 @@ _Z95 = 1.96
 _K95_2D = math.sqrt(-2.0 * math.log(0.05))
 _GUARD = 1e-9
 _ORIENT_UNIT = 360.0 / 65535.0
-_PC_LEVELS = np.array([500.0, 200.0, 100.0, 50.0, 20.0, 10.0, 5.0, 2.0, 1.0, 0.5, 0.2, 0.1, 0.05, 0.02, 0.01])
+_PC_LEVELS_T = (500.0, 200.0, 100.0, 50.0, 20.0, 10.0, 5.0, 2.0, 1.0, 0.5, 0.2, 0.1, 0.05, 0.02, 0.01)
 
 # Chunk scratch: ONE float64 buffer; row r of a chunk is S[r * _ST : r * _ST + m].  Every access
 # is "one base pointer + a compile-time offset", so LLVM proves the rows independent and vectorises
@@ -80,7 +80,8 @@ _T0, _T1, _T2 = 151, 152, 153  # per-corner temporaries
 # per-object rows (columns 0 .. nob - 1)
 _BEST, _BSEMI, _FBAD, _MX, _MY, _SS, _A2, _SX, _SY = 154, 155, 156, 157, 158, 159, 160, 161, 162
 _B0, _B1, _B2, _E00, _E01, _E11, _CXC, _CYC, _AREA, _DEG = 163, 164, 165, 166, 167, 168, 169, 170, 171, 172
-_NROWS = 173
+_ANG = 173
+_NROWS = 174
 
 
 def camera_constants(camera) -> tuple[np.ndarray, np.ndarray]:
@@ -127,7 +128,7 @@ def psd_factor(S: np.ndarray, *, rtol: float = 1e-14):
         A[p, :] = 0.0
         A[:, p] = 0.0
         r += 1
-    rows, cols = np.nonzero(L[:, :r])
+    cols, rows = np.nonzero(L[:, :r].T)  # sorted by column: the kernel forms one factor column at a time
     return rows.astype(np.int64), cols.astype(np.int64), np.ascontiguousarray(L[rows, cols]), r
 
 
@@ -370,35 +371,6 @@ def _stage_ground(S, m, cam, dR, need):
 
 
 @njit(cache=True, error_model="numpy", nogil=True)
-def _stage_whiten(S, m, Lr, Lc, Lv, r):
-    """Rows AW (2 r) = J L (row ``2 c + i``) and C3 (3) = the parameter part of each corner's
-    covariance (xx, xy, yy) = (J L)(J L)^T; only the non-zero entries of L are touched."""
-    for c in range(2 * r):
-        for j in range(m):
-            S[(_AW + c) * _ST + j] = 0.0
-    for e in range(Lr.shape[0]):
-        c, p, val = Lc[e], Lr[e], Lv[e]
-        # row views: their indices are provably >= 0, so the loops carry no wraparound test
-        o0 = S[(_AW + 2 * c) * _ST:(_AW + 2 * c) * _ST + m]
-        o1 = S[(_AW + 2 * c + 1) * _ST:(_AW + 2 * c + 1) * _ST + m]
-        i0 = S[(_JP + p) * _ST:(_JP + p) * _ST + m]
-        i1 = S[(_JP + 22 + p) * _ST:(_JP + 22 + p) * _ST + m]
-        for j in range(m):
-            o0[j] += i0[j] * val
-        for j in range(m):
-            o1[j] += i1[j] * val
-    for j in range(m):
-        S[_C3 * _ST + j], S[(_C3 + 1) * _ST + j], S[(_C3 + 2) * _ST + j] = 0.0, 0.0, 0.0
-    for c in range(r):
-        a0 = S[(_AW + 2 * c) * _ST:(_AW + 2 * c) * _ST + m]
-        a1 = S[(_AW + 2 * c + 1) * _ST:(_AW + 2 * c + 1) * _ST + m]
-        for j in range(m):
-            S[_C3 * _ST + j] += a0[j] * a0[j]
-            S[(_C3 + 1) * _ST + j] += a0[j] * a1[j]
-            S[(_C3 + 2) * _ST + j] += a1[j] * a1[j]
-
-
-@njit(cache=True, error_model="numpy", nogil=True)
 def _project(X, Y, Z, cam, uv):
     """World point (Z relative to the nominal ground) -> pixel; returns the status code (general.project)."""
     rx, ry, rz = X - cam[_C_X], Y - cam[_C_Y], Z - cam[_C_H]
@@ -426,67 +398,77 @@ def _project(X, Y, Z, cam, uv):
     return _OK
 
 
-@njit(cache=True, error_model="numpy", nogil=True)
-def _v2x(c00, c01, c11, ch, sh, out, n):
-    """CPM and J2735 integer fields of one 2x2 covariance (mirror of footprint_uq.v2x)."""
-    if not (math.isfinite(c00) and math.isfinite(c01) and math.isfinite(c11)):
-        out[n, 0], out[n, 1], out[n, 2] = 4096, 4096, 101
-        out[n, 3], out[n, 4], out[n, 5], out[n, 6] = 255, 255, 65535, 0
-        return
-    if sh != 0.0 or ch != 1.0:  # R C R^T with R = [[ch, sh], [-sh, ch]]
-        a00 = ch * c00 + sh * c01
-        a01 = ch * c01 + sh * c11
-        a10 = -sh * c00 + ch * c01
-        a11 = -sh * c01 + ch * c11
-        e00 = a00 * ch + a01 * sh
-        e01 = -a00 * sh + a01 * ch
-        e10 = a10 * ch + a11 * sh
-        e11 = -a10 * sh + a11 * ch
-        c00, c01, c11 = e00, 0.5 * (e01 + e10), e11
-    for i in range(2):
-        var = c00 if i == 0 else c11
-        conf = _Z95 * math.sqrt(max(var, 0.0))
-        if conf > 40.94:
-            out[n, i] = 4095
-        else:
-            m = math.ceil(conf / 0.01 * (1.0 - _GUARD))
-            out[n, i] = min(max(m, 1), 4094)
-    if c00 > 0.0 and c11 > 0.0:
-        rho = c01 / math.sqrt(c00 * c11)
-        out[n, 2] = int(min(max(np.rint(rho * 100.0), -100.0), 100.0))
-    else:
-        out[n, 2] = 101
-    mean = 0.5 * (c00 + c11)
-    rad = math.sqrt(0.25 * (c00 - c11) * (c00 - c11) + c01 * c01)
-    a = math.sqrt(mean + rad)
-    b = math.sqrt(max(mean - rad, 0.0))
-    for i in range(2):
-        s = a if i == 0 else b
-        if s >= 12.70:
-            out[n, 3 + i] = 254
-        else:
-            m = math.ceil(s / 0.05 * (1.0 - _GUARD))
-            out[n, 3 + i] = min(max(m, 0), 254)
-    ang = 0.5 * math.degrees(math.atan2(2.0 * c01, c00 - c11))
-    bearing = 90.0 - ang
-    bearing = bearing - 180.0 * math.floor(bearing / 180.0)
-    if bearing >= 180.0:
-        bearing -= 180.0
-    if a * a - b * b <= 1e-9 * (a * a + b * b):  # circular: any orientation is right; report north
-        bearing = 0.0
-    out[n, 5] = int(np.rint(bearing / _ORIENT_UNIT))
-    r95 = _K95_2D * a
-    cnt = 0
-    for lev in _PC_LEVELS:
-        if lev >= r95 * (1.0 - _GUARD):
-            cnt += 1
-    out[n, 6] = cnt
+@njit(cache=True, error_model="numpy", nogil=True, inline="always")
+def _heading(c00, c01, c11, ch, sh, rot):
+    """R C R^T with R = [[ch, sh], [-sh, ch]] (the covariance in east/north axes), or C if not ``rot``."""
+    if not rot:
+        return c00, c01, c11
+    a00 = ch * c00 + sh * c01
+    a01 = ch * c01 + sh * c11
+    a10 = -sh * c00 + ch * c01
+    a11 = -sh * c01 + ch * c11
+    e00 = a00 * ch + a01 * sh
+    e01 = -a00 * sh + a01 * ch
+    e10 = a10 * ch + a11 * sh
+    e11 = -a10 * sh + a11 * ch
+    return e00, 0.5 * (e01 + e10), e11
 
 
 @njit(cache=True, error_model="numpy", nogil=True)
-def _stage_corner_cov(S, m, W, Himg, allow_outside):
-    """Per corner: final code (outside the image), usable flag, covariance (C3 + J_uv P J_uv^T),
-    its semi-major axis; NaN for corners that could not be computed."""
+def _v2x_block(c00, c01, c11, ch, sh, ang, out, n0):
+    """CPM and J2735 integer fields of the covariances (c00[i], c01[i], c11[i]) into ``out[:, n0 + i]``
+    (7, N) -- the mirror of :mod:`footprint_uq.v2x`; ``ang`` is scratch.  The libm ``atan2`` runs in
+    a loop of its own so that the rest (square roots, roundings, the level count) vectorises.
+    """
+    nob = c00.shape[0]
+    rot = sh != 0.0 or ch != 1.0
+    for i in range(nob):
+        d00, d01, d11 = _heading(c00[i], c01[i], c11[i], ch, sh, rot)
+        ang[i] = math.atan2(2.0 * d01, d00 - d11)
+    g = 1.0 - _GUARD
+    for i in range(nob):
+        fin = math.isfinite(c00[i]) & math.isfinite(c01[i]) & math.isfinite(c11[i])
+        d00, d01, d11 = _heading(c00[i], c01[i], c11[i], ch, sh, rot)
+        # CPM: per-axis 95 % confidence in cm, 1..4094, 4095 out of range
+        cx = _Z95 * math.sqrt(max(d00, 0.0))
+        cy = _Z95 * math.sqrt(max(d11, 0.0))
+        vx = 4095.0 if cx > 40.94 else min(max(np.ceil(cx / 0.01 * g), 1.0), 4094.0)
+        vy = 4095.0 if cy > 40.94 else min(max(np.ceil(cy / 0.01 * g), 1.0), 4094.0)
+        # correlation in percent (101: unavailable)
+        pos = (d00 > 0.0) & (d11 > 0.0)
+        rho = d01 / math.sqrt(d00 * d11)
+        vr = min(max(np.rint(rho * 100.0), -100.0), 100.0) if pos else 101.0
+        # J2735: 1-sigma axes in 5 cm (254: 12.70 m or more), orientation of the major axis from north
+        mean = 0.5 * (d00 + d11)
+        rad = math.sqrt(0.25 * (d00 - d11) * (d00 - d11) + d01 * d01)
+        a = math.sqrt(mean + rad)
+        b = math.sqrt(max(mean - rad, 0.0))
+        va = 254.0 if a >= 12.70 else min(max(np.ceil(a / 0.05 * g), 0.0), 254.0)
+        vb = 254.0 if b >= 12.70 else min(max(np.ceil(b / 0.05 * g), 0.0), 254.0)
+        bearing = 90.0 - 0.5 * math.degrees(ang[i])
+        bearing = bearing - 180.0 * np.floor(bearing / 180.0)
+        bearing = bearing - 180.0 if bearing >= 180.0 else bearing
+        bearing = 0.0 if a * a - b * b <= 1e-9 * (a * a + b * b) else bearing  # circular: report north
+        vo = np.rint(bearing / _ORIENT_UNIT)
+        # PositionConfidence: how many levels (500 m ... 1 cm) the 95 % radius stays within
+        r95 = _K95_2D * a * g
+        cnt = 0.0
+        for lev in _PC_LEVELS_T:
+            cnt += 1.0 if lev >= r95 else 0.0
+        n = n0 + i
+        out[0, n] = np.int32(vx) if fin else 4096
+        out[1, n] = np.int32(vy) if fin else 4096
+        out[2, n] = np.int32(vr) if fin else 101
+        out[3, n] = np.int32(va) if fin else 255
+        out[4, n] = np.int32(vb) if fin else 255
+        out[5, n] = np.int32(vo) if fin else 65535
+        out[6, n] = np.int32(cnt) if fin else 0
+
+
+@njit(cache=True, error_model="numpy", nogil=True)
+def _stage_corner_flags(S, m, W, Himg, allow_outside):
+    """Per corner: final code (outside the image), usable flag, ground point (NaN where it could not
+    be computed)."""
     nan = math.nan
     for j in range(m):
         u, v = S[_U * _ST + j], S[_V * _ST + j]
@@ -497,6 +479,85 @@ def _stage_corner_cov(S, m, W, Himg, allow_outside):
         us = (rc == _OK) | ((rc == _OUTSIDE) & allow_outside)
         S[_RC * _ST + j] = rc
         S[_US * _ST + j] = 1.0 if us else 0.0
+        S[_XX * _ST + j] = S[_X * _ST + j] if computed else nan
+        S[_YY * _ST + j] = S[_Y * _ST + j] if computed else nan
+
+
+@njit(cache=True, error_model="numpy", nogil=True)
+def _stage_whiten(S, m, nob, K, Lr, Lc, Lv):
+    """Rows AW = J L (row ``2 c + i``), C3 (3 rows) = the parameter part (J L)(J L)^T of each corner's
+    covariance, and the parameter part of each object's centre covariance into E00, E01, E11:
+    B B^T with B = sum_k G_k (J_k L) (G from :func:`_stage_centroid`).
+
+    The factor's entries come sorted by column (``Lc`` non-decreasing).  A column is formed in
+    one pass per entry; the pass of its last entry also adds it to C3, so a diagonal factor costs
+    one pass per parameter.  Only non-zero entries are touched.  Rows chosen at run time are
+    indexed with unsigned offsets (no negative-index test, no array views with their reference
+    counting), so the loops vectorise.
+    """
+    for j in range(m):
+        S[_C3 * _ST + j], S[(_C3 + 1) * _ST + j], S[(_C3 + 2) * _ST + j] = 0.0, 0.0, 0.0
+    for i in range(nob):
+        S[_E00 * _ST + i], S[_E01 * _ST + i], S[_E11 * _ST + i] = 0.0, 0.0, 0.0
+    ne = Lr.shape[0]
+    mu = np.uint64(m)
+    c0, c1, c2 = np.uint64(_C3 * _ST), np.uint64((_C3 + 1) * _ST), np.uint64((_C3 + 2) * _ST)
+    t0, t1 = np.uint64(_T0 * _ST), np.uint64(_T1 * _ST)
+    g0, g1 = np.uint64(_G * _ST), np.uint64((_G + 1) * _ST)
+    g2, g3 = np.uint64((_G + 2) * _ST), np.uint64((_G + 3) * _ST)
+    for e in range(ne):
+        c, p, val = Lc[e], Lr[e], Lv[e]
+        first = e == 0 or Lc[e - 1] != c
+        last = e == ne - 1 or Lc[e + 1] != c
+        o0, o1 = np.uint64((_AW + 2 * c) * _ST), np.uint64((_AW + 2 * c + 1) * _ST)
+        i0, i1 = np.uint64((_JP + p) * _ST), np.uint64((_JP + 22 + p) * _ST)
+        if not last:
+            if first:
+                for j in range(mu):
+                    S[o0 + j] = S[i0 + j] * val
+                    S[o1 + j] = S[i1 + j] * val
+            else:
+                for j in range(mu):
+                    S[o0 + j] += S[i0 + j] * val
+                    S[o1 + j] += S[i1 + j] * val
+            continue
+        # the last entry completes column c: add it to C3 in the same pass (the single-entry column,
+        # the common case, does not read the row it writes), then form G_k (J_k L)_c
+        if first:
+            for j in range(mu):
+                a0, a1 = S[i0 + j] * val, S[i1 + j] * val
+                S[o0 + j], S[o1 + j] = a0, a1
+                S[c0 + j] += a0 * a0
+                S[c1 + j] += a0 * a1
+                S[c2 + j] += a1 * a1
+        else:
+            for j in range(mu):
+                a0, a1 = S[o0 + j] + S[i0 + j] * val, S[o1 + j] + S[i1 + j] * val
+                S[o0 + j], S[o1 + j] = a0, a1
+                S[c0 + j] += a0 * a0
+                S[c1 + j] += a0 * a1
+                S[c2 + j] += a1 * a1
+        for j in range(mu):
+            a0, a1 = S[o0 + j], S[o1 + j]
+            S[t0 + j] = S[g0 + j] * a0 + S[g1 + j] * a1
+            S[t1 + j] = S[g2 + j] * a0 + S[g3 + j] * a1
+        _sum_corners(S, _T0, _B0, nob, K)
+        _sum_corners(S, _T1, _B1, nob, K)
+        for i in range(nob):
+            b0, b1 = S[_B0 * _ST + i], S[_B1 * _ST + i]
+            S[_E00 * _ST + i] += b0 * b0
+            S[_E01 * _ST + i] += b0 * b1
+            S[_E11 * _ST + i] += b1 * b1
+
+
+@njit(cache=True, error_model="numpy", nogil=True)
+def _stage_corner_cov(S, m):
+    """Per corner: covariance C3 + J_uv P J_uv^T and its semi-major axis (rows CC, SSEL); NaN where
+    the corner could not be computed, SSEL -1 where it is not usable."""
+    nan = math.nan
+    for j in range(m):
+        rc = S[_RC * _ST + j]
+        computed = (rc == _OK) | (rc == _OUTSIDE)
         j00, j01 = S[_JUV * _ST + j], S[(_JUV + 1) * _ST + j]
         j10, j11 = S[(_JUV + 2) * _ST + j], S[(_JUV + 3) * _ST + j]
         p00, p01 = S[_P4 * _ST + j], S[(_P4 + 1) * _ST + j]
@@ -510,57 +571,53 @@ def _stage_corner_cov(S, m, W, Himg, allow_outside):
         S[_CC * _ST + j] = c00 if computed else nan
         S[(_CC + 1) * _ST + j] = c01 if computed else nan
         S[(_CC + 2) * _ST + j] = c11 if computed else nan
-        S[_XX * _ST + j] = S[_X * _ST + j] if computed else nan
-        S[_YY * _ST + j] = S[_Y * _ST + j] if computed else nan
-        S[_SSEL * _ST + j] = semi if us else -1.0
+        S[_SSEL * _ST + j] = semi if S[_US * _ST + j] != 0.0 else -1.0
 
 
-@njit(cache=True, error_model="numpy", nogil=True)
-def _blocks(S, row, k, nob):
-    """View of the nob columns of corner k in scratch row ``row`` (indices provably >= 0)."""
-    a = row * _ST + k * nob
-    return S[a:a + nob]
-
-
-@njit(cache=True, error_model="numpy", nogil=True)
+@njit(cache=True, error_model="numpy", nogil=True, inline="always")
 def _sum_corners(S, src, dst, nob, K):
     """Per object: row dst[i] = sum over corners k of row src[k * nob + i] (k in order)."""
-    d = _blocks(S, dst, 0, nob)
-    s = _blocks(S, src, 0, nob)
-    for i in range(nob):
-        d[i] = s[i]
+    d = np.uint64(dst * _ST)
+    s0 = np.uint64(src * _ST)
+    nu = np.uint64(nob)
+    for i in range(nu):
+        S[d + i] = S[s0 + i]
     for k in range(1, K):
-        s = _blocks(S, src, k, nob)
-        for i in range(nob):
-            d[i] += s[i]
+        sk = np.uint64(src * _ST + k * nob)
+        for i in range(nu):
+            S[d + i] += S[sk + i]
 
 
-@njit(cache=True, error_model="numpy", nogil=True)
+@njit(cache=True, error_model="numpy", nogil=True, inline="always")
 def _to_corners(S, src, dst, nob, K, shift):
     """Per corner: row dst[k * nob + i] = row src[((k + shift) mod K) * nob + i] if src is a corner row,
     or src[i] (per-object row) with ``shift < 0``."""
+    nu = np.uint64(nob)
     for k in range(K):
-        d = _blocks(S, dst, k, nob)
-        s = _blocks(S, src, 0 if shift < 0 else (k + shift) % K, nob)
-        for i in range(nob):
-            d[i] = s[i]
+        d = np.uint64(dst * _ST + k * nob)
+        s0 = np.uint64(src * _ST + (0 if shift < 0 else ((k + shift) % K) * nob))
+        for i in range(nu):
+            S[d + i] = S[s0 + i]
 
 
 @njit(cache=True, error_model="numpy", nogil=True)
 def _stage_select(S, nob, K):
     """Per object: the largest usable corner (BEST, BSEMI; -1 if none; first wins a tie) and the
     first unusable corner (FBAD, -1 if all are usable)."""
-    best, bsemi, fbad = _blocks(S, _BEST, 0, nob), _blocks(S, _BSEMI, 0, nob), _blocks(S, _FBAD, 0, nob)
     for i in range(nob):
-        best[i], bsemi[i], fbad[i] = -1.0, -1.0, -1.0
+        S[_BEST * _ST + i], S[_BSEMI * _ST + i], S[_FBAD * _ST + i] = -1.0, -1.0, -1.0
+    nu = np.uint64(nob)
+    bst, bsm, fbd = np.uint64(_BEST * _ST), np.uint64(_BSEMI * _ST), np.uint64(_FBAD * _ST)
     for k in range(K):
-        ssel, us = _blocks(S, _SSEL, k, nob), _blocks(S, _US, k, nob)
-        for i in range(nob):
-            s = ssel[i]
-            better = s > bsemi[i]
-            best[i] = k if better else best[i]
-            bsemi[i] = s if better else bsemi[i]
-            fbad[i] = k if ((fbad[i] < 0.0) & (us[i] == 0.0)) else fbad[i]
+        ss, us = np.uint64(_SSEL * _ST + k * nob), np.uint64(_US * _ST + k * nob)
+        kf = float(k)
+        for i in range(nu):
+            s = S[ss + i]
+            better = s > S[bsm + i]
+            S[bst + i] = kf if better else S[bst + i]
+            S[bsm + i] = s if better else S[bsm + i]
+            fb = S[fbd + i]
+            S[fbd + i] = kf if ((fb < 0.0) & (S[us + i] == 0.0)) else fb
 
 
 @njit(cache=True, error_model="numpy", nogil=True)
@@ -641,25 +698,11 @@ def _stage_centroid(S, nob, K):
 
 
 @njit(cache=True, error_model="numpy", nogil=True)
-def _stage_centre_cov(S, nob, K, r):
-    """Per object: centre covariance E = B B^T + sum_k H_k P_k H_k^T with B = sum_k G_k (J_k L)
-    and H_k = G_k J_uv,k (detector cross terms between corners are added by the caller)."""
+def _stage_centre_cov(S, nob, K):
+    """Per object: adds the pixel part sum_k H_k P_k H_k^T, H_k = G_k J_uv,k, to the centre covariance
+    (E00, E01, E11; the parameter part is :func:`_stage_whiten`'s, detector cross terms between
+    corners are added by the caller)."""
     m = K * nob
-    for i in range(nob):
-        S[_E00 * _ST + i], S[_E01 * _ST + i], S[_E11 * _ST + i] = 0.0, 0.0, 0.0
-    for c in range(r):
-        a0 = S[(_AW + 2 * c) * _ST:(_AW + 2 * c) * _ST + m]
-        a1 = S[(_AW + 2 * c + 1) * _ST:(_AW + 2 * c + 1) * _ST + m]
-        for j in range(m):
-            S[_T0 * _ST + j] = S[_G * _ST + j] * a0[j] + S[(_G + 1) * _ST + j] * a1[j]
-            S[_T1 * _ST + j] = S[(_G + 2) * _ST + j] * a0[j] + S[(_G + 3) * _ST + j] * a1[j]
-        _sum_corners(S, _T0, _B0, nob, K)
-        _sum_corners(S, _T1, _B1, nob, K)
-        for i in range(nob):
-            b0, b1 = S[_B0 * _ST + i], S[_B1 * _ST + i]
-            S[_E00 * _ST + i] += b0 * b0
-            S[_E01 * _ST + i] += b0 * b1
-            S[_E11 * _ST + i] += b1 * b1
     for j in range(m):
         g00, g01, g10, g11 = S[_G * _ST + j], S[(_G + 1) * _ST + j], S[(_G + 2) * _ST + j], S[(_G + 3) * _ST + j]
         u00, u01 = S[_JUV * _ST + j], S[(_JUV + 1) * _ST + j]
@@ -694,7 +737,7 @@ def alloc_outputs(N: int, K: int, *, joint: bool = False, corners: bool = True, 
             alloc((N if joint else 0, 2 * K, 2 * K), np.float64), alloc((N, K), np.int8), alloc((N, K), np.bool_),
             alloc((N,), np.int64), alloc((N,), np.float64), alloc((N, 2), np.float64), alloc((nc, 2, 2), np.float64),
             alloc((N, 2), np.float64), alloc((N, 2, 2), np.float64), alloc((N,), np.int32), alloc((N,), np.int64),
-            alloc((N,), np.float64), alloc((N, 7), np.int32))
+            alloc((N,), np.float64), alloc((7, N), np.int32))
 
 
 def scratch() -> np.ndarray:
@@ -748,7 +791,6 @@ def process_corners(uv, extra_reason, cam, dR, Lr, Lc, Lv, r, spx, det, det_mode
                 S[_V * _ST + k * nob + i] = uv[n0 + i, k, 1]
         _stage_undistort(S, m, cam, Jd, Jk, need)
         _stage_ground(S, m, cam, dR, need)
-        _stage_whiten(S, m, Lr, Lc, Lv, r)
         if has_extra:  # codes of the 3D projection override OK
             for k in range(K):
                 for i in range(nob):
@@ -774,10 +816,12 @@ def process_corners(uv, extra_reason, cam, dR, Lr, Lc, Lv, r, spx, det, det_mode
                     S[(_P4 + 1) * _ST + j] += d01
                     S[(_P4 + 2) * _ST + j] += d10
                     S[(_P4 + 3) * _ST + j] += d11
-        _stage_corner_cov(S, m, W, Himg, allow_outside)
-        _stage_select(S, nob, K)
+        _stage_corner_flags(S, m, W, Himg, allow_outside)
         _stage_centroid(S, nob, K)
-        _stage_centre_cov(S, nob, K, r)
+        _stage_whiten(S, m, nob, K, Lr, Lc, Lv)
+        _stage_corner_cov(S, m)
+        _stage_select(S, nob, K)
+        _stage_centre_cov(S, nob, K)
         # ---- outputs: corners ----
         for k in range(K):
             for i in range(nob):
@@ -846,12 +890,14 @@ def process_corners(uv, extra_reason, cam, dR, Lr, Lc, Lv, r, spx, det, det_mode
                 centre[n, 0], centre[n, 1] = S[_CXC * _ST + i], S[_CYC * _ST + i]
                 centre_cov[n, 0, 0], centre_cov[n, 0, 1] = e00, e01
                 centre_cov[n, 1, 0], centre_cov[n, 1, 1] = e01, e11
-                _v2x(e00, e01, e11, ch, sh, v2x, n)
             else:
+                e00, e01, e11 = nan, nan, nan
                 centre[n, 0], centre[n, 1] = nan, nan
                 centre_cov[n, 0, 0], centre_cov[n, 0, 1], centre_cov[n, 1, 0], centre_cov[n, 1, 1] = (nan, nan,
                                                                                                       nan, nan)
-                _v2x(nan, nan, nan, ch, sh, v2x, n)
+            S[_E00 * _ST + i], S[_E01 * _ST + i], S[_E11 * _ST + i] = e00, e01, e11
+        _v2x_block(S[_E00 * _ST:_E00 * _ST + nob], S[_E01 * _ST:_E01 * _ST + nob], S[_E11 * _ST:_E11 * _ST + nob],
+                   ch, sh, S[_ANG * _ST:_ANG * _ST + nob], v2x, n0)
         # ---- joint covariance (optional): diagonal blocks = corner covariances, off-diagonal blocks =
         # shared parameter part (+ detector cross terms in the full form) ----
         if want_joint:

@@ -553,7 +553,7 @@ class FrameProcessor:
     def _pack(self, uv, out) -> FootprintEstimate:
         (xy, ccov, joint, reason, usable, li, ls, lxy, lcov, centre, ccentre, creason, cbad, area, v2x) = out
         return FootprintEstimate(uv, xy, ccov, joint if self.joint_cov else None, reason, usable, li, ls, lxy, lcov,
-                                 centre, ccentre, creason == 0, creason, cbad, area, v2x, self.heading_offset_deg)
+                                 centre, ccentre, creason == 0, creason, cbad, area, v2x.T, self.heading_offset_deg)
 
     def corners(self, corners_px, *, pixel_cov_px2=None) -> FootprintEstimate:
         """Footprints from corners in pixels ``(N, K, 2)`` (see :func:`footprints_from_corners`)."""
