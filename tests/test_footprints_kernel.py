@@ -83,6 +83,22 @@ def test_boxes3d_agree(camera, budget, rng):
     assert (ref.corner_reason[3] == status.NOT_FINITE).all()
 
 
+def test_boxes3d_blocks_layouts_and_behind_camera(rng):
+    # 300 boxes: several projection blocks and kernel chunks; C-, F-ordered and strided input alike
+    cam = PanTiltCamera(1400.0, (1920, 1080), 8.0, 30.0, 15.0)
+    boxes = make_boxes(cam, rng, 300)
+    boxes[5, :2] = [-20.0 * np.sin(np.deg2rad(30.0)), -20.0 * np.cos(np.deg2rad(30.0))]  # 20 m behind it
+    boxes[6, 6] = np.inf
+    ref = footprints_from_boxes3d(cam, BUDGET, boxes)
+    assert (ref.corner_reason[5] == status.BEHIND_CAMERA).all()
+    assert (ref.corner_reason[6] == status.NOT_FINITE).all()
+    proc = FrameProcessor(cam, BUDGET)
+    wide = np.zeros((300, 14))
+    wide[:, ::2] = boxes
+    for b in (boxes, np.asfortranarray(boxes), wide[:, ::2]):
+        assert_same(ref, proc.boxes3d(b))
+
+
 def test_boxes3d_units_and_raised_bottom(camera, rng):
     boxes = make_boxes(camera, rng, 20)
     bd = boxes.copy()
@@ -206,11 +222,8 @@ def test_kernel_v2x_fields_match_numpy_at_boundaries(rng):
         want = {**cpm_fields(C, heading), **j2735_fields(C, heading)}
         h = np.deg2rad(heading)
         ch, sh = (1.0, 0.0) if heading == 0.0 else (np.cos(h), np.sin(h))
-        got = np.empty((7, len(C)), dtype=np.int32)
         c00, c01, c11 = (np.ascontiguousarray(C[:, a, b]) for a, b in ((0, 0), (0, 1), (1, 1)))
-        for n0 in range(0, len(C), 16):  # in blocks, as the kernel does
-            sl = slice(n0, n0 + 16)
-            fk._v2x_block(c00[sl], c01[sl], c11[sl], ch, sh, np.empty(16), got, n0)
+        got = fk.v2x_codes(c00, c01, c11, ch, sh)  # in blocks of 64, as in the kernel
         for j, name in enumerate(V2X_FIELDS):
             assert np.array_equal(got[j], want[name]), (heading, name)
 

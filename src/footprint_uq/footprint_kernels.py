@@ -52,7 +52,6 @@ _Z95 = 1.96
 _K95_2D = math.sqrt(-2.0 * math.log(0.05))
 _GUARD = 1e-9
 _ORIENT_UNIT = 360.0 / 65535.0
-_PC_LEVELS_T = (500.0, 200.0, 100.0, 50.0, 20.0, 10.0, 5.0, 2.0, 1.0, 0.5, 0.2, 0.1, 0.05, 0.02, 0.01)
 
 # Chunk scratch: ONE float64 buffer; row r of a chunk is S[r * _ST : r * _ST + m].  Every access
 # is "one base pointer + a compile-time offset", so LLVM proves the rows independent and vectorises
@@ -81,7 +80,10 @@ _T0, _T1, _T2 = 151, 152, 153  # per-corner temporaries
 _BEST, _BSEMI, _FBAD, _MX, _MY, _SS, _A2, _SX, _SY = 154, 155, 156, 157, 158, 159, 160, 161, 162
 _B0, _B1, _B2, _E00, _E01, _E11, _CXC, _CYC, _AREA, _DEG = 163, 164, 165, 166, 167, 168, 169, 170, 171, 172
 _ANG = 173
-_NROWS = 174
+_PC, _CS, _SN = 174, 175, 176  # 3D boxes: projection code per corner; cos, sin of each yaw
+_BX = 177  # 7 rows: the chunk's boxes
+_VX = 184  # 7 rows: V2X fields of each object
+_NROWS = 191
 
 
 def camera_constants(camera) -> tuple[np.ndarray, np.ndarray]:
@@ -370,34 +372,6 @@ def _stage_ground(S, m, cam, dR, need):
                 S[(_JP + 27 + kk) * _ST + j] = S[(_B4 + 2) * _ST + j] * e0 + S[(_B4 + 3) * _ST + j] * e1
 
 
-@njit(cache=True, error_model="numpy", nogil=True)
-def _project(X, Y, Z, cam, uv):
-    """World point (Z relative to the nominal ground) -> pixel; returns the status code (general.project)."""
-    rx, ry, rz = X - cam[_C_X], Y - cam[_C_Y], Z - cam[_C_H]
-    pcx = cam[_C_R + 0] * rx + cam[_C_R + 3] * ry + cam[_C_R + 6] * rz
-    pcy = cam[_C_R + 1] * rx + cam[_C_R + 4] * ry + cam[_C_R + 7] * rz
-    pcz = cam[_C_R + 2] * rx + cam[_C_R + 5] * ry + cam[_C_R + 8] * rz
-    finite = math.isfinite(X) and math.isfinite(Y) and math.isfinite(Z)
-    if not finite:
-        uv[0] = math.nan
-        uv[1] = math.nan
-        return _NOTFIN
-    if not pcz > 0.0:
-        uv[0] = math.nan
-        uv[1] = math.nan
-        return _BEHIND
-    x, y = pcx / pcz, pcy / pcz
-    k1, k2, p1, p2 = cam[_C_DIST], cam[_C_DIST + 1], cam[_C_DIST + 2], cam[_C_DIST + 3]
-    k3, k4, k5, k6 = cam[_C_DIST + 4], cam[_C_DIST + 5], cam[_C_DIST + 6], cam[_C_DIST + 7]
-    r2 = x * x + y * y
-    rad = (1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))) / (1.0 + r2 * (k4 + r2 * (k5 + r2 * k6)))
-    xd = x * rad + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x)
-    yd = y * rad + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y
-    uv[0] = cam[_C_FX] * xd + cam[_C_SK] * yd + cam[_C_CX]
-    uv[1] = cam[_C_FY] * yd + cam[_C_CY]
-    return _OK
-
-
 @njit(cache=True, error_model="numpy", nogil=True, inline="always")
 def _heading(c00, c01, c11, ch, sh, rot):
     """R C R^T with R = [[ch, sh], [-sh, ch]] (the covariance in east/north axes), or C if not ``rot``."""
@@ -415,20 +389,22 @@ def _heading(c00, c01, c11, ch, sh, rot):
 
 
 @njit(cache=True, error_model="numpy", nogil=True)
-def _v2x_block(c00, c01, c11, ch, sh, ang, out, n0):
-    """CPM and J2735 integer fields of the covariances (c00[i], c01[i], c11[i]) into ``out[:, n0 + i]``
-    (7, N) -- the mirror of :mod:`footprint_uq.v2x`; ``ang`` is scratch.  The libm ``atan2`` runs in
-    a loop of its own so that the rest (square roots, roundings, the level count) vectorises.
+def _stage_v2x(S, nob, ch, sh, out, n0):
+    """CPM and J2735 integer fields of the centre covariances (rows E00, E01, E11; NaN: unavailable)
+    into ``out[:, n0 + i]`` (7, N) -- the mirror of :mod:`footprint_uq.v2x`.
+
+    The libm ``atan2`` runs in a loop of its own and the fields are formed in scratch rows (one
+    buffer, constant offsets), so the rest -- square roots, roundings, the level count -- vectorises.
     """
-    nob = c00.shape[0]
     rot = sh != 0.0 or ch != 1.0
     for i in range(nob):
-        d00, d01, d11 = _heading(c00[i], c01[i], c11[i], ch, sh, rot)
-        ang[i] = math.atan2(2.0 * d01, d00 - d11)
+        d00, d01, d11 = _heading(S[_E00 * _ST + i], S[_E01 * _ST + i], S[_E11 * _ST + i], ch, sh, rot)
+        S[_ANG * _ST + i] = math.atan2(2.0 * d01, d00 - d11)
     g = 1.0 - _GUARD
     for i in range(nob):
-        fin = math.isfinite(c00[i]) & math.isfinite(c01[i]) & math.isfinite(c11[i])
-        d00, d01, d11 = _heading(c00[i], c01[i], c11[i], ch, sh, rot)
+        c00, c01, c11 = S[_E00 * _ST + i], S[_E01 * _ST + i], S[_E11 * _ST + i]
+        fin = math.isfinite(c00) & math.isfinite(c01) & math.isfinite(c11)
+        d00, d01, d11 = _heading(c00, c01, c11, ch, sh, rot)
         # CPM: per-axis 95 % confidence in cm, 1..4094, 4095 out of range
         cx = _Z95 * math.sqrt(max(d00, 0.0))
         cy = _Z95 * math.sqrt(max(d11, 0.0))
@@ -445,24 +421,42 @@ def _v2x_block(c00, c01, c11, ch, sh, ang, out, n0):
         b = math.sqrt(max(mean - rad, 0.0))
         va = 254.0 if a >= 12.70 else min(max(np.ceil(a / 0.05 * g), 0.0), 254.0)
         vb = 254.0 if b >= 12.70 else min(max(np.ceil(b / 0.05 * g), 0.0), 254.0)
-        bearing = 90.0 - 0.5 * math.degrees(ang[i])
+        bearing = 90.0 - 0.5 * math.degrees(S[_ANG * _ST + i])
         bearing = bearing - 180.0 * np.floor(bearing / 180.0)
         bearing = bearing - 180.0 if bearing >= 180.0 else bearing
         bearing = 0.0 if a * a - b * b <= 1e-9 * (a * a + b * b) else bearing  # circular: report north
         vo = np.rint(bearing / _ORIENT_UNIT)
         # PositionConfidence: how many levels (500 m ... 1 cm) the 95 % radius stays within
         r95 = _K95_2D * a * g
-        cnt = 0.0
-        for lev in _PC_LEVELS_T:
-            cnt += 1.0 if lev >= r95 else 0.0
-        n = n0 + i
-        out[0, n] = np.int32(vx) if fin else 4096
-        out[1, n] = np.int32(vy) if fin else 4096
-        out[2, n] = np.int32(vr) if fin else 101
-        out[3, n] = np.int32(va) if fin else 255
-        out[4, n] = np.int32(vb) if fin else 255
-        out[5, n] = np.int32(vo) if fin else 65535
-        out[6, n] = np.int32(cnt) if fin else 0
+        cnt = ((500.0 >= r95) * 1.0 + (200.0 >= r95) + (100.0 >= r95) + (50.0 >= r95) + (20.0 >= r95)
+               + (10.0 >= r95) + (5.0 >= r95) + (2.0 >= r95) + (1.0 >= r95) + (0.5 >= r95) + (0.2 >= r95)
+               + (0.1 >= r95) + (0.05 >= r95) + (0.02 >= r95) + (0.01 >= r95))  # the 15 levels, unrolled
+        S[_VX * _ST + i] = vx if fin else 4096.0
+        S[(_VX + 1) * _ST + i] = vy if fin else 4096.0
+        S[(_VX + 2) * _ST + i] = vr if fin else 101.0
+        S[(_VX + 3) * _ST + i] = va if fin else 255.0
+        S[(_VX + 4) * _ST + i] = vb if fin else 255.0
+        S[(_VX + 5) * _ST + i] = vo if fin else 65535.0
+        S[(_VX + 6) * _ST + i] = cnt if fin else 0.0
+    for f in range(7):
+        o = np.uint64((_VX + f) * _ST)
+        for i in range(nob):
+            out[f, n0 + i] = np.int32(S[o + np.uint64(i)])
+
+
+@njit(cache=True, error_model="numpy", nogil=True)
+def v2x_codes(c00, c01, c11, ch, sh):
+    """The kernel's V2X fields (7, n) int32 of covariances given by their entries (n,) each (for tests
+    and for callers with covariances of their own); ``ch, sh``: cos, sin of the heading offset."""
+    n = c00.shape[0]
+    out = np.empty((7, n), dtype=np.int32)
+    S = np.empty(_NROWS * _ST)
+    for n0 in range(0, n, _M_TARGET):
+        nob = min(_M_TARGET, n - n0)
+        for i in range(nob):
+            S[_E00 * _ST + i], S[_E01 * _ST + i], S[_E11 * _ST + i] = c00[n0 + i], c01[n0 + i], c11[n0 + i]
+        _stage_v2x(S, nob, ch, sh, out, n0)
+    return out
 
 
 @njit(cache=True, error_model="numpy", nogil=True)
@@ -746,10 +740,13 @@ def scratch() -> np.ndarray:
 
 
 @njit(cache=True, error_model="numpy", nogil=True)
-def process_corners(uv, extra_reason, cam, dR, Lr, Lc, Lv, r, spx, det, det_mode, allow_outside, ch, sh, out, S):
+def process_corners(uv, extra_reason, boxes, yaw_deg, bottom_on_ground, cam, dR, Lr, Lc, Lv, r, spx, det, det_mode,
+                    allow_outside, ch, sh, out, S):
     """The fused per-frame kernel on corners in pixels ``uv`` (N, K, 2), K <= :data:`MAX_CORNERS`.
 
-    extra_reason : (N, K) int8 codes overriding OK (3D projection), or shape (0, 0)
+    extra_reason : (N, K) int8 codes overriding OK, or shape (0, 0)
+    boxes, yaw_deg, bottom_on_ground : 3D boxes (N, 7) whose bottom corners are the corners (then
+        ``uv`` (N, 4, 2) receives their pixels, or has 0 rows), or shape (0, 7) (corners from ``uv``)
     Lr, Lc, Lv, r : sparse factor of the parameter covariance (:func:`psd_factor`)
     spx : (2, 2) budget pixel covariance;  det : 4-D detector covariance with det_mode
         0 none (any 4-D array), 1 (N, 1, 2, 2) per detection, 2 (N, K, 2, 2) per corner,
@@ -761,7 +758,9 @@ def process_corners(uv, extra_reason, cam, dR, Lr, Lc, Lv, r, spx, det, det_mode
         0 rows are not written.
     S : :func:`scratch`
     """
-    N, K = uv.shape[0], uv.shape[1]
+    from_boxes = boxes.shape[0] > 0
+    N, K = (boxes.shape[0], 4) if from_boxes else (uv.shape[0], uv.shape[1])
+    want_uv = from_boxes and uv.shape[0] == N
     (xy, ccov, joint, reason, usable, largest_index, largest_semi, largest_xy, largest_cov,
      centre, centre_cov, centre_reason, centre_bad, area_out, v2x) = out
     want_joint = joint.shape[0] == N and N > 0
@@ -785,12 +784,23 @@ def process_corners(uv, extra_reason, cam, dR, Lr, Lc, Lv, r, spx, det, det_mode
     for n0 in range(0, N, nob_max):
         nob = min(N - n0, nob_max)
         m = nob * K
-        for k in range(K):
-            for i in range(nob):
-                S[_U * _ST + k * nob + i] = uv[n0 + i, k, 0]
-                S[_V * _ST + k * nob + i] = uv[n0 + i, k, 1]
+        if from_boxes:
+            _stage_project(S, boxes, n0, nob, cam, yaw_deg, bottom_on_ground)
+            if want_uv:
+                for k in range(K):
+                    for i in range(nob):
+                        uv[n0 + i, k, 0], uv[n0 + i, k, 1] = S[_U * _ST + k * nob + i], S[_V * _ST + k * nob + i]
+        else:
+            for k in range(K):
+                for i in range(nob):
+                    S[_U * _ST + k * nob + i] = uv[n0 + i, k, 0]
+                    S[_V * _ST + k * nob + i] = uv[n0 + i, k, 1]
         _stage_undistort(S, m, cam, Jd, Jk, need)
         _stage_ground(S, m, cam, dR, need)
+        if from_boxes:  # the projection's codes override OK
+            for j in range(m):
+                pc = S[_PC * _ST + j]
+                S[_CODE * _ST + j] = S[_CODE * _ST + j] if pc == _OK else pc
         if has_extra:  # codes of the 3D projection override OK
             for k in range(K):
                 for i in range(nob):
@@ -896,8 +906,7 @@ def process_corners(uv, extra_reason, cam, dR, Lr, Lc, Lv, r, spx, det, det_mode
                 centre_cov[n, 0, 0], centre_cov[n, 0, 1], centre_cov[n, 1, 0], centre_cov[n, 1, 1] = (nan, nan,
                                                                                                       nan, nan)
             S[_E00 * _ST + i], S[_E01 * _ST + i], S[_E11 * _ST + i] = e00, e01, e11
-        _v2x_block(S[_E00 * _ST:_E00 * _ST + nob], S[_E01 * _ST:_E01 * _ST + nob], S[_E11 * _ST:_E11 * _ST + nob],
-                   ch, sh, S[_ANG * _ST:_ANG * _ST + nob], v2x, n0)
+        _stage_v2x(S, nob, ch, sh, v2x, n0)
         # ---- joint covariance (optional): diagonal blocks = corner covariances, off-diagonal blocks =
         # shared parameter part (+ detector cross terms in the full form) ----
         if want_joint:
@@ -946,36 +955,78 @@ def _h(S, j):
 
 
 @njit(cache=True, error_model="numpy", nogil=True)
-def boxes3d_to_pixels(boxes, cam, yaw_deg, bottom_on_ground, uv, code):
-    """Bottom corners of 3D boxes (N, 7) projected to pixels ``uv`` (N, 4, 2) with their codes ``code``
-    (N, 4) int8 (both filled here); returns the first row with a negative size (-1 if none)."""
-    N = boxes.shape[0]
-    bad = -1
-    sl = (-1.0, 1.0, 1.0, -1.0)
-    sw = (-1.0, -1.0, 1.0, 1.0)
+def _stage_project(S, boxes, n0, nob, cam, yaw_deg, bottom_on_ground):
+    """Bottom corners of boxes n0 .. n0 + nob - 1 (N, 7) projected into rows U, V (corner-major, 4
+    corners) with their codes in row PC (OK, BEHIND_CAMERA, NOT_FINITE; NaN pixels unless OK).
+
+    The arithmetic of :func:`footprint_uq.cameras.general.project` and of
+    :func:`footprint_uq.footprints.box3d_bottom_corners`, branch-free; the boxes are first copied
+    into scratch rows and the yaw's cos/sin (libm calls) run in a loop of their own, so the
+    projection loop vectorises.
+    """
+    for c in range(7):
+        o = np.uint64((_BX + c) * _ST)
+        for i in range(nob):
+            S[o + np.uint64(i)] = boxes[n0 + i, c]
+    ysc = math.pi / 180.0
+    for i in range(nob):
+        yaw = S[(_BX + 6) * _ST + i] * ysc if yaw_deg else S[(_BX + 6) * _ST + i]
+        S[_CS * _ST + i], S[_SN * _ST + i] = math.cos(yaw), math.sin(yaw)
+    fx, fy, cx, cy, skw = cam[_C_FX], cam[_C_FY], cam[_C_CX], cam[_C_CY], cam[_C_SK]
+    k1, k2, p1, p2 = cam[_C_DIST], cam[_C_DIST + 1], cam[_C_DIST + 2], cam[_C_DIST + 3]
+    k3, k4, k5, k6 = cam[_C_DIST + 4], cam[_C_DIST + 5], cam[_C_DIST + 6], cam[_C_DIST + 7]
+    X0, Y0, H = cam[_C_X], cam[_C_Y], cam[_C_H]
+    R0, R1, R2, R3, R4, R5, R6, R7, R8 = (cam[_C_R], cam[_C_R + 1], cam[_C_R + 2], cam[_C_R + 3], cam[_C_R + 4],
+                                          cam[_C_R + 5], cam[_C_R + 6], cam[_C_R + 7], cam[_C_R + 8])
     g0 = cam[_C_GROUNDZ]
-    for n in range(N):
-        x0, y0, z0 = boxes[n, 0], boxes[n, 1], boxes[n, 2]
-        if bad < 0 and (boxes[n, 3] < 0.0 or boxes[n, 4] < 0.0 or boxes[n, 5] < 0.0):
-            bad = n
-        hl, hw, hh = 0.5 * boxes[n, 3], 0.5 * boxes[n, 4], 0.5 * boxes[n, 5]
-        yaw = boxes[n, 6] * (math.pi / 180.0) if yaw_deg else boxes[n, 6]
-        c, s = math.cos(yaw), math.sin(yaw)
-        zb = 0.0 if bottom_on_ground else (z0 - hh) - g0
-        for k in range(4):
-            dl, dw = sl[k] * hl, sw[k] * hw
-            X = x0 + c * dl - s * dw
-            Y = y0 + s * dl + c * dw
-            Z = zb if math.isfinite(X) and math.isfinite(Y) else math.nan
-            code[n, k] = _project(X, Y, Z, cam, uv[n, k])
-    return bad
+    nan = math.nan
+    nu = np.uint64(nob)
+    for k in range(4):
+        sl = -1.0 if (k == 0) | (k == 3) else 1.0
+        sw = -1.0 if k < 2 else 1.0
+        ou, ov, oc = np.uint64(_U * _ST + k * nob), np.uint64(_V * _ST + k * nob), np.uint64(_PC * _ST + k * nob)
+        for i in range(nu):
+            c, s_ = S[np.uint64(_CS * _ST) + i], S[np.uint64(_SN * _ST) + i]
+            dl = sl * (0.5 * S[np.uint64((_BX + 3) * _ST) + i])
+            dw = sw * (0.5 * S[np.uint64((_BX + 4) * _ST) + i])
+            X = S[np.uint64(_BX * _ST) + i] + c * dl - s_ * dw
+            Y = S[np.uint64((_BX + 1) * _ST) + i] + s_ * dl + c * dw
+            zb = 0.0 if bottom_on_ground else (S[np.uint64((_BX + 2) * _ST) + i]
+                                               - 0.5 * S[np.uint64((_BX + 5) * _ST) + i]) - g0
+            Z = zb if (math.isfinite(X) & math.isfinite(Y)) else nan
+            rx, ry, rz = X - X0, Y - Y0, Z - H
+            pcx = R0 * rx + R3 * ry + R6 * rz
+            pcy = R1 * rx + R4 * ry + R7 * rz
+            pcz = R2 * rx + R5 * ry + R8 * rz
+            finite = math.isfinite(X) & math.isfinite(Y) & math.isfinite(Z)
+            x, y = pcx / pcz, pcy / pcz
+            r2 = x * x + y * y
+            rad = (1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))) / (1.0 + r2 * (k4 + r2 * (k5 + r2 * k6)))
+            xd = x * rad + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x)
+            yd = y * rad + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y
+            ok = finite & (pcz > 0.0)
+            S[ou + i] = fx * xd + skw * yd + cx if ok else nan
+            S[ov + i] = fy * yd + cy if ok else nan
+            S[oc + i] = _OK if ok else (_BEHIND if finite else _NOTFIN)
+
+
+@njit(cache=True, error_model="numpy", nogil=True)
+def first_negative_size(boxes):
+    """First row of boxes (N, 7) with a negative length, width or height (-1 if none)."""
+    for n in range(boxes.shape[0]):
+        if boxes[n, 3] < 0.0 or boxes[n, 4] < 0.0 or boxes[n, 5] < 0.0:
+            return n
+    return -1
 
 
 @njit(cache=True, error_model="numpy", nogil=True)
 def process_boxes3d(boxes, yaw_deg, bottom_on_ground, cam, dR, Lr, Lc, Lv, r, spx, det, det_mode, allow_outside,
-                    ch, sh, uv, code, out, S):
-    """:func:`boxes3d_to_pixels` (into ``uv``, ``code``) then :func:`process_corners` (into ``out``) in
-    one dispatch; returns the first row with a negative size (-1 if none)."""
-    bad = boxes3d_to_pixels(boxes, cam, yaw_deg, bottom_on_ground, uv, code)
-    process_corners(uv, code, cam, dR, Lr, Lc, Lv, r, spx, det, det_mode, allow_outside, ch, sh, out, S)
+                    ch, sh, uv, out, S):
+    """:func:`process_corners` on the projected bottom corners of 3D boxes (N, 7) (C- or F-ordered);
+    the pixels go to ``uv`` (N, 4, 2) if it has N rows.  Returns the first row with a negative size
+    (-1 if none; nothing else is done then)."""
+    bad = first_negative_size(boxes)
+    if bad < 0:
+        process_corners(uv, np.zeros((0, 0), dtype=np.int8), boxes, yaw_deg, bottom_on_ground, cam, dR, Lr, Lc, Lv,
+                        r, spx, det, det_mode, allow_outside, ch, sh, out, S)
     return bad

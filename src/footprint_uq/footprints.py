@@ -232,7 +232,8 @@ def box3d_bottom_corners(boxes_world, *, yaw_unit: str = "rad", bottom_on_ground
         i = int(np.flatnonzero(bad)[0])
         raise InputError(f"boxes_world[{i}] (length_m, width_m, height_m)", b[i, 3:6].tolist(), "sizes >= 0")
     yaw = b[:, 6] if yaw_unit == "rad" else np.deg2rad(b[:, 6])
-    c, s = np.cos(yaw), np.sin(yaw)
+    with np.errstate(invalid="ignore"):  # an infinite yaw gives NaN corners: flagged NOT_FINITE downstream
+        c, s = np.cos(yaw), np.sin(yaw)
     hl, hw = 0.5 * b[:, 3], 0.5 * b[:, 4]
     sl = np.array([-1.0, 1.0, 1.0, -1.0])
     sw = np.array([-1.0, -1.0, 1.0, 1.0])
@@ -520,6 +521,7 @@ class FrameProcessor:
         self._ch, self._sh = (1.0, 0.0) if h == 0.0 else (float(np.cos(h)), float(np.sin(h)))
         self._no_det = np.zeros((1, 1, 2, 2))
         self._no_extra = np.zeros((0, 0), dtype=np.int8)
+        self._no_boxes = np.zeros((0, 7))
         # for the batch: where output memory comes from, and whether per-corner coordinates and
         # covariances (and the largest point's covariance) are formed at all
         self._alloc = np.empty
@@ -546,8 +548,9 @@ class FrameProcessor:
                                            _extra_reason=extra if extra.shape[0] == N else None)
         det, mode = self._det(pixel_cov_px2, N, K)
         out = self._fk.alloc_outputs(N, K, joint=self.joint_cov, corners=self._corner_outputs, alloc=self._alloc)
-        self._fk.process_corners(uv, extra, self._cam, self._dR, self._Lr, self._Lc, self._Lv, self._r, self._spx,
-                                 det, mode, self.allow_outside_image, self._ch, self._sh, out, self._fk.scratch())
+        self._fk.process_corners(uv, extra, self._no_boxes, False, True, self._cam, self._dR, self._Lr, self._Lc,
+                                 self._Lv, self._r, self._spx, det, mode, self.allow_outside_image, self._ch, self._sh,
+                                 out, self._fk.scratch())
         return self._pack(uv, out)
 
     def _pack(self, uv, out) -> FootprintEstimate:
@@ -575,18 +578,20 @@ class FrameProcessor:
     def boxes3d(self, boxes_world, *, yaw_unit: str = "rad", bottom_on_ground: bool = True,
                 pixel_cov_px2=None) -> FootprintEstimate:
         """Footprints of 3D world boxes ``(N, 7)`` (see :func:`footprints_from_boxes3d`)."""
-        b = np.ascontiguousarray(boxes_world, dtype=np.float64)
+        b = np.asarray(boxes_world, dtype=np.float64)
+        if not (b.flags.c_contiguous or b.flags.f_contiguous):  # (a column-major table is taken as it is)
+            b = np.ascontiguousarray(b)
         if b.ndim != 2 or b.shape[1] != 7:
             raise InputError("boxes_world", b.shape, f"an array of shape (N, 7): {', '.join(BOX3D_COLUMNS)}")
         if yaw_unit not in ("rad", "deg"):
             raise InputError("yaw_unit", yaw_unit, "'rad' (column yaw_rad) or 'deg' (column yaw_deg)")
         N = b.shape[0]
         det, mode = self._det(pixel_cov_px2, N, 4)
-        uv, code = self._alloc((N, 4, 2), np.float64), self._alloc((N, 4), np.int8)
+        uv = self._alloc((N if self._corner_outputs else 0, 4, 2), np.float64)
         out = self._fk.alloc_outputs(N, 4, joint=self.joint_cov, corners=self._corner_outputs, alloc=self._alloc)
         bad = self._fk.process_boxes3d(b, yaw_unit == "deg", bool(bottom_on_ground), self._cam, self._dR, self._Lr,
                                        self._Lc, self._Lv, self._r, self._spx, det, mode, self.allow_outside_image,
-                                       self._ch, self._sh, uv, code, out, self._fk.scratch())
+                                       self._ch, self._sh, uv, out, self._fk.scratch())
         if bad >= 0:
             raise InputError(f"boxes_world[{bad}] (length_m, width_m, height_m)", b[bad, 3:6].tolist(), "sizes >= 0")
         return self._pack(uv, out)

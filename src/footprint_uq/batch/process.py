@@ -394,7 +394,7 @@ class BatchProcessor:
     def inputs_from_table(self, table: pa.Table):
         """``(X, cov)`` float64 arrays of a table's box and covariance columns (nulls -> NaN)."""
         _, cols, covcols, _, _ = self._layout
-        X = np.empty((table.num_rows, len(cols)))
+        X = np.empty((len(cols), table.num_rows)).T  # column-major: each column is one contiguous copy
         for j, c in enumerate(cols):
             X[:, j] = _column_float(table, c)
         cov = None
