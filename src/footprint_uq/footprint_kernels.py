@@ -478,8 +478,9 @@ def _stage_corner_flags(S, m, W, Himg, allow_outside):
 
 
 @njit(cache=True, error_model="numpy", nogil=True)
-def _stage_whiten(S, m, nob, K, Lr, Lc, Lv):
-    """Rows AW = J L (row ``2 c + i``), C3 (3 rows) = the parameter part (J L)(J L)^T of each corner's
+def _stage_whiten(S, m, nob, K, Lr, Lc, Lv, keep_aw):
+    """Rows AW = J L (row ``2 c + i``; single-entry columns only with ``keep_aw``, for the joint
+    covariance), C3 (3 rows) = the parameter part (J L)(J L)^T of each corner's
     covariance, and the parameter part of each object's centre covariance into E00, E01, E11:
     B B^T with B = sum_k G_k (J_k L) (G from :func:`_stage_centroid`).
 
@@ -515,26 +516,27 @@ def _stage_whiten(S, m, nob, K, Lr, Lc, Lv):
                     S[o0 + j] += S[i0 + j] * val
                     S[o1 + j] += S[i1 + j] * val
             continue
-        # the last entry completes column c: add it to C3 in the same pass (the single-entry column,
-        # the common case, does not read the row it writes), then form G_k (J_k L)_c
-        if first:
+        # the last entry completes column c: in one pass, add it to C3 and form G_k (J_k L)_c (a
+        # single-entry column, the common case, keeps J L in registers unless the joint needs it)
+        w = 0.0 if first else 1.0
+        if first and not keep_aw:
             for j in range(mu):
                 a0, a1 = S[i0 + j] * val, S[i1 + j] * val
-                S[o0 + j], S[o1 + j] = a0, a1
                 S[c0 + j] += a0 * a0
                 S[c1 + j] += a0 * a1
                 S[c2 + j] += a1 * a1
+                S[t0 + j] = S[g0 + j] * a0 + S[g1 + j] * a1
+                S[t1 + j] = S[g2 + j] * a0 + S[g3 + j] * a1
         else:
             for j in range(mu):
-                a0, a1 = S[o0 + j] + S[i0 + j] * val, S[o1 + j] + S[i1 + j] * val
+                a0 = (S[o0 + j] if w != 0.0 else 0.0) + S[i0 + j] * val
+                a1 = (S[o1 + j] if w != 0.0 else 0.0) + S[i1 + j] * val
                 S[o0 + j], S[o1 + j] = a0, a1
                 S[c0 + j] += a0 * a0
                 S[c1 + j] += a0 * a1
                 S[c2 + j] += a1 * a1
-        for j in range(mu):
-            a0, a1 = S[o0 + j], S[o1 + j]
-            S[t0 + j] = S[g0 + j] * a0 + S[g1 + j] * a1
-            S[t1 + j] = S[g2 + j] * a0 + S[g3 + j] * a1
+                S[t0 + j] = S[g0 + j] * a0 + S[g1 + j] * a1
+                S[t1 + j] = S[g2 + j] * a0 + S[g3 + j] * a1
         _sum_corners(S, _T0, _B0, nob, K)
         _sum_corners(S, _T1, _B1, nob, K)
         for i in range(nob):
@@ -828,7 +830,7 @@ def process_corners(uv, extra_reason, boxes, yaw_deg, bottom_on_ground, cam, dR,
                     S[(_P4 + 3) * _ST + j] += d11
         _stage_corner_flags(S, m, W, Himg, allow_outside)
         _stage_centroid(S, nob, K)
-        _stage_whiten(S, m, nob, K, Lr, Lc, Lv)
+        _stage_whiten(S, m, nob, K, Lr, Lc, Lv, want_joint)
         _stage_corner_cov(S, m)
         _stage_select(S, nob, K)
         _stage_centre_cov(S, nob, K)
