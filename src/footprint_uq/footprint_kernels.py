@@ -85,6 +85,11 @@ _BX = 177  # 7 rows: the chunk's boxes
 _VX = 184  # 7 rows: V2X fields of each object
 _NROWS = 191
 
+# rows of the per-object output block ``obj`` (13, N) (FootprintEstimate views them, the batch writes them)
+OBJ_ROWS = ("centre_x_m", "centre_y_m", "cov_xx_m2", "cov_xy_m2", "cov_yx_m2", "cov_yy_m2", "sigma_major_m",
+            "sigma_minor_m", "orientation_deg", "largest_sigma_major_m", "largest_x_m", "largest_y_m", "area_m2")
+_O_CX, _O_CY, _O_C00, _O_C01, _O_C10, _O_C11, _O_SMAJ, _O_SMIN, _O_ORI, _O_LSEMI, _O_LX, _O_LY, _O_AREA = range(13)
+
 
 def camera_constants(camera) -> tuple[np.ndarray, np.ndarray]:
     """``(cam, dR)`` for the kernels from a :class:`~footprint_uq.cameras.base.Camera`."""
@@ -389,17 +394,31 @@ def _heading(c00, c01, c11, ch, sh, rot):
 
 
 @njit(cache=True, error_model="numpy", nogil=True)
-def _stage_v2x(S, nob, ch, sh, out, n0):
+def _stage_v2x(S, nob, ch, sh, out, n0, obj):
     """CPM and J2735 integer fields of the centre covariances (rows E00, E01, E11; NaN: unavailable)
-    into ``out[:, n0 + i]`` (7, N) -- the mirror of :mod:`footprint_uq.v2x`.
+    into ``out[:, n0 + i]`` (7, N) -- the mirror of :mod:`footprint_uq.v2x` -- and the 1-sigma
+    ellipse (:func:`footprint_uq.ellipse.ellipse_axes`) into the rows SMAJ, SMIN, ORI of ``obj``
+    (if it has N columns).
 
     The libm ``atan2`` runs in a loop of its own and the fields are formed in scratch rows (one
     buffer, constant offsets), so the rest -- square roots, roundings, the level count -- vectorises.
     """
     rot = sh != 0.0 or ch != 1.0
+    want_obj = obj.shape[1] > 0
     for i in range(nob):
-        d00, d01, d11 = _heading(S[_E00 * _ST + i], S[_E01 * _ST + i], S[_E11 * _ST + i], ch, sh, rot)
-        S[_ANG * _ST + i] = math.atan2(2.0 * d01, d00 - d11)
+        c00, c01, c11 = S[_E00 * _ST + i], S[_E01 * _ST + i], S[_E11 * _ST + i]
+        d00, d01, d11 = _heading(c00, c01, c11, ch, sh, rot)
+        S[_ANG * _ST + i] = ang = math.atan2(2.0 * d01, d00 - d11)
+        if want_obj:  # the ellipse in W (hypot and atan2, as ellipse_axes)
+            mean = 0.5 * (c00 + c11)
+            rad = math.hypot(0.5 * (c00 - c11), c01)
+            if rot:
+                ang = math.atan2(2.0 * c01, c00 - c11)
+            ori = 0.5 * math.degrees(ang)
+            n = n0 + i
+            obj[_O_SMAJ, n] = math.sqrt(mean + rad)
+            obj[_O_SMIN, n] = math.sqrt(max(mean - rad, 0.0)) if mean - rad == mean - rad else math.nan
+            obj[_O_ORI, n] = ori + 180.0 if ori <= -90.0 else ori
     g = 1.0 - _GUARD
     for i in range(nob):
         c00, c01, c11 = S[_E00 * _ST + i], S[_E01 * _ST + i], S[_E11 * _ST + i]
@@ -455,7 +474,7 @@ def v2x_codes(c00, c01, c11, ch, sh):
         nob = min(_M_TARGET, n - n0)
         for i in range(nob):
             S[_E00 * _ST + i], S[_E01 * _ST + i], S[_E11 * _ST + i] = c00[n0 + i], c01[n0 + i], c11[n0 + i]
-        _stage_v2x(S, nob, ch, sh, out, n0)
+        _stage_v2x(S, nob, ch, sh, out, n0, np.empty((0, 0)))
     return out
 
 
@@ -731,9 +750,8 @@ def alloc_outputs(N: int, K: int, *, joint: bool = False, corners: bool = True, 
     nc = N if corners else 0
     return (alloc((nc, K, 2), np.float64), alloc((nc, K, 2, 2), np.float64),
             alloc((N if joint else 0, 2 * K, 2 * K), np.float64), alloc((N, K), np.int8), alloc((N, K), np.bool_),
-            alloc((N,), np.int64), alloc((N,), np.float64), alloc((N, 2), np.float64), alloc((nc, 2, 2), np.float64),
-            alloc((N, 2), np.float64), alloc((N, 2, 2), np.float64), alloc((N,), np.int32), alloc((N,), np.int64),
-            alloc((N,), np.float64), alloc((7, N), np.int32))
+            alloc((N,), np.int64), alloc((nc, 2, 2), np.float64), alloc((N,), np.int32), alloc((N,), np.int64),
+            alloc((len(OBJ_ROWS), N), np.float64), alloc((7, N), np.int32))
 
 
 def scratch() -> np.ndarray:
@@ -755,7 +773,7 @@ def process_corners(uv, extra_reason, boxes, yaw_deg, bottom_on_ground, cam, dR,
         3 (N, 1, 2K, 2K) full
     ch, sh : cos, sin of the heading offset (V2X fields)
     out : the arrays of :func:`alloc_outputs` (filled here): xy, ccov, joint, reason, usable,
-        largest_index, largest_semi, largest_xy, largest_cov, centre, centre_cov, centre_reason,
+        largest_index, largest_cov, centre_reason, centre_bad, obj (13, N: :data:`OBJ_ROWS`), v2x (7, N).
         centre_bad, area, v2x.  A joint with 0 rows is not formed; xy / ccov / largest_cov with
         0 rows are not written.
     S : :func:`scratch`
@@ -763,8 +781,7 @@ def process_corners(uv, extra_reason, boxes, yaw_deg, bottom_on_ground, cam, dR,
     from_boxes = boxes.shape[0] > 0
     N, K = (boxes.shape[0], 4) if from_boxes else (uv.shape[0], uv.shape[1])
     want_uv = from_boxes and uv.shape[0] == N
-    (xy, ccov, joint, reason, usable, largest_index, largest_semi, largest_xy, largest_cov,
-     centre, centre_cov, centre_reason, centre_bad, area_out, v2x) = out
+    xy, ccov, joint, reason, usable, largest_index, largest_cov, centre_reason, centre_bad, obj, v2x = out
     want_joint = joint.shape[0] == N and N > 0
     want_corners = xy.shape[0] == N and N > 0
     Jd, Jk = np.empty((2, 2)), np.empty((2, 8))
@@ -856,30 +873,30 @@ def process_corners(uv, extra_reason, boxes, yaw_deg, bottom_on_ground, cam, dR,
             largest_index[n] = best
             if best >= 0:
                 jb = best * nob + i
-                largest_semi[n] = S[_BSEMI * _ST + i]
-                largest_xy[n, 0], largest_xy[n, 1] = S[_XX * _ST + jb], S[_YY * _ST + jb]
+                obj[_O_LSEMI, n] = S[_BSEMI * _ST + i]
+                obj[_O_LX, n], obj[_O_LY, n] = S[_XX * _ST + jb], S[_YY * _ST + jb]
                 if want_corners:
                     c01 = S[(_CC + 1) * _ST + jb]
                     largest_cov[n, 0, 0], largest_cov[n, 0, 1] = S[_CC * _ST + jb], c01
                     largest_cov[n, 1, 0], largest_cov[n, 1, 1] = c01, S[(_CC + 2) * _ST + jb]
             else:
-                largest_semi[n] = nan
-                largest_xy[n, 0], largest_xy[n, 1] = nan, nan
+                obj[_O_LSEMI, n] = nan
+                obj[_O_LX, n], obj[_O_LY, n] = nan, nan
                 if want_corners:
                     largest_cov[n, 0, 0], largest_cov[n, 0, 1] = nan, nan
                     largest_cov[n, 1, 0], largest_cov[n, 1, 1] = nan, nan
             if fb >= 0:
                 code = int(S[_RC * _ST + fb * nob + i])
                 centre_bad[n] = fb
-                area_out[n] = nan
+                obj[_O_AREA, n] = nan
             elif S[_DEG * _ST + i] != 0.0:
                 code = _DEGENERATE
                 centre_bad[n] = -1
-                area_out[n] = S[_AREA * _ST + i]
+                obj[_O_AREA, n] = S[_AREA * _ST + i]
             else:
                 code = _OK
                 centre_bad[n] = -1
-                area_out[n] = S[_AREA * _ST + i]
+                obj[_O_AREA, n] = S[_AREA * _ST + i]
             centre_reason[n] = code
             if code == _OK:
                 e00, e01, e11 = S[_E00 * _ST + i], S[_E01 * _ST + i], S[_E11 * _ST + i]
@@ -899,16 +916,14 @@ def process_corners(uv, extra_reason, boxes, yaw_deg, bottom_on_ground, cam, dR,
                             e00 += m00 * hl00 + m01 * hl01
                             e01 += m00 * hl10 + m01 * hl11
                             e11 += m10 * hl10 + m11 * hl11
-                centre[n, 0], centre[n, 1] = S[_CXC * _ST + i], S[_CYC * _ST + i]
-                centre_cov[n, 0, 0], centre_cov[n, 0, 1] = e00, e01
-                centre_cov[n, 1, 0], centre_cov[n, 1, 1] = e01, e11
+                obj[_O_CX, n], obj[_O_CY, n] = S[_CXC * _ST + i], S[_CYC * _ST + i]
+                obj[_O_C00, n], obj[_O_C01, n], obj[_O_C10, n], obj[_O_C11, n] = e00, e01, e01, e11
             else:
                 e00, e01, e11 = nan, nan, nan
-                centre[n, 0], centre[n, 1] = nan, nan
-                centre_cov[n, 0, 0], centre_cov[n, 0, 1], centre_cov[n, 1, 0], centre_cov[n, 1, 1] = (nan, nan,
-                                                                                                      nan, nan)
+                obj[_O_CX, n], obj[_O_CY, n] = nan, nan
+                obj[_O_C00, n], obj[_O_C01, n], obj[_O_C10, n], obj[_O_C11, n] = nan, nan, nan, nan
             S[_E00 * _ST + i], S[_E01 * _ST + i], S[_E11 * _ST + i] = e00, e01, e11
-        _stage_v2x(S, nob, ch, sh, v2x, n0)
+        _stage_v2x(S, nob, ch, sh, v2x, n0, obj)
         # ---- joint covariance (optional): diagonal blocks = corner covariances, off-diagonal blocks =
         # shared parameter part (+ detector cross terms in the full form) ----
         if want_joint:

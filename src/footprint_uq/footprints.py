@@ -158,7 +158,7 @@ class FootprintEstimate:
         return {name: self.v2x_codes[:, i] for i, name in enumerate(V2X_FIELDS)}
 
     def __len__(self) -> int:
-        return int(self.corners_px.shape[0])
+        return int(self.centre_valid.shape[0])
 
     @property
     def n_corners(self) -> int:
@@ -554,9 +554,15 @@ class FrameProcessor:
         return self._pack(uv, out)
 
     def _pack(self, uv, out) -> FootprintEstimate:
-        (xy, ccov, joint, reason, usable, li, ls, lxy, lcov, centre, ccentre, creason, cbad, area, v2x) = out
-        return FootprintEstimate(uv, xy, ccov, joint if self.joint_cov else None, reason, usable, li, ls, lxy, lcov,
-                                 centre, ccentre, creason == 0, creason, cbad, area, v2x.T, self.heading_offset_deg)
+        xy, ccov, joint, reason, usable, li, lcov, creason, cbad, obj, v2x = out
+        N = obj.shape[1]
+        # views of the kernel's per-object rows (no copies): (N, 2) and (N, 2, 2) with strides across rows
+        centre, ccentre = obj[0:2].T, obj[2:6].T.reshape(N, 2, 2)
+        est = FootprintEstimate(uv, xy, ccov, joint if self.joint_cov else None, reason, usable, li, obj[9],
+                                obj[10:12].T, lcov, centre, ccentre, creason == 0, creason, cbad, obj[12], v2x.T,
+                                self.heading_offset_deg)
+        est._columns = obj
+        return est
 
     def corners(self, corners_px, *, pixel_cov_px2=None) -> FootprintEstimate:
         """Footprints from corners in pixels ``(N, K, 2)`` (see :func:`footprints_from_corners`)."""

@@ -26,7 +26,6 @@ missing columns, bad options) raise :class:`~footprint_uq.errors.InputError`.
 
 from __future__ import annotations
 
-import math
 import os
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
@@ -35,13 +34,13 @@ from pathlib import Path
 import numpy as np
 import pyarrow as pa
 import pyarrow.compute as pc
-from numba import njit
 
 from .. import status as st
 from .._checks import as_float
 from ..budget import load_budget
 from ..ellipse import chi2_scale
 from ..errors import InputError
+from ..footprint_kernels import OBJ_ROWS
 from ..footprints import CONTACT_MODES, DEGENERATE, V2X_FIELDS, FrameProcessor
 from . import schema as S
 
@@ -51,32 +50,11 @@ __all__ = ["BatchProcessor", "process_table", "process_file", "process_chunk", "
 #: relative tolerance of the per-row PSD test of the detector pixel covariance (a little
 #: stricter than footprint_uq._checks.check_cov's 1e-12 so that accepted rows always pass it)
 PSD_TOL = 0.5e-12
+#: row of each output column in the kernel's per-object block
+_OBJ = {name: i for i, name in enumerate(OBJ_ROWS)}
+_OBJ_OF = {"x_m": "centre_x_m", "y_m": "centre_y_m"}
 #: below this many rows a chunk is processed in one thread
 _MIN_ROWS_PER_THREAD = 20_000
-
-
-@njit(cache=True, nogil=True, error_model="numpy")
-def _centre_columns(centre, cov, largest_xy):
-    """Contiguous output columns of the centre (one pass): x, y, cov xx/xy/yy, 1-sigma ellipse, largest x/y.
-
-    The ellipse is :func:`footprint_uq.ellipse.ellipse_axes` (same formulas, NaN in -> NaN out).
-    """
-    n = centre.shape[0]
-    out = np.empty((10, n))
-    for i in range(n):
-        a, b, d = cov[i, 0, 0], 0.5 * (cov[i, 0, 1] + cov[i, 1, 0]), cov[i, 1, 1]
-        mean = 0.5 * (a + d)
-        rad = math.hypot(0.5 * (a - d), b)
-        ang = 0.5 * math.degrees(math.atan2(2.0 * b, a - d))
-        if ang <= -90.0:
-            ang += 180.0
-        out[0, i], out[1, i] = centre[i, 0], centre[i, 1]
-        out[2, i], out[3, i], out[4, i] = a, cov[i, 0, 1], d
-        out[5, i] = math.sqrt(mean + rad)
-        out[6, i] = math.sqrt(max(mean - rad, 0.0)) if mean - rad == mean - rad else math.nan
-        out[7, i] = ang
-        out[8, i], out[9, i] = largest_xy[i, 0], largest_xy[i, 1]
-    return out
 
 
 class Reasons:
@@ -135,13 +113,9 @@ class _Result:
     K: int
     reason_id: np.ndarray
     status_id: np.ndarray
-    centre: np.ndarray = field(default=None)
-    centre_cov: np.ndarray = field(default=None)
+    obj: np.ndarray = field(default=None)  # (13, n) rows footprint_kernels.OBJ_ROWS
     largest_index: np.ndarray = field(default=None)
-    largest_semi: np.ndarray = field(default=None)
-    largest_xy: np.ndarray = field(default=None)
-    area: np.ndarray = field(default=None)
-    v2x: np.ndarray = field(default=None)
+    v2x: np.ndarray = field(default=None)  # (7, n) rows V2X_FIELDS
     corners_px: np.ndarray = field(default=None)
     corners_xy: np.ndarray = field(default=None)
     corners_cov: np.ndarray = field(default=None)
@@ -341,16 +315,20 @@ class BatchProcessor:
                 out[good] = getattr(ests[0], attr)
             return out
 
-        res.centre = gather("centre_xy_world_m", (2,), np.nan)
-        res.centre_cov = gather("centre_cov_m2", (2, 2), np.nan)
+        def gather_rows(block, nrows, fill, dtype):  # (nrows, n) blocks of the kernel's per-object rows
+            if ests and all_good:
+                return block
+            out = np.full((nrows, n), fill, dtype=dtype)
+            if ests:
+                out[:, good] = block
+            return out
+
+        res.obj = gather_rows(ests[0]._columns if ests else None, len(OBJ_ROWS), np.nan, np.float64)
         res.largest_index = gather("largest_index", (), -1, np.int64)
-        res.largest_semi = gather("largest_semi_major_m", (), np.nan)
-        res.largest_xy = gather("largest_xy_world_m", (2,), np.nan)
-        res.area = gather("area_m2", (), np.nan)
-        unavailable = np.array([S.V2X_UNAVAILABLE[f] for f in V2X_FIELDS], dtype=np.int32)
-        res.v2x = gather("v2x_codes", (len(V2X_FIELDS),), 0, np.int32)
+        res.v2x = gather_rows(ests[0].v2x_codes.T if ests else None, len(V2X_FIELDS), 0, np.int32)
         if not all_good:
-            res.v2x[~good] = unavailable
+            unavailable = np.array([S.V2X_UNAVAILABLE[f] for f in V2X_FIELDS], dtype=np.int32)
+            res.v2x[:, ~good] = unavailable[:, None]
         creason = gather("centre_reason", (), -1, np.int32)
         cbad = gather("centre_bad_corner", (), -1, np.int64)
         corner_reason = gather("corner_reason", (K,), st.NOT_FINITE, np.int8)
@@ -470,20 +448,19 @@ class BatchProcessor:
         cols["status"] = pa.DictionaryArray.from_arrays(pa.array(res.status_id, type=pa.int32()), self._status_dict)
         cols["reason"] = pa.DictionaryArray.from_arrays(pa.array(res.reason_id, type=pa.int32()),
                                                         self.reasons.dictionary())
-        cc = _centre_columns(np.ascontiguousarray(res.centre), np.ascontiguousarray(res.centre_cov),
-                             np.ascontiguousarray(res.largest_xy))
-        for j, name in enumerate(S.CENTRE_COLUMNS):
-            cols[name] = cc[j]
+        obj = res.obj  # rows OBJ_ROWS, each one contiguous: the columns need no copy
+        for name in S.CENTRE_COLUMNS:
+            cols[name] = obj[_OBJ[_OBJ_OF.get(name, name)]]
         if self._k_conf is not None:
-            cols["semi_major_m"], cols["semi_minor_m"] = self._k_conf * cc[5], self._k_conf * cc[6]
+            cols["semi_major_m"] = self._k_conf * obj[_OBJ["sigma_major_m"]]
+            cols["semi_minor_m"] = self._k_conf * obj[_OBJ["sigma_minor_m"]]
         cols["largest_index"] = res.largest_index.astype(np.int8)
-        cols["largest_sigma_major_m"] = res.largest_semi
-        cols["largest_x_m"], cols["largest_y_m"] = cc[8], cc[9]
-        cols["area_m2"] = res.area
+        for name in ("largest_sigma_major_m", "largest_x_m", "largest_y_m", "area_m2"):
+            cols[name] = obj[_OBJ[name]]
         for j, name in enumerate(V2X_FIELDS):
-            cols[name] = res.v2x[:, j]
+            cols[name] = res.v2x[j]
         if self.geo is not None:
-            cols["lat_deg"], cols["lon_deg"] = self.geo.to_wgs84(res.centre)
+            cols["lat_deg"], cols["lon_deg"] = self.geo.to_wgs84(np.ascontiguousarray(obj[0:2].T))
         if self.corners:
             if self.geo is not None:
                 clat, clon = self.geo.to_wgs84(res.corners_xy)
