@@ -257,3 +257,14 @@ def test_reference_empty_frame():
     cam = PanTiltCamera(1400.0, (1920, 1080), 8.0, 30.0, 15.0)
     est = footprints_from_boxes3d(cam, BUDGET, np.zeros((0, 7)))
     assert len(est) == 0 and est.joint_cov_m2.shape == (0, 8, 8) and est.v2x_codes.shape == (0, 7)
+
+
+def test_empty_reusable_shapes_and_memory():
+    from footprint_uq.footprints import _POOL_MIN_BYTES, empty_reusable
+
+    for shape, dtype in (((3, 2), np.float64), ((_POOL_MIN_BYTES // 8 + 5, 2, 2), np.float64), ((1 << 21,), np.int8),
+                         ((0, 4, 2), np.float64)):
+        a = empty_reusable(shape, dtype)
+        assert a.shape == shape and a.dtype == dtype and a.flags.writeable and a.flags.c_contiguous
+        a[...] = 1
+        assert a.sum() == a.size

@@ -88,14 +88,6 @@ def _kernel_releases_gil() -> bool:
     return bool(opts.get("nogil", False))
 
 
-def _arrow_empty(shape, dtype) -> np.ndarray:
-    """An uninitialised numpy array in memory of pyarrow's default pool."""
-    dtype = np.dtype(dtype)
-    n = int(np.prod(shape, dtype=np.int64))
-    buf = pa.allocate_buffer(max(n * dtype.itemsize, 1))
-    return np.frombuffer(buf, dtype=dtype, count=n).reshape(shape)
-
-
 def _column_float(table: pa.Table, name: str) -> np.ndarray:
     """A numeric column as float64 numpy (nulls -> NaN)."""
     col = table.column(name)
@@ -180,10 +172,8 @@ class BatchProcessor:
         self._parallel = self.threads > 1 and _kernel_releases_gil()
         self.proc = FrameProcessor(camera, self.budget, heading_offset_deg=self.heading_offset_deg,
                                    allow_outside_image=self.allow_outside_image, joint_cov=False)
-        # kernel outputs in Arrow memory: the output columns reference them without a copy, and memory
-        # of written chunks is reused (fresh pages would cost ~130 ns per row); per-corner coordinates
-        # and covariances only when written
-        self.proc._alloc = _arrow_empty
+        # kernel outputs (FrameProcessor: pyarrow-pool memory, reused from chunk to chunk) become the
+        # output columns without a copy; per-corner coordinates and covariances only when written
         self.proc._corner_outputs = self.corners or self.geo is not None
         self.reasons = Reasons()
         self._status_dict = pa.array(list(S.STATUSES), type=pa.string())
