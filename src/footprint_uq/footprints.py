@@ -79,6 +79,7 @@ The V2X fields describe the centre.  For the paper's conservative upper bound, a
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -483,7 +484,7 @@ def empty_reusable(shape, dtype=np.float64) -> np.ndarray:
     (measured on a 2-core VM).  Small arrays come from numpy.
     """
     dtype = np.dtype(dtype)
-    n = int(np.prod(shape, dtype=np.int64))
+    n = math.prod(shape)
     if n * dtype.itemsize < _POOL_MIN_BYTES:
         return np.empty(shape, dtype=dtype)
     import pyarrow as pa
