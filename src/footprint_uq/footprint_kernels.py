@@ -1,24 +1,33 @@
 """Fused numba kernels for :class:`footprint_uq.footprints.FrameProcessor`.
 
-One call processes a frame.  The corners of up to 32 objects at a time are laid
-out structure-of-arrays (corner index last) and go through three straight-line
-stages that the compiler vectorises:
+One call processes a frame (or a batch chunk).  Objects go through in chunks of
+``_M_TARGET // K`` (16 boxes of 4 corners), corner-major (column ``k * nob + i`` is corner
+k of object i) in one scratch buffer ``S`` whose rows sit at compile-time offsets
+(``_U``, ``_JP``, ...): every access is "one base pointer + a constant", so LLVM proves
+the rows independent and vectorises each stage, a straight loop over the chunk's
+corners or objects:
 
-1. :func:`_stage_undistort` -- pixel -> normalised coordinates, OpenCV undistortion
-   (Newton, all corners of the chunk together, each stopping when converged, as
-   :func:`footprint_uq.cameras.distortion.undistort`) and its implicit-function Jacobians;
-2. :func:`_stage_ground` -- ray in the world, perturbed-ground intersection and the full
-   d(x, y)/d(params) (2 x 22) and d(x, y)/d(u, v) Jacobians (the math of
-   :func:`footprint_uq.cameras.general.backproject`, ported to scalar code);
-3. :func:`_stage_whiten` -- ``J L`` with the sparse factor ``L L^T`` of the 22x22 parameter
-   covariance (:func:`psd_factor`: only its non-zero entries are touched) and the
-   parameter part of each corner's covariance.
+* :func:`_stage_project` (3D boxes) -- the four bottom corners of each box into the image;
+* :func:`_stage_undistort` -- pixel -> normalised coordinates, OpenCV undistortion (Newton,
+  all corners together, each stopping when converged, as
+  :func:`footprint_uq.cameras.distortion.undistort`) and its implicit-function Jacobians;
+* :func:`_stage_ground` -- ray / perturbed-ground intersection with the full d(x, y)/d(params)
+  (2 x 22) and d(x, y)/d(u, v) Jacobians (the math of
+  :func:`footprint_uq.cameras.general.backproject`);
+* :func:`_stage_corner_flags`, :func:`_stage_centroid` -- status per corner (outside the
+  image, 3D projection), area centroid and its closed-form Jacobian;
+* :func:`_stage_whiten` -- ``J L`` with the sparse factor ``L L^T`` of the 22x22 parameter
+  covariance (:func:`psd_factor`; only non-zero entries are touched): the parameter part of
+  every corner's and of the centre's covariance;
+* :func:`_stage_corner_cov`, :func:`_stage_select`, :func:`_stage_centre_cov` -- per-point
+  pixel noise (budget + detector), the largest point;
+* :func:`_stage_v2x` -- 1-sigma ellipse and the CPM / J2735 integer fields.
 
-Then, per object: status flags (outside image, 3D projection), per-point pixel noise
-(budget + detector), the optional joint (2K x 2K) covariance, the largest point,
-the centroid and its closed-form Jacobian, the centre covariance and the V2X integer
-fields.  The numpy reference is :func:`footprint_uq.footprints.footprints_from_corners`;
-the tests hold the two to 1e-9 relative.
+libm calls (cos/sin, ``atan2``, ``hypot``) run in loops of their own; rows chosen at run
+time are indexed with unsigned offsets.  Outputs go to arrays the caller allocates
+(:func:`alloc_outputs`); the per-object numbers are contiguous rows (:data:`OBJ_ROWS`).
+The numpy reference is :func:`footprint_uq.footprints.footprints_from_corners`; the tests
+hold the two to 1e-9 relative and the V2X fields equal.
 
 Camera constants travel in one float64 vector ``cam`` (layout ``_C_*`` below) and
 the rotation derivatives in ``dR`` (3 angles, 3, 3), both prepared once per
