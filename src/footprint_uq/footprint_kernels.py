@@ -94,8 +94,9 @@ _BX = 177  # 7 rows: the chunk's boxes
 _VX = 184  # 7 rows: V2X fields of each object
 _NROWS = 191
 
-# rows of the per-object output block ``obj`` (13, N) (FootprintEstimate views them, the batch writes them)
-OBJ_ROWS = ("centre_x_m", "centre_y_m", "cov_xx_m2", "cov_xy_m2", "cov_yx_m2", "cov_yy_m2", "sigma_major_m",
+# rows of the per-object output block ``obj`` (13, N), named as the batch's output columns (FootprintEstimate
+# views them, the batch writes them; cov_yx_m2 = cov_xy_m2 completes the 2x2 view)
+OBJ_ROWS = ("x_m", "y_m", "cov_xx_m2", "cov_xy_m2", "cov_yx_m2", "cov_yy_m2", "sigma_major_m",
             "sigma_minor_m", "orientation_deg", "largest_sigma_major_m", "largest_x_m", "largest_y_m", "area_m2")
 _O_CX, _O_CY, _O_C00, _O_C01, _O_C10, _O_C11, _O_SMAJ, _O_SMIN, _O_ORI, _O_LSEMI, _O_LX, _O_LY, _O_AREA = range(13)
 
@@ -721,6 +722,14 @@ def _stage_centroid(S, nob, K):
         S[(_G + 3) * _ST + j] = (dSy_dy - 6.0 * Cyl * dA_dy) * inv6A
 
 
+@njit(cache=True, error_model="numpy", nogil=True, inline="always")
+def _h(S, j):
+    """H = G J_uv (2 x 2) of scratch column j: d centre / d (u, v) of that corner."""
+    g00, g01, g10, g11 = S[_G * _ST + j], S[(_G + 1) * _ST + j], S[(_G + 2) * _ST + j], S[(_G + 3) * _ST + j]
+    u00, u01, u10, u11 = S[_JUV * _ST + j], S[(_JUV + 1) * _ST + j], S[(_JUV + 2) * _ST + j], S[(_JUV + 3) * _ST + j]
+    return g00 * u00 + g01 * u10, g00 * u01 + g01 * u11, g10 * u00 + g11 * u10, g10 * u01 + g11 * u11
+
+
 @njit(cache=True, error_model="numpy", nogil=True)
 def _stage_centre_cov(S, nob, K):
     """Per object: adds the pixel part sum_k H_k P_k H_k^T, H_k = G_k J_uv,k, to the centre covariance
@@ -728,11 +737,7 @@ def _stage_centre_cov(S, nob, K):
     corners are added by the caller)."""
     m = K * nob
     for j in range(m):
-        g00, g01, g10, g11 = S[_G * _ST + j], S[(_G + 1) * _ST + j], S[(_G + 2) * _ST + j], S[(_G + 3) * _ST + j]
-        u00, u01 = S[_JUV * _ST + j], S[(_JUV + 1) * _ST + j]
-        u10, u11 = S[(_JUV + 2) * _ST + j], S[(_JUV + 3) * _ST + j]
-        h00, h01 = g00 * u00 + g01 * u10, g00 * u01 + g01 * u11
-        h10, h11 = g10 * u00 + g11 * u10, g10 * u01 + g11 * u11
+        h00, h01, h10, h11 = _h(S, j)
         p00, p01 = S[_P4 * _ST + j], S[(_P4 + 1) * _ST + j]
         p10, p11 = S[(_P4 + 2) * _ST + j], S[(_P4 + 3) * _ST + j]
         m00, m01 = h00 * p00 + h01 * p10, h00 * p01 + h01 * p11
@@ -970,14 +975,6 @@ def process_corners(uv, extra_reason, boxes, yaw_deg, bottom_on_ground, cam, dR,
                         joint[n, 2 * k + 1, 2 * l], joint[n, 2 * k + 1, 2 * l + 1] = v10, v11
                         joint[n, 2 * l, 2 * k], joint[n, 2 * l + 1, 2 * k] = v00, v01
                         joint[n, 2 * l, 2 * k + 1], joint[n, 2 * l + 1, 2 * k + 1] = v10, v11
-
-
-@njit(cache=True, error_model="numpy", nogil=True)
-def _h(S, j):
-    """H = G J_uv (2 x 2) of scratch column j: d centre / d (u, v) of that corner."""
-    g00, g01, g10, g11 = S[_G * _ST + j], S[(_G + 1) * _ST + j], S[(_G + 2) * _ST + j], S[(_G + 3) * _ST + j]
-    u00, u01, u10, u11 = S[_JUV * _ST + j], S[(_JUV + 1) * _ST + j], S[(_JUV + 2) * _ST + j], S[(_JUV + 3) * _ST + j]
-    return g00 * u00 + g01 * u10, g00 * u01 + g01 * u11, g10 * u00 + g11 * u10, g10 * u01 + g11 * u11
 
 
 @njit(cache=True, error_model="numpy", nogil=True)

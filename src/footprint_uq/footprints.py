@@ -544,9 +544,8 @@ class FrameProcessor:
         self._no_det = np.zeros((1, 1, 2, 2))
         self._no_extra = np.zeros((0, 0), dtype=np.int8)
         self._no_boxes = np.zeros((0, 7))
-        # where output memory comes from, and (for the batch) whether per-corner coordinates and
-        # covariances (and the largest point's covariance) are formed at all
-        self._alloc = empty_reusable
+        # (for the batch) whether per-corner coordinates and covariances (and the largest point's
+        # covariance) are formed at all
         self._corner_outputs = True
 
     def _det(self, pixel_cov_px2, N: int, K: int):
@@ -569,7 +568,7 @@ class FrameProcessor:
                                            heading_offset_deg=self.heading_offset_deg,
                                            _extra_reason=extra if extra.shape[0] == N else None)
         det, mode = self._det(pixel_cov_px2, N, K)
-        out = self._fk.alloc_outputs(N, K, joint=self.joint_cov, corners=self._corner_outputs, alloc=self._alloc)
+        out = self._fk.alloc_outputs(N, K, joint=self.joint_cov, corners=self._corner_outputs, alloc=empty_reusable)
         self._fk.process_corners(uv, extra, self._no_boxes, False, True, self._cam, self._dR, self._Lr, self._Lc,
                                  self._Lv, self._r, self._spx, det, mode, self.allow_outside_image, self._ch, self._sh,
                                  out, self._fk.scratch())
@@ -577,12 +576,13 @@ class FrameProcessor:
 
     def _pack(self, uv, out) -> FootprintEstimate:
         xy, ccov, joint, reason, usable, li, lcov, creason, cbad, obj, v2x = out
-        N = obj.shape[1]
+        fk = self._fk
         # views of the kernel's per-object rows (no copies): (N, 2) and (N, 2, 2) with strides across rows
-        centre, ccentre = obj[0:2].T, obj[2:6].T.reshape(N, 2, 2)
-        est = FootprintEstimate(uv, xy, ccov, joint if self.joint_cov else None, reason, usable, li, obj[9],
-                                obj[10:12].T, lcov, centre, ccentre, creason == 0, creason, cbad, obj[12], v2x.T,
-                                self.heading_offset_deg)
+        centre = obj[fk._O_CX:fk._O_CY + 1].T
+        ccentre = obj[fk._O_C00:fk._O_C11 + 1].T.reshape(obj.shape[1], 2, 2)
+        est = FootprintEstimate(uv, xy, ccov, joint if self.joint_cov else None, reason, usable, li,
+                                obj[fk._O_LSEMI], obj[fk._O_LX:fk._O_LY + 1].T, lcov, centre, ccentre, creason == 0,
+                                creason, cbad, obj[fk._O_AREA], v2x.T, self.heading_offset_deg)
         est._columns = obj
         return est
 
@@ -615,8 +615,8 @@ class FrameProcessor:
             raise InputError("yaw_unit", yaw_unit, "'rad' (column yaw_rad) or 'deg' (column yaw_deg)")
         N = b.shape[0]
         det, mode = self._det(pixel_cov_px2, N, 4)
-        uv = self._alloc((N if self._corner_outputs else 0, 4, 2), np.float64)
-        out = self._fk.alloc_outputs(N, 4, joint=self.joint_cov, corners=self._corner_outputs, alloc=self._alloc)
+        uv = empty_reusable((N if self._corner_outputs else 0, 4, 2), np.float64)
+        out = self._fk.alloc_outputs(N, 4, joint=self.joint_cov, corners=self._corner_outputs, alloc=empty_reusable)
         bad = self._fk.process_boxes3d(b, yaw_unit == "deg", bool(bottom_on_ground), self._cam, self._dR, self._Lr,
                                        self._Lc, self._Lv, self._r, self._spx, det, mode, self.allow_outside_image,
                                        self._ch, self._sh, uv, out, self._fk.scratch())

@@ -52,7 +52,6 @@ __all__ = ["BatchProcessor", "process_table", "process_file", "process_chunk", "
 PSD_TOL = 0.5e-12
 #: row of each output column in the kernel's per-object block
 _OBJ = {name: i for i, name in enumerate(OBJ_ROWS)}
-_OBJ_OF = {"x_m": "centre_x_m", "y_m": "centre_y_m"}
 #: below this many rows a chunk is processed in one thread
 _MIN_ROWS_PER_THREAD = 20_000
 
@@ -440,7 +439,7 @@ class BatchProcessor:
                                                         self.reasons.dictionary())
         obj = res.obj  # rows OBJ_ROWS, each one contiguous: the columns need no copy
         for name in S.CENTRE_COLUMNS:
-            cols[name] = obj[_OBJ[_OBJ_OF.get(name, name)]]
+            cols[name] = obj[_OBJ[name]]
         if self._k_conf is not None:
             cols["semi_major_m"] = self._k_conf * obj[_OBJ["sigma_major_m"]]
             cols["semi_minor_m"] = self._k_conf * obj[_OBJ["sigma_minor_m"]]
