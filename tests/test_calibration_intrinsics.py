@@ -52,7 +52,10 @@ def test_real_images_match_opencv_run_directly(real_cal):
     # same solver, same data: OpenCV's Levenberg-Marquardt stops at its own eps, and runs in different
     # processes/thread counts reproduce K to ~5e-9 relative (1e-6 px), far below sigma (~0.3 px)
     np.testing.assert_allclose(cal.K, K, rtol=1e-7)
-    np.testing.assert_allclose(cal.dist, d.ravel()[:5], rtol=1e-7, atol=1e-12)
+    # the distortion vector to the same 1e-7, relative to its scale: a small coefficient (p2 ~ 6e-4) alone
+    # moved by 8e-7 of itself (4.6e-10 absolute) between two runs in one clean-clone CI run
+    dref = d.ravel()[:5]
+    np.testing.assert_allclose(cal.dist, dref, rtol=1e-7, atol=1e-7 * np.abs(dref).max())
     np.testing.assert_allclose(cal.std_opencv, sdi.ravel()[:9], rtol=1e-6)
     np.testing.assert_allclose(cal.per_view_rms_px, pve.ravel(), rtol=1e-6)
     assert cal.rms_px == pytest.approx(rms, rel=1e-9)
