@@ -1,0 +1,13 @@
+"""Edge service: detections in, positions with uncertainty and V2X messages out, frame by frame.
+
+* :class:`Service` -- the per-frame API for embedding (``process_frame``);
+* :mod:`~footprint_uq.service.runner` -- the long-running service (stdin or MQTT in, stdout or
+  MQTT out, drop policy, metrics, SIGTERM drain) behind ``footprint-uq serve``;
+* :mod:`~footprint_uq.service.messages` -- the ETSI CPM (JSON and UPER) and SAE J3224 SDSM.
+
+See ``docs/service.md``.
+"""
+
+from .core import Service, error_record
+
+__all__ = ["Service", "error_record"]

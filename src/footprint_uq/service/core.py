@@ -1,0 +1,416 @@
+"""The edge service's per-frame work: one detector frame in, one output record out.
+
+:class:`Service` is the embedding API used by both transports (stdin and MQTT, see
+:mod:`footprint_uq.service.runner`).  ``Service(...).process_frame(frame)`` takes one frame
+(a dict, or one JSON text line)::
+
+    {"camera_id": "cam1", "frame": 42, "timestamp_s": 1714564800.033,
+     "detections": [{"object_id": 7, "class": "car",
+                     "u_min_px": 900, "v_min_px": 600, "u_max_px": 1000, "v_max_px": 700,
+                     "cov_uu_px2": 4.0, "cov_uv_px2": 0.0, "cov_vv_px2": 9.0}]}       # covariance optional
+
+with the box columns of the batch (docs/batch.md: 2D boxes ``u_min_px, v_min_px, u_max_px,
+v_max_px``; 3D boxes ``x_m, y_m, z_m, length_m, width_m, height_m, yaw_rad|yaw_deg``; corners
+``u0_px, v0_px, ...``; one family per frame) and returns either a **footprints record**
+(``"type": "footprints"``: every object's centre, ``cov_m2``, ellipse, largest point, CPM and
+J2735 fields, and the frame's CPM as JSON and UPER hex and SDSM as JSON) or an **error
+record** (``"type": "error"`` with the ``field`` and the ``reason``).  It never raises on
+bad input.  ``timestamp_s`` is Unix time in seconds (UTC): the CPM's ``TimestampIts`` and
+the SDSM time stamp are derived from it.  The layout is documented in ``docs/service.md``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+import zlib
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..batch import schema as S
+from ..ellipse import chi2_scale, ellipse_axes
+from ..errors import FootprintUQError, InputError
+from ..footprints import V2X_FIELDS, FrameProcessor
+from ..geo import GeoReference
+from .messages.cpm import (
+    CONFIDENCE_LEVEL_UNAVAILABLE,
+    CPM_CLASSES,
+    LATITUDE_UNAVAILABLE,
+    LONGITUDE_UNAVAILABLE,
+    build_cpm,
+    encode_cpm_uper,
+    perceived_object,
+    timestamp_its_ms,
+)
+from .messages.sdsm import build_sdsm, sdsm_object
+
+__all__ = ["Service", "CameraSetup", "error_record", "station_id_of", "RECORD_FOOTPRINTS", "RECORD_ERROR"]
+
+RECORD_FOOTPRINTS = "footprints"
+RECORD_ERROR = "error"
+_CPM_INDEX = V2X_FIELDS.index("cpm_x_confidence")
+_J_POS = V2X_FIELDS.index("j2735_position_confidence")
+
+
+def station_id_of(camera_id: str) -> int:
+    """Default StationId of a camera: CRC-32 of its id (stable, documented; override with ``station_id``)."""
+    return zlib.crc32(str(camera_id).encode("utf-8")) & 0xFFFFFFFF
+
+
+def error_record(reason: str, *, field: str | None = None, camera_id=None, frame=None, source: str | None = None
+                 ) -> dict:
+    """An error record (one per rejected frame)."""
+    return {"type": RECORD_ERROR, "camera_id": camera_id, "frame": frame, "field": field, "reason": str(reason),
+            "source": source}
+
+
+class _FrameError(Exception):
+    def __init__(self, field: str | None, reason: str):
+        super().__init__(reason)
+        self.field = field
+        self.reason = reason
+
+
+@dataclass
+class CameraSetup:
+    """One camera of the service: its prepared processor, map tie and station id."""
+
+    camera_id: str | None
+    processor: FrameProcessor
+    georef: GeoReference
+    station_id: int
+
+
+def _num(x) -> float | None:
+    return x if isinstance(x, float) and math.isfinite(x) else (float(x) if isinstance(x, int) else None)
+
+
+def _nan_none(values: list) -> list:
+    return [v if v == v else None for v in values]  # NaN != NaN
+
+
+def _finite_number(d: dict, key: str, where: str) -> float:
+    v = d.get(key)
+    if v is None:
+        raise _FrameError(f"{where}.{key}", f"missing field {key}")
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        raise _FrameError(f"{where}.{key}", f"field {key} is not a number: {v!r}")
+    if not math.isfinite(v):
+        raise _FrameError(f"{where}.{key}", f"field {key} is not finite: {v!r}")
+    return float(v)
+
+
+class Service:
+    """Detections in, positions with uncertainty and V2X messages out, one frame at a time.
+
+    Parameters
+    ----------
+    camera : Camera, optional
+        The one camera (with ``budget``); or give ``registry``.
+    budget : ErrorBudget, preset name, path or mapping
+        The camera's error budget (with ``registry``: the default for entries without one).
+    registry : path or dict camera_id -> RegistryEntry, optional
+        Many cameras (the batch registry format, :func:`footprint_uq.batch.fleet.load_registry`);
+        a frame's ``camera_id`` selects its camera.
+    camera_id : str, optional
+        With one camera: the id it answers to (frames with another id are errors); None
+        accepts any id (the frames come from that camera).
+    heading_offset_deg : float
+        Compass bearing of the world +y axis (V2X fields, CPM/SDSM east/north offsets);
+        registry entries may override it.
+    origin_lat_deg, origin_lon_deg : float, optional
+        WGS84 position of the world origin: objects get ``lat_deg``/``lon_deg`` and the
+        messages' reference position is the origin (otherwise it is "unavailable").
+    confidence : float
+        Probability of the ``semi_major_m``/``semi_minor_m`` ellipse (default 0.95).
+    contact : {"bottom-centre", "bottom-corners"}
+        Ground contact of 2D boxes.
+    allow_outside_image : bool
+        See :func:`footprint_uq.footprints.footprints_from_corners`.
+    station_id : int, optional
+        StationId of the messages (one camera); default :func:`station_id_of` of the camera id.
+    messages : bool
+        Build the CPM, its UPER encoding and the SDSM (default True).
+    warm_up : bool
+        Run each camera once on a dummy frame so that the compiled kernels are loaded
+        before the first real frame (default True).
+    """
+
+    def __init__(self, camera=None, budget=None, *, registry=None, camera_id: str | None = None,
+                 heading_offset_deg: float = 0.0, origin_lat_deg: float | None = None,
+                 origin_lon_deg: float | None = None, confidence: float = 0.95, contact: str = "bottom-centre",
+                 allow_outside_image: bool = False, station_id: int | None = None, messages: bool = True,
+                 warm_up: bool = True):
+        if (camera is None) == (registry is None):
+            raise InputError("camera/registry", "both" if camera is not None else "neither",
+                             "exactly one of a camera (with a budget) or a registry")
+        if contact not in S.BOX_TYPES and contact not in ("bottom-centre", "bottom-corners"):
+            raise InputError("contact", contact, "'bottom-centre' or 'bottom-corners'")
+        self.contact = contact
+        self.confidence = float(confidence)
+        if not 0.0 < self.confidence < 1.0:
+            raise InputError("confidence", confidence, "a probability in (0, 1)")
+        self._k = chi2_scale(self.confidence)
+        self.messages = bool(messages)
+        self.cameras: dict[str | None, CameraSetup] = {}
+        if camera is not None:
+            if budget is None:
+                raise InputError("budget", None, "an error budget (preset, file or ErrorBudget) for the camera")
+            geo = GeoReference(heading_offset_deg=heading_offset_deg, origin_lat_deg=origin_lat_deg,
+                               origin_lon_deg=origin_lon_deg)
+            sid = station_id if station_id is not None else station_id_of(camera_id or "camera")
+            self.cameras[camera_id] = CameraSetup(camera_id, self._processor(camera, budget, geo, allow_outside_image),
+                                                  geo, int(sid))
+        else:
+            from ..batch.fleet import load_registry
+
+            entries = registry if isinstance(registry, dict) else load_registry(registry, budget=budget)
+            for cid, e in entries.items():
+                geo = GeoReference(
+                    heading_offset_deg=heading_offset_deg if e.heading_offset_deg is None else e.heading_offset_deg,
+                    origin_lat_deg=origin_lat_deg if e.origin_lat_deg is None else e.origin_lat_deg,
+                    origin_lon_deg=origin_lon_deg if e.origin_lon_deg is None else e.origin_lon_deg)
+                self.cameras[str(cid)] = CameraSetup(str(cid), self._processor(e.camera, e.budget, geo,
+                                                                               allow_outside_image),
+                                                     geo, station_id_of(cid))
+        self._single = camera is not None
+        if warm_up:
+            self.warm_up()
+
+    @staticmethod
+    def _processor(camera, budget, geo: GeoReference, allow_outside_image: bool) -> FrameProcessor:
+        return FrameProcessor(camera, budget, heading_offset_deg=geo.heading_offset_deg,
+                              allow_outside_image=allow_outside_image, joint_cov=False)
+
+    @property
+    def camera_ids(self) -> list:
+        return list(self.cameras)
+
+    def warm_up(self) -> None:
+        """Load the compiled kernels (and pyproj, with an origin) once, before the first frame."""
+        for setup in self.cameras.values():
+            cam = setup.processor.camera
+            w, h = cam.image_size_px
+            setup.processor.corners(np.array([[[0.5 * w, 0.9 * h]]]))
+            setup.processor.boxes3d(np.zeros((0, 7)))
+            if setup.georef.has_origin:
+                setup.georef.to_wgs84(np.zeros((1, 2)))
+            if self.messages:
+                encode_cpm_uper(build_cpm(setup.station_id, 0, []))
+
+    # -- one frame ------------------------------------------------------------------------------------
+    def process_frame(self, frame, *, source: str | None = None) -> dict:
+        """One frame (dict or JSON text) -> a footprints record or an error record (never raises on bad input).
+
+        ``source`` (e.g. ``"stdin line 7"``, ``"mqtt detections/cam1"``) is copied into error records.
+        """
+        t0 = time.perf_counter()
+        camera_id = frame_no = None
+        try:
+            if isinstance(frame, (bytes, bytearray, memoryview)):
+                try:
+                    frame = bytes(frame).decode("utf-8")
+                except UnicodeDecodeError as e:
+                    raise _FrameError(None, f"frame is not UTF-8 text: {e}") from None
+            if isinstance(frame, str):
+                try:
+                    frame = json.loads(frame)
+                except json.JSONDecodeError as e:
+                    raise _FrameError(None, f"invalid JSON: {e}") from None
+            if not isinstance(frame, dict):
+                raise _FrameError(None, f"frame is not a JSON object: {type(frame).__name__}")
+            camera_id = frame.get("camera_id")
+            frame_no = frame.get("frame")
+            return self._process(frame, t0)
+        except _FrameError as e:
+            return error_record(e.reason, field=e.field, camera_id=_jsonable(camera_id), frame=_jsonable(frame_no),
+                                source=source)
+        except FootprintUQError as e:
+            return error_record(str(e), field=getattr(e, "field", None), camera_id=_jsonable(camera_id),
+                                frame=_jsonable(frame_no), source=source)
+
+    def _setup(self, camera_id) -> CameraSetup:
+        if camera_id is not None and not isinstance(camera_id, str):
+            raise _FrameError("camera_id", f"camera_id is not a string: {camera_id!r}")
+        if self._single:
+            (key, setup), = self.cameras.items()
+            if key is not None and camera_id != key:
+                raise _FrameError("camera_id", f"camera_id {camera_id!r} is not this service's camera {key!r}")
+            return setup
+        if camera_id is None:
+            raise _FrameError("camera_id", "missing field camera_id (needed with a registry)")
+        setup = self.cameras.get(camera_id)
+        if setup is None:
+            raise _FrameError("camera_id", f"camera_id {camera_id!r} not in the registry")
+        return setup
+
+    def _process(self, frame: dict, t0: float) -> dict:
+        camera_id = frame.get("camera_id")
+        setup = self._setup(camera_id)
+        fno = frame.get("frame")
+        if fno is None:
+            raise _FrameError("frame", "missing field frame")
+        if isinstance(fno, bool) or not isinstance(fno, int):
+            raise _FrameError("frame", f"field frame is not an integer: {fno!r}")
+        ts = _finite_number(frame, "timestamp_s", "frame")
+        dets = frame.get("detections")
+        if not isinstance(dets, list):
+            raise _FrameError("detections", f"field detections is not a list: {type(dets).__name__}")
+        ref_ms = timestamp_its_ms(ts) if self.messages else None
+        est, ids, classes, class_conf = self._footprints(setup, dets)
+        t1 = time.perf_counter()
+        objects, cpm, cpm_hex, sdsm = self._outputs(setup, est, ids, classes, class_conf, int(fno), ts, ref_ms)
+        t2 = time.perf_counter()
+        rec = {"type": RECORD_FOOTPRINTS, "camera_id": camera_id, "frame": fno, "timestamp_s": ts,
+               "station_id": setup.station_id, "heading_offset_deg": setup.georef.heading_offset_deg,
+               "confidence": self.confidence, "n_objects": len(objects), "objects": objects}
+        if self.messages:
+            rec.update(cpm=cpm, cpm_uper_hex=cpm_hex, sdsm=sdsm)
+        rec["processing_us"] = {"footprints": round(1e6 * (t1 - t0), 1), "messages": round(1e6 * (t2 - t1), 1),
+                                "total": round(1e6 * (time.perf_counter() - t0), 1)}
+        return rec
+
+    def _footprints(self, setup: CameraSetup, dets: list):
+        N = len(dets)
+        ids, classes, class_conf = [], [], []
+        for i, d in enumerate(dets):
+            if not isinstance(d, dict):
+                raise _FrameError(f"detections[{i}]", f"detection {i} is not a JSON object")
+            oid = d.get("object_id", i)
+            if oid is not None and (isinstance(oid, bool) or not isinstance(oid, (int, str))):
+                raise _FrameError(f"detections[{i}].object_id", f"object_id is not a string or integer: {oid!r}")
+            cls = d.get("class")
+            if cls is not None and not isinstance(cls, str):
+                raise _FrameError(f"detections[{i}].class", f"class is not a string: {cls!r}")
+            cc = d.get("class_confidence")
+            if cc is not None:
+                cc = _finite_number(d, "class_confidence", f"detections[{i}]")
+                if not 0.0 <= cc <= 1.0:
+                    raise _FrameError(f"detections[{i}].class_confidence", f"class_confidence {cc} not in [0, 1]")
+            ids.append(oid)
+            classes.append(cls)
+            class_conf.append(cc)
+        proc = setup.processor
+        if N == 0:
+            return proc.corners(np.zeros((0, 1, 2))), ids, classes, class_conf
+        family = S.detect_box_type(dets[0].keys())
+        if family is None:
+            raise _FrameError("detections[0]", "no complete box: 2D (u_min_px, v_min_px, u_max_px, v_max_px), 3D "
+                                               "(x_m, y_m, z_m, length_m, width_m, height_m, yaw_rad|yaw_deg) or "
+                                               "corners (u0_px, v0_px, ...), one family per frame")
+        cols = S.box_columns(family, dets[0].keys())
+        X = np.empty((N, len(cols)))
+        P = None
+        for i, d in enumerate(dets):
+            where = f"detections[{i}]"
+            X[i] = [_finite_number(d, c, where) for c in cols]
+            present = [c for c in S.COV_COLUMNS if d.get(c) is not None]
+            if present:
+                if len(present) != 3:
+                    missing = [c for c in S.COV_COLUMNS if c not in present]
+                    raise _FrameError(f"{where}.{missing[0]}", f"incomplete pixel covariance: {missing[0]} missing "
+                                                               "(give cov_uu_px2, cov_uv_px2, cov_vv_px2 or none)")
+                uu, uv, vv = (_finite_number(d, c, where) for c in S.COV_COLUMNS)
+                if P is None:
+                    P = np.zeros((N, 2, 2))
+                P[i] = ((uu, uv), (uv, vv))
+        try:
+            if family == "2d":
+                est = proc.boxes2d(X, contact=self.contact, pixel_cov_px2=P)
+            elif family == "3d":
+                est = proc.boxes3d(X, yaw_unit="deg" if cols[-1] == "yaw_deg" else "rad", pixel_cov_px2=P)
+            else:
+                est = proc.corners(X.reshape(N, -1, 2), pixel_cov_px2=P)
+        except InputError as e:
+            raise _FrameError(_detection_field(e.field), str(e)) from None
+        return est, ids, classes, class_conf
+
+    def _outputs(self, setup, est, ids, classes, class_conf, fno: int, ts: float, ref_ms):
+        N = len(ids)
+        geo = setup.georef
+        centre = est.centre_xy_world_m
+        cov = est.centre_cov_m2
+        a, b, ori = ellipse_axes(cov)
+        valid = est.centre_valid.tolist()
+        li = est.largest_index.tolist()
+        reasons = est.centre_reason_text() if N else []
+        codes = est.v2x_codes.tolist()
+        x, y = _nan_none(centre[:, 0].tolist()), _nan_none(centre[:, 1].tolist())
+        cxx, cxy, cyy = (_nan_none(v.tolist()) for v in (cov[:, 0, 0], cov[:, 0, 1], cov[:, 1, 1]))
+        a_l, b_l, o_l = _nan_none(a.tolist()), _nan_none(b.tolist()), _nan_none(ori.tolist())
+        ka, kb = _nan_none((self._k * a).tolist()), _nan_none((self._k * b).tolist())
+        lsemi = _nan_none(est.largest_semi_major_m.tolist())
+        lx, ly = (_nan_none(v.tolist()) for v in (est.largest_xy_world_m[:, 0], est.largest_xy_world_m[:, 1]))
+        en = geo.world_to_enu(centre) if N else np.zeros((0, 2))
+        if geo.has_origin and N:
+            lat, lon = (_nan_none(v.tolist()) for v in geo.to_wgs84(centre))
+        linear = getattr(est, "linear_ok", None)  # the library's linearity flag, when it provides one
+        nonlin = getattr(est, "nonlinearity", None)
+        objects, pos, sobj = [], [], []
+        for i in range(N):
+            ok = valid[i]
+            o = {"object_id": ids[i], "class": classes[i],
+                 "status": S.STATUS_OK if ok else (S.STATUS_PARTIAL if li[i] >= 0 else S.STATUS_ERROR),
+                 "reason": "ok" if ok else f"no centre: {reasons[i]}",
+                 "x_m": x[i], "y_m": y[i], "cov_m2": [[cxx[i], cxy[i]], [cxy[i], cyy[i]]],
+                 "sigma_major_m": a_l[i], "sigma_minor_m": b_l[i], "orientation_deg": o_l[i],
+                 "semi_major_m": ka[i], "semi_minor_m": kb[i],
+                 "largest_index": li[i], "largest_sigma_major_m": lsemi[i], "largest_x_m": lx[i],
+                 "largest_y_m": ly[i]}
+            o.update(zip(V2X_FIELDS, codes[i], strict=True))
+            if geo.has_origin:
+                o["lat_deg"], o["lon_deg"] = lat[i], lon[i]
+            if linear is not None:
+                o["linear_ok"] = bool(linear[i])
+            if nonlin is not None:
+                o["nonlinearity"] = _nan_none([float(nonlin[i])])[0]
+            if self.messages and ok:
+                oid = _message_object_id(ids[i], i)
+                cls = (classes[i] or "").lower()
+                cc = class_conf[i]
+                level = CONFIDENCE_LEVEL_UNAVAILABLE if cc is None else max(1, math.ceil(100.0 * cc - 1e-9))
+                c = codes[i]
+                pos.append(perceived_object(oid, en[i, 0], en[i, 1], c[_CPM_INDEX], c[_CPM_INDEX + 1],
+                                            c[_CPM_INDEX + 2], CPM_CLASSES.get(cls), level))
+                sobj.append(sdsm_object(oid, en[i, 0], en[i, 1], c[_J_POS], classes[i],
+                                        0 if cc is None else int(round(100.0 * cc))))
+                o["message_object_id"] = oid
+            elif self.messages:
+                o["message_object_id"] = None  # no centre: not in the CPM / SDSM
+            objects.append(o)
+        if not self.messages:
+            return objects, None, None, None
+        lat_e7 = lon_e7 = None
+        if geo.has_origin:
+            lat_e7, lon_e7 = round(geo.origin_lat_deg * 1e7), round(geo.origin_lon_deg * 1e7)
+        cpm = build_cpm(setup.station_id, ref_ms, pos[:255],
+                        latitude=LATITUDE_UNAVAILABLE if lat_e7 is None else lat_e7,
+                        longitude=LONGITUDE_UNAVAILABLE if lon_e7 is None else lon_e7)
+        cpm_hex = encode_cpm_uper(cpm).hex()
+        sdsm = build_sdsm(setup.station_id, fno, ts, sobj[:255],
+                          **({} if lat_e7 is None else {"lat_1e7deg": lat_e7, "lon_1e7deg": lon_e7}))
+        return objects, cpm, cpm_hex, sdsm
+
+
+def _message_object_id(object_id, index: int) -> int:
+    """Identifier2B of an object: its id if it is an integer in 0..65535, else CRC-32 of its text mod 65536."""
+    if isinstance(object_id, int) and 0 <= object_id <= 65535:
+        return object_id
+    if isinstance(object_id, str) and object_id.isdigit() and int(object_id) <= 65535:
+        return int(object_id)
+    text = str(index) if object_id is None else str(object_id)
+    return zlib.crc32(text.encode("utf-8")) & 0xFFFF
+
+
+def _detection_field(field: str) -> str:
+    # "boxes_px[3]" / "boxes_world[3] (...)" / "pixel_cov_px2" -> "detections[3]"
+    import re
+
+    m = re.search(r"\[(\d+)\]", field or "")
+    return f"detections[{m.group(1)}]" if m else "detections"
+
+
+def _jsonable(v):
+    return v if v is None or isinstance(v, (str, int, float, bool)) else repr(v)

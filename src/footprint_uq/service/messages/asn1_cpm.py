@@ -1,0 +1,226 @@
+"""The ASN.1 module of the CPM subset footprint-uq sends (ETSI TS 103 324 Release 2 + TS 102 894-2 CDD).
+
+Written for this project from the published definitions (TS 103 324 V2.1.1 ``CPM-PDU-Descriptions``,
+``CPM-OriginatingStationContainers``, ``CPM-PerceivedObjectContainer``; the CDD
+``ETSI-ITS-CDD`` major-version 3 / minor-version 1).  Only what footprint-uq emits is
+defined with its real type; everything else keeps its *place* so that the unaligned PER
+bits of what we send are those of the full standard:
+
+* an OPTIONAL component we never send is declared with the placeholder type ``NotSent``
+  (``NULL``): its presence bit is in the preamble exactly as in the standard (one bit per
+  OPTIONAL/DEFAULT component), and an absent component contributes no other bits;
+* a CHOICE alternative we never choose is declared ``NotSent`` too: the index of a
+  CHOICE depends only on the number and order of its root alternatives;
+* ``WrappedCpmContainer.containerData`` is an open type in the standard (an information
+  object set keyed by ``containerId``); X.691 clause 11.2 encodes an open type as the
+  complete encoding of the actual type, padded to octets, preceded by an unconstrained
+  length in octets -- bit for bit an unconstrained ``OCTET STRING``.  The subset declares
+  it ``OCTET STRING`` and :mod:`footprint_uq.service.messages.cpm` puts the UPER encoding
+  of the container in it (``OriginatingRsuContainer`` for ``containerId`` 2,
+  ``PerceivedObjectContainer`` for 5);
+* the constraint ``TrafficParticipantType (unknown|passengerCar..tram|agricultural)`` of
+  ``ObjectClass.vehicleSubClass`` is written as its PER effective constraint ``(0..14)``
+  (X.691 clause 10.3: the smallest range containing the union);
+* the ``WITH COMPONENTS {..., protocolVersion (2), messageId (cpm)}`` inner subtype of the
+  header is not PER-visible (X.691 B.2.2) and is not written; the encoder sets 2 and 14.
+
+A message from another station that uses components this subset does not define (velocity,
+dimensions, sensor information, ...) does not decode with this module; every message
+footprint-uq sends decodes with the full standard's module.
+"""
+
+from __future__ import annotations
+
+__all__ = ["CPM_ASN1", "CPM_PROTOCOL_VERSION", "MESSAGE_ID_CPM", "CONTAINER_ID_RSU", "CONTAINER_ID_PERCEIVED_OBJECTS"]
+
+#: ItsPduHeader.protocolVersion of a TS 103 324 Release 2 CPM
+CPM_PROTOCOL_VERSION = 2
+#: MessageId of the CPM (CDD ``MessageId``: cpm (14))
+MESSAGE_ID_CPM = 14
+#: CpmContainerId values (TS 103 324 ``originatingRsuContainer``, ``perceivedObjectContainer``)
+CONTAINER_ID_RSU = 2
+CONTAINER_ID_PERCEIVED_OBJECTS = 5
+
+CPM_ASN1 = r"""
+FootprintUQ-CPM-Subset DEFINITIONS AUTOMATIC TAGS ::= BEGIN
+
+-- placeholder of a component or alternative footprint-uq never sends (see the module doc)
+NotSent ::= NULL
+
+-- TS 103 324 CPM-PDU-Descriptions
+CollectivePerceptionMessage ::= SEQUENCE {
+    header   ItsPduHeader,
+    payload  CpmPayload
+}
+
+CpmPayload ::= SEQUENCE {
+    managementContainer  ManagementContainer,
+    cpmContainers        WrappedCpmContainers,
+    ...
+}
+
+ManagementContainer ::= SEQUENCE {
+    referenceTime      TimestampIts,
+    referencePosition  ReferencePosition,
+    segmentationInfo   NotSent OPTIONAL,
+    messageRateRange   NotSent OPTIONAL,
+    ...
+}
+
+CpmContainerId ::= INTEGER (1..16)
+
+WrappedCpmContainer ::= SEQUENCE {
+    containerId    CpmContainerId,
+    containerData  OCTET STRING
+}
+
+WrappedCpmContainers ::= SEQUENCE SIZE (1..8, ...) OF WrappedCpmContainer
+
+-- TS 103 324 CPM-OriginatingStationContainers
+OriginatingRsuContainer ::= SEQUENCE {
+    mapReference  NotSent OPTIONAL,
+    ...
+}
+
+-- TS 103 324 CPM-PerceivedObjectContainer
+PerceivedObjectContainer ::= SEQUENCE {
+    numberOfPerceivedObjects  CardinalNumber1B,
+    perceivedObjects          PerceivedObjects,
+    ...
+}
+
+PerceivedObjects ::= SEQUENCE SIZE (0..255, ...) OF PerceivedObject
+
+-- TS 102 894-2 ETSI-ITS-CDD
+ItsPduHeader ::= SEQUENCE {
+    protocolVersion  OrdinalNumber1B,
+    messageId        MessageId,
+    stationId        StationId
+}
+
+OrdinalNumber1B ::= INTEGER (0..255)
+CardinalNumber1B ::= INTEGER (0..255)
+MessageId ::= INTEGER (0..255)
+StationId ::= INTEGER (0..4294967295)
+TimestampIts ::= INTEGER (0..4398046511103)
+
+ReferencePosition ::= SEQUENCE {
+    latitude                   Latitude,
+    longitude                  Longitude,
+    positionConfidenceEllipse  PosConfidenceEllipse,
+    altitude                   Altitude
+}
+
+Latitude ::= INTEGER (-900000000..900000001)
+Longitude ::= INTEGER (-1800000000..1800000001)
+
+PosConfidenceEllipse ::= SEQUENCE {
+    semiMajorConfidence   SemiAxisLength,
+    semiMinorConfidence   SemiAxisLength,
+    semiMajorOrientation  HeadingValue
+}
+
+SemiAxisLength ::= INTEGER (0..4095)
+HeadingValue ::= INTEGER (0..3601)
+
+Altitude ::= SEQUENCE {
+    altitudeValue       AltitudeValue,
+    altitudeConfidence  AltitudeConfidence
+}
+
+AltitudeValue ::= INTEGER (-100000..800001)
+
+AltitudeConfidence ::= ENUMERATED {
+    alt-000-01 (0), alt-000-02 (1), alt-000-05 (2), alt-000-10 (3), alt-000-20 (4), alt-000-50 (5),
+    alt-001-00 (6), alt-002-00 (7), alt-005-00 (8), alt-010-00 (9), alt-020-00 (10), alt-050-00 (11),
+    alt-100-00 (12), alt-200-00 (13), outOfRange (14), unavailable (15)
+}
+
+PerceivedObject ::= SEQUENCE {
+    objectId                            Identifier2B OPTIONAL,
+    measurementDeltaTime                DeltaTimeMilliSecondSigned,
+    position                            CartesianPosition3dWithConfidence,
+    velocity                            NotSent OPTIONAL,
+    acceleration                        NotSent OPTIONAL,
+    angles                              NotSent OPTIONAL,
+    zAngularVelocity                    NotSent OPTIONAL,
+    lowerTriangularCorrelationMatrices  LowerTriangularPositiveSemidefiniteMatrices OPTIONAL,
+    objectDimensionZ                    NotSent OPTIONAL,
+    objectDimensionY                    NotSent OPTIONAL,
+    objectDimensionX                    NotSent OPTIONAL,
+    objectAge                           DeltaTimeMilliSecondSigned (0..2047) OPTIONAL,
+    objectPerceptionQuality             NotSent OPTIONAL,
+    sensorIdList                        NotSent OPTIONAL,
+    classification                      ObjectClassDescription OPTIONAL,
+    mapPosition                         NotSent OPTIONAL,
+    ...
+}
+
+Identifier2B ::= INTEGER (0..65535)
+DeltaTimeMilliSecondSigned ::= INTEGER (-2048..2047)
+
+CartesianPosition3dWithConfidence ::= SEQUENCE {
+    xCoordinate  CartesianCoordinateWithConfidence,
+    yCoordinate  CartesianCoordinateWithConfidence,
+    zCoordinate  CartesianCoordinateWithConfidence OPTIONAL
+}
+
+CartesianCoordinateWithConfidence ::= SEQUENCE {
+    value       CartesianCoordinateLarge,
+    confidence  CoordinateConfidence
+}
+
+CartesianCoordinateLarge ::= INTEGER (-131072..131071)
+CoordinateConfidence ::= INTEGER (1..4096)
+
+LowerTriangularPositiveSemidefiniteMatrices ::= SEQUENCE SIZE (1..4) OF LowerTriangularPositiveSemidefiniteMatrix
+
+LowerTriangularPositiveSemidefiniteMatrix ::= SEQUENCE {
+    componentsIncludedIntheMatrix  MatrixIncludedComponents,
+    matrix                         LowerTriangularPositiveSemidefiniteMatrixColumns
+}
+
+MatrixIncludedComponents ::= BIT STRING {
+    xPosition (0), yPosition (1), zPosition (2), xVelocityOrVelocityMagnitude (3),
+    yVelocityOrVelocityDirection (4), zSpeed (5), xAccelOrAccelMagnitude (6), yAccelOrAccelDirection (7),
+    zAcceleration (8), zAngle (9), yAngle (10), xAngle (11), zAngularVelocity (12)
+} (SIZE (13, ...))
+
+LowerTriangularPositiveSemidefiniteMatrixColumns ::= SEQUENCE SIZE (1..13) OF CorrelationColumn
+CorrelationColumn ::= SEQUENCE SIZE (1..13, ...) OF CorrelationCellValue
+CorrelationCellValue ::= INTEGER (-100..101)
+
+ObjectClassDescription ::= SEQUENCE SIZE (1..8) OF ObjectClassWithConfidence
+
+ObjectClassWithConfidence ::= SEQUENCE {
+    objectClass  ObjectClass,
+    confidence   ConfidenceLevel
+}
+
+ObjectClass ::= CHOICE {
+    vehicleSubClass  TrafficParticipantType (0..14),
+    vruSubClass      VruProfileAndSubprofile,
+    groupSubClass    NotSent,
+    otherSubClass    OtherSubClass,
+    ...
+}
+
+TrafficParticipantType ::= INTEGER (0..255)
+
+VruProfileAndSubprofile ::= CHOICE {
+    pedestrian                   VruSubProfilePedestrian,
+    bicyclistAndLightVruVehicle  NotSent,
+    motorcyclist                 NotSent,
+    animal                       NotSent,
+    ...
+}
+
+VruSubProfilePedestrian ::= ENUMERATED {
+    unavailable (0), ordinary-pedestrian (1), road-worker (2), first-responder (3), max (15)
+}
+
+OtherSubClass ::= INTEGER (0..255)
+ConfidenceLevel ::= INTEGER (1..101)
+
+END
+"""

@@ -1,0 +1,266 @@
+"""ETSI Collective Perception Message (TS 103 324 Release 2) of one frame: JSON and UPER.
+
+JSON layout
+-----------
+The JSON uses the standard's component names and units (the ASN.1 value, written as JSON):
+a CHOICE is an object with one key (the alternative), a BIT STRING of named bits is the list
+of the names of the bits that are set, and the open-type ``containerData`` holds the
+container itself (its type follows from ``containerId``)::
+
+    {"header": {"protocolVersion": 2, "messageId": 14, "stationId": 1},
+     "payload": {
+       "managementContainer": {
+         "referenceTime": 660000000000,                    # TimestampIts: ms since 2004-01-01 UTC (TAI)
+         "referencePosition": {"latitude": 422808000,     # 0.1 microdegree, 900000001 = unavailable
+                               "longitude": -837430000,   # 0.1 microdegree, 1800000001 = unavailable
+                               "positionConfidenceEllipse": {"semiMajorConfidence": 4095, ...},
+                               "altitude": {"altitudeValue": 800001, "altitudeConfidence": "unavailable"}}},
+       "cpmContainers": [
+         {"containerId": 2, "containerData": {}},                        # OriginatingRsuContainer
+         {"containerId": 5, "containerData": {                           # PerceivedObjectContainer
+            "numberOfPerceivedObjects": 1,
+            "perceivedObjects": [{
+               "objectId": 7, "measurementDeltaTime": 0,                 # ms after referenceTime
+               "position": {"xCoordinate": {"value": 1234, "confidence": 37},   # 0.01 m east; 0.01 m at 95 %
+                            "yCoordinate": {"value": -56, "confidence": 81}},   # 0.01 m north
+               "lowerTriangularCorrelationMatrices": [
+                  {"componentsIncludedIntheMatrix": ["xPosition", "yPosition"], "matrix": [[45]]}],
+               "classification": [{"objectClass": {"vehicleSubClass": 5}, "confidence": 101}]}]}}]}}
+
+Positions are relative to the reference position, x east and y north (TS 103 324: for an
+RSU the perceived objects are "in the coordinate system in which the y-axis corresponds to
+the North direction, the x-axis to the East direction").  The confidences and the
+correlation are :func:`footprint_uq.v2x.cpm_fields` of the centre covariance, unchanged.
+Coordinates beyond +-1310.71 m take the out-of-range values (-131072 / 131071).
+
+UPER
+----
+:func:`encode_cpm_uper` encodes the JSON with asn1tools from the subset module
+:data:`~footprint_uq.service.messages.asn1_cpm.CPM_ASN1` (read its doc for how the subset keeps
+the standard's bits); :func:`decode_cpm_uper` is its inverse and returns the same JSON.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+
+from ...errors import InputError
+from .asn1_cpm import (
+    CONTAINER_ID_PERCEIVED_OBJECTS,
+    CONTAINER_ID_RSU,
+    CPM_ASN1,
+    CPM_PROTOCOL_VERSION,
+    MESSAGE_ID_CPM,
+)
+
+__all__ = ["build_cpm", "encode_cpm_uper", "decode_cpm_uper", "cpm_to_asn1_value", "timestamp_its_ms",
+           "perceived_object", "LATITUDE_UNAVAILABLE", "LONGITUDE_UNAVAILABLE", "CPM_CLASSES", "MATRIX_COMPONENTS",
+           "unavailable_reference_ellipse"]
+
+LATITUDE_UNAVAILABLE = 900000001
+LONGITUDE_UNAVAILABLE = 1800000001
+SEMI_AXIS_UNAVAILABLE = 4095
+HEADING_UNAVAILABLE = 3601
+ALTITUDE_UNAVAILABLE = 800001
+COORD_MIN, COORD_MAX = -131072, 131071  # CartesianCoordinateLarge negative/positiveOutOfRange
+CONFIDENCE_LEVEL_UNAVAILABLE = 101
+
+#: MatrixIncludedComponents bit names, in bit order
+MATRIX_COMPONENTS = ("xPosition", "yPosition", "zPosition", "xVelocityOrVelocityMagnitude",
+                     "yVelocityOrVelocityDirection", "zSpeed", "xAccelOrAccelMagnitude", "yAccelOrAccelDirection",
+                     "zAcceleration", "zAngle", "yAngle", "xAngle", "zAngularVelocity")
+
+#: detector class (lower case) -> ObjectClass; classes not listed get no classification (it is OPTIONAL)
+CPM_CLASSES = {
+    "car": {"vehicleSubClass": 5}, "passengercar": {"vehicleSubClass": 5}, "passenger_car": {"vehicleSubClass": 5},
+    "bus": {"vehicleSubClass": 6},
+    "van": {"vehicleSubClass": 7}, "lighttruck": {"vehicleSubClass": 7}, "light_truck": {"vehicleSubClass": 7},
+    "truck": {"vehicleSubClass": 8}, "heavytruck": {"vehicleSubClass": 8}, "heavy_truck": {"vehicleSubClass": 8},
+    "trailer": {"vehicleSubClass": 9},
+    "specialvehicle": {"vehicleSubClass": 10}, "special_vehicle": {"vehicleSubClass": 10},
+    "tram": {"vehicleSubClass": 11},
+    "agricultural": {"vehicleSubClass": 14}, "tractor": {"vehicleSubClass": 14},
+    "pedestrian": {"vruSubClass": {"pedestrian": "ordinary-pedestrian"}},
+    "person": {"vruSubClass": {"pedestrian": "ordinary-pedestrian"}},
+}
+
+_UNIX_2004_S = 1072915200.0
+#: TAI - UTC leap seconds inserted after 2004-01-01 (Unix time at which each took effect)
+_LEAP_SECONDS_UNIX_S = (1136073600.0, 1230768000.0, 1341100800.0, 1435708800.0, 1483228800.0)
+TIMESTAMP_ITS_MAX = 4398046511103
+
+
+def timestamp_its_ms(unix_s: float) -> int:
+    """``TimestampIts`` of a Unix time (s, UTC): TAI milliseconds since 2004-01-01 00:00:00 UTC.
+
+    Leap seconds inserted since 2004 (five, the last at the start of 2017) are added, as the
+    CDD defines the count in TAI.
+    """
+    if not (isinstance(unix_s, (int, float)) and math.isfinite(unix_s)) or unix_s < _UNIX_2004_S:
+        raise InputError("timestamp_s", unix_s, "Unix time in seconds (UTC) on or after 2004-01-01 (TimestampIts)")
+    leap = sum(1 for t in _LEAP_SECONDS_UNIX_S if unix_s >= t)
+    ms = int(round((unix_s - _UNIX_2004_S + leap) * 1000.0))
+    if ms > TIMESTAMP_ITS_MAX:
+        raise InputError("timestamp_s", unix_s, "a time TimestampIts can hold (before the year 2143)")
+    return ms
+
+
+def unavailable_reference_ellipse() -> dict:
+    """PosConfidenceEllipse with every field 'unavailable' (the station's own position accuracy is not known)."""
+    return {"semiMajorConfidence": SEMI_AXIS_UNAVAILABLE, "semiMinorConfidence": SEMI_AXIS_UNAVAILABLE,
+            "semiMajorOrientation": HEADING_UNAVAILABLE}
+
+
+def _coord_cm(v_m: float) -> int:
+    c = round(v_m * 100.0)
+    return COORD_MIN if c <= COORD_MIN else COORD_MAX if c >= COORD_MAX else int(c)
+
+
+def perceived_object(object_id: int, east_m: float, north_m: float, x_conf: int, y_conf: int, xy_corr: int,
+                     object_class: dict | None, class_confidence: int = CONFIDENCE_LEVEL_UNAVAILABLE,
+                     measurement_delta_ms: int = 0) -> dict:
+    """One ``PerceivedObject`` (JSON form): position east/north of the reference position (m) with its
+    CPM confidences (:func:`footprint_uq.v2x.cpm_fields`), the x/y correlation cell when available."""
+    po = {"objectId": int(object_id), "measurementDeltaTime": int(measurement_delta_ms),
+          "position": {"xCoordinate": {"value": _coord_cm(east_m), "confidence": int(x_conf)},
+                       "yCoordinate": {"value": _coord_cm(north_m), "confidence": int(y_conf)}}}
+    if xy_corr != 101:  # CorrelationCellValue unavailable: the optional matrix is left out
+        po["lowerTriangularCorrelationMatrices"] = [
+            {"componentsIncludedIntheMatrix": ["xPosition", "yPosition"], "matrix": [[int(xy_corr)]]}]
+    if object_class is not None:
+        po["classification"] = [{"objectClass": object_class, "confidence": int(class_confidence)}]
+    return po
+
+
+def build_cpm(station_id: int, reference_time_ms: int, perceived_objects: list[dict], *,
+              latitude: int = LATITUDE_UNAVAILABLE, longitude: int = LONGITUDE_UNAVAILABLE) -> dict:
+    """The CPM (JSON form, see the module doc) of one frame.
+
+    Parameters
+    ----------
+    station_id : int        StationId of the roadside unit (0 .. 2^32 - 1)
+    reference_time_ms : int TimestampIts of the frame (:func:`timestamp_its_ms`)
+    perceived_objects : list of :func:`perceived_object` dicts (at most 255)
+    latitude, longitude : int
+        Reference position in 0.1 microdegree (unavailable by default: positions are then
+        relative to an unknown point and only their confidences are meaningful).
+    """
+    if not 0 <= int(station_id) <= 4294967295:
+        raise InputError("station_id", station_id, "an integer in 0..4294967295 (StationId)")
+    if len(perceived_objects) > 255:
+        raise InputError("perceived_objects", len(perceived_objects), "at most 255 objects per CPM")
+    return {
+        "header": {"protocolVersion": CPM_PROTOCOL_VERSION, "messageId": MESSAGE_ID_CPM, "stationId": int(station_id)},
+        "payload": {
+            "managementContainer": {
+                "referenceTime": int(reference_time_ms),
+                "referencePosition": {"latitude": int(latitude), "longitude": int(longitude),
+                                      "positionConfidenceEllipse": unavailable_reference_ellipse(),
+                                      "altitude": {"altitudeValue": ALTITUDE_UNAVAILABLE,
+                                                   "altitudeConfidence": "unavailable"}}},
+            "cpmContainers": [
+                {"containerId": CONTAINER_ID_RSU, "containerData": {}},
+                {"containerId": CONTAINER_ID_PERCEIVED_OBJECTS,
+                 "containerData": {"numberOfPerceivedObjects": len(perceived_objects),
+                                   "perceivedObjects": perceived_objects}}]}}
+
+
+@functools.cache
+def _spec():
+    import asn1tools
+
+    return asn1tools.compile_string(CPM_ASN1, "uper")
+
+
+def _bits_to_asn1(names: list[str]) -> tuple[bytes, int]:
+    v = 0
+    for n in names:
+        v |= 1 << (15 - MATRIX_COMPONENTS.index(n))
+    return v.to_bytes(2, "big"), len(MATRIX_COMPONENTS)
+
+
+def _bits_from_asn1(value: tuple[bytes, int]) -> list[str]:
+    data, n = value
+    v = int.from_bytes(data, "big")
+    nb = 8 * len(data)
+    return [MATRIX_COMPONENTS[i] for i in range(min(n, len(MATRIX_COMPONENTS))) if v >> (nb - 1 - i) & 1]
+
+
+def _choice_to_asn1(c: dict):
+    (name, value), = c.items()
+    return (name, _choice_to_asn1(value) if isinstance(value, dict) else value)
+
+
+def _choice_from_asn1(c):
+    name, value = c
+    return {name: _choice_from_asn1(value) if isinstance(value, tuple) else value}
+
+
+def _po_to_asn1(po: dict) -> dict:
+    out = dict(po)
+    if "lowerTriangularCorrelationMatrices" in po:
+        out["lowerTriangularCorrelationMatrices"] = [
+            {"componentsIncludedIntheMatrix": _bits_to_asn1(m["componentsIncludedIntheMatrix"]), "matrix": m["matrix"]}
+            for m in po["lowerTriangularCorrelationMatrices"]]
+    if "classification" in po:
+        out["classification"] = [{"objectClass": _choice_to_asn1(c["objectClass"]), "confidence": c["confidence"]}
+                                 for c in po["classification"]]
+    return out
+
+
+def _po_from_asn1(po: dict) -> dict:
+    out = dict(po)
+    if "lowerTriangularCorrelationMatrices" in po:
+        out["lowerTriangularCorrelationMatrices"] = [
+            {"componentsIncludedIntheMatrix": _bits_from_asn1(m["componentsIncludedIntheMatrix"]),
+             "matrix": [list(col) for col in m["matrix"]]}
+            for m in po["lowerTriangularCorrelationMatrices"]]
+    if "classification" in po:
+        out["classification"] = [{"objectClass": _choice_from_asn1(c["objectClass"]), "confidence": c["confidence"]}
+                                 for c in po["classification"]]
+    return out
+
+
+_CONTAINER_TYPES = {CONTAINER_ID_RSU: "OriginatingRsuContainer",
+                    CONTAINER_ID_PERCEIVED_OBJECTS: "PerceivedObjectContainer"}
+
+
+def cpm_to_asn1_value(cpm: dict) -> dict:
+    """The asn1tools value of a CPM JSON (containers encoded into their open-type octets)."""
+    spec = _spec()
+    containers = []
+    for w in cpm["payload"]["cpmContainers"]:
+        cid = w["containerId"]
+        if cid not in _CONTAINER_TYPES:
+            raise InputError("cpmContainers.containerId", cid, f"one of {sorted(_CONTAINER_TYPES)} (the subset sent)")
+        data = w["containerData"]
+        if cid == CONTAINER_ID_PERCEIVED_OBJECTS:
+            data = {**data, "perceivedObjects": [_po_to_asn1(p) for p in data["perceivedObjects"]]}
+        containers.append({"containerId": cid, "containerData": spec.encode(_CONTAINER_TYPES[cid], data)})
+    return {"header": cpm["header"],
+            "payload": {"managementContainer": cpm["payload"]["managementContainer"], "cpmContainers": containers}}
+
+
+def encode_cpm_uper(cpm: dict) -> bytes:
+    """UPER encoding (bytes) of a CPM given in its JSON form."""
+    return _spec().encode("CollectivePerceptionMessage", cpm_to_asn1_value(cpm))
+
+
+def decode_cpm_uper(data: bytes | str) -> dict:
+    """Decode UPER bytes (or their hex) into the CPM JSON form (inverse of :func:`encode_cpm_uper`)."""
+    spec = _spec()
+    raw = bytes.fromhex(data) if isinstance(data, str) else bytes(data)
+    msg = spec.decode("CollectivePerceptionMessage", raw)
+    containers = []
+    for w in msg["payload"]["cpmContainers"]:
+        cid = w["containerId"]
+        if cid not in _CONTAINER_TYPES:
+            raise InputError("cpmContainers.containerId", cid,
+                             f"one of {sorted(_CONTAINER_TYPES)} (the subset decoded)")
+        data_ = spec.decode(_CONTAINER_TYPES[cid], w["containerData"])
+        if cid == CONTAINER_ID_PERCEIVED_OBJECTS:
+            data_ = {**data_, "perceivedObjects": [_po_from_asn1(p) for p in data_["perceivedObjects"]]}
+        containers.append({"containerId": cid, "containerData": data_})
+    return {"header": msg["header"], "payload": {"managementContainer": msg["payload"]["managementContainer"],
+                                                 "cpmContainers": containers}}
