@@ -55,8 +55,8 @@ from .asn1_cpm import (
 )
 
 __all__ = ["build_cpm", "encode_cpm_uper", "decode_cpm_uper", "cpm_to_asn1_value", "timestamp_its_ms",
-           "perceived_object", "LATITUDE_UNAVAILABLE", "LONGITUDE_UNAVAILABLE", "CPM_CLASSES", "MATRIX_COMPONENTS",
-           "unavailable_reference_ellipse"]
+           "perceived_object", "coordinate_cm", "LATITUDE_UNAVAILABLE", "LONGITUDE_UNAVAILABLE", "CPM_CLASSES",
+           "MATRIX_COMPONENTS", "unavailable_reference_ellipse"]
 
 LATITUDE_UNAVAILABLE = 900000001
 LONGITUDE_UNAVAILABLE = 1800000001
@@ -112,19 +112,23 @@ def unavailable_reference_ellipse() -> dict:
             "semiMajorOrientation": HEADING_UNAVAILABLE}
 
 
-def _coord_cm(v_m: float) -> int:
-    c = round(v_m * 100.0)
-    return COORD_MIN if c <= COORD_MIN else COORD_MAX if c >= COORD_MAX else int(c)
+def coordinate_cm(v_m):
+    """``CartesianCoordinateLarge`` (0.01 m; out-of-range values beyond +-1310.71 m) of metres -> int array."""
+    import numpy as np
+
+    c = np.rint(np.nan_to_num(np.asarray(v_m, dtype=np.float64), nan=0.0) * 100.0)
+    return np.clip(c, COORD_MIN, COORD_MAX).astype(np.int64)
 
 
-def perceived_object(object_id: int, east_m: float, north_m: float, x_conf: int, y_conf: int, xy_corr: int,
+def perceived_object(object_id: int, east_cm: int, north_cm: int, x_conf: int, y_conf: int, xy_corr: int,
                      object_class: dict | None, class_confidence: int = CONFIDENCE_LEVEL_UNAVAILABLE,
                      measurement_delta_ms: int = 0) -> dict:
-    """One ``PerceivedObject`` (JSON form): position east/north of the reference position (m) with its
-    CPM confidences (:func:`footprint_uq.v2x.cpm_fields`), the x/y correlation cell when available."""
+    """One ``PerceivedObject`` (JSON form): position east/north of the reference position in 0.01 m
+    (:func:`coordinate_cm`) with its CPM confidences (:func:`footprint_uq.v2x.cpm_fields`), the x/y
+    correlation cell when available."""
     po = {"objectId": int(object_id), "measurementDeltaTime": int(measurement_delta_ms),
-          "position": {"xCoordinate": {"value": _coord_cm(east_m), "confidence": int(x_conf)},
-                       "yCoordinate": {"value": _coord_cm(north_m), "confidence": int(y_conf)}}}
+          "position": {"xCoordinate": {"value": int(east_cm), "confidence": int(x_conf)},
+                       "yCoordinate": {"value": int(north_cm), "confidence": int(y_conf)}}}
     if xy_corr != 101:  # CorrelationCellValue unavailable: the optional matrix is left out
         po["lowerTriangularCorrelationMatrices"] = [
             {"componentsIncludedIntheMatrix": ["xPosition", "yPosition"], "matrix": [[int(xy_corr)]]}]

@@ -30,7 +30,7 @@ import datetime as _dt
 
 from ...v2x import J2735_POSITION_CONFIDENCE_NAMES
 
-__all__ = ["build_sdsm", "sdsm_object", "SDSM_OBJECT_TYPES"]
+__all__ = ["build_sdsm", "sdsm_object", "offset_dm", "SDSM_OBJECT_TYPES"]
 
 SPEED_UNAVAILABLE = 8191
 HEADING_UNAVAILABLE = 28800
@@ -46,19 +46,22 @@ SDSM_OBJECT_TYPES = {
 }
 
 
-def _offset_dm(v_m: float) -> int:
-    d = round(v_m * 10.0)
-    return -OFFSET_MAX if d < -OFFSET_MAX else OFFSET_MAX if d > OFFSET_MAX else int(d)
+def offset_dm(v_m):
+    """``ObjectDistance`` (0.1 m, clamped to +-32767) of metres ``(...)`` -> int array."""
+    import numpy as np
+
+    d = np.rint(np.nan_to_num(np.asarray(v_m, dtype=np.float64), nan=0.0) * 10.0)
+    return np.clip(d, -OFFSET_MAX, OFFSET_MAX).astype(np.int64)
 
 
-def sdsm_object(object_id: int, east_m: float, north_m: float, position_confidence: int, object_class: str | None,
+def sdsm_object(object_id: int, east_dm: int, north_dm: int, position_confidence: int, object_class: str | None,
                 class_confidence_pct: int = 0, measurement_time_ms: int = 0) -> dict:
-    """One ``DetectedObjectData`` (JSON form) with the common data only."""
+    """One ``DetectedObjectData`` (JSON form) with the common data only; offsets from :func:`offset_dm`."""
     return {"detObjCommon": {
         "objType": SDSM_OBJECT_TYPES.get((object_class or "").lower(), "unknown"),
         "objTypeCfd": int(class_confidence_pct), "objectID": int(object_id),
         "measurementTime": int(measurement_time_ms), "timeConfidence": "unavailable",
-        "pos": {"offsetX": _offset_dm(east_m), "offsetY": _offset_dm(north_m)},
+        "pos": {"offsetX": int(east_dm), "offsetY": int(north_dm)},
         "posConfidence": {"pos": J2735_POSITION_CONFIDENCE_NAMES[int(position_confidence)],
                           "elevation": "unavailable"},
         "speed": SPEED_UNAVAILABLE, "speedConfidence": "unavailable",

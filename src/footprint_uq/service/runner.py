@@ -1,0 +1,389 @@
+"""The long-running service behind ``footprint-uq serve``: transports, drop policy, metrics, drain.
+
+Inputs: JSON Lines on stdin, or MQTT topics ``<input-prefix>/<camera_id>`` (QoS 1).  Outputs:
+JSON Lines on stdout, or MQTT topics ``<output-prefix>/<camera_id>`` (QoS 1), errors on
+``<output-prefix>/errors`` and health on ``<output-prefix>/health``.  One worker thread runs
+:meth:`footprint_uq.service.Service.process_frame`; the transports only move bytes.
+
+Overload policy (:class:`FrameQueue`): at most **one pending frame per camera**.  With
+``newest`` (the default for MQTT) a frame that arrives while its camera's previous frame is
+still waiting replaces it and the replaced one is counted in ``frames_dropped``; with ``block``
+(the default for stdin) the reader waits, so a pipe pushes back on the detector and nothing is
+dropped.  Memory is bounded by the number of cameras, never by the backlog.
+
+Accounting: ``frames_in = frames_out + errors + frames_dropped + pending`` at every health
+message; after a drain ``pending`` is 0.
+
+Faults: the MQTT client reconnects with exponential back-off (1 s to 16 s), resubscribes on
+every connect, and uses a persistent session (``clean_session=False``, fixed client id) so the
+broker keeps QoS-1 messages for it while it is away.  SIGTERM / SIGINT (or the end of stdin)
+stops reading, processes everything pending, waits for the outputs to be acknowledged and
+returns exit status 0.
+"""
+
+from __future__ import annotations
+
+import collections
+import os
+import signal
+import sys
+import threading
+import time
+from urllib.parse import urlparse
+
+import numpy as np
+
+from ..errors import ConfigError, InputError
+from .core import RECORD_ERROR, RECORD_FOOTPRINTS, Service, error_record
+
+__all__ = ["FrameQueue", "Metrics", "serve", "parse_mqtt_url", "POLICIES"]
+
+POLICIES = ("newest", "block")
+
+
+def _dumps(obj) -> bytes:
+    import orjson
+
+    return orjson.dumps(obj)
+
+
+def _loads(data):
+    import orjson
+
+    return orjson.loads(data)
+
+
+class FrameQueue:
+    """Pending frames, at most one per key (camera), served oldest-key first (see the module doc).
+
+    Parameters
+    ----------
+    policy : {"newest", "block"}
+    max_keys : int
+        Most distinct keys pending at once (a bound on memory when ids are garbage): a frame
+        of a new key beyond it is dropped (``newest``) or waits (``block``).
+    """
+
+    def __init__(self, policy: str = "newest", max_keys: int = 4096):
+        if policy not in POLICIES:
+            raise InputError("policy", policy, f"one of {POLICIES}")
+        self.policy = policy
+        self.max_keys = int(max_keys)
+        self._items: collections.OrderedDict = collections.OrderedDict()
+        self._cv = threading.Condition()
+        self._closed = False
+        self.dropped = 0
+
+    def put(self, key, item) -> bool:
+        """Queue ``item`` for ``key``; False if it was dropped (key limit) or the queue is closed."""
+        with self._cv:
+            if self.policy == "block":
+                while not self._closed and (key in self._items or len(self._items) >= self.max_keys):
+                    self._cv.wait(0.1)
+            if self._closed:
+                return False
+            if key in self._items:
+                self._items[key] = item  # keeps its place in line: cameras are served fairly
+                self.dropped += 1
+            elif len(self._items) >= self.max_keys:
+                self.dropped += 1
+                return False
+            else:
+                self._items[key] = item
+            self._cv.notify_all()
+            return True
+
+    def get(self, timeout: float | None = None):
+        """The oldest pending item (None after ``timeout`` s, or when closed and empty)."""
+        with self._cv:
+            end = None if timeout is None else time.monotonic() + timeout
+            while not self._items:
+                if self._closed:
+                    return None
+                remaining = None if end is None else end - time.monotonic()
+                if remaining is not None and remaining <= 0:
+                    return None
+                self._cv.wait(remaining)
+            _, item = self._items.popitem(last=False)
+            self._cv.notify_all()
+            return item
+
+    def close(self) -> None:
+        """No more puts; :meth:`get` drains what is pending, then returns None."""
+        with self._cv:
+            self._closed = True
+            self._cv.notify_all()
+
+    def __len__(self) -> int:
+        with self._cv:
+            return len(self._items)
+
+
+class Metrics:
+    """Counters and latencies of the service (thread-safe); :meth:`snapshot` is the health message."""
+
+    def __init__(self):
+        self._lock = threading.Lock()
+        self.t_start = time.monotonic()
+        self.frames_in = 0
+        self.frames_out = 0
+        self.errors = 0
+        self.publish_failed = 0
+        self._lat_ms: list[float] = []
+        self._proc_us: list[float] = []
+        self._lat_total = collections.deque(maxlen=100_000)
+
+    def received(self, n: int = 1) -> None:
+        with self._lock:
+            self.frames_in += n
+
+    def done(self, record: dict, latency_s: float) -> None:
+        with self._lock:
+            if record.get("type") == RECORD_FOOTPRINTS:
+                self.frames_out += 1
+                self._proc_us.append(record["processing_us"]["total"])
+            else:
+                self.errors += 1
+            self._lat_ms.append(1e3 * latency_s)
+            self._lat_total.append(1e3 * latency_s)
+
+    def snapshot(self, dropped: int, pending: int) -> dict:
+        """Totals since the start and p50/p99 latency (receipt -> output written) over the last interval."""
+        with self._lock:
+            lat, self._lat_ms = self._lat_ms, []
+            proc, self._proc_us = self._proc_us, []
+            rec = {"type": "health", "time_s": time.time(), "uptime_s": round(time.monotonic() - self.t_start, 3),
+                   "frames_in": self.frames_in, "frames_out": self.frames_out, "frames_dropped": dropped,
+                   "errors": self.errors, "pending": pending, "publish_failed": self.publish_failed,
+                   "interval_frames": len(lat)}
+        q = np.percentile(lat, [50, 99]).tolist() if lat else [None, None]
+        p = np.percentile(proc, [50, 99]).tolist() if proc else [None, None]
+        rec.update(latency_ms_p50=q[0], latency_ms_p99=q[1], processing_us_p50=p[0], processing_us_p99=p[1])
+        return rec
+
+    def latency_total_ms(self) -> list[float]:
+        with self._lock:
+            return list(self._lat_total)
+
+
+def parse_mqtt_url(url: str) -> tuple[str, int]:
+    """``mqtt://HOST:PORT`` -> (host, port) (port 1883 by default)."""
+    u = urlparse(url)
+    if u.scheme != "mqtt" or not u.hostname:
+        raise InputError("--mqtt", url, "mqtt://HOST:PORT")
+    try:
+        port = u.port or 1883
+    except ValueError:
+        raise InputError("--mqtt", url, "mqtt://HOST:PORT with a numeric port") from None
+    return u.hostname, port
+
+
+# -- sinks -------------------------------------------------------------------------------------------
+class _StdoutSink:
+    def __init__(self, stream):
+        self._out = stream
+        self._lock = threading.Lock()
+
+    def write(self, record: dict) -> None:
+        data = _dumps(record) + b"\n"
+        with self._lock:
+            self._out.write(data)
+            self._out.flush()
+
+    def close(self, timeout_s: float) -> None:
+        with self._lock:
+            self._out.flush()
+
+
+class _MqttSink:
+    def __init__(self, client, prefix: str, metrics: Metrics):
+        self._c = client
+        self._prefix = prefix
+        self._metrics = metrics
+        self._last = None
+
+    def write(self, record: dict) -> None:
+        kind = record.get("type")
+        if kind == RECORD_FOOTPRINTS:
+            topic = f"{self._prefix}/{record['camera_id'] if record['camera_id'] is not None else 'camera'}"
+        elif kind == RECORD_ERROR:
+            topic = f"{self._prefix}/errors"
+        else:
+            topic = f"{self._prefix}/health"
+        info = self._c.publish(topic, _dumps(record), qos=1)
+        if info.rc != 0:  # queue full (broker away for long): counted, never unbounded
+            with self._metrics._lock:
+                self._metrics.publish_failed += 1
+        else:
+            self._last = info
+
+    def close(self, timeout_s: float) -> None:
+        end = time.monotonic() + timeout_s
+        while self._c.want_write() or (self._last is not None and not self._last.is_published()):
+            if time.monotonic() > end:
+                break
+            time.sleep(0.01)
+
+
+# -- sources ---------------------------------------------------------------------------------------------
+def _stdin_reader(stream, queue: FrameQueue, sink, metrics: Metrics, stop: threading.Event) -> None:
+    for lineno, line in enumerate(stream, start=1):
+        if stop.is_set():
+            break
+        if not line.strip():
+            continue
+        t = time.monotonic()
+        metrics.received()
+        src = f"stdin line {lineno}"
+        try:
+            frame = _loads(line)
+        except ValueError as e:
+            rec = error_record(f"invalid JSON: {e}", source=src)
+            sink.write(rec)
+            metrics.done(rec, time.monotonic() - t)
+            continue
+        key = frame.get("camera_id") if isinstance(frame, dict) else None
+        key = key if isinstance(key, str) else repr(key)
+        if not queue.put(key, (frame, src, t)):
+            rec = error_record("service stopping or too many cameras pending", source=src)
+            sink.write(rec)
+            metrics.done(rec, time.monotonic() - t)
+    queue.close()
+
+
+def _mqtt_client(host: str, port: int, client_id: str):
+    try:
+        import paho.mqtt.client as mqtt
+    except ImportError:
+        raise ConfigError("--mqtt", "paho-mqtt not installed", "pip install 'footprint-uq[service]'") from None
+    c = mqtt.Client(mqtt.CallbackAPIVersion.VERSION2, client_id=client_id, clean_session=False)
+    c.reconnect_delay_set(min_delay=1, max_delay=16)
+    c.max_queued_messages_set(10_000)
+    c.max_inflight_messages_set(100)
+    return c
+
+
+# -- the service --------------------------------------------------------------------------------------------
+def serve(service: Service, *, input: str | None = "-", mqtt: str | None = None, output: str = "-",
+          input_prefix: str = "detections", output_prefix: str = "footprints", policy: str | None = None,
+          health_interval_s: float = 1.0, client_id: str | None = None, stdin=None, stdout=None,
+          stop: threading.Event | None = None, install_signals: bool = True, drain_timeout_s: float = 10.0) -> int:
+    """Run the service until SIGTERM/SIGINT, ``stop`` or the end of stdin; return the exit status (0).
+
+    Parameters
+    ----------
+    service : Service
+    input : "-" (stdin) or None (MQTT, needs ``mqtt``)
+    mqtt : "mqtt://HOST:PORT", optional
+        Broker for MQTT input (``input=None``) and/or output (``output="mqtt"``).
+    output : "-" (stdout JSON Lines) or "mqtt"
+    policy : {"newest", "block"}, optional
+        Overload policy (default: ``block`` for stdin, ``newest`` for MQTT).
+    health_interval_s : float
+        Period of the health/metrics message (0: none).
+    """
+    if input not in ("-", None):
+        raise InputError("--input", input, "'-' (stdin); use --mqtt for MQTT input")
+    if output not in ("-", "mqtt"):
+        raise InputError("--output", output, "'-' (stdout) or 'mqtt'")
+    if (input is None or output == "mqtt") and not mqtt:
+        raise InputError("--mqtt", None, "mqtt://HOST:PORT for MQTT input or output")
+    policy = policy or ("block" if input == "-" else "newest")
+    stop = stop or threading.Event()
+    metrics = Metrics()
+    queue = FrameQueue(policy)
+    client = None
+    subscribed = threading.Event()
+    if mqtt:
+        host, port = parse_mqtt_url(mqtt)
+        client = _mqtt_client(host, port, client_id or f"footprint-uq-serve-{os.getpid()}")
+        topic = f"{input_prefix}/+"
+
+        def on_connect(c, userdata, flags, reason_code, properties):
+            if not reason_code.is_failure and input is None and not stop.is_set():
+                c.subscribe(topic, qos=1)
+                subscribed.set()
+
+        def on_message(c, userdata, msg):
+            t = time.monotonic()
+            metrics.received()
+            cam = msg.topic[len(input_prefix) + 1:]
+            src = f"mqtt {msg.topic}"
+            try:
+                frame = _loads(msg.payload)
+            except ValueError as e:
+                rec = error_record(f"invalid JSON: {e}", camera_id=cam, source=src)
+                sink.write(rec)
+                metrics.done(rec, time.monotonic() - t)
+                return
+            if isinstance(frame, dict):
+                if "camera_id" not in frame:
+                    frame["camera_id"] = cam
+                elif frame["camera_id"] != cam:
+                    rec = error_record(f"camera_id {frame['camera_id']!r} does not match the topic {msg.topic!r}",
+                                       field="camera_id", camera_id=cam, frame=frame.get("frame"), source=src)
+                    sink.write(rec)
+                    metrics.done(rec, time.monotonic() - t)
+                    return
+            if not queue.put(cam, (frame, src, t)):
+                rec = error_record("service stopping or too many cameras pending", camera_id=cam, source=src)
+                sink.write(rec)
+                metrics.done(rec, time.monotonic() - t)
+
+        client.on_connect = on_connect
+        client.on_message = on_message
+        client.connect_async(host, port, keepalive=5)
+        client.loop_start()
+    out_stream = stdout if stdout is not None else sys.stdout.buffer
+    sink = _MqttSink(client, output_prefix, metrics) if output == "mqtt" else _StdoutSink(out_stream)
+
+    old_handlers = {}
+    if install_signals and threading.current_thread() is threading.main_thread():
+        for sig in (signal.SIGTERM, signal.SIGINT):
+            old_handlers[sig] = signal.signal(sig, lambda s, f: stop.set())
+
+    def worker():
+        while True:
+            item = queue.get(timeout=0.1)
+            if item is None:
+                if queue._closed:
+                    return
+                continue
+            frame, src, t = item
+            rec = service.process_frame(frame, source=src)
+            sink.write(rec)
+            metrics.done(rec, time.monotonic() - t)
+
+    def health():
+        while not stop.wait(health_interval_s):
+            sink.write(metrics.snapshot(queue.dropped, len(queue)))
+
+    threads = [threading.Thread(target=worker, name="footprint-uq-worker", daemon=True)]
+    if input == "-":
+        stream = stdin if stdin is not None else sys.stdin.buffer
+        threads.append(threading.Thread(target=_stdin_reader, args=(stream, queue, sink, metrics, stop),
+                                        name="footprint-uq-stdin", daemon=True))
+    if health_interval_s and health_interval_s > 0:
+        threads.append(threading.Thread(target=health, name="footprint-uq-health", daemon=True))
+    for t in threads:
+        t.start()
+    try:
+        # run until a stop request or the end of the input (stdin: the reader closes the queue)
+        while not stop.wait(0.05):
+            if input == "-" and not threads[0].is_alive():
+                break
+    finally:
+        stop.set()
+        if client is not None and input is None:
+            client.unsubscribe(topic)
+            time.sleep(0.2)  # messages already on the way are still taken in
+        queue.close()
+        threads[0].join(drain_timeout_s)
+        sink.write(metrics.snapshot(queue.dropped, len(queue)))
+        sink.close(drain_timeout_s)
+        if client is not None:
+            client.disconnect()
+            client.loop_stop()
+        for sig, h in old_handlers.items():
+            signal.signal(sig, h)
+    return 0
