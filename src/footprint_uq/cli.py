@@ -90,6 +90,7 @@ from .cli_case_study import case_study  # noqa: E402
 from .cli_core import demo_cmd, locate_cmd, map_cmd, presets_cmd  # noqa: E402
 from .cli_fuse import fuse_cmd  # noqa: E402
 from .cli_objects import objects_cmd  # noqa: E402
+from .cli_serve import serve_cmd  # noqa: E402
 
 main.add_command(locate_cmd)
 main.add_command(map_cmd)
@@ -100,6 +101,7 @@ main.add_command(carla)
 main.add_command(calibrate)
 main.add_command(objects_cmd)
 main.add_command(fuse_cmd)
+main.add_command(serve_cmd)
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -36,7 +36,7 @@ import numpy as np
 from ..errors import ConfigError, InputError
 from .core import RECORD_ERROR, RECORD_FOOTPRINTS, Service, error_record
 
-__all__ = ["FrameQueue", "Metrics", "serve", "parse_mqtt_url", "POLICIES"]
+__all__ = ["FrameQueue", "Metrics", "serve", "run", "parse_mqtt_url", "POLICIES"]
 
 POLICIES = ("newest", "block")
 
@@ -387,3 +387,26 @@ def serve(service: Service, *, input: str | None = "-", mqtt: str | None = None,
         for sig, h in old_handlers.items():
             signal.signal(sig, h)
     return 0
+
+
+def run(*, camera=None, budget=None, registry=None, camera_id: str | None = None, heading_offset_deg: float = 0.0,
+        origin_lat_deg: float | None = None, origin_lon_deg: float | None = None, confidence: float = 0.95,
+        contact: str = "bottom-centre", allow_outside_image: bool = False, station_id: int | None = None,
+        uper_encoder: str = "fast", **serve_options) -> int:
+    """``footprint-uq serve``: build the :class:`Service` from files (a camera file and budget, or a
+    registry) and :func:`serve` it; returns the exit status."""
+    if (camera is None) == (registry is None):
+        raise InputError("--camera/--registry", "both" if camera is not None else "neither",
+                         "one camera (--camera with --budget) or many (--registry)")
+    cam = None
+    if camera is not None:
+        from ..io import load_camera
+
+        if budget is None:
+            raise InputError("--budget", None, "an error budget (preset or file) for --camera")
+        cam = load_camera(camera)
+    service = Service(cam, budget, registry=registry, camera_id=camera_id, heading_offset_deg=heading_offset_deg,
+                      origin_lat_deg=origin_lat_deg, origin_lon_deg=origin_lon_deg, confidence=confidence,
+                      contact=contact, allow_outside_image=allow_outside_image, station_id=station_id,
+                      uper_encoder=uper_encoder)
+    return serve(service, **serve_options)

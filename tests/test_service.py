@@ -1,0 +1,300 @@
+"""The edge service's per-frame API, its messages and its drop policy (no broker: see test_service_mqtt.py).
+
+* ``Service.process_frame`` gives the numbers of ``FrameProcessor`` and the V2X fields of
+  ``footprint_uq.v2x`` for the centre covariance, in the output record and in the CPM / SDSM;
+* the CPM's UPER bytes: a hand-derived bit string for a tiny message (pinned), the direct writer
+  equal to asn1tools on seeded random messages, and asn1tools decoding back to the JSON;
+* malformed frames give error records naming the field, never an exception;
+* the one-pending-frame-per-camera queue drops and counts as documented.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import threading
+import time
+
+import numpy as np
+import pytest
+
+from footprint_uq import FrameProcessor, PanTiltCamera
+from footprint_uq.footprints import V2X_FIELDS
+from footprint_uq.service import Service
+from footprint_uq.service.messages.cpm import (
+    build_cpm,
+    decode_cpm_uper,
+    encode_cpm_uper,
+    perceived_object,
+    timestamp_its_ms,
+)
+from footprint_uq.service.messages.uper_cpm import encode_cpm_uper_fast
+from footprint_uq.service.runner import FrameQueue
+from footprint_uq.v2x import J2735_POSITION_CONFIDENCE_NAMES, cpm_fields, j2735_fields
+
+pytest.importorskip("asn1tools")
+
+T0 = 1714564800.0  # 2024-05-01 12:00:00 UTC
+HEADING = 12.0
+
+
+@pytest.fixture(scope="module")
+def camera():
+    return PanTiltCamera(focal_px=1400, image_size_px=(1920, 1080), height_m=8.0, pan_deg=30.0, tilt_deg=20.0)
+
+
+@pytest.fixture(scope="module")
+def service(camera):
+    return Service(camera, "basler1", heading_offset_deg=HEADING, uper_encoder="asn1tools")
+
+
+def boxes3d(rng, n):
+    return [{"object_id": i, "class": rng.choice(["car", "pedestrian", "truck", "bicycle"]),
+             "x_m": float(rng.uniform(0, 40)), "y_m": float(rng.uniform(8, 70)), "z_m": 0.75,
+             "length_m": float(rng.uniform(0.5, 6)), "width_m": float(rng.uniform(0.5, 2.5)), "height_m": 1.5,
+             "yaw_rad": float(rng.uniform(-3, 3))} for i in range(n)]
+
+
+# -- timestamps -------------------------------------------------------------------------------------
+def test_timestamp_its_counts_tai_milliseconds_since_2004():
+    assert timestamp_its_ms(1072915200.0) == 0  # 2004-01-01 00:00:00 UTC
+    assert timestamp_its_ms(1072915200.001) == 1
+    # 2024-05-01 12:00:00 UTC: 641,649,600 s of UTC since 2004 plus the 5 leap seconds of 2005-2016
+    assert timestamp_its_ms(T0) == (641_649_600 + 5) * 1000
+    with pytest.raises(ValueError, match="timestamp_s"):
+        timestamp_its_ms(1e9)  # 2001
+
+
+# -- UPER: hand-derived bits ----------------------------------------------------------------------------
+def _bits(v: int, n: int) -> str:
+    assert 0 <= v < 2 ** n
+    return format(v, f"0{n}b")
+
+
+def _octets(bits: str) -> bytes:
+    bits += "0" * (-len(bits) % 8)
+    return int(bits, 2).to_bytes(len(bits) // 8, "big")
+
+
+PINNED_TINY_CPM_HEX = ("020e000000010000000000035a4e900eb49d200fffffff08eddd0f88808020b004028408001e0010"
+                       "2690123ff900a030000091017200")  # 54 octets
+
+
+def test_uper_of_a_tiny_cpm_is_the_hand_derived_bytes():
+    """One perceived object; every field written out from X.691 (unaligned PER) by hand."""
+    po = perceived_object(7, 1234, -56, 37, 81, 45, {"vehicleSubClass": 5}, 101, 0)
+    cpm = build_cpm(1, 0, [po])  # reference time 0, reference position unavailable
+    obj = "".join([
+        "0",                                  # PerceivedObject extension bit
+        "10000100000010",                     # presence: objectId, lowerTriangular..., classification
+        _bits(7, 16),                         # objectId (0..65535)
+        _bits(0 + 2048, 12),                  # measurementDeltaTime (-2048..2047)
+        "0",                                  # position: zCoordinate absent
+        _bits(1234 + 131072, 18), _bits(37 - 1, 12),   # x value (-131072..131071), confidence (1..4096)
+        _bits(-56 + 131072, 18), _bits(81 - 1, 12),    # y
+        "00",                                 # one correlation matrix (SIZE 1..4)
+        "0" + "1100000000000",                # components: extension bit + 13 bits (xPosition, yPosition)
+        "0000",                               # one column (SIZE 1..13)
+        "0" + "0000",                         # column: extension bit + one cell (SIZE 1..13, ...)
+        _bits(45 + 100, 8),                   # CorrelationCellValue (-100..101)
+        "000",                                # one class (SIZE 1..8)
+        "0" + "00",                           # ObjectClass: extension bit + alternative 0 (vehicleSubClass)
+        _bits(5, 4),                          # TrafficParticipantType passengerCar in (0..14)
+        _bits(101 - 1, 7),                    # ConfidenceLevel (1..101)
+    ])
+    container = _octets("0" + _bits(1, 8) + "0" + _bits(1, 8) + obj)  # ext, numberOf..., list ext + count
+    message = "".join([
+        _bits(2, 8), _bits(14, 8), _bits(1, 32),              # ItsPduHeader
+        "0",                                                  # CpmPayload extension bit
+        "0" + "00",                                           # ManagementContainer: extension bit, 2 optionals
+        _bits(0, 42),                                         # referenceTime
+        _bits(900000001 + 900000000, 31),                     # latitude unavailable
+        _bits(1800000001 + 1800000000, 32),                   # longitude unavailable
+        _bits(4095, 12), _bits(4095, 12), _bits(3601, 12),    # confidence ellipse unavailable
+        _bits(800001 + 100000, 20), _bits(15, 4),             # altitude unavailable
+        "0" + _bits(2 - 1, 3),                                # two wrapped containers (SIZE 1..8, ...)
+        _bits(2 - 1, 4), _bits(1, 8), _bits(0, 8),            # originatingRsuContainer: 1 octet 0x00
+        _bits(5 - 1, 4), _bits(len(container), 8),            # perceivedObjectContainer, length < 128
+        "".join(_bits(b, 8) for b in container),
+    ])
+    expected = _octets(message)
+    assert expected.hex() == PINNED_TINY_CPM_HEX
+    assert encode_cpm_uper(cpm) == expected          # asn1tools from the subset module
+    assert encode_cpm_uper_fast(cpm) == expected     # the direct writer
+    assert decode_cpm_uper(expected) == cpm
+
+
+def test_direct_writer_equals_asn1tools_on_random_messages():
+    rng = np.random.default_rng(14)
+    classes = [None, {"vehicleSubClass": 0}, {"vehicleSubClass": 14}, {"otherSubClass": 255},
+               {"vruSubClass": {"pedestrian": "ordinary-pedestrian"}}, {"vruSubClass": {"pedestrian": "max"}}]
+    for n in (0, 1, 2, 17, 255):
+        objs = [perceived_object(int(rng.integers(0, 65536)), int(rng.integers(-131072, 131072)),
+                                 int(rng.integers(-131072, 131072)), int(rng.integers(1, 4097)),
+                                 int(rng.integers(1, 4097)),
+                                 int(rng.choice([101, -100, 100, 0, int(rng.integers(-99, 99))])),
+                                 classes[int(rng.integers(len(classes)))], int(rng.integers(1, 102)),
+                                 int(rng.integers(-2048, 2048))) for _ in range(n)]
+        cpm = build_cpm(int(rng.integers(0, 2 ** 32)), int(rng.integers(0, 2 ** 42)), objs,
+                        latitude=int(rng.integers(-900000000, 900000002)),
+                        longitude=int(rng.integers(-1800000000, 1800000002)))
+        ref = encode_cpm_uper(cpm)
+        assert encode_cpm_uper_fast(cpm) == ref, n
+        assert decode_cpm_uper(ref) == cpm, n
+    with pytest.raises(ValueError, match="objectId"):
+        encode_cpm_uper_fast(build_cpm(1, 0, [perceived_object(70000, 0, 0, 1, 1, 0, None)]))
+
+
+# -- the per-frame API ------------------------------------------------------------------------------
+def test_process_frame_matches_frame_processor_and_v2x(camera, service):
+    rng = np.random.default_rng(3)
+    dets = boxes3d(rng, 40)
+    rec = service.process_frame({"camera_id": "cam1", "frame": 5, "timestamp_s": T0, "detections": dets})
+    assert rec["type"] == "footprints" and rec["n_objects"] == 40
+    ref = FrameProcessor(camera, "basler1", heading_offset_deg=HEADING).boxes3d(
+        np.array([[d[k] for k in ("x_m", "y_m", "z_m", "length_m", "width_m", "height_m", "yaw_rad")] for d in dets]))
+    objs = rec["objects"]
+    valid = ref.centre_valid
+    assert 0 < valid.sum() < 40  # some boxes reach outside the image: partial / error rows are exercised too
+    xy = np.array([[np.nan if o["x_m"] is None else o["x_m"], np.nan if o["y_m"] is None else o["y_m"]]
+                   for o in objs])
+    np.testing.assert_allclose(xy[valid], ref.centre_xy_world_m[valid], rtol=1e-12)
+    cov = np.array([[[np.nan if v is None else v for v in row] for row in o["cov_m2"]] for o in objs])
+    np.testing.assert_allclose(cov[valid], ref.centre_cov_m2[valid], rtol=1e-12)
+    # the V2X fields of the record are footprint_uq.v2x's of the centre covariance
+    fields = {**cpm_fields(ref.centre_cov_m2, HEADING), **j2735_fields(ref.centre_cov_m2, HEADING)}
+    for name in V2X_FIELDS:
+        assert [o[name] for o in objs] == fields[name].tolist(), name
+    a = np.array([np.nan if o["sigma_major_m"] is None else o["sigma_major_m"] for o in objs])
+    k95 = math.sqrt(-2 * math.log(0.05))
+    semi = np.array([np.nan if o["semi_major_m"] is None else o["semi_major_m"] for o in objs])
+    np.testing.assert_allclose(semi[valid], k95 * a[valid], rtol=1e-12)
+    assert [o["status"] for o in objs] == ["ok" if v else ("partial" if li >= 0 else "error")
+                                          for v, li in zip(valid, ref.largest_index, strict=True)]
+    # the CPM carries exactly the objects with a centre, with the same confidence codes
+    pos = rec["cpm"]["payload"]["cpmContainers"][1]["containerData"]["perceivedObjects"]
+    ok = [o for o in objs if o["status"] == "ok"]
+    assert [p["objectId"] for p in pos] == [o["message_object_id"] for o in ok]
+    for p, o in zip(pos, ok, strict=True):
+        assert p["position"]["xCoordinate"]["confidence"] == o["cpm_x_confidence"]
+        assert p["position"]["yCoordinate"]["confidence"] == o["cpm_y_confidence"]
+        corr = p.get("lowerTriangularCorrelationMatrices")
+        assert (corr[0]["matrix"][0][0] if corr else 101) == o["cpm_xy_correlation"]
+    # east/north offsets: the world point rotated by the heading offset, in cm
+    h = np.deg2rad(HEADING)
+    for p, o in zip(pos, ok, strict=True):
+        e = o["x_m"] * np.cos(h) + o["y_m"] * np.sin(h)
+        n = -o["x_m"] * np.sin(h) + o["y_m"] * np.cos(h)
+        assert p["position"]["xCoordinate"]["value"] == round(100 * e)
+        assert p["position"]["yCoordinate"]["value"] == round(100 * n)
+    sd = rec["sdsm"]["objects"]
+    assert [s["detObjCommon"]["posConfidence"]["pos"] for s in sd] == \
+        [J2735_POSITION_CONFIDENCE_NAMES[o["j2735_position_confidence"]] for o in ok]
+    # the UPER bytes decode (asn1tools) to the CPM JSON, and the record is plain JSON
+    assert decode_cpm_uper(rec["cpm_uper_hex"]) == rec["cpm"]
+    assert json.loads(json.dumps(rec, allow_nan=False)) == rec
+
+
+def test_2d_boxes_with_detector_covariance_and_classes(camera, service):
+    det = {"object_id": "ped-3", "class": "pedestrian", "class_confidence": 0.87,
+           "u_min_px": 900.0, "v_min_px": 600.0, "u_max_px": 1000.0, "v_max_px": 700.0}
+    plain = service.process_frame({"frame": 1, "timestamp_s": T0, "detections": [det]})
+    noisy = service.process_frame({"frame": 2, "timestamp_s": T0, "detections": [
+        {**det, "cov_uu_px2": 16.0, "cov_uv_px2": 0.0, "cov_vv_px2": 25.0}]})
+    ref = FrameProcessor(camera, "basler1", heading_offset_deg=HEADING).boxes2d(
+        np.array([[900.0, 600.0, 1000.0, 700.0]]), pixel_cov_px2=np.array([[[16.0, 0.0], [0.0, 25.0]]]))
+    np.testing.assert_allclose(noisy["objects"][0]["cov_m2"], ref.centre_cov_m2[0], rtol=1e-12)
+    assert noisy["objects"][0]["sigma_major_m"] > plain["objects"][0]["sigma_major_m"]
+    po = noisy["cpm"]["payload"]["cpmContainers"][1]["containerData"]["perceivedObjects"][0]
+    assert po["classification"] == [{"objectClass": {"vruSubClass": {"pedestrian": "ordinary-pedestrian"}},
+                                     "confidence": 87}]
+    assert noisy["sdsm"]["objects"][0]["detObjCommon"]["objType"] == "vru"
+    assert noisy["sdsm"]["objects"][0]["detObjCommon"]["objTypeCfd"] == 87
+
+
+def test_geodetic_reference_position(camera):
+    pytest.importorskip("pyproj")
+    svc = Service(camera, "basler1", heading_offset_deg=HEADING, origin_lat_deg=42.2808, origin_lon_deg=-83.743)
+    rec = svc.process_frame({"frame": 1, "timestamp_s": T0, "detections": [
+        {"u_min_px": 900.0, "v_min_px": 600.0, "u_max_px": 1000.0, "v_max_px": 700.0}]})
+    mc = rec["cpm"]["payload"]["managementContainer"]
+    assert mc["referencePosition"]["latitude"] == 422808000 and mc["referencePosition"]["longitude"] == -837430000
+    assert mc["referenceTime"] == timestamp_its_ms(T0)
+    assert rec["sdsm"]["refPos"] == {"lat": 422808000, "long": -837430000}
+    o = rec["objects"][0]
+    assert 42.28 < o["lat_deg"] < 42.29 and -83.75 < o["lon_deg"] < -83.73
+
+
+@pytest.mark.parametrize("frame, field, words", [
+    ('{"frame": 1', None, "invalid JSON"),
+    ("[1, 2]", None, "not a JSON object"),
+    ({"timestamp_s": T0, "detections": []}, "frame", "missing field frame"),
+    ({"frame": "7", "timestamp_s": T0, "detections": []}, "frame", "not an integer"),
+    ({"frame": 1, "timestamp_s": None, "detections": []}, "frame.timestamp_s", "missing"),
+    ({"frame": 1, "timestamp_s": 1e9, "detections": []}, "timestamp_s", "2004"),
+    ({"frame": 1, "timestamp_s": T0, "detections": {}}, "detections", "not a list"),
+    ({"frame": 1, "timestamp_s": T0, "detections": [{"u_min_px": 1.0}]}, "detections[0]", "no complete box"),
+    ({"frame": 1, "timestamp_s": T0, "detections": [
+        {"u_min_px": 1.0, "v_min_px": 2.0, "u_max_px": 3.0, "v_max_px": 4.0},
+        {"u_min_px": 1.0, "v_min_px": "x", "u_max_px": 3.0, "v_max_px": 4.0}]},
+     "detections[1].v_min_px", "not a number"),
+    ({"frame": 1, "timestamp_s": T0, "detections": [
+        {"u_min_px": 1.0, "v_min_px": 2.0, "u_max_px": 3.0, "v_max_px": True}]}, "detections[0].v_max_px", "number"),
+    ({"frame": 1, "timestamp_s": T0, "detections": [
+        {"u_min_px": 5.0, "v_min_px": 2.0, "u_max_px": 3.0, "v_max_px": 4.0}]}, "detections[0]", "u_min <= u_max"),
+    ({"frame": 1, "timestamp_s": T0, "detections": [
+        {"u_min_px": 1.0, "v_min_px": 2.0, "u_max_px": 3.0, "v_max_px": 4.0, "cov_uu_px2": 1.0}]},
+     "detections[0].cov_uv_px2", "incomplete pixel covariance"),
+    ({"frame": 1, "timestamp_s": T0, "detections": [
+        {"u_min_px": 1.0, "v_min_px": 2.0, "u_max_px": 3.0, "v_max_px": 4.0, "cov_uu_px2": 1.0,
+         "cov_uv_px2": 5.0, "cov_vv_px2": 1.0}]}, "detections[0]", "positive semi-definite"),
+])
+def test_malformed_frames_give_error_records(service, frame, field, words):
+    rec = service.process_frame(frame, source="test line 3")
+    assert rec["type"] == "error", rec
+    assert rec["field"] == field and words in rec["reason"] and rec["source"] == "test line 3"
+    json.dumps(rec, allow_nan=False)
+
+
+def test_registry_routes_frames_by_camera_id(tmp_path, camera):
+    from footprint_uq import save_camera
+
+    save_camera(camera, tmp_path / "camA.yaml")
+    save_camera(PanTiltCamera(focal_px=1000, image_size_px=(1280, 720), height_m=5.0, pan_deg=0.0, tilt_deg=15.0),
+                tmp_path / "camB.yaml")
+    (tmp_path / "reg.csv").write_text("camera_id,camera,budget,heading_offset_deg\ncamA,camA.yaml,basler1,\n"
+                                      "camB,camB.yaml,bw-cube1,30\n")
+    svc = Service(registry=tmp_path / "reg.csv")
+    det = [{"u_min_px": 600.0, "v_min_px": 500.0, "u_max_px": 700.0, "v_max_px": 600.0}]
+    a = svc.process_frame({"camera_id": "camA", "frame": 1, "timestamp_s": T0, "detections": det})
+    b = svc.process_frame({"camera_id": "camB", "frame": 1, "timestamp_s": T0, "detections": det})
+    assert a["heading_offset_deg"] == 0.0 and b["heading_offset_deg"] == 30.0
+    assert a["station_id"] != b["station_id"] and a["objects"][0]["x_m"] != b["objects"][0]["x_m"]
+    c = svc.process_frame({"camera_id": "camC", "frame": 1, "timestamp_s": T0, "detections": det})
+    assert c["type"] == "error" and c["field"] == "camera_id" and "not in the registry" in c["reason"]
+
+
+# -- the drop policy --------------------------------------------------------------------------------
+def test_queue_keeps_the_newest_frame_per_camera_and_counts_drops():
+    q = FrameQueue("newest")
+    for i in range(5):
+        q.put("a", i)
+    q.put("b", 0)
+    q.put("a", 5)
+    assert len(q) == 2 and q.dropped == 5
+    assert q.get(0) == 5 and q.get(0) == 0 and q.get(0.01) is None  # camera a first: it was waiting longer
+    q.close()
+    assert q.get() is None and not q.put("a", 6)
+
+
+def test_queue_block_policy_waits_instead_of_dropping():
+    q = FrameQueue("block")
+    q.put("a", 1)
+    got = []
+    t = threading.Thread(target=lambda: got.append(q.put("a", 2)))
+    t.start()
+    time.sleep(0.2)
+    assert t.is_alive() and len(q) == 1  # the second frame of camera a waits for the first
+    assert q.get(0) == 1
+    t.join(2)
+    assert got == [True] and q.get(0) == 2 and q.dropped == 0
