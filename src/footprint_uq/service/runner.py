@@ -41,16 +41,26 @@ __all__ = ["FrameQueue", "Metrics", "serve", "run", "parse_mqtt_url", "POLICIES"
 POLICIES = ("newest", "block")
 
 
-def _dumps(obj) -> bytes:
-    import orjson
+try:  # the `service` extra; the standard library otherwise (same output, slower)
+    import orjson as _json_fast
+except ImportError:  # pragma: no cover - depends on the environment
+    _json_fast = None
 
-    return orjson.dumps(obj)
+
+def _dumps(obj) -> bytes:
+    if _json_fast is not None:
+        return _json_fast.dumps(obj)
+    import json
+
+    return json.dumps(obj, allow_nan=False, separators=(",", ":")).encode("utf-8")
 
 
 def _loads(data):
-    import orjson
+    if _json_fast is not None:
+        return _json_fast.loads(data)
+    import json
 
-    return orjson.loads(data)
+    return json.loads(data)
 
 
 class FrameQueue:
@@ -317,7 +327,7 @@ def serve(service: Service, *, input: str | None = "-", mqtt: str | None = None,
                 metrics.done(rec, time.monotonic() - t)
                 return
             if isinstance(frame, dict):
-                if "camera_id" not in frame:
+                if frame.get("camera_id") is None:  # absent or null: the topic names the camera
                     frame["camera_id"] = cam
                 elif frame["camera_id"] != cam:
                     rec = error_record(f"camera_id {frame['camera_id']!r} does not match the topic {msg.topic!r}",
