@@ -41,6 +41,7 @@ SECTIONS: dict[str, str] = {
     "batch": "run:batch_section",
     "dask": "run:dask_section",
     "memory": "run:memory_section",
+    "service": "bench_service:run",
 }
 
 #: one line per section, printed above its table
@@ -53,6 +54,7 @@ TITLES = {
     "batch": "Batch footprints per second, Parquet -> Parquet, single process",
     "dask": "Fleet batch (partitioned Parquet, several cameras): in-process vs a 2-worker local Dask cluster",
     "memory": "Peak resident memory of the streaming batch at 1x and 10x input sizes",
+    "service": "Edge service through Mosquitto on loopback: 8 cameras x 30 frames/s x 100 objects (2D boxes)",
 }
 
 #: (key, header, format) of the table columns, in order; a section's table shows the columns its rows have
@@ -331,6 +333,20 @@ def summary_rows(results: dict) -> list[tuple[str, str, str, str, str, str]]:
                     f"{b['peak_rss_mb']:.0f} MB at 10x ({b['input_decoded_mb'] + b['output_uncompressed_mb']:,.0f}"
                     " MB of data)", f"{a['peak_rss_mb']:.0f} MB at 1x", f"10x/1x {b['peak_rss_ratio']:.2f}",
                     a["target"], _yes_no(a["met"])))
+    sv = S.get("service", [])
+    if len(sv) == 4 and "latency_ms_p99" in sv[0]:
+        r = sv[0]
+        out.append((f"edge service, {r['cameras']} cameras x {r['fps_per_camera']:.0f} frames/s x {r['objects']} "
+                    f"objects via Mosquitto ({r['seconds']:.0f} s)",
+                    f"{r['sustained_frames_per_s']:.0f} frames/s out, dropped {r['frames_dropped']}; latency p50 "
+                    f"{r['latency_ms_p50']:.1f} / p99 {r['latency_ms_p99']:.1f} ms; peak RSS {r['peak_rss_mb']:.0f} MB",
+                    f"offered {r['offered_frames_per_s']:.0f} frames/s",
+                    f"{r['sustained_frames_per_s'] / r['offered_frames_per_s']:.2f} of offered",
+                    "all frames, p99 <= 20 ms", _yes_no(r["met"] and sv[1]["met"])))
+        out.append(("edge service, one 100-object frame: parse + footprints / whole record with messages",
+                    f"{sv[2]['median_us']:.0f} us / {sv[3]['median_us']:.0f} us",
+                    f"FrameProcessor alone {sv[2]['in_process']['frame_processor_us']:.0f} us", "",
+                    sv[2]["target"], _yes_no(sv[2]["met"])))
     return out
 
 

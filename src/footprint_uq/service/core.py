@@ -368,38 +368,45 @@ class Service:
             lat, lon = (_nan_none(v.tolist()) for v in geo.to_wgs84(centre))
         linear = getattr(est, "linear_ok", None)  # the library's linearity flag, when it provides one
         nonlin = getattr(est, "nonlinearity", None)
-        objects, pos, sobj = [], [], []
-        for i in range(N):
-            ok = valid[i]
-            o = {"object_id": ids[i], "class": classes[i],
-                 "status": S.STATUS_OK if ok else (S.STATUS_PARTIAL if li[i] >= 0 else S.STATUS_ERROR),
-                 "reason": "ok" if ok else f"no centre: {reasons[i]}",
-                 "x_m": x[i], "y_m": y[i], "cov_m2": [[cxx[i], cxy[i]], [cxy[i], cyy[i]]],
-                 "sigma_major_m": a_l[i], "sigma_minor_m": b_l[i], "orientation_deg": o_l[i],
-                 "semi_major_m": ka[i], "semi_minor_m": kb[i],
-                 "largest_index": li[i], "largest_sigma_major_m": lsemi[i], "largest_x_m": lx[i],
-                 "largest_y_m": ly[i]}
-            o.update(zip(V2X_FIELDS, codes[i], strict=True))
-            if geo.has_origin:
-                o["lat_deg"], o["lon_deg"] = lat[i], lon[i]
-            if linear is not None:
-                o["linear_ok"] = bool(linear[i])
-            if nonlin is not None:
-                o["nonlinearity"] = _nan_none([float(nonlin[i])])[0]
-            if self.messages and ok:
-                oid = _message_object_id(ids[i], i)
-                cls = (classes[i] or "").lower()
+        if all(valid):
+            status, reason = [S.STATUS_OK] * N, ["ok"] * N
+        else:
+            status = [S.STATUS_OK if ok else (S.STATUS_PARTIAL if j >= 0 else S.STATUS_ERROR)
+                      for ok, j in zip(valid, li, strict=True)]
+            reason = ["ok" if ok else f"no centre: {r}" for ok, r in zip(valid, reasons, strict=True)]
+        keys = ["object_id", "class", "status", "reason", "x_m", "y_m", "cov_m2", "sigma_major_m", "sigma_minor_m",
+                "orientation_deg", "semi_major_m", "semi_minor_m", "largest_index", "largest_sigma_major_m",
+                "largest_x_m", "largest_y_m", *V2X_FIELDS]
+        columns = [ids, classes, status, reason, x, y,
+                   [[[p, q], [q, r]] for p, q, r in zip(cxx, cxy, cyy, strict=True)],
+                   a_l, b_l, o_l, ka, kb, li, lsemi, lx, ly, *est.v2x_codes.T.tolist()]
+        if geo.has_origin:
+            keys += ["lat_deg", "lon_deg"]
+            columns += [lat, lon] if N else [[], []]
+        if linear is not None:
+            keys.append("linear_ok")
+            columns.append([bool(v) for v in linear])
+        if nonlin is not None:
+            keys.append("nonlinearity")
+            columns.append(_nan_none(np.asarray(nonlin, dtype=np.float64).tolist()))
+        pos, sobj = [], []
+        if self.messages:
+            ok_idx = [i for i in range(N) if valid[i]]
+            msg_ids = [None] * N
+            for i in ok_idx:
+                msg_ids[i] = _message_object_id(ids[i], i)
+            keys.append("message_object_id")  # None: no centre, not in the CPM / SDSM
+            columns.append(msg_ids)
+            for i in ok_idx:
                 cc = class_conf[i]
-                level = CONFIDENCE_LEVEL_UNAVAILABLE if cc is None else max(1, math.ceil(100.0 * cc - 1e-9))
                 c = codes[i]
-                pos.append(perceived_object(oid, ex_cm[i], ny_cm[i], c[_CPM_INDEX], c[_CPM_INDEX + 1],
-                                            c[_CPM_INDEX + 2], CPM_CLASSES.get(cls), level))
-                sobj.append(sdsm_object(oid, ex_dm[i], ny_dm[i], c[_J_POS], classes[i],
+                cls = classes[i]
+                level = CONFIDENCE_LEVEL_UNAVAILABLE if cc is None else max(1, math.ceil(100.0 * cc - 1e-9))
+                pos.append(perceived_object(msg_ids[i], ex_cm[i], ny_cm[i], c[_CPM_INDEX], c[_CPM_INDEX + 1],
+                                            c[_CPM_INDEX + 2], CPM_CLASSES.get(cls.lower()) if cls else None, level))
+                sobj.append(sdsm_object(msg_ids[i], ex_dm[i], ny_dm[i], c[_J_POS], cls,
                                         0 if cc is None else int(round(100.0 * cc))))
-                o["message_object_id"] = oid
-            elif self.messages:
-                o["message_object_id"] = None  # no centre: not in the CPM / SDSM
-            objects.append(o)
+        objects = [dict(zip(keys, row, strict=True)) for row in zip(*columns, strict=True)]
         return objects, pos, sobj
 
     def _messages(self, setup, pos, sobj, fno: int, ts: float, ref_ms):
@@ -437,7 +444,7 @@ def _box_array(dets: list, cols) -> np.ndarray:
 
 def _message_object_id(object_id, index: int) -> int:
     """Identifier2B of an object: its id if it is an integer in 0..65535, else CRC-32 of its text mod 65536."""
-    if isinstance(object_id, int) and 0 <= object_id <= 65535:
+    if type(object_id) is int and 0 <= object_id <= 65535:
         return object_id
     if isinstance(object_id, str) and object_id.isdigit() and int(object_id) <= 65535:
         return int(object_id)

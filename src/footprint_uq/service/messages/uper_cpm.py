@@ -62,23 +62,30 @@ def _check(name: str, v: int, lo: int, hi: int) -> int:
 
 def _object_bits(po: dict) -> tuple[int, int]:
     """(value, number of bits) of one PerceivedObject."""
-    v, n = 0, 15  # extension bit 0 + 14 presence bits, filled below
     pres = 0
-    if "objectId" in po:
-        pres |= 1 << _P_OBJECT_ID
-        v = (v << 16) | _check("objectId", po["objectId"], 0, 65535)
-        n += 16
-    v = (v << 12) | _check("measurementDeltaTime", po["measurementDeltaTime"], -2048, 2047)
+    oid = po.get("objectId")
+    mdt = po["measurementDeltaTime"] + 2048
     p = po["position"]
     if "zCoordinate" in p:
         raise InputError("position.zCoordinate", p["zCoordinate"], "absent (not in the subset sent)")
     x, y = p["xCoordinate"], p["yCoordinate"]
-    v = (v << 1) | 0
-    v = (v << 18) | _check("xCoordinate.value", x["value"], -131072, 131071)
-    v = (v << 12) | _check("xCoordinate.confidence", x["confidence"], 1, 4096)
-    v = (v << 18) | _check("yCoordinate.value", y["value"], -131072, 131071)
-    v = (v << 12) | _check("yCoordinate.confidence", y["confidence"], 1, 4096)
-    n += 12 + 1 + 60
+    xv, xc, yv, yc = x["value"] + 131072, x["confidence"] - 1, y["value"] + 131072, y["confidence"] - 1
+    # one range test for the common case; the named checks only when something is out of range
+    if not (0 <= mdt < 4096 and 0 <= xv < 262144 and 0 <= yv < 262144 and 0 <= xc < 4096 and 0 <= yc < 4096
+            and (oid is None or 0 <= oid < 65536)):
+        _check("objectId", oid if oid is not None else 0, 0, 65535)
+        _check("measurementDeltaTime", po["measurementDeltaTime"], -2048, 2047)
+        _check("xCoordinate.value", x["value"], -131072, 131071)
+        _check("xCoordinate.confidence", x["confidence"], 1, 4096)
+        _check("yCoordinate.value", y["value"], -131072, 131071)
+        _check("yCoordinate.confidence", y["confidence"], 1, 4096)
+    if oid is not None:
+        pres = 1 << _P_OBJECT_ID
+        v, n = (oid << 12) | mdt, 15 + 16 + 12
+    else:
+        v, n = mdt, 15 + 12
+    v = (((((v << 19) | xv) << 12 | xc) << 18 | yv) << 12) | yc  # the 0 bit before x: no zCoordinate
+    n += 61
     mats = po.get("lowerTriangularCorrelationMatrices")
     if mats is not None:
         pres |= 1 << _P_CORR

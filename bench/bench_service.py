@@ -1,0 +1,264 @@
+"""Edge-service load through a real Mosquitto on loopback: 8 cameras x 30 frames/s x 100 objects.
+
+    .venv/bin/python bench/bench_service.py [--seconds 60] [--cameras 8] [--fps 30] [--objects 100] [--quick]
+
+Starts ``mosquitto`` on a free loopback port and ``footprint-uq serve --registry ... --mqtt ...
+--output mqtt`` as a subprocess (the real CLI, default overload policy ``newest``), then publishes,
+from this process, one frame per camera every 1/fps s (QoS 1, 100 2D boxes each, a fresh
+``timestamp_s`` = the publish time) for ``--seconds``, and receives every output on
+``footprints/#``.  Reported:
+
+* sustained rate: output frames per second over the run; frames published / out / dropped /
+  errors (the service's final health message; target: every frame processed, none dropped);
+* end-to-end latency p50 / p99: publish -> output received by the subscriber (same clock; the
+  path detector -> broker -> service -> broker -> receiver), target p99 <= 20 ms;
+* peak RSS of the service process (``VmHWM``);
+* processing time per 100-object frame inside the service (``processing_us`` of the records:
+  the footprints (parse + fused kernel), the per-object records, the messages (CPM + UPER + SDSM)),
+  and, in this process on the same frame, ``Service.process_frame`` and ``FrameProcessor.boxes2d``
+  alone; target <= 300 us per 100-object frame.
+
+``--quick`` runs 5 s.  :func:`run` returns rows for ``bench/run.py`` (section ``service``).
+Nothing is asserted: the figures depend on the machine and its load (a shared 2-core VM).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import re
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+
+TARGET_P99_MS = 20.0
+TARGET_US = 300.0
+CAMERA = dict(focal_px=1400.0, image_size_px=(1920, 1080), height_m=8.0, pan_deg=30.0, tilt_deg=20.0)
+_TS = re.compile(rb'"timestamp_s":([0-9.eE+-]+)')
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _wait(cond, timeout_s, what):
+    end = time.monotonic() + timeout_s
+    while time.monotonic() < end:
+        if cond():
+            return
+        time.sleep(0.02)
+    raise RuntimeError(f"timed out waiting for {what}")
+
+
+def make_detections(n: int, seed: int) -> list[dict]:
+    """n 2D boxes below the horizon of the bench camera (pixels, bottom edge = ground contact)."""
+    rng = np.random.default_rng(seed)
+    u = rng.uniform(50, 1800, n)
+    v = rng.uniform(420, 1070, n)
+    w = rng.uniform(20, 120, n)
+    return [{"object_id": int(k), "class": "car", "u_min_px": round(float(a), 2),
+             "v_min_px": round(float(b - 0.8 * c), 2), "u_max_px": round(float(a + c), 2),
+             "v_max_px": round(float(b), 2)}
+            for k, (a, b, c) in enumerate(zip(u, v, w, strict=True))]
+
+
+def in_process_times(objects: int, repeats: int) -> dict:
+    """Median microseconds per frame of Service.process_frame (and its stages) and FrameProcessor alone."""
+    from footprint_uq import FrameProcessor, PanTiltCamera
+    from footprint_uq.service import Service
+
+    cam = PanTiltCamera(**CAMERA)
+    svc = Service(cam, "basler1")
+    dets = make_detections(objects, 0)
+    frame = {"camera_id": "cam0", "frame": 0, "timestamp_s": time.time(), "detections": dets}
+    for _ in range(5):
+        svc.process_frame(frame)
+    stages = [svc.process_frame(frame)["processing_us"] for _ in range(repeats)]
+    proc = FrameProcessor(cam, "basler1", joint_cov=False)
+    boxes = np.array([[d["u_min_px"], d["v_min_px"], d["u_max_px"], d["v_max_px"]] for d in dets])
+    for _ in range(5):
+        proc.boxes2d(boxes)
+    t = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        proc.boxes2d(boxes)
+        t.append(1e6 * (time.perf_counter() - t0))
+    out = {f"process_frame_{k}_us": float(np.median([s[k] for s in stages])) for k in stages[0]}
+    out["frame_processor_us"] = float(np.median(t))
+    return out
+
+
+def measure(seconds: float = 60.0, cameras: int = 8, fps: float = 30.0, objects: int = 100) -> dict:
+    import paho.mqtt.client as mqtt
+
+    mosquitto = shutil.which("mosquitto") or "/usr/sbin/mosquitto"
+    if not Path(mosquitto).exists():
+        raise RuntimeError("mosquitto not installed (apt-get install mosquitto)")
+    from footprint_uq import PanTiltCamera, save_camera
+
+    tmp = Path(tempfile.mkdtemp(prefix="bench_service_"))
+    port = _free_port()
+    (tmp / "mosquitto.conf").write_text(f"listener {port} 127.0.0.1\nallow_anonymous true\npersistence false\n"
+                                        "max_queued_messages 100000\n")
+    save_camera(PanTiltCamera(**CAMERA), tmp / "cam.yaml")
+    ids = [f"cam{i}" for i in range(cameras)]
+    (tmp / "reg.csv").write_text("camera_id,camera,budget\n" + "".join(f"{c},cam.yaml,basler1\n" for c in ids))
+    broker = subprocess.Popen([mosquitto, "-c", str(tmp / "mosquitto.conf")], stdout=subprocess.DEVNULL,
+                              stderr=subprocess.DEVNULL)
+    env = {**os.environ, "NUMBA_NUM_THREADS": "1"}
+    serve = None
+    try:
+        _wait(lambda: _port_open(port), 10, "mosquitto")
+        serve = subprocess.Popen([sys.executable, "-m", "footprint_uq.cli", "serve", "--registry", str(tmp / "reg.csv"),
+                                  "--mqtt", f"mqtt://127.0.0.1:{port}", "--output", "mqtt", "--client-id", "bench"],
+                                 stdout=subprocess.DEVNULL, stderr=open(tmp / "serve.err", "wb"), env=env)
+        lat_ms: list[float] = []
+        proc_us: list[dict] = []
+        health: list[dict] = []
+        lock = threading.Lock()
+        n_out = [0]
+
+        def on_message(c, u, msg):
+            t = time.time()
+            if msg.topic.endswith("/health"):
+                with lock:
+                    health.append(json.loads(msg.payload))
+                return
+            if msg.topic.endswith("/errors"):
+                return
+            m = _TS.search(msg.payload, 0, 400)
+            with lock:
+                n_out[0] += 1
+                lat_ms.append(1e3 * (t - float(m.group(1))))
+                if n_out[0] % 10 == 0:  # a sample of the per-stage times (parsing every record would load the VM)
+                    k = msg.payload.rfind(b'"processing_us":')
+                    proc_us.append(json.loads(msg.payload[k + 16:-1]))
+
+        rx = mqtt.Client(mqtt.CallbackAPIVersion.VERSION2, client_id="bench-rx")
+        rx.on_message = on_message
+        rx.on_connect = lambda c, u, f, rc, p: c.subscribe("footprints/#", qos=1)
+        rx.connect("127.0.0.1", port)
+        rx.loop_start()
+        _wait(lambda: len(health) >= 1, 120, "the service's first health message")
+        tx = mqtt.Client(mqtt.CallbackAPIVersion.VERSION2, client_id="bench-tx")
+        tx.max_inflight_messages_set(1000)
+        tx.connect("127.0.0.1", port)
+        tx.loop_start()
+        # pre-serialised frames: the publish loop only formats frame number and time stamp
+        bodies = {c: json.dumps(make_detections(objects, i)).encode() for i, c in enumerate(ids)}
+        sent = 0
+        period = 1.0 / fps
+        t_start = time.monotonic()
+        next_t = t_start
+        frame_no = 0
+        while time.monotonic() - t_start < seconds:
+            for c in ids:
+                payload = b'{"camera_id":"%s","frame":%d,"timestamp_s":%.6f,"detections":%s}' % (
+                    c.encode(), frame_no, time.time(), bodies[c])
+                tx.publish(f"detections/{c}", payload, qos=1)
+                sent += 1
+            frame_no += 1
+            next_t += period
+            time.sleep(max(0.0, next_t - time.monotonic()))
+        t_pub = time.monotonic() - t_start
+        h0 = len(health)
+        _wait(lambda: len(health) > h0 + 1 and health[-1]["frames_in"] >= sent and health[-1]["pending"] == 0, 60,
+              "the service to take in every frame")
+        _wait(lambda: n_out[0] >= health[-1]["frames_out"], 30, "the last outputs")
+        peak_rss_mb = _vm_hwm_mb(serve.pid)
+        serve.send_signal(signal.SIGTERM)
+        rc = serve.wait(60)
+        h = health[-1]
+        tx.loop_stop()
+        rx.loop_stop()
+    finally:
+        if serve is not None and serve.poll() is None:
+            serve.kill()
+        broker.terminate()
+        broker.wait(10)
+    lat = np.array(lat_ms)
+    stages = {k: float(np.median([p[k] for p in proc_us])) for k in proc_us[0]} if proc_us else {}
+    return {
+        "seconds": round(t_pub, 2), "cameras": cameras, "fps_per_camera": fps, "objects": objects,
+        "frames_published": sent, "frames_in": h["frames_in"], "frames_out": h["frames_out"],
+        "frames_dropped": h["frames_dropped"], "errors": h["errors"], "frames_received": n_out[0],
+        "sustained_frames_per_s": h["frames_out"] / t_pub, "offered_frames_per_s": sent / t_pub,
+        "latency_ms_p50": float(np.percentile(lat, 50)), "latency_ms_p99": float(np.percentile(lat, 99)),
+        "latency_ms_max": float(lat.max()), "peak_rss_mb": peak_rss_mb, "serve_exit_status": rc,
+        "service_processing_us_median": stages,
+        "all_processed": h["frames_out"] == sent and h["frames_dropped"] == 0 and h["errors"] == 0,
+    }
+
+
+def _port_open(port: int) -> bool:
+    try:
+        socket.create_connection(("127.0.0.1", port), timeout=0.2).close()
+        return True
+    except OSError:
+        return False
+
+
+def _vm_hwm_mb(pid: int) -> float:
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith("VmHWM:"):
+            return int(line.split()[1]) / 1024.0
+    return float("nan")
+
+
+def run(quick: bool = False) -> list[dict]:
+    """Rows for ``bench/run.py`` (section ``service``)."""
+    res = measure(seconds=5.0 if quick else 60.0)
+    times = in_process_times(100, 100 if quick else 500)
+    st = res["service_processing_us_median"]
+    load = (f"{res['cameras']} cameras x {res['fps_per_camera']:.0f} frames/s x {res['objects']} objects, "
+            f"{res['seconds']:.0f} s, through Mosquitto on loopback")
+    return [
+        {"case": f"serve, {load}: end-to-end latency p50 (publish -> output received)",
+         "median_ms": res["latency_ms_p50"], "items": res["frames_out"], "peak_rss_mb": res["peak_rss_mb"],
+         "target": "every frame processed, none dropped", "met": res["all_processed"], **res,
+         "notes": f"published {res['frames_published']}, out {res['frames_out']}, dropped {res['frames_dropped']}, "
+                  f"errors {res['errors']}; sustained {res['sustained_frames_per_s']:.1f} frames/s of "
+                  f"{res['offered_frames_per_s']:.1f} offered; p99 {res['latency_ms_p99']:.1f} ms, max "
+                  f"{res['latency_ms_max']:.1f} ms; peak RSS {res['peak_rss_mb']:.0f} MB"},
+        {"case": f"serve, {load}: end-to-end latency p99", "median_ms": res["latency_ms_p99"],
+         "items": res["frames_out"], "target": f"<= {TARGET_P99_MS:.0f} ms",
+         "met": res["latency_ms_p99"] <= TARGET_P99_MS},
+        {"case": "one 100-object frame in the service: parse + FrameProcessor (footprints stage)",
+         "median_us": st.get("footprints", times["process_frame_footprints_us"]), "items": 100,
+         "target": f"<= {TARGET_US:.0f} us", "met": st.get("footprints", times["process_frame_footprints_us"])
+         <= TARGET_US, "in_process": times},
+        {"case": "one 100-object frame in the service: everything (footprints + records + CPM/UPER/SDSM)",
+         "median_us": st.get("total", times["process_frame_total_us"]), "items": 100,
+         "notes": "stages (median us, in the service under load): " + ", ".join(f"{k} {v:.0f}" for k, v in st.items())
+                  + "; in this process, idle: " + ", ".join(f"{k} {v:.0f}" for k, v in times.items())},
+    ]
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seconds", type=float, default=60.0)
+    ap.add_argument("--cameras", type=int, default=8)
+    ap.add_argument("--fps", type=float, default=30.0)
+    ap.add_argument("--objects", type=int, default=100)
+    ap.add_argument("--quick", action="store_true", help="5 s instead of --seconds")
+    args = ap.parse_args(argv)
+    res = measure(seconds=5.0 if args.quick else args.seconds, cameras=args.cameras, fps=args.fps,
+                  objects=args.objects)
+    res["in_process"] = in_process_times(args.objects, 200)
+    print(json.dumps(res, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
