@@ -23,6 +23,8 @@ EXPECTED = {
                                      "paper J Cov(par) J^T", "library propagate"],
                                     ["reproduce_paper_partials/partials.csv"]),
     "linearity_check.py": (["horizon row 29.9 px", "basler1+0.5deg", "lin/MC"], ["linearity_check/linearity.csv"]),
+    "cpm_receiver.py": (["perceived objects (", "vruSubClass", "95 % semi-major", "conf x/y"],
+                         ["cpm_receiver/cpm_ellipses.png"]),
     "plan_mount.py": (["criterion: 95 % semi-major axis <= 1.75 m", "best reach with basler1: 54.9 m",
                        "linear/Monte-Carlo semi-major there"],
                       ["plan_mount/plan_mount.png", "plan_mount/plan_mount.csv"]),
