@@ -99,7 +99,7 @@ def in_process_times(objects: int, repeats: int) -> dict:
     return out
 
 
-def measure(seconds: float = 60.0, cameras: int = 8, fps: float = 30.0, objects: int = 100) -> dict:
+def measure(seconds: float = 60.0, cameras: int = 8, fps: float = 30.0, objects: int = 100, workers: int = 1) -> dict:
     import paho.mqtt.client as mqtt
 
     mosquitto = shutil.which("mosquitto") or "/usr/sbin/mosquitto"
@@ -121,7 +121,8 @@ def measure(seconds: float = 60.0, cameras: int = 8, fps: float = 30.0, objects:
     try:
         _wait(lambda: _port_open(port), 10, "mosquitto")
         serve = subprocess.Popen([sys.executable, "-m", "footprint_uq.cli", "serve", "--registry", str(tmp / "reg.csv"),
-                                  "--mqtt", f"mqtt://127.0.0.1:{port}", "--output", "mqtt", "--client-id", "bench"],
+                                  "--mqtt", f"mqtt://127.0.0.1:{port}", "--output", "mqtt", "--client-id", "bench",
+                                  "--workers", str(workers)],
                                  stdout=subprocess.DEVNULL, stderr=open(tmp / "serve.err", "wb"), env=env)
         lat_ms: list[float] = []
         proc_us: list[dict] = []
@@ -150,7 +151,7 @@ def measure(seconds: float = 60.0, cameras: int = 8, fps: float = 30.0, objects:
         rx.on_connect = lambda c, u, f, rc, p: c.subscribe("footprints/#", qos=1)
         rx.connect("127.0.0.1", port)
         rx.loop_start()
-        _wait(lambda: len(health) >= 1, 120, "the service's first health message")
+        _wait(lambda: len({h.get("worker") for h in health}) >= workers, 120, "every worker's first health message")
         tx = mqtt.Client(mqtt.CallbackAPIVersion.VERSION2, client_id="bench-tx")
         tx.max_inflight_messages_set(1000)
         tx.connect("127.0.0.1", port)
@@ -158,6 +159,8 @@ def measure(seconds: float = 60.0, cameras: int = 8, fps: float = 30.0, objects:
         # pre-serialised frames: the publish loop only formats frame number and time stamp
         bodies = {c: json.dumps(make_detections(objects, i)).encode() for i, c in enumerate(ids)}
         sent = 0
+        cpu0_s = sum(_cpu_s(p) for p in [serve.pid, *_descendants(serve.pid)])
+        cpu0_broker, cpu0_bench = _cpu_s(broker.pid), _cpu_s(os.getpid())
         period = 1.0 / fps
         t_start = time.monotonic()
         next_t = t_start
@@ -172,14 +175,23 @@ def measure(seconds: float = 60.0, cameras: int = 8, fps: float = 30.0, objects:
             next_t += period
             time.sleep(max(0.0, next_t - time.monotonic()))
         t_pub = time.monotonic() - t_start
-        h0 = len(health)
-        _wait(lambda: len(health) > h0 + 1 and health[-1]["frames_in"] >= sent and health[-1]["pending"] == 0, 60,
+        def totals() -> dict:  # the latest health record of every worker, summed
+            with lock:
+                last = {r.get("worker"): r for r in health}
+            keys = ("frames_in", "frames_out", "frames_dropped", "errors", "pending")
+            return {k: sum(r[k] for r in last.values()) for k in keys}
+
+        _wait(lambda: totals()["frames_in"] >= sent and totals()["pending"] == 0, 60,
               "the service to take in every frame")
-        _wait(lambda: n_out[0] >= health[-1]["frames_out"], 30, "the last outputs")
-        peak_rss_mb = _vm_hwm_mb(serve.pid)
+        time.sleep(1.5)  # one more health record from every worker
+        _wait(lambda: n_out[0] >= totals()["frames_out"], 30, "the last outputs")
+        pids = [serve.pid, *_descendants(serve.pid)]
+        peak_rss_mb = sum(_vm_hwm_mb(p) for p in pids)
+        cpu_s = sum(_cpu_s(p) for p in pids) - cpu0_s
+        cpu_broker, cpu_bench = _cpu_s(broker.pid) - cpu0_broker, _cpu_s(os.getpid()) - cpu0_bench
         serve.send_signal(signal.SIGTERM)
         rc = serve.wait(60)
-        h = health[-1]
+        h = totals()
         tx.loop_stop()
         rx.loop_stop()
     finally:
@@ -187,15 +199,19 @@ def measure(seconds: float = 60.0, cameras: int = 8, fps: float = 30.0, objects:
             serve.kill()
         broker.terminate()
         broker.wait(10)
+        shutil.rmtree(tmp, ignore_errors=True)
     lat = np.array(lat_ms)
     stages = {k: float(np.median([p[k] for p in proc_us])) for k in proc_us[0]} if proc_us else {}
     return {
-        "seconds": round(t_pub, 2), "cameras": cameras, "fps_per_camera": fps, "objects": objects,
+        "seconds": round(t_pub, 2), "workers": workers, "cameras": cameras, "fps_per_camera": fps, "objects": objects,
         "frames_published": sent, "frames_in": h["frames_in"], "frames_out": h["frames_out"],
         "frames_dropped": h["frames_dropped"], "errors": h["errors"], "frames_received": n_out[0],
         "sustained_frames_per_s": h["frames_out"] / t_pub, "offered_frames_per_s": sent / t_pub,
         "latency_ms_p50": float(np.percentile(lat, 50)), "latency_ms_p99": float(np.percentile(lat, 99)),
         "latency_ms_max": float(lat.max()), "peak_rss_mb": peak_rss_mb, "serve_exit_status": rc,
+        "serve_cpu_s": cpu_s, "serve_cpu_ms_per_frame": 1e3 * cpu_s / max(h["frames_in"], 1),
+        "broker_cpu_s": cpu_broker, "bench_publisher_receiver_cpu_s": cpu_bench,
+        "load_average_1min": os.getloadavg()[0],
         "service_processing_us_median": stages,
         "all_processed": h["frames_out"] == sent and h["frames_dropped"] == 0 and h["errors"] == 0,
     }
@@ -207,6 +223,20 @@ def _port_open(port: int) -> bool:
         return True
     except OSError:
         return False
+
+
+def _descendants(pid: int) -> list[int]:
+    out = []
+    for task in Path(f"/proc/{pid}/task").iterdir():
+        for c in (task / "children").read_text().split():
+            out += [int(c), *_descendants(int(c))]
+    return out
+
+
+def _cpu_s(pid: int) -> float:
+    """User + system CPU seconds of a process (all its threads)."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
 def _vm_hwm_mb(pid: int) -> float:
@@ -251,10 +281,11 @@ def main(argv=None) -> int:
     ap.add_argument("--cameras", type=int, default=8)
     ap.add_argument("--fps", type=float, default=30.0)
     ap.add_argument("--objects", type=int, default=100)
+    ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--quick", action="store_true", help="5 s instead of --seconds")
     args = ap.parse_args(argv)
     res = measure(seconds=5.0 if args.quick else args.seconds, cameras=args.cameras, fps=args.fps,
-                  objects=args.objects)
+                  objects=args.objects, workers=args.workers)
     res["in_process"] = in_process_times(args.objects, 200)
     print(json.dumps(res, indent=1))
     return 0

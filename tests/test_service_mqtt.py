@@ -298,3 +298,30 @@ def test_stdin_with_a_malformed_line_in_the_middle(camera_file):
     assert health[0]["frames_in"] == 7 == health[0]["frames_out"] + health[0]["errors"]
     for rec in fps:
         check_footprints(rec)
+
+
+def test_two_worker_processes_split_the_cameras(broker, camera_file, tmp_path):
+    reg = tmp_path / "reg.csv"
+    reg.write_text("camera_id,camera,budget\n" + "".join(f"cam{i},{camera_file},basler1\n" for i in range(3)))
+    rx = Client(broker, "rx-workers", "footprints/#")
+    p = start_serve(["--registry", str(reg), "--mqtt", broker.url, "--output", "mqtt", "--overload", "block",
+                     "--workers", "2", "--client-id", "serve-workers"])
+    try:
+        _wait(lambda: {h.get("worker") for h in rx.of("health")} == {"1/2", "2/2"}, 90, "both workers' health")
+        tx = Client(broker, "tx-workers")
+        for i in range(4):
+            for c in range(3):
+                tx.publish(f"detections/cam{c}", frame(f"cam{c}", i))
+        _wait(lambda: len(rx.of("footprints")) == 12, 30, "12 records")
+        assert sorted((r["camera_id"], r["frame"]) for r in rx.of("footprints")) == \
+            sorted((f"cam{c}", i) for c in range(3) for i in range(4))
+        tx.close()
+    finally:
+        rc, _, err = stop_serve(p)
+        rx.close()
+    assert rc == 0, err[-2000:]
+    last = {}
+    for h in rx.of("health"):
+        last[h["worker"]] = h
+    assert sum(h["frames_out"] for h in last.values()) == 12  # cam0, cam2 -> worker 1; cam1 -> worker 2
+    assert last["1/2"]["frames_out"] == 8 and last["2/2"]["frames_out"] == 4

@@ -37,6 +37,8 @@ __all__ = ["serve_cmd"]
                    "(default for MQTT), or block the reader (default for stdin).")
 @click.option("--health-interval-s", type=click.FloatRange(min=0), default=1.0, show_default=True,
               help="Period of the health/metrics message (0: none).")
+@click.option("--workers", type=click.IntRange(min=1), default=1, show_default=True,
+              help="Worker processes (MQTT input with --registry): the cameras are split over them.")
 @click.option("--client-id", default=None, help="MQTT client id (persistent session; default footprint-uq-serve-PID).")
 @click.option("--heading-offset-deg", type=float, default=0.0, show_default=True, metavar="D",
               help="Compass bearing of the world +y axis (V2X fields, message east/north offsets).")
@@ -52,8 +54,8 @@ __all__ = ["serve_cmd"]
 @click.option("--uper-encoder", type=click.Choice(["fast", "asn1tools"]), default="fast", show_default=True,
               help="CPM UPER writer: the direct writer, or asn1tools (same bytes, ~6 ms per 100 objects).")
 def serve_cmd(camera_path, budget_spec, registry, camera_id, input_, mqtt, output, input_prefix, output_prefix,
-              policy, health_interval_s, client_id, heading_offset_deg, origin_lat, origin_lon, confidence, contact,
-              allow_outside_image, station_id, uper_encoder):
+              policy, health_interval_s, workers, client_id, heading_offset_deg, origin_lat, origin_lon, confidence,
+              contact, allow_outside_image, station_id, uper_encoder):
     """Edge service: detector frames in, positions with uncertainty and V2X messages (CPM, SDSM) out.
 
     One output record per frame (or an error record), a health record every second;
@@ -64,7 +66,7 @@ def serve_cmd(camera_path, budget_spec, registry, camera_id, input_, mqtt, outpu
     sys.exit(run(camera=camera_path, budget=budget_spec, registry=registry, camera_id=camera_id,
                  heading_offset_deg=heading_offset_deg, origin_lat_deg=origin_lat, origin_lon_deg=origin_lon,
                  confidence=confidence, contact=contact, allow_outside_image=allow_outside_image,
-                 station_id=station_id, uper_encoder=uper_encoder, input=input_ if input_ is not None else
-                 (None if mqtt else "-"), mqtt=mqtt, output=output, input_prefix=input_prefix,
-                 output_prefix=output_prefix, policy=policy, health_interval_s=health_interval_s,
-                 client_id=client_id))
+                 station_id=station_id, uper_encoder=uper_encoder, workers=workers,
+                 input=input_ if input_ is not None else (None if mqtt else "-"), mqtt=mqtt, output=output,
+                 input_prefix=input_prefix, output_prefix=output_prefix, policy=policy,
+                 health_interval_s=health_interval_s, client_id=client_id))

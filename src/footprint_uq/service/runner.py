@@ -276,7 +276,8 @@ def _mqtt_client(host: str, port: int, client_id: str):
 # -- the service --------------------------------------------------------------------------------------------
 def serve(service: Service, *, input: str | None = "-", mqtt: str | None = None, output: str = "-",
           input_prefix: str = "detections", output_prefix: str = "footprints", policy: str | None = None,
-          health_interval_s: float = 1.0, client_id: str | None = None, stdin=None, stdout=None,
+          health_interval_s: float = 1.0, client_id: str | None = None, cameras: list[str] | None = None,
+          worker: str | None = None, stdin=None, stdout=None,
           stop: threading.Event | None = None, install_signals: bool = True, drain_timeout_s: float = 10.0) -> int:
     """Run the service until SIGTERM/SIGINT, ``stop`` or the end of stdin; return the exit status (0).
 
@@ -291,6 +292,10 @@ def serve(service: Service, *, input: str | None = "-", mqtt: str | None = None,
         Overload policy (default: ``block`` for stdin, ``newest`` for MQTT).
     health_interval_s : float
         Period of the health/metrics message (0: none).
+    cameras : list of str, optional
+        MQTT input: subscribe to these cameras' topics only (default: ``<input_prefix>/+``).
+    worker : str, optional
+        Label added to the health records (``"1/2"``: worker 1 of 2, see :func:`run`).
     """
     if input not in ("-", None):
         raise InputError("--input", input, "'-' (stdin); use --mqtt for MQTT input")
@@ -307,11 +312,11 @@ def serve(service: Service, *, input: str | None = "-", mqtt: str | None = None,
     if mqtt:
         host, port = parse_mqtt_url(mqtt)
         client = _mqtt_client(host, port, client_id or f"footprint-uq-serve-{os.getpid()}")
-        topic = f"{input_prefix}/+"
+        topics = [f"{input_prefix}/+"] if cameras is None else [f"{input_prefix}/{c}" for c in cameras]
 
         def on_connect(c, userdata, flags, reason_code, properties):
             if not reason_code.is_failure and input is None and not stop.is_set():
-                c.subscribe(topic, qos=1)
+                c.subscribe([(t, 1) for t in topics])
                 subscribed.set()
 
         def on_message(c, userdata, msg):
@@ -352,7 +357,7 @@ def serve(service: Service, *, input: str | None = "-", mqtt: str | None = None,
         for sig in (signal.SIGTERM, signal.SIGINT):
             old_handlers[sig] = signal.signal(sig, lambda s, f: stop.set())
 
-    def worker():
+    def work():
         while True:
             item = queue.get(timeout=0.1)
             if item is None:
@@ -364,11 +369,17 @@ def serve(service: Service, *, input: str | None = "-", mqtt: str | None = None,
             sink.write(rec)
             metrics.done(rec, time.monotonic() - t)
 
+    def snapshot():
+        rec = metrics.snapshot(queue.dropped, len(queue))
+        if worker is not None:
+            rec["worker"] = worker
+        return rec
+
     def health():
         while not stop.wait(health_interval_s):
-            sink.write(metrics.snapshot(queue.dropped, len(queue)))
+            sink.write(snapshot())
 
-    threads = [threading.Thread(target=worker, name="footprint-uq-worker", daemon=True)]
+    threads = [threading.Thread(target=work, name="footprint-uq-worker", daemon=True)]
     if input == "-":
         stream = stdin if stdin is not None else sys.stdin.buffer
         threads.append(threading.Thread(target=_stdin_reader, args=(stream, queue, sink, metrics, stop),
@@ -385,11 +396,11 @@ def serve(service: Service, *, input: str | None = "-", mqtt: str | None = None,
     finally:
         stop.set()
         if client is not None and input is None:
-            client.unsubscribe(topic)
+            client.unsubscribe(topics)
             time.sleep(0.2)  # messages already on the way are still taken in
         queue.close()
         threads[0].join(drain_timeout_s)
-        sink.write(metrics.snapshot(queue.dropped, len(queue)))
+        sink.write(snapshot())
         sink.close(drain_timeout_s)
         if client is not None:
             client.disconnect()
@@ -402,12 +413,27 @@ def serve(service: Service, *, input: str | None = "-", mqtt: str | None = None,
 def run(*, camera=None, budget=None, registry=None, camera_id: str | None = None, heading_offset_deg: float = 0.0,
         origin_lat_deg: float | None = None, origin_lon_deg: float | None = None, confidence: float = 0.95,
         contact: str = "bottom-centre", allow_outside_image: bool = False, station_id: int | None = None,
-        uper_encoder: str = "fast", **serve_options) -> int:
+        uper_encoder: str = "fast", workers: int = 1, **serve_options) -> int:
     """``footprint-uq serve``: build the :class:`Service` from files (a camera file and budget, or a
-    registry) and :func:`serve` it; returns the exit status."""
+    registry) and :func:`serve` it; returns the exit status.
+
+    With ``workers`` > 1 (MQTT input and a registry) the registry's cameras are split over that many
+    worker processes (camera ``i`` of the sorted ids goes to worker ``i mod workers``), each with its
+    own MQTT client (``<client_id>-w<k>``) subscribed to its cameras' topics and its own health
+    records (labelled ``"k/N"``); SIGTERM/SIGINT is passed on to them and the exit status is the
+    largest of theirs.
+    """
     if (camera is None) == (registry is None):
         raise InputError("--camera/--registry", "both" if camera is not None else "neither",
                          "one camera (--camera with --budget) or many (--registry)")
+    if workers > 1:
+        if registry is None or serve_options.get("input", "-") is not None:
+            raise InputError("--workers", workers, "1, unless the input is MQTT (--mqtt without --input) and "
+                                                   "the cameras come from a --registry")
+        return _run_workers(workers, dict(
+            budget=budget, registry=registry, heading_offset_deg=heading_offset_deg, origin_lat_deg=origin_lat_deg,
+            origin_lon_deg=origin_lon_deg, confidence=confidence, contact=contact,
+            allow_outside_image=allow_outside_image, uper_encoder=uper_encoder, **serve_options))
     cam = None
     if camera is not None:
         from ..io import load_camera
@@ -420,3 +446,47 @@ def run(*, camera=None, budget=None, registry=None, camera_id: str | None = None
                       contact=contact, allow_outside_image=allow_outside_image, station_id=station_id,
                       uper_encoder=uper_encoder)
     return serve(service, **serve_options)
+
+
+def _worker_main(options: dict, cameras: list[str], label: str) -> None:  # pragma: no cover - child process
+    from ..batch.fleet import load_registry
+
+    entries = load_registry(options.pop("registry"), budget=options["budget"])
+    sub = {c: entries[c] for c in cameras}
+    sys.exit(run(registry=sub, cameras=cameras, worker=label, **options))
+
+
+def _run_workers(n: int, options: dict) -> int:
+    import multiprocessing as mp
+
+    from ..batch.fleet import load_registry
+
+    ids = sorted(load_registry(options["registry"], budget=options["budget"]))
+    if n > len(ids):
+        raise InputError("--workers", n, f"at most the number of cameras in the registry ({len(ids)})")
+    base = options.pop("client_id", None) or f"footprint-uq-serve-{os.getpid()}"
+    ctx = mp.get_context("spawn")
+    procs = [ctx.Process(target=_worker_main, name=f"footprint-uq-worker-{k + 1}",
+                         args=({**options, "client_id": f"{base}-w{k + 1}"}, ids[k::n], f"{k + 1}/{n}"))
+             for k in range(n)]
+    stopping = threading.Event()
+    old = {}
+    if threading.current_thread() is threading.main_thread():
+        for sig in (signal.SIGTERM, signal.SIGINT):
+            old[sig] = signal.signal(sig, lambda s, f: stopping.set())
+    try:
+        for p in procs:
+            p.start()
+        while any(p.is_alive() for p in procs):
+            if stopping.wait(0.1):
+                for p in procs:
+                    if p.is_alive():
+                        os.kill(p.pid, signal.SIGTERM)
+                for p in procs:
+                    p.join()
+        # a worker stopped by SIGTERM before its own handler was installed had subscribed to nothing yet
+        codes = [0 if p.exitcode == -signal.SIGTERM and stopping.is_set() else p.exitcode for p in procs]
+        return next((c if c > 0 else 1 for c in codes if c != 0), 0)
+    finally:
+        for sig, h in old.items():
+            signal.signal(sig, h)
