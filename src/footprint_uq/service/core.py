@@ -34,6 +34,7 @@ from ..ellipse import chi2_scale, ellipse_axes
 from ..errors import FootprintUQError, InputError
 from ..footprints import V2X_FIELDS, FrameProcessor
 from ..geo import GeoReference
+from ..v2x import J2735_POSITION_CONFIDENCE_NAMES
 from .messages.cpm import (
     CONFIDENCE_LEVEL_UNAVAILABLE,
     CPM_CLASSES,
@@ -42,11 +43,10 @@ from .messages.cpm import (
     build_cpm,
     coordinate_cm,
     encode_cpm_uper,
-    perceived_object,
     timestamp_its_ms,
 )
-from .messages.sdsm import build_sdsm, offset_dm, sdsm_object
-from .messages.uper_cpm import encode_cpm_uper_fast
+from .messages.sdsm import HEADING_UNAVAILABLE, SDSM_OBJECT_TYPES, SPEED_UNAVAILABLE, build_sdsm, offset_dm
+from .messages.uper_cpm import class_bits, encode_cpm_uper_fast, perceived_object_container_uper
 
 __all__ = ["Service", "CameraSetup", "error_record", "station_id_of", "RECORD_FOOTPRINTS", "RECORD_ERROR",
            "UPER_ENCODERS"]
@@ -56,6 +56,7 @@ UPER_ENCODERS = ("fast", "asn1tools")
 RECORD_FOOTPRINTS = "footprints"
 RECORD_ERROR = "error"
 _CPM_INDEX = V2X_FIELDS.index("cpm_x_confidence")
+_CPM_CLASS_BITS = {name: class_bits(c) for name, c in CPM_CLASSES.items()}
 _J_POS = V2X_FIELDS.index("j2735_position_confidence")
 
 
@@ -290,24 +291,31 @@ class Service:
 
     def _footprints(self, setup: CameraSetup, dets: list):
         N = len(dets)
-        ids, classes, class_conf = [], [], []
         for i, d in enumerate(dets):
-            if not isinstance(d, dict):
+            if type(d) is not dict:
                 raise _FrameError(f"detections[{i}]", f"detection {i} is not a JSON object")
-            oid = d.get("object_id", i)
-            if oid is not None and (isinstance(oid, bool) or not isinstance(oid, (int, str))):
-                raise _FrameError(f"detections[{i}].object_id", f"object_id is not a string or integer: {oid!r}")
-            cls = d.get("class")
-            if cls is not None and not isinstance(cls, str):
-                raise _FrameError(f"detections[{i}].class", f"class is not a string: {cls!r}")
-            cc = d.get("class_confidence")
+        # one pass per field; the per-detection checks only name the first bad value
+        ids = [d.get("object_id", i) for i, d in enumerate(dets)]
+        for i, oid in enumerate(ids):
+            if type(oid) not in _ID_TYPES:  # numpy scalars from embedding code are taken as their Python value
+                if isinstance(oid, str):
+                    ids[i] = str(oid)
+                elif isinstance(oid, (int, np.integer)) and not isinstance(oid, (bool, np.bool_)):
+                    ids[i] = int(oid)
+                else:
+                    raise _FrameError(f"detections[{i}].object_id", f"object_id is not a string or integer: {oid!r}")
+        classes = [d.get("class") for d in dets]
+        for i, cls in enumerate(classes):
+            if cls is not None and type(cls) is not str:
+                if not isinstance(cls, str):
+                    raise _FrameError(f"detections[{i}].class", f"class is not a string: {cls!r}")
+                classes[i] = str(cls)
+        class_conf = [d.get("class_confidence") for d in dets]
+        for i, cc in enumerate(class_conf):
             if cc is not None:
-                cc = _finite_number(d, "class_confidence", f"detections[{i}]")
+                cc = class_conf[i] = _finite_number(dets[i], "class_confidence", f"detections[{i}]")
                 if not 0.0 <= cc <= 1.0:
                     raise _FrameError(f"detections[{i}].class_confidence", f"class_confidence {cc} not in [0, 1]")
-            ids.append(oid)
-            classes.append(cls)
-            class_conf.append(cc)
         proc = setup.processor
         if N == 0:
             return proc.corners(np.zeros((0, 1, 2))), ids, classes, class_conf
@@ -389,7 +397,7 @@ class Service:
         if nonlin is not None:
             keys.append("nonlinearity")
             columns.append(_nan_none(np.asarray(nonlin, dtype=np.float64).tolist()))
-        pos, sobj = [], []
+        pos = sobj = None
         if self.messages:
             ok_idx = [i for i in range(N) if valid[i]]
             msg_ids = [None] * N
@@ -397,33 +405,69 @@ class Service:
                 msg_ids[i] = _message_object_id(ids[i], i)
             keys.append("message_object_id")  # None: no centre, not in the CPM / SDSM
             columns.append(msg_ids)
-            for i in ok_idx:
-                cc = class_conf[i]
-                c = codes[i]
-                cls = classes[i]
-                level = CONFIDENCE_LEVEL_UNAVAILABLE if cc is None else max(1, math.ceil(100.0 * cc - 1e-9))
-                pos.append(perceived_object(msg_ids[i], ex_cm[i], ny_cm[i], c[_CPM_INDEX], c[_CPM_INDEX + 1],
-                                            c[_CPM_INDEX + 2], CPM_CLASSES.get(cls.lower()) if cls else None, level))
-                sobj.append(sdsm_object(msg_ids[i], ex_dm[i], ny_dm[i], c[_J_POS], cls,
-                                        0 if cc is None else int(round(100.0 * cc))))
+            pos = self._message_columns(ok_idx, msg_ids, classes, class_conf, codes, ex_cm, ny_cm, ex_dm, ny_dm)
         objects = [dict(zip(keys, row, strict=True)) for row in zip(*columns, strict=True)]
         return objects, pos, sobj
 
-    def _messages(self, setup, pos, sobj, fno: int, ts: float, ref_ms):
+    @staticmethod
+    def _message_columns(ok_idx, msg_ids, classes, class_conf, codes, ex_cm, ny_cm, ex_dm, ny_dm) -> dict:
+        """The per-object columns of the messages (objects with a centre, at most 255)."""
+        ok_idx = ok_idx[:255]
+        oid = [msg_ids[i] for i in ok_idx]
+        cls = [classes[i] for i in ok_idx]
+        cc = [class_conf[i] for i in ok_idx]
+        low = [c.lower() if c else None for c in cls]
+        cpm_class = [CPM_CLASSES.get(c) if c else None for c in low]
+        level = [CONFIDENCE_LEVEL_UNAVAILABLE if p is None else max(1, math.ceil(100.0 * p - 1e-9)) for p in cc]
+        return {"objectId": oid, "class": cls, "cpm_class": cpm_class, "level": level,
+                "class_bits": [_CPM_CLASS_BITS.get(c) if c else None for c in low],
+                "class_pct": [0 if p is None else int(round(100.0 * p)) for p in cc],
+                "x_cm": [ex_cm[i] for i in ok_idx], "y_cm": [ny_cm[i] for i in ok_idx],
+                "x_conf": [codes[i][_CPM_INDEX] for i in ok_idx], "y_conf": [codes[i][_CPM_INDEX + 1] for i in ok_idx],
+                "corr": [codes[i][_CPM_INDEX + 2] for i in ok_idx], "pos_conf": [codes[i][_J_POS] for i in ok_idx],
+                "x_dm": [ex_dm[i] for i in ok_idx], "y_dm": [ny_dm[i] for i in ok_idx]}
+
+    def _messages(self, setup, m: dict, sobj, fno: int, ts: float, ref_ms):
         geo = setup.georef
+        # the JSON forms of perceived_object() / sdsm_object(), written inline (the per-frame hot path)
+        pos = [{"objectId": o, "measurementDeltaTime": 0,
+                "position": {"xCoordinate": {"value": x, "confidence": cx},
+                             "yCoordinate": {"value": y, "confidence": cy}}}
+               for o, x, y, cx, cy in zip(m["objectId"], m["x_cm"], m["y_cm"], m["x_conf"], m["y_conf"], strict=True)]
+        for po, r, c, lv in zip(pos, m["corr"], m["cpm_class"], m["level"], strict=True):
+            if r != 101:
+                po["lowerTriangularCorrelationMatrices"] = [
+                    {"componentsIncludedIntheMatrix": ["xPosition", "yPosition"], "matrix": [[r]]}]
+            if c is not None:
+                po["classification"] = [{"objectClass": c, "confidence": lv}]
+        sobj = [{"detObjCommon": {
+            "objType": SDSM_OBJECT_TYPES.get(c.lower(), "unknown") if c else "unknown", "objTypeCfd": pct,
+            "objectID": o, "measurementTime": 0, "timeConfidence": "unavailable", "pos": {"offsetX": x, "offsetY": y},
+            "posConfidence": {"pos": J2735_POSITION_CONFIDENCE_NAMES[pc], "elevation": "unavailable"},
+            "speed": SPEED_UNAVAILABLE, "speedConfidence": "unavailable", "heading": HEADING_UNAVAILABLE,
+            "headingConf": "unavailable"}}
+            for o, x, y, pc, c, pct in zip(m["objectId"], m["x_dm"], m["y_dm"], m["pos_conf"], m["class"],
+                                           m["class_pct"], strict=True)]
         lat_e7 = lon_e7 = None
         if geo.has_origin:
             lat_e7, lon_e7 = round(geo.origin_lat_deg * 1e7), round(geo.origin_lon_deg * 1e7)
-        cpm = build_cpm(setup.station_id, ref_ms, pos[:255],
+        cpm = build_cpm(setup.station_id, ref_ms, pos,
                         latitude=LATITUDE_UNAVAILABLE if lat_e7 is None else lat_e7,
                         longitude=LONGITUDE_UNAVAILABLE if lon_e7 is None else lon_e7)
-        cpm_hex = self._encode(cpm).hex()
-        sdsm = build_sdsm(setup.station_id, fno, ts, sobj[:255],
+        if self.uper_encoder == "fast":
+            container = perceived_object_container_uper(
+                m["objectId"], m["x_cm"], m["x_conf"], m["y_cm"], m["y_conf"], m["corr"],
+                [None if c is None else (c, lv) for c, lv in zip(m["class_bits"], m["level"], strict=True)])
+            cpm_hex = encode_cpm_uper_fast(cpm, perceived_objects_uper=container).hex()
+        else:
+            cpm_hex = self._encode(cpm).hex()
+        sdsm = build_sdsm(setup.station_id, fno, ts, sobj,
                           **({} if lat_e7 is None else {"lat_1e7deg": lat_e7, "lon_1e7deg": lon_e7}))
         return cpm, cpm_hex, sdsm
 
 
 _NUMBER_TYPES = (int, float)
+_ID_TYPES = (int, str, type(None))
 
 
 def _box_array(dets: list, cols) -> np.ndarray:

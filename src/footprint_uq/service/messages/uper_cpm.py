@@ -44,7 +44,7 @@ from ...errors import InputError
 from .asn1_cpm import CONTAINER_ID_PERCEIVED_OBJECTS, CONTAINER_ID_RSU
 from .cpm import MATRIX_COMPONENTS
 
-__all__ = ["encode_cpm_uper_fast"]
+__all__ = ["encode_cpm_uper_fast", "perceived_object_container_uper", "class_bits"]
 
 _ALT_CONF = ("alt-000-01", "alt-000-02", "alt-000-05", "alt-000-10", "alt-000-20", "alt-000-50", "alt-001-00",
              "alt-002-00", "alt-005-00", "alt-010-00", "alt-020-00", "alt-050-00", "alt-100-00", "alt-200-00",
@@ -151,8 +151,70 @@ def _container_bytes(cid: int, data: dict) -> bytes:
     return _pad_bytes(int(s, 2), len(s))
 
 
-def encode_cpm_uper_fast(cpm: dict) -> bytes:
-    """UPER bytes of a CPM in its JSON form (same as :func:`~.cpm.encode_cpm_uper`)."""
+#: the bits after the 104 fixed ones of an object with its x/y correlation cell: one matrix (2), extension 0 +
+#: xPosition, yPosition (14), one column (4), extension 0 + one cell (5); the cell (8) follows
+_CORR_PREFIX = int("00" "01100000000000" "0000" "00000", 2)
+#: classification bits before the confidence: one class (3), CHOICE extension 0 + index (3), the alternative
+_CLASS_BITS = {"vehicleSubClass": (0, 4), "vruSubClass": (1, 6), "otherSubClass": (3, 8)}
+
+
+def class_bits(object_class: dict) -> tuple[int, int]:
+    """(value, bits) of a one-class ``classification`` without its confidence (JSON ``objectClass``)."""
+    (alt, val), = object_class.items()
+    if alt not in _CLASS_BITS:
+        raise InputError("objectClass", alt, "vehicleSubClass, vruSubClass or otherSubClass")
+    index, width = _CLASS_BITS[alt]
+    if alt == "vruSubClass":
+        (sub, prof), = val.items()
+        if sub != "pedestrian":
+            raise InputError("vruSubClass", sub, "'pedestrian' (the subset sent)")
+        val = _PEDESTRIAN.index(prof)  # extension 0, index 0 (pedestrian), enumeration index (3 bits)
+    elif not 0 <= val <= (14 if alt == "vehicleSubClass" else 255):
+        raise InputError(alt, val, "0..14 (vehicleSubClass) or 0..255 (otherSubClass)")
+    return (index << width) | val, 6 + width
+
+
+def perceived_object_container_uper(object_ids, x_cm, x_conf, y_cm, y_conf, xy_corr, classes) -> bytes:
+    """UPER bytes of a ``PerceivedObjectContainer`` from columns (one entry per object, measured at the
+    reference time): objectId, x/y (0.01 m) and their CoordinateConfidence, the CorrelationCellValue (101:
+    no matrix) and ``(class_bits(...), ConfidenceLevel)`` or None.  The same bytes as
+    :func:`encode_cpm_uper_fast` writes for the JSON form (the tests decode both with asn1tools)."""
+    n = len(object_ids)
+    for name, col, lo, hi in (("objectId", object_ids, 0, 65535), ("xCoordinate.value", x_cm, -131072, 131071),
+                              ("yCoordinate.value", y_cm, -131072, 131071),
+                              ("xCoordinate.confidence", x_conf, 1, 4096), ("yCoordinate.confidence", y_conf, 1, 4096),
+                              ("CorrelationCellValue", xy_corr, -100, 101)):
+        if n and not (lo <= min(col) and max(col) <= hi):
+            bad = next(v for v in col if not lo <= v <= hi)
+            raise InputError(name, bad, f"an integer in {lo}..{hi}")
+    if n > 255:
+        raise InputError("perceivedObjects count", n, "at most 255")
+    v, nb = (n << 9) | n, 18  # extension 0, numberOfPerceivedObjects, list extension 0, count
+    for oid, x, cx, y, cy, r, c in zip(object_ids, x_cm, x_conf, y_cm, y_conf, xy_corr, classes, strict=True):
+        pres = 0x2000 | (0x100 if r != 101 else 0) | (0x2 if c is not None else 0)
+        o = ((((((pres << 16 | oid) << 12 | 2048) << 19 | (x + 131072)) << 12 | (cx - 1)) << 18 | (y + 131072))
+             << 12) | (cy - 1)
+        w = 104
+        if r != 101:
+            o = (o << 33) | (_CORR_PREFIX << 8) | (r + 100)
+            w += 33
+        if c is not None:
+            (cv, cw), level = c
+            if not 1 <= level <= 101:
+                raise InputError("ConfidenceLevel", level, "an integer in 1..101")
+            o = (((o << cw) | cv) << 7) | (level - 1)
+            w += cw + 7
+        v = (v << w) | o
+        nb += w
+    return _pad_bytes(v, nb)
+
+
+def encode_cpm_uper_fast(cpm: dict, *, perceived_objects_uper: bytes | None = None) -> bytes:
+    """UPER bytes of a CPM in its JSON form (same as :func:`~.cpm.encode_cpm_uper`).
+
+    ``perceived_objects_uper``: the container's bytes when the caller already has them
+    (:func:`perceived_object_container_uper` on the same objects).
+    """
     h = cpm["header"]
     mc = cpm["payload"]["managementContainer"]
     rp = mc["referencePosition"]
@@ -182,7 +244,8 @@ def encode_cpm_uper_fast(cpm: dict) -> bytes:
         cid = w["containerId"]
         if cid not in (CONTAINER_ID_RSU, CONTAINER_ID_PERCEIVED_OBJECTS):
             raise InputError("containerId", cid, f"{CONTAINER_ID_RSU} or {CONTAINER_ID_PERCEIVED_OBJECTS}")
-        data = _container_bytes(cid, w["containerData"])
+        data = perceived_objects_uper if (cid == CONTAINER_ID_PERCEIVED_OBJECTS and perceived_objects_uper
+                                          is not None) else _container_bytes(cid, w["containerData"])
         L = len(data)
         if L < 128:
             length = format(L, "08b")
