@@ -298,3 +298,28 @@ def test_queue_block_policy_waits_instead_of_dropping():
     assert q.get(0) == 1
     t.join(2)
     assert got == [True] and q.get(0) == 2 and q.dropped == 0
+
+
+def test_column_writer_equals_asn1tools():
+    """The per-frame path writes the container from columns: the same bytes as asn1tools."""
+    from footprint_uq.service.messages.cpm import _spec, cpm_to_asn1_value
+    from footprint_uq.service.messages.uper_cpm import class_bits, perceived_object_container_uper
+
+    rng = np.random.default_rng(41)
+    classes = [None, {"vehicleSubClass": 0}, {"vehicleSubClass": 14}, {"otherSubClass": 255},
+               {"vruSubClass": {"pedestrian": "ordinary-pedestrian"}}]
+    for n in (0, 1, 9, 255):
+        cols = dict(o=rng.integers(0, 65536, n).tolist(), x=rng.integers(-131072, 131072, n).tolist(),
+                    y=rng.integers(-131072, 131072, n).tolist(), cx=rng.integers(1, 4097, n).tolist(),
+                    cy=rng.integers(1, 4097, n).tolist(), r=rng.choice([101, -100, 100, 0, 37], n).tolist(),
+                    c=[classes[k] for k in rng.integers(0, len(classes), n)], lv=rng.integers(1, 102, n).tolist())
+        objs = [perceived_object(*row) for row in zip(*cols.values(), strict=True)]  # (id, x, y, cx, cy, r, c, lv)
+        cpm = build_cpm(5, 0, objs)
+        ref = cpm_to_asn1_value(cpm)["payload"]["cpmContainers"][1]["containerData"]
+        got = perceived_object_container_uper(cols["o"], cols["x"], cols["cx"], cols["y"], cols["cy"], cols["r"],
+                                              [None if c is None else (class_bits(c), lv)
+                                               for c, lv in zip(cols["c"], cols["lv"], strict=True)])
+        assert got == ref, n
+        assert _spec().decode("PerceivedObjectContainer", got)["numberOfPerceivedObjects"] == n
+    with pytest.raises(ValueError, match="xCoordinate.value"):
+        perceived_object_container_uper([1], [131072], [1], [0], [1], [101], [None])
