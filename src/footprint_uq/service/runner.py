@@ -190,19 +190,34 @@ def parse_mqtt_url(url: str) -> tuple[str, int]:
 
 # -- sinks -------------------------------------------------------------------------------------------
 class _StdoutSink:
-    def __init__(self, stream):
+    """JSON Lines on a binary stream; when its reader goes away (broken pipe) it calls ``on_broken`` and
+    drops what follows (there is nobody left to deliver to)."""
+
+    def __init__(self, stream, on_broken):
         self._out = stream
         self._lock = threading.Lock()
+        self._broken = False
+        self._on_broken = on_broken
 
     def write(self, record: dict) -> None:
         data = _dumps(record) + b"\n"
         with self._lock:
-            self._out.write(data)
-            self._out.flush()
+            if self._broken:
+                return
+            try:
+                self._out.write(data)
+                self._out.flush()
+            except BrokenPipeError:
+                self._broken = True
+                self._on_broken()
 
     def close(self, timeout_s: float) -> None:
         with self._lock:
-            self._out.flush()
+            if not self._broken:
+                try:
+                    self._out.flush()
+                except BrokenPipeError:
+                    self._broken = True
 
 
 class _MqttSink:
@@ -350,7 +365,7 @@ def serve(service: Service, *, input: str | None = "-", mqtt: str | None = None,
         client.connect_async(host, port, keepalive=5)
         client.loop_start()
     out_stream = stdout if stdout is not None else sys.stdout.buffer
-    sink = _MqttSink(client, output_prefix, metrics) if output == "mqtt" else _StdoutSink(out_stream)
+    sink = _MqttSink(client, output_prefix, metrics) if output == "mqtt" else _StdoutSink(out_stream, stop.set)
 
     old_handlers = {}
     if install_signals and threading.current_thread() is threading.main_thread():
@@ -365,8 +380,16 @@ def serve(service: Service, *, input: str | None = "-", mqtt: str | None = None,
                     return
                 continue
             frame, src, t = item
-            rec = service.process_frame(frame, source=src)
-            sink.write(rec)
+            try:
+                rec = service.process_frame(frame, source=src)
+            except Exception as e:  # noqa: BLE001 - a bug met by one frame is reported in its record, not fatal
+                rec = error_record(f"internal error (please report): {type(e).__name__}: {e}", source=src,
+                                   camera_id=frame.get("camera_id") if isinstance(frame, dict) else None)
+            try:
+                sink.write(rec)
+            except BrokenPipeError:  # stdout closed by the reader: nothing more can be delivered
+                stop.set()
+                return
             metrics.done(rec, time.monotonic() - t)
 
     def snapshot():
@@ -377,7 +400,10 @@ def serve(service: Service, *, input: str | None = "-", mqtt: str | None = None,
 
     def health():
         while not stop.wait(health_interval_s):
-            sink.write(snapshot())
+            try:
+                sink.write(snapshot())
+            except BrokenPipeError:
+                stop.set()
 
     threads = [threading.Thread(target=work, name="footprint-uq-worker", daemon=True)]
     if input == "-":
@@ -400,8 +426,11 @@ def serve(service: Service, *, input: str | None = "-", mqtt: str | None = None,
             time.sleep(0.2)  # messages already on the way are still taken in
         queue.close()
         threads[0].join(drain_timeout_s)
-        sink.write(snapshot())
-        sink.close(drain_timeout_s)
+        try:
+            sink.write(snapshot())
+            sink.close(drain_timeout_s)
+        except BrokenPipeError:  # stdout's reader has gone (e.g. `| head`): nothing more to deliver
+            pass
         if client is not None:
             client.disconnect()
             client.loop_stop()
