@@ -99,7 +99,8 @@ def in_process_times(objects: int, repeats: int) -> dict:
     return out
 
 
-def measure(seconds: float = 60.0, cameras: int = 8, fps: float = 30.0, objects: int = 100, workers: int = 1) -> dict:
+def measure(seconds: float = 60.0, cameras: int = 8, fps: float = 30.0, objects: int = 100, workers: int = 1,
+            stagger: bool = False) -> dict:
     import paho.mqtt.client as mqtt
 
     mosquitto = shutil.which("mosquitto") or "/usr/sbin/mosquitto"
@@ -146,6 +147,10 @@ def measure(seconds: float = 60.0, cameras: int = 8, fps: float = 30.0, objects:
                     k = msg.payload.rfind(b'"processing_us":')
                     proc_us.append(json.loads(msg.payload[k + 16:-1]))
 
+        import gc
+
+        gc.collect()
+        gc.freeze()  # as the service does: no cyclic-GC stalls in the receiver's time stamps
         rx = mqtt.Client(mqtt.CallbackAPIVersion.VERSION2, client_id="bench-rx")
         rx.on_message = on_message
         rx.on_connect = lambda c, u, f, rc, p: c.subscribe("footprints/#", qos=1)
@@ -165,8 +170,13 @@ def measure(seconds: float = 60.0, cameras: int = 8, fps: float = 30.0, objects:
         t_start = time.monotonic()
         next_t = t_start
         frame_no = 0
+        # synchronised: every camera's frame at the start of each period (the worst case: a burst of `cameras`
+        # frames); staggered: camera k at k / cameras of the period (free-running cameras)
+        slot = period / cameras if stagger else 0.0
         while time.monotonic() - t_start < seconds:
-            for c in ids:
+            for k, c in enumerate(ids):
+                if slot:
+                    time.sleep(max(0.0, next_t + k * slot - time.monotonic()))
                 payload = b'{"camera_id":"%s","frame":%d,"timestamp_s":%.6f,"detections":%s}' % (
                     c.encode(), frame_no, time.time(), bodies[c])
                 tx.publish(f"detections/{c}", payload, qos=1)
@@ -175,6 +185,7 @@ def measure(seconds: float = 60.0, cameras: int = 8, fps: float = 30.0, objects:
             next_t += period
             time.sleep(max(0.0, next_t - time.monotonic()))
         t_pub = time.monotonic() - t_start
+
         def totals() -> dict:  # the latest health record of every worker, summed
             with lock:
                 last = {r.get("worker"): r for r in health}
@@ -203,7 +214,8 @@ def measure(seconds: float = 60.0, cameras: int = 8, fps: float = 30.0, objects:
     lat = np.array(lat_ms)
     stages = {k: float(np.median([p[k] for p in proc_us])) for k in proc_us[0]} if proc_us else {}
     return {
-        "seconds": round(t_pub, 2), "workers": workers, "cameras": cameras, "fps_per_camera": fps, "objects": objects,
+        "seconds": round(t_pub, 2), "workers": workers, "staggered": stagger,
+        "cameras": cameras, "fps_per_camera": fps, "objects": objects,
         "frames_published": sent, "frames_in": h["frames_in"], "frames_out": h["frames_out"],
         "frames_dropped": h["frames_dropped"], "errors": h["errors"], "frames_received": n_out[0],
         "sustained_frames_per_s": h["frames_out"] / t_pub, "offered_frames_per_s": sent / t_pub,
@@ -282,10 +294,11 @@ def main(argv=None) -> int:
     ap.add_argument("--fps", type=float, default=30.0)
     ap.add_argument("--objects", type=int, default=100)
     ap.add_argument("--workers", type=int, default=1)
+    ap.add_argument("--stagger", action="store_true", help="cameras spread over the frame period (not in a burst)")
     ap.add_argument("--quick", action="store_true", help="5 s instead of --seconds")
     args = ap.parse_args(argv)
     res = measure(seconds=5.0 if args.quick else args.seconds, cameras=args.cameras, fps=args.fps,
-                  objects=args.objects, workers=args.workers)
+                  objects=args.objects, workers=args.workers, stagger=args.stagger)
     res["in_process"] = in_process_times(args.objects, 200)
     print(json.dumps(res, indent=1))
     return 0
