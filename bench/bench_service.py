@@ -283,7 +283,8 @@ def run(quick: bool = False) -> list[dict]:
         {"case": "one 100-object frame in the service: everything (footprints + records + CPM/UPER/SDSM)",
          "median_us": st.get("total", times["process_frame_total_us"]), "items": 100,
          "notes": "stages (median us, in the service under load): " + ", ".join(f"{k} {v:.0f}" for k, v in st.items())
-                  + "; in the bench process after the load run: " + ", ".join(f"{k} {v:.0f}" for k, v in times.items())},
+                  + "; in the bench process after the load run: "
+                  + ", ".join(f"{k} {v:.0f}" for k, v in times.items())},
     ]
 
 
