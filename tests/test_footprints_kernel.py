@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from footprint_uq import ErrorBudget, InputError, PanTiltCamera, status
+from footprint_uq.budget import psd_factor
 from footprint_uq.cameras.base import Camera
-from footprint_uq.footprint_kernels import psd_factor
 from footprint_uq.footprints import (
     FrameProcessor,
     footprints_from_boxes2d,
@@ -180,16 +180,18 @@ def test_empty_frame(rng):
 
 def test_psd_factor_reproduces_covariance(rng):
     for S in (BUDGET.param_covariance(), FULL_BUDGET.param_covariance()):
-        rows, cols, vals, r = psd_factor(S)
-        L = np.zeros((S.shape[0], r))
-        L[rows, cols] = vals
-        assert np.abs(L @ L.T - S).max() <= 1e-15 * np.abs(S).max()
+        L = psd_factor(S).dense()
+        # each entry to the precision of its own variances (px^2 and rad^2 differ by 1e10)
+        d = np.sqrt(np.diag(S))
+        assert np.all(np.abs(L @ L.T - S) <= 1e-14 * np.outer(d, d))
     # fx and fy move together: one column, not two
-    rows, cols, vals, r = psd_factor(BUDGET.param_covariance())
-    assert r == np.count_nonzero(np.diag(BUDGET.param_covariance())) - 1
+    f = psd_factor(BUDGET.param_covariance())
+    assert f.rank == np.count_nonzero(np.diag(BUDGET.param_covariance())) - 1
+    assert np.array_equal(f.cols, np.sort(f.cols))  # sorted by column
     A = rng.normal(size=(22, 5))
-    rows, cols, vals, r = psd_factor(A @ A.T)
-    assert r == 5
+    assert psd_factor(A @ A.T).rank == 5
+    # the budget's own factor is this one
+    np.testing.assert_array_equal(BUDGET.param_factor().vals, psd_factor(BUDGET.param_covariance()).vals)
 
 
 def test_bad_input():

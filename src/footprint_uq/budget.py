@@ -36,6 +36,7 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
@@ -44,7 +45,7 @@ from . import presets
 from ._checks import check_cov
 from .errors import ConfigError, InputError
 
-__all__ = ["ErrorBudget", "SHARED_SOURCES", "POINT_SOURCES", "load_budget"]
+__all__ = ["ErrorBudget", "SHARED_SOURCES", "POINT_SOURCES", "SparseFactor", "load_budget", "psd_factor"]
 
 #: camera-level sources -> parameters they act on
 SHARED_SOURCES: dict[str, tuple[str, ...]] = {
@@ -250,6 +251,10 @@ class ErrorBudget:
             s2 += np.square(self.resolution_px)
         return np.diag(s2)
 
+    def param_factor(self) -> SparseFactor:
+        """The one factorisation of :meth:`param_covariance` every kernel uses (:func:`psd_factor`)."""
+        return psd_factor(self.param_covariance())
+
     def shared_source_covariances(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
         """Per shared source: ``(param indices, covariance block)``, only non-zero sources."""
         S = self.param_covariance()
@@ -304,6 +309,85 @@ def _parse_covariance(c, where):
         raise ConfigError(e.field, e.value, e.expected) from None
     mat = mat * np.outer(scale, scale)
     return tuple(out_names), mat
+
+
+class SparseFactor(NamedTuple):
+    """A sparse factor ``L`` (n x r) with ``L L^T = S``, stored by columns (CSC).
+
+    Attributes
+    ----------
+    colptr : ndarray of int64 (r + 1,)
+        Column ``j`` holds entries ``colptr[j]:colptr[j + 1]``.
+    rowidx : ndarray of int64
+        Row (parameter index) of each stored entry.
+    vals : ndarray of float64
+        The entries.
+    """
+
+    colptr: np.ndarray
+    rowidx: np.ndarray
+    vals: np.ndarray
+
+    @property
+    def rank(self) -> int:
+        return self.colptr.size - 1
+
+    @property
+    def cols(self) -> np.ndarray:
+        """Column of each stored entry (int64)."""
+        return np.repeat(np.arange(self.rank, dtype=np.int64), np.diff(self.colptr))
+
+    def dense(self, n: int = P.N_PARAMS) -> np.ndarray:
+        """``L`` as a dense (n, r) array."""
+        L = np.zeros((n, self.rank))
+        L[self.rowidx, self.cols] = self.vals
+        return L
+
+
+def psd_factor(S, *, rtol: float = 1e-14) -> SparseFactor:
+    """Sparse factor of a positive semi-definite covariance: ``S = L L^T``.
+
+    ``S`` is scaled to a correlation matrix (so that parameters in px^2 and in rad^2 keep
+    their relative precision), factored by diagonal-pivoted Cholesky -- pivoting stops when
+    the largest remaining diagonal is below ``rtol`` (the numerical rank) -- and scaled back.
+    A diagonal ``S`` gives a diagonal ``L``; fully correlated parameters (one focal error
+    moving fx and fy) share one column; zero-variance parameters appear in none.
+
+    Parameters
+    ----------
+    S : array_like, shape (n, n)
+        Symmetric PSD (checked by the budget that built it).
+    rtol : float
+        Rank threshold, relative to a correlation matrix's unit diagonal.
+
+    Returns
+    -------
+    SparseFactor
+    """
+    S = np.asarray(S, dtype=np.float64)
+    d = np.sqrt(np.clip(np.diag(S), 0.0, None))
+    used = np.flatnonzero(d > 0)
+    A = S[np.ix_(used, used)] / np.outer(d[used], d[used])
+    m = used.size
+    L = np.zeros((m, m))
+    r = 0
+    while r < m:
+        diag = np.diag(A)
+        p = int(np.argmax(diag))
+        if not diag[p] > rtol:
+            break
+        col = A[:, p] / np.sqrt(diag[p])
+        L[:, r] = col
+        A = A - np.outer(col, col)
+        A[p, :] = 0.0
+        A[:, p] = 0.0
+        r += 1
+    L = L[:, :r] * d[used][:, None]
+    cols, rows = np.nonzero(L.T)  # sorted by column: the kernels form one factor column at a time
+    colptr = np.zeros(r + 1, dtype=np.int64)
+    np.cumsum(np.bincount(cols, minlength=r), out=colptr[1:])
+    vals = np.ascontiguousarray(L[rows, cols])
+    return SparseFactor(colptr, used[rows].astype(np.int64), vals)
 
 
 def load_budget(spec) -> ErrorBudget:

@@ -17,8 +17,8 @@ corners or objects:
 * :func:`_stage_corner_flags`, :func:`_stage_centroid` -- status per corner (outside the
   image, 3D projection), area centroid and its closed-form Jacobian;
 * :func:`_stage_whiten` -- ``J L`` with the sparse factor ``L L^T`` of the 22x22 parameter
-  covariance (:func:`psd_factor`; only non-zero entries are touched): the parameter part of
-  every corner's and of the centre's covariance;
+  covariance (:meth:`footprint_uq.budget.ErrorBudget.param_factor`; only non-zero entries are
+  touched): the parameter part of every corner's and of the centre's covariance;
 * :func:`_stage_corner_cov`, :func:`_stage_select`, :func:`_stage_centre_cov` -- per-point
   pixel noise (budget + detector), the largest point;
 * :func:`_stage_v2x` -- 1-sigma ellipse and the CPM / J2735 integer fields.
@@ -41,6 +41,9 @@ import math
 import numpy as np
 from numba import njit
 
+from . import status, v2x
+from .fast import core
+
 # cam vector layout
 _C_FX, _C_FY, _C_CX, _C_CY, _C_SK = 0, 1, 2, 3, 4
 _C_DIST = 5  # 8 coefficients k1 k2 p1 p2 k3 k4 k5 k6
@@ -51,16 +54,18 @@ _C_HASDIST = 28
 _C_W, _C_HIMG = 29, 30
 _C_GROUNDZ = 31
 _C_IFX, _C_IFY = 32, 33  # 1 / fx, 1 / fy
-_C_LEN = 34
+_C_DOM = 34  # the packed lens domain (footprint_uq.cameras.lens_domain), to the end of the vector
 
-# status codes (footprint_uq.status) and the centre code DEGENERATE (footprints)
-_OK, _ABOVE, _NOTFIN, _UNDIST, _OUTSIDE, _BEHIND = 0, 1, 2, 3, 4, 5
-_DEGENERATE = 20
-
-_Z95 = 1.96
-_K95_2D = math.sqrt(-2.0 * math.log(0.05))
-_GUARD = 1e-9
-_ORIENT_UNIT = 360.0 / 65535.0
+# status codes (footprint_uq.status) and the constants of the V2X fields (footprint_uq.v2x), frozen at compile time
+_OK, _ABOVE, _NOTFIN, _UNDIST = status.OK, status.ABOVE_HORIZON, status.NOT_FINITE, status.UNDISTORT_FAILED
+_OUTSIDE, _BEHIND, _DEGENERATE = status.OUTSIDE_IMAGE, status.BEHIND_CAMERA, status.DEGENERATE
+_Z95, _K95_2D, _GUARD, _CIRC = v2x.Z95_1D, v2x.K95_2D, v2x.STEP_GUARD, v2x.CIRCULAR_RTOL
+_CPM_UNIT, _CPM_MAX_M = v2x.CPM_COORD_UNIT_M, v2x.CPM_COORD_MAX_M
+_CPM_OOR, _CPM_UNAV = float(v2x.CPM_COORD_OUT_OF_RANGE), float(v2x.CPM_COORD_UNAVAILABLE)
+_CORR_UNAV = float(v2x.CPM_CORR_UNAVAILABLE)
+_AX_UNIT, _AX_MAX, _AX_MAX_M = v2x.J2735_AXIS_UNIT_M, float(v2x.J2735_AXIS_MAX), v2x.J2735_AXIS_MAX_M
+_AX_UNAV = float(v2x.J2735_AXIS_UNAVAILABLE)
+_ORIENT_UNIT, _ORIENT_UNAV = v2x.J2735_ORIENTATION_UNIT_DEG, float(v2x.J2735_ORIENTATION_UNAVAILABLE)
 
 # Chunk scratch: ONE float64 buffer; row r of a chunk is S[r * _ST : r * _ST + m].  Every access
 # is "one base pointer + a compile-time offset", so LLVM proves the rows independent and vectorises
@@ -107,7 +112,7 @@ def camera_constants(camera) -> tuple[np.ndarray, np.ndarray]:
     from .cameras.rotation import R_W_C, dR_W_C
 
     p = np.asarray(camera.params, dtype=np.float64)
-    cam = np.zeros(_C_LEN)
+    cam = np.zeros(_C_DOM + camera.lens_domain.packed.size)
     cam[0:5] = p[0:5]
     cam[_C_DIST:_C_DIST + 8] = p[P.DIST_SLICE]
     cam[_C_X], cam[_C_Y], cam[_C_H] = p[P.XM], p[P.YM], p[P.HM]
@@ -117,57 +122,18 @@ def camera_constants(camera) -> tuple[np.ndarray, np.ndarray]:
     cam[_C_W], cam[_C_HIMG] = camera.image_size_px
     cam[_C_GROUNDZ] = camera.ground_z_m
     cam[_C_IFX], cam[_C_IFY] = 1.0 / p[0], 1.0 / p[1]
+    cam[_C_DOM:] = camera.lens_domain.packed
     dR = np.ascontiguousarray(dR_W_C(p[P.PAN], p[P.TILT], p[P.ROLL]))
     return cam, dR
 
 
-def psd_factor(S: np.ndarray, *, rtol: float = 1e-14):
-    """Sparse factor of a PSD covariance: ``S = L L^T`` by diagonal-pivoted Cholesky.
-
-    Returns ``(rows, cols, vals, r)``: the non-zero entries of ``L`` (n x r) with r the
-    numerical rank.  Pivoting stops when the largest remaining diagonal is below
-    ``rtol * max(diag S)``; a diagonal S gives a diagonal L and fully correlated
-    parameters (one focal error moving fx and fy) share one column.
-    """
-    A = np.array(S, dtype=np.float64, copy=True)
-    n = A.shape[0]
-    L = np.zeros((n, n))
-    tol = rtol * max(float(np.max(np.diag(A), initial=0.0)), 0.0)
-    r = 0
-    while r < n:
-        d = np.diag(A)
-        p = int(np.argmax(d))
-        if not d[p] > tol:
-            break
-        col = A[:, p] / np.sqrt(d[p])
-        L[:, r] = col
-        A = A - np.outer(col, col)
-        A[p, :] = 0.0
-        A[:, p] = 0.0
-        r += 1
-    cols, rows = np.nonzero(L[:, :r].T)  # sorted by column: the kernel forms one factor column at a time
-    return rows.astype(np.int64), cols.astype(np.int64), np.ascontiguousarray(L[rows, cols]), r
-
-
 @njit(cache=True, error_model="numpy", nogil=True)
 def _distort(x, y, cam, J, Jk, want_k):
-    """Distorted (xd, yd); fills J (2, 2) and, if want_k, Jk (2, 8)."""
-    k1, k2, p1, p2 = cam[_C_DIST], cam[_C_DIST + 1], cam[_C_DIST + 2], cam[_C_DIST + 3]
-    k3, k4, k5, k6 = cam[_C_DIST + 4], cam[_C_DIST + 5], cam[_C_DIST + 6], cam[_C_DIST + 7]
+    """Distorted (xd, yd) (:func:`footprint_uq.fast.core.distort_jac`); fills J (2, 2) and, if want_k, Jk (2, 8)."""
+    xd, yd, J[0, 0], J[0, 1], J[1, 0], J[1, 1], rad, den = core.distort_jac(x, y, cam[_C_DIST:_C_DIST + 8])
     r2 = x * x + y * y
-    num = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
-    den = 1.0 + r2 * (k4 + r2 * (k5 + r2 * k6))
     iden = 1.0 / den
-    rad = num * iden
-    xd = x * rad + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x)
-    yd = y * rad + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y
-    dnum = k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2)
-    dden = k4 + r2 * (2.0 * k5 + 3.0 * k6 * r2)
-    drad = (dnum * den - num * dden) * (iden * iden)
-    J[0, 0] = rad + x * drad * 2 * x + 2 * p1 * y + p2 * 6 * x
-    J[0, 1] = x * drad * 2 * y + 2 * p1 * x + p2 * 2 * y
-    J[1, 0] = y * drad * 2 * x + p1 * 2 * x + 2 * p2 * y
-    J[1, 1] = rad + y * drad * 2 * y + p1 * 6 * y + 2 * p2 * x
+    num = rad * den
     if want_k:
         r4 = r2 * r2
         r6 = r4 * r2
@@ -191,7 +157,8 @@ def _stage_undistort(S, m, cam, Jd, Jk, need):
 
     Also fills CONV (1.0 where undistortion converged), INV (d(undistorted)/d(distorted)) and
     JK (rows 0..7: d x_d / d k, rows 8..15: d y_d / d k).  Without distortion the loops are
-    straight-line and vectorise; with it each corner runs the Newton iteration of
+    straight-line and vectorise; with it the corners go through the scalar core
+    (:func:`footprint_uq.fast.core.undistort_vec`), inside the lens's valid domain as in
     :func:`footprint_uq.cameras.distortion.undistort`.  ``need`` as in :func:`_stage_ground`:
     without distortion, JK rows nobody reads are skipped.
     """
@@ -229,50 +196,19 @@ def _stage_undistort(S, m, cam, Jd, Jk, need):
                 S[(_JK + 6) * _ST + j], S[(_JK + 14) * _ST + j] = -x * r4, -y * r4
                 S[(_JK + 7) * _ST + j], S[(_JK + 15) * _ST + j] = -x * r6, -y * r6
         return
-    # Newton on all corners at once; a corner stops moving once converged (as the reference)
-    k1, k2, p1, p2 = cam[_C_DIST], cam[_C_DIST + 1], cam[_C_DIST + 2], cam[_C_DIST + 3]
-    k3, k4, k5, k6 = cam[_C_DIST + 4], cam[_C_DIST + 5], cam[_C_DIST + 6], cam[_C_DIST + 7]
+    # the scalar core's undistortion, vectorised over the chunk's corners (same answer as the reference)
+    dist = cam[_C_DIST:_C_DIST + 8]
+    ok = np.empty(m, dtype=np.bool_)
     for j in range(m):
         S[_XN * _ST + j], S[_YN * _ST + j] = S[_XD * _ST + j], S[_YD * _ST + j]
-    for _ in range(50):
-        n_active = 0
-        for j in range(m):
-            x, y, xd, yd = S[_XN * _ST + j], S[_YN * _ST + j], S[_XD * _ST + j], S[_YD * _ST + j]
-            tol = 1e-14 * max(1.0, max(abs(xd), abs(yd)))
-            r2 = x * x + y * y
-            num = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
-            den = 1.0 + r2 * (k4 + r2 * (k5 + r2 * k6))
-            iden = 1.0 / den
-            rad = num * iden
-            r0 = x * rad + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x) - xd
-            r1 = y * rad + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y - yd
-            dnum = k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2)
-            dden = k4 + r2 * (2.0 * k5 + 3.0 * k6 * r2)
-            drad = (dnum * den - num * dden) * (iden * iden)
-            j00 = rad + x * drad * 2 * x + 2 * p1 * y + p2 * 6 * x
-            j01 = x * drad * 2 * y + 2 * p1 * x + p2 * 2 * y
-            j10 = y * drad * 2 * x + p1 * 2 * x + 2 * p2 * y
-            j11 = rad + y * drad * 2 * y + p1 * 6 * y + 2 * p2 * x
-            # converged -- or hopeless (NaN): it stays as it is and fails the final check
-            done = (max(abs(r0), abs(r1)) <= tol) | (not math.isfinite(r0 + r1))
-            idet = 1.0 / (j00 * j11 - j01 * j10)
-            s0 = (j11 * r0 - j01 * r1) * idet
-            s1 = (-j10 * r0 + j00 * r1) * idet
-            S[_XN * _ST + j] = x if done else x - s0
-            S[_YN * _ST + j] = y if done else y - s1
-            n_active += 0 if done else 1
-        if n_active == 0:
-            break
+    core.undistort_vec(cam[_C_DOM:], dist, S[_XD * _ST:_XD * _ST + m], S[_YD * _ST:_YD * _ST + m],
+                       S[_XN * _ST:_XN * _ST + m], S[_YN * _ST:_YN * _ST + m],
+                       S[_INV * _ST:_INV * _ST + m], S[(_INV + 1) * _ST:(_INV + 1) * _ST + m],
+                       S[(_INV + 2) * _ST:(_INV + 2) * _ST + m], S[(_INV + 3) * _ST:(_INV + 3) * _ST + m],
+                       S[_T0 * _ST:_T0 * _ST + m], ok)
     for j in range(m):
-        xn, yn, xd, yd = S[_XN * _ST + j], S[_YN * _ST + j], S[_XD * _ST + j], S[_YD * _ST + j]
-        tol = 1e-14 * max(1.0, max(abs(xd), abs(yd)))
-        fxd, fyd = _distort(xn, yn, cam, Jd, Jk, True)
-        r0, r1 = fxd - xd, fyd - yd
-        det = Jd[0, 0] * Jd[1, 1] - Jd[0, 1] * Jd[1, 0]
-        S[_CONV * _ST + j] = 1.0 if ((max(abs(r0), abs(r1)) <= tol) and det > 0) else 0.0
-        idet = 1.0 / det
-        S[_INV * _ST + j], S[(_INV + 1) * _ST + j] = Jd[1, 1] * idet, -Jd[0, 1] * idet
-        S[(_INV + 2) * _ST + j], S[(_INV + 3) * _ST + j] = -Jd[1, 0] * idet, Jd[0, 0] * idet
+        S[_CONV * _ST + j] = 1.0 if ok[j] else 0.0
+        _distort(S[_XN * _ST + j], S[_YN * _ST + j], cam, Jd, Jk, True)
         for kk in range(8):
             S[(_JK + kk) * _ST + j] = Jk[0, kk]
             S[(_JK + 8 + kk) * _ST + j] = Jk[1, kk]
@@ -437,35 +373,35 @@ def _stage_v2x(S, nob, ch, sh, out, n0, obj):
         # CPM: per-axis 95 % confidence in cm, 1..4094, 4095 out of range
         cx = _Z95 * math.sqrt(max(d00, 0.0))
         cy = _Z95 * math.sqrt(max(d11, 0.0))
-        vx = 4095.0 if cx > 40.94 else min(max(np.ceil(cx / 0.01 * g), 1.0), 4094.0)
-        vy = 4095.0 if cy > 40.94 else min(max(np.ceil(cy / 0.01 * g), 1.0), 4094.0)
+        vx = _CPM_OOR if cx > _CPM_MAX_M else min(max(np.ceil(cx / _CPM_UNIT * g), 1.0), _CPM_OOR - 1.0)
+        vy = _CPM_OOR if cy > _CPM_MAX_M else min(max(np.ceil(cy / _CPM_UNIT * g), 1.0), _CPM_OOR - 1.0)
         # correlation in percent (101: unavailable)
         pos = (d00 > 0.0) & (d11 > 0.0)
         rho = d01 / math.sqrt(d00 * d11)
-        vr = min(max(np.rint(rho * 100.0), -100.0), 100.0) if pos else 101.0
+        vr = min(max(np.rint(rho * 100.0), -100.0), 100.0) if pos else _CORR_UNAV
         # J2735: 1-sigma axes in 5 cm (254: 12.70 m or more), orientation of the major axis from north
         mean = 0.5 * (d00 + d11)
         rad = math.sqrt(0.25 * (d00 - d11) * (d00 - d11) + d01 * d01)
         a = math.sqrt(mean + rad)
         b = math.sqrt(max(mean - rad, 0.0))
-        va = 254.0 if a >= 12.70 else min(max(np.ceil(a / 0.05 * g), 0.0), 254.0)
-        vb = 254.0 if b >= 12.70 else min(max(np.ceil(b / 0.05 * g), 0.0), 254.0)
+        va = _AX_MAX if a >= _AX_MAX_M else min(max(np.ceil(a / _AX_UNIT * g), 0.0), _AX_MAX)
+        vb = _AX_MAX if b >= _AX_MAX_M else min(max(np.ceil(b / _AX_UNIT * g), 0.0), _AX_MAX)
         bearing = 90.0 - 0.5 * math.degrees(S[_ANG * _ST + i])
         bearing = bearing - 180.0 * np.floor(bearing / 180.0)
         bearing = bearing - 180.0 if bearing >= 180.0 else bearing
-        bearing = 0.0 if a * a - b * b <= 1e-9 * (a * a + b * b) else bearing  # circular: report north
+        bearing = 0.0 if a * a - b * b <= _CIRC * (a * a + b * b) else bearing  # circular: report north
         vo = np.rint(bearing / _ORIENT_UNIT)
         # PositionConfidence: how many levels (500 m ... 1 cm) the 95 % radius stays within
         r95 = _K95_2D * a * g
         cnt = ((500.0 >= r95) * 1.0 + (200.0 >= r95) + (100.0 >= r95) + (50.0 >= r95) + (20.0 >= r95)
                + (10.0 >= r95) + (5.0 >= r95) + (2.0 >= r95) + (1.0 >= r95) + (0.5 >= r95) + (0.2 >= r95)
                + (0.1 >= r95) + (0.05 >= r95) + (0.02 >= r95) + (0.01 >= r95))  # the 15 levels, unrolled
-        S[_VX * _ST + i] = vx if fin else 4096.0
-        S[(_VX + 1) * _ST + i] = vy if fin else 4096.0
-        S[(_VX + 2) * _ST + i] = vr if fin else 101.0
-        S[(_VX + 3) * _ST + i] = va if fin else 255.0
-        S[(_VX + 4) * _ST + i] = vb if fin else 255.0
-        S[(_VX + 5) * _ST + i] = vo if fin else 65535.0
+        S[_VX * _ST + i] = vx if fin else _CPM_UNAV
+        S[(_VX + 1) * _ST + i] = vy if fin else _CPM_UNAV
+        S[(_VX + 2) * _ST + i] = vr if fin else _CORR_UNAV
+        S[(_VX + 3) * _ST + i] = va if fin else _AX_UNAV
+        S[(_VX + 4) * _ST + i] = vb if fin else _AX_UNAV
+        S[(_VX + 5) * _ST + i] = vo if fin else _ORIENT_UNAV
         S[(_VX + 6) * _ST + i] = cnt if fin else 0.0
     for f in range(7):
         o = np.uint64((_VX + f) * _ST)
@@ -781,7 +717,7 @@ def process_corners(uv, extra_reason, boxes, yaw_deg, bottom_on_ground, cam, dR,
     extra_reason : (N, K) int8 codes overriding OK, or shape (0, 0)
     boxes, yaw_deg, bottom_on_ground : 3D boxes (N, 7) whose bottom corners are the corners (then
         ``uv`` (N, 4, 2) receives their pixels, or has 0 rows), or shape (0, 7) (corners from ``uv``)
-    Lr, Lc, Lv, r : sparse factor of the parameter covariance (:func:`psd_factor`)
+    Lr, Lc, Lv, r : sparse factor of the parameter covariance (:func:`footprint_uq.budget.psd_factor`)
     spx : (2, 2) budget pixel covariance;  det : 4-D detector covariance with det_mode
         0 none (any 4-D array), 1 (N, 1, 2, 2) per detection, 2 (N, K, 2, 2) per corner,
         3 (N, 1, 2K, 2K) full
@@ -980,7 +916,8 @@ def process_corners(uv, extra_reason, boxes, yaw_deg, bottom_on_ground, cam, dR,
 @njit(cache=True, error_model="numpy", nogil=True)
 def _stage_project(S, boxes, n0, nob, cam, yaw_deg, bottom_on_ground):
     """Bottom corners of boxes n0 .. n0 + nob - 1 (N, 7) projected into rows U, V (corner-major, 4
-    corners) with their codes in row PC (OK, BEHIND_CAMERA, NOT_FINITE; NaN pixels unless OK).
+    corners) with their codes in row PC (OK, BEHIND_CAMERA, NOT_FINITE, UNDISTORT_FAILED past the lens's
+    fold; NaN pixels unless OK); rows XD, YD are used as scratch.
 
     The arithmetic of :func:`footprint_uq.cameras.general.project` and of
     :func:`footprint_uq.footprints.box3d_bottom_corners`, branch-free; the boxes are first copied
@@ -996,8 +933,7 @@ def _stage_project(S, boxes, n0, nob, cam, yaw_deg, bottom_on_ground):
         yaw = S[(_BX + 6) * _ST + i] * ysc if yaw_deg else S[(_BX + 6) * _ST + i]
         S[_CS * _ST + i], S[_SN * _ST + i] = math.cos(yaw), math.sin(yaw)
     fx, fy, cx, cy, skw = cam[_C_FX], cam[_C_FY], cam[_C_CX], cam[_C_CY], cam[_C_SK]
-    k1, k2, p1, p2 = cam[_C_DIST], cam[_C_DIST + 1], cam[_C_DIST + 2], cam[_C_DIST + 3]
-    k3, k4, k5, k6 = cam[_C_DIST + 4], cam[_C_DIST + 5], cam[_C_DIST + 6], cam[_C_DIST + 7]
+    dist = cam[_C_DIST:_C_DIST + 8]
     X0, Y0, H = cam[_C_X], cam[_C_Y], cam[_C_H]
     R0, R1, R2, R3, R4, R5, R6, R7, R8 = (cam[_C_R], cam[_C_R + 1], cam[_C_R + 2], cam[_C_R + 3], cam[_C_R + 4],
                                           cam[_C_R + 5], cam[_C_R + 6], cam[_C_R + 7], cam[_C_R + 8])
@@ -1008,6 +944,7 @@ def _stage_project(S, boxes, n0, nob, cam, yaw_deg, bottom_on_ground):
         sl = -1.0 if (k == 0) | (k == 3) else 1.0
         sw = -1.0 if k < 2 else 1.0
         ou, ov, oc = np.uint64(_U * _ST + k * nob), np.uint64(_V * _ST + k * nob), np.uint64(_PC * _ST + k * nob)
+        ox, oy = np.uint64(_XD * _ST + k * nob), np.uint64(_YD * _ST + k * nob)
         for i in range(nu):
             c, s_ = S[np.uint64(_CS * _ST) + i], S[np.uint64(_SN * _ST) + i]
             dl = sl * (0.5 * S[np.uint64((_BX + 3) * _ST) + i])
@@ -1023,14 +960,19 @@ def _stage_project(S, boxes, n0, nob, cam, yaw_deg, bottom_on_ground):
             pcz = R2 * rx + R5 * ry + R8 * rz
             finite = math.isfinite(X) & math.isfinite(Y) & math.isfinite(Z)
             x, y = pcx / pcz, pcy / pcz
-            r2 = x * x + y * y
-            rad = (1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))) / (1.0 + r2 * (k4 + r2 * (k5 + r2 * k6)))
-            xd = x * rad + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x)
-            yd = y * rad + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y
+            xd, yd = core.distort_point(x, y, dist)
             ok = finite & (pcz > 0.0)
             S[ou + i] = fx * xd + skw * yd + cx if ok else nan
             S[ov + i] = fy * yd + cy if ok else nan
             S[oc + i] = _OK if ok else (_BEHIND if finite else _NOTFIN)
+            S[ox + i], S[oy + i] = x, y
+    if cam[_C_HASDIST] != 0.0:
+        # past the lens's fold a world point maps to a meaningless pixel: no answer, as the reference
+        dom = cam[_C_DOM:]
+        for j in range(4 * nob):
+            if S[_PC * _ST + j] == _OK and not core.in_domain_undistorted(dom, S[_XD * _ST + j], S[_YD * _ST + j]):
+                S[_PC * _ST + j] = _UNDIST
+                S[_U * _ST + j], S[_V * _ST + j] = nan, nan
 
 
 @njit(cache=True, error_model="numpy", nogil=True)

@@ -97,8 +97,8 @@ __all__ = [
 ]
 
 #: centre reason code: zero-area footprint polygon (centroid undefined)
-DEGENERATE = 20
-_CENTRE_TEXT = {DEGENERATE: "footprint polygon has zero area (centroid undefined)"}
+DEGENERATE = status.DEGENERATE
+_CENTRE_TEXT = {DEGENERATE: status.REASONS[DEGENERATE]}
 CONTACT_MODES = ("bottom-centre", "bottom-corners")
 BOX3D_COLUMNS = ("x_m", "y_m", "z_m", "length_m", "width_m", "height_m", "yaw_rad")
 #: column order of :attr:`FootprintEstimate.v2x_codes`
@@ -535,9 +535,9 @@ class FrameProcessor:
         self.allow_outside_image = bool(allow_outside_image)
         self.joint_cov = bool(joint_cov)
         self._fk = fk
-        Sp = self.budget.param_covariance()
         self._cam, self._dR = fk.camera_constants(camera)
-        self._Lr, self._Lc, self._Lv, self._r = fk.psd_factor(Sp)
+        fac = self.budget.param_factor()
+        self._Lr, self._Lc, self._Lv, self._r = fac.rowidx, fac.cols, fac.vals, fac.rank
         self._spx = np.ascontiguousarray(self.budget.pixel_covariance())
         h = np.deg2rad(self.heading_offset_deg)
         self._ch, self._sh = (1.0, 0.0) if h == 0.0 else (float(np.cos(h)), float(np.sin(h)))

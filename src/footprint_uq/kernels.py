@@ -64,10 +64,12 @@ import numba as nb
 import numpy as np
 
 from . import params as P
+from . import status
 from ._checks import as_points, check_cov
 from .budget import load_budget
 from .cameras.rotation import R_W_C, dR_W_C
 from .errors import InputError
+from .fast import core
 
 __all__ = ["covariance_map", "covariance_points", "kernel_constants"]
 
@@ -81,55 +83,6 @@ _CONST_ROW = {P.XM: 0, P.YM: 1, P.HM: 2, P.GDZ: 3, P.GSX: 4, P.GSY: 5}
 # --------------------------------------------------------------------------------------
 # camera / budget constants
 # --------------------------------------------------------------------------------------
-def _factor(S: np.ndarray):
-    """Sparse factor ``S = L L^T`` (CSC: colptr, rowidx, vals) per connected block.
-
-    Each block is scaled to a correlation matrix before its eigen-decomposition so
-    that parameters of very different magnitudes (px^2 and rad^2) keep full relative
-    precision.  Non-positive eigen-directions (exactly or numerically zero) are dropped.
-    """
-    n = S.shape[0]
-    used = [i for i in range(n) if np.any(S[i] != 0) or np.any(S[:, i] != 0)]
-    seen: set[int] = set()
-    cols: list[tuple[np.ndarray, np.ndarray]] = []
-    for i in used:
-        if i in seen:
-            continue
-        comp, stack = [], [i]
-        seen.add(i)
-        while stack:
-            a = stack.pop()
-            comp.append(a)
-            for b in used:
-                if b not in seen and (S[a, b] != 0 or S[b, a] != 0):
-                    seen.add(b)
-                    stack.append(b)
-        comp = np.array(sorted(comp), dtype=np.int64)
-        sub = S[np.ix_(comp, comp)]
-        if comp.size == 1:
-            if sub[0, 0] > 0:
-                cols.append((comp, np.array([np.sqrt(sub[0, 0])])))
-            continue
-        d = np.sqrt(np.clip(np.diag(sub), 0.0, None))
-        if np.all(d > 0):
-            C = sub / np.outer(d, d)
-        else:
-            d = np.ones(comp.size)
-            C = sub
-        w, V = np.linalg.eigh(0.5 * (C + C.T))
-        for k in range(w.size):
-            if w[k] > 0:
-                col = d * V[:, k] * np.sqrt(w[k])
-                nz = col != 0
-                cols.append((comp[nz], col[nz]))
-    colptr = np.zeros(len(cols) + 1, dtype=np.int64)
-    for j, (idx, _) in enumerate(cols):
-        colptr[j + 1] = colptr[j] + idx.size
-    rowidx = np.concatenate([c[0] for c in cols]) if cols else np.zeros(0, dtype=np.int64)
-    vals = np.concatenate([c[1] for c in cols]) if cols else np.zeros(0)
-    return colptr, rowidx.astype(np.int64), vals.astype(np.float64)
-
-
 def kernel_constants(camera, budget) -> dict:
     """Camera- and budget-level constants the kernels use (exposed for tests and debugging).
 
@@ -151,8 +104,7 @@ def kernel_constants(camera, budget) -> dict:
     for k in range(3):
         A = R.T @ dR[k]
         omega[k] = (A[2, 1], A[0, 2], A[1, 0])
-    S = budget.param_covariance()
-    colptr, rowidx, vals = _factor(S)
+    colptr, rowidx, vals = budget.param_factor()
     r = colptr.size - 1
     vc = np.zeros((r, 6))
     has_qc = False
@@ -512,30 +464,11 @@ def _map_undistorted(prm, R, om, colptr, rowidx, vals, vc, has_qc, Cpq, cst, ste
 # kernel 2: general (OpenCV with distortion), per point
 # --------------------------------------------------------------------------------------
 @nb.njit(**_JIT1)
-def _distort_jac(x, y, k):
-    """Distorted point, 2x2 Jacobian and the pieces of d/dk (num, den, r2)."""
-    k1, k2, p1, p2, k3, k4, k5, k6 = k[0], k[1], k[2], k[3], k[4], k[5], k[6], k[7]
-    r2 = x * x + y * y
-    num = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
-    den = 1.0 + r2 * (k4 + r2 * (k5 + r2 * k6))
-    rad = num / den
-    xd = x * rad + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x)
-    yd = y * rad + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y
-    dnum = k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2)
-    dden = k4 + r2 * (2.0 * k5 + 3.0 * k6 * r2)
-    drad = (dnum * den - num * dden) / (den * den)
-    j00 = rad + x * drad * 2 * x + 2 * p1 * y + p2 * 6 * x
-    j01 = x * drad * 2 * y + 2 * p1 * x + p2 * 2 * y
-    j10 = y * drad * 2 * x + p1 * 2 * x + 2 * p2 * y
-    j11 = rad + y * drad * 2 * y + p1 * 6 * y + 2 * p2 * x
-    return xd, yd, j00, j01, j10, j11, num, den, r2
-
-
-@nb.njit(**_JIT1)
-def _point_general(u, v, S00, S01, S11, prm, R, om, colptr, rowidx, vals, vc, Ccc, has_qc, has_dist, sq, bq):
+def _point_general(u, v, S00, S01, S11, prm, R, om, colptr, rowidx, vals, vc, Ccc, has_qc, has_dist, dom, sq, bq):
     """Ground point and covariance of one pixel; sq (22, 2), bq (2, 6) scratch arrays.
 
-    Returns ``(ok, x, y, c00, c01, c11)``.
+    Returns ``(code, x, y, c00, c01, c11)`` with ``code`` a :mod:`footprint_uq.status` code
+    (precedence as the reference: not finite, then undistortion, then horizon).
     """
     fx, fy, cx, cy, sk = prm[0], prm[1], prm[2], prm[3], prm[4]
     dist = prm[5:13]
@@ -544,22 +477,11 @@ def _point_general(u, v, S00, S01, S11, prm, R, om, colptr, rowidx, vals, vc, Cc
     xn, yn = xd, yd
     M00, M01, M10, M11 = 1.0, 0.0, 0.0, 1.0
     conv = True
-    num, den, r2 = 1.0, 1.0, xd * xd + yd * yd
     if has_dist:
-        tol = 1e-14 * max(1.0, max(abs(xd), abs(yd)))
-        for _ in range(50):
-            fxd, fyd, j00, j01, j10, j11, num, den, r2 = _distort_jac(xn, yn, dist)
-            e0 = fxd - xd
-            e1 = fyd - yd
-            if max(abs(e0), abs(e1)) <= tol:
-                break
-            det = j00 * j11 - j01 * j10
-            xn = xn - (j11 * e0 - j01 * e1) / det
-            yn = yn - (-j10 * e0 + j00 * e1) / det
-        fxd, fyd, j00, j01, j10, j11, num, den, r2 = _distort_jac(xn, yn, dist)
-        det = j00 * j11 - j01 * j10
-        conv = (max(abs(fxd - xd), abs(fyd - yd)) <= tol) and (det > 0.0)
-        M00, M01, M10, M11 = j11 / det, -j01 / det, -j10 / det, j00 / det
+        conv, xn, yn, M00, M01, M10, M11 = core.undistort_point(dom, dist, xd, yd, xd, yd)
+    r2 = xn * xn + yn * yn
+    num = 1.0 + r2 * (dist[0] + r2 * (dist[1] + r2 * dist[4]))
+    den = 1.0 + r2 * (dist[5] + r2 * (dist[6] + r2 * dist[7]))
     x0, y0 = prm[13], prm[14]
     Hn = prm[15] - prm[19]
     gx, gy = prm[20], prm[21]
@@ -569,9 +491,10 @@ def _point_general(u, v, S00, S01, S11, prm, R, om, colptr, rowidx, vals, vc, Cc
     dxr = R[0, 0] * xn + R[0, 1] * yn + R[0, 2]
     dyr = R[1, 0] * xn + R[1, 1] * yn + R[1, 2]
     dn = g0 * xn + g1 * yn + g2
-    ok = conv and (dn < 0.0) and (Hn > 0.0) and np.isfinite(xn) and np.isfinite(yn)
-    if not ok:
-        return False, np.nan, np.nan, np.nan, np.nan, np.nan
+    if not conv:
+        return status.UNDISTORT_FAILED, np.nan, np.nan, np.nan, np.nan, np.nan
+    if not ((dn < 0.0) and (Hn > 0.0)):
+        return status.ABOVE_HORIZON, np.nan, np.nan, np.nan, np.nan, np.nan
     w = -1.0 / dn
     lam = Hn * w
     ox = lam * dxr
@@ -650,15 +573,15 @@ def _point_general(u, v, S00, S01, S11, prm, R, om, colptr, rowidx, vals, vc, Cc
                 bq[0, c] += v0 * vc[j, c]
                 bq[1, c] += v1 * vc[j, c]
     c00, c01, c11 = _finish(q00, q01, q11, Q00, Q01, Q10, Q11, ox / Hn, oy / Hn, ox, oy, Ccc, bq, has_qc)
-    return True, x0 + ox, y0 + oy, c00, c01, c11
+    return status.OK, x0 + ox, y0 + oy, c00, c01, c11
 
 
 #: blocks of contiguous rows per thread in the general kernel (Newton warm-starts within a block)
 _ROWS_PER_BLOCK_DIV = 16
 
 # row buffers of the general map kernel
-_XD, _XN, _YN, _M00, _M01, _M10, _M11, _Q00, _Q01, _Q11, _V0, _V1, _CONV, _IDEN = range(14)
-_NBUF = 14
+_XD, _XN, _YN, _M00, _M01, _M10, _M11, _Q00, _Q01, _Q11, _V0, _V1, _CONV, _IDEN, _YDB = range(15)
+_NBUF = 15
 
 
 @nb.njit(**_JIT1)
@@ -750,20 +673,20 @@ def _acc_param(k, lv, yd, prm, om, buf, W, sq):
 
 
 @nb.njit(**_JIT1)
-def _row_general(v, prm, R, om, colptr, rowidx, vals, vc, colkind, Om, has_qc, has_dist, warm, cst, Suv, buf, BQ,
-                 xr, cr, vr):
-    """One image row of the general kernel: Newton undistortion, then the covariance (all loops vectorise).
+def _row_general(v, prm, R, om, colptr, rowidx, vals, vc, colkind, Om, has_qc, has_dist, dom, warm, cst, Suv, buf,
+                 BQ, xr, cr, vr, rr):
+    """One image row of the general kernel: undistortion, then the covariance (all loops vectorise).
 
-    With ``warm``, ``buf`` holds the previous row's solution: Newton then starts from its
+    Undistortion is the scalar core's (:func:`footprint_uq.fast.core.undistort_vec`: the
+    lens's valid domain, Newton, the reference's acceptance test and its robust retry).  With
+    ``warm``, ``buf`` holds the previous row's solution: Newton then starts from its
     first-order continuation ``x_n,prev + M_prev (x_d - x_d,prev)`` where that pixel
-    converged (2-3 iterations instead of 5-8), else from ``x_d`` as
-    :func:`~footprint_uq.cameras.distortion.undistort` does.  The convergence test
-    (residual <= 1e-14 max(1, |x_d|) and det > 0) is the same.
+    converged (2-3 iterations instead of 5-8), else from ``x_d``.  ``rr`` receives the
+    :mod:`footprint_uq.status` code of each pixel.
     """
     W = vr.shape[0]
     fx, fy, cx, cy, sk = prm[0], prm[1], prm[2], prm[3], prm[4]
     d = prm[5:13]
-    k1, k2, p1, p2, k3, k4, k5, k6 = d[0], d[1], d[2], d[3], d[4], d[5], d[6], d[7]
     stepf = cst[27]
     yd = (v - cy) / fy
     xd, xn, yn = buf[_XD], buf[_XN], buf[_YN]
@@ -791,74 +714,12 @@ def _row_general(v, prm, R, om, colptr, rowidx, vals, vc, colkind, Om, has_qc, h
             yn[i] = yd
     ok = vr
     if has_dist:
-        # Newton's method pixel by pixel as distortion.undistort (converged pixels are frozen)
-        nan_ = np.nan
-        nbad = 1
-        for _ in range(50):
-            nbad = 0
-            for i in range(W):
-                x = xn[i]
-                y = yn[i]
-                r2 = x * x + y * y
-                num = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
-                den = 1.0 + r2 * (k4 + r2 * (k5 + r2 * k6))
-                iden = 1.0 / den
-                rad = num * iden
-                e0 = x * rad + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x) - xd[i]
-                e1 = y * rad + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y - yd
-                tol = 1e-14 * max(1.0, max(abs(xd[i]), abs(yd)))
-                conv = max(abs(e0), abs(e1)) <= tol
-                dnum = k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2)
-                dden = k4 + r2 * (2.0 * k5 + 3.0 * k6 * r2)
-                drad2 = 2.0 * (dnum - rad * dden) * iden
-                j00 = rad + x * x * drad2 + 2 * p1 * y + p2 * 6 * x
-                j01 = x * y * drad2 + 2 * p1 * x + p2 * 2 * y
-                j10 = x * y * drad2 + p1 * 2 * x + 2 * p2 * y
-                j11 = rad + y * y * drad2 + p1 * 6 * y + 2 * p2 * x
-                det = j00 * j11 - j01 * j10
-                idet = 1.0 / det
-                xn[i] = x if conv else x - (j11 * e0 - j01 * e1) * idet
-                yn[i] = y if conv else y - (-j10 * e0 + j00 * e1) * idet
-                nbad += 0 if conv else 1
-                # where converged, x is final and this is the final evaluation (kept if the loop ends here)
-                c = conv & (det > 0.0)
-                ok[i] = c
-                cv[i] = yd if c else nan_
-                idn_b[i] = iden
-                M00[i] = j11 * idet
-                M01[i] = -j01 * idet
-                M10[i] = -j10 * idet
-                M11[i] = j00 * idet
-            if nbad == 0:
-                break
-        for i in range(W if nbad > 0 else 0):  # iteration limit reached: evaluate at the last iterate
-            x = xn[i]
-            y = yn[i]
-            r2 = x * x + y * y
-            num = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
-            den = 1.0 + r2 * (k4 + r2 * (k5 + r2 * k6))
-            iden = 1.0 / den
-            rad = num * iden
-            e0 = x * rad + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x) - xd[i]
-            e1 = y * rad + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y - yd
-            tol = 1e-14 * max(1.0, max(abs(xd[i]), abs(yd)))
-            dnum = k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2)
-            dden = k4 + r2 * (2.0 * k5 + 3.0 * k6 * r2)
-            drad2 = 2.0 * (dnum - rad * dden) * iden
-            j00 = rad + x * x * drad2 + 2 * p1 * y + p2 * 6 * x
-            j01 = x * y * drad2 + 2 * p1 * x + p2 * 2 * y
-            j10 = x * y * drad2 + p1 * 2 * x + 2 * p2 * y
-            j11 = rad + y * y * drad2 + p1 * 6 * y + 2 * p2 * x
-            det = j00 * j11 - j01 * j10
-            c = (max(abs(e0), abs(e1)) <= tol) & (det > 0.0)
-            ok[i] = c
-            cv[i] = yd if c else nan_
-            idn_b[i] = iden
-            idet = 1.0 / det
-            M00[i] = j11 * idet
-            M01[i] = -j01 * idet
-            M10[i] = -j10 * idet
-            M11[i] = j00 * idet
+        # the scalar core's undistortion, vectorised over the row (same answer as the reference)
+        ydb = buf[_YDB]
+        ydb[:] = yd
+        core.undistort_vec(dom, d, xd, ydb, xn, yn, M00, M01, M10, M11, idn_b, ok)
+        for i in range(W):
+            cv[i] = yd if ok[i] else np.nan
     else:
         for i in range(W):
             ok[i] = True
@@ -958,7 +819,9 @@ def _row_general(v, prm, R, om, colptr, rowidx, vals, vc, colkind, Om, has_qc, h
         dxr = R00 * x + R01 * y + R02
         dyr = R10 * x + R11 * y + R12
         dn = g0 * x + g1 * y + g2
-        oki = ok[i] & (dn < 0.0)
+        lens = ok[i]
+        oki = lens & (dn < 0.0)
+        rr[i] = status.OK if oki else (status.ABOVE_HORIZON if lens else status.UNDISTORT_FAILED)
         w = -1.0 / dn
         lam = Hn * w
         ox = lam * dxr
@@ -1046,8 +909,8 @@ def _row_general(v, prm, R, om, colptr, rowidx, vals, vc, colkind, Om, has_qc, h
 
 
 @nb.njit(**_JIT)
-def _map_general(prm, R, om, colptr, rowidx, vals, vc, colkind, Om, has_qc, cst, Suv, step, xyf, covf, validf, W,
-                 nblk):
+def _map_general(prm, R, om, colptr, rowidx, vals, vc, colkind, Om, has_qc, dom, cst, Suv, step, xyf, covf, validf,
+                 reasonf, W, nblk):
     Hh = validf.shape[0] // W
     has_dist = False
     for i in range(5, 13):
@@ -1059,13 +922,13 @@ def _map_general(prm, R, om, colptr, rowidx, vals, vc, colkind, Om, has_qc, cst,
         BQ = np.empty((12, W))
         for iv in range(blk * per, min(Hh, (blk + 1) * per)):
             _row_general(np.float64(iv * step), prm, R, om, colptr, rowidx, vals, vc, colkind, Om, has_qc, has_dist,
-                         iv > blk * per, cst, Suv, buf, BQ,
+                         dom, iv > blk * per, cst, Suv, buf, BQ,
                          xyf[2 * W * iv:2 * W * (iv + 1)], covf[4 * W * iv:4 * W * (iv + 1)],
-                         validf[W * iv:W * (iv + 1)])
+                         validf[W * iv:W * (iv + 1)], reasonf[W * iv:W * (iv + 1)])
 
 
 @nb.njit(**_JIT)
-def _points_general(uv, Suv, prm, R, om, colptr, rowidx, vals, vc, Ccc, has_qc, xy, cov, valid):
+def _points_general(uv, Suv, prm, R, om, colptr, rowidx, vals, vc, Ccc, has_qc, dom, xy, cov, valid, reason):
     n = uv.shape[0]
     has_dist = False
     for i in range(5, 13):
@@ -1079,17 +942,19 @@ def _points_general(uv, Suv, prm, R, om, colptr, rowidx, vals, vc, Ccc, has_qc, 
             u = uv[i, 0]
             v = uv[i, 1]
             if not (np.isfinite(u) and np.isfinite(v)):
-                ok, x, y, c00, c01, c11 = False, np.nan, np.nan, np.nan, np.nan, np.nan
+                code, x, y, c00, c01, c11 = status.NOT_FINITE, np.nan, np.nan, np.nan, np.nan, np.nan
             else:
-                ok, x, y, c00, c01, c11 = _point_general(u, v, Suv[i, 0, 0], Suv[i, 0, 1], Suv[i, 1, 1], prm, R, om,
-                                                         colptr, rowidx, vals, vc, Ccc, has_qc, has_dist, sq, bq)
+                code, x, y, c00, c01, c11 = _point_general(u, v, Suv[i, 0, 0], Suv[i, 0, 1], Suv[i, 1, 1], prm, R,
+                                                           om, colptr, rowidx, vals, vc, Ccc, has_qc, has_dist, dom,
+                                                           sq, bq)
             xy[i, 0] = x
             xy[i, 1] = y
             cov[i, 0, 0] = c00
             cov[i, 0, 1] = c01
             cov[i, 1, 0] = c01
             cov[i, 1, 1] = c11
-            valid[i] = ok
+            valid[i] = code == status.OK
+            reason[i] = code
 
 
 # the same kernel without threads: for small batches the thread start-up costs more than the work
@@ -1138,7 +1003,7 @@ def _pixel_cov_q(prm, Suv):
     return np.ascontiguousarray(A @ Suv @ A.T)
 
 
-def covariance_map(camera, budget, step_px: int = 1, *, out=None):
+def covariance_map(camera, budget, step_px: int = 1, *, out=None, get_reason: bool = False):
     """Ground point, 2x2 covariance and validity of every pixel of a regular grid.
 
     Parameters
@@ -1156,6 +1021,8 @@ def covariance_map(camera, budget, step_px: int = 1, *, out=None):
     out : tuple of ndarray, optional
         Preallocated ``(xy_world_m (H, W, 2) float64, cov_m2 (H, W, 2, 2) float64,
         valid (H, W) bool)``, C-contiguous, for the grid's H, W; filled in place.
+    get_reason : bool
+        Also return the :mod:`footprint_uq.status` code of every pixel.
 
     Returns
     -------
@@ -1164,7 +1031,9 @@ def covariance_map(camera, budget, step_px: int = 1, *, out=None):
     cov_m2 : ndarray (H, W, 2, 2)
         Covariance, m^2; NaN where invalid.
     valid : ndarray of bool (H, W)
-        False at or above the horizon, or where undistortion fails.
+        False at or above the horizon, or outside the lens's valid domain.
+    reason : ndarray of int8 (H, W), with ``get_reason``
+        The same codes as :func:`footprint_uq.cameras.general.backproject`.
     """
     try:
         step = int(step_px)
@@ -1180,11 +1049,13 @@ def covariance_map(camera, budget, step_px: int = 1, *, out=None):
     xy, cov, valid = _check_out(out, H, W)
     k = kernel_constants(camera, budget)
     prm = k["params"]
+    reason = np.empty((H, W), dtype=np.int8)
     if not prm[P.HM] - prm[P.GDZ] > 0:  # camera at or below the ground: no pixel sees it
         xy[:] = np.nan
         cov[:] = np.nan
         valid[:] = False
-        return xy, cov, valid
+        reason[:] = status.ABOVE_HORIZON
+        return (xy, cov, valid, reason) if get_reason else (xy, cov, valid)
     # dynamic scheduling in small chunks: on a shared machine a descheduled thread then
     # delays only its current chunk instead of half of the image
     old_chunk = nb.set_parallel_chunksize(1)
@@ -1193,18 +1064,20 @@ def covariance_map(camera, budget, step_px: int = 1, *, out=None):
             colkind, Om = _column_kinds(k)
             nblk = min(H, _ROWS_PER_BLOCK_DIV * nb.get_num_threads())
             _map_general(prm, k["R"], k["omega"], k["colptr"], k["rowidx"], k["vals"], k["vc"], colkind, Om,
-                         k["has_qc"], _undistorted_constants(k, step), k["Suv"], step, xy.reshape(-1),
-                         cov.reshape(-1), valid.reshape(-1), W, nblk)
+                         k["has_qc"], camera.lens_domain.packed, _undistorted_constants(k, step), k["Suv"], step,
+                         xy.reshape(-1), cov.reshape(-1), valid.reshape(-1), reason.reshape(-1), W, nblk)
         else:
             _map_undistorted(prm, k["R"], k["omega"], k["colptr"], k["rowidx"], k["vals"], k["vc"], k["has_qc"],
                              _pixel_cov_q(prm, k["Suv"]), _undistorted_constants(k, step), step,
                              xy.reshape(-1), cov.reshape(-1), valid.reshape(-1), W)
+            if get_reason:  # without distortion a pixel is either fine or at / above the horizon
+                np.copyto(reason, np.where(valid, status.OK, status.ABOVE_HORIZON).astype(np.int8))
     finally:
         nb.set_parallel_chunksize(old_chunk)
-    return xy, cov, valid
+    return (xy, cov, valid, reason) if get_reason else (xy, cov, valid)
 
 
-def covariance_points(camera, budget, uv_px, pixel_cov_px2=None):
+def covariance_points(camera, budget, uv_px, pixel_cov_px2=None, *, get_reason: bool = False):
     """Ground point, 2x2 covariance and validity of scattered pixels (general kernel).
 
     Parameters
@@ -1216,12 +1089,16 @@ def covariance_points(camera, budget, uv_px, pixel_cov_px2=None):
     pixel_cov_px2 : array_like (2, 2) or (..., 2, 2), optional
         Extra per-point pixel covariance (e.g. a detector's), added to the budget's
         imaging and resolution noise, as in :func:`footprint_uq.propagation.propagate`.
+    get_reason : bool
+        Also return the :mod:`footprint_uq.status` code of every point.
 
     Returns
     -------
     xy_world_m : ndarray (..., 2)
     cov_m2 : ndarray (..., 2, 2)
     valid : ndarray of bool (...)
+    reason : ndarray of int8 (...), with ``get_reason``
+        The same codes as :func:`footprint_uq.cameras.general.backproject`.
     """
     budget = load_budget(budget)
     uv = as_points("uv_px", uv_px, 2)
@@ -1240,7 +1117,9 @@ def covariance_points(camera, budget, uv_px, pixel_cov_px2=None):
     xy = np.empty((n, 2))
     cov = np.empty((n, 2, 2))
     valid = np.empty(n, dtype=np.bool_)
+    reason = np.empty(n, dtype=np.int8)
     kernel = _points_general_serial if n < _SERIAL_BELOW else _points_general
     kernel(flat, Suv, k["params"], k["R"], k["omega"], k["colptr"], k["rowidx"], k["vals"], k["vc"],
-                    k["Ccc"], k["has_qc"], xy, cov, valid)
-    return xy.reshape(lead + (2,)), cov.reshape(lead + (2, 2)), valid.reshape(lead)
+           k["Ccc"], k["has_qc"], camera.lens_domain.packed, xy, cov, valid, reason)
+    out = xy.reshape(lead + (2,)), cov.reshape(lead + (2, 2)), valid.reshape(lead)
+    return out + (reason.reshape(lead),) if get_reason else out

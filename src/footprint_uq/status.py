@@ -15,6 +15,7 @@ UNDISTORT_FAILED = 3  # lens model not invertible at this pixel
 OUTSIDE_IMAGE = 4  # pixel outside the image (computed, but flagged)
 BEHIND_CAMERA = 5  # world point behind the camera (projection)
 BEYOND_RANGE = 6  # ground point farther than the requested max_range_m (maps)
+DEGENERATE = 20  # footprint centre only: the footprint polygon has zero area (centroid undefined)
 
 REASONS = {
     OK: "ok",
@@ -24,6 +25,7 @@ REASONS = {
     OUTSIDE_IMAGE: "pixel outside the image",
     BEHIND_CAMERA: "point is behind the camera",
     BEYOND_RANGE: "ground point beyond the requested maximum range",
+    DEGENERATE: "footprint polygon has zero area (centroid undefined)",
 }
 
 

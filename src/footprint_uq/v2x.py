@@ -108,8 +108,8 @@ J2735_POSITION_CONFIDENCE_M = (np.nan, 500.0, 200.0, 100.0, 50.0, 20.0, 10.0, 5.
 J2735_POSITION_CONFIDENCE_NAMES = ("unavailable", "a500m", "a200m", "a100m", "a50m", "a20m", "a10m",
                                    "a5m", "a2m", "a1m", "a50cm", "a20cm", "a10cm", "a5cm", "a2cm", "a1cm")
 
-_CIRCULAR_RTOL = 1e-9  # axes this close: orientation reported as 0 (north)
-_STEP_GUARD = 1e-9  # relative guard against binary rounding pushing an exact step up
+CIRCULAR_RTOL = 1e-9  # axes this close: orientation reported as 0 (north)
+STEP_GUARD = 1e-9  # relative guard against binary rounding pushing an exact step up
 
 
 def _cov(cov_m2) -> np.ndarray:
@@ -137,7 +137,7 @@ def rotate_to_true_north(cov_m2, heading_offset_deg: float = 0.0) -> np.ndarray:
 
 def _ceil_steps(value_m, unit_m):
     with np.errstate(invalid="ignore"):
-        return np.ceil(value_m / unit_m * (1.0 - _STEP_GUARD))
+        return np.ceil(value_m / unit_m * (1.0 - STEP_GUARD))
 
 
 def cpm_coordinate_confidence(sigma_m) -> np.ndarray:
@@ -223,7 +223,7 @@ def j2735_position_confidence(radius95_m) -> np.ndarray:
     levels = np.asarray(J2735_POSITION_CONFIDENCE_M[1:])  # decreasing 500 .. 0.01
     # number of levels whose radius is >= r (they come first): that count is the code
     with np.errstate(invalid="ignore"):
-        count = (levels[None, :] >= (r.reshape(-1, 1) * (1.0 - _STEP_GUARD))).sum(-1).reshape(r.shape)
+        count = (levels[None, :] >= (r.reshape(-1, 1) * (1.0 - STEP_GUARD))).sum(-1).reshape(r.shape)
     return np.where(np.isnan(r), 0, count).astype(np.int32)
 
 
@@ -241,7 +241,7 @@ def j2735_fields(cov_m2, heading_offset_deg: float = 0.0) -> dict[str, np.ndarra
         a, b, ang = _axes(c)
     bearing = np.mod(90.0 - ang, 180.0)  # ang is ccw from east in the true east/north frame
     with np.errstate(invalid="ignore"):
-        circular = (a * a - b * b) <= _CIRCULAR_RTOL * (a * a + b * b)
+        circular = (a * a - b * b) <= CIRCULAR_RTOL * (a * a + b * b)
     bearing = np.where(circular, 0.0, bearing)
     return {
         "j2735_semi_major": j2735_axis_accuracy(a),

@@ -7,6 +7,7 @@ import numpy as np
 from .. import params as P
 from .._checks import as_points
 from . import general
+from .lens_domain import LensDomain, lens_domain
 from .rotation import R_W_C
 
 __all__ = ["Camera"]
@@ -29,12 +30,13 @@ class Camera:
     # -- the trio ------------------------------------------------------------------
     def backproject(self, uv_px, *, get_gradients: bool = False) -> general.Backprojection:
         """Pixels ``(..., 2)`` -> ground points ``xy_world_m`` ``(..., 2)`` (see :class:`general.Backprojection`)."""
-        return general.backproject(self.params, as_points("uv_px", uv_px, 2), get_gradients=get_gradients)
+        return general.backproject(self.params, as_points("uv_px", uv_px, 2), get_gradients=get_gradients,
+                                   domain=self.lens_domain)
 
     def project(self, xyz_world_m, *, get_gradients: bool = False) -> general.Projection:
         """World points ``(..., 3)`` (frame W, metres) -> pixels ``(..., 2)``."""
         xyz = as_points("xyz_world_m", xyz_world_m, 3) - np.array([0.0, 0.0, self.ground_z_m])
-        return general.project(self.params, xyz, get_gradients=get_gradients)
+        return general.project(self.params, xyz, get_gradients=get_gradients, domain=self.lens_domain)
 
     def project_ground(self, xy_world_m, *, get_gradients: bool = False) -> general.Projection:
         """Ground points ``(..., 2)`` on the nominal ground plane -> pixels ``(..., 2)``.
@@ -43,17 +45,27 @@ class Camera:
         """
         xy = as_points("xy_world_m", xy_world_m, 2)
         xyz = np.concatenate([xy, np.zeros(xy.shape[:-1] + (1,))], -1)
-        pr = general.project(self.params, xyz, get_gradients=get_gradients)
+        pr = general.project(self.params, xyz, get_gradients=get_gradients, domain=self.lens_domain)
         if get_gradients:
             pr = pr._replace(duv_dxyz=pr.duv_dxyz[..., :2])
         return pr
 
     # -- functional form, for Monte Carlo and finite differences --------------------
     def backproject_with(self, params, uv_px) -> general.Backprojection:
-        """Back-project with another parameter vector ``(..., 22)`` (same model)."""
-        return general.backproject(params, uv_px)
+        """Back-project with another parameter vector ``(..., 22)`` (same model).
+
+        The pixels' validity is judged in this camera's lens domain (:attr:`lens_domain`), also
+        for perturbed distortion coefficients: a Monte Carlo sample never answers where the
+        nominal camera does not.
+        """
+        return general.backproject(params, uv_px, domain=self.lens_domain)
 
     # -- derived quantities ---------------------------------------------------------
+    @property
+    def lens_domain(self) -> LensDomain:
+        """Where the lens model can be inverted (:mod:`footprint_uq.cameras.lens_domain`), cached."""
+        return lens_domain(self.params[P.DIST_SLICE])
+
     @property
     def K(self) -> np.ndarray:
         fx, fy, cx, cy, sk = self.params[:5]

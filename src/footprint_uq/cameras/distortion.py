@@ -9,7 +9,8 @@ distorted as in OpenCV (``cv2.projectPoints``)::
     y_d = y radial + p1 (r2 + 2 y^2) + 2 p2 x y
 
 Coefficients travel as ``(..., 8)`` arrays in OpenCV order (k1, k2, p1, p2, k3, k4, k5, k6).
-Undistortion solves ``distort(x) = x_d`` by Newton's method; its Jacobians follow
+Undistortion is the scalar core's (:func:`footprint_uq.fast.core.undistort_point`), inside
+the lens's valid domain (:mod:`footprint_uq.cameras.lens_domain`); its Jacobians follow
 from the implicit-function theorem: ``dx/dx_d = (ddistort/dx)^-1`` and
 ``dx/dk = -(ddistort/dx)^-1 ddistort/dk``.
 """
@@ -17,6 +18,9 @@ from the implicit-function theorem: ``dx/dx_d = (ddistort/dx)^-1`` and
 from __future__ import annotations
 
 import numpy as np
+
+from ..fast import core
+from .lens_domain import lens_domain
 
 __all__ = ["distort", "undistort", "in_principal_region"]
 
@@ -86,41 +90,48 @@ def distort(xy_n, dist, *, get_gradients=False):
     return out, J, Jk
 
 
-def _solve2(J, b):
-    """Solve ``J x = b`` for batches of 2x2 systems; returns (x, det)."""
-    a, bb, c, d = J[..., 0, 0], J[..., 0, 1], J[..., 1, 0], J[..., 1, 1]
-    det = a * d - bb * c
-    x0 = (d * b[..., 0] - bb * b[..., 1]) / det
-    x1 = (-c * b[..., 0] + a * b[..., 1]) / det
-    return np.stack([x0, x1], -1), det
+def _groups(kf: np.ndarray, domain):
+    """``[(rows, LensDomain)]``: which rows of the (n, 8) coefficients go with which lens domain.
 
-
-def _branch_ok(x, k, n_steps=16):
-    """True where ``x`` lies in the lens model's principal (invertible) region.
-
-    The region is the one connected to the optical axis in which the distortion
-    map is locally invertible and does not fold the image over: along the segment
-    from 0 to ``x`` the Jacobian determinant and the radial factor stay positive
-    (checked at ``n_steps`` points).  A Newton solution outside it solves
-    ``distort(x) = x_d`` on another branch of the polynomial (e.g. a point on the
-    opposite side of the image) and must not be used.
+    With ``domain`` given, every row uses it (Monte Carlo: perturbed lenses, the nominal
+    lens's domain).  Else one domain per distinct coefficient row; rows with non-finite
+    coefficients belong to none (no answer).
     """
-    ok = np.ones(np.broadcast_shapes(x.shape[:-1], k.shape[:-1]), dtype=bool)
-    for t in np.arange(1, n_steps + 1) / n_steps:
-        _, _, rad, den, a, b, c, d = _fj(t * x[..., 0], t * x[..., 1], k)
-        ok &= (a * d - b * c > 0) & (rad > 0) & (den > 0)
-    return ok
+    n = kf.shape[0]
+    if domain is not None:
+        return [(slice(None), domain)]
+    if n == 0:
+        return []
+    if np.all(kf == kf[0]):
+        return [(slice(None), lens_domain(kf[0]))] if np.isfinite(kf[0]).all() else []
+    finite = np.isfinite(kf).all(-1)
+    uniq, inv = np.unique(kf[finite], axis=0, return_inverse=True)
+    rows = np.flatnonzero(finite)
+    return [(rows[inv.ravel() == j], lens_domain(uniq[j])) for j in range(uniq.shape[0])]
 
 
-def in_principal_region(xy_n, dist, *, n_steps: int = 16) -> np.ndarray:
+def _solve(xf: np.ndarray, kf: np.ndarray, domain):
+    """The scalar core (:func:`footprint_uq.fast.core.undistort_point`) over flat arrays."""
+    n = xf.shape[0]
+    out = np.full((n, 2), np.nan)
+    ok = np.zeros(n, dtype=bool)
+    minv = np.full((n, 4), np.nan)
+    for rows, dom in _groups(kf, domain):
+        xs = np.ascontiguousarray(xf[rows])
+        ks = np.ascontiguousarray(kf[rows])
+        o, c, m = np.empty_like(xs), np.empty(xs.shape[0], dtype=bool), np.empty((xs.shape[0], 4))
+        core.undistort_many(dom.packed, ks, xs, o, c, m)
+        out[rows], ok[rows], minv[rows] = o, c, m
+    return out, ok, minv
+
+
+def in_principal_region(xy_n, dist) -> np.ndarray:
     """True where undistorted normalised points lie in the lens model's principal region.
 
     The region connected to the optical axis where the distortion map is locally
-    invertible and does not fold over: along the segment from 0 to ``xy_n`` the
-    Jacobian determinant, the radial factor and its denominator stay positive
-    (checked at ``n_steps`` evenly spaced points, the last one ``xy_n`` itself).
-    :func:`undistort` accepts only solutions in this region, and projections of
-    points outside it are flagged.
+    invertible and does not fold over (:mod:`footprint_uq.cameras.lens_domain`):
+    :func:`undistort` returns only solutions in it, and projections of points
+    outside it are flagged.
 
     Parameters
     ----------
@@ -133,104 +144,41 @@ def in_principal_region(xy_n, dist, *, n_steps: int = 16) -> np.ndarray:
     """
     x = np.asarray(xy_n, dtype=np.float64)
     k = np.asarray(dist, dtype=np.float64)
-    with np.errstate(all="ignore"):
-        return _branch_ok(x, k, n_steps)
+    shape = np.broadcast_shapes(x.shape[:-1], k.shape[:-1])
+    xf = np.ascontiguousarray(np.broadcast_to(x, shape + (2,)).reshape(-1, 2))
+    kf = np.ascontiguousarray(np.broadcast_to(k, shape + (8,)).reshape(-1, 8))
+    ok = np.zeros(xf.shape[0], dtype=bool)
+    for rows, dom in _groups(kf, None):
+        ok[rows] = dom.contains_undistorted(xf[rows])
+    return ok.reshape(shape)
 
 
-def _inv2(J):
-    a, b, c, d = J[..., 0, 0], J[..., 0, 1], J[..., 1, 0], J[..., 1, 1]
-    det = a * d - b * c
-    return np.stack([np.stack([d, -b], -1), np.stack([-c, a], -1)], -2) / det[..., None, None]
+def undistort(xy_d, dist, *, domain=None, get_gradients=False):
+    """Invert :func:`distort`: the undistorted normalised point of each distorted one.
 
-
-_N_CONTINUATION = 16
-
-
-def _accept(x, xy_d, k, tol):
-    """Converged: residual within ``tol``, Jacobian non-singular, principal branch."""
-    xd, yd, _, _, a, b, c, d = _fj(x[..., 0], x[..., 1], k)
-    err = np.maximum(np.abs(xd - xy_d[..., 0]), np.abs(yd - xy_d[..., 1]))
-    ok = (err <= tol * np.maximum(1.0, np.abs(xy_d).max(axis=-1))) & (a * d - b * c > 0)
-    return ok & _branch_ok(x, k)
-
-
-def _newton(xy_d, k, tol, max_iter, x0=None):
-    """Damped Newton iteration for ``distort(x, k) = xy_d`` on an active set of points.
-
-    Starts from ``x0`` (default ``xy_d``); a step is halved (up to 12 times) until it lowers the
-    residual, which keeps the iteration from jumping over the fold of the lens
-    model onto another branch.  Returns the last iterate (convergence is judged
-    by the caller).
-    """
-    shape = xy_d.shape[:-1]
-    k = np.broadcast_to(k, shape + (8,))
-    shared = k.ndim == 1 or all(st == 0 for st in k.strides[:-1])
-    kf = k[(0,) * (k.ndim - 1)][None, :] if shared else k.reshape(-1, 8)
-    tx, ty = xy_d[..., 0].ravel(), xy_d[..., 1].ravel()
-    x0 = xy_d if x0 is None else np.broadcast_to(np.asarray(x0, dtype=np.float64), shape + (2,))
-    x, y = x0[..., 0].ravel().copy(), x0[..., 1].ravel().copy()
-    lim = tol * np.maximum(1.0, np.maximum(np.abs(tx), np.abs(ty)))
-    ok = np.isfinite(tx) & np.isfinite(ty) & np.isfinite(x) & np.isfinite(y)
-    ok &= np.isfinite(kf).all(-1) if not shared else bool(np.isfinite(kf).all())
-    active = np.flatnonzero(ok)
-    with np.errstate(all="ignore"):
-        for _ in range(max_iter):
-            if active.size == 0:
-                break
-            ka = kf if shared else kf[active]
-            xa, ya, ta, ua = x[active], y[active], tx[active], ty[active]
-            fx, fy, _, _, a, b, c, d = _fj(xa, ya, ka)
-            rx, ry = fx - ta, fy - ua
-            keep = np.maximum(np.abs(rx), np.abs(ry)) > lim[active]
-            if not keep.all():
-                active, xa, ya, ta, ua, rx, ry = (v[keep] for v in (active, xa, ya, ta, ua, rx, ry))
-                a, b, c, d = a[keep], b[keep], c[keep], d[keep]
-                ka = kf if shared else kf[active]
-            if active.size == 0:
-                break
-            det = a * d - b * c
-            sx, sy = (d * rx - b * ry) / det, (a * ry - c * rx) / det
-            r0 = rx * rx + ry * ry
-            lam = np.ones(active.size)
-            for _ in range(12):
-                xn, yn = xa - lam * sx, ya - lam * sy
-                fx, fy = _fj(xn, yn, ka, jac=False)[:2]
-                better = (fx - ta) ** 2 + (fy - ua) ** 2 < r0
-                if better.all():
-                    break
-                lam = np.where(better, lam, 0.5 * lam)
-            x[active], y[active] = xn, yn
-            active = active[np.isfinite(xn) & np.isfinite(yn)]
-    x = np.stack([x, y], -1)
-    return x.reshape(shape + (2,))
-
-
-def undistort(xy_d, dist, *, tol=1e-14, max_iter=50, get_gradients=False):
-    """Invert :func:`distort` by (damped) Newton's method.
-
-    The solution is accepted only in the lens model's principal region (see
-    :func:`_branch_ok`): past the fold of the radial polynomial another root of
-    ``distort(x) = x_d`` may exist (e.g. on the opposite side of the image), and
-    returning it would send the ray in a wrong direction.  Where Newton from
-    ``x_d`` fails, the solution is followed by continuation from the optical axis.
+    Every point goes through the scalar core
+    (:func:`footprint_uq.fast.core.undistort_point`), the one definition shared by all
+    paths: a point outside the lens's valid domain (:mod:`footprint_uq.cameras.lens_domain`)
+    has no answer; inside it, damped Newton from ``x_d``, retried by continuation from the
+    optical axis, converges to the principal root (residual <= 1e-14 max(1, |x_d|),
+    polished by one more step).
 
     Parameters
     ----------
     xy_d : array_like, shape (..., 2)
         Distorted normalised coordinates.
     dist : array_like, shape (..., 8)
-    tol : float
-        Convergence tolerance on the residual, in normalised units.  The default
-        1e-14 is about 1e-11 px for a 1000 px focal length, below the 1e-10 px
-        the camera models promise.
+    domain : LensDomain, optional
+        The valid domain to use for every point.  Default: the domain of each point's
+        own coefficients (cached per coefficient set).  Monte Carlo over perturbed lenses
+        passes the nominal lens's domain.
     get_gradients : bool
         Also return ``dxyn_dxyd`` (..., 2, 2) and ``dxyn_ddist`` (..., 2, 8).
 
     Returns
     -------
     xy_n : ndarray, shape (..., 2)
-        NaN where the iteration did not converge or the distortion map is
-        singular (outside the region where the lens model is invertible).
+        NaN where there is no answer.
     converged : ndarray of bool, shape (...)
     """
     xy_d = np.asarray(xy_d, dtype=np.float64)
@@ -245,26 +193,14 @@ def undistort(xy_d, dist, *, tol=1e-14, max_iter=50, get_gradients=False):
             return x, conv
         _, J, Jk = distort(x, k, get_gradients=True)
         return x, conv, np.broadcast_to(np.eye(2), shape + (2, 2)).copy(), -Jk
-    x = _newton(xy_d, k, tol, max_iter)
-    with np.errstate(all="ignore"):
-        conv = np.array(_accept(x, xy_d, k, tol), dtype=bool)  # writable, also for a single point
-        retry = ~conv & np.isfinite(xy_d).all(-1) & np.isfinite(k).all(-1)
-        if np.any(retry):
-            # Newton from x_d may land on another branch of the polynomial (past the fold)
-            # or stall; follow the solution of distort(x) = t x_d from the optical axis (t = 0)
-            # to t = 1 instead, which stays on the principal branch while there is one.
-            td, kr = xy_d[retry], k[retry]
-            xr = np.zeros_like(td)
-            for t in np.arange(1, _N_CONTINUATION + 1) / _N_CONTINUATION:
-                xr = _newton(t * td, kr, tol, 8, x0=xr)
-            xr = _newton(td, kr, tol, max_iter, x0=xr)
-            x = x.copy()
-            x[retry] = xr
-            conv[retry] = _accept(xr, td, kr, tol)
-    x = np.where(conv[..., None], x, np.nan)
+    xf = np.ascontiguousarray(xy_d.reshape(-1, 2))
+    kf = np.ascontiguousarray(k.reshape(-1, 8))
+    out, ok, minv = _solve(xf, kf, domain)
+    x = out.reshape(shape + (2,))
+    conv = ok.reshape(shape)
     if not get_gradients:
         return x, conv
+    Jinv = minv.reshape(shape + (2, 2))
     with np.errstate(all="ignore"):
-        _, J, Jk = distort(x, k, get_gradients=True)
-        Jinv = _inv2(J)
+        _, _, Jk = distort(x, k, get_gradients=True)
     return x, conv, Jinv, -(Jinv @ Jk)

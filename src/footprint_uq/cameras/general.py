@@ -18,7 +18,7 @@ import numpy as np
 from .. import params as P
 from .. import status
 from ..ground import intersect_ground
-from .distortion import _branch_ok, distort, undistort
+from .distortion import distort, in_principal_region, undistort
 from .pinhole import normalised_to_pixel, pixel_to_normalised
 from .rotation import R_W_C, dR_W_C
 
@@ -66,7 +66,7 @@ def _reason(valid_ground, conv, finite):
     return r
 
 
-def backproject(params, uv_px, *, get_gradients=False) -> Backprojection:
+def backproject(params, uv_px, *, get_gradients=False, domain=None) -> Backprojection:
     """Back-project pixels onto the ground.
 
     Parameters
@@ -77,6 +77,9 @@ def backproject(params, uv_px, *, get_gradients=False) -> Backprojection:
         Pixel coordinates (u right, v down), possibly distorted.
     get_gradients : bool
         Fill ``dxy_duv`` and ``dxy_dp``.
+    domain : LensDomain, optional
+        Valid domain of the lens (:mod:`footprint_uq.cameras.lens_domain`); default: that of
+        each point's own distortion coefficients.  Pixels outside it are ``UNDISTORT_FAILED``.
     """
     p = np.asarray(params, dtype=np.float64)
     uv = np.asarray(uv_px, dtype=np.float64)
@@ -91,7 +94,7 @@ def backproject(params, uv_px, *, get_gradients=False) -> Backprojection:
     R = R_W_C(*ang)
     if not get_gradients:
         xd = pixel_to_normalised(uv, fx, fy, cx, cy, sk)
-        xn, conv = undistort(xd, dist)
+        xn, conv = undistort(xd, dist, domain=domain)
         ray_c = np.concatenate([xn, np.ones(xn.shape[:-1] + (1,))], -1)
         ray_w = (R @ ray_c[..., None])[..., 0]
         xy, vg = intersect_ground(cam, ray_w, ground)
@@ -99,7 +102,7 @@ def backproject(params, uv_px, *, get_gradients=False) -> Backprojection:
         xy = np.where(valid[..., None], xy, np.nan)
         return Backprojection(xy, valid, _reason(vg, conv, finite))
     xd, dxd_duv, dxd_dk = pixel_to_normalised(uv, fx, fy, cx, cy, sk, get_gradients=True)
-    xn, conv, dxn_dxd, dxn_ddist = undistort(xd, dist, get_gradients=True)
+    xn, conv, dxn_dxd, dxn_ddist = undistort(xd, dist, domain=domain, get_gradients=True)
     ray_c = np.concatenate([xn, np.ones(xn.shape[:-1] + (1,))], -1)
     ray_w = (R @ ray_c[..., None])[..., 0]
     xy, vg, dxy_dcam, dxy_dray, dxy_dg = intersect_ground(cam, ray_w, ground, get_gradients=True)
@@ -123,7 +126,7 @@ def backproject(params, uv_px, *, get_gradients=False) -> Backprojection:
     return Backprojection(xy, valid, _reason(vg, conv, finite), dxy_duv, J)
 
 
-def project(params, xyz_rel_m, *, get_gradients=False) -> Projection:
+def project(params, xyz_rel_m, *, get_gradients=False, domain=None) -> Projection:
     """Project world points into the image.
 
     Parameters
@@ -134,6 +137,8 @@ def project(params, xyz_rel_m, *, get_gradients=False) -> Projection:
         ground plane, metres.  The ground parameters do not enter.
     get_gradients : bool
         Fill ``duv_dxyz`` and ``duv_dp``.
+    domain : LensDomain, optional
+        As in :func:`backproject`.
 
     Points behind the camera (``BEHIND_CAMERA``), non-finite input (``NOT_FINITE``)
     and points outside the lens model's valid region, where the distortion
@@ -163,7 +168,8 @@ def project(params, xyz_rel_m, *, get_gradients=False) -> Projection:
         # past the fold of the distortion polynomial a point maps to a meaningless pixel (possibly
         # near the image centre, or on the opposite side): flag it like an undistortion failure
         with np.errstate(all="ignore"):
-            lens_ok = _branch_ok(np.where(valid[..., None], xn, 0.0), dist)
+            x0 = np.where(valid[..., None], xn, 0.0)
+            lens_ok = in_principal_region(x0, dist) if domain is None else domain.contains_undistorted(x0)
         reason[valid & ~lens_ok] = status.UNDISTORT_FAILED
         valid = valid & lens_ok
     xn = np.where(valid[..., None], xn, np.nan)

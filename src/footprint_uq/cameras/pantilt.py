@@ -279,7 +279,7 @@ class PanTiltCamera(Camera):
         """
         uv = as_points("uv_px", uv_px, 2)
         if np.any(self.params[P.DIST_SLICE]) or np.any(self.params[P.GDZ:P.GSY + 1]):
-            return general.backproject(self.params, uv, get_gradients=get_gradients)
+            return general.backproject(self.params, uv, get_gradients=get_gradients, domain=self.lens_domain)
         return closed_form_backproject(self.params, uv, get_gradients=get_gradients)
 
     @property

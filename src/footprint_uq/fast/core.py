@@ -1,0 +1,336 @@
+"""The scalar core: per-point lens math written once, inlined into every compiled path.
+
+Every function here works on one point (scalars in, a tuple of scalars out) and is compiled
+with ``inline="always"``, so that the kernels that call it in their loops keep vectorising.
+The numpy reference (:func:`footprint_uq.cameras.distortion.undistort`,
+:mod:`footprint_uq.cameras.lens_domain`) calls the same functions through the small
+array wrappers at the end of this module: undistortion and the lens's valid domain exist
+once, and every path -- reference, maps, scattered points, per-frame footprints, batch --
+gives the same validity and the same numbers.
+
+Distortion coefficients travel as a float64 array ``k`` of 8 in OpenCV order
+(k1, k2, p1, p2, k3, k4, k5, k6); normalised coordinates are those of the OpenCV camera
+frame (``x = X/Z``, ``y = Y/Z``).  See ``docs/uncertainty-model.md`` ("The lens's valid
+domain") for the definitions.
+
+The packed lens domain ``dom`` (built by :func:`footprint_uq.cameras.lens_domain.lens_domain`)
+is a float64 vector: ``dom[DOM_M]`` the number M of angular bins, squared inner/outer radii of
+the distorted and undistorted boundaries, then the two boundary tables (M + 1 radii each, at
+uniform angles from -pi to pi) -- see the ``DOM_*`` offsets.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba as nb
+import numpy as np
+
+__all__ = [
+    "UNDISTORT_TOL", "UNDISTORT_MAX_ITER", "R_CAP", "STRETCH_MAX", "DOM_M", "DOM_RD_IN2", "DOM_RD_OUT2",
+    "DOM_RU_IN2", "DOM_RU_OUT2", "DOM_TAB", "distort_point", "distort_jac", "in_domain_distorted",
+    "in_domain_undistorted", "undistort_point", "undistort_vec", "fold_radius", "undistort_many", "contains_many",
+]
+
+_INL = dict(inline="always", cache=True, error_model="numpy", fastmath={"contract"})
+_JIT = dict(cache=True, error_model="numpy", fastmath={"contract"})
+
+#: residual tolerance of the undistortion, relative to max(1, |x_d|) in normalised units
+#: (about 1e-11 px for a 1000 px focal length)
+UNDISTORT_TOL = 1e-14
+#: Newton iterations from the start point (each damped by step halving)
+UNDISTORT_MAX_ITER = 50
+#: continuation steps from the optical axis when Newton from the start point fails
+_N_CONTINUATION = 16
+_N_HALVINGS = 12
+
+#: largest normalised radius, undistorted and distorted, of the valid domain (tan 87 deg): beyond it the
+#: distortion polynomial is evaluated where no calibration constrains it (and near a rational lens's
+#: pole the root cannot be resolved to the tolerance in floating point)
+R_CAP = math.tan(math.radians(87.0))
+
+#: largest local stretch of the lens model inside the valid domain (Frobenius norm of d(x_d)/d(x)): near
+#: a rational lens's pole the model magnifies without bound, a root can no longer be resolved in double
+#: precision, and no calibration constrains the model there
+STRETCH_MAX = 20.0
+
+# packed lens domain layout
+DOM_M, DOM_RD_IN2, DOM_RD_OUT2, DOM_RU_IN2, DOM_RU_OUT2 = 0, 1, 2, 3, 4
+DOM_TAB = 5
+
+
+@nb.njit(**_INL)
+def distort_point(x, y, k):
+    """Distorted normalised point ``(x_d, y_d)`` of the undistorted ``(x, y)`` (OpenCV's model)."""
+    r2 = x * x + y * y
+    num = 1.0 + r2 * (k[0] + r2 * (k[1] + r2 * k[4]))
+    den = 1.0 + r2 * (k[5] + r2 * (k[6] + r2 * k[7]))
+    rad = num / den
+    xd = x * rad + 2.0 * k[2] * x * y + k[3] * (r2 + 2.0 * x * x)
+    yd = y * rad + k[2] * (r2 + 2.0 * y * y) + 2.0 * k[3] * x * y
+    return xd, yd
+
+
+@nb.njit(**_INL)
+def distort_jac(x, y, k):
+    """Distorted point and its Jacobian ``d(x_d, y_d)/d(x, y)`` at the undistorted ``(x, y)``.
+
+    Returns ``(xd, yd, j00, j01, j10, j11, rad, den)``; ``rad`` is the radial factor and
+    ``den`` its denominator ``1 + k4 r^2 + k5 r^4 + k6 r^6``.
+    """
+    k1, k2, p1, p2, k3, k4, k5, k6 = k[0], k[1], k[2], k[3], k[4], k[5], k[6], k[7]
+    r2 = x * x + y * y
+    num = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+    den = 1.0 + r2 * (k4 + r2 * (k5 + r2 * k6))
+    iden = 1.0 / den
+    rad = num * iden
+    xd = x * rad + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x)
+    yd = y * rad + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y
+    dnum = k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2)
+    dden = k4 + r2 * (2.0 * k5 + 3.0 * k6 * r2)
+    drad2 = 2.0 * (dnum - rad * dden) * iden  # 2 d rad / d r2
+    j00 = rad + x * x * drad2 + 2.0 * p1 * y + 6.0 * p2 * x
+    j01 = x * y * drad2 + 2.0 * p1 * x + 2.0 * p2 * y
+    j10 = x * y * drad2 + 2.0 * p1 * x + 2.0 * p2 * y
+    j11 = rad + y * y * drad2 + 6.0 * p1 * y + 2.0 * p2 * x
+    return xd, yd, j00, j01, j10, j11, rad, den
+
+
+@nb.njit(**_INL)
+def _in_table(dom, off, in2, out2, x, y):
+    """``(x, y)`` strictly inside the star-shaped boundary tabulated at ``dom[off:]``."""
+    r2 = x * x + y * y
+    if r2 < in2:
+        return True
+    if not r2 < out2:  # also False for NaN
+        return False
+    m = int(dom[DOM_M])
+    t = (math.atan2(y, x) + math.pi) * (m / (2.0 * math.pi))
+    j = min(max(int(t), 0), m - 1)
+    rb = min(dom[off + j], dom[off + j + 1])
+    return r2 < rb * rb
+
+
+@nb.njit(**_INL)
+def in_domain_distorted(dom, xd, yd):
+    """True where the distorted normalised point lies inside the lens's valid domain."""
+    return _in_table(dom, DOM_TAB, dom[DOM_RD_IN2], dom[DOM_RD_OUT2], xd, yd)
+
+
+@nb.njit(**_INL)
+def in_domain_undistorted(dom, x, y):
+    """True where the undistorted normalised point lies inside the principal region."""
+    m = int(dom[DOM_M])
+    return _in_table(dom, DOM_TAB + m + 1, dom[DOM_RU_IN2], dom[DOM_RU_OUT2], x, y)
+
+
+@nb.njit(**_INL)
+def _newton(xd, yd, k, x, y, max_iter, tol):
+    """Damped Newton for ``distort(x, y) = (xd, yd)`` from ``(x, y)``; returns the last iterate.
+
+    A step is halved (up to 12 times) until it lowers the residual, which keeps the
+    iteration from jumping over the fold of the lens model onto another branch.
+    """
+    for _ in range(max_iter):
+        fx, fy, j00, j01, j10, j11, _r, _d = distort_jac(x, y, k)
+        ex = fx - xd
+        ey = fy - yd
+        if max(abs(ex), abs(ey)) <= tol or not (math.isfinite(ex) and math.isfinite(ey)):
+            break
+        idet = 1.0 / (j00 * j11 - j01 * j10)
+        sx = (j11 * ex - j01 * ey) * idet
+        sy = (j00 * ey - j10 * ex) * idet
+        r0 = ex * ex + ey * ey
+        lam = 1.0
+        xn, yn = x - sx, y - sy
+        for _h in range(_N_HALVINGS):
+            gx, gy = distort_point(xn, yn, k)
+            if (gx - xd) ** 2 + (gy - yd) ** 2 < r0:
+                break
+            lam *= 0.5
+            xn, yn = x - lam * sx, y - lam * sy
+        x, y = xn, yn
+    return x, y
+
+
+@nb.njit(**_INL)
+def _accept(dom, xd, yd, k, x, y, tol):
+    """Converged on the principal branch: residual within ``tol``, det > 0, inside the domain."""
+    fx, fy, j00, j01, j10, j11, _r, _d = distort_jac(x, y, k)
+    ok = max(abs(fx - xd), abs(fy - yd)) <= tol and j00 * j11 - j01 * j10 > 0.0
+    return ok and in_domain_undistorted(dom, x, y)
+
+
+@nb.njit(**_INL)
+def _radial_start(dom, k, xd, yd):
+    """Start point on the principal branch from the radial part alone.
+
+    Bisection (60 halvings) of ``r rad(r^2) = |x_d|`` on ``[0, r_fold]`` (the smallest fold
+    radius, where the radial map is monotone), along the direction of ``x_d``.  Far from the
+    axis (a pincushion lens near its 87 deg cap, a rational lens near its pole) Newton from
+    ``x_d`` needs more iterations than it has; from here it needs a few.
+    """
+    rd = math.sqrt(xd * xd + yd * yd)
+    if not rd > 0.0:
+        return 0.0, 0.0
+    lo, hi = 0.0, min(math.sqrt(dom[DOM_RU_IN2]), 1e3)
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        m2 = mid * mid
+        g = mid * (1.0 + m2 * (k[0] + m2 * (k[1] + m2 * k[4]))) / (1.0 + m2 * (k[5] + m2 * (k[6] + m2 * k[7])))
+        if g < rd:
+            lo = mid
+        else:
+            hi = mid
+    return xd * (lo / rd), yd * (lo / rd)
+
+
+@nb.njit(**_INL)
+def undistort_point(dom, k, xd, yd, x0, y0):
+    """Undistorted normalised point of ``(xd, yd)``, or ``ok = False``.
+
+    The single definition of undistortion.  A point outside the lens's valid domain
+    (:func:`in_domain_distorted`) has no answer.  Inside it, damped Newton starts from
+    ``(x0, y0)`` (callers pass ``(xd, yd)``, or a neighbour's solution continued to first
+    order); a result off the principal branch, or no convergence, is retried from the radial
+    part's own inverse (:func:`_radial_start`), then by continuation from the optical axis
+    (``distort(x) = t x_d`` for t = 1/16 .. 1).
+    The accepted root is polished by one more Newton step, so that every start gives
+    the same answer to rounding.
+
+    Returns ``(ok, x, y, m00, m01, m10, m11)`` with ``m = d(x, y)/d(xd, yd)`` (NaN if not ok).
+    """
+    nan = np.nan
+    if not (math.isfinite(xd) and math.isfinite(yd)) or not in_domain_distorted(dom, xd, yd):
+        return False, nan, nan, nan, nan, nan, nan
+    tol = UNDISTORT_TOL * max(1.0, max(abs(xd), abs(yd)))
+    x, y = _newton(xd, yd, k, x0, y0, UNDISTORT_MAX_ITER, tol)
+    if not _accept(dom, xd, yd, k, x, y, tol):
+        x, y = _radial_start(dom, k, xd, yd)
+        x, y = _newton(xd, yd, k, x, y, UNDISTORT_MAX_ITER, tol)
+    if not _accept(dom, xd, yd, k, x, y, tol):
+        x, y = 0.0, 0.0
+        for i in range(1, _N_CONTINUATION + 1):
+            t = i / _N_CONTINUATION
+            x, y = _newton(t * xd, t * yd, k, x, y, 8, tol)
+        x, y = _newton(xd, yd, k, x, y, UNDISTORT_MAX_ITER, tol)
+        if not _accept(dom, xd, yd, k, x, y, tol):
+            return False, nan, nan, nan, nan, nan, nan
+    fx, fy, j00, j01, j10, j11, _r, _d = distort_jac(x, y, k)
+    idet = 1.0 / (j00 * j11 - j01 * j10)
+    m00, m01, m10, m11 = j11 * idet, -j01 * idet, -j10 * idet, j00 * idet
+    ex, ey = fx - xd, fy - yd
+    return True, x - (m00 * ex + m01 * ey), y - (m10 * ex + m11 * ey), m00, m01, m10, m11
+
+
+@nb.njit(**_INL)
+def _regular(x, y, k):
+    """The lens model is locally invertible, not folded over, within :data:`R_CAP` and stretching by
+    less than :data:`STRETCH_MAX` at ``(x, y)``."""
+    xd, yd, j00, j01, j10, j11, rad, den = distort_jac(x, y, k)
+    return ((j00 * j11 - j01 * j10 > 0.0) and (rad > 0.0) and (den > 0.0) and (xd * xd + yd * yd < R_CAP * R_CAP)
+            and (j00 * j00 + j01 * j01 + j10 * j10 + j11 * j11 < STRETCH_MAX * STRETCH_MAX))
+
+
+@nb.njit(**_JIT)
+def fold_radius(k, c, s, r_max, n_grid):
+    """Largest ``r <= r_max`` such that the lens is regular on the segment from 0 to ``r (c, s)``.
+
+    Scans ``n_grid`` radii spaced quadratically (dense near the axis) for the first point
+    where the Jacobian determinant, the radial factor or its denominator stops being
+    positive (or the distorted radius reaches :data:`R_CAP`, or the local stretch
+    :data:`STRETCH_MAX`), then bisects to the last regular radius (60 halvings).
+    """
+    prev = 0.0
+    for i in range(1, n_grid + 1):
+        r = r_max * (i / n_grid) ** 2
+        if not _regular(r * c, r * s, k):
+            lo, hi = prev, r
+            for _ in range(60):
+                mid = 0.5 * (lo + hi)
+                if _regular(mid * c, mid * s, k):
+                    lo = mid
+                else:
+                    hi = mid
+            return lo
+        prev = r
+    return r_max
+
+
+@nb.njit(**_JIT)
+def undistort_vec(dom, k, xd, yd, xn, yn, m00, m01, m10, m11, iden, ok):
+    """:func:`undistort_point` over 1-D arrays, vectorised (the kernels' form).
+
+    On entry ``xn``, ``yn`` hold start points (``xd``, ``yd`` or a neighbour's solution
+    continued to first order).  All points take undamped Newton steps together -- a loop
+    LLVM vectorises, also after convergence, which polishes the root as
+    :func:`undistort_point` does; a point outside the valid domain is not iterated.  A
+    point that has not converged onto the principal branch after that is solved again by
+    :func:`undistort_point` from ``x_d``: the same answer, or "no answer", as every
+    other path.  On exit ``ok`` (bool), the solution, ``m = d(x, y)/d(xd, yd)`` and
+    ``iden = 1 / den`` at the solution (``den`` as in :func:`distort_jac`).
+    """
+    n = ok.shape[0]
+    for i in range(n):
+        ok[i] = math.isfinite(xd[i]) and math.isfinite(yd[i]) and in_domain_distorted(dom, xd[i], yd[i])
+    nbad = n
+    for _ in range(UNDISTORT_MAX_ITER):
+        nbad = 0
+        for i in range(n):
+            x, y = xn[i], yn[i]
+            fx, fy, j00, j01, j10, j11, _r, den = distort_jac(x, y, k)
+            ex, ey = fx - xd[i], fy - yd[i]
+            tol = UNDISTORT_TOL * max(1.0, max(abs(xd[i]), abs(yd[i])))
+            conv = max(abs(ex), abs(ey)) <= tol
+            idet = 1.0 / (j00 * j11 - j01 * j10)
+            a, b, c, d = j11 * idet, -j01 * idet, -j10 * idet, j00 * idet
+            go = ok[i]
+            xn[i] = x - (a * ex + b * ey) if go else x
+            yn[i] = y - (c * ex + d * ey) if go else y
+            m00[i], m01[i], m10[i], m11[i] = a, b, c, d
+            iden[i] = 1.0 / den
+            nbad += 1 if (go and not conv) else 0
+        if nbad == 0:
+            break
+    for i in range(n):
+        if not ok[i]:
+            continue
+        x, y = xn[i], yn[i]
+        fx, fy, j00, j01, j10, j11, _r, den = distort_jac(x, y, k)
+        tol = UNDISTORT_TOL * max(1.0, max(abs(xd[i]), abs(yd[i])))
+        good = (max(abs(fx - xd[i]), abs(fy - yd[i])) <= tol and j00 * j11 - j01 * j10 > 0.0
+                and in_domain_undistorted(dom, x, y))
+        if good:
+            continue
+        r = undistort_point(dom, k, xd[i], yd[i], xd[i], yd[i])
+        ok[i] = r[0]
+        xn[i], yn[i] = r[1], r[2]
+        m00[i], m01[i], m10[i], m11[i] = r[3], r[4], r[5], r[6]
+        iden[i] = 1.0 / distort_jac(r[1], r[2], k)[7]
+
+
+# --------------------------------------------------------------------------------------
+# array wrappers: how the numpy reference calls the core
+# --------------------------------------------------------------------------------------
+@nb.njit(**_JIT)
+def undistort_many(dom, k, xyd, out, ok, minv):
+    """Undistort ``xyd`` (n, 2) with coefficients ``k`` (n, 8) (rows may repeat by stride 0).
+
+    Fills ``out`` (n, 2), ``ok`` (n,) and ``minv`` (n, 4): d(undistorted)/d(distorted).
+    """
+    for i in range(xyd.shape[0]):
+        xd, yd = xyd[i, 0], xyd[i, 1]
+        r = undistort_point(dom, k[i], xd, yd, xd, yd)
+        ok[i] = r[0]
+        out[i, 0], out[i, 1] = r[1], r[2]
+        minv[i, 0], minv[i, 1], minv[i, 2], minv[i, 3] = r[3], r[4], r[5], r[6]
+
+
+@nb.njit(**_JIT)
+def contains_many(dom, xy, distorted, out):
+    """Domain membership of ``xy`` (n, 2): distorted (True) or undistorted (False) coordinates."""
+    for i in range(xy.shape[0]):
+        if distorted:
+            out[i] = in_domain_distorted(dom, xy[i, 0], xy[i, 1])
+        else:
+            out[i] = in_domain_undistorted(dom, xy[i, 0], xy[i, 1])

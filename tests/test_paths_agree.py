@@ -1,0 +1,181 @@
+"""Every path gives the reference's answer, including "no answer" (Hypothesis over whole domains).
+
+Cameras: the paper's pan-tilt model and OpenCV cameras with strong barrel (past the lens fold
+inside the image), pincushion, tangential and rational distortion, roll, tilt from nearly
+horizontal to nearly straight down.  Pixels: over the whole image and 10 % beyond it.
+Paths: :func:`propagate` (the numpy reference), :func:`covariance_points`,
+:func:`covariance_map`, :class:`FrameProcessor` (corners, 2D boxes, 3D boxes against their
+numpy reference) and the batch (:func:`process_table`).  The validity and the status code
+must be the same exactly; where valid, the numbers to 1e-9 relative.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pyarrow as pa
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from footprint_uq import params as P
+from footprint_uq import status
+from footprint_uq.batch import process_table
+from footprint_uq.budget import load_budget
+from footprint_uq.cameras.opencv import OpenCVCamera
+from footprint_uq.cameras.pantilt import PanTiltCamera
+from footprint_uq.cameras.rotation import R_W_C
+from footprint_uq.footprints import FrameProcessor, footprints_from_boxes3d
+from footprint_uq.kernels import covariance_map, covariance_points
+from footprint_uq.propagation import propagate
+
+RTOL = 1e-9
+W_PX, H_PX = 1280, 720
+
+LENSES = {
+    "none": lambda d: np.zeros(8),
+    # folds inside the image: k1 = -0.33, k2 = 0.045 at f = 950 px folds 706 px from the centre
+    "barrel": lambda d: np.array([d(st.floats(-0.45, -0.2)), d(st.floats(0.0, 0.08)), 0, 0,
+                                  d(st.floats(-0.01, 0.01)), 0, 0, 0]),
+    "pincushion": lambda d: np.array([d(st.floats(0.02, 0.3)), d(st.floats(-0.02, 0.05)), 0, 0, 0, 0, 0,
+                                      0]),
+    "tangential": lambda d: np.array([d(st.floats(-0.4, 0.1)), d(st.floats(-0.05, 0.08)),
+                                      d(st.floats(-0.01, 0.01)), d(st.floats(-0.01, 0.01)),
+                                      d(st.floats(-0.02, 0.02)), 0, 0, 0]),
+    "rational": lambda d: np.array([d(st.floats(-0.35, 0.15)), d(st.floats(-0.1, 0.1)),
+                                    d(st.floats(-5e-3, 5e-3)), d(st.floats(-5e-3, 5e-3)),
+                                    d(st.floats(-0.02, 0.02)), d(st.floats(-0.1, 0.1)),
+                                    d(st.floats(-0.05, 0.05)), d(st.floats(-0.02, 0.02))]),
+}
+
+
+@st.composite
+def cameras(draw):
+    f = draw(st.floats(400.0, 2500.0))
+    tilt = draw(st.one_of(st.floats(0.05, 2.0), st.floats(2.0, 60.0), st.floats(85.0, 89.9)))
+    pan = draw(st.floats(-180.0, 180.0))
+    roll = draw(st.floats(-10.0, 10.0))
+    h = draw(st.floats(3.0, 30.0))
+    x0, y0 = draw(st.floats(-50, 50)), draw(st.floats(-50, 50))
+    lens = draw(st.sampled_from(sorted(LENSES)))
+    if lens == "none" and draw(st.booleans()):
+        return PanTiltCamera(focal_px=f, image_size_px=(W_PX, H_PX), height_m=h, pan_deg=pan, tilt_deg=tilt,
+                             roll_deg=roll, position_m=(x0, y0))
+    dist = LENSES[lens](draw)
+    cx = (W_PX - 1) / 2 + draw(st.floats(-20, 20))
+    cy = (H_PX - 1) / 2 + draw(st.floats(-20, 20))
+    K = np.array([[f, draw(st.floats(-2, 2)), cx], [0.0, f * draw(st.floats(0.98, 1.02)), cy], [0, 0, 1]])
+    R = R_W_C(np.deg2rad(pan), np.deg2rad(tilt), np.deg2rad(roll)).T
+    t = -R @ np.array([x0, y0, h])
+    return OpenCVCamera(K, dist, R, t, (W_PX, H_PX))
+
+
+def _budget(draw_full: bool):
+    b = load_budget("bw-cube1")
+    if not draw_full:
+        return b
+    # a full budget: correlations between the intrinsics, distortion, position, angles and ground
+    S = b.param_covariance()
+    S[P.GDZ, P.GDZ], S[P.GSX, P.GSX], S[P.GSY, P.GSY] = 0.01, 1e-4, 1e-4
+    used = np.flatnonzero(np.diag(S) > 0)
+    d = np.sqrt(np.diag(S)[used])
+    A = np.random.default_rng(7).normal(size=(used.size, used.size))
+    C = A @ A.T
+    C = C / np.sqrt(np.outer(np.diag(C), np.diag(C)))
+    full = (0.5 * np.eye(used.size) + 0.5 * C) * np.outer(d, d)
+    return dataclasses.replace(b, covariance_names=tuple(P.PARAM_NAMES[i] for i in used), covariance_matrix=full,
+                               imaging_px=(0.3, 0.2))
+
+
+def _pixels(draw, n=48):
+    u = draw(st.lists(st.floats(-0.1 * W_PX, 1.1 * W_PX), min_size=n, max_size=n))
+    v = draw(st.lists(st.floats(-0.1 * H_PX, 1.1 * H_PX), min_size=n, max_size=n))
+    edge = [[-0.1 * W_PX, -0.1 * H_PX], [1.1 * W_PX, 1.1 * H_PX], [-0.1 * W_PX, 1.1 * H_PX], [W_PX / 2, H_PX - 1]]
+    return np.concatenate([np.stack([u, v], -1), edge])
+
+
+def _close(a, b, scale):
+    return np.all(np.abs(a - b) <= RTOL * scale)
+
+
+def _assert_same(ref, xy, cov, reason, what, cam, uv=None):
+    """``uv`` given: the path flags answers outside the image OUTSIDE_IMAGE (computed all the same)."""
+    expected = ref.reason.copy()
+    if uv is not None:
+        expected[(expected == status.OK) & ~cam.in_image(uv)] = status.OUTSIDE_IMAGE
+    np.testing.assert_array_equal(reason, expected, err_msg=f"{what}: status codes differ")
+    ok = ref.reason == status.OK
+    assert np.isnan(xy[~ok]).all() and np.isnan(cov[~ok]).all(), f"{what}: numbers where there is no answer"
+    foot = cam.params[[P.XM, P.YM]]
+    scale_xy = 1.0 + np.linalg.norm(ref.xy_world_m[ok] - foot, axis=-1)[:, None]
+    assert _close(xy[ok], ref.xy_world_m[ok], scale_xy), f"{what}: positions differ"
+    scale_c = np.abs(ref.cov_m2[ok]).max(axis=(-2, -1))[:, None, None]
+    assert _close(cov[ok], ref.cov_m2[ok], scale_c), f"{what}: covariances differ"
+
+
+SETTINGS = settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+
+
+@SETTINGS
+@given(data=st.data())
+def test_points_framewise_and_batch_agree_with_reference(data):
+    cam = data.draw(cameras())
+    budget = _budget(data.draw(st.booleans()))
+    uv = _pixels(data.draw)
+    ref = propagate(cam, budget, uv)
+    xy, cov, _, reason = covariance_points(cam, budget, uv, get_reason=True)
+    _assert_same(ref, xy, cov, reason, "covariance_points", cam)
+    est = FrameProcessor(cam, budget, allow_outside_image=True).corners(uv[:, None, :])
+    _assert_same(ref, est.corners_xy_world_m[:, 0], est.corners_cov_m2[:, 0], est.corner_reason[:, 0],
+                 "FrameProcessor.corners", cam, uv)
+    # 2D boxes whose bottom-centre is the pixel
+    boxes = np.stack([uv[:, 0] - 15, uv[:, 1] - 40, uv[:, 0] + 15, uv[:, 1]], -1)
+    est = FrameProcessor(cam, budget, allow_outside_image=True).boxes2d(boxes)
+    _assert_same(ref, est.corners_xy_world_m[:, 0], est.corners_cov_m2[:, 0], est.corner_reason[:, 0],
+                 "FrameProcessor.boxes2d", cam, uv)
+    # the batch, K = 1 corner per row, per-corner columns
+    tab = process_table(cam, budget, pa.table({"u0_px": uv[:, 0], "v0_px": uv[:, 1]}), corners=True,
+                        allow_outside_image=True)
+    bxy = np.stack([tab.column("c0_x_m").to_numpy(), tab.column("c0_y_m").to_numpy()], -1)
+    c01 = tab.column("c0_cov_xy_m2").to_numpy()
+    bcov = np.stack([np.stack([tab.column("c0_cov_xx_m2").to_numpy(), c01], -1),
+                     np.stack([c01, tab.column("c0_cov_yy_m2").to_numpy()], -1)], -2)
+    _assert_same(ref, bxy, bcov, tab.column("c0_reason").to_numpy().astype(np.int8), "batch", cam, uv)
+
+
+@SETTINGS
+@given(data=st.data())
+def test_map_agrees_with_reference(data):
+    cam = data.draw(cameras())
+    budget = _budget(data.draw(st.booleans()))
+    step = data.draw(st.integers(17, 61))
+    xy, cov, valid, reason = covariance_map(cam, budget, step, get_reason=True)
+    ref = propagate(cam, budget, cam.pixel_grid(step))
+    np.testing.assert_array_equal(valid, ref.valid)
+    _assert_same(ref, xy, cov, reason, "covariance_map", cam)
+
+
+@SETTINGS
+@given(data=st.data())
+def test_boxes3d_framewise_agrees_with_numpy_reference(data):
+    cam = data.draw(cameras())
+    budget = _budget(False)
+    n = 24
+    # boxes on the ground around the camera's foot, some behind it, some far
+    foot = cam.params[[P.XM, P.YM]]
+    r = np.array(data.draw(st.lists(st.floats(2.0, 150.0), min_size=n, max_size=n)))
+    a = np.array(data.draw(st.lists(st.floats(-np.pi, np.pi), min_size=n, max_size=n)))
+    yaw = np.array(data.draw(st.lists(st.floats(-np.pi, np.pi), min_size=n, max_size=n)))
+    boxes = np.stack([foot[0] + r * np.cos(a), foot[1] + r * np.sin(a), np.full(n, 0.8), np.full(n, 4.5),
+                      np.full(n, 1.9), np.full(n, 1.6), yaw], -1)
+    ref = footprints_from_boxes3d(cam, budget, boxes, allow_outside_image=True)
+    est = FrameProcessor(cam, budget, allow_outside_image=True).boxes3d(boxes)
+    np.testing.assert_array_equal(est.corner_reason, ref.corner_reason)
+    np.testing.assert_array_equal(est.centre_reason, ref.centre_reason)
+    ok = ref.corner_reason == status.OK
+    scale = 1.0 + np.abs(ref.corners_xy_world_m[ok] - foot).max(initial=0.0)
+    assert _close(est.corners_xy_world_m[ok], ref.corners_xy_world_m[ok], scale)
+    sc = np.abs(ref.corners_cov_m2[ok]).max(axis=(-2, -1))[:, None, None]
+    assert _close(est.corners_cov_m2[ok], ref.corners_cov_m2[ok], sc)
+    okc = ref.centre_valid
+    assert _close(est.centre_xy_world_m[okc], ref.centre_xy_world_m[okc], scale)
