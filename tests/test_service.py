@@ -323,3 +323,19 @@ def test_column_writer_equals_asn1tools():
         assert _spec().decode("PerceivedObjectContainer", got)["numberOfPerceivedObjects"] == n
     with pytest.raises(ValueError, match="xCoordinate.value"):
         perceived_object_container_uper([1], [131072], [1], [0], [1], [101], [None])
+
+
+def test_more_than_255_objects_are_said_not_to_fit_in_the_messages(camera):
+    svc = Service(camera, "basler1")
+    dets = [{"object_id": i, "u_min_px": 900.0, "v_min_px": 600.0, "u_max_px": 1000.0, "v_max_px": 700.0}
+            for i in range(260)]
+    rec = svc.process_frame({"frame": 1, "timestamp_s": T0, "detections": dets})
+    assert rec["n_objects"] == 260 and rec["objects_not_in_messages"] == 5
+    assert [o["message_object_id"] for o in rec["objects"][255:]] == [None] * 5
+    assert rec["cpm"]["payload"]["cpmContainers"][1]["containerData"]["numberOfPerceivedObjects"] == 255
+    assert len(rec["sdsm"]["objects"]) == 255
+    assert decode_cpm_uper(rec["cpm_uper_hex"]) == rec["cpm"]
+    assert "objects_not_in_messages" not in svc.process_frame({"frame": 2, "timestamp_s": T0, "detections": dets[:3]})
+    empty = svc.process_frame({"frame": 3, "timestamp_s": T0, "detections": []})
+    assert empty["n_objects"] == 0 and empty["sdsm"] is None  # J3224: an object list has at least one entry
+    assert decode_cpm_uper(empty["cpm_uper_hex"]) == empty["cpm"]

@@ -52,6 +52,8 @@ __all__ = ["Service", "CameraSetup", "error_record", "station_id_of", "RECORD_FO
            "UPER_ENCODERS"]
 
 UPER_ENCODERS = ("fast", "asn1tools")
+#: most perceived objects in one CPM (``PerceivedObjects ::= SEQUENCE SIZE (0..255, ...)``); the SDSM follows
+MAX_MESSAGE_OBJECTS = 255
 
 RECORD_FOOTPRINTS = "footprints"
 RECORD_ERROR = "error"
@@ -191,6 +193,7 @@ class Service:
                                                                                allow_outside_image),
                                                      geo, station_id_of(cid))
         self._single = camera is not None
+        self._omitted = 0
         if warm_up:
             self.warm_up()
 
@@ -284,6 +287,8 @@ class Service:
                "confidence": self.confidence, "n_objects": len(objects), "objects": objects}
         if self.messages:
             rec.update(cpm=cpm, cpm_uper_hex=cpm_hex, sdsm=sdsm)
+            if self._omitted:  # said, never silent: objects with a centre that did not fit in the messages
+                rec["objects_not_in_messages"] = self._omitted
         t3 = time.perf_counter()
         rec["processing_us"] = {"footprints": round(1e6 * (t1 - t0), 1), "records": round(1e6 * (t2 - t1), 1),
                                 "messages": round(1e6 * (t3 - t2), 1), "total": round(1e6 * (t3 - t0), 1)}
@@ -399,11 +404,13 @@ class Service:
             columns.append(_nan_none(np.asarray(nonlin, dtype=np.float64).tolist()))
         pos = sobj = None
         if self.messages:
-            ok_idx = [i for i in range(N) if valid[i]]
+            ok_all = [i for i in range(N) if valid[i]]
+            ok_idx = ok_all[:MAX_MESSAGE_OBJECTS]  # a CPM carries at most 255 perceived objects
+            self._omitted = len(ok_all) - len(ok_idx)
             msg_ids = [None] * N
             for i in ok_idx:
                 msg_ids[i] = _message_object_id(ids[i], i)
-            keys.append("message_object_id")  # None: no centre, not in the CPM / SDSM
+            keys.append("message_object_id")  # None: not in the CPM / SDSM (no centre, or beyond 255)
             columns.append(msg_ids)
             pos = self._message_columns(ok_idx, msg_ids, classes, class_conf, codes, ex_cm, ny_cm, ex_dm, ny_dm)
         objects = [dict(zip(keys, row, strict=True)) for row in zip(*columns, strict=True)]
@@ -412,7 +419,6 @@ class Service:
     @staticmethod
     def _message_columns(ok_idx, msg_ids, classes, class_conf, codes, ex_cm, ny_cm, ex_dm, ny_dm) -> dict:
         """The per-object columns of the messages (objects with a centre, at most 255)."""
-        ok_idx = ok_idx[:255]
         oid = [msg_ids[i] for i in ok_idx]
         cls = [classes[i] for i in ok_idx]
         cc = [class_conf[i] for i in ok_idx]
@@ -461,7 +467,8 @@ class Service:
             cpm_hex = encode_cpm_uper_fast(cpm, perceived_objects_uper=container).hex()
         else:
             cpm_hex = self._encode(cpm).hex()
-        sdsm = build_sdsm(setup.station_id, fno, ts, sobj,
+        # J3224's DetectedObjectList has 1..256 entries: a frame without objects has no SDSM (null)
+        sdsm = None if not sobj else build_sdsm(setup.station_id, fno, ts, sobj,
                           **({} if lat_e7 is None else {"lat_1e7deg": lat_e7, "lon_1e7deg": lon_e7}))
         return cpm, cpm_hex, sdsm
 
