@@ -528,6 +528,8 @@ class Summary:
     reasons: dict = field(default_factory=dict)
     elapsed_s: float = 0.0
     info: dict = field(default_factory=dict)
+    #: physical lines of a CSV (after the header) or JSON Lines input, counted apart from the parser
+    lines_in: int | None = None
 
     @property
     def rows_with_errors(self) -> int:
@@ -556,10 +558,12 @@ class Summary:
 
     @property
     def consistent(self) -> bool:
-        return self.rows_in == self.rows_out == self.rows_ok + self.rows_partial + self.rows_error
+        lines_ok = self.lines_in is None or self.lines_in == self.rows_in
+        return lines_ok and self.rows_in == self.rows_out == self.rows_ok + self.rows_partial + self.rows_error
 
     def to_dict(self) -> dict:
-        return {"rows_in": self.rows_in, "rows_out": self.rows_out, "rows_ok": self.rows_ok,
+        lines = {} if self.lines_in is None else {"lines_in": self.lines_in}
+        return {**lines, "rows_in": self.rows_in, "rows_out": self.rows_out, "rows_ok": self.rows_ok,
                 "rows_partial": self.rows_partial, "rows_error": self.rows_error,
                 "rows_with_errors": self.rows_error, "consistent": self.consistent,
                 "reasons": dict(sorted(self.reasons.items(), key=lambda kv: -kv[1])),
@@ -723,6 +727,7 @@ def process_file(camera, budget, detections, out, *, chunk_rows: int = S.DEFAULT
         pool.shutdown()
         bar.close()
         bp.close()
+    summ.lines_in = reader.lines
     summ.elapsed_s = time.perf_counter() - t0
     summ.info = {"detections": str(detections), "out": str(out), "format_in": reader.format, "format_out": fmt_out,
                  "box_type": bp.box_type, "contact": bp.contact if bp.box_type == "2d" else None,
