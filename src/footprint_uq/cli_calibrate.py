@@ -214,7 +214,9 @@ def synthetic_cmd(out_dir, views, board, square_m, margin_m, camera_file, scale,
             raise InputError("--plan", campaigns, "at least 2 campaigns")
         r = simulate_campaigns(cam, b, views, corner_noise_px=corner_noise_px, n_campaigns=campaigns,
                                bootstrap=plan_bootstrap, seed=seed, pose_kw=pose_kw)
-        (out / "plan.json").write_text(json.dumps(_jsonable(r), indent=2))
+        from .io.atomic import atomic_write_text
+
+        atomic_write_text(out / "plan.json", json.dumps(_jsonable(r), indent=2))
         click.echo(f"planning study: {views} views, corner noise {corner_noise_px:g} px, {campaigns} campaigns")
         click.echo("source     " + " ".join(f"{c[6:]:>10s}" for c in PAPER_COLUMNS))
         for src, row in r["paper"].items():

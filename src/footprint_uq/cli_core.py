@@ -209,7 +209,9 @@ def run_map(camera, budget, out_dir, *, step_px: int = 2, max_range_m: float | N
     summary["camera"] = camera_to_dict(camera)
     summary["budget_parameters"] = umap.budget.to_dict()
     summary["files"] = {k: p.name for k, p in files.items()}
-    files["summary_json"].write_text(json.dumps(summary, indent=2, allow_nan=False) + "\n", encoding="utf-8")
+    from .io.atomic import atomic_write_text
+
+    atomic_write_text(files["summary_json"], json.dumps(summary, indent=2, allow_nan=False) + "\n")
     return umap, files
 
 

@@ -621,6 +621,7 @@ def fuse_files(inputs, out, *, camera_id_from: str | None = None, key=DEFAULT_KE
     """
     from .batch.readers import open_detections
     from .batch.writers import detect_out_format, open_writer
+    from .io.atomic import atomic_write_text, same_file
 
     t0 = time.perf_counter()
     key = _check_options(key, confidence, ellipse_confidence, heading_offset_deg)
@@ -632,13 +633,14 @@ def fuse_files(inputs, out, *, camera_id_from: str | None = None, key=DEFAULT_KE
         raise InputError("out", str(out), "a .parquet, .csv or .jsonl file (GeoJSON needs footprint polygons)")
     sources_out = sources_path(out) if sources_out is None else Path(sources_out)
     detect_out_format(sources_out)
-    if Path(sources_out).resolve() == Path(out).resolve():
+    if Path(sources_out).absolute() == Path(out).absolute() or same_file(sources_out, out):
         raise InputError("sources_out", str(sources_out), "a different file from out")
     for p in inputs:
         if not p.is_file():
             raise InputError("INPUT", str(p), "an existing footprint file (.csv, .jsonl/.ndjson, .parquet/.pq)")
-        if p.resolve() in (Path(out).resolve(), Path(sources_out).resolve()):
-            raise InputError("out", str(out), f"a file that is not an input ({p})")
+        for o in (out, sources_out, summary_path(out)):
+            if same_file(p, o):
+                raise InputError("out", str(o), f"a file that is not an input (it is the same file as {p})")
     if camera_id_from is None:
         has_col = all("camera_id" in open_detections(p).columns for p in inputs)
         camera_id_from = "column" if has_col else "filename"
@@ -657,15 +659,25 @@ def fuse_files(inputs, out, *, camera_id_from: str | None = None, key=DEFAULT_KE
     parts = [_read_footprints(p, key=key, camera_id_from=camera_id_from, chunk_rows=chunk_rows) for p in inputs]
     res = _fuse_parts(parts, key, confidence=confidence, ellipse_confidence=ellipse_confidence,
                       heading_offset_deg=heading_offset_deg)
-    comp = compression or "none"
-    for path, table in ((out, res.objects), (sources_out, res.sources)):
-        kw = {"compression": comp} if detect_out_format(path) == "parquet" else {}
-        with open_writer(path, table.schema, **kw) as w:
-            w.write(table)
     s = res.summary
     if not s.consistent:  # pragma: no cover - a bug, not bad input
         raise RuntimeError(f"row accounting broken: {s.text()} (lines in {s.lines_in})")
+    comp = compression or "none"
+    writers = []
+    try:  # both tables complete under temporary names, then renamed; the old summary removed first
+        for path, table in ((out, res.objects), (sources_out, res.sources)):
+            kw = {"compression": comp} if detect_out_format(path) == "parquet" else {}
+            w = open_writer(path, table.schema, **kw)
+            writers.append(w)
+            w.write(table)
+        summary_path(out).unlink(missing_ok=True)
+        for w in writers:
+            w.close()
+    except BaseException:
+        for w in writers:
+            w.abort()
+        raise
     s.elapsed_s = time.perf_counter() - t0
     s.info.update({"camera_id_from": camera_id_from, "out": str(out), "sources_out": str(sources_out)})
-    summary_path(out).write_text(json.dumps(s.to_dict(), indent=2) + "\n", encoding="utf-8")
+    atomic_write_text(summary_path(out), json.dumps(s.to_dict(), indent=2) + "\n")
     return s

@@ -42,6 +42,7 @@ from ..ellipse import chi2_scale
 from ..errors import InputError
 from ..footprint_kernels import OBJ_ROWS
 from ..footprints import CONTACT_MODES, DEGENERATE, V2X_FIELDS, FrameProcessor
+from ..io.atomic import atomic_write_text, same_file
 from . import schema as S
 
 __all__ = ["BatchProcessor", "process_table", "process_file", "process_chunk", "Summary", "summary_path", "Reasons",
@@ -655,7 +656,8 @@ def process_chunk(bp: BatchProcessor, chunk) -> pa.Table:
 
 def process_file(camera, budget, detections, out, *, chunk_rows: int = S.DEFAULT_CHUNK_ROWS,
                  format_in: str | None = None, format_out: str | None = None, progress: bool | None = None,
-                 summary: bool = True, compression: str | None = "auto", **options) -> Summary:
+                 summary: bool = True, compression: str | None = "auto", info: dict | None = None,
+                 **options) -> Summary:
     """Stream a detection file through the footprint pipeline, chunk by chunk.
 
     Parameters
@@ -677,6 +679,8 @@ def process_file(camera, budget, detections, out, *, chunk_rows: int = S.DEFAULT
         Parquet compression: "auto" (snappy, the small-integer code columns uncompressed: see
         :func:`footprint_uq.batch.writers.parquet_options`), or one codec for every column
         ("snappy", "zstd", "lz4", "gzip"; None or "none": uncompressed).
+    info : dict, optional
+        Extra entries of the summary (e.g. the camera and budget files of the CLI).
     **options
         Keyword arguments of :class:`BatchProcessor`.
 
@@ -704,30 +708,44 @@ def process_file(camera, budget, detections, out, *, chunk_rows: int = S.DEFAULT
     bp = BatchProcessor(camera, budget, **options)
     schema = bp.resolve(reader.columns, reader.id_fields)
     reader.select(S.numeric_input_columns(bp.box_type, reader.columns))
-    if Path(out).resolve() == Path(detections).resolve():
-        raise InputError("out", str(out), "a file other than the detections")
+    for p in (out, summary_path(out)):
+        if same_file(p, detections):
+            raise InputError("out", str(p), "a file other than the detections (this is the same file)")
+    if Path(out).is_dir():
+        raise InputError("out", str(out), "a file path (this is a folder)")
     summ = Summary()
     show = sys.stderr.isatty() if progress is None else bool(progress)
     bar = tqdm(total=reader.total, unit=reader.unit, unit_scale=True, disable=not show, file=sys.stderr,
                desc="footprints", leave=False)
     pool = _Pool(1, thread_name_prefix="footprint-uq-writer")
     pending = None
+    writer = None
     try:
-        with open_writer(out, schema, format=fmt_out, compression=compression) as writer:
-            for chunk in _prefetch(iter(reader), 1):
-                table = process_chunk(bp, chunk)
-                summ.add_table(table, chunk.table.num_rows + len(chunk.malformed))
-                if pending is not None:
-                    pending.result()
-                pending = pool.submit(writer.write, table)
-                bar.update(chunk.progress)
+        writer = open_writer(out, schema, format=fmt_out, compression=compression)
+        for chunk in _prefetch(iter(reader), 1):
+            table = process_chunk(bp, chunk)
+            summ.add_table(table, chunk.table.num_rows + len(chunk.malformed))
             if pending is not None:
                 pending.result()
+            pending = pool.submit(writer.write, table)
+            bar.update(chunk.progress)
+        if pending is not None:
+            pending.result()
+        summ.lines_in = reader.lines
+        if not summ.consistent:  # pragma: no cover - a bug, not bad input
+            raise RuntimeError(f"row accounting broken: {summ.text()} (lines in {summ.lines_in})")
+        # the previous summary goes first: a summary never stands beside another output than its own
+        writer.before_commit = (lambda: summary_path(out).unlink(missing_ok=True)) if summary else None
+        writer.close()
+    except BaseException:
+        pool.shutdown(wait=True)  # an in-flight write finishes before its file is dropped
+        if writer is not None:
+            writer.abort()
+        raise
     finally:
         pool.shutdown()
         bar.close()
         bp.close()
-    summ.lines_in = reader.lines
     summ.elapsed_s = time.perf_counter() - t0
     summ.info = {"detections": str(detections), "out": str(out), "format_in": reader.format, "format_out": fmt_out,
                  "box_type": bp.box_type, "contact": bp.contact if bp.box_type == "2d" else None,
@@ -735,11 +753,9 @@ def process_file(camera, budget, detections, out, *, chunk_rows: int = S.DEFAULT
                  "origin": None if bp.geo is None else {
                      "origin_lat_deg": bp.geo.origin_lat_deg, "origin_lon_deg": bp.geo.origin_lon_deg,
                      "heading_offset_deg": bp.geo.heading_offset_deg}, "chunk_rows": reader.chunk_rows,
-                 "budget": bp.budget.name if hasattr(bp.budget, "name") else None}
-    if not summ.consistent:  # pragma: no cover - a bug, not bad input
-        raise RuntimeError(f"row accounting broken: {summ.text()}")
+                 "budget": bp.budget.name if hasattr(bp.budget, "name") else None, **(info or {})}
     if summary:
         import json
 
-        summary_path(out).write_text(json.dumps(summ.to_dict(), indent=2) + "\n", encoding="utf-8")
+        atomic_write_text(summary_path(out), json.dumps(summ.to_dict(), indent=2) + "\n")
     return summ

@@ -48,6 +48,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
+from ..io.atomic import atomic_path, atomic_write_text, commit, discard, temp_path
 from .boards import Checkerboard, parse_board
 from .detect import Detection, FrameSource, _mp_context, detect_frames
 
@@ -545,11 +546,12 @@ class IntrinsicCalibration:
         cov = self.coverage(grid_px, hull)
         em = self.error_map(grid_px)
         asym = self.asymmetry()
-        np.savez_compressed(out / "maps.npz", coverage_count=cov.count, mean_error_px=em.mean_error_px,
-                            corner_count=em.count, mean_residual_px=em.mean_residual_px,
-                            reflection_map_px=asym["reflection_map_px"], grid_px=grid_px,
-                            asymmetry_cell_px=asym["cell_px"], image_size_px=np.array(self.image_size_px),
-                            principal_point_px=self.K[:2, 2])
+        with atomic_path(out / "maps.npz") as tmp:
+            np.savez_compressed(tmp, coverage_count=cov.count, mean_error_px=em.mean_error_px,
+                                corner_count=em.count, mean_residual_px=em.mean_residual_px,
+                                reflection_map_px=asym["reflection_map_px"], grid_px=grid_px,
+                                asymmetry_cell_px=asym["cell_px"], image_size_px=np.array(self.image_size_px),
+                                principal_point_px=self.K[:2, 2])
         files["maps.npz"] = str(out / "maps.npz")
         summ = self.summary(grid_px=grid_px, hull=hull)
         summ["budget"] = {"source": budget_source, "full_covariance": bool(full_covariance),
@@ -559,9 +561,9 @@ class IntrinsicCalibration:
 
             files.update(save_calibration_figures(self, out, coverage=cov, error_map=em, asymmetry=asym))
         summ["files"] = sorted(files) + ["summary.json", "report.md"] + (["report.html"] if figures else [])
-        (out / "summary.json").write_text(json.dumps(_jsonable(summ), indent=2))
+        atomic_write_text(out / "summary.json", json.dumps(_jsonable(summ), indent=2))
         files["summary.json"] = str(out / "summary.json")
-        (out / "report.md").write_text(render_report(summ))
+        atomic_write_text(out / "report.md", render_report(summ))
         files["report.md"] = str(out / "report.md")
         if figures:
             from ..viz.calibration import write_calibration_html
@@ -576,6 +578,7 @@ class IntrinsicCalibration:
         import cv2
 
         path = Path(path)
+        final, path = Path(path), temp_path(path)
         fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_WRITE)
         try:
             fs.write("calibration_time", time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()))
@@ -589,9 +592,13 @@ class IntrinsicCalibration:
             fs.write("distortion_coefficients", self.dist.reshape(-1, 1))
             fs.write("avg_reprojection_error", float(self.rms_px))
             fs.write("opencv_version", self.opencv_version)
-        finally:
+        except BaseException:
             fs.release()
-        return path
+            discard(path)
+            raise
+        fs.release()
+        commit(path, final)
+        return final
 
 
 def _corr(cov):
@@ -621,7 +628,7 @@ def _write_yaml(path, data) -> Path:
     import yaml
 
     path = Path(path)
-    path.write_text(yaml.safe_dump(_jsonable(data), sort_keys=False, default_flow_style=None))
+    atomic_write_text(path, yaml.safe_dump(_jsonable(data), sort_keys=False, default_flow_style=None))
     return path
 
 
@@ -631,7 +638,7 @@ def write_frames_csv(rows: list[dict], path) -> Path:
     path = Path(path)
     cols = ["label", "path", "frame_index", "found", "method", "used", "dropped_round", "mean_error_px",
             "rms_error_px", "reason"]
-    with open(path, "w", newline="") as f:
+    with atomic_path(path) as tmp, open(tmp, "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=cols)
         w.writeheader()
         for r in rows:
