@@ -152,6 +152,13 @@ class FusedFootprints:
     summary: FuseSummary
 
 
+#: largest |x_m|, |y_m| of a footprint accepted for fusion (metres; projected map coordinates are ~1e7)
+MAX_COORD_M = 1e9
+#: range of the variances accepted for fusion (m^2): beyond it the information form overflows
+MAX_VAR_M2 = 1e12
+MIN_VAR_M2 = 1e-18
+
+
 # -- reading ---------------------------------------------------------------------------------------
 def _check_columns(names, key, need_camera: bool, where: str) -> None:
     names = set(names)
@@ -336,10 +343,18 @@ def _fuse_parts(parts: list[_Part], key, *, confidence: float, ellipse_confidenc
             bad = todo & ~np.isfinite(est[:n, j])
             rs[:n][bad] = f"missing or non-finite field {name}"
             todo &= ~bad
+        for j, name in enumerate(ESTIMATE_COLUMNS[:2]):
+            bad = todo & (np.abs(est[:n, j]) > MAX_COORD_M)
+            rs[:n][bad] = f"field {name} out of range (|{name}| > {MAX_COORD_M:g} m)"
+            todo &= ~bad
         cxx, cxy, cyy = est[:n, 2], est[:n, 3], est[:n, 4]
-        with np.errstate(invalid="ignore"):
+        with np.errstate(invalid="ignore", over="ignore"):
             pd_ok = (cxx > 0) & (cyy > 0) & (cxx * cyy - cxy * cxy > 0)
+            scale_ok = (np.maximum(cxx, cyy) <= MAX_VAR_M2) & (np.minimum(cxx, cyy) >= MIN_VAR_M2)
         rs[:n][todo & ~pd_ok] = "covariance not positive definite"
+        todo &= pd_ok
+        rs[:n][todo & ~scale_ok] = (f"covariance out of range (variances must lie in [{MIN_VAR_M2:g}, "
+                                    f"{MAX_VAR_M2:g}] m^2)")
         reason.append(rs)
         summary.inputs.append({"input": part.name, "camera_id": part.camera, "rows": n + m})
     if parts:
@@ -412,6 +427,12 @@ def _fuse_parts(parts: list[_Part], key, *, confidence: float, ellipse_confidenc
         np.fmax.at(max_d2, group[ok_d2], d2[ok_d2])
     cams_used = _join_per_group(group, camc, cam_uniq, used_in, M)
     cams_flag = _join_per_group(group, camc, cam_uniq, flag, M)
+    # outputs are checked too: a fused centre or covariance that is not finite is never "ok"
+    overflow = (nsrc > 0) & ~(np.isfinite(fx).all(-1) & np.isfinite(fP).all((-2, -1)))
+    if np.any(overflow):
+        fx, fP = fx.copy(), fP.copy()
+        fx[overflow], fP[overflow] = np.nan, np.nan
+        nsrc = np.where(overflow, 0, nsrc)
     smaj, smin, ori = ellipse_axes(fP)
     v2x = {**cpm_fields(fP, heading_offset_deg), **j2735_fields(fP, heading_offset_deg)}
     has = nsrc > 0
@@ -425,6 +446,7 @@ def _fuse_parts(parts: list[_Part], key, *, confidence: float, ellipse_confidenc
         firsts = order[np.r_[True, g_sorted[1:] != g_sorted[:-1]]] if order.size else order
         first_reason[group[firsts]] = reason[firsts]
         obj_reason[~has] = ["no usable estimate: " + str(r) for r in first_reason[~has]]
+        obj_reason[overflow] = "fused result not finite (overflow)"
     cols: dict[str, pa.Array] = {}
     for j, k in enumerate(key):
         cols[k] = kuniq[j].take(pa.array(groups[:, j])) if M else pa.array([], _key_type(k))

@@ -160,16 +160,32 @@ def load_registry(path, *, budget=None) -> dict[str, RegistryEntry]:
     else:
         base = p.parent
         suffix = p.suffix.lower()
+        try:
+            text = p.read_text(encoding="utf-8-sig")
+        except (OSError, UnicodeDecodeError) as e:
+            raise ConfigError("registry", str(p), f"a readable UTF-8 text file ({type(e).__name__}: {e})") from None
+        if "\x00" in text:
+            raise ConfigError("registry", str(p), "a text file (it holds NUL bytes)")
         if suffix == ".csv":
             import csv
+            import io
 
-            with open(p, newline="", encoding="utf-8-sig") as f:
+            try:
                 recs = [({k: v for k, v in r.items() if v != ""}, f"{p}: line {i + 2}")
-                        for i, r in enumerate(csv.DictReader(f))]
+                        for i, r in enumerate(csv.DictReader(io.StringIO(text, newline=""), strict=True))]
+            except csv.Error as e:
+                raise ConfigError("registry", str(p), f"a valid CSV table ({e})") from None
+            for rec, where in recs:
+                if None in rec or any(v is None for v in rec.values()):
+                    raise ConfigError(where, "wrong number of fields", "as many fields as the header")
         elif suffix in (".yaml", ".yml", ".json"):
             import yaml
 
-            data = yaml.safe_load(p.read_text(encoding="utf-8"))
+            try:
+                data = yaml.safe_load(text)
+            except (yaml.YAMLError, ValueError, RecursionError) as e:
+                first = (str(e).strip().splitlines() or [type(e).__name__])[0]
+                raise ConfigError("registry", str(p), f"a valid YAML/JSON registry ({first})") from None
             if isinstance(data, dict) and "cameras" in data:
                 data = data["cameras"]
             if not isinstance(data, list) or not all(isinstance(r, dict) for r in data):

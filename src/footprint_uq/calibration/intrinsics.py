@@ -708,9 +708,16 @@ def render_report(summ: dict) -> str:
 
 
 # ------------------------------------------------------------------------------------------ drivers
+#: RMS reprojection error (px) above which a calibration is refused by default: a good chessboard
+#: calibration is well below 1 px; several px mean wrong corners (e.g. a --board smaller than the
+#: printed one: the detector then finds a different part of the board in every view)
+MAX_RMS_PX = 2.0
+
+
 def calibrate_corners(image_points_px, board, image_size_px, *, labels=None, max_mean_reproj_px=None,
                       bootstrap: int = 0, seed: int = 0, min_views: int = 3, flags: int = 0, max_rounds: int = 50,
-                      detections=None, workers: int = 1, progress: bool = False) -> IntrinsicCalibration:
+                      detections=None, workers: int = 1, progress: bool = False,
+                      max_rms_px: float | None = MAX_RMS_PX) -> IntrinsicCalibration:
     """Calibrate from corner positions already detected.
 
     Parameters
@@ -733,6 +740,10 @@ def calibrate_corners(image_points_px, board, image_size_px, *, labels=None, max
         ``cv2.CALIB_*`` flags passed to OpenCV (default 0: fx, fy, cx, cy, k1, k2, p1, p2, k3 free, no skew).
     max_rounds : int
         Cap on filter rounds.
+    max_rms_px : float or None
+        Refuse (InputError naming the board) a fit whose RMS reprojection error exceeds it
+        (default :data:`MAX_RMS_PX`; None: no limit).  A principal point outside the image is
+        always refused: both are what a wrong board size gives.
     detections : list of Detection, optional
         All input frames (kept for the report).
     workers : int
@@ -803,6 +814,7 @@ def calibrate_corners(image_points_px, board, image_size_px, *, labels=None, max
         warnings.warn(f"frame filter did not settle in {max_rounds} rounds; the result uses the {len(active)} "
                       "frames left after the last round", RuntimeWarning, stacklevel=2)
         fit = _calibrate(obj, [imgs[i] for i in active], (w, h), flags)
+    _check_fit(fit, board, (w, h), max_rms_px)
     used = [imgs[i] for i in active]
     residuals = [c - _project(obj, rv, tv, fit.K, fit.dist)
                  for c, rv, tv in zip(used, fit.rvecs, fit.tvecs, strict=True)]
@@ -819,6 +831,20 @@ def calibrate_corners(image_points_px, board, image_size_px, *, labels=None, max
         [Detection(FrameSource(lab), True, c, (w, h), "", "given") for lab, c in zip(labels, imgs, strict=True)],
         rounds=rounds, dropped=dropped, bootstrap=boot, max_mean_reproj_px=thr, flags=int(flags),
         opencv_version=cv2.__version__)
+
+
+def _check_fit(fit, board, size, max_rms_px) -> None:
+    """Refuse a calibration whose principal point is outside the image or whose RMS is implausible."""
+    w, h = size
+    cx, cy = float(fit.K[0, 2]), float(fit.K[1, 2])
+    hint = (f"is the board {board.label()} (inner corners, cols x rows) the one in the images? A smaller "
+            "--board is found in a different part of a larger board in every view")
+    if not (np.isfinite(cx) and np.isfinite(cy) and -0.5 <= cx <= w - 0.5 and -0.5 <= cy <= h - 0.5):
+        raise InputError("board", board.label(), f"a calibration with its principal point inside the {w}x{h} image "
+                         f"(got cx = {cx:.1f}, cy = {cy:.1f} px; RMS {fit.rms_px:.2f} px): {hint}")
+    if max_rms_px is not None and not fit.rms_px <= float(max_rms_px):
+        raise InputError("board", board.label(), f"a calibration with RMS reprojection error <= {float(max_rms_px):g}"
+                         f" px (got {fit.rms_px:.2f} px; raise max_rms_px / --max-rms-px to accept it): {hint}")
 
 
 def _not_found_note(detections) -> str:
@@ -854,6 +880,10 @@ def calibrate_detections(detections, board, **kw) -> IntrinsicCalibration:
             d.found = False
             d.reason = (f"image size {d.image_size_px[0]}x{d.image_size_px[1]} differs from the other frames "
                         f"({size[0]}x{size[1]})")
+    other = [d for d in dets if (d.reason or "").startswith("image size ")]
+    if other:
+        warnings.warn(f"{len(other)} of {len(dets)} frames left out: their image size differs from the "
+                      f"{size[0]}x{size[1]} px of the others (first: {other[0].label})", RuntimeWarning, stacklevel=2)
     good = [d for d in dets if d.found]
     return calibrate_corners([d.corners_px for d in good], board, size, labels=[d.label for d in good],
                              detections=dets, **kw)
