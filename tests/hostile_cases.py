@@ -252,7 +252,11 @@ def _fuse_cases(d: Path) -> list[Case]:
 
 
 def _calibration_cases(d: Path) -> list[Case]:
+    images = Path(__file__).parent / "data" / "opencv-chessboard-right"  # OpenCV's 9x6 sample images
     return [
+        Case("calibrate --board 7x5 on 9x6 images", ["calibrate", "intrinsics", str(images), "--board", "7x5",
+                                                     "--square-m", "0.025", "--out", str(d / "cal75"), "--quiet",
+                                                     "--workers", "1"], "exit2", None, stderr_has="board"),
         Case("calibrate max tilt 95", ["calibrate", "synthetic", "--out", str(d / "syn"), "--max-tilt-deg", "95"],
              "exit2", d / "syn"),
         Case("calibrate max tilt -5", ["calibrate", "synthetic", "--out", str(d / "syn2"), "--max-tilt-deg", "-5"],
@@ -286,9 +290,11 @@ def run(case: Case) -> dict:
            "stderr": err.strip()[:300], "rows_lost": 0, "ok": False}
     if tb and r.exc_info is not None and not isinstance(r.exception, SystemExit):
         res["stderr"] = "".join(traceback.format_exception(*r.exc_info))[-600:]
+    # one error line, the last one (progress notes such as "frame X: no board found" may precede it)
     lines_err = [x for x in err.strip().splitlines() if x.strip()]
+    errors = [x for x in lines_err if x.startswith("footprint-uq: error:")]
     if case.expect == "exit2":
-        res["ok"] = (r.exit_code == 2 and len(lines_err) == 1 and not tb
+        res["ok"] = (r.exit_code == 2 and len(errors) == 1 and lines_err[-1] == errors[0] and not tb
                      and (case.stderr_has is None or case.stderr_has in err)
                      and (case.out is None or not Path(case.out).exists()))
     elif case.expect == "rows":

@@ -26,7 +26,7 @@ import pyarrow.compute as pc
 
 from ..errors import InputError
 from ..footprints import V2X_FIELDS
-from ..io.atomic import commit, discard, temp_path
+from ..io.atomic import clean_temporaries_of, commit, discard, temp_path
 
 __all__ = ["AUTO", "is_code_column", "OUT_FORMATS", "detect_out_format", "open_writer", "FootprintWriter",
            "decode_dictionaries", "parquet_options"]
@@ -74,6 +74,7 @@ class FootprintWriter(abc.ABC):
 
     def __init__(self, path, schema: pa.Schema):
         self.path = Path(path)
+        clean_temporaries_of(self.path)  # left by a killed run on the same output
         self.tmp = temp_path(self.path)
         self.schema = schema
         self.rows = 0

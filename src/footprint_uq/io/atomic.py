@@ -21,7 +21,7 @@ from pathlib import Path
 from urllib.parse import quote
 
 __all__ = ["TMP_MARK", "atomic_path", "atomic_write_text", "atomic_write_bytes", "commit", "discard", "temp_path",
-           "clean_temporaries", "fsync_dir", "path_component", "same_file"]
+           "clean_temporaries", "clean_temporaries_of", "fsync_dir", "path_component", "same_file"]
 
 #: part of every temporary name (``.<stem>.tmp-<hex><suffix>``)
 TMP_MARK = ".tmp-"
@@ -107,6 +107,18 @@ def clean_temporaries(folder, *, recursive: bool = True) -> int:
         if p.is_file() and not p.is_symlink():
             discard(p)
             n += 1
+    return n
+
+
+def clean_temporaries_of(final) -> int:
+    """Remove the temporaries of ``final`` left by killed runs (``.<stem>.tmp-*<suffix>`` beside it)."""
+    final = Path(final)
+    n = 0
+    if final.parent.is_dir() or str(final.parent) == "":
+        for p in (final.parent if str(final.parent) else Path(".")).glob(f".{final.stem}{TMP_MARK}*{final.suffix}"):
+            if p.is_file() and not p.is_symlink():
+                discard(p)
+                n += 1
     return n
 
 
