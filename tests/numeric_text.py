@@ -78,3 +78,42 @@ def assert_same_numbers(a, b, *, rtol: float = 1e-12, atol: float = 0.0, kind: s
         assert_same_text_numbers(a, b, rtol=rtol, atol=atol, where=where or "yaml")
     else:
         assert_same_text_numbers(a, b, rtol=rtol, atol=atol, where=where or "text")
+
+
+def _last_digit_unit(token: str) -> float:
+    """One unit in the last printed decimal of ``token`` (0 for integers: they must match exactly)."""
+    mant = re.split(r"[eE]", token)[0]
+    if "." not in mant:
+        return 0.0
+    decimals = len(mant.split(".")[1])
+    exp = int(re.split(r"[eE]", token)[1]) if re.search(r"[eE]", token) else 0
+    return 10.0 ** (exp - decimals)
+
+
+def contains_numeric(text: str, expected: str, *, whole_line: bool = False) -> bool:
+    """``expected`` occurs in ``text`` with every decimal number within one unit of its last printed digit.
+
+    The words must match exactly; a rounded number may differ by one unit in its last digit (the
+    value under it can fall on the other side of a rounding boundary on another CPU), an integer
+    must be equal.
+    """
+    parts = NUMBER_RE.split(expected)
+    nums = NUMBER_RE.findall(expected)
+    rx = "(" + NUMBER_RE.pattern + ")"
+    pattern = rx.join(re.escape(p) for p in parts)
+    if whole_line:
+        pattern = "^" + pattern + "$"
+    for m in re.finditer(pattern, text, flags=re.MULTILINE | re.IGNORECASE):
+        ok = True
+        for want, got in zip(nums, m.groups(), strict=True):
+            try:
+                w, g = float(want), float(got)
+            except ValueError:
+                ok = want.lower() == got.lower()
+            else:
+                ok = _close(w, g, 1e-12, 1.000001 * _last_digit_unit(want))
+            if not ok:
+                break
+        if ok:
+            return True
+    return False
