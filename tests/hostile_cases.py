@@ -178,6 +178,8 @@ def _detections(d: Path, camera: Path) -> list[Case]:
                          "jsonl"))
     out.append(rows_case("jsonl 5000-digit number", "\n".join(js[:2] + ['{"u_min_px": 1' + "0" * 5000 + "}"]
                                                               + js[2:]) + "\n", 11, "jsonl", "jsonl"))
+    out.append(rows_case("jsonl null first line (pyarrow 26 SIGSEGV)", "null\n" + "\n".join(js) + "\n", 11, "jsonl",
+                         "jsonl"))
     out.append(rows_case("jsonl huge exponent", "\n".join(js[:2] + ['{"u_min_px": 1e999999}'] + js[2:]) + "\n",
                          11, "jsonl", "jsonl"))
 

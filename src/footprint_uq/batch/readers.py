@@ -451,8 +451,10 @@ class DetectionReader:
                 rows_a = row0 + np.arange(n, dtype=np.int64)
                 row0 += n
                 table, pre, mal = None, None, []
-                blank = any(not x.strip() for x in lines)
-                if not blank:
+                # pyarrow's parser only sees blocks of lines that each hold one object: pyarrow 26.0.1
+                # crashes the process (SIGSEGV) on a block whose first value is a bare `null`
+                objects = all(x.lstrip()[:1] == b"{" and x.rstrip()[-1:] == b"}" for x in lines)
+                if objects:
                     try:
                         t = pjson.read_json(io.BytesIO(b"".join(lines)),
                                             read_options=pjson.ReadOptions(use_threads=True, block_size=1 << 24))
