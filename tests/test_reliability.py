@@ -284,3 +284,48 @@ def test_sigkill_fleet_job(fleet, tmp_path):
     import pyarrow.dataset as ds
 
     assert ds.dataset(out, format="parquet", partitioning="hive").to_table().num_rows == 240_000
+
+
+def test_dask_worker_killed_mid_job(fleet, tmp_path):
+    """A Dask worker SIGKILLed while it writes: its task is rerun elsewhere, every row is written once."""
+    distributed = pytest.importorskip("distributed")
+    import threading
+
+    import pyarrow.dataset as ds
+
+    from footprint_uq.batch.fleet import process_fleet
+
+    out = tmp_path / "out"
+    cluster = distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None)
+    client = distributed.Client(cluster)
+    try:
+        pids = client.run(os.getpid)
+        killed = []
+
+        def killer():
+            t0 = time.monotonic()
+            while time.monotonic() - t0 < 120 and not killed:
+                for p in tmp_path.iterdir():
+                    if p.name.startswith(".out") and any(p.rglob(f"*{TMP_MARK}*.parquet")):
+                        pid = next(iter(pids.values()))
+                        os.kill(pid, signal.SIGKILL)
+                        killed.append(pid)
+                        return
+                time.sleep(0.005)
+
+        th = threading.Thread(target=killer, daemon=True)
+        th.start()
+        s = process_fleet(fleet["reg"], fleet["data"], out, budget="basler1", client=client, retries=2,
+                          chunk_rows=5000, progress=False)
+        th.join(5)
+    finally:
+        client.close()
+        cluster.close()
+    assert killed, "no worker was killed while writing"
+    assert s.consistent and s.rows_in == s.rows_out == 240_000
+    t = ds.dataset(out, format="parquet", partitioning="hive").to_table()
+    assert t.num_rows == 240_000
+    keys = np.array(t.column("source").to_pylist(), dtype=object) + ":" + np.char.mod("%d", t.column("row")
+                                                                                      .to_numpy()).astype(object)
+    assert len(set(keys.tolist())) == 240_000  # every input row exactly once
+    assert _temps(out) == [] and [p.name for p in tmp_path.iterdir()] == ["out"]
