@@ -329,3 +329,24 @@ def test_dask_worker_killed_mid_job(fleet, tmp_path):
                                                                                       .to_numpy()).astype(object)
     assert len(set(keys.tolist())) == 240_000  # every input row exactly once
     assert _temps(out) == [] and [p.name for p in tmp_path.iterdir()] == ["out"]
+
+
+def test_batch_never_reports_an_overflowed_row_as_ok():
+    """Absurd but finite inputs (a box at 1e300 px, a detector covariance of 1e300 px^2): error rows with a reason."""
+    from footprint_uq.batch import process_table
+    from footprint_uq.batch.process import OVERFLOW_REASON
+
+    cam = PanTiltCamera(**CAM)
+    d = {"u_min_px": np.array([900.0, 1e300, 900.0, 900.0]), "v_min_px": np.array([500.0, 500.0, 1e300, 500.0]),
+         "u_max_px": np.array([980.0, 1e301, 980.0, 980.0]), "v_max_px": np.array([560.0, 560.0, 1e301, 560.0]),
+         "cov_uu_px2": np.array([np.nan, np.nan, np.nan, 1e300]), "cov_uv_px2": np.array([np.nan, np.nan, np.nan, 0]),
+         "cov_vv_px2": np.array([np.nan, np.nan, np.nan, 1e300])}
+    with np.errstate(all="ignore"):
+        t = process_table(cam, "basler1", d, allow_outside_image=True)
+    status, reason = t.column("status").to_pylist(), t.column("reason").to_pylist()
+    assert status == ["ok", "error", "error", "error"]
+    assert reason[1:3] == [OVERFLOW_REASON] * 2 and reason[3].startswith("pixel covariance out of range")
+    for c in ("x_m", "y_m", "cov_xx_m2", "sigma_major_m"):
+        v = t.column(c).to_numpy()
+        assert np.isfinite(v[0]) and np.isnan(v[1:]).all(), c
+    assert t.column("cpm_x_confidence").to_pylist()[1:] == [4096] * 3

@@ -53,6 +53,13 @@ __all__ = ["BatchProcessor", "process_table", "process_file", "process_chunk", "
 PSD_TOL = 0.5e-12
 #: row of each output column in the kernel's per-object block
 _OBJ = {name: i for i, name in enumerate(OBJ_ROWS)}
+#: kernel rows that must be finite in an "ok" row (centre and covariance) / a "partial" row (largest point)
+_CENTRE_ROWS = [_OBJ[c] for c in ("x_m", "y_m", "cov_xx_m2", "cov_xy_m2", "cov_yy_m2", "sigma_major_m")]
+_LARGEST_ROWS = [_OBJ[c] for c in ("largest_sigma_major_m", "largest_x_m", "largest_y_m")]
+#: largest detector pixel (co)variance accepted, px^2 (a 1e6-px sigma: far beyond any image)
+MAX_PIXEL_VAR_PX2 = 1e12
+#: reason of a row whose numbers overflowed (inputs finite but absurd, e.g. a box at 1e300 px)
+OVERFLOW_REASON = "result is not finite (overflow: input values far out of range)"
 #: below this many rows a chunk is processed in one thread
 _MIN_ROWS_PER_THREAD = 20_000
 
@@ -260,6 +267,11 @@ class BatchProcessor:
             if bad.any():
                 reason_id[bad] = self.reasons.id("pixel covariance (cov_uu_px2, cov_uv_px2, cov_vv_px2) is not "
                                                  "positive semi-definite")
+            with np.errstate(invalid="ignore"):
+                big = (scale > MAX_PIXEL_VAR_PX2) & (reason_id < 0)
+            if big.any():
+                reason_id[big] = self.reasons.id(f"pixel covariance out of range (entries above "
+                                                 f"{MAX_PIXEL_VAR_PX2:g} px^2)")
 
     # -- the kernel --------------------------------------------------------------------------------
     def _kernel(self, X: np.ndarray, P: np.ndarray | None):
@@ -327,14 +339,29 @@ class BatchProcessor:
             res.corners_xy = gather("corners_xy_world_m", (K, 2), np.nan)
             res.corners_cov = gather("corners_cov_m2", (K, 2, 2), np.nan)
             res.corner_reason = corner_reason
-        # status and reason of the processed rows
-        ok = good & (creason == st.OK)
-        partial = good & ~ok & (res.largest_index >= 0)
-        failed = good & ~ok & ~partial
+        # status and reason of the processed rows; outputs are checked too: a centre, covariance or
+        # largest point that overflowed (absurd but finite inputs) is never "ok"/"partial"
+        o = res.obj
+        with np.errstate(invalid="ignore"):
+            centre_fin = np.isfinite(o[_CENTRE_ROWS]).all(0) if n else np.zeros(0, bool)
+            largest_fin = np.isfinite(o[_LARGEST_ROWS]).all(0) if n else np.zeros(0, bool)
+        centre_ok = good & (creason == st.OK)
+        ok = centre_ok & centre_fin
+        partial = good & ~centre_ok & (res.largest_index >= 0) & largest_fin
+        overflow = (centre_ok & ~centre_fin) | (good & ~centre_ok & (res.largest_index >= 0) & ~largest_fin)
+        failed = good & ~ok & ~partial & ~overflow
         res.status_id[ok] = 0
         res.status_id[partial] = 1
         if ok.any():
             reason_id[ok] = self.reasons.id("ok")
+        if overflow.any():
+            reason_id[overflow] = self.reasons.id(OVERFLOW_REASON)
+            res.obj = o = np.array(o, copy=True) if o is not None and not o.flags.writeable else o
+            o[:, overflow] = np.nan
+            res.largest_index = np.where(overflow, -1, res.largest_index)
+            unavailable = np.array([S.V2X_UNAVAILABLE[f] for f in V2X_FIELDS], dtype=np.int32)
+            res.v2x = np.array(res.v2x, copy=True) if not res.v2x.flags.writeable else res.v2x
+            res.v2x[:, overflow] = unavailable[:, None]
         for mask, prefix in ((partial, "no centre: "), (failed, "no usable corner: ")):
             if not mask.any():
                 continue
