@@ -350,3 +350,17 @@ def test_batch_never_reports_an_overflowed_row_as_ok():
         v = t.column(c).to_numpy()
         assert np.isfinite(v[0]) and np.isnan(v[1:]).all(), c
     assert t.column("cpm_x_confidence").to_pylist()[1:] == [4096] * 3
+
+
+def test_fuse_out_hardlinked_to_an_input_is_refused(tmp_path):
+    hdr = "frame,object_id,x_m,y_m,cov_xx_m2,cov_xy_m2,cov_yy_m2\n"
+    a = tmp_path / "a.csv"
+    b = tmp_path / "b.csv"
+    a.write_text(hdr + "1,o1,10,5,0.04,0,0.04\n")
+    b.write_text(hdr + "1,o1,10.1,5,0.04,0,0.04\n")
+    link = tmp_path / "fused.csv"
+    os.link(b, link)
+    before = b.read_bytes()
+    r = CliRunner().invoke(main, ["fuse", str(a), str(b), "--out", str(link)])
+    assert r.exit_code == 2 and "same file" in r.stderr and len(r.stderr.strip().splitlines()) == 1
+    assert b.read_bytes() == before and _temps(tmp_path) == []
