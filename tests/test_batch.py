@@ -224,15 +224,17 @@ def test_unparseable_lines_and_values(cam, tmp_path):
                   + "\n")
     s = process_file(cam, BUDGET, js, tmp_path / "o.jsonl", chunk_rows=3, progress=False)
     rows = [json.loads(line) for line in (tmp_path / "o.jsonl").read_text().splitlines()]
-    assert [x["row"] for x in rows] == [0, 2, 3, 4, 5, 6]  # JSON Lines rows: line numbers; blank lines are not rows
-    assert [x["status"] for x in rows] == ["ok", "error", "error", "error", "error", "error"]
+    assert [x["row"] for x in rows] == list(range(7))  # JSON Lines rows: physical lines; a blank line is an error
+    assert [x["status"] for x in rows] == ["ok", "error", "error", "error", "error", "error", "error"]
+    assert rows[1]["reason"] == "empty line"
+    rows = rows[1:]
     assert rows[1]["reason"] == "field u_min_px is not a number"
     assert rows[2]["reason"].startswith("invalid JSON line")
     assert rows[3]["reason"] == "JSON line is not an object: list"
     assert rows[4]["reason"] == "missing or non-finite field v_max_px"
     assert rows[5]["reason"] == "field u_min_px is not a number"  # true is not 1.0
     assert rows[1]["x_m"] is None
-    assert s.rows_in == 6 and s.rows_error == 5
+    assert s.rows_in == s.lines_in == 7 and s.rows_error == 6
 
 
 def test_streaming_chunks_equal_one_chunk(cam, tmp_path):

@@ -123,3 +123,18 @@ def test_links_exist():
     for target in re.findall(r"\]\(([^)#]+)\)", README.read_text(encoding="utf-8")):
         if "://" not in target:
             assert (ROOT / target).exists(), target
+
+
+def test_reliability_figures_come_from_the_script():
+    """The README's Reliability block is bench/reliability.py's rendering of bench/results/reliability.json."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("reliability", ROOT / "bench" / "reliability.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    res = json.loads((ROOT / "bench" / "results" / "reliability.json").read_text(encoding="utf-8"))
+    text = README.read_text(encoding="utf-8")
+    block = text[text.index(mod.BEGIN) + len(mod.BEGIN):text.index(mod.END)].strip()
+    assert block == mod.render(res).strip()
+    assert res["rows_lost"] == 0 and res["tracebacks"] == 0
+    assert res["hostile_ok"] == res["hostile_inputs"] and res["kills_survived"] == res["kills"] > 0

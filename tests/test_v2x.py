@@ -175,3 +175,28 @@ def test_circular_covariance_orientation_is_deterministic():
     for h in (0.0, 17.0, 45.0, -120.0):
         assert j2735_fields(c, heading_offset_deg=h)["j2735_orientation"] == 0
     assert j2735_fields(np.zeros((2, 2)))["j2735_orientation"] == 0
+
+
+def test_covariance_not_psd_or_asymmetric_is_refused():
+    from footprint_uq.errors import InputError
+    from footprint_uq.v2x import cpm_fields, j2735_fields
+
+    for bad in ([[1.0, 2.0], [2.0, 1.0]], [[1.0, 0.5], [0.0, 1.0]], [[1.0, np.nan], [np.nan, 1.0]]):
+        for f in (cpm_fields, j2735_fields):
+            with pytest.raises(InputError, match="positive semi-definite"):
+                f(np.array([np.eye(2), bad]))
+    # rounding of a computed covariance is accepted; NaN (unavailable) is not an error
+    c = np.array([[1.0, 1.0 - 1e-15], [1.0 - 1e-15, 1.0 - 2e-15]])
+    cpm_fields(c)
+    assert j2735_fields(np.full((2, 2), np.nan))["j2735_semi_major"] == 255
+
+
+def test_one_infinite_variance_keeps_the_finite_axis():
+    """diag(inf, 1): the semi-minor axis is 1 m (code 20), not 'unavailable'; the major axis is east."""
+    from footprint_uq.v2x import J2735_AXIS_MAX, j2735_fields
+
+    f = j2735_fields(np.diag([np.inf, 1.0]))
+    assert f["j2735_semi_major"] == J2735_AXIS_MAX and f["j2735_semi_minor"] == 20
+    assert f["j2735_orientation"] == round(90.0 / (360.0 / 65535.0))
+    g = j2735_fields(np.diag([1.0, np.inf]))
+    assert g["j2735_semi_minor"] == 20 and g["j2735_orientation"] == 0

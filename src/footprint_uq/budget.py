@@ -69,6 +69,8 @@ _SCALAR_KEYS = ("focal_px", "height_m", "pan_deg", "tilt_deg", "roll_deg", "grou
                 "ground_slope_deg")
 _ALLOWED = set(_PAIR_KEYS) | set(_SCALAR_KEYS) | {"distortion", "covariance", "name", "description"}
 _DEG_ALIASES = {"pan_deg": "pan_rad", "tilt_deg": "tilt_rad", "roll_deg": "roll_rad"}
+#: largest standard deviation accepted, in the key's unit (beyond it products overflow; issue 11)
+MAX_SIGMA = 1e6
 
 
 def _sigma(field_name: str, value, n: int | None, where: str):
@@ -79,21 +81,21 @@ def _sigma(field_name: str, value, n: int | None, where: str):
     if n is None:
         try:
             x = float(value)
-        except (TypeError, ValueError):
+        except (TypeError, ValueError, OverflowError):
             raise ConfigError(label, value, "a standard deviation (number >= 0)") from None
-        if not np.isfinite(x) or x < 0:
-            raise ConfigError(label, value, "a finite standard deviation >= 0")
+        if not np.isfinite(x) or x < 0 or x > MAX_SIGMA:
+            raise ConfigError(label, value, f"a finite standard deviation >= 0 and <= {MAX_SIGMA:g}")
         return x
     if np.ndim(value) == 0:
         value = [value] * n if n == 2 else value
     try:
         arr = np.asarray(value, dtype=np.float64).ravel()
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         raise ConfigError(label, value, f"a list of {n} standard deviations") from None
     if arr.size != n:
         raise ConfigError(label, value, f"a list of {n} standard deviations")
-    if not np.all(np.isfinite(arr)) or np.any(arr < 0):
-        raise ConfigError(label, value, "finite standard deviations >= 0")
+    if not np.all(np.isfinite(arr)) or np.any(arr < 0) or np.any(arr > MAX_SIGMA):
+        raise ConfigError(label, value, f"finite standard deviations >= 0 and <= {MAX_SIGMA:g}")
     return tuple(float(a) for a in arr)
 
 
@@ -284,11 +286,17 @@ def _parse_covariance(c, where):
     label = f"{where}: covariance" if where else "covariance"
     if not isinstance(c, dict) or "names" not in c or "matrix" not in c:
         raise ConfigError(label, c, "a mapping with 'names' and 'matrix'")
+    if not isinstance(c["names"], list | tuple):
+        raise ConfigError(f"{label}.names", c["names"], "a list of parameter names")
     names = [str(n) for n in c["names"]]
     try:
         mat = np.asarray(c["matrix"], dtype=np.float64)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         raise ConfigError(f"{label}.matrix", c["matrix"], "a numeric square matrix") from None
+    big = np.abs(mat[np.isfinite(mat)])
+    if big.size and big.max() > MAX_SIGMA**2:
+        raise ConfigError(f"{label}.matrix", f"an entry of magnitude {big.max():g}",
+                          f"entries of magnitude <= {MAX_SIGMA**2:g} (variances in the parameters' units)")
     n = len(names)
     if mat.shape != (n, n):
         raise ConfigError(f"{label}.matrix", f"shape {mat.shape}", f"a {n}x{n} matrix matching 'names'")
@@ -402,7 +410,10 @@ def load_budget(spec) -> ErrorBudget:
     path = Path(s)
     if not path.exists():
         raise ConfigError("budget", s, f"a preset ({', '.join(presets.PRESET_NAMES)}) or an existing file")
-    text = path.read_text()
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as e:
+        raise ConfigError(str(path), type(e).__name__, f"a readable UTF-8 budget file ({e})") from None
     try:
         if path.suffix.lower() == ".json":
             data = json.loads(text)

@@ -7,7 +7,10 @@ add one, define a ``click.Command`` there and register it here with one
 Error policy: bad input (missing/unknown keys, wrong units, impossible values,
 unreadable files, bad options) prints **one line** naming the field on stderr
 and exits with status 2, never a traceback.  Warnings are printed as one line
-too.  Anything else is a bug and keeps its traceback.
+too.  Anything else is a bug: the last-resort handler prints one line saying so
+and exits with status 3 (``footprint-uq --debug COMMAND ...`` or
+``FOOTPRINT_UQ_DEBUG=1`` shows the traceback).  No known input may reach it
+(``tests/test_hostile.py``).
 """
 
 from __future__ import annotations
@@ -20,10 +23,19 @@ import click
 
 from .errors import FootprintUQError
 
-__all__ = ["main", "FootprintUQGroup", "EXIT_BAD_INPUT"]
+__all__ = ["main", "FootprintUQGroup", "EXIT_BAD_INPUT", "EXIT_BUG"]
 
 #: exit status of every bad-input error
 EXIT_BAD_INPUT = 2
+#: exit status of an unexpected error (a bug): one line, the traceback with --debug
+EXIT_BUG = 3
+
+
+def _debug(args) -> bool:
+    import os
+
+    argv = sys.argv[1:] if args is None else list(args)
+    return "--debug" in argv or os.environ.get("FOOTPRINT_UQ_DEBUG", "") not in ("", "0")
 
 
 def _one_line(text: str) -> str:
@@ -68,6 +80,17 @@ class FootprintUQGroup(click.Group):
             name = getattr(e, "filename", None)
             _error(f"{name}: {e.strerror or e}" if name else str(e))
             sys.exit(EXIT_BAD_INPUT)
+        except KeyboardInterrupt:
+            click.echo("footprint-uq: interrupted", err=True)
+            sys.exit(130)
+        except Exception as e:  # noqa: BLE001 - last line of defence: a bug, never bad input
+            if _debug(args):
+                import traceback
+
+                traceback.print_exc()
+            _error(f"internal error ({type(e).__name__}: {_one_line(e)[:300]}); please report it with the "
+                   "command line (run with --debug for the traceback)")
+            sys.exit(EXIT_BUG)
         finally:
             warnings.showwarning = old
         sys.exit(rv if isinstance(rv, int) else 0)
@@ -75,7 +98,8 @@ class FootprintUQGroup(click.Group):
 
 @click.group(cls=FootprintUQGroup, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(package_name="footprint-uq", prog_name="footprint-uq")
-def main():
+@click.option("--debug", is_flag=True, help="Show the traceback of an internal error (exit status 3).")
+def main(debug):
     """footprint-uq: ground position and 2x2 covariance of roadside-camera pixels and detections.
 
     Frames and units: docs/conventions.md.  File formats: docs/file-formats.md.

@@ -38,7 +38,7 @@ def _board_option(spec: str) -> str:
 def run_intrinsics(images, board: str, square_m: float, out_dir, *, max_mean_reproj_px=None, bootstrap: int = 0,
                    seed: int = 0, grid_px: float = 5.0, video_step: int = 1, workers=None, method: str = "auto",
                    hull: str = "corners", budget_source: str = "opencv", full_covariance: bool = False,
-                   min_views: int = 3, progress: bool = True, echo=None) -> dict:
+                   min_views: int = 3, progress: bool = True, echo=None, max_rms_px: float | None = 2.0) -> dict:
     """The ``calibrate intrinsics`` command as a function; returns the written files.
 
     Detection results are written to ``OUT/frames.csv`` before calibrating, so
@@ -62,7 +62,7 @@ def run_intrinsics(images, board: str, square_m: float, out_dir, *, max_mean_rep
     try:
         cal = calibrate_detections(dets, b, max_mean_reproj_px=max_mean_reproj_px, bootstrap=bootstrap, seed=seed,
                                    min_views=min_views, workers=(os.cpu_count() or 1) if workers is None else workers,
-                                   progress=progress)
+                                   progress=progress, max_rms_px=max_rms_px)
     except InputError:
         out.mkdir(parents=True, exist_ok=True)
         write_frames_csv([{"label": d.label, "path": d.source.path, "frame_index": d.source.frame_index,
@@ -79,9 +79,10 @@ def run_intrinsics(images, board: str, square_m: float, out_dir, *, max_mean_rep
 @click.argument("images", nargs=-1, required=True)
 @click.option("--board", "board", required=True, metavar="COLSxROWS", callback=lambda c, p, v: _board_option(v),
               help="Inner corners, e.g. 9x6 (the paper's board: 14x9).")
-@click.option("--square-m", type=float, required=True, metavar="M", help="Square size in metres.")
+@click.option("--square-m", type=click.FloatRange(min=0.0, min_open=True, max=100.0), required=True, metavar="M",
+              help="Square size in metres.")
 @click.option("--out", "out_dir", required=True, metavar="DIR", help="Output directory (created).")
-@click.option("--max-mean-reproj-px", type=float, default=None, metavar="T",
+@click.option("--max-mean-reproj-px", type=click.FloatRange(min=0.0, min_open=True), default=None, metavar="T",
               help="Frame filter: drop frames whose mean reprojection error exceeds T px, recalibrate, repeat.")
 @click.option("--bootstrap", type=click.IntRange(min=0), default=0, show_default=True, metavar="N",
               help="Bootstrap resamples over frames (0: none).")
@@ -102,9 +103,11 @@ def run_intrinsics(images, board: str, square_m: float, out_dir, *, max_mean_rep
 @click.option("--full-covariance", is_flag=True, help="Also write the 9x9 intrinsic covariance into budget.yaml.")
 @click.option("--min-views", type=click.IntRange(min=3), default=3, show_default=True,
               help="Fewest frames accepted.")
+@click.option("--max-rms-px", type=click.FloatRange(min=0.0, min_open=True), default=2.0, show_default=True,
+              metavar="PX", help="Refuse a calibration whose RMS reprojection error exceeds PX (wrong --board?).")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 def intrinsics_cmd(images, board, square_m, out_dir, max_mean_reproj_px, bootstrap, seed, grid_px, hull, video_step,
-                   workers, method, budget_source, full_covariance, min_views, quiet):
+                   workers, method, budget_source, full_covariance, min_views, max_rms_px, quiet):
     """Intrinsic calibration from checkerboard IMAGES (files, globs, folders or videos).
 
     Writes to DIR: camera.yaml (OpenCV FileStorage), intrinsics.yaml (footprint-uq
@@ -116,7 +119,7 @@ def intrinsics_cmd(images, board, square_m, out_dir, max_mean_reproj_px, bootstr
     res = run_intrinsics(images, board, square_m, out_dir, max_mean_reproj_px=max_mean_reproj_px,
                          bootstrap=bootstrap, seed=seed, grid_px=grid_px, video_step=video_step, workers=workers,
                          method=method, hull=hull, budget_source=budget_source, full_covariance=full_covariance,
-                         min_views=min_views, progress=not quiet,
+                         min_views=min_views, progress=not quiet, max_rms_px=max_rms_px,
                          echo=lambda m: click.echo(f"footprint-uq: {m}", err=True))
     cal = res["calibration"]
     n_in = len(cal.detections)
@@ -163,21 +166,27 @@ def _synthetic_camera(camera_file, scale):
 @click.option("--views", type=click.IntRange(min=3), default=20, show_default=True, help="Board poses.")
 @click.option("--board", "board", default="14x9", show_default=True, metavar="COLSxROWS",
               callback=lambda c, p, v: _board_option(v), help="Inner corners (default: the paper's board).")
-@click.option("--square-m", type=float, default=0.1, show_default=True, help="Square size in metres.")
-@click.option("--margin-m", type=float, default=0.05, show_default=True, help="White border around the squares.")
+@click.option("--square-m", type=click.FloatRange(min=0.0, min_open=True, max=100.0), default=0.1, show_default=True,
+              help="Square size in metres.")
+@click.option("--margin-m", type=click.FloatRange(min=0.0, max=100.0), default=0.05, show_default=True,
+              help="White border around the squares.")
 @click.option("--camera", "camera_file", default=None, metavar="FILE",
               help="Camera/intrinsics file to simulate (default: a Basler-ace-2-like 1920x1200 camera).")
 @click.option("--scale", type=click.FloatRange(min=0.05, max=4.0), default=1.0, show_default=True,
               help="Scale the sensor (same field of view), e.g. 0.4 for quick tests.")
-@click.option("--fill", type=(float, float), default=(0.3, 0.55), show_default=True,
+@click.option("--fill", type=(click.FloatRange(0.01, 1.0), click.FloatRange(0.01, 1.0)), default=(0.3, 0.55),
+              show_default=True,
               help="Board width as a fraction of the image width (min max).")
-@click.option("--max-tilt-deg", type=float, default=40.0, show_default=True)
+@click.option("--max-tilt-deg", type=click.FloatRange(min=10.0, max=80.0), default=40.0, show_default=True,
+              help="Largest board tilt (10..80 deg: the tilts are drawn from 10 deg up; beyond 80 the board is "
+                   "seen edge-on).")
 @click.option("--supersample", type=click.IntRange(min=1, max=8), default=4, show_default=True)
-@click.option("--blur-sigma-px", type=float, default=0.6, show_default=True)
-@click.option("--noise-sigma-dn", type=float, default=2.0, show_default=True, help="Sensor noise, grey levels.")
+@click.option("--blur-sigma-px", type=click.FloatRange(min=0.0, max=100.0), default=0.6, show_default=True)
+@click.option("--noise-sigma-dn", type=click.FloatRange(min=0.0, max=255.0), default=2.0, show_default=True,
+              help="Sensor noise, grey levels.")
 @click.option("--plan", "campaigns", type=click.IntRange(min=0), default=0, metavar="M",
               help="Also run a planning study: M repeated campaigns with --corner-noise-px (no rendering).")
-@click.option("--corner-noise-px", type=float, default=0.1, show_default=True,
+@click.option("--corner-noise-px", type=click.FloatRange(min=0.0, max=1000.0), default=0.1, show_default=True,
               help="Corner noise per coordinate for --plan.")
 @click.option("--plan-bootstrap", type=click.IntRange(min=0), default=100, show_default=True, metavar="N",
               help="Bootstrap resamples of the first planning campaign (0: none).")
@@ -214,7 +223,9 @@ def synthetic_cmd(out_dir, views, board, square_m, margin_m, camera_file, scale,
             raise InputError("--plan", campaigns, "at least 2 campaigns")
         r = simulate_campaigns(cam, b, views, corner_noise_px=corner_noise_px, n_campaigns=campaigns,
                                bootstrap=plan_bootstrap, seed=seed, pose_kw=pose_kw)
-        (out / "plan.json").write_text(json.dumps(_jsonable(r), indent=2))
+        from .io.atomic import atomic_write_text
+
+        atomic_write_text(out / "plan.json", json.dumps(_jsonable(r), indent=2))
         click.echo(f"planning study: {views} views, corner noise {corner_noise_px:g} px, {campaigns} campaigns")
         click.echo("source     " + " ".join(f"{c[6:]:>10s}" for c in PAPER_COLUMNS))
         for src, row in r["paper"].items():

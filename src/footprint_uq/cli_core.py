@@ -74,6 +74,10 @@ def _num(x):
     return x if math.isfinite(x) else None
 
 
+#: largest pixel coordinate accepted by --pixel (a million image widths away is already no pixel)
+MAX_PIXEL_PX = 1e9
+
+
 def locate_records(camera, budget, uv_px, *, confidence: float | None = None) -> list[dict]:
     """The ``locate`` output as a list of dicts (keys :data:`LOCATE_KEYS`, plus
     :data:`CONFIDENCE_KEYS` when ``confidence`` is given).
@@ -92,12 +96,16 @@ def locate_records(camera, budget, uv_px, *, confidence: float | None = None) ->
     for i in range(uv.shape[0]):
         ok = bool(est.valid[i])
         c = est.cov_m2[i]
+        why = None if ok else status.REASONS[int(est.reason[i])]
+        nums = (est.xy_world_m[i, 0], est.xy_world_m[i, 1], c[0, 0], c[0, 1], c[1, 1], a[i], b[i], ang[i])
+        if ok and not np.all(np.isfinite(nums)):  # outputs are checked too: never valid with a missing number
+            ok, why = False, "result is not finite (overflow or degenerate geometry)"
         rec = {
             "u_px": float(uv[i, 0]), "v_px": float(uv[i, 1]),
             "x_m": _num(est.xy_world_m[i, 0]), "y_m": _num(est.xy_world_m[i, 1]),
             "cov_m2": [[_num(c[0, 0]), _num(c[0, 1])], [_num(c[1, 0]), _num(c[1, 1])]],
             "sigma_major_m": _num(a[i]), "sigma_minor_m": _num(b[i]), "orientation_deg": _num(ang[i]),
-            "valid": ok, "reason": None if ok else status.REASONS[int(est.reason[i])],
+            "valid": ok, "reason": why,
         }
         if k is not None:
             rec.update({"confidence": confidence, "semi_major_m": _num(k * a[i]), "semi_minor_m": _num(k * b[i])})
@@ -154,10 +162,11 @@ def locate_cmd(camera_path, budget_spec, pixels, fmt, confidence):
     """
     confidence = _check_confidence(confidence)
     uv = np.array(pixels, dtype=np.float64).reshape(-1, 2)
-    bad = ~np.isfinite(uv).all(-1)
+    bad = ~(np.isfinite(uv) & (np.abs(uv) <= MAX_PIXEL_PX)).all(-1)
     if bad.any():
         i = int(np.argmax(bad))
-        raise InputError(f"--pixel (#{i + 1})", tuple(pixels[i]), "finite pixel coordinates U V")
+        raise InputError(f"--pixel (#{i + 1})", tuple(pixels[i]),
+                         f"finite pixel coordinates U V of magnitude <= {MAX_PIXEL_PX:g}")
     camera = _load_camera(camera_path)
     budget = _load_budget(budget_spec)
     outside = ~camera.in_image(uv)
@@ -209,7 +218,9 @@ def run_map(camera, budget, out_dir, *, step_px: int = 2, max_range_m: float | N
     summary["camera"] = camera_to_dict(camera)
     summary["budget_parameters"] = umap.budget.to_dict()
     summary["files"] = {k: p.name for k, p in files.items()}
-    files["summary_json"].write_text(json.dumps(summary, indent=2, allow_nan=False) + "\n", encoding="utf-8")
+    from .io.atomic import atomic_write_text
+
+    atomic_write_text(files["summary_json"], json.dumps(summary, indent=2, allow_nan=False) + "\n")
     return umap, files
 
 

@@ -68,6 +68,8 @@ def run_extrinsics(pairs, camera, board: str, square_m: float, out_dir, *, margi
     for k, s in enumerate(cal.frame_status):
         if s != "ok" and frames[k].ok:
             say(f"frame {frames[k].name}: {s}")
+    from .io.atomic import atomic_path, atomic_write_text
+
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     files = []
@@ -76,9 +78,9 @@ def run_extrinsics(pairs, camera, board: str, square_m: float, out_dir, *, margi
     summ = cal.summary()
     summ["budget_from"] = budget_from
     summ["board"] = {"cols": b.cols, "rows": b.rows, "square_m": b.square_m, "margin_m": b.margin_m}
-    (out / "summary.json").write_text(json.dumps(summ, indent=2, default=float))
+    atomic_write_text(out / "summary.json", json.dumps(summ, indent=2, default=float))
     files.append(out / "summary.json")
-    with open(out / "frames.csv", "w", newline="") as fh:
+    with atomic_path(out / "frames.csv") as tmp, open(tmp, "w", newline="") as fh:
         w = csv.writer(fh)
         w.writerow(["frame", "status", "rms_px", "n_points_read", "n_nonfinite_dropped", "n_zero_dropped",
                     "lidar_board_points", *ex.POSE_NAMES])
@@ -98,17 +100,19 @@ def run_extrinsics(pairs, camera, board: str, square_m: float, out_dir, *, margi
     for fp in used:
         for (x, y, z), (u, v) in zip(fp.xyz_m, fp.uv_px, strict=True):
             rows.append(",".join([fp.name] + [repr(float(q)) for q in (x, y, z, u, v)]))
-    (out / "correspondences.csv").write_text("\n".join(rows) + "\n")
+    atomic_write_text(out / "correspondences.csv", "\n".join(rows) + "\n")
     files.append(out / "correspondences.csv")
     if figures:
         from .viz.extrinsics import plot_board_poses, plot_pose_spread
 
         for name, fig in (("board_poses.png", plot_board_poses(cal)), ("pose_spread.png", plot_pose_spread(cal))):
-            fig.savefig(out / name, dpi=120, bbox_inches="tight")
+            with atomic_path(out / name) as tmp:
+                fig.savefig(tmp, dpi=120, bbox_inches="tight")
             files.append(out / name)
-    np.savez(out / "poses.npz", per_frame=cal.per_frame, pose=cal.pose, cov_per_frame=cal.cov_per_frame,
-             cov_jacobian=cal.cov_jacobian,
-             cov_bootstrap=cal.cov_bootstrap if cal.cov_bootstrap is not None else np.full((6, 6), np.nan))
+    with atomic_path(out / "poses.npz") as tmp:
+        np.savez(tmp, per_frame=cal.per_frame, pose=cal.pose, cov_per_frame=cal.cov_per_frame,
+                 cov_jacobian=cal.cov_jacobian,
+                 cov_bootstrap=cal.cov_bootstrap if cal.cov_bootstrap is not None else np.full((6, 6), np.nan))
     files.append(out / "poses.npz")
     return {"calibration": cal, "files": files}
 

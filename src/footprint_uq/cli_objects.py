@@ -57,9 +57,11 @@ __all__ = ["objects_cmd"]
               help="Fleet mode on a local Dask cluster of N workers.")
 @click.option("--retries", type=click.IntRange(min=0), default=2, show_default=True,
               help="Fleet mode on Dask: retries of a failed partition.")
+@click.option("--overwrite", is_flag=True,
+              help="Fleet mode: replace a non-empty --out folder as a whole (refused otherwise).")
 def objects_cmd(camera_path, budget_spec, detections, out, box_type, contact, chunk_rows, confidence,
                 heading_offset_deg, origin_lat, origin_lon, corners, allow_outside_image, compression, quiet,
-                registry, scheduler, workers, retries):
+                registry, scheduler, workers, retries, overwrite):
     """Footprints (centre, covariance, largest point, V2X fields) of every detection in a file.
 
     Every input row gives one output row with its 0-based row number, a status (ok,
@@ -78,24 +80,20 @@ def objects_cmd(camera_path, budget_spec, detections, out, box_type, contact, ch
 
         summ = process_fleet(registry, detections, out, budget=budget_spec, scheduler=scheduler, workers=workers,
                              retries=retries, chunk_rows=chunk_rows, progress=None if not quiet else False,
-                             compression=comp, **options)
+                             compression=comp, overwrite=overwrite, **options)
     else:
         if scheduler is not None or workers is not None:
             raise InputError("--scheduler/--workers", scheduler or workers,
                              "--registry too: Dask runs the fleet mode (a dataset of many cameras)")
         if camera_path is None or budget_spec is None:
             raise InputError("--camera/--budget", (camera_path, budget_spec), "both a camera file and a budget")
-        from .batch.process import process_file, summary_path
+        from .batch.process import process_file
         from .budget import load_budget
         from .io import load_camera
 
         cam = load_camera(camera_path)
         bud = load_budget(budget_spec)
         summ = process_file(cam, bud, detections, out, chunk_rows=chunk_rows, progress=None if not quiet else False,
-                            compression=comp, **options)
-        summ.info["camera"] = str(camera_path)
-        summ.info["budget"] = str(budget_spec)
-        import json
-
-        summary_path(out).write_text(json.dumps(summ.to_dict(), indent=2) + "\n", encoding="utf-8")
+                            compression=comp, info={"camera": str(camera_path), "budget": str(budget_spec)},
+                            **options)
     click.echo(f"footprint-uq objects: {summ.text()}; {summ.elapsed_s:.2f} s", err=True)

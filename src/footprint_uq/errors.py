@@ -14,7 +14,10 @@ class FootprintUQError(Exception):
 
 
 def _fmt_value(value: object) -> str:
-    text = repr(value)
+    try:
+        text = repr(value)
+    except ValueError:  # an integer beyond Python's int -> str digit limit
+        text = f"<{type(value).__name__} too long to print>"
     return text if len(text) <= 80 else text[:77] + "..."
 
 

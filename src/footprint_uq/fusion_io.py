@@ -93,6 +93,7 @@ class _Part:
     pre: list                # (n,) None or the reason a value did not convert
     malformed: list          # [(row, reason)]
     camera: str | None       # camera id for the whole input (filename mode), else None
+    lines: int | None = None  # physical lines of a CSV (after the header) / JSON Lines input, else None
 
 
 @dataclass
@@ -112,13 +113,17 @@ class FuseSummary:
     inputs: list = field(default_factory=list)
     elapsed_s: float = 0.0
     info: dict = field(default_factory=dict)
+    #: physical lines of the text inputs (CSV after the header, JSON Lines) plus the Parquet rows
+    lines_in: int | None = None
 
     @property
     def consistent(self) -> bool:
-        return self.rows_in == self.rows_used + self.rows_rejected
+        lines_ok = self.lines_in is None or self.lines_in == self.rows_in
+        return lines_ok and self.rows_in == self.rows_used + self.rows_rejected
 
     def to_dict(self) -> dict:
-        return {"rows_in": self.rows_in, "rows_used": self.rows_used, "rows_rejected": self.rows_rejected,
+        lines = {} if self.lines_in is None else {"lines_in": self.lines_in}
+        return {**lines, "rows_in": self.rows_in, "rows_used": self.rows_used, "rows_rejected": self.rows_rejected,
                 "consistent": self.consistent, "objects_out": self.objects_out, "objects_fused": self.objects_fused,
                 "objects_single": self.objects_single, "objects_unavailable": self.objects_unavailable,
                 "objects_inconsistent": self.objects_inconsistent, "sources_inconsistent": self.sources_inconsistent,
@@ -145,6 +150,13 @@ class FusedFootprints:
     objects: pa.Table
     sources: pa.Table
     summary: FuseSummary
+
+
+#: largest |x_m|, |y_m| of a footprint accepted for fusion (metres; projected map coordinates are ~1e7)
+MAX_COORD_M = 1e9
+#: range of the variances accepted for fusion (m^2): beyond it the information form overflows
+MAX_VAR_M2 = 1e12
+MIN_VAR_M2 = 1e-18
 
 
 # -- reading ---------------------------------------------------------------------------------------
@@ -211,7 +223,8 @@ def _read_footprints(path, *, key=DEFAULT_KEY, camera_id_from: str = "filename",
     table = _normalise(table, key, pre)
     src_rows = np.concatenate(rows) if rows else np.zeros(0, np.int64)
     cam = p.stem if camera_id_from == "filename" else None
-    return _Part(str(p), table, src_rows, pre, sorted(malformed), cam)
+    return _Part(str(p), table, src_rows, pre, sorted(malformed), cam,
+                 reader.lines if reader.lines is not None else reader.total)
 
 
 def _as_table(obj) -> pa.Table:
@@ -330,10 +343,18 @@ def _fuse_parts(parts: list[_Part], key, *, confidence: float, ellipse_confidenc
             bad = todo & ~np.isfinite(est[:n, j])
             rs[:n][bad] = f"missing or non-finite field {name}"
             todo &= ~bad
+        for j, name in enumerate(ESTIMATE_COLUMNS[:2]):
+            bad = todo & (np.abs(est[:n, j]) > MAX_COORD_M)
+            rs[:n][bad] = f"field {name} out of range (|{name}| > {MAX_COORD_M:g} m)"
+            todo &= ~bad
         cxx, cxy, cyy = est[:n, 2], est[:n, 3], est[:n, 4]
-        with np.errstate(invalid="ignore"):
+        with np.errstate(invalid="ignore", over="ignore"):
             pd_ok = (cxx > 0) & (cyy > 0) & (cxx * cyy - cxy * cxy > 0)
+            scale_ok = (np.maximum(cxx, cyy) <= MAX_VAR_M2) & (np.minimum(cxx, cyy) >= MIN_VAR_M2)
         rs[:n][todo & ~pd_ok] = "covariance not positive definite"
+        todo &= pd_ok
+        rs[:n][todo & ~scale_ok] = (f"covariance out of range (variances must lie in [{MIN_VAR_M2:g}, "
+                                    f"{MAX_VAR_M2:g}] m^2)")
         reason.append(rs)
         summary.inputs.append({"input": part.name, "camera_id": part.camera, "rows": n + m})
     if parts:
@@ -406,6 +427,12 @@ def _fuse_parts(parts: list[_Part], key, *, confidence: float, ellipse_confidenc
         np.fmax.at(max_d2, group[ok_d2], d2[ok_d2])
     cams_used = _join_per_group(group, camc, cam_uniq, used_in, M)
     cams_flag = _join_per_group(group, camc, cam_uniq, flag, M)
+    # outputs are checked too: a fused centre or covariance that is not finite is never "ok"
+    overflow = (nsrc > 0) & ~(np.isfinite(fx).all(-1) & np.isfinite(fP).all((-2, -1)))
+    if np.any(overflow):
+        fx, fP = fx.copy(), fP.copy()
+        fx[overflow], fP[overflow] = np.nan, np.nan
+        nsrc = np.where(overflow, 0, nsrc)
     smaj, smin, ori = ellipse_axes(fP)
     v2x = {**cpm_fields(fP, heading_offset_deg), **j2735_fields(fP, heading_offset_deg)}
     has = nsrc > 0
@@ -419,6 +446,7 @@ def _fuse_parts(parts: list[_Part], key, *, confidence: float, ellipse_confidenc
         firsts = order[np.r_[True, g_sorted[1:] != g_sorted[:-1]]] if order.size else order
         first_reason[group[firsts]] = reason[firsts]
         obj_reason[~has] = ["no usable estimate: " + str(r) for r in first_reason[~has]]
+        obj_reason[overflow] = "fused result not finite (overflow)"
     cols: dict[str, pa.Array] = {}
     for j, k in enumerate(key):
         cols[k] = kuniq[j].take(pa.array(groups[:, j])) if M else pa.array([], _key_type(k))
@@ -463,6 +491,8 @@ def _fuse_parts(parts: list[_Part], key, *, confidence: float, ellipse_confidenc
     sources = pa.table(sc)
     # -- summary ---------------------------------------------------------------------------------------
     summary.rows_in = R
+    if all(p.lines is not None for p in parts):
+        summary.lines_in = int(sum(p.lines for p in parts))
     summary.rows_used = int(used_in.sum())
     summary.rows_rejected = R - summary.rows_used
     summary.objects_out = M
@@ -613,6 +643,7 @@ def fuse_files(inputs, out, *, camera_id_from: str | None = None, key=DEFAULT_KE
     """
     from .batch.readers import open_detections
     from .batch.writers import detect_out_format, open_writer
+    from .io.atomic import atomic_write_text, same_file
 
     t0 = time.perf_counter()
     key = _check_options(key, confidence, ellipse_confidence, heading_offset_deg)
@@ -624,13 +655,14 @@ def fuse_files(inputs, out, *, camera_id_from: str | None = None, key=DEFAULT_KE
         raise InputError("out", str(out), "a .parquet, .csv or .jsonl file (GeoJSON needs footprint polygons)")
     sources_out = sources_path(out) if sources_out is None else Path(sources_out)
     detect_out_format(sources_out)
-    if Path(sources_out).resolve() == Path(out).resolve():
+    if Path(sources_out).absolute() == Path(out).absolute() or same_file(sources_out, out):
         raise InputError("sources_out", str(sources_out), "a different file from out")
     for p in inputs:
         if not p.is_file():
             raise InputError("INPUT", str(p), "an existing footprint file (.csv, .jsonl/.ndjson, .parquet/.pq)")
-        if p.resolve() in (Path(out).resolve(), Path(sources_out).resolve()):
-            raise InputError("out", str(out), f"a file that is not an input ({p})")
+        for o in (out, sources_out, summary_path(out)):
+            if same_file(p, o):
+                raise InputError("out", str(o), f"a file that is not an input (it is the same file as {p})")
     if camera_id_from is None:
         has_col = all("camera_id" in open_detections(p).columns for p in inputs)
         camera_id_from = "column" if has_col else "filename"
@@ -649,13 +681,25 @@ def fuse_files(inputs, out, *, camera_id_from: str | None = None, key=DEFAULT_KE
     parts = [_read_footprints(p, key=key, camera_id_from=camera_id_from, chunk_rows=chunk_rows) for p in inputs]
     res = _fuse_parts(parts, key, confidence=confidence, ellipse_confidence=ellipse_confidence,
                       heading_offset_deg=heading_offset_deg)
-    comp = compression or "none"
-    for path, table in ((out, res.objects), (sources_out, res.sources)):
-        kw = {"compression": comp} if detect_out_format(path) == "parquet" else {}
-        with open_writer(path, table.schema, **kw) as w:
-            w.write(table)
     s = res.summary
+    if not s.consistent:  # pragma: no cover - a bug, not bad input
+        raise RuntimeError(f"row accounting broken: {s.text()} (lines in {s.lines_in})")
+    comp = compression or "none"
+    writers = []
+    try:  # both tables complete under temporary names, then renamed; the old summary removed first
+        for path, table in ((out, res.objects), (sources_out, res.sources)):
+            kw = {"compression": comp} if detect_out_format(path) == "parquet" else {}
+            w = open_writer(path, table.schema, **kw)
+            writers.append(w)
+            w.write(table)
+        summary_path(out).unlink(missing_ok=True)
+        for w in writers:
+            w.close()
+    except BaseException:
+        for w in writers:
+            w.abort()
+        raise
     s.elapsed_s = time.perf_counter() - t0
     s.info.update({"camera_id_from": camera_id_from, "out": str(out), "sources_out": str(sources_out)})
-    summary_path(out).write_text(json.dumps(s.to_dict(), indent=2) + "\n", encoding="utf-8")
+    atomic_write_text(summary_path(out), json.dumps(s.to_dict(), indent=2) + "\n")
     return s

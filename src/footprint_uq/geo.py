@@ -219,5 +219,7 @@ def footprints_geojson(estimate, georef: GeoReference, *, object_ids=None, prope
 def write_geojson(path, feature_collection: dict) -> Path:
     """Write a FeatureCollection (``allow_nan=False``: missing numbers are already ``null``)."""
     p = Path(path)
-    p.write_text(json.dumps(feature_collection, allow_nan=False, indent=1))
+    from .io.atomic import atomic_write_text
+
+    atomic_write_text(p, json.dumps(feature_collection, allow_nan=False, indent=1))
     return p

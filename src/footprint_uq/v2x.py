@@ -110,6 +110,8 @@ J2735_POSITION_CONFIDENCE_NAMES = ("unavailable", "a500m", "a200m", "a100m", "a5
 
 CIRCULAR_RTOL = 1e-9  # axes this close: orientation reported as 0 (north)
 STEP_GUARD = 1e-9  # relative guard against binary rounding pushing an exact step up
+#: relative tolerance of the PSD / symmetry test of the covariances (rounding of a computed covariance is ~1e-16)
+PSD_RTOL = 1e-9
 
 
 def _cov(cov_m2) -> np.ndarray:
@@ -121,6 +123,18 @@ def _cov(cov_m2) -> np.ndarray:
         bad = np.argwhere(d < 0)[0]
         raise InputError(f"cov_m2[{', '.join(map(str, bad[:-1]))}] variance", float(d[tuple(bad)]),
                          "variances >= 0 (NaN = unavailable)")
+    a, b1, b2, dd = c[..., 0, 0], c[..., 0, 1], c[..., 1, 0], c[..., 1, 1]
+    with np.errstate(invalid="ignore", over="ignore"):
+        det = a * dd - b1 * b2
+        scale = a * dd
+        not_psd = np.isfinite(det) & np.isfinite(scale) & (det < -PSD_RTOL * scale)
+        not_psd |= np.isfinite(b1) & np.isfinite(b2) & (np.abs(b1 - b2) > PSD_RTOL * np.sqrt(np.abs(scale)) + 0.0)
+        not_psd |= np.isnan(b1) != np.isnan(a)  # an off-diagonal NaN with a known variance
+    if np.any(not_psd):
+        bad = tuple(int(i) for i in np.argwhere(not_psd)[0]) if not_psd.ndim else ()
+        m = c[bad]
+        raise InputError(f"cov_m2{list(bad) if bad else ''}", m.tolist(),
+                         "a symmetric positive semi-definite covariance (m^2), or NaN = unavailable")
     return c
 
 
@@ -191,6 +205,9 @@ def _axes(c):
     rad = np.hypot(0.5 * (a - d), b)
     l1 = mean + rad
     l2 = np.maximum(mean - rad, 0.0)
+    # one infinite variance (finite covariance term): the other axis keeps its value, never "unavailable"
+    l2 = np.where(np.isinf(a) & np.isfinite(d) & np.isfinite(b), d,
+                  np.where(np.isinf(d) & np.isfinite(a) & np.isfinite(b), a, l2))
     ang = 0.5 * np.degrees(np.arctan2(2.0 * b, a - d))  # ccw from east, (-90, 90]
     return np.sqrt(l1), np.sqrt(l2), ang
 
@@ -241,7 +258,7 @@ def j2735_fields(cov_m2, heading_offset_deg: float = 0.0) -> dict[str, np.ndarra
         a, b, ang = _axes(c)
     bearing = np.mod(90.0 - ang, 180.0)  # ang is ccw from east in the true east/north frame
     with np.errstate(invalid="ignore"):
-        circular = (a * a - b * b) <= CIRCULAR_RTOL * (a * a + b * b)
+        circular = np.isfinite(a) & ((a * a - b * b) <= CIRCULAR_RTOL * (a * a + b * b))
     bearing = np.where(circular, 0.0, bearing)
     return {
         "j2735_semi_major": j2735_axis_accuracy(a),

@@ -44,6 +44,7 @@ import pyarrow as pa
 import pyarrow.compute as pc
 
 from ..errors import ConfigError, InputError
+from ..io.atomic import atomic_write_text, clean_temporaries, commit, discard, fsync_dir, path_component, temp_path
 from . import schema as S
 from .process import BatchProcessor, Summary, _prefetch
 
@@ -159,16 +160,32 @@ def load_registry(path, *, budget=None) -> dict[str, RegistryEntry]:
     else:
         base = p.parent
         suffix = p.suffix.lower()
+        try:
+            text = p.read_text(encoding="utf-8-sig")
+        except (OSError, UnicodeDecodeError) as e:
+            raise ConfigError("registry", str(p), f"a readable UTF-8 text file ({type(e).__name__}: {e})") from None
+        if "\x00" in text:
+            raise ConfigError("registry", str(p), "a text file (it holds NUL bytes)")
         if suffix == ".csv":
             import csv
+            import io
 
-            with open(p, newline="", encoding="utf-8-sig") as f:
+            try:
                 recs = [({k: v for k, v in r.items() if v != ""}, f"{p}: line {i + 2}")
-                        for i, r in enumerate(csv.DictReader(f))]
+                        for i, r in enumerate(csv.DictReader(io.StringIO(text, newline=""), strict=True))]
+            except csv.Error as e:
+                raise ConfigError("registry", str(p), f"a valid CSV table ({e})") from None
+            for rec, where in recs:
+                if None in rec or any(v is None for v in rec.values()):
+                    raise ConfigError(where, "wrong number of fields", "as many fields as the header")
         elif suffix in (".yaml", ".yml", ".json"):
             import yaml
 
-            data = yaml.safe_load(p.read_text(encoding="utf-8"))
+            try:
+                data = yaml.safe_load(text)
+            except (yaml.YAMLError, ValueError, RecursionError) as e:
+                first = (str(e).strip().splitlines() or [type(e).__name__])[0]
+                raise ConfigError("registry", str(p), f"a valid YAML/JSON registry ({first})") from None
             if isinstance(data, dict) and "cameras" in data:
                 data = data["cameras"]
             if not isinstance(data, list) or not all(isinstance(r, dict) for r in data):
@@ -292,7 +309,12 @@ def _strip_camera(rel: str) -> str:
 
 
 def _out_path(task: Task, camera_id: str) -> Path:
-    return Path(task.out_dir, f"camera_id={camera_id}", task.out_rel or _strip_camera(task.rel))
+    """``out/camera_id=<id>/<rel>`` with the id percent-encoded (:func:`~footprint_uq.io.atomic.path_component`).
+
+    The id comes from data: encoded, ``a/../../x`` stays one folder name inside ``out``
+    (pyarrow's hive partitioning decodes it back: ``segment_encoding="uri"``).
+    """
+    return Path(task.out_dir, f"camera_id={path_component(camera_id)}", task.out_rel or _strip_camera(task.rel))
 
 
 def process_partition(task: Task) -> dict:
@@ -304,11 +326,11 @@ def process_partition(task: Task) -> dict:
     """
     import pyarrow.parquet as pq
 
-    from .readers import coerce_table, iter_parquet_tables
+    from .readers import coerce_table, iter_parquet_tables, open_parquet
     from .writers import parquet_options
 
     t0 = time.perf_counter()
-    pf = pq.ParquetFile(task.path)
+    pf = open_parquet(task.path, f"detections file {task.rel}")
     names = list(pf.schema_arrow.names)
     cam_in_file = "camera_id" in names
     part_cam = task.partition_keys.get("camera_id")
@@ -321,10 +343,9 @@ def process_partition(task: Task) -> dict:
     read_cols = [c for c in dict.fromkeys([c for c in S.ID_COLUMNS if c in names] + list(numeric))]
     writers: dict[str, tuple] = {}
     counts: dict[str, Summary] = {}
-    tmp_tag = f".tmp-{uuid.uuid4().hex[:8]}"
     start = 0
     overlap = True  # read ahead and write in background threads, as process_file
-    tables = iter_parquet_tables(pf, read_cols, task.chunk_rows, use_threads=False)
+    tables = iter_parquet_tables(pf, read_cols, task.chunk_rows, use_threads=False, where=task.path)
     if overlap:
         tables = _prefetch(tables, 1)
     pool = ThreadPoolExecutor(1, thread_name_prefix="footprint-uq-writer") if overlap else None
@@ -382,7 +403,7 @@ def process_partition(task: Task) -> dict:
                 if cam_id not in writers:
                     path = _out_path(task, cam_id)
                     path.parent.mkdir(parents=True, exist_ok=True)
-                    tmp = path.with_name(path.name + tmp_tag)
+                    tmp = temp_path(path)
                     writers[cam_id] = (pq.ParquetWriter(tmp, out.schema, **parquet_options(out.schema,
                                                                                            task.compression)), tmp,
                                        path)
@@ -393,16 +414,18 @@ def process_partition(task: Task) -> dict:
             pending.result()
         for w, tmp, path in writers.values():
             w.close()
-            os.replace(tmp, path)
-        writers_done = [str(p) for _, _, p in writers.values()]
+            commit(tmp, path)  # a retried task replaces its files, never duplicates them
+        writers_done = [Path(p).relative_to(task.out_dir).as_posix() for _, _, p in writers.values()]
     except BaseException:
         if pool is not None:
             pool.shutdown(wait=True)
         for w, tmp, _ in writers.values():
             try:
                 w.close()
+            except Exception:  # noqa: BLE001 - the file is dropped: its close error does not matter
+                pass
             finally:
-                Path(tmp).unlink(missing_ok=True)
+                discard(tmp)
         raise
     if pool is not None:
         pool.shutdown()
@@ -481,7 +504,7 @@ class FleetSummary:
 
 def process_fleet(registry, detections, out_dir, *, budget=None, scheduler=None, workers: int | None = None,
                   retries: int = 2, chunk_rows: int = S.DEFAULT_CHUNK_ROWS, compression: str | None = "auto",
-                  progress: bool | None = None, client=None, **options) -> FleetSummary:
+                  progress: bool | None = None, client=None, overwrite: bool = False, **options) -> FleetSummary:
     """Footprints of a multi-camera Parquet dataset, in this process or on a Dask cluster.
 
     Parameters
@@ -498,6 +521,11 @@ def process_fleet(registry, detections, out_dir, *, budget=None, scheduler=None,
         Dask retries of a failed partition (its output files are rewritten, never duplicated).
     client : dask.distributed.Client, optional
         Use this client (tests, notebooks) instead of ``scheduler``/``workers``.
+    overwrite : bool
+        Replace a non-empty ``out_dir`` (refused otherwise).  The job is built in a hidden
+        folder next to ``out_dir`` (``.<name>.tmp-<hex>``) and swapped in at the end, summary
+        included: a failed or killed job leaves the previous output as it was, a finished one
+        leaves only its own files (no stale partitions of an earlier run).
     **options
         :class:`~footprint_uq.batch.process.BatchProcessor` options (``box_type``, ``contact``,
         ``confidence``, ``heading_offset_deg``, ``origin_lat_deg``, ``origin_lon_deg``,
@@ -518,13 +546,18 @@ def process_fleet(registry, detections, out_dir, *, budget=None, scheduler=None,
         raise ConfigError("registry", "origin given for some cameras only",
                           "an origin for every camera (registry origin_lat_deg/origin_lon_deg, or --origin-lat/lon)")
     options = {k: v for k, v in options.items() if v is not None or k in ("origin_lat_deg", "origin_lon_deg")}
-    tasks = plan(detections, out_dir, reg, chunk_rows=chunk_rows, compression=compression, **options)
-    Path(out_dir).mkdir(parents=True, exist_ok=True)
+    out = Path(out_dir)
+    _check_out(out, detections, overwrite)
+    staging = temp_path(out)
+    tasks = plan(detections, staging, reg, chunk_rows=chunk_rows, compression=compression, **options)
+    _clean_stale(out)
+    staging.mkdir(parents=True)
     summ = FleetSummary()
     show = sys.stderr.isatty() if progress is None else bool(progress)
     bar = tqdm(total=len(tasks), unit="file", disable=not show, file=sys.stderr, desc="partitions", leave=False)
     fn = process_partition  # module global: one implementation for both paths
     own = None
+    done = False
     try:
         if client is None and scheduler is None and workers is None:
             for t in tasks:
@@ -547,7 +580,10 @@ def process_fleet(registry, detections, out_dir, *, budget=None, scheduler=None,
                 summ.add(fut.result())
                 bar.update(1)
             mode = "dask"
+        done = True
     finally:
+        if not done:
+            _rmtree(staging)
         bar.close()
         if own is not None:
             cluster = getattr(own, "cluster", None)
@@ -558,8 +594,57 @@ def process_fleet(registry, detections, out_dir, *, budget=None, scheduler=None,
     summ.info = {"detections": str(detections), "out": str(out_dir), "partitions": len(tasks), "mode": mode,
                  "chunk_rows": int(chunk_rows), "options": {k: v for k, v in options.items()},
                  "elapsed_s": round(summ.elapsed_s, 6)}
-    if not summ.consistent:  # pragma: no cover - a bug, not bad input
-        raise RuntimeError(f"row accounting broken: {summ.text()}")
-    Path(out_dir, "_summary.json").write_text(json.dumps(summ.to_dict(), indent=2, default=str) + "\n",
-                                              encoding="utf-8")
+    try:
+        if not summ.consistent:  # pragma: no cover - a bug, not bad input
+            raise RuntimeError(f"row accounting broken: {summ.text()}")
+        clean_temporaries(staging)  # files of killed or retried attempts
+        atomic_write_text(staging / "_summary.json", json.dumps(summ.to_dict(), indent=2, default=str) + "\n")
+        _swap_in(staging, out)
+    except BaseException:
+        _rmtree(staging)
+        raise
     return summ
+
+
+def _check_out(out: Path, detections, overwrite: bool) -> None:
+    """Refuse an output folder that is a file, holds the input, or is not empty (without ``overwrite``)."""
+    if out.exists() and not out.is_dir():
+        raise InputError("out", str(out), "a folder (this is a file)")
+    src = Path(detections)
+    if src.exists() and out.exists():
+        s, o = src.resolve(), out.resolve()
+        if s == o or o in s.parents:
+            raise InputError("out", str(out), "a folder that does not hold the detections")
+    if out.is_dir() and any(out.iterdir()) and not overwrite:
+        raise InputError("out", str(out), "an empty or new folder (or --overwrite to replace its contents)")
+
+
+def _clean_stale(out: Path) -> None:
+    """Remove the hidden staging / old folders of killed jobs on ``out`` (``.<name>.tmp-*``, ``.<name>.old-*``)."""
+    parent = out.parent if str(out.parent) else Path(".")
+    if not parent.is_dir():
+        return
+    for p in list(parent.glob(f".{out.name}.tmp-*")) + list(parent.glob(f".{out.name}.old-*")):
+        _rmtree(p)
+    clean_temporaries(out)
+
+
+def _rmtree(p: Path) -> None:
+    import shutil
+
+    if p.is_dir() and not p.is_symlink():
+        shutil.rmtree(p, ignore_errors=True)
+    elif p.exists() or p.is_symlink():
+        discard(p)
+
+
+def _swap_in(staging: Path, out: Path) -> None:
+    """Put the finished folder ``staging`` in place of ``out`` (the old one removed after the rename)."""
+    old = None
+    if out.exists():
+        old = out.with_name(f".{out.name}.old-{uuid.uuid4().hex[:8]}")
+        os.rename(out, old)
+    os.rename(staging, out)
+    fsync_dir(out.parent if str(out.parent) else ".")
+    if old is not None:
+        _rmtree(old)

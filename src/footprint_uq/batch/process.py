@@ -42,6 +42,7 @@ from ..ellipse import chi2_scale
 from ..errors import InputError
 from ..footprint_kernels import OBJ_ROWS
 from ..footprints import CONTACT_MODES, DEGENERATE, V2X_FIELDS, FrameProcessor
+from ..io.atomic import atomic_write_text, same_file
 from . import schema as S
 
 __all__ = ["BatchProcessor", "process_table", "process_file", "process_chunk", "Summary", "summary_path", "Reasons",
@@ -52,6 +53,13 @@ __all__ = ["BatchProcessor", "process_table", "process_file", "process_chunk", "
 PSD_TOL = 0.5e-12
 #: row of each output column in the kernel's per-object block
 _OBJ = {name: i for i, name in enumerate(OBJ_ROWS)}
+#: kernel rows that must be finite in an "ok" row (centre and covariance) / a "partial" row (largest point)
+_CENTRE_ROWS = [_OBJ[c] for c in ("x_m", "y_m", "cov_xx_m2", "cov_xy_m2", "cov_yy_m2", "sigma_major_m")]
+_LARGEST_ROWS = [_OBJ[c] for c in ("largest_sigma_major_m", "largest_x_m", "largest_y_m")]
+#: largest detector pixel (co)variance accepted, px^2 (a 1e6-px sigma: far beyond any image)
+MAX_PIXEL_VAR_PX2 = 1e12
+#: reason of a row whose numbers overflowed (inputs finite but absurd, e.g. a box at 1e300 px)
+OVERFLOW_REASON = "result is not finite (overflow: input values far out of range)"
 #: below this many rows a chunk is processed in one thread
 _MIN_ROWS_PER_THREAD = 20_000
 
@@ -259,6 +267,11 @@ class BatchProcessor:
             if bad.any():
                 reason_id[bad] = self.reasons.id("pixel covariance (cov_uu_px2, cov_uv_px2, cov_vv_px2) is not "
                                                  "positive semi-definite")
+            with np.errstate(invalid="ignore"):
+                big = (scale > MAX_PIXEL_VAR_PX2) & (reason_id < 0)
+            if big.any():
+                reason_id[big] = self.reasons.id(f"pixel covariance out of range (entries above "
+                                                 f"{MAX_PIXEL_VAR_PX2:g} px^2)")
 
     # -- the kernel --------------------------------------------------------------------------------
     def _kernel(self, X: np.ndarray, P: np.ndarray | None):
@@ -326,14 +339,29 @@ class BatchProcessor:
             res.corners_xy = gather("corners_xy_world_m", (K, 2), np.nan)
             res.corners_cov = gather("corners_cov_m2", (K, 2, 2), np.nan)
             res.corner_reason = corner_reason
-        # status and reason of the processed rows
-        ok = good & (creason == st.OK)
-        partial = good & ~ok & (res.largest_index >= 0)
-        failed = good & ~ok & ~partial
+        # status and reason of the processed rows; outputs are checked too: a centre, covariance or
+        # largest point that overflowed (absurd but finite inputs) is never "ok"/"partial"
+        o = res.obj
+        with np.errstate(invalid="ignore"):
+            centre_fin = np.isfinite(o[_CENTRE_ROWS]).all(0) if n else np.zeros(0, bool)
+            largest_fin = np.isfinite(o[_LARGEST_ROWS]).all(0) if n else np.zeros(0, bool)
+        centre_ok = good & (creason == st.OK)
+        ok = centre_ok & centre_fin
+        partial = good & ~centre_ok & (res.largest_index >= 0) & largest_fin
+        overflow = (centre_ok & ~centre_fin) | (good & ~centre_ok & (res.largest_index >= 0) & ~largest_fin)
+        failed = good & ~ok & ~partial & ~overflow
         res.status_id[ok] = 0
         res.status_id[partial] = 1
         if ok.any():
             reason_id[ok] = self.reasons.id("ok")
+        if overflow.any():
+            reason_id[overflow] = self.reasons.id(OVERFLOW_REASON)
+            res.obj = o = np.array(o, copy=True) if o is not None and not o.flags.writeable else o
+            o[:, overflow] = np.nan
+            res.largest_index = np.where(overflow, -1, res.largest_index)
+            unavailable = np.array([S.V2X_UNAVAILABLE[f] for f in V2X_FIELDS], dtype=np.int32)
+            res.v2x = np.array(res.v2x, copy=True) if not res.v2x.flags.writeable else res.v2x
+            res.v2x[:, overflow] = unavailable[:, None]
         for mask, prefix in ((partial, "no centre: "), (failed, "no usable corner: ")):
             if not mask.any():
                 continue
@@ -528,6 +556,8 @@ class Summary:
     reasons: dict = field(default_factory=dict)
     elapsed_s: float = 0.0
     info: dict = field(default_factory=dict)
+    #: physical lines of a CSV (after the header) or JSON Lines input, counted apart from the parser
+    lines_in: int | None = None
 
     @property
     def rows_with_errors(self) -> int:
@@ -556,10 +586,12 @@ class Summary:
 
     @property
     def consistent(self) -> bool:
-        return self.rows_in == self.rows_out == self.rows_ok + self.rows_partial + self.rows_error
+        lines_ok = self.lines_in is None or self.lines_in == self.rows_in
+        return lines_ok and self.rows_in == self.rows_out == self.rows_ok + self.rows_partial + self.rows_error
 
     def to_dict(self) -> dict:
-        return {"rows_in": self.rows_in, "rows_out": self.rows_out, "rows_ok": self.rows_ok,
+        lines = {} if self.lines_in is None else {"lines_in": self.lines_in}
+        return {**lines, "rows_in": self.rows_in, "rows_out": self.rows_out, "rows_ok": self.rows_ok,
                 "rows_partial": self.rows_partial, "rows_error": self.rows_error,
                 "rows_with_errors": self.rows_error, "consistent": self.consistent,
                 "reasons": dict(sorted(self.reasons.items(), key=lambda kv: -kv[1])),
@@ -651,7 +683,8 @@ def process_chunk(bp: BatchProcessor, chunk) -> pa.Table:
 
 def process_file(camera, budget, detections, out, *, chunk_rows: int = S.DEFAULT_CHUNK_ROWS,
                  format_in: str | None = None, format_out: str | None = None, progress: bool | None = None,
-                 summary: bool = True, compression: str | None = "auto", **options) -> Summary:
+                 summary: bool = True, compression: str | None = "auto", info: dict | None = None,
+                 **options) -> Summary:
     """Stream a detection file through the footprint pipeline, chunk by chunk.
 
     Parameters
@@ -673,6 +706,8 @@ def process_file(camera, budget, detections, out, *, chunk_rows: int = S.DEFAULT
         Parquet compression: "auto" (snappy, the small-integer code columns uncompressed: see
         :func:`footprint_uq.batch.writers.parquet_options`), or one codec for every column
         ("snappy", "zstd", "lz4", "gzip"; None or "none": uncompressed).
+    info : dict, optional
+        Extra entries of the summary (e.g. the camera and budget files of the CLI).
     **options
         Keyword arguments of :class:`BatchProcessor`.
 
@@ -700,25 +735,40 @@ def process_file(camera, budget, detections, out, *, chunk_rows: int = S.DEFAULT
     bp = BatchProcessor(camera, budget, **options)
     schema = bp.resolve(reader.columns, reader.id_fields)
     reader.select(S.numeric_input_columns(bp.box_type, reader.columns))
-    if Path(out).resolve() == Path(detections).resolve():
-        raise InputError("out", str(out), "a file other than the detections")
+    for p in (out, summary_path(out)):
+        if same_file(p, detections):
+            raise InputError("out", str(p), "a file other than the detections (this is the same file)")
+    if Path(out).is_dir():
+        raise InputError("out", str(out), "a file path (this is a folder)")
     summ = Summary()
     show = sys.stderr.isatty() if progress is None else bool(progress)
     bar = tqdm(total=reader.total, unit=reader.unit, unit_scale=True, disable=not show, file=sys.stderr,
                desc="footprints", leave=False)
     pool = _Pool(1, thread_name_prefix="footprint-uq-writer")
     pending = None
+    writer = None
     try:
-        with open_writer(out, schema, format=fmt_out, compression=compression) as writer:
-            for chunk in _prefetch(iter(reader), 1):
-                table = process_chunk(bp, chunk)
-                summ.add_table(table, chunk.table.num_rows + len(chunk.malformed))
-                if pending is not None:
-                    pending.result()
-                pending = pool.submit(writer.write, table)
-                bar.update(chunk.progress)
+        writer = open_writer(out, schema, format=fmt_out, compression=compression)
+        for chunk in _prefetch(iter(reader), 1):
+            table = process_chunk(bp, chunk)
+            summ.add_table(table, chunk.table.num_rows + len(chunk.malformed))
             if pending is not None:
                 pending.result()
+            pending = pool.submit(writer.write, table)
+            bar.update(chunk.progress)
+        if pending is not None:
+            pending.result()
+        summ.lines_in = reader.lines
+        if not summ.consistent:  # pragma: no cover - a bug, not bad input
+            raise RuntimeError(f"row accounting broken: {summ.text()} (lines in {summ.lines_in})")
+        # the previous summary goes first: a summary never stands beside another output than its own
+        writer.before_commit = (lambda: summary_path(out).unlink(missing_ok=True)) if summary else None
+        writer.close()
+    except BaseException:
+        pool.shutdown(wait=True)  # an in-flight write finishes before its file is dropped
+        if writer is not None:
+            writer.abort()
+        raise
     finally:
         pool.shutdown()
         bar.close()
@@ -730,11 +780,9 @@ def process_file(camera, budget, detections, out, *, chunk_rows: int = S.DEFAULT
                  "origin": None if bp.geo is None else {
                      "origin_lat_deg": bp.geo.origin_lat_deg, "origin_lon_deg": bp.geo.origin_lon_deg,
                      "heading_offset_deg": bp.geo.heading_offset_deg}, "chunk_rows": reader.chunk_rows,
-                 "budget": bp.budget.name if hasattr(bp.budget, "name") else None}
-    if not summ.consistent:  # pragma: no cover - a bug, not bad input
-        raise RuntimeError(f"row accounting broken: {summ.text()}")
+                 "budget": bp.budget.name if hasattr(bp.budget, "name") else None, **(info or {})}
     if summary:
         import json
 
-        summary_path(out).write_text(json.dumps(summ.to_dict(), indent=2) + "\n", encoding="utf-8")
+        atomic_write_text(summary_path(out), json.dumps(summ.to_dict(), indent=2) + "\n")
     return summ

@@ -11,18 +11,26 @@ Nothing is dropped silently:
   a JSON line that is not a JSON object) has no table row; it is listed in
   :attr:`Chunk.malformed` with its row number and reason.
 
-Row numbers (``row``) are 0-based:
+Row numbers (``row``) are 0-based and count **physical lines** (ended by LF or CRLF; the
+last line may have no terminator), so that rows in = lines in, whatever a line holds:
 
 * CSV: the data line (line ``row + 2`` of the file, the header being line 1); every
-  line after the header is a row (an empty line is a malformed row); fields must not
-  contain newlines;
-* JSON Lines: the line (line ``row + 1``); blank lines are not rows;
-* Parquet: the row in file order.
+  line after the header is a row.  A line that is not one CSV record by itself (a stray
+  or unterminated quote, a quoted line break, the wrong number of fields, bytes that are
+  not UTF-8, a carriage return inside the line) is a malformed row with its reason; an
+  empty line is an error row.  The header must be UTF-8 (a byte-order mark is allowed),
+  else the file is refused.  Blocks of lines are parsed by pyarrow when the result is
+  certain to be one record per line (checked), else line by line with Python's ``csv``
+  module in strict mode;
+* JSON Lines: the line (line ``row + 1``); a blank line is an error row (``empty line``);
+* Parquet: the row in file order (an empty, truncated or garbage file: :class:`InputError`).
+
+:attr:`DetectionReader.lines` counts the physical lines read, independently of the
+parser; the batch checks rows in against it.
 """
 
 from __future__ import annotations
 
-import bisect
 import io
 import json
 import math
@@ -38,7 +46,7 @@ from ..errors import InputError
 from . import schema as S
 
 __all__ = ["Chunk", "DetectionReader", "open_detections", "detect_format", "FORMATS", "coerce_table",
-           "iter_parquet_tables"]
+           "iter_parquet_tables", "open_parquet"]
 
 #: input formats by extension
 FORMATS = {".csv": "csv", ".jsonl": "jsonl", ".ndjson": "jsonl", ".parquet": "parquet", ".pq": "parquet"}
@@ -88,15 +96,20 @@ def _to_float(v):
     raise ValueError(type(v).__name__)
 
 
+_INT64 = (-(2**63), 2**63 - 1)
+
+
 def _to_int(v):
     if isinstance(v, bool):
         raise ValueError("boolean")
-    if isinstance(v, int):
-        return v
-    x = _to_float(v)
-    if not (math.isfinite(x) and x.is_integer()):
-        raise ValueError("not an integer")
-    return int(x)
+    if not isinstance(v, int):
+        x = _to_float(v)
+        if not (math.isfinite(x) and x.is_integer()):
+            raise ValueError("not an integer")
+        v = int(x)
+    if not _INT64[0] <= v <= _INT64[1]:  # a 64-bit integer column (frame)
+        raise ValueError("out of the 64-bit range")
+    return v
 
 
 def _convert_values(values: list, typ: pa.DataType):
@@ -207,10 +220,10 @@ class DetectionReader:
         self.chunk_rows = int(chunk_rows)
         self.needed: tuple[str, ...] = ()
         self.numeric: tuple[str, ...] = ()
+        #: physical lines read so far (CSV: after the header; JSON Lines: all), None for Parquet
+        self.lines: int | None = None if self.format == "parquet" else 0
         if self.format == "parquet":
-            import pyarrow.parquet as pq
-
-            self._pf = pq.ParquetFile(self.path)
+            self._pf = open_parquet(self.path, "detections")
             self.columns = list(self._pf.schema_arrow.names)
             self.total, self.unit = self._pf.metadata.num_rows, "rows"
         elif self.format == "csv":
@@ -248,7 +261,9 @@ class DetectionReader:
         start = 0
         # one decoding thread: the batch reads ahead in a thread of its own while the kernel uses the
         # cores; pyarrow's own pool here only adds scheduling (measured: ~25 % more CPU per row)
-        for t in iter_parquet_tables(self._pf, list(self.needed), self.chunk_rows, use_threads=False):
+        tables = iter_parquet_tables(self._pf, list(self.needed), self.chunk_rows, use_threads=False,
+                                     where=str(self.path))
+        for t in tables:
             n = t.num_rows
             t, pre = coerce_table(t, self.numeric)
             yield Chunk(t, np.arange(start, start + n, dtype=np.int64), pre, [], n)
@@ -258,84 +273,147 @@ class DetectionReader:
     def _csv_header(self) -> list[str]:
         import csv
 
-        with open(self.path, newline="", encoding="utf-8-sig") as f:
-            line = f.readline()
-        if not line.strip():
+        with open(self.path, "rb") as f:
+            raw = f.readline()
+        self._header_bytes = len(raw)
+        text = raw[3:] if raw.startswith(_BOM) else raw
+        try:
+            text = text.decode("utf-8").rstrip("\r\n")
+        except UnicodeDecodeError as e:
+            raise InputError("detections", str(self.path),
+                             f"a UTF-8 CSV file (header line: {_utf8_error(e)})") from None
+        if not text.strip():
             raise InputError("detections", str(self.path), "a CSV file whose first line is a header of column names")
-        return next(csv.reader([line]))
+        try:
+            names = next(csv.reader([text], strict=True))
+        except csv.Error as e:
+            raise InputError("detections", str(self.path), f"a CSV header line of column names ({e})") from None
+        dup = sorted({n for n in names if names.count(n) > 1})
+        if dup:
+            raise InputError("detections", str(self.path), f"a CSV header without duplicate columns (got {dup[0]!r} "
+                             "twice)")
+        return names
 
     def _iter_csv(self):
+        with open(self.path, "rb") as f:
+            f.seek(self._header_bytes)
+            row = 0
+            for block, ends in _line_blocks(f, self.chunk_rows):
+                n = ends.size
+                self.lines += n
+                try:
+                    chunk = self._csv_fast(block, ends, row)
+                except _SlowPath:
+                    chunk = self._csv_slow(block, ends, row)
+                chunk.progress = len(block)
+                yield chunk
+                row += n
+
+    def _csv_convert_options(self):
         import pyarrow.csv as pcsv
 
-        skipped: list[tuple[int, str]] = []  # (row, reason), found by the parser (possibly ahead of the batches)
+        return pcsv.ConvertOptions(column_types={c: pa.string() for c in self.needed},
+                                   include_columns=list(self.needed), strings_can_be_null=True)
+
+    def _csv_fast(self, block: bytes, ends: np.ndarray, row0: int) -> Chunk:
+        """pyarrow's parser on a block whose lines are certain to be one record each, else :class:`_SlowPath`.
+
+        Certain: the block is UTF-8, has no carriage return outside CRLF, and the parser finds
+        exactly one record (or one invalid row) per physical line, a sentinel line included (an
+        unterminated quote on the last line would swallow it).
+        """
+        import pyarrow.csv as pcsv
+
+        n = ends.size
+        try:
+            block.decode("utf-8")
+        except UnicodeDecodeError:
+            raise _SlowPath from None
+        if block.count(b"\r") != block.count(b"\r\n"):
+            raise _SlowPath
+        invalid: list = []
 
         def on_invalid(r):
-            row = (r.number - 2) if r.number is not None else None
-            if row is None:  # pragma: no cover - the serial reader always knows the line number
-                raise InputError("detections", f"malformed CSV line {r.text[:40]!r}", "lines with the header's fields")
-            what = "empty line" if not r.text.strip() else f"{r.actual_columns} fields, expected {r.expected_columns}"
-            bisect.insort(skipped, (row, f"malformed CSV line ({what})"))
+            invalid.append((r.number, r.actual_columns, r.expected_columns))
             return "skip"
 
-        counter = _CountingFile(open(self.path, "rb"))
-        types = {c: pa.string() for c in self.needed}
+        sentinel = b"" if block.endswith(b"\n") or not block else b"\n"
+        sentinel += b"," * (len(self.columns) - 1) + b"\n"
         try:
-            reader = pcsv.open_csv(
-                counter,
-                read_options=pcsv.ReadOptions(use_threads=False, block_size=1 << 22, encoding="utf8"),
-                parse_options=pcsv.ParseOptions(invalid_row_handler=on_invalid, ignore_empty_lines=False),
-                convert_options=pcsv.ConvertOptions(column_types=types, include_columns=list(self.needed),
-                                                    strings_can_be_null=True))
-        except pa.ArrowInvalid as e:
-            counter.close()
-            raise InputError("detections", str(self.path), f"a readable CSV file ({e})") from None
-        nxt = 0  # next unassigned row number
-        pending: list[pa.RecordBatch] = []
-        pending_rows: list[np.ndarray] = []
-        pending_bad: list[tuple[int, str]] = []
-        n_pending = 0
-        last_pos = 0
-        try:
-            while True:
+            t = pcsv.read_csv(io.BytesIO(block + sentinel),
+                              read_options=pcsv.ReadOptions(use_threads=False, column_names=self.columns,
+                                                            block_size=max(1 << 20, len(block) + 1024)),
+                              parse_options=pcsv.ParseOptions(invalid_row_handler=on_invalid,
+                                                              ignore_empty_lines=False),
+                              convert_options=self._csv_convert_options())
+        except (pa.ArrowException, ValueError):
+            raise _SlowPath from None
+        if t.num_rows + len(invalid) != n + 1 or any(num is None or not 1 <= num <= n for num, _, _ in invalid):
+            raise _SlowPath
+        t = t.slice(0, t.num_rows - 1)  # the sentinel
+        bad = np.zeros(n, dtype=bool)
+        mal = []
+        for num, got, want in invalid:
+            bad[num - 1] = True
+            mal.append((row0 + num - 1, f"malformed CSV line ({got} fields, expected {want})"))
+        rows = row0 + np.flatnonzero(~bad)
+        t, pre = coerce_table(t, self.numeric, id_types=S.ID_TYPES)
+        empty = _empty_lines(block, ends)[~bad]
+        if empty.any():
+            pre = pre if pre is not None else [None] * t.num_rows
+            for i in np.flatnonzero(empty).tolist():
+                pre[i] = "malformed CSV line (empty line)"
+        return Chunk(t, rows.astype(np.int64), pre, sorted(mal))
+
+    def _csv_slow(self, block: bytes, ends: np.ndarray, row0: int) -> Chunk:
+        """Line by line with Python's csv module (strict quoting within one line)."""
+        import csv
+
+        import pyarrow.csv as pcsv
+
+        ncol = len(self.columns)
+        idx = [self.columns.index(c) for c in self.needed]
+        nulls = set(pcsv.ConvertOptions().null_values)
+        keep, values, mal = [], [], []
+        start = 0
+        for i, end in enumerate(ends.tolist()):
+            raw = block[start:end]
+            start = end
+            row = row0 + i
+            raw = raw[:-1] if raw.endswith(b"\n") else raw
+            raw = raw[:-1] if raw.endswith(b"\r") else raw
+            try:
+                text = raw.decode("utf-8")
+            except UnicodeDecodeError as e:
+                mal.append((row, f"malformed CSV line (not UTF-8: {_utf8_error(e)})"))
+                continue
+            if not text:
+                fields = None
+            elif "\r" in text:
+                mal.append((row, "malformed CSV line (carriage return inside the line)"))
+                continue
+            else:
                 try:
-                    batch = reader.read_next_batch()
-                except StopIteration:
-                    batch = None
-                if batch is not None and batch.num_rows:
-                    rows, nxt, bad = _assign_rows(nxt, batch.num_rows, skipped)
-                    pending.append(batch)
-                    pending_rows.append(rows)
-                    pending_bad += bad
-                    n_pending += batch.num_rows
-                if batch is None:  # trailing malformed lines
-                    pending_bad += [s for s in skipped if s[0] >= nxt]
-                    skipped.clear()
-                while n_pending >= self.chunk_rows or (batch is None and (n_pending or pending_bad)):
-                    take = min(self.chunk_rows, n_pending)
-                    t = pa.Table.from_batches(pending, schema=reader.schema) if pending else None
-                    rows = np.concatenate(pending_rows) if pending_rows else np.zeros(0, np.int64)
-                    head = t.slice(0, take) if t is not None else pa.table({c: pa.array([], pa.string())
-                                                                             for c in self.needed})
-                    hr = rows[:take]
-                    lim = hr[-1] if take and n_pending > take else np.iinfo(np.int64).max
-                    mal = [b for b in pending_bad if b[0] <= lim]
-                    pending_bad = [b for b in pending_bad if b[0] > lim]
-                    if t is not None and n_pending > take:
-                        pending = t.slice(take).to_batches()
-                        pending_rows = [rows[take:]]
-                    else:
-                        pending, pending_rows = [], []
-                    n_pending -= take
-                    head, pre = coerce_table(head, self.numeric, id_types=S.ID_TYPES)
-                    pos = counter.pos
-                    yield Chunk(head, hr, pre, mal, pos - last_pos)
-                    last_pos = pos
-                if batch is None:
-                    break
-        except pa.ArrowInvalid as e:
-            raise InputError("detections", str(self.path), f"a readable CSV file ({e})") from None
-        finally:
-            counter.close()
+                    fields = next(csv.reader([text], strict=True))
+                except csv.Error as e:
+                    why = "unterminated quote" if "unexpected end of data" in str(e) else str(e)
+                    mal.append((row, f"malformed CSV line ({why})"))
+                    continue
+                if len(fields) != ncol:
+                    mal.append((row, f"malformed CSV line ({len(fields)} fields, expected {ncol})"))
+                    continue
+            keep.append(i)
+            values.append(fields)
+        cols = {}
+        for name, j in zip(self.needed, idx, strict=True):
+            cols[name] = pa.array([None if f is None or f[j] in nulls else f[j] for f in values], pa.string())
+        t, pre = coerce_table(pa.table(cols) if cols else pa.table({}), self.numeric, id_types=S.ID_TYPES)
+        empty = [k for k, f in enumerate(values) if f is None]
+        if empty:
+            pre = pre if pre is not None else [None] * t.num_rows
+            for k in empty:
+                pre[k] = "malformed CSV line (empty line)"
+        return Chunk(t, row0 + np.asarray(keep, dtype=np.int64), pre, mal)
 
     # jsonl
     def _jsonl_columns(self) -> list[str]:
@@ -345,59 +423,75 @@ class DetectionReader:
             for i, line in enumerate(f):
                 if i >= 1000:
                     break
+                if i == 0 and line.startswith(_BOM):
+                    line = line[3:]
                 try:
                     obj = json.loads(line)
-                except ValueError:
+                except (ValueError, RecursionError):
                     continue
                 if isinstance(obj, dict):
-                    names.update(dict.fromkeys(obj))
+                    names.update(dict.fromkeys(str(k) for k in obj))
         return list(names)
 
     def _iter_jsonl(self):
         import pyarrow.json as pjson
 
         with open(self.path, "rb") as f:
-            lineno = 0
-            while True:
-                lines, rows, nbytes = [], [], 0
-                while len(lines) < self.chunk_rows:
-                    line = f.readline()
-                    if not line:
-                        break
-                    nbytes += len(line)
-                    if line.strip():
-                        lines.append(line if line.endswith(b"\n") else line + b"\n")
-                        rows.append(lineno)
-                    lineno += 1
-                if not lines and not nbytes:
-                    break
-                rows_a = np.asarray(rows, dtype=np.int64)
+            row0 = 0
+            first = True
+            for block, ends in _line_blocks(f, self.chunk_rows):
+                n = ends.size
+                self.lines += n
+                starts = np.concatenate([[0], ends[:-1]]).tolist()
+                lines = [block[a:b] for a, b in zip(starts, ends.tolist(), strict=True)]
+                if first and lines[0].startswith(_BOM):
+                    lines[0] = lines[0][3:]
+                first = False
+                lines = [x if x.endswith(b"\n") else x + b"\n" for x in lines]
+                rows_a = row0 + np.arange(n, dtype=np.int64)
+                row0 += n
                 table, pre, mal = None, None, []
-                try:
-                    t = pjson.read_json(io.BytesIO(b"".join(lines)),
-                                        read_options=pjson.ReadOptions(use_threads=True, block_size=1 << 24))
-                    if t.num_rows == len(lines):
-                        table = t
-                except (pa.ArrowInvalid, pa.ArrowNotImplementedError):
-                    table = None
+                # pyarrow's parser only sees blocks of lines that each hold one object: pyarrow 26.0.1
+                # crashes the process (SIGSEGV) on a block whose first value is a bare `null`
+                objects = all(x.lstrip()[:1] == b"{" and x.rstrip()[-1:] == b"}" for x in lines)
+                if objects:
+                    try:
+                        t = pjson.read_json(io.BytesIO(b"".join(lines)),
+                                            read_options=pjson.ReadOptions(use_threads=True, block_size=1 << 24))
+                        if t.num_rows == n:
+                            table = t
+                    except (pa.ArrowException, ValueError):
+                        table = None
                 if table is not None:
-                    table = _select(table, self.needed)
-                    table, pre = coerce_table(table, self.numeric, id_types=S.ID_TYPES)
-                else:
+                    try:
+                        table = _select(table, self.needed)
+                        table, pre = coerce_table(table, self.numeric, id_types=S.ID_TYPES)
+                    except (pa.ArrowException, ValueError, TypeError):  # nested values pyarrow cannot cast
+                        table = None
+                if table is None:
                     table, pre, mal, keep = self._jsonl_slow(lines, rows_a)
                     rows_a = rows_a[keep]
-                yield Chunk(table, rows_a, pre, mal, nbytes)
-                if len(lines) < self.chunk_rows and not line:
-                    break
+                yield Chunk(table, rows_a, pre, mal, len(block))
 
     def _jsonl_slow(self, lines, rows):
         """Line by line: invalid JSON lines become malformed rows, bad values pre-errors."""
         records, keep, mal = [], [], []
         for i, line in enumerate(lines):
+            if not line.strip():
+                mal.append((int(rows[i]), "empty line"))
+                continue
             try:
-                obj = json.loads(line)
-            except ValueError as e:
+                text = line.decode("utf-8")
+            except UnicodeDecodeError as e:
+                mal.append((int(rows[i]), f"invalid JSON line: not UTF-8 ({_utf8_error(e)})"))
+                continue
+            try:
+                obj = json.loads(text)
+            except json.JSONDecodeError as e:
                 mal.append((int(rows[i]), f"invalid JSON line: {e.msg}"))
+                continue
+            except (ValueError, RecursionError) as e:
+                mal.append((int(rows[i]), f"invalid JSON line: {_first_line(e)}"))
                 continue
             if not isinstance(obj, dict):
                 mal.append((int(rows[i]), f"JSON line is not an object: {type(obj).__name__}"))
@@ -414,22 +508,113 @@ class DetectionReader:
                 if pre[j] is None:
                     pre[j] = f"field {name} is not {_what(typ)}"
             arrays[name] = pa.array(values, type=typ)
-        return (pa.table(arrays), (pre if any(p is not None for p in pre) else None), mal,
-                np.asarray(keep, dtype=np.int64))
+        return (pa.table(arrays) if arrays else pa.table({}), (pre if any(p is not None for p in pre) else None),
+                mal, np.asarray(keep, dtype=np.int64))
 
 
-def iter_parquet_tables(pf, columns: list, chunk_rows: int, *, use_threads: bool = True) -> Iterator[pa.Table]:
+class _SlowPath(Exception):
+    """The fast CSV parser cannot be trusted on this block: parse it line by line."""
+
+
+_BOM = b"\xef\xbb\xbf"
+
+
+def _utf8_error(e: UnicodeDecodeError) -> str:
+    return f"byte 0x{e.object[e.start]:02x} at column {e.start + 1}"
+
+
+def _first_line(e: BaseException) -> str:
+    text = str(e).splitlines()
+    return (text[0] if text else type(e).__name__)[:120]
+
+
+def _line_blocks(f, max_lines: int, read_size: int = 1 << 22):
+    """``(block, ends)`` of up to ``max_lines`` physical lines of binary file ``f``.
+
+    A physical line ends with ``\\n`` (LF or CRLF); the last one may have no terminator.
+    ``ends`` (int64) are the offsets just past each line in ``block``.
+    """
+    buf = b""
+    nl = np.zeros(0, dtype=np.int64)  # newline offsets in buf
+    eof = False
+    while True:
+        while nl.size < max_lines and not eof:
+            data = f.read(read_size)
+            if not data:
+                eof = True
+                break
+            new = np.flatnonzero(np.frombuffer(data, dtype=np.uint8) == 10) + len(buf)
+            buf += data
+            nl = np.concatenate([nl, new])
+        if nl.size >= max_lines:
+            cut = int(nl[max_lines - 1]) + 1
+            ends = nl[:max_lines] + 1
+            yield buf[:cut], ends
+            buf = buf[cut:]
+            nl = nl[max_lines:] - cut
+            continue
+        # end of file: the rest
+        if not buf:
+            return
+        ends = nl + 1
+        if not buf.endswith(b"\n"):
+            ends = np.concatenate([ends, [len(buf)]])
+        yield buf, ends.astype(np.int64)
+        return
+
+
+def _empty_lines(block: bytes, ends: np.ndarray) -> np.ndarray:
+    """(n,) bool: physical lines with nothing but their terminator (LF or CRLF)."""
+    a = np.frombuffer(block, dtype=np.uint8)
+    starts = np.concatenate([[0], ends[:-1]]).astype(np.int64)
+    length = ends - starts
+    term = (length > 0) & (a[np.maximum(ends - 1, 0)] == 10) if a.size else np.zeros(ends.size, bool)
+    content = length - term
+    cr = np.zeros(ends.size, dtype=bool)
+    one = content == 1
+    if one.any():
+        cr[one] = a[starts[one]] == 13
+    return (content == 0) | cr
+
+
+def open_parquet(path, field: str = "detections"):
+    """``pyarrow.parquet.ParquetFile`` of ``path``; an empty, truncated or garbage file is an InputError."""
+    import pyarrow.parquet as pq
+
+    try:
+        return pq.ParquetFile(path)
+    except (pa.ArrowException, OSError, ValueError) as e:
+        raise InputError(field, str(path), f"a readable Parquet file ({_first_line(e)})") from None
+
+
+def _guarded_batches(pf, i: int, where: str, **kw):
+    """``pf.iter_batches(row_groups=[i])`` where a corrupt page raises :class:`InputError` naming ``where``."""
+    it = pf.iter_batches(row_groups=[i], **kw)
+    while True:
+        try:
+            batch = next(it)
+        except StopIteration:
+            return
+        except (pa.ArrowException, OSError, ValueError) as e:
+            raise InputError("detections", where, f"a readable Parquet file (row group {i}: {_first_line(e)})"
+                             ) from None
+        yield batch
+
+
+def iter_parquet_tables(pf, columns: list, chunk_rows: int, *, use_threads: bool = True,
+                        where: str = "detections") -> Iterator[pa.Table]:
     """Tables of ``chunk_rows`` rows (the last one shorter) of a ``pyarrow.parquet.ParquetFile``, in file order.
 
     Reads one row group at a time (``iter_batches(row_groups=[i])``): iterating a whole file
     with one ``iter_batches`` call keeps memory growing with the file in pyarrow 15-26, one
-    row group at a time does not.
+    row group at a time does not.  A corrupt or truncated page raises :class:`InputError`
+    naming ``where`` (the file).
     """
     buf: list[pa.Table] = []
     n_buf = 0
     for i in range(pf.num_row_groups):
-        for batch in pf.iter_batches(batch_size=chunk_rows, row_groups=[i], columns=columns,
-                                     use_threads=use_threads):
+        for batch in _guarded_batches(pf, i, where, batch_size=chunk_rows, columns=columns,
+                                      use_threads=use_threads):
             buf.append(pa.Table.from_batches([batch]))
             n_buf += batch.num_rows
             while n_buf >= chunk_rows:
@@ -446,58 +631,6 @@ def _select(table: pa.Table, names) -> pa.Table:
     """The columns ``names`` of ``table``; absent ones (never seen in this chunk) as nulls."""
     cols = {n: (table.column(n) if n in table.column_names else pa.nulls(table.num_rows)) for n in names}
     return pa.table(cols)
-
-
-def _assign_rows(nxt: int, n: int, skipped: list[tuple[int, str]]):
-    """Row numbers of n parsed rows starting at ``nxt``, skipping malformed rows.
-
-    Returns ``(rows, next, malformed)`` with the malformed rows inside the range (removed from ``skipped``).
-    """
-    j = bisect.bisect_left(skipped, (nxt, ""))
-    rows = np.empty(n, dtype=np.int64)
-    filled = 0
-    r = nxt
-    bad = []
-    while filled < n:
-        if j < len(skipped) and skipped[j][0] == r:
-            bad.append(skipped[j])
-            j += 1
-            r += 1
-            continue
-        stop = skipped[j][0] if j < len(skipped) else r + (n - filled)
-        m = min(stop - r, n - filled)
-        rows[filled:filled + m] = np.arange(r, r + m)
-        filled += m
-        r += m
-    # malformed rows right after the last parsed row belong to a later chunk
-    for b in bad:
-        skipped.remove(b)
-    return rows, r, bad
-
-
-class _CountingFile(io.RawIOBase):
-    """A read-only binary file wrapper that counts the bytes read (progress of the CSV reader)."""
-
-    def __init__(self, f):
-        self._f = f
-        self.pos = 0
-
-    def readable(self) -> bool:
-        return True
-
-    def readinto(self, b) -> int:
-        n = self._f.readinto(b)
-        self.pos += n or 0
-        return n
-
-    def read(self, size=-1):
-        data = self._f.read(size)
-        self.pos += len(data)
-        return data
-
-    def close(self) -> None:
-        self._f.close()
-        super().close()
 
 
 def open_detections(path, *, chunk_rows: int = S.DEFAULT_CHUNK_ROWS, format: str | None = None) -> DetectionReader:

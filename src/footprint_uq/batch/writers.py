@@ -18,6 +18,7 @@ from __future__ import annotations
 import abc
 import json
 import math
+import os
 from pathlib import Path
 
 import numpy as np
@@ -26,6 +27,7 @@ import pyarrow.compute as pc
 
 from ..errors import InputError
 from ..footprints import V2X_FIELDS
+from ..io.atomic import clean_temporaries_of, commit, discard, temp_path
 
 __all__ = ["AUTO", "is_code_column", "OUT_FORMATS", "detect_out_format", "open_writer", "FootprintWriter",
            "decode_dictionaries", "parquet_options"]
@@ -60,31 +62,94 @@ def _plain_schema(schema: pa.Schema) -> pa.Schema:
 
 
 class FootprintWriter(abc.ABC):
-    """Base class: ``write(table)`` per chunk, ``close()`` at the end (also a context manager)."""
+    """Base class: ``write(table)`` per chunk, ``close()`` at the end (also a context manager).
+
+    Atomic: the rows go to a hidden temporary file next to ``path`` (:attr:`tmp`);
+    :meth:`close` flushes, fsyncs and renames it to ``path``, :meth:`abort` (or leaving the
+    ``with`` block by an exception) removes it, leaving any previous ``path`` intact.
+    ``before_commit`` (optional callable) runs just before the rename (e.g. removing a stale
+    summary, so that a summary never describes another file than the one beside it).
+    """
 
     format = ""
 
     def __init__(self, path, schema: pa.Schema):
         self.path = Path(path)
+        clean_temporaries_of(self.path)  # left by a killed run on the same output
+        self.tmp = temp_path(self.path)
         self.schema = schema
         self.rows = 0
+        self.before_commit = None
+        self._done = False
+        self._fd = None
 
     def write(self, table: pa.Table) -> None:
         self._write(table)
         self.rows += table.num_rows
+        self._sync()
+
+    def _sync(self) -> None:
+        """Flush this chunk's bytes to the disk now (in the batch's writer thread, overlapping the next
+        chunk's computation), so that the final fsync before the rename has little left to do."""
+        try:
+            if self._fd is None:
+                self._fd = os.open(self.tmp, os.O_RDONLY)
+            os.fdatasync(self._fd)
+        except (OSError, AttributeError):  # pragma: no cover - no fdatasync (macOS) or not yet on disk
+            pass
+
+    def _close_fd(self) -> None:
+        if self._fd is not None:
+            try:
+                os.close(self._fd)
+            except OSError:  # pragma: no cover
+                pass
+            self._fd = None
 
     @abc.abstractmethod
     def _write(self, table: pa.Table) -> None:
         """Write one chunk (each format's own writer)."""
 
-    def close(self) -> None:  # noqa: B027 - optional hook: writers without a file handle have nothing to close
-        """Flush and close the output (default: nothing to do)."""
+    @abc.abstractmethod
+    def _close(self) -> None:
+        """Flush and close the temporary file (each format's own writer)."""
+
+    def close(self) -> None:
+        """Finish the file and rename it to :attr:`path`."""
+        if self._done:
+            return
+        self._done = True
+        try:
+            self._close()
+            self._close_fd()
+            if self.before_commit is not None:
+                self.before_commit()
+            commit(self.tmp, self.path)
+        except BaseException:
+            discard(self.tmp)
+            raise
+
+    def abort(self) -> None:
+        """Drop the output: close and remove the temporary file (never raises)."""
+        if self._done:
+            return
+        self._done = True
+        try:
+            self._close()
+        except Exception:  # noqa: BLE001 - the file is being dropped, its close errors do not matter
+            pass
+        finally:
+            self._close_fd()
+            discard(self.tmp)
 
     def __enter__(self):
         return self
 
-    def __exit__(self, *exc):
-        self.close()
+    def __exit__(self, exc_type, exc, tb):
+        if exc_type is None:
+            self.close()
+        else:
+            self.abort()
 
 
 #: the default Parquet compression: see :func:`parquet_options`
@@ -125,13 +190,13 @@ class ParquetOut(FootprintWriter):
         import pyarrow.parquet as pq
 
         super().__init__(path, schema)
-        self._w = pq.ParquetWriter(self.path, schema, **parquet_options(schema, compression))
+        self._w = pq.ParquetWriter(self.tmp, schema, **parquet_options(schema, compression))
 
     def _write(self, table):
         if table.num_rows:
             self._w.write_table(table.cast(self.schema) if table.schema != self.schema else table)
 
-    def close(self):
+    def _close(self):
         self._w.close()
 
 
@@ -143,7 +208,7 @@ class CsvOut(FootprintWriter):
 
         super().__init__(path, schema)
         self._plain = _plain_schema(schema)
-        self._w = pcsv.CSVWriter(self.path, self._plain)
+        self._w = pcsv.CSVWriter(str(self.tmp), self._plain)
 
     def _write(self, table):
         t = decode_dictionaries(table)
@@ -152,7 +217,7 @@ class CsvOut(FootprintWriter):
                 for c in t.columns]
         self._w.write_table(pa.Table.from_arrays(cols, schema=self._plain))
 
-    def close(self):
+    def _close(self):
         self._w.close()
 
 
@@ -161,7 +226,7 @@ class JsonlOut(FootprintWriter):
 
     def __init__(self, path, schema):
         super().__init__(path, schema)
-        self._f = open(self.path, "w", encoding="utf-8")
+        self._f = open(self.tmp, "w", encoding="utf-8")
 
     def _write(self, table):
         if not table.num_rows:
@@ -170,7 +235,7 @@ class JsonlOut(FootprintWriter):
         text = df.to_json(orient="records", lines=True, double_precision=15)
         self._f.write(text if text.endswith("\n") else text + "\n")
 
-    def close(self):
+    def _close(self):
         self._f.close()
 
 
@@ -193,7 +258,7 @@ class GeoJsonOut(FootprintWriter):
             K += 1
         self.K = K
         self._props = [n for n in schema.names if not (n.startswith("c") and n[1:2].isdigit())]
-        self._f = open(self.path, "w", encoding="utf-8")
+        self._f = open(self.tmp, "w", encoding="utf-8")
         self._f.write('{"type": "FeatureCollection", "features": [\n')
         self._first = True
 
@@ -229,9 +294,11 @@ class GeoJsonOut(FootprintWriter):
         self._f.write(("" if self._first else sep) + sep.join(parts))
         self._first = False
 
-    def close(self):
-        self._f.write("\n]}\n")
-        self._f.close()
+    def _close(self):
+        try:
+            self._f.write("\n]}\n")
+        finally:
+            self._f.close()
 
 
 def open_writer(path, schema: pa.Schema, *, format: str | None = None, compression: str | None = AUTO):

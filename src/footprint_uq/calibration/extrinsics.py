@@ -974,7 +974,9 @@ def write_correspondences_csv(path, frames: list[FrameData], which: int = 0) -> 
             continue
         for (x, y, z), (u, v) in zip(f.xyz_candidates[which], f.uv_px, strict=True):
             rows.append(",".join([str(f.name)] + [repr(float(q)) for q in (x, y, z, u, v)]))
-    Path(path).write_text("\n".join(rows) + "\n")
+    from ..io.atomic import atomic_write_text
+
+    atomic_write_text(path, "\n".join(rows) + "\n")
     return Path(path)
 
 

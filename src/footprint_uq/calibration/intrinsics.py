@@ -48,6 +48,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
+from ..io.atomic import atomic_path, atomic_write_text, commit, discard, temp_path
 from .boards import Checkerboard, parse_board
 from .detect import Detection, FrameSource, _mp_context, detect_frames
 
@@ -545,11 +546,12 @@ class IntrinsicCalibration:
         cov = self.coverage(grid_px, hull)
         em = self.error_map(grid_px)
         asym = self.asymmetry()
-        np.savez_compressed(out / "maps.npz", coverage_count=cov.count, mean_error_px=em.mean_error_px,
-                            corner_count=em.count, mean_residual_px=em.mean_residual_px,
-                            reflection_map_px=asym["reflection_map_px"], grid_px=grid_px,
-                            asymmetry_cell_px=asym["cell_px"], image_size_px=np.array(self.image_size_px),
-                            principal_point_px=self.K[:2, 2])
+        with atomic_path(out / "maps.npz") as tmp:
+            np.savez_compressed(tmp, coverage_count=cov.count, mean_error_px=em.mean_error_px,
+                                corner_count=em.count, mean_residual_px=em.mean_residual_px,
+                                reflection_map_px=asym["reflection_map_px"], grid_px=grid_px,
+                                asymmetry_cell_px=asym["cell_px"], image_size_px=np.array(self.image_size_px),
+                                principal_point_px=self.K[:2, 2])
         files["maps.npz"] = str(out / "maps.npz")
         summ = self.summary(grid_px=grid_px, hull=hull)
         summ["budget"] = {"source": budget_source, "full_covariance": bool(full_covariance),
@@ -559,9 +561,9 @@ class IntrinsicCalibration:
 
             files.update(save_calibration_figures(self, out, coverage=cov, error_map=em, asymmetry=asym))
         summ["files"] = sorted(files) + ["summary.json", "report.md"] + (["report.html"] if figures else [])
-        (out / "summary.json").write_text(json.dumps(_jsonable(summ), indent=2))
+        atomic_write_text(out / "summary.json", json.dumps(_jsonable(summ), indent=2))
         files["summary.json"] = str(out / "summary.json")
-        (out / "report.md").write_text(render_report(summ))
+        atomic_write_text(out / "report.md", render_report(summ))
         files["report.md"] = str(out / "report.md")
         if figures:
             from ..viz.calibration import write_calibration_html
@@ -576,6 +578,7 @@ class IntrinsicCalibration:
         import cv2
 
         path = Path(path)
+        final, path = Path(path), temp_path(path)
         fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_WRITE)
         try:
             fs.write("calibration_time", time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()))
@@ -589,9 +592,13 @@ class IntrinsicCalibration:
             fs.write("distortion_coefficients", self.dist.reshape(-1, 1))
             fs.write("avg_reprojection_error", float(self.rms_px))
             fs.write("opencv_version", self.opencv_version)
-        finally:
+        except BaseException:
             fs.release()
-        return path
+            discard(path)
+            raise
+        fs.release()
+        commit(path, final)
+        return final
 
 
 def _corr(cov):
@@ -621,7 +628,7 @@ def _write_yaml(path, data) -> Path:
     import yaml
 
     path = Path(path)
-    path.write_text(yaml.safe_dump(_jsonable(data), sort_keys=False, default_flow_style=None))
+    atomic_write_text(path, yaml.safe_dump(_jsonable(data), sort_keys=False, default_flow_style=None))
     return path
 
 
@@ -631,7 +638,7 @@ def write_frames_csv(rows: list[dict], path) -> Path:
     path = Path(path)
     cols = ["label", "path", "frame_index", "found", "method", "used", "dropped_round", "mean_error_px",
             "rms_error_px", "reason"]
-    with open(path, "w", newline="") as f:
+    with atomic_path(path) as tmp, open(tmp, "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=cols)
         w.writeheader()
         for r in rows:
@@ -701,9 +708,16 @@ def render_report(summ: dict) -> str:
 
 
 # ------------------------------------------------------------------------------------------ drivers
+#: RMS reprojection error (px) above which a calibration is refused by default: a good chessboard
+#: calibration is well below 1 px; several px mean wrong corners (e.g. a --board smaller than the
+#: printed one: the detector then finds a different part of the board in every view)
+MAX_RMS_PX = 2.0
+
+
 def calibrate_corners(image_points_px, board, image_size_px, *, labels=None, max_mean_reproj_px=None,
                       bootstrap: int = 0, seed: int = 0, min_views: int = 3, flags: int = 0, max_rounds: int = 50,
-                      detections=None, workers: int = 1, progress: bool = False) -> IntrinsicCalibration:
+                      detections=None, workers: int = 1, progress: bool = False,
+                      max_rms_px: float | None = MAX_RMS_PX) -> IntrinsicCalibration:
     """Calibrate from corner positions already detected.
 
     Parameters
@@ -726,6 +740,10 @@ def calibrate_corners(image_points_px, board, image_size_px, *, labels=None, max
         ``cv2.CALIB_*`` flags passed to OpenCV (default 0: fx, fy, cx, cy, k1, k2, p1, p2, k3 free, no skew).
     max_rounds : int
         Cap on filter rounds.
+    max_rms_px : float or None
+        Refuse (InputError naming the board) a fit whose RMS reprojection error exceeds it
+        (default :data:`MAX_RMS_PX`; None: no limit).  A principal point outside the image is
+        always refused: both are what a wrong board size gives.
     detections : list of Detection, optional
         All input frames (kept for the report).
     workers : int
@@ -796,6 +814,7 @@ def calibrate_corners(image_points_px, board, image_size_px, *, labels=None, max
         warnings.warn(f"frame filter did not settle in {max_rounds} rounds; the result uses the {len(active)} "
                       "frames left after the last round", RuntimeWarning, stacklevel=2)
         fit = _calibrate(obj, [imgs[i] for i in active], (w, h), flags)
+    _check_fit(fit, board, (w, h), max_rms_px)
     used = [imgs[i] for i in active]
     residuals = [c - _project(obj, rv, tv, fit.K, fit.dist)
                  for c, rv, tv in zip(used, fit.rvecs, fit.tvecs, strict=True)]
@@ -812,6 +831,20 @@ def calibrate_corners(image_points_px, board, image_size_px, *, labels=None, max
         [Detection(FrameSource(lab), True, c, (w, h), "", "given") for lab, c in zip(labels, imgs, strict=True)],
         rounds=rounds, dropped=dropped, bootstrap=boot, max_mean_reproj_px=thr, flags=int(flags),
         opencv_version=cv2.__version__)
+
+
+def _check_fit(fit, board, size, max_rms_px) -> None:
+    """Refuse a calibration whose principal point is outside the image or whose RMS is implausible."""
+    w, h = size
+    cx, cy = float(fit.K[0, 2]), float(fit.K[1, 2])
+    hint = (f"is the board {board.label()} (inner corners, cols x rows) the one in the images? A smaller "
+            "--board is found in a different part of a larger board in every view")
+    if not (np.isfinite(cx) and np.isfinite(cy) and -0.5 <= cx <= w - 0.5 and -0.5 <= cy <= h - 0.5):
+        raise InputError("board", board.label(), f"a calibration with its principal point inside the {w}x{h} image "
+                         f"(got cx = {cx:.1f}, cy = {cy:.1f} px; RMS {fit.rms_px:.2f} px): {hint}")
+    if max_rms_px is not None and not fit.rms_px <= float(max_rms_px):
+        raise InputError("board", board.label(), f"a calibration with RMS reprojection error <= {float(max_rms_px):g}"
+                         f" px (got {fit.rms_px:.2f} px; raise max_rms_px / --max-rms-px to accept it): {hint}")
 
 
 def _not_found_note(detections) -> str:
@@ -847,6 +880,10 @@ def calibrate_detections(detections, board, **kw) -> IntrinsicCalibration:
             d.found = False
             d.reason = (f"image size {d.image_size_px[0]}x{d.image_size_px[1]} differs from the other frames "
                         f"({size[0]}x{size[1]})")
+    other = [d for d in dets if (d.reason or "").startswith("image size ")]
+    if other:
+        warnings.warn(f"{len(other)} of {len(dets)} frames left out: their image size differs from the "
+                      f"{size[0]}x{size[1]} px of the others (first: {other[0].label})", RuntimeWarning, stacklevel=2)
     good = [d for d in dets if d.found]
     return calibrate_corners([d.corners_px for d in good], board, size, labels=[d.label for d in good],
                              detections=dets, **kw)

@@ -28,6 +28,12 @@ P_RTOL = 1e-6
 P_FAR_PX = 5.0
 #: pixel discrepancy (everywhere) below which P is taken as K [R | t] printed with fewer digits
 P_WARN_PX = 0.05
+#: largest magnitude of any number of a camera or pose file (metres, pixels, degrees): beyond it
+#: products overflow to inf and results turn into "valid" NaNs (issue 11); projected map
+#: coordinates (UTM, ECEF: ~1e7 m) stay far below it
+MAX_MAGNITUDE = 1e9
+#: largest image side accepted, pixels
+MAX_IMAGE_SIDE_PX = 1_000_000
 
 
 def label(where: str, field: str) -> str:
@@ -79,7 +85,7 @@ def as_matrix(where: str, field: str, value, shapes) -> np.ndarray:
     desc = " or ".join(f"{r}x{c}" for r, c in shapes)
     try:
         a = np.asarray(value, dtype=np.float64)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         raise ConfigError(label(where, field), value, f"a numeric {desc} matrix") from None
     if a.shape not in shapes:
         match = [s for s in shapes if a.size == s[0] * s[1]]
@@ -90,7 +96,16 @@ def as_matrix(where: str, field: str, value, shapes) -> np.ndarray:
     if not np.all(np.isfinite(a)):
         bad = tuple(int(i) for i in np.argwhere(~np.isfinite(a))[0])
         raise ConfigError(label(where, f"{field}[{', '.join(map(str, bad))}]"), float(a[bad]), "a finite number")
+    _check_magnitude(where, field, a)
     return a
+
+
+def _check_magnitude(where: str, field: str, a: np.ndarray) -> None:
+    big = np.abs(a) > MAX_MAGNITUDE
+    if np.any(big):
+        i = tuple(int(k) for k in np.argwhere(big)[0])
+        name = f"{field}[{', '.join(map(str, i))}]" if a.ndim else field
+        raise ConfigError(label(where, name), float(a[i]), f"a number of magnitude <= {MAX_MAGNITUDE:g}")
 
 
 def as_vector(where: str, field: str, value, sizes, what: str = "numbers") -> np.ndarray:
@@ -98,7 +113,7 @@ def as_vector(where: str, field: str, value, sizes, what: str = "numbers") -> np
     desc = " or ".join(map(str, sizes))
     try:
         a = np.asarray(value, dtype=np.float64)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         raise ConfigError(label(where, field), value, f"a list of {desc} {what}") from None
     if a.ndim == 2 and 1 in a.shape:
         a = a.ravel()
@@ -107,6 +122,7 @@ def as_vector(where: str, field: str, value, sizes, what: str = "numbers") -> np
     if not np.all(np.isfinite(a)):
         i = int(np.argwhere(~np.isfinite(a))[0, 0])
         raise ConfigError(label(where, f"{field}[{i}]"), float(a[i]), "a finite number")
+    _check_magnitude(where, field, a)
     return a
 
 
@@ -115,10 +131,12 @@ def as_number(where: str, field: str, value, *, positive: bool = False, lo=None,
         raise ConfigError(label(where, field), value, f"a number{unit}")
     try:
         x = float(value)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         raise ConfigError(label(where, field), value, f"a number{unit}") from None
     if not math.isfinite(x):
         raise ConfigError(label(where, field), value, f"a finite number{unit}")
+    if abs(x) > MAX_MAGNITUDE:
+        raise ConfigError(label(where, field), value, f"a number of magnitude <= {MAX_MAGNITUDE:g}{unit}")
     if positive and not x > 0:
         raise ConfigError(label(where, field), value, f"a number > 0{unit}")
     if lo is not None and x < lo:
@@ -138,10 +156,10 @@ def as_image_size(where: str, field: str, value) -> tuple[int, int]:
             raise ConfigError(label(where, field), value, expected)
         try:
             f = float(v)
-        except (TypeError, ValueError):
+        except (TypeError, ValueError, OverflowError):
             raise ConfigError(label(where, field), value, expected) from None
-        if not math.isfinite(f) or f != int(f) or f <= 0:
-            raise ConfigError(label(where, field), value, expected)
+        if not math.isfinite(f) or f != int(f) or f <= 0 or f > MAX_IMAGE_SIDE_PX:
+            raise ConfigError(label(where, field), value, f"{expected}, at most {MAX_IMAGE_SIDE_PX}")
         out.append(int(f))
     return out[0], out[1]
 

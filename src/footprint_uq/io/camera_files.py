@@ -321,7 +321,9 @@ def _write_mapping(data: dict, path, header: str) -> Path:
     else:
         raise InputError("path", str(path), "a file name ending in .yaml, .yml or .json")
     p.parent.mkdir(parents=True, exist_ok=True)
-    p.write_text(text, encoding="utf-8")
+    from .atomic import atomic_write_text
+
+    atomic_write_text(p, text)
     return p
 
 

@@ -173,8 +173,11 @@ def save_calibration_figures(cal, out_dir, *, coverage=None, error_map=None, asy
         "sigmas.png": plot_sigma_comparison(cal),
     }
     files = {}
+    from ..io.atomic import atomic_path
+
     for name, fig in figs.items():
-        fig.savefig(out / name, dpi=dpi, bbox_inches="tight")
+        with atomic_path(out / name) as tmp:
+            fig.savefig(tmp, dpi=dpi, bbox_inches="tight")
         files[name] = str(out / name)
     return files
 

@@ -410,5 +410,8 @@ def save_figure(fig: Figure, path, *, dpi: int = 150) -> Path:
     """Save ``fig`` (PNG/PDF/SVG by extension), creating parent directories."""
     p = Path(path)
     p.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(p, dpi=dpi, bbox_inches="tight")
+    from ..io.atomic import atomic_path
+
+    with atomic_path(p) as tmp:
+        fig.savefig(tmp, dpi=dpi, bbox_inches="tight")
     return p

@@ -92,5 +92,7 @@ def write_html(path, html: str) -> Path:
     """Write ``html`` (UTF-8), creating parent directories."""
     p = Path(path)
     p.parent.mkdir(parents=True, exist_ok=True)
-    p.write_text(html, encoding="utf-8")
+    from ..io.atomic import atomic_write_text
+
+    atomic_write_text(p, html)
     return p

@@ -1,0 +1,143 @@
+"""Atomic outputs: write under a temporary name in the same folder, flush + fsync, then rename.
+
+After any failure (an exception, a full disk, a killed process) nothing new stands under
+the final name and the previous file of that name is intact; a temporary file left by a
+killed process is hidden (its name starts with ``.``, which pyarrow datasets and globbing
+skip) and carries :data:`TMP_MARK` (``.<stem>.tmp-<hex><suffix>``), so :func:`clean_temporaries` can remove it.
+
+* :func:`atomic_path` -- a context manager yielding the temporary path to write (by any
+  library: matplotlib, numpy, pyarrow), committed on a clean exit;
+* :func:`atomic_write_text` / :func:`atomic_write_bytes` -- one call for small files;
+* :func:`path_component` -- a name from data (a camera id) made safe to be one path component.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import uuid
+from collections.abc import Iterator
+from pathlib import Path
+from urllib.parse import quote
+
+__all__ = ["TMP_MARK", "atomic_path", "atomic_write_text", "atomic_write_bytes", "commit", "discard", "temp_path",
+           "clean_temporaries", "clean_temporaries_of", "fsync_dir", "path_component", "same_file"]
+
+#: part of every temporary name (``.<stem>.tmp-<hex><suffix>``)
+TMP_MARK = ".tmp-"
+
+
+def temp_path(final) -> Path:
+    """A fresh hidden temporary name next to ``final``: ``.<stem>.tmp-<8 hex><suffix>``.
+
+    The extension is kept, so writers that choose their format by it (matplotlib, numpy's
+    ``savez``, OpenCV's FileStorage) write the same bytes as under the final name.
+    """
+    final = Path(final)
+    return final.with_name(f".{final.stem}{TMP_MARK}{uuid.uuid4().hex[:8]}{final.suffix}")
+
+
+def fsync_dir(folder) -> None:
+    """fsync a folder (makes a rename in it durable); a no-op where folders cannot be opened."""
+    try:
+        fd = os.open(folder, os.O_RDONLY)
+    except OSError:  # pragma: no cover - e.g. Windows
+        return
+    try:
+        os.fsync(fd)
+    except OSError:  # pragma: no cover - some file systems refuse fsync on folders
+        pass
+    finally:
+        os.close(fd)
+
+
+def commit(tmp, final) -> None:
+    """fsync ``tmp``, rename it to ``final`` (replacing it), fsync the folder."""
+    with open(tmp, "rb+") as f:
+        os.fsync(f.fileno())
+    os.replace(tmp, final)
+    fsync_dir(Path(final).parent or ".")
+
+
+def discard(tmp) -> None:
+    """Remove a temporary file (never raises)."""
+    with contextlib.suppress(OSError):
+        Path(tmp).unlink()
+
+
+@contextlib.contextmanager
+def atomic_path(final) -> Iterator[Path]:
+    """Yield a temporary path next to ``final``; on a clean exit it replaces ``final``, else it is removed.
+
+    Examples
+    --------
+    >>> with atomic_path("fig.png") as tmp:
+    ...     fig.savefig(tmp)    # the temporary name keeps the extension
+    """
+    final = Path(final)
+    tmp = temp_path(final)
+    try:
+        yield tmp
+        commit(tmp, final)
+    except BaseException:
+        discard(tmp)
+        raise
+
+
+def atomic_write_bytes(path, data: bytes) -> None:
+    """Write ``data`` to ``path`` atomically."""
+    with atomic_path(path) as tmp, open(tmp, "wb") as f:
+        f.write(data)
+        f.flush()
+
+
+def atomic_write_text(path, text: str, *, encoding: str = "utf-8") -> None:
+    """Write ``text`` to ``path`` atomically."""
+    atomic_write_bytes(path, text.encode(encoding))
+
+
+def clean_temporaries(folder, *, recursive: bool = True) -> int:
+    """Remove the temporary files :func:`temp_path` names under ``folder``; returns how many."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        return 0
+    it = folder.rglob(f".*{TMP_MARK}*") if recursive else folder.glob(f".*{TMP_MARK}*")
+    n = 0
+    for p in it:
+        if p.is_file() and not p.is_symlink():
+            discard(p)
+            n += 1
+    return n
+
+
+def clean_temporaries_of(final) -> int:
+    """Remove the temporaries of ``final`` left by killed runs (``.<stem>.tmp-*<suffix>`` beside it)."""
+    final = Path(final)
+    n = 0
+    if final.parent.is_dir() or str(final.parent) == "":
+        for p in (final.parent if str(final.parent) else Path(".")).glob(f".{final.stem}{TMP_MARK}*{final.suffix}"):
+            if p.is_file() and not p.is_symlink():
+                discard(p)
+                n += 1
+    return n
+
+
+def path_component(name) -> str:
+    """``name`` (text from data: a camera id) as one safe path component, percent-encoded.
+
+    Every character but ASCII letters, digits and ``-_.~`` is encoded as ``%XX`` of its UTF-8
+    bytes (what hive partitioning does), so ``/``, ``\\``, ``..``-tricks and control characters
+    cannot leave the folder; ``.`` and ``..`` themselves and a leading ``.`` are encoded too.
+    Distinct names give distinct components (``urllib.parse.unquote`` inverts it).
+    """
+    text = quote(str(name), safe="-_~")
+    text = text.replace(".", "%2E") if text.strip(".") == "" or text.startswith(".") else text
+    return text if text else "%00empty"
+
+
+def same_file(a, b) -> bool:
+    """True when ``a`` and ``b`` are the same file (hard links and symlinks included), by identity."""
+    try:
+        return os.path.samefile(a, b)
+    except OSError:
+        return Path(a).absolute() == Path(b).absolute()
