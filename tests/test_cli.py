@@ -142,6 +142,18 @@ def test_presets_formats():
     assert len(lines) == 7 and lines[0].startswith("name,focal_px")
 
 
+def test_presets_angle_reading_and_axes():
+    rows = json.loads(run("presets", "bw-cube1", "BW-Cube1@deg", "--format", "json").stdout)
+    assert [row["name"] for row in rows] == ["bw-cube1", "bw-cube1@deg"]
+    assert rows[0]["pan_deg"] == pytest.approx(0.8032e-3) and rows[1]["pan_deg"] == pytest.approx(0.8032)
+    # Table 3: sigma X 0.4912 (north), sigma Y 0.1910 (east)
+    assert rows[0]["x_m"] == 0.1910 and rows[0]["y_m"] == 0.4912
+    text = run("presets", "basler1@deg").stdout
+    assert "Basler1@deg" in text and "@deg" in run("presets", "--help").stdout
+    r = run("presets", "basler1@rad")
+    assert r.exit_code == 2 and "@deg" in r.output and "Traceback" not in r.output
+
+
 def test_demo_writes_report(tmp_path):
     out = tmp_path / "demo"
     r = run("demo", "--out", out, "--step-px", 24)
