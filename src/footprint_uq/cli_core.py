@@ -28,12 +28,12 @@ __all__ = ["locate_cmd", "map_cmd", "presets_cmd", "demo_cmd", "locate_records",
 
 #: keys of every ``locate`` record, in output order
 LOCATE_KEYS = ("u_px", "v_px", "x_m", "y_m", "cov_m2", "sigma_major_m", "sigma_minor_m", "orientation_deg",
-               "valid", "reason")
+               "nonlinearity", "linear_ok", "valid", "reason")
 #: extra keys when ``--confidence`` is given
 CONFIDENCE_KEYS = ("confidence", "semi_major_m", "semi_minor_m")
 #: CSV columns of ``locate`` (covariance flattened)
 CSV_KEYS = ("u_px", "v_px", "x_m", "y_m", "cov_xx_m2", "cov_xy_m2", "cov_yy_m2", "sigma_major_m", "sigma_minor_m",
-            "orientation_deg", "valid", "reason")
+            "orientation_deg", "nonlinearity", "linear_ok", "valid", "reason")
 
 #: the demonstration camera: a roadside pole, full-HD camera (our pan-tilt camera-file keys)
 DEMO_CAMERA = {
@@ -74,18 +74,21 @@ def _num(x):
     return x if math.isfinite(x) else None
 
 
-def locate_records(camera, budget, uv_px, *, confidence: float | None = None) -> list[dict]:
+def locate_records(camera, budget, uv_px, *, confidence: float | None = None,
+                   linear_threshold: float = 0.05) -> list[dict]:
     """The ``locate`` output as a list of dicts (keys :data:`LOCATE_KEYS`, plus
     :data:`CONFIDENCE_KEYS` when ``confidence`` is given).
 
     Numbers are those of :func:`footprint_uq.propagate` and
     :func:`footprint_uq.ellipse_axes`; invalid points have None numbers, ``valid``
-    False and the reason text of :mod:`footprint_uq.status`.
+    False and the reason text of :mod:`footprint_uq.status`.  ``nonlinearity`` is the
+    predicted relative error of the linear 1-sigma semi-major axis and ``linear_ok``
+    is ``nonlinearity <= linear_threshold`` (False for invalid points).
     """
     from .propagation import propagate
 
     uv = np.asarray(uv_px, dtype=np.float64).reshape(-1, 2)
-    est = propagate(camera, budget, uv)
+    est = propagate(camera, budget, uv, linear_threshold=linear_threshold)
     a, b, ang = ellipse_axes(est.cov_m2)
     k = chi2_scale(confidence) if confidence is not None else None
     out = []
@@ -97,6 +100,7 @@ def locate_records(camera, budget, uv_px, *, confidence: float | None = None) ->
             "x_m": _num(est.xy_world_m[i, 0]), "y_m": _num(est.xy_world_m[i, 1]),
             "cov_m2": [[_num(c[0, 0]), _num(c[0, 1])], [_num(c[1, 0]), _num(c[1, 1])]],
             "sigma_major_m": _num(a[i]), "sigma_minor_m": _num(b[i]), "orientation_deg": _num(ang[i]),
+            "nonlinearity": _num(est.nonlinearity[i]), "linear_ok": bool(est.linear_ok[i]),
             "valid": ok, "reason": None if ok else status.REASONS[int(est.reason[i])],
         }
         if k is not None:
@@ -145,13 +149,20 @@ def _csv_text(records: list[dict], confidence) -> str:
 @click.option("--format", "fmt", type=click.Choice(["json", "csv"]), default="json", show_default=True)
 @click.option("--confidence", type=float, default=None, metavar="P",
               help="Also report the semi-axes of the P-confidence ellipse (2-D chi-square, 0.95 -> 2.4477 sigma).")
-def locate_cmd(camera_path, budget_spec, pixels, fmt, confidence):
+@click.option("--linear-threshold", type=float, default=0.05, show_default=True, metavar="E",
+              help="linear_ok is true where the predicted relative error of the linear 1-sigma semi-major axis "
+                   "(nonlinearity) is at most E.")
+def locate_cmd(camera_path, budget_spec, pixels, fmt, confidence, linear_threshold):
     """Ground position (x east, y north, metres) and 2x2 covariance (m^2) of pixels.
 
     One record per --pixel: u_px, v_px, x_m, y_m, cov_m2, sigma_major_m,
     sigma_minor_m (1 sigma), orientation_deg (major axis, counter-clockwise from
-    east), valid and reason (null when valid).  With --confidence P, also
-    confidence, semi_major_m and semi_minor_m of the P ellipse.
+    east), nonlinearity (predicted relative error of the linear sigma_major_m:
+    0.05 = 5 %), linear_ok (nonlinearity <= --linear-threshold), valid and reason
+    (null when valid).  With --confidence P, also confidence, semi_major_m and
+    semi_minor_m of the P ellipse.  A valid pixel that is not linear_ok is also
+    reported on stderr: its covariance underestimates the spread (near the
+    horizon; docs/uncertainty-model.md, "The linearity flag").
     """
     confidence = _check_confidence(confidence)
     uv = np.array(pixels, dtype=np.float64).reshape(-1, 2)
@@ -166,7 +177,13 @@ def locate_cmd(camera_path, budget_spec, pixels, fmt, confidence):
         w, h = camera.image_size_px
         click.echo(f"footprint-uq: warning: --pixel #{i + 1} ({uv[i, 0]:g}, {uv[i, 1]:g}) is outside the "
                    f"{w}x{h} image; computed anyway", err=True)
-    records = locate_records(camera, budget, uv, confidence=confidence)
+    records = locate_records(camera, budget, uv, confidence=confidence, linear_threshold=linear_threshold)
+    for i, r in enumerate(records):
+        if r["valid"] and not r["linear_ok"]:
+            nl = r["nonlinearity"]
+            click.echo(f"footprint-uq: warning: --pixel #{i + 1} ({uv[i, 0]:g}, {uv[i, 1]:g}): linearisation error "
+                       f"predicted {100 * nl:.1f} % of sigma_major_m (> {100 * linear_threshold:g} %): the covariance "
+                       "underestimates the spread", err=True)
     if fmt == "json":
         click.echo(json.dumps(records, indent=2, allow_nan=False))
     else:
