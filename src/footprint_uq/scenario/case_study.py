@@ -75,7 +75,7 @@ def camera_type_label(name: str) -> str:
 # -- configuration -------------------------------------------------------------------------
 _CONFIG_KEYS = {"intersection", "vehicle", "trajectory", "cameras", "camera_types", "confidence", "heatmap"}
 _TRAJ_KEYS = {"approach", "entry_lane", "exit_lane", "lead_in_m", "lead_out_m", "turn_radius_m", "speed_mps",
-              "frame_rate_hz"}
+              "turn_speed_mps", "accel_mps2", "frame_rate_hz"}
 _HEAT_KEYS = {"step_m", "margin_m", "yaw_deg"}
 
 
@@ -94,7 +94,8 @@ class CaseStudyConfig:
     vehicle: Vehicle = field(default_factory=Vehicle)
     trajectory: dict = field(default_factory=lambda: {
         "approach": "south", "entry_lane": 0, "exit_lane": 0, "lead_in_m": 35.0, "lead_out_m": 35.0,
-        "turn_radius_m": None, "speed_mps": 8.0, "frame_rate_hz": 10.0})
+        "turn_radius_m": None, "speed_mps": 8.0, "turn_speed_mps": 4.5, "accel_mps2": 2.0,
+        "frame_rate_hz": 10.0})
     cameras: list = field(default_factory=list)
     camera_types: dict = field(default_factory=lambda: {k: k for k in CAMERA_TYPES})
     confidence: float = 0.95
@@ -223,14 +224,16 @@ def build_scene(config: CaseStudyConfig | None = None) -> Scene:
     path = left_turn_path(config.intersection, approach=t["approach"], entry_lane=int(t["entry_lane"]),
                           exit_lane=int(t["exit_lane"]), lead_in_m=t["lead_in_m"], lead_out_m=t["lead_out_m"],
                           turn_radius_m=t["turn_radius_m"])
-    tr = sample_trajectory(path, config.vehicle, speed_mps=t["speed_mps"], frame_rate_hz=t["frame_rate_hz"])
+    tr = sample_trajectory(path, config.vehicle, speed_mps=t["speed_mps"], frame_rate_hz=t["frame_rate_hz"],
+                           turn_speed_mps=t["turn_speed_mps"], accel_mps2=t["accel_mps2"])
     cams = {}
     settings = {}
     for spec in config.cameras:
         cams[spec.name] = spec.build()
         settings[spec.name] = spec.to_dict()
     return Scene(config.intersection.layout(), cams, np.arange(len(tr)), tr.t_s, tr.boxes_world, tr.segment,
-                 camera_settings=settings, extra={"path": path.to_dict(), "turn_radius_m": path.radius_m})
+                 camera_settings=settings, extra={"path": path.to_dict(), "turn_radius_m": path.radius_m,
+                                                  "speed_mps": tr.speed_mps})
 
 
 # -- axes -----------------------------------------------------------------------------------------
