@@ -186,6 +186,16 @@ def test_report_written_with_every_figure(small_report):
     assert f"camera1, X = north, Y = east: {verdict}" in html
     summary = json.loads(paths["summary"].read_text())
     assert len(summary["summary"]) == 6 and len(summary["xy_statements"]) == 18
+    # the paper's statements with their verdicts, and the link to the reproduction page
+    from footprint_uq.scenario.claims import evaluate_claims
+
+    claims = evaluate_claims(res)
+    assert [c["id"] for c in summary["claims"]] == ["xy_sequence", "lane_width", "ranking"]
+    for c in claims:
+        assert f"<b>{c['verdict']}</b>" in html
+    assert [c["verdict"] for c in summary["claims"]] == [c["verdict"] for c in claims]
+    if paths.get("reproduction") is not None:
+        assert 'href="paper-reproduction.md"' in html and paths["reproduction"].is_file()
 
 
 def test_csv_round_trip(small_report):

@@ -151,8 +151,9 @@ def xy_sequence_claim(result, *, axes: str = XY_AXES) -> dict:
     why = ("holds for every camera and type" if not failed else
            "fails for " + ", ".join(failed) + ": " + "; ".join(
                f"{p['camera']}/{p['camera_type']}: X>Y in {_pct(p['share_X_gt_Y_entry'])} of the entry frames, "
-               f"Y>X in {_pct(p['share_Y_gt_X_exit'])} of the exit frames, crossing at "
-               f"{_frac(p['crossing_position_in_junction'])} of the way through the junction"
+               f"Y>X in {_pct(p['share_Y_gt_X_exit'])} of the exit frames, X-to-Y crossing at "
+               f"{_frac(p['crossing_position_in_junction'])} of the junction passage (wanted "
+               f"{XY_MIDDLE[0]:.2f}-{XY_MIDDLE[1]:.2f})"
                for p in per if not p["pass"] and p["camera"] in failed[:2])[:600])
     return {"id": "xy_sequence", "paper": PAPER_QUOTES["xy_sequence"],
             "measure": f"X = north, Y = east (the paper's frame G, pan a compass heading); footprint-centre sigma: "
