@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from footprint_uq import ErrorBudget, InputError, OpenCVCamera, PanTiltCamera, ellipse_axes, monte_carlo, propagate
 from footprint_uq import params as P
@@ -146,3 +148,24 @@ def test_indicator_tracks_the_monte_carlo_deviation(sweep):
     # beyond the flag the linear axis under-estimates, and the indicator says so
     big = np.concatenate([m[n > 0.3] for _, n, _, m in sweep])
     assert big.size and np.all(big > 0.2)
+
+
+@settings(max_examples=40, deadline=None)
+@given(pan=st.floats(-180, 180), tilt=st.floats(5, 60), height=st.floats(3, 30), u=st.floats(0, 1919),
+       v=st.floats(0, 1079), x=st.floats(-1e4, 1e4), slope=st.floats(0.0, 1.0))
+def test_properties_over_cameras_and_pixels(pan, tilt, height, u, v, x, slope):
+    """Finite and >= 0 where valid; invariant to where the camera stands; ~ k^2 when the budget is scaled by k."""
+    budget = ErrorBudget.preset("bw-cube1@deg").replace(ground_slope_deg=slope, roll_deg=0.1)
+    cam = PanTiltCamera(1400.0, (1920, 1080), height, pan, tilt)
+    far = PanTiltCamera(1400.0, (1920, 1080), height, pan, tilt, position_m=(x, -x / 3))
+    uv = np.array([u, v])
+    est = propagate(cam, budget, uv)
+    if not est.valid:
+        assert np.isnan(est.nonlinearity) and not est.linear_ok
+        return
+    nl = float(est.nonlinearity)
+    assert np.isfinite(nl) and nl >= 0.0
+    assert float(propagate(far, budget, uv).nonlinearity) == pytest.approx(nl, rel=1e-6, abs=1e-12)
+    if 1e-8 < nl < 1e-3:  # leading order: every term of delta / lam_max scales with the variances
+        nl2 = float(propagate(cam, budget.scaled(2.0), uv).nonlinearity)
+        assert nl2 / nl == pytest.approx(4.0, rel=0.03)
