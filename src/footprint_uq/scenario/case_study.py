@@ -51,6 +51,7 @@ from ..budget import SHARED_SOURCES, ErrorBudget, load_budget
 from ..ellipse import chi2_scale, ellipse_axes
 from ..errors import ConfigError
 from ..footprints import footprints_from_boxes3d, polygon_centroid
+from ..propagation import DEFAULT_LINEAR_THRESHOLD, nonlinearity
 from .cameras import CAMERA_TYPES, CameraSpec, default_camera_specs
 from .intersection import Intersection, RoadLayout, cfg_float
 from .trajectory import SEGMENTS, Vehicle, box_corners, left_turn_path, sample_trajectory
@@ -395,6 +396,7 @@ class CaseStudyResult:
                                                                  if aj.size else float("nan")),
                     "largest_sigma_major_max_m": _stat(np.max, lp),
                     "frames_centre_95_over_half_lane": int(np.sum(a * k95 > lane / 2)),
+                    "frames_not_linear_ok": int(np.sum(ok & ~r["footprint_linear_ok"].to_numpy(bool))),
                 }
                 out.append(row)
         return out
@@ -557,6 +559,9 @@ def analyse(scene: Scene, camera_types=None, *, confidence: float = 0.95):
         for ct, budget in budgets.items():
             fp = footprints_from_boxes3d(cam, budget, boxes)
             contrib = centre_contributions(cam, budget, fp)
+            with np.errstate(invalid="ignore"):
+                corner_nl = nonlinearity(cam, budget, np.nan_to_num(fp.corners_px, nan=-1e6))
+            corner_nl = np.where(np.isfinite(fp.corners_xy_world_m).all(-1), corner_nl, np.nan)
             footprints[(cam_name, ct)] = fp
             contributions[(cam_name, ct)] = contrib
             row = dict(base)
@@ -571,6 +576,11 @@ def analyse(scene: Scene, camera_types=None, *, confidence: float = 0.95):
                 row[f"corner{k}_sigma_y_m"] = np.sqrt(fp.corners_cov_m2[:, k, 1, 1])
                 row[f"corner{k}_cov_xy_m2"] = fp.corners_cov_m2[:, k, 0, 1]
                 row[f"corner{k}_reason"] = fp.corner_reason[:, k]
+                row[f"corner{k}_nonlinearity"] = corner_nl[:, k]
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", RuntimeWarning)  # all corners invalid: NaN
+                row["footprint_nonlinearity_max"] = np.nanmax(corner_nl, axis=1) if N else np.zeros(0)
+            row["footprint_linear_ok"] = fp.centre_valid & np.all(corner_nl <= DEFAULT_LINEAR_THRESHOLD, axis=1)
             for q, cov, xy in (("largest", fp.largest_cov_m2, fp.largest_xy_world_m),
                                ("centre", fp.centre_cov_m2, fp.centre_xy_world_m)):
                 a, b, th = ellipse_axes(cov)

@@ -704,7 +704,8 @@ def write_case_study_report(result, out_dir, *, settings: dict | None = None, el
         "centre_semi_major_95_junction_median_m": "centre 95 % semi-major, junction median [m]",
         "centre_axis_95_junction_median_over_lane": "95 % major axis / lane width (junction)",
         "largest_sigma_major_max_m": "largest-point σ_major max [m]",
-        "frames_centre_95_over_half_lane": "frames with 95 % semi-major > half lane"}, floatfmt=".3g"))
+        "frames_centre_95_over_half_lane": "frames with 95 % semi-major > half lane",
+        "frames_not_linear_ok": "frames with a corner's linearisation error > 5 %"}, floatfmt=".3g"))
     parts.append("<h2>Figures</h2>")
     for i, cam in enumerate(result.camera_names):
         parts.append(f"<h3>{esc(cam)}</h3>")
