@@ -14,7 +14,16 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from footprint_uq import ErrorBudget, InputError, OpenCVCamera, PanTiltCamera, ellipse_axes, monte_carlo, propagate
+from footprint_uq import (
+    ErrorBudget,
+    InputError,
+    OpenCVCamera,
+    PanTiltCamera,
+    ellipse_axes,
+    monte_carlo,
+    propagate,
+    propagate_joint,
+)
 from footprint_uq import params as P
 from footprint_uq.propagation import nonlinearity, nonlinearity_from_forms, ray_denominator
 
@@ -169,3 +178,12 @@ def test_properties_over_cameras_and_pixels(pan, tilt, height, u, v, x, slope):
     if 1e-8 < nl < 1e-3:  # leading order: every term of delta / lam_max scales with the variances
         nl2 = float(propagate(cam, budget.scaled(2.0), uv).nonlinearity)
         assert nl2 / nl == pytest.approx(4.0, rel=0.03)
+
+
+def test_joint_propagation_carries_the_same_flag():
+    uv = np.array([[[959.5, 800.0], [959.5, 60.0], [300.0, 200.0]], [[959.5, 20.0], [1500.0, 300.0], [10.0, 1000.0]]])
+    j = propagate_joint(DEMO, "bw-cube1@deg", uv, linear_threshold=0.02)
+    e = propagate(DEMO, "bw-cube1@deg", uv, linear_threshold=0.02)
+    np.testing.assert_allclose(j.nonlinearity, e.nonlinearity, rtol=1e-10)
+    np.testing.assert_array_equal(j.linear_ok, e.linear_ok)
+    assert j.linear_ok.shape == (2, 3) and propagate_joint(DEMO, "basler1", uv, linearity=False).nonlinearity is None

@@ -90,12 +90,17 @@ class JointEstimate:
 
     ``xy_world_m`` (..., K, 2); ``cov_m2`` (..., 2K, 2K) ordered x0, y0, x1, y1, ...;
     ``valid``/``reason`` (..., K).  Rows and columns of invalid points are NaN.
+    ``nonlinearity``/``linear_ok`` (..., K): the linearity flag of each point (its 2x2
+    marginal, as :func:`propagate`); None with ``linearity=False``.
     """
 
     xy_world_m: np.ndarray
     cov_m2: np.ndarray
     valid: np.ndarray
     reason: np.ndarray
+    nonlinearity: np.ndarray | None = None
+    linear_ok: np.ndarray | None = None
+    linear_threshold: float = DEFAULT_LINEAR_THRESHOLD
 
 
 @dataclass
@@ -183,7 +188,8 @@ def propagate(camera, budget, uv_px, *, pixel_cov_px2=None, breakdown: bool = Fa
     return GroundEstimate(bp.xy_world_m, cov, bp.valid, bp.reason, contrib, nl, ok, thr)
 
 
-def propagate_joint(camera, budget, uv_px, *, pixel_cov_px2=None) -> JointEstimate:
+def propagate_joint(camera, budget, uv_px, *, pixel_cov_px2=None, linearity: bool = True,
+                    linear_threshold: float = DEFAULT_LINEAR_THRESHOLD) -> JointEstimate:
     """Joint covariance of K points seen in the same image.
 
     Parameters
@@ -191,10 +197,13 @@ def propagate_joint(camera, budget, uv_px, *, pixel_cov_px2=None) -> JointEstima
     uv_px : array_like, shape (..., K, 2)
     pixel_cov_px2 : array_like, shape (..., K, 2, 2), optional
         Per-point detector covariance (independent between points).
+    linearity, linear_threshold
+        The per-point linearity flag, as in :func:`propagate`.
 
     The camera-level sources couple the points; per-point sources fill the 2x2
     diagonal blocks only.
     """
+    thr = _threshold(linear_threshold)
     budget = load_budget(budget)
     uv = as_points("uv_px", uv_px, 2)
     if uv.ndim < 2:
@@ -210,7 +219,14 @@ def propagate_joint(camera, budget, uv_px, *, pixel_cov_px2=None) -> JointEstima
     blocks = _sandwich(bp.dxy_duv, Suv)  # (..., K, 2, 2)
     for k in range(K):
         cov[..., 2 * k:2 * k + 2, 2 * k:2 * k + 2] += blocks[..., k, :, :]
-    return JointEstimate(bp.xy_world_m, cov, bp.valid, bp.reason)
+    nl = ok = None
+    if linearity:
+        idx = np.arange(K)
+        marg = cov.reshape(lead + (K, 2, K, 2))[..., idx, :, idx, :]  # (K, ..., 2, 2): advanced indices first
+        marg = np.moveaxis(marg, 0, -3)
+        nl = _nonlinearity(camera, budget, uv, marg, bp.dxy_dp, bp.dxy_duv, Sp, Suv, bp.valid)
+        ok = bp.valid & (nl <= thr)
+    return JointEstimate(bp.xy_world_m, cov, bp.valid, bp.reason, nl, ok, thr)
 
 
 def _sample_params(budget: ErrorBudget, n: int, rng) -> np.ndarray:
