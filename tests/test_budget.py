@@ -46,7 +46,8 @@ def test_table3_exactly_as_printed_with_the_milli_degree_unit():
         assert presets.PAPER_TABLE3[name] == tuple(float(v) for v in row), name
         b = ErrorBudget.preset(name)
         X, Y, h, a, t = (float(v) for v in row)
-        assert b.position_m == (X, Y) and b.height_m == h
+        # the paper's X is north, Y east: world (east, north) = (Y, X)
+        assert b.position_m == (Y, X) and b.height_m == h
         # "0.1524" in a column headed (10^-3 deg) is 0.0001524 deg
         assert b.pan_deg == pytest.approx(a * 1e-3, rel=1e-15)
         assert b.tilt_deg == pytest.approx(t * 1e-3, rel=1e-15)
@@ -82,7 +83,8 @@ def test_preset_budget_values_and_param_covariance():
     # one focal error moves fx and fy together: a rank-one 2x2 block of sigma_f^2
     np.testing.assert_allclose(S[:2, :2], 0.4411**2 * np.ones((2, 2)), rtol=1e-15)
     assert S[P.CX, P.CX] == pytest.approx(0.3031**2) and S[P.K2, P.K2] == pytest.approx(0.0005**2)
-    assert S[P.XM, P.XM] == pytest.approx(0.4912**2) and S[P.HM, P.HM] == pytest.approx(0.8484**2)
+    assert S[P.YM, P.YM] == pytest.approx(0.4912**2) and S[P.HM, P.HM] == pytest.approx(0.8484**2)
+    assert S[P.XM, P.XM] == pytest.approx(0.1910**2)
     # pixel covariance: imaging and resolution add: 0.1^2 + 0.01^2 = 0.0101 px^2
     np.testing.assert_allclose(b.pixel_covariance(), 0.0101 * np.eye(2), rtol=1e-14)
     np.testing.assert_allclose(b.pixel_covariance(("imaging",)), 0.01 * np.eye(2), rtol=1e-14)

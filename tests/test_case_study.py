@@ -186,6 +186,16 @@ def test_report_written_with_every_figure(small_report):
     assert f"camera1, X = north, Y = east: {verdict}" in html
     summary = json.loads(paths["summary"].read_text())
     assert len(summary["summary"]) == 6 and len(summary["xy_statements"]) == 18
+    # the paper's statements with their verdicts, and the link to the reproduction page
+    from footprint_uq.scenario.claims import evaluate_claims
+
+    claims = evaluate_claims(res)
+    assert [c["id"] for c in summary["claims"]] == ["xy_sequence", "lane_width", "ranking"]
+    for c in claims:
+        assert f"<b>{c['verdict']}</b>" in html
+    assert [c["verdict"] for c in summary["claims"]] == [c["verdict"] for c in claims]
+    if paths.get("reproduction") is not None:
+        assert 'href="paper-reproduction.md"' in html and paths["reproduction"].is_file()
 
 
 def test_csv_round_trip(small_report):
@@ -272,3 +282,21 @@ def test_nothing_in_view_is_reported_not_invented(tmp_path):
         warnings.simplefilter("error", RuntimeWarning)
         paths = write_case_study_report(res, tmp_path, heatmap=cfg.heatmap, dpi=40)
     assert "not testable" in paths["report"].read_text()
+
+
+def test_linearity_flag_columns(result):
+    from footprint_uq.propagation import nonlinearity
+
+    r = result.rows("camera2", "bw-cube1")
+    cam = result.scene.cameras["camera2"]
+    i = int(np.flatnonzero(r.centre_valid.to_numpy())[0])
+    uv = np.array([[r.loc[i, f"corner{k}_u_px"], r.loc[i, f"corner{k}_v_px"]] for k in range(4)])
+    nl = nonlinearity(cam, result.budgets["bw-cube1"], uv)
+    np.testing.assert_allclose([r.loc[i, f"corner{k}_nonlinearity"] for k in range(4)], nl, rtol=1e-12)
+    assert r.loc[i, "footprint_nonlinearity_max"] == pytest.approx(nl.max(), rel=1e-12)
+    assert bool(r.loc[i, "footprint_linear_ok"]) == bool(nl.max() <= 0.05)
+    # frames whose centre is not available are never flagged linear
+    assert not r.footprint_linear_ok[~r.centre_valid].any()
+    s = {(x["camera"], x["camera_type"]): x for x in result.summary()}
+    assert s[("camera2", "bw-cube1")]["frames_not_linear_ok"] == int(
+        np.sum(r.centre_valid & ~r.footprint_linear_ok))

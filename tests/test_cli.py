@@ -60,9 +60,11 @@ def test_locate_json_equals_api(camera_file):
             assert rec["cov_m2"] == est.cov_m2[i].tolist()
             assert rec["sigma_major_m"] == a[i] and rec["sigma_minor_m"] == b[i]
             assert rec["orientation_deg"] == ang[i]
+            assert rec["nonlinearity"] == est.nonlinearity[i] and rec["linear_ok"] is bool(est.linear_ok[i])
         else:
             assert rec["reason"] == status.REASONS[status.ABOVE_HORIZON]
             assert rec["x_m"] is None and rec["y_m"] is None and rec["sigma_major_m"] is None
+            assert rec["nonlinearity"] is None and rec["linear_ok"] is False
             assert rec["cov_m2"] == [[None, None], [None, None]]
 
 
@@ -83,10 +85,30 @@ def test_locate_csv_equals_api(camera_file):
             assert [float(d[k]) for k in ("cov_xx_m2", "cov_xy_m2", "cov_yy_m2")] == [c[0, 0], c[0, 1], c[1, 1]]
             assert float(d["sigma_major_m"]) == a[i] and float(d["sigma_minor_m"]) == b[i]
             assert float(d["orientation_deg"]) == ang[i]
+            assert float(d["nonlinearity"]) == est.nonlinearity[i]
+            assert d["linear_ok"] == ("true" if est.linear_ok[i] else "false")
             assert d["reason"] == ""
         else:
             assert np.isnan(float(d["x_m"])) and np.isnan(float(d["cov_xx_m2"]))
             assert d["reason"] == status.REASONS[status.ABOVE_HORIZON]
+
+
+def test_locate_linearity_flag_and_threshold(tmp_path):
+    cam = tmp_path / "cam.yaml"
+    save_camera(PanTiltCamera(1400.0, (1920, 1080), 8.0, 30.0, 20.0), cam)
+    args = ("locate", "--camera", cam, "--pixel", 959.5, 800, "--pixel", 959.5, 60)
+    r = run(*args, "--budget", "bw-cube1@deg")
+    assert r.exit_code == 0, r.output
+    near, far = json.loads(r.stdout)
+    assert near["linear_ok"] is True and near["nonlinearity"] < 0.01
+    assert far["linear_ok"] is False and far["nonlinearity"] > 0.5
+    assert "#2" in r.stderr and "linearisation error" in r.stderr and "#1" not in r.stderr
+    # as printed (1e-3 deg) the same pixel is linear; a threshold of 1e-9 flags both
+    assert all(rec["linear_ok"] for rec in json.loads(run(*args, "--budget", "bw-cube1").stdout))
+    r = run(*args, "--budget", "bw-cube1", "--linear-threshold", 1e-9)
+    assert [rec["linear_ok"] for rec in json.loads(r.stdout)] == [False, False]
+    r = run(*args, "--budget", "bw-cube1", "--linear-threshold", -1)
+    assert r.exit_code == 2 and "linear_threshold" in r.output
 
 
 def test_locate_confidence(camera_file):
@@ -140,6 +162,18 @@ def test_presets_formats():
     assert rows[0]["height_m"] == 0.1936 and rows[0]["pan_deg"] == pytest.approx(0.1524e-3)
     lines = run("presets", "--format", "csv").stdout.strip().splitlines()
     assert len(lines) == 7 and lines[0].startswith("name,focal_px")
+
+
+def test_presets_angle_reading_and_axes():
+    rows = json.loads(run("presets", "bw-cube1", "BW-Cube1@deg", "--format", "json").stdout)
+    assert [row["name"] for row in rows] == ["bw-cube1", "bw-cube1@deg"]
+    assert rows[0]["pan_deg"] == pytest.approx(0.8032e-3) and rows[1]["pan_deg"] == pytest.approx(0.8032)
+    # Table 3: sigma X 0.4912 (north), sigma Y 0.1910 (east)
+    assert rows[0]["x_m"] == 0.1910 and rows[0]["y_m"] == 0.4912
+    text = run("presets", "basler1@deg").stdout
+    assert "Basler1@deg" in text and "@deg" in run("presets", "--help").stdout
+    r = run("presets", "basler1@rad")
+    assert r.exit_code == 2 and "@deg" in r.output and "Traceback" not in r.output
 
 
 def test_demo_writes_report(tmp_path):

@@ -207,7 +207,8 @@ def test_config_file_round_trip(tmp_path):
     import yaml
 
     cfg = CaseStudyConfig.from_dict({"intersection": {"lanes_per_direction": 3, "lane_width_m": 3.25},
-                                     "trajectory": {"speed_mps": 6.0, "frame_rate_hz": 5.0},
+                                     "trajectory": {"speed_mps": 6.0, "frame_rate_hz": 5.0,
+                                                    "turn_speed_mps": None},
                                      "camera_types": ["basler1", "bw-cube1"]})
     p = tmp_path / "cs.yaml"
     p.write_text(yaml.safe_dump(cfg.to_dict()))
@@ -227,3 +228,29 @@ def test_config_file_round_trip(tmp_path):
 def test_config_bad_input(d, field):
     with pytest.raises(ConfigError, match=field):
         CaseStudyConfig.from_dict(d)
+
+
+def test_speed_profile_brakes_turns_and_accelerates():
+    """Default: 8 m/s on the straights, 4.5 m/s through the arc, 2 m/s^2 braking and accelerating."""
+    from footprint_uq.scenario.trajectory import speed_profile
+
+    path = left_turn_path(Intersection())
+    s0, s1 = path.breakpoints_m
+    v = speed_profile(path, [0.0, s0 - 1.0, s0, 0.5 * (s0 + s1), s1, s1 + 1.0, path.length_m], speed_mps=8.0,
+                      turn_speed_mps=4.5, accel_mps2=2.0)
+    np.testing.assert_allclose(v[[0, -1]], 8.0)
+    np.testing.assert_allclose(v[2:5], 4.5)
+    np.testing.assert_allclose(v[[1, 5]], np.sqrt(4.5**2 + 2 * 2.0 * 1.0))
+    tr = sample_trajectory(path, speed_mps=8.0, frame_rate_hz=10.0, turn_speed_mps=4.5, accel_mps2=2.0)
+    # the frames follow the profile: displacement per frame = speed x 0.1 s (to the profile's change in 0.1 s)
+    step = np.diff(tr.s_m)
+    np.testing.assert_allclose(step, 0.1 * 0.5 * (tr.speed_mps[1:] + tr.speed_mps[:-1]), atol=0.2 * 0.1 * 0.1 * 2)
+    turn = tr.segment == 1
+    assert np.allclose(tr.speed_mps[turn], 4.5)
+    # lateral acceleration in the turn v^2 / R = 2.3 m/s^2 (the old constant 8 m/s gave 7.3 m/s^2)
+    assert 4.5**2 / path.radius_m == pytest.approx(2.314, abs=1e-3)
+    # default scene: the same profile
+    scene = build_scene(CaseStudyConfig())
+    np.testing.assert_allclose(scene.extra["speed_mps"], tr.speed_mps)
+    with pytest.raises(InputError, match="turn_speed_mps"):
+        sample_trajectory(path, turn_speed_mps=-1.0)

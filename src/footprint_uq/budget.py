@@ -14,7 +14,7 @@ key                 shape        meaning (1-sigma)
 focal_px            scalar       focal length; applied to fx and fy together
 principal_point_px  [c, r]       principal point column / row
 distortion          [5]          k1, k2, p1, p2, k3 (dimensionless)
-position_m          [x, y]       camera position along world x, y
+position_m          [x, y]       camera position along world x (east), y (north)
 height_m            scalar       camera height
 pan_deg             scalar       pan (heading)
 tilt_deg            scalar       tilt (pitch)
@@ -152,11 +152,16 @@ class ErrorBudget:
     # -- construction ----------------------------------------------------------------
     @classmethod
     def preset(cls, name: str) -> ErrorBudget:
-        """One of :data:`footprint_uq.presets.PRESET_NAMES` (case-insensitive)."""
-        key = str(name).strip().lower()
-        if key not in presets.PAPER_TABLE2:
-            raise ConfigError("budget preset", name, f"one of {', '.join(presets.PRESET_NAMES)}")
-        return cls.from_dict(presets.preset_dict(key))
+        """One of :data:`footprint_uq.presets.PRESET_NAMES` (case-insensitive).
+
+        Table 3's angular errors are read as printed (10^-3 deg); append ``@deg``
+        (``"basler1@deg"``) to read them as degrees (:mod:`footprint_uq.presets`).
+        Table 3's sigma X (north) and sigma Y (east) become ``position_m = (sigma_Y, sigma_X)``
+        (world east, north).
+        """
+        if presets.parse_preset_name(name) is None:
+            raise ConfigError("budget preset", name, f"one of {_preset_choices()}")
+        return cls.from_dict(presets.preset_dict(str(name)))
 
     @classmethod
     def from_dict(cls, d: dict, *, where: str = "") -> ErrorBudget:
@@ -282,6 +287,11 @@ class ErrorBudget:
         }
 
 
+def _preset_choices() -> str:
+    return (f"{', '.join(presets.PRESET_NAMES)} (angles as printed, 1e-3 deg), "
+            f"or one of them with '@deg' (angles read as degrees)")
+
+
 def _parse_covariance(c, where):
     label = f"{where}: covariance" if where else "covariance"
     if not isinstance(c, dict) or "names" not in c or "matrix" not in c:
@@ -399,17 +409,21 @@ def psd_factor(S, *, rtol: float = 1e-14) -> SparseFactor:
 
 
 def load_budget(spec) -> ErrorBudget:
-    """A budget from a preset name, a YAML/JSON file path, a mapping or an ErrorBudget."""
+    """A budget from a preset name, a YAML/JSON file path, a mapping or an ErrorBudget.
+
+    Preset names are case-insensitive; ``NAME@deg`` reads Table 3's angular errors as
+    degrees instead of the printed 10^-3 deg (see :mod:`footprint_uq.presets`).
+    """
     if isinstance(spec, ErrorBudget):
         return spec
     if isinstance(spec, dict):
         return ErrorBudget.from_dict(spec)
     s = str(spec)
-    if s.strip().lower() in presets.PAPER_TABLE2:
+    if presets.parse_preset_name(s) is not None:
         return ErrorBudget.preset(s)
     path = Path(s)
     if not path.exists():
-        raise ConfigError("budget", s, f"a preset ({', '.join(presets.PRESET_NAMES)}) or an existing file")
+        raise ConfigError("budget", s, f"a preset ({_preset_choices()}) or an existing file")
     try:
         text = path.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as e:

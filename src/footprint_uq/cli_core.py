@@ -21,19 +21,19 @@ from . import status
 from .budget import ErrorBudget, load_budget
 from .ellipse import chi2_scale, ellipse_axes
 from .errors import InputError
-from .presets import DISPLAY_NAMES, PRESET_NAMES
+from .presets import PRESET_NAMES, display_name
 
 __all__ = ["locate_cmd", "map_cmd", "presets_cmd", "demo_cmd", "locate_records", "LOCATE_KEYS", "CSV_KEYS",
            "run_map", "run_demo", "DEMO_CAMERA", "DEMO_PRESETS", "presets_table"]
 
 #: keys of every ``locate`` record, in output order
 LOCATE_KEYS = ("u_px", "v_px", "x_m", "y_m", "cov_m2", "sigma_major_m", "sigma_minor_m", "orientation_deg",
-               "valid", "reason")
+               "nonlinearity", "linear_ok", "valid", "reason")
 #: extra keys when ``--confidence`` is given
 CONFIDENCE_KEYS = ("confidence", "semi_major_m", "semi_minor_m")
 #: CSV columns of ``locate`` (covariance flattened)
 CSV_KEYS = ("u_px", "v_px", "x_m", "y_m", "cov_xx_m2", "cov_xy_m2", "cov_yy_m2", "sigma_major_m", "sigma_minor_m",
-            "orientation_deg", "valid", "reason")
+            "orientation_deg", "nonlinearity", "linear_ok", "valid", "reason")
 
 #: the demonstration camera: a roadside pole, full-HD camera (our pan-tilt camera-file keys)
 DEMO_CAMERA = {
@@ -78,18 +78,21 @@ def _num(x):
 MAX_PIXEL_PX = 1e9
 
 
-def locate_records(camera, budget, uv_px, *, confidence: float | None = None) -> list[dict]:
+def locate_records(camera, budget, uv_px, *, confidence: float | None = None,
+                   linear_threshold: float = 0.05) -> list[dict]:
     """The ``locate`` output as a list of dicts (keys :data:`LOCATE_KEYS`, plus
     :data:`CONFIDENCE_KEYS` when ``confidence`` is given).
 
     Numbers are those of :func:`footprint_uq.propagate` and
     :func:`footprint_uq.ellipse_axes`; invalid points have None numbers, ``valid``
-    False and the reason text of :mod:`footprint_uq.status`.
+    False and the reason text of :mod:`footprint_uq.status`.  ``nonlinearity`` is the
+    predicted relative error of the linear 1-sigma semi-major axis and ``linear_ok``
+    is ``nonlinearity <= linear_threshold`` (False for invalid points).
     """
     from .propagation import propagate
 
     uv = np.asarray(uv_px, dtype=np.float64).reshape(-1, 2)
-    est = propagate(camera, budget, uv)
+    est = propagate(camera, budget, uv, linear_threshold=linear_threshold)
     a, b, ang = ellipse_axes(est.cov_m2)
     k = chi2_scale(confidence) if confidence is not None else None
     out = []
@@ -105,6 +108,7 @@ def locate_records(camera, budget, uv_px, *, confidence: float | None = None) ->
             "x_m": _num(est.xy_world_m[i, 0]), "y_m": _num(est.xy_world_m[i, 1]),
             "cov_m2": [[_num(c[0, 0]), _num(c[0, 1])], [_num(c[1, 0]), _num(c[1, 1])]],
             "sigma_major_m": _num(a[i]), "sigma_minor_m": _num(b[i]), "orientation_deg": _num(ang[i]),
+            "nonlinearity": _num(est.nonlinearity[i]), "linear_ok": bool(ok and est.linear_ok[i]),
             "valid": ok, "reason": why,
         }
         if k is not None:
@@ -146,19 +150,27 @@ def _csv_text(records: list[dict], confidence) -> str:
 @click.option("--camera", "camera_path", required=True, metavar="FILE",
               help="Camera file (YAML/JSON, OpenCV, ROS or TUMTraf; docs/file-formats.md).")
 @click.option("--budget", "budget_spec", required=True, metavar="FILE_OR_PRESET",
-              help=f"Error budget: a preset ({', '.join(PRESET_NAMES)}) or a YAML/JSON budget file.")
+              help=f"Error budget: a preset ({', '.join(PRESET_NAMES)}; append @deg to read Table 3's "
+                   "angles as degrees instead of the printed 1e-3 deg) or a YAML/JSON budget file.")
 @click.option("--pixel", "pixels", type=(float, float), multiple=True, required=True, metavar="U V",
               help="Pixel (u right, v down, origin at the centre of the top-left pixel); repeat for more.")
 @click.option("--format", "fmt", type=click.Choice(["json", "csv"]), default="json", show_default=True)
 @click.option("--confidence", type=float, default=None, metavar="P",
               help="Also report the semi-axes of the P-confidence ellipse (2-D chi-square, 0.95 -> 2.4477 sigma).")
-def locate_cmd(camera_path, budget_spec, pixels, fmt, confidence):
+@click.option("--linear-threshold", type=float, default=0.05, show_default=True, metavar="E",
+              help="linear_ok is true where the predicted relative error of the linear 1-sigma semi-major axis "
+                   "(nonlinearity) is at most E.")
+def locate_cmd(camera_path, budget_spec, pixels, fmt, confidence, linear_threshold):
     """Ground position (x east, y north, metres) and 2x2 covariance (m^2) of pixels.
 
     One record per --pixel: u_px, v_px, x_m, y_m, cov_m2, sigma_major_m,
     sigma_minor_m (1 sigma), orientation_deg (major axis, counter-clockwise from
-    east), valid and reason (null when valid).  With --confidence P, also
-    confidence, semi_major_m and semi_minor_m of the P ellipse.
+    east), nonlinearity (predicted relative error of the linear sigma_major_m:
+    0.05 = 5 %), linear_ok (nonlinearity <= --linear-threshold), valid and reason
+    (null when valid).  With --confidence P, also confidence, semi_major_m and
+    semi_minor_m of the P ellipse.  A valid pixel that is not linear_ok is also
+    reported on stderr: its covariance underestimates the spread (near the
+    horizon; docs/uncertainty-model.md, "The linearity flag").
     """
     confidence = _check_confidence(confidence)
     uv = np.array(pixels, dtype=np.float64).reshape(-1, 2)
@@ -174,7 +186,13 @@ def locate_cmd(camera_path, budget_spec, pixels, fmt, confidence):
         w, h = camera.image_size_px
         click.echo(f"footprint-uq: warning: --pixel #{i + 1} ({uv[i, 0]:g}, {uv[i, 1]:g}) is outside the "
                    f"{w}x{h} image; computed anyway", err=True)
-    records = locate_records(camera, budget, uv, confidence=confidence)
+    records = locate_records(camera, budget, uv, confidence=confidence, linear_threshold=linear_threshold)
+    for i, r in enumerate(records):
+        if r["valid"] and not r["linear_ok"]:
+            nl = r["nonlinearity"]
+            click.echo(f"footprint-uq: warning: --pixel #{i + 1} ({uv[i, 0]:g}, {uv[i, 1]:g}): linearisation error "
+                       f"predicted {100 * nl:.1f} % of sigma_major_m (> {100 * linear_threshold:g} %): the covariance "
+                       "underestimates the spread", err=True)
     if fmt == "json":
         click.echo(json.dumps(records, indent=2, allow_nan=False))
     else:
@@ -257,27 +275,36 @@ _PRESET_ROWS = (
     ("focal_px", "px", "focal length"), ("pp_c_px", "px", "principal point, column"),
     ("pp_r_px", "px", "principal point, row"), ("k1", "-", "radial k1"), ("k2", "-", "radial k2"),
     ("p1", "-", "tangential p1"), ("p2", "-", "tangential p2"), ("k3", "-", "radial k3"),
-    ("x_m", "m", "position x"), ("y_m", "m", "position y"), ("height_m", "m", "height"),
+    ("x_m", "m", "position east (Table 3 sigma Y)"), ("y_m", "m", "position north (Table 3 sigma X)"),
+    ("height_m", "m", "height"),
     ("pan_deg", "deg", "pan (alpha)"), ("tilt_deg", "deg", "tilt (theta)"), ("roll_deg", "deg", "roll"),
     ("ground_height_m", "m", "ground height"), ("ground_slope_deg", "deg", "ground slope"),
     ("imaging_px", "px", "imaging noise (per point)"), ("resolution_px", "px", "resolution (per point)"),
 )
 
 
-def presets_table() -> list[dict]:
-    """One row per preset (:meth:`ErrorBudget.table_row`), 1-sigma values, units in the keys."""
-    return [ErrorBudget.preset(n).table_row() for n in PRESET_NAMES]
+def presets_table(names=None) -> list[dict]:
+    """One row per preset (:meth:`ErrorBudget.table_row`), 1-sigma values, units in the keys.
+
+    ``names``: preset names, each optionally with the ``@deg`` suffix; default the six presets
+    with Table 3's angles as printed.
+    """
+    names = list(names) if names else list(PRESET_NAMES)
+    return [ErrorBudget.preset(n).table_row() for n in names]
 
 
 def _presets_text(rows) -> str:
-    names = [DISPLAY_NAMES.get(r["name"], r["name"]) for r in rows]
+    names = [display_name(r["name"]) for r in rows]
     header = ["parameter (1 sigma)", "unit"] + names
     body = [[desc, unit] + [f"{r[key]:.4g}" for r in rows] for key, unit, desc in _PRESET_ROWS]
     widths = [max(len(str(x)) for x in col) for col in zip(header, *body, strict=True)]
     lines = ["Error-budget presets: Kusari et al., Tables 2 (intrinsic) and 3 (extrinsic); imaging/resolution "
              "from Sec. III-D.",
-             "Angular errors are the paper's printed values in 1e-3 deg (e.g. 0.1524 -> 0.0001524 deg); roll and "
-             "ground-plane errors were not measured (0).", ""]
+             "Table 3's sigma X is north, sigma Y east (the paper's earth frame): world position (east, north) = "
+             "(sigma Y, sigma X).",
+             "Angles: NAME reads Table 3's sigma alpha/theta as printed, in 1e-3 deg (0.1524 -> 0.0001524 deg); "
+             "NAME@deg reads them as degrees.",
+             "Roll and ground-plane errors were not measured (0).", ""]
     fmt_row = lambda cells: "  ".join(  # noqa: E731
         (c.ljust(w) if i < 2 else c.rjust(w)) for i, (c, w) in enumerate(zip(cells, widths, strict=True)))
     lines.append(fmt_row(header))
@@ -287,10 +314,20 @@ def _presets_text(rows) -> str:
 
 
 @click.command("presets")
+@click.argument("names", nargs=-1, metavar="[NAME[@deg]]...")
 @click.option("--format", "fmt", type=click.Choice(["text", "json", "csv"]), default="text", show_default=True)
-def presets_cmd(fmt):
-    """The error-budget presets of the paper (Tables 2-3): 1-sigma values of every source."""
-    rows = presets_table()
+def presets_cmd(names, fmt):
+    """The error-budget presets of the paper (Tables 2-3): 1-sigma values of every source.
+
+    Table 3's sigma X is along north and sigma Y along east (the paper's earth frame,
+    docs/conventions.md): the world position sigma is (east, north) = (sigma Y, sigma X).
+    Table 3 prints sigma alpha and sigma theta in 1e-3 deg. A preset name alone
+    (basler1) reads them as printed: the default. NAME@deg (basler1@deg) reads the same
+    numbers as degrees; the suffix works wherever a preset is accepted (--budget of
+    every command, case-study camera_types, load_budget). Give NAMES to list only
+    those, e.g. `footprint-uq presets basler1 basler1@deg`.
+    """
+    rows = presets_table(names)
     if fmt == "json":
         click.echo(json.dumps(rows, indent=2))
     elif fmt == "csv":
@@ -344,7 +381,7 @@ def run_demo(out_dir, *, step_px: int = 4, max_range_m: float = 120.0, presets=D
         say(f"figures: {b.name}")
         _, files[b.name] = run_map(camera, b, out / b.name, step_px=step_px, max_range_m=max_range_m,
                                    vmin_m=vmin, vmax_m=vmax, umap=m)
-    prof = save_figure(plot_range_profile(maps, [DISPLAY_NAMES[b.name] for b in budgets]),
+    prof = save_figure(plot_range_profile(maps, [display_name(b.name) for b in budgets]),
                        out / "range_profile.png")
 
     # -- report --------------------------------------------------------------------------
@@ -400,7 +437,7 @@ def run_demo(out_dir, *, step_px: int = 4, max_range_m: float = 120.0, presets=D
         s = m.summary()
         thr = {t["semi_major_below_m"]: t for t in s["below_threshold"]}
         srows.append({
-            "budget": DISPLAY_NAMES[b.name],
+            "budget": display_name(b.name),
             "median semi-major [m]": s["semi_major_m_median"],
             "95th pct semi-major [m]": s["semi_major_m_p95"],
             "max range with semi-major < 0.5 m [m]": thr[0.5]["max_range_m"],
@@ -415,7 +452,7 @@ def run_demo(out_dir, *, step_px: int = 4, max_range_m: float = 120.0, presets=D
     prow = []
     for b in budgets:
         for r in locate_records(camera, b, np.array(_DEMO_PIXELS), confidence=0.95):
-            prow.append({"budget": DISPLAY_NAMES[b.name], "u_px": r["u_px"], "v_px": r["v_px"], "x_m": r["x_m"],
+            prow.append({"budget": display_name(b.name), "u_px": r["u_px"], "v_px": r["v_px"], "x_m": r["x_m"],
                          "y_m": r["y_m"], "semi_major_m (95 %)": r["semi_major_m"],
                          "semi_minor_m (95 %)": r["semi_minor_m"], "orientation_deg": r["orientation_deg"],
                          "status": "ok" if r["valid"] else r["reason"].split(":")[0]})
@@ -425,7 +462,7 @@ def run_demo(out_dir, *, step_px: int = 4, max_range_m: float = 120.0, presets=D
     parts.append(img_tag(prof.read_bytes(), "1-sigma semi-axes against ground range for the three budgets."))
     for b in budgets:
         f = files[b.name]
-        parts.append(f"<h2>{esc(DISPLAY_NAMES[b.name])}</h2>")
+        parts.append(f"<h2>{esc(display_name(b.name))}</h2>")
         parts.append(img_tag(f["image_png"].read_bytes(), "Semi-major axis per pixel (1 sigma), common colour "
                              "scale across budgets; grey: no ground intersection or beyond the maximum range."))
         parts.append(img_tag(f["ground_png"].read_bytes(), "The same on the ground (bird's-eye view)."))

@@ -11,8 +11,11 @@ denominator is the ray's downward component.  Where the denominator is large
 source and the linear covariance agrees with Monte Carlo to a few percent; as a
 pixel approaches the horizon, the distance grows like 1/denominator, the
 distribution becomes skewed with a heavy far tail and the linear sigma
-under-estimates.  :func:`linearity_ratio` measures the ratio linear/Monte-Carlo
-so that users can see where this happens.
+under-estimates.  :func:`nonlinearity` predicts, per point and in closed form,
+the relative error of the linear 1-sigma semi-major axis (a second-order
+expansion of ``1/Dn``); :func:`propagate` returns it as ``nonlinearity`` with the
+flag ``linear_ok`` (``nonlinearity <= linear_threshold``, default 0.05).
+:func:`linearity_ratio` measures the ratio linear/Monte-Carlo, to check it.
 
 NaN policy: where a point is invalid (ray above the horizon, non-finite input,
 lens model not invertible) the mean and covariance are NaN and ``valid`` is
@@ -33,7 +36,11 @@ from .ellipse import ellipse_axes
 from .errors import InputError
 
 __all__ = ["GroundEstimate", "JointEstimate", "MonteCarloEstimate", "propagate", "propagate_joint",
-           "monte_carlo", "unscented", "linearity_ratio"]
+           "monte_carlo", "unscented", "linearity_ratio", "nonlinearity", "nonlinearity_from_forms",
+           "DEFAULT_LINEAR_THRESHOLD"]
+
+#: default threshold of ``linear_ok``: predicted relative error of the linear 1-sigma semi-major axis
+DEFAULT_LINEAR_THRESHOLD = 0.05
 
 
 @dataclass
@@ -49,6 +56,13 @@ class GroundEstimate:
     contributions : dict[str, (..., 2, 2)] or None
         Per-source covariance contributions; they add up to ``cov_m2``
         (``"cross_terms"`` holds correlations between sources, if any).
+    nonlinearity : (...) float or None
+        Predicted relative error of the linear 1-sigma semi-major axis
+        (:func:`nonlinearity`); NaN where the point is invalid.
+    linear_ok : (...) bool or None
+        ``nonlinearity <= linear_threshold``; False where the point is invalid.
+    linear_threshold : float
+        Threshold used for ``linear_ok``.
     """
 
     xy_world_m: np.ndarray
@@ -56,6 +70,9 @@ class GroundEstimate:
     valid: np.ndarray
     reason: np.ndarray
     contributions: dict | None = None
+    nonlinearity: np.ndarray | None = None
+    linear_ok: np.ndarray | None = None
+    linear_threshold: float = DEFAULT_LINEAR_THRESHOLD
 
     def ellipse(self, confidence: float | None = None):
         """``(semi_major_m, semi_minor_m, orientation_deg)``; see :func:`footprint_uq.ellipse.ellipse_axes`."""
@@ -73,12 +90,17 @@ class JointEstimate:
 
     ``xy_world_m`` (..., K, 2); ``cov_m2`` (..., 2K, 2K) ordered x0, y0, x1, y1, ...;
     ``valid``/``reason`` (..., K).  Rows and columns of invalid points are NaN.
+    ``nonlinearity``/``linear_ok`` (..., K): the linearity flag of each point (its 2x2
+    marginal, as :func:`propagate`); None with ``linearity=False``.
     """
 
     xy_world_m: np.ndarray
     cov_m2: np.ndarray
     valid: np.ndarray
     reason: np.ndarray
+    nonlinearity: np.ndarray | None = None
+    linear_ok: np.ndarray | None = None
+    linear_threshold: float = DEFAULT_LINEAR_THRESHOLD
 
 
 @dataclass
@@ -108,7 +130,8 @@ def _sandwich(J, S):
     return J @ S @ np.swapaxes(J, -1, -2)
 
 
-def propagate(camera, budget, uv_px, *, pixel_cov_px2=None, breakdown: bool = False) -> GroundEstimate:
+def propagate(camera, budget, uv_px, *, pixel_cov_px2=None, breakdown: bool = False,
+              linearity: bool = True, linear_threshold: float = DEFAULT_LINEAR_THRESHOLD) -> GroundEstimate:
     """Ground point and 2x2 covariance of each pixel (first order).
 
     Parameters
@@ -121,7 +144,14 @@ def propagate(camera, budget, uv_px, *, pixel_cov_px2=None, breakdown: bool = Fa
         to the budget's imaging and resolution errors.
     breakdown : bool
         Also return the per-source contributions.
+    linearity : bool
+        Also compute ``nonlinearity`` and ``linear_ok`` (:func:`nonlinearity`); False
+        leaves them None.
+    linear_threshold : float
+        ``linear_ok = nonlinearity <= linear_threshold`` (default 0.05: the linear
+        1-sigma semi-major axis is predicted within 5 % of the true one).
     """
+    thr = _threshold(linear_threshold)
     budget = load_budget(budget)
     uv = as_points("uv_px", uv_px, 2)
     bp = camera.backproject(uv, get_gradients=True)
@@ -151,10 +181,15 @@ def propagate(camera, budget, uv_px, *, pixel_cov_px2=None, breakdown: bool = Fa
         cross = shared_full - total_shared
         if np.any(np.abs(np.nan_to_num(cross)) > 1e-15 * np.nan_to_num(np.abs(shared_full)).max(initial=0)):
             contrib["cross_terms"] = cross
-    return GroundEstimate(bp.xy_world_m, cov, bp.valid, bp.reason, contrib)
+    nl = ok = None
+    if linearity:
+        nl = _nonlinearity(camera, budget, uv, cov, bp.dxy_dp, bp.dxy_duv, Sp, Suv, bp.valid)
+        ok = bp.valid & (nl <= thr)
+    return GroundEstimate(bp.xy_world_m, cov, bp.valid, bp.reason, contrib, nl, ok, thr)
 
 
-def propagate_joint(camera, budget, uv_px, *, pixel_cov_px2=None) -> JointEstimate:
+def propagate_joint(camera, budget, uv_px, *, pixel_cov_px2=None, linearity: bool = True,
+                    linear_threshold: float = DEFAULT_LINEAR_THRESHOLD) -> JointEstimate:
     """Joint covariance of K points seen in the same image.
 
     Parameters
@@ -162,10 +197,13 @@ def propagate_joint(camera, budget, uv_px, *, pixel_cov_px2=None) -> JointEstima
     uv_px : array_like, shape (..., K, 2)
     pixel_cov_px2 : array_like, shape (..., K, 2, 2), optional
         Per-point detector covariance (independent between points).
+    linearity, linear_threshold
+        The per-point linearity flag, as in :func:`propagate`.
 
     The camera-level sources couple the points; per-point sources fill the 2x2
     diagonal blocks only.
     """
+    thr = _threshold(linear_threshold)
     budget = load_budget(budget)
     uv = as_points("uv_px", uv_px, 2)
     if uv.ndim < 2:
@@ -181,7 +219,14 @@ def propagate_joint(camera, budget, uv_px, *, pixel_cov_px2=None) -> JointEstima
     blocks = _sandwich(bp.dxy_duv, Suv)  # (..., K, 2, 2)
     for k in range(K):
         cov[..., 2 * k:2 * k + 2, 2 * k:2 * k + 2] += blocks[..., k, :, :]
-    return JointEstimate(bp.xy_world_m, cov, bp.valid, bp.reason)
+    nl = ok = None
+    if linearity:
+        idx = np.arange(K)
+        marg = cov.reshape(lead + (K, 2, K, 2))[..., idx, :, idx, :]  # (K, ..., 2, 2): advanced indices first
+        marg = np.moveaxis(marg, 0, -3)
+        nl = _nonlinearity(camera, budget, uv, marg, bp.dxy_dp, bp.dxy_duv, Sp, Suv, bp.valid)
+        ok = bp.valid & (nl <= thr)
+    return JointEstimate(bp.xy_world_m, cov, bp.valid, bp.reason, nl, ok, thr)
 
 
 def _sample_params(budget: ErrorBudget, n: int, rng) -> np.ndarray:
@@ -287,3 +332,160 @@ def linearity_ratio(camera, budget, uv_px, *, n_samples: int = 20_000, seed: int
     a_mc = ellipse_axes(mc.cov_m2)[0]
     with np.errstate(invalid="ignore", divide="ignore"):
         return a_lin / a_mc, mc.fraction_valid
+
+
+# -- linearity indicator ---------------------------------------------------------------------------
+def _threshold(value) -> float:
+    try:
+        t = float(value)
+    except (TypeError, ValueError):
+        raise InputError("linear_threshold", value, "a relative error > 0, e.g. 0.05") from None
+    if not np.isfinite(t) or t <= 0:
+        raise InputError("linear_threshold", value, "a relative error > 0, e.g. 0.05")
+    return t
+
+
+def ray_denominator(camera, uv_px):
+    """The ground intersection's denominator and its gradients (reference path, numpy).
+
+    The ground point is ``xy = C_xy + lam d_xy`` with the world ray ``d = R_W_C (x_n, y_n, 1)``
+    (``x_n, y_n`` undistorted normalised coordinates), ``lam = N / Dn``, ``N = ground_dz - h``
+    (< 0) and ``Dn = d_z - s_x d_x - s_y d_y`` (< 0 where the ray meets the ground; ``s_x, s_y``
+    the ground slopes): ``Dn`` is the ray's component along the (upward) ground normal.
+
+    Parameters
+    ----------
+    camera : Camera
+    uv_px : array_like, shape (..., 2)
+
+    Returns
+    -------
+    dn : (...)            ``Dn`` (dimensionless, the ray has unit boresight component)
+    lam_m : (...)         ``lam = N / Dn``, metres (depth along the boresight)
+    d_xy : (..., 2)       horizontal part of ``d``
+    ddn_dp : (..., 22)    dDn / d(params), :data:`footprint_uq.params.PARAM_NAMES` order
+    ddn_duv : (..., 2)    dDn / d(u, v), per pixel
+    """
+    from .cameras.distortion import undistort
+    from .cameras.pinhole import pixel_to_normalised
+    from .cameras.rotation import R_W_C, dR_W_C
+
+    p = np.asarray(camera.params, dtype=np.float64)
+    uv = np.asarray(uv_px, dtype=np.float64)
+    fx, fy, cx, cy, sk = (p[i] for i in range(5))
+    xd, dxd_duv, dxd_dk = pixel_to_normalised(uv, fx, fy, cx, cy, sk, get_gradients=True)
+    xn, _, dxn_dxd, dxn_ddist = undistort(xd, p[P.DIST_SLICE], get_gradients=True)
+    ang = (p[P.PAN], p[P.TILT], p[P.ROLL])
+    R = R_W_C(*ang)
+    ray_c = np.concatenate([xn, np.ones(xn.shape[:-1] + (1,))], -1)
+    d = ray_c @ R.T
+    gx, gy = p[P.GSX], p[P.GSY]
+    n = np.array([-gx, -gy, 1.0])
+    dn = d @ n
+    N = p[P.GDZ] - p[P.HM]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        lam = N / dn
+    nR = n @ R[:, :2]  # dDn/dxn (2,)
+    ddn_dxd = np.einsum("j,...jk->...k", nR, dxn_dxd)
+    g = np.zeros(dn.shape + (P.N_PARAMS,))
+    g[..., 0:5] = np.einsum("...j,...jk->...k", ddn_dxd, dxd_dk)
+    g[..., P.DIST_SLICE] = np.einsum("j,...jk->...k", nR, dxn_ddist)
+    dRc = np.einsum("aij,...j->...ai", dR_W_C(*ang), ray_c)  # (..., 3 angles, 3)
+    g[..., P.PAN:P.ROLL + 1] = dRc @ n
+    g[..., P.GSX] = -d[..., 0]
+    g[..., P.GSY] = -d[..., 1]
+    g_uv = np.einsum("...j,...jk->...k", ddn_dxd, dxd_duv)
+    return dn, lam, d[..., :2], g, g_uv
+
+
+def nonlinearity_from_forms(lam_max_m2, e_major, dn, lam_m, d_xy, mu, gamma):
+    """Second-order correction of the linear semi-major axis, from per-point scalars (portable).
+
+    With ``e`` the unit major axis of the linear covariance (eigenvalue ``lam_max``),
+    ``r = J^T e`` (J the (2, n) Jacobian of the ground point over all n error sources,
+    camera parameters and pixel), ``g`` the gradient of ``Dn`` over the same sources and
+    ``Sigma`` their covariance::
+
+        mu    = r^T Sigma g      (m)          covariance of the major-axis error with dDn
+        gamma = g^T Sigma g      (1)          sigma_Dn^2
+        q2    = gamma / Dn^2                  relative variance of the denominator
+        b     = lam (d_xy . e)   (m)          the depth term along e: xy = C + lam d_xy / (1 + eps)
+        w     = -b / Dn          (m)          D = w dDn, the linear part of the depth term
+        c_L   = mu / Dn,  c_A = (mu - w gamma) / Dn
+        s_A   = lam_max - 2 w mu + w^2 gamma      variance of the rest of the linear error
+        s_LA  = lam_max - w mu
+        delta = 2 q2^2 b^2 - 4 q2 b c_A + q2 s_A + c_A^2 - 6 q2 c_L b + 2 q2 s_LA + 4 c_L c_A
+                + (69 q2^3 + 696 q2^4) b^2
+        nonlinearity = | sqrt(1 + delta / lam_max) - 1 |
+
+    ``delta`` is the fourth-moment (second-order) change of the variance along ``e`` when
+    ``1 / (1 + eps)``, ``eps = dDn / Dn``, is expanded to third order and the errors are
+    jointly Gaussian (docs/uncertainty-model.md, "The linearity flag"); the last terms are the
+    next terms of the pure depth error's (asymptotic) series, ``Var(1 / (1 + eps)) = q2 +
+    8 q2^2 + 69 q2^3 + 696 q2^4 + ...``, which dominates near the horizon.  Shapes broadcast:
+    ``e_major``, ``d_xy`` (..., 2), the others (...).  Returns (...); 1.0 where
+    ``1 + delta / lam_max < 0`` (the expansion has broken down), NaN where an input is NaN.
+    """
+    e = np.asarray(e_major, dtype=np.float64)
+    b = np.asarray(lam_m) * np.einsum("...i,...i->...", np.asarray(d_xy, dtype=np.float64), e)
+    dn = np.asarray(dn, dtype=np.float64)
+    lam_max = np.asarray(lam_max_m2, dtype=np.float64)
+    mu = np.asarray(mu, dtype=np.float64)
+    gamma = np.asarray(gamma, dtype=np.float64)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        q2 = gamma / dn**2
+        w = -b / dn
+        c_L = mu / dn
+        c_A = (mu - w * gamma) / dn
+        s_A = lam_max - 2 * w * mu + w * w * gamma
+        s_LA = lam_max - w * mu
+        delta = (2 * q2 * q2 * b * b - 4 * q2 * b * c_A + q2 * s_A + c_A * c_A - 6 * q2 * c_L * b
+                 + 2 * q2 * s_LA + 4 * c_L * c_A + (69 + 696 * q2) * q2 * q2 * q2 * b * b)
+        x = 1.0 + delta / lam_max
+        out = np.where(x >= 0, np.abs(np.sqrt(np.abs(x)) - 1.0), 1.0)
+    return np.where(np.isfinite(x), out, np.nan)
+
+
+def _nonlinearity(camera, budget, uv, cov, J, Juv, Sp, Suv, valid):
+    dn, lam, d_xy, g, g_uv = ray_denominator(camera, uv)
+    w_eig, V = np.linalg.eigh(np.where(valid[..., None, None], cov, np.eye(2)))
+    lam_max = w_eig[..., 1]
+    e = V[..., :, 1]
+    r = np.einsum("...ij,...i->...j", np.nan_to_num(J), e)  # (..., 22)
+    r_uv = np.einsum("...ij,...i->...j", np.nan_to_num(Juv), e)  # (..., 2)
+    Sg = g @ Sp  # Sp symmetric
+    mu = np.einsum("...i,...i->...", r, Sg) + np.einsum("...i,...ij,...j->...", r_uv, Suv, g_uv)
+    gamma = np.einsum("...i,...i->...", g, Sg) + np.einsum("...i,...ij,...j->...", g_uv, Suv, g_uv)
+    nl = nonlinearity_from_forms(lam_max, e, dn, lam, d_xy, mu, gamma)
+    return np.where(valid, nl, np.nan)
+
+
+def nonlinearity(camera, budget, uv_px, *, pixel_cov_px2=None) -> np.ndarray:
+    """Predicted relative error of the linear 1-sigma semi-major axis, per point (closed form).
+
+    The ground point is ``xy = C_xy + lam d_xy`` with ``lam = N / Dn``: the division by the
+    ray's component along the ground normal, ``Dn``, is the model's main non-linearity
+    (near the horizon ``Dn -> 0``).  Expanding ``1 / (1 + eps)``, ``eps = dDn / Dn``, to
+    third order and taking the fourth moments of the jointly Gaussian errors gives the
+    change ``delta`` of the variance along the linear major axis; the indicator is
+    ``|sqrt(1 + delta / lam_max) - 1|`` (formula: :func:`nonlinearity_from_forms`).
+    It needs, per point, only ``Dn``, ``lam``, ``d_xy``, the major axis and two quadratic
+    forms of the Jacobians (``r^T Sigma g`` and ``g^T Sigma g``).
+
+    Parameters
+    ----------
+    camera : Camera
+    budget : ErrorBudget, preset name, path or mapping
+    uv_px : array_like, shape (..., 2)
+    pixel_cov_px2 : array_like, shape (..., 2, 2), optional
+        Extra per-point pixel covariance (as in :func:`propagate`).
+
+    Returns
+    -------
+    ndarray, shape (...)
+        0 where the linearisation is exact; e.g. 0.05 means the linear 1-sigma semi-major
+        axis is predicted to be off by 5 % (Monte Carlo: ``linearity_ratio``).  NaN where the
+        point is invalid.
+    """
+    est = propagate(camera, budget, uv_px, pixel_cov_px2=pixel_cov_px2)
+    return est.nonlinearity

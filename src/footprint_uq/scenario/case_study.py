@@ -51,6 +51,7 @@ from ..budget import SHARED_SOURCES, ErrorBudget, load_budget
 from ..ellipse import chi2_scale, ellipse_axes
 from ..errors import ConfigError
 from ..footprints import footprints_from_boxes3d, polygon_centroid
+from ..propagation import DEFAULT_LINEAR_THRESHOLD, nonlinearity
 from .cameras import CAMERA_TYPES, CameraSpec, default_camera_specs
 from .intersection import Intersection, RoadLayout, cfg_float
 from .trajectory import SEGMENTS, Vehicle, box_corners, left_turn_path, sample_trajectory
@@ -75,7 +76,7 @@ def camera_type_label(name: str) -> str:
 # -- configuration -------------------------------------------------------------------------
 _CONFIG_KEYS = {"intersection", "vehicle", "trajectory", "cameras", "camera_types", "confidence", "heatmap"}
 _TRAJ_KEYS = {"approach", "entry_lane", "exit_lane", "lead_in_m", "lead_out_m", "turn_radius_m", "speed_mps",
-              "frame_rate_hz"}
+              "turn_speed_mps", "accel_mps2", "frame_rate_hz"}
 _HEAT_KEYS = {"step_m", "margin_m", "yaw_deg"}
 
 
@@ -94,7 +95,8 @@ class CaseStudyConfig:
     vehicle: Vehicle = field(default_factory=Vehicle)
     trajectory: dict = field(default_factory=lambda: {
         "approach": "south", "entry_lane": 0, "exit_lane": 0, "lead_in_m": 35.0, "lead_out_m": 35.0,
-        "turn_radius_m": None, "speed_mps": 8.0, "frame_rate_hz": 10.0})
+        "turn_radius_m": None, "speed_mps": 8.0, "turn_speed_mps": 4.5, "accel_mps2": 2.0,
+        "frame_rate_hz": 10.0})
     cameras: list = field(default_factory=list)
     camera_types: dict = field(default_factory=lambda: {k: k for k in CAMERA_TYPES})
     confidence: float = 0.95
@@ -223,14 +225,16 @@ def build_scene(config: CaseStudyConfig | None = None) -> Scene:
     path = left_turn_path(config.intersection, approach=t["approach"], entry_lane=int(t["entry_lane"]),
                           exit_lane=int(t["exit_lane"]), lead_in_m=t["lead_in_m"], lead_out_m=t["lead_out_m"],
                           turn_radius_m=t["turn_radius_m"])
-    tr = sample_trajectory(path, config.vehicle, speed_mps=t["speed_mps"], frame_rate_hz=t["frame_rate_hz"])
+    tr = sample_trajectory(path, config.vehicle, speed_mps=t["speed_mps"], frame_rate_hz=t["frame_rate_hz"],
+                           turn_speed_mps=t["turn_speed_mps"], accel_mps2=t["accel_mps2"])
     cams = {}
     settings = {}
     for spec in config.cameras:
         cams[spec.name] = spec.build()
         settings[spec.name] = spec.to_dict()
     return Scene(config.intersection.layout(), cams, np.arange(len(tr)), tr.t_s, tr.boxes_world, tr.segment,
-                 camera_settings=settings, extra={"path": path.to_dict(), "turn_radius_m": path.radius_m})
+                 camera_settings=settings, extra={"path": path.to_dict(), "turn_radius_m": path.radius_m,
+                                                  "speed_mps": tr.speed_mps})
 
 
 # -- axes -----------------------------------------------------------------------------------------
@@ -392,6 +396,7 @@ class CaseStudyResult:
                                                                  if aj.size else float("nan")),
                     "largest_sigma_major_max_m": _stat(np.max, lp),
                     "frames_centre_95_over_half_lane": int(np.sum(a * k95 > lane / 2)),
+                    "frames_not_linear_ok": int(np.sum(ok & ~r["footprint_linear_ok"].to_numpy(bool))),
                 }
                 out.append(row)
         return out
@@ -554,6 +559,9 @@ def analyse(scene: Scene, camera_types=None, *, confidence: float = 0.95):
         for ct, budget in budgets.items():
             fp = footprints_from_boxes3d(cam, budget, boxes)
             contrib = centre_contributions(cam, budget, fp)
+            with np.errstate(invalid="ignore"):
+                corner_nl = nonlinearity(cam, budget, np.nan_to_num(fp.corners_px, nan=-1e6))
+            corner_nl = np.where(np.isfinite(fp.corners_xy_world_m).all(-1), corner_nl, np.nan)
             footprints[(cam_name, ct)] = fp
             contributions[(cam_name, ct)] = contrib
             row = dict(base)
@@ -568,6 +576,11 @@ def analyse(scene: Scene, camera_types=None, *, confidence: float = 0.95):
                 row[f"corner{k}_sigma_y_m"] = np.sqrt(fp.corners_cov_m2[:, k, 1, 1])
                 row[f"corner{k}_cov_xy_m2"] = fp.corners_cov_m2[:, k, 0, 1]
                 row[f"corner{k}_reason"] = fp.corner_reason[:, k]
+                row[f"corner{k}_nonlinearity"] = corner_nl[:, k]
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", RuntimeWarning)  # all corners invalid: NaN
+                row["footprint_nonlinearity_max"] = np.nanmax(corner_nl, axis=1) if N else np.zeros(0)
+            row["footprint_linear_ok"] = fp.centre_valid & np.all(corner_nl <= DEFAULT_LINEAR_THRESHOLD, axis=1)
             for q, cov, xy in (("largest", fp.largest_cov_m2, fp.largest_xy_world_m),
                                ("centre", fp.centre_cov_m2, fp.centre_xy_world_m)):
                 a, b, th = ellipse_axes(cov)

@@ -546,18 +546,37 @@ def _fmt_xy(v):
     return "&ndash;" if v is None else f"({v[0]:.1f}, {v[1]:.1f})"
 
 
+def _claims_html(claims: list[dict], esc, reproduction_link: str | None) -> str:
+    """The paper's statements with their fixed tolerances and verdicts (:mod:`footprint_uq.scenario.claims`)."""
+    rows = []
+    for i, c in enumerate(claims):
+        pc = ", ".join(f"{esc(k)}: {esc(v)}" for k, v in c["per_camera"].items())
+        rows.append(f"<tr><td>({'abc'[i]}) &ldquo;{esc(c['paper'])}&rdquo;</td><td>{esc(c['measure'])}</td>"
+                    f"<td>{pc}</td><td><b>{esc(c['verdict'])}</b></td><td>{esc(c['why'])}</td></tr>")
+    link = ""
+    if reproduction_link:
+        link = (f' Every table and statement of the paper, under both readings of Table 3&rsquo;s angles: '
+                f'<a href="{esc(reproduction_link)}">{esc(reproduction_link)}</a> (also '
+                '<code>docs/paper-reproduction.md</code> in the footprint-uq sources).')
+    return ("<h2>The paper&rsquo;s statements, tested</h2><p>Tolerances fixed in "
+            "<code>footprint_uq.scenario.claims</code> before the results were looked at; X = north and Y = east "
+            "are the paper&rsquo;s earth-frame axes (pan read as a compass heading)." + link + "</p>"
+            '<div style="overflow-x:auto"><table><tr><th>paper</th><th>measure</th><th>per camera</th>'
+            "<th>verdict</th><th>why</th></tr>" + "".join(rows) + "</table></div>")
+
+
 def _findings_html(result, esc) -> str:
     """The closing note: what the reproduction shows, computed from the data."""
     st = result.statements()
     cams, types = result.camera_names, result.type_names
-    parts = ["<h2>What the reproduction shows</h2>"]
+    parts = ["<h2>What the data show</h2>"]
     # statement 1
     parts.append("<p><b>Paper:</b> &ldquo;the uncertainty in X dominating in the beginning and equaling the "
                  "uncertainty in Y in the middle of the intersection. The uncertainty in Y dominates from that "
-                 "point onward.&rdquo; Tested on the footprint centre, per camera, camera type and reading of "
-                 "X/Y: it <i>holds</i> when σ_X &gt; σ_Y in at least 80 % of the entry-lane frames, σ_Y &gt; σ_X in "
-                 "at least 80 % of the exit-lane frames, and σ_X falls below σ_Y inside the intersection box or "
-                 "during the turn.</p>")
+                 "point onward.&rdquo; The verdict above uses X = north, Y = east. For information, the same "
+                 "sequence in three readings of X/Y (north-east is the verdict's), per camera and camera type: "
+                 "σ_X &gt; σ_Y in at least 80 % of the entry-lane frames, σ_Y &gt; σ_X in at least 80 % of the "
+                 "exit-lane frames, and σ_X falls below σ_Y inside the intersection box or during the turn.</p>")
     items = []
     for cam in cams:
         for system in AXIS_SYSTEMS:
@@ -616,39 +635,30 @@ def _findings_html(result, esc) -> str:
                  "within about 45° of X, Y beyond. The paper's sequence therefore appears when the line of "
                  "sight swings across 45° from X during the turn, which depends on where the camera stands "
                  "and on how X is tied to the ground; the numbers per camera:</p><ul>" + "".join(why) + "</ul>")
-    # statement 2
+    # statement 2: descriptive sizes (the verdict is claim (b) above)
     lw = result.lane_width_statements()
-    parts.append("<p><b>Paper:</b> &ldquo;the uncertainty in BW-Cube cameras being almost equivalent to the lane "
-                 "width&rdquo;. Measured on the footprint centre in the intersection box (median over frames, then "
-                 "over cameras); &ldquo;close&rdquo; = within a factor 1.5 of the lane width "
-                 f"({result.scene.layout.lane_width_m:g} m):</p><ul>")
+    parts.append("<p><b>Sizes next to the lane width</b> "
+                 f"({result.scene.layout.lane_width_m:g} m; footprint centre in the intersection box, median over "
+                 "frames, then over cameras; the verdict is statement (b) above):</p><ul>")
     for ct in types:
         rows = [s for s in lw if s["camera_type"] == ct]
         txt = "; ".join(f"{esc(s['measure'])} {s['value_m']:.2f} m = {s['ratio_to_lane_width']:.2f} lane widths"
-                        f" ({'close' if s['close'] else 'not close'})" for s in rows)
+                        for s in rows)
         largest = " &mdash; the largest of the camera types" if rows and rows[0]["is_largest_type"] else ""
         parts.append(f"<li>{esc(camera_type_label(ct))}: {txt}{largest}.</li>")
     parts.append("</ul>")
-    cube = [s for s in lw if "cube" in s["camera_type"].lower()]
-    if cube:
-        close = [s["measure"] for s in cube if s["close"]]
-        if close:
-            parts.append(f"<p>For BW-Cube the statement holds for: {esc(', '.join(close))}; it is the largest "
-                         "because its preset has the largest camera height and position errors (Table 3: "
-                         "σ_h = 0.85 m, σ_X = 0.49 m), which dominate at these ranges.</p>"
-                         if cube[0]["is_largest_type"] else
-                         f"<p>For BW-Cube the statement holds for: {esc(', '.join(close))}.</p>")
-        else:
-            parts.append("<p>For BW-Cube none of the three measures is within a factor 1.5 of the lane width.</p>")
     return "\n".join(parts)
 
 
 def write_case_study_report(result, out_dir, *, settings: dict | None = None, ellipse_every: int = 4,
-                            heatmap: dict | None = None, dpi: int = 130) -> dict:
+                            heatmap: dict | None = None, dpi: int = 130,
+                            reproduction_link: str | None = None) -> dict:
     """Write every figure (PNG), ``case_study_frames.csv``, ``summary.json`` and ``report.html`` to ``out_dir``.
 
+    ``reproduction_link``: relative link to the paper-reproduction page (shown next to the verdicts).
     Returns a dict with the paths (``figures``: stem -> path, ``csv``, ``summary``, ``report``).
     """
+    from ..scenario.claims import evaluate_claims
     from .report import esc, html_page, img_tag, write_html
     from .report import html_table as _html_table
 
@@ -671,7 +681,8 @@ def write_case_study_report(result, out_dir, *, settings: dict | None = None, el
     statements = result.statements()
     lane = result.lane_width_statements()
     summary_path = out / "summary.json"
-    summary_path.write_text(json.dumps({"summary": summary, "xy_statements": statements,
+    claims = evaluate_claims(result)
+    summary_path.write_text(json.dumps({"summary": summary, "claims": claims, "xy_statements": statements,
                                         "lane_width_statements": lane}, indent=1, default=_json_default))
     # settings tables
     scene = result.scene
@@ -683,6 +694,7 @@ def write_case_study_report(result, out_dir, *, settings: dict | None = None, el
              f"<code>*_95</code> numbers are 2-D {100 * result.confidence:g} % regions "
              f"({chi2_scale(result.confidence):.4g} σ). All numbers are first-order propagation "
              f"(<code>footprint_uq.footprints.footprints_from_boxes3d</code>).</p>"]
+    parts.append(_claims_html(claims, esc, reproduction_link))
     parts.append(_findings_html(result, esc).replace("&nbsp;", " "))
     parts.append("<h2>Summary per camera and camera type</h2>")
     parts.append(html_table(summary, headers={
@@ -692,7 +704,8 @@ def write_case_study_report(result, out_dir, *, settings: dict | None = None, el
         "centre_semi_major_95_junction_median_m": "centre 95 % semi-major, junction median [m]",
         "centre_axis_95_junction_median_over_lane": "95 % major axis / lane width (junction)",
         "largest_sigma_major_max_m": "largest-point σ_major max [m]",
-        "frames_centre_95_over_half_lane": "frames with 95 % semi-major > half lane"}, floatfmt=".3g"))
+        "frames_centre_95_over_half_lane": "frames with 95 % semi-major > half lane",
+        "frames_not_linear_ok": "frames with a corner's linearisation error > 5 %"}, floatfmt=".3g"))
     parts.append("<h2>Figures</h2>")
     for i, cam in enumerate(result.camera_names):
         parts.append(f"<h3>{esc(cam)}</h3>")
