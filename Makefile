@@ -19,8 +19,11 @@ $(STAMP): pyproject.toml | $(BIN)/python
 demo: $(STAMP)
 	$(BIN)/footprint-uq demo --out out/demo
 
+# numba's on-disk cache is keyed on each function's own file only: a kernel that inlines the scalar core
+# (src/footprint_uq/fast/core.py) would keep running the old core after an edit. Tests start from a clean cache.
 test: $(STAMP)
 	$(BIN)/ruff check src tests bench
+	find src -name '*.nbi' -delete -o -name '*.nbc' -delete
 	$(BIN)/python -m pytest -q
 
 lint: $(STAMP)

@@ -61,21 +61,38 @@ lenses = st.tuples(st.floats(-0.45, 0.3), st.floats(-0.1, 0.1), st.floats(-0.01,
 
 @settings(max_examples=80, deadline=None)
 @given(k=lenses, seed=st.integers(0, 2**32 - 1))
-def test_domain_is_where_undistortion_answers(k, seed):
+def test_every_answer_is_a_principal_root(k, seed):
     dom = lens_domain(k)
     rng = np.random.default_rng(seed)
     scale = 1.3 * float(np.max(dom.r_max_distorted)) if dom.limited else 2.0
     xd = rng.uniform(-scale, scale, (400, 2))
     xn, conv = undistort(xd, dom.dist)
-    inside = dom.contains_distorted(xd)
-    # inside the domain there is always an answer, on the principal branch, that re-distorts to the pixel
-    assert conv[inside].all()
-    err = np.abs(distort(xn[inside], dom.dist) - xd[inside]).max(-1)
-    assert np.all(err <= 1e-13 * np.maximum(1.0, np.abs(xd[inside]).max(-1)))
-    assert dom.contains_undistorted(xn[inside]).all()
-    # outside it never
-    assert not conv[~inside].any()
-    assert np.isnan(xn[~inside]).all()
+    np.testing.assert_array_equal(dom.contains_distorted(xd), conv)
+    # an answer re-distorts to the pixel and lies in the principal region; no answer is NaN
+    err = np.abs(distort(xn[conv], dom.dist) - xd[conv]).max(-1)
+    assert np.all(err <= 1e-13 * np.maximum(1.0, np.abs(xd[conv]).max(-1)))
+    assert dom.contains_undistorted(xn[conv]).all()
+    assert np.isnan(xn[~conv]).all()
+    # beyond the quick filter's radius nothing answers
+    far = np.hypot(xd[:, 0], xd[:, 1]) > 1.011 * np.max(dom.r_max_distorted)
+    assert not conv[far].any()
+
+
+@settings(max_examples=80, deadline=None)
+@given(k=lenses, seed=st.integers(0, 2**32 - 1))
+def test_whole_principal_region_is_answered(k, seed):
+    """Every point of U (sampled out to 99.9 % of its boundary in each direction) is found again from its pixel."""
+    dom = lens_domain(k)
+    rng = np.random.default_rng(seed)
+    a = rng.uniform(-np.pi, np.pi, 400)
+    bins = np.clip(((a + np.pi) / (2 * np.pi) * (dom.angles_rad.size - 1)).astype(int), 0, dom.angles_rad.size - 2)
+    edge = np.minimum(dom.r_fold[bins], dom.r_fold[bins + 1]) if dom.limited else np.full(a.size, 2.0)
+    r = np.sqrt(rng.uniform(0, 1, a.size)) * 0.999 * edge
+    x = np.stack([r * np.cos(a), r * np.sin(a)], -1)
+    assert dom.contains_undistorted(x).all()
+    xn, conv = undistort(distort(x, dom.dist), dom.dist)
+    assert conv.all()
+    np.testing.assert_allclose(xn, x, rtol=0, atol=1e-9 * max(1.0, float(np.max(r))))
 
 
 @settings(max_examples=60, deadline=None)

@@ -29,7 +29,7 @@ time are indexed with unsigned offsets.  Outputs go to arrays the caller allocat
 The numpy reference is :func:`footprint_uq.footprints.footprints_from_corners`; the tests
 hold the two to 1e-9 relative and the V2X fields equal.
 
-Camera constants travel in one float64 vector ``cam`` (layout ``_C_*`` below) and
+Camera constants travel in one named structure ``cam`` (:class:`KernelCamera`) and
 the rotation derivatives in ``dR`` (3 angles, 3, 3), both prepared once per
 camera by the processor.
 """
@@ -37,24 +37,46 @@ camera by the processor.
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
 
+from . import params as P
 from . import status, v2x
+from .cameras.rotation import R_W_C, dR_W_C
 from .fast import core
 
-# cam vector layout
-_C_FX, _C_FY, _C_CX, _C_CY, _C_SK = 0, 1, 2, 3, 4
-_C_DIST = 5  # 8 coefficients k1 k2 p1 p2 k3 k4 k5 k6
-_C_X, _C_Y, _C_H = 13, 14, 15
-_C_GDZ, _C_GSX, _C_GSY = 16, 17, 18
-_C_R = 19  # 9 entries, row major, OpenCV camera -> world
-_C_HASDIST = 28
-_C_W, _C_HIMG = 29, 30
-_C_GROUNDZ = 31
-_C_IFX, _C_IFY = 32, 33  # 1 / fx, 1 / fy
-_C_DOM = 34  # the packed lens domain (footprint_uq.cameras.lens_domain), to the end of the vector
+
+class KernelCamera(NamedTuple):
+    """Camera constants the kernels read (one per :class:`~footprint_uq.footprints.FrameProcessor`).
+
+    Numba passes it by value as a struct; fields are read by name (``cam.fx``).  Units as in
+    :data:`footprint_uq.params.PARAM_NAMES`; ``R`` is ``R_W_C`` row-major (9,); ``dom`` the packed
+    lens domain (:mod:`footprint_uq.cameras.lens_domain`).
+    """
+
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+    skew: float
+    ifx: float  # 1 / fx
+    ify: float  # 1 / fy
+    dist: np.ndarray  # (8,) k1 k2 p1 p2 k3 k4 k5 k6
+    has_dist: bool
+    x0: float  # camera position in W, m
+    y0: float
+    h: float  # height above the nominal ground, m
+    gdz: float  # ground offset and slopes (nominal)
+    gsx: float
+    gsy: float
+    R: np.ndarray  # (9,)
+    width_px: float
+    height_px: float
+    ground_z_m: float
+    dom: np.ndarray
+
 
 # status codes (footprint_uq.status) and the constants of the V2X fields (footprint_uq.v2x), frozen at compile time
 _OK, _ABOVE, _NOTFIN, _UNDIST = status.OK, status.ABOVE_HORIZON, status.NOT_FINITE, status.UNDISTORT_FAILED
@@ -75,62 +97,91 @@ _ORIENT_UNIT, _ORIENT_UNAV = v2x.J2735_ORIENTATION_UNIT_DEG, float(v2x.J2735_ORI
 _ST = 264  # row stride = most corners in a chunk (not a power of two: keeps rows in different cache sets)
 _M_TARGET = 64  # corners per chunk (a chunk's working set stays in L1/L2)
 MAX_CORNERS = _ST  # footprints with more corners per object go to the numpy reference
-_U, _V, _XD, _YD, _XN, _YN, _CONV = 0, 1, 2, 3, 4, 5, 6
-_INV = 7  # 4 rows: d(undistorted)/d(distorted) 00 01 10 11
-_JK = 11  # 16 rows: d x_d / d k (8), d y_d / d k (8)
-_X, _Y, _CODE = 27, 28, 29
-_JP = 30  # 44 rows: d(x, y)/d(params), row i * 22 + param
-_JUV = 74  # 4 rows: d(x, y)/d(u, v)
-_B4 = 78  # 4 rows: d(x, y)/d(x_n)
-_AW = 82  # 2 r <= 44 rows: J L
-_C3 = 126  # 3 rows: parameter part of each corner covariance (xx, xy, yy)
-_P4 = 129  # 4 rows: pixel covariance of each corner (budget + detector)
-_CC = 133  # 3 rows: corner covariance (xx, xy, yy), NaN if not computed
-_SSEL, _RC, _US, _XX, _YY = 136, 137, 138, 139, 140  # semi-axis if usable else -1, code, usable, x, y (NaN)
-_Q, _QN, _QP = 141, 143, 145  # 2 rows each: corner minus vertex mean; the same of the next / previous corner
-_G = 147  # 4 rows: d centre / d corner (cx/x, cx/y, cy/x, cy/y)
-_T0, _T1, _T2 = 151, 152, 153  # per-corner temporaries
-# per-object rows (columns 0 .. nob - 1)
-_BEST, _BSEMI, _FBAD, _MX, _MY, _SS, _A2, _SX, _SY = 154, 155, 156, 157, 158, 159, 160, 161, 162
-_B0, _B1, _B2, _E00, _E01, _E11, _CXC, _CYC, _AREA, _DEG = 163, 164, 165, 166, 167, 168, 169, 170, 171, 172
-_ANG = 173
-_PC, _CS, _SN = 174, 175, 176  # 3D boxes: projection code per corner; cos, sin of each yaw
-_BX = 177  # 7 rows: the chunk's boxes
-_VX = 184  # 7 rows: V2X fields of each object
-_NROWS = 191
+def _layout(blocks) -> tuple[dict[str, int], int]:
+    """Row offsets of consecutive named blocks ``[(name, rows, meaning), ...]`` and the total."""
+    off, n = {}, 0
+    for name, rows, _meaning in blocks:
+        off[name] = n
+        n += rows
+    return off, n
+
+
+#: the scratch rows, in order: (name, rows, meaning); offsets are generated from this table
+SCRATCH_ROWS = (
+    ("U", 1, "corner pixel u"), ("V", 1, "corner pixel v"),
+    ("XD", 1, "distorted normalised x"), ("YD", 1, "distorted normalised y"),
+    ("XN", 1, "undistorted normalised x"), ("YN", 1, "undistorted normalised y"),
+    ("CONV", 1, "1.0 where undistortion answered"),
+    ("INV", 4, "d(undistorted)/d(distorted) 00 01 10 11"),
+    ("JK", 16, "d x_d / d k (8), d y_d / d k (8)"),
+    ("X", 1, "ground x"), ("Y", 1, "ground y"), ("CODE", 1, "status code"),
+    ("JP", 44, "d(x, y)/d(params), row i * 22 + param"),
+    ("JUV", 4, "d(x, y)/d(u, v)"),
+    ("B4", 4, "d(x, y)/d(x_n)"),
+    ("AW", 44, "J L (2 r <= 44 rows)"),
+    ("C3", 3, "parameter part of each corner covariance (xx, xy, yy)"),
+    ("P4", 4, "pixel covariance of each corner (budget + detector)"),
+    ("CC", 3, "corner covariance (xx, xy, yy), NaN if not computed"),
+    ("SSEL", 1, "semi-axis if usable else -1"), ("RC", 1, "final code"), ("US", 1, "usable"),
+    ("XX", 1, "x (NaN if not computed)"), ("YY", 1, "y (NaN if not computed)"),
+    ("Q", 2, "corner minus vertex mean"), ("QN", 2, "the same of the next corner"),
+    ("QP", 2, "the same of the previous corner"),
+    ("G", 4, "d centre / d corner (cx/x, cx/y, cy/x, cy/y)"),
+    ("T0", 1, "per-corner temporary"), ("T1", 1, "per-corner temporary"), ("T2", 1, "per-corner temporary"),
+    # per-object rows (columns 0 .. nob - 1)
+    ("BEST", 1, "largest corner"), ("BSEMI", 1, "its semi-axis"), ("FBAD", 1, "first unusable corner"),
+    ("MX", 1, "vertex mean x"), ("MY", 1, "vertex mean y"), ("SS", 1, "sum"), ("A2", 1, "twice the area"),
+    ("SX", 1, "centroid sum x"), ("SY", 1, "centroid sum y"),
+    ("B0", 1, "pixel-noise part 00"), ("B1", 1, "pixel-noise part 01"), ("B2", 1, "pixel-noise part 11"),
+    ("E00", 1, "centre covariance xx"), ("E01", 1, "centre covariance xy"), ("E11", 1, "centre covariance yy"),
+    ("CXC", 1, "centre x"), ("CYC", 1, "centre y"), ("AREA", 1, "signed area"), ("DEG", 1, "degenerate"),
+    ("ANG", 1, "ellipse angle"),
+    ("PC", 1, "3D boxes: projection code per corner"), ("CS", 1, "cos yaw"), ("SN", 1, "sin yaw"),
+    ("BX", 7, "the chunk's boxes"),
+    ("VX", 7, "V2X fields of each object"),
+)
+_ROW, _NROWS = _layout(SCRATCH_ROWS)
+_U, _V, _XD, _YD, _XN, _YN, _CONV, _INV, _JK = (_ROW[k] for k in ("U", "V", "XD", "YD", "XN", "YN", "CONV", "INV",
+                                                                  "JK"))
+_X, _Y, _CODE, _JP, _JUV, _B4, _AW, _C3, _P4, _CC = (_ROW[k] for k in ("X", "Y", "CODE", "JP", "JUV", "B4", "AW",
+                                                                       "C3", "P4", "CC"))
+_SSEL, _RC, _US, _XX, _YY, _Q, _QN, _QP, _G = (_ROW[k] for k in ("SSEL", "RC", "US", "XX", "YY", "Q", "QN", "QP",
+                                                                  "G"))
+_T0, _T1, _T2 = _ROW["T0"], _ROW["T1"], _ROW["T2"]
+_BEST, _BSEMI, _FBAD, _MX, _MY, _SS, _A2, _SX, _SY = (_ROW[k] for k in ("BEST", "BSEMI", "FBAD", "MX", "MY", "SS",
+                                                                         "A2", "SX", "SY"))
+_B0, _B1, _B2, _E00, _E01, _E11, _CXC, _CYC, _AREA, _DEG = (_ROW[k] for k in ("B0", "B1", "B2", "E00", "E01", "E11",
+                                                                              "CXC", "CYC", "AREA", "DEG"))
+_ANG, _PC, _CS, _SN, _BX, _VX = (_ROW[k] for k in ("ANG", "PC", "CS", "SN", "BX", "VX"))
 
 # rows of the per-object output block ``obj`` (13, N), named as the batch's output columns (FootprintEstimate
 # views them, the batch writes them; cov_yx_m2 = cov_xy_m2 completes the 2x2 view)
 OBJ_ROWS = ("x_m", "y_m", "cov_xx_m2", "cov_xy_m2", "cov_yx_m2", "cov_yy_m2", "sigma_major_m",
             "sigma_minor_m", "orientation_deg", "largest_sigma_major_m", "largest_x_m", "largest_y_m", "area_m2")
-_O_CX, _O_CY, _O_C00, _O_C01, _O_C10, _O_C11, _O_SMAJ, _O_SMIN, _O_ORI, _O_LSEMI, _O_LX, _O_LY, _O_AREA = range(13)
+#: row of each name in ``obj``
+OBJ_ROW = {name: i for i, name in enumerate(OBJ_ROWS)}
+_O_CX, _O_CY, _O_C00, _O_C01, _O_C10, _O_C11, _O_SMAJ, _O_SMIN, _O_ORI, _O_LSEMI, _O_LX, _O_LY, _O_AREA = (
+    OBJ_ROW[k] for k in OBJ_ROWS)
 
 
-def camera_constants(camera) -> tuple[np.ndarray, np.ndarray]:
+def camera_constants(camera) -> tuple[KernelCamera, np.ndarray]:
     """``(cam, dR)`` for the kernels from a :class:`~footprint_uq.cameras.base.Camera`."""
-    from . import params as P
-    from .cameras.rotation import R_W_C, dR_W_C
-
     p = np.asarray(camera.params, dtype=np.float64)
-    cam = np.zeros(_C_DOM + camera.lens_domain.packed.size)
-    cam[0:5] = p[0:5]
-    cam[_C_DIST:_C_DIST + 8] = p[P.DIST_SLICE]
-    cam[_C_X], cam[_C_Y], cam[_C_H] = p[P.XM], p[P.YM], p[P.HM]
-    cam[_C_GDZ], cam[_C_GSX], cam[_C_GSY] = p[P.GDZ], p[P.GSX], p[P.GSY]
-    cam[_C_R:_C_R + 9] = R_W_C(p[P.PAN], p[P.TILT], p[P.ROLL]).ravel()
-    cam[_C_HASDIST] = 1.0 if np.any(p[P.DIST_SLICE] != 0) else 0.0
-    cam[_C_W], cam[_C_HIMG] = camera.image_size_px
-    cam[_C_GROUNDZ] = camera.ground_z_m
-    cam[_C_IFX], cam[_C_IFY] = 1.0 / p[0], 1.0 / p[1]
-    cam[_C_DOM:] = camera.lens_domain.packed
-    dR = np.ascontiguousarray(dR_W_C(p[P.PAN], p[P.TILT], p[P.ROLL]))
-    return cam, dR
+    ang = p[P.PAN], p[P.TILT], p[P.ROLL]
+    w, h = camera.image_size_px
+    cam = KernelCamera(
+        fx=float(p[P.FX]), fy=float(p[P.FY]), cx=float(p[P.CX]), cy=float(p[P.CY]), skew=float(p[P.SKEW]),
+        ifx=1.0 / p[P.FX], ify=1.0 / p[P.FY], dist=np.ascontiguousarray(p[P.DIST_SLICE]),
+        has_dist=bool(np.any(p[P.DIST_SLICE] != 0)), x0=float(p[P.XM]), y0=float(p[P.YM]), h=float(p[P.HM]),
+        gdz=float(p[P.GDZ]), gsx=float(p[P.GSX]), gsy=float(p[P.GSY]), R=np.ascontiguousarray(R_W_C(*ang).ravel()),
+        width_px=float(w), height_px=float(h), ground_z_m=float(camera.ground_z_m), dom=camera.lens_domain.packed)
+    return cam, np.ascontiguousarray(dR_W_C(*ang))
 
 
 @njit(cache=True, error_model="numpy", nogil=True)
 def _distort(x, y, cam, J, Jk, want_k):
     """Distorted (xd, yd) (:func:`footprint_uq.fast.core.distort_jac`); fills J (2, 2) and, if want_k, Jk (2, 8)."""
-    xd, yd, J[0, 0], J[0, 1], J[1, 0], J[1, 1], rad, den = core.distort_jac(x, y, cam[_C_DIST:_C_DIST + 8])
+    xd, yd, J[0, 0], J[0, 1], J[1, 0], J[1, 1], rad, den = core.distort_jac(x, y, cam.dist)
     r2 = x * x + y * y
     iden = 1.0 / den
     num = rad * den
@@ -162,13 +213,13 @@ def _stage_undistort(S, m, cam, Jd, Jk, need):
     :func:`footprint_uq.cameras.distortion.undistort`.  ``need`` as in :func:`_stage_ground`:
     without distortion, JK rows nobody reads are skipped.
     """
-    cx, cy, sk = cam[_C_CX], cam[_C_CY], cam[_C_SK]
-    ifx, ify = cam[_C_IFX], cam[_C_IFY]
+    cx, cy, sk = cam.cx, cam.cy, cam.skew
+    ifx, ify = cam.ifx, cam.ify
     for j in range(m):
         yd = (S[_V * _ST + j] - cy) * ify
         S[_XD * _ST + j] = (S[_U * _ST + j] - cx - sk * yd) * ifx
         S[_YD * _ST + j] = yd
-    if cam[_C_HASDIST] == 0.0:
+    if not cam.has_dist:
         for j in range(m):
             x, y = S[_XD * _ST + j], S[_YD * _ST + j]
             S[_XN * _ST + j], S[_YN * _ST + j] = x, y
@@ -197,11 +248,11 @@ def _stage_undistort(S, m, cam, Jd, Jk, need):
                 S[(_JK + 7) * _ST + j], S[(_JK + 15) * _ST + j] = -x * r6, -y * r6
         return
     # the scalar core's undistortion, vectorised over the chunk's corners (same answer as the reference)
-    dist = cam[_C_DIST:_C_DIST + 8]
+    dist = cam.dist
     ok = np.empty(m, dtype=np.bool_)
     for j in range(m):
         S[_XN * _ST + j], S[_YN * _ST + j] = S[_XD * _ST + j], S[_YD * _ST + j]
-    core.undistort_vec(cam[_C_DOM:], dist, S[_XD * _ST:_XD * _ST + m], S[_YD * _ST:_YD * _ST + m],
+    core.undistort_vec(cam.dom, dist, S[_XD * _ST:_XD * _ST + m], S[_YD * _ST:_YD * _ST + m],
                        S[_XN * _ST:_XN * _ST + m], S[_YN * _ST:_YN * _ST + m],
                        S[_INV * _ST:_INV * _ST + m], S[(_INV + 1) * _ST:(_INV + 1) * _ST + m],
                        S[(_INV + 2) * _ST:(_INV + 2) * _ST + m], S[(_INV + 3) * _ST:(_INV + 3) * _ST + m],
@@ -234,13 +285,13 @@ def _stage_ground(S, m, cam, dR, need):
                                                    dR1[2, 0], dR1[2, 1], dR1[2, 2])
     o00, o01, o02, o10, o11, o12, o20, o21, o22 = (dR2[0, 0], dR2[0, 1], dR2[0, 2], dR2[1, 0], dR2[1, 1], dR2[1, 2],
                                                    dR2[2, 0], dR2[2, 1], dR2[2, 2])
-    sk, ifx, ify = cam[_C_SK], cam[_C_IFX], cam[_C_IFY]
+    sk, ifx, ify = cam.skew, cam.ifx, cam.ify
     skf = sk * ify * ifx
-    R0, R1, R2, R3, R4, R5, R6, R7, R8 = (cam[_C_R], cam[_C_R + 1], cam[_C_R + 2], cam[_C_R + 3], cam[_C_R + 4],
-                                          cam[_C_R + 5], cam[_C_R + 6], cam[_C_R + 7], cam[_C_R + 8])
-    gdz, gx, gy = cam[_C_GDZ], cam[_C_GSX], cam[_C_GSY]
-    Nn = gdz - cam[_C_H]
-    X0, Y0 = cam[_C_X], cam[_C_Y]
+    R0, R1, R2, R3, R4, R5, R6, R7, R8 = (cam.R[0], cam.R[1], cam.R[2], cam.R[3], cam.R[4],
+                                          cam.R[5], cam.R[6], cam.R[7], cam.R[8])
+    gdz, gx, gy = cam.gdz, cam.gsx, cam.gsy
+    Nn = gdz - cam.h
+    X0, Y0 = cam.x0, cam.y0
     for j in range(m):
         u, v = S[_U * _ST + j], S[_V * _ST + j]
         xd, yd, xn, yn = S[_XD * _ST + j], S[_YD * _ST + j], S[_XN * _ST + j], S[_YN * _ST + j]
@@ -735,7 +786,7 @@ def process_corners(uv, extra_reason, boxes, yaw_deg, bottom_on_ground, cam, dR,
     want_joint = joint.shape[0] == N and N > 0
     want_corners = xy.shape[0] == N and N > 0
     Jd, Jk = np.empty((2, 2)), np.empty((2, 8))
-    W, Himg = cam[_C_W], cam[_C_HIMG]
+    W, Himg = cam.width_px, cam.height_px
     nan = math.nan
     has_extra = extra_reason.shape[0] == N and N > 0
     # parameters with a non-zero row in the factor; flags for groups of them: if any of k1..k6 is
@@ -932,12 +983,12 @@ def _stage_project(S, boxes, n0, nob, cam, yaw_deg, bottom_on_ground):
     for i in range(nob):
         yaw = S[(_BX + 6) * _ST + i] * ysc if yaw_deg else S[(_BX + 6) * _ST + i]
         S[_CS * _ST + i], S[_SN * _ST + i] = math.cos(yaw), math.sin(yaw)
-    fx, fy, cx, cy, skw = cam[_C_FX], cam[_C_FY], cam[_C_CX], cam[_C_CY], cam[_C_SK]
-    dist = cam[_C_DIST:_C_DIST + 8]
-    X0, Y0, H = cam[_C_X], cam[_C_Y], cam[_C_H]
-    R0, R1, R2, R3, R4, R5, R6, R7, R8 = (cam[_C_R], cam[_C_R + 1], cam[_C_R + 2], cam[_C_R + 3], cam[_C_R + 4],
-                                          cam[_C_R + 5], cam[_C_R + 6], cam[_C_R + 7], cam[_C_R + 8])
-    g0 = cam[_C_GROUNDZ]
+    fx, fy, cx, cy, skw = cam.fx, cam.fy, cam.cx, cam.cy, cam.skew
+    dist = cam.dist
+    X0, Y0, H = cam.x0, cam.y0, cam.h
+    R0, R1, R2, R3, R4, R5, R6, R7, R8 = (cam.R[0], cam.R[1], cam.R[2], cam.R[3], cam.R[4],
+                                          cam.R[5], cam.R[6], cam.R[7], cam.R[8])
+    g0 = cam.ground_z_m
     nan = math.nan
     nu = np.uint64(nob)
     for k in range(4):
@@ -966,9 +1017,9 @@ def _stage_project(S, boxes, n0, nob, cam, yaw_deg, bottom_on_ground):
             S[ov + i] = fy * yd + cy if ok else nan
             S[oc + i] = _OK if ok else (_BEHIND if finite else _NOTFIN)
             S[ox + i], S[oy + i] = x, y
-    if cam[_C_HASDIST] != 0.0:
+    if cam.has_dist:
         # past the lens's fold a world point maps to a meaningless pixel: no answer, as the reference
-        dom = cam[_C_DOM:]
+        dom = cam.dom
         for j in range(4 * nob):
             if S[_PC * _ST + j] == _OK and not core.in_domain_undistorted(dom, S[_XD * _ST + j], S[_YD * _ST + j]):
                 S[_PC * _ST + j] = _UNDIST

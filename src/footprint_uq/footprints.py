@@ -576,13 +576,14 @@ class FrameProcessor:
 
     def _pack(self, uv, out) -> FootprintEstimate:
         xy, ccov, joint, reason, usable, li, lcov, creason, cbad, obj, v2x = out
-        fk = self._fk
+        row = self._fk.OBJ_ROW
         # views of the kernel's per-object rows (no copies): (N, 2) and (N, 2, 2) with strides across rows
-        centre = obj[fk._O_CX:fk._O_CY + 1].T
-        ccentre = obj[fk._O_C00:fk._O_C11 + 1].T.reshape(obj.shape[1], 2, 2)
+        centre = obj[row["x_m"]:row["y_m"] + 1].T
+        ccentre = obj[row["cov_xx_m2"]:row["cov_yy_m2"] + 1].T.reshape(obj.shape[1], 2, 2)
         est = FootprintEstimate(uv, xy, ccov, joint if self.joint_cov else None, reason, usable, li,
-                                obj[fk._O_LSEMI], obj[fk._O_LX:fk._O_LY + 1].T, lcov, centre, ccentre, creason == 0,
-                                creason, cbad, obj[fk._O_AREA], v2x.T, self.heading_offset_deg)
+                                obj[row["largest_sigma_major_m"]], obj[row["largest_x_m"]:row["largest_y_m"] + 1].T,
+                                lcov, centre, ccentre, creason == 0, creason, cbad, obj[row["area_m2"]], v2x.T,
+                                self.heading_offset_deg)
         est._columns = obj
         return est
 

@@ -16,15 +16,14 @@ ground), so the domain is made explicit, once per camera:
   (:func:`footprint_uq.fast.core.fold_radius`), capped at :data:`R_MAX` (87 deg off-axis, in
   undistorted and in distorted coordinates);
 * the **valid domain** ``D = distort(U)`` (distorted normalised coordinates, i.e. pixels):
-  its boundary is the image of U's, tabulated in polar form at :data:`N_BINS` angles.
+  the pixels whose root lies in ``U``.  Membership is decided by the solver itself
+  (:func:`footprint_uq.fast.core.undistort_point`: its answer is accepted only in ``U``), so
+  every path applies the same test; pixels beyond the largest distorted radius of ``U``'s
+  boundary (plus 1 %) are rejected at once.
 
-A pixel is usable only inside ``D`` (else :data:`footprint_uq.status.UNDISTORT_FAILED`); a
-world point projects only from inside ``U``.  Inside ``D`` the principal root is unique and
-every path finds it.  The tables are shrunk by a relative :data:`MARGIN` and read
-conservatively (the smaller of two neighbouring entries), so that a point the table calls
-inside is inside.  With tangential terms so strong that the boundary is not star-shaped
-around the axis in distorted coordinates, the domain falls back to its largest inscribed
-disc (``LensDomain.star_shaped`` is then False).
+A pixel outside ``D`` is :data:`footprint_uq.status.UNDISTORT_FAILED`; a world point projects
+only from inside ``U``.  ``U``'s boundary table is shrunk by a relative :data:`MARGIN` and read
+conservatively (the smaller of two neighbouring entries).
 
 Without distortion the domain is unlimited.
 """
@@ -62,11 +61,13 @@ class LensDomain(NamedTuple):
     r_fold : ndarray (N_BINS + 1,)
         Undistorted normalised boundary radius at angles ``angles_rad`` (inf without distortion).
     r_max_distorted : ndarray (N_BINS + 1,)
-        Distorted normalised boundary radius at the same angles of the distorted plane.
+        Distorted normalised radius of the image of each boundary point ``r_fold``
+        (for a radial-only lens: the largest distorted radius with a ray).
     angles_rad : ndarray (N_BINS + 1,)
         Uniform angles from -pi to pi.
     star_shaped : bool
-        False where the inscribed-disc fallback is in use.
+        Whether the domain's boundary in the distorted plane is star-shaped around the axis
+        (information only: membership is decided by the solver, not by a polar table).
     """
 
     dist: np.ndarray
@@ -82,18 +83,25 @@ class LensDomain(NamedTuple):
         return bool(np.isfinite(self.packed[core.DOM_RD_OUT2]))
 
     def contains_distorted(self, xy_d) -> np.ndarray:
-        """``(..., 2)`` distorted normalised points -> bool ``(...)``: inside the valid domain."""
-        return self._contains(xy_d, True)
+        """``(..., 2)`` distorted normalised points -> bool ``(...)``: inside the valid domain.
+
+        By definition where the scalar core's undistortion answers (its root lies in the
+        principal region); the same test every path applies.
+        """
+        a = np.asarray(xy_d, dtype=np.float64)
+        flat = np.ascontiguousarray(a.reshape(-1, 2))
+        n = flat.shape[0]
+        out, ok, minv = np.empty((n, 2)), np.empty(n, dtype=np.bool_), np.empty((n, 4))
+        k = np.broadcast_to(np.ascontiguousarray(self.dist), (n, 8))
+        core.undistort_many(self.packed, k, flat, out, ok, minv)
+        return ok.reshape(a.shape[:-1])
 
     def contains_undistorted(self, xy_n) -> np.ndarray:
         """``(..., 2)`` undistorted normalised points -> bool ``(...)``: inside the principal region."""
-        return self._contains(xy_n, False)
-
-    def _contains(self, xy, distorted: bool) -> np.ndarray:
-        a = np.asarray(xy, dtype=np.float64)
+        a = np.asarray(xy_n, dtype=np.float64)
         flat = np.ascontiguousarray(a.reshape(-1, 2))
         out = np.empty(flat.shape[0], dtype=np.bool_)
-        core.contains_many(self.packed, flat, distorted, out)
+        core.contains_many(self.packed, flat, out)
         return out.reshape(a.shape[:-1])
 
 
@@ -117,7 +125,7 @@ def _build(key: tuple) -> LensDomain:
         r_u = np.array([core.fold_radius(k, c[i], s[i], R_MAX, _N_GRID) for i in range(ang.size)])
         r_u[-1] = r_u[0]  # -pi and pi are one direction
     r_u = r_u * (1.0 - MARGIN)
-    # image of the boundary in the distorted plane, in polar form
+    # image of the boundary in the distorted plane: its largest radius (+1 %) is the quick outer filter
     xb, yb = r_u * c, r_u * s
     r2 = xb * xb + yb * yb
     num = 1.0 + r2 * (k[0] + r2 * (k[1] + r2 * k[4]))
@@ -125,19 +133,11 @@ def _build(key: tuple) -> LensDomain:
     rad = num / den
     xd = xb * rad + 2.0 * k[2] * xb * yb + k[3] * (r2 + 2.0 * xb * xb)
     yd = yb * rad + k[2] * (r2 + 2.0 * yb * yb) + 2.0 * k[3] * xb * yb
-    rho = np.hypot(xd, yd)
+    r_d = np.hypot(xd, yd)
     psi = np.unwrap(np.arctan2(yd, xd))
     star = bool(np.all(np.diff(psi) > 0) and abs(psi[-1] - psi[0] - 2 * np.pi) < 1e-9)
-    if k[2] == 0.0 and k[3] == 0.0:
-        r_d = np.full(ang.size, rho[0])
-    elif star:
-        r_d = np.interp(ang, psi[:-1], rho[:-1], period=2 * np.pi)
-        r_d[-1] = r_d[0]
-    else:
-        r_d = np.full(ang.size, rho.min())
-        r_u = np.full(ang.size, r_u.min())
-    r_d = r_d * (1.0 - MARGIN)
-    packed = np.concatenate([[N_BINS, r_d.min() ** 2, r_d.max() ** 2, r_u.min() ** 2, r_u.max() ** 2], r_d, r_u])
+    packed = np.concatenate([[N_BINS, r_d.min() ** 2, (1.01 * r_d.max()) ** 2, r_u.min() ** 2, r_u.max() ** 2],
+                             r_d, r_u])
     for a in (k, packed, r_u, r_d, ang):
         a.setflags(write=False)
     return LensDomain(k, packed, r_u, r_d, ang, star)

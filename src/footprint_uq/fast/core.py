@@ -55,7 +55,7 @@ R_CAP = math.tan(math.radians(87.0))
 STRETCH_MAX = 20.0
 
 # packed lens domain layout
-DOM_M, DOM_RD_IN2, DOM_RD_OUT2, DOM_RU_IN2, DOM_RU_OUT2 = 0, 1, 2, 3, 4
+DOM_M, DOM_RD_IN2, DOM_RD_OUT2, DOM_RU_IN2, DOM_RU_OUT2 = 0, 1, 2, 3, 4  # RD_IN2: kept for layout
 DOM_TAB = 5
 
 
@@ -113,8 +113,13 @@ def _in_table(dom, off, in2, out2, x, y):
 
 @nb.njit(**_INL)
 def in_domain_distorted(dom, xd, yd):
-    """True where the distorted normalised point lies inside the lens's valid domain."""
-    return _in_table(dom, DOM_TAB, dom[DOM_RD_IN2], dom[DOM_RD_OUT2], xd, yd)
+    """Quick filter: False where the distorted point is certainly outside the valid domain.
+
+    Beyond the largest distorted radius of the principal region's boundary (with a 1 %
+    margin) no pixel has a ray.  Inside that radius the answer is the solver's: a pixel is
+    valid when :func:`undistort_point` finds its root in the principal region.
+    """
+    return xd * xd + yd * yd < dom[DOM_RD_OUT2]
 
 
 @nb.njit(**_INL)
@@ -125,11 +130,13 @@ def in_domain_undistorted(dom, x, y):
 
 
 @nb.njit(**_INL)
-def _newton(xd, yd, k, x, y, max_iter, tol):
-    """Damped Newton for ``distort(x, y) = (xd, yd)`` from ``(x, y)``; returns the last iterate.
+def _newton(dom, xd, yd, k, x, y, max_iter, tol):
+    """Damped Newton for ``distort(x, y) = (xd, yd)`` from ``(x, y)`` in the principal region.
 
-    A step is halved (up to 12 times) until it lowers the residual, which keeps the
-    iteration from jumping over the fold of the lens model onto another branch.
+    A step is halved (up to 12 times) until it lowers the residual AND stays in the principal
+    region: the iteration never leaves the region where the lens model is one-to-one, so it
+    cannot jump over the fold onto another branch, and where a root exists there it converges
+    to it.  Returns the last iterate (convergence is judged by the caller).
     """
     for _ in range(max_iter):
         fx, fy, j00, j01, j10, j11, _r, _d = distort_jac(x, y, k)
@@ -142,14 +149,17 @@ def _newton(xd, yd, k, x, y, max_iter, tol):
         sy = (j00 * ey - j10 * ex) * idet
         r0 = ex * ex + ey * ey
         lam = 1.0
-        xn, yn = x - sx, y - sy
+        moved = False
         for _h in range(_N_HALVINGS):
+            xn, yn = x - lam * sx, y - lam * sy
             gx, gy = distort_point(xn, yn, k)
-            if (gx - xd) ** 2 + (gy - yd) ** 2 < r0:
+            if (gx - xd) ** 2 + (gy - yd) ** 2 < r0 and in_domain_undistorted(dom, xn, yn):
+                x, y = xn, yn
+                moved = True
                 break
             lam *= 0.5
-            xn, yn = x - lam * sx, y - lam * sy
-        x, y = xn, yn
+        if not moved:
+            break
     return x, y
 
 
@@ -189,12 +199,14 @@ def _radial_start(dom, k, xd, yd):
 def undistort_point(dom, k, xd, yd, x0, y0):
     """Undistorted normalised point of ``(xd, yd)``, or ``ok = False``.
 
-    The single definition of undistortion.  A point outside the lens's valid domain
-    (:func:`in_domain_distorted`) has no answer.  Inside it, damped Newton starts from
-    ``(x0, y0)`` (callers pass ``(xd, yd)``, or a neighbour's solution continued to first
-    order); a result off the principal branch, or no convergence, is retried from the radial
-    part's own inverse (:func:`_radial_start`), then by continuation from the optical axis
-    (``distort(x) = t x_d`` for t = 1/16 .. 1).
+    The single definition of undistortion, and of the lens's valid domain in pixels: a pixel
+    has an answer when its root lies in the principal region (:func:`in_domain_undistorted`).
+    Far pixels are rejected at once (:func:`in_domain_distorted`).  Otherwise damped Newton,
+    held inside the principal region (:func:`_newton`), starts from ``(x0, y0)`` (callers pass
+    ``(xd, yd)``, or a neighbour's solution continued to first order) if that lies in the
+    region, and from the radial part's own inverse (:func:`_radial_start`) if not or if it
+    does not converge; last, by continuation from the optical axis (``distort(x) = t x_d`` for
+    t = 1/16 .. 1).
     The accepted root is polished by one more Newton step, so that every start gives
     the same answer to rounding.
 
@@ -204,16 +216,19 @@ def undistort_point(dom, k, xd, yd, x0, y0):
     if not (math.isfinite(xd) and math.isfinite(yd)) or not in_domain_distorted(dom, xd, yd):
         return False, nan, nan, nan, nan, nan, nan
     tol = UNDISTORT_TOL * max(1.0, max(abs(xd), abs(yd)))
-    x, y = _newton(xd, yd, k, x0, y0, UNDISTORT_MAX_ITER, tol)
+    rx, ry = _radial_start(dom, k, xd, yd)
+    if in_domain_undistorted(dom, x0, y0):
+        x, y = _newton(dom, xd, yd, k, x0, y0, UNDISTORT_MAX_ITER, tol)
+    else:
+        x, y = rx, ry
     if not _accept(dom, xd, yd, k, x, y, tol):
-        x, y = _radial_start(dom, k, xd, yd)
-        x, y = _newton(xd, yd, k, x, y, UNDISTORT_MAX_ITER, tol)
+        x, y = _newton(dom, xd, yd, k, rx, ry, UNDISTORT_MAX_ITER, tol)
     if not _accept(dom, xd, yd, k, x, y, tol):
         x, y = 0.0, 0.0
         for i in range(1, _N_CONTINUATION + 1):
             t = i / _N_CONTINUATION
-            x, y = _newton(t * xd, t * yd, k, x, y, 8, tol)
-        x, y = _newton(xd, yd, k, x, y, UNDISTORT_MAX_ITER, tol)
+            x, y = _newton(dom, t * xd, t * yd, k, x, y, 8, tol)
+        x, y = _newton(dom, xd, yd, k, x, y, UNDISTORT_MAX_ITER, tol)
         if not _accept(dom, xd, yd, k, x, y, tol):
             return False, nan, nan, nan, nan, nan, nan
     fx, fy, j00, j01, j10, j11, _r, _d = distort_jac(x, y, k)
@@ -327,10 +342,7 @@ def undistort_many(dom, k, xyd, out, ok, minv):
 
 
 @nb.njit(**_JIT)
-def contains_many(dom, xy, distorted, out):
-    """Domain membership of ``xy`` (n, 2): distorted (True) or undistorted (False) coordinates."""
+def contains_many(dom, xy, out):
+    """Principal-region membership of undistorted normalised points ``xy`` (n, 2)."""
     for i in range(xy.shape[0]):
-        if distorted:
-            out[i] = in_domain_distorted(dom, xy[i, 0], xy[i, 1])
-        else:
-            out[i] = in_domain_undistorted(dom, xy[i, 0], xy[i, 1])
+        out[i] = in_domain_undistorted(dom, xy[i, 0], xy[i, 1])

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 from matplotlib.figure import Figure
 
+from ..cameras.distortion import distort
 from ..cameras.pinhole import normalised_to_pixel, pixel_to_normalised
 from ..status import UNDISTORT_FAILED
 
@@ -38,8 +39,8 @@ def plot_lens_domain(camera, *, margin: float = 0.1, step_px: int = 4, title: st
             label="image border")
     if dom.limited:
         ang = dom.angles_rad
-        bd = normalised_to_pixel(np.stack([dom.r_max_distorted * np.cos(ang), dom.r_max_distorted * np.sin(ang)], -1),
-                                 fx, fy, cx, cy, sk)
+        edge = distort(np.stack([dom.r_fold * np.cos(ang), dom.r_fold * np.sin(ang)], -1), dom.dist)
+        bd = normalised_to_pixel(edge, fx, fy, cx, cy, sk)
         ax.plot(bd[:, 0], bd[:, 1], "r--", lw=1.2, label="lens fold (domain boundary)")
     share = 100.0 * (1.0 - inside[(uv[..., 0] >= 0) & (uv[..., 0] <= w - 1) & (uv[..., 1] >= 0)
                                   & (uv[..., 1] <= h - 1)].mean())
