@@ -11,7 +11,9 @@ input that caused it (saved as ``crash-*`` in the working folder).
 
 from __future__ import annotations
 
+import atexit
 import os
+import shutil
 import sys
 import tempfile
 
@@ -24,6 +26,7 @@ with atheris.instrument_imports(include=["footprint_uq.batch.readers"]):
 EXT = (".csv", ".jsonl", ".parquet")
 NUMERIC = ("u_min_px", "v_min_px", "u_max_px", "v_max_px")
 _DIR = tempfile.mkdtemp(prefix="fuzz-readers-")
+atexit.register(shutil.rmtree, _DIR, True)
 
 
 def physical_lines(data: bytes, header: bool) -> int:

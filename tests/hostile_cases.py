@@ -266,6 +266,31 @@ def _calibration_cases(d: Path) -> list[Case]:
     ]
 
 
+def _other_commands(d: Path, camera: Path) -> list[Case]:
+    """Files read by the other commands (scenario configs, recordings, LiDAR correspondences)."""
+    binary = _w(d / "binary.dat", bytes(range(256)) * 8)
+    bad_yaml = _w(d / "bad.yaml", "a: [1, 2\n")
+    bad_json = _w(d / "bad.json", '{"a": 1,\n')
+    corr = _w(d / "corr.csv", bytes(range(256)) * 8)
+    rec = _w(d / "rec.jsonl", bytes(range(256)) * 8)
+    return [
+        Case("case-study binary config", ["case-study", "--out", str(d / "cs1"), "--config", str(binary)], "exit2",
+             d / "cs1"),
+        Case("case-study broken YAML config", ["case-study", "--out", str(d / "cs2"), "--config", str(bad_yaml)],
+             "exit2", d / "cs2"),
+        Case("case-study broken JSON config", ["case-study", "--out", str(d / "cs3"), "--config", str(bad_json)],
+             "exit2", d / "cs3"),
+        Case("case-study binary recording", ["case-study", "--out", str(d / "cs4"), "--recording", str(rec)],
+             "exit2", d / "cs4"),
+        Case("carla export binary config", ["carla", "export", "--out", str(d / "r.jsonl"), "--config", str(binary)],
+             "exit2", d / "r.jsonl"),
+        Case("extrinsics binary correspondences", ["calibrate", "extrinsics", "--pairs", str(corr), "--camera",
+                                                   str(camera), "--board", "9x6", "--square-m", "0.1", "--ground",
+                                                   "identity", "--out", str(d / "ex")], "exit2", None,
+             stderr_has="corr.csv"),
+    ]
+
+
 def build(d: Path) -> list[Case]:
     """Write every hostile file under ``d`` and return the cases."""
     d = Path(d)
@@ -273,7 +298,7 @@ def build(d: Path) -> list[Case]:
     budget = _w(d / "budget.yaml", BUDGET)
     return (_camera_cases(d / "cam", budget) + _budget_cases(d / "bud", camera) + _locate_cases(camera)
             + _detections(d / "det", camera) + _truncated_parquet(d / "pq", camera) + _fuse_cases(d / "fuse")
-            + _calibration_cases(d / "cal"))
+            + _calibration_cases(d / "cal") + _other_commands(d / "other", camera))
 
 
 def run(case: Case) -> dict:

@@ -7,7 +7,8 @@ add one, define a ``click.Command`` there and register it here with one
 Error policy: bad input (missing/unknown keys, wrong units, impossible values,
 unreadable files, bad options) prints **one line** naming the field on stderr
 and exits with status 2, never a traceback.  Warnings are printed as one line
-too.  Anything else is a bug: the last-resort handler prints one line saying so
+too.  Input files that are not UTF-8, or not valid JSON/YAML, are bad input as
+well, wherever they are read.  Anything else is a bug: the last-resort handler prints one line saying so
 and exits with status 3 (``footprint-uq --debug COMMAND ...`` or
 ``FOOTPRINT_UQ_DEBUG=1`` shows the traceback).  No known input may reach it
 (``tests/test_hostile.py``).
@@ -15,6 +16,7 @@ and exits with status 3 (``footprint-uq --debug COMMAND ...`` or
 
 from __future__ import annotations
 
+import json
 import re
 import sys
 import warnings
@@ -50,6 +52,25 @@ def _showwarning(message, category, filename, lineno, file=None, line=None):
     click.echo(f"footprint-uq: warning: {category.__name__}: {_one_line(message)}", err=True)
 
 
+def _is_yaml_error(e: BaseException) -> bool:
+    try:
+        import yaml
+    except ImportError:  # pragma: no cover - PyYAML is a dependency
+        return False
+    return isinstance(e, yaml.YAMLError)
+
+
+def _bug(e: BaseException, args) -> None:
+    """Last line of defence: an unexpected exception is a bug: one line, exit 3 (traceback with --debug)."""
+    if _debug(args):
+        import traceback
+
+        traceback.print_exception(e)
+    _error(f"internal error ({type(e).__name__}: {_one_line(e)[:300]}); please report it with the "
+           "command line (run with --debug for the traceback)")
+    sys.exit(EXIT_BUG)
+
+
 class FootprintUQGroup(click.Group):
     """A click group that turns bad-input exceptions into one-line messages and exit status 2."""
 
@@ -80,17 +101,21 @@ class FootprintUQGroup(click.Group):
             name = getattr(e, "filename", None)
             _error(f"{name}: {e.strerror or e}" if name else str(e))
             sys.exit(EXIT_BAD_INPUT)
+        except UnicodeDecodeError as e:  # a text file that is not UTF-8 (readers that name the file raise earlier)
+            _error(f"an input file is not UTF-8 text (byte 0x{e.object[e.start]:02x} at offset {e.start}); "
+                   "save it as UTF-8")
+            sys.exit(EXIT_BAD_INPUT)
+        except json.JSONDecodeError as e:  # a JSON input file that does not parse
+            _error(f"an input file is not valid JSON (line {e.lineno}, column {e.colno}: {e.msg})")
+            sys.exit(EXIT_BAD_INPUT)
+        except Exception as e:  # noqa: BLE001 - YAML errors are bad input; anything else is a bug
+            if _is_yaml_error(e):
+                _error(f"an input file is not valid YAML ({_one_line(str(e).splitlines()[0] if str(e) else e)})")
+                sys.exit(EXIT_BAD_INPUT)
+            _bug(e, args)
         except KeyboardInterrupt:
             click.echo("footprint-uq: interrupted", err=True)
             sys.exit(130)
-        except Exception as e:  # noqa: BLE001 - last line of defence: a bug, never bad input
-            if _debug(args):
-                import traceback
-
-                traceback.print_exc()
-            _error(f"internal error ({type(e).__name__}: {_one_line(e)[:300]}); please report it with the "
-                   "command line (run with --debug for the traceback)")
-            sys.exit(EXIT_BUG)
         finally:
             warnings.showwarning = old
         sys.exit(rv if isinstance(rv, int) else 0)

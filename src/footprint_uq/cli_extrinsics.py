@@ -46,6 +46,9 @@ def run_extrinsics(pairs, camera, board: str, square_m: float, out_dir, *, margi
     if ground not in ("fit", "identity"):
         T_gl = ex.load_transform(ground)
     if p.is_file() and p.suffix.lower() == ".csv":
+        from .io._common import read_text
+
+        read_text(p)  # a file that is not UTF-8 text: one line naming it
         frames = ex.read_correspondences_csv(p)
         if ground == "fit":
             raise InputError("--ground", "fit", "'identity' or a T_ground_lidar file when --pairs is a "
