@@ -187,3 +187,18 @@ def test_joint_propagation_carries_the_same_flag():
     np.testing.assert_allclose(j.nonlinearity, e.nonlinearity, rtol=1e-10)
     np.testing.assert_array_equal(j.linear_ok, e.linear_ok)
     assert j.linear_ok.shape == (2, 3) and propagate_joint(DEMO, "basler1", uv, linearity=False).nonlinearity is None
+
+
+def test_camera_position_error_is_additive_not_through_the_denominator():
+    """Isotropic position noise adds sigma^2 I to the covariance and nothing to the second-order change delta."""
+    uv = np.array([[959.5, 100.0], [400.0, 150.0]])
+    tilt = ErrorBudget.from_dict({"tilt_deg": 0.5, "height_m": 0.2})
+    both = tilt.replace(position_m=[0.3, 0.3])
+    a, b = propagate(DEMO, tilt, uv), propagate(DEMO, both, uv)
+    la = ellipse_axes(a.cov_m2)[0] ** 2
+    lb = ellipse_axes(b.cov_m2)[0] ** 2
+    np.testing.assert_allclose(lb, la + 0.09, rtol=1e-9)
+    delta_a = ((1 + a.nonlinearity) ** 2 - 1) * la
+    delta_b = ((1 + b.nonlinearity) ** 2 - 1) * lb
+    np.testing.assert_allclose(delta_b, delta_a, rtol=1e-9)
+    assert np.all(b.nonlinearity < a.nonlinearity)
