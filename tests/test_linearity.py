@@ -29,6 +29,8 @@ from footprint_uq.propagation import nonlinearity, nonlinearity_from_forms, ray_
 
 DEMO = PanTiltCamera(focal_px=1400.0, image_size_px=(1920, 1080), height_m=8.0, pan_deg=30.0, tilt_deg=20.0)
 BENCH = PanTiltCamera(1400, (1920, 1080), 10.0, 30.0, 12.0, roll_deg=1.0, position_m=(5.0, -3.0))
+_T = DEMO.T_cam_world
+LENS = OpenCVCamera(DEMO.K, [-0.08, 0.02, 1e-3, -5e-4, 0.0], _T[:3, :3], _T[:3, 3], (1920, 1080))  # with distortion
 SLOPE = ErrorBudget.preset("basler1").replace(roll_deg=0.05, ground_height_m=0.05, ground_slope_deg=0.5,
                                               name="basler1+slope0.5")
 
@@ -120,7 +122,7 @@ def _sweep(cam):
 
 
 CASES = [(DEMO, "basler1"), (DEMO, "bw-cube1"), (DEMO, "basler1@deg"), (DEMO, "bw-cube1@deg"),
-         (DEMO, "bw-bullet1@deg"), (DEMO, SLOPE), (BENCH, SLOPE), (BENCH, "bw-cube1@deg")]
+         (DEMO, "bw-bullet1@deg"), (DEMO, SLOPE), (BENCH, SLOPE), (BENCH, "bw-cube1@deg"), (LENS, "bw-cube1@deg")]
 
 
 @pytest.fixture(scope="module")
