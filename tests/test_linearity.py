@@ -204,3 +204,27 @@ def test_camera_position_error_is_additive_not_through_the_denominator():
     delta_b = ((1 + b.nonlinearity) ** 2 - 1) * lb
     np.testing.assert_allclose(delta_b, delta_a, rtol=1e-9)
     assert np.all(b.nonlinearity < a.nonlinearity)
+
+
+def test_covariance_for_v2x_follows_the_policy():
+    from footprint_uq.propagation import (
+        V2X_COV_LINEAR,
+        V2X_COV_SAMPLED,
+        V2X_COV_UNAVAILABLE,
+        covariance_for_v2x,
+    )
+
+    uv = np.array([[959.5, 800.0], [959.5, 60.0], [959.5, 20.0]])  # near, flagged (8 %), above the horizon
+    cov, src, est = covariance_for_v2x(DEMO, "basler1@deg", uv, n_samples=20_000, seed=3)
+    assert src.tolist() == [V2X_COV_LINEAR, V2X_COV_SAMPLED, V2X_COV_UNAVAILABLE]
+    assert est.linear_ok[0] and 0.05 < est.nonlinearity[1] <= 0.5
+    np.testing.assert_array_equal(cov[0], est.cov_m2[0])
+    assert np.isnan(cov[2]).all()
+    # the sampled covariance where its semi-major axis is the larger: never less than the linear one
+    mc = monte_carlo(DEMO, "basler1@deg", uv[1:2], n_samples=20_000, seed=3)
+    a_mc, a_lin = ellipse_axes(mc.cov_m2)[0][0], ellipse_axes(est.cov_m2[1])[0]
+    assert a_mc > a_lin
+    np.testing.assert_allclose(cov[1], mc.cov_m2[0], rtol=1e-12)
+    # far beyond the expansion (BW-Cube1 in degrees near the horizon): unavailable, NaN
+    cov2, src2, est2 = covariance_for_v2x(DEMO, "bw-cube1@deg", np.array([[959.5, 45.0]]), n_samples=2000)
+    assert est2.nonlinearity[0] > 0.5 and src2.tolist() == [V2X_COV_UNAVAILABLE] and np.isnan(cov2).all()

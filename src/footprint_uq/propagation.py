@@ -37,7 +37,8 @@ from .errors import InputError
 
 __all__ = ["GroundEstimate", "JointEstimate", "MonteCarloEstimate", "propagate", "propagate_joint",
            "monte_carlo", "unscented", "linearity_ratio", "nonlinearity", "nonlinearity_from_forms",
-           "DEFAULT_LINEAR_THRESHOLD"]
+           "DEFAULT_LINEAR_THRESHOLD", "covariance_for_v2x", "V2X_COV_LINEAR", "V2X_COV_SAMPLED",
+           "V2X_COV_UNAVAILABLE"]
 
 #: default threshold of ``linear_ok``: predicted relative error of the linear 1-sigma semi-major axis
 DEFAULT_LINEAR_THRESHOLD = 0.05
@@ -511,3 +512,52 @@ def nonlinearity(camera, budget, uv_px, *, pixel_cov_px2=None) -> np.ndarray:
     """
     est = propagate(camera, budget, uv_px, pixel_cov_px2=pixel_cov_px2)
     return est.nonlinearity
+
+
+#: :func:`covariance_for_v2x` sources: the linear covariance, a sampled one, or none (encode "unavailable")
+V2X_COV_LINEAR, V2X_COV_SAMPLED, V2X_COV_UNAVAILABLE = 0, 1, 2
+
+
+def covariance_for_v2x(camera, budget, uv_px, *, linear_threshold: float = DEFAULT_LINEAR_THRESHOLD,
+                       unavailable_above: float = 0.5, min_fraction_valid: float = 0.999, n_samples: int = 4000,
+                       seed: int = 0, pixel_cov_px2=None):
+    """The covariance to encode in V2X confidence fields, by the policy of docs/uncertainty-model.md.
+
+    1. ``linear_ok``: the linear covariance;
+    2. not ``linear_ok`` and ``nonlinearity <= unavailable_above``: the larger of the linear and a
+       seeded Monte-Carlo covariance of that point (the one with the larger semi-major axis), so
+       that the encoded confidence never promises less spread than the samples show;
+    3. ``nonlinearity > unavailable_above``, fewer than ``min_fraction_valid`` of the samples
+       meeting the ground, or an invalid point: NaN (encode the fields' "unavailable" values).
+
+    Monte Carlo runs only for the points of case 2 (``n_samples`` each, ``seed``).
+
+    Parameters
+    ----------
+    camera, budget, uv_px (..., 2), pixel_cov_px2 : as :func:`propagate`
+
+    Returns
+    -------
+    cov_m2 : (..., 2, 2)   m^2, NaN for case 3
+    source : (...) int8    :data:`V2X_COV_LINEAR`, :data:`V2X_COV_SAMPLED` or :data:`V2X_COV_UNAVAILABLE`
+    estimate : GroundEstimate   the linear result with its flag
+    """
+    hi = _threshold(unavailable_above)
+    est = propagate(camera, budget, uv_px, pixel_cov_px2=pixel_cov_px2, linear_threshold=linear_threshold)
+    cov = np.array(est.cov_m2, dtype=np.float64, copy=True)
+    source = np.where(est.linear_ok, V2X_COV_LINEAR, V2X_COV_UNAVAILABLE).astype(np.int8)
+    mid = est.valid & ~est.linear_ok & (est.nonlinearity <= hi)
+    if np.any(mid):
+        uv = as_points("uv_px", uv_px, 2)
+        pc = None
+        if pixel_cov_px2 is not None:
+            pc = np.broadcast_to(np.asarray(pixel_cov_px2, dtype=np.float64), uv.shape[:-1] + (2, 2))[mid]
+        mc = monte_carlo(camera, budget, uv[mid], n_samples=n_samples, seed=seed, pixel_cov_px2=pc)
+        lin = cov[mid]
+        a_mc, a_lin = ellipse_axes(mc.cov_m2)[0], ellipse_axes(lin)[0]
+        good = mc.fraction_valid >= min_fraction_valid
+        chosen = np.where((a_mc > a_lin)[:, None, None], mc.cov_m2, lin)
+        cov[mid] = np.where(good[:, None, None], chosen, np.nan)
+        source[mid] = np.where(good, V2X_COV_SAMPLED, V2X_COV_UNAVAILABLE)
+    cov[source == V2X_COV_UNAVAILABLE] = np.nan
+    return cov, source, est
