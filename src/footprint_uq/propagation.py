@@ -37,7 +37,7 @@ from .errors import InputError
 
 __all__ = ["GroundEstimate", "JointEstimate", "MonteCarloEstimate", "propagate", "propagate_joint",
            "monte_carlo", "unscented", "linearity_ratio", "nonlinearity", "nonlinearity_from_forms",
-           "DEFAULT_LINEAR_THRESHOLD", "covariance_for_v2x", "V2X_COV_LINEAR", "V2X_COV_SAMPLED",
+           "DEFAULT_LINEAR_THRESHOLD", "ray_denominator", "covariance_for_v2x", "V2X_COV_LINEAR", "V2X_COV_SAMPLED",
            "V2X_COV_UNAVAILABLE"]
 
 #: default threshold of ``linear_ok``: predicted relative error of the linear 1-sigma semi-major axis
