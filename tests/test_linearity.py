@@ -29,6 +29,8 @@ from footprint_uq.propagation import nonlinearity, nonlinearity_from_forms, ray_
 
 DEMO = PanTiltCamera(focal_px=1400.0, image_size_px=(1920, 1080), height_m=8.0, pan_deg=30.0, tilt_deg=20.0)
 BENCH = PanTiltCamera(1400, (1920, 1080), 10.0, 30.0, 12.0, roll_deg=1.0, position_m=(5.0, -3.0))
+_T = DEMO.T_cam_world
+LENS = OpenCVCamera(DEMO.K, [-0.08, 0.02, 1e-3, -5e-4, 0.0], _T[:3, :3], _T[:3, 3], (1920, 1080))  # with distortion
 SLOPE = ErrorBudget.preset("basler1").replace(roll_deg=0.05, ground_height_m=0.05, ground_slope_deg=0.5,
                                               name="basler1+slope0.5")
 
@@ -120,7 +122,7 @@ def _sweep(cam):
 
 
 CASES = [(DEMO, "basler1"), (DEMO, "bw-cube1"), (DEMO, "basler1@deg"), (DEMO, "bw-cube1@deg"),
-         (DEMO, "bw-bullet1@deg"), (DEMO, SLOPE), (BENCH, SLOPE), (BENCH, "bw-cube1@deg")]
+         (DEMO, "bw-bullet1@deg"), (DEMO, SLOPE), (BENCH, SLOPE), (BENCH, "bw-cube1@deg"), (LENS, "bw-cube1@deg")]
 
 
 @pytest.fixture(scope="module")
@@ -187,3 +189,42 @@ def test_joint_propagation_carries_the_same_flag():
     np.testing.assert_allclose(j.nonlinearity, e.nonlinearity, rtol=1e-10)
     np.testing.assert_array_equal(j.linear_ok, e.linear_ok)
     assert j.linear_ok.shape == (2, 3) and propagate_joint(DEMO, "basler1", uv, linearity=False).nonlinearity is None
+
+
+def test_camera_position_error_is_additive_not_through_the_denominator():
+    """Isotropic position noise adds sigma^2 I to the covariance and nothing to the second-order change delta."""
+    uv = np.array([[959.5, 100.0], [400.0, 150.0]])
+    tilt = ErrorBudget.from_dict({"tilt_deg": 0.5, "height_m": 0.2})
+    both = tilt.replace(position_m=[0.3, 0.3])
+    a, b = propagate(DEMO, tilt, uv), propagate(DEMO, both, uv)
+    la = ellipse_axes(a.cov_m2)[0] ** 2
+    lb = ellipse_axes(b.cov_m2)[0] ** 2
+    np.testing.assert_allclose(lb, la + 0.09, rtol=1e-9)
+    delta_a = ((1 + a.nonlinearity) ** 2 - 1) * la
+    delta_b = ((1 + b.nonlinearity) ** 2 - 1) * lb
+    np.testing.assert_allclose(delta_b, delta_a, rtol=1e-9)
+    assert np.all(b.nonlinearity < a.nonlinearity)
+
+
+def test_covariance_for_v2x_follows_the_policy():
+    from footprint_uq.propagation import (
+        V2X_COV_LINEAR,
+        V2X_COV_SAMPLED,
+        V2X_COV_UNAVAILABLE,
+        covariance_for_v2x,
+    )
+
+    uv = np.array([[959.5, 800.0], [959.5, 60.0], [959.5, 20.0]])  # near, flagged (8 %), above the horizon
+    cov, src, est = covariance_for_v2x(DEMO, "basler1@deg", uv, n_samples=20_000, seed=3)
+    assert src.tolist() == [V2X_COV_LINEAR, V2X_COV_SAMPLED, V2X_COV_UNAVAILABLE]
+    assert est.linear_ok[0] and 0.05 < est.nonlinearity[1] <= 0.5
+    np.testing.assert_array_equal(cov[0], est.cov_m2[0])
+    assert np.isnan(cov[2]).all()
+    # the sampled covariance where its semi-major axis is the larger: never less than the linear one
+    mc = monte_carlo(DEMO, "basler1@deg", uv[1:2], n_samples=20_000, seed=3)
+    a_mc, a_lin = ellipse_axes(mc.cov_m2)[0][0], ellipse_axes(est.cov_m2[1])[0]
+    assert a_mc > a_lin
+    np.testing.assert_allclose(cov[1], mc.cov_m2[0], rtol=1e-12)
+    # far beyond the expansion (BW-Cube1 in degrees near the horizon): unavailable, NaN
+    cov2, src2, est2 = covariance_for_v2x(DEMO, "bw-cube1@deg", np.array([[959.5, 45.0]]), n_samples=2000)
+    assert est2.nonlinearity[0] > 0.5 and src2.tolist() == [V2X_COV_UNAVAILABLE] and np.isnan(cov2).all()

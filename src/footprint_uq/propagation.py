@@ -37,7 +37,8 @@ from .errors import InputError
 
 __all__ = ["GroundEstimate", "JointEstimate", "MonteCarloEstimate", "propagate", "propagate_joint",
            "monte_carlo", "unscented", "linearity_ratio", "nonlinearity", "nonlinearity_from_forms",
-           "DEFAULT_LINEAR_THRESHOLD"]
+           "DEFAULT_LINEAR_THRESHOLD", "ray_denominator", "covariance_for_v2x", "V2X_COV_LINEAR", "V2X_COV_SAMPLED",
+           "V2X_COV_UNAVAILABLE"]
 
 #: default threshold of ``linear_ok``: predicted relative error of the linear 1-sigma semi-major axis
 DEFAULT_LINEAR_THRESHOLD = 0.05
@@ -398,22 +399,28 @@ def ray_denominator(camera, uv_px):
     return dn, lam, d[..., :2], g, g_uv
 
 
-def nonlinearity_from_forms(lam_max_m2, e_major, dn, lam_m, d_xy, mu, gamma):
+def nonlinearity_from_forms(lam_max_m2, e_major, dn, lam_m, d_xy, mu, gamma, *, s_num_m2=None, s_cross_m2=None,
+                            mu_num=None):
     """Second-order correction of the linear semi-major axis, from per-point scalars (portable).
 
     With ``e`` the unit major axis of the linear covariance (eigenvalue ``lam_max``),
     ``r = J^T e`` (J the (2, n) Jacobian of the ground point over all n error sources,
-    camera parameters and pixel), ``g`` the gradient of ``Dn`` over the same sources and
-    ``Sigma`` their covariance::
+    camera parameters and pixel), ``g`` the gradient of ``Dn`` over the same sources,
+    ``Sigma`` their covariance, and ``r'`` = ``r`` with the camera-position entries (x_m,
+    y_m) set to 0 -- the position moves the ground point additively, not through
+    ``1 / Dn``::
 
         mu    = r^T Sigma g      (m)          covariance of the major-axis error with dDn
         gamma = g^T Sigma g      (1)          sigma_Dn^2
+        s_num = r'^T Sigma r'    (m^2)        the major-axis variance without the position error
+        s_crs = r^T Sigma r'     (m^2)        (= s_num when the position is uncorrelated with the rest)
+        mu'   = r'^T Sigma g     (m)          (= mu: Dn does not depend on the position)
         q2    = gamma / Dn^2                  relative variance of the denominator
         b     = lam (d_xy . e)   (m)          the depth term along e: xy = C + lam d_xy / (1 + eps)
         w     = -b / Dn          (m)          D = w dDn, the linear part of the depth term
-        c_L   = mu / Dn,  c_A = (mu - w gamma) / Dn
-        s_A   = lam_max - 2 w mu + w^2 gamma      variance of the rest of the linear error
-        s_LA  = lam_max - w mu
+        c_L   = mu / Dn,  c_A = (mu' - w gamma) / Dn
+        s_A   = s_num - 2 w mu' + w^2 gamma   variance of the numerator's linear error A
+        s_LA  = s_crs - w mu                  covariance of the whole linear error L with A
         delta = 2 q2^2 b^2 - 4 q2 b c_A + q2 s_A + c_A^2 - 6 q2 c_L b + 2 q2 s_LA + 4 c_L c_A
                 + (69 q2^3 + 696 q2^4) b^2
         nonlinearity = | sqrt(1 + delta / lam_max) - 1 |
@@ -422,7 +429,11 @@ def nonlinearity_from_forms(lam_max_m2, e_major, dn, lam_m, d_xy, mu, gamma):
     ``1 / (1 + eps)``, ``eps = dDn / Dn``, is expanded to third order and the errors are
     jointly Gaussian (docs/uncertainty-model.md, "The linearity flag"); the last terms are the
     next terms of the pure depth error's (asymptotic) series, ``Var(1 / (1 + eps)) = q2 +
-    8 q2^2 + 69 q2^3 + 696 q2^4 + ...``, which dominates near the horizon.  Shapes broadcast:
+    8 q2^2 + 69 q2^3 + 696 q2^4 + ...``, which dominates near the horizon.
+
+    ``s_num_m2``, ``s_cross_m2`` and ``mu_num`` default to ``lam_max``, ``lam_max`` and ``mu``
+    (no position error).  With a position error uncorrelated with the other parameters,
+    ``s_num = s_crs = lam_max - e^T Sigma_pos e`` and ``mu' = mu``.  Shapes broadcast:
     ``e_major``, ``d_xy`` (..., 2), the others (...).  Returns (...); 1.0 where
     ``1 + delta / lam_max < 0`` (the expansion has broken down), NaN where an input is NaN.
     """
@@ -432,13 +443,16 @@ def nonlinearity_from_forms(lam_max_m2, e_major, dn, lam_m, d_xy, mu, gamma):
     lam_max = np.asarray(lam_max_m2, dtype=np.float64)
     mu = np.asarray(mu, dtype=np.float64)
     gamma = np.asarray(gamma, dtype=np.float64)
+    s_num = lam_max if s_num_m2 is None else np.asarray(s_num_m2, dtype=np.float64)
+    s_crs = lam_max if s_cross_m2 is None else np.asarray(s_cross_m2, dtype=np.float64)
+    mu_n = mu if mu_num is None else np.asarray(mu_num, dtype=np.float64)
     with np.errstate(divide="ignore", invalid="ignore"):
         q2 = gamma / dn**2
         w = -b / dn
         c_L = mu / dn
-        c_A = (mu - w * gamma) / dn
-        s_A = lam_max - 2 * w * mu + w * w * gamma
-        s_LA = lam_max - w * mu
+        c_A = (mu_n - w * gamma) / dn
+        s_A = s_num - 2 * w * mu_n + w * w * gamma
+        s_LA = s_crs - w * mu
         delta = (2 * q2 * q2 * b * b - 4 * q2 * b * c_A + q2 * s_A + c_A * c_A - 6 * q2 * c_L * b
                  + 2 * q2 * s_LA + 4 * c_L * c_A + (69 + 696 * q2) * q2 * q2 * q2 * b * b)
         x = 1.0 + delta / lam_max
@@ -453,10 +467,19 @@ def _nonlinearity(camera, budget, uv, cov, J, Juv, Sp, Suv, valid):
     e = V[..., :, 1]
     r = np.einsum("...ij,...i->...j", np.nan_to_num(J), e)  # (..., 22)
     r_uv = np.einsum("...ij,...i->...j", np.nan_to_num(Juv), e)  # (..., 2)
+    r_num = r.copy()
+    r_num[..., P.XM:P.YM + 1] = 0.0  # the camera position moves the point additively
     Sg = g @ Sp  # Sp symmetric
-    mu = np.einsum("...i,...i->...", r, Sg) + np.einsum("...i,...ij,...j->...", r_uv, Suv, g_uv)
+    pix_g = np.einsum("...i,...ij,...j->...", r_uv, Suv, g_uv)
+    pix_r = np.einsum("...i,...ij,...j->...", r_uv, Suv, r_uv)
+    mu = np.einsum("...i,...i->...", r, Sg) + pix_g
+    mu_num = np.einsum("...i,...i->...", r_num, Sg) + pix_g
     gamma = np.einsum("...i,...i->...", g, Sg) + np.einsum("...i,...ij,...j->...", g_uv, Suv, g_uv)
-    nl = nonlinearity_from_forms(lam_max, e, dn, lam, d_xy, mu, gamma)
+    Sr_num = r_num @ Sp
+    s_num = np.einsum("...i,...i->...", r_num, Sr_num) + pix_r
+    s_crs = np.einsum("...i,...i->...", r, Sr_num) + pix_r
+    nl = nonlinearity_from_forms(lam_max, e, dn, lam, d_xy, mu, gamma, s_num_m2=s_num, s_cross_m2=s_crs,
+                                 mu_num=mu_num)
     return np.where(valid, nl, np.nan)
 
 
@@ -489,3 +512,52 @@ def nonlinearity(camera, budget, uv_px, *, pixel_cov_px2=None) -> np.ndarray:
     """
     est = propagate(camera, budget, uv_px, pixel_cov_px2=pixel_cov_px2)
     return est.nonlinearity
+
+
+#: :func:`covariance_for_v2x` sources: the linear covariance, a sampled one, or none (encode "unavailable")
+V2X_COV_LINEAR, V2X_COV_SAMPLED, V2X_COV_UNAVAILABLE = 0, 1, 2
+
+
+def covariance_for_v2x(camera, budget, uv_px, *, linear_threshold: float = DEFAULT_LINEAR_THRESHOLD,
+                       unavailable_above: float = 0.5, min_fraction_valid: float = 0.999, n_samples: int = 4000,
+                       seed: int = 0, pixel_cov_px2=None):
+    """The covariance to encode in V2X confidence fields, by the policy of docs/uncertainty-model.md.
+
+    1. ``linear_ok``: the linear covariance;
+    2. not ``linear_ok`` and ``nonlinearity <= unavailable_above``: the larger of the linear and a
+       seeded Monte-Carlo covariance of that point (the one with the larger semi-major axis), so
+       that the encoded confidence never promises less spread than the samples show;
+    3. ``nonlinearity > unavailable_above``, fewer than ``min_fraction_valid`` of the samples
+       meeting the ground, or an invalid point: NaN (encode the fields' "unavailable" values).
+
+    Monte Carlo runs only for the points of case 2 (``n_samples`` each, ``seed``).
+
+    Parameters
+    ----------
+    camera, budget, uv_px (..., 2), pixel_cov_px2 : as :func:`propagate`
+
+    Returns
+    -------
+    cov_m2 : (..., 2, 2)   m^2, NaN for case 3
+    source : (...) int8    :data:`V2X_COV_LINEAR`, :data:`V2X_COV_SAMPLED` or :data:`V2X_COV_UNAVAILABLE`
+    estimate : GroundEstimate   the linear result with its flag
+    """
+    hi = _threshold(unavailable_above)
+    est = propagate(camera, budget, uv_px, pixel_cov_px2=pixel_cov_px2, linear_threshold=linear_threshold)
+    cov = np.array(est.cov_m2, dtype=np.float64, copy=True)
+    source = np.where(est.linear_ok, V2X_COV_LINEAR, V2X_COV_UNAVAILABLE).astype(np.int8)
+    mid = est.valid & ~est.linear_ok & (est.nonlinearity <= hi)
+    if np.any(mid):
+        uv = as_points("uv_px", uv_px, 2)
+        pc = None
+        if pixel_cov_px2 is not None:
+            pc = np.broadcast_to(np.asarray(pixel_cov_px2, dtype=np.float64), uv.shape[:-1] + (2, 2))[mid]
+        mc = monte_carlo(camera, budget, uv[mid], n_samples=n_samples, seed=seed, pixel_cov_px2=pc)
+        lin = cov[mid]
+        a_mc, a_lin = ellipse_axes(mc.cov_m2)[0], ellipse_axes(lin)[0]
+        good = mc.fraction_valid >= min_fraction_valid
+        chosen = np.where((a_mc > a_lin)[:, None, None], mc.cov_m2, lin)
+        cov[mid] = np.where(good[:, None, None], chosen, np.nan)
+        source[mid] = np.where(good, V2X_COV_SAMPLED, V2X_COV_UNAVAILABLE)
+    cov[source == V2X_COV_UNAVAILABLE] = np.nan
+    return cov, source, est

@@ -224,7 +224,7 @@ def render_markdown(data: dict) -> str:
     a("|---|---|---|---|")
     for cid, c in data["failing"].items():
         a(f"| {cid.replace('_', ' ')} | {_md_escape(C.FAILING_EXAMPLES[cid]['why'])} | **{c['verdict']}** | "
-          f"{_md_escape(c['why'][:300])} |")
+          f"{_md_escape(c['why'])} |")
     a("")
     a("Share of the camera-height error in the footprint-centre variance (median over the frames):")
     a("")
