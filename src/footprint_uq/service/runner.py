@@ -182,6 +182,11 @@ class Metrics:
             return list(self._lat_total)
 
 
+def _log(text: str) -> None:
+    """One line on stderr (the operator's log; the records go to stdout or MQTT)."""
+    print(f"footprint-uq serve: {text}", file=sys.stderr, flush=True)
+
+
 def parse_mqtt_url(url: str) -> tuple[str, int]:
     """``mqtt://HOST:PORT`` -> (host, port) (port 1883 by default)."""
     u = urlparse(url)
@@ -430,6 +435,9 @@ def serve(service: Service, *, input: str | None = "-", mqtt: str | None = None,
         threads.append(threading.Thread(target=health, name="footprint-uq-health", daemon=True))
     for t in threads:
         t.start()
+    _log(f"ready: input {'stdin' if input == '-' else mqtt + ' ' + ', '.join(topics)}, output "
+         f"{'stdout' if output == '-' else mqtt + ' ' + output_prefix + '/...'}, overload policy {policy}"
+         + (f", worker {worker}" if worker else ""))
     try:
         # run until a stop request or the end of the input (stdin: the reader closes the queue)
         while not stop.wait(0.05):
@@ -454,6 +462,8 @@ def serve(service: Service, *, input: str | None = "-", mqtt: str | None = None,
             signal.signal(sig, h)
         gc.set_threshold(*old_gc)
         gc.unfreeze()
+        _log(f"stopped: frames in {metrics.frames_in}, out {metrics.frames_out}, dropped {queue.dropped}, "
+             f"errors {metrics.errors}")
         sys.setswitchinterval(old_switch)
     return 0
 
@@ -482,18 +492,30 @@ def run(*, camera=None, budget=None, registry=None, camera_id: str | None = None
             budget=budget, registry=registry, heading_offset_deg=heading_offset_deg, origin_lat_deg=origin_lat_deg,
             origin_lon_deg=origin_lon_deg, confidence=confidence, contact=contact,
             allow_outside_image=allow_outside_image, uper_encoder=uper_encoder, **serve_options))
-    cam = None
-    if camera is not None:
-        from ..io import load_camera
+    # a SIGTERM while the cameras load and the kernels compile (seconds) is a stop request too: nothing was
+    # taken in yet, so the drain is empty and the exit status 0
+    stop = serve_options.pop("stop", None) or threading.Event()
+    old = {}
+    if threading.current_thread() is threading.main_thread():
+        for sig in (signal.SIGTERM, signal.SIGINT):
+            old[sig] = signal.signal(sig, lambda s, f: stop.set())
+    _log("starting: loading the cameras and the compiled kernels")
+    try:
+        cam = None
+        if camera is not None:
+            from ..io import load_camera
 
-        if budget is None:
-            raise InputError("--budget", None, "an error budget (preset or file) for --camera")
-        cam = load_camera(camera)
-    service = Service(cam, budget, registry=registry, camera_id=camera_id, heading_offset_deg=heading_offset_deg,
-                      origin_lat_deg=origin_lat_deg, origin_lon_deg=origin_lon_deg, confidence=confidence,
-                      contact=contact, allow_outside_image=allow_outside_image, station_id=station_id,
-                      uper_encoder=uper_encoder)
-    return serve(service, **serve_options)
+            if budget is None:
+                raise InputError("--budget", None, "an error budget (preset or file) for --camera")
+            cam = load_camera(camera)
+        service = Service(cam, budget, registry=registry, camera_id=camera_id, heading_offset_deg=heading_offset_deg,
+                          origin_lat_deg=origin_lat_deg, origin_lon_deg=origin_lon_deg, confidence=confidence,
+                          contact=contact, allow_outside_image=allow_outside_image, station_id=station_id,
+                          uper_encoder=uper_encoder)
+        return serve(service, stop=stop, **serve_options)
+    finally:
+        for sig, h in old.items():
+            signal.signal(sig, h)
 
 
 def _worker_main(options: dict, cameras: list[str], label: str) -> None:  # pragma: no cover - child process
