@@ -339,3 +339,16 @@ def test_more_than_255_objects_are_said_not_to_fit_in_the_messages(camera):
     empty = svc.process_frame({"frame": 3, "timestamp_s": T0, "detections": []})
     assert empty["n_objects"] == 0 and empty["sdsm"] is None  # J3224: an object list has at least one entry
     assert decode_cpm_uper(empty["cpm_uper_hex"]) == empty["cpm"]
+
+
+def test_bad_service_options_are_refused(camera):
+    with pytest.raises(ValueError, match="contact"):
+        Service(camera, "basler1", contact="2d", warm_up=False)
+    with pytest.raises(ValueError, match="camera/registry"):
+        Service(warm_up=False)
+    with pytest.raises(ValueError, match="budget"):
+        Service(camera, warm_up=False)
+    with pytest.raises(ValueError, match="uper_encoder"):
+        Service(camera, "basler1", uper_encoder="ber", warm_up=False)
+    with pytest.raises(ValueError, match="confidence"):
+        Service(camera, "basler1", confidence=1.0, warm_up=False)
