@@ -352,3 +352,26 @@ def test_bad_service_options_are_refused(camera):
         Service(camera, "basler1", uper_encoder="ber", warm_up=False)
     with pytest.raises(ValueError, match="confidence"):
         Service(camera, "basler1", confidence=1.0, warm_up=False)
+
+
+@pytest.mark.parametrize("args, words", [
+    (["--budget", "basler1"], "--camera/--registry"),
+    (["--camera", "cam.yaml", "--budget", "basler1", "--mqtt", "http://x"], "mqtt://HOST:PORT"),
+    (["--camera", "nope.yaml", "--budget", "basler1", "--input", "-"], "nope.yaml"),
+    (["--registry", "reg.csv", "--input", "-", "--workers", "2"], "--workers"),
+    (["--camera", "cam.yaml", "--output", "mqtt"], "--mqtt"),
+    (["--camera", "cam.yaml", "--input", "-"], "--budget"),
+])
+def test_serve_bad_options_exit_2_with_one_line(tmp_path, monkeypatch, camera, args, words):
+    from click.testing import CliRunner
+
+    from footprint_uq import save_camera
+    from footprint_uq.cli import main
+
+    monkeypatch.chdir(tmp_path)
+    save_camera(camera, "cam.yaml")
+    (tmp_path / "reg.csv").write_text("camera_id,camera,budget\ncam1,cam.yaml,basler1\n")
+    r = CliRunner().invoke(main, ["serve", *args])
+    assert r.exit_code == 2, r.output
+    lines = [ln for ln in r.output.splitlines() if ln.startswith("footprint-uq: error")]
+    assert len(lines) == 1 and words in lines[0], r.output

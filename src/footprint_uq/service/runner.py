@@ -182,6 +182,17 @@ class Metrics:
             return list(self._lat_total)
 
 
+def _check_transport(input, mqtt, output) -> None:
+    if input not in ("-", None):
+        raise InputError("--input", input, "'-' (stdin); use --mqtt for MQTT input")
+    if output not in ("-", "mqtt"):
+        raise InputError("--output", output, "'-' (stdout) or 'mqtt'")
+    if (input is None or output == "mqtt") and not mqtt:
+        raise InputError("--mqtt", None, "mqtt://HOST:PORT for MQTT input or output")
+    if mqtt:
+        parse_mqtt_url(mqtt)
+
+
 def _log(text: str) -> None:
     """One line on stderr (the operator's log; the records go to stdout or MQTT)."""
     print(f"footprint-uq serve: {text}", file=sys.stderr, flush=True)
@@ -323,12 +334,7 @@ def serve(service: Service, *, input: str | None = "-", mqtt: str | None = None,
     worker : str, optional
         Label added to the health records (``"1/2"``: worker 1 of 2, see :func:`run`).
     """
-    if input not in ("-", None):
-        raise InputError("--input", input, "'-' (stdin); use --mqtt for MQTT input")
-    if output not in ("-", "mqtt"):
-        raise InputError("--output", output, "'-' (stdout) or 'mqtt'")
-    if (input is None or output == "mqtt") and not mqtt:
-        raise InputError("--mqtt", None, "mqtt://HOST:PORT for MQTT input or output")
+    _check_transport(input, mqtt, output)
     policy = policy or ("block" if input == "-" else "newest")
     stop = stop or threading.Event()
     metrics = Metrics()
@@ -484,6 +490,7 @@ def run(*, camera=None, budget=None, registry=None, camera_id: str | None = None
     if (camera is None) == (registry is None):
         raise InputError("--camera/--registry", "both" if camera is not None else "neither",
                          "one camera (--camera with --budget) or many (--registry)")
+    _check_transport(serve_options.get("input", "-"), serve_options.get("mqtt"), serve_options.get("output", "-"))
     if workers > 1:
         if registry is None or serve_options.get("input", "-") is not None:
             raise InputError("--workers", workers, "1, unless the input is MQTT (--mqtt without --input) and "
