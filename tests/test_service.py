@@ -17,6 +17,8 @@ import time
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from footprint_uq import FrameProcessor, PanTiltCamera
 from footprint_uq.footprints import V2X_FIELDS
@@ -375,3 +377,33 @@ def test_serve_bad_options_exit_2_with_one_line(tmp_path, monkeypatch, camera, a
     assert r.exit_code == 2, r.output
     lines = [ln for ln in r.output.splitlines() if ln.startswith("footprint-uq: error")]
     assert len(lines) == 1 and words in lines[0], r.output
+
+
+_CLASSES = st.one_of(st.none(), st.builds(lambda v: {"vehicleSubClass": v}, st.integers(0, 14)),
+                     st.builds(lambda v: {"otherSubClass": v}, st.integers(0, 255)),
+                     st.builds(lambda v: {"vruSubClass": {"pedestrian": v}},
+                               st.sampled_from(["unavailable", "ordinary-pedestrian", "road-worker",
+                                                "first-responder", "max"])))
+_OBJECT = st.tuples(st.integers(0, 65535), st.integers(-131072, 131071), st.integers(-131072, 131071),
+                    st.integers(1, 4096), st.integers(1, 4096), st.integers(-100, 101), _CLASSES,
+                    st.integers(1, 101), st.one_of(st.just(0), st.integers(-2048, 2047)))
+
+
+@settings(max_examples=150, deadline=None)
+@given(objs=st.lists(_OBJECT, max_size=4), station=st.integers(0, 2 ** 32 - 1), ref=st.integers(0, 2 ** 42 - 1),
+           lat=st.integers(-900000000, 900000001), lon=st.integers(-1800000000, 1800000001))
+def test_uper_writers_equal_asn1tools_over_the_whole_value_ranges(objs, station, ref, lat, lon):
+    """Every field at every value of its range (edges included): both writers give asn1tools' bytes."""
+    from footprint_uq.service.messages.cpm import cpm_to_asn1_value
+    from footprint_uq.service.messages.uper_cpm import class_bits, perceived_object_container_uper
+
+    cpm = build_cpm(station, ref, [perceived_object(*o) for o in objs], latitude=lat, longitude=lon)
+    ref_bytes = encode_cpm_uper(cpm)
+    assert encode_cpm_uper_fast(cpm) == ref_bytes
+    assert decode_cpm_uper(ref_bytes) == cpm
+    if all(o[8] == 0 for o in objs):  # the column writer: objects measured at the reference time
+        cols = list(zip(*objs, strict=True)) if objs else [()] * 9
+        got = perceived_object_container_uper(cols[0], cols[1], cols[3], cols[2], cols[4], cols[5],
+                                              [None if c is None else (class_bits(c), lv)
+                                               for c, lv in zip(cols[6], cols[7], strict=True)])
+        assert got == cpm_to_asn1_value(cpm)["payload"]["cpmContainers"][1]["containerData"]
