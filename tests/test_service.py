@@ -17,6 +17,8 @@ import time
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from footprint_uq import FrameProcessor, PanTiltCamera
 from footprint_uq.footprints import V2X_FIELDS
@@ -339,3 +341,69 @@ def test_more_than_255_objects_are_said_not_to_fit_in_the_messages(camera):
     empty = svc.process_frame({"frame": 3, "timestamp_s": T0, "detections": []})
     assert empty["n_objects"] == 0 and empty["sdsm"] is None  # J3224: an object list has at least one entry
     assert decode_cpm_uper(empty["cpm_uper_hex"]) == empty["cpm"]
+
+
+def test_bad_service_options_are_refused(camera):
+    with pytest.raises(ValueError, match="contact"):
+        Service(camera, "basler1", contact="2d", warm_up=False)
+    with pytest.raises(ValueError, match="camera/registry"):
+        Service(warm_up=False)
+    with pytest.raises(ValueError, match="budget"):
+        Service(camera, warm_up=False)
+    with pytest.raises(ValueError, match="uper_encoder"):
+        Service(camera, "basler1", uper_encoder="ber", warm_up=False)
+    with pytest.raises(ValueError, match="confidence"):
+        Service(camera, "basler1", confidence=1.0, warm_up=False)
+
+
+@pytest.mark.parametrize("args, words", [
+    (["--budget", "basler1"], "--camera/--registry"),
+    (["--camera", "cam.yaml", "--budget", "basler1", "--mqtt", "http://x"], "mqtt://HOST:PORT"),
+    (["--camera", "nope.yaml", "--budget", "basler1", "--input", "-"], "nope.yaml"),
+    (["--registry", "reg.csv", "--input", "-", "--workers", "2"], "--workers"),
+    (["--camera", "cam.yaml", "--output", "mqtt"], "--mqtt"),
+    (["--camera", "cam.yaml", "--input", "-"], "--budget"),
+])
+def test_serve_bad_options_exit_2_with_one_line(tmp_path, monkeypatch, camera, args, words):
+    from click.testing import CliRunner
+
+    from footprint_uq import save_camera
+    from footprint_uq.cli import main
+
+    monkeypatch.chdir(tmp_path)
+    save_camera(camera, "cam.yaml")
+    (tmp_path / "reg.csv").write_text("camera_id,camera,budget\ncam1,cam.yaml,basler1\n")
+    r = CliRunner().invoke(main, ["serve", *args])
+    assert r.exit_code == 2, r.output
+    lines = [ln for ln in r.output.splitlines() if ln.startswith("footprint-uq: error")]
+    assert len(lines) == 1 and words in lines[0], r.output
+
+
+_CLASSES = st.one_of(st.none(), st.builds(lambda v: {"vehicleSubClass": v}, st.integers(0, 14)),
+                     st.builds(lambda v: {"otherSubClass": v}, st.integers(0, 255)),
+                     st.builds(lambda v: {"vruSubClass": {"pedestrian": v}},
+                               st.sampled_from(["unavailable", "ordinary-pedestrian", "road-worker",
+                                                "first-responder", "max"])))
+_OBJECT = st.tuples(st.integers(0, 65535), st.integers(-131072, 131071), st.integers(-131072, 131071),
+                    st.integers(1, 4096), st.integers(1, 4096), st.integers(-100, 101), _CLASSES,
+                    st.integers(1, 101), st.one_of(st.just(0), st.integers(-2048, 2047)))
+
+
+@settings(max_examples=150, deadline=None)
+@given(objs=st.lists(_OBJECT, max_size=4), station=st.integers(0, 2 ** 32 - 1), ref=st.integers(0, 2 ** 42 - 1),
+           lat=st.integers(-900000000, 900000001), lon=st.integers(-1800000000, 1800000001))
+def test_uper_writers_equal_asn1tools_over_the_whole_value_ranges(objs, station, ref, lat, lon):
+    """Every field at every value of its range (edges included): both writers give asn1tools' bytes."""
+    from footprint_uq.service.messages.cpm import cpm_to_asn1_value
+    from footprint_uq.service.messages.uper_cpm import class_bits, perceived_object_container_uper
+
+    cpm = build_cpm(station, ref, [perceived_object(*o) for o in objs], latitude=lat, longitude=lon)
+    ref_bytes = encode_cpm_uper(cpm)
+    assert encode_cpm_uper_fast(cpm) == ref_bytes
+    assert decode_cpm_uper(ref_bytes) == cpm
+    if all(o[8] == 0 for o in objs):  # the column writer: objects measured at the reference time
+        cols = list(zip(*objs, strict=True)) if objs else [()] * 9
+        got = perceived_object_container_uper(cols[0], cols[1], cols[3], cols[2], cols[4], cols[5],
+                                              [None if c is None else (class_bits(c), lv)
+                                               for c, lv in zip(cols[6], cols[7], strict=True)])
+        assert got == cpm_to_asn1_value(cpm)["payload"]["cpmContainers"][1]["containerData"]

@@ -325,3 +325,13 @@ def test_two_worker_processes_split_the_cameras(broker, camera_file, tmp_path):
         last[h["worker"]] = h
     assert sum(h["frames_out"] for h in last.values()) == 12  # cam0, cam2 -> worker 1; cam1 -> worker 2
     assert last["1/2"]["frames_out"] == 8 and last["2/2"]["frames_out"] == 4
+
+
+def test_sigterm_while_starting_up_exits_0(broker, camera_file):
+    p = start_serve(["--camera", str(camera_file), "--budget", "basler1", "--mqtt", broker.url, "--output", "-",
+                     "--client-id", "serve-early"])
+    assert b"starting" in p.stderr.readline()  # signal handlers in place; cameras and kernels still loading
+    rc, out, err = stop_serve(p)
+    assert rc == 0, err[-2000:]
+    recs = [json.loads(x) for x in out.splitlines()]
+    assert recs and recs[-1]["type"] == "health" and recs[-1]["frames_in"] == 0

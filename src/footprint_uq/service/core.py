@@ -32,7 +32,7 @@ import numpy as np
 from ..batch import schema as S
 from ..ellipse import chi2_scale, ellipse_axes
 from ..errors import FootprintUQError, InputError
-from ..footprints import V2X_FIELDS, FrameProcessor
+from ..footprints import CONTACT_MODES, V2X_FIELDS, FrameProcessor
 from ..geo import GeoReference
 from ..v2x import J2735_POSITION_CONFIDENCE_NAMES
 from .messages.cpm import (
@@ -89,10 +89,6 @@ class CameraSetup:
     processor: FrameProcessor
     georef: GeoReference
     station_id: int
-
-
-def _num(x) -> float | None:
-    return x if isinstance(x, float) and math.isfinite(x) else (float(x) if isinstance(x, int) else None)
 
 
 def _nan_none(values: list) -> list:
@@ -159,8 +155,8 @@ class Service:
         if (camera is None) == (registry is None):
             raise InputError("camera/registry", "both" if camera is not None else "neither",
                              "exactly one of a camera (with a budget) or a registry")
-        if contact not in S.BOX_TYPES and contact not in ("bottom-centre", "bottom-corners"):
-            raise InputError("contact", contact, "'bottom-centre' or 'bottom-corners'")
+        if contact not in CONTACT_MODES:
+            raise InputError("contact", contact, f"one of {CONTACT_MODES}")
         self.contact = contact
         self.confidence = float(confidence)
         if not 0.0 < self.confidence < 1.0:

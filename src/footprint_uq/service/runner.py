@@ -182,6 +182,22 @@ class Metrics:
             return list(self._lat_total)
 
 
+def _check_transport(input, mqtt, output) -> None:
+    if input not in ("-", None):
+        raise InputError("--input", input, "'-' (stdin); use --mqtt for MQTT input")
+    if output not in ("-", "mqtt"):
+        raise InputError("--output", output, "'-' (stdout) or 'mqtt'")
+    if (input is None or output == "mqtt") and not mqtt:
+        raise InputError("--mqtt", None, "mqtt://HOST:PORT for MQTT input or output")
+    if mqtt:
+        parse_mqtt_url(mqtt)
+
+
+def _log(text: str) -> None:
+    """One line on stderr (the operator's log; the records go to stdout or MQTT)."""
+    print(f"footprint-uq serve: {text}", file=sys.stderr, flush=True)
+
+
 def parse_mqtt_url(url: str) -> tuple[str, int]:
     """``mqtt://HOST:PORT`` -> (host, port) (port 1883 by default)."""
     u = urlparse(url)
@@ -318,12 +334,7 @@ def serve(service: Service, *, input: str | None = "-", mqtt: str | None = None,
     worker : str, optional
         Label added to the health records (``"1/2"``: worker 1 of 2, see :func:`run`).
     """
-    if input not in ("-", None):
-        raise InputError("--input", input, "'-' (stdin); use --mqtt for MQTT input")
-    if output not in ("-", "mqtt"):
-        raise InputError("--output", output, "'-' (stdout) or 'mqtt'")
-    if (input is None or output == "mqtt") and not mqtt:
-        raise InputError("--mqtt", None, "mqtt://HOST:PORT for MQTT input or output")
+    _check_transport(input, mqtt, output)
     policy = policy or ("block" if input == "-" else "newest")
     stop = stop or threading.Event()
     metrics = Metrics()
@@ -430,6 +441,9 @@ def serve(service: Service, *, input: str | None = "-", mqtt: str | None = None,
         threads.append(threading.Thread(target=health, name="footprint-uq-health", daemon=True))
     for t in threads:
         t.start()
+    _log(f"ready: input {'stdin' if input == '-' else mqtt + ' ' + ', '.join(topics)}, output "
+         f"{'stdout' if output == '-' else mqtt + ' ' + output_prefix + '/...'}, overload policy {policy}"
+         + (f", worker {worker}" if worker else ""))
     try:
         # run until a stop request or the end of the input (stdin: the reader closes the queue)
         while not stop.wait(0.05):
@@ -454,6 +468,8 @@ def serve(service: Service, *, input: str | None = "-", mqtt: str | None = None,
             signal.signal(sig, h)
         gc.set_threshold(*old_gc)
         gc.unfreeze()
+        _log(f"stopped: frames in {metrics.frames_in}, out {metrics.frames_out}, dropped {queue.dropped}, "
+             f"errors {metrics.errors}")
         sys.setswitchinterval(old_switch)
     return 0
 
@@ -474,6 +490,7 @@ def run(*, camera=None, budget=None, registry=None, camera_id: str | None = None
     if (camera is None) == (registry is None):
         raise InputError("--camera/--registry", "both" if camera is not None else "neither",
                          "one camera (--camera with --budget) or many (--registry)")
+    _check_transport(serve_options.get("input", "-"), serve_options.get("mqtt"), serve_options.get("output", "-"))
     if workers > 1:
         if registry is None or serve_options.get("input", "-") is not None:
             raise InputError("--workers", workers, "1, unless the input is MQTT (--mqtt without --input) and "
@@ -482,18 +499,30 @@ def run(*, camera=None, budget=None, registry=None, camera_id: str | None = None
             budget=budget, registry=registry, heading_offset_deg=heading_offset_deg, origin_lat_deg=origin_lat_deg,
             origin_lon_deg=origin_lon_deg, confidence=confidence, contact=contact,
             allow_outside_image=allow_outside_image, uper_encoder=uper_encoder, **serve_options))
-    cam = None
-    if camera is not None:
-        from ..io import load_camera
+    # a SIGTERM while the cameras load and the kernels compile (seconds) is a stop request too: nothing was
+    # taken in yet, so the drain is empty and the exit status 0
+    stop = serve_options.pop("stop", None) or threading.Event()
+    old = {}
+    if threading.current_thread() is threading.main_thread():
+        for sig in (signal.SIGTERM, signal.SIGINT):
+            old[sig] = signal.signal(sig, lambda s, f: stop.set())
+    _log("starting: loading the cameras and the compiled kernels")
+    try:
+        cam = None
+        if camera is not None:
+            from ..io import load_camera
 
-        if budget is None:
-            raise InputError("--budget", None, "an error budget (preset or file) for --camera")
-        cam = load_camera(camera)
-    service = Service(cam, budget, registry=registry, camera_id=camera_id, heading_offset_deg=heading_offset_deg,
-                      origin_lat_deg=origin_lat_deg, origin_lon_deg=origin_lon_deg, confidence=confidence,
-                      contact=contact, allow_outside_image=allow_outside_image, station_id=station_id,
-                      uper_encoder=uper_encoder)
-    return serve(service, **serve_options)
+            if budget is None:
+                raise InputError("--budget", None, "an error budget (preset or file) for --camera")
+            cam = load_camera(camera)
+        service = Service(cam, budget, registry=registry, camera_id=camera_id, heading_offset_deg=heading_offset_deg,
+                          origin_lat_deg=origin_lat_deg, origin_lon_deg=origin_lon_deg, confidence=confidence,
+                          contact=contact, allow_outside_image=allow_outside_image, station_id=station_id,
+                          uper_encoder=uper_encoder)
+        return serve(service, stop=stop, **serve_options)
+    finally:
+        for sig, h in old.items():
+            signal.signal(sig, h)
 
 
 def _worker_main(options: dict, cameras: list[str], label: str) -> None:  # pragma: no cover - child process
