@@ -179,3 +179,28 @@ def test_boxes3d_framewise_agrees_with_numpy_reference(data):
     assert _close(est.corners_cov_m2[ok], ref.corners_cov_m2[ok], sc)
     okc = ref.centre_valid
     assert _close(est.centre_xy_world_m[okc], ref.centre_xy_world_m[okc], scale)
+
+
+def test_overflow_is_no_answer_in_every_pixel_path():
+    """Finite inputs, infinite result (a camera 1e200 m up: the pixel-noise term overflows): OVERFLOW, NaN."""
+    cam = PanTiltCamera(focal_px=1000.0, image_size_px=(W_PX, H_PX), height_m=10.0, pan_deg=20.0, tilt_deg=30.0)
+    cam.params[P.HM] = 1e200
+    budget = load_budget("bw-cube1")
+    uv = cam.pixel_grid(40).reshape(-1, 2)
+    ref = propagate(cam, budget, uv)
+    assert (ref.reason == status.OVERFLOW).sum() > 100 and not ref.valid.any()
+    assert np.isnan(ref.xy_world_m).all() and np.isnan(ref.cov_m2).all()
+    xy, cov, valid, reason = covariance_points(cam, budget, uv, get_reason=True)
+    _assert_same(ref, xy, cov, reason, "covariance_points", cam)
+    xy, cov, valid, reason = covariance_map(cam, budget, 40, get_reason=True)
+    _assert_same(ref, xy.reshape(-1, 2), cov.reshape(-1, 2, 2), reason.reshape(-1), "covariance_map", cam)
+    for opencv in (False, True):
+        if opencv:  # the general kernel too
+            K = np.array([[1000.0, 0, 639.5], [0, 1000.0, 359.5], [0, 0, 1]])
+            R = R_W_C(np.deg2rad(20.0), np.deg2rad(30.0), 0.0).T
+            cam = OpenCVCamera(K, [-0.1, 0.01, 0, 0, 0], R, -R @ [0.0, 0.0, 10.0], (W_PX, H_PX))
+            cam.params[P.HM] = 1e200
+            ref = propagate(cam, budget, uv)
+            xy, cov, valid, reason = covariance_map(cam, budget, 40, get_reason=True)
+            _assert_same(ref, xy.reshape(-1, 2), cov.reshape(-1, 2, 2), reason.reshape(-1), "map (general)", cam)
+            assert (ref.reason == status.OVERFLOW).sum() > 100

@@ -437,7 +437,7 @@ def _row_undistorted_qc(cst, cxs, dx0, dy0, dn0, P00, P01, P11, BQ, xr, cr, vr):
 
 
 @nb.njit(**_JIT)
-def _map_undistorted(prm, R, om, colptr, rowidx, vals, vc, has_qc, Cpq, cst, step, xyf, covf, validf, W):
+def _map_undistorted(prm, R, om, colptr, rowidx, vals, vc, has_qc, Cpq, cst, step, xyf, covf, validf, reasonf, W):
     Hh = validf.shape[0] // W
     fy, cx, cy, sk = prm[1], prm[2], prm[3], prm[4]
     gx, gy = prm[20], prm[21]
@@ -458,6 +458,10 @@ def _map_undistorted(prm, R, om, colptr, rowidx, vals, vc, has_qc, Cpq, cst, ste
             _row_undistorted_qc(cst, cxs, dx0, dy0, dn0, P00, P01, P11, BQ, xr, cr, vr)
         else:
             _row_undistorted(cst, cxs, dx0, dy0, dn0, P00, P01, P11, xr, cr, vr)
+        rr = reasonf[W * iv:W * (iv + 1)]
+        for i in range(W):  # without distortion a pixel is fine or at / above the horizon
+            rr[i] = status.OK if vr[i] else status.ABOVE_HORIZON
+        _finish_row(xr, cr, vr, rr)
 
 
 # --------------------------------------------------------------------------------------
@@ -573,7 +577,10 @@ def _point_general(u, v, S00, S01, S11, prm, R, om, colptr, rowidx, vals, vc, Cc
                 bq[0, c] += v0 * vc[j, c]
                 bq[1, c] += v1 * vc[j, c]
     c00, c01, c11 = _finish(q00, q01, q11, Q00, Q01, Q10, Q11, ox / Hn, oy / Hn, ox, oy, Ccc, bq, has_qc)
-    return status.OK, x0 + ox, y0 + oy, c00, c01, c11
+    x, y = x0 + ox, y0 + oy
+    if not (np.isfinite(x) and np.isfinite(y) and np.isfinite(c00) and np.isfinite(c01) and np.isfinite(c11)):
+        return status.OVERFLOW, np.nan, np.nan, np.nan, np.nan, np.nan
+    return status.OK, x, y, c00, c01, c11
 
 
 #: blocks of contiguous rows per thread in the general kernel (Newton warm-starts within a block)
@@ -906,6 +913,20 @@ def _row_general(v, prm, R, om, colptr, rowidx, vals, vc, colkind, Om, has_qc, h
             cr[4 * i + 1] += c01
             cr[4 * i + 2] += c01
             cr[4 * i + 3] += 2.0 * E11 + 2.0 * n1 * ay
+    _finish_row(xr, cr, vr, rr)
+
+
+@nb.njit(**_JIT1)
+def _finish_row(xr, cr, vr, rr):
+    """Outputs are checked too: a pixel whose position or covariance is not finite is OVERFLOW (NaN)."""
+    nan = np.nan
+    for i in range(vr.shape[0]):
+        if vr[i] and not (np.isfinite(xr[2 * i]) and np.isfinite(xr[2 * i + 1]) and np.isfinite(cr[4 * i])
+                          and np.isfinite(cr[4 * i + 1]) and np.isfinite(cr[4 * i + 3])):
+            vr[i] = False
+            rr[i] = status.OVERFLOW
+            xr[2 * i] = xr[2 * i + 1] = nan
+            cr[4 * i] = cr[4 * i + 1] = cr[4 * i + 2] = cr[4 * i + 3] = nan
 
 
 @nb.njit(**_JIT)
@@ -1069,9 +1090,7 @@ def covariance_map(camera, budget, step_px: int = 1, *, out=None, get_reason: bo
         else:
             _map_undistorted(prm, k["R"], k["omega"], k["colptr"], k["rowidx"], k["vals"], k["vc"], k["has_qc"],
                              _pixel_cov_q(prm, k["Suv"]), _undistorted_constants(k, step), step,
-                             xy.reshape(-1), cov.reshape(-1), valid.reshape(-1), W)
-            if get_reason:  # without distortion a pixel is either fine or at / above the horizon
-                np.copyto(reason, np.where(valid, status.OK, status.ABOVE_HORIZON).astype(np.int8))
+                             xy.reshape(-1), cov.reshape(-1), valid.reshape(-1), reason.reshape(-1), W)
     finally:
         nb.set_parallel_chunksize(old_chunk)
     return (xy, cov, valid, reason) if get_reason else (xy, cov, valid)

@@ -18,9 +18,12 @@ flag ``linear_ok`` (``nonlinearity <= linear_threshold``, default 0.05).
 :func:`linearity_ratio` measures the ratio linear/Monte-Carlo, to check it.
 
 NaN policy: where a point is invalid (ray above the horizon, non-finite input,
-lens model not invertible) the mean and covariance are NaN and ``valid`` is
+pixel outside the lens's valid domain, or a result that is not finite although every
+input is -- ``OVERFLOW``) the mean and covariance are NaN and ``valid`` is
 False; the ``reason`` array says why.  Derivatives are never returned for an
 undefined point and no invalid point is ever replaced by a plausible number.
+The fused kernels (:func:`footprint_uq.kernels.covariance_map`,
+:func:`~footprint_uq.kernels.covariance_points`) apply the same output check.
 """
 
 from __future__ import annotations
@@ -30,6 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import params as P
+from . import status
 from ._checks import as_points, check_cov
 from .budget import ErrorBudget, load_budget
 from .ellipse import ellipse_axes
@@ -182,11 +186,40 @@ def propagate(camera, budget, uv_px, *, pixel_cov_px2=None, breakdown: bool = Fa
         cross = shared_full - total_shared
         if np.any(np.abs(np.nan_to_num(cross)) > 1e-15 * np.nan_to_num(np.abs(shared_full)).max(initial=0)):
             contrib["cross_terms"] = cross
+    xy, cov, valid, reason = _check_outputs(bp.xy_world_m, cov, bp.valid, bp.reason)
     nl = ok = None
     if linearity:
-        nl = _nonlinearity(camera, budget, uv, cov, bp.dxy_dp, bp.dxy_duv, Sp, Suv, bp.valid)
-        ok = bp.valid & (nl <= thr)
-    return GroundEstimate(bp.xy_world_m, cov, bp.valid, bp.reason, contrib, nl, ok, thr)
+        nl = _nonlinearity(camera, budget, uv, cov, bp.dxy_dp, bp.dxy_duv, Sp, Suv, valid)
+        ok = valid & (nl <= thr)
+    return GroundEstimate(xy, cov, valid, reason, contrib, nl, ok, thr)
+
+
+def _check_outputs(xy, cov, valid, reason, *, joint: bool = False):
+    """Outputs are checked too: a point whose position or covariance is not finite is invalid
+    (:data:`footprint_uq.status.OVERFLOW`), never valid with an infinite number.
+
+    ``cov`` is (..., 2, 2) per point or (..., 2K, 2K) joint over the last axis of ``xy``'s points.
+    """
+    K = xy.shape[-2] if joint else None
+    if K is None:
+        fin = np.isfinite(xy).all(-1) & np.isfinite(cov).all((-2, -1))
+    else:
+        blocks = cov.reshape(cov.shape[:-2] + (K, 2, K, 2))
+        idx = np.arange(K)
+        diag = np.moveaxis(blocks[..., idx, :, idx, :], 0, -3)  # (..., K, 2, 2)
+        fin = np.isfinite(xy).all(-1) & np.isfinite(diag).all((-2, -1))
+    bad = valid & ~fin
+    if not bad.any():
+        return xy, cov, valid, reason
+    valid = valid & ~bad
+    reason = np.where(bad, status.OVERFLOW, reason).astype(np.int8)
+    xy = np.where(bad[..., None], np.nan, xy)
+    if K is None:
+        cov = np.where(bad[..., None, None], np.nan, cov)
+    else:
+        rows = np.repeat(bad, 2, axis=-1)
+        cov = np.where(rows[..., :, None] | rows[..., None, :], np.nan, cov)
+    return xy, cov, valid, reason
 
 
 def propagate_joint(camera, budget, uv_px, *, pixel_cov_px2=None, linearity: bool = True,
@@ -220,14 +253,15 @@ def propagate_joint(camera, budget, uv_px, *, pixel_cov_px2=None, linearity: boo
     blocks = _sandwich(bp.dxy_duv, Suv)  # (..., K, 2, 2)
     for k in range(K):
         cov[..., 2 * k:2 * k + 2, 2 * k:2 * k + 2] += blocks[..., k, :, :]
+    xy, cov, valid, reason = _check_outputs(bp.xy_world_m, cov, bp.valid, bp.reason, joint=True)
     nl = ok = None
     if linearity:
         idx = np.arange(K)
         marg = cov.reshape(lead + (K, 2, K, 2))[..., idx, :, idx, :]  # (K, ..., 2, 2): advanced indices first
         marg = np.moveaxis(marg, 0, -3)
-        nl = _nonlinearity(camera, budget, uv, marg, bp.dxy_dp, bp.dxy_duv, Sp, Suv, bp.valid)
-        ok = bp.valid & (nl <= thr)
-    return JointEstimate(bp.xy_world_m, cov, bp.valid, bp.reason, nl, ok, thr)
+        nl = _nonlinearity(camera, budget, uv, marg, bp.dxy_dp, bp.dxy_duv, Sp, Suv, valid)
+        ok = valid & (nl <= thr)
+    return JointEstimate(xy, cov, valid, reason, nl, ok, thr)
 
 
 def _sample_params(budget: ErrorBudget, n: int, rng) -> np.ndarray:
@@ -446,7 +480,7 @@ def nonlinearity_from_forms(lam_max_m2, e_major, dn, lam_m, d_xy, mu, gamma, *, 
     s_num = lam_max if s_num_m2 is None else np.asarray(s_num_m2, dtype=np.float64)
     s_crs = lam_max if s_cross_m2 is None else np.asarray(s_cross_m2, dtype=np.float64)
     mu_n = mu if mu_num is None else np.asarray(mu_num, dtype=np.float64)
-    with np.errstate(divide="ignore", invalid="ignore"):
+    with np.errstate(all="ignore"):  # invalid points may carry inf (OVERFLOW); their result is NaN
         q2 = gamma / dn**2
         w = -b / dn
         c_L = mu / dn

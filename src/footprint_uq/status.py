@@ -15,6 +15,7 @@ UNDISTORT_FAILED = 3  # lens model not invertible at this pixel
 OUTSIDE_IMAGE = 4  # pixel outside the image (computed, but flagged)
 BEHIND_CAMERA = 5  # world point behind the camera (projection)
 BEYOND_RANGE = 6  # ground point farther than the requested max_range_m (maps)
+OVERFLOW = 7  # every input finite, but the result is not (absurd geometry or error sizes)
 DEGENERATE = 20  # footprint centre only: the footprint polygon has zero area (centroid undefined)
 
 REASONS = {
@@ -25,6 +26,7 @@ REASONS = {
     OUTSIDE_IMAGE: "pixel outside the image",
     BEHIND_CAMERA: "point is behind the camera",
     BEYOND_RANGE: "ground point beyond the requested maximum range",
+    OVERFLOW: "result is not finite (overflow: the camera geometry or the error sizes are out of range)",
     DEGENERATE: "footprint polygon has zero area (centroid undefined)",
 }
 
