@@ -25,7 +25,7 @@ from footprint_uq.budget import load_budget
 from footprint_uq.cameras.opencv import OpenCVCamera
 from footprint_uq.cameras.pantilt import PanTiltCamera
 from footprint_uq.cameras.rotation import R_W_C
-from footprint_uq.footprints import FrameProcessor, footprints_from_boxes3d
+from footprint_uq.footprints import FrameProcessor, footprints_from_boxes3d, footprints_from_corners
 from footprint_uq.kernels import covariance_map, covariance_points
 from footprint_uq.propagation import propagate
 
@@ -204,3 +204,23 @@ def test_overflow_is_no_answer_in_every_pixel_path():
             xy, cov, valid, reason = covariance_map(cam, budget, 40, get_reason=True)
             _assert_same(ref, xy.reshape(-1, 2), cov.reshape(-1, 2, 2), reason.reshape(-1), "map (general)", cam)
             assert (ref.reason == status.OVERFLOW).sum() > 100
+
+
+def test_overflow_framewise_agrees_with_numpy_reference():
+    """The per-frame kernel and its numpy reference mark the same overflowed corners and centres."""
+    cam = PanTiltCamera(focal_px=1000.0, image_size_px=(W_PX, H_PX), height_m=10.0, pan_deg=20.0, tilt_deg=30.0)
+    uv = np.array([[[600.0, 500.0], [700.0, 500.0], [700.0, 600.0], [600.0, 600.0]],
+                   [[600.0, 100.0], [700.0, 100.0], [700.0, 600.0], [600.0, 600.0]]])
+    cam.params[P.HM] = 1e200
+    ref = footprints_from_corners(cam, "bw-cube1", uv)
+    est = FrameProcessor(cam, "bw-cube1").corners(uv)
+    for e in (ref, est):
+        assert (e.corner_reason[e.corner_reason != status.ABOVE_HORIZON] == status.OVERFLOW).all()
+        assert not e.centre_valid.any() and not e.corner_usable.any()
+        assert np.isnan(e.corners_xy_world_m).all() and np.isnan(e.centre_cov_m2).all()
+        assert (e.largest_index == -1).all()
+        assert (e.v2x["cpm_x_confidence"] == 4096).all()
+    np.testing.assert_array_equal(est.corner_reason, ref.corner_reason)
+    np.testing.assert_array_equal(est.centre_reason, ref.centre_reason)
+    np.testing.assert_array_equal(est.centre_bad_corner, ref.centre_bad_corner)
+    np.testing.assert_array_equal(est.v2x_codes, ref.v2x_codes)

@@ -412,7 +412,7 @@ def footprints_from_corners(camera, budget, corners_px, *, pixel_cov_px2=None, a
     centre_reason = np.where(all_usable, status.OK, reason[rows, first_bad]).astype(np.int32)
     # outside-image corners that are computed but not allowed keep the OUTSIDE_IMAGE code
     xy_c = np.where(all_usable[:, None, None], xy, 0.0)
-    with np.errstate(invalid="ignore"):
+    with np.errstate(invalid="ignore", over="ignore"):  # overflow on absurd inputs: _mark_overflow flags it
         C, area, G = polygon_centroid(xy_c, get_gradients=True)
     if K >= 3:
         degenerate = all_usable & ~np.isfinite(C).all(-1)
@@ -420,19 +420,69 @@ def footprints_from_corners(camera, budget, corners_px, *, pixel_cov_px2=None, a
     ok = centre_reason == status.OK
     joint_c = np.where(all_usable[:, None, None], joint, 0.0)
     G = np.where(ok[:, None, None], G, 0.0)
-    ccov_c = G @ joint_c @ np.swapaxes(G, -1, -2)
+    with np.errstate(invalid="ignore", over="ignore"):
+        ccov_c = G @ joint_c @ np.swapaxes(G, -1, -2)
     centre = np.where(ok[:, None], C, np.nan)
     centre_cov = np.where(ok[:, None, None], ccov_c, np.nan)
     area = np.where(all_usable, area, np.nan)
     fields = {**cpm_fields(centre_cov, heading_offset_deg), **j2735_fields(centre_cov, heading_offset_deg)}
     v2x = np.stack([fields[name] for name in V2X_FIELDS], -1).astype(np.int32)
-    return FootprintEstimate(
+    return _mark_overflow(FootprintEstimate(
         corners_px=uv, corners_xy_world_m=xy, corners_cov_m2=ccov, joint_cov_m2=joint,
         corner_reason=reason.astype(np.int8), corner_usable=usable, largest_index=largest_index,
         largest_semi_major_m=largest_semi, largest_xy_world_m=largest_xy, largest_cov_m2=largest_cov,
         centre_xy_world_m=centre, centre_cov_m2=centre_cov, centre_valid=ok, centre_reason=centre_reason,
         centre_bad_corner=np.where(ok, -1, np.where(centre_reason == DEGENERATE, -1, centre_bad)),
-        area_m2=area, v2x_codes=v2x, heading_offset_deg=float(heading_offset_deg))
+        area_m2=area, v2x_codes=v2x, heading_offset_deg=float(heading_offset_deg)))
+
+
+def _mark_overflow(est: FootprintEstimate) -> FootprintEstimate:
+    """Outputs are checked too (in place): a corner whose ground point or covariance is not finite
+    although it was computed gets :data:`~footprint_uq.status.OVERFLOW` and is not usable; its
+    object's largest point, centre and V2X fields follow as for any unusable corner; a centre whose
+    position or covariance is not finite is OVERFLOW too.  Shared by the numpy reference and
+    :class:`FrameProcessor`, so both give the same codes.
+    """
+    xy, cc, reason = est.corners_xy_world_m, est.corners_cov_m2, est.corner_reason
+    computed = (reason == status.OK) | (reason == status.OUTSIDE_IMAGE)
+    over = computed & ~(np.isfinite(xy).all(-1) & np.isfinite(cc).all((-2, -1)))
+    centre_over = est.centre_valid & ~(np.isfinite(est.centre_xy_world_m).all(-1)
+                                       & np.isfinite(est.centre_cov_m2).all((-2, -1)))
+    objs = np.flatnonzero(over.any(1) | centre_over)
+    if objs.size == 0:
+        return est
+    reason[over] = status.OVERFLOW
+    est.corner_usable[over] = False
+    xy[over] = np.nan
+    cc[over] = np.nan
+    if est.joint_cov_m2 is not None:
+        rows = np.repeat(over, 2, axis=1)
+        est.joint_cov_m2[rows[:, :, None] | rows[:, None, :]] = np.nan
+    usable = est.corner_usable[objs]
+    a, b, d = cc[objs, :, 0, 0], cc[objs, :, 0, 1], cc[objs, :, 1, 1]
+    with np.errstate(invalid="ignore"):
+        semi = np.where(usable, np.sqrt(0.5 * (a + d) + np.hypot(0.5 * (a - d), b)), -np.inf)
+    li = np.argmax(semi, axis=1)
+    has = usable.any(1)
+    est.largest_index[objs] = np.where(has, li, -1)
+    est.largest_semi_major_m[objs] = np.where(has, semi[np.arange(objs.size), li], np.nan)
+    est.largest_xy_world_m[objs] = np.where(has[:, None], xy[objs, li], np.nan)
+    est.largest_cov_m2[objs] = np.where(has[:, None, None], cc[objs, li], np.nan)
+    first_bad = np.argmax(~usable, axis=1)
+    all_usable = usable.all(1)
+    code = np.where(~all_usable, reason[objs, first_bad],
+                    np.where(centre_over[objs], status.OVERFLOW, est.centre_reason[objs]))
+    est.centre_reason[objs] = code
+    est.centre_bad_corner[objs] = np.where(all_usable, -1, first_bad)
+    bad = code != status.OK
+    est.centre_valid[objs] = ~bad
+    est.centre_xy_world_m[objs[bad]] = np.nan
+    est.centre_cov_m2[objs[bad]] = np.nan
+    est.area_m2[objs[~all_usable]] = np.nan
+    fields = {**cpm_fields(est.centre_cov_m2[objs], est.heading_offset_deg),
+              **j2735_fields(est.centre_cov_m2[objs], est.heading_offset_deg)}
+    est.v2x_codes[objs] = np.stack([fields[name] for name in V2X_FIELDS], -1).astype(np.int32)
+    return est
 
 
 def footprints_from_boxes2d(camera, budget, boxes_px, *, contact: str = "bottom-centre", pixel_cov_px2=None,
@@ -585,7 +635,7 @@ class FrameProcessor:
                                 lcov, centre, ccentre, creason == 0, creason, cbad, obj[row["area_m2"]], v2x.T,
                                 self.heading_offset_deg)
         est._columns = obj
-        return est
+        return _mark_overflow(est)
 
     def corners(self, corners_px, *, pixel_cov_px2=None) -> FootprintEstimate:
         """Footprints from corners in pixels ``(N, K, 2)`` (see :func:`footprints_from_corners`)."""
