@@ -300,3 +300,19 @@ def test_linearity_flag_columns(result):
     s = {(x["camera"], x["camera_type"]): x for x in result.summary()}
     assert s[("camera2", "bw-cube1")]["frames_not_linear_ok"] == int(
         np.sum(r.centre_valid & ~r.footprint_linear_ok))
+
+
+def test_camera_names_from_data_never_leave_the_output_folder(tmp_path):
+    """A camera name with '/' and '..' (from a recording) is percent-encoded in the figure names."""
+    from footprint_uq.viz.case_study import write_case_study_report
+
+    cfg = CaseStudyConfig.from_dict({**SMALL, "camera_types": ["basler1"],
+                                     "cameras": [{"name": "a/../../evil", "position_m": [9, 9], "pan_deg": 45}]})
+    res = analyse(build_scene(cfg), cfg.camera_types)
+    out = tmp_path / "out"
+    paths = write_case_study_report(res, out, heatmap=cfg.heatmap, dpi=30)
+    written = sorted(p.name for p in out.iterdir())
+    assert all(p.parent == out for p in paths["figures"].values())
+    assert not (tmp_path / "evil_view.png").exists() and not list(tmp_path.glob("*.png"))
+    assert any(n.startswith("a%2F..%2F..%2Fevil") for n in written), written
+    assert not [n for n in written if n.startswith(".")]  # no temporary file left

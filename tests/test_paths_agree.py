@@ -224,3 +224,19 @@ def test_overflow_framewise_agrees_with_numpy_reference():
     np.testing.assert_array_equal(est.centre_reason, ref.centre_reason)
     np.testing.assert_array_equal(est.centre_bad_corner, ref.centre_bad_corner)
     np.testing.assert_array_equal(est.v2x_codes, ref.v2x_codes)
+
+
+def test_overflow_in_the_batch_lean_mode():
+    """Without per-corner covariances (the batch's lean mode) overflowed rows are errors, never OK numbers."""
+    from footprint_uq.batch import process_table
+
+    cam = PanTiltCamera(focal_px=1000.0, image_size_px=(W_PX, H_PX), height_m=10.0, pan_deg=20.0, tilt_deg=30.0)
+    cam.params[P.HM] = 1e200
+    d = {"u_min_px": np.array([600.0, 100.0]), "v_min_px": np.array([500.0, 550.0]),
+         "u_max_px": np.array([700.0, 300.0]), "v_max_px": np.array([600.0, 650.0])}
+    with np.errstate(all="ignore"):
+        t = process_table(cam, "bw-cube1", d)
+    assert t.column("status").to_pylist() == ["error", "error"]
+    for c in ("x_m", "y_m", "cov_xx_m2", "sigma_major_m"):
+        assert np.isnan(t.column(c).to_numpy()).all(), c
+    assert t.column("cpm_x_confidence").to_pylist() == [4096, 4096]

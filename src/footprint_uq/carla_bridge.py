@@ -48,6 +48,7 @@ from ._checks import as_float, as_points
 from .cameras.pantilt import PanTiltCamera
 from .cameras.rotation import pan_tilt_roll_from_R_W_C
 from .errors import ConfigError, InputError
+from .io.atomic import atomic_path
 
 __all__ = [
     "S_WORLD_CARLA", "A_LOCAL_CV", "RECORDING_FORMAT", "RECORDING_VERSION", "carla_rotation_matrix",
@@ -270,7 +271,7 @@ def write_recording(path, *, cameras: dict, frames, layout=None, header: dict | 
     head = {"type": "header", "format": RECORDING_FORMAT, "version": RECORDING_VERSION, "coordinates": "carla",
             "units": {"length": "m", "angle": "deg", "time": "s"}}
     head.update(header or {})
-    with p.open("w", encoding="utf-8") as f:
+    with atomic_path(p) as tmp, tmp.open("w", encoding="utf-8") as f:
         f.write(json.dumps(head) + "\n")
         for name, cam in cameras.items():
             rec = cam if isinstance(cam, dict) else camera_to_carla(cam)

@@ -441,11 +441,23 @@ def _mark_overflow(est: FootprintEstimate) -> FootprintEstimate:
     although it was computed gets :data:`~footprint_uq.status.OVERFLOW` and is not usable; its
     object's largest point, centre and V2X fields follow as for any unusable corner; a centre whose
     position or covariance is not finite is OVERFLOW too.  Shared by the numpy reference and
-    :class:`FrameProcessor`, so both give the same codes.
+    :class:`FrameProcessor`, so both give the same codes.  Without per-corner covariances (the
+    batch's lean mode) only the largest corner's point and semi-major axis are kept, so an object with an
+    overflowing corner has no largest point (index -1, NaN); a corner covariance that overflows
+    reaches the centre's and makes the centre OVERFLOW.
     """
     xy, cc, reason = est.corners_xy_world_m, est.corners_cov_m2, est.corner_reason
     computed = (reason == status.OK) | (reason == status.OUTSIDE_IMAGE)
-    over = computed & ~(np.isfinite(xy).all(-1) & np.isfinite(cc).all((-2, -1)))
+    lite = cc.shape[0] != reason.shape[0]  # FrameProcessor without per-corner outputs (batch)
+    if lite:  # the largest corner's point and covariance are kept; the others reach the centre's
+        finite = np.isfinite(xy).all(-1) if xy.shape[0] == reason.shape[0] else np.ones(reason.shape, bool)
+        n_obj = np.arange(reason.shape[0])
+        li = np.maximum(est.largest_index, 0)
+        finite[n_obj, li] &= (est.largest_index < 0) | (np.isfinite(est.largest_semi_major_m)
+                                                       & np.isfinite(est.largest_xy_world_m).all(-1))
+    else:
+        finite = np.isfinite(xy).all(-1) & np.isfinite(cc).all((-2, -1))
+    over = computed & ~finite
     centre_over = est.centre_valid & ~(np.isfinite(est.centre_xy_world_m).all(-1)
                                        & np.isfinite(est.centre_cov_m2).all((-2, -1)))
     objs = np.flatnonzero(over.any(1) | centre_over)
@@ -453,21 +465,31 @@ def _mark_overflow(est: FootprintEstimate) -> FootprintEstimate:
         return est
     reason[over] = status.OVERFLOW
     est.corner_usable[over] = False
-    xy[over] = np.nan
-    cc[over] = np.nan
+    if not lite:
+        xy[over] = np.nan
+        cc[over] = np.nan
+    elif xy.shape[0] == reason.shape[0]:
+        xy[over] = np.nan
     if est.joint_cov_m2 is not None:
         rows = np.repeat(over, 2, axis=1)
         est.joint_cov_m2[rows[:, :, None] | rows[:, None, :]] = np.nan
     usable = est.corner_usable[objs]
-    a, b, d = cc[objs, :, 0, 0], cc[objs, :, 0, 1], cc[objs, :, 1, 1]
-    with np.errstate(invalid="ignore"):
-        semi = np.where(usable, np.sqrt(0.5 * (a + d) + np.hypot(0.5 * (a - d), b)), -np.inf)
-    li = np.argmax(semi, axis=1)
-    has = usable.any(1)
-    est.largest_index[objs] = np.where(has, li, -1)
-    est.largest_semi_major_m[objs] = np.where(has, semi[np.arange(objs.size), li], np.nan)
-    est.largest_xy_world_m[objs] = np.where(has[:, None], xy[objs, li], np.nan)
-    est.largest_cov_m2[objs] = np.where(has[:, None, None], cc[objs, li], np.nan)
+    if lite:  # no covariances to rank the other corners by: the largest point is unavailable
+        est.largest_index[objs] = -1
+        est.largest_semi_major_m[objs] = np.nan
+        est.largest_xy_world_m[objs] = np.nan
+        if est.largest_cov_m2.shape[0]:
+            est.largest_cov_m2[objs] = np.nan
+    else:
+        a, b, d = cc[objs, :, 0, 0], cc[objs, :, 0, 1], cc[objs, :, 1, 1]
+        with np.errstate(invalid="ignore"):
+            semi = np.where(usable, np.sqrt(0.5 * (a + d) + np.hypot(0.5 * (a - d), b)), -np.inf)
+        li = np.argmax(semi, axis=1)
+        has = usable.any(1)
+        est.largest_index[objs] = np.where(has, li, -1)
+        est.largest_semi_major_m[objs] = np.where(has, semi[np.arange(objs.size), li], np.nan)
+        est.largest_xy_world_m[objs] = np.where(has[:, None], xy[objs, li], np.nan)
+        est.largest_cov_m2[objs] = np.where(has[:, None, None], cc[objs, li], np.nan)
     first_bad = np.argmax(~usable, axis=1)
     all_usable = usable.all(1)
     code = np.where(~all_usable, reason[objs, first_bad],

@@ -48,6 +48,7 @@ from ._checks import as_float
 from .budget import ErrorBudget, load_budget
 from .ellipse import chi2_scale, ellipse_axes
 from .errors import InputError
+from .io.atomic import atomic_path
 from .propagation import propagate
 
 __all__ = ["UncertaintyMap", "uncertainty_map", "ground_sampling_distance", "pixel_jacobian", "GSD_DEFINITION"]
@@ -192,14 +193,22 @@ class UncertaintyMap:
             "semi_axes": "1 sigma; multiply by chi2_scale(p) (2.4477 for 95 %) for a p-confidence ellipse",
             "reasons": {str(k): v for k, v in status.REASONS.items()},
         }
+        with atomic_path(path) as tmp:
+            self._savez(tmp, meta)
+        return Path(path)
+
+    def _savez(self, path, meta) -> None:
+        with open(path, "wb") as f:  # a file object: numpy appends no ".npz" to the temporary name
+            self._savez_to(f, meta)
+
+    def _savez_to(self, f, meta) -> None:
         np.savez_compressed(
-            path, uv_px=self.uv_px, xy_world_m=self.xy_world_m, cov_m2=self.cov_m2, valid=self.valid,
+            f, uv_px=self.uv_px, xy_world_m=self.xy_world_m, cov_m2=self.cov_m2, valid=self.valid,
             reason=self.reason, semi_major_m=self.semi_major_m, semi_minor_m=self.semi_minor_m,
             orientation_deg=self.orientation_deg, gsd_range_m=self.gsd_range_m, gsd_cross_m=self.gsd_cross_m,
             footprint_area_m2=self.footprint_area_m2, range_m=self.range_m,
             metadata_json=np.array(json.dumps(meta, default=_json_default)),
         )
-        return path
 
     @classmethod
     def load_npz(cls, path) -> UncertaintyMap:

@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
+from ..io.atomic import atomic_path
 
 __all__ = [
     "PointCloud", "read_point_cloud", "read_pcd", "read_ply", "read_npy", "read_csv",
@@ -574,7 +575,8 @@ def write_npy(path, xyz_m, intensity=None) -> Path:
     """Write an ``(N, 3)`` (or ``(N, 4)`` with intensity) float64 ``.npy``."""
     xyz = np.asarray(xyz_m, dtype=np.float64)
     arr = xyz if intensity is None else np.column_stack([xyz, np.asarray(intensity, dtype=np.float64)])
-    np.save(Path(path), arr)
+    with atomic_path(path) as tmp, open(tmp, "wb") as f:
+        np.save(f, arr)
     return Path(path)
 
 

@@ -44,6 +44,7 @@ import numpy as np
 
 from .._checks import as_float
 from ..errors import InputError
+from ..io.atomic import atomic_path, atomic_write_text
 from .boards import PAPER_BOARD, Checkerboard, parse_board
 
 __all__ = ["SyntheticCamera", "DEFAULT_CAMERA", "make_board_poses", "project_corners", "render_board",
@@ -396,7 +397,8 @@ def write_campaign(out_dir, camera: SyntheticCamera = DEFAULT_CAMERA, board=PAPE
     names = []
     for k, im in enumerate(images):
         name = f"board_{k:03d}.png"
-        cv2.imwrite(str(out / name), im)
+        with atomic_path(out / name) as tmp:
+            cv2.imwrite(str(tmp), im)
         names.append(name)
     truth = {"camera": {"K": camera.K.tolist(), "dist": list(camera.dist), "image_size_px": list(camera.image_size_px)},
              "board": {"inner_corners": [board.cols, board.rows], "square_m": board.square_m,
@@ -404,7 +406,7 @@ def write_campaign(out_dir, camera: SyntheticCamera = DEFAULT_CAMERA, board=PAPE
              "seed": seed, "render": {k: v for k, v in render_kw.items() if isinstance(v, (int, float))},
              "frames": [{"image": nm, "rvec": rv.tolist(), "tvec": tv.tolist(), "corners_px": c.tolist()}
                         for nm, rv, tv, c in zip(names, rvecs, tvecs, corners, strict=True)]}
-    (out / "truth.json").write_text(json.dumps(truth, indent=1))
+    atomic_write_text(out / "truth.json", json.dumps(truth, indent=1))
     return out
 
 

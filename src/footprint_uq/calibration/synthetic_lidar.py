@@ -38,6 +38,7 @@ import numpy as np
 from ..cameras.opencv import OpenCVCamera
 from ..cameras.rotation import R_W_C
 from ..errors import InputError
+from ..io.atomic import atomic_path, atomic_write_text
 from .boards import PAPER_BOARD, Checkerboard
 from .pointclouds import PointCloud, write_point_cloud
 
@@ -369,11 +370,12 @@ class LidarCampaign:
             write_point_cloud(d / f"{name}{cloud_format}", cl.xyz_m,
                               {"intensity": cl.fields["intensity"], "ring": cl.fields["ring"]}
                               if cloud_format in (".pcd", ".ply") else None, **writer_kw)
-            np.savetxt(d / f"{name}_corners.csv", uv, delimiter=",", header="u,v", comments="", fmt="%.6f")
+            with atomic_path(d / f"{name}_corners.csv") as tmp:
+                np.savetxt(tmp, uv, delimiter=",", header="u,v", comments="", fmt="%.6f")
         save_camera(self.camera, d / "camera.yaml")
-        (d / "truth.json").write_text(json.dumps({"camera_pose": self.truth, "T_world_lidar":
-                                                  self.T_world_lidar.tolist(), "sigma_px": self.sigma_px,
-                                                  "range_noise_m": self.scanner.range_noise_m}, indent=2))
+        atomic_write_text(d / "truth.json", json.dumps({"camera_pose": self.truth, "T_world_lidar":
+                                                        self.T_world_lidar.tolist(), "sigma_px": self.sigma_px,
+                                                        "range_noise_m": self.scanner.range_noise_m}, indent=2))
         return d
 
 

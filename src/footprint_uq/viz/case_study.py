@@ -31,6 +31,7 @@ from matplotlib.lines import Line2D
 from matplotlib.patches import Polygon
 
 from ..ellipse import chi2_scale, ellipse_points
+from ..io.atomic import atomic_path, atomic_write_text, path_component
 from ..scenario.case_study import AXIS_SYSTEMS, camera_type_label, footprint_heatmap
 from ..scenario.intersection import RoadLayout
 from ..scenario.trajectory import box_corners
@@ -671,19 +672,22 @@ def write_case_study_report(result, out_dir, *, settings: dict | None = None, el
     paths = {}
     pngs = {}
     for stem, fig in figs.items():
-        p = out / f"{stem}.png"
-        fig.savefig(p, dpi=dpi)  # constrained layout: no second (tight) layout pass
+        # camera names come from data (a recording): percent-encoded before they touch a path
+        p = out / f"{path_component(stem)}.png"
+        with atomic_path(p) as tmp:
+            fig.savefig(tmp, dpi=dpi)  # constrained layout: no second (tight) layout pass
         paths[stem] = p
         pngs[stem] = p.read_bytes()
     csv_path = out / "case_study_frames.csv"
-    result.table.to_csv(csv_path, index=False, float_format="%.9g")
+    with atomic_path(csv_path) as tmp:
+        result.table.to_csv(tmp, index=False, float_format="%.9g")
     summary = result.summary()
     statements = result.statements()
     lane = result.lane_width_statements()
     summary_path = out / "summary.json"
     claims = evaluate_claims(result)
-    summary_path.write_text(json.dumps({"summary": summary, "claims": claims, "xy_statements": statements,
-                                        "lane_width_statements": lane}, indent=1, default=_json_default))
+    atomic_write_text(summary_path, json.dumps({"summary": summary, "claims": claims, "xy_statements": statements,
+                                                "lane_width_statements": lane}, indent=1, default=_json_default))
     # settings tables
     scene = result.scene
     parts = [f"<p>Reproduction of the case study of Kusari et al., &ldquo;Object level footprint uncertainty "

@@ -15,6 +15,8 @@ import math
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 
+from ..io.atomic import atomic_write_text
+
 __all__ = ["fig_to_png_bytes", "png_data_uri", "img_tag", "html_table", "html_page", "write_html", "esc"]
 
 _CSS = """
@@ -92,7 +94,5 @@ def write_html(path, html: str) -> Path:
     """Write ``html`` (UTF-8), creating parent directories."""
     p = Path(path)
     p.parent.mkdir(parents=True, exist_ok=True)
-    from ..io.atomic import atomic_write_text
-
     atomic_write_text(p, html)
     return p
