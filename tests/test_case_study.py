@@ -190,7 +190,7 @@ def test_report_written_with_every_figure(small_report):
     from footprint_uq.scenario.claims import evaluate_claims
 
     claims = evaluate_claims(res)
-    assert [c["id"] for c in summary["claims"]] == ["xy_sequence", "lane_width", "ranking"]
+    assert [c["id"] for c in summary["claims"]] == ["xy_sequence", "lane_width", "ranking", "farthest_corner"]
     for c in claims:
         assert f"<b>{c['verdict']}</b>" in html
     assert [c["verdict"] for c in summary["claims"]] == [c["verdict"] for c in claims]

@@ -31,7 +31,7 @@ def _claim(result, cid):
 
 def test_tolerances_are_the_stated_ones():
     assert C.XY_MAJORITY == 0.8 and C.XY_MIDDLE == (1 / 3, 2 / 3) and C.LANE_BAND == 0.25
-    assert C.RANK_MARGIN == 1.10 and C.XY_AXES == "north-east"
+    assert C.RANK_MARGIN == 1.10 and C.XY_AXES == "north-east" and C.FARTHEST_SHARE == 0.9
 
 
 @pytest.mark.parametrize("reading", ["printed", "deg"])
@@ -89,3 +89,11 @@ def test_roles_and_missing_types():
     rk = _claim(r, "ranking")
     assert lw["verdict"] == "FAIL" and "no BW-Cube" in lw["why"]
     assert rk["verdict"] == "FAIL" and "lacks" in rk["why"]
+
+
+@pytest.mark.parametrize("reading", ["printed", "deg"])
+def test_farthest_corner_is_the_most_uncertain(default_results, reading):
+    c = _claim(default_results[reading], "farthest_corner")
+    assert c["verdict"] == "PASS"
+    for p in c["details"]:
+        assert min(p["share_farthest_is_largest"].values()) >= 0.9

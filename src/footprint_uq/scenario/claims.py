@@ -31,6 +31,14 @@ that the tests can show each check is able to say FAIL.
     must exceed Basler by at least :data:`RANK_MARGIN` (10 %: a difference worth stating
     in a figure).
 
+(d) **Farthest corner** (Section "Estimating uncertainty of bounding box") -- "unless the
+    center of the bounding box coincides with the center of the camera coordinate system,
+    the four extreme points will have different uncertainties with the points away from the
+    center having largest uncertainties".  The camera coordinate system is centred on the
+    camera, so: the footprint corner with the largest 1-sigma semi-major axis is the one
+    farthest (horizontally) from the camera's foot, in at least :data:`FARTHEST_SHARE` of
+    the frames of every camera and type.
+
 Camera types are recognised by their preset name (``basler1``, ``bw-bullet1``,
 ``bw-cube1``, with or without ``@deg``): :func:`type_roles`.
 """
@@ -41,8 +49,9 @@ import numpy as np
 
 from .. import presets
 
-__all__ = ["XY_MAJORITY", "XY_MIDDLE", "LANE_BAND", "RANK_MARGIN", "XY_AXES", "FAILING_EXAMPLES", "PAPER_QUOTES",
-           "evaluate_claims", "xy_sequence_claim", "lane_width_claim", "ranking_claim", "type_roles"]
+__all__ = ["XY_MAJORITY", "XY_MIDDLE", "LANE_BAND", "RANK_MARGIN", "FARTHEST_SHARE", "XY_AXES", "FAILING_EXAMPLES",
+           "PAPER_QUOTES", "evaluate_claims", "xy_sequence_claim", "lane_width_claim", "ranking_claim",
+           "farthest_corner_claim", "type_roles"]
 
 #: share of the entry (exit) frames where X (Y) must dominate
 XY_MAJORITY = 0.8
@@ -52,6 +61,8 @@ XY_MIDDLE = (1.0 / 3.0, 2.0 / 3.0)
 LANE_BAND = 0.25
 #: "higher": at least 10 % more
 RANK_MARGIN = 1.10
+#: share of the frames in which the farthest corner must be the most uncertain one
+FARTHEST_SHARE = 0.9
 #: the paper's X and Y in the world (pan read as a compass heading): the case-study table's reading
 XY_AXES = "north-east"
 
@@ -61,6 +72,9 @@ PAPER_QUOTES = {
                    "The uncertainty in Y dominates from that point onward.",
     "lane_width": "We can also clearly see the differences in uncertainties between the cameras with the uncertainty "
                   "in BW-Cube cameras being almost equivalent to the lane width.",
+    "farthest_corner": "unless the center of the bounding box coincides with the center of the camera coordinate "
+                       "system, the four extreme points will have different uncertainties with the points away from "
+                       "the center having largest uncertainties.",
     "ranking": "the uncertainty of parameters is higher in the BW-Cube and BW-Bullet cameras as opposed to the Basler "
                "cameras (Tables 2-3; the case study: 'the differences in uncertainties between the cameras')",
 }
@@ -86,6 +100,11 @@ FAILING_EXAMPLES = {
         "config": {"camera_types": {
             "basler1": {**presets.preset_dict("basler1"), "height_m": 1.0, "name": "basler1-unsurveyed"},
             "bw-bullet1": "bw-bullet1", "bw-cube1": "bw-cube1"}},
+    },
+    "farthest_corner": {
+        "why": "a budget with a camera-position error only: every corner moves by the same offset, the uncertainty "
+               "does not grow with distance and no corner is the most uncertain",
+        "config": {"camera_types": {"position-only": {"name": "position-only", "position_m": [0.5, 0.5]}}},
     },
 }
 
@@ -237,7 +256,32 @@ def ranking_claim(result) -> dict:
             "verdict": _verdict(ok), "why": why}
 
 
+def farthest_corner_claim(result) -> dict:
+    """Statement (d): the footprint corner farthest from the camera is the most uncertain (module doc)."""
+    per = []
+    for cam in result.camera_names:
+        foot = result.scene.cameras[cam].position_world_m[:2]
+        shares = {}
+        for ct in result.type_names:
+            r = result.rows(cam, ct)
+            dist = np.stack([np.hypot(r[f"corner{k}_x_m"].to_numpy() - foot[0],
+                                      r[f"corner{k}_y_m"].to_numpy() - foot[1]) for k in range(4)], 1)
+            li = r["largest_index"].to_numpy()
+            ok = (li >= 0) & np.isfinite(dist).all(1)
+            shares[ct] = float(np.mean(np.argmax(dist[ok], 1) == li[ok])) if ok.any() else float("nan")
+        per.append({"camera": cam, "share_farthest_is_largest": shares,
+                    "pass": bool(shares) and all(v >= FARTHEST_SHARE for v in shares.values())})
+    ok = bool(per) and all(p["pass"] for p in per)
+    why = "; ".join(f"{p['camera']}: lowest share {min(p['share_farthest_is_largest'].values()):.2f} "
+                    f"({min(p['share_farthest_is_largest'], key=p['share_farthest_is_largest'].get)})" for p in per)
+    return {"id": "farthest_corner", "paper": PAPER_QUOTES["farthest_corner"],
+            "measure": f"the corner with the largest sigma_major is the one farthest from the camera foot in >= "
+                       f"{FARTHEST_SHARE:.0%} of the frames, every camera and type",
+            "per_camera": {p["camera"]: _verdict(p["pass"]) for p in per}, "details": per,
+            "verdict": _verdict(ok), "why": why}
+
+
 def evaluate_claims(result) -> list[dict]:
-    """The three statements on a :class:`~footprint_uq.scenario.case_study.CaseStudyResult` (module doc)."""
-    return [xy_sequence_claim(result), lane_width_claim(result), ranking_claim(result)]
+    """The statements (a)-(d) on a :class:`~footprint_uq.scenario.case_study.CaseStudyResult` (module doc)."""
+    return [xy_sequence_claim(result), lane_width_claim(result), ranking_claim(result), farthest_corner_claim(result)]
 

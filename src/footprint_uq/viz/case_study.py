@@ -552,7 +552,7 @@ def _claims_html(claims: list[dict], esc, reproduction_link: str | None) -> str:
     rows = []
     for i, c in enumerate(claims):
         pc = ", ".join(f"{esc(k)}: {esc(v)}" for k, v in c["per_camera"].items())
-        rows.append(f"<tr><td>({'abc'[i]}) &ldquo;{esc(c['paper'])}&rdquo;</td><td>{esc(c['measure'])}</td>"
+        rows.append(f"<tr><td>({'abcd'[i]}) &ldquo;{esc(c['paper'])}&rdquo;</td><td>{esc(c['measure'])}</td>"
                     f"<td>{pc}</td><td><b>{esc(c['verdict'])}</b></td><td>{esc(c['why'])}</td></tr>")
     link = ""
     if reproduction_link:
