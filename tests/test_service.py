@@ -407,3 +407,35 @@ def test_uper_writers_equal_asn1tools_over_the_whole_value_ranges(objs, station,
                                               [None if c is None else (class_bits(c), lv)
                                                for c, lv in zip(cols[6], cols[7], strict=True)])
         assert got == cpm_to_asn1_value(cpm)["payload"]["cpmContainers"][1]["containerData"]
+
+
+def test_linearity_flag_is_the_librarys_nonlinearity(camera):
+    from footprint_uq.propagation import DEFAULT_LINEAR_THRESHOLD, nonlinearity
+
+    svc = Service(camera, "basler1", linearity=True)
+    boxes = [(900.0, 600.0, 1000.0, 700.0), (300.0, 200.0, 340.0, 260.0), (1500.0, 80.0, 1520.0, 105.0),
+             (100.0, 10.0, 120.0, 20.0)]  # near, far, close to the horizon, above it
+    rec = svc.process_frame({"frame": 1, "timestamp_s": T0, "detections": [
+        {"u_min_px": a, "v_min_px": b, "u_max_px": c, "v_max_px": d, "cov_uu_px2": 4.0, "cov_uv_px2": 0.0,
+         "cov_vv_px2": 9.0} for a, b, c, d in boxes]})
+    uv = np.array([[(a + c) / 2, d] for a, b, c, d in boxes])
+    ref = nonlinearity(camera, "basler1", uv, pixel_cov_px2=np.tile(np.diag([4.0, 9.0]), (4, 1, 1)))
+    got = np.array([np.nan if o["nonlinearity"] is None else o["nonlinearity"] for o in rec["objects"]])
+    np.testing.assert_allclose(got[:3], ref[:3], rtol=1e-12)
+    assert np.isnan(got[3]) and rec["objects"][3]["linear_ok"] is False  # above the horizon: no flag to give
+    assert [o["linear_ok"] for o in rec["objects"][:3]] == (ref[:3] <= DEFAULT_LINEAR_THRESHOLD).tolist()
+    assert ref[0] < ref[1] < ref[2]  # grows towards the horizon
+    # 3D boxes: the worst of the four corners
+    rng = np.random.default_rng(8)
+    dets = boxes3d(rng, 6)
+    rec3 = svc.process_frame({"frame": 2, "timestamp_s": T0, "detections": dets})
+    est = FrameProcessor(camera, "basler1").boxes3d(
+        np.array([[d[k] for k in ("x_m", "y_m", "z_m", "length_m", "width_m", "height_m", "yaw_rad")] for d in dets]))
+    nl = nonlinearity(camera, "basler1", est.corners_px.reshape(-1, 2)).reshape(-1, 4)
+    for o, row, use in zip(rec3["objects"], nl, est.corner_usable, strict=True):
+        if use.any():
+            assert o["nonlinearity"] == pytest.approx(np.max(row[use]), rel=1e-12)
+        else:
+            assert o["nonlinearity"] is None and o["linear_ok"] is False
+    assert "linear_ok" not in Service(camera, "basler1").process_frame(
+        {"frame": 1, "timestamp_s": T0, "detections": dets})["objects"][0]  # off by default: absent, not guessed

@@ -477,7 +477,8 @@ def serve(service: Service, *, input: str | None = "-", mqtt: str | None = None,
 def run(*, camera=None, budget=None, registry=None, camera_id: str | None = None, heading_offset_deg: float = 0.0,
         origin_lat_deg: float | None = None, origin_lon_deg: float | None = None, confidence: float = 0.95,
         contact: str = "bottom-centre", allow_outside_image: bool = False, station_id: int | None = None,
-        uper_encoder: str = "fast", workers: int = 1, **serve_options) -> int:
+        uper_encoder: str = "fast", linearity: bool = False, linear_threshold: float | None = None,
+        workers: int = 1, **serve_options) -> int:
     """``footprint-uq serve``: build the :class:`Service` from files (a camera file and budget, or a
     registry) and :func:`serve` it; returns the exit status.
 
@@ -498,7 +499,8 @@ def run(*, camera=None, budget=None, registry=None, camera_id: str | None = None
         return _run_workers(workers, dict(
             budget=budget, registry=registry, heading_offset_deg=heading_offset_deg, origin_lat_deg=origin_lat_deg,
             origin_lon_deg=origin_lon_deg, confidence=confidence, contact=contact,
-            allow_outside_image=allow_outside_image, uper_encoder=uper_encoder, **serve_options))
+            allow_outside_image=allow_outside_image, uper_encoder=uper_encoder, linearity=linearity,
+            linear_threshold=linear_threshold, **serve_options))
     # a SIGTERM while the cameras load and the kernels compile (seconds) is a stop request too: nothing was
     # taken in yet, so the drain is empty and the exit status 0
     stop = serve_options.pop("stop", None) or threading.Event()
@@ -518,7 +520,7 @@ def run(*, camera=None, budget=None, registry=None, camera_id: str | None = None
         service = Service(cam, budget, registry=registry, camera_id=camera_id, heading_offset_deg=heading_offset_deg,
                           origin_lat_deg=origin_lat_deg, origin_lon_deg=origin_lon_deg, confidence=confidence,
                           contact=contact, allow_outside_image=allow_outside_image, station_id=station_id,
-                          uper_encoder=uper_encoder)
+                          uper_encoder=uper_encoder, linearity=linearity, linear_threshold=linear_threshold)
         return serve(service, stop=stop, **serve_options)
     finally:
         for sig, h in old.items():
