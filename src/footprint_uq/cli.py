@@ -83,7 +83,7 @@ def main():
 
 
 # -- the registry: one line per command -------------------------------------------------
-from . import cli_extrinsics  # noqa: E402,F401  (adds `extrinsics` to the calibrate group)
+from . import cli_extrinsics, cli_gcp  # noqa: E402,F401  (add `extrinsics` and `gcp` to the calibrate group)
 from .cli_calibrate import calibrate  # noqa: E402
 from .cli_carla import carla  # noqa: E402
 from .cli_case_study import case_study  # noqa: E402
