@@ -87,6 +87,7 @@ from . import cli_extrinsics, cli_gcp  # noqa: E402,F401  (add `extrinsics` and 
 from .cli_calibrate import calibrate  # noqa: E402
 from .cli_carla import carla  # noqa: E402
 from .cli_case_study import case_study  # noqa: E402
+from .cli_convert import convert_cmd  # noqa: E402
 from .cli_core import demo_cmd, locate_cmd, map_cmd, presets_cmd  # noqa: E402
 from .cli_fuse import fuse_cmd  # noqa: E402
 from .cli_objects import objects_cmd  # noqa: E402
@@ -100,6 +101,7 @@ main.add_command(carla)
 main.add_command(calibrate)
 main.add_command(objects_cmd)
 main.add_command(fuse_cmd)
+main.add_command(convert_cmd)
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -54,7 +54,7 @@ PANTILT_KEYS = (("model", "image_size_px", "focal_px", "height_m", "pan_deg", "t
 OPENCV_KEYS = (("model", "image_size_px", "K"), ("dist", "R", "t", "P", "ground_z_m", "name", "description"))
 
 _MODEL_ALIASES = {"pan-tilt": "pan-tilt", "pantilt": "pan-tilt", "pan_tilt": "pan-tilt", "paper": "pan-tilt",
-                  "opencv": "opencv", "open-cv": "opencv", "pinhole": "opencv"}
+                  "opencv": "opencv", "open-cv": "opencv", "pinhole": "opencv", "homography": "homography"}
 
 _UNITS = {"m": "metres", "mm": "millimetres", "cm": "centimetres", "km": "kilometres", "ft": "feet",
           "px": "pixels", "pix": "pixels", "pixel": "pixels", "pixels": "pixels", "deg": "degrees",
@@ -151,13 +151,27 @@ def camera_from_dict(d: dict, *, where: str = "", ground_z_m=None, image_size_px
         raise ConfigError(C.label(where, "model"), "missing", f"'model: pan-tilt' or 'model: opencv'{hint}")
     model = _MODEL_ALIASES.get(str(d["model"]).strip().lower())
     if model is None:
-        raise ConfigError(C.label(where, "model"), d["model"], "'pan-tilt' or 'opencv'")
+        raise ConfigError(C.label(where, "model"), d["model"], "'pan-tilt', 'opencv' or 'homography'")
     d = dict(d)
     d = _merge_arg(d, "ground_z_m", ground_z_m, where)
     d = _merge_arg(d, "image_size_px", image_size_px, where)
     if model == "pan-tilt":
         return _pantilt_from_dict(d, where)
+    if model == "homography":
+        return _homography_camera(d, where)
     return _opencv_from_dict(d, where)
+
+
+def _homography_camera(d, where):
+    """``model: homography`` with K: the decomposed camera (footprint_uq.cameras.homography)."""
+    from ..cameras.homography import homography_file_from_dict
+
+    f = homography_file_from_dict(d, where=where)
+    if f.camera is None:
+        raise ConfigError(C.label(where, "K"), "missing",
+                          "K to decompose the homography into a camera; a plane mapping without K has no "
+                          "22-parameter budget: use footprint_uq.cameras.homography.load_homography")
+    return f.camera
 
 
 def _merge_arg(d, key, value, where):
