@@ -142,3 +142,85 @@ def test_half_filled_and_bad_files(tmp_path):
         load_camera(tmp_path / "lid.json", lidar_to_base=tmp_path / "T.json")
     with pytest.raises(ConfigError, match="lidar_to_base"):
         load_camera(DATA / "s040_camera_basler_north_16mm.json", lidar_to_base=np.eye(4))
+
+
+# ------------------------------------------------------------------------------------------ DAIR-V2X-I
+DAIR = DATA / "dair-v2x-i" / "calib"
+ROPE = DATA / "rope3d"
+
+
+def test_dair_v2x_virtual_lidar_ground():
+    intr = json.loads((DAIR / "camera_intrinsic" / "000009.json").read_text())
+    ext = json.loads((DAIR / "virtuallidar_to_camera" / "000009.json").read_text())
+    cam = load_camera(DAIR / "camera_intrinsic" / "000009.json", image_size_px=(1920, 1080))  # extrinsic: sibling
+    assert cam.height_m == pytest.approx(7.5, abs=1e-9)
+    K = np.asarray(intr["cam_K"]).reshape(3, 3)
+    R, t = np.asarray(ext["rotation"]), np.asarray(ext["translation"]).ravel()
+    uv = _pixels(seed=1) * [1.0, 1080 / 1200]
+    bp = cam.backproject(uv)
+    X = np.c_[bp.xy_world_m[bp.valid], np.zeros(bp.valid.sum())]
+    # the file's own projection: virtual LiDAR -> camera -> K with cam_D (OpenCV order)
+    uv_file = cv2.projectPoints(X, cv2.Rodrigues(R)[0], t, K, np.asarray(intr["cam_D"]))[0].reshape(-1, 2)
+    np.testing.assert_allclose(uv_file, uv[bp.valid], atol=1e-6)
+    assert np.abs(cam.backproject(uv_file).xy_world_m - X[:, :2]).max() < 1e-3
+
+
+def test_dair_v2x_bad_files(tmp_path):
+    with pytest.raises(ConfigError, match=r"image size: got 'missing'"):
+        load_camera(DAIR / "camera_intrinsic" / "000009.json")
+    lone = tmp_path / "000009.json"
+    shutil.copy(DAIR / "camera_intrinsic" / "000009.json", lone)
+    with pytest.raises(ConfigError, match=r"extrinsic: got 'missing', expected extrinsic="):
+        load_camera(lone, image_size_px=(1920, 1080))
+    ext = json.loads((DAIR / "virtuallidar_to_camera" / "000009.json").read_text())
+    bad = tmp_path / "ext.json"
+    bad.write_text(json.dumps({"rotation": ext["rotation"]}))
+    with pytest.raises(ConfigError, match="translation: got 'missing'"):
+        load_camera(lone, image_size_px=(1920, 1080), extrinsic=bad)
+    flipped = dict(ext, translation=[[-v[0]] for v in ext["translation"]])  # camera under the ground
+    bad.write_text(json.dumps(flipped))
+    with pytest.raises(ConfigError, match="rotation/translation: got 'camera"):
+        load_camera(lone, image_size_px=(1920, 1080), extrinsic=bad)
+    intr = json.loads(lone.read_text())
+    intr["cam_K"] = intr["cam_K"][:8]
+    lone.write_text(json.dumps(intr))
+    with pytest.raises(ConfigError, match="cam_K"):
+        load_camera(lone, image_size_px=(1920, 1080), extrinsic=DAIR / "virtuallidar_to_camera" / "000009.json")
+
+
+# ------------------------------------------------------------------------------------------ Rope3D
+def test_rope3d_denorm_ground():
+    calib = next((ROPE / "calib").glob("*.txt"))
+    P2 = np.array(calib.read_text().split(":")[1].split(), dtype=float).reshape(3, 4)
+    plane = np.array((ROPE / "denorm" / calib.name).read_text().split(), dtype=float)
+    cam = load_camera(calib, image_size_px=(1920, 1080))  # denorm: sibling
+    assert cam.height_m == pytest.approx(7.5, abs=1e-9) and cam.tilt_deg == pytest.approx(14.0, abs=1e-6)
+    uv = _pixels(seed=2) * [1.0, 1080 / 1200]
+    bp = cam.backproject(uv)
+    Xw = np.c_[bp.xy_world_m[bp.valid], np.zeros(bp.valid.sum())]
+    Xc = Xw @ cam.R.T + cam.t
+    # on the file's ground plane (to well below 1 mm) and back to the pixel through the file's P2
+    assert np.abs(Xc @ plane[:3] + plane[3]).max() / np.linalg.norm(plane[:3]) < 1e-6
+    q = np.c_[Xc, np.ones(len(Xc))] @ P2.T
+    np.testing.assert_allclose(q[:, :2] / q[:, 2:], uv[bp.valid], atol=1e-6)
+
+
+def test_rope3d_bad_files(tmp_path):
+    calib = next((ROPE / "calib").glob("*.txt"))
+    with pytest.raises(ConfigError, match="image size"):
+        load_camera(calib)
+    (tmp_path / "calib").mkdir()
+    (tmp_path / "denorm").mkdir()
+    c = tmp_path / "calib" / "x.txt"
+    c.write_text(calib.read_text())
+    with pytest.raises(ConfigError, match="denorm: got 'missing'"):
+        load_camera(c, image_size_px=(1920, 1080))
+    (tmp_path / "denorm" / "x.txt").write_text("0 0 0 5\n")
+    with pytest.raises(ConfigError, match=r"\(a, b, c\) != 0"):
+        load_camera(c, image_size_px=(1920, 1080))
+    (tmp_path / "denorm" / "x.txt").write_text("0 1 0\n")
+    with pytest.raises(ConfigError, match="4 finite numbers"):
+        load_camera(c, image_size_px=(1920, 1080))
+    c.write_text("P2: 1 2 3\n")
+    with pytest.raises(ConfigError, match="P2: got '1 2 3', expected 12 finite numbers"):
+        load_camera(c, image_size_px=(1920, 1080))

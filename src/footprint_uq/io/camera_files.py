@@ -45,7 +45,7 @@ __all__ = ["load_camera", "load_intrinsics", "save_camera", "save_budget", "came
            "detect_format", "FORMATS", "PANTILT_KEYS", "OPENCV_KEYS"]
 
 #: formats understood by :func:`load_camera`
-FORMATS = ("footprint-uq", "opencv", "ros", "tumtraf")
+FORMATS = ("footprint-uq", "opencv", "ros", "tumtraf", "dair-v2x", "rope3d")
 
 #: keys of a pan-tilt camera file: required, optional
 PANTILT_KEYS = (("model", "image_size_px", "focal_px", "height_m", "pan_deg", "tilt_deg"),
@@ -385,6 +385,10 @@ def _detect_mapping(data: dict, p: Path) -> str:
            "translation_matrix", "projection_matrix")
     if any(k in data for k in tum):
         return "tumtraf"
+    if "cam_K" in data:
+        return "dair-v2x"
+    if "P2" in data:
+        return "rope3d"
     raise ConfigError(str(p), f"keys {sorted(map(str, data))[:8]}",
                       "a camera file in one of the formats " + ", ".join(FORMATS) +
                       " (ours needs 'model: pan-tilt' or 'model: opencv'; see docs/file-formats.md)")
@@ -455,6 +459,16 @@ def load_camera(path, *, format: str | None = None, ground_z_m=None, image_size_
         from .ros_files import camera_from_ros_file
 
         return camera_from_ros_file(p, ground_z_m=ground_z_m, image_size_px=image_size_px, pose=pose, **options)
+    if fmt == "dair-v2x":
+        from .dataset_files import camera_from_dair_v2x
+
+        return camera_from_dair_v2x(p, ground_z_m=ground_z_m, image_size_px=image_size_px, pose=pose, **options)
+    if fmt == "rope3d":
+        from .dataset_files import camera_from_rope3d
+
+        if pose is not None:
+            raise ConfigError(C.label(str(p), "pose"), "given as argument", "no pose: the denorm plane gives it")
+        return camera_from_rope3d(p, ground_z_m=ground_z_m, image_size_px=image_size_px, **options)
     from .dataset_files import camera_from_tumtraf_file
 
     return camera_from_tumtraf_file(p, ground_z_m=ground_z_m, image_size_px=image_size_px, pose=pose, **options)

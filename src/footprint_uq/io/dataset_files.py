@@ -59,7 +59,9 @@ from ..errors import ConfigError, ConsistencyWarning, InputError
 from . import _common as C
 from .pose import NO_POSE_HELP, camera_from_intrinsics_and_pose, read_pose
 
-__all__ = ["read_tumtraf_calibration", "camera_from_tumtraf_file", "POSE_CONVENTIONS"]
+__all__ = ["read_tumtraf_calibration", "camera_from_tumtraf_file", "POSE_CONVENTIONS", "read_dair_v2x_intrinsics",
+           "read_dair_v2x_extrinsics", "camera_from_dair_v2x", "read_rope3d_calibration", "read_denorm",
+           "camera_from_rope3d"]
 
 POSE_CONVENTIONS = ("world_to_camera", "camera_to_world")
 _K_KEYS = ("intrinsic_camera_matrix", "intrinsic_matrix", "intrinsic", "camera_matrix")
@@ -475,3 +477,159 @@ def _camera_from_extrinsics(d, size, gz, where):
                       "(ground points only in the lower image part, if any); check the pose convention",
                       ConsistencyWarning, stacklevel=3)
     return cam
+
+
+# ---------------------------------------------------------------------------------------------
+# DAIR-V2X-I: calib/camera_intrinsic/{id}.json + calib/virtuallidar_to_camera/{id}.json
+# ---------------------------------------------------------------------------------------------
+def _sibling(path, folder: str, suffix: str | None = None):
+    """``<dataset>/calib/<folder>/<id>`` next to ``<dataset>/calib/<this folder>/<id>`` (None if absent)."""
+    from pathlib import Path
+
+    p = Path(path)
+    cand = p.parent.parent / folder / (p.name if suffix is None else p.stem + suffix)
+    return cand if cand.is_file() else None
+
+
+def read_dair_v2x_intrinsics(path) -> dict:
+    """DAIR-V2X-I ``camera_intrinsic`` JSON: ``cam_K`` (9 numbers, row-major K), ``cam_D`` (k1 k2 p1 p2 k3,
+    OpenCV order), optional ``width``/``height``.  Returns ``K``, ``dist``, ``image_size_px`` (or None)."""
+    p, d = C.read_mapping(path)
+    where = str(p)
+    for k in ("cam_K",):
+        if k not in d or _empty(d[k]):
+            raise ConfigError(C.label(where, k), "missing", "the 9 numbers of K (row-major), DAIR-V2X camera_intrinsic")
+    K = C.check_K(where, "cam_K", C.as_matrix(where, "cam_K", d["cam_K"], (3, 3)))
+    dist = (np.zeros(0) if d.get("cam_D") is None or _empty(d["cam_D"]) else
+            C.as_vector(where, "cam_D", d["cam_D"], (4, 5, 8), "distortion coefficients (k1 k2 p1 p2 [k3 ...])"))
+    size = None
+    if d.get("width") is not None or d.get("height") is not None:
+        size = C.as_image_size(where, "width, height", [d.get("width"), d.get("height")])
+    return {"where": where, "K": K, "dist": dist, "image_size_px": size}
+
+
+def read_dair_v2x_extrinsics(path) -> dict:
+    """DAIR-V2X-I ``virtuallidar_to_camera`` JSON: ``rotation`` (3x3) and ``translation`` (3x1) mapping the
+    virtual-LiDAR frame to the camera (``x_cam = R x_lidar + t``, metres)."""
+    p, d = C.read_mapping(path, what="extrinsic file")
+    where = str(p)
+    for k in ("rotation", "translation"):
+        if k not in d or _empty(d[k]) or _placeholder(d[k]):
+            raise ConfigError(C.label(where, k), "missing", "rotation (3x3) and translation (3x1) of "
+                              "virtuallidar_to_camera")
+    R = C.as_matrix(where, "rotation", d["rotation"], (3, 3))
+    C.check_rotation(where, "rotation", R)
+    t = C.as_vector(where, "translation", np.asarray(d["translation"], dtype=object).ravel().tolist()
+                    if isinstance(d["translation"], list) else d["translation"], 3, "numbers (metres)")
+    return {"where": where, "R": R, "t": t}
+
+
+def camera_from_dair_v2x(path, *, extrinsic=None, image_size_px=None, ground_z_m=None, pose=None):
+    """An :class:`OpenCVCamera` from a DAIR-V2X-I camera: intrinsic JSON + ``virtuallidar_to_camera`` JSON.
+
+    The world frame is the *virtual LiDAR* frame, whose x-y plane is the ground (z up): ground points come
+    out in it.  ``extrinsic`` defaults to ``../virtuallidar_to_camera/<same name>`` (the dataset's layout).
+    """
+    from .opencv_files import _resolve_size, _with_pose
+
+    d = read_dair_v2x_intrinsics(path)
+    where = d["where"]
+    size = _resolve_size(where, d["image_size_px"], image_size_px)
+    gz = 0.0 if ground_z_m is None else C.as_number("argument", "ground_z_m", ground_z_m)
+    if pose is not None:
+        return _with_pose(d["K"], d["dist"], size, read_pose(pose), gz, where)
+    ext = extrinsic if extrinsic is not None else _sibling(path, "virtuallidar_to_camera")
+    if ext is None:
+        raise ConfigError(C.label(where, "extrinsic"), "missing",
+                          "extrinsic='.../virtuallidar_to_camera/<id>.json' (not found next to calib/camera_intrinsic) "
+                          "or pose=")
+    e = read_dair_v2x_extrinsics(ext)
+    ok, h, tilt = _plausible(e["R"], e["t"], gz)
+    if not ok:
+        raise ConfigError(C.label(e["where"], "rotation/translation"), f"camera {h:.4g} m above the ground, tilt "
+                          f"{tilt:.3g} deg", "a camera above the virtual-LiDAR ground (z = 0) looking down")
+    return camera_from_intrinsics_and_pose(d["K"], d["dist"], size, R=e["R"], t=e["t"], ground_z_m=gz, where=where)
+
+
+# ---------------------------------------------------------------------------------------------
+# Rope3D: calib/{id}.txt (KITTI-style "P2: 12 numbers") + denorm/{id}.txt (ground plane a b c d)
+# ---------------------------------------------------------------------------------------------
+def _numbers_line(where, field, text, n):
+    try:
+        vals = [float(x) for x in text.replace(",", " ").split()]
+    except ValueError:
+        raise ConfigError(C.label(where, field), text.strip()[:60], f"{n} numbers") from None
+    if len(vals) != n or not np.all(np.isfinite(vals)):
+        raise ConfigError(C.label(where, field), text.strip()[:60], f"{n} finite numbers")
+    return np.array(vals)
+
+
+def read_rope3d_calibration(path) -> dict:
+    """Rope3D / KITTI calibration text: the line ``P2: p00 ... p23`` (3x4, camera frame -> pixels)."""
+    p, text = C.read_text(path)
+    where = str(p)
+    lines = {ln.split(":", 1)[0].strip(): ln.split(":", 1)[1] for ln in text.splitlines() if ":" in ln}
+    if "P2" not in lines:
+        raise ConfigError(C.label(where, "P2"), "missing", "a line 'P2: ' with the 12 numbers of the 3x4 projection")
+    P2 = _numbers_line(where, "P2", lines["P2"], 12).reshape(3, 4)
+    return {"where": where, "P2": P2}
+
+
+def read_denorm(path) -> np.ndarray:
+    """Rope3D ``denorm`` text: the ground plane ``a x + b y + c z + d = 0`` in the camera frame (4 numbers),
+    normalised to a unit normal pointing to the camera's side (``d > 0`` is the camera height)."""
+    p, text = C.read_text(path)
+    where = str(p)
+    g = _numbers_line(where, "denorm", text, 4)
+    n = np.linalg.norm(g[:3])
+    if n == 0:
+        raise ConfigError(C.label(where, "denorm"), g.tolist(), "a plane a b c d with (a, b, c) != 0")
+    g = g / n
+    if g[3] == 0:
+        raise ConfigError(C.label(where, "denorm"), g.tolist(), "a ground plane not through the camera (d != 0)")
+    return g if g[3] > 0 else -g
+
+
+def camera_from_rope3d(path, *, denorm=None, image_size_px=None, ground_z_m=None):
+    """An :class:`OpenCVCamera` from a Rope3D camera: ``calib/<id>.txt`` (P2) + ``denorm/<id>.txt``.
+
+    The world frame W is built from the ground plane: z up along the plane's normal, origin at the
+    camera's foot point, +y (north, pan 0) the boresight's direction on the ground, +x to its right;
+    the camera is ``d`` metres above the plane.  ``P2`` must be ``K [I | t]`` (a camera-frame projection).
+    ``denorm`` defaults to ``../denorm/<same name>``; the image size is not in the files (Rope3D: 1920x1080)
+    and must be given.
+    """
+    from .opencv_files import _resolve_size
+
+    d = read_rope3d_calibration(path)
+    where = d["where"]
+    size = _resolve_size(where, None, image_size_px)
+    if ground_z_m not in (None, 0, 0.0):
+        raise ConfigError("ground_z_m", ground_z_m, "none: the ground of a Rope3D camera is its denorm plane (z = 0)")
+    dn = denorm if denorm is not None else _sibling(path, "denorm")
+    if dn is None:
+        raise ConfigError(C.label(where, "denorm"), "missing",
+                          "denorm='.../denorm/<id>.txt' (the ground plane; not found next to calib/)")
+    g = read_denorm(dn)
+    P2 = d["P2"]
+    K = P2[:, :3].copy()
+    if abs(K[1, 0]) > 1e-9 * abs(K[0, 0]) or abs(K[2, 0]) > 1e-12 or abs(K[2, 1]) > 1e-12 or K[2, 2] <= 0:
+        raise ConfigError(C.label(where, "P2"), P2.tolist(), "K [I | t] with an upper-triangular K (a projection "
+                          "from the camera frame)")
+    K = K / K[2, 2]
+    c_ref = -np.linalg.solve(P2[:, :3], P2[:, 3])  # the camera centre in the reference (denorm) frame
+    n, h = g[:3], float(g[:3] @ c_ref + g[3])
+    if h <= 0:
+        raise ConfigError(C.label(str(dn), "denorm"), f"camera {h:.4g} m above the plane", "a camera above the ground")
+    fwd = np.array([0.0, 0.0, 1.0]) - n[2] * n  # boresight projected on the ground
+    if np.linalg.norm(fwd) < 1e-6:
+        raise ConfigError(C.label(str(dn), "denorm"), g.tolist(), "a camera not looking straight down")
+    fwd /= np.linalg.norm(fwd)
+    B = np.column_stack([np.cross(fwd, n), fwd, n])  # world axes (east, north, up) in the camera frame
+    if B[:, 1] @ np.array([0.0, 0.0, 1.0]) <= 0 or np.array([0.0, 0.0, 1.0]) @ n >= 0:
+        raise ConfigError(C.label(str(dn), "denorm"), g.tolist(), "a camera looking down at the plane")
+    # x_ref = B x_world + (c_ref - h n) (the foot point), x_cam = x_ref - c_ref: world -> camera is (B, -h n)
+    try:
+        return OpenCVCamera(K, None, B, -h * n, size, 0.0)
+    except InputError as e:
+        raise C.rewrap(e, where) from None

@@ -114,6 +114,38 @@ def tumtraf():
     })
 
 
+K_1080 = np.array([[2183.4, 0.0, 940.6], [0.0, 2179.0, 547.6], [0.0, 0.0, 1.0]])
+ROPE3D_ID = "1632_fa2sd4a11North151_420_1613710840_1613716786_1_obstacle"
+
+
+def dair_v2x():
+    """DAIR-V2X-I: calib/camera_intrinsic/<id>.json (cam_K row-major, cam_D) and
+    calib/virtuallidar_to_camera/<id>.json (rotation 3x3, translation 3x1; the virtual LiDAR's x-y plane is
+    the ground)."""
+    root = HERE / "dair-v2x-i" / "calib"
+    (root / "camera_intrinsic").mkdir(parents=True, exist_ok=True)
+    (root / "virtuallidar_to_camera").mkdir(parents=True, exist_ok=True)
+    (root / "camera_intrinsic" / "000009.json").write_text(json.dumps(
+        {"cam_D": [-0.25, 0.08, 1.0e-4, -3.0e-4, 0.0], "cam_K": K_1080.ravel().tolist()}, indent=2) + "\n")
+    (root / "virtuallidar_to_camera" / "000009.json").write_text(json.dumps(
+        {"rotation": R_CAM_BASE.tolist(), "translation": [[v] for v in T_CAM_BASE.tolist()]}, indent=2) + "\n")
+
+
+def rope3d():
+    """Rope3D: calib/<id>.txt ("P2: " 12 numbers, K [I | 0]) and denorm/<id>.txt (a b c d: the ground plane
+    in the camera frame; here with the normal pointing down, d < 0, as either sign occurs)."""
+    root = HERE / "rope3d"
+    (root / "calib").mkdir(parents=True, exist_ok=True)
+    (root / "denorm").mkdir(parents=True, exist_ok=True)
+    P2 = np.c_[K_1080, np.zeros(3)]
+    (root / "calib" / f"{ROPE3D_ID}.txt").write_text("P2: " + " ".join(repr(float(v)) for v in P2.ravel()) + "\n")
+    n_up = R_CAM_BASE @ np.array([0.0, 0.0, 1.0])
+    plane = -np.r_[n_up, C_BASE[2]]
+    (root / "denorm" / f"{ROPE3D_ID}.txt").write_text(" ".join(repr(float(v)) for v in plane) + "\n")
+
+
 if __name__ == "__main__":
     tumtraf()
+    dair_v2x()
+    rope3d()
     print("fixtures written to", HERE)
