@@ -1,4 +1,7 @@
-"""Roadside-dataset calibration JSON: TUMTraf (TUM Traffic) / A9 / Providentia++.
+"""Roadside-dataset calibration files: TUMTraf (TUM Traffic) / A9 / Providentia++, DAIR-V2X-I, Rope3D.
+
+The TUMTraf part is described below; DAIR-V2X-I and Rope3D at :func:`camera_from_dair_v2x` and
+:func:`camera_from_rope3d`; every format in ``docs/file-formats.md``.
 
 The TUM Traffic dev kit (``tum-traffic-dataset-dev-kit/calib/*.json``) ships one
 JSON file per sensor.  Two generations exist:
@@ -17,10 +20,13 @@ JSON file per sensor.  Two generations exist:
       calibrated_intrinsic_camera_matrix   images, re-projection); not used
 
 * **A9 highway** (``s040_*/s050_*``, R0/R1 releases): ``intrinsic_camera_matrix`` as
-  3x4 with a zero last column, ``dist_coefficients``, and the sensor pose as
-  ``rotation_*``/``translation_sensor_station_base_to_sensor`` in a z-up *sensor*
-  frame (x forward), not an OpenCV camera frame; these extrinsics are not read:
-  such files are intrinsics-only here, the pose must be given (``pose=``).
+  3x4 with a zero last column, ``dist_coefficients``, and the sensor pose in the
+  station-base frame: ``rotation_matrix_sensor_station_base_to_sensor`` (sensor -> base,
+  sensor axes x forward, y left, z up) and ``translation_sensor_station_base_to_sensor``
+  (the sensor's position, metres); the ground is z = 0 of the base frame.
+* **LiDAR-relative** (``*_R3/_R4``): ``projection_from_<lidar>`` (LiDAR frame -> pixels),
+  moved into the base frame with ``transformation_matrix_<lidar>_to_<base>`` (in the file,
+  in ``<lidar>.json`` next to it, or ``lidar_to_base=``).
 
 What is read, in this order:
 
@@ -45,7 +51,10 @@ projection_matrix                               3x4, checked against K [R | t]; 
 direction implied by the key names.  When the implied direction puts the camera
 under the ground or makes it look up while the other direction gives a
 plausible roadside camera, a :class:`ConfigError` says so (never a silent flip).
-Matrices filled with -1 (placeholders in the dev kit's vehicle files) count as absent.
+Matrices filled with -1 (placeholders in the dev kit's vehicle files), mappings whose values are
+all -1 and empty lists count as absent; when rotation_matrix/translation give no camera above the
+ground (below 300 m) looking down in either direction, another pose of the file is used (warned) or
+the file is refused; a ``vehicle_*`` file without a pose is refused as a vehicle camera.
 """
 
 from __future__ import annotations
