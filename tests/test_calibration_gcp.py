@@ -278,3 +278,27 @@ def test_campaign_generator_is_seeded():
     a = campaign(np.random.default_rng(1), known_intrinsics=True)
     b = campaign(np.random.default_rng(1), known_intrinsics=True)
     np.testing.assert_array_equal(a[1].uv_px, b[1].uv_px)
+
+
+def test_cli_gcp_with_the_intrinsics_budget(tmp_path):
+    cam, uv, xyz = _scene()
+    pts = _write_csv(tmp_path / "g.csv", ["u_px", "v_px", "x_m", "y_m", "z_m", "sigma_px"],
+                     np.column_stack([uv, xyz, np.full(len(uv), 0.5)]).tolist())
+    from footprint_uq import save_camera
+
+    intr = save_camera(cam, tmp_path / "intr.yaml")
+    (tmp_path / "ib.yaml").write_text("focal_px: 6.0\nprincipal_point_px: [4.0, 3.0]\n")
+    args = ["calibrate", "gcp", "--points", str(pts), "--image-size", "1920x1080", "--intrinsics", str(intr)]
+    r1 = CliRunner().invoke(main, args + ["--out", str(tmp_path / "a")])
+    r2 = CliRunner().invoke(main, args + ["--intrinsics-budget", str(tmp_path / "ib.yaml"), "--out",
+                                          str(tmp_path / "b")])
+    assert r1.exit_code == 0 and r2.exit_code == 0, r1.output + r2.output
+    a, b = load_budget(tmp_path / "a" / "budget.yaml"), load_budget(tmp_path / "b" / "budget.yaml")
+    assert "cx_px" in b.covariance_names and "cx_px" not in a.covariance_names
+    Ca, Cb = a.param_covariance(), b.param_covariance()
+    assert Cb[P.FX, P.FX] == pytest.approx(36.0) and Cb[P.CY, P.CY] == pytest.approx(9.0)
+    assert np.all(np.diag(Cb)[POSE] > np.diag(Ca)[POSE])  # the intrinsics' uncertainty widens the pose
+    assert np.any(Cb[np.ix_(POSE, [P.FX, P.CX, P.CY])] != 0)  # and correlates with it
+    r = CliRunner().invoke(main, ["calibrate", "gcp", "--points", str(pts), "--image-size", "1920x1080",
+                                  "--intrinsics-budget", str(tmp_path / "ib.yaml"), "--out", str(tmp_path / "c")])
+    assert r.exit_code == 2 and "--intrinsics too" in r.output

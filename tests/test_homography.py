@@ -7,6 +7,8 @@ import numpy as np
 import pytest
 import yaml
 from click.testing import CliRunner
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from footprint_uq import PanTiltCamera, save_camera
 from footprint_uq.cameras.homography import (
@@ -164,3 +166,24 @@ def test_convert_cli(tmp_path, cam):
     r = CliRunner().invoke(main, ["convert", "--camera", str(tmp_path / "d.yaml"), "--to", "homography", "--out",
                                   str(tmp_path / "x.yaml")])
     assert r.exit_code == 2 and r.output.count("\n") == 1 and "no lens distortion" in r.output
+
+
+@settings(max_examples=60, deadline=None)
+@given(f=st.floats(600, 3000), h=st.floats(2.0, 40.0), pan=st.floats(-180, 180), tilt=st.floats(3.0, 85.0),
+       roll=st.floats(-10, 10), x=st.floats(-100, 100), y=st.floats(-100, 100), gz=st.floats(-5, 5))
+def test_homography_round_trip_property(f, h, pan, tilt, roll, x, y, gz):
+    # any undistorted camera: its homography maps pixels to its ground points, and decomposes back into it
+    cam = PanTiltCamera(focal_px=f, image_size_px=SIZE, height_m=h, pan_deg=pan, tilt_deg=tilt, roll_deg=roll,
+                        position_m=(x, y), ground_z_m=gz)
+    hc = HomographyCamera(homography_from_camera(cam), SIZE)
+    uv = np.array([[959.5, 1079.0], [100.0, 1000.0], [1800.0, 900.0]])
+    ref = cam.backproject(uv)
+    bp = hc.backproject(uv)
+    np.testing.assert_array_equal(bp.valid, ref.valid)
+    ok = ref.valid
+    scale = 1.0 + np.abs(ref.xy_world_m[ok]).max() if ok.any() else 1.0
+    np.testing.assert_allclose(bp.xy_world_m[ok], ref.xy_world_m[ok], atol=1e-9 * scale * (1 + 1 / np.sin(
+        np.deg2rad(tilt))))
+    cam2, _ = camera_from_homography(hc, cam.K, SIZE, ground_z_m=gz)
+    np.testing.assert_allclose(cam2.position_world_m, cam.position_world_m, atol=1e-6 * (1 + h))
+    assert abs(cam2.tilt_deg - tilt) < 1e-6
