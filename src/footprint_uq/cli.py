@@ -132,10 +132,11 @@ def main(debug):
 
 
 # -- the registry: one line per command -------------------------------------------------
-from . import cli_extrinsics  # noqa: E402,F401  (adds `extrinsics` to the calibrate group)
+from . import cli_extrinsics, cli_gcp  # noqa: E402,F401  (add `extrinsics` and `gcp` to the calibrate group)
 from .cli_calibrate import calibrate  # noqa: E402
 from .cli_carla import carla  # noqa: E402
 from .cli_case_study import case_study  # noqa: E402
+from .cli_convert import convert_cmd  # noqa: E402
 from .cli_core import demo_cmd, locate_cmd, map_cmd, presets_cmd  # noqa: E402
 from .cli_fuse import fuse_cmd  # noqa: E402
 from .cli_objects import objects_cmd  # noqa: E402
@@ -151,6 +152,7 @@ main.add_command(calibrate)
 main.add_command(objects_cmd)
 main.add_command(fuse_cmd)
 main.add_command(serve_cmd)
+main.add_command(convert_cmd)
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -84,16 +84,20 @@ def atomic_path(final) -> Iterator[Path]:
         raise
 
 
-def atomic_write_bytes(path, data: bytes) -> None:
-    """Write ``data`` to ``path`` atomically."""
+def atomic_write_bytes(path, data: bytes, *, parents: bool = False) -> Path:
+    """Write ``data`` to ``path`` atomically (``parents``: create missing folders); returns the path."""
+    path = Path(path)
+    if parents:
+        path.parent.mkdir(parents=True, exist_ok=True)
     with atomic_path(path) as tmp, open(tmp, "wb") as f:
         f.write(data)
         f.flush()
+    return path
 
 
-def atomic_write_text(path, text: str, *, encoding: str = "utf-8") -> None:
-    """Write ``text`` to ``path`` atomically."""
-    atomic_write_bytes(path, text.encode(encoding))
+def atomic_write_text(path, text: str, *, encoding: str = "utf-8", parents: bool = False) -> Path:
+    """Write ``text`` to ``path`` atomically (``parents``: create missing folders); returns the path."""
+    return atomic_write_bytes(path, text.encode(encoding), parents=parents)
 
 
 def clean_temporaries(folder, *, recursive: bool = True) -> int:

@@ -45,7 +45,7 @@ __all__ = ["load_camera", "load_intrinsics", "save_camera", "save_budget", "came
            "detect_format", "FORMATS", "PANTILT_KEYS", "OPENCV_KEYS"]
 
 #: formats understood by :func:`load_camera`
-FORMATS = ("footprint-uq", "opencv", "ros", "tumtraf")
+FORMATS = ("footprint-uq", "opencv", "ros", "tumtraf", "dair-v2x", "rope3d")
 
 #: keys of a pan-tilt camera file: required, optional
 PANTILT_KEYS = (("model", "image_size_px", "focal_px", "height_m", "pan_deg", "tilt_deg"),
@@ -54,7 +54,7 @@ PANTILT_KEYS = (("model", "image_size_px", "focal_px", "height_m", "pan_deg", "t
 OPENCV_KEYS = (("model", "image_size_px", "K"), ("dist", "R", "t", "P", "ground_z_m", "name", "description"))
 
 _MODEL_ALIASES = {"pan-tilt": "pan-tilt", "pantilt": "pan-tilt", "pan_tilt": "pan-tilt", "paper": "pan-tilt",
-                  "opencv": "opencv", "open-cv": "opencv", "pinhole": "opencv"}
+                  "opencv": "opencv", "open-cv": "opencv", "pinhole": "opencv", "homography": "homography"}
 
 _UNITS = {"m": "metres", "mm": "millimetres", "cm": "centimetres", "km": "kilometres", "ft": "feet",
           "px": "pixels", "pix": "pixels", "pixel": "pixels", "pixels": "pixels", "deg": "degrees",
@@ -151,13 +151,27 @@ def camera_from_dict(d: dict, *, where: str = "", ground_z_m=None, image_size_px
         raise ConfigError(C.label(where, "model"), "missing", f"'model: pan-tilt' or 'model: opencv'{hint}")
     model = _MODEL_ALIASES.get(str(d["model"]).strip().lower())
     if model is None:
-        raise ConfigError(C.label(where, "model"), d["model"], "'pan-tilt' or 'opencv'")
+        raise ConfigError(C.label(where, "model"), d["model"], "'pan-tilt', 'opencv' or 'homography'")
     d = dict(d)
     d = _merge_arg(d, "ground_z_m", ground_z_m, where)
     d = _merge_arg(d, "image_size_px", image_size_px, where)
     if model == "pan-tilt":
         return _pantilt_from_dict(d, where)
+    if model == "homography":
+        return _homography_camera(d, where)
     return _opencv_from_dict(d, where)
+
+
+def _homography_camera(d, where):
+    """``model: homography`` with K: the decomposed camera (footprint_uq.cameras.homography)."""
+    from ..cameras.homography import homography_file_from_dict
+
+    f = homography_file_from_dict(d, where=where)
+    if f.camera is None:
+        raise ConfigError(C.label(where, "K"), "missing",
+                          "K to decompose the homography into a camera; a plane mapping without K has no "
+                          "22-parameter budget: use footprint_uq.cameras.homography.load_homography")
+    return f.camera
 
 
 def _merge_arg(d, key, value, where):
@@ -373,6 +387,10 @@ def _detect_mapping(data: dict, p: Path) -> str:
            "translation_matrix", "projection_matrix")
     if any(k in data for k in tum):
         return "tumtraf"
+    if "cam_K" in data:
+        return "dair-v2x"
+    if "P2" in data:
+        return "rope3d"
     raise ConfigError(str(p), f"keys {sorted(map(str, data))[:8]}",
                       "a camera file in one of the formats " + ", ".join(FORMATS) +
                       " (ours needs 'model: pan-tilt' or 'model: opencv'; see docs/file-formats.md)")
@@ -443,6 +461,16 @@ def load_camera(path, *, format: str | None = None, ground_z_m=None, image_size_
         from .ros_files import camera_from_ros_file
 
         return camera_from_ros_file(p, ground_z_m=ground_z_m, image_size_px=image_size_px, pose=pose, **options)
+    if fmt == "dair-v2x":
+        from .dataset_files import camera_from_dair_v2x
+
+        return camera_from_dair_v2x(p, ground_z_m=ground_z_m, image_size_px=image_size_px, pose=pose, **options)
+    if fmt == "rope3d":
+        from .dataset_files import camera_from_rope3d
+
+        if pose is not None:
+            raise ConfigError(C.label(str(p), "pose"), "given as argument", "no pose: the denorm plane gives it")
+        return camera_from_rope3d(p, ground_z_m=ground_z_m, image_size_px=image_size_px, **options)
     from .dataset_files import camera_from_tumtraf_file
 
     return camera_from_tumtraf_file(p, ground_z_m=ground_z_m, image_size_px=image_size_px, pose=pose, **options)

@@ -1,0 +1,844 @@
+"""Camera pose (and focal length) from ground control points, with the full covariance of the solve.
+
+A ground control point (GCP) is a pixel ``uv_px`` clicked in the image and the same
+point's world coordinates ``xyz_world_m`` (frame W, docs/conventions.md) from a survey
+or a map.  From four or more GCPs and known intrinsics the pose follows (PnP); from six
+or more not on one line the focal length too (square pixels, principal point at the image
+centre, no distortion).
+
+Solve
+-----
+Start: OpenCV's SQPnP, EPnP and (coplanar points) IPPE solutions, each refined by
+:func:`cv2.solvePnPRefineLM`; candidates putting a point behind the camera or the camera
+below the ground plane are dropped and the one with the smallest reprojection error kept
+(without intrinsics: the same over a grid of focal lengths).  Then a Levenberg-Marquardt
+refinement in the library's own parameters (``x_m, y_m, height_m, pan_rad, tilt_rad,
+roll_rad`` [, the focal length, moving ``fx_px`` and ``fy_px`` together]) with the
+library's own projection (:func:`footprint_uq.cameras.general.project`) minimises
+
+    sum_i r_i^T S_i^-1 r_i,   r_i = uv_i - project(xyz_i),
+    S_i = sigma_px,i^2 I_2 + sigma_m,i^2 (d uv / d xyz)_i (d uv / d xyz)_i^T
+
+(the *effective variance*: the survey noise of each point mapped through the derivative of
+its projection).  It stops when the Gauss-Newton step is below 1e-6 of every parameter's
+standard deviation.
+
+Covariance
+----------
+First order at the solution: ``C_theta = H^-1`` with ``H = sum J_i^T S_i^-1 J_i`` (the
+normal matrix; pixel and survey noise both enter through ``S_i``).  Given intrinsics with
+a covariance ``C_int`` (13 x 13 over ``fx_px .. k6``) add their effect: the pose moves by
+``G d_int`` with ``G = -H^-1 sum J_i^T S_i^-1 (d uv / d int)_i``, so the full 22 x 22
+parameter covariance is ``A C_theta A^T + B C_int B^T`` with ``A`` placing theta in the
+parameter vector and ``B = A G + E_int`` (``E_int`` placing the intrinsics).  The stated
+sigmas are used as they are (not rescaled by the residuals); the reduced chi-square of the
+fit says whether they were realistic.  Ground-plane parameters are 0: the GCPs define the
+ground ``z = 0`` of W.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .. import params as P
+from ..cameras import general
+from ..cameras.opencv import OpenCVCamera
+from ..cameras.rotation import R_W_C, pan_tilt_roll_from_R_W_C
+from ..errors import ConsistencyWarning, InputError
+
+__all__ = ["GCPSet", "GCPSolution", "read_gcp_csv", "solve_gcp", "run_gcp", "POSE_NAMES", "GCP_COLUMNS"]
+
+#: the estimated pose parameters, in :data:`footprint_uq.params.PARAM_NAMES` order
+POSE_NAMES = ("x_m", "y_m", "height_m", "pan_rad", "tilt_rad", "roll_rad")
+#: columns a GCP CSV may have
+GCP_COLUMNS = ("name", "u_px", "v_px", "x_m", "y_m", "z_m", "lat_deg", "lon_deg", "alt_m", "sigma_px", "sigma_m")
+_POSE_IDX = P.param_index(POSE_NAMES)
+_INT_IDX = np.arange(P.SKEW + 1 + 8)  # fx .. k6: the 13 intrinsic parameters
+MIN_POINTS_POSE = 4
+MIN_POINTS_FOCAL = 6
+_CONV_SIGMA = 1e-6  # stop when the Gauss-Newton step is below this many standard deviations
+_ROUNDOFF_SIGMA = 1e-3  # ... or below this many when no step lowers the cost (round-off limited)
+_COLLINEAR_RTOL = 1e-3  # second singular value / first below this: the points are on one line
+
+
+# ---------------------------------------------------------------------------------------------
+# input
+# ---------------------------------------------------------------------------------------------
+@dataclass
+class GCPSet:
+    """Ground control points in the world frame W.
+
+    Attributes
+    ----------
+    uv_px : ndarray (N, 2)
+        Pixels (u right, v down).
+    xyz_world_m : ndarray (N, 3)
+        World points (x east, y north, z up), metres; the ground plane is ``z = 0``.
+    sigma_px : ndarray (N,)
+        1-sigma pixel noise of each point (per image axis).
+    sigma_m : ndarray (N,)
+        1-sigma survey noise of each point (per world axis x, y, z).
+    names : list of str
+    georef : dict
+        ``origin_lat_deg``, ``origin_lon_deg``, ``origin_alt_m`` of W when known (else empty).
+    """
+
+    uv_px: np.ndarray
+    xyz_world_m: np.ndarray
+    sigma_px: np.ndarray
+    sigma_m: np.ndarray
+    names: list = field(default_factory=list)
+    georef: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        self.uv_px = np.asarray(self.uv_px, dtype=np.float64).reshape(-1, 2)
+        n = len(self.uv_px)
+        self.xyz_world_m = np.asarray(self.xyz_world_m, dtype=np.float64).reshape(n, 3)
+        self.sigma_px = np.broadcast_to(np.asarray(self.sigma_px, dtype=np.float64), (n,)).copy()
+        self.sigma_m = np.broadcast_to(np.asarray(self.sigma_m, dtype=np.float64), (n,)).copy()
+        if not self.names:
+            self.names = [str(i + 1) for i in range(n)]
+
+
+def _float_cell(path, row_no, col, text):
+    try:
+        x = float(text)
+    except (TypeError, ValueError):
+        raise InputError(f"{path}: row {row_no} {col}", text, "a number") from None
+    if not math.isfinite(x):
+        raise InputError(f"{path}: row {row_no} {col}", text, "a finite number")
+    return x
+
+
+def read_gcp_csv(path, *, pixel_sigma_px: float = 1.0, survey_sigma_m: float = 0.05, origin_lat_deg=None,
+                 origin_lon_deg=None, origin_alt_m=None) -> GCPSet:
+    """Read a GCP table.
+
+    Columns (header row, any order): ``u_px, v_px`` and either ``x_m, y_m[, z_m]`` (world
+    frame W, metres) or ``lat_deg, lon_deg[, alt_m]`` (WGS84; converted to a local
+    east/north/up frame by pyproj, azimuthal equidistant about the origin); optional
+    ``sigma_px``, ``sigma_m`` (per point, override the defaults) and ``name``.
+
+    Parameters
+    ----------
+    path : str or Path
+    pixel_sigma_px, survey_sigma_m : float
+        Default 1-sigma pixel noise (per image axis) and survey noise (per world axis).
+    origin_lat_deg, origin_lon_deg : float, optional
+        Geodetic origin of W (default: the mean latitude/longitude of the points).
+    origin_alt_m : float, optional
+        Altitude of the ground plane ``z = 0`` (default: the median ``alt_m`` of the points).
+    """
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8-sig")
+    except OSError as e:
+        raise InputError("--points", str(p), f"a readable CSV file ({e.strerror or e})") from None
+    except UnicodeDecodeError:
+        raise InputError("--points", str(p), "a UTF-8 text CSV file") from None
+    rows = list(csv.reader(line for line in text.splitlines() if line.strip() and not line.lstrip().startswith("#")))
+    if not rows:
+        raise InputError(str(p), "an empty file", "a header row u_px, v_px, x_m, y_m[, z_m] and one row per point")
+    header = [h.strip().lower() for h in rows[0]]
+    unknown = [h for h in header if h not in GCP_COLUMNS]
+    if unknown:
+        raise InputError(f"{p}: column", unknown[0], f"one of {', '.join(GCP_COLUMNS)} (units in the names)")
+    if len(set(header)) != len(header):
+        raise InputError(f"{p}: header", header, "each column once")
+    has_xy = "x_m" in header or "y_m" in header
+    has_ll = "lat_deg" in header or "lon_deg" in header
+    if has_xy == has_ll:
+        raise InputError(f"{p}: header", header, "either x_m, y_m[, z_m] (world frame) or lat_deg, lon_deg[, alt_m]")
+    need = ["u_px", "v_px"] + (["x_m", "y_m"] if has_xy else ["lat_deg", "lon_deg"])
+    for c in need:
+        if c not in header:
+            raise InputError(f"{p}: header", header, f"a column {c}")
+    if has_xy and "alt_m" in header or has_ll and "z_m" in header:
+        raise InputError(f"{p}: header", header, "z_m with x_m/y_m, alt_m with lat_deg/lon_deg")
+    col = {h: i for i, h in enumerate(header)}
+    data = {h: [] for h in header if h != "name"}
+    names = []
+    for k, r in enumerate(rows[1:], start=2):
+        if len(r) != len(header):
+            raise InputError(f"{p}: row {k}", r, f"{len(header)} cells like the header")
+        for h in data:
+            data[h].append(_float_cell(p, k, h, r[col[h]].strip()))
+        names.append(r[col["name"]].strip() if "name" in col else str(k - 1))
+    n = len(names)
+    if n == 0:
+        raise InputError(str(p), "no data rows", "one row per ground control point")
+    a = {h: np.asarray(v) for h, v in data.items()}
+    uv = np.stack([a["u_px"], a["v_px"]], -1)
+    georef = {}
+    if has_xy:
+        z = a.get("z_m", np.zeros(n))
+        xyz = np.stack([a["x_m"], a["y_m"], z], -1)
+        if origin_lat_deg is not None:
+            georef = {"origin_lat_deg": float(origin_lat_deg), "origin_lon_deg": float(origin_lon_deg)}
+    else:
+        from ..geo import GeoReference
+
+        lat, lon = a["lat_deg"], a["lon_deg"]
+        if np.any(np.abs(lat) > 90) or np.any(np.abs(lon) > 180):
+            raise InputError(f"{p}: lat_deg/lon_deg", (lat.tolist()[:3], lon.tolist()[:3]),
+                             "latitudes in [-90, 90] and longitudes in [-180, 180] degrees")
+        olat = float(np.mean(lat)) if origin_lat_deg is None else float(origin_lat_deg)
+        olon = float(np.mean(lon)) if origin_lon_deg is None else float(origin_lon_deg)
+        g = GeoReference(origin_lat_deg=olat, origin_lon_deg=olon)
+        xy = g.from_wgs84(lat, lon)
+        if "alt_m" in a:
+            oalt = float(np.median(a["alt_m"])) if origin_alt_m is None else float(origin_alt_m)
+            z = a["alt_m"] - oalt
+        else:
+            oalt = None if origin_alt_m is None else float(origin_alt_m)
+            z = np.zeros(n)
+        xyz = np.concatenate([xy, z[:, None]], -1)
+        georef = {"origin_lat_deg": olat, "origin_lon_deg": olon}
+        if oalt is not None:
+            georef["origin_alt_m"] = oalt
+    spx = a.get("sigma_px", np.full(n, float(pixel_sigma_px)))
+    sm = a.get("sigma_m", np.full(n, float(survey_sigma_m)))
+    for name, s in (("sigma_px", spx), ("sigma_m", sm)):
+        bad = np.flatnonzero(~(s >= 0))
+        if bad.size:
+            raise InputError(f"{p}: row {bad[0] + 2} {name}", float(s[bad[0]]), "a standard deviation >= 0")
+    if np.any(spx + sm <= 0):
+        k = int(np.flatnonzero(spx + sm <= 0)[0])
+        raise InputError(f"{p}: row {k + 2} sigma_px/sigma_m", (0.0, 0.0), "pixel or survey noise > 0")
+    return GCPSet(uv, xyz, spx, sm, names, georef)
+
+
+# ---------------------------------------------------------------------------------------------
+# checks
+# ---------------------------------------------------------------------------------------------
+def _check_geometry(uv, xyz, image_size_px, estimate_focal):
+    n = len(uv)
+    need = MIN_POINTS_FOCAL if estimate_focal else MIN_POINTS_POSE
+    if n < need:
+        what = "focal length and pose (no intrinsics given)" if estimate_focal else "a pose"
+        raise InputError("ground control points", n, f"at least {need} points for {what}")
+    bad = np.flatnonzero(~np.isfinite(uv).all(-1) | ~np.isfinite(xyz).all(-1))
+    if bad.size:
+        raise InputError(f"ground control point {bad[0] + 1}", (uv[bad[0]].tolist(), xyz[bad[0]].tolist()),
+                         "finite pixel and world coordinates")
+    w, h = image_size_px
+    out = np.flatnonzero((uv[:, 0] < -0.5) | (uv[:, 0] > w - 0.5) | (uv[:, 1] < -0.5) | (uv[:, 1] > h - 0.5))
+    if out.size:
+        raise InputError(f"ground control point {out[0] + 1} pixel", uv[out[0]].tolist(),
+                         f"inside the {w}x{h} image ([-0.5, {w - 0.5}] x [-0.5, {h - 0.5}])")
+    for what, pts in (("world points", xyz), ("pixels", uv)):
+        s = np.linalg.svd(pts - pts.mean(0), compute_uv=False)
+        if s[0] == 0 or s[1] < _COLLINEAR_RTOL * s[0]:
+            raise InputError(f"ground control points ({what})", f"singular values {np.round(s, 6).tolist()}",
+                             "points not all on one line (spread them across the scene)")
+    if len(np.unique(np.round(xyz, 9), axis=0)) < n:
+        raise InputError("ground control points (world points)", "repeated points", "distinct points")
+
+
+def _coplanar(xyz) -> bool:
+    s = np.linalg.svd(xyz - xyz.mean(0), compute_uv=False)
+    return bool(s[2] < 1e-6 * s[0])
+
+
+# ---------------------------------------------------------------------------------------------
+# parameters
+# ---------------------------------------------------------------------------------------------
+def _param_map(estimate_focal: bool) -> np.ndarray:
+    """``A`` (22, k): theta -> parameter increments (focal first when estimated)."""
+    k = 6 + int(estimate_focal)
+    A = np.zeros((P.N_PARAMS, k))
+    j = 0
+    if estimate_focal:
+        A[P.FX, 0] = A[P.FY, 0] = 1.0
+        j = 1
+    for i, idx in enumerate(_POSE_IDX):
+        A[idx, j + i] = 1.0
+    return A
+
+
+def _params_from_Rt(K, dist, R, t) -> np.ndarray:
+    p = np.zeros(P.N_PARAMS)
+    p[[P.FX, P.FY, P.CX, P.CY, P.SKEW]] = K[0, 0], K[1, 1], K[0, 2], K[1, 2], K[0, 1]
+    d = np.zeros(8)
+    d[:len(dist)] = dist
+    p[P.DIST_SLICE] = d
+    C = -R.T @ t
+    p[[P.XM, P.YM, P.HM]] = C
+    p[[P.PAN, P.TILT, P.ROLL]] = pan_tilt_roll_from_R_W_C(R.T)
+    return p
+
+
+def _camera_from_params(p, image_size_px) -> OpenCVCamera:
+    K = np.array([[p[P.FX], p[P.SKEW], p[P.CX]], [0.0, p[P.FY], p[P.CY]], [0.0, 0.0, 1.0]])
+    d = p[P.DIST_SLICE]
+    R = R_W_C(p[P.PAN], p[P.TILT], p[P.ROLL]).T
+    t = -R @ p[[P.XM, P.YM, P.HM]]
+    return OpenCVCamera(K, d if np.any(d[5:]) else d[:5], R, t, image_size_px)
+
+
+# ---------------------------------------------------------------------------------------------
+# start: OpenCV PnP
+# ---------------------------------------------------------------------------------------------
+def _pnp_candidates(xyz, uv, K, dist):
+    """Refined PnP solutions ``(R, t, rms_px, n_behind, below_ground)`` from SQPnP, EPnP and IPPE."""
+    import cv2
+
+    obj = np.ascontiguousarray(xyz, dtype=np.float64).reshape(-1, 1, 3)
+    img = np.ascontiguousarray(uv, dtype=np.float64).reshape(-1, 1, 2)
+    dist = np.asarray(dist, dtype=np.float64)
+    flags = [cv2.SOLVEPNP_SQPNP, cv2.SOLVEPNP_EPNP]
+    if _coplanar(xyz):
+        flags.append(cv2.SOLVEPNP_IPPE)
+    out = []
+    for fl in flags:
+        try:
+            n, rvecs, tvecs, _ = cv2.solvePnPGeneric(obj, img, K, dist, flags=fl)
+        except cv2.error:
+            continue
+        for rv, tv in zip(rvecs[:n], tvecs[:n], strict=True):
+            try:
+                rv, tv = cv2.solvePnPRefineLM(obj, img, K, dist, rv.copy(), tv.copy())
+            except cv2.error:
+                pass
+            if not (np.all(np.isfinite(rv)) and np.all(np.isfinite(tv))):
+                continue
+            R = cv2.Rodrigues(rv)[0]
+            t = tv.ravel()
+            zc = xyz @ R[2] + t[2]
+            proj = cv2.projectPoints(obj, rv, tv, K, dist)[0].reshape(-1, 2)
+            rms = float(np.sqrt(np.mean(np.sum((proj - uv) ** 2, -1))))
+            out.append((R, t, rms, int(np.sum(zc <= 0)), bool((-R.T @ t)[2] <= 0)))
+    return out
+
+
+def _best_candidate(cands):
+    ok = [c for c in cands if c[3] == 0 and not c[4] and np.isfinite(c[2])]
+    if ok:
+        return min(ok, key=lambda c: c[2])
+    if any(c[3] == 0 for c in cands):
+        raise InputError("ground control points", "every pose that fits puts the camera below the ground plane z = 0",
+                         "world heights (z_m / alt_m) relative to the ground, and pixels matching their points")
+    raise InputError("ground control points", "every pose that fits puts points behind the camera",
+                     "pixels matching their world points (check the order of the rows and of u/v, x/y)")
+
+
+def _initial_params(uv, xyz, image_size_px, K, dist):
+    """Starting parameter vector (22,): PnP with K, or the best of a grid of focal lengths."""
+    if K is not None:
+        R, t, *_ = _best_candidate(_pnp_candidates(xyz, uv, K, dist))
+        return _params_from_Rt(K, dist, R, t)
+    w, h = image_size_px
+    best, cands_all = None, []
+    for hfov in np.deg2rad(np.linspace(8.0, 140.0, 45)):
+        f = (w / 2.0) / math.tan(hfov / 2.0)
+        Kf = np.array([[f, 0.0, (w - 1) / 2.0], [0.0, f, (h - 1) / 2.0], [0.0, 0.0, 1.0]])
+        cands = _pnp_candidates(xyz, uv, Kf, np.zeros(5))
+        cands_all += cands
+        ok = [c for c in cands if c[3] == 0 and not c[4] and np.isfinite(c[2])]
+        if ok:
+            c = min(ok, key=lambda c: c[2])
+            if best is None or c[2] < best[0]:
+                best = (c[2], Kf, c[0], c[1])
+    if best is None:
+        _best_candidate(cands_all)  # raises naming the cause
+    _, Kf, R, t = best
+    return _params_from_Rt(Kf, np.zeros(5), R, t)
+
+
+# ---------------------------------------------------------------------------------------------
+# Levenberg-Marquardt on the library's parameters, batched over problems
+# ---------------------------------------------------------------------------------------------
+def _point_covariance(params, xyz, s_px2, s_m2, mask):
+    """Per-point residual covariance ``S`` (B, N, 2, 2): pixel noise plus survey noise mapped by d uv / d xyz."""
+    pr = general.project(params[:, None, :], xyz, get_gradients=True)
+    Jx = np.where((mask & pr.valid)[..., None, None], pr.duv_dxyz, 0.0)
+    S = s_px2[..., None, None] * np.eye(2) + s_m2[..., None, None] * (Jx @ np.swapaxes(Jx, -1, -2))
+    return np.where(mask[..., None, None], S, np.eye(2))
+
+
+def _normal_equations(params, uv, xyz, S, mask, A):
+    """Cost (B,), normal matrix H (B, k, k), gradient g (B, k), ok (B,) and the per-point pieces, for fixed S."""
+    pr = general.project(params[:, None, :], xyz, get_gradients=True)
+    ok = (pr.valid | ~mask).all(-1)
+    r = np.where(mask[..., None], uv - pr.uv_px, 0.0)
+    det = S[..., 0, 0] * S[..., 1, 1] - S[..., 0, 1] * S[..., 1, 0]
+    Si = np.stack([np.stack([S[..., 1, 1], -S[..., 0, 1]], -1), np.stack([-S[..., 1, 0], S[..., 0, 0]], -1)], -2)
+    Si = Si / det[..., None, None] * mask[..., None, None]
+    Jp = np.where(mask[..., None, None], pr.duv_dp, 0.0)
+    Jt = Jp @ A  # (B, N, 2, k)
+    SiJ = Si @ Jt
+    H = np.einsum("bnik,bnil->bkl", Jt, SiJ)
+    g = np.einsum("bnik,bni->bk", SiJ, r)
+    cost = np.einsum("bni,bnij,bnj->b", r, Si, r)
+    cost = np.where(ok, cost, np.inf)
+    return cost, H, g, ok, (r, Si, Jp, SiJ)
+
+
+def _gn_step_sigma(H, g):
+    """Largest Gauss-Newton step component in standard deviations (B,)."""
+    with np.errstate(all="ignore"):
+        Hi = np.linalg.pinv(H)
+        gn = np.einsum("bkl,bl->bk", Hi, g)
+        sig = np.sqrt(np.clip(np.diagonal(Hi, axis1=1, axis2=2), 1e-300, None))
+        out = np.max(np.abs(gn) / sig, -1)
+    return np.where(np.isfinite(out), out, np.inf)
+
+
+def _lm_fixed(theta, base, A, uv, xyz, S, mask, max_iter, active0):
+    """Levenberg-Marquardt with the point covariances S held fixed; B problems at once."""
+    B, k = theta.shape
+    cost, H, g, _, _ = _normal_equations(base + theta @ A.T, uv, xyz, S, mask, A)
+    lam = np.full(B, 1e-3)
+    conv = ~active0.copy()
+    failed = active0 & ~np.isfinite(cost)
+    iters = np.zeros(B, int)
+    eye = np.eye(k)
+    for _ in range(max_iter):
+        conv |= ~failed & (_gn_step_sigma(H, g) < _CONV_SIGMA)
+        active = ~conv & ~failed
+        if not active.any():
+            break
+        iters += active
+        D = np.diagonal(H, axis1=1, axis2=2)[:, None, :] * eye + 1e-300 * eye
+        with np.errstate(all="ignore"):
+            step = np.einsum("bkl,bl->bk", np.linalg.pinv(H + lam[:, None, None] * D), g)
+        step = np.where(active[:, None] & np.isfinite(step).all(-1, keepdims=True), step, 0.0)
+        new = theta + step
+        c2, H2, g2, ok2, _ = _normal_equations(base + new @ A.T, uv, xyz, S, mask, A)
+        better = active & ok2 & (c2 <= cost)
+        theta[better], cost[better], H[better], g[better] = new[better], c2[better], H2[better], g2[better]
+        lam = np.where(better, np.maximum(lam / 10.0, 1e-12), np.where(active, lam * 10.0, lam))
+        stuck = active & (lam > 1e12)
+        # no step lowers the cost any more: at the minimum to round-off if the Gauss-Newton step is tiny
+        conv |= stuck & (_gn_step_sigma(H, g) < _ROUNDOFF_SIGMA)
+        failed |= stuck & ~conv
+    return theta, conv & ~failed, iters
+
+
+def _lm(theta, base, A, uv, xyz, s_px2, s_m2, mask, max_iter=100, max_outer=20):
+    """Minimise the effective-variance cost for B problems at once.
+
+    The point covariances S depend (weakly) on the pose through d uv / d xyz: they are held
+    fixed during a Levenberg-Marquardt run, recomputed at its solution, and the run repeated
+    until the Gauss-Newton step with the updated S is below 1e-6 sigma (Orear's effective
+    variance iteration; 2-3 rounds).
+
+    Returns theta (B, k), converged (B,), iterations (B,), and the normal equations at the end.
+    """
+    theta = np.array(theta, dtype=np.float64)
+    B = theta.shape[0]
+    iters = np.zeros(B, int)
+    active = np.ones(B, bool)
+    conv = np.zeros(B, bool)
+    tol = _CONV_SIGMA
+    for _ in range(max_outer):
+        S = _point_covariance(base + theta @ A.T, xyz, s_px2, s_m2, mask)
+        _, H, g, ok, _ = _normal_equations(base + theta @ A.T, uv, xyz, S, mask, A)
+        done = ok & (_gn_step_sigma(H, g) < tol)
+        conv |= active & done
+        active &= ~done
+        if not active.any():
+            break
+        before = theta.copy()
+        theta, c, it = _lm_fixed(theta, base, A, uv, xyz, S, mask, max_iter, active)
+        iters += it
+        still = np.all(theta == before, -1)  # converged without moving: at the round-off limit
+        conv |= active & c & still
+        active &= c & ~still  # a failed inner run stays failed
+    S = _point_covariance(base + theta @ A.T, xyz, s_px2, s_m2, mask)
+    ne = _normal_equations(base + theta @ A.T, uv, xyz, S, mask, A)
+    return theta, conv, iters, ne
+
+
+# ---------------------------------------------------------------------------------------------
+# result
+# ---------------------------------------------------------------------------------------------
+@dataclass
+class GCPSolution:
+    """A camera solved from ground control points, with the covariance of the solve.
+
+    Attributes
+    ----------
+    camera : OpenCVCamera
+        The solved camera (world frame W of the GCPs, ground ``z = 0``).
+    params : ndarray (22,)
+        Its parameter vector (:data:`footprint_uq.params.PARAM_NAMES`).
+    cov_params : ndarray (22, 22)
+        Full first-order covariance of the solve (pixel and survey noise, plus the
+        given intrinsics' covariance); zero for parameters that were neither solved
+        nor uncertain.
+    estimated : tuple of str
+        The solved parameters (``focal_px`` stands for ``fx_px = fy_px``).
+    cov_theta : ndarray (k, k)
+        Covariance of the solved parameters alone (pixel and survey noise only).
+    gcps : GCPSet
+    uv_fit_px, residual_px : ndarray (N, 2)
+        Reprojected GCPs and ``uv_px - uv_fit_px``.
+    residual_sigma : ndarray (N,)
+        Whitened residual norm ``sqrt(r^T S^-1 r)`` (about 1.4 on average for a correct model).
+    loo_residual_px : ndarray (N, 2)
+        Leave-one-out: the point's pixel minus its projection by the camera solved without it (NaN
+        where the others do not determine a camera; ``loo_status`` says why).
+    loo_ground_error_m : ndarray (N, 2)
+        Leave-one-out: the point's pixel back-projected by that camera onto the horizontal plane of
+        the point, minus its surveyed x, y.
+    chi2, dof : float, int
+        ``sum r^T S^-1 r`` and ``2 N - k``.
+    iterations : int
+    """
+
+    camera: OpenCVCamera
+    params: np.ndarray
+    cov_params: np.ndarray
+    estimated: tuple
+    cov_theta: np.ndarray
+    gcps: GCPSet
+    uv_fit_px: np.ndarray
+    residual_px: np.ndarray
+    residual_sigma: np.ndarray
+    chi2: float
+    dof: int
+    iterations: int
+    image_size_px: tuple
+    intrinsics_cov_given: bool = False
+    loo_residual_px: np.ndarray | None = None
+    loo_ground_error_m: np.ndarray | None = None
+    loo_status: list = field(default_factory=list)
+
+    @property
+    def rms_px(self) -> float:
+        """Root-mean-square reprojection error (px, over both axes of all points)."""
+        return float(np.sqrt(np.mean(self.residual_px**2) * 2))
+
+    @property
+    def reduced_chi2(self) -> float:
+        return float(self.chi2 / self.dof) if self.dof > 0 else math.nan
+
+    def sigma_params(self) -> np.ndarray:
+        """1-sigma of every parameter (22,)."""
+        return np.sqrt(np.clip(np.diagonal(self.cov_params), 0.0, None))
+
+    def pose_table(self) -> list[dict]:
+        """One row per solved parameter: value and 1-sigma (angles in degrees)."""
+        s = self.sigma_params()
+        rows = []
+        names = (("focal_px", P.FX),) if "focal_px" in self.estimated else ()
+        names += tuple((n, P.IDX[n]) for n in POSE_NAMES)
+        for n, i in names:
+            v, e = self.params[i], s[i]
+            if n.endswith("_rad"):
+                n, v, e = n[:-4] + "_deg", math.degrees(v), math.degrees(e)
+            rows.append({"parameter": n, "value": float(v), "sigma": float(e)})
+        return rows
+
+    def budget(self, name: str = "gcp"):
+        """The error budget: the full covariance over every parameter with a non-zero variance."""
+        from ..budget import ErrorBudget
+
+        var = np.diagonal(self.cov_params)
+        idx = np.flatnonzero(var > 0)
+        C = self.cov_params[np.ix_(idx, idx)]
+        C = 0.5 * (C + C.T)
+        desc = (f"ground-control-point solve: {len(self.gcps.uv_px)} points, RMS {self.rms_px:.3g} px, "
+                f"reduced chi-square {self.reduced_chi2:.3g}; solved {', '.join(self.estimated)}"
+                + ("; intrinsics covariance included" if self.intrinsics_cov_given else ""))
+        return ErrorBudget(covariance_names=tuple(P.PARAM_NAMES[i] for i in idx), covariance_matrix=C, name=name,
+                           description=desc)
+
+    def ground_covariance_m2(self, uv_px):
+        """Ground points ``(..., 2)`` and their covariance ``(..., 2, 2)`` (m^2) from the solve alone.
+
+        Only the calibration part (shared by all pixels of the image); add the per-pixel noise
+        of your detector with :func:`footprint_uq.propagate` and :meth:`budget`.
+        """
+        bp = general.backproject(self.params, np.asarray(uv_px, dtype=np.float64), get_gradients=True)
+        J = bp.dxy_dp
+        return bp.xy_world_m, J @ self.cov_params @ np.swapaxes(J, -1, -2)
+
+    def residual_rows(self) -> list[dict]:
+        g = self.gcps
+        rows = []
+        for i in range(len(g.uv_px)):
+            row = {"name": g.names[i], "u_px": g.uv_px[i, 0], "v_px": g.uv_px[i, 1], "x_m": g.xyz_world_m[i, 0],
+                   "y_m": g.xyz_world_m[i, 1], "z_m": g.xyz_world_m[i, 2], "sigma_px": g.sigma_px[i],
+                   "sigma_m": g.sigma_m[i], "u_fit_px": self.uv_fit_px[i, 0], "v_fit_px": self.uv_fit_px[i, 1],
+                   "du_px": self.residual_px[i, 0], "dv_px": self.residual_px[i, 1],
+                   "residual_px": float(np.hypot(*self.residual_px[i])),
+                   "residual_sigma": self.residual_sigma[i]}
+            if self.loo_residual_px is not None:
+                lr, le = self.loo_residual_px[i], self.loo_ground_error_m[i]
+                row.update({"loo_du_px": lr[0], "loo_dv_px": lr[1], "loo_residual_px": float(np.hypot(*lr)),
+                            "loo_dx_m": le[0], "loo_dy_m": le[1], "loo_ground_error_m": float(np.hypot(*le)),
+                            "loo_status": self.loo_status[i]})
+            rows.append({k: (float(v) if isinstance(v, np.floating) else v) for k, v in row.items()})
+        return rows
+
+    def summary(self) -> dict:
+        return {
+            "n_points": int(len(self.gcps.uv_px)), "image_size_px": list(self.image_size_px),
+            "estimated": list(self.estimated), "rms_px": self.rms_px, "chi2": float(self.chi2), "dof": int(self.dof),
+            "reduced_chi2": self.reduced_chi2, "iterations": int(self.iterations),
+            "intrinsics_covariance_included": self.intrinsics_cov_given,
+            "pose": self.pose_table(), "georef": dict(self.gcps.georef),
+            "parameter_names": list(P.PARAM_NAMES), "cov_params": self.cov_params.tolist(),
+        }
+
+
+# ---------------------------------------------------------------------------------------------
+# the solve
+# ---------------------------------------------------------------------------------------------
+def solve_gcp(gcps: GCPSet, image_size_px, *, intrinsics=None, intrinsics_cov=None, leave_one_out: bool = True,
+              max_iter: int = 100) -> GCPSolution:
+    """Solve the camera from ground control points (see the module doc).
+
+    Parameters
+    ----------
+    gcps : GCPSet
+        Pixels ``(N, 2)``, world points ``(N, 3)`` and their sigmas.
+    image_size_px : (int, int)
+        (width, height).
+    intrinsics : optional
+        ``K`` and ``dist`` (an :class:`footprint_uq.calibration.extrinsics.Intrinsics`, a camera, or a
+        camera file); None solves the focal length too (``fx = fy``, principal point at the image
+        centre, no distortion), which needs at least 6 points.
+    intrinsics_cov : array_like (13, 13), optional
+        Covariance of ``fx_px .. k6`` (PARAM_NAMES order) of the given intrinsics.
+    leave_one_out : bool
+        Also re-solve without each point in turn (residuals.csv's ``loo_*`` columns).
+    max_iter : int
+        Levenberg-Marquardt iterations allowed.
+
+    Raises
+    ------
+    InputError
+        Fewer than 4 (6) points, points on one line, repeated points, pixels outside the
+        image, every fitting pose puts points behind the camera or the camera below the
+        ground, the focal length is not observable, or the solve does not converge.
+    """
+    from .extrinsics import load_intrinsics
+
+    w, h = (int(v) for v in image_size_px)
+    size = (w, h)
+    K = dist = None
+    if intrinsics is not None:
+        intr = load_intrinsics(intrinsics)
+        if tuple(intr.image_size_px) != size:
+            raise InputError("--intrinsics image size", list(intr.image_size_px), f"the image size {w}x{h}")
+        K, dist = intr.K, intr.dist
+    estimate_focal = K is None
+    uv, xyz = gcps.uv_px, gcps.xyz_world_m
+    _check_geometry(uv, xyz, size, estimate_focal)
+    if intrinsics_cov is not None:
+        if estimate_focal:
+            raise InputError("intrinsics covariance", "given without intrinsics", "intrinsics with it")
+        from .._checks import check_cov
+
+        intrinsics_cov = check_cov("intrinsics covariance", intrinsics_cov, 13)
+    p0 = _initial_params(uv, xyz, size, K, dist)
+    A = _param_map(estimate_focal)
+    theta0 = np.concatenate([[p0[P.FX]] if estimate_focal else [], p0[_POSE_IDX]])
+    base = np.where(np.any(A != 0, 1), 0.0, p0)
+    s_px2, s_m2 = gcps.sigma_px**2, gcps.sigma_m**2
+    mask = np.ones((1, len(uv)), bool)
+    th, conv, iters, ne = _lm(theta0[None], base[None], A, uv[None], xyz[None], s_px2[None], s_m2[None], mask,
+                              max_iter)
+    if not conv[0]:
+        raise InputError("ground control point solve", f"no convergence in {int(iters[0])} iterations",
+                         "a consistent set of points (check for mismatched or swapped rows)")
+    theta = th[0]
+    p = base + A @ theta
+    cost, H, _, ok, (r, Si, Jp, SiJ) = ne
+    if not ok[0]:
+        raise InputError("ground control points", "a point behind the solved camera", "points in front of the camera")
+    if p[P.HM] <= 0:
+        raise InputError("ground control point solve", f"camera height {p[P.HM]:.3g} m",
+                         "a camera above the ground plane z = 0")
+    H = H[0]
+    wH = np.sqrt(np.diagonal(H))
+    Hn = H / np.outer(wH, wH)
+    cond = np.linalg.cond(Hn)
+    if not np.isfinite(cond) or cond > 1e12:
+        what = "focal length and pose" if estimate_focal else "pose"
+        raise InputError("ground control points", f"normal-matrix condition number {cond:.3g}",
+                         f"points that determine the {what} (spread them in depth and across the image"
+                         + (", or give --intrinsics)" if estimate_focal else ")"))
+    C_theta = np.linalg.inv(Hn) / np.outer(wH, wH)
+    C_theta = 0.5 * (C_theta + C_theta.T)
+    cov = A @ C_theta @ A.T
+    if intrinsics_cov is not None:
+        Hti = np.einsum("nik,nil->kl", SiJ[0], Jp[0][..., _INT_IDX])  # (k, 13)
+        G = -C_theta @ Hti
+        Bm = A @ G
+        Bm[_INT_IDX, np.arange(13)] += 1.0
+        cov = cov + Bm @ intrinsics_cov @ Bm.T
+    cov = 0.5 * (cov + cov.T)
+    cam = _camera_from_params(p, size)
+    uv_fit = general.project(p, xyz).uv_px
+    res = uv - uv_fit
+    rs = np.sqrt(np.einsum("ni,nij,nj->n", r[0], Si[0], r[0]))
+    k = A.shape[1]
+    dof = 2 * len(uv) - k
+    sol = GCPSolution(cam, p, cov, (("focal_px",) if estimate_focal else ()) + POSE_NAMES, C_theta, gcps, uv_fit, res,
+                      rs, float(cost[0]), dof, int(iters[0]), size, intrinsics_cov is not None)
+    if leave_one_out:
+        _leave_one_out(sol, base, A, theta, max_iter, estimate_focal)
+    _warn_residuals(sol)
+    return sol
+
+
+def _leave_one_out(sol, base, A, theta, max_iter, estimate_focal):
+    g = sol.gcps
+    n = len(g.uv_px)
+    need = MIN_POINTS_FOCAL if estimate_focal else MIN_POINTS_POSE
+    sol.loo_residual_px = np.full((n, 2), np.nan)
+    sol.loo_ground_error_m = np.full((n, 2), np.nan)
+    if n - 1 < need:
+        sol.loo_status = [f"too few points without it ({n - 1} < {need})"] * n
+        return
+    mask = ~np.eye(n, dtype=bool)
+    th, conv, _, ne = _lm(np.repeat(theta[None], n, 0), np.repeat(base[None], n, 0), A,
+                          np.repeat(g.uv_px[None], n, 0), np.repeat(g.xyz_world_m[None], n, 0),
+                          np.repeat(g.sigma_px[None] ** 2, n, 0), np.repeat(g.sigma_m[None] ** 2, n, 0), mask,
+                          max_iter)
+    pl = base + th @ A.T  # (n, 22)
+    pred = general.project(pl, g.xyz_world_m)
+    ph = pl.copy()
+    ph[:, P.HM] -= g.xyz_world_m[:, 2]  # back-project onto the horizontal plane through the point
+    bp = general.backproject(ph, g.uv_px)
+    ok = conv & pred.valid & bp.valid
+    sol.loo_residual_px = np.where(ok[:, None], g.uv_px - pred.uv_px, np.nan)
+    sol.loo_ground_error_m = np.where(ok[:, None], bp.xy_world_m - g.xyz_world_m[:, :2], np.nan)
+    sol.loo_status = ["ok" if o else ("no convergence" if not c else "not visible / above the horizon")
+                      for o, c in zip(ok, conv, strict=True)]
+
+
+def _warn_residuals(sol):
+    from scipy.stats import chi2
+
+    if sol.dof > 0:
+        pval = chi2.sf(sol.chi2, sol.dof)
+        if pval < 1e-3:
+            warnings.warn(f"GCP residuals are larger than the stated sigmas explain (reduced chi-square "
+                          f"{sol.reduced_chi2:.3g}, p = {pval:.2g}): the covariance is optimistic; raise "
+                          "--pixel-sigma-px/--survey-sigma-m or check residuals.csv for a wrong point",
+                          ConsistencyWarning, stacklevel=3)
+    worst = int(np.argmax(sol.residual_sigma))
+    if sol.residual_sigma[worst] > 5.0:
+        warnings.warn(f"GCP {sol.gcps.names[worst]}: residual {sol.residual_sigma[worst]:.3g} sigma "
+                      f"({np.hypot(*sol.residual_px[worst]):.3g} px); a mismatched point?",
+                      ConsistencyWarning, stacklevel=3)
+
+
+# ---------------------------------------------------------------------------------------------
+# the command as a function
+# ---------------------------------------------------------------------------------------------
+def parse_image_size(text) -> tuple[int, int]:
+    """``"1920x1080"`` (or a pair) -> ``(1920, 1080)``; InputError otherwise."""
+    if isinstance(text, str):
+        parts = text.lower().replace(" ", "").split("x")
+    else:
+        parts = list(text)
+    try:
+        w, h = (int(str(v)) for v in parts)
+    except (TypeError, ValueError):
+        raise InputError("--image-size", text, "WIDTHxHEIGHT in pixels, e.g. 1920x1080") from None
+    if w <= 0 or h <= 0:
+        raise InputError("--image-size", text, "a positive width and height")
+    return w, h
+
+
+def _yaml_text(data: dict, header: str) -> str:
+    import yaml
+
+    from ..io._common import sanitize
+
+    return f"# {header}\n" + yaml.safe_dump(sanitize(data), sort_keys=False, default_flow_style=None, width=100)
+
+
+def _csv_text(rows: list[dict]) -> str:
+    import io
+
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=list(rows[0]), lineterminator="\n")
+    w.writeheader()
+    for r in rows:
+        w.writerow({k: (repr(float(v)) if isinstance(v, float) else v) for k, v in r.items()})
+    return buf.getvalue()
+
+
+def _read_image(path, image_size_px):
+    import cv2
+
+    img = cv2.imread(str(path), cv2.IMREAD_COLOR)
+    if img is None:
+        raise InputError("--image", str(path), "a readable image file")
+    if (img.shape[1], img.shape[0]) != tuple(image_size_px):
+        raise InputError("--image size", f"{img.shape[1]}x{img.shape[0]}",
+                         f"the --image-size {image_size_px[0]}x{image_size_px[1]}")
+    return img[..., ::-1]
+
+
+def run_gcp(points, image_size_px, out_dir, *, intrinsics=None, intrinsics_budget=None, pixel_sigma_px: float = 1.0,
+            survey_sigma_m: float = 0.05, origin_lat_deg=None, origin_lon_deg=None, origin_alt_m=None, image=None,
+            figures: bool = True) -> dict:
+    """The ``calibrate gcp`` command as a function: read, solve, write; returns ``{"solution", "files",
+    "warnings"}``.
+
+    Writes to ``out_dir`` (each file atomically): ``camera.yaml`` (the solved camera), ``budget.yaml``
+    (the full parameter covariance of the solve), ``residuals.csv`` (per point and leave-one-out),
+    ``summary.json``, ``gcp.png`` (points and residual arrows, ``image`` behind) and ``summary.html``.
+    """
+    import json
+
+    from ..io.atomic import atomic_write_text
+    from ..io.camera_files import camera_to_dict
+
+    size = parse_image_size(image_size_px)
+    if (origin_lat_deg is None) != (origin_lon_deg is None):
+        raise InputError("--origin-lat/--origin-lon", (origin_lat_deg, origin_lon_deg), "both or neither")
+    gcps = read_gcp_csv(points, pixel_sigma_px=pixel_sigma_px, survey_sigma_m=survey_sigma_m,
+                        origin_lat_deg=origin_lat_deg, origin_lon_deg=origin_lon_deg, origin_alt_m=origin_alt_m)
+    cov_int = None
+    if intrinsics_budget is not None:
+        if intrinsics is None:
+            raise InputError("--intrinsics-budget", str(intrinsics_budget), "--intrinsics too")
+        from ..budget import load_budget
+
+        cov_int = load_budget(intrinsics_budget).param_covariance()[np.ix_(_INT_IDX, _INT_IDX)]
+    img = _read_image(image, size) if image is not None else None
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", ConsistencyWarning)
+        sol = solve_gcp(gcps, size, intrinsics=intrinsics, intrinsics_cov=cov_int)
+    notes = [str(w.message) for w in caught if issubclass(w.category, ConsistencyWarning)]
+    for w in caught:
+        warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    files = [
+        atomic_write_text(out / "camera.yaml", _yaml_text(camera_to_dict(sol.camera),
+                                                          "footprint-uq camera file from ground control points")),
+        atomic_write_text(out / "budget.yaml", _yaml_text(sol.budget().to_dict(),
+                                                          "footprint-uq error budget: full covariance of the "
+                                                          "ground-control-point solve (docs/calibration.md)")),
+        atomic_write_text(out / "residuals.csv", _csv_text(sol.residual_rows())),
+    ]
+    summ = sol.summary()
+    summ["warnings"] = notes
+    files.append(atomic_write_text(out / "summary.json", json.dumps(summ, indent=2, allow_nan=True) + "\n"))
+    if figures:
+        from ..viz.gcp import gcp_report_html, plot_gcp
+        from ..viz.maps import save_figure
+
+        fig = plot_gcp(sol, image=img)
+        files.append(save_figure(fig, out / "gcp.png", dpi=120))
+        files.append(atomic_write_text(out / "summary.html", gcp_report_html(sol, fig, notes)))
+        import matplotlib.pyplot as plt
+
+        plt.close(fig)
+    return {"solution": sol, "files": files, "warnings": notes}
