@@ -489,8 +489,9 @@ def nonlinearity_from_forms(lam_max_m2, e_major, dn, lam_m, d_xy, mu, gamma, *, 
         s_LA = s_crs - w * mu
         delta = (2 * q2 * q2 * b * b - 4 * q2 * b * c_A + q2 * s_A + c_A * c_A - 6 * q2 * c_L * b
                  + 2 * q2 * s_LA + 4 * c_L * c_A + (69 + 696 * q2) * q2 * q2 * q2 * b * b)
-        x = 1.0 + delta / lam_max
-        out = np.where(x >= 0, np.abs(np.sqrt(np.abs(x)) - 1.0), 1.0)
+        t = delta / lam_max
+        x = 1.0 + t
+        out = np.where(x >= 0, np.abs(t) / (np.sqrt(np.abs(x)) + 1.0), 1.0)  # |sqrt(x) - 1|, no cancellation
     return np.where(np.isfinite(x), out, np.nan)
 
 
