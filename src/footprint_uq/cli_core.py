@@ -205,25 +205,35 @@ MAP_FILES = {
     "image_png": "uncertainty_image.png",
     "ground_png": "uncertainty_ground.png",
     "gsd_png": "gsd.png",
+    "nonlinearity_png": "nonlinearity.png",
     "summary_json": "summary.json",
 }
 
 
 def run_map(camera, budget, out_dir, *, step_px: int = 2, max_range_m: float | None = None,
-            confidence: float | None = None, vmin_m=None, vmax_m=None, dpi: int = 150, umap=None):
+            confidence: float | None = None, vmin_m=None, vmax_m=None, dpi: int = 150, umap=None,
+            linearity: bool = True, linear_threshold: float = 0.05):
     """Compute an uncertainty map and write its arrays, figures and summary into ``out_dir``.
 
-    ``umap`` may be given (already computed for this camera and budget).
-    Returns ``(umap, files)`` with ``files`` the :data:`MAP_FILES` keys mapped to paths.
+    ``umap`` may be given (already computed for this camera and budget).  With ``linearity`` (default;
+    it costs little: bench section "maps") the map carries the linearity flag: the figures hatch the
+    pixels that are not ``linear_ok`` and draw the threshold's contour, and ``nonlinearity.png`` shows
+    the layer.  Returns ``(umap, files)`` with ``files`` the :data:`MAP_FILES` keys mapped to paths
+    (without ``nonlinearity_png`` when the map has no flag).
     """
     from .maps import uncertainty_map
-    from .viz import plot_ground_map, plot_gsd_maps, plot_image_map, save_figure
+    from .viz import plot_ground_map, plot_gsd_maps, plot_image_map, plot_nonlinearity_map, save_figure
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     if umap is None:
-        umap = uncertainty_map(camera, budget, step_px, max_range_m=max_range_m)
+        umap = uncertainty_map(camera, budget, step_px, max_range_m=max_range_m, linearity=linearity,
+                               linear_threshold=linear_threshold)
     files = {k: out / v for k, v in MAP_FILES.items()}
+    if umap.nonlinearity is None:
+        del files["nonlinearity_png"]
+    else:
+        save_figure(plot_nonlinearity_map(umap), files["nonlinearity_png"], dpi=dpi)
     umap.save_npz(files["npz"])
     save_figure(plot_image_map(umap, confidence=confidence, vmin_m=vmin_m, vmax_m=vmax_m), files["image_png"],
                 dpi=dpi)
@@ -252,12 +262,19 @@ def run_map(camera, budget, out_dir, *, step_px: int = 2, max_range_m: float | N
               help="Mask ground points farther than M metres from the camera foot point.")
 @click.option("--confidence", type=float, default=None, metavar="P",
               help="Draw P-confidence semi-axes instead of 1 sigma (0.95 -> 2.4477 sigma).")
-def map_cmd(camera_path, budget_spec, out_dir, step_px, max_range_m, confidence):
-    """Per-pixel uncertainty map: PNG heat maps (image and bird's-eye), GSD maps, .npz arrays, summary.json."""
+@click.option("--linearity/--no-linearity", default=True, show_default=True,
+              help="Compute the linearity flag: the nonlinearity layer (map.npz, nonlinearity.png) and, in the "
+                   "figures, the pixels that are not linear_ok hatched with the threshold's contour.")
+@click.option("--linear-threshold", type=float, default=0.05, show_default=True, metavar="E",
+              help="linear_ok where the predicted relative error of the linear 1-sigma semi-major axis is at most E.")
+def map_cmd(camera_path, budget_spec, out_dir, step_px, max_range_m, confidence, linearity, linear_threshold):
+    """Per-pixel uncertainty map: PNG heat maps (image and bird's-eye), GSD maps, the linearity flag, .npz
+    arrays, summary.json."""
     confidence = _check_confidence(confidence)
     camera = _load_camera(camera_path)
     budget = _load_budget(budget_spec)
-    umap, files = run_map(camera, budget, out_dir, step_px=step_px, max_range_m=max_range_m, confidence=confidence)
+    umap, files = run_map(camera, budget, out_dir, step_px=step_px, max_range_m=max_range_m, confidence=confidence,
+                          linearity=linearity, linear_threshold=linear_threshold)
     s = umap.summary(confidence=confidence)
     for p in files.values():
         click.echo(f"wrote {p}")
@@ -266,6 +283,11 @@ def map_cmd(camera_path, budget_spec, out_dir, step_px, max_range_m, confidence)
         click.echo(f"valid pixels {100 * s['fraction_valid']:.1f} %; {lab} semi-major axis: median "
                    f"{s['semi_major_m_median']:.3g} m, 95th percentile {s['semi_major_m_p95']:.3g} m, "
                    f"max {s['semi_major_m_max']:.3g} m")
+        if s["fraction_linear_ok"] is not None:
+            near = s["range_m_min_not_linear_ok"]
+            click.echo(f"linear_ok (nonlinearity <= {s['linear_threshold']:g}) at "
+                       f"{100 * s['fraction_linear_ok']:.1f} % of the valid pixels"
+                       + (f"; not from {near:.3g} m on" if near is not None else ""))
     else:
         click.echo("footprint-uq: warning: no pixel of this camera sees the ground", err=True)
 
@@ -443,6 +465,8 @@ def run_demo(out_dir, *, step_px: int = 4, max_range_m: float = 120.0, presets=D
             "max range with semi-major < 0.5 m [m]": thr[0.5]["max_range_m"],
             "max range with semi-major < 1 m [m]": thr[1.0]["max_range_m"],
             "ground area with semi-major < 1 m [m²]": thr[1.0]["ground_area_m2"],
+            "linear_ok [% of valid px]": (None if s["fraction_linear_ok"] is None
+                                          else 100.0 * s["fraction_linear_ok"]),
         })
     parts.append(html_table(srows, floatfmt=".3g"))
     parts.append(f"<p>Pixels beyond {max_range_m:g} m of ground range are masked; the grid step is {step_px} px. "
