@@ -469,7 +469,8 @@ def nonlinearity_from_forms(lam_max_m2, e_major, dn, lam_m, d_xy, mu, gamma, *, 
     (no position error).  With a position error uncorrelated with the other parameters,
     ``s_num = s_crs = lam_max - e^T Sigma_pos e`` and ``mu' = mu``.  Shapes broadcast:
     ``e_major``, ``d_xy`` (..., 2), the others (...).  Returns (...); 1.0 where
-    ``1 + delta / lam_max < 0`` (the expansion has broken down), NaN where an input is NaN.
+    ``1 + delta / lam_max < 0`` (the expansion has broken down), 0 where ``delta`` is 0 (also with
+    ``lam_max`` 0: a budget without any uncertainty), NaN where an input is NaN.
     """
     e = np.asarray(e_major, dtype=np.float64)
     b = np.asarray(lam_m) * np.einsum("...i,...i->...", np.asarray(d_xy, dtype=np.float64), e)
@@ -489,7 +490,7 @@ def nonlinearity_from_forms(lam_max_m2, e_major, dn, lam_m, d_xy, mu, gamma, *, 
         s_LA = s_crs - w * mu
         delta = (2 * q2 * q2 * b * b - 4 * q2 * b * c_A + q2 * s_A + c_A * c_A - 6 * q2 * c_L * b
                  + 2 * q2 * s_LA + 4 * c_L * c_A + (69 + 696 * q2) * q2 * q2 * q2 * b * b)
-        t = delta / lam_max
+        t = np.where(delta == 0, 0.0, delta / lam_max)  # no uncertainty at all (a zero budget): exact, 0
         x = 1.0 + t
         out = np.where(x >= 0, np.abs(t) / (np.sqrt(np.abs(x)) + 1.0), 1.0)  # |sqrt(x) - 1|, no cancellation
     return np.where(np.isfinite(x), out, np.nan)

@@ -217,12 +217,12 @@ def undistort_point(dom, k, xd, yd, x0, y0):
     if not (math.isfinite(xd) and math.isfinite(yd)) or not in_domain_distorted(dom, xd, yd):
         return False, nan, nan, nan, nan, nan, nan
     tol = UNDISTORT_TOL * max(1.0, max(abs(xd), abs(yd)))
-    rx, ry = _radial_start(dom, k, xd, yd)
     if in_domain_undistorted(dom, x0, y0):
         x, y = _newton(dom, xd, yd, k, x0, y0, UNDISTORT_MAX_ITER, tol)
     else:
-        x, y = rx, ry
-    if not _accept(dom, xd, yd, k, x, y, tol):
+        x, y = _radial_start(dom, k, xd, yd)
+    if not _accept(dom, xd, yd, k, x, y, tol):  # (the radial start only when needed: 60 bisection steps)
+        rx, ry = _radial_start(dom, k, xd, yd)
         x, y = _newton(dom, xd, yd, k, rx, ry, UNDISTORT_MAX_ITER, tol)
     if not _accept(dom, xd, yd, k, x, y, tol):
         x, y = 0.0, 0.0
@@ -357,7 +357,8 @@ def nonlinearity_forms(lam_max_m2, e0, e1, dn, lam_m, dx, dy, mu, gamma, s_num_m
     ray, ``dn`` the ray denominator ``Dn``, ``lam_m = N / Dn``; ``mu = r^T Sigma g``,
     ``gamma = g^T Sigma g``, ``s_num = r'^T Sigma r'``, ``s_cross = r^T Sigma r'``,
     ``mu_num = r'^T Sigma g``).  Returns a float >= 0; 1.0 where the expansion has broken
-    down (``1 + delta / lam_max < 0``), NaN where an input is not finite.
+    down (``1 + delta / lam_max < 0``), 0 where ``delta`` is 0 (also with ``lam_max`` 0: no uncertainty),
+    NaN where an input is not finite.
     """
     b = lam_m * (dx * e0 + dy * e1)
     q2 = gamma / (dn * dn)
@@ -368,7 +369,7 @@ def nonlinearity_forms(lam_max_m2, e0, e1, dn, lam_m, dx, dy, mu, gamma, s_num_m
     s_LA = s_cross_m2 - w * mu
     delta = (2.0 * q2 * q2 * b * b - 4.0 * q2 * b * c_A + q2 * s_A + c_A * c_A - 6.0 * q2 * c_L * b
              + 2.0 * q2 * s_LA + 4.0 * c_L * c_A + (69.0 + 696.0 * q2) * q2 * q2 * q2 * b * b)
-    t = delta / lam_max_m2
+    t = 0.0 if delta == 0.0 else delta / lam_max_m2  # no uncertainty at all (a zero budget): exact, 0
     x = 1.0 + t
     nl = abs(t) / (math.sqrt(abs(x)) + 1.0)  # = |sqrt(1 + t) - 1| without cancellation
     nl = nl if x >= 0.0 else 1.0
