@@ -288,14 +288,7 @@ def _stage_ground(S, m, cam, dR, need):
     if ``need``, the (22,) mask of parameters with variance, asks for them) in one short loop
     per coefficient, from d(x, y)/d(x_n) kept in rows B4.
     """
-    need_k, need_k456 = need[5], need[10]
-    dR0, dR1, dR2 = dR[0], dR[1], dR[2]
-    p00, p01, p02, p10, p11, p12, p20, p21, p22 = (dR0[0, 0], dR0[0, 1], dR0[0, 2], dR0[1, 0], dR0[1, 1], dR0[1, 2],
-                                                   dR0[2, 0], dR0[2, 1], dR0[2, 2])
-    t00, t01, t02, t10, t11, t12, t20, t21, t22 = (dR1[0, 0], dR1[0, 1], dR1[0, 2], dR1[1, 0], dR1[1, 1], dR1[1, 2],
-                                                   dR1[2, 0], dR1[2, 1], dR1[2, 2])
-    o00, o01, o02, o10, o11, o12, o20, o21, o22 = (dR2[0, 0], dR2[0, 1], dR2[0, 2], dR2[1, 0], dR2[1, 1], dR2[1, 2],
-                                                   dR2[2, 0], dR2[2, 1], dR2[2, 2])
+    D0, D1, D2 = _mat9(dR[0]), _mat9(dR[1]), _mat9(dR[2])  # d R / d (pan, tilt, roll)
     sk, ifx, ify = cam.skew, cam.ifx, cam.ify
     skf = sk * ify * ifx
     R0, R1, R2, R3, R4, R5, R6, R7, R8 = (cam.R[0], cam.R[1], cam.R[2], cam.R[3], cam.R[4],
@@ -350,21 +343,9 @@ def _stage_ground(S, m, cam, dR, need):
         S[(_JP + 13) * _ST + j], S[(_JP + 14) * _ST + j], S[(_JP + 15) * _ST + j] = 1.0, 0.0, -dx * inv
         S[(_JP + 35) * _ST + j], S[(_JP + 36) * _ST + j], S[(_JP + 37) * _ST + j] = 0.0, 1.0, -dy * inv
         # angles: dxy/dray @ (dR_k @ ray_c)
-        q0 = p00 * xn + p01 * yn + p02
-        q1 = p10 * xn + p11 * yn + p12
-        q2 = p20 * xn + p21 * yn + p22
-        S[(_JP + 16) * _ST + j] = a00 * q0 + a01 * q1 + a02 * q2
-        S[(_JP + 38) * _ST + j] = a10 * q0 + a11 * q1 + a12 * q2
-        q0 = t00 * xn + t01 * yn + t02
-        q1 = t10 * xn + t11 * yn + t12
-        q2 = t20 * xn + t21 * yn + t22
-        S[(_JP + 17) * _ST + j] = a00 * q0 + a01 * q1 + a02 * q2
-        S[(_JP + 39) * _ST + j] = a10 * q0 + a11 * q1 + a12 * q2
-        q0 = o00 * xn + o01 * yn + o02
-        q1 = o10 * xn + o11 * yn + o12
-        q2 = o20 * xn + o21 * yn + o22
-        S[(_JP + 18) * _ST + j] = a00 * q0 + a01 * q1 + a02 * q2
-        S[(_JP + 40) * _ST + j] = a10 * q0 + a11 * q1 + a12 * q2
+        _angle_rows(S, j, _JP + 16, D0, xn, yn, a00, a01, a02, a10, a11, a12)
+        _angle_rows(S, j, _JP + 17, D1, xn, yn, a00, a01, a02, a10, a11, a12)
+        _angle_rows(S, j, _JP + 18, D2, xn, yn, a00, a01, a02, a10, a11, a12)
         # ground: d_xy dlam/dg, dlam/dg = (1/Dn, lam dx/Dn, lam dy/Dn)
         g1, g2 = lam * dx * inv, lam * dy * inv
         S[(_JP + 19) * _ST + j], S[(_JP + 20) * _ST + j], S[(_JP + 21) * _ST + j] = dx * inv, dx * g1, dx * g2
@@ -374,15 +355,42 @@ def _stage_ground(S, m, cam, dR, need):
         S[(_JUV + 1) * _ST + j] = -c00 * skf + c01 * ify
         S[(_JUV + 2) * _ST + j] = c10 * ifx
         S[(_JUV + 3) * _ST + j] = -c10 * skf + c11 * ify
-    # distortion: dxy/dxn @ (-(dxd/dxn)^-1 dxd/dk)  (k1 k2 p1 p2 k3, then k4 k5 k6)
-    if need_k:
-        for kk in range(8 if need_k456 else 5):
-            for j in range(m):
-                jx, jy = S[(_JK + kk) * _ST + j], S[(_JK + 8 + kk) * _ST + j]
-                e0 = -(S[_INV * _ST + j] * jx + S[(_INV + 1) * _ST + j] * jy)
-                e1 = -(S[(_INV + 2) * _ST + j] * jx + S[(_INV + 3) * _ST + j] * jy)
-                S[(_JP + 5 + kk) * _ST + j] = S[_B4 * _ST + j] * e0 + S[(_B4 + 1) * _ST + j] * e1
-                S[(_JP + 27 + kk) * _ST + j] = S[(_B4 + 2) * _ST + j] * e0 + S[(_B4 + 3) * _ST + j] * e1
+    _stage_ground_distortion(S, m, need)
+
+
+@njit(cache=True, error_model="numpy", nogil=True, inline="always")
+def _mat9(A):
+    """A (3, 3) as a row-major 9-tuple (constants the loops read without touching an array)."""
+    return A[0, 0], A[0, 1], A[0, 2], A[1, 0], A[1, 1], A[1, 2], A[2, 0], A[2, 1], A[2, 2]
+
+
+@njit(cache=True, error_model="numpy", nogil=True, inline="always")
+def _mat9_ray(D, x, y):
+    """``D (x, y, 1)`` for a row-major 9-tuple ``D``."""
+    return D[0] * x + D[1] * y + D[2], D[3] * x + D[4] * y + D[5], D[6] * x + D[7] * y + D[8]
+
+
+@njit(cache=True, error_model="numpy", nogil=True, inline="always")
+def _angle_rows(S, j, row, D, xn, yn, a00, a01, a02, a10, a11, a12):
+    """JP rows ``row`` (x) and ``row + 22`` (y) of one angle: ``dxy/dray @ (dR_k @ (x_n, y_n, 1))``."""
+    q0, q1, q2 = _mat9_ray(D, xn, yn)
+    S[row * _ST + j] = a00 * q0 + a01 * q1 + a02 * q2
+    S[(row + 22) * _ST + j] = a10 * q0 + a11 * q1 + a12 * q2
+
+
+@njit(cache=True, error_model="numpy", nogil=True)
+def _stage_ground_distortion(S, m, need):
+    """JP rows of the distortion coefficients (only those ``need`` asks for), one short loop each:
+    ``dxy/dxn @ (-(dxd/dxn)^-1 dxd/dk)`` from rows B4, INV and JK (k1 k2 p1 p2 k3, then k4 k5 k6)."""
+    if not need[5]:
+        return
+    for kk in range(8 if need[10] else 5):
+        for j in range(m):
+            jx, jy = S[(_JK + kk) * _ST + j], S[(_JK + 8 + kk) * _ST + j]
+            e0 = -(S[_INV * _ST + j] * jx + S[(_INV + 1) * _ST + j] * jy)
+            e1 = -(S[(_INV + 2) * _ST + j] * jx + S[(_INV + 3) * _ST + j] * jy)
+            S[(_JP + 5 + kk) * _ST + j] = S[_B4 * _ST + j] * e0 + S[(_B4 + 1) * _ST + j] * e1
+            S[(_JP + 27 + kk) * _ST + j] = S[(_B4 + 2) * _ST + j] * e0 + S[(_B4 + 3) * _ST + j] * e1
 
 
 @njit(cache=True, error_model="numpy", nogil=True)
@@ -948,6 +956,225 @@ def scratch() -> np.ndarray:
 
 
 @njit(cache=True, error_model="numpy", nogil=True)
+def _needed_params(Lr):
+    """(22,) bool: parameters with a non-zero row in the factor.  Flags for groups of them: if any of
+    k1..k6 is needed, ``need[5]`` (k1..k3, p1, p2) stands for the group, ``need[10]`` for k4..k6."""
+    need = np.zeros(22, dtype=np.bool_)
+    for e in range(Lr.shape[0]):
+        need[Lr[e]] = True
+    kd = False
+    for e in range(5, 13):
+        kd = kd or need[e]
+    need[5] = kd
+    need[10] = need[10] or need[11] or need[12]
+    return need
+
+
+@njit(cache=True, error_model="numpy", nogil=True)
+def _chunk_pixels(S, uv, boxes, yaw_deg, bottom_on_ground, cam, n0, nob, K):
+    """Rows U, V of a chunk: the corners of ``uv`` or the projected bottom corners of ``boxes`` (then
+    also copied to ``uv`` if it has a row per box)."""
+    if boxes.shape[0] > 0:
+        _stage_project(S, boxes, n0, nob, cam, yaw_deg, bottom_on_ground)
+        if uv.shape[0] == boxes.shape[0]:
+            for k in range(K):
+                for i in range(nob):
+                    uv[n0 + i, k, 0], uv[n0 + i, k, 1] = S[_U * _ST + k * nob + i], S[_V * _ST + k * nob + i]
+    else:
+        for k in range(K):
+            for i in range(nob):
+                S[_U * _ST + k * nob + i] = uv[n0 + i, k, 0]
+                S[_V * _ST + k * nob + i] = uv[n0 + i, k, 1]
+
+
+@njit(cache=True, error_model="numpy", nogil=True)
+def _chunk_codes(S, extra_reason, from_boxes, n0, nob, K):
+    """Codes of the 3D projection (row PC) or the caller's ``extra_reason`` override OK in row CODE."""
+    m = nob * K
+    if from_boxes:
+        for j in range(m):
+            pc = S[_PC * _ST + j]
+            S[_CODE * _ST + j] = S[_CODE * _ST + j] if pc == _OK else pc
+    if extra_reason.shape[0] > 0:
+        for k in range(K):
+            for i in range(nob):
+                ex = extra_reason[n0 + i, k]
+                if ex != _OK:
+                    S[_CODE * _ST + k * nob + i] = ex
+
+
+@njit(cache=True, error_model="numpy", nogil=True)
+def _chunk_pixel_cov(S, spx, det, det_mode, n0, nob, K):
+    """Rows P4: each corner's pixel covariance, the budget's ``spx`` plus the detector's ``det``
+    (``det_mode`` 1 per detection, 2 per corner, 3 the diagonal blocks of the full form)."""
+    s00, s01, s10, s11 = spx[0, 0], spx[0, 1], spx[1, 0], spx[1, 1]
+    for j in range(nob * K):
+        S[_P4 * _ST + j], S[(_P4 + 1) * _ST + j], S[(_P4 + 2) * _ST + j], S[(_P4 + 3) * _ST + j] = (s00, s01,
+                                                                                                   s10, s11)
+    if det_mode == 0:
+        return
+    for k in range(K):
+        for i in range(nob):
+            j, n = k * nob + i, n0 + i
+            if det_mode == 1:
+                d00, d01, d10, d11 = det[n, 0, 0, 0], det[n, 0, 0, 1], det[n, 0, 1, 0], det[n, 0, 1, 1]
+            elif det_mode == 2:
+                d00, d01, d10, d11 = det[n, k, 0, 0], det[n, k, 0, 1], det[n, k, 1, 0], det[n, k, 1, 1]
+            else:
+                d00, d01 = det[n, 0, 2 * k, 2 * k], det[n, 0, 2 * k, 2 * k + 1]
+                d10, d11 = det[n, 0, 2 * k + 1, 2 * k], det[n, 0, 2 * k + 1, 2 * k + 1]
+            S[_P4 * _ST + j] += d00
+            S[(_P4 + 1) * _ST + j] += d01
+            S[(_P4 + 2) * _ST + j] += d10
+            S[(_P4 + 3) * _ST + j] += d11
+
+
+@njit(cache=True, error_model="numpy", nogil=True)
+def _out_corners(S, out, n0, nob, K):
+    """Per-corner outputs of a chunk: codes and usable flags; ground points, covariances and the flag
+    where the per-corner arrays have rows."""
+    xy, ccov, reason, usable, cnl = out[0], out[1], out[3], out[4], out[11]
+    for k in range(K):
+        for i in range(nob):
+            j, n = k * nob + i, n0 + i
+            reason[n, k] = np.int8(S[_RC * _ST + j])
+            usable[n, k] = S[_US * _ST + j] != 0.0
+    if xy.shape[0] == 0:
+        return
+    for k in range(K):
+        for i in range(nob):
+            j, n = k * nob + i, n0 + i
+            xy[n, k, 0], xy[n, k, 1] = S[_XX * _ST + j], S[_YY * _ST + j]
+            c01 = S[(_CC + 1) * _ST + j]
+            ccov[n, k, 0, 0], ccov[n, k, 0, 1] = S[_CC * _ST + j], c01
+            ccov[n, k, 1, 0], ccov[n, k, 1, 1] = c01, S[(_CC + 2) * _ST + j]
+            cnl[n, k] = S[_NL * _ST + j]
+
+
+@njit(cache=True, error_model="numpy", nogil=True)
+def _out_largest(S, out, n0, nob):
+    """Per object: the largest point (index, semi-axis, position, flag; its covariance if asked), NaN / -1
+    without a usable corner."""
+    largest_index, largest_cov, obj = out[5], out[6], out[9]
+    want_cov = largest_cov.shape[0] > 0
+    nan = math.nan
+    for i in range(nob):
+        n = n0 + i
+        best = int(S[_BEST * _ST + i])
+        largest_index[n] = best
+        if best >= 0:
+            jb = best * nob + i
+            obj[_O_LSEMI, n] = S[_BSEMI * _ST + i]
+            obj[_O_LNL, n] = S[_NL * _ST + jb]
+            obj[_O_LX, n], obj[_O_LY, n] = S[_XX * _ST + jb], S[_YY * _ST + jb]
+            c00, c01, c11 = S[_CC * _ST + jb], S[(_CC + 1) * _ST + jb], S[(_CC + 2) * _ST + jb]
+        else:
+            obj[_O_LSEMI, n] = nan
+            obj[_O_LNL, n] = nan
+            obj[_O_LX, n], obj[_O_LY, n] = nan, nan
+            c00, c01, c11 = nan, nan, nan
+        if want_cov:
+            largest_cov[n, 0, 0], largest_cov[n, 0, 1] = c00, c01
+            largest_cov[n, 1, 0], largest_cov[n, 1, 1] = c01, c11
+
+
+@njit(cache=True, error_model="numpy", nogil=True)
+def _det_cross(S, det, n, i, nob, K):
+    """Detector cross terms between the corners of object ``i`` (full form): sum_{k != l} H_k P_kl H_l^T."""
+    e00, e01, e11 = 0.0, 0.0, 0.0
+    for k in range(K):
+        hk00, hk01, hk10, hk11 = _h(S, k * nob + i)
+        for l in range(K):
+            if l == k:
+                continue
+            hl00, hl01, hl10, hl11 = _h(S, l * nob + i)
+            q00, q01 = det[n, 0, 2 * k, 2 * l], det[n, 0, 2 * k, 2 * l + 1]
+            q10, q11 = det[n, 0, 2 * k + 1, 2 * l], det[n, 0, 2 * k + 1, 2 * l + 1]
+            m00, m01 = hk00 * q00 + hk01 * q10, hk00 * q01 + hk01 * q11
+            m10 = hk10 * q00 + hk11 * q10
+            m11 = hk10 * q01 + hk11 * q11
+            e00 += m00 * hl00 + m01 * hl01
+            e01 += m00 * hl10 + m01 * hl11
+            e11 += m10 * hl10 + m11 * hl11
+    return e00, e01, e11
+
+
+@njit(cache=True, error_model="numpy", nogil=True)
+def _out_centre(S, out, det, det_mode, n0, nob, K):
+    """Per object: the centre's code (first unusable corner, DEGENERATE, OK), position, covariance (with the
+    detector's cross terms in the full form), flag and area; rows E00, E01, E11 hold the final covariance
+    (NaN without a centre) for :func:`_stage_v2x`."""
+    centre_reason, centre_bad, obj = out[7], out[8], out[9]
+    nan = math.nan
+    for i in range(nob):
+        n = n0 + i
+        fb = int(S[_FBAD * _ST + i])
+        if fb >= 0:
+            code = int(S[_RC * _ST + fb * nob + i])
+            centre_bad[n] = fb
+            obj[_O_AREA, n] = nan
+        else:
+            code = _DEGENERATE if S[_DEG * _ST + i] != 0.0 else _OK
+            centre_bad[n] = -1
+            obj[_O_AREA, n] = S[_AREA * _ST + i]
+        centre_reason[n] = code
+        if code == _OK:
+            e00, e01, e11 = S[_E00 * _ST + i], S[_E01 * _ST + i], S[_E11 * _ST + i]
+            if det_mode == 3:
+                d00, d01, d11 = _det_cross(S, det, n, i, nob, K)
+                e00, e01, e11 = e00 + d00, e01 + d01, e11 + d11
+            obj[_O_CX, n], obj[_O_CY, n] = S[_CXC * _ST + i], S[_CYC * _ST + i]
+            obj[_O_NL, n] = S[_NLC * _ST + i]
+        else:
+            e00, e01, e11 = nan, nan, nan
+            obj[_O_CX, n], obj[_O_CY, n] = nan, nan
+            obj[_O_NL, n] = nan
+        obj[_O_C00, n], obj[_O_C01, n], obj[_O_C10, n], obj[_O_C11, n] = e00, e01, e01, e11
+        S[_E00 * _ST + i], S[_E01 * _ST + i], S[_E11 * _ST + i] = e00, e01, e11
+
+
+@njit(cache=True, error_model="numpy", nogil=True)
+def _out_joint(S, joint, reason, det, det_mode, r, n0, nob, K):
+    """The joint covariance (2K x 2K) of each object: diagonal blocks = corner covariances, off-diagonal
+    blocks = the shared parameter part ``(J_k L)(J_l L)^T`` (+ detector cross terms in the full form)."""
+    nan = math.nan
+    for i in range(nob):
+        n = n0 + i
+        for k in range(K):
+            jk = k * nob + i
+            ck = reason[n, k] == _OK or reason[n, k] == _OUTSIDE
+            for l in range(k, K):
+                jl = l * nob + i
+                cl = reason[n, l] == _OK or reason[n, l] == _OUTSIDE
+                if not (ck and cl):
+                    v00, v01, v10, v11 = nan, nan, nan, nan
+                elif k == l:
+                    v00, v01 = S[_CC * _ST + jk], S[(_CC + 1) * _ST + jk]
+                    v10, v11 = v01, S[(_CC + 2) * _ST + jk]
+                else:
+                    v00, v01, v10, v11 = 0.0, 0.0, 0.0, 0.0
+                    for c in range(r):
+                        a0k, a1k = S[(_AW + 2 * c) * _ST + jk], S[(_AW + 2 * c + 1) * _ST + jk]
+                        a0l, a1l = S[(_AW + 2 * c) * _ST + jl], S[(_AW + 2 * c + 1) * _ST + jl]
+                        v00 += a0k * a0l
+                        v01 += a0k * a1l
+                        v10 += a1k * a0l
+                        v11 += a1k * a1l
+                    if det_mode == 3:
+                        for a in range(2):
+                            for b in range(2):
+                                p = det[n, 0, 2 * k + a, 2 * l + b]
+                                v00 += S[(_JUV + a) * _ST + jk] * p * S[(_JUV + b) * _ST + jl]
+                                v01 += S[(_JUV + a) * _ST + jk] * p * S[(_JUV + 2 + b) * _ST + jl]
+                                v10 += S[(_JUV + 2 + a) * _ST + jk] * p * S[(_JUV + b) * _ST + jl]
+                                v11 += S[(_JUV + 2 + a) * _ST + jk] * p * S[(_JUV + 2 + b) * _ST + jl]
+                joint[n, 2 * k, 2 * l], joint[n, 2 * k, 2 * l + 1] = v00, v01
+                joint[n, 2 * k + 1, 2 * l], joint[n, 2 * k + 1, 2 * l + 1] = v10, v11
+                joint[n, 2 * l, 2 * k], joint[n, 2 * l + 1, 2 * k] = v00, v01
+                joint[n, 2 * l, 2 * k + 1], joint[n, 2 * l + 1, 2 * k + 1] = v10, v11
+
+
+@njit(cache=True, error_model="numpy", nogil=True)
 def process_corners(uv, extra_reason, boxes, yaw_deg, bottom_on_ground, cam, dR, Lr, Lc, Lv, r, spx, det, det_mode,
                     allow_outside, ch, sh, flag, out, S):
     """The fused per-frame kernel on corners in pixels ``uv`` (N, K, 2), K <= :data:`MAX_CORNERS`.
@@ -970,73 +1197,24 @@ def process_corners(uv, extra_reason, boxes, yaw_deg, bottom_on_ground, cam, dR,
     """
     from_boxes = boxes.shape[0] > 0
     N, K = (boxes.shape[0], 4) if from_boxes else (uv.shape[0], uv.shape[1])
-    want_uv = from_boxes and uv.shape[0] == N
-    xy, ccov, joint, reason, usable, largest_index, largest_cov, centre_reason, centre_bad, obj, v2x, cnl = out
+    joint, reason = out[2], out[3]
     want_joint = joint.shape[0] == N and N > 0
-    want_corners = xy.shape[0] == N and N > 0
+    extra = extra_reason if (extra_reason.shape[0] == N and N > 0) else extra_reason[:0]
     Jd, Jk = np.empty((2, 2)), np.empty((2, 8))
-    W, Himg = cam.width_px, cam.height_px
-    nan = math.nan
-    has_extra = extra_reason.shape[0] == N and N > 0
-    # parameters with a non-zero row in the factor; flags for groups of them: if any of k1..k6 is
-    # needed, need[5] (k1..k3, p1, p2) stands for the group, need[10] for k4..k6
-    need = np.zeros(22, dtype=np.bool_)
-    for e in range(Lr.shape[0]):
-        need[Lr[e]] = True
-    kd = False
-    for e in range(5, 13):
-        kd = kd or need[e]
-    need[5] = kd
-    need[10] = need[10] or need[11] or need[12]
-    nob_max = max(1, _M_TARGET // K)
-    s00, s01, s10, s11 = spx[0, 0], spx[0, 1], spx[1, 0], spx[1, 1]
+    need = _needed_params(Lr)
     sp00, sp01, sp11 = _pos_cov(Lr, Lc, Lv)
+    nob_max = max(1, _M_TARGET // K)
     for n0 in range(0, N, nob_max):
         nob = min(N - n0, nob_max)
         m = nob * K
-        if from_boxes:
-            _stage_project(S, boxes, n0, nob, cam, yaw_deg, bottom_on_ground)
-            if want_uv:
-                for k in range(K):
-                    for i in range(nob):
-                        uv[n0 + i, k, 0], uv[n0 + i, k, 1] = S[_U * _ST + k * nob + i], S[_V * _ST + k * nob + i]
-        else:
-            for k in range(K):
-                for i in range(nob):
-                    S[_U * _ST + k * nob + i] = uv[n0 + i, k, 0]
-                    S[_V * _ST + k * nob + i] = uv[n0 + i, k, 1]
+        # corners -> ground, with every Jacobian and the status codes
+        _chunk_pixels(S, uv, boxes, yaw_deg, bottom_on_ground, cam, n0, nob, K)
         _stage_undistort(S, m, cam, Jd, Jk, need)
         _stage_ground(S, m, cam, dR, need)
-        if from_boxes:  # the projection's codes override OK
-            for j in range(m):
-                pc = S[_PC * _ST + j]
-                S[_CODE * _ST + j] = S[_CODE * _ST + j] if pc == _OK else pc
-        if has_extra:  # codes of the 3D projection override OK
-            for k in range(K):
-                for i in range(nob):
-                    ex = extra_reason[n0 + i, k]
-                    if ex != _OK:
-                        S[_CODE * _ST + k * nob + i] = ex
-        # per-corner pixel covariance: budget + detector
-        for j in range(m):
-            S[_P4 * _ST + j], S[(_P4 + 1) * _ST + j], S[(_P4 + 2) * _ST + j], S[(_P4 + 3) * _ST + j] = (s00, s01,
-                                                                                                       s10, s11)
-        if det_mode != 0:
-            for k in range(K):
-                for i in range(nob):
-                    j, n = k * nob + i, n0 + i
-                    if det_mode == 1:
-                        d00, d01, d10, d11 = det[n, 0, 0, 0], det[n, 0, 0, 1], det[n, 0, 1, 0], det[n, 0, 1, 1]
-                    elif det_mode == 2:
-                        d00, d01, d10, d11 = det[n, k, 0, 0], det[n, k, 0, 1], det[n, k, 1, 0], det[n, k, 1, 1]
-                    else:
-                        d00, d01 = det[n, 0, 2 * k, 2 * k], det[n, 0, 2 * k, 2 * k + 1]
-                        d10, d11 = det[n, 0, 2 * k + 1, 2 * k], det[n, 0, 2 * k + 1, 2 * k + 1]
-                    S[_P4 * _ST + j] += d00
-                    S[(_P4 + 1) * _ST + j] += d01
-                    S[(_P4 + 2) * _ST + j] += d10
-                    S[(_P4 + 3) * _ST + j] += d11
-        _stage_corner_flags(S, m, W, Himg, allow_outside)
+        _chunk_codes(S, extra, from_boxes, n0, nob, K)
+        _chunk_pixel_cov(S, spx, det, det_mode, n0, nob, K)
+        _stage_corner_flags(S, m, cam.width_px, cam.height_px, allow_outside)
+        # covariances of corners and centre, the linearity flag, the largest point
         _stage_centroid(S, nob, K)
         _stage_whiten(S, m, nob, K, Lr, Lc, Lv, want_joint)
         _stage_corner_cov(S, m)
@@ -1046,125 +1224,17 @@ def process_corners(uv, extra_reason, boxes, yaw_deg, bottom_on_ground, cam, dR,
             _stage_flag(S, m, sp00, sp01, sp11)
         else:
             for j in range(m):
-                S[_NL * _ST + j] = nan
+                S[_NL * _ST + j] = math.nan
         _stage_flag_objects(S, nob, K)
         _stage_select(S, nob, K)
         _stage_centre_cov(S, nob, K)
-        # ---- outputs: corners ----
-        for k in range(K):
-            for i in range(nob):
-                j, n = k * nob + i, n0 + i
-                reason[n, k] = np.int8(S[_RC * _ST + j])
-                usable[n, k] = S[_US * _ST + j] != 0.0
-        if want_corners:
-            for k in range(K):
-                for i in range(nob):
-                    j, n = k * nob + i, n0 + i
-                    xy[n, k, 0], xy[n, k, 1] = S[_XX * _ST + j], S[_YY * _ST + j]
-                    c01 = S[(_CC + 1) * _ST + j]
-                    ccov[n, k, 0, 0], ccov[n, k, 0, 1] = S[_CC * _ST + j], c01
-                    ccov[n, k, 1, 0], ccov[n, k, 1, 1] = c01, S[(_CC + 2) * _ST + j]
-                    cnl[n, k] = S[_NL * _ST + j]
-        # ---- outputs: per object ----
-        for i in range(nob):
-            n = n0 + i
-            best = int(S[_BEST * _ST + i])
-            fb = int(S[_FBAD * _ST + i])
-            largest_index[n] = best
-            if best >= 0:
-                jb = best * nob + i
-                obj[_O_LSEMI, n] = S[_BSEMI * _ST + i]
-                obj[_O_LNL, n] = S[_NL * _ST + jb]
-                obj[_O_LX, n], obj[_O_LY, n] = S[_XX * _ST + jb], S[_YY * _ST + jb]
-                if want_corners:
-                    c01 = S[(_CC + 1) * _ST + jb]
-                    largest_cov[n, 0, 0], largest_cov[n, 0, 1] = S[_CC * _ST + jb], c01
-                    largest_cov[n, 1, 0], largest_cov[n, 1, 1] = c01, S[(_CC + 2) * _ST + jb]
-            else:
-                obj[_O_LSEMI, n] = nan
-                obj[_O_LNL, n] = nan
-                obj[_O_LX, n], obj[_O_LY, n] = nan, nan
-                if want_corners:
-                    largest_cov[n, 0, 0], largest_cov[n, 0, 1] = nan, nan
-                    largest_cov[n, 1, 0], largest_cov[n, 1, 1] = nan, nan
-            if fb >= 0:
-                code = int(S[_RC * _ST + fb * nob + i])
-                centre_bad[n] = fb
-                obj[_O_AREA, n] = nan
-            elif S[_DEG * _ST + i] != 0.0:
-                code = _DEGENERATE
-                centre_bad[n] = -1
-                obj[_O_AREA, n] = S[_AREA * _ST + i]
-            else:
-                code = _OK
-                centre_bad[n] = -1
-                obj[_O_AREA, n] = S[_AREA * _ST + i]
-            centre_reason[n] = code
-            if code == _OK:
-                e00, e01, e11 = S[_E00 * _ST + i], S[_E01 * _ST + i], S[_E11 * _ST + i]
-                if det_mode == 3:  # detector cross terms between corners: sum_{k != l} H_k P_kl H_l^T
-                    for k in range(K):
-                        jk = k * nob + i
-                        hk00, hk01, hk10, hk11 = _h(S, jk)
-                        for l in range(K):
-                            if l == k:
-                                continue
-                            hl00, hl01, hl10, hl11 = _h(S, l * nob + i)
-                            q00, q01 = det[n, 0, 2 * k, 2 * l], det[n, 0, 2 * k, 2 * l + 1]
-                            q10, q11 = det[n, 0, 2 * k + 1, 2 * l], det[n, 0, 2 * k + 1, 2 * l + 1]
-                            m00, m01 = hk00 * q00 + hk01 * q10, hk00 * q01 + hk01 * q11
-                            m10 = hk10 * q00 + hk11 * q10
-                            m11 = hk10 * q01 + hk11 * q11
-                            e00 += m00 * hl00 + m01 * hl01
-                            e01 += m00 * hl10 + m01 * hl11
-                            e11 += m10 * hl10 + m11 * hl11
-                obj[_O_CX, n], obj[_O_CY, n] = S[_CXC * _ST + i], S[_CYC * _ST + i]
-                obj[_O_C00, n], obj[_O_C01, n], obj[_O_C10, n], obj[_O_C11, n] = e00, e01, e01, e11
-                obj[_O_NL, n] = S[_NLC * _ST + i]
-            else:
-                e00, e01, e11 = nan, nan, nan
-                obj[_O_NL, n] = nan
-                obj[_O_CX, n], obj[_O_CY, n] = nan, nan
-                obj[_O_C00, n], obj[_O_C01, n], obj[_O_C10, n], obj[_O_C11, n] = nan, nan, nan, nan
-            S[_E00 * _ST + i], S[_E01 * _ST + i], S[_E11 * _ST + i] = e00, e01, e11
-        _stage_v2x(S, nob, ch, sh, v2x, n0, obj)
-        # ---- joint covariance (optional): diagonal blocks = corner covariances, off-diagonal blocks =
-        # shared parameter part (+ detector cross terms in the full form) ----
+        # outputs
+        _out_corners(S, out, n0, nob, K)
+        _out_largest(S, out, n0, nob)
+        _out_centre(S, out, det, det_mode, n0, nob, K)
+        _stage_v2x(S, nob, ch, sh, out[10], n0, out[9])
         if want_joint:
-            for i in range(nob):
-                n = n0 + i
-                for k in range(K):
-                    jk = k * nob + i
-                    ck = reason[n, k] == _OK or reason[n, k] == _OUTSIDE
-                    for l in range(k, K):
-                        jl = l * nob + i
-                        cl = reason[n, l] == _OK or reason[n, l] == _OUTSIDE
-                        if not (ck and cl):
-                            v00, v01, v10, v11 = nan, nan, nan, nan
-                        elif k == l:
-                            v00, v01 = S[_CC * _ST + jk], S[(_CC + 1) * _ST + jk]
-                            v10, v11 = v01, S[(_CC + 2) * _ST + jk]
-                        else:
-                            v00, v01, v10, v11 = 0.0, 0.0, 0.0, 0.0
-                            for c in range(r):
-                                a0k, a1k = S[(_AW + 2 * c) * _ST + jk], S[(_AW + 2 * c + 1) * _ST + jk]
-                                a0l, a1l = S[(_AW + 2 * c) * _ST + jl], S[(_AW + 2 * c + 1) * _ST + jl]
-                                v00 += a0k * a0l
-                                v01 += a0k * a1l
-                                v10 += a1k * a0l
-                                v11 += a1k * a1l
-                            if det_mode == 3:
-                                for a in range(2):
-                                    for b in range(2):
-                                        p = det[n, 0, 2 * k + a, 2 * l + b]
-                                        v00 += S[(_JUV + a) * _ST + jk] * p * S[(_JUV + b) * _ST + jl]
-                                        v01 += S[(_JUV + a) * _ST + jk] * p * S[(_JUV + 2 + b) * _ST + jl]
-                                        v10 += S[(_JUV + 2 + a) * _ST + jk] * p * S[(_JUV + b) * _ST + jl]
-                                        v11 += S[(_JUV + 2 + a) * _ST + jk] * p * S[(_JUV + 2 + b) * _ST + jl]
-                        joint[n, 2 * k, 2 * l], joint[n, 2 * k, 2 * l + 1] = v00, v01
-                        joint[n, 2 * k + 1, 2 * l], joint[n, 2 * k + 1, 2 * l + 1] = v10, v11
-                        joint[n, 2 * l, 2 * k], joint[n, 2 * l + 1, 2 * k] = v00, v01
-                        joint[n, 2 * l, 2 * k + 1], joint[n, 2 * l + 1, 2 * k + 1] = v10, v11
+            _out_joint(S, joint, reason, det, det_mode, r, n0, nob, K)
 
 
 @njit(cache=True, error_model="numpy", nogil=True)

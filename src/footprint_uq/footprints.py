@@ -75,6 +75,17 @@ about 75 us (pan-tilt) / 90 us (OpenCV with distortion) on the 2-core reference 
 The V2X fields describe the centre.  For the paper's conservative upper bound, apply
 :func:`footprint_uq.v2x.cpm_fields` / :func:`~footprint_uq.v2x.j2735_fields` to
 ``largest_cov_m2`` instead.
+
+The linearity flag
+------------------
+Every corner carries ``nonlinearity`` (predicted relative error of its linear 1-sigma
+semi-major axis; :func:`footprint_uq.propagation.nonlinearity`, computed in the kernel), the
+largest point its corner's, the centre the largest of its corners'; ``*_linear_ok`` is
+``nonlinearity <= linear_threshold``.  Where the centre is not ``linear_ok`` the V2X fields
+follow ``v2x_policy`` (:data:`V2X_POLICIES`; docs/uncertainty-model.md, "Policy for the V2X
+fields"): by default the larger of the linear and a seeded Monte-Carlo covariance of the
+centre (:func:`centre_covariance_sampled`, only the flagged objects, common random numbers),
+or "unavailable" beyond nonlinearity 0.5; ``v2x_source`` says which.
 """
 
 from __future__ import annotations

@@ -48,6 +48,17 @@ Formulation (valid for any camera of the shared parameter vector):
   covariance of the rotation vector) are folded into the last pass; the others
   (distortion, mixed) cost one vectorised pass over the row each.
 
+* Linearity flag (``get_nonlinearity``): the ray denominator ``Dn = g~ . d`` also depends on
+  the component ``z`` of a rotation's ray change along the ray (which the ground point
+  ignores), so the state gains ``z`` (per-row polynomials ``ZQ``/``ZZ``/``BZ`` in the pan-tilt
+  kernel, buffer rows ``Z``/``QZ0``/``QZ1``/``ZZ`` and ``BQ[12:18]`` in the general one); the
+  quadratic forms the flag needs come from the state covariance (:func:`_flag`) and the scalar
+  core evaluates it (:func:`footprint_uq.fast.core.nonlinearity_point`), in the same pass.
+
+Structure: each row of the general kernel goes through small stages (:func:`_row_undistort`,
+:func:`_row_intrinsics`, :func:`_row_mixed`, :func:`_row_pixels`, :func:`_row_qc`,
+:func:`_row_flag`); its buffer's rows are named in :data:`BUF_ROWS`.
+
 Performance notes (see ``bench/``): the pixel loops are written on 1-D views of
 one output row so that LLVM vectorises them (2-D indexing or a runtime-length
 inner loop defeats the vectoriser).  ``fastmath={"contract"}`` (FMA only,
@@ -654,27 +665,55 @@ def _point_general(u, v, S00, S01, S11, prm, R, om, colptr, rowidx, vals, vc, Cc
     Q01 = w * (Hn * R[0, 1] + ox * g1)
     Q10 = w * (Hn * R[1, 0] + oy * g0)
     Q11 = w * (Hn * R[1, 1] + oy * g1)
-    # d q / d param for every ray parameter (pre-M for intrinsics)
+    _point_dq(xd, yd, xn, yn, num, den, M00, M01, M10, M11, prm, om, sq)
+    # pixel noise: dq/duv = M A, A = [[1/fx, -sk/(fx fy)], [0, 1/fy]]
+    B00 = M00 / fx
+    B01 = -M00 * sk / (fx * fy) + M01 / fy
+    B10 = M10 / fx
+    B11 = -M10 * sk / (fx * fy) + M11 / fy
+    T00 = B00 * S00 + B01 * S01
+    T01 = B00 * S01 + B01 * S11
+    T10 = B10 * S00 + B11 * S01
+    T11 = B10 * S01 + B11 * S11
+    q00, q01, q11, zq0, zq1, zz = _point_state(T00 * B00 + T01 * B01, T00 * B10 + T01 * B11,
+                                               T10 * B10 + T11 * B11, xn, yn, om, colptr, rowidx, vals, vc,
+                                               has_qc, sq, bq, bz)
+    ax, ay = ox / Hn, oy / Hn
+    c00, c01, c11 = _finish(q00, q01, q11, Q00, Q01, Q10, Q11, ax, ay, ox, oy, Ccc, bq, has_qc)
+    x, y = x0 + ox, y0 + oy
+    if not (np.isfinite(x) and np.isfinite(y) and np.isfinite(c00) and np.isfinite(c01) and np.isfinite(c11)):
+        return status.OVERFLOW, np.nan, np.nan, np.nan, np.nan, np.nan, np.nan
+    nl = np.nan
+    if flag:
+        nl = _flag(c00, c01, c11, dn, lam, dxr, dyr, ox, oy, ax, ay, Q00, Q01, Q10, Q11, g0, g1, q00, q01, q11, zq0,
+                   zq1, zz, to_fixed_tuple(Ccc.ravel(), 36), has_qc, bq, bz)
+    return status.OK, x, y, c00, c01, c11, nl
+
+
+@nb.njit(**_JIT1)
+def _point_dq(xd, yd, xn, yn, num, den, M00, M01, M10, M11, prm, om, sq):
+    """``sq[k] = d q / d param_k`` (2,) of one pixel for every ray parameter: intrinsics act on ``x_d``
+    (``dq = M dx_d``), distortion ``dq = -M d distort / dk`` at ``(x_n, y_n)``, rotations ``omega x q~``
+    without its component along the ray (``M`` = d(undistorted)/d(distorted); ``num``, ``den`` the
+    radial factor's numerator and denominator)."""
+    fx, fy, sk = prm[0], prm[1], prm[4]
     for k in range(19):
         sq[k, 0] = 0.0
         sq[k, 1] = 0.0
-    # intrinsics act on x_d: dq = M dx_d
-    a0, a1 = -xd / fx, 0.0
-    sq[0, 0] = M00 * a0 + M01 * a1
-    sq[0, 1] = M10 * a0 + M11 * a1
-    a0, a1 = sk * yd / (fx * fy), -yd / fy
-    sq[1, 0] = M00 * a0 + M01 * a1
-    sq[1, 1] = M10 * a0 + M11 * a1
-    a0, a1 = -1.0 / fx, 0.0
-    sq[2, 0] = M00 * a0 + M01 * a1
-    sq[2, 1] = M10 * a0 + M11 * a1
-    a0, a1 = sk / (fx * fy), -1.0 / fy
-    sq[3, 0] = M00 * a0 + M01 * a1
-    sq[3, 1] = M10 * a0 + M11 * a1
-    a0, a1 = -yd / fx, 0.0
-    sq[4, 0] = M00 * a0 + M01 * a1
-    sq[4, 1] = M10 * a0 + M11 * a1
-    # distortion: dq = -M d distort / dk at (xn, yn)
+    for k in range(5):
+        if k == 0:
+            a0, a1 = -xd / fx, 0.0
+        elif k == 1:
+            a0, a1 = sk * yd / (fx * fy), -yd / fy
+        elif k == 2:
+            a0, a1 = -1.0 / fx, 0.0
+        elif k == 3:
+            a0, a1 = sk / (fx * fy), -1.0 / fy
+        else:
+            a0, a1 = -yd / fx, 0.0
+        sq[k, 0] = M00 * a0 + M01 * a1
+        sq[k, 1] = M10 * a0 + M11 * a1
+    r2 = xn * xn + yn * yn
     r4 = r2 * r2
     r6 = r4 * r2
     id_ = 1.0 / den
@@ -689,28 +728,21 @@ def _point_general(u, v, S00, S01, S11, prm, R, om, colptr, rowidx, vals, vc, Cc
             a0, a1 = xn * drk[i], yn * drk[i]
         sq[5 + i, 0] = -(M00 * a0 + M01 * a1)
         sq[5 + i, 1] = -(M10 * a0 + M11 * a1)
-    # rotations
     for i in range(3):
         w0, w1, w2 = om[i, 0], om[i, 1], om[i, 2]
         sq[16 + i, 0] = w1 - w2 * yn - w0 * xn * yn + w1 * xn * xn
         sq[16 + i, 1] = -w0 * (1.0 + yn * yn) + w2 * xn + w1 * xn * yn
-    # pixel noise: dq/duv = M A, A = [[1/fx, -sk/(fx fy)], [0, 1/fy]]
-    B00 = M00 / fx
-    B01 = -M00 * sk / (fx * fy) + M01 / fy
-    B10 = M10 / fx
-    B11 = -M10 * sk / (fx * fy) + M11 / fy
-    T00 = B00 * S00 + B01 * S01
-    T01 = B00 * S01 + B01 * S11
-    T10 = B10 * S00 + B11 * S01
-    T11 = B10 * S01 + B11 * S11
-    q00 = T00 * B00 + T01 * B01
-    q01 = T00 * B10 + T01 * B11
-    q11 = T10 * B10 + T11 * B11
+
+
+@nb.njit(**_JIT1)
+def _point_state(q00, q01, q11, xn, yn, om, colptr, rowidx, vals, vc, has_qc, sq, bq, bz):
+    """The ray-state covariance of one pixel, factor column by factor column, added to the pixel noise's
+    ``(q00, q01, q11)``: returns ``(q00, q01, q11, zq0, zq1, zz)`` (the ``z`` parts for :func:`_flag`) and
+    fills ``bq`` (2, 6) / ``bz`` (6,), the ray / constant cross terms (with ``has_qc``)."""
     bq[:] = 0.0
     bz[:] = 0.0
-    zq0, zq1, zz = 0.0, 0.0, 0.0  # the rotations' ray-scale component z (see _flag)
-    r = colptr.size - 1
-    for j in range(r):
+    zq0, zq1, zz = 0.0, 0.0, 0.0
+    for j in range(colptr.size - 1):
         v0 = 0.0
         v1 = 0.0
         z = 0.0
@@ -732,16 +764,7 @@ def _point_general(u, v, S00, S01, S11, prm, R, om, colptr, rowidx, vals, vc, Cc
                 bq[0, c] += v0 * vc[j, c]
                 bq[1, c] += v1 * vc[j, c]
                 bz[c] += z * vc[j, c]
-    ax, ay = ox / Hn, oy / Hn
-    c00, c01, c11 = _finish(q00, q01, q11, Q00, Q01, Q10, Q11, ax, ay, ox, oy, Ccc, bq, has_qc)
-    x, y = x0 + ox, y0 + oy
-    if not (np.isfinite(x) and np.isfinite(y) and np.isfinite(c00) and np.isfinite(c01) and np.isfinite(c11)):
-        return status.OVERFLOW, np.nan, np.nan, np.nan, np.nan, np.nan, np.nan
-    nl = np.nan
-    if flag:
-        nl = _flag(c00, c01, c11, dn, lam, dxr, dyr, ox, oy, ax, ay, Q00, Q01, Q10, Q11, g0, g1, q00, q01, q11, zq0,
-                   zq1, zz, to_fixed_tuple(Ccc.ravel(), 36), has_qc, bq, bz)
-    return status.OK, x, y, c00, c01, c11, nl
+    return q00, q01, q11, zq0, zq1, zz
 
 
 #: blocks of contiguous rows per thread in the general kernel (Newton warm-starts within a block)
@@ -776,92 +799,118 @@ def _acc_param(k, lv, yd, prm, om, buf, W, sq, flag):
     ``lv^2 dq_k dq_k^T`` to ``buf[Q00/Q01/Q11]`` (one vectorised loop per parameter type).
     With ``flag`` a rotation also adds its ray-scale component ``lv z_k`` to ``buf[Z]`` (not with ``sq``:
     single rotations are folded into ``Om``)."""
+    if k <= 4:
+        _acc_intrinsic(k, lv, yd, prm, buf, W, sq)
+    elif k <= 12:
+        _acc_distortion(k, lv, prm, buf, W, sq)
+    elif k >= 16 and k <= 18:
+        _acc_rotation(k, lv, om, buf, W, sq, flag)
+
+
+@nb.njit(**_JIT1)
+def _acc_intrinsic(k, lv, yd, prm, buf, W, sq):
+    """Intrinsics act on x_d: ``dq = M dx_d`` with ``dx_d = (a0 + a1 x_d, b0)`` (row constants)."""
     fx, fy, sk = prm[0], prm[1], prm[4]
-    xd, xn, yn = buf[_XD], buf[_XN], buf[_YN]
+    if k == 0:
+        a0, a1, b0 = 0.0, -lv / fx, 0.0
+    elif k == 1:
+        a0, a1, b0 = lv * sk * yd / (fx * fy), 0.0, -lv * yd / fy
+    elif k == 2:
+        a0, a1, b0 = -lv / fx, 0.0, 0.0
+    elif k == 3:
+        a0, a1, b0 = lv * sk / (fx * fy), 0.0, -lv / fy
+    else:
+        a0, a1, b0 = -lv * yd / fx, 0.0, 0.0
+    xd = buf[_XD]
+    M00, M01, M10, M11 = buf[_M00], buf[_M01], buf[_M10], buf[_M11]
+    if sq:
+        q00, q01, q11 = buf[_Q00], buf[_Q01], buf[_Q11]
+        for i in range(W):
+            e = a0 + a1 * xd[i]
+            f0 = M00[i] * e + M01[i] * b0
+            f1 = M10[i] * e + M11[i] * b0
+            q00[i] += f0 * f0
+            q01[i] += f0 * f1
+            q11[i] += f1 * f1
+    else:
+        v0, v1 = buf[_V0], buf[_V1]
+        for i in range(W):
+            e = a0 + a1 * xd[i]
+            v0[i] += M00[i] * e + M01[i] * b0
+            v1[i] += M10[i] * e + M11[i] * b0
+
+
+@nb.njit(**_JIT1)
+def _acc_distortion(k, lv, prm, buf, W, sq):
+    """Distortion coefficient ``k`` (5..12): ``dq = -M d distort / dk`` at ``(x_n, y_n)``."""
+    i8 = k - 5
+    d = prm[5:13]
+    k1, k2, k3 = d[0], d[1], d[4]
+    xn, yn = buf[_XN], buf[_YN]
+    iden_ = buf[_IDEN]  # 1 / (1 + k4 r2 + k5 r2^2 + k6 r2^3) at (x_n, y_n), from the Newton pass
     M00, M01, M10, M11 = buf[_M00], buf[_M01], buf[_M10], buf[_M11]
     v0, v1 = buf[_V0], buf[_V1]
     q00, q01, q11 = buf[_Q00], buf[_Q01], buf[_Q11]
-    if k <= 4:  # intrinsics act on x_d: dq = M dx_d, dx_d = (a0 + a1 x_d, b0)
-        if k == 0:
-            a0, a1, b0 = 0.0, -lv / fx, 0.0
-        elif k == 1:
-            a0, a1, b0 = lv * sk * yd / (fx * fy), 0.0, -lv * yd / fy
-        elif k == 2:
-            a0, a1, b0 = -lv / fx, 0.0, 0.0
-        elif k == 3:
-            a0, a1, b0 = lv * sk / (fx * fy), 0.0, -lv / fy
+    tang = i8 == 2 or i8 == 3
+    n = 1 if (i8 == 0 or i8 == 5) else (2 if (i8 == 1 or i8 == 6) else 3)
+    for i in range(W):
+        x = xn[i]
+        y = yn[i]
+        r2 = x * x + y * y
+        if tang:
+            if i8 == 2:
+                e0 = 2.0 * x * y
+                e1 = r2 + 2.0 * y * y
+            else:
+                e0 = r2 + 2.0 * x * x
+                e1 = 2.0 * x * y
         else:
-            a0, a1, b0 = -lv * yd / fx, 0.0, 0.0
+            rr = r2 if n == 1 else (r2 * r2 if n == 2 else r2 * r2 * r2)
+            idn = iden_[i]
+            if i8 <= 4:
+                dr = rr * idn
+            else:
+                dr = -(1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))) * rr * (idn * idn)
+            e0 = x * dr
+            e1 = y * dr
+        f0 = -lv * (M00[i] * e0 + M01[i] * e1)
+        f1 = -lv * (M10[i] * e0 + M11[i] * e1)
         if sq:
-            for i in range(W):
-                e = a0 + a1 * xd[i]
-                f0 = M00[i] * e + M01[i] * b0
-                f1 = M10[i] * e + M11[i] * b0
-                q00[i] += f0 * f0
-                q01[i] += f0 * f1
-                q11[i] += f1 * f1
+            q00[i] += f0 * f0
+            q01[i] += f0 * f1
+            q11[i] += f1 * f1
         else:
-            for i in range(W):
-                e = a0 + a1 * xd[i]
-                v0[i] += M00[i] * e + M01[i] * b0
-                v1[i] += M10[i] * e + M11[i] * b0
-    elif k <= 12:  # distortion: dq = -M d distort / dk at (x_n, y_n)
-        i8 = k - 5
-        d = prm[5:13]
-        k1, k2, k3 = d[0], d[1], d[4]
-        iden_ = buf[_IDEN]  # 1 / (1 + k4 r2 + k5 r2^2 + k6 r2^3) at (x_n, y_n), from the Newton pass
-        tang = i8 == 2 or i8 == 3
-        n = 1 if (i8 == 0 or i8 == 5) else (2 if (i8 == 1 or i8 == 6) else 3)
+            v0[i] += f0
+            v1[i] += f1
+
+
+@nb.njit(**_JIT1)
+def _acc_rotation(k, lv, om, buf, W, sq, flag):
+    """Rotation generator ``k`` (16..18): ``dq`` = ``omega x q~`` without its component along the ray;
+    with ``flag`` (and not ``sq``) also that component ``z = w0 y_n - w1 x_n`` into ``buf[Z]``."""
+    w0, w1, w2 = lv * om[k - 16, 0], lv * om[k - 16, 1], lv * om[k - 16, 2]
+    xn, yn = buf[_XN], buf[_YN]
+    if sq:
+        q00, q01, q11 = buf[_Q00], buf[_Q01], buf[_Q11]
         for i in range(W):
             x = xn[i]
             y = yn[i]
-            r2 = x * x + y * y
-            if tang:
-                if i8 == 2:
-                    e0 = 2.0 * x * y
-                    e1 = r2 + 2.0 * y * y
-                else:
-                    e0 = r2 + 2.0 * x * x
-                    e1 = 2.0 * x * y
-            else:
-                rr = r2 if n == 1 else (r2 * r2 if n == 2 else r2 * r2 * r2)
-                idn = iden_[i]
-                if i8 <= 4:
-                    dr = rr * idn
-                else:
-                    dr = -(1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))) * rr * (idn * idn)
-                e0 = x * dr
-                e1 = y * dr
-            f0 = -lv * (M00[i] * e0 + M01[i] * e1)
-            f1 = -lv * (M10[i] * e0 + M11[i] * e1)
-            if sq:
-                q00[i] += f0 * f0
-                q01[i] += f0 * f1
-                q11[i] += f1 * f1
-            else:
-                v0[i] += f0
-                v1[i] += f1
-    elif k >= 16 and k <= 18:
-        w0, w1, w2 = lv * om[k - 16, 0], lv * om[k - 16, 1], lv * om[k - 16, 2]
-        if sq:
+            f0 = w1 - w2 * y - w0 * x * y + w1 * x * x
+            f1 = -w0 * (1.0 + y * y) + w2 * x + w1 * x * y
+            q00[i] += f0 * f0
+            q01[i] += f0 * f1
+            q11[i] += f1 * f1
+    else:
+        v0, v1 = buf[_V0], buf[_V1]
+        for i in range(W):
+            x = xn[i]
+            y = yn[i]
+            v0[i] += w1 - w2 * y - w0 * x * y + w1 * x * x
+            v1[i] += -w0 * (1.0 + y * y) + w2 * x + w1 * x * y
+        if flag:
+            zr = buf[_Z]
             for i in range(W):
-                x = xn[i]
-                y = yn[i]
-                f0 = w1 - w2 * y - w0 * x * y + w1 * x * x
-                f1 = -w0 * (1.0 + y * y) + w2 * x + w1 * x * y
-                q00[i] += f0 * f0
-                q01[i] += f0 * f1
-                q11[i] += f1 * f1
-        else:
-            for i in range(W):
-                x = xn[i]
-                y = yn[i]
-                v0[i] += w1 - w2 * y - w0 * x * y + w1 * x * x
-                v1[i] += -w0 * (1.0 + y * y) + w2 * x + w1 * x * y
-            if flag:
-                zr = buf[_Z]
-                for i in range(W):
-                    zr[i] += w0 * yn[i] - w1 * xn[i]
+                zr[i] += w0 * yn[i] - w1 * xn[i]
 
 
 @nb.njit(**_JIT1)
