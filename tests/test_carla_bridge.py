@@ -12,7 +12,8 @@ import warnings
 import numpy as np
 import pytest
 
-from footprint_uq.carla_bridge import (
+from footprint_uq.errors import ConfigError, InputError
+from footprint_uq.integrations.carla.bridge import (
     box_from_carla,
     box_to_carla,
     camera_from_carla,
@@ -27,8 +28,7 @@ from footprint_uq.carla_bridge import (
     scene_to_recording,
     world_to_carla,
 )
-from footprint_uq.errors import ConfigError, InputError
-from footprint_uq.footprints import box3d_bottom_corners
+from footprint_uq.products.footprints import box3d_bottom_corners
 from footprint_uq.scenario import CaseStudyConfig, analyse, build_scene
 
 SIZE = (1920, 1080)
@@ -279,7 +279,7 @@ def test_recording_bad_header(tmp_path):
 
 # -- geometry of the capture command, without a server ---------------------------------------------------------
 def test_capture_camera_poses_match_the_generator():
-    from footprint_uq.cli_carla import camera_poses_for_junction, plan_left_turn_geometry
+    from footprint_uq.cli.carla import camera_poses_for_junction, plan_left_turn_geometry
     from footprint_uq.scenario import Intersection, default_camera_specs
 
     inter = Intersection()
@@ -300,7 +300,7 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
-_RUN = ("import sys; from footprint_uq.cli import main; from footprint_uq.cli_carla import carla; "
+_RUN = ("import sys; from footprint_uq.cli.main import main; from footprint_uq.cli.carla import carla; "
         "main.add_command(carla) if 'carla' not in main.commands else None; main(sys.argv[1:])")
 
 
@@ -328,8 +328,8 @@ def test_capture_fails_fast_without_carla_package(tmp_path):
 def test_export_command_writes_the_generator_scene(tmp_path):
     from click.testing import CliRunner
 
-    from footprint_uq.cli import main
-    from footprint_uq.cli_carla import carla
+    from footprint_uq.cli.carla import carla
+    from footprint_uq.cli.main import main
 
     if "carla" not in main.commands:
         main.add_command(carla)
@@ -456,7 +456,7 @@ class _FakeWorld:
 
 def test_capture_procedure_on_a_scripted_world(tmp_path):
     cm = pytest.importorskip("carla")
-    from footprint_uq.cli_carla import _capture
+    from footprint_uq.cli.carla import _capture
     from footprint_uq.scenario import Intersection, default_camera_specs, left_turn_path
 
     path = left_turn_path(Intersection())

@@ -18,7 +18,7 @@ from footprint_uq.cameras.homography import (
     homography_from_camera,
     load_homography,
 )
-from footprint_uq.cli import main
+from footprint_uq.cli.main import main
 from footprint_uq.errors import ConfigError, InputError
 from footprint_uq.io import load_camera
 

@@ -39,7 +39,7 @@ def test_last_resort_handler(monkeypatch):
     from click.testing import CliRunner
 
     from footprint_uq import cli_core
-    from footprint_uq.cli import EXIT_BUG, main
+    from footprint_uq.cli.main import EXIT_BUG, main
 
     def boom(*a, **k):
         raise ZeroDivisionError("simulated bug")

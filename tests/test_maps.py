@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from footprint_uq import ErrorBudget, InputError, OpenCVCamera, PanTiltCamera, ellipse_axes, propagate, status
-from footprint_uq.maps import UncertaintyMap, ground_sampling_distance, uncertainty_map
+from footprint_uq.products.maps import UncertaintyMap, ground_sampling_distance, uncertainty_map
 
 BUDGET = ErrorBudget.preset("bw-bullet1").replace(ground_height_m=0.05, ground_slope_deg=0.5, roll_deg=0.01)
 
@@ -69,7 +69,7 @@ def test_default_path_equals_reference(cam, cam_cv):
 
 def test_kernel_guard_falls_back_on_disagreement(cam, monkeypatch):
     """A kernel returning wrong numbers is detected, reported and replaced by the reference path."""
-    import footprint_uq.maps as maps_mod
+    import footprint_uq.products.maps as maps_mod
 
     def broken(camera, budget, step_px=1, *, out=None):
         est = propagate(camera, budget, camera.pixel_grid(step_px))
@@ -85,7 +85,7 @@ def test_kernel_guard_falls_back_on_disagreement(cam, monkeypatch):
 
 
 def test_pixel_jacobian_equals_backproject(cam, cam_cv):
-    from footprint_uq.maps import pixel_jacobian
+    from footprint_uq.products.maps import pixel_jacobian
 
     for c in (cam, cam_cv):
         uv = c.pixel_grid(6)

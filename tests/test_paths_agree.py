@@ -21,13 +21,13 @@ from hypothesis import strategies as st
 from footprint_uq import params as P
 from footprint_uq import status
 from footprint_uq.batch import process_table
-from footprint_uq.budget import load_budget
 from footprint_uq.cameras.opencv import OpenCVCamera
 from footprint_uq.cameras.pantilt import PanTiltCamera
 from footprint_uq.cameras.rotation import R_W_C
-from footprint_uq.footprints import FrameProcessor, footprints_from_boxes3d, footprints_from_corners
-from footprint_uq.kernels import covariance_map, covariance_points
-from footprint_uq.propagation import propagate
+from footprint_uq.fast.map_kernels import covariance_map, covariance_points
+from footprint_uq.products.footprints import FrameProcessor, footprints_from_boxes3d, footprints_from_corners
+from footprint_uq.uncertainty.budget import load_budget
+from footprint_uq.uncertainty.propagation import propagate
 
 RTOL = 1e-9
 W_PX, H_PX = 1280, 720

@@ -1,7 +1,7 @@
 """The edge service's per-frame API, its messages and its drop policy (no broker: see test_service_mqtt.py).
 
 * ``Service.process_frame`` gives the numbers of ``FrameProcessor`` and the V2X fields of
-  ``footprint_uq.v2x`` for the centre covariance, in the output record and in the CPM / SDSM;
+  ``footprint_uq.products.v2x`` for the centre covariance, in the output record and in the CPM / SDSM;
 * the CPM's UPER bytes: a hand-derived bit string for a tiny message (pinned), the direct writer
   equal to asn1tools on seeded random messages, and asn1tools decoding back to the JSON;
 * malformed frames give error records naming the field, never an exception;
@@ -21,7 +21,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from footprint_uq import FrameProcessor, PanTiltCamera
-from footprint_uq.footprints import V2X_FIELDS
+from footprint_uq.products.footprints import V2X_FIELDS
+from footprint_uq.products.v2x import J2735_POSITION_CONFIDENCE_NAMES, cpm_fields, j2735_fields
 from footprint_uq.service import Service
 from footprint_uq.service.messages.cpm import (
     build_cpm,
@@ -32,7 +33,6 @@ from footprint_uq.service.messages.cpm import (
 )
 from footprint_uq.service.messages.uper_cpm import encode_cpm_uper_fast
 from footprint_uq.service.runner import FrameQueue
-from footprint_uq.v2x import J2735_POSITION_CONFIDENCE_NAMES, cpm_fields, j2735_fields
 
 pytest.importorskip("asn1tools")
 
@@ -163,7 +163,7 @@ def test_process_frame_matches_frame_processor_and_v2x(camera, service):
     np.testing.assert_allclose(xy[valid], ref.centre_xy_world_m[valid], rtol=1e-12)
     cov = np.array([[[np.nan if v is None else v for v in row] for row in o["cov_m2"]] for o in objs])
     np.testing.assert_allclose(cov[valid], ref.centre_cov_m2[valid], rtol=1e-12)
-    # the V2X fields of the record are footprint_uq.v2x's of the centre covariance
+    # the V2X fields of the record are footprint_uq.products.v2x's of the centre covariance
     fields = {**cpm_fields(ref.centre_cov_m2, HEADING), **j2735_fields(ref.centre_cov_m2, HEADING)}
     for name in V2X_FIELDS:
         assert [o[name] for o in objs] == fields[name].tolist(), name
@@ -368,7 +368,7 @@ def test_serve_bad_options_exit_2_with_one_line(tmp_path, monkeypatch, camera, a
     from click.testing import CliRunner
 
     from footprint_uq import save_camera
-    from footprint_uq.cli import main
+    from footprint_uq.cli.main import main
 
     monkeypatch.chdir(tmp_path)
     save_camera(camera, "cam.yaml")
@@ -410,7 +410,7 @@ def test_uper_writers_equal_asn1tools_over_the_whole_value_ranges(objs, station,
 
 
 def test_linearity_flag_is_the_librarys_nonlinearity(camera):
-    from footprint_uq.propagation import DEFAULT_LINEAR_THRESHOLD, nonlinearity
+    from footprint_uq.uncertainty.propagation import DEFAULT_LINEAR_THRESHOLD, nonlinearity
 
     svc = Service(camera, "basler1", linearity=True)
     boxes = [(900.0, 600.0, 1000.0, 700.0), (300.0, 200.0, 340.0, 260.0), (1500.0, 80.0, 1520.0, 105.0),

@@ -7,7 +7,7 @@ respect to the parameters are ``(..., 2, 22)`` arrays whose last axis follows
 :data:`PARAM_NAMES`.
 
 Units are in the names.  Angles in the vector are radians (the budget file
-speaks degrees; :mod:`footprint_uq.budget` converts).  Three parameters are
+speaks degrees; :mod:`footprint_uq.uncertainty.budget` converts).  Three parameters are
 perturbations with nominal value 0: the ground offset ``ground_dz_m`` and the
 ground slopes ``ground_slope_x``/``ground_slope_y`` (dimensionless gradients
 dz/dx, dz/dy of the ground plane, pivoting about the camera's foot point).

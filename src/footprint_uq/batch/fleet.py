@@ -86,8 +86,8 @@ _REG_KEYS = {"camera_id", "camera", "budget", "heading_offset_deg", "origin_lat_
 
 
 def _entry(rec: dict, where: str, base: Path, default_budget) -> RegistryEntry:
-    from ..budget import load_budget
     from ..io import load_camera
+    from ..uncertainty.budget import load_budget
 
     unknown = set(rec) - _REG_KEYS
     if unknown:

@@ -37,12 +37,12 @@ import pyarrow.compute as pc
 
 from .. import status as st
 from .._checks import as_float
-from ..budget import load_budget
-from ..ellipse import chi2_scale
 from ..errors import InputError
-from ..footprint_kernels import OBJ_ROWS
-from ..footprints import CONTACT_MODES, DEGENERATE, V2X_FIELDS, FrameProcessor
+from ..fast.footprint_kernels import OBJ_ROWS
 from ..io.atomic import atomic_write_text, same_file
+from ..products.footprints import CONTACT_MODES, DEGENERATE, V2X_FIELDS, FrameProcessor
+from ..uncertainty.budget import load_budget
+from ..uncertainty.ellipse import chi2_scale
 from . import schema as S
 
 __all__ = ["BatchProcessor", "process_table", "process_file", "process_chunk", "Summary", "summary_path", "Reasons",
@@ -89,7 +89,7 @@ class Reasons:
 
 
 def _kernel_releases_gil() -> bool:
-    from .. import footprint_kernels as fk
+    from ..fast import footprint_kernels as fk
 
     opts = getattr(fk.process_corners, "targetoptions", {}) or {}
     return bool(opts.get("nogil", False))
@@ -131,7 +131,7 @@ class BatchProcessor:
     box_type : {"2d", "3d", "corners"} or None
         None: detected from the columns of the first table.
     contact : {"bottom-centre", "bottom-corners"}
-        Ground contact of 2D boxes (:func:`footprint_uq.footprints.box2d_contact_points`).
+        Ground contact of 2D boxes (:func:`footprint_uq.products.footprints.box2d_contact_points`).
     confidence : float, optional
         Also write ``semi_major_m``/``semi_minor_m``, the ellipse at this probability (2-D).
     heading_offset_deg : float
@@ -169,7 +169,7 @@ class BatchProcessor:
                              "both the latitude and the longitude of the origin, or neither")
         self.geo = None
         if origin_lat_deg is not None:
-            from ..geo import GeoReference
+            from ..products.geo import GeoReference
 
             self.geo = GeoReference(self.heading_offset_deg, origin_lat_deg, origin_lon_deg)
         self.corners = bool(corners)

@@ -27,8 +27,8 @@ import pyarrow as pa
 import pyarrow.compute as pc
 
 from ..errors import InputError
-from ..footprints import V2X_FIELDS
 from ..io.atomic import clean_temporaries_of, commit, discard, temp_path
+from ..products.footprints import V2X_FIELDS
 
 __all__ = ["AUTO", "is_code_column", "OUT_FORMATS", "detect_out_format", "open_writer", "FootprintWriter",
            "decode_dictionaries", "parquet_options"]

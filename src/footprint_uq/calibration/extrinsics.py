@@ -52,11 +52,11 @@ from pathlib import Path
 import numpy as np
 
 from .. import params as P
-from ..budget import ErrorBudget
 from ..cameras import general
 from ..cameras.opencv import OpenCVCamera
 from ..cameras.rotation import R_W_C, pan_tilt_roll_from_R_W_C
 from ..errors import InputError
+from ..uncertainty.budget import ErrorBudget
 from .boards import Checkerboard, parse_board
 from .lidar import detect_board, fit_ground_plane, ground_frame_from_plane, parse_region, transform_points
 from .pointclouds import PointCloud, read_point_cloud

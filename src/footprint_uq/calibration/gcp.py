@@ -182,7 +182,7 @@ def read_gcp_csv(path, *, pixel_sigma_px: float = 1.0, survey_sigma_m: float = 0
         if origin_lat_deg is not None:
             georef = {"origin_lat_deg": float(origin_lat_deg), "origin_lon_deg": float(origin_lon_deg)}
     else:
-        from ..geo import GeoReference
+        from ..products.geo import GeoReference
 
         lat, lon = a["lat_deg"], a["lon_deg"]
         if np.any(np.abs(lat) > 90) or np.any(np.abs(lon) > 180):
@@ -539,7 +539,7 @@ class GCPSolution:
 
     def budget(self, name: str = "gcp"):
         """The error budget: the full covariance over every parameter with a non-zero variance."""
-        from ..budget import ErrorBudget
+        from ..uncertainty.budget import ErrorBudget
 
         var = np.diagonal(self.cov_params)
         idx = np.flatnonzero(var > 0)
@@ -808,7 +808,7 @@ def run_gcp(points, image_size_px, out_dir, *, intrinsics=None, intrinsics_budge
     if intrinsics_budget is not None:
         if intrinsics is None:
             raise InputError("--intrinsics-budget", str(intrinsics_budget), "--intrinsics too")
-        from ..budget import load_budget
+        from ..uncertainty.budget import load_budget
 
         cov_int = load_budget(intrinsics_budget).param_covariance()[np.ix_(_INT_IDX, _INT_IDX)]
     img = _read_image(image, size) if image is not None else None

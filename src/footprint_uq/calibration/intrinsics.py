@@ -395,7 +395,7 @@ class IntrinsicCalibration:
 
     # -- conversions ----------------------------------------------------------------
     def budget_dict(self, source: str = "opencv", *, full_covariance: bool = False, name: str | None = None) -> dict:
-        """The intrinsic part of a budget file (keys of :mod:`footprint_uq.budget`)."""
+        """The intrinsic part of a budget file (keys of :mod:`footprint_uq.uncertainty.budget`)."""
         s = self.std(source)
         d = {
             "name": name or f"calibrated-{source}",
@@ -418,8 +418,8 @@ class IntrinsicCalibration:
         return d
 
     def to_budget(self, source: str = "opencv", *, full_covariance: bool = False, name: str | None = None):
-        """An :class:`footprint_uq.budget.ErrorBudget` with the intrinsic error sizes (others zero)."""
-        from ..budget import ErrorBudget
+        """An :class:`footprint_uq.uncertainty.budget.ErrorBudget` with the intrinsic error sizes (others zero)."""
+        from ..uncertainty.budget import ErrorBudget
 
         return ErrorBudget.from_dict(self.budget_dict(source, full_covariance=full_covariance, name=name))
 

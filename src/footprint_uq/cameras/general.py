@@ -2,7 +2,7 @@
 
 This is the reference path for both camera models: pixel -> normalised
 (:mod:`.pinhole`) -> undistorted (:mod:`.distortion`) -> ray in the world
-(:mod:`.rotation`) -> ground intersection (:mod:`footprint_uq.ground`).  The
+(:mod:`.rotation`) -> ground intersection (:mod:`footprint_uq.cameras.ground`).  The
 paper's closed form (:mod:`.pantilt`) must agree with it for zero distortion.
 
 All functions broadcast: ``params`` is ``(..., 22)`` (see
@@ -17,8 +17,8 @@ import numpy as np
 
 from .. import params as P
 from .. import status
-from ..ground import intersect_ground
 from .distortion import distort, in_principal_region, undistort
+from .ground import intersect_ground
 from .pinhole import normalised_to_pixel, pixel_to_normalised
 from .rotation import R_W_C, dR_W_C
 

@@ -272,7 +272,7 @@ class PanTiltCamera(Camera):
         (see :func:`closed_form_backproject`).  ``dxy_dp`` has all 22 columns of
         :data:`~footprint_uq.params.PARAM_NAMES`: fx and fy separately (the focal
         budget moves both together), distortion derivatives at zero nominal
-        distortion, ground columns as in :mod:`footprint_uq.ground`.  If the
+        distortion, ground columns as in :mod:`footprint_uq.cameras.ground`.  If the
         parameter vector has been given non-zero nominal distortion or ground
         perturbations, the general path is used.  :meth:`backproject_with`
         (Monte Carlo, finite differences) always uses the general path.

@@ -355,9 +355,9 @@ def save_camera(camera: Camera, path) -> Path:
 def save_budget(budget, path) -> Path:
     """Write an error budget (an ErrorBudget, a preset name or a budget mapping) as YAML or JSON.
 
-    Read it back with :func:`footprint_uq.budget.load_budget`.  Returns the path written.
+    Read it back with :func:`footprint_uq.uncertainty.budget.load_budget`.  Returns the path written.
     """
-    from ..budget import load_budget
+    from ..uncertainty.budget import load_budget
 
     return _write_mapping(load_budget(budget).to_dict(), path,
                           "footprint-uq error budget: 1-sigma values, units in the key names (docs/file-formats.md)")

@@ -22,9 +22,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import presets
-from ..budget import ErrorBudget
-from ..ellipse import ellipse_axes
+from ..uncertainty import presets
+from ..uncertainty.budget import ErrorBudget
+from ..uncertainty.ellipse import ellipse_axes
 from . import claims as C
 
 __all__ = ["reproduction_data", "render_markdown", "write_paper_reproduction"]
@@ -118,7 +118,7 @@ def _height_share(result) -> dict:
 
 def _readme_mc() -> list[dict]:
     """Linear / Monte-Carlo sigma_major along the boresight's azimuth, at 50-200 m, for each camera."""
-    from ..propagation import monte_carlo, propagate
+    from ..uncertainty.propagation import monte_carlo, propagate
 
     rows = []
     for name, cam in _cameras().items():

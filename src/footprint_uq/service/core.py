@@ -30,11 +30,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..batch import schema as S
-from ..ellipse import chi2_scale, ellipse_axes
 from ..errors import FootprintUQError, InputError
-from ..footprints import CONTACT_MODES, V2X_FIELDS, FrameProcessor
-from ..geo import GeoReference
-from ..v2x import J2735_POSITION_CONFIDENCE_NAMES
+from ..products.footprints import CONTACT_MODES, V2X_FIELDS, FrameProcessor
+from ..products.geo import GeoReference
+from ..products.v2x import J2735_POSITION_CONFIDENCE_NAMES
+from ..uncertainty.ellipse import chi2_scale, ellipse_axes
 from .messages.cpm import (
     CONFIDENCE_LEVEL_UNAVAILABLE,
     CPM_CLASSES,
@@ -132,7 +132,7 @@ class Service:
     contact : {"bottom-centre", "bottom-corners"}
         Ground contact of 2D boxes.
     allow_outside_image : bool
-        See :func:`footprint_uq.footprints.footprints_from_corners`.
+        See :func:`footprint_uq.products.footprints.footprints_from_corners`.
     station_id : int, optional
         StationId of the messages (one camera); default :func:`station_id_of` of the camera id.
     messages : bool
@@ -145,11 +145,11 @@ class Service:
     linearity : bool
         Add per object ``nonlinearity`` -- the largest predicted relative error of the linear
         1-sigma semi-major axis over its usable ground-contact points
-        (:func:`footprint_uq.propagation.nonlinearity`; for 2D boxes with the bottom-centre contact
+        (:func:`footprint_uq.uncertainty.propagation.nonlinearity`; for 2D boxes with the bottom-centre contact
         that point is the centre itself) -- and ``linear_ok`` (``nonlinearity <= linear_threshold``).
         Off by default: it costs about 1.7 ms per 100 points (numpy), more than the rest of a frame.
     linear_threshold : float, optional
-        Threshold of ``linear_ok`` (default :data:`footprint_uq.propagation.DEFAULT_LINEAR_THRESHOLD`).
+        Threshold of ``linear_ok`` (default :data:`footprint_uq.uncertainty.propagation.DEFAULT_LINEAR_THRESHOLD`).
     warm_up : bool
         Run each camera once on a dummy frame so that the compiled kernels are loaded
         before the first real frame (default True).
@@ -200,7 +200,7 @@ class Service:
         self._single = camera is not None
         self._omitted = 0
         self._pixel_cov = None
-        from ..propagation import DEFAULT_LINEAR_THRESHOLD
+        from ..uncertainty.propagation import DEFAULT_LINEAR_THRESHOLD
 
         self.linearity = bool(linearity)
         self.linear_threshold = DEFAULT_LINEAR_THRESHOLD if linear_threshold is None else float(linear_threshold)
@@ -372,9 +372,9 @@ class Service:
 
     def _linearity(self, setup: CameraSetup, est):
         """Per object: the largest predicted relative error of the linear 1-sigma semi-major axis over its
-        usable ground-contact points (:func:`footprint_uq.propagation.nonlinearity`, with the detector's
+        usable ground-contact points (:func:`footprint_uq.uncertainty.propagation.nonlinearity`, with the detector's
         pixel covariance) and ``linear_ok`` = that <= the threshold (False where nothing is usable)."""
-        from ..propagation import nonlinearity
+        from ..uncertainty.propagation import nonlinearity
 
         uv = est.corners_px
         N, K = uv.shape[:2]

@@ -30,11 +30,11 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.patches import Polygon
 
-from ..ellipse import chi2_scale, ellipse_points
 from ..io.atomic import atomic_path, atomic_write_text, path_component
 from ..scenario.case_study import AXIS_SYSTEMS, camera_type_label, footprint_heatmap
 from ..scenario.intersection import RoadLayout
 from ..scenario.trajectory import box_corners
+from ..uncertainty.ellipse import chi2_scale, ellipse_points
 
 __all__ = ["plot_camera_views", "plot_birdseye", "plot_sigma_profiles", "plot_contributions", "plot_heatmaps",
            "case_study_figures", "write_case_study_report", "TYPE_COLOURS"]
@@ -697,7 +697,7 @@ def write_case_study_report(result, out_dir, *, settings: dict | None = None, el
              f"{len(scene)} frames; lane width {scene.layout.lane_width_m:g} m. Ellipses and the "
              f"<code>*_95</code> numbers are 2-D {100 * result.confidence:g} % regions "
              f"({chi2_scale(result.confidence):.4g} σ). All numbers are first-order propagation "
-             f"(<code>footprint_uq.footprints.footprints_from_boxes3d</code>).</p>"]
+             f"(<code>footprint_uq.products.footprints.footprints_from_boxes3d</code>).</p>"]
     parts.append(_claims_html(claims, esc, reproduction_link))
     parts.append(_findings_html(result, esc).replace("&nbsp;", " "))
     parts.append("<h2>Summary per camera and camera type</h2>")

@@ -1,4 +1,4 @@
-"""Figures of :class:`~footprint_uq.maps.UncertaintyMap`: in the image, on the ground, GSD.
+"""Figures of :class:`~footprint_uq.products.maps.UncertaintyMap`: in the image, on the ground, GSD.
 
 * :func:`plot_image_map`: the per-pixel semi-major axis of the ground-position
   ellipse, drawn over the image frame (log colour scale, labelled contours,
@@ -24,8 +24,8 @@ from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
 
 from .. import params as P
 from .. import status
-from ..ellipse import chi2_scale
-from ..propagation import propagate
+from ..uncertainty.ellipse import chi2_scale
+from ..uncertainty.propagation import propagate
 
 __all__ = ["DEFAULT_LEVELS_M", "GSD_LEVELS_M", "plot_image_map", "plot_ground_map", "plot_gsd_maps",
            "plot_range_profile", "save_figure"]
@@ -224,7 +224,7 @@ def _ground_grid_values(umap, extent, n_cells, confidence):
     inside = pr.valid & cam.in_image(pr.uv_px)
     uv = np.where(inside[..., None], pr.uv_px, np.nan)
     est = propagate(cam, umap.budget, uv)
-    from ..ellipse import ellipse_axes
+    from ..uncertainty.ellipse import ellipse_axes
 
     a = ellipse_axes(est.cov_m2, confidence=confidence)[0]
     ok = inside & est.valid
@@ -259,7 +259,7 @@ def plot_ground_map(umap, *, confidence: float | None = None, levels_m=DEFAULT_L
     """Bird's-eye heat map of the semi-major axis on the ground (x east, y north, metres).
 
     Each ground cell is projected into the image and propagated exactly
-    (:func:`footprint_uq.propagation.propagate`); cells outside the image, above
+    (:func:`footprint_uq.uncertainty.propagation.propagate`); cells outside the image, above
     the horizon or beyond ``umap.max_range_m`` are left blank.
 
     Parameters
@@ -334,7 +334,7 @@ def plot_gsd_maps(umap, *, levels_m=GSD_LEVELS_M, vmin_m=None, vmax_m=None, titl
     """Two image-frame panels: ground sampling distance along the line of sight and across it.
 
     Both panels share one log colour scale, metres per pixel (see
-    :mod:`footprint_uq.maps` for the definition).
+    :mod:`footprint_uq.products.maps` for the definition).
     """
     vals = np.concatenate([umap.gsd_range_m[umap.valid], umap.gsd_cross_m[umap.valid]])
     norm = _lognorm(vals, vmin_m, vmax_m)

@@ -3,7 +3,7 @@
 Reads the per-camera footprint outputs of ``footprint-uq objects`` (or
 :func:`footprint_uq.batch.process_table`), associates the estimates of the same
 object by a key (default ``frame, object_id``), fuses the footprint centres by
-covariance weighting in information form (:func:`footprint_uq.fusion.fuse_by_id`)
+covariance weighting in information form (:func:`footprint_uq.products.fusion.fuse_by_id`)
 and writes one row per (frame, object) with the fused centre, its covariance,
 ellipse, the number of cameras used, the consistency test and the CPM/J2735
 fields of the fused covariance, plus one row per input row (the *sources*)
@@ -45,12 +45,12 @@ from pathlib import Path
 import numpy as np
 import pyarrow as pa
 
-from ._checks import as_float
-from .ellipse import ellipse_axes
-from .errors import InputError
-from .footprints import V2X_FIELDS
-from .fusion import chi2_threshold, fuse_by_id
-from .v2x import cpm_fields, j2735_fields
+from .._checks import as_float
+from ..errors import InputError
+from ..products.footprints import V2X_FIELDS
+from ..products.fusion import chi2_threshold, fuse_by_id
+from ..products.v2x import cpm_fields, j2735_fields
+from ..uncertainty.ellipse import ellipse_axes
 
 __all__ = ["DEFAULT_KEY", "ESTIMATE_COLUMNS", "CAMERA_ID_FROM", "FuseSummary", "FusedFootprints", "fuse_footprints",
            "fuse_files", "sources_path", "summary_path"]
@@ -176,7 +176,7 @@ def _check_columns(names, key, need_camera: bool, where: str) -> None:
 
 def _normalise(table: pa.Table, key, pre: list) -> pa.Table:
     """Keys -> their types, camera_id/status/reason -> text, numbers -> float64 (conversion errors into ``pre``)."""
-    from .batch.readers import coerce_table
+    from .readers import coerce_table
 
     numeric = tuple(c for c in ESTIMATE_COLUMNS + ("row",) if c in table.column_names)
     id_types = {k: _key_type(k) for k in key}
@@ -197,7 +197,7 @@ def _read_footprints(path, *, key=DEFAULT_KEY, camera_id_from: str = "filename",
     Unparseable lines and values that do not convert are kept with their reason
     (they become rejected rows), row numbers as in ``docs/batch.md`` ("Row numbers").
     """
-    from .batch.readers import open_detections
+    from .readers import open_detections
 
     p = Path(path)
     if not p.is_file():
@@ -641,9 +641,9 @@ def fuse_files(inputs, out, *, camera_id_from: str | None = None, key=DEFAULT_KE
     FuseSummary
         Also written to :func:`summary_path` of ``out`` (``<out>.summary.json``).
     """
-    from .batch.readers import open_detections
-    from .batch.writers import detect_out_format, open_writer
-    from .io.atomic import atomic_write_text, same_file
+    from ..io.atomic import atomic_write_text, same_file
+    from .readers import open_detections
+    from .writers import detect_out_format, open_writer
 
     t0 = time.perf_counter()
     key = _check_options(key, confidence, ellipse_confidence, heading_offset_deg)

@@ -1,4 +1,4 @@
-"""Fused numba kernels for :class:`footprint_uq.footprints.FrameProcessor`.
+"""Fused numba kernels for :class:`footprint_uq.products.footprints.FrameProcessor`.
 
 One call processes a frame (or a batch chunk).  Objects go through in chunks of
 ``_M_TARGET // K`` (16 boxes of 4 corners), corner-major (column ``k * nob + i`` is corner
@@ -17,7 +17,7 @@ corners or objects:
 * :func:`_stage_corner_flags`, :func:`_stage_centroid` -- status per corner (outside the
   image, 3D projection), area centroid and its closed-form Jacobian;
 * :func:`_stage_whiten` -- ``J L`` with the sparse factor ``L L^T`` of the 22x22 parameter
-  covariance (:meth:`footprint_uq.budget.ErrorBudget.param_factor`; only non-zero entries are
+  covariance (:meth:`footprint_uq.uncertainty.budget.ErrorBudget.param_factor`; only non-zero entries are
   touched): the parameter part of every corner's and of the centre's covariance;
 * :func:`_stage_corner_cov`, :func:`_stage_select`, :func:`_stage_centre_cov` -- per-point
   pixel noise (budget + detector), the largest point;
@@ -26,7 +26,7 @@ corners or objects:
 libm calls (cos/sin, ``atan2``, ``hypot``) run in loops of their own; rows chosen at run
 time are indexed with unsigned offsets.  Outputs go to arrays the caller allocates
 (:func:`alloc_outputs`); the per-object numbers are contiguous rows (:data:`OBJ_ROWS`).
-The numpy reference is :func:`footprint_uq.footprints.footprints_from_corners`; the tests
+The numpy reference is :func:`footprint_uq.products.footprints.footprints_from_corners`; the tests
 hold the two to 1e-9 relative and the V2X fields equal.
 
 Camera constants travel in one named structure ``cam`` (:class:`KernelCamera`) and
@@ -42,14 +42,15 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from . import params as P
-from . import status, v2x
-from .cameras.rotation import R_W_C, dR_W_C
-from .fast import core
+from .. import params as P
+from .. import status
+from ..cameras.rotation import R_W_C, dR_W_C
+from ..products import v2x
+from . import core
 
 
 class KernelCamera(NamedTuple):
-    """Camera constants the kernels read (one per :class:`~footprint_uq.footprints.FrameProcessor`).
+    """Camera constants the kernels read (one per :class:`~footprint_uq.products.footprints.FrameProcessor`).
 
     Numba passes it by value as a struct; fields are read by name (``cam.fx``).  Units as in
     :data:`footprint_uq.params.PARAM_NAMES`; ``R`` is ``R_W_C`` row-major (9,); ``dom`` the packed
@@ -78,7 +79,7 @@ class KernelCamera(NamedTuple):
     dom: np.ndarray
 
 
-# status codes (footprint_uq.status) and the constants of the V2X fields (footprint_uq.v2x), frozen at compile time
+# status codes (footprint_uq.status) and the V2X constants (footprint_uq.products.v2x), frozen at compile time
 _OK, _ABOVE, _NOTFIN, _UNDIST = status.OK, status.ABOVE_HORIZON, status.NOT_FINITE, status.UNDISTORT_FAILED
 _OUTSIDE, _BEHIND, _DEGENERATE = status.OUTSIDE_IMAGE, status.BEHIND_CAMERA, status.DEGENERATE
 _Z95, _K95_2D, _GUARD, _CIRC = v2x.Z95_1D, v2x.K95_2D, v2x.STEP_GUARD, v2x.CIRCULAR_RTOL
@@ -393,8 +394,8 @@ def _heading(c00, c01, c11, ch, sh, rot):
 @njit(cache=True, error_model="numpy", nogil=True)
 def _stage_v2x(S, nob, ch, sh, out, n0, obj):
     """CPM and J2735 integer fields of the centre covariances (rows E00, E01, E11; NaN: unavailable)
-    into ``out[:, n0 + i]`` (7, N) -- the mirror of :mod:`footprint_uq.v2x` -- and the 1-sigma
-    ellipse (:func:`footprint_uq.ellipse.ellipse_axes`) into the rows SMAJ, SMIN, ORI of ``obj``
+    into ``out[:, n0 + i]`` (7, N) -- the mirror of :mod:`footprint_uq.products.v2x` -- and the 1-sigma
+    ellipse (:func:`footprint_uq.uncertainty.ellipse.ellipse_axes`) into the rows SMAJ, SMIN, ORI of ``obj``
     (if it has N columns).
 
     The libm ``atan2`` runs in a loop of its own and the fields are formed in scratch rows (one
@@ -768,7 +769,7 @@ def process_corners(uv, extra_reason, boxes, yaw_deg, bottom_on_ground, cam, dR,
     extra_reason : (N, K) int8 codes overriding OK, or shape (0, 0)
     boxes, yaw_deg, bottom_on_ground : 3D boxes (N, 7) whose bottom corners are the corners (then
         ``uv`` (N, 4, 2) receives their pixels, or has 0 rows), or shape (0, 7) (corners from ``uv``)
-    Lr, Lc, Lv, r : sparse factor of the parameter covariance (:func:`footprint_uq.budget.psd_factor`)
+    Lr, Lc, Lv, r : sparse factor of the parameter covariance (:func:`footprint_uq.uncertainty.budget.psd_factor`)
     spx : (2, 2) budget pixel covariance;  det : 4-D detector covariance with det_mode
         0 none (any 4-D array), 1 (N, 1, 2, 2) per detection, 2 (N, K, 2, 2) per corner,
         3 (N, 1, 2K, 2K) full
@@ -971,7 +972,7 @@ def _stage_project(S, boxes, n0, nob, cam, yaw_deg, bottom_on_ground):
     fold; NaN pixels unless OK); rows XD, YD are used as scratch.
 
     The arithmetic of :func:`footprint_uq.cameras.general.project` and of
-    :func:`footprint_uq.footprints.box3d_bottom_corners`, branch-free; the boxes are first copied
+    :func:`footprint_uq.products.footprints.box3d_bottom_corners`, branch-free; the boxes are first copied
     into scratch rows and the yaw's cos/sin (libm calls) run in a loop of their own, so the
     projection loop vectorises.
     """

@@ -1,7 +1,7 @@
 """CARLA interoperability: coordinate conventions, cameras, 3-D boxes and recordings.
 
 Pure numpy: nothing here imports ``carla`` (the tests compare against the real package
-where it is installed; :mod:`footprint_uq.cli_carla` uses it to capture).
+where it is installed; :mod:`footprint_uq.cli.carla` uses it to capture).
 
 Conventions
 -----------
@@ -44,11 +44,11 @@ from pathlib import Path
 
 import numpy as np
 
-from ._checks import as_float, as_points
-from .cameras.pantilt import PanTiltCamera
-from .cameras.rotation import pan_tilt_roll_from_R_W_C
-from .errors import ConfigError, InputError
-from .io.atomic import atomic_path
+from ..._checks import as_float, as_points
+from ...cameras.pantilt import PanTiltCamera
+from ...cameras.rotation import pan_tilt_roll_from_R_W_C
+from ...errors import ConfigError, InputError
+from ...io.atomic import atomic_path
 
 __all__ = [
     "S_WORLD_CARLA", "A_LOCAL_CV", "RECORDING_FORMAT", "RECORDING_VERSION", "carla_rotation_matrix",
@@ -329,9 +329,9 @@ def read_recording(path, *, actor_id: int | None = None, ground_z_m: float | Non
     naming its line number and skipped; a malformed header, camera or road record raises
     :class:`~footprint_uq.errors.ConfigError`.
     """
-    from .scenario.case_study import Scene
-    from .scenario.intersection import Marking, RoadLayout
-    from .scenario.trajectory import segment_labels
+    from ...scenario.case_study import Scene
+    from ...scenario.intersection import Marking, RoadLayout
+    from ...scenario.trajectory import segment_labels
 
     p = Path(path)
     if not p.exists():

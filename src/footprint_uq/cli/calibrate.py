@@ -5,7 +5,7 @@ To add one (e.g. ``extrinsics``): define a ``click.Command`` in its own module,
 keeping heavy imports inside the function so that ``footprint-uq --help`` stays
 fast, and register it at the bottom of this file with one
 ``calibrate.add_command(cmd)`` line.  The group itself is registered in
-:mod:`footprint_uq.cli` with ``main.add_command(calibrate)``.
+:mod:`footprint_uq.cli.main` with ``main.add_command(calibrate)``.
 
 Bad input raises :class:`footprint_uq.errors.InputError`; the top-level group
 turns it into a one-line message and exit status 2.  Frame-level problems
@@ -18,7 +18,7 @@ from __future__ import annotations
 import click
 import numpy as np
 
-from .errors import InputError
+from ..errors import InputError
 
 __all__ = ["calibrate", "intrinsics_cmd", "run_intrinsics", "synthetic_cmd"]
 
@@ -29,7 +29,7 @@ def calibrate():
 
 
 def _board_option(spec: str) -> str:
-    from .calibration.boards import parse_board
+    from ..calibration.boards import parse_board
 
     parse_board(spec)  # raises InputError naming the field
     return spec
@@ -48,9 +48,9 @@ def run_intrinsics(images, board: str, square_m: float, out_dir, *, max_mean_rep
     import os
     from pathlib import Path
 
-    from .calibration.boards import parse_board
-    from .calibration.detect import detect_frames
-    from .calibration.intrinsics import calibrate_detections, write_frames_csv
+    from ..calibration.boards import parse_board
+    from ..calibration.detect import detect_frames
+    from ..calibration.intrinsics import calibrate_detections, write_frames_csv
 
     echo = echo or (lambda msg: None)
     b = parse_board(board, square_m)
@@ -141,12 +141,12 @@ def intrinsics_cmd(images, board, square_m, out_dir, max_mean_reproj_px, bootstr
 
 
 def _synthetic_camera(camera_file, scale):
-    from .calibration.synthetic import DEFAULT_CAMERA, SyntheticCamera
+    from ..calibration.synthetic import DEFAULT_CAMERA, SyntheticCamera
 
     if camera_file is None:
         cam = DEFAULT_CAMERA
     else:
-        from .io import load_intrinsics
+        from ..io import load_intrinsics
 
         K, dist, size = load_intrinsics(camera_file)
         if size is None:
@@ -204,9 +204,9 @@ def synthetic_cmd(out_dir, views, board, square_m, margin_m, camera_file, scale,
     import json
     from pathlib import Path
 
-    from .calibration.boards import parse_board
-    from .calibration.intrinsics import PAPER_COLUMNS, _jsonable
-    from .calibration.synthetic import simulate_campaigns, write_campaign
+    from ..calibration.boards import parse_board
+    from ..calibration.intrinsics import PAPER_COLUMNS, _jsonable
+    from ..calibration.synthetic import simulate_campaigns, write_campaign
 
     b = parse_board(board, square_m, margin_m)
     cam = _synthetic_camera(camera_file, scale)
@@ -223,7 +223,7 @@ def synthetic_cmd(out_dir, views, board, square_m, margin_m, camera_file, scale,
             raise InputError("--plan", campaigns, "at least 2 campaigns")
         r = simulate_campaigns(cam, b, views, corner_noise_px=corner_noise_px, n_campaigns=campaigns,
                                bootstrap=plan_bootstrap, seed=seed, pose_kw=pose_kw)
-        from .io.atomic import atomic_write_text
+        from ..io.atomic import atomic_write_text
 
         atomic_write_text(out / "plan.json", json.dumps(_jsonable(r), indent=2))
         click.echo(f"planning study: {views} views, corner noise {corner_noise_px:g} px, {campaigns} campaigns")

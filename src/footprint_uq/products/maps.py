@@ -42,14 +42,14 @@ from pathlib import Path
 
 import numpy as np
 
-from . import params as P
-from . import status
-from ._checks import as_float
-from .budget import ErrorBudget, load_budget
-from .ellipse import chi2_scale, ellipse_axes
-from .errors import InputError
-from .io.atomic import atomic_path
-from .propagation import propagate
+from .. import params as P
+from .. import status
+from .._checks import as_float
+from ..errors import InputError
+from ..io.atomic import atomic_path
+from ..uncertainty.budget import ErrorBudget, load_budget
+from ..uncertainty.ellipse import chi2_scale, ellipse_axes
+from ..uncertainty.propagation import propagate
 
 __all__ = ["UncertaintyMap", "uncertainty_map", "ground_sampling_distance", "pixel_jacobian", "GSD_DEFINITION"]
 
@@ -218,7 +218,7 @@ class UncertaintyMap:
             meta = json.loads(str(z["metadata_json"])) if "metadata_json" in z.files else {}
         camera = None
         if meta.get("camera"):
-            from .io import camera_from_dict
+            from ..io import camera_from_dict
 
             camera = camera_from_dict(meta["camera"], where=str(path))
         budget = ErrorBudget.from_dict(meta["budget"]) if meta.get("budget") else None
@@ -230,7 +230,7 @@ def _camera_dict(camera):
     """The camera-file mapping (exact round trip through :func:`footprint_uq.io.camera_from_dict`)."""
     if camera is None:
         return None
-    from .io import camera_to_dict
+    from ..io import camera_to_dict
 
     return camera_to_dict(camera)
 
@@ -293,10 +293,10 @@ def pixel_jacobian(camera, uv_px, *, full: bool = False):
     the point is invalid.  With ``full``, returns ``(xy_world_m, dxy_duv, valid,
     reason)`` (the back-projection itself from the same single undistortion).
     """
-    from .cameras.distortion import undistort
-    from .cameras.general import _reason
-    from .cameras.pinhole import pixel_to_normalised
-    from .ground import intersect_ground
+    from ..cameras.distortion import undistort
+    from ..cameras.general import _reason
+    from ..cameras.ground import intersect_ground
+    from ..cameras.pinhole import pixel_to_normalised
 
     p = camera.params
     uv = np.asarray(uv_px, dtype=np.float64)
@@ -358,9 +358,9 @@ def _kernel_disagreement(camera, budget, uv, xy, cov, valid, xy_ref, valid_ref, 
 
 
 def _covariance_map_kernel():
-    """``footprint_uq.kernels.covariance_map`` if available, else None."""
+    """``footprint_uq.fast.map_kernels.covariance_map`` if available, else None."""
     try:
-        from .kernels import covariance_map
+        from ..fast.map_kernels import covariance_map
     except ImportError:
         return None
     return covariance_map
@@ -375,7 +375,7 @@ def uncertainty_map(camera, budget, step_px: int = 1, *, max_range_m: float | No
     camera : Camera
         :class:`~footprint_uq.PanTiltCamera` or :class:`~footprint_uq.OpenCVCamera`.
     budget : ErrorBudget, preset name, path or mapping
-        Error budget (:func:`footprint_uq.budget.load_budget`).
+        Error budget (:func:`footprint_uq.uncertainty.budget.load_budget`).
     step_px : int
         Grid step; the grid is ``camera.pixel_grid(step_px)`` (pixel centres 0, step, 2 step, ...).
     max_range_m : float, optional
@@ -383,8 +383,8 @@ def uncertainty_map(camera, budget, step_px: int = 1, *, max_range_m: float | No
         (reason :data:`footprint_uq.status.BEYOND_RANGE`).  Near the horizon the
         ground range grows without bound; this keeps maps and figures readable.
     use_kernel : bool
-        Use the fused ``footprint_uq.kernels.covariance_map`` when it is available;
-        False forces the reference path (:func:`footprint_uq.propagation.propagate`).
+        Use the fused ``footprint_uq.fast.map_kernels.covariance_map`` when it is available;
+        False forces the reference path (:func:`footprint_uq.uncertainty.propagation.propagate`).
 
     Returns
     -------
@@ -436,8 +436,8 @@ def uncertainty_map(camera, budget, step_px: int = 1, *, max_range_m: float | No
         problem = _kernel_disagreement(camera, budget, flat, xy, cov, valid, xy_ref, reason == status.OK,
                                        gsd_r + gsd_c)
         if problem:
-            warnings.warn(f"footprint_uq.kernels.covariance_map disagrees with the reference path ({problem}); "
-                          "using footprint_uq.propagation.propagate for this map", RuntimeWarning, stacklevel=2)
+            warnings.warn(f"fast.map_kernels.covariance_map disagrees with the reference path ({problem}); "
+                          "using uncertainty.propagation.propagate for this map", RuntimeWarning, stacklevel=2)
             for s in range(0, n, _BLOCK_PX):
                 blk = slice(s, min(n, s + _BLOCK_PX))
                 est = propagate(camera, budget, flat[blk])

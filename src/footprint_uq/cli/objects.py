@@ -13,9 +13,9 @@ from __future__ import annotations
 
 import click
 
-from .batch.schema import DEFAULT_CHUNK_ROWS
-from .footprints import CONTACT_MODES
-from .presets import PRESET_NAMES
+from ..batch.schema import DEFAULT_CHUNK_ROWS
+from ..products.footprints import CONTACT_MODES
+from ..uncertainty.presets import PRESET_NAMES
 
 __all__ = ["objects_cmd"]
 
@@ -67,7 +67,7 @@ def objects_cmd(camera_path, budget_spec, detections, out, box_type, contact, ch
     Every input row gives one output row with its 0-based row number, a status (ok,
     partial, error) and a reason; a summary goes to stderr and to OUT.summary.json.
     """
-    from .errors import InputError
+    from ..errors import InputError
 
     options = dict(box_type=box_type, contact=contact, confidence=confidence, heading_offset_deg=heading_offset_deg,
                    origin_lat_deg=origin_lat, origin_lon_deg=origin_lon, corners=corners,
@@ -76,7 +76,7 @@ def objects_cmd(camera_path, budget_spec, detections, out, box_type, contact, ch
     if registry is not None:
         if camera_path is not None:
             raise InputError("--camera", camera_path, "no --camera with --registry (the registry names the cameras)")
-        from .batch.fleet import process_fleet
+        from ..batch.fleet import process_fleet
 
         summ = process_fleet(registry, detections, out, budget=budget_spec, scheduler=scheduler, workers=workers,
                              retries=retries, chunk_rows=chunk_rows, progress=None if not quiet else False,
@@ -87,9 +87,9 @@ def objects_cmd(camera_path, budget_spec, detections, out, box_type, contact, ch
                              "--registry too: Dask runs the fleet mode (a dataset of many cameras)")
         if camera_path is None or budget_spec is None:
             raise InputError("--camera/--budget", (camera_path, budget_spec), "both a camera file and a budget")
-        from .batch.process import process_file
-        from .budget import load_budget
-        from .io import load_camera
+        from ..batch.process import process_file
+        from ..io import load_camera
+        from ..uncertainty.budget import load_budget
 
         cam = load_camera(camera_path)
         bud = load_budget(budget_spec)

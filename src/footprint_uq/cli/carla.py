@@ -139,7 +139,7 @@ def capture(host, port, out_file, timeout_s, map_name, fps, speed_mps, lead_in_m
 
 
 def _capture(cm, world, out_file, *, fps, speed_mps, lead_in_m, lead_out_m, vehicle_filter, images_dir):
-    from .carla_bridge import write_recording
+    from ..integrations.carla.bridge import write_recording
 
     cmap = world.get_map()
     # a left-turn connection inside a junction, with room before and after
@@ -272,7 +272,7 @@ def _capture(cm, world, out_file, *, fps, speed_mps, lead_in_m, lead_out_m, vehi
 
 def _road_layout(cmap, centre_xy, *, radius_m, junction_box):
     """Lane strips (polygons) and lane edges (markings) near the junction, in W (for drawing)."""
-    from .scenario.intersection import Marking, RoadLayout
+    from ..scenario.intersection import Marking, RoadLayout
 
     c = np.asarray(centre_xy, dtype=float)
     groups: dict = {}
@@ -308,8 +308,8 @@ def _road_layout(cmap, centre_xy, *, radius_m, junction_box):
               help="Scenario settings (docs/case-study.md); default: the paper-like set-up.")
 def export(out_file, config):
     """Write our generated left-turn scenario as a recording (CARLA coordinates)."""
-    from .carla_bridge import scene_to_recording
-    from .scenario.case_study import CaseStudyConfig, build_scene, load_config
+    from ..integrations.carla.bridge import scene_to_recording
+    from ..scenario.case_study import CaseStudyConfig, build_scene, load_config
 
     cfg = load_config(config) if config else CaseStudyConfig()
     scene = build_scene(cfg)

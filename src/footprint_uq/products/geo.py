@@ -28,10 +28,10 @@ from pathlib import Path
 
 import numpy as np
 
-from . import status
-from ._checks import as_float, as_points
-from .ellipse import ellipse_axes
-from .errors import InputError
+from .. import status
+from .._checks import as_float, as_points
+from ..errors import InputError
+from ..uncertainty.ellipse import ellipse_axes
 from .v2x import cpm_fields, j2735_fields, rotate_to_true_north
 
 __all__ = ["GeoReference", "footprints_geojson", "write_geojson"]
@@ -219,7 +219,7 @@ def footprints_geojson(estimate, georef: GeoReference, *, object_ids=None, prope
 def write_geojson(path, feature_collection: dict) -> Path:
     """Write a FeatureCollection (``allow_nan=False``: missing numbers are already ``null``)."""
     p = Path(path)
-    from .io.atomic import atomic_write_text
+    from ..io.atomic import atomic_write_text
 
     atomic_write_text(p, json.dumps(feature_collection, allow_nan=False, indent=1))
     return p

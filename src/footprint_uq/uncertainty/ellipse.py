@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._checks import as_float
+from .._checks import as_float
 
 __all__ = ["chi2_scale", "ellipse_axes", "ellipse_points", "heading_deg"]
 
@@ -21,7 +21,7 @@ def chi2_scale(confidence: float, dof: int = 2) -> float:
     """Sigma multiplier ``k`` of the ``confidence`` region of a ``dof``-D Gaussian."""
     p = as_float("confidence", confidence)
     if not 0.0 < p < 1.0:
-        from .errors import InputError
+        from ..errors import InputError
 
         raise InputError("confidence", confidence, "a probability in (0, 1), e.g. 0.95")
     if dof == 2:

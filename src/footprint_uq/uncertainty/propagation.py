@@ -22,8 +22,8 @@ pixel outside the lens's valid domain, or a result that is not finite although e
 input is -- ``OVERFLOW``) the mean and covariance are NaN and ``valid`` is
 False; the ``reason`` array says why.  Derivatives are never returned for an
 undefined point and no invalid point is ever replaced by a plausible number.
-The fused kernels (:func:`footprint_uq.kernels.covariance_map`,
-:func:`~footprint_uq.kernels.covariance_points`) apply the same output check.
+The fused kernels (:func:`footprint_uq.fast.map_kernels.covariance_map`,
+:func:`~footprint_uq.fast.map_kernels.covariance_points`) apply the same output check.
 """
 
 from __future__ import annotations
@@ -32,12 +32,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import params as P
-from . import status
-from ._checks import as_points, check_cov
+from .. import params as P
+from .. import status
+from .._checks import as_points, check_cov
+from ..errors import InputError
 from .budget import ErrorBudget, load_budget
 from .ellipse import ellipse_axes
-from .errors import InputError
 
 __all__ = ["GroundEstimate", "JointEstimate", "MonteCarloEstimate", "propagate", "propagate_joint",
            "monte_carlo", "unscented", "linearity_ratio", "nonlinearity", "nonlinearity_from_forms",
@@ -80,7 +80,7 @@ class GroundEstimate:
     linear_threshold: float = DEFAULT_LINEAR_THRESHOLD
 
     def ellipse(self, confidence: float | None = None):
-        """``(semi_major_m, semi_minor_m, orientation_deg)``; see :func:`footprint_uq.ellipse.ellipse_axes`."""
+        """Semi-axes and orientation (:func:`~footprint_uq.uncertainty.ellipse.ellipse_axes`)."""
         return ellipse_axes(self.cov_m2, confidence=confidence)
 
     @property
@@ -401,9 +401,9 @@ def ray_denominator(camera, uv_px):
     ddn_dp : (..., 22)    dDn / d(params), :data:`footprint_uq.params.PARAM_NAMES` order
     ddn_duv : (..., 2)    dDn / d(u, v), per pixel
     """
-    from .cameras.distortion import undistort
-    from .cameras.pinhole import pixel_to_normalised
-    from .cameras.rotation import R_W_C, dR_W_C
+    from ..cameras.distortion import undistort
+    from ..cameras.pinhole import pixel_to_normalised
+    from ..cameras.rotation import R_W_C, dR_W_C
 
     p = np.asarray(camera.params, dtype=np.float64)
     uv = np.asarray(uv_px, dtype=np.float64)

@@ -1,9 +1,9 @@
 """Fused per-pixel kernels: ground point and 2x2 covariance of every pixel (numba).
 
-These compute exactly what :func:`footprint_uq.propagation.propagate` computes
+These compute exactly what :func:`footprint_uq.uncertainty.propagation.propagate` computes
 (first-order ``Cov = J_p Sigma_p J_p^T + J_uv Sigma_uv J_uv^T``), without ever
 materialising the ``(..., 2, 22)`` Jacobians, so that a full-HD map takes
-milliseconds.  They agree with :func:`~footprint_uq.propagation.propagate` to
+milliseconds.  They agree with :func:`~footprint_uq.uncertainty.propagation.propagate` to
 about 1e-12 relative (tests ask for 1e-9).  The only fast-math flag is
 ``contract`` (fused multiply-add); no reassociation, NaN/inf semantics kept.
 
@@ -63,13 +63,13 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from . import params as P
-from . import status
-from ._checks import as_points, check_cov
-from .budget import load_budget
-from .cameras.rotation import R_W_C, dR_W_C
-from .errors import InputError
-from .fast import core
+from .. import params as P
+from .. import status
+from .._checks import as_points, check_cov
+from ..cameras.rotation import R_W_C, dR_W_C
+from ..errors import InputError
+from ..uncertainty.budget import load_budget
+from . import core
 
 __all__ = ["covariance_map", "covariance_points", "kernel_constants"]
 
@@ -1107,7 +1107,7 @@ def covariance_points(camera, budget, uv_px, pixel_cov_px2=None, *, get_reason: 
         Pixel coordinates (u right, v down); non-finite rows give ``valid = False``.
     pixel_cov_px2 : array_like (2, 2) or (..., 2, 2), optional
         Extra per-point pixel covariance (e.g. a detector's), added to the budget's
-        imaging and resolution noise, as in :func:`footprint_uq.propagation.propagate`.
+        imaging and resolution noise, as in :func:`footprint_uq.uncertainty.propagation.propagate`.
     get_reason : bool
         Also return the :mod:`footprint_uq.status` code of every point.
 

@@ -40,10 +40,10 @@ from typing import NamedTuple
 
 import numpy as np
 
-from . import params as P
+from .. import params as P
+from .._checks import check_cov
+from ..errors import ConfigError, InputError
 from . import presets
-from ._checks import check_cov
-from .errors import ConfigError, InputError
 
 __all__ = ["ErrorBudget", "SHARED_SOURCES", "POINT_SOURCES", "SparseFactor", "load_budget", "psd_factor"]
 
@@ -152,10 +152,10 @@ class ErrorBudget:
     # -- construction ----------------------------------------------------------------
     @classmethod
     def preset(cls, name: str) -> ErrorBudget:
-        """One of :data:`footprint_uq.presets.PRESET_NAMES` (case-insensitive).
+        """One of :data:`footprint_uq.uncertainty.presets.PRESET_NAMES` (case-insensitive).
 
         Table 3's angular errors are read as printed (10^-3 deg); append ``@deg``
-        (``"basler1@deg"``) to read them as degrees (:mod:`footprint_uq.presets`).
+        (``"basler1@deg"``) to read them as degrees (:mod:`footprint_uq.uncertainty.presets`).
         Table 3's sigma X (north) and sigma Y (east) become ``position_m = (sigma_Y, sigma_X)``
         (world east, north).
         """
@@ -412,7 +412,7 @@ def load_budget(spec) -> ErrorBudget:
     """A budget from a preset name, a YAML/JSON file path, a mapping or an ErrorBudget.
 
     Preset names are case-insensitive; ``NAME@deg`` reads Table 3's angular errors as
-    degrees instead of the printed 10^-3 deg (see :mod:`footprint_uq.presets`).
+    degrees instead of the printed 10^-3 deg (see :mod:`footprint_uq.uncertainty.presets`).
     """
     if isinstance(spec, ErrorBudget):
         return spec

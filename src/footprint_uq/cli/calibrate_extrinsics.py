@@ -1,7 +1,7 @@
 """``footprint-uq calibrate extrinsics``: the camera's extrinsic error budget from a LiDAR ground truth.
 
 Importing this module registers the command on the ``calibrate`` group
-(:mod:`footprint_uq.cli_calibrate`).  Frame-level problems (no board in a cloud,
+(:mod:`footprint_uq.cli.calibrate`).  Frame-level problems (no board in a cloud,
 no board in an image, unreadable files, NaN points) never stop the run: they are
 listed in ``frames.csv``, ``summary.json`` and on stderr.
 """
@@ -14,8 +14,8 @@ from pathlib import Path
 
 import click
 
-from .cli_calibrate import calibrate
-from .errors import InputError
+from ..errors import InputError
+from .calibrate import calibrate
 
 __all__ = ["extrinsics_cmd", "run_extrinsics"]
 
@@ -34,9 +34,9 @@ def run_extrinsics(pairs, camera, board: str, square_m: float, out_dir, *, margi
     """
     import numpy as np
 
-    from .calibration import extrinsics as ex
-    from .calibration.boards import parse_board
-    from .io import save_budget, save_camera
+    from ..calibration import extrinsics as ex
+    from ..calibration.boards import parse_board
+    from ..io import save_budget, save_camera
 
     say = echo or (lambda m: None)
     b = parse_board(board, square_m, margin_m)
@@ -46,7 +46,7 @@ def run_extrinsics(pairs, camera, board: str, square_m: float, out_dir, *, margi
     if ground not in ("fit", "identity"):
         T_gl = ex.load_transform(ground)
     if p.is_file() and p.suffix.lower() == ".csv":
-        from .io._common import read_text
+        from ..io._common import read_text
 
         read_text(p)  # a file that is not UTF-8 text: one line naming it
         frames = ex.read_correspondences_csv(p)
@@ -71,7 +71,7 @@ def run_extrinsics(pairs, camera, board: str, square_m: float, out_dir, *, margi
     for k, s in enumerate(cal.frame_status):
         if s != "ok" and frames[k].ok:
             say(f"frame {frames[k].name}: {s}")
-    from .io.atomic import atomic_path, atomic_write_text
+    from ..io.atomic import atomic_path, atomic_write_text
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -106,7 +106,7 @@ def run_extrinsics(pairs, camera, board: str, square_m: float, out_dir, *, margi
     atomic_write_text(out / "correspondences.csv", "\n".join(rows) + "\n")
     files.append(out / "correspondences.csv")
     if figures:
-        from .viz.extrinsics import plot_board_poses, plot_pose_spread
+        from ..viz.extrinsics import plot_board_poses, plot_pose_spread
 
         for name, fig in (("board_poses.png", plot_board_poses(cal)), ("pose_spread.png", plot_pose_spread(cal))):
             with atomic_path(out / name) as tmp:
@@ -159,7 +159,7 @@ def extrinsics_cmd(pairs, camera, board, square_m, margin_m, region, ground, boo
     (the three variabilities side by side), frames.csv, correspondences.csv,
     poses.npz and the figures board_poses.png and pose_spread.png.
     """
-    from .calibration.extrinsics import POSE_NAMES
+    from ..calibration.extrinsics import POSE_NAMES
 
     if budget_from == "bootstrap" and bootstrap < 2:
         raise InputError("--budget-from", budget_from, "--bootstrap N with N >= 2")

@@ -9,8 +9,8 @@ import sys
 
 import click
 
-from .footprints import CONTACT_MODES
-from .presets import PRESET_NAMES
+from ..products.footprints import CONTACT_MODES
+from ..uncertainty.presets import PRESET_NAMES
 
 __all__ = ["serve_cmd"]
 
@@ -66,7 +66,7 @@ def serve_cmd(camera_path, budget_spec, registry, camera_id, input_, mqtt, outpu
     One output record per frame (or an error record), a health record every second;
     SIGTERM drains and exits 0.  See docs/service.md.
     """
-    from .service.runner import run
+    from ..service.runner import run
 
     sys.exit(run(camera=camera_path, budget=budget_spec, registry=registry, camera_id=camera_id,
                  heading_offset_deg=heading_offset_deg, origin_lat_deg=origin_lat, origin_lon_deg=origin_lon,

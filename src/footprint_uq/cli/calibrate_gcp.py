@@ -1,7 +1,7 @@
 """``footprint-uq calibrate gcp``: a camera and its error budget from ground control points.
 
 Importing this module registers the command on the ``calibrate`` group
-(:mod:`footprint_uq.cli_calibrate`); the work is done by
+(:mod:`footprint_uq.cli.calibrate`); the work is done by
 :func:`footprint_uq.calibration.gcp.run_gcp`.
 """
 
@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import click
 
-from .cli_calibrate import calibrate
+from .calibrate import calibrate
 
 __all__ = ["gcp_cmd"]
 
@@ -42,7 +42,7 @@ def gcp_cmd(points, image_size, intrinsics, intrinsics_budget, pixel_sigma_px, s
     Writes to DIR: camera.yaml, budget.yaml (full parameter covariance), residuals.csv
     (per point and leave-one-out), summary.json, gcp.png and summary.html.
     """
-    from .calibration.gcp import run_gcp
+    from ..calibration.gcp import run_gcp
 
     res = run_gcp(points, image_size, out_dir, intrinsics=intrinsics, intrinsics_budget=intrinsics_budget,
                   pixel_sigma_px=pixel_sigma_px, survey_sigma_m=survey_sigma_m, origin_lat_deg=origin_lat,

@@ -2,7 +2,7 @@
 
 Columns and semantics: docs/uncertainty-model.md, section "Multi-camera fusion".
 
-The work is :func:`footprint_uq.fusion_io.fuse_files`; association is by key only
+The work is :func:`footprint_uq.batch.fusion_files.fuse_files`; association is by key only
 (default ``frame,object_id``: the ids must be shared across cameras, e.g. from a
 tracker).  Bad input (files, columns, options) is one line on stderr and exit
 status 2 (the group's policy); bad *rows* never stop the job: they are listed in
@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import click
 
-from .fusion_io import CAMERA_ID_FROM, DEFAULT_KEY
+from ..batch.fusion_files import CAMERA_ID_FROM, DEFAULT_KEY
 
 __all__ = ["fuse_cmd"]
 
@@ -47,7 +47,7 @@ def fuse_cmd(inputs, out, sources_out, camera_id_from, key, confidence, ellipse_
     the fused centre and is flagged above the chi-square quantile at --confidence.
     Every input row is accounted for: a summary goes to stderr and to OUT.summary.json.
     """
-    from .fusion_io import fuse_files
+    from ..batch.fusion_files import fuse_files
 
     keys = tuple(k.strip() for k in key.split(","))
     s = fuse_files(inputs, out, camera_id_from=camera_id_from, key=keys, confidence=confidence,

@@ -73,8 +73,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._checks import as_float
-from .errors import InputError
+from .._checks import as_float
+from ..errors import InputError
 
 __all__ = [
     "Z95_1D", "K95_2D", "CPM_COORD_OUT_OF_RANGE", "CPM_COORD_UNAVAILABLE", "CPM_CORR_UNAVAILABLE",

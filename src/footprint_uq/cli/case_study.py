@@ -1,6 +1,6 @@
 """``footprint-uq case-study``: the paper's left-turn case study -> figures, CSV and report.html.
 
-Registered in :mod:`footprint_uq.cli` (``main.add_command(case_study)``); ``make demo`` runs it.
+Registered in :mod:`footprint_uq.cli.main` (``main.add_command(case_study)``); ``make demo`` runs it.
 """
 
 from __future__ import annotations
@@ -31,10 +31,10 @@ def run_case_study(out_dir, *, config=None, recording=None, camera_types=None, e
     import matplotlib
 
     matplotlib.use("Agg")
-    from .carla_bridge import read_recording, scene_to_recording
-    from .scenario.case_study import CaseStudyConfig, analyse, build_scene, load_config
-    from .scenario.reproduction import write_paper_reproduction
-    from .viz.case_study import write_case_study_report
+    from ..integrations.carla.bridge import read_recording, scene_to_recording
+    from ..scenario.case_study import CaseStudyConfig, analyse, build_scene, load_config
+    from ..scenario.reproduction import write_paper_reproduction
+    from ..viz.case_study import write_case_study_report
 
     if config is None:
         cfg = CaseStudyConfig()
@@ -80,7 +80,7 @@ def case_study(out_dir, config, recording, camera_types, ellipse_every, dpi, sav
     of the paper under both readings of Table 3's angles). Camera types accept
     NAME@deg (Table 3's angles read as degrees).
     """
-    from .scenario.claims import evaluate_claims
+    from ..scenario.claims import evaluate_claims
 
     paths = run_case_study(out_dir, config=config, recording=recording, camera_types=list(camera_types) or None,
                            ellipse_every=ellipse_every, dpi=dpi, write_recording_to=save_recording)

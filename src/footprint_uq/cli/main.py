@@ -23,7 +23,7 @@ import warnings
 
 import click
 
-from .errors import FootprintUQError
+from ..errors import FootprintUQError
 
 __all__ = ["main", "FootprintUQGroup", "EXIT_BAD_INPUT", "EXIT_BUG"]
 
@@ -132,15 +132,16 @@ def main(debug):
 
 
 # -- the registry: one line per command -------------------------------------------------
-from . import cli_extrinsics, cli_gcp  # noqa: E402,F401  (add `extrinsics` and `gcp` to the calibrate group)
-from .cli_calibrate import calibrate  # noqa: E402
-from .cli_carla import carla  # noqa: E402
-from .cli_case_study import case_study  # noqa: E402
-from .cli_convert import convert_cmd  # noqa: E402
-from .cli_core import demo_cmd, locate_cmd, map_cmd, presets_cmd  # noqa: E402
-from .cli_fuse import fuse_cmd  # noqa: E402
-from .cli_objects import objects_cmd  # noqa: E402
-from .cli_serve import serve_cmd  # noqa: E402
+from . import calibrate_extrinsics as cli_extrinsics  # noqa: E402,F401  (add `extrinsics` and `gcp` to the calibrate group)
+from . import calibrate_gcp as cli_gcp  # noqa: E402,F401  (add `extrinsics` and `gcp` to the calibrate group)
+from .calibrate import calibrate  # noqa: E402
+from .carla import carla  # noqa: E402
+from .case_study import case_study  # noqa: E402
+from .convert import convert_cmd  # noqa: E402
+from .core import demo_cmd, locate_cmd, map_cmd, presets_cmd  # noqa: E402
+from .fuse import fuse_cmd  # noqa: E402
+from .objects import objects_cmd  # noqa: E402
+from .serve import serve_cmd  # noqa: E402
 
 main.add_command(locate_cmd)
 main.add_command(map_cmd)

@@ -37,8 +37,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._checks import as_float, as_points
-from .errors import InputError
+from .._checks import as_float, as_points
+from ..errors import InputError
 
 __all__ = ["FusionResult", "fuse_by_id", "pairwise_mahalanobis", "chi2_threshold"]
 

@@ -47,7 +47,7 @@ budget's per-point imaging and resolution noise:
   two bottom corners share the ``v_max`` error.
 
 Camera-level errors (:meth:`ErrorBudget.param_covariance`) are shared by all corners of
-all objects in a frame and couple the corners (:func:`footprint_uq.propagation.propagate_joint`
+all objects in a frame and couple the corners (:func:`footprint_uq.uncertainty.propagation.propagate_joint`
 semantics); per-point noise only fills the diagonal 2x2 blocks (or the detector's
 cross terms).
 
@@ -65,15 +65,15 @@ unusable corner and its index, or :data:`DEGENERATE`).
 Two paths, same numbers
 -----------------------
 The ``footprints_from_*`` functions are the readable numpy reference (built on
-``camera.backproject`` and :mod:`footprint_uq.propagation` semantics).  For every-frame
+``camera.backproject`` and :mod:`footprint_uq.uncertainty.propagation` semantics).  For every-frame
 use next to a detector, :class:`FrameProcessor` prepares the camera and budget once and
-runs one fused numba kernel per frame (:mod:`footprint_uq.footprint_kernels`); its
+runs one fused numba kernel per frame (:mod:`footprint_uq.fast.footprint_kernels`); its
 results agree with the reference to 1e-9 relative.  One frame of 100 3D boxes takes
 about 75 us (pan-tilt) / 90 us (OpenCV with distortion) on the 2-core reference machine
 (``bench/bench_footprints.py``).
 
 The V2X fields describe the centre.  For the paper's conservative upper bound, apply
-:func:`footprint_uq.v2x.cpm_fields` / :func:`~footprint_uq.v2x.j2735_fields` to
+:func:`footprint_uq.products.v2x.cpm_fields` / :func:`~footprint_uq.products.v2x.j2735_fields` to
 ``largest_cov_m2`` instead.
 """
 
@@ -84,10 +84,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import status
-from ._checks import as_points, check_cov
-from .budget import load_budget
-from .errors import InputError
+from .. import status
+from .._checks import as_points, check_cov
+from ..errors import InputError
+from ..uncertainty.budget import load_budget
 from .v2x import cpm_fields, j2735_fields
 
 __all__ = [
@@ -128,7 +128,7 @@ class FootprintEstimate:
     centre_bad_corner : (N,) int       index of that corner (-1 if none)
     area_m2 : (N,)                     signed shoelace area (positive = counter-clockwise in W)
     v2x_codes : (N, 7) int32           CPM and J2735 fields of the centre covariance, columns
-                                       :data:`V2X_FIELDS` (see :mod:`footprint_uq.v2x`); :attr:`v2x` as a dict
+                                       :data:`V2X_FIELDS` (see :mod:`footprint_uq.products.v2x`); :attr:`v2x` as a dict
     heading_offset_deg : float         used for the V2X fields
 
     ``joint_cov_m2`` is None when a :class:`FrameProcessor` was asked not to form it.
@@ -180,7 +180,7 @@ class FootprintEstimate:
 
     def centre_ellipse(self, confidence: float | None = None):
         """``(semi_major_m, semi_minor_m, orientation_deg)`` of the centre covariance."""
-        from .ellipse import ellipse_axes
+        from ..uncertainty.ellipse import ellipse_axes
 
         return ellipse_axes(self.centre_cov_m2, confidence=confidence)
 
@@ -570,7 +570,7 @@ class FrameProcessor:
     Camera and budget constants (parameter vector, rotation and its derivatives, the
     non-zero entries of the 22x22 parameter covariance, the budget's pixel covariance)
     are prepared once; each call then runs one compiled kernel over the frame's
-    detections (see :mod:`footprint_uq.footprint_kernels`).  Results agree with
+    detections (see :mod:`footprint_uq.fast.footprint_kernels`).  Results agree with
     :func:`footprints_from_corners` / :func:`footprints_from_boxes2d` /
     :func:`footprints_from_boxes3d` to 1e-9 relative.
 
@@ -598,8 +598,8 @@ class FrameProcessor:
 
     def __init__(self, camera, budget, *, heading_offset_deg: float = 0.0, allow_outside_image: bool = False,
                  joint_cov: bool = True):
-        from . import footprint_kernels as fk
-        from ._checks import as_float
+        from .._checks import as_float
+        from ..fast import footprint_kernels as fk
 
         self.camera = camera
         self.budget = load_budget(budget)

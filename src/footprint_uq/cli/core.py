@@ -1,6 +1,6 @@
 """Core CLI commands: ``locate``, ``map``, ``presets`` and ``demo``.
 
-Each command is a plain :class:`click.Command` registered in :mod:`footprint_uq.cli`.
+Each command is a plain :class:`click.Command` registered in :mod:`footprint_uq.cli.main`.
 Bad input raises :class:`~footprint_uq.errors.InputError` / ``ConfigError`` (or a
 click usage error); the group prints it as one line and exits with status 2.
 """
@@ -17,11 +17,11 @@ from pathlib import Path
 import click
 import numpy as np
 
-from . import status
-from .budget import ErrorBudget, load_budget
-from .ellipse import chi2_scale, ellipse_axes
-from .errors import InputError
-from .presets import PRESET_NAMES, display_name
+from .. import status
+from ..errors import InputError
+from ..uncertainty.budget import ErrorBudget, load_budget
+from ..uncertainty.ellipse import chi2_scale, ellipse_axes
+from ..uncertainty.presets import PRESET_NAMES, display_name
 
 __all__ = ["locate_cmd", "map_cmd", "presets_cmd", "demo_cmd", "locate_records", "LOCATE_KEYS", "CSV_KEYS",
            "run_map", "run_demo", "DEMO_CAMERA", "DEMO_PRESETS", "presets_table"]
@@ -52,7 +52,7 @@ DEMO_PRESETS = ("basler1", "bw-bullet1", "bw-cube1")
 
 # -- shared helpers --------------------------------------------------------------------------
 def _load_camera(path):
-    from .io import load_camera
+    from ..io import load_camera
 
     return load_camera(path)
 
@@ -89,7 +89,7 @@ def locate_records(camera, budget, uv_px, *, confidence: float | None = None,
     predicted relative error of the linear 1-sigma semi-major axis and ``linear_ok``
     is ``nonlinearity <= linear_threshold`` (False for invalid points).
     """
-    from .propagation import propagate
+    from ..uncertainty.propagation import propagate
 
     uv = np.asarray(uv_px, dtype=np.float64).reshape(-1, 2)
     est = propagate(camera, budget, uv, linear_threshold=linear_threshold)
@@ -216,8 +216,8 @@ def run_map(camera, budget, out_dir, *, step_px: int = 2, max_range_m: float | N
     ``umap`` may be given (already computed for this camera and budget).
     Returns ``(umap, files)`` with ``files`` the :data:`MAP_FILES` keys mapped to paths.
     """
-    from .maps import uncertainty_map
-    from .viz import plot_ground_map, plot_gsd_maps, plot_image_map, save_figure
+    from ..products.maps import uncertainty_map
+    from ..viz import plot_ground_map, plot_gsd_maps, plot_image_map, save_figure
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -230,13 +230,13 @@ def run_map(camera, budget, out_dir, *, step_px: int = 2, max_range_m: float | N
     save_figure(plot_ground_map(umap, confidence=confidence, vmin_m=vmin_m, vmax_m=vmax_m), files["ground_png"],
                 dpi=dpi)
     save_figure(plot_gsd_maps(umap), files["gsd_png"], dpi=dpi)
-    from .io import camera_to_dict
+    from ..io import camera_to_dict
 
     summary = umap.summary(confidence=confidence)
     summary["camera"] = camera_to_dict(camera)
     summary["budget_parameters"] = umap.budget.to_dict()
     summary["files"] = {k: p.name for k, p in files.items()}
-    from .io.atomic import atomic_write_text
+    from ..io.atomic import atomic_write_text
 
     atomic_write_text(files["summary_json"], json.dumps(summary, indent=2, allow_nan=False) + "\n")
     return umap, files
@@ -352,13 +352,13 @@ def run_demo(out_dir, *, step_px: int = 4, max_range_m: float = 120.0, presets=D
     Writes, in ``out_dir``: ``camera.yaml``, one sub-directory per preset with the
     ``map`` outputs, ``range_profile.png`` and a self-contained ``report.html``;
     with ``case_study``, also the paper's left-turn case study in ``case-study/``
-    (:func:`footprint_uq.cli_case_study.run_case_study`), linked from the report.
+    (:func:`footprint_uq.cli.case_study.run_case_study`), linked from the report.
     Returns the path of the report.
     """
-    from .io import camera_from_dict, camera_to_dict, save_camera
-    from .maps import GSD_DEFINITION
-    from .viz import plot_range_profile, save_figure
-    from .viz.report import esc, html_page, html_table, img_tag, write_html
+    from ..io import camera_from_dict, camera_to_dict, save_camera
+    from ..products.maps import GSD_DEFINITION
+    from ..viz import plot_range_profile, save_figure
+    from ..viz.report import esc, html_page, html_table, img_tag, write_html
 
     say = progress or (lambda msg: None)
     out = Path(out_dir)
@@ -368,7 +368,7 @@ def run_demo(out_dir, *, step_px: int = 4, max_range_m: float = 120.0, presets=D
     budgets = [ErrorBudget.preset(p) for p in presets]
 
     # common colour scale across budgets so that the figures compare directly
-    from .maps import uncertainty_map
+    from ..products.maps import uncertainty_map
 
     maps = []
     for b in budgets:
@@ -397,7 +397,7 @@ def run_demo(out_dir, *, step_px: int = 4, max_range_m: float = 120.0, presets=D
         f"World frame: x east, y north, metres; pan is a compass heading (see <code>docs/conventions.md</code>). "
         f"Generated by <code>footprint-uq demo</code>; camera file: <code>{esc(cam_path.name)}</code>.</p>")
     if case_study:
-        from .cli_case_study import run_case_study
+        from .case_study import run_case_study
 
         say("case study")
         try:
