@@ -16,11 +16,11 @@ from footprint_uq.cameras.homography import (
     camera_from_homography,
     fit_homography,
     homography_from_camera,
-    load_homography,
 )
 from footprint_uq.cli.main import main
 from footprint_uq.errors import ConfigError, InputError
 from footprint_uq.io import load_camera
+from footprint_uq.io.homography_files import load_homography
 
 SIZE = (1920, 1080)
 

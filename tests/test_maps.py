@@ -77,7 +77,7 @@ def test_kernel_guard_falls_back_on_disagreement(cam, monkeypatch):
         cov[est.valid.nonzero()[0][-1], :] *= 1.01  # one row of pixels 1 % off
         return est.xy_world_m, cov, est.valid
 
-    monkeypatch.setattr(maps_mod, "_covariance_map_kernel", lambda: broken)
+    monkeypatch.setattr(maps_mod, "covariance_map", broken)
     ref = uncertainty_map(cam, BUDGET, 4, use_kernel=False)
     with pytest.warns(RuntimeWarning, match="disagrees with the reference path"):
         m = uncertainty_map(cam, BUDGET, 4)

@@ -43,14 +43,19 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pyarrow as pa
+import pyarrow.compute as pc
 
 from .._checks import as_float
 from ..errors import InputError
+from ..io.atomic import atomic_write_text, same_file
 from ..products.footprints import V2X_FIELDS
 from ..products.fusion import chi2_threshold, fuse_by_id
 from ..products.v2x import cpm_fields, j2735_fields
 from ..uncertainty.ellipse import ellipse_axes
+from .readers import coerce_table, open_detections
+from .writers import detect_out_format, open_writer
 
 __all__ = ["DEFAULT_KEY", "ESTIMATE_COLUMNS", "CAMERA_ID_FROM", "FuseSummary", "FusedFootprints", "fuse_footprints",
            "fuse_files", "sources_path", "summary_path"]
@@ -176,7 +181,6 @@ def _check_columns(names, key, need_camera: bool, where: str) -> None:
 
 def _normalise(table: pa.Table, key, pre: list) -> pa.Table:
     """Keys -> their types, camera_id/status/reason -> text, numbers -> float64 (conversion errors into ``pre``)."""
-    from .readers import coerce_table
 
     numeric = tuple(c for c in ESTIMATE_COLUMNS + ("row",) if c in table.column_names)
     id_types = {k: _key_type(k) for k in key}
@@ -197,7 +201,6 @@ def _read_footprints(path, *, key=DEFAULT_KEY, camera_id_from: str = "filename",
     Unparseable lines and values that do not convert are kept with their reason
     (they become rejected rows), row numbers as in ``docs/batch.md`` ("Row numbers").
     """
-    from .readers import open_detections
 
     p = Path(path)
     if not p.is_file():
@@ -232,13 +235,8 @@ def _as_table(obj) -> pa.Table:
         return obj
     if isinstance(obj, pa.RecordBatch):
         return pa.Table.from_batches([obj])
-    try:
-        import pandas as pd
-
-        if isinstance(obj, pd.DataFrame):
-            return pa.Table.from_pandas(obj, preserve_index=False)
-    except ImportError:  # pragma: no cover - pandas is a dependency of the dev environment only
-        pass
+    if isinstance(obj, pd.DataFrame):
+        return pa.Table.from_pandas(obj, preserve_index=False)
     if isinstance(obj, dict):
         return pa.table({k: (v if isinstance(v, pa.Array | pa.ChunkedArray) else np.asarray(v))
                          for k, v in obj.items()})
@@ -253,7 +251,6 @@ def _column(table: pa.Table, name: str, typ: pa.DataType, n_extra: int) -> pa.Ar
         col = table.column(name)
         col = col.combine_chunks() if isinstance(col, pa.ChunkedArray) else col
         if col.type != typ:
-            import pyarrow.compute as pc
 
             col = pc.cast(col, typ)
     else:
@@ -269,7 +266,6 @@ def _floats(table: pa.Table, name: str) -> np.ndarray:
 
 def _codes(arr: pa.Array) -> tuple[np.ndarray, pa.Array]:
     """Integer codes (-1 for null) of an Arrow array and its sorted distinct values (codes index them)."""
-    import pyarrow.compute as pc
 
     enc = pc.dictionary_encode(arr)
     values = enc.dictionary
@@ -328,7 +324,6 @@ def _fuse_parts(parts: list[_Part], key, *, confidence: float, ellipse_confidenc
             todo &= ~miss
         if "status" in t.column_names:
             st_col = _column(t, "status", pa.string(), 0)
-            import pyarrow.compute as pc
 
             not_ok = pc.fill_null(pc.not_equal(st_col, _STATUS_OK), True).to_numpy(zero_copy_only=False)
             bad = np.flatnonzero(todo & not_ok)
@@ -641,9 +636,6 @@ def fuse_files(inputs, out, *, camera_id_from: str | None = None, key=DEFAULT_KE
     FuseSummary
         Also written to :func:`summary_path` of ``out`` (``<out>.summary.json``).
     """
-    from ..io.atomic import atomic_write_text, same_file
-    from .readers import open_detections
-    from .writers import detect_out_format, open_writer
 
     t0 = time.perf_counter()
     key = _check_options(key, confidence, ellipse_confidence, heading_offset_deg)

@@ -83,11 +83,14 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+import pyarrow as pa
 
 from .. import status
-from .._checks import as_points, check_cov
+from .._checks import as_float, as_points, check_cov
 from ..errors import InputError
+from ..fast import footprint_kernels as fk
 from ..uncertainty.budget import load_budget
+from ..uncertainty.ellipse import ellipse_axes
 from .v2x import cpm_fields, j2735_fields
 
 __all__ = [
@@ -130,6 +133,9 @@ class FootprintEstimate:
     v2x_codes : (N, 7) int32           CPM and J2735 fields of the centre covariance, columns
                                        :data:`V2X_FIELDS` (see :mod:`footprint_uq.products.v2x`); :attr:`v2x` as a dict
     heading_offset_deg : float         used for the V2X fields
+    object_rows : (R, N) or None       the fused kernel's per-object rows
+                                       (:data:`footprint_uq.fast.footprint_kernels.OBJ_ROW` names them;
+                                       the batch reads its columns from them); None from the reference
 
     ``joint_cov_m2`` is None when a :class:`FrameProcessor` was asked not to form it.
     """
@@ -152,6 +158,7 @@ class FootprintEstimate:
     area_m2: np.ndarray
     v2x_codes: np.ndarray
     heading_offset_deg: float = 0.0
+    object_rows: np.ndarray | None = None
 
     @property
     def v2x(self) -> dict[str, np.ndarray]:
@@ -180,7 +187,6 @@ class FootprintEstimate:
 
     def centre_ellipse(self, confidence: float | None = None):
         """``(semi_major_m, semi_minor_m, orientation_deg)`` of the centre covariance."""
-        from ..uncertainty.ellipse import ellipse_axes
 
         return ellipse_axes(self.centre_cov_m2, confidence=confidence)
 
@@ -341,7 +347,7 @@ def _box_cov_to_corners(box_cov_px2, A: np.ndarray, N: int) -> np.ndarray:
 
 # -- the reference path ----------------------------------------------------------------------
 def footprints_from_corners(camera, budget, corners_px, *, pixel_cov_px2=None, allow_outside_image: bool = False,
-                            heading_offset_deg: float = 0.0, _extra_reason=None) -> FootprintEstimate:
+                            heading_offset_deg: float = 0.0, extra_reason=None) -> FootprintEstimate:
     """Footprint estimates of N objects from their corners in pixels ``(N, K, 2)``.
 
     Parameters
@@ -355,6 +361,8 @@ def footprints_from_corners(camera, budget, corners_px, *, pixel_cov_px2=None, a
     allow_outside_image : bool
         Let corners outside the image enter the largest point and the centre.
     heading_offset_deg : float
+    extra_reason : array_like (N, K) int8, optional
+        Status codes that override OK per corner (e.g. BEHIND_CAMERA from a 3D box's projection).
         Bearing of the world +y axis from true north, for the V2X fields.
 
     Returns
@@ -371,8 +379,8 @@ def footprints_from_corners(camera, budget, corners_px, *, pixel_cov_px2=None, a
     reason = bp.reason.copy()
     inside = camera.in_image(uv)
     reason[(reason == status.OK) & ~inside] = status.OUTSIDE_IMAGE
-    if _extra_reason is not None:  # e.g. BEHIND_CAMERA from the 3D projection
-        reason = np.where(_extra_reason != status.OK, _extra_reason, reason).astype(np.int8)
+    if extra_reason is not None:  # e.g. BEHIND_CAMERA from the 3D projection
+        reason = np.where(extra_reason != status.OK, extra_reason, reason).astype(np.int8)
     computed = bp.valid & ((reason == status.OK) | (reason == status.OUTSIDE_IMAGE))
     usable = computed & ((reason == status.OK) | allow_outside_image)
     xy = np.where(computed[..., None], bp.xy_world_m, np.nan)
@@ -539,7 +547,7 @@ def footprints_from_boxes3d(camera, budget, boxes_world, *, yaw_unit: str = "rad
     uv = np.where(pr.valid[..., None], pr.uv_px, np.nan)
     return footprints_from_corners(camera, budget, uv, pixel_cov_px2=pixel_cov_px2,
                                    allow_outside_image=allow_outside_image, heading_offset_deg=heading_offset_deg,
-                                   _extra_reason=extra)
+                                   extra_reason=extra)
 
 
 # -- the per-frame fast path ---------------------------------------------------------------------
@@ -559,7 +567,6 @@ def empty_reusable(shape, dtype=np.float64) -> np.ndarray:
     n = math.prod(shape)
     if n * dtype.itemsize < _POOL_MIN_BYTES:
         return np.empty(shape, dtype=dtype)
-    import pyarrow as pa
 
     return np.frombuffer(pa.allocate_buffer(n * dtype.itemsize), dtype=dtype, count=n).reshape(shape)
 
@@ -598,8 +605,6 @@ class FrameProcessor:
 
     def __init__(self, camera, budget, *, heading_offset_deg: float = 0.0, allow_outside_image: bool = False,
                  joint_cov: bool = True):
-        from .._checks import as_float
-        from ..fast import footprint_kernels as fk
 
         self.camera = camera
         self.budget = load_budget(budget)
@@ -616,9 +621,9 @@ class FrameProcessor:
         self._no_det = np.zeros((1, 1, 2, 2))
         self._no_extra = np.zeros((0, 0), dtype=np.int8)
         self._no_boxes = np.zeros((0, 7))
-        # (for the batch) whether per-corner coordinates and covariances (and the largest point's
-        # covariance) are formed at all
-        self._corner_outputs = True
+        #: whether per-corner coordinates and covariances (and the largest point's covariance) are
+        #: formed at all; the batch sets False when it writes no corner columns (leaner, faster)
+        self.corner_outputs = True
 
     def _det(self, pixel_cov_px2, N: int, K: int):
         if pixel_cov_px2 is None:
@@ -638,9 +643,9 @@ class FrameProcessor:
             return footprints_from_corners(self.camera, self.budget, uv, pixel_cov_px2=pixel_cov_px2,
                                            allow_outside_image=self.allow_outside_image,
                                            heading_offset_deg=self.heading_offset_deg,
-                                           _extra_reason=extra if extra.shape[0] == N else None)
+                                           extra_reason=extra if extra.shape[0] == N else None)
         det, mode = self._det(pixel_cov_px2, N, K)
-        out = self._fk.alloc_outputs(N, K, joint=self.joint_cov, corners=self._corner_outputs, alloc=empty_reusable)
+        out = self._fk.alloc_outputs(N, K, joint=self.joint_cov, corners=self.corner_outputs, alloc=empty_reusable)
         self._fk.process_corners(uv, extra, self._no_boxes, False, True, self._cam, self._dR, self._Lr, self._Lc,
                                  self._Lv, self._r, self._spx, det, mode, self.allow_outside_image, self._ch, self._sh,
                                  out, self._fk.scratch())
@@ -656,7 +661,7 @@ class FrameProcessor:
                                 obj[row["largest_sigma_major_m"]], obj[row["largest_x_m"]:row["largest_y_m"] + 1].T,
                                 lcov, centre, ccentre, creason == 0, creason, cbad, obj[row["area_m2"]], v2x.T,
                                 self.heading_offset_deg)
-        est._columns = obj
+        est.object_rows = obj
         return _mark_overflow(est)
 
     def corners(self, corners_px, *, pixel_cov_px2=None) -> FootprintEstimate:
@@ -688,8 +693,8 @@ class FrameProcessor:
             raise InputError("yaw_unit", yaw_unit, "'rad' (column yaw_rad) or 'deg' (column yaw_deg)")
         N = b.shape[0]
         det, mode = self._det(pixel_cov_px2, N, 4)
-        uv = empty_reusable((N if self._corner_outputs else 0, 4, 2), np.float64)
-        out = self._fk.alloc_outputs(N, 4, joint=self.joint_cov, corners=self._corner_outputs, alloc=empty_reusable)
+        uv = empty_reusable((N if self.corner_outputs else 0, 4, 2), np.float64)
+        out = self._fk.alloc_outputs(N, 4, joint=self.joint_cov, corners=self.corner_outputs, alloc=empty_reusable)
         bad = self._fk.process_boxes3d(b, yaw_unit == "deg", bool(bottom_on_ground), self._cam, self._dR, self._Lr,
                                        self._Lc, self._Lv, self._r, self._spx, det, mode, self.allow_outside_image,
                                        self._ch, self._sh, uv, out, self._fk.scratch())

@@ -36,6 +36,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.stats import chi2
 
 from .._checks import as_float, as_points
 from ..errors import InputError
@@ -50,7 +51,6 @@ def chi2_threshold(confidence: float, dof: int) -> float:
         raise InputError("confidence", confidence, "a probability in (0, 1), e.g. 0.99")
     if dof == 2:
         return float(-2.0 * np.log1p(-p))
-    from scipy.stats import chi2
 
     return float(chi2.ppf(p, dof))
 

@@ -31,6 +31,7 @@ import numpy as np
 from .. import status
 from .._checks import as_float, as_points
 from ..errors import InputError
+from ..io.atomic import atomic_write_text
 from ..uncertainty.ellipse import ellipse_axes
 from .v2x import cpm_fields, j2735_fields, rotate_to_true_north
 
@@ -219,7 +220,6 @@ def footprints_geojson(estimate, georef: GeoReference, *, object_ids=None, prope
 def write_geojson(path, feature_collection: dict) -> Path:
     """Write a FeatureCollection (``allow_nan=False``: missing numbers are already ``null``)."""
     p = Path(path)
-    from ..io.atomic import atomic_write_text
 
     atomic_write_text(p, json.dumps(feature_collection, allow_nan=False, indent=1))
     return p

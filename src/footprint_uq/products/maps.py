@@ -45,7 +45,12 @@ import numpy as np
 from .. import params as P
 from .. import status
 from .._checks import as_float
+from ..cameras.distortion import undistort
+from ..cameras.ground import intersect_ground
+from ..cameras.pinhole import pixel_to_normalised
 from ..errors import InputError
+from ..fast.map_kernels import covariance_map
+from ..io import camera_from_dict, camera_to_dict
 from ..io.atomic import atomic_path
 from ..uncertainty.budget import ErrorBudget, load_budget
 from ..uncertainty.ellipse import chi2_scale, ellipse_axes
@@ -218,7 +223,6 @@ class UncertaintyMap:
             meta = json.loads(str(z["metadata_json"])) if "metadata_json" in z.files else {}
         camera = None
         if meta.get("camera"):
-            from ..io import camera_from_dict
 
             camera = camera_from_dict(meta["camera"], where=str(path))
         budget = ErrorBudget.from_dict(meta["budget"]) if meta.get("budget") else None
@@ -230,7 +234,6 @@ def _camera_dict(camera):
     """The camera-file mapping (exact round trip through :func:`footprint_uq.io.camera_from_dict`)."""
     if camera is None:
         return None
-    from ..io import camera_to_dict
 
     return camera_to_dict(camera)
 
@@ -293,10 +296,6 @@ def pixel_jacobian(camera, uv_px, *, full: bool = False):
     the point is invalid.  With ``full``, returns ``(xy_world_m, dxy_duv, valid,
     reason)`` (the back-projection itself from the same single undistortion).
     """
-    from ..cameras.distortion import undistort
-    from ..cameras.general import _reason
-    from ..cameras.ground import intersect_ground
-    from ..cameras.pinhole import pixel_to_normalised
 
     p = camera.params
     uv = np.asarray(uv_px, dtype=np.float64)
@@ -317,7 +316,7 @@ def pixel_jacobian(camera, uv_px, *, full: bool = False):
     if not full:
         return J, valid
     xy = np.where(valid[..., None], xy, np.nan)
-    return xy, J, valid, _reason(vg, conv, finite)
+    return xy, J, valid, status.backprojection_reason(vg, conv, finite)
 
 
 def _kernel_disagreement(camera, budget, uv, xy, cov, valid, xy_ref, valid_ref, m_per_px, *, n_check: int = 256,
@@ -357,13 +356,6 @@ def _kernel_disagreement(camera, budget, uv, xy, cov, valid, xy_ref, valid_ref, 
     return ""
 
 
-def _covariance_map_kernel():
-    """``footprint_uq.fast.map_kernels.covariance_map`` if available, else None."""
-    try:
-        from ..fast.map_kernels import covariance_map
-    except ImportError:
-        return None
-    return covariance_map
 
 
 def uncertainty_map(camera, budget, step_px: int = 1, *, max_range_m: float | None = None,
@@ -413,7 +405,7 @@ def uncertainty_map(camera, budget, step_px: int = 1, *, max_range_m: float | No
     xy_ref = np.empty((n, 2))
     gsd_r, gsd_c, area, rng = (np.empty(n) for _ in range(4))
 
-    kernel = _covariance_map_kernel() if use_kernel else None
+    kernel = covariance_map if use_kernel else None
     if kernel is not None:
         kxy, kcov, kvalid = (np.asarray(a) for a in kernel(camera, budget, step))
         if kxy.shape != (H, W, 2) or kcov.shape != (H, W, 2, 2) or kvalid.shape != (H, W):

@@ -43,6 +43,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
+import yaml
 
 from .. import params as P
 from .. import status
@@ -176,10 +178,8 @@ def load_config(path) -> CaseStudyConfig:
         if p.suffix.lower() == ".json":
             data = json.loads(text)
         else:
-            import yaml
-
             data = yaml.safe_load(text)
-    except (ValueError, ImportError) as e:
+    except ValueError as e:
         raise ConfigError(str(p), type(e).__name__, f"valid YAML/JSON ({str(e).splitlines()[0]})") from None
     except Exception as e:  # yaml.YAMLError has no common base with ValueError
         raise ConfigError(str(p), type(e).__name__, f"valid YAML/JSON ({str(e).splitlines()[0]})") from None
@@ -517,7 +517,6 @@ def analyse(scene: Scene, camera_types=None, *, confidence: float = 0.95):
     -------
     CaseStudyResult
     """
-    import pandas as pd
 
     if camera_types is None:
         camera_types = {k: k for k in CAMERA_TYPES}

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import time
 import zlib
 from dataclasses import dataclass
@@ -30,11 +31,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..batch import schema as S
+from ..batch.fleet import load_registry
 from ..errors import FootprintUQError, InputError
 from ..products.footprints import CONTACT_MODES, V2X_FIELDS, FrameProcessor
 from ..products.geo import GeoReference
 from ..products.v2x import J2735_POSITION_CONFIDENCE_NAMES
 from ..uncertainty.ellipse import chi2_scale, ellipse_axes
+from ..uncertainty.propagation import DEFAULT_LINEAR_THRESHOLD, nonlinearity
 from .messages.cpm import (
     CONFIDENCE_LEVEL_UNAVAILABLE,
     CPM_CLASSES,
@@ -186,7 +189,6 @@ class Service:
             self.cameras[camera_id] = CameraSetup(camera_id, self._processor(camera, budget, geo, allow_outside_image),
                                                   geo, int(sid))
         else:
-            from ..batch.fleet import load_registry
 
             entries = registry if isinstance(registry, dict) else load_registry(registry, budget=budget)
             for cid, e in entries.items():
@@ -200,7 +202,6 @@ class Service:
         self._single = camera is not None
         self._omitted = 0
         self._pixel_cov = None
-        from ..uncertainty.propagation import DEFAULT_LINEAR_THRESHOLD
 
         self.linearity = bool(linearity)
         self.linear_threshold = DEFAULT_LINEAR_THRESHOLD if linear_threshold is None else float(linear_threshold)
@@ -374,7 +375,6 @@ class Service:
         """Per object: the largest predicted relative error of the linear 1-sigma semi-major axis over its
         usable ground-contact points (:func:`footprint_uq.uncertainty.propagation.nonlinearity`, with the detector's
         pixel covariance) and ``linear_ok`` = that <= the threshold (False where nothing is usable)."""
-        from ..uncertainty.propagation import nonlinearity
 
         uv = est.corners_px
         N, K = uv.shape[:2]
@@ -535,7 +535,6 @@ def _message_object_id(object_id, index: int) -> int:
 
 def _detection_field(field: str) -> str:
     # "boxes_px[3]" / "boxes_world[3] (...)" / "pixel_cov_px2" -> "detections[3]"
-    import re
 
     m = re.search(r"\[(\d+)\]", field or "")
     return f"detections[{m.group(1)}]" if m else "detections"

@@ -30,6 +30,8 @@ from __future__ import annotations
 
 import collections
 import gc
+import json
+import multiprocessing as mp
 import os
 import signal
 import sys
@@ -39,7 +41,9 @@ from urllib.parse import urlparse
 
 import numpy as np
 
+from ..batch.fleet import load_registry
 from ..errors import ConfigError, InputError
+from ..io import load_camera
 from .core import RECORD_ERROR, RECORD_FOOTPRINTS, Service, error_record
 
 __all__ = ["FrameQueue", "Metrics", "serve", "run", "parse_mqtt_url", "POLICIES"]
@@ -56,7 +60,6 @@ except ImportError:  # pragma: no cover - depends on the environment
 def _dumps(obj) -> bytes:
     if _json_fast is not None:
         return _json_fast.dumps(obj)
-    import json
 
     return json.dumps(obj, allow_nan=False, separators=(",", ":")).encode("utf-8")
 
@@ -64,7 +67,6 @@ def _dumps(obj) -> bytes:
 def _loads(data):
     if _json_fast is not None:
         return _json_fast.loads(data)
-    import json
 
     return json.loads(data)
 
@@ -512,7 +514,6 @@ def run(*, camera=None, budget=None, registry=None, camera_id: str | None = None
     try:
         cam = None
         if camera is not None:
-            from ..io import load_camera
 
             if budget is None:
                 raise InputError("--budget", None, "an error budget (preset or file) for --camera")
@@ -528,7 +529,6 @@ def run(*, camera=None, budget=None, registry=None, camera_id: str | None = None
 
 
 def _worker_main(options: dict, cameras: list[str], label: str) -> None:  # pragma: no cover - child process
-    from ..batch.fleet import load_registry
 
     entries = load_registry(options.pop("registry"), budget=options["budget"])
     sub = {c: entries[c] for c in cameras}
@@ -536,9 +536,7 @@ def _worker_main(options: dict, cameras: list[str], label: str) -> None:  # prag
 
 
 def _run_workers(n: int, options: dict) -> int:
-    import multiprocessing as mp
 
-    from ..batch.fleet import load_registry
 
     ids = sorted(load_registry(options["registry"], budget=options["budget"]))
     if n > len(ids):

@@ -39,6 +39,7 @@ from pathlib import Path
 from typing import NamedTuple
 
 import numpy as np
+import yaml
 
 from .. import params as P
 from .._checks import check_cov
@@ -432,7 +433,6 @@ def load_budget(spec) -> ErrorBudget:
         if path.suffix.lower() == ".json":
             data = json.loads(text)
         else:
-            import yaml
 
             data = yaml.safe_load(text)
     except Exception as e:

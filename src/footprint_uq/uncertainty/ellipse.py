@@ -11,8 +11,10 @@ north, [0, 180)).
 from __future__ import annotations
 
 import numpy as np
+from scipy.stats import chi2
 
 from .._checks import as_float
+from ..errors import InputError
 
 __all__ = ["chi2_scale", "ellipse_axes", "ellipse_points", "heading_deg"]
 
@@ -21,12 +23,10 @@ def chi2_scale(confidence: float, dof: int = 2) -> float:
     """Sigma multiplier ``k`` of the ``confidence`` region of a ``dof``-D Gaussian."""
     p = as_float("confidence", confidence)
     if not 0.0 < p < 1.0:
-        from ..errors import InputError
 
         raise InputError("confidence", confidence, "a probability in (0, 1), e.g. 0.95")
     if dof == 2:
         return float(np.sqrt(-2.0 * np.log1p(-p)))
-    from scipy.stats import chi2
 
     return float(np.sqrt(chi2.ppf(p, dof)))
 

@@ -35,6 +35,9 @@ import numpy as np
 from .. import params as P
 from .. import status
 from .._checks import as_points, check_cov
+from ..cameras.distortion import undistort
+from ..cameras.pinhole import pixel_to_normalised
+from ..cameras.rotation import R_W_C, dR_W_C
 from ..errors import InputError
 from .budget import ErrorBudget, load_budget
 from .ellipse import ellipse_axes
@@ -401,9 +404,6 @@ def ray_denominator(camera, uv_px):
     ddn_dp : (..., 22)    dDn / d(params), :data:`footprint_uq.params.PARAM_NAMES` order
     ddn_duv : (..., 2)    dDn / d(u, v), per pixel
     """
-    from ..cameras.distortion import undistort
-    from ..cameras.pinhole import pixel_to_normalised
-    from ..cameras.rotation import R_W_C, dR_W_C
 
     p = np.asarray(camera.params, dtype=np.float64)
     uv = np.asarray(uv_px, dtype=np.float64)

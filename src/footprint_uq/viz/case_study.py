@@ -23,6 +23,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import matplotlib
 import numpy as np
 from matplotlib import colors
 from matplotlib.collections import LineCollection, PolyCollection
@@ -32,9 +33,12 @@ from matplotlib.patches import Polygon
 
 from ..io.atomic import atomic_path, atomic_write_text, path_component
 from ..scenario.case_study import AXIS_SYSTEMS, camera_type_label, footprint_heatmap
+from ..scenario.claims import evaluate_claims
 from ..scenario.intersection import RoadLayout
 from ..scenario.trajectory import box_corners
 from ..uncertainty.ellipse import chi2_scale, ellipse_points
+from .report import esc, html_page, img_tag, write_html
+from .report import html_table as _html_table
 
 __all__ = ["plot_camera_views", "plot_birdseye", "plot_sigma_profiles", "plot_contributions", "plot_heatmaps",
            "case_study_figures", "write_case_study_report", "TYPE_COLOURS"]
@@ -458,7 +462,6 @@ def plot_heatmaps(result, camera: str, heatmaps: dict | None = None, **kw) -> Fi
     ar = (hm0.y_m[-1] - hm0.y_m[0]) / max(hm0.x_m[-1] - hm0.x_m[0], 1e-9)
     fig = Figure(figsize=(4.0 * len(types) + 0.8, 4.0 * ar + 1.1), layout="constrained")
     axes = fig.subplots(1, len(types), squeeze=False)[0]
-    import matplotlib
 
     cmap = matplotlib.colormaps["magma_r"].with_extremes(bad=(1, 1, 1, 0))
     im = None
@@ -659,9 +662,6 @@ def write_case_study_report(result, out_dir, *, settings: dict | None = None, el
     ``reproduction_link``: relative link to the paper-reproduction page (shown next to the verdicts).
     Returns a dict with the paths (``figures``: stem -> path, ``csv``, ``summary``, ``report``).
     """
-    from ..scenario.claims import evaluate_claims
-    from .report import esc, html_page, img_tag, write_html
-    from .report import html_table as _html_table
 
     def html_table(*a, **k):
         return '<div style="overflow-x:auto">' + _html_table(*a, **k) + "</div>"

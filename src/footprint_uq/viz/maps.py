@@ -17,14 +17,17 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import matplotlib
 import numpy as np
 from matplotlib import colors
 from matplotlib.figure import Figure
+from matplotlib.patches import Patch
 from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
 
 from .. import params as P
 from .. import status
-from ..uncertainty.ellipse import chi2_scale
+from ..io.atomic import atomic_path
+from ..uncertainty.ellipse import chi2_scale, ellipse_axes
 from ..uncertainty.propagation import propagate
 
 __all__ = ["DEFAULT_LEVELS_M", "GSD_LEVELS_M", "plot_image_map", "plot_ground_map", "plot_gsd_maps",
@@ -40,7 +43,6 @@ _BAD = "#d9d9d9"
 
 
 def _cmap(name=_CMAP):
-    import matplotlib
 
     return matplotlib.colormaps[name].with_extremes(bad=_BAD)
 
@@ -178,7 +180,6 @@ def plot_image_map(umap, *, confidence: float | None = None, levels_m=DEFAULT_LE
 
 def _invalid_handles(umap):
     """Legend patches for the greyed-out (invalid) pixels, by reason."""
-    from matplotlib.patches import Patch
 
     beyond = getattr(status, "BEYOND_RANGE", -1)
     out = []
@@ -224,7 +225,6 @@ def _ground_grid_values(umap, extent, n_cells, confidence):
     inside = pr.valid & cam.in_image(pr.uv_px)
     uv = np.where(inside[..., None], pr.uv_px, np.nan)
     est = propagate(cam, umap.budget, uv)
-    from ..uncertainty.ellipse import ellipse_axes
 
     a = ellipse_axes(est.cov_m2, confidence=confidence)[0]
     ok = inside & est.valid
@@ -410,7 +410,6 @@ def save_figure(fig: Figure, path, *, dpi: int = 150) -> Path:
     """Save ``fig`` (PNG/PDF/SVG by extension), creating parent directories."""
     p = Path(path)
     p.parent.mkdir(parents=True, exist_ok=True)
-    from ..io.atomic import atomic_path
 
     with atomic_path(p) as tmp:
         fig.savefig(tmp, dpi=dpi, bbox_inches="tight")

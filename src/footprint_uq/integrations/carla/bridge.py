@@ -49,6 +49,9 @@ from ...cameras.pantilt import PanTiltCamera
 from ...cameras.rotation import pan_tilt_roll_from_R_W_C
 from ...errors import ConfigError, InputError
 from ...io.atomic import atomic_path
+from ...scenario.case_study import Scene
+from ...scenario.intersection import Marking, RoadLayout
+from ...scenario.trajectory import segment_labels
 
 __all__ = [
     "S_WORLD_CARLA", "A_LOCAL_CV", "RECORDING_FORMAT", "RECORDING_VERSION", "carla_rotation_matrix",
@@ -329,9 +332,6 @@ def read_recording(path, *, actor_id: int | None = None, ground_z_m: float | Non
     naming its line number and skipped; a malformed header, camera or road record raises
     :class:`~footprint_uq.errors.ConfigError`.
     """
-    from ...scenario.case_study import Scene
-    from ...scenario.intersection import Marking, RoadLayout
-    from ...scenario.trajectory import segment_labels
 
     p = Path(path)
     if not p.exists():

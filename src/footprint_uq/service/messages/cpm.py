@@ -45,6 +45,8 @@ from __future__ import annotations
 import functools
 import math
 
+import numpy as np
+
 from ...errors import InputError
 from .asn1_cpm import (
     CONTAINER_ID_PERCEIVED_OBJECTS,
@@ -114,7 +116,6 @@ def unavailable_reference_ellipse() -> dict:
 
 def coordinate_cm(v_m):
     """``CartesianCoordinateLarge`` (0.01 m; out-of-range values beyond +-1310.71 m) of metres -> int array."""
-    import numpy as np
 
     c = np.rint(np.nan_to_num(np.asarray(v_m, dtype=np.float64), nan=0.0) * 100.0)
     return np.clip(c, COORD_MIN, COORD_MAX).astype(np.int64)

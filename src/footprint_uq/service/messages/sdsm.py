@@ -28,6 +28,8 @@ from __future__ import annotations
 
 import datetime as _dt
 
+import numpy as np
+
 from ...products.v2x import J2735_POSITION_CONFIDENCE_NAMES
 
 __all__ = ["build_sdsm", "sdsm_object", "offset_dm", "SDSM_OBJECT_TYPES"]
@@ -48,7 +50,6 @@ SDSM_OBJECT_TYPES = {
 
 def offset_dm(v_m):
     """``ObjectDistance`` (0.1 m, clamped to +-32767) of metres ``(...)`` -> int array."""
-    import numpy as np
 
     d = np.rint(np.nan_to_num(np.asarray(v_m, dtype=np.float64), nan=0.0) * 10.0)
     return np.clip(d, -OFFSET_MAX, OFFSET_MAX).astype(np.int64)
