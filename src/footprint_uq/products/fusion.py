@@ -36,7 +36,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.stats import chi2
+from scipy.special import chdtri
 
 from .._checks import as_float, as_points
 from ..errors import InputError
@@ -52,7 +52,7 @@ def chi2_threshold(confidence: float, dof: int) -> float:
     if dof == 2:
         return float(-2.0 * np.log1p(-p))
 
-    return float(chi2.ppf(p, dof))
+    return float(chdtri(dof, 1.0 - p))  # the chi-square quantile
 
 
 def _inv2(c):

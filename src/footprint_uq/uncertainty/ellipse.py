@@ -11,7 +11,7 @@ north, [0, 180)).
 from __future__ import annotations
 
 import numpy as np
-from scipy.stats import chi2
+from scipy.special import chdtri
 
 from .._checks import as_float
 from ..errors import InputError
@@ -23,12 +23,10 @@ def chi2_scale(confidence: float, dof: int = 2) -> float:
     """Sigma multiplier ``k`` of the ``confidence`` region of a ``dof``-D Gaussian."""
     p = as_float("confidence", confidence)
     if not 0.0 < p < 1.0:
-
         raise InputError("confidence", confidence, "a probability in (0, 1), e.g. 0.95")
     if dof == 2:
         return float(np.sqrt(-2.0 * np.log1p(-p)))
-
-    return float(np.sqrt(chi2.ppf(p, dof)))
+    return float(np.sqrt(chdtri(dof, 1.0 - p)))  # the chi-square quantile (scipy.stats is slow to import)
 
 
 def ellipse_axes(cov_m2, *, confidence: float | None = None):
