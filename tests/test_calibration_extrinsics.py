@@ -325,7 +325,6 @@ def test_budget_feeds_propagate(solved, tmp_path):
 def test_cli_end_to_end(campaign, tmp_path):
     from click.testing import CliRunner
 
-    import footprint_uq.cli.calibrate_extrinsics  # noqa: F401 - registers the command
     from footprint_uq.cli.calibrate import calibrate
 
     d = campaign.write(tmp_path / "pairs")
@@ -394,7 +393,6 @@ def test_rendered_images_and_pcd_pairs_through_the_cli(tmp_path):
     import yaml
     from click.testing import CliRunner
 
-    import footprint_uq.cli.calibrate_extrinsics  # noqa: F401 - registers the command
     from footprint_uq.calibration import synthetic as sy
     from footprint_uq.calibration.pointclouds import write_pcd
     from footprint_uq.cli.calibrate import calibrate

@@ -24,7 +24,7 @@ def result():
 
 @pytest.fixture(scope="module")
 def small_report(tmp_path_factory):
-    from footprint_uq.cli.case_study import run_case_study
+    from footprint_uq.viz.case_study_run import run_case_study
 
     out = tmp_path_factory.mktemp("case_study")
     paths = run_case_study(out, config=CaseStudyConfig.from_dict(SMALL), dpi=60)
@@ -208,11 +208,8 @@ def test_csv_round_trip(small_report):
 
 
 def _cli():
-    from footprint_uq.cli.case_study import case_study
     from footprint_uq.cli.main import main
 
-    if "case-study" not in main.commands:
-        main.add_command(case_study)
     return main
 
 
@@ -243,8 +240,7 @@ def test_cli_case_study_bad_config(tmp_path):
 
     cfg = tmp_path / "cfg.json"
     cfg.write_text(json.dumps({"trajectory": {"speed_kmh": 30}}))
-    code = ("import sys; from footprint_uq.cli.main import main; from footprint_uq.cli.case_study import case_study; "
-            "main.add_command(case_study) if 'case-study' not in main.commands else None; main(sys.argv[1:])")
+    code = "import sys; from footprint_uq.cli.main import main; main(sys.argv[1:])"
     p = subprocess.run([sys.executable, "-c", code, "case-study", "--out", str(tmp_path / "o"), "--config", str(cfg)],
                        capture_output=True, text=True, timeout=120)
     assert p.returncode == 2

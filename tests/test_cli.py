@@ -13,9 +13,9 @@ import pytest
 from click.testing import CliRunner
 
 from footprint_uq import PanTiltCamera, ellipse_axes, propagate, status
-from footprint_uq.cli.core import CSV_KEYS, LOCATE_KEYS
 from footprint_uq.cli.main import main
 from footprint_uq.io import load_camera, save_camera
+from footprint_uq.products.locate import CSV_KEYS, LOCATE_KEYS
 from footprint_uq.products.maps import UncertaintyMap
 
 CAM_KW = {"focal_px": 400.0, "image_size_px": (320, 240), "height_m": 7.5, "pan_deg": 200.0, "tilt_deg": 14.0,

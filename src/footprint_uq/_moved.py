@@ -16,7 +16,9 @@ import warnings
 
 __all__ = ["MOVED", "install"]
 
-#: old module name -> new module name (both relative to ``footprint_uq``)
+#: old module name -> new module name (both relative to ``footprint_uq``).  ``cli_core`` has no alias:
+#: it was split into one module per command (cli/locate, map, presets, demo) and its logic moved to
+#: the library (products.locate, viz.map_report, uncertainty.preset_tables, viz.demo).
 MOVED = {
     "kernels": "fast.map_kernels",
     "footprint_kernels": "fast.footprint_kernels",
@@ -32,7 +34,6 @@ MOVED = {
     "fusion": "products.fusion",
     "fusion_io": "batch.fusion_files",
     "carla_bridge": "integrations.carla.bridge",
-    "cli_core": "cli.core",
     "cli_calibrate": "cli.calibrate",
     "cli_extrinsics": "cli.calibrate_extrinsics",
     "cli_gcp": "cli.calibrate_gcp",

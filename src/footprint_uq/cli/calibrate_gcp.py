@@ -1,20 +1,19 @@
 """``footprint-uq calibrate gcp``: a camera and its error budget from ground control points.
 
-Importing this module registers the command on the ``calibrate`` group
-(:mod:`footprint_uq.cli.calibrate`); the work is done by
-:func:`footprint_uq.calibration.gcp.run_gcp`.
+The work is done by :func:`footprint_uq.calibration.gcp.run_gcp`; the command is registered on
+the ``calibrate`` group in :mod:`footprint_uq.cli.calibrate`.
 """
 
 from __future__ import annotations
 
 import click
 
-from .calibrate import calibrate
+from ..calibration.gcp import run_gcp
 
 __all__ = ["gcp_cmd"]
 
 
-@calibrate.command("gcp")
+@click.command("gcp")
 @click.option("--points", required=True, metavar="CSV",
               help="GCP table: u_px, v_px and x_m, y_m[, z_m] (world frame) or lat_deg, lon_deg[, alt_m]; "
                    "optional sigma_px, sigma_m, name.")
@@ -42,8 +41,6 @@ def gcp_cmd(points, image_size, intrinsics, intrinsics_budget, pixel_sigma_px, s
     Writes to DIR: camera.yaml, budget.yaml (full parameter covariance), residuals.csv
     (per point and leave-one-out), summary.json, gcp.png and summary.html.
     """
-    from ..calibration.gcp import run_gcp
-
     res = run_gcp(points, image_size, out_dir, intrinsics=intrinsics, intrinsics_budget=intrinsics_budget,
                   pixel_sigma_px=pixel_sigma_px, survey_sigma_m=survey_sigma_m, origin_lat_deg=origin_lat,
                   origin_lon_deg=origin_lon, origin_alt_m=origin_alt_m, image=image)

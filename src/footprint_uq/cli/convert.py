@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import click
 
+from ..io.convert import convert_camera_file
+
 __all__ = ["convert_cmd"]
 
 
@@ -18,7 +20,5 @@ __all__ = ["convert_cmd"]
 @click.option("--out", "out", required=True, metavar="FILE", help="Output file (.yaml, .yml or .json).")
 def convert_cmd(camera, to, keep_intrinsics, out):
     """Convert a camera file to another model (written atomically)."""
-    from ..io.convert import convert_camera_file
-
     p = convert_camera_file(camera, to, out, keep_intrinsics=keep_intrinsics)
     click.echo(f"wrote {p}")

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import click
 
-from ..batch.fusion_files import CAMERA_ID_FROM, DEFAULT_KEY
+from ..batch.fusion_files import CAMERA_ID_FROM, DEFAULT_KEY, fuse_files
 
 __all__ = ["fuse_cmd"]
 
@@ -47,8 +47,6 @@ def fuse_cmd(inputs, out, sources_out, camera_id_from, key, confidence, ellipse_
     the fused centre and is flagged above the chi-square quantile at --confidence.
     Every input row is accounted for: a summary goes to stderr and to OUT.summary.json.
     """
-    from ..batch.fusion_files import fuse_files
-
     keys = tuple(k.strip() for k in key.split(","))
     s = fuse_files(inputs, out, camera_id_from=camera_id_from, key=keys, confidence=confidence,
                    ellipse_confidence=ellipse_confidence, heading_offset_deg=heading_offset_deg,

@@ -1,8 +1,11 @@
-"""The ``footprint-uq`` command line: a thin registry of commands.
+"""The ``footprint-uq`` command line: the group, its error policy and the registry of commands.
 
-Commands live in small modules (``cli_core`` for locate/map/presets/demo); to
-add one, define a ``click.Command`` there and register it here with one
-``main.add_command(...)`` line.
+Each command lives in a module of its own (``cli/locate.py``, ``cli/map.py``, ...) that only
+parses arguments, calls one library function and prints.  To add one, define a
+``click.Command`` in a new module and register it at the bottom of this file with one
+``main.add_lazy_command(NAME, "footprint_uq.cli.MODULE:ATTRIBUTE")`` line: the module is
+imported only when the command runs or a help page lists it, so that a command does not pay for
+the start-up of the others (matplotlib, OpenCV, pyarrow, ...).
 
 Error policy: bad input (missing/unknown keys, wrong units, impossible values,
 unreadable files, bad options) prints **one line** naming the field on stderr
@@ -16,12 +19,16 @@ and exits with status 3 (``footprint-uq --debug COMMAND ...`` or
 
 from __future__ import annotations
 
+import importlib
 import json
+import os
 import re
 import sys
+import traceback
 import warnings
 
 import click
+import yaml
 
 from ..errors import FootprintUQError
 
@@ -34,8 +41,6 @@ EXIT_BUG = 3
 
 
 def _debug(args) -> bool:
-    import os
-
     argv = sys.argv[1:] if args is None else list(args)
     return "--debug" in argv or os.environ.get("FOOTPRINT_UQ_DEBUG", "") not in ("", "0")
 
@@ -53,18 +58,12 @@ def _showwarning(message, category, filename, lineno, file=None, line=None):
 
 
 def _is_yaml_error(e: BaseException) -> bool:
-    try:
-        import yaml
-    except ImportError:  # pragma: no cover - PyYAML is a dependency
-        return False
     return isinstance(e, yaml.YAMLError)
 
 
 def _bug(e: BaseException, args) -> None:
     """Last line of defence: an unexpected exception is a bug: one line, exit 3 (traceback with --debug)."""
     if _debug(args):
-        import traceback
-
         traceback.print_exception(e)
     _error(f"internal error ({type(e).__name__}: {_one_line(e)[:300]}); please report it with the "
            "command line (run with --debug for the traceback)")
@@ -72,7 +71,29 @@ def _bug(e: BaseException, args) -> None:
 
 
 class FootprintUQGroup(click.Group):
-    """A click group that turns bad-input exceptions into one-line messages and exit status 2."""
+    """A click group that turns bad-input exceptions into one-line messages and exit status 2.
+
+    Commands are added as usual (:meth:`add_command`) or lazily (:meth:`add_lazy_command`): a
+    lazy command's module is imported when the command is first looked up (it runs, or a help
+    page lists it).
+    """
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self.lazy_commands: dict[str, str] = {}
+
+    def add_lazy_command(self, name: str, import_path: str) -> None:
+        """Register the command ``name`` found at ``import_path`` (``"package.module:attribute"``)."""
+        self.lazy_commands[name] = import_path
+
+    def list_commands(self, ctx) -> list[str]:
+        return sorted({*super().list_commands(ctx), *self.lazy_commands})
+
+    def get_command(self, ctx, cmd_name):
+        if cmd_name not in self.commands and cmd_name in self.lazy_commands:
+            module, _, attribute = self.lazy_commands[cmd_name].partition(":")
+            self.add_command(getattr(importlib.import_module(module), attribute), cmd_name)
+        return super().get_command(ctx, cmd_name)
 
     def main(self, args=None, prog_name=None, complete_var=None, standalone_mode=True, **extra):
         if not standalone_mode:
@@ -131,29 +152,18 @@ def main(debug):
     """
 
 
-# -- the registry: one line per command -------------------------------------------------
-from . import calibrate_extrinsics as cli_extrinsics  # noqa: E402,F401  (add `extrinsics` and `gcp` to the calibrate group)
-from . import calibrate_gcp as cli_gcp  # noqa: E402,F401  (add `extrinsics` and `gcp` to the calibrate group)
-from .calibrate import calibrate  # noqa: E402
-from .carla import carla  # noqa: E402
-from .case_study import case_study  # noqa: E402
-from .convert import convert_cmd  # noqa: E402
-from .core import demo_cmd, locate_cmd, map_cmd, presets_cmd  # noqa: E402
-from .fuse import fuse_cmd  # noqa: E402
-from .objects import objects_cmd  # noqa: E402
-from .serve import serve_cmd  # noqa: E402
-
-main.add_command(locate_cmd)
-main.add_command(map_cmd)
-main.add_command(presets_cmd)
-main.add_command(demo_cmd)
-main.add_command(case_study)
-main.add_command(carla)
-main.add_command(calibrate)
-main.add_command(objects_cmd)
-main.add_command(fuse_cmd)
-main.add_command(serve_cmd)
-main.add_command(convert_cmd)
+# -- the registry: one line per command (module imported on first use) -----------------------
+main.add_lazy_command("locate", "footprint_uq.cli.locate:locate_cmd")
+main.add_lazy_command("map", "footprint_uq.cli.map:map_cmd")
+main.add_lazy_command("presets", "footprint_uq.cli.presets:presets_cmd")
+main.add_lazy_command("demo", "footprint_uq.cli.demo:demo_cmd")
+main.add_lazy_command("case-study", "footprint_uq.cli.case_study:case_study")
+main.add_lazy_command("carla", "footprint_uq.cli.carla:carla")
+main.add_lazy_command("calibrate", "footprint_uq.cli.calibrate:calibrate")
+main.add_lazy_command("objects", "footprint_uq.cli.objects:objects_cmd")
+main.add_lazy_command("fuse", "footprint_uq.cli.fuse:fuse_cmd")
+main.add_lazy_command("serve", "footprint_uq.cli.serve:serve_cmd")
+main.add_lazy_command("convert", "footprint_uq.cli.convert:convert_cmd")
 
 
 if __name__ == "__main__":  # pragma: no cover

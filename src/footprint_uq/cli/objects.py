@@ -13,9 +13,13 @@ from __future__ import annotations
 
 import click
 
+from ..batch.fleet import process_fleet
+from ..batch.process import process_file
 from ..batch.schema import DEFAULT_CHUNK_ROWS
+from ..errors import InputError
 from ..products.footprints import CONTACT_MODES
 from ..uncertainty.presets import PRESET_NAMES
+from .common import load_camera_and_budget
 
 __all__ = ["objects_cmd"]
 
@@ -67,8 +71,6 @@ def objects_cmd(camera_path, budget_spec, detections, out, box_type, contact, ch
     Every input row gives one output row with its 0-based row number, a status (ok,
     partial, error) and a reason; a summary goes to stderr and to OUT.summary.json.
     """
-    from ..errors import InputError
-
     options = dict(box_type=box_type, contact=contact, confidence=confidence, heading_offset_deg=heading_offset_deg,
                    origin_lat_deg=origin_lat, origin_lon_deg=origin_lon, corners=corners,
                    allow_outside_image=allow_outside_image)
@@ -76,8 +78,6 @@ def objects_cmd(camera_path, budget_spec, detections, out, box_type, contact, ch
     if registry is not None:
         if camera_path is not None:
             raise InputError("--camera", camera_path, "no --camera with --registry (the registry names the cameras)")
-        from ..batch.fleet import process_fleet
-
         summ = process_fleet(registry, detections, out, budget=budget_spec, scheduler=scheduler, workers=workers,
                              retries=retries, chunk_rows=chunk_rows, progress=None if not quiet else False,
                              compression=comp, overwrite=overwrite, **options)
@@ -87,12 +87,7 @@ def objects_cmd(camera_path, budget_spec, detections, out, box_type, contact, ch
                              "--registry too: Dask runs the fleet mode (a dataset of many cameras)")
         if camera_path is None or budget_spec is None:
             raise InputError("--camera/--budget", (camera_path, budget_spec), "both a camera file and a budget")
-        from ..batch.process import process_file
-        from ..io import load_camera
-        from ..uncertainty.budget import load_budget
-
-        cam = load_camera(camera_path)
-        bud = load_budget(budget_spec)
+        cam, bud = load_camera_and_budget(camera_path, budget_spec)
         summ = process_file(cam, bud, detections, out, chunk_rows=chunk_rows, progress=None if not quiet else False,
                             compression=comp, info={"camera": str(camera_path), "budget": str(budget_spec)},
                             **options)

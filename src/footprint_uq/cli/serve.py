@@ -10,6 +10,7 @@ import sys
 import click
 
 from ..products.footprints import CONTACT_MODES
+from ..service.runner import run
 from ..uncertainty.presets import PRESET_NAMES
 
 __all__ = ["serve_cmd"]
@@ -66,8 +67,6 @@ def serve_cmd(camera_path, budget_spec, registry, camera_id, input_, mqtt, outpu
     One output record per frame (or an error record), a health record every second;
     SIGTERM drains and exits 0.  See docs/service.md.
     """
-    from ..service.runner import run
-
     sys.exit(run(camera=camera_path, budget=budget_spec, registry=registry, camera_id=camera_id,
                  heading_offset_deg=heading_offset_deg, origin_lat_deg=origin_lat, origin_lon_deg=origin_lon,
                  confidence=confidence, contact=contact, allow_outside_image=allow_outside_image,
