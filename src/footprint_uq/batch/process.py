@@ -357,6 +357,8 @@ class BatchProcessor:
         ok = centre_ok & centre_fin
         partial = good & ~centre_ok & (res.largest_index >= 0) & largest_fin
         overflow = (centre_ok & ~centre_fin) | (good & ~centre_ok & (res.largest_index >= 0) & ~largest_fin)
+        # the frame processor's own output check (OVERFLOW codes) leaving nothing usable: an overflow too
+        overflow |= good & ~ok & ~partial & ((creason == st.OVERFLOW) | (corner_reason == st.OVERFLOW).any(1))
         failed = good & ~ok & ~partial & ~overflow
         res.status_id[ok] = 0
         res.status_id[partial] = 1
