@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -56,7 +56,7 @@ class SyntheticOptions:
     """
 
     views: int = 20
-    fill: tuple[float, float] = field(default=(0.3, 0.55))
+    fill: tuple[float, float] = (0.3, 0.55)
     max_tilt_deg: float = 40.0
     supersample: int = 4
     blur_sigma_px: float = 0.6
@@ -124,7 +124,7 @@ def _plain(o):
 
 
 def run_synthetic(out_dir, board: str = "14x9", square_m: float = 0.1, *, margin_m: float = 0.05,
-                  camera=None, options: SyntheticOptions | None = None) -> dict:
+                  camera=None, scale: float = 1.0, options: SyntheticOptions | None = None) -> dict:
     """Render a synthetic checkerboard campaign and/or run its planning study into ``out_dir``.
 
     Parameters
@@ -136,21 +136,26 @@ def run_synthetic(out_dir, board: str = "14x9", square_m: float = 0.1, *, margin
         Inner corners, ``"COLSxROWS"`` (default: the paper's board).
     square_m, margin_m : float
         Square size and white border, metres.
-    camera : SyntheticCamera, optional
-        Default :data:`~footprint_uq.calibration.synthetic.DEFAULT_CAMERA`
-        (see :func:`synthetic_camera`).
+    camera : SyntheticCamera or path, optional
+        The camera, or a camera/intrinsics file (:func:`synthetic_camera`); default
+        :data:`~footprint_uq.calibration.synthetic.DEFAULT_CAMERA`.
+    scale : float
+        Scale the sensor, same field of view.
     options : SyntheticOptions, optional
 
     Returns
     -------
     dict
-        ``board`` (:class:`Checkerboard`), ``camera``, ``rendered`` (bool), ``plan`` (the
+        ``board`` (:class:`Checkerboard`), ``camera`` (the simulated one), ``rendered`` (bool), ``plan`` (the
         :func:`~footprint_uq.calibration.synthetic.simulate_campaigns` result, or None) and
         ``plan_file`` (path or None).
     """
     o = options if options is not None else SyntheticOptions()
-    cam = camera if camera is not None else DEFAULT_CAMERA
     b = parse_board(board, square_m, margin_m)
+    if isinstance(camera, SyntheticCamera):
+        cam = camera if scale == 1.0 else camera.scaled(scale)
+    else:
+        cam = synthetic_camera(camera, scale)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     pose_kw = {"fill": tuple(o.fill), "max_tilt_deg": o.max_tilt_deg}

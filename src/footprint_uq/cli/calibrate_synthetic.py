@@ -7,9 +7,9 @@ from pathlib import Path
 
 import click
 
-from ..calibration import PAPER_COLUMNS
-from ..calibration.synthetic_run import SyntheticOptions, run_synthetic, synthetic_camera
+from ..calibration.synthetic_run import SyntheticOptions, run_synthetic
 from ..errors import InputError
+from ..params import PAPER_COLUMNS
 from .calibrate_common import board_callback
 
 __all__ = ["synthetic_cmd"]
@@ -57,12 +57,12 @@ def synthetic_cmd(out_dir, views, board, square_m, margin_m, camera_file, scale,
     """
     if campaigns == 1:
         raise InputError("--plan", campaigns, "at least 2 campaigns")
-    cam = synthetic_camera(camera_file, scale)
     options = SyntheticOptions(views=views, fill=tuple(fill), max_tilt_deg=max_tilt_deg, supersample=supersample,
                                blur_sigma_px=blur_sigma_px, noise_sigma_dn=noise_sigma_dn, render=not no_render,
                                campaigns=campaigns, corner_noise_px=corner_noise_px, plan_bootstrap=plan_bootstrap,
                                seed=seed)
-    res = run_synthetic(out_dir, board, square_m, margin_m=margin_m, camera=cam, options=options)
+    res = run_synthetic(out_dir, board, square_m, margin_m=margin_m, camera=camera_file, scale=scale, options=options)
+    cam = res["camera"]
     if res["rendered"]:
         click.echo(f"rendered {views} images of a {res['board'].label()} board ({cam.image_size_px[0]}x"
                    f"{cam.image_size_px[1]} px) with truth.json into {Path(out_dir)}")

@@ -7,7 +7,6 @@ from pathlib import Path
 
 import click
 
-from ..scenario.claims import evaluate_claims
 from ..viz.case_study_run import run_case_study
 
 __all__ = ["case_study"]
@@ -41,7 +40,7 @@ def case_study(out_dir, config, recording, camera_types, ellipse_every, dpi, sav
     res = paths["result"]
     click.echo(f"case study: {len(res.scene)} frames, {len(res.camera_names)} cameras x {len(res.type_names)} "
                f"camera types")
-    for c in evaluate_claims(res):
+    for c in paths["claims"]:
         click.echo(f"  {c['id']}: {c['verdict']} ({', '.join(f'{k} {v}' for k, v in c['per_camera'].items())})")
     click.echo(f"figures: {len(paths['figures'])} PNG in {out_dir}")
     click.echo(f"csv: {paths['csv']}")

@@ -14,6 +14,7 @@ import matplotlib
 
 from ..integrations.carla.bridge import read_recording, scene_to_recording
 from ..scenario.case_study import CaseStudyConfig, analyse, build_scene, load_config
+from ..scenario.claims import evaluate_claims
 from ..scenario.reproduction import write_paper_reproduction
 from .case_study import write_case_study_report
 
@@ -49,8 +50,9 @@ def run_case_study(out_dir, *, config=None, recording=None, camera_types=None, e
     dict
         The paths of :func:`~footprint_uq.viz.case_study.write_case_study_report` (``figures``,
         ``csv``, ``report``, ...), plus ``result`` (the
-        :class:`~footprint_uq.scenario.case_study.CaseStudyResult`) and ``reproduction`` (the
-        path of ``paper-reproduction.md``, or None).
+        :class:`~footprint_uq.scenario.case_study.CaseStudyResult`), ``claims`` (the paper's
+        statements tested, :func:`footprint_uq.scenario.claims.evaluate_claims`) and
+        ``reproduction`` (the path of ``paper-reproduction.md``, or None).
     """
     matplotlib.use("Agg")
     if config is None:
@@ -70,5 +72,6 @@ def run_case_study(out_dir, *, config=None, recording=None, camera_types=None, e
                                     heatmap=cfg.heatmap, dpi=dpi,
                                     reproduction_link=repro.name if repro is not None else None)
     paths["result"] = result
+    paths["claims"] = evaluate_claims(result)
     paths["reproduction"] = repro
     return paths
