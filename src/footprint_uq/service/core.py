@@ -43,16 +43,22 @@ from ..v2x import J2735_POSITION_CONFIDENCE_NAMES
 from .jsonrows import Table
 from .messages.cpm import (
     CONFIDENCE_LEVEL_UNAVAILABLE,
+    COORD_MAX,
+    COORD_MIN,
     CPM_CLASSES,
     LATITUDE_UNAVAILABLE,
     LONGITUDE_UNAVAILABLE,
     build_cpm,
-    coordinate_cm,
     encode_cpm_uper,
     timestamp_its_ms,
 )
-from .messages.sdsm import HEADING_UNAVAILABLE, SDSM_OBJECT_TYPES, SPEED_UNAVAILABLE, build_sdsm, offset_dm
-from .messages.uper_cpm import class_bits, encode_cpm_uper_fast, perceived_object_container_uper_arrays
+from .messages.sdsm import HEADING_UNAVAILABLE, OFFSET_MAX, SDSM_OBJECT_TYPES, SPEED_UNAVAILABLE, build_sdsm
+from .messages.uper_cpm import (
+    CpmUperWriter,
+    class_bits,
+    encode_cpm_uper_fast,
+    perceived_object_container_uper_arrays,
+)
 
 __all__ = ["Service", "CameraSetup", "FrameOutput", "error_record", "station_id_of", "RECORD_FOOTPRINTS",
            "RECORD_ERROR", "UPER_ENCODERS"]
@@ -115,6 +121,19 @@ class CameraSetup:
     processor: FrameProcessor
     georef: GeoReference
     station_id: int
+    #: the reference position of the messages (0.1 microdegree; "unavailable" without an origin)
+    lat_1e7deg: int | None = None
+    lon_1e7deg: int | None = None
+    #: the fixed part of its CPMs' UPER encoding
+    uper: CpmUperWriter | None = None
+
+    def __post_init__(self):
+        geo = self.georef
+        if geo.has_origin:
+            self.lat_1e7deg, self.lon_1e7deg = round(geo.origin_lat_deg * 1e7), round(geo.origin_lon_deg * 1e7)
+        self.uper = CpmUperWriter(self.station_id, latitude=LATITUDE_UNAVAILABLE if self.lat_1e7deg is None else
+                                  self.lat_1e7deg, longitude=LONGITUDE_UNAVAILABLE if self.lon_1e7deg is None else
+                                  self.lon_1e7deg)
 
 
 def _finite_number(d: dict, key: str, where: str) -> float:
@@ -249,6 +268,11 @@ class Service:
                 setup.georef.to_wgs84(np.zeros((1, 2)))
             if self.messages:
                 self._encode(build_cpm(setup.station_id, 0, []))
+        # the compiled writers (JSON rows, UPER container): loaded from numba's cache or compiled now
+        t = Table(1)
+        t.json([b'{"a":', t.column(np.zeros(1)), t.when(np.ones(1, bool), b',"b":', t.column(["x"])), b"}"])
+        one = np.ones(1, np.int64)
+        perceived_object_container_uper_arrays(one, one, one, one, one, one, one, one, one)
 
     # -- one frame ------------------------------------------------------------------------------------
     def process_frame(self, frame, *, source: str | None = None) -> dict:
@@ -479,8 +503,7 @@ class Service:
         geo = setup.georef
         N, m = len(classes), len(ok_idx)
         en = geo.world_to_enu(est.centre_xy_world_m) if N else np.zeros((0, 2))
-        e_ok, n_ok = en[ok_idx, 0], en[ok_idx, 1]
-        x_cm, y_cm, x_dm, y_dm = coordinate_cm(e_ok), coordinate_cm(n_ok), offset_dm(e_ok), offset_dm(n_ok)
+        x_cm, y_cm, x_dm, y_dm = _cm_dm(en[ok_idx])
         codes = est.v2x_codes[ok_idx]
         x_conf, y_conf, corr = codes[:, _CPM_INDEX], codes[:, _CPM_INDEX + 1], codes[:, _CPM_INDEX + 2]
         crow = (np.fromiter(map(_CLASS_ROWS.__getitem__, classes), np.intp, N)[ok_idx] if any(classes)
@@ -506,9 +529,7 @@ class Service:
                      t.when(has_cls, b',"classification":[{"objectClass":', t.column(_CLS_OBJECT[crow].tolist()),
                             b',"confidence":', lv, b"}]"),
                      b"}"])
-        lat_e7 = lon_e7 = None
-        if geo.has_origin:
-            lat_e7, lon_e7 = round(geo.origin_lat_deg * 1e7), round(geo.origin_lon_deg * 1e7)
+        lat_e7, lon_e7 = setup.lat_1e7deg, setup.lon_1e7deg
         cpm = build_cpm(setup.station_id, ref_ms, [],
                         latitude=LATITUDE_UNAVAILABLE if lat_e7 is None else lat_e7,
                         longitude=LONGITUDE_UNAVAILABLE if lon_e7 is None else lon_e7)
@@ -517,7 +538,7 @@ class Service:
         if self.uper_encoder == "fast":
             container = perceived_object_container_uper_arrays(
                 msg_ids, x_cm, x_conf, y_cm, y_conf, corr, _CLS_BITS_VALUE[crow], _CLS_BITS_WIDTH[crow], level)
-            cpm_hex = encode_cpm_uper_fast(cpm, perceived_objects_uper=container).hex()
+            cpm_hex = setup.uper.encode(ref_ms, container).hex()
         else:
             cpm_hex = self._encode(orjson.loads(cpm_json)).hex()
         # J3224's DetectedObjectList has 1..256 entries: a frame without objects has no SDSM (null)
@@ -530,6 +551,16 @@ class Service:
         sdsm = build_sdsm(setup.station_id, fno, ts, [],
                           **({} if lat_e7 is None else {"lat_1e7deg": lat_e7, "lon_1e7deg": lon_e7}))
         return cpm_json, cpm_hex, _splice(orjson.dumps(sdsm), b'"objects":[]', objs)
+
+
+def _cm_dm(en: np.ndarray):
+    """:func:`~.messages.cpm.coordinate_cm` and :func:`~.messages.sdsm.offset_dm` of east/north ``(m, 2)`` metres
+    (finite: centres that exist), as x/y columns: the same numbers in a handful of numpy calls."""
+    if np.isnan(en).any():  # (only from absurd coordinates: inf - inf)
+        en = np.nan_to_num(en)
+    cm = np.clip(np.rint(en * 100.0), COORD_MIN, COORD_MAX).astype(np.int64)
+    dm = np.clip(np.rint(en * 10.0), -OFFSET_MAX, OFFSET_MAX).astype(np.int64)
+    return cm[:, 0], cm[:, 1], dm[:, 0], dm[:, 1]
 
 
 def _splice(doc: bytes, empty_list: bytes, items: bytes) -> bytes:

@@ -145,29 +145,13 @@ class Table:
         n = self.n
         if n == 0:
             return b"[]"
-        lit = bytearray()
-        ops: list[tuple[int, int, int]] = []
-        per_row = [0]
-
-        def emit(parts):
-            for p in parts:
-                if isinstance(p, bytes):
-                    if ops and ops[-1][0] == 0 and ops[-1][1] + ops[-1][2] == len(lit):  # merge with the last text
-                        ops[-1] = (0, ops[-1][1], ops[-1][2] + len(p))
-                    else:
-                        ops.append((0, len(lit), len(p)))
-                    lit.extend(p)
-                    per_row[0] += len(p)
-                elif isinstance(p, tuple):
-                    k = len(ops)
-                    ops.append((2, p[0], 0))
-                    emit(p[1])
-                    ops[k] = (2, p[0], len(ops) - k - 1)
-                    ops.append((0, len(lit), 0))  # a boundary: text after the group is not merged into it
-                else:
-                    ops.append((1, p, 0))
-
-        emit(layout)
+        key = tuple(layout)
+        compiled = _LAYOUTS.get(key)
+        if compiled is None:
+            compiled = _compile(key)
+            if len(_LAYOUTS) < 256:
+                _LAYOUTS[key] = compiled
+        lit, ops, per_row = compiled
         buf = np.frombuffer(b"".join(self._texts), dtype=np.uint8)
         want = self._ncols * n
         starts = np.empty(want, np.int64)
@@ -175,7 +159,36 @@ class Table:
         got = _scan(buf, starts, ends)
         if got != want:
             raise ValueError(f"columns hold {got} values, expected {want} ({self._ncols} columns x {n} rows)")
-        masks = np.array(self._masks) if self._masks else np.zeros((1, n), dtype=bool)
-        size = 2 + n * (per_row[0] + 1) + buf.shape[0]  # an upper bound
-        return _weave(buf, starts, ends, n, np.frombuffer(bytes(lit), np.uint8), np.array(ops, dtype=np.int64),
-                      masks, size).tobytes()
+        masks = np.array(self._masks) if self._masks else _NO_MASKS
+        size = 2 + n * (per_row + 1) + buf.shape[0]  # an upper bound
+        return _weave(buf, starts, ends, n, lit, ops, masks, size).tobytes()
+
+
+_LAYOUTS: dict = {}
+_NO_MASKS = np.zeros((1, 1), dtype=bool)
+
+
+def _compile(layout: tuple):
+    """A layout -> (constant texts, ops of :func:`_weave`, constant bytes per row)."""
+    lit = bytearray()
+    ops: list[tuple[int, int, int]] = []
+
+    def emit(parts):
+        for p in parts:
+            if isinstance(p, bytes):
+                if ops and ops[-1][0] == 0 and ops[-1][1] + ops[-1][2] == len(lit):  # merge with the last text
+                    ops[-1] = (0, ops[-1][1], ops[-1][2] + len(p))
+                else:
+                    ops.append((0, len(lit), len(p)))
+                lit.extend(p)
+            elif isinstance(p, tuple):
+                k = len(ops)
+                ops.append((2, p[0], 0))
+                emit(p[1])
+                ops[k] = (2, p[0], len(ops) - k - 1)
+                ops.append((0, len(lit), 0))  # a boundary: text after the group is not merged into it
+            else:
+                ops.append((1, p, 0))
+
+    emit(layout)
+    return np.frombuffer(bytes(lit), np.uint8), np.array(ops, dtype=np.int64), len(lit)
