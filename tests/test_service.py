@@ -547,3 +547,20 @@ def test_objects_and_messages_are_the_documented_layout(camera):
     assert rec["cpm"]["payload"]["cpmContainers"][1]["containerData"]["perceivedObjects"] == pos
     assert rec["sdsm"]["objects"] == sdsm
     assert decode_cpm_uper(rec["cpm_uper_hex"]) == rec["cpm"]
+
+
+def test_message_coordinates_are_coordinate_cm_and_offset_dm():
+    """The service's one-pass conversion gives cpm.coordinate_cm / sdsm.offset_dm exactly (halves, clamps, NaN)."""
+    from footprint_uq.service.core import _cm_dm
+    from footprint_uq.service.messages.cpm import coordinate_cm
+    from footprint_uq.service.messages.sdsm import offset_dm
+
+    rng = np.random.default_rng(5)
+    en = np.concatenate([rng.standard_normal((2000, 2)) * s for s in (0.01, 1.0, 100.0, 1e3, 1e4, 1e6)] + [np.array(
+        [[0.005, -0.005], [0.015, 0.025], [1310.715, -1310.725], [np.nan, np.inf], [-np.inf, 1e308],
+         [3276.75, -3276.75], [-0.0, 0.0]])])
+    rows = rng.permutation(len(en))
+    with np.errstate(over="ignore"):
+        ref = [coordinate_cm(en[rows, 0]), coordinate_cm(en[rows, 1]), offset_dm(en[rows, 0]), offset_dm(en[rows, 1])]
+    for got, want in zip(_cm_dm(en, rows), ref, strict=True):
+        np.testing.assert_array_equal(got, want)

@@ -291,11 +291,29 @@ def _stdin_reader(stream, queue: FrameQueue, sink, metrics: Metrics, stop: threa
             continue
         key = frame.get("camera_id") if isinstance(frame, dict) else None
         key = key if isinstance(key, str) else repr(key)
-        if not queue.put(key, (frame, src, t)):
+        if not queue.put(key, (frame, src, t, None)):
             rec = error_record("service stopping or too many cameras pending", source=src)
             sink.write(rec)
             metrics.done(rec, time.monotonic() - t)
     queue.close()
+
+
+def _mqtt_frame(payload: bytes, cam: str, src: str):
+    """(frame, None) from an MQTT payload of topic ``<prefix>/<cam>``, or (None, the error output)."""
+    try:
+        frame = _loads(payload)
+    except ValueError as e:
+        rec = error_record(f"invalid JSON: {e}", camera_id=cam, source=src)
+        return None, FrameOutput(_dumps(rec), RECORD_ERROR, cam, None, rec)
+    if isinstance(frame, dict):
+        if frame.get("camera_id") is None:  # absent or null: the topic names the camera
+            frame["camera_id"] = cam
+        elif frame["camera_id"] != cam:
+            topic = src.removeprefix("mqtt ")
+            rec = error_record(f"camera_id {frame['camera_id']!r} does not match the topic {topic!r}",
+                               field="camera_id", camera_id=cam, frame=frame.get("frame"), source=src)
+            return None, FrameOutput(_dumps(rec), RECORD_ERROR, cam, None, rec)
+    return frame, None
 
 
 def _mqtt_client(host: str, port: int, client_id: str):
@@ -352,27 +370,13 @@ def serve(service: Service, *, input: str | None = "-", mqtt: str | None = None,
                 subscribed.set()
 
         def on_message(c, userdata, msg):
+            # the network thread only queues the payload: the worker parses it (a frame replaced by a newer one
+            # of its camera is never parsed, and the network thread is free for the next packet)
             t = time.monotonic()
             metrics.received()
             cam = msg.topic[len(input_prefix) + 1:]
             src = f"mqtt {msg.topic}"
-            try:
-                frame = _loads(msg.payload)
-            except ValueError as e:
-                rec = error_record(f"invalid JSON: {e}", camera_id=cam, source=src)
-                sink.write(rec)
-                metrics.done(rec, time.monotonic() - t)
-                return
-            if isinstance(frame, dict):
-                if frame.get("camera_id") is None:  # absent or null: the topic names the camera
-                    frame["camera_id"] = cam
-                elif frame["camera_id"] != cam:
-                    rec = error_record(f"camera_id {frame['camera_id']!r} does not match the topic {msg.topic!r}",
-                                       field="camera_id", camera_id=cam, frame=frame.get("frame"), source=src)
-                    sink.write(rec)
-                    metrics.done(rec, time.monotonic() - t)
-                    return
-            if not queue.put(cam, (frame, src, t)):
+            if not queue.put(cam, (msg.payload, src, t, cam)):
                 rec = error_record("service stopping or too many cameras pending", camera_id=cam, source=src)
                 sink.write(rec)
                 metrics.done(rec, time.monotonic() - t)
@@ -396,9 +400,14 @@ def serve(service: Service, *, input: str | None = "-", mqtt: str | None = None,
                 if queue._closed:
                     return
                 continue
-            frame, src, t = item
+            frame, src, t, topic_camera = item
             try:
-                out = service.process_frame_json(frame, source=src)
+                if topic_camera is not None:  # an MQTT payload: parsed here, its camera_id checked against the topic
+                    frame, out = _mqtt_frame(frame, topic_camera, src)
+                    if out is None:
+                        out = service.process_frame_json(frame, source=src)
+                else:
+                    out = service.process_frame_json(frame, source=src)
             except Exception as e:  # noqa: BLE001 - a bug met by one frame is reported in its record, not fatal
                 rec = error_record(f"internal error (please report): {type(e).__name__}: {e}", source=src,
                                    camera_id=frame.get("camera_id") if isinstance(frame, dict) else None)
