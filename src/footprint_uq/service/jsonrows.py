@@ -151,7 +151,7 @@ class Table:
             compiled = _compile(key)
             if len(_LAYOUTS) < 256:
                 _LAYOUTS[key] = compiled
-        lit, ops, per_row = compiled
+        lit, ops, per_row, reuse = compiled
         buf = np.frombuffer(b"".join(self._texts), dtype=np.uint8)
         want = self._ncols * n
         starts = np.empty(want, np.int64)
@@ -160,7 +160,7 @@ class Table:
         if got != want:
             raise ValueError(f"columns hold {got} values, expected {want} ({self._ncols} columns x {n} rows)")
         masks = np.array(self._masks) if self._masks else _NO_MASKS
-        size = 2 + n * (per_row + 1) + buf.shape[0]  # an upper bound
+        size = 2 + n * (per_row + 1) + reuse * buf.shape[0]  # an upper bound (a column may be written twice)
         return _weave(buf, starts, ends, n, lit, ops, masks, size).tobytes()
 
 
@@ -169,7 +169,7 @@ _NO_MASKS = np.zeros((1, 1), dtype=bool)
 
 
 def _compile(layout: tuple):
-    """A layout -> (constant texts, ops of :func:`_weave`, constant bytes per row)."""
+    """A layout -> (constant texts, ops of :func:`_weave`, constant bytes per row, most uses of one column in a row)."""
     lit = bytearray()
     ops: list[tuple[int, int, int]] = []
 
@@ -191,4 +191,6 @@ def _compile(layout: tuple):
                 ops.append((1, p, 0))
 
     emit(layout)
-    return np.frombuffer(bytes(lit), np.uint8), np.array(ops, dtype=np.int64), len(lit)
+    cols = [o[1] for o in ops if o[0] == 1]
+    reuse = max((cols.count(c) for c in set(cols)), default=1)
+    return np.frombuffer(bytes(lit), np.uint8), np.array(ops, dtype=np.int64), len(lit), reuse
