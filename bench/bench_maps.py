@@ -10,6 +10,10 @@ full Jacobians) on the full grid (``--quick``: every 4th pixel; its rate is per
 pixel either way).  ``cpu_ms`` is the process CPU time of one kernel run (all
 threads): on a shared machine it shows the work done independently of waiting
 for a core (with 2 idle cores the wall time approaches ``cpu_ms / 2``).
+
+The linearity flag (``covariance_map(..., get_nonlinearity=True)``, computed in the same pass): the
+map with and without it, runs interleaved (A B A B ...) into preallocated outputs, median of each;
+``time / ours`` is with / without (target <= 1.5, the budget of issue 12).
 """
 
 from __future__ import annotations
@@ -72,6 +76,25 @@ def _naive_rate(cam, budget, quick):
     return n / float(np.median(times)) / 1e6, n
 
 
+def flag_cost(cam, budget, out, runs: int):
+    """Median seconds of the map without and with the linearity flag (interleaved runs) and CPU seconds."""
+    nl = np.empty(out[2].shape)
+    nl.fill(0)
+    out4 = out + (nl,)
+    covariance_map(cam, budget, out=out)  # warm-up (compile / load from cache)
+    covariance_map(cam, budget, out=out4, get_nonlinearity=True)
+    t0, t1, c0, c1 = [], [], [], []
+    for _ in range(runs):
+        for fn, t, c in ((lambda: covariance_map(cam, budget, out=out), t0, c0),
+                         (lambda: covariance_map(cam, budget, out=out4, get_nonlinearity=True), t1, c1)):
+            a, ca = time.perf_counter(), time.process_time()
+            fn()
+            t.append(time.perf_counter() - a)
+            c.append(time.process_time() - ca)
+    return (float(np.median(t0)), float(np.median(t1)), float(np.median(c0)), float(np.median(c1)),
+            float(np.nanmax(nl)), float(np.mean(nl[out[2]] <= 0.05)))
+
+
 def run(quick: bool = False) -> list[dict]:
     runs = 7 if quick else 21
     budget = ErrorBudget.preset("basler1").replace(roll_deg=0.05, ground_height_m=0.05, ground_slope_deg=0.5)
@@ -101,5 +124,19 @@ def run(quick: bool = False) -> list[dict]:
             "valid_fraction": valid_frac, "budget": "basler1 + roll 0.05 deg + ground 0.05 m / 0.5 deg",
             "notes": (f"{valid_frac:.0%} of pixels below the horizon; output {nbytes / 1e6:.1f} MB "
                       f"(xy + cov float64 + valid); numpy baseline on {n_naive:,} px"),
+        })
+    for label, cam in (("pan-tilt (closed form), all sources", pt), ("OpenCV with distortion, all sources", oc)):
+        off, on, cpu_off, cpu_on, nl_max, ok_frac = flag_cost(cam, budget, out, runs)
+        ratio = on / off
+        print(f"  {label}: map with the linearity flag {on * 1e3:.2f} ms vs without {off * 1e3:.2f} ms: "
+              f"ratio {ratio:.3f} (CPU {cpu_on / cpu_off:.3f})", flush=True)
+        rows.append({
+            "case": f"{label}, {W}x{H}: with the linearity flag", "pixels": W * H, "median_ms": on * 1e3,
+            "cpu_ms": cpu_on * 1e3, "runs": runs, "mpx_per_s": W * H / on / 1e6, "time_vs_ours": ratio,
+            "without_flag_ms": off * 1e3, "without_flag_cpu_ms": cpu_off * 1e3, "cpu_ratio": cpu_on / cpu_off,
+            "target": "flag / no flag <= 1.5", "met": ratio <= 1.5,
+            "notes": (f"time / ours = with / without the flag ({off * 1e3:.2f} ms, interleaved runs; CPU ratio "
+                      f"{cpu_on / cpu_off:.2f}); linear_ok at {ok_frac:.1%} of the valid pixels, largest "
+                      f"nonlinearity {nl_max:.3g}; output + {W * H * 8 / 1e6:.1f} MB"),
         })
     return rows

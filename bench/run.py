@@ -107,13 +107,18 @@ def footprints_section(quick: bool = False) -> list[dict]:
                  res["repeats"], {"target": f"<= {res['target_us']:.0f} us",
                                   "met": r["fast_median_us"] <= res["target_us"]}),
                 ("fast_with_joint_cov_median_us", "same, with the joint (8x8) corner covariance", res["repeats"], {}),
+                ("fast_without_flag_median_us", "same, without the linearity flag (linearity=False)",
+                 res["repeats"], {}),
                 ("numpy_reference_median_us", "footprints_from_boxes3d (vectorised numpy), whole frame",
                  max(res["repeats"] // 20, 5), {}),
                 ("naive_loop_median_us", "naive per-object loop over the numpy reference", None, {})):
             rows.append({**common, "case": f"{cam}: {what}", "median_us": r[key],
                          "runs": runs if runs is not None else ("3" if quick else "20"),
                          "speedup_vs_naive": naive / r[key], **extra})
-        rows[-4]["objects_with_valid_centre"] = r["objects_with_valid_centre"]
+        rows[-5]["objects_with_valid_centre"] = r["objects_with_valid_centre"]
+        rows[-5]["flagged_centres"] = r.get("flagged_centres")
+        rows[-4]["time_vs_ours"] = r["fast_with_joint_cov_median_us"] / r["fast_median_us"]
+        rows[-3]["time_vs_ours"] = r["fast_without_flag_median_us"] / r["fast_median_us"]
     return rows
 
 
@@ -286,6 +291,13 @@ def summary_rows(results: dict) -> list[tuple[str, str, str, str, str, str]]:
             ratio += f"; {unc['time_vs_ours']:.1e}x `uncertainties`"
         out.append(("full-HD covariance map, pan-tilt, all sources", f"{pt['median_ms']:.1f} ms", ref, ratio,
                     pt["target"], _yes_no(pt["met"])))
+    for cam in ("pan-tilt", "OpenCV"):
+        fl = _find(mp, cam, "linearity flag")
+        if fl:
+            out.append((f"full-HD map with the linearity flag, {cam}", f"{fl['median_ms']:.1f} ms",
+                        f"the same map without the flag: {fl['without_flag_ms']:.1f} ms",
+                        f"flag / no flag {fl['time_vs_ours']:.2f} (CPU {fl['cpu_ratio']:.2f})", fl["target"],
+                        _yes_no(fl["met"])))
     if oc:
         out.append(("full-HD covariance map, OpenCV with distortion",
                     f"{oc['median_ms']:.1f} ms = {oc['mpx_per_s']:.0f} Mpx/s",
@@ -309,10 +321,15 @@ def summary_rows(results: dict) -> list[tuple[str, str, str, str, str, str]]:
     fp = S.get("footprints", [])
     for cam in ("pan-tilt", "opencv-distortion"):
         fast, naive = _find(fp, cam, "FrameProcessor"), _find(fp, cam, "naive")
+        noflag = _find(fp, cam, "without the linearity flag")
         if fast and naive:
-            out.append((f"one frame of 100 objects (3D boxes), {cam}", f"{fast['median_us']:.0f} us",
-                        f"naive per-object loop: {naive['median_us'] / 1e3:.0f} ms",
-                        f"{fast['speedup_vs_naive']:,.0f}x", fast["target"], _yes_no(fast["met"])))
+            ref = f"naive per-object loop: {naive['median_us'] / 1e3:.0f} ms"
+            ratio = f"{fast['speedup_vs_naive']:,.0f}x"
+            if noflag:
+                ref += f"; without the linearity flag: {noflag['median_us']:.0f} us"
+                ratio += f"; the flag costs x{1 / noflag['time_vs_ours']:.2f}"
+            out.append((f"one frame of 100 objects (3D boxes), {cam}", f"{fast['median_us']:.0f} us", ref, ratio,
+                        fast["target"], _yes_no(fast["met"])))
     for r in S.get("batch", []):
         if "footprints_per_s" in r:
             out.append((r["case"].replace("batch ", "batch, single process, "),

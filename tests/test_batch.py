@@ -100,6 +100,37 @@ def read_any(path) -> pa.Table:
 
 
 # -- numbers ---------------------------------------------------------------------------------------
+@pytest.mark.parametrize("corners", [False, True], ids=["lean", "corners"])
+def test_flag_columns_match_reference_3d(cam, corners):
+    """Columns nonlinearity / linear_ok (and c{k}_nonlinearity) are the reference's centre / corner flags, and
+    where a centre is not linear_ok the V2X fields follow the policy as in the reference (lean mode too:
+    the flagged rows' pixels are projected again for the sampling)."""
+    rng = np.random.default_rng(5)
+    n = 60
+    d = rng.uniform(12.0, 140.0, n)  # angles read in degrees: far objects are not linear_ok
+    a = np.deg2rad(30.0 + rng.uniform(-25.0, 25.0, n))
+    B = np.stack([d * np.sin(a), d * np.cos(a), np.full(n, 0.8), np.full(n, 4.5), np.full(n, 1.8),
+                  np.full(n, 1.5), rng.uniform(-np.pi, np.pi, n)], 1)
+    cols = dict(zip(("x_m", "y_m", "z_m", "length_m", "width_m", "height_m", "yaw_rad"), B.T, strict=True))
+    out = process_table(cam, "bw-cube1@deg", cols, corners=corners)
+    ref = footprints_from_boxes3d(cam, "bw-cube1@deg", B)
+    nl = out.column("nonlinearity").to_numpy()
+    assert np.array_equal(np.isnan(nl), np.isnan(ref.centre_nonlinearity))
+    ok = ~np.isnan(nl)
+    np.testing.assert_allclose(nl[ok], ref.centre_nonlinearity[ok], rtol=1e-9, atol=1e-12)
+    lin = out.column("linear_ok").to_numpy(zero_copy_only=False)
+    assert np.array_equal(lin, ref.centre_linear_ok)
+    assert 5 <= lin.sum() <= n - 5  # both kinds of rows present
+    assert not lin[~ok].any()
+    for name in V2X_FIELDS:
+        assert np.array_equal(out.column(name).to_numpy(), ref.v2x[name]), name
+    assert (ref.v2x_source == 1).any()  # sampled covariances were encoded
+    if corners:
+        for k in range(4):
+            np.testing.assert_allclose(out.column(f"c{k}_nonlinearity").to_numpy(), ref.corners_nonlinearity[:, k],
+                                       rtol=1e-9, atol=1e-12)
+
+
 def test_process_table_matches_reference_3d(cam):
     d = boxes3d(40)
     out = process_table(cam, BUDGET, d, confidence=0.95, corners=True)

@@ -137,7 +137,8 @@ def test_map_writes_files(camera_file, tmp_path):
     r = run("map", "--camera", camera_file, "--budget", "basler1", "--out", out, "--step-px", 8,
             "--max-range-m", 150)
     assert r.exit_code == 0, r.output
-    for name in ("map.npz", "uncertainty_image.png", "uncertainty_ground.png", "gsd.png", "summary.json"):
+    for name in ("map.npz", "uncertainty_image.png", "uncertainty_ground.png", "gsd.png", "nonlinearity.png",
+                 "summary.json"):
         p = out / name
         assert p.is_file() and p.stat().st_size > 1000, name
         if name.endswith(".png"):
@@ -149,6 +150,17 @@ def test_map_writes_files(camera_file, tmp_path):
     assert s["semi_major_m_median"] == pytest.approx(float(np.median(m.semi_major_m[m.valid])))
     assert s["camera"]["model"] == "pan-tilt"
     assert "median" in r.stdout
+    # the linearity flag is on by default: layer in the npz, headline in the summary and on stdout
+    assert m.nonlinearity is not None and m.linear_threshold == 0.05
+    assert s["fraction_linear_ok"] == pytest.approx(float(m.linear_ok[m.valid].mean()))
+    assert "linear_ok" in r.stdout
+    r = run("map", "--camera", camera_file, "--budget", "basler1", "--out", tmp_path / "off", "--step-px", 8,
+            "--no-linearity")
+    assert r.exit_code == 0, r.output
+    assert not (tmp_path / "off" / "nonlinearity.png").exists()
+    assert UncertaintyMap.load_npz(tmp_path / "off" / "map.npz").nonlinearity is None
+    r = run("map", "--camera", camera_file, "--budget", "basler1", "--out", tmp_path / "bad", "--linear-threshold", -1)
+    assert r.exit_code == 2 and "linear_threshold" in r.stderr
 
 
 def test_presets_formats():

@@ -65,17 +65,21 @@ def test_default_path_equals_reference(cam, cam_cv):
         scale = np.abs(ref.cov_m2[v]).max(axis=(-2, -1), keepdims=True)
         assert np.max(np.abs(m.cov_m2[v] - ref.cov_m2[v]) / scale) < 1e-8
         assert np.all(np.isnan(m.cov_m2[~v]))
+        # the linearity layer: the reference's numbers, NaN (and not linear_ok) where there is no ground point
+        np.testing.assert_allclose(m.nonlinearity[v], ref.nonlinearity[v], rtol=1e-9, atol=1e-12)
+        assert np.all(np.isnan(m.nonlinearity[~v])) and not m.linear_ok[~v].any()
+        np.testing.assert_array_equal(m.linear_ok, ref.linear_ok)
 
 
 def test_kernel_guard_falls_back_on_disagreement(cam, monkeypatch):
     """A kernel returning wrong numbers is detected, reported and replaced by the reference path."""
     import footprint_uq.products.maps as maps_mod
 
-    def broken(camera, budget, step_px=1, *, out=None):
+    def broken(camera, budget, step_px=1, *, out=None, get_nonlinearity=False):
         est = propagate(camera, budget, camera.pixel_grid(step_px))
         cov = est.cov_m2.copy()
         cov[est.valid.nonzero()[0][-1], :] *= 1.01  # one row of pixels 1 % off
-        return est.xy_world_m, cov, est.valid
+        return (est.xy_world_m, cov, est.valid) + ((est.nonlinearity,) if get_nonlinearity else ())
 
     monkeypatch.setattr(maps_mod, "covariance_map", broken)
     ref = uncertainty_map(cam, BUDGET, 4, use_kernel=False)
@@ -200,6 +204,9 @@ def test_npz_round_trip(tmp_path, cam, cam_cv):
                      "gsd_cross_m", "footprint_area_m2", "range_m", "orientation_deg"):
             np.testing.assert_array_equal(getattr(back, name), getattr(m, name))
         assert back.step_px == 9 and back.max_range_m == 60
+        np.testing.assert_array_equal(back.nonlinearity, m.nonlinearity)
+        np.testing.assert_array_equal(back.linear_ok, m.linear_ok)
+        assert back.linear_threshold == m.linear_threshold
         np.testing.assert_array_equal(back.camera.params, c.params)
         np.testing.assert_array_equal(back.budget.param_covariance(), BUDGET.param_covariance())
         with np.load(p) as z:
@@ -233,6 +240,58 @@ def test_figures(tmp_path, cam):
         p = viz.save_figure(f, tmp_path / f"{name}.png", dpi=60)
         assert p.stat().st_size > 5000
         assert p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_linearity_layer_masks_and_summary(cam):
+    """linear_ok = valid and nonlinearity <= threshold; max_range masks the layer too; the summary counts it."""
+    m = uncertainty_map(cam, "bw-cube1@deg", 2, max_range_m=80, linear_threshold=0.02)
+    beyond = m.reason == status.BEYOND_RANGE
+    assert beyond.any() and np.all(np.isnan(m.nonlinearity[~m.valid]))
+    with np.errstate(invalid="ignore"):
+        np.testing.assert_array_equal(m.linear_ok, m.valid & (m.nonlinearity <= 0.02))
+    s = m.summary()
+    assert s["linear_threshold"] == 0.02
+    assert s["fraction_linear_ok"] == pytest.approx(m.linear_ok[m.valid].mean())
+    assert 0.0 < s["fraction_linear_ok"] < 1.0  # the flag trips inside 80 m with degree-read angles
+    bad = m.valid & ~m.linear_ok
+    assert s["range_m_min_not_linear_ok"] == pytest.approx(m.range_m[bad].min())
+    off = uncertainty_map(cam, "bw-cube1@deg", 2, max_range_m=80, linearity=False)
+    assert off.nonlinearity is None and off.linear_ok is None and off.summary()["fraction_linear_ok"] is None
+    np.testing.assert_array_equal(off.cov_m2, m.cov_m2)
+    with pytest.raises(InputError, match="linear_threshold"):
+        uncertainty_map(cam, BUDGET, 4, linear_threshold=0.0)
+
+
+def test_figures_show_the_linearity_flag(tmp_path, cam):
+    """The heat map hatches the valid pixels that are not linear_ok and draws the threshold's contour; the
+    nonlinearity figure shows the layer, masked exactly where there is no ground point."""
+    from matplotlib.contour import ContourSet
+
+    from footprint_uq import viz
+
+    thr = 0.05
+    m = uncertainty_map(cam, "bw-cube1@deg", 2, linear_threshold=thr)
+    assert (m.valid & ~m.linear_ok).any() and m.linear_ok.any()
+    for fig in (viz.plot_image_map(m), viz.plot_ground_map(m)):
+        sets = [c for c in fig.axes[0].collections if isinstance(c, ContourSet)]
+        lines = [c for c in sets if list(c.levels) == [thr] and not c.filled]
+        hatched = [c for c in sets if c.filled and any(h for h in (c.hatches or []))]
+        assert len(lines) == 1 and len(hatched) == 1
+        labels = fig.axes[0].get_legend().get_texts()
+        assert any("not linear_ok" in t.get_text() for t in labels)
+    fig = viz.plot_nonlinearity_map(m)
+    img = fig.axes[0].images[0].get_array()
+    np.testing.assert_array_equal(img.mask, ~m.valid)
+    np.testing.assert_allclose(img.compressed(), np.clip(m.nonlinearity[m.valid], 1e-4 * 0.999, None))
+    sets = [c for c in fig.axes[0].collections if isinstance(c, ContourSet)]
+    assert [list(c.levels) for c in sets] == [[thr]]
+    # without the flag: no hatch, no threshold contour
+    off = viz.plot_image_map(uncertainty_map(cam, "bw-cube1@deg", 2, linearity=False))
+    assert not [c for c in off.axes[0].collections if isinstance(c, ContourSet) and list(c.levels) == [thr]]
+    with pytest.raises(InputError, match="nonlinearity"):
+        viz.plot_nonlinearity_map(uncertainty_map(cam, BUDGET, 4, linearity=False))
+    p = viz.save_figure(fig, tmp_path / "nl.png", dpi=60)
+    assert p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
 def test_report_helpers(tmp_path):

@@ -6,7 +6,9 @@ horizontal to nearly straight down.  Pixels: over the whole image and 10 % beyon
 Paths: :func:`propagate` (the numpy reference), :func:`covariance_points`,
 :func:`covariance_map`, :class:`FrameProcessor` (corners, 2D boxes, 3D boxes against their
 numpy reference) and the batch (:func:`process_table`).  The validity and the status code
-must be the same exactly; where valid, the numbers to 1e-9 relative.
+must be the same exactly; where valid, the numbers to 1e-9 relative -- the linearity flag's
+``nonlinearity`` too (plus 1e-12 absolute: a relative error of the axis far below anything the
+flag resolves), with the same ``linear_ok`` and the same V2X fields where it is False.
 """
 
 from __future__ import annotations
@@ -27,9 +29,11 @@ from footprint_uq.cameras.rotation import R_W_C
 from footprint_uq.fast.map_kernels import covariance_map, covariance_points
 from footprint_uq.products.footprints import FrameProcessor, footprints_from_boxes3d, footprints_from_corners
 from footprint_uq.uncertainty.budget import load_budget
-from footprint_uq.uncertainty.propagation import propagate
+from footprint_uq.uncertainty.propagation import DEFAULT_LINEAR_THRESHOLD, propagate
 
 RTOL = 1e-9
+#: absolute floor of the flag's comparison (a nonlinearity of 1e-12 is 0 for every purpose)
+NL_ATOL = 1e-12
 W_PX, H_PX = 1280, 720
 
 LENSES = {
@@ -113,6 +117,20 @@ def _assert_same(ref, xy, cov, reason, what, cam, uv=None):
     assert _close(cov[ok], ref.cov_m2[ok], scale_c), f"{what}: covariances differ"
 
 
+def _assert_same_flag(ref_nl, nl, what, threshold=DEFAULT_LINEAR_THRESHOLD):
+    """The same nonlinearity (NaN where the reference has none) and the same linear_ok."""
+    ref_nl = np.asarray(ref_nl, dtype=float)
+    nl = np.asarray(nl, dtype=float)
+    np.testing.assert_array_equal(np.isnan(nl), np.isnan(ref_nl), err_msg=f"{what}: flag missing / extra")
+    m = ~np.isnan(ref_nl)
+    err = np.abs(nl[m] - ref_nl[m])
+    tol = RTOL * np.abs(ref_nl[m]) + NL_ATOL
+    assert np.all(err <= tol), f"{what}: nonlinearity differs by {np.max(err / tol):.3g} x the tolerance"
+    at_edge = np.abs(ref_nl[m] - threshold) <= RTOL * threshold  # (measure zero: a draw exactly at the threshold)
+    np.testing.assert_array_equal((nl[m] <= threshold)[~at_edge], (ref_nl[m] <= threshold)[~at_edge],
+                                  err_msg=f"{what}: linear_ok differs")
+
+
 SETTINGS = settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 
 
@@ -123,16 +141,22 @@ def test_points_framewise_and_batch_agree_with_reference(data):
     budget = _budget(data.draw(st.booleans()))
     uv = _pixels(data.draw)
     ref = propagate(cam, budget, uv)
-    xy, cov, _, reason = covariance_points(cam, budget, uv, get_reason=True)
+    xy, cov, _, reason, nl = covariance_points(cam, budget, uv, get_reason=True, get_nonlinearity=True)
     _assert_same(ref, xy, cov, reason, "covariance_points", cam)
+    _assert_same_flag(ref.nonlinearity, nl, "covariance_points")
     est = FrameProcessor(cam, budget, allow_outside_image=True).corners(uv[:, None, :])
     _assert_same(ref, est.corners_xy_world_m[:, 0], est.corners_cov_m2[:, 0], est.corner_reason[:, 0],
                  "FrameProcessor.corners", cam, uv)
+    _assert_same_flag(ref.nonlinearity, est.corners_nonlinearity[:, 0], "FrameProcessor.corners")
     # 2D boxes whose bottom-centre is the pixel
     boxes = np.stack([uv[:, 0] - 15, uv[:, 1] - 40, uv[:, 0] + 15, uv[:, 1]], -1)
     est = FrameProcessor(cam, budget, allow_outside_image=True).boxes2d(boxes)
     _assert_same(ref, est.corners_xy_world_m[:, 0], est.corners_cov_m2[:, 0], est.corner_reason[:, 0],
                  "FrameProcessor.boxes2d", cam, uv)
+    _assert_same_flag(ref.nonlinearity, est.corners_nonlinearity[:, 0], "FrameProcessor.boxes2d")
+    # one corner: the centre and the largest point are that corner, with its flag
+    _assert_same_flag(ref.nonlinearity, est.centre_nonlinearity, "FrameProcessor.boxes2d centre")
+    _assert_same_flag(ref.nonlinearity, est.largest_nonlinearity, "FrameProcessor.boxes2d largest point")
     # the batch, K = 1 corner per row, per-corner columns
     tab = process_table(cam, budget, pa.table({"u0_px": uv[:, 0], "v0_px": uv[:, 1]}), corners=True,
                         allow_outside_image=True)
@@ -141,6 +165,9 @@ def test_points_framewise_and_batch_agree_with_reference(data):
     bcov = np.stack([np.stack([tab.column("c0_cov_xx_m2").to_numpy(), c01], -1),
                      np.stack([c01, tab.column("c0_cov_yy_m2").to_numpy()], -1)], -2)
     _assert_same(ref, bxy, bcov, tab.column("c0_reason").to_numpy().astype(np.int8), "batch", cam, uv)
+    _assert_same_flag(ref.nonlinearity, tab.column("c0_nonlinearity").to_numpy(), "batch c0_nonlinearity")
+    _assert_same_flag(ref.nonlinearity, tab.column("nonlinearity").to_numpy(), "batch nonlinearity")
+    np.testing.assert_array_equal(tab.column("linear_ok").to_numpy(zero_copy_only=False), ref.linear_ok)
 
 
 @SETTINGS
@@ -149,10 +176,16 @@ def test_map_agrees_with_reference(data):
     cam = data.draw(cameras())
     budget = _budget(data.draw(st.booleans()))
     step = data.draw(st.integers(17, 61))
-    xy, cov, valid, reason = covariance_map(cam, budget, step, get_reason=True)
+    xy, cov, valid, reason, nl = covariance_map(cam, budget, step, get_reason=True, get_nonlinearity=True)
     ref = propagate(cam, budget, cam.pixel_grid(step))
     np.testing.assert_array_equal(valid, ref.valid)
     _assert_same(ref, xy, cov, reason, "covariance_map", cam)
+    _assert_same_flag(ref.nonlinearity, nl, "covariance_map")
+    # the flag is an extra output of the same pass: the other outputs do not change
+    xy0, cov0, valid0 = covariance_map(cam, budget, step)
+    np.testing.assert_array_equal(valid0, valid)
+    np.testing.assert_array_equal(cov0, cov)
+    np.testing.assert_array_equal(xy0, xy)
 
 
 @SETTINGS
@@ -179,6 +212,46 @@ def test_boxes3d_framewise_agrees_with_numpy_reference(data):
     assert _close(est.corners_cov_m2[ok], ref.corners_cov_m2[ok], sc)
     okc = ref.centre_valid
     assert _close(est.centre_xy_world_m[okc], ref.centre_xy_world_m[okc], scale)
+    _assert_same_flag(ref.corners_nonlinearity, est.corners_nonlinearity, "boxes3d corners")
+    _assert_same_flag(ref.centre_nonlinearity, est.centre_nonlinearity, "boxes3d centre")
+    _assert_same_flag(ref.largest_nonlinearity, est.largest_nonlinearity, "boxes3d largest point")
+    np.testing.assert_array_equal(est.v2x_source, ref.v2x_source)
+    np.testing.assert_array_equal(est.v2x_codes, ref.v2x_codes)
+
+
+@SETTINGS
+@given(data=st.data())
+def test_framewise_flag_and_v2x_policy_agree_with_numpy_reference(data):
+    """Objects from near the camera to the horizon (angles read in degrees: many centres are not
+    linear_ok), every detector covariance form: the flag of every corner, largest point and centre, and
+    the V2X fields the policy gives (sampled or unavailable) are the reference's."""
+    cam = data.draw(cameras())
+    budget = data.draw(st.sampled_from(["bw-cube1@deg", "basler1@deg", "basler1"]))
+    n = 12
+    u = np.array(data.draw(st.lists(st.floats(0.0, W_PX - 60.0), min_size=n, max_size=n)))
+    v = np.array(data.draw(st.lists(st.floats(20.0, H_PX - 1.0), min_size=n, max_size=n)))
+    uv = np.stack([u, v], -1)[:, None, :] + np.array([[0.0, 0.0], [50.0, 0.0], [50.0, -15.0], [0.0, -15.0]])
+    form = data.draw(st.sampled_from(["none", "per-object", "per-corner", "full"]))
+    pc = {"none": None, "per-object": np.tile(np.diag([0.8, 0.3]), (n, 1, 1)),
+          "per-corner": np.tile(np.diag([0.5, 0.2]), (n, 4, 1, 1)),
+          "full": np.tile(0.3 * np.eye(8) + 0.1, (n, 1, 1))}[form]
+    opts = dict(allow_outside_image=True, v2x_samples=200, heading_offset_deg=data.draw(st.floats(-180.0, 180.0)))
+    ref = footprints_from_corners(cam, budget, uv, pixel_cov_px2=pc, **opts)
+    est = FrameProcessor(cam, budget, **opts).corners(uv, pixel_cov_px2=pc)
+    np.testing.assert_array_equal(est.corner_reason, ref.corner_reason)
+    np.testing.assert_array_equal(est.centre_reason, ref.centre_reason)
+    _assert_same_flag(ref.corners_nonlinearity, est.corners_nonlinearity, "corners")
+    _assert_same_flag(ref.centre_nonlinearity, est.centre_nonlinearity, "centre")
+    _assert_same_flag(ref.largest_nonlinearity, est.largest_nonlinearity, "largest point")
+    np.testing.assert_array_equal(est.centre_linear_ok, ref.centre_linear_ok)
+    np.testing.assert_array_equal(est.v2x_source, ref.v2x_source)
+    np.testing.assert_array_equal(est.v2x_codes, ref.v2x_codes)
+    # the centre's flag is its worst corner's, the largest point's its corner's
+    ok = ref.centre_valid
+    np.testing.assert_array_equal(ref.centre_nonlinearity[ok], ref.corners_nonlinearity[ok].max(1))
+    has = ref.largest_index >= 0
+    np.testing.assert_array_equal(ref.largest_nonlinearity[has],
+                                  ref.corners_nonlinearity[np.flatnonzero(has), ref.largest_index[has]])
 
 
 def test_overflow_is_no_answer_in_every_pixel_path():

@@ -484,12 +484,11 @@ def test_objects_and_messages_are_the_documented_layout(camera):
     ellipse_axes and footprint_uq.v2x (the per-object dicts of the documented layout): every key, order
     and value, for a frame with valid, partial and failed centres, classes, class confidences and
     detector covariances."""
-    from footprint_uq.uncertainty.ellipse import ellipse_axes
     from footprint_uq.products.geo import GeoReference
-
     from footprint_uq.service.core import _message_object_id
     from footprint_uq.service.messages.cpm import CPM_CLASSES, coordinate_cm
     from footprint_uq.service.messages.sdsm import offset_dm, sdsm_object
+    from footprint_uq.uncertainty.ellipse import ellipse_axes
 
     rng = np.random.default_rng(21)
     n = 60

@@ -121,13 +121,14 @@ class _Result:
     K: int
     reason_id: np.ndarray
     status_id: np.ndarray
-    obj: np.ndarray = field(default=None)  # (13, n) rows footprint_kernels.OBJ_ROWS
+    obj: np.ndarray = field(default=None)  # (len(OBJ_ROWS), n) rows footprint_kernels.OBJ_ROWS
     largest_index: np.ndarray = field(default=None)
     v2x: np.ndarray = field(default=None)  # (7, n) rows V2X_FIELDS
     corners_px: np.ndarray = field(default=None)
     corners_xy: np.ndarray = field(default=None)
     corners_cov: np.ndarray = field(default=None)
     corner_reason: np.ndarray = field(default=None)
+    corners_nl: np.ndarray = field(default=None)
 
 
 class BatchProcessor:
@@ -153,6 +154,11 @@ class BatchProcessor:
         Let corners outside the image enter the centre and the largest point.
     bottom_on_ground : bool
         3D boxes: put the bottom face on the ground (see :func:`footprints_from_boxes3d`).
+    linear_threshold : float
+        ``linear_ok = nonlinearity <= linear_threshold`` (default 0.05).
+    v2x_policy : {"sampled", "unavailable", "linear"}
+        The V2X fields of rows whose centre is not ``linear_ok`` (see
+        :class:`~footprint_uq.footprints.FrameProcessor`, docs/batch.md).
     threads : int, optional
         Threads for the numeric kernel on large chunks (default: up to 2; used only
         when the compiled kernel releases the GIL).
@@ -161,7 +167,8 @@ class BatchProcessor:
     def __init__(self, camera, budget, *, box_type: str | None = None, contact: str = "bottom-centre",
                  confidence: float | None = None, heading_offset_deg: float = 0.0,
                  origin_lat_deg: float | None = None, origin_lon_deg: float | None = None, corners: bool = False,
-                 allow_outside_image: bool = False, bottom_on_ground: bool = True, threads: int | None = None):
+                 allow_outside_image: bool = False, bottom_on_ground: bool = True,
+                 linear_threshold: float = 0.05, v2x_policy: str = "sampled", threads: int | None = None):
         if box_type is not None and box_type not in S.BOX_TYPES:
             raise InputError("box_type", box_type, f"one of {S.BOX_TYPES}")
         if contact not in CONTACT_MODES:
@@ -186,7 +193,10 @@ class BatchProcessor:
         self.threads = max(1, min(2, os.cpu_count() or 1)) if threads is None else max(1, int(threads))
         self._parallel = self.threads > 1 and _kernel_releases_gil()
         self.proc = FrameProcessor(camera, self.budget, heading_offset_deg=self.heading_offset_deg,
-                                   allow_outside_image=self.allow_outside_image, joint_cov=False)
+                                   allow_outside_image=self.allow_outside_image, joint_cov=False,
+                                   linear_threshold=linear_threshold, v2x_policy=v2x_policy)
+        self.linear_threshold = self.proc.linear_threshold
+        self.v2x_policy = v2x_policy
         # kernel outputs (FrameProcessor: pyarrow-pool memory, reused from chunk to chunk) become the
         # output columns without a copy; per-corner coordinates and covariances only when written
         self.proc.corner_outputs = self.corners or self.geo is not None
@@ -346,6 +356,7 @@ class BatchProcessor:
             res.corners_px = gather("corners_px", (K, 2), np.nan)
             res.corners_xy = gather("corners_xy_world_m", (K, 2), np.nan)
             res.corners_cov = gather("corners_cov_m2", (K, 2, 2), np.nan)
+            res.corners_nl = gather("corners_nonlinearity", (K,), np.nan)
             res.corner_reason = corner_reason
         # status and reason of the processed rows; outputs are checked too: a centre, covariance or
         # largest point that overflowed (absurd but finite inputs) is never "ok"/"partial"
@@ -481,6 +492,10 @@ class BatchProcessor:
         if self._k_conf is not None:
             cols["semi_major_m"] = self._k_conf * obj[_OBJ["sigma_major_m"]]
             cols["semi_minor_m"] = self._k_conf * obj[_OBJ["sigma_minor_m"]]
+        nl = obj[_OBJ["nonlinearity"]]
+        cols["nonlinearity"] = nl
+        with np.errstate(invalid="ignore"):
+            cols["linear_ok"] = nl <= self.linear_threshold  # NaN (no centre) -> False
         cols["largest_index"] = res.largest_index.astype(np.int8)
         for name in ("largest_sigma_major_m", "largest_x_m", "largest_y_m", "area_m2"):
             cols[name] = obj[_OBJ[name]]
@@ -497,6 +512,7 @@ class BatchProcessor:
                 cc = res.corners_cov[:, k]
                 cols[f"c{k}_cov_xx_m2"], cols[f"c{k}_cov_xy_m2"], cols[f"c{k}_cov_yy_m2"] = (cc[:, 0, 0], cc[:, 0, 1],
                                                                                            cc[:, 1, 1])
+                cols[f"c{k}_nonlinearity"] = res.corners_nl[:, k]
                 cols[f"c{k}_reason"] = res.corner_reason[:, k].astype(np.int8)
                 if self.geo is not None:
                     cols[f"c{k}_lat_deg"], cols[f"c{k}_lon_deg"] = clat[:, k], clon[:, k]

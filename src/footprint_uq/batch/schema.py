@@ -20,8 +20,8 @@ Output
 ------
 :func:`output_schema`: ``row`` (0-based index of the input row), the id columns
 present in the input, ``status`` (:data:`STATUSES`), ``reason``, the footprint centre and its
-covariance, ellipse, largest point, area, the V2X fields, optionally lat/lon and
-per-corner columns.
+covariance, ellipse, the linearity flag (:data:`FLAG_COLUMNS`), largest point, area, the V2X fields,
+optionally lat/lon and per-corner columns.
 """
 
 from __future__ import annotations
@@ -36,7 +36,7 @@ __all__ = ["DEFAULT_CHUNK_ROWS", "ID_COLUMNS", "ID_TYPES",
            "BOX2D_COLUMNS", "BOX3D_COLUMNS", "YAW_COLUMNS", "COV_COLUMNS", "BOX_TYPES",
            "STATUSES", "STATUS_OK", "STATUS_PARTIAL", "STATUS_ERROR", "V2X_UNAVAILABLE", "corner_columns",
            "count_corners", "detect_box_type", "box_columns", "numeric_input_columns", "output_schema",
-           "corner_output_columns", "CENTRE_COLUMNS", "REASON_TYPE"]
+           "corner_output_columns", "CENTRE_COLUMNS", "FLAG_COLUMNS", "REASON_TYPE"]
 
 #: rows per chunk by default: peak memory about 0.35 GB + 0.8 kB x chunk_rows (docs/batch.md)
 DEFAULT_CHUNK_ROWS = 131_072
@@ -109,12 +109,15 @@ def numeric_input_columns(box_type: str, names) -> tuple[str, ...]:
 
 CENTRE_COLUMNS = ("x_m", "y_m", "cov_xx_m2", "cov_xy_m2", "cov_yy_m2", "sigma_major_m", "sigma_minor_m",
                   "orientation_deg")
+#: the centre's linearity flag (docs/uncertainty-model.md, "The linearity flag"): ``nonlinearity`` (float, NaN
+#: without a centre) and ``linear_ok`` (bool, ``nonlinearity <= linear_threshold``)
+FLAG_COLUMNS = ("nonlinearity", "linear_ok")
 
 
 def corner_output_columns(k: int, geo: bool) -> list[tuple[str, pa.DataType]]:
     cols = [(f"c{k}_u_px", pa.float64()), (f"c{k}_v_px", pa.float64()), (f"c{k}_x_m", pa.float64()),
             (f"c{k}_y_m", pa.float64()), (f"c{k}_cov_xx_m2", pa.float64()), (f"c{k}_cov_xy_m2", pa.float64()),
-            (f"c{k}_cov_yy_m2", pa.float64()), (f"c{k}_reason", pa.int8())]
+            (f"c{k}_cov_yy_m2", pa.float64()), (f"c{k}_nonlinearity", pa.float64()), (f"c{k}_reason", pa.int8())]
     if geo:
         cols += [(f"c{k}_lat_deg", pa.float64()), (f"c{k}_lon_deg", pa.float64())]
     return cols
@@ -142,6 +145,7 @@ def output_schema(id_fields: list[pa.Field], n_corners: int, *, confidence: bool
     f += [c(name, pa.float64()) for name in CENTRE_COLUMNS]
     if confidence:
         f += [c("semi_major_m", pa.float64()), c("semi_minor_m", pa.float64())]
+    f += [c("nonlinearity", pa.float64()), c("linear_ok", pa.bool_())]
     f += [c("largest_index", pa.int8()), c("largest_sigma_major_m", pa.float64()),
           c("largest_x_m", pa.float64()), c("largest_y_m", pa.float64()), c("area_m2", pa.float64())]
     f += [c(name, pa.int32()) for name in V2X_FIELDS]

@@ -20,12 +20,18 @@ __all__ = ["map_cmd"]
               help="Mask ground points farther than M metres from the camera foot point.")
 @click.option("--confidence", type=float, default=None, metavar="P",
               help="Draw P-confidence semi-axes instead of 1 sigma (0.95 -> 2.4477 sigma).")
-def map_cmd(camera_path, budget_spec, out_dir, step_px, max_range_m, confidence):
-    """Per-pixel uncertainty map: PNG heat maps (image and bird's-eye), GSD maps, .npz arrays, summary.json."""
+@click.option("--linearity/--no-linearity", default=True, show_default=True,
+              help="Compute the linearity flag: the nonlinearity layer (map.npz, nonlinearity.png) and, in the "
+                   "figures, the pixels that are not linear_ok hatched with the threshold's contour.")
+@click.option("--linear-threshold", type=float, default=0.05, show_default=True, metavar="E",
+              help="linear_ok where the predicted relative error of the linear 1-sigma semi-major axis is at most E.")
+def map_cmd(camera_path, budget_spec, out_dir, step_px, max_range_m, confidence, linearity, linear_threshold):
+    """Per-pixel uncertainty map: PNG heat maps (image and bird's-eye), GSD maps, the linearity flag, .npz
+    arrays, summary.json."""
     confidence = check_confidence(confidence)
     camera, budget = load_camera_and_budget(camera_path, budget_spec)
     umap, files = write_map_report(camera, budget, out_dir, step_px=step_px, max_range_m=max_range_m,
-                                   confidence=confidence)
+                                   confidence=confidence, linearity=linearity, linear_threshold=linear_threshold)
     for p in files.values():
         click.echo(f"wrote {p}")
     s = umap.summary(confidence=confidence)
@@ -36,3 +42,8 @@ def map_cmd(camera_path, budget_spec, out_dir, step_px, max_range_m, confidence)
     click.echo(f"valid pixels {100 * s['fraction_valid']:.1f} %; {lab} semi-major axis: median "
                f"{s['semi_major_m_median']:.3g} m, 95th percentile {s['semi_major_m_p95']:.3g} m, "
                f"max {s['semi_major_m_max']:.3g} m")
+    if s["fraction_linear_ok"] is not None:
+        near = s["range_m_min_not_linear_ok"]
+        click.echo(f"linear_ok (nonlinearity <= {s['linear_threshold']:g}) at "
+                   f"{100 * s['fraction_linear_ok']:.1f} % of the valid pixels"
+                   + (f"; not from {near:.3g} m on" if near is not None else ""))

@@ -17,7 +17,7 @@ from ..batch.fleet import process_fleet
 from ..batch.process import process_file
 from ..batch.schema import DEFAULT_CHUNK_ROWS
 from ..errors import InputError
-from ..products.footprints import CONTACT_MODES
+from ..products.footprints import CONTACT_MODES, V2X_POLICIES
 from ..uncertainty.presets import PRESET_NAMES
 from .common import load_camera_and_budget
 
@@ -49,6 +49,12 @@ __all__ = ["objects_cmd"]
 @click.option("--corners", is_flag=True, help="Also write every corner's pixel, ground position and covariance.")
 @click.option("--allow-outside-image", is_flag=True,
               help="Let corners outside the image enter the centre and the largest point.")
+@click.option("--linear-threshold", type=float, default=0.05, show_default=True, metavar="E",
+              help="linear_ok is true where the centre's nonlinearity (predicted relative error of the linear "
+                   "sigma_major_m) is at most E.")
+@click.option("--v2x-policy", type=click.Choice(list(V2X_POLICIES)), default="sampled", show_default=True,
+              help="V2X fields of centres that are not linear_ok: the larger of the linear and a seeded Monte-Carlo "
+                   "covariance (unavailable beyond nonlinearity 0.5), always unavailable, or the linear one.")
 @click.option("--compression", type=click.Choice(["auto", "snappy", "zstd", "lz4", "gzip", "none"]), default="auto",
               show_default=True, help="Parquet compression: auto = snappy, small-integer code columns uncompressed; "
                                       "else one codec for every column.")
@@ -64,8 +70,8 @@ __all__ = ["objects_cmd"]
 @click.option("--overwrite", is_flag=True,
               help="Fleet mode: replace a non-empty --out folder as a whole (refused otherwise).")
 def objects_cmd(camera_path, budget_spec, detections, out, box_type, contact, chunk_rows, confidence,
-                heading_offset_deg, origin_lat, origin_lon, corners, allow_outside_image, compression, quiet,
-                registry, scheduler, workers, retries, overwrite):
+                heading_offset_deg, origin_lat, origin_lon, corners, allow_outside_image, linear_threshold, v2x_policy,
+                compression, quiet, registry, scheduler, workers, retries, overwrite):
     """Footprints (centre, covariance, largest point, V2X fields) of every detection in a file.
 
     Every input row gives one output row with its 0-based row number, a status (ok,
@@ -73,7 +79,7 @@ def objects_cmd(camera_path, budget_spec, detections, out, box_type, contact, ch
     """
     options = dict(box_type=box_type, contact=contact, confidence=confidence, heading_offset_deg=heading_offset_deg,
                    origin_lat_deg=origin_lat, origin_lon_deg=origin_lon, corners=corners,
-                   allow_outside_image=allow_outside_image)
+                   allow_outside_image=allow_outside_image, linear_threshold=linear_threshold, v2x_policy=v2x_policy)
     comp = None if compression == "none" else compression
     if registry is not None:
         if camera_path is not None:

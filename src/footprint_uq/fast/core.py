@@ -30,6 +30,7 @@ __all__ = [
     "UNDISTORT_TOL", "UNDISTORT_MAX_ITER", "R_CAP", "STRETCH_MAX", "DOM_M", "DOM_RD_IN2", "DOM_RD_OUT2",
     "DOM_RU_IN2", "DOM_RU_OUT2", "DOM_TAB", "distort_point", "distort_jac", "in_domain_distorted",
     "in_domain_undistorted", "undistort_point", "undistort_vec", "fold_radius", "undistort_many", "contains_many",
+    "major_axis", "nonlinearity_forms", "nonlinearity_point",
 ]
 
 _INL = dict(inline="always", cache=True, error_model="numpy", fastmath={"contract"})
@@ -332,6 +333,89 @@ def undistort_vec(dom, k, xd, yd, xn, yn, m00, m01, m10, m11, iden, ok):
         nfail += 0 if ok[i] else 1
     if nfail:
         _undistort_fallback(dom, k, xd, yd, xn, yn, m00, m01, m10, m11, iden, ok)
+
+
+# --------------------------------------------------------------------------------------
+# the linearity flag (docs/uncertainty-model.md, "The linearity flag")
+# --------------------------------------------------------------------------------------
+@nb.njit(**_INL)
+def major_axis(c00, c01, c11):
+    """Largest eigenvalue and its unit eigenvector of the symmetric 2x2 ``[[c00, c01], [c01, c11]]``.
+
+    Returns ``(lam_max, e0, e1)`` (units of ``c``; ``e`` dimensionless).  The eigenvector is formed
+    from the better-conditioned column of ``C - lam_min I`` (no cancellation); a circular ``C``
+    gives ``e = (1, 0)``.  NaN in: ``lam_max`` NaN.
+    """
+    d = 0.5 * (c00 - c11)
+    rad = math.sqrt(d * d + c01 * c01)
+    lam_max = 0.5 * (c00 + c11) + rad
+    pos = d >= 0.0  # selects, no branches: the kernels' pixel loops stay vectorised
+    a0 = d + rad if pos else c01
+    a1 = c01 if pos else rad - d
+    nrm = math.sqrt(a0 * a0 + a1 * a1)
+    inv = 1.0 / nrm
+    good = nrm > 0.0
+    return lam_max, a0 * inv if good else 1.0, a1 * inv if good else 0.0
+
+
+@nb.njit(**_INL)
+def nonlinearity_forms(lam_max_m2, e0, e1, dn, lam_m, dx, dy, mu, gamma, s_num_m2, s_cross_m2, mu_num):
+    """Predicted relative error of the linear 1-sigma semi-major axis, one point (scalar port).
+
+    The formula of :func:`footprint_uq.propagation.nonlinearity_from_forms` (same argument
+    meanings: ``e = (e0, e1)`` the unit major axis, ``(dx, dy)`` the horizontal part of the world
+    ray, ``dn`` the ray denominator ``Dn``, ``lam_m = N / Dn``; ``mu = r^T Sigma g``,
+    ``gamma = g^T Sigma g``, ``s_num = r'^T Sigma r'``, ``s_cross = r^T Sigma r'``,
+    ``mu_num = r'^T Sigma g``).  Returns a float >= 0; 1.0 where the expansion has broken
+    down (``1 + delta / lam_max < 0``), 0 where ``delta`` is 0 (also with ``lam_max`` 0: no uncertainty),
+    NaN where an input is not finite.
+    """
+    b = lam_m * (dx * e0 + dy * e1)
+    q2 = gamma / (dn * dn)
+    w = -b / dn
+    c_L = mu / dn
+    c_A = (mu_num - w * gamma) / dn
+    s_A = s_num_m2 - 2.0 * w * mu_num + w * w * gamma
+    s_LA = s_cross_m2 - w * mu
+    delta = (2.0 * q2 * q2 * b * b - 4.0 * q2 * b * c_A + q2 * s_A + c_A * c_A - 6.0 * q2 * c_L * b
+             + 2.0 * q2 * s_LA + 4.0 * c_L * c_A + (69.0 + 696.0 * q2) * q2 * q2 * q2 * b * b)
+    t = 0.0 if delta == 0.0 else delta / lam_max_m2  # no uncertainty at all (a zero budget): exact, 0
+    x = 1.0 + t
+    nl = abs(t) / (math.sqrt(abs(x)) + 1.0)  # = |sqrt(1 + t) - 1| without cancellation
+    nl = nl if x >= 0.0 else 1.0
+    return nl if (x - x) == 0.0 else math.nan  # not finite -> NaN (selects: the loops stay vectorised)
+
+
+@nb.njit(**_INL)
+def nonlinearity_point(c00, c01, c11, dn, lam_m, dx, dy, jg0, jg1, gamma, gp0, gp1, x00, x01, x10, x11,
+                       sp00, sp01, sp11):
+    """The linearity flag of one point from what a kernel has at hand (all sources: parameters and pixel).
+
+    Parameters (``J`` the 2 x n Jacobian of the ground point over every error source, ``g`` the
+    gradient of ``Dn`` over the same sources, ``Sigma`` their covariance, ``E`` the selector of
+    the camera position x_m, y_m):
+
+    c00, c01, c11 : the linear covariance ``J Sigma J^T``, m^2
+    dn, lam_m, dx, dy : ``Dn``, ``lam = N / Dn`` (m) and the ray's horizontal part ``d_xy``
+    jg0, jg1 : ``J Sigma g`` (2,), m
+    gamma : ``g^T Sigma g``
+    gp0, gp1 : ``E^T Sigma g`` (2,), m -- zero when the position is uncorrelated with the rest
+    x00, x01, x10, x11 : ``X = J Sigma E`` (2, 2), m^2 -- ``Sigma_pos`` when uncorrelated
+    sp00, sp01, sp11 : ``Sigma_pos = E^T Sigma E``, m^2
+
+    With ``e`` the unit major axis (eigenvalue ``lam_max``): ``mu = e . J Sigma g``,
+    ``mu_num = mu - e . E^T Sigma g``, ``s_cross = lam_max - e^T X e`` and ``s_num = lam_max -
+    2 e^T X e + e^T Sigma_pos e`` (``r' = J'^T e`` with ``J' = J - E^T``); then
+    :func:`nonlinearity_forms`.
+    """
+    lam_max, e0, e1 = major_axis(c00, c01, c11)
+    mu = e0 * jg0 + e1 * jg1
+    mu_num = mu - (e0 * gp0 + e1 * gp1)
+    exe = e0 * (x00 * e0 + x01 * e1) + e1 * (x10 * e0 + x11 * e1)
+    epe = e0 * (sp00 * e0 + sp01 * e1) + e1 * (sp01 * e0 + sp11 * e1)
+    s_crs = lam_max - exe
+    s_num = lam_max - 2.0 * exe + epe
+    return nonlinearity_forms(lam_max, e0, e1, dn, lam_m, dx, dy, mu, gamma, s_num, s_crs, mu_num)
 
 
 # --------------------------------------------------------------------------------------

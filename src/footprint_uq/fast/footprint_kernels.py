@@ -140,6 +140,14 @@ SCRATCH_ROWS = (
     ("PC", 1, "3D boxes: projection code per corner"), ("CS", 1, "cos yaw"), ("SN", 1, "sin yaw"),
     ("BX", 7, "the chunk's boxes"),
     ("VX", 7, "V2X fields of each object"),
+    # the linearity flag (docs/uncertainty-model.md, "The linearity flag"; fast.core.nonlinearity_point)
+    ("GD", 22, "dDn/d(params), row = param (0 for x_m, y_m, height_m, ground_dz_m)"),
+    ("GUV", 2, "dDn/d(u, v)"), ("DN", 1, "ray denominator Dn"), ("LAM", 1, "lam = N / Dn, m"),
+    ("DXY", 2, "horizontal part of the world ray"),
+    ("JG", 2, "J Sigma g (parameters; + pixel in _stage_flag)"), ("GAM", 1, "g^T Sigma g"),
+    ("XP", 4, "J Sigma E (00 01 10 11), E the camera position"), ("GPS", 2, "E^T Sigma g"),
+    ("FA", 2, "one factor column of J L being formed"), ("FT", 1, "the same of L^T g"),
+    ("NL", 1, "nonlinearity per corner"), ("NLC", 1, "nonlinearity of the centre (largest of its corners')"),
 )
 _ROW, _NROWS = _layout(SCRATCH_ROWS)
 _U, _V, _XD, _YD, _XN, _YN, _CONV, _INV, _JK = (_ROW[k] for k in ("U", "V", "XD", "YD", "XN", "YN", "CONV", "INV",
@@ -154,15 +162,18 @@ _BEST, _BSEMI, _FBAD, _MX, _MY, _SS, _A2, _SX, _SY = (_ROW[k] for k in ("BEST", 
 _B0, _B1, _B2, _E00, _E01, _E11, _CXC, _CYC, _AREA, _DEG = (_ROW[k] for k in ("B0", "B1", "B2", "E00", "E01", "E11",
                                                                               "CXC", "CYC", "AREA", "DEG"))
 _ANG, _PC, _CS, _SN, _BX, _VX = (_ROW[k] for k in ("ANG", "PC", "CS", "SN", "BX", "VX"))
+_GD, _GUV, _DN, _LAM, _DXY, _JG, _GAM, _XP, _GPS, _FA, _FT, _NL, _NLC = (
+    _ROW[k] for k in ("GD", "GUV", "DN", "LAM", "DXY", "JG", "GAM", "XP", "GPS", "FA", "FT", "NL", "NLC"))
 
 # rows of the per-object output block ``obj`` (13, N), named as the batch's output columns (FootprintEstimate
 # views them, the batch writes them; cov_yx_m2 = cov_xy_m2 completes the 2x2 view)
 OBJ_ROWS = ("x_m", "y_m", "cov_xx_m2", "cov_xy_m2", "cov_yx_m2", "cov_yy_m2", "sigma_major_m",
-            "sigma_minor_m", "orientation_deg", "largest_sigma_major_m", "largest_x_m", "largest_y_m", "area_m2")
+            "sigma_minor_m", "orientation_deg", "largest_sigma_major_m", "largest_x_m", "largest_y_m", "area_m2",
+            "nonlinearity", "largest_nonlinearity")
 #: row of each name in ``obj``
 OBJ_ROW = {name: i for i, name in enumerate(OBJ_ROWS)}
-_O_CX, _O_CY, _O_C00, _O_C01, _O_C10, _O_C11, _O_SMAJ, _O_SMIN, _O_ORI, _O_LSEMI, _O_LX, _O_LY, _O_AREA = (
-    OBJ_ROW[k] for k in OBJ_ROWS)
+(_O_CX, _O_CY, _O_C00, _O_C01, _O_C10, _O_C11, _O_SMAJ, _O_SMIN, _O_ORI, _O_LSEMI, _O_LX, _O_LY, _O_AREA, _O_NL,
+ _O_LNL) = (OBJ_ROW[k] for k in OBJ_ROWS)
 
 
 def camera_constants(camera) -> tuple[KernelCamera, np.ndarray]:
@@ -373,6 +384,181 @@ def _stage_ground(S, m, cam, dR, need):
                 e1 = -(S[(_INV + 2) * _ST + j] * jx + S[(_INV + 3) * _ST + j] * jy)
                 S[(_JP + 5 + kk) * _ST + j] = S[_B4 * _ST + j] * e0 + S[(_B4 + 1) * _ST + j] * e1
                 S[(_JP + 27 + kk) * _ST + j] = S[(_B4 + 2) * _ST + j] * e0 + S[(_B4 + 3) * _ST + j] * e1
+
+
+@njit(cache=True, error_model="numpy", nogil=True)
+def _stage_ray_denominator(S, m, cam, dR, need):
+    """The linearity flag's per-corner inputs: rows DN, LAM, DXY, GD = dDn/d(params) and GUV = dDn/d(u, v).
+
+    ``Dn = n . d`` is the world ray ``d = R (x_n, y_n, 1)`` along the ground's upward normal
+    ``n = (-s_x, -s_y, 1)`` (< 0 where the ray meets the ground), ``lam = N / Dn`` with ``N =
+    ground_dz - h``; the gradients follow the chain of :func:`_stage_ground` contracted with ``n``
+    instead of ``dxy/dray`` (numpy reference: :func:`footprint_uq.propagation.ray_denominator`).
+    Rows of parameters ``Dn`` does not depend on (x_m, y_m, height_m, ground_dz_m) are zero.
+    """
+    R0, R1, R2, R3, R4, R5, R6, R7, R8 = (cam.R[0], cam.R[1], cam.R[2], cam.R[3], cam.R[4],
+                                          cam.R[5], cam.R[6], cam.R[7], cam.R[8])
+    gx, gy = cam.gsx, cam.gsy
+    n0, n1, n2 = R6 - gx * R0 - gy * R3, R7 - gx * R1 - gy * R4, R8 - gx * R2 - gy * R5  # n . R[:, c]
+    d0, d1, d2 = dR[0], dR[1], dR[2]  # n . dR_a[:, c] for the three angles
+    a00, a01, a02 = (d0[2, 0] - gx * d0[0, 0] - gy * d0[1, 0], d0[2, 1] - gx * d0[0, 1] - gy * d0[1, 1],
+                     d0[2, 2] - gx * d0[0, 2] - gy * d0[1, 2])
+    a10, a11, a12 = (d1[2, 0] - gx * d1[0, 0] - gy * d1[1, 0], d1[2, 1] - gx * d1[0, 1] - gy * d1[1, 1],
+                     d1[2, 2] - gx * d1[0, 2] - gy * d1[1, 2])
+    a20, a21, a22 = (d2[2, 0] - gx * d2[0, 0] - gy * d2[1, 0], d2[2, 1] - gx * d2[0, 1] - gy * d2[1, 1],
+                     d2[2, 2] - gx * d2[0, 2] - gy * d2[1, 2])
+    sk, ifx, ify = cam.skew, cam.ifx, cam.ify
+    skf = sk * ify * ifx
+    Nn = cam.gdz - cam.h
+    for j in range(m):
+        xd, yd, xn, yn = S[_XD * _ST + j], S[_YD * _ST + j], S[_XN * _ST + j], S[_YN * _ST + j]
+        i00, i01 = S[_INV * _ST + j], S[(_INV + 1) * _ST + j]
+        i10, i11 = S[(_INV + 2) * _ST + j], S[(_INV + 3) * _ST + j]
+        dx = R0 * xn + R1 * yn + R2
+        dy = R3 * xn + R4 * yn + R5
+        dn = n0 * xn + n1 * yn + n2
+        S[_DN * _ST + j], S[_LAM * _ST + j] = dn, Nn / dn
+        S[_DXY * _ST + j], S[(_DXY + 1) * _ST + j] = dx, dy
+        e0 = n0 * i00 + n1 * i10  # dDn/dx_d
+        e1 = n0 * i01 + n1 * i11
+        dy_dfy = -yd * ify
+        S[_GD * _ST + j] = -e0 * xd * ifx
+        S[(_GD + 1) * _ST + j] = -e0 * sk * ifx * dy_dfy + e1 * dy_dfy
+        S[(_GD + 2) * _ST + j] = -e0 * ifx
+        S[(_GD + 3) * _ST + j] = e0 * skf - e1 * ify
+        S[(_GD + 4) * _ST + j] = -e0 * yd * ifx
+        S[(_GD + 13) * _ST + j], S[(_GD + 14) * _ST + j] = 0.0, 0.0
+        S[(_GD + 15) * _ST + j], S[(_GD + 19) * _ST + j] = 0.0, 0.0
+        S[(_GD + 16) * _ST + j] = a00 * xn + a01 * yn + a02
+        S[(_GD + 17) * _ST + j] = a10 * xn + a11 * yn + a12
+        S[(_GD + 18) * _ST + j] = a20 * xn + a21 * yn + a22
+        S[(_GD + 20) * _ST + j], S[(_GD + 21) * _ST + j] = -dx, -dy
+        S[_GUV * _ST + j] = e0 * ifx
+        S[(_GUV + 1) * _ST + j] = -e0 * skf + e1 * ify
+    # distortion: n . R[:, :2] (dx_n/dk), dx_n/dk = -(dx_d/dx_n)^-1 dx_d/dk
+    for kk in range(8):
+        if (kk < 5 and need[5]) or (kk >= 5 and need[10]):
+            for j in range(m):
+                jx, jy = S[(_JK + kk) * _ST + j], S[(_JK + 8 + kk) * _ST + j]
+                e0 = -(S[_INV * _ST + j] * jx + S[(_INV + 1) * _ST + j] * jy)
+                e1 = -(S[(_INV + 2) * _ST + j] * jx + S[(_INV + 3) * _ST + j] * jy)
+                S[(_GD + 5 + kk) * _ST + j] = n0 * e0 + n1 * e1
+        else:
+            for j in range(m):
+                S[(_GD + 5 + kk) * _ST + j] = 0.0
+
+
+@njit(cache=True, error_model="numpy", nogil=True)
+def _pos_cov(Lr, Lc, Lv):
+    """``Sigma_pos`` (00, 01, 11) of the camera position (x_m, y_m) from the sparse factor (sorted by column)."""
+    s00, s01, s11 = 0.0, 0.0, 0.0
+    px, py = 0.0, 0.0
+    ne = Lr.shape[0]
+    for e in range(ne):
+        if e == 0 or Lc[e - 1] != Lc[e]:
+            px, py = 0.0, 0.0
+        if Lr[e] == 13:
+            px = Lv[e]
+        elif Lr[e] == 14:
+            py = Lv[e]
+        if e == ne - 1 or Lc[e + 1] != Lc[e]:
+            s00 += px * px
+            s01 += px * py
+            s11 += py * py
+    return s00, s01, s11
+
+
+@njit(cache=True, error_model="numpy", nogil=True)
+def _stage_flag_params(S, m, Lr, Lc, Lv):
+    """The parameter part of the flag's forms over the corners of a chunk, with ``Sigma = L L^T``:
+    rows JG = ``J Sigma g`` = sum_c (J L)_c (L^T g)_c, GAM = ``g^T Sigma g``, XP = ``J Sigma E`` and
+    GPS = ``E^T Sigma g`` (``E`` the camera position x_m, y_m).
+
+    One pass per factor entry, as :func:`_stage_whiten`: a column is formed in rows FA (``J L``) and
+    FT (``L^T g``); the pass of its last entry adds it to JG and GAM (if ``Dn`` depends on the column)
+    and, for a column with a position entry, to XP and GPS.
+    """
+    for j in range(m):
+        S[_JG * _ST + j], S[(_JG + 1) * _ST + j], S[_GAM * _ST + j] = 0.0, 0.0, 0.0
+        S[_XP * _ST + j], S[(_XP + 1) * _ST + j], S[(_XP + 2) * _ST + j], S[(_XP + 3) * _ST + j] = 0.0, 0.0, 0.0, 0.0
+        S[_GPS * _ST + j], S[(_GPS + 1) * _ST + j] = 0.0, 0.0
+    ne = Lr.shape[0]
+    mu = np.uint64(m)
+    f0, f1, ft = np.uint64(_FA * _ST), np.uint64((_FA + 1) * _ST), np.uint64(_FT * _ST)
+    jg0, jg1, gam = np.uint64(_JG * _ST), np.uint64((_JG + 1) * _ST), np.uint64(_GAM * _ST)
+    x00, x01, x10, x11 = (np.uint64(_XP * _ST), np.uint64((_XP + 1) * _ST), np.uint64((_XP + 2) * _ST),
+                          np.uint64((_XP + 3) * _ST))
+    gp0, gp1 = np.uint64(_GPS * _ST), np.uint64((_GPS + 1) * _ST)
+    px, py, hasg = 0.0, 0.0, False
+    for e in range(ne):
+        c, p, val = Lc[e], Lr[e], Lv[e]
+        first = e == 0 or Lc[e - 1] != c
+        last = e == ne - 1 or Lc[e + 1] != c
+        if first:
+            px, py, hasg = 0.0, 0.0, False
+        px = val if p == 13 else px
+        py = val if p == 14 else py
+        hasg = hasg or not (p == 13 or p == 14 or p == 15 or p == 19)
+        i0, i1, ig = np.uint64((_JP + p) * _ST), np.uint64((_JP + 22 + p) * _ST), np.uint64((_GD + p) * _ST)
+        w = 0.0 if first else 1.0  # (GD rows of the parameters Dn does not depend on are zero)
+        if not last:
+            for j in range(mu):
+                S[f0 + j] = (S[f0 + j] if w != 0.0 else 0.0) + S[i0 + j] * val
+                S[f1 + j] = (S[f1 + j] if w != 0.0 else 0.0) + S[i1 + j] * val
+                S[ft + j] = (S[ft + j] if w != 0.0 else 0.0) + S[ig + j] * val
+            continue
+        if hasg:
+            for j in range(mu):
+                a0 = (S[f0 + j] if w != 0.0 else 0.0) + S[i0 + j] * val
+                a1 = (S[f1 + j] if w != 0.0 else 0.0) + S[i1 + j] * val
+                t = (S[ft + j] if w != 0.0 else 0.0) + S[ig + j] * val
+                S[jg0 + j] += a0 * t
+                S[jg1 + j] += a1 * t
+                S[gam + j] += t * t
+        if px != 0.0 or py != 0.0:
+            for j in range(mu):
+                a0 = (S[f0 + j] if w != 0.0 else 0.0) + S[i0 + j] * val
+                a1 = (S[f1 + j] if w != 0.0 else 0.0) + S[i1 + j] * val
+                t = (S[ft + j] if w != 0.0 else 0.0) + S[ig + j] * val
+                S[x00 + j] += a0 * px
+                S[x01 + j] += a0 * py
+                S[x10 + j] += a1 * px
+                S[x11 + j] += a1 * py
+                S[gp0 + j] += px * t
+                S[gp1 + j] += py * t
+
+
+@njit(cache=True, error_model="numpy", nogil=True)
+def _stage_flag(S, m, sp00, sp01, sp11):
+    """Per corner: the nonlinearity (row NL; NaN where the corner was not computed) from its covariance
+    CC, the parameter forms of :func:`_stage_flag_params` plus the pixel part (JUV, P4, GUV) and
+    ``Sigma_pos`` (:func:`footprint_uq.fast.core.nonlinearity_point`)."""
+    for j in range(m):
+        g0, g1 = S[_GUV * _ST + j], S[(_GUV + 1) * _ST + j]
+        v0 = S[_P4 * _ST + j] * g0 + S[(_P4 + 1) * _ST + j] * g1  # P g_uv
+        v1 = S[(_P4 + 2) * _ST + j] * g0 + S[(_P4 + 3) * _ST + j] * g1
+        jg0 = S[_JG * _ST + j] + S[_JUV * _ST + j] * v0 + S[(_JUV + 1) * _ST + j] * v1
+        jg1 = S[(_JG + 1) * _ST + j] + S[(_JUV + 2) * _ST + j] * v0 + S[(_JUV + 3) * _ST + j] * v1
+        gam = S[_GAM * _ST + j] + g0 * v0 + g1 * v1
+        S[_NL * _ST + j] = core.nonlinearity_point(
+            S[_CC * _ST + j], S[(_CC + 1) * _ST + j], S[(_CC + 2) * _ST + j], S[_DN * _ST + j], S[_LAM * _ST + j],
+            S[_DXY * _ST + j], S[(_DXY + 1) * _ST + j], jg0, jg1, gam, S[_GPS * _ST + j], S[(_GPS + 1) * _ST + j],
+            S[_XP * _ST + j], S[(_XP + 1) * _ST + j], S[(_XP + 2) * _ST + j], S[(_XP + 3) * _ST + j], sp00, sp01, sp11)
+
+
+@njit(cache=True, error_model="numpy", nogil=True)
+def _stage_flag_objects(S, nob, K):
+    """Per object: NLC = the largest nonlinearity of its corners (NaN if any is NaN) -- the centre's
+    flag (docs/uncertainty-model.md)."""
+    nan = math.nan
+    for i in range(nob):
+        S[_NLC * _ST + i] = -math.inf
+    for k in range(K):
+        o = np.uint64(_NL * _ST + k * nob)
+        d = np.uint64(_NLC * _ST)
+        for i in range(np.uint64(nob)):
+            v, cur = S[o + i], S[d + i]
+            S[d + i] = nan if (v != v) | (cur != cur) else max(v, cur)
 
 
 @njit(cache=True, error_model="numpy", nogil=True, inline="always")
@@ -746,14 +932,15 @@ def alloc_outputs(N: int, K: int, *, joint: bool = False, corners: bool = True, 
     """Output arrays of :func:`process_corners` for N objects of K corners (allocated here, by numpy:
     numba's own allocations of large arrays are fresh pages every call, ~40 % of the kernel's time).
 
-    ``corners=False`` gives (0, ...) per-corner coordinate/covariance arrays: the kernel then skips them.
+    ``corners=False`` gives (0, ...) per-corner coordinate/covariance/nonlinearity arrays: the kernel then
+    skips them.
     ``alloc(shape, dtype)`` may supply the memory (default :func:`numpy.empty`).
     """
     nc = N if corners else 0
     return (alloc((nc, K, 2), np.float64), alloc((nc, K, 2, 2), np.float64),
             alloc((N if joint else 0, 2 * K, 2 * K), np.float64), alloc((N, K), np.int8), alloc((N, K), np.bool_),
             alloc((N,), np.int64), alloc((nc, 2, 2), np.float64), alloc((N,), np.int32), alloc((N,), np.int64),
-            alloc((len(OBJ_ROWS), N), np.float64), alloc((7, N), np.int32))
+            alloc((len(OBJ_ROWS), N), np.float64), alloc((7, N), np.int32), alloc((nc, K), np.float64))
 
 
 def scratch() -> np.ndarray:
@@ -763,7 +950,7 @@ def scratch() -> np.ndarray:
 
 @njit(cache=True, error_model="numpy", nogil=True)
 def process_corners(uv, extra_reason, boxes, yaw_deg, bottom_on_ground, cam, dR, Lr, Lc, Lv, r, spx, det, det_mode,
-                    allow_outside, ch, sh, out, S):
+                    allow_outside, ch, sh, flag, out, S):
     """The fused per-frame kernel on corners in pixels ``uv`` (N, K, 2), K <= :data:`MAX_CORNERS`.
 
     extra_reason : (N, K) int8 codes overriding OK, or shape (0, 0)
@@ -774,16 +961,18 @@ def process_corners(uv, extra_reason, boxes, yaw_deg, bottom_on_ground, cam, dR,
         0 none (any 4-D array), 1 (N, 1, 2, 2) per detection, 2 (N, K, 2, 2) per corner,
         3 (N, 1, 2K, 2K) full
     ch, sh : cos, sin of the heading offset (V2X fields)
+    flag : compute the linearity flag (per corner, the largest point's and the centre's ``nonlinearity``;
+        NaN without it)
     out : the arrays of :func:`alloc_outputs` (filled here): xy, ccov, joint, reason, usable,
-        largest_index, largest_cov, centre_reason, centre_bad, obj (13, N: :data:`OBJ_ROWS`), v2x (7, N).
-        centre_bad, area, v2x.  A joint with 0 rows is not formed; xy / ccov / largest_cov with
-        0 rows are not written.
+        largest_index, largest_cov, centre_reason, centre_bad, obj (:data:`OBJ_ROWS`, N), v2x (7, N),
+        cnl (N, K) per-corner nonlinearity.  A joint with 0 rows is not formed; xy / ccov / largest_cov /
+        cnl with 0 rows are not written.
     S : :func:`scratch`
     """
     from_boxes = boxes.shape[0] > 0
     N, K = (boxes.shape[0], 4) if from_boxes else (uv.shape[0], uv.shape[1])
     want_uv = from_boxes and uv.shape[0] == N
-    xy, ccov, joint, reason, usable, largest_index, largest_cov, centre_reason, centre_bad, obj, v2x = out
+    xy, ccov, joint, reason, usable, largest_index, largest_cov, centre_reason, centre_bad, obj, v2x, cnl = out
     want_joint = joint.shape[0] == N and N > 0
     want_corners = xy.shape[0] == N and N > 0
     Jd, Jk = np.empty((2, 2)), np.empty((2, 8))
@@ -802,6 +991,7 @@ def process_corners(uv, extra_reason, boxes, yaw_deg, bottom_on_ground, cam, dR,
     need[10] = need[10] or need[11] or need[12]
     nob_max = max(1, _M_TARGET // K)
     s00, s01, s10, s11 = spx[0, 0], spx[0, 1], spx[1, 0], spx[1, 1]
+    sp00, sp01, sp11 = _pos_cov(Lr, Lc, Lv)
     for n0 in range(0, N, nob_max):
         nob = min(N - n0, nob_max)
         m = nob * K
@@ -851,6 +1041,14 @@ def process_corners(uv, extra_reason, boxes, yaw_deg, bottom_on_ground, cam, dR,
         _stage_centroid(S, nob, K)
         _stage_whiten(S, m, nob, K, Lr, Lc, Lv, want_joint)
         _stage_corner_cov(S, m)
+        if flag:
+            _stage_ray_denominator(S, m, cam, dR, need)
+            _stage_flag_params(S, m, Lr, Lc, Lv)
+            _stage_flag(S, m, sp00, sp01, sp11)
+        else:
+            for j in range(m):
+                S[_NL * _ST + j] = nan
+        _stage_flag_objects(S, nob, K)
         _stage_select(S, nob, K)
         _stage_centre_cov(S, nob, K)
         # ---- outputs: corners ----
@@ -867,6 +1065,7 @@ def process_corners(uv, extra_reason, boxes, yaw_deg, bottom_on_ground, cam, dR,
                     c01 = S[(_CC + 1) * _ST + j]
                     ccov[n, k, 0, 0], ccov[n, k, 0, 1] = S[_CC * _ST + j], c01
                     ccov[n, k, 1, 0], ccov[n, k, 1, 1] = c01, S[(_CC + 2) * _ST + j]
+                    cnl[n, k] = S[_NL * _ST + j]
         # ---- outputs: per object ----
         for i in range(nob):
             n = n0 + i
@@ -876,6 +1075,7 @@ def process_corners(uv, extra_reason, boxes, yaw_deg, bottom_on_ground, cam, dR,
             if best >= 0:
                 jb = best * nob + i
                 obj[_O_LSEMI, n] = S[_BSEMI * _ST + i]
+                obj[_O_LNL, n] = S[_NL * _ST + jb]
                 obj[_O_LX, n], obj[_O_LY, n] = S[_XX * _ST + jb], S[_YY * _ST + jb]
                 if want_corners:
                     c01 = S[(_CC + 1) * _ST + jb]
@@ -883,6 +1083,7 @@ def process_corners(uv, extra_reason, boxes, yaw_deg, bottom_on_ground, cam, dR,
                     largest_cov[n, 1, 0], largest_cov[n, 1, 1] = c01, S[(_CC + 2) * _ST + jb]
             else:
                 obj[_O_LSEMI, n] = nan
+                obj[_O_LNL, n] = nan
                 obj[_O_LX, n], obj[_O_LY, n] = nan, nan
                 if want_corners:
                     largest_cov[n, 0, 0], largest_cov[n, 0, 1] = nan, nan
@@ -920,8 +1121,10 @@ def process_corners(uv, extra_reason, boxes, yaw_deg, bottom_on_ground, cam, dR,
                             e11 += m10 * hl10 + m11 * hl11
                 obj[_O_CX, n], obj[_O_CY, n] = S[_CXC * _ST + i], S[_CYC * _ST + i]
                 obj[_O_C00, n], obj[_O_C01, n], obj[_O_C10, n], obj[_O_C11, n] = e00, e01, e01, e11
+                obj[_O_NL, n] = S[_NLC * _ST + i]
             else:
                 e00, e01, e11 = nan, nan, nan
+                obj[_O_NL, n] = nan
                 obj[_O_CX, n], obj[_O_CY, n] = nan, nan
                 obj[_O_C00, n], obj[_O_C01, n], obj[_O_C10, n], obj[_O_C11, n] = nan, nan, nan, nan
             S[_E00 * _ST + i], S[_E01 * _ST + i], S[_E11 * _ST + i] = e00, e01, e11
@@ -1038,12 +1241,12 @@ def first_negative_size(boxes):
 
 @njit(cache=True, error_model="numpy", nogil=True)
 def process_boxes3d(boxes, yaw_deg, bottom_on_ground, cam, dR, Lr, Lc, Lv, r, spx, det, det_mode, allow_outside,
-                    ch, sh, uv, out, S):
+                    ch, sh, flag, uv, out, S):
     """:func:`process_corners` on the projected bottom corners of 3D boxes (N, 7) (C- or F-ordered);
     the pixels go to ``uv`` (N, 4, 2) if it has N rows.  Returns the first row with a negative size
     (-1 if none; nothing else is done then)."""
     bad = first_negative_size(boxes)
     if bad < 0:
         process_corners(uv, np.zeros((0, 0), dtype=np.int8), boxes, yaw_deg, bottom_on_ground, cam, dR, Lr, Lc, Lv,
-                        r, spx, det, det_mode, allow_outside, ch, sh, out, S)
+                        r, spx, det, det_mode, allow_outside, ch, sh, flag, out, S)
     return bad

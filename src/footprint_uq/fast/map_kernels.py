@@ -62,6 +62,7 @@ from __future__ import annotations
 
 import numba as nb
 import numpy as np
+from numba.np.unsafe.ndarray import to_fixed_tuple
 
 from .. import params as P
 from .. import status
@@ -205,6 +206,15 @@ def _horner14(c, x):
     return (b0 + b1 * x4) + (b2 + b3 * x4) * x8
 
 
+@nb.njit(inline="always", **_JIT1)
+def _horner8(c, x):
+    """Degree-8 polynomial ``c`` (9,) at ``x``."""
+    x2 = x * x
+    x4 = x2 * x2
+    return ((c[0] + c[1] * x) + (c[2] + c[3] * x) * x2) + ((c[4] + c[5] * x) + (c[6] + c[7] * x) * x2) * x4 \
+        + c[8] * (x4 * x4)
+
+
 @nb.njit(**_JIT1)
 def _horner7(c, x):
     r = c[7]
@@ -268,28 +278,92 @@ def _finish(q00, q01, q11, Q00, Q01, Q10, Q11, ax, ay, ox, oy, Ccc, bq, has_qc):
     return c00, c01, c11
 
 
+@nb.njit(inline="always", **_JIT1)
+def _flag(c00, c01, c11, dn, lam, dxr, dyr, ox, oy, ax, ay, Q00, Q01, Q10, Q11, g0, g1, q00, q01, q11, zq0, zq1, zz,
+          cc, has_qc, bq, bz):
+    """Nonlinearity of one pixel (:func:`footprint_uq.fast.core.nonlinearity_point`) from its state covariance.
+
+    State ``(q0, q1 | z | x0, y0, h, dz, gx, gy)``: ``z`` is the component of a rotation's ray
+    change along the ray itself (``omega x q~`` = ``(dq, 0) + z q~``), which moves ``Dn`` but not
+    the ground point.  ``J = A_J S`` with ``A_J = [Q | 0 | I2 | a (1, -1, -o_x, -o_y)]`` and
+    ``g = a_g S`` with ``a_g = (g0, g1 | Dn | 0, 0, 0, 0, -d_x, -d_y)``, so ``J Sigma g = A_J C_s a_g``,
+    ``g^T Sigma g = a_g . C_s a_g`` and ``J Sigma E = A_J C_s[:, (x0, y0)]``.  Pieces of ``C_s``:
+    ``q00, q01, q11`` (ray, pixel noise included), ``zq0, zq1, zz`` (z rows), ``cc`` the constants'
+    covariance ``Ccc`` (6, 6) as a flat tuple (row-major: a pixel loop then reads no array and
+    vectorises), and with ``has_qc`` ``bq`` (2, 6) / ``bz`` (6,) the ray / constant cross terms.
+    """
+    uq0 = q00 * g0 + q01 * g1 + zq0 * dn
+    uq1 = q01 * g0 + q11 * g1 + zq1 * dn
+    uz = zq0 * g0 + zq1 * g1 + zz * dn
+    uc0 = -(cc[4] * dxr + cc[5] * dyr)
+    uc1 = -(cc[10] * dxr + cc[11] * dyr)
+    uc2 = -(cc[16] * dxr + cc[17] * dyr)
+    uc3 = -(cc[22] * dxr + cc[23] * dyr)
+    uc4 = -(cc[28] * dxr + cc[29] * dyr)
+    uc5 = -(cc[34] * dxr + cc[35] * dyr)
+    h0 = cc[12] - cc[18] - ox * cc[24] - oy * cc[30]
+    h1 = cc[13] - cc[19] - ox * cc[25] - oy * cc[31]
+    X00 = cc[0] + ax * h0
+    X01 = cc[1] + ax * h1
+    X10 = cc[6] + ay * h0
+    X11 = cc[7] + ay * h1
+    if has_qc:
+        uq0 -= bq[0, 4] * dxr + bq[0, 5] * dyr
+        uq1 -= bq[1, 4] * dxr + bq[1, 5] * dyr
+        uz -= bz[4] * dxr + bz[5] * dyr
+        uc0 += bq[0, 0] * g0 + bq[1, 0] * g1 + bz[0] * dn
+        uc1 += bq[0, 1] * g0 + bq[1, 1] * g1 + bz[1] * dn
+        uc2 += bq[0, 2] * g0 + bq[1, 2] * g1 + bz[2] * dn
+        uc3 += bq[0, 3] * g0 + bq[1, 3] * g1 + bz[3] * dn
+        uc4 += bq[0, 4] * g0 + bq[1, 4] * g1 + bz[4] * dn
+        uc5 += bq[0, 5] * g0 + bq[1, 5] * g1 + bz[5] * dn
+        X00 += Q00 * bq[0, 0] + Q01 * bq[1, 0]
+        X01 += Q00 * bq[0, 1] + Q01 * bq[1, 1]
+        X10 += Q10 * bq[0, 0] + Q11 * bq[1, 0]
+        X11 += Q10 * bq[0, 1] + Q11 * bq[1, 1]
+    gamma = g0 * uq0 + g1 * uq1 + dn * uz - dxr * uc4 - dyr * uc5
+    hg = uc2 - uc3 - ox * uc4 - oy * uc5
+    jg0 = Q00 * uq0 + Q01 * uq1 + uc0 + ax * hg
+    jg1 = Q10 * uq0 + Q11 * uq1 + uc1 + ay * hg
+    return core.nonlinearity_point(c00, c01, c11, dn, lam, dxr, dyr, jg0, jg1, gamma, uc0, uc1, X00, X01, X10, X11,
+                                   cc[0], cc[1], cc[7])
+
+
 # --------------------------------------------------------------------------------------
 # kernel 1: zero nominal distortion (the paper's pan-tilt camera), per-row polynomials
 # --------------------------------------------------------------------------------------
 @nb.njit(**_JIT1)
-def _row_polys(yn, prm, om, colptr, rowidx, vals, vc, has_qc, Cpq, P00, P01, P11, BQ):
-    """Per-row polynomial coefficients of C_qq (degree 14) and of the q/constant cross terms (degree 7)."""
+def _row_polys(yn, prm, om, colptr, rowidx, vals, vc, has_qc, Cpq, P00, P01, P11, BQ, flag, ZQ, ZZ, BZ):
+    """Per-row polynomial coefficients of C_qq (degree 14) and of the q/constant cross terms (degree 7).
+
+    With ``flag`` also those of the rotations' ray-scale component ``z = w0 y_n - w1 x_n`` (see
+    :func:`_flag`): ``ZQ`` (2, 9) its covariance with ``dq`` (degree 8), ``ZZ`` (3,) its variance,
+    ``BZ`` (6, 2) (with ``has_qc``) its covariance with the constant state.
+    """
     P00[:] = 0.0
     P01[:] = 0.0
     P11[:] = 0.0
     BQ[:] = 0.0
+    if flag:
+        ZQ[:] = 0.0
+        ZZ[:] = 0.0
+        BZ[:] = 0.0
     a = np.empty(8)
     b = np.empty(8)
     r = colptr.size - 1
     for j in range(r):
         a[:] = 0.0
         b[:] = 0.0
+        z0, z1 = 0.0, 0.0
         ray = False
         for nz in range(colptr[j], colptr[j + 1]):
             k = rowidx[nz]
             if k < 13 or (k >= 16 and k <= 18):
                 _add_ray_poly(k, vals[nz], yn, prm, om, a, b)
                 ray = True
+            if k >= 16 and k <= 18:
+                z0 += vals[nz] * om[k - 16, 0] * yn
+                z1 -= vals[nz] * om[k - 16, 1]
         if not ray:
             continue
         for i in range(8):
@@ -299,6 +373,15 @@ def _row_polys(yn, prm, om, colptr, rowidx, vals, vc, has_qc, Cpq, P00, P01, P11
                 P00[i + m] += ai * a[m]
                 P01[i + m] += ai * b[m]
                 P11[i + m] += bi * b[m]
+        if flag:
+            for i in range(8):
+                ZQ[0, i] += a[i] * z0
+                ZQ[0, i + 1] += a[i] * z1
+                ZQ[1, i] += b[i] * z0
+                ZQ[1, i + 1] += b[i] * z1
+            ZZ[0] += z0 * z0
+            ZZ[1] += 2.0 * z0 * z1
+            ZZ[2] += z1 * z1
         if has_qc:
             for c in range(6):
                 v = vc[j, c]
@@ -306,6 +389,9 @@ def _row_polys(yn, prm, om, colptr, rowidx, vals, vc, has_qc, Cpq, P00, P01, P11
                     for i in range(8):
                         BQ[0, c, i] += a[i] * v
                         BQ[1, c, i] += b[i] * v
+                    if flag:
+                        BZ[c, 0] += z0 * v
+                        BZ[c, 1] += z1 * v
     P00[0] += Cpq[0, 0]
     P01[0] += Cpq[0, 1]
     P11[0] += Cpq[1, 1]
@@ -341,7 +427,8 @@ def _undistorted_constants(k: dict, step: int) -> np.ndarray:
 def _pixel_undistorted(cst, x, dx0, dy0, dn0, P00, P01, P11):
     """Ground offset and covariance of one pixel at normalised column ``x`` of a row (shared by the row kernels).
 
-    Returns ``(ok, ox, oy, Q00, Q01, Q10, Q11, ax, ay, c00, c01, c11)``.
+    Returns ``(ok, ox, oy, Q00, Q01, Q10, Q11, ax, ay, c00, c01, c11, dn, lam, dxr, dyr, q00, q01, q11)``
+    (the last seven for the linearity flag: ray denominator, depth, ray, ray-state covariance).
     """
     Hn = cst[2]
     g0 = cst[3]
@@ -378,7 +465,7 @@ def _pixel_undistorted(cst, x, dx0, dy0, dn0, P00, P01, P11):
     c00 += (sv * ax + 2.0 * mx) * ax
     c01 += sv * ax * ay + mx * ay + ax * my
     c11 += (sv * ay + 2.0 * my) * ay
-    return ok, ox, oy, Q00, Q01, Q10, Q11, ax, ay, c00, c01, c11
+    return ok, ox, oy, Q00, Q01, Q10, Q11, ax, ay, c00, c01, c11, dn, lam, dxr, dyr, q00, q01, q11
 
 
 @nb.njit(inline="always", **_JIT1)
@@ -402,43 +489,93 @@ def _row_undistorted(cst, cxs, dx0, dy0, dn0, P00, P01, P11, xr, cr, vr):
     ifx = cst[28]
     for iu in range(vr.shape[0]):
         x = (np.float64(iu) * stepf - cxs) * ifx
-        ok, ox, oy, _, _, _, _, _, _, c00, c01, c11 = _pixel_undistorted(cst, x, dx0, dy0, dn0, P00, P01, P11)
+        ok, ox, oy, _, _, _, _, _, _, c00, c01, c11, _, _, _, _, _, _, _ = _pixel_undistorted(cst, x, dx0, dy0, dn0,
+                                                                                             P00, P01, P11)
         _store_pixel(xr, cr, vr, iu, ok, x0 + ox, y0 + oy, c00, c01, c11)
 
 
 @nb.njit(**_JIT1)
-def _row_undistorted_qc(cst, cxs, dx0, dy0, dn0, P00, P01, P11, BQ, xr, cr, vr):
-    """As :func:`_row_undistorted`, with ray/position/ground cross-covariances (full budgets)."""
-    x0 = cst[0]
-    y0 = cst[1]
-    stepf = cst[27]
-    ifx = cst[28]
+def _row_undistorted_flag(cst, cxs, dx0, dy0, dn0, P00, P01, P11, ZQ, ZZ, Ccc, xr, cr, vr, nr):
+    """As :func:`_row_undistorted`, with the linearity flag into ``nr`` (NaN where not valid)."""
+    # every coefficient as a tuple: the pixel loop reads no array (LLVM vectorises it without alias checks)
+    cs = to_fixed_tuple(cst, 30)
+    p00, p01, p11 = to_fixed_tuple(P00, 15), to_fixed_tuple(P01, 15), to_fixed_tuple(P11, 15)
+    zq0c, zq1c, zzc = to_fixed_tuple(ZQ[0], 9), to_fixed_tuple(ZQ[1], 9), to_fixed_tuple(ZZ, 3)
+    cc = to_fixed_tuple(Ccc.ravel(), 36)
+    x0, y0, g0, g1, stepf, ifx = cs[0], cs[1], cs[3], cs[4], cs[27], cs[28]
     bq = np.zeros((2, 6))
+    bz = np.zeros(6)
     for iu in range(vr.shape[0]):
         x = (np.float64(iu) * stepf - cxs) * ifx
-        ok, ox, oy, Q00, Q01, Q10, Q11, ax, ay, c00, c01, c11 = _pixel_undistorted(cst, x, dx0, dy0, dn0,
-                                                                                   P00, P01, P11)
+        ok, ox, oy, Q00, Q01, Q10, Q11, ax, ay, c00, c01, c11, dn, lam, dxr, dyr, q00, q01, q11 = \
+            _pixel_undistorted(cs, x, dx0, dy0, dn0, p00, p01, p11)
+        zq0 = _horner8(zq0c, x)
+        zq1 = _horner8(zq1c, x)
+        zz = zzc[0] + x * (zzc[1] + x * zzc[2])
+        nl = _flag(c00, c01, c11, dn, lam, dxr, dyr, ox, oy, ax, ay, Q00, Q01, Q10, Q11, g0, g1, q00, q01, q11, zq0,
+                   zq1, zz, cc, False, bq, bz)
+        _store_pixel(xr, cr, vr, iu, ok, x0 + ox, y0 + oy, c00, c01, c11)
+        nr[iu] = nl if ok else np.nan
+
+
+@nb.njit(inline="always", **_JIT1)
+def _qc_terms(Q00, Q01, Q10, Q11, ax, ay, ox, oy, bq):
+    """Covariance terms of the ray / constant cross-covariance ``bq`` (2, 6): ``(d00, d01, d11)``."""
+    E00 = Q00 * bq[0, 0] + Q01 * bq[1, 0]
+    E01 = Q00 * bq[0, 1] + Q01 * bq[1, 1]
+    E10 = Q10 * bq[0, 0] + Q11 * bq[1, 0]
+    E11 = Q10 * bq[0, 1] + Q11 * bq[1, 1]
+    rx, ry = -ox, -oy
+    h0 = bq[0, 2] - bq[0, 3] + bq[0, 4] * rx + bq[0, 5] * ry
+    h1 = bq[1, 2] - bq[1, 3] + bq[1, 4] * rx + bq[1, 5] * ry
+    n0 = Q00 * h0 + Q01 * h1
+    n1 = Q10 * h0 + Q11 * h1
+    return 2.0 * E00 + 2.0 * n0 * ax, E01 + E10 + n0 * ay + ax * n1, 2.0 * E11 + 2.0 * n1 * ay
+
+
+@nb.njit(**_JIT1)
+def _row_undistorted_qc(cst, cxs, dx0, dy0, dn0, P00, P01, P11, BQ, ZQ, ZZ, BZ, Ccc, xr, cr, vr, nr):
+    """As :func:`_row_undistorted`, with ray/position/ground cross-covariances (full budgets); the
+    linearity flag into ``nr`` if it has a row's length (else not computed)."""
+    x0 = cst[0]
+    y0 = cst[1]
+    g0 = cst[3]
+    g1 = cst[4]
+    stepf = cst[27]
+    ifx = cst[28]
+    flag = nr.shape[0] == vr.shape[0]
+    cc = to_fixed_tuple(Ccc.ravel(), 36)
+    bq = np.zeros((2, 6))
+    bz = np.zeros(6)
+    for iu in range(vr.shape[0]):
+        x = (np.float64(iu) * stepf - cxs) * ifx
+        ok, ox, oy, Q00, Q01, Q10, Q11, ax, ay, c00, c01, c11, dn, lam, dxr, dyr, q00, q01, q11 = \
+            _pixel_undistorted(cst, x, dx0, dy0, dn0, P00, P01, P11)
         for a_ in range(2):
             for c_ in range(6):
                 bq[a_, c_] = _horner7(BQ[a_, c_], x)
-        E00 = Q00 * bq[0, 0] + Q01 * bq[1, 0]
-        E01 = Q00 * bq[0, 1] + Q01 * bq[1, 1]
-        E10 = Q10 * bq[0, 0] + Q11 * bq[1, 0]
-        E11 = Q10 * bq[0, 1] + Q11 * bq[1, 1]
-        rx, ry = -ox, -oy
-        h0 = bq[0, 2] - bq[0, 3] + bq[0, 4] * rx + bq[0, 5] * ry
-        h1 = bq[1, 2] - bq[1, 3] + bq[1, 4] * rx + bq[1, 5] * ry
-        n0 = Q00 * h0 + Q01 * h1
-        n1 = Q10 * h0 + Q11 * h1
-        c00 += 2.0 * E00 + 2.0 * n0 * ax
-        c01 += E01 + E10 + n0 * ay + ax * n1
-        c11 += 2.0 * E11 + 2.0 * n1 * ay
+        d00, d01, d11 = _qc_terms(Q00, Q01, Q10, Q11, ax, ay, ox, oy, bq)
+        c00 += d00
+        c01 += d01
+        c11 += d11
         _store_pixel(xr, cr, vr, iu, ok, x0 + ox, y0 + oy, c00, c01, c11)
+        if flag:
+            for c_ in range(6):
+                bz[c_] = BZ[c_, 0] + BZ[c_, 1] * x
+            zq0 = _horner8(ZQ[0], x)
+            zq1 = _horner8(ZQ[1], x)
+            zz = ZZ[0] + x * (ZZ[1] + x * ZZ[2])
+            nl = _flag(c00, c01, c11, dn, lam, dxr, dyr, ox, oy, ax, ay, Q00, Q01, Q10, Q11, g0, g1, q00, q01, q11,
+                       zq0, zq1, zz, cc, True, bq, bz)
+            nr[iu] = nl if ok else np.nan
 
 
 @nb.njit(**_JIT)
-def _map_undistorted(prm, R, om, colptr, rowidx, vals, vc, has_qc, Cpq, cst, step, xyf, covf, validf, reasonf, W):
+def _map_undistorted(prm, R, om, colptr, rowidx, vals, vc, has_qc, Cpq, Ccc, cst, step, xyf, covf, validf, reasonf,
+                     nlf, W):
+    """Rows of the undistorted kernel in parallel; ``nlf`` (H W,) receives the nonlinearity, or has 0 rows."""
     Hh = validf.shape[0] // W
+    flag = nlf.shape[0] == validf.shape[0]
     fy, cx, cy, sk = prm[1], prm[2], prm[3], prm[4]
     gx, gy = prm[20], prm[21]
     g1 = R[2, 1] - gx * R[0, 1] - gy * R[1, 1]
@@ -449,30 +586,40 @@ def _map_undistorted(prm, R, om, colptr, rowidx, vals, vc, has_qc, Cpq, cst, ste
         P01 = np.empty(15)
         P11 = np.empty(15)
         BQ = np.zeros((2, 6, 8))
-        _row_polys(yn, prm, om, colptr, rowidx, vals, vc, has_qc, Cpq, P00, P01, P11, BQ)
+        ZQ = np.zeros((2, 9))
+        ZZ = np.zeros(3)
+        BZ = np.zeros((6, 2))
+        _row_polys(yn, prm, om, colptr, rowidx, vals, vc, has_qc, Cpq, P00, P01, P11, BQ, flag, ZQ, ZZ, BZ)
         xr = xyf[2 * W * iv:2 * W * (iv + 1)]
         cr = covf[4 * W * iv:4 * W * (iv + 1)]
         vr = validf[W * iv:W * (iv + 1)]
+        nr = nlf[W * iv:W * (iv + 1)] if flag else nlf[0:0]
         cxs, dx0, dy0, dn0 = cx + sk * yn, R[0, 1] * yn + R[0, 2], R[1, 1] * yn + R[1, 2], g1 * yn + g2
         if has_qc:
-            _row_undistorted_qc(cst, cxs, dx0, dy0, dn0, P00, P01, P11, BQ, xr, cr, vr)
+            _row_undistorted_qc(cst, cxs, dx0, dy0, dn0, P00, P01, P11, BQ, ZQ, ZZ, BZ, Ccc, xr, cr, vr, nr)
+        elif flag:
+            _row_undistorted_flag(cst, cxs, dx0, dy0, dn0, P00, P01, P11, ZQ, ZZ, Ccc, xr, cr, vr, nr)
         else:
             _row_undistorted(cst, cxs, dx0, dy0, dn0, P00, P01, P11, xr, cr, vr)
         rr = reasonf[W * iv:W * (iv + 1)]
         for i in range(W):  # without distortion a pixel is fine or at / above the horizon
             rr[i] = status.OK if vr[i] else status.ABOVE_HORIZON
         _finish_row(xr, cr, vr, rr)
+        if flag:
+            _mask_row(nr, vr)
 
 
 # --------------------------------------------------------------------------------------
 # kernel 2: general (OpenCV with distortion), per point
 # --------------------------------------------------------------------------------------
 @nb.njit(**_JIT1)
-def _point_general(u, v, S00, S01, S11, prm, R, om, colptr, rowidx, vals, vc, Ccc, has_qc, has_dist, dom, sq, bq):
-    """Ground point and covariance of one pixel; sq (22, 2), bq (2, 6) scratch arrays.
+def _point_general(u, v, S00, S01, S11, prm, R, om, colptr, rowidx, vals, vc, Ccc, has_qc, has_dist, dom, sq, bq, bz,
+                   flag):
+    """Ground point and covariance of one pixel; sq (22, 2), bq (2, 6), bz (6,) scratch arrays.
 
-    Returns ``(code, x, y, c00, c01, c11)`` with ``code`` a :mod:`footprint_uq.status` code
-    (precedence as the reference: not finite, then undistortion, then horizon).
+    Returns ``(code, x, y, c00, c01, c11, nl)`` with ``code`` a :mod:`footprint_uq.status` code
+    (precedence as the reference: not finite, then undistortion, then horizon) and ``nl`` the
+    linearity flag's ``nonlinearity`` (with ``flag``; NaN otherwise or where not OK).
     """
     fx, fy, cx, cy, sk = prm[0], prm[1], prm[2], prm[3], prm[4]
     dist = prm[5:13]
@@ -496,9 +643,9 @@ def _point_general(u, v, S00, S01, S11, prm, R, om, colptr, rowidx, vals, vc, Cc
     dyr = R[1, 0] * xn + R[1, 1] * yn + R[1, 2]
     dn = g0 * xn + g1 * yn + g2
     if not conv:
-        return status.UNDISTORT_FAILED, np.nan, np.nan, np.nan, np.nan, np.nan
+        return status.UNDISTORT_FAILED, np.nan, np.nan, np.nan, np.nan, np.nan, np.nan
     if not ((dn < 0.0) and (Hn > 0.0)):
-        return status.ABOVE_HORIZON, np.nan, np.nan, np.nan, np.nan, np.nan
+        return status.ABOVE_HORIZON, np.nan, np.nan, np.nan, np.nan, np.nan, np.nan
     w = -1.0 / dn
     lam = Hn * w
     ox = lam * dxr
@@ -560,41 +707,75 @@ def _point_general(u, v, S00, S01, S11, prm, R, om, colptr, rowidx, vals, vc, Cc
     q01 = T00 * B10 + T01 * B11
     q11 = T10 * B10 + T11 * B11
     bq[:] = 0.0
+    bz[:] = 0.0
+    zq0, zq1, zz = 0.0, 0.0, 0.0  # the rotations' ray-scale component z (see _flag)
     r = colptr.size - 1
     for j in range(r):
         v0 = 0.0
         v1 = 0.0
+        z = 0.0
         for nz in range(colptr[j], colptr[j + 1]):
             k = rowidx[nz]
             if k < 13 or (k >= 16 and k <= 18):
                 v0 += vals[nz] * sq[k, 0]
                 v1 += vals[nz] * sq[k, 1]
+            if k >= 16 and k <= 18:
+                z += vals[nz] * (om[k - 16, 0] * yn - om[k - 16, 1] * xn)
         q00 += v0 * v0
         q01 += v0 * v1
         q11 += v1 * v1
+        zq0 += v0 * z
+        zq1 += v1 * z
+        zz += z * z
         if has_qc:
             for c in range(6):
                 bq[0, c] += v0 * vc[j, c]
                 bq[1, c] += v1 * vc[j, c]
-    c00, c01, c11 = _finish(q00, q01, q11, Q00, Q01, Q10, Q11, ox / Hn, oy / Hn, ox, oy, Ccc, bq, has_qc)
+                bz[c] += z * vc[j, c]
+    ax, ay = ox / Hn, oy / Hn
+    c00, c01, c11 = _finish(q00, q01, q11, Q00, Q01, Q10, Q11, ax, ay, ox, oy, Ccc, bq, has_qc)
     x, y = x0 + ox, y0 + oy
     if not (np.isfinite(x) and np.isfinite(y) and np.isfinite(c00) and np.isfinite(c01) and np.isfinite(c11)):
-        return status.OVERFLOW, np.nan, np.nan, np.nan, np.nan, np.nan
-    return status.OK, x, y, c00, c01, c11
+        return status.OVERFLOW, np.nan, np.nan, np.nan, np.nan, np.nan, np.nan
+    nl = np.nan
+    if flag:
+        nl = _flag(c00, c01, c11, dn, lam, dxr, dyr, ox, oy, ax, ay, Q00, Q01, Q10, Q11, g0, g1, q00, q01, q11, zq0,
+                   zq1, zz, to_fixed_tuple(Ccc.ravel(), 36), has_qc, bq, bz)
+    return status.OK, x, y, c00, c01, c11, nl
 
 
 #: blocks of contiguous rows per thread in the general kernel (Newton warm-starts within a block)
 _ROWS_PER_BLOCK_DIV = 16
 
 # row buffers of the general map kernel
-_XD, _XN, _YN, _M00, _M01, _M10, _M11, _Q00, _Q01, _Q11, _V0, _V1, _CONV, _IDEN, _YDB = range(15)
-_NBUF = 15
+#: (name, meaning) of the rows of ``buf`` (_NBUF, W); the offsets _XD ... are generated from this table
+BUF_ROWS = (
+    ("XD", "distorted normalised x"), ("XN", "undistorted normalised x"), ("YN", "undistorted normalised y"),
+    ("M00", "d(undistorted)/d(distorted) 00"), ("M01", "01"), ("M10", "10"), ("M11", "11"),
+    ("Q00", "ray-state covariance C_qq 00 (with the flag: the total, pixel noise and rotations included)"),
+    ("Q01", "C_qq 01"), ("Q11", "C_qq 11"), ("V0", "one factor column's dq_0"), ("V1", "its dq_1"),
+    ("CONV", "previous row's y_d where that pixel converged, else NaN"), ("IDEN", "1 / distortion denominator"),
+    ("YDB", "the row's y_d, broadcast"),
+    # the linearity flag (see _flag): the rotations' ray-scale component z of the mixed factor columns
+    ("Z", "one factor column's z"), ("QZ0", "C_qz 0"), ("QZ1", "C_qz 1"), ("ZZ", "C_zz"),
+)
+_BUF = {name: i for i, (name, _) in enumerate(BUF_ROWS)}
+_XD, _XN, _YN, _M00, _M01, _M10, _M11, _Q00, _Q01, _Q11, _V0, _V1, _CONV, _IDEN, _YDB = (
+    _BUF[k] for k in ("XD", "XN", "YN", "M00", "M01", "M10", "M11", "Q00", "Q01", "Q11", "V0", "V1", "CONV", "IDEN",
+                      "YDB"))
+_Z, _QZ0, _QZ1, _ZZ = (_BUF[k] for k in ("Z", "QZ0", "QZ1", "ZZ"))
+_NBUF = len(BUF_ROWS)
+#: rows of the ray / constant cross terms ``BQ`` of the general kernel: dq_0 x constants (6), dq_1 x constants
+#: (6), and with the flag z x constants (6)
+_NBQ = 18
 
 
 @nb.njit(**_JIT1)
-def _acc_param(k, lv, yd, prm, om, buf, W, sq):
+def _acc_param(k, lv, yd, prm, om, buf, W, sq, flag):
     """Add ``lv * dq_k`` of every pixel of the row to ``buf[V0/V1]`` or, with ``sq``, add
-    ``lv^2 dq_k dq_k^T`` to ``buf[Q00/Q01/Q11]`` (one vectorised loop per parameter type)."""
+    ``lv^2 dq_k dq_k^T`` to ``buf[Q00/Q01/Q11]`` (one vectorised loop per parameter type).
+    With ``flag`` a rotation also adds its ray-scale component ``lv z_k`` to ``buf[Z]`` (not with ``sq``:
+    single rotations are folded into ``Om``)."""
     fx, fy, sk = prm[0], prm[1], prm[4]
     xd, xn, yn = buf[_XD], buf[_XN], buf[_YN]
     M00, M01, M10, M11 = buf[_M00], buf[_M01], buf[_M10], buf[_M11]
@@ -677,24 +858,24 @@ def _acc_param(k, lv, yd, prm, om, buf, W, sq):
                 y = yn[i]
                 v0[i] += w1 - w2 * y - w0 * x * y + w1 * x * x
                 v1[i] += -w0 * (1.0 + y * y) + w2 * x + w1 * x * y
+            if flag:
+                zr = buf[_Z]
+                for i in range(W):
+                    zr[i] += w0 * yn[i] - w1 * xn[i]
 
 
 @nb.njit(**_JIT1)
-def _row_general(v, prm, R, om, colptr, rowidx, vals, vc, colkind, Om, has_qc, has_dist, dom, warm, cst, Suv, buf,
-                 BQ, xr, cr, vr, rr):
-    """One image row of the general kernel: undistortion, then the covariance (all loops vectorise).
+def _row_undistort(v, prm, has_dist, dom, warm, stepf, buf, ok):
+    """Pixels of one row -> distorted (XD) and undistorted (XN, YN) normalised coordinates, M, IDEN, ``ok``.
 
     Undistortion is the scalar core's (:func:`footprint_uq.fast.core.undistort_vec`: the
     lens's valid domain, Newton, the reference's acceptance test and its robust retry).  With
     ``warm``, ``buf`` holds the previous row's solution: Newton then starts from its
     first-order continuation ``x_n,prev + M_prev (x_d - x_d,prev)`` where that pixel
-    converged (2-3 iterations instead of 5-8), else from ``x_d``.  ``rr`` receives the
-    :mod:`footprint_uq.status` code of each pixel.
+    converged (2-3 iterations instead of 5-8), else from ``x_d``.  Returns the row's ``y_d``.
     """
-    W = vr.shape[0]
+    W = ok.shape[0]
     fx, fy, cx, cy, sk = prm[0], prm[1], prm[2], prm[3], prm[4]
-    d = prm[5:13]
-    stepf = cst[27]
     yd = (v - cy) / fy
     xd, xn, yn = buf[_XD], buf[_XN], buf[_YN]
     M00, M01, M10, M11 = buf[_M00], buf[_M01], buf[_M10], buf[_M11]
@@ -719,12 +900,10 @@ def _row_general(v, prm, R, om, colptr, rowidx, vals, vc, colkind, Om, has_qc, h
             xd[i] = x
             xn[i] = x
             yn[i] = yd
-    ok = vr
     if has_dist:
-        # the scalar core's undistortion, vectorised over the row (same answer as the reference)
         ydb = buf[_YDB]
         ydb[:] = yd
-        core.undistort_vec(dom, d, xd, ydb, xn, yn, M00, M01, M10, M11, idn_b, ok)
+        core.undistort_vec(dom, prm[5:13], xd, ydb, xn, yn, M00, M01, M10, M11, idn_b, ok)
         for i in range(W):
             cv[i] = yd if ok[i] else np.nan
     else:
@@ -735,16 +914,17 @@ def _row_general(v, prm, R, om, colptr, rowidx, vals, vc, colkind, Om, has_qc, h
             M01[i] = 0.0
             M10[i] = 0.0
             M11[i] = 1.0
-    # camera-level covariance in q-space, factor column by factor column
-    q00, q01, q11, v0, v1 = buf[_Q00], buf[_Q01], buf[_Q11], buf[_V0], buf[_V1]
-    q00[:] = 0.0
-    q01[:] = 0.0
-    q11[:] = 0.0
-    if has_qc:
-        BQ[:] = 0.0
-    r = colptr.size - 1
-    # factor columns acting on the intrinsics only: dx_d = (A0 + A1 x_d, B0), summed as polynomials
-    # in x_d (row constants); with the pixel noise A Suv A^T they form the pre-M covariance C_pre
+    return yd
+
+
+@nb.njit(**_JIT1)
+def _row_intrinsics(yd, prm, colptr, rowidx, vals, colkind, Suv):
+    """The pre-M covariance ``C_pre`` of one row: intrinsics-only factor columns and the pixel noise.
+
+    Those columns move ``x_d`` by ``(A0 + A1 x_d, B0)`` (row constants), so with the pixel noise
+    ``A Suv A^T`` their covariance is a polynomial in ``x_d``: returns its coefficients
+    ``(c00_0, c00_1, c00_2, c01_0, c01_1, c11_0)``.
+    """
     fx, fy, sk = prm[0], prm[1], prm[4]
     ifx, ify, skf = 1.0 / fx, 1.0 / fy, -sk / (fx * fy)
     S00, S01, S11 = Suv[0, 0], Suv[0, 1], Suv[1, 1]
@@ -752,7 +932,7 @@ def _row_general(v, prm, R, om, colptr, rowidx, vals, vc, colkind, Om, has_qc, h
     c01_0 = ifx * ify * S01 + skf * ify * S11
     c11_0 = ify * ify * S11
     c00_1, c00_2, c01_1 = 0.0, 0.0, 0.0
-    for j in range(r):
+    for j in range(colptr.size - 1):
         if colkind[j] != 1:
             continue
         A0, A1, B0 = 0.0, 0.0, 0.0
@@ -777,21 +957,35 @@ def _row_general(v, prm, R, om, colptr, rowidx, vals, vc, colkind, Om, has_qc, h
         c01_0 += A0 * B0
         c01_1 += A1 * B0
         c11_0 += B0 * B0
-    for j in range(r):
+    return c00_0, c00_1, c00_2, c01_0, c01_1, c11_0
+
+
+@nb.njit(**_JIT1)
+def _row_mixed(yd, prm, om, colptr, rowidx, vals, vc, colkind, has_qc, flag, buf, BQ):
+    """The other factor columns (distortion, mixed) of one row into ``buf[Q00/Q01/Q11]`` (C_qq) and
+    ``BQ`` (ray / constant cross terms); with ``flag`` also the rotations' ``z`` rows (see :func:`_flag`)."""
+    W = buf.shape[1]
+    q00, q01, q11, v0, v1 = buf[_Q00], buf[_Q01], buf[_Q11], buf[_V0], buf[_V1]
+    zr, qz0, qz1, zz = buf[_Z], buf[_QZ0], buf[_QZ1], buf[_ZZ]
+    for j in range(colptr.size - 1):
         if colkind[j] != 0:
-            continue  # intrinsics-only (above) and rotation-only (Om, in the last loop) columns
+            continue  # intrinsics-only (_row_intrinsics) and rotation-only (Om, in _row_pixels) columns
         if colptr[j + 1] - colptr[j] == 1:
             k = rowidx[colptr[j]]
             if k < 13 or (k >= 16 and k <= 18):  # a ray parameter alone: no constant part
-                _acc_param(k, vals[colptr[j]], yd, prm, om, buf, W, True)
+                _acc_param(k, vals[colptr[j]], yd, prm, om, buf, W, True, False)
             continue
         v0[:] = 0.0
         v1[:] = 0.0
         ray = False
+        rot = False
         for nz in range(colptr[j], colptr[j + 1]):
             k = rowidx[nz]
+            if k >= 16 and k <= 18 and flag and not rot:
+                zr[:] = 0.0
+                rot = True
             if k < 13 or (k >= 16 and k <= 18):
-                _acc_param(k, vals[nz], yd, prm, om, buf, W, False)
+                _acc_param(k, vals[nz], yd, prm, om, buf, W, False, flag)
                 ray = True
         if not ray:
             continue
@@ -801,6 +995,12 @@ def _row_general(v, prm, R, om, colptr, rowidx, vals, vc, colkind, Om, has_qc, h
             q00[i] += a * a
             q01[i] += a * b
             q11[i] += b * b
+        if rot:
+            for i in range(W):
+                z = zr[i]
+                qz0[i] += v0[i] * z
+                qz1[i] += v1[i] * z
+                zz[i] += z * z
         if has_qc:
             for c in range(6):
                 vcc = vc[j, c]
@@ -810,33 +1010,55 @@ def _row_general(v, prm, R, om, colptr, rowidx, vals, vc, colkind, Om, has_qc, h
                     for i in range(W):
                         B0[i] += v0[i] * vcc
                         B1[i] += v1[i] * vcc
-    # per pixel: ray, ground point, Q, pixel noise, finish
-    x0, y0, Hn, g0, g1 = cst[0], cst[1], cst[2], cst[3], cst[4]
-    HR00, HR01, HR10, HR11 = cst[5], cst[6], cst[7], cst[8]
+                    if rot:
+                        B2 = BQ[12 + c]
+                        for i in range(W):
+                            B2[i] += zr[i] * vcc
+
+
+@nb.njit(inline="always", **_JIT1)
+def _ray_state(x, y, cst, R00, R01, R02, R10, R11, R12):
+    """Ray, ground offset and ``Q = d xy / d q`` of one pixel of the general kernel:
+    ``(dxr, dyr, dn, lam, ox, oy, Q00, Q01, Q10, Q11)``."""
+    Hn, g0, g1, g2 = cst[2], cst[3], cst[4], cst[29]
+    dxr = R00 * x + R01 * y + R02
+    dyr = R10 * x + R11 * y + R12
+    dn = g0 * x + g1 * y + g2
+    w = -1.0 / dn
+    lam = Hn * w
+    ox = lam * dxr
+    oy = lam * dyr
+    Q00 = w * (cst[5] + ox * g0)
+    Q01 = w * (cst[6] + ox * g1)
+    Q10 = w * (cst[7] + oy * g0)
+    Q11 = w * (cst[8] + oy * g1)
+    return dxr, dyr, dn, lam, ox, oy, Q00, Q01, Q10, Q11
+
+
+@nb.njit(**_JIT1)
+def _row_pixels(cst, R, Om, pre, flag, buf, xr, cr, vr, rr):
+    """Per pixel: ray, ground point, Q, the ray-state covariance (mixed columns + ``M C_pre M^T`` +
+    rotations ``G Om G^T``), the covariance; codes into ``rr``.  With ``flag`` the total ray-state
+    covariance goes back to ``buf[Q00/Q01/Q11]`` (for :func:`_row_flag`)."""
+    x0, y0, iHn = cst[0], cst[1], cst[26]
     p00, p01, p11 = cst[11], cst[12], cst[13]
     s0, s1, s2, s3, s4, s5 = cst[14], cst[15], cst[16], cst[17], cst[18], cst[19]
-    m00, m01, m02, m10, m11, m12, iHn = cst[20], cst[21], cst[22], cst[23], cst[24], cst[25], cst[26]
-    g2 = cst[29]
+    m00, m01, m02, m10, m11, m12 = cst[20], cst[21], cst[22], cst[23], cst[24], cst[25]
+    c00_0, c00_1, c00_2, c01_0, c01_1, c11_0 = pre
     R00, R01, R02, R10, R11, R12 = R[0, 0], R[0, 1], R[0, 2], R[1, 0], R[1, 1], R[1, 2]
     O00, O01, O02, O11, O12, O22 = Om[0, 0], Om[0, 1], Om[0, 2], Om[1, 1], Om[1, 2], Om[2, 2]
+    xd, xn, yn = buf[_XD], buf[_XN], buf[_YN]
+    M00, M01, M10, M11 = buf[_M00], buf[_M01], buf[_M10], buf[_M11]
+    q00, q01, q11 = buf[_Q00], buf[_Q01], buf[_Q11]
+    ok = vr
     nan = np.nan
-    for i in range(W):
+    for i in range(vr.shape[0]):
         x = xn[i]
         y = yn[i]
-        dxr = R00 * x + R01 * y + R02
-        dyr = R10 * x + R11 * y + R12
-        dn = g0 * x + g1 * y + g2
+        dxr, dyr, dn, lam, ox, oy, Q00, Q01, Q10, Q11 = _ray_state(x, y, cst, R00, R01, R02, R10, R11, R12)
         lens = ok[i]
         oki = lens & (dn < 0.0)
         rr[i] = status.OK if oki else (status.ABOVE_HORIZON if lens else status.UNDISTORT_FAILED)
-        w = -1.0 / dn
-        lam = Hn * w
-        ox = lam * dxr
-        oy = lam * dyr
-        Q00 = w * (HR00 + ox * g0)
-        Q01 = w * (HR01 + ox * g1)
-        Q10 = w * (HR10 + oy * g0)
-        Q11 = w * (HR11 + oy * g1)
         # intrinsics + pixel noise: M C_pre M^T, C_pre polynomial in x_d
         xdi = xd[i]
         e00 = c00_0 + xdi * (c00_1 + xdi * c00_2)
@@ -859,6 +1081,8 @@ def _row_general(v, prm, R, om, colptr, rowidx, vals, vc, colkind, Om, has_qc, h
         a00 = q00[i] + T00 * m00_ + T01 * m01_ + H0 * G00 + H1 * G01 + H2 * G02
         a01 = q01[i] + T00 * m10_ + T01 * m11_ + H0 * G10 + H1 * G11 + H2 * G12
         a11 = q11[i] + T10 * m10_ + T11 * m11_ + K0 * G10 + K1 * G11 + K2 * G12
+        if flag:
+            q00[i], q01[i], q11[i] = a00, a01, a11
         A00 = Q00 * a00 + Q01 * a01
         A01 = Q00 * a01 + Q01 * a11
         A10 = Q10 * a00 + Q11 * a01
@@ -881,39 +1105,118 @@ def _row_general(v, prm, R, om, colptr, rowidx, vals, vc, colkind, Om, has_qc, h
         cr[4 * i + 2] = c01 if oki else nan
         cr[4 * i + 3] = c11 if oki else nan
         ok[i] = oki
+
+
+@nb.njit(**_JIT1)
+def _row_qc(cst, R, buf, BQ, cr, vr):
+    """Adds the ray / constant cross terms (``BQ``, full budgets) to the covariances of a row."""
+    R00, R01, R02, R10, R11, R12 = R[0, 0], R[0, 1], R[0, 2], R[1, 0], R[1, 1], R[1, 2]
+    iHn = cst[26]
+    xn, yn = buf[_XN], buf[_YN]
+    bq = np.empty((2, 6))
+    for i in range(vr.shape[0]):
+        if not vr[i]:
+            continue
+        _, _, _, _, ox, oy, Q00, Q01, Q10, Q11 = _ray_state(xn[i], yn[i], cst, R00, R01, R02, R10, R11, R12)
+        for c in range(6):
+            bq[0, c] = BQ[c, i]
+            bq[1, c] = BQ[6 + c, i]
+        d00, d01, d11 = _qc_terms(Q00, Q01, Q10, Q11, ox * iHn, oy * iHn, ox, oy, bq)
+        cr[4 * i] += d00
+        cr[4 * i + 1] += d01
+        cr[4 * i + 2] += d01
+        cr[4 * i + 3] += d11
+
+
+@nb.njit(inline="always", **_JIT1)
+def _pixel_flag(i, cs, R, Om, cc, has_qc, buf, BQ, cr, bq, bz):
+    """The linearity flag of pixel ``i`` of a row of the general kernel (:func:`_flag`).
+
+    The rotation-only factor columns (``Om``) add ``C_qz = G Om h`` and ``C_zz = h^T Om h`` with
+    ``z = h . omega``, ``h = (y, -x, 0)``; the mixed columns' parts are in ``buf`` and ``BQ``.
+    ``buf`` is indexed as a 2-D array (one base pointer: the loop needs few alias checks).
+    """
+    x = buf[_XN, i]
+    y = buf[_YN, i]
+    dxr, dyr, dn, lam, ox, oy, Q00, Q01, Q10, Q11 = _ray_state(x, y, cs, R[0], R[1], R[2], R[3], R[4], R[5])
+    Oh0 = Om[0] * y - Om[1] * x
+    Oh1 = Om[1] * y - Om[3] * x
+    Oh2 = Om[2] * y - Om[4] * x
+    zq0 = buf[_QZ0, i] - x * y * Oh0 + (1.0 + x * x) * Oh1 - y * Oh2
+    zq1 = buf[_QZ1, i] - (1.0 + y * y) * Oh0 + x * y * Oh1 + x * Oh2
+    zz = buf[_ZZ, i] + y * Oh0 - x * Oh1
     if has_qc:
-        for i in range(W):
-            if not ok[i]:
-                continue
-            x = xn[i]
-            y = yn[i]
-            dxr = R00 * x + R01 * y + R02
-            dyr = R10 * x + R11 * y + R12
-            dn = g0 * x + g1 * y + g2
-            w = -1.0 / dn
-            lam = Hn * w
-            ox = lam * dxr
-            oy = lam * dyr
-            Q00 = w * (HR00 + ox * g0)
-            Q01 = w * (HR01 + ox * g1)
-            Q10 = w * (HR10 + oy * g0)
-            Q11 = w * (HR11 + oy * g1)
-            ax = ox * iHn
-            ay = oy * iHn
-            E00 = Q00 * BQ[0, i] + Q01 * BQ[6, i]
-            E01 = Q00 * BQ[1, i] + Q01 * BQ[7, i]
-            E10 = Q10 * BQ[0, i] + Q11 * BQ[6, i]
-            E11 = Q10 * BQ[1, i] + Q11 * BQ[7, i]
-            h0 = BQ[2, i] - BQ[3, i] - BQ[4, i] * ox - BQ[5, i] * oy
-            h1 = BQ[8, i] - BQ[9, i] - BQ[10, i] * ox - BQ[11, i] * oy
-            n0 = Q00 * h0 + Q01 * h1
-            n1 = Q10 * h0 + Q11 * h1
-            cr[4 * i] += 2.0 * E00 + 2.0 * n0 * ax
-            c01 = E01 + E10 + n0 * ay + ax * n1
-            cr[4 * i + 1] += c01
-            cr[4 * i + 2] += c01
-            cr[4 * i + 3] += 2.0 * E11 + 2.0 * n1 * ay
+        for c in range(6):
+            bq[0, c] = BQ[c, i]
+            bq[1, c] = BQ[6 + c, i]
+            bz[c] = BQ[12 + c, i]
+    iHn = cs[26]
+    return _flag(cr[4 * i], cr[4 * i + 1], cr[4 * i + 3], dn, lam, dxr, dyr, ox, oy, ox * iHn, oy * iHn, Q00, Q01,
+                 Q10, Q11, cs[3], cs[4], buf[_Q00, i], buf[_Q01, i], buf[_Q11, i], zq0, zq1, zz, cc, has_qc, bq, bz)
+
+
+@nb.njit(**_JIT1)
+def _row_flag(cst, R, Om, Ccc, has_qc, buf, BQ, cr, vr, nr):
+    """The linearity flag of every pixel of a row (:func:`_pixel_flag`) into ``nr`` (NaN where not valid).
+
+    Constants travel as tuples and ``buf`` is read as one 2-D array, so that the loop without the
+    full budget's cross terms vectorises (its square roots and divisions dominate otherwise).
+    """
+    cs = to_fixed_tuple(cst, 30)
+    cc = to_fixed_tuple(Ccc.ravel(), 36)
+    Rt = (R[0, 0], R[0, 1], R[0, 2], R[1, 0], R[1, 1], R[1, 2])
+    Omt = (Om[0, 0], Om[0, 1], Om[0, 2], Om[1, 1], Om[1, 2])
+    bq = np.zeros((2, 6))
+    bz = np.zeros(6)
+    nan = np.nan
+    if has_qc:
+        for i in range(vr.shape[0]):
+            nl = _pixel_flag(i, cs, Rt, Omt, cc, True, buf, BQ, cr, bq, bz)
+            nr[i] = nl if vr[i] else nan
+    else:
+        for i in range(vr.shape[0]):
+            nl = _pixel_flag(i, cs, Rt, Omt, cc, False, buf, BQ, cr, bq, bz)
+            nr[i] = nl if vr[i] else nan
+
+
+@nb.njit(**_JIT1)
+def _row_general(v, prm, R, om, colptr, rowidx, vals, vc, colkind, Om, Ccc, has_qc, has_dist, dom, warm, cst, Suv,
+                 buf, BQ, xr, cr, vr, rr, nr):
+    """One image row of the general kernel: undistortion, then the covariance (all loops vectorise).
+
+    Stages: :func:`_row_undistort`, :func:`_row_intrinsics` and :func:`_row_mixed` (the factor
+    columns), :func:`_row_pixels`, with a full budget :func:`_row_qc`, and with ``nr`` of the row's
+    length the linearity flag (:func:`_row_flag`).  ``rr`` receives the :mod:`footprint_uq.status`
+    code of each pixel.
+    """
+    flag = nr.shape[0] == vr.shape[0]
+    yd = _row_undistort(v, prm, has_dist, dom, warm, cst[27], buf, vr)
+    buf[_Q00][:] = 0.0
+    buf[_Q01][:] = 0.0
+    buf[_Q11][:] = 0.0
+    if flag:
+        buf[_QZ0][:] = 0.0
+        buf[_QZ1][:] = 0.0
+        buf[_ZZ][:] = 0.0
+    if has_qc:
+        BQ[:] = 0.0
+    pre = _row_intrinsics(yd, prm, colptr, rowidx, vals, colkind, Suv)
+    _row_mixed(yd, prm, om, colptr, rowidx, vals, vc, colkind, has_qc, flag, buf, BQ)
+    _row_pixels(cst, R, Om, pre, flag, buf, xr, cr, vr, rr)
+    if has_qc:
+        _row_qc(cst, R, buf, BQ, cr, vr)
+    if flag:
+        _row_flag(cst, R, Om, Ccc, has_qc, buf, BQ, cr, vr, nr)
     _finish_row(xr, cr, vr, rr)
+    if flag:
+        _mask_row(nr, vr)
+
+
+@nb.njit(**_JIT1)
+def _mask_row(nr, vr):
+    """NaN nonlinearity where the pixel is not valid (after :func:`_finish_row`)."""
+    for i in range(vr.shape[0]):
+        nr[i] = nr[i] if vr[i] else np.nan
 
 
 @nb.njit(**_JIT1)
@@ -930,9 +1233,12 @@ def _finish_row(xr, cr, vr, rr):
 
 
 @nb.njit(**_JIT)
-def _map_general(prm, R, om, colptr, rowidx, vals, vc, colkind, Om, has_qc, dom, cst, Suv, step, xyf, covf, validf,
-                 reasonf, W, nblk):
+def _map_general(prm, R, om, colptr, rowidx, vals, vc, colkind, Om, Ccc, has_qc, dom, cst, Suv, step, xyf, covf,
+                 validf, reasonf, nlf, W, nblk):
+    """Blocks of contiguous rows of the general kernel in parallel; ``nlf`` (H W,) receives the
+    nonlinearity, or has 0 rows."""
     Hh = validf.shape[0] // W
+    flag = nlf.shape[0] == validf.shape[0]
     has_dist = False
     for i in range(5, 13):
         if prm[i] != 0.0:
@@ -940,17 +1246,20 @@ def _map_general(prm, R, om, colptr, rowidx, vals, vc, colkind, Om, has_qc, dom,
     per = (Hh + nblk - 1) // nblk
     for blk in nb.prange(nblk):
         buf = np.empty((_NBUF, W))
-        BQ = np.empty((12, W))
+        BQ = np.empty((_NBQ, W))
         for iv in range(blk * per, min(Hh, (blk + 1) * per)):
-            _row_general(np.float64(iv * step), prm, R, om, colptr, rowidx, vals, vc, colkind, Om, has_qc, has_dist,
-                         dom, iv > blk * per, cst, Suv, buf, BQ,
+            _row_general(np.float64(iv * step), prm, R, om, colptr, rowidx, vals, vc, colkind, Om, Ccc, has_qc,
+                         has_dist, dom, iv > blk * per, cst, Suv, buf, BQ,
                          xyf[2 * W * iv:2 * W * (iv + 1)], covf[4 * W * iv:4 * W * (iv + 1)],
-                         validf[W * iv:W * (iv + 1)], reasonf[W * iv:W * (iv + 1)])
+                         validf[W * iv:W * (iv + 1)], reasonf[W * iv:W * (iv + 1)],
+                         nlf[W * iv:W * (iv + 1)] if flag else nlf[0:0])
 
 
 @nb.njit(**_JIT)
-def _points_general(uv, Suv, prm, R, om, colptr, rowidx, vals, vc, Ccc, has_qc, dom, xy, cov, valid, reason):
+def _points_general(uv, Suv, prm, R, om, colptr, rowidx, vals, vc, Ccc, has_qc, dom, xy, cov, valid, reason, nlin):
+    """Every point of ``uv`` (n, 2); ``nlin`` (n,) receives the nonlinearity, or has 0 rows (not computed)."""
     n = uv.shape[0]
+    flag = nlin.shape[0] == n and n > 0
     has_dist = False
     for i in range(5, 13):
         if prm[i] != 0.0:
@@ -959,15 +1268,18 @@ def _points_general(uv, Suv, prm, R, om, colptr, rowidx, vals, vc, Ccc, has_qc, 
     for c in nb.prange((n + nchunk - 1) // nchunk):
         sq = np.empty((22, 2))
         bq = np.zeros((2, 6))
+        bz = np.zeros(6)
         for i in range(c * nchunk, min(n, (c + 1) * nchunk)):
             u = uv[i, 0]
             v = uv[i, 1]
             if not (np.isfinite(u) and np.isfinite(v)):
-                code, x, y, c00, c01, c11 = status.NOT_FINITE, np.nan, np.nan, np.nan, np.nan, np.nan
+                code, x, y, c00, c01, c11, nl = status.NOT_FINITE, np.nan, np.nan, np.nan, np.nan, np.nan, np.nan
             else:
-                code, x, y, c00, c01, c11 = _point_general(u, v, Suv[i, 0, 0], Suv[i, 0, 1], Suv[i, 1, 1], prm, R,
-                                                           om, colptr, rowidx, vals, vc, Ccc, has_qc, has_dist, dom,
-                                                           sq, bq)
+                code, x, y, c00, c01, c11, nl = _point_general(u, v, Suv[i, 0, 0], Suv[i, 0, 1], Suv[i, 1, 1], prm,
+                                                               R, om, colptr, rowidx, vals, vc, Ccc, has_qc, has_dist,
+                                                               dom, sq, bq, bz, flag)
+            if flag:
+                nlin[i] = nl
             xy[i, 0] = x
             xy[i, 1] = y
             cov[i, 0, 0] = c00
@@ -1004,18 +1316,21 @@ def _column_kinds(k: dict):
     return kind, np.ascontiguousarray(Om)
 
 
-def _check_out(out, H, W):
-    if not (isinstance(out, tuple | list) and len(out) == 3):
-        raise InputError("out", type(out).__name__, "a tuple (xy_world_m, cov_m2, valid) of preallocated arrays")
-    xy, cov, valid = out
-    for name, a, shape, dt in (("out[0] (xy_world_m)", xy, (H, W, 2), np.float64),
-                               ("out[1] (cov_m2)", cov, (H, W, 2, 2), np.float64),
-                               ("out[2] (valid)", valid, (H, W), np.bool_)):
+def _check_out(out, H, W, get_nonlinearity):
+    """``(xy, cov, valid, nonlinearity or None)`` of a caller's ``out`` tuple, checked."""
+    n_ok = (3, 4) if get_nonlinearity else (3,)
+    if not (isinstance(out, tuple | list) and len(out) in n_ok):
+        raise InputError("out", type(out).__name__ if not isinstance(out, tuple | list) else f"{len(out)} arrays",
+                         "a tuple (xy_world_m, cov_m2, valid) of preallocated arrays"
+                         + (" (and nonlinearity, with get_nonlinearity)" if get_nonlinearity else ""))
+    specs = [("out[0] (xy_world_m)", (H, W, 2), np.float64), ("out[1] (cov_m2)", (H, W, 2, 2), np.float64),
+             ("out[2] (valid)", (H, W), np.bool_), ("out[3] (nonlinearity)", (H, W), np.float64)]
+    for a, (name, shape, dt) in zip(out, specs, strict=False):
         if not isinstance(a, np.ndarray) or a.shape != shape or a.dtype != dt or not a.flags.c_contiguous \
                 or not a.flags.writeable:
             got = (getattr(a, "shape", None), str(getattr(a, "dtype", type(a).__name__)))
             raise InputError(name, got, f"a writeable C-contiguous {np.dtype(dt).name} array of shape {shape}")
-    return xy, cov, valid
+    return out[0], out[1], out[2], (out[3] if len(out) == 4 else None)
 
 
 def _pixel_cov_q(prm, Suv):
@@ -1024,7 +1339,8 @@ def _pixel_cov_q(prm, Suv):
     return np.ascontiguousarray(A @ Suv @ A.T)
 
 
-def covariance_map(camera, budget, step_px: int = 1, *, out=None, get_reason: bool = False):
+def covariance_map(camera, budget, step_px: int = 1, *, out=None, get_reason: bool = False,
+                   get_nonlinearity: bool = False):
     """Ground point, 2x2 covariance and validity of every pixel of a regular grid.
 
     Parameters
@@ -1041,9 +1357,14 @@ def covariance_map(camera, budget, step_px: int = 1, *, out=None, get_reason: bo
         Grid step: pixel centres ``camera.pixel_grid(step_px)``.
     out : tuple of ndarray, optional
         Preallocated ``(xy_world_m (H, W, 2) float64, cov_m2 (H, W, 2, 2) float64,
-        valid (H, W) bool)``, C-contiguous, for the grid's H, W; filled in place.
+        valid (H, W) bool)``, C-contiguous, for the grid's H, W; filled in place.  With
+        ``get_nonlinearity`` a fourth array ``nonlinearity (H, W) float64`` may follow.
     get_reason : bool
         Also return the :mod:`footprint_uq.status` code of every pixel.
+    get_nonlinearity : bool
+        Also return the linearity flag's ``nonlinearity`` of every pixel, computed in the same
+        pass (:func:`footprint_uq.fast.core.nonlinearity_point`; the number
+        :func:`footprint_uq.propagation.propagate` gives; ``linear_ok = nonlinearity <= threshold``).
 
     Returns
     -------
@@ -1055,6 +1376,9 @@ def covariance_map(camera, budget, step_px: int = 1, *, out=None, get_reason: bo
         False at or above the horizon, or outside the lens's valid domain.
     reason : ndarray of int8 (H, W), with ``get_reason``
         The same codes as :func:`footprint_uq.cameras.general.backproject`.
+    nonlinearity : ndarray (H, W), with ``get_nonlinearity``
+        Predicted relative error of the linear 1-sigma semi-major axis (dimensionless); NaN where
+        not valid.  After ``reason`` when both are asked for.
     """
     try:
         step = int(step_px)
@@ -1067,16 +1391,28 @@ def covariance_map(camera, budget, step_px: int = 1, *, out=None, get_reason: bo
     H = (h_img + step - 1) // step
     if out is None:
         out = (np.empty((H, W, 2)), np.empty((H, W, 2, 2)), np.empty((H, W), dtype=np.bool_))
-    xy, cov, valid = _check_out(out, H, W)
+    xy, cov, valid, nlin = _check_out(out, H, W, get_nonlinearity)
     k = kernel_constants(camera, budget)
     prm = k["params"]
     reason = np.empty((H, W), dtype=np.int8)
+    if nlin is None:
+        nlin = np.empty((H, W) if get_nonlinearity else (0, W))
+
+    def result():
+        res = (xy, cov, valid)
+        if get_reason:
+            res = res + (reason,)
+        if get_nonlinearity:
+            res = res + (nlin,)
+        return res
+
     if not prm[P.HM] - prm[P.GDZ] > 0:  # camera at or below the ground: no pixel sees it
         xy[:] = np.nan
         cov[:] = np.nan
         valid[:] = False
         reason[:] = status.ABOVE_HORIZON
-        return (xy, cov, valid, reason) if get_reason else (xy, cov, valid)
+        nlin[:] = np.nan
+        return result()
     # dynamic scheduling in small chunks: on a shared machine a descheduled thread then
     # delays only its current chunk instead of half of the image
     old_chunk = nb.set_parallel_chunksize(1)
@@ -1085,18 +1421,21 @@ def covariance_map(camera, budget, step_px: int = 1, *, out=None, get_reason: bo
             colkind, Om = _column_kinds(k)
             nblk = min(H, _ROWS_PER_BLOCK_DIV * nb.get_num_threads())
             _map_general(prm, k["R"], k["omega"], k["colptr"], k["rowidx"], k["vals"], k["vc"], colkind, Om,
-                         k["has_qc"], camera.lens_domain.packed, _undistorted_constants(k, step), k["Suv"], step,
-                         xy.reshape(-1), cov.reshape(-1), valid.reshape(-1), reason.reshape(-1), W, nblk)
+                         k["Ccc"], k["has_qc"], camera.lens_domain.packed, _undistorted_constants(k, step), k["Suv"],
+                         step, xy.reshape(-1), cov.reshape(-1), valid.reshape(-1), reason.reshape(-1),
+                         nlin.reshape(-1), W, nblk)
         else:
             _map_undistorted(prm, k["R"], k["omega"], k["colptr"], k["rowidx"], k["vals"], k["vc"], k["has_qc"],
-                             _pixel_cov_q(prm, k["Suv"]), _undistorted_constants(k, step), step,
-                             xy.reshape(-1), cov.reshape(-1), valid.reshape(-1), reason.reshape(-1), W)
+                             _pixel_cov_q(prm, k["Suv"]), k["Ccc"], _undistorted_constants(k, step), step,
+                             xy.reshape(-1), cov.reshape(-1), valid.reshape(-1), reason.reshape(-1),
+                             nlin.reshape(-1), W)
     finally:
         nb.set_parallel_chunksize(old_chunk)
-    return (xy, cov, valid, reason) if get_reason else (xy, cov, valid)
+    return result()
 
 
-def covariance_points(camera, budget, uv_px, pixel_cov_px2=None, *, get_reason: bool = False):
+def covariance_points(camera, budget, uv_px, pixel_cov_px2=None, *, get_reason: bool = False,
+                      get_nonlinearity: bool = False):
     """Ground point, 2x2 covariance and validity of scattered pixels (general kernel).
 
     Parameters
@@ -1110,6 +1449,9 @@ def covariance_points(camera, budget, uv_px, pixel_cov_px2=None, *, get_reason: 
         imaging and resolution noise, as in :func:`footprint_uq.uncertainty.propagation.propagate`.
     get_reason : bool
         Also return the :mod:`footprint_uq.status` code of every point.
+    get_nonlinearity : bool
+        Also return the linearity flag's ``nonlinearity`` of every point (the same number as
+        :func:`footprint_uq.propagation.propagate`'s; ``linear_ok = nonlinearity <= threshold``).
 
     Returns
     -------
@@ -1118,6 +1460,9 @@ def covariance_points(camera, budget, uv_px, pixel_cov_px2=None, *, get_reason: 
     valid : ndarray of bool (...)
     reason : ndarray of int8 (...), with ``get_reason``
         The same codes as :func:`footprint_uq.cameras.general.backproject`.
+    nonlinearity : ndarray (...), with ``get_nonlinearity``
+        Predicted relative error of the linear 1-sigma semi-major axis (dimensionless); NaN where
+        not valid.  After ``reason`` when both are asked for.
     """
     budget = load_budget(budget)
     uv = as_points("uv_px", uv_px, 2)
@@ -1137,8 +1482,13 @@ def covariance_points(camera, budget, uv_px, pixel_cov_px2=None, *, get_reason: 
     cov = np.empty((n, 2, 2))
     valid = np.empty(n, dtype=np.bool_)
     reason = np.empty(n, dtype=np.int8)
+    nlin = np.empty(n if get_nonlinearity else 0)
     kernel = _points_general_serial if n < _SERIAL_BELOW else _points_general
     kernel(flat, Suv, k["params"], k["R"], k["omega"], k["colptr"], k["rowidx"], k["vals"], k["vc"],
-           k["Ccc"], k["has_qc"], camera.lens_domain.packed, xy, cov, valid, reason)
+           k["Ccc"], k["has_qc"], camera.lens_domain.packed, xy, cov, valid, reason, nlin)
     out = xy.reshape(lead + (2,)), cov.reshape(lead + (2, 2)), valid.reshape(lead)
-    return out + (reason.reshape(lead),) if get_reason else out
+    if get_reason:
+        out = out + (reason.reshape(lead),)
+    if get_nonlinearity:
+        out = out + (nlin.reshape(lead),)
+    return out

@@ -91,12 +91,21 @@ from ..errors import InputError
 from ..fast import footprint_kernels as fk
 from ..uncertainty.budget import load_budget
 from ..uncertainty.ellipse import ellipse_axes
+from ..uncertainty.propagation import (
+    DEFAULT_LINEAR_THRESHOLD,
+    V2X_COV_LINEAR,
+    V2X_COV_SAMPLED,
+    V2X_COV_UNAVAILABLE,
+    check_linear_threshold,
+    nonlinearity_of_jacobians,
+    sample_params,
+)
 from .v2x import cpm_fields, j2735_fields
 
 __all__ = [
     "FootprintEstimate", "FrameProcessor", "V2X_FIELDS", "DEGENERATE", "CONTACT_MODES", "BOX3D_COLUMNS",
-    "box2d_contact_points", "box3d_bottom_corners", "polygon_centroid", "footprints_from_corners",
-    "footprints_from_boxes2d", "footprints_from_boxes3d",
+    "V2X_POLICIES", "box2d_contact_points", "box3d_bottom_corners", "polygon_centroid", "footprints_from_corners",
+    "footprints_from_boxes2d", "footprints_from_boxes3d", "centre_covariance_sampled",
 ]
 
 #: centre reason code: zero-area footprint polygon (centroid undefined)
@@ -107,6 +116,17 @@ BOX3D_COLUMNS = ("x_m", "y_m", "z_m", "length_m", "width_m", "height_m", "yaw_ra
 #: column order of :attr:`FootprintEstimate.v2x_codes`
 V2X_FIELDS = ("cpm_x_confidence", "cpm_y_confidence", "cpm_xy_correlation", "j2735_semi_major",
               "j2735_semi_minor", "j2735_orientation", "j2735_position_confidence")
+#: what the V2X fields encode where the centre is not ``linear_ok`` (docs/uncertainty-model.md): "sampled" (the
+#: documented policy: the larger of the linear and a seeded Monte-Carlo covariance, "unavailable" beyond
+#: nonlinearity 0.5), "unavailable" (no sampling: every such centre is encoded "unavailable"), "linear" (the
+#: linear covariance regardless of the flag)
+V2X_POLICIES = ("sampled", "unavailable", "linear")
+#: V2X policy: above this nonlinearity the centre's fields are "unavailable" (no ellipse describes the spread)
+V2X_UNAVAILABLE_ABOVE = 0.5
+#: V2X policy: fewer samples than this share meeting the ground -> "unavailable"
+V2X_MIN_FRACTION_VALID = 0.999
+#: V2X policy: Monte-Carlo samples per flagged centre (common random numbers, seed ``v2x_seed``)
+V2X_SAMPLES = 2000
 
 
 @dataclass
@@ -131,13 +151,23 @@ class FootprintEstimate:
     centre_bad_corner : (N,) int       index of that corner (-1 if none)
     area_m2 : (N,)                     signed shoelace area (positive = counter-clockwise in W)
     v2x_codes : (N, 7) int32           CPM and J2735 fields of the centre covariance, columns
-                                       :data:`V2X_FIELDS` (see :mod:`footprint_uq.products.v2x`); :attr:`v2x` as a dict
+                                       :data:`V2X_FIELDS` (see :mod:`footprint_uq.products.v2x`); :attr:`v2x` as a dict;
+                                       where the centre is not ``linear_ok`` they follow ``v2x_source``
     heading_offset_deg : float         used for the V2X fields
+    corners_nonlinearity : (N, K)      the linearity flag of each corner (its 2x2 covariance; NaN where not
+                                       computed): predicted relative error of the linear 1-sigma semi-major axis
+    centre_nonlinearity : (N,)         the centre's: the largest of its corners' (NaN without a centre)
+    largest_nonlinearity : (N,)        the largest point's (its corner's; NaN without one)
+    linear_threshold : float           ``*_linear_ok = *_nonlinearity <= linear_threshold`` (properties)
+    v2x_source : (N,) int8             what the V2X fields encode: 0 the linear centre covariance, 1 a sampled
+                                       one (larger), 2 "unavailable" (:data:`V2X_POLICIES`; no centre: 2)
     object_rows : (R, N) or None       the fused kernel's per-object rows
                                        (:data:`footprint_uq.fast.footprint_kernels.OBJ_ROW` names them;
                                        the batch reads its columns from them); None from the reference
 
-    ``joint_cov_m2`` is None when a :class:`FrameProcessor` was asked not to form it.
+    ``joint_cov_m2`` is None when a :class:`FrameProcessor` was asked not to form it; the flag's arrays
+    are None when it was not computed (``linearity=False``), ``corners_nonlinearity`` has 0 rows when the
+    batch's lean mode skips per-corner outputs.
     """
 
     corners_px: np.ndarray
@@ -158,7 +188,33 @@ class FootprintEstimate:
     area_m2: np.ndarray
     v2x_codes: np.ndarray
     heading_offset_deg: float = 0.0
+    corners_nonlinearity: np.ndarray | None = None
+    centre_nonlinearity: np.ndarray | None = None
+    largest_nonlinearity: np.ndarray | None = None
+    linear_threshold: float = DEFAULT_LINEAR_THRESHOLD
+    v2x_source: np.ndarray | None = None
     object_rows: np.ndarray | None = None
+
+    def _ok(self, nl):
+        if nl is None:
+            return None
+        with np.errstate(invalid="ignore"):
+            return nl <= self.linear_threshold  # NaN (not computed) -> False
+
+    @property
+    def corners_linear_ok(self) -> np.ndarray | None:
+        """(N, K) bool: ``corners_nonlinearity <= linear_threshold`` (False where not computed)."""
+        return self._ok(self.corners_nonlinearity)
+
+    @property
+    def centre_linear_ok(self) -> np.ndarray | None:
+        """(N,) bool: ``centre_nonlinearity <= linear_threshold`` (False without a centre)."""
+        return self._ok(self.centre_nonlinearity)
+
+    @property
+    def largest_linear_ok(self) -> np.ndarray | None:
+        """(N,) bool: ``largest_nonlinearity <= linear_threshold`` (False without a largest point)."""
+        return self._ok(self.largest_nonlinearity)
 
     @property
     def v2x(self) -> dict[str, np.ndarray]:
@@ -347,7 +403,10 @@ def _box_cov_to_corners(box_cov_px2, A: np.ndarray, N: int) -> np.ndarray:
 
 # -- the reference path ----------------------------------------------------------------------
 def footprints_from_corners(camera, budget, corners_px, *, pixel_cov_px2=None, allow_outside_image: bool = False,
-                            heading_offset_deg: float = 0.0, extra_reason=None) -> FootprintEstimate:
+                            heading_offset_deg: float = 0.0, linearity: bool = True,
+                            linear_threshold: float = DEFAULT_LINEAR_THRESHOLD, v2x_policy: str = "sampled",
+                            v2x_samples: int = V2X_SAMPLES, v2x_seed: int = 0,
+                            extra_reason=None) -> FootprintEstimate:
     """Footprint estimates of N objects from their corners in pixels ``(N, K, 2)``.
 
     Parameters
@@ -364,11 +423,22 @@ def footprints_from_corners(camera, budget, corners_px, *, pixel_cov_px2=None, a
     extra_reason : array_like (N, K) int8, optional
         Status codes that override OK per corner (e.g. BEHIND_CAMERA from a 3D box's projection).
         Bearing of the world +y axis from true north, for the V2X fields.
+    linearity : bool
+        Compute the linearity flag (per corner, largest point, centre; see :class:`FootprintEstimate`).
+    linear_threshold : float
+        ``linear_ok = nonlinearity <= linear_threshold`` (default 0.05).
+    v2x_policy : {"sampled", "unavailable", "linear"}
+        What the V2X fields encode where the centre is not ``linear_ok`` (:data:`V2X_POLICIES`;
+        docs/uncertainty-model.md, "Policy for the V2X fields").
+    v2x_samples, v2x_seed : int
+        Monte-Carlo samples per flagged centre and their seed (policy "sampled";
+        :func:`centre_covariance_sampled`).
 
     Returns
     -------
     FootprintEstimate
     """
+    thr, v2x_samples = _check_flag_options(linear_threshold, v2x_policy, v2x_samples)
     budget = load_budget(budget)
     uv = as_points("corners_px", corners_px, 2)
     if uv.ndim != 3 or uv.shape[1] < 1:
@@ -435,13 +505,25 @@ def footprints_from_corners(camera, budget, corners_px, *, pixel_cov_px2=None, a
     area = np.where(all_usable, area, np.nan)
     fields = {**cpm_fields(centre_cov, heading_offset_deg), **j2735_fields(centre_cov, heading_offset_deg)}
     v2x = np.stack([fields[name] for name in V2X_FIELDS], -1).astype(np.int32)
-    return _mark_overflow(FootprintEstimate(
+    cnl = largest_nl = centre_nl = None
+    if linearity:  # each corner's flag from its 2x2 covariance (budget + detector pixel noise on the diagonal)
+        Suv_k = np.broadcast_to(budget.pixel_covariance(), (N, K, 2, 2))
+        if det is not None:
+            Suv_k = Suv_k + np.stack([det[:, 2 * k:2 * k + 2, 2 * k:2 * k + 2] for k in range(K)], 1)
+        with np.errstate(invalid="ignore", over="ignore"):
+            cnl = nonlinearity_of_jacobians(camera, budget, uv, ccov, bp.dxy_dp, bp.dxy_duv, Sp, Suv_k, computed)
+        largest_nl = np.where(any_usable, cnl[rows, li], np.nan)
+        centre_nl = np.where(ok, cnl.max(1), np.nan)  # the centre's flag: its worst corner's (NaN propagates)
+    est = _mark_overflow(FootprintEstimate(
         corners_px=uv, corners_xy_world_m=xy, corners_cov_m2=ccov, joint_cov_m2=joint,
         corner_reason=reason.astype(np.int8), corner_usable=usable, largest_index=largest_index,
         largest_semi_major_m=largest_semi, largest_xy_world_m=largest_xy, largest_cov_m2=largest_cov,
         centre_xy_world_m=centre, centre_cov_m2=centre_cov, centre_valid=ok, centre_reason=centre_reason,
         centre_bad_corner=np.where(ok, -1, np.where(centre_reason == DEGENERATE, -1, centre_bad)),
-        area_m2=area, v2x_codes=v2x, heading_offset_deg=float(heading_offset_deg)))
+        area_m2=area, v2x_codes=v2x, heading_offset_deg=float(heading_offset_deg), corners_nonlinearity=cnl,
+        centre_nonlinearity=centre_nl, largest_nonlinearity=largest_nl, linear_threshold=thr))
+    return _apply_v2x_policy(est, camera, budget, v2x_policy, v2x_samples, v2x_seed,
+                             corners_of=lambda r: uv[r], det_of=lambda r: None if det is None else det[r])
 
 
 def _mark_overflow(est: FootprintEstimate) -> FootprintEstimate:
@@ -473,6 +555,9 @@ def _mark_overflow(est: FootprintEstimate) -> FootprintEstimate:
         return est
     reason[over] = status.OVERFLOW
     est.corner_usable[over] = False
+    cnl = est.corners_nonlinearity
+    if cnl is not None and cnl.shape[0] == reason.shape[0]:
+        cnl[over] = np.nan
     if not lite:
         xy[over] = np.nan
         cc[over] = np.nan
@@ -488,6 +573,8 @@ def _mark_overflow(est: FootprintEstimate) -> FootprintEstimate:
         est.largest_xy_world_m[objs] = np.nan
         if est.largest_cov_m2.shape[0]:
             est.largest_cov_m2[objs] = np.nan
+        if est.largest_nonlinearity is not None:
+            est.largest_nonlinearity[objs] = np.nan
     else:
         a, b, d = cc[objs, :, 0, 0], cc[objs, :, 0, 1], cc[objs, :, 1, 1]
         with np.errstate(invalid="ignore"):
@@ -498,6 +585,8 @@ def _mark_overflow(est: FootprintEstimate) -> FootprintEstimate:
         est.largest_semi_major_m[objs] = np.where(has, semi[np.arange(objs.size), li], np.nan)
         est.largest_xy_world_m[objs] = np.where(has[:, None], xy[objs, li], np.nan)
         est.largest_cov_m2[objs] = np.where(has[:, None, None], cc[objs, li], np.nan)
+        if est.largest_nonlinearity is not None:
+            est.largest_nonlinearity[objs] = np.where(has, cnl[objs, li], np.nan)
     first_bad = np.argmax(~usable, axis=1)
     all_usable = usable.all(1)
     code = np.where(~all_usable, reason[objs, first_bad],
@@ -508,6 +597,8 @@ def _mark_overflow(est: FootprintEstimate) -> FootprintEstimate:
     est.centre_valid[objs] = ~bad
     est.centre_xy_world_m[objs[bad]] = np.nan
     est.centre_cov_m2[objs[bad]] = np.nan
+    if est.centre_nonlinearity is not None:
+        est.centre_nonlinearity[objs[bad]] = np.nan
     est.area_m2[objs[~all_usable]] = np.nan
     fields = {**cpm_fields(est.centre_cov_m2[objs], est.heading_offset_deg),
               **j2735_fields(est.centre_cov_m2[objs], est.heading_offset_deg)}
@@ -515,13 +606,130 @@ def _mark_overflow(est: FootprintEstimate) -> FootprintEstimate:
     return est
 
 
+def _check_flag_options(linear_threshold, v2x_policy, v2x_samples):
+    """``(threshold, samples)`` of the linearity flag / V2X policy options, checked."""
+    thr = check_linear_threshold(linear_threshold)
+    if v2x_policy not in V2X_POLICIES:
+        raise InputError("v2x_policy", v2x_policy, f"one of {V2X_POLICIES}")
+    try:
+        n = int(v2x_samples)
+    except (TypeError, ValueError):
+        raise InputError("v2x_samples", v2x_samples, "an integer >= 100") from None
+    if n != v2x_samples or n < 100:
+        raise InputError("v2x_samples", v2x_samples, "an integer >= 100")
+    return thr, n
+
+
+def centre_covariance_sampled(camera, budget, corners_px, *, pixel_cov_px2=None, n_samples: int = V2X_SAMPLES,
+                              seed: int = 0, max_points: int = 1 << 20):
+    """Seeded Monte-Carlo covariance of footprint centres on the full (non-linear) camera model.
+
+    Each sample draws one set of camera-level errors (shared by the corners) and the pixel noise of
+    every corner (budget + detector, correlated between corners if the detector covariance is),
+    back-projects the K corners and takes the centre as the reference does (:func:`polygon_centroid`:
+    area centroid, midpoint, point).  **Common random numbers**: every object uses the same
+    standard-normal draws (from ``seed``), so an object's result does not depend on which other
+    objects are processed with it (frame, batch chunk, thread).  Vectorised over samples and objects
+    (at most ``max_points`` back-projections at a time).
+
+    Parameters
+    ----------
+    camera : Camera
+    budget : ErrorBudget, preset name, path or mapping
+    corners_px : (n, K, 2) corner pixels of n objects
+    pixel_cov_px2 : (n, 2K, 2K), optional
+        Detector pixel covariance (added to the budget's imaging and resolution noise).
+    n_samples, seed : int
+
+    Returns
+    -------
+    cov_m2 : (n, 2, 2)          sample covariance of the centre over the samples where every corner
+                                meets the ground and the centre exists (m^2; NaN with fewer than 2)
+    fraction_valid : (n,)       share of such samples
+    """
+    budget = load_budget(budget)
+    uv = np.asarray(corners_px, dtype=np.float64)
+    n, K = uv.shape[:2]
+    rng = np.random.default_rng(seed)
+    dp = sample_params(budget, n_samples, rng)  # (S, 22), shared by all objects
+    z = rng.standard_normal((n_samples, 2 * K))
+    Spx = np.kron(np.eye(K), budget.pixel_covariance())
+    Spx = np.broadcast_to(Spx, (n, 2 * K, 2 * K)) if pixel_cov_px2 is None else Spx + pixel_cov_px2
+    w, V = np.linalg.eigh(Spx)
+    A = V * np.sqrt(np.clip(w, 0.0, None))[:, None, :]  # (n, 2K, 2K): Spx = A A^T
+    ref = camera.backproject(uv).xy_world_m
+    ref = np.where(np.isfinite(ref), ref, 0.0).mean(1)  # deviations from a nearby point: no cancellation
+    cov = np.full((n, 2, 2), np.nan)
+    frac = np.zeros(n)
+    step = max(1, max_points // (n_samples * K))
+    params = camera.params + dp[:, None, None, :]
+    for a in range(0, n, step):
+        b = min(n, a + step)
+        noise = np.einsum("rij,sj->sri", A[a:b], z).reshape(n_samples, b - a, K, 2)
+        bp = camera.backproject_with(params, uv[None, a:b] + noise)
+        with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
+            C = polygon_centroid(np.where(bp.valid[..., None], bp.xy_world_m, 0.0))[0] - ref[a:b]  # (S, r, 2)
+        good = bp.valid.all(-1) & np.isfinite(C).all(-1)
+        cnt = good.sum(0)
+        C = np.where(good[..., None], C, 0.0)
+        mean = C.sum(0) / np.maximum(cnt, 1)[:, None]
+        d = np.where(good[..., None], C - mean, 0.0)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            cov[a:b] = np.einsum("sri,srj->rij", d, d) / (cnt - 1)[:, None, None]
+        cov[a:b][cnt < 2] = np.nan
+        frac[a:b] = cnt / n_samples
+    return cov, frac
+
+
+def _apply_v2x_policy(est: FootprintEstimate, camera, budget, policy: str, n_samples: int, seed: int, *,
+                      corners_of, det_of) -> FootprintEstimate:
+    """V2X fields where the centre is not ``linear_ok`` (in place; docs/uncertainty-model.md, "Policy for the V2X
+    fields"), shared by the numpy reference and :class:`FrameProcessor`.
+
+    ``corners_of(rows)`` gives the corner pixels (r, K, 2) and ``det_of(rows)`` the detector covariance
+    (r, 2K, 2K) or None of the flagged rows: only those are sampled (:func:`centre_covariance_sampled`).
+    """
+    src = np.where(est.centre_valid, V2X_COV_LINEAR, V2X_COV_UNAVAILABLE).astype(np.int8)
+    est.v2x_source = src
+    if est.centre_nonlinearity is None or policy == "linear":
+        return est
+    rows = np.flatnonzero(est.centre_valid & ~est.centre_linear_ok)
+    if rows.size == 0:
+        return est
+    nl = est.centre_nonlinearity[rows]
+    cov = np.full((rows.size, 2, 2), np.nan)
+    src_r = np.full(rows.size, V2X_COV_UNAVAILABLE, dtype=np.int8)
+    mid = nl <= V2X_UNAVAILABLE_ABOVE
+    if policy == "sampled" and mid.any():
+        r = rows[mid]
+        mc, frac = centre_covariance_sampled(camera, budget, corners_of(r), pixel_cov_px2=det_of(r),
+                                             n_samples=n_samples, seed=seed)
+        lin = est.centre_cov_m2[r]
+        a_mc, a_lin = _semi_major(mc), _semi_major(lin)
+        chosen = np.where((a_mc > a_lin)[:, None, None], mc, lin)
+        good = frac >= V2X_MIN_FRACTION_VALID
+        cov[mid] = np.where(good[:, None, None], chosen, np.nan)
+        src_r[mid] = np.where(good, V2X_COV_SAMPLED, V2X_COV_UNAVAILABLE)
+    src[rows] = src_r
+    fields = {**cpm_fields(cov, est.heading_offset_deg), **j2735_fields(cov, est.heading_offset_deg)}
+    est.v2x_codes[rows] = np.stack([fields[name] for name in V2X_FIELDS], -1).astype(np.int32)
+    return est
+
+
+def _semi_major(cov):
+    a, b, d = cov[..., 0, 0], cov[..., 0, 1], cov[..., 1, 1]
+    with np.errstate(invalid="ignore"):
+        return np.sqrt(0.5 * (a + d) + np.hypot(0.5 * (a - d), b))
+
+
 def footprints_from_boxes2d(camera, budget, boxes_px, *, contact: str = "bottom-centre", pixel_cov_px2=None,
                             box_cov_px2=None, allow_outside_image: bool = False,
-                            heading_offset_deg: float = 0.0) -> FootprintEstimate:
+                            heading_offset_deg: float = 0.0, **flag_options) -> FootprintEstimate:
     """Footprints of axis-aligned image boxes ``(N, 4)`` (see the module doc for ``contact``).
 
     ``pixel_cov_px2`` as in :func:`footprints_from_corners`; ``box_cov_px2`` ``(N, 4, 4)``
-    or ``(N, 4)`` sigmas on the box coordinates (not both).
+    or ``(N, 4)`` sigmas on the box coordinates (not both).  ``flag_options``: ``linearity``,
+    ``linear_threshold``, ``v2x_policy``, ``v2x_samples``, ``v2x_seed`` of :func:`footprints_from_corners`.
     """
     corners, A = box2d_contact_points(boxes_px, contact)
     N, K = corners.shape[:2]
@@ -530,15 +738,17 @@ def footprints_from_boxes2d(camera, budget, boxes_px, *, contact: str = "bottom-
             raise InputError("box_cov_px2", "given with pixel_cov_px2", "only one detector covariance")
         pixel_cov_px2 = _box_cov_to_corners(box_cov_px2, A, N)
     return footprints_from_corners(camera, budget, corners, pixel_cov_px2=pixel_cov_px2,
-                                   allow_outside_image=allow_outside_image, heading_offset_deg=heading_offset_deg)
+                                   allow_outside_image=allow_outside_image, heading_offset_deg=heading_offset_deg,
+                                   **flag_options)
 
 
 def footprints_from_boxes3d(camera, budget, boxes_world, *, yaw_unit: str = "rad", bottom_on_ground: bool = True,
                             pixel_cov_px2=None, allow_outside_image: bool = False,
-                            heading_offset_deg: float = 0.0) -> FootprintEstimate:
+                            heading_offset_deg: float = 0.0, **flag_options) -> FootprintEstimate:
     """Footprints of 3D world boxes ``(N, 7)``: bottom corners -> image -> ground with uncertainty.
 
-    Corners behind the camera get ``BEHIND_CAMERA`` and NaN.
+    Corners behind the camera get ``BEHIND_CAMERA`` and NaN.  ``flag_options`` as in
+    :func:`footprints_from_boxes2d`.
     """
     X = box3d_bottom_corners(boxes_world, yaw_unit=yaw_unit, bottom_on_ground=bottom_on_ground,
                              ground_z_m=camera.ground_z_m)
@@ -547,7 +757,7 @@ def footprints_from_boxes3d(camera, budget, boxes_world, *, yaw_unit: str = "rad
     uv = np.where(pr.valid[..., None], pr.uv_px, np.nan)
     return footprints_from_corners(camera, budget, uv, pixel_cov_px2=pixel_cov_px2,
                                    allow_outside_image=allow_outside_image, heading_offset_deg=heading_offset_deg,
-                                   extra_reason=extra)
+                                   extra_reason=extra, **flag_options)
 
 
 # -- the per-frame fast path ---------------------------------------------------------------------
@@ -592,6 +802,9 @@ class FrameProcessor:
     joint_cov : bool
         Form the (N, 2K, 2K) joint corner covariance (default True).  Without it
         ``joint_cov_m2`` is None; corner and centre covariances are unchanged.
+    linearity, linear_threshold, v2x_policy, v2x_samples, v2x_seed
+        The linearity flag (computed in the kernel) and the V2X policy where the centre is not
+        ``linear_ok``, as in :func:`footprints_from_corners`.
 
     A processor keeps only read-only constants and the kernels release the GIL, so
     one processor may serve several threads at once (e.g. chunks of a batch).
@@ -604,8 +817,12 @@ class FrameProcessor:
     """
 
     def __init__(self, camera, budget, *, heading_offset_deg: float = 0.0, allow_outside_image: bool = False,
-                 joint_cov: bool = True):
-
+                 joint_cov: bool = True, linearity: bool = True, linear_threshold: float = DEFAULT_LINEAR_THRESHOLD,
+                 v2x_policy: str = "sampled", v2x_samples: int = V2X_SAMPLES, v2x_seed: int = 0):
+        self.linear_threshold, self.v2x_samples = _check_flag_options(linear_threshold, v2x_policy, v2x_samples)
+        self.linearity = bool(linearity)
+        self.v2x_policy = v2x_policy
+        self.v2x_seed = int(v2x_seed)
         self.camera = camera
         self.budget = load_budget(budget)
         self.heading_offset_deg = as_float("heading_offset_deg", heading_offset_deg)
@@ -637,32 +854,43 @@ class FrameProcessor:
             return np.ascontiguousarray(check_cov("pixel_cov_px2", c, 2 * K)[:, None]), 3
         raise InputError("pixel_cov_px2", c.shape, f"shape ({N}, 2, 2), ({N}, {K}, 2, 2) or ({N}, {2 * K}, {2 * K})")
 
+    def _flag_options(self) -> dict:
+        return dict(linearity=self.linearity, linear_threshold=self.linear_threshold, v2x_policy=self.v2x_policy,
+                    v2x_samples=self.v2x_samples, v2x_seed=self.v2x_seed)
+
     def _run(self, uv, extra, pixel_cov_px2) -> FootprintEstimate:
         N, K = uv.shape[0], uv.shape[1]
         if K > self._fk.MAX_CORNERS:  # beyond the kernel's chunk layout: the numpy reference
             return footprints_from_corners(self.camera, self.budget, uv, pixel_cov_px2=pixel_cov_px2,
                                            allow_outside_image=self.allow_outside_image,
                                            heading_offset_deg=self.heading_offset_deg,
-                                           extra_reason=extra if extra.shape[0] == N else None)
+                                           extra_reason=extra if extra.shape[0] == N else None,
+                                           **self._flag_options())
         det, mode = self._det(pixel_cov_px2, N, K)
         out = self._fk.alloc_outputs(N, K, joint=self.joint_cov, corners=self.corner_outputs, alloc=empty_reusable)
         self._fk.process_corners(uv, extra, self._no_boxes, False, True, self._cam, self._dR, self._Lr, self._Lc,
                                  self._Lv, self._r, self._spx, det, mode, self.allow_outside_image, self._ch, self._sh,
-                                 out, self._fk.scratch())
-        return self._pack(uv, out)
+                                 self.linearity, out, self._fk.scratch())
+        return self._pack(uv, out, lambda r: uv[r], det, mode)
 
-    def _pack(self, uv, out) -> FootprintEstimate:
-        xy, ccov, joint, reason, usable, li, lcov, creason, cbad, obj, v2x = out
+    def _pack(self, uv, out, corners_of, det, mode) -> FootprintEstimate:
+        xy, ccov, joint, reason, usable, li, lcov, creason, cbad, obj, v2x, cnl = out
         row = self._fk.OBJ_ROW
         # views of the kernel's per-object rows (no copies): (N, 2) and (N, 2, 2) with strides across rows
         centre = obj[row["x_m"]:row["y_m"] + 1].T
         ccentre = obj[row["cov_xx_m2"]:row["cov_yy_m2"] + 1].T.reshape(obj.shape[1], 2, 2)
+        flag = self.linearity
         est = FootprintEstimate(uv, xy, ccov, joint if self.joint_cov else None, reason, usable, li,
                                 obj[row["largest_sigma_major_m"]], obj[row["largest_x_m"]:row["largest_y_m"] + 1].T,
                                 lcov, centre, ccentre, creason == 0, creason, cbad, obj[row["area_m2"]], v2x.T,
-                                self.heading_offset_deg)
+                                self.heading_offset_deg, cnl if flag else None,
+                                obj[row["nonlinearity"]] if flag else None,
+                                obj[row["largest_nonlinearity"]] if flag else None, self.linear_threshold)
         est.object_rows = obj
-        return _mark_overflow(est)
+        K = reason.shape[1]
+        return _apply_v2x_policy(_mark_overflow(est), self.camera, self.budget, self.v2x_policy, self.v2x_samples,
+                                 self.v2x_seed, corners_of=corners_of,
+                                 det_of=lambda r: _det_joint_rows(det, mode, r, K))
 
     def corners(self, corners_px, *, pixel_cov_px2=None) -> FootprintEstimate:
         """Footprints from corners in pixels ``(N, K, 2)`` (see :func:`footprints_from_corners`)."""
@@ -697,7 +925,27 @@ class FrameProcessor:
         out = self._fk.alloc_outputs(N, 4, joint=self.joint_cov, corners=self.corner_outputs, alloc=empty_reusable)
         bad = self._fk.process_boxes3d(b, yaw_unit == "deg", bool(bottom_on_ground), self._cam, self._dR, self._Lr,
                                        self._Lc, self._Lv, self._r, self._spx, det, mode, self.allow_outside_image,
-                                       self._ch, self._sh, uv, out, self._fk.scratch())
+                                       self._ch, self._sh, self.linearity, uv, out, self._fk.scratch())
         if bad >= 0:
             raise InputError(f"boxes_world[{bad}] (length_m, width_m, height_m)", b[bad, 3:6].tolist(), "sizes >= 0")
-        return self._pack(uv, out)
+
+        def corners_of(r):  # the flagged rows' pixels (the batch's lean mode keeps none)
+            if uv.shape[0] == N:
+                return uv[r]
+            X = box3d_bottom_corners(b[r], yaw_unit=yaw_unit, bottom_on_ground=bottom_on_ground,
+                                     ground_z_m=self.camera.ground_z_m)
+            return self.camera.project(X).uv_px
+
+        return self._pack(uv, out, corners_of, det, mode)
+
+
+def _det_joint_rows(det, mode: int, rows, K: int):
+    """The kernel's detector covariance (``FrameProcessor._det``) of ``rows`` as (r, 2K, 2K), or None."""
+    if mode == 0:
+        return None
+    if mode == 3:
+        return det[rows, 0]
+    out = np.zeros((len(rows), 2 * K, 2 * K))
+    for k in range(K):
+        out[:, 2 * k:2 * k + 2, 2 * k:2 * k + 2] = det[rows, 0] if mode == 1 else det[rows, k]
+    return out

@@ -31,6 +31,13 @@ or whose lens model cannot be inverted is NaN with ``valid`` False and the
 :mod:`footprint_uq.status` code in ``reason``.  With ``max_range_m``, pixels
 that land farther than that from the camera foot point are masked the same
 way with :data:`footprint_uq.status.BEYOND_RANGE`.
+
+Linearity: ``nonlinearity`` is the predicted relative error of the linear 1-sigma
+semi-major axis of every pixel (docs/uncertainty-model.md, "The linearity flag"),
+computed in the same kernel pass; ``linear_ok`` masks the pixels where it is at most
+``linear_threshold`` (default 0.05).  Where ``linear_ok`` is False the covariance
+under-estimates the spread (near the horizon): the figures hatch that region and draw
+the threshold's contour.
 """
 
 from __future__ import annotations
@@ -54,7 +61,7 @@ from ..io import camera_from_dict, camera_to_dict
 from ..io.atomic import atomic_path
 from ..uncertainty.budget import ErrorBudget, load_budget
 from ..uncertainty.ellipse import chi2_scale, ellipse_axes
-from ..uncertainty.propagation import propagate
+from ..uncertainty.propagation import DEFAULT_LINEAR_THRESHOLD, check_linear_threshold, propagate
 
 __all__ = ["UncertaintyMap", "uncertainty_map", "ground_sampling_distance", "pixel_jacobian", "GSD_DEFINITION"]
 
@@ -100,6 +107,11 @@ class UncertaintyMap:
     camera, budget
         The inputs (kept for figures and reports; not stored in the ``.npz`` arrays).
     max_range_m : float or None
+    nonlinearity : ndarray (H, W) or None
+        Predicted relative error of the linear 1-sigma semi-major axis (0.05 = 5 %); NaN where
+        not valid; None when not computed (``linearity=False``).
+    linear_threshold : float
+        Threshold of :attr:`linear_ok`.
     """
 
     uv_px: np.ndarray
@@ -118,6 +130,16 @@ class UncertaintyMap:
     camera: object = field(default=None, repr=False)
     budget: ErrorBudget | None = field(default=None, repr=False)
     max_range_m: float | None = None
+    nonlinearity: np.ndarray | None = None
+    linear_threshold: float = DEFAULT_LINEAR_THRESHOLD
+
+    @property
+    def linear_ok(self) -> np.ndarray | None:
+        """(H, W) bool: valid and ``nonlinearity <= linear_threshold`` (None without the layer)."""
+        if self.nonlinearity is None:
+            return None
+        with np.errstate(invalid="ignore"):
+            return self.valid & (self.nonlinearity <= self.linear_threshold)
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -166,6 +188,7 @@ class UncertaintyMap:
             out.update({k: None for k in ("semi_major_m_min", "semi_major_m_median", "semi_major_m_p95",
                                           "semi_major_m_max", "range_m_max", "gsd_range_m_median",
                                           "gsd_cross_m_median")})
+        out.update(self._linearity_summary(v))
         area = self.footprint_area_m2 * float(self.step_px) ** 2
         out["below_threshold"] = []
         for t in thresholds_m:
@@ -177,6 +200,20 @@ class UncertaintyMap:
                 "fraction_of_image": float(m.sum() / n) if n else 0.0,
             })
         return out
+
+    def _linearity_summary(self, v) -> dict:
+        """The flag's headline numbers: share of valid pixels that are ``linear_ok`` and the nearest
+        range where a pixel is not (None if none)."""
+        if self.nonlinearity is None:
+            return {"linear_threshold": None, "fraction_linear_ok": None, "nonlinearity_max": None,
+                    "range_m_min_not_linear_ok": None}
+        ok = self.linear_ok
+        bad = v & ~ok
+        nl = self.nonlinearity[v]
+        return {"linear_threshold": float(self.linear_threshold),
+                "fraction_linear_ok": float(ok[v].mean()) if v.any() else None,
+                "nonlinearity_max": float(np.nanmax(nl)) if np.isfinite(nl).any() else None,
+                "range_m_min_not_linear_ok": float(self.range_m[bad].min()) if bad.any() else None}
 
     def save_npz(self, path) -> Path:
         """Write every array to a compressed ``.npz`` file, plus a ``metadata_json`` string.
@@ -197,6 +234,9 @@ class UncertaintyMap:
             "orientation_convention": "degrees counter-clockwise from +x (east), in (-90, 90]",
             "semi_axes": "1 sigma; multiply by chi2_scale(p) (2.4477 for 95 %) for a p-confidence ellipse",
             "reasons": {str(k): v for k, v in status.REASONS.items()},
+            "linear_threshold": float(self.linear_threshold),
+            "nonlinearity": "predicted relative error of the linear 1-sigma semi-major axis; linear_ok = valid and "
+                            "nonlinearity <= linear_threshold (docs/uncertainty-model.md)",
         }
         with atomic_path(path) as tmp:
             self._savez(tmp, meta)
@@ -207,11 +247,12 @@ class UncertaintyMap:
             self._savez_to(f, meta)
 
     def _savez_to(self, f, meta) -> None:
+        flag = {} if self.nonlinearity is None else {"nonlinearity": self.nonlinearity, "linear_ok": self.linear_ok}
         np.savez_compressed(
             f, uv_px=self.uv_px, xy_world_m=self.xy_world_m, cov_m2=self.cov_m2, valid=self.valid,
             reason=self.reason, semi_major_m=self.semi_major_m, semi_minor_m=self.semi_minor_m,
             orientation_deg=self.orientation_deg, gsd_range_m=self.gsd_range_m, gsd_cross_m=self.gsd_cross_m,
-            footprint_area_m2=self.footprint_area_m2, range_m=self.range_m,
+            footprint_area_m2=self.footprint_area_m2, range_m=self.range_m, **flag,
             metadata_json=np.array(json.dumps(meta, default=_json_default)),
         )
 
@@ -219,7 +260,7 @@ class UncertaintyMap:
     def load_npz(cls, path) -> UncertaintyMap:
         """Read a file written by :meth:`save_npz` (camera and budget are rebuilt when possible)."""
         with np.load(path, allow_pickle=False) as z:
-            arrays = {k: z[k] for k in z.files if k != "metadata_json"}
+            arrays = {k: z[k] for k in z.files if k not in ("metadata_json", "linear_ok")}  # linear_ok: derived
             meta = json.loads(str(z["metadata_json"])) if "metadata_json" in z.files else {}
         camera = None
         if meta.get("camera"):
@@ -227,7 +268,8 @@ class UncertaintyMap:
             camera = camera_from_dict(meta["camera"], where=str(path))
         budget = ErrorBudget.from_dict(meta["budget"]) if meta.get("budget") else None
         return cls(**arrays, step_px=int(meta.get("step_px", 1)), camera=camera, budget=budget,
-                   max_range_m=meta.get("max_range_m"))
+                   max_range_m=meta.get("max_range_m"),
+                   linear_threshold=float(meta.get("linear_threshold", DEFAULT_LINEAR_THRESHOLD)))
 
 
 def _camera_dict(camera):
@@ -320,7 +362,7 @@ def pixel_jacobian(camera, uv_px, *, full: bool = False):
 
 
 def _kernel_disagreement(camera, budget, uv, xy, cov, valid, xy_ref, valid_ref, m_per_px, *, n_check: int = 256,
-                         rtol: float = 1e-6) -> str:
+                         rtol: float = 1e-6, nonlinearity=None) -> str:
     """Cheap guard on the fused kernel: '' if it agrees with the reference path, else what differs.
 
     Checks validity and ground points everywhere, finiteness of every valid
@@ -347,19 +389,27 @@ def _kernel_disagreement(camera, budget, uv, xy, cov, valid, xy_ref, valid_ref, 
     k = min(32, v.size)
     far = v[np.argpartition(rng, v.size - k)[v.size - k:]]
     pick = np.unique(np.concatenate([v[np.linspace(0, v.size - 1, min(n_check, v.size)).astype(np.intp)], far]))
-    ref = propagate(camera, budget, uv[pick]).cov_m2
+    est = propagate(camera, budget, uv[pick])
+    ref = est.cov_m2
     scale = np.abs(ref).max(axis=(-2, -1))
     err = np.abs(cov[pick] - ref).max(axis=(-2, -1)) / scale
     if np.any(~(err <= rtol)):
         return f"covariance differs by up to {np.nanmax(err):.3g} (relative) at {int((~(err <= rtol)).sum())} " \
                f"of {pick.size} checked pixels"
+    if nonlinearity is not None:
+        with np.errstate(invalid="ignore"):
+            err = np.abs(nonlinearity[pick] - est.nonlinearity) / np.maximum(np.abs(est.nonlinearity), 1e-12)
+        if np.any(~(err <= rtol)):
+            return f"nonlinearity differs by up to {np.nanmax(err):.3g} (relative) at {int((~(err <= rtol)).sum())} " \
+                   f"of {pick.size} checked pixels"
     return ""
 
 
 
 
 def uncertainty_map(camera, budget, step_px: int = 1, *, max_range_m: float | None = None,
-                    use_kernel: bool = True) -> UncertaintyMap:
+                    use_kernel: bool = True, linearity: bool = True,
+                    linear_threshold: float = DEFAULT_LINEAR_THRESHOLD) -> UncertaintyMap:
     """Ground point, covariance, ellipse and GSD of every ``step_px``-th pixel of the image.
 
     Parameters
@@ -377,6 +427,10 @@ def uncertainty_map(camera, budget, step_px: int = 1, *, max_range_m: float | No
     use_kernel : bool
         Use the fused ``footprint_uq.fast.map_kernels.covariance_map`` when it is available;
         False forces the reference path (:func:`footprint_uq.uncertainty.propagation.propagate`).
+    linearity : bool
+        Also compute the ``nonlinearity`` layer (in the same kernel pass) and the ``linear_ok`` mask.
+    linear_threshold : float
+        ``linear_ok = valid and nonlinearity <= linear_threshold`` (default 0.05).
 
     Returns
     -------
@@ -392,6 +446,7 @@ def uncertainty_map(camera, budget, step_px: int = 1, *, max_range_m: float | No
         raise InputError("step_px", step_px, "a positive integer")
     if max_range_m is not None:
         max_range_m = as_float("max_range_m", max_range_m, positive=True)
+    thr = check_linear_threshold(linear_threshold)
     budget = load_budget(budget)
     uv = camera.pixel_grid(step)
     H, W = uv.shape[:2]
@@ -404,36 +459,44 @@ def uncertainty_map(camera, budget, step_px: int = 1, *, max_range_m: float | No
     reason = np.empty(n, dtype=np.int8)
     xy_ref = np.empty((n, 2))
     gsd_r, gsd_c, area, rng = (np.empty(n) for _ in range(4))
+    nl = np.full(n, np.nan) if linearity else None
 
     kernel = covariance_map if use_kernel else None
     if kernel is not None:
-        kxy, kcov, kvalid = (np.asarray(a) for a in kernel(camera, budget, step))
+        res = kernel(camera, budget, step, get_nonlinearity=True) if linearity else kernel(camera, budget, step)
+        kxy, kcov, kvalid = (np.asarray(a) for a in res[:3])
         if kxy.shape != (H, W, 2) or kcov.shape != (H, W, 2, 2) or kvalid.shape != (H, W):
             raise RuntimeError(f"kernels.covariance_map returned shapes {kxy.shape}, {kcov.shape}, "
                                f"{kvalid.shape}; expected ({H}, {W}, 2), ({H}, {W}, 2, 2), ({H}, {W})")
         xy[:] = kxy.reshape(-1, 2)
         cov[:] = kcov.reshape(-1, 2, 2)
         valid[:] = kvalid.reshape(-1)
+        if linearity:
+            nl[:] = np.asarray(res[3]).reshape(-1)
     for s in range(0, n, _BLOCK_PX):
         blk = slice(s, min(n, s + _BLOCK_PX))
         xy_b, J_b, _, reason[blk] = pixel_jacobian(camera, flat[blk], full=True)
         xy_ref[blk] = xy_b
         gsd_r[blk], gsd_c[blk], area[blk], rng[blk] = ground_sampling_distance(camera, xy_b, J_b)
         if kernel is None:
-            est = propagate(camera, budget, flat[blk])
+            est = propagate(camera, budget, flat[blk], linearity=linearity)
             xy[blk] = est.xy_world_m
             cov[blk] = est.cov_m2
             valid[blk] = est.valid
+            if linearity:
+                nl[blk] = est.nonlinearity
     if kernel is not None:
         problem = _kernel_disagreement(camera, budget, flat, xy, cov, valid, xy_ref, reason == status.OK,
-                                       gsd_r + gsd_c)
+                                       gsd_r + gsd_c, nonlinearity=nl)
         if problem:
             warnings.warn(f"fast.map_kernels.covariance_map disagrees with the reference path ({problem}); "
                           "using uncertainty.propagation.propagate for this map", RuntimeWarning, stacklevel=2)
             for s in range(0, n, _BLOCK_PX):
                 blk = slice(s, min(n, s + _BLOCK_PX))
-                est = propagate(camera, budget, flat[blk])
+                est = propagate(camera, budget, flat[blk], linearity=linearity)
                 xy[blk], cov[blk], valid[blk] = est.xy_world_m, est.cov_m2, est.valid
+                if linearity:
+                    nl[blk] = est.nonlinearity
     if max_range_m is not None:
         far = valid & (rng > max_range_m)
         valid &= ~far
@@ -443,7 +506,7 @@ def uncertainty_map(camera, budget, step_px: int = 1, *, max_range_m: float | No
     inv = ~valid
     xy[inv] = np.nan
     cov[inv] = np.nan
-    for a in (gsd_r, gsd_c, area, rng):
+    for a in (gsd_r, gsd_c, area, rng) + ((nl,) if linearity else ()):
         a[inv] = np.nan
     a_m, b_m, ang = ellipse_axes(cov)
     sh = (H, W)
@@ -452,5 +515,6 @@ def uncertainty_map(camera, budget, step_px: int = 1, *, max_range_m: float | No
         reason=reason.reshape(sh), semi_major_m=a_m.reshape(sh), semi_minor_m=b_m.reshape(sh),
         orientation_deg=ang.reshape(sh), gsd_range_m=gsd_r.reshape(sh), gsd_cross_m=gsd_c.reshape(sh),
         footprint_area_m2=area.reshape(sh), range_m=rng.reshape(sh), step_px=step, camera=camera,
-        budget=budget, max_range_m=max_range_m,
+        budget=budget, max_range_m=max_range_m, nonlinearity=None if nl is None else nl.reshape(sh),
+        linear_threshold=thr,
     )

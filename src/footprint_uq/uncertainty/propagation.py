@@ -42,10 +42,10 @@ from ..errors import InputError
 from .budget import ErrorBudget, load_budget
 from .ellipse import ellipse_axes
 
-__all__ = ["GroundEstimate", "JointEstimate", "MonteCarloEstimate", "propagate", "propagate_joint",
-           "monte_carlo", "unscented", "linearity_ratio", "nonlinearity", "nonlinearity_from_forms",
-           "DEFAULT_LINEAR_THRESHOLD", "ray_denominator", "covariance_for_v2x", "V2X_COV_LINEAR", "V2X_COV_SAMPLED",
-           "V2X_COV_UNAVAILABLE"]
+__all__ = ["GroundEstimate", "JointEstimate", "MonteCarloEstimate", "propagate", "propagate_joint", "monte_carlo",
+           "unscented", "linearity_ratio", "nonlinearity", "nonlinearity_from_forms", "DEFAULT_LINEAR_THRESHOLD",
+           "ray_denominator", "nonlinearity_of_jacobians", "check_linear_threshold", "sample_params",
+           "covariance_for_v2x", "V2X_COV_LINEAR", "V2X_COV_SAMPLED", "V2X_COV_UNAVAILABLE"]
 
 #: default threshold of ``linear_ok``: predicted relative error of the linear 1-sigma semi-major axis
 DEFAULT_LINEAR_THRESHOLD = 0.05
@@ -159,7 +159,7 @@ def propagate(camera, budget, uv_px, *, pixel_cov_px2=None, breakdown: bool = Fa
         ``linear_ok = nonlinearity <= linear_threshold`` (default 0.05: the linear
         1-sigma semi-major axis is predicted within 5 % of the true one).
     """
-    thr = _threshold(linear_threshold)
+    thr = check_linear_threshold(linear_threshold)
     budget = load_budget(budget)
     uv = as_points("uv_px", uv_px, 2)
     bp = camera.backproject(uv, get_gradients=True)
@@ -192,7 +192,7 @@ def propagate(camera, budget, uv_px, *, pixel_cov_px2=None, breakdown: bool = Fa
     xy, cov, valid, reason = _check_outputs(bp.xy_world_m, cov, bp.valid, bp.reason)
     nl = ok = None
     if linearity:
-        nl = _nonlinearity(camera, budget, uv, cov, bp.dxy_dp, bp.dxy_duv, Sp, Suv, valid)
+        nl = nonlinearity_of_jacobians(camera, budget, uv, cov, bp.dxy_dp, bp.dxy_duv, Sp, Suv, valid)
         ok = valid & (nl <= thr)
     return GroundEstimate(xy, cov, valid, reason, contrib, nl, ok, thr)
 
@@ -240,7 +240,7 @@ def propagate_joint(camera, budget, uv_px, *, pixel_cov_px2=None, linearity: boo
     The camera-level sources couple the points; per-point sources fill the 2x2
     diagonal blocks only.
     """
-    thr = _threshold(linear_threshold)
+    thr = check_linear_threshold(linear_threshold)
     budget = load_budget(budget)
     uv = as_points("uv_px", uv_px, 2)
     if uv.ndim < 2:
@@ -262,12 +262,13 @@ def propagate_joint(camera, budget, uv_px, *, pixel_cov_px2=None, linearity: boo
         idx = np.arange(K)
         marg = cov.reshape(lead + (K, 2, K, 2))[..., idx, :, idx, :]  # (K, ..., 2, 2): advanced indices first
         marg = np.moveaxis(marg, 0, -3)
-        nl = _nonlinearity(camera, budget, uv, marg, bp.dxy_dp, bp.dxy_duv, Sp, Suv, valid)
+        nl = nonlinearity_of_jacobians(camera, budget, uv, marg, bp.dxy_dp, bp.dxy_duv, Sp, Suv, valid)
         ok = valid & (nl <= thr)
     return JointEstimate(xy, cov, valid, reason, nl, ok, thr)
 
 
-def _sample_params(budget: ErrorBudget, n: int, rng) -> np.ndarray:
+def sample_params(budget: ErrorBudget, n: int, rng) -> np.ndarray:
+    """``n`` seeded draws ``(n, 22)`` of the parameter errors of ``budget`` (zero mean, its covariance)."""
     Sp = budget.param_covariance()
     w, V = np.linalg.eigh(Sp)
     A = V * np.sqrt(np.clip(w, 0.0, None))
@@ -298,7 +299,7 @@ def monte_carlo(camera, budget, uv_px, *, n_samples: int = 10_000, seed: int = 0
     done = 0
     while done < n_samples:
         m = min(chunk, n_samples - done)
-        dp = _sample_params(budget, m, rng).reshape((m,) + (1,) * len(shape) + (P.N_PARAMS,))
+        dp = sample_params(budget, m, rng).reshape((m,) + (1,) * len(shape) + (P.N_PARAMS,))
         z = rng.standard_normal((m,) + shape + (2,))
         if Luv is not None:
             noise = (Luv @ z[..., None])[..., 0]
@@ -373,7 +374,8 @@ def linearity_ratio(camera, budget, uv_px, *, n_samples: int = 20_000, seed: int
 
 
 # -- linearity indicator ---------------------------------------------------------------------------
-def _threshold(value) -> float:
+def check_linear_threshold(value) -> float:
+    """The linearity threshold as a float > 0 (else :class:`InputError` naming ``linear_threshold``)."""
     try:
         t = float(value)
     except (TypeError, ValueError):
@@ -469,7 +471,8 @@ def nonlinearity_from_forms(lam_max_m2, e_major, dn, lam_m, d_xy, mu, gamma, *, 
     (no position error).  With a position error uncorrelated with the other parameters,
     ``s_num = s_crs = lam_max - e^T Sigma_pos e`` and ``mu' = mu``.  Shapes broadcast:
     ``e_major``, ``d_xy`` (..., 2), the others (...).  Returns (...); 1.0 where
-    ``1 + delta / lam_max < 0`` (the expansion has broken down), NaN where an input is NaN.
+    ``1 + delta / lam_max < 0`` (the expansion has broken down), 0 where ``delta`` is 0 (also with
+    ``lam_max`` 0: a budget without any uncertainty), NaN where an input is NaN.
     """
     e = np.asarray(e_major, dtype=np.float64)
     b = np.asarray(lam_m) * np.einsum("...i,...i->...", np.asarray(d_xy, dtype=np.float64), e)
@@ -489,12 +492,16 @@ def nonlinearity_from_forms(lam_max_m2, e_major, dn, lam_m, d_xy, mu, gamma, *, 
         s_LA = s_crs - w * mu
         delta = (2 * q2 * q2 * b * b - 4 * q2 * b * c_A + q2 * s_A + c_A * c_A - 6 * q2 * c_L * b
                  + 2 * q2 * s_LA + 4 * c_L * c_A + (69 + 696 * q2) * q2 * q2 * q2 * b * b)
-        x = 1.0 + delta / lam_max
-        out = np.where(x >= 0, np.abs(np.sqrt(np.abs(x)) - 1.0), 1.0)
+        t = np.where(delta == 0, 0.0, delta / lam_max)  # no uncertainty at all (a zero budget): exact, 0
+        x = 1.0 + t
+        out = np.where(x >= 0, np.abs(t) / (np.sqrt(np.abs(x)) + 1.0), 1.0)  # |sqrt(x) - 1|, no cancellation
     return np.where(np.isfinite(x), out, np.nan)
 
 
-def _nonlinearity(camera, budget, uv, cov, J, Juv, Sp, Suv, valid):
+def nonlinearity_of_jacobians(camera, budget, uv, cov, J, Juv, Sp, Suv, valid):
+    """:func:`nonlinearity` from an already propagated covariance: ``uv`` (..., 2) pixels, ``cov`` (..., 2, 2)
+    their linear covariance, ``J``/``Juv`` the Jacobians over the 22 parameters and the pixel, ``Sp``/``Suv``
+    the parameter and pixel covariances, ``valid`` the usable points (others NaN)."""
     dn, lam, d_xy, g, g_uv = ray_denominator(camera, uv)
     w_eig, V = np.linalg.eigh(np.where(valid[..., None, None], cov, np.eye(2)))
     lam_max = w_eig[..., 1]
@@ -576,7 +583,7 @@ def covariance_for_v2x(camera, budget, uv_px, *, linear_threshold: float = DEFAU
     source : (...) int8    :data:`V2X_COV_LINEAR`, :data:`V2X_COV_SAMPLED` or :data:`V2X_COV_UNAVAILABLE`
     estimate : GroundEstimate   the linear result with its flag
     """
-    hi = _threshold(unavailable_above)
+    hi = check_linear_threshold(unavailable_above)
     est = propagate(camera, budget, uv_px, pixel_cov_px2=pixel_cov_px2, linear_threshold=linear_threshold)
     cov = np.array(est.cov_m2, dtype=np.float64, copy=True)
     source = np.where(est.linear_ok, V2X_COV_LINEAR, V2X_COV_UNAVAILABLE).astype(np.int8)

@@ -12,6 +12,7 @@ from .maps import (
     plot_ground_map,
     plot_gsd_maps,
     plot_image_map,
+    plot_nonlinearity_map,
     plot_range_profile,
     save_figure,
 )
@@ -19,6 +20,6 @@ from .report import esc, fig_to_png_bytes, html_page, html_table, img_tag, png_d
 
 __all__ = [
     "DEFAULT_LEVELS_M", "GSD_LEVELS_M", "plot_ground_map", "plot_gsd_maps", "plot_image_map",
-    "plot_range_profile", "save_figure", "fig_to_png_bytes", "html_page", "html_table", "png_data_uri",
-    "write_html", "img_tag", "esc",
+    "plot_range_profile", "plot_nonlinearity_map", "save_figure", "fig_to_png_bytes", "html_page", "html_table",
+    "png_data_uri", "write_html", "img_tag", "esc",
 ]

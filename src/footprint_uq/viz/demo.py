@@ -174,6 +174,8 @@ def _summary_sections(budgets, maps, step_px, max_range_m) -> list[str]:
             "max range with semi-major < 0.5 m [m]": thr[0.5]["max_range_m"],
             "max range with semi-major < 1 m [m]": thr[1.0]["max_range_m"],
             "ground area with semi-major < 1 m [m²]": thr[1.0]["ground_area_m2"],
+            "linear_ok [% of valid px]": (None if s["fraction_linear_ok"] is None
+                                          else 100.0 * s["fraction_linear_ok"]),
         })
     return ["<h2>Summary</h2>", html_table(srows, floatfmt=".3g"),
             f"<p>Pixels beyond {max_range_m:g} m of ground range are masked; the grid step is {step_px} px. "

@@ -12,7 +12,7 @@ from pathlib import Path
 from ..io import camera_to_dict
 from ..io.atomic import atomic_write_text
 from ..products.maps import uncertainty_map
-from .maps import plot_ground_map, plot_gsd_maps, plot_image_map, save_figure
+from .maps import plot_ground_map, plot_gsd_maps, plot_image_map, plot_nonlinearity_map, save_figure
 
 __all__ = ["MAP_FILES", "write_map_report"]
 
@@ -22,13 +22,14 @@ MAP_FILES = {
     "image_png": "uncertainty_image.png",
     "ground_png": "uncertainty_ground.png",
     "gsd_png": "gsd.png",
+    "nonlinearity_png": "nonlinearity.png",
     "summary_json": "summary.json",
 }
 
 
 def write_map_report(camera, budget, out_dir, *, step_px: int = 2, max_range_m: float | None = None,
                      confidence: float | None = None, vmin_m: float | None = None, vmax_m: float | None = None,
-                     dpi: int = 150, umap=None):
+                     dpi: int = 150, umap=None, linearity: bool = True, linear_threshold: float = 0.05):
     """Compute an uncertainty map and write its arrays, figures and summary into ``out_dir``.
 
     Parameters
@@ -52,6 +53,12 @@ def write_map_report(camera, budget, out_dir, *, step_px: int = 2, max_range_m: 
     umap : UncertaintyMap, optional
         Already computed for this camera and budget (then ``step_px`` and ``max_range_m`` are
         not used).
+    linearity : bool
+        Carry the linearity flag (default; it costs little, bench section "maps"): the figures
+        hatch the pixels that are not ``linear_ok`` and draw the threshold's contour, and
+        ``nonlinearity.png`` shows the layer.
+    linear_threshold : float
+        ``linear_ok`` where the predicted relative error of the linear semi-major axis is at most this.
 
     Returns
     -------
@@ -59,13 +66,19 @@ def write_map_report(camera, budget, out_dir, *, step_px: int = 2, max_range_m: 
         The map.
     files : dict
         The :data:`MAP_FILES` keys mapped to the written paths.  ``summary.json`` holds
-        :meth:`UncertaintyMap.summary`, the camera, the budget and the file names.
+        :meth:`UncertaintyMap.summary`, the camera, the budget and the file names (no
+        ``nonlinearity_png`` when the map has no flag).
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     if umap is None:
-        umap = uncertainty_map(camera, budget, step_px, max_range_m=max_range_m)
+        umap = uncertainty_map(camera, budget, step_px, max_range_m=max_range_m, linearity=linearity,
+                               linear_threshold=linear_threshold)
     files = {k: out / v for k, v in MAP_FILES.items()}
+    if umap.nonlinearity is None:
+        del files["nonlinearity_png"]
+    else:
+        save_figure(plot_nonlinearity_map(umap), files["nonlinearity_png"], dpi=dpi)
     umap.save_npz(files["npz"])
     save_figure(plot_image_map(umap, confidence=confidence, vmin_m=vmin_m, vmax_m=vmax_m), files["image_png"],
                 dpi=dpi)

@@ -9,6 +9,13 @@
 * :func:`plot_gsd_maps`: ground sampling distance along and across the line of sight.
 * :func:`plot_range_profile`: semi-major axis against ground range along the
   image centre column, for several maps (e.g. several budgets).
+* :func:`plot_nonlinearity_map`: the linearity flag's layer (predicted relative error of the
+  linear 1-sigma semi-major axis) in the image frame, masked where there is no ground point,
+  with the contour of the threshold.
+
+Where a map carries the flag, the heat maps hatch the pixels (or ground cells) that are not
+``linear_ok`` -- the covariance under-estimates the spread there -- and draw the threshold's
+contour (red).
 
 Figures are built with :class:`matplotlib.figure.Figure` (no pyplot; Agg).
 """
@@ -26,12 +33,13 @@ from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
 
 from .. import params as P
 from .. import status
+from ..errors import InputError
 from ..io.atomic import atomic_path
 from ..uncertainty.ellipse import chi2_scale, ellipse_axes
 from ..uncertainty.propagation import propagate
 
 __all__ = ["DEFAULT_LEVELS_M", "GSD_LEVELS_M", "plot_image_map", "plot_ground_map", "plot_gsd_maps",
-           "plot_range_profile", "save_figure"]
+           "plot_range_profile", "plot_nonlinearity_map", "save_figure", "FLAG_COLOR"]
 
 #: contour levels of the semi-major axis, metres (those inside the colour range are drawn)
 DEFAULT_LEVELS_M = (0.1, 0.25, 0.5, 1.0, 2.0, 5.0, 10.0, 20.0, 50.0)
@@ -40,6 +48,10 @@ GSD_LEVELS_M = (0.005, 0.01, 0.02, 0.05, 0.1, 0.2, 0.5, 1.0, 2.0, 5.0)
 
 _CMAP = "viridis"
 _BAD = "#d9d9d9"
+#: colour of the linearity threshold's contour
+FLAG_COLOR = "#d62728"
+#: hatch of the pixels that are not linear_ok
+_FLAG_HATCH = "////"
 
 
 def _cmap(name=_CMAP):
@@ -131,8 +143,30 @@ def _new_fig(figsize):
     return fig
 
 
+def _draw_linearity(ax, X, Y, nonlinearity, valid, threshold):
+    """Hatch the valid points whose nonlinearity exceeds ``threshold`` and draw its contour.
+
+    Returns the legend handles (none if every point is ``linear_ok`` or there is no layer).
+    """
+
+    if nonlinearity is None:
+        return []
+    with np.errstate(invalid="ignore"):
+        bad = valid & ~(nonlinearity <= threshold)
+    if not bad.any():
+        return []
+    ax.contourf(X, Y, bad.astype(float), levels=[0.5, 1.5], colors="none", hatches=[_FLAG_HATCH], zorder=3.5)
+    handles = [Patch(facecolor="none", edgecolor="#333", hatch=_FLAG_HATCH,
+                     label=f"not linear_ok: linear σ off by > {100 * threshold:g} %")]
+    nl = np.ma.masked_invalid(np.where(valid, nonlinearity, np.nan))
+    if nl.count() and nl.min() < threshold < nl.max():
+        ax.contour(X, Y, nl, levels=[threshold], colors=FLAG_COLOR, linewidths=1.4, zorder=4.5)
+        ax.plot([], [], color=FLAG_COLOR, lw=1.4, label=f"nonlinearity = {threshold:g}")
+    return handles
+
+
 def plot_image_map(umap, *, confidence: float | None = None, levels_m=DEFAULT_LEVELS_M, vmin_m=None,
-                   vmax_m=None, title: str | None = None, figsize=None) -> Figure:
+                   vmax_m=None, title: str | None = None, figsize=None, show_linearity: bool = True) -> Figure:
     """Heat map of the ground-position semi-major axis for every pixel, in the image frame.
 
     Parameters
@@ -146,6 +180,9 @@ def plot_image_map(umap, *, confidence: float | None = None, levels_m=DEFAULT_LE
         Colour-scale limits (log scale); default from the data.  Fix them to compare figures.
     title : str, optional
     figsize : (float, float), inches; default from the image aspect ratio
+    show_linearity : bool
+        Hatch the pixels that are not ``linear_ok`` and draw the threshold's contour (when the map
+        carries the flag).
 
     Returns
     -------
@@ -161,6 +198,8 @@ def plot_image_map(umap, *, confidence: float | None = None, levels_m=DEFAULT_LE
     im = ax.imshow(np.ma.masked_invalid(a), cmap=_cmap(), norm=norm, extent=_extent(umap), origin="upper",
                    interpolation="nearest", zorder=1)
     _contours(ax, umap.uv_px[..., 0], umap.uv_px[..., 1], a, levels_m, norm)
+    flag = _draw_linearity(ax, umap.uv_px[..., 0], umap.uv_px[..., 1], umap.nonlinearity, umap.valid,
+                           umap.linear_threshold) if show_linearity else []
     _draw_horizon(ax, umap)
     ax.set_xlim(-0.5, w - 0.5)
     ax.set_ylim(h - 0.5, -0.5)
@@ -168,7 +207,7 @@ def plot_image_map(umap, *, confidence: float | None = None, levels_m=DEFAULT_LE
     ax.set_xlabel("u [px] (column, right)", fontsize=9)
     ax.set_ylabel("v [px] (row, down)", fontsize=9)
     ax.tick_params(labelsize=8)
-    handles = ax.get_legend_handles_labels()[0] + _invalid_handles(umap)
+    handles = ax.get_legend_handles_labels()[0] + flag + _invalid_handles(umap)
     if handles:
         ax.legend(handles=handles, loc="lower right", fontsize=7.5, framealpha=0.85)
     _colorbar(fig, im, ax, _sigma_label(confidence))
@@ -230,7 +269,7 @@ def _ground_grid_values(umap, extent, n_cells, confidence):
     ok = inside & est.valid
     if umap.max_range_m is not None:
         ok &= np.hypot(X - cam.params[P.XM], Y - cam.params[P.YM]) <= umap.max_range_m
-    return X, Y, np.where(ok, a, np.nan), res
+    return X, Y, np.where(ok, a, np.nan), res, np.where(ok, est.nonlinearity, np.nan), ok
 
 
 def _border_trace(cam, n=400):
@@ -255,7 +294,7 @@ def _border_trace(cam, n=400):
 
 def plot_ground_map(umap, *, confidence: float | None = None, levels_m=DEFAULT_LEVELS_M, extent_m=None,
                     n_cells: int = 360, vmin_m=None, vmax_m=None, range_rings_m=None, title: str | None = None,
-                    figsize=(7.2, 6.4)) -> Figure:
+                    figsize=(7.2, 6.4), show_linearity: bool = True) -> Figure:
     """Bird's-eye heat map of the semi-major axis on the ground (x east, y north, metres).
 
     Each ground cell is projected into the image and propagated exactly
@@ -273,16 +312,21 @@ def plot_ground_map(umap, *, confidence: float | None = None, levels_m=DEFAULT_L
         Cells along the longer side of the window.
     range_rings_m : sequence of float, optional
         Dashed circles of constant ground range around the camera foot point.
+    show_linearity : bool
+        Hatch the cells that are not ``linear_ok`` (threshold ``umap.linear_threshold``) and draw the
+        threshold's contour, when the map carries the flag.
     """
     cam = umap.camera
     extent = _ground_extent(umap, extent_m)
-    X, Y, a, res = _ground_grid_values(umap, extent, int(n_cells), confidence)
+    X, Y, a, res, nl, ok = _ground_grid_values(umap, extent, int(n_cells), confidence)
     norm = _lognorm(a, vmin_m, vmax_m)
     fig = _new_fig(figsize)
     ax = fig.add_subplot()
     im = ax.imshow(np.ma.masked_invalid(a), cmap=_cmap(), norm=norm, origin="lower", interpolation="nearest",
                    extent=(X[0, 0] - res / 2, X[0, -1] + res / 2, Y[0, 0] - res / 2, Y[-1, 0] + res / 2), zorder=1)
     _contours(ax, X, Y, a, levels_m, norm)
+    flag = (_draw_linearity(ax, X, Y, nl, ok, umap.linear_threshold)
+            if show_linearity and umap.nonlinearity is not None else [])
     for k, line in enumerate(_border_trace(cam)):
         ax.plot(line[:, 0], line[:, 1], color="#333", lw=0.8, zorder=4, label="image border on the ground" if k == 0
                 else None)
@@ -311,7 +355,7 @@ def plot_ground_map(umap, *, confidence: float | None = None, levels_m=DEFAULT_L
     ax.set_ylabel("y (north) [m]", fontsize=9)
     ax.tick_params(labelsize=8)
     ax.grid(True, color="#ccc", lw=0.4, zorder=0)
-    ax.legend(loc="best", fontsize=7.5, framealpha=0.85)
+    ax.legend(handles=ax.get_legend_handles_labels()[0] + flag, loc="best", fontsize=7.5, framealpha=0.85)
     _colorbar(fig, im, ax, _sigma_label(confidence))
     budget = getattr(umap.budget, "name", "")
     fig.suptitle(title or f"Ground-position uncertainty, bird's-eye view — budget {budget}", fontsize=11)
@@ -403,6 +447,53 @@ def plot_range_profile(maps, labels=None, *, confidence: float | None = None, co
     ax.tick_params(labelsize=8)
     ax.legend(fontsize=7.5, ncol=2)
     ax.set_title(title or "Uncertainty along the image centre column", fontsize=10.5)
+    return fig
+
+
+def plot_nonlinearity_map(umap, *, vmin=1e-4, vmax=1.0, title: str | None = None, figsize=None) -> Figure:
+    """The linearity flag's layer in the image frame: ``nonlinearity`` per pixel (log colour scale),
+    masked (grey) where there is no ground point, with the contour of ``umap.linear_threshold``.
+
+    Parameters
+    ----------
+    umap : UncertaintyMap
+        With the ``nonlinearity`` layer (:func:`footprint_uq.maps.uncertainty_map`, ``linearity=True``).
+    vmin, vmax : float
+        Colour-scale limits (dimensionless; values beyond are clipped and the colour bar extended).
+    """
+
+    if umap.nonlinearity is None:
+        raise InputError("umap.nonlinearity", None, "a map computed with linearity=True")
+    z = np.where(umap.valid, umap.nonlinearity, np.nan)
+    norm = colors.LogNorm(vmin=vmin, vmax=vmax)
+    cam = umap.camera
+    w, h = cam.image_size_px
+    fig = _new_fig(figsize or (8.6, 0.9 + 7.2 * h / w))
+    ax = fig.add_subplot()
+    im = ax.imshow(np.ma.masked_invalid(np.clip(z, vmin * 0.999, None)), cmap=_cmap("plasma"), norm=norm,
+                   extent=_extent(umap), origin="upper", interpolation="nearest", zorder=1)
+    thr = umap.linear_threshold
+    zm = np.ma.masked_invalid(z)
+    if zm.count() and zm.min() < thr < zm.max():
+        ax.contour(umap.uv_px[..., 0], umap.uv_px[..., 1], zm, levels=[thr], colors=FLAG_COLOR, linewidths=1.6,
+                   zorder=4)
+        ax.plot([], [], color=FLAG_COLOR, lw=1.6, label=f"threshold {thr:g}: linear_ok below (nearer)")
+    _draw_horizon(ax, umap)
+    ax.set_xlim(-0.5, w - 0.5)
+    ax.set_ylim(h - 0.5, -0.5)
+    ax.set_aspect("equal")
+    ax.set_xlabel("u [px] (column, right)", fontsize=9)
+    ax.set_ylabel("v [px] (row, down)", fontsize=9)
+    ax.tick_params(labelsize=8)
+    handles = ax.get_legend_handles_labels()[0] + _invalid_handles(umap)
+    if handles:
+        ax.legend(handles=handles, loc="lower right", fontsize=7.5, framealpha=0.85)
+    _colorbar(fig, im, ax, "nonlinearity: predicted relative error of the linear 1-σ semi-major axis", data=z)
+    ok = umap.linear_ok[umap.valid]
+    share = f"; linear_ok at {100 * ok.mean():.1f} % of the valid pixels" if ok.size else ""
+    budget = getattr(umap.budget, "name", "")
+    fig.suptitle(title or f"Linearity flag per pixel — budget {budget}", fontsize=11)
+    ax.set_title(_camera_caption(cam) + f"; grid step {umap.step_px} px{share}", fontsize=8, color="#444")
     return fig
 
 
