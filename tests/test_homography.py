@@ -61,7 +61,7 @@ def test_jacobians_match_central_differences(cam):
         d[j] = e
         num = (hc.backproject(uv + d).xy_world_m - hc.backproject(uv - d).xy_world_m) / (2 * e)
         np.testing.assert_allclose(bp.dxy_duv[..., j], num, rtol=1e-6, atol=1e-10)
-    from footprint_uq.cameras.homography import _apply
+    from footprint_uq.cameras.homography import apply_homography as _apply
 
     H = hc.H_ground_image
     for j in range(9):
