@@ -6,10 +6,10 @@ Measured in one run on the same machine:
   (read, validate, fused kernel, ellipses, V2X fields, write Parquet), median of ``repeats``, with the
   files on the local disk and, where there is one, on a RAM file system (``/dev/shm``); the CPU time
   of the process per row and the first (cold) run are reported next to it;
-* ``kernel`` -- the fused :class:`~footprint_uq.footprints.FrameProcessor` alone on the same
+* ``kernel`` -- the fused :class:`~footprint_uq.products.footprints.FrameProcessor` alone on the same
   boxes in memory (the compute floor of the batch);
 * ``naive`` -- a per-object Python loop over the numpy reference
-  (:func:`~footprint_uq.footprints.footprints_from_boxes3d` / ``_boxes2d`` one object at a time),
+  (:func:`~footprint_uq.products.footprints.footprints_from_boxes3d` / ``_boxes2d`` one object at a time),
   timed on a subset and reported per object (labelled as extrapolated).
 
 Run ``.venv/bin/python bench/bench_batch.py [--rows N] [--repeats R]``; :func:`measure`
@@ -34,7 +34,7 @@ import pyarrow.parquet as pq
 
 from footprint_uq import PanTiltCamera
 from footprint_uq.batch.process import process_file
-from footprint_uq.footprints import FrameProcessor, footprints_from_boxes2d, footprints_from_boxes3d
+from footprint_uq.products.footprints import FrameProcessor, footprints_from_boxes2d, footprints_from_boxes3d
 
 TARGET_PER_S = 2_000_000
 CAMERA = dict(focal_px=1400.0, image_size_px=(1920, 1080), height_m=8.0, pan_deg=30.0, tilt_deg=20.0)

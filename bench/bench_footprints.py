@@ -3,10 +3,10 @@
 From the boxes to the corner and centre covariances, largest-point values and the
 CPM/J2735 fields (issue 3 target: <= 100 microseconds median).  Measured in one run:
 
-* ``fast`` -- :meth:`footprint_uq.footprints.FrameProcessor.boxes3d` (fused numba kernel,
+* ``fast`` -- :meth:`footprint_uq.products.footprints.FrameProcessor.boxes3d` (fused numba kernel,
   joint corner covariance off, as a per-frame V2X producer would run it), and with the
   joint (N, 8, 8) covariance on;
-* ``reference`` -- :func:`footprint_uq.footprints.footprints_from_boxes3d`, the vectorised
+* ``reference`` -- :func:`footprint_uq.products.footprints.footprints_from_boxes3d`, the vectorised
   numpy path, on the whole frame;
 * ``naive`` -- a per-object Python loop over the numpy reference (one call per object).
 
@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from footprint_uq import OpenCVCamera, PanTiltCamera
-from footprint_uq.footprints import FrameProcessor, footprints_from_boxes3d
+from footprint_uq.products.footprints import FrameProcessor, footprints_from_boxes3d
 
 TARGET_US = 100.0
 CAMERA = dict(focal_px=1400.0, image_size_px=(1920, 1080), height_m=8.0, pan_deg=30.0, tilt_deg=20.0)

@@ -5,7 +5,7 @@ several times into preallocated output (page faults excluded), each run followed
 by a plain ``np.copyto`` of the same number of bytes between two preallocated
 buffers -- the memory-bandwidth reference measured under the same conditions.
 ``copy / ours`` >= 0.7 means the kernel runs within 70 % of that limit.  The
-naive baseline is :func:`footprint_uq.propagation.propagate` (vectorised numpy,
+naive baseline is :func:`footprint_uq.uncertainty.propagation.propagate` (vectorised numpy,
 full Jacobians) on the full grid (``--quick``: every 4th pixel; its rate is per
 pixel either way).  ``cpu_ms`` is the process CPU time of one kernel run (all
 threads): on a shared machine it shows the work done independently of waiting
@@ -23,7 +23,7 @@ import time
 import numpy as np
 
 from footprint_uq import ErrorBudget, OpenCVCamera, PanTiltCamera, propagate
-from footprint_uq.kernels import covariance_map
+from footprint_uq.fast.map_kernels import covariance_map
 
 W, H = 1920, 1080
 DIST = [-0.2, 0.05, 1e-3, -2e-3, 0.01]  # moderate barrel distortion (k1, k2, p1, p2, k3)

@@ -14,9 +14,14 @@ from this process, one frame per camera every 1/fps s (QoS 1, 100 2D boxes each,
   path detector -> broker -> service -> broker -> receiver), target p99 <= 20 ms;
 * peak RSS of the service process (``VmHWM``);
 * processing time per 100-object frame inside the service (``processing_us`` of the records:
-  the footprints (parse + fused kernel), the per-object records, the messages (CPM + UPER + SDSM)),
-  and, in this process on the same frame, ``Service.process_frame`` and ``FrameProcessor.boxes2d``
-  alone; target <= 300 us per 100-object frame.
+  the footprints (detections into arrays + fused kernel), the per-object records, the messages
+  (CPM + UPER + SDSM), the total, all as JSON text), and, in this process on the same frame
+  (:func:`in_process_times`), the same stages, the payload's JSON parsing, CPU times, the dict API
+  ``Service.process_frame`` and ``FrameProcessor.boxes2d`` alone (the reference); target <= 300 us
+  per 100-object frame;
+* CPU seconds of the service (and of each of its threads: the worker, paho's network thread, ...),
+  the broker, the publisher (this process) and the receiver (a process of its own, so that reading
+  ~33 MB/s of records does not compete with the publisher for the GIL), and the load average.
 
 ``--quick`` runs 5 s.  :func:`run` returns rows for ``bench/run.py`` (section ``service``).
 Nothing is asserted: the figures depend on the machine and its load (a shared 2-core VM).
@@ -74,28 +79,61 @@ def make_detections(n: int, seed: int) -> list[dict]:
 
 
 def in_process_times(objects: int, repeats: int) -> dict:
-    """Median microseconds per frame of Service.process_frame (and its stages) and FrameProcessor alone."""
+    """Median microseconds per 100-object frame, measured in this process on the bench frame.
+
+    * ``mqtt_payload_parse_us``: ``orjson.loads`` of the frame's MQTT payload (the service's worker does it
+      before ``process_frame_json``; not in ``processing_us``);
+    * ``process_frame_<stage>_us``: ``processing_us`` of the records of ``Service.process_frame_json`` (wall
+      clock): ``footprints`` = the detections parsed into arrays + the fused kernel, ``records`` = the
+      per-object records' JSON, ``messages`` = CPM JSON + UPER + SDSM JSON, ``total`` = all of it, the
+      record's JSON text included;
+    * ``process_frame_json_cpu_us``: the same call's thread CPU time (immune to waiting for a core);
+    * ``process_frame_dict_us``: ``Service.process_frame`` (the embedding API: the same text, parsed into dicts);
+    * ``frame_processor_us`` (and ``_cpu_us``): ``FrameProcessor.boxes2d`` alone on the same boxes (the
+      kernel's share; the reference measured in the same run).
+    """
+    import gc
+
+    import orjson
+
     from footprint_uq import FrameProcessor, PanTiltCamera
     from footprint_uq.service import Service
 
     cam = PanTiltCamera(**CAMERA)
     svc = Service(cam, "basler1")
     dets = make_detections(objects, 0)
-    frame = {"camera_id": "cam0", "frame": 0, "timestamp_s": time.time(), "detections": dets}
-    for _ in range(5):
-        svc.process_frame(frame)
-    stages = [svc.process_frame(frame)["processing_us"] for _ in range(repeats)]
+    payload = json.dumps({"camera_id": "cam0", "frame": 0, "timestamp_s": time.time(), "detections": dets}).encode()
     proc = FrameProcessor(cam, "basler1", joint_cov=False)
     boxes = np.array([[d["u_min_px"], d["v_min_px"], d["u_max_px"], d["v_max_px"]] for d in dets])
-    for _ in range(5):
+    for _ in range(20):
+        svc.process_frame(orjson.loads(payload))
         proc.boxes2d(boxes)
-    t = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
+    gc.collect()
+    gc.freeze()  # as the service does
+    t: dict[str, list] = {}
+    stages: list[dict] = []
+    wall, cpu = time.perf_counter, time.thread_time
+    for _ in range(repeats):  # interleaved, so that a change of the machine's load reaches every figure alike
+        t0 = wall()
+        frame = orjson.loads(payload)
+        t.setdefault("mqtt_payload_parse_us", []).append(wall() - t0)
+        c0 = cpu()
+        out = svc.process_frame_json(frame)
+        t.setdefault("process_frame_json_cpu_us", []).append(cpu() - c0)
+        k = out.data.rindex(b'"processing_us":')
+        stages.append(orjson.loads(out.data[k + 16:-1]))
+        frame = orjson.loads(payload)
+        t0 = wall()
+        svc.process_frame(frame)
+        t.setdefault("process_frame_dict_us", []).append(wall() - t0)
+        t0, c0 = wall(), cpu()
         proc.boxes2d(boxes)
-        t.append(1e6 * (time.perf_counter() - t0))
+        t.setdefault("frame_processor_cpu_us", []).append(cpu() - c0)
+        t.setdefault("frame_processor_us", []).append(wall() - t0)
+    gc.unfreeze()
     out = {f"process_frame_{k}_us": float(np.median([s[k] for s in stages])) for k in stages[0]}
-    out["frame_processor_us"] = float(np.median(t))
+    out.update({k: 1e6 * float(np.median(v)) for k, v in t.items()})
+    out["total_over_kernel"] = out["process_frame_total_us"] / out["frame_processor_us"]
     return out
 
 
@@ -118,44 +156,36 @@ def measure(seconds: float = 60.0, cameras: int = 8, fps: float = 30.0, objects:
     broker = subprocess.Popen([mosquitto, "-c", str(tmp / "mosquitto.conf")], stdout=subprocess.DEVNULL,
                               stderr=subprocess.DEVNULL)
     env = {**os.environ, "NUMBA_NUM_THREADS": "1"}
-    serve = None
+    serve = rx = None
+    load_start = os.getloadavg()[0]
     try:
         _wait(lambda: _port_open(port), 10, "mosquitto")
         serve = subprocess.Popen([sys.executable, "-m", "footprint_uq.cli", "serve", "--registry", str(tmp / "reg.csv"),
                                   "--mqtt", f"mqtt://127.0.0.1:{port}", "--output", "mqtt", "--client-id", "bench",
                                   "--workers", str(workers)],
                                  stdout=subprocess.DEVNULL, stderr=open(tmp / "serve.err", "wb"), env=env)
-        lat_ms: list[float] = []
-        proc_us: list[dict] = []
+        # the receiver runs in a process of its own (it reads ~33 MB/s of records through paho): in this
+        # process it would compete with the publisher for the GIL and delay both the frames and the time stamps
+        rx = subprocess.Popen([sys.executable, __file__, "--receiver", str(port)], stdin=subprocess.PIPE,
+                              stdout=subprocess.PIPE, env=env)
         health: list[dict] = []
+        result: dict = {}
         lock = threading.Lock()
-        n_out = [0]
+        rx_ready = threading.Event()
 
-        def on_message(c, u, msg):
-            t = time.time()
-            if msg.topic.endswith("/health"):
+        def read_rx():
+            for line in rx.stdout:
+                d = json.loads(line)
                 with lock:
-                    health.append(json.loads(msg.payload))
-                return
-            if msg.topic.endswith("/errors"):
-                return
-            m = _TS.search(msg.payload, 0, 400)
-            with lock:
-                n_out[0] += 1
-                lat_ms.append(1e3 * (t - float(m.group(1))))
-                if n_out[0] % 10 == 0:  # a sample of the per-stage times (parsing every record would load the VM)
-                    k = msg.payload.rfind(b'"processing_us":')
-                    proc_us.append(json.loads(msg.payload[k + 16:-1]))
+                    if "health" in d:
+                        health.append(d["health"])
+                    elif "result" in d:
+                        result.update(d["result"])
+                if "ready" in d:
+                    rx_ready.set()
 
-        import gc
-
-        gc.collect()
-        gc.freeze()  # as the service does: no cyclic-GC stalls in the receiver's time stamps
-        rx = mqtt.Client(mqtt.CallbackAPIVersion.VERSION2, client_id="bench-rx")
-        rx.on_message = on_message
-        rx.on_connect = lambda c, u, f, rc, p: c.subscribe("footprints/#", qos=1)
-        rx.connect("127.0.0.1", port)
-        rx.loop_start()
+        threading.Thread(target=read_rx, daemon=True).start()
+        _wait(rx_ready.is_set, 30, "the receiver")
         _wait(lambda: len({h.get("worker") for h in health}) >= workers, 120, "every worker's first health message")
         tx = mqtt.Client(mqtt.CallbackAPIVersion.VERSION2, client_id="bench-tx")
         tx.max_inflight_messages_set(1000)
@@ -195,35 +225,49 @@ def measure(seconds: float = 60.0, cameras: int = 8, fps: float = 30.0, objects:
         _wait(lambda: totals()["frames_in"] >= sent and totals()["pending"] == 0, 60,
               "the service to take in every frame")
         time.sleep(1.5)  # one more health record from every worker
-        _wait(lambda: n_out[0] >= totals()["frames_out"], 30, "the last outputs")
+        rx.stdin.write(json.dumps({"expect": totals()["frames_out"]}).encode() + b"\n")
+        rx.stdin.flush()
+        _wait(lambda: "latency_ms" in result, 60, "the receiver's figures")
         pids = [serve.pid, *_descendants(serve.pid)]
         peak_rss_mb = sum(_vm_hwm_mb(p) for p in pids)
         cpu_s = sum(_cpu_s(p) for p in pids) - cpu0_s
+        threads_cpu_s = sorted((_cpu_s(serve.pid, tid) for tid in _tids(serve.pid)), reverse=True)
         cpu_broker, cpu_bench = _cpu_s(broker.pid) - cpu0_broker, _cpu_s(os.getpid()) - cpu0_bench
         serve.send_signal(signal.SIGTERM)
         rc = serve.wait(60)
         h = totals()
         tx.loop_stop()
-        rx.loop_stop()
+        rx.wait(30)
     finally:
         if serve is not None and serve.poll() is None:
             serve.kill()
+        if rx is not None and rx.poll() is None:
+            rx.kill()
         broker.terminate()
         broker.wait(10)
         shutil.rmtree(tmp, ignore_errors=True)
-    lat = np.array(lat_ms)
+    lat = np.array(result["latency_ms"])
+    # the service's own view (receipt -> record handed to paho), per health interval of the run
+    svc_p50 = [r["latency_ms_p50"] for r in health if r.get("latency_ms_p50") is not None]
+    svc_p99 = [r["latency_ms_p99"] for r in health if r.get("latency_ms_p99") is not None]
+    proc_us = result["processing_us"]
     stages = {k: float(np.median([p[k] for p in proc_us])) for k in proc_us[0]} if proc_us else {}
     return {
         "seconds": round(t_pub, 2), "workers": workers, "staggered": stagger,
         "cameras": cameras, "fps_per_camera": fps, "objects": objects,
         "frames_published": sent, "frames_in": h["frames_in"], "frames_out": h["frames_out"],
-        "frames_dropped": h["frames_dropped"], "errors": h["errors"], "frames_received": n_out[0],
+        "frames_dropped": h["frames_dropped"], "errors": h["errors"], "frames_received": result["received"],
         "sustained_frames_per_s": h["frames_out"] / t_pub, "offered_frames_per_s": sent / t_pub,
         "latency_ms_p50": float(np.percentile(lat, 50)), "latency_ms_p99": float(np.percentile(lat, 99)),
-        "latency_ms_max": float(lat.max()), "peak_rss_mb": peak_rss_mb, "serve_exit_status": rc,
+        "latency_ms_max": float(lat.max()),
+        "service_latency_ms_p50_median_of_intervals": float(np.median(svc_p50)) if svc_p50 else None,
+        "service_latency_ms_p99_median_of_intervals": float(np.median(svc_p99)) if svc_p99 else None,
+        "service_latency_ms_p99_worst_interval": float(np.max(svc_p99)) if svc_p99 else None,
+        "peak_rss_mb": peak_rss_mb, "serve_exit_status": rc,
         "serve_cpu_s": cpu_s, "serve_cpu_ms_per_frame": 1e3 * cpu_s / max(h["frames_in"], 1),
-        "broker_cpu_s": cpu_broker, "bench_publisher_receiver_cpu_s": cpu_bench,
-        "load_average_1min": os.getloadavg()[0],
+        "serve_threads_cpu_s": threads_cpu_s, "broker_cpu_s": cpu_broker, "bench_publisher_cpu_s": cpu_bench,
+        "bench_receiver_cpu_s": result["cpu_s"],
+        "load_average_1min_start": load_start, "load_average_1min": os.getloadavg()[0],
         "service_processing_us_median": stages,
         "all_processed": h["frames_out"] == sent and h["frames_dropped"] == 0 and h["errors"] == 0,
     }
@@ -245,9 +289,14 @@ def _descendants(pid: int) -> list[int]:
     return out
 
 
-def _cpu_s(pid: int) -> float:
-    """User + system CPU seconds of a process (all its threads)."""
-    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+def _tids(pid: int) -> list[int]:
+    return [int(t.name) for t in Path(f"/proc/{pid}/task").iterdir()]
+
+
+def _cpu_s(pid: int, tid: int | None = None) -> float:
+    """User + system CPU seconds of a process (all its threads), or of one of its threads."""
+    path = f"/proc/{pid}/stat" if tid is None else f"/proc/{pid}/task/{tid}/stat"
+    fields = Path(path).read_text().rsplit(")", 1)[1].split()
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
@@ -280,15 +329,72 @@ def run(quick: bool = False) -> list[dict]:
          "median_us": st.get("footprints", times["process_frame_footprints_us"]), "items": 100,
          "target": f"<= {TARGET_US:.0f} us", "met": st.get("footprints", times["process_frame_footprints_us"])
          <= TARGET_US, "in_process": times},
-        {"case": "one 100-object frame in the service: everything (footprints + records + CPM/UPER/SDSM)",
+        {"case": "one 100-object frame in the service: everything (footprints + records + CPM/UPER/SDSM, as JSON text)",
          "median_us": st.get("total", times["process_frame_total_us"]), "items": 100,
+         "target": f"<= {TARGET_US:.0f} us", "met": st.get("total", times["process_frame_total_us"]) <= TARGET_US,
          "notes": "stages (median us, in the service under load): " + ", ".join(f"{k} {v:.0f}" for k, v in st.items())
                   + "; in the bench process after the load run: "
                   + ", ".join(f"{k} {v:.0f}" for k, v in times.items())},
     ]
 
 
+def _receiver(port: int) -> None:
+    """The subscriber (``--receiver PORT``, run by :func:`measure`): end-to-end latency of every record, a
+    sample of their ``processing_us``; health records passed on at once, one JSON line each on stdout."""
+    import gc
+
+    import paho.mqtt.client as mqtt
+
+    lat_ms: list[float] = []
+    proc_us: list[dict] = []
+    lock = threading.Lock()
+    out_lock = threading.Lock()
+
+    def say(d: dict) -> None:
+        with out_lock:
+            sys.stdout.write(json.dumps(d) + "\n")
+            sys.stdout.flush()
+
+    def on_message(c, u, msg):
+        t = time.time()
+        if msg.topic.endswith("/health"):
+            say({"health": json.loads(msg.payload)})
+            return
+        if msg.topic.endswith("/errors"):
+            return
+        m = _TS.search(msg.payload, 0, 400)
+        with lock:
+            lat_ms.append(1e3 * (t - float(m.group(1))))
+            if len(lat_ms) % 10 == 0:  # a sample of the per-stage times (parsing every record would load the VM)
+                k = msg.payload.rfind(b'"processing_us":')
+                proc_us.append(json.loads(msg.payload[k + 16:-1]))
+
+    gc.collect()
+    gc.freeze()  # as the service does: no cyclic-GC stalls in the time stamps
+    rx = mqtt.Client(mqtt.CallbackAPIVersion.VERSION2, client_id="bench-rx")
+    rx.on_message = on_message
+    subscribed = threading.Event()
+    rx.on_connect = lambda c, u, f, rc, p: c.subscribe("footprints/#", qos=1)
+    rx.on_subscribe = lambda *a: subscribed.set()
+    rx.connect("127.0.0.1", port)
+    rx.loop_start()
+    _wait(subscribed.is_set, 30, "the subscription")
+    say({"ready": True})
+    expect = json.loads(sys.stdin.readline())["expect"]
+    try:
+        _wait(lambda: len(lat_ms) >= expect, 30, "the last outputs")
+    except RuntimeError:
+        pass  # reported: received < frames out
+    rx.loop_stop()
+    with lock:
+        say({"result": {"latency_ms": lat_ms, "processing_us": proc_us, "received": len(lat_ms),
+                        "cpu_s": time.process_time()}})
+
+
 def main(argv=None) -> int:
+    if argv is None and len(sys.argv) == 3 and sys.argv[1] == "--receiver":
+        _receiver(int(sys.argv[2]))
+        return 0
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seconds", type=float, default=60.0)
     ap.add_argument("--cameras", type=int, default=8)

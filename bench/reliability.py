@@ -47,7 +47,7 @@ def _env():
 
 
 def _cli(args) -> list[str]:
-    return [sys.executable, "-c", "from footprint_uq.cli import main; main()", *[str(a) for a in args]]
+    return [sys.executable, "-c", "from footprint_uq.cli.main import main; main()", *[str(a) for a in args]]
 
 
 def _rows(path: Path) -> int:

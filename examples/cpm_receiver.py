@@ -31,10 +31,10 @@ from pathlib import Path
 import numpy as np
 
 from footprint_uq import PanTiltCamera
-from footprint_uq.ellipse import chi2_scale, ellipse_points
+from footprint_uq.products.v2x import Z95_1D
 from footprint_uq.service import Service
 from footprint_uq.service.messages.cpm import decode_cpm_uper
-from footprint_uq.v2x import Z95_1D
+from footprint_uq.uncertainty.ellipse import chi2_scale, ellipse_points
 
 ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
 ap.add_argument("--out", default=os.environ.get("FOOTPRINT_UQ_EXAMPLES_OUT", "out/examples"))

@@ -20,8 +20,8 @@ import numpy as np
 from _common import output_dir
 
 from footprint_uq import FrameProcessor, GeoReference, PanTiltCamera, footprints_geojson
-from footprint_uq.footprints import V2X_FIELDS
-from footprint_uq.v2x import J2735_POSITION_CONFIDENCE_NAMES
+from footprint_uq.products.footprints import V2X_FIELDS
+from footprint_uq.products.v2x import J2735_POSITION_CONFIDENCE_NAMES
 
 out = output_dir(__doc__.splitlines()[0], "footprints_per_frame")
 

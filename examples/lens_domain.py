@@ -19,8 +19,8 @@ from _common import output_dir
 from footprint_uq import propagate
 from footprint_uq.cameras.opencv import OpenCVCamera
 from footprint_uq.cameras.rotation import R_W_C
-from footprint_uq.footprints import FrameProcessor
-from footprint_uq.kernels import covariance_map, covariance_points
+from footprint_uq.fast.map_kernels import covariance_map, covariance_points
+from footprint_uq.products.footprints import FrameProcessor
 from footprint_uq.status import UNDISTORT_FAILED
 from footprint_uq.viz import save_figure
 from footprint_uq.viz.lens import plot_lens_domain

@@ -15,7 +15,7 @@ import numpy as np
 from _common import output_dir
 
 from footprint_uq import PanTiltCamera, ellipse_axes, monte_carlo, propagate, unscented
-from footprint_uq.ellipse import ellipse_points
+from footprint_uq.uncertainty.ellipse import ellipse_points
 
 out = output_dir(__doc__.splitlines()[0], "quickstart")
 

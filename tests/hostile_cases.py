@@ -307,7 +307,7 @@ def run(case: Case) -> dict:
 
     from click.testing import CliRunner
 
-    from footprint_uq.cli import main
+    from footprint_uq.cli.main import main
 
     r = CliRunner().invoke(main, [str(a) for a in case.argv], catch_exceptions=True)
     err = r.stderr if hasattr(r, "stderr") else r.output

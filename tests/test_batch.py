@@ -13,11 +13,11 @@ from click.testing import CliRunner
 
 from footprint_uq import PanTiltCamera
 from footprint_uq.batch.process import BatchProcessor, process_file, process_table, summary_path
-from footprint_uq.ellipse import ellipse_axes
 from footprint_uq.errors import InputError
-from footprint_uq.footprints import V2X_FIELDS, footprints_from_boxes2d, footprints_from_boxes3d
 from footprint_uq.io import save_camera
-from footprint_uq.v2x import cpm_fields, j2735_fields
+from footprint_uq.products.footprints import V2X_FIELDS, footprints_from_boxes2d, footprints_from_boxes3d
+from footprint_uq.products.v2x import cpm_fields, j2735_fields
+from footprint_uq.uncertainty.ellipse import ellipse_axes
 
 CAM = dict(focal_px=1400.0, image_size_px=(1920, 1080), height_m=8.0, pan_deg=30.0, tilt_deg=20.0)
 BUDGET = "basler1"
@@ -398,8 +398,8 @@ def test_round_trip_of_formats(cam, tmp_path, ext_in):
 
 # -- CLI -----------------------------------------------------------------------------------------------
 def _cli():
-    from footprint_uq.cli import main
-    from footprint_uq.cli_objects import objects_cmd
+    from footprint_uq.cli.main import main
+    from footprint_uq.cli.objects import objects_cmd
 
     if "objects" not in main.commands:
         main.add_command(objects_cmd)

@@ -10,7 +10,7 @@ import pytest
 
 from footprint_uq import ConfigError, ErrorBudget, PanTiltCamera, load_budget, presets, propagate
 from footprint_uq import params as P
-from footprint_uq.ground import sigma_ground_z
+from footprint_uq.cameras.ground import sigma_ground_z
 
 # Hand-copied from the paper (shared/seed, Tables 2 and 3), as printed.
 # Table 2: sigma fx, fy, f, c, r (px), k1, k2, p1, p2, k3.

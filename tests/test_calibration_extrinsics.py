@@ -14,13 +14,13 @@ import warnings
 import numpy as np
 import pytest
 
-from footprint_uq.budget import load_budget
 from footprint_uq.calibration import extrinsics as ex
 from footprint_uq.calibration import lidar
 from footprint_uq.calibration import synthetic_lidar as sl
 from footprint_uq.calibration.boards import PAPER_BOARD
 from footprint_uq.errors import InputError
-from footprint_uq.propagation import propagate
+from footprint_uq.uncertainty.budget import load_budget
+from footprint_uq.uncertainty.propagation import propagate
 
 SCANNER = sl.SpinningLidar(n_azimuth=1024, range_noise_m=0.02, azimuth_window_deg=(-80.0, 80.0))
 TRUTH_KEYS = ex.POSE_NAMES
@@ -325,8 +325,7 @@ def test_budget_feeds_propagate(solved, tmp_path):
 def test_cli_end_to_end(campaign, tmp_path):
     from click.testing import CliRunner
 
-    import footprint_uq.cli_extrinsics  # noqa: F401 - registers the command
-    from footprint_uq.cli_calibrate import calibrate
+    from footprint_uq.cli.calibrate import calibrate
 
     d = campaign.write(tmp_path / "pairs")
     args = ["extrinsics", "--pairs", str(d), "--camera", str(d / "camera.yaml"), "--board", "14x9",
@@ -394,10 +393,9 @@ def test_rendered_images_and_pcd_pairs_through_the_cli(tmp_path):
     import yaml
     from click.testing import CliRunner
 
-    import footprint_uq.cli_extrinsics  # noqa: F401 - registers the command
     from footprint_uq.calibration import synthetic as sy
     from footprint_uq.calibration.pointclouds import write_pcd
-    from footprint_uq.cli_calibrate import calibrate
+    from footprint_uq.cli.calibrate import calibrate
 
     scam = sy.DEFAULT_CAMERA.scaled(0.5)
     # the LiDAR pitched down 12 deg so that it sees the low, close boards of an intrinsic campaign too

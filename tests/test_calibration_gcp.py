@@ -18,7 +18,7 @@ from footprint_uq.calibration import calibrate_intrinsics, parse_board
 from footprint_uq.calibration.extrinsics import Intrinsics
 from footprint_uq.calibration.gcp import GCPSet, _params_from_Rt, read_gcp_csv, run_gcp, solve_gcp
 from footprint_uq.cameras import general
-from footprint_uq.cli import main
+from footprint_uq.cli.main import main
 from footprint_uq.errors import ConsistencyWarning, InputError
 from footprint_uq.io import load_camera
 from gcp_campaigns import SIZE, campaign, coverage
@@ -201,7 +201,7 @@ def test_bad_tables_refused(tmp_path, header, row, match):
 
 def test_lat_lon_table_gives_the_same_camera(tmp_path):
     pytest.importorskip("pyproj")
-    from footprint_uq.geo import GeoReference
+    from footprint_uq.products.geo import GeoReference
 
     cam, uv, xyz = _scene()
     geo = GeoReference(origin_lat_deg=48.1, origin_lon_deg=11.6)

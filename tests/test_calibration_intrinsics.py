@@ -307,7 +307,7 @@ def test_calibrate_budget_propagate_pipeline(real_cal, tmp_path):
     # and the calibrated intrinsics' uncertainty is a few centimetres at ~10 m, not metres
     assert np.sqrt(np.linalg.eigvalsh(est.cov_m2)).max() < 1.0
     # the same through the CLI: footprint-uq locate --camera (calibrated K, dist + pose) --budget budget.yaml
-    from footprint_uq.cli import main
+    from footprint_uq.cli.main import main
     from footprint_uq.io import save_camera
 
     save_camera(cam, tmp_path / "cam.yaml")
@@ -393,8 +393,8 @@ def test_video_input_with_frame_step(tmp_path):
 
 # ------------------------------------------------------------------------------------------ CLI
 def _cli():
-    from footprint_uq.cli import FootprintUQGroup
-    from footprint_uq.cli_calibrate import calibrate
+    from footprint_uq.cli.calibrate import calibrate
+    from footprint_uq.cli.main import FootprintUQGroup
 
     return FootprintUQGroup(name="footprint-uq", commands={"calibrate": calibrate})
 

@@ -12,7 +12,8 @@ import warnings
 import numpy as np
 import pytest
 
-from footprint_uq.carla_bridge import (
+from footprint_uq.errors import ConfigError, InputError
+from footprint_uq.integrations.carla.bridge import (
     box_from_carla,
     box_to_carla,
     camera_from_carla,
@@ -27,8 +28,7 @@ from footprint_uq.carla_bridge import (
     scene_to_recording,
     world_to_carla,
 )
-from footprint_uq.errors import ConfigError, InputError
-from footprint_uq.footprints import box3d_bottom_corners
+from footprint_uq.products.footprints import box3d_bottom_corners
 from footprint_uq.scenario import CaseStudyConfig, analyse, build_scene
 
 SIZE = (1920, 1080)
@@ -279,7 +279,7 @@ def test_recording_bad_header(tmp_path):
 
 # -- geometry of the capture command, without a server ---------------------------------------------------------
 def test_capture_camera_poses_match_the_generator():
-    from footprint_uq.cli_carla import camera_poses_for_junction, plan_left_turn_geometry
+    from footprint_uq.integrations.carla.capture import camera_poses_for_junction, plan_left_turn_geometry
     from footprint_uq.scenario import Intersection, default_camera_specs
 
     inter = Intersection()
@@ -300,8 +300,7 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
-_RUN = ("import sys; from footprint_uq.cli import main; from footprint_uq.cli_carla import carla; "
-        "main.add_command(carla) if 'carla' not in main.commands else None; main(sys.argv[1:])")
+_RUN = "import sys; from footprint_uq.cli.main import main; main(sys.argv[1:])"
 
 
 def test_capture_fails_fast_without_server(tmp_path):
@@ -328,11 +327,8 @@ def test_capture_fails_fast_without_carla_package(tmp_path):
 def test_export_command_writes_the_generator_scene(tmp_path):
     from click.testing import CliRunner
 
-    from footprint_uq.cli import main
-    from footprint_uq.cli_carla import carla
+    from footprint_uq.cli.main import main
 
-    if "carla" not in main.commands:
-        main.add_command(carla)
     rec = tmp_path / "ours.jsonl"
     res = CliRunner().invoke(main, ["carla", "export", "--out", str(rec)])
     assert res.exit_code == 0, res.output
@@ -344,7 +340,7 @@ def test_export_command_writes_the_generator_scene(tmp_path):
 
 # -- the capture procedure against a scripted stand-in for a CARLA world -----------------------------------------
 class _FakeWorld:
-    """Just enough of carla.World/Map/Waypoint for ``cli_carla._capture``: one lane along our generator's
+    """Just enough of carla.World/Map/Waypoint for :func:`capture_left_turn`: one lane along our generator's
     left-turn path (CARLA coordinates), a junction over the arc, blueprints and actors that store transforms."""
 
     def __init__(self, cm, path, fps):
@@ -456,14 +452,14 @@ class _FakeWorld:
 
 def test_capture_procedure_on_a_scripted_world(tmp_path):
     cm = pytest.importorskip("carla")
-    from footprint_uq.cli_carla import _capture
+    from footprint_uq.integrations.carla.capture import CaptureOptions, capture_left_turn
     from footprint_uq.scenario import Intersection, default_camera_specs, left_turn_path
 
     path = left_turn_path(Intersection())
     world = _FakeWorld(cm, path, fps=10.0)
     out = tmp_path / "cap.jsonl"
-    info = _capture(cm, world, out, fps=10.0, speed_mps=8.0, lead_in_m=35.0, lead_out_m=35.0,
-                    vehicle_filter="vehicle.*", images_dir=None)
+    info = capture_left_turn(cm, world, out, CaptureOptions(fps=10.0, speed_mps=8.0, lead_in_m=35.0, lead_out_m=35.0,
+                                                            vehicle_filter="vehicle.*", images_dir=None))
     assert info["junction_id"] == 7 and info["map"] == "FakeTown"
     # actors destroyed, settings restored
     assert sorted(world.destroyed) == [1, 2, 3] and world.applied[0] == (True, 0.1)

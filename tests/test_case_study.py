@@ -9,10 +9,10 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from footprint_uq.budget import load_budget
-from footprint_uq.footprints import footprints_from_boxes3d
+from footprint_uq.products.footprints import footprints_from_boxes3d
 from footprint_uq.scenario import AXIS_SYSTEMS, CaseStudyConfig, analyse, axis_components, build_scene
 from footprint_uq.scenario.case_study import FootprintHeatmap, footprint_heatmap
+from footprint_uq.uncertainty.budget import load_budget
 
 SMALL = {"trajectory": {"frame_rate_hz": 2.0}, "heatmap": {"step_m": 4.0}}
 
@@ -24,7 +24,7 @@ def result():
 
 @pytest.fixture(scope="module")
 def small_report(tmp_path_factory):
-    from footprint_uq.cli_case_study import run_case_study
+    from footprint_uq.viz.case_study_run import run_case_study
 
     out = tmp_path_factory.mktemp("case_study")
     paths = run_case_study(out, config=CaseStudyConfig.from_dict(SMALL), dpi=60)
@@ -208,11 +208,8 @@ def test_csv_round_trip(small_report):
 
 
 def _cli():
-    from footprint_uq.cli import main
-    from footprint_uq.cli_case_study import case_study
+    from footprint_uq.cli.main import main
 
-    if "case-study" not in main.commands:
-        main.add_command(case_study)
     return main
 
 
@@ -220,7 +217,7 @@ def test_cli_case_study_on_a_recording(tmp_path):
     """The command end to end, on a recording of our own (small) scenario: same numbers as the generator."""
     from click.testing import CliRunner
 
-    from footprint_uq.carla_bridge import scene_to_recording
+    from footprint_uq.integrations.carla.bridge import scene_to_recording
 
     cfg = CaseStudyConfig.from_dict(SMALL)
     scene = build_scene(cfg)
@@ -243,8 +240,7 @@ def test_cli_case_study_bad_config(tmp_path):
 
     cfg = tmp_path / "cfg.json"
     cfg.write_text(json.dumps({"trajectory": {"speed_kmh": 30}}))
-    code = ("import sys; from footprint_uq.cli import main; from footprint_uq.cli_case_study import case_study; "
-            "main.add_command(case_study) if 'case-study' not in main.commands else None; main(sys.argv[1:])")
+    code = "import sys; from footprint_uq.cli.main import main; main(sys.argv[1:])"
     p = subprocess.run([sys.executable, "-c", code, "case-study", "--out", str(tmp_path / "o"), "--config", str(cfg)],
                        capture_output=True, text=True, timeout=120)
     assert p.returncode == 2
@@ -285,7 +281,7 @@ def test_nothing_in_view_is_reported_not_invented(tmp_path):
 
 
 def test_linearity_flag_columns(result):
-    from footprint_uq.propagation import nonlinearity
+    from footprint_uq.uncertainty.propagation import nonlinearity
 
     r = result.rows("camera2", "bw-cube1")
     cam = result.scene.cameras["camera2"]

@@ -13,10 +13,10 @@ import pytest
 from click.testing import CliRunner
 
 from footprint_uq import PanTiltCamera, ellipse_axes, propagate, status
-from footprint_uq.cli import main
-from footprint_uq.cli_core import CSV_KEYS, LOCATE_KEYS
+from footprint_uq.cli.main import main
 from footprint_uq.io import load_camera, save_camera
-from footprint_uq.maps import UncertaintyMap
+from footprint_uq.products.locate import CSV_KEYS, LOCATE_KEYS
+from footprint_uq.products.maps import UncertaintyMap
 
 CAM_KW = {"focal_px": 400.0, "image_size_px": (320, 240), "height_m": 7.5, "pan_deg": 200.0, "tilt_deg": 14.0,
           "roll_deg": -2.0, "position_m": (12.0, -4.0)}
@@ -306,3 +306,24 @@ def test_real_process_exit_status_and_no_traceback(tmp_path, camera_file):
     p = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
     assert p.returncode == 0, p.stderr
     assert json.loads(p.stdout)[0]["valid"] is True
+
+
+def test_registry_loads_every_command_lazily():
+    """One registry line per command; a command's module is imported when the command is looked up, not
+    before (so that `presets` does not pay for matplotlib); the groups register their subcommands explicitly."""
+    from footprint_uq.cli.calibrate import calibrate
+    from footprint_uq.cli.carla import carla
+
+    names = ["calibrate", "carla", "case-study", "convert", "demo", "fuse", "locate", "map", "objects", "presets",
+             "serve"]
+    assert main.list_commands(None) == names
+    for name in names:
+        assert main.get_command(None, name).name == name
+    assert sorted(calibrate.commands) == ["extrinsics", "gcp", "intrinsics", "synthetic"]
+    assert sorted(carla.commands) == ["capture", "export"]
+    code = ("import sys; from footprint_uq.cli.main import main; "
+            "before = 'footprint_uq.viz.map_report' in sys.modules; main.get_command(None, 'presets'); "
+            "mid = 'footprint_uq.viz.map_report' in sys.modules; main.get_command(None, 'map'); "
+            "print(before, mid, 'footprint_uq.viz.map_report' in sys.modules)")
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert p.stdout.split() == ["False", "False", "True"], p.stderr

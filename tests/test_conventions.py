@@ -19,7 +19,7 @@ import pytest
 from footprint_uq import PanTiltCamera, chi2_scale, ellipse_axes, propagate
 from footprint_uq.cameras.pantilt import paper_xy
 from footprint_uq.cameras.rotation import R_G_P, R_P_C, R_W_C, R_W_G
-from footprint_uq.ellipse import heading_deg
+from footprint_uq.uncertainty.ellipse import heading_deg
 
 DOC = Path(__file__).resolve().parents[1] / "docs" / "conventions.md"
 

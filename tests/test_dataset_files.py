@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from footprint_uq.cli import main
+from footprint_uq.cli.main import main
 from footprint_uq.errors import ConfigError, ConsistencyWarning
 from footprint_uq.io import load_camera
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from footprint_uq import InputError
-from footprint_uq.ellipse import chi2_scale, ellipse_axes, ellipse_points, heading_deg
+from footprint_uq.uncertainty.ellipse import chi2_scale, ellipse_axes, ellipse_points, heading_deg
 
 
 def _rot(deg):

@@ -31,6 +31,7 @@ EXPECTED = {
     "lens_domain.py": (["fold radius (undistorted, normalised): 1.2534", "= 706 px",
                         "status codes equal to the reference:  map True  points True  FrameProcessor True"],
                        ["lens_domain/lens_domain.png"]),
+    "architecture_figure.py": (["boxes 19, arrows 20; wrote"], ["architecture_figure/architecture.png"]),
     "plan_mount.py": (["criterion: 95 % semi-major axis <= 1.75 m", "best reach with basler1: 54.7 m",
                        "linear/Monte-Carlo semi-major there"],
                       ["plan_mount/plan_mount.png", "plan_mount/plan_mount.csv"]),

@@ -91,7 +91,7 @@ def test_camera_files_load_or_refuse_in_one_line(tmp_path, d, fmt):
 @SETTINGS
 @given(budget_mappings, st.sampled_from(["yaml", "json"]))
 def test_budget_files_load_or_refuse_in_one_line(tmp_path, d, fmt):
-    from footprint_uq.budget import load_budget
+    from footprint_uq.uncertainty.budget import load_budget
 
     p = tmp_path / f"budget.{fmt}"
     p.write_bytes(_dump(d, fmt))

@@ -201,8 +201,8 @@ def test_cli_fleet(fleet_data, tmp_path):
     from click.testing import CliRunner
 
     distributed = pytest.importorskip("distributed")
-    from footprint_uq.cli import main
-    from footprint_uq.cli_objects import objects_cmd
+    from footprint_uq.cli.main import main
+    from footprint_uq.cli.objects import objects_cmd
 
     if "objects" not in main.commands:
         main.add_command(objects_cmd)

@@ -7,8 +7,7 @@ import pytest
 
 from footprint_uq import ErrorBudget, InputError, PanTiltCamera, propagate, propagate_joint, status
 from footprint_uq import params as P
-from footprint_uq.ellipse import ellipse_axes
-from footprint_uq.footprints import (
+from footprint_uq.products.footprints import (
     DEGENERATE,
     box2d_contact_points,
     box3d_bottom_corners,
@@ -17,6 +16,7 @@ from footprint_uq.footprints import (
     footprints_from_corners,
     polygon_centroid,
 )
+from footprint_uq.uncertainty.ellipse import ellipse_axes
 
 BUDGET = ErrorBudget.preset("basler1")
 

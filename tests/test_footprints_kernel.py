@@ -6,14 +6,14 @@ import numpy as np
 import pytest
 
 from footprint_uq import ErrorBudget, InputError, PanTiltCamera, status
-from footprint_uq.budget import psd_factor
 from footprint_uq.cameras.base import Camera
-from footprint_uq.footprints import (
+from footprint_uq.products.footprints import (
     FrameProcessor,
     footprints_from_boxes2d,
     footprints_from_boxes3d,
     footprints_from_corners,
 )
+from footprint_uq.uncertainty.budget import psd_factor
 
 BUDGET = ErrorBudget.preset("basler1")
 FULL_BUDGET = BUDGET.replace(roll_deg=0.02, ground_height_m=0.05, ground_slope_deg=0.5, pan_deg=0.03,
@@ -140,7 +140,7 @@ def test_other_polygon_sizes(K, rng):
 def test_more_corners_than_the_kernel_layout_takes(rng):
     # the fused kernel holds at most MAX_CORNERS corners per object; beyond, the processor uses the
     # numpy reference (same results, no error)
-    from footprint_uq.footprint_kernels import MAX_CORNERS
+    from footprint_uq.fast.footprint_kernels import MAX_CORNERS
 
     cam = PanTiltCamera(1200.0, (1280, 720), 6.0, -40.0, 20.0)
     K = MAX_CORNERS + 1
@@ -211,8 +211,8 @@ def test_bad_input():
 
 def test_kernel_v2x_fields_match_numpy_at_boundaries(rng):
     from footprint_uq import footprint_kernels as fk
-    from footprint_uq.footprints import V2X_FIELDS
-    from footprint_uq.v2x import cpm_fields, j2735_fields
+    from footprint_uq.products.footprints import V2X_FIELDS
+    from footprint_uq.products.v2x import cpm_fields, j2735_fields
 
     s = np.array([0.0, 0.01 / 1.96, 0.05 / 1.96, 40.94 / 1.96, 40.95 / 1.96, 0.05, 12.65, 12.69, 12.70, 300.0])
     covs = [np.diag([a * a, b * b]) for a in s for b in s[::3]]
@@ -262,7 +262,7 @@ def test_reference_empty_frame():
 
 
 def test_empty_reusable_shapes_and_memory():
-    from footprint_uq.footprints import _POOL_MIN_BYTES, empty_reusable
+    from footprint_uq.products.footprints import _POOL_MIN_BYTES, empty_reusable
 
     for shape, dtype in (((3, 2), np.float64), ((_POOL_MIN_BYTES // 8 + 5, 2, 2), np.float64), ((1 << 21,), np.int8),
                          ((0, 4, 2), np.float64)):

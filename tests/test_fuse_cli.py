@@ -1,4 +1,4 @@
-"""Multi-camera fusion through the CLI (``footprint-uq fuse``) and footprint_uq.fusion_io.
+"""Multi-camera fusion through the CLI (``footprint-uq fuse``) and footprint_uq.batch.fusion_files.
 
 The per-camera inputs are made by the real footprint pipeline (``process_file`` on two
 PanTiltCameras seeing one shared set of 3D boxes), written as CSV or Parquet.
@@ -17,13 +17,13 @@ from click.testing import CliRunner
 
 from footprint_uq import PanTiltCamera
 from footprint_uq.batch import process_table
+from footprint_uq.batch.fusion_files import fuse_files, fuse_footprints, sources_path, summary_path
 from footprint_uq.batch.process import process_file
-from footprint_uq.ellipse import ellipse_axes
 from footprint_uq.errors import InputError
-from footprint_uq.footprints import box3d_bottom_corners
-from footprint_uq.fusion import pairwise_mahalanobis
-from footprint_uq.fusion_io import fuse_files, fuse_footprints, sources_path, summary_path
-from footprint_uq.v2x import cpm_fields, j2735_fields
+from footprint_uq.products.footprints import box3d_bottom_corners
+from footprint_uq.products.fusion import pairwise_mahalanobis
+from footprint_uq.products.v2x import cpm_fields, j2735_fields
+from footprint_uq.uncertainty.ellipse import ellipse_axes
 
 BUDGET = "basler1"
 # A looks north from the origin; B looks east from 30 m west: the two views cross at right angles
@@ -78,8 +78,8 @@ def footprints(tmp_path_factory):
 
 
 def _cli():
-    from footprint_uq.cli import FootprintUQGroup
-    from footprint_uq.cli_fuse import fuse_cmd
+    from footprint_uq.cli.fuse import fuse_cmd
+    from footprint_uq.cli.main import FootprintUQGroup
 
     g = FootprintUQGroup(name="footprint-uq")
     g.add_command(fuse_cmd)

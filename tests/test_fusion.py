@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from footprint_uq import InputError
-from footprint_uq.fusion import chi2_threshold, fuse_by_id, pairwise_mahalanobis
+from footprint_uq.products.fusion import chi2_threshold, fuse_by_id, pairwise_mahalanobis
 
 
 def test_hand_computed_two_cameras():

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from footprint_uq import ErrorBudget, InputError, PanTiltCamera
-from footprint_uq.footprints import footprints_from_boxes3d, footprints_from_corners
-from footprint_uq.geo import GeoReference, footprints_geojson, write_geojson
-from footprint_uq.v2x import cpm_fields, j2735_fields
+from footprint_uq.products.footprints import footprints_from_boxes3d, footprints_from_corners
+from footprint_uq.products.geo import GeoReference, footprints_geojson, write_geojson
+from footprint_uq.products.v2x import cpm_fields, j2735_fields
 
 pyproj = pytest.importorskip("pyproj")
 

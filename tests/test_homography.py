@@ -16,11 +16,11 @@ from footprint_uq.cameras.homography import (
     camera_from_homography,
     fit_homography,
     homography_from_camera,
-    load_homography,
 )
-from footprint_uq.cli import main
+from footprint_uq.cli.main import main
 from footprint_uq.errors import ConfigError, InputError
 from footprint_uq.io import load_camera
+from footprint_uq.io.homography_files import load_homography
 
 SIZE = (1920, 1080)
 
@@ -61,7 +61,7 @@ def test_jacobians_match_central_differences(cam):
         d[j] = e
         num = (hc.backproject(uv + d).xy_world_m - hc.backproject(uv - d).xy_world_m) / (2 * e)
         np.testing.assert_allclose(bp.dxy_duv[..., j], num, rtol=1e-6, atol=1e-10)
-    from footprint_uq.cameras.homography import _apply
+    from footprint_uq.cameras.homography import apply_homography as _apply
 
     H = hc.H_ground_image
     for j in range(9):

@@ -38,13 +38,13 @@ def test_last_resort_handler(monkeypatch):
     """An unexpected exception (a bug) is one line and exit 3; --debug adds the traceback."""
     from click.testing import CliRunner
 
-    from footprint_uq import cli_core
-    from footprint_uq.cli import EXIT_BUG, main
+    from footprint_uq.cli import presets as presets_cli
+    from footprint_uq.cli.main import EXIT_BUG, main
 
     def boom(*a, **k):
         raise ZeroDivisionError("simulated bug")
 
-    monkeypatch.setattr(cli_core, "presets_table", boom)
+    monkeypatch.setattr(presets_cli, "presets_table", boom)
     r = CliRunner().invoke(main, ["presets"])
     assert r.exit_code == EXIT_BUG
     err = r.stderr

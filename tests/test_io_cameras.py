@@ -12,7 +12,6 @@ import numpy as np
 import pytest
 
 from footprint_uq import ConfigError, ConsistencyWarning, ErrorBudget, InputError, OpenCVCamera, PanTiltCamera
-from footprint_uq.budget import load_budget
 from footprint_uq.cameras.rotation import R_W_C
 from footprint_uq.io import (
     camera_from_dict,
@@ -24,7 +23,8 @@ from footprint_uq.io import (
     save_camera,
 )
 from footprint_uq.io.camera_files import _exact_deg
-from footprint_uq.presets import PRESET_NAMES
+from footprint_uq.uncertainty.budget import load_budget
+from footprint_uq.uncertainty.presets import PRESET_NAMES
 
 DATA = Path(__file__).parent / "data" / "cameras"
 

@@ -25,7 +25,7 @@ from footprint_uq import (
     propagate_joint,
 )
 from footprint_uq import params as P
-from footprint_uq.propagation import nonlinearity, nonlinearity_from_forms, ray_denominator
+from footprint_uq.uncertainty.propagation import nonlinearity, nonlinearity_from_forms, ray_denominator
 
 DEMO = PanTiltCamera(focal_px=1400.0, image_size_px=(1920, 1080), height_m=8.0, pan_deg=30.0, tilt_deg=20.0)
 BENCH = PanTiltCamera(1400, (1920, 1080), 10.0, 30.0, 12.0, roll_deg=1.0, position_m=(5.0, -3.0))
@@ -207,7 +207,7 @@ def test_camera_position_error_is_additive_not_through_the_denominator():
 
 
 def test_covariance_for_v2x_follows_the_policy():
-    from footprint_uq.propagation import (
+    from footprint_uq.uncertainty.propagation import (
         V2X_COV_LINEAR,
         V2X_COV_SAMPLED,
         V2X_COV_UNAVAILABLE,

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from footprint_uq import ErrorBudget, InputError, OpenCVCamera, PanTiltCamera, ellipse_axes, propagate, status
-from footprint_uq.maps import UncertaintyMap, ground_sampling_distance, uncertainty_map
+from footprint_uq.products.maps import UncertaintyMap, ground_sampling_distance, uncertainty_map
 
 BUDGET = ErrorBudget.preset("bw-bullet1").replace(ground_height_m=0.05, ground_slope_deg=0.5, roll_deg=0.01)
 
@@ -73,7 +73,7 @@ def test_default_path_equals_reference(cam, cam_cv):
 
 def test_kernel_guard_falls_back_on_disagreement(cam, monkeypatch):
     """A kernel returning wrong numbers is detected, reported and replaced by the reference path."""
-    import footprint_uq.maps as maps_mod
+    import footprint_uq.products.maps as maps_mod
 
     def broken(camera, budget, step_px=1, *, out=None, get_nonlinearity=False):
         est = propagate(camera, budget, camera.pixel_grid(step_px))
@@ -81,7 +81,7 @@ def test_kernel_guard_falls_back_on_disagreement(cam, monkeypatch):
         cov[est.valid.nonzero()[0][-1], :] *= 1.01  # one row of pixels 1 % off
         return (est.xy_world_m, cov, est.valid) + ((est.nonlinearity,) if get_nonlinearity else ())
 
-    monkeypatch.setattr(maps_mod, "_covariance_map_kernel", lambda: broken)
+    monkeypatch.setattr(maps_mod, "covariance_map", broken)
     ref = uncertainty_map(cam, BUDGET, 4, use_kernel=False)
     with pytest.warns(RuntimeWarning, match="disagrees with the reference path"):
         m = uncertainty_map(cam, BUDGET, 4)
@@ -89,7 +89,7 @@ def test_kernel_guard_falls_back_on_disagreement(cam, monkeypatch):
 
 
 def test_pixel_jacobian_equals_backproject(cam, cam_cv):
-    from footprint_uq.maps import pixel_jacobian
+    from footprint_uq.products.maps import pixel_jacobian
 
     for c in (cam, cam_cv):
         uv = c.pixel_grid(6)

@@ -84,7 +84,7 @@ def test_pantilt_to_opencv_and_back_is_exact():
     oc = cam.to_opencv()
     np.testing.assert_allclose(oc.params, cam.params, rtol=0, atol=1e-12)
     assert oc.ground_z_m == cam.ground_z_m and oc.image_size_px == cam.image_size_px
-    back = oc.to_pantilt()
+    back = PanTiltCamera.from_opencv(oc)
     assert isinstance(back, PanTiltCamera)
     np.testing.assert_allclose(back.params, cam.params, rtol=0, atol=1e-12)
     uv = np.array([[100.0, 900.0], [960.0, 600.0], [1800.0, 1000.0]])
@@ -96,7 +96,7 @@ def test_pantilt_opencv_round_trip_any_tilt(tilt_deg):
     cam = _pantilt(tilt_deg=tilt_deg, roll_deg=20.0)
     oc = cam.to_opencv()
     np.testing.assert_allclose(oc.R_world_cam, cam.R_world_cam, atol=1e-14)
-    back = oc.to_pantilt()
+    back = PanTiltCamera.from_opencv(oc)
     np.testing.assert_allclose(back.R_world_cam, cam.R_world_cam, atol=1e-14)
     if tilt_deg == 90.0:  # gimbal: pan + roll is what is defined
         assert back.roll_deg == 0.0
@@ -119,9 +119,9 @@ def test_strict_conversion_to_pantilt():
                     ([[1200.0, 0, 955], [0, 1200.0, 545], [0, 0, 1]], [-0.1, 0, 0, 0])):
         oc = OpenCVCamera(K, dist, cam.R, cam.t, IMAGE, cam.ground_z_m)
         with pytest.raises(InputError, match="camera intrinsics"):
-            oc.to_pantilt()
+            PanTiltCamera.from_opencv(oc)
         with pytest.warns(ConsistencyWarning, match="approximating"):
-            approx = oc.to_pantilt(strict=False)
+            approx = PanTiltCamera.from_opencv(oc, strict=False)
         assert approx.focal_px == pytest.approx((K[0][0] + K[1][1]) / 2)
         np.testing.assert_allclose(approx.R_world_cam, cam.R_world_cam, atol=1e-14)
 

@@ -2,7 +2,7 @@
 
 ``tests/data/paper_tables_2_3.tex`` holds the two tables verbatim (LaTeX rows as printed in
 arXiv:2308.12846).  The values are parsed from that text, independently of
-:mod:`footprint_uq.presets`, and every preset's world covariance is checked:
+:mod:`footprint_uq.uncertainty.presets`, and every preset's world covariance is checked:
 
 * Table 3's sigma X is along the paper's X = **north**, sigma Y along Y = **east**
   (``docs/conventions.md``, frame G), so in the world frame W (x east, y north) the

@@ -23,13 +23,13 @@ from hypothesis import strategies as st
 from footprint_uq import params as P
 from footprint_uq import status
 from footprint_uq.batch import process_table
-from footprint_uq.budget import load_budget
 from footprint_uq.cameras.opencv import OpenCVCamera
 from footprint_uq.cameras.pantilt import PanTiltCamera
 from footprint_uq.cameras.rotation import R_W_C
-from footprint_uq.footprints import FrameProcessor, footprints_from_boxes3d, footprints_from_corners
-from footprint_uq.kernels import covariance_map, covariance_points
-from footprint_uq.propagation import DEFAULT_LINEAR_THRESHOLD, propagate
+from footprint_uq.fast.map_kernels import covariance_map, covariance_points
+from footprint_uq.products.footprints import FrameProcessor, footprints_from_boxes3d, footprints_from_corners
+from footprint_uq.uncertainty.budget import load_budget
+from footprint_uq.uncertainty.propagation import DEFAULT_LINEAR_THRESHOLD, propagate
 
 RTOL = 1e-9
 #: absolute floor of the flag's comparison (a nonlinearity of 1e-12 is 0 for every purpose)

@@ -16,7 +16,7 @@ import pytest
 from footprint_uq import ErrorBudget, InputError, OpenCVCamera, PanTiltCamera, propagate, propagate_joint, status
 from footprint_uq import params as P
 from footprint_uq.cameras import general
-from footprint_uq.propagation import linearity_ratio, monte_carlo, unscented
+from footprint_uq.uncertainty.propagation import linearity_ratio, monte_carlo, unscented
 
 N_MC = 20_000
 

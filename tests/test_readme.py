@@ -12,7 +12,7 @@ import yaml
 from click.testing import CliRunner
 
 from footprint_uq import ErrorBudget
-from footprint_uq.cli import main
+from footprint_uq.cli.main import main
 from footprint_uq.io import camera_from_dict
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -24,7 +24,7 @@ import pytest
 from click.testing import CliRunner
 
 from footprint_uq import PanTiltCamera, save_camera
-from footprint_uq.cli import main
+from footprint_uq.cli.main import main
 from footprint_uq.io.atomic import TMP_MARK, atomic_path, atomic_write_text, path_component
 
 SRC = Path(__file__).resolve().parents[1] / "src"
@@ -146,7 +146,7 @@ def _kill_when(proc, seen, timeout_s: float = 120.0) -> bool:
 
 
 def _cli(args) -> list[str]:
-    return [sys.executable, "-c", "from footprint_uq.cli import main; main()", *[str(a) for a in args]]
+    return [sys.executable, "-c", "from footprint_uq.cli.main import main; main()", *[str(a) for a in args]]
 
 
 def _env():

@@ -61,8 +61,8 @@ def report(tmp_path_factory):
         if os.environ.get("CI"):  # .ci/run installs chromium: a missing browser in CI is a failure, not a skip
             pytest.fail("chromium not found in CI (.ci/run should have installed it)")
         pytest.skip("chromium not installed (apt-get install -y chromium); the browser check needs it")
-    from footprint_uq.cli_case_study import run_case_study
     from footprint_uq.scenario import CaseStudyConfig
+    from footprint_uq.viz.case_study_run import run_case_study
 
     out = tmp_path_factory.mktemp("report")
     cfg = CaseStudyConfig.from_dict({"trajectory": {"frame_rate_hz": 2.0}, "heatmap": {"step_m": 4.0}})

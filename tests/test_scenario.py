@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from footprint_uq.errors import ConfigError, InputError
-from footprint_uq.footprints import box3d_bottom_corners
+from footprint_uq.products.footprints import box3d_bottom_corners
 from footprint_uq.scenario import (
     CameraSpec,
     CaseStudyConfig,

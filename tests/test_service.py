@@ -1,7 +1,7 @@
 """The edge service's per-frame API, its messages and its drop policy (no broker: see test_service_mqtt.py).
 
 * ``Service.process_frame`` gives the numbers of ``FrameProcessor`` and the V2X fields of
-  ``footprint_uq.v2x`` for the centre covariance, in the output record and in the CPM / SDSM;
+  ``footprint_uq.products.v2x`` for the centre covariance, in the output record and in the CPM / SDSM;
 * the CPM's UPER bytes: a hand-derived bit string for a tiny message (pinned), the direct writer
   equal to asn1tools on seeded random messages, and asn1tools decoding back to the JSON;
 * malformed frames give error records naming the field, never an exception;
@@ -21,7 +21,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from footprint_uq import FrameProcessor, PanTiltCamera
-from footprint_uq.footprints import V2X_FIELDS
+from footprint_uq.products.footprints import V2X_FIELDS
+from footprint_uq.products.v2x import J2735_POSITION_CONFIDENCE_NAMES, cpm_fields, j2735_fields
 from footprint_uq.service import Service
 from footprint_uq.service.messages.cpm import (
     build_cpm,
@@ -32,7 +33,6 @@ from footprint_uq.service.messages.cpm import (
 )
 from footprint_uq.service.messages.uper_cpm import encode_cpm_uper_fast
 from footprint_uq.service.runner import FrameQueue
-from footprint_uq.v2x import J2735_POSITION_CONFIDENCE_NAMES, cpm_fields, j2735_fields
 
 pytest.importorskip("asn1tools")
 
@@ -163,7 +163,7 @@ def test_process_frame_matches_frame_processor_and_v2x(camera, service):
     np.testing.assert_allclose(xy[valid], ref.centre_xy_world_m[valid], rtol=1e-12)
     cov = np.array([[[np.nan if v is None else v for v in row] for row in o["cov_m2"]] for o in objs])
     np.testing.assert_allclose(cov[valid], ref.centre_cov_m2[valid], rtol=1e-12)
-    # the V2X fields of the record are footprint_uq.v2x's of the centre covariance
+    # the V2X fields of the record are footprint_uq.products.v2x's of the centre covariance
     fields = {**cpm_fields(ref.centre_cov_m2, HEADING), **j2735_fields(ref.centre_cov_m2, HEADING)}
     for name in V2X_FIELDS:
         assert [o[name] for o in objs] == fields[name].tolist(), name
@@ -368,7 +368,7 @@ def test_serve_bad_options_exit_2_with_one_line(tmp_path, monkeypatch, camera, a
     from click.testing import CliRunner
 
     from footprint_uq import save_camera
-    from footprint_uq.cli import main
+    from footprint_uq.cli.main import main
 
     monkeypatch.chdir(tmp_path)
     save_camera(camera, "cam.yaml")
@@ -395,7 +395,7 @@ _OBJECT = st.tuples(st.integers(0, 65535), st.integers(-131072, 131071), st.inte
 def test_uper_writers_equal_asn1tools_over_the_whole_value_ranges(objs, station, ref, lat, lon):
     """Every field at every value of its range (edges included): both writers give asn1tools' bytes."""
     from footprint_uq.service.messages.cpm import cpm_to_asn1_value
-    from footprint_uq.service.messages.uper_cpm import class_bits, perceived_object_container_uper
+    from footprint_uq.service.messages.uper_cpm import CpmUperWriter, class_bits, perceived_object_container_uper
 
     cpm = build_cpm(station, ref, [perceived_object(*o) for o in objs], latitude=lat, longitude=lon)
     ref_bytes = encode_cpm_uper(cpm)
@@ -407,10 +407,12 @@ def test_uper_writers_equal_asn1tools_over_the_whole_value_ranges(objs, station,
                                               [None if c is None else (class_bits(c), lv)
                                                for c, lv in zip(cols[6], cols[7], strict=True)])
         assert got == cpm_to_asn1_value(cpm)["payload"]["cpmContainers"][1]["containerData"]
+        # the service's per-station writer: fixed part once, reference time and container per frame
+        assert CpmUperWriter(station, latitude=lat, longitude=lon).encode(ref, got) == ref_bytes
 
 
 def test_linearity_flag_is_the_librarys_nonlinearity(camera):
-    from footprint_uq.propagation import DEFAULT_LINEAR_THRESHOLD, nonlinearity
+    from footprint_uq.uncertainty.propagation import DEFAULT_LINEAR_THRESHOLD, nonlinearity
 
     svc = Service(camera, "basler1", linearity=True)
     boxes = [(900.0, 600.0, 1000.0, 700.0), (300.0, 200.0, 340.0, 260.0), (1500.0, 80.0, 1520.0, 105.0),
@@ -439,3 +441,126 @@ def test_linearity_flag_is_the_librarys_nonlinearity(camera):
             assert o["nonlinearity"] is None and o["linear_ok"] is False
     assert "linear_ok" not in Service(camera, "basler1").process_frame(
         {"frame": 1, "timestamp_s": T0, "detections": dets})["objects"][0]  # off by default: absent, not guessed
+
+
+# -- the column-wise JSON writer ------------------------------------------------------------------------
+_TEXT = st.text(alphabet=st.sampled_from(list(',[]{}":\\ aZ\u00e9\u4e2d\n\t\x00\U0001f697')), max_size=6)
+_FLOAT = st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.sampled_from([0.0, -0.0, 5e-324, 1e16, 1e-7]))
+
+
+@settings(max_examples=150, deadline=None)
+@given(n=st.integers(0, 12), data=st.data())
+def test_table_writes_what_orjson_writes_for_the_dicts(n, data):
+    """Every kind of column (floats with NaN/inf/-0.0, int32/int64, bools, strings with JSON's special
+    characters, None, objects), optional groups and a column used twice: the same bytes as orjson.dumps
+    of the list of dicts."""
+    import orjson
+
+    from footprint_uq.service.jsonrows import Table
+
+    f = np.array(data.draw(st.lists(_FLOAT, min_size=n, max_size=n)), dtype=np.float64)
+    i32 = np.array(data.draw(st.lists(st.integers(-2 ** 31, 2 ** 31 - 1), min_size=n, max_size=n)), dtype=np.int32)
+    i64 = np.array(data.draw(st.lists(st.integers(-2 ** 63, 2 ** 63 - 1), min_size=n, max_size=n)), dtype=np.int64)
+    ok = np.array(data.draw(st.lists(st.booleans(), min_size=n, max_size=n)), dtype=bool)
+    txt = data.draw(st.lists(st.one_of(st.none(), _TEXT, st.integers(-10 ** 6, 10 ** 6)), min_size=n, max_size=n))
+    obj = data.draw(st.lists(st.one_of(st.none(), st.dictionaries(_TEXT, st.one_of(_TEXT, st.dictionaries(
+        _TEXT, _TEXT, max_size=2)), max_size=2)), min_size=n, max_size=n))
+    t = Table(n)
+    cf, c32, c64, cb, ct, co = (t.column(f), *t.columns(np.array([i32, i64])), t.column(ok), t.column(txt),
+                                t.column(obj))
+    got = t.json([b'{"f":', cf, b',"t":', ct, t.when(ok, b',"i32":', c32, b',"again":', cf), t.when(~ok, b',"o":', co),
+                  b',"i64":', c64, b',"b":', cb, b"}"])
+    ref = []
+    for k in range(n):
+        d = {"f": f[k].item(), "t": txt[k]}
+        d.update({"i32": int(i32[k]), "again": f[k].item()} if ok[k] else {"o": obj[k]})
+        d.update({"i64": int(i64[k]), "b": bool(ok[k])})
+        ref.append(d)
+    assert got == orjson.dumps(ref)
+
+
+def test_objects_and_messages_are_the_documented_layout(camera):
+    """The record written column-wise equals the one built object by object from FrameProcessor,
+    ellipse_axes and footprint_uq.v2x (the per-object dicts of the documented layout): every key, order
+    and value, for a frame with valid, partial and failed centres, classes, class confidences and
+    detector covariances."""
+    from footprint_uq.products.geo import GeoReference
+    from footprint_uq.service.core import _message_object_id
+    from footprint_uq.service.messages.cpm import CPM_CLASSES, coordinate_cm
+    from footprint_uq.service.messages.sdsm import offset_dm, sdsm_object
+    from footprint_uq.uncertainty.ellipse import ellipse_axes
+
+    rng = np.random.default_rng(21)
+    n = 60
+    u, v, w = rng.uniform(-50, 1900, n), rng.uniform(0, 1100, n), rng.uniform(5, 150, n)
+    classes = [None, "car", "Pedestrian", "truck", "bicycle", "dog", "thing", ""]
+    dets = []
+    for k in range(n):
+        d = {"object_id": [k, f"id-{k}", 70000 + k, "123", None][k % 5], "class": classes[k % len(classes)],
+             "u_min_px": float(u[k]), "v_min_px": float(v[k] - 0.8 * w[k]), "u_max_px": float(u[k] + w[k]),
+             "v_max_px": float(v[k]), "cov_uu_px2": 4.0 + k, "cov_uv_px2": 0.5, "cov_vv_px2": 9.0}
+        if k % 3:
+            d["class_confidence"] = float(rng.uniform(0, 1))
+        dets.append(d)
+    svc = Service(camera, "basler1", heading_offset_deg=HEADING, confidence=0.9, linearity=True,
+                  contact="bottom-corners")
+    rec = svc.process_frame({"camera_id": "c", "frame": 3, "timestamp_s": T0, "detections": dets})
+    X = np.array([[d[c] for c in ("u_min_px", "v_min_px", "u_max_px", "v_max_px")] for d in dets])
+    P = np.array([[[d["cov_uu_px2"], d["cov_uv_px2"]], [d["cov_uv_px2"], d["cov_vv_px2"]]] for d in dets])
+    est = FrameProcessor(camera, "basler1", heading_offset_deg=HEADING, joint_cov=False).boxes2d(
+        X, contact="bottom-corners", pixel_cov_px2=P)
+    a, b, ori = ellipse_axes(est.centre_cov_m2)
+    k90 = math.sqrt(-2 * math.log(0.1))
+    none = lambda x: None if not math.isfinite(x) else x  # noqa: E731
+    reasons = est.centre_reason_text()
+    objects, pos, sdsm = [], [], []
+    en = GeoReference(heading_offset_deg=HEADING).world_to_enu(est.centre_xy_world_m)
+    for k, d in enumerate(dets):
+        ok = bool(est.centre_valid[k])
+        li = int(est.largest_index[k])
+        c = est.centre_cov_m2[k].tolist()
+        o = {"object_id": d["object_id"], "class": d["class"], "status": "ok" if ok else ("partial" if li >= 0 else
+             "error"), "reason": "ok" if ok else f"no centre: {reasons[k]}",
+             "x_m": none(est.centre_xy_world_m[k, 0]), "y_m": none(est.centre_xy_world_m[k, 1]),
+             "cov_m2": [[none(c[0][0]), none(c[0][1])], [none(c[0][1]), none(c[1][1])]],
+             "sigma_major_m": none(a[k]), "sigma_minor_m": none(b[k]), "orientation_deg": none(ori[k]),
+             "semi_major_m": none(k90 * a[k]), "semi_minor_m": none(k90 * b[k]), "largest_index": li,
+             "largest_sigma_major_m": none(est.largest_semi_major_m[k]),
+             "largest_x_m": none(est.largest_xy_world_m[k, 0]), "largest_y_m": none(est.largest_xy_world_m[k, 1]),
+             **dict(zip(V2X_FIELDS, est.v2x_codes[k].tolist(), strict=True)),
+             # (checked against the library by test_linearity_flag_is_the_librarys_nonlinearity)
+             "nonlinearity": rec["objects"][k]["nonlinearity"], "linear_ok": rec["objects"][k]["linear_ok"],
+             "message_object_id": _message_object_id(d["object_id"], k) if ok else None}
+        objects.append(o)
+        if ok:
+            p = d.get("class_confidence")
+            cls = CPM_CLASSES.get(d["class"].lower()) if d["class"] else None
+            level = 101 if p is None else max(1, math.ceil(100 * p - 1e-9))
+            pos.append(perceived_object(o["message_object_id"], int(coordinate_cm(en[k, 0])),
+                                        int(coordinate_cm(en[k, 1])), o["cpm_x_confidence"], o["cpm_y_confidence"],
+                                        o["cpm_xy_correlation"], cls, level))
+            sdsm.append(sdsm_object(o["message_object_id"], int(offset_dm(en[k, 0])), int(offset_dm(en[k, 1])),
+                                    o["j2735_position_confidence"], d["class"], 0 if p is None else round(100 * p)))
+    assert 0 < len(pos) < n and {o["status"] for o in objects} == {"ok", "partial", "error"}
+    assert rec["objects"] == objects
+    assert json.dumps(rec["objects"]) == json.dumps(objects)  # key order too
+    assert rec["cpm"]["payload"]["cpmContainers"][1]["containerData"]["perceivedObjects"] == pos
+    assert rec["sdsm"]["objects"] == sdsm
+    assert decode_cpm_uper(rec["cpm_uper_hex"]) == rec["cpm"]
+
+
+def test_message_coordinates_are_coordinate_cm_and_offset_dm():
+    """The service's one-pass conversion gives cpm.coordinate_cm / sdsm.offset_dm exactly (halves, clamps, NaN)."""
+    from footprint_uq.service.core import _cm_dm
+    from footprint_uq.service.messages.cpm import coordinate_cm
+    from footprint_uq.service.messages.sdsm import offset_dm
+
+    rng = np.random.default_rng(5)
+    en = np.concatenate([rng.standard_normal((2000, 2)) * s for s in (0.01, 1.0, 100.0, 1e3, 1e4, 1e6)] + [np.array(
+        [[0.005, -0.005], [0.015, 0.025], [1310.715, -1310.725], [np.nan, np.inf], [-np.inf, 1e308],
+         [3276.75, -3276.75], [-0.0, 0.0]])])
+    rows = rng.permutation(len(en))
+    with np.errstate(over="ignore"):
+        ref = [coordinate_cm(en[rows, 0]), coordinate_cm(en[rows, 1]), offset_dm(en[rows, 0]), offset_dm(en[rows, 1])]
+    for got, want in zip(_cm_dm(en, rows), ref, strict=True):
+        np.testing.assert_array_equal(got, want)

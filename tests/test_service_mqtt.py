@@ -5,7 +5,7 @@ free loopback port with its own config file (listener on 127.0.0.1 only, anonymo
 persistence) and killed at the end; every wait is bounded.  The service runs as the real CLI in
 a subprocess.  Checked: frames in = frames out + error records (+ the dropped frames the health
 message counts), the UPER payloads decode (asn1tools) back to the CPM JSON, the confidence fields
-are footprint_uq.v2x's, a broker restart in the middle of the stream, SIGTERM drains and exits 0,
+are footprint_uq.products.v2x's, a broker restart in the middle of the stream, SIGTERM drains and exits 0,
 and stdin mode with a malformed line in the middle.
 """
 
@@ -26,8 +26,8 @@ import numpy as np
 import pytest
 
 from footprint_uq import PanTiltCamera, save_camera
+from footprint_uq.products.v2x import cpm_fields, j2735_fields
 from footprint_uq.service.messages.cpm import decode_cpm_uper
-from footprint_uq.v2x import cpm_fields, j2735_fields
 
 mqtt = pytest.importorskip("paho.mqtt.client")
 pytest.importorskip("asn1tools")
@@ -152,7 +152,7 @@ def frame(camera_id, i, n=5, seed=0):
 
 
 def check_footprints(rec: dict, heading_offset_deg: float = 0.0):
-    """UPER payload decodes to the CPM JSON; confidence fields are footprint_uq.v2x's of cov_m2."""
+    """UPER payload decodes to the CPM JSON; confidence fields are footprint_uq.products.v2x's of cov_m2."""
     assert decode_cpm_uper(rec["cpm_uper_hex"]) == rec["cpm"]
     for o in rec["objects"]:
         if o["status"] != "ok":

@@ -188,8 +188,8 @@ def test_simulate_campaigns_planning_table():
 def test_cli_synthetic_then_intrinsics(tmp_path):
     from click.testing import CliRunner
 
-    from footprint_uq.cli import FootprintUQGroup
-    from footprint_uq.cli_calibrate import calibrate
+    from footprint_uq.cli.calibrate import calibrate
+    from footprint_uq.cli.main import FootprintUQGroup
 
     cli = FootprintUQGroup(name="footprint-uq", commands={"calibrate": calibrate})
     syn = tmp_path / "syn"

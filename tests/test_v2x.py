@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from footprint_uq import InputError
-from footprint_uq.v2x import (
+from footprint_uq.products.v2x import (
     K95_2D,
     cpm_coordinate_confidence,
     cpm_correlation,
@@ -179,7 +179,7 @@ def test_circular_covariance_orientation_is_deterministic():
 
 def test_covariance_not_psd_or_asymmetric_is_refused():
     from footprint_uq.errors import InputError
-    from footprint_uq.v2x import cpm_fields, j2735_fields
+    from footprint_uq.products.v2x import cpm_fields, j2735_fields
 
     for bad in ([[1.0, 2.0], [2.0, 1.0]], [[1.0, 0.5], [0.0, 1.0]], [[1.0, np.nan], [np.nan, 1.0]]):
         for f in (cpm_fields, j2735_fields):
@@ -193,7 +193,7 @@ def test_covariance_not_psd_or_asymmetric_is_refused():
 
 def test_one_infinite_variance_keeps_the_finite_axis():
     """diag(inf, 1): the semi-minor axis is 1 m (code 20), not 'unavailable'; the major axis is east."""
-    from footprint_uq.v2x import J2735_AXIS_MAX, j2735_fields
+    from footprint_uq.products.v2x import J2735_AXIS_MAX, j2735_fields
 
     f = j2735_fields(np.diag([np.inf, 1.0]))
     assert f["j2735_semi_major"] == J2735_AXIS_MAX and f["j2735_semi_minor"] == 20

@@ -6,23 +6,25 @@ closed-form Jacobians, ``Cov = J Sigma J^T`` and the footprint uncertainty of
 detected objects, generalised to OpenCV cameras with distortion.
 """
 
-from .budget import ErrorBudget, load_budget
+from . import _moved
 from .cameras.opencv import OpenCVCamera
 from .cameras.pantilt import PanTiltCamera
-from .ellipse import chi2_scale, ellipse_axes, ellipse_points
 from .errors import ConfigError, ConsistencyWarning, FootprintUQError, InputError
-from .footprints import (
+from .io import load_camera, save_budget, save_camera
+from .params import PARAM_NAMES
+from .products.footprints import (
     FootprintEstimate,
     FrameProcessor,
     footprints_from_boxes2d,
     footprints_from_boxes3d,
     footprints_from_corners,
 )
-from .fusion import fuse_by_id
-from .geo import GeoReference, footprints_geojson
-from .io import load_camera, save_budget, save_camera
-from .params import PARAM_NAMES
-from .propagation import (
+from .products.fusion import fuse_by_id
+from .products.geo import GeoReference, footprints_geojson
+from .products.v2x import cpm_fields, j2735_fields  # noqa: E402
+from .uncertainty.budget import ErrorBudget, load_budget
+from .uncertainty.ellipse import chi2_scale, ellipse_axes, ellipse_points
+from .uncertainty.propagation import (
     GroundEstimate,
     JointEstimate,
     linearity_ratio,
@@ -31,9 +33,10 @@ from .propagation import (
     propagate_joint,
     unscented,
 )
-from .v2x import cpm_fields, j2735_fields  # noqa: E402
 
 __version__ = "0.1.0"
+
+_moved.install(__name__)  # the module paths of 0.1 stay importable (DeprecationWarning)
 
 __all__ = [
     "ErrorBudget", "load_budget", "OpenCVCamera", "PanTiltCamera", "chi2_scale", "ellipse_axes",

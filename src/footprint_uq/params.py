@@ -7,7 +7,7 @@ respect to the parameters are ``(..., 2, 22)`` arrays whose last axis follows
 :data:`PARAM_NAMES`.
 
 Units are in the names.  Angles in the vector are radians (the budget file
-speaks degrees; :mod:`footprint_uq.budget` converts).  Three parameters are
+speaks degrees; :mod:`footprint_uq.uncertainty.budget` converts).  Three parameters are
 perturbations with nominal value 0: the ground offset ``ground_dz_m`` and the
 ground slopes ``ground_slope_x``/``ground_slope_y`` (dimensionless gradients
 dz/dx, dz/dy of the ground plane, pivoting about the camera's foot point).
@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["PARAM_NAMES", "N_PARAMS", "IDX", "DIST_SLICE", "param_index"]
+__all__ = ["PARAM_NAMES", "N_PARAMS", "IDX", "DIST_SLICE", "param_index", "INTRINSIC_NAMES", "PAPER_COLUMNS"]
 
 PARAM_NAMES: tuple[str, ...] = (
     "fx_px", "fy_px", "cx_px", "cy_px", "skew_px",
@@ -42,3 +42,9 @@ DIST_SLICE = slice(K1, K6 + 1)  # OpenCV order k1, k2, p1, p2, k3, k4, k5, k6
 def param_index(names) -> np.ndarray:
     """Indices of ``names`` in :data:`PARAM_NAMES` (KeyError names the unknown one)."""
     return np.array([IDX[n] for n in names], dtype=np.intp)
+
+#: the nine intrinsics a chessboard calibration estimates (OpenCV's order; pixels and dimensionless)
+INTRINSIC_NAMES = ("fx_px", "fy_px", "cx_px", "cy_px", "k1", "k2", "p1", "p2", "k3")
+#: the columns of the paper's Table 2 (intrinsic standard deviations)
+PAPER_COLUMNS = ("sigma_fx_px", "sigma_fy_px", "sigma_f_px", "sigma_c_px", "sigma_r_px",
+                 "sigma_k1", "sigma_k2", "sigma_p1", "sigma_p2", "sigma_k3")

@@ -36,3 +36,14 @@ def reason_text(code) -> np.ndarray | str:
     if np.ndim(code) == 0:
         return REASONS[int(code)]
     return np.vectorize(lambda c: REASONS[int(c)], otypes=[object])(code)
+
+
+def backprojection_reason(valid_ground, converged, finite) -> np.ndarray:
+    """Codes of back-projected pixels from three boolean masks of the same shape: the ray meets the
+    ground (else ABOVE_HORIZON), the undistortion converged (else UNDISTORT_FAILED), the input is
+    finite (else NOT_FINITE); a later failure overrides an earlier one."""
+    r = np.full(np.shape(valid_ground), OK, dtype=np.int8)
+    r[~np.asarray(valid_ground, dtype=bool)] = ABOVE_HORIZON
+    r[~np.asarray(converged, dtype=bool)] = UNDISTORT_FAILED
+    r[~np.asarray(finite, dtype=bool)] = NOT_FINITE
+    return r

@@ -31,8 +31,12 @@ ok + partial + error.
 
 from __future__ import annotations
 
+import csv
+import io
 import json
 import os
+import shutil
+import sys
 import time
 import uuid
 from concurrent.futures import ThreadPoolExecutor
@@ -42,11 +46,18 @@ from pathlib import Path
 import numpy as np
 import pyarrow as pa
 import pyarrow.compute as pc
+import pyarrow.parquet as pq
+import yaml
+from tqdm import tqdm
 
 from ..errors import ConfigError, InputError
+from ..io import load_camera
 from ..io.atomic import atomic_write_text, clean_temporaries, commit, discard, fsync_dir, path_component, temp_path
+from ..uncertainty.budget import load_budget
 from . import schema as S
-from .process import BatchProcessor, Summary, _prefetch
+from .process import BatchProcessor, Summary, prefetch
+from .readers import coerce_table, iter_parquet_tables, open_parquet
+from .writers import parquet_options
 
 __all__ = ["RegistryEntry", "load_registry", "plan", "Task", "process_partition", "process_fleet", "FleetSummary",
            "UNKNOWN_CAMERA", "require_dask"]
@@ -86,8 +97,6 @@ _REG_KEYS = {"camera_id", "camera", "budget", "heading_offset_deg", "origin_lat_
 
 
 def _entry(rec: dict, where: str, base: Path, default_budget) -> RegistryEntry:
-    from ..budget import load_budget
-    from ..io import load_camera
 
     unknown = set(rec) - _REG_KEYS
     if unknown:
@@ -167,8 +176,6 @@ def load_registry(path, *, budget=None) -> dict[str, RegistryEntry]:
         if "\x00" in text:
             raise ConfigError("registry", str(p), "a text file (it holds NUL bytes)")
         if suffix == ".csv":
-            import csv
-            import io
 
             try:
                 recs = [({k: v for k, v in r.items() if v != ""}, f"{p}: line {i + 2}")
@@ -179,7 +186,6 @@ def load_registry(path, *, budget=None) -> dict[str, RegistryEntry]:
                 if None in rec or any(v is None for v in rec.values()):
                     raise ConfigError(where, "wrong number of fields", "as many fields as the header")
         elif suffix in (".yaml", ".yml", ".json"):
-            import yaml
 
             try:
                 data = yaml.safe_load(text)
@@ -275,7 +281,6 @@ def plan(dataset, out_dir, registry: dict, *, chunk_rows: int = S.DEFAULT_CHUNK_
 
 
 def _has_camera_column(path) -> bool:
-    import pyarrow.parquet as pq
 
     return "camera_id" in pq.read_schema(path).names
 
@@ -324,10 +329,7 @@ def process_partition(task: Task) -> dict:
     -------
     dict: ``{"index", "rel", "files": [...], "cameras": {camera_id: Summary.to_dict() counts}, "elapsed_s"}``
     """
-    import pyarrow.parquet as pq
 
-    from .readers import coerce_table, iter_parquet_tables, open_parquet
-    from .writers import parquet_options
 
     t0 = time.perf_counter()
     pf = open_parquet(task.path, f"detections file {task.rel}")
@@ -347,7 +349,7 @@ def process_partition(task: Task) -> dict:
     overlap = True  # read ahead and write in background threads, as process_file
     tables = iter_parquet_tables(pf, read_cols, task.chunk_rows, use_threads=False, where=task.path)
     if overlap:
-        tables = _prefetch(tables, 1)
+        tables = prefetch(tables, 1)
     pool = ThreadPoolExecutor(1, thread_name_prefix="footprint-uq-writer") if overlap else None
     pending = None
 
@@ -535,9 +537,7 @@ def process_fleet(registry, detections, out_dir, *, budget=None, scheduler=None,
     -------
     FleetSummary
     """
-    import sys
 
-    from tqdm import tqdm
 
     t0 = time.perf_counter()
     reg = registry if isinstance(registry, dict) else load_registry(registry, budget=budget)
@@ -630,7 +630,6 @@ def _clean_stale(out: Path) -> None:
 
 
 def _rmtree(p: Path) -> None:
-    import shutil
 
     if p.is_dir() and not p.is_symlink():
         shutil.rmtree(p, ignore_errors=True)

@@ -26,27 +26,38 @@ missing columns, bad options) raise :class:`~footprint_uq.errors.InputError`.
 
 from __future__ import annotations
 
+import json
 import os
+import queue
+import sys
+import threading
+import time
 from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import ThreadPoolExecutor as _Pool
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 import pyarrow as pa
 import pyarrow.compute as pc
+from tqdm import tqdm
 
 from .. import status as st
 from .._checks import as_float
-from ..budget import load_budget
-from ..ellipse import chi2_scale
 from ..errors import InputError
-from ..footprint_kernels import OBJ_ROWS
-from ..footprints import CONTACT_MODES, DEGENERATE, V2X_FIELDS, FrameProcessor
+from ..fast import footprint_kernels as fk
+from ..fast.footprint_kernels import OBJ_ROWS
 from ..io.atomic import atomic_write_text, same_file
+from ..products.footprints import CONTACT_MODES, DEGENERATE, V2X_FIELDS, FrameProcessor
+from ..products.geo import GeoReference
+from ..uncertainty.budget import load_budget
+from ..uncertainty.ellipse import chi2_scale
 from . import schema as S
+from .readers import open_detections
+from .writers import detect_out_format, open_writer
 
-__all__ = ["BatchProcessor", "process_table", "process_file", "process_chunk", "Summary", "summary_path", "Reasons",
-           "PSD_TOL"]
+__all__ = ["prefetch", "BatchProcessor", "process_table", "process_file", "process_chunk", "Summary", "summary_path",
+           "Reasons", "PSD_TOL"]
 
 #: relative tolerance of the per-row PSD test of the detector pixel covariance (a little
 #: stricter than footprint_uq._checks.check_cov's 1e-12 so that accepted rows always pass it)
@@ -68,7 +79,6 @@ class Reasons:
     """Registry of reason strings -> small integer ids (stable over a whole job)."""
 
     def __init__(self):
-        import threading
 
         self.texts: list[str] = []
         self._ids: dict[str, int] = {}
@@ -89,7 +99,6 @@ class Reasons:
 
 
 def _kernel_releases_gil() -> bool:
-    from .. import footprint_kernels as fk
 
     opts = getattr(fk.process_corners, "targetoptions", {}) or {}
     return bool(opts.get("nogil", False))
@@ -132,7 +141,7 @@ class BatchProcessor:
     box_type : {"2d", "3d", "corners"} or None
         None: detected from the columns of the first table.
     contact : {"bottom-centre", "bottom-corners"}
-        Ground contact of 2D boxes (:func:`footprint_uq.footprints.box2d_contact_points`).
+        Ground contact of 2D boxes (:func:`footprint_uq.products.footprints.box2d_contact_points`).
     confidence : float, optional
         Also write ``semi_major_m``/``semi_minor_m``, the ellipse at this probability (2-D).
     heading_offset_deg : float
@@ -176,7 +185,6 @@ class BatchProcessor:
                              "both the latitude and the longitude of the origin, or neither")
         self.geo = None
         if origin_lat_deg is not None:
-            from ..geo import GeoReference
 
             self.geo = GeoReference(self.heading_offset_deg, origin_lat_deg, origin_lon_deg)
         self.corners = bool(corners)
@@ -191,7 +199,7 @@ class BatchProcessor:
         self.v2x_policy = v2x_policy
         # kernel outputs (FrameProcessor: pyarrow-pool memory, reused from chunk to chunk) become the
         # output columns without a copy; per-corner coordinates and covariances only when written
-        self.proc._corner_outputs = self.corners or self.geo is not None
+        self.proc.corner_outputs = self.corners or self.geo is not None
         self.reasons = Reasons()
         self._status_dict = pa.array(list(S.STATUSES), type=pa.string())
         self._pool = None
@@ -335,7 +343,7 @@ class BatchProcessor:
                 out[:, good] = block
             return out
 
-        res.obj = gather_rows(ests[0]._columns if ests else None, len(OBJ_ROWS), np.nan, np.float64)
+        res.obj = gather_rows(ests[0].object_rows if ests else None, len(OBJ_ROWS), np.nan, np.float64)
         res.largest_index = gather("largest_index", (), -1, np.int64)
         res.v2x = gather_rows(ests[0].v2x_codes.T if ests else None, len(V2X_FIELDS), 0, np.int32)
         if not all_good:
@@ -360,6 +368,8 @@ class BatchProcessor:
         ok = centre_ok & centre_fin
         partial = good & ~centre_ok & (res.largest_index >= 0) & largest_fin
         overflow = (centre_ok & ~centre_fin) | (good & ~centre_ok & (res.largest_index >= 0) & ~largest_fin)
+        # the frame processor's own output check (OVERFLOW codes) leaving nothing usable: an overflow too
+        overflow |= good & ~ok & ~partial & ((creason == st.OVERFLOW) | (corner_reason == st.OVERFLOW).any(1))
         failed = good & ~ok & ~partial & ~overflow
         res.status_id[ok] = 0
         res.status_id[partial] = 1
@@ -640,10 +650,8 @@ def summary_path(out) -> Path:
     return out.with_name(out.name + ".summary.json")
 
 
-def _prefetch(iterable, depth: int = 1):
+def prefetch(iterable, depth: int = 1):
     """Iterate ``iterable`` in a background thread, ``depth`` items ahead (pyarrow decodes without the GIL)."""
-    import queue
-    import threading
 
     q: queue.Queue = queue.Queue(maxsize=max(1, depth))
     done = object()
@@ -731,14 +739,8 @@ def process_file(camera, budget, detections, out, *, chunk_rows: int = S.DEFAULT
     -------
     Summary
     """
-    import sys
-    import time
-    from concurrent.futures import ThreadPoolExecutor as _Pool
 
-    from tqdm import tqdm
 
-    from .readers import open_detections
-    from .writers import detect_out_format, open_writer
 
     t0 = time.perf_counter()
     fmt_out = detect_out_format(out, format_out)
@@ -765,7 +767,7 @@ def process_file(camera, budget, detections, out, *, chunk_rows: int = S.DEFAULT
     writer = None
     try:
         writer = open_writer(out, schema, format=fmt_out, compression=compression)
-        for chunk in _prefetch(iter(reader), 1):
+        for chunk in prefetch(iter(reader), 1):
             table = process_chunk(bp, chunk)
             summ.add_table(table, chunk.table.num_rows + len(chunk.malformed))
             if pending is not None:
@@ -798,7 +800,6 @@ def process_file(camera, budget, detections, out, *, chunk_rows: int = S.DEFAULT
                      "heading_offset_deg": bp.geo.heading_offset_deg}, "chunk_rows": reader.chunk_rows,
                  "budget": bp.budget.name if hasattr(bp.budget, "name") else None, **(info or {})}
     if summary:
-        import json
 
         atomic_write_text(summary_path(out), json.dumps(summ.to_dict(), indent=2) + "\n")
     return summ

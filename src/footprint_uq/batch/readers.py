@@ -31,6 +31,7 @@ parser; the batch checks rows in against it.
 
 from __future__ import annotations
 
+import csv
 import io
 import json
 import math
@@ -41,6 +42,9 @@ from pathlib import Path
 import numpy as np
 import pyarrow as pa
 import pyarrow.compute as pc
+import pyarrow.csv as pcsv
+import pyarrow.json as pjson
+import pyarrow.parquet as pq
 
 from ..errors import InputError
 from . import schema as S
@@ -271,7 +275,6 @@ class DetectionReader:
 
     # csv
     def _csv_header(self) -> list[str]:
-        import csv
 
         with open(self.path, "rb") as f:
             raw = f.readline()
@@ -310,7 +313,6 @@ class DetectionReader:
                 row += n
 
     def _csv_convert_options(self):
-        import pyarrow.csv as pcsv
 
         return pcsv.ConvertOptions(column_types={c: pa.string() for c in self.needed},
                                    include_columns=list(self.needed), strings_can_be_null=True)
@@ -322,7 +324,6 @@ class DetectionReader:
         exactly one record (or one invalid row) per physical line, a sentinel line included (an
         unterminated quote on the last line would swallow it).
         """
-        import pyarrow.csv as pcsv
 
         n = ends.size
         try:
@@ -367,9 +368,7 @@ class DetectionReader:
 
     def _csv_slow(self, block: bytes, ends: np.ndarray, row0: int) -> Chunk:
         """Line by line with Python's csv module (strict quoting within one line)."""
-        import csv
 
-        import pyarrow.csv as pcsv
 
         ncol = len(self.columns)
         idx = [self.columns.index(c) for c in self.needed]
@@ -434,7 +433,6 @@ class DetectionReader:
         return list(names)
 
     def _iter_jsonl(self):
-        import pyarrow.json as pjson
 
         with open(self.path, "rb") as f:
             row0 = 0
@@ -579,7 +577,6 @@ def _empty_lines(block: bytes, ends: np.ndarray) -> np.ndarray:
 
 def open_parquet(path, field: str = "detections"):
     """``pyarrow.parquet.ParquetFile`` of ``path``; an empty, truncated or garbage file is an InputError."""
-    import pyarrow.parquet as pq
 
     try:
         return pq.ParquetFile(path)

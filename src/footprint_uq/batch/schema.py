@@ -30,7 +30,7 @@ import re
 
 import pyarrow as pa
 
-from ..footprints import V2X_FIELDS
+from ..products.footprints import V2X_FIELDS
 
 __all__ = ["DEFAULT_CHUNK_ROWS", "ID_COLUMNS", "ID_TYPES",
            "BOX2D_COLUMNS", "BOX3D_COLUMNS", "YAW_COLUMNS", "COV_COLUMNS", "BOX_TYPES",

@@ -25,10 +25,12 @@ import numpy as np
 import orjson
 import pyarrow as pa
 import pyarrow.compute as pc
+import pyarrow.csv as pcsv
+import pyarrow.parquet as pq
 
 from ..errors import InputError
-from ..footprints import V2X_FIELDS
 from ..io.atomic import clean_temporaries_of, commit, discard, temp_path
+from ..products.footprints import V2X_FIELDS
 
 __all__ = ["AUTO", "is_code_column", "OUT_FORMATS", "detect_out_format", "open_writer", "FootprintWriter",
            "decode_dictionaries", "parquet_options"]
@@ -188,7 +190,6 @@ class ParquetOut(FootprintWriter):
     format = "parquet"
 
     def __init__(self, path, schema, *, compression: str | None = AUTO):
-        import pyarrow.parquet as pq
 
         super().__init__(path, schema)
         self._w = pq.ParquetWriter(self.tmp, schema, **parquet_options(schema, compression))
@@ -205,7 +206,6 @@ class CsvOut(FootprintWriter):
     format = "csv"
 
     def __init__(self, path, schema):
-        import pyarrow.csv as pcsv
 
         super().__init__(path, schema)
         self._plain = _plain_schema(schema)

@@ -24,17 +24,20 @@ two detectors otherwise may start at opposite ends of the board.
 from __future__ import annotations
 
 import glob
+import multiprocessing
 import os
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import dataclass
 from pathlib import Path
 
+import cv2
 import numpy as np
+from tqdm.auto import tqdm
 
 from ..errors import InputError
 from .boards import Checkerboard, parse_board
 
-__all__ = ["FrameSource", "Detection", "expand_inputs", "detect_corners", "detect_frames",
+__all__ = ["mp_context", "FrameSource", "Detection", "expand_inputs", "detect_corners", "detect_frames",
            "IMAGE_EXTENSIONS", "VIDEO_EXTENSIONS", "METHODS"]
 
 IMAGE_EXTENSIONS = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".pgm", ".ppm", ".webp")
@@ -143,7 +146,6 @@ def expand_inputs(inputs, *, video_step: int = 1) -> list[FrameSource]:
 
 # ---------------------------------------------------------------------------------- detection
 def _to_gray(image) -> np.ndarray:
-    import cv2
 
     a = np.asarray(image)
     if a.ndim == 3 and a.shape[2] in (3, 4):
@@ -194,7 +196,6 @@ def detect_corners(image, board, *, method: str = "auto", subpix: bool = True) -
     method : str
         The detector that found the board, or ``""``.
     """
-    import cv2
 
     board = parse_board(board)
     if method not in METHODS:
@@ -220,7 +221,6 @@ def detect_corners(image, board, *, method: str = "auto", subpix: bool = True) -
 
 
 def _detect_one(source: FrameSource, gray, board: Checkerboard, method: str, subpix: bool) -> Detection:
-    import cv2
 
     if gray is None:
         if not os.path.exists(source.path):
@@ -243,20 +243,18 @@ def _detect_one(source: FrameSource, gray, board: Checkerboard, method: str, sub
     return Detection(source, True, corners, size, "", used)
 
 
-def _mp_context():
+def mp_context():
     """Process start method of the pools: ``spawn``.
 
     ``fork`` deadlocks once OpenCV's thread pool (or a video decoder) has run in
     the parent process.  With ``spawn``, a script calling these functions needs
     the usual ``if __name__ == "__main__":`` guard.
     """
-    import multiprocessing
 
     return multiprocessing.get_context("spawn")
 
 
 def _worker_init():
-    import cv2
 
     cv2.setNumThreads(1)
 
@@ -268,7 +266,6 @@ def _worker(args):
 
 def _iter_tasks(sources: list[FrameSource], video_step: int, report):
     """Yield ``(source, gray or None)``; videos are decoded here, in order."""
-    import cv2
 
     for src in sources:
         if src.frame_index != -1:
@@ -318,7 +315,6 @@ def detect_frames(inputs, board, *, video_step: int = 1, workers: int | None = N
         One per frame, in input order (video frames in frame order); failures
         included with their reason.
     """
-    from tqdm.auto import tqdm
 
     board = parse_board(board)
     if method not in METHODS:
@@ -347,7 +343,7 @@ def detect_frames(inputs, board, *, video_step: int = 1, workers: int | None = N
                 report(_detect_one(src, gray, board, method, subpix))
         else:
             with ProcessPoolExecutor(max_workers=n_workers, initializer=_worker_init,
-                                     mp_context=_mp_context()) as ex:
+                                     mp_context=mp_context()) as ex:
                 pending = {}
                 window = 4 * n_workers
                 for src, gray in _iter_tasks(sources, int(video_step), report):

@@ -49,15 +49,20 @@ import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import cv2
 import numpy as np
+import yaml
 
 from .. import params as P
-from ..budget import ErrorBudget
 from ..cameras import general
 from ..cameras.opencv import OpenCVCamera
 from ..cameras.rotation import R_W_C, pan_tilt_roll_from_R_W_C
 from ..errors import InputError
+from ..io import load_camera
+from ..io.atomic import atomic_write_text
+from ..uncertainty.budget import ErrorBudget
 from .boards import Checkerboard, parse_board
+from .detect import detect_corners
 from .lidar import detect_board, fit_ground_plane, ground_frame_from_plane, parse_region, transform_points
 from .pointclouds import PointCloud, read_point_cloud
 
@@ -102,7 +107,6 @@ def load_intrinsics(spec) -> Intrinsics:
     if isinstance(spec, Intrinsics):
         return spec
     if isinstance(spec, (str, Path)):
-        from ..io import load_camera
 
         try:
             cam = load_camera(spec)
@@ -136,7 +140,6 @@ def load_intrinsics(spec) -> Intrinsics:
 def _intrinsics_mapping(path):
     """Our camera-file keys without a pose (``model: opencv``, ``image_size_px``, ``K``[, ``dist``]), as
     the intrinsic calibration writes them; None if the file is not such a mapping."""
-    import yaml
 
     try:
         d = yaml.safe_load(Path(path).read_text())
@@ -207,7 +210,6 @@ class FramePose:
 
     @property
     def camera_centre_lidar_m(self) -> np.ndarray:
-        import cv2
 
         R = cv2.Rodrigues(self.rvec)[0]
         return -R.T @ self.tvec.ravel()
@@ -225,7 +227,6 @@ def load_transform(spec) -> np.ndarray:
         elif p.suffix.lower() in (".txt", ".csv"):
             T = np.array([float(v) for v in p.read_text().replace(",", " ").split()])
         else:
-            import yaml
 
             d = yaml.safe_load(p.read_text())
             if isinstance(d, dict):
@@ -261,7 +262,6 @@ def load_transform(spec) -> np.ndarray:
 # PnP
 # ---------------------------------------------------------------------------------------------
 def _reproj(rvec, tvec, xyz, uv, intr):
-    import cv2
 
     pr = cv2.projectPoints(xyz.reshape(-1, 1, 3), rvec, tvec, intr.K, intr.dist)[0].reshape(-1, 2)
     return pr - uv
@@ -276,7 +276,6 @@ def solve_frame(xyz_m, uv_px, intr: Intrinsics, *, ransac_threshold_px: float = 
     FramePose or None
         None when no pose with at least 6 inliers was found.
     """
-    import cv2
 
     X = np.ascontiguousarray(xyz_m, dtype=np.float64).reshape(-1, 3)
     uv = np.ascontiguousarray(uv_px, dtype=np.float64).reshape(-1, 2)
@@ -331,7 +330,6 @@ def _camera_behind_board(pose: FramePose) -> bool:
 
 
 def _rot_angle_deg(ra, rb):
-    import cv2
 
     Ra, Rb = cv2.Rodrigues(ra)[0], cv2.Rodrigues(rb)[0]
     c = (np.trace(Ra.T @ Rb) - 1.0) / 2.0
@@ -389,7 +387,6 @@ def resolve_orientation(candidates: list[list[FramePose]], *, position_tol_m: fl
 
 def pose_in_ground(rvec, tvec, T_ground_lidar) -> np.ndarray:
     """``(6,)`` pose in the paper's terms (:data:`POSE_NAMES`) from an OpenCV LiDAR -> camera pose."""
-    import cv2
 
     R = cv2.Rodrigues(np.asarray(rvec, float))[0]
     t = np.asarray(tvec, float).ravel()
@@ -483,7 +480,6 @@ class ExtrinsicCalibration:
 
     def camera(self) -> OpenCVCamera:
         """The camera with the joint pose, in the ground frame."""
-        import cv2
 
         R = cv2.Rodrigues(self.rvec)[0]
         T = self.T_ground_lidar
@@ -507,7 +503,6 @@ class ExtrinsicCalibration:
 
     def summary(self) -> dict:
         """JSON-ready summary: pose, the three variabilities side by side, per-frame table, failures."""
-        import cv2
 
         truthy = {}
         for src in BUDGET_SOURCES:
@@ -624,7 +619,6 @@ def calibrate_extrinsics(frames, intrinsics, *, T_ground_lidar=None, ground: str
     InputError
         Fewer than ``min_frames`` usable frames (the message lists why frames failed).
     """
-    import cv2
 
     intr = load_intrinsics(intrinsics)
     if estimator not in ("joint", "mean"):
@@ -750,7 +744,6 @@ def calibrate_extrinsics(frames, intrinsics, *, T_ground_lidar=None, ground: str
 
 def _rt_from_pose(pose6, T_ground_lidar):
     """OpenCV LiDAR -> camera ``(rvec, tvec)`` from a pose in the paper's terms (inverse of pose_in_ground)."""
-    import cv2
 
     T = np.asarray(T_ground_lidar, float)
     R_gc = R_W_C(*np.deg2rad(pose6[3:]))
@@ -835,9 +828,7 @@ def frames_from_pairs(pairs, board, *, region=None, ground="fit", plane_threshol
         One per pair, failures included with their reason.
     ground_plane : PlaneFit or None
     """
-    import cv2
 
-    from .detect import detect_corners
 
     board = parse_board(board) if not isinstance(board, Checkerboard) else board
     if isinstance(pairs, (str, Path)):
@@ -974,7 +965,6 @@ def write_correspondences_csv(path, frames: list[FrameData], which: int = 0) -> 
             continue
         for (x, y, z), (u, v) in zip(f.xyz_candidates[which], f.uv_px, strict=True):
             rows.append(",".join([str(f.name)] + [repr(float(q)) for q in (x, y, z, u, v)]))
-    from ..io.atomic import atomic_write_text
 
     atomic_write_text(path, "\n".join(rows) + "\n")
     return Path(path)

@@ -39,18 +39,33 @@ ground ``z = 0`` of W.
 from __future__ import annotations
 
 import csv
+import io
+import json
 import math
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import cv2
+import matplotlib.pyplot as plt
 import numpy as np
+import yaml
+from scipy.stats import chi2
 
 from .. import params as P
+from .._checks import check_cov
 from ..cameras import general
 from ..cameras.opencv import OpenCVCamera
 from ..cameras.rotation import R_W_C, pan_tilt_roll_from_R_W_C
 from ..errors import ConsistencyWarning, InputError
+from ..io._common import sanitize
+from ..io.atomic import atomic_write_text
+from ..io.camera_files import camera_to_dict
+from ..products.geo import GeoReference
+from ..uncertainty.budget import ErrorBudget, load_budget
+from ..viz.gcp import gcp_report_html, plot_gcp
+from ..viz.maps import save_figure
+from .extrinsics import load_intrinsics
 
 __all__ = ["GCPSet", "GCPSolution", "read_gcp_csv", "solve_gcp", "run_gcp", "POSE_NAMES", "GCP_COLUMNS"]
 
@@ -182,7 +197,6 @@ def read_gcp_csv(path, *, pixel_sigma_px: float = 1.0, survey_sigma_m: float = 0
         if origin_lat_deg is not None:
             georef = {"origin_lat_deg": float(origin_lat_deg), "origin_lon_deg": float(origin_lon_deg)}
     else:
-        from ..geo import GeoReference
 
         lat, lon = a["lat_deg"], a["lon_deg"]
         if np.any(np.abs(lat) > 90) or np.any(np.abs(lon) > 180):
@@ -287,7 +301,6 @@ def _camera_from_params(p, image_size_px) -> OpenCVCamera:
 # ---------------------------------------------------------------------------------------------
 def _pnp_candidates(xyz, uv, K, dist):
     """Refined PnP solutions ``(R, t, rms_px, n_behind, below_ground)`` from SQPnP, EPnP and IPPE."""
-    import cv2
 
     obj = np.ascontiguousarray(xyz, dtype=np.float64).reshape(-1, 1, 3)
     img = np.ascontiguousarray(uv, dtype=np.float64).reshape(-1, 1, 2)
@@ -539,7 +552,6 @@ class GCPSolution:
 
     def budget(self, name: str = "gcp"):
         """The error budget: the full covariance over every parameter with a non-zero variance."""
-        from ..budget import ErrorBudget
 
         var = np.diagonal(self.cov_params)
         idx = np.flatnonzero(var > 0)
@@ -621,7 +633,6 @@ def solve_gcp(gcps: GCPSet, image_size_px, *, intrinsics=None, intrinsics_cov=No
         image, every fitting pose puts points behind the camera or the camera below the
         ground, the focal length is not observable, or the solve does not converge.
     """
-    from .extrinsics import load_intrinsics
 
     w, h = (int(v) for v in image_size_px)
     size = (w, h)
@@ -637,7 +648,6 @@ def solve_gcp(gcps: GCPSet, image_size_px, *, intrinsics=None, intrinsics_cov=No
     if intrinsics_cov is not None:
         if estimate_focal:
             raise InputError("intrinsics covariance", "given without intrinsics", "intrinsics with it")
-        from .._checks import check_cov
 
         intrinsics_cov = check_cov("intrinsics covariance", intrinsics_cov, 13)
     p0 = _initial_params(uv, xyz, size, K, dist)
@@ -719,7 +729,6 @@ def _leave_one_out(sol, base, A, theta, max_iter, estimate_focal):
 
 
 def _warn_residuals(sol):
-    from scipy.stats import chi2
 
     if sol.dof > 0:
         pval = chi2.sf(sol.chi2, sol.dof)
@@ -754,15 +763,12 @@ def parse_image_size(text) -> tuple[int, int]:
 
 
 def _yaml_text(data: dict, header: str) -> str:
-    import yaml
 
-    from ..io._common import sanitize
 
     return f"# {header}\n" + yaml.safe_dump(sanitize(data), sort_keys=False, default_flow_style=None, width=100)
 
 
 def _csv_text(rows: list[dict]) -> str:
-    import io
 
     buf = io.StringIO()
     w = csv.DictWriter(buf, fieldnames=list(rows[0]), lineterminator="\n")
@@ -773,7 +779,6 @@ def _csv_text(rows: list[dict]) -> str:
 
 
 def _read_image(path, image_size_px):
-    import cv2
 
     img = cv2.imread(str(path), cv2.IMREAD_COLOR)
     if img is None:
@@ -794,10 +799,7 @@ def run_gcp(points, image_size_px, out_dir, *, intrinsics=None, intrinsics_budge
     (the full parameter covariance of the solve), ``residuals.csv`` (per point and leave-one-out),
     ``summary.json``, ``gcp.png`` (points and residual arrows, ``image`` behind) and ``summary.html``.
     """
-    import json
 
-    from ..io.atomic import atomic_write_text
-    from ..io.camera_files import camera_to_dict
 
     size = parse_image_size(image_size_px)
     if (origin_lat_deg is None) != (origin_lon_deg is None):
@@ -808,7 +810,6 @@ def run_gcp(points, image_size_px, out_dir, *, intrinsics=None, intrinsics_budge
     if intrinsics_budget is not None:
         if intrinsics is None:
             raise InputError("--intrinsics-budget", str(intrinsics_budget), "--intrinsics too")
-        from ..budget import load_budget
 
         cov_int = load_budget(intrinsics_budget).param_covariance()[np.ix_(_INT_IDX, _INT_IDX)]
     img = _read_image(image, size) if image is not None else None
@@ -832,13 +833,10 @@ def run_gcp(points, image_size_px, out_dir, *, intrinsics=None, intrinsics_budge
     summ["warnings"] = notes
     files.append(atomic_write_text(out / "summary.json", json.dumps(summ, indent=2, allow_nan=True) + "\n"))
     if figures:
-        from ..viz.gcp import gcp_report_html, plot_gcp
-        from ..viz.maps import save_figure
 
         fig = plot_gcp(sol, image=img)
         files.append(save_figure(fig, out / "gcp.png", dpi=120))
         files.append(atomic_write_text(out / "summary.html", gcp_report_html(sol, fig, notes)))
-        import matplotlib.pyplot as plt
 
         plt.close(fig)
     return {"solution": sol, "files": files, "warnings": notes}

@@ -38,29 +38,36 @@ which the core then uses instead of those sigmas.
 
 from __future__ import annotations
 
+import csv
 import json
 import math
 import os
+import time
 import warnings
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import cv2
 import numpy as np
+import yaml
+from tqdm.auto import tqdm
 
+from ..cameras.opencv import OpenCVCamera
 from ..errors import InputError
 from ..io.atomic import atomic_path, atomic_write_text, commit, discard, temp_path
+from ..params import INTRINSIC_NAMES, PAPER_COLUMNS
+from ..uncertainty.budget import ErrorBudget
+from ..viz.calibration import save_calibration_figures, write_calibration_html
 from .boards import Checkerboard, parse_board
-from .detect import Detection, FrameSource, _mp_context, detect_frames
+from .detect import Detection, FrameSource, detect_frames, mp_context
+from .maps import coverage_map, error_asymmetry, reprojection_error_map
 
 __all__ = ["INTRINSIC_NAMES", "PAPER_COLUMNS", "IntrinsicCalibration", "BootstrapResult", "FilterRound",
            "calibrate_intrinsics", "calibrate_detections", "calibrate_corners", "intrinsic_covariance",
            "bootstrap_intrinsics", "paper_sigmas", "compare_sigmas"]
 
-#: the nine estimated intrinsics, in PARAM_NAMES spelling
-INTRINSIC_NAMES = ("fx_px", "fy_px", "cx_px", "cy_px", "k1", "k2", "p1", "p2", "k3")
-#: the paper's Table 2 columns
-PAPER_COLUMNS = ("sigma_fx_px", "sigma_fy_px", "sigma_f_px", "sigma_c_px", "sigma_r_px",
-                 "sigma_k1", "sigma_k2", "sigma_p1", "sigma_p2", "sigma_k3")
+#: where a standard deviation of the intrinsics can come from
 SIGMA_SOURCES = ("opencv", "jacobian", "bootstrap", "max")
 
 
@@ -91,7 +98,6 @@ class _Fit:
 
 def _calibrate(obj: np.ndarray, imgs: list[np.ndarray], image_size_px, flags: int = 0,
                K0=None, d0=None, criteria=None) -> _Fit:
-    import cv2
 
     objs = [obj.astype(np.float32)] * len(imgs)
     ips = [np.asarray(c, dtype=np.float32).reshape(-1, 1, 2) for c in imgs]
@@ -115,7 +121,6 @@ def _calibrate(obj: np.ndarray, imgs: list[np.ndarray], image_size_px, flags: in
 
 
 def _project(obj, rvec, tvec, K, dist, jacobian=False):
-    import cv2
 
     pts, J = cv2.projectPoints(obj.astype(np.float64), np.asarray(rvec, dtype=np.float64),
                                np.asarray(tvec, dtype=np.float64), K, np.asarray(dist, dtype=np.float64))
@@ -203,7 +208,6 @@ class BootstrapResult:
 
 
 def _boot_fit(args):
-    import cv2
 
     obj, imgs, idx_list, image_size_px, K0, d0, flags = args
     cv2.setNumThreads(1)
@@ -228,9 +232,7 @@ def bootstrap_intrinsics(obj, imgs, image_size_px, K0, d0, n: int, *, seed: int 
     OpenCV cannot solve are counted in ``n_failed``.  The resamples are drawn
     up front, so the result does not depend on ``workers``.
     """
-    from concurrent.futures import ProcessPoolExecutor
 
-    from tqdm.auto import tqdm
 
     n = int(n)
     rng = np.random.default_rng(seed)
@@ -253,7 +255,7 @@ def bootstrap_intrinsics(obj, imgs, image_size_px, K0, d0, n: int, *, seed: int 
                 results.extend(_boot_fit(tk))
                 bar.update(len(tk[2]))
         else:
-            with ProcessPoolExecutor(max_workers=int(workers), mp_context=_mp_context()) as ex:
+            with ProcessPoolExecutor(max_workers=int(workers), mp_context=mp_context()) as ex:
                 for tk, res in zip(tasks, ex.map(_boot_fit, tasks), strict=True):
                     results.extend(res)
                     bar.update(len(tk[2]))
@@ -395,7 +397,7 @@ class IntrinsicCalibration:
 
     # -- conversions ----------------------------------------------------------------
     def budget_dict(self, source: str = "opencv", *, full_covariance: bool = False, name: str | None = None) -> dict:
-        """The intrinsic part of a budget file (keys of :mod:`footprint_uq.budget`)."""
+        """The intrinsic part of a budget file (keys of :mod:`footprint_uq.uncertainty.budget`)."""
         s = self.std(source)
         d = {
             "name": name or f"calibrated-{source}",
@@ -418,8 +420,7 @@ class IntrinsicCalibration:
         return d
 
     def to_budget(self, source: str = "opencv", *, full_covariance: bool = False, name: str | None = None):
-        """An :class:`footprint_uq.budget.ErrorBudget` with the intrinsic error sizes (others zero)."""
-        from ..budget import ErrorBudget
+        """An :class:`footprint_uq.uncertainty.budget.ErrorBudget` with the intrinsic error sizes (others zero)."""
 
         return ErrorBudget.from_dict(self.budget_dict(source, full_covariance=full_covariance, name=name))
 
@@ -430,7 +431,6 @@ class IntrinsicCalibration:
 
     def camera(self, R, t, ground_z_m: float = 0.0):
         """An :class:`~footprint_uq.OpenCVCamera` with these intrinsics and a given pose (world -> camera)."""
-        from ..cameras.opencv import OpenCVCamera
 
         return OpenCVCamera(self.K, self.dist, R, t, self.image_size_px, ground_z_m)
 
@@ -445,18 +445,15 @@ class IntrinsicCalibration:
         raise InputError("hull", hull, "'corners' or 'squares'")
 
     def coverage(self, grid_px: float = 5.0, hull: str = "corners"):
-        from .maps import coverage_map
 
         return coverage_map(self.board_outlines_px(hull), self.image_size_px, grid_px)
 
     def error_map(self, grid_px: float = 5.0):
-        from .maps import reprojection_error_map
 
         return reprojection_error_map(np.concatenate(self.image_points_px), np.concatenate(self.residuals_px),
                                       self.image_size_px, grid_px)
 
     def asymmetry(self, cell_px: float = 40.0, n_permutations: int = 200, seed: int = 0) -> dict:
-        from .maps import error_asymmetry
 
         return error_asymmetry(np.concatenate(self.image_points_px), np.concatenate(self.residuals_px),
                                (self.K[0, 2], self.K[1, 2]), self.image_size_px, cell_px=cell_px,
@@ -557,7 +554,6 @@ class IntrinsicCalibration:
         summ["budget"] = {"source": budget_source, "full_covariance": bool(full_covariance),
                           "file": "budget.yaml"}
         if figures:
-            from ..viz.calibration import save_calibration_figures
 
             files.update(save_calibration_figures(self, out, coverage=cov, error_map=em, asymmetry=asym))
         summ["files"] = sorted(files) + ["summary.json", "report.md"] + (["report.html"] if figures else [])
@@ -566,16 +562,13 @@ class IntrinsicCalibration:
         atomic_write_text(out / "report.md", render_report(summ))
         files["report.md"] = str(out / "report.md")
         if figures:
-            from ..viz.calibration import write_calibration_html
 
             files["report.html"] = str(write_calibration_html(summ, out))
         return files
 
     def write_opencv_yaml(self, path) -> Path:
         """OpenCV FileStorage YAML (``camera_matrix``, ``distortion_coefficients``) as OpenCV's sample writes."""
-        import time
 
-        import cv2
 
         path = Path(path)
         final, path = Path(path), temp_path(path)
@@ -625,7 +618,6 @@ def _jsonable(o):
 
 
 def _write_yaml(path, data) -> Path:
-    import yaml
 
     path = Path(path)
     atomic_write_text(path, yaml.safe_dump(_jsonable(data), sort_keys=False, default_flow_style=None))
@@ -633,7 +625,6 @@ def _write_yaml(path, data) -> Path:
 
 
 def write_frames_csv(rows: list[dict], path) -> Path:
-    import csv
 
     path = Path(path)
     cols = ["label", "path", "frame_index", "found", "method", "used", "dropped_round", "mean_error_px",
@@ -755,7 +746,6 @@ def calibrate_corners(image_points_px, board, image_size_px, *, labels=None, max
     -------
     IntrinsicCalibration
     """
-    import cv2
 
     board = parse_board(board)
     mv = int(min_views)

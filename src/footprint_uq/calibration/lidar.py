@@ -36,7 +36,11 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass, field
 
+import cv2
 import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
 
 from .._checks import as_float
 from ..errors import InputError
@@ -354,7 +358,6 @@ def fit_rectangle(uv_m, size_m=None, *, tolerance_m: float = 0.03, cell_m: float
     minimum-area rectangle of the points inside, and the centre is the middle of
     their robust extents (:func:`_robust_extents`).  ``axis_a`` is along the long side.
     """
-    import cv2
 
     uv = np.asarray(uv_m, float)
     centre = uv.mean(axis=0)
@@ -520,9 +523,6 @@ def detect_board(cloud, board, *, region=None, ground: PlaneFit | None = None, g
     BoardDetection
         ``found=False`` with a reason when no board-sized planar patch exists.
     """
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-    from scipy.spatial import cKDTree
 
     board = parse_board(board) if not isinstance(board, Checkerboard) else board
     xyz = np.asarray(getattr(cloud, "xyz_m", cloud), dtype=np.float64)

@@ -38,6 +38,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 
 from .._checks import as_float, as_points
@@ -119,7 +120,6 @@ def coverage_map(outlines_px, image_size_px, cell_px: float = 5.0) -> CoverageMa
     CoverageMap
         ``count`` has shape ``(ny, nx) = grid_shape(image_size_px, cell_px)``.
     """
-    import cv2
 
     ny, nx = grid_shape(image_size_px, cell_px)
     uc, vc = cell_centres(image_size_px, cell_px)

@@ -23,6 +23,7 @@ import struct
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numba
 import numpy as np
 
 from ..errors import InputError
@@ -200,7 +201,6 @@ _lzf_jit: dict = {}
 
 def _jit(name):
     if name not in _lzf_jit:
-        import numba
 
         _lzf_jit[name] = numba.njit(cache=False, nogil=True)(
             _lzf_decompress_py if name == "d" else _lzf_compress_py)

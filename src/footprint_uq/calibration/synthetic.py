@@ -39,6 +39,7 @@ import json
 from dataclasses import dataclass
 from pathlib import Path
 
+import cv2
 import numba
 import numpy as np
 
@@ -46,6 +47,7 @@ from .._checks import as_float
 from ..errors import InputError
 from ..io.atomic import atomic_path, atomic_write_text
 from .boards import PAPER_BOARD, Checkerboard, parse_board
+from .intrinsics import INTRINSIC_NAMES, calibrate_corners, paper_sigmas
 
 __all__ = ["SyntheticCamera", "DEFAULT_CAMERA", "make_board_poses", "project_corners", "render_board",
            "noisy_corners", "render_campaign", "write_campaign", "simulate_campaigns"]
@@ -100,13 +102,11 @@ DEFAULT_CAMERA = SyntheticCamera(1015.0, 1015.0, 962.3, 597.8, (1920, 1200), (-0
 
 
 def _rodrigues(R):
-    import cv2
 
     return cv2.Rodrigues(np.asarray(R, dtype=np.float64))[0].ravel()
 
 
 def _rot(axis, angle):
-    import cv2
 
     a = np.asarray(axis, dtype=np.float64)
     return cv2.Rodrigues(a / np.linalg.norm(a) * angle)[0]
@@ -114,7 +114,6 @@ def _rot(axis, angle):
 
 def project_corners(camera: SyntheticCamera, board, rvec, tvec, points_m=None) -> np.ndarray:
     """Exact image positions (N, 2), px, of the board's inner corners (or of ``points_m`` (N, 3), board frame)."""
-    import cv2
 
     board = parse_board(board)
     obj = board.object_points() if points_m is None else np.asarray(points_m, dtype=np.float64).reshape(-1, 3)
@@ -128,7 +127,6 @@ def _render_margin(board: Checkerboard) -> float:
 
 
 def _pose_ok(camera, board, rvec, tvec, margin_px, max_view_deg) -> bool:
-    import cv2
 
     R = cv2.Rodrigues(np.asarray(rvec, dtype=np.float64))[0]
     e = board.square_m + _render_margin(board)
@@ -184,7 +182,6 @@ def make_board_poses(camera: SyntheticCamera = DEFAULT_CAMERA, board=PAPER_BOARD
     InputError
         When no valid pose is found for a target position (board too large for the image).
     """
-    import cv2
 
     board = parse_board(board)
     n = int(n)
@@ -329,7 +326,6 @@ def render_board(camera: SyntheticCamera, board, rvec, tvec, *, supersample: int
     corners_px : ndarray (N, 2)
         Exact corner positions (ground truth), px, in the board's corner order.
     """
-    import cv2
 
     board = parse_board(board)
     ss = int(supersample)
@@ -388,7 +384,6 @@ def render_campaign(camera: SyntheticCamera = DEFAULT_CAMERA, board=PAPER_BOARD,
 def write_campaign(out_dir, camera: SyntheticCamera = DEFAULT_CAMERA, board=PAPER_BOARD, n: int = 20, *,
                    seed: int = 0, pose_kw: dict | None = None, **render_kw) -> Path:
     """Render a campaign into ``out_dir`` (``board_000.png``...) with ``truth.json`` (camera, board, poses, corners)."""
-    import cv2
 
     board = parse_board(board)
     out = Path(out_dir)
@@ -429,7 +424,6 @@ def simulate_campaigns(camera: SyntheticCamera = DEFAULT_CAMERA, board=PAPER_BOA
         ``paper`` -- the paper's Table-2 row for each of ``scatter``, ``opencv``,
         ``bootstrap``.  Arrays follow :data:`~footprint_uq.calibration.INTRINSIC_NAMES`.
     """
-    from .intrinsics import INTRINSIC_NAMES, calibrate_corners, paper_sigmas
 
     board = parse_board(board)
     m = int(n_campaigns)

@@ -30,14 +30,17 @@ recovered by :mod:`.extrinsics` compare directly with the truth.
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import cv2
 import numpy as np
 
 from ..cameras.opencv import OpenCVCamera
 from ..cameras.rotation import R_W_C
 from ..errors import InputError
+from ..io import save_camera
 from ..io.atomic import atomic_path, atomic_write_text
 from .boards import PAPER_BOARD, Checkerboard
 from .pointclouds import PointCloud, write_point_cloud
@@ -136,7 +139,6 @@ def poses_from_camera(camera, rvecs, tvecs) -> list:
     """Board poses ``T_world_board`` from board -> camera poses (OpenCV ``rvec``, ``tvec``; e.g. those of
     :func:`footprint_uq.calibration.synthetic.make_board_poses`) and the camera's pose in W, so that the
     LiDAR scans are taken at the same board poses as the synthetic images."""
-    import cv2
 
     T_wc = camera.T_world_cam
     out = []
@@ -359,9 +361,7 @@ class LidarCampaign:
     def write(self, directory, *, cloud_format: str = ".pcd", **writer_kw) -> Path:
         """Write ``frame_XXX.<fmt>`` clouds and ``frame_XXX_corners.csv`` (u, v) files, plus
         ``camera_intrinsics.yaml`` (the true intrinsics; pose = truth) and ``truth.json``."""
-        import json
 
-        from ..io import save_camera
 
         d = Path(directory)
         d.mkdir(parents=True, exist_ok=True)

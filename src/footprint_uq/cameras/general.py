@@ -2,7 +2,7 @@
 
 This is the reference path for both camera models: pixel -> normalised
 (:mod:`.pinhole`) -> undistorted (:mod:`.distortion`) -> ray in the world
-(:mod:`.rotation`) -> ground intersection (:mod:`footprint_uq.ground`).  The
+(:mod:`.rotation`) -> ground intersection (:mod:`footprint_uq.cameras.ground`).  The
 paper's closed form (:mod:`.pantilt`) must agree with it for zero distortion.
 
 All functions broadcast: ``params`` is ``(..., 22)`` (see
@@ -17,8 +17,8 @@ import numpy as np
 
 from .. import params as P
 from .. import status
-from ..ground import intersect_ground
 from .distortion import distort, in_principal_region, undistort
+from .ground import intersect_ground
 from .pinhole import normalised_to_pixel, pixel_to_normalised
 from .rotation import R_W_C, dR_W_C
 
@@ -58,14 +58,6 @@ class Projection(NamedTuple):
     duv_dp: np.ndarray | None = None
 
 
-def _reason(valid_ground, conv, finite):
-    r = np.full(np.shape(valid_ground), status.OK, dtype=np.int8)
-    r[~valid_ground] = status.ABOVE_HORIZON
-    r[~conv] = status.UNDISTORT_FAILED
-    r[~finite] = status.NOT_FINITE
-    return r
-
-
 def backproject(params, uv_px, *, get_gradients=False, domain=None) -> Backprojection:
     """Back-project pixels onto the ground.
 
@@ -100,7 +92,7 @@ def backproject(params, uv_px, *, get_gradients=False, domain=None) -> Backproje
         xy, vg = intersect_ground(cam, ray_w, ground)
         valid = vg & conv & finite
         xy = np.where(valid[..., None], xy, np.nan)
-        return Backprojection(xy, valid, _reason(vg, conv, finite))
+        return Backprojection(xy, valid, status.backprojection_reason(vg, conv, finite))
     xd, dxd_duv, dxd_dk = pixel_to_normalised(uv, fx, fy, cx, cy, sk, get_gradients=True)
     xn, conv, dxn_dxd, dxn_ddist = undistort(xd, dist, domain=domain, get_gradients=True)
     ray_c = np.concatenate([xn, np.ones(xn.shape[:-1] + (1,))], -1)
@@ -123,7 +115,7 @@ def backproject(params, uv_px, *, get_gradients=False, domain=None) -> Backproje
     xy = np.where(nan[..., None], np.nan, xy)
     J[nan] = np.nan
     dxy_duv = np.where(nan[..., None, None], np.nan, dxy_duv)
-    return Backprojection(xy, valid, _reason(vg, conv, finite), dxy_duv, J)
+    return Backprojection(xy, valid, status.backprojection_reason(vg, conv, finite), dxy_duv, J)
 
 
 def project(params, xyz_rel_m, *, get_gradients=False, domain=None) -> Projection:

@@ -22,17 +22,20 @@ traffic-analytics tools store.  It holds for an undistorted image of a flat grou
 
 from __future__ import annotations
 
+import warnings
 from typing import NamedTuple
 
+import cv2
 import numpy as np
 
 from .. import params as P
 from .. import status
-from .._checks import as_points
+from .._checks import as_points, check_cov
 from ..errors import ConsistencyWarning, InputError
+from .opencv import OpenCVCamera
 
-__all__ = ["HomographyCamera", "HomographyBackprojection", "HomographyFile", "HOMOGRAPHY_KEYS", "fit_homography",
-           "camera_from_homography", "homography_from_camera", "homography_file_from_dict", "load_homography"]
+__all__ = ["HomographyCamera", "HomographyBackprojection", "fit_homography", "apply_homography",
+           "camera_from_homography", "homography_from_camera"]
 
 
 class HomographyBackprojection(NamedTuple):
@@ -59,8 +62,18 @@ def _as_H(name, H) -> np.ndarray:
     return H / np.linalg.norm(H)
 
 
-def _apply(H, uv, get_gradients):
-    """q = H [u, v, 1], xy = q[:2] / q[2], and the derivatives."""
+def apply_homography(H, uv, get_gradients):
+    """Map pixels through a homography: ``q = H [u, v, 1]``, ``xy = q[:2] / q[2]``.
+
+    Parameters
+    ----------
+    H : (3, 3) array;  uv : (..., 2) pixels;  get_gradients : bool
+
+    Returns
+    -------
+    q (..., 3), xy (..., 2), and with ``get_gradients`` ``dxy_duv`` (..., 2, 2) and ``dxy_dh``
+    (..., 2, 9) (row-major entries of H), else None, None.
+    """
     ph = np.concatenate([uv, np.ones(uv.shape[:-1] + (1,))], -1)
     q = ph @ H.T
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -122,7 +135,6 @@ class HomographyCamera:
         self.ground_z_m = float(ground_z_m)
         self.cov_h = None
         if cov_h is not None:
-            from .._checks import check_cov
 
             self.cov_h = check_cov("cov_H", cov_h, 9)
         self.points = points
@@ -135,7 +147,7 @@ class HomographyCamera:
     def backproject(self, uv_px, *, get_gradients: bool = False) -> HomographyBackprojection:
         """Pixels ``(..., 2)`` -> ground points ``xy_world_m (..., 2)``; NaN above the horizon."""
         uv = as_points("uv_px", uv_px, 2)
-        q, xy, J_uv, J_h = _apply(self.H_ground_image, uv, get_gradients)
+        q, xy, J_uv, J_h = apply_homography(self.H_ground_image, uv, get_gradients)
         finite = np.isfinite(uv).all(-1)
         valid = finite & (q[..., 2] > 0)
         reason = np.where(finite, np.where(valid, status.OK, status.ABOVE_HORIZON), status.NOT_FINITE).astype(np.int8)
@@ -149,7 +161,7 @@ class HomographyCamera:
         """Ground points ``(..., 2)`` -> pixels ``(..., 2)`` (NaN for points behind the camera)."""
         xy = as_points("xy_world_m", xy_world_m, 2)
         Hi = self.H_image_ground
-        q, uv, _, _ = _apply(Hi, xy, False)
+        q, uv, _, _ = apply_homography(Hi, xy, False)
         # the pixel must map back to the ground side
         ph = np.concatenate([uv, np.ones(uv.shape[:-1] + (1,))], -1)
         ok = (ph @ self.H_ground_image[2]) > 0
@@ -209,7 +221,6 @@ def fit_homography(uv_px, xy_world_m, *, sigma_px=1.0, sigma_m=0.05, max_iter: i
     (effective variance); Gauss-Newton on ``|H|_F = 1`` from OpenCV's least-squares start.
     ``cov_h = B (J_B^T W J_B)^-1 B^T`` with B a tangent basis at H.
     """
-    import cv2
 
     uv = np.asarray(uv_px, dtype=np.float64).reshape(-1, 2)
     xy = np.asarray(xy_world_m, dtype=np.float64).reshape(-1, 2)
@@ -230,7 +241,7 @@ def fit_homography(uv_px, xy_world_m, *, sigma_px=1.0, sigma_m=0.05, max_iter: i
     h = (H0 / np.linalg.norm(H0)).ravel()
 
     def pieces(h):
-        _, f, Juv, Jh = _apply(h.reshape(3, 3), uv, True)
+        _, f, Juv, Jh = apply_homography(h.reshape(3, 3), uv, True)
         r = xy - f
         S = sm2[:, None, None] * np.eye(2) + spx2[:, None, None] * (Juv @ np.swapaxes(Juv, -1, -2))
         Si = np.linalg.inv(S)
@@ -293,7 +304,6 @@ def camera_from_homography(H_ground_image, K, image_size_px, *, dist=None, cov_h
     propagated from ``cov_h`` (central differences of the decomposition).  ``H`` must map
     undistorted pixels (``K`` applied to normalised coordinates); ``dist`` is only carried over.
     """
-    from .opencv import OpenCVCamera
 
     hc = H_ground_image if isinstance(H_ground_image, HomographyCamera) else HomographyCamera(H_ground_image,
                                                                                              image_size_px)
@@ -304,7 +314,7 @@ def camera_from_homography(H_ground_image, K, image_size_px, *, dist=None, cov_h
 
     def params_of(Hm):
         R, t = _decompose(Hm, K)
-        X = _apply(Hm, ref_uv, False)[1]  # a ground point the camera sees
+        X = apply_homography(Hm, ref_uv, False)[1]  # a ground point the camera sees
         if (R[2, :2] @ X + t[2]) <= 0:
             raise InputError("H_ground_image with K", "the ground seen behind the camera",
                              "a homography of a right-handed ground frame (x east, y north, z up)")
@@ -337,7 +347,6 @@ def homography_from_camera(camera) -> np.ndarray:
 
     Raises InputError for a camera with lens distortion (no homography maps its pixels).
     """
-    import warnings
 
     d = camera.dist
     if np.any(d):
@@ -353,123 +362,3 @@ def homography_from_camera(camera) -> np.ndarray:
     if not np.all(np.isfinite(H)):
         warnings.warn("degenerate homography (camera in the ground plane)", ConsistencyWarning, stacklevel=2)
     return HomographyCamera(H, camera.image_size_px, oriented=True).H_ground_image
-
-
-# ---------------------------------------------------------------------------------------------
-# camera files: model: homography
-# ---------------------------------------------------------------------------------------------
-#: keys of a ``model: homography`` camera file: required, optional
-HOMOGRAPHY_KEYS = (("model", "image_size_px", "H_ground_image"),
-                   ("K", "dist", "ground_z_m", "points", "cov_H", "name", "description"))
-_POINT_KEYS = ("uv_px", "xy_world_m", "sigma_px", "sigma_m")
-
-
-class HomographyFile(NamedTuple):
-    """A ``model: homography`` file: the plane mapping, the camera (with ``K``, else None) and the
-    6x6 covariance of its pose (``x_m, y_m, height_m, pan_rad, tilt_rad, roll_rad``; None without a
-    covariance of H)."""
-
-    homography: HomographyCamera
-    camera: object
-    cov_pose: np.ndarray | None
-
-
-def homography_file_from_dict(d: dict, *, where: str = "") -> HomographyFile:
-    """Parse a ``model: homography`` mapping (see docs/file-formats.md); ConfigError names the field."""
-    import warnings
-
-    from ..errors import ConfigError
-    from ..io import _common as C
-
-    for k in d:
-        if k not in HOMOGRAPHY_KEYS[0] + HOMOGRAPHY_KEYS[1]:
-            raise ConfigError(C.label(where, str(k)), d[k],
-                              f"one of the keys {list(HOMOGRAPHY_KEYS[0] + HOMOGRAPHY_KEYS[1])} (homography file)")
-    for k in HOMOGRAPHY_KEYS[0]:
-        if d.get(k) is None:
-            raise ConfigError(C.label(where, k), "missing", f"a value for '{k}' (homography camera file)")
-    size = C.as_image_size(where, "image_size_px", d["image_size_px"])
-    H = C.as_matrix(where, "H_ground_image", d["H_ground_image"], (3, 3))
-    gz = C.as_number(where, "ground_z_m", d.get("ground_z_m", 0.0), unit=" (metres)")
-    points, cov = None, None
-    if d.get("points") is not None:
-        pts = d["points"]
-        if not isinstance(pts, dict) or any(k not in _POINT_KEYS for k in pts) or "uv_px" not in pts \
-                or "xy_world_m" not in pts:
-            raise ConfigError(C.label(where, "points"), pts if not isinstance(pts, dict) else sorted(pts),
-                              "a mapping with uv_px (N x 2), xy_world_m (N x 2) [, sigma_px, sigma_m]")
-        uv = _rows(where, "points.uv_px", pts["uv_px"])
-        xy = _rows(where, "points.xy_world_m", pts["xy_world_m"])
-        if len(uv) != len(xy):
-            raise ConfigError(C.label(where, "points"), f"{len(uv)} pixels, {len(xy)} ground points", "pairs")
-        spx, sm = pts.get("sigma_px", 1.0), pts.get("sigma_m", 0.05)
-        for name, s in (("points.sigma_px", spx), ("points.sigma_m", sm)):
-            a = np.asarray(s, dtype=np.float64) if _numeric(s) else None
-            if a is None or a.ndim > 1 or (a.ndim == 1 and a.size != len(uv)) or np.any(~(a >= 0)):
-                raise ConfigError(C.label(where, name), s, f"a standard deviation >= 0 or {len(uv)} of them")
-        points = {"uv_px": uv, "xy_world_m": xy, "sigma_px": spx, "sigma_m": sm}
-        try:
-            Hf, cov, _ = fit_homography(uv, xy, sigma_px=spx, sigma_m=sm)
-        except InputError as e:
-            raise C.rewrap(e, where) from None
-        Hn = H / np.linalg.norm(H)
-        Hn = Hn if np.sum(Hn * Hf) > 0 else -Hn
-        d_m = np.hypot(*(_apply(Hn, uv, False)[1] - _apply(Hf, uv, False)[1]).T).max()
-        sig = np.sqrt(np.max(np.linalg.eigvalsh(_apply(Hf, uv, True)[3] @ cov @ np.swapaxes(
-            _apply(Hf, uv, True)[3], -1, -2)), -1)).max()
-        if d_m > 3 * max(sig, 1e-9):
-            warnings.warn(f"{where}: H_ground_image differs from the fit of its points by up to {d_m:.3g} m "
-                          f"({d_m / max(sig, 1e-12):.3g} sigma); the fit's covariance is used around the file's H",
-                          ConsistencyWarning, stacklevel=3)
-    if d.get("cov_H") is not None:
-        if points is not None:
-            raise ConfigError(C.label(where, "cov_H"), "given with points", "cov_H or points (the fit gives it)")
-        cov = C.as_matrix(where, "cov_H", d["cov_H"], (9, 9))
-    try:
-        hc = HomographyCamera(H, size, cov_h=cov, ground_z_m=gz, points=points,
-                              ground_side_uv_px=None if points is None else points["uv_px"])
-        cam, cov_pose = None, None
-        if d.get("K") is not None:
-            K = C.check_K(where, "K", C.as_matrix(where, "K", d["K"], (3, 3)))
-            dist = None if d.get("dist") is None else C.as_vector(where, "dist", d["dist"], (0, 4, 5, 8),
-                                                                   "distortion coefficients")
-            cam, cov_pose = camera_from_homography(hc, K, size, dist=dist, cov_h=hc.cov_h, ground_z_m=gz)
-        elif d.get("dist") is not None:
-            raise ConfigError(C.label(where, "dist"), d["dist"], "dist only with K")
-    except InputError as e:
-        if isinstance(e, ConfigError):
-            raise
-        raise C.rewrap(e, where) from None
-    return HomographyFile(hc, cam, cov_pose)
-
-
-def _numeric(s) -> bool:
-    try:
-        np.asarray(s, dtype=np.float64)
-    except (TypeError, ValueError):
-        return False
-    return True
-
-
-def _rows(where, field, value) -> np.ndarray:
-    from ..errors import ConfigError
-    from ..io import _common as C
-
-    try:
-        a = np.asarray(value, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise ConfigError(C.label(where, field), value, "a list of [a, b] pairs") from None
-    if a.ndim != 2 or a.shape[1] != 2 or not np.all(np.isfinite(a)):
-        raise ConfigError(C.label(where, field), value, "a list of finite [a, b] pairs")
-    return a
-
-
-def load_homography(path) -> HomographyFile:
-    """Read a ``model: homography`` camera file (YAML/JSON); see :func:`homography_file_from_dict`."""
-    from ..errors import ConfigError
-    from ..io import _common as C
-
-    p, d = C.read_mapping(path)
-    if not isinstance(d, dict) or str(d.get("model", "")).strip().lower() != "homography":
-        raise ConfigError(C.label(str(p), "model"), d.get("model") if isinstance(d, dict) else d, "'homography'")
-    return homography_file_from_dict(d, where=str(p))

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import warnings
 
+import cv2
 import numpy as np
 
 from .. import params as P
@@ -100,7 +101,6 @@ class OpenCVCamera(Camera):
     @classmethod
     def from_projection_matrix(cls, Pm, image_size_px, dist=None, ground_z_m=0.0):
         """Build from a 3x4 projection matrix ``P = K [R | t]`` (RQ decomposition)."""
-        import cv2
 
         Pm = _matrix("P", Pm, (3, 4))
         K, R, c_h = cv2.decomposeProjectionMatrix(Pm)[:3]
@@ -138,29 +138,6 @@ class OpenCVCamera(Camera):
             "t": self._t.tolist(),
             "ground_z_m": self.ground_z_m,
         }
-
-    def to_pantilt(self, *, strict: bool = True, rtol: float = 1e-9):
-        """Convert to the paper's :class:`PanTiltCamera`.
-
-        The pose always converts exactly.  The intrinsics convert exactly only when
-        ``fx == fy``, skew is 0 and there is no distortion; otherwise ``strict``
-        raises :class:`InputError`, and ``strict=False`` uses ``f = (fx + fy) / 2``,
-        drops skew and distortion and warns.
-        """
-        from .pantilt import PanTiltCamera
-
-        fx, fy, cx, cy, sk = self.params[:5]
-        exact = abs(fx - fy) <= rtol * fx and abs(sk) <= rtol * fx and not np.any(self.dist)
-        if not exact:
-            msg = (f"fx={fx:g}, fy={fy:g}, skew={sk:g}, dist={self.dist.tolist()}")
-            if strict:
-                raise InputError("camera intrinsics", msg,
-                                 "fx == fy, zero skew and zero distortion for an exact pan-tilt camera "
-                                 "(use strict=False to approximate)")
-            warnings.warn(f"approximating OpenCV camera as pan-tilt: {msg}", ConsistencyWarning, stacklevel=2)
-        x, y, h = self.params[P.XM:P.HM + 1]
-        return PanTiltCamera((fx + fy) / 2.0, self.image_size_px, h, self.pan_deg, self.tilt_deg,
-                             self.roll_deg, (x, y), (cx, cy), self.ground_z_m)
 
     def __repr__(self) -> str:
         return (f"OpenCVCamera(fx={self.params[0]:g}, fy={self.params[1]:g}, image_size_px={self.image_size_px}, "

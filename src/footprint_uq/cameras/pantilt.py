@@ -20,14 +20,17 @@ world frame W (x east, y north) the ground point is ``(x0 + Y, y0 + X)``.
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 
 from .. import params as P
 from .. import status
 from .._checks import as_float, as_points
-from ..errors import InputError
+from ..errors import ConsistencyWarning, InputError
 from . import general
 from .base import Camera
+from .opencv import OpenCVCamera
 
 __all__ = ["PanTiltCamera", "paper_xy", "paper_partials", "closed_form_backproject"]
 
@@ -272,7 +275,7 @@ class PanTiltCamera(Camera):
         (see :func:`closed_form_backproject`).  ``dxy_dp`` has all 22 columns of
         :data:`~footprint_uq.params.PARAM_NAMES`: fx and fy separately (the focal
         budget moves both together), distortion derivatives at zero nominal
-        distortion, ground columns as in :mod:`footprint_uq.ground`.  If the
+        distortion, ground columns as in :mod:`footprint_uq.cameras.ground`.  If the
         parameter vector has been given non-zero nominal distortion or ground
         perturbations, the general path is used.  :meth:`backproject_with`
         (Monte Carlo, finite differences) always uses the general path.
@@ -309,10 +312,30 @@ class PanTiltCamera(Camera):
             "ground_z_m": self.ground_z_m,
         }
 
-    def to_opencv(self):
-        """The same camera as an :class:`~footprint_uq.cameras.opencv.OpenCVCamera`."""
-        from .opencv import OpenCVCamera
+    @classmethod
+    def from_opencv(cls, camera, *, strict: bool = True, rtol: float = 1e-9) -> PanTiltCamera:
+        """The paper's pan-tilt camera equal to an :class:`~footprint_uq.cameras.opencv.OpenCVCamera`.
 
+        The pose always converts exactly.  The intrinsics convert exactly only when
+        ``fx == fy``, skew is 0 and there is no distortion; otherwise ``strict``
+        raises :class:`InputError`, and ``strict=False`` uses ``f = (fx + fy) / 2``,
+        drops skew and distortion and warns.
+        """
+        fx, fy, cx, cy, sk = camera.params[:5]
+        exact = abs(fx - fy) <= rtol * fx and abs(sk) <= rtol * fx and not np.any(camera.dist)
+        if not exact:
+            msg = (f"fx={fx:g}, fy={fy:g}, skew={sk:g}, dist={camera.dist.tolist()}")
+            if strict:
+                raise InputError("camera intrinsics", msg,
+                                 "fx == fy, zero skew and zero distortion for an exact pan-tilt camera "
+                                 "(use strict=False to approximate)")
+            warnings.warn(f"approximating OpenCV camera as pan-tilt: {msg}", ConsistencyWarning, stacklevel=2)
+        x, y, h = camera.params[P.XM:P.HM + 1]
+        return cls((fx + fy) / 2.0, camera.image_size_px, h, camera.pan_deg, camera.tilt_deg,
+                   camera.roll_deg, (x, y), (cx, cy), camera.ground_z_m)
+
+    def to_opencv(self) -> OpenCVCamera:
+        """The same camera as an :class:`~footprint_uq.cameras.opencv.OpenCVCamera`."""
         T = self.T_cam_world
         return OpenCVCamera(self.K, np.zeros(5), T[:3, :3], T[:3, 3], self.image_size_px,
                             ground_z_m=self.ground_z_m)

@@ -217,14 +217,15 @@ def undistort_point(dom, k, xd, yd, x0, y0):
     if not (math.isfinite(xd) and math.isfinite(yd)) or not in_domain_distorted(dom, xd, yd):
         return False, nan, nan, nan, nan, nan, nan
     tol = UNDISTORT_TOL * max(1.0, max(abs(xd), abs(yd)))
+    ok = False
     if in_domain_undistorted(dom, x0, y0):
         x, y = _newton(dom, xd, yd, k, x0, y0, UNDISTORT_MAX_ITER, tol)
-    else:
-        x, y = _radial_start(dom, k, xd, yd)
-    if not _accept(dom, xd, yd, k, x, y, tol):  # (the radial start only when needed: 60 bisection steps)
+        ok = _accept(dom, xd, yd, k, x, y, tol)
+    if not ok:  # the radial start only when needed: its bisection costs more than the Newton steps
         rx, ry = _radial_start(dom, k, xd, yd)
         x, y = _newton(dom, xd, yd, k, rx, ry, UNDISTORT_MAX_ITER, tol)
-    if not _accept(dom, xd, yd, k, x, y, tol):
+        ok = _accept(dom, xd, yd, k, x, y, tol)
+    if not ok:
         x, y = 0.0, 0.0
         for i in range(1, _N_CONTINUATION + 1):
             t = i / _N_CONTINUATION
@@ -274,55 +275,64 @@ def fold_radius(k, c, s, r_max, n_grid):
 
 
 @nb.njit(**_JIT)
-def undistort_vec(dom, k, xd, yd, xn, yn, m00, m01, m10, m11, iden, ok):
-    """:func:`undistort_point` over 1-D arrays, vectorised (the kernels' form).
-
-    On entry ``xn``, ``yn`` hold start points (``xd``, ``yd`` or a neighbour's solution
-    continued to first order).  All points take undamped Newton steps together -- a loop
-    LLVM vectorises, also after convergence, which polishes the root as
-    :func:`undistort_point` does; a point outside the valid domain is not iterated.  A
-    point that has not converged onto the principal branch after that is solved again by
-    :func:`undistort_point` from ``x_d``: the same answer, or "no answer", as every
-    other path.  On exit ``ok`` (bool), the solution, ``m = d(x, y)/d(xd, yd)`` and
-    ``iden = 1 / den`` at the solution (``den`` as in :func:`distort_jac`).
-    """
-    n = ok.shape[0]
-    for i in range(n):
-        ok[i] = math.isfinite(xd[i]) and math.isfinite(yd[i]) and in_domain_distorted(dom, xd[i], yd[i])
-    nbad = n
-    for _ in range(UNDISTORT_MAX_ITER):
-        nbad = 0
-        for i in range(n):
-            x, y = xn[i], yn[i]
-            fx, fy, j00, j01, j10, j11, _r, den = distort_jac(x, y, k)
-            ex, ey = fx - xd[i], fy - yd[i]
-            tol = UNDISTORT_TOL * max(1.0, max(abs(xd[i]), abs(yd[i])))
-            conv = max(abs(ex), abs(ey)) <= tol
-            idet = 1.0 / (j00 * j11 - j01 * j10)
-            a, b, c, d = j11 * idet, -j01 * idet, -j10 * idet, j00 * idet
-            go = ok[i]
-            xn[i] = x - (a * ex + b * ey) if go else x
-            yn[i] = y - (c * ex + d * ey) if go else y
-            m00[i], m01[i], m10[i], m11[i] = a, b, c, d
-            iden[i] = 1.0 / den
-            nbad += 1 if (go and not conv) else 0
-        if nbad == 0:
-            break
-    for i in range(n):
-        if not ok[i]:
-            continue
-        x, y = xn[i], yn[i]
-        fx, fy, j00, j01, j10, j11, _r, den = distort_jac(x, y, k)
-        tol = UNDISTORT_TOL * max(1.0, max(abs(xd[i]), abs(yd[i])))
-        good = (max(abs(fx - xd[i]), abs(fy - yd[i])) <= tol and j00 * j11 - j01 * j10 > 0.0
-                and in_domain_undistorted(dom, x, y))
-        if good:
+def _undistort_fallback(dom, k, xd, yd, xn, yn, m00, m01, m10, m11, iden, ok):
+    """The points :func:`undistort_vec`'s Newton pass left without an accepted root, solved by
+    :func:`undistort_point` from ``x_d`` (same answer, or "no answer", as every other path)."""
+    for i in range(ok.shape[0]):
+        if ok[i] or not in_domain_distorted(dom, xd[i], yd[i]):
             continue
         r = undistort_point(dom, k, xd[i], yd[i], xd[i], yd[i])
         ok[i] = r[0]
         xn[i], yn[i] = r[1], r[2]
         m00[i], m01[i], m10[i], m11[i] = r[3], r[4], r[5], r[6]
         iden[i] = 1.0 / distort_jac(r[1], r[2], k)[7]
+
+
+@nb.njit(**_JIT)
+def undistort_vec(dom, k, xd, yd, xn, yn, m00, m01, m10, m11, iden, ok):
+    """:func:`undistort_point` over 1-D arrays, vectorised (the kernels' form).
+
+    On entry ``xn``, ``yn`` hold start points (``xd``, ``yd`` or a neighbour's solution
+    continued to first order).  All points take undamped Newton steps together -- a loop
+    LLVM vectorises; a converged point is frozen and a point outside the valid domain is not
+    iterated.  A point is accepted where it converged with a positive Jacobian determinant in
+    the principal region; any other point is solved again by :func:`undistort_point` from
+    ``x_d`` (:func:`_undistort_fallback`).  On exit ``ok`` (bool), the solution,
+    ``m = d(x, y)/d(xd, yd)`` and ``iden = 1 / den`` at the solution (``den`` as in
+    :func:`distort_jac`).  Solutions agree with :func:`undistort_point`'s to the Newton
+    tolerance (that one is polished by one more step).
+    """
+    n = ok.shape[0]
+    kt = (k[0], k[1], k[2], k[3], k[4], k[5], k[6], k[7])  # scalars: stores to the rows cannot alias them
+    rd_out2 = dom[DOM_RD_OUT2]
+    for _ in range(UNDISTORT_MAX_ITER):
+        nbad = 0
+        for i in range(n):
+            x, y = xn[i], yn[i]
+            xdi, ydi = xd[i], yd[i]
+            fx, fy, j00, j01, j10, j11, _r, den = distort_jac(x, y, kt)
+            ex, ey = fx - xdi, fy - ydi
+            conv = max(abs(ex), abs(ey)) <= UNDISTORT_TOL * max(1.0, max(abs(xdi), abs(ydi)))
+            inside = xdi * xdi + ydi * ydi < rd_out2  # in_domain_distorted; False for NaN
+            det = j00 * j11 - j01 * j10
+            idet = 1.0 / det
+            a, b, c, d = j11 * idet, -j01 * idet, -j10 * idet, j00 * idet
+            step = inside and not conv
+            xn[i] = x - (a * ex + b * ey) if step else x
+            yn[i] = y - (c * ex + d * ey) if step else y
+            m00[i], m01[i], m10[i], m11[i] = a, b, c, d
+            iden[i] = 1.0 / den
+            ok[i] = inside and conv and det > 0.0
+            nbad += 1 if step else 0
+        if nbad == 0:
+            break
+    nfail = 0
+    for i in range(n):
+        if ok[i] and not in_domain_undistorted(dom, xn[i], yn[i]):  # a root, but past the fold
+            ok[i] = False
+        nfail += 0 if ok[i] else 1
+    if nfail:
+        _undistort_fallback(dom, k, xd, yd, xn, yn, m00, m01, m10, m11, iden, ok)
 
 
 # --------------------------------------------------------------------------------------

@@ -7,12 +7,14 @@ every inconsistency that is tolerated is reported as a
 
 from __future__ import annotations
 
+import difflib
 import json
 import math
 import warnings
 from pathlib import Path
 
 import numpy as np
+import yaml
 
 from ..errors import ConfigError, ConsistencyWarning, InputError
 
@@ -62,7 +64,6 @@ def parse_mapping(text: str, path: Path, *, what: str = "camera file") -> dict:
         if path.suffix.lower() == ".json":
             data = json.loads(text)
         else:
-            import yaml
 
             data = yaml.safe_load(text)
     except Exception as e:  # yaml.YAMLError / json.JSONDecodeError, with their one-line reason
@@ -323,3 +324,55 @@ def sanitize(obj):
     if isinstance(obj, (float, np.floating)):
         return float(obj)
     return obj
+
+
+#: unit suffixes of keys and what they spell
+UNITS = {"m": "metres", "mm": "millimetres", "cm": "centimetres", "km": "kilometres", "ft": "feet",
+          "px": "pixels", "pix": "pixels", "pixel": "pixels", "pixels": "pixels", "deg": "degrees",
+          "degrees": "degrees", "rad": "radians", "radians": "radians", "meters": "metres", "metres": "metres",
+          "meter": "metres", "metre": "metres"}
+KEY_UNIT = {"image_size_px": "px", "focal_px": "px", "principal_point_px": "px", "position_m": "m",
+             "height_m": "m", "pan_deg": "deg", "tilt_deg": "deg", "roll_deg": "deg", "ground_z_m": "m"}
+ALIASES = {
+    "focal": "focal_px", "focal_length": "focal_px", "focal_length_px": "focal_px", "f": "focal_px",
+    "f_px": "focal_px", "fx": "focal_px", "fy": "focal_px", "focal_length_mm": "focal_px",
+    "height": "height_m", "camera_height": "height_m", "mounting_height": "height_m", "h": "height_m",
+    "altitude": "height_m", "pan": "pan_deg", "yaw": "pan_deg", "heading": "pan_deg", "azimuth": "pan_deg",
+    "tilt": "tilt_deg", "pitch": "tilt_deg", "roll": "roll_deg", "position": "position_m", "xy": "position_m",
+    "location": "position_m", "principal_point": "principal_point_px", "pp": "principal_point_px",
+    "cx": "principal_point_px", "cy": "principal_point_px", "center": "principal_point_px",
+    "image_size": "image_size_px", "resolution": "image_size_px", "size": "image_size_px",
+    "width": "image_size_px", "image_width": "image_size_px", "image_height": "image_size_px",
+    "ground_z": "ground_z_m", "ground_height": "ground_z_m", "ground": "ground_z_m",
+    "camera_matrix": "K", "intrinsics": "K", "intrinsic_matrix": "K", "k": "K",
+    "distortion": "dist", "dist_coeffs": "dist", "distortion_coefficients": "dist", "d": "dist",
+    "rotation": "R", "rotation_matrix": "R", "r": "R", "translation": "t", "tvec": "t", "T": "t",
+    "translation_vector": "t", "projection_matrix": "P", "p": "P", "type": "model", "camera_model": "model",
+}
+
+
+def suggest_key(key: str, allowed) -> str:
+    """What to write instead of an unknown key: the key with the right unit, an alias or a close match."""
+    allowed = list(allowed)
+    k = str(key)
+    kl = k.lower()
+    base, _, unit = kl.rpartition("_")
+    if not base or unit not in UNITS:
+        base, unit = kl, ""
+    candidates = [a for a in allowed if a.rpartition("_")[0] == base or a == base]
+    target = candidates[0] if candidates else ALIASES.get(kl) or ALIASES.get(base) or ALIASES.get(k)
+    if target and target in allowed:
+        want = KEY_UNIT.get(target)
+        if target == "focal_px" and kl in ("fx", "fy"):
+            return "a known key: use 'focal_px' (one focal length; model: opencv with K when fx != fy)"
+        if want and unit and UNITS.get(unit) != UNITS[want]:
+            note = " = focal length / pixel pitch" if target == "focal_px" and unit in ("mm", "m", "cm") else ""
+            return (f"a known key: use '{target}' ({UNITS[want]}{note}) instead; '{k}' is in {UNITS[unit]}, "
+                    "convert the value")
+        if want and not unit:
+            return f"a known key with its unit: use '{target}' ({UNITS[want]})"
+        return f"a known key: use '{target}'"
+    close = difflib.get_close_matches(k, allowed, n=1, cutoff=0.6)
+    if close:
+        return f"a known key: did you mean '{close[0]}'?"
+    return f"one of the keys {allowed}"

@@ -29,17 +29,24 @@ calibration files (format detected from the content); see
 
 from __future__ import annotations
 
-import difflib
 import json
 from pathlib import Path
 
 import numpy as np
+import yaml
 
 from ..cameras.base import Camera
 from ..cameras.opencv import OpenCVCamera
 from ..cameras.pantilt import PanTiltCamera
 from ..errors import ConfigError, InputError
+from ..uncertainty.budget import load_budget
 from . import _common as C
+from .atomic import atomic_write_text
+from .dataset_files import camera_from_dair_v2x, camera_from_rope3d, camera_from_tumtraf_file, read_tumtraf_calibration
+from .homography_files import homography_file_from_dict
+from .opencv_files import camera_from_opencv_file, read_opencv_file
+from .pose import NO_POSE_HELP, pose_camera, read_pose
+from .ros_files import camera_from_ros_file, read_ros_camera_info
 
 __all__ = ["load_camera", "load_intrinsics", "save_camera", "save_budget", "camera_from_dict", "camera_to_dict",
            "detect_format", "FORMATS", "PANTILT_KEYS", "OPENCV_KEYS"]
@@ -56,62 +63,17 @@ OPENCV_KEYS = (("model", "image_size_px", "K"), ("dist", "R", "t", "P", "ground_
 _MODEL_ALIASES = {"pan-tilt": "pan-tilt", "pantilt": "pan-tilt", "pan_tilt": "pan-tilt", "paper": "pan-tilt",
                   "opencv": "opencv", "open-cv": "opencv", "pinhole": "opencv", "homography": "homography"}
 
-_UNITS = {"m": "metres", "mm": "millimetres", "cm": "centimetres", "km": "kilometres", "ft": "feet",
-          "px": "pixels", "pix": "pixels", "pixel": "pixels", "pixels": "pixels", "deg": "degrees",
-          "degrees": "degrees", "rad": "radians", "radians": "radians", "meters": "metres", "metres": "metres",
-          "meter": "metres", "metre": "metres"}
-_KEY_UNIT = {"image_size_px": "px", "focal_px": "px", "principal_point_px": "px", "position_m": "m",
-             "height_m": "m", "pan_deg": "deg", "tilt_deg": "deg", "roll_deg": "deg", "ground_z_m": "m"}
-_ALIASES = {
-    "focal": "focal_px", "focal_length": "focal_px", "focal_length_px": "focal_px", "f": "focal_px",
-    "f_px": "focal_px", "fx": "focal_px", "fy": "focal_px", "focal_length_mm": "focal_px",
-    "height": "height_m", "camera_height": "height_m", "mounting_height": "height_m", "h": "height_m",
-    "altitude": "height_m", "pan": "pan_deg", "yaw": "pan_deg", "heading": "pan_deg", "azimuth": "pan_deg",
-    "tilt": "tilt_deg", "pitch": "tilt_deg", "roll": "roll_deg", "position": "position_m", "xy": "position_m",
-    "location": "position_m", "principal_point": "principal_point_px", "pp": "principal_point_px",
-    "cx": "principal_point_px", "cy": "principal_point_px", "center": "principal_point_px",
-    "image_size": "image_size_px", "resolution": "image_size_px", "size": "image_size_px",
-    "width": "image_size_px", "image_width": "image_size_px", "image_height": "image_size_px",
-    "ground_z": "ground_z_m", "ground_height": "ground_z_m", "ground": "ground_z_m",
-    "camera_matrix": "K", "intrinsics": "K", "intrinsic_matrix": "K", "k": "K",
-    "distortion": "dist", "dist_coeffs": "dist", "distortion_coefficients": "dist", "d": "dist",
-    "rotation": "R", "rotation_matrix": "R", "r": "R", "translation": "t", "tvec": "t", "T": "t",
-    "translation_vector": "t", "projection_matrix": "P", "p": "P", "type": "model", "camera_model": "model",
-}
 
 
-def _suggest(key: str, allowed) -> str:
-    """What to write instead of an unknown key: the key with the right unit, an alias or a close match."""
-    allowed = list(allowed)
-    k = str(key)
-    kl = k.lower()
-    base, _, unit = kl.rpartition("_")
-    if not base or unit not in _UNITS:
-        base, unit = kl, ""
-    candidates = [a for a in allowed if a.rpartition("_")[0] == base or a == base]
-    target = candidates[0] if candidates else _ALIASES.get(kl) or _ALIASES.get(base) or _ALIASES.get(k)
-    if target and target in allowed:
-        want = _KEY_UNIT.get(target)
-        if target == "focal_px" and kl in ("fx", "fy"):
-            return "a known key: use 'focal_px' (one focal length; model: opencv with K when fx != fy)"
-        if want and unit and _UNITS.get(unit) != _UNITS[want]:
-            note = " = focal length / pixel pitch" if target == "focal_px" and unit in ("mm", "m", "cm") else ""
-            return (f"a known key: use '{target}' ({_UNITS[want]}{note}) instead; '{k}' is in {_UNITS[unit]}, "
-                    "convert the value")
-        if want and not unit:
-            return f"a known key with its unit: use '{target}' ({_UNITS[want]})"
-        return f"a known key: use '{target}'"
-    close = difflib.get_close_matches(k, allowed, n=1, cutoff=0.6)
-    if close:
-        return f"a known key: did you mean '{close[0]}'?"
-    return f"one of the keys {allowed}"
+
+
 
 
 def _check_keys(d: dict, where: str, required, optional, model: str) -> None:
     allowed = list(required) + list(optional)
     for k in d:
         if k not in allowed:
-            raise ConfigError(C.label(where, str(k)), d[k], _suggest(k, allowed) + f" ({model} camera file)")
+            raise ConfigError(C.label(where, str(k)), d[k], C.suggest_key(k, allowed) + f" ({model} camera file)")
     for k in required:
         if k not in d or d[k] is None:
             raise ConfigError(C.label(where, k), "missing", f"a value for '{k}' ({model} camera file, "
@@ -147,7 +109,7 @@ def camera_from_dict(d: dict, *, where: str = "", ground_z_m=None, image_size_px
     if not isinstance(d, dict):
         raise ConfigError(where or "camera", type(d).__name__, "a mapping of camera keys")
     if "model" not in d:
-        hint = next((f"; did you mean '{_ALIASES[k]}'?" for k in d if k in ("type", "camera_model")), "")
+        hint = next((f"; did you mean '{C.ALIASES[k]}'?" for k in d if k in ("type", "camera_model")), "")
         raise ConfigError(C.label(where, "model"), "missing", f"'model: pan-tilt' or 'model: opencv'{hint}")
     model = _MODEL_ALIASES.get(str(d["model"]).strip().lower())
     if model is None:
@@ -164,13 +126,12 @@ def camera_from_dict(d: dict, *, where: str = "", ground_z_m=None, image_size_px
 
 def _homography_camera(d, where):
     """``model: homography`` with K: the decomposed camera (footprint_uq.cameras.homography)."""
-    from ..cameras.homography import homography_file_from_dict
 
     f = homography_file_from_dict(d, where=where)
     if f.camera is None:
         raise ConfigError(C.label(where, "K"), "missing",
                           "K to decompose the homography into a camera; a plane mapping without K has no "
-                          "22-parameter budget: use footprint_uq.cameras.homography.load_homography")
+                          "22-parameter budget: use footprint_uq.io.homography_files.load_homography")
     return f.camera
 
 
@@ -231,13 +192,10 @@ def _opencv_from_dict(d, where, pose=None):
         if has_rt or P is not None:
             raise ConfigError(C.label(where, "pose"), "given as argument",
                               "no pose argument: the file has one (R, t or P)")
-        from .opencv_files import _with_pose
-        from .pose import read_pose
 
-        return _with_pose(K, np.zeros(0) if dist is None else dist, size, read_pose(pose),
+        return pose_camera(K, np.zeros(0) if dist is None else dist, size, read_pose(pose),
                           gz if "ground_z_m" in d else None, where)
     if not has_rt and P is None:
-        from .pose import NO_POSE_HELP
 
         raise ConfigError(C.label(where, "R, t"), "missing",
                           "the pose: R (3x3) and t (3), or P (3x4) in the file, or " + NO_POSE_HELP)
@@ -329,13 +287,11 @@ def _write_mapping(data: dict, path, header: str) -> Path:
     if suffix == ".json":
         text = json.dumps(data, indent=2, allow_nan=False) + "\n"
     elif suffix in (".yaml", ".yml"):
-        import yaml
 
         text = f"# {header}\n" + yaml.safe_dump(data, sort_keys=False, default_flow_style=None, width=100)
     else:
         raise InputError("path", str(path), "a file name ending in .yaml, .yml or .json")
     p.parent.mkdir(parents=True, exist_ok=True)
-    from .atomic import atomic_write_text
 
     atomic_write_text(p, text)
     return p
@@ -355,9 +311,8 @@ def save_camera(camera: Camera, path) -> Path:
 def save_budget(budget, path) -> Path:
     """Write an error budget (an ErrorBudget, a preset name or a budget mapping) as YAML or JSON.
 
-    Read it back with :func:`footprint_uq.budget.load_budget`.  Returns the path written.
+    Read it back with :func:`footprint_uq.uncertainty.budget.load_budget`.  Returns the path written.
     """
-    from ..budget import load_budget
 
     return _write_mapping(load_budget(budget).to_dict(), path,
                           "footprint-uq error budget: 1-sigma values, units in the key names (docs/file-formats.md)")
@@ -454,24 +409,19 @@ def load_camera(path, *, format: str | None = None, ground_z_m=None, image_size_
             return _opencv_from_dict(d, str(p), pose=pose)
         return camera_from_dict(data, where=str(p), ground_z_m=ground_z_m, image_size_px=image_size_px)
     if fmt == "opencv":
-        from .opencv_files import camera_from_opencv_file
 
         return camera_from_opencv_file(p, ground_z_m=ground_z_m, image_size_px=image_size_px, pose=pose, **options)
     if fmt == "ros":
-        from .ros_files import camera_from_ros_file
 
         return camera_from_ros_file(p, ground_z_m=ground_z_m, image_size_px=image_size_px, pose=pose, **options)
     if fmt == "dair-v2x":
-        from .dataset_files import camera_from_dair_v2x
 
         return camera_from_dair_v2x(p, ground_z_m=ground_z_m, image_size_px=image_size_px, pose=pose, **options)
     if fmt == "rope3d":
-        from .dataset_files import camera_from_rope3d
 
         if pose is not None:
             raise ConfigError(C.label(str(p), "pose"), "given as argument", "no pose: the denorm plane gives it")
         return camera_from_rope3d(p, ground_z_m=ground_z_m, image_size_px=image_size_px, **options)
-    from .dataset_files import camera_from_tumtraf_file
 
     return camera_from_tumtraf_file(p, ground_z_m=ground_z_m, image_size_px=image_size_px, pose=pose, **options)
 
@@ -487,15 +437,12 @@ def load_intrinsics(path, *, format: str | None = None):
     p, text = C.read_text(path)
     fmt = format if format is not None else detect_format(p, text)
     if fmt == "opencv":
-        from .opencv_files import read_opencv_file
 
         d = read_opencv_file(p)
     elif fmt == "ros":
-        from .ros_files import read_ros_camera_info
 
         d = read_ros_camera_info(p)
     elif fmt == "tumtraf":
-        from .dataset_files import read_tumtraf_calibration
 
         d = read_tumtraf_calibration(p)
     elif fmt == "footprint-uq":

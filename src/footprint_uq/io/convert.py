@@ -7,9 +7,18 @@ writes atomically.
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
+import yaml
+
+from ..cameras.homography import homography_from_camera
+from ..cameras.opencv import OpenCVCamera
 from ..errors import InputError
+from ._common import read_mapping, sanitize
+from .atomic import atomic_write_text
+from .camera_files import camera_to_dict, load_camera
+from .homography_files import load_homography
 
 __all__ = ["TARGETS", "convert_camera_file"]
 
@@ -25,14 +34,8 @@ def convert_camera_file(camera, to: str, out, *, keep_intrinsics: bool = False) 
     distortion only); ``keep_intrinsics`` adds ``K`` so that the file decomposes back into the camera.
     ``to="opencv"`` writes K, R, t.  Returns the path written.
     """
-    import json
 
-    import yaml
 
-    from ..cameras.homography import homography_from_camera, load_homography
-    from ._common import read_mapping, sanitize
-    from .atomic import atomic_write_text
-    from .camera_files import camera_to_dict, load_camera
 
     if to not in TARGETS:
         raise InputError("--to", to, f"one of {', '.join(TARGETS)}")
@@ -60,7 +63,6 @@ def convert_camera_file(camera, to: str, out, *, keep_intrinsics: bool = False) 
     else:
         if not hasattr(cam, "T_cam_world"):
             raise InputError("camera", type(cam).__name__, "a camera with a pose")
-        from ..cameras.opencv import OpenCVCamera
 
         T = cam.T_cam_world
         dist = cam.dist

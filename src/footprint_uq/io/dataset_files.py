@@ -60,13 +60,14 @@ the file is refused; a ``vehicle_*`` file without a pose is refused as a vehicle
 from __future__ import annotations
 
 import warnings
+from pathlib import Path
 
 import numpy as np
 
 from ..cameras.opencv import OpenCVCamera
 from ..errors import ConfigError, ConsistencyWarning, InputError
 from . import _common as C
-from .pose import NO_POSE_HELP, camera_from_intrinsics_and_pose, read_pose
+from .pose import NO_POSE_HELP, camera_from_intrinsics_and_pose, pose_camera, read_pose, resolve_image_size
 
 __all__ = ["read_tumtraf_calibration", "camera_from_tumtraf_file", "POSE_CONVENTIONS", "read_dair_v2x_intrinsics",
            "read_dair_v2x_extrinsics", "camera_from_dair_v2x", "read_rope3d_calibration", "read_denorm",
@@ -276,14 +277,13 @@ def camera_from_tumtraf_file(path, *, ground_z_m=None, image_size_px=None, pose=
         ``transformation_matrix_<lidar>_to_<base>``) or the 4x4 LiDAR -> base transform; the
         camera is then in the base frame (e.g. ``s110_base``, ground ``z = 0``).
     """
-    from .opencv_files import _resolve_size, _with_pose
 
     if use not in (None, "extrinsics", "projection_matrix", "station_base", "lidar_projection"):
         raise ConfigError("use", use, "None, 'extrinsics', 'projection_matrix', 'station_base' or "
                           "'lidar_projection'")
     d = read_tumtraf_calibration(path, pose_convention=pose_convention)
     where = d["where"]
-    size = _resolve_size(where, d["image_size_px"], image_size_px)
+    size = resolve_image_size(where, d["image_size_px"], image_size_px)
     gz = 0.0 if ground_z_m is None else C.as_number("argument", "ground_z_m", ground_z_m)
     C.check_principal_point(where, d["K"][0, 2], d["K"][1, 2], size)
     lidar = _lidar_projection(d, where, lidar_to_base)
@@ -294,9 +294,8 @@ def camera_from_tumtraf_file(path, *, ground_z_m=None, image_size_px=None, pose=
             keys = d["pose_keys"] or ("projection_matrix",)
             raise ConfigError(C.label(where, "pose"), "given as argument",
                               f"no pose argument: the file has one ({', '.join(keys)})")
-        return _with_pose(d["K"], d["dist"], size, read_pose(pose), gz, where)
+        return pose_camera(d["K"], d["dist"], size, read_pose(pose), gz, where)
     if not has_pose:
-        from pathlib import Path
 
         if Path(where).name.lower().startswith("vehicle"):
             raise ConfigError(C.label(where, "pose"), "a vehicle camera",
@@ -416,7 +415,6 @@ def _camera_from_station_base(d, size, gz, where):
 
 def _load_lidar_transforms(spec):
     """``{lidar: (base, T 4x4)}`` from a LiDAR calibration JSON path or a 4x4 matrix (name None)."""
-    from pathlib import Path
 
     if isinstance(spec, (str, Path)):
         p, m = C.read_mapping(spec, what="LiDAR calibration file")
@@ -442,7 +440,6 @@ def _lidar_projection(d, where, lidar_to_base):
     transforms = dict(d["lidar_transforms"])
     if lidar_to_base is not None:
         transforms.update(_load_lidar_transforms(lidar_to_base))
-    from pathlib import Path
 
     for name in d["lidar_projections"]:
         sibling = Path(where).parent / f"{name}.json"  # the dev kit's calib/ folder holds the LiDAR's file
@@ -493,7 +490,6 @@ def _camera_from_extrinsics(d, size, gz, where):
 # ---------------------------------------------------------------------------------------------
 def _sibling(path, folder: str, suffix: str | None = None):
     """``<dataset>/calib/<folder>/<id>`` next to ``<dataset>/calib/<this folder>/<id>`` (None if absent)."""
-    from pathlib import Path
 
     p = Path(path)
     cand = p.parent.parent / folder / (p.name if suffix is None else p.stem + suffix)
@@ -539,14 +535,13 @@ def camera_from_dair_v2x(path, *, extrinsic=None, image_size_px=None, ground_z_m
     The world frame is the *virtual LiDAR* frame, whose x-y plane is the ground (z up): ground points come
     out in it.  ``extrinsic`` defaults to ``../virtuallidar_to_camera/<same name>`` (the dataset's layout).
     """
-    from .opencv_files import _resolve_size, _with_pose
 
     d = read_dair_v2x_intrinsics(path)
     where = d["where"]
-    size = _resolve_size(where, d["image_size_px"], image_size_px)
+    size = resolve_image_size(where, d["image_size_px"], image_size_px)
     gz = 0.0 if ground_z_m is None else C.as_number("argument", "ground_z_m", ground_z_m)
     if pose is not None:
-        return _with_pose(d["K"], d["dist"], size, read_pose(pose), gz, where)
+        return pose_camera(d["K"], d["dist"], size, read_pose(pose), gz, where)
     ext = extrinsic if extrinsic is not None else _sibling(path, "virtuallidar_to_camera")
     if ext is None:
         raise ConfigError(C.label(where, "extrinsic"), "missing",
@@ -608,11 +603,10 @@ def camera_from_rope3d(path, *, denorm=None, image_size_px=None, ground_z_m=None
     ``denorm`` defaults to ``../denorm/<same name>``; the image size is not in the files (Rope3D: 1920x1080)
     and must be given.
     """
-    from .opencv_files import _resolve_size
 
     d = read_rope3d_calibration(path)
     where = d["where"]
-    size = _resolve_size(where, None, image_size_px)
+    size = resolve_image_size(where, None, image_size_px)
     if ground_z_m not in (None, 0, 0.0):
         raise ConfigError("ground_z_m", ground_z_m, "none: the ground of a Rope3D camera is its denorm plane (z = 0)")
     dn = denorm if denorm is not None else _sibling(path, "denorm")

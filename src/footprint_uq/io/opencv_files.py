@@ -27,11 +27,20 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import cv2
 import numpy as np
 
+from ..cameras.opencv import OpenCVCamera
 from ..errors import ConfigError, InputError
 from . import _common as C
-from .pose import NO_POSE_HELP, camera_from_intrinsics_and_pose, read_pose
+from .pose import (
+    NO_POSE_HELP,
+    camera_from_intrinsics_and_pose,
+    pose_camera,
+    read_pose,
+    resolve_ground_z,
+    resolve_image_size,
+)
 
 __all__ = ["read_opencv_file", "camera_from_opencv_file"]
 
@@ -42,7 +51,6 @@ _P_KEYS = ("P", "projection_matrix")
 
 
 def _open(path: Path):
-    import cv2
 
     try:
         fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
@@ -57,7 +65,6 @@ def _open(path: Path):
 
 def _node_value(where: str, key: str, node):
     """The numeric content of a FileStorage node (matrix, sequence or number); None if absent."""
-    import cv2
 
     if node.isNone():
         return None
@@ -144,7 +151,6 @@ def read_opencv_file(path) -> dict:
                     raise ConfigError(C.label(where, b if a in keys else a), "missing", f"both {a} and {b}")
                 tv = C.as_vector(where, b, get(b), 3, "numbers (metres)")
                 if a == "rvec":
-                    import cv2
 
                     out["R"] = cv2.Rodrigues(C.as_vector(where, a, get(a), 3, "numbers (radians)").reshape(3, 1))[0]
                 else:
@@ -168,8 +174,8 @@ def camera_from_opencv_file(path, *, ground_z_m=None, image_size_px=None, pose=N
     """An :class:`OpenCVCamera` from an OpenCV FileStorage file (plus ``pose`` when the file has none)."""
     d = read_opencv_file(path)
     where = d["where"]
-    size = _resolve_size(where, d["image_size_px"], image_size_px)
-    gz = _resolve_ground(where, d.get("ground_z_m"), ground_z_m)
+    size = resolve_image_size(where, d["image_size_px"], image_size_px)
+    gz = resolve_ground_z(where, d.get("ground_z_m"), ground_z_m)
     gz0 = 0.0 if gz is None else gz
     if d["R"] is not None:
         if pose is not None:
@@ -181,7 +187,6 @@ def camera_from_opencv_file(path, *, ground_z_m=None, image_size_px=None, pose=N
             C.check_projection_matrix(where, d["P_key"], d["P"], cam)
         return cam
     if pose is None and d["P"] is not None:
-        from ..cameras.opencv import OpenCVCamera
 
         try:
             fromP = OpenCVCamera.from_projection_matrix(d["P"], size, None, gz0)
@@ -195,41 +200,4 @@ def camera_from_opencv_file(path, *, ground_z_m=None, image_size_px=None, pose=N
                  "camera's pose in the world)" if d["n_board_views"] else "")
         raise ConfigError(C.label(where, "pose"), "the file has intrinsics only", NO_POSE_HELP + board)
     kw = read_pose(pose)
-    return _with_pose(d["K"], d["dist"], size, kw, gz, where)
-
-
-def _with_pose(K, dist, size, kw: dict, gz, where):
-    pose_where = kw.pop("where", "pose")
-    if "ground_z_m" in kw:
-        gz_pose = C.as_number(pose_where, "ground_z_m", kw.pop("ground_z_m"))
-        if gz is not None and gz_pose != gz:
-            raise ConfigError(C.label(pose_where, "ground_z_m"), gz_pose, f"the same ground_z_m as given ({gz})")
-        gz = gz_pose
-    try:
-        return camera_from_intrinsics_and_pose(K, dist, size, ground_z_m=0.0 if gz is None else gz,
-                                               where=pose_where, **kw)
-    except TypeError as e:  # pragma: no cover - read_pose filters the keys
-        raise ConfigError(pose_where, str(e), "pose keys") from None
-
-
-def _resolve_size(where, from_file, given):
-    if from_file is None and given is None:
-        raise ConfigError(C.label(where, "image size"), "missing", "image_size_px=(width, height) as argument "
-                          "(the file does not state the image size)")
-    if given is None:
-        return from_file
-    g = C.as_image_size("argument", "image_size_px", given)
-    if from_file is not None and g != tuple(from_file):
-        raise ConfigError(C.label(where, "image size"), list(from_file),
-                          f"the image_size_px given as argument {list(g)} (intrinsics are calibrated for one "
-                          "resolution; rescale K explicitly for another)")
-    return g
-
-
-def _resolve_ground(where, from_file, given):
-    if given is None:
-        return from_file
-    g = C.as_number("argument", "ground_z_m", given)
-    if from_file is not None and g != from_file:
-        raise ConfigError(C.label(where, "ground_z_m"), from_file, f"the ground_z_m given as argument ({g})")
-    return g
+    return pose_camera(d["K"], d["dist"], size, kw, gz, where)

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import cv2
 import numpy as np
 
 from ..cameras.opencv import OpenCVCamera
@@ -42,11 +43,9 @@ def read_pose(pose, *, where: str = "pose") -> dict:
         d = pose
     else:
         raise ConfigError(where, type(pose).__name__, "a pose mapping or the path of a YAML/JSON pose file")
-    from .camera_files import _suggest
-
     for k in d:
         if k not in POSE_KEYS:
-            raise ConfigError(C.label(where, str(k)), d[k], _suggest(k, POSE_KEYS) + " (pose)")
+            raise ConfigError(C.label(where, str(k)), d[k], C.suggest_key(k, POSE_KEYS) + " (pose)")
     out = {k: v for k, v in d.items() if v is not None}
     out["where"] = where
     return out
@@ -103,7 +102,6 @@ def camera_from_intrinsics_and_pose(K, dist, image_size_px, *, R=None, t=None, r
         R = C.as_matrix(where, "R", R, (3, 3))
         t = C.as_vector(where, "t", t, 3, "numbers (metres)")
     elif name == "rvec, tvec":
-        import cv2
 
         rv = C.as_vector(where, "rvec", rvec, 3, "numbers (Rodrigues vector, radians)")
         t = C.as_vector(where, "tvec", tvec, 3, "numbers (metres)")
@@ -122,3 +120,44 @@ def camera_from_intrinsics_and_pose(K, dist, image_size_px, *, R=None, t=None, r
         return OpenCVCamera(K, dist, R, t, size, gz)
     except InputError as e:
         raise C.rewrap(e, where) from None
+
+
+def pose_camera(K, dist, size, kw: dict, gz, where):
+    """The camera of intrinsics ``K``, ``dist`` and image ``size`` at the pose ``kw`` (:func:`read_pose`);
+    a ground height in the pose must agree with ``gz`` (the file's or the caller's)."""
+    pose_where = kw.pop("where", "pose")
+    if "ground_z_m" in kw:
+        gz_pose = C.as_number(pose_where, "ground_z_m", kw.pop("ground_z_m"))
+        if gz is not None and gz_pose != gz:
+            raise ConfigError(C.label(pose_where, "ground_z_m"), gz_pose, f"the same ground_z_m as given ({gz})")
+        gz = gz_pose
+    try:
+        return camera_from_intrinsics_and_pose(K, dist, size, ground_z_m=0.0 if gz is None else gz,
+                                               where=pose_where, **kw)
+    except TypeError as e:  # pragma: no cover - read_pose filters the keys
+        raise ConfigError(pose_where, str(e), "pose keys") from None
+
+
+def resolve_image_size(where, from_file, given):
+    """The image size: the file's, the caller's, or both when they agree (else :class:`ConfigError`)."""
+    if from_file is None and given is None:
+        raise ConfigError(C.label(where, "image size"), "missing", "image_size_px=(width, height) as argument "
+                          "(the file does not state the image size)")
+    if given is None:
+        return from_file
+    g = C.as_image_size("argument", "image_size_px", given)
+    if from_file is not None and g != tuple(from_file):
+        raise ConfigError(C.label(where, "image size"), list(from_file),
+                          f"the image_size_px given as argument {list(g)} (intrinsics are calibrated for one "
+                          "resolution; rescale K explicitly for another)")
+    return g
+
+
+def resolve_ground_z(where, from_file, given):
+    """The ground height: the file's, the caller's, or both when they agree (else :class:`ConfigError`)."""
+    if given is None:
+        return from_file
+    g = C.as_number("argument", "ground_z_m", given)
+    if from_file is not None and g != from_file:
+        raise ConfigError(C.label(where, "ground_z_m"), from_file, f"the ground_z_m given as argument ({g})")
+    return g

@@ -28,7 +28,7 @@ import numpy as np
 
 from ..errors import ConfigError, ConsistencyWarning
 from . import _common as C
-from .pose import NO_POSE_HELP, read_pose
+from .pose import NO_POSE_HELP, pose_camera, read_pose, resolve_ground_z, resolve_image_size
 
 __all__ = ["read_ros_camera_info", "camera_from_ros_file", "ROS_DISTORTION_MODELS"]
 
@@ -109,11 +109,10 @@ def read_ros_camera_info(path) -> dict:
 
 def camera_from_ros_file(path, *, ground_z_m=None, image_size_px=None, pose=None):
     """An :class:`OpenCVCamera` from a ROS CameraInfo YAML and a ``pose`` (CameraInfo has none)."""
-    from .opencv_files import _resolve_ground, _resolve_size, _with_pose
 
     d = read_ros_camera_info(path)
     where = d["where"]
-    size = _resolve_size(where, d["image_size_px"], image_size_px)
+    size = resolve_image_size(where, d["image_size_px"], image_size_px)
     if pose is None:
         raise ConfigError(C.label(where, "pose"), "a ROS CameraInfo file has intrinsics only", NO_POSE_HELP)
-    return _with_pose(d["K"], d["dist"], size, read_pose(pose), _resolve_ground(where, None, ground_z_m), where)
+    return pose_camera(d["K"], d["dist"], size, read_pose(pose), resolve_ground_z(where, None, ground_z_m), where)

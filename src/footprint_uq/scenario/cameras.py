@@ -15,10 +15,10 @@ camera".  Our defaults, for a vehicle approaching from the south and turning lef
 Both are 1920x1080, 8 m and 10 m high, tilted 20 deg down, with 80 and 90 deg horizontal
 fields of view (focal 1144 px and 960 px), like a real roadside installation.  The principal point is
 the image centre ``(w/2, h/2)``, the convention of CARLA's camera sensor, so the same
-camera can be placed in CARLA (:mod:`footprint_uq.carla_bridge`).
+camera can be placed in CARLA (:mod:`footprint_uq.integrations.carla.bridge`).
 
 The camera *types* (Basler, BW-Bullet, BW-Cube) are error budgets: the paper's presets
-``basler1``, ``bw-bullet1``, ``bw-cube1`` (:mod:`footprint_uq.presets`).
+``basler1``, ``bw-bullet1``, ``bw-cube1`` (:mod:`footprint_uq.uncertainty.presets`).
 """
 
 from __future__ import annotations

@@ -10,11 +10,11 @@ Pipeline::
     result.statements()                            # the paper's claims, tested on the data
 
 A :class:`Scene` can also come from a CARLA recording
-(:func:`footprint_uq.carla_bridge.read_recording`); :func:`analyse` does not care.
+(:func:`footprint_uq.integrations.carla.bridge.read_recording`); :func:`analyse` does not care.
 
 Per frame and camera, the vehicle's 3-D box is known in the world (ground truth, as the
 paper captured it in CARLA).  Its bottom corners are projected into the image and
-back-projected with uncertainty by :func:`footprint_uq.footprints.footprints_from_boxes3d`
+back-projected with uncertainty by :func:`footprint_uq.products.footprints.footprints_from_boxes3d`
 (the camera-level errors are shared by the corners); from that come the largest-point
 and footprint-centre uncertainties.  Per-source contributions to the footprint-centre
 covariance are the same linear propagation split by source (they add up to the total).
@@ -43,15 +43,18 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
+import yaml
 
 from .. import params as P
-from .. import presets, status
+from .. import status
 from .._checks import as_float
-from ..budget import SHARED_SOURCES, ErrorBudget, load_budget
-from ..ellipse import chi2_scale, ellipse_axes
 from ..errors import ConfigError
-from ..footprints import footprints_from_boxes3d, polygon_centroid
-from ..propagation import DEFAULT_LINEAR_THRESHOLD, nonlinearity
+from ..products.footprints import footprints_from_boxes3d, polygon_centroid
+from ..uncertainty import presets
+from ..uncertainty.budget import SHARED_SOURCES, ErrorBudget, load_budget
+from ..uncertainty.ellipse import chi2_scale, ellipse_axes
+from ..uncertainty.propagation import DEFAULT_LINEAR_THRESHOLD, nonlinearity
 from .cameras import CAMERA_TYPES, CameraSpec, default_camera_specs
 from .intersection import Intersection, RoadLayout, cfg_float
 from .trajectory import SEGMENTS, Vehicle, box_corners, left_turn_path, sample_trajectory
@@ -175,10 +178,8 @@ def load_config(path) -> CaseStudyConfig:
         if p.suffix.lower() == ".json":
             data = json.loads(text)
         else:
-            import yaml
-
             data = yaml.safe_load(text)
-    except (ValueError, ImportError) as e:
+    except ValueError as e:
         raise ConfigError(str(p), type(e).__name__, f"valid YAML/JSON ({str(e).splitlines()[0]})") from None
     except Exception as e:  # yaml.YAMLError has no common base with ValueError
         raise ConfigError(str(p), type(e).__name__, f"valid YAML/JSON ({str(e).splitlines()[0]})") from None
@@ -274,7 +275,7 @@ def centre_contributions(camera, budget, fp) -> dict[str, np.ndarray]:
     """Per-source covariance ``(N, 2, 2)`` of the footprint centres of ``fp`` (a FootprintEstimate).
 
     The centre is a function of the corners, ``C = C(p_0, ..., p_{K-1})``, with the
-    Jacobian ``G`` of :func:`footprint_uq.footprints.polygon_centroid`; a camera-level
+    Jacobian ``G`` of :func:`footprint_uq.products.footprints.polygon_centroid`; a camera-level
     source ``s`` with parameter block ``Sigma_s`` contributes ``G J_s Sigma_s J_s^T G^T``
     (``J_s`` stacks the corners' ``dxy/dp_s``), a per-point source ``G Juv (I x S) Juv^T G^T``.
     Correlations between sources, if the budget has any, are in ``"cross_terms"``.  The
@@ -516,7 +517,6 @@ def analyse(scene: Scene, camera_types=None, *, confidence: float = 0.95):
     -------
     CaseStudyResult
     """
-    import pandas as pd
 
     if camera_types is None:
         camera_types = {k: k for k in CAMERA_TYPES}

@@ -47,7 +47,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .. import presets
+from ..uncertainty import presets
 
 __all__ = ["XY_MAJORITY", "XY_MIDDLE", "LANE_BAND", "RANK_MARGIN", "FARTHEST_SHARE", "XY_AXES", "FAILING_EXAMPLES",
            "PAPER_QUOTES", "evaluate_claims", "xy_sequence_claim", "lane_width_claim", "ranking_claim",

@@ -104,7 +104,7 @@ class RoadLayout:
     """What the figures draw: paved polygons, painted markings and the lane width.
 
     Produced by :meth:`Intersection.layout` for the synthetic scene, or read from a
-    recording (:mod:`footprint_uq.carla_bridge`) for a CARLA map.
+    recording (:mod:`footprint_uq.integrations.carla.bridge`) for a CARLA map.
     """
 
     road_polygons: list = field(default_factory=list)

@@ -22,10 +22,13 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import presets
-from ..budget import ErrorBudget
-from ..ellipse import ellipse_axes
+from ..cameras.pantilt import PanTiltCamera
+from ..uncertainty import presets
+from ..uncertainty.budget import ErrorBudget
+from ..uncertainty.ellipse import ellipse_axes
+from ..uncertainty.propagation import monte_carlo, propagate
 from . import claims as C
+from .case_study import CaseStudyConfig, analyse, build_scene
 
 __all__ = ["reproduction_data", "render_markdown", "write_paper_reproduction"]
 
@@ -34,7 +37,6 @@ _T2_COLS = ("sigma fx", "sigma fy", "sigma f", "sigma c", "sigma r", "k1", "k2",
 
 
 def _cameras():
-    from ..cameras.pantilt import PanTiltCamera
 
     return {
         "demo camera (README, `make demo`): 8 m, tilt 20 deg, pan 30 deg": PanTiltCamera(
@@ -118,7 +120,6 @@ def _height_share(result) -> dict:
 
 def _readme_mc() -> list[dict]:
     """Linear / Monte-Carlo sigma_major along the boresight's azimuth, at 50-200 m, for each camera."""
-    from ..propagation import monte_carlo, propagate
 
     rows = []
     for name, cam in _cameras().items():
@@ -140,7 +141,6 @@ def _readme_mc() -> list[dict]:
 
 def reproduction_data() -> dict:
     """Everything the page shows (plain Python values)."""
-    from .case_study import CaseStudyConfig, analyse, build_scene
 
     cfg = CaseStudyConfig()
     scene = build_scene(cfg)

@@ -268,7 +268,7 @@ def box_corners(boxes) -> np.ndarray:
 
     Order: the bottom face counter-clockwise seen from above starting rear-right --
     (-l/2, -w/2), (+l/2, -w/2), (+l/2, +w/2), (-l/2, +w/2) in the box frame (x forward, y
-    left), the order of :func:`footprint_uq.footprints.box3d_bottom_corners` -- then the top
+    left), the order of :func:`footprint_uq.products.footprints.box3d_bottom_corners` -- then the top
     face in the same order.  Corners 0-3 are the footprint.
     """
     b = np.asarray(boxes, dtype=np.float64)

@@ -23,33 +23,49 @@ from __future__ import annotations
 
 import json
 import math
+import operator
+import re
 import time
 import zlib
 from dataclasses import dataclass
+from itertools import chain
+from itertools import repeat as _repeat
+from typing import NamedTuple
 
 import numpy as np
+import orjson
+from numba import njit
 
 from ..batch import schema as S
-from ..ellipse import chi2_scale, ellipse_axes
+from ..batch.fleet import load_registry
 from ..errors import FootprintUQError, InputError
-from ..footprints import CONTACT_MODES, V2X_FIELDS, FrameProcessor
-from ..geo import GeoReference
-from ..v2x import J2735_POSITION_CONFIDENCE_NAMES
+from ..products.footprints import CONTACT_MODES, V2X_FIELDS, FrameProcessor
+from ..products.geo import GeoReference
+from ..products.v2x import J2735_POSITION_CONFIDENCE_NAMES
+from ..uncertainty.ellipse import chi2_scale, ellipse_axes
+from ..uncertainty.propagation import DEFAULT_LINEAR_THRESHOLD, nonlinearity
+from .jsonrows import Table
 from .messages.cpm import (
     CONFIDENCE_LEVEL_UNAVAILABLE,
+    COORD_MAX,
+    COORD_MIN,
     CPM_CLASSES,
     LATITUDE_UNAVAILABLE,
     LONGITUDE_UNAVAILABLE,
     build_cpm,
-    coordinate_cm,
     encode_cpm_uper,
     timestamp_its_ms,
 )
-from .messages.sdsm import HEADING_UNAVAILABLE, SDSM_OBJECT_TYPES, SPEED_UNAVAILABLE, build_sdsm, offset_dm
-from .messages.uper_cpm import class_bits, encode_cpm_uper_fast, perceived_object_container_uper
+from .messages.sdsm import HEADING_UNAVAILABLE, OFFSET_MAX, SDSM_OBJECT_TYPES, SPEED_UNAVAILABLE, build_sdsm
+from .messages.uper_cpm import (
+    CpmUperWriter,
+    class_bits,
+    encode_cpm_uper_fast,
+    perceived_object_container_uper_arrays,
+)
 
-__all__ = ["Service", "CameraSetup", "error_record", "station_id_of", "RECORD_FOOTPRINTS", "RECORD_ERROR",
-           "UPER_ENCODERS"]
+__all__ = ["Service", "CameraSetup", "FrameOutput", "error_record", "station_id_of", "RECORD_FOOTPRINTS",
+           "RECORD_ERROR", "UPER_ENCODERS"]
 
 UPER_ENCODERS = ("fast", "asn1tools")
 #: most perceived objects in one CPM (``PerceivedObjects ::= SEQUENCE SIZE (0..255, ...)``); the SDSM follows
@@ -58,7 +74,6 @@ MAX_MESSAGE_OBJECTS = 255
 RECORD_FOOTPRINTS = "footprints"
 RECORD_ERROR = "error"
 _CPM_INDEX = V2X_FIELDS.index("cpm_x_confidence")
-_CPM_CLASS_BITS = {name: class_bits(c) for name, c in CPM_CLASSES.items()}
 _J_POS = V2X_FIELDS.index("j2735_position_confidence")
 
 
@@ -72,6 +87,27 @@ def error_record(reason: str, *, field: str | None = None, camera_id=None, frame
     """An error record (one per rejected frame)."""
     return {"type": RECORD_ERROR, "camera_id": camera_id, "frame": frame, "field": field, "reason": str(reason),
             "source": source}
+
+
+class FrameOutput(NamedTuple):
+    """One frame's output as the transports send it (:meth:`Service.process_frame_json`)."""
+
+    #: the record as JSON text (UTF-8)
+    data: bytes
+    #: ``"footprints"`` or ``"error"``
+    type: str
+    camera_id: object
+    #: ``processing_us["total"]`` of a footprints record (None for an error record)
+    processing_us: float | None
+    #: an error record as a dict (None for a footprints record: parse ``data``)
+    record: dict | None
+
+
+def _dumps_error(rec: dict) -> bytes:
+    try:
+        return orjson.dumps(rec)
+    except orjson.JSONEncodeError:  # text that is not valid Unicode (an embedding caller's str): escaped
+        return json.dumps(rec, ensure_ascii=True, separators=(",", ":")).encode("ascii")
 
 
 class _FrameError(Exception):
@@ -89,10 +125,19 @@ class CameraSetup:
     processor: FrameProcessor
     georef: GeoReference
     station_id: int
+    #: the reference position of the messages (0.1 microdegree; "unavailable" without an origin)
+    lat_1e7deg: int | None = None
+    lon_1e7deg: int | None = None
+    #: the fixed part of its CPMs' UPER encoding
+    uper: CpmUperWriter | None = None
 
-
-def _nan_none(values: list) -> list:
-    return [v if v == v else None for v in values]  # NaN != NaN
+    def __post_init__(self):
+        geo = self.georef
+        if geo.has_origin:
+            self.lat_1e7deg, self.lon_1e7deg = round(geo.origin_lat_deg * 1e7), round(geo.origin_lon_deg * 1e7)
+        self.uper = CpmUperWriter(self.station_id, latitude=LATITUDE_UNAVAILABLE if self.lat_1e7deg is None else
+                                  self.lat_1e7deg, longitude=LONGITUDE_UNAVAILABLE if self.lon_1e7deg is None else
+                                  self.lon_1e7deg)
 
 
 def _finite_number(d: dict, key: str, where: str) -> float:
@@ -132,7 +177,7 @@ class Service:
     contact : {"bottom-centre", "bottom-corners"}
         Ground contact of 2D boxes.
     allow_outside_image : bool
-        See :func:`footprint_uq.footprints.footprints_from_corners`.
+        See :func:`footprint_uq.products.footprints.footprints_from_corners`.
     station_id : int, optional
         StationId of the messages (one camera); default :func:`station_id_of` of the camera id.
     messages : bool
@@ -145,11 +190,11 @@ class Service:
     linearity : bool
         Add per object ``nonlinearity`` -- the largest predicted relative error of the linear
         1-sigma semi-major axis over its usable ground-contact points
-        (:func:`footprint_uq.propagation.nonlinearity`; for 2D boxes with the bottom-centre contact
+        (:func:`footprint_uq.uncertainty.propagation.nonlinearity`; for 2D boxes with the bottom-centre contact
         that point is the centre itself) -- and ``linear_ok`` (``nonlinearity <= linear_threshold``).
         Off by default: it costs about 1.7 ms per 100 points (numpy), more than the rest of a frame.
     linear_threshold : float, optional
-        Threshold of ``linear_ok`` (default :data:`footprint_uq.propagation.DEFAULT_LINEAR_THRESHOLD`).
+        Threshold of ``linear_ok`` (default :data:`footprint_uq.uncertainty.propagation.DEFAULT_LINEAR_THRESHOLD`).
     warm_up : bool
         Run each camera once on a dummy frame so that the compiled kernels are loaded
         before the first real frame (default True).
@@ -186,7 +231,6 @@ class Service:
             self.cameras[camera_id] = CameraSetup(camera_id, self._processor(camera, budget, geo, allow_outside_image),
                                                   geo, int(sid))
         else:
-            from ..batch.fleet import load_registry
 
             entries = registry if isinstance(registry, dict) else load_registry(registry, budget=budget)
             for cid, e in entries.items():
@@ -198,9 +242,6 @@ class Service:
                                                                                allow_outside_image),
                                                      geo, station_id_of(cid))
         self._single = camera is not None
-        self._omitted = 0
-        self._pixel_cov = None
-        from ..propagation import DEFAULT_LINEAR_THRESHOLD
 
         self.linearity = bool(linearity)
         self.linear_threshold = DEFAULT_LINEAR_THRESHOLD if linear_threshold is None else float(linear_threshold)
@@ -229,12 +270,28 @@ class Service:
                 setup.georef.to_wgs84(np.zeros((1, 2)))
             if self.messages:
                 self._encode(build_cpm(setup.station_id, 0, []))
+        # the compiled writers (JSON rows, UPER container): loaded from numba's cache or compiled now
+        t = Table(1)
+        t.json([b'{"a":', t.column(np.zeros(1)), t.when(np.ones(1, bool), b',"b":', t.column(["x"])), b"}"])
+        one = np.ones(1, np.int64)
+        perceived_object_container_uper_arrays(one, one, one, one, one, one, one, one, one)
+        _cm_dm(np.zeros((1, 2)), np.zeros(1, np.int64))
 
     # -- one frame ------------------------------------------------------------------------------------
     def process_frame(self, frame, *, source: str | None = None) -> dict:
         """One frame (dict or JSON text) -> a footprints record or an error record (never raises on bad input).
 
         ``source`` (e.g. ``"stdin line 7"``, ``"mqtt detections/cam1"``) is copied into error records.
+        The record is :meth:`process_frame_json`'s text, parsed.
+        """
+        out = self.process_frame_json(frame, source=source)
+        return out.record if out.record is not None else orjson.loads(out.data)
+
+    def process_frame_json(self, frame, *, source: str | None = None) -> FrameOutput:
+        """:meth:`process_frame` as the JSON text the transports send (a :class:`FrameOutput`).
+
+        The footprints record is written as text directly from the frame's arrays, without building the
+        per-object dicts: the bytes orjson writes for :meth:`process_frame`'s record, in a fraction of the time.
         """
         t0 = time.perf_counter()
         camera_id = frame_no = None
@@ -253,13 +310,17 @@ class Service:
                 raise _FrameError(None, f"frame is not a JSON object: {type(frame).__name__}")
             camera_id = frame.get("camera_id")
             frame_no = frame.get("frame")
-            return self._process(frame, t0)
+            try:
+                return self._process(frame, t0)
+            except orjson.JSONEncodeError as e:  # e.g. a lone surrogate in a string of an embedding caller's dict
+                raise _FrameError(None, f"text that cannot be written as JSON: {e}") from None
         except _FrameError as e:
-            return error_record(e.reason, field=e.field, camera_id=_jsonable(camera_id), frame=_jsonable(frame_no),
-                                source=source)
+            rec = error_record(e.reason, field=e.field, camera_id=_jsonable(camera_id), frame=_jsonable(frame_no),
+                               source=source)
         except FootprintUQError as e:
-            return error_record(str(e), field=getattr(e, "field", None), camera_id=_jsonable(camera_id),
-                                frame=_jsonable(frame_no), source=source)
+            rec = error_record(str(e), field=getattr(e, "field", None), camera_id=_jsonable(camera_id),
+                               frame=_jsonable(frame_no), source=source)
+        return FrameOutput(_dumps_error(rec), RECORD_ERROR, rec["camera_id"], None, rec)
 
     def _setup(self, camera_id) -> CameraSetup:
         if camera_id is not None and not isinstance(camera_id, str):
@@ -276,7 +337,7 @@ class Service:
             raise _FrameError("camera_id", f"camera_id {camera_id!r} not in the registry")
         return setup
 
-    def _process(self, frame: dict, t0: float) -> dict:
+    def _process(self, frame: dict, t0: float) -> FrameOutput:
         camera_id = frame.get("camera_id")
         setup = self._setup(camera_id)
         fno = frame.get("frame")
@@ -289,53 +350,62 @@ class Service:
         if not isinstance(dets, list):
             raise _FrameError("detections", f"field detections is not a list: {type(dets).__name__}")
         ref_ms = timestamp_its_ms(ts) if self.messages else None
-        est, ids, classes, class_conf = self._footprints(setup, dets)
+        est, ids, classes, class_p, P = self._footprints(setup, dets)
         t1 = time.perf_counter()
-        objects, pos, sobj = self._objects(setup, est, ids, classes, class_conf)
+        objects, ok_idx, msg_ids = self._objects_json(setup, est, ids, classes, P)
         t2 = time.perf_counter()
-        cpm, cpm_hex, sdsm = self._messages(setup, pos, sobj, int(fno), ts, ref_ms) if self.messages else (None,) * 3
-        rec = {"type": RECORD_FOOTPRINTS, "camera_id": camera_id, "frame": fno, "timestamp_s": ts,
-               "station_id": setup.station_id, "heading_offset_deg": setup.georef.heading_offset_deg,
-               "confidence": self.confidence, "n_objects": len(objects), "objects": objects}
+        head = {"type": RECORD_FOOTPRINTS, "camera_id": camera_id, "frame": fno, "timestamp_s": ts,
+                "station_id": setup.station_id, "heading_offset_deg": setup.georef.heading_offset_deg,
+                "confidence": self.confidence, "n_objects": len(ids)}
+        parts = [orjson.dumps(head)[:-1], b',"objects":', objects]
         if self.messages:
-            rec.update(cpm=cpm, cpm_uper_hex=cpm_hex, sdsm=sdsm)
-            if self._omitted:  # said, never silent: objects with a centre that did not fit in the messages
-                rec["objects_not_in_messages"] = self._omitted
+            cpm, cpm_hex, sdsm = self._messages_json(setup, est, classes, class_p, ok_idx, msg_ids, int(fno), ts,
+                                                     ref_ms)
+            parts += [b',"cpm":', cpm, b',"cpm_uper_hex":"', cpm_hex.encode(), b'","sdsm":', sdsm]
+            omitted = int(np.count_nonzero(est.centre_valid)) - len(ok_idx)
+            if omitted:  # said, never silent: objects with a centre that did not fit in the messages
+                parts += [b',"objects_not_in_messages":', b"%d" % omitted]
         t3 = time.perf_counter()
-        rec["processing_us"] = {"footprints": round(1e6 * (t1 - t0), 1), "records": round(1e6 * (t2 - t1), 1),
-                                "messages": round(1e6 * (t3 - t2), 1), "total": round(1e6 * (t3 - t0), 1)}
-        return rec
+        total = round(1e6 * (t3 - t0), 1)
+        parts += [b',"processing_us":', orjson.dumps({
+            "footprints": round(1e6 * (t1 - t0), 1), "records": round(1e6 * (t2 - t1), 1),
+            "messages": round(1e6 * (t3 - t2), 1), "total": total}), b"}"]
+        return FrameOutput(b"".join(parts), RECORD_FOOTPRINTS, camera_id, total, None)
 
     def _footprints(self, setup: CameraSetup, dets: list):
+        """Parse the detections into arrays and run the camera's kernel.
+
+        Each field is taken from every detection in one C-level pass (``map``) and checked on its set
+        of types; only a frame with something wrong goes through the per-detection checks, which name
+        the first bad field (the same error records as before the fast paths)."""
         N = len(dets)
-        for i, d in enumerate(dets):
-            if type(d) is not dict:
-                raise _FrameError(f"detections[{i}]", f"detection {i} is not a JSON object")
-        # one pass per field; the per-detection checks only name the first bad value
-        ids = [d.get("object_id", i) for i, d in enumerate(dets)]
-        for i, oid in enumerate(ids):
-            if type(oid) not in _ID_TYPES:  # numpy scalars from embedding code are taken as their Python value
-                if isinstance(oid, str):
-                    ids[i] = str(oid)
-                elif isinstance(oid, (int, np.integer)) and not isinstance(oid, (bool, np.bool_)):
-                    ids[i] = int(oid)
-                else:
-                    raise _FrameError(f"detections[{i}].object_id", f"object_id is not a string or integer: {oid!r}")
-        classes = [d.get("class") for d in dets]
-        for i, cls in enumerate(classes):
-            if cls is not None and type(cls) is not str:
-                if not isinstance(cls, str):
-                    raise _FrameError(f"detections[{i}].class", f"class is not a string: {cls!r}")
-                classes[i] = str(cls)
-        class_conf = [d.get("class_confidence") for d in dets]
-        for i, cc in enumerate(class_conf):
-            if cc is not None:
-                cc = class_conf[i] = _finite_number(dets[i], "class_confidence", f"detections[{i}]")
-                if not 0.0 <= cc <= 1.0:
-                    raise _FrameError(f"detections[{i}].class_confidence", f"class_confidence {cc} not in [0, 1]")
+        if N and set(map(type, dets)) != _DICT_ONLY:
+            i = next(i for i, d in enumerate(dets) if type(d) is not dict)
+            raise _FrameError(f"detections[{i}]", f"detection {i} is not a JSON object")
+        keys = set().union(*dets) if N else set()
+        # object ids: absent -> the detection's index; explicit null stays None
+        if "object_id" not in keys:
+            ids = list(range(N))
+        else:
+            try:
+                ids = list(map(_GET_ID, dets))
+            except KeyError:
+                ids = [d.get("object_id", i) for i, d in enumerate(dets)]
+            if not set(map(type, ids)) <= _ID_TYPES_SET:
+                _check_ids(ids)
+        if "class" not in keys:
+            classes = [None] * N
+        else:
+            classes = list(map(dict.get, dets, _repeat("class")))
+            if not set(map(type, classes)) <= _CLASS_TYPES:
+                _check_classes(classes)
+        if "class_confidence" not in keys:
+            class_p = None
+        else:
+            class_p = _class_confidences(dets)
         proc = setup.processor
         if N == 0:
-            return proc.corners(np.zeros((0, 1, 2))), ids, classes, class_conf
+            return proc.corners(np.zeros((0, 1, 2))), ids, classes, class_p, None
         family = S.detect_box_type(dets[0].keys())
         if family is None:
             raise _FrameError("detections[0]", "no complete box: 2D (u_min_px, v_min_px, u_max_px, v_max_px), 3D "
@@ -344,20 +414,10 @@ class Service:
         cols = S.box_columns(family, dets[0].keys())
         X = _box_array(dets, cols)
         P = None
-        for i, d in enumerate(dets):
-            where = f"detections[{i}]"
-            if "cov_uu_px2" not in d and "cov_uv_px2" not in d and "cov_vv_px2" not in d:
-                continue
-            present = [c for c in S.COV_COLUMNS if d.get(c) is not None]
-            if present:
-                if len(present) != 3:
-                    missing = [c for c in S.COV_COLUMNS if c not in present]
-                    raise _FrameError(f"{where}.{missing[0]}", f"incomplete pixel covariance: {missing[0]} missing "
-                                                               "(give cov_uu_px2, cov_uv_px2, cov_vv_px2 or none)")
-                uu, uv, vv = (_finite_number(d, c, where) for c in S.COV_COLUMNS)
-                if P is None:
-                    P = np.zeros((N, 2, 2))
-                P[i] = ((uu, uv), (uv, vv))
+        if not keys.isdisjoint(S.COV_COLUMNS):
+            P = _fast_cov(dets)
+            if P is None:
+                P = _slow_cov(dets)
         try:
             if family == "2d":
                 est = proc.boxes2d(X, contact=self.contact, pixel_cov_px2=P)
@@ -367,18 +427,15 @@ class Service:
                 est = proc.corners(X.reshape(N, -1, 2), pixel_cov_px2=P)
         except InputError as e:
             raise _FrameError(_detection_field(e.field), str(e)) from None
-        self._pixel_cov = P
-        return est, ids, classes, class_conf
+        return est, ids, classes, class_p, P
 
-    def _linearity(self, setup: CameraSetup, est):
+    def _linearity(self, setup: CameraSetup, est, P):
         """Per object: the largest predicted relative error of the linear 1-sigma semi-major axis over its
-        usable ground-contact points (:func:`footprint_uq.propagation.nonlinearity`, with the detector's
+        usable ground-contact points (:func:`footprint_uq.uncertainty.propagation.nonlinearity`, with the detector's
         pixel covariance) and ``linear_ok`` = that <= the threshold (False where nothing is usable)."""
-        from ..propagation import nonlinearity
 
         uv = est.corners_px
         N, K = uv.shape[:2]
-        P = self._pixel_cov
         Pk = None if P is None else np.broadcast_to(P[:, None], (N, K, 2, 2)).reshape(N * K, 2, 2)
         proc = setup.processor
         with np.errstate(invalid="ignore"):
@@ -389,130 +446,301 @@ class Service:
             ok = np.isfinite(worst) & (worst <= self.linear_threshold)
         return worst, ok
 
-    def _objects(self, setup, est, ids, classes, class_conf):
+    def _objects_json(self, setup: CameraSetup, est, ids: list, classes: list, P) -> tuple[bytes, np.ndarray, list]:
+        """The ``objects`` list of the record as JSON text, written column-wise (:class:`.jsonrows.Table`); and
+        the indices of the objects in the messages (with a centre, at most 255) and their ``message_object_id``."""
         N = len(ids)
         geo = setup.georef
-        centre = est.centre_xy_world_m
         cov = est.centre_cov_m2
         a, b, ori = ellipse_axes(cov)
-        valid = est.centre_valid.tolist()
-        li = est.largest_index.tolist()
-        reasons = est.centre_reason_text() if N else []
-        codes = est.v2x_codes.tolist()
-        x, y = _nan_none(centre[:, 0].tolist()), _nan_none(centre[:, 1].tolist())
-        cxx, cxy, cyy = (_nan_none(v.tolist()) for v in (cov[:, 0, 0], cov[:, 0, 1], cov[:, 1, 1]))
-        a_l, b_l, o_l = _nan_none(a.tolist()), _nan_none(b.tolist()), _nan_none(ori.tolist())
-        ka, kb = _nan_none((self._k * a).tolist()), _nan_none((self._k * b).tolist())
-        lsemi = _nan_none(est.largest_semi_major_m.tolist())
-        lx, ly = (_nan_none(v.tolist()) for v in (est.largest_xy_world_m[:, 0], est.largest_xy_world_m[:, 1]))
-        en = geo.world_to_enu(centre) if N else np.zeros((0, 2))
-        if self.messages:
-            ex_cm, ny_cm = coordinate_cm(en[:, 0]).tolist(), coordinate_cm(en[:, 1]).tolist()
-            ex_dm, ny_dm = offset_dm(en[:, 0]).tolist(), offset_dm(en[:, 1]).tolist()
-        if geo.has_origin and N:
-            lat, lon = (_nan_none(v.tolist()) for v in geo.to_wgs84(centre))
-        linear = nonlin = None
-        if self.linearity and N:
-            nonlin, linear = self._linearity(setup, est)
-        if all(valid):
-            status, reason = [S.STATUS_OK] * N, ["ok"] * N
+        valid = est.centre_valid
+        centre = est.centre_xy_world_m
+        t = Table(N)
+        oid, cls = t.column(ids), t.column(classes)
+        x, y, cxx, cxy, cyy, sa, sb, so, ka, kb, ls, lx, ly = t.columns(np.array([
+            centre[:, 0], centre[:, 1], cov[:, 0, 0], cov[:, 0, 1], cov[:, 1, 1], a, b, ori, self._k * a, self._k * b,
+            est.largest_semi_major_m, est.largest_xy_world_m[:, 0], est.largest_xy_world_m[:, 1]]))
+        layout = [b'{"object_id":', oid, b',"class":', cls]
+        if valid.all():
+            layout.append(_STATUS_ALL_OK)
         else:
-            status = [S.STATUS_OK if ok else (S.STATUS_PARTIAL if j >= 0 else S.STATUS_ERROR)
-                      for ok, j in zip(valid, li, strict=True)]
-            reason = ["ok" if ok else f"no centre: {r}" for ok, r in zip(valid, reasons, strict=True)]
-        keys = ["object_id", "class", "status", "reason", "x_m", "y_m", "cov_m2", "sigma_major_m", "sigma_minor_m",
-                "orientation_deg", "semi_major_m", "semi_minor_m", "largest_index", "largest_sigma_major_m",
-                "largest_x_m", "largest_y_m", *V2X_FIELDS]
-        columns = [ids, classes, status, reason, x, y,
-                   [[[p, q], [q, r]] for p, q, r in zip(cxx, cxy, cyy, strict=True)],
-                   a_l, b_l, o_l, ka, kb, li, lsemi, lx, ly, *est.v2x_codes.T.tolist()]
+            li = est.largest_index.tolist()
+            reasons = est.centre_reason_text()
+            layout += [b',"status":', t.column([S.STATUS_OK if ok else (S.STATUS_PARTIAL if j >= 0 else S.STATUS_ERROR)
+                                                for ok, j in zip(valid.tolist(), li, strict=True)]),
+                       b',"reason":', t.column(["ok" if ok else f"no centre: {r}"
+                                                for ok, r in zip(valid.tolist(), reasons, strict=True)])]
+        layout += [b',"x_m":', x, b',"y_m":', y, b',"cov_m2":[[', cxx, b",", cxy, b"],[", cxy, b",", cyy,
+                   b']],"sigma_major_m":', sa, b',"sigma_minor_m":', sb, b',"orientation_deg":', so,
+                   b',"semi_major_m":', ka, b',"semi_minor_m":', kb, b',"largest_index":', t.column(est.largest_index),
+                   b',"largest_sigma_major_m":', ls, b',"largest_x_m":', lx, b',"largest_y_m":', ly]
+        for key, col in zip(_V2X_KEYS, t.columns(est.v2x_codes.T), strict=True):
+            layout += [key, col]
         if geo.has_origin:
-            keys += ["lat_deg", "lon_deg"]
-            columns += [lat, lon] if N else [[], []]
-        if linear is not None:
-            keys += ["nonlinearity", "linear_ok"]
-            columns += [_nan_none(nonlin.tolist()), linear.tolist()]
-        pos = sobj = None
+            lat, lon = geo.to_wgs84(centre) if N else (np.zeros(0), np.zeros(0))
+            layout += [b',"lat_deg":', t.column(lat), b',"lon_deg":', t.column(lon)]
+        if self.linearity:
+            nonlin, linear = self._linearity(setup, est, P) if N else (np.zeros(0), np.zeros(0, bool))
+            layout += [b',"nonlinearity":', t.column(nonlin), b',"linear_ok":', t.column(linear)]
+        ok_idx = msg_ids = None
         if self.messages:
-            ok_all = [i for i in range(N) if valid[i]]
+            ok_all = np.flatnonzero(valid)
             ok_idx = ok_all[:MAX_MESSAGE_OBJECTS]  # a CPM carries at most 255 perceived objects
-            self._omitted = len(ok_all) - len(ok_idx)
-            msg_ids = [None] * N
-            for i in ok_idx:
-                msg_ids[i] = _message_object_id(ids[i], i)
-            keys.append("message_object_id")  # None: not in the CPM / SDSM (no centre, or beyond 255)
-            columns.append(msg_ids)
-            pos = self._message_columns(ok_idx, msg_ids, classes, class_conf, codes, ex_cm, ny_cm, ex_dm, ny_dm)
-        objects = [dict(zip(keys, row, strict=True)) for row in zip(*columns, strict=True)]
-        return objects, pos, sobj
+            msg_ids = _message_ids(ids, ok_idx)
+            if len(ok_idx) == N:
+                layout += [b',"message_object_id":', t.column(msg_ids)]
+            else:  # null: not in the CPM / SDSM (no centre, or beyond 255)
+                col = np.zeros(N, np.int64)
+                col[ok_idx] = msg_ids
+                sent = np.zeros(N, bool)
+                sent[ok_idx] = True
+                layout += [b',"message_object_id":', t.when(sent, t.column(col)), t.when(~sent, b"null")]
+        layout.append(b"}")
+        return t.json(layout), ok_idx, msg_ids
 
-    @staticmethod
-    def _message_columns(ok_idx, msg_ids, classes, class_conf, codes, ex_cm, ny_cm, ex_dm, ny_dm) -> dict:
-        """The per-object columns of the messages (objects with a centre, at most 255)."""
-        oid = [msg_ids[i] for i in ok_idx]
-        cls = [classes[i] for i in ok_idx]
-        cc = [class_conf[i] for i in ok_idx]
-        low = [c.lower() if c else None for c in cls]
-        cpm_class = [CPM_CLASSES.get(c) if c else None for c in low]
-        level = [CONFIDENCE_LEVEL_UNAVAILABLE if p is None else max(1, math.ceil(100.0 * p - 1e-9)) for p in cc]
-        return {"objectId": oid, "class": cls, "cpm_class": cpm_class, "level": level,
-                "class_bits": [_CPM_CLASS_BITS.get(c) if c else None for c in low],
-                "class_pct": [0 if p is None else int(round(100.0 * p)) for p in cc],
-                "x_cm": [ex_cm[i] for i in ok_idx], "y_cm": [ny_cm[i] for i in ok_idx],
-                "x_conf": [codes[i][_CPM_INDEX] for i in ok_idx], "y_conf": [codes[i][_CPM_INDEX + 1] for i in ok_idx],
-                "corr": [codes[i][_CPM_INDEX + 2] for i in ok_idx], "pos_conf": [codes[i][_J_POS] for i in ok_idx],
-                "x_dm": [ex_dm[i] for i in ok_idx], "y_dm": [ny_dm[i] for i in ok_idx]}
-
-    def _messages(self, setup, m: dict, sobj, fno: int, ts: float, ref_ms):
+    def _messages_json(self, setup: CameraSetup, est, classes: list, class_p, ok_idx: np.ndarray,
+                       msg_ids: np.ndarray, fno: int, ts: float, ref_ms: int) -> tuple[bytes, str, bytes]:
+        """The CPM (JSON text), its UPER encoding (hex) and the SDSM (JSON text, ``null`` without objects) of
+        the objects ``ok_idx``, written column-wise; UPER by the compiled column writer."""
         geo = setup.georef
-        # the JSON forms of perceived_object() / sdsm_object(), written inline (the per-frame hot path)
-        pos = [{"objectId": o, "measurementDeltaTime": 0,
-                "position": {"xCoordinate": {"value": x, "confidence": cx},
-                             "yCoordinate": {"value": y, "confidence": cy}}}
-               for o, x, y, cx, cy in zip(m["objectId"], m["x_cm"], m["y_cm"], m["x_conf"], m["y_conf"], strict=True)]
-        for po, r, c, lv in zip(pos, m["corr"], m["cpm_class"], m["level"], strict=True):
-            if r != 101:
-                po["lowerTriangularCorrelationMatrices"] = [
-                    {"componentsIncludedIntheMatrix": ["xPosition", "yPosition"], "matrix": [[r]]}]
-            if c is not None:
-                po["classification"] = [{"objectClass": c, "confidence": lv}]
-        sobj = [{"detObjCommon": {
-            "objType": SDSM_OBJECT_TYPES.get(c.lower(), "unknown") if c else "unknown", "objTypeCfd": pct,
-            "objectID": o, "measurementTime": 0, "timeConfidence": "unavailable", "pos": {"offsetX": x, "offsetY": y},
-            "posConfidence": {"pos": J2735_POSITION_CONFIDENCE_NAMES[pc], "elevation": "unavailable"},
-            "speed": SPEED_UNAVAILABLE, "speedConfidence": "unavailable", "heading": HEADING_UNAVAILABLE,
-            "headingConf": "unavailable"}}
-            for o, x, y, pc, c, pct in zip(m["objectId"], m["x_dm"], m["y_dm"], m["pos_conf"], m["class"],
-                                           m["class_pct"], strict=True)]
-        lat_e7 = lon_e7 = None
-        if geo.has_origin:
-            lat_e7, lon_e7 = round(geo.origin_lat_deg * 1e7), round(geo.origin_lon_deg * 1e7)
-        cpm = build_cpm(setup.station_id, ref_ms, pos,
+        N, m = len(classes), len(ok_idx)
+        en = geo.world_to_enu(est.centre_xy_world_m) if N else np.zeros((0, 2))
+        x_cm, y_cm, x_dm, y_dm = _cm_dm(en, ok_idx)
+        codes = est.v2x_codes[ok_idx]
+        x_conf, y_conf, corr = codes[:, _CPM_INDEX], codes[:, _CPM_INDEX + 1], codes[:, _CPM_INDEX + 2]
+        crow = (np.fromiter(map(_CLASS_ROWS.__getitem__, classes), np.intp, N)[ok_idx] if any(classes)
+                else np.full(m, _DEFAULT_CLASS_ROW, np.intp))
+        has_cls = _CLS_BITS_WIDTH[crow] > 0
+        t = Table(m)
+        oid = t.column(msg_ids)
+        if class_p is None:
+            level = np.full(m, CONFIDENCE_LEVEL_UNAVAILABLE, np.int64)
+            lv = b"%d" % CONFIDENCE_LEVEL_UNAVAILABLE
+            pct = b"0"
+        else:
+            p = class_p[ok_idx]
+            none = np.isnan(p)
+            level = np.where(none, CONFIDENCE_LEVEL_UNAVAILABLE, np.maximum(1.0, np.ceil(100.0 * p - 1e-9))
+                             ).astype(np.int64)
+            lv = t.column(level)
+            pct = t.column(np.where(none, 0.0, np.rint(100.0 * p)).astype(np.int64))
+        cx, cy, xv, yv, r = t.columns(np.array([x_conf, y_conf, x_cm, y_cm, corr], dtype=np.int64))
+        po = t.json([b'{"objectId":', oid, b',"measurementDeltaTime":0,"position":{"xCoordinate":{"value":', xv,
+                     b',"confidence":', cx, b'},"yCoordinate":{"value":', yv, b',"confidence":', cy, b"}}",
+                     t.when(corr != 101, _CORR_OPEN, r, _CORR_CLOSE),
+                     t.when(has_cls, b',"classification":[{"objectClass":', t.column(_CLS_OBJECT[crow].tolist()),
+                            b',"confidence":', lv, b"}]"),
+                     b"}"])
+        lat_e7, lon_e7 = setup.lat_1e7deg, setup.lon_1e7deg
+        cpm = build_cpm(setup.station_id, ref_ms, [],
                         latitude=LATITUDE_UNAVAILABLE if lat_e7 is None else lat_e7,
                         longitude=LONGITUDE_UNAVAILABLE if lon_e7 is None else lon_e7)
+        cpm["payload"]["cpmContainers"][1]["containerData"]["numberOfPerceivedObjects"] = m
+        cpm_json = _splice(orjson.dumps(cpm), b'"perceivedObjects":[]', po)
         if self.uper_encoder == "fast":
-            container = perceived_object_container_uper(
-                m["objectId"], m["x_cm"], m["x_conf"], m["y_cm"], m["y_conf"], m["corr"],
-                [None if c is None else (c, lv) for c, lv in zip(m["class_bits"], m["level"], strict=True)])
-            cpm_hex = encode_cpm_uper_fast(cpm, perceived_objects_uper=container).hex()
+            container = perceived_object_container_uper_arrays(
+                msg_ids, x_cm, x_conf, y_cm, y_conf, corr, _CLS_BITS_VALUE[crow], _CLS_BITS_WIDTH[crow], level)
+            cpm_hex = setup.uper.encode(ref_ms, container).hex()
         else:
-            cpm_hex = self._encode(cpm).hex()
+            cpm_hex = self._encode(orjson.loads(cpm_json)).hex()
         # J3224's DetectedObjectList has 1..256 entries: a frame without objects has no SDSM (null)
-        sdsm = None if not sobj else build_sdsm(setup.station_id, fno, ts, sobj,
+        if m == 0:
+            return cpm_json, cpm_hex, b"null"
+        xd, yd = t.columns(np.array([x_dm, y_dm]))
+        objs = t.json([b'{"detObjCommon":{"objType":', t.column(_SDSM_TYPE[crow].tolist()), b',"objTypeCfd":', pct,
+                       b',"objectID":', oid, _SDSM_AFTER_ID, xd, b',"offsetY":', yd, b'},"posConfidence":{"pos":',
+                       t.column(_POS_NAMES[codes[:, _J_POS]].tolist()), _SDSM_TAIL])
+        sdsm = build_sdsm(setup.station_id, fno, ts, [],
                           **({} if lat_e7 is None else {"lat_1e7deg": lat_e7, "lon_1e7deg": lon_e7}))
-        return cpm, cpm_hex, sdsm
+        return cpm_json, cpm_hex, _splice(orjson.dumps(sdsm), b'"objects":[]', objs)
 
 
-_NUMBER_TYPES = (int, float)
+@njit(cache=True, nogil=True)
+def _cm_dm_kernel(en, rows, cm_min, cm_max, dm_max):  # pragma: no cover - compiled
+    out = np.empty((4, rows.shape[0]), np.int64)
+    for j in range(rows.shape[0]):
+        for a in range(2):
+            v = en[rows[j], a]
+            if v != v:  # NaN -> 0, as numpy.nan_to_num (only from absurd coordinates: inf - inf)
+                v = 0.0
+            c = np.rint(v * 100.0)
+            d = np.rint(v * 10.0)
+            out[a, j] = int(min(max(c, cm_min), cm_max))
+            out[2 + a, j] = int(min(max(d, -dm_max), dm_max))
+    return out
+
+
+def _cm_dm(en: np.ndarray, rows: np.ndarray):
+    """:func:`~.messages.cpm.coordinate_cm` and :func:`~.messages.sdsm.offset_dm` of the east/north metres
+    ``en[rows]``: x cm, y cm, x dm, y dm (the same numbers in one compiled pass)."""
+    return _cm_dm_kernel(np.ascontiguousarray(en, dtype=np.float64), np.asarray(rows, dtype=np.int64),
+                         float(COORD_MIN), float(COORD_MAX), float(OFFSET_MAX))
+
+
+def _splice(doc: bytes, empty_list: bytes, items: bytes) -> bytes:
+    """``doc`` with its (only) ``"key":[]`` replaced by ``"key":<items>``."""
+    i = doc.rindex(empty_list) + len(empty_list) - 2
+    return doc[:i] + items + doc[i + 2:]
+
+
+def _message_ids(ids: list, ok_idx: np.ndarray) -> np.ndarray:
+    """``message_object_id`` (:func:`_message_object_id`) of the objects ``ok_idx``."""
+    ok = ok_idx.tolist()
+    sel = ids if len(ok) == len(ids) else [ids[i] for i in ok]
+    if set(map(type, sel)) <= _INT_ONLY:
+        try:
+            arr = np.array(sel, dtype=np.int64)
+        except OverflowError:
+            pass
+        else:
+            if not arr.size or (arr.min() >= 0 and arr.max() <= 65535):
+                return arr
+    return np.array([_message_object_id(ids[i], i) for i in ok], dtype=np.int64)
+
+
+def _class_rows():
+    """The distinct (CPM ObjectClass, SDSM objType) of a detector class, and lower-case class -> row."""
+    results, row_of = [], {}
+
+    def row(cpm, sdsm):
+        key = (orjson.dumps(cpm) if cpm is not None else None, sdsm)
+        if key not in results:
+            results.append(key)
+        return results.index(key)
+
+    default = row(None, "unknown")
+    for low in sorted(set(CPM_CLASSES) | set(SDSM_OBJECT_TYPES)):
+        row_of[low] = row(CPM_CLASSES.get(low), SDSM_OBJECT_TYPES.get(low, "unknown"))
+    return results, row_of, default
+
+
+_CLASS_RESULTS, _ROW_OF_LOWER, _DEFAULT_CLASS_ROW = _class_rows()
+#: per row: the CPM ObjectClass (None: no classification), its class bits for the UPER writer (width 0: none)
+#: and the SDSM objType
+_CLS_OBJECT = np.array([None if c is None else orjson.loads(c) for c, _ in _CLASS_RESULTS], dtype=object)
+_CLS_BITS = [(0, 0) if c is None else class_bits(orjson.loads(c)) for c, _ in _CLASS_RESULTS]
+_CLS_BITS_VALUE = np.array([v for v, _ in _CLS_BITS], dtype=np.int64)
+_CLS_BITS_WIDTH = np.array([w for _, w in _CLS_BITS], dtype=np.int64)
+_SDSM_TYPE = np.array([t for _, t in _CLASS_RESULTS], dtype=object)
+_POS_NAMES = np.array(J2735_POSITION_CONFIDENCE_NAMES, dtype=object)
+
+
+class _ClassRowCache(dict):
+    """Detector class (str or None) -> row of the class tables; remembers at most 4096 class strings."""
+
+    def __missing__(self, c):
+        r = _ROW_OF_LOWER.get(c.lower(), _DEFAULT_CLASS_ROW) if c else _DEFAULT_CLASS_ROW
+        if len(self) < 4096:
+            self[c] = r
+        return r
+
+
+_CLASS_ROWS = _ClassRowCache()
+_CORR_OPEN = b',"lowerTriangularCorrelationMatrices":[{"componentsIncludedIntheMatrix":["xPosition","yPosition"],' \
+             b'"matrix":[['
+_CORR_CLOSE = b"]]}]"
+_SDSM_AFTER_ID = b',"measurementTime":0,"timeConfidence":"unavailable","pos":{"offsetX":'
+_SDSM_TAIL = (b',"elevation":"unavailable"},"speed":%d,"speedConfidence":"unavailable","heading":%d,'
+              b'"headingConf":"unavailable"}}' % (SPEED_UNAVAILABLE, HEADING_UNAVAILABLE))
+_STATUS_ALL_OK = b',"status":%s,"reason":"ok"' % orjson.dumps(S.STATUS_OK)
+_V2X_KEYS = [b',"%s":' % k.encode() for k in V2X_FIELDS]
+_DICT_ONLY = {dict}
+_ID_TYPES_SET = {int, str, type(None)}
+_CLASS_TYPES = {str, type(None)}
+_INT_ONLY = {int}
+_GET_ID = operator.itemgetter("object_id")
+
+
+def _check_ids(ids: list) -> None:
+    """Per object (in place): numpy integers and str subclasses -> int / str; anything else -> _FrameError."""
+    for i, oid in enumerate(ids):
+        if type(oid) not in _ID_TYPES:  # numpy scalars from embedding code are taken as their Python value
+            if isinstance(oid, str):
+                ids[i] = str(oid)
+            elif isinstance(oid, (int, np.integer)) and not isinstance(oid, (bool, np.bool_)):
+                ids[i] = int(oid)
+            else:
+                raise _FrameError(f"detections[{i}].object_id", f"object_id is not a string or integer: {oid!r}")
+
+
+def _check_classes(classes: list) -> None:
+    for i, cls in enumerate(classes):
+        if cls is not None and type(cls) is not str:
+            if not isinstance(cls, str):
+                raise _FrameError(f"detections[{i}].class", f"class is not a string: {cls!r}")
+            classes[i] = str(cls)
+
+
+def _class_confidences(dets: list) -> np.ndarray:
+    """(N,) class confidences in [0, 1], NaN where absent or null; a bad value -> _FrameError (the first)."""
+    cc = list(map(dict.get, dets, _repeat("class_confidence")))
+    if set(map(type, cc)) <= _CONF_TYPES:
+        try:
+            p = np.array(cc, dtype=np.float64)
+        except OverflowError:
+            pass
+        else:
+            fin = np.isfinite(p)
+            if int(fin.sum()) == len(cc) - cc.count(None) and not ((p[fin] < 0.0) | (p[fin] > 1.0)).any():
+                return p
+    for i, c in enumerate(cc):
+        if c is not None:
+            c = _finite_number(dets[i], "class_confidence", f"detections[{i}]")
+            if not 0.0 <= c <= 1.0:
+                raise _FrameError(f"detections[{i}].class_confidence", f"class_confidence {c} not in [0, 1]")
+    return np.array(cc, dtype=np.float64)
+
+
+def _fast_cov(dets: list):
+    """(N, 2, 2) pixel covariances when every detection has all three numbers (finite), else None."""
+    try:
+        vals = list(map(_GET_COV, dets))
+    except KeyError:
+        return None
+    if not set(map(type, chain.from_iterable(vals))) <= _NUMBER_SET:
+        return None
+    try:
+        c = np.array(vals, dtype=np.float64)
+    except OverflowError:
+        return None
+    if not np.isfinite(c).all():
+        return None
+    return c[:, [0, 1, 1, 2]].reshape(-1, 2, 2)
+
+
+def _slow_cov(dets: list):
+    """Per detection: all three covariance entries or none (absent or null); names the first bad field."""
+    P = None
+    N = len(dets)
+    for i, d in enumerate(dets):
+        where = f"detections[{i}]"
+        if "cov_uu_px2" not in d and "cov_uv_px2" not in d and "cov_vv_px2" not in d:
+            continue
+        present = [c for c in S.COV_COLUMNS if d.get(c) is not None]
+        if present:
+            if len(present) != 3:
+                missing = [c for c in S.COV_COLUMNS if c not in present]
+                raise _FrameError(f"{where}.{missing[0]}", f"incomplete pixel covariance: {missing[0]} missing "
+                                                           "(give cov_uu_px2, cov_uv_px2, cov_vv_px2 or none)")
+            uu, uv, vv = (_finite_number(d, c, where) for c in S.COV_COLUMNS)
+            if P is None:
+                P = np.zeros((N, 2, 2))
+            P[i] = ((uu, uv), (uv, vv))
+    return P
+
+
 _ID_TYPES = (int, str, type(None))
+_NUMBER_SET = {int, float}  # (bool is not int here: type() is exact)
+_CONF_TYPES = {int, float, type(None)}
+_GET_COV = operator.itemgetter(*S.COV_COLUMNS)
 
 
 def _box_array(dets: list, cols) -> np.ndarray:
     """The (N, len(cols)) box values; a frame with a missing, non-numeric or non-finite value -> _FrameError."""
     try:
-        rows = [[d[c] for c in cols] for d in dets]
-        if all(type(v) in _NUMBER_TYPES for r in rows for v in r):  # (bool is not int here: type() is exact)
-            X = np.array(rows, dtype=np.float64)
+        flat = list(chain.from_iterable(map(operator.itemgetter(*cols), dets)))
+        if set(map(type, flat)) <= _NUMBER_SET:
+            X = np.array(flat, dtype=np.float64).reshape(len(dets), len(cols))
             if np.isfinite(X).all():
                 return X
     except (KeyError, TypeError, OverflowError):
@@ -535,7 +763,6 @@ def _message_object_id(object_id, index: int) -> int:
 
 def _detection_field(field: str) -> str:
     # "boxes_px[3]" / "boxes_world[3] (...)" / "pixel_cov_px2" -> "detections[3]"
-    import re
 
     m = re.search(r"\[(\d+)\]", field or "")
     return f"detections[{m.group(1)}]" if m else "detections"

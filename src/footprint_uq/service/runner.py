@@ -3,7 +3,8 @@
 Inputs: JSON Lines on stdin, or MQTT topics ``<input-prefix>/<camera_id>`` (QoS 1).  Outputs:
 JSON Lines on stdout, or MQTT topics ``<output-prefix>/<camera_id>`` (QoS 1), errors on
 ``<output-prefix>/errors`` and health on ``<output-prefix>/health``.  One worker thread runs
-:meth:`footprint_uq.service.Service.process_frame`; the transports only move bytes.
+:meth:`footprint_uq.service.Service.process_frame_json` (the record as JSON text, written without
+building per-object dicts); the transports only move bytes.
 
 Overload policy (:class:`FrameQueue`): at most **one pending frame per camera**.  With
 ``newest`` (the default for MQTT) a frame that arrives while its camera's previous frame is
@@ -30,6 +31,7 @@ from __future__ import annotations
 
 import collections
 import gc
+import multiprocessing as mp
 import os
 import signal
 import sys
@@ -38,35 +40,24 @@ import time
 from urllib.parse import urlparse
 
 import numpy as np
+import orjson
 
+from ..batch.fleet import load_registry
 from ..errors import ConfigError, InputError
-from .core import RECORD_ERROR, RECORD_FOOTPRINTS, Service, error_record
+from ..io import load_camera
+from .core import RECORD_ERROR, RECORD_FOOTPRINTS, FrameOutput, Service, error_record
 
 __all__ = ["FrameQueue", "Metrics", "serve", "run", "parse_mqtt_url", "POLICIES"]
 
 POLICIES = ("newest", "block")
 
 
-try:  # the `service` extra; the standard library otherwise (same output, slower)
-    import orjson as _json_fast
-except ImportError:  # pragma: no cover - depends on the environment
-    _json_fast = None
-
-
 def _dumps(obj) -> bytes:
-    if _json_fast is not None:
-        return _json_fast.dumps(obj)
-    import json
-
-    return json.dumps(obj, allow_nan=False, separators=(",", ":")).encode("utf-8")
+    return orjson.dumps(obj)
 
 
 def _loads(data):
-    if _json_fast is not None:
-        return _json_fast.loads(data)
-    import json
-
-    return json.loads(data)
+    return orjson.loads(data)
 
 
 class FrameQueue:
@@ -154,10 +145,15 @@ class Metrics:
             self.frames_in += n
 
     def done(self, record: dict, latency_s: float) -> None:
+        self.done_output(record.get("type"), record["processing_us"]["total"] if record.get("type") ==
+                         RECORD_FOOTPRINTS else None, latency_s)
+
+    def done_output(self, kind, processing_us: float | None, latency_s: float) -> None:
+        """One output written: a footprints record (with its total processing time) or an error record."""
         with self._lock:
-            if record.get("type") == RECORD_FOOTPRINTS:
+            if kind == RECORD_FOOTPRINTS:
                 self.frames_out += 1
-                self._proc_us.append(record["processing_us"]["total"])
+                self._proc_us.append(processing_us)
             else:
                 self.errors += 1
             self._lat_ms.append(1e3 * latency_s)
@@ -222,7 +218,11 @@ class _StdoutSink:
         self._on_broken = on_broken
 
     def write(self, record: dict) -> None:
-        data = _dumps(record) + b"\n"
+        self.write_json(record.get("type"), record.get("camera_id"), _dumps(record))
+
+    def write_json(self, kind, camera_id, data: bytes) -> None:
+        """One record already written as JSON text (:meth:`Service.process_frame_json`)."""
+        data += b"\n"
         with self._lock:
             if self._broken:
                 return
@@ -250,14 +250,17 @@ class _MqttSink:
         self._last = None
 
     def write(self, record: dict) -> None:
-        kind = record.get("type")
+        self.write_json(record.get("type"), record.get("camera_id"), _dumps(record))
+
+    def write_json(self, kind, camera_id, data: bytes) -> None:
+        """One record already written as JSON text (:meth:`Service.process_frame_json`)."""
         if kind == RECORD_FOOTPRINTS:
-            topic = f"{self._prefix}/{record['camera_id'] if record['camera_id'] is not None else 'camera'}"
+            topic = f"{self._prefix}/{camera_id if camera_id is not None else 'camera'}"
         elif kind == RECORD_ERROR:
             topic = f"{self._prefix}/errors"
         else:
             topic = f"{self._prefix}/health"
-        info = self._c.publish(topic, _dumps(record), qos=1)
+        info = self._c.publish(topic, data, qos=1)
         if info.rc != 0:  # queue full (broker away for long): counted, never unbounded
             with self._metrics._lock:
                 self._metrics.publish_failed += 1
@@ -291,11 +294,29 @@ def _stdin_reader(stream, queue: FrameQueue, sink, metrics: Metrics, stop: threa
             continue
         key = frame.get("camera_id") if isinstance(frame, dict) else None
         key = key if isinstance(key, str) else repr(key)
-        if not queue.put(key, (frame, src, t)):
+        if not queue.put(key, (frame, src, t, None)):
             rec = error_record("service stopping or too many cameras pending", source=src)
             sink.write(rec)
             metrics.done(rec, time.monotonic() - t)
     queue.close()
+
+
+def _mqtt_frame(payload: bytes, cam: str, src: str):
+    """(frame, None) from an MQTT payload of topic ``<prefix>/<cam>``, or (None, the error output)."""
+    try:
+        frame = _loads(payload)
+    except ValueError as e:
+        rec = error_record(f"invalid JSON: {e}", camera_id=cam, source=src)
+        return None, FrameOutput(_dumps(rec), RECORD_ERROR, cam, None, rec)
+    if isinstance(frame, dict):
+        if frame.get("camera_id") is None:  # absent or null: the topic names the camera
+            frame["camera_id"] = cam
+        elif frame["camera_id"] != cam:
+            topic = src.removeprefix("mqtt ")
+            rec = error_record(f"camera_id {frame['camera_id']!r} does not match the topic {topic!r}",
+                               field="camera_id", camera_id=cam, frame=frame.get("frame"), source=src)
+            return None, FrameOutput(_dumps(rec), RECORD_ERROR, cam, None, rec)
+    return frame, None
 
 
 def _mqtt_client(host: str, port: int, client_id: str):
@@ -352,27 +373,13 @@ def serve(service: Service, *, input: str | None = "-", mqtt: str | None = None,
                 subscribed.set()
 
         def on_message(c, userdata, msg):
+            # the network thread only queues the payload: the worker parses it (a frame replaced by a newer one
+            # of its camera is never parsed, and the network thread is free for the next packet)
             t = time.monotonic()
             metrics.received()
             cam = msg.topic[len(input_prefix) + 1:]
             src = f"mqtt {msg.topic}"
-            try:
-                frame = _loads(msg.payload)
-            except ValueError as e:
-                rec = error_record(f"invalid JSON: {e}", camera_id=cam, source=src)
-                sink.write(rec)
-                metrics.done(rec, time.monotonic() - t)
-                return
-            if isinstance(frame, dict):
-                if frame.get("camera_id") is None:  # absent or null: the topic names the camera
-                    frame["camera_id"] = cam
-                elif frame["camera_id"] != cam:
-                    rec = error_record(f"camera_id {frame['camera_id']!r} does not match the topic {msg.topic!r}",
-                                       field="camera_id", camera_id=cam, frame=frame.get("frame"), source=src)
-                    sink.write(rec)
-                    metrics.done(rec, time.monotonic() - t)
-                    return
-            if not queue.put(cam, (frame, src, t)):
+            if not queue.put(cam, (msg.payload, src, t, cam)):
                 rec = error_record("service stopping or too many cameras pending", camera_id=cam, source=src)
                 sink.write(rec)
                 metrics.done(rec, time.monotonic() - t)
@@ -396,18 +403,24 @@ def serve(service: Service, *, input: str | None = "-", mqtt: str | None = None,
                 if queue._closed:
                     return
                 continue
-            frame, src, t = item
+            frame, src, t, topic_camera = item
             try:
-                rec = service.process_frame(frame, source=src)
+                if topic_camera is not None:  # an MQTT payload: parsed here, its camera_id checked against the topic
+                    frame, out = _mqtt_frame(frame, topic_camera, src)
+                    if out is None:
+                        out = service.process_frame_json(frame, source=src)
+                else:
+                    out = service.process_frame_json(frame, source=src)
             except Exception as e:  # noqa: BLE001 - a bug met by one frame is reported in its record, not fatal
                 rec = error_record(f"internal error (please report): {type(e).__name__}: {e}", source=src,
                                    camera_id=frame.get("camera_id") if isinstance(frame, dict) else None)
+                out = FrameOutput(_dumps(rec), RECORD_ERROR, rec["camera_id"], None, rec)
             try:
-                sink.write(rec)
+                sink.write_json(out.type, out.camera_id, out.data)
             except BrokenPipeError:  # stdout closed by the reader: nothing more can be delivered
                 stop.set()
                 return
-            metrics.done(rec, time.monotonic() - t)
+            metrics.done_output(out.type, out.processing_us, time.monotonic() - t)
 
     def snapshot():
         rec = metrics.snapshot(queue.dropped, len(queue))
@@ -512,7 +525,6 @@ def run(*, camera=None, budget=None, registry=None, camera_id: str | None = None
     try:
         cam = None
         if camera is not None:
-            from ..io import load_camera
 
             if budget is None:
                 raise InputError("--budget", None, "an error budget (preset or file) for --camera")
@@ -528,7 +540,6 @@ def run(*, camera=None, budget=None, registry=None, camera_id: str | None = None
 
 
 def _worker_main(options: dict, cameras: list[str], label: str) -> None:  # pragma: no cover - child process
-    from ..batch.fleet import load_registry
 
     entries = load_registry(options.pop("registry"), budget=options["budget"])
     sub = {c: entries[c] for c in cameras}
@@ -536,9 +547,7 @@ def _worker_main(options: dict, cameras: list[str], label: str) -> None:  # prag
 
 
 def _run_workers(n: int, options: dict) -> int:
-    import multiprocessing as mp
 
-    from ..batch.fleet import load_registry
 
     ids = sorted(load_registry(options["registry"], budget=options["budget"]))
     if n > len(ids):

@@ -13,6 +13,10 @@ import numpy as np
 from matplotlib import colors
 from matplotlib.figure import Figure
 
+from ..io.atomic import atomic_path
+from ..params import INTRINSIC_NAMES, PAPER_COLUMNS
+from .report import esc, html_page, html_table, img_tag, write_html
+
 __all__ = ["plot_coverage", "plot_error_map", "plot_asymmetry", "plot_view_errors", "plot_sigma_comparison",
            "save_calibration_figures"]
 
@@ -56,9 +60,9 @@ def plot_coverage(coverage, *, principal_point_px=None, title: str | None = None
     return fig
 
 
-def plot_error_map(error_map, *, principal_point_px=None, quiver_cell_px: float = 40.0, points_px=None,
-                   residuals_px=None, title: str | None = None) -> Figure:
-    """Mean reprojection error per cell; optional arrows of the mean residual on a coarser grid."""
+def plot_error_map(error_map, *, principal_point_px=None, residual_map=None, title: str | None = None) -> Figure:
+    """Mean reprojection error per cell; optional arrows of the mean residual per cell of ``residual_map``
+    (a coarser map of the same kind, e.g. ``cal.error_map(40.0)``)."""
     fig = Figure(figsize=(7.5, 5.2))
     ax = fig.add_subplot()
     e = error_map.mean_error_px
@@ -67,10 +71,9 @@ def plot_error_map(error_map, *, principal_point_px=None, quiver_cell_px: float 
                    interpolation="nearest", vmin=0.0, vmax=max(vmax, 1e-6))
     ax.set_facecolor("0.85")
     fig.colorbar(im, ax=ax, shrink=0.85, label="mean reprojection error (px)")
-    if points_px is not None and residuals_px is not None:
-        from ..calibration.maps import reprojection_error_map
-
-        coarse = reprojection_error_map(points_px, residuals_px, error_map.image_size_px, quiver_cell_px)
+    if residual_map is not None:
+        coarse = residual_map
+        quiver_cell_px = coarse.cell_px
         ny, nx = coarse.count.shape
         uc = (np.arange(nx) + 0.5) * quiver_cell_px - 0.5
         vc = (np.arange(ny) + 0.5) * quiver_cell_px - 0.5
@@ -133,8 +136,6 @@ def plot_view_errors(cal) -> Figure:
 
 def plot_sigma_comparison(cal) -> Figure:
     """Standard deviations per intrinsic from OpenCV, our Jacobian and the bootstrap (log scale)."""
-    from ..calibration.intrinsics import INTRINSIC_NAMES
-
     fig = Figure(figsize=(7.5, 3.8))
     ax = fig.add_subplot()
     x = np.arange(len(INTRINSIC_NAMES))
@@ -163,17 +164,14 @@ def save_calibration_figures(cal, out_dir, *, coverage=None, error_map=None, asy
     error_map = error_map if error_map is not None else cal.error_map(grid_px)
     asymmetry = asymmetry if asymmetry is not None else cal.asymmetry()
     pp = (cal.K[0, 2], cal.K[1, 2])
-    pts = np.concatenate(cal.image_points_px)
-    res = np.concatenate(cal.residuals_px)
     figs = {
         "coverage.png": plot_coverage(coverage, principal_point_px=pp),
-        "reprojection_error.png": plot_error_map(error_map, principal_point_px=pp, points_px=pts, residuals_px=res),
+        "reprojection_error.png": plot_error_map(error_map, principal_point_px=pp, residual_map=cal.error_map(40.0)),
         "asymmetry.png": plot_asymmetry(asymmetry, cal.image_size_px, principal_point_px=pp),
         "view_errors.png": plot_view_errors(cal),
         "sigmas.png": plot_sigma_comparison(cal),
     }
     files = {}
-    from ..io.atomic import atomic_path
 
     for name, fig in figs.items():
         with atomic_path(out / name) as tmp:
@@ -185,8 +183,6 @@ def save_calibration_figures(cal, out_dir, *, coverage=None, error_map=None, asy
 def write_calibration_html(summary: dict, out_dir, *, figures=("coverage.png", "reprojection_error.png",
                                                                "asymmetry.png", "view_errors.png", "sigmas.png")):
     """A self-contained ``report.html`` (figures embedded) from :meth:`IntrinsicCalibration.summary`."""
-    from ..calibration.intrinsics import INTRINSIC_NAMES, PAPER_COLUMNS
-    from .report import esc, html_page, html_table, img_tag, write_html
 
     out = Path(out_dir)
     s = summary

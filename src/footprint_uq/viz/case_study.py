@@ -23,6 +23,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import matplotlib
 import numpy as np
 from matplotlib import colors
 from matplotlib.collections import LineCollection, PolyCollection
@@ -30,11 +31,14 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.patches import Polygon
 
-from ..ellipse import chi2_scale, ellipse_points
 from ..io.atomic import atomic_path, atomic_write_text, path_component
 from ..scenario.case_study import AXIS_SYSTEMS, camera_type_label, footprint_heatmap
+from ..scenario.claims import evaluate_claims
 from ..scenario.intersection import RoadLayout
 from ..scenario.trajectory import box_corners
+from ..uncertainty.ellipse import chi2_scale, ellipse_points
+from .report import esc, html_page, img_tag, write_html
+from .report import html_table as _html_table
 
 __all__ = ["plot_camera_views", "plot_birdseye", "plot_sigma_profiles", "plot_contributions", "plot_heatmaps",
            "case_study_figures", "write_case_study_report", "TYPE_COLOURS"]
@@ -458,7 +462,6 @@ def plot_heatmaps(result, camera: str, heatmaps: dict | None = None, **kw) -> Fi
     ar = (hm0.y_m[-1] - hm0.y_m[0]) / max(hm0.x_m[-1] - hm0.x_m[0], 1e-9)
     fig = Figure(figsize=(4.0 * len(types) + 0.8, 4.0 * ar + 1.1), layout="constrained")
     axes = fig.subplots(1, len(types), squeeze=False)[0]
-    import matplotlib
 
     cmap = matplotlib.colormaps["magma_r"].with_extremes(bad=(1, 1, 1, 0))
     im = None
@@ -659,9 +662,6 @@ def write_case_study_report(result, out_dir, *, settings: dict | None = None, el
     ``reproduction_link``: relative link to the paper-reproduction page (shown next to the verdicts).
     Returns a dict with the paths (``figures``: stem -> path, ``csv``, ``summary``, ``report``).
     """
-    from ..scenario.claims import evaluate_claims
-    from .report import esc, html_page, img_tag, write_html
-    from .report import html_table as _html_table
 
     def html_table(*a, **k):
         return '<div style="overflow-x:auto">' + _html_table(*a, **k) + "</div>"
@@ -697,7 +697,7 @@ def write_case_study_report(result, out_dir, *, settings: dict | None = None, el
              f"{len(scene)} frames; lane width {scene.layout.lane_width_m:g} m. Ellipses and the "
              f"<code>*_95</code> numbers are 2-D {100 * result.confidence:g} % regions "
              f"({chi2_scale(result.confidence):.4g} σ). All numbers are first-order propagation "
-             f"(<code>footprint_uq.footprints.footprints_from_boxes3d</code>).</p>"]
+             f"(<code>footprint_uq.products.footprints.footprints_from_boxes3d</code>).</p>"]
     parts.append(_claims_html(claims, esc, reproduction_link))
     parts.append(_findings_html(result, esc).replace("&nbsp;", " "))
     parts.append("<h2>Summary per camera and camera type</h2>")

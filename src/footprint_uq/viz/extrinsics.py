@@ -12,8 +12,11 @@ Both return a :class:`matplotlib.figure.Figure` built without pyplot (Agg).
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 from matplotlib.figure import Figure
+
+from ..calibration.extrinsics import POSE_NAMES
 
 __all__ = ["plot_board_poses", "plot_pose_spread"]
 
@@ -31,7 +34,6 @@ def plot_board_poses(calibration, *, title: str = "Checkerboard positions relati
     ----------
     calibration : ExtrinsicCalibration
     """
-    import cv2
 
     cal = calibration
     R = cv2.Rodrigues(cal.rvec)[0]
@@ -89,7 +91,6 @@ def plot_board_poses(calibration, *, title: str = "Checkerboard positions relati
 def plot_pose_spread(calibration, *, truth=None) -> Figure:
     """Per-frame poses minus the joint estimate, one panel per parameter, with +-1 sigma bands
     (per-frame spread, bootstrap, Jacobian); ``truth`` (dict of :data:`POSE_NAMES`) marked if given."""
-    from ..calibration.extrinsics import POSE_NAMES
 
     cal = calibration
     fig = Figure(figsize=(12, 6))

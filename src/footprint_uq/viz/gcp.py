@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 from matplotlib.figure import Figure
 
-from ..ellipse import ellipse_points
+from ..uncertainty.ellipse import ellipse_points
 from .report import esc, html_page, html_table, img_tag
 
 __all__ = ["plot_gcp", "gcp_report_html"]

@@ -1,4 +1,4 @@
-"""Figures of :class:`~footprint_uq.maps.UncertaintyMap`: in the image, on the ground, GSD.
+"""Figures of :class:`~footprint_uq.products.maps.UncertaintyMap`: in the image, on the ground, GSD.
 
 * :func:`plot_image_map`: the per-pixel semi-major axis of the ground-position
   ellipse, drawn over the image frame (log colour scale, labelled contours,
@@ -24,15 +24,19 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import matplotlib
 import numpy as np
 from matplotlib import colors
 from matplotlib.figure import Figure
+from matplotlib.patches import Patch
 from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
 
 from .. import params as P
 from .. import status
-from ..ellipse import chi2_scale
-from ..propagation import propagate
+from ..errors import InputError
+from ..io.atomic import atomic_path
+from ..uncertainty.ellipse import chi2_scale, ellipse_axes
+from ..uncertainty.propagation import propagate
 
 __all__ = ["DEFAULT_LEVELS_M", "GSD_LEVELS_M", "plot_image_map", "plot_ground_map", "plot_gsd_maps",
            "plot_range_profile", "plot_nonlinearity_map", "save_figure", "FLAG_COLOR"]
@@ -51,7 +55,6 @@ _FLAG_HATCH = "////"
 
 
 def _cmap(name=_CMAP):
-    import matplotlib
 
     return matplotlib.colormaps[name].with_extremes(bad=_BAD)
 
@@ -145,7 +148,6 @@ def _draw_linearity(ax, X, Y, nonlinearity, valid, threshold):
 
     Returns the legend handles (none if every point is ``linear_ok`` or there is no layer).
     """
-    from matplotlib.patches import Patch
 
     if nonlinearity is None:
         return []
@@ -217,7 +219,6 @@ def plot_image_map(umap, *, confidence: float | None = None, levels_m=DEFAULT_LE
 
 def _invalid_handles(umap):
     """Legend patches for the greyed-out (invalid) pixels, by reason."""
-    from matplotlib.patches import Patch
 
     beyond = getattr(status, "BEYOND_RANGE", -1)
     out = []
@@ -263,7 +264,6 @@ def _ground_grid_values(umap, extent, n_cells, confidence):
     inside = pr.valid & cam.in_image(pr.uv_px)
     uv = np.where(inside[..., None], pr.uv_px, np.nan)
     est = propagate(cam, umap.budget, uv)
-    from ..ellipse import ellipse_axes
 
     a = ellipse_axes(est.cov_m2, confidence=confidence)[0]
     ok = inside & est.valid
@@ -298,7 +298,7 @@ def plot_ground_map(umap, *, confidence: float | None = None, levels_m=DEFAULT_L
     """Bird's-eye heat map of the semi-major axis on the ground (x east, y north, metres).
 
     Each ground cell is projected into the image and propagated exactly
-    (:func:`footprint_uq.propagation.propagate`); cells outside the image, above
+    (:func:`footprint_uq.uncertainty.propagation.propagate`); cells outside the image, above
     the horizon or beyond ``umap.max_range_m`` are left blank.
 
     Parameters
@@ -378,7 +378,7 @@ def plot_gsd_maps(umap, *, levels_m=GSD_LEVELS_M, vmin_m=None, vmax_m=None, titl
     """Two image-frame panels: ground sampling distance along the line of sight and across it.
 
     Both panels share one log colour scale, metres per pixel (see
-    :mod:`footprint_uq.maps` for the definition).
+    :mod:`footprint_uq.products.maps` for the definition).
     """
     vals = np.concatenate([umap.gsd_range_m[umap.valid], umap.gsd_cross_m[umap.valid]])
     norm = _lognorm(vals, vmin_m, vmax_m)
@@ -461,7 +461,6 @@ def plot_nonlinearity_map(umap, *, vmin=1e-4, vmax=1.0, title: str | None = None
     vmin, vmax : float
         Colour-scale limits (dimensionless; values beyond are clipped and the colour bar extended).
     """
-    from ..errors import InputError
 
     if umap.nonlinearity is None:
         raise InputError("umap.nonlinearity", None, "a map computed with linearity=True")
@@ -502,7 +501,6 @@ def save_figure(fig: Figure, path, *, dpi: int = 150) -> Path:
     """Save ``fig`` (PNG/PDF/SVG by extension), creating parent directories."""
     p = Path(path)
     p.parent.mkdir(parents=True, exist_ok=True)
-    from ..io.atomic import atomic_path
 
     with atomic_path(p) as tmp:
         fig.savefig(tmp, dpi=dpi, bbox_inches="tight")

@@ -30,7 +30,7 @@ container itself (its type follows from ``containerId``)::
 Positions are relative to the reference position, x east and y north (TS 103 324: for an
 RSU the perceived objects are "in the coordinate system in which the y-axis corresponds to
 the North direction, the x-axis to the East direction").  The confidences and the
-correlation are :func:`footprint_uq.v2x.cpm_fields` of the centre covariance, unchanged.
+correlation are :func:`footprint_uq.products.v2x.cpm_fields` of the centre covariance, unchanged.
 Coordinates beyond +-1310.71 m take the out-of-range values (-131072 / 131071).
 
 UPER
@@ -44,6 +44,8 @@ from __future__ import annotations
 
 import functools
 import math
+
+import numpy as np
 
 from ...errors import InputError
 from .asn1_cpm import (
@@ -114,7 +116,6 @@ def unavailable_reference_ellipse() -> dict:
 
 def coordinate_cm(v_m):
     """``CartesianCoordinateLarge`` (0.01 m; out-of-range values beyond +-1310.71 m) of metres -> int array."""
-    import numpy as np
 
     c = np.rint(np.nan_to_num(np.asarray(v_m, dtype=np.float64), nan=0.0) * 100.0)
     return np.clip(c, COORD_MIN, COORD_MAX).astype(np.int64)
@@ -124,7 +125,7 @@ def perceived_object(object_id: int, east_cm: int, north_cm: int, x_conf: int, y
                      object_class: dict | None, class_confidence: int = CONFIDENCE_LEVEL_UNAVAILABLE,
                      measurement_delta_ms: int = 0) -> dict:
     """One ``PerceivedObject`` (JSON form): position east/north of the reference position in 0.01 m
-    (:func:`coordinate_cm`) with its CPM confidences (:func:`footprint_uq.v2x.cpm_fields`), the x/y
+    (:func:`coordinate_cm`) with its CPM confidences (:func:`footprint_uq.products.v2x.cpm_fields`), the x/y
     correlation cell when available."""
     po = {"objectId": int(object_id), "measurementDeltaTime": int(measurement_delta_ms),
           "position": {"xCoordinate": {"value": int(east_cm), "confidence": int(x_conf)},

@@ -16,7 +16,7 @@ Only JSON is produced (no UPER).  Layout (J3224 ``SensorDataSharingMessage``)::
          "posConfidence": {"pos": "a50cm", "elevation": "unavailable"},   # J2735 PositionConfidence (95 %)
          "speed": 8191, "speedConfidence": "unavailable", "heading": 28800, "headingConf": "unavailable"}}]}
 
-``posConfidence.pos`` is :func:`footprint_uq.v2x.j2735_position_confidence` of the centre
+``posConfidence.pos`` is :func:`footprint_uq.products.v2x.j2735_position_confidence` of the centre
 covariance (the per-object ``j2735`` fields of the service output carry the full J2735
 ``PositionalAccuracy`` too).  Speed and heading are not measured from one frame: J3224's
 "unavailable" values.  ``objTypeCfd`` is the detector's class confidence in percent
@@ -28,7 +28,9 @@ from __future__ import annotations
 
 import datetime as _dt
 
-from ...v2x import J2735_POSITION_CONFIDENCE_NAMES
+import numpy as np
+
+from ...products.v2x import J2735_POSITION_CONFIDENCE_NAMES
 
 __all__ = ["build_sdsm", "sdsm_object", "offset_dm", "SDSM_OBJECT_TYPES"]
 
@@ -48,7 +50,6 @@ SDSM_OBJECT_TYPES = {
 
 def offset_dm(v_m):
     """``ObjectDistance`` (0.1 m, clamped to +-32767) of metres ``(...)`` -> int array."""
-    import numpy as np
 
     d = np.rint(np.nan_to_num(np.asarray(v_m, dtype=np.float64), nan=0.0) * 10.0)
     return np.clip(d, -OFFSET_MAX, OFFSET_MAX).astype(np.int64)

@@ -40,11 +40,15 @@ The whole message is padded with 0 bits to an octet boundary.
 
 from __future__ import annotations
 
+import numpy as np
+from numba import njit
+
 from ...errors import InputError
 from .asn1_cpm import CONTAINER_ID_PERCEIVED_OBJECTS, CONTAINER_ID_RSU
-from .cpm import MATRIX_COMPONENTS
+from .cpm import LATITUDE_UNAVAILABLE, LONGITUDE_UNAVAILABLE, MATRIX_COMPONENTS, build_cpm
 
-__all__ = ["encode_cpm_uper_fast", "perceived_object_container_uper", "class_bits"]
+__all__ = ["encode_cpm_uper_fast", "perceived_object_container_uper", "perceived_object_container_uper_arrays",
+           "class_bits", "CpmUperWriter"]
 
 _ALT_CONF = ("alt-000-01", "alt-000-02", "alt-000-05", "alt-000-10", "alt-000-20", "alt-000-50", "alt-001-00",
              "alt-002-00", "alt-005-00", "alt-010-00", "alt-020-00", "alt-050-00", "alt-100-00", "alt-200-00",
@@ -180,41 +184,107 @@ def perceived_object_container_uper(object_ids, x_cm, x_conf, y_cm, y_conf, xy_c
     no matrix) and ``(class_bits(...), ConfidenceLevel)`` or None.  The same bytes as
     :func:`encode_cpm_uper_fast` writes for the JSON form (the tests decode both with asn1tools)."""
     n = len(object_ids)
-    for name, col, lo, hi in (("objectId", object_ids, 0, 65535), ("xCoordinate.value", x_cm, -131072, 131071),
-                              ("yCoordinate.value", y_cm, -131072, 131071),
-                              ("xCoordinate.confidence", x_conf, 1, 4096), ("yCoordinate.confidence", y_conf, 1, 4096),
-                              ("CorrelationCellValue", xy_corr, -100, 101)):
-        if n and not (lo <= min(col) and max(col) <= hi):
-            bad = next(v for v in col if not lo <= v <= hi)
-            raise InputError(name, bad, f"an integer in {lo}..{hi}")
-    if n > 255:
-        raise InputError("perceivedObjects count", n, "at most 255")
-    v, nb = (n << 9) | n, 18  # extension 0, numberOfPerceivedObjects, list extension 0, count
-    for oid, x, cx, y, cy, r, c in zip(object_ids, x_cm, x_conf, y_cm, y_conf, xy_corr, classes, strict=True):
-        pres = 0x2000 | (0x100 if r != 101 else 0) | (0x2 if c is not None else 0)
-        o = ((((((pres << 16 | oid) << 12 | 2048) << 19 | (x + 131072)) << 12 | (cx - 1)) << 18 | (y + 131072))
-             << 12) | (cy - 1)
-        w = 104
-        if r != 101:
-            o = (o << 33) | (_CORR_PREFIX << 8) | (r + 100)
-            w += 33
+    cv = np.zeros(n, np.int64)
+    cw = np.zeros(n, np.int64)
+    lv = np.ones(n, np.int64)
+    for i, c in enumerate(classes):
         if c is not None:
-            (cv, cw), level = c
-            if not 1 <= level <= 101:
-                raise InputError("ConfidenceLevel", level, "an integer in 1..101")
-            o = (((o << cw) | cv) << 7) | (level - 1)
-            w += cw + 7
-        v = (v << w) | o
-        nb += w
-    return _pad_bytes(v, nb)
+            (cv[i], cw[i]), lv[i] = c
+    return perceived_object_container_uper_arrays(object_ids, x_cm, x_conf, y_cm, y_conf, xy_corr, cv, cw, lv)
 
 
-def encode_cpm_uper_fast(cpm: dict, *, perceived_objects_uper: bytes | None = None) -> bytes:
-    """UPER bytes of a CPM in its JSON form (same as :func:`~.cpm.encode_cpm_uper`).
+_COLUMN_RANGES = (("objectId", 0, 65535), ("xCoordinate.value", -131072, 131071),
+                  ("yCoordinate.value", -131072, 131071), ("xCoordinate.confidence", 1, 4096),
+                  ("yCoordinate.confidence", 1, 4096), ("CorrelationCellValue", -100, 101))
+_LO = np.array([lo for _, lo, _ in _COLUMN_RANGES], dtype=np.int64)
+_HI = np.array([hi for _, _, hi in _COLUMN_RANGES], dtype=np.int64)
 
-    ``perceived_objects_uper``: the container's bytes when the caller already has them
-    (:func:`perceived_object_container_uper` on the same objects).
+
+@njit(cache=True, nogil=True)
+def _put(out, acc, nacc, k, v, w):  # pragma: no cover - compiled
+    """Append the ``w`` (<= 40) low bits of ``v`` to the bit accumulator; full octets go to ``out[k]``."""
+    acc = (acc << w) | v
+    nacc += w
+    while nacc >= 8:
+        nacc -= 8
+        out[k] = (acc >> nacc) & 0xFF
+        k += 1
+    acc &= (1 << nacc) - 1
+    return acc, nacc, k
+
+
+@njit(cache=True, nogil=True)
+def _container_kernel(cols, lo, hi, cv, cw, lv):  # pragma: no cover - compiled
+    """UPER octets of a PerceivedObjectContainer from the (6, n) columns objectId, x, y, x confidence,
+    y confidence, correlation; or an error: (empty, column, object) -- column 6 = ConfidenceLevel,
+    7 = more than 255 objects."""
+    n = cols.shape[1]
+    for j in range(6):
+        for i in range(n):
+            if cols[j, i] < lo[j] or cols[j, i] > hi[j]:
+                return np.zeros(0, np.uint8), j, i
+    if n > 255:
+        return np.zeros(0, np.uint8), 7, 0
+    nbits = 18
+    for i in range(n):
+        nbits += 104
+        if cols[5, i] != 101:
+            nbits += 33
+        if cw[i] > 0:
+            nbits += cw[i] + 7
+    out = np.zeros((nbits + 7) // 8, np.uint8)
+    acc, nacc, k = np.int64(0), 0, 0
+    acc, nacc, k = _put(out, acc, nacc, k, (n << 9) | n, 18)  # extension 0, numberOf..., list extension 0, count
+    for i in range(n):
+        corr, cls = cols[5, i] != 101, cw[i] > 0
+        if cls and (lv[i] < 1 or lv[i] > 101):
+            return np.zeros(0, np.uint8), 6, i
+        pres = 0x2000 | (0x100 if corr else 0) | (0x2 if cls else 0)
+        acc, nacc, k = _put(out, acc, nacc, k, pres, 15)  # extension 0 + 14 presence bits
+        acc, nacc, k = _put(out, acc, nacc, k, cols[0, i], 16)
+        acc, nacc, k = _put(out, acc, nacc, k, 2048, 12)  # measurementDeltaTime 0
+        acc, nacc, k = _put(out, acc, nacc, k, cols[1, i] + 131072, 19)  # the 0 bit before x: no zCoordinate
+        acc, nacc, k = _put(out, acc, nacc, k, cols[3, i] - 1, 12)
+        acc, nacc, k = _put(out, acc, nacc, k, cols[2, i] + 131072, 18)
+        acc, nacc, k = _put(out, acc, nacc, k, cols[4, i] - 1, 12)
+        if corr:
+            acc, nacc, k = _put(out, acc, nacc, k, (_CORR_PREFIX << 8) | (cols[5, i] + 100), 33)
+        if cls:
+            acc, nacc, k = _put(out, acc, nacc, k, (cv[i] << 7) | (lv[i] - 1), cw[i] + 7)
+    if nacc:
+        out[k] = (acc << (8 - nacc)) & 0xFF
+    return out, -1, -1
+
+
+def perceived_object_container_uper_arrays(object_ids, x_cm, x_conf, y_cm, y_conf, xy_corr, class_value,
+                                           class_width, level) -> bytes:
+    """:func:`perceived_object_container_uper` from integer arrays (one compiled pass, no per-object Python).
+
+    ``class_value``, ``class_width``: :func:`class_bits` of each object's class, width 0 for an object
+    without a classification (its value and ``level`` are then ignored); ``level``: its ConfidenceLevel.
     """
+    n = len(object_ids)
+    cols = np.empty((6, n), np.int64)
+    for j, c in enumerate((object_ids, x_cm, y_cm, x_conf, y_conf, xy_corr)):
+        try:
+            cols[j] = c
+        except OverflowError:  # beyond 64 bits: out of range anyway
+            name, lo, hi = _COLUMN_RANGES[j]
+            raise InputError(name, next(v for v in c if not lo <= v <= hi), f"an integer in {lo}..{hi}") from None
+    out, col, i = _container_kernel(cols, _LO, _HI, np.asarray(class_value, dtype=np.int64),
+                                    np.asarray(class_width, dtype=np.int64), np.asarray(level, dtype=np.int64))
+    if col >= 0:
+        if col == 7:
+            raise InputError("perceivedObjects count", n, "at most 255")
+        if col == 6:
+            raise InputError("ConfidenceLevel", int(np.asarray(level)[i]), "an integer in 1..101")
+        name, lo, hi = _COLUMN_RANGES[col]
+        raise InputError(name, int(cols[col, i]), f"an integer in {lo}..{hi}")
+    return out.tobytes()
+
+
+def _head_bits(cpm: dict) -> tuple[int, int]:
+    """(value, bits) of a CPM up to its list of containers: header, management container, container count."""
     h = cpm["header"]
     mc = cpm["payload"]["managementContainer"]
     rp = mc["referencePosition"]
@@ -235,24 +305,64 @@ def encode_cpm_uper_fast(cpm: dict, *, perceived_objects_uper: bytes | None = No
         (_check("semiMajorOrientation", el["semiMajorOrientation"], 0, 3601), 12),
         (_check("altitudeValue", alt["altitudeValue"], -100000, 800001), 20),
         (_ALT_CONF.index(alt["altitudeConfidence"]), 4),
+        (0, 1),  # cpmContainers extension bit
+        (_check("cpmContainers count", len(cpm["payload"]["cpmContainers"]), 1, 8), 3),
     ]
-    wrapped = cpm["payload"]["cpmContainers"]
-    fields.append((0, 1))
-    fields.append((_check("cpmContainers count", len(wrapped), 1, 8), 3))
-    parts = ["".join(format(v, f"0{n}b") for v, n in fields)]
-    for w in wrapped:
+    v = nb = 0
+    for f, w in fields:
+        v = (v << w) | f
+        nb += w
+    return v, nb
+
+
+#: bit offset of ``referenceTime`` in the message (header 48 bits, payload extension bit, management container
+#: extension bit and 2 presence bits)
+_REFERENCE_TIME_AT = 52
+
+
+def _append_container(v: int, nb: int, cid: int, data: bytes) -> tuple[int, int]:
+    """A WrappedCpmContainer after ``nb`` bits: containerId, the open type's length determinant, its octets."""
+    L = len(data)
+    if L < 128:
+        v, nb = (v << 12) | ((cid - 1) << 8) | L, nb + 12
+    elif L < 16384:
+        v, nb = (v << 20) | ((cid - 1) << 16) | 0x8000 | L, nb + 20
+    else:
+        raise InputError("containerData", L, "fewer than 16384 octets (no fragmented open types)")
+    return (v << 8 * L) | int.from_bytes(data, "big"), nb + 8 * L
+
+
+def encode_cpm_uper_fast(cpm: dict, *, perceived_objects_uper: bytes | None = None) -> bytes:
+    """UPER bytes of a CPM in its JSON form (same as :func:`~.cpm.encode_cpm_uper`).
+
+    ``perceived_objects_uper``: the container's bytes when the caller already has them
+    (:func:`perceived_object_container_uper` on the same objects).
+    """
+    v, nb = _head_bits(cpm)
+    for w in cpm["payload"]["cpmContainers"]:
         cid = w["containerId"]
         if cid not in (CONTAINER_ID_RSU, CONTAINER_ID_PERCEIVED_OBJECTS):
             raise InputError("containerId", cid, f"{CONTAINER_ID_RSU} or {CONTAINER_ID_PERCEIVED_OBJECTS}")
         data = perceived_objects_uper if (cid == CONTAINER_ID_PERCEIVED_OBJECTS and perceived_objects_uper
                                           is not None) else _container_bytes(cid, w["containerData"])
-        L = len(data)
-        if L < 128:
-            length = format(L, "08b")
-        elif L < 16384:
-            length = format(0x8000 | L, "016b")
-        else:
-            raise InputError("containerData", L, "fewer than 16384 octets (no fragmented open types)")
-        parts.append(format(cid - 1, "04b") + length + format(int.from_bytes(data, "big"), f"0{8 * L}b"))
-    s = "".join(parts)
-    return _pad_bytes(int(s, 2), len(s))
+        v, nb = _append_container(v, nb, cid, data)
+    return _pad_bytes(v, nb)
+
+
+class CpmUperWriter:
+    """UPER of one station's CPMs as the service sends them (:func:`~.cpm.build_cpm`: the RSU container, then
+    the perceived objects): everything but the reference time and the perceived objects is written once;
+    :meth:`encode` adds those two.  The same bytes as :func:`encode_cpm_uper_fast` (the tests compare them)."""
+
+    def __init__(self, station_id: int, *, latitude: int = LATITUDE_UNAVAILABLE,
+                 longitude: int = LONGITUDE_UNAVAILABLE):
+        v, nb = _head_bits(build_cpm(station_id, 0, [], latitude=latitude, longitude=longitude))
+        self._v, self._nb = _append_container(v, nb, CONTAINER_ID_RSU, _container_bytes(CONTAINER_ID_RSU, {}))
+        self._ref_shift = self._nb - _REFERENCE_TIME_AT - 42
+
+    def encode(self, reference_time_ms: int, perceived_objects_uper: bytes) -> bytes:
+        """The message with this ``TimestampIts`` and PerceivedObjectContainer (its UPER octets)."""
+        ref = _check("referenceTime", reference_time_ms, 0, 4398046511103)
+        v, nb = _append_container(self._v | (ref << self._ref_shift), self._nb, CONTAINER_ID_PERCEIVED_OBJECTS,
+                                  perceived_objects_uper)
+        return _pad_bytes(v, nb)

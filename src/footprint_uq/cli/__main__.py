@@ -1,0 +1,5 @@
+"""``python -m footprint_uq.cli``: the ``footprint-uq`` command."""
+
+from .main import main
+
+main()

@@ -1,0 +1,68 @@
+"""``footprint-uq locate``: ground position and covariance of pixels
+(:func:`footprint_uq.products.locate.locate_records`)."""
+
+from __future__ import annotations
+
+import json
+
+import click
+import numpy as np
+
+from ..errors import InputError
+from ..products.locate import locate_csv, locate_records
+from ..uncertainty.presets import PRESET_NAMES
+from .common import check_confidence, load_camera_and_budget, warn
+
+__all__ = ["locate_cmd", "MAX_PIXEL_PX"]
+
+#: largest pixel coordinate accepted by --pixel (a million image widths away is already no pixel)
+MAX_PIXEL_PX = 1e9
+
+
+@click.command("locate")
+@click.option("--camera", "camera_path", required=True, metavar="FILE",
+              help="Camera file (YAML/JSON, OpenCV, ROS or TUMTraf; docs/file-formats.md).")
+@click.option("--budget", "budget_spec", required=True, metavar="FILE_OR_PRESET",
+              help=f"Error budget: a preset ({', '.join(PRESET_NAMES)}; append @deg to read Table 3's "
+                   "angles as degrees instead of the printed 1e-3 deg) or a YAML/JSON budget file.")
+@click.option("--pixel", "pixels", type=(float, float), multiple=True, required=True, metavar="U V",
+              help="Pixel (u right, v down, origin at the centre of the top-left pixel); repeat for more.")
+@click.option("--format", "fmt", type=click.Choice(["json", "csv"]), default="json", show_default=True)
+@click.option("--confidence", type=float, default=None, metavar="P",
+              help="Also report the semi-axes of the P-confidence ellipse (2-D chi-square, 0.95 -> 2.4477 sigma).")
+@click.option("--linear-threshold", type=float, default=0.05, show_default=True, metavar="E",
+              help="linear_ok is true where the predicted relative error of the linear 1-sigma semi-major axis "
+                   "(nonlinearity) is at most E.")
+def locate_cmd(camera_path, budget_spec, pixels, fmt, confidence, linear_threshold):
+    """Ground position (x east, y north, metres) and 2x2 covariance (m^2) of pixels.
+
+    One record per --pixel: u_px, v_px, x_m, y_m, cov_m2, sigma_major_m,
+    sigma_minor_m (1 sigma), orientation_deg (major axis, counter-clockwise from
+    east), nonlinearity (predicted relative error of the linear sigma_major_m:
+    0.05 = 5 %), linear_ok (nonlinearity <= --linear-threshold), valid and reason
+    (null when valid).  With --confidence P, also confidence, semi_major_m and
+    semi_minor_m of the P ellipse.  A valid pixel that is not linear_ok is also
+    reported on stderr: its covariance underestimates the spread (near the
+    horizon; docs/uncertainty-model.md, "The linearity flag").
+    """
+    confidence = check_confidence(confidence)
+    uv = np.array(pixels, dtype=np.float64).reshape(-1, 2)
+    bad = ~(np.isfinite(uv) & (np.abs(uv) <= MAX_PIXEL_PX)).all(-1)
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise InputError(f"--pixel (#{i + 1})", tuple(pixels[i]),
+                         f"finite pixel coordinates U V of magnitude <= {MAX_PIXEL_PX:g}")
+    camera, budget = load_camera_and_budget(camera_path, budget_spec)
+    w, h = camera.image_size_px
+    for i in np.flatnonzero(~camera.in_image(uv)):
+        warn(f"--pixel #{i + 1} ({uv[i, 0]:g}, {uv[i, 1]:g}) is outside the {w}x{h} image; computed anyway")
+    records = locate_records(camera, budget, uv, confidence=confidence, linear_threshold=linear_threshold)
+    for i, r in enumerate(records):
+        if r["valid"] and not r["linear_ok"]:
+            warn(f"--pixel #{i + 1} ({uv[i, 0]:g}, {uv[i, 1]:g}): linearisation error predicted "
+                 f"{100 * r['nonlinearity']:.1f} % of sigma_major_m (> {100 * linear_threshold:g} %): the covariance "
+                 "underestimates the spread")
+    if fmt == "json":
+        click.echo(json.dumps(records, indent=2, allow_nan=False))
+    else:
+        click.echo(locate_csv(records, confidence), nl=False)

@@ -1,0 +1,1 @@
+"""CARLA: coordinate frames, camera poses and JSON Lines recordings (:mod:`.bridge`)."""

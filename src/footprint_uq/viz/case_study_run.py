@@ -1,0 +1,77 @@
+"""The paper's left-turn case study from settings to report (the ``footprint-uq case-study`` output).
+
+:func:`run_case_study` builds the scene (the generator of :mod:`footprint_uq.scenario`, or a
+CARLA recording), analyses it for each camera type and writes the figures, the per-frame CSV,
+``summary.json``, ``report.html`` (:func:`footprint_uq.viz.case_study.write_case_study_report`)
+and ``paper-reproduction.md`` (:mod:`footprint_uq.scenario.reproduction`).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+from ..integrations.carla.bridge import read_recording, scene_to_recording
+from ..scenario.case_study import CaseStudyConfig, analyse, build_scene, load_config
+from ..scenario.claims import evaluate_claims
+from ..scenario.reproduction import write_paper_reproduction
+from .case_study import write_case_study_report
+
+__all__ = ["run_case_study"]
+
+
+def run_case_study(out_dir, *, config=None, recording=None, camera_types=None, ellipse_every: int = 4,
+                   dpi: int = 130, write_recording_to=None, reproduction: bool = True) -> dict:
+    """Run the case study and write its report.
+
+    Parameters
+    ----------
+    out_dir : path
+        Output directory (created).
+    config : path or CaseStudyConfig, optional
+        Scenario settings (YAML/JSON file, ``docs/case-study.md``); default the paper-like set-up.
+    recording : path, optional
+        Analyse a recording (``docs/carla-recording.md``) instead of the generator's scene.
+    camera_types : list of str or ErrorBudget, optional
+        Budget specs overriding the config's camera types.
+    ellipse_every : int
+        Draw the ellipse of every n-th frame.
+    dpi : int
+        Resolution of the PNG figures.
+    write_recording_to : path, optional
+        Also save the analysed scene as a recording.
+    reproduction : bool
+        Also write ``paper-reproduction.md`` (the paper's tables and statements under both
+        readings of Table 3's angles, default scene) and link it from the report.
+
+    Returns
+    -------
+    dict
+        The paths of :func:`~footprint_uq.viz.case_study.write_case_study_report` (``figures``,
+        ``csv``, ``report``, ...), plus ``result`` (the
+        :class:`~footprint_uq.scenario.case_study.CaseStudyResult`), ``claims`` (the paper's
+        statements tested, :func:`footprint_uq.scenario.claims.evaluate_claims`) and
+        ``reproduction`` (the path of ``paper-reproduction.md``, or None).
+    """
+    matplotlib.use("Agg")
+    if config is None:
+        cfg = CaseStudyConfig()
+    elif isinstance(config, CaseStudyConfig):
+        cfg = config
+    else:
+        cfg = load_config(config)
+    types = cfg.camera_types if not camera_types else {str(k): k for k in camera_types}
+    scene = read_recording(recording) if recording is not None else build_scene(cfg)
+    if write_recording_to is not None:
+        scene_to_recording(scene, write_recording_to)
+    result = analyse(scene, types, confidence=cfg.confidence)
+    settings = cfg.to_dict() if recording is None else {"heatmap": cfg.heatmap}
+    repro = write_paper_reproduction(Path(out_dir) / "paper-reproduction.md") if reproduction else None
+    paths = write_case_study_report(result, out_dir, settings=settings, ellipse_every=ellipse_every,
+                                    heatmap=cfg.heatmap, dpi=dpi,
+                                    reproduction_link=repro.name if repro is not None else None)
+    paths["result"] = result
+    paths["claims"] = evaluate_claims(result)
+    paths["reproduction"] = repro
+    return paths

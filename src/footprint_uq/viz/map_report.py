@@ -1,0 +1,93 @@
+"""An uncertainty map on disk: its arrays, three figures and a summary (the ``footprint-uq map`` output).
+
+:func:`write_map_report` computes (or takes) an :class:`~footprint_uq.products.maps.UncertaintyMap`
+and writes the files named in :data:`MAP_FILES` into one directory, each atomically.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from ..io import camera_to_dict
+from ..io.atomic import atomic_write_text
+from ..products.maps import uncertainty_map
+from .maps import plot_ground_map, plot_gsd_maps, plot_image_map, plot_nonlinearity_map, save_figure
+
+__all__ = ["MAP_FILES", "write_map_report"]
+
+#: the files of a map report: key -> file name inside the output directory
+MAP_FILES = {
+    "npz": "map.npz",
+    "image_png": "uncertainty_image.png",
+    "ground_png": "uncertainty_ground.png",
+    "gsd_png": "gsd.png",
+    "nonlinearity_png": "nonlinearity.png",
+    "summary_json": "summary.json",
+}
+
+
+def write_map_report(camera, budget, out_dir, *, step_px: int = 2, max_range_m: float | None = None,
+                     confidence: float | None = None, vmin_m: float | None = None, vmax_m: float | None = None,
+                     dpi: int = 150, umap=None, linearity: bool = True, linear_threshold: float = 0.05):
+    """Compute an uncertainty map and write its arrays, figures and summary into ``out_dir``.
+
+    Parameters
+    ----------
+    camera : Camera
+        The camera.
+    budget : ErrorBudget or str
+        Error budget (or a preset name / budget file).
+    out_dir : path
+        Output directory (created).
+    step_px : int
+        Grid step in pixels (1 = every pixel).
+    max_range_m : float, optional
+        Mask ground points farther than this from the camera foot point.
+    confidence : float, optional
+        Draw the semi-axes of this confidence ellipse instead of 1 sigma, and summarise them.
+    vmin_m, vmax_m : float, optional
+        Colour scale of the two semi-major-axis figures (default: from the data).
+    dpi : int
+        Resolution of the PNG figures.
+    umap : UncertaintyMap, optional
+        Already computed for this camera and budget (then ``step_px`` and ``max_range_m`` are
+        not used).
+    linearity : bool
+        Carry the linearity flag (default; it costs little, bench section "maps"): the figures
+        hatch the pixels that are not ``linear_ok`` and draw the threshold's contour, and
+        ``nonlinearity.png`` shows the layer.
+    linear_threshold : float
+        ``linear_ok`` where the predicted relative error of the linear semi-major axis is at most this.
+
+    Returns
+    -------
+    umap : UncertaintyMap
+        The map.
+    files : dict
+        The :data:`MAP_FILES` keys mapped to the written paths.  ``summary.json`` holds
+        :meth:`UncertaintyMap.summary`, the camera, the budget and the file names (no
+        ``nonlinearity_png`` when the map has no flag).
+    """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    if umap is None:
+        umap = uncertainty_map(camera, budget, step_px, max_range_m=max_range_m, linearity=linearity,
+                               linear_threshold=linear_threshold)
+    files = {k: out / v for k, v in MAP_FILES.items()}
+    if umap.nonlinearity is None:
+        del files["nonlinearity_png"]
+    else:
+        save_figure(plot_nonlinearity_map(umap), files["nonlinearity_png"], dpi=dpi)
+    umap.save_npz(files["npz"])
+    save_figure(plot_image_map(umap, confidence=confidence, vmin_m=vmin_m, vmax_m=vmax_m), files["image_png"],
+                dpi=dpi)
+    save_figure(plot_ground_map(umap, confidence=confidence, vmin_m=vmin_m, vmax_m=vmax_m), files["ground_png"],
+                dpi=dpi)
+    save_figure(plot_gsd_maps(umap), files["gsd_png"], dpi=dpi)
+    summary = umap.summary(confidence=confidence)
+    summary["camera"] = camera_to_dict(camera)
+    summary["budget_parameters"] = umap.budget.to_dict()
+    summary["files"] = {k: p.name for k, p in files.items()}
+    atomic_write_text(files["summary_json"], json.dumps(summary, indent=2, allow_nan=False) + "\n")
+    return umap, files

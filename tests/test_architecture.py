@@ -1,0 +1,187 @@
+"""The package's architecture, checked: no import cycles, no private names across modules, imports at
+the top of modules (function-local imports only for optional extras), and the old module paths of
+0.1 only as aliases (``footprint_uq._moved``).  See docs/architecture.md."""
+
+from __future__ import annotations
+
+import ast
+import importlib
+import sys
+import warnings
+from collections import defaultdict
+from pathlib import Path
+
+import pytest
+
+SRC = Path(__file__).resolve().parents[1] / "src"
+PKG = "footprint_uq"
+#: optional extras: imported where used, so that the core runs without them
+OPTIONAL = {"dask", "distributed", "carla", "pyproj", "paho", "asn1tools", "uncertainties", "atheris"}
+
+
+def _modules() -> dict[str, tuple[Path, bool]]:
+    out = {}
+    for f in sorted((SRC / PKG).rglob("*.py")):
+        parts = list(f.relative_to(SRC).with_suffix("").parts)
+        is_pkg = parts[-1] == "__init__"
+        out[".".join(parts[:-1] if is_pkg else parts)] = (f, is_pkg)
+    return out
+
+
+MODS = _modules()
+
+
+def _base(mod: str, is_pkg: bool, node: ast.ImportFrom) -> str:
+    if node.level == 0:
+        return node.module or ""
+    b = mod.split(".") if is_pkg else mod.split(".")[:-1]
+    b = b[: len(b) - (node.level - 1)] if node.level > 1 else b
+    return ".".join(b + ([node.module] if node.module else []))
+
+
+class _Scan:
+    """Every import of one module: (node, inside a function?, under TYPE_CHECKING?, internal targets)."""
+
+    def __init__(self, mod: str):
+        self.mod = mod
+        path, self.is_pkg = MODS[mod]
+        self.tree = ast.parse(path.read_text(), str(path))
+        parents = {c: n for n in ast.walk(self.tree) for c in ast.iter_child_nodes(n)}
+        self.imports = []
+        for n in ast.walk(self.tree):
+            if not isinstance(n, ast.Import | ast.ImportFrom):
+                continue
+            p, in_func, type_only = parents.get(n), False, False
+            while p is not None:
+                in_func |= isinstance(p, ast.FunctionDef | ast.AsyncFunctionDef)
+                type_only |= isinstance(p, ast.If) and "TYPE_CHECKING" in ast.unparse(p.test)
+                p = parents.get(p)
+            self.imports.append((n, in_func, type_only, self._targets(n)))
+
+    def _targets(self, n) -> list[tuple[str, str | None] | None]:
+        """Per imported name: (internal module, imported name or None for a module), or None (external)."""
+        if isinstance(n, ast.Import):
+            return [(a.name, None) if a.name.split(".")[0] == PKG else None for a in n.names]
+        base = _base(self.mod, self.is_pkg, n)
+        if base.split(".")[0] != PKG:
+            return [None] * len(n.names)
+        return [(f"{base}.{a.name}", None) if f"{base}.{a.name}" in MODS else (base, a.name) for a in n.names]
+
+
+SCANS = {m: _Scan(m) for m in MODS}
+
+
+def _ancestors(mod: str) -> list[str]:
+    parts = mod.split(".")
+    return [".".join(parts[:i]) for i in range(1, len(parts) + 1)]
+
+
+def _runtime_graph() -> dict[str, set[str]]:
+    """Module -> modules whose execution its top-level imports start (a package's __init__ runs before
+    any of its modules; a module's own ancestors are already running, so they are not edges)."""
+    g = defaultdict(set)
+    for mod, scan in SCANS.items():
+        own = set(_ancestors(mod))
+        for _, in_func, type_only, targets in scan.imports:
+            if in_func or type_only:
+                continue
+            for target, _ in filter(None, targets):
+                g[mod].update(a for a in _ancestors(target)[1:] if a in MODS and a not in own)
+    return g
+
+
+def _cycles(g: dict[str, set[str]]) -> list[list[str]]:
+    index, low, stack, on, out, counter = {}, {}, [], set(), [], [0]
+
+    def visit(v):
+        index[v] = low[v] = counter[0]
+        counter[0] += 1
+        stack.append(v)
+        on.add(v)
+        for w in sorted(g.get(v, ())):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            comp = []
+            while True:
+                w = stack.pop()
+                on.discard(w)
+                comp.append(w)
+                if w == v:
+                    break
+            if len(comp) > 1:
+                out.append(sorted(comp))
+
+    for v in sorted(g):
+        if v not in index:
+            visit(v)
+    return out
+
+
+def test_no_import_cycles():
+    assert _cycles(_runtime_graph()) == []
+
+
+def test_cycle_finder_finds_a_cycle():
+    """The check above can fail: a two-module cycle and one through a package's __init__."""
+    assert _cycles({"a": {"b"}, "b": {"a"}, "c": {"a"}}) == [["a", "b"]]
+    assert _cycles({"p": {"p.x"}, "p.x": {"q"}, "q": {"p"}}) == [["p", "p.x", "q"]]
+
+
+def test_imports_are_at_module_top_except_optional_extras():
+    bad = []
+    for mod, scan in SCANS.items():
+        for n, in_func, _, _ in scan.imports:
+            if not in_func:
+                continue
+            names = [n.module or ""] if isinstance(n, ast.ImportFrom) and n.level == 0 else \
+                [a.name for a in n.names] if isinstance(n, ast.Import) else [PKG]
+            if not all(name.split(".")[0] in OPTIONAL for name in names):
+                bad.append(f"{mod}:{n.lineno}: {ast.unparse(n)}")
+    assert bad == []
+
+
+def test_no_private_names_across_modules():
+    """``from .x import _y`` and ``x._y`` on an imported module are private reach-ins.  Private
+    *modules* (``_common``, ``_checks``) are the package's shared internals and may be imported."""
+    bad = []
+    for mod, scan in SCANS.items():
+        aliases = {}
+        for n, _, _, targets in scan.imports:
+            for t, alias in zip(targets, n.names, strict=True):
+                if t is None:
+                    continue
+                target, name = t
+                if name is not None and name.startswith("_") and not name.startswith("__"):
+                    bad.append(f"{mod}:{n.lineno}: {ast.unparse(n)}")
+                if name is None and target != mod:
+                    aliases[alias.asname or alias.name.split(".")[-1]] = target
+        for node in ast.walk(scan.tree):
+            if (isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name) and node.value.id in aliases
+                    and node.attr.startswith("_") and not node.attr.startswith("__")):
+                bad.append(f"{mod}:{node.lineno}: {node.value.id}.{node.attr}")
+    assert bad == []
+
+
+def test_every_internal_import_resolves_to_a_module_of_the_new_layout():
+    bad = []
+    for mod, scan in SCANS.items():
+        for n, _, _, targets in scan.imports:
+            bad += [f"{mod}:{n.lineno}: {t[0]}" for t in targets if t is not None and t[0] not in MODS]
+    assert bad == []
+
+
+@pytest.mark.parametrize("old", ["kernels", "maps", "footprints", "budget", "propagation", "carla_bridge"])
+def test_old_module_paths_are_aliases_of_the_moved_modules(old, monkeypatch):
+    from footprint_uq._moved import MOVED
+
+    new = importlib.import_module(f"{PKG}.{MOVED[old]}")
+    monkeypatch.delitem(sys.modules, f"{PKG}.{old}", raising=False)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        mod = importlib.import_module(f"{PKG}.{old}")
+    assert mod is new and mod.__name__ == f"{PKG}.{MOVED[old]}" and mod.__spec__.name == f"{PKG}.{MOVED[old]}"
+    assert any(issubclass(w.category, DeprecationWarning) and MOVED[old] in str(w.message) for w in caught)
