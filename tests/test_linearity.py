@@ -25,6 +25,7 @@ from footprint_uq import (
     propagate_joint,
 )
 from footprint_uq import params as P
+from footprint_uq.products.footprints import centre_covariance_sampled, footprints_from_corners
 from footprint_uq.uncertainty.propagation import nonlinearity, nonlinearity_from_forms, ray_denominator
 
 DEMO = PanTiltCamera(focal_px=1400.0, image_size_px=(1920, 1080), height_m=8.0, pan_deg=30.0, tilt_deg=20.0)
@@ -236,8 +237,6 @@ def test_centre_flag_tracks_the_sampled_centre(camera):
     (the full model, shared camera errors, every corner's pixel noise), from near the camera to the horizon:
     where linear_ok the linear centre's semi-major axis is within 5 % (+ Monte-Carlo noise), and up to 0.15
     the flag is within 20 % of the measured deviation, as for single points."""
-    from footprint_uq.footprints import _semi_major, centre_covariance_sampled, footprints_from_corners
-
     v = np.array([900.0, 500.0, 300.0, 200.0, 150.0, 120.0, 100.0, 85.0, 75.0, 65.0])  # chosen before the results
     corners = np.array([[0.0, 0.0], [60.0, 0.0], [60.0, -12.0], [0.0, -12.0]])
     uv = np.stack([np.full(v.size, 900.0), v], -1)[:, None, :] + corners
@@ -245,7 +244,7 @@ def test_centre_flag_tracks_the_sampled_centre(camera):
     for budget in ("bw-cube1@deg", "basler1@deg", "bw-bullet1@deg"):
         est = footprints_from_corners(camera, budget, uv, v2x_policy="linear")
         mc, frac = centre_covariance_sampled(camera, budget, uv, n_samples=20_000, seed=3)
-        dev = _semi_major(mc) / _semi_major(est.centre_cov_m2) - 1.0
+        dev = ellipse_axes(mc)[0] / ellipse_axes(est.centre_cov_m2)[0] - 1.0
         use = est.centre_valid & (frac >= 0.999)
         ok = use & est.centre_linear_ok
         n_ok += ok.sum()
