@@ -7,13 +7,23 @@ The factories are plain functions exposed through fixtures (``random_params``,
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 import pytest
+from hypothesis import settings
 
 from footprint_uq import params as P
 from footprint_uq.cameras.distortion import distort
 from footprint_uq.cameras.pinhole import normalised_to_pixel
 from footprint_uq.cameras.rotation import R_W_C
+
+# Hypothesis profiles: "explore" (the default: new random examples each run, failures kept in
+# .hypothesis/ and replayed) and "ci" (.ci/run: a fixed seed, so that a run on a clean clone is
+# reproducible; a failure prints the example and its reproduce blob).
+settings.register_profile("explore", print_blob=True)
+settings.register_profile("ci", derandomize=True, print_blob=True)
+settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "explore"))
 
 IMAGE_SIZE_PX = (1920, 1080)
 

@@ -17,12 +17,13 @@ import dataclasses
 
 import numpy as np
 import pyarrow as pa
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, given, note, settings
 from hypothesis import strategies as st
 
 from footprint_uq import params as P
 from footprint_uq import status
 from footprint_uq.batch import process_table
+from footprint_uq.cameras.distortion import distort
 from footprint_uq.cameras.opencv import OpenCVCamera
 from footprint_uq.cameras.pantilt import PanTiltCamera
 from footprint_uq.cameras.rotation import R_W_C
@@ -71,7 +72,10 @@ def cameras(draw):
     K = np.array([[f, draw(st.floats(-2, 2)), cx], [0.0, f * draw(st.floats(0.98, 1.02)), cy], [0, 0, 1]])
     R = R_W_C(np.deg2rad(pan), np.deg2rad(tilt), np.deg2rad(roll)).T
     t = -R @ np.array([x0, y0, h])
-    return OpenCVCamera(K, dist, R, t, (W_PX, H_PX))
+    cam = OpenCVCamera(K, dist, R, t, (W_PX, H_PX))
+    note(f"camera: K={K.tolist()!r} dist={dist.tolist()!r} pan/tilt/roll_deg={(pan, tilt, roll)!r} "
+         f"position_m={(x0, y0, h)!r}")
+    return cam
 
 
 def _budget(draw_full: bool):
@@ -98,8 +102,28 @@ def _pixels(draw, n=48):
     return np.concatenate([np.stack([u, v], -1), edge])
 
 
-def _close(a, b, scale):
-    return np.all(np.abs(a - b) <= RTOL * scale)
+def _close(a, b, scale, rtol=RTOL):
+    return np.all(np.abs(a - b) <= rtol * scale)
+
+
+def _lens_rtol(cam, xy_world_m):
+    """Per-point relative tolerance for paths that *project* world points first (3D boxes).
+
+    Each path projects a box corner with its own arithmetic, so the pixels agree to a few ulp,
+    not exactly.  Back-projection multiplies that difference by the condition number of the
+    distortion Jacobian, the covariance (which holds the Jacobian's inverse twice) by its square.
+    Near the lens fold the condition number reaches 10^3 and no two correct implementations can
+    agree to 1e-9 there; the tolerance is 1e-9 plus 100 eps cond^2 -- 1e-9 for any lens the
+    condition number of which stays below ~200.
+    """
+    xy = np.asarray(xy_world_m, dtype=float)
+    if not isinstance(cam, OpenCVCamera) or not np.any(cam.params[P.DIST_SLICE]):
+        return np.full(xy.shape[:-1], RTOL)
+    X = np.concatenate([xy, np.full(xy.shape[:-1] + (1,), cam.ground_z_m)], -1)
+    xc = X @ cam.R.T + cam.t
+    _, J, _ = distort(xc[..., :2] / xc[..., 2:], cam.params[P.DIST_SLICE], get_gradients=True)
+    cond = np.linalg.cond(J)
+    return RTOL + 100.0 * np.finfo(float).eps * np.where(np.isfinite(cond), cond, 0.0) ** 2
 
 
 def _assert_same(ref, xy, cov, reason, what, cam, uv=None):
@@ -117,16 +141,20 @@ def _assert_same(ref, xy, cov, reason, what, cam, uv=None):
     assert _close(cov[ok], ref.cov_m2[ok], scale_c), f"{what}: covariances differ"
 
 
-def _assert_same_flag(ref_nl, nl, what, threshold=DEFAULT_LINEAR_THRESHOLD):
-    """The same nonlinearity (NaN where the reference has none) and the same linear_ok."""
+def _assert_same_flag(ref_nl, nl, what, threshold=DEFAULT_LINEAR_THRESHOLD, rtol=RTOL):
+    """The same nonlinearity (NaN where the reference has none) and the same linear_ok.
+
+    ``rtol``: scalar or one per value (see :func:`_lens_rtol`).
+    """
     ref_nl = np.asarray(ref_nl, dtype=float)
     nl = np.asarray(nl, dtype=float)
     np.testing.assert_array_equal(np.isnan(nl), np.isnan(ref_nl), err_msg=f"{what}: flag missing / extra")
     m = ~np.isnan(ref_nl)
     err = np.abs(nl[m] - ref_nl[m])
-    tol = RTOL * np.abs(ref_nl[m]) + NL_ATOL
+    rtol = np.broadcast_to(rtol, ref_nl.shape)[m]
+    tol = rtol * np.abs(ref_nl[m]) + NL_ATOL
     assert np.all(err <= tol), f"{what}: nonlinearity differs by {np.max(err / tol):.3g} x the tolerance"
-    at_edge = np.abs(ref_nl[m] - threshold) <= RTOL * threshold  # (measure zero: a draw exactly at the threshold)
+    at_edge = np.abs(ref_nl[m] - threshold) <= rtol * threshold  # (measure zero: a draw exactly at the threshold)
     np.testing.assert_array_equal((nl[m] <= threshold)[~at_edge], (ref_nl[m] <= threshold)[~at_edge],
                                   err_msg=f"{what}: linear_ok differs")
 
@@ -206,15 +234,17 @@ def test_boxes3d_framewise_agrees_with_numpy_reference(data):
     np.testing.assert_array_equal(est.corner_reason, ref.corner_reason)
     np.testing.assert_array_equal(est.centre_reason, ref.centre_reason)
     ok = ref.corner_reason == status.OK
+    rt = _lens_rtol(cam, np.nan_to_num(ref.corners_xy_world_m))  # (n, 4): 1e-9 unless near the lens fold
     scale = 1.0 + np.abs(ref.corners_xy_world_m[ok] - foot).max(initial=0.0)
-    assert _close(est.corners_xy_world_m[ok], ref.corners_xy_world_m[ok], scale)
+    assert _close(est.corners_xy_world_m[ok], ref.corners_xy_world_m[ok], scale, rt[ok][:, None])
     sc = np.abs(ref.corners_cov_m2[ok]).max(axis=(-2, -1))[:, None, None]
-    assert _close(est.corners_cov_m2[ok], ref.corners_cov_m2[ok], sc)
+    assert _close(est.corners_cov_m2[ok], ref.corners_cov_m2[ok], sc, rt[ok][:, None, None])
     okc = ref.centre_valid
-    assert _close(est.centre_xy_world_m[okc], ref.centre_xy_world_m[okc], scale)
-    _assert_same_flag(ref.corners_nonlinearity, est.corners_nonlinearity, "boxes3d corners")
-    _assert_same_flag(ref.centre_nonlinearity, est.centre_nonlinearity, "boxes3d centre")
-    _assert_same_flag(ref.largest_nonlinearity, est.largest_nonlinearity, "boxes3d largest point")
+    rt_obj = np.where(ok, rt, RTOL).max(axis=1)  # an object's numbers come from its worst corner
+    assert _close(est.centre_xy_world_m[okc], ref.centre_xy_world_m[okc], scale, rt_obj[okc][:, None])
+    _assert_same_flag(ref.corners_nonlinearity, est.corners_nonlinearity, "boxes3d corners", rtol=rt)
+    _assert_same_flag(ref.centre_nonlinearity, est.centre_nonlinearity, "boxes3d centre", rtol=rt_obj)
+    _assert_same_flag(ref.largest_nonlinearity, est.largest_nonlinearity, "boxes3d largest point", rtol=rt_obj)
     np.testing.assert_array_equal(est.v2x_source, ref.v2x_source)
     np.testing.assert_array_equal(est.v2x_codes, ref.v2x_codes)
 
