@@ -30,7 +30,7 @@ __all__ = [
     "UNDISTORT_TOL", "UNDISTORT_MAX_ITER", "R_CAP", "STRETCH_MAX", "DOM_M", "DOM_RD_IN2", "DOM_RD_OUT2",
     "DOM_RU_IN2", "DOM_RU_OUT2", "DOM_TAB", "distort_point", "distort_jac", "in_domain_distorted",
     "in_domain_undistorted", "undistort_point", "undistort_vec", "fold_radius", "undistort_many", "contains_many",
-    "major_axis", "nonlinearity_forms", "nonlinearity_point",
+    "major_axis", "nonlinearity_forms", "nonlinearity_point", "ground_of_ray",
 ]
 
 _INL = dict(inline="always", cache=True, error_model="numpy", fastmath={"contract"})
@@ -333,6 +333,44 @@ def undistort_vec(dom, k, xd, yd, xn, yn, m00, m01, m10, m11, iden, ok):
         nfail += 0 if ok[i] else 1
     if nfail:
         _undistort_fallback(dom, k, xd, yd, xn, yn, m00, m01, m10, m11, iden, ok)
+
+
+# --------------------------------------------------------------------------------------
+# ray / ground intersection (docs/uncertainty-model.md, "Back-projection")
+# --------------------------------------------------------------------------------------
+@nb.njit(**_INL)
+def ground_of_ray(h_m, hR00, hR01, hR10, hR11, g0, g1, dxr, dyr, dn):
+    """Where the ray of one pixel meets the ground plane, and how that point moves with the ray.
+
+    The ray is ``d = R_world_cam (x, y, 1)`` for undistorted normalised coordinates ``(x, y)``;
+    the ground is the plane ``z = s_x x + s_y y + dz`` (normal ``n = (-s_x, -s_y, 1)``).
+
+    Parameters
+    ----------
+    h_m : float
+        Camera height above the ground plane at its foot (m, > 0).
+    hR00, hR01, hR10, hR11 : float
+        ``h_m`` times ``R_world_cam[0:2, 0:2]`` (m; per camera, precomputed by the callers).
+    g0, g1 : float
+        ``n . R_world_cam[:, 0]`` and ``n . R_world_cam[:, 1]``: how the ray's normal component
+        ``dn`` changes with ``x`` and ``y``.
+    dxr, dyr, dn : float
+        The ray's world x and y components and its component along ``n`` (< 0 where the ray
+        meets the ground in front of the camera; the caller decides validity).
+
+    Returns
+    -------
+    tuple
+        ``(lam, ox, oy, Q00, Q01, Q10, Q11)``: the depth ``lam = h_m / -dn`` along the ray (m),
+        the ground point's offset from the camera's foot ``(ox, oy) = lam (dxr, dyr)`` (m) and
+        ``Q = d(ox, oy) / d(x, y)`` (m per normalised unit).
+    """
+    w = -1.0 / dn
+    lam = h_m * w
+    ox = lam * dxr
+    oy = lam * dyr
+    return (lam, ox, oy, w * (hR00 + ox * g0), w * (hR01 + ox * g1), w * (hR10 + oy * g0),
+            w * (hR11 + oy * g1))
 
 
 # --------------------------------------------------------------------------------------

@@ -295,7 +295,9 @@ def _stage_ground(S, m, cam, dR, need):
     R0, R1, R2, R3, R4, R5, R6, R7, R8 = (cam.R[0], cam.R[1], cam.R[2], cam.R[3], cam.R[4],
                                           cam.R[5], cam.R[6], cam.R[7], cam.R[8])
     gdz, gx, gy = cam.gdz, cam.gsx, cam.gsy
-    Nn = gdz - cam.h
+    Hn = cam.h - gdz
+    n0, n1 = R6 - gx * R0 - gy * R3, R7 - gx * R1 - gy * R4  # n . R[:, 0], n . R[:, 1]
+    hR00, hR01, hR10, hR11 = Hn * R0, Hn * R1, Hn * R3, Hn * R4
     X0, Y0 = cam.x0, cam.y0
     for j in range(m):
         u, v = S[_U * _ST + j], S[_V * _ST + j]
@@ -308,24 +310,21 @@ def _stage_ground(S, m, cam, dR, need):
         dz = R6 * xn + R7 * yn + R8
         Dn = dz - gx * dx - gy * dy
         inv = 1.0 / Dn
-        lam = Nn * inv
-        vg = (Dn < 0.0) & (Nn < 0.0) & math.isfinite(lam)
+        # the ground point and b = dxy/dxn (the scalar core)
+        lam, ox, oy, b00, b01, b10, b11 = core.ground_of_ray(Hn, hR00, hR01, hR10, hR11, n0, n1, dx, dy, Dn)
+        vg = (Dn < 0.0) & (Hn > 0.0) & math.isfinite(lam)
         rc = _OK if vg else _ABOVE
         rc = _UNDIST if S[_CONV * _ST + j] == 0.0 else rc
         rc = rc if finite else _NOTFIN
         S[_CODE * _ST + j] = rc
-        S[_X * _ST + j] = X0 + lam * dx
-        S[_Y * _ST + j] = Y0 + lam * dy
-        # dxy/dray (2, 3) = lam I + d_xy dlam/dray, dlam/dray = (-lam/Dn) (-gx, -gy, 1)
+        S[_X * _ST + j] = X0 + ox
+        S[_Y * _ST + j] = Y0 + oy
+        # dxy/dray (2, 3) = lam I + d_xy dlam/dray, dlam/dray = (-lam/Dn) (-gx, -gy, 1) (for the angles)
         f = -lam * inv
         l0, l1, l2 = -gx * f, -gy * f, f
         a00, a01, a02 = lam + dx * l0, dx * l1, dx * l2
         a10, a11, a12 = dy * l0, lam + dy * l1, dy * l2
-        # dxy/dxn = dxy/dray @ R[:, :2];  dxy/dxd = dxy/dxn @ dxn/dxd
-        b00 = a00 * R0 + a01 * R3 + a02 * R6
-        b01 = a00 * R1 + a01 * R4 + a02 * R7
-        b10 = a10 * R0 + a11 * R3 + a12 * R6
-        b11 = a10 * R1 + a11 * R4 + a12 * R7
+        # dxy/dxd = dxy/dxn @ dxn/dxd
         S[_B4 * _ST + j], S[(_B4 + 1) * _ST + j], S[(_B4 + 2) * _ST + j], S[(_B4 + 3) * _ST + j] = b00, b01, b10, b11
         c00 = b00 * i00 + b01 * i10
         c01 = b00 * i01 + b01 * i11
@@ -1107,6 +1106,7 @@ def _out_centre(S, out, det, det_mode, n0, nob, K):
     (NaN without a centre) for :func:`_stage_v2x`."""
     centre_reason, centre_bad, obj = out[7], out[8], out[9]
     nan = math.nan
+    n_over = 0
     for i in range(nob):
         n = n0 + i
         fb = int(S[_FBAD * _ST + i])
@@ -1126,12 +1126,28 @@ def _out_centre(S, out, det, det_mode, n0, nob, K):
                 e00, e01, e11 = e00 + d00, e01 + d01, e11 + d11
             obj[_O_CX, n], obj[_O_CY, n] = S[_CXC * _ST + i], S[_CYC * _ST + i]
             obj[_O_NL, n] = S[_NLC * _ST + i]
+            fin = (math.isfinite(e00) & math.isfinite(e01) & math.isfinite(e11) & math.isfinite(obj[_O_CX, n])
+                   & math.isfinite(obj[_O_CY, n]))
+            n_over += 0 if fin else 1
         else:
             e00, e01, e11 = nan, nan, nan
             obj[_O_CX, n], obj[_O_CY, n] = nan, nan
             obj[_O_NL, n] = nan
         obj[_O_C00, n], obj[_O_C01, n], obj[_O_C10, n], obj[_O_C11, n] = e00, e01, e01, e11
         S[_E00 * _ST + i], S[_E01 * _ST + i], S[_E11 * _ST + i] = e00, e01, e11
+    return n_over
+
+
+@njit(cache=True, error_model="numpy", nogil=True)
+def _count_corner_overflow(S, m):
+    """Corners whose ground point or covariance was computed but is not finite (OVERFLOW candidates)."""
+    n_over = 0
+    for j in range(m):
+        rc = S[_RC * _ST + j]
+        fin = (math.isfinite(S[_XX * _ST + j]) & math.isfinite(S[_YY * _ST + j]) & math.isfinite(S[_CC * _ST + j])
+               & math.isfinite(S[(_CC + 1) * _ST + j]) & math.isfinite(S[(_CC + 2) * _ST + j]))
+        n_over += 1 if (((rc == _OK) | (rc == _OUTSIDE)) & (not fin)) else 0
+    return n_over
 
 
 @njit(cache=True, error_model="numpy", nogil=True)
@@ -1195,6 +1211,9 @@ def process_corners(uv, extra_reason, boxes, yaw_deg, bottom_on_ground, cam, dR,
         cnl (N, K) per-corner nonlinearity.  A joint with 0 rows is not formed; xy / ccov / largest_cov /
         cnl with 0 rows are not written.
     S : :func:`scratch`
+
+    Returns the number of corners and centres that were computed but are not finite (0 almost always;
+    the caller then marks them OVERFLOW, ``products.footprints._mark_overflow``).
     """
     from_boxes = boxes.shape[0] > 0
     N, K = (boxes.shape[0], 4) if from_boxes else (uv.shape[0], uv.shape[1])
@@ -1205,6 +1224,7 @@ def process_corners(uv, extra_reason, boxes, yaw_deg, bottom_on_ground, cam, dR,
     need = _needed_params(Lr)
     sp00, sp01, sp11 = _pos_cov(Lr, Lc, Lv)
     nob_max = max(1, _M_TARGET // K)
+    n_over = 0
     for n0 in range(0, N, nob_max):
         nob = min(N - n0, nob_max)
         m = nob * K
@@ -1232,10 +1252,11 @@ def process_corners(uv, extra_reason, boxes, yaw_deg, bottom_on_ground, cam, dR,
         # outputs
         _out_corners(S, out, n0, nob, K)
         _out_largest(S, out, n0, nob)
-        _out_centre(S, out, det, det_mode, n0, nob, K)
+        n_over += _out_centre(S, out, det, det_mode, n0, nob, K) + _count_corner_overflow(S, m)
         _stage_v2x(S, nob, ch, sh, out[10], n0, out[9])
         if want_joint:
             _out_joint(S, joint, reason, det, det_mode, r, n0, nob, K)
+    return n_over
 
 
 @njit(cache=True, error_model="numpy", nogil=True)
@@ -1313,10 +1334,11 @@ def first_negative_size(boxes):
 def process_boxes3d(boxes, yaw_deg, bottom_on_ground, cam, dR, Lr, Lc, Lv, r, spx, det, det_mode, allow_outside,
                     ch, sh, flag, uv, out, S):
     """:func:`process_corners` on the projected bottom corners of 3D boxes (N, 7) (C- or F-ordered);
-    the pixels go to ``uv`` (N, 4, 2) if it has N rows.  Returns the first row with a negative size
-    (-1 if none; nothing else is done then)."""
+    the pixels go to ``uv`` (N, 4, 2) if it has N rows.  Returns ``(bad, n_over)``: the first row with a
+    negative size (-1 if none; nothing else is done then) and :func:`process_corners`'s count."""
     bad = first_negative_size(boxes)
+    n_over = 0
     if bad < 0:
-        process_corners(uv, np.zeros((0, 0), dtype=np.int8), boxes, yaw_deg, bottom_on_ground, cam, dR, Lr, Lc, Lv,
-                        r, spx, det, det_mode, allow_outside, ch, sh, flag, out, S)
-    return bad
+        n_over = process_corners(uv, np.zeros((0, 0), dtype=np.int8), boxes, yaw_deg, bottom_on_ground, cam, dR, Lr,
+                                 Lc, Lv, r, spx, det, det_mode, allow_outside, ch, sh, flag, out, S)
+    return bad, n_over

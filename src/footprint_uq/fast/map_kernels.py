@@ -441,21 +441,13 @@ def _pixel_undistorted(cst, x, dx0, dy0, dn0, P00, P01, P11):
     Returns ``(ok, ox, oy, Q00, Q01, Q10, Q11, ax, ay, c00, c01, c11, dn, lam, dxr, dyr, q00, q01, q11)``
     (the last seven for the linearity flag: ray denominator, depth, ray, ray-state covariance).
     """
-    Hn = cst[2]
     g0 = cst[3]
-    g1 = cst[4]
     dxr = dx0 + x * cst[9]
     dyr = dy0 + x * cst[10]
     dn = dn0 + x * g0
     ok = dn < 0.0
-    w = -1.0 / dn
-    lam = Hn * w
-    ox = lam * dxr
-    oy = lam * dyr
-    Q00 = w * (cst[5] + ox * g0)
-    Q01 = w * (cst[6] + ox * g1)
-    Q10 = w * (cst[7] + oy * g0)
-    Q11 = w * (cst[8] + oy * g1)
+    lam, ox, oy, Q00, Q01, Q10, Q11 = core.ground_of_ray(cst[2], cst[5], cst[6], cst[7], cst[8], g0, cst[4], dxr,
+                                                         dyr, dn)
     q00 = _horner14(P00, x)
     q01 = _horner14(P01, x)
     q11 = _horner14(P11, x)
@@ -657,14 +649,8 @@ def _point_general(u, v, S00, S01, S11, prm, R, om, colptr, rowidx, vals, vc, Cc
         return status.UNDISTORT_FAILED, np.nan, np.nan, np.nan, np.nan, np.nan, np.nan
     if not ((dn < 0.0) and (Hn > 0.0)):
         return status.ABOVE_HORIZON, np.nan, np.nan, np.nan, np.nan, np.nan, np.nan
-    w = -1.0 / dn
-    lam = Hn * w
-    ox = lam * dxr
-    oy = lam * dyr
-    Q00 = w * (Hn * R[0, 0] + ox * g0)
-    Q01 = w * (Hn * R[0, 1] + ox * g1)
-    Q10 = w * (Hn * R[1, 0] + oy * g0)
-    Q11 = w * (Hn * R[1, 1] + oy * g1)
+    lam, ox, oy, Q00, Q01, Q10, Q11 = core.ground_of_ray(Hn, Hn * R[0, 0], Hn * R[0, 1], Hn * R[1, 0], Hn * R[1, 1],
+                                                         g0, g1, dxr, dyr, dn)
     _point_dq(xd, yd, xn, yn, num, den, M00, M01, M10, M11, prm, om, sq)
     # pixel noise: dq/duv = M A, A = [[1/fx, -sk/(fx fy)], [0, 1/fy]]
     B00 = M00 / fx
@@ -1069,18 +1055,12 @@ def _row_mixed(yd, prm, om, colptr, rowidx, vals, vc, colkind, has_qc, flag, buf
 def _ray_state(x, y, cst, R00, R01, R02, R10, R11, R12):
     """Ray, ground offset and ``Q = d xy / d q`` of one pixel of the general kernel:
     ``(dxr, dyr, dn, lam, ox, oy, Q00, Q01, Q10, Q11)``."""
-    Hn, g0, g1, g2 = cst[2], cst[3], cst[4], cst[29]
+    g0, g1 = cst[3], cst[4]
     dxr = R00 * x + R01 * y + R02
     dyr = R10 * x + R11 * y + R12
-    dn = g0 * x + g1 * y + g2
-    w = -1.0 / dn
-    lam = Hn * w
-    ox = lam * dxr
-    oy = lam * dyr
-    Q00 = w * (cst[5] + ox * g0)
-    Q01 = w * (cst[6] + ox * g1)
-    Q10 = w * (cst[7] + oy * g0)
-    Q11 = w * (cst[8] + oy * g1)
+    dn = g0 * x + g1 * y + cst[29]
+    lam, ox, oy, Q00, Q01, Q10, Q11 = core.ground_of_ray(cst[2], cst[5], cst[6], cst[7], cst[8], g0, g1, dxr, dyr,
+                                                         dn)
     return dxr, dyr, dn, lam, ox, oy, Q00, Q01, Q10, Q11
 
 

@@ -879,12 +879,12 @@ class FrameProcessor:
                                            **self._flag_options())
         det, mode = self._det(pixel_cov_px2, N, K)
         out = self._fk.alloc_outputs(N, K, joint=self.joint_cov, corners=self.corner_outputs, alloc=empty_reusable)
-        self._fk.process_corners(uv, extra, self._no_boxes, False, True, self._cam, self._dR, self._Lr, self._Lc,
-                                 self._Lv, self._r, self._spx, det, mode, self.allow_outside_image, self._ch, self._sh,
-                                 self.linearity, out, self._fk.scratch())
-        return self._pack(uv, out, lambda r: uv[r], det, mode)
+        n_over = self._fk.process_corners(uv, extra, self._no_boxes, False, True, self._cam, self._dR, self._Lr,
+                                          self._Lc, self._Lv, self._r, self._spx, det, mode, self.allow_outside_image,
+                                          self._ch, self._sh, self.linearity, out, self._fk.scratch())
+        return self._pack(uv, out, lambda r: uv[r], det, mode, n_over)
 
-    def _pack(self, uv, out, corners_of, det, mode) -> FootprintEstimate:
+    def _pack(self, uv, out, corners_of, det, mode, n_over) -> FootprintEstimate:
         xy, ccov, joint, reason, usable, li, lcov, creason, cbad, obj, v2x, cnl = out
         row = self._fk.OBJ_ROW
         # views of the kernel's per-object rows (no copies): (N, 2) and (N, 2, 2) with strides across rows
@@ -899,7 +899,9 @@ class FrameProcessor:
                                 obj[row["largest_nonlinearity"]] if flag else None, self.linear_threshold)
         est.object_rows = obj
         K = reason.shape[1]
-        return _apply_v2x_policy(_mark_overflow(est), self.camera, self.budget, self.v2x_policy, self.v2x_samples,
+        if n_over:  # (the kernel counts what _mark_overflow would find; almost always nothing)
+            est = _mark_overflow(est)
+        return _apply_v2x_policy(est, self.camera, self.budget, self.v2x_policy, self.v2x_samples,
                                  self.v2x_seed, corners_of=corners_of,
                                  det_of=lambda r: _det_joint_rows(det, mode, r, K))
 
@@ -934,9 +936,10 @@ class FrameProcessor:
         det, mode = self._det(pixel_cov_px2, N, 4)
         uv = empty_reusable((N if self.corner_outputs else 0, 4, 2), np.float64)
         out = self._fk.alloc_outputs(N, 4, joint=self.joint_cov, corners=self.corner_outputs, alloc=empty_reusable)
-        bad = self._fk.process_boxes3d(b, yaw_unit == "deg", bool(bottom_on_ground), self._cam, self._dR, self._Lr,
-                                       self._Lc, self._Lv, self._r, self._spx, det, mode, self.allow_outside_image,
-                                       self._ch, self._sh, self.linearity, uv, out, self._fk.scratch())
+        bad, n_over = self._fk.process_boxes3d(b, yaw_unit == "deg", bool(bottom_on_ground), self._cam, self._dR,
+                                               self._Lr, self._Lc, self._Lv, self._r, self._spx, det, mode,
+                                               self.allow_outside_image, self._ch, self._sh, self.linearity, uv, out,
+                                               self._fk.scratch())
         if bad >= 0:
             raise InputError(f"boxes_world[{bad}] (length_m, width_m, height_m)", b[bad, 3:6].tolist(), "sizes >= 0")
 
@@ -947,7 +950,7 @@ class FrameProcessor:
                                      ground_z_m=self.camera.ground_z_m)
             return self.camera.project(X).uv_px
 
-        return self._pack(uv, out, corners_of, det, mode)
+        return self._pack(uv, out, corners_of, det, mode, n_over)
 
 
 def _det_joint_rows(det, mode: int, rows, K: int):
