@@ -317,12 +317,12 @@ def undistort_vec(dom, k, xd, yd, xn, yn, m00, m01, m10, m11, iden, ok):
             det = j00 * j11 - j01 * j10
             idet = 1.0 / det
             a, b, c, d = j11 * idet, -j01 * idet, -j10 * idet, j00 * idet
-            step = inside and not conv
+            step = inside & (not conv)  # (bitwise, not short-circuit: the loop stays branch-free and vectorises)
             xn[i] = x - (a * ex + b * ey) if step else x
             yn[i] = y - (c * ex + d * ey) if step else y
             m00[i], m01[i], m10[i], m11[i] = a, b, c, d
             iden[i] = 1.0 / den
-            ok[i] = inside and conv and det > 0.0
+            ok[i] = inside & conv & (det > 0.0)
             nbad += 1 if step else 0
         if nbad == 0:
             break

@@ -1279,7 +1279,8 @@ def _stage_project(S, boxes, n0, nob, cam, yaw_deg, bottom_on_ground):
         yaw = S[(_BX + 6) * _ST + i] * ysc if yaw_deg else S[(_BX + 6) * _ST + i]
         S[_CS * _ST + i], S[_SN * _ST + i] = math.cos(yaw), math.sin(yaw)
     fx, fy, cx, cy, skw = cam.fx, cam.fy, cam.cx, cam.cy, cam.skew
-    dist = cam.dist
+    d = cam.dist
+    kt = (d[0], d[1], d[2], d[3], d[4], d[5], d[6], d[7])  # scalars: no reload from memory S may alias
     X0, Y0, H = cam.x0, cam.y0, cam.h
     R0, R1, R2, R3, R4, R5, R6, R7, R8 = (cam.R[0], cam.R[1], cam.R[2], cam.R[3], cam.R[4],
                                           cam.R[5], cam.R[6], cam.R[7], cam.R[8])
@@ -1306,7 +1307,7 @@ def _stage_project(S, boxes, n0, nob, cam, yaw_deg, bottom_on_ground):
             pcz = R2 * rx + R5 * ry + R8 * rz
             finite = math.isfinite(X) & math.isfinite(Y) & math.isfinite(Z)
             x, y = pcx / pcz, pcy / pcz
-            xd, yd = core.distort_point(x, y, dist)
+            xd, yd = core.distort_point(x, y, kt)
             ok = finite & (pcz > 0.0)
             S[ou + i] = fx * xd + skw * yd + cx if ok else nan
             S[ov + i] = fy * yd + cy if ok else nan

@@ -486,14 +486,14 @@ def _store_pixel(xr, cr, vr, iu, ok, x, y, c00, c01, c11):
 @nb.njit(**_JIT1)
 def _row_undistorted(cst, cxs, dx0, dy0, dn0, P00, P01, P11, xr, cr, vr):
     """One image row (1-D views of the outputs, so that LLVM vectorises the pixel loop)."""
-    x0 = cst[0]
-    y0 = cst[1]
-    stepf = cst[27]
-    ifx = cst[28]
+    # constants and polynomials as scalars: stores to the outputs cannot make the loop reload them (it vectorises)
+    cs = to_fixed_tuple(cst, 30)
+    p00, p01, p11 = to_fixed_tuple(P00, 15), to_fixed_tuple(P01, 15), to_fixed_tuple(P11, 15)
+    x0, y0, stepf, ifx = cs[0], cs[1], cs[27], cs[28]
     for iu in range(vr.shape[0]):
         x = (np.float64(iu) * stepf - cxs) * ifx
-        ok, ox, oy, _, _, _, _, _, _, c00, c01, c11, _, _, _, _, _, _, _ = _pixel_undistorted(cst, x, dx0, dy0, dn0,
-                                                                                             P00, P01, P11)
+        ok, ox, oy, _, _, _, _, _, _, c00, c01, c11, _, _, _, _, _, _, _ = _pixel_undistorted(cs, x, dx0, dy0, dn0,
+                                                                                             p00, p01, p11)
         _store_pixel(xr, cr, vr, iu, ok, x0 + ox, y0 + oy, c00, c01, c11)
 
 
@@ -540,12 +540,8 @@ def _qc_terms(Q00, Q01, Q10, Q11, ax, ay, ox, oy, bq):
 def _row_undistorted_qc(cst, cxs, dx0, dy0, dn0, P00, P01, P11, BQ, ZQ, ZZ, BZ, Ccc, xr, cr, vr, nr):
     """As :func:`_row_undistorted`, with ray/position/ground cross-covariances (full budgets); the
     linearity flag into ``nr`` if it has a row's length (else not computed)."""
-    x0 = cst[0]
-    y0 = cst[1]
-    g0 = cst[3]
-    g1 = cst[4]
-    stepf = cst[27]
-    ifx = cst[28]
+    cs = to_fixed_tuple(cst, 30)
+    x0, y0, g0, g1, stepf, ifx = cs[0], cs[1], cs[3], cs[4], cs[27], cs[28]
     flag = nr.shape[0] == vr.shape[0]
     cc = to_fixed_tuple(Ccc.ravel(), 36)
     bq = np.zeros((2, 6))
@@ -553,7 +549,7 @@ def _row_undistorted_qc(cst, cxs, dx0, dy0, dn0, P00, P01, P11, BQ, ZQ, ZZ, BZ, 
     for iu in range(vr.shape[0]):
         x = (np.float64(iu) * stepf - cxs) * ifx
         ok, ox, oy, Q00, Q01, Q10, Q11, ax, ay, c00, c01, c11, dn, lam, dxr, dyr, q00, q01, q11 = \
-            _pixel_undistorted(cst, x, dx0, dy0, dn0, P00, P01, P11)
+            _pixel_undistorted(cs, x, dx0, dy0, dn0, P00, P01, P11)
         for a_ in range(2):
             for c_ in range(6):
                 bq[a_, c_] = _horner7(BQ[a_, c_], x)
@@ -1069,6 +1065,17 @@ def _row_pixels(cst, R, Om, pre, flag, buf, xr, cr, vr, rr):
     """Per pixel: ray, ground point, Q, the ray-state covariance (mixed columns + ``M C_pre M^T`` +
     rotations ``G Om G^T``), the covariance; codes into ``rr``.  With ``flag`` the total ray-state
     covariance goes back to ``buf[Q00/Q01/Q11]`` (for :func:`_row_flag`)."""
+    if flag:
+        _row_pixels_loop(cst, R, Om, pre, True, buf, xr, cr, vr, rr)
+    else:
+        _row_pixels_loop(cst, R, Om, pre, False, buf, xr, cr, vr, rr)
+
+
+@nb.njit(inline="always", **_JIT1)
+def _row_pixels_loop(cst, R, Om, pre, store_q, buf, xr, cr, vr, rr):
+    """:func:`_row_pixels` with ``store_q`` a constant (two compiled loops: LLVM vectorises a loop whose
+    stores do not depend on a run-time flag)."""
+    cs = to_fixed_tuple(cst, 30)  # constants as scalars: stores to the outputs cannot make the loop reload them
     x0, y0, iHn = cst[0], cst[1], cst[26]
     p00, p01, p11 = cst[11], cst[12], cst[13]
     s0, s1, s2, s3, s4, s5 = cst[14], cst[15], cst[16], cst[17], cst[18], cst[19]
@@ -1081,13 +1088,15 @@ def _row_pixels(cst, R, Om, pre, flag, buf, xr, cr, vr, rr):
     q00, q01, q11 = buf[_Q00], buf[_Q01], buf[_Q11]
     ok = vr
     nan = np.nan
+    # codes in loops of their own (an int8 store in the pixel loop keeps LLVM from vectorising it)
+    for i in range(vr.shape[0]):
+        rr[i] = status.OK if ok[i] else status.UNDISTORT_FAILED
     for i in range(vr.shape[0]):
         x = xn[i]
         y = yn[i]
-        dxr, dyr, dn, lam, ox, oy, Q00, Q01, Q10, Q11 = _ray_state(x, y, cst, R00, R01, R02, R10, R11, R12)
+        dxr, dyr, dn, lam, ox, oy, Q00, Q01, Q10, Q11 = _ray_state(x, y, cs, R00, R01, R02, R10, R11, R12)
         lens = ok[i]
         oki = lens & (dn < 0.0)
-        rr[i] = status.OK if oki else (status.ABOVE_HORIZON if lens else status.UNDISTORT_FAILED)
         # intrinsics + pixel noise: M C_pre M^T, C_pre polynomial in x_d
         xdi = xd[i]
         e00 = c00_0 + xdi * (c00_1 + xdi * c00_2)
@@ -1107,10 +1116,11 @@ def _row_pixels(cst, R, Om, pre, flag, buf, xr, cr, vr, rr):
         K0 = G10 * O00 + G11 * O01 + G12 * O02
         K1 = G10 * O01 + G11 * O11 + G12 * O12
         K2 = G10 * O02 + G11 * O12 + G12 * O22
-        a00 = q00[i] + T00 * m00_ + T01 * m01_ + H0 * G00 + H1 * G01 + H2 * G02
-        a01 = q01[i] + T00 * m10_ + T01 * m11_ + H0 * G10 + H1 * G11 + H2 * G12
-        a11 = q11[i] + T10 * m10_ + T11 * m11_ + K0 * G10 + K1 * G11 + K2 * G12
-        if flag:
+        b00, b01, b11 = q00[i], q01[i], q11[i]
+        a00 = b00 + T00 * m00_ + T01 * m01_ + H0 * G00 + H1 * G01 + H2 * G02
+        a01 = b01 + T00 * m10_ + T01 * m11_ + H0 * G10 + H1 * G11 + H2 * G12
+        a11 = b11 + T10 * m10_ + T11 * m11_ + K0 * G10 + K1 * G11 + K2 * G12
+        if store_q:  # (a constant once inlined: the loop without the flag has no stores to buf and vectorises)
             q00[i], q01[i], q11[i] = a00, a01, a11
         A00 = Q00 * a00 + Q01 * a01
         A01 = Q00 * a01 + Q01 * a11
@@ -1134,19 +1144,22 @@ def _row_pixels(cst, R, Om, pre, flag, buf, xr, cr, vr, rr):
         cr[4 * i + 2] = c01 if oki else nan
         cr[4 * i + 3] = c11 if oki else nan
         ok[i] = oki
+    for i in range(vr.shape[0]):
+        rr[i] = status.ABOVE_HORIZON if (rr[i] == status.OK) & (not ok[i]) else rr[i]
 
 
 @nb.njit(**_JIT1)
 def _row_qc(cst, R, buf, BQ, cr, vr):
     """Adds the ray / constant cross terms (``BQ``, full budgets) to the covariances of a row."""
     R00, R01, R02, R10, R11, R12 = R[0, 0], R[0, 1], R[0, 2], R[1, 0], R[1, 1], R[1, 2]
-    iHn = cst[26]
+    cs = to_fixed_tuple(cst, 30)
+    iHn = cs[26]
     xn, yn = buf[_XN], buf[_YN]
     bq = np.empty((2, 6))
     for i in range(vr.shape[0]):
         if not vr[i]:
             continue
-        _, _, _, _, ox, oy, Q00, Q01, Q10, Q11 = _ray_state(xn[i], yn[i], cst, R00, R01, R02, R10, R11, R12)
+        _, _, _, _, ox, oy, Q00, Q01, Q10, Q11 = _ray_state(xn[i], yn[i], cs, R00, R01, R02, R10, R11, R12)
         for c in range(6):
             bq[0, c] = BQ[c, i]
             bq[1, c] = BQ[6 + c, i]

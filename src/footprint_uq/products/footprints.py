@@ -91,6 +91,7 @@ or "unavailable" beyond nonlinearity 0.5; ``v2x_source`` says which.
 from __future__ import annotations
 
 import math
+import threading
 from dataclasses import dataclass
 
 import numpy as np
@@ -700,11 +701,12 @@ def _apply_v2x_policy(est: FootprintEstimate, camera, budget, policy: str, n_sam
     ``corners_of(rows)`` gives the corner pixels (r, K, 2) and ``det_of(rows)`` the detector covariance
     (r, 2K, 2K) or None of the flagged rows: only those are sampled (:func:`centre_covariance_sampled`).
     """
-    src = np.where(est.centre_valid, V2X_COV_LINEAR, V2X_COV_UNAVAILABLE).astype(np.int8)
+    src = np.where(est.centre_valid, np.int8(V2X_COV_LINEAR), np.int8(V2X_COV_UNAVAILABLE))
     est.v2x_source = src
     if est.centre_nonlinearity is None or policy == "linear":
         return est
-    rows = np.flatnonzero(est.centre_valid & ~est.centre_linear_ok)
+    with np.errstate(invalid="ignore"):  # (NaN: no centre, not valid either)
+        rows = np.flatnonzero(est.centre_valid & ~(est.centre_nonlinearity <= est.linear_threshold))
     if rows.size == 0:
         return est
     nl = est.centre_nonlinearity[rows]
@@ -774,6 +776,24 @@ def footprints_from_boxes3d(camera, budget, boxes_world, *, yaw_unit: str = "rad
 # -- the per-frame fast path ---------------------------------------------------------------------
 #: outputs of at least this many bytes come from pyarrow's memory pool (see :func:`empty_reusable`)
 _POOL_MIN_BYTES = 1 << 20
+
+
+#: per-thread scratch of the per-frame kernel (one frame at a time per thread; allocated once: a fresh
+#: scratch every frame cost ~9 us of page touching)
+_TLS = threading.local()
+#: frames of fewer corners than this get their outputs from numpy directly (no pool bookkeeping)
+_SMALL_FRAME_CORNERS = 2048
+
+
+def _scratch() -> np.ndarray:
+    S = getattr(_TLS, "scratch", None)
+    if S is None:
+        S = _TLS.scratch = fk.scratch()
+    return S
+
+
+def _alloc_for(n_corners: int):
+    return np.empty if n_corners < _SMALL_FRAME_CORNERS else empty_reusable
 
 
 def empty_reusable(shape, dtype=np.float64) -> np.ndarray:
@@ -878,10 +898,10 @@ class FrameProcessor:
                                            extra_reason=extra if extra.shape[0] == N else None,
                                            **self._flag_options())
         det, mode = self._det(pixel_cov_px2, N, K)
-        out = self._fk.alloc_outputs(N, K, joint=self.joint_cov, corners=self.corner_outputs, alloc=empty_reusable)
+        out = self._fk.alloc_outputs(N, K, joint=self.joint_cov, corners=self.corner_outputs, alloc=_alloc_for(N * K))
         n_over = self._fk.process_corners(uv, extra, self._no_boxes, False, True, self._cam, self._dR, self._Lr,
                                           self._Lc, self._Lv, self._r, self._spx, det, mode, self.allow_outside_image,
-                                          self._ch, self._sh, self.linearity, out, self._fk.scratch())
+                                          self._ch, self._sh, self.linearity, out, _scratch())
         return self._pack(uv, out, lambda r: uv[r], det, mode, n_over)
 
     def _pack(self, uv, out, corners_of, det, mode, n_over) -> FootprintEstimate:
@@ -934,12 +954,12 @@ class FrameProcessor:
             raise InputError("yaw_unit", yaw_unit, "'rad' (column yaw_rad) or 'deg' (column yaw_deg)")
         N = b.shape[0]
         det, mode = self._det(pixel_cov_px2, N, 4)
-        uv = empty_reusable((N if self.corner_outputs else 0, 4, 2), np.float64)
-        out = self._fk.alloc_outputs(N, 4, joint=self.joint_cov, corners=self.corner_outputs, alloc=empty_reusable)
+        uv = _alloc_for(N * 4)((N if self.corner_outputs else 0, 4, 2), np.float64)
+        out = self._fk.alloc_outputs(N, 4, joint=self.joint_cov, corners=self.corner_outputs, alloc=_alloc_for(N * 4))
         bad, n_over = self._fk.process_boxes3d(b, yaw_unit == "deg", bool(bottom_on_ground), self._cam, self._dR,
                                                self._Lr, self._Lc, self._Lv, self._r, self._spx, det, mode,
                                                self.allow_outside_image, self._ch, self._sh, self.linearity, uv, out,
-                                               self._fk.scratch())
+                                               _scratch())
         if bad >= 0:
             raise InputError(f"boxes_world[{bad}] (length_m, width_m, height_m)", b[bad, 3:6].tolist(), "sizes >= 0")
 
