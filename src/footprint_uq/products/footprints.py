@@ -705,8 +705,7 @@ def _apply_v2x_policy(est: FootprintEstimate, camera, budget, policy: str, n_sam
     est.v2x_source = src
     if est.centre_nonlinearity is None or policy == "linear":
         return est
-    with np.errstate(invalid="ignore"):  # (NaN: no centre, not valid either)
-        rows = np.flatnonzero(est.centre_valid & ~(est.centre_nonlinearity <= est.linear_threshold))
+    rows = np.flatnonzero(est.centre_valid & ~est.centre_linear_ok)
     if rows.size == 0:
         return est
     nl = est.centre_nonlinearity[rows]
@@ -781,8 +780,6 @@ _POOL_MIN_BYTES = 1 << 20
 #: per-thread scratch of the per-frame kernel (one frame at a time per thread; allocated once: a fresh
 #: scratch every frame cost ~9 us of page touching)
 _TLS = threading.local()
-#: frames of fewer corners than this get their outputs from numpy directly (no pool bookkeeping)
-_SMALL_FRAME_CORNERS = 2048
 
 
 def _scratch() -> np.ndarray:
@@ -790,10 +787,6 @@ def _scratch() -> np.ndarray:
     if S is None:
         S = _TLS.scratch = fk.scratch()
     return S
-
-
-def _alloc_for(n_corners: int):
-    return np.empty if n_corners < _SMALL_FRAME_CORNERS else empty_reusable
 
 
 def empty_reusable(shape, dtype=np.float64) -> np.ndarray:
@@ -898,7 +891,7 @@ class FrameProcessor:
                                            extra_reason=extra if extra.shape[0] == N else None,
                                            **self._flag_options())
         det, mode = self._det(pixel_cov_px2, N, K)
-        out = self._fk.alloc_outputs(N, K, joint=self.joint_cov, corners=self.corner_outputs, alloc=_alloc_for(N * K))
+        out = self._fk.alloc_outputs(N, K, joint=self.joint_cov, corners=self.corner_outputs, alloc=empty_reusable)
         n_over = self._fk.process_corners(uv, extra, self._no_boxes, False, True, self._cam, self._dR, self._Lr,
                                           self._Lc, self._Lv, self._r, self._spx, det, mode, self.allow_outside_image,
                                           self._ch, self._sh, self.linearity, out, _scratch())
@@ -954,8 +947,8 @@ class FrameProcessor:
             raise InputError("yaw_unit", yaw_unit, "'rad' (column yaw_rad) or 'deg' (column yaw_deg)")
         N = b.shape[0]
         det, mode = self._det(pixel_cov_px2, N, 4)
-        uv = _alloc_for(N * 4)((N if self.corner_outputs else 0, 4, 2), np.float64)
-        out = self._fk.alloc_outputs(N, 4, joint=self.joint_cov, corners=self.corner_outputs, alloc=_alloc_for(N * 4))
+        uv = empty_reusable((N if self.corner_outputs else 0, 4, 2), np.float64)
+        out = self._fk.alloc_outputs(N, 4, joint=self.joint_cov, corners=self.corner_outputs, alloc=empty_reusable)
         bad, n_over = self._fk.process_boxes3d(b, yaw_unit == "deg", bool(bottom_on_ground), self._cam, self._dR,
                                                self._Lr, self._Lc, self._Lv, self._r, self._spx, det, mode,
                                                self.allow_outside_image, self._ch, self._sh, self.linearity, uv, out,
