@@ -475,6 +475,15 @@ def _pos_cov(Lr, Lc, Lv):
     return s00, s01, s11
 
 
+@njit(inline="always", cache=True, error_model="numpy", nogil=True)
+def _factor_column(S, j, f0, f1, ft, i0, i1, ig, w, val):
+    """Corner ``j`` of the factor column being formed, with the entry ``val`` of parameter rows ``i0, i1``
+    (``J``) and ``ig`` (``g``) added: ``(J L)_0, (J L)_1, (L^T g)`` (the rows FA, FT restart where ``w`` is 0)."""
+    keep = w != 0.0
+    return ((S[f0 + j] if keep else 0.0) + S[i0 + j] * val, (S[f1 + j] if keep else 0.0) + S[i1 + j] * val,
+            (S[ft + j] if keep else 0.0) + S[ig + j] * val)
+
+
 @njit(cache=True, error_model="numpy", nogil=True)
 def _stage_flag_params(S, m, Lr, Lc, Lv):
     """The parameter part of the flag's forms over the corners of a chunk, with ``Sigma = L L^T``:
@@ -510,23 +519,17 @@ def _stage_flag_params(S, m, Lr, Lc, Lv):
         w = 0.0 if first else 1.0  # (GD rows of the parameters Dn does not depend on are zero)
         if not last:
             for j in range(mu):
-                S[f0 + j] = (S[f0 + j] if w != 0.0 else 0.0) + S[i0 + j] * val
-                S[f1 + j] = (S[f1 + j] if w != 0.0 else 0.0) + S[i1 + j] * val
-                S[ft + j] = (S[ft + j] if w != 0.0 else 0.0) + S[ig + j] * val
+                S[f0 + j], S[f1 + j], S[ft + j] = _factor_column(S, j, f0, f1, ft, i0, i1, ig, w, val)
             continue
         if hasg:
             for j in range(mu):
-                a0 = (S[f0 + j] if w != 0.0 else 0.0) + S[i0 + j] * val
-                a1 = (S[f1 + j] if w != 0.0 else 0.0) + S[i1 + j] * val
-                t = (S[ft + j] if w != 0.0 else 0.0) + S[ig + j] * val
+                a0, a1, t = _factor_column(S, j, f0, f1, ft, i0, i1, ig, w, val)
                 S[jg0 + j] += a0 * t
                 S[jg1 + j] += a1 * t
                 S[gam + j] += t * t
         if px != 0.0 or py != 0.0:
             for j in range(mu):
-                a0 = (S[f0 + j] if w != 0.0 else 0.0) + S[i0 + j] * val
-                a1 = (S[f1 + j] if w != 0.0 else 0.0) + S[i1 + j] * val
-                t = (S[ft + j] if w != 0.0 else 0.0) + S[ig + j] * val
+                a0, a1, t = _factor_column(S, j, f0, f1, ft, i0, i1, ig, w, val)
                 S[x00 + j] += a0 * px
                 S[x01 + j] += a0 * py
                 S[x10 + j] += a1 * px
