@@ -84,10 +84,10 @@ def _storages(workdir: str | None) -> list[tuple[str, str | None]]:
     return out
 
 
-def _timed_file_run(cam, src, dst) -> tuple[float, float, object]:
+def _timed_file_run(cam, src, dst, linearity: bool = True) -> tuple[float, float, object]:
     """(wall s, CPU s of the process (user + system, all threads), summary) of one process_file call."""
     r0, t0 = resource.getrusage(resource.RUSAGE_SELF), time.perf_counter()
-    s = process_file(cam, BUDGET, src, dst, progress=False, summary=False)
+    s = process_file(cam, BUDGET, src, dst, progress=False, summary=False, linearity=linearity)
     wall, r1 = time.perf_counter() - t0, resource.getrusage(resource.RUSAGE_SELF)
     return wall, (r1.ru_utime - r0.ru_utime) + (r1.ru_stime - r0.ru_stime), s
 
@@ -98,7 +98,9 @@ def measure(rows: int = 2_000_000, repeats: int = 3, naive_rows: int = 2_000, bo
 
     Per storage: one full-size first run (reported as ``first_run_s``: on a fresh VM its new pages
     cost extra), then ``repeats`` timed runs, each writing a new output file (the previous one is
-    deleted before the clock starts); ``batch_s`` is their median.
+    deleted before the clock starts); ``batch_s`` is their median.  Each run is followed by one
+    with ``linearity=False`` (``--no-linearity``: the job as it was before the flag existed, for
+    like-for-like comparisons with older commits); ``batch_no_flag_s`` is their median.
     """
     cam = PanTiltCamera(**CAMERA)
     out: dict = {"rows": rows, "repeats": repeats, "cpus": os.cpu_count(), "target_per_s": TARGET_PER_S,
@@ -119,7 +121,7 @@ def measure(rows: int = 2_000_000, repeats: int = 3, naive_rows: int = 2_000, bo
                 pq.write_table(table.slice(0, 1000), small)
                 process_file(cam, BUDGET, small, Path(tmp) / "warm_out.parquet", progress=False, summary=False)
                 first_s, _, _ = _timed_file_run(cam, src, dst)
-                times, cpus = [], []
+                times, cpus, times_nf = [], [], []
                 for _ in range(repeats):
                     # a job writes a new file: the previous output goes before the clock starts (rewriting
                     # it in place costs ~20 % more here: truncating 200 MB on this VM's ext4, mounted with
@@ -129,8 +131,13 @@ def measure(rows: int = 2_000_000, repeats: int = 3, naive_rows: int = 2_000, bo
                     times.append(t)
                     cpus.append(c)
                     assert s.rows_out == rows
+                    dst.unlink()
+                    t, _, s_nf = _timed_file_run(cam, src, dst, linearity=False)
+                    times_nf.append(t)
+                    assert s_nf.rows_out == rows
                 t_b = statistics.median(times)
                 res[storage] = {"batch_footprints_per_s": rows / t_b, "batch_s": t_b, "batch_runs_s": times,
+                                "batch_no_flag_s": statistics.median(times_nf), "batch_no_flag_runs_s": times_nf,
                                 "first_run_s": first_s, "cpu_ns_per_row": 1e9 * statistics.median(cpus) / rows,
                                 "meets_target": rows / t_b >= TARGET_PER_S,
                                 "rows_ok": int(s.rows_ok), "rows_partial": int(s.rows_partial),
@@ -159,7 +166,8 @@ def run(quick: bool = False) -> list[dict]:
     names = {"3d": "3D boxes (4 corners)", "2d": "2D boxes (bottom centre)"}
     for bt in ("3d", "2d"):
         for storage, r in res[bt].items():
-            rows.append({"case": f"batch Parquet -> Parquet, {names[bt]}, {res['rows']:,} rows, files on {storage}",
+            case = f"batch Parquet -> Parquet, {names[bt]}, {res['rows']:,} rows, files on {storage}"
+            rows.append({"case": case,
                          "median_ms": 1e3 * r["batch_s"], "runs": res["repeats"],
                          "speedup_vs_naive": r["speedup_vs_naive"], "target": ">= 2 M footprints/s",
                          "met": r["meets_target"],
@@ -171,6 +179,13 @@ def run(quick: bool = False) -> list[dict]:
                                   f"{r['kernel_only_footprints_per_s'] / 1e6:.2f} M/s in one thread; naive per-object "
                                   f"loop {r['naive_loop_footprints_per_s']:,.0f} /s ({r['naive_loop_note']})",
                          **r})
+            rows.append({"case": f"{case}: without the linearity flag (--no-linearity)",
+                         "median_ms": 1e3 * r["batch_no_flag_s"], "runs": res["repeats"],
+                         "parity_of": case,
+                         "time_vs_ours": r["batch_no_flag_s"] / r["batch_s"],
+                         "notes": f"{res['rows'] / r['batch_no_flag_s'] / 1e6:.2f} M footprints/s; runs "
+                                  + " ".join(f"{t:.2f}" for t in r["batch_no_flag_runs_s"])
+                                  + " s, each right after a run with the flag; time_vs_ours = without / with"})
     return rows
 
 

@@ -69,18 +69,22 @@ def _measure(cam, n_objects: int, repeats: int, naive_repeats: int, seed: int) -
     fast_noflag = _median_us(lambda: _touch(proc_noflag.boxes3d(boxes)), repeats)
     fast_joint = _median_us(lambda: _touch(proc_joint.boxes3d(boxes)), repeats)
     ref = _median_us(lambda: _touch(footprints_from_boxes3d(cam, BUDGET, boxes)), max(repeats // 20, 5))
+    ref_noflag = _median_us(lambda: _touch(footprints_from_boxes3d(cam, BUDGET, boxes, linearity=False)),
+                            max(repeats // 20, 5))
 
-    def naive():
+    def naive(**kw):
         for i in range(n_objects):
-            _touch(footprints_from_boxes3d(cam, BUDGET, boxes[i:i + 1]))
+            _touch(footprints_from_boxes3d(cam, BUDGET, boxes[i:i + 1], **kw))
 
     naive_us = _median_us(naive, naive_repeats)
+    naive_noflag_us = _median_us(lambda: naive(linearity=False), naive_repeats)
     est = proc.boxes3d(boxes)
     return {
         "fast_median_us": fast, "fast_with_joint_cov_median_us": fast_joint,
         "fast_without_flag_median_us": fast_noflag,
         "flagged_centres": int((est.centre_valid & ~est.centre_linear_ok).sum()),
         "numpy_reference_median_us": ref, "naive_loop_median_us": naive_us,
+        "numpy_reference_without_flag_median_us": ref_noflag, "naive_loop_without_flag_median_us": naive_noflag_us,
         "naive_over_fast": naive_us / fast, "meets_target": fast <= TARGET_US,
         "objects_with_valid_centre": int(est.centre_valid.sum()),
     }

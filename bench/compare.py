@@ -9,7 +9,10 @@ Each round runs ``bench/run.py --sections ...`` of the base tree, then of this t
 subprocess whose ``PYTHONPATH`` is that tree's ``src`` (numba caches of both are cleared first, so
 each tree compiles its own kernels).  Rounds alternate A B A B, so slow drift of a shared machine
 hits both.  Printed per case: the best of the rounds' medians for each tree and the ratio
-new/base (< 1: faster now).  Nothing is asserted: the machines are noisy.
+new/base (< 1: faster now); and, where the new tree has a row measured like for like with the
+base (``parity_of`` names the base's case: the same work with the features the base did not
+have switched off, e.g. ``linearity=False``), that figure and its ratio to the base ("at parity").
+Nothing is asserted: the machines are noisy.
 """
 
 from __future__ import annotations
@@ -44,6 +47,8 @@ def _run(tree: Path, sections: str, out: Path) -> dict:
             for k in _KEYS:
                 if k in r:
                     figures[(name, r["case"], k)] = float(r[k])
+                    if "parity_of" in r:
+                        figures[(name, r["parity_of"], k, "parity")] = float(r[k])
                     break
     return figures
 
@@ -64,12 +69,17 @@ def main() -> int:
                 figs = _run(tree, args.sections, Path(tmp) / f"{label}{r}")
                 for key, v in figs.items():
                     best[label][key] = min(v, best[label].get(key, float("inf")))
-    print(f"{'section':<11} {'case':<92} {'base':>10} {'new':>10} {'new/base':>8}")
-    for key in sorted(set(best["base"]) & set(best["new"])):
+    print(f"{'section':<11} {'case':<92} {'base':>10} {'new':>10} {'new/base':>8} {'at parity':>10} "
+          f"{'parity/base':>11}")
+    for key in sorted(k for k in set(best["base"]) & set(best["new"]) if len(k) == 3):
         name, case, unit = key
         b, n = best["base"][key], best["new"][key]
         u = unit.split("_")[1]
-        print(f"{name:<11} {case[:92]:<92} {b:>8.2f}{u:>2} {n:>8.2f}{u:>2} {n / b:>8.3f}")
+        line = f"{name:<11} {case[:92]:<92} {b:>8.2f}{u:>2} {n:>8.2f}{u:>2} {n / b:>8.3f}"
+        p = best["new"].get(key + ("parity",))
+        if p is not None:
+            line += f" {p:>8.2f}{u:>2} {p / b:>11.3f}"
+        print(line)
     return 0
 
 

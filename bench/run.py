@@ -115,10 +115,18 @@ def footprints_section(quick: bool = False) -> list[dict]:
             rows.append({**common, "case": f"{cam}: {what}", "median_us": r[key],
                          "runs": runs if runs is not None else ("3" if quick else "20"),
                          "speedup_vs_naive": naive / r[key], **extra})
-        rows[-5]["objects_with_valid_centre"] = r["objects_with_valid_centre"]
-        rows[-5]["flagged_centres"] = r.get("flagged_centres")
+        first = rows[-5]
+        first["objects_with_valid_centre"] = r["objects_with_valid_centre"]
+        first["flagged_centres"] = r.get("flagged_centres")
         rows[-4]["time_vs_ours"] = r["fast_with_joint_cov_median_us"] / r["fast_median_us"]
         rows[-3]["time_vs_ours"] = r["fast_without_flag_median_us"] / r["fast_median_us"]
+        rows[-3]["parity_of"] = first["case"]
+        # the numpy reference without the flag: like for like with commits older than the flag (bench/compare.py)
+        for key, of in (("numpy_reference_without_flag_median_us", rows[-2]), ("naive_loop_without_flag_median_us",
+                                                                                 rows[-1])):
+            rows.append({**common, "case": f"{of['case']}, without the linearity flag", "median_us": r[key],
+                         "runs": of["runs"], "speedup_vs_naive": naive / r[key], "parity_of": of["case"],
+                         "time_vs_ours": r[key] / of["median_us"]})
     return rows
 
 
@@ -128,8 +136,9 @@ def batch_section(quick: bool = False) -> list[dict]:
 
     rows = []
     for r in bench_batch.run(quick=quick):
-        r = {**r, "items": r["rows_ok"] + r["rows_partial"] + r["rows_error"],
-             "footprints_per_s": r["batch_footprints_per_s"]}
+        if "batch_footprints_per_s" in r:
+            r = {**r, "items": r["rows_ok"] + r["rows_partial"] + r["rows_error"],
+                 "footprints_per_s": r["batch_footprints_per_s"]}
         rows.append(r)
     return rows
 

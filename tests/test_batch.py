@@ -131,6 +131,38 @@ def test_flag_columns_match_reference_3d(cam, corners):
                                        rtol=1e-9, atol=1e-12)
 
 
+@pytest.mark.parametrize("corners", [False, True], ids=["lean", "corners"])
+def test_without_linearity_the_flag_columns_are_absent(cam, corners):
+    """linearity=False: no nonlinearity / linear_ok / c{k}_nonlinearity columns (absent, not filled), every
+    other column as with the flag, and the V2X fields the linear ones (the reference's policy "linear") --
+    including the rows the flag would have sent to the sampled policy; bad rows are still reported."""
+    rng = np.random.default_rng(5)
+    n = 60
+    d = rng.uniform(12.0, 140.0, n)  # angles read in degrees: far objects are not linear_ok
+    a = np.deg2rad(30.0 + rng.uniform(-25.0, 25.0, n))
+    cols = {"x_m": d * np.sin(a), "y_m": d * np.cos(a), "z_m": np.full(n, 0.8), "length_m": np.full(n, 4.5),
+            "width_m": np.full(n, 1.8), "height_m": np.full(n, 1.5), "yaw_rad": rng.uniform(-np.pi, np.pi, n)}
+    cols["x_m"][3] = np.nan
+    on = process_table(cam, "bw-cube1@deg", cols, corners=corners)
+    off = process_table(cam, "bw-cube1@deg", cols, corners=corners, linearity=False)
+    flag_cols = {"nonlinearity", "linear_ok"} | ({f"c{k}_nonlinearity" for k in range(4)} if corners else set())
+    assert flag_cols <= set(on.column_names)
+    assert set(off.column_names) == set(on.column_names) - flag_cols
+    assert off.num_rows == n and off.column("reason").to_pylist()[3] == "missing or non-finite field x_m"
+    B = np.stack([cols[c] for c in ("x_m", "y_m", "z_m", "length_m", "width_m", "height_m", "yaw_rad")], 1)
+    ref = footprints_from_boxes3d(cam, "bw-cube1@deg", B, v2x_policy="linear")
+    assert (~ref.centre_linear_ok & ref.centre_valid).sum() >= 5  # the flag would have acted on these rows
+    for name in off.column_names:
+        if name in V2X_FIELDS:
+            assert np.array_equal(off.column(name).to_numpy(), ref.v2x[name]), name
+        elif name not in ("reason", "status"):
+            a_, b_ = off.column(name).to_numpy(zero_copy_only=False), on.column(name).to_numpy(zero_copy_only=False)
+            if a_.dtype.kind == "f":
+                np.testing.assert_array_equal(a_, b_, err_msg=name)
+            else:
+                assert np.array_equal(a_, b_), name
+
+
 def test_process_table_matches_reference_3d(cam):
     d = boxes3d(40)
     out = process_table(cam, BUDGET, d, confidence=0.95, corners=True)
@@ -421,6 +453,12 @@ def test_cli_objects(cam, tmp_path):
     assert js["camera"] == str(camf) and js["budget"] == BUDGET and js["rows_error"] == len(BAD_2D)
     t = pq.read_table(out)
     assert "semi_major_m" in t.column_names and t.num_rows == 20
+    r = CliRunner().invoke(_cli(), ["objects", "--camera", str(camf), "--budget", BUDGET, "--detections", str(src),
+                                    "--out", str(tmp_path / "n.parquet"), "--no-linearity", "--corners", "--quiet"])
+    assert r.exit_code == 0, r.output
+    t2 = pq.read_table(tmp_path / "n.parquet")
+    assert t2.num_rows == 20 and "linear_ok" not in t2.column_names and "c0_nonlinearity" not in t2.column_names
+    assert t2.column("x_m").to_pylist() == pytest.approx(t.column("x_m").to_pylist(), nan_ok=True)
     # whole-job bad input: one line, exit status 2
     r = CliRunner().invoke(_cli(), ["objects", "--camera", str(camf), "--budget", BUDGET, "--detections", str(src),
                                     "--out", str(tmp_path / "o.txt")])

@@ -154,6 +154,10 @@ class BatchProcessor:
         Let corners outside the image enter the centre and the largest point.
     bottom_on_ground : bool
         3D boxes: put the bottom face on the ground (see :func:`footprints_from_boxes3d`).
+    linearity : bool
+        Compute the centre's linearity flag and write its columns (``nonlinearity``, ``linear_ok``,
+        ``c{k}_nonlinearity``); False: no flag, the columns are absent and every V2X field is the
+        linear one (``v2x_policy`` has nothing to act on).
     linear_threshold : float
         ``linear_ok = nonlinearity <= linear_threshold`` (default 0.05).
     v2x_policy : {"sampled", "unavailable", "linear"}
@@ -168,7 +172,8 @@ class BatchProcessor:
                  confidence: float | None = None, heading_offset_deg: float = 0.0,
                  origin_lat_deg: float | None = None, origin_lon_deg: float | None = None, corners: bool = False,
                  allow_outside_image: bool = False, bottom_on_ground: bool = True,
-                 linear_threshold: float = 0.05, v2x_policy: str = "sampled", threads: int | None = None):
+                 linearity: bool = True, linear_threshold: float = 0.05, v2x_policy: str = "sampled",
+                 threads: int | None = None):
         if box_type is not None and box_type not in S.BOX_TYPES:
             raise InputError("box_type", box_type, f"one of {S.BOX_TYPES}")
         if contact not in CONTACT_MODES:
@@ -194,7 +199,8 @@ class BatchProcessor:
         self._parallel = self.threads > 1 and _kernel_releases_gil()
         self.proc = FrameProcessor(camera, self.budget, heading_offset_deg=self.heading_offset_deg,
                                    allow_outside_image=self.allow_outside_image, joint_cov=False,
-                                   linear_threshold=linear_threshold, v2x_policy=v2x_policy)
+                                   linearity=linearity, linear_threshold=linear_threshold, v2x_policy=v2x_policy)
+        self.linearity = bool(linearity)
         self.linear_threshold = self.proc.linear_threshold
         self.v2x_policy = v2x_policy
         # kernel outputs (FrameProcessor: pyarrow-pool memory, reused from chunk to chunk) become the
@@ -238,7 +244,7 @@ class BatchProcessor:
         self.box_type = bt
         self._layout = (bt, cols, cov, list(id_fields), K)
         self.schema = S.output_schema(list(id_fields), K, confidence=self._k_conf is not None,
-                                      geo=self.geo is not None, corners=self.corners)
+                                      geo=self.geo is not None, corners=self.corners, linearity=self.linearity)
         return self.schema
 
     @property
@@ -356,7 +362,8 @@ class BatchProcessor:
             res.corners_px = gather("corners_px", (K, 2), np.nan)
             res.corners_xy = gather("corners_xy_world_m", (K, 2), np.nan)
             res.corners_cov = gather("corners_cov_m2", (K, 2, 2), np.nan)
-            res.corners_nl = gather("corners_nonlinearity", (K,), np.nan)
+            if self.linearity:
+                res.corners_nl = gather("corners_nonlinearity", (K,), np.nan)
             res.corner_reason = corner_reason
         # status and reason of the processed rows; outputs are checked too: a centre, covariance or
         # largest point that overflowed (absurd but finite inputs) is never "ok"/"partial"
@@ -492,10 +499,11 @@ class BatchProcessor:
         if self._k_conf is not None:
             cols["semi_major_m"] = self._k_conf * obj[_OBJ["sigma_major_m"]]
             cols["semi_minor_m"] = self._k_conf * obj[_OBJ["sigma_minor_m"]]
-        nl = obj[_OBJ["nonlinearity"]]
-        cols["nonlinearity"] = nl
-        with np.errstate(invalid="ignore"):
-            cols["linear_ok"] = nl <= self.linear_threshold  # NaN (no centre) -> False
+        if self.linearity:
+            nl = obj[_OBJ["nonlinearity"]]
+            cols["nonlinearity"] = nl
+            with np.errstate(invalid="ignore"):
+                cols["linear_ok"] = nl <= self.linear_threshold  # NaN (no centre) -> False
         cols["largest_index"] = res.largest_index.astype(np.int8)
         for name in ("largest_sigma_major_m", "largest_x_m", "largest_y_m", "area_m2"):
             cols[name] = obj[_OBJ[name]]
@@ -512,7 +520,8 @@ class BatchProcessor:
                 cc = res.corners_cov[:, k]
                 cols[f"c{k}_cov_xx_m2"], cols[f"c{k}_cov_xy_m2"], cols[f"c{k}_cov_yy_m2"] = (cc[:, 0, 0], cc[:, 0, 1],
                                                                                            cc[:, 1, 1])
-                cols[f"c{k}_nonlinearity"] = res.corners_nl[:, k]
+                if self.linearity:
+                    cols[f"c{k}_nonlinearity"] = res.corners_nl[:, k]
                 cols[f"c{k}_reason"] = res.corner_reason[:, k].astype(np.int8)
                 if self.geo is not None:
                     cols[f"c{k}_lat_deg"], cols[f"c{k}_lon_deg"] = clat[:, k], clon[:, k]

@@ -114,17 +114,20 @@ CENTRE_COLUMNS = ("x_m", "y_m", "cov_xx_m2", "cov_xy_m2", "cov_yy_m2", "sigma_ma
 FLAG_COLUMNS = ("nonlinearity", "linear_ok")
 
 
-def corner_output_columns(k: int, geo: bool) -> list[tuple[str, pa.DataType]]:
+def corner_output_columns(k: int, geo: bool, linearity: bool = True) -> list[tuple[str, pa.DataType]]:
     cols = [(f"c{k}_u_px", pa.float64()), (f"c{k}_v_px", pa.float64()), (f"c{k}_x_m", pa.float64()),
             (f"c{k}_y_m", pa.float64()), (f"c{k}_cov_xx_m2", pa.float64()), (f"c{k}_cov_xy_m2", pa.float64()),
-            (f"c{k}_cov_yy_m2", pa.float64()), (f"c{k}_nonlinearity", pa.float64()), (f"c{k}_reason", pa.int8())]
+            (f"c{k}_cov_yy_m2", pa.float64())]
+    if linearity:
+        cols.append((f"c{k}_nonlinearity", pa.float64()))
+    cols.append((f"c{k}_reason", pa.int8()))
     if geo:
         cols += [(f"c{k}_lat_deg", pa.float64()), (f"c{k}_lon_deg", pa.float64())]
     return cols
 
 
 def output_schema(id_fields: list[pa.Field], n_corners: int, *, confidence: bool, geo: bool,
-                  corners: bool) -> pa.Schema:
+                  corners: bool, linearity: bool = True) -> pa.Schema:
     """Schema of the footprint table.
 
     Parameters
@@ -134,6 +137,8 @@ def output_schema(id_fields: list[pa.Field], n_corners: int, *, confidence: bool
     confidence : add ``semi_major_m``/``semi_minor_m`` (ellipse at the requested confidence)
     geo : add ``lat_deg``/``lon_deg`` (WGS84) of the centre (and of the corners with ``corners``)
     corners : add the per-corner columns ``c{k}_*``
+    linearity : add the linearity flag's columns (:data:`FLAG_COLUMNS`, and ``c{k}_nonlinearity`` with
+        ``corners``); without it they are absent, not filled
     """
     # computed columns are never null ("no value" is NaN or the message's "unavailable" code); declaring them
     # non-nullable spares the Parquet writer the definition levels (~40 ns per row of 27 columns)
@@ -145,7 +150,8 @@ def output_schema(id_fields: list[pa.Field], n_corners: int, *, confidence: bool
     f += [c(name, pa.float64()) for name in CENTRE_COLUMNS]
     if confidence:
         f += [c("semi_major_m", pa.float64()), c("semi_minor_m", pa.float64())]
-    f += [c("nonlinearity", pa.float64()), c("linear_ok", pa.bool_())]
+    if linearity:
+        f += [c("nonlinearity", pa.float64()), c("linear_ok", pa.bool_())]
     f += [c("largest_index", pa.int8()), c("largest_sigma_major_m", pa.float64()),
           c("largest_x_m", pa.float64()), c("largest_y_m", pa.float64()), c("area_m2", pa.float64())]
     f += [c(name, pa.int32()) for name in V2X_FIELDS]
@@ -153,5 +159,5 @@ def output_schema(id_fields: list[pa.Field], n_corners: int, *, confidence: bool
         f += [c("lat_deg", pa.float64()), c("lon_deg", pa.float64())]
     if corners:
         for k in range(n_corners):
-            f += [c(n, t) for n, t in corner_output_columns(k, geo)]
+            f += [c(n, t) for n, t in corner_output_columns(k, geo, linearity)]
     return pa.schema(f)

@@ -49,6 +49,10 @@ __all__ = ["objects_cmd"]
 @click.option("--corners", is_flag=True, help="Also write every corner's pixel, ground position and covariance.")
 @click.option("--allow-outside-image", is_flag=True,
               help="Let corners outside the image enter the centre and the largest point.")
+@click.option("--linearity/--no-linearity", default=True, show_default=True,
+              help="Compute the centre's linearity flag (columns nonlinearity, linear_ok, c<k>_nonlinearity) and "
+                   "apply --v2x-policy to the centres that are not linear_ok; --no-linearity: no flag columns, "
+                   "every V2X field from the linear covariance (faster).")
 @click.option("--linear-threshold", type=float, default=0.05, show_default=True, metavar="E",
               help="linear_ok is true where the centre's nonlinearity (predicted relative error of the linear "
                    "sigma_major_m) is at most E.")
@@ -70,8 +74,8 @@ __all__ = ["objects_cmd"]
 @click.option("--overwrite", is_flag=True,
               help="Fleet mode: replace a non-empty --out folder as a whole (refused otherwise).")
 def objects_cmd(camera_path, budget_spec, detections, out, box_type, contact, chunk_rows, confidence,
-                heading_offset_deg, origin_lat, origin_lon, corners, allow_outside_image, linear_threshold, v2x_policy,
-                compression, quiet, registry, scheduler, workers, retries, overwrite):
+                heading_offset_deg, origin_lat, origin_lon, corners, allow_outside_image, linearity, linear_threshold,
+                v2x_policy, compression, quiet, registry, scheduler, workers, retries, overwrite):
     """Footprints (centre, covariance, largest point, V2X fields) of every detection in a file.
 
     Every input row gives one output row with its 0-based row number, a status (ok,
@@ -79,7 +83,8 @@ def objects_cmd(camera_path, budget_spec, detections, out, box_type, contact, ch
     """
     options = dict(box_type=box_type, contact=contact, confidence=confidence, heading_offset_deg=heading_offset_deg,
                    origin_lat_deg=origin_lat, origin_lon_deg=origin_lon, corners=corners,
-                   allow_outside_image=allow_outside_image, linear_threshold=linear_threshold, v2x_policy=v2x_policy)
+                   allow_outside_image=allow_outside_image, linearity=linearity, linear_threshold=linear_threshold,
+                   v2x_policy=v2x_policy)
     comp = None if compression == "none" else compression
     if registry is not None:
         if camera_path is not None:

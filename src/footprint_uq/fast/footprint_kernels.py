@@ -953,6 +953,12 @@ def alloc_outputs(N: int, K: int, *, joint: bool = False, corners: bool = True, 
             alloc((len(OBJ_ROWS), N), np.float64), alloc((7, N), np.int32), alloc((nc, K), np.float64))
 
 
+def outputs_max_bytes(N: int, K: int, *, joint: bool = False) -> int:
+    """Bytes of the largest array of :func:`alloc_outputs` (N, K, joint) and of the (N, K, 2) pixels: one
+    number for an allocation policy that decides once per frame instead of once per array."""
+    return 8 * N * max(4 * K, 4 * K * K if joint else 0, len(OBJ_ROWS), 7)
+
+
 def scratch() -> np.ndarray:
     """Scratch buffer of :func:`process_corners` (one per call or per thread)."""
     return np.empty(_NROWS * _ST)
