@@ -57,6 +57,11 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
+def _no_delay(client, userdata, sock) -> None:
+    """TCP_NODELAY on a bench client's broker connection (Nagle's algorithm off, as for the service)."""
+    sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+
+
 def _wait(cond, timeout_s, what):
     end = time.monotonic() + timeout_s
     while time.monotonic() < end:
@@ -149,7 +154,7 @@ def measure(seconds: float = 60.0, cameras: int = 8, fps: float = 30.0, objects:
     tmp = Path(tempfile.mkdtemp(prefix="bench_service_"))
     port = _free_port()
     (tmp / "mosquitto.conf").write_text(f"listener {port} 127.0.0.1\nallow_anonymous true\npersistence false\n"
-                                        "max_queued_messages 100000\n")
+                                        "max_queued_messages 100000\nset_tcp_nodelay true\n")
     save_camera(PanTiltCamera(**CAMERA), tmp / "cam.yaml")
     ids = [f"cam{i}" for i in range(cameras)]
     (tmp / "reg.csv").write_text("camera_id,camera,budget\n" + "".join(f"{c},cam.yaml,basler1\n" for c in ids))
@@ -188,6 +193,7 @@ def measure(seconds: float = 60.0, cameras: int = 8, fps: float = 30.0, objects:
         _wait(rx_ready.is_set, 30, "the receiver")
         _wait(lambda: len({h.get("worker") for h in health}) >= workers, 120, "every worker's first health message")
         tx = mqtt.Client(mqtt.CallbackAPIVersion.VERSION2, client_id="bench-tx")
+        tx.on_socket_open = _no_delay  # a detector's client, as docs/service.md advises
         tx.max_inflight_messages_set(1000)
         tx.connect("127.0.0.1", port)
         tx.loop_start()
@@ -372,6 +378,7 @@ def _receiver(port: int) -> None:
     gc.collect()
     gc.freeze()  # as the service does: no cyclic-GC stalls in the time stamps
     rx = mqtt.Client(mqtt.CallbackAPIVersion.VERSION2, client_id="bench-rx")
+    rx.on_socket_open = _no_delay
     rx.on_message = on_message
     subscribed = threading.Event()
     rx.on_connect = lambda c, u, f, rc, p: c.subscribe("footprints/#", qos=1)

@@ -335,3 +335,20 @@ def test_sigterm_while_starting_up_exits_0(broker, camera_file):
     assert rc == 0, err[-2000:]
     recs = [json.loads(x) for x in out.splitlines()]
     assert recs and recs[-1]["type"] == "health" and recs[-1]["frames_in"] == 0
+
+
+def test_service_client_disables_nagle(broker):
+    """The service's broker connection has TCP_NODELAY (Nagle off): its records and PUBACKs leave at once."""
+    from footprint_uq.service.runner import _mqtt_client
+
+    c = _mqtt_client("127.0.0.1", broker.port, "nodelay-check")
+    connected = threading.Event()
+    c.on_connect = lambda *a: connected.set()
+    c.connect("127.0.0.1", broker.port)
+    c.loop_start()
+    try:
+        _wait(connected.is_set, 10, "the connection")
+        assert c.socket().getsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY) != 0
+    finally:
+        c.disconnect()
+        c.loop_stop()
