@@ -311,3 +311,21 @@ def test_report_helpers(tmp_path):
     assert page.startswith("<!DOCTYPE html>") and "<title>T &amp; T</title>" in page
     p = write_html(tmp_path / "x" / "r.html", page)
     assert p.read_text(encoding="utf-8") == page
+
+
+def test_returned_reason_is_never_the_internal_scratch():
+    """covariance_map reuses a per-thread status buffer only when the codes are not returned: a returned
+    ``reason`` is the caller's own array, untouched by later maps (of this or another size)."""
+    from footprint_uq.fast.map_kernels import covariance_map
+
+    cam = PanTiltCamera(800.0, (64, 48), 6.0, 0.0, 0.5)  # the horizon crosses the image
+    cam2 = PanTiltCamera(800.0, (64, 48), 6.0, 0.0, 1.5)  # other codes: more of the image sees the ground
+    *_, r1 = covariance_map(cam, "basler1", get_reason=True)
+    keep = r1.copy()
+    covariance_map(cam2, "basler1")  # writes the scratch
+    covariance_map(cam2, "basler1", step_px=2)
+    *_, r2 = covariance_map(cam2, "basler1", get_reason=True)
+    assert not np.shares_memory(r1, r2)
+    np.testing.assert_array_equal(r1, keep)
+    assert (r1 == status.ABOVE_HORIZON).any() and (r1 == status.OK).any()
+    assert not np.array_equal(r1, r2)

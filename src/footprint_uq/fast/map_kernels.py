@@ -71,6 +71,8 @@ and ``valid = False``.
 
 from __future__ import annotations
 
+import threading
+
 import numba as nb
 import numpy as np
 from numba.np.unsafe.ndarray import to_fixed_tuple
@@ -571,16 +573,18 @@ def _row_undistorted_qc(cst, cxs, dx0, dy0, dn0, P00, P01, P11, BQ, ZQ, ZZ, BZ, 
 
 @nb.njit(**_JIT)
 def _map_undistorted(prm, R, om, colptr, rowidx, vals, vc, has_qc, Cpq, Ccc, cst, step, xyf, covf, validf, reasonf,
-                     nlf, W):
-    """Rows of the undistorted kernel in parallel; ``nlf`` (H W,) receives the nonlinearity, or has 0 rows."""
+                     nlf, W, nblk):
+    """Blocks of contiguous rows of the undistorted kernel in parallel (the per-row scratch allocated once per
+    block: allocations in every row of a parallel loop cost both threads); ``nlf`` (H W,) receives the
+    nonlinearity, or has 0 rows."""
     Hh = validf.shape[0] // W
     flag = nlf.shape[0] == validf.shape[0]
     fy, cx, cy, sk = prm[1], prm[2], prm[3], prm[4]
     gx, gy = prm[20], prm[21]
     g1 = R[2, 1] - gx * R[0, 1] - gy * R[1, 1]
     g2 = R[2, 2] - gx * R[0, 2] - gy * R[1, 2]
-    for iv in nb.prange(Hh):
-        yn = (iv * step - cy) / fy
+    per = (Hh + nblk - 1) // nblk
+    for blk in nb.prange(nblk):
         P00 = np.empty(15)
         P01 = np.empty(15)
         P11 = np.empty(15)
@@ -588,24 +592,26 @@ def _map_undistorted(prm, R, om, colptr, rowidx, vals, vc, has_qc, Cpq, Ccc, cst
         ZQ = np.zeros((2, 9))
         ZZ = np.zeros(3)
         BZ = np.zeros((6, 2))
-        _row_polys(yn, prm, om, colptr, rowidx, vals, vc, has_qc, Cpq, P00, P01, P11, BQ, flag, ZQ, ZZ, BZ)
-        xr = xyf[2 * W * iv:2 * W * (iv + 1)]
-        cr = covf[4 * W * iv:4 * W * (iv + 1)]
-        vr = validf[W * iv:W * (iv + 1)]
-        nr = nlf[W * iv:W * (iv + 1)] if flag else nlf[0:0]
-        cxs, dx0, dy0, dn0 = cx + sk * yn, R[0, 1] * yn + R[0, 2], R[1, 1] * yn + R[1, 2], g1 * yn + g2
-        if has_qc:
-            _row_undistorted_qc(cst, cxs, dx0, dy0, dn0, P00, P01, P11, BQ, ZQ, ZZ, BZ, Ccc, xr, cr, vr, nr)
-        elif flag:
-            _row_undistorted_flag(cst, cxs, dx0, dy0, dn0, P00, P01, P11, ZQ, ZZ, Ccc, xr, cr, vr, nr)
-        else:
-            _row_undistorted(cst, cxs, dx0, dy0, dn0, P00, P01, P11, xr, cr, vr)
-        rr = reasonf[W * iv:W * (iv + 1)]
-        for i in range(W):  # without distortion a pixel is fine or at / above the horizon
-            rr[i] = status.OK if vr[i] else status.ABOVE_HORIZON
-        _finish_row(xr, cr, vr, rr)
-        if flag:
-            _mask_row(nr, vr)
+        for iv in range(blk * per, min(Hh, (blk + 1) * per)):
+            yn = (iv * step - cy) / fy
+            _row_polys(yn, prm, om, colptr, rowidx, vals, vc, has_qc, Cpq, P00, P01, P11, BQ, flag, ZQ, ZZ, BZ)
+            xr = xyf[2 * W * iv:2 * W * (iv + 1)]
+            cr = covf[4 * W * iv:4 * W * (iv + 1)]
+            vr = validf[W * iv:W * (iv + 1)]
+            nr = nlf[W * iv:W * (iv + 1)] if flag else nlf[0:0]
+            cxs, dx0, dy0, dn0 = cx + sk * yn, R[0, 1] * yn + R[0, 2], R[1, 1] * yn + R[1, 2], g1 * yn + g2
+            if has_qc:
+                _row_undistorted_qc(cst, cxs, dx0, dy0, dn0, P00, P01, P11, BQ, ZQ, ZZ, BZ, Ccc, xr, cr, vr, nr)
+            elif flag:
+                _row_undistorted_flag(cst, cxs, dx0, dy0, dn0, P00, P01, P11, ZQ, ZZ, Ccc, xr, cr, vr, nr)
+            else:
+                _row_undistorted(cst, cxs, dx0, dy0, dn0, P00, P01, P11, xr, cr, vr)
+            rr = reasonf[W * iv:W * (iv + 1)]
+            for i in range(W):  # without distortion a pixel is fine or at / above the horizon
+                rr[i] = status.OK if vr[i] else status.ABOVE_HORIZON
+            _finish_row(xr, cr, vr, rr)
+            if flag:
+                _mask_row(nr, vr)
 
 
 # --------------------------------------------------------------------------------------
@@ -749,7 +755,8 @@ def _point_state(q00, q01, q11, xn, yn, om, colptr, rowidx, vals, vc, has_qc, sq
     return q00, q01, q11, zq0, zq1, zz
 
 
-#: blocks of contiguous rows per thread in the general kernel (Newton warm-starts within a block)
+#: blocks of contiguous rows per thread of the map kernels (scratch allocated once per block; in the general
+#: kernel also the Newton warm-starts within a block)
 _ROWS_PER_BLOCK_DIV = 16
 
 # row buffers of the general map kernel
@@ -1436,7 +1443,7 @@ def covariance_map(camera, budget, step_px: int = 1, *, out=None, get_reason: bo
     xy, cov, valid, nlin = _check_out(out, H, W, get_nonlinearity)
     k = kernel_constants(camera, budget)
     prm = k["params"]
-    reason = np.empty((H, W), dtype=np.int8)
+    reason = np.empty((H, W), dtype=np.int8) if get_reason else _reason_scratch(H, W)
     if nlin is None:
         nlin = np.empty((H, W) if get_nonlinearity else (0, W))
 
@@ -1459,9 +1466,9 @@ def covariance_map(camera, budget, step_px: int = 1, *, out=None, get_reason: bo
     # delays only its current chunk instead of half of the image
     old_chunk = nb.set_parallel_chunksize(1)
     try:
+        nblk = min(H, _ROWS_PER_BLOCK_DIV * nb.get_num_threads())
         if np.any(prm[P.DIST_SLICE]):
             colkind, Om = _column_kinds(k)
-            nblk = min(H, _ROWS_PER_BLOCK_DIV * nb.get_num_threads())
             _map_general(prm, k["R"], k["omega"], k["colptr"], k["rowidx"], k["vals"], k["vc"], colkind, Om,
                          k["Ccc"], k["has_qc"], camera.lens_domain.packed, _undistorted_constants(k, step), k["Suv"],
                          step, xy.reshape(-1), cov.reshape(-1), valid.reshape(-1), reason.reshape(-1),
@@ -1470,10 +1477,22 @@ def covariance_map(camera, budget, step_px: int = 1, *, out=None, get_reason: bo
             _map_undistorted(prm, k["R"], k["omega"], k["colptr"], k["rowidx"], k["vals"], k["vc"], k["has_qc"],
                              _pixel_cov_q(prm, k["Suv"]), k["Ccc"], _undistorted_constants(k, step), step,
                              xy.reshape(-1), cov.reshape(-1), valid.reshape(-1), reason.reshape(-1),
-                             nlin.reshape(-1), W)
+                             nlin.reshape(-1), W, nblk)
     finally:
         nb.set_parallel_chunksize(old_chunk)
     return result()
+
+
+#: per-thread status codes of the last map size, when the caller does not ask for them (a fresh 2 MB array per
+#: full-HD map was first touched by both kernel threads at once: page faults that cost up to 40 % of the map)
+_TLS = threading.local()
+
+
+def _reason_scratch(H: int, W: int) -> np.ndarray:
+    buf = getattr(_TLS, "reason", None)
+    if buf is None or buf.shape != (H, W):
+        buf = _TLS.reason = np.empty((H, W), dtype=np.int8)
+    return buf
 
 
 def covariance_points(camera, budget, uv_px, pixel_cov_px2=None, *, get_reason: bool = False,
