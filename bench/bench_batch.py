@@ -181,7 +181,8 @@ def run(quick: bool = False) -> list[dict]:
                          **r})
             rows.append({"case": f"{case}: without the linearity flag (--no-linearity)",
                          "median_ms": 1e3 * r["batch_no_flag_s"], "runs": res["repeats"],
-                         "parity_of": case,
+                         "parity_of": case, "footprints_per_s": res["rows"] / r["batch_no_flag_s"],
+                         "items": r["rows_ok"] + r["rows_partial"] + r["rows_error"],
                          "time_vs_ours": r["batch_no_flag_s"] / r["batch_s"],
                          "notes": f"{res['rows'] / r['batch_no_flag_s'] / 1e6:.2f} M footprints/s; runs "
                                   + " ".join(f"{t:.2f}" for t in r["batch_no_flag_runs_s"])

@@ -340,7 +340,7 @@ def summary_rows(results: dict) -> list[tuple[str, str, str, str, str, str]]:
             out.append((f"one frame of 100 objects (3D boxes), {cam}", f"{fast['median_us']:.0f} us", ref, ratio,
                         fast["target"], _yes_no(fast["met"])))
     for r in S.get("batch", []):
-        if "footprints_per_s" in r:
+        if "footprints_per_s" in r and "parity_of" not in r:  # (rows without the flag: for bench/compare.py)
             out.append((r["case"].replace("batch ", "batch, single process, "),
                         f"{r['footprints_per_s'] / 1e6:.2f} M footprints/s",
                         f"naive per-object loop: {r['naive_loop_footprints_per_s']:,.0f} /s",
