@@ -270,3 +270,19 @@ def test_empty_reusable_shapes_and_memory():
         assert a.shape == shape and a.dtype == dtype and a.flags.writeable and a.flags.c_contiguous
         a[...] = 1
         assert a.sum() == a.size
+
+
+def test_thread_buffer_reused_per_thread_and_per_shape():
+    import threading
+
+    from footprint_uq.fast.buffers import thread_buffer
+
+    a = thread_buffer("t", (5,))
+    assert thread_buffer("t", (5,)) is a  # reused
+    assert thread_buffer("t", (6,)).shape == (6,)  # another shape: a new buffer
+    assert thread_buffer("t", (6,), np.int8).dtype == np.int8  # another dtype too
+    other = []
+    t = threading.Thread(target=lambda: other.append(thread_buffer("t", (6,), np.int8)))
+    t.start()
+    t.join()
+    assert not np.shares_memory(other[0], thread_buffer("t", (6,), np.int8))  # one per thread

@@ -959,9 +959,8 @@ def outputs_max_bytes(N: int, K: int, *, joint: bool = False) -> int:
     return 8 * N * max(4 * K, 4 * K * K if joint else 0, len(OBJ_ROWS), 7)
 
 
-def scratch() -> np.ndarray:
-    """Scratch buffer of :func:`process_corners` (one per call or per thread)."""
-    return np.empty(_NROWS * _ST)
+#: shape of the scratch buffer ``S`` of :func:`process_corners` (float64; one per call or per thread)
+SCRATCH_SHAPE = (_NROWS * _ST,)
 
 
 @njit(cache=True, error_model="numpy", nogil=True)

@@ -71,8 +71,6 @@ and ``valid = False``.
 
 from __future__ import annotations
 
-import threading
-
 import numba as nb
 import numpy as np
 from numba.np.unsafe.ndarray import to_fixed_tuple
@@ -84,6 +82,7 @@ from ..cameras.rotation import R_W_C, dR_W_C
 from ..errors import InputError
 from ..uncertainty.budget import load_budget
 from . import core
+from .buffers import thread_buffer
 
 __all__ = ["covariance_map", "covariance_points", "kernel_constants"]
 
@@ -1443,7 +1442,9 @@ def covariance_map(camera, budget, step_px: int = 1, *, out=None, get_reason: bo
     xy, cov, valid, nlin = _check_out(out, H, W, get_nonlinearity)
     k = kernel_constants(camera, budget)
     prm = k["params"]
-    reason = np.empty((H, W), dtype=np.int8) if get_reason else _reason_scratch(H, W)
+    # the codes are needed in any case; a per-thread buffer when not returned (fast.buffers: a fresh 2 MB
+    # array first touched by both kernel threads cost up to 40 % of a full-HD map)
+    reason = np.empty((H, W), dtype=np.int8) if get_reason else thread_buffer("map_reason", (H, W), np.int8)
     if nlin is None:
         nlin = np.empty((H, W) if get_nonlinearity else (0, W))
 
@@ -1481,18 +1482,6 @@ def covariance_map(camera, budget, step_px: int = 1, *, out=None, get_reason: bo
     finally:
         nb.set_parallel_chunksize(old_chunk)
     return result()
-
-
-#: per-thread status codes of the last map size, when the caller does not ask for them (a fresh 2 MB array per
-#: full-HD map was first touched by both kernel threads at once: page faults that cost up to 40 % of the map)
-_TLS = threading.local()
-
-
-def _reason_scratch(H: int, W: int) -> np.ndarray:
-    buf = getattr(_TLS, "reason", None)
-    if buf is None or buf.shape != (H, W):
-        buf = _TLS.reason = np.empty((H, W), dtype=np.int8)
-    return buf
 
 
 def covariance_points(camera, budget, uv_px, pixel_cov_px2=None, *, get_reason: bool = False,

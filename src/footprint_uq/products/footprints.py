@@ -91,7 +91,6 @@ or "unavailable" beyond nonlinearity 0.5; ``v2x_source`` says which.
 from __future__ import annotations
 
 import math
-import threading
 from dataclasses import dataclass
 
 import numpy as np
@@ -101,6 +100,7 @@ from .. import status
 from .._checks import as_float, as_points, check_cov
 from ..errors import InputError
 from ..fast import footprint_kernels as fk
+from ..fast.buffers import thread_buffer
 from ..uncertainty.budget import load_budget
 from ..uncertainty.ellipse import ellipse_axes
 from ..uncertainty.propagation import (
@@ -781,18 +781,6 @@ def footprints_from_boxes3d(camera, budget, boxes_world, *, yaw_unit: str = "rad
 _POOL_MIN_BYTES = 1 << 20
 
 
-#: per-thread scratch of the per-frame kernel (one frame at a time per thread; allocated once: a fresh
-#: scratch every frame cost ~9 us of page touching)
-_TLS = threading.local()
-
-
-def _scratch() -> np.ndarray:
-    S = getattr(_TLS, "scratch", None)
-    if S is None:
-        S = _TLS.scratch = fk.scratch()
-    return S
-
-
 def empty_reusable(shape, dtype=np.float64) -> np.ndarray:
     """An uninitialised array whose memory is reused after it is freed.
 
@@ -889,6 +877,12 @@ class FrameProcessor:
             return np.ascontiguousarray(check_cov("pixel_cov_px2", c, 2 * K)[:, None]), 3
         raise InputError("pixel_cov_px2", c.shape, f"shape ({N}, 2, 2), ({N}, {K}, 2, 2) or ({N}, {2 * K}, {2 * K})")
 
+    @staticmethod
+    def _scratch() -> np.ndarray:
+        """The per-frame kernel's scratch: one per thread (fast.buffers; a fresh one every frame cost ~9 us of
+        page touching), so one processor may serve several threads at once."""
+        return thread_buffer("frame_scratch", fk.SCRATCH_SHAPE)
+
     def _flag_options(self) -> dict:
         return dict(linearity=self.linearity, linear_threshold=self.linear_threshold, v2x_policy=self.v2x_policy,
                     v2x_samples=self.v2x_samples, v2x_seed=self.v2x_seed)
@@ -906,7 +900,7 @@ class FrameProcessor:
         out = self._fk.alloc_outputs(N, K, joint=self.joint_cov, corners=self.corner_outputs, alloc=alloc)
         n_over = self._fk.process_corners(uv, extra, self._no_boxes, False, True, self._cam, self._dR, self._Lr,
                                           self._Lc, self._Lv, self._r, self._spx, det, mode, self.allow_outside_image,
-                                          self._ch, self._sh, self.linearity, out, _scratch())
+                                          self._ch, self._sh, self.linearity, out, self._scratch())
         return self._pack(uv, out, lambda r: uv[r], det, mode, n_over)
 
     def _pack(self, uv, out, corners_of, det, mode, n_over) -> FootprintEstimate:
@@ -965,7 +959,7 @@ class FrameProcessor:
         bad, n_over = self._fk.process_boxes3d(b, yaw_unit == "deg", bool(bottom_on_ground), self._cam, self._dR,
                                                self._Lr, self._Lc, self._Lv, self._r, self._spx, det, mode,
                                                self.allow_outside_image, self._ch, self._sh, self.linearity, uv, out,
-                                               _scratch())
+                                               self._scratch())
         if bad >= 0:
             raise InputError(f"boxes_world[{bad}] (length_m, width_m, height_m)", b[bad, 3:6].tolist(), "sizes >= 0")
 
