@@ -286,3 +286,17 @@ def test_thread_buffer_reused_per_thread_and_per_shape():
     t.start()
     t.join()
     assert not np.shares_memory(other[0], thread_buffer("t", (6,), np.int8))  # one per thread
+
+
+@pytest.mark.parametrize("N", [0, 1, 100, 40_000])
+@pytest.mark.parametrize("K", [1, 2, 4, 8])
+@pytest.mark.parametrize("joint", [False, True])
+def test_outputs_max_bytes_bounds_alloc_outputs(N, K, joint):
+    """outputs_max_bytes (FrameProcessor's once-per-frame allocation choice) is at least the largest array
+    alloc_outputs makes (and the (N, K, 2) pixels): it is written from the same shapes and must not go stale."""
+    from footprint_uq.fast import footprint_kernels as fk
+
+    arrays = fk.alloc_outputs(N, K, joint=joint, corners=True) + (np.empty((N, K, 2)),)
+    largest = max(a.nbytes for a in arrays)
+    bound = fk.outputs_max_bytes(N, K, joint=joint)
+    assert largest <= bound <= 2 * largest or N == 0
