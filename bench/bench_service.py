@@ -57,11 +57,6 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
-def _no_delay(client, userdata, sock) -> None:
-    """TCP_NODELAY on a bench client's broker connection (Nagle's algorithm off, as for the service)."""
-    sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-
-
 def _wait(cond, timeout_s, what):
     end = time.monotonic() + timeout_s
     while time.monotonic() < end:
@@ -146,6 +141,8 @@ def measure(seconds: float = 60.0, cameras: int = 8, fps: float = 30.0, objects:
             stagger: bool = False) -> dict:
     import paho.mqtt.client as mqtt
 
+    from footprint_uq.service import tcp_no_delay
+
     mosquitto = shutil.which("mosquitto") or "/usr/sbin/mosquitto"
     if not Path(mosquitto).exists():
         raise RuntimeError("mosquitto not installed (apt-get install mosquitto)")
@@ -193,7 +190,7 @@ def measure(seconds: float = 60.0, cameras: int = 8, fps: float = 30.0, objects:
         _wait(rx_ready.is_set, 30, "the receiver")
         _wait(lambda: len({h.get("worker") for h in health}) >= workers, 120, "every worker's first health message")
         tx = mqtt.Client(mqtt.CallbackAPIVersion.VERSION2, client_id="bench-tx")
-        tx.on_socket_open = _no_delay  # a detector's client, as docs/service.md advises
+        tx.on_socket_open = tcp_no_delay  # a detector's client, as docs/service.md advises
         tx.max_inflight_messages_set(1000)
         tx.connect("127.0.0.1", port)
         tx.loop_start()
@@ -351,6 +348,8 @@ def _receiver(port: int) -> None:
 
     import paho.mqtt.client as mqtt
 
+    from footprint_uq.service import tcp_no_delay
+
     lat_ms: list[float] = []
     proc_us: list[dict] = []
     lock = threading.Lock()
@@ -378,7 +377,7 @@ def _receiver(port: int) -> None:
     gc.collect()
     gc.freeze()  # as the service does: no cyclic-GC stalls in the time stamps
     rx = mqtt.Client(mqtt.CallbackAPIVersion.VERSION2, client_id="bench-rx")
-    rx.on_socket_open = _no_delay
+    rx.on_socket_open = tcp_no_delay
     rx.on_message = on_message
     subscribed = threading.Event()
     rx.on_connect = lambda c, u, f, rc, p: c.subscribe("footprints/#", qos=1)

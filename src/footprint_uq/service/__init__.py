@@ -10,5 +10,6 @@ See ``docs/service.md``.
 """
 
 from .core import FrameOutput, Service, error_record
+from .runner import tcp_no_delay
 
-__all__ = ["Service", "FrameOutput", "error_record"]
+__all__ = ["Service", "FrameOutput", "error_record", "tcp_no_delay"]

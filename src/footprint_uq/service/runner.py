@@ -329,14 +329,16 @@ def _mqtt_client(host: str, port: int, client_id: str):
     c.reconnect_delay_set(min_delay=1, max_delay=16)
     c.max_queued_messages_set(10_000)
     c.max_inflight_messages_set(100)
-    c.on_socket_open = _tcp_no_delay
+    c.on_socket_open = tcp_no_delay
     return c
 
 
-def _tcp_no_delay(client, userdata, sock) -> None:
-    """Nagle's algorithm off on the broker connection (``TCP_NODELAY``): a record's last TCP segment, a
-    PUBACK, would otherwise wait for the peer's ACK of the previous one (milliseconds at the p99 of the
-    load benchmark; the broker's side: Mosquitto's ``set_tcp_nodelay true``, docs/service.md)."""
+def tcp_no_delay(client, userdata, sock) -> None:
+    """A paho-mqtt ``on_socket_open`` callback: Nagle's algorithm off on the broker connection
+    (``TCP_NODELAY``).  A record's last TCP segment, a PUBACK, would otherwise wait for the peer's ACK of
+    the previous one (milliseconds at the p99 of the load benchmark; the broker's side: Mosquitto's
+    ``set_tcp_nodelay true``, docs/service.md).  Detectors and receivers: ``client.on_socket_open =
+    tcp_no_delay``."""
     try:
         sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
     except (OSError, AttributeError):  # not a TCP socket (a websocket wrapper, a Unix socket)
