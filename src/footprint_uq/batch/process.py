@@ -200,7 +200,7 @@ class BatchProcessor:
         self.proc = FrameProcessor(camera, self.budget, heading_offset_deg=self.heading_offset_deg,
                                    allow_outside_image=self.allow_outside_image, joint_cov=False,
                                    linearity=linearity, linear_threshold=linear_threshold, v2x_policy=v2x_policy)
-        self.linearity = bool(linearity)
+        self.linearity = self.proc.linearity
         self.linear_threshold = self.proc.linear_threshold
         self.v2x_policy = v2x_policy
         # kernel outputs (FrameProcessor: pyarrow-pool memory, reused from chunk to chunk) become the
