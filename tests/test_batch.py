@@ -100,18 +100,27 @@ def read_any(path) -> pa.Table:
 
 
 # -- numbers ---------------------------------------------------------------------------------------
+BOX3D_RAD = ("x_m", "y_m", "z_m", "length_m", "width_m", "height_m", "yaw_rad")
+
+
+def near_and_far_boxes3d(n=60):
+    """(n, 7) 3D boxes 12-140 m away: with angles read in degrees (``bw-cube1@deg``) the far ones are not
+    linear_ok; and the same as table columns."""
+    rng = np.random.default_rng(5)
+    d = rng.uniform(12.0, 140.0, n)
+    a = np.deg2rad(30.0 + rng.uniform(-25.0, 25.0, n))
+    B = np.stack([d * np.sin(a), d * np.cos(a), np.full(n, 0.8), np.full(n, 4.5), np.full(n, 1.8),
+                  np.full(n, 1.5), rng.uniform(-np.pi, np.pi, n)], 1)
+    return B, dict(zip(BOX3D_RAD, B.T.copy(), strict=True))
+
+
 @pytest.mark.parametrize("corners", [False, True], ids=["lean", "corners"])
 def test_flag_columns_match_reference_3d(cam, corners):
     """Columns nonlinearity / linear_ok (and c{k}_nonlinearity) are the reference's centre / corner flags, and
     where a centre is not linear_ok the V2X fields follow the policy as in the reference (lean mode too:
     the flagged rows' pixels are projected again for the sampling)."""
-    rng = np.random.default_rng(5)
-    n = 60
-    d = rng.uniform(12.0, 140.0, n)  # angles read in degrees: far objects are not linear_ok
-    a = np.deg2rad(30.0 + rng.uniform(-25.0, 25.0, n))
-    B = np.stack([d * np.sin(a), d * np.cos(a), np.full(n, 0.8), np.full(n, 4.5), np.full(n, 1.8),
-                  np.full(n, 1.5), rng.uniform(-np.pi, np.pi, n)], 1)
-    cols = dict(zip(("x_m", "y_m", "z_m", "length_m", "width_m", "height_m", "yaw_rad"), B.T, strict=True))
+    B, cols = near_and_far_boxes3d()
+    n = B.shape[0]
     out = process_table(cam, "bw-cube1@deg", cols, corners=corners)
     ref = footprints_from_boxes3d(cam, "bw-cube1@deg", B)
     nl = out.column("nonlinearity").to_numpy()
@@ -136,12 +145,8 @@ def test_without_linearity_the_flag_columns_are_absent(cam, corners):
     """linearity=False: no nonlinearity / linear_ok / c{k}_nonlinearity columns (absent, not filled), every
     other column as with the flag, and the V2X fields the linear ones (the reference's policy "linear") --
     including the rows the flag would have sent to the sampled policy; bad rows are still reported."""
-    rng = np.random.default_rng(5)
-    n = 60
-    d = rng.uniform(12.0, 140.0, n)  # angles read in degrees: far objects are not linear_ok
-    a = np.deg2rad(30.0 + rng.uniform(-25.0, 25.0, n))
-    cols = {"x_m": d * np.sin(a), "y_m": d * np.cos(a), "z_m": np.full(n, 0.8), "length_m": np.full(n, 4.5),
-            "width_m": np.full(n, 1.8), "height_m": np.full(n, 1.5), "yaw_rad": rng.uniform(-np.pi, np.pi, n)}
+    _, cols = near_and_far_boxes3d()
+    n = len(cols["x_m"])
     cols["x_m"][3] = np.nan
     on = process_table(cam, "bw-cube1@deg", cols, corners=corners)
     off = process_table(cam, "bw-cube1@deg", cols, corners=corners, linearity=False)
@@ -149,7 +154,7 @@ def test_without_linearity_the_flag_columns_are_absent(cam, corners):
     assert flag_cols <= set(on.column_names)
     assert set(off.column_names) == set(on.column_names) - flag_cols
     assert off.num_rows == n and off.column("reason").to_pylist()[3] == "missing or non-finite field x_m"
-    B = np.stack([cols[c] for c in ("x_m", "y_m", "z_m", "length_m", "width_m", "height_m", "yaw_rad")], 1)
+    B = np.stack([cols[c] for c in BOX3D_RAD], 1)
     ref = footprints_from_boxes3d(cam, "bw-cube1@deg", B, v2x_policy="linear")
     assert (~ref.centre_linear_ok & ref.centre_valid).sum() >= 5  # the flag would have acted on these rows
     for name in off.column_names:
