@@ -84,10 +84,10 @@ def _storages(workdir: str | None) -> list[tuple[str, str | None]]:
     return out
 
 
-def _timed_file_run(cam, src, dst, linearity: bool = True) -> tuple[float, float, object]:
+def _timed_file_run(cam, src, dst, linearity: bool = True, fsync: bool = True) -> tuple[float, float, object]:
     """(wall s, CPU s of the process (user + system, all threads), summary) of one process_file call."""
     r0, t0 = resource.getrusage(resource.RUSAGE_SELF), time.perf_counter()
-    s = process_file(cam, BUDGET, src, dst, progress=False, summary=False, linearity=linearity)
+    s = process_file(cam, BUDGET, src, dst, progress=False, summary=False, linearity=linearity, fsync=fsync)
     wall, r1 = time.perf_counter() - t0, resource.getrusage(resource.RUSAGE_SELF)
     return wall, (r1.ru_utime - r0.ru_utime) + (r1.ru_stime - r0.ru_stime), s
 
@@ -99,8 +99,9 @@ def measure(rows: int = 2_000_000, repeats: int = 3, naive_rows: int = 2_000, bo
     Per storage: one full-size first run (reported as ``first_run_s``: on a fresh VM its new pages
     cost extra), then ``repeats`` timed runs, each writing a new output file (the previous one is
     deleted before the clock starts); ``batch_s`` is their median.  Each run is followed by one
-    with ``linearity=False`` (``--no-linearity``: the job as it was before the flag existed, for
-    like-for-like comparisons with older commits); ``batch_no_flag_s`` is their median.
+    with ``linearity=False, fsync=False`` (``--no-linearity --no-fsync``: the job as it was before the
+    flag and the durable outputs existed, for like-for-like comparisons with older commits);
+    ``batch_no_flag_s`` is their median.
     """
     cam = PanTiltCamera(**CAMERA)
     out: dict = {"rows": rows, "repeats": repeats, "cpus": os.cpu_count(), "target_per_s": TARGET_PER_S,
@@ -132,7 +133,7 @@ def measure(rows: int = 2_000_000, repeats: int = 3, naive_rows: int = 2_000, bo
                     cpus.append(c)
                     assert s.rows_out == rows
                     dst.unlink()
-                    t, _, s_nf = _timed_file_run(cam, src, dst, linearity=False)
+                    t, _, s_nf = _timed_file_run(cam, src, dst, linearity=False, fsync=False)
                     times_nf.append(t)
                     assert s_nf.rows_out == rows
                 t_b = statistics.median(times)
@@ -179,7 +180,7 @@ def run(quick: bool = False) -> list[dict]:
                                   f"{r['kernel_only_footprints_per_s'] / 1e6:.2f} M/s in one thread; naive per-object "
                                   f"loop {r['naive_loop_footprints_per_s']:,.0f} /s ({r['naive_loop_note']})",
                          **r})
-            rows.append({"case": f"{case}: without the linearity flag (--no-linearity)",
+            rows.append({"case": f"{case}: without the linearity flag and fsync (--no-linearity --no-fsync)",
                          "median_ms": 1e3 * r["batch_no_flag_s"], "runs": res["repeats"],
                          "parity_of": case, "footprints_per_s": res["rows"] / r["batch_no_flag_s"],
                          "items": r["rows_ok"] + r["rows_partial"] + r["rows_error"],

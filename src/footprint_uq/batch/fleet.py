@@ -227,6 +227,7 @@ class Task:
     threads: int | None = 1  # kernel threads per task: 1 on Dask workers, None (up to 2) in-process
     template: RegistryEntry | None = None  # processes the rows of unknown cameras (all error rows)
     out_rel: str = ""  # output path under camera_id=<id>/ (unique among the tasks)
+    fsync: bool = True  # durable outputs (io.atomic.commit)
 
 
 def _hive_keys(rel: str) -> dict:
@@ -416,7 +417,7 @@ def process_partition(task: Task) -> dict:
             pending.result()
         for w, tmp, path in writers.values():
             w.close()
-            commit(tmp, path)  # a retried task replaces its files, never duplicates them
+            commit(tmp, path, fsync=task.fsync)  # a retried task replaces its files, never duplicates them
         writers_done = [Path(p).relative_to(task.out_dir).as_posix() for _, _, p in writers.values()]
     except BaseException:
         if pool is not None:
@@ -506,7 +507,8 @@ class FleetSummary:
 
 def process_fleet(registry, detections, out_dir, *, budget=None, scheduler=None, workers: int | None = None,
                   retries: int = 2, chunk_rows: int = S.DEFAULT_CHUNK_ROWS, compression: str | None = "auto",
-                  progress: bool | None = None, client=None, overwrite: bool = False, **options) -> FleetSummary:
+                  progress: bool | None = None, client=None, overwrite: bool = False, fsync: bool = True,
+                  **options) -> FleetSummary:
     """Footprints of a multi-camera Parquet dataset, in this process or on a Dask cluster.
 
     Parameters
@@ -528,6 +530,10 @@ def process_fleet(registry, detections, out_dir, *, budget=None, scheduler=None,
         folder next to ``out_dir`` (``.<name>.tmp-<hex>``) and swapped in at the end, summary
         included: a failed or killed job leaves the previous output as it was, a finished one
         leaves only its own files (no stale partitions of an earlier run).
+    fsync : bool
+        Make the outputs durable (default): every file and the folders are fsynced before they are renamed
+        into place.  False only renames (never partial for a killed job, not durable across a power loss;
+        :func:`footprint_uq.batch.process.process_file`).
     **options
         :class:`~footprint_uq.batch.process.BatchProcessor` options (``box_type``, ``contact``,
         ``confidence``, ``heading_offset_deg``, ``origin_lat_deg``, ``origin_lon_deg``,
@@ -550,6 +556,8 @@ def process_fleet(registry, detections, out_dir, *, budget=None, scheduler=None,
     _check_out(out, detections, overwrite)
     staging = temp_path(out)
     tasks = plan(detections, staging, reg, chunk_rows=chunk_rows, compression=compression, **options)
+    for t in tasks:
+        t.fsync = bool(fsync)
     _clean_stale(out)
     staging.mkdir(parents=True)
     summ = FleetSummary()
@@ -592,14 +600,15 @@ def process_fleet(registry, detections, out_dir, *, budget=None, scheduler=None,
                 cluster.close()
     summ.elapsed_s = time.perf_counter() - t0
     summ.info = {"detections": str(detections), "out": str(out_dir), "partitions": len(tasks), "mode": mode,
-                 "chunk_rows": int(chunk_rows), "options": {k: v for k, v in options.items()},
+                 "chunk_rows": int(chunk_rows), "options": {k: v for k, v in options.items()}, "fsync": bool(fsync),
                  "elapsed_s": round(summ.elapsed_s, 6)}
     try:
         if not summ.consistent:  # pragma: no cover - a bug, not bad input
             raise RuntimeError(f"row accounting broken: {summ.text()}")
         clean_temporaries(staging)  # files of killed or retried attempts
-        atomic_write_text(staging / "_summary.json", json.dumps(summ.to_dict(), indent=2, default=str) + "\n")
-        _swap_in(staging, out)
+        atomic_write_text(staging / "_summary.json", json.dumps(summ.to_dict(), indent=2, default=str) + "\n",
+                          fsync=fsync)
+        _swap_in(staging, out, fsync=fsync)
     except BaseException:
         _rmtree(staging)
         raise
@@ -637,13 +646,14 @@ def _rmtree(p: Path) -> None:
         discard(p)
 
 
-def _swap_in(staging: Path, out: Path) -> None:
+def _swap_in(staging: Path, out: Path, *, fsync: bool = True) -> None:
     """Put the finished folder ``staging`` in place of ``out`` (the old one removed after the rename)."""
     old = None
     if out.exists():
         old = out.with_name(f".{out.name}.old-{uuid.uuid4().hex[:8]}")
         os.rename(out, old)
     os.rename(staging, out)
-    fsync_dir(out.parent if str(out.parent) else ".")
+    if fsync:
+        fsync_dir(out.parent if str(out.parent) else ".")
     if old is not None:
         _rmtree(old)

@@ -717,7 +717,7 @@ def process_chunk(bp: BatchProcessor, chunk) -> pa.Table:
 def process_file(camera, budget, detections, out, *, chunk_rows: int = S.DEFAULT_CHUNK_ROWS,
                  format_in: str | None = None, format_out: str | None = None, progress: bool | None = None,
                  summary: bool = True, compression: str | None = "auto", info: dict | None = None,
-                 **options) -> Summary:
+                 fsync: bool = True, **options) -> Summary:
     """Stream a detection file through the footprint pipeline, chunk by chunk.
 
     Parameters
@@ -741,6 +741,11 @@ def process_file(camera, budget, detections, out, *, chunk_rows: int = S.DEFAULT
         ("snappy", "zstd", "lz4", "gzip"; None or "none": uncompressed).
     info : dict, optional
         Extra entries of the summary (e.g. the camera and budget files of the CLI).
+    fsync : bool
+        Make the output durable: every chunk is flushed to the disk as it is written and the file and its
+        folder are fsynced before the rename (default).  False only renames: the output is still never
+        partial under its name for a killed job, but a power loss or an operating-system crash may leave
+        it empty or missing (scratch outputs, tmpfs; saves the disk write on the job's critical path).
     **options
         Keyword arguments of :class:`BatchProcessor`.
 
@@ -775,7 +780,7 @@ def process_file(camera, budget, detections, out, *, chunk_rows: int = S.DEFAULT
     pending = None
     writer = None
     try:
-        writer = open_writer(out, schema, format=fmt_out, compression=compression)
+        writer = open_writer(out, schema, format=fmt_out, compression=compression, fsync=fsync)
         for chunk in prefetch(iter(reader), 1):
             table = process_chunk(bp, chunk)
             summ.add_table(table, chunk.table.num_rows + len(chunk.malformed))
@@ -807,8 +812,8 @@ def process_file(camera, budget, detections, out, *, chunk_rows: int = S.DEFAULT
                  "origin": None if bp.geo is None else {
                      "origin_lat_deg": bp.geo.origin_lat_deg, "origin_lon_deg": bp.geo.origin_lon_deg,
                      "heading_offset_deg": bp.geo.heading_offset_deg}, "chunk_rows": reader.chunk_rows,
-                 "budget": bp.budget.name if hasattr(bp.budget, "name") else None, **(info or {})}
+                 "budget": bp.budget.name if hasattr(bp.budget, "name") else None, "fsync": bool(fsync), **(info or {})}
     if summary:
 
-        atomic_write_text(summary_path(out), json.dumps(summ.to_dict(), indent=2) + "\n")
+        atomic_write_text(summary_path(out), json.dumps(summ.to_dict(), indent=2) + "\n", fsync=fsync)
     return summ

@@ -72,6 +72,9 @@ class FootprintWriter(abc.ABC):
     ``with`` block by an exception) removes it, leaving any previous ``path`` intact.
     ``before_commit`` (optional callable) runs just before the rename (e.g. removing a stale
     summary, so that a summary never describes another file than the one beside it).
+    ``fsync`` (default True): flush every chunk to the disk and fsync before the rename; False only
+    renames (:func:`footprint_uq.io.atomic.commit`: never partial for a killed process, not durable
+    across a power loss).
     """
 
     format = ""
@@ -83,13 +86,15 @@ class FootprintWriter(abc.ABC):
         self.schema = schema
         self.rows = 0
         self.before_commit = None
+        self.fsync = True
         self._done = False
         self._fd = None
 
     def write(self, table: pa.Table) -> None:
         self._write(table)
         self.rows += table.num_rows
-        self._sync()
+        if self.fsync:
+            self._sync()
 
     def _sync(self) -> None:
         """Flush this chunk's bytes to the disk now (in the batch's writer thread, overlapping the next
@@ -127,7 +132,7 @@ class FootprintWriter(abc.ABC):
             self._close_fd()
             if self.before_commit is not None:
                 self.before_commit()
-            commit(self.tmp, self.path)
+            commit(self.tmp, self.path, fsync=self.fsync)
         except BaseException:
             discard(self.tmp)
             raise
@@ -306,13 +311,17 @@ class GeoJsonOut(FootprintWriter):
             self._f.close()
 
 
-def open_writer(path, schema: pa.Schema, *, format: str | None = None, compression: str | None = AUTO):
-    """A :class:`FootprintWriter` for ``path`` (format from the extension)."""
+def open_writer(path, schema: pa.Schema, *, format: str | None = None, compression: str | None = AUTO,
+                fsync: bool = True):
+    """A :class:`FootprintWriter` for ``path`` (format from the extension; ``fsync`` as in :class:`FootprintWriter`)."""
     fmt = detect_out_format(path, format)
     if fmt == "parquet":
-        return ParquetOut(path, schema, compression=compression)
-    if fmt == "csv":
-        return CsvOut(path, schema)
-    if fmt == "jsonl":
-        return JsonlOut(path, schema)
-    return GeoJsonOut(path, schema)
+        w = ParquetOut(path, schema, compression=compression)
+    elif fmt == "csv":
+        w = CsvOut(path, schema)
+    elif fmt == "jsonl":
+        w = JsonlOut(path, schema)
+    else:
+        w = GeoJsonOut(path, schema)
+    w.fsync = bool(fsync)
+    return w

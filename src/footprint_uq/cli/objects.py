@@ -62,6 +62,10 @@ __all__ = ["objects_cmd"]
 @click.option("--compression", type=click.Choice(["auto", "snappy", "zstd", "lz4", "gzip", "none"]), default="auto",
               show_default=True, help="Parquet compression: auto = snappy, small-integer code columns uncompressed; "
                                       "else one codec for every column.")
+@click.option("--fsync/--no-fsync", default=True, show_default=True,
+              help="Durable outputs: flush to the disk and fsync before the rename into place. --no-fsync only "
+                   "renames (never partial for a killed job, but a power loss may leave the output empty or "
+                   "missing): for scratch outputs and tmpfs.")
 @click.option("--quiet", "-q", is_flag=True, help="No progress bar.")
 @click.option("--registry", "registry", default=None, metavar="FILE_OR_DIR",
               help="Fleet mode: camera registry (camera_id -> camera file, budget); docs/batch.md.")
@@ -75,7 +79,7 @@ __all__ = ["objects_cmd"]
               help="Fleet mode: replace a non-empty --out folder as a whole (refused otherwise).")
 def objects_cmd(camera_path, budget_spec, detections, out, box_type, contact, chunk_rows, confidence,
                 heading_offset_deg, origin_lat, origin_lon, corners, allow_outside_image, linearity, linear_threshold,
-                v2x_policy, compression, quiet, registry, scheduler, workers, retries, overwrite):
+                v2x_policy, compression, fsync, quiet, registry, scheduler, workers, retries, overwrite):
     """Footprints (centre, covariance, largest point, V2X fields) of every detection in a file.
 
     Every input row gives one output row with its 0-based row number, a status (ok,
@@ -91,7 +95,7 @@ def objects_cmd(camera_path, budget_spec, detections, out, box_type, contact, ch
             raise InputError("--camera", camera_path, "no --camera with --registry (the registry names the cameras)")
         summ = process_fleet(registry, detections, out, budget=budget_spec, scheduler=scheduler, workers=workers,
                              retries=retries, chunk_rows=chunk_rows, progress=None if not quiet else False,
-                             compression=comp, overwrite=overwrite, **options)
+                             compression=comp, overwrite=overwrite, fsync=fsync, **options)
     else:
         if scheduler is not None or workers is not None:
             raise InputError("--scheduler/--workers", scheduler or workers,
@@ -101,5 +105,5 @@ def objects_cmd(camera_path, budget_spec, detections, out, box_type, contact, ch
         cam, bud = load_camera_and_budget(camera_path, budget_spec)
         summ = process_file(cam, bud, detections, out, chunk_rows=chunk_rows, progress=None if not quiet else False,
                             compression=comp, info={"camera": str(camera_path), "budget": str(budget_spec)},
-                            **options)
+                            fsync=fsync, **options)
     click.echo(f"footprint-uq objects: {summ.text()}; {summ.elapsed_s:.2f} s", err=True)

@@ -51,12 +51,19 @@ def fsync_dir(folder) -> None:
         os.close(fd)
 
 
-def commit(tmp, final) -> None:
-    """fsync ``tmp``, rename it to ``final`` (replacing it), fsync the folder."""
-    with open(tmp, "rb+") as f:
-        os.fsync(f.fileno())
+def commit(tmp, final, *, fsync: bool = True) -> None:
+    """fsync ``tmp``, rename it to ``final`` (replacing it), fsync the folder.
+
+    ``fsync=False`` only renames: the output is still never partial under its final name for a killed
+    process (the rename follows the last write), but after a power loss or an operating-system crash
+    it may be empty or missing -- for scratch outputs and tmpfs, where the fsyncs cost time for nothing.
+    """
+    if fsync:
+        with open(tmp, "rb+") as f:
+            os.fsync(f.fileno())
     os.replace(tmp, final)
-    fsync_dir(Path(final).parent or ".")
+    if fsync:
+        fsync_dir(Path(final).parent or ".")
 
 
 def discard(tmp) -> None:
@@ -66,7 +73,7 @@ def discard(tmp) -> None:
 
 
 @contextlib.contextmanager
-def atomic_path(final) -> Iterator[Path]:
+def atomic_path(final, *, fsync: bool = True) -> Iterator[Path]:
     """Yield a temporary path next to ``final``; on a clean exit it replaces ``final``, else it is removed.
 
     Examples
@@ -78,26 +85,28 @@ def atomic_path(final) -> Iterator[Path]:
     tmp = temp_path(final)
     try:
         yield tmp
-        commit(tmp, final)
+        commit(tmp, final, fsync=fsync)
     except BaseException:
         discard(tmp)
         raise
 
 
-def atomic_write_bytes(path, data: bytes, *, parents: bool = False) -> Path:
-    """Write ``data`` to ``path`` atomically (``parents``: create missing folders); returns the path."""
+def atomic_write_bytes(path, data: bytes, *, parents: bool = False, fsync: bool = True) -> Path:
+    """Write ``data`` to ``path`` atomically (``parents``: create missing folders; ``fsync`` as in
+    :func:`commit`); returns the path."""
     path = Path(path)
     if parents:
         path.parent.mkdir(parents=True, exist_ok=True)
-    with atomic_path(path) as tmp, open(tmp, "wb") as f:
+    with atomic_path(path, fsync=fsync) as tmp, open(tmp, "wb") as f:
         f.write(data)
         f.flush()
     return path
 
 
-def atomic_write_text(path, text: str, *, encoding: str = "utf-8", parents: bool = False) -> Path:
-    """Write ``text`` to ``path`` atomically (``parents``: create missing folders); returns the path."""
-    return atomic_write_bytes(path, text.encode(encoding), parents=parents)
+def atomic_write_text(path, text: str, *, encoding: str = "utf-8", parents: bool = False, fsync: bool = True) -> Path:
+    """Write ``text`` to ``path`` atomically (``parents``: create missing folders; ``fsync`` as in
+    :func:`commit`); returns the path."""
+    return atomic_write_bytes(path, text.encode(encoding), parents=parents, fsync=fsync)
 
 
 def clean_temporaries(folder, *, recursive: bool = True) -> int:
