@@ -297,6 +297,10 @@ def test_overflow_is_no_answer_in_every_pixel_path():
     _assert_same(ref, xy, cov, reason, "covariance_points", cam)
     xy, cov, valid, reason = covariance_map(cam, budget, 40, get_reason=True)
     _assert_same(ref, xy.reshape(-1, 2), cov.reshape(-1, 2, 2), reason.reshape(-1), "covariance_map", cam)
+    # without the codes (the undistorted kernel then writes none) and with the flag: the same no-answer
+    xy2, cov2, valid2, nl2 = covariance_map(cam, budget, 40, get_nonlinearity=True)
+    np.testing.assert_array_equal(valid2, valid)
+    assert np.isnan(xy2).all() and np.isnan(cov2).all() and np.isnan(nl2).all()
     for opencv in (False, True):
         if opencv:  # the general kernel too
             K = np.array([[1000.0, 0, 639.5], [0, 1000.0, 359.5], [0, 0, 1]])

@@ -29,8 +29,8 @@ import numpy as np
 __all__ = [
     "UNDISTORT_TOL", "UNDISTORT_MAX_ITER", "R_CAP", "STRETCH_MAX", "DOM_M", "DOM_RD_IN2", "DOM_RD_OUT2",
     "DOM_RU_IN2", "DOM_RU_OUT2", "DOM_TAB", "distort_point", "distort_jac", "in_domain_distorted",
-    "in_domain_undistorted", "undistort_point", "undistort_vec", "fold_radius", "undistort_many", "contains_many",
-    "major_axis", "nonlinearity_forms", "nonlinearity_point", "ground_of_ray",
+    "in_domain_undistorted", "undistort_point", "undistort_vec", "undistort_row", "fold_radius", "undistort_many",
+    "contains_many", "major_axis", "nonlinearity_forms", "nonlinearity_point", "ground_of_ray",
 ]
 
 _INL = dict(inline="always", cache=True, error_model="numpy", fastmath={"contract"})
@@ -288,6 +288,45 @@ def _undistort_fallback(dom, k, xd, yd, xn, yn, m00, m01, m10, m11, iden, ok):
         iden[i] = 1.0 / distort_jac(r[1], r[2], k)[7]
 
 
+@nb.njit(**_INL)
+def _newton_vec_point(x, y, xdi, ydi, kt, rd_out2, ru_in2):
+    """One undamped Newton step of :func:`undistort_vec` at one point (shared by its two loops).
+
+    Returns ``(x', y', m00, m01, m10, m11, iden, ok, step, near_fold)``: the next iterate (the same
+    point where it converged or lies outside the distorted domain), ``m = d(x, y)/d(xd, yd)`` and
+    ``1 / den`` at ``(x, y)``, whether ``(x, y)`` is accepted (converged, ``det > 0``, ``x_d`` in the
+    domain), whether it stepped, and whether an accepted point lies beyond the domain's inner
+    undistorted radius (its principal-region test needs the table: :func:`in_domain_undistorted`).
+    """
+    fx, fy, j00, j01, j10, j11, _r, den = distort_jac(x, y, kt)
+    ex, ey = fx - xdi, fy - ydi
+    conv = max(abs(ex), abs(ey)) <= UNDISTORT_TOL * max(1.0, max(abs(xdi), abs(ydi)))
+    inside = xdi * xdi + ydi * ydi < rd_out2  # in_domain_distorted; False for NaN
+    det = j00 * j11 - j01 * j10
+    idet = 1.0 / det
+    a, b, c, d = j11 * idet, -j01 * idet, -j10 * idet, j00 * idet
+    step = inside & (not conv)  # (bitwise, not short-circuit: the loop stays branch-free and vectorises)
+    ok = inside & conv & (det > 0.0)
+    near_fold = ok & (not (x * x + y * y < ru_in2))
+    xs = x - (a * ex + b * ey) if step else x
+    ys = y - (c * ex + d * ey) if step else y
+    return xs, ys, a, b, c, d, 1.0 / den, ok, step, near_fold
+
+
+@nb.njit(**_INL)
+def _undistort_accept(dom, k, xd, yd, xn, yn, m00, m01, m10, m11, iden, ok, nfail, nnear):
+    """After the Newton pass: accepted points beyond the inner radius (``nnear`` of them) that are past the
+    fold are refused, then every refused point goes to :func:`_undistort_fallback` (``yd`` an array)."""
+    if nnear:
+        nfail = 0
+        for i in range(ok.shape[0]):
+            if ok[i] and not in_domain_undistorted(dom, xn[i], yn[i]):  # a root, but past the fold
+                ok[i] = False
+            nfail += 0 if ok[i] else 1
+    if nfail:
+        _undistort_fallback(dom, k, xd, yd, xn, yn, m00, m01, m10, m11, iden, ok)
+
+
 @nb.njit(**_JIT)
 def undistort_vec(dom, k, xd, yd, xn, yn, m00, m01, m10, m11, iden, ok):
     """:func:`undistort_point` over 1-D arrays, vectorised (the kernels' form).
@@ -300,39 +339,50 @@ def undistort_vec(dom, k, xd, yd, xn, yn, m00, m01, m10, m11, iden, ok):
     ``x_d`` (:func:`_undistort_fallback`).  On exit ``ok`` (bool), the solution,
     ``m = d(x, y)/d(xd, yd)`` and ``iden = 1 / den`` at the solution (``den`` as in
     :func:`distort_jac`).  Solutions agree with :func:`undistort_point`'s to the Newton
-    tolerance (that one is polished by one more step).
+    tolerance (that one is polished by one more step).  :func:`undistort_row` is the same for
+    points that share one ``y_d`` (an image row).
     """
     n = ok.shape[0]
     kt = (k[0], k[1], k[2], k[3], k[4], k[5], k[6], k[7])  # scalars: stores to the rows cannot alias them
-    rd_out2 = dom[DOM_RD_OUT2]
+    rd_out2, ru_in2 = dom[DOM_RD_OUT2], dom[DOM_RU_IN2]
+    nfail = nnear = 0
     for _ in range(UNDISTORT_MAX_ITER):
-        nbad = 0
+        nbad = nfail = nnear = 0  # (the counts of the last pass are the final ones)
         for i in range(n):
-            x, y = xn[i], yn[i]
-            xdi, ydi = xd[i], yd[i]
-            fx, fy, j00, j01, j10, j11, _r, den = distort_jac(x, y, kt)
-            ex, ey = fx - xdi, fy - ydi
-            conv = max(abs(ex), abs(ey)) <= UNDISTORT_TOL * max(1.0, max(abs(xdi), abs(ydi)))
-            inside = xdi * xdi + ydi * ydi < rd_out2  # in_domain_distorted; False for NaN
-            det = j00 * j11 - j01 * j10
-            idet = 1.0 / det
-            a, b, c, d = j11 * idet, -j01 * idet, -j10 * idet, j00 * idet
-            step = inside & (not conv)  # (bitwise, not short-circuit: the loop stays branch-free and vectorises)
-            xn[i] = x - (a * ex + b * ey) if step else x
-            yn[i] = y - (c * ex + d * ey) if step else y
-            m00[i], m01[i], m10[i], m11[i] = a, b, c, d
-            iden[i] = 1.0 / den
-            ok[i] = inside & conv & (det > 0.0)
+            xn[i], yn[i], m00[i], m01[i], m10[i], m11[i], iden[i], oki, step, near = _newton_vec_point(
+                xn[i], yn[i], xd[i], yd[i], kt, rd_out2, ru_in2)
+            ok[i] = oki
             nbad += 1 if step else 0
+            nfail += 0 if oki else 1
+            nnear += 1 if near else 0
         if nbad == 0:
             break
-    nfail = 0
-    for i in range(n):
-        if ok[i] and not in_domain_undistorted(dom, xn[i], yn[i]):  # a root, but past the fold
-            ok[i] = False
-        nfail += 0 if ok[i] else 1
-    if nfail:
-        _undistort_fallback(dom, k, xd, yd, xn, yn, m00, m01, m10, m11, iden, ok)
+    _undistort_accept(dom, k, xd, yd, xn, yn, m00, m01, m10, m11, iden, ok, nfail, nnear)
+
+
+@nb.njit(**_JIT)
+def undistort_row(dom, k, xd, yd, ydb, xn, yn, m00, m01, m10, m11, iden, ok):
+    """:func:`undistort_vec` for points that share one distorted ``yd`` (a scalar: an image row of the
+    maps; the loop then reads one array less).  ``ydb`` is a scratch row, filled with ``yd`` only when
+    some point needs :func:`_undistort_fallback`."""
+    n = ok.shape[0]
+    kt = (k[0], k[1], k[2], k[3], k[4], k[5], k[6], k[7])
+    rd_out2, ru_in2 = dom[DOM_RD_OUT2], dom[DOM_RU_IN2]
+    nfail = nnear = 0
+    for _ in range(UNDISTORT_MAX_ITER):
+        nbad = nfail = nnear = 0
+        for i in range(n):
+            xn[i], yn[i], m00[i], m01[i], m10[i], m11[i], iden[i], oki, step, near = _newton_vec_point(
+                xn[i], yn[i], xd[i], yd, kt, rd_out2, ru_in2)
+            ok[i] = oki
+            nbad += 1 if step else 0
+            nfail += 0 if oki else 1
+            nnear += 1 if near else 0
+        if nbad == 0:
+            break
+    if nfail or nnear:
+        ydb[:n] = yd
+    _undistort_accept(dom, k, xd, ydb, xn, yn, m00, m01, m10, m11, iden, ok, nfail, nnear)
 
 
 # --------------------------------------------------------------------------------------

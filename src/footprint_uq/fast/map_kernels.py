@@ -473,15 +473,25 @@ def _pixel_undistorted(cst, x, dx0, dy0, dn0, P00, P01, P11):
 
 
 @nb.njit(inline="always", **_JIT1)
+def _finite(a):
+    """``a`` is finite (``a - a`` is 0 for finite numbers, NaN for inf and NaN): branch-free, vectorises."""
+    return (a - a) == 0.0
+
+
+@nb.njit(inline="always", **_JIT1)
 def _store_pixel(xr, cr, vr, iu, ok, x, y, c00, c01, c11):
+    """Store one pixel; returns whether it is valid: ``ok`` (it meets the ground) and every output finite
+    (the outputs are checked in the same pass: a computed pixel that is not finite is OVERFLOW, NaN)."""
     nan = np.nan
-    xr[2 * iu] = x if ok else nan
-    xr[2 * iu + 1] = y if ok else nan
-    cr[4 * iu] = c00 if ok else nan
-    cr[4 * iu + 1] = c01 if ok else nan
-    cr[4 * iu + 2] = c01 if ok else nan
-    cr[4 * iu + 3] = c11 if ok else nan
-    vr[iu] = ok
+    good = ok & _finite(x) & _finite(y) & _finite(c00) & _finite(c01) & _finite(c11)
+    xr[2 * iu] = x if good else nan
+    xr[2 * iu + 1] = y if good else nan
+    cr[4 * iu] = c00 if good else nan
+    cr[4 * iu + 1] = c01 if good else nan
+    cr[4 * iu + 2] = c01 if good else nan
+    cr[4 * iu + 3] = c11 if good else nan
+    vr[iu] = good
+    return good
 
 
 @nb.njit(**_JIT1)
@@ -518,8 +528,8 @@ def _row_undistorted_flag(cst, cxs, dx0, dy0, dn0, P00, P01, P11, ZQ, ZZ, Ccc, x
         zz = zzc[0] + x * (zzc[1] + x * zzc[2])
         nl = _flag(c00, c01, c11, dn, lam, dxr, dyr, ox, oy, ax, ay, Q00, Q01, Q10, Q11, g0, g1, q00, q01, q11, zq0,
                    zq1, zz, cc, False, bq, bz)
-        _store_pixel(xr, cr, vr, iu, ok, x0 + ox, y0 + oy, c00, c01, c11)
-        nr[iu] = nl if ok else np.nan
+        good = _store_pixel(xr, cr, vr, iu, ok, x0 + ox, y0 + oy, c00, c01, c11)
+        nr[iu] = nl if good else np.nan
 
 
 @nb.njit(inline="always", **_JIT1)
@@ -558,7 +568,7 @@ def _row_undistorted_qc(cst, cxs, dx0, dy0, dn0, P00, P01, P11, BQ, ZQ, ZZ, BZ, 
         c00 += d00
         c01 += d01
         c11 += d11
-        _store_pixel(xr, cr, vr, iu, ok, x0 + ox, y0 + oy, c00, c01, c11)
+        good = _store_pixel(xr, cr, vr, iu, ok, x0 + ox, y0 + oy, c00, c01, c11)
         if flag:
             for c_ in range(6):
                 bz[c_] = BZ[c_, 0] + BZ[c_, 1] * x
@@ -567,7 +577,7 @@ def _row_undistorted_qc(cst, cxs, dx0, dy0, dn0, P00, P01, P11, BQ, ZQ, ZZ, BZ, 
             zz = ZZ[0] + x * (ZZ[1] + x * ZZ[2])
             nl = _flag(c00, c01, c11, dn, lam, dxr, dyr, ox, oy, ax, ay, Q00, Q01, Q10, Q11, g0, g1, q00, q01, q11,
                        zq0, zq1, zz, cc, True, bq, bz)
-            nr[iu] = nl if ok else np.nan
+            nr[iu] = nl if good else np.nan
 
 
 @nb.njit(**_JIT)
@@ -575,9 +585,10 @@ def _map_undistorted(prm, R, om, colptr, rowidx, vals, vc, has_qc, Cpq, Ccc, cst
                      nlf, W, nblk):
     """Blocks of contiguous rows of the undistorted kernel in parallel (the per-row scratch allocated once per
     block: allocations in every row of a parallel loop cost both threads); ``nlf`` (H W,) receives the
-    nonlinearity, or has 0 rows."""
+    nonlinearity, ``reasonf`` (H W,) the status codes, or either has 0 rows (not wanted)."""
     Hh = validf.shape[0] // W
     flag = nlf.shape[0] == validf.shape[0]
+    codes = reasonf.shape[0] == validf.shape[0]
     fy, cx, cy, sk = prm[1], prm[2], prm[3], prm[4]
     gx, gy = prm[20], prm[21]
     g1 = R[2, 1] - gx * R[0, 1] - gy * R[1, 1]
@@ -605,12 +616,18 @@ def _map_undistorted(prm, R, om, colptr, rowidx, vals, vc, has_qc, Cpq, Ccc, cst
                 _row_undistorted_flag(cst, cxs, dx0, dy0, dn0, P00, P01, P11, ZQ, ZZ, Ccc, xr, cr, vr, nr)
             else:
                 _row_undistorted(cst, cxs, dx0, dy0, dn0, P00, P01, P11, xr, cr, vr)
-            rr = reasonf[W * iv:W * (iv + 1)]
-            for i in range(W):  # without distortion a pixel is fine or at / above the horizon
-                rr[i] = status.OK if vr[i] else status.ABOVE_HORIZON
-            _finish_row(xr, cr, vr, rr)
-            if flag:
-                _mask_row(nr, vr)
+            if codes:  # without distortion a pixel is fine, at / above the horizon, or computed but not finite
+                _row_codes_undistorted(cxs, dn0, cst[3], cst[27], cst[28], vr, reasonf[W * iv:W * (iv + 1)])
+
+
+@nb.njit(**_JIT1)
+def _row_codes_undistorted(cxs, dn0, g0, stepf, ifx, vr, rr):
+    """Status codes of a row of the undistorted kernel (in a loop of its own: an int8 store in the pixel loop
+    stops it vectorising): OK where valid, else OVERFLOW where the ray meets the ground (``dn < 0``, as in
+    :func:`_pixel_undistorted`) but an output was not finite, else ABOVE_HORIZON."""
+    for iu in range(vr.shape[0]):
+        dn = dn0 + (np.float64(iu) * stepf - cxs) * ifx * g0
+        rr[iu] = status.OK if vr[iu] else (status.OVERFLOW if dn < 0.0 else status.ABOVE_HORIZON)
 
 
 # --------------------------------------------------------------------------------------
@@ -905,7 +922,7 @@ def _acc_rotation(k, lv, om, buf, W, sq, flag):
 def _row_undistort(v, prm, has_dist, dom, warm, stepf, buf, ok):
     """Pixels of one row -> distorted (XD) and undistorted (XN, YN) normalised coordinates, M, IDEN, ``ok``.
 
-    Undistortion is the scalar core's (:func:`footprint_uq.fast.core.undistort_vec`: the
+    Undistortion is the scalar core's (:func:`footprint_uq.fast.core.undistort_row`: the
     lens's valid domain, Newton, the reference's acceptance test and its robust retry).  With
     ``warm``, ``buf`` holds the previous row's solution: Newton then starts from its
     first-order continuation ``x_n,prev + M_prev (x_d - x_d,prev)`` where that pixel
@@ -918,6 +935,7 @@ def _row_undistort(v, prm, has_dist, dom, warm, stepf, buf, ok):
     M00, M01, M10, M11 = buf[_M00], buf[_M01], buf[_M10], buf[_M11]
     cv = buf[_CONV]
     idn_b = buf[_IDEN]
+    ydb = buf[_YDB]
     ifx_ = 1.0 / fx
     if warm and has_dist:
         # cv holds the previous row's y_d where that pixel converged, NaN elsewhere
@@ -937,15 +955,15 @@ def _row_undistort(v, prm, has_dist, dom, warm, stepf, buf, ok):
             xd[i] = x
             xn[i] = x
             yn[i] = yd
+    # cv: y_d where the lens let the pixel through, NaN elsewhere (the next row's warm start; the codes)
     if has_dist:
-        ydb = buf[_YDB]
-        ydb[:] = yd
-        core.undistort_vec(dom, prm[5:13], xd, ydb, xn, yn, M00, M01, M10, M11, idn_b, ok)
+        core.undistort_row(dom, prm[5:13], xd, yd, ydb, xn, yn, M00, M01, M10, M11, idn_b, ok)
         for i in range(W):
             cv[i] = yd if ok[i] else np.nan
     else:
         for i in range(W):
             ok[i] = True
+            cv[i] = yd
             idn_b[i] = 1.0
             M00[i] = 1.0
             M01[i] = 0.0
@@ -1092,11 +1110,8 @@ def _row_pixels_loop(cst, R, Om, pre, store_q, buf, xr, cr, vr, rr):
     xd, xn, yn = buf[_XD], buf[_XN], buf[_YN]
     M00, M01, M10, M11 = buf[_M00], buf[_M01], buf[_M10], buf[_M11]
     q00, q01, q11 = buf[_Q00], buf[_Q01], buf[_Q11]
+    cv = buf[_CONV]
     ok = vr
-    nan = np.nan
-    # codes in loops of their own (an int8 store in the pixel loop keeps LLVM from vectorising it)
-    for i in range(vr.shape[0]):
-        rr[i] = status.OK if ok[i] else status.UNDISTORT_FAILED
     for i in range(vr.shape[0]):
         x = xn[i]
         y = yn[i]
@@ -1143,15 +1158,15 @@ def _row_pixels_loop(cst, R, Om, pre, store_q, buf, xr, cr, vr, rr):
         c00 += (sv * ax + 2.0 * mx) * ax
         c01 += sv * ax * ay + mx * ay + ax * my
         c11 += (sv * ay + 2.0 * my) * ay
-        xr[2 * i] = x0 + ox if oki else nan
-        xr[2 * i + 1] = y0 + oy if oki else nan
-        cr[4 * i] = c00 if oki else nan
-        cr[4 * i + 1] = c01 if oki else nan
-        cr[4 * i + 2] = c01 if oki else nan
-        cr[4 * i + 3] = c11 if oki else nan
-        ok[i] = oki
+        _store_pixel(xr, cr, vr, i, oki, x0 + ox, y0 + oy, c00, c01, c11)  # (checks the outputs: OVERFLOW)
+    # codes in a loop of their own (an int8 store in the pixel loop keeps LLVM from vectorising it): OK,
+    # UNDISTORT_FAILED where the lens did not let the pixel through (cv NaN), else OVERFLOW where the ray
+    # meets the ground (dn < 0, as in _ray_state) but an output was not finite, else ABOVE_HORIZON
+    g0, g1, g2 = cs[3], cs[4], cs[29]
     for i in range(vr.shape[0]):
-        rr[i] = status.ABOVE_HORIZON if (rr[i] == status.OK) & (not ok[i]) else rr[i]
+        dn = g0 * xn[i] + g1 * yn[i] + g2
+        miss = status.OVERFLOW if dn < 0.0 else status.ABOVE_HORIZON
+        rr[i] = status.OK if ok[i] else (status.UNDISTORT_FAILED if cv[i] != cv[i] else miss)
 
 
 @nb.njit(**_JIT1)
@@ -1253,23 +1268,15 @@ def _row_general(v, prm, R, om, colptr, rowidx, vals, vc, colkind, Om, Ccc, has_
     _row_pixels(cst, R, Om, pre, flag, buf, xr, cr, vr, rr)
     if has_qc:
         _row_qc(cst, R, buf, BQ, cr, vr)
+        _finish_row(xr, cr, vr, rr)  # the cross terms may overflow what _row_pixels checked
     if flag:
         _row_flag(cst, R, Om, Ccc, has_qc, buf, BQ, cr, vr, nr)
-    _finish_row(xr, cr, vr, rr)
-    if flag:
-        _mask_row(nr, vr)
-
-
-@nb.njit(**_JIT1)
-def _mask_row(nr, vr):
-    """NaN nonlinearity where the pixel is not valid (after :func:`_finish_row`)."""
-    for i in range(vr.shape[0]):
-        nr[i] = nr[i] if vr[i] else np.nan
 
 
 @nb.njit(**_JIT1)
 def _finish_row(xr, cr, vr, rr):
-    """Outputs are checked too: a pixel whose position or covariance is not finite is OVERFLOW (NaN)."""
+    """Outputs are checked again after :func:`_row_qc`: a pixel whose position or covariance is not finite is
+    OVERFLOW (NaN)."""
     nan = np.nan
     for i in range(vr.shape[0]):
         if vr[i] and not (np.isfinite(xr[2 * i]) and np.isfinite(xr[2 * i + 1]) and np.isfinite(cr[4 * i])
@@ -1442,9 +1449,14 @@ def covariance_map(camera, budget, step_px: int = 1, *, out=None, get_reason: bo
     xy, cov, valid, nlin = _check_out(out, H, W, get_nonlinearity)
     k = kernel_constants(camera, budget)
     prm = k["params"]
-    # the codes are needed in any case; a per-thread buffer when not returned (fast.buffers: a fresh 2 MB
-    # array first touched by both kernel threads cost up to 40 % of a full-HD map)
-    reason = np.empty((H, W), dtype=np.int8) if get_reason else thread_buffer("map_reason", (H, W), np.int8)
+    general = bool(np.any(prm[P.DIST_SLICE]))
+    # the general kernel needs the codes in any case: a per-thread buffer when not returned (fast.buffers: a
+    # fresh 2 MB array first touched by both kernel threads cost up to 40 % of a full-HD map); the undistorted
+    # kernel writes them only when asked for
+    if get_reason:
+        reason = np.empty((H, W), dtype=np.int8)
+    else:
+        reason = thread_buffer("map_reason", (H, W), np.int8) if general else np.empty((0, W), dtype=np.int8)
     if nlin is None:
         nlin = np.empty((H, W) if get_nonlinearity else (0, W))
 
@@ -1468,7 +1480,7 @@ def covariance_map(camera, budget, step_px: int = 1, *, out=None, get_reason: bo
     old_chunk = nb.set_parallel_chunksize(1)
     try:
         nblk = min(H, _ROWS_PER_BLOCK_DIV * nb.get_num_threads())
-        if np.any(prm[P.DIST_SLICE]):
+        if general:
             colkind, Om = _column_kinds(k)
             _map_general(prm, k["R"], k["omega"], k["colptr"], k["rowidx"], k["vals"], k["vc"], colkind, Om,
                          k["Ccc"], k["has_qc"], camera.lens_domain.packed, _undistorted_constants(k, step), k["Suv"],
