@@ -210,8 +210,7 @@ class FootprintEstimate:
     def _ok(self, nl):
         if nl is None:
             return None
-        with np.errstate(invalid="ignore"):
-            return nl <= self.linear_threshold  # NaN (not computed) -> False
+        return nl <= self.linear_threshold  # NaN (not computed) -> False (comparisons with NaN do not warn)
 
     @property
     def corners_linear_ok(self) -> np.ndarray | None:
@@ -693,8 +692,7 @@ def centre_covariance_sampled(camera, budget, corners_px, *, pixel_cov_px2=None,
     return cov, frac
 
 
-#: v2x_source of a centre without (0) and with (1) a value, before the policy
-_SOURCE_OF_VALID = np.array([V2X_COV_UNAVAILABLE, V2X_COV_LINEAR], dtype=np.int8)
+_NO_NL = np.zeros(0)
 
 
 def _apply_v2x_policy(est: FootprintEstimate, camera, budget, policy: str, n_samples: int, seed: int, *,
@@ -705,13 +703,14 @@ def _apply_v2x_policy(est: FootprintEstimate, camera, budget, policy: str, n_sam
     ``corners_of(rows)`` gives the corner pixels (r, K, 2) and ``det_of(rows)`` the detector covariance
     (r, 2K, 2K) or None of the flagged rows: only those are sampled (:func:`centre_covariance_sampled`).
     """
-    src = _SOURCE_OF_VALID.take(est.centre_valid.view(np.uint8))  # (a lookup: np.where costs 2x here)
+    src = np.empty(len(est), dtype=np.int8)
+    nl = est.centre_nonlinearity
+    n_flagged = fk.v2x_source_and_flagged(est.centre_valid, _NO_NL if nl is None else nl, est.linear_threshold,
+                                          V2X_COV_LINEAR, V2X_COV_UNAVAILABLE, src)
     est.v2x_source = src
-    if est.centre_nonlinearity is None or policy == "linear":
+    if n_flagged == 0 or policy == "linear":  # (almost every frame)
         return est
     rows = np.flatnonzero(est.centre_valid & ~est.centre_linear_ok)
-    if rows.size == 0:
-        return est
     nl = est.centre_nonlinearity[rows]
     cov = np.full((rows.size, 2, 2), np.nan)
     src_r = np.full(rows.size, V2X_COV_UNAVAILABLE, dtype=np.int8)
