@@ -65,9 +65,11 @@ def _measure(cam, n_objects: int, repeats: int, naive_repeats: int, seed: int) -
     proc = FrameProcessor(cam, BUDGET, joint_cov=False)
     proc_joint = FrameProcessor(cam, BUDGET, joint_cov=True)
     proc_noflag = FrameProcessor(cam, BUDGET, joint_cov=False, linearity=False)
+    proc_joint_noflag = FrameProcessor(cam, BUDGET, joint_cov=True, linearity=False)
     fast = _median_us(lambda: _touch(proc.boxes3d(boxes)), repeats)
     fast_noflag = _median_us(lambda: _touch(proc_noflag.boxes3d(boxes)), repeats)
     fast_joint = _median_us(lambda: _touch(proc_joint.boxes3d(boxes)), repeats)
+    fast_joint_noflag = _median_us(lambda: _touch(proc_joint_noflag.boxes3d(boxes)), repeats)
     ref = _median_us(lambda: _touch(footprints_from_boxes3d(cam, BUDGET, boxes)), max(repeats // 20, 5))
     ref_noflag = _median_us(lambda: _touch(footprints_from_boxes3d(cam, BUDGET, boxes, linearity=False)),
                             max(repeats // 20, 5))
@@ -81,7 +83,7 @@ def _measure(cam, n_objects: int, repeats: int, naive_repeats: int, seed: int) -
     est = proc.boxes3d(boxes)
     return {
         "fast_median_us": fast, "fast_with_joint_cov_median_us": fast_joint,
-        "fast_without_flag_median_us": fast_noflag,
+        "fast_without_flag_median_us": fast_noflag, "fast_with_joint_cov_without_flag_median_us": fast_joint_noflag,
         "flagged_centres": int((est.centre_valid & ~est.centre_linear_ok).sum()),
         "numpy_reference_median_us": ref, "naive_loop_median_us": naive_us,
         "numpy_reference_without_flag_median_us": ref_noflag, "naive_loop_without_flag_median_us": naive_noflag_us,

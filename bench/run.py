@@ -121,9 +121,11 @@ def footprints_section(quick: bool = False) -> list[dict]:
         rows[-4]["time_vs_ours"] = r["fast_with_joint_cov_median_us"] / r["fast_median_us"]
         rows[-3]["time_vs_ours"] = r["fast_without_flag_median_us"] / r["fast_median_us"]
         rows[-3]["parity_of"] = first["case"]
-        # the numpy reference without the flag: like for like with commits older than the flag (bench/compare.py)
-        for key, of in (("numpy_reference_without_flag_median_us", rows[-2]), ("naive_loop_without_flag_median_us",
-                                                                                 rows[-1])):
+        # the joint covariance, the numpy reference and the naive loop without the flag: like for like with commits
+        # older than the flag (bench/compare.py)
+        for key, of in (("fast_with_joint_cov_without_flag_median_us", rows[-4]),
+                        ("numpy_reference_without_flag_median_us", rows[-2]),
+                        ("naive_loop_without_flag_median_us", rows[-1])):
             rows.append({**common, "case": f"{of['case']}, without the linearity flag", "median_us": r[key],
                          "runs": of["runs"], "speedup_vs_naive": naive / r[key], "parity_of": of["case"],
                          "time_vs_ours": r[key] / of["median_us"]})

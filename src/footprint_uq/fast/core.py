@@ -314,6 +314,30 @@ def _newton_vec_point(x, y, xdi, ydi, kt, rd_out2, ru_in2):
 
 
 @nb.njit(**_INL)
+def _newton_pass(dom, k, xd, yd_row, yd, xn, yn, m00, m01, m10, m11, iden, ok, one_yd):
+    """The Newton pass of :func:`undistort_vec` (``one_yd`` False: ``yd_row[i]``) and :func:`undistort_row`
+    (True: the scalar ``yd``); ``one_yd`` is a literal at both call sites, so each compiles a loop of its
+    own without the other's load.  Returns the last pass's ``(nfail, nnear)``."""
+    n = ok.shape[0]
+    kt = (k[0], k[1], k[2], k[3], k[4], k[5], k[6], k[7])  # scalars: stores to the rows cannot alias them
+    rd_out2, ru_in2 = dom[DOM_RD_OUT2], dom[DOM_RU_IN2]
+    nfail = nnear = 0
+    for _ in range(UNDISTORT_MAX_ITER):
+        nbad = nfail = nnear = 0  # (the counts of the last pass are the final ones)
+        for i in range(n):
+            ydi = yd if one_yd else yd_row[i]
+            xn[i], yn[i], m00[i], m01[i], m10[i], m11[i], iden[i], oki, step, near = _newton_vec_point(
+                xn[i], yn[i], xd[i], ydi, kt, rd_out2, ru_in2)
+            ok[i] = oki
+            nbad += 1 if step else 0
+            nfail += 0 if oki else 1
+            nnear += 1 if near else 0
+        if nbad == 0:
+            break
+    return nfail, nnear
+
+
+@nb.njit(**_INL)
 def _undistort_accept(dom, k, xd, yd, xn, yn, m00, m01, m10, m11, iden, ok, nfail, nnear):
     """After the Newton pass: accepted points beyond the inner radius (``nnear`` of them) that are past the
     fold are refused, then every refused point goes to :func:`_undistort_fallback` (``yd`` an array)."""
@@ -342,21 +366,7 @@ def undistort_vec(dom, k, xd, yd, xn, yn, m00, m01, m10, m11, iden, ok):
     tolerance (that one is polished by one more step).  :func:`undistort_row` is the same for
     points that share one ``y_d`` (an image row).
     """
-    n = ok.shape[0]
-    kt = (k[0], k[1], k[2], k[3], k[4], k[5], k[6], k[7])  # scalars: stores to the rows cannot alias them
-    rd_out2, ru_in2 = dom[DOM_RD_OUT2], dom[DOM_RU_IN2]
-    nfail = nnear = 0
-    for _ in range(UNDISTORT_MAX_ITER):
-        nbad = nfail = nnear = 0  # (the counts of the last pass are the final ones)
-        for i in range(n):
-            xn[i], yn[i], m00[i], m01[i], m10[i], m11[i], iden[i], oki, step, near = _newton_vec_point(
-                xn[i], yn[i], xd[i], yd[i], kt, rd_out2, ru_in2)
-            ok[i] = oki
-            nbad += 1 if step else 0
-            nfail += 0 if oki else 1
-            nnear += 1 if near else 0
-        if nbad == 0:
-            break
+    nfail, nnear = _newton_pass(dom, k, xd, yd, 0.0, xn, yn, m00, m01, m10, m11, iden, ok, False)
     _undistort_accept(dom, k, xd, yd, xn, yn, m00, m01, m10, m11, iden, ok, nfail, nnear)
 
 
@@ -365,23 +375,9 @@ def undistort_row(dom, k, xd, yd, ydb, xn, yn, m00, m01, m10, m11, iden, ok):
     """:func:`undistort_vec` for points that share one distorted ``yd`` (a scalar: an image row of the
     maps; the loop then reads one array less).  ``ydb`` is a scratch row, filled with ``yd`` only when
     some point needs :func:`_undistort_fallback`."""
-    n = ok.shape[0]
-    kt = (k[0], k[1], k[2], k[3], k[4], k[5], k[6], k[7])
-    rd_out2, ru_in2 = dom[DOM_RD_OUT2], dom[DOM_RU_IN2]
-    nfail = nnear = 0
-    for _ in range(UNDISTORT_MAX_ITER):
-        nbad = nfail = nnear = 0
-        for i in range(n):
-            xn[i], yn[i], m00[i], m01[i], m10[i], m11[i], iden[i], oki, step, near = _newton_vec_point(
-                xn[i], yn[i], xd[i], yd, kt, rd_out2, ru_in2)
-            ok[i] = oki
-            nbad += 1 if step else 0
-            nfail += 0 if oki else 1
-            nnear += 1 if near else 0
-        if nbad == 0:
-            break
+    nfail, nnear = _newton_pass(dom, k, xd, ydb, yd, xn, yn, m00, m01, m10, m11, iden, ok, True)
     if nfail or nnear:
-        ydb[:n] = yd
+        ydb[:ok.shape[0]] = yd
     _undistort_accept(dom, k, xd, ydb, xn, yn, m00, m01, m10, m11, iden, ok, nfail, nnear)
 
 
