@@ -240,7 +240,7 @@ def _hive_keys(rel: str) -> dict:
 
 
 def plan(dataset, out_dir, registry: dict, *, chunk_rows: int = S.DEFAULT_CHUNK_ROWS,
-         compression: str | None = "auto", **options) -> list[Task]:
+         compression: str | None = "auto", fsync: bool = True, **options) -> list[Task]:
     """Tasks (one per Parquet file under ``dataset``, sorted by path)."""
     root = Path(dataset)
     if root.is_file():
@@ -267,7 +267,7 @@ def plan(dataset, out_dir, registry: dict, *, chunk_rows: int = S.DEFAULT_CHUNK_
         if cid is not None and not _has_camera_column(f):
             cams, one = ({cid: registry[cid]} if cid in registry else {}), cid
         tasks.append(Task(i, str(f), rel, str(out), cams, dict(options), int(chunk_rows), compression, keys,
-                          template=template))
+                          template=template, fsync=bool(fsync)))
         only.append(one)
     # two inputs that may write the same camera to the same path (they differ only by a camera_id
     # folder, and one holds a camera_id column): number their outputs
@@ -555,9 +555,7 @@ def process_fleet(registry, detections, out_dir, *, budget=None, scheduler=None,
     out = Path(out_dir)
     _check_out(out, detections, overwrite)
     staging = temp_path(out)
-    tasks = plan(detections, staging, reg, chunk_rows=chunk_rows, compression=compression, **options)
-    for t in tasks:
-        t.fsync = bool(fsync)
+    tasks = plan(detections, staging, reg, chunk_rows=chunk_rows, compression=compression, fsync=fsync, **options)
     _clean_stale(out)
     staging.mkdir(parents=True)
     summ = FleetSummary()
