@@ -8,6 +8,7 @@ The factories are plain functions exposed through fixtures (``random_params``,
 from __future__ import annotations
 
 import os
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -26,6 +27,22 @@ settings.register_profile("ci", derandomize=True, print_blob=True)
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "explore"))
 
 IMAGE_SIZE_PX = (1920, 1080)
+
+# Real data shared beside the repository (../shared/data: Rope3D, TUMTraf, ETSI ASN.1, OpenCV boards;
+# each folder has a SOURCE.txt). FOOTPRINT_UQ_SHARED_DATA overrides the location.
+SHARED_DATA = Path(os.environ.get("FOOTPRINT_UQ_SHARED_DATA",
+                                  Path(__file__).resolve().parents[2] / "shared" / "data"))
+
+
+@pytest.fixture(scope="session")
+def shared_data():
+    """``shared_data("rope3d-demo")`` -> the folder's path, or the test is skipped with a message."""
+    def get(name: str) -> Path:
+        folder = SHARED_DATA / name
+        if not folder.is_dir():
+            pytest.skip(f"real data folder {folder} is missing (../shared/data beside the repository)")
+        return folder
+    return get
 
 
 def make_random_params(rng, *, distortion: str = "strong", skew: bool = True, roll: bool = True,
