@@ -6,7 +6,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed-dev
 
-.PHONY: demo test lint bench clean
+.PHONY: demo test test-quick sysdeps lint bench clean
 
 $(BIN)/python:
 	$(PY) -m venv $(VENV) || python3 -m venv $(VENV)
@@ -21,10 +21,21 @@ demo: $(STAMP)
 
 # numba's on-disk cache is keyed on each function's own file only: a kernel that inlines the scalar core
 # (src/footprint_uq/fast/core.py) would keep running the old core after an edit. Tests start from a clean cache.
-test: $(STAMP)
+test: $(STAMP) sysdeps
 	$(BIN)/ruff check src tests bench
 	find src -name '*.nbi' -delete -o -name '*.nbc' -delete
 	$(BIN)/python -m pytest -q
+
+# the suite less the tests marked slow (tests/conftest.py SLOW_TESTS and @pytest.mark.slow); keeps numba's cache:
+# after an edit of src/footprint_uq/fast/ run `make test` (or delete src/**/*.nbi|*.nbc) once
+test-quick: $(STAMP)
+	$(BIN)/ruff check src tests bench
+	$(BIN)/python -m pytest -q -m "not slow"
+
+# chromium (browser tests) and mosquitto (MQTT tests): installed as root with apt-get, else the tests that need
+# them are skipped and listed at the end of the run
+sysdeps:
+	@bash tools/sysdeps.sh
 
 lint: $(STAMP)
 	$(BIN)/ruff check src tests bench

@@ -185,3 +185,25 @@ def random_pantilt_camera():
                              tuple(np.array(IMAGE_SIZE_PX) / 2 + rng.uniform(-30, 30, 2)), ground_z_m)
 
     return make
+
+
+# `make test-quick` runs `pytest -m "not slow"`: the suite less the tests below (each ~10 s or more on a
+# quiet 2-core machine, or whole modules of end-to-end jobs) and those marked @pytest.mark.slow in their
+# file. `make test` runs everything. Entries are file names or "file::test" prefixes.
+SLOW_TESTS = (
+    "test_bench.py",                      # bench/run.py --quick end to end (~1-2 min)
+    "test_fuzz.py",                       # a 60-s atheris fuzz of the readers
+    "test_reliability.py",                # jobs SIGKILLed while writing, ENOSPC, Dask workers killed
+    "test_service_mqtt.py",               # a real Mosquitto broker, restarts and SIGTERM drains
+    "test_lens_domain.py::test_every_answer_is_a_principal_root",
+    "test_lens_domain.py::test_pincushion_and_no_distortion",
+    "test_calibration_extrinsics.py::test_rendered_images_and_pcd_pairs_through_the_cli",
+    "test_calibration_extrinsics.py::test_lidar_campaigns_bootstrap_covers_the_error",
+)
+
+
+def pytest_collection_modifyitems(config, items):
+    for item in items:
+        nodeid = item.nodeid.removeprefix("tests/")
+        if any(nodeid == s or nodeid.startswith(s + "::") or nodeid.startswith(s + "[") for s in SLOW_TESTS):
+            item.add_marker(pytest.mark.slow)

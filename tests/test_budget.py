@@ -8,9 +8,10 @@ from decimal import Decimal
 import numpy as np
 import pytest
 
-from footprint_uq import ConfigError, ErrorBudget, PanTiltCamera, load_budget, presets, propagate
+from footprint_uq import ConfigError, ErrorBudget, PanTiltCamera, load_budget, propagate
 from footprint_uq import params as P
 from footprint_uq.cameras.ground import sigma_ground_z
+from footprint_uq.uncertainty import presets
 
 # Hand-copied from the paper (shared/seed, Tables 2 and 3), as printed.
 # Table 2: sigma fx, fy, f, c, r (px), k1, k2, p1, p2, k3.

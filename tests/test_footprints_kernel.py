@@ -210,7 +210,7 @@ def test_bad_input():
 
 
 def test_kernel_v2x_fields_match_numpy_at_boundaries(rng):
-    from footprint_uq import footprint_kernels as fk
+    from footprint_uq.fast import footprint_kernels as fk
     from footprint_uq.products.footprints import V2X_FIELDS
     from footprint_uq.products.v2x import cpm_fields, j2735_fields
 

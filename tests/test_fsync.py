@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import os
+from pathlib import Path
 
 import numpy as np
 import pyarrow as pa
@@ -92,8 +93,8 @@ def test_process_file_with_and_without_fsync(site, tmp_path, syncs, ext):
     assert syncs == synced  # not one call more
     assert a.read_bytes() == b.read_bytes()
     assert s_a.rows_out == s_b.rows_out == 5_000
-    assert json.loads(open(f"{a}.summary.json").read())["fsync"] is True
-    assert json.loads(open(f"{b}.summary.json").read())["fsync"] is False
+    assert json.loads(Path(f"{a}.summary.json").read_text())["fsync"] is True
+    assert json.loads(Path(f"{b}.summary.json").read_text())["fsync"] is False
     assert not [p for p in tmp_path.iterdir() if TMP_MARK in p.name]
 
 

@@ -19,8 +19,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from footprint_uq import ConfigError, ErrorBudget, PanTiltCamera, ellipse_axes, load_budget, presets, propagate
+from footprint_uq import ConfigError, ErrorBudget, PanTiltCamera, ellipse_axes, load_budget, propagate
 from footprint_uq import params as P
+from footprint_uq.uncertainty import presets
 
 TEX = Path(__file__).resolve().parent / "data" / "paper_tables_2_3.tex"
 _ROW = re.compile(r"\\textbf\{([A-Za-z0-9-]+)\}\s*&(.*?)\\\\")

@@ -134,8 +134,13 @@ def _pixel_cov(budget: ErrorBudget, pixel_cov_px2, shape):
 
 
 def _sandwich(J, S):
-    """``J S J^T`` for J (..., m, n), S (n, n) or (..., n, n)."""
-    return J @ S @ np.swapaxes(J, -1, -2)
+    """``J S J^T`` for J (..., m, n), S (n, n) or (..., n, n).
+
+    Overflow gives inf/NaN without a RuntimeWarning: such a point's result is not finite and is
+    marked invalid (``status.OVERFLOW``) where the results are checked.
+    """
+    with np.errstate(over="ignore", invalid="ignore"):
+        return J @ S @ np.swapaxes(J, -1, -2)
 
 
 def propagate(camera, budget, uv_px, *, pixel_cov_px2=None, breakdown: bool = False,
@@ -169,7 +174,8 @@ def propagate(camera, budget, uv_px, *, pixel_cov_px2=None, breakdown: bool = Fa
     Jp = bp.dxy_dp[..., used]
     cov = _sandwich(Jp, Sp[np.ix_(used, used)])
     Suv = _pixel_cov(budget, pixel_cov_px2, shape)
-    cov = cov + _sandwich(bp.dxy_duv, Suv)
+    with np.errstate(invalid="ignore"):  # inf + -inf of an overflowed point: NaN, marked invalid below
+        cov = cov + _sandwich(bp.dxy_duv, Suv)
     contrib = None
     if breakdown:
         contrib = {}
