@@ -11,8 +11,8 @@ uncertainty of a detected object is reported as
   covariance is exact for the corners' covariance and its linearity is theirs.  The area
   centroid (:func:`polygon_centroid`) divides by the polygon's area: a thin far footprint
   (a car broadside at 90 m is 2 px tall) flips orientation in some noise draws and the
-  centroid then has no finite variance -- its linear covariance was 11 times too small
-  (docs/uncertainty-model.md, "The footprint centre").  For a box's footprint (a
+  centroid then has no finite variance -- its linear semi-major axis was 11 times too small
+  in the issue-21 reproducer (docs/uncertainty-model.md, "The footprint centre").  For a box's footprint (a
   parallelogram on the ground) the two are the same point.
 
 Inputs, one call per frame of N detections
@@ -330,6 +330,10 @@ def box3d_bottom_corners(boxes_world, *, yaw_unit: str = "rad", bottom_on_ground
 
 def polygon_centroid(xy_m, *, get_gradients: bool = False):
     """Area centroid of polygons ``(..., K, 2)`` (shoelace), with its Jacobian.
+
+    Not the footprint centre the estimates report (:func:`footprint_centre`, the vertex mean): the
+    area centroid divides by the area, so its linear covariance is wrong wherever noise can fold the
+    polygon (docs/uncertainty-model.md, "The footprint centre").
 
     K = 1: the point; K = 2: the midpoint; K >= 3: ``C = sum (p_i + p_{i+1}) c_i / (6 A)``
     with ``c_i = x_i y_{i+1} - x_{i+1} y_i`` and ``A = sum c_i / 2``.  Coordinates are
