@@ -1,4 +1,5 @@
-"""Object footprints: centroid and its Jacobian, corner/joint/centre covariances, partial visibility."""
+"""Object footprints: the centre (vertex mean) and the area centroid with their Jacobians, corner/joint/centre
+covariances, partial visibility."""
 
 from __future__ import annotations
 
@@ -11,6 +12,7 @@ from footprint_uq.products.footprints import (
     DEGENERATE,
     box2d_contact_points,
     box3d_bottom_corners,
+    footprint_centre,
     footprints_from_boxes2d,
     footprints_from_boxes3d,
     footprints_from_corners,
@@ -66,6 +68,35 @@ def test_centroid_degenerate_is_nan():
     assert np.all(np.isnan(C)) and A == 0.0
 
 
+def test_footprint_centre_pinned_values():
+    """The reported centre is the vertex mean (K = 2 the midpoint, K = 1 the point), with the shoelace area;
+    zero area (K >= 3) has no centre; far from the origin it stays exact."""
+    tr = np.array([[0.0, 0.0], [4.0, 0.0], [3.0, 2.0], [1.0, 2.0]])
+    C, A = footprint_centre(tr)
+    assert np.allclose(C, [2.0, 1.0], rtol=1e-15) and A == pytest.approx(6.0)  # area centroid: (2, 8/9)
+    C2, A2 = footprint_centre(tr[::-1])
+    assert np.allclose(C2, C) and A2 == pytest.approx(-6.0)
+    assert np.allclose(footprint_centre(tr[:1])[0], [0.0, 0.0]) and footprint_centre(tr[:2])[1] == 0.0
+    assert np.allclose(footprint_centre(tr[:2])[0], [2.0, 0.0])
+    off = np.array([6.4e5, 5.3e6])
+    assert np.allclose(footprint_centre(tr + off)[0] - off, [2.0, 1.0], atol=1e-9)
+    line = np.array([[0.0, 0.0], [1.0, 1.0], [2.0, 2.0], [3.0, 3.0]])
+    C, A, G = footprint_centre(line, get_gradients=True)
+    assert np.all(np.isnan(C)) and A == 0.0 and np.isfinite(G).all()
+    # a parallelogram (every box's footprint): the same point as the area centroid
+    par = np.array([[0.0, 0.0], [4.0, 1.0], [5.0, 3.0], [1.0, 2.0]])
+    assert np.allclose(footprint_centre(par)[0], polygon_centroid(par)[0], rtol=1e-14)
+
+
+@pytest.mark.parametrize("K", [1, 2, 3, 4, 6])
+def test_footprint_centre_jacobian_vs_central_differences(K, rng, central_diff, rel_err):
+    pts = rng.uniform(-50, 50, (7, K, 2))
+    C, _, G = footprint_centre(pts, get_gradients=True)
+    for i in range(7):
+        fd = central_diff(lambda v: footprint_centre(v.reshape(K, 2))[0], pts[i].ravel(), np.full(2 * K, 1e-3))
+        assert rel_err(fd, G[i]) < 1e-9
+
+
 @pytest.mark.parametrize("K", [1, 2, 3, 4, 6])
 def test_centroid_jacobian_vs_central_differences(K, rng, central_diff, rel_err):
     worst = 0.0
@@ -110,7 +141,7 @@ def test_box3d_round_trip_recovers_footprint(cam, rng):
     ok = est.corner_reason != status.BEHIND_CAMERA
     assert ok.all()
     assert np.allclose(est.corners_xy_world_m, truth, atol=1e-8)
-    assert np.allclose(est.centre_xy_world_m, boxes[:, :2], atol=1e-8)  # rectangle: centroid = centre
+    assert np.allclose(est.centre_xy_world_m, boxes[:, :2], atol=1e-8)  # rectangle: vertex mean = centre
 
 
 # -- covariances -----------------------------------------------------------------------------------
@@ -141,7 +172,7 @@ def test_largest_point_is_the_largest_corner(cam, rng):
 def test_centre_covariance_is_jacobian_sandwich(cam, rng):
     boxes = visible_boxes(cam, rng, 5)
     est = footprints_from_boxes3d(cam, BUDGET, boxes, allow_outside_image=True)
-    _, _, G = polygon_centroid(est.corners_xy_world_m, get_gradients=True)
+    _, _, G = footprint_centre(est.corners_xy_world_m, get_gradients=True)
     want = G @ est.joint_cov_m2 @ np.swapaxes(G, -1, -2)
     assert np.allclose(est.centre_cov_m2, want, rtol=1e-12)
 
@@ -160,7 +191,7 @@ def _mc_centroid(camera, budget, corners_px, n, seed, det_chol=None):
         noise = noise + (rng.standard_normal((n, 2 * K)) @ det_chol.T).reshape(n, K, 2)
     bp = camera.backproject_with(camera.params + dp[:, None, :], corners_px + noise)
     assert bp.valid.all()
-    C, _ = polygon_centroid(bp.xy_world_m)
+    C, _ = footprint_centre(bp.xy_world_m)
     return np.cov(C.T)
 
 

@@ -16,7 +16,7 @@ OUTSIDE_IMAGE = 4  # pixel outside the image (computed, but flagged)
 BEHIND_CAMERA = 5  # world point behind the camera (projection)
 BEYOND_RANGE = 6  # ground point farther than the requested max_range_m (maps)
 OVERFLOW = 7  # every input finite, but the result is not (absurd geometry or error sizes)
-DEGENERATE = 20  # footprint centre only: the footprint polygon has zero area (centroid undefined)
+DEGENERATE = 20  # footprint centre only: the footprint polygon (K >= 3 corners) has zero area
 
 REASONS = {
     OK: "ok",
@@ -27,7 +27,7 @@ REASONS = {
     BEHIND_CAMERA: "point is behind the camera",
     BEYOND_RANGE: "ground point beyond the requested maximum range",
     OVERFLOW: "result is not finite (overflow: the camera geometry or the error sizes are out of range)",
-    DEGENERATE: "footprint polygon has zero area (centroid undefined)",
+    DEGENERATE: "footprint polygon has zero area",
 }
 
 

@@ -406,7 +406,7 @@ class BatchProcessor:
                 else:
                     code, bad = divmod(k, 64)
                     if code == DEGENERATE:
-                        text = "footprint polygon has zero area (centroid undefined)"
+                        text = st.REASONS[DEGENERATE]
                     else:
                         text = f"corner {bad - 1} of {K}: {st.REASONS[code]}"
                 ids[i] = self.reasons.id(prefix + text)

@@ -15,7 +15,7 @@ corners or objects:
   (2 x 22) and d(x, y)/d(u, v) Jacobians (the math of
   :func:`footprint_uq.cameras.general.backproject`);
 * :func:`_stage_corner_flags`, :func:`_stage_centroid` -- status per corner (outside the
-  image, 3D projection), area centroid and its closed-form Jacobian;
+  image, 3D projection), the centre (vertex mean), its Jacobian and the polygon's area;
 * :func:`_stage_whiten` -- ``J L`` with the sparse factor ``L L^T`` of the 22x22 parameter
   covariance (:meth:`footprint_uq.uncertainty.budget.ErrorBudget.param_factor`; only non-zero entries are
   touched): the parameter part of every corner's and of the centre's covariance;
@@ -132,13 +132,11 @@ SCRATCH_ROWS = (
     ("SSEL", 1, "semi-axis if usable else -1"), ("RC", 1, "final code"), ("US", 1, "usable"),
     ("XX", 1, "x (NaN if not computed)"), ("YY", 1, "y (NaN if not computed)"),
     ("Q", 2, "corner minus vertex mean"), ("QN", 2, "the same of the next corner"),
-    ("QP", 2, "the same of the previous corner"),
     ("G", 4, "d centre / d corner (cx/x, cx/y, cy/x, cy/y)"),
     ("T0", 1, "per-corner temporary"), ("T1", 1, "per-corner temporary"), ("T2", 1, "per-corner temporary"),
     # per-object rows (columns 0 .. nob - 1)
     ("BEST", 1, "largest corner"), ("BSEMI", 1, "its semi-axis"), ("FBAD", 1, "first unusable corner"),
     ("MX", 1, "vertex mean x"), ("MY", 1, "vertex mean y"), ("SS", 1, "sum"), ("A2", 1, "twice the area"),
-    ("SX", 1, "centroid sum x"), ("SY", 1, "centroid sum y"),
     ("B0", 1, "pixel-noise part 00"), ("B1", 1, "pixel-noise part 01"), ("B2", 1, "pixel-noise part 11"),
     ("E00", 1, "centre covariance xx"), ("E01", 1, "centre covariance xy"), ("E11", 1, "centre covariance yy"),
     ("CXC", 1, "centre x"), ("CYC", 1, "centre y"), ("AREA", 1, "signed area"), ("DEG", 1, "degenerate"),
@@ -160,11 +158,9 @@ _U, _V, _XD, _YD, _XN, _YN, _CONV, _INV, _JK = (_ROW[k] for k in ("U", "V", "XD"
                                                                   "JK"))
 _X, _Y, _CODE, _JP, _JUV, _B4, _AW, _C3, _P4, _CC = (_ROW[k] for k in ("X", "Y", "CODE", "JP", "JUV", "B4", "AW",
                                                                        "C3", "P4", "CC"))
-_SSEL, _RC, _US, _XX, _YY, _Q, _QN, _QP, _G = (_ROW[k] for k in ("SSEL", "RC", "US", "XX", "YY", "Q", "QN", "QP",
-                                                                  "G"))
+_SSEL, _RC, _US, _XX, _YY, _Q, _QN, _G = (_ROW[k] for k in ("SSEL", "RC", "US", "XX", "YY", "Q", "QN", "G"))
 _T0, _T1, _T2 = _ROW["T0"], _ROW["T1"], _ROW["T2"]
-_BEST, _BSEMI, _FBAD, _MX, _MY, _SS, _A2, _SX, _SY = (_ROW[k] for k in ("BEST", "BSEMI", "FBAD", "MX", "MY", "SS",
-                                                                         "A2", "SX", "SY"))
+_BEST, _BSEMI, _FBAD, _MX, _MY, _SS, _A2 = (_ROW[k] for k in ("BEST", "BSEMI", "FBAD", "MX", "MY", "SS", "A2"))
 _B0, _B1, _B2, _E00, _E01, _E11, _CXC, _CYC, _AREA, _DEG = (_ROW[k] for k in ("B0", "B1", "B2", "E00", "E01", "E11",
                                                                               "CXC", "CYC", "AREA", "DEG"))
 _ANG, _PC, _CS, _SN, _BX, _VX = (_ROW[k] for k in ("ANG", "PC", "CS", "SN", "BX", "VX"))
@@ -837,9 +833,11 @@ def _stage_select(S, nob, K):
 
 @njit(**_STAGE)
 def _stage_centroid(S, nob, K):
-    """Per object: area centroid (CXC, CYC), AREA, DEG (zero area) and its Jacobian G (4 rows:
-    d cx/d x_k, d cx/d y_k, d cy/d x_k, d cy/d y_k).  Computed for every object; objects with an
-    unusable corner carry NaN and are masked by the caller.  K < 3: the vertex mean.
+    """Per object: the centre (CXC, CYC) = the vertex mean of the corners, AREA (signed shoelace area, K >= 3),
+    DEG (zero area, K >= 3) and the centre's Jacobian G (4 rows: d cx/d x_k, d cx/d y_k, d cy/d x_k,
+    d cy/d y_k; the constant 1/K, 0, 0, 1/K).  Computed for every object; objects with an unusable corner
+    carry NaN and are masked by the caller (numpy reference:
+    :func:`footprint_uq.products.footprints.footprint_centre`).
 
     Per-object sums over corners and per-corner uses of per-object numbers go through
     :func:`_sum_corners` / :func:`_to_corners`, so every loop runs straight over columns.
@@ -847,18 +845,19 @@ def _stage_centroid(S, nob, K):
     m = K * nob
     _sum_corners(S, _XX, _MX, nob, K)
     _sum_corners(S, _YY, _MY, nob, K)
-    if K < 3:
-        for i in range(nob):
-            S[_CXC * _ST + i], S[_CYC * _ST + i] = S[_MX * _ST + i] / K, S[_MY * _ST + i] / K
-            S[_AREA * _ST + i], S[_DEG * _ST + i] = 0.0, 0.0
-        for j in range(m):
-            S[_G * _ST + j], S[(_G + 1) * _ST + j] = 1.0 / K, 0.0
-            S[(_G + 2) * _ST + j], S[(_G + 3) * _ST + j] = 0.0, 1.0 / K
-        return
+    ik = 1.0 / K
+    for j in range(m):
+        S[_G * _ST + j], S[(_G + 1) * _ST + j] = ik, 0.0
+        S[(_G + 2) * _ST + j], S[(_G + 3) * _ST + j] = 0.0, ik
     for i in range(nob):
         S[_MX * _ST + i] /= K
         S[_MY * _ST + i] /= K
-    # q = corner - vertex mean (the centroid is formed relative to the mean: no cancellation)
+    if K < 3:
+        for i in range(nob):
+            S[_CXC * _ST + i], S[_CYC * _ST + i] = S[_MX * _ST + i], S[_MY * _ST + i]
+            S[_AREA * _ST + i], S[_DEG * _ST + i] = 0.0, 0.0
+        return
+    # q = corner - vertex mean (the area is formed relative to the mean: no cancellation)
     _to_corners(S, _MX, _T0, nob, K, -1)
     _to_corners(S, _MY, _T1, nob, K, -1)
     for j in range(m):
@@ -871,45 +870,13 @@ def _stage_centroid(S, nob, K):
     _to_corners(S, _Q, _QN, nob, K, 1)
     _to_corners(S, _Q + 1, _QN + 1, nob, K, 1)
     for j in range(m):
-        x, y = S[_Q * _ST + j], S[(_Q + 1) * _ST + j]
-        xn_, yn_ = S[_QN * _ST + j], S[(_QN + 1) * _ST + j]
-        c = x * yn_ - xn_ * y
-        S[_T0 * _ST + j] = c
-        S[_T1 * _ST + j] = (x + xn_) * c
-        S[_T2 * _ST + j] = (y + yn_) * c
+        S[_T0 * _ST + j] = S[_Q * _ST + j] * S[(_QN + 1) * _ST + j] - S[_QN * _ST + j] * S[(_Q + 1) * _ST + j]
     _sum_corners(S, _T0, _A2, nob, K)
-    _sum_corners(S, _T1, _SX, nob, K)
-    _sum_corners(S, _T2, _SY, nob, K)
     for i in range(nob):
         area = 0.5 * S[_A2 * _ST + i]
         deg = not (abs(area) > 1e-12 * max(S[_SS * _ST + i], 1e-300))
-        inv6A = 1.0 / (6.0 * area)
-        Cxl, Cyl = S[_SX * _ST + i] * inv6A, S[_SY * _ST + i] * inv6A
         S[_AREA * _ST + i], S[_DEG * _ST + i] = area, 1.0 if deg else 0.0
-        S[_CXC * _ST + i], S[_CYC * _ST + i] = Cxl + S[_MX * _ST + i], Cyl + S[_MY * _ST + i]
-        S[_SX * _ST + i], S[_SY * _ST + i], S[_A2 * _ST + i] = Cxl, Cyl, inv6A  # per-object inputs of G
-    _to_corners(S, _SX, _T0, nob, K, -1)
-    _to_corners(S, _SY, _T1, nob, K, -1)
-    _to_corners(S, _A2, _T2, nob, K, -1)
-    _to_corners(S, _Q, _QP, nob, K, K - 1)  # previous corner
-    _to_corners(S, _Q + 1, _QP + 1, nob, K, K - 1)
-    for j in range(m):
-        x, y = S[_Q * _ST + j], S[(_Q + 1) * _ST + j]
-        xn_, yn_ = S[_QN * _ST + j], S[(_QN + 1) * _ST + j]
-        xp, yp = S[_QP * _ST + j], S[(_QP + 1) * _ST + j]
-        Cxl, Cyl, inv6A = S[_T0 * _ST + j], S[_T1 * _ST + j], S[_T2 * _ST + j]
-        c = x * yn_ - xn_ * y
-        cp = xp * y - x * yp
-        dA_dx = 0.5 * (yn_ - yp)
-        dA_dy = 0.5 * (xp - xn_)
-        dSx_dx = c + cp + (x + xn_) * yn_ - (xp + x) * yp
-        dSx_dy = -(x + xn_) * xn_ + (xp + x) * xp
-        dSy_dx = (y + yn_) * yn_ - (yp + y) * yp
-        dSy_dy = c + cp - (y + yn_) * xn_ + (yp + y) * xp
-        S[_G * _ST + j] = (dSx_dx - 6.0 * Cxl * dA_dx) * inv6A
-        S[(_G + 1) * _ST + j] = (dSx_dy - 6.0 * Cxl * dA_dy) * inv6A
-        S[(_G + 2) * _ST + j] = (dSy_dx - 6.0 * Cyl * dA_dx) * inv6A
-        S[(_G + 3) * _ST + j] = (dSy_dy - 6.0 * Cyl * dA_dy) * inv6A
+        S[_CXC * _ST + i], S[_CYC * _ST + i] = S[_MX * _ST + i], S[_MY * _ST + i]
 
 
 @njit(**_STAGE)

@@ -1,15 +1,19 @@
-"""Object footprints: ground corners, their joint covariance, largest point, centroid.
+"""Object footprints: ground corners, their joint covariance, largest point, centre.
 
 Implements the paper's section "Estimating uncertainty of bounding box": the
 uncertainty of a detected object is reported as
 
 * the **largest point uncertainty** -- the footprint corner with the largest 1-sigma
   semi-major axis, the paper's upper bound on the positional uncertainty -- and
-* the **footprint centre** -- the area centroid of the convex footprint polygon
-  (shoelace formula; *not* the vertex mean, which differs for any non-parallelogram
-  quadrilateral, as the image of a rectangle under the ground back-projection is),
-  with its covariance propagated from the joint covariance of all corners through
-  the centroid's closed-form Jacobian.
+* the **footprint centre** -- the vertex mean of the footprint's ground corners
+  (:func:`footprint_centre`), with its covariance propagated from the joint covariance of
+  all corners through its (constant) Jacobian.  It is linear in the corners, so its
+  covariance is exact for the corners' covariance and its linearity is theirs.  The area
+  centroid (:func:`polygon_centroid`) divides by the polygon's area: a thin far footprint
+  (a car broadside at 90 m is 2 px tall) flips orientation in some noise draws and the
+  centroid then has no finite variance -- its linear semi-major axis was 11 times too small
+  in the issue-21 reproducer (docs/uncertainty-model.md, "The footprint centre").  For a box's footprint (a
+  parallelogram on the ground) the two are the same point.
 
 Inputs, one call per frame of N detections
 ------------------------------------------
@@ -58,8 +62,8 @@ observed: they lie outside the image) are still back-projected -- their numbers 
 kept and finite -- but they are not *usable* unless ``allow_outside_image=True``.
 ``ABOVE_HORIZON``, ``BEHIND_CAMERA`` (3D corners), ``UNDISTORT_FAILED`` and
 ``NOT_FINITE`` corners are NaN.  The largest point is taken over the usable corners
-(NaN and index -1 if none); the centre needs every corner usable and a non-degenerate
-polygon, otherwise it is NaN and ``centre_reason`` says why (the code of the first
+(NaN and index -1 if none); the centre needs every corner usable and, for K >= 3, a polygon
+of non-zero area, otherwise it is NaN and ``centre_reason`` says why (the code of the first
 unusable corner and its index, or :data:`DEGENERATE`).
 
 Two paths, same numbers
@@ -80,7 +84,8 @@ The linearity flag
 ------------------
 Every corner carries ``nonlinearity`` (predicted relative error of its linear 1-sigma
 semi-major axis; :func:`footprint_uq.propagation.nonlinearity`, computed in the kernel), the
-largest point its corner's, the centre the largest of its corners'; ``*_linear_ok`` is
+largest point its corner's, the centre the largest of its corners' (the centre is linear in the
+corners: all of its non-linearity is theirs); ``*_linear_ok`` is
 ``nonlinearity <= linear_threshold``.  Where the centre is not ``linear_ok`` the V2X fields
 follow ``v2x_policy`` (:data:`V2X_POLICIES`; docs/uncertainty-model.md, "Policy for the V2X
 fields"): by default the larger of the linear and a seeded Monte-Carlo covariance of the
@@ -116,11 +121,12 @@ from .v2x import cpm_fields, j2735_fields
 
 __all__ = [
     "FootprintEstimate", "FrameProcessor", "V2X_FIELDS", "DEGENERATE", "CONTACT_MODES", "BOX3D_COLUMNS",
-    "V2X_POLICIES", "box2d_contact_points", "box3d_bottom_corners", "polygon_centroid", "footprints_from_corners",
+    "V2X_POLICIES", "box2d_contact_points", "box3d_bottom_corners", "polygon_centroid", "footprint_centre",
+    "footprints_from_corners",
     "footprints_from_boxes2d", "footprints_from_boxes3d", "centre_covariance_sampled",
 ]
 
-#: centre reason code: zero-area footprint polygon (centroid undefined)
+#: centre reason code: zero-area footprint polygon (K >= 3: not a footprint)
 DEGENERATE = status.DEGENERATE
 _CENTRE_TEXT = {DEGENERATE: status.REASONS[DEGENERATE]}
 CONTACT_MODES = ("bottom-centre", "bottom-corners")
@@ -156,7 +162,8 @@ class FootprintEstimate:
     largest_index : (N,) int           corner with the largest semi-major axis (-1: none usable)
     largest_semi_major_m : (N,)        its 1-sigma semi-major axis, m (the paper's upper bound)
     largest_xy_world_m : (N, 2), largest_cov_m2 : (N, 2, 2)
-    centre_xy_world_m : (N, 2)         area centroid (K >= 3), midpoint (K = 2), point (K = 1)
+    centre_xy_world_m : (N, 2)         vertex mean of the corners (:func:`footprint_centre`; K = 2 the
+                                       midpoint, K = 1 the point)
     centre_cov_m2 : (N, 2, 2)
     centre_valid : (N,) bool
     centre_reason : (N,) int           0, the status code of the first unusable corner, or DEGENERATE
@@ -168,7 +175,8 @@ class FootprintEstimate:
     heading_offset_deg : float         used for the V2X fields
     corners_nonlinearity : (N, K)      the linearity flag of each corner (its 2x2 covariance; NaN where not
                                        computed): predicted relative error of the linear 1-sigma semi-major axis
-    centre_nonlinearity : (N,)         the centre's: the largest of its corners' (NaN without a centre)
+    centre_nonlinearity : (N,)         the centre's: the largest of its corners' (it is linear in them; NaN
+                                       without a centre)
     largest_nonlinearity : (N,)        the largest point's (its corner's; NaN without one)
     linear_threshold : float           ``*_linear_ok = *_nonlinearity <= linear_threshold`` (properties)
     v2x_source : (N,) int8             what the V2X fields encode: 0 the linear centre covariance, 1 a sampled
@@ -323,6 +331,10 @@ def box3d_bottom_corners(boxes_world, *, yaw_unit: str = "rad", bottom_on_ground
 def polygon_centroid(xy_m, *, get_gradients: bool = False):
     """Area centroid of polygons ``(..., K, 2)`` (shoelace), with its Jacobian.
 
+    Not the footprint centre the estimates report (:func:`footprint_centre`, the vertex mean): the
+    area centroid divides by the area, so its linear covariance is wrong wherever noise can fold the
+    polygon (docs/uncertainty-model.md, "The footprint centre").
+
     K = 1: the point; K = 2: the midpoint; K >= 3: ``C = sum (p_i + p_{i+1}) c_i / (6 A)``
     with ``c_i = x_i y_{i+1} - x_{i+1} y_i`` and ``A = sum c_i / 2``.  Coordinates are
     shifted to the vertex mean first (the centroid is translation-equivariant and its
@@ -374,6 +386,43 @@ def polygon_centroid(xy_m, *, get_gradients: bool = False):
     G[..., 1, 0::2] = (dSy_dx - 6.0 * Cy_l[..., None] * dA_dx) * inv6A[..., None]
     G[..., 1, 1::2] = (dSy_dy - 6.0 * Cy_l[..., None] * dA_dy) * inv6A[..., None]
     return C, A, G
+
+
+def footprint_centre(xy_m, *, get_gradients: bool = False):
+    """The footprint centre of polygons ``(..., K, 2)``: the vertex mean, with the polygon's area.
+
+    The centre every path reports (docs/uncertainty-model.md, "The footprint centre"): the mean of the
+    K corners, ``C = sum p_k / K`` -- linear in the corners, so it cannot invert whatever the noise does
+    to the polygon (the area centroid, :func:`polygon_centroid`, divides by the area and has no finite
+    variance once the area's sign can flip).  For the footprint of a box (a parallelogram on the ground)
+    the two coincide.
+
+    Returns
+    -------
+    centre : (..., 2)          NaN where K >= 3 and the polygon has zero area (:data:`DEGENERATE`)
+    area : (...)               signed shoelace area, m^2 (K < 3: 0)
+    dC_dxy : (..., 2, 2K)      only with ``get_gradients``: the constant ``(1/K) [I I ... I]``
+    """
+    p = as_points("xy_m", xy_m, 2)
+    K = p.shape[-2]
+    lead = p.shape[:-2]
+    m = p.mean(-2)
+    if K < 3:
+        area = np.zeros(lead)
+        C = m
+    else:
+        q = p - m[..., None, :]
+        x, y = q[..., 0], q[..., 1]
+        area = 0.5 * (x * np.roll(y, -1, -1) - np.roll(x, -1, -1) * y).sum(-1)
+        with np.errstate(invalid="ignore"):
+            deg = ~(np.abs(area) > 1e-12 * np.maximum((q * q).sum((-1, -2)), 1e-300))
+        C = np.where(deg[..., None], np.nan, m)
+    if not get_gradients:
+        return C, area
+    G = np.zeros(lead + (2, 2 * K))
+    G[..., 0, 0::2] = 1.0 / K
+    G[..., 1, 1::2] = 1.0 / K
+    return C, area, G
 
 
 # -- pixel covariances -----------------------------------------------------------------------
@@ -502,7 +551,7 @@ def footprints_from_corners(camera, budget, corners_px, *, pixel_cov_px2=None, a
     # outside-image corners that are computed but not allowed keep the OUTSIDE_IMAGE code
     xy_c = np.where(all_usable[:, None, None], xy, 0.0)
     with np.errstate(invalid="ignore", over="ignore"):  # overflow on absurd inputs: _mark_overflow flags it
-        C, area, G = polygon_centroid(xy_c, get_gradients=True)
+        C, area, G = footprint_centre(xy_c, get_gradients=True)
     if K >= 3:
         degenerate = all_usable & ~np.isfinite(C).all(-1)
         centre_reason = np.where(degenerate, DEGENERATE, centre_reason)
@@ -637,9 +686,9 @@ def centre_covariance_sampled(camera, budget, corners_px, *, pixel_cov_px2=None,
 
     Each sample draws one set of camera-level errors (shared by the corners) and the pixel noise of
     every corner (budget + detector, correlated between corners if the detector covariance is),
-    back-projects the K corners and takes the centre as the reference does (:func:`polygon_centroid`:
-    area centroid, midpoint, point).  **Common random numbers**: every object uses the same
-    standard-normal draws (from ``seed``), so an object's result does not depend on which other
+    back-projects the K corners and takes the centre as the reference does (:func:`footprint_centre`:
+    the vertex mean; samples whose polygon has zero area are left out).  **Common random numbers**: every
+    object uses the same standard-normal draws (from ``seed``), so an object's result does not depend on which other
     objects are processed with it (frame, batch chunk, thread).  Vectorised over samples and objects
     (at most ``max_points`` back-projections at a time).
 
@@ -679,7 +728,7 @@ def centre_covariance_sampled(camera, budget, corners_px, *, pixel_cov_px2=None,
         noise = np.einsum("rij,sj->sri", A[a:b], z).reshape(n_samples, b - a, K, 2)
         bp = camera.backproject_with(params, uv[None, a:b] + noise)
         with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
-            C = polygon_centroid(np.where(bp.valid[..., None], bp.xy_world_m, 0.0))[0] - ref[a:b]  # (S, r, 2)
+            C = footprint_centre(np.where(bp.valid[..., None], bp.xy_world_m, 0.0))[0] - ref[a:b]  # (S, r, 2)
         good = bp.valid.all(-1) & np.isfinite(C).all(-1)
         cnt = good.sum(0)
         C = np.where(good[..., None], C, 0.0)

@@ -50,7 +50,7 @@ from .. import params as P
 from .. import status
 from .._checks import as_float
 from ..errors import ConfigError
-from ..products.footprints import footprints_from_boxes3d, polygon_centroid
+from ..products.footprints import footprint_centre, footprints_from_boxes3d
 from ..uncertainty import presets
 from ..uncertainty.budget import SHARED_SOURCES, ErrorBudget, load_budget
 from ..uncertainty.ellipse import chi2_scale, ellipse_axes
@@ -275,7 +275,7 @@ def centre_contributions(camera, budget, fp) -> dict[str, np.ndarray]:
     """Per-source covariance ``(N, 2, 2)`` of the footprint centres of ``fp`` (a FootprintEstimate).
 
     The centre is a function of the corners, ``C = C(p_0, ..., p_{K-1})``, with the
-    Jacobian ``G`` of :func:`footprint_uq.products.footprints.polygon_centroid`; a camera-level
+    Jacobian ``G`` of :func:`footprint_uq.products.footprints.footprint_centre`; a camera-level
     source ``s`` with parameter block ``Sigma_s`` contributes ``G J_s Sigma_s J_s^T G^T``
     (``J_s`` stacks the corners' ``dxy/dp_s``), a per-point source ``G Juv (I x S) Juv^T G^T``.
     Correlations between sources, if the budget has any, are in ``"cross_terms"``.  The
@@ -290,7 +290,7 @@ def centre_contributions(camera, budget, fp) -> dict[str, np.ndarray]:
     bp = camera.backproject(uv_ok, get_gradients=True)
     xy = np.where(ok[:, None, None], fp.corners_xy_world_m, bp.xy_world_m)
     with np.errstate(invalid="ignore", divide="ignore"):
-        _, _, G = polygon_centroid(xy, get_gradients=True)
+        _, _, G = footprint_centre(xy, get_gradients=True)
     G = np.nan_to_num(G)
     out: dict[str, np.ndarray] = {}
     total = np.zeros((N, 2, 2))
