@@ -69,7 +69,8 @@ def _object_table(pairs, m, group_names) -> pa.Table:
         cols[k] = pa.array(np.asarray(m[k], dtype=bool), mask=~ok)  # null where there is no residual
     cols.update(range_m=pairs.range_m, nonlinearity=pairs.nonlinearity,
                 linear_ok=pa.array(np.asarray(pairs.linear_ok, dtype=bool)))
-    return pa.table({k: (v if isinstance(v, pa.Array) else pa.array(np.asarray(v, dtype=np.float64)))
+    # NaN -> null: an empty CSV field, as in the batch's outputs
+    return pa.table({k: (v if isinstance(v, pa.Array) else pa.array(np.asarray(v, dtype=np.float64), from_pandas=True))
                      for k, v in cols.items()})
 
 
