@@ -7,9 +7,10 @@ of freedom if the model is right) and whether the truth is inside the 50 / 90 / 
 
 Summary (:class:`CoverageAccumulator`, fed chunk by chunk, memory flat in the number of pairs):
 
-* empirical coverage per level with a Wilson interval (objects taken as independent) and the same
-  interval at the **effective number of objects** ``n_eff`` (below); with several calibration groups also
-  the cluster-robust standard error from the spread between groups;
+* empirical coverage per level with a Wilson interval (objects taken as independent), the same interval
+  at the **effective number of objects** ``n_eff`` (below) and the standard error ``sqrt(p (1 - p) / n_eff)``
+  at the nominal level ``p``; with several calibration groups also the cluster-robust standard error from
+  the spread between groups;
 * coverage by range band, class and ``linear_ok``; a fine grid of levels for the calibration figure;
 * the bias (mean residual) with its model covariance (shared calibration draws included) and a test;
 * the verdict from the NEES test.
@@ -287,7 +288,10 @@ class CoverageAccumulator:
         return np.sqrt(G / (G - 1) * (dev**2).sum(0)) / self.n
 
     def coverage(self) -> list[dict]:
-        """Per level: empirical coverage, Wilson intervals (independent, and at n_eff), cluster SE."""
+        """Per level: empirical coverage, Wilson intervals (independent, and at n_eff), the model's standard error
+        of the coverage at the nominal level with n_eff objects (``se_n_eff``: the yardstick of "within 2 standard
+        errors"), and with several groups the cluster-robust standard error from the spread between groups (it
+        collapses when every group covers ~100 %: prefer ``se_n_eff``)."""
         test = self.nees_test()
         inside = sum((G.inside for G in self.groups.values()), np.zeros(len(LEVELS), dtype=np.int64))
         N = self.n
@@ -297,7 +301,8 @@ class CoverageAccumulator:
         out = []
         for j, lv in enumerate(LEVELS):
             row = {"nominal": lv, "n": N, "inside": int(inside[j]), "empirical": inside[j] / N if N else float("nan"),
-                   "interval": [float(lo[j]), float(hi[j])], "interval_n_eff": [float(lo_e[j]), float(hi_e[j])]}
+                   "interval": [float(lo[j]), float(hi[j])], "interval_n_eff": [float(lo_e[j]), float(hi_e[j])],
+                   "se_n_eff": float(np.sqrt(lv * (1 - lv) / neff)) if neff > 0 else float("nan")}
             if len(self.groups) >= 2:
                 p = inside[j] / N
                 G = len(self.groups)

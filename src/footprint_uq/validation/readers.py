@@ -17,9 +17,9 @@ Formats (docs/validation.md, "Inputs"):
   denorm plane, z up).
 * **DAIR-V2X-I** (:func:`read_dair_v2x_folder`): ``label/camera/<id>.json`` (a list of objects with
   ``type``, ``2d_box`` {xmin, ymin, xmax, ymax}, ``3d_dimensions`` {h, w, l}, ``3d_location`` {x, y, z}
-  (the 3-D box centre) and ``rotation``), with the calibration of
-  :func:`footprint_uq.io.dataset_files.camera_from_dair_v2x`; ``label/virtuallidar/<id>.json`` (the
-  same objects in the virtual-LiDAR = world frame) is preferred for the truth when present.
+  (the 3-D box centre in the virtual-LiDAR frame, the world frame of the calibration) and ``rotation``),
+  with the calibration of :func:`footprint_uq.io.dataset_files.camera_from_dair_v2x`
+  (``calib/camera_intrinsic`` + ``calib/virtuallidar_to_camera``).
 * **TUMTraf OpenLABEL** (:func:`read_openlabel`): ``openlabel.frames.<n>.objects.<uuid>.object_data``
   with a ``cuboid`` (``val`` = x, y, z, qx, qy, qz, qw, length, width, height: the 3-D box centre in
   the station frame of the calibration) and, for camera labels, a 2-D ``bbox`` (``val`` = u_centre,
@@ -275,8 +275,8 @@ def _num_map(obj, key, names):
     return out
 
 
-def _dair_object(obj, i: int, frame: str, T_world_cam, world_objs) -> dict:
-    row = {"line": i, "frame": frame, "object_id": str(i)}
+def _dair_object(obj, i: int, frame: str) -> dict:
+    row = {"line": i, "frame": frame, "object_id": str(obj.get("track_id", i)) if isinstance(obj, dict) else str(i)}
     if not isinstance(obj, dict):
         row["error"] = f"malformed label object (a {type(obj).__name__}, expected a mapping)"
         return row
@@ -299,25 +299,17 @@ def _dair_object(obj, i: int, frame: str, T_world_cam, world_objs) -> dict:
         return row
     if "box" not in row:
         row["error"] = NO_DETECTION
-    if world_objs is not None:  # virtual-LiDAR labels: the centre in W (z up), bottom = centre - h/2
-        try:
-            wl = np.array(_num_map(world_objs[i], "3d_location", ("x", "y", "z")))
-        except (ValueError, IndexError, AttributeError) as e:
-            row["error"] = f"malformed virtual-LiDAR label object ({e})"
-            return row
-        row.update(truth=wl[:2].tolist(), z=float(wl[2] - h / 2))
-        return row
-    # camera-frame labels: the box centre, y down -> bottom centre at y + h/2
-    p = T_world_cam[:3, :3] @ (loc + np.array([0.0, h / 2, 0.0])) + T_world_cam[:3, 3]
-    row.update(truth=p[:2].tolist(), z=float(p[2]))
+    # the 3-D box centre in the virtual-LiDAR frame (= W, z up, ground z = 0): the bottom centre is h/2 lower
+    rot = obj.get("rotation")
+    yaw = float(rot) if isinstance(rot, int | float) and np.isfinite(rot) else np.nan
+    row.update(truth=loc[:2].tolist(), z=float(loc[2] - h / 2), yaw=yaw)
     return row
 
 
-def parse_dair_v2x_labels(objects, *, camera, frame: str = "", world_objects=None) -> list[dict]:
-    """Rows of a DAIR-V2X-I ``label/camera`` list (truth from ``world_objects``, the virtual-LiDAR labels
-    of the same frame in the same order, when given; else the camera-frame centre moved to W)."""
-    T = np.asarray(camera.T_world_cam)
-    return [_dair_object(o, i, frame, T, world_objects) for i, o in enumerate(objects)]
+def parse_dair_v2x_labels(objects, *, frame: str = "") -> list[dict]:
+    """Rows of a DAIR-V2X-I label list (``label/camera/<id>.json``): 2-D box and the 3-D box in the
+    virtual-LiDAR frame, which is the world frame of :func:`footprint_uq.io.dataset_files.camera_from_dair_v2x`."""
+    return [_dair_object(o, i, frame) for i, o in enumerate(objects)]
 
 
 def _json_list(path):
@@ -331,8 +323,8 @@ def _json_list(path):
 
 
 def read_dair_v2x_folder(folder, *, report: FolderReport | None = None) -> Iterator[LabelChunk]:
-    """DAIR-V2X-I folder (``calib/camera_intrinsic``, ``calib/virtuallidar_to_camera``, ``label/camera``,
-    optional ``label/virtuallidar``) -> one :class:`LabelChunk` per frame."""
+    """DAIR-V2X-I folder (``calib/camera_intrinsic``, ``calib/virtuallidar_to_camera``, ``label/camera``)
+    -> one :class:`LabelChunk` per frame."""
     report = report if report is not None else FolderReport()
     root = Path(folder)
     labels = root / "label" / "camera"
@@ -356,18 +348,11 @@ def read_dair_v2x_folder(folder, *, report: FolderReport | None = None) -> Itera
                 key = f"dair:{_file_key(ifile, efile)}"
             except InputError as e:
                 err = f"calibration refused ({e})"
-        world = None
-        wfile = root / "label" / "virtuallidar" / f"{fid}.json"
-        if err is None and wfile.is_file():
-            world, werr = _json_list(wfile)
-            if werr is None and len(world) != len(objs):
-                werr = f"label/virtuallidar has {len(world)} objects, label/camera {len(objs)}"
-            err = None if werr is None else f"virtual-LiDAR labels refused: {werr}"
         if err is not None:
             n = max(1, len(objs) if objs is not None else 1)
             yield _chunk(lab, key, None, [{"line": i, "frame": fid, "error": err} for i in range(n)])
             continue
-        yield _chunk(lab, key, cam, parse_dair_v2x_labels(objs, camera=cam, frame=fid, world_objects=world))
+        yield _chunk(lab, key, cam, parse_dair_v2x_labels(objs, frame=fid))
 
 
 # ---------------------------------------------------------------------------------------------------

@@ -40,7 +40,8 @@ def plot_calibration(summary: dict, *, title: str = "") -> Figure:
         p, e = row["nominal"], row["empirical"]
         lo_e, hi_e = row["interval_n_eff"]
         ax.plot([p, p], [lo_e, hi_e], color="#d95f02", lw=4, alpha=0.45, solid_capstyle="butt")
-        ax.errorbar([p], [e], yerr=[[e - row["interval"][0]], [row["interval"][1] - e]], fmt="o", color="#d95f02",
+        ax.errorbar([p], [e], yerr=[[max(e - row["interval"][0], 0.0)], [max(row["interval"][1] - e, 0.0)]], fmt="o",
+                    color="#d95f02",
                     ms=5, capsize=3, lw=1)
     ax.plot([], [], color="#d95f02", lw=4, alpha=0.45, label="levels: interval at n_eff")
     ax.set_xlim(0, 1)
@@ -120,7 +121,8 @@ def plot_by_range(summary: dict, sample: dict) -> Figure:
     lo = np.array([r["interval_95"][0] for r in rows])
     hi = np.array([r["interval_95"][1] for r in rows])
     bx.bar(x, cov, color="#9ecae1")
-    bx.errorbar(x, cov, yerr=[cov - lo, hi - cov], fmt="none", color="k", capsize=3, lw=1)
+    bx.errorbar(x, cov, yerr=[np.clip(cov - lo, 0, None), np.clip(hi - cov, 0, None)], fmt="none", color="k",
+                capsize=3, lw=1)
     bx.axhline(0.95, color="#d95f02", ls="--", lw=1)
     bx.set_xticks(x, [f"{r['range']}\n(n={r['n']})" for r in rows], fontsize=7)
     bx.set_ylim(0, 1.05)
@@ -148,7 +150,7 @@ def _coverage_rows(summary):
                     "empirical": _pct(r["empirical"]),
                     "Wilson 95 % (independent)": f"{_pct(r['interval'][0])} &ndash; {_pct(r['interval'][1])}",
                     "at n_eff": f"{_pct(r['interval_n_eff'][0])} &ndash; {_pct(r['interval_n_eff'][1])}",
-                    "cluster SE": _pct(r.get("se_cluster"))})
+                    "SE at n_eff": _pct(r.get("se_n_eff")), "cluster SE": _pct(r.get("se_cluster"))})
     return out
 
 
@@ -202,7 +204,7 @@ def validation_html(summary: dict, figures: dict, *, title: str = "Validation of
              f"<code>{esc(summary.get('contact'))}</code>, {summary.get('n_groups', 0)} calibration group(s).</p>",
              "<h2>Coverage of the ellipses</h2>",
              _raw_table(_coverage_rows(summary), ["nominal", "inside", "empirical", "Wilson 95 % (independent)",
-                                                  "at n_eff", "cluster SE"]),
+                                                  "at n_eff", "SE at n_eff", "cluster SE"]),
              img_tag(figures["calibration"], "Coverage calibration: empirical against nominal", dpi=dpi),
              f'<p class="note">{esc(_NOTE)}</p>',
              "<h2>Pairs</h2>",
