@@ -167,7 +167,7 @@ class CoverageAccumulator:
         ``param_covariance()``).
         """
         for s, c in zip(*np.unique(pairs.status.astype(str), return_counts=True), strict=True):
-            self.status_counts[s] = self.status_counts.get(s, 0) + int(c)
+            self.status_counts[str(s)] = self.status_counts.get(str(s), 0) + int(c)
         m = object_metrics(pairs.residual_m, pairs.cov_m2)
         ok = pairs.usable & np.isfinite(m["nees"])
         if not np.any(ok):
