@@ -6,10 +6,12 @@ is written block by block to a Parquet pairs table with a camera registry.  The 
 (:func:`footprint_uq.viz.validation_run.run_validation`: read in chunks -> contact function -> pairs ->
 coverage accumulation -> per-object Parquet, summary JSON, HTML report) runs in a fresh subprocess per
 size, which reports its wall time and its own peak resident memory (``VmHWM``).  Goal: 10^6 pairs in
-under 60 s on the 2-core machine, peak memory flat in the number of pairs (the same at 10^5 and 10^6).
+under 60 s on the 2-core machine, peak memory flat in the number of pairs (the same at 10^5 and 10^6; the
+memory runs use small chunks so that 10^5 pairs span several chunks too).  The rows of the 50 cameras are
+interleaved, so that every chunk holds every camera (the work per chunk is the same at both sizes).
 
 Run ``.venv/bin/python bench/bench_validate.py [--pairs 1000000] [--small 100000] [--cameras 50]
-[--repeats 3] [--json out.json]``; :func:`measure` returns the figures.
+[--repeats 3] [--chunk-rows 131072] [--memory-chunk-rows 16384] [--json out.json]``; :func:`measure` returns the figures.
 """
 
 from __future__ import annotations
@@ -24,6 +26,8 @@ import tempfile
 import time
 from pathlib import Path
 
+import numpy as np
+import pyarrow as pa
 import pyarrow.parquet as pq
 
 from footprint_uq.io import save_camera
@@ -48,16 +52,19 @@ print(json.dumps({"pairs": summary["n_pairs"], "groups": summary["n_groups"], "v
 """
 
 
-def write_campaign(folder: Path, n_pairs: int, n_cameras: int, *, seed: int = 0) -> tuple[Path, Path]:
-    """Pairs table (Parquet, written camera by camera) and camera registry of a synthetic campaign."""
+def write_campaign(folder: Path, n_pairs: int, n_cameras: int, *, seed: int = 0, block: int = 100_000
+                   ) -> tuple[Path, Path]:
+    """Pairs table (Parquet) and camera registry of a synthetic campaign.  The rows of all cameras are
+    interleaved (seeded shuffle, as detections sorted by time would be), so that every chunk holds every
+    camera at both sizes: the work per chunk, hence the memory, is the same at 10^5 and 10^6 pairs."""
     cams = random_cameras(n_cameras, seed=seed)
     per = n_pairs // n_cameras
     path = folder / f"pairs_{n_pairs}.parquet"
-    writer = None
-    for t in campaign_table(cams, BUDGET, per, seed=seed):
-        writer = writer or pq.ParquetWriter(path, t.schema)
-        writer.write_table(t)
-    writer.close()
+    table = pa.concat_tables(campaign_table(cams, BUDGET, per, seed=seed))
+    table = table.take(np.random.default_rng(seed).permutation(table.num_rows))
+    with pq.ParquetWriter(path, table.schema) as writer:
+        for start in range(0, table.num_rows, block):
+            writer.write_table(table.slice(start, block))
     for cid, cam in cams.items():
         save_camera(cam, folder / f"{cid}.yaml")
     reg = folder / "registry.json"
@@ -75,10 +82,12 @@ def run_child(pairs: Path, registry: Path, out: Path, budget_file: Path, chunk_r
 
 
 def measure(*, pairs: int = 1_000_000, small: int = 100_000, cameras: int = 50, repeats: int = 3,
-            chunk_rows: int = 131_072) -> dict:
-    """Median wall time and peak RSS of the validation job at ``small`` and ``pairs`` pairs."""
-    out: dict = {"cameras": cameras, "chunk_rows": chunk_rows, "repeats": repeats, "cpus": os.cpu_count(),
-                 "sizes": {}}
+            chunk_rows: int = 131_072, memory_chunk_rows: int = 16_384) -> dict:
+    """Wall time (median of ``repeats`` fresh processes, ``chunk_rows``) at ``pairs`` pairs, and peak RSS at
+    ``small`` and ``pairs`` pairs with ``memory_chunk_rows`` (so that the small input spans several chunks
+    too: like for like)."""
+    out: dict = {"cameras": cameras, "chunk_rows": chunk_rows, "memory_chunk_rows": memory_chunk_rows,
+                 "repeats": repeats, "cpus": os.cpu_count(), "load_avg_start": os.getloadavg()[0], "sizes": {}}
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
         budget_file = folder / "budget.json"
@@ -87,13 +96,18 @@ def measure(*, pairs: int = 1_000_000, small: int = 100_000, cameras: int = 50, 
             t0 = time.perf_counter()
             path, reg = write_campaign(folder, n, cameras)
             gen = time.perf_counter() - t0
-            runs = [run_child(path, reg, folder / f"out_{n}", budget_file, chunk_rows) for _ in range(repeats)]
-            out["sizes"][n] = {"generate_s": gen, "elapsed_s": [r["elapsed_s"] for r in runs],
-                               "median_s": statistics.median(r["elapsed_s"] for r in runs),
-                               "peak_rss_mb": max(r["peak_rss_mb"] for r in runs),
-                               "us_per_pair": 1e6 * statistics.median(r["elapsed_s"] for r in runs) / runs[0]["pairs"],
-                               "pairs": runs[0]["pairs"], "groups": runs[0]["groups"], "verdict": runs[0]["verdict"],
-                               "coverage_95": runs[0]["coverage_95"]}
+            mem = run_child(path, reg, folder / f"mem_{n}", budget_file, memory_chunk_rows)
+            row = {"generate_s": gen, "peak_rss_mb": mem["peak_rss_mb"], "memory_run_s": mem["elapsed_s"],
+                   "pairs": mem["pairs"], "groups": mem["groups"], "verdict": mem["verdict"],
+                   "coverage_95": mem["coverage_95"]}
+            if n == pairs:
+                runs = [run_child(path, reg, folder / f"out_{n}", budget_file, chunk_rows) for _ in range(repeats)]
+                row.update(elapsed_s=[r["elapsed_s"] for r in runs], median_s=statistics.median(r["elapsed_s"]
+                                                                                                 for r in runs),
+                           peak_rss_mb_time_runs=max(r["peak_rss_mb"] for r in runs))
+                row["us_per_pair"] = 1e6 * row["median_s"] / mem["pairs"]
+            out["sizes"][n] = row
+    out["load_avg_end"] = os.getloadavg()[0]
     return out
 
 
@@ -104,13 +118,20 @@ def main(argv=None) -> int:
     ap.add_argument("--cameras", type=int, default=50)
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--chunk-rows", type=int, default=131_072)
+    ap.add_argument("--memory-chunk-rows", type=int, default=16_384)
     ap.add_argument("--json", type=Path, default=None)
     a = ap.parse_args(argv)
-    res = measure(pairs=a.pairs, small=a.small, cameras=a.cameras, repeats=a.repeats, chunk_rows=a.chunk_rows)
+    res = measure(pairs=a.pairs, small=a.small, cameras=a.cameras, repeats=a.repeats, chunk_rows=a.chunk_rows,
+                  memory_chunk_rows=a.memory_chunk_rows)
     for n, r in res["sizes"].items():
-        print(f"{n:>9,} pairs, {res['cameras']} cameras: median {r['median_s']:.2f} s "
-              f"({r['us_per_pair']:.1f} us/pair), peak RSS {r['peak_rss_mb']:.0f} MB, verdict {r['verdict']}, "
-              f"95 % coverage {100 * r['coverage_95']:.1f} %")
+        print(f"{n:>9,} pairs, {res['cameras']} cameras: peak RSS {r['peak_rss_mb']:.0f} MB "
+              f"({res['memory_chunk_rows']}-row chunks), verdict {r['verdict']}, 95 % coverage "
+              f"{100 * r['coverage_95']:.1f} %")
+        if "median_s" in r:
+            print(f"{n:>9,} pairs: wall time median {r['median_s']:.1f} s of {res['repeats']} "
+                  f"({r['us_per_pair']:.1f} us/pair, {res['chunk_rows']}-row chunks; peak RSS "
+                  f"{r['peak_rss_mb_time_runs']:.0f} MB); load average {res['load_avg_start']:.1f} -> "
+                  f"{res['load_avg_end']:.1f} on {res['cpus']} CPUs")
     if a.json:
         a.json.write_text(json.dumps(res, indent=1))
     return 0

@@ -194,8 +194,8 @@ class CoverageAccumulator:
     def _add_cells(self, kind, keys, inside, nees):
         keys = np.asarray(keys, dtype=object)
         uk, inv = np.unique(keys.astype(str), return_inverse=True)
-        ins = np.zeros((len(uk), len(LEVELS)), dtype=np.int64)
-        np.add.at(ins, inv, inside)
+        ins = np.stack([np.bincount(inv, weights=inside[:, j], minlength=len(uk)) for j in range(len(LEVELS))],
+                       1).astype(np.int64)
         cnt = np.bincount(inv, minlength=len(uk))
         ns = np.bincount(inv, weights=nees, minlength=len(uk))
         for j, k in enumerate(uk):

@@ -44,7 +44,10 @@ class ValidationResult:
 
 
 def _text(a) -> pa.Array:
-    return pa.array([None if v is None else str(v) for v in a], type=pa.string())
+    try:  # str / None objects: converted by Arrow directly (no Python loop)
+        return pa.array(a, type=pa.string(), from_pandas=True)
+    except (pa.ArrowTypeError, pa.ArrowInvalid):
+        return pa.array([None if v is None else str(v) for v in a], type=pa.string())
 
 
 def _object_table(pairs, m, group_names) -> pa.Table:

@@ -41,6 +41,7 @@ from pathlib import Path
 
 import numpy as np
 import pyarrow as pa
+import pyarrow.compute as pc
 
 from ..batch.readers import open_detections
 from ..batch.schema import BOX2D_COLUMNS, COV_COLUMNS
@@ -554,6 +555,25 @@ def read_pairs_table(path, cameras, *, georef: GeoReference | None = None, chunk
         yield from _split_table_chunk(ch, path, cams, single, truth_cols, georef, off)
 
 
+def _camera_groups(t: pa.Table, n: int, single: bool):
+    """``(camera_id or None, row indices)`` per camera of a chunk, in order of first appearance (vectorised)."""
+    if single:
+        return [(None, np.arange(n))]
+    col = t.column("camera_id").combine_chunks()
+    if col.type != pa.string():
+        col = pc.cast(col, pa.string())
+    enc = col.dictionary_encode()
+    idx = enc.indices.to_numpy(zero_copy_only=False)
+    idx = np.where(enc.indices.is_null().to_numpy(zero_copy_only=False), -1, np.nan_to_num(idx, nan=-1)).astype(
+        np.int64)
+    names = enc.dictionary.to_pylist()
+    order = np.argsort(idx, kind="stable")
+    uniq, start = np.unique(idx[order], return_index=True)
+    parts = np.split(order, start[1:])
+    first = [p[0] for p in parts]
+    return [(None if u < 0 else names[u], p) for _, u, p in sorted(zip(first, uniq.tolist(), parts, strict=True))]
+
+
 def _split_table_chunk(ch, path, cams, single, truth_cols, georef, off):
     t, n = ch.table, ch.table.num_rows
     lines = ch.rows + off
@@ -565,12 +585,8 @@ def _split_table_chunk(ch, path, cams, single, truth_cols, georef, off):
     truth = np.stack([_column(t, c, n) for c in truth_cols], 1)
     cov, partial = _pixel_cov(t, n)
     errors = _table_errors(box, truth, partial, ch.pre_errors)
-    cid = _ids(t, "camera_id", n)
-    keys = np.full(n, None, dtype=object) if single else np.array([None if c is None else str(c) for c in cid],
-                                                                   dtype=object)
     ids = {k: _ids(t, k, n) for k in ("frame", "object_id", "class")}
-    for k in dict.fromkeys(keys.tolist()):
-        sel = np.flatnonzero(keys == k) if k is not None else np.flatnonzero(np.equal(keys, None))
+    for k, sel in _camera_groups(t, n, single):
         entry = cams.get(k)
         err = [errors[i] for i in sel]
         if entry is None:
