@@ -11,7 +11,8 @@ memory runs use small chunks so that 10^5 pairs span several chunks too).  The r
 interleaved, so that every chunk holds every camera (the work per chunk is the same at both sizes).
 
 Run ``.venv/bin/python bench/bench_validate.py [--pairs 1000000] [--small 100000] [--cameras 50]
-[--repeats 3] [--chunk-rows 131072] [--memory-chunk-rows 16384] [--json out.json]``; :func:`measure` returns the figures.
+[--repeats 3] [--chunk-rows 131072] [--memory-chunk-rows 16384] [--json out.json]``;
+:func:`measure` returns the figures.
 """
 
 from __future__ import annotations
