@@ -78,6 +78,8 @@ def _doc_lines(doc: str, prefixes: tuple[str, ...]) -> list[str]:
     ("plan_mount.py", "planning.md", ("basler1 ", "basler1+", "basler1,", "bw-cube1 ", "best reach", "criterion:")),
     ("linearity_check.py", "uncertainty-model.md", ("basler1 ", "basler1+", "bw-cube1 ", "where linear_ok:",
                                                     "where nonlin")),
+    ("rope3d_validation.py", "validation.md", ("basler1 ", "basler1@deg ", "paper-style ", "0-25 m ", "25-50 m ",
+                                               "50-75 m ", "75-100 m ")),
     ("quickstart.py", "uncertainty-model.md", ("1-sigma ellipse:", "95 % ellipse:", "height ", "position ",
                                                "principal_point ", "imaging ")),
 ])
