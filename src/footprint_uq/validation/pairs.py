@@ -248,9 +248,8 @@ def build_pairs(chunk: LabelChunk, budget, *, contact="bottom-centre", groups: G
         if fn is bottom_centre:
             res, nl_i = _bottom_centre(chunk.camera, bud, boxes, cuv, True)
         else:
-            yaw = chunk.yaw_world_rad[idx]
+            # the labelled yaw (chunk.yaw_world_rad) is truth: never handed to the contact model
             res = fn(chunk.camera, bud, boxes, chunk.cls[idx], yaw_rad=None, cov_uv_px2=cuv)
-            del yaw  # the labelled yaw is truth: never handed to the contact model
             uv = box2d_contact_points(boxes, "bottom-centre")[0][:, 0, :]
             nl_i = propagate(chunk.camera, bud, uv, pixel_cov_px2=cuv, linear_threshold=linear_threshold).nonlinearity
         xy[idx], cov[idx], cov_obj[idx], J[idx], nl[idx] = res.xy_world_m, res.cov_m2, res.cov_object_m2, \
