@@ -1,0 +1,1 @@
+"""Validation against labelled field data: pairs, coverage, and the budget fit (``fit``)."""
