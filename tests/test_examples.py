@@ -32,6 +32,8 @@ EXPECTED = {
                         "status codes equal to the reference:  map True  points True  FrameProcessor True"],
                        ["lens_domain/lens_domain.png"]),
     "architecture_figure.py": (["boxes 19, arrows 20; wrote"], ["architecture_figure/architecture.png"]),
+    "contact_figure.py": (["bottom-centre ", "footprint centre (yaw unknown)", "inside the 95 % ellipse",
+                           "footprint centre (yaw known)"], ["contact_figure/contact_figure.png"]),
     "plan_mount.py": (["criterion: 95 % semi-major axis <= 1.75 m", "best reach with basler1: 54.7 m",
                        "linear/Monte-Carlo semi-major there"],
                       ["plan_mount/plan_mount.png", "plan_mount/plan_mount.csv"]),

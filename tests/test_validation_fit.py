@@ -26,7 +26,7 @@ def _small_case(seed=1, n=12):
     return r, J, R, g
 
 
-def _dense_loglik(r, J, R, g, S, s2, reml, fit_bias=True):
+def _dense_loglik(r, J, R, g, S, s2, reml, fit_bias=True, gz2=0.0):
     """The textbook Gaussian (restricted) log-likelihood with the full (2N, 2N) covariance."""
     n = r.shape[0]
     C = np.zeros((2 * n, 2 * n))
@@ -34,7 +34,8 @@ def _dense_loglik(r, J, R, g, S, s2, reml, fit_bias=True):
         for j in range(n):
             if g[i] == g[j]:
                 C[2 * i:2 * i + 2, 2 * j:2 * j + 2] = J[i] @ S @ J[j].T
-        C[2 * i:2 * i + 2, 2 * i:2 * i + 2] += R[i] + s2 * np.eye(2)
+        jg = J[i][:, 19]
+        C[2 * i:2 * i + 2, 2 * i:2 * i + 2] += R[i] + s2 * np.eye(2) + gz2 * np.outer(jg, jg)
     X, y = np.tile(np.eye(2), (n, 1)), r.ravel()
     Ci = np.linalg.inv(C)
     Phi = X.T @ Ci @ X
@@ -53,18 +54,19 @@ def test_woodbury_likelihood_and_score_match_the_dense_reference(reml, fit_bias)
     Sf = np.zeros((22, 22))
     Sf[0, 0] = Sf[1, 1] = Sf[0, 1] = Sf[1, 0] = 0.3
     data = F._prepare(r, J, R, g, np.arange(22))
-    model = F._Model(data, Sf, A, True, fit_bias, reml)
-    v = np.array([0.2, 0.5, 0.1, 0.3])
+    E = F._object_shapes(J[data.order], list(F.OBJECT_TERMS))
+    model = F._Model(data, Sf, A, E, fit_bias, reml)
+    v = np.array([0.2, 0.5, 0.1, 0.3, 0.15])
     ll, score, beta, _ = model.evaluate(v)
 
     def dense(x):
-        return _dense_loglik(r, J, R, g, Sf + np.tensordot(x[:3], A, 1), x[3], reml, fit_bias)
+        return _dense_loglik(r, J, R, g, Sf + np.tensordot(x[:3], A, 1), x[3], reml, fit_bias, gz2=x[4])
 
     ll_d, beta_d = dense(v)
     assert ll == pytest.approx(ll_d, rel=1e-10, abs=1e-10)
     np.testing.assert_allclose(beta, beta_d, rtol=1e-9, atol=1e-12)
     h = 1e-6
-    num = np.array([(dense(v + h * e)[0] - dense(v - h * e)[0]) / (2 * h) for e in np.eye(4)])
+    num = np.array([(dense(v + h * e)[0] - dense(v - h * e)[0]) / (2 * h) for e in np.eye(5)])
     np.testing.assert_allclose(score, num, rtol=1e-6, atol=1e-7)
 
 

@@ -38,7 +38,8 @@ from ..io.atomic import atomic_write_text
 from ..io.camera_files import save_budget
 from ..uncertainty.budget import ErrorBudget, load_budget
 
-__all__ = ["FITTABLE_TERMS", "OBJECT_TERM", "BudgetFit", "TermFit", "fit_budget", "cross_validate",
+__all__ = ["FITTABLE_TERMS", "OBJECT_TERM", "OBJECT_GROUND_TERM", "OBJECT_TERMS", "BudgetFit", "TermFit",
+           "fit_budget", "cross_validate",
            "log_likelihood", "CrossValidation", "nees_of"]
 
 #: budget keys that can be free, with their parameters (pair keys get one sigma for both components)
@@ -50,6 +51,10 @@ FITTABLE_TERMS: dict[str, tuple[str, ...]] = {
 }
 #: the free per-object term: an isotropic sigma (metres) added to every object's own covariance
 OBJECT_TERM = "object_m"
+#: a per-object ground-height error (sigma, metres) acting through each object's own d(xy)/d(ground_dz):
+#: local terrain, a box not on the calibrated plane -- an error that grows with range like the ground's
+OBJECT_GROUND_TERM = "object_ground_m"
+OBJECT_TERMS = (OBJECT_TERM, OBJECT_GROUND_TERM)
 _PAIRS = ("principal_point_px", "position_m")
 _LEVELS = (0.5, 0.9, 0.95, 0.99)
 
@@ -133,20 +138,20 @@ def _prepare(residual_m, dxy_dp, cov_object_m2, group, cols) -> _Data:
 class _Model:
     """The (restricted) log-likelihood of the variances ``v`` of the free terms, and its score."""
 
-    def __init__(self, data: _Data, Sfixed, A, object_free: bool, fit_bias: bool, reml: bool):
-        self.d, self.Sf, self.A = data, Sfixed, A          # A: (m_shared, k, k)
-        self.object_free, self.fit_bias, self.reml = object_free, fit_bias, reml
-        self.m = A.shape[0] + int(object_free)
+    def __init__(self, data: _Data, Sfixed, A, E, fit_bias: bool, reml: bool):
+        self.d, self.Sf, self.A, self.E = data, Sfixed, A, E   # A: (m_shared, k, k); E: (q, N, 2, 2)
+        self.object_free, self.fit_bias, self.reml = E.shape[0] > 0, fit_bias, reml
+        self.m = A.shape[0] + E.shape[0]
         self._cache = None
-        if not object_free:
-            self._cache = self._object_sums(0.0)
+        if not self.object_free:
+            self._cache = self._object_sums(np.zeros(0))
             if self._cache is None:
                 raise InputError("cov_object_m2", "a singular covariance",
                                  "positive-definite per-object covariances (or a free 'object_m' term)")
 
-    def _object_sums(self, s2: float) -> dict:
+    def _object_sums(self, vo) -> dict | None:
         d = self.d
-        D = d.R + s2 * np.eye(2)
+        D = d.R + np.tensordot(vo, self.E, 1) if vo.size else d.R
         det = D[:, 0, 0] * D[:, 1, 1] - D[:, 0, 1] * D[:, 1, 0]
         if np.any(det <= 0):
             return None
@@ -167,7 +172,7 @@ class _Model:
     def evaluate(self, v, grad: bool = True):
         """(log-likelihood, score (m,) or None, bias (2,), bias covariance (2, 2))."""
         v = np.asarray(v, dtype=np.float64)
-        s = self._cache if not self.object_free else self._object_sums(v[-1])
+        s = self._cache if not self.object_free else self._object_sums(v[self.A.shape[0]:])
         if s is None:
             return -np.inf, None, None, None
         S = self.sigma(v)
@@ -205,15 +210,15 @@ class _Model:
             g += 0.5 * np.einsum("gka,jkl,glb,ba->j", Y, self.A, Y, Phi_i)
         if not self.object_free:
             return g
-        d = self.d
+        d, E = self.d, self.E
         V, Kg, btg = s["V"], K[d.gid], bt[d.gid]
         z = (s["Di"] @ (d.r - beta)[..., None])[..., 0] - np.einsum("nak,nkl,nl->na", V, Kg, btg)
-        SE = np.add.reduceat(np.swapaxes(V, 1, 2) @ V, d.starts, axis=0)
-        tr = np.trace(s["Di"], axis1=1, axis2=2).sum() - np.einsum("gkl,glk->", K, SE)
-        go = -0.5 * (tr - np.einsum("na,na->", z, z))
+        SE = np.add.reduceat(np.einsum("nak,qnab,nbl->qnkl", V, E, V), d.starts, axis=1)   # (q, G, k, k)
+        tr = np.einsum("nab,qnba->q", s["Di"], E) - np.einsum("gkl,qglk->q", K, SE)
+        go = -0.5 * (tr - np.einsum("na,qnab,nb->q", z, E, z))
         if use_reml:
             Z = s["Di"] - V @ (Kg @ s["P"][d.gid])        # rows of C^-1 X for each object (N, 2, 2)
-            go += 0.5 * np.trace(Phi_i @ np.einsum("nab,nac->bc", Z, Z))
+            go += 0.5 * np.einsum("cb,nab,qnad,ndc->q", Phi_i, Z, E, Z)
         return np.r_[g, go]
 
 
@@ -226,7 +231,8 @@ def log_likelihood(residual_m, dxy_dp, cov_object_m2, group, budget, *, object_s
     S = load_budget(budget).param_covariance()
     cols = np.arange(P.N_PARAMS)
     data = _prepare(residual_m, dxy_dp, cov_object_m2, group, cols)
-    model = _Model(data, S, np.zeros((0, P.N_PARAMS, P.N_PARAMS)), True, fit_bias, _method(method))
+    E = np.broadcast_to(np.eye(2), (1, data.r.shape[0], 2, 2))
+    model = _Model(data, S, np.zeros((0, P.N_PARAMS, P.N_PARAMS)), E, fit_bias, _method(method))
     return float(model.evaluate(np.array([object_sigma_m**2]), grad=False)[0])
 
 
@@ -280,8 +286,14 @@ class BudgetFit:
 
     @property
     def object_sigma_m(self) -> float:
-        """The fitted per-object sigma (metres), 0 if ``object_m`` was not free."""
+        """The fitted per-object isotropic sigma (metres), 0 if ``object_m`` was not free."""
         t = self.terms.get(OBJECT_TERM)
+        return t.sigma if t is not None and t.status != "unidentifiable" else 0.0
+
+    @property
+    def object_ground_sigma_m(self) -> float:
+        """The fitted per-object ground-height sigma (metres), 0 if ``object_ground_m`` was not free."""
+        t = self.terms.get(OBJECT_GROUND_TERM)
         return t.sigma if t is not None and t.status != "unidentifiable" else 0.0
 
     def to_budget(self, name: str = "fitted") -> ErrorBudget:
@@ -289,18 +301,19 @@ class BudgetFit:
 
         Unidentifiable terms keep the base budget's value; the other members of a merged set are
         zero (their joint effect is in the representative's sigma: see :attr:`terms`).  The per-object
-        term ``object_m`` has no budget key (it is in metres, not pixels): see :attr:`object_sigma_m`.
+        terms have no budget key (metres, not pixels): see :attr:`object_sigma_m`, :attr:`object_ground_sigma_m`.
         """
         d = self.base_budget.to_dict()
         for term, t in self.terms.items():
-            if term == OBJECT_TERM or t.status == "unidentifiable":
+            if term in OBJECT_TERMS or t.status == "unidentifiable":
                 continue
             d[term] = [t.sigma, t.sigma] if term in _PAIRS else t.sigma
         d["name"] = name
         merged = [f"{k} (with {', '.join(t.merged_with)})" for k, t in self.terms.items() if t.status == "merged"]
         d["description"] = (f"fitted by {self.method.upper()} to {self.n_objects} residuals in {self.n_groups} "
                             f"calibration group(s)" + (f"; merged: {'; '.join(merged)}" if merged else "")
-                            + (f"; per-object sigma {self.object_sigma_m:.4g} m" if OBJECT_TERM in self.terms else ""))
+                            + "".join(f"; per-object {k} {self.terms[k].sigma:.4g} m" for k in OBJECT_TERMS
+                                      if k in self.terms))
         return ErrorBudget.from_dict(d)
 
     def to_dict(self) -> dict:
@@ -332,23 +345,36 @@ def _jsonable(x):
     return x
 
 
-def _check_free(free, base: ErrorBudget) -> tuple[list[str], bool]:
+def _check_free(free, base: ErrorBudget) -> tuple[list[str], list[str]]:
     if isinstance(free, str):
         free = [free]
     names = list(dict.fromkeys(free))
+    allowed = [*FITTABLE_TERMS, *OBJECT_TERMS]
     if not names:
-        raise InputError("free", free, f"at least one of {[*FITTABLE_TERMS, OBJECT_TERM]}")
+        raise InputError("free", free, f"at least one of {allowed}")
     for t in names:
-        if t not in FITTABLE_TERMS and t != OBJECT_TERM:
+        if t not in allowed:
             hint = " (per-point pixel terms are inside cov_object_m2: free 'object_m' instead)" \
                 if t in ("imaging_px", "resolution_px", "distortion") else ""
-            raise InputError("free", t, f"one of {[*FITTABLE_TERMS, OBJECT_TERM]}{hint}")
-    shared = [t for t in names if t != OBJECT_TERM]
+            raise InputError("free", t, f"one of {allowed}{hint}")
+    shared = [t for t in names if t in FITTABLE_TERMS]
     if base.covariance_matrix is not None:
         clash = set(base.covariance_names) & {p for t in shared for p in FITTABLE_TERMS[t]}
         if clash:
             raise InputError("base_budget.covariance", sorted(clash), "no full-covariance entries for free terms")
-    return shared, OBJECT_TERM in names
+    return shared, [t for t in OBJECT_TERMS if t in names]
+
+
+def _object_shapes(J: np.ndarray, objs: list[str]) -> np.ndarray:
+    """Per free per-object term: its covariance per unit variance, (q, N, 2, 2)."""
+    out = []
+    for t in objs:
+        if t == OBJECT_TERM:
+            out.append(np.broadcast_to(np.eye(2), (J.shape[0], 2, 2)))
+        else:
+            j = J[:, :, P.GDZ]
+            out.append(j[:, :, None] * j[:, None, :])
+    return np.stack(out) if out else np.zeros((0, J.shape[0], 2, 2))
 
 
 def _informative_groups(data: _Data, A: np.ndarray) -> np.ndarray:
@@ -362,7 +388,7 @@ def _informative_groups(data: _Data, A: np.ndarray) -> np.ndarray:
     return per_group.sum(0)
 
 
-def _scales(data: _Data, A: np.ndarray, object_free: bool) -> np.ndarray:
+def _scales(data: _Data, A: np.ndarray, E: np.ndarray) -> np.ndarray:
     """Per free variance: the value at which it alone explains the residuals' typical power."""
     power = max(float(np.median(np.sum(data.r**2, 1))) / 2, 1e-12)
     out = []
@@ -370,8 +396,9 @@ def _scales(data: _Data, A: np.ndarray, object_free: bool) -> np.ndarray:
         c = np.einsum("nak,kl,nal->n", data.U, a, data.U) / 2
         med = float(np.median(c[c > 0])) if np.any(c > 0) else 0.0
         out.append(power / med if med > 0 else 1.0)
-    if object_free:
-        out.append(power)
+    for e in E:
+        med = float(np.median(np.trace(e, axis1=1, axis2=2))) / 2
+        out.append(power / med if med > 0 else 1.0)
     return np.array(out)
 
 
@@ -502,6 +529,7 @@ def fit_budget(residual_m, dxy_dp, cov_object_m2, group, *, free, base_budget=No
     Sf, A = _term_matrices(base, shared)
     cols = np.flatnonzero((np.abs(Sf).sum(0) > 0) | (np.abs(A).sum((0, 1)) > 0))
     data = _prepare(residual_m, dxy_dp, cov_object_m2, group, cols)
+    E = _object_shapes(np.asarray(dxy_dp, dtype=np.float64)[data.order], obj)
     A, Sf = A[:, cols][:, :, cols], Sf[np.ix_(cols, cols)]
     n_inf = _informative_groups(data, A)
     terms: dict[str, TermFit] = {}
@@ -514,18 +542,19 @@ def fit_budget(residual_m, dxy_dp, cov_object_m2, group, *, free, base_budget=No
                                     f"{min_groups} needed (kept the base budget's value)")
         else:
             active.append(j)
-    return _fit_active(data, base, shared, obj, Sf, A, active, terms, fit_bias, reml, collinear_tol)
+    return _fit_active(data, base, shared, (obj, E), Sf, A, active, terms, fit_bias, reml, collinear_tol)
 
 
-def _fit_active(data, base, shared, obj, Sf, A, active, terms, fit_bias, reml, tol) -> BudgetFit:
+def _fit_active(data, base, shared, objects, Sf, A, active, terms, fit_bias, reml, tol) -> BudgetFit:
     """Fit the active shared terms (+ the object term); merge collinear sets and fit again."""
     merged: dict[str, tuple[str, ...]] = {}
     while True:
-        names = [shared[j] for j in active] + ([OBJECT_TERM] if obj else [])
-        model = _Model(data, Sf, A[active], obj, fit_bias, reml)
-        scale = _scales(data, A[active], obj)
-        start = np.array([_variance_of(t, _budget_sigma(base, t)) for t in names if t != OBJECT_TERM]
-                         + ([0.0] if obj else [])) / scale
+        obj, E = objects
+        names = [shared[j] for j in active] + obj
+        model = _Model(data, Sf, A[active], E, fit_bias, reml)
+        scale = _scales(data, A[active], E)
+        start = np.array([_variance_of(t, _budget_sigma(base, t)) for t in names if t not in OBJECT_TERMS]
+                         + [0.0] * len(obj)) / scale
         start = np.where(start > 0, start, 0.1)
         v, ok, msg = _optimise(model, scale, start)
         H = _information(model, v, scale) if v.size else np.zeros((0, 0))
@@ -534,6 +563,8 @@ def _fit_active(data, base, shared, obj, Sf, A, active, terms, fit_bias, reml, t
             break
         info = {t: H[names.index(t), names.index(t)] * scale[names.index(t)] ** 2 for t in group_}
         keep = max(group_, key=info.get)
+        if keep in OBJECT_TERMS:  # a per-object term stays free; a shared term it absorbs is dropped
+            group_ = [keep] + [t for t in group_ if t not in OBJECT_TERMS]
         merged[keep] = tuple(sorted(set(merged.get(keep, ())) | {t for t in group_ if t != keep}
                                     | {u for t in group_ if t != keep for u in merged.pop(t, ())}))
         active = [j for j in active if shared[j] == keep or shared[j] not in group_]
@@ -552,7 +583,7 @@ def _fit_active(data, base, shared, obj, Sf, A, active, terms, fit_bias, reml, t
         terms[t] = TermFit(_sigma_of(t, v[i]), float(se), (float(lo), float(hi)), st, merged.get(t, ()), note)
         for u in merged.get(t, ()):
             terms[u] = TermFit(0.0, np.nan, (0.0, np.inf), "merged", (t,), f"merged into {t} (not split)")
-    order = [t for t in [*shared, OBJECT_TERM] if t in terms]
+    order = [t for t in [*shared, *OBJECT_TERMS] if t in terms]
     return BudgetFit({t: terms[t] for t in order}, beta, cov_beta, float(ll), "reml" if reml else "ml",
                      int(data.r.shape[0]), int(data.starts.size), base, ok, msg, H, tuple(names))
 
@@ -601,11 +632,15 @@ def _folds(n: int, group, by: str, n_folds, seed: int) -> np.ndarray:
     return np.random.default_rng(seed).permutation(np.arange(n) % k)
 
 
-def nees_of(residual_m, dxy_dp, cov_object_m2, budget, *, object_sigma_m: float = 0.0, bias_m=(0.0, 0.0)):
-    """Squared Mahalanobis distance (N,) of residuals under ``J Sigma(budget) J^T + R + sigma_m^2 I``."""
+def nees_of(residual_m, dxy_dp, cov_object_m2, budget, *, object_sigma_m: float = 0.0,
+            object_ground_sigma_m: float = 0.0, bias_m=(0.0, 0.0)):
+    """Squared Mahalanobis distance (N,) of residuals under
+    ``J Sigma(budget) J^T + R + sigma_m^2 I + sigma_gz^2 j_gz j_gz^T`` (``j_gz = dxy_dp[..., ground_dz_m]``)."""
     S = load_budget(budget).param_covariance()
     J = np.asarray(dxy_dp, dtype=np.float64)
-    C = J @ S @ np.swapaxes(J, 1, 2) + np.asarray(cov_object_m2, dtype=np.float64) + object_sigma_m**2 * np.eye(2)
+    jg = J[:, :, P.GDZ]
+    C = J @ S @ np.swapaxes(J, 1, 2) + np.asarray(cov_object_m2, dtype=np.float64) + object_sigma_m**2 * np.eye(2) \
+        + object_ground_sigma_m**2 * jg[:, :, None] * jg[:, None, :]
     d = np.asarray(residual_m, dtype=np.float64) - np.asarray(bias_m, dtype=np.float64)
     return np.einsum("na,na->n", d, np.linalg.solve(C, d[..., None])[..., 0])
 
@@ -634,7 +669,7 @@ def cross_validate(residual_m, dxy_dp, cov_object_m2, group, *, free, by: str = 
         except (InputError, np.linalg.LinAlgError):
             continue
         nees[test] = nees_of(r[test], J[test], R[test], fit.to_budget(), object_sigma_m=fit.object_sigma_m,
-                             bias_m=fit.bias_m)
+                             object_ground_sigma_m=fit.object_ground_sigma_m, bias_m=fit.bias_m)
     ok = np.isfinite(nees)
     inside = nees[:, None] <= -2 * np.log1p(-lv)[None, :]
     cov = inside[ok].mean(0) if ok.any() else np.full(lv.size, np.nan)
