@@ -32,6 +32,8 @@ EXPECTED = {
                         "status codes equal to the reference:  map True  points True  FrameProcessor True"],
                        ["lens_domain/lens_domain.png"]),
     "architecture_figure.py": (["boxes 19, arrows 20; wrote"], ["architecture_figure/architecture.png"]),
+    "contact_figure.py": (["bottom-centre ", "footprint centre (yaw unknown)", "inside the 95 % ellipse",
+                           "footprint centre (yaw known)"], ["contact_figure/contact_figure.png"]),
     "rope3d_validation.py": (["|error| median 0.835 m, 95th percentile 3.16 m, max 5.90 m",
                               "basler1@deg   77.3%  84.1%  84.1%  88.6%   2.75   1.10",
                               "0-25 m     n=4   cov95   0.0%"],

@@ -11,6 +11,10 @@
 * :mod:`~footprint_uq.validation.coverage` -- per-object NEES and ellipse membership; streaming
   accumulation of coverage, bias and the NEES test that accounts for the calibration draw shared by
   every object of one camera.
+* :mod:`~footprint_uq.validation.fit` -- the budget fit: REML variance components with the calibration
+  error shared by the objects of one group, identifiability (unidentifiable and merged terms), intervals,
+  cross-validated coverage, ``budget.yaml`` (docs/budget-fit.md); the job of ``footprint-uq calibrate
+  budget`` is :mod:`footprint_uq.viz.budget_fit_run`.
 
 The HTML report and the whole job are :mod:`footprint_uq.viz.validation` and
 :mod:`footprint_uq.viz.validation_run`; the command is ``footprint-uq validate`` (docs/validation.md).

@@ -30,6 +30,7 @@ from .. import params as P
 from .. import status
 from .._checks import as_points
 from ..errors import InputError
+from ..products.contact import footprint_centre
 from ..products.footprints import box2d_contact_points
 from ..uncertainty.budget import load_budget
 from ..uncertainty.propagation import DEFAULT_LINEAR_THRESHOLD, nonlinearity_of_jacobians, propagate
@@ -115,7 +116,7 @@ def bottom_centre(camera, budget, boxes_xyxy_px, classes=None, *, yaw_rad=None, 
 
 
 #: contact models by name (``footprint-uq validate --contact NAME``)
-CONTACT_MODELS = {"bottom-centre": bottom_centre}
+CONTACT_MODELS = {"bottom-centre": bottom_centre, "footprint-centre": footprint_centre}
 
 
 def contact_model(name):

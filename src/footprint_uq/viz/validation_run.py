@@ -30,7 +30,7 @@ from ..validation.job import validate
 from .report import fig_to_png_bytes
 from .validation import validation_figures, validation_html
 
-__all__ = ["run_validation", "detect_kind", "KINDS", "VALIDATION_FILES"]
+__all__ = ["run_validation", "detect_kind", "label_chunks", "KINDS", "VALIDATION_FILES"]
 
 KINDS = ("kitti", "dair-v2x", "openlabel", "table")
 VALIDATION_FILES = {"summary": "summary.json", "report": "report.html", "calibration_png": "calibration.png"}
@@ -59,7 +59,8 @@ def detect_kind(labels) -> str:
     raise InputError("labels", str(labels), "a folder, an OpenLABEL .json or a pairs table (.csv, .jsonl, .parquet)")
 
 
-def _chunks(labels, kind, report, *, camera, registry, budget, calibration, image_size_px, georef, chunk_rows):
+def label_chunks(labels, kind, report, *, camera, registry, budget, calibration, image_size_px, georef, chunk_rows):
+    """The reader of ``labels`` (one of :data:`KINDS`): an iterator of LabelChunk (also for ``calibrate budget``)."""
     if kind == "kitti":
         return R.read_kitti_folder(labels, image_size_px=image_size_px or R.ROPE3D_IMAGE_SIZE_PX, report=report)
     if kind == "dair-v2x":
@@ -128,8 +129,8 @@ def run_validation(labels, out_dir, budget, *, kind: str | None = None, contact=
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     folder = R.FolderReport()
-    chunks = _chunks(labels, kind, folder, camera=camera, registry=registry, budget=budget, calibration=calibration,
-                     image_size_px=image_size_px, georef=georef, chunk_rows=chunk_rows)
+    chunks = label_chunks(labels, kind, folder, camera=camera, registry=registry, budget=budget,
+                          calibration=calibration, image_size_px=image_size_px, georef=georef, chunk_rows=chunk_rows)
     files = {"objects": out / f"objects.{objects_format}", "summary": out / VALIDATION_FILES["summary"]}
     res = validate(chunks, budget, contact=contact, objects_out=files["objects"], range_bands_m=range_bands_m,
                    alpha=alpha, fsync=fsync, progress=progress)
