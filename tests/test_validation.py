@@ -168,6 +168,10 @@ def test_openlabel_reader(tmp_path):
     lab = tmp_path / "frame.json"
     lab.write_text(json.dumps({"openlabel": {"frames": {"7": {"objects": objects}}}}))
     pairs = collect_pairs(read_openlabel(lab, calibration=calib), PAPER_STYLE)
+    for bad in ('{"openlabel": 5}', '[1, 2]', '{"openlabel": {"frames": []}}', "not json"):
+        (tmp_path / "bad.json").write_text(bad)
+        with pytest.raises(InputError, match="openlabel|OpenLABEL"):
+            list(read_openlabel(tmp_path / "bad.json", calibration=calib))
     assert pairs.status.tolist() == ["ok", "ok", "error", "no truth"]
     assert "cuboid" in pairs.reason[2] and pairs.object_id[0] == "uuid-0" and pairs.frame[0] == "7"
     np.testing.assert_allclose(pairs.residual_m[:2], 0.0, atol=1e-5)
