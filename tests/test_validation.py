@@ -238,6 +238,14 @@ def test_bottom_centre_matches_propagate_and_splits_its_covariance():
     shared = res.dxy_dp @ BUDGET.param_covariance() @ np.swapaxes(res.dxy_dp, -1, -2)
     np.testing.assert_allclose(shared + res.cov_object_m2, res.cov_m2, rtol=1e-12)
     assert np.all(res.valid) and np.all(res.status == status.OK)
+    cams = random_cameras(2, seed=8)
+    pairs = collect_pairs(campaign_chunks(cams, BUDGET, 25, seed=8), BUDGET)
+    for k, cam in enumerate(cams.values()):  # the pairs' linearity flag is propagate's (compiled kernel)
+        sel = pairs.group == k
+        uv_k = np.c_[(pairs.box_xyxy_px[sel, 0] + pairs.box_xyxy_px[sel, 2]) / 2, pairs.box_xyxy_px[sel, 3]]
+        ref_k = propagate(cam, BUDGET, uv_k)
+        np.testing.assert_allclose(pairs.nonlinearity[sel], ref_k.nonlinearity, rtol=1e-7, atol=1e-12)
+        np.testing.assert_array_equal(pairs.linear_ok[sel], ref_k.linear_ok)
     odd = bottom_centre(CAM, BUDGET, np.array([[900, 1100, 950, 1150], [900, 0, 950, 1.0]]))  # below; sky
     assert odd.valid.tolist() == [True, False]
     assert odd.status.tolist() == [status.OUTSIDE_IMAGE, status.ABOVE_HORIZON]

@@ -30,10 +30,11 @@ from .. import params as P
 from .. import status
 from .._checks import as_points
 from ..errors import InputError
+from ..fast.map_kernels import covariance_points
 from ..products.contact import footprint_centre
 from ..products.footprints import box2d_contact_points
 from ..uncertainty.budget import load_budget
-from ..uncertainty.propagation import DEFAULT_LINEAR_THRESHOLD, nonlinearity_of_jacobians, propagate
+from ..uncertainty.propagation import DEFAULT_LINEAR_THRESHOLD
 from .readers import NO_DETECTION, NO_TRUTH, LabelChunk
 
 __all__ = ["ContactResult", "bottom_centre", "CONTACT_MODELS", "contact_model", "Pairs", "GroupIndex",
@@ -86,10 +87,16 @@ def _bottom_centre(camera, budget, boxes_xyxy_px, cov_uv_px2, linearity: bool):
     valid = bp.valid & np.isfinite(cov).all((-1, -2))
     st[bp.valid & ~valid] = status.OVERFLOW
     st[valid & ~camera.in_image(uv)] = status.OUTSIDE_IMAGE  # computed, but flagged
-    nl = None
-    if linearity:
-        nl = nonlinearity_of_jacobians(camera, budget, uv, cov, bp.dxy_dp, bp.dxy_duv, Sp, Suv, valid)
+    nl = _nonlinearity(camera, budget, uv, cov_uv_px2, valid) if linearity else None
     return ContactResult(bp.xy_world_m, cov, cov_obj, bp.dxy_dp, valid, st), nl
+
+
+def _nonlinearity(camera, budget, uv, cov_uv_px2, valid):
+    """The linearity flag's ``nonlinearity`` of contact pixels ``uv`` (the compiled kernel's, equal to
+    :func:`~footprint_uq.uncertainty.propagation.propagate`'s; ~20x faster than the numpy form); NaN where
+    not ``valid``."""
+    nl = covariance_points(camera, budget, uv, cov_uv_px2, get_nonlinearity=True)[-1]
+    return np.where(valid, nl, np.nan)
 
 
 def bottom_centre(camera, budget, boxes_xyxy_px, classes=None, *, yaw_rad=None, cov_uv_px2=None) -> ContactResult:
@@ -252,7 +259,7 @@ def build_pairs(chunk: LabelChunk, budget, *, contact="bottom-centre", groups: G
             # the labelled yaw (chunk.yaw_world_rad) is truth: never handed to the contact model
             res = fn(chunk.camera, bud, boxes, chunk.cls[idx], yaw_rad=None, cov_uv_px2=cuv)
             uv = box2d_contact_points(boxes, "bottom-centre")[0][:, 0, :]
-            nl_i = propagate(chunk.camera, bud, uv, pixel_cov_px2=cuv, linear_threshold=linear_threshold).nonlinearity
+            nl_i = _nonlinearity(chunk.camera, bud, uv, cuv, np.isfinite(uv).all(1))
         xy[idx], cov[idx], cov_obj[idx], J[idx], nl[idx] = res.xy_world_m, res.cov_m2, res.cov_object_m2, \
             res.dxy_dp, nl_i
         bad = idx[~np.asarray(res.valid, dtype=bool)]
