@@ -36,6 +36,7 @@ from footprint_uq.validation.readers import (
     read_pairs_table,
 )
 from footprint_uq.validation.synthetic import campaign_chunks, campaign_table, random_cameras
+from footprint_uq.viz.validation_run import run_validation
 
 # the Rope3D demo frame's calibration (liyingying0113/rope3d-dataset-tools, Apache-2.0; see
 # ../shared/data/rope3d-demo/SOURCE.txt): P2 and the denorm ground plane
@@ -112,6 +113,18 @@ def test_kitti_reader_truth_in_world_and_every_bad_line_reported(kitti_folder):
     assert by_line[11][0] == "error" and "not finite" in by_line[11][1]
     f2 = pairs.subset(np.array([s.endswith("f2.txt") for s in pairs.source]))
     assert f2.status.tolist() == ["error"] and "no calibration" in f2.reason[0]
+
+
+def test_kitti_folder_report_in_the_outputs(kitti_folder, tmp_path):
+    summary, files = run_validation(kitti_folder[0], tmp_path / "out", PAPER_STYLE, fsync=False)
+    assert summary["folder"] == {"frames": 2, "labels_without_calibration": ["f2"],
+                                 "calibration_without_labels": ["f3"]}
+    assert summary["unpaired"] == {"detections_without_truth": 2, "truth_without_detection": 1,
+                                   "no_ground_point": 0, "error_rows": 6}
+    html = files["report"].read_text(encoding="utf-8")
+    assert "1 label files without calibration (their rows are errors): f2" in html
+    rows = pcsv.read_csv(files["objects"])
+    assert rows.num_rows == 12 and rows.column("line").to_pylist()[:11] == list(range(1, 12))
 
 
 def test_kitti_reader_missing_folder_is_an_input_error(tmp_path):

@@ -212,6 +212,7 @@ def validation_html(summary: dict, figures: dict, *, title: str = "Validation of
                           "detections without truth": un.get("detections_without_truth", 0),
                           "truths without detection": un.get("truth_without_detection", 0),
                           "no ground point": un.get("no_ground_point", 0), "error rows": un.get("error_rows", 0)}]),
+             _folder_note(summary.get("folder")),
              "<h2>Errors and bias</h2>",
              html_table([{"median |error| (m)": err.get("median_m"), "95th percentile (m)": err.get("p95_m"),
                           "max (m)": err.get("max_m"),
@@ -231,6 +232,21 @@ def validation_html(summary: dict, figures: dict, *, title: str = "Validation of
         parts += [f"<h2>Calibration groups ({len(groups)})</h2>",
                   html_table(groups[:100], ["group", "n", "nees_mean", "coverage_95"], floatfmt=".3g")]
     return html_page(title, parts)
+
+
+def _folder_note(folder) -> str:
+    """Frames that could not be paired (label files without calibration, calibration without labels)."""
+    if not folder:
+        return ""
+    parts = []
+    for key, what in (("labels_without_calibration", "label files without calibration (their rows are errors)"),
+                      ("calibration_without_labels", "calibration files without labels")):
+        ids = folder.get(key) or []
+        if ids:
+            shown = ", ".join(str(i) for i in ids[:10]) + (f", ... ({len(ids)} in all)" if len(ids) > 10 else "")
+            parts.append(f"{len(ids)} {what}: {shown}")
+    return f'<p class="note">Frames: {esc(folder.get("frames", 0))} read; {esc("; ".join(parts))}.</p>' if parts \
+        else ""
 
 
 def _interval(b, j) -> str:
