@@ -219,6 +219,18 @@ def test_pairs_table_rows_and_unpaired_counted(tmp_path):
                               {"a": CAM}))
 
 
+def test_pairs_table_json_lines_line_numbers(tmp_path):
+    xy, uv = _ground_points(CAM, 2, seed=9)
+    rows = [json.dumps({"object_id": f"o{k}", **dict(zip(("u_min_px", "v_min_px", "u_max_px", "v_max_px"),
+                                                          _box(q), strict=True)), "x_m": p[0], "y_m": p[1]})
+            for k, (p, q) in enumerate(zip(xy, uv, strict=True))]
+    path = _write(tmp_path / "pairs.jsonl", "\n".join([rows[0], "{not json", "", rows[1]]) + "\n")
+    pairs = collect_pairs(read_pairs_table(path, CAM), PAPER_STYLE)
+    got = dict(zip(pairs.line.tolist(), pairs.status.tolist(), strict=True))
+    assert got == {1: "ok", 2: "error", 3: "error", 4: "ok"}
+    np.testing.assert_allclose(pairs.residual_m[pairs.usable], 0.0, atol=1e-5)
+
+
 def _write(path, text):
     path.write_text(text)
     return path
