@@ -315,11 +315,11 @@ def test_registry_loads_every_command_lazily():
     from footprint_uq.cli.carla import carla
 
     names = ["calibrate", "carla", "case-study", "convert", "demo", "fuse", "locate", "map", "objects", "presets",
-             "serve"]
+             "serve", "validate"]
     assert main.list_commands(None) == names
     for name in names:
         assert main.get_command(None, name).name == name
-    assert sorted(calibrate.commands) == ["extrinsics", "gcp", "intrinsics", "synthetic"]
+    assert sorted(calibrate.commands) == ["budget", "extrinsics", "gcp", "intrinsics", "synthetic"]
     assert sorted(carla.commands) == ["capture", "export"]
     code = ("import sys; from footprint_uq.cli.main import main; "
             "before = 'footprint_uq.viz.map_report' in sys.modules; main.get_command(None, 'presets'); "

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import click
 
+from .calibrate_budget import budget_cmd
 from .calibrate_extrinsics import extrinsics_cmd
 from .calibrate_gcp import gcp_cmd
 from .calibrate_intrinsics import intrinsics_cmd
@@ -31,3 +32,4 @@ calibrate.add_command(intrinsics_cmd)
 calibrate.add_command(synthetic_cmd)
 calibrate.add_command(extrinsics_cmd)
 calibrate.add_command(gcp_cmd)
+calibrate.add_command(budget_cmd)

@@ -1,0 +1,84 @@
+"""CLI command ``footprint-uq validate``: labelled detections in, a verdict on the uncertainty out.
+
+Calls :func:`footprint_uq.viz.validation_run.run_validation` (docs/validation.md).  Bad input is one
+line on stderr and exit status 2 (the group's policy); bad rows are error rows of ``objects.csv``,
+counted in the summary, never a stop.
+"""
+
+from __future__ import annotations
+
+import click
+
+from ..errors import InputError
+from ..uncertainty.presets import PRESET_NAMES
+from ..validation.coverage import DEFAULT_RANGE_BANDS_M
+from ..validation.pairs import CONTACT_MODELS
+from ..viz.validation_run import KINDS, run_validation
+
+__all__ = ["validate_cmd"]
+
+
+def _bands(text: str) -> tuple[float, ...]:
+    try:
+        edges = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        raise InputError("--range-bands", text, "comma-separated distances in metres, e.g. 0,25,50,100") from None
+    if len(edges) < 1 or any(b <= a for a, b in zip(edges, edges[1:], strict=False)) or edges[0] < 0:
+        raise InputError("--range-bands", text, "ascending non-negative distances in metres, e.g. 0,25,50,100")
+    return edges
+
+
+@click.command("validate")
+@click.option("--labels", required=True, metavar="PATH",
+              help="Labelled data: a KITTI-layout folder (Rope3D: calib/, denorm/, label_2/), a DAIR-V2X-I folder, "
+                   "TUMTraf OpenLABEL .json file(s), or a pairs table (.csv, .jsonl, .parquet).")
+@click.option("--out", "out_dir", required=True, metavar="DIR", help="Output folder (created).")
+@click.option("--budget", "budget_spec", required=True, metavar="FILE_OR_PRESET",
+              help=f"The error budget to validate: a preset ({', '.join(PRESET_NAMES)}, optionally NAME@deg) or a "
+                   "budget file (a camera registry's per-camera budgets win).")
+@click.option("--contact", type=click.Choice(sorted(CONTACT_MODELS)), default="bottom-centre", show_default=True,
+              help="Where a 2-D box touches the ground.")
+@click.option("--kind", type=click.Choice(KINDS), default=None, help="Input kind (default: from the path).")
+@click.option("--camera", "camera_path", default=None, metavar="FILE", help="Camera file of a one-camera pairs table.")
+@click.option("--registry", default=None, metavar="FILE_OR_DIR",
+              help="Camera registry (camera_id -> camera, budget, origin) of a multi-camera pairs table.")
+@click.option("--calibration", default=None, metavar="FILE", help="TUMTraf calibration JSON of OpenLABEL labels.")
+@click.option("--image-size", nargs=2, type=click.IntRange(min=1), default=None, metavar="W H",
+              help="Image size where the files do not give it (Rope3D: 1920 1080, the default there).")
+@click.option("--origin-lat", type=float, default=None, metavar="LAT", help="WGS84 latitude of the world origin.")
+@click.option("--origin-lon", type=float, default=None, metavar="LON", help="WGS84 longitude of the world origin.")
+@click.option("--heading-offset-deg", type=float, default=0.0, show_default=True, metavar="D",
+              help="Compass bearing of the world +y axis (truth given as lat_deg, lon_deg).")
+@click.option("--range-bands", default=",".join(f"{v:g}" for v in DEFAULT_RANGE_BANDS_M), show_default=True,
+              metavar="EDGES", help="Range band edges in metres (the last band is open).")
+@click.option("--alpha", type=click.FloatRange(0.0, 0.5, min_open=True), default=0.05, show_default=True,
+              help="Significance of the NEES test (two-sided) and of the bias test.")
+@click.option("--objects-format", type=click.Choice(["csv", "parquet"]), default="csv", show_default=True,
+              help="Format of the per-object file.")
+@click.option("--no-report", is_flag=True, help="No report.html / calibration.png (summary and objects only).")
+@click.option("--fsync/--no-fsync", default=True, show_default=True, help="Durable outputs (fsync before rename).")
+def validate_cmd(labels, out_dir, budget_spec, contact, kind, camera_path, registry, calibration, image_size,
+                 origin_lat, origin_lon, heading_offset_deg, range_bands, alpha, objects_format, no_report, fsync):
+    """Do the uncertainty ellipses contain the real errors?  Coverage, bias and a verdict.
+
+    Writes summary.json, objects.csv (one row per input object, with its status) and report.html into
+    OUT; prints the verdict.
+    """
+    summary, files = run_validation(labels, out_dir, budget_spec, kind=kind, contact=contact, camera=camera_path,
+                                    registry=registry, calibration=calibration,
+                                    image_size_px=tuple(image_size) if image_size else None,
+                                    origin_lat_deg=origin_lat, origin_lon_deg=origin_lon,
+                                    heading_offset_deg=heading_offset_deg, range_bands_m=_bands(range_bands),
+                                    alpha=alpha, objects_format=objects_format, report=not no_report, fsync=fsync)
+    t = summary["nees_test"]
+    c95 = next((c for c in summary["coverage"] if c["nominal"] == 0.95), None)
+    un = summary["unpaired"]
+    if summary["verdict"] is None:
+        msg = "no usable pair (no verdict)"
+    else:
+        msg = (f"{summary['verdict']}: {summary['n_pairs']} pairs, 95 % ellipse covers {100 * c95['empirical']:.1f} % "
+               f"(Wilson {100 * c95['interval'][0]:.1f}-{100 * c95['interval'][1]:.1f} %), mean NEES "
+               f"{t['nees_mean']:.3g} (expected 2, n_eff {t['n_eff']:.3g})")
+    click.echo(f"footprint-uq validate: {msg}; unpaired: {un['detections_without_truth']} detections without truth, "
+               f"{un['truth_without_detection']} truths without detection, {un['error_rows']} error rows, "
+               f"{un['no_ground_point']} without ground point; {out_dir}/{files['summary'].name}")

@@ -1,0 +1,676 @@
+"""Fit an error budget to observed residuals: variance components with a shared calibration draw.
+
+Model (``docs/validation.md``, "Fitting the budget"): the residual of object ``i`` (truth minus
+prediction, world frame, metres) is
+
+    r_i = bias + J_i e_g + n_i,     e_g ~ N(0, Sigma(theta)),   n_i ~ N(0, R_i(theta))
+
+where ``J_i = dxy_dp`` (2 x 22), ``g`` the calibration group of the object (camera or campaign: one
+draw ``e_g`` of the camera parameters' error shared by all its objects), ``Sigma(theta)`` the
+parameter covariance of an :class:`~footprint_uq.uncertainty.budget.ErrorBudget` whose *free*
+terms are unknown, and ``R_i`` the per-object covariance (pixel noise, contact model) plus an
+optional free per-object term ``object_m`` (``sigma_m^2 I``).  The residuals of one group are
+jointly Gaussian, ``C_g = J_g Sigma J_g^T + blockdiag(R_i)``; the likelihood is evaluated through
+the Woodbury identity on the (at most 22-dimensional) shared part, so a group of thousands of
+objects costs a few small matrix products per object.
+
+Estimation: REML (default; ML with ``method="ml"``) over the variances of the free terms, the bias
+profiled out by generalised least squares, bounded L-BFGS-B with the analytic score; standard errors
+from the observed information (central differences of the score); 95 % intervals on the log scale
+(truncated at zero where the estimate is within two standard errors of it).  Identifiability: a
+shared term needs draws from at least ``min_groups`` groups (one camera and one frame give one draw
+of its calibration error: no sigma); terms the information matrix cannot tell apart (normalised
+eigenvalue below ``collinear_tol``) are merged -- fitted as one, reported as merged, never split.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from typing import NamedTuple
+
+import numpy as np
+from scipy import optimize
+
+from .. import params as P
+from ..errors import InputError
+from ..io.atomic import atomic_write_text
+from ..io.camera_files import save_budget
+from ..uncertainty.budget import ErrorBudget, load_budget
+
+__all__ = ["FITTABLE_TERMS", "OBJECT_TERM", "OBJECT_GROUND_TERM", "OBJECT_TERMS", "BudgetFit", "TermFit",
+           "fit_budget", "cross_validate",
+           "log_likelihood", "CrossValidation", "nees_of"]
+
+#: budget keys that can be free, with their parameters (pair keys get one sigma for both components)
+FITTABLE_TERMS: dict[str, tuple[str, ...]] = {
+    "focal_px": ("fx_px", "fy_px"), "principal_point_px": ("cx_px", "cy_px"),
+    "position_m": ("x_m", "y_m"), "height_m": ("height_m",), "pan_deg": ("pan_rad",),
+    "tilt_deg": ("tilt_rad",), "roll_deg": ("roll_rad",), "ground_height_m": ("ground_dz_m",),
+    "ground_slope_deg": ("ground_slope_x", "ground_slope_y"),
+}
+#: the free per-object term: an isotropic sigma (metres) added to every object's own covariance
+OBJECT_TERM = "object_m"
+#: a per-object ground-height error (sigma, metres) acting through each object's own d(xy)/d(ground_dz):
+#: local terrain, a box not on the calibrated plane -- an error that grows with range like the ground's
+OBJECT_GROUND_TERM = "object_ground_m"
+OBJECT_TERMS = (OBJECT_TERM, OBJECT_GROUND_TERM)
+_PAIRS = ("principal_point_px", "position_m")
+_LEVELS = (0.5, 0.9, 0.95, 0.99)
+
+
+def _unit_covariance(term: str) -> np.ndarray:
+    """Parameter covariance (22, 22) per unit *variance* of ``term`` (slope: per unit gradient^2)."""
+    if term == "ground_slope_deg":
+        A = np.zeros((P.N_PARAMS, P.N_PARAMS))
+        idx = P.param_index(FITTABLE_TERMS[term])
+        A[idx, idx] = 1.0
+        return A
+    one = [1.0, 1.0] if term in _PAIRS else 1.0
+    return ErrorBudget.from_dict({term: one}).param_covariance()
+
+
+def _sigma_of(term: str, variance: float) -> float:
+    """The budget-file sigma of a term from its internal variance (slope: gradient -> degrees)."""
+    s = float(np.sqrt(max(variance, 0.0)))
+    return float(np.degrees(np.arctan(s))) if term == "ground_slope_deg" else s
+
+
+def _variance_of(term: str, sigma: float) -> float:
+    return float(np.tan(np.radians(sigma)) ** 2) if term == "ground_slope_deg" else float(sigma) ** 2
+
+
+def _budget_sigma(budget: ErrorBudget, term: str) -> float:
+    v = getattr(budget, term)
+    return float(max(v)) if term in _PAIRS else float(v)
+
+
+class _Data(NamedTuple):
+    """Inputs sorted by group, Jacobians restricted to the ``k`` parameter columns that matter."""
+
+    r: np.ndarray        # (N, 2)
+    U: np.ndarray        # (N, 2, k)
+    R: np.ndarray        # (N, 2, 2)
+    starts: np.ndarray   # (G,) first row of each group
+    gid: np.ndarray      # (N,) group index 0..G-1 of each row
+    order: np.ndarray    # (N,) rows of the caller's arrays in this order
+    labels: np.ndarray   # (G,) the caller's group labels
+    cols: np.ndarray     # (k,) parameter columns kept
+
+
+def _check_inputs(residual_m, dxy_dp, cov_object_m2, group):
+    r = np.asarray(residual_m, dtype=np.float64)
+    if r.ndim != 2 or r.shape[1] != 2 or r.shape[0] < 2:
+        raise InputError("residual_m", f"shape {r.shape}", "an array (N, 2) with N >= 2 (truth minus prediction, m)")
+    n = r.shape[0]
+    J = np.asarray(dxy_dp, dtype=np.float64)
+    if J.shape != (n, 2, P.N_PARAMS):
+        raise InputError("dxy_dp", f"shape {J.shape}", f"an array ({n}, 2, {P.N_PARAMS}) in PARAM_NAMES order")
+    R = np.asarray(cov_object_m2, dtype=np.float64)
+    if R.shape != (n, 2, 2):
+        raise InputError("cov_object_m2", f"shape {R.shape}", f"an array ({n}, 2, 2) in m^2")
+    g = np.asarray(group)
+    if g.shape != (n,):
+        raise InputError("group", f"shape {g.shape}", f"an array ({n},) of calibration-draw labels")
+    for name, a in (("residual_m", r), ("dxy_dp", J), ("cov_object_m2", R)):
+        bad = ~np.isfinite(a.reshape(n, -1)).all(1)
+        if bad.any():
+            i = int(np.flatnonzero(bad)[0])
+            raise InputError(f"{name}[{i}]", "non-finite", "finite numbers (drop invalid objects first)")
+    det = R[:, 0, 0] * R[:, 1, 1] - R[:, 0, 1] * R[:, 1, 0]
+    bad = (R[:, 0, 0] < 0) | (det < -1e-12 * np.maximum(R[:, 0, 0] * R[:, 1, 1], 1e-300)) | \
+        (np.abs(R[:, 0, 1] - R[:, 1, 0]) > 1e-9 * np.maximum(np.abs(R[:, 0, 1]), 1e-300))
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise InputError(f"cov_object_m2[{i}]", R[i].tolist(), "a symmetric positive semi-definite 2x2 covariance")
+    return r, J, R, g
+
+
+def _prepare(residual_m, dxy_dp, cov_object_m2, group, cols) -> _Data:
+    r, J, R, g = _check_inputs(residual_m, dxy_dp, cov_object_m2, group)
+    labels, gid = np.unique(g, return_inverse=True)
+    order = np.argsort(gid, kind="stable")
+    gid = gid[order]
+    starts = np.flatnonzero(np.r_[True, gid[1:] != gid[:-1]])
+    return _Data(r[order], J[order][:, :, cols], R[order], starts, gid, order, labels, cols)
+
+
+class _Model:
+    """The (restricted) log-likelihood of the variances ``v`` of the free terms, and its score."""
+
+    def __init__(self, data: _Data, Sfixed, A, E, fit_bias: bool, reml: bool):
+        self.d, self.Sf, self.A, self.E = data, Sfixed, A, E   # A: (m_shared, k, k); E: (q, N, 2, 2)
+        self.object_free, self.fit_bias, self.reml = E.shape[0] > 0, fit_bias, reml
+        self.m = A.shape[0] + E.shape[0]
+        self._cache = None
+        if not self.object_free:
+            self._cache = self._object_sums(np.zeros(0))
+            if self._cache is None:
+                raise InputError("cov_object_m2", "a singular covariance",
+                                 "positive-definite per-object covariances (or a free 'object_m' term)")
+
+    def _object_sums(self, vo) -> dict | None:
+        d = self.d
+        D = d.R + np.tensordot(vo, self.E, 1) if vo.size else d.R
+        det = D[:, 0, 0] * D[:, 1, 1] - D[:, 0, 1] * D[:, 1, 0]
+        if np.any(det <= 0):
+            return None
+        Di = np.stack([np.stack([D[:, 1, 1], -D[:, 0, 1]], -1), np.stack([-D[:, 1, 0], D[:, 0, 0]], -1)], -2)
+        Di /= det[:, None, None]
+        V = Di @ d.U                                    # (N, 2, k)
+        Dr = (Di @ d.r[..., None])[..., 0]
+        red = lambda a: np.add.reduceat(a, d.starts, axis=0)  # noqa: E731
+        return {"Di": Di, "V": V, "Dr_i": Dr, "M": red(np.swapaxes(d.U, 1, 2) @ V),
+                "b": red(np.einsum("nak,na->nk", V, d.r)), "P": red(np.swapaxes(V, 1, 2)),
+                "Dsum": red(Di), "Dr": red(Dr), "rDr": red(np.einsum("na,na->n", d.r, Dr)),
+                "ld": red(np.log(det))}
+
+    def sigma(self, v) -> np.ndarray:
+        ns = self.A.shape[0]
+        return self.Sf + np.tensordot(v[:ns], self.A, 1)
+
+    def evaluate(self, v, grad: bool = True):
+        """(log-likelihood, score (m,) or None, bias (2,), bias covariance (2, 2))."""
+        v = np.asarray(v, dtype=np.float64)
+        s = self._cache if not self.object_free else self._object_sums(v[self.A.shape[0]:])
+        if s is None:
+            return -np.inf, None, None, None
+        S = self.sigma(v)
+        k = S.shape[0]
+        Hm = np.eye(k) + s["M"] @ S                      # (G, k, k)
+        sign, ldH = np.linalg.slogdet(Hm)
+        if np.any(sign <= 0):
+            return -np.inf, None, None, None
+        K = np.swapaxes(np.linalg.solve(np.swapaxes(Hm, 1, 2), np.broadcast_to(S, Hm.shape)), 1, 2)
+        KP = K @ s["P"]
+        Phi_g = s["Dsum"] - np.swapaxes(s["P"], 1, 2) @ KP
+        Xr_g = s["Dr"] - np.einsum("gka,gk->ga", KP, s["b"])
+        Phi = Phi_g.sum(0)
+        beta = np.linalg.solve(Phi, Xr_g.sum(0)) if self.fit_bias else np.zeros(2)
+        bt = s["b"] - np.einsum("gka,a->gk", s["P"], beta)   # U^T D^-1 (r - beta)
+        quad = (s["rDr"] - 2 * s["Dr"] @ beta + np.einsum("a,gab,b->g", beta, s["Dsum"], beta)
+                - np.einsum("gk,gkl,gl->g", bt, K, bt))
+        ll = -0.5 * (np.sum(s["ld"] + ldH) + np.sum(quad) + self.d.r.size * np.log(2 * np.pi))
+        if self.fit_bias and self.reml:
+            ll -= 0.5 * np.linalg.slogdet(Phi)[1]
+        cov_beta = np.linalg.inv(Phi) if self.fit_bias else np.zeros((2, 2))
+        if not grad:
+            return ll, None, beta, cov_beta
+        return ll, self._score(s, S, K, bt, beta, Phi), beta, cov_beta
+
+    def _score(self, s, S, K, bt, beta, Phi):
+        M = s["M"]
+        w = bt - np.einsum("gkl,gl->gk", M @ K, bt)       # U^T C^-1 (r - beta)
+        Q = M - M @ K @ M                                 # U^T C^-1 U
+        g = -0.5 * (np.einsum("jab,gba->j", self.A, Q) - np.einsum("ga,jab,gb->j", w, self.A, w))
+        use_reml = self.fit_bias and self.reml
+        if use_reml:
+            Phi_i = np.linalg.inv(Phi)
+            Y = s["P"] - M @ K @ s["P"]                   # U^T C^-1 X  (G, k, 2)
+            g += 0.5 * np.einsum("gka,jkl,glb,ba->j", Y, self.A, Y, Phi_i)
+        if not self.object_free:
+            return g
+        d, E = self.d, self.E
+        V, Kg, btg = s["V"], K[d.gid], bt[d.gid]
+        z = (s["Di"] @ (d.r - beta)[..., None])[..., 0] - np.einsum("nak,nkl,nl->na", V, Kg, btg)
+        SE = np.add.reduceat(np.einsum("nak,qnab,nbl->qnkl", V, E, V), d.starts, axis=1)   # (q, G, k, k)
+        tr = np.einsum("nab,qnba->q", s["Di"], E) - np.einsum("gkl,qglk->q", K, SE)
+        go = -0.5 * (tr - np.einsum("na,qnab,nb->q", z, E, z))
+        if use_reml:
+            Z = s["Di"] - V @ (Kg @ s["P"][d.gid])        # rows of C^-1 X for each object (N, 2, 2)
+            go += 0.5 * np.einsum("cb,nab,qnad,ndc->q", Phi_i, Z, E, Z)
+        return np.r_[g, go]
+
+
+def log_likelihood(residual_m, dxy_dp, cov_object_m2, group, budget, *, object_sigma_m: float = 0.0,
+                   fit_bias: bool = True, method: str = "reml") -> float:
+    """The (restricted) log-likelihood of residuals under a budget (for comparisons and checks).
+
+    Parameters as in :func:`fit_budget`; ``budget`` is any budget :func:`load_budget` accepts.
+    """
+    S = load_budget(budget).param_covariance()
+    cols = np.arange(P.N_PARAMS)
+    data = _prepare(residual_m, dxy_dp, cov_object_m2, group, cols)
+    E = np.broadcast_to(np.eye(2), (1, data.r.shape[0], 2, 2))
+    model = _Model(data, S, np.zeros((0, P.N_PARAMS, P.N_PARAMS)), E, fit_bias, _method(method))
+    return float(model.evaluate(np.array([object_sigma_m**2]), grad=False)[0])
+
+
+def _method(method: str) -> bool:
+    if method not in ("reml", "ml"):
+        raise InputError("method", method, "'reml' (restricted maximum likelihood) or 'ml'")
+    return method == "reml"
+
+
+# ---------------------------------------------------------------------------------------------
+# the fit
+# ---------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class TermFit:
+    """One free term of the fit.
+
+    Attributes
+    ----------
+    sigma : float           fitted 1-sigma, in the term's unit (budget key: ``pan_deg`` in degrees, ...)
+    se : float              standard error of ``sigma`` (observed information; NaN where not defined)
+    ci95 : (float, float)   95 % interval of ``sigma``
+    status : str            ``"identified"``, ``"merged"`` (see ``merged_with``), ``"unidentifiable"``
+    merged_with : tuple     the other terms of a merged set (their joint effect is carried by this one)
+    note : str              why a term is merged or unidentifiable
+    """
+
+    sigma: float
+    se: float
+    ci95: tuple[float, float]
+    status: str
+    merged_with: tuple[str, ...] = ()
+    note: str = ""
+
+
+@dataclass
+class BudgetFit:
+    """The result of :func:`fit_budget`; :meth:`to_budget` gives the fitted :class:`ErrorBudget`."""
+
+    terms: dict[str, TermFit]
+    bias_m: np.ndarray
+    bias_cov_m2: np.ndarray
+    log_likelihood: float
+    method: str
+    n_objects: int
+    n_groups: int
+    base_budget: ErrorBudget
+    converged: bool
+    message: str = ""
+    information: np.ndarray | None = field(default=None, repr=False)
+    fitted_names: tuple[str, ...] = ()
+
+    @property
+    def object_sigma_m(self) -> float:
+        """The fitted per-object isotropic sigma (metres), 0 if ``object_m`` was not free."""
+        t = self.terms.get(OBJECT_TERM)
+        return t.sigma if t is not None and t.status != "unidentifiable" else 0.0
+
+    @property
+    def object_ground_sigma_m(self) -> float:
+        """The fitted per-object ground-height sigma (metres), 0 if ``object_ground_m`` was not free."""
+        t = self.terms.get(OBJECT_GROUND_TERM)
+        return t.sigma if t is not None and t.status != "unidentifiable" else 0.0
+
+    def to_budget(self, name: str = "fitted") -> ErrorBudget:
+        """The base budget with every identified (or merged-representative) free term replaced.
+
+        Unidentifiable terms keep the base budget's value; the other members of a merged set are
+        zero (their joint effect is in the representative's sigma: see :attr:`terms`).  The per-object
+        terms have no budget key (metres, not pixels): see :attr:`object_sigma_m`, :attr:`object_ground_sigma_m`.
+        """
+        d = self.base_budget.to_dict()
+        for term, t in self.terms.items():
+            if term in OBJECT_TERMS or t.status == "unidentifiable":
+                continue
+            d[term] = [t.sigma, t.sigma] if term in _PAIRS else t.sigma
+        d["name"] = name
+        merged = [f"{k} (with {', '.join(t.merged_with)})" for k, t in self.terms.items() if t.status == "merged"]
+        d["description"] = (f"fitted by {self.method.upper()} to {self.n_objects} residuals in {self.n_groups} "
+                            f"calibration group(s)" + (f"; merged: {'; '.join(merged)}" if merged else "")
+                            + "".join(f"; per-object {k} {self.terms[k].sigma:.4g} m" for k in OBJECT_TERMS
+                                      if k in self.terms))
+        return ErrorBudget.from_dict(d)
+
+    def to_dict(self) -> dict:
+        return {
+            "method": self.method, "n_objects": self.n_objects, "n_groups": self.n_groups,
+            "log_likelihood": self.log_likelihood, "converged": self.converged, "message": self.message,
+            "bias_m": self.bias_m.tolist(), "bias_sigma_m": np.sqrt(np.diag(self.bias_cov_m2)).tolist(),
+            "terms": {k: {"sigma": t.sigma, "se": t.se, "ci95": list(t.ci95), "status": t.status,
+                          "merged_with": list(t.merged_with), "note": t.note} for k, t in self.terms.items()},
+            "budget": self.to_budget().to_dict(),
+        }
+
+    def write(self, budget_path, summary_path=None):
+        """Write the fitted budget (YAML/JSON, readable by every command) and optionally the JSON summary."""
+        out = [save_budget(self.to_budget(), budget_path)]
+        if summary_path is not None:
+            text = json.dumps(_jsonable(self.to_dict()), indent=2, allow_nan=False) + "\n"
+            out.append(atomic_write_text(summary_path, text, parents=True))
+        return out
+
+
+def _jsonable(x):
+    if isinstance(x, dict):
+        return {k: _jsonable(v) for k, v in x.items()}
+    if isinstance(x, list | tuple):
+        return [_jsonable(v) for v in x]
+    if isinstance(x, float) and not np.isfinite(x):
+        return None
+    return x
+
+
+def _check_free(free, base: ErrorBudget) -> tuple[list[str], list[str]]:
+    if isinstance(free, str):
+        free = [free]
+    names = list(dict.fromkeys(free))
+    allowed = [*FITTABLE_TERMS, *OBJECT_TERMS]
+    if not names:
+        raise InputError("free", free, f"at least one of {allowed}")
+    for t in names:
+        if t not in allowed:
+            hint = " (per-point pixel terms are inside cov_object_m2: free 'object_m' instead)" \
+                if t in ("imaging_px", "resolution_px", "distortion") else ""
+            raise InputError("free", t, f"one of {allowed}{hint}")
+    shared = [t for t in names if t in FITTABLE_TERMS]
+    if base.covariance_matrix is not None:
+        clash = set(base.covariance_names) & {p for t in shared for p in FITTABLE_TERMS[t]}
+        if clash:
+            raise InputError("base_budget.covariance", sorted(clash), "no full-covariance entries for free terms")
+    return shared, [t for t in OBJECT_TERMS if t in names]
+
+
+def _object_shapes(J: np.ndarray, objs: list[str]) -> np.ndarray:
+    """Per free per-object term: its covariance per unit variance, (q, N, 2, 2)."""
+    out = []
+    for t in objs:
+        if t == OBJECT_TERM:
+            out.append(np.broadcast_to(np.eye(2), (J.shape[0], 2, 2)))
+        else:
+            j = J[:, :, P.GDZ]
+            out.append(j[:, :, None] * j[:, None, :])
+    return np.stack(out) if out else np.zeros((0, J.shape[0], 2, 2))
+
+
+def _informative_groups(data: _Data, A: np.ndarray) -> np.ndarray:
+    """Per shared term: the number of groups whose objects it moves (a Jacobian column != 0)."""
+    if A.shape[0] == 0:
+        return np.zeros(0, dtype=int)
+    used = np.abs(A).sum(-1) > 0                                      # (m, k) columns of each term
+    col = np.abs(data.U).max(1) > 1e-12 * max(np.abs(data.U).max(), 1e-300)   # (N, k)
+    hit = (col[:, None, :] & used[None]).any(-1)                        # (N, m)
+    per_group = np.add.reduceat(hit.astype(int), data.starts, axis=0) > 0
+    return per_group.sum(0)
+
+
+def _scales(data: _Data, A: np.ndarray, E: np.ndarray) -> np.ndarray:
+    """Per free variance: the value at which it alone explains the residuals' typical power."""
+    power = max(float(np.median(np.sum(data.r**2, 1))) / 2, 1e-12)
+    out = []
+    for a in A:
+        c = np.einsum("nak,kl,nal->n", data.U, a, data.U) / 2
+        med = float(np.median(c[c > 0])) if np.any(c > 0) else 0.0
+        out.append(power / med if med > 0 else 1.0)
+    for e in E:
+        med = float(np.median(np.trace(e, axis1=1, axis2=2))) / 2
+        out.append(power / med if med > 0 else 1.0)
+    return np.array(out)
+
+
+def _optimise(model: _Model, scale: np.ndarray, start: np.ndarray):
+    """Maximise the likelihood over variances >= 0 (scaled to order one), from two starts.
+
+    Bounded truncated Newton (scipy's TNC): on a busy machine L-BFGS-B's BLAS calls cost ~4x more
+    for these few parameters.  Converged: the projected score (per object) is below 1e-6.
+    """
+    if model.m == 0:
+        return np.zeros(0), True, "no free term"
+    n = model.d.r.shape[0]
+
+    def f(u):
+        ll, g, _, _ = model.evaluate(u * scale)
+        if not np.isfinite(ll):
+            return 1e30, np.zeros_like(u)
+        return -ll / n, -g * scale / n
+
+    best = None
+    for u0 in (start, np.full(model.m, 0.3)):
+        res = optimize.minimize(f, u0, jac=True, method="TNC", bounds=[(0.0, None)] * model.m,
+                                options={"maxfun": 1000, "ftol": 1e-14, "gtol": 1e-10})
+        if best is None or res.fun < best.fun:
+            best = res
+    g = f(best.x)[1]
+    pg = np.where(best.x > 0, np.abs(g), np.clip(-g, 0, None))
+    ok = bool(np.all(pg < 1e-6))
+    return best.x * scale, ok, f"{best.message}; projected score {pg.max():.2g} per object"
+
+
+def _information(model: _Model, v: np.ndarray, scale: np.ndarray) -> np.ndarray:
+    """Observed information (m, m) in variance units: central differences of the analytic score."""
+    m = v.size
+    H = np.zeros((m, m))
+    for j in range(m):
+        h = 1e-4 * max(v[j], 1e-2 * scale[j])
+        e = np.zeros(m)
+        e[j] = h
+        gp, gm = model.evaluate(v + e)[1], model.evaluate(v - e)[1]
+        if gp is None or gm is None:  # a step left the positive-definite region: one-sided
+            gp, gm, h = model.evaluate(v + 2 * e)[1], model.evaluate(v)[1], 2 * h
+        H[:, j] = -(gp - gm) / (2 * h)
+    return 0.5 * (H + H.T)
+
+
+def _collinear(H: np.ndarray, names: list[str], tol: float) -> list[str] | None:
+    """The terms of the weakest direction of the normalised information, if it is (nearly) null."""
+    d = np.sqrt(np.clip(np.diag(H), 0, None))
+    if H.shape[0] < 2 or np.any(d == 0):
+        return None
+    lam, vec = np.linalg.eigh(H / np.outer(d, d))
+    if lam[0] >= tol:
+        return None
+    c = np.abs(vec[:, 0])
+    return [names[i] for i in np.flatnonzero(c > 0.2 * c.max())]
+
+
+def _interval(v: float, se_v: float) -> tuple[float, float, float]:
+    """(se of sigma, lower, upper) of the 95 % interval of sigma = sqrt(v).
+
+    Normal on the cube root of the variance (Wilson-Hilferty: a variance estimated from few draws is
+    close to a scaled chi-square, whose cube root is nearly normal), truncated at zero.
+    """
+    if not np.isfinite(se_v):
+        return np.nan, 0.0, np.inf
+    v = max(v, 0.0)
+    s = np.sqrt(v)
+    se = se_v / (2 * s) if s > 0 else np.inf
+    c = v ** (1 / 3)
+    half = 1.96 * se_v / (3 * c * c) if c > 0 else np.inf
+    lo = max(c - half, 0.0) ** 1.5
+    hi = (c + half) ** 1.5 if np.isfinite(half) else float(np.sqrt(v + 1.96 * se_v))
+    return se, float(lo), float(hi)
+
+
+def _term_matrices(base: ErrorBudget, shared: list[str]):
+    """(fixed covariance with the free terms removed, unit covariances of the free terms), (22, 22)."""
+    S = base.param_covariance()
+    for t in shared:
+        idx = P.param_index(FITTABLE_TERMS[t])
+        S[idx, :] = 0.0
+        S[:, idx] = 0.0
+    A = np.stack([_unit_covariance(t) for t in shared]) if shared else np.zeros((0, P.N_PARAMS, P.N_PARAMS))
+    return S, A
+
+
+def fit_budget(residual_m, dxy_dp, cov_object_m2, group, *, free, base_budget=None, fit_bias: bool = True,
+               method: str = "reml", min_groups: int = 3, collinear_tol: float = 0.01) -> BudgetFit:
+    """Fit the free terms of an error budget to residuals (maximum likelihood / REML).
+
+    Parameters
+    ----------
+    residual_m : array_like (N, 2)
+        Truth minus prediction, world frame (x east, y north), metres.
+    dxy_dp : array_like (N, 2, 22)
+        Jacobian of each predicted ground point w.r.t. the camera parameters (``PARAM_NAMES`` order).
+    cov_object_m2 : array_like (N, 2, 2)
+        Per-object covariance (pixel / detector noise, contact model), m^2; not the calibration part.
+    group : array_like (N,)
+        Label of each object's calibration draw (camera, or calibration campaign): objects of one
+        group share one error of the camera parameters.
+    free : sequence of str
+        Budget keys to fit (:data:`FITTABLE_TERMS`: ``pan_deg``, ``height_m``, ``position_m``, ...)
+        and/or ``"object_m"`` (a per-object isotropic sigma in metres added to ``cov_object_m2``).
+        Pair keys (``position_m``, ``principal_point_px``) get one sigma for both components.
+    base_budget : budget spec, optional
+        Values of the terms that are not free (default: all zero).
+    fit_bias : bool
+        Estimate a common mean residual (2,) (profiled by generalised least squares).
+    method : {"reml", "ml"}
+        Restricted (default: the bias's two degrees of freedom do not shrink the variances) or plain ML.
+    min_groups : int
+        A shared term needs objects in at least this many groups to be fitted; below it the term is
+        reported ``"unidentifiable"`` and keeps the base budget's value.
+    collinear_tol : float
+        Smallest eigenvalue of the normalised information below which terms are merged.
+
+    Returns
+    -------
+    BudgetFit
+    """
+    base = ErrorBudget() if base_budget is None else load_budget(base_budget)
+    shared, obj = _check_free(free, base)
+    reml = _method(method)
+    if int(min_groups) < 1:
+        raise InputError("min_groups", min_groups, "an integer >= 1")
+    Sf, A = _term_matrices(base, shared)
+    cols = np.flatnonzero((np.abs(Sf).sum(0) > 0) | (np.abs(A).sum((0, 1)) > 0))
+    data = _prepare(residual_m, dxy_dp, cov_object_m2, group, cols)
+    E = _object_shapes(np.asarray(dxy_dp, dtype=np.float64)[data.order], obj)
+    A, Sf = A[:, cols][:, :, cols], Sf[np.ix_(cols, cols)]
+    n_inf = _informative_groups(data, A)
+    terms: dict[str, TermFit] = {}
+    active = []
+    for j, t in enumerate(shared):
+        if n_inf[j] < min_groups:
+            Sf = Sf + _variance_of(t, _budget_sigma(base, t)) * A[j]
+            terms[t] = TermFit(_budget_sigma(base, t), np.nan, (0.0, np.inf), "unidentifiable",
+                               note=f"objects in {n_inf[j]} calibration group(s); one draw per group, at least "
+                                    f"{min_groups} needed (kept the base budget's value)")
+        else:
+            active.append(j)
+    return _fit_active(data, base, shared, (obj, E), Sf, A, active, terms, fit_bias, reml, collinear_tol)
+
+
+def _fit_active(data, base, shared, objects, Sf, A, active, terms, fit_bias, reml, tol) -> BudgetFit:
+    """Fit the active shared terms (+ the object term); merge collinear sets and fit again."""
+    merged: dict[str, tuple[str, ...]] = {}
+    while True:
+        obj, E = objects
+        names = [shared[j] for j in active] + obj
+        model = _Model(data, Sf, A[active], E, fit_bias, reml)
+        scale = _scales(data, A[active], E)
+        start = np.array([_variance_of(t, _budget_sigma(base, t)) for t in names if t not in OBJECT_TERMS]
+                         + [0.0] * len(obj)) / scale
+        start = np.where(start > 0, start, 0.1)
+        v, ok, msg = _optimise(model, scale, start)
+        H = _information(model, v, scale) if v.size else np.zeros((0, 0))
+        group_ = _collinear(H, names, tol)
+        if group_ is None or len(group_) < 2:
+            break
+        info = {t: H[names.index(t), names.index(t)] * scale[names.index(t)] ** 2 for t in group_}
+        keep = max(group_, key=info.get)
+        if keep in OBJECT_TERMS:  # a per-object term stays free; a shared term it absorbs is dropped
+            group_ = [keep] + [t for t in group_ if t not in OBJECT_TERMS]
+        merged[keep] = tuple(sorted(set(merged.get(keep, ())) | {t for t in group_ if t != keep}
+                                    | {u for t in group_ if t != keep for u in merged.pop(t, ())}))
+        active = [j for j in active if shared[j] == keep or shared[j] not in group_]
+    ll, _, beta, cov_beta = model.evaluate(v, grad=False)
+    try:
+        cov_v = np.linalg.inv(H) if v.size else np.zeros((0, 0))
+    except np.linalg.LinAlgError:
+        cov_v = np.full_like(H, np.nan)
+    for i, t in enumerate(names):
+        se_v = float(np.sqrt(cov_v[i, i])) if cov_v[i, i] > 0 else np.nan
+        se, lo, hi = _interval(v[i], se_v)
+        if t == "ground_slope_deg":  # intervals of the gradient -> degrees
+            se, lo, hi = np.degrees(se) if np.isfinite(se) else se, _sigma_of(t, lo**2), _sigma_of(t, hi**2)
+        st = "merged" if t in merged else "identified"
+        note = f"the data cannot tell it from {', '.join(merged[t])}: their joint effect" if t in merged else ""
+        terms[t] = TermFit(_sigma_of(t, v[i]), float(se), (float(lo), float(hi)), st, merged.get(t, ()), note)
+        for u in merged.get(t, ()):
+            terms[u] = TermFit(0.0, np.nan, (0.0, np.inf), "merged", (t,), f"merged into {t} (not split)")
+    order = [t for t in [*shared, *OBJECT_TERMS] if t in terms]
+    return BudgetFit({t: terms[t] for t in order}, beta, cov_beta, float(ll), "reml" if reml else "ml",
+                     int(data.r.shape[0]), int(data.starts.size), base, ok, msg, H, tuple(names))
+
+
+# ---------------------------------------------------------------------------------------------
+# cross-validated coverage
+# ---------------------------------------------------------------------------------------------
+class CrossValidation(NamedTuple):
+    """Coverage of held-out residuals by the ellipses of a budget fitted without them.
+
+    Attributes
+    ----------
+    by : str                 ``"object"`` or ``"group"``
+    n_folds : int
+    levels : (L,)            nominal probabilities of the ellipses
+    coverage : (L,)          fraction of held-out residuals inside each ellipse
+    nees : (N,)              squared Mahalanobis distance of each residual (caller's order; NaN where the
+                             fold's fit failed)
+    inside : (N, L) bool
+    """
+
+    by: str
+    n_folds: int
+    levels: np.ndarray
+    coverage: np.ndarray
+    nees: np.ndarray
+    inside: np.ndarray
+
+    def to_dict(self) -> dict:
+        return {"by": self.by, "n_folds": self.n_folds, "levels": self.levels.tolist(),
+                "coverage": self.coverage.tolist(), "n": int(np.isfinite(self.nees).sum())}
+
+
+def _folds(n: int, group, by: str, n_folds, seed: int) -> np.ndarray:
+    """Fold index (n,) of every object."""
+    if by == "group":
+        labels, fold = np.unique(group, return_inverse=True)
+        if labels.size < 2:
+            raise InputError("group", f"{labels.size} group", "at least 2 groups for leave-one-group-out")
+        return fold
+    if by != "object":
+        raise InputError("by", by, "'object' (leave-one-object-out) or 'group' (leave-one-group-out)")
+    k = n if n_folds is None and n <= 100 else int(n_folds or 10)
+    if not 2 <= k <= n:
+        raise InputError("n_folds", n_folds, f"an integer in [2, {n}]")
+    return np.random.default_rng(seed).permutation(np.arange(n) % k)
+
+
+def nees_of(residual_m, dxy_dp, cov_object_m2, budget, *, object_sigma_m: float = 0.0,
+            object_ground_sigma_m: float = 0.0, bias_m=(0.0, 0.0)):
+    """Squared Mahalanobis distance (N,) of residuals under
+    ``J Sigma(budget) J^T + R + sigma_m^2 I + sigma_gz^2 j_gz j_gz^T`` (``j_gz = dxy_dp[..., ground_dz_m]``)."""
+    S = load_budget(budget).param_covariance()
+    J = np.asarray(dxy_dp, dtype=np.float64)
+    jg = J[:, :, P.GDZ]
+    C = J @ S @ np.swapaxes(J, 1, 2) + np.asarray(cov_object_m2, dtype=np.float64) + object_sigma_m**2 * np.eye(2) \
+        + object_ground_sigma_m**2 * jg[:, :, None] * jg[:, None, :]
+    d = np.asarray(residual_m, dtype=np.float64) - np.asarray(bias_m, dtype=np.float64)
+    return np.einsum("na,na->n", d, np.linalg.solve(C, d[..., None])[..., 0])
+
+
+def cross_validate(residual_m, dxy_dp, cov_object_m2, group, *, free, by: str = "object", n_folds=None,
+                   levels=_LEVELS, seed: int = 0, **fit_options) -> CrossValidation:
+    """Cross-validated coverage of the fitted budget's ellipses.
+
+    ``by="object"``: leave-one-object-out (exact for N <= 100 objects; otherwise ``n_folds``-fold over
+    objects, default 10, seeded); ``by="group"``: leave-one-group-out (a camera's objects are held out
+    together, so its calibration draw is never seen by the fit).  Each held-out residual is judged by
+    the ellipse of its marginal covariance ``J Sigma J^T + R + sigma_m^2 I`` (what a user deploying
+    the budget would draw), centred on the fitted bias.  ``fit_options`` go to :func:`fit_budget`.
+    """
+    r, J, R, g = _check_inputs(residual_m, dxy_dp, cov_object_m2, group)
+    lv = np.asarray(levels, dtype=np.float64)
+    if lv.ndim != 1 or np.any(~(lv > 0) | ~(lv < 1)):
+        raise InputError("levels", levels, "probabilities in (0, 1)")
+    fold = _folds(r.shape[0], g, by, n_folds, seed)
+    nees = np.full(r.shape[0], np.nan)
+    for f in np.unique(fold):
+        test = fold == f
+        train = ~test
+        try:
+            fit = fit_budget(r[train], J[train], R[train], g[train], free=free, **fit_options)
+        except (InputError, np.linalg.LinAlgError):
+            continue
+        nees[test] = nees_of(r[test], J[test], R[test], fit.to_budget(), object_sigma_m=fit.object_sigma_m,
+                             object_ground_sigma_m=fit.object_ground_sigma_m, bias_m=fit.bias_m)
+    ok = np.isfinite(nees)
+    inside = nees[:, None] <= -2 * np.log1p(-lv)[None, :]
+    cov = inside[ok].mean(0) if ok.any() else np.full(lv.size, np.nan)
+    return CrossValidation(by, int(np.unique(fold).size), lv, cov, nees, inside & ok[:, None])

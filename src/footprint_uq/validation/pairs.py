@@ -1,0 +1,295 @@
+"""Detections paired with their truth: the contact function and the pairs builder.
+
+A **contact function** turns 2-D boxes into ground points with their uncertainty::
+
+    contact(camera, budget, boxes_xyxy_px (N, 4), classes (N,), *, yaw_rad=None, cov_uv_px2=None) -> ContactResult
+
+:class:`ContactResult` holds ``xy_world_m`` (N, 2), the total covariance ``cov_m2`` (N, 2, 2), its
+per-object part ``cov_object_m2`` (pixel / detector noise and the contact model's own spread; not the
+camera calibration), ``dxy_dp`` (N, 2, 22) (columns in :data:`footprint_uq.params.PARAM_NAMES` order) so
+that ``cov_m2 = dxy_dp Sigma_params dxy_dp^T + cov_object_m2``, ``valid`` and ``status``
+(:mod:`footprint_uq.status`).  :func:`bottom_centre` back-projects the centre of the box's bottom edge
+(the behaviour of ``footprint-uq objects --contact bottom-centre``); other models register in
+:data:`CONTACT_MODELS` by name.
+
+The **pairs builder** (:func:`build_pairs`, :func:`iter_pairs`, :func:`collect_pairs`) runs a contact
+function on every :class:`~footprint_uq.validation.readers.LabelChunk` and gives per object the residual
+``truth - prediction`` (world frame, metres) with everything the coverage and the budget fit need: the
+Jacobian, the per-object covariance and the calibration group (one integer per calibration draw).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass, fields
+from typing import NamedTuple
+
+import numpy as np
+
+from .. import params as P
+from .. import status
+from .._checks import as_points
+from ..errors import InputError
+from ..fast.map_kernels import covariance_points
+from ..products.contact import footprint_centre
+from ..products.footprints import box2d_contact_points
+from ..uncertainty.budget import load_budget
+from ..uncertainty.propagation import DEFAULT_LINEAR_THRESHOLD
+from .readers import NO_DETECTION, NO_TRUTH, LabelChunk
+
+__all__ = ["ContactResult", "bottom_centre", "CONTACT_MODELS", "contact_model", "Pairs", "GroupIndex",
+           "build_pairs", "iter_pairs", "collect_pairs", "STATUS_OK", "STATUS_ERROR", "STATUS_NO_TRUTH",
+           "STATUS_NO_DETECTION", "STATUS_NO_GROUND"]
+
+#: per-object status of a pair
+STATUS_OK = "ok"                    # residual computed
+STATUS_NO_TRUTH = "no truth"        # a detection without truth (unpaired)
+STATUS_NO_DETECTION = "no detection"  # a truth without detection (unpaired)
+STATUS_NO_GROUND = "no ground point"  # the contact function found no ground point (above the horizon, ...)
+STATUS_ERROR = "error"              # a malformed row, unknown camera, missing calibration
+
+
+class ContactResult(NamedTuple):
+    """Ground points of 2-D detections (see the module doc; the same fields as
+    ``footprint_uq.products.contact.ContactResult``)."""
+
+    xy_world_m: np.ndarray
+    cov_m2: np.ndarray
+    cov_object_m2: np.ndarray
+    dxy_dp: np.ndarray
+    valid: np.ndarray
+    status: np.ndarray
+
+
+def _sandwich(J, S):
+    return J @ S @ np.swapaxes(J, -1, -2)
+
+
+def _bottom_centre(camera, budget, boxes_xyxy_px, cov_uv_px2, linearity: bool):
+    """:func:`bottom_centre` and, with ``linearity``, the nonlinearity of each point (else None)."""
+    budget = load_budget(budget)
+    b = as_points("boxes_xyxy_px", boxes_xyxy_px, 4)
+    if b.ndim != 2:
+        raise InputError("boxes_xyxy_px", b.shape, "an array of shape (N, 4): u_min, v_min, u_max, v_max")
+    uv = box2d_contact_points(b, "bottom-centre")[0][:, 0, :]
+    bp = camera.backproject(uv, get_gradients=True)
+    Sp = budget.param_covariance()
+    Suv = budget.pixel_covariance()
+    if cov_uv_px2 is not None:
+        c = np.asarray(cov_uv_px2, dtype=np.float64)
+        if c.shape != (len(b), 2, 2):
+            raise InputError("cov_uv_px2", f"shape {c.shape}", f"(N, 2, 2) with N = {len(b)}")
+        Suv = Suv + c
+    Suv = np.broadcast_to(Suv, (len(b), 2, 2))
+    cov_obj = _sandwich(bp.dxy_duv, Suv)
+    cov = _sandwich(bp.dxy_dp, Sp) + cov_obj
+    st = bp.reason.copy()
+    valid = bp.valid & np.isfinite(cov).all((-1, -2))
+    st[bp.valid & ~valid] = status.OVERFLOW
+    st[valid & ~camera.in_image(uv)] = status.OUTSIDE_IMAGE  # computed, but flagged
+    nl = _nonlinearity(camera, budget, uv, cov_uv_px2, valid) if linearity else None
+    return ContactResult(bp.xy_world_m, cov, cov_obj, bp.dxy_dp, valid, st), nl
+
+
+def _nonlinearity(camera, budget, uv, cov_uv_px2, valid):
+    """The linearity flag's ``nonlinearity`` of contact pixels ``uv`` (the compiled kernel's, equal to
+    :func:`~footprint_uq.uncertainty.propagation.propagate`'s; ~20x faster than the numpy form); NaN where
+    not ``valid``."""
+    nl = covariance_points(camera, budget, uv, cov_uv_px2, get_nonlinearity=True)[-1]
+    return np.where(valid, nl, np.nan)
+
+
+def bottom_centre(camera, budget, boxes_xyxy_px, classes=None, *, yaw_rad=None, cov_uv_px2=None) -> ContactResult:
+    """Ground point of the centre of each box's bottom edge, ``((u_min + u_max) / 2, v_max)``.
+
+    Parameters
+    ----------
+    camera : Camera
+    budget : ErrorBudget, preset name, path or mapping
+    boxes_xyxy_px : (N, 4) ``u_min, v_min, u_max, v_max``, pixels
+    classes : (N,) object classes (not used by this model)
+    yaw_rad : (N,) or None, not used by this model
+    cov_uv_px2 : (N, 2, 2) or None
+        Detector covariance of the contact pixel, px^2, added to the budget's imaging and resolution noise.
+
+    Returns
+    -------
+    ContactResult
+        ``cov_object_m2 = dxy_duv Sigma_uv dxy_duv^T`` (pixel noise), ``cov_m2`` adds the calibration part
+        ``dxy_dp Sigma_params dxy_dp^T``.  Invalid points are NaN with their status; a valid point whose
+        pixel is outside the image keeps its numbers with status ``OUTSIDE_IMAGE``.
+    """
+    return _bottom_centre(camera, budget, boxes_xyxy_px, cov_uv_px2, False)[0]
+
+
+#: contact models by name (``footprint-uq validate --contact NAME``)
+CONTACT_MODELS = {"bottom-centre": bottom_centre, "footprint-centre": footprint_centre}
+
+
+def contact_model(name):
+    """The contact function registered as ``name`` (a callable is returned unchanged)."""
+    if callable(name):
+        return name
+    if name not in CONTACT_MODELS:
+        raise InputError("contact", name, f"one of {sorted(CONTACT_MODELS)}")
+    return CONTACT_MODELS[name]
+
+
+class GroupIndex:
+    """Calibration group keys -> consecutive integers (0, 1, ...), kept across chunks and files."""
+
+    def __init__(self):
+        self.keys: dict[str, int] = {}
+
+    def __call__(self, key: str) -> int:
+        return self.keys.setdefault(key, len(self.keys))
+
+    def names(self) -> list[str]:
+        return list(self.keys)
+
+
+@dataclass
+class Pairs:
+    """Per object (every row of the input, in order): the pair and its residual.
+
+    Attributes
+    ----------
+    source : (n,) object; line : (n,) int64     where the row comes from (file, line or row)
+    frame, object_id, cls : (n,) object         identifiers
+    group : (n,) int64                          calibration group (:class:`GroupIndex`), -1: no camera
+    status : (n,) object                        ``ok``, ``no truth``, ``no detection``, ``no ground point``, ``error``
+    reason : (n,) object                        why (the error text, or the status code's text)
+    box_xyxy_px : (n, 4); truth_xy_world_m, xy_world_m, residual_m : (n, 2)   residual = truth - prediction
+    cov_m2, cov_object_m2 : (n, 2, 2)           total and per-object covariance (m^2)
+    dxy_dp : (n, 2, 22)                         Jacobian w.r.t. the camera parameters
+    range_m : (n,)                              horizontal distance camera foot point -> truth (prediction
+                                                where there is no truth)
+    truth_z_m : (n,)                            truth height above the camera's ground plane (NaN unknown)
+    nonlinearity : (n,); linear_ok : (n,) bool  the bottom-centre point's linearity flag
+    """
+
+    source: np.ndarray
+    line: np.ndarray
+    frame: np.ndarray
+    object_id: np.ndarray
+    cls: np.ndarray
+    group: np.ndarray
+    status: np.ndarray
+    reason: np.ndarray
+    box_xyxy_px: np.ndarray
+    truth_xy_world_m: np.ndarray
+    xy_world_m: np.ndarray
+    residual_m: np.ndarray
+    cov_m2: np.ndarray
+    cov_object_m2: np.ndarray
+    dxy_dp: np.ndarray
+    range_m: np.ndarray
+    truth_z_m: np.ndarray
+    nonlinearity: np.ndarray
+    linear_ok: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.line)
+
+    @property
+    def usable(self) -> np.ndarray:
+        """(n,) bool: rows with a residual (status ``ok``)."""
+        return self.status == STATUS_OK
+
+    def subset(self, mask) -> Pairs:
+        return Pairs(**{f.name: getattr(self, f.name)[mask] for f in fields(self)})
+
+    @staticmethod
+    def concatenate(parts: list[Pairs]) -> Pairs:
+        if not parts:
+            return _empty_pairs()
+        return Pairs(**{f.name: np.concatenate([getattr(p, f.name) for p in parts]) for f in fields(Pairs)})
+
+
+def _empty_pairs() -> Pairs:
+    z = np.zeros(0)
+    o = np.zeros(0, dtype=object)
+    return Pairs(o, np.zeros(0, np.int64), o, o, o, np.zeros(0, np.int64), o, o, np.zeros((0, 4)), np.zeros((0, 2)),
+                 np.zeros((0, 2)), np.zeros((0, 2)), np.zeros((0, 2, 2)), np.zeros((0, 2, 2)),
+                 np.zeros((0, 2, P.N_PARAMS)), z, z, z, np.zeros(0, dtype=bool))
+
+
+def _status_of(chunk: LabelChunk) -> tuple[np.ndarray, np.ndarray]:
+    n = len(chunk)
+    st = np.full(n, STATUS_OK, dtype=object)
+    why = np.full(n, "ok", dtype=object)
+    for i, e in enumerate(chunk.error):
+        if e is None:
+            continue
+        st[i] = {NO_TRUTH: STATUS_NO_TRUTH, NO_DETECTION: STATUS_NO_DETECTION}.get(e, STATUS_ERROR)
+        why[i] = e
+    if chunk.camera is None:
+        st[st != STATUS_ERROR] = STATUS_ERROR
+    return st, why
+
+
+def build_pairs(chunk: LabelChunk, budget, *, contact="bottom-centre", groups: GroupIndex | None = None,
+                linear_threshold: float = DEFAULT_LINEAR_THRESHOLD) -> Pairs:
+    """The pairs of one chunk: contact function on the detections, residual against the truth.
+
+    Parameters
+    ----------
+    chunk : LabelChunk
+    budget : the error budget (the chunk's own budget, from a camera registry, wins)
+    contact : name in :data:`CONTACT_MODELS` or a contact function
+    groups : GroupIndex shared by every chunk of a job (calibration group numbers)
+    linear_threshold : ``linear_ok = nonlinearity <= linear_threshold`` (of the bottom-centre point)
+    """
+    fn = contact_model(contact)
+    groups = groups if groups is not None else GroupIndex()
+    n = len(chunk)
+    st, why = _status_of(chunk)
+    nan2, nan22 = np.full((n, 2), np.nan), np.full((n, 2, 2), np.nan)
+    xy, cov, cov_obj, J = nan2.copy(), nan22.copy(), nan22.copy(), np.full((n, 2, P.N_PARAMS), np.nan)
+    nl = np.full(n, np.nan)
+    has_det = (st == STATUS_OK) | (st == STATUS_NO_TRUTH)
+    idx = np.flatnonzero(has_det)
+    if idx.size:
+        bud = load_budget(chunk.budget if chunk.budget is not None else budget)
+        cuv = None if chunk.cov_uv_px2 is None else chunk.cov_uv_px2[idx]
+        boxes = chunk.box_xyxy_px[idx]
+        if fn is bottom_centre:
+            res, nl_i = _bottom_centre(chunk.camera, bud, boxes, cuv, True)
+        else:
+            # the labelled yaw (chunk.yaw_world_rad) is truth: never handed to the contact model
+            res = fn(chunk.camera, bud, boxes, chunk.cls[idx], yaw_rad=None, cov_uv_px2=cuv)
+            uv = box2d_contact_points(boxes, "bottom-centre")[0][:, 0, :]
+            nl_i = _nonlinearity(chunk.camera, bud, uv, cuv, np.isfinite(uv).all(1))
+        xy[idx], cov[idx], cov_obj[idx], J[idx], nl[idx] = res.xy_world_m, res.cov_m2, res.cov_object_m2, \
+            res.dxy_dp, nl_i
+        bad = idx[~np.asarray(res.valid, dtype=bool)]
+        codes = np.asarray(res.status)[~np.asarray(res.valid, dtype=bool)]
+        st[bad] = np.where(st[bad] == STATUS_OK, STATUS_NO_GROUND, st[bad])
+        why[bad] = [status.REASONS.get(int(c), f"status {int(c)}") for c in codes]
+    ok = st == STATUS_OK
+    resid = np.where(ok[:, None], chunk.truth_xy_world_m - xy, np.nan)
+    g = -1 if chunk.camera is None else groups(chunk.camera_key)
+    ref = np.where(np.isfinite(chunk.truth_xy_world_m).all(1)[:, None], chunk.truth_xy_world_m, xy)
+    rng = (np.linalg.norm(ref - np.asarray(chunk.camera.position_world_m)[:2], axis=1)
+           if chunk.camera is not None else np.full(n, np.nan))
+    return Pairs(source=np.full(n, chunk.source, dtype=object), line=np.asarray(chunk.line, dtype=np.int64),
+                 frame=chunk.frame, object_id=chunk.object_id, cls=chunk.cls, group=np.full(n, g, dtype=np.int64),
+                 status=st, reason=why, box_xyxy_px=chunk.box_xyxy_px, truth_xy_world_m=chunk.truth_xy_world_m,
+                 xy_world_m=xy, residual_m=resid, cov_m2=cov, cov_object_m2=cov_obj, dxy_dp=J, range_m=rng,
+                 truth_z_m=chunk.truth_z_m, nonlinearity=nl, linear_ok=np.isfinite(nl) & (nl <= linear_threshold))
+
+
+def iter_pairs(chunks: Iterable[LabelChunk], budget, *, contact="bottom-centre", groups: GroupIndex | None = None,
+               linear_threshold: float = DEFAULT_LINEAR_THRESHOLD) -> Iterator[Pairs]:
+    """:func:`build_pairs` over a stream of chunks (memory: one chunk at a time)."""
+    groups = groups if groups is not None else GroupIndex()
+    for ch in chunks:
+        yield build_pairs(ch, budget, contact=contact, groups=groups, linear_threshold=linear_threshold)
+
+
+def collect_pairs(chunks: Iterable[LabelChunk], budget, *, contact="bottom-centre", groups: GroupIndex | None = None,
+                  linear_threshold: float = DEFAULT_LINEAR_THRESHOLD) -> Pairs:
+    """Every pair of a stream in memory: the input of ``footprint_uq.validation.fit.fit_budget``
+    (``pairs.subset(pairs.usable)``: ``residual_m``, ``dxy_dp``, ``cov_object_m2``, ``group``)."""
+    return Pairs.concatenate(list(iter_pairs(chunks, budget, contact=contact, groups=groups,
+                                             linear_threshold=linear_threshold)))

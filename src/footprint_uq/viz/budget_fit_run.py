@@ -1,0 +1,96 @@
+"""The job of ``footprint-uq calibrate budget``: labelled data -> pairs -> fitted budget (docs/budget-fit.md).
+
+Readers and pairs are those of ``validate`` (:mod:`footprint_uq.viz.validation_run`,
+:mod:`footprint_uq.validation.pairs`); the fit is :func:`footprint_uq.validation.fit.fit_budget`, the
+cross-validated coverage :func:`footprint_uq.validation.fit.cross_validate`.  Writes the fitted budget
+(YAML, readable by every command) and a JSON summary; both atomically.
+"""
+
+from __future__ import annotations
+
+import json
+from collections import Counter
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError
+from ..io.atomic import atomic_write_text
+from ..io.camera_files import save_budget
+from ..products.geo import GeoReference
+from ..uncertainty.budget import ErrorBudget, load_budget
+from ..validation import readers as R
+from ..validation.fit import cross_validate, fit_budget
+from ..validation.pairs import GroupIndex, collect_pairs
+from .validation_run import KINDS, detect_kind, label_chunks
+
+__all__ = ["run_budget_fit", "DEFAULT_FREE", "BUDGET_FIT_FILES"]
+
+#: the terms fitted by default: the orientation, the height and a per-object sigma
+DEFAULT_FREE = ("pan_deg", "tilt_deg", "height_m", "object_m")
+BUDGET_FIT_FILES = {"budget": "budget.yaml", "summary": "fit.json"}
+
+
+def _jsonable(x):
+    if isinstance(x, dict):
+        return {str(k): _jsonable(v) for k, v in x.items()}
+    if isinstance(x, list | tuple | np.ndarray):
+        return [_jsonable(v) for v in (x.tolist() if isinstance(x, np.ndarray) else x)]
+    if isinstance(x, np.generic):
+        x = x.item()
+    return None if isinstance(x, float) and not np.isfinite(x) else x
+
+
+def _pairs(labels, kind, budget, contact, folder, **reader):
+    kind = kind or detect_kind(labels)
+    if kind not in KINDS:
+        raise InputError("kind", kind, f"one of {KINDS}")
+    groups = GroupIndex()
+    chunks = label_chunks(labels, kind, folder, budget=budget, **reader)
+    return kind, collect_pairs(chunks, budget, contact=contact, groups=groups), groups
+
+
+def run_budget_fit(labels, out_dir, *, base_budget=None, free=DEFAULT_FREE, kind: str | None = None,
+                   contact="bottom-centre", camera=None, registry=None, calibration=None, image_size_px=None,
+                   origin_lat_deg=None, origin_lon_deg=None, heading_offset_deg: float = 0.0, method: str = "reml",
+                   min_groups: int = 3, cross_validation: bool = True, fsync: bool = True) -> tuple[dict, dict]:
+    """Fit the free terms of a budget to labelled data and write ``budget.yaml`` and ``fit.json``.
+
+    Parameters as :func:`footprint_uq.viz.validation_run.run_validation` for the input; ``base_budget``
+    (default: all zero) gives the terms that are not free; ``free``, ``method``, ``min_groups`` as
+    :func:`footprint_uq.validation.fit.fit_budget`; ``cross_validation`` adds leave-one-object-out (and,
+    with two groups or more, leave-one-group-out) coverage to the summary.
+
+    Returns
+    -------
+    summary : dict (also in ``fit.json``); files : dict name -> Path
+    """
+    base = ErrorBudget() if base_budget is None else load_budget(base_budget)
+    georef = None
+    if origin_lat_deg is not None or origin_lon_deg is not None:
+        georef = GeoReference(heading_offset_deg, origin_lat_deg, origin_lon_deg)
+    folder = R.FolderReport()
+    kind, pairs, groups = _pairs(labels, kind, base, contact, folder, camera=camera, registry=registry,
+                                 calibration=calibration, image_size_px=image_size_px, georef=georef,
+                                 chunk_rows=131_072)
+    use = pairs.subset(pairs.usable)
+    if len(use) < 2:
+        raise InputError("labels", str(labels), f"at least 2 usable detection/truth pairs (found {len(use)}; "
+                         f"statuses {dict(Counter(pairs.status.tolist()))})")
+    args = (use.residual_m, use.dxy_dp, use.cov_object_m2, use.group)
+    opts = {"free": list(free), "base_budget": base, "method": method, "min_groups": min_groups}
+    fit = fit_budget(*args, **opts)
+    summary = {"labels": str(labels), "kind": kind, "contact": contact if isinstance(contact, str) else "custom",
+               "statuses": dict(Counter(pairs.status.tolist())), "groups": groups.names(), "folder": folder.to_dict(),
+               "fit": fit.to_dict(), "cross_validation": {}}
+    if cross_validation:
+        summary["cross_validation"]["object"] = cross_validate(*args, by="object", **opts).to_dict()
+        if len(np.unique(use.group)) >= 2:
+            summary["cross_validation"]["group"] = cross_validate(*args, by="group", **opts).to_dict()
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    files = {k: out / v for k, v in BUDGET_FIT_FILES.items()}
+    save_budget(fit.to_budget(name=f"fitted to {Path(str(labels)).name}"), files["budget"])
+    summary["files"] = {k: v.name for k, v in files.items()}
+    atomic_write_text(files["summary"], json.dumps(_jsonable(summary), indent=1, allow_nan=False) + "\n", fsync=fsync)
+    return summary, files
