@@ -163,6 +163,15 @@ def test_bad_input_is_a_one_line_error(kw, field):
     assert e.value.field.startswith(field) and "\n" not in str(e.value)
 
 
+def test_a_box_cut_by_the_image_border_says_nothing_by_its_width():
+    boxes = np.array([[0.0, 500.0, 120.0, 620.0], [1800.0, 500.0, 1919.0, 600.0]])
+    cut = C.footprint_centre(CAM, {}, boxes, ["car"] * 2)
+    blind = C.footprint_centre(CAM, {}, boxes, ["car"] * 2, box_sigma_px=1e5)  # width noise swamps it
+    np.testing.assert_allclose(cut.xy_world_m, blind.xy_world_m, atol=1e-3)
+    inside = C.footprint_centre(CAM, {}, boxes + [[5.0, 0, 5.0, 0], [-5.0, 0, -5.0, 0]], ["car"] * 2)
+    assert np.abs(inside.xy_world_m - blind.xy_world_m).max() > 0.01  # the width is used off the border
+
+
 def test_a_box_above_the_horizon_is_invalid_not_a_number():
     r = C.footprint_centre(CAM, {}, [[900.0, -400.0, 1000.0, -300.0], [900.0, 500.0, 1000.0, 620.0]], ["car"] * 2)
     assert list(r.valid) == [False, True] and np.isnan(r.xy_world_m[0]).all() and r.status[0] != 0
