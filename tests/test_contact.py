@@ -34,7 +34,7 @@ def _render_boxes(cam, rng, n, cls, *, edge_sigma_px=2.0, v_range=(380.0, 1000.0
 def test_monte_carlo_of_rendered_boxes_bias_removed_and_95_percent_coverage():
     """Cars at 20-110 m, unknown yaw, size from the prior, 2 px noise on every box edge."""
     rng = np.random.default_rng(20)
-    n, s = 400, 2.0
+    n, s = 300, 2.0
     truth, boxes, _ = _render_boxes(CAM, rng, n, "car", edge_sigma_px=s)
     cov_uv = np.diag([s**2 / 2, s**2])  # the bottom-centre pixel: mean of two edges in u, one edge in v
     res = C.footprint_centre(CAM, {}, boxes, ["car"] * n, cov_uv_px2=cov_uv, box_sigma_px=s)
