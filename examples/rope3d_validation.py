@@ -7,7 +7,9 @@ The frame (tests/data/rope3d-demo: a Rope3D roadside camera, 1920x1080, 48 label
 bottom-centre is back-projected (``--contact bottom-centre``) and compared with the labelled bottom centre
 of its 3-D box.  Printed: the table of docs/validation.md (coverage of the 50/90/95/99 % ellipses, mean
 NEES, effective number of objects, verdict) and the coverage by range band; written: the figure
-``validation_rope3d.png`` (docs/figures/validation-rope3d.png).
+``validation_rope3d.png`` (docs/figures/validation-rope3d.png).  Then the same with the contact model
+(``--contact footprint-centre``), and the budget fitted to these residuals (paper-style base with the free
+per-object terms ``object_m`` and ``object_ground_m``: docs/budget-fit.md) judged leave-one-object-out.
 """
 
 from __future__ import annotations
@@ -19,7 +21,9 @@ from _common import output_dir
 from matplotlib.figure import Figure
 
 from footprint_uq.uncertainty.budget import ErrorBudget
+from footprint_uq.validation.fit import cross_validate, fit_budget
 from footprint_uq.validation.job import validate
+from footprint_uq.validation.pairs import collect_pairs
 from footprint_uq.validation.readers import read_kitti_folder
 
 out = output_dir(__doc__.splitlines()[0], "rope3d_validation")
@@ -37,6 +41,9 @@ results = {}
 for name, budget in BUDGETS.items():
     res = validate(read_kitti_folder(FRAME), budget, objects_out=out / f"objects_{name}.csv", fsync=False)
     results[name] = res
+# the contact model of issue 20 (class size priors + viewing geometry: the footprint centre, not the bottom edge)
+contact = {name: validate(read_kitti_folder(FRAME), BUDGETS[name], contact="footprint-centre", fsync=False)
+           for name in ("basler1@deg", "paper-style")}
 
 first = next(iter(results.values())).summary
 print(f"pairs {first['n_pairs']}, rows {first['rows']}; |error| median {first['error']['median_m']:.3f} m, "
@@ -49,9 +56,28 @@ for name, res in results.items():
     semi = 2.4477 * np.median(res.accumulator.sample["sigma_major_m"])
     print(f"{name:<12} " + " ".join(f"{100 * c:5.1f}%" for c in cov)
           + f" {s['nees_test']['nees_mean']:6.2f} {s['nees_test']['n_eff']:6.2f} {semi:13.2f} m  {s['verdict']}")
-print("by range (basler1@deg):")
+print("footprint-centre contact:")
+for name, res in contact.items():
+    s = res.summary
+    cov = [c["empirical"] for c in s["coverage"]]
+    semi = 2.4477 * np.median(res.accumulator.sample["sigma_major_m"])
+    print(f"{name:<12} " + " ".join(f"{100 * c:5.1f}%" for c in cov)
+          + f" {s['nees_test']['nees_mean']:6.2f} {s['nees_test']['n_eff']:6.2f} {semi:13.2f} m  {s['verdict']}"
+          + f"  (median |error| {s['error']['median_m']:.3f} m)")
+# the budget fitted to these residuals (paper-style base, free per-object terms), judged leave-one-object-out
+pairs = collect_pairs(read_kitti_folder(FRAME), BUDGETS["paper-style"], contact="footprint-centre")
+u = pairs.subset(pairs.usable)
+free = ("object_m", "object_ground_m")
+fit = fit_budget(u.residual_m, u.dxy_dp, u.cov_object_m2, u.group, free=free, base_budget=BUDGETS["paper-style"])
+cv = cross_validate(u.residual_m, u.dxy_dp, u.cov_object_m2, u.group, free=free, by="object",
+                    base_budget=BUDGETS["paper-style"])
+print("fitted (LOO)  " + " ".join(f"{100 * c:5.1f}%" for c in cv.coverage)
+      + f"  object_m {fit.terms['object_m'].sigma:.3f} m, object_ground_m {fit.terms['object_ground_m'].sigma:.3f} m")
+print("by range (basler1@deg; last column: footprint-centre contact):")
+fc = {r["range"]: r for r in contact["basler1@deg"].summary["by_range"]}
 for r in results["basler1@deg"].summary["by_range"]:
-    print(f"  {r['range']:<10} n={r['n']:<3d} cov95 {100 * r['coverage_95']:5.1f}%  mean NEES {r['nees_mean']:.2f}")
+    print(f"  {r['range']:<10} n={r['n']:<3d} cov95 {100 * r['coverage_95']:5.1f}%  mean NEES {r['nees_mean']:.2f}"
+          f"  | {100 * fc[r['range']]['coverage_95']:5.1f}%")
 
 fig = Figure(figsize=(10.5, 4.2))
 ax, bx = fig.subplots(1, 2)

@@ -78,9 +78,14 @@ def _object_table(pairs, m, group_names) -> pa.Table:
 
 
 class ObjectWriter:
-    """Per-object rows into ``.csv`` or ``.parquet``, written to a temporary file and renamed at :meth:`close`."""
+    """Per-object rows into ``.csv`` or ``.parquet``, written to a temporary file and renamed at :meth:`close`.
 
-    def __init__(self, path, *, fsync: bool = True):
+    Small tables (one per camera of a chunk) are gathered into blocks of at least ``block_rows`` rows before
+    they are written: a Parquet file keeps metadata per row group in memory until it is closed, so one row
+    group per small table would make memory grow with the number of pairs.
+    """
+
+    def __init__(self, path, *, fsync: bool = True, block_rows: int = 65_536):
         self.path = Path(path)
         suffix = self.path.suffix.lower()
         if suffix not in (".csv", ".parquet", ".pq"):
@@ -90,15 +95,30 @@ class ObjectWriter:
         self.fsync = fsync
         self.writer = None
         self.rows = 0
+        self.block_rows = int(block_rows)
+        self.pending: list[pa.Table] = []
+        self.pending_rows = 0
 
     def write(self, table: pa.Table) -> None:
+        self.pending.append(table)
+        self.pending_rows += table.num_rows
+        self.rows += table.num_rows
+        if self.pending_rows >= self.block_rows:
+            self._flush()
+
+    def _flush(self) -> None:
+        if not self.pending:
+            return
+        table = pa.concat_tables(self.pending)
+        self.pending, self.pending_rows = [], 0
         if self.writer is None:
             self.writer = (pq.ParquetWriter(self.tmp, table.schema) if self.parquet
                            else pcsv.CSVWriter(self.tmp, table.schema))
         self.writer.write_table(table)
-        self.rows += table.num_rows
 
     def close(self, *, ok: bool = True) -> None:
+        if ok:
+            self._flush()
         if self.writer is not None:
             self.writer.close()
         elif ok:  # no chunk at all: a header-only file

@@ -413,7 +413,8 @@ def _openlabel_frames(path):
         data = json.loads(Path(path).read_bytes().decode("utf-8-sig"))
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
         raise ConfigError("labels", str(path), f"a readable OpenLABEL JSON file ({type(e).__name__})") from None
-    frames = data.get("openlabel", {}).get("frames") if isinstance(data, dict) else None
+    top = data.get("openlabel") if isinstance(data, dict) else None
+    frames = top.get("frames") if isinstance(top, dict) else None
     if not isinstance(frames, dict):
         raise ConfigError(f"{path}: openlabel.frames", "missing", "a mapping frame -> {objects: {...}}")
     return frames
