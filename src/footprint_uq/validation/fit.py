@@ -15,9 +15,10 @@ the Woodbury identity on the (at most 22-dimensional) shared part, so a group of
 objects costs a few small matrix products per object.
 
 Estimation: REML (default; ML with ``method="ml"``) over the variances of the free terms, the bias
-profiled out by generalised least squares, bounded L-BFGS-B with the analytic score; standard errors
-from the observed information (central differences of the score); 95 % intervals on the log scale
-(truncated at zero where the estimate is within two standard errors of it).  Identifiability: a
+profiled out by generalised least squares, bounded truncated Newton (TNC) with the analytic score;
+standard errors from the observed information (central differences of the score); 95 % intervals of
+Satterthwaite's kind (the variance as a scaled chi-square with its effective degrees of freedom,
+``nu = 2 v^2 / se_v^2``).  Identifiability: a
 shared term needs draws from at least ``min_groups`` groups (one camera and one frame give one draw
 of its calibration error: no sigma); terms the information matrix cannot tell apart (normalised
 eigenvalue below ``collinear_tol``) are merged -- fitted as one, reported as merged, never split.
@@ -30,7 +31,7 @@ from dataclasses import dataclass, field
 from typing import NamedTuple
 
 import numpy as np
-from scipy import optimize
+from scipy import optimize, stats
 
 from .. import params as P
 from ..errors import InputError
@@ -471,19 +472,25 @@ def _collinear(H: np.ndarray, names: list[str], tol: float) -> list[str] | None:
 def _interval(v: float, se_v: float) -> tuple[float, float, float]:
     """(se of sigma, lower, upper) of the 95 % interval of sigma = sqrt(v).
 
-    Normal on the cube root of the variance (Wilson-Hilferty: a variance estimated from few draws is
-    close to a scaled chi-square, whose cube root is nearly normal), truncated at zero.
+    Satterthwaite: the estimate is taken as a scaled chi-square, ``v_hat ~ v chi2_nu / nu`` with the
+    effective degrees of freedom ``nu = 2 v_hat^2 / se_v^2`` (a variance seen through few calibration
+    draws has few), and the interval is ``[nu v_hat / chi2_nu(0.975), nu v_hat / chi2_nu(0.025)]`` --
+    wider above than below, as the likelihood of a variance is; its lower end is 0 below one degree of
+    freedom.  At ``v_hat = 0``: ``[0, sqrt(1.96 se_v)]``.
     """
     if not np.isfinite(se_v):
         return np.nan, 0.0, np.inf
     v = max(v, 0.0)
     s = np.sqrt(v)
     se = se_v / (2 * s) if s > 0 else np.inf
-    c = v ** (1 / 3)
-    half = 1.96 * se_v / (3 * c * c) if c > 0 else np.inf
-    lo = max(c - half, 0.0) ** 1.5
-    hi = (c + half) ** 1.5 if np.isfinite(half) else float(np.sqrt(v + 1.96 * se_v))
-    return se, float(lo), float(hi)
+    if v <= 0 or se_v <= 0:
+        return se, 0.0, float(np.sqrt(v + 1.96 * se_v))
+    nu = 2 * v * v / (se_v * se_v)
+    with np.errstate(divide="ignore", over="ignore"):  # a handful of degrees of freedom: no upper bound
+        lo, hi = nu * v / stats.chi2.ppf(0.975, nu), nu * v / stats.chi2.ppf(0.025, nu)
+    if nu < 1 or not np.isfinite(lo):  # the estimate within a standard error of zero: zero is inside
+        lo = 0.0
+    return se, float(np.sqrt(lo)), float(np.sqrt(hi)) if np.isfinite(hi) else np.inf
 
 
 def _term_matrices(base: ErrorBudget, shared: list[str]):
