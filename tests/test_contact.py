@@ -34,7 +34,7 @@ def _render_boxes(cam, rng, n, cls, *, edge_sigma_px=2.0, v_range=(380.0, 1000.0
 def test_monte_carlo_of_rendered_boxes_bias_removed_and_95_percent_coverage():
     """Cars at 20-110 m, unknown yaw, size from the prior, 2 px noise on every box edge."""
     rng = np.random.default_rng(20)
-    n, s = 400, 2.0
+    n, s = 300, 2.0
     truth, boxes, _ = _render_boxes(CAM, rng, n, "car", edge_sigma_px=s)
     cov_uv = np.diag([s**2 / 2, s**2])  # the bottom-centre pixel: mean of two edges in u, one edge in v
     res = C.footprint_centre(CAM, {}, boxes, ["car"] * n, cov_uv_px2=cov_uv, box_sigma_px=s)
@@ -161,6 +161,15 @@ def test_bad_input_is_a_one_line_error(kw, field):
     with pytest.raises(InputError) as e:
         C.footprint_centre(CAM, {}, [[900.0, 500.0, 1000.0, 620.0]], ["car"], **kw)
     assert e.value.field.startswith(field) and "\n" not in str(e.value)
+
+
+def test_a_box_cut_by_the_image_border_says_nothing_by_its_width():
+    boxes = np.array([[0.0, 500.0, 120.0, 620.0], [1800.0, 500.0, 1919.0, 600.0]])
+    cut = C.footprint_centre(CAM, {}, boxes, ["car"] * 2)
+    blind = C.footprint_centre(CAM, {}, boxes, ["car"] * 2, box_sigma_px=1e5)  # width noise swamps it
+    np.testing.assert_allclose(cut.xy_world_m, blind.xy_world_m, atol=1e-3)
+    inside = C.footprint_centre(CAM, {}, boxes + [[5.0, 0, 5.0, 0], [-5.0, 0, -5.0, 0]], ["car"] * 2)
+    assert np.abs(inside.xy_world_m - blind.xy_world_m).max() > 0.01  # the width is used off the border
 
 
 def test_a_box_above_the_horizon_is_invalid_not_a_number():

@@ -44,6 +44,7 @@ _GH_X, _GH_W = np.polynomial.hermite_e.hermegauss(5)  # probabilists' Gauss-Herm
 _GH_W = _GH_W / _GH_W.sum()
 _NEWTON_STEPS = 9
 _CHUNK_POINTS = 200_000
+_NO_EVIDENCE_PX2 = 1e12  # the width variance of a box cut by the image border (its width says nothing)
 
 
 class ContactResult(NamedTuple):
@@ -384,7 +385,8 @@ def footprint_centre(camera, budget, boxes_xyxy_px, classes, *, yaw_rad=None, ya
         Detector covariance of the bottom-centre pixel, added to the budget's per-point noise.
     box_sigma_px : float
         Sigma of each box edge (px, default 2): the noise of the observed box width on which the yaw and
-        size are conditioned (plus the budget's per-point noise along u).
+        size are conditioned (plus the budget's per-point noise along u).  A box touching the left or
+        right image border is not conditioned on its width (the border cut it).
     size_priors : path, optional
         A YAML file overriding the shipped priors class by class (:func:`load_size_priors`).
     unknown_class : {"fallback", "error"}
@@ -403,8 +405,11 @@ def footprint_centre(camera, budget, boxes_xyxy_px, classes, *, yaw_rad=None, ya
     bs = float(box_sigma_px)
     if not (np.isfinite(bs) and bs > 0):
         raise InputError("box_sigma_px", box_sigma_px, "a finite sigma > 0 (px) of each box edge")
-    w_obs = np.asarray(boxes_xyxy_px, dtype=np.float64)[:, 2] - np.asarray(boxes_xyxy_px, dtype=np.float64)[:, 0]
+    box = np.asarray(boxes_xyxy_px, dtype=np.float64)
+    w_obs = box[:, 2] - box[:, 0]
     r_w = np.full(n, 2 * (bs**2 + load_budget(budget).pixel_covariance()[0, 0]))
+    # a box cut by the left or right image border does not show the object's width: no evidence from it
+    r_w[(box[:, 0] <= 0.5) | (box[:, 2] >= camera.image_size_px[0] - 1.5)] = _NO_EVIDENCE_PX2
     bp = camera.backproject(b)
     xy, J = np.full((n, 2), np.nan), np.full((n, 2, P.N_PARAMS + 2), np.nan)
     spread = np.full((n, 2, 2), np.nan)

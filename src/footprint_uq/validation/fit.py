@@ -15,9 +15,10 @@ the Woodbury identity on the (at most 22-dimensional) shared part, so a group of
 objects costs a few small matrix products per object.
 
 Estimation: REML (default; ML with ``method="ml"``) over the variances of the free terms, the bias
-profiled out by generalised least squares, bounded L-BFGS-B with the analytic score; standard errors
-from the observed information (central differences of the score); 95 % intervals on the log scale
-(truncated at zero where the estimate is within two standard errors of it).  Identifiability: a
+profiled out by generalised least squares, bounded truncated Newton (TNC) with the analytic score;
+standard errors from the observed information (central differences of the score); 95 % intervals of
+Satterthwaite's kind (the variance as a scaled chi-square with its effective degrees of freedom,
+``nu = 2 v^2 / se_v^2``).  Identifiability: a
 shared term needs draws from at least ``min_groups`` groups (one camera and one frame give one draw
 of its calibration error: no sigma); terms the information matrix cannot tell apart (normalised
 eigenvalue below ``collinear_tol``) are merged -- fitted as one, reported as merged, never split.
@@ -30,7 +31,7 @@ from dataclasses import dataclass, field
 from typing import NamedTuple
 
 import numpy as np
-from scipy import optimize
+from scipy import optimize, stats
 
 from .. import params as P
 from ..errors import InputError
@@ -151,7 +152,9 @@ class _Model:
 
     def _object_sums(self, vo) -> dict | None:
         d = self.d
-        D = d.R + np.tensordot(vo, self.E, 1) if vo.size else d.R
+        D = d.R.copy()
+        for v, Eq in zip(vo, self.E, strict=True):
+            D += v * Eq
         det = D[:, 0, 0] * D[:, 1, 1] - D[:, 0, 1] * D[:, 1, 0]
         if np.any(det <= 0):
             return None
@@ -210,15 +213,18 @@ class _Model:
             g += 0.5 * np.einsum("gka,jkl,glb,ba->j", Y, self.A, Y, Phi_i)
         if not self.object_free:
             return g
-        d, E = self.d, self.E
-        V, Kg, btg = s["V"], K[d.gid], bt[d.gid]
-        z = (s["Di"] @ (d.r - beta)[..., None])[..., 0] - np.einsum("nak,nkl,nl->na", V, Kg, btg)
-        SE = np.add.reduceat(np.einsum("nak,qnab,nbl->qnkl", V, E, V), d.starts, axis=1)   # (q, G, k, k)
-        tr = np.einsum("nab,qnba->q", s["Di"], E) - np.einsum("gkl,qglk->q", K, SE)
-        go = -0.5 * (tr - np.einsum("na,qnab,nb->q", z, E, z))
-        if use_reml:
-            Z = s["Di"] - V @ (Kg @ s["P"][d.gid])        # rows of C^-1 X for each object (N, 2, 2)
-            go += 0.5 * np.einsum("cb,nab,qnad,ndc->q", Phi_i, Z, E, Z)
+        d, E, V, Di = self.d, self.E, s["V"], s["Di"]
+        Kb = np.einsum("gkl,gl->gk", K, bt)[d.gid]                                # (N, k)
+        z = (Di @ (d.r - beta)[..., None])[..., 0] - np.einsum("nak,nk->na", V, Kb)  # C^-1 (r - beta), per object
+        Z = Di - V @ (K @ s["P"])[d.gid] if use_reml else None                    # rows of C^-1 X (N, 2, 2)
+        go = np.empty(E.shape[0])
+        for q, Eq in enumerate(E):
+            EV = Eq @ V
+            SE = np.add.reduceat(np.swapaxes(V, 1, 2) @ EV, d.starts, axis=0)       # (G, k, k)
+            tr = np.einsum("nab,nba->", Di, Eq) - np.einsum("gkl,glk->", K, SE)
+            go[q] = -0.5 * (tr - np.einsum("na,na->", z, (Eq @ z[..., None])[..., 0]))
+            if use_reml:
+                go[q] += 0.5 * np.trace(Phi_i @ (np.swapaxes(Z, 1, 2) @ (Eq @ Z)).sum(0))
         return np.r_[g, go]
 
 
@@ -406,7 +412,8 @@ def _optimise(model: _Model, scale: np.ndarray, start: np.ndarray):
     """Maximise the likelihood over variances >= 0 (scaled to order one), from two starts.
 
     Bounded truncated Newton (scipy's TNC): on a busy machine L-BFGS-B's BLAS calls cost ~4x more
-    for these few parameters.  Converged: the projected score (per object) is below 1e-6.
+    for these few parameters.  Converged: the projected score (per object) is below 1e-6; a second
+    start is tried only where the first does not converge.
     """
     if model.m == 0:
         return np.zeros(0), True, "no free term"
@@ -418,15 +425,20 @@ def _optimise(model: _Model, scale: np.ndarray, start: np.ndarray):
             return 1e30, np.zeros_like(u)
         return -ll / n, -g * scale / n
 
+    def projected(x):
+        g = f(x)[1]
+        return np.where(x > 0, np.abs(g), np.clip(-g, 0, None))
+
     best = None
-    for u0 in (start, np.full(model.m, 0.3)):
+    for u0 in (start, np.full(model.m, 0.3)):  # the second start only where the first did not converge
         res = optimize.minimize(f, u0, jac=True, method="TNC", bounds=[(0.0, None)] * model.m,
                                 options={"maxfun": 1000, "ftol": 1e-14, "gtol": 1e-10})
         if best is None or res.fun < best.fun:
             best = res
-    g = f(best.x)[1]
-    pg = np.where(best.x > 0, np.abs(g), np.clip(-g, 0, None))
-    ok = bool(np.all(pg < 1e-6))
+        pg = projected(best.x)
+        ok = bool(np.all(pg < 1e-6))
+        if ok:
+            break
     return best.x * scale, ok, f"{best.message}; projected score {pg.max():.2g} per object"
 
 
@@ -460,19 +472,25 @@ def _collinear(H: np.ndarray, names: list[str], tol: float) -> list[str] | None:
 def _interval(v: float, se_v: float) -> tuple[float, float, float]:
     """(se of sigma, lower, upper) of the 95 % interval of sigma = sqrt(v).
 
-    Normal on the cube root of the variance (Wilson-Hilferty: a variance estimated from few draws is
-    close to a scaled chi-square, whose cube root is nearly normal), truncated at zero.
+    Satterthwaite: the estimate is taken as a scaled chi-square, ``v_hat ~ v chi2_nu / nu`` with the
+    effective degrees of freedom ``nu = 2 v_hat^2 / se_v^2`` (a variance seen through few calibration
+    draws has few), and the interval is ``[nu v_hat / chi2_nu(0.975), nu v_hat / chi2_nu(0.025)]`` --
+    wider above than below, as the likelihood of a variance is; its lower end is 0 below one degree of
+    freedom.  At ``v_hat = 0``: ``[0, sqrt(1.96 se_v)]``.
     """
     if not np.isfinite(se_v):
         return np.nan, 0.0, np.inf
     v = max(v, 0.0)
     s = np.sqrt(v)
     se = se_v / (2 * s) if s > 0 else np.inf
-    c = v ** (1 / 3)
-    half = 1.96 * se_v / (3 * c * c) if c > 0 else np.inf
-    lo = max(c - half, 0.0) ** 1.5
-    hi = (c + half) ** 1.5 if np.isfinite(half) else float(np.sqrt(v + 1.96 * se_v))
-    return se, float(lo), float(hi)
+    if v <= 0 or se_v <= 0:
+        return se, 0.0, float(np.sqrt(v + 1.96 * se_v))
+    nu = 2 * v * v / (se_v * se_v)
+    with np.errstate(divide="ignore", over="ignore"):  # a handful of degrees of freedom: no upper bound
+        lo, hi = nu * v / stats.chi2.ppf(0.975, nu), nu * v / stats.chi2.ppf(0.025, nu)
+    if nu < 1 or not np.isfinite(lo):  # the estimate within a standard error of zero: zero is inside
+        lo = 0.0
+    return se, float(np.sqrt(lo)), float(np.sqrt(hi)) if np.isfinite(hi) else np.inf
 
 
 def _term_matrices(base: ErrorBudget, shared: list[str]):

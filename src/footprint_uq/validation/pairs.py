@@ -22,7 +22,6 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, fields
-from typing import NamedTuple
 
 import numpy as np
 
@@ -31,7 +30,7 @@ from .. import status
 from .._checks import as_points
 from ..errors import InputError
 from ..fast.map_kernels import covariance_points
-from ..products.contact import footprint_centre
+from ..products.contact import ContactResult, footprint_centre
 from ..products.footprints import box2d_contact_points
 from ..uncertainty.budget import load_budget
 from ..uncertainty.propagation import DEFAULT_LINEAR_THRESHOLD
@@ -47,18 +46,6 @@ STATUS_NO_TRUTH = "no truth"        # a detection without truth (unpaired)
 STATUS_NO_DETECTION = "no detection"  # a truth without detection (unpaired)
 STATUS_NO_GROUND = "no ground point"  # the contact function found no ground point (above the horizon, ...)
 STATUS_ERROR = "error"              # a malformed row, unknown camera, missing calibration
-
-
-class ContactResult(NamedTuple):
-    """Ground points of 2-D detections (see the module doc; the same fields as
-    ``footprint_uq.products.contact.ContactResult``)."""
-
-    xy_world_m: np.ndarray
-    cov_m2: np.ndarray
-    cov_object_m2: np.ndarray
-    dxy_dp: np.ndarray
-    valid: np.ndarray
-    status: np.ndarray
 
 
 def _sandwich(J, S):
