@@ -174,7 +174,7 @@ def page_html(session: PlanSession) -> str:
                                      ("tilt_deg", "tilt (deg, down)", 1, 89, 0.5)))
     state_json = json.dumps(st).replace("</", "<\\/")
     return (f'<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8">'
-            f'<meta name="viewport" content="width=device-width, initial-scale=1">'
+            f'<meta name="viewport" content="width=device-width, initial-scale=1"><link rel="icon" href="data:,">'
             f"<title>Site plan (interactive): {esc(session.site.name)}</title><style>{_PAGE_CSS}</style></head>"
             f"<body><h1>Site plan: {esc(session.site.name)}</h1>"
             f'<p>Weighted met area: <b id="fraction"></b> <span id="status"></span></p>'

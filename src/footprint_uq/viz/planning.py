@@ -166,6 +166,11 @@ _NOT_MODELLED = ("What the planner does not model: occlusion by traffic (a lorry
                  "the budget's angles. Occluders are prisms on a flat ground.")
 
 
+def _table(rows, **kw) -> str:
+    """An HTML table that scrolls inside its own box on a narrow screen (the page never overflows)."""
+    return f'<div style="overflow-x: auto; max-width: 100%">{html_table(rows, **kw)}</div>'
+
+
 def layout_rows(cameras) -> list[dict]:
     rows = []
     for lc in cameras:
@@ -188,8 +193,8 @@ def plan_report_html(site, samples, cameras, evaluation, infos, *, sensitivity_r
              f"{len(cameras)} cameras. A sample is <i>met</i> when the {conf:g} % semi-major axis of its ground "
              f"position {how} "
              f"is at most its zone's requirement. Weighted met area: <b>{100 * evaluation.fraction:.1f} %</b>.</p>"]
-    parts += ["<h2>Zones</h2>", html_table([z.row() for z in evaluation.zones], floatfmt=".3g")]
-    parts += ["<h2>Layout</h2>", html_table(layout_rows(cameras), floatfmt=".4g")]
+    parts += ["<h2>Zones</h2>", _table([z.row() for z in evaluation.zones], floatfmt=".3g")]
+    parts += ["<h2>Layout</h2>", _table(layout_rows(cameras), floatfmt=".4g")]
     parts.append(img_tag(plot_site(site, samples, cameras, infos), "The site to scale: zones (blue), occluders "
                          "(hatched), candidate mounts (triangles), each camera's footprint on the zones and heading.",
                          dpi=dpi))
@@ -210,10 +215,10 @@ def plan_report_html(site, samples, cameras, evaluation, infos, *, sensitivity_r
     if sensitivity_rows:
         parts += ["<h2>Sensitivity</h2>", "<p>The weighted met fraction when each camera (and all of them) is "
                   "mounted 1 m higher or lower or tilted 2 deg more or less than planned, and with every sigma of "
-                  "the error budgets doubled.</p>", html_table(sensitivity_rows, floatfmt=".4g")]
+                  "the error budgets doubled.</p>", _table(sensitivity_rows, floatfmt=".4g")]
     if plan_info:
-        parts += ["<h2>How the plan was found</h2>", html_table([{"item": k, "value": v} for k, v in plan_info.items()],
-                                                               floatfmt=".4g")]
+        parts += ["<h2>How the plan was found</h2>", _table([{"item": k, "value": v} for k, v in plan_info.items()],
+                                                           floatfmt=".4g")]
     parts.append(f'<p class="note">{esc(_NOT_MODELLED)}</p>')
     return html_page(f"Site plan: {site.name}", parts)
 
