@@ -7,6 +7,7 @@ The small site below has 48 candidate configurations (3 mounts x 2 lenses x 2 ti
 from __future__ import annotations
 
 import itertools
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -291,6 +292,16 @@ def test_greedy_with_fusion_is_close_to_the_optimum_here(small):
     assert _value(cov, obj, greedy(cov, obj, 2, soft=False)) < 0.5 * best
 
 
+def test_precompute_in_worker_processes_is_the_same(small):
+    site, s, configs, cov = small
+    par = precompute(site, s, configs, workers=2)
+    for c in range(len(configs)):
+        assert np.array_equal(par.index[c], cov.index[c])
+        np.testing.assert_array_equal(par.info[c], cov.info[c])
+    with pytest.raises(InputError, match="workers"):
+        precompute(site, s, configs[:2], workers=0)
+
+
 # -- refinement and the whole plan -------------------------------------------------------------------------------
 def test_refinement_is_never_worse_and_reproducible(small):
     site, s, configs, _ = small
@@ -320,3 +331,13 @@ def test_plan_end_to_end_is_reproducible():
     assert len({c.mount for c in r1.configs}) == len(r1.configs) <= 2
     with pytest.raises(InputError, match="method"):
         plan(site, method="annealing")
+
+
+def test_the_site_file_of_the_docs_is_valid():
+    """docs/planning.md's example site file loads (lat/lon included) and its lat/lon polygon lies near the origin."""
+    pytest.importorskip("pyproj")
+    text = (Path(__file__).resolve().parents[1] / "docs" / "planning.md").read_text(encoding="utf-8")
+    block = text.split("```yaml\n", 1)[1].split("```", 1)[0]
+    site = site_from_dict(yaml.safe_load(block))
+    assert [z.name for z in site.zones] == ["lanes", "crossing"] and site.zones[1].weight == 3
+    assert np.abs(site.zones[1].polygon_m).max() < 10 and len(candidate_grid(site)) == 2 * 2 * 2 * 3 * 12

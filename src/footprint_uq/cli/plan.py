@@ -55,13 +55,15 @@ def _echo_zones(ev):
 @click.option("--max-refine-evals", type=click.IntRange(min=0), default=200, show_default=True)
 @click.option("--sensitivity/--no-sensitivity", default=True, show_default=True,
               help="Sensitivity table (+-1 m height, +-2 deg tilt, budget sigmas x2).")
+@click.option("--workers", type=click.IntRange(min=1), default=1, show_default=True,
+              help="Processes screening the candidates (e.g. the number of cores).")
 @click.option("--progress/--no-progress", default=True, show_default=True, help="Progress bar on stderr.")
 def plan_cmd(site_path, out_dir, layout_path, serve, serve_layout, port, max_cameras, max_cost, method, fusion,
-             refine, seed, screen_step, max_refine_evals, sensitivity, progress):
+             refine, seed, screen_step, max_refine_evals, sensitivity, workers, progress):
     """Choose K mounts and, for each, camera, lens, height, pan and tilt to maximise the weighted area whose
     95 % position uncertainty meets its zone's requirement; or evaluate / interactively adjust a layout."""
     opts = PlanOptions(method, max_cameras, max_cost, fusion, refine, seed, screen_step, max_refine_evals,
-                       sensitivity, progress)
+                       sensitivity, progress, workers=workers)
     if serve:
         serve_plan(site_path, serve_layout, port=port, fusion=fusion)
         return

@@ -30,8 +30,11 @@ the result is never worse than its start.
 from __future__ import annotations
 
 import heapq
+import os
 import time
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
+from multiprocessing import get_context
 
 import numpy as np
 from scipy import sparse
@@ -89,16 +92,59 @@ class Coverage:
     cost: np.ndarray
 
 
-def precompute(site, samples: GroundSamples, configs, *, progress: bool = False) -> Coverage:
-    """:func:`camera_information` of every configuration (with a progress bar)."""
+def _infos_of(site, xy_world_m, configs) -> list[tuple[np.ndarray, np.ndarray]]:
+    out = []
+    for cfg in configs:
+        i, inf = camera_information(build_camera(site, cfg), site.camera_type(cfg.camera_type).budget, xy_world_m,
+                                    site.occluders)
+        out.append((i.astype(np.int64), inf))
+    return out
+
+
+#: candidates per task of the worker processes
+CHUNK = 64
+
+
+def resolve_workers(workers: int | None, n_configs: int) -> int:
+    """``workers`` (None: one per CPU, at most 4, and 1 for grids below 500 candidates).
+
+    More than one worker starts processes with ``spawn``: a script that calls the planner with workers
+    must keep its top level under ``if __name__ == "__main__":``.
+    """
+    if workers is None:
+        return 1 if n_configs < 500 else max(1, min(os.cpu_count() or 1, 4))
+    if isinstance(workers, bool) or not isinstance(workers, int | np.integer) or workers < 1:
+        raise InputError("workers", workers, "an integer >= 1 (or None: automatic)")
+    return int(workers)
+
+
+def precompute(site, samples: GroundSamples, configs, *, progress: bool = False, workers: int | None = 1) -> Coverage:
+    """:func:`camera_information` of every configuration (with a progress bar).
+
+    ``workers > 1`` spreads the candidates over that many processes (``spawn``: each imports the package
+    and loads the compiled kernels from numba's cache, about a second); the result is the same.
+    """
+    configs = list(configs)
     names = [m.name for m in site.mounts]
-    index, info = [], []
-    for cfg in tqdm(configs, desc="candidates", unit="cam", disable=not progress, leave=False):
-        i, inf = camera_information(build_camera(site, cfg), site.camera_type(cfg.camera_type).budget,
-                                    samples.xy_world_m, site.occluders)
-        index.append(i.astype(np.int64))
-        info.append(inf)
-    return Coverage(list(configs), index, info, np.array([names.index(c.mount) for c in configs], dtype=np.int64),
+    w = resolve_workers(workers, len(configs))
+    bar = tqdm(total=len(configs), desc="candidates", unit="cam", disable=not progress, leave=False)
+    if w == 1:
+        infos = []
+        for k in range(0, len(configs), CHUNK):
+            infos += _infos_of(site, samples.xy_world_m, configs[k:k + CHUNK])
+            bar.update(len(configs[k:k + CHUNK]))
+    else:
+        with ProcessPoolExecutor(max_workers=w, mp_context=get_context("spawn")) as pool:
+            futs = [pool.submit(_infos_of, site, samples.xy_world_m, configs[k:k + CHUNK])
+                    for k in range(0, len(configs), CHUNK)]
+            infos = []
+            for f in futs:
+                part = f.result()
+                infos += part
+                bar.update(len(part))
+    bar.close()
+    return Coverage(configs, [i for i, _ in infos], [x for _, x in infos],
+                    np.array([names.index(c.mount) for c in configs], dtype=np.int64),
                     np.array([config_cost(site, c) for c in configs]))
 
 
@@ -379,13 +425,15 @@ def _discrete(cov, obj, method, k, max_cost, lazy, time_limit_s):
 def plan(site, *, method: str = "greedy", max_cameras: int | None = None, max_cost: float | None = None,
          fusion: bool = True, refine_layout: bool = True, seed: int = 0, lazy: bool = True,
          max_refine_evals: int = 200, time_limit_s: float | None = None, screen_step: int = 1,
-         progress: bool = False) -> PlanResult:
+         workers: int | None = 1, progress: bool = False) -> PlanResult:
     """Plan a site (see the module docstring): discrete stage, then the continuous refinement.
 
     ``max_cameras`` / ``max_cost`` default to the site file's ``search`` section.  ``screen_step > 1``
     runs the discrete stage on every ``screen_step``-th sample in both directions (each standing for
     ``screen_step^2`` cells: about ``screen_step^2`` times faster); the refinement and the evaluation
-    always use every sample.  Deterministic for a given ``seed`` (the refinement's visiting order).
+    always use every sample.  ``workers``: processes of the candidate screening (:func:`precompute`;
+    None: automatic; see :func:`resolve_workers`).  Deterministic for a given ``seed`` (the
+    refinement's visiting order).
     """
     if method not in METHODS:
         raise InputError("method", method, f"one of {list(METHODS)}")
@@ -400,7 +448,7 @@ def plan(site, *, method: str = "greedy", max_cameras: int | None = None, max_co
     obj = Objective.of(site, samples, fusion=fusion)
     screen = samples.thinned(int(screen_step))
     configs = candidate_grid(site)
-    cov = precompute(site, screen, configs, progress=progress)
+    cov = precompute(site, screen, configs, progress=progress, workers=workers)
     t["precompute"] = time.perf_counter()
     chosen, _, used = _discrete(cov, Objective.of(site, screen, fusion=fusion), method, k, cost, lazy, time_limit_s)
     t["discrete"] = time.perf_counter()

@@ -33,6 +33,7 @@ class PlanOptions:
     sensitivity: bool = True
     progress: bool = False
     dpi: int = 100
+    workers: int | None = 1
 
 
 def _summary(evaluation) -> dict:
@@ -59,7 +60,7 @@ def run_plan(site_path, out_dir, opts: PlanOptions | None = None):
     site = load_site(site_path)
     res = plan(site, method=opts.method, max_cameras=opts.max_cameras, max_cost=opts.max_cost, fusion=opts.fusion,
                refine_layout=opts.refine, seed=opts.seed, screen_step=opts.screen_step,
-               max_refine_evals=opts.max_refine_evals, progress=opts.progress)
+               max_refine_evals=opts.max_refine_evals, workers=opts.workers, progress=opts.progress)
     out = Path(out_dir)
     cameras = layout_from_configs(site, res.configs)
     files = write_layout(cameras, out, site_path=Path(site_path).resolve())
