@@ -3,6 +3,10 @@
 from __future__ import annotations
 
 import json
+import os
+import subprocess
+import sys
+import urllib.request
 
 import numpy as np
 import pytest
@@ -14,6 +18,7 @@ from footprint_uq.io import load_camera
 from footprint_uq.planning.coverage import CameraConfig, build_camera
 from footprint_uq.planning.geometry import ground_samples
 from footprint_uq.planning.layout import (
+    LayoutCamera,
     evaluate_cameras,
     layout_from_configs,
     perturbed_camera,
@@ -115,3 +120,31 @@ def test_sensitivity_rows(planned):
     assert rows[-1]["fraction_met"] <= base
     assert all(abs(r["delta_points"] - 100 * (r["fraction_met"] - base)) < 1e-9 for r in rows)
     assert layout_from_configs(site, [c.config for c in cams])[0].name == cams[0].name
+    # the rows against evaluations of the moved layouts themselves
+    up = [LayoutCamera(c.name, perturbed_camera(c.camera, height_m=1.0), c.budget) for c in cams]
+    got = {(r["change"], r["camera"]): r["fraction_met"] for r in rows}
+    assert got[("height +1 m", "all")] == pytest.approx(evaluate_cameras(site, samples, up)[0].fraction, abs=1e-12)
+    one = [up[0]] + cams[1:]
+    assert got[("height +1 m", cams[0].name)] == pytest.approx(evaluate_cameras(site, samples, one)[0].fraction,
+                                                                abs=1e-12)
+    tilted = [LayoutCamera(c.name, perturbed_camera(c.camera, tilt_deg=-2.0), c.budget) for c in cams]
+    assert got[("tilt -2 deg", "all")] == pytest.approx(evaluate_cameras(site, samples, tilted)[0].fraction, abs=1e-12)
+
+
+def test_serve_command_listens_on_loopback(planned):
+    """``plan --serve`` through the command line: prints its URL on 127.0.0.1 and serves the page."""
+    site_path, out, _ = planned
+    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+    proc = subprocess.Popen([sys.executable, "-m", "footprint_uq.cli", "plan", "--site", str(site_path), "--serve",
+                             "--layout", str(out / "layout.yaml"), "--port", "0"], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, env=env)
+    try:
+        line = proc.stdout.readline()
+        assert "http://127.0.0.1:" in line, line + proc.stderr.read() if proc.poll() is not None else line
+        url = line.split("http://", 1)[1].split()[0]
+        with urllib.request.urlopen(f"http://{url}", timeout=60) as r:
+            page = r.read().decode()
+        assert 'id="tilt_deg"' in page and "data:image/png;base64," in page
+    finally:
+        proc.terminate()
+        proc.wait(timeout=30)
