@@ -12,6 +12,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+from hypothesis import assume, given, settings
+from hypothesis import strategies as st
 
 from footprint_uq.errors import ConfigError, InputError
 from footprint_uq.planning.coverage import (
@@ -341,3 +343,37 @@ def test_the_site_file_of_the_docs_is_valid():
     site = site_from_dict(yaml.safe_load(block))
     assert [z.name for z in site.zones] == ["lanes", "crossing"] and site.zones[1].weight == 3
     assert np.abs(site.zones[1].polygon_m).max() < 10 and len(candidate_grid(site)) == 2 * 2 * 2 * 3 * 12
+
+
+def _slab_blocked(p, c, h_cam, x0, y0, x1, y1, H):
+    """Independent reference for an axis-aligned box: Liang-Barsky clipping of the sight line p -> c."""
+    d = (c[0] - p[0], c[1] - p[1])
+    s_in, s_out = 0.0, 1.0
+    for q0, dq, lo, hi in ((p[0], d[0], x0, x1), (p[1], d[1], y0, y1)):
+        if dq == 0:
+            if not lo <= q0 <= hi:
+                return False
+            continue
+        a, b = (lo - q0) / dq, (hi - q0) / dq
+        s_in, s_out = max(s_in, min(a, b)), min(s_out, max(a, b))
+    return s_in <= s_out and s_in * h_cam < H
+
+
+@settings(max_examples=300, deadline=None, derandomize=True)
+@given(st.floats(-30, 30), st.floats(-30, 30), st.floats(1, 40), st.floats(-20, 20), st.floats(-20, 20),
+       st.floats(0.5, 15), st.floats(0.5, 15), st.floats(0.5, 30), st.floats(0, 180))
+def test_occlusion_matches_box_clipping_everywhere(px, py, h_cam, bx, by, w, d, H, rot_deg):
+    """Property: for any box, point and camera height, in any orientation of the frame, the polygon test agrees
+    with Liang-Barsky clipping of the sight line in the box's own frame (cases within 1e-6 of a tie skipped)."""
+    x0, y0, x1, y1 = bx, by, bx + w, by + d
+    c = (0.0, 0.0)
+    ref = _slab_blocked((px, py), c, h_cam, x0, y0, x1, y1, H)
+    near_tie = any(_slab_blocked((px, py), c, h_cam, x0 - e, y0 - e, x1 + e, y1 + e, H + f) != ref
+                   for e in (-1e-6, 1e-6) for f in (-1e-6 * h_cam, 1e-6 * h_cam))
+    assume(not near_tie)
+    a = np.deg2rad(rot_deg)
+    R = np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]])
+    box = _Box(x0, y0, x1, y1, H)
+    box.polygon_m = box.polygon_m @ R.T
+    got = occluded((np.array([[px, py]]) @ R.T), (0.0, 0.0, h_cam), [box])[0]
+    assert got == ref

@@ -428,12 +428,39 @@ def plan(site, *, method: str = "greedy", max_cameras: int | None = None, max_co
          workers: int | None = 1, progress: bool = False) -> PlanResult:
     """Plan a site (see the module docstring): discrete stage, then the continuous refinement.
 
-    ``max_cameras`` / ``max_cost`` default to the site file's ``search`` section.  ``screen_step > 1``
-    runs the discrete stage on every ``screen_step``-th sample in both directions (each standing for
-    ``screen_step^2`` cells: about ``screen_step^2`` times faster); the refinement and the evaluation
-    always use every sample.  ``workers``: processes of the candidate screening (:func:`precompute`;
-    None: automatic; see :func:`resolve_workers`).  Deterministic for a given ``seed`` (the
-    refinement's visiting order).
+    Parameters
+    ----------
+    site : Site
+        From :func:`footprint_uq.planning.site.load_site`.
+    method : {"greedy", "milp", "both"}
+        The discrete stage.
+    max_cameras, max_cost : int, float, optional
+        K and the cost limit (mounts + cameras); default: the site file's ``search`` section.
+    fusion : bool
+        A sample is met by the fused covariance of every camera that sees it (else by one camera).
+    refine_layout : bool
+        Run :func:`refine` after the discrete stage (never worse than its start).
+    seed : int
+        Seed of the refinement's visiting order: same site, options and seed give the same layout.
+    lazy : bool
+        Lazy evaluation in :func:`greedy`.
+    max_refine_evals : int
+        Largest number of layouts the refinement evaluates.
+    time_limit_s : float, optional
+        Time limit of the integer program.
+    screen_step : int
+        ``> 1``: the discrete stage sees every ``screen_step``-th sample in both directions, each standing
+        for ``screen_step^2`` cells (about ``screen_step^2`` times faster); the refinement and the
+        evaluation always use every sample.
+    workers : int or None
+        Processes of the candidate screening (:func:`precompute`; None: automatic, see
+        :func:`resolve_workers`).
+    progress : bool
+        tqdm progress bars on stderr.
+
+    Returns
+    -------
+    PlanResult
     """
     if method not in METHODS:
         raise InputError("method", method, f"one of {list(METHODS)}")
