@@ -144,7 +144,10 @@ _DEL = object()
     ("cameras.0.lenses", [], "cameras[0].lenses", "at least 1"),
     ("search.max_cameras", 0, "search.max_cameras", "integer >= 1"),
     ("search.tilts_deg", [20, 95], "search.tilts_deg[1]", "<= 89.5"),
-    ("search.pan_step_deg", 0, "search.pan_step_deg", "> 0"),
+    ("search.pan_step_deg", 0, "search.pan_step_deg", ">= 1.0"),
+    ("search.heights_per_mount", 100000, "search", "candidate grid of at most"),
+    ("zones.0.polygon_m", [[0, 0], [1e7, 0], [0, 5]], "zones[0].polygon_m", "magnitude <= 1e+06"),
+    ("resolution_m", 0.001, "resolution_m", "cells over the site"),
 ])
 def test_site_file_bad_input_names_the_field(tmp_path, path, value, field, expected):
     d = small_site_dict()

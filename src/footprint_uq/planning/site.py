@@ -160,6 +160,13 @@ class Site:
 
 
 # -- reading -----------------------------------------------------------------------------------------------------
+#: largest coordinate of a polygon or mount (metres in the site's local frame)
+MAX_COORD_M = 1e6
+#: largest number of raster cells over the site's bounds (the ground samples' grid)
+MAX_CELLS = 20_000_000
+#: largest candidate grid (mounts x heights x lenses x tilts x pans)
+MAX_CANDIDATES = 200_000
+
 _TOP = {"name", "resolution_m", "origin", "zones", "occluders", "mounts", "cameras", "search"}
 _ZONE = {"name", "polygon_m", "polygon_latlon", "max_semi_major_m", "weight"}
 _OCC = {"name", "polygon_m", "polygon_latlon", "height_m"}
@@ -222,6 +229,9 @@ def _polygon(where, fld, d, georef):
     if a.ndim != 2 or a.shape[1] != 2 or a.shape[0] < 3 or not np.all(np.isfinite(a)):
         raise ConfigError(label(where, f"{fld}.{key}"), f"shape {a.shape}" if a.ndim else d[key],
                           "at least 3 finite [x, y] (or [lat, lon]) pairs")
+    if np.abs(a).max() > MAX_COORD_M:
+        raise ConfigError(label(where, f"{fld}.{key}"), float(np.abs(a).max()),
+                          f"coordinates of magnitude <= {MAX_COORD_M:g} (a local frame, metres)")
     if key == "polygon_latlon":
         a = _latlon_to_world(where, f"{fld}.{key}", georef, a[:, 0], a[:, 1])
     area = 0.5 * abs(np.sum(a[:, 0] * np.roll(a[:, 1], -1) - np.roll(a[:, 0], -1) * a[:, 1]))
@@ -325,7 +335,7 @@ def _int(where, fld, v, lo):
 
 def _search(where, d):
     d = _mapping(where, "search", d or {}, _SEARCH)
-    step = as_number(where, "search.pan_step_deg", d.get("pan_step_deg", 30.0), positive=True, hi=360.0, unit=" (deg)")
+    step = as_number(where, "search.pan_step_deg", d.get("pan_step_deg", 30.0), lo=1.0, hi=360.0, unit=" (deg)")
     tilts = d.get("tilts_deg", [15.0, 25.0, 40.0])
     tilts = _list(where, "search.tilts_deg", tilts if isinstance(tilts, list) else [tilts])
     tilts = tuple(as_number(where, f"search.tilts_deg[{i}]", t, lo=0.5, hi=89.5, unit=" (deg, down)")
@@ -351,9 +361,22 @@ def site_from_dict(d: dict, *, where: str = "", base_dir=None) -> Site:
     name = d.get("name", "site")
     if not isinstance(name, str):
         raise ConfigError(label(where, "name"), name, "a string")
-    return Site(_zones(where, d["zones"], georef), mounts, cams, _occluders(where, d.get("occluders", []), georef),
+    site = Site(_zones(where, d["zones"], georef), mounts, cams, _occluders(where, d.get("occluders", []), georef),
                 _search(where, d.get("search")),
                 as_number(where, "resolution_m", d.get("resolution_m", 0.5), positive=True, unit=" (m)"), name)
+    x0, y0, x1, y1 = site.bounds_m(site.resolution_m)
+    cells = ((x1 - x0) / site.resolution_m) * ((y1 - y0) / site.resolution_m)
+    if cells > MAX_CELLS:
+        raise ConfigError(label(where, "resolution_m"), site.resolution_m,
+                          f"a grid of at most {MAX_CELLS:g} cells over the site ({x1 - x0:.3g} m x {y1 - y0:.3g} m "
+                          f"needs {cells:.3g}): a coarser resolution or a smaller site")
+    g = site.search
+    n = len(g.pans_deg()) * len(g.tilts_deg) * sum(len(c.lenses) for c in site.cameras) * \
+        sum(len(g.heights_m(m)) for m in site.mounts)
+    if n > MAX_CANDIDATES:
+        raise ConfigError(label(where, "search"), f"{n} candidates", f"a candidate grid of at most {MAX_CANDIDATES} "
+                          "(mounts x heights x lenses x tilts x pans): a coarser pan step, fewer tilts or heights")
+    return site
 
 
 def load_site(path) -> Site:
