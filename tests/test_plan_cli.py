@@ -148,3 +148,11 @@ def test_serve_command_listens_on_loopback(planned):
     finally:
         proc.terminate()
         proc.wait(timeout=30)
+
+
+def test_nothing_affordable_warns_and_writes_an_empty_layout(planned, tmp_path):
+    r = CliRunner().invoke(main, ["plan", "--site", str(planned[0]), "--out", str(tmp_path), "--max-cost", "0.5",
+                                  "--no-progress", "--no-sensitivity"])
+    assert r.exit_code == 0 and "warning: no candidate camera" in r.output
+    assert yaml.safe_load((tmp_path / "layout.yaml").read_text())["cameras"] == []
+    assert json.loads((tmp_path / "plan.json").read_text())["fraction_met"] == 0.0

@@ -275,6 +275,8 @@ def test_milp_respects_the_cost_limit(small):
     picks = milp_select(cov, obj, 2, max_cost=3.5)
     assert cov.cost[picks].sum() <= 3.5 and "b" not in {cov.configs[c].mount for c in picks}
     assert _value(cov, obj, picks) == pytest.approx(best, abs=1e-9)
+    g = greedy(cov, obj, 2, max_cost=3.5)
+    assert cov.cost[g].sum() <= 3.5 and 0 < _value(cov, obj, g) <= best
 
 
 def test_greedy_single_camera_is_the_exhaustive_optimum_and_lazy_equals_full(small):

@@ -15,6 +15,7 @@ import click
 from ..errors import InputError
 from ..viz.plan_server import serve_plan
 from ..viz.planning_run import PlanOptions, run_evaluate, run_plan
+from .common import warn
 
 __all__ = ["plan_cmd"]
 
@@ -76,6 +77,9 @@ def plan_cmd(site_path, out_dir, layout_path, serve, serve_layout, port, max_cam
         ev = res.evaluation
         click.echo(f"{res.n_candidates} candidates, {res.method}: {res.discrete_value:.0f} m^2 -> refined "
                    f"{res.value:.0f} m^2 (weighted) in {res.seconds['total']:.1f} s")
+        if not res.configs:
+            warn("no candidate camera meets any sample's requirement within the constraints (cost, count): "
+                 "the layout is empty")
         for c in res.configs:
             click.echo(f"  {c.mount}: {c.camera_type}/{c.lens} at {c.height_m:.2f} m, pan {c.pan_deg:.1f} deg, "
                        f"tilt {c.tilt_deg:.1f} deg")
