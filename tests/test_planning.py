@@ -382,3 +382,12 @@ def test_occlusion_matches_box_clipping_everywhere(px, py, h_cam, bx, by, w, d, 
     box.polygon_m = box.polygon_m @ R.T
     got = occluded((np.array([[px, py]]) @ R.T), (0.0, 0.0, h_cam), [box])[0]
     assert got == ref
+
+
+def test_milp_refuses_a_grid_too_large_for_it(small, monkeypatch):
+    from footprint_uq.planning import optimise
+
+    site, s, _, cov = small
+    monkeypatch.setattr(optimise, "MILP_MAX_WORK", 1000.0)
+    with pytest.raises(InputError, match="method: .*milp.*greedy"):
+        milp_select(cov, Objective.of(site, s), 2)

@@ -53,7 +53,8 @@ def _echo_zones(ev):
 @click.option("--seed", type=int, default=0, show_default=True, help="Seed of the refinement.")
 @click.option("--screen-step", type=click.IntRange(min=1), default=1, show_default=True,
               help="Screen the candidates on every N-th sample (faster); refinement and evaluation use all.")
-@click.option("--max-refine-evals", type=click.IntRange(min=0), default=200, show_default=True)
+@click.option("--max-refine-evals", type=click.IntRange(min=0), default=200, show_default=True,
+              help="Largest number of layouts the refinement evaluates.")
 @click.option("--sensitivity/--no-sensitivity", default=True, show_default=True,
               help="Sensitivity table (+-1 m height, +-2 deg tilt, budget sigmas x2).")
 @click.option("--workers", type=click.IntRange(min=1), default=1, show_default=True,

@@ -58,8 +58,8 @@ __all__ = ["candidate_grid", "Coverage", "precompute", "Objective", "greedy", "m
            "PlanResult", "plan", "config_cost", "layout_information"]
 
 METHODS = ("greedy", "milp", "both")
-#: largest (candidates x samples) for which the integer program is built
-MILP_MAX_CELLS = 20_000_000
+#: largest (candidates^2 x samples) for which the integer program is built (its pair enumeration)
+MILP_MAX_WORK = 1e9
 
 
 def candidate_grid(site) -> list[CameraConfig]:
@@ -283,9 +283,9 @@ def milp_select(cov: Coverage, obj: Objective, max_cameras: int, max_cost: float
                 time_limit_s: float | None = None) -> list[int]:
     """The integer program of the module docstring; returns the chosen indices into ``cov.configs``."""
     n, C = obj.weight.shape[0], len(cov.configs)
-    if C * n > MILP_MAX_CELLS:
-        raise InputError("method", "milp", f"a grid of at most {MILP_MAX_CELLS:g} candidates x samples (this one has "
-                         f"{C} x {n}): use method greedy, or a coarser grid")
+    if float(C) * C * n > MILP_MAX_WORK:
+        raise InputError("method", "milp", f"a grid with candidates^2 x samples <= {MILP_MAX_WORK:g} (this one: "
+                         f"{C}^2 x {n}): use method greedy, a coarser grid or a larger --screen-step")
     D = _dense(cov, n)
     single = np.zeros((C, n), dtype=bool)
     for c in range(C):
