@@ -13,7 +13,9 @@ Discrete stage, over the grid of :func:`candidate_grid` (mount x height x camera
   is a weighted coverage, monotone submodular: greedy is within 1 - 1/e of the optimum and the lazy
   bound is exact.  **With fusion it is not submodular**: two cameras can together meet a sample that
   neither meets alone, so a gain can grow as cameras are added; the lazy bound may then be stale and
-  greedy carries no guarantee (``lazy=False`` re-evaluates every candidate in every round).
+  greedy carries no guarantee (``lazy=False`` re-evaluates every candidate in every round).  With
+  fusion, greedy scores the progress towards the requirement for every pick but the last
+  (:func:`greedy`, ``soft``).
 * ``milp``: an integer program (:func:`scipy.optimize.milp`, HiGHS) over the same grid, exact for the
   objective in which a sample counts when one camera or the fused pair of two cameras meets it
   (pair variables ``z_ab <= x_a, x_b`` for every pair that meets some sample neither meets alone).
@@ -197,21 +199,24 @@ def greedy(cov: Coverage, obj: Objective, max_cameras: int, max_cost: float | No
            lazy: bool = True, soft: bool | None = None) -> list[int]:
     """Greedy selection (see the module docstring); returns indices into ``cov.configs``, in order.
 
-    ``soft`` (default: with fusion) scores a candidate by the *progress* it brings,
-    ``sum_i w_i (min(1, lambda_min(I_i) / t_i)`` after - before), ``t_i`` the information the sample's
-    requirement needs: a camera that halves the shortfall of samples that only a second camera will
-    bring over the line is credited for it, where the met-area gain would be zero.  Without fusion the
-    score is the met-area gain itself.
+    ``soft`` scores a candidate by the *progress* it brings, ``sum_i w_i (min(1, lambda_min(I_i) / t_i)``
+    after - before), ``t_i`` the information the sample's requirement needs: a camera that halves the
+    shortfall of samples that only a second camera will bring over the line is credited for it, where
+    the met-area gain would be zero.  ``soft=None`` (default): with fusion, the progress for every pick
+    but the last (after the last, nothing completes a partial progress), which is chosen by its met-area
+    gain; ``soft=False``: the met-area gain throughout (the only score without fusion).
     """
-    soft = obj.fusion if soft is None else bool(soft)
+    auto = soft is None
+    use_soft = obj.fusion if auto else bool(soft)
     n = obj.weight.shape[0]
     S, score = np.zeros((n, 3)), np.zeros(n)
     chosen, used, spent = [], set(), 0.0
     bound = np.full(len(cov.configs), np.inf)
     tiny = 1e-9 * max(float(cov.cost.max()), 1.0)
+    state = {"soft": use_soft}
 
     def sample_score(info, idx):
-        if soft:
+        if state["soft"]:
             return np.clip(information_lambda_min(info) / obj.threshold[idx], 0.0, 1.0)
         return obj.meets(info, idx).astype(np.float64)
 
@@ -223,7 +228,11 @@ def greedy(cov: Coverage, obj: Objective, max_cameras: int, max_cost: float | No
     def key(g, c):
         return g if max_cost is None else g / max(cov.cost[c], tiny)
 
-    for _ in range(max_cameras):
+    for step in range(max_cameras):
+        if auto and state["soft"] and step == max_cameras - 1:  # the last pick: by met area
+            state["soft"] = False
+            score = obj.meets(S, slice(None)).astype(np.float64)
+            bound[:] = np.inf
         alive = np.flatnonzero(_affordable(cov, used, spent, max_cost))
         if alive.size == 0:
             break
@@ -290,7 +299,7 @@ def milp_select(cov: Coverage, obj: Objective, max_cameras: int, max_cost: float
     single = np.zeros((C, n), dtype=bool)
     for c in range(C):
         single[c, cov.index[c]] = obj.meets(cov.info[c], cov.index[c])
-    pairs, prow = _pair_cover(cov, obj, single, D) if obj.fusion else ([], [])
+    pairs, prow = _pair_cover(cov, obj, single, D) if obj.fusion and max_cameras >= 2 else ([], [])
     Pn = len(pairs)
     keep = np.flatnonzero(single.any(0) | np.isin(np.arange(n), np.concatenate(prow) if prow else []))
     m = keep.size
