@@ -61,7 +61,7 @@ __all__ = ["candidate_grid", "Coverage", "precompute", "Objective", "greedy", "m
 
 METHODS = ("greedy", "milp", "both")
 #: largest (candidates^2 x samples) for which the integer program is built (its pair enumeration)
-MILP_MAX_WORK = 1e9
+MILP_MAX_WORK = 1e8
 
 
 def candidate_grid(site) -> list[CameraConfig]:
@@ -433,7 +433,7 @@ def _discrete(cov, obj, method, k, max_cost, lazy, time_limit_s):
 
 def plan(site, *, method: str = "greedy", max_cameras: int | None = None, max_cost: float | None = None,
          fusion: bool = True, refine_layout: bool = True, seed: int = 0, lazy: bool = True,
-         max_refine_evals: int = 200, time_limit_s: float | None = None, screen_step: int = 1,
+         max_refine_evals: int = 200, time_limit_s: float | None = 300.0, screen_step: int = 1,
          workers: int | None = 1, progress: bool = False) -> PlanResult:
     """Plan a site (see the module docstring): discrete stage, then the continuous refinement.
 
@@ -456,7 +456,7 @@ def plan(site, *, method: str = "greedy", max_cameras: int | None = None, max_co
     max_refine_evals : int
         Largest number of layouts the refinement evaluates.
     time_limit_s : float, optional
-        Time limit of the integer program.
+        Time limit of the integer program (HiGHS keeps its best layout found by then).
     screen_step : int
         ``> 1``: the discrete stage sees every ``screen_step``-th sample in both directions, each standing
         for ``screen_step^2`` cells (about ``screen_step^2`` times faster); the refinement and the
