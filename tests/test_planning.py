@@ -391,3 +391,13 @@ def test_milp_refuses_a_grid_too_large_for_it(small, monkeypatch):
     monkeypatch.setattr(optimise, "MILP_MAX_WORK", 1000.0)
     with pytest.raises(InputError, match="method: .*milp.*greedy"):
         milp_select(cov, Objective.of(site, s), 2)
+
+
+def test_milp_stopped_early_warns_and_plan_falls_back_to_greedy(small):
+    site, s, _, cov = small
+    with pytest.warns(RuntimeWarning, match="milp stopped before proving its optimum"):
+        picks = milp_select(cov, Objective.of(site, s), 2, time_limit_s=1e-4)
+    assert len(picks) <= 2
+    r = plan(site, method="milp", time_limit_s=1e-4, refine_layout=False)
+    greedy_only = plan(site, method="greedy", refine_layout=False)
+    assert r.value >= greedy_only.value > 0

@@ -34,6 +34,7 @@ from __future__ import annotations
 import heapq
 import os
 import time
+import warnings
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from multiprocessing import get_context
@@ -290,7 +291,15 @@ def _pair_cover(cov: Coverage, obj: Objective, single: np.ndarray, D: np.ndarray
 
 def milp_select(cov: Coverage, obj: Objective, max_cameras: int, max_cost: float | None = None, *,
                 time_limit_s: float | None = None) -> list[int]:
-    """The integer program of the module docstring; returns the chosen indices into ``cov.configs``."""
+    """The integer program of the module docstring; returns the chosen indices into ``cov.configs``.
+
+    Stopped at ``time_limit_s`` before proving its optimum, it returns its best layout so far with a
+    ``RuntimeWarning`` (that layout can be poor).
+    """
+    return _milp(cov, obj, max_cameras, max_cost, time_limit_s)[0]
+
+
+def _milp(cov, obj, max_cameras, max_cost, time_limit_s) -> tuple[list[int], bool]:
     n, C = obj.weight.shape[0], len(cov.configs)
     if float(C) * C * n > MILP_MAX_WORK:
         raise InputError("method", "milp", f"a grid with candidates^2 x samples <= {MILP_MAX_WORK:g} (this one: "
@@ -329,9 +338,14 @@ def milp_select(cov: Coverage, obj: Objective, max_cameras: int, max_cost: float
     options = {"disp": False} if time_limit_s is None else {"disp": False, "time_limit": float(time_limit_s)}
     res = milp(c, constraints=LinearConstraint(A, -np.inf, hi), integrality=integrality, bounds=Bounds(0, 1),
                options=options)
-    if res.x is None:
+    if res.x is None and res.status != 1:
         raise InputError("method", "milp", f"a solvable integer program ({res.message})")
-    return [int(i) for i in np.flatnonzero(res.x[:C] > 0.5)]
+    picks = [] if res.x is None else [int(i) for i in np.flatnonzero(res.x[:C] > 0.5)]
+    if res.status != 0:
+        warnings.warn(f"milp stopped before proving its optimum ({res.message}); its best layout so far is kept "
+                      "(plan() compares it with greedy's)", RuntimeWarning, stacklevel=2)
+        return picks, False
+    return picks, True
 
 
 def layout_information(site, samples: GroundSamples, configs, *, budget_scale: float = 1.0):
@@ -425,7 +439,11 @@ def _discrete(cov, obj, method, k, max_cost, lazy, time_limit_s):
     if method in ("greedy", "both"):
         picks["greedy"] = greedy(cov, obj, k, max_cost, lazy=lazy)
     if method in ("milp", "both"):
-        picks["milp"] = milp_select(cov, obj, k, max_cost, time_limit_s=time_limit_s)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            picks["milp"], optimal = _milp(cov, obj, k, max_cost, time_limit_s)
+        if not optimal and "greedy" not in picks:  # stopped early: its incumbent against greedy's layout
+            picks["greedy"] = greedy(cov, obj, k, max_cost, lazy=lazy)
     vals = {m: obj.value([(cov.index[c], cov.info[c]) for c in p]) for m, p in picks.items()}
     best = max(vals, key=lambda m: (vals[m], m == "milp"))
     return [cov.configs[c] for c in picks[best]], vals[best], best
