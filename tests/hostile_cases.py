@@ -284,11 +284,38 @@ def _other_commands(d: Path, camera: Path) -> list[Case]:
              "exit2", d / "cs4"),
         Case("carla export binary config", ["carla", "export", "--out", str(d / "r.jsonl"), "--config", str(binary)],
              "exit2", d / "r.jsonl"),
+        *_plan_cases(d / "plan", binary, bad_yaml, bad_json),
         Case("extrinsics binary correspondences", ["calibrate", "extrinsics", "--pairs", str(corr), "--camera",
                                                    str(camera), "--board", "9x6", "--square-m", "0.1", "--ground",
                                                    "identity", "--out", str(d / "ex")], "exit2", None,
              stderr_has="corr.csv"),
     ]
+
+
+SITE = """zones: [{name: road, polygon_m: [[0, 0], [20, 0], [20, 8], [0, 8]], max_semi_major_m: 1.0}]
+mounts: [{name: a, position_m: [-5, 4], height_m: 8}]
+cameras: [{name: hd, image_size_px: [640, 360], budget: basler1, lenses: [{name: n, focal_px: 500}]}]
+search: {pan_step_deg: 90, tilts_deg: [20], heights_per_mount: 1, max_cameras: 1}
+"""
+
+
+def _plan_cases(d: Path, binary: Path, bad_yaml: Path, bad_json: Path) -> list[Case]:
+    """Site and layout files of ``footprint-uq plan``."""
+    site = _w(d / "site.yaml", SITE)
+    nan_site = _w(d / "nan.yaml", SITE.replace("max_semi_major_m: 1.0", "max_semi_major_m: .nan"))
+    huge = _w(d / "huge.yaml", SITE.replace("[[0, 0], [20, 0]", "[[0, 0], [1e300, 0]"))
+    layout = _w(d / "layout.yaml", "cameras: [{name: a, camera_file: binary.dat, budget: basler1}]\n")
+    _w(d / "binary.dat", bytes(range(256)) * 8)
+    out = [Case(f"plan {n} site", ["plan", "--site", str(f), "--out", str(d / f"o{i}"), "--no-progress"], "exit2",
+                d / f"o{i}") for i, (n, f) in enumerate((("binary", binary), ("broken YAML", bad_yaml),
+                                                         ("broken JSON", bad_json), ("NaN requirement", nan_site),
+                                                         ("huge polygon", huge)))]
+    out.append(Case("plan --evaluate binary layout", ["plan", "--site", str(site), "--evaluate", str(binary),
+                                                      "--out", str(d / "ev1")], "exit2", d / "ev1"))
+    out.append(Case("plan --evaluate layout with a binary camera file", ["plan", "--site", str(site), "--evaluate",
+                                                                        str(layout), "--out", str(d / "ev2")],
+                    "exit2", d / "ev2"))
+    return out
 
 
 def build(d: Path) -> list[Case]:

@@ -185,3 +185,24 @@ def test_old_module_paths_are_aliases_of_the_moved_modules(old, monkeypatch):
         mod = importlib.import_module(f"{PKG}.{old}")
     assert mod is new and mod.__name__ == f"{PKG}.{MOVED[old]}" and mod.__spec__.name == f"{PKG}.{MOVED[old]}"
     assert any(issubclass(w.category, DeprecationWarning) and MOVED[old] in str(w.message) for w in caught)
+
+
+#: the planner's layer (docs/architecture.md): above products / scenario, below viz and cli
+PLANNING_MAY_NOT_IMPORT = ("viz", "cli", "batch", "service", "integrations", "calibration")
+BELOW_PLANNING = ("params", "errors", "status", "_checks", "fast", "cameras", "uncertainty", "products", "io",
+                  "scenario")
+
+
+def test_planning_layer():
+    bad = []
+    for mod, scan in SCANS.items():
+        top = mod.split(".")[1] if mod.count(".") else ""
+        for n, _, _, targets in scan.imports:
+            for t in filter(None, targets):
+                target_top = t[0].split(".")[1] if t[0].count(".") else ""
+                if top == "planning" and target_top in PLANNING_MAY_NOT_IMPORT:
+                    bad.append(f"{mod}:{n.lineno}: {t[0]} (above planning)")
+                if top in BELOW_PLANNING and target_top == "planning":
+                    bad.append(f"{mod}:{n.lineno}: {t[0]} (planning is above {top})")
+    assert any(m.startswith(f"{PKG}.planning.") for m in MODS)
+    assert bad == []

@@ -41,6 +41,10 @@ EXPECTED = {
     "plan_mount.py": (["criterion: 95 % semi-major axis <= 1.75 m", "best reach with basler1: 54.7 m",
                        "linear/Monte-Carlo semi-major there"],
                       ["plan_mount/plan_mount.png", "plan_mount/plan_mount.csv"]),
+    "plan_intersection.py": (["1152 candidates, 11256 samples at 0.5 m", "naive layout (one camera per arm, looking "
+                              "at the centre): 57.8 % met", "zone lanes (<= 1.75 m): planned"],
+                             ["plan_intersection/site.yaml", "plan_intersection/plan/layout.yaml",
+                              "plan_intersection/plan/report.html"]),
 }
 
 

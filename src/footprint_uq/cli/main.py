@@ -165,6 +165,7 @@ main.add_lazy_command("fuse", "footprint_uq.cli.fuse:fuse_cmd")
 main.add_lazy_command("serve", "footprint_uq.cli.serve:serve_cmd")
 main.add_lazy_command("convert", "footprint_uq.cli.convert:convert_cmd")
 main.add_lazy_command("validate", "footprint_uq.cli.validate:validate_cmd")
+main.add_lazy_command("plan", "footprint_uq.cli.plan:plan_cmd")
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -1,0 +1,520 @@
+"""Choosing the layout: a discrete stage over a candidate grid, then a continuous refinement.
+
+Objective: the weighted met area ``f(S) = sum_i w_i a_i [sample i meets its zone's requirement]``
+of a set ``S`` of camera configurations (at most one per mount), with the fused covariance of every
+camera that sees a sample (or, ``fusion=False``, the best single camera), subject to at most
+``max_cameras`` cameras and, optionally, a total cost of at most ``max_cost``.
+
+Discrete stage, over the grid of :func:`candidate_grid` (mount x height x camera type x lens x tilt x pan):
+
+* ``greedy``: add the configuration of largest gain (gain per cost under a cost limit) until the
+  count or the money runs out or nothing gains; *lazy* evaluation keeps each configuration's last
+  gain as an upper bound and re-evaluates only the top of the queue.  Without fusion the objective
+  is a weighted coverage, monotone submodular: greedy is within 1 - 1/e of the optimum and the lazy
+  bound is exact.  **With fusion it is not submodular**: two cameras can together meet a sample that
+  neither meets alone, so a gain can grow as cameras are added; the lazy bound may then be stale and
+  greedy carries no guarantee (``lazy=False`` re-evaluates every candidate in every round).  With
+  fusion, greedy scores the progress towards the requirement for every pick but the last
+  (:func:`greedy`, ``soft``).
+* ``milp``: an integer program (:func:`scipy.optimize.milp`, HiGHS) over the same grid, exact for the
+  objective in which a sample counts when one camera or the fused pair of two cameras meets it
+  (pair variables ``z_ab <= x_a, x_b`` for every pair that meets some sample neither meets alone).
+  Samples met only by three or more fused cameras are not in the program (they are counted when the
+  chosen layout is evaluated), so for ``max_cameras <= 2`` it is the exact optimum over the grid.
+  Its size grows with the square of the grid: meant for small and medium grids.
+* ``both``: run both and keep the better layout (by the full objective).
+
+Continuous refinement (:func:`refine`): pattern search over each chosen camera's pan, tilt and height
+(within its mount's range), seeded; a move is kept only if it strictly increases the objective, so
+the result is never worse than its start.
+"""
+
+from __future__ import annotations
+
+import heapq
+import os
+import time
+import warnings
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass, field
+from multiprocessing import get_context
+
+import numpy as np
+from scipy import sparse
+from scipy.optimize import Bounds, LinearConstraint, milp
+from tqdm.auto import tqdm
+
+from ..errors import InputError
+from .coverage import (
+    CameraConfig,
+    LayoutEvaluation,
+    build_camera,
+    camera_information,
+    evaluate_information,
+    information_lambda_min,
+    requirement_threshold,
+    semi_major_from_info,
+)
+from .geometry import GroundSamples, ground_samples
+
+__all__ = ["candidate_grid", "Coverage", "precompute", "Objective", "greedy", "milp_select", "refine",
+           "PlanResult", "plan", "config_cost", "layout_information"]
+
+METHODS = ("greedy", "milp", "both")
+#: largest (candidates^2 x samples) for which the integer program is built (its pair enumeration)
+MILP_MAX_WORK = 1e8
+
+
+def candidate_grid(site) -> list[CameraConfig]:
+    """Every configuration of the site's search grid (mount x height x camera x lens x tilt x pan)."""
+    g = site.search
+    out = []
+    for m in site.mounts:
+        for h in g.heights_m(m):
+            for ct in site.cameras:
+                for lens in ct.lenses:
+                    for t in g.tilts_deg:
+                        out += [CameraConfig(m.name, ct.name, lens.name, float(h), float(p), float(t))
+                                for p in g.pans_deg()]
+    return out
+
+
+def config_cost(site, cfg: CameraConfig) -> float:
+    """Mount cost + camera cost of one configuration."""
+    return site.mount(cfg.mount).cost + site.camera_type(cfg.camera_type).cost
+
+
+@dataclass
+class Coverage:
+    """What every candidate sees: sample indices and information ``(n_c, 3)`` per configuration."""
+
+    configs: list[CameraConfig]
+    index: list[np.ndarray]
+    info: list[np.ndarray]
+    mount: np.ndarray
+    cost: np.ndarray
+
+
+def _infos_of(site, xy_world_m, configs) -> list[tuple[np.ndarray, np.ndarray]]:
+    out = []
+    for cfg in configs:
+        i, inf = camera_information(build_camera(site, cfg), site.camera_type(cfg.camera_type).budget, xy_world_m,
+                                    site.occluders)
+        out.append((i.astype(np.int64), inf))
+    return out
+
+
+#: candidates per task of the worker processes
+CHUNK = 64
+
+
+def resolve_workers(workers: int | None, n_configs: int) -> int:
+    """``workers`` (None: one per CPU, at most 4, and 1 for grids below 500 candidates).
+
+    More than one worker starts processes with ``spawn``: a script that calls the planner with workers
+    must keep its top level under ``if __name__ == "__main__":``.
+    """
+    if workers is None:
+        return 1 if n_configs < 500 else max(1, min(os.cpu_count() or 1, 4))
+    if isinstance(workers, bool) or not isinstance(workers, int | np.integer) or workers < 1:
+        raise InputError("workers", workers, "an integer >= 1 (or None: automatic)")
+    return int(workers)
+
+
+def precompute(site, samples: GroundSamples, configs, *, progress: bool = False, workers: int | None = 1) -> Coverage:
+    """:func:`camera_information` of every configuration (with a progress bar).
+
+    ``workers > 1`` spreads the candidates over that many processes (``spawn``: each imports the package
+    and loads the compiled kernels from numba's cache, about a second); the result is the same.
+    """
+    configs = list(configs)
+    names = [m.name for m in site.mounts]
+    w = resolve_workers(workers, len(configs))
+    bar = tqdm(total=len(configs), desc="candidates", unit="cam", disable=not progress, leave=False)
+    if w == 1:
+        infos = []
+        for k in range(0, len(configs), CHUNK):
+            infos += _infos_of(site, samples.xy_world_m, configs[k:k + CHUNK])
+            bar.update(len(configs[k:k + CHUNK]))
+    else:
+        with ProcessPoolExecutor(max_workers=w, mp_context=get_context("spawn")) as pool:
+            futs = [pool.submit(_infos_of, site, samples.xy_world_m, configs[k:k + CHUNK])
+                    for k in range(0, len(configs), CHUNK)]
+            infos = []
+            for f in futs:
+                part = f.result()
+                infos += part
+                bar.update(len(part))
+    bar.close()
+    return Coverage(configs, [i for i, _ in infos], [x for _, x in infos],
+                    np.array([names.index(c.mount) for c in configs], dtype=np.int64),
+                    np.array([config_cost(site, c) for c in configs]))
+
+
+@dataclass
+class Objective:
+    """Weights ``w_i a_i`` and requirements of the samples; ``fusion`` and ``confidence`` of the test."""
+
+    weight: np.ndarray
+    requirement_m: np.ndarray
+    fusion: bool = True
+    confidence: float = 0.95
+
+    @classmethod
+    def of(cls, site, samples: GroundSamples, *, fusion: bool = True) -> Objective:
+        w = np.array([z.weight for z in site.zones])[samples.zone] * samples.area_m2
+        req = np.array([z.max_semi_major_m for z in site.zones])[samples.zone]
+        return cls(w, req, fusion, site.search.confidence)
+
+    @property
+    def threshold(self) -> np.ndarray:
+        """``lambda_min(I)`` each sample needs (1/m^2)."""
+        return requirement_threshold(self.requirement_m, self.confidence)
+
+    def meets(self, info, idx) -> np.ndarray:
+        return semi_major_from_info(info, self.confidence) <= self.requirement_m[idx]
+
+    def value(self, infos) -> float:
+        """Objective of a layout given each camera's ``(index, info)``."""
+        n = self.weight.shape[0]
+        if self.fusion:
+            total = np.zeros((n, 3))
+            for idx, inf in infos:
+                np.add.at(total, idx, inf)
+            met = self.meets(total, slice(None))
+        else:
+            met = np.zeros(n, dtype=bool)
+            for idx, inf in infos:
+                met[idx] |= self.meets(inf, idx)
+        return float(self.weight[met].sum())
+
+
+def _affordable(cov, used_mounts, spent, max_cost):
+    ok = ~np.isin(cov.mount, list(used_mounts))
+    if max_cost is not None:
+        ok &= cov.cost <= max_cost - spent + 1e-12
+    return ok
+
+
+def greedy(cov: Coverage, obj: Objective, max_cameras: int, max_cost: float | None = None, *,
+           lazy: bool = True, soft: bool | None = None) -> list[int]:
+    """Greedy selection (see the module docstring); returns indices into ``cov.configs``, in order.
+
+    ``soft`` scores a candidate by the *progress* it brings, ``sum_i w_i (min(1, lambda_min(I_i) / t_i)``
+    after - before), ``t_i`` the information the sample's requirement needs: a camera that halves the
+    shortfall of samples that only a second camera will bring over the line is credited for it, where
+    the met-area gain would be zero.  ``soft=None`` (default): with fusion, the progress for every pick
+    but the last (after the last, nothing completes a partial progress), which is chosen by its met-area
+    gain; ``soft=False``: the met-area gain throughout (the only score without fusion).
+    """
+    auto = soft is None
+    use_soft = obj.fusion if auto else bool(soft)
+    n = obj.weight.shape[0]
+    S, score = np.zeros((n, 3)), np.zeros(n)
+    chosen, used, spent = [], set(), 0.0
+    bound = np.full(len(cov.configs), np.inf)
+    tiny = 1e-9 * max(float(cov.cost.max()), 1.0)
+    state = {"soft": use_soft}
+
+    def sample_score(info, idx):
+        if state["soft"]:
+            return np.clip(information_lambda_min(info) / obj.threshold[idx], 0.0, 1.0)
+        return obj.meets(info, idx).astype(np.float64)
+
+    def gain(c):
+        idx, inf = cov.index[c], cov.info[c]
+        new = sample_score(S[idx] + inf, idx) if obj.fusion else np.maximum(score[idx], sample_score(inf, idx))
+        return float(obj.weight[idx] @ (new - score[idx]))
+
+    def key(g, c):
+        return g if max_cost is None else g / max(cov.cost[c], tiny)
+
+    for step in range(max_cameras):
+        if auto and state["soft"] and step == max_cameras - 1:  # the last pick: by met area
+            state["soft"] = False
+            score = obj.meets(S, slice(None)).astype(np.float64)
+            bound[:] = np.inf
+        alive = np.flatnonzero(_affordable(cov, used, spent, max_cost))
+        if alive.size == 0:
+            break
+        if lazy:
+            c = _lazy_pick(alive, bound, gain, key)
+        else:
+            for a in alive:
+                bound[a] = gain(a)
+            c = int(alive[int(np.argmax([key(bound[a], a) for a in alive]))])
+        if not bound[c] > 1e-12:
+            break
+        chosen.append(c)
+        used.add(int(cov.mount[c]))
+        spent += float(cov.cost[c])
+        idx = cov.index[c]
+        S[idx] += cov.info[c]
+        score[idx] = sample_score(S[idx], idx) if obj.fusion else np.maximum(score[idx], sample_score(cov.info[c], idx))
+    return chosen
+
+
+def _lazy_pick(alive, bound, gain, key) -> int:
+    """Pop the best upper bound, re-evaluate it, until the top of the queue is fresh (lazy greedy)."""
+    heap = [(-key(bound[c], c), int(c), False) for c in alive]
+    heapq.heapify(heap)
+    while True:
+        _, c, fresh = heapq.heappop(heap)
+        if fresh:
+            return c
+        bound[c] = gain(c)
+        heapq.heappush(heap, (-key(bound[c], c), c, True))
+
+
+def _dense(cov: Coverage, n: int) -> np.ndarray:
+    D = np.zeros((len(cov.configs), n, 3))
+    for c, (idx, inf) in enumerate(zip(cov.index, cov.info, strict=True)):
+        D[c, idx] = inf
+    return D
+
+
+def _pair_cover(cov: Coverage, obj: Objective, single: np.ndarray, D: np.ndarray):
+    """Pairs ``(a, b)`` of configurations on different mounts whose fusion meets samples neither meets alone."""
+    pairs, rows = [], []
+    C = D.shape[0]
+    for a in range(C - 1):
+        b = np.arange(a + 1, C)
+        b = b[cov.mount[b] != cov.mount[a]]
+        if b.size == 0:
+            continue
+        both = obj.meets(D[a][None] + D[b], slice(None)) & ~single[a][None] & ~single[b]
+        for j in np.flatnonzero(both.any(1)):
+            pairs.append((a, int(b[j])))
+            rows.append(np.flatnonzero(both[j]))
+    return pairs, rows
+
+
+def milp_select(cov: Coverage, obj: Objective, max_cameras: int, max_cost: float | None = None, *,
+                time_limit_s: float | None = None) -> list[int]:
+    """The integer program of the module docstring; returns the chosen indices into ``cov.configs``.
+
+    Stopped at ``time_limit_s`` before proving its optimum, it returns its best layout so far with a
+    ``RuntimeWarning`` (that layout can be poor).
+    """
+    return _milp(cov, obj, max_cameras, max_cost, time_limit_s)[0]
+
+
+def _milp(cov, obj, max_cameras, max_cost, time_limit_s) -> tuple[list[int], bool]:
+    n, C = obj.weight.shape[0], len(cov.configs)
+    if float(C) * C * n > MILP_MAX_WORK:
+        raise InputError("method", "milp", f"a grid with candidates^2 x samples <= {MILP_MAX_WORK:g} (this one: "
+                         f"{C}^2 x {n}): use method greedy, a coarser grid or a larger --screen-step")
+    D = _dense(cov, n)
+    single = np.zeros((C, n), dtype=bool)
+    for c in range(C):
+        single[c, cov.index[c]] = obj.meets(cov.info[c], cov.index[c])
+    pairs, prow = _pair_cover(cov, obj, single, D) if obj.fusion and max_cameras >= 2 else ([], [])
+    Pn = len(pairs)
+    keep = np.flatnonzero(single.any(0) | np.isin(np.arange(n), np.concatenate(prow) if prow else []))
+    m = keep.size
+    pos = np.full(n, -1)
+    pos[keep] = np.arange(m)
+    # cover rows: y_i - sum_c A_ci x_c - sum_p B_pi z_p <= 0
+    sc, si = np.nonzero(single[:, keep])
+    pr = np.concatenate([pos[r] for r in prow]) if prow else np.zeros(0, dtype=np.int64)
+    pc = np.repeat(np.arange(Pn), [r.size for r in prow]) if prow else np.zeros(0, dtype=np.int64)
+    cover = sparse.coo_matrix((np.concatenate([-np.ones(si.size), -np.ones(pr.size), np.ones(m)]),
+                               (np.concatenate([si, pr, np.arange(m)]),
+                                np.concatenate([sc, C + pc, C + Pn + np.arange(m)]))), shape=(m, C + Pn + m))
+    link_r = np.repeat(np.arange(2 * Pn), 2)
+    link_c = np.array([[C + p, pairs[p][k]] for p in range(Pn) for k in (0, 1)], dtype=np.int64).reshape(-1)
+    link = sparse.coo_matrix((np.tile([1.0, -1.0], 2 * Pn), (link_r, link_c)), shape=(2 * Pn, C + Pn + m))
+    M = int(cov.mount.max()) + 1
+    per_mount = sparse.coo_matrix((np.ones(C), (cov.mount, np.arange(C))), shape=(M, C + Pn + m))
+    totals = [np.concatenate([np.ones(C), np.zeros(Pn + m)])]
+    ub = [float(max_cameras)]
+    if max_cost is not None:
+        totals.append(np.concatenate([cov.cost, np.zeros(Pn + m)]))
+        ub.append(float(max_cost))
+    A = sparse.vstack([cover, link, per_mount, sparse.csr_matrix(np.array(totals))]).tocsr()
+    hi = np.concatenate([np.zeros(m + 2 * Pn), np.ones(M), ub])
+    c = np.concatenate([np.zeros(C + Pn), -obj.weight[keep]])
+    integrality = np.concatenate([np.ones(C), np.zeros(Pn + m)])
+    options = {"disp": False} if time_limit_s is None else {"disp": False, "time_limit": float(time_limit_s)}
+    res = milp(c, constraints=LinearConstraint(A, -np.inf, hi), integrality=integrality, bounds=Bounds(0, 1),
+               options=options)
+    if res.x is None and res.status != 1:
+        raise InputError("method", "milp", f"a solvable integer program ({res.message})")
+    picks = [] if res.x is None else [int(i) for i in np.flatnonzero(res.x[:C] > 0.5)]
+    if res.status != 0:
+        warnings.warn(f"milp stopped before proving its optimum ({res.message}); its best layout so far is kept "
+                      "(plan() compares it with greedy's)", RuntimeWarning, stacklevel=2)
+        return picks, False
+    return picks, True
+
+
+def layout_information(site, samples: GroundSamples, configs, *, budget_scale: float = 1.0):
+    """``(index, info)`` of each configuration of a layout (``budget_scale`` multiplies every sigma)."""
+    out = []
+    for cfg in configs:
+        b = site.camera_type(cfg.camera_type).budget
+        out.append(camera_information(build_camera(site, cfg), b if budget_scale == 1.0 else b.scaled(budget_scale),
+                                      samples.xy_world_m, site.occluders))
+    return out
+
+
+def _clip(site, cfg: CameraConfig, var: str, value: float) -> float:
+    if var == "pan_deg":
+        return float(np.mod(value, 360.0))
+    if var == "tilt_deg":
+        return float(np.clip(value, 0.5, 89.5))
+    lo, hi = site.mount(cfg.mount).height_range_m
+    return float(np.clip(value, lo, hi))
+
+
+def _step(site, cfg: CameraConfig, var: str) -> float:
+    """First step of the pattern search: half the pan grid, 4 deg of tilt, a quarter of the height range."""
+    if var == "pan_deg":
+        return site.search.pan_step_deg / 2.0
+    if var == "tilt_deg":
+        return 4.0
+    lo, hi = site.mount(cfg.mount).height_range_m
+    return (hi - lo) / 4.0
+
+
+def refine(site, samples: GroundSamples, configs, obj: Objective, *, seed: int = 0, max_evals: int = 200,
+           levels: int = 3, progress: bool = False) -> tuple[list[CameraConfig], float, float, int]:
+    """Pattern search over pan, tilt and height of each camera (see the module docstring).
+
+    Returns ``(configs, start_value, value, n_evaluations)``; ``value >= start_value`` always.
+    """
+    configs = list(configs)
+    infos = layout_information(site, samples, configs)
+    start = best = obj.value(infos)
+    rng = np.random.default_rng(seed)
+    evals = 0
+    bar = tqdm(total=max_evals, desc="refine", unit="eval", disable=not progress, leave=False)
+    for lev in range(levels):
+        scale = 2.0 ** -lev
+        improved = True
+        while improved and evals < max_evals:
+            improved = False
+            for k in rng.permutation(len(configs)):
+                for var in rng.permutation(["pan_deg", "tilt_deg", "height_m"]):
+                    s = scale * _step(site, configs[k], var)
+                    for sign in (1.0, -1.0):
+                        if evals >= max_evals or s <= 0:
+                            break
+                        trial = configs[k].replace(**{var: _clip(site, configs[k], var,
+                                                                 getattr(configs[k], var) + sign * s)})
+                        if trial == configs[k]:
+                            continue
+                        evals += 1
+                        bar.update(1)
+                        t_info = layout_information(site, samples, [trial])[0]
+                        v = obj.value(infos[:k] + [t_info] + infos[k + 1:])
+                        if v > best:
+                            configs[k], infos[k], best, improved = trial, t_info, v, True
+                            break
+    bar.close()
+    return configs, start, best, evals
+
+
+@dataclass
+class PlanResult:
+    """A plan: the chosen configurations, their evaluation and how they were found.
+
+    ``discrete_value`` is the objective after the discrete stage, ``value`` after the refinement
+    (m^2 of weighted met area; ``value >= discrete_value``); ``seconds`` per stage.
+    """
+
+    configs: list[CameraConfig]
+    evaluation: LayoutEvaluation
+    discrete_value: float
+    value: float
+    method: str
+    n_candidates: int
+    samples: GroundSamples
+    seconds: dict = field(default_factory=dict)
+    discrete_configs: list[CameraConfig] = field(default_factory=list)
+
+
+def _discrete(cov, obj, method, k, max_cost, lazy, time_limit_s):
+    picks = {}
+    if method in ("greedy", "both"):
+        picks["greedy"] = greedy(cov, obj, k, max_cost, lazy=lazy)
+    if method in ("milp", "both"):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            picks["milp"], optimal = _milp(cov, obj, k, max_cost, time_limit_s)
+        if not optimal and "greedy" not in picks:  # stopped early: its incumbent against greedy's layout
+            picks["greedy"] = greedy(cov, obj, k, max_cost, lazy=lazy)
+    vals = {m: obj.value([(cov.index[c], cov.info[c]) for c in p]) for m, p in picks.items()}
+    best = max(vals, key=lambda m: (vals[m], m == "milp"))
+    return [cov.configs[c] for c in picks[best]], vals[best], best
+
+
+def plan(site, *, method: str = "greedy", max_cameras: int | None = None, max_cost: float | None = None,
+         fusion: bool = True, refine_layout: bool = True, seed: int = 0, lazy: bool = True,
+         max_refine_evals: int = 200, time_limit_s: float | None = 300.0, screen_step: int = 1,
+         workers: int | None = 1, progress: bool = False) -> PlanResult:
+    """Plan a site (see the module docstring): discrete stage, then the continuous refinement.
+
+    Parameters
+    ----------
+    site : Site
+        From :func:`footprint_uq.planning.site.load_site`.
+    method : {"greedy", "milp", "both"}
+        The discrete stage.
+    max_cameras, max_cost : int, float, optional
+        K and the cost limit (mounts + cameras); default: the site file's ``search`` section.
+    fusion : bool
+        A sample is met by the fused covariance of every camera that sees it (else by one camera).
+    refine_layout : bool
+        Run :func:`refine` after the discrete stage (never worse than its start).
+    seed : int
+        Seed of the refinement's visiting order: same site, options and seed give the same layout.
+    lazy : bool
+        Lazy evaluation in :func:`greedy`.
+    max_refine_evals : int
+        Largest number of layouts the refinement evaluates.
+    time_limit_s : float, optional
+        Time limit of the integer program (HiGHS keeps its best layout found by then).
+    screen_step : int
+        ``> 1``: the discrete stage sees every ``screen_step``-th sample in both directions, each standing
+        for ``screen_step^2`` cells (about ``screen_step^2`` times faster); the refinement and the
+        evaluation always use every sample.
+    workers : int or None
+        Processes of the candidate screening (:func:`precompute`; None: automatic, see
+        :func:`resolve_workers`).
+    progress : bool
+        tqdm progress bars on stderr.
+
+    Returns
+    -------
+    PlanResult
+    """
+    if method not in METHODS:
+        raise InputError("method", method, f"one of {list(METHODS)}")
+    k = site.search.max_cameras if max_cameras is None else int(max_cameras)
+    if k < 1:
+        raise InputError("max_cameras", max_cameras, "an integer >= 1")
+    cost = site.search.max_cost if max_cost is None else float(max_cost)
+    t = {"start": time.perf_counter()}
+    if isinstance(screen_step, bool) or not isinstance(screen_step, int | np.integer) or screen_step < 1:
+        raise InputError("screen_step", screen_step, "an integer >= 1")
+    samples = ground_samples(site)
+    obj = Objective.of(site, samples, fusion=fusion)
+    screen = samples.thinned(int(screen_step))
+    configs = candidate_grid(site)
+    cov = precompute(site, screen, configs, progress=progress, workers=workers)
+    t["precompute"] = time.perf_counter()
+    chosen, _, used = _discrete(cov, Objective.of(site, screen, fusion=fusion), method, k, cost, lazy, time_limit_s)
+    t["discrete"] = time.perf_counter()
+    final = chosen
+    dval = value = obj.value(layout_information(site, samples, chosen))
+    if refine_layout and chosen:
+        final, _, value, _ = refine(site, samples, chosen, obj, seed=seed, max_evals=max_refine_evals,
+                                        progress=progress)
+    t["refine"] = time.perf_counter()
+    ev = evaluate_information(site, samples, layout_information(site, samples, final), fusion=fusion)
+    t["evaluate"] = time.perf_counter()
+    keys = list(t)
+    secs = {b: t[b] - t[a] for a, b in zip(keys, keys[1:], strict=False)}
+    secs["total"] = t[keys[-1]] - t["start"]
+    return PlanResult(final, ev, dval, value, used, len(configs), samples, secs, chosen)

@@ -1,0 +1,88 @@
+"""The jobs behind ``footprint-uq plan`` and ``plan --evaluate``: options -> files written.
+
+``out_dir`` receives ``layout.yaml`` and ``cameras/*.yaml`` (plan only), ``plan.json`` (or
+``evaluation.json``) and ``report.html``; every file is written atomically.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from ..planning.geometry import ground_samples
+from ..planning.layout import evaluate_cameras, layout_from_configs, read_layout, sensitivity, write_json, write_layout
+from ..planning.optimise import plan
+from ..planning.site import load_site
+from .planning import write_plan_report
+
+__all__ = ["PlanOptions", "run_plan", "run_evaluate"]
+
+
+@dataclass
+class PlanOptions:
+    """Options of ``footprint-uq plan`` (None: the site file's ``search`` section)."""
+
+    method: str = "greedy"
+    max_cameras: int | None = None
+    max_cost: float | None = None
+    fusion: bool = True
+    refine: bool = True
+    seed: int = 0
+    screen_step: int = 1
+    max_refine_evals: int = 200
+    sensitivity: bool = True
+    progress: bool = False
+    dpi: int = 100
+    workers: int | None = 1
+
+
+def _summary(evaluation) -> dict:
+    return {"fraction_met": evaluation.fraction, "weighted_met_area_m2": evaluation.value,
+            "zones": [z.row() for z in evaluation.zones]}
+
+
+def _finish(site, samples, cameras, out: Path, name: str, extra: dict, opts: PlanOptions) -> dict[str, Path]:
+    ev, infos = evaluate_cameras(site, samples, cameras, fusion=opts.fusion)
+    sens = sensitivity(site, samples, cameras, fusion=opts.fusion) if opts.sensitivity else None
+    files = {name: write_json(out / f"{name}.json", {**extra, **_summary(ev), "sensitivity": sens})}
+    info = {k: v for k, v in extra.items() if not isinstance(v, list | dict)}
+    files["report"] = write_plan_report(out / "report.html", site, samples, cameras, ev, infos,
+                                        sensitivity_rows=sens, plan_info=info, dpi=opts.dpi)
+    return files
+
+
+def run_plan(site_path, out_dir, opts: PlanOptions | None = None):
+    """Plan the site of ``site_path`` and write the layout, ``plan.json`` and the report.
+
+    Returns ``(PlanResult, files)``.
+    """
+    opts = opts or PlanOptions()
+    site = load_site(site_path)
+    res = plan(site, method=opts.method, max_cameras=opts.max_cameras, max_cost=opts.max_cost, fusion=opts.fusion,
+               refine_layout=opts.refine, seed=opts.seed, screen_step=opts.screen_step,
+               max_refine_evals=opts.max_refine_evals, workers=opts.workers, progress=opts.progress)
+    out = Path(out_dir)
+    cameras = layout_from_configs(site, res.configs)
+    files = write_layout(cameras, out, site_path=Path(site_path).resolve())
+    extra = {"site": str(Path(site_path).resolve()), "method": res.method, "candidates": res.n_candidates,
+             "samples": len(res.samples), "seed": opts.seed, "screen_step": opts.screen_step,
+             "fusion": opts.fusion, "discrete_value_m2": res.discrete_value, "refined_value_m2": res.value,
+             "seconds_total": res.seconds.get("total"),
+             "cameras": [c.__dict__ for c in res.configs]}
+    files.update(_finish(site, res.samples, cameras, out, "plan", extra, opts))
+    return res, files
+
+
+def run_evaluate(site_path, layout_path, out_dir, opts: PlanOptions | None = None):
+    """Evaluate the layout of ``layout_path`` on the site: ``evaluation.json`` and the report.
+
+    Returns ``(LayoutEvaluation, files)``.
+    """
+    opts = opts or PlanOptions()
+    site = load_site(site_path)
+    cameras = read_layout(layout_path, site)
+    samples = ground_samples(site)
+    files = _finish(site, samples, cameras, Path(out_dir), "evaluation",
+                    {"site": str(Path(site_path).resolve()), "layout": str(Path(layout_path).resolve()),
+                     "fusion": opts.fusion, "samples": len(samples)}, opts)
+    return evaluate_cameras(site, samples, cameras, fusion=opts.fusion)[0], files
