@@ -949,13 +949,13 @@ def _stage_centre_cov(S, nob, K):
 
 
 def alloc_outputs(N: int, K: int, *, joint: bool = False, corners: bool = True, alloc=np.empty,
-                  shared_rank: int = 0):
+                  shared_rank: int | None = None):
     """Output arrays of :func:`process_corners` for N objects of K corners (allocated here, by numpy:
     numba's own allocations of large arrays are fresh pages every call, ~40 % of the kernel's time).
 
     ``corners=False`` gives (0, ...) per-corner coordinate/covariance/nonlinearity arrays: the kernel then
-    skips them.  ``shared_rank`` r > 0 (the factor's rank) adds the centre's whitened parameter Jacobian
-    (N, 2, r) (the camera-level part of its covariance is ``B B^T``; the tracker needs B itself); 0 gives
+    skips them.  ``shared_rank`` r (the factor's rank) adds the centre's whitened parameter Jacobian
+    (N, 2, r) (the camera-level part of its covariance is ``B B^T``; the tracker needs B itself); None gives
     (0, 2, 0): not written.
     ``alloc(shape, dtype)`` may supply the memory (default :func:`numpy.empty`).
     """
@@ -964,13 +964,13 @@ def alloc_outputs(N: int, K: int, *, joint: bool = False, corners: bool = True, 
             alloc((N if joint else 0, 2 * K, 2 * K), np.float64), alloc((N, K), np.int8), alloc((N, K), np.bool_),
             alloc((N,), np.int64), alloc((nc, 2, 2), np.float64), alloc((N,), np.int32), alloc((N,), np.int64),
             alloc((len(OBJ_ROWS), N), np.float64), alloc((7, N), np.int32), alloc((nc, K), np.float64),
-            alloc((N if shared_rank > 0 else 0, 2, shared_rank), np.float64))
+            alloc((0, 2, 0) if shared_rank is None else (N, 2, shared_rank), np.float64))
 
 
-def outputs_max_bytes(N: int, K: int, *, joint: bool = False, shared_rank: int = 0) -> int:
+def outputs_max_bytes(N: int, K: int, *, joint: bool = False, shared_rank: int | None = None) -> int:
     """Bytes of the largest array of :func:`alloc_outputs` (N, K, joint, shared_rank) and of the (N, K, 2)
     pixels: one number for an allocation policy that decides once per frame instead of once per array."""
-    return 8 * N * max(4 * K, 4 * K * K if joint else 0, len(OBJ_ROWS), 7, 2 * shared_rank)
+    return 8 * N * max(4 * K, 4 * K * K if joint else 0, len(OBJ_ROWS), 7, 2 * (shared_rank or 0))
 
 
 #: shape of the scratch buffer ``S`` of :func:`process_corners` (float64; one per call or per thread)

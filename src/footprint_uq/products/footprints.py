@@ -930,7 +930,7 @@ class FrameProcessor:
                                            extra_reason=extra if extra.shape[0] == N else None,
                                            **self._flag_options())
         det, mode = self._det(pixel_cov_px2, N, K)
-        r = self._r if self.shared_jacobian else 0
+        r = self._r if self.shared_jacobian else None
         alloc = reusable_allocator(self._fk.outputs_max_bytes(N, K, joint=self.joint_cov, shared_rank=r))
         out = self._fk.alloc_outputs(N, K, joint=self.joint_cov, corners=self.corner_outputs, alloc=alloc,
                                      shared_rank=r)
@@ -992,7 +992,7 @@ class FrameProcessor:
             raise InputError("yaw_unit", yaw_unit, "'rad' (column yaw_rad) or 'deg' (column yaw_deg)")
         N = b.shape[0]
         det, mode = self._det(pixel_cov_px2, N, 4)
-        r = self._r if self.shared_jacobian else 0
+        r = self._r if self.shared_jacobian else None
         alloc = reusable_allocator(self._fk.outputs_max_bytes(N, 4, joint=self.joint_cov, shared_rank=r))
         uv = alloc((N if self.corner_outputs else 0, 4, 2), np.float64)
         out = self._fk.alloc_outputs(N, 4, joint=self.joint_cov, corners=self.corner_outputs, alloc=alloc,
