@@ -19,9 +19,10 @@ class ConstantVelocity:
     """Nearly constant velocity: continuous white-noise acceleration of spectral density ``accel_psd_m2ps3``
     on each axis (Bar-Shalom et al., *Estimation with Applications to Tracking and Navigation*, 6.2.2).
 
-    Over a step ``dt`` the velocity changes by a random amount of variance ``q dt`` per axis: ``q`` = 2 m^2/s^3
-    lets a road user's velocity wander by about 1.4 m/s in one second (a car braking at 3 m/s^2 or turning
-    at 20 deg/s at 10 m/s exceeds it for a second or two; docs/uncertainty-model.md shows what that costs).
+    Over a step ``dt`` the velocity changes by a random amount of variance ``q dt`` per axis: the default
+    ``q`` = 3 m^2/s^3 lets a road user's velocity wander by about 1.7 m/s in one second.  Sustained manoeuvres
+    (braking at 2-4 m/s^2, turning at up to 4 m/s^2 of centripetal acceleration) are within it: the sweep of
+    docs/uncertainty-model.md ("Motion") measures the coverage; raise ``q`` for more aggressive motion.
 
     Parameters
     ----------
@@ -29,7 +30,7 @@ class ConstantVelocity:
         Spectral density ``q`` of the acceleration noise, m^2/s^3 (> 0).
     """
 
-    accel_psd_m2ps3: float = 2.0
+    accel_psd_m2ps3: float = 3.0
 
     def __post_init__(self):
         object.__setattr__(self, "accel_psd_m2ps3", as_float("accel_psd_m2ps3", self.accel_psd_m2ps3, positive=True))

@@ -55,7 +55,7 @@ def default_camera() -> PanTiltCamera:
 
 
 def trajectories(scenario: str, n_runs: int, rate_hz: float, duration_s: float, rng, *,
-                 truth_accel_psd_m2ps3: float = 0.5) -> Trajectories:
+                 truth_accel_psd_m2ps3: float = 2.5) -> Trajectories:
     """Seeded truth of ``n_runs`` objects in front of :func:`default_camera` (25-55 m north of it at the start).
 
     straight: 3-15 m/s in any direction; turning: 6-12 m/s at a turn rate of +-(8-20) deg/s (centripetal
@@ -121,7 +121,7 @@ class CoverageResult(NamedTuple):
 
 def coverage(scenario: str, rate_hz: float, *, n_runs: int = 500, duration_s: float = 3.0, seed: int = 0,
              budget="basler1@deg", detector_sigma_px: float = 1.5, calibration: str = "consider",
-             config: TrackerConfig | None = None, truth_accel_psd_m2ps3: float = 0.5, camera=None) -> CoverageResult:
+             config: TrackerConfig | None = None, truth_accel_psd_m2ps3: float = 2.5, camera=None) -> CoverageResult:
     """Run the seeded sweep (module doc) and count how often the tracker's 95 % regions hold the truth.
 
     Every frame from the second detection on is evaluated (velocity: 2-D ellipse, ``chi2 = 5.99``; heading:

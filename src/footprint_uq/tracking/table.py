@@ -43,7 +43,7 @@ class TrackerConfig:
         :data:`CALIBRATION_MODES`; anything but "consider" is for comparisons only.
     """
 
-    accel_psd_m2ps3: float = 2.0
+    accel_psd_m2ps3: float = 3.0
     timeout_s: float = 1.0
     gate_chi2: float = DEFAULT_GATE_CHI2
     sigma_v0_mps: float = 50.0
@@ -78,6 +78,13 @@ class TrackOutput(NamedTuple):
     cov_xy_m2: np.ndarray
     v_mps: np.ndarray
     cov_v_m2ps2: np.ndarray
+
+    @classmethod
+    def untracked(cls, n: int) -> TrackOutput:
+        """n objects without a track (track_id -1, NaN)."""
+        nan = np.nan
+        return cls(np.full(n, -1, np.int64), np.zeros(n, bool), np.zeros(n, np.int64), np.full(n, nan),
+                   np.full((n, 2), nan), np.full((n, 2, 2), nan), np.full((n, 2), nan), np.full((n, 2, 2), nan))
 
 
 class TrackTable:
@@ -172,8 +179,9 @@ class TrackTable:
         Parameters
         ----------
         time_s : float
-            The frame's time, s (frames must come in time order: a frame not later than the previous one is not
-            tracked, and counted in :attr:`n_stale_frames`).
+            The frame's time, s.  Frames must come in time order: a frame earlier than the previous one is not
+            tracked (counted in :attr:`n_stale_frames`); one at the same time continues that frame (a frame given
+            in parts), where an id already updated at that time is a repeated id.
         object_ids : sequence of n hashables (None: not tracked; a repeated id: only its first object is)
         xy_m : (n, 2)               centres in W (NaN: no centre this frame; the track waits, it may time out)
         cov_frame_m2 : (n, 2, 2)    per-frame part of their covariance, m^2
@@ -189,8 +197,8 @@ class TrackTable:
         if B.shape != (n, 2, B.shape[2] if B.ndim == 3 else -1) or (self.config.calibration == "consider"
                                                                     and B.shape[2] != self.rank):
             raise InputError("shared_m", B.shape, f"shape ({n}, 2, {self.rank})")
-        out = _empty_output(n)
-        if t <= self._last_time:
+        out = TrackOutput.untracked(n)
+        if t < self._last_time:
             self.n_stale_frames += 1
             return out
         self._last_time = t
@@ -199,13 +207,19 @@ class TrackTable:
         ok = np.isfinite(xy).all(1) & np.isfinite(cov_frame_m2).all((1, 2)) & np.isfinite(B).all((1, 2))
         first = dict(zip(reversed(ids), range(n - 1, -1, -1), strict=True))
         first.pop(None, None)
-        rows = np.fromiter(first.values(), np.int64, len(first))
+        rows = np.sort(np.fromiter(first.values(), np.int64, len(first)))
         rows = rows[ok[rows]]
         if rows.size == 0:
             return out
         keys = [ids[i] for i in rows.tolist()]
         slots = np.fromiter(map(self._index.get, keys, repeat(-1)), np.int64, rows.size)
         meas = self._measurement(xy[rows], np.asarray(cov_frame_m2, dtype=np.float64)[rows], B[rows])
+        again = slots >= 0
+        again[again] = self._t_last[slots[again]] == t  # updated at this time already: a repeated id
+        if again.any():
+            rows, slots, keys = rows[~again], slots[~again], [k for k, a in zip(keys, again.tolist(), strict=True)
+                                                             if not a]
+            meas = _take(meas, np.flatnonzero(~again))
         new = slots < 0
         old = np.flatnonzero(~new)
         if old.size:
@@ -262,11 +276,6 @@ class TrackTable:
 def _take(m: SplitMeasurement, i: np.ndarray) -> SplitMeasurement:
     return SplitMeasurement(m.xy_m[i], m.cov_frame_m2[i], m.shared_m[i])
 
-
-def _empty_output(n: int) -> TrackOutput:
-    nan = np.nan
-    return TrackOutput(np.full(n, -1, np.int64), np.zeros(n, bool), np.zeros(n, np.int64), np.full(n, nan),
-                       np.full((n, 2), nan), np.full((n, 2, 2), nan), np.full((n, 2), nan), np.full((n, 2, 2), nan))
 
 
 class SharedJacobianAt:
