@@ -92,6 +92,39 @@ def test_schmidt_update_is_the_augmented_kalman_filter_on_the_state(rng):
     assert (init.P[:, 2:, 2:] == 49.0 * np.eye(2)).all() and (init.x[:, 2:] == 0).all()
 
 
+def test_compiled_step_equals_the_numpy_components(rng, random_opencv_camera):
+    """kernels.predict_update = SchmidtPredictor + SchmidtUpdater (gate-rejected tracks untouched);
+    kernels.project_ground = camera.project on the ground (distortion, points behind the camera)."""
+    from footprint_uq.fast.footprint_kernels import camera_constants
+    from footprint_uq.tracking.kernels import predict_update, project_ground
+
+    n, r = 7, 4
+    state, _ = _random_state(rng, n, r)
+    B = rng.normal(size=(n, 2, r))
+    R = np.array([[0.3, 0.1], [0.1, 0.2]]) * np.ones((n, 1, 1))
+    z = state.x[:, :2] + rng.normal(size=(n, 2)) * np.array([1, 1, 1, 1, 1, 1, 30.0])[:, None]
+    dt = rng.uniform(0.01, 0.2, n)
+    model = ConstantVelocity(2.5)
+    post, d2_ref = SchmidtUpdater().update(SchmidtPredictor(model).predict(state, dt), SplitMeasurement(z, R, B))
+    x, P, C, d2 = state.x.copy(), state.P.copy(), state.C.copy(), np.empty(n)
+    gate = np.sort(d2_ref)[-2] + 1e-9  # the largest innovation fails the gate
+    predict_update(x, P, C, dt, 2.5, z, R, B, gate, d2)
+    np.testing.assert_allclose(d2, d2_ref, rtol=1e-12)
+    ok = d2_ref <= gate
+    assert ok.sum() == n - 1
+    for got, want, before in ((x, post.x, state.x), (P, post.P, state.P), (C, post.C, state.C)):
+        np.testing.assert_allclose(got[ok], want[ok], rtol=1e-11, atol=1e-12)
+        np.testing.assert_array_equal(got[~ok], before[~ok])
+    for cam in (random_opencv_camera(rng, distortion="mild"), default_camera()):
+        xy = np.column_stack([rng.uniform(-30, 30, 50), rng.uniform(-20, 80, 50)])
+        xy[3] = np.nan
+        uv = np.empty((50, 2))
+        project_ground(xy, camera_constants(cam)[0], uv)
+        ref = cam.project(np.column_stack([xy, np.full(50, cam.ground_z_m)])).uv_px
+        assert np.array_equal(np.isnan(uv), np.isnan(ref)) and np.isnan(ref).any()
+        np.testing.assert_allclose(uv, ref, rtol=1e-12, equal_nan=True)
+
+
 def test_filter_covariance_against_monte_carlo(rng):
     """The exact linear model (one w per run, B changing along the path, white frame noise, random accelerations):
     the error covariance of position, velocity and their cross-covariance with w match the filter's P and C."""

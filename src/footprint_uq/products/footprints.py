@@ -240,7 +240,14 @@ class FootprintEstimate:
         """(N, 2, 2) the camera-level (calibration) part ``B B^T`` of ``centre_cov_m2``, m^2: the same error in
         every frame (None without :attr:`centre_shared_m`)."""
         B = self.centre_shared_m
-        return None if B is None else B @ np.swapaxes(B, -1, -2)
+        if B is None:
+            return None
+        out = np.empty(B.shape[:-2] + (2, 2))  # (three sums: a stacked (N, 2, r) matmul costs ~10x more)
+        b0, b1 = B[..., 0, :], B[..., 1, :]
+        out[..., 0, 0] = np.einsum("...i,...i->...", b0, b0)
+        out[..., 0, 1] = out[..., 1, 0] = np.einsum("...i,...i->...", b0, b1)
+        out[..., 1, 1] = np.einsum("...i,...i->...", b1, b1)
+        return out
 
     @property
     def centre_cov_frame_m2(self) -> np.ndarray | None:

@@ -11,8 +11,10 @@ import numpy as np
 
 from .._checks import as_float
 from ..errors import InputError
+from ..fast.footprint_kernels import camera_constants
 from ..products.footprints import FrameProcessor
-from .filter import Initiator, SchmidtPredictor, SchmidtUpdater, SplitMeasurement, TrackState
+from .filter import Initiator, SplitMeasurement
+from .kernels import predict_update, project_ground
 from .models import ConstantVelocity
 
 __all__ = ["TrackerConfig", "TrackOutput", "TrackTable", "SharedJacobianAt", "CALIBRATION_MODES", "DEFAULT_GATE_CHI2"]
@@ -113,8 +115,10 @@ class TrackTable:
         self.config = config or TrackerConfig()
         self.shared_at = shared_at
         self.rank = int(rank) if self.config.calibration == "consider" else 0
-        self.predictor = SchmidtPredictor(ConstantVelocity(self.config.accel_psd_m2ps3))
-        self.updater = SchmidtUpdater()
+        #: the model the compiled update runs (:func:`~footprint_uq.tracking.kernels.predict_update` is
+        #: :class:`~footprint_uq.tracking.filter.SchmidtPredictor` + :class:`~footprint_uq.tracking.filter.
+        #: SchmidtUpdater` in one pass; the tests hold them equal)
+        self.model = ConstantVelocity(self.config.accel_psd_m2ps3)
         self.initiator = Initiator(self.config.sigma_v0_mps)
         self._index: dict = {}  # object_id -> slot
         self._cap = 0
@@ -223,19 +227,7 @@ class TrackTable:
         new = slots < 0
         old = np.flatnonzero(~new)
         if old.size:
-            s = slots[old]
-            pred = self.predictor.predict(TrackState(self._x[s], self._P[s], self._C[s]), t - self._t_last[s])
-            m_old = _take(meas, old)
-            if self.shared_at is not None and self.rank:
-                Bp = np.asarray(self.shared_at(pred.x[:, :2]), dtype=np.float64)
-                m_old = m_old._replace(shared_m=np.where(np.isfinite(Bp).all((1, 2))[:, None, None], Bp,
-                                                         m_old.shared_m))
-            post, d2 = self.updater.update(pred, m_old)
-            keep = d2 <= self.config.gate_chi2  # NaN (a singular S) fails the gate too
-            sk = s[keep]
-            self._x[sk], self._P[sk], self._C[sk] = post.x[keep], post.P[keep], post.C[keep]
-            self._t_last[sk] = t
-            self._n[sk] += 1
+            keep = self._update(t, slots[old], _take(meas, old))
             new[old[~keep]] = True
         self._start(t, keys, slots, new, meas)
         # outputs
@@ -250,6 +242,25 @@ class TrackTable:
         out.v_mps[rows[has_v]] = self._x[s[has_v], 2:]
         out.cov_v_m2ps2[rows[has_v]] = self._P[s[has_v], 2:, 2:]
         return out
+
+    def _update(self, t: float, s: np.ndarray, m: SplitMeasurement) -> np.ndarray:
+        """Predict and update the tracks in slots ``s`` (the compiled :func:`~footprint_uq.tracking.kernels.
+        predict_update`, i.e. :class:`SchmidtPredictor` + :class:`SchmidtUpdater`); returns which passed the gate."""
+        x, P, C = self._x[s], self._P[s], self._C[s]
+        dt = t - self._t_last[s]
+        B = m.shared_m
+        if self.shared_at is not None and self.rank:  # B at the predicted positions (see the class doc)
+            Bp = np.asarray(self.shared_at(x[:, :2] + dt[:, None] * x[:, 2:]), dtype=np.float64)
+            B = np.where(np.isfinite(Bp).all((1, 2))[:, None, None], Bp, B)
+        d2 = np.empty(s.size)
+        predict_update(x, P, C, dt, self.config.accel_psd_m2ps3, m.xy_m, m.cov_frame_m2, np.ascontiguousarray(B),
+                       self.config.gate_chi2, d2)
+        keep = d2 <= self.config.gate_chi2  # NaN (a singular S) fails the gate too
+        sk = s[keep]
+        self._x[sk], self._P[sk], self._C[sk] = x[keep], P[keep], C[keep]
+        self._t_last[sk] = t
+        self._n[sk] += 1
+        return keep
 
     def _start(self, t: float, keys: list, slots: np.ndarray, new: np.ndarray, meas: SplitMeasurement) -> None:
         """The initiator's tracks for the objects ``new`` (slots filled in place; restarted ids keep their slot)."""
@@ -298,11 +309,10 @@ class SharedJacobianAt:
         self.processor.corner_outputs = False
         self.camera = camera
         self.rank = int(self.processor.budget.param_factor().rank)
+        self._cam = camera_constants(camera)[0]
 
     def __call__(self, xy_m) -> np.ndarray:
-        xy = np.asarray(xy_m, dtype=np.float64).reshape(-1, 2)
-        xyz = np.empty((xy.shape[0], 3))
-        xyz[:, :2] = xy
-        xyz[:, 2] = self.camera.ground_z_m
-        uv = self.camera.project(xyz).uv_px
-        return self.processor.corners(np.ascontiguousarray(uv[:, None, :])).centre_shared_m
+        xy = np.ascontiguousarray(xy_m, dtype=np.float64).reshape(-1, 2)
+        uv = np.empty((xy.shape[0], 1, 2))
+        project_ground(xy, self._cam, uv[:, 0])
+        return self.processor.corners(uv).centre_shared_m
