@@ -398,3 +398,10 @@ def test_objects_cli_tracks(camera, tmp_path):
     assert t.column("speed_mps")[6].as_py() == pytest.approx(10.0, abs=0.1)
     r = CliRunner().invoke(main, [*args])
     assert r.exit_code == 0 and "track_id" not in pq.read_table(tmp_path / "o.parquet").column_names
+
+
+def test_warm_up_leaves_the_table_untouched():
+    at = SharedJacobianAt(default_camera(), "basler1@deg")
+    tab = TrackTable(rank=at.rank, shared_at=at)
+    tab.warm_up()
+    assert len(tab) == 0 and tab.step(0.0, ["a"], *_meas(1, [[0, 30]], r=at.rank)).track_id.tolist() == [0]

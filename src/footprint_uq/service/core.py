@@ -262,6 +262,8 @@ class Service:
                 proc.shared_jacobian = True
                 at = SharedJacobianAt(proc.camera, proc.budget)
                 setup.tracks, setup.tracks_lock = TrackTable(cfg, rank=at.rank, shared_at=at), threading.Lock()
+                if warm_up:
+                    setup.tracks.warm_up()
 
         self.linearity = bool(linearity)
         self.linear_threshold = DEFAULT_LINEAR_THRESHOLD if linear_threshold is None else float(linear_threshold)

@@ -16,7 +16,76 @@ from numba import njit
 
 from ..fast import core
 
-__all__ = ["predict_update", "project_ground"]
+__all__ = ["predict_update", "update_slots", "project_ground"]
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _step_one(x, P, C, h, q, z, R, B, gate, Pp, Cp, K, cross):  # pragma: no cover - compiled
+    """One track (views ``x (4,)``, ``P (4, 4)``, ``C (4, r)``; measurement ``z (2,)``, ``R (2, 2)``, ``B (2, r)``):
+    predict by ``h`` and update in place if the innovation's squared Mahalanobis distance is ``<= gate``; returns
+    that distance (NaN if not finite).  ``Pp, Cp, K, cross`` are scratch."""
+    r = C.shape[1]
+    # predict: F = [[I, h I], [0, I]], Q = q [[h^3/3 I, h^2/2 I], [h^2/2 I, h I]]
+    for a in range(4):
+        for b in range(4):
+            Pp[a, b] = P[a, b]
+    for a in range(4):  # F P
+        Pp[0, a] += h * Pp[2, a]
+        Pp[1, a] += h * Pp[3, a]
+    for a in range(4):  # (F P) F^T
+        Pp[a, 0] += h * Pp[a, 2]
+        Pp[a, 1] += h * Pp[a, 3]
+    q3, q2, q1 = q * h * h * h / 3.0, q * h * h / 2.0, q * h
+    Pp[0, 0] += q3
+    Pp[1, 1] += q3
+    Pp[2, 2] += q1
+    Pp[3, 3] += q1
+    Pp[0, 2] += q2
+    Pp[2, 0] += q2
+    Pp[1, 3] += q2
+    Pp[3, 1] += q2
+    for c in range(r):
+        Cp[0, c] = C[0, c] + h * C[2, c]
+        Cp[1, c] = C[1, c] + h * C[3, c]
+        Cp[2, c] = C[2, c]
+        Cp[3, c] = C[3, c]
+    x0, x1 = x[0] + h * x[2], x[1] + h * x[3]
+    # innovation: S = P_pp + C_p B^T + B C_p^T + B B^T + R; cross = P H^T + C B^T
+    s00, s01, s11 = Pp[0, 0] + R[0, 0], Pp[0, 1] + R[0, 1], Pp[1, 1] + R[1, 1]
+    for a in range(4):
+        cross[a, 0], cross[a, 1] = Pp[a, 0], Pp[a, 1]
+    for c in range(r):
+        b0, b1 = B[0, c], B[1, c]
+        s00 += 2.0 * Cp[0, c] * b0 + b0 * b0
+        s01 += Cp[0, c] * b1 + b0 * Cp[1, c] + b0 * b1
+        s11 += 2.0 * Cp[1, c] * b1 + b1 * b1
+        for a in range(4):
+            cross[a, 0] += Cp[a, c] * b0
+            cross[a, 1] += Cp[a, c] * b1
+    det = s00 * s11 - s01 * s01
+    i00, i01, i11 = s11 / det, -s01 / det, s00 / det
+    y0, y1 = z[0] - x0, z[1] - x1
+    m = y0 * y0 * i00 + 2.0 * y0 * y1 * i01 + y1 * y1 * i11
+    if not math.isfinite(m):
+        return math.nan
+    if not m <= gate:
+        return m
+    for a in range(4):
+        K[a, 0] = cross[a, 0] * i00 + cross[a, 1] * i01
+        K[a, 1] = cross[a, 0] * i01 + cross[a, 1] * i11
+    x[0], x[1] = x0 + K[0, 0] * y0 + K[0, 1] * y1, x1 + K[1, 0] * y0 + K[1, 1] * y1
+    x[2] += K[2, 0] * y0 + K[2, 1] * y1
+    x[3] += K[3, 0] * y0 + K[3, 1] * y1
+    for a in range(4):
+        for b in range(a, 4):
+            v = Pp[a, b] - (K[a, 0] * cross[b, 0] + K[a, 1] * cross[b, 1])
+            w = Pp[b, a] - (K[b, 0] * cross[a, 0] + K[b, 1] * cross[a, 1])
+            P[a, b] = P[b, a] = 0.5 * (v + w)
+    for c in range(r):
+        e0, e1 = Cp[0, c] + B[0, c], Cp[1, c] + B[1, c]
+        for a in range(4):
+            C[a, c] = Cp[a, c] - (K[a, 0] * e0 + K[a, 1] * e1)
+    return m
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -24,72 +93,34 @@ def predict_update(x, P, C, dt, q, z, R, B, gate, d2):  # pragma: no cover - com
     """Predict n tracks by ``dt (n,)`` (constant velocity, acceleration density ``q``) and update them with ``z (n,
     2)``, ``R (n, 2, 2)``, ``B (n, 2, r)``, in place where the innovation's ``d2 <= gate``; ``d2 (n,)`` receives the
     squared Mahalanobis distances (NaN if not finite).  Rejected tracks are left as they were (not predicted)."""
-    n, r = x.shape[0], C.shape[2]
-    Pp = np.empty((4, 4))
-    Cp = np.empty((4, r))
-    K = np.empty((4, 2))
-    cross = np.empty((4, 2))
-    for i in range(n):
-        h = dt[i]
-        # predict: F = [[I, h I], [0, I]], Q = q [[h^3/3 I, h^2/2 I], [h^2/2 I, h I]]
-        for a in range(4):
-            for b in range(4):
-                Pp[a, b] = P[i, a, b]
-        for a in range(4):  # F P
-            Pp[0, a] += h * Pp[2, a]
-            Pp[1, a] += h * Pp[3, a]
-        for a in range(4):  # (F P) F^T
-            Pp[a, 0] += h * Pp[a, 2]
-            Pp[a, 1] += h * Pp[a, 3]
-        q3, q2, q1 = q * h * h * h / 3.0, q * h * h / 2.0, q * h
-        Pp[0, 0] += q3
-        Pp[1, 1] += q3
-        Pp[2, 2] += q1
-        Pp[3, 3] += q1
-        Pp[0, 2] += q2
-        Pp[2, 0] += q2
-        Pp[1, 3] += q2
-        Pp[3, 1] += q2
-        for c in range(r):
-            Cp[0, c] = C[i, 0, c] + h * C[i, 2, c]
-            Cp[1, c] = C[i, 1, c] + h * C[i, 3, c]
-            Cp[2, c] = C[i, 2, c]
-            Cp[3, c] = C[i, 3, c]
-        x0, x1 = x[i, 0] + h * x[i, 2], x[i, 1] + h * x[i, 3]
-        # innovation: S = P_pp + C_p B^T + B C_p^T + B B^T + R; cross = P H^T + C B^T
-        s00, s01, s11 = Pp[0, 0] + R[i, 0, 0], Pp[0, 1] + R[i, 0, 1], Pp[1, 1] + R[i, 1, 1]
-        for a in range(4):
-            cross[a, 0], cross[a, 1] = Pp[a, 0], Pp[a, 1]
-        for c in range(r):
-            b0, b1 = B[i, 0, c], B[i, 1, c]
-            s00 += 2.0 * Cp[0, c] * b0 + b0 * b0
-            s01 += Cp[0, c] * b1 + b0 * Cp[1, c] + b0 * b1
-            s11 += 2.0 * Cp[1, c] * b1 + b1 * b1
-            for a in range(4):
-                cross[a, 0] += Cp[a, c] * b0
-                cross[a, 1] += Cp[a, c] * b1
-        det = s00 * s11 - s01 * s01
-        i00, i01, i11 = s11 / det, -s01 / det, s00 / det
-        y0, y1 = z[i, 0] - x0, z[i, 1] - x1
-        m = y0 * y0 * i00 + 2.0 * y0 * y1 * i01 + y1 * y1 * i11
-        d2[i] = m if math.isfinite(m) else math.nan
-        if not m <= gate:
-            continue
-        for a in range(4):
-            K[a, 0] = cross[a, 0] * i00 + cross[a, 1] * i01
-            K[a, 1] = cross[a, 0] * i01 + cross[a, 1] * i11
-        x[i, 0], x[i, 1] = x0 + K[0, 0] * y0 + K[0, 1] * y1, x1 + K[1, 0] * y0 + K[1, 1] * y1
-        x[i, 2] += K[2, 0] * y0 + K[2, 1] * y1
-        x[i, 3] += K[3, 0] * y0 + K[3, 1] * y1
-        for a in range(4):
-            for b in range(a, 4):
-                v = Pp[a, b] - (K[a, 0] * cross[b, 0] + K[a, 1] * cross[b, 1])
-                w = Pp[b, a] - (K[b, 0] * cross[a, 0] + K[b, 1] * cross[a, 1])
-                P[i, a, b] = P[i, b, a] = 0.5 * (v + w)
-        for c in range(r):
-            e0, e1 = Cp[0, c] + B[i, 0, c], Cp[1, c] + B[i, 1, c]
-            for a in range(4):
-                C[i, a, c] = Cp[a, c] - (K[a, 0] * e0 + K[a, 1] * e1)
+    r = C.shape[2]
+    Pp, Cp, K, cross = np.empty((4, 4)), np.empty((4, r)), np.empty((4, 2)), np.empty((4, 2))
+    for i in range(x.shape[0]):
+        d2[i] = _step_one(x[i], P[i], C[i], dt[i], q, z[i], R[i], B[i], gate, Pp, Cp, K, cross)
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def update_slots(X, P, C, t_last, n_upd, slots, t, q, z, R, B_pred, B_frame, gate, d2):  # pragma: no cover
+    """:func:`predict_update` on a table's storage in place: track ``i`` of the frame is row ``slots[i]`` of ``X (cap,
+    4)``, ``P``, ``C``, last updated at ``t_last``; its ``B`` is ``B_pred[i]`` (at the predicted position) where
+    finite, else ``B_frame[i]``.  Accepted tracks get ``t_last = t`` and one more update in ``n_upd``."""
+    r = C.shape[2]
+    Pp, Cp, K, cross = np.empty((4, 4)), np.empty((4, r)), np.empty((4, 2)), np.empty((4, 2))
+    use_pred = B_pred.shape[0] == slots.shape[0]
+    for i in range(slots.shape[0]):
+        s = slots[i]
+        B = B_frame[i]
+        if use_pred:
+            fin = True
+            for c in range(r):
+                fin = fin & math.isfinite(B_pred[i, 0, c]) & math.isfinite(B_pred[i, 1, c])
+            if fin:
+                B = B_pred[i]
+        m = _step_one(X[s], P[s], C[s], t - t_last[s], q, z[i], R[i], B, gate, Pp, Cp, K, cross)
+        d2[i] = m
+        if m <= gate:
+            t_last[s] = t
+            n_upd[s] += 1
 
 
 @njit(cache=True, nogil=True, error_model="numpy")

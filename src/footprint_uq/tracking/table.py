@@ -14,11 +14,12 @@ from ..errors import InputError
 from ..fast.footprint_kernels import camera_constants
 from ..products.footprints import FrameProcessor
 from .filter import Initiator, SplitMeasurement
-from .kernels import predict_update, project_ground
+from .kernels import project_ground, update_slots
 from .models import ConstantVelocity
 
 __all__ = ["TrackerConfig", "TrackOutput", "TrackTable", "SharedJacobianAt", "CALIBRATION_MODES", "DEFAULT_GATE_CHI2"]
 
+_NO_B = np.zeros((0, 2, 0))
 #: how the calibration error enters the filter: "consider" (the split model, the only honest one), "white" (the
 #: whole per-frame covariance as white noise) and "ignore" (only the per-frame part) are kept to show what goes
 #: wrong (docs/uncertainty-model.md)
@@ -130,6 +131,14 @@ class TrackTable:
 
     def __len__(self) -> int:
         return len(self._index)
+
+    def warm_up(self) -> None:
+        """Load the compiled steps (numba's cache, or compile them) without touching the tracks."""
+        r = self.rank
+        Bp = _NO_B if self.shared_at is None else np.ascontiguousarray(self.shared_at(np.zeros((1, 2))))
+        update_slots(np.zeros((1, 4)), np.eye(4)[None].copy(), np.zeros((1, 4, r)), np.zeros(1),
+                     np.zeros(1, np.int64), np.zeros(1, np.int64), 1.0, 1.0, np.zeros((1, 2)), np.eye(2)[None].copy(),
+                     Bp if Bp.shape == (1, 2, r) else _NO_B, np.zeros((1, 2, r)), 1.0, np.empty(1))
 
     def _grow(self, cap: int) -> None:
         old = self._cap
@@ -244,23 +253,18 @@ class TrackTable:
         return out
 
     def _update(self, t: float, s: np.ndarray, m: SplitMeasurement) -> np.ndarray:
-        """Predict and update the tracks in slots ``s`` (the compiled :func:`~footprint_uq.tracking.kernels.
-        predict_update`, i.e. :class:`SchmidtPredictor` + :class:`SchmidtUpdater`); returns which passed the gate."""
-        x, P, C = self._x[s], self._P[s], self._C[s]
-        dt = t - self._t_last[s]
-        B = m.shared_m
+        """Predict and update the tracks in slots ``s`` in place (the compiled :func:`~footprint_uq.tracking.kernels.
+        update_slots`, i.e. :class:`SchmidtPredictor` + :class:`SchmidtUpdater`); returns which passed the gate."""
         if self.shared_at is not None and self.rank:  # B at the predicted positions (see the class doc)
-            Bp = np.asarray(self.shared_at(x[:, :2] + dt[:, None] * x[:, 2:]), dtype=np.float64)
-            B = np.where(np.isfinite(Bp).all((1, 2))[:, None, None], Bp, B)
+            x = self._x[s]
+            Bp = np.ascontiguousarray(self.shared_at(x[:, :2] + (t - self._t_last[s])[:, None] * x[:, 2:]),
+                                      dtype=np.float64)
+        else:
+            Bp = _NO_B
         d2 = np.empty(s.size)
-        predict_update(x, P, C, dt, self.config.accel_psd_m2ps3, m.xy_m, m.cov_frame_m2, np.ascontiguousarray(B),
-                       self.config.gate_chi2, d2)
-        keep = d2 <= self.config.gate_chi2  # NaN (a singular S) fails the gate too
-        sk = s[keep]
-        self._x[sk], self._P[sk], self._C[sk] = x[keep], P[keep], C[keep]
-        self._t_last[sk] = t
-        self._n[sk] += 1
-        return keep
+        update_slots(self._x, self._P, self._C, self._t_last, self._n, s, t, self.config.accel_psd_m2ps3, m.xy_m,
+                     m.cov_frame_m2, Bp, np.ascontiguousarray(m.shared_m), self.config.gate_chi2, d2)
+        return d2 <= self.config.gate_chi2  # NaN (a singular S) fails the gate too
 
     def _start(self, t: float, keys: list, slots: np.ndarray, new: np.ndarray, meas: SplitMeasurement) -> None:
         """The initiator's tracks for the objects ``new`` (slots filled in place; restarted ids keep their slot)."""
