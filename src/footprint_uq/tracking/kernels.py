@@ -16,7 +16,7 @@ from numba import njit
 
 from ..fast import core
 
-__all__ = ["predict_update", "update_slots", "project_ground"]
+__all__ = ["predict_update", "update_slots", "project_ground", "motion_fields"]
 
 
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
@@ -144,3 +144,31 @@ def project_ground(xy, cam, uv):  # pragma: no cover - compiled
         xd, yd = core.distort_point(x, y, kt)
         uv[i, 0] = cam.fx * xd + cam.skew * yd + cam.cx if ok else math.nan
         uv[i, 1] = cam.fy * yd + cam.cy if ok else math.nan
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def motion_fields(v, cov, ch, sh, ratio, out, cov_out):  # pragma: no cover - compiled
+    """:func:`footprint_uq.tracking.motion.object_motion`'s arithmetic in one pass: velocities ``v (n, 2)`` and
+    covariances ``cov (n, 2, 2)`` in W, rotated to east / north by ``(ch, sh)`` = cos / sin of the heading offset,
+    into ``out (7, n)`` = v_east, v_north, speed, sigma_speed, heading_deg, sigma_heading_deg (NaN below ``ratio``
+    velocity sigmas of speed) and ``cov_out (n, 2, 2)``."""
+    nan = math.nan
+    for i in range(v.shape[0]):
+        ve = ch * v[i, 0] + sh * v[i, 1]
+        vn = -sh * v[i, 0] + ch * v[i, 1]
+        c00, c01, c11 = cov[i, 0, 0], cov[i, 0, 1], cov[i, 1, 1]
+        a = ch * ch * c00 + 2.0 * ch * sh * c01 + sh * sh * c11  # R C R^T, R = [[ch, sh], [-sh, ch]]
+        b = -ch * sh * c00 + (ch * ch - sh * sh) * c01 + ch * sh * c11
+        d = sh * sh * c00 - 2.0 * ch * sh * c01 + ch * ch * c11
+        cov_out[i, 0, 0], cov_out[i, 0, 1], cov_out[i, 1, 0], cov_out[i, 1, 1] = a, b, b, d
+        sp = math.hypot(ve, vn)
+        out[0, i], out[1, i], out[2, i] = ve, vn, sp
+        if sp > 0.0:
+            out[3, i] = math.sqrt(ve * ve * a + 2.0 * ve * vn * b + vn * vn * d) / sp
+            hd = math.degrees(math.atan2(ve, vn))
+            out[4, i] = hd + 360.0 if hd < 0.0 else hd
+            smax = math.sqrt(0.5 * (a + d) + math.hypot(0.5 * (a - d), b))
+            sh_ = math.degrees(math.sqrt(vn * vn * a - 2.0 * ve * vn * b + ve * ve * d) / (sp * sp))
+            out[5, i] = sh_ if sp >= ratio * smax else nan
+        else:
+            out[3, i], out[4, i], out[5, i] = nan, nan, nan

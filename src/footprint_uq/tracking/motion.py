@@ -15,12 +15,13 @@ The speed's sigma is the delta method's along the estimated direction; it is NaN
 
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
 import numpy as np
 
 from .._checks import as_float
-from ..products.v2x import rotate_to_true_north
+from .kernels import motion_fields
 from .table import TrackOutput
 
 __all__ = ["MotionArrays", "MOTION_FIELDS", "object_motion", "DEFAULT_HEADING_MIN_RATIO", "yaw_compass_deg"]
@@ -79,19 +80,12 @@ def object_motion(tracks: TrackOutput, *, heading_offset_deg: float = 0.0, yaw_r
     h = as_float("heading_offset_deg", heading_offset_deg)
     ratio = as_float("heading_min_ratio", heading_min_ratio, positive=True)
     n = tracks.track_id.shape[0]
-    c, s = np.cos(np.deg2rad(h)), np.sin(np.deg2rad(h))
-    vw = tracks.v_mps
-    ve, vn = c * vw[:, 0] + s * vw[:, 1], -s * vw[:, 0] + c * vw[:, 1]
-    cov = rotate_to_true_north(tracks.cov_v_m2ps2, h)
-    a, b, d = cov[:, 0, 0], cov[:, 0, 1], cov[:, 1, 1]
-    speed = np.hypot(ve, vn)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        sig_speed = np.sqrt(ve * ve * a + 2.0 * ve * vn * b + vn * vn * d) / speed
-        sig_head = np.rad2deg(np.sqrt(vn * vn * a - 2.0 * ve * vn * b + ve * ve * d) / (speed * speed))
-        sig_max = np.sqrt(0.5 * (a + d) + np.hypot(0.5 * (a - d), b))
-        heading = np.where(speed > 0, np.mod(np.rad2deg(np.arctan2(ve, vn)), 360.0), np.nan)
-        sig_head = np.where(speed >= ratio * sig_max, sig_head, np.nan)
-    sig_speed = np.where(speed > 0, sig_speed, np.nan)
+    out = np.empty((6, n))
+    cov = np.empty((n, 2, 2))
+    hr = math.radians(h)
+    motion_fields(np.ascontiguousarray(tracks.v_mps, dtype=np.float64),
+                  np.ascontiguousarray(tracks.cov_v_m2ps2, dtype=np.float64), math.cos(hr), math.sin(hr), ratio, out,
+                  cov)
     yaw = np.full(n, np.nan) if yaw_rad is None else yaw_compass_deg(yaw_rad, h)
     sig_yaw = np.full(n, np.nan) if sigma_yaw_rad is None else np.rad2deg(np.asarray(sigma_yaw_rad, np.float64))
-    return MotionArrays(ve, vn, cov, speed, sig_speed, heading, sig_head, yaw, sig_yaw, tracks.age_s.copy())
+    return MotionArrays(out[0], out[1], cov, out[2], out[3], out[4], out[5], yaw, sig_yaw, tracks.age_s.copy())
