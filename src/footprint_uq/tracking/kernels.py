@@ -16,7 +16,7 @@ from numba import njit
 
 from ..fast import core
 
-__all__ = ["predict_update", "update_slots", "project_ground", "motion_fields"]
+__all__ = ["predict_update", "update_slots", "project_ground", "motion_fields", "gather_outputs"]
 
 
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
@@ -172,3 +172,19 @@ def motion_fields(v, cov, ch, sh, ratio, out, cov_out):  # pragma: no cover - co
             out[5, i] = sh_ if sp >= ratio * smax else nan
         else:
             out[3, i], out[4, i], out[5, i] = nan, nan, nan
+
+
+@njit(cache=True, nogil=True)
+def gather_outputs(rows, slots, new, tid, n_upd, t_first, X, P, t, o_tid, o_new, o_n, o_age, o_xy, o_cxy, o_v,
+                   o_cv):  # pragma: no cover - compiled
+    """Per tracked object ``rows[j]`` of a frame (table row ``slots[j]``): its track's id, whether it is new, its
+    updates, age, filtered position and covariance, and (from the second update on) its velocity and covariance,
+    into the frame's output arrays (:class:`~footprint_uq.tracking.table.TrackOutput`, prefilled as untracked)."""
+    for j in range(rows.shape[0]):
+        i, s = rows[j], slots[j]
+        o_tid[i], o_new[i], o_n[i], o_age[i] = tid[s], new[j], n_upd[s], t - t_first[s]
+        o_xy[i, 0], o_xy[i, 1] = X[s, 0], X[s, 1]
+        o_cxy[i, 0, 0], o_cxy[i, 0, 1], o_cxy[i, 1, 0], o_cxy[i, 1, 1] = P[s, 0, 0], P[s, 0, 1], P[s, 1, 0], P[s, 1, 1]
+        if n_upd[s] >= 2:
+            o_v[i, 0], o_v[i, 1] = X[s, 2], X[s, 3]
+            o_cv[i, 0, 0], o_cv[i, 0, 1], o_cv[i, 1, 0], o_cv[i, 1, 1] = P[s, 2, 2], P[s, 2, 3], P[s, 3, 2], P[s, 3, 3]

@@ -14,7 +14,7 @@ from ..errors import InputError
 from ..fast.footprint_kernels import camera_constants
 from ..products.footprints import FrameProcessor
 from .filter import Initiator, SplitMeasurement
-from .kernels import project_ground, update_slots
+from .kernels import gather_outputs, project_ground, update_slots
 from .models import ConstantVelocity
 
 __all__ = ["TrackerConfig", "TrackOutput", "TrackTable", "SharedJacobianAt", "CALIBRATION_MODES", "DEFAULT_GATE_CHI2"]
@@ -239,17 +239,7 @@ class TrackTable:
             keep = self._update(t, slots[old], _take(meas, old))
             new[old[~keep]] = True
         self._start(t, keys, slots, new, meas)
-        # outputs
-        s = slots
-        out.track_id[rows] = self._tid[s]
-        out.new_track[rows] = new
-        out.n_updates[rows] = self._n[s]
-        out.age_s[rows] = t - self._t_first[s]
-        out.xy_m[rows] = self._x[s, :2]
-        out.cov_xy_m2[rows] = self._P[s, :2, :2]
-        has_v = self._n[s] >= 2
-        out.v_mps[rows[has_v]] = self._x[s[has_v], 2:]
-        out.cov_v_m2ps2[rows[has_v]] = self._P[s[has_v], 2:, 2:]
+        gather_outputs(rows, slots, new, self._tid, self._n, self._t_first, self._x, self._P, t, *out)
         return out
 
     def _update(self, t: float, s: np.ndarray, m: SplitMeasurement) -> np.ndarray:
