@@ -970,6 +970,20 @@ class FrameProcessor:
                                  self.v2x_seed, corners_of=corners_of,
                                  det_of=lambda r: _det_joint_rows(det, mode, r, K))
 
+    def point_shared_jacobian(self, uv_px) -> np.ndarray:
+        """The whitened parameter Jacobian ``B`` (n, 2, r) of the ground points of pixels ``uv_px (n, 2)``, alone:
+        :attr:`FootprintEstimate.centre_shared_m` of one-point footprints (pixels outside the image included), NaN
+        where a pixel has no ground point.  One kernel pass without the rest of an estimate (the tracker evaluates
+        ``B`` at every track's predicted position in every frame: ~4x less than :meth:`corners`)."""
+        uv = np.ascontiguousarray(uv_px, dtype=np.float64).reshape(-1, 1, 2)
+        out = self._fk.alloc_outputs(uv.shape[0], 1, corners=False, shared_rank=self._r)
+        self._fk.process_corners(uv, self._no_extra, self._no_boxes, False, True, self._cam, self._dR, self._Lr,
+                                 self._Lc, self._Lv, self._r, self._spx, self._no_det, 0, True, self._ch, self._sh,
+                                 False, out, self._scratch())
+        shared = out[12]
+        shared[out[7] != status.OK] = np.nan
+        return shared
+
     def corners(self, corners_px, *, pixel_cov_px2=None) -> FootprintEstimate:
         """Footprints from corners in pixels ``(N, K, 2)`` (see :func:`footprints_from_corners`)."""
         uv = np.ascontiguousarray(corners_px, dtype=np.float64)

@@ -309,4 +309,4 @@ class SharedJacobianAt:
         xy = np.ascontiguousarray(xy_m, dtype=np.float64).reshape(-1, 2)
         uv = np.empty((xy.shape[0], 1, 2))
         project_ground(xy, self._cam, uv[:, 0])
-        return self.processor.corners(uv).centre_shared_m
+        return self.processor.point_shared_jacobian(uv)
