@@ -126,7 +126,7 @@ class TrackTable:
         self._grow(64)
         self._next_id = 0
         self._last_time: float = -math.inf
-        #: frames refused because their time was not later than the previous frame's (no tracking for them)
+        #: frames not tracked because their time was earlier than the previous frame's
         self.n_stale_frames = 0
 
     def __len__(self) -> int:
