@@ -544,7 +544,7 @@ def footprints_from_corners(camera, budget, corners_px, *, pixel_cov_px2=None, a
     centre_cov = np.where(ok[:, None, None], ccov_c, np.nan)
     with np.errstate(invalid="ignore", over="ignore"):  # the centre's whitened parameter Jacobian dC/dp L
         L = budget.param_factor().dense()
-        shared = G @ (np.where(bad_rows[:, :, None], 0.0, bp.dxy_dp.reshape(N, 2 * K, -1)) @ L)
+        shared = G @ (np.where(bad_rows[:, :, None], 0.0, bp.dxy_dp.reshape(N, 2 * K, bp.dxy_dp.shape[-1])) @ L)
     shared = np.where(ok[:, None, None], shared, np.nan)
     area = np.where(all_usable, area, np.nan)
     fields = {**cpm_fields(centre_cov, heading_offset_deg), **j2735_fields(centre_cov, heading_offset_deg)}
