@@ -206,3 +206,25 @@ def test_planning_layer():
                     bad.append(f"{mod}:{n.lineno}: {t[0]} (planning is above {top})")
     assert any(m.startswith(f"{PKG}.planning.") for m in MODS)
     assert bad == []
+
+
+#: the tracker's layer: above products/ and uncertainty/ (it builds on FrameProcessor), below service/, batch/ and cli/
+TRACKING_MAY_IMPORT = ("params", "errors", "status", "_checks", "fast", "cameras", "uncertainty", "products",
+                       "tracking")
+TRACKING_IMPORTED_BY = ("tracking", "service", "batch", "cli")
+
+
+def test_tracking_layer():
+    """footprint_uq.tracking imports only from its own layer and the ones below; only service, batch and cli (and
+    itself) import it."""
+    bad = []
+    for mod, scan in SCANS.items():
+        layer = mod.split(".")[1] if mod.count(".") else ""
+        for n, _, _, targets in scan.imports:
+            for t in filter(None, targets):
+                tl = t[0].split(".")[1] if t[0].count(".") else ""
+                if layer == "tracking" and tl not in TRACKING_MAY_IMPORT:
+                    bad.append(f"{mod}:{n.lineno}: imports {t[0]}")
+                if tl == "tracking" and layer not in TRACKING_IMPORTED_BY:
+                    bad.append(f"{mod}:{n.lineno}: imports {t[0]}")
+    assert any(m.startswith(f"{PKG}.tracking.") for m in MODS) and bad == []

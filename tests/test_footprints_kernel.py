@@ -300,3 +300,40 @@ def test_outputs_max_bytes_bounds_alloc_outputs(N, K, joint):
     largest = max(a.nbytes for a in arrays)
     bound = fk.outputs_max_bytes(N, K, joint=joint)
     assert largest <= bound <= 2 * largest or N == 0
+
+
+@pytest.mark.parametrize("budget", [BUDGET, FULL_BUDGET], ids=["basler1", "full"])
+def test_centre_shared_jacobian_splits_the_covariance(camera, budget, rng):
+    """The centre's whitened parameter Jacobian B (the tracker's shared calibration error): the kernel equals the
+    reference, B B^T is the camera-level part (the whole covariance without pixel noise), the frame part is PSD,
+    and B is dC/dp L by seeded central differences of the back-projection."""
+    boxes = make_boxes(camera, rng, 40)
+    boxes[3, 0] = np.nan
+    ref = footprints_from_boxes3d(camera, budget, boxes)
+    plain = FrameProcessor(camera, budget).boxes3d(boxes)
+    assert plain.centre_shared_m is None and plain.centre_cov_frame_m2 is None
+    fast = FrameProcessor(camera, budget, shared_jacobian=True).boxes3d(boxes)
+    L = budget.param_factor().dense()
+    assert fast.centre_shared_m.shape == ref.centre_shared_m.shape == (40, 2, L.shape[1])
+    ok = ref.centre_valid
+    assert np.array_equal(ok, fast.centre_valid) and ok.sum() > 10 and np.isnan(fast.centre_shared_m[~ok]).all()
+    scale = np.abs(ref.centre_shared_m[ok]).max(axis=(1, 2), keepdims=True)
+    assert np.abs(fast.centre_shared_m[ok] - ref.centre_shared_m[ok]).max() <= 1e-9 * scale.max()
+    frame = fast.centre_cov_frame_m2[ok]
+    assert np.linalg.eigvalsh(frame).min() >= -1e-12 * np.abs(fast.centre_cov_m2[ok]).max()
+    quiet = budget.replace(imaging_px=(0.0, 0.0), resolution_px=(0.0, 0.0))
+    q = FrameProcessor(camera, quiet, shared_jacobian=True).boxes3d(boxes)
+    np.testing.assert_allclose(q.centre_cov_shared_m2[ok], q.centre_cov_m2[ok], rtol=1e-9,
+                               atol=1e-12 * np.abs(q.centre_cov_m2[ok]).max())
+    # central differences of the centre along each factor column (parameters moved by L[:, c] * h)
+    uv = ref.corners_px[ok][:5]
+    i = np.flatnonzero(ok)[:5]
+    for c in range(L.shape[1]):
+        h = 1e-4
+        xy = []
+        for s in (h, -h):
+            cam = Camera()
+            cam.params, cam.image_size_px, cam.ground_z_m = camera.params + s * L[:, c], (1920, 1080), camera.ground_z_m
+            xy.append(footprints_from_corners(cam, quiet, uv, linearity=False).centre_xy_world_m)
+        num = (xy[0] - xy[1]) / (2 * h)
+        np.testing.assert_allclose(ref.centre_shared_m[i, :, c], num, rtol=1e-5, atol=1e-7)

@@ -50,6 +50,7 @@ from ..fast.footprint_kernels import OBJ_ROWS
 from ..io.atomic import atomic_write_text, same_file
 from ..products.footprints import CONTACT_MODES, DEGENERATE, V2X_FIELDS, FrameProcessor
 from ..products.geo import GeoReference
+from ..tracking import SharedJacobianAt, TrackerConfig, TrackOutput, TrackTable, object_motion
 from ..uncertainty.budget import load_budget
 from ..uncertainty.ellipse import chi2_scale
 from . import schema as S
@@ -73,6 +74,10 @@ MAX_PIXEL_VAR_PX2 = 1e12
 OVERFLOW_REASON = "result is not finite (overflow: input values far out of range)"
 #: below this many rows a chunk is processed in one thread
 _MIN_ROWS_PER_THREAD = 20_000
+#: the motion columns of ``tracks=True`` (docs/batch.md), after the other columns; track_id is null where untracked
+TRACK_COLUMNS = ("track_id", "v_east_mps", "v_north_mps", "cov_v_ee_m2ps2", "cov_v_en_m2ps2", "cov_v_nn_m2ps2",
+                 "speed_mps", "sigma_speed_mps", "heading_deg", "sigma_heading_deg", "yaw_deg", "sigma_yaw_deg",
+                 "age_s")
 
 
 class Reasons:
@@ -129,6 +134,8 @@ class _Result:
     corners_cov: np.ndarray = field(default=None)
     corner_reason: np.ndarray = field(default=None)
     corners_nl: np.ndarray = field(default=None)
+    shared: np.ndarray = field(default=None)  # (n, 2, r) the centre's whitened parameter Jacobian (tracks)
+    motion: dict = field(default=None)  # TRACK_COLUMNS -> (n,) arrays (tracks)
 
 
 class BatchProcessor:
@@ -166,6 +173,13 @@ class BatchProcessor:
     threads : int, optional
         Threads for the numeric kernel on large chunks (default: up to 2; used only
         when the compiled kernel releases the GIL).
+    tracks : bool
+        Track objects across frames (:mod:`footprint_uq.tracking`; needs the columns ``timestamp_s`` and
+        ``object_id``; one track table per ``camera_id``) and add :data:`TRACK_COLUMNS`.  A frame is a run of
+        consecutive rows with the same camera and time; each camera's frames must come in time order (rows of an
+        earlier time than the camera's previous frame are not tracked).  Chunks then run in one thread.
+    tracker : TrackerConfig, optional
+        The tracker's options.
     """
 
     def __init__(self, camera, budget, *, box_type: str | None = None, contact: str = "bottom-centre",
@@ -173,7 +187,7 @@ class BatchProcessor:
                  origin_lat_deg: float | None = None, origin_lon_deg: float | None = None, corners: bool = False,
                  allow_outside_image: bool = False, bottom_on_ground: bool = True,
                  linearity: bool = True, linear_threshold: float = 0.05, v2x_policy: str = "sampled",
-                 threads: int | None = None):
+                 threads: int | None = None, tracks: bool = False, tracker: TrackerConfig | None = None):
         if box_type is not None and box_type not in S.BOX_TYPES:
             raise InputError("box_type", box_type, f"one of {S.BOX_TYPES}")
         if contact not in CONTACT_MODES:
@@ -210,6 +224,12 @@ class BatchProcessor:
         self._status_dict = pa.array(list(S.STATUSES), type=pa.string())
         self._pool = None
         self._layout = None  # (box_type, box columns, cov columns, id fields, K) fixed by the first table
+        self.tracks = bool(tracks)
+        self.tracker = tracker or TrackerConfig()
+        self._track_tables: dict = {}  # camera_id -> TrackTable
+        if self.tracks:
+            self.proc.shared_jacobian = True
+            self._shared_at = SharedJacobianAt(camera, self.budget)
 
     # -- layout -----------------------------------------------------------------------------------
     def resolve(self, names, id_fields: list[pa.Field] | None = None):
@@ -245,6 +265,12 @@ class BatchProcessor:
         self._layout = (bt, cols, cov, list(id_fields), K)
         self.schema = S.output_schema(list(id_fields), K, confidence=self._k_conf is not None,
                                       geo=self.geo is not None, corners=self.corners, linearity=self.linearity)
+        if self.tracks:
+            need = [c for c in ("timestamp_s", "object_id") if c not in names]
+            if need:
+                raise InputError("detections columns", f"missing {need}", "timestamp_s and object_id for tracks")
+            for name in TRACK_COLUMNS:
+                self.schema = self.schema.append(pa.field(name, pa.int64() if name == "track_id" else pa.float64()))
         return self.schema
 
     @property
@@ -365,6 +391,8 @@ class BatchProcessor:
             if self.linearity:
                 res.corners_nl = gather("corners_nonlinearity", (K,), np.nan)
             res.corner_reason = corner_reason
+        if self.tracks:
+            res.shared = gather("centre_shared_m", (2, self._shared_at.rank), np.nan)
         # status and reason of the processed rows; outputs are checked too: a centre, covariance or
         # largest point that overflowed (absurd but finite inputs) is never "ok"/"partial"
         o = res.obj
@@ -457,7 +485,7 @@ class BatchProcessor:
             for i, text in enumerate(pre_errors):
                 if text is not None:
                     reason_id[i] = self.reasons.id(text)
-        if not self._parallel or n < 2 * _MIN_ROWS_PER_THREAD:
+        if not self._parallel or n < 2 * _MIN_ROWS_PER_THREAD or self.tracks:
             return self._process_part(table, rows, reason_id)
         # large chunk: contiguous parts in threads (the kernel releases the GIL), then one table
         edges = [n * i // self.threads for i in range(self.threads + 1)]
@@ -477,7 +505,45 @@ class BatchProcessor:
     def _process_part(self, table: pa.Table, rows: np.ndarray, reason_id: np.ndarray) -> pa.Table:
         X, cov = self.inputs_from_table(table)
         res = self.compute(X, cov, reason_id)
+        if self.tracks:
+            res.motion = self._track(res, table, X)
         return self.to_table(res, table, rows)
+
+    def _track(self, res: _Result, table: pa.Table, X: np.ndarray) -> dict:
+        """The motion columns of a chunk: its frames (runs of rows with the same camera and time) in order,
+        each through its camera's :class:`~footprint_uq.tracking.table.TrackTable`."""
+        n = res.n
+        t = _column_float(table, "timestamp_s")
+        ids = table.column("object_id").to_pylist()
+        cams = table.column("camera_id").to_pylist() if "camera_id" in table.column_names else [None] * n
+        o = res.obj
+        xy = np.ascontiguousarray(o[[_OBJ["x_m"], _OBJ["y_m"]]].T)
+        cov = o[[_OBJ["cov_xx_m2"], _OBJ["cov_xy_m2"], _OBJ["cov_yx_m2"], _OBJ["cov_yy_m2"]]].T.reshape(n, 2, 2)
+        B = res.shared
+        cov_frame = cov - B @ np.swapaxes(B, -1, -2)
+        cam_arr = np.array(cams, dtype=object)
+        cut = np.flatnonzero((t[1:] != t[:-1]) | (cam_arr[1:] != cam_arr[:-1])) + 1 if n else np.zeros(0, np.int64)
+        pieces = []
+        for a, b in zip(np.r_[0, cut].tolist(), np.r_[cut, n].tolist(), strict=True):
+            table_c = self._track_tables.get(cams[a])
+            if table_c is None:
+                table_c = self._track_tables[cams[a]] = TrackTable(self.tracker, rank=self._shared_at.rank,
+                                                                   shared_at=self._shared_at)
+            if not np.isfinite(t[a]):  # no time: not tracked
+                pieces.append(TrackOutput.untracked(b - a))
+                continue
+            pieces.append(table_c.step(t[a], ids[a:b], xy[a:b], cov_frame[a:b], B[a:b]))
+        tout = TrackOutput(*[np.concatenate(f) for f in zip(*pieces, strict=True)]) if pieces else None
+        yaw = None
+        if self.box_type == "3d" and n:
+            yaw = X[:, 6] if self._layout[1][-1] == "yaw_rad" else np.deg2rad(X[:, 6])
+        if tout is None:
+            return {name: np.zeros(0, np.int64 if name == "track_id" else np.float64) for name in TRACK_COLUMNS}
+        m = object_motion(tout, heading_offset_deg=self.heading_offset_deg, yaw_rad=yaw)
+        c = m.cov_v_m2ps2
+        return dict(zip(TRACK_COLUMNS, (tout.track_id, m.v_east_mps, m.v_north_mps, c[:, 0, 0], c[:, 0, 1], c[:, 1, 1],
+                                        m.speed_mps, m.sigma_speed_mps, m.heading_deg, m.sigma_heading_deg, m.yaw_deg,
+                                        m.sigma_yaw_deg, m.age_s), strict=True))
 
     def to_table(self, res: _Result, table: pa.Table, rows: np.ndarray) -> pa.Table:
         """Assemble the output table of :meth:`compute`'s numbers."""
@@ -525,6 +591,11 @@ class BatchProcessor:
                 cols[f"c{k}_reason"] = res.corner_reason[:, k].astype(np.int8)
                 if self.geo is not None:
                     cols[f"c{k}_lat_deg"], cols[f"c{k}_lon_deg"] = clat[:, k], clon[:, k]
+        if self.tracks:
+            mo = res.motion if res.motion is not None else {  # (the malformed rows' table: never tracked)
+                name: np.full(n, -1 if name == "track_id" else np.nan) for name in TRACK_COLUMNS}
+            cols.update(mo)
+            cols["track_id"] = pa.array(mo["track_id"].astype(np.int64), type=pa.int64(), mask=mo["track_id"] < 0)
         arrays = []
         for f in self.schema:
             v = cols[f.name]

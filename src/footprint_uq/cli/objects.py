@@ -66,6 +66,10 @@ __all__ = ["objects_cmd"]
               help="Durable outputs: flush to the disk and fsync before the rename into place. --no-fsync only "
                    "renames (never partial for a killed job, but a power loss may leave the output empty or "
                    "missing): for scratch outputs and tmpfs.")
+@click.option("--tracks", is_flag=True,
+              help="Track objects across frames (needs timestamp_s and object_id; one camera's frames in time "
+                   "order) and add track_id, velocity, speed, heading, yaw, their sigmas and age (docs/batch.md). "
+                   "Not in fleet mode.")
 @click.option("--quiet", "-q", is_flag=True, help="No progress bar.")
 @click.option("--registry", "registry", default=None, metavar="FILE_OR_DIR",
               help="Fleet mode: camera registry (camera_id -> camera file, budget); docs/batch.md.")
@@ -79,7 +83,7 @@ __all__ = ["objects_cmd"]
               help="Fleet mode: replace a non-empty --out folder as a whole (refused otherwise).")
 def objects_cmd(camera_path, budget_spec, detections, out, box_type, contact, chunk_rows, confidence,
                 heading_offset_deg, origin_lat, origin_lon, corners, allow_outside_image, linearity, linear_threshold,
-                v2x_policy, compression, fsync, quiet, registry, scheduler, workers, retries, overwrite):
+                v2x_policy, compression, fsync, tracks, quiet, registry, scheduler, workers, retries, overwrite):
     """Footprints (centre, covariance, largest point, V2X fields) of every detection in a file.
 
     Every input row gives one output row with its 0-based row number, a status (ok,
@@ -89,10 +93,15 @@ def objects_cmd(camera_path, budget_spec, detections, out, box_type, contact, ch
                    origin_lat_deg=origin_lat, origin_lon_deg=origin_lon, corners=corners,
                    allow_outside_image=allow_outside_image, linearity=linearity, linear_threshold=linear_threshold,
                    v2x_policy=v2x_policy)
+    if tracks:
+        options["tracks"] = True
     comp = None if compression == "none" else compression
     if registry is not None:
         if camera_path is not None:
             raise InputError("--camera", camera_path, "no --camera with --registry (the registry names the cameras)")
+        if tracks:
+            raise InputError("--tracks", True, "a single detections file (--camera): fleet partitions run in "
+                                               "parallel, out of time order")
         summ = process_fleet(registry, detections, out, budget=budget_spec, scheduler=scheduler, workers=workers,
                              retries=retries, chunk_rows=chunk_rows, progress=None if not quiet else False,
                              compression=comp, overwrite=overwrite, fsync=fsync, **options)

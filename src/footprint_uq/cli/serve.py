@@ -59,9 +59,12 @@ __all__ = ["serve_cmd"]
                    "ground-contact point) and linear_ok; costs ~1.7 ms per 100 points.")
 @click.option("--linear-threshold", type=click.FloatRange(min=0, min_open=True), default=None, metavar="E",
               help="linear_ok is nonlinearity <= E (default 0.05).")
+@click.option("--tracks", is_flag=True,
+              help="Track each camera's objects by object_id and add their velocity, speed, heading, yaw, their "
+                   "sigmas and age (docs/service.md); frames of a camera must come in time order.")
 def serve_cmd(camera_path, budget_spec, registry, camera_id, input_, mqtt, output, input_prefix, output_prefix,
               policy, health_interval_s, workers, client_id, heading_offset_deg, origin_lat, origin_lon, confidence,
-              contact, allow_outside_image, station_id, uper_encoder, linearity, linear_threshold):
+              contact, allow_outside_image, station_id, uper_encoder, linearity, linear_threshold, tracks):
     """Edge service: detector frames in, positions with uncertainty and V2X messages (CPM, SDSM) out.
 
     One output record per frame (or an error record), a health record every second;
@@ -71,7 +74,7 @@ def serve_cmd(camera_path, budget_spec, registry, camera_id, input_, mqtt, outpu
                  heading_offset_deg=heading_offset_deg, origin_lat_deg=origin_lat, origin_lon_deg=origin_lon,
                  confidence=confidence, contact=contact, allow_outside_image=allow_outside_image,
                  station_id=station_id, uper_encoder=uper_encoder, linearity=linearity,
-                 linear_threshold=linear_threshold, workers=workers,
+                 linear_threshold=linear_threshold, workers=workers, tracks=tracks,
                  input=input_ if input_ is not None else (None if mqtt else "-"), mqtt=mqtt, output=output,
                  input_prefix=input_prefix, output_prefix=output_prefix, policy=policy,
                  health_interval_s=health_interval_s, client_id=client_id))

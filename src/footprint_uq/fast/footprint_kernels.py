@@ -693,11 +693,12 @@ def _stage_corner_flags(S, m, W, Himg, allow_outside):
 
 
 @njit(**_STAGE)
-def _stage_whiten(S, m, nob, K, Lr, Lc, Lv, keep_aw):
+def _stage_whiten(S, m, nob, K, Lr, Lc, Lv, keep_aw, shared, n0):
     """Rows AW = J L (row ``2 c + i``; single-entry columns only with ``keep_aw``, for the joint
     covariance), C3 (3 rows) = the parameter part (J L)(J L)^T of each corner's
     covariance, and the parameter part of each object's centre covariance into E00, E01, E11:
-    B B^T with B = sum_k G_k (J_k L) (G from :func:`_stage_centroid`).
+    B B^T with B = sum_k G_k (J_k L) (G from :func:`_stage_centroid`).  ``shared`` (N, 2, r), if it has
+    rows, receives B itself (the centre's whitened parameter Jacobian ``dC/dp L``, object ``n0 + i``).
 
     The factor's entries come sorted by column (``Lc`` non-decreasing).  A column is formed in
     one pass per entry; the pass of its last entry also adds it to C3, so a diagonal factor costs
@@ -759,6 +760,9 @@ def _stage_whiten(S, m, nob, K, Lr, Lc, Lv, keep_aw):
             S[_E00 * _ST + i] += b0 * b0
             S[_E01 * _ST + i] += b0 * b1
             S[_E11 * _ST + i] += b1 * b1
+        if shared.shape[0] > 0:
+            for i in range(nob):
+                shared[n0 + i, 0, c], shared[n0 + i, 1, c] = S[_B0 * _ST + i], S[_B1 * _ST + i]
 
 
 @njit(**_STAGE)
@@ -911,25 +915,29 @@ def _stage_centre_cov(S, nob, K):
         S[_E11 * _ST + i] += S[_B2 * _ST + i]
 
 
-def alloc_outputs(N: int, K: int, *, joint: bool = False, corners: bool = True, alloc=np.empty):
+def alloc_outputs(N: int, K: int, *, joint: bool = False, corners: bool = True, alloc=np.empty,
+                  shared_rank: int | None = None):
     """Output arrays of :func:`process_corners` for N objects of K corners (allocated here, by numpy:
     numba's own allocations of large arrays are fresh pages every call, ~40 % of the kernel's time).
 
     ``corners=False`` gives (0, ...) per-corner coordinate/covariance/nonlinearity arrays: the kernel then
-    skips them.
+    skips them.  ``shared_rank`` r (the factor's rank) adds the centre's whitened parameter Jacobian
+    (N, 2, r) (the camera-level part of its covariance is ``B B^T``; the tracker needs B itself); None gives
+    (0, 2, 0): not written.
     ``alloc(shape, dtype)`` may supply the memory (default :func:`numpy.empty`).
     """
     nc = N if corners else 0
     return (alloc((nc, K, 2), np.float64), alloc((nc, K, 2, 2), np.float64),
             alloc((N if joint else 0, 2 * K, 2 * K), np.float64), alloc((N, K), np.int8), alloc((N, K), np.bool_),
             alloc((N,), np.int64), alloc((nc, 2, 2), np.float64), alloc((N,), np.int32), alloc((N,), np.int64),
-            alloc((len(OBJ_ROWS), N), np.float64), alloc((7, N), np.int32), alloc((nc, K), np.float64))
+            alloc((len(OBJ_ROWS), N), np.float64), alloc((7, N), np.int32), alloc((nc, K), np.float64),
+            alloc((0, 2, 0) if shared_rank is None else (N, 2, shared_rank), np.float64))
 
 
-def outputs_max_bytes(N: int, K: int, *, joint: bool = False) -> int:
-    """Bytes of the largest array of :func:`alloc_outputs` (N, K, joint) and of the (N, K, 2) pixels: one
-    number for an allocation policy that decides once per frame instead of once per array."""
-    return 8 * N * max(4 * K, 4 * K * K if joint else 0, len(OBJ_ROWS), 7)
+def outputs_max_bytes(N: int, K: int, *, joint: bool = False, shared_rank: int | None = None) -> int:
+    """Bytes of the largest array of :func:`alloc_outputs` (N, K, joint, shared_rank) and of the (N, K, 2)
+    pixels: one number for an allocation policy that decides once per frame instead of once per array."""
+    return 8 * N * max(4 * K, 4 * K * K if joint else 0, len(OBJ_ROWS), 7, 2 * (shared_rank or 0))
 
 
 #: shape of the scratch buffer ``S`` of :func:`process_corners` (float64; one per call or per thread)
@@ -1189,8 +1197,8 @@ def process_corners(uv, extra_reason, boxes, yaw_deg, bottom_on_ground, cam, dR,
         NaN without it)
     out : the arrays of :func:`alloc_outputs` (filled here): xy, ccov, joint, reason, usable,
         largest_index, largest_cov, centre_reason, centre_bad, obj (:data:`OBJ_ROWS`, N), v2x (7, N),
-        cnl (N, K) per-corner nonlinearity.  A joint with 0 rows is not formed; xy / ccov / largest_cov /
-        cnl with 0 rows are not written.
+        cnl (N, K) per-corner nonlinearity, shared (N, 2, r) the centre's whitened parameter Jacobian.
+        A joint with 0 rows is not formed; xy / ccov / largest_cov / cnl / shared with 0 rows are not written.
     S : :func:`scratch`
 
     Returns the number of corners and centres that were computed but are not finite (0 almost always;
@@ -1218,7 +1226,7 @@ def process_corners(uv, extra_reason, boxes, yaw_deg, bottom_on_ground, cam, dR,
         _stage_corner_flags(S, m, cam.width_px, cam.height_px, allow_outside)
         # covariances of corners and centre, the linearity flag, the largest point
         _stage_centroid(S, nob, K)
-        _stage_whiten(S, m, nob, K, Lr, Lc, Lv, want_joint)
+        _stage_whiten(S, m, nob, K, Lr, Lc, Lv, want_joint, out[12], n0)
         _stage_corner_cov(S, m)
         if flag:
             _stage_ray_denominator(S, m, cam, dR, need)

@@ -181,6 +181,13 @@ class FootprintEstimate:
     linear_threshold : float           ``*_linear_ok = *_nonlinearity <= linear_threshold`` (properties)
     v2x_source : (N,) int8             what the V2X fields encode: 0 the linear centre covariance, 1 a sampled
                                        one (larger), 2 "unavailable" (:data:`V2X_POLICIES`; no centre: 2)
+    centre_shared_m : (N, 2, r) or None  the centre's whitened parameter Jacobian ``B = dC/dp L``
+                                       (``L L^T`` = the budget's parameter covariance, r its rank): the
+                                       calibration error moves the centre by ``B w`` with one ``w ~ N(0, I_r)``
+                                       shared by every object and frame of the camera; ``B B^T`` is the
+                                       camera-level part of ``centre_cov_m2`` (:attr:`centre_cov_shared_m2`),
+                                       the rest is new every frame (:attr:`centre_cov_frame_m2`).  NaN without
+                                       a centre; None from a :class:`FrameProcessor` not asked for it
     object_rows : (R, N) or None       the fused kernel's per-object rows
                                        (:data:`footprint_uq.fast.footprint_kernels.OBJ_ROW` names them;
                                        the batch reads its columns from them); None from the reference
@@ -214,6 +221,7 @@ class FootprintEstimate:
     linear_threshold: float = DEFAULT_LINEAR_THRESHOLD
     v2x_source: np.ndarray | None = None
     object_rows: np.ndarray | None = None
+    centre_shared_m: np.ndarray | None = None
 
     def _ok(self, nl):
         if nl is None:
@@ -234,6 +242,27 @@ class FootprintEstimate:
     def largest_linear_ok(self) -> np.ndarray | None:
         """(N,) bool: ``largest_nonlinearity <= linear_threshold`` (False without a largest point)."""
         return self._ok(self.largest_nonlinearity)
+
+    @property
+    def centre_cov_shared_m2(self) -> np.ndarray | None:
+        """(N, 2, 2) the camera-level (calibration) part ``B B^T`` of ``centre_cov_m2``, m^2: the same error in
+        every frame (None without :attr:`centre_shared_m`)."""
+        B = self.centre_shared_m
+        if B is None:
+            return None
+        out = np.empty(B.shape[:-2] + (2, 2))  # (three sums: a stacked (N, 2, r) matmul costs ~10x more)
+        b0, b1 = B[..., 0, :], B[..., 1, :]
+        out[..., 0, 0] = np.einsum("...i,...i->...", b0, b0)
+        out[..., 0, 1] = out[..., 1, 0] = np.einsum("...i,...i->...", b0, b1)
+        out[..., 1, 1] = np.einsum("...i,...i->...", b1, b1)
+        return out
+
+    @property
+    def centre_cov_frame_m2(self) -> np.ndarray | None:
+        """(N, 2, 2) the per-frame part of ``centre_cov_m2`` (imaging, resolution, detector noise), m^2:
+        ``centre_cov_m2 - centre_cov_shared_m2`` (None without :attr:`centre_shared_m`)."""
+        shared = self.centre_cov_shared_m2
+        return None if shared is None else self.centre_cov_m2 - shared
 
     @property
     def v2x(self) -> dict[str, np.ndarray]:
@@ -562,6 +591,10 @@ def footprints_from_corners(camera, budget, corners_px, *, pixel_cov_px2=None, a
         ccov_c = G @ joint_c @ np.swapaxes(G, -1, -2)
     centre = np.where(ok[:, None], C, np.nan)
     centre_cov = np.where(ok[:, None, None], ccov_c, np.nan)
+    with np.errstate(invalid="ignore", over="ignore"):  # the centre's whitened parameter Jacobian dC/dp L
+        L = budget.param_factor().dense()
+        shared = G @ (np.where(bad_rows[:, :, None], 0.0, bp.dxy_dp.reshape(N, 2 * K, bp.dxy_dp.shape[-1])) @ L)
+    shared = np.where(ok[:, None, None], shared, np.nan)
     area = np.where(all_usable, area, np.nan)
     fields = {**cpm_fields(centre_cov, heading_offset_deg), **j2735_fields(centre_cov, heading_offset_deg)}
     v2x = np.stack([fields[name] for name in V2X_FIELDS], -1).astype(np.int32)
@@ -581,7 +614,8 @@ def footprints_from_corners(camera, budget, corners_px, *, pixel_cov_px2=None, a
         centre_xy_world_m=centre, centre_cov_m2=centre_cov, centre_valid=ok, centre_reason=centre_reason,
         centre_bad_corner=np.where(ok, -1, np.where(centre_reason == DEGENERATE, -1, centre_bad)),
         area_m2=area, v2x_codes=v2x, heading_offset_deg=float(heading_offset_deg), corners_nonlinearity=cnl,
-        centre_nonlinearity=centre_nl, largest_nonlinearity=largest_nl, linear_threshold=thr))
+        centre_nonlinearity=centre_nl, largest_nonlinearity=largest_nl, linear_threshold=thr,
+        centre_shared_m=shared))
     return _apply_v2x_policy(est, camera, budget, v2x_policy, v2x_samples, v2x_seed,
                              corners_of=lambda r: uv[r], det_of=lambda r: None if det is None else det[r])
 
@@ -660,6 +694,8 @@ def _mark_overflow(est: FootprintEstimate) -> FootprintEstimate:
     if est.centre_nonlinearity is not None:
         est.centre_nonlinearity[objs[bad]] = np.nan
     est.area_m2[objs[~all_usable]] = np.nan
+    if est.centre_shared_m is not None and est.centre_shared_m.shape[0]:
+        est.centre_shared_m[objs[bad]] = np.nan
     fields = {**cpm_fields(est.centre_cov_m2[objs], est.heading_offset_deg),
               **j2735_fields(est.centre_cov_m2[objs], est.heading_offset_deg)}
     est.v2x_codes[objs] = np.stack([fields[name] for name in V2X_FIELDS], -1).astype(np.int32)
@@ -876,6 +912,10 @@ class FrameProcessor:
     linearity, linear_threshold, v2x_policy, v2x_samples, v2x_seed
         The linearity flag (computed in the kernel) and the V2X policy where the centre is not
         ``linear_ok``, as in :func:`footprints_from_corners`.
+    shared_jacobian : bool
+        Also return each centre's whitened parameter Jacobian ``centre_shared_m`` (N, 2, r), which splits
+        its covariance into the camera-level part shared by every frame and the per-frame part (the tracker
+        needs it, :mod:`footprint_uq.tracking`); default False (None).
 
     A processor keeps only read-only constants and the kernels release the GIL, so
     one processor may serve several threads at once (e.g. chunks of a batch).
@@ -889,7 +929,9 @@ class FrameProcessor:
 
     def __init__(self, camera, budget, *, heading_offset_deg: float = 0.0, allow_outside_image: bool = False,
                  joint_cov: bool = True, linearity: bool = True, linear_threshold: float = DEFAULT_LINEAR_THRESHOLD,
-                 v2x_policy: str = "sampled", v2x_samples: int = V2X_SAMPLES, v2x_seed: int = 0):
+                 v2x_policy: str = "sampled", v2x_samples: int = V2X_SAMPLES, v2x_seed: int = 0,
+                 shared_jacobian: bool = False):
+        self.shared_jacobian = bool(shared_jacobian)
         self.linear_threshold, self.v2x_samples = _check_flag_options(linear_threshold, v2x_policy, v2x_samples)
         self.linearity = bool(linearity)
         self.v2x_policy = v2x_policy
@@ -944,15 +986,17 @@ class FrameProcessor:
                                            extra_reason=extra if extra.shape[0] == N else None,
                                            **self._flag_options())
         det, mode = self._det(pixel_cov_px2, N, K)
-        alloc = reusable_allocator(self._fk.outputs_max_bytes(N, K, joint=self.joint_cov))
-        out = self._fk.alloc_outputs(N, K, joint=self.joint_cov, corners=self.corner_outputs, alloc=alloc)
+        r = self._r if self.shared_jacobian else None
+        alloc = reusable_allocator(self._fk.outputs_max_bytes(N, K, joint=self.joint_cov, shared_rank=r))
+        out = self._fk.alloc_outputs(N, K, joint=self.joint_cov, corners=self.corner_outputs, alloc=alloc,
+                                     shared_rank=r)
         n_over = self._fk.process_corners(uv, extra, self._no_boxes, False, True, self._cam, self._dR, self._Lr,
                                           self._Lc, self._Lv, self._r, self._spx, det, mode, self.allow_outside_image,
                                           self._ch, self._sh, self.linearity, out, self._scratch())
         return self._pack(uv, out, lambda r: uv[r], det, mode, n_over)
 
     def _pack(self, uv, out, corners_of, det, mode, n_over) -> FootprintEstimate:
-        xy, ccov, joint, reason, usable, li, lcov, creason, cbad, obj, v2x, cnl = out
+        xy, ccov, joint, reason, usable, li, lcov, creason, cbad, obj, v2x, cnl, shared = out
         row = self._fk.OBJ_ROW
         # views of the kernel's per-object rows (no copies): (N, 2) and (N, 2, 2) with strides across rows
         centre = obj[row["x_m"]:row["y_m"] + 1].T
@@ -965,12 +1009,29 @@ class FrameProcessor:
                                 obj[row["nonlinearity"]] if flag else None,
                                 obj[row["largest_nonlinearity"]] if flag else None, self.linear_threshold)
         est.object_rows = obj
+        if self.shared_jacobian:
+            shared[creason != 0] = np.nan
+            est.centre_shared_m = shared
         K = reason.shape[1]
         if n_over:  # (the kernel counts what _mark_overflow would find; almost always nothing)
             est = _mark_overflow(est)
         return _apply_v2x_policy(est, self.camera, self.budget, self.v2x_policy, self.v2x_samples,
                                  self.v2x_seed, corners_of=corners_of,
                                  det_of=lambda r: _det_joint_rows(det, mode, r, K))
+
+    def point_shared_jacobian(self, uv_px) -> np.ndarray:
+        """The whitened parameter Jacobian ``B`` (n, 2, r) of the ground points of pixels ``uv_px (n, 2)``, alone:
+        :attr:`FootprintEstimate.centre_shared_m` of one-point footprints (pixels outside the image included), NaN
+        where a pixel has no ground point.  One kernel pass without the rest of an estimate (the tracker evaluates
+        ``B`` at every track's predicted position in every frame: ~4x less than :meth:`corners`)."""
+        uv = np.ascontiguousarray(uv_px, dtype=np.float64).reshape(-1, 1, 2)
+        out = self._fk.alloc_outputs(uv.shape[0], 1, corners=False, shared_rank=self._r)
+        self._fk.process_corners(uv, self._no_extra, self._no_boxes, False, True, self._cam, self._dR, self._Lr,
+                                 self._Lc, self._Lv, self._r, self._spx, self._no_det, 0, True, self._ch, self._sh,
+                                 False, out, self._scratch())
+        shared = out[12]
+        shared[out[7] != status.OK] = np.nan
+        return shared
 
     def corners(self, corners_px, *, pixel_cov_px2=None) -> FootprintEstimate:
         """Footprints from corners in pixels ``(N, K, 2)`` (see :func:`footprints_from_corners`)."""
@@ -1001,9 +1062,11 @@ class FrameProcessor:
             raise InputError("yaw_unit", yaw_unit, "'rad' (column yaw_rad) or 'deg' (column yaw_deg)")
         N = b.shape[0]
         det, mode = self._det(pixel_cov_px2, N, 4)
-        alloc = reusable_allocator(self._fk.outputs_max_bytes(N, 4, joint=self.joint_cov))
+        r = self._r if self.shared_jacobian else None
+        alloc = reusable_allocator(self._fk.outputs_max_bytes(N, 4, joint=self.joint_cov, shared_rank=r))
         uv = alloc((N if self.corner_outputs else 0, 4, 2), np.float64)
-        out = self._fk.alloc_outputs(N, 4, joint=self.joint_cov, corners=self.corner_outputs, alloc=alloc)
+        out = self._fk.alloc_outputs(N, 4, joint=self.joint_cov, corners=self.corner_outputs, alloc=alloc,
+                                     shared_rank=r)
         bad, n_over = self._fk.process_boxes3d(b, yaw_unit == "deg", bool(bottom_on_ground), self._cam, self._dR,
                                                self._Lr, self._Lc, self._Lv, self._r, self._spx, det, mode,
                                                self.allow_outside_image, self._ch, self._sh, self.linearity, uv, out,

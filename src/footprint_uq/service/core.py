@@ -25,6 +25,7 @@ import json
 import math
 import operator
 import re
+import threading
 import time
 import zlib
 from dataclasses import dataclass
@@ -42,6 +43,7 @@ from ..errors import FootprintUQError, InputError
 from ..products.footprints import CONTACT_MODES, V2X_FIELDS, FrameProcessor
 from ..products.geo import GeoReference
 from ..products.v2x import J2735_POSITION_CONFIDENCE_NAMES
+from ..tracking import SharedJacobianAt, TrackerConfig, TrackTable, object_motion
 from ..uncertainty.ellipse import chi2_scale, ellipse_axes
 from ..uncertainty.propagation import DEFAULT_LINEAR_THRESHOLD, nonlinearity
 from .jsonrows import Table
@@ -130,6 +132,9 @@ class CameraSetup:
     lon_1e7deg: int | None = None
     #: the fixed part of its CPMs' UPER encoding
     uper: CpmUperWriter | None = None
+    #: its tracks by object_id (``tracks=True``; one frame at a time: ``tracks_lock``)
+    tracks: TrackTable | None = None
+    tracks_lock: threading.Lock | None = None
 
     def __post_init__(self):
         geo = self.georef
@@ -198,6 +203,13 @@ class Service:
     warm_up : bool
         Run each camera once on a dummy frame so that the compiled kernels are loaded
         before the first real frame (default True).
+    tracks : bool
+        Track each camera's objects by ``object_id`` across frames (:mod:`footprint_uq.tracking`) and add their
+        motion to every object: ``track_id``, ``v_east_mps``, ``v_north_mps``, ``cov_v_m2ps2``, ``speed_mps``,
+        ``sigma_speed_mps``, ``heading_deg``, ``sigma_heading_deg``, ``yaw_deg``, ``sigma_yaw_deg``, ``age_s``
+        (null where unknown; docs/service.md).  Frames of a camera must then come in time order.
+    tracker : TrackerConfig, optional
+        The tracker's options (timeout, gate, acceleration noise).
     """
 
     def __init__(self, camera=None, budget=None, *, registry=None, camera_id: str | None = None,
@@ -205,7 +217,7 @@ class Service:
                  origin_lon_deg: float | None = None, confidence: float = 0.95, contact: str = "bottom-centre",
                  allow_outside_image: bool = False, station_id: int | None = None, messages: bool = True,
                  uper_encoder: str = "fast", linearity: bool = False, linear_threshold: float | None = None,
-                 warm_up: bool = True):
+                 warm_up: bool = True, tracks: bool = False, tracker: TrackerConfig | None = None):
         if (camera is None) == (registry is None):
             raise InputError("camera/registry", "both" if camera is not None else "neither",
                              "exactly one of a camera (with a budget) or a registry")
@@ -242,6 +254,16 @@ class Service:
                                                                                allow_outside_image),
                                                      geo, station_id_of(cid))
         self._single = camera is not None
+        self.tracks = bool(tracks)
+        if self.tracks:
+            cfg = tracker or TrackerConfig()
+            for setup in self.cameras.values():
+                proc = setup.processor
+                proc.shared_jacobian = True
+                at = SharedJacobianAt(proc.camera, proc.budget)
+                setup.tracks, setup.tracks_lock = TrackTable(cfg, rank=at.rank, shared_at=at), threading.Lock()
+                if warm_up:
+                    setup.tracks.warm_up()
 
         self.linearity = bool(linearity)
         self.linear_threshold = DEFAULT_LINEAR_THRESHOLD if linear_threshold is None else float(linear_threshold)
@@ -351,8 +373,9 @@ class Service:
             raise _FrameError("detections", f"field detections is not a list: {type(dets).__name__}")
         ref_ms = timestamp_its_ms(ts) if self.messages else None
         est, ids, classes, class_p, P = self._footprints(setup, dets)
+        motion = self._motion(setup, est, ids, ts, dets) if self.tracks else None
         t1 = time.perf_counter()
-        objects, ok_idx, msg_ids = self._objects_json(setup, est, ids, classes, P)
+        objects, ok_idx, msg_ids = self._objects_json(setup, est, ids, classes, P, motion)
         t2 = time.perf_counter()
         head = {"type": RECORD_FOOTPRINTS, "camera_id": camera_id, "frame": fno, "timestamp_s": ts,
                 "station_id": setup.station_id, "heading_offset_deg": setup.georef.heading_offset_deg,
@@ -446,7 +469,22 @@ class Service:
             ok = np.isfinite(worst) & (worst <= self.linear_threshold)
         return worst, ok
 
-    def _objects_json(self, setup: CameraSetup, est, ids: list, classes: list, P) -> tuple[bytes, np.ndarray, list]:
+    @staticmethod
+    def _motion(setup: CameraSetup, est, ids: list, ts: float, dets: list):
+        """The frame's objects through the camera's tracks: ``(track_id (N,), MotionArrays)``."""
+        yaw = None
+        if dets and ("yaw_rad" in dets[0] or "yaw_deg" in dets[0]):  # 3D boxes: their yaw (checked by then)
+            key = "yaw_rad" if "yaw_rad" in dets[0] else "yaw_deg"
+            yaw = np.fromiter(map(dict.get, dets, _repeat(key)), np.float64, len(dets))
+            yaw = yaw if key == "yaw_rad" else np.deg2rad(yaw)
+        N = len(ids)
+        B = est.centre_shared_m if est.centre_shared_m is not None else np.full((N, 2, setup.tracks.rank), np.nan)
+        with setup.tracks_lock:
+            out = setup.tracks.step(ts, ids, est.centre_xy_world_m, est.centre_cov_frame_m2, B)
+        return out.track_id, object_motion(out, heading_offset_deg=setup.georef.heading_offset_deg, yaw_rad=yaw)
+
+    def _objects_json(self, setup: CameraSetup, est, ids: list, classes: list, P,
+                      motion=None) -> tuple[bytes, np.ndarray, list]:
         """The ``objects`` list of the record as JSON text, written column-wise (:class:`.jsonrows.Table`); and
         the indices of the objects in the messages (with a centre, at most 255) and their ``message_object_id``."""
         N = len(ids)
@@ -482,6 +520,18 @@ class Service:
         if self.linearity:
             nonlin, linear = self._linearity(setup, est, P) if N else (np.zeros(0), np.zeros(0, bool))
             layout += [b',"nonlinearity":', t.column(nonlin), b',"linear_ok":', t.column(linear)]
+        if motion is not None:  # null where unknown (no track, no velocity yet, heading sigma unavailable, ...)
+            tid, m = motion
+            tracked = tid >= 0
+            ve, vn, c00, c01, c11, sp, ssp, hd, shd, yw, syw, age = t.columns(np.array([
+                m.v_east_mps, m.v_north_mps, m.cov_v_m2ps2[:, 0, 0], m.cov_v_m2ps2[:, 0, 1], m.cov_v_m2ps2[:, 1, 1],
+                m.speed_mps, m.sigma_speed_mps, m.heading_deg, m.sigma_heading_deg, m.yaw_deg, m.sigma_yaw_deg,
+                m.age_s]))
+            layout += [b',"track_id":', t.when(tracked, t.column(tid)), t.when(~tracked, b"null"),
+                       b',"v_east_mps":', ve, b',"v_north_mps":', vn, b',"cov_v_m2ps2":[[', c00, b",", c01, b"],[",
+                       c01, b",", c11, b']],"speed_mps":', sp, b',"sigma_speed_mps":', ssp, b',"heading_deg":', hd,
+                       b',"sigma_heading_deg":', shd, b',"yaw_deg":', yw, b',"sigma_yaw_deg":', syw, b',"age_s":',
+                       age]
         ok_idx = msg_ids = None
         if self.messages:
             ok_all = np.flatnonzero(valid)

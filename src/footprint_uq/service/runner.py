@@ -546,7 +546,8 @@ def run(*, camera=None, budget=None, registry=None, camera_id: str | None = None
         service = Service(cam, budget, registry=registry, camera_id=camera_id, heading_offset_deg=heading_offset_deg,
                           origin_lat_deg=origin_lat_deg, origin_lon_deg=origin_lon_deg, confidence=confidence,
                           contact=contact, allow_outside_image=allow_outside_image, station_id=station_id,
-                          uper_encoder=uper_encoder, linearity=linearity, linear_threshold=linear_threshold)
+                          uper_encoder=uper_encoder, linearity=linearity, linear_threshold=linear_threshold,
+                          tracks=serve_options.pop("tracks", False))
         return serve(service, stop=stop, **serve_options)
     finally:
         for sig, h in old.items():

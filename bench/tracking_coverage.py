@@ -1,0 +1,96 @@
+"""The tracker's coverage sweep (docs/uncertainty-model.md, "Motion: velocity and heading"), and its figure.
+
+For every scenario (straight, turning, stopping) and rate (10, 20, 30 Hz), ``--runs`` seeded runs of 3 s (each run:
+one calibration error drawn for the whole run, pixel noise every frame; :mod:`footprint_uq.tracking.synthetic`)
+through three filters: the split measurement model (``consider``), the whole per-frame covariance fed as white
+noise (``white``) and the calibration error left out (``ignore``).  Prints the share of frames whose 95 % velocity
+ellipse, heading interval and position ellipse hold the truth, writes them as JSON and draws
+``docs/figures/tracking-coverage.png`` with ``--figure``.
+
+    PYTHONPATH=src .venv/bin/python bench/tracking_coverage.py [--runs 1000] [--json out.json] [--figure PNG]
+
+The small seeded version is ``tests/test_tracking.py::test_coverage_small_seeded_sweep``.  Nothing is asserted here.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+
+from footprint_uq.tracking.synthetic import SCENARIOS, coverage
+
+RATES_HZ = (10, 20, 30)
+MODES = ("consider", "white", "ignore")
+
+
+def sweep(n_runs: int = 1000, seed: int = 0) -> list[dict]:
+    rows = []
+    for mode in MODES:
+        for scenario in SCENARIOS:
+            for hz in RATES_HZ:
+                r = coverage(scenario, hz, n_runs=n_runs, seed=seed, calibration=mode)
+                rows.append(dict(mode=mode, scenario=scenario, rate_hz=hz, **{k: float(v) if isinstance(v, float)
+                                                                              else v for k, v in r._asdict().items()}))
+                print(f"{mode:9s} {scenario:9s} {hz:3d} Hz  velocity {r.velocity:6.1%}  heading {r.heading:6.1%}  "
+                      f"position {r.position:6.1%}  sigma_v {r.mean_sigma_v_mps:.2f} m/s  rms error "
+                      f"{r.rms_error_v_mps:.2f} m/s", flush=True)
+    return rows
+
+
+def figure(rows: list[dict], path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 3, figsize=(13, 4.4))
+    cases = [(s, hz) for s in SCENARIOS for hz in RATES_HZ]
+    style = {"consider": ("o", "C0", "split model (consider state)"), "white": ("s", "C3", "full covariance as white "
+                                                                                          "noise"),
+             "ignore": ("^", "C2", "calibration left out")}
+    for ax, key, title in zip(axes, ("velocity", "heading", "position"),
+                              ("velocity (95 % ellipse)", "heading (95 % interval)", "position (95 % ellipse)"),
+                              strict=True):
+        ax.axhspan(93, 97, color="0.9", zorder=0)
+        ax.axhline(95, color="0.5", lw=0.8)
+        for mode in MODES:
+            m, c, label = style[mode]
+            y = [next(r[key] for r in rows if r["mode"] == mode and r["scenario"] == s and r["rate_hz"] == hz) * 100
+                 for s, hz in cases]
+            ax.plot(range(len(cases)), y, m, color=c, label=label, ms=6)
+        ax.set_xticks(range(len(cases)), [f"{s[:4]}\n{hz} Hz" for s, hz in cases], fontsize=7)
+        ax.set_title(title, fontsize=10)
+        ax.set_ylim((85, 100.5) if key != "position" else (0, 101))
+    axes[0].set_ylabel("coverage of the truth, %")
+    axes[2].legend(fontsize=8, loc="lower center", bbox_to_anchor=(0.5, 0.14))
+    fig.suptitle(f"Tracker coverage, {rows[0]['n_runs']} seeded runs per case (calibration error once per run, "
+                 "pixel noise per frame); grey band: 95 +- 2 %", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+
+
+def main(argv=None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--runs", type=int, default=1000)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--json", default=None)
+    ap.add_argument("--figure", default=None)
+    ap.add_argument("--from-json", default=None, help="draw the figure of an earlier --json file (no sweep)")
+    a = ap.parse_args(argv)
+    t0 = time.perf_counter()
+    if a.from_json:
+        with open(a.from_json) as f:
+            rows = json.load(f)
+    else:
+        rows = sweep(a.runs, a.seed)
+    print(f"{time.perf_counter() - t0:.0f} s")
+    if a.json:
+        with open(a.json, "w") as f:
+            json.dump(rows, f, indent=1)
+    if a.figure:
+        figure(rows, a.figure)
+
+
+if __name__ == "__main__":
+    main()

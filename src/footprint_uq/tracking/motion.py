@@ -1,0 +1,91 @@
+"""Velocity, speed, heading and yaw with their confidences, as the V2X messages' motion fields take them.
+
+Conventions (docs/conventions.md): velocities are rotated from the world frame W into true east / north by the
+camera's ``heading_offset_deg`` (the bearing of W's +y axis, as the messages' positions); headings and yaws are
+compass bearings, degrees clockwise from true north in [0, 360).
+
+Heading near zero speed (the NaN policy, as the ``uncertainties`` package: a value whose confidence cannot be
+stated keeps its value and gets a NaN sigma): the heading is ``atan2(v_east, v_north)`` wherever the speed is
+not 0; its sigma (delta method, ``sigma^2 = g^T Sigma_v g`` with ``g = (v_north, -v_east) / speed^2``) is given
+only where ``speed >= heading_min_ratio * sigma_v_max`` (the velocity ellipse's largest 1-sigma semi-axis):
+below that the direction of the velocity is not known well enough for a Gaussian interval (at a ratio of 3 the
+ellipse's 2.45-sigma contour nearly reaches zero speed) and ``sigma_heading_deg`` is NaN ("unavailable").
+The speed's sigma is the delta method's along the estimated direction; it is NaN at exactly zero speed.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+
+from .._checks import as_float
+from .kernels import motion_fields
+from .table import TrackOutput
+
+__all__ = ["MotionArrays", "MOTION_FIELDS", "object_motion", "DEFAULT_HEADING_MIN_RATIO", "yaw_compass_deg"]
+
+#: heading sigma only where speed >= this many sigma of the velocity's largest semi-axis
+DEFAULT_HEADING_MIN_RATIO = 3.0
+
+
+class MotionArrays(NamedTuple):
+    """Per object (n,), NaN = unknown; the fields (in order) of ``service.messages``' ``ObjectMotion``.
+
+    v_east_mps, v_north_mps : (n,)    velocity, true east / north, m/s
+    cov_v_m2ps2 : (n, 2, 2)           its covariance (east, north), m^2/s^2
+    speed_mps, sigma_speed_mps : (n,)
+    heading_deg, sigma_heading_deg : (n,)   direction of motion, compass (clockwise from true north), deg
+    yaw_deg, sigma_yaw_deg : (n,)     a 3-D box's yaw as a compass bearing of its length axis, deg
+    age_s : (n,)                      time since the track's first detection, s
+    """
+
+    v_east_mps: np.ndarray
+    v_north_mps: np.ndarray
+    cov_v_m2ps2: np.ndarray
+    speed_mps: np.ndarray
+    sigma_speed_mps: np.ndarray
+    heading_deg: np.ndarray
+    sigma_heading_deg: np.ndarray
+    yaw_deg: np.ndarray
+    sigma_yaw_deg: np.ndarray
+    age_s: np.ndarray
+
+
+MOTION_FIELDS = MotionArrays._fields
+
+
+def yaw_compass_deg(yaw_rad, heading_offset_deg: float = 0.0) -> np.ndarray:
+    """3-D box yaws (radians counter-clockwise from W's +x, the box columns' ``yaw_rad``) as compass bearings
+    (degrees clockwise from true north, [0, 360))."""
+    return np.mod(90.0 - np.rad2deg(np.asarray(yaw_rad, dtype=np.float64)) + heading_offset_deg, 360.0)
+
+
+def object_motion(tracks: TrackOutput, *, heading_offset_deg: float = 0.0, yaw_rad=None, sigma_yaw_rad=None,
+                  heading_min_ratio: float = DEFAULT_HEADING_MIN_RATIO) -> MotionArrays:
+    """The motion fields of a frame's objects from the tracker's output (see the module doc for the policies).
+
+    Parameters
+    ----------
+    tracks : TrackOutput
+        :meth:`footprint_uq.tracking.table.TrackTable.step`'s output for the frame (n objects).
+    heading_offset_deg : float
+        Bearing of W's +y axis from true north (the camera's, as for its positions).
+    yaw_rad, sigma_yaw_rad : (n,), optional
+        3-D boxes' yaw (W, counter-clockwise from +x, rad) and its sigma if the detector gives one (else NaN).
+    heading_min_ratio : float
+        Speed / largest velocity sigma below which the heading's sigma is NaN.
+    """
+    h = as_float("heading_offset_deg", heading_offset_deg)
+    ratio = as_float("heading_min_ratio", heading_min_ratio, positive=True)
+    n = tracks.track_id.shape[0]
+    out = np.empty((6, n))
+    cov = np.empty((n, 2, 2))
+    hr = math.radians(h)
+    motion_fields(np.ascontiguousarray(tracks.v_mps, dtype=np.float64),
+                  np.ascontiguousarray(tracks.cov_v_m2ps2, dtype=np.float64), math.cos(hr), math.sin(hr), ratio, out,
+                  cov)
+    yaw = np.full(n, np.nan) if yaw_rad is None else yaw_compass_deg(yaw_rad, h)
+    sig_yaw = np.full(n, np.nan) if sigma_yaw_rad is None else np.rad2deg(np.asarray(sigma_yaw_rad, np.float64))
+    return MotionArrays(out[0], out[1], cov, out[2], out[3], out[4], out[5], yaw, sig_yaw, tracks.age_s.copy())

@@ -1,0 +1,312 @@
+"""One camera's tracks, keyed by the detector's ``object_id``: initiation, gating, timeout, update."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from itertools import repeat
+from typing import NamedTuple
+
+import numpy as np
+
+from .._checks import as_float
+from ..errors import InputError
+from ..fast.footprint_kernels import camera_constants
+from ..products.footprints import FrameProcessor
+from .filter import Initiator, SplitMeasurement
+from .kernels import gather_outputs, project_ground, update_slots
+from .models import ConstantVelocity
+
+__all__ = ["TrackerConfig", "TrackOutput", "TrackTable", "SharedJacobianAt", "CALIBRATION_MODES", "DEFAULT_GATE_CHI2"]
+
+_NO_B = np.zeros((0, 2, 0))
+#: how the calibration error enters the filter: "consider" (the split model, the only honest one), "white" (the
+#: whole per-frame covariance as white noise) and "ignore" (only the per-frame part) are kept to show what goes
+#: wrong (docs/uncertainty-model.md)
+CALIBRATION_MODES = ("consider", "white", "ignore")
+#: gate: squared Mahalanobis distance of the innovation (2 dof) beyond which a detection is not the same object;
+#: -2 ln(1e-6): a consistent track is cut once in a million frames
+DEFAULT_GATE_CHI2 = -2.0 * math.log(1e-6)
+
+
+@dataclass(frozen=True)
+class TrackerConfig:
+    """Options of :class:`TrackTable` (docs/uncertainty-model.md, "Motion: velocity and heading").
+
+    accel_psd_m2ps3 : float
+        Acceleration noise of the constant-velocity model (:class:`~footprint_uq.tracking.models.ConstantVelocity`).
+    timeout_s : float
+        A track not updated for longer than this is deleted; its ``object_id`` then starts a new track.
+    gate_chi2 : float
+        A detection whose innovation has ``y^T S^-1 y`` above this starts a new track (its id was reused).
+    sigma_v0_mps : float
+        Prior sigma of each velocity component of a new track (the velocity is reported from its second
+        detection on).
+    calibration : {"consider", "white", "ignore"}
+        :data:`CALIBRATION_MODES`; anything but "consider" is for comparisons only.
+    """
+
+    accel_psd_m2ps3: float = 3.0
+    timeout_s: float = 1.0
+    gate_chi2: float = DEFAULT_GATE_CHI2
+    sigma_v0_mps: float = 50.0
+    calibration: str = "consider"
+
+    def __post_init__(self):
+        for name in ("accel_psd_m2ps3", "timeout_s", "gate_chi2", "sigma_v0_mps"):
+            object.__setattr__(self, name, as_float(name, getattr(self, name), positive=True))
+        if self.calibration not in CALIBRATION_MODES:
+            raise InputError("calibration", self.calibration, f"one of {CALIBRATION_MODES}")
+
+
+class TrackOutput(NamedTuple):
+    """Per object of one frame (leading dimension n, the frame's objects in their order).
+
+    track_id : (n,) int64          the track's number in this table (-1: not tracked: no id, no centre, a
+                                   repeated id in the frame, or a frame not later than the previous one)
+    new_track : (n,) bool          the track started at this frame (new id, timeout or a jump beyond the gate)
+    n_updates : (n,) int64         detections in the track so far (0 if not tracked)
+    age_s : (n,)                   time since the track's first detection, s (NaN if not tracked)
+    xy_m : (n, 2), cov_xy_m2 : (n, 2, 2)           filtered position in W and its covariance (calibration share
+                                                   included)
+    v_mps : (n, 2), cov_v_m2ps2 : (n, 2, 2)        velocity in W and its covariance (NaN before the second
+                                                   detection: a single position says nothing of the velocity)
+    """
+
+    track_id: np.ndarray
+    new_track: np.ndarray
+    n_updates: np.ndarray
+    age_s: np.ndarray
+    xy_m: np.ndarray
+    cov_xy_m2: np.ndarray
+    v_mps: np.ndarray
+    cov_v_m2ps2: np.ndarray
+
+    @classmethod
+    def untracked(cls, n: int) -> TrackOutput:
+        """n objects without a track (track_id -1, NaN)."""
+        nan = np.nan
+        return cls(np.full(n, -1, np.int64), np.zeros(n, bool), np.zeros(n, np.int64), np.full(n, nan),
+                   np.full((n, 2), nan), np.full((n, 2, 2), nan), np.full((n, 2), nan), np.full((n, 2, 2), nan))
+
+
+class TrackTable:
+    """The tracks of one camera, keyed by ``object_id`` (any hashable; None is never tracked).
+
+    Each :meth:`step` takes one frame: tracks not updated for longer than ``timeout_s`` are deleted first (the
+    deleter); then every object whose id has a track is predicted to the frame's time and gated (a jump with
+    ``y^T S^-1 y > gate_chi2`` restarts the track under a new ``track_id``), the others start tracks
+    (the initiator); all updates of a frame run together, vectorised over its objects.
+
+    Parameters
+    ----------
+    config : TrackerConfig
+    rank : int
+        Columns r of the frames' ``shared_m`` (the budget's factor rank, :attr:`SharedJacobianAt.rank`).
+    shared_at : callable ``(n, 2) -> (n, 2, r)``, optional
+        The shared Jacobian ``B`` at world points (:class:`SharedJacobianAt`).  Given, an update uses ``B`` at
+        the track's *predicted* position instead of the frame's ``shared_m`` (which is evaluated at the measured
+        pixel, so its small error is correlated with that frame's noise: the filter believes it knows how the
+        calibration error changes from frame to frame to a fraction of the frame noise, and a 0.2 % error of B
+        that follows the noise makes 30 Hz velocity ellipses cover ~60 % instead of 95 %; docs/uncertainty-model.md).
+        Always give it for real use; the frame's ``shared_m`` then serves new tracks and points it cannot map.
+    """
+
+    def __init__(self, config: TrackerConfig | None = None, *, rank: int, shared_at=None):
+        self.config = config or TrackerConfig()
+        self.shared_at = shared_at
+        self.rank = int(rank) if self.config.calibration == "consider" else 0
+        #: the model the compiled update runs (:func:`~footprint_uq.tracking.kernels.predict_update` is
+        #: :class:`~footprint_uq.tracking.filter.SchmidtPredictor` + :class:`~footprint_uq.tracking.filter.
+        #: SchmidtUpdater` in one pass; the tests hold them equal)
+        self.model = ConstantVelocity(self.config.accel_psd_m2ps3)
+        self.initiator = Initiator(self.config.sigma_v0_mps)
+        self._index: dict = {}  # object_id -> slot
+        self._cap = 0
+        self._grow(64)
+        self._next_id = 0
+        self._last_time: float = -math.inf
+        #: frames not tracked because their time was earlier than the previous frame's
+        self.n_stale_frames = 0
+
+    def __len__(self) -> int:
+        return len(self._index)
+
+    def warm_up(self) -> None:
+        """Load the compiled steps (numba's cache, or compile them) without touching the tracks."""
+        r = self.rank
+        Bp = _NO_B if self.shared_at is None else np.ascontiguousarray(self.shared_at(np.zeros((1, 2))))
+        update_slots(np.zeros((1, 4)), np.eye(4)[None].copy(), np.zeros((1, 4, r)), np.zeros(1),
+                     np.zeros(1, np.int64), np.zeros(1, np.int64), 1.0, 1.0, np.zeros((1, 2)), np.eye(2)[None].copy(),
+                     Bp if Bp.shape == (1, 2, r) else _NO_B, np.zeros((1, 2, r)), 1.0, np.empty(1))
+
+    def _grow(self, cap: int) -> None:
+        old = self._cap
+        r = self.rank
+
+        def extend(a, shape, fill):
+            b = np.full((cap,) + shape, fill, dtype=a.dtype if a is not None else np.float64)
+            if a is not None:
+                b[:old] = a
+            return b
+
+        def g(name):
+            return getattr(self, name, None)
+
+        self._x = extend(g("_x"), (4,), 0.0)
+        self._P = extend(g("_P"), (4, 4), 0.0)
+        self._C = extend(g("_C"), (4, r), 0.0)
+        self._t_last = extend(g("_t_last"), (), np.nan)
+        self._t_first = extend(g("_t_first"), (), np.nan)
+        self._n = extend(g("_n"), (), 0).astype(np.int64)
+        self._tid = extend(g("_tid"), (), -1).astype(np.int64)
+        keys = np.empty(cap, dtype=object)
+        if old:
+            keys[:old] = self._keys
+        self._keys = keys
+        self._free = list(range(cap - 1, old - 1, -1)) + getattr(self, "_free", [])
+        self._cap = cap
+
+    def _delete_expired(self, time_s: float) -> None:
+        """The deleter: drop tracks whose last update is more than ``timeout_s`` before ``time_s``."""
+        if not self._index:
+            return
+        with np.errstate(invalid="ignore"):
+            old = np.flatnonzero(time_s - self._t_last > self.config.timeout_s)
+        for s in old.tolist():
+            del self._index[self._keys[s]]
+            self._keys[s] = None
+            self._t_last[s] = np.nan
+            self._free.append(s)
+
+    def _measurement(self, xy_m, cov_frame_m2, shared_m) -> SplitMeasurement:
+        mode = self.config.calibration
+        if mode == "consider":
+            return SplitMeasurement(xy_m, cov_frame_m2, shared_m)
+        R = cov_frame_m2 + (shared_m @ np.swapaxes(shared_m, -1, -2) if mode == "white" else 0.0)
+        return SplitMeasurement(xy_m, R, np.zeros((xy_m.shape[0], 2, 0)))
+
+    def step(self, time_s: float, object_ids, xy_m, cov_frame_m2, shared_m) -> TrackOutput:
+        """One frame of n objects: update their tracks and return their motion (:class:`TrackOutput`).
+
+        Parameters
+        ----------
+        time_s : float
+            The frame's time, s.  Frames must come in time order: a frame earlier than the previous one is not
+            tracked (counted in :attr:`n_stale_frames`); one at the same time continues that frame (a frame given
+            in parts), where an id already updated at that time is a repeated id.
+        object_ids : sequence of n hashables (None: not tracked; a repeated id: only its first object is)
+        xy_m : (n, 2)               centres in W (NaN: no centre this frame; the track waits, it may time out)
+        cov_frame_m2 : (n, 2, 2)    per-frame part of their covariance, m^2
+        shared_m : (n, 2, r)        their whitened parameter Jacobians (the calibration part ``B B^T``)
+        """
+        t = as_float("time_s", time_s)
+        xy = np.asarray(xy_m, dtype=np.float64).reshape(-1, 2)
+        n = xy.shape[0]
+        ids = list(object_ids)
+        if len(ids) != n:
+            raise InputError("object_ids", len(ids), f"{n} ids, one per object")
+        B = np.asarray(shared_m, dtype=np.float64)
+        if B.shape != (n, 2, B.shape[2] if B.ndim == 3 else -1) or (self.config.calibration == "consider"
+                                                                    and B.shape[2] != self.rank):
+            raise InputError("shared_m", B.shape, f"shape ({n}, 2, {self.rank})")
+        out = TrackOutput.untracked(n)
+        if t < self._last_time:
+            self.n_stale_frames += 1
+            return out
+        self._last_time = t
+        self._delete_expired(t)
+        # the first object of each id with a centre (dict keeps the first index when built from the end)
+        ok = np.isfinite(xy).all(1) & np.isfinite(cov_frame_m2).all((1, 2)) & np.isfinite(B).all((1, 2))
+        first = dict(zip(reversed(ids), range(n - 1, -1, -1), strict=True))
+        first.pop(None, None)
+        rows = np.sort(np.fromiter(first.values(), np.int64, len(first)))
+        rows = rows[ok[rows]]
+        if rows.size == 0:
+            return out
+        keys = [ids[i] for i in rows.tolist()]
+        slots = np.fromiter(map(self._index.get, keys, repeat(-1)), np.int64, rows.size)
+        meas = self._measurement(xy[rows], np.asarray(cov_frame_m2, dtype=np.float64)[rows], B[rows])
+        again = slots >= 0
+        again[again] = self._t_last[slots[again]] == t  # updated at this time already: a repeated id
+        if again.any():
+            rows, slots, keys = rows[~again], slots[~again], [k for k, a in zip(keys, again.tolist(), strict=True)
+                                                             if not a]
+            meas = _take(meas, np.flatnonzero(~again))
+        new = slots < 0
+        old = np.flatnonzero(~new)
+        if old.size:
+            keep = self._update(t, slots[old], _take(meas, old))
+            new[old[~keep]] = True
+        self._start(t, keys, slots, new, meas)
+        gather_outputs(rows, slots, new, self._tid, self._n, self._t_first, self._x, self._P, t, *out)
+        return out
+
+    def _update(self, t: float, s: np.ndarray, m: SplitMeasurement) -> np.ndarray:
+        """Predict and update the tracks in slots ``s`` in place (the compiled :func:`~footprint_uq.tracking.kernels.
+        update_slots`, i.e. :class:`SchmidtPredictor` + :class:`SchmidtUpdater`); returns which passed the gate."""
+        if self.shared_at is not None and self.rank:  # B at the predicted positions (see the class doc)
+            x = self._x[s]
+            Bp = np.ascontiguousarray(self.shared_at(x[:, :2] + (t - self._t_last[s])[:, None] * x[:, 2:]),
+                                      dtype=np.float64)
+        else:
+            Bp = _NO_B
+        d2 = np.empty(s.size)
+        update_slots(self._x, self._P, self._C, self._t_last, self._n, s, t, self.config.accel_psd_m2ps3, m.xy_m,
+                     m.cov_frame_m2, Bp, np.ascontiguousarray(m.shared_m), self.config.gate_chi2, d2)
+        return d2 <= self.config.gate_chi2  # NaN (a singular S) fails the gate too
+
+    def _start(self, t: float, keys: list, slots: np.ndarray, new: np.ndarray, meas: SplitMeasurement) -> None:
+        """The initiator's tracks for the objects ``new`` (slots filled in place; restarted ids keep their slot)."""
+        idx = np.flatnonzero(new)
+        if idx.size == 0:
+            return
+        need = int(np.count_nonzero(slots[idx] < 0))
+        if need > len(self._free):
+            self._grow(max(2 * self._cap, self._cap + need))
+        for i in idx[slots[idx] < 0].tolist():
+            s = self._free.pop()
+            slots[i] = s
+            self._keys[s] = keys[i]
+            self._index[keys[i]] = s
+        s = slots[idx]
+        st = self.initiator.initiate(_take(meas, idx))
+        self._x[s], self._P[s], self._C[s] = st.x, st.P, st.C
+        self._t_last[s] = self._t_first[s] = t
+        self._n[s] = 1
+        self._tid[s] = np.arange(self._next_id, self._next_id + idx.size)
+        self._next_id += idx.size
+
+
+def _take(m: SplitMeasurement, i: np.ndarray) -> SplitMeasurement:
+    return SplitMeasurement(m.xy_m[i], m.cov_frame_m2[i], m.shared_m[i])
+
+
+
+class SharedJacobianAt:
+    """``B`` (the whitened calibration Jacobian of a ground point, (n, 2, r)) at world points, for
+    :class:`TrackTable`'s ``shared_at``: the points are projected into the image by the nominal camera and run
+    through the fused kernel as one-point footprints (NaN where a point has no pixel or no ground point).
+
+    For a polygon's centroid this is ``B`` at the centroid's ground point, not the centroid of its corners'
+    ``B`` (they differ by a term of the order of (object size / range)^2, the same in every frame).
+
+    Parameters
+    ----------
+    camera : Camera
+    budget : ErrorBudget, preset name, path or mapping
+    """
+
+    def __init__(self, camera, budget):
+        self.processor = FrameProcessor(camera, budget, joint_cov=False, linearity=False, v2x_policy="linear",
+                                        shared_jacobian=True, allow_outside_image=True)
+        self.processor.corner_outputs = False
+        self.camera = camera
+        self.rank = int(self.processor.budget.param_factor().rank)
+        self._cam = camera_constants(camera)[0]
+
+    def __call__(self, xy_m) -> np.ndarray:
+        xy = np.ascontiguousarray(xy_m, dtype=np.float64).reshape(-1, 2)
+        uv = np.empty((xy.shape[0], 1, 2))
+        project_ground(xy, self._cam, uv[:, 0])
+        return self.processor.point_shared_jacobian(uv)
