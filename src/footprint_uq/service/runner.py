@@ -47,6 +47,7 @@ from ..batch.fleet import load_registry
 from ..errors import ConfigError, InputError
 from ..io import load_camera
 from .core import RECORD_ERROR, RECORD_FOOTPRINTS, FrameOutput, Service, error_record
+from .messages.asn1_cpm import DEFAULT_CDD
 
 __all__ = ["FrameQueue", "Metrics", "serve", "run", "parse_mqtt_url", "POLICIES"]
 
@@ -505,7 +506,7 @@ def run(*, camera=None, budget=None, registry=None, camera_id: str | None = None
         origin_lat_deg: float | None = None, origin_lon_deg: float | None = None, confidence: float = 0.95,
         contact: str = "bottom-centre", allow_outside_image: bool = False, station_id: int | None = None,
         uper_encoder: str = "fast", linearity: bool = False, linear_threshold: float | None = None,
-        workers: int = 1, **serve_options) -> int:
+        workers: int = 1, cpm_cdd: str = DEFAULT_CDD, v2x_policy: str = "sampled", **serve_options) -> int:
     """``footprint-uq serve``: build the :class:`Service` from files (a camera file and budget, or a
     registry) and :func:`serve` it; returns the exit status.
 
@@ -527,7 +528,7 @@ def run(*, camera=None, budget=None, registry=None, camera_id: str | None = None
             budget=budget, registry=registry, heading_offset_deg=heading_offset_deg, origin_lat_deg=origin_lat_deg,
             origin_lon_deg=origin_lon_deg, confidence=confidence, contact=contact,
             allow_outside_image=allow_outside_image, uper_encoder=uper_encoder, linearity=linearity,
-            linear_threshold=linear_threshold, **serve_options))
+            linear_threshold=linear_threshold, cpm_cdd=cpm_cdd, v2x_policy=v2x_policy, **serve_options))
     # a SIGTERM while the cameras load and the kernels compile (seconds) is a stop request too: nothing was
     # taken in yet, so the drain is empty and the exit status 0
     stop = serve_options.pop("stop", None) or threading.Event()
@@ -546,7 +547,8 @@ def run(*, camera=None, budget=None, registry=None, camera_id: str | None = None
         service = Service(cam, budget, registry=registry, camera_id=camera_id, heading_offset_deg=heading_offset_deg,
                           origin_lat_deg=origin_lat_deg, origin_lon_deg=origin_lon_deg, confidence=confidence,
                           contact=contact, allow_outside_image=allow_outside_image, station_id=station_id,
-                          uper_encoder=uper_encoder, linearity=linearity, linear_threshold=linear_threshold)
+                          uper_encoder=uper_encoder, linearity=linearity, linear_threshold=linear_threshold,
+                          cpm_cdd=cpm_cdd, v2x_policy=v2x_policy)
         return serve(service, stop=stop, **serve_options)
     finally:
         for sig, h in old.items():
