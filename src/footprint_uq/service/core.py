@@ -39,6 +39,7 @@ from numba import njit
 
 from ..batch import schema as S
 from ..batch.fleet import load_registry
+from ..batch.process import MAX_PIXEL_VAR_PX2
 from ..errors import FootprintUQError, InputError
 from ..products.footprints import CONTACT_MODES, V2X_FIELDS, V2X_POLICIES, FrameProcessor
 from ..products.geo import GeoReference
@@ -443,12 +444,16 @@ class Service:
                                                "(x_m, y_m, z_m, length_m, width_m, height_m, yaw_rad|yaw_deg) or "
                                                "corners (u0_px, v0_px, ...), one family per frame")
         cols = S.box_columns(family, dets[0].keys())
+        if family == "corners":
+            _check_corner_counts(dets, cols)
         X = _box_array(dets, cols)
         P = None
         if not keys.isdisjoint(S.COV_COLUMNS):
             P = _fast_cov(dets)
             if P is None:
                 P = _slow_cov(dets)
+            if P is not None:
+                _check_pixel_cov_range(P)
         try:
             if family == "2d":
                 est = proc.boxes2d(X, contact=self.contact, pixel_cov_px2=P)
@@ -801,6 +806,32 @@ def _slow_cov(dets: list):
                 P = np.zeros((N, 2, 2))
             P[i] = ((uu, uv), (uv, vv))
     return P
+
+
+_CORNER_KEY = re.compile(r"^[uv]\d+_px$")
+
+
+def _check_corner_counts(dets: list, cols) -> None:
+    """Every detection of a corners frame has the corner columns of the first one (no more, no fewer)."""
+    want = set(cols)
+    for i, d in enumerate(dets):
+        have = {k for k in d if _CORNER_KEY.match(k)}
+        if have != want:
+            extra = sorted(have - want)
+            name = extra[0] if extra else sorted(want - have)[0]
+            raise _FrameError(f"detections[{i}].{name}", f"detection {i} has {len(have) // 2} corners "
+                              f"({len(have)} corner columns), detection 0 has {len(want) // 2}: one corner count per "
+                              "frame")
+
+
+def _check_pixel_cov_range(P: np.ndarray) -> None:
+    """Detector pixel (co)variances within the batch's limit (:data:`footprint_uq.batch.process.MAX_PIXEL_VAR_PX2`)."""
+    big = np.abs(P) > MAX_PIXEL_VAR_PX2
+    if big.any():
+        i, r, c = (int(v) for v in np.argwhere(big)[0])
+        name = S.COV_COLUMNS[0 if r == c == 0 else (2 if r == c else 1)]
+        raise _FrameError(f"detections[{i}].{name}", f"pixel covariance out of range: {name} {float(P[i, r, c]):g} "
+                                                     f"(entries up to {MAX_PIXEL_VAR_PX2:g} px^2)")
 
 
 _ID_TYPES = (int, str, type(None))
