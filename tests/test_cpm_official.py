@@ -256,6 +256,14 @@ def check_record(rec: dict, cdd: str, spec, pycrate_cpm, motion: ObjectMotion | 
         assert (p["angles"]["zAngle"]["value"], p["angles"]["zAngle"]["confidence"]) == (mc.yaw[k], mc.yaw_conf[k]) \
             if mc.has_yaw[k] else "angles" not in p
         assert p["objectAge"] == mc.age_ms[k] if mc.has_age[k] else "objectAge" not in p
+    if mc is not None and sent:  # the SDSM's speed and heading with their J2735 confidences
+        from footprint_uq.service.messages.motion import HEADING_CONFIDENCE_NAMES, SPEED_CONFIDENCE_NAMES
+
+        rows = [k for k, _ in sent]
+        assert [(o["detObjCommon"]["speed"], o["detObjCommon"]["speedConfidence"], o["detObjCommon"]["heading"],
+                 o["detObjCommon"]["headingConf"]) for o in rec["sdsm"]["objects"]] == \
+            [(mc.sdsm_speed[k], SPEED_CONFIDENCE_NAMES[mc.sdsm_speed_conf[k]], mc.sdsm_heading[k],
+              HEADING_CONFIDENCE_NAMES[mc.sdsm_heading_conf[k]]) for k in rows]
 
 
 def _run(camera, cdd, origin, dets, motion=None, monkeypatch=None, policy="sampled"):
