@@ -146,3 +146,20 @@ def test_vru_classes_per_release():
         assert c["motorcycle"] == {"vruSubClass": {"motorcyclist": moto}}
         assert c["dog"] == {"vruSubClass": {"animal": dog}}
         assert c["car"] == {"vehicleSubClass": 5}
+
+
+def test_the_array_writer_takes_object_motion_or_its_codes():
+    from footprint_uq.service.messages.uper_cpm import perceived_object_container_uper_arrays
+
+    rng = np.random.default_rng(4)
+    n = 7
+    cov = np.zeros((n, 2, 2))
+    cov[:, 0, 0] = cov[:, 1, 1] = 0.04
+    m = ObjectMotion(rng.uniform(-20, 20, n), rng.uniform(-20, 20, n), cov, rng.uniform(0, 20, n),
+                     np.full(n, 0.2), rng.uniform(0, 360, n), np.full(n, 2.0), rng.uniform(0, 360, n),
+                     np.full(n, 1.0), rng.uniform(0, 5, n))
+    one = np.ones(n, np.int64)
+    cols = (np.arange(n), one, one, one, one, np.full(n, 101), 0 * one, 0 * one, one)
+    with_motion = perceived_object_container_uper_arrays(*cols, motion=m)
+    assert with_motion == perceived_object_container_uper_arrays(*cols, motion=motion_codes(m, n))
+    assert len(with_motion) > len(perceived_object_container_uper_arrays(*cols))  # 78 more bits per object

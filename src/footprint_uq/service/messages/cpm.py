@@ -42,7 +42,7 @@ CDD releases: the JSON and the UPER follow the release given as ``cdd`` (:data:`
 UPER
 ----
 :func:`encode_cpm_uper` encodes the JSON with asn1tools from the subset module
-:data:`~footprint_uq.service.messages.asn1_cpm.CPM_ASN1` (read its doc for how the subset keeps
+:data:`~footprint_uq.service.messages.asn1_cpm.CPM_ASN1_BY_CDD` (read its doc for how the subset keeps
 the standard's bits); :func:`decode_cpm_uper` is its inverse and returns the same JSON.
 """
 

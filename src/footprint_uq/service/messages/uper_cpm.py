@@ -46,6 +46,7 @@ from numba import njit
 from ...errors import InputError
 from .asn1_cpm import CONTAINER_ID_PERCEIVED_OBJECTS, CONTAINER_ID_RSU, DEFAULT_CDD, VRU_SUBPROFILES
 from .cpm import LATITUDE_UNAVAILABLE, LONGITUDE_UNAVAILABLE, MATRIX_COMPONENTS, build_cpm, check_cdd
+from .motion import ObjectMotion, motion_codes
 
 __all__ = ["encode_cpm_uper_fast", "perceived_object_container_uper", "perceived_object_container_uper_arrays",
            "class_bits", "CpmUperWriter"]
@@ -340,7 +341,7 @@ def _motion_rows(motion, n: int):
     """The 10 motion rows (velocity present, x, x conf, y, y conf, angles present, z, conf, age present, age)."""
     if motion is None:
         return np.zeros((10, n), np.int64) + np.array([0, 0, 1, 0, 1, 0, 0, 1, 0, 0])[:, None]
-    m = motion
+    m = motion_codes(motion, n) if isinstance(motion, ObjectMotion) else motion
     return np.array([m.has_velocity, m.vx, m.vx_conf, m.vy, m.vy_conf, m.has_yaw, m.yaw, m.yaw_conf, m.has_age,
                      m.age_ms], dtype=np.int64).reshape(10, n)
 
@@ -351,7 +352,8 @@ def perceived_object_container_uper_arrays(object_ids, x_cm, x_conf, y_cm, y_con
 
     ``class_value``, ``class_width``: :func:`class_bits` of each object's class (in release ``cdd``), width 0
     for an object without a classification (its value and ``level`` are then ignored); ``level``: its
-    ConfidenceLevel; ``motion``: :class:`~.motion.MotionCodes` of the objects or None.
+    ConfidenceLevel; ``motion``: the objects' :class:`~.motion.ObjectMotion` (converted by
+    :func:`~.motion.motion_codes`), their :class:`~.motion.MotionCodes`, or None (no motion sent).
     """
     n = len(object_ids)
     cols = np.empty((_NCOLS, n), np.int64)
