@@ -387,6 +387,10 @@ def test_bad_service_options_are_refused(camera):
         Service(camera, warm_up=False)
     with pytest.raises(ValueError, match="uper_encoder"):
         Service(camera, "basler1", uper_encoder="ber", warm_up=False)
+    with pytest.raises(ValueError, match="cpm_cdd"):
+        Service(camera, "basler1", cpm_cdd="1.3.1", warm_up=False)
+    with pytest.raises(ValueError, match="v2x_policy"):
+        Service(camera, "basler1", v2x_policy="optimistic", warm_up=False)
     with pytest.raises(ValueError, match="confidence"):
         Service(camera, "basler1", confidence=1.0, warm_up=False)
 
@@ -398,6 +402,8 @@ def test_bad_service_options_are_refused(camera):
     (["--registry", "reg.csv", "--input", "-", "--workers", "2"], "--workers"),
     (["--camera", "cam.yaml", "--output", "mqtt"], "--mqtt"),
     (["--camera", "cam.yaml", "--input", "-"], "--budget"),
+    (["--camera", "cam.yaml", "--budget", "basler1", "--cpm-cdd", "2.4.1"], "--cpm-cdd"),
+    (["--camera", "cam.yaml", "--budget", "basler1", "--queue-depth", "0"], "--queue-depth"),
 ])
 def test_serve_bad_options_exit_2_with_one_line(tmp_path, monkeypatch, camera, args, words):
     from click.testing import CliRunner
