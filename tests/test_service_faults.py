@@ -253,3 +253,24 @@ def test_queue_and_limits_in_a_seeded_sequence():
                 assert last.get(k, -1) < s
                 last[k] = s
         assert taken + len(q) + q.dropped == put
+
+
+def test_quick_ack_is_set_on_a_tcp_socket():
+    """The 50 Hz fix: after a frame or a PUBACK the service's socket is switched to quick-ack (Linux), so a
+    broker with Nagle's algorithm on does not hold the next frame for a delayed ACK."""
+    import socket
+
+    from footprint_uq.service.runner import quick_ack
+
+    if not hasattr(socket, "TCP_QUICKACK"):
+        pytest.skip("TCP_QUICKACK is Linux-only")
+    with socket.create_server(("127.0.0.1", 0)) as srv:
+        c = socket.create_connection(srv.getsockname())
+        s, _ = srv.accept()
+        with c, s:
+            c.sendall(b"x")
+            s.recv(1)
+            s.sendall(b"y")  # sending after receiving: the kernel's delayed-ACK ("ping-pong") mode
+            quick_ack(s)
+            assert s.getsockopt(socket.IPPROTO_TCP, socket.TCP_QUICKACK) == 1
+    quick_ack(None)  # no socket yet (before the connection): nothing to do
