@@ -31,7 +31,7 @@ import uuid
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 from footprint_uq import PanTiltCamera
@@ -283,6 +283,9 @@ def _run(camera, cdd, origin, dets, motion=None, monkeypatch=None, policy="sampl
        n=st.one_of(st.integers(0, 8), st.integers(9, 64), st.integers(200, 255)),
        far=st.sampled_from([0.0, 0.3, 1.0]), origin=st.booleans(), with_motion=st.booleans(),
        seed=st.integers(0, 2 ** 32 - 1))
+@example(cdd="2.1.1", n=255, far=0.3, origin=True, with_motion=True, seed=1)  # the corners of the sweep, always
+@example(cdd="2.2.1", n=255, far=0.3, origin=False, with_motion=True, seed=2)
+@example(cdd="2.2.1", n=0, far=0.0, origin=True, with_motion=False, seed=3)
 def test_every_payload_decodes_with_the_official_modules_to_the_records_numbers(camera, official, monkeypatch, cdd, n,
                                                                               far, origin, with_motion, seed):
     rng = np.random.default_rng(seed)

@@ -329,6 +329,7 @@ def _stdin_lines(stream, max_bytes: int, stop: threading.Event):
     interpreter's stdin lock at exit)."""
     try:
         fd = stream.fileno()
+        select.select([fd], [], [], 0)  # a descriptor select can wait on (not so on every platform)
     except (AttributeError, OSError, ValueError, io.UnsupportedOperation):
         fd = None
     if fd is None:
