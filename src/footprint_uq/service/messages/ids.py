@@ -86,11 +86,13 @@ class MessageIdMap:
         return num
 
     def assign(self, ids: list, rows, t_s: float) -> np.ndarray:
-        """Message ids (int64, one per entry of ``rows``) of the objects ``ids[rows]`` of a frame at time ``t_s``."""
+        """Message ids (int64, one per entry of ``rows``: sorted, distinct indices) of the objects ``ids[rows]`` of a
+        frame at time ``t_s`` (s)."""
         rows = np.asarray(rows, dtype=np.int64).tolist()
-        sel = [ids[i] for i in rows]
+        sel = ids if len(rows) == len(ids) else [ids[i] for i in rows]  # (rows are sorted and unique)
         occ = None  # occurrence of each id in the frame (None: every id once, none null)
-        if len(set(sel)) == len(sel) and None not in sel:  # the usual frame: its keys are its ids
+        distinct = set(sel)
+        if len(distinct) == len(sel) and None not in distinct:  # the usual frame: its keys are its ids
             keys = sel
         else:
             count: dict = {}
