@@ -33,6 +33,7 @@ import argparse
 import json
 import os
 import re
+import shlex
 import shutil
 import signal
 import socket
@@ -138,7 +139,7 @@ def in_process_times(objects: int, repeats: int) -> dict:
 
 
 def measure(seconds: float = 60.0, cameras: int = 8, fps: float = 30.0, objects: int = 100, workers: int = 1,
-            stagger: bool = False) -> dict:
+            stagger: bool = False, serve_args: tuple = ()) -> dict:
     import paho.mqtt.client as mqtt
 
     from footprint_uq.service import tcp_no_delay
@@ -164,7 +165,7 @@ def measure(seconds: float = 60.0, cameras: int = 8, fps: float = 30.0, objects:
         _wait(lambda: _port_open(port), 10, "mosquitto")
         serve = subprocess.Popen([sys.executable, "-m", "footprint_uq.cli", "serve", "--registry", str(tmp / "reg.csv"),
                                   "--mqtt", f"mqtt://127.0.0.1:{port}", "--output", "mqtt", "--client-id", "bench",
-                                  "--workers", str(workers)],
+                                  "--workers", str(workers), *serve_args],
                                  stdout=subprocess.DEVNULL, stderr=open(tmp / "serve.err", "wb"), env=env)
         # the receiver runs in a process of its own (it reads ~33 MB/s of records through paho): in this
         # process it would compete with the publisher for the GIL and delay both the frames and the time stamps
@@ -409,9 +410,11 @@ def main(argv=None) -> int:
     ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--stagger", action="store_true", help="cameras spread over the frame period (not in a burst)")
     ap.add_argument("--quick", action="store_true", help="5 s instead of --seconds")
+    ap.add_argument("--serve-args", default="", help="more `footprint-uq serve` options, e.g. '--queue-depth 1'")
     args = ap.parse_args(argv)
     res = measure(seconds=5.0 if args.quick else args.seconds, cameras=args.cameras, fps=args.fps,
-                  objects=args.objects, workers=args.workers, stagger=args.stagger)
+                  objects=args.objects, workers=args.workers, stagger=args.stagger,
+                  serve_args=tuple(shlex.split(args.serve_args)))
     res["in_process"] = in_process_times(args.objects, 200)
     print(json.dumps(res, indent=1))
     return 0

@@ -91,7 +91,7 @@ import matplotlib.pyplot as plt  # noqa: E402  (after MPLBACKEND)
 k95 = chi2_scale(0.95)
 fig, ax = plt.subplots(figsize=(7, 7))
 for rec in records:
-    cpm = decode_cpm_uper(rec["cpm_uper_hex"])  # what the receiver gets: the bytes only
+    cpm = decode_cpm_uper(rec["cpm_uper_hex"], rec.get("cpm_cdd", "2.1.1"))  # the bytes, in the release compiled
     assert cpm == rec["cpm"]
     ref = cpm["payload"]["managementContainer"]["referencePosition"]
     objs = cpm["payload"]["cpmContainers"][1]["containerData"]["perceivedObjects"]

@@ -82,8 +82,9 @@ PINNED_TINY_CPM_HEX = ("020e000000010000000000035a4e900eb49d200fffffff08eddd0f88
                        "2690123ff900a030000091017200")  # 54 octets
 
 
-def test_uper_of_a_tiny_cpm_is_the_hand_derived_bytes():
-    """One perceived object; every field written out from X.691 (unaligned PER) by hand."""
+@pytest.mark.parametrize("cdd", ["2.1.1", "2.2.1"])
+def test_uper_of_a_tiny_cpm_is_the_hand_derived_bytes(cdd):
+    """One perceived object; every field written out from X.691 (unaligned PER) by hand, in both CDD releases."""
     po = perceived_object(7, 1234, -56, 37, 81, 45, {"vehicleSubClass": 5}, 101, 0)
     cpm = build_cpm(1, 0, [po])  # reference time 0, reference position unavailable
     obj = "".join([
@@ -96,6 +97,7 @@ def test_uper_of_a_tiny_cpm_is_the_hand_derived_bytes():
         _bits(-56 + 131072, 18), _bits(81 - 1, 12),    # y
         "00",                                 # one correlation matrix (SIZE 1..4)
         "0" + "1100000000000",                # components: extension bit + 13 bits (xPosition, yPosition)
+        "0" * (cdd == "2.2.1"),               # CDD V2.2.1: the columns' SIZE (1..13, ...) extension bit
         "0000",                               # one column (SIZE 1..13)
         "0" + "0000",                         # column: extension bit + one cell (SIZE 1..13, ...)
         _bits(45 + 100, 8),                   # CorrelationCellValue (-100..101)
@@ -120,16 +122,25 @@ def test_uper_of_a_tiny_cpm_is_the_hand_derived_bytes():
         "".join(_bits(b, 8) for b in container),
     ])
     expected = _octets(message)
-    assert expected.hex() == PINNED_TINY_CPM_HEX
-    assert encode_cpm_uper(cpm) == expected          # asn1tools from the subset module
-    assert encode_cpm_uper_fast(cpm) == expected     # the direct writer
-    assert decode_cpm_uper(expected) == cpm
+    if cdd == "2.1.1":
+        assert expected.hex() == PINNED_TINY_CPM_HEX
+    assert encode_cpm_uper(cpm, cdd) == expected            # asn1tools from the subset module
+    assert encode_cpm_uper_fast(cpm, cdd=cdd) == expected   # the direct writer
+    assert decode_cpm_uper(expected, cdd) == cpm
 
 
-def test_direct_writer_equals_asn1tools_on_random_messages():
+def _vru_classes(cdd):
+    from footprint_uq.service.messages.asn1_cpm import VRU_SUBPROFILES
+
+    return [{"vruSubClass": {alt: (name if cdd == "2.1.1" else k)}}
+            for alt, names in VRU_SUBPROFILES.items() for k, name in enumerate(names)] + \
+        [{"vruSubClass": {alt: "max" if cdd == "2.1.1" else 15}} for alt in VRU_SUBPROFILES]
+
+
+@pytest.mark.parametrize("cdd", ["2.1.1", "2.2.1"])
+def test_direct_writer_equals_asn1tools_on_random_messages(cdd):
     rng = np.random.default_rng(14)
-    classes = [None, {"vehicleSubClass": 0}, {"vehicleSubClass": 14}, {"otherSubClass": 255},
-               {"vruSubClass": {"pedestrian": "ordinary-pedestrian"}}, {"vruSubClass": {"pedestrian": "max"}}]
+    classes = [None, {"vehicleSubClass": 0}, {"vehicleSubClass": 14}, {"otherSubClass": 255}, *_vru_classes(cdd)]
     for n in (0, 1, 2, 17, 255):
         objs = [perceived_object(int(rng.integers(0, 65536)), int(rng.integers(-131072, 131072)),
                                  int(rng.integers(-131072, 131072)), int(rng.integers(1, 4097)),
@@ -140,9 +151,9 @@ def test_direct_writer_equals_asn1tools_on_random_messages():
         cpm = build_cpm(int(rng.integers(0, 2 ** 32)), int(rng.integers(0, 2 ** 42)), objs,
                         latitude=int(rng.integers(-900000000, 900000002)),
                         longitude=int(rng.integers(-1800000000, 1800000002)))
-        ref = encode_cpm_uper(cpm)
-        assert encode_cpm_uper_fast(cpm) == ref, n
-        assert decode_cpm_uper(ref) == cpm, n
+        ref = encode_cpm_uper(cpm, cdd)
+        assert encode_cpm_uper_fast(cpm, cdd=cdd) == ref, n
+        assert decode_cpm_uper(ref, cdd) == cpm, n
     with pytest.raises(ValueError, match="objectId"):
         encode_cpm_uper_fast(build_cpm(1, 0, [perceived_object(70000, 0, 0, 1, 1, 0, None)]))
 
@@ -182,13 +193,14 @@ def test_process_frame_matches_frame_processor_and_v2x(camera, service):
         assert p["position"]["yCoordinate"]["confidence"] == o["cpm_y_confidence"]
         corr = p.get("lowerTriangularCorrelationMatrices")
         assert (corr[0]["matrix"][0][0] if corr else 101) == o["cpm_xy_correlation"]
-    # east/north offsets: the world point rotated by the heading offset, in cm
+    # east/north offsets: the world point rotated by the heading offset, in cm, as the CDD's
+    # CartesianCoordinateLarge: (n - 1) x 0.01 m < v <= n x 0.01 m
     h = np.deg2rad(HEADING)
     for p, o in zip(pos, ok, strict=True):
         e = o["x_m"] * np.cos(h) + o["y_m"] * np.sin(h)
         n = -o["x_m"] * np.sin(h) + o["y_m"] * np.cos(h)
-        assert p["position"]["xCoordinate"]["value"] == round(100 * e)
-        assert p["position"]["yCoordinate"]["value"] == round(100 * n)
+        assert p["position"]["xCoordinate"]["value"] == math.ceil(100 * e)
+        assert p["position"]["yCoordinate"]["value"] == math.ceil(100 * n)
     sd = rec["sdsm"]["objects"]
     assert [s["detObjCommon"]["posConfidence"]["pos"] for s in sd] == \
         [J2735_POSITION_CONFIDENCE_NAMES[o["j2735_position_confidence"]] for o in ok]
@@ -208,7 +220,7 @@ def test_2d_boxes_with_detector_covariance_and_classes(camera, service):
     np.testing.assert_allclose(noisy["objects"][0]["cov_m2"], ref.centre_cov_m2[0], rtol=1e-12)
     assert noisy["objects"][0]["sigma_major_m"] > plain["objects"][0]["sigma_major_m"]
     po = noisy["cpm"]["payload"]["cpmContainers"][1]["containerData"]["perceivedObjects"][0]
-    assert po["classification"] == [{"objectClass": {"vruSubClass": {"pedestrian": "ordinary-pedestrian"}},
+    assert po["classification"] == [{"objectClass": {"vruSubClass": {"pedestrian": 1}},  # CDD V2.2.1: INTEGER
                                      "confidence": 87}]
     assert noisy["sdsm"]["objects"][0]["detObjCommon"]["objType"] == "vru"
     assert noisy["sdsm"]["objects"][0]["detObjCommon"]["objTypeCfd"] == 87
@@ -302,27 +314,50 @@ def test_queue_block_policy_waits_instead_of_dropping():
     assert got == [True] and q.get(0) == 2 and q.dropped == 0
 
 
-def test_column_writer_equals_asn1tools():
-    """The per-frame path writes the container from columns: the same bytes as asn1tools."""
+def _random_motion(rng, n):
+    """Motion codes of n objects, each component present or not, over the whole value ranges."""
+    from footprint_uq.service.messages.motion import MotionCodes
+
+    def pick(lo, hi):
+        return np.where(rng.random(n) < 0.2, rng.choice([lo, hi], n), rng.integers(lo, hi + 1, n))
+
+    z = np.zeros(n, np.int64)
+    return MotionCodes(rng.random(n) < 0.6, pick(-16383, 16383), pick(1, 127), pick(-16383, 16383), pick(1, 127),
+                       rng.random(n) < 0.6, pick(0, 3601), pick(1, 127), rng.random(n) < 0.6, pick(0, 2047),
+                       z, z, z, z)
+
+
+def _motion_kwargs(mc, i):
+    return dict(velocity=(mc.vx[i], mc.vx_conf[i], mc.vy[i], mc.vy_conf[i]) if mc.has_velocity[i] else None,
+                yaw=(mc.yaw[i], mc.yaw_conf[i]) if mc.has_yaw[i] else None,
+                age_ms=int(mc.age_ms[i]) if mc.has_age[i] else None)
+
+
+@pytest.mark.parametrize("cdd", ["2.1.1", "2.2.1"])
+def test_column_writer_equals_asn1tools(cdd):
+    """The per-frame path writes the container from columns (motion included): the same bytes as asn1tools."""
     from footprint_uq.service.messages.cpm import _spec, cpm_to_asn1_value
     from footprint_uq.service.messages.uper_cpm import class_bits, perceived_object_container_uper
 
     rng = np.random.default_rng(41)
-    classes = [None, {"vehicleSubClass": 0}, {"vehicleSubClass": 14}, {"otherSubClass": 255},
-               {"vruSubClass": {"pedestrian": "ordinary-pedestrian"}}]
+    classes = [None, {"vehicleSubClass": 0}, {"vehicleSubClass": 14}, {"otherSubClass": 255}, *_vru_classes(cdd)]
     for n in (0, 1, 9, 255):
         cols = dict(o=rng.integers(0, 65536, n).tolist(), x=rng.integers(-131072, 131072, n).tolist(),
                     y=rng.integers(-131072, 131072, n).tolist(), cx=rng.integers(1, 4097, n).tolist(),
                     cy=rng.integers(1, 4097, n).tolist(), r=rng.choice([101, -100, 100, 0, 37], n).tolist(),
                     c=[classes[k] for k in rng.integers(0, len(classes), n)], lv=rng.integers(1, 102, n).tolist())
-        objs = [perceived_object(*row) for row in zip(*cols.values(), strict=True)]  # (id, x, y, cx, cy, r, c, lv)
+        mc = _random_motion(rng, n)
+        objs = [perceived_object(*row, **_motion_kwargs(mc, i))  # (id, x, y, cx, cy, r, c, lv)
+                for i, row in enumerate(zip(*cols.values(), strict=True))]
         cpm = build_cpm(5, 0, objs)
-        ref = cpm_to_asn1_value(cpm)["payload"]["cpmContainers"][1]["containerData"]
+        ref = cpm_to_asn1_value(cpm, cdd)["payload"]["cpmContainers"][1]["containerData"]
         got = perceived_object_container_uper(cols["o"], cols["x"], cols["cx"], cols["y"], cols["cy"], cols["r"],
-                                              [None if c is None else (class_bits(c), lv)
-                                               for c, lv in zip(cols["c"], cols["lv"], strict=True)])
+                                              [None if c is None else (class_bits(c, cdd), lv)
+                                               for c, lv in zip(cols["c"], cols["lv"], strict=True)], cdd=cdd,
+                                              motion=mc)
         assert got == ref, n
-        assert _spec().decode("PerceivedObjectContainer", got)["numberOfPerceivedObjects"] == n
+        assert _spec(cdd).decode("PerceivedObjectContainer", got)["numberOfPerceivedObjects"] == n
+        assert encode_cpm_uper_fast(cpm, cdd=cdd) == encode_cpm_uper(cpm, cdd)
     with pytest.raises(ValueError, match="xCoordinate.value"):
         perceived_object_container_uper([1], [131072], [1], [0], [1], [101], [None])
 
@@ -352,6 +387,10 @@ def test_bad_service_options_are_refused(camera):
         Service(camera, warm_up=False)
     with pytest.raises(ValueError, match="uper_encoder"):
         Service(camera, "basler1", uper_encoder="ber", warm_up=False)
+    with pytest.raises(ValueError, match="cpm_cdd"):
+        Service(camera, "basler1", cpm_cdd="1.3.1", warm_up=False)
+    with pytest.raises(ValueError, match="v2x_policy"):
+        Service(camera, "basler1", v2x_policy="optimistic", warm_up=False)
     with pytest.raises(ValueError, match="confidence"):
         Service(camera, "basler1", confidence=1.0, warm_up=False)
 
@@ -363,6 +402,8 @@ def test_bad_service_options_are_refused(camera):
     (["--registry", "reg.csv", "--input", "-", "--workers", "2"], "--workers"),
     (["--camera", "cam.yaml", "--output", "mqtt"], "--mqtt"),
     (["--camera", "cam.yaml", "--input", "-"], "--budget"),
+    (["--camera", "cam.yaml", "--budget", "basler1", "--cpm-cdd", "2.4.1"], "--cpm-cdd"),
+    (["--camera", "cam.yaml", "--budget", "basler1", "--queue-depth", "0"], "--queue-depth"),
 ])
 def test_serve_bad_options_exit_2_with_one_line(tmp_path, monkeypatch, camera, args, words):
     from click.testing import CliRunner
@@ -379,34 +420,62 @@ def test_serve_bad_options_exit_2_with_one_line(tmp_path, monkeypatch, camera, a
     assert len(lines) == 1 and words in lines[0], r.output
 
 
-_CLASSES = st.one_of(st.none(), st.builds(lambda v: {"vehicleSubClass": v}, st.integers(0, 14)),
+_CDD = st.sampled_from(["2.1.1", "2.2.1"])
+_CLASSES = st.one_of(st.none(), st.builds(lambda v: {"vehicleSubClass": v}, st.sampled_from([0, 5, 6, 7, 8, 9, 10,
+                                                                                              11, 14])),
                      st.builds(lambda v: {"otherSubClass": v}, st.integers(0, 255)),
-                     st.builds(lambda v: {"vruSubClass": {"pedestrian": v}},
-                               st.sampled_from(["unavailable", "ordinary-pedestrian", "road-worker",
-                                                "first-responder", "max"])))
+                     st.sampled_from(_vru_classes("2.1.1") + _vru_classes("2.2.1")))
 _OBJECT = st.tuples(st.integers(0, 65535), st.integers(-131072, 131071), st.integers(-131072, 131071),
                     st.integers(1, 4096), st.integers(1, 4096), st.integers(-100, 101), _CLASSES,
                     st.integers(1, 101), st.one_of(st.just(0), st.integers(-2048, 2047)))
+_MOTION = st.fixed_dictionaries({}, optional={
+    "velocity": st.tuples(st.integers(-16383, 16383), st.integers(1, 127), st.integers(-16383, 16383),
+                          st.integers(1, 127)),
+    "yaw": st.tuples(st.integers(0, 3601), st.integers(1, 127)), "age_ms": st.integers(0, 2047)})
+
+
+def _release_class(c, cdd):
+    """A class of either release's JSON, as the release ``cdd`` writes it."""
+    if c is None or "vruSubClass" not in c:
+        return c
+    from footprint_uq.service.messages.asn1_cpm import VRU_SUBPROFILES
+
+    (alt, v), = c["vruSubClass"].items()
+    names = (*VRU_SUBPROFILES[alt], "max")
+    k = 15 if v == "max" else names.index(v) if isinstance(v, str) else v
+    return {"vruSubClass": {alt: (names[-1] if k == 15 else names[k]) if cdd == "2.1.1" else k}}
 
 
 @settings(max_examples=150, deadline=None)
-@given(objs=st.lists(_OBJECT, max_size=4), station=st.integers(0, 2 ** 32 - 1), ref=st.integers(0, 2 ** 42 - 1),
-           lat=st.integers(-900000000, 900000001), lon=st.integers(-1800000000, 1800000001))
-def test_uper_writers_equal_asn1tools_over_the_whole_value_ranges(objs, station, ref, lat, lon):
-    """Every field at every value of its range (edges included): both writers give asn1tools' bytes."""
+@given(objs=st.lists(st.tuples(_OBJECT, _MOTION), max_size=4), station=st.integers(0, 2 ** 32 - 1),
+       ref=st.integers(0, 2 ** 42 - 1), lat=st.integers(-900000000, 900000001),
+       lon=st.integers(-1800000000, 1800000001), cdd=_CDD)
+def test_uper_writers_equal_asn1tools_over_the_whole_value_ranges(objs, station, ref, lat, lon, cdd):
+    """Every field at every value of its range (edges included), both releases, with and without motion: both
+    writers give asn1tools' bytes."""
     from footprint_uq.service.messages.cpm import cpm_to_asn1_value
+    from footprint_uq.service.messages.motion import MotionCodes
     from footprint_uq.service.messages.uper_cpm import CpmUperWriter, class_bits, perceived_object_container_uper
 
-    cpm = build_cpm(station, ref, [perceived_object(*o) for o in objs], latitude=lat, longitude=lon)
-    ref_bytes = encode_cpm_uper(cpm)
-    assert encode_cpm_uper_fast(cpm) == ref_bytes
-    assert decode_cpm_uper(ref_bytes) == cpm
-    if all(o[8] == 0 for o in objs):  # the column writer: objects measured at the reference time
-        cols = list(zip(*objs, strict=True)) if objs else [()] * 9
+    objs = [((*o[:6], _release_class(o[6], cdd), *o[7:]), mo) for o, mo in objs]
+    cpm = build_cpm(station, ref, [perceived_object(*o, **mo) for o, mo in objs], latitude=lat, longitude=lon)
+    ref_bytes = encode_cpm_uper(cpm, cdd)
+    assert encode_cpm_uper_fast(cpm, cdd=cdd) == ref_bytes
+    assert decode_cpm_uper(ref_bytes, cdd) == cpm
+    if all(o[8] == 0 for o, _ in objs):  # the column writer: objects measured at the reference time
+        cols = list(zip(*[o for o, _ in objs], strict=True)) if objs else [()] * 9
+        mos = [mo for _, mo in objs]
+        vel = [mo.get("velocity", (0, 1, 0, 1)) for mo in mos]
+        yaw = [mo.get("yaw", (0, 1)) for mo in mos]
+        z = np.zeros(len(objs), np.int64)
+        mc = MotionCodes(np.array(["velocity" in mo for mo in mos], bool), *np.array(vel, np.int64).reshape(-1, 4).T,
+                         np.array(["yaw" in mo for mo in mos], bool), *np.array(yaw, np.int64).reshape(-1, 2).T,
+                         np.array(["age_ms" in mo for mo in mos], bool),
+                         np.array([mo.get("age_ms", 0) for mo in mos], np.int64), z, z, z, z)
         got = perceived_object_container_uper(cols[0], cols[1], cols[3], cols[2], cols[4], cols[5],
-                                              [None if c is None else (class_bits(c), lv)
-                                               for c, lv in zip(cols[6], cols[7], strict=True)])
-        assert got == cpm_to_asn1_value(cpm)["payload"]["cpmContainers"][1]["containerData"]
+                                              [None if c is None else (class_bits(c, cdd), lv)
+                                               for c, lv in zip(cols[6], cols[7], strict=True)], cdd=cdd, motion=mc)
+        assert got == cpm_to_asn1_value(cpm, cdd)["payload"]["cpmContainers"][1]["containerData"]
         # the service's per-station writer: fixed part once, reference time and container per frame
         assert CpmUperWriter(station, latitude=lat, longitude=lon).encode(ref, got) == ref_bytes
 
@@ -485,8 +554,8 @@ def test_objects_and_messages_are_the_documented_layout(camera):
     and value, for a frame with valid, partial and failed centres, classes, class confidences and
     detector covariances."""
     from footprint_uq.products.geo import GeoReference
-    from footprint_uq.service.core import _message_object_id
     from footprint_uq.service.messages.cpm import CPM_CLASSES, coordinate_cm
+    from footprint_uq.service.messages.ids import MessageIdMap
     from footprint_uq.service.messages.sdsm import offset_dm, sdsm_object
     from footprint_uq.uncertainty.ellipse import ellipse_axes
 
@@ -515,6 +584,10 @@ def test_objects_and_messages_are_the_documented_layout(camera):
     reasons = est.centre_reason_text()
     objects, pos, sdsm = [], [], []
     en = GeoReference(heading_offset_deg=HEADING).world_to_enu(est.centre_xy_world_m)
+    ok_rows = np.flatnonzero(est.centre_valid)
+    msg_id = dict(zip(ok_rows.tolist(), MessageIdMap().assign([d["object_id"] for d in dets], ok_rows, T0).tolist(),
+                      strict=True))
+    v2x_cov = est.centre_cov_m2 if est.v2x_cov_m2 is None else est.v2x_cov_m2
     for k, d in enumerate(dets):
         ok = bool(est.centre_valid[k])
         li = int(est.largest_index[k])
@@ -528,9 +601,12 @@ def test_objects_and_messages_are_the_documented_layout(camera):
              "largest_sigma_major_m": none(est.largest_semi_major_m[k]),
              "largest_x_m": none(est.largest_xy_world_m[k, 0]), "largest_y_m": none(est.largest_xy_world_m[k, 1]),
              **dict(zip(V2X_FIELDS, est.v2x_codes[k].tolist(), strict=True)),
+             "v2x_source": ["linear", "sampled", "unavailable"][est.v2x_source[k]],
+             "v2x_cov_m2": None if est.v2x_source[k] == 2 else [[v2x_cov[k, 0, 0], v2x_cov[k, 0, 1]],
+                                                                [v2x_cov[k, 0, 1], v2x_cov[k, 1, 1]]],
              # (checked against the library by test_linearity_flag_is_the_librarys_nonlinearity)
              "nonlinearity": rec["objects"][k]["nonlinearity"], "linear_ok": rec["objects"][k]["linear_ok"],
-             "message_object_id": _message_object_id(d["object_id"], k) if ok else None}
+             "message_object_id": msg_id[k] if ok else None}
         objects.append(o)
         if ok:
             p = d.get("class_confidence")

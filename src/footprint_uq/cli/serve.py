@@ -9,8 +9,9 @@ import sys
 
 import click
 
-from ..products.footprints import CONTACT_MODES
-from ..service.runner import run
+from ..products.footprints import CONTACT_MODES, V2X_POLICIES
+from ..service.messages.asn1_cpm import CDD_RELEASES, DEFAULT_CDD
+from ..service.runner import MAX_FRAME_BYTES, QUEUE_DEPTH, run
 from ..uncertainty.presets import PRESET_NAMES
 
 __all__ = ["serve_cmd"]
@@ -62,9 +63,20 @@ __all__ = ["serve_cmd"]
 @click.option("--tracks", is_flag=True,
               help="Track each camera's objects by object_id and add their velocity, speed, heading, yaw, their "
                    "sigmas and age (docs/service.md); frames of a camera must come in time order.")
+@click.option("--cpm-cdd", type=click.Choice(list(CDD_RELEASES)), default=DEFAULT_CDD, show_default=True,
+              help="ETSI-ITS-CDD release of the CPM (2.2.1 also covers 2.4.1); receivers decode only the release "
+                   "they compiled (docs/service.md).")
+@click.option("--queue-depth", type=click.IntRange(min=1), default=QUEUE_DEPTH, show_default=True, metavar="N",
+              help="Frames pending per camera: a burst of up to N frames is processed, not replaced (newest).")
+@click.option("--max-frame-bytes", type=click.IntRange(min=1), default=MAX_FRAME_BYTES, show_default=True,
+              metavar="B", help="A larger frame (MQTT payload or stdin line) is refused with an error record.")
+@click.option("--v2x-policy", type=click.Choice(list(V2X_POLICIES)), default="sampled", show_default=True,
+              help="What the V2X fields encode where an object's centre is not linear_ok (far objects): "
+                   "docs/uncertainty-model.md; each object's record names it (v2x_source, v2x_cov_m2).")
 def serve_cmd(camera_path, budget_spec, registry, camera_id, input_, mqtt, output, input_prefix, output_prefix,
               policy, health_interval_s, workers, client_id, heading_offset_deg, origin_lat, origin_lon, confidence,
-              contact, allow_outside_image, station_id, uper_encoder, linearity, linear_threshold, tracks):
+              contact, allow_outside_image, station_id, uper_encoder, linearity, linear_threshold, cpm_cdd, v2x_policy,
+              queue_depth, max_frame_bytes, tracks):
     """Edge service: detector frames in, positions with uncertainty and V2X messages (CPM, SDSM) out.
 
     One output record per frame (or an error record), a health record every second;
@@ -74,7 +86,8 @@ def serve_cmd(camera_path, budget_spec, registry, camera_id, input_, mqtt, outpu
                  heading_offset_deg=heading_offset_deg, origin_lat_deg=origin_lat, origin_lon_deg=origin_lon,
                  confidence=confidence, contact=contact, allow_outside_image=allow_outside_image,
                  station_id=station_id, uper_encoder=uper_encoder, linearity=linearity,
-                 linear_threshold=linear_threshold, workers=workers, tracks=tracks,
+                 linear_threshold=linear_threshold, workers=workers, cpm_cdd=cpm_cdd, v2x_policy=v2x_policy,
+                 queue_depth=queue_depth, max_frame_bytes=max_frame_bytes, tracks=tracks,
                  input=input_ if input_ is not None else (None if mqtt else "-"), mqtt=mqtt, output=output,
                  input_prefix=input_prefix, output_prefix=output_prefix, policy=policy,
                  health_interval_s=health_interval_s, client_id=client_id))

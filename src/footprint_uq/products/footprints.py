@@ -222,6 +222,9 @@ class FootprintEstimate:
     v2x_source: np.ndarray | None = None
     object_rows: np.ndarray | None = None
     centre_shared_m: np.ndarray | None = None
+    #: (N, 2, 2) the covariance the V2X fields encode where it is not ``centre_cov_m2`` (a flagged centre: the
+    #: sampled one, or NaN for "unavailable"); None when it is ``centre_cov_m2`` for every object
+    v2x_cov_m2: np.ndarray | None = None
 
     def _ok(self, nl):
         if nl is None:
@@ -811,6 +814,8 @@ def _apply_v2x_policy(est: FootprintEstimate, camera, budget, policy: str, n_sam
         cov[mid] = np.where(good[:, None, None], chosen, np.nan)
         src_r[mid] = np.where(good, V2X_COV_SAMPLED, V2X_COV_UNAVAILABLE)
     src[rows] = src_r
+    est.v2x_cov_m2 = np.array(est.centre_cov_m2)
+    est.v2x_cov_m2[rows] = cov
     fields = {**cpm_fields(cov, est.heading_offset_deg), **j2735_fields(cov, est.heading_offset_deg)}
     est.v2x_codes[rows] = np.stack([fields[name] for name in V2X_FIELDS], -1).astype(np.int32)
     return est

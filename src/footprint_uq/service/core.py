@@ -21,6 +21,7 @@ the SDSM time stamp are derived from it.  The layout is documented in ``docs/ser
 
 from __future__ import annotations
 
+import functools
 import json
 import math
 import operator
@@ -28,7 +29,7 @@ import re
 import threading
 import time
 import zlib
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from itertools import chain
 from itertools import repeat as _repeat
 from typing import NamedTuple
@@ -39,26 +40,40 @@ from numba import njit
 
 from ..batch import schema as S
 from ..batch.fleet import load_registry
+from ..batch.process import MAX_PIXEL_VAR_PX2
 from ..errors import FootprintUQError, InputError
-from ..products.footprints import CONTACT_MODES, V2X_FIELDS, FrameProcessor
+from ..products.footprints import CONTACT_MODES, V2X_FIELDS, V2X_POLICIES, FrameProcessor
 from ..products.geo import GeoReference
 from ..products.v2x import J2735_POSITION_CONFIDENCE_NAMES
 from ..tracking import SharedJacobianAt, TrackerConfig, TrackTable, object_motion
 from ..uncertainty.ellipse import chi2_scale, ellipse_axes
 from ..uncertainty.propagation import DEFAULT_LINEAR_THRESHOLD, nonlinearity
 from .jsonrows import Table
+from .messages.asn1_cpm import DEFAULT_CDD
 from .messages.cpm import (
     CONFIDENCE_LEVEL_UNAVAILABLE,
+    COORD_GUARD_CM,
     COORD_MAX,
     COORD_MIN,
-    CPM_CLASSES,
+    CPM_CLASS_OF,
     LATITUDE_UNAVAILABLE,
     LONGITUDE_UNAVAILABLE,
     build_cpm,
+    check_cdd,
     encode_cpm_uper,
+    object_class_json,
     timestamp_its_ms,
 )
-from .messages.sdsm import HEADING_UNAVAILABLE, OFFSET_MAX, SDSM_OBJECT_TYPES, SPEED_UNAVAILABLE, build_sdsm
+from .messages.ids import MessageIdMap
+from .messages.motion import (
+    HEADING_CONFIDENCE_NAMES,
+    SDSM_HEADING_UNAVAILABLE,
+    SDSM_SPEED_UNAVAILABLE,
+    SPEED_CONFIDENCE_NAMES,
+    ObjectMotion,
+    motion_codes,
+)
+from .messages.sdsm import OFFSET_MAX, SDSM_OBJECT_TYPES, build_sdsm
 from .messages.uper_cpm import (
     CpmUperWriter,
     class_bits,
@@ -135,6 +150,8 @@ class CameraSetup:
     #: its tracks by object_id (``tracks=True``; one frame at a time: ``tracks_lock``)
     tracks: TrackTable | None = None
     tracks_lock: threading.Lock | None = None
+    #: object_id -> the messages' object id (unique per message, stable across frames; messages/ids.py)
+    ids: MessageIdMap = field(default_factory=MessageIdMap)
 
     def __post_init__(self):
         geo = self.georef
@@ -192,6 +209,13 @@ class Service:
         objects); ``fast`` (default) writes the same bytes directly
         (:mod:`~footprint_uq.service.messages.uper_cpm`, checked bit for bit against asn1tools by
         the tests) in a fraction of that.
+    cpm_cdd : {"2.2.1", "2.1.1"}
+        The ETSI-ITS-CDD release of the CPM (:data:`~footprint_uq.service.messages.asn1_cpm.CDD_RELEASES`;
+        default the newest): a receiver decodes only the release it compiled (docs/service.md).
+    v2x_policy : {"sampled", "unavailable", "linear"}
+        What the V2X fields (the CPM's confidences and correlation, the J2735 fields) encode where an object's
+        centre is not ``linear_ok`` (far objects): :data:`footprint_uq.products.footprints.V2X_POLICIES`,
+        docs/uncertainty-model.md; each object's record says which (``v2x_source``, ``v2x_cov_m2``).
     linearity : bool
         Add per object ``nonlinearity`` -- the largest predicted relative error of the linear
         1-sigma semi-major axis over its usable ground-contact points
@@ -217,7 +241,8 @@ class Service:
                  origin_lon_deg: float | None = None, confidence: float = 0.95, contact: str = "bottom-centre",
                  allow_outside_image: bool = False, station_id: int | None = None, messages: bool = True,
                  uper_encoder: str = "fast", linearity: bool = False, linear_threshold: float | None = None,
-                 warm_up: bool = True, tracks: bool = False, tracker: TrackerConfig | None = None):
+                 warm_up: bool = True, cpm_cdd: str = DEFAULT_CDD, v2x_policy: str = "sampled",
+                 tracks: bool = False, tracker: TrackerConfig | None = None):
         if (camera is None) == (registry is None):
             raise InputError("camera/registry", "both" if camera is not None else "neither",
                              "exactly one of a camera (with a budget) or a registry")
@@ -232,7 +257,13 @@ class Service:
         if uper_encoder not in UPER_ENCODERS:
             raise InputError("uper_encoder", uper_encoder, f"one of {UPER_ENCODERS}")
         self.uper_encoder = uper_encoder
-        self._encode = encode_cpm_uper if uper_encoder == "asn1tools" else encode_cpm_uper_fast
+        self.cpm_cdd = check_cdd(cpm_cdd)
+        if v2x_policy not in V2X_POLICIES:
+            raise InputError("v2x_policy", v2x_policy, f"one of {V2X_POLICIES}")
+        self.v2x_policy = v2x_policy
+        self._encode = functools.partial(encode_cpm_uper if uper_encoder == "asn1tools" else encode_cpm_uper_fast,
+                                         cdd=self.cpm_cdd)
+        self._cls = _class_tables(self.cpm_cdd)
         self.cameras: dict[str | None, CameraSetup] = {}
         if camera is not None:
             if budget is None:
@@ -272,10 +303,9 @@ class Service:
         if warm_up:
             self.warm_up()
 
-    @staticmethod
-    def _processor(camera, budget, geo: GeoReference, allow_outside_image: bool) -> FrameProcessor:
+    def _processor(self, camera, budget, geo: GeoReference, allow_outside_image: bool) -> FrameProcessor:
         return FrameProcessor(camera, budget, heading_offset_deg=geo.heading_offset_deg,
-                              allow_outside_image=allow_outside_image, joint_cov=False)
+                              allow_outside_image=allow_outside_image, joint_cov=False, v2x_policy=self.v2x_policy)
 
     @property
     def camera_ids(self) -> list:
@@ -296,7 +326,7 @@ class Service:
         t = Table(1)
         t.json([b'{"a":', t.column(np.zeros(1)), t.when(np.ones(1, bool), b',"b":', t.column(["x"])), b"}"])
         one = np.ones(1, np.int64)
-        perceived_object_container_uper_arrays(one, one, one, one, one, one, one, one, one)
+        perceived_object_container_uper_arrays(one, one, one, one, one, one, one, one, one, cdd=self.cpm_cdd)
         _cm_dm(np.zeros((1, 2)), np.zeros(1, np.int64))
 
     # -- one frame ------------------------------------------------------------------------------------
@@ -375,15 +405,19 @@ class Service:
         est, ids, classes, class_p, P = self._footprints(setup, dets)
         motion = self._motion(setup, est, ids, ts, dets) if self.tracks else None
         t1 = time.perf_counter()
-        objects, ok_idx, msg_ids = self._objects_json(setup, est, ids, classes, P, motion)
+        objects, ok_idx, msg_ids = self._objects_json(setup, est, ids, classes, P, ts, motion)
         t2 = time.perf_counter()
         head = {"type": RECORD_FOOTPRINTS, "camera_id": camera_id, "frame": fno, "timestamp_s": ts,
                 "station_id": setup.station_id, "heading_offset_deg": setup.georef.heading_offset_deg,
                 "confidence": self.confidence, "n_objects": len(ids)}
+        if self.messages:
+            head["cpm_cdd"] = self.cpm_cdd
         parts = [orjson.dumps(head)[:-1], b',"objects":', objects]
         if self.messages:
+            # motion: the tracker's motion of the frame's objects (None: the messages carry no motion)
+            om = None if motion is None else ObjectMotion(*motion[1])
             cpm, cpm_hex, sdsm = self._messages_json(setup, est, classes, class_p, ok_idx, msg_ids, int(fno), ts,
-                                                     ref_ms)
+                                                     ref_ms, motion=om)
             parts += [b',"cpm":', cpm, b',"cpm_uper_hex":"', cpm_hex.encode(), b'","sdsm":', sdsm]
             omitted = int(np.count_nonzero(est.centre_valid)) - len(ok_idx)
             if omitted:  # said, never silent: objects with a centre that did not fit in the messages
@@ -435,12 +469,16 @@ class Service:
                                                "(x_m, y_m, z_m, length_m, width_m, height_m, yaw_rad|yaw_deg) or "
                                                "corners (u0_px, v0_px, ...), one family per frame")
         cols = S.box_columns(family, dets[0].keys())
+        if family == "corners":
+            _check_corner_counts(dets, cols)
         X = _box_array(dets, cols)
         P = None
         if not keys.isdisjoint(S.COV_COLUMNS):
             P = _fast_cov(dets)
             if P is None:
                 P = _slow_cov(dets)
+            if P is not None:
+                _check_pixel_cov_range(P)
         try:
             if family == "2d":
                 est = proc.boxes2d(X, contact=self.contact, pixel_cov_px2=P)
@@ -483,7 +521,7 @@ class Service:
             out = setup.tracks.step(ts, ids, est.centre_xy_world_m, est.centre_cov_frame_m2, B)
         return out.track_id, object_motion(out, heading_offset_deg=setup.georef.heading_offset_deg, yaw_rad=yaw)
 
-    def _objects_json(self, setup: CameraSetup, est, ids: list, classes: list, P,
+    def _objects_json(self, setup: CameraSetup, est, ids: list, classes: list, P, ts: float = 0.0,
                       motion=None) -> tuple[bytes, np.ndarray, list]:
         """The ``objects`` list of the record as JSON text, written column-wise (:class:`.jsonrows.Table`); and
         the indices of the objects in the messages (with a centre, at most 255) and their ``message_object_id``."""
@@ -514,6 +552,7 @@ class Service:
                    b',"largest_sigma_major_m":', ls, b',"largest_x_m":', lx, b',"largest_y_m":', ly]
         for key, col in zip(_V2X_KEYS, t.columns(est.v2x_codes.T), strict=True):
             layout += [key, col]
+        layout += _v2x_source_layout(t, est, cxx, cxy, cyy)
         if geo.has_origin:
             lat, lon = geo.to_wgs84(centre) if N else (np.zeros(0), np.zeros(0))
             layout += [b',"lat_deg":', t.column(lat), b',"lon_deg":', t.column(lon)]
@@ -536,7 +575,7 @@ class Service:
         if self.messages:
             ok_all = np.flatnonzero(valid)
             ok_idx = ok_all[:MAX_MESSAGE_OBJECTS]  # a CPM carries at most 255 perceived objects
-            msg_ids = _message_ids(ids, ok_idx)
+            msg_ids = setup.ids.assign(ids, ok_idx, ts)
             if len(ok_idx) == N:
                 layout += [b',"message_object_id":', t.column(msg_ids)]
             else:  # null: not in the CPM / SDSM (no centre, or beyond 255)
@@ -549,9 +588,11 @@ class Service:
         return t.json(layout), ok_idx, msg_ids
 
     def _messages_json(self, setup: CameraSetup, est, classes: list, class_p, ok_idx: np.ndarray,
-                       msg_ids: np.ndarray, fno: int, ts: float, ref_ms: int) -> tuple[bytes, str, bytes]:
+                       msg_ids: np.ndarray, fno: int, ts: float, ref_ms: int, motion: ObjectMotion | None = None
+                       ) -> tuple[bytes, str, bytes]:
         """The CPM (JSON text), its UPER encoding (hex) and the SDSM (JSON text, ``null`` without objects) of
-        the objects ``ok_idx``, written column-wise; UPER by the compiled column writer."""
+        the objects ``ok_idx``, written column-wise; UPER by the compiled column writer.  ``motion``: the
+        :class:`~.messages.motion.ObjectMotion` of all the frame's objects (None: no motion is sent)."""
         geo = setup.georef
         N, m = len(classes), len(ok_idx)
         en = geo.world_to_enu(est.centre_xy_world_m) if N else np.zeros((0, 2))
@@ -560,7 +601,9 @@ class Service:
         x_conf, y_conf, corr = codes[:, _CPM_INDEX], codes[:, _CPM_INDEX + 1], codes[:, _CPM_INDEX + 2]
         crow = (np.fromiter(map(_CLASS_ROWS.__getitem__, classes), np.intp, N)[ok_idx] if any(classes)
                 else np.full(m, _DEFAULT_CLASS_ROW, np.intp))
-        has_cls = _CLS_BITS_WIDTH[crow] > 0
+        cls = self._cls
+        has_cls = cls.bits_width[crow] > 0
+        mc = None if motion is None else motion_codes(motion.take(ok_idx), m)
         t = Table(m)
         oid = t.column(msg_ids)
         if class_p is None:
@@ -575,10 +618,11 @@ class Service:
             lv = t.column(level)
             pct = t.column(np.where(none, 0.0, np.rint(100.0 * p)).astype(np.int64))
         cx, cy, xv, yv, r = t.columns(np.array([x_conf, y_conf, x_cm, y_cm, corr], dtype=np.int64))
+        vel, age = _motion_layout(t, mc)
         po = t.json([b'{"objectId":', oid, b',"measurementDeltaTime":0,"position":{"xCoordinate":{"value":', xv,
-                     b',"confidence":', cx, b'},"yCoordinate":{"value":', yv, b',"confidence":', cy, b"}}",
-                     t.when(corr != 101, _CORR_OPEN, r, _CORR_CLOSE),
-                     t.when(has_cls, b',"classification":[{"objectClass":', t.column(_CLS_OBJECT[crow].tolist()),
+                     b',"confidence":', cx, b'},"yCoordinate":{"value":', yv, b',"confidence":', cy, b"}}", *vel,
+                     t.when(corr != 101, _CORR_OPEN, r, _CORR_CLOSE), *age,
+                     t.when(has_cls, b',"classification":[{"objectClass":', t.column(cls.object_json[crow].tolist()),
                             b',"confidence":', lv, b"}]"),
                      b"}"])
         lat_e7, lon_e7 = setup.lat_1e7deg, setup.lon_1e7deg
@@ -589,7 +633,8 @@ class Service:
         cpm_json = _splice(orjson.dumps(cpm), b'"perceivedObjects":[]', po)
         if self.uper_encoder == "fast":
             container = perceived_object_container_uper_arrays(
-                msg_ids, x_cm, x_conf, y_cm, y_conf, corr, _CLS_BITS_VALUE[crow], _CLS_BITS_WIDTH[crow], level)
+                msg_ids, x_cm, x_conf, y_cm, y_conf, corr, cls.bits_value[crow], cls.bits_width[crow], level,
+                cdd=self.cpm_cdd, motion=mc)
             cpm_hex = setup.uper.encode(ref_ms, container).hex()
         else:
             cpm_hex = self._encode(orjson.loads(cpm_json)).hex()
@@ -597,23 +642,43 @@ class Service:
         if m == 0:
             return cpm_json, cpm_hex, b"null"
         xd, yd = t.columns(np.array([x_dm, y_dm]))
+        if mc is None:
+            tail = [_SDSM_TAIL_NO_MOTION]
+        else:
+            sp, hd = t.columns(np.array([mc.sdsm_speed, mc.sdsm_heading]))
+            tail = [_SDSM_SPEED, sp, b',"speedConfidence":', t.column(_SPEED_CONF[mc.sdsm_speed_conf].tolist()),
+                    b',"heading":', hd, b',"headingConf":', t.column(_HEADING_CONF[mc.sdsm_heading_conf].tolist()),
+                    b"}}"]
         objs = t.json([b'{"detObjCommon":{"objType":', t.column(_SDSM_TYPE[crow].tolist()), b',"objTypeCfd":', pct,
                        b',"objectID":', oid, _SDSM_AFTER_ID, xd, b',"offsetY":', yd, b'},"posConfidence":{"pos":',
-                       t.column(_POS_NAMES[codes[:, _J_POS]].tolist()), _SDSM_TAIL])
+                       t.column(_POS_NAMES[codes[:, _J_POS]].tolist()), *tail])
         sdsm = build_sdsm(setup.station_id, fno, ts, [],
                           **({} if lat_e7 is None else {"lat_1e7deg": lat_e7, "lon_1e7deg": lon_e7}))
         return cpm_json, cpm_hex, _splice(orjson.dumps(sdsm), b'"objects":[]', objs)
 
 
+def _motion_layout(t: Table, mc) -> tuple[list, list]:
+    """The CPM JSON pieces of ``velocity`` and ``angles`` (after the position) and of ``objectAge`` (after the
+    correlation matrix) of :class:`~.messages.motion.MotionCodes` (none without motion)."""
+    if mc is None:
+        return [], []
+    vx, vxc, vy, vyc, z, zc, age = t.columns(np.array([mc.vx, mc.vx_conf, mc.vy, mc.vy_conf, mc.yaw, mc.yaw_conf,
+                                                        mc.age_ms], dtype=np.int64))
+    vel = [t.when(mc.has_velocity, b',"velocity":{"cartesianVelocity":{"xVelocity":{"value":', vx,
+                  b',"confidence":', vxc, b'},"yVelocity":{"value":', vy, b',"confidence":', vyc, b"}}}"),
+           t.when(mc.has_yaw, b',"angles":{"zAngle":{"value":', z, b',"confidence":', zc, b"}}")]
+    return vel, [t.when(mc.has_age, b',"objectAge":', age)]
+
+
 @njit(cache=True, nogil=True)
-def _cm_dm_kernel(en, rows, cm_min, cm_max, dm_max):  # pragma: no cover - compiled
+def _cm_dm_kernel(en, rows, cm_min, cm_max, dm_max, cm_guard):  # pragma: no cover - compiled
     out = np.empty((4, rows.shape[0]), np.int64)
     for j in range(rows.shape[0]):
         for a in range(2):
             v = en[rows[j], a]
             if v != v:  # NaN -> 0, as numpy.nan_to_num (only from absurd coordinates: inf - inf)
                 v = 0.0
-            c = np.rint(v * 100.0)
+            c = np.ceil(v * 100.0 - cm_guard)  # CartesianCoordinateLarge: (n-1) x 0.01 < v <= n x 0.01
             d = np.rint(v * 10.0)
             out[a, j] = int(min(max(c, cm_min), cm_max))
             out[2 + a, j] = int(min(max(d, -dm_max), dm_max))
@@ -624,7 +689,7 @@ def _cm_dm(en: np.ndarray, rows: np.ndarray):
     """:func:`~.messages.cpm.coordinate_cm` and :func:`~.messages.sdsm.offset_dm` of the east/north metres
     ``en[rows]``: x cm, y cm, x dm, y dm (the same numbers in one compiled pass)."""
     return _cm_dm_kernel(np.ascontiguousarray(en, dtype=np.float64), np.asarray(rows, dtype=np.int64),
-                         float(COORD_MIN), float(COORD_MAX), float(OFFSET_MAX))
+                         float(COORD_MIN), float(COORD_MAX), float(OFFSET_MAX), COORD_GUARD_CM)
 
 
 def _splice(doc: bytes, empty_list: bytes, items: bytes) -> bytes:
@@ -633,46 +698,56 @@ def _splice(doc: bytes, empty_list: bytes, items: bytes) -> bytes:
     return doc[:i] + items + doc[i + 2:]
 
 
-def _message_ids(ids: list, ok_idx: np.ndarray) -> np.ndarray:
-    """``message_object_id`` (:func:`_message_object_id`) of the objects ``ok_idx``."""
-    ok = ok_idx.tolist()
-    sel = ids if len(ok) == len(ids) else [ids[i] for i in ok]
-    if set(map(type, sel)) <= _INT_ONLY:
-        try:
-            arr = np.array(sel, dtype=np.int64)
-        except OverflowError:
-            pass
-        else:
-            if not arr.size or (arr.min() >= 0 and arr.max() <= 65535):
-                return arr
-    return np.array([_message_object_id(ids[i], i) for i in ok], dtype=np.int64)
+def _v2x_source_layout(t: Table, est, cxx, cxy, cyy) -> list:
+    """``v2x_source`` and ``v2x_cov_m2`` of every object: which covariance its V2X fields encode (the policy of
+    docs/uncertainty-model.md) -- ``cov_m2`` itself ("linear"), a sampled one ("sampled") or none ("unavailable",
+    null) -- so that every CPM / J2735 field is ``footprint_uq.products.v2x`` of a covariance in the record."""
+    src = est.v2x_source
+    names = _V2X_SOURCE_NAMES[src]
+    if est.v2x_cov_m2 is not None:
+        c = est.v2x_cov_m2
+        cxx, cxy, cyy = t.columns(np.array([c[:, 0, 0], c[:, 0, 1], c[:, 1, 1]]))
+    has = src != _V2X_UNAVAILABLE
+    return [b',"v2x_source":', t.column(names.tolist()), b',"v2x_cov_m2":',
+            t.when(has, b"[[", cxx, b",", cxy, b"],[", cxy, b",", cyy, b"]]"), t.when(~has, b"null")]
 
 
 def _class_rows():
-    """The distinct (CPM ObjectClass, SDSM objType) of a detector class, and lower-case class -> row."""
+    """The distinct (CPM class spec, SDSM objType) of the detector classes, and lower-case class -> row."""
     results, row_of = [], {}
 
-    def row(cpm, sdsm):
-        key = (orjson.dumps(cpm) if cpm is not None else None, sdsm)
+    def row(spec, sdsm):
+        key = (spec, sdsm)
         if key not in results:
             results.append(key)
         return results.index(key)
 
     default = row(None, "unknown")
-    for low in sorted(set(CPM_CLASSES) | set(SDSM_OBJECT_TYPES)):
-        row_of[low] = row(CPM_CLASSES.get(low), SDSM_OBJECT_TYPES.get(low, "unknown"))
+    for low in sorted(set(CPM_CLASS_OF) | set(SDSM_OBJECT_TYPES)):
+        row_of[low] = row(CPM_CLASS_OF.get(low), SDSM_OBJECT_TYPES.get(low, "unknown"))
     return results, row_of, default
 
 
 _CLASS_RESULTS, _ROW_OF_LOWER, _DEFAULT_CLASS_ROW = _class_rows()
-#: per row: the CPM ObjectClass (None: no classification), its class bits for the UPER writer (width 0: none)
-#: and the SDSM objType
-_CLS_OBJECT = np.array([None if c is None else orjson.loads(c) for c, _ in _CLASS_RESULTS], dtype=object)
-_CLS_BITS = [(0, 0) if c is None else class_bits(orjson.loads(c)) for c, _ in _CLASS_RESULTS]
-_CLS_BITS_VALUE = np.array([v for v, _ in _CLS_BITS], dtype=np.int64)
-_CLS_BITS_WIDTH = np.array([w for _, w in _CLS_BITS], dtype=np.int64)
 _SDSM_TYPE = np.array([t for _, t in _CLASS_RESULTS], dtype=object)
 _POS_NAMES = np.array(J2735_POSITION_CONFIDENCE_NAMES, dtype=object)
+
+
+class _ClassTables(NamedTuple):
+    """Per row of the class tables, in one CDD release: the CPM ObjectClass (JSON; None: no classification) and
+    its class bits for the UPER writer (width 0: none)."""
+
+    object_json: np.ndarray
+    bits_value: np.ndarray
+    bits_width: np.ndarray
+
+
+@functools.cache
+def _class_tables(cdd: str) -> _ClassTables:
+    objs = [None if spec is None else object_class_json(spec, cdd) for spec, _ in _CLASS_RESULTS]
+    bits = [(0, 0) if o is None else class_bits(o, cdd) for o in objs]
+    return _ClassTables(np.array(objs, dtype=object), np.array([v for v, _ in bits], dtype=np.int64),
+                        np.array([w for _, w in bits], dtype=np.int64))
 
 
 class _ClassRowCache(dict):
@@ -690,8 +765,13 @@ _CORR_OPEN = b',"lowerTriangularCorrelationMatrices":[{"componentsIncludedIntheM
              b'"matrix":[['
 _CORR_CLOSE = b"]]}]"
 _SDSM_AFTER_ID = b',"measurementTime":0,"timeConfidence":"unavailable","pos":{"offsetX":'
-_SDSM_TAIL = (b',"elevation":"unavailable"},"speed":%d,"speedConfidence":"unavailable","heading":%d,'
-              b'"headingConf":"unavailable"}}' % (SPEED_UNAVAILABLE, HEADING_UNAVAILABLE))
+_SDSM_TAIL_NO_MOTION = (b',"elevation":"unavailable"},"speed":%d,"speedConfidence":"unavailable","heading":%d,'
+                        b'"headingConf":"unavailable"}}' % (SDSM_SPEED_UNAVAILABLE, SDSM_HEADING_UNAVAILABLE))
+_SDSM_SPEED = b',"elevation":"unavailable"},"speed":'
+_SPEED_CONF = np.array(SPEED_CONFIDENCE_NAMES, dtype=object)
+_HEADING_CONF = np.array(HEADING_CONFIDENCE_NAMES, dtype=object)
+_V2X_SOURCE_NAMES = np.array(["linear", "sampled", "unavailable"], dtype=object)  # FootprintEstimate.v2x_source
+_V2X_UNAVAILABLE = 2
 _STATUS_ALL_OK = b',"status":%s,"reason":"ok"' % orjson.dumps(S.STATUS_OK)
 _V2X_KEYS = [b',"%s":' % k.encode() for k in V2X_FIELDS]
 _DICT_ONLY = {dict}
@@ -779,6 +859,32 @@ def _slow_cov(dets: list):
     return P
 
 
+_CORNER_KEY = re.compile(r"^[uv]\d+_px$")
+
+
+def _check_corner_counts(dets: list, cols) -> None:
+    """Every detection of a corners frame has the corner columns of the first one (no more, no fewer)."""
+    want = set(cols)
+    for i, d in enumerate(dets):
+        have = {k for k in d if _CORNER_KEY.match(k)}
+        if have != want:
+            extra = sorted(have - want)
+            name = extra[0] if extra else sorted(want - have)[0]
+            raise _FrameError(f"detections[{i}].{name}", f"detection {i} has {len(have) // 2} corners "
+                              f"({len(have)} corner columns), detection 0 has {len(want) // 2}: one corner count per "
+                              "frame")
+
+
+def _check_pixel_cov_range(P: np.ndarray) -> None:
+    """Detector pixel (co)variances within the batch's limit (:data:`footprint_uq.batch.process.MAX_PIXEL_VAR_PX2`)."""
+    big = np.abs(P) > MAX_PIXEL_VAR_PX2
+    if big.any():
+        i, r, c = (int(v) for v in np.argwhere(big)[0])
+        name = S.COV_COLUMNS[0 if r == c == 0 else (2 if r == c else 1)]
+        raise _FrameError(f"detections[{i}].{name}", f"pixel covariance out of range: {name} {float(P[i, r, c]):g} "
+                                                     f"(entries up to {MAX_PIXEL_VAR_PX2:g} px^2)")
+
+
 _ID_TYPES = (int, str, type(None))
 _NUMBER_SET = {int, float}  # (bool is not int here: type() is exact)
 _CONF_TYPES = {int, float, type(None)}
@@ -799,16 +905,6 @@ def _box_array(dets: list, cols) -> np.ndarray:
     for i, d in enumerate(dets):  # the slow path names the first bad field
         X[i] = [_finite_number(d, c, f"detections[{i}]") for c in cols]
     return X
-
-
-def _message_object_id(object_id, index: int) -> int:
-    """Identifier2B of an object: its id if it is an integer in 0..65535, else CRC-32 of its text mod 65536."""
-    if type(object_id) is int and 0 <= object_id <= 65535:
-        return object_id
-    if isinstance(object_id, str) and object_id.isdigit() and int(object_id) <= 65535:
-        return int(object_id)
-    text = str(index) if object_id is None else str(object_id)
-    return zlib.crc32(text.encode("utf-8")) & 0xFFFF
 
 
 def _detection_field(field: str) -> str:

@@ -31,8 +31,10 @@ from __future__ import annotations
 
 import collections
 import gc
+import io
 import multiprocessing as mp
 import os
+import select
 import signal
 import socket
 import sys
@@ -47,10 +49,21 @@ from ..batch.fleet import load_registry
 from ..errors import ConfigError, InputError
 from ..io import load_camera
 from .core import RECORD_ERROR, RECORD_FOOTPRINTS, FrameOutput, Service, error_record
+from .messages.asn1_cpm import DEFAULT_CDD
 
 __all__ = ["FrameQueue", "Metrics", "serve", "run", "parse_mqtt_url", "POLICIES"]
 
 POLICIES = ("newest", "block")
+#: frames pending per camera (a burst of this many frames of one camera is processed, not replaced)
+QUEUE_DEPTH = 2
+#: the largest frame accepted (bytes of one MQTT payload or stdin line; a 255-object frame is ~60 kB)
+MAX_FRAME_BYTES = 4 << 20
+#: the most bytes of frames pending in all
+MAX_PENDING_BYTES = 256 << 20
+
+
+def _plain(v):
+    return v if v is None or isinstance(v, (str, int, float, bool)) else repr(v)
 
 
 def _dumps(obj) -> bytes:
@@ -62,7 +75,7 @@ def _loads(data):
 
 
 class FrameQueue:
-    """Pending frames, at most one per key (camera), served oldest-key first (see the module doc).
+    """Pending frames, at most ``depth`` per key (camera), served oldest-key first (see the module doc).
 
     Parameters
     ----------
@@ -70,39 +83,64 @@ class FrameQueue:
     max_keys : int
         Most distinct keys pending at once (a bound on memory when ids are garbage): a frame
         of a new key beyond it is dropped (``newest``) or waits (``block``).
+    depth : int
+        Most frames pending per key: with ``newest`` a frame arriving when its key already has ``depth``
+        frames pending replaces the oldest of them (counted in :attr:`dropped`); with ``block`` it waits.
+    max_bytes : int
+        Most bytes pending in all (the ``nbytes`` given to :meth:`put`): beyond it a frame is dropped
+        (``newest``, counted) or waits (``block``), so memory stays bounded whatever the frames' sizes.
     """
 
-    def __init__(self, policy: str = "newest", max_keys: int = 4096):
+    def __init__(self, policy: str = "newest", max_keys: int = 4096, depth: int = 1, max_bytes: int = 1 << 62):
         if policy not in POLICIES:
             raise InputError("policy", policy, f"one of {POLICIES}")
+        if int(depth) < 1:
+            raise InputError("depth", depth, "an integer >= 1 (frames pending per camera)")
         self.policy = policy
         self.max_keys = int(max_keys)
-        self._items: collections.OrderedDict = collections.OrderedDict()
+        self.depth = int(depth)
+        self.max_bytes = int(max_bytes)
+        self._items: collections.OrderedDict = collections.OrderedDict()  # key -> deque of (item, nbytes)
         self._cv = threading.Condition()
         self._closed = False
+        self._n = 0
+        self.bytes = 0
         self.dropped = 0
 
-    def put(self, key, item) -> bool:
-        """Queue ``item`` for ``key``; False if it was dropped (key limit) or the queue is closed."""
+    def _full(self, key, nbytes: int) -> bool:
+        dq = self._items.get(key)
+        return ((dq is not None and len(dq) >= self.depth) or (dq is None and len(self._items) >= self.max_keys)
+                or (self._n > 0 and self.bytes + nbytes > self.max_bytes))
+
+    def put(self, key, item, nbytes: int = 0) -> bool:
+        """Queue ``item`` for ``key``; False if it was dropped (key or byte limit) or the queue is closed."""
         with self._cv:
             if self.policy == "block":
-                while not self._closed and (key in self._items or len(self._items) >= self.max_keys):
+                while not self._closed and self._full(key, nbytes):
                     self._cv.wait(0.1)
             if self._closed:
                 return False
-            if key in self._items:
-                self._items[key] = item  # keeps its place in line: cameras are served fairly
+            dq = self._items.get(key)
+            if dq is not None and len(dq) >= self.depth:  # newest: the oldest pending frame of the key goes
+                _, nb = dq.popleft()
+                self._n -= 1
+                self.bytes -= nb
                 self.dropped += 1
-            elif len(self._items) >= self.max_keys:
+            if (dq is None and len(self._items) >= self.max_keys) or (self._n > 0 and
+                                                                      self.bytes + nbytes > self.max_bytes):
                 self.dropped += 1
                 return False
-            else:
-                self._items[key] = item
+            if dq is None:
+                dq = self._items[key] = collections.deque()  # keeps its place in line: cameras are served fairly
+            dq.append((item, nbytes))
+            self._n += 1
+            self.bytes += nbytes
             self._cv.notify_all()
             return True
 
     def get(self, timeout: float | None = None):
-        """The oldest pending item (None after ``timeout`` s, or when closed and empty)."""
+        """The oldest pending item of the key waiting longest (None after ``timeout`` s, or when closed and
+        empty); a key's frames come out in the order they were put."""
         with self._cv:
             end = None if timeout is None else time.monotonic() + timeout
             while not self._items:
@@ -112,7 +150,14 @@ class FrameQueue:
                 if remaining is not None and remaining <= 0:
                     return None
                 self._cv.wait(remaining)
-            _, item = self._items.popitem(last=False)
+            key, dq = next(iter(self._items.items()))
+            item, nb = dq.popleft()
+            if dq:
+                self._items.move_to_end(key)  # its next frame waits behind the other cameras' ones
+            else:
+                del self._items[key]
+            self._n -= 1
+            self.bytes -= nb
             self._cv.notify_all()
             return item
 
@@ -124,7 +169,7 @@ class FrameQueue:
 
     def __len__(self) -> int:
         with self._cv:
-            return len(self._items)
+            return self._n
 
 
 class Metrics:
@@ -277,29 +322,118 @@ class _MqttSink:
 
 
 # -- sources ---------------------------------------------------------------------------------------------
-def _stdin_reader(stream, queue: FrameQueue, sink, metrics: Metrics, stop: threading.Event) -> None:
-    for lineno, line in enumerate(stream, start=1):
+def _stdin_lines(stream, max_bytes: int, stop: threading.Event):
+    """Yield ``(line, length)`` of each line of ``stream``; ``line`` is None for a line longer than ``max_bytes``
+    (its bytes are skipped, never held).  A real file descriptor is read with ``select`` + ``os.read`` so that a
+    stop request ends the reader even while the input is open and idle (and no thread is left holding the
+    interpreter's stdin lock at exit)."""
+    try:
+        fd = stream.fileno()
+        select.select([fd], [], [], 0)  # a descriptor select can wait on (not so on every platform)
+    except (AttributeError, OSError, ValueError, io.UnsupportedOperation):
+        fd = None
+    if fd is None:
+        while True:
+            line = stream.readline(max_bytes + 1)
+            if not line:
+                return
+            n = len(line)
+            if n > max_bytes and not line.endswith(b"\n"):
+                while line and not line.endswith(b"\n"):
+                    line = stream.readline(1 << 16)
+                    n += len(line)
+                yield None, n
+            else:
+                yield line, n
+    buf, skipped = bytearray(), -1  # skipped >= 0: inside an over-long line (its length so far)
+    while not stop.is_set():
+        if not select.select([fd], [], [], 0.1)[0]:
+            continue
+        chunk = os.read(fd, 1 << 16)
+        if not chunk:
+            break
+        start = 0
+        while (end := chunk.find(b"\n", start)) >= 0:
+            if skipped >= 0 or len(buf) + end - start + 1 > max_bytes:
+                yield None, max(skipped, 0) + len(buf) + end - start + 1
+                skipped = -1
+                buf.clear()
+            else:
+                buf += chunk[start:end + 1]
+                yield bytes(buf), len(buf)
+                buf.clear()
+            start = end + 1
+        rest = len(chunk) - start
+        if skipped >= 0:
+            skipped += rest
+        elif len(buf) + rest > max_bytes:
+            skipped, buf = len(buf) + rest, bytearray()
+        else:
+            buf += chunk[start:]
+    if skipped >= 0:
+        yield None, skipped
+    elif buf and not stop.is_set():
+        yield bytes(buf), len(buf)
+
+
+def _stdin_reader(stream, queue: FrameQueue, sink, metrics: Metrics, stop: threading.Event,
+                  max_frame_bytes: int = 1 << 62) -> None:
+    lineno = 0
+    last_key = None  # an unreadable line waits behind the frames of the camera of the line before it
+    for line, nbytes in _stdin_lines(stream, max_frame_bytes, stop):
+        lineno += 1
         if stop.is_set():
             break
-        if not line.strip():
+        if line is not None and not line.strip():
             continue
         t = time.monotonic()
         metrics.received()
         src = f"stdin line {lineno}"
+        if line is None:
+            rec = error_record(f"frame of {nbytes} bytes is larger than the limit of {max_frame_bytes} bytes "
+                               "(--max-frame-bytes)", source=src)
+            _queue_error(queue, last_key, rec, src, t, sink, metrics)
+            continue
         try:
             frame = _loads(line)
         except ValueError as e:
-            rec = error_record(f"invalid JSON: {e}", source=src)
-            sink.write(rec)
-            metrics.done(rec, time.monotonic() - t)
+            _queue_error(queue, last_key, error_record(f"invalid JSON: {e}", source=src), src, t, sink, metrics)
             continue
         key = frame.get("camera_id") if isinstance(frame, dict) else None
-        key = key if isinstance(key, str) else repr(key)
-        if not queue.put(key, (frame, src, t, None)):
-            rec = error_record("service stopping or too many cameras pending", source=src)
+        key = last_key = key if isinstance(key, str) else repr(key)
+        if not queue.put(key, (frame, src, t, None), nbytes):
+            rec = error_record("service stopping, too many cameras or bytes pending", source=src,
+                               camera_id=key if isinstance(frame, dict) and isinstance(frame.get("camera_id"), str)
+                               else None)
             sink.write(rec)
             metrics.done(rec, time.monotonic() - t)
     queue.close()
+
+
+#: the fourth element of a queued item whose first element is a finished FrameOutput (an error found on receipt)
+_READY = object()
+
+
+def _queue_error(queue: FrameQueue, key, rec: dict, src: str, t: float, sink, metrics: Metrics) -> None:
+    """An error record found on receipt goes through the queue, behind the frames received before it (records
+    leave in input order); written at once only if the queue refuses it."""
+    out = FrameOutput(_dumps(rec), RECORD_ERROR, rec.get("camera_id"), None, rec)
+    if not queue.put(key, (out, src, t, _READY), len(out.data)):
+        sink.write(rec)
+        metrics.done(rec, time.monotonic() - t)
+
+
+def _topic_level_error(camera_id) -> str | None:
+    """Why ``camera_id`` cannot be the last level of an MQTT topic (None if it can): MQTT 3.1.1 clause 4.7 --
+    no wildcard ``#`` / ``+`` in a topic name, no NUL, not empty, at most 65535 bytes in all."""
+    if camera_id is None:
+        return None
+    if not isinstance(camera_id, str) or not camera_id or "#" in camera_id or "+" in camera_id or "\0" in camera_id:
+        return (f"camera_id {camera_id!r} cannot name an MQTT topic (MQTT 3.1.1 clause 4.7: no '#', '+' or NUL, "
+                "not empty)")
+    if len(camera_id.encode("utf-8", "surrogatepass")) > 60000:
+        return f"camera_id of {len(camera_id)} characters is too long for an MQTT topic"
+    return None
 
 
 def _mqtt_frame(payload: bytes, cam: str, src: str):
@@ -343,6 +477,27 @@ def tcp_no_delay(client, userdata, sock) -> None:
         sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
     except (OSError, AttributeError):  # not a TCP socket (a websocket wrapper, a Unix socket)
         pass
+    quick_ack(sock)
+
+
+_QUICKACK = getattr(socket, "TCP_QUICKACK", None)  # Linux only
+
+
+def quick_ack(sock) -> None:
+    """ACK what the broker sent at once instead of delaying the ACK (``TCP_QUICKACK``, Linux; the kernel may
+    leave quick-ack mode again, so the service sets it after every message it receives).
+
+    Why: a broker with Nagle's algorithm on (Mosquitto's default, ``set_tcp_nodelay false``) holds the next
+    frame for this client while its last small segment to it -- the PUBACK of the service's previous record --
+    is unacknowledged, and a delayed ACK waits up to 40 ms: at 50 Hz the frames then arrived in pairs
+    (measured: gaps 44 ms / 0.1 ms, `bench/bench_service_50hz.py`) and ``--overload newest`` replaced half of
+    them.  Costs one system call per frame."""
+    if _QUICKACK is None or sock is None:
+        return
+    try:
+        sock.setsockopt(socket.IPPROTO_TCP, _QUICKACK, 1)
+    except (OSError, AttributeError):
+        pass
 
 
 # -- the service --------------------------------------------------------------------------------------------
@@ -350,7 +505,9 @@ def serve(service: Service, *, input: str | None = "-", mqtt: str | None = None,
           input_prefix: str = "detections", output_prefix: str = "footprints", policy: str | None = None,
           health_interval_s: float = 1.0, client_id: str | None = None, cameras: list[str] | None = None,
           worker: str | None = None, stdin=None, stdout=None,
-          stop: threading.Event | None = None, install_signals: bool = True, drain_timeout_s: float = 10.0) -> int:
+          stop: threading.Event | None = None, install_signals: bool = True, drain_timeout_s: float = 10.0,
+          queue_depth: int = QUEUE_DEPTH, max_frame_bytes: int = MAX_FRAME_BYTES,
+          max_pending_bytes: int = MAX_PENDING_BYTES) -> int:
     """Run the service until SIGTERM/SIGINT, ``stop`` or the end of stdin; return the exit status (0).
 
     Parameters
@@ -368,12 +525,19 @@ def serve(service: Service, *, input: str | None = "-", mqtt: str | None = None,
         MQTT input: subscribe to these cameras' topics only (default: ``<input_prefix>/+``).
     worker : str, optional
         Label added to the health records (``"1/2"``: worker 1 of 2, see :func:`run`).
+    queue_depth : int
+        Frames pending per camera (:class:`FrameQueue` ``depth``): a burst of up to this many frames of one
+        camera is processed, not replaced.
+    max_frame_bytes, max_pending_bytes : int
+        A frame (MQTT payload, stdin line) larger than ``max_frame_bytes`` is refused with an error record
+        before it is queued (a stdin line is skipped without being held); the frames pending in all hold at
+        most ``max_pending_bytes`` (beyond: dropped and counted with ``newest``, waiting with ``block``).
     """
     _check_transport(input, mqtt, output)
     policy = policy or ("block" if input == "-" else "newest")
     stop = stop or threading.Event()
     metrics = Metrics()
-    queue = FrameQueue(policy)
+    queue = FrameQueue(policy, depth=queue_depth, max_bytes=max_pending_bytes)
     client = None
     subscribed = threading.Event()
     if mqtt:
@@ -390,16 +554,23 @@ def serve(service: Service, *, input: str | None = "-", mqtt: str | None = None,
             # the network thread only queues the payload: the worker parses it (a frame replaced by a newer one
             # of its camera is never parsed, and the network thread is free for the next packet)
             t = time.monotonic()
+            quick_ack(c.socket())
             metrics.received()
             cam = msg.topic[len(input_prefix) + 1:]
             src = f"mqtt {msg.topic}"
-            if not queue.put(cam, (msg.payload, src, t, cam)):
+            if len(msg.payload) > max_frame_bytes:  # refused before it is queued (paho frees it on return)
+                rec = error_record(f"frame of {len(msg.payload)} bytes is larger than the limit of {max_frame_bytes} "
+                                   "bytes (--max-frame-bytes)", camera_id=cam, source=src)
+                _queue_error(queue, cam, rec, src, t, sink, metrics)
+                return
+            if not queue.put(cam, (msg.payload, src, t, cam), len(msg.payload)):
                 rec = error_record("service stopping or too many cameras pending", camera_id=cam, source=src)
                 sink.write(rec)
                 metrics.done(rec, time.monotonic() - t)
 
         client.on_connect = on_connect
         client.on_message = on_message
+        client.on_publish = lambda c, *a: quick_ack(c.socket())  # the PUBACK of a record: ACK it at once
         client.connect_async(host, port, keepalive=5)
         client.loop_start()
     out_stream = stdout if stdout is not None else sys.stdout.buffer
@@ -419,7 +590,14 @@ def serve(service: Service, *, input: str | None = "-", mqtt: str | None = None,
                 continue
             frame, src, t, topic_camera = item
             try:
-                if topic_camera is not None:  # an MQTT payload: parsed here, its camera_id checked against the topic
+                if topic_camera is _READY:  # an error record found on receipt, in its place in the line
+                    out = frame
+                elif output == "mqtt" and isinstance(frame, dict) and \
+                        (why := _topic_level_error(frame.get("camera_id"))) is not None:
+                    rec = error_record(why, field="camera_id", camera_id=_plain(frame.get("camera_id")),
+                                       frame=_plain(frame.get("frame")), source=src)
+                    out = FrameOutput(_dumps(rec), RECORD_ERROR, None, None, rec)
+                elif topic_camera is not None:  # an MQTT payload: parsed here, its camera_id checked against the topic
                     frame, out = _mqtt_frame(frame, topic_camera, src)
                     if out is None:
                         out = service.process_frame_json(frame, source=src)
@@ -434,6 +612,10 @@ def serve(service: Service, *, input: str | None = "-", mqtt: str | None = None,
             except BrokenPipeError:  # stdout closed by the reader: nothing more can be delivered
                 stop.set()
                 return
+            except Exception as e:  # noqa: BLE001 - e.g. the MQTT client refusing a publish: counted, never fatal
+                with metrics._lock:
+                    metrics.publish_failed += 1
+                _log(f"output failed ({type(e).__name__}: {e}); counted in publish_failed")
             metrics.done_output(out.type, out.processing_us, time.monotonic() - t)
 
     def snapshot():
@@ -462,7 +644,8 @@ def serve(service: Service, *, input: str | None = "-", mqtt: str | None = None,
     threads = [threading.Thread(target=work, name="footprint-uq-worker", daemon=True)]
     if input == "-":
         stream = stdin if stdin is not None else sys.stdin.buffer
-        threads.append(threading.Thread(target=_stdin_reader, args=(stream, queue, sink, metrics, stop),
+        threads.append(threading.Thread(target=_stdin_reader, args=(stream, queue, sink, metrics, stop,
+                                                                    max_frame_bytes),
                                         name="footprint-uq-stdin", daemon=True))
     if health_interval_s and health_interval_s > 0:
         threads.append(threading.Thread(target=health, name="footprint-uq-health", daemon=True))
@@ -483,6 +666,8 @@ def serve(service: Service, *, input: str | None = "-", mqtt: str | None = None,
             time.sleep(0.2)  # messages already on the way are still taken in
         queue.close()
         threads[0].join(drain_timeout_s)
+        if input == "-":
+            threads[1].join(1.0)  # the stdin reader sees the stop within 0.1 s (select), even on an idle open pipe
         try:
             sink.write(snapshot())
             sink.close(drain_timeout_s)
@@ -505,7 +690,7 @@ def run(*, camera=None, budget=None, registry=None, camera_id: str | None = None
         origin_lat_deg: float | None = None, origin_lon_deg: float | None = None, confidence: float = 0.95,
         contact: str = "bottom-centre", allow_outside_image: bool = False, station_id: int | None = None,
         uper_encoder: str = "fast", linearity: bool = False, linear_threshold: float | None = None,
-        workers: int = 1, **serve_options) -> int:
+        workers: int = 1, cpm_cdd: str = DEFAULT_CDD, v2x_policy: str = "sampled", **serve_options) -> int:
     """``footprint-uq serve``: build the :class:`Service` from files (a camera file and budget, or a
     registry) and :func:`serve` it; returns the exit status.
 
@@ -527,7 +712,7 @@ def run(*, camera=None, budget=None, registry=None, camera_id: str | None = None
             budget=budget, registry=registry, heading_offset_deg=heading_offset_deg, origin_lat_deg=origin_lat_deg,
             origin_lon_deg=origin_lon_deg, confidence=confidence, contact=contact,
             allow_outside_image=allow_outside_image, uper_encoder=uper_encoder, linearity=linearity,
-            linear_threshold=linear_threshold, **serve_options))
+            linear_threshold=linear_threshold, cpm_cdd=cpm_cdd, v2x_policy=v2x_policy, **serve_options))
     # a SIGTERM while the cameras load and the kernels compile (seconds) is a stop request too: nothing was
     # taken in yet, so the drain is empty and the exit status 0
     stop = serve_options.pop("stop", None) or threading.Event()
@@ -547,6 +732,7 @@ def run(*, camera=None, budget=None, registry=None, camera_id: str | None = None
                           origin_lat_deg=origin_lat_deg, origin_lon_deg=origin_lon_deg, confidence=confidence,
                           contact=contact, allow_outside_image=allow_outside_image, station_id=station_id,
                           uper_encoder=uper_encoder, linearity=linearity, linear_threshold=linear_threshold,
+                          cpm_cdd=cpm_cdd, v2x_policy=v2x_policy,
                           tracks=serve_options.pop("tracks", False))
         return serve(service, stop=stop, **serve_options)
     finally:

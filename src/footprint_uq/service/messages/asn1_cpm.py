@@ -1,8 +1,17 @@
-"""The ASN.1 module of the CPM subset footprint-uq sends (ETSI TS 103 324 Release 2 + TS 102 894-2 CDD).
+"""The ASN.1 modules of the CPM subset footprint-uq sends (ETSI TS 103 324 Release 2 + TS 102 894-2 CDD).
 
 Written for this project from the published definitions (TS 103 324 V2.1.1 ``CPM-PDU-Descriptions``,
 ``CPM-OriginatingStationContainers``, ``CPM-PerceivedObjectContainer``; the CDD
-``ETSI-ITS-CDD`` major-version 3 / minor-version 1).  Only what footprint-uq emits is
+``ETSI-ITS-CDD``), one module per CDD release (:data:`CDD_RELEASES`, :data:`CPM_ASN1_BY_CDD`):
+
+* ``"2.1.1"``: TS 103 324 V2.1.1 with ETSI-ITS-CDD V2.1.1 (major-version 3, minor-version 1);
+* ``"2.2.1"``: the same CPM with ETSI-ITS-CDD V2.2.1 (major-version 4); CDD V2.4.1 is the same on the wire
+  for everything this subset sends.  What reaches the wire differs in two places:
+  ``LowerTriangularPositiveSemidefiniteMatrixColumns`` gains an extension marker (one more bit per matrix)
+  and the VRU sub-profiles (``VruSubProfilePedestrian``, ``...Bicyclist``, ``...Motorcyclist``,
+  ``...Animal``) change from ENUMERATED (root index, 3 or 4 bits) to ``INTEGER (0..15)`` (4 bits).
+  A receiver decodes only the release it compiled: a 2.1.1 payload with a correlation matrix or a VRU
+  class does not decode (or decodes wrong) with the 2.2.1 modules and vice versa.  Only what footprint-uq emits is
 defined with its real type; everything else keeps its *place* so that the unaligned PER
 bits of what we send are those of the full standard:
 
@@ -24,14 +33,15 @@ bits of what we send are those of the full standard:
 * the ``WITH COMPONENTS {..., protocolVersion (2), messageId (cpm)}`` inner subtype of the
   header is not PER-visible (X.691 B.2.2) and is not written; the encoder sets 2 and 14.
 
-A message from another station that uses components this subset does not define (velocity,
-dimensions, sensor information, ...) does not decode with this module; every message
+A message from another station that uses components this subset does not define (acceleration,
+polar velocity, dimensions, sensor information, ...) does not decode with this module; every message
 footprint-uq sends decodes with the full standard's module.
 """
 
 from __future__ import annotations
 
-__all__ = ["CPM_ASN1", "CPM_PROTOCOL_VERSION", "MESSAGE_ID_CPM", "CONTAINER_ID_RSU", "CONTAINER_ID_PERCEIVED_OBJECTS"]
+__all__ = ["CPM_ASN1", "CPM_ASN1_BY_CDD", "CDD_RELEASES", "DEFAULT_CDD", "VRU_SUBPROFILES", "CPM_PROTOCOL_VERSION",
+           "MESSAGE_ID_CPM", "CONTAINER_ID_RSU", "CONTAINER_ID_PERCEIVED_OBJECTS"]
 
 #: ItsPduHeader.protocolVersion of a TS 103 324 Release 2 CPM
 CPM_PROTOCOL_VERSION = 2
@@ -41,7 +51,25 @@ MESSAGE_ID_CPM = 14
 CONTAINER_ID_RSU = 2
 CONTAINER_ID_PERCEIVED_OBJECTS = 5
 
-CPM_ASN1 = r"""
+#: the CDD releases the subset is written for; the newest is the default
+CDD_RELEASES = ("2.1.1", "2.2.1")
+DEFAULT_CDD = "2.2.1"
+
+#: VruProfileAndSubprofile alternatives (in CHOICE order) and their sub-profile names, numbers 0.. in order
+#: (CDD V2.1.1: ENUMERATED with a last ``max (15)``; V2.2.1: INTEGER (0..15) with these named numbers; the
+#: V2.2.1 bicyclist's ``roadbike (9)``, ``childrensbike (10)`` are not used)
+VRU_SUBPROFILES = {
+    "pedestrian": ("unavailable", "ordinary-pedestrian", "road-worker", "first-responder"),
+    "bicyclistAndLightVruVehicle": ("unavailable", "bicyclist", "wheelchair-user", "horse-and-rider", "rollerskater",
+                                    "e-scooter", "personal-transporter", "pedelec", "speed-pedelec"),
+    "motorcyclist": ("unavailable", "moped", "motorcycle", "motorcycle-and-sidecar-right",
+                     "motorcycle-and-sidecar-left"),
+    "animal": ("unavailable", "wild-animal", "farm-animal", "service-animal"),
+}
+_VRU_TYPES = {"pedestrian": "VruSubProfilePedestrian", "bicyclistAndLightVruVehicle": "VruSubProfileBicyclist",
+              "motorcyclist": "VruSubProfileMotorcyclist", "animal": "VruSubProfileAnimal"}
+
+_TEMPLATE = r"""
 FootprintUQ-CPM-Subset DEFINITIONS AUTOMATIC TAGS ::= BEGIN
 
 -- placeholder of a component or alternative footprint-uq never sends (see the module doc)
@@ -140,9 +168,9 @@ PerceivedObject ::= SEQUENCE {
     objectId                            Identifier2B OPTIONAL,
     measurementDeltaTime                DeltaTimeMilliSecondSigned,
     position                            CartesianPosition3dWithConfidence,
-    velocity                            NotSent OPTIONAL,
+    velocity                            Velocity3dWithConfidence OPTIONAL,
     acceleration                        NotSent OPTIONAL,
-    angles                              NotSent OPTIONAL,
+    angles                              EulerAnglesWithConfidence OPTIONAL,
     zAngularVelocity                    NotSent OPTIONAL,
     lowerTriangularCorrelationMatrices  LowerTriangularPositiveSemidefiniteMatrices OPTIONAL,
     objectDimensionZ                    NotSent OPTIONAL,
@@ -171,6 +199,39 @@ CartesianCoordinateWithConfidence ::= SEQUENCE {
 }
 
 CartesianCoordinateLarge ::= INTEGER (-131072..131071)
+
+Velocity3dWithConfidence ::= CHOICE {
+    polarVelocity      NotSent,
+    cartesianVelocity  VelocityCartesian
+}
+
+VelocityCartesian ::= SEQUENCE {
+    xVelocity  VelocityComponent,
+    yVelocity  VelocityComponent,
+    zVelocity  VelocityComponent OPTIONAL
+}
+
+VelocityComponent ::= SEQUENCE {
+    value       VelocityComponentValue,
+    confidence  SpeedConfidence
+}
+
+VelocityComponentValue ::= INTEGER (-16383..16383)
+SpeedConfidence ::= INTEGER (1..127)
+
+EulerAnglesWithConfidence ::= SEQUENCE {
+    zAngle  CartesianAngle,
+    yAngle  CartesianAngle OPTIONAL,
+    xAngle  CartesianAngle OPTIONAL
+}
+
+CartesianAngle ::= SEQUENCE {
+    value       CartesianAngleValue,
+    confidence  AngleConfidence
+}
+
+CartesianAngleValue ::= INTEGER (0..3601)
+AngleConfidence ::= INTEGER (1..127)
 CoordinateConfidence ::= INTEGER (1..4096)
 
 LowerTriangularPositiveSemidefiniteMatrices ::= SEQUENCE SIZE (1..4) OF LowerTriangularPositiveSemidefiniteMatrix
@@ -186,7 +247,7 @@ MatrixIncludedComponents ::= BIT STRING {
     zAcceleration (8), zAngle (9), yAngle (10), xAngle (11), zAngularVelocity (12)
 } (SIZE (13, ...))
 
-LowerTriangularPositiveSemidefiniteMatrixColumns ::= SEQUENCE SIZE (1..13) OF CorrelationColumn
+LowerTriangularPositiveSemidefiniteMatrixColumns ::= SEQUENCE SIZE (@COLUMNS@) OF CorrelationColumn
 CorrelationColumn ::= SEQUENCE SIZE (1..13, ...) OF CorrelationCellValue
 CorrelationCellValue ::= INTEGER (-100..101)
 
@@ -209,18 +270,37 @@ TrafficParticipantType ::= INTEGER (0..255)
 
 VruProfileAndSubprofile ::= CHOICE {
     pedestrian                   VruSubProfilePedestrian,
-    bicyclistAndLightVruVehicle  NotSent,
-    motorcyclist                 NotSent,
-    animal                       NotSent,
+    bicyclistAndLightVruVehicle  VruSubProfileBicyclist,
+    motorcyclist                 VruSubProfileMotorcyclist,
+    animal                       VruSubProfileAnimal,
     ...
 }
 
-VruSubProfilePedestrian ::= ENUMERATED {
-    unavailable (0), ordinary-pedestrian (1), road-worker (2), first-responder (3), max (15)
-}
-
+@VRU@
 OtherSubClass ::= INTEGER (0..255)
 ConfidenceLevel ::= INTEGER (1..101)
 
 END
 """
+
+
+def _vru_types(cdd: str) -> str:
+    out = []
+    for alt, names in VRU_SUBPROFILES.items():
+        if cdd == "2.1.1":
+            body = ", ".join(f"{n} ({i})" for i, n in enumerate(names)) + ", max (15)"
+            out.append(f"{_VRU_TYPES[alt]} ::= ENUMERATED {{ {body} }}")
+        else:
+            out.append(f"{_VRU_TYPES[alt]} ::= INTEGER (0..15)")
+    return "\n".join(out)
+
+
+def _module(cdd: str) -> str:
+    return (_TEMPLATE.replace("@COLUMNS@", "1..13" if cdd == "2.1.1" else "1..13, ...")
+            .replace("@VRU@", _vru_types(cdd)))
+
+
+#: the subset module of each CDD release (:data:`CDD_RELEASES`)
+CPM_ASN1_BY_CDD = {cdd: _module(cdd) for cdd in CDD_RELEASES}
+#: the subset module of CDD V2.1.1 (the first release; kept under its old name)
+CPM_ASN1 = CPM_ASN1_BY_CDD["2.1.1"]

@@ -31,12 +31,18 @@ Positions are relative to the reference position, x east and y north (TS 103 324
 RSU the perceived objects are "in the coordinate system in which the y-axis corresponds to
 the North direction, the x-axis to the East direction").  The confidences and the
 correlation are :func:`footprint_uq.products.v2x.cpm_fields` of the centre covariance, unchanged.
-Coordinates beyond +-1310.71 m take the out-of-range values (-131072 / 131071).
+Coordinates are ``ceil(v / 0.01 m)`` as the CDD defines ``CartesianCoordinateLarge`` (:func:`coordinate_cm`);
+beyond -1310.72 / +1310.70 m they take the out-of-range values (-131072 / 131071).  With motion
+(:mod:`.motion`) an object also carries ``velocity`` (``cartesianVelocity``: east, north with their
+``SpeedConfidence``), ``angles.zAngle`` (its yaw) and ``objectAge``.
+
+CDD releases: the JSON and the UPER follow the release given as ``cdd`` (:data:`~.asn1_cpm.CDD_RELEASES`;
+:mod:`.asn1_cpm` says what differs).  A VRU sub-profile is a name in V2.1.1 and a number in V2.2.1.
 
 UPER
 ----
 :func:`encode_cpm_uper` encodes the JSON with asn1tools from the subset module
-:data:`~footprint_uq.service.messages.asn1_cpm.CPM_ASN1` (read its doc for how the subset keeps
+:data:`~footprint_uq.service.messages.asn1_cpm.CPM_ASN1_BY_CDD` (read its doc for how the subset keeps
 the standard's bits); :func:`decode_cpm_uper` is its inverse and returns the same JSON.
 """
 
@@ -49,16 +55,20 @@ import numpy as np
 
 from ...errors import InputError
 from .asn1_cpm import (
+    CDD_RELEASES,
     CONTAINER_ID_PERCEIVED_OBJECTS,
     CONTAINER_ID_RSU,
-    CPM_ASN1,
+    CPM_ASN1_BY_CDD,
     CPM_PROTOCOL_VERSION,
+    DEFAULT_CDD,
     MESSAGE_ID_CPM,
+    VRU_SUBPROFILES,
 )
 
 __all__ = ["build_cpm", "encode_cpm_uper", "decode_cpm_uper", "cpm_to_asn1_value", "timestamp_its_ms",
            "perceived_object", "coordinate_cm", "LATITUDE_UNAVAILABLE", "LONGITUDE_UNAVAILABLE", "CPM_CLASSES",
-           "MATRIX_COMPONENTS", "unavailable_reference_ellipse"]
+           "MATRIX_COMPONENTS", "unavailable_reference_ellipse", "CPM_CLASS_OF", "CPM_CLASSES_BY_CDD",
+           "object_class_json", "check_cdd"]
 
 LATITUDE_UNAVAILABLE = 900000001
 LONGITUDE_UNAVAILABLE = 1800000001
@@ -73,19 +83,56 @@ MATRIX_COMPONENTS = ("xPosition", "yPosition", "zPosition", "xVelocityOrVelocity
                      "yVelocityOrVelocityDirection", "zSpeed", "xAccelOrAccelMagnitude", "yAccelOrAccelDirection",
                      "zAcceleration", "zAngle", "yAngle", "xAngle", "zAngularVelocity")
 
-#: detector class (lower case) -> ObjectClass; classes not listed get no classification (it is OPTIONAL)
-CPM_CLASSES = {
-    "car": {"vehicleSubClass": 5}, "passengercar": {"vehicleSubClass": 5}, "passenger_car": {"vehicleSubClass": 5},
-    "bus": {"vehicleSubClass": 6},
-    "van": {"vehicleSubClass": 7}, "lighttruck": {"vehicleSubClass": 7}, "light_truck": {"vehicleSubClass": 7},
-    "truck": {"vehicleSubClass": 8}, "heavytruck": {"vehicleSubClass": 8}, "heavy_truck": {"vehicleSubClass": 8},
-    "trailer": {"vehicleSubClass": 9},
-    "specialvehicle": {"vehicleSubClass": 10}, "special_vehicle": {"vehicleSubClass": 10},
-    "tram": {"vehicleSubClass": 11},
-    "agricultural": {"vehicleSubClass": 14}, "tractor": {"vehicleSubClass": 14},
-    "pedestrian": {"vruSubClass": {"pedestrian": "ordinary-pedestrian"}},
-    "person": {"vruSubClass": {"pedestrian": "ordinary-pedestrian"}},
+#: detector class (lower case) -> ObjectClass, release-neutral: ``("vehicleSubClass", TrafficParticipantType)`` or
+#: ``("vruSubClass", VruProfileAndSubprofile alternative, sub-profile number)``.  ``vehicleSubClass`` is constrained
+#: to ``unknown|passengerCar..tram|agricultural`` (0, 5..11, 14): two-wheelers and animals are VRU sub-classes
+#: (CDD ``ObjectClass``, ``VruProfileAndSubprofile``).  Classes not listed get no classification (it is OPTIONAL).
+_VEH, _VRU = "vehicleSubClass", "vruSubClass"
+_PED, _BIKE, _MOTO, _ANIMAL = "pedestrian", "bicyclistAndLightVruVehicle", "motorcyclist", "animal"
+CPM_CLASS_OF = {
+    **dict.fromkeys(("car", "passengercar", "passenger_car"), (_VEH, 5)),
+    "bus": (_VEH, 6),
+    **dict.fromkeys(("van", "lighttruck", "light_truck"), (_VEH, 7)),
+    **dict.fromkeys(("truck", "heavytruck", "heavy_truck"), (_VEH, 8)),
+    "trailer": (_VEH, 9),
+    **dict.fromkeys(("specialvehicle", "special_vehicle"), (_VEH, 10)),
+    "tram": (_VEH, 11),
+    **dict.fromkeys(("agricultural", "tractor"), (_VEH, 14)),
+    **dict.fromkeys(("pedestrian", "person"), (_VRU, _PED, 1)),  # ordinary-pedestrian
+    **dict.fromkeys(("road_worker", "road-worker"), (_VRU, _PED, 2)),
+    **dict.fromkeys(("bicycle", "bicyclist", "cyclist", "bike"), (_VRU, _BIKE, 1)),  # bicyclist
+    **dict.fromkeys(("wheelchair", "wheelchair_user", "wheelchair-user"), (_VRU, _BIKE, 2)),
+    **dict.fromkeys(("e-scooter", "e_scooter", "escooter"), (_VRU, _BIKE, 5)),
+    **dict.fromkeys(("moped",), (_VRU, _MOTO, 1)),
+    **dict.fromkeys(("motorcycle", "motorcyclist", "motorbike"), (_VRU, _MOTO, 2)),
+    **dict.fromkeys(("animal", "dog", "cat", "bird"), (_VRU, _ANIMAL, 0)),  # sub-profile unavailable
+    **dict.fromkeys(("wild_animal", "wild-animal", "deer", "bear", "elephant", "zebra", "giraffe"),
+                    (_VRU, _ANIMAL, 1)),
+    **dict.fromkeys(("farm_animal", "farm-animal", "horse", "cow", "sheep"), (_VRU, _ANIMAL, 2)),
+    **dict.fromkeys(("service_animal", "service-animal"), (_VRU, _ANIMAL, 3)),
 }
+
+
+def check_cdd(cdd: str) -> str:
+    """The CDD release name, checked (:data:`~.asn1_cpm.CDD_RELEASES`)."""
+    if cdd not in CDD_RELEASES:
+        raise InputError("cpm_cdd", cdd, f"one of {', '.join(CDD_RELEASES)} (the ETSI-ITS-CDD release of the CPM)")
+    return cdd
+
+
+def object_class_json(spec: tuple, cdd: str = DEFAULT_CDD) -> dict:
+    """The ``ObjectClass`` (JSON form) of a :data:`CPM_CLASS_OF` entry in the CDD release ``cdd``: a VRU sub-profile
+    is its name in V2.1.1 (ENUMERATED) and its number in V2.2.1 (INTEGER (0..15))."""
+    if spec[0] == _VEH:
+        return {_VEH: spec[1]}
+    _, alt, number = spec
+    return {_VRU: {alt: VRU_SUBPROFILES[alt][number] if check_cdd(cdd) == "2.1.1" else number}}
+
+
+#: per CDD release: detector class (lower case) -> ObjectClass (JSON form)
+CPM_CLASSES_BY_CDD = {cdd: {k: object_class_json(v, cdd) for k, v in CPM_CLASS_OF.items()} for cdd in CDD_RELEASES}
+#: detector class (lower case) -> ObjectClass (JSON form) of the default release
+CPM_CLASSES = CPM_CLASSES_BY_CDD[DEFAULT_CDD]
 
 _UNIX_2004_S = 1072915200.0
 #: TAI - UTC leap seconds inserted after 2004-01-01 (Unix time at which each took effect)
@@ -114,25 +161,45 @@ def unavailable_reference_ellipse() -> dict:
             "semiMajorOrientation": HEADING_UNAVAILABLE}
 
 
-def coordinate_cm(v_m):
-    """``CartesianCoordinateLarge`` (0.01 m; out-of-range values beyond +-1310.71 m) of metres -> int array."""
+#: absolute guard (in 0.01 m) against binary rounding pushing a coordinate exactly on a step (0.07 m) up
+COORD_GUARD_CM = 1e-7
 
-    c = np.rint(np.nan_to_num(np.asarray(v_m, dtype=np.float64), nan=0.0) * 100.0)
+
+def coordinate_cm(v_m):
+    """``CartesianCoordinateLarge`` (0.01 m) of metres -> int array.
+
+    The CDD (TS 102 894-2 V2.1.1 and V2.2.1, DE ``CartesianCoordinateLarge``): ``n`` "if the longitudinal
+    offset information is equal to or less than n x 0,01 metre and more than (n-1) x 0,01 metre", i.e.
+    ``n = ceil(v / 0.01 m)`` (not the nearest centimetre); -131072 "less than or equal to -1 310,72 metres",
+    131071 "greater than + 1 310,70 metres" (both follow from the ceiling and the clamp).  A value within
+    1e-9 m of a step counts as on it (:data:`COORD_GUARD_CM`).  NaN gives 0 (such objects are not sent).
+    """
+    c = np.ceil(np.nan_to_num(np.asarray(v_m, dtype=np.float64), nan=0.0) * 100.0 - COORD_GUARD_CM)
     return np.clip(c, COORD_MIN, COORD_MAX).astype(np.int64)
 
 
 def perceived_object(object_id: int, east_cm: int, north_cm: int, x_conf: int, y_conf: int, xy_corr: int,
                      object_class: dict | None, class_confidence: int = CONFIDENCE_LEVEL_UNAVAILABLE,
-                     measurement_delta_ms: int = 0) -> dict:
+                     measurement_delta_ms: int = 0, *, velocity: tuple | None = None, yaw: tuple | None = None,
+                     age_ms: int | None = None) -> dict:
     """One ``PerceivedObject`` (JSON form): position east/north of the reference position in 0.01 m
     (:func:`coordinate_cm`) with its CPM confidences (:func:`footprint_uq.products.v2x.cpm_fields`), the x/y
-    correlation cell when available."""
+    correlation cell when available; with motion (:mod:`.motion` codes) ``velocity = (vx, vx_conf, vy, vy_conf)``
+    (``cartesianVelocity``), ``yaw = (zAngle value, confidence)`` and ``age_ms`` (``objectAge``)."""
     po = {"objectId": int(object_id), "measurementDeltaTime": int(measurement_delta_ms),
           "position": {"xCoordinate": {"value": int(east_cm), "confidence": int(x_conf)},
                        "yCoordinate": {"value": int(north_cm), "confidence": int(y_conf)}}}
+    if velocity is not None:
+        vx, cx, vy, cy = map(int, velocity)
+        po["velocity"] = {"cartesianVelocity": {"xVelocity": {"value": vx, "confidence": cx},
+                                                "yVelocity": {"value": vy, "confidence": cy}}}
+    if yaw is not None:
+        po["angles"] = {"zAngle": {"value": int(yaw[0]), "confidence": int(yaw[1])}}
     if xy_corr != 101:  # CorrelationCellValue unavailable: the optional matrix is left out
         po["lowerTriangularCorrelationMatrices"] = [
             {"componentsIncludedIntheMatrix": ["xPosition", "yPosition"], "matrix": [[int(xy_corr)]]}]
+    if age_ms is not None:
+        po["objectAge"] = int(age_ms)
     if object_class is not None:
         po["classification"] = [{"objectClass": object_class, "confidence": int(class_confidence)}]
     return po
@@ -172,10 +239,10 @@ def build_cpm(station_id: int, reference_time_ms: int, perceived_objects: list[d
 
 
 @functools.cache
-def _spec():
+def _spec(cdd: str = DEFAULT_CDD):
     import asn1tools
 
-    return asn1tools.compile_string(CPM_ASN1, "uper")
+    return asn1tools.compile_string(CPM_ASN1_BY_CDD[check_cdd(cdd)], "uper")
 
 
 def _bits_to_asn1(names: list[str]) -> tuple[bytes, int]:
@@ -204,6 +271,8 @@ def _choice_from_asn1(c):
 
 def _po_to_asn1(po: dict) -> dict:
     out = dict(po)
+    if "velocity" in po:  # a CHOICE of SEQUENCEs
+        out["velocity"], = po["velocity"].items()
     if "lowerTriangularCorrelationMatrices" in po:
         out["lowerTriangularCorrelationMatrices"] = [
             {"componentsIncludedIntheMatrix": _bits_to_asn1(m["componentsIncludedIntheMatrix"]), "matrix": m["matrix"]}
@@ -216,6 +285,8 @@ def _po_to_asn1(po: dict) -> dict:
 
 def _po_from_asn1(po: dict) -> dict:
     out = dict(po)
+    if "velocity" in po:
+        out["velocity"] = dict([po["velocity"]])
     if "lowerTriangularCorrelationMatrices" in po:
         out["lowerTriangularCorrelationMatrices"] = [
             {"componentsIncludedIntheMatrix": _bits_from_asn1(m["componentsIncludedIntheMatrix"]),
@@ -231,9 +302,9 @@ _CONTAINER_TYPES = {CONTAINER_ID_RSU: "OriginatingRsuContainer",
                     CONTAINER_ID_PERCEIVED_OBJECTS: "PerceivedObjectContainer"}
 
 
-def cpm_to_asn1_value(cpm: dict) -> dict:
-    """The asn1tools value of a CPM JSON (containers encoded into their open-type octets)."""
-    spec = _spec()
+def cpm_to_asn1_value(cpm: dict, cdd: str = DEFAULT_CDD) -> dict:
+    """The asn1tools value of a CPM JSON (containers encoded into their open-type octets) in CDD release ``cdd``."""
+    spec = _spec(cdd)
     containers = []
     for w in cpm["payload"]["cpmContainers"]:
         cid = w["containerId"]
@@ -247,14 +318,14 @@ def cpm_to_asn1_value(cpm: dict) -> dict:
             "payload": {"managementContainer": cpm["payload"]["managementContainer"], "cpmContainers": containers}}
 
 
-def encode_cpm_uper(cpm: dict) -> bytes:
-    """UPER encoding (bytes) of a CPM given in its JSON form."""
-    return _spec().encode("CollectivePerceptionMessage", cpm_to_asn1_value(cpm))
+def encode_cpm_uper(cpm: dict, cdd: str = DEFAULT_CDD) -> bytes:
+    """UPER encoding (bytes) of a CPM given in its JSON form, with the subset module of CDD release ``cdd``."""
+    return _spec(cdd).encode("CollectivePerceptionMessage", cpm_to_asn1_value(cpm, cdd))
 
 
-def decode_cpm_uper(data: bytes | str) -> dict:
+def decode_cpm_uper(data: bytes | str, cdd: str = DEFAULT_CDD) -> dict:
     """Decode UPER bytes (or their hex) into the CPM JSON form (inverse of :func:`encode_cpm_uper`)."""
-    spec = _spec()
+    spec = _spec(cdd)
     raw = bytes.fromhex(data) if isinstance(data, str) else bytes(data)
     msg = spec.decode("CollectivePerceptionMessage", raw)
     containers = []

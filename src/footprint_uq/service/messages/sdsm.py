@@ -18,7 +18,8 @@ Only JSON is produced (no UPER).  Layout (J3224 ``SensorDataSharingMessage``)::
 
 ``posConfidence.pos`` is :func:`footprint_uq.products.v2x.j2735_position_confidence` of the centre
 covariance (the per-object ``j2735`` fields of the service output carry the full J2735
-``PositionalAccuracy`` too).  Speed and heading are not measured from one frame: J3224's
+``PositionalAccuracy`` too).  Speed and heading come from a tracker
+(:class:`~.motion.ObjectMotion`, conversions in :mod:`.motion`); without one they are J3224's
 "unavailable" values.  ``objTypeCfd`` is the detector's class confidence in percent
 (``class_confidence`` in [0, 1] in the detection), 0 when the detector gives none.
 Offsets beyond +-3276.7 m are clamped to +-32767.
@@ -31,6 +32,7 @@ import datetime as _dt
 import numpy as np
 
 from ...products.v2x import J2735_POSITION_CONFIDENCE_NAMES
+from .motion import HEADING_CONFIDENCE_NAMES, SPEED_CONFIDENCE_NAMES
 
 __all__ = ["build_sdsm", "sdsm_object", "offset_dm", "SDSM_OBJECT_TYPES"]
 
@@ -41,10 +43,14 @@ OFFSET_MAX = 32767
 #: detector class (lower case) -> J3224 ObjectType (others: "unknown")
 SDSM_OBJECT_TYPES = {
     **dict.fromkeys(("car", "passengercar", "passenger_car", "bus", "van", "truck", "lighttruck", "light_truck",
-                     "heavytruck", "heavy_truck", "trailer", "tram", "motorcycle", "specialvehicle",
-                     "special_vehicle", "agricultural", "tractor", "vehicle"), "vehicle"),
-    **dict.fromkeys(("pedestrian", "person", "cyclist", "bicycle", "bicyclist", "vru"), "vru"),
-    **dict.fromkeys(("animal", "dog", "deer", "horse"), "animal"),
+                     "heavytruck", "heavy_truck", "trailer", "tram", "motorcycle", "motorcyclist", "motorbike", "moped",
+                     "specialvehicle", "special_vehicle", "agricultural", "tractor", "vehicle"), "vehicle"),
+    **dict.fromkeys(("pedestrian", "person", "road_worker", "road-worker", "cyclist", "bicycle", "bicyclist", "bike",
+                     "wheelchair", "wheelchair_user", "wheelchair-user", "e-scooter", "e_scooter", "escooter", "vru"),
+                    "vru"),
+    **dict.fromkeys(("animal", "dog", "cat", "bird", "deer", "bear", "elephant", "zebra", "giraffe", "horse", "cow",
+                     "sheep", "wild_animal", "wild-animal", "farm_animal", "farm-animal", "service_animal",
+                     "service-animal"), "animal"),
 }
 
 
@@ -56,8 +62,10 @@ def offset_dm(v_m):
 
 
 def sdsm_object(object_id: int, east_dm: int, north_dm: int, position_confidence: int, object_class: str | None,
-                class_confidence_pct: int = 0, measurement_time_ms: int = 0) -> dict:
-    """One ``DetectedObjectData`` (JSON form) with the common data only; offsets from :func:`offset_dm`."""
+                class_confidence_pct: int = 0, measurement_time_ms: int = 0, *, speed: int = SPEED_UNAVAILABLE,
+                speed_confidence: int = 0, heading: int = HEADING_UNAVAILABLE, heading_confidence: int = 0) -> dict:
+    """One ``DetectedObjectData`` (JSON form) with the common data only; offsets from :func:`offset_dm`; speed,
+    heading and their confidence codes from :func:`~.motion.motion_codes` (unavailable by default)."""
     return {"detObjCommon": {
         "objType": SDSM_OBJECT_TYPES.get((object_class or "").lower(), "unknown"),
         "objTypeCfd": int(class_confidence_pct), "objectID": int(object_id),
@@ -65,8 +73,8 @@ def sdsm_object(object_id: int, east_dm: int, north_dm: int, position_confidence
         "pos": {"offsetX": int(east_dm), "offsetY": int(north_dm)},
         "posConfidence": {"pos": J2735_POSITION_CONFIDENCE_NAMES[int(position_confidence)],
                           "elevation": "unavailable"},
-        "speed": SPEED_UNAVAILABLE, "speedConfidence": "unavailable",
-        "heading": HEADING_UNAVAILABLE, "headingConf": "unavailable"}}
+        "speed": int(speed), "speedConfidence": SPEED_CONFIDENCE_NAMES[int(speed_confidence)],
+        "heading": int(heading), "headingConf": HEADING_CONFIDENCE_NAMES[int(heading_confidence)]}}
 
 
 def build_sdsm(station_id: int, frame: int, unix_s: float, objects: list[dict], *, lat_1e7deg: int = 900000001,

@@ -44,8 +44,9 @@ import numpy as np
 from numba import njit
 
 from ...errors import InputError
-from .asn1_cpm import CONTAINER_ID_PERCEIVED_OBJECTS, CONTAINER_ID_RSU
-from .cpm import LATITUDE_UNAVAILABLE, LONGITUDE_UNAVAILABLE, MATRIX_COMPONENTS, build_cpm
+from .asn1_cpm import CONTAINER_ID_PERCEIVED_OBJECTS, CONTAINER_ID_RSU, DEFAULT_CDD, VRU_SUBPROFILES
+from .cpm import LATITUDE_UNAVAILABLE, LONGITUDE_UNAVAILABLE, MATRIX_COMPONENTS, build_cpm, check_cdd
+from .motion import ObjectMotion, motion_codes
 
 __all__ = ["encode_cpm_uper_fast", "perceived_object_container_uper", "perceived_object_container_uper_arrays",
            "class_bits", "CpmUperWriter"]
@@ -53,9 +54,56 @@ __all__ = ["encode_cpm_uper_fast", "perceived_object_container_uper", "perceived
 _ALT_CONF = ("alt-000-01", "alt-000-02", "alt-000-05", "alt-000-10", "alt-000-20", "alt-000-50", "alt-001-00",
              "alt-002-00", "alt-005-00", "alt-010-00", "alt-020-00", "alt-050-00", "alt-100-00", "alt-200-00",
              "outOfRange", "unavailable")
-_PEDESTRIAN = ("unavailable", "ordinary-pedestrian", "road-worker", "first-responder", "max")
+_VRU_ALTS = tuple(VRU_SUBPROFILES)
 #: bit position (from the left of the 14 presence bits) of the optional components we may send
-_P_OBJECT_ID, _P_CORR, _P_CLASS = 13, 8, 1
+_P_OBJECT_ID, _P_VELOCITY, _P_ANGLES, _P_CORR, _P_AGE, _P_CLASS = 13, 12, 10, 8, 4, 1
+
+
+def _vru_bits(val: dict, cdd: str) -> tuple[int, int]:
+    """(value, bits) of a VruProfileAndSubprofile: extension bit 0, index (2 bits), the sub-profile -- in CDD
+    V2.1.1 the ENUMERATED's root index (names in order, then ``max`` = 15; 3 or 4 bits), in V2.2.1 INTEGER
+    (0..15) (4 bits)."""
+    (alt, prof), = val.items()
+    if alt not in VRU_SUBPROFILES:
+        raise InputError("vruSubClass", alt, f"one of {', '.join(_VRU_ALTS)}")
+    names = VRU_SUBPROFILES[alt]
+    if cdd == "2.1.1":
+        full = (*names, "max")
+        if prof not in full:
+            raise InputError(f"vruSubClass.{alt}", prof, f"one of {', '.join(full)} (CDD V2.1.1 ENUMERATED)")
+        width = (len(full) - 1).bit_length()
+        sub = full.index(prof)
+    else:
+        if isinstance(prof, bool) or not isinstance(prof, int) or not 0 <= prof <= 15:
+            raise InputError(f"vruSubClass.{alt}", prof, "an integer in 0..15 (CDD V2.2.1 INTEGER)")
+        width, sub = 4, prof
+    return (_VRU_ALTS.index(alt) << width) | sub, 3 + width
+
+
+def _motion_bits(po: dict) -> tuple[int, int, int, int, int, int]:
+    """(velocity value, bits, angles value, bits, objectAge value, bits) of a PerceivedObject (0 bits: absent)."""
+    vv = vn = av = an = gv = gn = 0
+    vel = po.get("velocity")
+    if vel is not None:
+        (alt, c), = vel.items()
+        if alt != "cartesianVelocity" or "zVelocity" in c:
+            raise InputError("velocity", alt, "cartesianVelocity without zVelocity (the subset sent)")
+        x, y = c["xVelocity"], c["yVelocity"]
+        vv = (1 << 45) | (_check("xVelocity.value", x["value"], -16383, 16383) << 29) | \
+            (_check("xVelocity.confidence", x["confidence"], 1, 127) << 22) | \
+            (_check("yVelocity.value", y["value"], -16383, 16383) << 7) | \
+            _check("yVelocity.confidence", y["confidence"], 1, 127)
+        vn = 46  # CHOICE index 1, no zVelocity, x (15 + 7), y (15 + 7)
+    ang = po.get("angles")
+    if ang is not None:
+        if set(ang) != {"zAngle"}:
+            raise InputError("angles", sorted(ang), "zAngle only (the subset sent)")
+        z = ang["zAngle"]
+        av = (_check("zAngle.value", z["value"], 0, 3601) << 7) | _check("zAngle.confidence", z["confidence"], 1, 127)
+        an = 21  # no yAngle, xAngle (2 presence bits), value 12, confidence 7
+    if po.get("objectAge") is not None:
+        gv, gn = _check("objectAge", po["objectAge"], 0, 2047), 11
+    return vv, vn, av, an, gv, gn
 
 
 def _check(name: str, v: int, lo: int, hi: int) -> int:
@@ -64,7 +112,7 @@ def _check(name: str, v: int, lo: int, hi: int) -> int:
     return v - lo
 
 
-def _object_bits(po: dict) -> tuple[int, int]:
+def _object_bits(po: dict, cdd: str = DEFAULT_CDD) -> tuple[int, int]:
     """(value, number of bits) of one PerceivedObject."""
     pres = 0
     oid = po.get("objectId")
@@ -90,6 +138,14 @@ def _object_bits(po: dict) -> tuple[int, int]:
         v, n = mdt, 15 + 12
     v = (((((v << 19) | xv) << 12 | xc) << 18 | yv) << 12) | yc  # the 0 bit before x: no zCoordinate
     n += 61
+    vv, vn, av, an, gv, gn = _motion_bits(po)
+    if vn:
+        pres |= 1 << _P_VELOCITY
+        v, n = (v << vn) | vv, n + vn
+    if an:
+        pres |= 1 << _P_ANGLES
+        v, n = (v << an) | av, n + an
+    ext = 0 if cdd == "2.1.1" else 1  # V2.2.1: LowerTriangularPositiveSemidefiniteMatrixColumns is extensible
     mats = po.get("lowerTriangularCorrelationMatrices")
     if mats is not None:
         pres |= 1 << _P_CORR
@@ -100,14 +156,17 @@ def _object_bits(po: dict) -> tuple[int, int]:
             for name in m["componentsIncludedIntheMatrix"]:
                 bits |= 1 << (12 - MATRIX_COMPONENTS.index(name))
             cols = m["matrix"]
-            v = (v << 18) | (bits << 4) | _check("matrix columns", len(cols), 1, 13)
-            n += 18
+            v = (v << 18 + ext) | (bits << 4 + ext) | _check("matrix columns", len(cols), 1, 13)
+            n += 18 + ext
             for col in cols:
                 v = (v << 5) | _check("correlation column size", len(col), 1, 13)
                 n += 5
                 for cell in col:
                     v = (v << 8) | _check("CorrelationCellValue", cell, -100, 101)
                     n += 8
+    if gn:
+        pres |= 1 << _P_AGE
+        v, n = (v << gn) | gv, n + gn
     classes = po.get("classification")
     if classes is not None:
         pres |= 1 << _P_CLASS
@@ -116,14 +175,14 @@ def _object_bits(po: dict) -> tuple[int, int]:
         for c in classes:
             (alt, val), = c["objectClass"].items()
             if alt == "vehicleSubClass":
-                v = (v << 7) | (0 << 4) | _check("vehicleSubClass", val, 0, 14)
+                if val not in _VEHICLE_SUBCLASSES:
+                    raise InputError("vehicleSubClass", val, "0, 5..11 or 14 (unknown|passengerCar..tram|agricultural)")
+                v = (v << 7) | (0 << 4) | val
                 n += 7
             elif alt == "vruSubClass":
-                (sub, prof), = val.items()
-                if sub != "pedestrian":
-                    raise InputError("vruSubClass", sub, "'pedestrian' (the subset sent)")
-                v = (v << 9) | (1 << 6) | (0 << 3) | _PEDESTRIAN.index(prof)
-                n += 9
+                bv, bw = _vru_bits(val, cdd)
+                v = (v << 3 + bw) | (1 << bw) | bv
+                n += 3 + bw
             elif alt == "otherSubClass":
                 v = (v << 11) | (3 << 8) | _check("otherSubClass", val, 0, 255)
                 n += 11
@@ -139,7 +198,7 @@ def _pad_bytes(v: int, n: int) -> bytes:
     return (v << pad).to_bytes((n + pad) // 8, "big") if n else b"\x00"
 
 
-def _container_bytes(cid: int, data: dict) -> bytes:
+def _container_bytes(cid: int, data: dict, cdd: str = DEFAULT_CDD) -> bytes:
     if cid == CONTAINER_ID_RSU:
         if data:
             raise InputError("OriginatingRsuContainer", data, "empty (mapReference is not sent)")
@@ -149,40 +208,46 @@ def _container_bytes(cid: int, data: dict) -> bytes:
         _check("perceivedObjects count", len(objs), 0, 255)
     parts = [format(head, "018b")]
     for po in objs:
-        val, nb = _object_bits(po)
+        val, nb = _object_bits(po, cdd)
         parts.append(format(val, f"0{nb}b"))
     s = "".join(parts)
     return _pad_bytes(int(s, 2), len(s))
 
 
 #: the bits after the 104 fixed ones of an object with its x/y correlation cell: one matrix (2), extension 0 +
-#: xPosition, yPosition (14), one column (4), extension 0 + one cell (5); the cell (8) follows
-_CORR_PREFIX = int("00" "01100000000000" "0000" "00000", 2)
+#: xPosition, yPosition (14), [V2.2.1: the columns' extension bit 0], one column (4), extension 0 + one cell (5);
+#: the cell (8) follows.  Per CDD release: (prefix, bits of prefix + cell)
+_CORR_PREFIX = {"2.1.1": (int("00" "01100000000000" "0000" "00000", 2), 33),
+                "2.2.1": (int("00" "01100000000000" "0" "0000" "00000", 2), 34)}
 #: classification bits before the confidence: one class (3), CHOICE extension 0 + index (3), the alternative
-_CLASS_BITS = {"vehicleSubClass": (0, 4), "vruSubClass": (1, 6), "otherSubClass": (3, 8)}
+_CLASS_BITS = {"vehicleSubClass": (0, 4), "vruSubClass": (1, None), "otherSubClass": (3, 8)}
+#: the TrafficParticipantType values ObjectClass.vehicleSubClass permits (unknown|passengerCar..tram|agricultural);
+#: PER encodes them in 4 bits over the effective constraint 0..14 (X.691 clause 10.3)
+_VEHICLE_SUBCLASSES = frozenset((0, 5, 6, 7, 8, 9, 10, 11, 14))
 
 
-def class_bits(object_class: dict) -> tuple[int, int]:
-    """(value, bits) of a one-class ``classification`` without its confidence (JSON ``objectClass``)."""
+def class_bits(object_class: dict, cdd: str = DEFAULT_CDD) -> tuple[int, int]:
+    """(value, bits) of a one-class ``classification`` without its confidence (JSON ``objectClass``), CDD ``cdd``."""
     (alt, val), = object_class.items()
     if alt not in _CLASS_BITS:
         raise InputError("objectClass", alt, "vehicleSubClass, vruSubClass or otherSubClass")
     index, width = _CLASS_BITS[alt]
     if alt == "vruSubClass":
-        (sub, prof), = val.items()
-        if sub != "pedestrian":
-            raise InputError("vruSubClass", sub, "'pedestrian' (the subset sent)")
-        val = _PEDESTRIAN.index(prof)  # extension 0, index 0 (pedestrian), enumeration index (3 bits)
-    elif not 0 <= val <= (14 if alt == "vehicleSubClass" else 255):
-        raise InputError(alt, val, "0..14 (vehicleSubClass) or 0..255 (otherSubClass)")
+        val, width = _vru_bits(val, check_cdd(cdd))
+    elif isinstance(val, bool) or not isinstance(val, int) or not (
+            val in _VEHICLE_SUBCLASSES if alt == "vehicleSubClass" else 0 <= val <= 255):
+        raise InputError(alt, val, "0, 5..11 or 14 (vehicleSubClass: unknown|passengerCar..tram|agricultural) "
+                                   "or 0..255 (otherSubClass)")
     return (index << width) | val, 6 + width
 
 
-def perceived_object_container_uper(object_ids, x_cm, x_conf, y_cm, y_conf, xy_corr, classes) -> bytes:
+def perceived_object_container_uper(object_ids, x_cm, x_conf, y_cm, y_conf, xy_corr, classes, *,
+                                    cdd: str = DEFAULT_CDD, motion=None) -> bytes:
     """UPER bytes of a ``PerceivedObjectContainer`` from columns (one entry per object, measured at the
     reference time): objectId, x/y (0.01 m) and their CoordinateConfidence, the CorrelationCellValue (101:
-    no matrix) and ``(class_bits(...), ConfidenceLevel)`` or None.  The same bytes as
-    :func:`encode_cpm_uper_fast` writes for the JSON form (the tests decode both with asn1tools)."""
+    no matrix) and ``(class_bits(..., cdd), ConfidenceLevel)`` or None; ``motion``: the objects'
+    :class:`~.motion.MotionCodes` or None.  The same bytes as :func:`encode_cpm_uper_fast` writes for the JSON
+    form (the tests decode both with asn1tools and with the official modules)."""
     n = len(object_ids)
     cv = np.zeros(n, np.int64)
     cw = np.zeros(n, np.int64)
@@ -190,14 +255,21 @@ def perceived_object_container_uper(object_ids, x_cm, x_conf, y_cm, y_conf, xy_c
     for i, c in enumerate(classes):
         if c is not None:
             (cv[i], cw[i]), lv[i] = c
-    return perceived_object_container_uper_arrays(object_ids, x_cm, x_conf, y_cm, y_conf, xy_corr, cv, cw, lv)
+    return perceived_object_container_uper_arrays(object_ids, x_cm, x_conf, y_cm, y_conf, xy_corr, cv, cw, lv,
+                                                  cdd=cdd, motion=motion)
 
 
 _COLUMN_RANGES = (("objectId", 0, 65535), ("xCoordinate.value", -131072, 131071),
                   ("yCoordinate.value", -131072, 131071), ("xCoordinate.confidence", 1, 4096),
-                  ("yCoordinate.confidence", 1, 4096), ("CorrelationCellValue", -100, 101))
+                  ("yCoordinate.confidence", 1, 4096), ("CorrelationCellValue", -100, 101),
+                  ("velocity present", 0, 1), ("xVelocity.value", -16383, 16383), ("xVelocity.confidence", 1, 127),
+                  ("yVelocity.value", -16383, 16383), ("yVelocity.confidence", 1, 127), ("angles present", 0, 1),
+                  ("zAngle.value", 0, 3601), ("zAngle.confidence", 1, 127), ("objectAge present", 0, 1),
+                  ("objectAge", 0, 2047))
 _LO = np.array([lo for _, lo, _ in _COLUMN_RANGES], dtype=np.int64)
 _HI = np.array([hi for _, _, hi in _COLUMN_RANGES], dtype=np.int64)
+#: rows of the column array: 0-5 position (objectId, x, y, x conf, y conf, correlation), 6-15 motion
+_NCOLS = len(_COLUMN_RANGES)
 
 
 @njit(cache=True, nogil=True)
@@ -214,22 +286,21 @@ def _put(out, acc, nacc, k, v, w):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
-def _container_kernel(cols, lo, hi, cv, cw, lv):  # pragma: no cover - compiled
-    """UPER octets of a PerceivedObjectContainer from the (6, n) columns objectId, x, y, x confidence,
-    y confidence, correlation; or an error: (empty, column, object) -- column 6 = ConfidenceLevel,
-    7 = more than 255 objects."""
+def _container_kernel(cols, lo, hi, cv, cw, lv, corr_prefix, corr_bits):  # pragma: no cover - compiled
+    """UPER octets of a PerceivedObjectContainer from the (16, n) columns (:data:`_COLUMN_RANGES`); or an error:
+    (empty, column, object) -- column 16 = ConfidenceLevel, 17 = more than 255 objects."""
     n = cols.shape[1]
-    for j in range(6):
+    for j in range(cols.shape[0]):
         for i in range(n):
             if cols[j, i] < lo[j] or cols[j, i] > hi[j]:
                 return np.zeros(0, np.uint8), j, i
     if n > 255:
-        return np.zeros(0, np.uint8), 7, 0
+        return np.zeros(0, np.uint8), 17, 0
     nbits = 18
     for i in range(n):
-        nbits += 104
+        nbits += 104 + 46 * cols[6, i] + 21 * cols[11, i] + 11 * cols[14, i]
         if cols[5, i] != 101:
-            nbits += 33
+            nbits += corr_bits
         if cw[i] > 0:
             nbits += cw[i] + 7
     out = np.zeros((nbits + 7) // 8, np.uint8)
@@ -237,9 +308,11 @@ def _container_kernel(cols, lo, hi, cv, cw, lv):  # pragma: no cover - compiled
     acc, nacc, k = _put(out, acc, nacc, k, (n << 9) | n, 18)  # extension 0, numberOf..., list extension 0, count
     for i in range(n):
         corr, cls = cols[5, i] != 101, cw[i] > 0
+        vel, ang, age = cols[6, i] == 1, cols[11, i] == 1, cols[14, i] == 1
         if cls and (lv[i] < 1 or lv[i] > 101):
-            return np.zeros(0, np.uint8), 6, i
-        pres = 0x2000 | (0x100 if corr else 0) | (0x2 if cls else 0)
+            return np.zeros(0, np.uint8), 16, i
+        pres = (0x2000 | (0x1000 if vel else 0) | (0x400 if ang else 0) | (0x100 if corr else 0)
+                | (0x10 if age else 0) | (0x2 if cls else 0))
         acc, nacc, k = _put(out, acc, nacc, k, pres, 15)  # extension 0 + 14 presence bits
         acc, nacc, k = _put(out, acc, nacc, k, cols[0, i], 16)
         acc, nacc, k = _put(out, acc, nacc, k, 2048, 12)  # measurementDeltaTime 0
@@ -247,8 +320,16 @@ def _container_kernel(cols, lo, hi, cv, cw, lv):  # pragma: no cover - compiled
         acc, nacc, k = _put(out, acc, nacc, k, cols[3, i] - 1, 12)
         acc, nacc, k = _put(out, acc, nacc, k, cols[2, i] + 131072, 18)
         acc, nacc, k = _put(out, acc, nacc, k, cols[4, i] - 1, 12)
+        if vel:  # CHOICE index 1 (cartesianVelocity), no zVelocity, x, y with their SpeedConfidence
+            acc, nacc, k = _put(out, acc, nacc, k, (2 << 15) | (cols[7, i] + 16383), 17)
+            acc, nacc, k = _put(out, acc, nacc, k, cols[8, i] - 1, 7)
+            acc, nacc, k = _put(out, acc, nacc, k, ((cols[9, i] + 16383) << 7) | (cols[10, i] - 1), 22)
+        if ang:  # no yAngle, xAngle; zAngle value, AngleConfidence
+            acc, nacc, k = _put(out, acc, nacc, k, (cols[12, i] << 7) | (cols[13, i] - 1), 21)
         if corr:
-            acc, nacc, k = _put(out, acc, nacc, k, (_CORR_PREFIX << 8) | (cols[5, i] + 100), 33)
+            acc, nacc, k = _put(out, acc, nacc, k, (corr_prefix << 8) | (cols[5, i] + 100), corr_bits)
+        if age:
+            acc, nacc, k = _put(out, acc, nacc, k, cols[15, i], 11)
         if cls:
             acc, nacc, k = _put(out, acc, nacc, k, (cv[i] << 7) | (lv[i] - 1), cw[i] + 7)
     if nacc:
@@ -256,27 +337,41 @@ def _container_kernel(cols, lo, hi, cv, cw, lv):  # pragma: no cover - compiled
     return out, -1, -1
 
 
+def _motion_rows(motion, n: int):
+    """The 10 motion rows (velocity present, x, x conf, y, y conf, angles present, z, conf, age present, age)."""
+    if motion is None:
+        return np.zeros((10, n), np.int64) + np.array([0, 0, 1, 0, 1, 0, 0, 1, 0, 0])[:, None]
+    m = motion_codes(motion, n) if isinstance(motion, ObjectMotion) else motion
+    return np.array([m.has_velocity, m.vx, m.vx_conf, m.vy, m.vy_conf, m.has_yaw, m.yaw, m.yaw_conf, m.has_age,
+                     m.age_ms], dtype=np.int64).reshape(10, n)
+
+
 def perceived_object_container_uper_arrays(object_ids, x_cm, x_conf, y_cm, y_conf, xy_corr, class_value,
-                                           class_width, level) -> bytes:
+                                           class_width, level, *, cdd: str = DEFAULT_CDD, motion=None) -> bytes:
     """:func:`perceived_object_container_uper` from integer arrays (one compiled pass, no per-object Python).
 
-    ``class_value``, ``class_width``: :func:`class_bits` of each object's class, width 0 for an object
-    without a classification (its value and ``level`` are then ignored); ``level``: its ConfidenceLevel.
+    ``class_value``, ``class_width``: :func:`class_bits` of each object's class (in release ``cdd``), width 0
+    for an object without a classification (its value and ``level`` are then ignored); ``level``: its
+    ConfidenceLevel; ``motion``: the objects' :class:`~.motion.ObjectMotion` (converted by
+    :func:`~.motion.motion_codes`), their :class:`~.motion.MotionCodes`, or None (no motion sent).
     """
     n = len(object_ids)
-    cols = np.empty((6, n), np.int64)
+    cols = np.empty((_NCOLS, n), np.int64)
     for j, c in enumerate((object_ids, x_cm, y_cm, x_conf, y_conf, xy_corr)):
         try:
             cols[j] = c
         except OverflowError:  # beyond 64 bits: out of range anyway
             name, lo, hi = _COLUMN_RANGES[j]
             raise InputError(name, next(v for v in c if not lo <= v <= hi), f"an integer in {lo}..{hi}") from None
+    cols[6:] = _motion_rows(motion, n)
+    prefix, bits = _CORR_PREFIX[check_cdd(cdd)]
     out, col, i = _container_kernel(cols, _LO, _HI, np.asarray(class_value, dtype=np.int64),
-                                    np.asarray(class_width, dtype=np.int64), np.asarray(level, dtype=np.int64))
+                                    np.asarray(class_width, dtype=np.int64), np.asarray(level, dtype=np.int64),
+                                    prefix, bits)
     if col >= 0:
-        if col == 7:
+        if col == 17:
             raise InputError("perceivedObjects count", n, "at most 255")
-        if col == 6:
+        if col == 16:
             raise InputError("ConfidenceLevel", int(np.asarray(level)[i]), "an integer in 1..101")
         name, lo, hi = _COLUMN_RANGES[col]
         raise InputError(name, int(cols[col, i]), f"an integer in {lo}..{hi}")
@@ -332,8 +427,8 @@ def _append_container(v: int, nb: int, cid: int, data: bytes) -> tuple[int, int]
     return (v << 8 * L) | int.from_bytes(data, "big"), nb + 8 * L
 
 
-def encode_cpm_uper_fast(cpm: dict, *, perceived_objects_uper: bytes | None = None) -> bytes:
-    """UPER bytes of a CPM in its JSON form (same as :func:`~.cpm.encode_cpm_uper`).
+def encode_cpm_uper_fast(cpm: dict, *, cdd: str = DEFAULT_CDD, perceived_objects_uper: bytes | None = None) -> bytes:
+    """UPER bytes of a CPM in its JSON form in CDD release ``cdd`` (same as :func:`~.cpm.encode_cpm_uper`).
 
     ``perceived_objects_uper``: the container's bytes when the caller already has them
     (:func:`perceived_object_container_uper` on the same objects).
@@ -344,7 +439,7 @@ def encode_cpm_uper_fast(cpm: dict, *, perceived_objects_uper: bytes | None = No
         if cid not in (CONTAINER_ID_RSU, CONTAINER_ID_PERCEIVED_OBJECTS):
             raise InputError("containerId", cid, f"{CONTAINER_ID_RSU} or {CONTAINER_ID_PERCEIVED_OBJECTS}")
         data = perceived_objects_uper if (cid == CONTAINER_ID_PERCEIVED_OBJECTS and perceived_objects_uper
-                                          is not None) else _container_bytes(cid, w["containerData"])
+                                          is not None) else _container_bytes(cid, w["containerData"], check_cdd(cdd))
         v, nb = _append_container(v, nb, cid, data)
     return _pad_bytes(v, nb)
 

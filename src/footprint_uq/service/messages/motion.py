@@ -1,0 +1,209 @@
+"""Object motion for the V2X messages: the interface a tracker fills, and its message fields.
+
+:class:`ObjectMotion` holds, per object of a frame (arrays of length ``n``, in the order of the objects
+given to the message builders), the motion a tracker estimated.  NaN means unknown: the field is then
+left out of the CPM (an OPTIONAL component) or set to J3224's "unavailable".
+
+Frames and angles (docs/conventions.md): velocities are **true east / north** (the messages' frame:
+the world frame W rotated by the heading offset); ``heading_deg`` (direction of motion) and ``yaw_deg``
+(the body's longitudinal axis, its front) are **compass bearings, degrees clockwise from true north**.
+All sigmas are 1-sigma; the messages state 95 % confidences (``1.96 sigma``, as the position's).
+
+Conversions (the CDD clause of each data element: ETSI TS 102 894-2 V2.1.1 / V2.2.1, ``ETSI-ITS-CDD``;
+J2735 2016 for the SDSM):
+
+=====================================  ===========================================================
+CPM ``velocity.cartesianVelocity``     ``VelocityComponentValue`` (0.01 m/s): ``n`` if the value is
+  x (east), y (north)                  "equal to or less than n x 0,01 m/s, and greater than (n-1) x
+                                       0,01 m/s" -> ceil; -16383 at or below -163.83 m/s, 16382 at or
+                                       above 163.81 m/s
+  their confidences                    ``SpeedConfidence`` (0.01 m/s, 95 %): ``n`` "if the confidence
+                                       value is equal to or less than n * 0,01 m/s" -> ceil of
+                                       1.96 sigma (sigma from ``cov_v_m2ps2``'s diagonal), at least
+                                       1; 126 above 1.25 m/s; 127 unknown
+CPM ``angles.zAngle``                  ``CartesianAngleValue`` (0.1 deg, counter-clockwise from the
+  (the yaw)                            x axis = east): ``n`` if the angle is "equal to or less than
+                                       n x 0,1 degrees, and greater than (n-1) x 0,1 degrees" -> ceil
+                                       of ``(90 - yaw_deg) mod 360``; 3600 "shall not be used": 0
+  its confidence                       ``AngleConfidence`` (0.1 deg, 95 %): ceil of 1.96 sigma, at
+                                       least 1; 126 above 12.5 deg; 127 unknown
+CPM ``objectAge``                      ``DeltaTimeMilliSecondSigned (0..2047)``: "the difference in
+                                       time between the moment it has been first detected and the
+                                       reference time of the message"; "1500 indicates that the object
+                                       has been observed for more than 1.5 s" -> floor of the age in
+                                       ms, at most 2047
+SDSM ``speed``                         J2735 ``Speed`` (0.02 m/s, 8191 unavailable): nearest, at most
+                                       8190
+SDSM ``speedConfidence``               J2735 ``SpeedConfidence`` (95 %): the tightest level (100, 10,
+                                       5, 1, 0.1, 0.05, 0.01 m/s) >= 1.96 sigma; unavailable above
+                                       100 m/s or unknown
+SDSM ``heading``                       J2735 ``Heading`` (0.0125 deg clockwise from north, 28800
+                                       unavailable): nearest, modulo 360 deg
+SDSM ``headingConf``                   J2735 ``HeadingConfidence`` (95 %): the tightest level (10, 5,
+                                       1, 0.1, 0.05, 0.01, 0.0125 deg) >= 1.96 sigma; unavailable above
+                                       10 deg or unknown
+=====================================  ===========================================================
+
+A confidence never understates: every rule above rounds the 95 % value up to a level that contains it.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from ...errors import InputError
+
+__all__ = ["ObjectMotion", "MotionCodes", "motion_codes", "unknown_motion", "SPEED_CONFIDENCE_NAMES",
+           "HEADING_CONFIDENCE_NAMES", "SPEED_CONFIDENCE_MPS", "HEADING_CONFIDENCE_DEG"]
+
+Z95 = 1.96
+#: relative guard against binary rounding pushing a value exactly on a step up (as products.v2x)
+_GUARD = 1e-9
+
+VELOCITY_UNAVAILABLE = 16383
+VELOCITY_MIN, VELOCITY_MAX = -16383, 16382
+CONF_OUT_OF_RANGE, CONF_UNAVAILABLE = 126, 127
+ANGLE_UNAVAILABLE = 3601
+AGE_MAX_MS = 2047
+SDSM_SPEED_UNAVAILABLE = 8191
+SDSM_HEADING_UNAVAILABLE = 28800
+
+#: J2735 SpeedConfidence levels (m/s, 95 %) of codes 1..7 and the names of codes 0..7
+SPEED_CONFIDENCE_MPS = (100.0, 10.0, 5.0, 1.0, 0.1, 0.05, 0.01)
+SPEED_CONFIDENCE_NAMES = ("unavailable", "prec100ms", "prec10ms", "prec5ms", "prec1ms", "prec0-1ms", "prec0-05ms",
+                          "prec0-01ms")
+#: J2735 HeadingConfidence levels (deg, 95 %) of codes 1..7 (the last two in the standard's order) and names
+HEADING_CONFIDENCE_DEG = (10.0, 5.0, 1.0, 0.1, 0.05, 0.01, 0.0125)
+HEADING_CONFIDENCE_NAMES = ("unavailable", "prec10deg", "prec05deg", "prec01deg", "prec0-1deg", "prec0-05deg",
+                            "prec0-01deg", "prec0-0125deg")
+
+
+class ObjectMotion(NamedTuple):
+    """Per-object motion of one frame (arrays of length n; NaN = unknown; see the module doc for frames)."""
+
+    #: velocity east / north (m/s, true east / north)
+    v_east_mps: np.ndarray
+    v_north_mps: np.ndarray
+    #: (n, 2, 2) covariance of (v_east, v_north) (m^2/s^2)
+    cov_v_m2ps2: np.ndarray
+    #: speed (m/s) and its 1-sigma
+    speed_mps: np.ndarray
+    sigma_speed_mps: np.ndarray
+    #: direction of motion, compass bearing (deg clockwise from true north), and its 1-sigma (deg)
+    heading_deg: np.ndarray
+    sigma_heading_deg: np.ndarray
+    #: body orientation (front), compass bearing (deg clockwise from true north), and its 1-sigma (deg)
+    yaw_deg: np.ndarray
+    sigma_yaw_deg: np.ndarray
+    #: time since the object was first seen (s)
+    age_s: np.ndarray
+
+    def take(self, rows) -> ObjectMotion:
+        """The motion of the objects ``rows`` (an index array), in that order."""
+        return ObjectMotion(*(np.asarray(a)[rows] for a in self))
+
+
+def unknown_motion(n: int) -> ObjectMotion:
+    """An :class:`ObjectMotion` of ``n`` objects with every field unknown (NaN)."""
+    nan = np.full(n, np.nan)
+    return ObjectMotion(nan, nan, np.full((n, 2, 2), np.nan), nan, nan, nan, nan, nan, nan, nan)
+
+
+class MotionCodes(NamedTuple):
+    """The message fields of an :class:`ObjectMotion` (int64 arrays of length n)."""
+
+    #: CPM velocity: present (any component known), x/y VelocityComponentValue and SpeedConfidence
+    has_velocity: np.ndarray
+    vx: np.ndarray
+    vx_conf: np.ndarray
+    vy: np.ndarray
+    vy_conf: np.ndarray
+    #: CPM angles.zAngle: present, CartesianAngleValue, AngleConfidence
+    has_yaw: np.ndarray
+    yaw: np.ndarray
+    yaw_conf: np.ndarray
+    #: CPM objectAge: present, ms
+    has_age: np.ndarray
+    age_ms: np.ndarray
+    #: SDSM: speed (0.02 m/s), SpeedConfidence code, heading (0.0125 deg), HeadingConfidence code
+    sdsm_speed: np.ndarray
+    sdsm_speed_conf: np.ndarray
+    sdsm_heading: np.ndarray
+    sdsm_heading_conf: np.ndarray
+
+
+def _arr(name, v, n, shape=()):
+    a = np.asarray(v, dtype=np.float64)
+    if a.shape != (n, *shape):
+        raise InputError(f"motion.{name}", a.shape, f"an array of shape {(n, *shape)}")
+    return a
+
+
+def _check_sigma(name, s):
+    with np.errstate(invalid="ignore"):
+        if np.any(s < 0):
+            raise InputError(f"motion.{name}", float(s[s < 0][0]), "a standard deviation >= 0 (NaN = unknown)")
+
+
+def _ceil(x):
+    with np.errstate(invalid="ignore"):
+        return np.ceil(x * (1.0 - _GUARD) - _GUARD)
+
+
+def _confidence(sigma, unit, out_of_range_above):
+    """CDD confidence code (1..125, 126 out of range, 127 unavailable) of 1-sigma values."""
+    c = Z95 * sigma
+    with np.errstate(invalid="ignore"):
+        n = np.clip(np.nan_to_num(_ceil(c / unit), nan=1.0), 1, 125)
+        return np.where(np.isnan(c), CONF_UNAVAILABLE, np.where(c > out_of_range_above, CONF_OUT_OF_RANGE, n)
+                        ).astype(np.int64)
+
+
+def _velocity_value(v):
+    with np.errstate(invalid="ignore"):
+        n = np.clip(np.nan_to_num(_ceil(v * 100.0), nan=0.0), VELOCITY_MIN, VELOCITY_MAX)
+        n = np.where(v >= 163.81, VELOCITY_MAX, np.where(v <= -163.83, VELOCITY_MIN, n))
+    return np.where(np.isnan(v), VELOCITY_UNAVAILABLE, n).astype(np.int64)
+
+
+def _level_code(c95, levels):
+    """J2735 confidence enumeration: the code of the tightest level >= ``c95`` (0: none / unknown)."""
+    lv = np.asarray(levels)
+    with np.errstate(invalid="ignore"):
+        ok = lv[None, :] >= (c95.reshape(-1, 1) * (1.0 - _GUARD))
+    tight = np.where(ok, lv[None, :], np.inf)
+    code = np.argmin(tight, axis=1) + 1
+    return np.where(ok.any(1) & ~np.isnan(c95.ravel()), code, 0).reshape(c95.shape).astype(np.int64)
+
+
+def motion_codes(motion: ObjectMotion, n: int) -> MotionCodes:
+    """The CPM and SDSM fields of ``motion`` (module doc), checked: shapes ``(n,)`` / ``(n, 2, 2)``, sigmas
+    and ages >= 0 -> :class:`~footprint_uq.errors.InputError` naming the field."""
+    ve, vn = _arr("v_east_mps", motion.v_east_mps, n), _arr("v_north_mps", motion.v_north_mps, n)
+    cov = _arr("cov_v_m2ps2", motion.cov_v_m2ps2, n, (2, 2))
+    sp, ssp = _arr("speed_mps", motion.speed_mps, n), _arr("sigma_speed_mps", motion.sigma_speed_mps, n)
+    hd, shd = _arr("heading_deg", motion.heading_deg, n), _arr("sigma_heading_deg", motion.sigma_heading_deg, n)
+    yw, syw = _arr("yaw_deg", motion.yaw_deg, n), _arr("sigma_yaw_deg", motion.sigma_yaw_deg, n)
+    age = _arr("age_s", motion.age_s, n)
+    for name, s in (("sigma_speed_mps", ssp), ("sigma_heading_deg", shd), ("sigma_yaw_deg", syw), ("age_s", age),
+                    ("speed_mps", sp), ("cov_v_m2ps2[0, 0]", cov[:, 0, 0]), ("cov_v_m2ps2[1, 1]", cov[:, 1, 1])):
+        _check_sigma(name, s)
+    for name, a in (("v_east_mps", ve), ("v_north_mps", vn), ("heading_deg", hd), ("yaw_deg", yw)):
+        if np.isinf(a).any():
+            raise InputError(f"motion.{name}", float(a[np.isinf(a)][0]), "a finite number (NaN = unknown)")
+    sx, sy = np.sqrt(cov[:, 0, 0]), np.sqrt(cov[:, 1, 1])
+    has_v = ~(np.isnan(ve) & np.isnan(vn))
+    z = np.mod(90.0 - yw, 360.0)
+    yaw = np.where(np.isnan(z), ANGLE_UNAVAILABLE, np.nan_to_num(_ceil(z * 10.0)) % 3600).astype(np.int64)
+    with np.errstate(invalid="ignore"):
+        age_ms = np.where(np.isnan(age), 0, np.minimum(np.floor(np.nan_to_num(age) * 1000.0 + 1e-6), AGE_MAX_MS))
+        speed = np.where(np.isnan(sp), SDSM_SPEED_UNAVAILABLE, np.minimum(np.rint(np.nan_to_num(sp) / 0.02), 8190))
+        head = np.where(np.isnan(hd), SDSM_HEADING_UNAVAILABLE, np.rint(np.mod(np.nan_to_num(hd), 360.0) / 0.0125)
+                        % 28800)
+    return MotionCodes(
+        has_v, _velocity_value(ve), _confidence(sx, 0.01, 1.25), _velocity_value(vn), _confidence(sy, 0.01, 1.25),
+        ~np.isnan(yw), yaw, _confidence(syw, 0.1, 12.5), ~np.isnan(age), age_ms.astype(np.int64),
+        speed.astype(np.int64), _level_code(Z95 * ssp, SPEED_CONFIDENCE_MPS), head.astype(np.int64),
+        _level_code(Z95 * shd, HEADING_CONFIDENCE_DEG))

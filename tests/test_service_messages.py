@@ -1,0 +1,165 @@
+"""The messages' building blocks, pinned against the standards' rules (the official-module sweep is
+test_cpm_official.py): message object ids, CartesianCoordinateLarge, motion conversions, VRU classes."""
+
+from __future__ import annotations
+
+import uuid
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from footprint_uq import PanTiltCamera
+from footprint_uq.errors import InputError
+from footprint_uq.service import Service
+from footprint_uq.service.messages.cpm import CPM_CLASSES_BY_CDD, coordinate_cm
+from footprint_uq.service.messages.ids import MESSAGE_ID_HOLD_S, MessageIdMap, preferred_number
+from footprint_uq.service.messages.motion import ObjectMotion, motion_codes, unknown_motion
+
+T0 = 1714564800.0
+
+
+# -- object ids --------------------------------------------------------------------------------------------------
+def test_ids_are_unique_per_message_and_stable_across_frames():
+    """255 UUID ids per frame for 20 frames (the issue's case: duplicates in 9 of 20 frames before): every
+    message has 255 distinct ids, and an id seen again keeps its number."""
+    rng = np.random.default_rng(1)
+    pool = [str(uuid.UUID(int=int(rng.integers(0, 2 ** 63)))) for _ in range(600)]
+    m = MessageIdMap()
+    first = {}
+    for f in range(20):
+        ids = [pool[i] for i in rng.choice(600, 255, replace=False)]
+        nums = m.assign(ids, np.arange(255), T0 + f / 30).tolist()
+        assert len(set(nums)) == 255, f
+        for oid, num in zip(ids, nums, strict=True):
+            assert first.setdefault(oid, num) == num  # stable
+    # the numbers of different ids never coincide while they are held
+    assert len(set(first.values())) == len(first)
+
+
+def test_integer_and_text_ids_are_distinct_and_collisions_resolved():
+    m = MessageIdMap()
+    a = m.assign([7, "7", 7, None, None], range(5), T0).tolist()
+    assert a[0] == 7 and len(set(a)) == 5  # int 7 keeps 7; "7", the second 7 and the null ids get others
+    b = m.assign(["7", "q", 7, None], range(4), T0 + 1).tolist()
+    assert [b[0], b[2], b[3]] == [a[1], a[0], a[3]]  # same ids -> same numbers (a null id: the same index)
+    # a text id whose hash asks for a number another id holds gets the next free one
+    text = next(f"x{k}" for k in range(10 ** 6) if preferred_number(f"x{k}") == 7)
+    c = m.assign([text, 7], range(2), T0 + 2).tolist()
+    held = set(a) | set(b)
+    assert c == [next(k for k in range(8, 65536) if k not in held), 7]
+
+
+def test_numbers_are_released_only_after_the_hold_time():
+    m = MessageIdMap()
+    assert m.assign([100], [0], T0).tolist() == [100]
+    text = next(f"y{k}" for k in range(10 ** 6) if preferred_number(f"y{k}") == 100)
+    assert m.assign([text], [0], T0 + MESSAGE_ID_HOLD_S / 2).tolist() == [101]  # 100 still held
+    assert m.assign([text, 100], [0, 1], T0 + MESSAGE_ID_HOLD_S / 2 + 1).tolist() == [101, 100]
+    late = m.assign(["z"], [0], T0 + 3 * MESSAGE_ID_HOLD_S)  # everything expired meanwhile
+    assert len(m) == 1 and late.tolist() == [preferred_number("z")]
+
+
+@settings(max_examples=60, deadline=None)
+@given(frames=st.lists(st.lists(st.one_of(st.integers(-3, 70000), st.text(max_size=3), st.none()), max_size=40),
+                       min_size=1, max_size=6))
+def test_ids_unique_in_every_message(frames):
+    m = MessageIdMap()
+    for f, ids in enumerate(frames):
+        nums = m.assign(ids, np.arange(len(ids)), T0 + f).tolist()
+        assert len(set(nums)) == len(ids) and all(0 <= n <= 65535 for n in nums)
+
+
+def test_service_record_ids_follow_the_map():
+    cam = PanTiltCamera(focal_px=1400, image_size_px=(1920, 1080), height_m=8.0, pan_deg=30.0, tilt_deg=20.0)
+    svc = Service(cam, "basler1")
+    det = {"u_min_px": 900.0, "v_min_px": 600.0, "u_max_px": 960.0, "v_max_px": 700.0}
+    dets = [{**det, "object_id": i} for i in (7, "7", "abc", 7)]
+    recs = [svc.process_frame({"frame": f, "timestamp_s": T0 + f, "detections": dets[::-1] if f else dets})
+            for f in range(2)]
+    ids = [[o["message_object_id"] for o in r["objects"]] for r in recs]
+    assert len(set(ids[0])) == 4 and ids[0][0] == 7
+    # reversed order: the same object ids keep their numbers ("7" and "abc" exactly; the two 7s are the first and
+    # second occurrence, so they swap with the order)
+    assert ids[1][2] == ids[0][1] and ids[1][1] == ids[0][2] and sorted(ids[1]) == sorted(ids[0])
+
+
+# -- CartesianCoordinateLarge ----------------------------------------------------------------------------------------
+@pytest.mark.parametrize("v_m, n", [(0.0, 0), (0.07, 7), (0.0701, 8), (0.004, 1), (-0.004, 0), (-0.01, -1),
+                                    (-0.0101, -1), (12.34, 1234), (1310.70, 131070), (1310.7001, 131071),
+                                    (5000.0, 131071), (-1310.71, -131071), (-1310.7101, -131071), (-1310.7201, -131072),
+                                    (-1310.72, -131072), (-9999.0, -131072)])
+def test_cartesian_coordinate_large_is_the_cdds_ceiling(v_m, n):
+    """TS 102 894-2 (V2.1.1 and V2.2.1), DE CartesianCoordinateLarge: n if n x 0.01 m >= v > (n-1) x 0.01 m;
+    -131072 at or below -1310.72 m, 131071 above 1310.70 m."""
+    assert int(coordinate_cm(v_m)) == n
+
+
+# -- motion ---------------------------------------------------------------------------------------------------------
+def _one(**kw):
+    m = unknown_motion(1)._asdict()
+    for k, v in kw.items():
+        m[k] = np.array([v], dtype=float) if k != "cov_v_m2ps2" else np.array([v], dtype=float)
+    return motion_codes(ObjectMotion(**m), 1)
+
+
+def test_motion_codes_pinned_values():
+    c = _one(v_east_mps=1.234, v_north_mps=-0.004, cov_v_m2ps2=[[0.25, 0.0], [0.0, 1.0]])
+    assert c.has_velocity[0] and (c.vx[0], c.vy[0]) == (124, 0)  # ceil: 1.234 -> 124, -0.004 -> 0
+    assert (c.vx_conf[0], c.vy_conf[0]) == (98, 126)  # 1.96 x 0.5 = 0.98 m/s; 1.96 m/s > 1.25: out of range
+    assert _one(v_east_mps=200.0).vx[0] == 16382 and _one(v_east_mps=-200.0).vx[0] == -16383
+    assert _one(v_east_mps=1.0).vy[0] == 16383 and _one(v_east_mps=1.0).vx_conf[0] == 127  # unknown parts
+    assert not _one().has_velocity[0] and not _one().has_yaw[0] and not _one().has_age[0]
+    # yaw: compass (clockwise from north) -> CartesianAngleValue (counter-clockwise from east), 0.1 deg, ceil
+    for yaw, z in ((0.0, 900), (90.0, 0), (180.0, 2700), (270.0, 1800), (359.99, 901), (89.99, 1), (-90.0, 1800)):
+        assert _one(yaw_deg=yaw).yaw[0] == z, yaw
+    assert _one(yaw_deg=10.0, sigma_yaw_deg=1.0).yaw_conf[0] == 20  # 1.96 deg -> 20 x 0.1
+    assert _one(yaw_deg=10.0, sigma_yaw_deg=7.0).yaw_conf[0] == 126 and _one(yaw_deg=1.0).yaw_conf[0] == 127
+    assert _one(age_s=0.7499).age_ms[0] == 749 and _one(age_s=9.0).age_ms[0] == 2047
+    # SDSM: J2735 Speed 0.02 m/s, Heading 0.0125 deg, the confidences' tightest level >= 1.96 sigma
+    s = _one(speed_mps=10.01, sigma_speed_mps=0.3, heading_deg=45.0, sigma_heading_deg=0.006)
+    assert (s.sdsm_speed[0], s.sdsm_heading[0]) == (500, 3600)
+    assert s.sdsm_speed_conf[0] == 4  # 0.588 m/s -> prec1ms
+    assert s.sdsm_heading_conf[0] == 7  # 0.01176 deg -> prec0-0125deg (0.01 deg would understate it)
+    assert _one(heading_deg=-0.005).sdsm_heading[0] == 0 and _one(speed_mps=1.0).sdsm_speed_conf[0] == 0
+    assert _one(speed_mps=1.0, sigma_speed_mps=60.0).sdsm_speed_conf[0] == 0  # 117.6 m/s: no level holds it
+
+
+def test_motion_checks_name_the_field():
+    m = unknown_motion(2)
+    with pytest.raises(InputError, match="motion.sigma_yaw_deg"):
+        motion_codes(m._replace(sigma_yaw_deg=np.array([1.0, -1.0])), 2)
+    with pytest.raises(InputError, match="motion.v_east_mps"):
+        motion_codes(m._replace(v_east_mps=np.zeros(3)), 2)
+    with pytest.raises(InputError, match="motion.heading_deg"):
+        motion_codes(m._replace(heading_deg=np.array([np.inf, 0.0])), 2)
+
+
+# -- classes ---------------------------------------------------------------------------------------------------------
+def test_vru_classes_per_release():
+    for cdd, ped, bike, moto, dog in (("2.1.1", "ordinary-pedestrian", "bicyclist", "motorcycle", "unavailable"),
+                                      ("2.2.1", 1, 1, 2, 0)):
+        c = CPM_CLASSES_BY_CDD[cdd]
+        assert c["pedestrian"] == {"vruSubClass": {"pedestrian": ped}}
+        assert c["bicycle"] == c["cyclist"] == {"vruSubClass": {"bicyclistAndLightVruVehicle": bike}}
+        assert c["motorcycle"] == {"vruSubClass": {"motorcyclist": moto}}
+        assert c["dog"] == {"vruSubClass": {"animal": dog}}
+        assert c["car"] == {"vehicleSubClass": 5}
+
+
+def test_the_array_writer_takes_object_motion_or_its_codes():
+    from footprint_uq.service.messages.uper_cpm import perceived_object_container_uper_arrays
+
+    rng = np.random.default_rng(4)
+    n = 7
+    cov = np.zeros((n, 2, 2))
+    cov[:, 0, 0] = cov[:, 1, 1] = 0.04
+    m = ObjectMotion(rng.uniform(-20, 20, n), rng.uniform(-20, 20, n), cov, rng.uniform(0, 20, n),
+                     np.full(n, 0.2), rng.uniform(0, 360, n), np.full(n, 2.0), rng.uniform(0, 360, n),
+                     np.full(n, 1.0), rng.uniform(0, 5, n))
+    one = np.ones(n, np.int64)
+    cols = (np.arange(n), one, one, one, one, np.full(n, 101), 0 * one, 0 * one, one)
+    with_motion = perceived_object_container_uper_arrays(*cols, motion=m)
+    assert with_motion == perceived_object_container_uper_arrays(*cols, motion=motion_codes(m, n))
+    assert len(with_motion) > len(perceived_object_container_uper_arrays(*cols))  # 78 more bits per object
