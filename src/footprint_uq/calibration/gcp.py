@@ -39,17 +39,14 @@ ground ``z = 0`` of W.
 from __future__ import annotations
 
 import csv
-import io
-import json
+import hashlib
 import math
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import cv2
-import matplotlib.pyplot as plt
 import numpy as np
-import yaml
 from scipy.stats import chi2
 
 from .. import params as P
@@ -58,28 +55,38 @@ from ..cameras import general
 from ..cameras.opencv import OpenCVCamera
 from ..cameras.rotation import R_W_C, pan_tilt_roll_from_R_W_C
 from ..errors import ConsistencyWarning, InputError
-from ..io._common import sanitize
-from ..io.atomic import atomic_write_text
-from ..io.camera_files import camera_to_dict
 from ..products.geo import GeoReference
-from ..uncertainty.budget import ErrorBudget, load_budget
-from ..viz.gcp import gcp_report_html, plot_gcp
-from ..viz.maps import save_figure
+from ..uncertainty.budget import MAX_SIGMA, ErrorBudget
 from .extrinsics import load_intrinsics
 
-__all__ = ["GCPSet", "GCPSolution", "read_gcp_csv", "solve_gcp", "run_gcp", "POSE_NAMES", "GCP_COLUMNS"]
+__all__ = ["GCPSet", "GCPSolution", "read_gcp_csv", "solve_gcp", "POSE_NAMES", "GCP_COLUMNS", "MAX_POINTS"]
 
 #: the estimated pose parameters, in :data:`footprint_uq.params.PARAM_NAMES` order
 POSE_NAMES = ("x_m", "y_m", "height_m", "pan_rad", "tilt_rad", "roll_rad")
 #: columns a GCP CSV may have
 GCP_COLUMNS = ("name", "u_px", "v_px", "x_m", "y_m", "z_m", "lat_deg", "lon_deg", "alt_m", "sigma_px", "sigma_m")
 _POSE_IDX = P.param_index(POSE_NAMES)
-_INT_IDX = np.arange(P.SKEW + 1 + 8)  # fx .. k6: the 13 intrinsic parameters
+#: indices of the 13 intrinsic parameters fx_px .. k6 in the parameter vector
+INTRINSIC_IDX = np.arange(P.SKEW + 1 + 8)
+_INT_IDX = INTRINSIC_IDX
 MIN_POINTS_POSE = 4
 MIN_POINTS_FOCAL = 6
 _CONV_SIGMA = 1e-6  # stop when the Gauss-Newton step is below this many standard deviations
 _ROUNDOFF_SIGMA = 1e-3  # ... or below this many when no step lowers the cost (round-off limited)
 _COLLINEAR_RTOL = 1e-3  # second singular value / first below this: the points are on one line
+#: most ground control points one solve takes (the solve is O(N) in memory and time; beyond this a
+#: table is a point cloud, not a survey: thin it)
+MAX_POINTS = 100_000
+#: smallest non-zero point sigma (px or m); below it the weights 1/sigma^2 overflow the normal matrix
+MIN_POINT_SIGMA = 1e-6
+#: largest point sigma (px or m): the budget files' limit (:data:`footprint_uq.uncertainty.budget.MAX_SIGMA`)
+MAX_POINT_SIGMA = MAX_SIGMA
+#: leave-one-out re-solves only up to this many points (above it the linearised leave-one-out residuals alone)
+MAX_LOO_POINTS = 400
+_LOO_CHUNK = 200_000  # problems x points per batched leave-one-out run (bounds its memory to ~100 MB)
+#: lat/lon tables: farthest point from the origin of W (m); the local frame ignores the Earth's curvature
+#: (0.31 m drop at 2 km)
+MAX_ORIGIN_DISTANCE_M = 2000.0
 
 
 # ---------------------------------------------------------------------------------------------
@@ -157,7 +164,10 @@ def read_gcp_csv(path, *, pixel_sigma_px: float = 1.0, survey_sigma_m: float = 0
         raise InputError("--points", str(p), f"a readable CSV file ({e.strerror or e})") from None
     except UnicodeDecodeError:
         raise InputError("--points", str(p), "a UTF-8 text CSV file") from None
-    rows = list(csv.reader(line for line in text.splitlines() if line.strip() and not line.lstrip().startswith("#")))
+    lines = [line for line in text.splitlines() if line.strip() and not line.lstrip().startswith("#")]
+    if len(lines) - 1 > MAX_POINTS:
+        raise InputError(f"{p}: rows", len(lines) - 1, f"at most {MAX_POINTS} ground control points (thin the table)")
+    rows = list(csv.reader(lines))
     if not rows:
         raise InputError(str(p), "an empty file", "a header row u_px, v_px, x_m, y_m[, z_m] and one row per point")
     header = [h.strip().lower() for h in rows[0]]
@@ -203,9 +213,14 @@ def read_gcp_csv(path, *, pixel_sigma_px: float = 1.0, survey_sigma_m: float = 0
             raise InputError(f"{p}: lat_deg/lon_deg", (lat.tolist()[:3], lon.tolist()[:3]),
                              "latitudes in [-90, 90] and longitudes in [-180, 180] degrees")
         olat = float(np.mean(lat)) if origin_lat_deg is None else float(origin_lat_deg)
-        olon = float(np.mean(lon)) if origin_lon_deg is None else float(origin_lon_deg)
+        olon = _mean_longitude_deg(lon) if origin_lon_deg is None else float(origin_lon_deg)
         g = GeoReference(origin_lat_deg=olat, origin_lon_deg=olon)
         xy = g.from_wgs84(lat, lon)
+        far = np.flatnonzero(~(np.hypot(*xy.T) <= MAX_ORIGIN_DISTANCE_M))
+        if far.size:
+            raise InputError(f"{p}: row {far[0] + 2} lat_deg/lon_deg",
+                             f"{float(np.hypot(*xy[far[0]])):.4g} m from the origin ({olat:.6f}, {olon:.6f})",
+                             f"points within {MAX_ORIGIN_DISTANCE_M:g} m of the origin (the local frame is flat)")
         if "alt_m" in a:
             oalt = float(np.median(a["alt_m"])) if origin_alt_m is None else float(origin_alt_m)
             z = a["alt_m"] - oalt
@@ -218,14 +233,28 @@ def read_gcp_csv(path, *, pixel_sigma_px: float = 1.0, survey_sigma_m: float = 0
             georef["origin_alt_m"] = oalt
     spx = a.get("sigma_px", np.full(n, float(pixel_sigma_px)))
     sm = a.get("sigma_m", np.full(n, float(survey_sigma_m)))
-    for name, s in (("sigma_px", spx), ("sigma_m", sm)):
-        bad = np.flatnonzero(~(s >= 0))
-        if bad.size:
-            raise InputError(f"{p}: row {bad[0] + 2} {name}", float(s[bad[0]]), "a standard deviation >= 0")
-    if np.any(spx + sm <= 0):
-        k = int(np.flatnonzero(spx + sm <= 0)[0])
-        raise InputError(f"{p}: row {k + 2} sigma_px/sigma_m", (0.0, 0.0), "pixel or survey noise > 0")
+    _check_sigmas(spx, sm, lambda k: f"{p}: row {k + 2}")
     return GCPSet(uv, xyz, spx, sm, names, georef)
+
+
+def _mean_longitude_deg(lon_deg) -> float:
+    """The circular mean of longitudes (degrees, in [-180, 180)): right on both sides of 180 deg."""
+    lam = np.deg2rad(np.asarray(lon_deg, dtype=np.float64))
+    m = math.degrees(math.atan2(float(np.mean(np.sin(lam))), float(np.mean(np.cos(lam)))))
+    return float((m + 180.0) % 360.0 - 180.0)
+
+
+def _check_sigmas(sigma_px, sigma_m, where) -> None:
+    """Each sigma 0 or in [MIN_POINT_SIGMA, MAX_POINT_SIGMA], and not both 0; ``where(k)`` names point k."""
+    lo, hi = MIN_POINT_SIGMA, MAX_POINT_SIGMA
+    for name, s in (("sigma_px", sigma_px), ("sigma_m", sigma_m)):
+        bad = np.flatnonzero(~((s == 0) | ((s >= lo) & (s <= hi))))
+        if bad.size:
+            raise InputError(f"{where(bad[0])} {name}", float(s[bad[0]]),
+                             f"a standard deviation of 0 or in [{lo:g}, {hi:g}]")
+    both = np.flatnonzero((sigma_px == 0) & (sigma_m == 0))
+    if both.size:
+        raise InputError(f"{where(both[0])} sigma_px/sigma_m", (0.0, 0.0), "pixel or survey noise > 0")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -237,6 +266,8 @@ def _check_geometry(uv, xyz, image_size_px, estimate_focal):
     if n < need:
         what = "focal length and pose (no intrinsics given)" if estimate_focal else "a pose"
         raise InputError("ground control points", n, f"at least {need} points for {what}")
+    if n > MAX_POINTS:
+        raise InputError("ground control points", n, f"at most {MAX_POINTS} points (thin the table)")
     bad = np.flatnonzero(~np.isfinite(uv).all(-1) | ~np.isfinite(xyz).all(-1))
     if bad.size:
         raise InputError(f"ground control point {bad[0] + 1}", (uv[bad[0]].tolist(), xyz[bad[0]].tolist()),
@@ -393,10 +424,26 @@ def _normal_equations(params, uv, xyz, S, mask, A):
     return cost, H, g, ok, (r, Si, Jp, SiJ)
 
 
-def _gn_step_sigma(H, g):
-    """Largest Gauss-Newton step component in standard deviations (B,)."""
+def _pinv(H):
+    """``pinv`` of each (k, k) matrix of H (B, k, k); NaN where H is not finite (never an SVD failure)."""
+    fin = np.isfinite(H).all((-1, -2))
+    out = np.full_like(H, np.nan)
     with np.errstate(all="ignore"):
-        Hi = np.linalg.pinv(H)
+        try:
+            out[fin] = np.linalg.pinv(H[fin])
+        except np.linalg.LinAlgError:  # SVD did not converge on one of them (extreme scaling): one by one
+            for b in np.flatnonzero(fin):
+                try:
+                    out[b] = np.linalg.pinv(H[b])
+                except np.linalg.LinAlgError:
+                    pass
+    return out
+
+
+def _gn_step_sigma(H, g):
+    """Largest Gauss-Newton step component in standard deviations (B,); inf where H or g is not finite."""
+    Hi = _pinv(H)
+    with np.errstate(all="ignore"):
         gn = np.einsum("bkl,bl->bk", Hi, g)
         sig = np.sqrt(np.clip(np.diagonal(Hi, axis1=1, axis2=2), 1e-300, None))
         out = np.max(np.abs(gn) / sig, -1)
@@ -420,7 +467,7 @@ def _lm_fixed(theta, base, A, uv, xyz, S, mask, max_iter, active0):
         iters += active
         D = np.diagonal(H, axis1=1, axis2=2)[:, None, :] * eye + 1e-300 * eye
         with np.errstate(all="ignore"):
-            step = np.einsum("bkl,bl->bk", np.linalg.pinv(H + lam[:, None, None] * D), g)
+            step = np.einsum("bkl,bl->bk", _pinv(H + lam[:, None, None] * D), g)
         step = np.where(active[:, None] & np.isfinite(step).all(-1, keepdims=True), step, 0.0)
         new = theta + step
         c2, H2, g2, ok2, _ = _normal_equations(base + new @ A.T, uv, xyz, S, mask, A)
@@ -591,9 +638,16 @@ class GCPSolution:
             rows.append({k: (float(v) if isinstance(v, np.floating) else v) for k, v in row.items()})
         return rows
 
+    @property
+    def solve_id(self) -> str:
+        """16 hex digits naming this solve: a hash of its numbers (same inputs, same id)."""
+        data = np.concatenate([self.params, self.cov_params.ravel(), self.gcps.uv_px.ravel(),
+                               self.gcps.xyz_world_m.ravel(), [self.chi2]])
+        return hashlib.sha256(np.ascontiguousarray(data, dtype="<f8").tobytes()).hexdigest()[:16]
+
     def summary(self) -> dict:
         return {
-            "n_points": int(len(self.gcps.uv_px)), "image_size_px": list(self.image_size_px),
+            "solve_id": self.solve_id, "n_points": int(len(self.gcps.uv_px)), "image_size_px": list(self.image_size_px),
             "estimated": list(self.estimated), "rms_px": self.rms_px, "chi2": float(self.chi2), "dof": int(self.dof),
             "reduced_chi2": self.reduced_chi2, "iterations": int(self.iterations),
             "intrinsics_covariance_included": self.intrinsics_cov_given,
@@ -645,6 +699,7 @@ def solve_gcp(gcps: GCPSet, image_size_px, *, intrinsics=None, intrinsics_cov=No
     estimate_focal = K is None
     uv, xyz = gcps.uv_px, gcps.xyz_world_m
     _check_geometry(uv, xyz, size, estimate_focal)
+    _check_sigmas(gcps.sigma_px, gcps.sigma_m, lambda k: f"ground control point {k + 1}")
     if intrinsics_cov is not None:
         if estimate_focal:
             raise InputError("intrinsics covariance", "given without intrinsics", "intrinsics with it")
@@ -671,8 +726,9 @@ def solve_gcp(gcps: GCPSet, image_size_px, *, intrinsics=None, intrinsics_cov=No
                          "a camera above the ground plane z = 0")
     H = H[0]
     wH = np.sqrt(np.diagonal(H))
-    Hn = H / np.outer(wH, wH)
-    cond = np.linalg.cond(Hn)
+    with np.errstate(all="ignore"):
+        Hn = H / np.outer(wH, wH)
+    cond = np.linalg.cond(Hn) if np.isfinite(Hn).all() else math.inf
     if not np.isfinite(cond) or cond > 1e12:
         what = "focal length and pose" if estimate_focal else "pose"
         raise InputError("ground control points", f"normal-matrix condition number {cond:.3g}",
@@ -711,11 +767,18 @@ def _leave_one_out(sol, base, A, theta, max_iter, estimate_focal):
     if n - 1 < need:
         sol.loo_status = [f"too few points without it ({n - 1} < {need})"] * n
         return
-    mask = ~np.eye(n, dtype=bool)
-    th, conv, _, ne = _lm(np.repeat(theta[None], n, 0), np.repeat(base[None], n, 0), A,
-                          np.repeat(g.uv_px[None], n, 0), np.repeat(g.xyz_world_m[None], n, 0),
-                          np.repeat(g.sigma_px[None] ** 2, n, 0), np.repeat(g.sigma_m[None] ** 2, n, 0), mask,
-                          max_iter)
+    if n > MAX_LOO_POINTS:
+        sol.loo_status = [f"not re-solved (more than {MAX_LOO_POINTS} points)"] * n
+        return
+    th, conv = np.empty((n, len(theta))), np.empty(n, bool)
+    step = max(1, _LOO_CHUNK // n)  # problems per batched run: memory O(step * n), never O(n^2)
+    for i0 in range(0, n, step):
+        m = min(step, n - i0)
+        mask = np.ones((m, n), bool)
+        mask[np.arange(m), i0 + np.arange(m)] = False
+        th[i0:i0 + m], conv[i0:i0 + m], _, _ = _lm(
+            np.repeat(theta[None], m, 0), np.repeat(base[None], m, 0), A, g.uv_px[None], g.xyz_world_m[None],
+            g.sigma_px[None] ** 2, g.sigma_m[None] ** 2, mask, max_iter)
     pl = base + th @ A.T  # (n, 22)
     pred = general.project(pl, g.xyz_world_m)
     ph = pl.copy()
@@ -742,101 +805,3 @@ def _warn_residuals(sol):
         warnings.warn(f"GCP {sol.gcps.names[worst]}: residual {sol.residual_sigma[worst]:.3g} sigma "
                       f"({np.hypot(*sol.residual_px[worst]):.3g} px); a mismatched point?",
                       ConsistencyWarning, stacklevel=3)
-
-
-# ---------------------------------------------------------------------------------------------
-# the command as a function
-# ---------------------------------------------------------------------------------------------
-def parse_image_size(text) -> tuple[int, int]:
-    """``"1920x1080"`` (or a pair) -> ``(1920, 1080)``; InputError otherwise."""
-    if isinstance(text, str):
-        parts = text.lower().replace(" ", "").split("x")
-    else:
-        parts = list(text)
-    try:
-        w, h = (int(str(v)) for v in parts)
-    except (TypeError, ValueError):
-        raise InputError("--image-size", text, "WIDTHxHEIGHT in pixels, e.g. 1920x1080") from None
-    if w <= 0 or h <= 0:
-        raise InputError("--image-size", text, "a positive width and height")
-    return w, h
-
-
-def _yaml_text(data: dict, header: str) -> str:
-
-
-    return f"# {header}\n" + yaml.safe_dump(sanitize(data), sort_keys=False, default_flow_style=None, width=100)
-
-
-def _csv_text(rows: list[dict]) -> str:
-
-    buf = io.StringIO()
-    w = csv.DictWriter(buf, fieldnames=list(rows[0]), lineterminator="\n")
-    w.writeheader()
-    for r in rows:
-        w.writerow({k: (repr(float(v)) if isinstance(v, float) else v) for k, v in r.items()})
-    return buf.getvalue()
-
-
-def _read_image(path, image_size_px):
-
-    img = cv2.imread(str(path), cv2.IMREAD_COLOR)
-    if img is None:
-        raise InputError("--image", str(path), "a readable image file")
-    if (img.shape[1], img.shape[0]) != tuple(image_size_px):
-        raise InputError("--image size", f"{img.shape[1]}x{img.shape[0]}",
-                         f"the --image-size {image_size_px[0]}x{image_size_px[1]}")
-    return img[..., ::-1]
-
-
-def run_gcp(points, image_size_px, out_dir, *, intrinsics=None, intrinsics_budget=None, pixel_sigma_px: float = 1.0,
-            survey_sigma_m: float = 0.05, origin_lat_deg=None, origin_lon_deg=None, origin_alt_m=None, image=None,
-            figures: bool = True) -> dict:
-    """The ``calibrate gcp`` command as a function: read, solve, write; returns ``{"solution", "files",
-    "warnings"}``.
-
-    Writes to ``out_dir`` (each file atomically): ``camera.yaml`` (the solved camera), ``budget.yaml``
-    (the full parameter covariance of the solve), ``residuals.csv`` (per point and leave-one-out),
-    ``summary.json``, ``gcp.png`` (points and residual arrows, ``image`` behind) and ``summary.html``.
-    """
-
-
-    size = parse_image_size(image_size_px)
-    if (origin_lat_deg is None) != (origin_lon_deg is None):
-        raise InputError("--origin-lat/--origin-lon", (origin_lat_deg, origin_lon_deg), "both or neither")
-    gcps = read_gcp_csv(points, pixel_sigma_px=pixel_sigma_px, survey_sigma_m=survey_sigma_m,
-                        origin_lat_deg=origin_lat_deg, origin_lon_deg=origin_lon_deg, origin_alt_m=origin_alt_m)
-    cov_int = None
-    if intrinsics_budget is not None:
-        if intrinsics is None:
-            raise InputError("--intrinsics-budget", str(intrinsics_budget), "--intrinsics too")
-
-        cov_int = load_budget(intrinsics_budget).param_covariance()[np.ix_(_INT_IDX, _INT_IDX)]
-    img = _read_image(image, size) if image is not None else None
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always", ConsistencyWarning)
-        sol = solve_gcp(gcps, size, intrinsics=intrinsics, intrinsics_cov=cov_int)
-    notes = [str(w.message) for w in caught if issubclass(w.category, ConsistencyWarning)]
-    for w in caught:
-        warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    files = [
-        atomic_write_text(out / "camera.yaml", _yaml_text(camera_to_dict(sol.camera),
-                                                          "footprint-uq camera file from ground control points")),
-        atomic_write_text(out / "budget.yaml", _yaml_text(sol.budget().to_dict(),
-                                                          "footprint-uq error budget: full covariance of the "
-                                                          "ground-control-point solve (docs/calibration.md)")),
-        atomic_write_text(out / "residuals.csv", _csv_text(sol.residual_rows())),
-    ]
-    summ = sol.summary()
-    summ["warnings"] = notes
-    files.append(atomic_write_text(out / "summary.json", json.dumps(summ, indent=2, allow_nan=True) + "\n"))
-    if figures:
-
-        fig = plot_gcp(sol, image=img)
-        files.append(save_figure(fig, out / "gcp.png", dpi=120))
-        files.append(atomic_write_text(out / "summary.html", gcp_report_html(sol, fig, notes)))
-
-        plt.close(fig)
-    return {"solution": sol, "files": files, "warnings": notes}

@@ -1,6 +1,6 @@
 """``footprint-uq calibrate gcp``: a camera and its error budget from ground control points.
 
-The work is done by :func:`footprint_uq.calibration.gcp.run_gcp`; the command is registered on
+The work is done by :func:`footprint_uq.calibration.gcp_run.run_gcp`; the command is registered on
 the ``calibrate`` group in :mod:`footprint_uq.cli.calibrate`.
 """
 
@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import click
 
-from ..calibration.gcp import run_gcp
+from ..calibration.gcp_run import run_gcp
 
 __all__ = ["gcp_cmd"]
 
