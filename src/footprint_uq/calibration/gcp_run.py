@@ -32,7 +32,7 @@ from ..io.camera_files import camera_to_dict, load_camera
 from ..uncertainty.budget import ErrorBudget, load_budget
 from ..viz.gcp import gcp_report_html, plot_gcp
 from ..viz.maps import save_figure
-from .gcp import INTRINSIC_IDX, read_gcp_csv, solve_gcp
+from .gcp import INTRINSIC_IDX, LENS_K1_SIGMA, read_gcp_csv, solve_gcp
 
 __all__ = ["run_gcp", "parse_image_size", "OUTPUT_NAMES", "MAX_IMAGE_PIXELS"]
 
@@ -173,7 +173,11 @@ def _write_set(folder: Path, sol, img, notes, figures: bool) -> list[Path]:
         fig = plot_gcp(sol, image=img)
         try:
             files.append(save_figure(fig, folder / "gcp.png", dpi=120))
-            files.append(atomic_write_text(folder / "summary.html", gcp_report_html(sol, fig, notes)))
+            shown = [f"NOT USABLE: {f}" for f in sol.flags] + list(notes)
+            if sol.inflation > 1.0:
+                shown.append(f"covariance inflated x{sol.inflation:.3g} (the cost rises slower than its quadratic "
+                             "model, or lopsided)")
+            files.append(atomic_write_text(folder / "summary.html", gcp_report_html(sol, fig, shown)))
         finally:
             plt.close(fig)
     load_camera(folder / "camera.yaml")  # every command reads these: refuse here, not there
@@ -183,7 +187,7 @@ def _write_set(folder: Path, sol, img, notes, figures: bool) -> list[Path]:
 
 def run_gcp(points, image_size_px, out_dir, *, intrinsics=None, intrinsics_budget=None, pixel_sigma_px: float = 1.0,
             survey_sigma_m: float = 0.05, origin_lat_deg=None, origin_lon_deg=None, origin_alt_m=None, image=None,
-            figures: bool = True) -> dict:
+            figures: bool = True, solve_k1: bool = False, lens_k1_sigma: float = LENS_K1_SIGMA) -> dict:
     """The ``calibrate gcp`` command as a function: read, solve, write; returns ``{"solution", "files",
     "warnings"}``.
 
@@ -191,6 +195,9 @@ def run_gcp(points, image_size_px, out_dir, *, intrinsics=None, intrinsics_budge
     (the full parameter covariance of the solve), ``residuals.csv`` (per point and leave-one-out),
     ``summary.json``, ``gcp.png`` (points and residual arrows, ``image`` behind) and ``summary.html``.
     ``out_dir`` must be new, empty, or hold only a previous run's files (they are replaced).
+    A solve that flags itself (``solution.flags``: another pose minimum, weak geometry, residual or lens
+    tests) is still written, with its reasons in ``summary.json`` (``usable``, ``flags``) and the budget's
+    description.
     """
     size = parse_image_size(image_size_px)
     if (origin_lat_deg is None) != (origin_lon_deg is None):
@@ -208,7 +215,8 @@ def run_gcp(points, image_size_px, out_dir, *, intrinsics=None, intrinsics_budge
     img = _read_image(image, size) if image is not None else None
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", ConsistencyWarning)
-        sol = solve_gcp(gcps, size, intrinsics=intrinsics, intrinsics_cov=cov_int)
+        sol = solve_gcp(gcps, size, intrinsics=intrinsics, intrinsics_cov=cov_int, solve_k1=solve_k1,
+                        lens_k1_sigma=lens_k1_sigma)
     notes = [str(w.message) for w in caught if issubclass(w.category, ConsistencyWarning)]
     for w in caught:
         warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
