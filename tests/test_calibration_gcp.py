@@ -632,6 +632,17 @@ def test_support_and_locate_with_the_gcp_summary(tmp_path):
     assert "outside the control points' support" in r.stderr
     r = CliRunner().invoke(main, args + ["--gcp-summary", str(tmp_path / "o" / "summary.json"), "--format", "csv"])
     assert r.exit_code == 0 and r.stdout.splitlines()[0].endswith("gcp_inside_hull,gcp_leverage_ratio,gcp_supported")
+    # the map: gcp_support.npz on the map's pixel grid
+    r = CliRunner().invoke(main, ["map", "--camera", str(tmp_path / "o" / "camera.yaml"), "--budget",
+                                  str(tmp_path / "o" / "budget.yaml"), "--out", str(tmp_path / "m"), "--step-px", "40",
+                                  "--gcp-summary", str(tmp_path / "o" / "summary.json")])
+    assert r.exit_code == 0, r.output
+    z = np.load(tmp_path / "m" / "gcp_support.npz")
+    uvm = np.stack([z["u_px"], z["v_px"]], -1)
+    ref = sol.support(uvm)
+    np.testing.assert_array_equal(z["inside_hull"], ref["inside_hull"])
+    np.testing.assert_allclose(z["leverage_ratio"], ref["leverage_ratio"], rtol=1e-9)
+    assert z["supported"].any() and not z["supported"].all()
     # a summary of another solve is refused (the budget is named after its own solve)
     other = _write_csv(tmp_path / "g2.csv", ["u_px", "v_px", "x_m", "y_m", "z_m"],
                        np.column_stack([uv + rng.normal(0, 1, uv.shape), xyz]).tolist())

@@ -25,8 +25,10 @@ import numpy as np
 
 from ..cameras import general
 from ..errors import InputError
+from ..io.atomic import atomic_path
 
-__all__ = ["SUPPORT_KEYS", "leverage_px2", "inside_convex", "support_of", "load_gcp_support", "add_support"]
+__all__ = ["SUPPORT_KEYS", "leverage_px2", "inside_convex", "support_of", "load_gcp_support", "add_support",
+           "save_support_map"]
 
 #: keys added to `locate` records
 SUPPORT_KEYS = ("gcp_inside_hull", "gcp_leverage_ratio", "gcp_supported")
@@ -94,3 +96,17 @@ def add_support(records: list[dict], camera, budget, support: dict) -> list[dict
         r.update({"gcp_inside_hull": bool(a), "gcp_leverage_ratio": float(b) if np.isfinite(b) else None,
                   "gcp_supported": bool(c)})
     return records
+
+
+def save_support_map(path, camera, budget, support: dict, uv_px, *, chunk: int = 65536) -> Path:
+    """The support of a map's pixels ``uv_px (H, W, 2)`` as ``.npz`` (``u_px``, ``v_px``, ``inside_hull``,
+    ``leverage_ratio``, ``supported``; ``(H, W)`` each), written atomically; in chunks of ``chunk`` pixels."""
+    uv = np.asarray(uv_px, dtype=np.float64)
+    flat = uv.reshape(-1, 2)
+    C = budget.param_covariance()
+    parts = [support_of(camera.params, C, support, flat[i:i + chunk]) for i in range(0, len(flat), chunk)]
+    out = {k: np.concatenate([q[k] for q in parts]).reshape(uv.shape[:-1]) for k in parts[0]}
+    p = Path(path)
+    with atomic_path(p) as tmp, open(tmp, "wb") as f:
+        np.savez_compressed(f, u_px=uv[..., 0], v_px=uv[..., 1], **out)
+    return p
