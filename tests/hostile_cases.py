@@ -266,6 +266,39 @@ def _calibration_cases(d: Path) -> list[Case]:
     ]
 
 
+def _gcp_cases(d: Path) -> list[Case]:
+    """``calibrate gcp``: point sigmas past the budget files' limits, a solve whose covariance a budget file
+    could not hold, too many points, a photo too large to draw (told by its header, never decoded)."""
+    import struct
+    import zlib
+
+    rows = ["200,700,-9.0,21.0", "1700,720,12.0,22.0", "960,1000,1.0,10.5", "300,600,-14.0,33.0",
+            "1600,610,17.0,34.0", "950,560,0.5,45.0", "620,820,-6.0,15.0", "1300,840,6.0,15.5"]
+    good = _w(d / "g.csv", "u_px,v_px,x_m,y_m\n" + "\n".join(rows) + "\n")
+
+    def sig(name, v):
+        return _w(d / f"{name}.csv", "u_px,v_px,x_m,y_m,sigma_px\n" + "".join(f"{r},{v}\n" for r in rows))
+
+    many = _w(d / "many.csv", "u_px,v_px,x_m,y_m\n" + "1,2,3,4\n" * 10_001)
+    ihdr = struct.pack(">IIBBBBB", 30000, 30000, 8, 2, 0, 0, 0)
+    png = _w(d / "huge.png", b"\x89PNG\r\n\x1a\n" + struct.pack(">I", 13) + b"IHDR" + ihdr
+             + struct.pack(">I", zlib.crc32(b"IHDR" + ihdr)))
+
+    def case(name, pts, out, *extra, size="1920x1080", has=None):
+        return Case(name, ["calibrate", "gcp", "--points", str(pts), "--image-size", size, *extra, "--out",
+                           str(d / out)], "exit2", d / out, stderr_has=has)
+
+    return [
+        case("gcp sigma_px 1e-300", sig("tiny", "1e-300"), "o1", has="sigma_px"),
+        case("gcp sigma_px 1e300", sig("huge", "1e300"), "o2", has="sigma_px"),
+        case("gcp sigma_px 1e6 (budget refuses the solve)", sig("limit", "1e6"), "o3", has="budget files refuse"),
+        case("gcp 10001 points", many, "o4", has="at most 10000"),
+        case("gcp 30000x30000 PNG header", good, "o5", "--image", str(png), size="30000x30000", has="Mpx"),
+        case("gcp image not PNG/JPEG", good, "o6", "--image", str(_w(d / "x.gif", b"GIF89a" + bytes(20))),
+             has="PNG or JPEG"),
+    ]
+
+
 def _other_commands(d: Path, camera: Path) -> list[Case]:
     """Files read by the other commands (scenario configs, recordings, LiDAR correspondences)."""
     binary = _w(d / "binary.dat", bytes(range(256)) * 8)
@@ -325,7 +358,7 @@ def build(d: Path) -> list[Case]:
     budget = _w(d / "budget.yaml", BUDGET)
     return (_camera_cases(d / "cam", budget) + _budget_cases(d / "bud", camera) + _locate_cases(camera)
             + _detections(d / "det", camera) + _truncated_parquet(d / "pq", camera) + _fuse_cases(d / "fuse")
-            + _calibration_cases(d / "cal") + _other_commands(d / "other", camera))
+            + _calibration_cases(d / "cal") + _gcp_cases(d / "gcp") + _other_commands(d / "other", camera))
 
 
 def run(case: Case) -> dict:

@@ -16,7 +16,8 @@ from footprint_uq import PanTiltCamera, load_budget, propagate
 from footprint_uq import params as P
 from footprint_uq.calibration import calibrate_intrinsics, parse_board
 from footprint_uq.calibration.extrinsics import Intrinsics
-from footprint_uq.calibration.gcp import GCPSet, _params_from_Rt, read_gcp_csv, run_gcp, solve_gcp
+from footprint_uq.calibration.gcp import GCPSet, _params_from_Rt, read_gcp_csv, solve_gcp
+from footprint_uq.calibration.gcp_run import run_gcp
 from footprint_uq.cameras import general
 from footprint_uq.cli.main import main
 from footprint_uq.errors import ConsistencyWarning, InputError
@@ -302,3 +303,349 @@ def test_cli_gcp_with_the_intrinsics_budget(tmp_path):
     r = CliRunner().invoke(main, ["calibrate", "gcp", "--points", str(pts), "--image-size", "1920x1080",
                                   "--intrinsics-budget", str(tmp_path / "ib.yaml"), "--out", str(tmp_path / "c")])
     assert r.exit_code == 2 and "--intrinsics too" in r.output
+
+
+# ------------------------------------------------------------------------------------------ hostile numbers (issue 21)
+def test_non_finite_normal_matrix_never_reaches_the_svd():
+    from footprint_uq.calibration.gcp import _gn_step_sigma, _pinv
+
+    H = np.stack([np.eye(3) * 4.0, np.full((3, 3), np.nan), np.diag([1.0, np.inf, 1.0])])
+    g = np.ones((3, 3))
+    Hi = _pinv(H)
+    np.testing.assert_allclose(Hi[0], np.eye(3) / 4.0)
+    assert np.isnan(Hi[1:]).all()
+    step = _gn_step_sigma(H, g)
+    assert step[0] == pytest.approx(0.5) and np.isinf(step[1:]).all()
+
+
+@pytest.mark.parametrize("sigma", [1e-300, 1e300, 1e-7, 2e6])
+def test_extreme_point_sigmas_refused(tmp_path, sigma):
+    cam, uv, xyz = _scene()
+    p = _write_csv(tmp_path / "g.csv", ["u_px", "v_px", "x_m", "y_m", "z_m", "sigma_px"],
+                   np.column_stack([uv, xyz, np.full(len(uv), sigma)]).tolist())
+    with pytest.raises(InputError, match=r"row 2 sigma_px.*0 or in \[1e-06, 1e\+06\]"):
+        read_gcp_csv(p)
+    with pytest.raises(InputError, match="point 1 sigma_m"):
+        solve_gcp(GCPSet(uv, xyz, 1.0, sigma), SIZE, intrinsics=Intrinsics(cam.K, np.zeros(5), SIZE))
+
+
+def test_sigma_at_the_limit_never_writes_a_budget_locate_refuses(tmp_path):
+    # sigma_px 1e6 is within the budget files' limit per point, but the solve's covariance is not
+    cam, uv, xyz = _scene()
+    p = _write_csv(tmp_path / "g.csv", ["u_px", "v_px", "x_m", "y_m", "z_m", "sigma_px"],
+                   np.column_stack([uv, xyz, np.full(len(uv), 1e6)]).tolist())
+    r = CliRunner().invoke(main, ["calibrate", "gcp", "--points", str(p), "--image-size", "1920x1080",
+                                  "--out", str(tmp_path / "o")])
+    assert r.exit_code == 2 and "budget files refuse" in r.output and r.output.count("\n") == 1, r.output
+    assert not (tmp_path / "o").exists()
+    # a large but supportable sigma: written, and `locate` takes the budget
+    p2 = _write_csv(tmp_path / "g2.csv", ["u_px", "v_px", "x_m", "y_m", "z_m", "sigma_px"],
+                    np.column_stack([uv, xyz, np.full(len(uv), 30.0)]).tolist())
+    r = CliRunner().invoke(main, ["calibrate", "gcp", "--points", str(p2), "--image-size", "1920x1080",
+                                  "--out", str(tmp_path / "o2")])
+    assert r.exit_code == 0, r.output
+    r = CliRunner().invoke(main, ["locate", "--camera", str(tmp_path / "o2" / "camera.yaml"), "--budget",
+                                  str(tmp_path / "o2" / "budget.yaml"), "--pixel", "900", "800"])
+    assert r.exit_code == 0, r.output
+
+
+def test_point_count_limit_and_memory_bounded_leave_one_out(tmp_path):
+    from footprint_uq.calibration.gcp import MAX_LOO_POINTS, MAX_POINTS
+
+    p = tmp_path / "many.csv"
+    p.write_text("u_px,v_px,x_m,y_m\n" + "1,2,3,4\n" * (MAX_POINTS + 1))
+    with pytest.raises(InputError, match=f"at most {MAX_POINTS}"):
+        read_gcp_csv(p)
+    # 1500 points: solved (leave-one-out re-solves only up to MAX_LOO_POINTS; memory O(N), not O(N^2))
+    cam, uv, xyz = _scene(seed=4, n=1500)
+    rng = np.random.default_rng(0)
+    g = GCPSet(uv + rng.normal(0, 1, uv.shape), xyz, 1.0, 0.0)
+    s = solve_gcp(g, SIZE, intrinsics=Intrinsics(cam.K, np.zeros(5), SIZE))
+    d = s.params[POSE] - cam.params[POSE]
+    assert d @ np.linalg.solve(s.cov_params[np.ix_(POSE, POSE)], d) < 25
+    assert s.loo_status[0].startswith(f"not re-solved (more than {MAX_LOO_POINTS}")
+
+
+def test_leave_one_out_in_chunks_matches_one_batch(monkeypatch):
+    import footprint_uq.calibration.gcp as G
+
+    cam, uv, xyz = _scene()
+    rng = np.random.default_rng(8)
+    g = GCPSet(uv + rng.normal(0, 1, uv.shape), xyz, 1.0, 0.05)
+    a = solve_gcp(g, SIZE)
+    monkeypatch.setattr(G, "_LOO_CHUNK", 3 * len(uv))  # 3 problems per run
+    b = solve_gcp(g, SIZE)
+    np.testing.assert_allclose(b.loo_residual_px, a.loo_residual_px, rtol=1e-9, atol=1e-9)
+
+
+def test_lat_lon_across_the_antimeridian(tmp_path):
+    pytest.importorskip("pyproj")
+    from footprint_uq.products.geo import GeoReference
+
+    cam, uv, xyz = _scene()
+    geo = GeoReference(origin_lat_deg=-16.8, origin_lon_deg=179.99995)
+    lat, lon = geo.to_wgs84(xyz[:, :2])
+    lon = (np.asarray(lon) + 180.0) % 360.0 - 180.0
+    assert (lon > 0).any() and (lon < 0).any()  # on both sides of 180 deg
+    p = _write_csv(tmp_path / "ll.csv", ["u_px", "v_px", "lat_deg", "lon_deg", "alt_m"],
+                   np.column_stack([uv, lat, lon, xyz[:, 2] + 3.0]).tolist())
+    g = read_gcp_csv(p)
+    assert abs(abs(g.georef["origin_lon_deg"]) - 180.0) < 1e-3
+    # the same points as in the world frame, up to the origin's shift (a few metres)
+    shift = g.xyz_world_m[:, :2] - xyz[:, :2]
+    np.testing.assert_allclose(shift - shift.mean(0), 0.0, atol=0.01)
+    assert np.abs(shift.mean(0)).max() < 50
+    s = solve_gcp(g, SIZE, intrinsics=Intrinsics(cam.K, np.zeros(5), SIZE), leave_one_out=False)
+    assert np.hypot(*(s.params[[P.XM, P.YM]] - cam.params[[P.XM, P.YM]] - shift.mean(0))) < 1e-3
+    # an explicit origin far from the points is refused (the local frame is flat)
+    with pytest.raises(InputError, match="within 2000 m of the origin"):
+        read_gcp_csv(p, origin_lat_deg=-16.8, origin_lon_deg=0.0)
+
+
+def test_image_checked_from_its_header_before_decoding(tmp_path):
+    import struct
+    import zlib
+
+    cam, uv, xyz = _scene()
+    pts = _write_csv(tmp_path / "g.csv", ["u_px", "v_px", "x_m", "y_m", "z_m"], np.column_stack([uv, xyz]).tolist())
+    # a PNG header claiming 30000 x 30000 pixels (no pixel data: decoding it would fail or run out of memory)
+    ihdr = struct.pack(">IIBBBBB", 30000, 30000, 8, 2, 0, 0, 0)
+    png = b"\x89PNG\r\n\x1a\n" + struct.pack(">I", 13) + b"IHDR" + ihdr + struct.pack(">I", zlib.crc32(b"IHDR" + ihdr))
+    (tmp_path / "huge.png").write_bytes(png)
+    args = ["calibrate", "gcp", "--points", str(pts), "--intrinsics-budget"]
+    del args[-1]
+    r = CliRunner().invoke(main, args + ["--image-size", "30000x30000", "--image", str(tmp_path / "huge.png"),
+                                         "--out", str(tmp_path / "o")])
+    assert r.exit_code == 2 and "Mpx" in r.output and r.output.count("\n") == 1, r.output
+    r = CliRunner().invoke(main, args + ["--image-size", "1920x1080", "--image", str(tmp_path / "huge.png"),
+                                         "--out", str(tmp_path / "o")])
+    assert r.exit_code == 2 and "30000x30000" in r.output, r.output
+    (tmp_path / "x.gif").write_bytes(b"GIF89a" + bytes(20))
+    r = CliRunner().invoke(main, args + ["--image-size", "1920x1080", "--image", str(tmp_path / "x.gif"),
+                                         "--out", str(tmp_path / "o")])
+    assert r.exit_code == 2 and "PNG or JPEG" in r.output, r.output
+    assert not (tmp_path / "o").exists()
+
+
+# ------------------------------------------------------------------------------------------ outputs as one unit
+_KILL_DRIVER = """
+import os, signal, sys
+import footprint_uq.io.atomic as A
+from footprint_uq.calibration import gcp_run  # imported once, before the forks
+from footprint_uq.cli.main import main
+outs, args = sys.argv[1].split(","), sys.argv[2:]
+for k, out in enumerate(outs, start=1):  # one forked run per kill point: killed after its k-th rename
+    pid = os.fork()
+    if pid == 0:
+        n = [0]
+        def hook(f):
+            def w(*a, **kw):
+                r = f(*a, **kw)
+                n[0] += 1
+                if n[0] == k:
+                    os.kill(os.getpid(), signal.SIGKILL)
+                return r
+            return w
+        os.replace, os.rename, A._exchange = hook(os.replace), hook(os.rename), hook(A._exchange)
+        try:
+            main(args + ["--out", out], standalone_mode=False)
+        finally:
+            os._exit(0)
+    print("STATUS", k, os.waitpid(pid, 0)[1], flush=True)
+"""
+
+
+def _gcp_sets(tmp_path):
+    cam, uv, xyz = _scene()
+    rng = np.random.default_rng(12)
+    a = _write_csv(tmp_path / "a.csv", ["u_px", "v_px", "x_m", "y_m", "z_m"],
+                   np.column_stack([uv + rng.normal(0, 1, uv.shape), xyz]).tolist())
+    b = _write_csv(tmp_path / "b.csv", ["u_px", "v_px", "x_m", "y_m", "z_m"],
+                   np.column_stack([uv + rng.normal(0, 1, uv.shape), xyz]).tolist())
+    return a, b
+
+
+def _snapshot(folder):
+    return {p.name: p.read_bytes() for p in sorted(Path(folder).iterdir())} if Path(folder).is_dir() else None
+
+
+def test_kill_after_every_rename_leaves_the_old_set_or_the_new_set(tmp_path):
+    import os
+    import shutil
+    import subprocess
+    import sys
+
+    a, b = _gcp_sets(tmp_path)
+    args = ["calibrate", "gcp", "--image-size", "1920x1080"]
+    for name, pts in (("A", a), ("B", b)):
+        r = CliRunner().invoke(main, args + ["--points", str(pts), "--out", str(tmp_path / name)])
+        assert r.exit_code == 0, r.output
+    old, new = _snapshot(tmp_path / "A"), _snapshot(tmp_path / "B")
+    assert len(old) == 6 and old.keys() == new.keys() and all(old[k] != new[k] for k in old)
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(Path(__file__).parents[1] / "src"),
+                                                       os.environ.get("PYTHONPATH", "")]))
+    outs = []
+    for k in range(1, 9):  # 6 files written in the hidden folder, then the swap; 8: past the end
+        outs.append(tmp_path / f"out{k}")
+        shutil.copytree(tmp_path / "A", outs[-1])
+    p = subprocess.run([sys.executable, "-c", _KILL_DRIVER, ",".join(map(str, outs)), *args, "--points", str(b)],
+                       env=env, capture_output=True, text=True, timeout=600)
+    status = dict(line.split()[1:] for line in p.stdout.splitlines() if line.startswith("STATUS "))
+    assert len(status) == 8, p.stderr[-800:]
+    seen = set()
+    for k, out in enumerate(outs, start=1):
+        got = _snapshot(out)
+        assert got in (old, new), (k, status, p.stderr[-500:])
+        seen.add("old" if got == old else "new")
+        assert (status[str(k)] == "9") == (k < 8)  # killed, except past the last rename
+    assert seen == {"old", "new"}
+    # the next run cleans what a killed one left (hidden folders) and writes its set
+    r = CliRunner().invoke(main, args + ["--points", str(b), "--out", str(outs[2])])
+    assert r.exit_code == 0 and _snapshot(outs[2]) == new, r.output
+    assert not [q for q in tmp_path.iterdir() if q.name.startswith(".out3")]
+    assert seen == {"old", "new"}
+
+
+def test_failing_figure_or_bad_output_folder_leaves_the_previous_set(tmp_path, monkeypatch):
+    import footprint_uq.calibration.gcp_run as R
+
+    a, b = _gcp_sets(tmp_path)
+    out = tmp_path / "o"
+    run_gcp(a, "1920x1080", out)
+    before = _snapshot(out)
+
+    def broken(*args, **kw):
+        raise MemoryError("drawing")
+
+    monkeypatch.setattr(R, "plot_gcp", broken)
+    with pytest.raises(MemoryError):
+        run_gcp(b, "1920x1080", out)
+    assert _snapshot(out) == before
+    assert [q.name for q in tmp_path.iterdir() if q.name.startswith(".")] == []
+    monkeypatch.undo()
+    (out / "notes.txt").write_text("mine")
+    with pytest.raises(InputError, match="holding 'notes.txt'"):
+        run_gcp(b, "1920x1080", out)
+    # the files name their solve: summary.json, the budget's name and camera.yaml agree
+    (out / "notes.txt").unlink()
+    res = run_gcp(b, "1920x1080", out)
+    sid = res["solution"].solve_id
+    import json
+
+    assert json.loads((out / "summary.json").read_text())["solve_id"] == sid
+    assert load_budget(out / "budget.yaml").name == f"gcp-{sid}"
+    assert sid in (out / "camera.yaml").read_text().splitlines()[0]
+
+
+# ------------------------------------------------------------------------------------------ weak geometry (issue 21)
+@pytest.mark.parametrize("regime,n,seed", [("corner", 30, 5), ("clustered", 30, 6)])
+def test_weak_geometry_regimes_flag_what_they_cannot_support(regime, n, seed):
+    # small seeded versions of bench/bench_gcp_regimes.py (300 campaigns each there, docs/calibration.md)
+    from gcp_campaigns import evaluate, table_row
+
+    recs = evaluate(regime, n, seed=seed)
+    row = table_row(recs)
+    assert all(r["usable"] or r["flags"] or r["refused"] for r in recs)  # never unusable without a reason
+    assert row["usable"] >= 5 and n - row["usable"] >= 5, row  # both kinds occur in these regimes
+    # among usable results the true pose is in the 95 % region (target 93 %, measured over 300 in the bench;
+    # at this size 2 misses are allowed: P(> 2 misses of ~12 at 95 %) = 2 %)
+    assert sum(r["pose_in"] for r in recs if r["usable"]) >= row["usable"] - 2, row
+    # what does not hold its region is flagged (by far the most) or refused
+    flagged_misses = sum(not r["pose_in"] for r in recs if not r["usable"])
+    assert flagged_misses >= 3 * sum(not r["pose_in"] for r in recs if r["usable"]), row
+    assert set(row["reasons"]) <= {"ambiguous pose", "weak geometry", "residuals", "outlier", "lens model",
+                                   "ground control points", "ground control point solve"}
+
+
+def test_unknown_lens_k1_prior_and_the_k1_score_test():
+    from gcp_campaigns import evaluate
+
+    # focal solved, true k1 in -0.15..0.05: with the k1 prior the regions hold; assuming k1 = 0 the score test
+    # flags most of what would be wrong
+    prior = evaluate("lens", 8, seed=3)
+    assert sum(r["pose_in"] for r in prior if r["usable"]) >= sum(r["usable"] for r in prior) - 1
+    # assuming k1 = 0 where the lens is distorted: the k1 score test names it, before the chi-square does
+    cam, uv, xyz = _scene(n=20)
+    p = cam.params.copy()
+    p[P.K1] = -0.02
+    g = GCPSet(general.project(p, xyz).uv_px + np.random.default_rng(0).normal(0, 0.5, uv.shape), xyz, 0.5, 0.0)
+    with pytest.warns(ConsistencyWarning):
+        s = solve_gcp(g, SIZE, leave_one_out=False, lens_k1_sigma=0.0)
+    assert s.flags[0].startswith("lens model") and s.tests["k1_score"] > 20 * s.reduced_chi2
+    s = solve_gcp(g, SIZE, leave_one_out=False)  # the default: k1 solved with its prior
+    assert s.usable and abs(s.params[P.K1] + 0.02) < 3 * s.sigma_params()[P.K1]
+    # with the true lens undistorted the score test stays quiet (1 % level): documented campaigns
+    ok = evaluate("documented", 20, seed=4)
+    assert sum("lens model" in " ".join(r["flags"]) for r in ok) <= 2
+
+
+def test_solve_k1_recovers_the_distortion():
+    cam, uv, xyz = _scene(n=20)
+    p = cam.params.copy()
+    p[P.K1] = -0.02
+    uvd = general.project(p, xyz).uv_px
+    K = np.array([[cam.params[P.FX], 0, cam.params[P.CX]], [0, cam.params[P.FY], cam.params[P.CY]], [0, 0, 1]])
+    intr = Intrinsics(K, np.zeros(5), SIZE)
+    with pytest.warns(ConsistencyWarning):
+        s0 = solve_gcp(GCPSet(uvd, xyz, 0.5, 0.0), SIZE, intrinsics=intr, leave_one_out=False)
+    assert any(f.startswith("lens model") for f in s0.flags) and not s0.usable
+    s1 = solve_gcp(GCPSet(uvd, xyz, 0.5, 0.0), SIZE, intrinsics=intr, leave_one_out=False, solve_k1=True)
+    assert s1.estimated[-1] == "k1" and s1.params[P.K1] == pytest.approx(-0.02, abs=1e-9)
+    np.testing.assert_allclose(s1.params[POSE], p[POSE], atol=1e-6)
+    assert s1.usable, s1.flags
+
+
+def test_other_pose_minimum_is_reported():
+    # 4 coplanar points near the image centre seen almost head-on: the two IPPE poses fit about equally
+    cam = PanTiltCamera(focal_px=1400, image_size_px=SIZE, height_m=10.0, pan_deg=0, tilt_deg=80,
+                        position_m=(0.0, 0.0))
+    uv = np.array([[930.0, 510.0], [990.0, 512.0], [992.0, 570.0], [928.0, 568.0]])
+    xyz = np.column_stack([cam.backproject(uv).xy_world_m, np.zeros(4)])
+    rng = np.random.default_rng(1)
+    s = solve_gcp(GCPSet(general.project(cam.params, xyz).uv_px + rng.normal(0, 0.5, (4, 2)), xyz, 0.5, 0.0), SIZE,
+                  intrinsics=Intrinsics(cam.K, np.zeros(5), SIZE), leave_one_out=False)
+    assert s.alternatives, "the second IPPE minimum"
+    a = s.alternatives[0]
+    assert a["delta_chi2"] >= 0 and a["distance_sigma"] > 1
+    assert any(f.startswith("ambiguous pose") for f in s.flags)
+    assert not s.usable
+
+
+def test_support_and_locate_with_the_gcp_summary(tmp_path):
+    cam, uv, xyz = _scene()
+    rng = np.random.default_rng(2)
+    pts = _write_csv(tmp_path / "g.csv", ["u_px", "v_px", "x_m", "y_m", "z_m"],
+                     np.column_stack([uv + rng.normal(0, 1, uv.shape), xyz]).tolist())
+    sol = run_gcp(pts, "1920x1080", tmp_path / "o")["solution"]
+    sup = sol.support(sol.gcps.uv_px)
+    assert sup["inside_hull"].all() and np.max(sup["leverage_ratio"]) <= 1.0 + 1e-9
+    inside, outside = [float(v) for v in sol.gcps.uv_px.mean(0)], [960.0, 300.0]  # the points are all v > 560
+    args = ["locate", "--camera", str(tmp_path / "o" / "camera.yaml"), "--budget", str(tmp_path / "o" / "budget.yaml"),
+            "--pixel", *map(str, inside), "--pixel", *map(str, outside)]
+    r = CliRunner().invoke(main, args + ["--gcp-summary", str(tmp_path / "o" / "summary.json")])
+    assert r.exit_code == 0, r.output
+    import json
+
+    recs = json.loads(r.stdout)
+    assert recs[0]["gcp_inside_hull"] and recs[0]["gcp_supported"]
+    assert not recs[1]["gcp_inside_hull"] and recs[1]["gcp_leverage_ratio"] > 1 and not recs[1]["gcp_supported"]
+    assert "outside the control points' support" in r.stderr
+    r = CliRunner().invoke(main, args + ["--gcp-summary", str(tmp_path / "o" / "summary.json"), "--format", "csv"])
+    assert r.exit_code == 0 and r.stdout.splitlines()[0].endswith("gcp_inside_hull,gcp_leverage_ratio,gcp_supported")
+    # the map: gcp_support.npz on the map's pixel grid
+    r = CliRunner().invoke(main, ["map", "--camera", str(tmp_path / "o" / "camera.yaml"), "--budget",
+                                  str(tmp_path / "o" / "budget.yaml"), "--out", str(tmp_path / "m"), "--step-px", "40",
+                                  "--gcp-summary", str(tmp_path / "o" / "summary.json")])
+    assert r.exit_code == 0, r.output
+    z = np.load(tmp_path / "m" / "gcp_support.npz")
+    uvm = np.stack([z["u_px"], z["v_px"]], -1)
+    ref = sol.support(uvm)
+    np.testing.assert_array_equal(z["inside_hull"], ref["inside_hull"])
+    np.testing.assert_allclose(z["leverage_ratio"], ref["leverage_ratio"], rtol=1e-9)
+    assert z["supported"].any() and not z["supported"].all()
+    # a summary of another solve is refused (the budget is named after its own solve)
+    other = _write_csv(tmp_path / "g2.csv", ["u_px", "v_px", "x_m", "y_m", "z_m"],
+                       np.column_stack([uv + rng.normal(0, 1, uv.shape), xyz]).tolist())
+    run_gcp(other, "1920x1080", tmp_path / "o2")
+    r = CliRunner().invoke(main, args + ["--gcp-summary", str(tmp_path / "o2" / "summary.json")])
+    assert r.exit_code == 2 and "budget's own solve" in r.output, r.output

@@ -8,12 +8,14 @@ centre, no distortion).
 
 Solve
 -----
-Start: OpenCV's SQPnP, EPnP and (coplanar points) IPPE solutions, each refined by
+Starts: the PnP solution family -- OpenCV's SQPnP, EPnP and IPPE (both planar solutions; on
+the points flattened to ``z = 0`` for uneven ground), each refined by
 :func:`cv2.solvePnPRefineLM`; candidates putting a point behind the camera or the camera
-below the ground plane are dropped and the one with the smallest reprojection error kept
-(without intrinsics: the same over a grid of focal lengths).  Then a Levenberg-Marquardt
-refinement in the library's own parameters (``x_m, y_m, height_m, pan_rad, tilt_rad,
-roll_rad`` [, the focal length, moving ``fx_px`` and ``fy_px`` together]) with the
+below the ground plane are dropped, up to :data:`MAX_STARTS` distinct ones kept (without
+intrinsics: the same over a grid of focal lengths).  Then a Levenberg-Marquardt refinement
+from every start at once in the library's own parameters (``x_m, y_m, height_m, pan_rad,
+tilt_rad, roll_rad`` [, the focal length, moving ``fx_px`` and ``fy_px`` together] [, ``k1``:
+with ``solve_k1``, or without intrinsics under a zero-mean prior of ``lens_k1_sigma``]) with the
 library's own projection (:func:`footprint_uq.cameras.general.project`) minimises
 
     sum_i r_i^T S_i^-1 r_i,   r_i = uv_i - project(xyz_i),
@@ -34,52 +36,82 @@ parameter vector and ``B = A G + E_int`` (``E_int`` placing the intrinsics).  Th
 sigmas are used as they are (not rescaled by the residuals); the reduced chi-square of the
 fit says whether they were realistic.  Ground-plane parameters are 0: the GCPs define the
 ground ``z = 0`` of W.
+
+Weak geometry
+-------------
+:func:`_diagnose` flags a result it cannot support (``GCPSolution.flags``, ``usable``): another
+minimum within :data:`AMBIGUOUS_DELTA_CHI2`; the k1 score test (known lens); the chi-square and
+the normalised leave-one-out residuals; a cost that is not quadratic over the 95 % region
+(:func:`_nonlinearity`, which inflates the covariance where that suffices).  docs/calibration.md,
+section 5, has the measured table.  Support of a pixel: :mod:`footprint_uq.products.gcp_support`.
 """
 
 from __future__ import annotations
 
 import csv
-import io
-import json
+import hashlib
 import math
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import cv2
-import matplotlib.pyplot as plt
 import numpy as np
-import yaml
 from scipy.stats import chi2
 
 from .. import params as P
 from .._checks import check_cov
 from ..cameras import general
+from ..cameras.lens_domain import lens_domain
 from ..cameras.opencv import OpenCVCamera
 from ..cameras.rotation import R_W_C, pan_tilt_roll_from_R_W_C
 from ..errors import ConsistencyWarning, InputError
-from ..io._common import sanitize
-from ..io.atomic import atomic_write_text
-from ..io.camera_files import camera_to_dict
+from ..products.gcp_support import leverage_px2, support_of
 from ..products.geo import GeoReference
-from ..uncertainty.budget import ErrorBudget, load_budget
-from ..viz.gcp import gcp_report_html, plot_gcp
-from ..viz.maps import save_figure
+from ..uncertainty.budget import MAX_SIGMA, ErrorBudget
 from .extrinsics import load_intrinsics
 
-__all__ = ["GCPSet", "GCPSolution", "read_gcp_csv", "solve_gcp", "run_gcp", "POSE_NAMES", "GCP_COLUMNS"]
+__all__ = ["GCPSet", "GCPSolution", "read_gcp_csv", "solve_gcp", "POSE_NAMES", "GCP_COLUMNS", "MAX_POINTS"]
 
 #: the estimated pose parameters, in :data:`footprint_uq.params.PARAM_NAMES` order
 POSE_NAMES = ("x_m", "y_m", "height_m", "pan_rad", "tilt_rad", "roll_rad")
 #: columns a GCP CSV may have
 GCP_COLUMNS = ("name", "u_px", "v_px", "x_m", "y_m", "z_m", "lat_deg", "lon_deg", "alt_m", "sigma_px", "sigma_m")
 _POSE_IDX = P.param_index(POSE_NAMES)
-_INT_IDX = np.arange(P.SKEW + 1 + 8)  # fx .. k6: the 13 intrinsic parameters
+#: indices of the 13 intrinsic parameters fx_px .. k6 in the parameter vector
+INTRINSIC_IDX = np.arange(P.SKEW + 1 + 8)
+_INT_IDX = INTRINSIC_IDX
 MIN_POINTS_POSE = 4
 MIN_POINTS_FOCAL = 6
 _CONV_SIGMA = 1e-6  # stop when the Gauss-Newton step is below this many standard deviations
 _ROUNDOFF_SIGMA = 1e-3  # ... or below this many when no step lowers the cost (round-off limited)
 _COLLINEAR_RTOL = 1e-3  # second singular value / first below this: the points are on one line
+#: most ground control points one solve takes (the solve is O(N) in memory and time; beyond this a
+#: table is a point cloud, not a survey: thin it)
+MAX_POINTS = 10_000
+#: smallest non-zero point sigma (px or m); below it the weights 1/sigma^2 overflow the normal matrix
+MIN_POINT_SIGMA = 1e-6
+#: largest point sigma (px or m): the budget files' limit (:data:`footprint_uq.uncertainty.budget.MAX_SIGMA`)
+MAX_POINT_SIGMA = MAX_SIGMA
+#: leave-one-out re-solves only up to this many points (above it the linearised leave-one-out residuals alone)
+MAX_LOO_POINTS = 400
+#: an other pose minimum whose cost exceeds the best one's by less than this is reported as ambiguous
+AMBIGUOUS_DELTA_CHI2 = 25.0
+#: p-values below which the residual tests (chi-square, normalised leave-one-out) flag the result
+RESIDUAL_TEST_P = 1e-3
+#: p-value below which the k1 score test flags the lens model
+LENS_TEST_P = 1e-2
+#: largest covariance inflation for a cost that rises slower than quadratic; beyond it the result is flagged
+MAX_INFLATION = 4.0
+#: largest ratio of the cost's rise to its quadratic model on the 95 % region's axes; beyond it the result is flagged
+MAX_COST_RATIO = 2.0
+#: without intrinsics the lens is unknown: k1 is solved with a zero-mean prior of this standard deviation
+LENS_K1_SIGMA = 0.1
+MAX_STARTS = 4  # distinct PnP starts refined by Levenberg-Marquardt (the other pose minima among them)
+_LOO_CHUNK = 200_000  # problems x points per batched leave-one-out run (bounds its memory to ~100 MB)
+#: lat/lon tables: farthest point from the origin of W (m); the local frame ignores the Earth's curvature
+#: (0.31 m drop at 2 km)
+MAX_ORIGIN_DISTANCE_M = 2000.0
 
 
 # ---------------------------------------------------------------------------------------------
@@ -157,7 +189,10 @@ def read_gcp_csv(path, *, pixel_sigma_px: float = 1.0, survey_sigma_m: float = 0
         raise InputError("--points", str(p), f"a readable CSV file ({e.strerror or e})") from None
     except UnicodeDecodeError:
         raise InputError("--points", str(p), "a UTF-8 text CSV file") from None
-    rows = list(csv.reader(line for line in text.splitlines() if line.strip() and not line.lstrip().startswith("#")))
+    lines = [line for line in text.splitlines() if line.strip() and not line.lstrip().startswith("#")]
+    if len(lines) - 1 > MAX_POINTS:
+        raise InputError(f"{p}: rows", len(lines) - 1, f"at most {MAX_POINTS} ground control points (thin the table)")
+    rows = list(csv.reader(lines))
     if not rows:
         raise InputError(str(p), "an empty file", "a header row u_px, v_px, x_m, y_m[, z_m] and one row per point")
     header = [h.strip().lower() for h in rows[0]]
@@ -203,9 +238,14 @@ def read_gcp_csv(path, *, pixel_sigma_px: float = 1.0, survey_sigma_m: float = 0
             raise InputError(f"{p}: lat_deg/lon_deg", (lat.tolist()[:3], lon.tolist()[:3]),
                              "latitudes in [-90, 90] and longitudes in [-180, 180] degrees")
         olat = float(np.mean(lat)) if origin_lat_deg is None else float(origin_lat_deg)
-        olon = float(np.mean(lon)) if origin_lon_deg is None else float(origin_lon_deg)
+        olon = _mean_longitude_deg(lon) if origin_lon_deg is None else float(origin_lon_deg)
         g = GeoReference(origin_lat_deg=olat, origin_lon_deg=olon)
         xy = g.from_wgs84(lat, lon)
+        far = np.flatnonzero(~(np.hypot(*xy.T) <= MAX_ORIGIN_DISTANCE_M))
+        if far.size:
+            raise InputError(f"{p}: row {far[0] + 2} lat_deg/lon_deg",
+                             f"{float(np.hypot(*xy[far[0]])):.4g} m from the origin ({olat:.6f}, {olon:.6f})",
+                             f"points within {MAX_ORIGIN_DISTANCE_M:g} m of the origin (the local frame is flat)")
         if "alt_m" in a:
             oalt = float(np.median(a["alt_m"])) if origin_alt_m is None else float(origin_alt_m)
             z = a["alt_m"] - oalt
@@ -218,25 +258,41 @@ def read_gcp_csv(path, *, pixel_sigma_px: float = 1.0, survey_sigma_m: float = 0
             georef["origin_alt_m"] = oalt
     spx = a.get("sigma_px", np.full(n, float(pixel_sigma_px)))
     sm = a.get("sigma_m", np.full(n, float(survey_sigma_m)))
-    for name, s in (("sigma_px", spx), ("sigma_m", sm)):
-        bad = np.flatnonzero(~(s >= 0))
-        if bad.size:
-            raise InputError(f"{p}: row {bad[0] + 2} {name}", float(s[bad[0]]), "a standard deviation >= 0")
-    if np.any(spx + sm <= 0):
-        k = int(np.flatnonzero(spx + sm <= 0)[0])
-        raise InputError(f"{p}: row {k + 2} sigma_px/sigma_m", (0.0, 0.0), "pixel or survey noise > 0")
+    _check_sigmas(spx, sm, lambda k: f"{p}: row {k + 2}")
     return GCPSet(uv, xyz, spx, sm, names, georef)
+
+
+def _mean_longitude_deg(lon_deg) -> float:
+    """The circular mean of longitudes (degrees, in [-180, 180)): right on both sides of 180 deg."""
+    lam = np.deg2rad(np.asarray(lon_deg, dtype=np.float64))
+    m = math.degrees(math.atan2(float(np.mean(np.sin(lam))), float(np.mean(np.cos(lam)))))
+    return float((m + 180.0) % 360.0 - 180.0)
+
+
+def _check_sigmas(sigma_px, sigma_m, where) -> None:
+    """Each sigma 0 or in [MIN_POINT_SIGMA, MAX_POINT_SIGMA], and not both 0; ``where(k)`` names point k."""
+    lo, hi = MIN_POINT_SIGMA, MAX_POINT_SIGMA
+    for name, s in (("sigma_px", sigma_px), ("sigma_m", sigma_m)):
+        bad = np.flatnonzero(~((s == 0) | ((s >= lo) & (s <= hi))))
+        if bad.size:
+            raise InputError(f"{where(bad[0])} {name}", float(s[bad[0]]),
+                             f"a standard deviation of 0 or in [{lo:g}, {hi:g}]")
+    both = np.flatnonzero((sigma_px == 0) & (sigma_m == 0))
+    if both.size:
+        raise InputError(f"{where(both[0])} sigma_px/sigma_m", (0.0, 0.0), "pixel or survey noise > 0")
 
 
 # ---------------------------------------------------------------------------------------------
 # checks
 # ---------------------------------------------------------------------------------------------
-def _check_geometry(uv, xyz, image_size_px, estimate_focal):
+def _check_geometry(uv, xyz, image_size_px, estimate_focal, extra: int = 0):
     n = len(uv)
-    need = MIN_POINTS_FOCAL if estimate_focal else MIN_POINTS_POSE
+    need = (MIN_POINTS_FOCAL if estimate_focal else MIN_POINTS_POSE) + extra
     if n < need:
         what = "focal length and pose (no intrinsics given)" if estimate_focal else "a pose"
         raise InputError("ground control points", n, f"at least {need} points for {what}")
+    if n > MAX_POINTS:
+        raise InputError("ground control points", n, f"at most {MAX_POINTS} points (thin the table)")
     bad = np.flatnonzero(~np.isfinite(uv).all(-1) | ~np.isfinite(xyz).all(-1))
     if bad.size:
         raise InputError(f"ground control point {bad[0] + 1}", (uv[bad[0]].tolist(), xyz[bad[0]].tolist()),
@@ -263,9 +319,9 @@ def _coplanar(xyz) -> bool:
 # ---------------------------------------------------------------------------------------------
 # parameters
 # ---------------------------------------------------------------------------------------------
-def _param_map(estimate_focal: bool) -> np.ndarray:
-    """``A`` (22, k): theta -> parameter increments (focal first when estimated)."""
-    k = 6 + int(estimate_focal)
+def _param_map(estimate_focal: bool, estimate_k1: bool = False) -> np.ndarray:
+    """``A`` (22, k): theta -> parameter increments (focal first when estimated, k1 last when estimated)."""
+    k = 6 + int(estimate_focal) + int(estimate_k1)
     A = np.zeros((P.N_PARAMS, k))
     j = 0
     if estimate_focal:
@@ -273,6 +329,8 @@ def _param_map(estimate_focal: bool) -> np.ndarray:
         j = 1
     for i, idx in enumerate(_POSE_IDX):
         A[idx, j + i] = 1.0
+    if estimate_k1:
+        A[P.K1, -1] = 1.0
     return A
 
 
@@ -305,13 +363,14 @@ def _pnp_candidates(xyz, uv, K, dist):
     obj = np.ascontiguousarray(xyz, dtype=np.float64).reshape(-1, 1, 3)
     img = np.ascontiguousarray(uv, dtype=np.float64).reshape(-1, 1, 2)
     dist = np.asarray(dist, dtype=np.float64)
-    flags = [cv2.SOLVEPNP_SQPNP, cv2.SOLVEPNP_EPNP]
-    if _coplanar(xyz):
-        flags.append(cv2.SOLVEPNP_IPPE)
+    flat = obj.copy()
+    flat[..., 2] = 0.0  # planar starts even for uneven ground: IPPE's two solutions are the two pose minima
+    runs = [(cv2.SOLVEPNP_SQPNP, obj), (cv2.SOLVEPNP_EPNP, obj)]
+    runs += [(cv2.SOLVEPNP_IPPE, obj)] if _coplanar(xyz) else [(cv2.SOLVEPNP_IPPE, flat)]
     out = []
-    for fl in flags:
+    for fl, o in runs:
         try:
-            n, rvecs, tvecs, _ = cv2.solvePnPGeneric(obj, img, K, dist, flags=fl)
+            n, rvecs, tvecs, _ = cv2.solvePnPGeneric(o, img, K, dist, flags=fl)
         except cv2.error:
             continue
         for rv, tv in zip(rvecs[:n], tvecs[:n], strict=True):
@@ -330,10 +389,10 @@ def _pnp_candidates(xyz, uv, K, dist):
     return out
 
 
-def _best_candidate(cands):
+def _usable_candidates(cands):
     ok = [c for c in cands if c[3] == 0 and not c[4] and np.isfinite(c[2])]
     if ok:
-        return min(ok, key=lambda c: c[2])
+        return sorted(ok, key=lambda c: c[2])
     if any(c[3] == 0 for c in cands):
         raise InputError("ground control points", "every pose that fits puts the camera below the ground plane z = 0",
                          "world heights (z_m / alt_m) relative to the ground, and pixels matching their points")
@@ -341,43 +400,74 @@ def _best_candidate(cands):
                      "pixels matching their world points (check the order of the rows and of u/v, x/y)")
 
 
-def _initial_params(uv, xyz, image_size_px, K, dist):
-    """Starting parameter vector (22,): PnP with K, or the best of a grid of focal lengths."""
+def _initial_params(uv, xyz, image_size_px, K, dist, max_starts: int = MAX_STARTS) -> np.ndarray:
+    """Starting parameter vectors (S, 22), best first: the PnP solution family with K (SQPnP, EPnP, and
+    IPPE's two planar solutions on the points and on the points flattened to z = 0), or with K from a grid
+    of focal lengths; every distinct start up to ``max_starts`` (the other pose minima are among them)."""
     if K is not None:
-        R, t, *_ = _best_candidate(_pnp_candidates(xyz, uv, K, dist))
-        return _params_from_Rt(K, dist, R, t)
-    w, h = image_size_px
-    best, cands_all = None, []
-    for hfov in np.deg2rad(np.linspace(8.0, 140.0, 45)):
-        f = (w / 2.0) / math.tan(hfov / 2.0)
-        Kf = np.array([[f, 0.0, (w - 1) / 2.0], [0.0, f, (h - 1) / 2.0], [0.0, 0.0, 1.0]])
-        cands = _pnp_candidates(xyz, uv, Kf, np.zeros(5))
-        cands_all += cands
-        ok = [c for c in cands if c[3] == 0 and not c[4] and np.isfinite(c[2])]
-        if ok:
-            c = min(ok, key=lambda c: c[2])
-            if best is None or c[2] < best[0]:
-                best = (c[2], Kf, c[0], c[1])
-    if best is None:
-        _best_candidate(cands_all)  # raises naming the cause
-    _, Kf, R, t = best
-    return _params_from_Rt(Kf, np.zeros(5), R, t)
+        grid = [(K, dist)]
+    else:
+        w, h = image_size_px
+        grid = []
+        for hfov in np.deg2rad(np.linspace(8.0, 140.0, 45)):
+            f = (w / 2.0) / math.tan(hfov / 2.0)
+            grid.append((np.array([[f, 0.0, (w - 1) / 2.0], [0.0, f, (h - 1) / 2.0], [0.0, 0.0, 1.0]]), np.zeros(5)))
+    cands = []
+    for Kg, dg in grid:
+        cands += [(c, Kg, dg) for c in _pnp_candidates(xyz, uv, Kg, dg)]
+    ok = {id(c) for c in _usable_candidates([c for c, _, _ in cands])}
+    ranked = sorted([t for t in cands if id(t[0]) in ok], key=lambda t: t[0][2])
+    starts = []
+    for c, Kg, dg in ranked:
+        p = _params_from_Rt(Kg, dg, c[0], c[1])
+        if not any(np.abs(p - q)[[P.XM, P.YM, P.HM]].max() < 1e-3 * (1 + np.abs(q[P.HM])) and
+                   np.abs(p - q)[[P.PAN, P.TILT, P.ROLL]].max() < 1e-4 for q in starts):
+            starts.append(p)
+        if len(starts) >= max_starts:
+            break
+    return np.array(starts)
 
 
 # ---------------------------------------------------------------------------------------------
 # Levenberg-Marquardt on the library's parameters, batched over problems
 # ---------------------------------------------------------------------------------------------
+def _project_batch(params, xyz):
+    """``general.project`` of B parameter vectors (B, 22) over points (1 or B, N, 3), with gradients.
+
+    The lens's valid domain is that of the coefficients rounded to 1e-3 (a domain is built per distinct
+    lens, ~20 ms: one per Levenberg-Marquardt step when k1 is solved); the fold of a lens moves
+    smoothly with its coefficients, far outside the image for such a change.
+    """
+    dq = np.round(params[:, P.DIST_SLICE], 3)
+    if not np.isfinite(dq).all():
+        return general.project(params[:, None, :], xyz, get_gradients=True)
+    uniq, inv = np.unique(dq, axis=0, return_inverse=True)
+    inv = inv.ravel()
+    if len(uniq) == 1:
+        return general.project(params[:, None, :], xyz, get_gradients=True, domain=lens_domain(uniq[0]))
+    parts = [(np.flatnonzero(inv == j), u) for j, u in enumerate(uniq)]
+    subs = [general.project(params[rows, None, :], xyz if xyz.shape[0] == 1 else xyz[rows], get_gradients=True,
+                            domain=lens_domain(u)) for rows, u in parts]
+    fields = []
+    for f in range(len(subs[0])):
+        out = np.empty((len(params),) + subs[0][f].shape[1:], subs[0][f].dtype)
+        for (rows, _), sub in zip(parts, subs, strict=True):
+            out[rows] = sub[f]
+        fields.append(out)
+    return general.Projection(*fields)
+
+
 def _point_covariance(params, xyz, s_px2, s_m2, mask):
     """Per-point residual covariance ``S`` (B, N, 2, 2): pixel noise plus survey noise mapped by d uv / d xyz."""
-    pr = general.project(params[:, None, :], xyz, get_gradients=True)
+    pr = _project_batch(params, xyz)
     Jx = np.where((mask & pr.valid)[..., None, None], pr.duv_dxyz, 0.0)
     S = s_px2[..., None, None] * np.eye(2) + s_m2[..., None, None] * (Jx @ np.swapaxes(Jx, -1, -2))
     return np.where(mask[..., None, None], S, np.eye(2))
 
 
-def _normal_equations(params, uv, xyz, S, mask, A):
+def _normal_equations(params, uv, xyz, S, mask, A, prior=None):
     """Cost (B,), normal matrix H (B, k, k), gradient g (B, k), ok (B,) and the per-point pieces, for fixed S."""
-    pr = general.project(params[:, None, :], xyz, get_gradients=True)
+    pr = _project_batch(params, xyz)
     ok = (pr.valid | ~mask).all(-1)
     r = np.where(mask[..., None], uv - pr.uv_px, 0.0)
     det = S[..., 0, 0] * S[..., 1, 1] - S[..., 0, 1] * S[..., 1, 0]
@@ -389,24 +479,45 @@ def _normal_equations(params, uv, xyz, S, mask, A):
     H = np.einsum("bnik,bnil->bkl", Jt, SiJ)
     g = np.einsum("bnik,bni->bk", SiJ, r)
     cost = np.einsum("bni,bnij,bnj->b", r, Si, r)
+    if prior is not None:  # a Gaussian prior on theta: mean (k,), precision (k,) (0 where none)
+        d = prior[0] - params @ np.linalg.pinv(A).T
+        cost = cost + np.sum(prior[1] * d * d, -1)
+        H = H + np.diag(prior[1])
+        g = g + prior[1] * d
     cost = np.where(ok, cost, np.inf)
     return cost, H, g, ok, (r, Si, Jp, SiJ)
 
 
-def _gn_step_sigma(H, g):
-    """Largest Gauss-Newton step component in standard deviations (B,)."""
+def _pinv(H):
+    """``pinv`` of each (k, k) matrix of H (B, k, k); NaN where H is not finite (never an SVD failure)."""
+    fin = np.isfinite(H).all((-1, -2))
+    out = np.full_like(H, np.nan)
     with np.errstate(all="ignore"):
-        Hi = np.linalg.pinv(H)
+        try:
+            out[fin] = np.linalg.pinv(H[fin])
+        except np.linalg.LinAlgError:  # SVD did not converge on one of them (extreme scaling): one by one
+            for b in np.flatnonzero(fin):
+                try:
+                    out[b] = np.linalg.pinv(H[b])
+                except np.linalg.LinAlgError:
+                    pass
+    return out
+
+
+def _gn_step_sigma(H, g):
+    """Largest Gauss-Newton step component in standard deviations (B,); inf where H or g is not finite."""
+    Hi = _pinv(H)
+    with np.errstate(all="ignore"):
         gn = np.einsum("bkl,bl->bk", Hi, g)
         sig = np.sqrt(np.clip(np.diagonal(Hi, axis1=1, axis2=2), 1e-300, None))
         out = np.max(np.abs(gn) / sig, -1)
     return np.where(np.isfinite(out), out, np.inf)
 
 
-def _lm_fixed(theta, base, A, uv, xyz, S, mask, max_iter, active0):
+def _lm_fixed(theta, base, A, uv, xyz, S, mask, max_iter, active0, prior=None):
     """Levenberg-Marquardt with the point covariances S held fixed; B problems at once."""
     B, k = theta.shape
-    cost, H, g, _, _ = _normal_equations(base + theta @ A.T, uv, xyz, S, mask, A)
+    cost, H, g, _, _ = _normal_equations(base + theta @ A.T, uv, xyz, S, mask, A, prior)
     lam = np.full(B, 1e-3)
     conv = ~active0.copy()
     failed = active0 & ~np.isfinite(cost)
@@ -420,10 +531,10 @@ def _lm_fixed(theta, base, A, uv, xyz, S, mask, max_iter, active0):
         iters += active
         D = np.diagonal(H, axis1=1, axis2=2)[:, None, :] * eye + 1e-300 * eye
         with np.errstate(all="ignore"):
-            step = np.einsum("bkl,bl->bk", np.linalg.pinv(H + lam[:, None, None] * D), g)
+            step = np.einsum("bkl,bl->bk", _pinv(H + lam[:, None, None] * D), g)
         step = np.where(active[:, None] & np.isfinite(step).all(-1, keepdims=True), step, 0.0)
         new = theta + step
-        c2, H2, g2, ok2, _ = _normal_equations(base + new @ A.T, uv, xyz, S, mask, A)
+        c2, H2, g2, ok2, _ = _normal_equations(base + new @ A.T, uv, xyz, S, mask, A, prior)
         better = active & ok2 & (c2 <= cost)
         theta[better], cost[better], H[better], g[better] = new[better], c2[better], H2[better], g2[better]
         lam = np.where(better, np.maximum(lam / 10.0, 1e-12), np.where(active, lam * 10.0, lam))
@@ -434,7 +545,7 @@ def _lm_fixed(theta, base, A, uv, xyz, S, mask, max_iter, active0):
     return theta, conv & ~failed, iters
 
 
-def _lm(theta, base, A, uv, xyz, s_px2, s_m2, mask, max_iter=100, max_outer=20):
+def _lm(theta, base, A, uv, xyz, s_px2, s_m2, mask, max_iter=100, max_outer=20, prior=None):
     """Minimise the effective-variance cost for B problems at once.
 
     The point covariances S depend (weakly) on the pose through d uv / d xyz: they are held
@@ -452,20 +563,20 @@ def _lm(theta, base, A, uv, xyz, s_px2, s_m2, mask, max_iter=100, max_outer=20):
     tol = _CONV_SIGMA
     for _ in range(max_outer):
         S = _point_covariance(base + theta @ A.T, xyz, s_px2, s_m2, mask)
-        _, H, g, ok, _ = _normal_equations(base + theta @ A.T, uv, xyz, S, mask, A)
+        _, H, g, ok, _ = _normal_equations(base + theta @ A.T, uv, xyz, S, mask, A, prior)
         done = ok & (_gn_step_sigma(H, g) < tol)
         conv |= active & done
         active &= ~done
         if not active.any():
             break
         before = theta.copy()
-        theta, c, it = _lm_fixed(theta, base, A, uv, xyz, S, mask, max_iter, active)
+        theta, c, it = _lm_fixed(theta, base, A, uv, xyz, S, mask, max_iter, active, prior)
         iters += it
         still = np.all(theta == before, -1)  # converged without moving: at the round-off limit
         conv |= active & c & still
         active &= c & ~still  # a failed inner run stays failed
     S = _point_covariance(base + theta @ A.T, xyz, s_px2, s_m2, mask)
-    ne = _normal_equations(base + theta @ A.T, uv, xyz, S, mask, A)
+    ne = _normal_equations(base + theta @ A.T, uv, xyz, S, mask, A, prior)
     return theta, conv, iters, ne
 
 
@@ -523,6 +634,42 @@ class GCPSolution:
     loo_residual_px: np.ndarray | None = None
     loo_ground_error_m: np.ndarray | None = None
     loo_status: list = field(default_factory=list)
+    param_map: np.ndarray | None = None
+    flags: list = field(default_factory=list)
+    alternatives: list = field(default_factory=list)
+    tests: dict = field(default_factory=dict)
+    loo_normalised: np.ndarray | None = None
+    nonlinearity: dict = field(default_factory=dict)
+    inflation: float = 1.0
+    prior: tuple | None = None
+    k1_prior_sigma: float | None = None
+
+    @property
+    def usable(self) -> bool:
+        """False when the solve flagged itself (``flags`` says why): its covariance cannot be trusted."""
+        return not self.flags
+
+    @property
+    def estimated_param_names(self) -> list:
+        """The solved parameters as :data:`footprint_uq.params.PARAM_NAMES` entries (focal -> ``fx_px``)."""
+        return [{"focal_px": "fx_px"}.get(n, n) for n in self.estimated]
+
+    def support(self, uv_px) -> dict:
+        """Per pixel ``(..., 2)``: how far the control points support it (module doc, *Support*).
+
+        Returns ``inside_hull`` (inside the convex hull of the control points' pixels), ``leverage_ratio``
+        (the solve's own pixel variance at the pixel's ground point, over its largest value at a control
+        point: <= 1 within the support, growing with extrapolation) and ``supported`` (either).
+        """
+        return support_of(self.params, self.cov_params, self.support_data(), uv_px)
+
+    def support_data(self) -> dict:
+        """What :func:`support_of` needs besides the camera and covariance (written to summary.json)."""
+        g = self.gcps
+        k = cv2.convexHull(np.ascontiguousarray(g.uv_px, dtype=np.float32), returnPoints=False).ravel()
+        hull = g.uv_px[k]  # the points themselves (float64), in the hull's order
+        lev = leverage_px2(self.params, self.cov_params, g.xyz_world_m)
+        return {"hull_uv_px": hull.astype(float).tolist(), "leverage_max_px2": float(np.max(lev))}
 
     @property
     def rms_px(self) -> float:
@@ -559,7 +706,10 @@ class GCPSolution:
         C = 0.5 * (C + C.T)
         desc = (f"ground-control-point solve: {len(self.gcps.uv_px)} points, RMS {self.rms_px:.3g} px, "
                 f"reduced chi-square {self.reduced_chi2:.3g}; solved {', '.join(self.estimated)}"
-                + ("; intrinsics covariance included" if self.intrinsics_cov_given else ""))
+                + ("; intrinsics covariance included" if self.intrinsics_cov_given else "")
+                + (f"; k1 with a prior sigma {self.k1_prior_sigma:g}" if self.k1_prior_sigma else "")
+                + (f"; covariance inflated x{self.inflation:.3g} (nonlinear)" if self.inflation > 1 else "")
+                + ("".join(f"; NOT USABLE: {f}" for f in self.flags)))
         return ErrorBudget(covariance_names=tuple(P.PARAM_NAMES[i] for i in idx), covariance_matrix=C, name=name,
                            description=desc)
 
@@ -583,6 +733,8 @@ class GCPSolution:
                    "du_px": self.residual_px[i, 0], "dv_px": self.residual_px[i, 1],
                    "residual_px": float(np.hypot(*self.residual_px[i])),
                    "residual_sigma": self.residual_sigma[i]}
+            if self.loo_normalised is not None:
+                row["loo_normalised"] = float(self.loo_normalised[i])
             if self.loo_residual_px is not None:
                 lr, le = self.loo_residual_px[i], self.loo_ground_error_m[i]
                 row.update({"loo_du_px": lr[0], "loo_dv_px": lr[1], "loo_residual_px": float(np.hypot(*lr)),
@@ -591,14 +743,24 @@ class GCPSolution:
             rows.append({k: (float(v) if isinstance(v, np.floating) else v) for k, v in row.items()})
         return rows
 
+    @property
+    def solve_id(self) -> str:
+        """16 hex digits naming this solve: a hash of its numbers (same inputs, same id)."""
+        data = np.concatenate([self.params, self.cov_params.ravel(), self.gcps.uv_px.ravel(),
+                               self.gcps.xyz_world_m.ravel(), [self.chi2]])
+        return hashlib.sha256(np.ascontiguousarray(data, dtype="<f8").tobytes()).hexdigest()[:16]
+
     def summary(self) -> dict:
         return {
-            "n_points": int(len(self.gcps.uv_px)), "image_size_px": list(self.image_size_px),
+            "solve_id": self.solve_id, "n_points": int(len(self.gcps.uv_px)), "image_size_px": list(self.image_size_px),
             "estimated": list(self.estimated), "rms_px": self.rms_px, "chi2": float(self.chi2), "dof": int(self.dof),
             "reduced_chi2": self.reduced_chi2, "iterations": int(self.iterations),
             "intrinsics_covariance_included": self.intrinsics_cov_given,
             "pose": self.pose_table(), "georef": dict(self.gcps.georef),
             "parameter_names": list(P.PARAM_NAMES), "cov_params": self.cov_params.tolist(),
+            "usable": self.usable, "flags": list(self.flags), "alternatives": self.alternatives,
+            "tests": self.tests, "nonlinearity": self.nonlinearity, "covariance_inflation": self.inflation,
+            "support": self.support_data(), "k1_prior_sigma": self.k1_prior_sigma,
         }
 
 
@@ -606,7 +768,7 @@ class GCPSolution:
 # the solve
 # ---------------------------------------------------------------------------------------------
 def solve_gcp(gcps: GCPSet, image_size_px, *, intrinsics=None, intrinsics_cov=None, leave_one_out: bool = True,
-              max_iter: int = 100) -> GCPSolution:
+              max_iter: int = 100, solve_k1: bool = False, lens_k1_sigma: float = LENS_K1_SIGMA) -> GCPSolution:
     """Solve the camera from ground control points (see the module doc).
 
     Parameters
@@ -625,6 +787,11 @@ def solve_gcp(gcps: GCPSet, image_size_px, *, intrinsics=None, intrinsics_cov=No
         Also re-solve without each point in turn (residuals.csv's ``loo_*`` columns).
     max_iter : int
         Levenberg-Marquardt iterations allowed.
+    solve_k1 : bool
+        Also solve the radial distortion ``k1`` freely (one more point needed).
+    lens_k1_sigma : float
+        Without intrinsics (and without ``solve_k1``): the lens is unknown, so ``k1`` is solved too with a
+        zero-mean Gaussian prior of this standard deviation (0: assume no distortion at all).
 
     Raises
     ------
@@ -633,7 +800,6 @@ def solve_gcp(gcps: GCPSet, image_size_px, *, intrinsics=None, intrinsics_cov=No
         image, every fitting pose puts points behind the camera or the camera below the
         ground, the focal length is not observable, or the solve does not converge.
     """
-
     w, h = (int(v) for v in image_size_px)
     size = (w, h)
     K = dist = None
@@ -644,65 +810,216 @@ def solve_gcp(gcps: GCPSet, image_size_px, *, intrinsics=None, intrinsics_cov=No
         K, dist = intr.K, intr.dist
     estimate_focal = K is None
     uv, xyz = gcps.uv_px, gcps.xyz_world_m
-    _check_geometry(uv, xyz, size, estimate_focal)
+    _check_geometry(uv, xyz, size, estimate_focal, int(solve_k1))
+    if not (0.0 <= lens_k1_sigma <= 1.0):
+        raise InputError("lens k1 sigma", lens_k1_sigma, "a standard deviation in [0, 1]")
+    k1_prior = estimate_focal and not solve_k1 and lens_k1_sigma > 0
+    _check_sigmas(gcps.sigma_px, gcps.sigma_m, lambda k: f"ground control point {k + 1}")
     if intrinsics_cov is not None:
         if estimate_focal:
             raise InputError("intrinsics covariance", "given without intrinsics", "intrinsics with it")
-
         intrinsics_cov = check_cov("intrinsics covariance", intrinsics_cov, 13)
-    p0 = _initial_params(uv, xyz, size, K, dist)
-    A = _param_map(estimate_focal)
-    theta0 = np.concatenate([[p0[P.FX]] if estimate_focal else [], p0[_POSE_IDX]])
-    base = np.where(np.any(A != 0, 1), 0.0, p0)
-    s_px2, s_m2 = gcps.sigma_px**2, gcps.sigma_m**2
-    mask = np.ones((1, len(uv)), bool)
-    th, conv, iters, ne = _lm(theta0[None], base[None], A, uv[None], xyz[None], s_px2[None], s_m2[None], mask,
-                              max_iter)
-    if not conv[0]:
-        raise InputError("ground control point solve", f"no convergence in {int(iters[0])} iterations",
-                         "a consistent set of points (check for mismatched or swapped rows)")
-    theta = th[0]
+    starts = _initial_params(uv, xyz, size, K, dist)
+    A = _param_map(estimate_focal, solve_k1 or k1_prior)
+    prior = None
+    if k1_prior:
+        prior = (np.zeros(A.shape[1]), np.zeros(A.shape[1]))
+        prior[1][-1] = 1.0 / lens_k1_sigma**2
+    used = np.any(A != 0, 1)
+    base = np.where(used, 0.0, starts[0])
+    theta0 = starts @ np.linalg.pinv(A).T  # the estimated parameters of each start (A's columns are 0/1)
+    minima = _minima(theta0, base, A, gcps, max_iter, prior)
+    theta, (cost, H, r, Si, Jp, SiJ), iters = minima[0]
     p = base + A @ theta
-    cost, H, _, ok, (r, Si, Jp, SiJ) = ne
-    if not ok[0]:
-        raise InputError("ground control points", "a point behind the solved camera", "points in front of the camera")
-    if p[P.HM] <= 0:
-        raise InputError("ground control point solve", f"camera height {p[P.HM]:.3g} m",
+    C_theta = _covariance_theta(H, estimate_focal)
+    cov = _full_covariance(A, C_theta, SiJ, Jp, intrinsics_cov)
+    cam = _camera_from_params(p, size)
+    uv_fit = general.project(p, xyz).uv_px
+    rs = np.sqrt(np.einsum("ni,nij,nj->n", r, Si, r))
+    names = (("focal_px",) if estimate_focal else ()) + POSE_NAMES + (("k1",) if solve_k1 or k1_prior else ())
+    dof = 2 * len(uv) - A.shape[1] + int(k1_prior)  # the prior is one more observation
+    sol = GCPSolution(cam, p, cov, names, C_theta, gcps, uv_fit, uv - uv_fit, rs, float(cost), dof, iters, size,
+                      intrinsics_cov is not None)
+    sol.param_map, sol.prior = A, prior
+    sol.k1_prior_sigma = float(lens_k1_sigma) if k1_prior else None
+    _diagnose(sol, minima, base, A, (r, Si, Jp, SiJ), test_k1=not (solve_k1 or k1_prior) and intrinsics_cov is None)
+    if leave_one_out:
+        _leave_one_out(sol, base, A, theta, max_iter, estimate_focal, prior)
+    _warn_residuals(sol)
+    return sol
+
+
+def _minima(theta0, base, A, gcps, max_iter, prior=None) -> list:
+    """Refine every start; the distinct minima ``(theta, (cost, H, r, Si, Jp, SiJ), iterations)``, best first."""
+    S = len(theta0)
+    n = len(gcps.uv_px)
+    mask = np.ones((1, n), bool)
+    th, conv, iters = np.empty_like(theta0), np.empty(S, bool), np.empty(S, int)
+    step = max(1, _LOO_CHUNK // n)  # starts per batched run: memory O(step * n)
+    for i0 in range(0, S, step):
+        sl = slice(i0, min(S, i0 + step))
+        th[sl], conv[sl], iters[sl], _ = _lm(theta0[sl], np.repeat(base[None], len(theta0[sl]), 0), A,
+                                             gcps.uv_px[None], gcps.xyz_world_m[None], gcps.sigma_px[None] ** 2,
+                                             gcps.sigma_m[None] ** 2, mask, max_iter, prior=prior)
+    ja = [int(np.argmax(A[a])) for a in (P.PAN, P.TILT, P.ROLL)]
+    for b in range(len(th)):  # the same camera in the canonical angles (|tilt| <= 90 deg, as PnP's starts)
+        if np.isfinite(th[b, ja]).all():
+            th[b, ja] = pan_tilt_roll_from_R_W_C(R_W_C(*th[b, ja]))
+    pb = np.repeat(base[None], S, 0) + th @ A.T  # the normal equations in those angles (H depends on them)
+    Sc = _point_covariance(pb, gcps.xyz_world_m[None], gcps.sigma_px[None] ** 2, gcps.sigma_m[None] ** 2, mask)
+    cost, H, _, ok, (r, Si, Jp, SiJ) = _normal_equations(pb, gcps.uv_px[None], gcps.xyz_world_m[None], Sc, mask, A,
+                                                         prior)
+    height = (base + th @ A.T)[:, P.HM]
+    good = np.flatnonzero(conv & ok & (height > 0) & np.isfinite(cost))
+    if good.size == 0:
+        if not conv.any():
+            raise InputError("ground control point solve", f"no convergence in {int(iters.max())} iterations",
+                             "a consistent set of points (check for mismatched or swapped rows)")
+        if not (conv & ok).any():
+            raise InputError("ground control points", "a point behind the solved camera",
+                             "points in front of the camera")
+        raise InputError("ground control point solve", f"camera height {height[conv][0]:.3g} m",
                          "a camera above the ground plane z = 0")
-    H = H[0]
+    out, cams = [], []
+    for b in good[np.argsort(cost[good])]:
+        d = th[b] - np.array([m[0] for m in out]) if out else np.zeros((0, th.shape[1]))
+        if out and np.min(np.einsum("mk,kl,ml->m", d, H[b], d)) < 1.0:  # within 1 sigma of a kept one: the same
+            continue
+        pb = base + A @ th[b]  # the same camera written with other angles (pan + 360 deg, ...)
+        cam = np.concatenate([R_W_C(pb[P.PAN], pb[P.TILT], pb[P.ROLL]).ravel(), pb[[P.XM, P.YM, P.HM]] * 1e-3,
+                              pb[_INT_IDX] * 1e-3])
+        if any(np.abs(cam - c).max() < 1e-7 for c in cams):
+            continue
+        cams.append(cam)
+        out.append((th[b], (float(cost[b]), H[b], r[b], Si[b], Jp[b], SiJ[b]), int(iters[b])))
+    return out
+
+
+def _covariance_theta(H, estimate_focal) -> np.ndarray:
+    """``H^-1`` (k, k) by the scaled inverse; InputError when H is not finite or its condition number > 1e12."""
     wH = np.sqrt(np.diagonal(H))
-    Hn = H / np.outer(wH, wH)
-    cond = np.linalg.cond(Hn)
+    with np.errstate(all="ignore"):
+        Hn = H / np.outer(wH, wH)
+    cond = np.linalg.cond(Hn) if np.isfinite(Hn).all() else math.inf
     if not np.isfinite(cond) or cond > 1e12:
         what = "focal length and pose" if estimate_focal else "pose"
         raise InputError("ground control points", f"normal-matrix condition number {cond:.3g}",
                          f"points that determine the {what} (spread them in depth and across the image"
                          + (", or give --intrinsics)" if estimate_focal else ")"))
-    C_theta = np.linalg.inv(Hn) / np.outer(wH, wH)
-    C_theta = 0.5 * (C_theta + C_theta.T)
+    C = np.linalg.inv(Hn) / np.outer(wH, wH)
+    return 0.5 * (C + C.T)
+
+
+def _full_covariance(A, C_theta, SiJ, Jp, intrinsics_cov) -> np.ndarray:
+    """The 22 x 22 covariance: the solve's, plus the given intrinsics' effect (module doc)."""
     cov = A @ C_theta @ A.T
     if intrinsics_cov is not None:
-        Hti = np.einsum("nik,nil->kl", SiJ[0], Jp[0][..., _INT_IDX])  # (k, 13)
-        G = -C_theta @ Hti
-        Bm = A @ G
+        Hti = np.einsum("nik,nil->kl", SiJ, Jp[..., _INT_IDX])  # (k, 13)
+        Bm = A @ (-C_theta @ Hti)
         Bm[_INT_IDX, np.arange(13)] += 1.0
         cov = cov + Bm @ intrinsics_cov @ Bm.T
-    cov = 0.5 * (cov + cov.T)
-    cam = _camera_from_params(p, size)
-    uv_fit = general.project(p, xyz).uv_px
-    res = uv - uv_fit
-    rs = np.sqrt(np.einsum("ni,nij,nj->n", r[0], Si[0], r[0]))
+    return 0.5 * (cov + cov.T)
+
+
+def _diagnose(sol, minima, base, A, pieces, *, test_k1: bool) -> None:
+    """What the solve says about its own weakness (module doc, *Weak geometry*): ``sol.flags`` (the reasons the
+    result is not usable), ``sol.alternatives``, ``sol.inflation``, ``sol.tests``, ``sol.loo_normalised``."""
+    r, Si, Jp, SiJ = pieces
     k = A.shape[1]
-    dof = 2 * len(uv) - k
-    sol = GCPSolution(cam, p, cov, (("focal_px",) if estimate_focal else ()) + POSE_NAMES, C_theta, gcps, uv_fit, res,
-                      rs, float(cost[0]), dof, int(iters[0]), size, intrinsics_cov is not None)
-    if leave_one_out:
-        _leave_one_out(sol, base, A, theta, max_iter, estimate_focal)
-    _warn_residuals(sol)
-    return sol
+    theta = minima[0][0]
+    flags, tests = [], {}
+    # other pose minima with a comparable cost
+    sol.alternatives = []
+    for th, ne, _ in minima[1:]:
+        d = th - theta
+        p_alt = base + A @ th
+        sol.alternatives.append({"delta_chi2": ne[0] - sol.chi2, "distance_sigma": float(np.sqrt(d @ ne[1] @ d)),
+                                 "pose": {n: float(p_alt[P.IDX[n]]) for n in POSE_NAMES}})
+    close = [a for a in sol.alternatives if a["delta_chi2"] < AMBIGUOUS_DELTA_CHI2]
+    if close:
+        a = close[0]
+        flags.append(f"ambiguous pose: another minimum {a['distance_sigma']:.3g} sigma away fits almost as well "
+                     f"(chi-square + {a['delta_chi2']:.3g}; {len(close)} such); add points spread across the image")
+    # the residuals: overall chi-square, normalised leave-one-out residuals, the lens (k1 score test)
+    Jt = Jp @ A
+    Pcov = Jt @ sol.cov_theta @ Jt.transpose(0, 2, 1)  # (N, 2, 2) the fit's share of each residual
+    Rcov = np.linalg.inv(Si) - Pcov
+    with np.errstate(all="ignore"):
+        t = np.einsum("ni,ni->n", r, np.linalg.solve(Rcov, r[..., None])[..., 0])
+    sol.loo_normalised = np.where(np.isfinite(t) & (t >= 0), t, np.nan)
+    if sol.dof > 0:
+        tests["chi2_p"] = float(chi2.sf(sol.chi2, sol.dof))
+        if tests["chi2_p"] < RESIDUAL_TEST_P:
+            flags.append(f"residuals: reduced chi-square {sol.reduced_chi2:.3g} (p = {tests['chi2_p']:.2g}); the "
+                         "stated sigmas are too small or a point is wrong")
+    tm = np.nanmax(sol.loo_normalised) if np.isfinite(sol.loo_normalised).any() else np.nan
+    if np.isfinite(tm) and sol.dof > 0:
+        tests["loo_max_p"] = float(min(1.0, len(r) * chi2.sf(tm, 2)))  # Bonferroni over the points
+        if tests["loo_max_p"] < RESIDUAL_TEST_P:
+            worst = sol.gcps.names[int(np.nanargmax(sol.loo_normalised))]
+            flags.append(f"outlier: point {worst}'s normalised leave-one-out residual {tm:.3g} "
+                         f"(p = {tests['loo_max_p']:.2g} over {len(r)} points)")
+    if test_k1 and sol.dof > 1:
+        jk = Jp[..., P.K1]  # (N, 2) d uv / d k1
+        sk = np.einsum("ni,nij->nj", jk, Si)
+        g = float(np.einsum("ni,ni->", sk, r))
+        cross = np.einsum("ni,nik->k", sk, Jt)
+        v = float(np.einsum("ni,ni->", sk, jk)) - cross @ sol.cov_theta @ cross
+        if v > 0:
+            tests["k1_score"] = g * g / v
+            tests["k1_p"] = float(chi2.sf(tests["k1_score"], 1))
+            if tests["k1_p"] < LENS_TEST_P:
+                flags.append(f"lens model: the residuals ask for radial distortion (k1 score test "
+                             f"{tests['k1_score']:.3g}, p = {tests['k1_p']:.2g}); solve k1 (--solve-k1) or give "
+                             "calibrated --intrinsics")
+    sol.tests = tests
+    flags.sort(key=lambda f: not f.startswith(("ambiguous", "lens model")))  # the specific diagnosis first
+    flags += _nonlinearity(sol, base, A, k)
+    sol.flags = flags
 
 
-def _leave_one_out(sol, base, A, theta, max_iter, estimate_focal):
+def _nonlinearity(sol, base, A, k) -> list:
+    """The cost at both ends of each principal axis of the 95 % region against its quadratic model.
+
+    ``ratio`` = cost rise / chi2_95 (1 for a quadratic cost).  The covariance is inflated by
+    ``max(1 / min ratio, sqrt(max over axes of the larger / smaller end's ratio))`` (a region wider than
+    its ellipse, and a lopsided one: the estimate is biased along that axis); the result is flagged
+    where the cost rises more than MAX_COST_RATIO times its model (a curved valley), or the inflation
+    would exceed MAX_INFLATION, or an end is not a camera that sees every point.
+    """
+    lam, V = np.linalg.eigh(sol.cov_theta)
+    c2 = float(chi2.ppf(0.95, k))
+    steps = np.sqrt(np.clip(lam, 0, None) * c2)[:, None] * V.T  # (k, k) rows: the axes' half-lengths
+    theta = sol.params @ np.linalg.pinv(A).T
+    g = sol.gcps
+    mask = np.ones((1, len(g.uv_px)), bool)
+    pts = base + (theta + np.concatenate([steps, -steps])) @ A.T
+    S = _point_covariance(pts, g.xyz_world_m[None], g.sigma_px[None] ** 2, g.sigma_m[None] ** 2, mask)
+    cost = _normal_equations(pts, g.uv_px[None], g.xyz_world_m[None], S, mask, A, sol.prior)[0]
+    ratio = (cost - sol.chi2) / c2
+    if not np.all(np.isfinite(ratio)):
+        sol.nonlinearity = {"cost_ratio_min": None, "cost_ratio_max": None, "lopsided": None}
+        return ["weak geometry: the 95 % region is not an ellipse (at its edge a point leaves the camera's view); "
+                "add points, spread them across the image and in depth"]
+    rp, rm = ratio[:k], ratio[k:]
+    with np.errstate(all="ignore"):
+        lop = float(np.max(np.maximum(rp, rm) / np.minimum(rp, rm)))
+    lo, hi = float(ratio.min()), float(ratio.max())
+    sol.nonlinearity = {"cost_ratio_min": lo, "cost_ratio_max": hi, "lopsided": lop}
+    if hi > MAX_COST_RATIO:
+        return [f"weak geometry: the 95 % region is not an ellipse (the cost rises {hi:.3g} times its quadratic "
+                "model along an axis: a curved valley); add points, spread them across the image and in depth"]
+    f = max(1.0, 1.0 / lo if lo > 0 else math.inf, math.sqrt(lop) if lo > 0 else math.inf)
+    if f > MAX_INFLATION:
+        return [f"weak geometry: the 95 % region is not an ellipse (its covariance would need inflating x{f:.3g}); "
+                "add points, spread them across the image and in depth"]
+    sol.inflation = f  # the solve's own share only: a given intrinsics covariance stays as given
+    sol.cov_params = sol.cov_params + (f - 1.0) * (A @ sol.cov_theta @ A.T)
+    sol.cov_theta = sol.cov_theta * f
+    return []
+
+
+def _leave_one_out(sol, base, A, theta, max_iter, estimate_focal, prior=None):
     g = sol.gcps
     n = len(g.uv_px)
     need = MIN_POINTS_FOCAL if estimate_focal else MIN_POINTS_POSE
@@ -711,11 +1028,18 @@ def _leave_one_out(sol, base, A, theta, max_iter, estimate_focal):
     if n - 1 < need:
         sol.loo_status = [f"too few points without it ({n - 1} < {need})"] * n
         return
-    mask = ~np.eye(n, dtype=bool)
-    th, conv, _, ne = _lm(np.repeat(theta[None], n, 0), np.repeat(base[None], n, 0), A,
-                          np.repeat(g.uv_px[None], n, 0), np.repeat(g.xyz_world_m[None], n, 0),
-                          np.repeat(g.sigma_px[None] ** 2, n, 0), np.repeat(g.sigma_m[None] ** 2, n, 0), mask,
-                          max_iter)
+    if n > MAX_LOO_POINTS:
+        sol.loo_status = [f"not re-solved (more than {MAX_LOO_POINTS} points)"] * n
+        return
+    th, conv = np.empty((n, len(theta))), np.empty(n, bool)
+    step = max(1, _LOO_CHUNK // n)  # problems per batched run: memory O(step * n), never O(n^2)
+    for i0 in range(0, n, step):
+        m = min(step, n - i0)
+        mask = np.ones((m, n), bool)
+        mask[np.arange(m), i0 + np.arange(m)] = False
+        th[i0:i0 + m], conv[i0:i0 + m], _, _ = _lm(
+            np.repeat(theta[None], m, 0), np.repeat(base[None], m, 0), A, g.uv_px[None], g.xyz_world_m[None],
+            g.sigma_px[None] ** 2, g.sigma_m[None] ** 2, mask, max_iter, prior=prior)
     pl = base + th @ A.T  # (n, 22)
     pred = general.project(pl, g.xyz_world_m)
     ph = pl.copy()
@@ -742,101 +1066,3 @@ def _warn_residuals(sol):
         warnings.warn(f"GCP {sol.gcps.names[worst]}: residual {sol.residual_sigma[worst]:.3g} sigma "
                       f"({np.hypot(*sol.residual_px[worst]):.3g} px); a mismatched point?",
                       ConsistencyWarning, stacklevel=3)
-
-
-# ---------------------------------------------------------------------------------------------
-# the command as a function
-# ---------------------------------------------------------------------------------------------
-def parse_image_size(text) -> tuple[int, int]:
-    """``"1920x1080"`` (or a pair) -> ``(1920, 1080)``; InputError otherwise."""
-    if isinstance(text, str):
-        parts = text.lower().replace(" ", "").split("x")
-    else:
-        parts = list(text)
-    try:
-        w, h = (int(str(v)) for v in parts)
-    except (TypeError, ValueError):
-        raise InputError("--image-size", text, "WIDTHxHEIGHT in pixels, e.g. 1920x1080") from None
-    if w <= 0 or h <= 0:
-        raise InputError("--image-size", text, "a positive width and height")
-    return w, h
-
-
-def _yaml_text(data: dict, header: str) -> str:
-
-
-    return f"# {header}\n" + yaml.safe_dump(sanitize(data), sort_keys=False, default_flow_style=None, width=100)
-
-
-def _csv_text(rows: list[dict]) -> str:
-
-    buf = io.StringIO()
-    w = csv.DictWriter(buf, fieldnames=list(rows[0]), lineterminator="\n")
-    w.writeheader()
-    for r in rows:
-        w.writerow({k: (repr(float(v)) if isinstance(v, float) else v) for k, v in r.items()})
-    return buf.getvalue()
-
-
-def _read_image(path, image_size_px):
-
-    img = cv2.imread(str(path), cv2.IMREAD_COLOR)
-    if img is None:
-        raise InputError("--image", str(path), "a readable image file")
-    if (img.shape[1], img.shape[0]) != tuple(image_size_px):
-        raise InputError("--image size", f"{img.shape[1]}x{img.shape[0]}",
-                         f"the --image-size {image_size_px[0]}x{image_size_px[1]}")
-    return img[..., ::-1]
-
-
-def run_gcp(points, image_size_px, out_dir, *, intrinsics=None, intrinsics_budget=None, pixel_sigma_px: float = 1.0,
-            survey_sigma_m: float = 0.05, origin_lat_deg=None, origin_lon_deg=None, origin_alt_m=None, image=None,
-            figures: bool = True) -> dict:
-    """The ``calibrate gcp`` command as a function: read, solve, write; returns ``{"solution", "files",
-    "warnings"}``.
-
-    Writes to ``out_dir`` (each file atomically): ``camera.yaml`` (the solved camera), ``budget.yaml``
-    (the full parameter covariance of the solve), ``residuals.csv`` (per point and leave-one-out),
-    ``summary.json``, ``gcp.png`` (points and residual arrows, ``image`` behind) and ``summary.html``.
-    """
-
-
-    size = parse_image_size(image_size_px)
-    if (origin_lat_deg is None) != (origin_lon_deg is None):
-        raise InputError("--origin-lat/--origin-lon", (origin_lat_deg, origin_lon_deg), "both or neither")
-    gcps = read_gcp_csv(points, pixel_sigma_px=pixel_sigma_px, survey_sigma_m=survey_sigma_m,
-                        origin_lat_deg=origin_lat_deg, origin_lon_deg=origin_lon_deg, origin_alt_m=origin_alt_m)
-    cov_int = None
-    if intrinsics_budget is not None:
-        if intrinsics is None:
-            raise InputError("--intrinsics-budget", str(intrinsics_budget), "--intrinsics too")
-
-        cov_int = load_budget(intrinsics_budget).param_covariance()[np.ix_(_INT_IDX, _INT_IDX)]
-    img = _read_image(image, size) if image is not None else None
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always", ConsistencyWarning)
-        sol = solve_gcp(gcps, size, intrinsics=intrinsics, intrinsics_cov=cov_int)
-    notes = [str(w.message) for w in caught if issubclass(w.category, ConsistencyWarning)]
-    for w in caught:
-        warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    files = [
-        atomic_write_text(out / "camera.yaml", _yaml_text(camera_to_dict(sol.camera),
-                                                          "footprint-uq camera file from ground control points")),
-        atomic_write_text(out / "budget.yaml", _yaml_text(sol.budget().to_dict(),
-                                                          "footprint-uq error budget: full covariance of the "
-                                                          "ground-control-point solve (docs/calibration.md)")),
-        atomic_write_text(out / "residuals.csv", _csv_text(sol.residual_rows())),
-    ]
-    summ = sol.summary()
-    summ["warnings"] = notes
-    files.append(atomic_write_text(out / "summary.json", json.dumps(summ, indent=2, allow_nan=True) + "\n"))
-    if figures:
-
-        fig = plot_gcp(sol, image=img)
-        files.append(save_figure(fig, out / "gcp.png", dpi=120))
-        files.append(atomic_write_text(out / "summary.html", gcp_report_html(sol, fig, notes)))
-
-        plt.close(fig)
-    return {"solution": sol, "files": files, "warnings": notes}

@@ -9,6 +9,7 @@ import click
 import numpy as np
 
 from ..errors import InputError
+from ..products.gcp_support import add_support, load_gcp_support
 from ..products.locate import locate_csv, locate_records
 from ..uncertainty.presets import PRESET_NAMES
 from .common import check_confidence, load_camera_and_budget, warn
@@ -33,7 +34,10 @@ MAX_PIXEL_PX = 1e9
 @click.option("--linear-threshold", type=float, default=0.05, show_default=True, metavar="E",
               help="linear_ok is true where the predicted relative error of the linear 1-sigma semi-major axis "
                    "(nonlinearity) is at most E.")
-def locate_cmd(camera_path, budget_spec, pixels, fmt, confidence, linear_threshold):
+@click.option("--gcp-summary", default=None, metavar="FILE",
+              help="summary.json of the `calibrate gcp` run the camera and budget come from: adds gcp_inside_hull, "
+                   "gcp_leverage_ratio, gcp_supported (how far the control points support each pixel).")
+def locate_cmd(camera_path, budget_spec, pixels, fmt, confidence, linear_threshold, gcp_summary):
     """Ground position (x east, y north, metres) and 2x2 covariance (m^2) of pixels.
 
     One record per --pixel: u_px, v_px, x_m, y_m, cov_m2, sigma_major_m,
@@ -57,6 +61,12 @@ def locate_cmd(camera_path, budget_spec, pixels, fmt, confidence, linear_thresho
     for i in np.flatnonzero(~camera.in_image(uv)):
         warn(f"--pixel #{i + 1} ({uv[i, 0]:g}, {uv[i, 1]:g}) is outside the {w}x{h} image; computed anyway")
     records = locate_records(camera, budget, uv, confidence=confidence, linear_threshold=linear_threshold)
+    if gcp_summary is not None:
+        add_support(records, camera, budget, load_gcp_support(gcp_summary, budget))
+        for i, r in enumerate(records):
+            if not r["gcp_supported"]:
+                warn(f"--pixel #{i + 1} ({uv[i, 0]:g}, {uv[i, 1]:g}) is outside the control points' support "
+                     f"(leverage ratio {r['gcp_leverage_ratio'] or float('inf'):.3g}): an extrapolation of the solve")
     for i, r in enumerate(records):
         if r["valid"] and not r["linear_ok"]:
             warn(f"--pixel #{i + 1} ({uv[i, 0]:g}, {uv[i, 1]:g}): linearisation error predicted "

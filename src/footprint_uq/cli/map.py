@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import click
 
+from ..products.gcp_support import load_gcp_support, save_support_map
 from ..viz.map_report import write_map_report
 from .common import check_confidence, load_camera_and_budget, warn
 
@@ -25,13 +28,20 @@ __all__ = ["map_cmd"]
                    "figures, the pixels that are not linear_ok hatched with the threshold's contour.")
 @click.option("--linear-threshold", type=float, default=0.05, show_default=True, metavar="E",
               help="linear_ok where the predicted relative error of the linear 1-sigma semi-major axis is at most E.")
-def map_cmd(camera_path, budget_spec, out_dir, step_px, max_range_m, confidence, linearity, linear_threshold):
+@click.option("--gcp-summary", default=None, metavar="FILE",
+              help="summary.json of the `calibrate gcp` run the camera and budget come from: also writes "
+                   "gcp_support.npz (inside_hull, leverage_ratio, supported per map pixel).")
+def map_cmd(camera_path, budget_spec, out_dir, step_px, max_range_m, confidence, linearity, linear_threshold,
+            gcp_summary):
     """Per-pixel uncertainty map: PNG heat maps (image and bird's-eye), GSD maps, the linearity flag, .npz
     arrays, summary.json."""
     confidence = check_confidence(confidence)
     camera, budget = load_camera_and_budget(camera_path, budget_spec)
+    support = load_gcp_support(gcp_summary, budget) if gcp_summary is not None else None
     umap, files = write_map_report(camera, budget, out_dir, step_px=step_px, max_range_m=max_range_m,
                                    confidence=confidence, linearity=linearity, linear_threshold=linear_threshold)
+    if support is not None:
+        files["gcp_support"] = save_support_map(Path(out_dir) / "gcp_support.npz", camera, budget, support, umap.uv_px)
     for p in files.values():
         click.echo(f"wrote {p}")
     s = umap.summary(confidence=confidence)

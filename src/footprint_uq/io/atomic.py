@@ -8,23 +8,32 @@ skip) and carries :data:`TMP_MARK` (``.<stem>.tmp-<hex><suffix>``), so :func:`cl
 * :func:`atomic_path` -- a context manager yielding the temporary path to write (by any
   library: matplotlib, numpy, pyarrow), committed on a clean exit;
 * :func:`atomic_write_text` / :func:`atomic_write_bytes` -- one call for small files;
-* :func:`path_component` -- a name from data (a camera id) made safe to be one path component.
+* :func:`path_component` -- a name from data (a camera id) made safe to be one path component;
+* :func:`swap_in_folder` / :func:`recover_folder` -- a folder of outputs built under a hidden name
+  (``temp_path(out)``) put in place of ``out`` as one unit (an atomic exchange where the system has
+  one), and what a killed swap left behind put right.
 """
 
 from __future__ import annotations
 
 import contextlib
+import ctypes
 import os
+import shutil
+import sys
 import uuid
 from collections.abc import Iterator
 from pathlib import Path
 from urllib.parse import quote
 
 __all__ = ["TMP_MARK", "atomic_path", "atomic_write_text", "atomic_write_bytes", "commit", "discard", "temp_path",
-           "clean_temporaries", "clean_temporaries_of", "fsync_dir", "path_component", "same_file"]
+           "clean_temporaries", "clean_temporaries_of", "fsync_dir", "path_component", "same_file", "swap_in_folder",
+           "recover_folder", "OLD_MARK"]
 
 #: part of every temporary name (``.<stem>.tmp-<hex><suffix>``)
 TMP_MARK = ".tmp-"
+#: part of the hidden name a replaced output folder has until it is removed (``.<name>.old-<hex>``)
+OLD_MARK = ".old-"
 
 
 def temp_path(final) -> Path:
@@ -154,3 +163,65 @@ def same_file(a, b) -> bool:
         return os.path.samefile(a, b)
     except OSError:
         return Path(a).absolute() == Path(b).absolute()
+
+
+def _exchange(a, b) -> bool:
+    """Swap two existing paths atomically (Linux ``renameat2(RENAME_EXCHANGE)``); False where unsupported."""
+    if not sys.platform.startswith("linux"):
+        return False
+    try:
+        fn = ctypes.CDLL(None, use_errno=True).renameat2
+    except (AttributeError, OSError):
+        return False
+    fn.argtypes = [ctypes.c_int, ctypes.c_char_p, ctypes.c_int, ctypes.c_char_p, ctypes.c_uint]
+    at_fdcwd, rename_exchange = -100, 2
+    return fn(at_fdcwd, os.fsencode(a), at_fdcwd, os.fsencode(b), rename_exchange) == 0
+
+
+def _rmtree(p: Path) -> None:
+    if p.is_dir() and not p.is_symlink():
+        shutil.rmtree(p, ignore_errors=True)
+    else:
+        discard(p)
+
+
+def swap_in_folder(staging, out, *, fsync: bool = True) -> None:
+    """Put the finished folder ``staging`` in place of the folder ``out`` as one unit.
+
+    Where the system can swap two names atomically (Linux), ``out`` holds the old folder or the new
+    one at every moment; elsewhere the old folder is first renamed to ``.<name>.old-<hex>`` and, for a
+    process killed between the two renames, :func:`recover_folder` puts it back.  The old folder is
+    removed afterwards.
+    """
+    staging, out = Path(staging), Path(out)
+    parent = out.parent if str(out.parent) else Path(".")
+    if out.exists() and _exchange(staging, out):
+        if fsync:
+            fsync_dir(parent)
+        _rmtree(staging)  # now the old folder
+        return
+    old = None
+    if out.exists():
+        old = out.with_name(f".{out.name}{OLD_MARK}{uuid.uuid4().hex[:8]}")
+        os.rename(out, old)
+    os.rename(staging, out)
+    if fsync:
+        fsync_dir(parent)
+    if old is not None:
+        _rmtree(old)
+
+
+def recover_folder(out) -> None:
+    """After a killed job on ``out``: remove its hidden staging folders, and restore the previous folder
+    if a swap was killed between its two renames (``out`` missing, ``.<name>.old-*`` present)."""
+    out = Path(out)
+    parent = out.parent if str(out.parent) else Path(".")
+    if not parent.is_dir():
+        return
+    for p in parent.glob(f".{out.name}{TMP_MARK}*"):
+        _rmtree(p)
+    olds = sorted(parent.glob(f".{out.name}{OLD_MARK}*"), key=lambda q: q.stat().st_mtime)
+    if olds and not out.exists() and olds[-1].is_dir():
+        os.rename(olds.pop(), out)
+    for p in olds:
+        _rmtree(p)

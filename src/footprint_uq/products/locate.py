@@ -118,6 +118,7 @@ def locate_csv(records: list[dict], confidence: float | None = None) -> str:
         printed in full (``repr``), ``reason`` empty for valid rows.
     """
     cols = list(CSV_KEYS) + (list(CONFIDENCE_KEYS) if confidence is not None else [])
+    cols += [k for k in records[0] if k.startswith("gcp_")] if records else []  # products.gcp_support
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(cols)

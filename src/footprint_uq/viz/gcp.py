@@ -60,12 +60,18 @@ def plot_gcp(solution, *, image=None, confidence: float = 0.95) -> Figure:
                   color="tab:purple", width=0.003, alpha=0.7, label=f"leave-one-out residual x{k:g}")
     for name, (u, v) in zip(g.names, g.uv_px, strict=True):
         ax.annotate(name, (u, v), textcoords="offset points", xytext=(5, 5), fontsize=7, color="tab:blue")
+    hull = np.asarray(s.support_data()["hull_uv_px"]) if hasattr(s, "support_data") else np.zeros((0, 2))
+    if len(hull) >= 3:  # the control points' support (pixels outside it are extrapolations)
+        ring = np.vstack([hull, hull[:1]])
+        ax.plot(ring[:, 0], ring[:, 1], "--", color="tab:gray", lw=0.8, label="hull of the points (support)")
     ax.set_xlim(-0.5, w - 0.5)
     ax.set_ylim(h - 0.5, -0.5)
     ax.set_aspect("equal")
     ax.set_xlabel("u (px)")
     ax.set_ylabel("v (px)")
-    ax.set_title(f"{len(g.uv_px)} GCPs: RMS {s.rms_px:.3g} px, reduced chi-square {s.reduced_chi2:.3g}", fontsize=10)
+    flag = "" if getattr(s, "usable", True) else "  [NOT USABLE: see the flags]"
+    ax.set_title(f"{len(g.uv_px)} GCPs: RMS {s.rms_px:.3g} px, reduced chi-square {s.reduced_chi2:.3g}{flag}",
+                 fontsize=10)
     ax.legend(fontsize=7, loc="lower left")
     # ground view
     xy, cov = s.ground_covariance_m2(g.uv_px)
