@@ -354,3 +354,34 @@ def test_releases_do_not_decode_each_other(camera, official):
         assert "lowerTriangularCorrelationMatrices" in str(rec["cpm"])
         with pytest.raises(Exception):  # noqa: B017
             check_record(rec, cdd, *official(other), dets=dets)
+
+
+@pytest.mark.parametrize("cdd", ["2.1.1", "2.2.1"])
+def test_tracked_motion_reaches_the_official_decoders(camera, official, cdd):
+    """serve --tracks end to end: the tracker's motion of each object (the record's fields) is what the CPM and the
+    SDSM carry, decoded by the official modules (velocity with confidences, yaw, objectAge; speed and heading)."""
+    svc = Service(camera, "basler1@deg", heading_offset_deg=HEADING, cpm_cdd=cdd, tracks=True)
+    rng = np.random.default_rng(5)
+    xy0 = np.array([[2.0, 30.0], [12.0, 45.0], [10.0, 25.0]])  # pan 30 deg: all three in view
+    v = np.array([[0.0, 8.0], [3.0, -1.0], [-1.5, 0.0]])
+    rec = None
+    for k in range(12):  # 12 frames at 10 Hz: every track has a velocity
+        xy = xy0 + 0.1 * k * v + rng.normal(0, 0.02, (3, 2))
+        dets = [{"object_id": f"o{j}", "class": "car", "x_m": float(xy[j, 0]), "y_m": float(xy[j, 1]), "z_m": 0.75,
+                 "length_m": 4.5, "width_m": 1.8, "height_m": 1.5, "yaw_rad": float(np.arctan2(v[j, 1], v[j, 0]))}
+                for j in range(3)]
+        rec = svc.process_frame({"camera_id": "cam", "frame": k, "timestamp_s": T0 + 0.1 * k, "detections": dets})
+    objs = rec["objects"]
+
+    def col(key):
+        return np.array([np.nan if o[key] is None else o[key] for o in objs], dtype=float)
+
+    cov = np.array([[[np.nan if c is None else c for c in row] for row in o["cov_v_m2ps2"]] for o in objs])
+    motion = ObjectMotion(col("v_east_mps"), col("v_north_mps"), cov, col("speed_mps"), col("sigma_speed_mps"),
+                          col("heading_deg"), col("sigma_heading_deg"), col("yaw_deg"), col("sigma_yaw_deg"),
+                          col("age_s"))
+    assert np.isfinite(motion.v_east_mps).all() and (motion.age_s > 1.0).all()
+    for folder in OFFICIAL[cdd]:
+        check_record(rec, cdd, *official(folder), motion=motion, dets=None)
+    pos = rec["cpm"]["payload"]["cpmContainers"][1]["containerData"]["perceivedObjects"]
+    assert all("velocity" in p and "objectAge" in p for p in pos)
