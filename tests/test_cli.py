@@ -314,7 +314,7 @@ def test_registry_loads_every_command_lazily():
     from footprint_uq.cli.calibrate import calibrate
     from footprint_uq.cli.carla import carla
 
-    names = ["calibrate", "carla", "case-study", "convert", "demo", "fuse", "locate", "map", "objects", "presets",
+    names = ["calibrate", "camera", "carla", "case-study", "convert", "demo", "fuse", "locate", "map", "objects", "presets",
              "serve"]
     assert main.list_commands(None) == names
     for name in names:

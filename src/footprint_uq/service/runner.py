@@ -505,7 +505,7 @@ def run(*, camera=None, budget=None, registry=None, camera_id: str | None = None
         origin_lat_deg: float | None = None, origin_lon_deg: float | None = None, confidence: float = 0.95,
         contact: str = "bottom-centre", allow_outside_image: bool = False, station_id: int | None = None,
         uper_encoder: str = "fast", linearity: bool = False, linear_threshold: float | None = None,
-        workers: int = 1, **serve_options) -> int:
+        workers: int = 1, pose=None, **serve_options) -> int:
     """``footprint-uq serve``: build the :class:`Service` from files (a camera file and budget, or a
     registry) and :func:`serve` it; returns the exit status.
 
@@ -513,7 +513,8 @@ def run(*, camera=None, budget=None, registry=None, camera_id: str | None = None
     worker processes (camera ``i`` of the sorted ids goes to worker ``i mod workers``), each with its
     own MQTT client (``<client_id>-w<k>``) subscribed to its cameras' topics and its own health
     records (labelled ``"k/N"``); SIGTERM/SIGINT is passed on to them and the exit status is the
-    largest of theirs.
+    largest of theirs.  ``pose`` (a pose mapping or file) completes an intrinsics-only ``camera`` file
+    (:func:`footprint_uq.io.load_camera`).
     """
     if (camera is None) == (registry is None):
         raise InputError("--camera/--registry", "both" if camera is not None else "neither",
@@ -542,7 +543,7 @@ def run(*, camera=None, budget=None, registry=None, camera_id: str | None = None
 
             if budget is None:
                 raise InputError("--budget", None, "an error budget (preset or file) for --camera")
-            cam = load_camera(camera)
+            cam = load_camera(camera, pose=pose)
         service = Service(cam, budget, registry=registry, camera_id=camera_id, heading_offset_deg=heading_offset_deg,
                           origin_lat_deg=origin_lat_deg, origin_lon_deg=origin_lon_deg, confidence=confidence,
                           contact=contact, allow_outside_image=allow_outside_image, station_id=station_id,

@@ -46,7 +46,8 @@ from .._checks import check_cov
 from ..errors import ConfigError, InputError
 from . import presets
 
-__all__ = ["ErrorBudget", "SHARED_SOURCES", "POINT_SOURCES", "SparseFactor", "load_budget", "psd_factor"]
+__all__ = ["ErrorBudget", "SHARED_SOURCES", "POINT_SOURCES", "TERM_GROUPS", "SparseFactor", "load_budget",
+           "psd_factor"]
 
 #: camera-level sources -> parameters they act on
 SHARED_SOURCES: dict[str, tuple[str, ...]] = {
@@ -61,6 +62,13 @@ SHARED_SOURCES: dict[str, tuple[str, ...]] = {
     "roll": ("roll_rad",),
     "ground_height": ("ground_dz_m",),
     "ground_slope": ("ground_slope_x", "ground_slope_y"),
+}
+#: groups of camera-level parameters a complete budget has some error on (:meth:`ErrorBudget.missing_terms`):
+#: a budget with none on one group (e.g. the one ``calibrate intrinsics`` writes: no pose, no ground error)
+#: gives the covariance of the other sources only, far smaller than a deployed camera's
+TERM_GROUPS: dict[str, tuple[str, ...]] = {
+    "extrinsic": ("x_m", "y_m", "height_m", "pan_rad", "tilt_rad", "roll_rad"),
+    "ground": ("ground_dz_m", "ground_slope_x", "ground_slope_y"),
 }
 #: per-point sources (act on the pixel)
 POINT_SOURCES = ("imaging", "resolution", "detector")
@@ -273,6 +281,17 @@ class ErrorBudget:
             if np.any(block):
                 out[name] = (idx, block)
         return out
+
+    def missing_terms(self) -> tuple[str, ...]:
+        """The groups of :data:`TERM_GROUPS` (``"extrinsic"``, ``"ground"``) this budget has no error on at all.
+
+        Empty for a complete budget (every preset).  A budget without extrinsic terms -- the one
+        ``calibrate intrinsics`` writes, say -- gives the covariance of the intrinsics (and pixel noise)
+        alone: tens of times smaller than that of a deployed camera, whose pose is never exact.
+        """
+        S = self.param_covariance()
+        return tuple(name for name, names in TERM_GROUPS.items()
+                     if not np.any(S[np.ix_(P.param_index(names), P.param_index(names))]))
 
     def table_row(self) -> dict:
         """Flat dictionary for tables (the `presets` command, reports)."""
