@@ -269,7 +269,7 @@ def projection_discrepancy_px(P_file: np.ndarray, P_model: np.ndarray, image_siz
 
 
 def check_projection_matrix(where: str, field: str, P_file: np.ndarray, camera, *, alt_K: dict | None = None,
-                            far_px: float = P_FAR_PX) -> None:
+                            far_px: float = P_FAR_PX, other_K_ok: bool = False) -> None:
     """Compare a file's 3x4 ``P`` with ``K [R | t]`` of ``camera``.
 
     ``P`` is normalised to the scale of ``K [R | t]`` (its sign and magnitude are
@@ -277,7 +277,9 @@ def check_projection_matrix(where: str, field: str, P_file: np.ndarray, camera, 
     said; otherwise the discrepancy in pixels at a few image points decides: up to
     ``far_px`` a :class:`ConsistencyWarning`, beyond a :class:`ConfigError`.  When
     ``alt_K`` maps other intrinsic-matrix keys of the file to their matrices and one
-    of them explains ``P`` exactly, the message says so.
+    of them explains ``P`` exactly, the message says so.  With ``other_K_ok`` (TUMTraf s110 files, whose P is
+    documented as another intrinsic matrix times [R | t]) a P with exactly the camera's pose and another
+    intrinsic matrix is warned about, not refused, even when the file does not hold that matrix.
     """
     P_model = camera.P
     scale = float(np.sum(P_model * P_file) / np.sum(P_file * P_file))
@@ -300,6 +302,8 @@ def check_projection_matrix(where: str, field: str, P_file: np.ndarray, camera, 
         if np.linalg.norm(P_file * s - P_alt) <= 1e-6 * np.linalg.norm(P_alt):
             explained = f"; {field} equals {key} [R | t] instead"
             break
+    if not explained and other_K_ok:
+        explained = _same_pose_other_K(P_file, camera, field)
     if d.max() <= far_px or explained:
         warnings.warn(f"{label(where, field)} differs from K [R | t] (relative {rel:.2g}; at ground points seen at "
                       f"pixels {detail}){explained}; using K, dist, R, t", ConsistencyWarning, stacklevel=3)
@@ -307,6 +311,31 @@ def check_projection_matrix(where: str, field: str, P_file: np.ndarray, camera, 
     raise ConfigError(label(where, field), f"{d.max():.3g} px away from K [R | t]",
                       f"a projection matrix consistent with K [R | t] within {far_px:g} px (ground points seen at "
                       f"pixels {detail})")
+
+
+def _same_pose_other_K(P_file, camera, field) -> str:
+    """``"; FIELD has the pose R, t exactly ..."`` when the RQ decomposition of ``P_file`` gives the camera's
+    rotation and centre (1e-9 relative) with another intrinsic matrix (the 2023 TUMTraf south2 file: P is
+    the later releases' calibrated_intrinsic_camera_matrix [R | t], a key that file does not have); else ``""``."""
+    M = np.asarray(P_file, dtype=np.float64)[:, :3]
+    if not np.all(np.isfinite(M)) or abs(np.linalg.det(M)) < 1e-300:
+        return ""
+    Kp, Rp = np.linalg.qr(np.linalg.inv(M))  # inv(M) = inv(R) inv(K): Q = R^T, upper triangular = inv(K)
+    Rq = Kp.T
+    K_p = np.linalg.inv(Rp)
+    sign = np.diag(np.sign(np.diag(K_p)))  # positive focal lengths
+    K_p, Rq = K_p @ sign, sign @ Rq
+    if np.linalg.det(Rq) < 0:
+        Rq, K_p = -Rq, -K_p
+    C_p = -np.linalg.solve(M, np.asarray(P_file, dtype=np.float64)[:, 3])
+    C_m = camera.position_world_m
+    same = (np.allclose(Rq, camera.R, rtol=0, atol=1e-9)
+            and np.linalg.norm(C_p - C_m) <= 1e-9 * max(1.0, float(np.linalg.norm(C_m))))
+    if not same:
+        return ""
+    K_p = K_p / K_p[2, 2]
+    return (f"; {field} has the pose R, t exactly, with another intrinsic matrix (fx {K_p[0, 0]:.6g}, fy "
+            f"{K_p[1, 1]:.6g}, cx {K_p[0, 2]:.6g}, cy {K_p[1, 2]:.6g} px)")
 
 
 def sanitize(obj):
