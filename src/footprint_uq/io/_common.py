@@ -8,14 +8,13 @@ every inconsistency that is tolerated is reported as a
 from __future__ import annotations
 
 import difflib
-import json
 import math
 import warnings
 from pathlib import Path
 
 import numpy as np
-import yaml
 
+from .._parse import load_yaml_or_json
 from ..errors import ConfigError, ConsistencyWarning, InputError
 
 __all__ = [
@@ -28,6 +27,9 @@ __all__ = [
 P_RTOL = 1e-6
 #: largest pixel discrepancy between P and K [R | t] that is only a warning; beyond it a ConfigError
 P_FAR_PX = 5.0
+#: smallest focal length of a camera file, pixels: below one pixel the image spans nearly 180 degrees in every
+#: direction and the kernels' products underflow (focal_px 1e-300 ran with 15 RuntimeWarnings)
+MIN_FOCAL_PX = 1.0
 #: pixel discrepancy (everywhere) below which P is taken as K [R | t] printed with fewer digits
 P_WARN_PX = 0.05
 #: largest magnitude of any number of a camera or pose file (metres, pixels, degrees): beyond it
@@ -61,11 +63,9 @@ def read_text(path) -> tuple[Path, str]:
 def parse_mapping(text: str, path: Path, *, what: str = "camera file") -> dict:
     """Parse YAML or JSON text (by extension; YAML otherwise) into a mapping."""
     try:
-        if path.suffix.lower() == ".json":
-            data = json.loads(text)
-        else:
-
-            data = yaml.safe_load(text)
+        data = load_yaml_or_json(text, str(path), is_json=path.suffix.lower() == ".json")
+    except ConfigError:  # alias bomb, duplicate key, too large: already named
+        raise
     except Exception as e:  # yaml.YAMLError / json.JSONDecodeError, with their one-line reason
         first = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
         raise ConfigError(str(path), type(e).__name__, f"a valid {'JSON' if path.suffix.lower() == '.json' else 'YAML'}"
@@ -186,8 +186,9 @@ def check_K(where: str, field: str, K: np.ndarray) -> np.ndarray:
     if K[2, 2] != 1.0 and K[2, 2] > 0 and abs(K[2, 2] - 1.0) <= 1e-12:
         K[2, 2] = 1.0
     fx, fy = K[0, 0], K[1, 1]
-    if not (fx > 0 and fy > 0):
-        raise ConfigError(label(where, f"{field} (fx, fy)"), (float(fx), float(fy)), "focal lengths > 0 px")
+    if not (fx >= MIN_FOCAL_PX and fy >= MIN_FOCAL_PX):
+        raise ConfigError(label(where, f"{field} (fx, fy)"), (float(fx), float(fy)),
+                          f"focal lengths >= {MIN_FOCAL_PX:g} px")
     scale = max(fx, fy)
     if K[2, 2] != 1.0:
         raise ConfigError(label(where, f"{field}[2][2]"), float(K[2, 2]), "1 ([[fx, s, cx], [0, fy, cy], [0, 0, 1]])")

@@ -33,16 +33,15 @@ plus optional ``name`` and ``description``.
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import NamedTuple
 
 import numpy as np
-import yaml
 
 from .. import params as P
 from .._checks import check_cov
+from .._parse import load_yaml_or_json
 from ..errors import ConfigError, InputError
 from . import presets
 
@@ -449,11 +448,9 @@ def load_budget(spec) -> ErrorBudget:
     except (OSError, UnicodeDecodeError) as e:
         raise ConfigError(str(path), type(e).__name__, f"a readable UTF-8 budget file ({e})") from None
     try:
-        if path.suffix.lower() == ".json":
-            data = json.loads(text)
-        else:
-
-            data = yaml.safe_load(text)
+        data = load_yaml_or_json(text, str(path), is_json=path.suffix.lower() == ".json")
+    except ConfigError:  # alias bomb, duplicate key, too large: already named
+        raise
     except Exception as e:
         raise ConfigError(str(path), type(e).__name__, f"valid YAML/JSON ({str(e).splitlines()[0]})") from None
     return ErrorBudget.from_dict(data, where=str(path))
