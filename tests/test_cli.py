@@ -315,7 +315,7 @@ def test_registry_loads_every_command_lazily():
     from footprint_uq.cli.carla import carla
 
     names = ["calibrate", "camera", "carla", "case-study", "convert", "demo", "fuse", "locate", "map", "objects",
-             "presets", "serve"]
+             "presets", "serve", "warmup"]
     assert main.list_commands(None) == names
     for name in names:
         assert main.get_command(None, name).name == name

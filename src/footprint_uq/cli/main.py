@@ -171,6 +171,7 @@ main.add_lazy_command("fuse", "footprint_uq.cli.fuse:fuse_cmd")
 main.add_lazy_command("serve", "footprint_uq.cli.serve:serve_cmd")
 main.add_lazy_command("convert", "footprint_uq.cli.convert:convert_cmd")
 main.add_lazy_command("camera", "footprint_uq.cli.camera:camera")
+main.add_lazy_command("warmup", "footprint_uq.cli.warmup:warmup_cmd")
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import click
 
+from ..products.warmup import compile_notice
 from ..viz.map_report import write_map_report
-from .common import DEFAULT_STEP_PX, check_confidence, load_camera_and_budget, pose_options, warn
+from .common import DEFAULT_STEP_PX, check_confidence, load_camera_and_budget, note, pose_options, warn
 
 __all__ = ["map_cmd"]
 
@@ -32,6 +33,9 @@ def map_cmd(camera_path, budget_spec, out_dir, step_px, max_range_m, confidence,
     arrays, summary.json."""
     confidence = check_confidence(confidence)
     camera, budget = load_camera_and_budget(camera_path, budget_spec, pose)
+    msg = compile_notice(["map"])
+    if msg is not None:
+        note(msg)
     umap, files = write_map_report(camera, budget, out_dir, step_px=step_px, max_range_m=max_range_m,
                                    confidence=confidence, linearity=linearity, linear_threshold=linear_threshold)
     for p in files.values():

@@ -18,8 +18,9 @@ from ..batch.process import process_file
 from ..batch.schema import DEFAULT_CHUNK_ROWS
 from ..errors import InputError
 from ..products.footprints import CONTACT_MODES, V2X_POLICIES
+from ..products.warmup import compile_notice
 from ..uncertainty.presets import PRESET_NAMES
-from .common import load_camera_and_budget, pose_options
+from .common import load_camera_and_budget, note, pose_options
 
 __all__ = ["objects_cmd"]
 
@@ -91,6 +92,9 @@ def objects_cmd(camera_path, budget_spec, detections, out, box_type, contact, ch
                    allow_outside_image=allow_outside_image, linearity=linearity, linear_threshold=linear_threshold,
                    v2x_policy=v2x_policy)
     comp = None if compression == "none" else compression
+    msg = compile_notice(["objects"])
+    if msg is not None:
+        note(msg)
     if registry is not None:
         if camera_path is not None:
             raise InputError("--camera", camera_path, "no --camera with --registry (the registry names the cameras)")

@@ -267,8 +267,21 @@ class ErrorBudget:
         return np.diag(s2)
 
     def param_factor(self) -> SparseFactor:
-        """The one factorisation of :meth:`param_covariance` every kernel uses (:func:`psd_factor`)."""
-        return psd_factor(self.param_covariance())
+        """The one factorisation of :meth:`param_covariance` every kernel uses (:func:`psd_factor`).
+
+        Computed once per budget (the budget is frozen; a covariance matrix changed in place is noticed by
+        its bytes): the eigen-decomposition cost ~0.15 ms of every small ``covariance_points`` call and is
+        the only LAPACK call on that path (OpenBLAS may wake its threads for it).
+        """
+        key = None if self.covariance_matrix is None else np.asarray(self.covariance_matrix).tobytes()
+        cached = self.__dict__.get("_factor")
+        if cached is not None and cached[0] == key:
+            return cached[1]
+        f = psd_factor(self.param_covariance())
+        for a in f:
+            a.setflags(write=False)
+        object.__setattr__(self, "_factor", (key, f))
+        return f
 
     def shared_source_covariances(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
         """Per shared source: ``(param indices, covariance block)``, only non-zero sources."""
