@@ -277,9 +277,7 @@ class ErrorBudget:
         cached = self.__dict__.get("_factor")
         if cached is not None and cached[0] == key:
             return cached[1]
-        f = psd_factor(self.param_covariance())
-        for a in f:
-            a.setflags(write=False)
+        f = psd_factor(self.param_covariance())  # writable arrays: a read-only one is another type to numba
         object.__setattr__(self, "_factor", (key, f))
         return f
 
