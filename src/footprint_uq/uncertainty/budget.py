@@ -33,6 +33,7 @@ plus optional ``name`` and ``description``.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import NamedTuple
@@ -438,6 +439,11 @@ def psd_factor(S, *, rtol: float = 1e-14) -> SparseFactor:
     return SparseFactor(colptr, used[rows].astype(np.int64), vals)
 
 
+@functools.lru_cache(maxsize=64)
+def _preset(name: str) -> ErrorBudget:
+    return ErrorBudget.preset(name)
+
+
 def load_budget(spec) -> ErrorBudget:
     """A budget from a preset name, a YAML/JSON file path, a mapping or an ErrorBudget.
 
@@ -450,7 +456,7 @@ def load_budget(spec) -> ErrorBudget:
         return ErrorBudget.from_dict(spec)
     s = str(spec)
     if presets.parse_preset_name(s) is not None:
-        return ErrorBudget.preset(s)
+        return _preset(s)  # one (frozen) object per name: its factor is computed once, not on every call
     path = Path(s)
     if not path.exists():
         raise ConfigError("budget", s, f"a preset ({_preset_choices()}) or an existing file")
