@@ -11,11 +11,10 @@ import click
 
 from ..errors import InputError
 from ..products.footprints import CONTACT_MODES
-from ..products.warmup import compile_notice
 from ..service.runner import run
 from ..uncertainty.budget import load_budget
 from ..uncertainty.presets import PRESET_NAMES
-from .common import budget_notice, note, pose_options, warn
+from .common import budget_notice, pose_options, warn
 
 __all__ = ["serve_cmd"]
 
@@ -79,9 +78,6 @@ def serve_cmd(camera_path, budget_spec, registry, camera_id, input_, mqtt, outpu
         msg = budget_notice(load_budget(budget_spec))
         if msg is not None:
             warn(msg)
-    msg = compile_notice(["objects"])
-    if msg is not None:
-        note(msg)
     sys.exit(run(camera=camera_path, pose=pose, budget=budget_spec, registry=registry, camera_id=camera_id,
                  heading_offset_deg=heading_offset_deg, origin_lat_deg=origin_lat, origin_lon_deg=origin_lon,
                  confidence=confidence, contact=contact, allow_outside_image=allow_outside_image,

@@ -46,6 +46,7 @@ import orjson
 from ..batch.fleet import load_registry
 from ..errors import ConfigError, InputError
 from ..io import load_camera
+from ..products.warmup import compile_notice
 from .core import RECORD_ERROR, RECORD_FOOTPRINTS, FrameOutput, Service, error_record
 
 __all__ = ["FrameQueue", "Metrics", "serve", "run", "parse_mqtt_url", "POLICIES"]
@@ -537,6 +538,9 @@ def run(*, camera=None, budget=None, registry=None, camera_id: str | None = None
         for sig in (signal.SIGTERM, signal.SIGINT):
             old[sig] = signal.signal(sig, lambda s, f: stop.set())
     _log("starting: loading the cameras and the compiled kernels")
+    cold = compile_notice(["objects"])
+    if cold is not None:  # after "starting": the signal handlers are in place
+        _log(cold)
     try:
         cam = None
         if camera is not None:
