@@ -6,7 +6,11 @@ Every case is a command line and what the README promises for it:
 * ``exit 2`` -- bad input: one line on stderr naming the field, no traceback, and nothing
   new under the output name;
 * ``rows``   -- bad *rows* in a detection file: exit 0, every physical line of the file is one
-  output row (``rows lost`` = lines - rows out must be 0), the bad ones with status ``error``.
+  output row (``rows lost`` = lines - rows out must be 0), the bad ones with status ``error``;
+* ``fleet rows`` -- the same for a fleet job (``--registry``): exit 0, its ``_summary.json`` consistent
+  with every input row out, at least ``extra["errors"]`` of them error rows.
+
+``extra["must_exist"]``: files that must still be there afterwards (nothing deleted outside --out).
 
 No case may reach the last-resort handler (exit 3) or print a traceback.
 """
@@ -37,6 +41,10 @@ imaging_px: [0.1, 0.1]
 HEADER = "frame,object_id,u_min_px,v_min_px,u_max_px,v_max_px"
 GOOD = "{i},car{i},900,500,980,560"
 BIG = "1" + "0" * 399  # a 400-digit number
+#: a 397-byte "billion laughs" (the issue's was 472 bytes): 9 levels of 9 aliases, ~4e8 values once expanded (issue 24)
+ANCHOR_BOMB = ("a: &a [lol, lol, lol, lol, lol, lol, lol, lol, lol]\n"
+               + "".join(f"{n}: &{n} [{', '.join(['*' + p] * 9)}]\n" for p, n in zip("abcdefg", "bcdefgh", strict=True))
+               + "model: [*h, *h, *h, *h, *h, *h, *h, *h, *h]\n")
 
 
 @dataclass
@@ -50,6 +58,24 @@ class Case:
     lines: int | None = None         # rows: physical data lines of the input
     stderr_has: str | None = None    # exit2: a word the one-line message must contain
     extra: dict = field(default_factory=dict)
+
+
+def _homography(*, K_scale: float = 1.0, H_scale: float = 1.0) -> str:
+    """The ``model: homography`` file of :data:`CAMERA` with K (focal lengths times ``K_scale``: a K that does not
+    belong to H) and H times ``H_scale`` (the same homography, scaled out of range)."""
+    import numpy as np
+    import yaml
+
+    from footprint_uq.cameras.homography import homography_from_camera
+    from footprint_uq.io import camera_from_dict
+
+    cam = camera_from_dict(yaml.safe_load(CAMERA))
+    K = cam.K.copy()
+    K[0, 0] *= K_scale
+    K[1, 1] *= K_scale
+    H = homography_from_camera(cam) * H_scale
+    return yaml.safe_dump({"model": "homography", "image_size_px": [1920, 1080],
+                           "H_ground_image": np.asarray(H).tolist(), "K": K.tolist()})
 
 
 def _w(path: Path, data) -> Path:
@@ -82,6 +108,11 @@ def _camera_cases(d: Path, budget: Path) -> list[Case]:
         "camera yaml anchor bomb": ("a: &a [x, x, x, x, x, x, x, x, x]\nb: &b [*a, *a, *a, *a, *a, *a, *a, *a]\n"
                                     "c: &c [*b, *b, *b, *b, *b, *b, *b, *b]\nd: &d [*c, *c, *c, *c, *c, *c, *c]\n"
                                     "model: *d\n"),
+        "camera yaml billion laughs 9x9 aliases": ANCHOR_BOMB,
+        "camera duplicate key": CAMERA + "tilt_deg: 70.0\n",
+        "camera focal 1e-300": CAMERA.replace("1400.0", "1e-300"),
+        "homography K disagrees with H": _homography(K_scale=1.3),
+        "homography H x 1e-300 with K": _homography(H_scale=1e-300),
     }
     out = []
     for name, text in cams.items():
@@ -91,6 +122,11 @@ def _camera_cases(d: Path, budget: Path) -> list[Case]:
             + ', "position_m": [0, 0], "height_m": 8, "pan_deg": 30, "tilt_deg": 20}')
     out.append(Case("camera JSON 400-digit focal", ["locate", "--camera", str(js), "--budget", "basler1",
                                                     "--pixel", "959.5", "800"]))
+    js = _w(d / "camera_duplicate_key.json", json.dumps({"model": "pan-tilt", "image_size_px": [1920, 1080],
+                                                         "focal_px": 1400, "height_m": 8, "pan_deg": 30,
+                                                         "tilt_deg": 20})[:-1] + ', "tilt_deg": 70}')
+    out.append(Case("camera JSON duplicate key", ["locate", "--camera", str(js), "--budget", "basler1",
+                                                  "--pixel", "959.5", "800"], stderr_has="tilt_deg"))
     js = _w(d / "camera_huge_int.json", '{"model": "pan-tilt", "image_size_px": [1920, 1080], "focal_px": 1'
             + "0" * 5000 + ', "position_m": [0, 0], "height_m": 8, "pan_deg": 30, "tilt_deg": 20}')
     out.append(Case("camera JSON 5000-digit focal", ["locate", "--camera", str(js), "--budget", "basler1",
@@ -114,11 +150,16 @@ def _budget_cases(d: Path, camera: Path) -> list[Case]:
         "budget negative sigma": BUDGET.replace("focal_px: 0.5", "focal_px: -0.5"),
         "budget sigma text": BUDGET.replace("focal_px: 0.5", "focal_px: abc"),
         "budget list": "- 1\n",
+        "budget billion laughs 9x9 aliases": ANCHOR_BOMB.replace("model", "focal_px"),
+        "budget duplicate key": BUDGET + "focal_px: 0.0\n",
     }
     out = []
     for name, text in buds.items():
         p = _w(d / f"{name.replace(' ', '_')}.yaml", text)
         out.append(Case(name, ["locate", "--camera", str(camera), "--budget", str(p), "--pixel", "959.5", "800"]))
+    p = _w(d / "budget_duplicate.json", '{"name": "x", "tilt_deg": 0.05, "tilt_deg": 0.0}')
+    out.append(Case("budget JSON duplicate key", ["locate", "--camera", str(camera), "--budget", str(p), "--pixel",
+                                                  "959.5", "800"], stderr_has="tilt_deg"))
     return out
 
 
@@ -180,6 +221,10 @@ def _detections(d: Path, camera: Path) -> list[Case]:
                                                               + js[2:]) + "\n", 11, "jsonl", "jsonl"))
     out.append(rows_case("jsonl null first line (pyarrow 26 SIGSEGV)", "null\n" + "\n".join(js) + "\n", 11, "jsonl",
                          "jsonl"))
+    box3d = json.dumps({"frame": 99, "x_m": 5.0, "y_m": 20.0, "z_m": 0.8, "length_m": 4.0, "width_m": 2.0,
+                        "height_m": 1.5, "yaw_deg": 0.0})
+    out.append(rows_case("jsonl a 3-D box line in the first chunk", "\n".join(js[:2] + [box3d] + js[2:]) + "\n",
+                         11, "jsonl", "jsonl"))
     out.append(rows_case("jsonl huge exponent", "\n".join(js[:2] + ['{"u_min_px": 1e999999}'] + js[2:]) + "\n",
                          11, "jsonl", "jsonl"))
 
@@ -236,6 +281,46 @@ def _truncated_parquet(d: Path, camera: Path) -> list[Case]:
     out.append(Case("fleet binary yaml registry", ["objects", "--registry", str(reg), "--budget", "basler1",
                                                    "--detections", str(ds / "a.parquet"), "--out",
                                                    str(d / "fleet_out3"), "--quiet"], "exit2", d / "fleet_out3"))
+    return out
+
+
+def _fleet_cases(d: Path) -> list[Case]:
+    """Fleet jobs: camera ids too long for a folder name, a symlinked --out with --overwrite, a second job on the
+    same --out, a registry that is an alias bomb (issue 24)."""
+    import os
+
+    import numpy as np
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    n = 12
+    boxes = {"frame": np.arange(n), "u_min_px": np.full(n, 900.0), "v_min_px": np.full(n, 500.0),
+             "u_max_px": np.full(n, 980.0), "v_max_px": np.full(n, 560.0)}
+    long_reg = "\u00e9" * 50  # registered, 300 characters once percent-encoded
+    ids = ["cam1"] * 4 + ["x" * 300] * 4 + [long_reg] * 4  # the 300-character one is not registered
+    ds = d / "ids"
+    ds.mkdir(parents=True, exist_ok=True)
+    pq.write_table(pa.table({"camera_id": ids, **boxes}), ds / "part.parquet")
+    _w(d / "reg" / "cam1.yaml", CAMERA)
+    reg = _w(d / "registry.csv", f"camera_id,camera\ncam1,reg/cam1.yaml\n{long_reg},reg/cam1.yaml\n")
+    base = ["objects", "--registry", str(reg), "--budget", "basler1", "--detections", str(ds), "--quiet"]
+    out = [Case("fleet camera ids too long for a folder name", base + ["--out", str(d / "out_ids")], "fleet rows",
+                d / "out_ids", n, extra={"errors": 8})]
+    victim_dir = d / "elsewhere"
+    victim = _w(victim_dir / ".keep.tmp-0123abcd.parquet", b"not ours")  # looks like a temporary of ours
+    link = d / "out_link"
+    if not link.is_symlink():
+        os.symlink(victim_dir, link)
+    out.append(Case("fleet --out a symlink with --overwrite", base + ["--out", str(link), "--overwrite"], "exit2",
+                    None, stderr_has="symbolic link", extra={"must_exist": [str(victim)]}))
+    busy = d / "out_busy"
+    _w(d / ".out_busy.lock", f"{os.getpid()}\n")  # a live job holds it
+    out.append(Case("fleet second job on the same --out", base + ["--out", str(busy)], "exit2", busy,
+                    stderr_has="lock", extra={"must_exist": [str(d / ".out_busy.lock")]}))
+    bomb = _w(d / "bomb_registry.yaml", ANCHOR_BOMB)
+    out.append(Case("fleet registry billion laughs", ["objects", "--registry", str(bomb), "--budget", "basler1",
+                                                      "--detections", str(ds), "--out", str(d / "out_bomb"),
+                                                      "--quiet"], "exit2", d / "out_bomb"))
     return out
 
 
@@ -357,7 +442,8 @@ def build(d: Path) -> list[Case]:
     camera = _w(d / "camera.yaml", CAMERA)
     budget = _w(d / "budget.yaml", BUDGET)
     return (_camera_cases(d / "cam", budget) + _budget_cases(d / "bud", camera) + _locate_cases(camera)
-            + _detections(d / "det", camera) + _truncated_parquet(d / "pq", camera) + _fuse_cases(d / "fuse")
+            + _detections(d / "det", camera) + _truncated_parquet(d / "pq", camera) + _fleet_cases(d / "fleet")
+            + _fuse_cases(d / "fuse")
             + _calibration_cases(d / "cal") + _gcp_cases(d / "gcp") + _other_commands(d / "other", camera))
 
 
@@ -380,10 +466,18 @@ def run(case: Case) -> dict:
     # one error line, the last one (progress notes such as "frame X: no board found" may precede it)
     lines_err = [x for x in err.strip().splitlines() if x.strip()]
     errors = [x for x in lines_err if x.startswith("footprint-uq: error:")]
+    kept = all(Path(p).exists() for p in case.extra.get("must_exist", ()))
     if case.expect == "exit2":
         res["ok"] = (r.exit_code == 2 and len(errors) == 1 and lines_err[-1] == errors[0] and not tb
                      and (case.stderr_has is None or case.stderr_has in err)
-                     and (case.out is None or not Path(case.out).exists()))
+                     and (case.out is None or not Path(case.out).exists()) and kept)
+    elif case.expect == "fleet rows":
+        summ = Path(case.out) / "_summary.json"
+        js = json.loads(summ.read_text()) if r.exit_code == 0 and summ.exists() else {}
+        res["rows_out"] = js.get("rows_out", 0)
+        res["rows_lost"] = max(0, case.lines - res["rows_out"])
+        res["ok"] = (r.exit_code == 0 and not tb and js.get("consistent") is True and js.get("rows_in") == case.lines
+                     and res["rows_out"] == case.lines and js.get("rows_error", 0) >= case.extra["errors"] and kept)
     elif case.expect == "rows":
         rows_out = _rows(case.out) if r.exit_code == 0 and Path(case.out).exists() else 0
         res["rows_lost"] = max(0, case.lines - rows_out)

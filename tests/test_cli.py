@@ -314,8 +314,8 @@ def test_registry_loads_every_command_lazily():
     from footprint_uq.cli.calibrate import calibrate
     from footprint_uq.cli.carla import carla
 
-    names = ["calibrate", "carla", "case-study", "convert", "demo", "fuse", "locate", "map", "objects", "plan",
-             "presets", "serve", "validate"]
+    names = ["calibrate", "camera", "carla", "case-study", "convert", "demo", "fuse", "locate", "map", "objects",
+             "plan", "presets", "serve", "validate", "warmup"]
     assert main.list_commands(None) == names
     for name in names:
         assert main.get_command(None, name).name == name

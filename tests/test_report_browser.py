@@ -121,3 +121,125 @@ def test_report_screenshot_kept(report, tmp_path):
     assert p.returncode == 0, p.stderr[-2000:]
     data = shot.read_bytes()
     assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 50_000
+
+
+# -- every HTML page the project writes: no horizontal overflow, every image loaded (issue 24) ----------------------
+LAYOUT = """<script>
+window.__fuq = {errors: []};
+window.addEventListener('error', function (e) {
+  var t = e.target || {};
+  window.__fuq.errors.push(e.message || ('resource failed: ' + (t.src || t.href || t.tagName)));
+}, true);
+window.addEventListener('load', function () {
+  var vw = document.documentElement.clientWidth;
+  var wide = Array.prototype.slice.call(document.body.querySelectorAll('*')).filter(function (el) {
+    var r = el.getBoundingClientRect();
+    var clipped = false;
+    for (var p = el.parentElement; p && p !== document.body; p = p.parentElement) {
+      if (getComputedStyle(p).overflowX !== 'visible') { clipped = true; break; }
+    }
+    return !clipped && r.width > 0 && r.right > vw + 1;
+  }).slice(0, 5).map(function (el) { return el.tagName + ':' + (el.textContent || '').slice(0, 40); });
+  var scrolled = Array.prototype.slice.call(document.body.querySelectorAll('*')).filter(function (el) {
+    return getComputedStyle(el).overflowX !== 'visible' && el.scrollWidth > el.clientWidth + 1;
+  }).map(function (el) { return (el.textContent || '').slice(0, 60); });
+  var imgs = Array.prototype.slice.call(document.images).map(function (i) {
+    return {complete: i.complete, w: i.naturalWidth, alt: i.alt.slice(0, 40)};
+  });
+  var out = {errors: window.__fuq.errors, scroll_w: document.documentElement.scrollWidth, view_w: vw, wide: wide,
+             scrolled: scrolled, imgs: imgs};
+  var pre = document.createElement('pre');
+  pre.id = 'fuq-check';
+  pre.textContent = JSON.stringify(out);
+  document.body.appendChild(pre);
+});
+</script>"""
+
+
+def _layout(html: str, tmp_path) -> dict:
+    """Open ``html`` at 1200 px with the layout probe; what it recorded (overflowing elements, images)."""
+    probe = tmp_path / "layout.html"
+    probe.write_text(html.replace("<head>", "<head>" + LAYOUT, 1), encoding="utf-8")
+    p = _run(["--virtual-time-budget=10000", "--window-size=1200,900", "--hide-scrollbars", "--dump-dom",
+              probe.as_uri()], tmp_path)
+    assert p.returncode == 0, p.stderr[-2000:]
+    m = re.search(r'<pre id="fuq-check">(.*?)</pre>', p.stdout, re.S)
+    assert m, "the page did not finish loading (no check output)\n" + p.stderr[-2000:]
+    return json.loads(m.group(1).replace("&quot;", '"').replace("&amp;", "&").replace("&lt;", "<")
+                      .replace("&gt;", ">"))
+
+
+def _assert_laid_out(res: dict, n_img_min: int):
+    assert res["errors"] == []
+    assert res["scroll_w"] <= res["view_w"], res["wide"]  # no horizontal overflow of the page
+    assert res["wide"] == []
+    assert res["scrolled"] == []  # nor a table hidden in a scrolling box (the statements table was, 1912 px wide)
+    assert len(res["imgs"]) >= n_img_min
+    bad = [i for i in res["imgs"] if not (i["complete"] and i["w"] > 0)]
+    assert bad == []  # every image decoded
+
+
+@pytest.fixture(scope="module")
+def pages(report, tmp_path_factory):
+    """Every kind of HTML page the project writes, small: the case study (the module's report), the demo, an
+    intrinsic calibration and a ground-control-point solve."""
+    from click.testing import CliRunner
+
+    from footprint_uq.cli.main import main
+    from footprint_uq.viz.demo import write_demo
+
+    out = tmp_path_factory.mktemp("pages")
+    found = {"case study": (report["report"], 10)}
+    found["demo"] = (write_demo(out / "demo", step_px=48, case_study=False), 8)
+    images = Path(__file__).parent / "data" / "opencv-chessboard-right"
+    r = CliRunner().invoke(main, ["calibrate", "intrinsics", str(images), "--board", "9x6", "--square-m", "0.025",
+                                  "--out", str(out / "cal"), "--quiet", "--workers", "1"])
+    assert r.exit_code == 0, r.output
+    found["intrinsic calibration"] = (out / "cal" / "report.html", 3)
+    found["ground control points"] = (_gcp_page(out / "gcp"), 1)
+    return found
+
+
+def _gcp_page(out: Path) -> Path:
+    import numpy as np
+
+    from footprint_uq import PanTiltCamera
+    from footprint_uq.calibration.gcp import run_gcp
+
+    cam = PanTiltCamera(focal_px=1400.0, image_size_px=(1920, 1080), height_m=8.0, pan_deg=30.0, tilt_deg=20.0)
+    xy = np.array([[x, y] for x in (-6.0, 0.0, 6.0) for y in (15.0, 25.0, 40.0)])
+    xyz = np.c_[xy @ np.array([[np.cos(0.52), -np.sin(0.52)], [np.sin(0.52), np.cos(0.52)]]), np.zeros(len(xy))]
+    uv = cam.project(xyz).uv_px + np.random.default_rng(1).normal(0, 0.5, (len(xy), 2))
+    out.mkdir(parents=True, exist_ok=True)
+    pts = out.parent / "gcp.csv"
+    pts.write_text("u_px,v_px,x_m,y_m,z_m\n" + "".join(f"{a},{b},{c},{d},{e}\n" for (a, b), (c, d, e)
+                                                     in zip(uv, xyz, strict=True)))
+    run_gcp(pts, "1920x1080", out)
+    return out / "summary.html"
+
+
+@pytest.mark.parametrize("kind", ["case study", "demo", "intrinsic calibration", "ground control points"])
+def test_every_page_fits_the_window_and_every_image_loads(pages, kind, tmp_path):
+    path, n_img = pages[kind]
+    _assert_laid_out(_layout(path.read_text(encoding="utf-8"), tmp_path), n_img)
+
+
+def test_layout_probe_detects_overflow_and_a_broken_image(pages, tmp_path):
+    """Negative control: a table that cannot wrap and an image that does not decode are both flagged."""
+    html = pages["demo"][0].read_text(encoding="utf-8")
+    wide = html.replace("<h2>", '<table><tr><td style="white-space:nowrap">' + "x" * 400 + "</td></tr></table><h2>",
+                        1)
+    res = _layout(wide, tmp_path)
+    assert res["scroll_w"] > res["view_w"] and res["wide"]
+    i = html.index("data:image/png;base64,") + len("data:image/png;base64,")
+    res = _layout(html[:i] + "AAAA" + html[i + 40:], tmp_path)
+    assert sum(not (x["complete"] and x["w"] > 0) for x in res["imgs"]) == 1
+
+
+def test_case_study_tables_read_as_text(report):
+    """The statements table wraps inside the page; the detail table has human headers and no NaN cells."""
+    html = report["report"].read_text(encoding="utf-8")
+    assert '<table class="wide">' in html
+    detail = html[html.index("X/Y statement in detail"):html.index("<h2>Settings")]
+    assert ">NaN<" not in html and "median_X_over_Y" not in detail and "frames_entry" not in detail
+    assert "median σ_X / σ_Y, entry lane" in detail

@@ -6,7 +6,7 @@ closed-form Jacobians, ``Cov = J Sigma J^T`` and the footprint uncertainty of
 detected objects, generalised to OpenCV cameras with distortion.
 """
 
-from . import _moved
+from . import _moved, _numba_cache  # noqa: F401 - _numba_cache: numba's cache folder, set before any kernel module
 from .cameras.opencv import OpenCVCamera
 from .cameras.pantilt import PanTiltCamera
 from .errors import ConfigError, ConsistencyWarning, FootprintUQError, InputError

@@ -50,6 +50,7 @@ import pyarrow.parquet as pq
 import yaml
 from tqdm import tqdm
 
+from .._parse import load_yaml
 from ..errors import ConfigError, InputError
 from ..io import load_camera
 from ..io.atomic import atomic_write_text, clean_temporaries, commit, discard, fsync_dir, path_component, temp_path
@@ -64,6 +65,11 @@ __all__ = ["RegistryEntry", "load_registry", "plan", "Task", "process_partition"
 
 #: output folder name of rows without a camera_id
 UNKNOWN_CAMERA = "__unknown__"
+#: longest folder name of a camera's partition, bytes (``camera_id=`` + the percent-encoded id; the usual
+#: file-system limit is 255): a longer id's rows are error rows in the unknown camera's partition
+MAX_PARTITION_NAME_BYTES = 255
+#: the lock file beside ``--out`` that keeps a second job off the same output folder
+LOCK_SUFFIX = ".lock"
 _PROCESSORS: dict = {}  # per-process cache of BatchProcessors (Dask workers keep theirs between tasks)
 
 
@@ -188,7 +194,7 @@ def load_registry(path, *, budget=None) -> dict[str, RegistryEntry]:
         elif suffix in (".yaml", ".yml", ".json"):
 
             try:
-                data = yaml.safe_load(text)
+                data = load_yaml(text, str(p))
             except (yaml.YAMLError, ValueError, RecursionError) as e:
                 first = (str(e).strip().splitlines() or [type(e).__name__])[0]
                 raise ConfigError("registry", str(p), f"a valid YAML/JSON registry ({first})") from None
@@ -314,13 +320,46 @@ def _strip_camera(rel: str) -> str:
     return Path(*parts, p.stem + ".parquet").as_posix()
 
 
+def _partition_name(camera_id: str) -> str:
+    return f"camera_id={path_component(camera_id)}"
+
+
+def _too_long(camera_id: str) -> bool:
+    """The id's partition folder name would exceed :data:`MAX_PARTITION_NAME_BYTES`."""
+    return len(_partition_name(camera_id).encode()) > MAX_PARTITION_NAME_BYTES
+
+
+def _route_long_ids(cid: pa.Array) -> tuple[pa.Array, pa.Array | None]:
+    """``(cid, original)``: ids too long for a folder name replaced by :data:`UNKNOWN_CAMERA` (their rows become
+    error rows), and the original ids (None when none was too long)."""
+    long_ids = [c for c in pc.unique(cid).to_pylist() if c is not None and _too_long(c)]
+    if not long_ids:
+        return cid, None
+    return pc.if_else(pc.is_in(cid, value_set=pa.array(long_ids, pa.string())), UNKNOWN_CAMERA, cid), cid
+
+
+def _unknown_reasons(original: pa.Array | None, sel: np.ndarray) -> list[str]:
+    """Per row of the unknown camera's rows ``sel``: why (no camera_id, or one too long for a folder name)."""
+    if original is None:
+        return ["missing camera_id"] * sel.size
+    out = []
+    for c in original.take(pa.array(sel)).to_pylist():
+        if c == UNKNOWN_CAMERA:
+            out.append("missing camera_id")
+        else:
+            n = len(_partition_name(c).encode())
+            out.append(f"camera_id {c[:24]!r}... ({len(c)} characters) too long for a folder name: {n} bytes "
+                       f"percent-encoded, at most {MAX_PARTITION_NAME_BYTES}")
+    return out
+
+
 def _out_path(task: Task, camera_id: str) -> Path:
     """``out/camera_id=<id>/<rel>`` with the id percent-encoded (:func:`~footprint_uq.io.atomic.path_component`).
 
     The id comes from data: encoded, ``a/../../x`` stays one folder name inside ``out``
     (pyarrow's hive partitioning decodes it back: ``segment_encoding="uri"``).
     """
-    return Path(task.out_dir, f"camera_id={path_component(camera_id)}", task.out_rel or _strip_camera(task.rel))
+    return Path(task.out_dir, _partition_name(camera_id), task.out_rel or _strip_camera(task.rel))
 
 
 def process_partition(task: Task) -> dict:
@@ -376,7 +415,7 @@ def process_partition(task: Task) -> dict:
                 cid = pa.nulls(n, pa.string()) if part_cam is None else pc.cast(
                     pa.DictionaryArray.from_arrays(pa.array(np.zeros(n, np.int32)), pa.array([part_cam])),
                     pa.string())
-            cid = pc.fill_null(cid, UNKNOWN_CAMERA)
+            cid, original = _route_long_ids(pc.fill_null(cid, UNKNOWN_CAMERA))
             t = t.append_column("camera_id", cid)
             t, pre = coerce_table(t, numeric)
             cams = sorted(pc.unique(cid).to_pylist())
@@ -390,8 +429,8 @@ def process_partition(task: Task) -> dict:
                 sub_pre = None if pre is None else [pre[i] for i in sel]
                 entry = entries.get(cam_id)
                 if entry is None:
-                    why = "missing camera_id" if cam_id == UNKNOWN_CAMERA else "camera_id not in the registry"
-                    sub_pre = [why] * sel.size
+                    sub_pre = (_unknown_reasons(original, sel) if cam_id == UNKNOWN_CAMERA
+                               else ["camera_id not in the registry"] * sel.size)
                     bp = template
                 else:
                     bp = _processor(entry, task.options, probe, id_fields, task.threads)
@@ -529,7 +568,9 @@ def process_fleet(registry, detections, out_dir, *, budget=None, scheduler=None,
         Replace a non-empty ``out_dir`` (refused otherwise).  The job is built in a hidden
         folder next to ``out_dir`` (``.<name>.tmp-<hex>``) and swapped in at the end, summary
         included: a failed or killed job leaves the previous output as it was, a finished one
-        leaves only its own files (no stale partitions of an earlier run).
+        leaves only its own files (no stale partitions of an earlier run).  A symbolic link as
+        ``out_dir`` is refused (replacing and cleaning it would act on its target), and one job at a
+        time writes to a folder: a lock file ``.<name>.lock`` beside it refuses a second one.
     fsync : bool
         Make the outputs durable (default): every file and the folders are fsynced before they are renamed
         into place.  False only renames (never partial for a killed job, not durable across a power loss;
@@ -554,6 +595,15 @@ def process_fleet(registry, detections, out_dir, *, budget=None, scheduler=None,
     options = {k: v for k, v in options.items() if v is not None or k in ("origin_lat_deg", "origin_lon_deg")}
     out = Path(out_dir)
     _check_out(out, detections, overwrite)
+    with _OutLock(out):
+        return _run_fleet(reg, detections, out, out_dir, t0, chunk_rows=chunk_rows, compression=compression,
+                          fsync=fsync, scheduler=scheduler, workers=workers, retries=retries, progress=progress,
+                          client=client, options=options)
+
+
+def _run_fleet(reg, detections, out: Path, out_dir, t0, *, chunk_rows, compression, fsync, scheduler, workers,
+               retries, progress, client, options) -> FleetSummary:
+    """The body of :func:`process_fleet` once ``out`` is checked and locked."""
     staging = temp_path(out)
     tasks = plan(detections, staging, reg, chunk_rows=chunk_rows, compression=compression, fsync=fsync, **options)
     _clean_stale(out)
@@ -613,8 +663,61 @@ def process_fleet(registry, detections, out_dir, *, budget=None, scheduler=None,
     return summ
 
 
+class _OutLock:
+    """An exclusive lock on ``--out`` for one job: the file ``.<name>.lock`` beside it, created with O_EXCL (a
+    second job on the same folder is refused, naming the first's pid), removed at the end.  A lock whose
+    process is gone (a killed job) is taken over."""
+
+    def __init__(self, out: Path):
+        parent = out.parent if str(out.parent) else Path(".")
+        self.path = parent / f".{out.name}{LOCK_SUFFIX}"
+        self.out = out
+
+    def __enter__(self):
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        for _ in range(2):
+            try:
+                fd = os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
+            except FileExistsError:
+                pid = self._holder()
+                if pid is not None and _alive(pid):
+                    raise InputError("out", str(self.out), f"a folder no other job writes to (job {pid} holds "
+                                     f"{self.path}; delete that file if no such job runs)") from None
+                discard(self.path)  # a killed job's lock
+                continue
+            with os.fdopen(fd, "w") as f:
+                f.write(f"{os.getpid()}\n")
+            return self
+        raise InputError("out", str(self.out), f"a folder no other job writes to ({self.path} keeps reappearing)")
+
+    def _holder(self) -> int | None:
+        try:
+            return int(self.path.read_text().split()[0])
+        except (OSError, ValueError, IndexError):
+            return None
+
+    def __exit__(self, *exc):
+        if self._holder() == os.getpid():
+            discard(self.path)
+        return False
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # pragma: no cover - another user's live process
+        return True
+    return True
+
+
 def _check_out(out: Path, detections, overwrite: bool) -> None:
-    """Refuse an output folder that is a file, holds the input, or is not empty (without ``overwrite``)."""
+    """Refuse an output folder that is a file, a symbolic link (``--overwrite`` would replace and clean
+    through it), holds the input, or is not empty (without ``overwrite``)."""
+    if out.is_symlink():
+        raise InputError("out", str(out), f"a real folder, not a symbolic link (to {os.readlink(out)}): pass the "
+                         "folder it points to")
     if out.exists() and not out.is_dir():
         raise InputError("out", str(out), "a folder (this is a file)")
     src = Path(detections)

@@ -836,8 +836,9 @@ def process_file(camera, budget, detections, out, *, chunk_rows: int = S.DEFAULT
         options["corners"] = True  # the polygon
     reader = open_detections(detections, chunk_rows=chunk_rows, format=format_in)
     bp = BatchProcessor(camera, budget, **options)
-    schema = bp.resolve(reader.columns, reader.id_fields)
-    reader.select(S.numeric_input_columns(bp.box_type, reader.columns))
+    names = reader.columns if bp.box_type is not None else reader.family_columns  # JSON Lines: one rule per family
+    schema = bp.resolve(names, reader.id_fields)
+    reader.select(S.numeric_input_columns(bp.box_type, names))
     for p in (out, summary_path(out)):
         if same_file(p, detections):
             raise InputError("out", str(p), "a file other than the detections (this is the same file)")

@@ -35,6 +35,7 @@ import csv
 import io
 import json
 import math
+from collections import Counter
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -210,8 +211,10 @@ class DetectionReader:
 
     Attributes
     ----------
-    path, format, columns (every column name in the file), total (progress units, or None),
-    unit ("rows" or "B"), id_fields (id columns present, with their output types)
+    path, format, columns (every column name in the file), family_columns (the columns that decide the box
+    family: JSON Lines, those of the objects of the file's prevalent family, see :meth:`_jsonl_columns`;
+    else ``columns``), total (progress units, or None), unit ("rows" or "B"), id_fields (id columns
+    present, with their output types)
     """
 
     def __init__(self, path, *, chunk_rows: int = S.DEFAULT_CHUNK_ROWS, format: str | None = None):
@@ -226,6 +229,7 @@ class DetectionReader:
         self.numeric: tuple[str, ...] = ()
         #: physical lines read so far (CSV: after the header; JSON Lines: all), None for Parquet
         self.lines: int | None = None if self.format == "parquet" else 0
+        self.family_columns: list[str] | None = None
         if self.format == "parquet":
             self._pf = open_parquet(self.path, "detections")
             self.columns = list(self._pf.schema_arrow.names)
@@ -234,8 +238,10 @@ class DetectionReader:
             self.columns = self._csv_header()
             self.total, self.unit = self.path.stat().st_size, "B"
         else:
-            self.columns = self._jsonl_columns()
+            self.columns, self.family_columns = self._jsonl_columns()
             self.total, self.unit = self.path.stat().st_size, "B"
+        if self.family_columns is None:
+            self.family_columns = list(self.columns)
 
     # layout
     def select(self, numeric: tuple[str, ...]) -> None:
@@ -415,9 +421,16 @@ class DetectionReader:
         return Chunk(t, row0 + np.asarray(keep, dtype=np.int64), pre, mal)
 
     # jsonl
-    def _jsonl_columns(self) -> list[str]:
-        """Column names: the union of the keys of the first 1000 JSON objects."""
-        names: dict[str, None] = {}
+    def _jsonl_columns(self) -> tuple[list[str], list[str]]:
+        """``(columns, family_columns)``: the union of the keys of the first 1000 JSON objects, and the union of
+        the keys of those of them whose box family is the prevalent one (most objects; a tie: the first seen)
+        or that have no complete box.
+
+        One rule for a line of another box family wherever it is: the family is decided by the file's
+        objects, not by one odd line among the first 1000, so that line is an error row (its box columns
+        missing) as it is at row 300,000 -- never a refusal of the whole file.
+        """
+        keys: list[tuple[str, ...]] = []
         with open(self.path, "rb") as f:
             for i, line in enumerate(f):
                 if i >= 1000:
@@ -429,8 +442,17 @@ class DetectionReader:
                 except (ValueError, RecursionError):
                     continue
                 if isinstance(obj, dict):
-                    names.update(dict.fromkeys(str(k) for k in obj))
-        return list(names)
+                    keys.append(tuple(str(k) for k in obj))
+        families = [S.detect_box_type(k) for k in keys]
+        votes = Counter(f for f in families if f is not None)
+        top = max(votes, key=lambda f: (votes[f], -families.index(f))) if votes else None
+        names: dict[str, None] = {}
+        family: dict[str, None] = {}
+        for k, fam in zip(keys, families, strict=True):
+            names.update(dict.fromkeys(k))
+            if fam is None or fam == top:
+                family.update(dict.fromkeys(k))
+        return list(names), list(family)
 
     def _iter_jsonl(self):
 

@@ -54,10 +54,11 @@ import numpy as np
 import yaml
 
 from .. import params as P
+from .._parse import load_yaml
 from ..cameras import general
 from ..cameras.opencv import OpenCVCamera
 from ..cameras.rotation import R_W_C, pan_tilt_roll_from_R_W_C
-from ..errors import InputError
+from ..errors import ConfigError, InputError
 from ..io import load_camera
 from ..io.atomic import atomic_write_text
 from ..uncertainty.budget import ErrorBudget
@@ -142,8 +143,8 @@ def _intrinsics_mapping(path):
     the intrinsic calibration writes them; None if the file is not such a mapping."""
 
     try:
-        d = yaml.safe_load(Path(path).read_text())
-    except (OSError, yaml.YAMLError, UnicodeDecodeError):
+        d = load_yaml(Path(path).read_text(), str(path))
+    except (OSError, yaml.YAMLError, UnicodeDecodeError, ConfigError):
         return None
     if not isinstance(d, dict) or "K" not in d or "image_size_px" not in d or any(k in d for k in ("R", "t", "P")):
         return None
@@ -228,7 +229,7 @@ def load_transform(spec) -> np.ndarray:
             T = np.array([float(v) for v in p.read_text().replace(",", " ").split()])
         else:
 
-            d = yaml.safe_load(p.read_text())
+            d = load_yaml(p.read_text(), str(p))
             if isinstance(d, dict):
                 for k in ("T_ground_lidar", "T", "matrix", "transform"):
                     if k in d:

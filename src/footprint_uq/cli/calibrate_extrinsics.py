@@ -40,7 +40,8 @@ __all__ = ["extrinsics_cmd"]
               help="RANSAC / inlier reprojection threshold, px.")
 @click.option("--plane-threshold-m", type=click.FloatRange(min=0.001), default=0.05, show_default=True,
               help="Plane inlier distance in the clouds (about 3x the range noise).")
-@click.option("--min-frames", type=click.IntRange(min=2), default=3, show_default=True)
+@click.option("--min-frames", type=click.IntRange(min=2), default=3, show_default=True,
+              help="Usable frames needed (a spread from fewer than 3 frames is meaningless).")
 @click.option("--max-frame-rms-px", type=click.FloatRange(min=0.0, min_open=True), default=None, metavar="T",
               help="Drop frames whose own reprojection RMS exceeds T px (reported in frames.csv).")
 @click.option("--estimator", type=click.Choice(["joint", "mean"]), default="joint", show_default=True,

@@ -34,8 +34,10 @@ __all__ = ["synthetic_cmd"]
 @click.option("--max-tilt-deg", type=click.FloatRange(min=10.0, max=80.0), default=40.0, show_default=True,
               help="Largest board tilt (10..80 deg: the tilts are drawn from 10 deg up; beyond 80 the board is "
                    "seen edge-on).")
-@click.option("--supersample", type=click.IntRange(min=1, max=8), default=4, show_default=True)
-@click.option("--blur-sigma-px", type=click.FloatRange(min=0.0, max=100.0), default=0.6, show_default=True)
+@click.option("--supersample", type=click.IntRange(min=1, max=8), default=4, show_default=True,
+              help="Rendering: sub-pixels per pixel side (box filter).")
+@click.option("--blur-sigma-px", type=click.FloatRange(min=0.0, max=100.0), default=0.6, show_default=True,
+              help="Rendering: Gaussian optical blur, px (0: none).")
 @click.option("--noise-sigma-dn", type=click.FloatRange(min=0.0, max=255.0), default=2.0, show_default=True,
               help="Sensor noise, grey levels.")
 @click.option("--plan", "campaigns", type=click.IntRange(min=0), default=0, metavar="M",
@@ -45,7 +47,8 @@ __all__ = ["synthetic_cmd"]
 @click.option("--plan-bootstrap", type=click.IntRange(min=0), default=100, show_default=True, metavar="N",
               help="Bootstrap resamples of the first planning campaign (0: none).")
 @click.option("--no-render", is_flag=True, help="Skip the images (e.g. with --plan only).")
-@click.option("--seed", type=int, default=0, show_default=True)
+@click.option("--seed", type=int, default=0, show_default=True,
+              help="Seed of the board poses, the sensor noise and the planning study.")
 def synthetic_cmd(out_dir, views, board, square_m, margin_m, camera_file, scale, fill, max_tilt_deg, supersample,
                   blur_sigma_px, noise_sigma_dn, campaigns, corner_noise_px, plan_bootstrap, no_render, seed):
     """Synthetic checkerboard campaign: rendered images with exact corners (truth.json), and a planning study.

@@ -27,8 +27,10 @@ __all__ = ["capture"]
 @click.option("--fps", default=10.0, show_default=True, type=click.FloatRange(1, 100), help="Frame rate.")
 @click.option("--speed", "speed_mps", default=8.0, show_default=True, type=click.FloatRange(0.5, 40),
               help="Vehicle speed, m/s.")
-@click.option("--lead-in", "lead_in_m", default=35.0, show_default=True, type=click.FloatRange(0, 200))
-@click.option("--lead-out", "lead_out_m", default=35.0, show_default=True, type=click.FloatRange(0, 200))
+@click.option("--lead-in", "lead_in_m", default=35.0, show_default=True, type=click.FloatRange(0, 200),
+              help="Path length before the junction connection, metres.")
+@click.option("--lead-out", "lead_out_m", default=35.0, show_default=True, type=click.FloatRange(0, 200),
+              help="Path length after the junction connection, metres.")
 @click.option("--vehicle", "vehicle_filter", default="vehicle.lincoln.mkz*", show_default=True,
               help="Blueprint filter of the vehicle (falls back to any four-wheeled vehicle).")
 @click.option("--images", "images_dir", default=None, type=click.Path(file_okay=False, path_type=Path),

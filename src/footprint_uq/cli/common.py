@@ -1,4 +1,4 @@
-"""Helpers shared by several commands: camera and budget loading, option checks, stderr lines.
+"""Helpers shared by several commands: camera, pose and budget loading, option checks, stderr lines.
 
 (Those of the ``calibrate`` commands only are in :mod:`.calibrate_common`, so that the other
 commands do not load the calibration package.)
@@ -6,18 +6,102 @@ commands do not load the calibration package.)
 
 from __future__ import annotations
 
+import functools
+
 import click
 
+from ..errors import InputError
 from ..io import load_camera
 from ..uncertainty.budget import load_budget
 from ..uncertainty.ellipse import chi2_scale
 
-__all__ = ["load_camera_and_budget", "check_confidence", "note", "warn"]
+__all__ = ["load_camera_and_budget", "check_confidence", "note", "warn", "pose_options", "pose_from_options",
+           "budget_notice", "DEFAULT_STEP_PX"]
+
+#: the default grid step of every map the command line draws (``map``, ``demo``), pixels
+DEFAULT_STEP_PX = 4
+
+_POSE_HELP = "; with an intrinsics-only camera file (e.g. the camera.yaml of `calibrate intrinsics`)."
+_POSE_OPTIONS = (
+    click.option("--pose-file", default=None, metavar="FILE",
+                 help="The camera's pose, a YAML/JSON file with R and t (world -> camera), rvec and tvec, or "
+                      "height_m, pan_deg, tilt_deg [, roll_deg, position_m, ground_z_m] (docs/file-formats.md)"
+                      + _POSE_HELP),
+    click.option("--height-m", type=float, default=None, metavar="H",
+                 help="Pose: camera height above the ground plane, metres (with --pan-deg and --tilt-deg)"
+                      + _POSE_HELP),
+    click.option("--pan-deg", type=float, default=None, metavar="DEG",
+                 help="Pose: compass heading of the optical axis, degrees clockwise from north."),
+    click.option("--tilt-deg", type=float, default=None, metavar="DEG",
+                 help="Pose: tilt below the horizontal, degrees (positive down)."),
+    click.option("--roll-deg", type=float, default=None, metavar="DEG",
+                 help="Pose: roll about the optical axis, degrees (default 0)."),
+    click.option("--position-m", type=(float, float), default=None, metavar="X Y",
+                 help="Pose: camera foot point, metres east and north of the world origin (default 0 0)."),
+)
+_POSE_ARGS = ("pose_file", "height_m", "pan_deg", "tilt_deg", "roll_deg", "position_m")
 
 
-def load_camera_and_budget(camera_path, budget_spec):
-    """``(camera, budget)`` from a camera file and a preset name or budget file (bad input: InputError)."""
-    return load_camera(camera_path), load_budget(budget_spec)
+def pose_from_options(pose_file=None, height_m=None, pan_deg=None, tilt_deg=None, roll_deg=None,
+                      position_m=None):
+    """The ``pose`` argument of :func:`footprint_uq.io.load_camera` from the pose options: None (no pose
+    option), the pose file's path, or a mapping of the paper's pose parameters (InputError when mixed
+    or incomplete)."""
+    angles = {"--height-m": height_m, "--pan-deg": pan_deg, "--tilt-deg": tilt_deg}
+    extra = {"--roll-deg": roll_deg, "--position-m": position_m}
+    given = [k for k, v in {**angles, **extra}.items() if v is not None]
+    if pose_file is not None:
+        if given:
+            raise InputError(given[0], "given with --pose-file", "one pose: --pose-file, or --height-m, --pan-deg "
+                             "and --tilt-deg [--roll-deg, --position-m]")
+        return str(pose_file)
+    if not given:
+        return None
+    missing = [k for k, v in angles.items() if v is None]
+    if missing:
+        raise InputError(missing[0], "missing", f"all of --height-m, --pan-deg and --tilt-deg (given: "
+                         f"{', '.join(given)})")
+    pose = {"height_m": height_m, "pan_deg": pan_deg, "tilt_deg": tilt_deg}
+    if roll_deg is not None:
+        pose["roll_deg"] = roll_deg
+    if position_m is not None:
+        pose["position_m"] = list(position_m)
+    return pose
+
+
+def pose_options(f):
+    """Decorator of a command: adds the pose options (:data:`_POSE_OPTIONS`) and passes them on as one
+    ``pose`` keyword (:func:`pose_from_options`)."""
+
+    @functools.wraps(f)
+    def wrapper(*args, **kwargs):
+        pose = pose_from_options(**{k: kwargs.pop(k) for k in _POSE_ARGS})
+        return f(*args, pose=pose, **kwargs)
+
+    for option in reversed(_POSE_OPTIONS):
+        wrapper = option(wrapper)
+    return wrapper
+
+
+def budget_notice(budget) -> str | None:
+    """The loud line for a budget without extrinsic terms (None for one that has them)."""
+    missing = budget.missing_terms()
+    if "extrinsic" not in missing:
+        return None
+    what = " or ".join(missing)
+    return (f"the budget {budget.name!r} has no {what} error terms (as the budget.yaml of `calibrate intrinsics`): "
+            "the covariances are those of the intrinsics and the pixel noise alone, far smaller than a deployed "
+            "camera's; add the pose's errors (height_m, pan_deg, tilt_deg, ...; docs/file-formats.md)")
+
+
+def load_camera_and_budget(camera_path, budget_spec, pose=None):
+    """``(camera, budget)`` from a camera file (with ``pose`` for an intrinsics-only one) and a preset name
+    or budget file (bad input: InputError); a budget without extrinsic terms is named on stderr."""
+    camera, budget = load_camera(camera_path, pose=pose), load_budget(budget_spec)
+    msg = budget_notice(budget)
+    if msg is not None:
+        warn(msg)
+    return camera, budget
 
 
 def check_confidence(confidence: float | None) -> float | None:

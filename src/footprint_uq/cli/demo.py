@@ -7,14 +7,15 @@ import sys
 import click
 
 from ..viz.demo import write_demo
-from .common import warn
+from .common import DEFAULT_STEP_PX, warn
 
 __all__ = ["demo_cmd"]
 
 
 @click.command("demo")
 @click.option("--out", "out_dir", required=True, metavar="DIR", help="Output directory (created).")
-@click.option("--step-px", type=click.IntRange(min=1), default=4, show_default=True, help="Map grid step.")
+@click.option("--step-px", type=click.IntRange(min=1), default=DEFAULT_STEP_PX, show_default=True,
+              help="Map grid step in pixels (as in `map`).")
 @click.option("--case-study/--no-case-study", default=True, show_default=True,
               help="Also run the paper's left-turn case study into DIR/case-study.")
 def demo_cmd(out_dir, step_px, case_study):

@@ -12,7 +12,7 @@ from ..errors import InputError
 from ..products.gcp_support import add_support, load_gcp_support
 from ..products.locate import locate_csv, locate_records
 from ..uncertainty.presets import PRESET_NAMES
-from .common import check_confidence, load_camera_and_budget, warn
+from .common import check_confidence, load_camera_and_budget, pose_options, warn
 
 __all__ = ["locate_cmd", "MAX_PIXEL_PX"]
 
@@ -28,7 +28,9 @@ MAX_PIXEL_PX = 1e9
                    "angles as degrees instead of the printed 1e-3 deg) or a YAML/JSON budget file.")
 @click.option("--pixel", "pixels", type=(float, float), multiple=True, required=True, metavar="U V",
               help="Pixel (u right, v down, origin at the centre of the top-left pixel); repeat for more.")
-@click.option("--format", "fmt", type=click.Choice(["json", "csv"]), default="json", show_default=True)
+@click.option("--format", "fmt", type=click.Choice(["json", "csv"]), default="json", show_default=True,
+              help="Output: a JSON list of records, or CSV with the covariance flattened (cov_xx_m2, cov_xy_m2, "
+                   "cov_yy_m2).")
 @click.option("--confidence", type=float, default=None, metavar="P",
               help="Also report the semi-axes of the P-confidence ellipse (2-D chi-square, 0.95 -> 2.4477 sigma).")
 @click.option("--linear-threshold", type=float, default=0.05, show_default=True, metavar="E",
@@ -37,14 +39,16 @@ MAX_PIXEL_PX = 1e9
 @click.option("--gcp-summary", default=None, metavar="FILE",
               help="summary.json of the `calibrate gcp` run the camera and budget come from: adds gcp_inside_hull, "
                    "gcp_leverage_ratio, gcp_supported (how far the control points support each pixel).")
-def locate_cmd(camera_path, budget_spec, pixels, fmt, confidence, linear_threshold, gcp_summary):
+@pose_options
+def locate_cmd(camera_path, budget_spec, pixels, fmt, confidence, linear_threshold, gcp_summary, pose):
     """Ground position (x east, y north, metres) and 2x2 covariance (m^2) of pixels.
 
     One record per --pixel: u_px, v_px, x_m, y_m, cov_m2, sigma_major_m,
     sigma_minor_m (1 sigma), orientation_deg (major axis, counter-clockwise from
     east), nonlinearity (predicted relative error of the linear sigma_major_m:
     0.05 = 5 %), linear_ok (nonlinearity <= --linear-threshold), valid and reason
-    (null when valid).  With --confidence P, also confidence, semi_major_m and
+    (null when valid), budget_missing_terms (the error groups the budget has
+    nothing on: "extrinsic", "ground").  With --confidence P, also confidence, semi_major_m and
     semi_minor_m of the P ellipse.  A valid pixel that is not linear_ok is also
     reported on stderr: its covariance underestimates the spread (near the
     horizon; docs/uncertainty-model.md, "The linearity flag").
@@ -56,7 +60,7 @@ def locate_cmd(camera_path, budget_spec, pixels, fmt, confidence, linear_thresho
         i = int(np.argmax(bad))
         raise InputError(f"--pixel (#{i + 1})", tuple(pixels[i]),
                          f"finite pixel coordinates U V of magnitude <= {MAX_PIXEL_PX:g}")
-    camera, budget = load_camera_and_budget(camera_path, budget_spec)
+    camera, budget = load_camera_and_budget(camera_path, budget_spec, pose)
     w, h = camera.image_size_px
     for i in np.flatnonzero(~camera.in_image(uv)):
         warn(f"--pixel #{i + 1} ({uv[i, 0]:g}, {uv[i, 1]:g}) is outside the {w}x{h} image; computed anyway")

@@ -38,6 +38,8 @@ __all__ = ["main", "FootprintUQGroup", "EXIT_BAD_INPUT", "EXIT_BUG"]
 EXIT_BAD_INPUT = 2
 #: exit status of an unexpected error (a bug): one line, the traceback with --debug
 EXIT_BUG = 3
+#: what click raises for a group run without a command (click >= 8.2; a never-raised class before)
+_NO_COMMAND = getattr(click.exceptions, "NoArgsIsHelpError", type("_NeverRaised", (Exception,), {}))
 
 
 def _debug(args) -> bool:
@@ -104,6 +106,10 @@ class FootprintUQGroup(click.Group):
             rv = super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
         except click.exceptions.Exit as e:  # --help, --version
             sys.exit(e.exit_code)
+        except _NO_COMMAND as e:  # a group without its command: the usage and the commands, as written
+            click.echo(e.ctx.get_help() if e.ctx is not None else e.format_message(), err=True)
+            _error("missing command: one of those listed above")
+            sys.exit(EXIT_BAD_INPUT)
         except click.Abort:
             click.echo("footprint-uq: aborted", err=True)
             sys.exit(1)
@@ -166,6 +172,8 @@ main.add_lazy_command("serve", "footprint_uq.cli.serve:serve_cmd")
 main.add_lazy_command("convert", "footprint_uq.cli.convert:convert_cmd")
 main.add_lazy_command("validate", "footprint_uq.cli.validate:validate_cmd")
 main.add_lazy_command("plan", "footprint_uq.cli.plan:plan_cmd")
+main.add_lazy_command("camera", "footprint_uq.cli.camera:camera")
+main.add_lazy_command("warmup", "footprint_uq.cli.warmup:warmup_cmd")
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -18,8 +18,9 @@ from ..batch.process import process_file
 from ..batch.schema import DEFAULT_CHUNK_ROWS
 from ..errors import InputError
 from ..products.footprints import CONTACT_MODES, V2X_POLICIES
+from ..products.warmup import compile_notice
 from ..uncertainty.presets import PRESET_NAMES
-from .common import load_camera_and_budget
+from .common import load_camera_and_budget, note, pose_options
 
 __all__ = ["objects_cmd"]
 
@@ -81,9 +82,11 @@ __all__ = ["objects_cmd"]
               help="Fleet mode on Dask: retries of a failed partition.")
 @click.option("--overwrite", is_flag=True,
               help="Fleet mode: replace a non-empty --out folder as a whole (refused otherwise).")
+@pose_options
 def objects_cmd(camera_path, budget_spec, detections, out, box_type, contact, chunk_rows, confidence,
                 heading_offset_deg, origin_lat, origin_lon, corners, allow_outside_image, linearity, linear_threshold,
-                v2x_policy, compression, fsync, tracks, quiet, registry, scheduler, workers, retries, overwrite):
+                v2x_policy, compression, fsync, tracks, quiet, registry, scheduler, workers, retries, overwrite,
+                pose):
     """Footprints (centre, covariance, largest point, V2X fields) of every detection in a file.
 
     Every input row gives one output row with its 0-based row number, a status (ok,
@@ -96,12 +99,18 @@ def objects_cmd(camera_path, budget_spec, detections, out, box_type, contact, ch
     if tracks:
         options["tracks"] = True
     comp = None if compression == "none" else compression
+    msg = compile_notice(["objects"])
+    if msg is not None:
+        note(msg)
     if registry is not None:
         if camera_path is not None:
             raise InputError("--camera", camera_path, "no --camera with --registry (the registry names the cameras)")
         if tracks:
             raise InputError("--tracks", True, "a single detections file (--camera): fleet partitions run in "
                                                "parallel, out of time order")
+        if pose is not None:
+            raise InputError("--pose-file/--height-m", pose, "no pose options with --registry (its camera files "
+                             "hold the poses; `footprint-uq camera compose` writes one)")
         summ = process_fleet(registry, detections, out, budget=budget_spec, scheduler=scheduler, workers=workers,
                              retries=retries, chunk_rows=chunk_rows, progress=None if not quiet else False,
                              compression=comp, overwrite=overwrite, fsync=fsync, **options)
@@ -111,8 +120,10 @@ def objects_cmd(camera_path, budget_spec, detections, out, box_type, contact, ch
                              "--registry too: Dask runs the fleet mode (a dataset of many cameras)")
         if camera_path is None or budget_spec is None:
             raise InputError("--camera/--budget", (camera_path, budget_spec), "both a camera file and a budget")
-        cam, bud = load_camera_and_budget(camera_path, budget_spec)
+        cam, bud = load_camera_and_budget(camera_path, budget_spec, pose)
         summ = process_file(cam, bud, detections, out, chunk_rows=chunk_rows, progress=None if not quiet else False,
-                            compression=comp, info={"camera": str(camera_path), "budget": str(budget_spec)},
+                            compression=comp, info={"camera": str(camera_path), "budget": str(budget_spec),
+                                                      **({} if pose is None else {"pose": pose}),
+                                                      "budget_missing_terms": list(bud.missing_terms())},
                             fsync=fsync, **options)
     click.echo(f"footprint-uq objects: {summ.text()}; {summ.elapsed_s:.2f} s", err=True)

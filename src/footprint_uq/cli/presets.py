@@ -13,7 +13,8 @@ __all__ = ["presets_cmd"]
 
 @click.command("presets")
 @click.argument("names", nargs=-1, metavar="[NAME[@deg]]...")
-@click.option("--format", "fmt", type=click.Choice(["text", "json", "csv"]), default="text", show_default=True)
+@click.option("--format", "fmt", type=click.Choice(["text", "json", "csv"]), default="text", show_default=True,
+              help="Output: an aligned text table, JSON, or CSV.")
 def presets_cmd(names, fmt):
     """The error-budget presets of the paper (Tables 2-3): 1-sigma values of every source.
 

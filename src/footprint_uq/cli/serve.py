@@ -9,10 +9,13 @@ import sys
 
 import click
 
+from ..errors import InputError
 from ..products.footprints import CONTACT_MODES, V2X_POLICIES
 from ..service.messages.asn1_cpm import CDD_RELEASES, DEFAULT_CDD
 from ..service.runner import MAX_FRAME_BYTES, QUEUE_DEPTH, run
+from ..uncertainty.budget import load_budget
 from ..uncertainty.presets import PRESET_NAMES
+from .common import budget_notice, pose_options, warn
 
 __all__ = ["serve_cmd"]
 
@@ -55,9 +58,10 @@ __all__ = ["serve_cmd"]
               help="StationId of the messages (one camera; default: CRC-32 of the camera id).")
 @click.option("--uper-encoder", type=click.Choice(["fast", "asn1tools"]), default="fast", show_default=True,
               help="CPM UPER writer: the direct writer, or asn1tools (same bytes, ~6 ms per 100 objects).")
-@click.option("--linearity", is_flag=True,
+@click.option("--linearity/--no-linearity", default=True, show_default=True,
               help="Add per object nonlinearity (predicted relative error of the linear sigma_major_m, worst "
-                   "ground-contact point) and linear_ok; costs ~1.7 ms per 100 points.")
+                   "ground-contact point) and linear_ok, as map and objects do; costs ~1.7 ms per 100 points "
+                   "(--no-linearity: without).")
 @click.option("--linear-threshold", type=click.FloatRange(min=0, min_open=True), default=None, metavar="E",
               help="linear_ok is nonlinearity <= E (default 0.05).")
 @click.option("--tracks", is_flag=True,
@@ -73,16 +77,23 @@ __all__ = ["serve_cmd"]
 @click.option("--v2x-policy", type=click.Choice(list(V2X_POLICIES)), default="sampled", show_default=True,
               help="What the V2X fields encode where an object's centre is not linear_ok (far objects): "
                    "docs/uncertainty-model.md; each object's record names it (v2x_source, v2x_cov_m2).")
+@pose_options
 def serve_cmd(camera_path, budget_spec, registry, camera_id, input_, mqtt, output, input_prefix, output_prefix,
               policy, health_interval_s, workers, client_id, heading_offset_deg, origin_lat, origin_lon, confidence,
               contact, allow_outside_image, station_id, uper_encoder, linearity, linear_threshold, cpm_cdd, v2x_policy,
-              queue_depth, max_frame_bytes, tracks):
+              queue_depth, max_frame_bytes, tracks, pose):
     """Edge service: detector frames in, positions with uncertainty and V2X messages (CPM, SDSM) out.
 
     One output record per frame (or an error record), a health record every second;
     SIGTERM drains and exits 0.  See docs/service.md.
     """
-    sys.exit(run(camera=camera_path, budget=budget_spec, registry=registry, camera_id=camera_id,
+    if pose is not None and camera_path is None:
+        raise InputError("--pose-file/--height-m", pose, "--camera too (a registry's camera files hold the poses)")
+    if budget_spec is not None:
+        msg = budget_notice(load_budget(budget_spec))
+        if msg is not None:
+            warn(msg)
+    sys.exit(run(camera=camera_path, pose=pose, budget=budget_spec, registry=registry, camera_id=camera_id,
                  heading_offset_deg=heading_offset_deg, origin_lat_deg=origin_lat, origin_lon_deg=origin_lon,
                  confidence=confidence, contact=contact, allow_outside_image=allow_outside_image,
                  station_id=station_id, uper_encoder=uper_encoder, linearity=linearity,

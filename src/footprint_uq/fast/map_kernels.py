@@ -84,7 +84,7 @@ from ..uncertainty.budget import load_budget
 from . import core
 from .buffers import thread_buffer
 
-__all__ = ["covariance_map", "covariance_points", "kernel_constants"]
+__all__ = ["covariance_map", "covariance_points", "kernel_constants", "SERIAL_BELOW", "MAP_KERNELS", "POINT_KERNELS"]
 
 _JIT = dict(parallel=True, fastmath={"contract"}, cache=True, error_model="numpy")
 _JIT1 = dict(fastmath={"contract"}, cache=True, error_model="numpy")
@@ -1348,6 +1348,8 @@ def _points_general(uv, Suv, prm, R, om, colptr, rowidx, vals, vc, Ccc, has_qc, 
 # the same kernel without threads: for small batches the thread start-up costs more than the work
 _points_general_serial = nb.njit(**_JIT1)(_points_general.py_func)
 _SERIAL_BELOW = 4096
+#: below this many points ``covariance_points`` runs the serial kernel
+SERIAL_BELOW = _SERIAL_BELOW
 
 
 # --------------------------------------------------------------------------------------
@@ -1554,3 +1556,8 @@ def covariance_points(camera, budget, uv_px, pixel_cov_px2=None, *, get_reason: 
     if get_nonlinearity:
         out = out + (nlin.reshape(lead),)
     return out
+
+
+#: the entry kernels, by use (:mod:`footprint_uq.products.warmup` checks their cache and compiles them ahead)
+MAP_KERNELS = (_map_general, _map_undistorted)
+POINT_KERNELS = (_points_general_serial, _points_general)

@@ -8,14 +8,13 @@ every inconsistency that is tolerated is reported as a
 from __future__ import annotations
 
 import difflib
-import json
 import math
 import warnings
 from pathlib import Path
 
 import numpy as np
-import yaml
 
+from .._parse import load_yaml_or_json
 from ..errors import ConfigError, ConsistencyWarning, InputError
 
 __all__ = [
@@ -28,6 +27,9 @@ __all__ = [
 P_RTOL = 1e-6
 #: largest pixel discrepancy between P and K [R | t] that is only a warning; beyond it a ConfigError
 P_FAR_PX = 5.0
+#: smallest focal length of a camera file, pixels: below one pixel the image spans nearly 180 degrees in every
+#: direction and the kernels' products underflow (focal_px 1e-300 ran with 15 RuntimeWarnings)
+MIN_FOCAL_PX = 1.0
 #: pixel discrepancy (everywhere) below which P is taken as K [R | t] printed with fewer digits
 P_WARN_PX = 0.05
 #: largest magnitude of any number of a camera or pose file (metres, pixels, degrees): beyond it
@@ -61,11 +63,9 @@ def read_text(path) -> tuple[Path, str]:
 def parse_mapping(text: str, path: Path, *, what: str = "camera file") -> dict:
     """Parse YAML or JSON text (by extension; YAML otherwise) into a mapping."""
     try:
-        if path.suffix.lower() == ".json":
-            data = json.loads(text)
-        else:
-
-            data = yaml.safe_load(text)
+        data = load_yaml_or_json(text, str(path), is_json=path.suffix.lower() == ".json")
+    except ConfigError:  # alias bomb, duplicate key, too large: already named
+        raise
     except Exception as e:  # yaml.YAMLError / json.JSONDecodeError, with their one-line reason
         first = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
         raise ConfigError(str(path), type(e).__name__, f"a valid {'JSON' if path.suffix.lower() == '.json' else 'YAML'}"
@@ -186,8 +186,9 @@ def check_K(where: str, field: str, K: np.ndarray) -> np.ndarray:
     if K[2, 2] != 1.0 and K[2, 2] > 0 and abs(K[2, 2] - 1.0) <= 1e-12:
         K[2, 2] = 1.0
     fx, fy = K[0, 0], K[1, 1]
-    if not (fx > 0 and fy > 0):
-        raise ConfigError(label(where, f"{field} (fx, fy)"), (float(fx), float(fy)), "focal lengths > 0 px")
+    if not (fx >= MIN_FOCAL_PX and fy >= MIN_FOCAL_PX):
+        raise ConfigError(label(where, f"{field} (fx, fy)"), (float(fx), float(fy)),
+                          f"focal lengths >= {MIN_FOCAL_PX:g} px")
     scale = max(fx, fy)
     if K[2, 2] != 1.0:
         raise ConfigError(label(where, f"{field}[2][2]"), float(K[2, 2]), "1 ([[fx, s, cx], [0, fy, cy], [0, 0, 1]])")
@@ -269,7 +270,7 @@ def projection_discrepancy_px(P_file: np.ndarray, P_model: np.ndarray, image_siz
 
 
 def check_projection_matrix(where: str, field: str, P_file: np.ndarray, camera, *, alt_K: dict | None = None,
-                            far_px: float = P_FAR_PX) -> None:
+                            far_px: float = P_FAR_PX, other_K_ok: bool = False) -> None:
     """Compare a file's 3x4 ``P`` with ``K [R | t]`` of ``camera``.
 
     ``P`` is normalised to the scale of ``K [R | t]`` (its sign and magnitude are
@@ -277,7 +278,9 @@ def check_projection_matrix(where: str, field: str, P_file: np.ndarray, camera, 
     said; otherwise the discrepancy in pixels at a few image points decides: up to
     ``far_px`` a :class:`ConsistencyWarning`, beyond a :class:`ConfigError`.  When
     ``alt_K`` maps other intrinsic-matrix keys of the file to their matrices and one
-    of them explains ``P`` exactly, the message says so.
+    of them explains ``P`` exactly, the message says so.  With ``other_K_ok`` (TUMTraf s110 files, whose P is
+    documented as another intrinsic matrix times [R | t]) a P with exactly the camera's pose and another
+    intrinsic matrix is warned about, not refused, even when the file does not hold that matrix.
     """
     P_model = camera.P
     scale = float(np.sum(P_model * P_file) / np.sum(P_file * P_file))
@@ -300,6 +303,8 @@ def check_projection_matrix(where: str, field: str, P_file: np.ndarray, camera, 
         if np.linalg.norm(P_file * s - P_alt) <= 1e-6 * np.linalg.norm(P_alt):
             explained = f"; {field} equals {key} [R | t] instead"
             break
+    if not explained and other_K_ok:
+        explained = _same_pose_other_K(P_file, camera, field)
     if d.max() <= far_px or explained:
         warnings.warn(f"{label(where, field)} differs from K [R | t] (relative {rel:.2g}; at ground points seen at "
                       f"pixels {detail}){explained}; using K, dist, R, t", ConsistencyWarning, stacklevel=3)
@@ -307,6 +312,31 @@ def check_projection_matrix(where: str, field: str, P_file: np.ndarray, camera, 
     raise ConfigError(label(where, field), f"{d.max():.3g} px away from K [R | t]",
                       f"a projection matrix consistent with K [R | t] within {far_px:g} px (ground points seen at "
                       f"pixels {detail})")
+
+
+def _same_pose_other_K(P_file, camera, field) -> str:
+    """``"; FIELD has the pose R, t exactly ..."`` when the RQ decomposition of ``P_file`` gives the camera's
+    rotation and centre (1e-9 relative) with another intrinsic matrix (the 2023 TUMTraf south2 file: P is
+    the later releases' calibrated_intrinsic_camera_matrix [R | t], a key that file does not have); else ``""``."""
+    M = np.asarray(P_file, dtype=np.float64)[:, :3]
+    if not np.all(np.isfinite(M)) or abs(np.linalg.det(M)) < 1e-300:
+        return ""
+    Kp, Rp = np.linalg.qr(np.linalg.inv(M))  # inv(M) = inv(R) inv(K): Q = R^T, upper triangular = inv(K)
+    Rq = Kp.T
+    K_p = np.linalg.inv(Rp)
+    sign = np.diag(np.sign(np.diag(K_p)))  # positive focal lengths
+    K_p, Rq = K_p @ sign, sign @ Rq
+    if np.linalg.det(Rq) < 0:
+        Rq, K_p = -Rq, -K_p
+    C_p = -np.linalg.solve(M, np.asarray(P_file, dtype=np.float64)[:, 3])
+    C_m = camera.position_world_m
+    same = (np.allclose(Rq, camera.R, rtol=0, atol=1e-9)
+            and np.linalg.norm(C_p - C_m) <= 1e-9 * max(1.0, float(np.linalg.norm(C_m))))
+    if not same:
+        return ""
+    K_p = K_p / K_p[2, 2]
+    return (f"; {field} has the pose R, t exactly, with another intrinsic matrix (fx {K_p[0, 0]:.6g}, fy "
+            f"{K_p[1, 1]:.6g}, cx {K_p[0, 2]:.6g}, cy {K_p[1, 2]:.6g} px)")
 
 
 def sanitize(obj):

@@ -153,7 +153,7 @@ def _pantilt_from_dict(d, where):
     _check_keys(d, where, *PANTILT_KEYS, model="pan-tilt")
     size = C.as_image_size(where, "image_size_px", d["image_size_px"])
     kw = dict(
-        focal_px=C.as_number(where, "focal_px", d["focal_px"], positive=True, unit=" (pixels)"),
+        focal_px=C.as_number(where, "focal_px", d["focal_px"], positive=True, lo=C.MIN_FOCAL_PX, unit=" (pixels)"),
         image_size_px=size,
         height_m=C.as_number(where, "height_m", d["height_m"], positive=True, unit=" (metres above the ground)"),
         pan_deg=C.as_number(where, "pan_deg", d["pan_deg"], lo=-360, hi=360, unit=" (degrees)"),

@@ -15,7 +15,9 @@ JSON file per sensor.  Two generations exist:
                                            x_cam = R x_world + t
       projection_matrix                    3x4; in the released files it is
                                            calibrated_intrinsic_camera_matrix [R | t],
-                                           NOT intrinsic_camera_matrix [R | t]
+                                           NOT intrinsic_camera_matrix [R | t] (also in the
+                                           2023 south2 file that lacks that key: a P with
+                                           exactly the pose R, t and another K is warned about)
       optimal_intrinsic_camera_matrix,     other 3x3 / 3x4 intrinsic matrices (undistorted
       calibrated_intrinsic_camera_matrix   images, re-projection); not used
 
@@ -24,9 +26,20 @@ JSON file per sensor.  Two generations exist:
   station-base frame: ``rotation_matrix_sensor_station_base_to_sensor`` (sensor -> base,
   sensor axes x forward, y left, z up) and ``translation_sensor_station_base_to_sensor``
   (the sensor's position, metres); the ground is z = 0 of the base frame.
+* **A9 R0** (``s040_*/s050_*`` of the dev kit's 2024-03-06 .. 2024-04-29 releases): ``intrinsic_matrix``,
+  ``extrinsic_matrix`` (3x4 world -> camera), ``projection_matrix``, and ``rotation_matrix`` (= the
+  extrinsic rotation transposed) with a ``translation`` {x, y, z} given in another frame (its x, y are not
+  the camera centre of ``extrinsic_matrix``; its z is the height the projection matrix was built with).
+  The pose is ``extrinsic_matrix``; ``translation`` is not used.  In two of the five distinct files the
+  projection matrix is ``K extrinsic_matrix`` exactly; in the other three it disagrees by 30-58 px at
+  ground points (a 0.1-0.3 deg different rotation, the camera 0.1-0.4 m lower): ``extrinsic_matrix`` is
+  used all the same (warned), because its rotation is the file's ``rotation_matrix`` exactly and the
+  2024-04-29 release replaced the projection matrix of ``s040_camera_basler_north_16mm`` by
+  ``K extrinsic_matrix``, i.e. the authors corrected P towards the extrinsics, not the other way.
 * **LiDAR-relative** (``*_R3/_R4``): ``projection_from_<lidar>`` (LiDAR frame -> pixels),
   moved into the base frame with ``transformation_matrix_<lidar>_to_<base>`` (in the file,
-  in ``<lidar>.json`` next to it, or ``lidar_to_base=``).
+  in ``<lidar>.json`` next to it, or ``lidar_to_base=``); the 2023 release's LiDAR files name it
+  ``transformation_matrix_into_<base>`` (the LiDAR is the file's own sensor).
 
 What is read, in this order:
 
@@ -152,7 +165,10 @@ def read_tumtraf_calibration(path, *, pose_convention: str | None = None) -> dic
                 out["alt_K"][k] = a[:, :3]
     out["R"] = out["t"] = None
     out["pose_keys"] = None
+    out["a9_r0"] = _a9_r0_layout(d, where, placeholders)
     for rk, tk, conv in _RT_PAIRS:
+        if out["a9_r0"] and tk == "translation":
+            continue  # another frame's translation: the pose is extrinsic_matrix (module docstring, "A9 R0")
         if rk in d and tk in d and rk not in placeholders and tk not in placeholders:
             Rm = C.as_matrix(where, rk, d[rk], (3, 3))
             tv = _translation(where, tk, d[tk])
@@ -211,12 +227,30 @@ def _station_base(d, where, absent):
     return {"station_base": (R_world_cam.T, -R_world_cam.T @ Cb), "station_base_rpy_deg": rpy}
 
 
-def _lidar_transforms(d, where, absent):
-    """``transformation_matrix_<lidar>_to_<base>`` 4x4 (LiDAR -> base) found in a mapping, by LiDAR name."""
+def _a9_r0_layout(d, where, placeholders) -> bool:
+    """The A9 R0 layout: ``rotation_matrix`` and ``translation`` beside an ``extrinsic_matrix`` whose rotation is
+    ``rotation_matrix`` transposed (then ``translation`` is in another frame and the pose is the extrinsic)."""
+    keys = ("rotation_matrix", "translation", "extrinsic_matrix")
+    if any(k not in d or k in placeholders for k in keys):
+        return False
+    Rm = C.as_matrix(where, "rotation_matrix", d["rotation_matrix"], (3, 3))
+    E = C.as_matrix(where, "extrinsic_matrix", d["extrinsic_matrix"], [(3, 4), (4, 4)])
+    return bool(np.allclose(E[:3, :3], Rm.T, rtol=0, atol=1e-6))
+
+
+def _lidar_transforms(d, where, absent, own_name: str | None = None):
+    """``transformation_matrix_<lidar>_to_<base>`` 4x4 (LiDAR -> base) found in a mapping, by LiDAR name; in a
+    LiDAR's own file (``own_name``) also the 2023 release's ``transformation_matrix_into_<base>``."""
     out = {}
     for k, v in d.items():
-        if k.startswith("transformation_matrix_") and "_to_" in k and k not in absent:
-            src, _, dst = k[len("transformation_matrix_"):].partition("_to_")
+        into = k.startswith("transformation_matrix_into_")
+        if into and own_name is None:
+            continue
+        if k.startswith("transformation_matrix_") and ("_to_" in k or into) and k not in absent:
+            if into:
+                src, dst = own_name, k[len("transformation_matrix_into_"):]
+            else:
+                src, _, dst = k[len("transformation_matrix_"):].partition("_to_")
             T = C.as_matrix(where, k, v, (4, 4))
             if np.any(T[3] != [0, 0, 0, 1]):
                 raise ConfigError(C.label(where, f"{k}[3]"), T[3].tolist(), "[0, 0, 0, 1]")
@@ -326,8 +360,10 @@ def camera_from_tumtraf_file(path, *, ground_z_m=None, image_size_px=None, pose=
             ("station_base", None) if d["station_base"] is not None else lidar)
         if ok or use == "extrinsics" or (ok2 and alt is None):
             cam = _camera_from_extrinsics(d, size, gz, where)
-            if d["P"] is not None:
-                C.check_projection_matrix(where, "projection_matrix", d["P"], cam, alt_K=d["alt_K"])
+            if d["P"] is not None and d["a9_r0"]:
+                _check_a9_projection(d["P"], cam, where)
+            elif d["P"] is not None:
+                C.check_projection_matrix(where, "projection_matrix", d["P"], cam, alt_K=d["alt_K"], other_K_ok=True)
             return cam
         # the implied direction gives no camera above the ground looking down: another pose of the file, or refuse
         keys = "/".join(d["pose_keys"])
@@ -360,6 +396,25 @@ def camera_from_tumtraf_file(path, *, ground_z_m=None, image_size_px=None, pose=
             warnings.warn(f"{where}: projection_matrix pose differs from {'/'.join(d['pose_keys'])} by "
                           f"{ang:.3g} deg and {dC:.3g} m; using projection_matrix", ConsistencyWarning, stacklevel=2)
     return cam
+
+
+def _check_a9_projection(P_file, cam, where):
+    """An A9 R0 file's projection matrix against ``K extrinsic_matrix``: silent when equal, else a warning that
+    says which is used and why (module docstring, "A9 R0")."""
+    P_model = cam.P
+    Pn = P_file * float(np.sum(P_model * P_file) / np.sum(P_file * P_file))
+    if np.linalg.norm(Pn - P_model) <= C.P_RTOL * np.linalg.norm(P_model):
+        return
+    _, dpx = C.projection_discrepancy_px(Pn, P_model, cam.image_size_px, cam.position_world_m, cam.ground_z_m)
+    if dpx.max() <= C.P_WARN_PX:
+        return
+    other = OpenCVCamera.from_projection_matrix(P_file, cam.image_size_px, None, cam.ground_z_m)
+    warnings.warn(f"{where}: projection_matrix differs from K extrinsic_matrix by up to {dpx.max():.3g} px at ground "
+                  f"points (its camera {other.height_m:.3g} m high, tilt {other.tilt_deg:.3g} deg; the extrinsic's "
+                  f"{cam.height_m:.3g} m, {cam.tilt_deg:.3g} deg); using K, dist, extrinsic_matrix: its rotation is "
+                  "the file's rotation_matrix exactly (translation is in another frame), and the dev kit's "
+                  "2024-04-29 release corrected s040_camera_basler_north_16mm's projection_matrix to K "
+                  "extrinsic_matrix", ConsistencyWarning, stacklevel=3)
 
 
 def _camera_from_P(Pm, size, gz, where, d, key):
@@ -418,10 +473,11 @@ def _load_lidar_transforms(spec):
 
     if isinstance(spec, (str, Path)):
         p, m = C.read_mapping(spec, what="LiDAR calibration file")
-        out = _lidar_transforms(m, str(p), {k for k, v in m.items() if _placeholder(v) or _empty(v)})
+        out = _lidar_transforms(m, str(p), {k for k, v in m.items() if _placeholder(v) or _empty(v)},
+                                own_name=p.stem)
         if not out:
             raise ConfigError(C.label(str(p), "transformation_matrix_<lidar>_to_<base>"), "missing",
-                              "the LiDAR -> base 4x4 transform")
+                              "the LiDAR -> base 4x4 transform (or transformation_matrix_into_<base>)")
         return out
     T = C.as_matrix("lidar_to_base", "T", spec, (4, 4))
     if np.any(T[3] != [0, 0, 0, 1]):

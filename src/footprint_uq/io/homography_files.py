@@ -18,6 +18,8 @@ __all__ = ["HOMOGRAPHY_KEYS", "HomographyFile", "homography_file_from_dict", "lo
 HOMOGRAPHY_KEYS = (("model", "image_size_px", "H_ground_image"),
                    ("K", "dist", "ground_z_m", "points", "cov_H", "name", "description"))
 _POINT_KEYS = ("uv_px", "xy_world_m", "sigma_px", "sigma_m")
+#: the range of the largest entry of a file's H (scale-free; beyond it its products under- or overflow)
+H_SCALE_RANGE = (1e-100, 1e100)
 
 
 class HomographyFile(NamedTuple):
@@ -43,6 +45,12 @@ def homography_file_from_dict(d: dict, *, where: str = "") -> HomographyFile:
             raise ConfigError(C.label(where, k), "missing", f"a value for '{k}' (homography camera file)")
     size = C.as_image_size(where, "image_size_px", d["image_size_px"])
     H = C.as_matrix(where, "H_ground_image", d["H_ground_image"], (3, 3))
+    top = float(np.abs(H).max())
+    if not H_SCALE_RANGE[0] <= top <= H_SCALE_RANGE[1]:
+        raise ConfigError(C.label(where, "H_ground_image"), f"largest entry {top:.3g}",
+                          f"a matrix scaled to a largest entry between {H_SCALE_RANGE[0]:g} and {H_SCALE_RANGE[1]:g} "
+                          "(a homography is defined up to scale: divide it by its largest entry; beyond, its "
+                          "products under- or overflow)")
     gz = C.as_number(where, "ground_z_m", d.get("ground_z_m", 0.0), unit=" (metres)")
     points, cov = None, None
     if d.get("points") is not None:
@@ -87,6 +95,7 @@ def homography_file_from_dict(d: dict, *, where: str = "") -> HomographyFile:
             dist = None if d.get("dist") is None else C.as_vector(where, "dist", d["dist"], (0, 4, 5, 8),
                                                                    "distortion coefficients")
             cam, cov_pose = camera_from_homography(hc, K, size, dist=dist, cov_h=hc.cov_h, ground_z_m=gz)
+            _check_K_explains_H(hc, cam, where)
         elif d.get("dist") is not None:
             raise ConfigError(C.label(where, "dist"), d["dist"], "dist only with K")
     except InputError as e:
@@ -94,6 +103,41 @@ def homography_file_from_dict(d: dict, *, where: str = "") -> HomographyFile:
             raise
         raise C.rewrap(e, where) from None
     return HomographyFile(hc, cam, cov_pose)
+
+
+def _check_K_explains_H(hc: HomographyCamera, cam, where: str) -> None:
+    """The camera decomposed with ``K`` must reproduce the file's H: pixels of the image's lower half mapped to
+    the ground by H and back through ``K [R | t]``.  Beyond :data:`footprint_uq.io._common.P_FAR_PX` the
+    file is refused (K and H describe two different mappings: which one is meant cannot be told), above
+    0.05 px it is warned about; the camera (K, R, t) is what every command then uses."""
+    w, h = hc.image_size_px
+    uv = np.array([[u * (w - 1), v * (h - 1)] for v in (0.6, 0.8, 1.0) for u in (0.0, 0.5, 1.0)])
+    H = hc.H_ground_image
+    q = np.c_[uv, np.ones(len(uv))] @ H.T
+    front = np.abs(q[:, 2]) > 1e-12 * np.abs(q).max()
+    if not front.any():
+        return
+    xy = q[front, :2] / q[front, 2:3]
+    X = np.c_[xy, np.full(len(xy), cam.ground_z_m), np.ones(len(xy))]
+    p = X @ cam.P.T
+    ok = p[:, 2] > 0
+    if not ok.any():
+        raise ConfigError(C.label(where, "K"), "the ground of H_ground_image behind the camera decomposed with K",
+                          "a K that belongs to this homography")
+    d_px = np.full(len(p), np.inf)
+    d_px[ok] = np.hypot(*(p[ok, :2] / p[ok, 2:3] - uv[front][ok]).T)
+    worst = int(np.argmax(d_px))
+    u, v = uv[front][worst]
+    off = f"{d_px[worst]:.3g} px off H_ground_image at pixel ({u:.6g}, {v:.6g})"
+    why = (f"H maps that pixel to ({xy[worst, 0]:.4g}, {xy[worst, 1]:.4g}) m, which the camera decomposed with K "
+           "sees elsewhere")
+    if d_px[worst] > C.P_FAR_PX:
+        raise ConfigError(C.label(where, "K"), off,
+                          f"a K that explains H within {C.P_FAR_PX:g} px ({why}: K and H are two different mappings; "
+                          "drop K to use H alone: load_homography)")
+    if d_px[worst] > C.P_WARN_PX:
+        warnings.warn(f"{C.label(where, 'K')}: {off} ({why}); using the camera of K (its pose from H)",
+                      ConsistencyWarning, stacklevel=4)
 
 
 def _numeric(s) -> bool:

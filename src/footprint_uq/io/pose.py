@@ -28,8 +28,10 @@ __all__ = ["camera_from_intrinsics_and_pose", "read_pose", "POSE_KEYS"]
 
 POSE_KEYS = ("R", "t", "rvec", "tvec", "height_m", "pan_deg", "tilt_deg", "roll_deg", "position_m", "ground_z_m")
 
-NO_POSE_HELP = ("a camera pose: pass pose={'height_m': .., 'pan_deg': .., 'tilt_deg': .., ['roll_deg', "
-                "'position_m']} or pose={'R': 3x3, 't': 3} (world -> camera), or pose='pose.yaml' with those keys "
+NO_POSE_HELP = ("a camera pose: on the command line --pose-file FILE, or --height-m H --pan-deg P --tilt-deg T "
+                "[--roll-deg R --position-m X Y] (or `footprint-uq camera compose` to write a full camera file); "
+                "in Python pose={'height_m': .., 'pan_deg': .., 'tilt_deg': .., ['roll_deg', 'position_m']} or "
+                "pose={'R': 3x3, 't': 3} (world -> camera), or pose='pose.yaml' with those keys "
                 "(docs/file-formats.md)")
 
 

@@ -15,6 +15,7 @@ import math
 import numpy as np
 
 from .. import status
+from ..uncertainty.budget import load_budget
 from ..uncertainty.ellipse import chi2_scale, ellipse_axes
 from ..uncertainty.propagation import propagate
 
@@ -22,12 +23,12 @@ __all__ = ["LOCATE_KEYS", "CONFIDENCE_KEYS", "CSV_KEYS", "locate_records", "loca
 
 #: keys of every ``locate`` record, in output order
 LOCATE_KEYS = ("u_px", "v_px", "x_m", "y_m", "cov_m2", "sigma_major_m", "sigma_minor_m", "orientation_deg",
-               "nonlinearity", "linear_ok", "valid", "reason")
+               "nonlinearity", "linear_ok", "valid", "reason", "budget_missing_terms")
 #: extra keys when a confidence level is given
 CONFIDENCE_KEYS = ("confidence", "semi_major_m", "semi_minor_m")
 #: CSV columns of ``locate`` (covariance flattened)
 CSV_KEYS = ("u_px", "v_px", "x_m", "y_m", "cov_xx_m2", "cov_xy_m2", "cov_yy_m2", "sigma_major_m", "sigma_minor_m",
-            "orientation_deg", "nonlinearity", "linear_ok", "valid", "reason")
+            "orientation_deg", "nonlinearity", "linear_ok", "valid", "reason", "budget_missing_terms")
 
 
 def _num(x):
@@ -63,8 +64,13 @@ def locate_records(camera, budget, uv_px, *, confidence: float | None = None,
         is the predicted relative error of the linear 1-sigma semi-major axis.  An invalid
         point, or a valid one whose outputs are not all finite, has None numbers, ``valid``
         False, ``linear_ok`` False and the reason text of :mod:`footprint_uq.status`.
+        ``budget_missing_terms`` lists the error groups the budget has nothing on
+        (:meth:`footprint_uq.ErrorBudget.missing_terms`: ``"extrinsic"``, ``"ground"``; the paper's
+        presets have no ground terms, the budget of ``calibrate intrinsics`` neither extrinsic ones).
     """
     uv = np.asarray(uv_px, dtype=np.float64).reshape(-1, 2)
+    budget = load_budget(budget)
+    missing = list(budget.missing_terms())
     est = propagate(camera, budget, uv, linear_threshold=linear_threshold)
     a, b, ang = ellipse_axes(est.cov_m2)
     k = chi2_scale(confidence) if confidence is not None else None
@@ -82,7 +88,7 @@ def locate_records(camera, budget, uv_px, *, confidence: float | None = None,
             "cov_m2": [[_num(c[0, 0]), _num(c[0, 1])], [_num(c[1, 0]), _num(c[1, 1])]],
             "sigma_major_m": _num(a[i]), "sigma_minor_m": _num(b[i]), "orientation_deg": _num(ang[i]),
             "nonlinearity": _num(est.nonlinearity[i]), "linear_ok": bool(ok and est.linear_ok[i]),
-            "valid": ok, "reason": why,
+            "valid": ok, "reason": why, "budget_missing_terms": list(missing),
         }
         if k is not None:
             rec.update({"confidence": confidence, "semi_major_m": _num(k * a[i]), "semi_minor_m": _num(k * b[i])})
@@ -115,7 +121,8 @@ def locate_csv(records: list[dict], confidence: float | None = None) -> str:
     str
         Columns :data:`CSV_KEYS` (the covariance flattened to ``cov_xx_m2``, ``cov_xy_m2``,
         ``cov_yy_m2``); missing numbers are ``nan``, booleans ``true``/``false``, floats
-        printed in full (``repr``), ``reason`` empty for valid rows.
+        printed in full (``repr``), ``reason`` empty for valid rows, ``budget_missing_terms``
+        joined with ``;``.
     """
     cols = list(CSV_KEYS) + (list(CONFIDENCE_KEYS) if confidence is not None else [])
     cols += [k for k in records[0] if k.startswith("gcp_")] if records else []  # products.gcp_support
@@ -126,6 +133,7 @@ def locate_csv(records: list[dict], confidence: float | None = None) -> str:
         flat = dict(r)
         cov = flat.pop("cov_m2")
         flat["cov_xx_m2"], flat["cov_xy_m2"], flat["cov_yy_m2"] = cov[0][0], cov[0][1], cov[1][1]
+        flat["budget_missing_terms"] = ";".join(flat.get("budget_missing_terms", ()))
         row = [_cell(flat[c]) for c in cols]
         row[cols.index("reason")] = r["reason"] if not r["valid"] else ""
         w.writerow(row)

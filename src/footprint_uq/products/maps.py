@@ -63,7 +63,12 @@ from ..uncertainty.budget import ErrorBudget, load_budget
 from ..uncertainty.ellipse import chi2_scale, ellipse_axes
 from ..uncertainty.propagation import DEFAULT_LINEAR_THRESHOLD, check_linear_threshold, propagate
 
-__all__ = ["UncertaintyMap", "uncertainty_map", "ground_sampling_distance", "pixel_jacobian", "GSD_DEFINITION"]
+__all__ = ["UncertaintyMap", "uncertainty_map", "ground_sampling_distance", "pixel_jacobian", "GSD_DEFINITION",
+           "SUMMARY_RANGES_M"]
+
+#: ranges (metres from the camera foot point) of the summary's ``within_range`` figures: the reach of a
+#: roadside camera's detections (an unmasked map's maximum comes from pixels just below the horizon)
+SUMMARY_RANGES_M = (50.0, 100.0, 200.0)
 
 #: one-line definition stored with every saved map
 GSD_DEFINITION = ("gsd_range_m = |dxy/du . e_range| + |dxy/dv . e_range|, gsd_cross_m = the same with "
@@ -157,6 +162,13 @@ class UncertaintyMap:
         For each threshold ``t``: the ground area (m^2) and the farthest range (m) of
         valid pixels whose semi-major axis (1 sigma, or at ``confidence``) is below ``t``.
         The area sums the pixel footprints ``|det dxy_duv|`` (times ``step_px^2``).
+
+        Without ``max_range_m`` the maximum (``semi_major_m_max``, ``range_m_max``) comes from the pixels
+        just below the horizon (10^5..10^6 m): use the percentiles (``semi_major_m_p90/p95/p99``,
+        ``range_m_p95``) and, with the linearity flag, ``semi_major_m_max_linear_ok`` / ``range_m_max_linear_ok``
+        (the largest over the pixels whose linear covariance holds), or ``within_range``: the 95th
+        percentile and the maximum of the valid pixels within each of :data:`SUMMARY_RANGES_M` of the
+        camera foot point.
         """
         a, _ = self.semi_axes(confidence)
         v = self.valid & np.isfinite(a)
@@ -178,17 +190,31 @@ class UncertaintyMap:
             out.update({
                 "semi_major_m_min": float(av.min()),
                 "semi_major_m_median": float(np.median(av)),
+                "semi_major_m_p90": float(np.percentile(av, 90)),
                 "semi_major_m_p95": float(np.percentile(av, 95)),
+                "semi_major_m_p99": float(np.percentile(av, 99)),
                 "semi_major_m_max": float(av.max()),
+                "range_m_p95": float(np.percentile(self.range_m[v], 95)),
                 "range_m_max": float(self.range_m[v].max()),
                 "gsd_range_m_median": float(np.median(self.gsd_range_m[v])),
                 "gsd_cross_m_median": float(np.median(self.gsd_cross_m[v])),
             })
         else:
-            out.update({k: None for k in ("semi_major_m_min", "semi_major_m_median", "semi_major_m_p95",
-                                          "semi_major_m_max", "range_m_max", "gsd_range_m_median",
-                                          "gsd_cross_m_median")})
+            out.update({k: None for k in ("semi_major_m_min", "semi_major_m_median", "semi_major_m_p90",
+                                          "semi_major_m_p95", "semi_major_m_p99", "semi_major_m_max", "range_m_p95",
+                                          "range_m_max", "gsd_range_m_median", "gsd_cross_m_median")})
         out.update(self._linearity_summary(v))
+        ok = v & self.linear_ok if self.nonlinearity is not None else None
+        has_ok = ok is not None and bool(ok.any())
+        out["semi_major_m_max_linear_ok"] = float(a[ok].max()) if has_ok else None
+        out["range_m_max_linear_ok"] = float(self.range_m[ok].max()) if has_ok else None
+        out["within_range"] = []
+        for r in SUMMARY_RANGES_M:
+            m = v & (self.range_m <= r)
+            out["within_range"].append({
+                "range_m": float(r), "fraction_of_valid": float(m.sum() / max(int(v.sum()), 1)),
+                "semi_major_m_p95": float(np.percentile(a[m], 95)) if m.any() else None,
+                "semi_major_m_max": float(a[m].max()) if m.any() else None})
         area = self.footprint_area_m2 * float(self.step_px) ** 2
         out["below_threshold"] = []
         for t in thresholds_m:

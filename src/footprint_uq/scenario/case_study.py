@@ -37,18 +37,17 @@ horizontal line of sight from the camera's foot to the footprint centre).
 
 from __future__ import annotations
 
-import json
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
-import yaml
 
 from .. import params as P
 from .. import status
 from .._checks import as_float
+from .._parse import load_yaml_or_json
 from ..errors import ConfigError
 from ..products.footprints import footprint_centre, footprints_from_boxes3d
 from ..uncertainty import presets
@@ -175,10 +174,9 @@ def load_config(path) -> CaseStudyConfig:
         raise ConfigError("config", str(path), "an existing YAML or JSON file")
     text = p.read_text()
     try:
-        if p.suffix.lower() == ".json":
-            data = json.loads(text)
-        else:
-            data = yaml.safe_load(text)
+        data = load_yaml_or_json(text, str(p), is_json=p.suffix.lower() == ".json")
+    except ConfigError:  # alias bomb, duplicate key, too large: already named
+        raise
     except ValueError as e:
         raise ConfigError(str(p), type(e).__name__, f"valid YAML/JSON ({str(e).splitlines()[0]})") from None
     except Exception as e:  # yaml.YAMLError has no common base with ValueError

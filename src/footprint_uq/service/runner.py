@@ -48,6 +48,7 @@ import orjson
 from ..batch.fleet import load_registry
 from ..errors import ConfigError, InputError
 from ..io import load_camera
+from ..products.warmup import compile_notice
 from .core import RECORD_ERROR, RECORD_FOOTPRINTS, FrameOutput, Service, error_record
 from .messages.asn1_cpm import DEFAULT_CDD
 
@@ -690,7 +691,8 @@ def run(*, camera=None, budget=None, registry=None, camera_id: str | None = None
         origin_lat_deg: float | None = None, origin_lon_deg: float | None = None, confidence: float = 0.95,
         contact: str = "bottom-centre", allow_outside_image: bool = False, station_id: int | None = None,
         uper_encoder: str = "fast", linearity: bool = False, linear_threshold: float | None = None,
-        workers: int = 1, cpm_cdd: str = DEFAULT_CDD, v2x_policy: str = "sampled", **serve_options) -> int:
+        workers: int = 1, cpm_cdd: str = DEFAULT_CDD, v2x_policy: str = "sampled", pose=None,
+        **serve_options) -> int:
     """``footprint-uq serve``: build the :class:`Service` from files (a camera file and budget, or a
     registry) and :func:`serve` it; returns the exit status.
 
@@ -698,7 +700,8 @@ def run(*, camera=None, budget=None, registry=None, camera_id: str | None = None
     worker processes (camera ``i`` of the sorted ids goes to worker ``i mod workers``), each with its
     own MQTT client (``<client_id>-w<k>``) subscribed to its cameras' topics and its own health
     records (labelled ``"k/N"``); SIGTERM/SIGINT is passed on to them and the exit status is the
-    largest of theirs.
+    largest of theirs.  ``pose`` (a pose mapping or file) completes an intrinsics-only ``camera`` file
+    (:func:`footprint_uq.io.load_camera`).
     """
     if (camera is None) == (registry is None):
         raise InputError("--camera/--registry", "both" if camera is not None else "neither",
@@ -721,13 +724,16 @@ def run(*, camera=None, budget=None, registry=None, camera_id: str | None = None
         for sig in (signal.SIGTERM, signal.SIGINT):
             old[sig] = signal.signal(sig, lambda s, f: stop.set())
     _log("starting: loading the cameras and the compiled kernels")
+    cold = compile_notice(["objects"])
+    if cold is not None:  # after "starting": the signal handlers are in place
+        _log(cold)
     try:
         cam = None
         if camera is not None:
 
             if budget is None:
                 raise InputError("--budget", None, "an error budget (preset or file) for --camera")
-            cam = load_camera(camera)
+            cam = load_camera(camera, pose=pose)
         service = Service(cam, budget, registry=registry, camera_id=camera_id, heading_offset_deg=heading_offset_deg,
                           origin_lat_deg=origin_lat_deg, origin_lon_deg=origin_lon_deg, confidence=confidence,
                           contact=contact, allow_outside_image=allow_outside_image, station_id=station_id,

@@ -546,6 +546,22 @@ def _circ_median(bearing_deg) -> float:
     return float(np.mod(m + np.median((b - m + 180.0) % 360.0 - 180.0), 360.0))
 
 
+#: the "X/Y statement in detail" table: column -> header
+_DETAIL_HEADERS = {
+    "camera": "camera", "camera_type": "camera type", "axes": "X / Y reading", "frames_entry": "frames, entry lane",
+    "frames_turn": "frames, turn", "frames_exit": "frames, exit lane",
+    "share_X_gt_Y_entry": "share σ_X > σ_Y, entry lane", "share_Y_gt_X_exit": "share σ_Y > σ_X, exit lane",
+    "median_X_over_Y_entry": "median σ_X / σ_Y, entry lane", "median_X_over_Y_turn": "median σ_X / σ_Y, turn",
+    "median_X_over_Y_exit": "median σ_X / σ_Y, exit lane", "first_X_to_Y_crossing_t_s": "first σ_X = σ_Y at [s]",
+    "crossing_in_junction": "that crossing in the junction", "holds": "statement holds"}
+#: what an empty cell of that table means
+_DETAIL_MISSING = {
+    "share_X_gt_Y_entry": "no entry-lane frame in view", "share_Y_gt_X_exit": "no exit-lane frame in view",
+    "median_X_over_Y_entry": "no entry-lane frame in view", "median_X_over_Y_turn": "no turn frame in view",
+    "median_X_over_Y_exit": "no exit-lane frame in view", "first_X_to_Y_crossing_t_s": "no crossing",
+    "crossing_in_junction": "no crossing"}
+
+
 def _fmt_xy(v):
     return "&ndash;" if v is None else f"({v[0]:.1f}, {v[1]:.1f})"
 
@@ -565,8 +581,9 @@ def _claims_html(claims: list[dict], esc, reproduction_link: str | None) -> str:
     return ("<h2>The paper&rsquo;s statements, tested</h2><p>Tolerances fixed in "
             "<code>footprint_uq.scenario.claims</code> before the results were looked at; X = north and Y = east "
             "are the paper&rsquo;s earth-frame axes (pan read as a compass heading)." + link + "</p>"
-            '<div style="overflow-x:auto"><table><tr><th>paper</th><th>measure</th><th>per camera</th>'
-            "<th>verdict</th><th>why</th></tr>" + "".join(rows) + "</table></div>")
+            '<table class="wide"><colgroup><col style="width:24%"><col style="width:22%"><col style="width:18%">'
+            '<col style="width:10%"><col style="width:26%"></colgroup><tr><th>paper</th><th>measure</th>'
+            "<th>per camera</th><th>verdict</th><th>why</th></tr>" + "".join(rows) + "</table>")
 
 
 def _findings_html(result, esc) -> str:
@@ -720,11 +737,8 @@ def write_case_study_report(result, out_dir, *, settings: dict | None = None, el
     parts.append("<h2>X/Y statement in detail (per camera, camera type and axis reading)</h2>")
     st_rows = [dict(s, first_X_to_Y_crossing_xy_m=_fmt_xy(s["first_X_to_Y_crossing_xy_m"]),
                     camera_type=camera_type_label(s["camera_type"])) for s in statements]
-    parts.append(html_table(st_rows, columns=["camera", "camera_type", "axes", "frames_entry", "frames_turn",
-                                              "frames_exit", "share_X_gt_Y_entry", "share_Y_gt_X_exit",
-                                              "median_X_over_Y_entry", "median_X_over_Y_turn",
-                                              "median_X_over_Y_exit", "first_X_to_Y_crossing_t_s",
-                                              "crossing_in_junction", "holds"], floatfmt=".3g"))
+    parts.append(html_table(st_rows, columns=list(_DETAIL_HEADERS), headers=_DETAIL_HEADERS,
+                            missing=_DETAIL_MISSING, floatfmt=".3g"))
     parts.append("<h2>Settings</h2><h3>Cameras</h3>")
     cam_rows = []
     for name, cam in scene.cameras.items():
@@ -737,7 +751,10 @@ def write_case_study_report(result, out_dir, *, settings: dict | None = None, el
                          "image_px": f"{w}x{h}", "where": s.get("description", "")})
     parts.append(html_table(cam_rows, floatfmt=".4g"))
     parts.append("<h3>Camera types (error budgets, 1-σ)</h3>")
-    parts.append(html_table([b.table_row() | {"name": camera_type_label(k)} for k, b in result.budgets.items()],
+    # one column per camera type (a row each had 20 columns: wider than the page)
+    rows = {camera_type_label(k): b.table_row() for k, b in result.budgets.items()}
+    keys = [k for k in next(iter(rows.values())) if k != "name"] if rows else []
+    parts.append(html_table([{"parameter (1-σ)": k, **{t: r[k] for t, r in rows.items()}} for k in keys],
                             floatfmt=".4g"))
     if settings:
         parts.append("<h3>Scenario</h3>")

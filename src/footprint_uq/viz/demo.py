@@ -202,6 +202,10 @@ def _figure_sections(budgets, files, prof: Path) -> list[str]:
         parts.append(img_tag(f["image_png"].read_bytes(), "Semi-major axis per pixel (1 sigma), common colour "
                              "scale across budgets; grey: no ground intersection or beyond the maximum range."))
         parts.append(img_tag(f["ground_png"].read_bytes(), "The same on the ground (bird's-eye view)."))
+        if f.get("nonlinearity_png") is not None and Path(f["nonlinearity_png"]).exists():
+            parts.append(img_tag(Path(f["nonlinearity_png"]).read_bytes(),
+                                 "Linearity flag: predicted relative error of the linear 1-sigma semi-major axis per "
+                                 "pixel, with the 5 % contour (beyond it the covariance underestimates the spread)."))
     parts.append("<h2>Ground sampling distance</h2>")
     parts.append(img_tag(files[budgets[0].name]["gsd_png"].read_bytes(),
                          "Metres of ground per pixel, along and across the line of sight (camera only, no budget)."))

@@ -27,7 +27,7 @@ MAP_FILES = {
 }
 
 
-def write_map_report(camera, budget, out_dir, *, step_px: int = 2, max_range_m: float | None = None,
+def write_map_report(camera, budget, out_dir, *, step_px: int = 4, max_range_m: float | None = None,
                      confidence: float | None = None, vmin_m: float | None = None, vmax_m: float | None = None,
                      dpi: int = 150, umap=None, linearity: bool = True, linear_threshold: float = 0.05):
     """Compute an uncertainty map and write its arrays, figures and summary into ``out_dir``.

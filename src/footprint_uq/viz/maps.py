@@ -114,6 +114,25 @@ def _draw_horizon(ax, umap):
     return False
 
 
+def _clabel_inside(ax, cs, fmt, fontsize, xlim, ylim, *, at=(0.3, 0.7), margin=0.08):
+    """Contour labels placed well inside the panel (clabel's own choice put them on the right edge, clipped):
+    for each level, the point of its line nearest to the fractions ``at`` of the width, at least ``margin`` of
+    the panel away from every edge."""
+    (x0, x1), (y0, y1) = sorted(xlim), sorted(ylim)
+    dx, dy = x1 - x0, y1 - y0
+    spots = []
+    for segs in cs.allsegs:
+        pts = np.concatenate([s for s in segs if len(s)]) if any(len(s) for s in segs) else np.zeros((0, 2))
+        inner = pts[(pts[:, 0] > x0 + margin * dx) & (pts[:, 0] < x1 - margin * dx)
+                    & (pts[:, 1] > y0 + margin * dy) & (pts[:, 1] < y1 - margin * dy)] if len(pts) else pts
+        for f in at[:1] if len(inner) < 2 else at:
+            if len(inner):
+                spots.append(tuple(inner[np.argmin(np.abs(inner[:, 0] - (x0 + f * dx)))]))
+                break
+    if spots:
+        ax.clabel(cs, fmt=fmt, fontsize=fontsize, inline=True, inline_spacing=3, manual=spots)
+
+
 def _contours(ax, X, Y, Z, levels, norm, fmt="%g m"):
     lv = _levels_in(levels, norm)
     if not lv or not np.isfinite(Z).any():
@@ -396,7 +415,7 @@ def plot_gsd_maps(umap, *, levels_m=GSD_LEVELS_M, vmin_m=None, vmax_m=None, titl
         if lv and np.isfinite(z).any():
             cs = ax.contour(umap.uv_px[..., 0], umap.uv_px[..., 1], np.ma.masked_invalid(z), levels=lv,
                             colors="white", linewidths=0.8)
-            ax.clabel(cs, fmt="%g m", fontsize=7, inline=True)
+            _clabel_inside(ax, cs, "%g m", 7, (-0.5, w - 0.5), (h - 0.5, -0.5))
         _draw_horizon(ax, umap)
         ax.set_xlim(-0.5, w - 0.5)
         ax.set_ylim(h - 0.5, -0.5)
@@ -445,7 +464,9 @@ def plot_range_profile(maps, labels=None, *, confidence: float | None = None, co
     ax.set_ylabel(_sigma_label(confidence).replace(" semi-major axis", " semi-axes"), fontsize=9)
     ax.grid(True, which="both", color="#ddd", lw=0.5)
     ax.tick_params(labelsize=8)
-    ax.legend(fontsize=7.5, ncol=2)
+    # below the axes: inside them it covered the curves (the semi-major axis rises to its top-left corner)
+    ax.legend(fontsize=7.5, ncol=min(3, len(maps)), loc="upper center", bbox_to_anchor=(0.5, -0.16),
+              frameon=False)
     ax.set_title(title or "Uncertainty along the image centre column", fontsize=10.5)
     return fig
 

@@ -31,6 +31,9 @@ figure { margin: 1em 0; } figure img { max-width: 100%; border: 1px solid #ddd; 
 figcaption { font-size: .9em; color: #555; }
 .note { background: #f7f7e8; border-left: 4px solid #cc9; padding: .5em 1em; font-size: .92em; }
 code { background: #f3f3f3; padding: 0 .2em; }
+table.wide { width: 100%; table-layout: fixed; }
+table.wide th, table.wide td { white-space: normal; text-align: left; vertical-align: top; overflow-wrap: anywhere; }
+.scroll { overflow-x: auto; max-width: 100%; }
 """
 
 
@@ -58,27 +61,31 @@ def img_tag(fig_or_png, caption: str = "", *, dpi: int = 130) -> str:
     return f'<figure><img alt="{esc(caption)}" src="{png_data_uri(bytes(png))}">{cap}</figure>'
 
 
-def _fmt(v, floatfmt: str) -> str:
+def _fmt(v, floatfmt: str, missing: str = "&ndash;") -> str:
     if v is None:
-        return "&ndash;"
+        return missing
     if isinstance(v, bool):
         return "yes" if v else "no"
     if isinstance(v, float):
         if math.isnan(v):
-            return "NaN"
+            return missing
         return format(v, floatfmt)
     return esc(v)
 
 
 def html_table(rows: Sequence[dict], columns: Iterable[str] | None = None, *, headers: dict | None = None,
-               floatfmt: str = ".4g") -> str:
-    """An HTML table of ``rows`` (dicts); ``columns`` selects/orders keys, ``headers`` renames them."""
+               floatfmt: str = ".4g", missing: dict | None = None) -> str:
+    """An HTML table of ``rows`` (dicts); ``columns`` selects/orders keys, ``headers`` renames them,
+    ``missing`` says per column what a None / NaN cell means (default: a dash, never "NaN").  Wrapped in a
+    horizontally scrolling block, so that a wide table never widens the page."""
     rows = list(rows)
     cols = list(columns) if columns is not None else (list(rows[0]) if rows else [])
     headers = headers or {}
+    missing = missing or {}
     head = "".join(f"<th>{esc(headers.get(c, c))}</th>" for c in cols)
-    body = "".join("<tr>" + "".join(f"<td>{_fmt(r.get(c), floatfmt)}</td>" for c in cols) + "</tr>" for r in rows)
-    return f"<table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>"
+    body = "".join("<tr>" + "".join(f"<td>{_fmt(r.get(c), floatfmt, esc(missing.get(c, '')) or '&ndash;')}</td>"
+                                    for c in cols) + "</tr>" for r in rows)
+    return f'<div class="scroll"><table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table></div>'
 
 
 def html_page(title: str, parts: Iterable[str], *, css: str = _CSS) -> str:

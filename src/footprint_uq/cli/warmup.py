@@ -1,0 +1,26 @@
+"""``footprint-uq warmup``: compile the kernels ahead of time (:func:`footprint_uq.products.warmup.warmup`), e.g.
+while building a container image or before a service starts, so that no command pays for it later."""
+
+from __future__ import annotations
+
+import click
+
+from .._numba_cache import cache_dir
+from ..products.warmup import GROUPS, cold_groups, warmup
+
+__all__ = ["warmup_cmd"]
+
+
+@click.command("warmup")
+@click.option("--only", "only", type=click.Choice(list(GROUPS)), multiple=True,
+              help="Compile only these kernel groups (repeat; default: all): map (map, demo), points "
+                   "(scattered pixels), objects (objects, serve, FrameProcessor).")
+def warmup_cmd(only):
+    """Compile every kernel once into numba's cache folder (later runs of every command start at once)."""
+    groups = list(only) or list(GROUPS)
+    cold = set(cold_groups(groups))
+    times = warmup(groups, progress=lambda g: click.echo(f"footprint-uq: warmup: {g} kernels "
+                                                         f"{'compiling' if g in cold else 'cached'}", err=True))
+    for g, s in times.items():
+        click.echo(f"{g}: {s:.1f} s ({'compiled' if g in cold else 'loaded from the cache'})")
+    click.echo(f"cache: {cache_dir()}")
