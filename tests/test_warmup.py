@@ -45,3 +45,20 @@ def test_warmup_fills_the_cache_and_the_command_reports_it():
     r = CliRunner().invoke(main, ["warmup", "--only", "objects"])
     assert r.exit_code == 0, r.output
     assert "objects:" in r.stdout and "loaded from the cache" in r.stdout and "cache: " in r.stdout
+
+
+def test_the_notice_never_comes_before_an_input_error(monkeypatch, tmp_path):
+    """A cold cache's notice is said right before the kernels run, after every input is checked: a bad option is
+    still one line on stderr; a good run says the notice once, before its output."""
+    from footprint_uq import PanTiltCamera, save_camera
+
+    monkeypatch.setattr(W, "cold_groups", lambda groups: list(groups))  # every group "cold"
+    cam = tmp_path / "cam.yaml"
+    save_camera(PanTiltCamera(focal_px=400.0, image_size_px=(320, 240), height_m=8.0, pan_deg=0.0, tilt_deg=20.0),
+                cam)
+    base = ["map", "--camera", str(cam), "--budget", "basler1", "--out", str(tmp_path / "m")]
+    r = CliRunner().invoke(main, [*base, "--max-range-m", "-5"])
+    assert r.exit_code == 2 and r.stderr.count("\n") == 1 and "max_range_m" in r.stderr, r.stderr
+    r = CliRunner().invoke(main, [*base, "--step-px", "16"])
+    assert r.exit_code == 0, r.output
+    assert r.stderr.count("compiling the map kernels once") == 1

@@ -13,12 +13,13 @@ from __future__ import annotations
 
 import click
 
+from .._notices import set_compile_handler
 from ..batch.fleet import process_fleet
 from ..batch.process import process_file
 from ..batch.schema import DEFAULT_CHUNK_ROWS
 from ..errors import InputError
 from ..products.footprints import CONTACT_MODES, V2X_POLICIES
-from ..products.warmup import compile_notice
+from ..products.warmup import compile_handler
 from ..uncertainty.presets import PRESET_NAMES
 from .common import load_camera_and_budget, note, pose_options
 
@@ -99,9 +100,7 @@ def objects_cmd(camera_path, budget_spec, detections, out, box_type, contact, ch
     if tracks:
         options["tracks"] = True
     comp = None if compression == "none" else compression
-    msg = compile_notice(["objects"])
-    if msg is not None:
-        note(msg)
+    set_compile_handler(compile_handler(note))  # said before the kernels' first compile, after the inputs are checked
     if registry is not None:
         if camera_path is not None:
             raise InputError("--camera", camera_path, "no --camera with --registry (the registry names the cameras)")

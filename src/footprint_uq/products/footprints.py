@@ -103,6 +103,7 @@ import pyarrow as pa
 
 from .. import status
 from .._checks import as_float, as_points, check_cov
+from .._notices import before_kernels
 from ..errors import InputError
 from ..fast import footprint_kernels as fk
 from ..fast.buffers import thread_buffer
@@ -995,6 +996,7 @@ class FrameProcessor:
         alloc = reusable_allocator(self._fk.outputs_max_bytes(N, K, joint=self.joint_cov, shared_rank=r))
         out = self._fk.alloc_outputs(N, K, joint=self.joint_cov, corners=self.corner_outputs, alloc=alloc,
                                      shared_rank=r)
+        before_kernels("objects")
         n_over = self._fk.process_corners(uv, extra, self._no_boxes, False, True, self._cam, self._dR, self._Lr,
                                           self._Lc, self._Lv, self._r, self._spx, det, mode, self.allow_outside_image,
                                           self._ch, self._sh, self.linearity, out, self._scratch())
@@ -1031,6 +1033,7 @@ class FrameProcessor:
         ``B`` at every track's predicted position in every frame: ~4x less than :meth:`corners`)."""
         uv = np.ascontiguousarray(uv_px, dtype=np.float64).reshape(-1, 1, 2)
         out = self._fk.alloc_outputs(uv.shape[0], 1, corners=False, shared_rank=self._r)
+        before_kernels("objects")
         self._fk.process_corners(uv, self._no_extra, self._no_boxes, False, True, self._cam, self._dR, self._Lr,
                                  self._Lc, self._Lv, self._r, self._spx, self._no_det, 0, True, self._ch, self._sh,
                                  False, out, self._scratch())
@@ -1072,6 +1075,7 @@ class FrameProcessor:
         uv = alloc((N if self.corner_outputs else 0, 4, 2), np.float64)
         out = self._fk.alloc_outputs(N, 4, joint=self.joint_cov, corners=self.corner_outputs, alloc=alloc,
                                      shared_rank=r)
+        before_kernels("objects")
         bad, n_over = self._fk.process_boxes3d(b, yaw_unit == "deg", bool(bottom_on_ground), self._cam, self._dR,
                                                self._Lr, self._Lc, self._Lv, self._r, self._spx, det, mode,
                                                self.allow_outside_image, self._ch, self._sh, self.linearity, uv, out,

@@ -52,6 +52,7 @@ import numpy as np
 from .. import params as P
 from .. import status
 from .._checks import as_float
+from .._notices import before_kernels
 from ..cameras.distortion import undistort
 from ..cameras.ground import intersect_ground
 from ..cameras.pinhole import pixel_to_normalised
@@ -475,6 +476,7 @@ def uncertainty_map(camera, budget, step_px: int = 1, *, max_range_m: float | No
     thr = check_linear_threshold(linear_threshold)
     budget = load_budget(budget)
     uv = camera.pixel_grid(step)
+    before_kernels("map")
     H, W = uv.shape[:2]
     flat = uv.reshape(-1, 2)
     n = flat.shape[0]

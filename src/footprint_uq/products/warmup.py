@@ -27,7 +27,7 @@ from ..uncertainty.budget import load_budget
 from .footprints import FrameProcessor
 from .maps import uncertainty_map
 
-__all__ = ["GROUPS", "ABOUT_S", "cold_groups", "compile_notice", "warmup"]
+__all__ = ["GROUPS", "ABOUT_S", "cold_groups", "compile_notice", "compile_handler", "warmup"]
 
 #: the entry kernels of each group (their cache index files tell whether the group is compiled)
 GROUPS = {
@@ -58,6 +58,16 @@ def compile_notice(groups: Iterable[str]) -> str | None:
     n = sum(ABOUT_S[g] for g in cold)
     return (f"compiling the {'/'.join(cold)} kernels once: about {n} s on 2 cores (cached in {cache_dir()}; later runs "
             "start at once; `footprint-uq warmup` does it ahead of time)")
+
+
+def compile_handler(emit: Callable[[str], None]) -> Callable[[str], None]:
+    """A handler for :func:`footprint_uq._notices.set_compile_handler`: ``emit(compile_notice([group]))`` when
+    the group's kernels are cold (a command line passes its stderr printer)."""
+    def handler(group: str) -> None:
+        msg = compile_notice([group])
+        if msg is not None:
+            emit(msg)
+    return handler
 
 
 def _cameras():
