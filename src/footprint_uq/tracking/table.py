@@ -55,13 +55,13 @@ class TrackerConfig:
         :data:`CALIBRATION_MODES`; anything but "consider" is for comparisons only.
     """
 
-    accel_psd_m2ps3: float = 2.0
+    accel_psd_m2ps3: float = 1.5
     timeout_s: float = 1.0
     gate_chi2: float = DEFAULT_GATE_CHI2
     sigma_v0_mps: float = 50.0
     calibration: str = "consider"
     manoeuvre_accel_psd_m2ps3: float | None = DEFAULT_MANOEUVRE_PSD
-    quiet_sojourn_s: float = 4.0
+    quiet_sojourn_s: float = 3.0
     manoeuvre_sojourn_s: float = 1.0
 
     def __post_init__(self):
