@@ -1,7 +1,8 @@
-"""The tracker (footprint_uq.tracking): components against closed forms and an augmented Kalman filter,
-covariances against seeded Monte Carlo, the track table's timeout / gate / id reuse, the motion fields' conventions
-and NaN policy, the coverage sweep (small seeded version; bench/bench_tracking.py and
-examples/tracking_coverage.py run the larger one), and the service / batch / CLI plumbing."""
+"""The tracker (footprint_uq.tracking): components against closed forms and an augmented Kalman filter, the
+compiled IMM step against its numpy reference, covariances against seeded Monte Carlo, the track table's timeout /
+gate / id reuse, the motion fields' conventions and NaN policy, the coverage sweep (small seeded version;
+bench/tracking_coverage.py runs the larger one, bench/bench_tracking.py the cost), and the service / batch / CLI
+plumbing."""
 
 from __future__ import annotations
 

@@ -2,9 +2,10 @@
 frame's tracks, and ground points into the image (for ``B`` at predicted positions).
 
 The numpy classes (:class:`~footprint_uq.tracking.filter.SchmidtPredictor`, :class:`~footprint_uq.tracking.filter.
-SchmidtUpdater`) are the readable reference; ``tests/test_tracking.py`` holds these kernels to them (1e-12).  A
-frame of 100 tracks as ~40 small numpy operations on (100, 4, 4) / (100, 4, r) stacks costs ~400 us of call
-overhead; compiled, ~10 us.
+SchmidtUpdater`, :class:`~footprint_uq.tracking.filter.InteractingModels`) are the readable reference;
+``tests/test_tracking.py`` holds these kernels to them (1e-9).  A frame of 100 tracks as ~40 small numpy operations
+on (100, 4, 4) / (100, 4, r) stacks costs ~400 us of call overhead (several times that for two modes); compiled,
+~10-50 us.
 """
 
 from __future__ import annotations

@@ -110,7 +110,10 @@ class TrackTable:
     Each :meth:`step` takes one frame: tracks not updated for longer than ``timeout_s`` are deleted first (the
     deleter); then every object whose id has a track is predicted to the frame's time and gated (a jump with
     ``y^T S^-1 y > gate_chi2`` restarts the track under a new ``track_id``), the others start tracks
-    (the initiator); all updates of a frame run together, vectorised over its objects.
+    (the initiator); all updates of a frame run together, vectorised over its objects.  Each track runs the
+    interacting-multiple-model filter over :attr:`models` (a quiet and a manoeuvre constant-velocity mode; one
+    mode if ``manoeuvre_accel_psd_m2ps3`` is None); its reported state is the modes' moment-matched combination,
+    and the gate cuts a track only if the detection is beyond it for every mode.
 
     Parameters
     ----------
@@ -130,9 +133,9 @@ class TrackTable:
         self.config = config or TrackerConfig()
         self.shared_at = shared_at
         self.rank = int(rank) if self.config.calibration == "consider" else 0
-        #: the model the compiled update runs (:func:`~footprint_uq.tracking.kernels.predict_update` is
-        #: :class:`~footprint_uq.tracking.filter.SchmidtPredictor` + :class:`~footprint_uq.tracking.filter.
-        #: SchmidtUpdater` in one pass; the tests hold them equal)
+        #: the modes the compiled update runs (:func:`~footprint_uq.tracking.kernels.update_slots` is
+        #: :class:`~footprint_uq.tracking.filter.InteractingModels` -- mixing, each mode's SchmidtPredictor +
+        #: SchmidtUpdater, mode probabilities, combination -- in one pass; the tests hold them equal)
         cfg = self.config
         self.models = tuple(ConstantVelocity(q) for q in (cfg.accel_psd_m2ps3, cfg.manoeuvre_accel_psd_m2ps3)
                             if q is not None)
