@@ -39,12 +39,15 @@ FILTERS = {
 MODES = tuple(FILTERS)
 
 
-def sweep(n_runs: int = 1000, seed: int = 0) -> list[dict]:
+def sweep(n_runs: int = 1000, seed: int = 0, truth_psd: float = 2.5, filters=None) -> list[dict]:
     rows = []
     for mode, (calibration, cfg) in FILTERS.items():
+        if filters and mode not in filters:
+            continue
         for scenario in SCENARIOS:
             for hz in RATES_HZ:
-                r = coverage(scenario, hz, n_runs=n_runs, seed=seed, calibration=calibration, config=cfg)
+                r = coverage(scenario, hz, n_runs=n_runs, seed=seed, calibration=calibration, config=cfg,
+                             truth_accel_psd_m2ps3=truth_psd)
                 rows.append(dict(mode=mode, scenario=scenario, rate_hz=hz, **{k: float(v) if isinstance(v, float)
                                                                               else v for k, v in r._asdict().items()}))
                 print(f"{mode:9s} {scenario:9s} {hz:3d} Hz  velocity {r.velocity:6.1%}  heading {r.heading:6.1%}  "
@@ -90,6 +93,8 @@ def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--runs", type=int, default=1000)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--truth-psd", type=float, default=2.5, help="the truth's random acceleration density, m^2/s^3")
+    ap.add_argument("--filters", nargs="*", choices=MODES, help="only these filters (default: all)")
     ap.add_argument("--json", default=None)
     ap.add_argument("--figure", default=None)
     ap.add_argument("--from-json", default=None, help="draw the figure of an earlier --json file (no sweep)")
@@ -99,7 +104,7 @@ def main(argv=None) -> None:
         with open(a.from_json) as f:
             rows = json.load(f)
     else:
-        rows = sweep(a.runs, a.seed)
+        rows = sweep(a.runs, a.seed, a.truth_psd, a.filters)
     print(f"{time.perf_counter() - t0:.0f} s")
     if a.json:
         with open(a.json, "w") as f:

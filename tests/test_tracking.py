@@ -174,6 +174,17 @@ def test_imm_kernel_equals_the_numpy_reference(rng):
         np.testing.assert_array_equal(got[~ok], before[~ok])
     np.testing.assert_allclose(X[ok], x_ref[ok], rtol=1e-9, atol=1e-12)
     np.testing.assert_allclose(P[ok], P_ref[ok], rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(st[3].sum(1), 1.0, rtol=1e-12)
+    assert (np.linalg.eigvalsh(P[ok]) > 0).all() and np.array_equal(P, np.swapaxes(P, 1, 2))
+    # a non-finite measurement covariance: NaN distance, the track untouched (the NaN policy)
+    R_bad = R.copy()
+    R_bad[0, 0, 0] = np.nan
+    before = [a.copy() for a in st]
+    update_slots(X, P, *st, n_upd, np.arange(1), 1.0, qs, 1.0 / sojourn, z, R_bad, np.zeros((0, 2, 0)), B, np.inf,
+                 d2)
+    assert np.isnan(d2[0]) and n_upd[0] == ok[0]
+    for got, want in zip(st, before, strict=True):
+        np.testing.assert_array_equal(got[0], want[0])
     # one mode: the plain filter
     st1 = [modes[0].x.copy(), modes[0].P.copy(), modes[0].C.copy()]
     predict_update(*st1, -t_last, 2.0, z, R, B, np.inf, np.empty(n))
