@@ -161,7 +161,7 @@ def update_slots(X, P, Xm, Pm, Cm, mu, t_last, n_upd, slots, t, qs, rates, z, R,
     M, r = Xm.shape[1], Cm.shape[3]
     Pp, Cp, K, cross = np.empty((4, 4)), np.empty((4, r)), np.empty((4, 2)), np.empty((4, 2))
     xs, Ps, Cs = np.empty((M, 4)), np.empty((M, 4, 4)), np.empty((M, 4, r))
-    pij, cbar, m, lik = np.empty((2, 2)), np.empty(M), np.empty(M), np.empty(M)
+    pij, cbar, lik = np.empty((2, 2)), np.empty(M), np.empty(M)
     use_pred = B_pred.shape[0] == slots.shape[0]
     for i in range(slots.shape[0]):
         s = slots[i]
@@ -178,7 +178,6 @@ def update_slots(X, P, Xm, Pm, Cm, mu, t_last, n_upd, slots, t, qs, rates, z, R,
         best, bad = math.inf, False
         for j in range(M):
             mj, det = _step_one(xs[j], Ps[j], Cs[j], h, qs[j], z[i], R[i], B, math.inf, Pp, Cp, K, cross)
-            m[j] = mj
             lik[j] = -0.5 * mj - 0.5 * math.log(det) + math.log(cbar[j]) if math.isfinite(mj) else -math.inf
             if not math.isfinite(mj):
                 bad = True
