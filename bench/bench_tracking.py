@@ -7,7 +7,10 @@ run, interleaved frame by frame (medians over ``frames`` frames after a warm-up 
 * ``positions_split`` -- the same with ``shared_jacobian=True`` (the centre's whitened calibration Jacobian);
 * ``shared_at`` -- :class:`~footprint_uq.tracking.table.SharedJacobianAt` at the 100 predicted positions alone;
 * ``track`` -- :meth:`TrackTable.step` (deleter, ids, predict, ``shared_at``, gate, update, outputs; vectorised
-  over the objects, no loop over tracks) + :func:`~footprint_uq.tracking.motion.object_motion`;
+  over the objects, no loop over tracks) + :func:`~footprint_uq.tracking.motion.object_motion`, the default
+  two-mode IMM filter;
+* ``track_cv`` -- the same with the single constant-velocity mode (``manoeuvre_accel_psd_m2ps3=None``: the tracker
+  before the IMM), on the same frames;
 * ``total`` -- ``positions_split + track``: positions and motion of one frame.
 
 Run ``.venv/bin/python bench/bench_tracking.py [--objects N] [--frames F] [--json]``; :func:`run` returns the
@@ -58,9 +61,11 @@ def run(n_objects: int = 100, frames: int = 300) -> dict:
     split = FrameProcessor(cam, BUDGET, joint_cov=False, linearity=False, v2x_policy="linear", shared_jacobian=True)
     at = SharedJacobianAt(cam, BUDGET)
     table = TrackTable(TrackerConfig(timeout_s=1e9), rank=at.rank, shared_at=at)
+    table_cv = TrackTable(TrackerConfig(timeout_s=1e9, manoeuvre_accel_psd_m2ps3=None), rank=at.rank, shared_at=at)
     det = np.broadcast_to(np.eye(2), (n_objects, 2, 2))
     restarts = 0
-    times = {k: [] for k in ("positions", "positions_split", "shared_at", "track", "total")}
+    keys = ("positions", "positions_split", "shared_at", "track", "track_cv", "total")
+    times = {k: [] for k in keys}
     for k, (t, ids, boxes) in enumerate(_frames(cam, n_objects, frames + 30)):
         t0 = time.perf_counter()
         plain.boxes3d(boxes, pixel_cov_px2=det)
@@ -72,10 +77,13 @@ def run(n_objects: int = 100, frames: int = 300) -> dict:
         t3 = time.perf_counter()
         at(est.centre_xy_world_m)
         t4 = time.perf_counter()
+        object_motion(table_cv.step(t, ids, est.centre_xy_world_m, est.centre_cov_frame_m2, est.centre_shared_m),
+                      yaw_rad=boxes[:, 6])
+        t5 = time.perf_counter()
         restarts += int(out.new_track.sum()) if k else 0
         if k >= 30:
             for key, dt in (("positions", t1 - t0), ("positions_split", t2 - t1), ("track", t3 - t2),
-                            ("shared_at", t4 - t3), ("total", t3 - t1)):
+                            ("shared_at", t4 - t3), ("track_cv", t5 - t4), ("total", t3 - t1)):
                 times[key].append(dt * 1e6)
     res = {k: round(statistics.median(v), 1) for k, v in times.items()}
     res.update(n_objects=n_objects, frames=frames, target_us=TARGET_US, tracked=int((out.n_updates > 1).sum()),
@@ -93,7 +101,7 @@ def main(argv=None) -> None:
     if a.json:
         print(json.dumps(res))
         return
-    for k in ("positions", "positions_split", "shared_at", "track", "total"):
+    for k in ("positions", "positions_split", "shared_at", "track", "track_cv", "total"):
         print(f"{k:16s} {res[k]:8.1f} us per frame of {res['n_objects']} objects (median of {res['frames']})")
     print(f"target: total <= {TARGET_US:.0f} us -> {'met' if res['total'] <= TARGET_US else 'NOT met'}")
 

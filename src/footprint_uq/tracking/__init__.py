@@ -4,6 +4,8 @@ Small components in the spirit of Stone Soup (docs/uncertainty-model.md, "Motion
 
 * :class:`~footprint_uq.tracking.models.ConstantVelocity` -- the transition model (nearly constant velocity,
   continuous white-noise acceleration);
+* :class:`~footprint_uq.tracking.filter.InteractingModels` -- an interacting-multiple-model (IMM) filter over two
+  such modes, a quiet one (driving on) and a manoeuvre one (turning, braking), switching as a Markov chain;
 * :class:`~footprint_uq.tracking.filter.SchmidtPredictor`, :class:`~footprint_uq.tracking.filter.SchmidtUpdater`,
   :class:`~footprint_uq.tracking.filter.Initiator` -- a Schmidt-Kalman (consider-state) filter whose measurement
   model splits each centre's covariance into the camera's calibration error (shared by every frame: a consider
@@ -14,11 +16,20 @@ Small components in the spirit of Stone Soup (docs/uncertainty-model.md, "Motion
   object's age as the arrays of the V2X messages' motion fields.
 """
 
-from .filter import Initiator, SchmidtPredictor, SchmidtUpdater, SplitMeasurement, TrackState
+from .filter import (
+    Initiator,
+    InteractingModels,
+    SchmidtPredictor,
+    SchmidtUpdater,
+    SplitMeasurement,
+    TrackState,
+    mode_switch_probabilities,
+)
 from .models import ConstantVelocity
 from .motion import MOTION_FIELDS, MotionArrays, object_motion
 from .table import CALIBRATION_MODES, SharedJacobianAt, TrackerConfig, TrackOutput, TrackTable
 
 __all__ = ["ConstantVelocity", "SchmidtPredictor", "SchmidtUpdater", "Initiator", "SplitMeasurement", "TrackState",
+           "InteractingModels", "mode_switch_probabilities",
            "TrackTable", "SharedJacobianAt", "TrackerConfig", "TrackOutput", "CALIBRATION_MODES", "MotionArrays",
            "MOTION_FIELDS", "object_motion"]

@@ -21,13 +21,15 @@ Every array carries the tracks as its leading dimension ``n``; there is no loop 
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import NamedTuple
 
 import numpy as np
 
 from .models import ConstantVelocity
 
-__all__ = ["TrackState", "SplitMeasurement", "SchmidtPredictor", "SchmidtUpdater", "Initiator"]
+__all__ = ["TrackState", "SplitMeasurement", "SchmidtPredictor", "SchmidtUpdater", "Initiator", "InteractingModels",
+           "mode_switch_probabilities"]
 
 
 class TrackState(NamedTuple):
@@ -133,3 +135,64 @@ class Initiator:
         C = np.zeros((n, 4, r))
         C[:, :2] = -B
         return TrackState(x, P, C)
+
+
+def mode_switch_probabilities(dt_s, rates_hz) -> np.ndarray:
+    """``Pi[n, a, b]`` = P(mode b after a step ``dt_s[n]`` | mode a before it) of two modes (or one) switching as a
+    continuous-time Markov chain that leaves mode a at ``rates_hz[a]`` (1/s, the inverse of its mean sojourn)."""
+    dt = np.asarray(dt_s, dtype=np.float64)
+    rates = np.asarray(rates_hz, dtype=np.float64)
+    if rates.shape[0] == 1:
+        return np.ones((dt.shape[0], 1, 1))
+    a, b = rates
+    e = -np.expm1(-(a + b) * dt) / (a + b)
+    return np.stack([np.stack([1 - a * e, a * e], -1), np.stack([b * e, 1 - b * e], -1)], -2)
+
+
+class InteractingModels:
+    """Interacting multiple model filter (Blom and Bar-Shalom 1988; Bar-Shalom et al. 11.6.6) over constant-velocity
+    modes of different acceleration noise, each mode a Schmidt filter with the same consider state ``w``.
+
+    One step: *mixing* (each mode's start state is the moment-matched mixture of all modes' states, weighted by
+    the switching probabilities; the cross-covariances with ``w`` mix linearly, as ``w`` has zero mean in every
+    mode), each mode's predict + update, the mode probabilities from the innovations' likelihoods, and the
+    moment-matched combination that is reported.  The readable reference of the compiled
+    :func:`~footprint_uq.tracking.kernels.update_slots` (held to it in tests/test_tracking.py).
+    """
+
+    def __init__(self, models: Sequence[ConstantVelocity], sojourn_s: Sequence[float]):
+        self.predictors = [SchmidtPredictor(m) for m in models]
+        self.rates_hz = 1.0 / np.asarray(sojourn_s, dtype=np.float64)
+        self.updater = SchmidtUpdater()
+
+    @staticmethod
+    def _moments(w: np.ndarray, xs: list, Ps: list) -> tuple[np.ndarray, np.ndarray]:
+        x = sum(w[:, i, None] * xs[i] for i in range(len(xs)))
+        P = sum(w[:, i, None, None] * (Ps[i] + np.einsum("ni,nj->nij", xs[i] - x, xs[i] - x)) for i in range(len(xs)))
+        return x, P
+
+    def step(self, modes: list[TrackState], mu: np.ndarray, dt_s, meas: SplitMeasurement):
+        """Modes' states and probabilities ``mu (n, M)`` after a step ``dt_s (n,)`` and a measurement each.
+
+        Returns the modes' posteriors, their probabilities, the combined ``x (n, 4)``, ``P (n, 4, 4)`` and the
+        smallest of the modes' squared Mahalanobis distances ``d2 (n,)``.
+        """
+        M = len(modes)
+        Pi = mode_switch_probabilities(dt_s, self.rates_hz)
+        cbar = np.einsum("nij,ni->nj", Pi, mu)
+        post, loglik, d2 = [], [], []
+        for j in range(M):
+            w = Pi[:, :, j] * mu / cbar[:, j, None]
+            x0, P0 = self._moments(w, [m.x for m in modes], [m.P for m in modes])
+            C0 = sum(w[:, i, None, None] * modes[i].C for i in range(M))
+            pred = self.predictors[j].predict(TrackState(x0, P0, C0), dt_s)
+            S = self.updater.innovation(pred, meas)[1]
+            st, m2 = self.updater.update(pred, meas)
+            post.append(st)
+            d2.append(m2)
+            loglik.append(-0.5 * m2 - 0.5 * np.log(np.linalg.det(S)) + np.log(cbar[:, j]))
+        ll = np.stack(loglik, -1)
+        lik = np.maximum(np.exp(ll - ll.max(-1, keepdims=True)), 1e-9)  # a mode never dies out
+        mu_new = lik / lik.sum(-1, keepdims=True)
+        x, P = self._moments(mu_new, [s.x for s in post], [s.P for s in post])
+        return post, mu_new, x, P, np.min(np.stack(d2, -1), -1)

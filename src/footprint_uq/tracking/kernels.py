@@ -2,9 +2,10 @@
 frame's tracks, and ground points into the image (for ``B`` at predicted positions).
 
 The numpy classes (:class:`~footprint_uq.tracking.filter.SchmidtPredictor`, :class:`~footprint_uq.tracking.filter.
-SchmidtUpdater`) are the readable reference; ``tests/test_tracking.py`` holds these kernels to them (1e-12).  A
-frame of 100 tracks as ~40 small numpy operations on (100, 4, 4) / (100, 4, r) stacks costs ~400 us of call
-overhead; compiled, ~10 us.
+SchmidtUpdater`, :class:`~footprint_uq.tracking.filter.InteractingModels`) are the readable reference;
+``tests/test_tracking.py`` holds these kernels to them (1e-9).  A frame of 100 tracks as ~40 small numpy operations
+on (100, 4, 4) / (100, 4, r) stacks costs ~400 us of call overhead (several times that for two modes); compiled,
+~10-50 us.
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ __all__ = ["predict_update", "update_slots", "project_ground", "motion_fields", 
 def _step_one(x, P, C, h, q, z, R, B, gate, Pp, Cp, K, cross):  # pragma: no cover - compiled
     """One track (views ``x (4,)``, ``P (4, 4)``, ``C (4, r)``; measurement ``z (2,)``, ``R (2, 2)``, ``B (2, r)``):
     predict by ``h`` and update in place if the innovation's squared Mahalanobis distance is ``<= gate``; returns
-    that distance (NaN if not finite).  ``Pp, Cp, K, cross`` are scratch."""
+    that distance (NaN if not finite) and ``det S``.  ``Pp, Cp, K, cross`` are scratch."""
     r = C.shape[1]
     # predict: F = [[I, h I], [0, I]], Q = q [[h^3/3 I, h^2/2 I], [h^2/2 I, h I]]
     for a in range(4):
@@ -66,10 +67,10 @@ def _step_one(x, P, C, h, q, z, R, B, gate, Pp, Cp, K, cross):  # pragma: no cov
     i00, i01, i11 = s11 / det, -s01 / det, s00 / det
     y0, y1 = z[0] - x0, z[1] - x1
     m = y0 * y0 * i00 + 2.0 * y0 * y1 * i01 + y1 * y1 * i11
-    if not math.isfinite(m):
-        return math.nan
+    if not (math.isfinite(m) and det > 0.0):
+        return math.nan, det
     if not m <= gate:
-        return m
+        return m, det
     for a in range(4):
         K[a, 0] = cross[a, 0] * i00 + cross[a, 1] * i01
         K[a, 1] = cross[a, 0] * i01 + cross[a, 1] * i11
@@ -85,7 +86,7 @@ def _step_one(x, P, C, h, q, z, R, B, gate, Pp, Cp, K, cross):  # pragma: no cov
         e0, e1 = Cp[0, c] + B[0, c], Cp[1, c] + B[1, c]
         for a in range(4):
             C[a, c] = Cp[a, c] - (K[a, 0] * e0 + K[a, 1] * e1)
-    return m
+    return m, det
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -96,16 +97,71 @@ def predict_update(x, P, C, dt, q, z, R, B, gate, d2):  # pragma: no cover - com
     r = C.shape[2]
     Pp, Cp, K, cross = np.empty((4, 4)), np.empty((4, r)), np.empty((4, 2)), np.empty((4, 2))
     for i in range(x.shape[0]):
-        d2[i] = _step_one(x[i], P[i], C[i], dt[i], q, z[i], R[i], B[i], gate, Pp, Cp, K, cross)
+        d2[i] = _step_one(x[i], P[i], C[i], dt[i], q, z[i], R[i], B[i], gate, Pp, Cp, K, cross)[0]
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _switch_probs(h, rates, pij):  # pragma: no cover - compiled
+    """``pij[a, b]`` = P(mode b at the end of a step ``h`` | mode a at its start) of the continuous-time Markov chain
+    leaving mode ``a`` at ``rates[a]`` (1/s); one or two modes (closed form of ``expm``)."""
+    if rates.shape[0] == 1:
+        pij[0, 0] = 1.0
+        return
+    a, b = rates[0], rates[1]
+    tot = a + b
+    e = -math.expm1(-tot * h) / tot if tot > 0.0 else 0.0
+    pij[0, 1], pij[1, 0] = a * e, b * e
+    pij[0, 0], pij[1, 1] = 1.0 - a * e, 1.0 - b * e
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _mix(Xm, Pm, Cm, mu, pij, cbar, xs, Ps, Cs):  # pragma: no cover - compiled
+    """IMM mixing of one track's mode-conditioned states ``Xm (M, 4)``, ``Pm``, ``Cm`` with mode probabilities ``mu``
+    into the start states ``xs``, ``Ps``, ``Cs`` of each mode's step; ``cbar`` receives the predicted mode
+    probabilities."""
+    M, r = Xm.shape[0], Cm.shape[2]
+    for j in range(M):
+        cb = 0.0
+        for i in range(M):
+            cb += pij[i, j] * mu[i]
+        cbar[j] = cb
+        for a in range(4):
+            xs[j, a] = 0.0
+            for c in range(r):
+                Cs[j, a, c] = 0.0
+            for b in range(4):
+                Ps[j, a, b] = 0.0
+        for i in range(M):
+            wt = pij[i, j] * mu[i] / cb
+            for a in range(4):
+                xs[j, a] += wt * Xm[i, a]
+                for c in range(r):
+                    Cs[j, a, c] += wt * Cm[i, a, c]
+        for i in range(M):
+            wt = pij[i, j] * mu[i] / cb
+            for a in range(4):
+                da = Xm[i, a] - xs[j, a]
+                for b in range(4):
+                    Ps[j, a, b] += wt * (Pm[i, a, b] + da * (Xm[i, b] - xs[j, b]))
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def update_slots(X, P, C, t_last, n_upd, slots, t, q, z, R, B_pred, B_frame, gate, d2):  # pragma: no cover
-    """:func:`predict_update` on a table's storage in place: track ``i`` of the frame is row ``slots[i]`` of ``X (cap,
-    4)``, ``P``, ``C``, last updated at ``t_last``; its ``B`` is ``B_pred[i]`` (at the predicted position) where
-    finite, else ``B_frame[i]``.  Accepted tracks get ``t_last = t`` and one more update in ``n_upd``."""
-    r = C.shape[2]
+def update_slots(X, P, Xm, Pm, Cm, mu, t_last, n_upd, slots, t, qs, rates, z, R, B_pred, B_frame, gate,
+                 d2):  # pragma: no cover - compiled
+    """One frame's interacting-multiple-model (IMM) Schmidt update of a table's storage, in place.
+
+    Track ``i`` of the frame is row ``slots[i]``: its M constant-velocity modes (acceleration densities ``qs (M,)``,
+    leaving rates ``rates (M,)`` in 1/s, M <= 2) are ``Xm (cap, M, 4)``, ``Pm (cap, M, 4, 4)``, ``Cm (cap, M, 4,
+    r)`` with probabilities ``mu (cap, M)``; ``X (cap, 4)``, ``P (cap, 4, 4)`` receive their moment-matched
+    combination.  Each mode is mixed (:func:`_mix`), predicted to ``t`` from ``t_last`` and updated with ``z[i]``,
+    ``R[i]`` and ``B_pred[i]`` (``B`` at the predicted position) where finite, else ``B_frame[i]``.  ``d2[i]``
+    receives the smallest of the modes' squared Mahalanobis distances; the track is updated only if it is ``<=
+    gate`` (then ``t_last = t`` and one more update in ``n_upd``), else left as it was.  With one mode this is
+    :func:`predict_update`."""
+    M, r = Xm.shape[1], Cm.shape[3]
     Pp, Cp, K, cross = np.empty((4, 4)), np.empty((4, r)), np.empty((4, 2)), np.empty((4, 2))
+    xs, Ps, Cs = np.empty((M, 4)), np.empty((M, 4, 4)), np.empty((M, 4, r))
+    pij, cbar, lik = np.empty((2, 2)), np.empty(M), np.empty(M)
     use_pred = B_pred.shape[0] == slots.shape[0]
     for i in range(slots.shape[0]):
         s = slots[i]
@@ -116,11 +172,48 @@ def update_slots(X, P, C, t_last, n_upd, slots, t, q, z, R, B_pred, B_frame, gat
                 fin = fin & math.isfinite(B_pred[i, 0, c]) & math.isfinite(B_pred[i, 1, c])
             if fin:
                 B = B_pred[i]
-        m = _step_one(X[s], P[s], C[s], t - t_last[s], q, z[i], R[i], B, gate, Pp, Cp, K, cross)
-        d2[i] = m
-        if m <= gate:
-            t_last[s] = t
-            n_upd[s] += 1
+        h = t - t_last[s]
+        _switch_probs(h, rates, pij)
+        _mix(Xm[s], Pm[s], Cm[s], mu[s], pij, cbar, xs, Ps, Cs)
+        best, bad = math.inf, False
+        for j in range(M):
+            mj, det = _step_one(xs[j], Ps[j], Cs[j], h, qs[j], z[i], R[i], B, math.inf, Pp, Cp, K, cross)
+            lik[j] = -0.5 * mj - 0.5 * math.log(det) + math.log(cbar[j]) if math.isfinite(mj) else -math.inf
+            if not math.isfinite(mj):
+                bad = True
+            elif mj < best:
+                best = mj
+        best = math.nan if bad else best  # a singular mode fails the gate
+        d2[i] = best
+        if not best <= gate:
+            continue
+        top = lik[0]
+        for j in range(1, M):
+            top = max(top, lik[j])
+        tot = 0.0
+        for j in range(M):
+            lik[j] = max(math.exp(lik[j] - top), 1e-9)  # a mode never dies out: it must be able to come back
+            tot += lik[j]
+        for a in range(4):
+            X[s, a] = 0.0
+            for b in range(4):
+                P[s, a, b] = 0.0
+        for j in range(M):
+            mu[s, j] = lik[j] / tot
+            for a in range(4):
+                Xm[s, j, a] = xs[j, a]
+                X[s, a] += mu[s, j] * xs[j, a]
+                for c in range(r):
+                    Cm[s, j, a, c] = Cs[j, a, c]
+                for b in range(4):
+                    Pm[s, j, a, b] = Ps[j, a, b]
+        for j in range(M):
+            for a in range(4):
+                da = xs[j, a] - X[s, a]
+                for b in range(4):
+                    P[s, a, b] += mu[s, j] * (Ps[j, a, b] + da * (xs[j, b] - X[s, b]))
+        t_last[s] = t
+        n_upd[s] += 1
 
 
 @njit(cache=True, nogil=True, error_model="numpy")

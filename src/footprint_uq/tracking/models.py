@@ -19,10 +19,11 @@ class ConstantVelocity:
     """Nearly constant velocity: continuous white-noise acceleration of spectral density ``accel_psd_m2ps3``
     on each axis (Bar-Shalom et al., *Estimation with Applications to Tracking and Navigation*, 6.2.2).
 
-    Over a step ``dt`` the velocity changes by a random amount of variance ``q dt`` per axis: the default
-    ``q`` = 3 m^2/s^3 lets a road user's velocity wander by about 1.7 m/s in one second.  Sustained manoeuvres
-    (braking at 2-4 m/s^2, turning at up to 4 m/s^2 of centripetal acceleration) are within it: the sweep of
-    docs/uncertainty-model.md ("Motion") measures the coverage; raise ``q`` for more aggressive motion.
+    Over a step ``dt`` the velocity changes by a random amount of variance ``q dt`` per axis: ``q`` = 3 m^2/s^3
+    lets a road user's velocity wander by about 1.7 m/s in one second.  One such model lags a sustained manoeuvre
+    (a turn at 4 m/s^2 of centripetal acceleration, braking at 2-8 m/s^2), and a larger ``q`` over-covers
+    straight driving: the tracker runs two of them, a quiet and a manoeuvre mode, in an interacting-multiple-model
+    filter (:class:`~footprint_uq.tracking.filter.InteractingModels`; docs/uncertainty-model.md, section 11).
 
     Parameters
     ----------

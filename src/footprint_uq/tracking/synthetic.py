@@ -16,6 +16,7 @@ contain the truth.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from typing import NamedTuple
 
@@ -131,7 +132,7 @@ def coverage(scenario: str, rate_hz: float, *, n_runs: int = 500, duration_s: fl
     camera = camera or default_camera()
     budget = load_budget(budget)
     cfg = config or TrackerConfig()
-    cfg = TrackerConfig(cfg.accel_psd_m2ps3, cfg.timeout_s, cfg.gate_chi2, cfg.sigma_v0_mps, calibration)
+    cfg = dataclasses.replace(cfg, calibration=calibration)
     tr = trajectories(scenario, n_runs, rate_hz, duration_s, rng, truth_accel_psd_m2ps3=truth_accel_psd_m2ps3)
     proc = FrameProcessor(camera, budget, joint_cov=False, linearity=False, shared_jacobian=True,
                           v2x_policy="linear")

@@ -27,6 +27,8 @@ CALIBRATION_MODES = ("consider", "white", "ignore")
 #: gate: squared Mahalanobis distance of the innovation (2 dof) beyond which a detection is not the same object;
 #: -2 ln(1e-6): a consistent track is cut once in a million frames
 DEFAULT_GATE_CHI2 = -2.0 * math.log(1e-6)
+#: acceleration density of the manoeuvre mode, m^2/s^3 (docs/uncertainty-model.md, section 11)
+DEFAULT_MANOEUVRE_PSD = 30.0
 
 
 @dataclass(frozen=True)
@@ -34,7 +36,14 @@ class TrackerConfig:
     """Options of :class:`TrackTable` (docs/uncertainty-model.md, "Motion: velocity and heading").
 
     accel_psd_m2ps3 : float
-        Acceleration noise of the constant-velocity model (:class:`~footprint_uq.tracking.models.ConstantVelocity`).
+        Acceleration noise of the quiet constant-velocity mode (:class:`~footprint_uq.tracking.models.
+        ConstantVelocity`): a road user driving on.
+    manoeuvre_accel_psd_m2ps3 : float or None
+        Acceleration noise of the manoeuvre mode (turning, braking) of the interacting-multiple-model filter; None:
+        the quiet mode alone (a plain constant-velocity filter, whose ellipses lag a sustained manoeuvre).
+    quiet_sojourn_s, manoeuvre_sojourn_s : float
+        Mean time a road user stays in each mode (the mode switches as a continuous-time Markov chain, so the
+        switching probabilities follow each step's length).
     timeout_s : float
         A track not updated for longer than this is deleted; its ``object_id`` then starts a new track.
     gate_chi2 : float
@@ -46,14 +55,19 @@ class TrackerConfig:
         :data:`CALIBRATION_MODES`; anything but "consider" is for comparisons only.
     """
 
-    accel_psd_m2ps3: float = 3.0
+    accel_psd_m2ps3: float = 1.5
     timeout_s: float = 1.0
     gate_chi2: float = DEFAULT_GATE_CHI2
     sigma_v0_mps: float = 50.0
     calibration: str = "consider"
+    manoeuvre_accel_psd_m2ps3: float | None = DEFAULT_MANOEUVRE_PSD
+    quiet_sojourn_s: float = 3.0
+    manoeuvre_sojourn_s: float = 1.0
 
     def __post_init__(self):
-        for name in ("accel_psd_m2ps3", "timeout_s", "gate_chi2", "sigma_v0_mps"):
+        for name in ("accel_psd_m2ps3", "timeout_s", "gate_chi2", "sigma_v0_mps", "quiet_sojourn_s",
+                     "manoeuvre_sojourn_s") + (("manoeuvre_accel_psd_m2ps3",) if self.manoeuvre_accel_psd_m2ps3
+                                               is not None else ()):
             object.__setattr__(self, name, as_float(name, getattr(self, name), positive=True))
         if self.calibration not in CALIBRATION_MODES:
             raise InputError("calibration", self.calibration, f"one of {CALIBRATION_MODES}")
@@ -96,7 +110,10 @@ class TrackTable:
     Each :meth:`step` takes one frame: tracks not updated for longer than ``timeout_s`` are deleted first (the
     deleter); then every object whose id has a track is predicted to the frame's time and gated (a jump with
     ``y^T S^-1 y > gate_chi2`` restarts the track under a new ``track_id``), the others start tracks
-    (the initiator); all updates of a frame run together, vectorised over its objects.
+    (the initiator); all updates of a frame run together, vectorised over its objects.  Each track runs the
+    interacting-multiple-model filter over :attr:`models` (a quiet and a manoeuvre constant-velocity mode; one
+    mode if ``manoeuvre_accel_psd_m2ps3`` is None); its reported state is the modes' moment-matched combination,
+    and the gate cuts a track only if the detection is beyond it for every mode.
 
     Parameters
     ----------
@@ -116,10 +133,17 @@ class TrackTable:
         self.config = config or TrackerConfig()
         self.shared_at = shared_at
         self.rank = int(rank) if self.config.calibration == "consider" else 0
-        #: the model the compiled update runs (:func:`~footprint_uq.tracking.kernels.predict_update` is
-        #: :class:`~footprint_uq.tracking.filter.SchmidtPredictor` + :class:`~footprint_uq.tracking.filter.
-        #: SchmidtUpdater` in one pass; the tests hold them equal)
-        self.model = ConstantVelocity(self.config.accel_psd_m2ps3)
+        #: the modes the compiled update runs (:func:`~footprint_uq.tracking.kernels.update_slots` is
+        #: :class:`~footprint_uq.tracking.filter.InteractingModels` -- mixing, each mode's SchmidtPredictor +
+        #: SchmidtUpdater, mode probabilities, combination -- in one pass; the tests hold them equal)
+        cfg = self.config
+        self.models = tuple(ConstantVelocity(q) for q in (cfg.accel_psd_m2ps3, cfg.manoeuvre_accel_psd_m2ps3)
+                            if q is not None)
+        self.model = self.models[0]
+        self._qs = np.array([m.accel_psd_m2ps3 for m in self.models])
+        self._rates = np.array([1.0 / cfg.quiet_sojourn_s, 1.0 / cfg.manoeuvre_sojourn_s])[:len(self.models)]
+        #: the modes' probabilities of a new track: the chain's stationary distribution
+        self.mu0 = (1.0 / self._rates) / (1.0 / self._rates).sum()
         self.initiator = Initiator(self.config.sigma_v0_mps)
         self._index: dict = {}  # object_id -> slot
         self._cap = 0
@@ -136,8 +160,10 @@ class TrackTable:
         """Load the compiled steps (numba's cache, or compile them) without touching the tracks."""
         r = self.rank
         Bp = _NO_B if self.shared_at is None else np.ascontiguousarray(self.shared_at(np.zeros((1, 2))))
-        update_slots(np.zeros((1, 4)), np.eye(4)[None].copy(), np.zeros((1, 4, r)), np.zeros(1),
-                     np.zeros(1, np.int64), np.zeros(1, np.int64), 1.0, 1.0, np.zeros((1, 2)), np.eye(2)[None].copy(),
+        M = len(self.models)
+        update_slots(np.zeros((1, 4)), np.eye(4)[None].copy(), np.zeros((1, M, 4)), np.tile(np.eye(4), (1, M, 1, 1)),
+                     np.zeros((1, M, 4, r)), np.full((1, M), 1.0 / M), np.zeros(1), np.zeros(1, np.int64),
+                     np.zeros(1, np.int64), 1.0, self._qs, self._rates, np.zeros((1, 2)), np.eye(2)[None].copy(),
                      Bp if Bp.shape == (1, 2, r) else _NO_B, np.zeros((1, 2, r)), 1.0, np.empty(1))
 
     def _grow(self, cap: int) -> None:
@@ -155,7 +181,11 @@ class TrackTable:
 
         self._x = extend(g("_x"), (4,), 0.0)
         self._P = extend(g("_P"), (4, 4), 0.0)
-        self._C = extend(g("_C"), (4, r), 0.0)
+        M = len(self.models)
+        self._xm = extend(g("_xm"), (M, 4), 0.0)
+        self._Pm = extend(g("_Pm"), (M, 4, 4), 0.0)
+        self._Cm = extend(g("_Cm"), (M, 4, r), 0.0)
+        self._mu = extend(g("_mu"), (M,), 1.0 / M)
         self._t_last = extend(g("_t_last"), (), np.nan)
         self._t_first = extend(g("_t_first"), (), np.nan)
         self._n = extend(g("_n"), (), 0).astype(np.int64)
@@ -252,8 +282,9 @@ class TrackTable:
         else:
             Bp = _NO_B
         d2 = np.empty(s.size)
-        update_slots(self._x, self._P, self._C, self._t_last, self._n, s, t, self.config.accel_psd_m2ps3, m.xy_m,
-                     m.cov_frame_m2, Bp, np.ascontiguousarray(m.shared_m), self.config.gate_chi2, d2)
+        update_slots(self._x, self._P, self._xm, self._Pm, self._Cm, self._mu, self._t_last, self._n, s, t, self._qs,
+                     self._rates, m.xy_m, m.cov_frame_m2, Bp, np.ascontiguousarray(m.shared_m), self.config.gate_chi2,
+                     d2)
         return d2 <= self.config.gate_chi2  # NaN (a singular S) fails the gate too
 
     def _start(self, t: float, keys: list, slots: np.ndarray, new: np.ndarray, meas: SplitMeasurement) -> None:
@@ -271,7 +302,9 @@ class TrackTable:
             self._index[keys[i]] = s
         s = slots[idx]
         st = self.initiator.initiate(_take(meas, idx))
-        self._x[s], self._P[s], self._C[s] = st.x, st.P, st.C
+        self._x[s], self._P[s] = st.x, st.P
+        self._xm[s], self._Pm[s], self._Cm[s] = st.x[:, None], st.P[:, None], st.C[:, None]
+        self._mu[s] = self.mu0
         self._t_last[s] = self._t_first[s] = t
         self._n[s] = 1
         self._tid[s] = np.arange(self._next_id, self._next_id + idx.size)
