@@ -415,7 +415,7 @@ class Service:
         parts = [orjson.dumps(head)[:-1], b',"objects":', objects]
         if self.messages:
             # motion: the tracker's motion of the frame's objects (None: the messages carry no motion)
-            om = None if motion is None else ObjectMotion(*motion[1])
+            om = None if motion is None else motion[1]
             cpm, cpm_hex, sdsm = self._messages_json(setup, est, classes, class_p, ok_idx, msg_ids, int(fno), ts,
                                                      ref_ms, motion=om)
             parts += [b',"cpm":', cpm, b',"cpm_uper_hex":"', cpm_hex.encode(), b'","sdsm":', sdsm]
@@ -509,7 +509,7 @@ class Service:
 
     @staticmethod
     def _motion(setup: CameraSetup, est, ids: list, ts: float, dets: list):
-        """The frame's objects through the camera's tracks: ``(track_id (N,), MotionArrays)``."""
+        """The frame's objects through the camera's tracks: ``(track_id (N,), ObjectMotion)``."""
         yaw = None
         if dets and ("yaw_rad" in dets[0] or "yaw_deg" in dets[0]):  # 3D boxes: their yaw (checked by then)
             key = "yaw_rad" if "yaw_rad" in dets[0] else "yaw_deg"

@@ -26,10 +26,10 @@ from .filter import (
     mode_switch_probabilities,
 )
 from .models import ConstantVelocity
-from .motion import MOTION_FIELDS, MotionArrays, object_motion
+from .motion import MOTION_FIELDS, MotionArrays, ObjectMotion, object_motion
 from .table import CALIBRATION_MODES, SharedJacobianAt, TrackerConfig, TrackOutput, TrackTable
 
 __all__ = ["ConstantVelocity", "SchmidtPredictor", "SchmidtUpdater", "Initiator", "SplitMeasurement", "TrackState",
            "InteractingModels", "mode_switch_probabilities",
            "TrackTable", "SharedJacobianAt", "TrackerConfig", "TrackOutput", "CALIBRATION_MODES", "MotionArrays",
-           "MOTION_FIELDS", "object_motion"]
+           "ObjectMotion", "MOTION_FIELDS", "object_motion"]

@@ -24,20 +24,23 @@ from .._checks import as_float
 from .kernels import motion_fields
 from .table import TrackOutput
 
-__all__ = ["MotionArrays", "MOTION_FIELDS", "object_motion", "DEFAULT_HEADING_MIN_RATIO", "yaw_compass_deg"]
+__all__ = ["ObjectMotion", "MotionArrays", "MOTION_FIELDS", "object_motion", "DEFAULT_HEADING_MIN_RATIO",
+           "yaw_compass_deg"]
 
 #: heading sigma only where speed >= this many sigma of the velocity's largest semi-axis
 DEFAULT_HEADING_MIN_RATIO = 3.0
 
 
-class MotionArrays(NamedTuple):
-    """Per object (n,), NaN = unknown; the fields (in order) of ``service.messages``' ``ObjectMotion``.
+class ObjectMotion(NamedTuple):
+    """Per-object motion of one frame (arrays of length n; NaN = unknown), as the tracker gives it and the V2X
+    messages (``service.messages.motion``: CPM velocity / yawAngle / objectAge, SDSM speed / heading) take it.
 
     v_east_mps, v_north_mps : (n,)    velocity, true east / north, m/s
     cov_v_m2ps2 : (n, 2, 2)           its covariance (east, north), m^2/s^2
     speed_mps, sigma_speed_mps : (n,)
     heading_deg, sigma_heading_deg : (n,)   direction of motion, compass (clockwise from true north), deg
-    yaw_deg, sigma_yaw_deg : (n,)     a 3-D box's yaw as a compass bearing of its length axis, deg
+    yaw_deg, sigma_yaw_deg : (n,)     body orientation (front; a 3-D box's yaw as a compass bearing of its length
+                                      axis), deg
     age_s : (n,)                      time since the track's first detection, s
     """
 
@@ -52,6 +55,14 @@ class MotionArrays(NamedTuple):
     sigma_yaw_deg: np.ndarray
     age_s: np.ndarray
 
+    def take(self, rows) -> ObjectMotion:
+        """The motion of the objects ``rows`` (an index array), in that order."""
+        return ObjectMotion(*(np.asarray(a)[rows] for a in self))
+
+
+#: the tracker's name for :class:`ObjectMotion` (one class)
+MotionArrays = ObjectMotion
+
 
 MOTION_FIELDS = MotionArrays._fields
 
@@ -63,7 +74,7 @@ def yaw_compass_deg(yaw_rad, heading_offset_deg: float = 0.0) -> np.ndarray:
 
 
 def object_motion(tracks: TrackOutput, *, heading_offset_deg: float = 0.0, yaw_rad=None, sigma_yaw_rad=None,
-                  heading_min_ratio: float = DEFAULT_HEADING_MIN_RATIO) -> MotionArrays:
+                  heading_min_ratio: float = DEFAULT_HEADING_MIN_RATIO) -> ObjectMotion:
     """The motion fields of a frame's objects from the tracker's output (see the module doc for the policies).
 
     Parameters
@@ -88,4 +99,4 @@ def object_motion(tracks: TrackOutput, *, heading_offset_deg: float = 0.0, yaw_r
                   cov)
     yaw = np.full(n, np.nan) if yaw_rad is None else yaw_compass_deg(yaw_rad, h)
     sig_yaw = np.full(n, np.nan) if sigma_yaw_rad is None else np.rad2deg(np.asarray(sigma_yaw_rad, np.float64))
-    return MotionArrays(out[0], out[1], cov, out[2], out[3], out[4], out[5], yaw, sig_yaw, tracks.age_s.copy())
+    return ObjectMotion(out[0], out[1], cov, out[2], out[3], out[4], out[5], yaw, sig_yaw, tracks.age_s.copy())

@@ -54,6 +54,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ...errors import InputError
+from ...tracking.motion import ObjectMotion
 
 __all__ = ["ObjectMotion", "MotionCodes", "motion_codes", "unknown_motion", "SPEED_CONFIDENCE_NAMES",
            "HEADING_CONFIDENCE_NAMES", "SPEED_CONFIDENCE_MPS", "HEADING_CONFIDENCE_DEG"]
@@ -78,31 +79,6 @@ SPEED_CONFIDENCE_NAMES = ("unavailable", "prec100ms", "prec10ms", "prec5ms", "pr
 HEADING_CONFIDENCE_DEG = (10.0, 5.0, 1.0, 0.1, 0.05, 0.01, 0.0125)
 HEADING_CONFIDENCE_NAMES = ("unavailable", "prec10deg", "prec05deg", "prec01deg", "prec0-1deg", "prec0-05deg",
                             "prec0-01deg", "prec0-0125deg")
-
-
-class ObjectMotion(NamedTuple):
-    """Per-object motion of one frame (arrays of length n; NaN = unknown; see the module doc for frames)."""
-
-    #: velocity east / north (m/s, true east / north)
-    v_east_mps: np.ndarray
-    v_north_mps: np.ndarray
-    #: (n, 2, 2) covariance of (v_east, v_north) (m^2/s^2)
-    cov_v_m2ps2: np.ndarray
-    #: speed (m/s) and its 1-sigma
-    speed_mps: np.ndarray
-    sigma_speed_mps: np.ndarray
-    #: direction of motion, compass bearing (deg clockwise from true north), and its 1-sigma (deg)
-    heading_deg: np.ndarray
-    sigma_heading_deg: np.ndarray
-    #: body orientation (front), compass bearing (deg clockwise from true north), and its 1-sigma (deg)
-    yaw_deg: np.ndarray
-    sigma_yaw_deg: np.ndarray
-    #: time since the object was first seen (s)
-    age_s: np.ndarray
-
-    def take(self, rows) -> ObjectMotion:
-        """The motion of the objects ``rows`` (an index array), in that order."""
-        return ObjectMotion(*(np.asarray(a)[rows] for a in self))
 
 
 def unknown_motion(n: int) -> ObjectMotion:
