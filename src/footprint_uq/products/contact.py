@@ -27,7 +27,9 @@ from .. import params as P
 from .. import status
 from .._checks import check_cov
 from ..cameras import general
+from ..cameras.rotation import R_W_C, dR_W_C
 from ..errors import ConfigError, InputError
+from ..fast import contact_kernels as ck
 from ..uncertainty.budget import load_budget
 from .footprints import box2d_contact_points
 
@@ -236,6 +238,21 @@ class _Nodes(NamedTuple):
 
 
 def _solve_nodes(camera, b_px, c_start, sizes, yaw) -> _Nodes:
+    """:func:`_solve_nodes_reference`, compiled (:func:`footprint_uq.fast.contact_kernels.solve_nodes`:
+    every object and node in one call, objects in parallel; the same numbers to rounding)."""
+    p = np.ascontiguousarray(camera.params, dtype=np.float64)
+    n, K = yaw.shape
+    c, dc = np.empty((n, K, 2)), np.empty((n, K, 2, P.N_PARAMS + 2))
+    w, dw = np.empty((n, K)), np.empty((n, K, P.N_PARAMS + 2))
+    conv, ok = np.empty((n, K), dtype=np.bool_), np.empty((n, K), dtype=np.bool_)
+    ang = (p[P.PAN], p[P.TILT], p[P.ROLL])
+    f64 = lambda a: np.ascontiguousarray(a, dtype=np.float64)  # noqa: E731
+    ck.solve_nodes(p, f64(R_W_C(*ang)), f64(dR_W_C(*ang)), camera.lens_domain.packed, bool(np.any(p[P.DIST_SLICE])),
+                   f64(b_px), f64(c_start), f64(sizes), f64(yaw), _NEWTON_STEPS, c, dc, w, dw, conv, ok)
+    return _Nodes(c, dc, w, dw, conv.all(-1), ok.all(-1))
+
+
+def _solve_nodes_reference(camera, b_px, c_start, sizes, yaw) -> _Nodes:
     """Footprint centres whose rendered boxes have the bottom-centre pixel ``b_px`` (n, 2), one per node.
 
     Newton's method with the Jacobian refreshed every third step (a chord step in between: the

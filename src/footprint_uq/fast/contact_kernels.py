@@ -1,0 +1,231 @@
+"""The contact model's node solver, compiled: rendered boxes of cuboids and their inverse.
+
+:func:`solve_nodes` is the compiled form of the numpy reference
+``footprint_uq.products.contact._solve_nodes_reference`` (same schedule of Newton and chord steps, same
+acceptance test, same outputs, to rounding): for every object ``i`` and quadrature node ``k`` (a yaw and a
+size) it finds the footprint centre whose rendered box -- the bounding box of the cuboid's eight
+projected corners -- has the detected bottom-centre pixel, then the derivatives of that centre and of the
+rendered box width with respect to the 22 camera parameters and the bottom-centre pixel
+(implicit-function theorem).  Only the three corners that carry the box's left, right and bottom edge are
+differentiated (the numpy reference differentiates all eight and selects).
+
+The camera travels as ``prm`` (22,), ``R`` = ``R_W_C`` (3, 3), ``dR`` = its derivatives (3, 3, 3) with
+respect to pan, tilt, roll, the packed lens domain ``dom`` and ``has_dist`` (the lens domain is checked
+only for a distorting lens, as in :func:`footprint_uq.cameras.general.project`).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba as nb
+import numpy as np
+
+from .. import params as P
+from . import core
+
+__all__ = ["solve_nodes", "CONV_TOL_PX"]
+
+_INL = dict(inline="always", cache=True, error_model="numpy", fastmath={"contract"})
+_JIT = dict(cache=True, error_model="numpy", fastmath={"contract"}, parallel=True)
+
+#: a node is converged when its rendered bottom-centre pixel is within this of the detected one (px)
+CONV_TOL_PX = 1e-4
+_SL = (-1.0, 1.0, 1.0, -1.0, -1.0, 1.0, 1.0, -1.0)   # corner signs along the length
+_SW = (-1.0, -1.0, 1.0, 1.0, -1.0, -1.0, 1.0, 1.0)   # ... along the width
+
+
+@nb.njit(**_INL)
+def _corner(prm, cx, cy, L, W, H, cs, sn, j):
+    """World corner ``j`` (x, y, z; z from the nominal ground plane) of the box centred at (cx, cy)."""
+    dl, dw = 0.5 * L * _SL[j], 0.5 * W * _SW[j]
+    x = cx + (cs * dl - sn * dw)
+    y = cy + (sn * dl + cs * dw)
+    zg = prm[P.GDZ] + prm[P.GSX] * (cx - prm[P.XM]) + prm[P.GSY] * (cy - prm[P.YM])
+    return x, y, zg + (H if j >= 4 else 0.0)
+
+
+@nb.njit(**_INL)
+def _cam(prm, R, x, y, z):
+    """Camera-frame point ``R^T (X - C)`` and the relative world point."""
+    r0, r1, r2 = x - prm[P.XM], y - prm[P.YM], z - prm[P.HM]
+    p0 = R[0, 0] * r0 + R[1, 0] * r1 + R[2, 0] * r2
+    p1 = R[0, 1] * r0 + R[1, 1] * r1 + R[2, 1] * r2
+    p2 = R[0, 2] * r0 + R[1, 2] * r1 + R[2, 2] * r2
+    return p0, p1, p2, r0, r1, r2
+
+
+@nb.njit(**_INL)
+def _uv(prm, R, dom, has_dist, x, y, z):
+    """Pixel of a world point and whether it projects (in front, finite, inside the lens's domain)."""
+    p0, p1, p2 = _cam(prm, R, x, y, z)[:3]
+    if not p2 > 0.0:
+        return math.nan, math.nan, False
+    xn, yn = p0 / p2, p1 / p2
+    if not (math.isfinite(xn) and math.isfinite(yn)):
+        return math.nan, math.nan, False
+    if has_dist:
+        if not core.in_domain_undistorted(dom, xn, yn):
+            return math.nan, math.nan, False
+        xd, yd = core.distort_point(xn, yn, prm[5:13])
+    else:
+        xd, yd = xn, yn
+    return prm[P.FX] * xd + prm[P.SKEW] * yd + prm[P.CX], prm[P.FY] * yd + prm[P.CY], True
+
+
+@nb.njit(**_INL)
+def _edges(prm, R, dom, has_dist, cx, cy, L, W, H, cs, sn):
+    """``u_min, u_max, v_max`` of the rendered box, the corners that carry them, and whether all eight
+    corners project (first index on ties, like ``numpy.argmin``)."""
+    umin, umax, vmax = math.inf, -math.inf, -math.inf
+    imin, imax, iv = 0, 0, 0
+    ok = True
+    for j in range(8):
+        x, y, z = _corner(prm, cx, cy, L, W, H, cs, sn, j)
+        u, v, good = _uv(prm, R, dom, has_dist, x, y, z)
+        ok = ok and good
+        if u < umin:
+            umin, imin = u, j
+        if u > umax:
+            umax, imax = u, j
+        if v > vmax:
+            vmax, iv = v, j
+    return umin, umax, vmax, imin, imax, iv, ok
+
+
+@nb.njit(**_INL)
+def _grad(prm, R, dR, cx, cy, x, y, z, out):
+    """d(u, v)/d(c_x, c_y) in ``out[:, 22:24]`` and d(u, v)/d(params) in ``out[:, :22]`` of a corner that
+    moves with the footprint centre (its z on the ground plane), as ``general.project`` and the reference."""
+    p0, p1, p2, r0, r1, r2 = _cam(prm, R, x, y, z)
+    iz = 1.0 / p2
+    xn, yn = p0 * iz, p1 * iz
+    k = prm[5:13]
+    xd, yd, j00, j01, j10, j11, rad, den = core.distort_jac(xn, yn, k)
+    fx, fy, sk = prm[P.FX], prm[P.FY], prm[P.SKEW]
+    a00, a01, a10, a11 = fx * j00 + sk * j10, fx * j01 + sk * j11, fy * j10, fy * j11   # duv/dxn
+    dpc = np.empty((2, 3))
+    for a in range(2):
+        b0, b1 = (a00, a01) if a == 0 else (a10, a11)
+        dpc[a, 0], dpc[a, 1], dpc[a, 2] = b0 * iz, b1 * iz, -(b0 * xn + b1 * yn) * iz
+    out[:, :] = 0.0
+    out[0, P.FX], out[0, P.CX], out[0, P.SKEW] = xd, 1.0, yd
+    out[1, P.FY], out[1, P.CY] = yd, 1.0
+    r2n, num = xn * xn + yn * yn, rad * den
+    r4, r6 = r2n * r2n, r2n * r2n * r2n
+    dr = (r2n / den, r4 / den, 0.0, 0.0, r6 / den, -num * r2n / den**2, -num * r4 / den**2, -num * r6 / den**2)
+    for i in range(8):
+        dxk, dyk = xn * dr[i], yn * dr[i]
+        if i == 2:
+            dxk, dyk = 2.0 * xn * yn, r2n + 2.0 * yn * yn
+        elif i == 3:
+            dxk, dyk = r2n + 2.0 * xn * xn, 2.0 * xn * yn
+        out[0, 5 + i] = fx * dxk + sk * dyk
+        out[1, 5 + i] = fy * dyk
+    gsx, gsy = prm[P.GSX], prm[P.GSY]
+    for a in range(2):
+        d0 = dpc[a, 0] * R[0, 0] + dpc[a, 1] * R[0, 1] + dpc[a, 2] * R[0, 2]   # duv/dxyz
+        d1 = dpc[a, 0] * R[1, 0] + dpc[a, 1] * R[1, 1] + dpc[a, 2] * R[1, 2]
+        d2 = dpc[a, 0] * R[2, 0] + dpc[a, 1] * R[2, 1] + dpc[a, 2] * R[2, 2]
+        out[a, 22], out[a, 23] = d0 + d2 * gsx, d1 + d2 * gsy
+        out[a, P.XM], out[a, P.YM], out[a, P.HM] = -d0 - d2 * gsx, -d1 - d2 * gsy, -d2
+        out[a, P.GDZ] = d2
+        out[a, P.GSX], out[a, P.GSY] = d2 * (cx - prm[P.XM]), d2 * (cy - prm[P.YM])
+        for g in range(3):
+            s = 0.0
+            for i in range(3):
+                s += dpc[a, i] * (dR[g, 0, i] * r0 + dR[g, 1, i] * r1 + dR[g, 2, i] * r2)
+            out[a, P.PAN + g] = s
+
+
+@nb.njit(**_INL)
+def _grads(prm, R, dR, cx, cy, L, W, H, cs, sn, imin, imax, iv, g):
+    """:func:`_grad` of the corners carrying u_min, u_max and v_max into ``g[0]``, ``g[1]``, ``g[2]``."""
+    for q in range(3):
+        jj = imin if q == 0 else (imax if q == 1 else iv)
+        x, y, z = _corner(prm, cx, cy, L, W, H, cs, sn, jj)
+        _grad(prm, R, dR, cx, cy, x, y, z, g[q])
+
+
+@nb.njit(**_INL)
+def _newton(prm, R, dR, dom, has_dist, bu, bv, cx, cy, L, W, H, cs, sn, n_steps, g):
+    """Newton's method for one node, the Jacobian refreshed every third step (chord steps in between),
+    as the reference; ``g`` (3, 2, 24) is scratch.  Returns the centre."""
+    j00, j01, j10, j11 = 1.0, 0.0, 0.0, 1.0
+    for it in range(n_steps):
+        umin, umax, vmax, imin, imax, iv, ok = _edges(prm, R, dom, has_dist, cx, cy, L, W, H, cs, sn)
+        if it % 3 == 0:
+            j00, j01, j10, j11 = 1.0, 0.0, 0.0, 1.0
+            if ok:
+                _grads(prm, R, dR, cx, cy, L, W, H, cs, sn, imin, imax, iv, g)
+                a00, a01 = 0.5 * (g[0, 0, 22] + g[1, 0, 22]), 0.5 * (g[0, 0, 23] + g[1, 0, 23])
+                a10, a11 = g[2, 1, 22], g[2, 1, 23]
+                if math.isfinite(a00) and math.isfinite(a01) and math.isfinite(a10) and math.isfinite(a11):
+                    j00, j01, j10, j11 = a00, a01, a10, a11
+        if not ok:
+            continue
+        r0, r1 = 0.5 * (umin + umax) - bu, vmax - bv
+        det = j00 * j11 - j01 * j10
+        s0, s1 = (j11 * r0 - j01 * r1) / det, (j00 * r1 - j10 * r0) / det
+        if math.isfinite(s0) and math.isfinite(s1):
+            cx, cy = cx - s0, cy - s1
+    return cx, cy
+
+
+@nb.njit(**_INL)
+def _node_out(prm, R, dR, dom, has_dist, bu, bv, cx, cy, L, W, H, cs, sn, g, dc, dw):
+    """The converged node: its derivatives ``dc`` (2, 24) (params, then the bottom-centre pixel) and the
+    box width's ``dw`` (24,); returns (width, converged, all corners project)."""
+    umin, umax, vmax, imin, imax, iv, ok = _edges(prm, R, dom, has_dist, cx, cy, L, W, H, cs, sn)
+    if not ok:
+        dc[:, :] = math.nan
+        dw[:] = math.nan
+        return math.nan, False, False
+    _grads(prm, R, dR, cx, cy, L, W, H, cs, sn, imin, imax, iv, g)
+    a00, a01 = 0.5 * (g[0, 0, 22] + g[1, 0, 22]), 0.5 * (g[0, 0, 23] + g[1, 0, 23])
+    a10, a11 = g[2, 1, 22], g[2, 1, 23]
+    det = a00 * a11 - a01 * a10
+    good = math.isfinite(det) and abs(det) > 0.0
+    if not good:
+        a00, a01, a10, a11, det = 1.0, 0.0, 0.0, 1.0, 1.0
+    i00, i01, i10, i11 = a11 / det, -a01 / det, -a10 / det, a00 / det
+    conv = good and max(abs(0.5 * (umin + umax) - bu), abs(vmax - bv)) < CONV_TOL_PX
+    for m in range(22):
+        f0 = 0.5 * (g[0, 0, m] + g[1, 0, m])
+        f1 = g[2, 1, m]
+        dc[0, m] = -(i00 * f0 + i01 * f1)
+        dc[1, m] = -(i10 * f0 + i11 * f1)
+    dc[0, 22], dc[0, 23], dc[1, 22], dc[1, 23] = i00, i01, i10, i11
+    e0, e1 = g[1, 0, 22] - g[0, 0, 22], g[1, 0, 23] - g[0, 0, 23]    # d(width)/dc
+    for m in range(24):
+        dw[m] = (g[1, 0, m] - g[0, 0, m] if m < 22 else 0.0) + e0 * dc[0, m] + e1 * dc[1, m]
+    return umax - umin, conv, True
+
+
+@nb.njit(**_JIT)
+def solve_nodes(prm, R, dR, dom, has_dist, b_px, c_start, sizes, yaw, n_steps, c, dc, w, dw, conv, ok):
+    """Every node of every object, objects in parallel.
+
+    Parameters
+    ----------
+    prm (22,), R (3, 3), dR (3, 3, 3), dom (packed lens domain), has_dist (bool): the camera
+    b_px : (n, 2) detected bottom-centre pixels
+    c_start : (n, K, 2) Newton's start per node (world, metres)
+    sizes : (n, K, 3) length, width, height (m); yaw : (n, K) radians
+    n_steps : Newton / chord steps before the final evaluation
+
+    Outputs (filled): ``c`` (n, K, 2), ``dc`` (n, K, 2, 24), ``w`` (n, K) rendered box width (px),
+    ``dw`` (n, K, 24), ``conv`` and ``ok`` (n, K) bool (converged; every corner projects).
+    """
+    n, K = yaw.shape
+    for i in nb.prange(n):
+        g = np.empty((3, 2, 24))
+        bu, bv = b_px[i, 0], b_px[i, 1]
+        for k in range(K):
+            L, W, H = sizes[i, k, 0], sizes[i, k, 1], sizes[i, k, 2]
+            cs, sn = math.cos(yaw[i, k]), math.sin(yaw[i, k])
+            cx, cy = _newton(prm, R, dR, dom, has_dist, bu, bv, c_start[i, k, 0], c_start[i, k, 1],
+                             L, W, H, cs, sn, n_steps, g)
+            c[i, k, 0], c[i, k, 1] = cx, cy
+            w[i, k], conv[i, k], ok[i, k] = _node_out(prm, R, dR, dom, has_dist, bu, bv, cx, cy, L, W, H, cs, sn,
+                                                      g, dc[i, k], dw[i, k])
