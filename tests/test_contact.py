@@ -233,8 +233,8 @@ def _distorted_camera():
 
 @pytest.mark.parametrize("which", ["pantilt", "distorted"])
 def test_compiled_solver_agrees_with_the_numpy_reference(which, monkeypatch):
-    """footprint_centre with the compiled node solver (the default) and with the numpy reference
-    (``_solve_nodes_reference``): every output to 1e-9 relative, validity and codes equal; mixed classes,
+    """footprint_centre with the compiled node solver and posterior (the default) and with the numpy
+    reference (``_solve_nodes_reference``, ``_posterior_reference``): every output to 1e-9 relative, validity and codes equal; mixed classes,
     known and unknown yaws, a box cut by the border, a box above the horizon."""
     monkeypatch.setattr(C, "YAW_NODES_UNKNOWN", 12)
     cam = CAM if which == "pantilt" else _distorted_camera()
@@ -247,6 +247,7 @@ def test_compiled_solver_agrees_with_the_numpy_reference(which, monkeypatch):
     kw = {"yaw_rad": yaw, "cov_uv_px2": np.diag([1.0, 2.0])}
     fast = C.footprint_centre(cam, {"pan_deg": 0.1, "height_m": 0.1}, boxes, cls, **kw)
     monkeypatch.setattr(C, "_solve_nodes", C._solve_nodes_reference)
+    monkeypatch.setattr(C, "_posterior", C._posterior_reference)
     ref = C.footprint_centre(cam, {"pan_deg": 0.1, "height_m": 0.1}, boxes, cls, **kw)
     assert fast.valid[:-1].all() and not fast.valid[-1]
     np.testing.assert_array_equal(fast.valid, ref.valid)

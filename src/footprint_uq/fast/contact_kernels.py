@@ -24,13 +24,16 @@ import numpy as np
 from .. import params as P
 from . import core
 
-__all__ = ["solve_nodes", "CONV_TOL_PX"]
+__all__ = ["solve_nodes", "posterior", "CONV_TOL_PX", "STOP_M"]
 
 _INL = dict(inline="always", cache=True, error_model="numpy", fastmath={"contract"})
 _JIT = dict(cache=True, error_model="numpy", fastmath={"contract"}, parallel=True)
 
 #: a node is converged when its rendered bottom-centre pixel is within this of the detected one (px)
 CONV_TOL_PX = 1e-4
+#: a node stops iterating after a step shorter than this (m) in both coordinates: the remaining steps of the
+#: reference's fixed count would move its centre by less still (relative ~1e-11 of its position)
+STOP_M = 1e-9
 _SL = (-1.0, 1.0, 1.0, -1.0, -1.0, 1.0, 1.0, -1.0)   # corner signs along the length
 _SW = (-1.0, -1.0, 1.0, 1.0, -1.0, -1.0, 1.0, 1.0)   # ... along the width
 
@@ -104,10 +107,8 @@ def _grad(prm, R, dR, cx, cy, x, y, z, out):
     xd, yd, j00, j01, j10, j11, rad, den = core.distort_jac(xn, yn, k)
     fx, fy, sk = prm[P.FX], prm[P.FY], prm[P.SKEW]
     a00, a01, a10, a11 = fx * j00 + sk * j10, fx * j01 + sk * j11, fy * j10, fy * j11   # duv/dxn
-    dpc = np.empty((2, 3))
-    for a in range(2):
-        b0, b1 = (a00, a01) if a == 0 else (a10, a11)
-        dpc[a, 0], dpc[a, 1], dpc[a, 2] = b0 * iz, b1 * iz, -(b0 * xn + b1 * yn) * iz
+    q00, q01, q02 = a00 * iz, a01 * iz, -(a00 * xn + a01 * yn) * iz   # duv/d(camera-frame point)
+    q10, q11, q12 = a10 * iz, a11 * iz, -(a10 * xn + a11 * yn) * iz
     out[:, :] = 0.0
     out[0, P.FX], out[0, P.CX], out[0, P.SKEW] = xd, 1.0, yd
     out[1, P.FY], out[1, P.CY] = yd, 1.0
@@ -124,18 +125,37 @@ def _grad(prm, R, dR, cx, cy, x, y, z, out):
         out[1, 5 + i] = fy * dyk
     gsx, gsy = prm[P.GSX], prm[P.GSY]
     for a in range(2):
-        d0 = dpc[a, 0] * R[0, 0] + dpc[a, 1] * R[0, 1] + dpc[a, 2] * R[0, 2]   # duv/dxyz
-        d1 = dpc[a, 0] * R[1, 0] + dpc[a, 1] * R[1, 1] + dpc[a, 2] * R[1, 2]
-        d2 = dpc[a, 0] * R[2, 0] + dpc[a, 1] * R[2, 1] + dpc[a, 2] * R[2, 2]
+        e0, e1, e2 = (q00, q01, q02) if a == 0 else (q10, q11, q12)
+        d0 = e0 * R[0, 0] + e1 * R[0, 1] + e2 * R[0, 2]   # duv/dxyz
+        d1 = e0 * R[1, 0] + e1 * R[1, 1] + e2 * R[1, 2]
+        d2 = e0 * R[2, 0] + e1 * R[2, 1] + e2 * R[2, 2]
         out[a, 22], out[a, 23] = d0 + d2 * gsx, d1 + d2 * gsy
         out[a, P.XM], out[a, P.YM], out[a, P.HM] = -d0 - d2 * gsx, -d1 - d2 * gsy, -d2
         out[a, P.GDZ] = d2
         out[a, P.GSX], out[a, P.GSY] = d2 * (cx - prm[P.XM]), d2 * (cy - prm[P.YM])
         for g in range(3):
-            s = 0.0
-            for i in range(3):
-                s += dpc[a, i] * (dR[g, 0, i] * r0 + dR[g, 1, i] * r1 + dR[g, 2, i] * r2)
-            out[a, P.PAN + g] = s
+            out[a, P.PAN + g] = (e0 * (dR[g, 0, 0] * r0 + dR[g, 1, 0] * r1 + dR[g, 2, 0] * r2)
+                                 + e1 * (dR[g, 0, 1] * r0 + dR[g, 1, 1] * r1 + dR[g, 2, 1] * r2)
+                                 + e2 * (dR[g, 0, 2] * r0 + dR[g, 1, 2] * r1 + dR[g, 2, 2] * r2))
+
+
+@nb.njit(**_INL)
+def _dc(prm, R, cx, cy, L, W, H, cs, sn, j, a):
+    """Row ``a`` (0: u, 1: v) of d(u, v)/d(c_x, c_y) of corner ``j`` (the Newton steps' part of :func:`_grad`)."""
+    x, y, z = _corner(prm, cx, cy, L, W, H, cs, sn, j)
+    p0, p1, p2 = _cam(prm, R, x, y, z)[:3]
+    iz = 1.0 / p2
+    xn, yn = p0 * iz, p1 * iz
+    j00, j01, j10, j11 = core.distort_jac(xn, yn, prm[5:13])[2:6]
+    if a == 0:
+        b0, b1 = prm[P.FX] * j00 + prm[P.SKEW] * j10, prm[P.FX] * j01 + prm[P.SKEW] * j11
+    else:
+        b0, b1 = prm[P.FY] * j10, prm[P.FY] * j11
+    e0, e1, e2 = b0 * iz, b1 * iz, -(b0 * xn + b1 * yn) * iz
+    d0 = e0 * R[0, 0] + e1 * R[0, 1] + e2 * R[0, 2]
+    d1 = e0 * R[1, 0] + e1 * R[1, 1] + e2 * R[1, 2]
+    d2 = e0 * R[2, 0] + e1 * R[2, 1] + e2 * R[2, 2]
+    return d0 + d2 * prm[P.GSX], d1 + d2 * prm[P.GSY]
 
 
 @nb.njit(**_INL)
@@ -157,9 +177,10 @@ def _newton(prm, R, dR, dom, has_dist, bu, bv, cx, cy, L, W, H, cs, sn, n_steps,
         if it % 3 == 0:
             j00, j01, j10, j11 = 1.0, 0.0, 0.0, 1.0
             if ok:
-                _grads(prm, R, dR, cx, cy, L, W, H, cs, sn, imin, imax, iv, g)
-                a00, a01 = 0.5 * (g[0, 0, 22] + g[1, 0, 22]), 0.5 * (g[0, 0, 23] + g[1, 0, 23])
-                a10, a11 = g[2, 1, 22], g[2, 1, 23]
+                a00, a01 = _dc(prm, R, cx, cy, L, W, H, cs, sn, imin, 0)
+                b00, b01 = _dc(prm, R, cx, cy, L, W, H, cs, sn, imax, 0)
+                a00, a01 = 0.5 * (a00 + b00), 0.5 * (a01 + b01)
+                a10, a11 = _dc(prm, R, cx, cy, L, W, H, cs, sn, iv, 1)
                 if math.isfinite(a00) and math.isfinite(a01) and math.isfinite(a10) and math.isfinite(a11):
                     j00, j01, j10, j11 = a00, a01, a10, a11
         if not ok:
@@ -169,6 +190,8 @@ def _newton(prm, R, dR, dom, has_dist, bu, bv, cx, cy, L, W, H, cs, sn, n_steps,
         s0, s1 = (j11 * r0 - j01 * r1) / det, (j00 * r1 - j10 * r0) / det
         if math.isfinite(s0) and math.isfinite(s1):
             cx, cy = cx - s0, cy - s1
+            if abs(s0) < STOP_M and abs(s1) < STOP_M:
+                break  # the convergence mask: the remaining steps would move the centre by less still
     return cx, cy
 
 
@@ -229,3 +252,100 @@ def solve_nodes(prm, R, dR, dom, has_dist, b_px, c_start, sizes, yaw, n_steps, c
             c[i, k, 0], c[i, k, 1] = cx, cy
             w[i, k], conv[i, k], ok[i, k] = _node_out(prm, R, dR, dom, has_dist, bu, bv, cx, cy, L, W, H, cs, sn,
                                                       g, dc[i, k], dw[i, k])
+
+
+@nb.njit(**_INL)
+def _yaw_node(c, dc, z, dz, w_obs, r_w, mu, dmu, Pj, dlogL):
+    """One yaw node's 6 size points conditioned on the observed width (a Kalman update), forward-mode
+    derivatives through it; fills ``mu`` (2,), ``dmu`` (2, M), ``Pj`` (2, 2), ``dlogL`` (M,) and returns
+    ``(innovation, Czz, -0.5 innov^2 / Czz - 0.5 log Czz)`` (the reference's ``_posterior``, one node)."""
+    M = dz.shape[1]
+    cb0, cb1, zb = 0.0, 0.0, 0.0
+    for s in range(6):
+        cb0 += c[s, 0]
+        cb1 += c[s, 1]
+        zb += z[s]
+    cb0, cb1, zb = cb0 / 6, cb1 / 6, zb / 6
+    ccz0, ccz1, czz, c00, c01, c11 = 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+    for s in range(6):
+        e0, e1, ez = c[s, 0] - cb0, c[s, 1] - cb1, z[s] - zb
+        ccz0 += e0 * ez
+        ccz1 += e1 * ez
+        czz += ez * ez
+        c00 += e0 * e0
+        c01 += e0 * e1
+        c11 += e1 * e1
+    ccz0, ccz1, czz = ccz0 / 6, ccz1 / 6, czz / 6 + r_w
+    g0, g1 = ccz0 / czz, ccz1 / czz
+    innov = w_obs - zb
+    mu[0], mu[1] = cb0 + g0 * innov, cb1 + g1 * innov
+    Pj[0, 0], Pj[0, 1] = c00 / 6 - g0 * ccz0, c01 / 6 - g0 * ccz1
+    Pj[1, 0], Pj[1, 1] = c01 / 6 - g1 * ccz0, c11 / 6 - g1 * ccz1
+    ez6 = np.empty(6)
+    for s in range(6):
+        ez6[s] = z[s] - zb
+    for m in range(M):
+        dcb0, dcb1, dzb = 0.0, 0.0, 0.0
+        for s in range(6):
+            dcb0 += dc[s, 0, m]
+            dcb1 += dc[s, 1, m]
+            dzb += dz[s, m]
+        dcb0, dcb1, dzb = dcb0 / 6, dcb1 / 6, dzb / 6
+        dccz0, dccz1, dczz = 0.0, 0.0, 0.0
+        for s in range(6):
+            dez = dz[s, m] - dzb
+            dccz0 += (dc[s, 0, m] - dcb0) * ez6[s] + (c[s, 0] - cb0) * dez
+            dccz1 += (dc[s, 1, m] - dcb1) * ez6[s] + (c[s, 1] - cb1) * dez
+            dczz += ez6[s] * dez
+        dccz0, dccz1, dczz = dccz0 / 6, dccz1 / 6, 2 * dczz / 6
+        dmu[0, m] = dcb0 + (dccz0 - g0 * dczz) / czz * innov - g0 * dzb
+        dmu[1, m] = dcb1 + (dccz1 - g1 * dczz) / czz * innov - g1 * dzb
+        dlogL[m] = (innov / czz) * dzb + (0.5 * innov**2 / czz**2 - 0.5 / czz) * dczz
+    return -0.5 * innov**2 / czz - 0.5 * math.log(czz)
+
+
+@nb.njit(**_JIT)
+def posterior(c, dc, w, dw, ny, w_obs, r_w, log_prior, x, dx, cov):
+    """The mixture over yaw nodes of the width-conditioned size points, objects in parallel.
+
+    ``c`` (n, ny * 6, 2), ``dc`` (n, ny * 6, 2, M), ``w`` (n, ny * 6), ``dw`` (n, ny * 6, M) (yaw-major
+    nodes, :func:`solve_nodes`), ``w_obs`` and ``r_w`` (n,) the observed width and its variance (px, px^2),
+    ``log_prior`` (ny,); fills the centre ``x`` (n, 2), its derivatives ``dx`` (n, 2, M) and the contact
+    covariance ``cov`` (n, 2, 2).
+    """
+    n, M = c.shape[0], dw.shape[2]
+    for i in nb.prange(n):
+        mu, dmu, Pj = np.empty((ny, 2)), np.empty((ny, 2, M)), np.empty((ny, 2, 2))
+        logL, dlogL, pi = np.empty(ny), np.empty((ny, M)), np.empty(ny)
+        for j in range(ny):
+            sl = slice(6 * j, 6 * j + 6)
+            logL[j] = _yaw_node(c[i, sl], dc[i, sl], w[i, sl], dw[i, sl], w_obs[i], r_w[i], mu[j], dmu[j], Pj[j],
+                                dlogL[j]) + log_prior[j]
+        top = logL.max()
+        tot = 0.0
+        for j in range(ny):
+            pi[j] = math.exp(logL[j] - top)
+            tot += pi[j]
+        pi /= tot
+        x0, x1 = 0.0, 0.0
+        for j in range(ny):
+            x0 += pi[j] * mu[j, 0]
+            x1 += pi[j] * mu[j, 1]
+        x[i, 0], x[i, 1] = x0, x1
+        for m in range(M):
+            mbar = 0.0
+            for j in range(ny):
+                mbar += pi[j] * dlogL[j, m]
+            s0, s1 = 0.0, 0.0
+            for j in range(ny):
+                dpi = pi[j] * (dlogL[j, m] - mbar)
+                s0 += dpi * mu[j, 0] + pi[j] * dmu[j, 0, m]
+                s1 += dpi * mu[j, 1] + pi[j] * dmu[j, 1, m]
+            dx[i, 0, m], dx[i, 1, m] = s0, s1
+        v00, v01, v11 = 0.0, 0.0, 0.0
+        for j in range(ny):
+            d0, d1 = mu[j, 0] - x0, mu[j, 1] - x1
+            v00 += pi[j] * (Pj[j, 0, 0] + d0 * d0)
+            v01 += pi[j] * (Pj[j, 0, 1] + d0 * d1)
+            v11 += pi[j] * (Pj[j, 1, 1] + d1 * d1)
+        cov[i, 0, 0], cov[i, 0, 1], cov[i, 1, 0], cov[i, 1, 1] = v00, v01, v01, v11

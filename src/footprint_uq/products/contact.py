@@ -17,6 +17,7 @@ interface; :data:`CONTACT_MODELS` names both.
 
 from __future__ import annotations
 
+import functools
 from pathlib import Path
 from typing import NamedTuple
 
@@ -81,6 +82,17 @@ class SizePrior(NamedTuple):
 # size priors
 # ---------------------------------------------------------------------------------------------
 def _read_priors(path) -> dict:
+    """The parsed file, cached on its path, modification time and size (read-only: never mutate it)."""
+    p = Path(path)
+    try:
+        st = p.stat()
+    except OSError:
+        st = None
+    return _parse_priors(str(p), None if st is None else (st.st_mtime_ns, st.st_size))
+
+
+@functools.lru_cache(maxsize=32)
+def _parse_priors(path: str, stamp) -> dict:
     p = Path(path)
     try:
         d = yaml.safe_load(p.read_text(encoding="utf-8"))
@@ -283,6 +295,16 @@ def _solve_nodes_reference(camera, b_px, c_start, sizes, yaw) -> _Nodes:
 
 
 def _posterior(nd: _Nodes, ny: int, w_obs, r_w, log_prior):
+    """:func:`_posterior_reference`, compiled (:func:`footprint_uq.fast.contact_kernels.posterior`)."""
+    n, M = nd.c.shape[0], nd.dw.shape[-1]
+    x, dx, cov = np.empty((n, 2)), np.empty((n, 2, M)), np.empty((n, 2, 2))
+    f64 = lambda a: np.ascontiguousarray(a, dtype=np.float64)  # noqa: E731
+    ck.posterior(f64(nd.c), f64(nd.dc), f64(nd.w), f64(nd.dw), int(ny), f64(w_obs), f64(r_w),
+                 f64(np.broadcast_to(log_prior, (ny,))), x, dx, cov)
+    return x, dx, cov
+
+
+def _posterior_reference(nd: _Nodes, ny: int, w_obs, r_w, log_prior):
     """Condition each yaw node's unscented size points on the observed box width (a Kalman update),
     weigh the yaw nodes by the width's marginal likelihood, and mix.  Forward-mode derivatives (24
     columns: the 22 parameters and the bottom-centre pixel) go through every step.
