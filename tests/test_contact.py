@@ -234,8 +234,9 @@ def _distorted_camera():
 @pytest.mark.parametrize("which", ["pantilt", "distorted"])
 def test_compiled_solver_agrees_with_the_numpy_reference(which, monkeypatch):
     """footprint_centre with the compiled node solver and posterior (the default) and with the numpy
-    reference (``_solve_nodes_reference``, ``_posterior_reference``): every output to 1e-9 relative, validity and codes equal; mixed classes,
-    known and unknown yaws, a box cut by the border, a box above the horizon."""
+    reference (``_solve_nodes_reference``, ``_posterior_reference``): every output to 1e-9 relative,
+    validity and codes equal; mixed classes, known and unknown yaws, a box cut by the border, a box above
+    the horizon."""
     monkeypatch.setattr(C, "YAW_NODES_UNKNOWN", 12)
     cam = CAM if which == "pantilt" else _distorted_camera()
     rng = np.random.default_rng(11)
