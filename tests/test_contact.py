@@ -259,3 +259,25 @@ def test_compiled_solver_agrees_with_the_numpy_reference(which, monkeypatch):
         scale = np.abs(np.nan_to_num(b)).reshape(len(b), -1).max(1).reshape((-1,) + (1,) * (b.ndim - 1))
         err = np.nanmax(np.abs(a - b) / np.where(scale > 0, scale, 1.0))
         assert err < 1e-9, (f, err)
+
+
+def test_one_bottom_centre_for_products_and_validation_with_flags_and_linearity():
+    """validation.pairs uses the contact module's bottom_centre and CONTACT_MODELS (one implementation); a box
+    whose bottom centre lies below the image keeps its numbers flagged OUTSIDE_IMAGE (in both models), and
+    the bottom-centre point's linearity flag equals propagate's."""
+    from footprint_uq import status
+    from footprint_uq.uncertainty.propagation import propagate
+    from footprint_uq.validation import pairs
+
+    assert pairs.bottom_centre is C.bottom_centre and pairs.CONTACT_MODELS is C.CONTACT_MODELS
+    boxes = np.array([[900.0, 500.0, 1000.0, 620.0], [900.0, 1000.0, 1000.0, 1100.0]])
+    budget = {"pan_deg": 0.1, "tilt_deg": 0.05, "height_m": 0.2, "imaging_px": [1.0, 1.0]}
+    for model in C.CONTACT_MODELS.values():
+        r = model(CAM, budget, boxes, ["car", "car"])
+        assert r.valid.all() and list(r.status) == [status.OK, status.OUTSIDE_IMAGE]
+        assert np.isfinite(r.xy_world_m).all()
+    cuv = np.diag([2.0, 3.0])
+    nl = C.bottom_centre_nonlinearity(CAM, budget, boxes, cuv)
+    ref = propagate(CAM, budget, [[950.0, 620.0], [950.0, 1100.0]], pixel_cov_px2=cuv, linearity=True)
+    np.testing.assert_allclose(nl, ref.nonlinearity, rtol=1e-7)
+    assert np.isnan(C.bottom_centre_nonlinearity(CAM, budget, boxes, cuv, valid=[True, False])[1])
