@@ -59,9 +59,8 @@ def _cam(prm, R, x, y, z):
 
 
 @nb.njit(**_INL)
-def _uv(prm, R, dom, has_dist, x, y, z):
-    """Pixel of a world point and whether it projects (in front, finite, inside the lens's domain)."""
-    p0, p1, p2 = _cam(prm, R, x, y, z)[:3]
+def _pix(prm, dom, has_dist, p0, p1, p2):
+    """Pixel of a camera-frame point and whether it projects (in front, finite, inside the lens's domain)."""
     if not p2 > 0.0:
         return math.nan, math.nan, False
     xn, yn = p0 / p2, p1 / p2
@@ -77,15 +76,28 @@ def _uv(prm, R, dom, has_dist, x, y, z):
 
 
 @nb.njit(**_INL)
-def _edges(prm, R, dom, has_dist, cx, cy, L, W, H, cs, sn):
+def _offsets(R, L, W, H, cs, sn):
+    """The box's half length, half width and height vectors in the camera frame (9 scalars): a corner is
+    ``R^T (c - C) + s_l o_l + s_w o_w + top o_h`` (the rotation of :func:`_corner`, distributed)."""
+    lx, ly, wx, wy = 0.5 * L * cs, 0.5 * L * sn, -0.5 * W * sn, 0.5 * W * cs
+    return (R[0, 0] * lx + R[1, 0] * ly, R[0, 1] * lx + R[1, 1] * ly, R[0, 2] * lx + R[1, 2] * ly,
+            R[0, 0] * wx + R[1, 0] * wy, R[0, 1] * wx + R[1, 1] * wy, R[0, 2] * wx + R[1, 2] * wy,
+            R[2, 0] * H, R[2, 1] * H, R[2, 2] * H)
+
+
+@nb.njit(**_INL)
+def _edges(prm, R, dom, has_dist, cx, cy, o):
     """``u_min, u_max, v_max`` of the rendered box, the corners that carry them, and whether all eight
-    corners project (first index on ties, like ``numpy.argmin``)."""
+    corners project (first index on ties, like ``numpy.argmin``); ``o``: :func:`_offsets`."""
+    zg = prm[P.GDZ] + prm[P.GSX] * (cx - prm[P.XM]) + prm[P.GSY] * (cy - prm[P.YM])
+    q0, q1, q2 = _cam(prm, R, cx, cy, zg)[:3]
     umin, umax, vmax = math.inf, -math.inf, -math.inf
     imin, imax, iv = 0, 0, 0
     ok = True
     for j in range(8):
-        x, y, z = _corner(prm, cx, cy, L, W, H, cs, sn, j)
-        u, v, good = _uv(prm, R, dom, has_dist, x, y, z)
+        sl, sw, t = _SL[j], _SW[j], 1.0 if j >= 4 else 0.0
+        u, v, good = _pix(prm, dom, has_dist, q0 + sl * o[0] + sw * o[3] + t * o[6],
+                          q1 + sl * o[1] + sw * o[4] + t * o[7], q2 + sl * o[2] + sw * o[5] + t * o[8])
         ok = ok and good
         if u < umin:
             umin, imin = u, j
@@ -172,8 +184,9 @@ def _newton(prm, R, dR, dom, has_dist, bu, bv, cx, cy, L, W, H, cs, sn, n_steps,
     """Newton's method for one node, the Jacobian refreshed every third step (chord steps in between),
     as the reference; ``g`` (3, 2, 24) is scratch.  Returns the centre."""
     j00, j01, j10, j11 = 1.0, 0.0, 0.0, 1.0
+    o = _offsets(R, L, W, H, cs, sn)
     for it in range(n_steps):
-        umin, umax, vmax, imin, imax, iv, ok = _edges(prm, R, dom, has_dist, cx, cy, L, W, H, cs, sn)
+        umin, umax, vmax, imin, imax, iv, ok = _edges(prm, R, dom, has_dist, cx, cy, o)
         if it % 3 == 0:
             j00, j01, j10, j11 = 1.0, 0.0, 0.0, 1.0
             if ok:
@@ -199,7 +212,8 @@ def _newton(prm, R, dR, dom, has_dist, bu, bv, cx, cy, L, W, H, cs, sn, n_steps,
 def _node_out(prm, R, dR, dom, has_dist, bu, bv, cx, cy, L, W, H, cs, sn, g, dc, dw):
     """The converged node: its derivatives ``dc`` (2, 24) (params, then the bottom-centre pixel) and the
     box width's ``dw`` (24,); returns (width, converged, all corners project)."""
-    umin, umax, vmax, imin, imax, iv, ok = _edges(prm, R, dom, has_dist, cx, cy, L, W, H, cs, sn)
+    o = _offsets(R, L, W, H, cs, sn)
+    umin, umax, vmax, imin, imax, iv, ok = _edges(prm, R, dom, has_dist, cx, cy, o)
     if not ok:
         dc[:, :] = math.nan
         dw[:] = math.nan
