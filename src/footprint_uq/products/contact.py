@@ -251,18 +251,26 @@ class _Nodes(NamedTuple):
     front: np.ndarray      # (n,)
 
 
+def _writeable(a) -> np.ndarray:
+    """``a`` as a writeable C-contiguous float64 array (copied only when it is not one)."""
+    a = np.ascontiguousarray(a, dtype=np.float64)
+    return a if a.flags.writeable else a.copy()
+
+
 def _solve_nodes(camera, b_px, c_start, sizes, yaw) -> _Nodes:
     """:func:`_solve_nodes_reference`, compiled (:func:`footprint_uq.fast.contact_kernels.solve_nodes`:
     every object and node in one call, objects in parallel; the same numbers to rounding)."""
-    p = np.ascontiguousarray(camera.params, dtype=np.float64)
+    p = np.array(camera.params, dtype=np.float64, order="C")
     n, K = yaw.shape
     c, dc = np.empty((n, K, 2)), np.empty((n, K, 2, P.N_PARAMS + 2))
     w, dw = np.empty((n, K)), np.empty((n, K, P.N_PARAMS + 2))
     conv, ok = np.empty((n, K), dtype=np.bool_), np.empty((n, K), dtype=np.bool_)
     ang = (p[P.PAN], p[P.TILT], p[P.ROLL])
-    f64 = lambda a: np.ascontiguousarray(a, dtype=np.float64)  # noqa: E731
-    ck.solve_nodes(p, f64(R_W_C(*ang)), f64(dR_W_C(*ang)), camera.lens_domain.packed, bool(np.any(p[P.DIST_SLICE])),
-                   f64(b_px), f64(c_start), f64(sizes), f64(yaw), _NEWTON_STEPS, c, dc, w, dw, conv, ok)
+    # writeable C-contiguous float64 (a read-only array, such as a cached lens domain, is another numba type:
+    # a second compilation of the kernel); the small ones copied
+    cp, f64 = (lambda a: np.array(a, dtype=np.float64, order="C")), _writeable  # noqa: E731
+    ck.solve_nodes(p, cp(R_W_C(*ang)), cp(dR_W_C(*ang)), cp(camera.lens_domain.packed), bool(np.any(p[P.DIST_SLICE])),
+                   cp(b_px), f64(c_start), f64(sizes), f64(yaw), _NEWTON_STEPS, c, dc, w, dw, conv, ok)
     return _Nodes(c, dc, w, dw, conv.all(-1), ok.all(-1))
 
 
@@ -300,9 +308,9 @@ def _posterior(nd: _Nodes, ny: int, w_obs, r_w, log_prior):
     """:func:`_posterior_reference`, compiled (:func:`footprint_uq.fast.contact_kernels.posterior`)."""
     n, M = nd.c.shape[0], nd.dw.shape[-1]
     x, dx, cov = np.empty((n, 2)), np.empty((n, 2, M)), np.empty((n, 2, 2))
-    f64 = lambda a: np.ascontiguousarray(a, dtype=np.float64)  # noqa: E731
-    ck.posterior(f64(nd.c), f64(nd.dc), f64(nd.w), f64(nd.dw), int(ny), f64(w_obs), f64(r_w),
-                 f64(np.broadcast_to(log_prior, (ny,))), x, dx, cov)
+    f64, cp = _writeable, (lambda a: np.array(a, dtype=np.float64, order="C"))  # noqa: E731
+    ck.posterior(f64(nd.c), f64(nd.dc), f64(nd.w), f64(nd.dw), int(ny), cp(w_obs), cp(r_w),
+                 cp(np.broadcast_to(log_prior, (ny,))), x, dx, cov)
     return x, dx, cov
 
 
