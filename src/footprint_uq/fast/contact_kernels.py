@@ -16,6 +16,7 @@ only for a distorting lens, as in :func:`footprint_uq.cameras.general.project`).
 
 from __future__ import annotations
 
+import contextlib
 import math
 
 import numba as nb
@@ -24,11 +25,13 @@ import numpy as np
 from .. import params as P
 from . import core
 
-__all__ = ["solve_nodes", "posterior", "CONV_TOL_PX", "STOP_M"]
+__all__ = ["solve_nodes", "posterior", "threads_for", "CONV_TOL_PX", "STOP_M", "PARALLEL_MIN_NODES"]
 
 _INL = dict(inline="always", cache=True, error_model="numpy", fastmath={"contract"})
 _JIT = dict(cache=True, error_model="numpy", fastmath={"contract"}, parallel=True)
 
+#: yaw/size nodes of one call below which the kernels run on one thread (:func:`threads_for`)
+PARALLEL_MIN_NODES = 20_000
 #: a node is converged when its rendered bottom-centre pixel is within this of the detected one (px)
 CONV_TOL_PX = 1e-4
 #: a node stops iterating after a step shorter than this (m) in both coordinates: the remaining steps of the
@@ -363,3 +366,18 @@ def posterior(c, dc, w, dw, ny, w_obs, r_w, log_prior, x, dx, cov):
             v01 += pi[j] * (Pj[j, 0, 1] + d0 * d1)
             v11 += pi[j] * (Pj[j, 1, 1] + d1 * d1)
         cov[i, 0, 0], cov[i, 0, 1], cov[i, 1, 0], cov[i, 1, 1] = v00, v01, v01, v11
+
+
+@contextlib.contextmanager
+def threads_for(nodes: int):
+    """One numba thread (this thread's setting, restored after) below :data:`PARALLEL_MIN_NODES` nodes: a
+    parallel launch waits for a second core, ~20 ms on a loaded machine, more than a small frame costs."""
+    before = nb.get_num_threads()
+    if nodes >= PARALLEL_MIN_NODES or before == 1:
+        yield
+        return
+    nb.set_num_threads(1)
+    try:
+        yield
+    finally:
+        nb.set_num_threads(before)

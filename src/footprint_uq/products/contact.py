@@ -269,8 +269,10 @@ def _solve_nodes(camera, b_px, c_start, sizes, yaw) -> _Nodes:
     # writeable C-contiguous float64 (a read-only array, such as a cached lens domain, is another numba type:
     # a second compilation of the kernel); the small ones copied
     cp, f64 = (lambda a: np.array(a, dtype=np.float64, order="C")), _writeable  # noqa: E731
-    ck.solve_nodes(p, cp(R_W_C(*ang)), cp(dR_W_C(*ang)), cp(camera.lens_domain.packed), bool(np.any(p[P.DIST_SLICE])),
-                   cp(b_px), f64(c_start), f64(sizes), f64(yaw), _NEWTON_STEPS, c, dc, w, dw, conv, ok)
+    with ck.threads_for(n * K):
+        ck.solve_nodes(p, cp(R_W_C(*ang)), cp(dR_W_C(*ang)), cp(camera.lens_domain.packed),
+                       bool(np.any(p[P.DIST_SLICE])), cp(b_px), f64(c_start), f64(sizes), f64(yaw), _NEWTON_STEPS,
+                       c, dc, w, dw, conv, ok)
     return _Nodes(c, dc, w, dw, conv.all(-1), ok.all(-1))
 
 
@@ -309,8 +311,9 @@ def _posterior(nd: _Nodes, ny: int, w_obs, r_w, log_prior):
     n, M = nd.c.shape[0], nd.dw.shape[-1]
     x, dx, cov = np.empty((n, 2)), np.empty((n, 2, M)), np.empty((n, 2, 2))
     f64, cp = _writeable, (lambda a: np.array(a, dtype=np.float64, order="C"))  # noqa: E731
-    ck.posterior(f64(nd.c), f64(nd.dc), f64(nd.w), f64(nd.dw), int(ny), cp(w_obs), cp(r_w),
-                 cp(np.broadcast_to(log_prior, (ny,))), x, dx, cov)
+    with ck.threads_for(nd.w.size):
+        ck.posterior(f64(nd.c), f64(nd.dc), f64(nd.w), f64(nd.dw), int(ny), cp(w_obs), cp(r_w),
+                     cp(np.broadcast_to(log_prior, (ny,))), x, dx, cov)
     return x, dx, cov
 
 
