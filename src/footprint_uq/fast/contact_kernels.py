@@ -30,8 +30,9 @@ __all__ = ["solve_nodes", "posterior", "threads_for", "CONV_TOL_PX", "STOP_M", "
 _INL = dict(inline="always", cache=True, error_model="numpy", fastmath={"contract"})
 _JIT = dict(cache=True, error_model="numpy", fastmath={"contract"}, parallel=True)
 
-#: yaw/size nodes of one call below which the kernels run on one thread (:func:`threads_for`)
-PARALLEL_MIN_NODES = 20_000
+#: yaw/size nodes of one call below which the kernels run on one thread (:func:`threads_for`; measured on the
+#: loaded 2-core machine, bench/bench_contact.py: 100 objects x 216 nodes took 46 ms on two threads, ~20 ms on one)
+PARALLEL_MIN_NODES = 100_000
 #: a node is converged when its rendered bottom-centre pixel is within this of the detected one (px)
 CONV_TOL_PX = 1e-4
 #: a node stops iterating after a step shorter than this (m) in both coordinates: the remaining steps of the
