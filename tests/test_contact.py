@@ -219,3 +219,65 @@ def test_rope3d_contact_model_removes_most_of_the_bottom_centre_error(shared_dat
     flat = [np.median(np.linalg.norm(f(cam, {}, boxes, cls).xy_world_m - xyz[:, :2], axis=1))
             for f in (C.bottom_centre, C.footprint_centre)]
     assert flat[1] <= flat[0]
+
+
+# ---------------------------------------------------------------------------------------------
+# the compiled node solver against the numpy reference
+# ---------------------------------------------------------------------------------------------
+def _distorted_camera():
+    cam = OpenCVCamera(np.array([[1800.0, 0.5, 950.0], [0, 1790.0, 545.0], [0, 0, 1]]),
+                       np.array([-0.05, 0.01, 1e-4, -2e-4, 0.0]), *_pose(), (1920, 1080), 0.0)
+    cam.params[P.GSX], cam.params[P.GSY], cam.params[P.GDZ] = 0.01, -0.02, 0.05
+    return cam
+
+
+@pytest.mark.parametrize("which", ["pantilt", "distorted"])
+def test_compiled_solver_agrees_with_the_numpy_reference(which, monkeypatch):
+    """footprint_centre with the compiled node solver and posterior (the default) and with the numpy
+    reference (``_solve_nodes_reference``, ``_posterior_reference``): every output to 1e-9 relative,
+    validity and codes equal; mixed classes, known and unknown yaws, a box cut by the border, a box above
+    the horizon."""
+    monkeypatch.setattr(C, "YAW_NODES_UNKNOWN", 12)
+    cam = CAM if which == "pantilt" else _distorted_camera()
+    rng = np.random.default_rng(11)
+    _, boxes, yaw = _render_boxes(cam, rng, 12, "car", v_range=(450, 950))
+    boxes = np.vstack([boxes, [[0.0, 500.0, 120.0, 620.0], [900.0, -400.0, 1000.0, -300.0]]])
+    cls = ["car", "van", "truck", "bus", "pedestrian", "cyclist"] * 2 + ["car", "car"]
+    yaw = np.concatenate([yaw, [np.nan, 0.3]])
+    yaw[::3] = np.nan
+    kw = {"yaw_rad": yaw, "cov_uv_px2": np.diag([1.0, 2.0])}
+    fast = C.footprint_centre(cam, {"pan_deg": 0.1, "height_m": 0.1}, boxes, cls, **kw)
+    monkeypatch.setattr(C, "_solve_nodes", C._solve_nodes_reference)
+    monkeypatch.setattr(C, "_posterior", C._posterior_reference)
+    ref = C.footprint_centre(cam, {"pan_deg": 0.1, "height_m": 0.1}, boxes, cls, **kw)
+    assert fast.valid[:-1].all() and not fast.valid[-1]
+    np.testing.assert_array_equal(fast.valid, ref.valid)
+    np.testing.assert_array_equal(fast.status, ref.status)
+    for f in ("xy_world_m", "cov_m2", "cov_object_m2", "dxy_dp"):
+        a, b = getattr(fast, f), getattr(ref, f)
+        np.testing.assert_array_equal(np.isnan(a), np.isnan(b))
+        scale = np.abs(np.nan_to_num(b)).reshape(len(b), -1).max(1).reshape((-1,) + (1,) * (b.ndim - 1))
+        err = np.nanmax(np.abs(a - b) / np.where(scale > 0, scale, 1.0))
+        assert err < 1e-9, (f, err)
+
+
+def test_one_bottom_centre_for_products_and_validation_with_flags_and_linearity():
+    """validation.pairs uses the contact module's bottom_centre and CONTACT_MODELS (one implementation); a box
+    whose bottom centre lies below the image keeps its numbers flagged OUTSIDE_IMAGE (in both models), and
+    the bottom-centre point's linearity flag equals propagate's."""
+    from footprint_uq import status
+    from footprint_uq.uncertainty.propagation import propagate
+    from footprint_uq.validation import pairs
+
+    assert pairs.bottom_centre is C.bottom_centre and pairs.CONTACT_MODELS is C.CONTACT_MODELS
+    boxes = np.array([[900.0, 500.0, 1000.0, 620.0], [900.0, 1000.0, 1000.0, 1100.0]])
+    budget = {"pan_deg": 0.1, "tilt_deg": 0.05, "height_m": 0.2, "imaging_px": [1.0, 1.0]}
+    for model in C.CONTACT_MODELS.values():
+        r = model(CAM, budget, boxes, ["car", "car"])
+        assert r.valid.all() and list(r.status) == [status.OK, status.OUTSIDE_IMAGE]
+        assert np.isfinite(r.xy_world_m).all()
+    cuv = np.diag([2.0, 3.0])
+    nl = C.bottom_centre_nonlinearity(CAM, budget, boxes, cuv)
+    ref = propagate(CAM, budget, [[950.0, 620.0], [950.0, 1100.0]], pixel_cov_px2=cuv, linearity=True)
+    np.testing.assert_allclose(nl, ref.nonlinearity, rtol=1e-7)
+    assert np.isnan(C.bottom_centre_nonlinearity(CAM, budget, boxes, cuv, valid=[True, False])[1])

@@ -17,6 +17,7 @@ interface; :data:`CONTACT_MODELS` names both.
 
 from __future__ import annotations
 
+import functools
 from pathlib import Path
 from typing import NamedTuple
 
@@ -25,14 +26,18 @@ import yaml
 
 from .. import params as P
 from .. import status
-from .._checks import check_cov
+from .._checks import as_points, check_cov
 from ..cameras import general
+from ..cameras.rotation import R_W_C, dR_W_C
 from ..errors import ConfigError, InputError
+from ..fast import contact_kernels as ck
+from ..fast.map_kernels import covariance_points
 from ..uncertainty.budget import load_budget
 from .footprints import box2d_contact_points
 
 __all__ = ["ContactResult", "SizePrior", "CONTACT_MODELS", "SIZE_PRIORS_FILE", "load_size_priors",
-           "bottom_centre", "footprint_centre", "YAW_NODES_UNKNOWN", "DEFAULT_YAW_SIGMA_RAD"]
+           "bottom_centre", "bottom_centre_nonlinearity", "footprint_centre", "YAW_NODES_UNKNOWN",
+           "DEFAULT_YAW_SIGMA_RAD"]
 
 #: the shipped priors (per-class length, width, height: mean and sigma, metres)
 SIZE_PRIORS_FILE = Path(__file__).resolve().parents[1] / "presets" / "size_priors.yaml"
@@ -79,6 +84,17 @@ class SizePrior(NamedTuple):
 # size priors
 # ---------------------------------------------------------------------------------------------
 def _read_priors(path) -> dict:
+    """The parsed file, cached on its path, modification time and size (read-only: never mutate it)."""
+    p = Path(path)
+    try:
+        st = p.stat()
+    except OSError:
+        st = None
+    return _parse_priors(str(p), None if st is None else (st.st_mtime_ns, st.st_size))
+
+
+@functools.lru_cache(maxsize=32)
+def _parse_priors(path: str, stamp) -> dict:
     p = Path(path)
     try:
         d = yaml.safe_load(p.read_text(encoding="utf-8"))
@@ -235,7 +251,32 @@ class _Nodes(NamedTuple):
     front: np.ndarray      # (n,)
 
 
+def _writeable(a) -> np.ndarray:
+    """``a`` as a writeable C-contiguous float64 array (copied only when it is not one)."""
+    a = np.ascontiguousarray(a, dtype=np.float64)
+    return a if a.flags.writeable else a.copy()
+
+
 def _solve_nodes(camera, b_px, c_start, sizes, yaw) -> _Nodes:
+    """:func:`_solve_nodes_reference`, compiled (:func:`footprint_uq.fast.contact_kernels.solve_nodes`:
+    every object and node in one call, objects in parallel; the same numbers to rounding)."""
+    p = np.array(camera.params, dtype=np.float64, order="C")
+    n, K = yaw.shape
+    c, dc = np.empty((n, K, 2)), np.empty((n, K, 2, P.N_PARAMS + 2))
+    w, dw = np.empty((n, K)), np.empty((n, K, P.N_PARAMS + 2))
+    conv, ok = np.empty((n, K), dtype=np.bool_), np.empty((n, K), dtype=np.bool_)
+    ang = (p[P.PAN], p[P.TILT], p[P.ROLL])
+    # writeable C-contiguous float64 (a read-only array, such as a cached lens domain, is another numba type:
+    # a second compilation of the kernel); the small ones copied
+    cp, f64 = (lambda a: np.array(a, dtype=np.float64, order="C")), _writeable  # noqa: E731
+    with ck.threads_for(n * K):
+        ck.solve_nodes(p, cp(R_W_C(*ang)), cp(dR_W_C(*ang)), cp(camera.lens_domain.packed),
+                       bool(np.any(p[P.DIST_SLICE])), cp(b_px), f64(c_start), f64(sizes), f64(yaw), _NEWTON_STEPS,
+                       c, dc, w, dw, conv, ok)
+    return _Nodes(c, dc, w, dw, conv.all(-1), ok.all(-1))
+
+
+def _solve_nodes_reference(camera, b_px, c_start, sizes, yaw) -> _Nodes:
     """Footprint centres whose rendered boxes have the bottom-centre pixel ``b_px`` (n, 2), one per node.
 
     Newton's method with the Jacobian refreshed every third step (a chord step in between: the
@@ -266,6 +307,17 @@ def _solve_nodes(camera, b_px, c_start, sizes, yaw) -> _Nodes:
 
 
 def _posterior(nd: _Nodes, ny: int, w_obs, r_w, log_prior):
+    """:func:`_posterior_reference`, compiled (:func:`footprint_uq.fast.contact_kernels.posterior`)."""
+    n, M = nd.c.shape[0], nd.dw.shape[-1]
+    x, dx, cov = np.empty((n, 2)), np.empty((n, 2, M)), np.empty((n, 2, 2))
+    f64, cp = _writeable, (lambda a: np.array(a, dtype=np.float64, order="C"))  # noqa: E731
+    with ck.threads_for(nd.w.size):
+        ck.posterior(f64(nd.c), f64(nd.dc), f64(nd.w), f64(nd.dw), int(ny), cp(w_obs), cp(r_w),
+                     cp(np.broadcast_to(log_prior, (ny,))), x, dx, cov)
+    return x, dx, cov
+
+
+def _posterior_reference(nd: _Nodes, ny: int, w_obs, r_w, log_prior):
     """Condition each yaw node's unscented size points on the observed box width (a Kalman update),
     weigh the yaw nodes by the width's marginal likelihood, and mix.  Forward-mode derivatives (24
     columns: the 22 parameters and the bottom-centre pixel) go through every step.
@@ -304,39 +356,69 @@ def _posterior(nd: _Nodes, ny: int, w_obs, r_w, log_prior):
 # the two contact models
 # ---------------------------------------------------------------------------------------------
 def _inputs(budget, boxes_xyxy_px, cov_uv_px2):
-    """Bottom-centre pixels (N, 2), per-object pixel covariance (N, 2, 2), parameter covariance (22, 22)."""
-    b = box2d_contact_points(boxes_xyxy_px, "bottom-centre")[0][:, 0, :]
+    """Boxes (N, 4), bottom-centre pixels (N, 2), per-object pixel covariance (N, 2, 2), parameter covariance
+    (22, 22) and the budget."""
+    box = as_points("boxes_xyxy_px", boxes_xyxy_px, 4)
+    if box.ndim != 2:
+        raise InputError("boxes_xyxy_px", box.shape, "an array of shape (N, 4): u_min, v_min, u_max, v_max")
+    b = box2d_contact_points(box, "bottom-centre")[0][:, 0, :]
     budget = load_budget(budget)
     n = b.shape[0]
     S_pix = np.broadcast_to(budget.pixel_covariance(), (n, 2, 2))
     if cov_uv_px2 is not None:
-        c = check_cov("cov_uv_px2", cov_uv_px2, 2)
-        if c.shape not in ((2, 2), (n, 2, 2)):
-            raise InputError("cov_uv_px2", f"shape {c.shape}", f"a covariance (2, 2) or ({n}, 2, 2) in px^2")
-        S_pix = S_pix + c
-    return b, S_pix, budget.param_covariance()
+        S_pix = S_pix + _detector_cov(cov_uv_px2, n)
+    return box, b, S_pix, budget.param_covariance(), budget
 
 
-def _result(xy, J, Juv, spread, S_pix, Sp, valid, reason) -> ContactResult:
-    with np.errstate(invalid="ignore"):
+def _detector_cov(cov_uv_px2, n: int) -> np.ndarray:
+    c = check_cov("cov_uv_px2", cov_uv_px2, 2)
+    if c.shape not in ((2, 2), (n, 2, 2)):
+        raise InputError("cov_uv_px2", f"shape {c.shape}", f"a covariance (2, 2) or ({n}, 2, 2) in px^2")
+    return np.broadcast_to(c, (n, 2, 2))
+
+
+def _result(camera, b, xy, J, Juv, spread, S_pix, Sp, valid, reason) -> ContactResult:
+    """Totals, NaN where invalid; a covariance that overflows is ``OVERFLOW``; a valid point whose
+    bottom-centre pixel ``b`` lies outside the image keeps its numbers, flagged ``OUTSIDE_IMAGE``."""
+    with np.errstate(invalid="ignore", over="ignore"):
         cov_obj = Juv @ S_pix @ np.swapaxes(Juv, 1, 2) + spread
         cov = J @ Sp @ np.swapaxes(J, 1, 2) + cov_obj
-    bad = ~valid
+    reason = reason.astype(np.int8)
+    ok = valid & np.isfinite(cov).all((-1, -2))
+    reason[valid & ~ok] = status.OVERFLOW
+    reason[ok & ~camera.in_image(b)] = status.OUTSIDE_IMAGE  # computed, but flagged
+    bad = ~ok
     for a in (xy, J, cov_obj, cov):
         a[bad] = np.nan
-    return ContactResult(xy, cov, cov_obj, J, valid, reason.astype(np.int8))
+    return ContactResult(xy, cov, cov_obj, J, ok, reason)
 
 
 def bottom_centre(camera, budget, boxes_xyxy_px, classes=None, *, yaw_rad=None, cov_uv_px2=None) -> ContactResult:
-    """The back-projected bottom-centre pixel ``((u_min + u_max) / 2, v_max)`` of each box (the model
-    without a contact offset; ``classes`` and ``yaw_rad`` are accepted for a common interface and unused).
+    """Ground point of the centre of each box's bottom edge, ``((u_min + u_max) / 2, v_max)``: the model
+    without a contact offset (``footprint-uq objects --contact bottom-centre``; ``classes`` and ``yaw_rad``
+    are accepted for a common interface and unused).
 
-    Parameters and result as :func:`footprint_centre`; the per-object covariance is the pixel noise only.
+    Parameters and result as :func:`footprint_centre`: ``cov_object_m2 = dxy_duv Sigma_uv dxy_duv^T`` (the
+    pixel noise only), ``cov_m2`` adds the calibration part ``dxy_dp Sigma_params dxy_dp^T``.  Invalid points
+    are NaN with their status; a valid point whose pixel is outside the image keeps its numbers with status
+    ``OUTSIDE_IMAGE``.  The linearity flag of the same pixels: :func:`bottom_centre_nonlinearity`.
     """
-    b, S_pix, Sp = _inputs(budget, boxes_xyxy_px, cov_uv_px2)
+    _, b, S_pix, Sp, _ = _inputs(budget, boxes_xyxy_px, cov_uv_px2)
     bp = camera.backproject(b, get_gradients=True)
-    return _result(bp.xy_world_m.copy(), bp.dxy_dp.copy(), bp.dxy_duv, np.zeros((b.shape[0], 2, 2)), S_pix, Sp,
-                   bp.valid.copy(), bp.reason.copy())
+    return _result(camera, b, bp.xy_world_m.copy(), bp.dxy_dp.copy(), bp.dxy_duv, np.zeros((b.shape[0], 2, 2)),
+                   S_pix, Sp, bp.valid.copy(), bp.reason.copy())
+
+
+def bottom_centre_nonlinearity(camera, budget, boxes_xyxy_px, cov_uv_px2=None, valid=None) -> np.ndarray:
+    """The linearity flag's ``nonlinearity`` (N,) of each box's bottom-centre pixel (the compiled kernel's,
+    :func:`~footprint_uq.fast.map_kernels.covariance_points`, equal to
+    :func:`~footprint_uq.uncertainty.propagation.propagate`'s and ~20x faster than the numpy form); NaN where
+    the pixel has none, and where ``valid`` (N,) bool is given and False."""
+    box = as_points("boxes_xyxy_px", boxes_xyxy_px, 4)
+    uv = box2d_contact_points(box, "bottom-centre")[0][:, 0, :]
+    cuv = None if cov_uv_px2 is None else np.ascontiguousarray(_detector_cov(cov_uv_px2, uv.shape[0]))
+    nl = covariance_points(camera, budget, uv, cuv, get_nonlinearity=True)[-1]
+    return nl if valid is None else np.where(valid, nl, np.nan)
 
 
 def _yaws(yaw_rad, yaw_sigma_rad, n):
@@ -398,16 +480,15 @@ def footprint_centre(camera, budget, boxes_xyxy_px, classes, *, yaw_rad=None, ya
         Invalid where the bottom-centre pixel has no ground point (its code), where a rendered corner is
         behind the camera (``BEHIND_CAMERA``) or where the box cannot be matched (``OVERFLOW``).
     """
-    b, S_pix, Sp = _inputs(budget, boxes_xyxy_px, cov_uv_px2)
+    box, b, S_pix, Sp, bud = _inputs(budget, boxes_xyxy_px, cov_uv_px2)
     n = b.shape[0]
     mean, sig = _class_priors(classes, n, size_priors, unknown_class)
     yaw, ysig = _yaws(yaw_rad, yaw_sigma_rad, n)
     bs = float(box_sigma_px)
     if not (np.isfinite(bs) and bs > 0):
         raise InputError("box_sigma_px", box_sigma_px, "a finite sigma > 0 (px) of each box edge")
-    box = np.asarray(boxes_xyxy_px, dtype=np.float64)
     w_obs = box[:, 2] - box[:, 0]
-    r_w = np.full(n, 2 * (bs**2 + load_budget(budget).pixel_covariance()[0, 0]))
+    r_w = np.full(n, 2 * (bs**2 + bud.pixel_covariance()[0, 0]))
     # a box cut by the left or right image border does not show the object's width: no evidence from it
     r_w[(box[:, 0] <= 0.5) | (box[:, 2] >= camera.image_size_px[0] - 1.5)] = _NO_EVIDENCE_PX2
     bp = camera.backproject(b)
@@ -425,8 +506,9 @@ def footprint_centre(camera, budget, boxes_xyxy_px, classes, *, yaw_rad=None, ya
             valid[r] = nd.converged
             reason[r[~nd.front]] = status.BEHIND_CAMERA
             reason[r[nd.front & ~nd.converged]] = status.OVERFLOW
-    return _result(xy, J[..., :P.N_PARAMS].copy(), J[..., P.N_PARAMS:], spread, S_pix, Sp, valid, reason)
+    return _result(camera, b, xy, J[..., :P.N_PARAMS].copy(), J[..., P.N_PARAMS:], spread, S_pix, Sp, valid, reason)
 
 
-#: the contact models by name (``contact=`` of the validation and the CLI)
+#: the contact models by name (``contact=`` of the validation, ``footprint-uq validate / calibrate budget
+#: --contact NAME``): the one registry, re-exported by :mod:`footprint_uq.validation.pairs`
 CONTACT_MODELS = {"bottom-centre": bottom_centre, "footprint-centre": footprint_centre}

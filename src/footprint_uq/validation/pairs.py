@@ -9,8 +9,9 @@ per-object part ``cov_object_m2`` (pixel / detector noise and the contact model'
 camera calibration), ``dxy_dp`` (N, 2, 22) (columns in :data:`footprint_uq.params.PARAM_NAMES` order) so
 that ``cov_m2 = dxy_dp Sigma_params dxy_dp^T + cov_object_m2``, ``valid`` and ``status``
 (:mod:`footprint_uq.status`).  :func:`bottom_centre` back-projects the centre of the box's bottom edge
-(the behaviour of ``footprint-uq objects --contact bottom-centre``); other models register in
-:data:`CONTACT_MODELS` by name.
+(the behaviour of ``footprint-uq objects --contact bottom-centre``), :func:`footprint_centre
+<footprint_uq.products.contact.footprint_centre>` models where the box touches the ground; both live in
+:mod:`footprint_uq.products.contact`, whose :data:`CONTACT_MODELS` (re-exported here) names them.
 
 The **pairs builder** (:func:`build_pairs`, :func:`iter_pairs`, :func:`collect_pairs`) runs a contact
 function on every :class:`~footprint_uq.validation.readers.LabelChunk` and gives per object the residual
@@ -27,11 +28,8 @@ import numpy as np
 
 from .. import params as P
 from .. import status
-from .._checks import as_points
 from ..errors import InputError
-from ..fast.map_kernels import covariance_points
-from ..products.contact import ContactResult, footprint_centre
-from ..products.footprints import box2d_contact_points
+from ..products.contact import CONTACT_MODELS, ContactResult, bottom_centre, bottom_centre_nonlinearity
 from ..uncertainty.budget import load_budget
 from ..uncertainty.propagation import DEFAULT_LINEAR_THRESHOLD
 from .readers import NO_DETECTION, NO_TRUTH, LabelChunk
@@ -46,71 +44,6 @@ STATUS_NO_TRUTH = "no truth"        # a detection without truth (unpaired)
 STATUS_NO_DETECTION = "no detection"  # a truth without detection (unpaired)
 STATUS_NO_GROUND = "no ground point"  # the contact function found no ground point (above the horizon, ...)
 STATUS_ERROR = "error"              # a malformed row, unknown camera, missing calibration
-
-
-def _sandwich(J, S):
-    return J @ S @ np.swapaxes(J, -1, -2)
-
-
-def _bottom_centre(camera, budget, boxes_xyxy_px, cov_uv_px2, linearity: bool):
-    """:func:`bottom_centre` and, with ``linearity``, the nonlinearity of each point (else None)."""
-    budget = load_budget(budget)
-    b = as_points("boxes_xyxy_px", boxes_xyxy_px, 4)
-    if b.ndim != 2:
-        raise InputError("boxes_xyxy_px", b.shape, "an array of shape (N, 4): u_min, v_min, u_max, v_max")
-    uv = box2d_contact_points(b, "bottom-centre")[0][:, 0, :]
-    bp = camera.backproject(uv, get_gradients=True)
-    Sp = budget.param_covariance()
-    Suv = budget.pixel_covariance()
-    if cov_uv_px2 is not None:
-        c = np.asarray(cov_uv_px2, dtype=np.float64)
-        if c.shape != (len(b), 2, 2):
-            raise InputError("cov_uv_px2", f"shape {c.shape}", f"(N, 2, 2) with N = {len(b)}")
-        Suv = Suv + c
-    Suv = np.broadcast_to(Suv, (len(b), 2, 2))
-    cov_obj = _sandwich(bp.dxy_duv, Suv)
-    cov = _sandwich(bp.dxy_dp, Sp) + cov_obj
-    st = bp.reason.copy()
-    valid = bp.valid & np.isfinite(cov).all((-1, -2))
-    st[bp.valid & ~valid] = status.OVERFLOW
-    st[valid & ~camera.in_image(uv)] = status.OUTSIDE_IMAGE  # computed, but flagged
-    nl = _nonlinearity(camera, budget, uv, cov_uv_px2, valid) if linearity else None
-    return ContactResult(bp.xy_world_m, cov, cov_obj, bp.dxy_dp, valid, st), nl
-
-
-def _nonlinearity(camera, budget, uv, cov_uv_px2, valid):
-    """The linearity flag's ``nonlinearity`` of contact pixels ``uv`` (the compiled kernel's, equal to
-    :func:`~footprint_uq.uncertainty.propagation.propagate`'s; ~20x faster than the numpy form); NaN where
-    not ``valid``."""
-    nl = covariance_points(camera, budget, uv, cov_uv_px2, get_nonlinearity=True)[-1]
-    return np.where(valid, nl, np.nan)
-
-
-def bottom_centre(camera, budget, boxes_xyxy_px, classes=None, *, yaw_rad=None, cov_uv_px2=None) -> ContactResult:
-    """Ground point of the centre of each box's bottom edge, ``((u_min + u_max) / 2, v_max)``.
-
-    Parameters
-    ----------
-    camera : Camera
-    budget : ErrorBudget, preset name, path or mapping
-    boxes_xyxy_px : (N, 4) ``u_min, v_min, u_max, v_max``, pixels
-    classes : (N,) object classes (not used by this model)
-    yaw_rad : (N,) or None, not used by this model
-    cov_uv_px2 : (N, 2, 2) or None
-        Detector covariance of the contact pixel, px^2, added to the budget's imaging and resolution noise.
-
-    Returns
-    -------
-    ContactResult
-        ``cov_object_m2 = dxy_duv Sigma_uv dxy_duv^T`` (pixel noise), ``cov_m2`` adds the calibration part
-        ``dxy_dp Sigma_params dxy_dp^T``.  Invalid points are NaN with their status; a valid point whose
-        pixel is outside the image keeps its numbers with status ``OUTSIDE_IMAGE``.
-    """
-    return _bottom_centre(camera, budget, boxes_xyxy_px, cov_uv_px2, False)[0]
-
-
-#: contact models by name (``footprint-uq validate --contact NAME``)
-CONTACT_MODELS = {"bottom-centre": bottom_centre, "footprint-centre": footprint_centre}
 
 
 def contact_model(name):
@@ -240,13 +173,10 @@ def build_pairs(chunk: LabelChunk, budget, *, contact="bottom-centre", groups: G
         bud = load_budget(chunk.budget if chunk.budget is not None else budget)
         cuv = None if chunk.cov_uv_px2 is None else chunk.cov_uv_px2[idx]
         boxes = chunk.box_xyxy_px[idx]
-        if fn is bottom_centre:
-            res, nl_i = _bottom_centre(chunk.camera, bud, boxes, cuv, True)
-        else:
-            # the labelled yaw (chunk.yaw_world_rad) is truth: never handed to the contact model
-            res = fn(chunk.camera, bud, boxes, chunk.cls[idx], yaw_rad=None, cov_uv_px2=cuv)
-            uv = box2d_contact_points(boxes, "bottom-centre")[0][:, 0, :]
-            nl_i = _nonlinearity(chunk.camera, bud, uv, cuv, np.isfinite(uv).all(1))
+        # the labelled yaw (chunk.yaw_world_rad) is truth: never handed to the contact model
+        res = fn(chunk.camera, bud, boxes, chunk.cls[idx], yaw_rad=None, cov_uv_px2=cuv)
+        # the linearity flag is the bottom-centre point's, whatever the model
+        nl_i = bottom_centre_nonlinearity(chunk.camera, bud, boxes, cuv, res.valid if fn is bottom_centre else None)
         xy[idx], cov[idx], cov_obj[idx], J[idx], nl[idx] = res.xy_world_m, res.cov_m2, res.cov_object_m2, \
             res.dxy_dp, nl_i
         bad = idx[~np.asarray(res.valid, dtype=bool)]
