@@ -15,7 +15,7 @@ import numpy as np
 from ..cameras.pantilt import PanTiltCamera
 from ..uncertainty.budget import load_budget
 
-__all__ = ["SyntheticCampaign", "synthetic_campaign", "campaign_cameras"]
+__all__ = ["SyntheticCampaign", "synthetic_campaign", "synthetic_campaign_chunks", "campaign_cameras"]
 
 
 class SyntheticCampaign(NamedTuple):
@@ -54,11 +54,20 @@ def synthetic_campaign(budget, n_cameras: int, n_objects: int, *, pixel_sigma_px
         A common offset of every residual.
     seed : int
     """
+    out = list(synthetic_campaign_chunks(budget, n_cameras, n_objects, pixel_sigma_px=pixel_sigma_px,
+                                         object_sigma_m=object_sigma_m, bias_m=bias_m, seed=seed))
+    r, J, R, grp = (np.concatenate([o[i] for o in out]) for i in range(4))
+    return SyntheticCampaign(r, J, R, grp, np.stack([o[4] for o in out]))
+
+
+def synthetic_campaign_chunks(budget, n_cameras: int, n_objects: int, *, pixel_sigma_px: float = 2.0,
+                              object_sigma_m: float = 0.0, bias_m=(0.0, 0.0), seed: int = 0):
+    """The campaign of :func:`synthetic_campaign` (same draws), one camera at a time: yields
+    ``(residual_m, dxy_dp, cov_object_m2, group, param_error)`` per camera (memory: one camera)."""
     rng = np.random.default_rng(seed)
     S = load_budget(budget).param_covariance()
     vals, vecs = np.linalg.eigh(S)
     Lf = vecs * np.sqrt(np.clip(vals, 0, None))
-    out = []
     for g, cam in enumerate(campaign_cameras(n_cameras, rng)):
         hz = float(np.nanmax(cam.horizon_v_px(np.array([0.0, 1919.0]))))
         uv = np.column_stack([rng.uniform(0, 1919, 4 * n_objects),
@@ -70,6 +79,4 @@ def synthetic_campaign(budget, n_cameras: int, n_objects: int, *, pixel_sigma_px
         e = Lf @ rng.standard_normal(S.shape[0])
         noise = np.einsum("nab,nb->na", Juv, rng.normal(0, pixel_sigma_px, (keep.size, 2)))
         r = J @ e + noise + rng.normal(0, object_sigma_m, (keep.size, 2)) + np.asarray(bias_m, float)
-        out.append((r, J, R, np.full(keep.size, g), e))
-    r, J, R, grp = (np.concatenate([o[i] for o in out]) for i in range(4))
-    return SyntheticCampaign(r, J, R, grp, np.stack([o[4] for o in out]))
+        yield r, J, R, np.full(keep.size, g), e
