@@ -6,7 +6,7 @@ Usage::
 
 Each size runs in a fresh process (its own peak RSS, ``VmHWM``).  The synthetic campaign
 (``footprint_uq.validation.campaigns.synthetic_campaign_chunks``, the calibration error drawn once per
-camera) is streamed camera by camera into the fit's compact records (``fit.compact_inputs``: only the
+camera; 2000 objects a chunk) is streamed into the fit's compact records (``fit.compact_inputs``: only the
 Jacobian columns that carry variance), then ``fit_compact`` with pan, tilt, height and the per-object term
 free is timed, then the cross-validated coverage (leave-one-object-out, 10 folds, and leave-one-camera-out;
 on the reported subsample of ``CV_MAX_PAIRS`` pairs).  ``--dense`` times the former path instead (the whole
@@ -47,12 +47,14 @@ def one(n: int, cameras: int, dense: bool) -> dict:
         fit = F.fit_budget(c.residual_m, c.dxy_dp, c.cov_object_m2, c.group, free=free)
         n_pairs = int(c.residual_m.shape[0])
     else:
-        chunks = (x[:4] for x in synthetic_campaign_chunks(truth, cameras, n // cameras, object_sigma_m=0.3, seed=1))
+        chunks = (x[:4] for x in synthetic_campaign_chunks(truth, cameras, n // cameras, object_sigma_m=0.3, seed=1,
+                                                            batch=2000))
         data = F.compact_inputs(chunks, free=free)
         t1 = time.perf_counter()
         fit = F.fit_compact(data, free=free)
         n_pairs = data.n
-        row["records_mb"] = sum(a.nbytes for a in (data.r, data.U, data.R3, data.jg, data.gid)) / 2**20
+        row["records_mb"] = sum(a.nbytes for p in data.parts() for a in p[:5]) / 2**20
+        row["records"] = type(data).__name__
     t2 = time.perf_counter()
     row["fit_s"] = t2 - t1
     row["peak_rss_fit_mb"] = _hwm_mb()

@@ -38,7 +38,7 @@ from ..errors import InputError
 from ..io.atomic import atomic_write_text
 from ..io.camera_files import save_budget
 from ..uncertainty.budget import ErrorBudget, load_budget
-from .fit_compact import CompactModel, CompactPairs, check_chunk, compact_chunks
+from .fit_compact import MEMORY_PAIRS, CompactModel, CompactPairs, check_chunk, compact_chunks
 
 __all__ = ["FITTABLE_TERMS", "OBJECT_TERM", "OBJECT_GROUND_TERM", "OBJECT_TERMS", "BudgetFit", "TermFit",
            "fit_budget", "cross_validate", "compact_inputs", "fit_compact", "cross_validate_compact",
@@ -366,29 +366,37 @@ def _object_shapes(J: np.ndarray, objs: list[str]) -> np.ndarray:
     return np.stack(out) if out else np.zeros((0, J.shape[0], 2, 2))
 
 
-def _informative_groups(data: CompactPairs, A: np.ndarray) -> np.ndarray:
+def _informative_groups(data, A: np.ndarray) -> np.ndarray:
     """Per shared term: the number of groups whose objects it moves (a Jacobian column != 0)."""
     if A.shape[0] == 0:
         return np.zeros(0, dtype=int)
     used = np.abs(A).sum(-1) > 0                                      # (m, k) columns of each term
-    absU = np.abs(data.U).max(1)                                      # (N, k)
-    col = absU > 1e-12 * max(float(absU.max()) if absU.size else 0.0, 1e-300)
-    hit = (col[:, None, :] & used[None]).any(-1)                        # (N, m)
+    big = max(max((float(np.abs(p.U).max()) if p.U.size else 0.0) for p in data.parts()), 1e-300)
     G = data.labels.size
-    per_group = np.stack([np.bincount(data.gid, weights=hit[:, j], minlength=G) for j in range(A.shape[0])], 1)
+    per_group = np.zeros((G, A.shape[0]))
+    for p in data.parts():
+        col = np.abs(p.U).max(1) > 1e-12 * big                        # (n, k)
+        hit = (col[:, None, :] & used[None]).any(-1)                    # (n, m)
+        per_group += np.stack([np.bincount(p.gid, weights=hit[:, j], minlength=G) for j in range(A.shape[0])], 1)
     return (per_group > 0).sum(0)
 
 
-def _scales(data: CompactPairs, A: np.ndarray, kinds: np.ndarray) -> np.ndarray:
+def _median_of(data, fn) -> float:
+    """Median over every record of ``fn(part) -> (n,)`` (one quantity in memory at a time)."""
+    return float(np.median(np.concatenate([fn(p) for p in data.parts()])))
+
+
+def _scales(data, A: np.ndarray, kinds: np.ndarray) -> np.ndarray:
     """Per free variance: the value at which it alone explains the residuals' typical power."""
-    power = max(float(np.median(np.sum(data.r**2, 1))) / 2, 1e-12)
+    power = max(_median_of(data, lambda p: np.sum(p.r**2, 1)) / 2, 1e-12)
     out = []
     for a in A:
-        c = np.einsum("nak,nak->n", data.U @ a, data.U) / 2
+        c = np.concatenate([np.einsum("nak,nak->n", p.U @ a, p.U) / 2 for p in data.parts()])
         med = float(np.median(c[c > 0])) if np.any(c > 0) else 0.0
+        del c
         out.append(power / med if med > 0 else 1.0)
     for kind in kinds:
-        med = 1.0 if kind == 0 else float(np.median(np.sum(data.jg**2, 1))) / 2
+        med = 1.0 if kind == 0 else _median_of(data, lambda p: np.sum(p.jg**2, 1)) / 2
         out.append(power / med if med > 0 else 1.0)
     return np.array(out)
 
@@ -525,7 +533,8 @@ def fit_budget(residual_m, dxy_dp, cov_object_m2, group, *, free, base_budget=No
     BudgetFit
     """
     setup = _setup(free, base_budget, method, min_groups)
-    data = compact_chunks([(residual_m, dxy_dp, cov_object_m2, group)], setup.cols, OBJECT_GROUND_TERM in setup.obj)
+    data = compact_chunks([(residual_m, dxy_dp, cov_object_m2, group)], setup.cols, OBJECT_GROUND_TERM in setup.obj,
+                          memory_pairs=None)
     return _fit_data(data, setup, fit_bias, collinear_tol)
 
 
@@ -551,13 +560,15 @@ def _setup(free, base_budget, method, min_groups) -> _Setup:
     return _Setup(base, shared, obj, reml, int(min_groups), Sf, A, cols)
 
 
-def compact_inputs(chunks, *, free, base_budget=None) -> CompactPairs:
+def compact_inputs(chunks, *, free, base_budget=None, memory_pairs: int | None = MEMORY_PAIRS):
     """Stream ``(residual_m, dxy_dp, cov_object_m2, group)`` chunks (arrays as :func:`fit_budget`'s) into the
     compact records a fit with these ``free`` terms and ``base_budget`` needs (:func:`fit_compact`,
-    :func:`cross_validate_compact`): only the Jacobian columns that carry variance, about 100 bytes a pair."""
+    :func:`cross_validate_compact`): only the Jacobian columns that carry variance, about 100 bytes a pair,
+    in memory up to ``memory_pairs`` pairs, beyond in parts in a temporary folder (memory flat in the number
+    of pairs; :func:`footprint_uq.validation.fit_compact.compact_chunks`)."""
     base = ErrorBudget() if base_budget is None else load_budget(base_budget)
     setup = _setup(free, base, "reml", 1)
-    return compact_chunks(chunks, setup.cols, OBJECT_GROUND_TERM in setup.obj)
+    return compact_chunks(chunks, setup.cols, OBJECT_GROUND_TERM in setup.obj, memory_pairs=memory_pairs)
 
 
 def fit_compact(data: CompactPairs, *, free, base_budget=None, fit_bias: bool = True, method: str = "reml",
@@ -568,7 +579,7 @@ def fit_compact(data: CompactPairs, *, free, base_budget=None, fit_bias: bool = 
 
 
 def _fit_data(data: CompactPairs, setup: _Setup, fit_bias: bool, collinear_tol: float) -> BudgetFit:
-    if not np.array_equal(data.cols, setup.cols) or (OBJECT_GROUND_TERM in setup.obj and data.jg.shape[0] != data.n):
+    if not np.array_equal(data.cols, setup.cols) or (OBJECT_GROUND_TERM in setup.obj and not data.has_ground):
         raise InputError("data", f"records of columns {data.cols.tolist()}",
                          "records built by compact_inputs with the same free terms and base budget")
     cols, base, shared = setup.cols, setup.base, setup.shared
@@ -629,7 +640,7 @@ def _fit_active(data, base, shared, objects, Sf, A, active, terms, fit_bias, rem
             terms[u] = TermFit(0.0, np.nan, (0.0, np.inf), "merged", (t,), f"merged into {t} (not split)")
     order = [t for t in [*shared, *OBJECT_TERMS] if t in terms]
     return BudgetFit({t: terms[t] for t in order}, beta, cov_beta, float(ll), "reml" if reml else "ml",
-                     data.n, int(np.unique(data.gid).size), base, ok, msg, H, tuple(names))
+                     data.n, data.groups_present(), base, ok, msg, H, tuple(names))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -717,7 +728,7 @@ def cross_validate(residual_m, dxy_dp, cov_object_m2, group, *, free, by: str = 
     the result says so (``n_sampled``, ``subsampled``) and the pairs outside it have ``nees`` NaN.
     """
     data = compact_inputs([(residual_m, dxy_dp, cov_object_m2, group)], free=free,
-                          base_budget=fit_options.get("base_budget"))
+                          base_budget=fit_options.get("base_budget"), memory_pairs=None)
     return cross_validate_compact(data, free=free, by=by, n_folds=n_folds, levels=levels, seed=seed,
                                   max_pairs=max_pairs, **fit_options)
 
@@ -747,7 +758,7 @@ def cross_validate_compact(data: CompactPairs, *, free, by: str = "object", n_fo
     rows = np.arange(data.n)
     if max_pairs is not None and data.n > int(max_pairs):
         rows = np.sort(np.random.default_rng(seed).choice(data.n, int(max_pairs), replace=False))
-    sub = data.subset(rows) if rows.size < data.n else data
+    sub = data.take(rows) if rows.size < data.n or not isinstance(data, CompactPairs) else data
     fold = _folds(sub.n, sub.gid, by, n_folds, seed)
     nees = np.full(data.n, np.nan)
     for f in np.unique(fold):

@@ -15,6 +15,10 @@ fixed: sufficient statistics).  It computes exactly what the dense reference
 
 from __future__ import annotations
 
+import os
+import shutil
+import tempfile
+import weakref
 from collections.abc import Iterable
 from typing import NamedTuple
 
@@ -24,7 +28,7 @@ from .. import params as P
 from ..errors import InputError
 from ..fast.fit_kernels import group_sums
 
-__all__ = ["CompactPairs", "compact_chunks", "check_chunk", "CompactModel"]
+__all__ = ["CompactPairs", "SpilledPairs", "compact_chunks", "check_chunk", "CompactModel", "MEMORY_PAIRS", "PART_ROWS"]
 
 
 class CompactPairs(NamedTuple):
@@ -42,10 +46,74 @@ class CompactPairs(NamedTuple):
     def n(self) -> int:
         return int(self.r.shape[0])
 
+    @property
+    def has_ground(self) -> bool:
+        return self.jg.shape[0] == self.n
+
     def subset(self, rows) -> CompactPairs:
         """The records ``rows`` (index or mask), same labels and columns."""
         jg = self.jg[rows] if self.jg.shape[0] else self.jg
         return CompactPairs(self.r[rows], self.U[rows], self.R3[rows], jg, self.gid[rows], self.labels, self.cols)
+
+    take = subset
+
+    def parts(self):
+        """The records in parts (here: one), for the passes of the fit."""
+        yield self
+
+    def groups_present(self) -> int:
+        return int(np.unique(self.gid).size)
+
+
+class SpilledPairs:
+    """Compact records written in parts to a temporary folder (deleted with the object): the passes of the
+    fit map one part at a time, so the process holds one part (``part_rows`` records), whatever the number
+    of pairs; the operating system's page cache keeps the files.  Same interface as :class:`CompactPairs`
+    for the fit (``n``, ``labels``, ``cols``, ``has_ground``, ``parts()``, ``take(rows)``)."""
+
+    _FIELDS = ("r", "U", "R3", "jg", "gid")
+
+    def __init__(self, folder: str, sizes: list[int], remap: np.ndarray, labels, cols, has_ground: bool):
+        self.folder, self.sizes, self.remap = folder, sizes, remap
+        self.labels, self.cols, self.has_ground = labels, cols, has_ground
+        self.n = int(sum(sizes))
+        self._cleanup = weakref.finalize(self, shutil.rmtree, folder, True)
+
+    def _load(self, i: int) -> CompactPairs:
+        a = {f: np.asarray(np.load(os.path.join(self.folder, f"{i}_{f}.npy"), mmap_mode="r"))
+             for f in self._FIELDS if f != "jg" or self.has_ground}
+        a.setdefault("jg", np.zeros((0, 2)))
+        return CompactPairs(a["r"], a["U"], a["R3"], a["jg"], self.remap[a["gid"]], self.labels, self.cols)
+
+    def parts(self):
+        for i in range(len(self.sizes)):
+            yield self._load(i)
+
+    def take(self, rows) -> CompactPairs:
+        """The records ``rows`` (sorted indices) gathered in memory."""
+        rows = np.asarray(rows, dtype=np.int64)
+        out, start = [], 0
+        for i, size in enumerate(self.sizes):
+            sel = rows[(rows >= start) & (rows < start + size)] - start
+            if sel.size:
+                out.append(self._load(i).subset(sel))
+            start += size
+        jg = np.concatenate([o.jg for o in out]) if self.has_ground else np.zeros((0, 2))
+        return CompactPairs(*(np.concatenate([getattr(o, f) for o in out]) for f in ("r", "U", "R3")), jg,
+                            np.concatenate([o.gid for o in out]), self.labels, self.cols)
+
+    def groups_present(self) -> int:
+        seen = np.zeros(self.labels.size, dtype=bool)
+        for p in self.parts():
+            seen[p.gid] = True
+        return int(seen.sum())
+
+    @staticmethod
+    def write_part(folder: str, i: int, part: tuple) -> None:
+        for f, a in zip(SpilledPairs._FIELDS, part, strict=True):
+            if a.size == 0:
+                continue
+            np.save(os.path.join(folder, f"{i}_{f}.npy"), a)
 
 
 def check_chunk(r, J, R, g, offset: int = 0):
@@ -78,33 +146,77 @@ def check_chunk(r, J, R, g, offset: int = 0):
     return r, J, R, g
 
 
-def compact_chunks(chunks: Iterable, cols, need_ground: bool) -> CompactPairs:
+#: records kept in memory; above this many pairs the records are spilled to a temporary folder in parts
+MEMORY_PAIRS = 262_144
+#: records per part (spilled form)
+PART_ROWS = 131_072
+
+
+def compact_chunks(chunks: Iterable, cols, need_ground: bool, *, memory_pairs: int | None = MEMORY_PAIRS,
+                   part_rows: int = PART_ROWS):
     """Stream ``(residual_m (n, 2), dxy_dp (n, 2, 22), cov_object_m2 (n, 2, 2), group (n,))`` chunks into
     compact records (only the Jacobian columns ``cols``; the ground column with ``need_ground``).
 
-    Memory: the records plus one chunk.  Raises :class:`InputError` naming the first bad row (global
-    number) or where there are fewer than 2 rows in all.
+    Up to ``memory_pairs`` pairs (``None``: no limit) the records stay in memory (:class:`CompactPairs`);
+    beyond, they are written in parts of about ``part_rows`` to a temporary folder (:class:`SpilledPairs`):
+    memory is then one part plus one chunk, flat in the number of pairs.  Raises :class:`InputError`
+    naming the first bad row (global number) or where there are fewer than 2 rows in all.
     """
     cols = np.asarray(cols, dtype=np.int64)
+    pending: list[tuple] = []
     parts: list[tuple] = []
+    sizes: list[int] = []
     index: dict = {}
-    n = 0
-    for r, J, R, g in chunks:
-        r, J, R, g = check_chunk(r, J, R, g, n)
-        if r.shape[0] == 0:
-            continue
-        lab, inv = np.unique(g, return_inverse=True)
-        ids = np.array([index.setdefault(x.item() if isinstance(x, np.generic) else x, len(index)) for x in lab],
-                       dtype=np.int32)
-        R3 = np.stack([R[:, 0, 0], 0.5 * (R[:, 0, 1] + R[:, 1, 0]), R[:, 1, 1]], 1)
-        jg = np.ascontiguousarray(J[:, :, P.GDZ]) if need_ground else np.zeros((0, 2))
-        parts.append((r, np.ascontiguousarray(J[:, :, cols]), R3, jg, ids[inv.reshape(-1)]))
-        n += r.shape[0]
+    n, folder = 0, None
+
+    def flush():
+        nonlocal folder
+        if not pending:
+            return
+        part = tuple(np.concatenate([p[i] for p in pending]) for i in range(5))
+        pending.clear()
+        if folder is None and memory_pairs is not None and n > memory_pairs:
+            folder = tempfile.mkdtemp(prefix="footprint-uq-fit-")
+            for i, old in enumerate(parts):
+                SpilledPairs.write_part(folder, i, old)
+            parts.clear()
+        if folder is not None:
+            SpilledPairs.write_part(folder, len(sizes), part)
+        else:
+            parts.append(part)
+        sizes.append(part[0].shape[0])
+
+    try:
+        for r, J, R, g in chunks:
+            r, J, R, g = check_chunk(r, J, R, g, n)
+            if r.shape[0] == 0:
+                continue
+            lab, inv = np.unique(g, return_inverse=True)
+            ids = np.array([index.setdefault(x.item() if isinstance(x, np.generic) else x, len(index)) for x in lab],
+                           dtype=np.int32)
+            R3 = np.stack([R[:, 0, 0], 0.5 * (R[:, 0, 1] + R[:, 1, 0]), R[:, 1, 1]], 1)
+            jg = np.ascontiguousarray(J[:, :, P.GDZ]) if need_ground else np.zeros((0, 2))
+            pending.append((r, np.ascontiguousarray(J[:, :, cols]), R3, jg, ids[inv.reshape(-1)]))
+            n += r.shape[0]
+            if sum(p[0].shape[0] for p in pending) >= part_rows:
+                flush()
+        flush()
+    except BaseException:
+        if folder is not None:
+            shutil.rmtree(folder, ignore_errors=True)
+        raise
     if n < 2:
         raise InputError("residual_m", f"shape ({n}, 2)", "an array (N, 2) with N >= 2 (truth minus prediction, m)")
-    cat = [np.concatenate([p[i] for p in parts]) for i in range(5)]
+    remap, labels = _sorted_labels(index)
+    if folder is not None:
+        return SpilledPairs(folder, sizes, remap, labels, cols, need_ground)
+    cat = [np.concatenate([p[i] for p in parts]) if len(parts) > 1 else parts[0][i] for i in range(5)]
     jg = cat[3] if need_ground else np.zeros((0, 2))
-    # labels sorted as np.unique sorts them (the dense reference's group order), records re-indexed
+    return CompactPairs(cat[0], cat[1], cat[2], jg, remap[cat[4]], labels, cols)
+
+
+def _sorted_labels(index: dict):
+    """Labels sorted as np.unique sorts them (the dense reference's group order) and the map to them."""
     keys = list(index)
     try:
         order = sorted(range(len(keys)), key=lambda i: keys[i])
@@ -112,8 +224,7 @@ def compact_chunks(chunks: Iterable, cols, need_ground: bool) -> CompactPairs:
         order = list(range(len(keys)))
     remap = np.empty(len(keys), dtype=np.int32)
     remap[order] = np.arange(len(keys), dtype=np.int32)
-    labels = np.array([keys[i] for i in order])
-    return CompactPairs(cat[0], cat[1], cat[2], jg, remap[cat[4]], labels, cols)
+    return remap, np.array([keys[i] for i in order])
 
 
 class CompactModel:
@@ -139,8 +250,13 @@ class CompactModel:
                                  "positive-definite per-object covariances (or a free 'object_m' term)")
 
     def _sums(self, vo, with_score):
-        d = self.d
-        return group_sums(d.r, d.U, d.R3, d.jg, d.gid, self.n_groups, vo, self.kinds, with_score=with_score)
+        total = None
+        for d in self.d.parts():
+            s = group_sums(d.r, d.U, d.R3, d.jg, d.gid, self.n_groups, vo, self.kinds, with_score=with_score)
+            if s is None:
+                return None
+            total = s if total is None else {k: total[k] + s[k] for k in total}
+        return total
 
     def sigma(self, v) -> np.ndarray:
         ns = self.A.shape[0]
