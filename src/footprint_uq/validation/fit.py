@@ -41,7 +41,8 @@ from ..uncertainty.budget import ErrorBudget, load_budget
 from .fit_compact import MEMORY_PAIRS, CompactModel, CompactPairs, check_chunk, compact_chunks
 
 __all__ = ["FITTABLE_TERMS", "OBJECT_TERM", "OBJECT_GROUND_TERM", "OBJECT_TERMS", "BudgetFit", "TermFit",
-           "fit_budget", "cross_validate", "compact_inputs", "fit_compact", "cross_validate_compact",
+           "fit_budget", "cross_validate", "compact_inputs", "fit_compact", "cross_validate_compact", "CompactPairs",
+           "CV_MAX_PAIRS",
            "log_likelihood", "CrossValidation", "nees_of"]
 
 #: budget keys that can be free, with their parameters (pair keys get one sigma for both components)
@@ -450,6 +451,32 @@ def _information(model: _Model, v: np.ndarray, scale: np.ndarray) -> np.ndarray:
     return 0.5 * (H + H.T)
 
 
+def _polish(model, v: np.ndarray, scale: np.ndarray, H: np.ndarray, steps: int = 4):
+    """Newton steps from the optimiser's point on the variances off their bound (the optimiser stops at a
+    projected score of 1e-6 per object, which leaves ~1e-7..1e-4 relative in flat directions): the estimate
+    then is the likelihood's maximum to rounding, whichever path reached it.  A step is taken only where it
+    stays inside the bounds and does not lower the likelihood; ``H`` is recomputed at the new point."""
+    for _ in range(steps):
+        idx = np.flatnonzero(v > 0)
+        if idx.size == 0:
+            break
+        ll0, g, _, _ = model.evaluate(v)
+        if g is None:
+            break
+        try:
+            step = np.linalg.solve(H[np.ix_(idx, idx)], g[idx])
+        except np.linalg.LinAlgError:
+            break
+        vn = v.copy()
+        vn[idx] += step
+        if not np.all(vn[idx] > 0) or not model.evaluate(vn, grad=False)[0] >= ll0:
+            break
+        v, H = vn, _information(model, vn, scale)
+        if np.all(np.abs(step) <= 1e-10 * v[idx]):
+            break
+    return v, H
+
+
 def _collinear(H: np.ndarray, names: list[str], tol: float) -> list[str] | None:
     """The terms of the weakest direction of the normalised information, if it is (nearly) null."""
     d = np.sqrt(np.clip(np.diag(H), 0, None))
@@ -613,6 +640,7 @@ def _fit_active(data, base, shared, objects, Sf, A, active, terms, fit_bias, rem
         start = np.where(start > 0, start, 0.1)
         v, ok, msg = _optimise(model, scale, start)
         H = _information(model, v, scale) if v.size else np.zeros((0, 0))
+        v, H = _polish(model, v, scale, H)
         group_ = _collinear(H, names, tol)
         if group_ is None or len(group_) < 2:
             break
