@@ -11,6 +11,12 @@ Jacobian columns that carry variance), then ``fit_compact`` with pan, tilt, heig
 free is timed, then the cross-validated coverage (leave-one-object-out, 10 folds, and leave-one-camera-out;
 on the reported subsample of ``CV_MAX_PAIRS`` pairs).  ``--dense`` times the former path instead (the whole
 campaign in memory, ``fit_budget`` on the arrays).  Writes ``DIR/bench_fit.json`` and prints a table.
+
+``--job``: the whole ``calibrate budget`` job instead
+(:func:`footprint_uq.viz.budget_fit_run.run_budget_fit`: a Parquet pairs table of bench/bench_validate.py's
+synthetic probe-vehicle campaign, 50 cameras with a registry, read in chunks -> bottom-centre contact ->
+pairs -> compact records -> fit -> cross-validated coverage -> budget.yaml, fit.json), one fresh process per
+size (its wall time and ``VmHWM``); writes ``DIR/bench_fit_job.json``.
 """
 
 from __future__ import annotations
@@ -69,16 +75,68 @@ def one(n: int, cameras: int, dense: bool) -> dict:
     return row
 
 
+_JOB = r"""
+import json, sys, time
+t0 = time.perf_counter()
+from footprint_uq.uncertainty.budget import load_budget
+from footprint_uq.viz.budget_fit_run import run_budget_fit
+t1 = time.perf_counter()
+summary, files = run_budget_fit(sys.argv[1], sys.argv[2], base_budget=load_budget(sys.argv[3]), registry=sys.argv[4],
+                                fsync=False)
+t2 = time.perf_counter()
+hwm = [line for line in open("/proc/self/status") if line.startswith("VmHWM:")][0]
+fit = summary["fit"]
+print(json.dumps({"pairs": fit["n_objects"], "groups": fit["n_groups"], "elapsed_s": t2 - t1, "import_s": t1 - t0,
+                  "peak_rss_mb": int(hwm.split()[1]) / 1024.0, "converged": fit["converged"],
+                  "sigmas": {k: t["sigma"] for k, t in fit["terms"].items()},
+                  "cross_validation": summary["cross_validation"]}))
+"""
+
+
+def job(sizes, cameras: int) -> list[dict]:
+    """The ``calibrate budget`` job on pairs tables of each size (fresh process each)."""
+    import tempfile
+
+    sys.path.insert(0, str(ROOT / "bench"))
+    from bench_validate import BUDGET, write_campaign
+
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp)
+        budget_file = folder / "budget.json"
+        budget_file.write_text(json.dumps(BUDGET.to_dict()))
+        for n in sizes:
+            path, reg = write_campaign(folder, n, cameras)
+            p = subprocess.run([sys.executable, "-c", _JOB, str(path), str(folder / f"out_{n}"), str(budget_file),
+                                str(reg)], capture_output=True, text=True, timeout=3600)
+            if p.returncode != 0:
+                raise RuntimeError(p.stderr[-3000:])
+            r = json.loads(p.stdout.strip().splitlines()[-1])
+            r.update(cameras=cameras, load_avg=os.getloadavg()[0])
+            rows.append(r)
+            cv = "; ".join(f"leave-one-{k}-out 95 %: {100 * c['coverage'][2]:.1f} % on {c['n_sampled']} pairs"
+                           for k, c in r["cross_validation"].items())
+            print(f"{r['pairs']:>9d} pairs, {cameras} cameras: calibrate budget {r['elapsed_s']:.1f} s, peak RSS "
+                  f"{r['peak_rss_mb']:.0f} MB, converged {r['converged']}; {cv}; load {r['load_avg']:.1f}")
+    return rows
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--sizes", default="100000,1000000")
     ap.add_argument("--cameras", type=int, default=50)
     ap.add_argument("--out", type=Path, default=ROOT / "bench" / "results")
     ap.add_argument("--dense", action="store_true", help="the former path: every array in memory, fit_budget")
+    ap.add_argument("--job", action="store_true", help="the whole `calibrate budget` job on a pairs table")
     ap.add_argument("--one", type=int, default=None, help=argparse.SUPPRESS)
     a = ap.parse_args(argv)
     if a.one is not None:
         print(json.dumps(one(a.one, a.cameras, a.dense)))
+        return 0
+    if a.job:
+        rows = job([int(s) for s in a.sizes.split(",")], a.cameras)
+        a.out.mkdir(parents=True, exist_ok=True)
+        (a.out / "bench_fit_job.json").write_text(json.dumps(rows, indent=2) + "\n")
         return 0
     rows = []
     for n in (int(s) for s in a.sizes.split(",")):

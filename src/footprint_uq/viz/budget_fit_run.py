@@ -99,7 +99,7 @@ def run_budget_fit(labels, out_dir, *, base_budget=None, free=DEFAULT_FREE, kind
                "fit": fit.to_dict(), "cross_validation": {}}
     if cross_validation:  # above fit.CV_MAX_PAIRS pairs: on a seeded subsample, reported in the summary
         summary["cross_validation"]["object"] = cross_validate_compact(data, by="object", **opts).to_dict()
-        if np.unique(data.gid).size >= 2:
+        if data.groups_present() >= 2:
             summary["cross_validation"]["group"] = cross_validate_compact(data, by="group", **opts).to_dict()
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
