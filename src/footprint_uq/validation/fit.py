@@ -469,7 +469,8 @@ def _polish(model, v: np.ndarray, scale: np.ndarray, H: np.ndarray, steps: int =
             break
         vn = v.copy()
         vn[idx] += step
-        if not np.all(vn[idx] > 0) or not model.evaluate(vn, grad=False)[0] >= ll0:
+        # a Newton step near the maximum changes the likelihood by less than its rounding: tolerate that
+        if not np.all(vn[idx] > 0) or not model.evaluate(vn, grad=False)[0] >= ll0 - 1e-10 * max(1.0, abs(ll0)):
             break
         v, H = vn, _information(model, vn, scale)
         if np.all(np.abs(step) <= 1e-10 * v[idx]):
