@@ -10,7 +10,7 @@ import pytest
 from footprint_uq.errors import InputError
 from footprint_uq.uncertainty.budget import ErrorBudget, load_budget
 from footprint_uq.validation import fit as F
-from footprint_uq.validation.campaigns import synthetic_campaign
+from footprint_uq.validation.campaigns import synthetic_campaign, synthetic_campaign_chunks
 
 TRUTH = {"pan_deg": 0.1, "tilt_deg": 0.05, "height_m": 0.2}
 FREE = ["pan_deg", "tilt_deg", "height_m", "object_m"]
@@ -191,3 +191,83 @@ def test_bad_arrays_name_the_field_and_row():
         F.fit_budget(c.residual_m, c.dxy_dp, R, c.group, free=["pan_deg"])
     with pytest.raises(InputError, match="by"):
         F.cross_validate(c.residual_m, c.dxy_dp, c.cov_object_m2, c.group, free=["pan_deg"], by="camera")
+
+
+# ---------------------------------------------------------------------------------------------
+# the compact / streamed path (fit_compact: per-group sums, records spilled in parts) = the dense reference
+# ---------------------------------------------------------------------------------------------
+def _dense_model(data, Sf, A, kinds, fit_bias, reml):
+    """The dense reference model (every per-object array, rows sorted by group) on compact records."""
+    R = np.stack([data.R3[:, [0, 1]], data.R3[:, [1, 2]]], 1)
+    order = np.argsort(data.gid, kind="stable")
+    gid = data.gid[order]
+    starts = np.flatnonzero(np.r_[True, gid[1:] != gid[:-1]])
+    d = F._Data(data.r[order], data.U[order], R[order], starts, gid, order, data.labels, data.cols)
+    E = np.stack([np.broadcast_to(np.eye(2), (data.n, 2, 2)) if k == 0 else
+                  data.jg[:, :, None] * data.jg[:, None, :] for k in kinds])[:, order] \
+        if len(kinds) else np.zeros((0, data.n, 2, 2))
+    return F._Model(d, Sf, A, E, fit_bias, reml)
+
+
+@pytest.mark.parametrize("reml", [False, True])
+def test_compact_likelihood_and_score_equal_the_dense_ones(reml):
+    c = synthetic_campaign(TRUTH, 5, 30, object_sigma_m=0.3, seed=21)
+    free = ["pan_deg", "height_m", "object_m", "object_ground_m"]
+    setup = F._setup(free, "basler1", "reml", 3)
+    data = F.compact_inputs([(c.residual_m, c.dxy_dp, c.cov_object_m2, c.group)], free=free, base_budget="basler1")
+    A, Sf = setup.A[:, data.cols][:, :, data.cols], setup.Sf[np.ix_(data.cols, data.cols)]
+    v = np.array([3e-6, 0.04, 0.09, 0.01])
+    a = F.CompactModel(data, Sf, A, [0, 1], True, reml).evaluate(v)
+    b = _dense_model(data, Sf, A, [0, 1], True, reml).evaluate(v)
+    assert a[0] == pytest.approx(b[0], rel=1e-12)
+    np.testing.assert_allclose(a[1], b[1], rtol=1e-9, atol=1e-9 * np.abs(b[1]).max())
+    np.testing.assert_allclose(a[2], b[2], rtol=1e-10, atol=1e-14)
+
+
+@pytest.mark.parametrize("free, method", [(FREE, "reml"), (["pan_deg", "object_m", "object_ground_m"], "ml")])
+def test_compact_fit_equals_the_dense_reference_fit(monkeypatch, free, method):
+    """The whole fit (optimiser, information, intervals, identifiability) with the compact model and with the
+    dense reference model in its place: the same estimates to 1e-8 relative."""
+    c = synthetic_campaign(TRUTH, 8, 40, object_sigma_m=0.3, bias_m=(0.1, 0.0), seed=22)
+    args = (c.residual_m, c.dxy_dp, c.cov_object_m2, c.group)
+    fast = F.fit_budget(*args, free=free, method=method)
+    monkeypatch.setattr(F, "CompactModel", _dense_model)
+    ref = F.fit_budget(*args, free=free, method=method)
+    assert fast.log_likelihood == pytest.approx(ref.log_likelihood, rel=1e-12)
+    np.testing.assert_allclose(fast.bias_m, ref.bias_m, rtol=1e-8, atol=1e-12)
+    for k, t in ref.terms.items():
+        u = fast.terms[k]
+        assert (u.status, u.merged_with) == (t.status, t.merged_with)
+        np.testing.assert_allclose([u.sigma, u.se, *u.ci95], [t.sigma, t.se, *t.ci95], rtol=1e-8, atol=1e-12)
+
+
+def test_records_spilled_in_parts_give_the_same_fit_and_cross_validation(tmp_path):
+    free = ["pan_deg", "tilt_deg", "object_m", "object_ground_m"]
+    chunks = [x[:4] for x in synthetic_campaign_chunks(TRUTH, 6, 50, object_sigma_m=0.3, seed=3, batch=20)]
+    mem = F.compact_inputs(chunks, free=free, memory_pairs=None)
+    spilled = F.compact_inputs(chunks, free=free, memory_pairs=70)
+    assert isinstance(mem, F.CompactPairs) and not isinstance(spilled, F.CompactPairs) and spilled.n == mem.n == 300
+    a, b = F.fit_compact(mem, free=free), F.fit_compact(spilled, free=free)
+    for k in a.terms:
+        np.testing.assert_allclose([b.terms[k].sigma, *b.terms[k].ci95], [a.terms[k].sigma, *a.terms[k].ci95],
+                                   rtol=1e-10)
+    cv_a = F.cross_validate_compact(mem, free=free, max_pairs=120, seed=4)
+    cv_b = F.cross_validate_compact(spilled, free=free, max_pairs=120, seed=4)
+    np.testing.assert_allclose(cv_b.nees, cv_a.nees, rtol=1e-10)  # NaN where the same rows are left out
+    d = cv_a.to_dict()
+    assert d["subsampled"] and d["n_sampled"] == d["n"] == 120 and d["n_pairs"] == 300
+    folder = spilled.folder
+    del spilled
+    import gc
+
+    gc.collect()
+    assert not __import__("os").path.exists(folder)  # the temporary parts go with the records
+
+
+def test_a_bad_row_in_a_later_chunk_is_named_by_its_global_number():
+    c = synthetic_campaign(TRUTH, 3, 10, seed=0)
+    R = c.cov_object_m2.copy()
+    R[17] = [[1.0, 0.0], [0.0, -1.0]]
+    chunks = [(c.residual_m[s], c.dxy_dp[s], R[s], c.group[s]) for s in (slice(0, 12), slice(12, None))]
+    with pytest.raises(InputError, match=r"cov_object_m2\[17\]"):
+        F.compact_inputs(chunks, free=["pan_deg"])

@@ -38,9 +38,11 @@ from ..errors import InputError
 from ..io.atomic import atomic_write_text
 from ..io.camera_files import save_budget
 from ..uncertainty.budget import ErrorBudget, load_budget
+from .fit_compact import MEMORY_PAIRS, CompactModel, CompactPairs, check_chunk, compact_chunks
 
 __all__ = ["FITTABLE_TERMS", "OBJECT_TERM", "OBJECT_GROUND_TERM", "OBJECT_TERMS", "BudgetFit", "TermFit",
-           "fit_budget", "cross_validate",
+           "fit_budget", "cross_validate", "compact_inputs", "fit_compact", "cross_validate_compact", "CompactPairs",
+           "CV_MAX_PAIRS",
            "log_likelihood", "CrossValidation", "nees_of"]
 
 #: budget keys that can be free, with their parameters (pair keys get one sigma for both components)
@@ -100,30 +102,9 @@ class _Data(NamedTuple):
 
 
 def _check_inputs(residual_m, dxy_dp, cov_object_m2, group):
-    r = np.asarray(residual_m, dtype=np.float64)
-    if r.ndim != 2 or r.shape[1] != 2 or r.shape[0] < 2:
+    r, J, R, g = check_chunk(residual_m, dxy_dp, cov_object_m2, group)
+    if r.shape[0] < 2:
         raise InputError("residual_m", f"shape {r.shape}", "an array (N, 2) with N >= 2 (truth minus prediction, m)")
-    n = r.shape[0]
-    J = np.asarray(dxy_dp, dtype=np.float64)
-    if J.shape != (n, 2, P.N_PARAMS):
-        raise InputError("dxy_dp", f"shape {J.shape}", f"an array ({n}, 2, {P.N_PARAMS}) in PARAM_NAMES order")
-    R = np.asarray(cov_object_m2, dtype=np.float64)
-    if R.shape != (n, 2, 2):
-        raise InputError("cov_object_m2", f"shape {R.shape}", f"an array ({n}, 2, 2) in m^2")
-    g = np.asarray(group)
-    if g.shape != (n,):
-        raise InputError("group", f"shape {g.shape}", f"an array ({n},) of calibration-draw labels")
-    for name, a in (("residual_m", r), ("dxy_dp", J), ("cov_object_m2", R)):
-        bad = ~np.isfinite(a.reshape(n, -1)).all(1)
-        if bad.any():
-            i = int(np.flatnonzero(bad)[0])
-            raise InputError(f"{name}[{i}]", "non-finite", "finite numbers (drop invalid objects first)")
-    det = R[:, 0, 0] * R[:, 1, 1] - R[:, 0, 1] * R[:, 1, 0]
-    bad = (R[:, 0, 0] < 0) | (det < -1e-12 * np.maximum(R[:, 0, 0] * R[:, 1, 1], 1e-300)) | \
-        (np.abs(R[:, 0, 1] - R[:, 1, 0]) > 1e-9 * np.maximum(np.abs(R[:, 0, 1]), 1e-300))
-    if bad.any():
-        i = int(np.flatnonzero(bad)[0])
-        raise InputError(f"cov_object_m2[{i}]", R[i].tolist(), "a symmetric positive semi-definite 2x2 covariance")
     return r, J, R, g
 
 
@@ -137,12 +118,15 @@ def _prepare(residual_m, dxy_dp, cov_object_m2, group, cols) -> _Data:
 
 
 class _Model:
-    """The (restricted) log-likelihood of the variances ``v`` of the free terms, and its score."""
+    """The (restricted) log-likelihood of the variances ``v`` of the free terms, and its score: the dense
+    reference (every per-object array in memory) of :class:`~footprint_uq.validation.fit_compact.CompactModel`,
+    which the fit uses; kept for :func:`log_likelihood` and the tests."""
 
     def __init__(self, data: _Data, Sfixed, A, E, fit_bias: bool, reml: bool):
         self.d, self.Sf, self.A, self.E = data, Sfixed, A, E   # A: (m_shared, k, k); E: (q, N, 2, 2)
         self.object_free, self.fit_bias, self.reml = E.shape[0] > 0, fit_bias, reml
         self.m = A.shape[0] + E.shape[0]
+        self.n = data.r.shape[0]
         self._cache = None
         if not self.object_free:
             self._cache = self._object_sums(np.zeros(0))
@@ -383,27 +367,37 @@ def _object_shapes(J: np.ndarray, objs: list[str]) -> np.ndarray:
     return np.stack(out) if out else np.zeros((0, J.shape[0], 2, 2))
 
 
-def _informative_groups(data: _Data, A: np.ndarray) -> np.ndarray:
+def _informative_groups(data, A: np.ndarray) -> np.ndarray:
     """Per shared term: the number of groups whose objects it moves (a Jacobian column != 0)."""
     if A.shape[0] == 0:
         return np.zeros(0, dtype=int)
     used = np.abs(A).sum(-1) > 0                                      # (m, k) columns of each term
-    col = np.abs(data.U).max(1) > 1e-12 * max(np.abs(data.U).max(), 1e-300)   # (N, k)
-    hit = (col[:, None, :] & used[None]).any(-1)                        # (N, m)
-    per_group = np.add.reduceat(hit.astype(int), data.starts, axis=0) > 0
-    return per_group.sum(0)
+    big = max(max((float(np.abs(p.U).max()) if p.U.size else 0.0) for p in data.parts()), 1e-300)
+    G = data.labels.size
+    per_group = np.zeros((G, A.shape[0]))
+    for p in data.parts():
+        col = np.abs(p.U).max(1) > 1e-12 * big                        # (n, k)
+        hit = (col[:, None, :] & used[None]).any(-1)                    # (n, m)
+        per_group += np.stack([np.bincount(p.gid, weights=hit[:, j], minlength=G) for j in range(A.shape[0])], 1)
+    return (per_group > 0).sum(0)
 
 
-def _scales(data: _Data, A: np.ndarray, E: np.ndarray) -> np.ndarray:
+def _median_of(data, fn) -> float:
+    """Median over every record of ``fn(part) -> (n,)`` (one quantity in memory at a time)."""
+    return float(np.median(np.concatenate([fn(p) for p in data.parts()])))
+
+
+def _scales(data, A: np.ndarray, kinds: np.ndarray) -> np.ndarray:
     """Per free variance: the value at which it alone explains the residuals' typical power."""
-    power = max(float(np.median(np.sum(data.r**2, 1))) / 2, 1e-12)
+    power = max(_median_of(data, lambda p: np.sum(p.r**2, 1)) / 2, 1e-12)
     out = []
     for a in A:
-        c = np.einsum("nak,kl,nal->n", data.U, a, data.U) / 2
+        c = np.concatenate([np.einsum("nak,nak->n", p.U @ a, p.U) / 2 for p in data.parts()])
         med = float(np.median(c[c > 0])) if np.any(c > 0) else 0.0
+        del c
         out.append(power / med if med > 0 else 1.0)
-    for e in E:
-        med = float(np.median(np.trace(e, axis1=1, axis2=2))) / 2
+    for kind in kinds:
+        med = 1.0 if kind == 0 else _median_of(data, lambda p: np.sum(p.jg**2, 1)) / 2
         out.append(power / med if med > 0 else 1.0)
     return np.array(out)
 
@@ -417,7 +411,7 @@ def _optimise(model: _Model, scale: np.ndarray, start: np.ndarray):
     """
     if model.m == 0:
         return np.zeros(0), True, "no free term"
-    n = model.d.r.shape[0]
+    n = model.n
 
     def f(u):
         ll, g, _, _ = model.evaluate(u * scale)
@@ -455,6 +449,33 @@ def _information(model: _Model, v: np.ndarray, scale: np.ndarray) -> np.ndarray:
             gp, gm, h = model.evaluate(v + 2 * e)[1], model.evaluate(v)[1], 2 * h
         H[:, j] = -(gp - gm) / (2 * h)
     return 0.5 * (H + H.T)
+
+
+def _polish(model, v: np.ndarray, scale: np.ndarray, H: np.ndarray, steps: int = 4):
+    """Newton steps from the optimiser's point on the variances off their bound (the optimiser stops at a
+    projected score of 1e-6 per object, which leaves ~1e-7..1e-4 relative in flat directions): the estimate
+    then is the likelihood's maximum to rounding, whichever path reached it.  A step is taken only where it
+    stays inside the bounds and does not lower the likelihood; ``H`` is recomputed at the new point."""
+    for _ in range(steps):
+        idx = np.flatnonzero(v > 0)
+        if idx.size == 0:
+            break
+        ll0, g, _, _ = model.evaluate(v)
+        if g is None:
+            break
+        try:
+            step = np.linalg.solve(H[np.ix_(idx, idx)], g[idx])
+        except np.linalg.LinAlgError:
+            break
+        vn = v.copy()
+        vn[idx] += step
+        # a Newton step near the maximum changes the likelihood by less than its rounding: tolerate that
+        if not np.all(vn[idx] > 0) or not model.evaluate(vn, grad=False)[0] >= ll0 - 1e-10 * max(1.0, abs(ll0)):
+            break
+        v, H = vn, _information(model, vn, scale)
+        if np.all(np.abs(step) <= 1e-10 * v[idx]):
+            break
+    return v, H
 
 
 def _collinear(H: np.ndarray, names: list[str], tol: float) -> list[str] | None:
@@ -539,6 +560,24 @@ def fit_budget(residual_m, dxy_dp, cov_object_m2, group, *, free, base_budget=No
     -------
     BudgetFit
     """
+    setup = _setup(free, base_budget, method, min_groups)
+    data = compact_chunks([(residual_m, dxy_dp, cov_object_m2, group)], setup.cols, OBJECT_GROUND_TERM in setup.obj,
+                          memory_pairs=None)
+    return _fit_data(data, setup, fit_bias, collinear_tol)
+
+
+class _Setup(NamedTuple):
+    base: ErrorBudget
+    shared: list
+    obj: list
+    reml: bool
+    min_groups: int
+    Sf: np.ndarray     # (22, 22) fixed part
+    A: np.ndarray      # (m, 22, 22) unit covariances of the free shared terms
+    cols: np.ndarray   # parameter columns that carry variance
+
+
+def _setup(free, base_budget, method, min_groups) -> _Setup:
     base = ErrorBudget() if base_budget is None else load_budget(base_budget)
     shared, obj = _check_free(free, base)
     reml = _method(method)
@@ -546,36 +585,63 @@ def fit_budget(residual_m, dxy_dp, cov_object_m2, group, *, free, base_budget=No
         raise InputError("min_groups", min_groups, "an integer >= 1")
     Sf, A = _term_matrices(base, shared)
     cols = np.flatnonzero((np.abs(Sf).sum(0) > 0) | (np.abs(A).sum((0, 1)) > 0))
-    data = _prepare(residual_m, dxy_dp, cov_object_m2, group, cols)
-    E = _object_shapes(np.asarray(dxy_dp, dtype=np.float64)[data.order], obj)
-    A, Sf = A[:, cols][:, :, cols], Sf[np.ix_(cols, cols)]
+    return _Setup(base, shared, obj, reml, int(min_groups), Sf, A, cols)
+
+
+def compact_inputs(chunks, *, free, base_budget=None, memory_pairs: int | None = MEMORY_PAIRS):
+    """Stream ``(residual_m, dxy_dp, cov_object_m2, group)`` chunks (arrays as :func:`fit_budget`'s) into the
+    compact records a fit with these ``free`` terms and ``base_budget`` needs (:func:`fit_compact`,
+    :func:`cross_validate_compact`): only the Jacobian columns that carry variance, about 100 bytes a pair,
+    in memory up to ``memory_pairs`` pairs, beyond in parts in a temporary folder (memory flat in the number
+    of pairs; :func:`footprint_uq.validation.fit_compact.compact_chunks`)."""
+    base = ErrorBudget() if base_budget is None else load_budget(base_budget)
+    setup = _setup(free, base, "reml", 1)
+    return compact_chunks(chunks, setup.cols, OBJECT_GROUND_TERM in setup.obj, memory_pairs=memory_pairs)
+
+
+def fit_compact(data: CompactPairs, *, free, base_budget=None, fit_bias: bool = True, method: str = "reml",
+                min_groups: int = 3, collinear_tol: float = 0.01) -> BudgetFit:
+    """:func:`fit_budget` on records from :func:`compact_inputs` (built with the same ``free`` and
+    ``base_budget``): the streamed form, memory ~100 bytes a pair."""
+    return _fit_data(data, _setup(free, base_budget, method, min_groups), fit_bias, collinear_tol)
+
+
+def _fit_data(data: CompactPairs, setup: _Setup, fit_bias: bool, collinear_tol: float) -> BudgetFit:
+    if not np.array_equal(data.cols, setup.cols) or (OBJECT_GROUND_TERM in setup.obj and not data.has_ground):
+        raise InputError("data", f"records of columns {data.cols.tolist()}",
+                         "records built by compact_inputs with the same free terms and base budget")
+    cols, base, shared = setup.cols, setup.base, setup.shared
+    A, Sf = setup.A[:, cols][:, :, cols], setup.Sf[np.ix_(cols, cols)]
     n_inf = _informative_groups(data, A)
     terms: dict[str, TermFit] = {}
     active = []
     for j, t in enumerate(shared):
-        if n_inf[j] < min_groups:
+        if n_inf[j] < setup.min_groups:
             Sf = Sf + _variance_of(t, _budget_sigma(base, t)) * A[j]
             terms[t] = TermFit(_budget_sigma(base, t), np.nan, (0.0, np.inf), "unidentifiable",
                                note=f"objects in {n_inf[j]} calibration group(s); one draw per group, at least "
-                                    f"{min_groups} needed (kept the base budget's value)")
+                                    f"{setup.min_groups} needed (kept the base budget's value)")
         else:
             active.append(j)
-    return _fit_active(data, base, shared, (obj, E), Sf, A, active, terms, fit_bias, reml, collinear_tol)
+    kinds = np.array([0 if t == OBJECT_TERM else 1 for t in setup.obj], dtype=np.int64)
+    return _fit_active(data, base, shared, (setup.obj, kinds), Sf, A, active, terms, fit_bias, setup.reml,
+                       collinear_tol)
 
 
 def _fit_active(data, base, shared, objects, Sf, A, active, terms, fit_bias, reml, tol) -> BudgetFit:
     """Fit the active shared terms (+ the object term); merge collinear sets and fit again."""
     merged: dict[str, tuple[str, ...]] = {}
     while True:
-        obj, E = objects
+        obj, kinds = objects
         names = [shared[j] for j in active] + obj
-        model = _Model(data, Sf, A[active], E, fit_bias, reml)
-        scale = _scales(data, A[active], E)
+        model = CompactModel(data, Sf, A[active], kinds, fit_bias, reml)
+        scale = _scales(data, A[active], kinds)
         start = np.array([_variance_of(t, _budget_sigma(base, t)) for t in names if t not in OBJECT_TERMS]
                          + [0.0] * len(obj)) / scale
         start = np.where(start > 0, start, 0.1)
         v, ok, msg = _optimise(model, scale, start)
         H = _information(model, v, scale) if v.size else np.zeros((0, 0))
+        v, H = _polish(model, v, scale, H)
         group_ = _collinear(H, names, tol)
         if group_ is None or len(group_) < 2:
             break
@@ -603,7 +669,7 @@ def _fit_active(data, base, shared, objects, Sf, A, active, terms, fit_bias, rem
             terms[u] = TermFit(0.0, np.nan, (0.0, np.inf), "merged", (t,), f"merged into {t} (not split)")
     order = [t for t in [*shared, *OBJECT_TERMS] if t in terms]
     return BudgetFit({t: terms[t] for t in order}, beta, cov_beta, float(ll), "reml" if reml else "ml",
-                     int(data.r.shape[0]), int(data.starts.size), base, ok, msg, H, tuple(names))
+                     data.n, data.groups_present(), base, ok, msg, H, tuple(names))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -619,8 +685,10 @@ class CrossValidation(NamedTuple):
     levels : (L,)            nominal probabilities of the ellipses
     coverage : (L,)          fraction of held-out residuals inside each ellipse
     nees : (N,)              squared Mahalanobis distance of each residual (caller's order; NaN where the
-                             fold's fit failed)
+                             fold's fit failed or the pair is not in the subsample)
     inside : (N, L) bool
+    n_sampled : int          pairs the cross-validation ran on: all ``N``, or a seeded subsample of
+                             ``max_pairs`` of them (``subsampled``)
     """
 
     by: str
@@ -629,10 +697,16 @@ class CrossValidation(NamedTuple):
     coverage: np.ndarray
     nees: np.ndarray
     inside: np.ndarray
+    n_sampled: int = -1
+
+    @property
+    def subsampled(self) -> bool:
+        return 0 <= self.n_sampled < self.nees.size
 
     def to_dict(self) -> dict:
         return {"by": self.by, "n_folds": self.n_folds, "levels": self.levels.tolist(),
-                "coverage": self.coverage.tolist(), "n": int(np.isfinite(self.nees).sum())}
+                "coverage": self.coverage.tolist(), "n": int(np.isfinite(self.nees).sum()),
+                "n_pairs": int(self.nees.size), "n_sampled": int(self.n_sampled), "subsampled": self.subsampled}
 
 
 def _folds(n: int, group, by: str, n_folds, seed: int) -> np.ndarray:
@@ -663,8 +737,13 @@ def nees_of(residual_m, dxy_dp, cov_object_m2, budget, *, object_sigma_m: float 
     return np.einsum("na,na->n", d, np.linalg.solve(C, d[..., None])[..., 0])
 
 
+#: pairs above which the cross-validation runs on a seeded subsample of this many (reported, never silent)
+CV_MAX_PAIRS = 20_000
+
+
 def cross_validate(residual_m, dxy_dp, cov_object_m2, group, *, free, by: str = "object", n_folds=None,
-                   levels=_LEVELS, seed: int = 0, **fit_options) -> CrossValidation:
+                   levels=_LEVELS, seed: int = 0, max_pairs: int | None = CV_MAX_PAIRS,
+                   **fit_options) -> CrossValidation:
     """Cross-validated coverage of the fitted budget's ellipses.
 
     ``by="object"``: leave-one-object-out (exact for N <= 100 objects; otherwise ``n_folds``-fold over
@@ -672,23 +751,53 @@ def cross_validate(residual_m, dxy_dp, cov_object_m2, group, *, free, by: str = 
     together, so its calibration draw is never seen by the fit).  Each held-out residual is judged by
     the ellipse of its marginal covariance ``J Sigma J^T + R + sigma_m^2 I`` (what a user deploying
     the budget would draw), centred on the fitted bias.  ``fit_options`` go to :func:`fit_budget`.
+
+    Bounded cost: above ``max_pairs`` pairs (default :data:`CV_MAX_PAIRS`; ``None``: never) the folds are
+    drawn from a seeded uniform subsample of ``max_pairs`` pairs (every fit then sees at most that many);
+    the result says so (``n_sampled``, ``subsampled``) and the pairs outside it have ``nees`` NaN.
     """
-    r, J, R, g = _check_inputs(residual_m, dxy_dp, cov_object_m2, group)
+    data = compact_inputs([(residual_m, dxy_dp, cov_object_m2, group)], free=free,
+                          base_budget=fit_options.get("base_budget"), memory_pairs=None)
+    return cross_validate_compact(data, free=free, by=by, n_folds=n_folds, levels=levels, seed=seed,
+                                  max_pairs=max_pairs, **fit_options)
+
+
+def _nees_compact(data: CompactPairs, fit: BudgetFit) -> np.ndarray:
+    """NEES (n,) of the records under the fitted budget (its covariance lives in the records' columns)."""
+    S = fit.to_budget().param_covariance()[np.ix_(data.cols, data.cols)]
+    C = data.U @ S @ np.swapaxes(data.U, 1, 2) + fit.object_sigma_m**2 * np.eye(2)
+    C[:, 0, 0] += data.R3[:, 0]
+    C[:, 0, 1] += data.R3[:, 1]
+    C[:, 1, 0] += data.R3[:, 1]
+    C[:, 1, 1] += data.R3[:, 2]
+    if fit.object_ground_sigma_m > 0:
+        C += fit.object_ground_sigma_m**2 * data.jg[:, :, None] * data.jg[:, None, :]
+    d = data.r - fit.bias_m
+    return np.einsum("na,na->n", d, np.linalg.solve(C, d[..., None])[..., 0])
+
+
+def cross_validate_compact(data: CompactPairs, *, free, by: str = "object", n_folds=None, levels=_LEVELS,
+                           seed: int = 0, max_pairs: int | None = CV_MAX_PAIRS, **fit_options) -> CrossValidation:
+    """:func:`cross_validate` on records from :func:`compact_inputs` (same ``free`` and ``base_budget``)."""
     lv = np.asarray(levels, dtype=np.float64)
     if lv.ndim != 1 or np.any(~(lv > 0) | ~(lv < 1)):
         raise InputError("levels", levels, "probabilities in (0, 1)")
-    fold = _folds(r.shape[0], g, by, n_folds, seed)
-    nees = np.full(r.shape[0], np.nan)
+    if max_pairs is not None and int(max_pairs) < 2:
+        raise InputError("max_pairs", max_pairs, "an integer >= 2 (or None: no subsample)")
+    rows = np.arange(data.n)
+    if max_pairs is not None and data.n > int(max_pairs):
+        rows = np.sort(np.random.default_rng(seed).choice(data.n, int(max_pairs), replace=False))
+    sub = data.take(rows) if rows.size < data.n or not isinstance(data, CompactPairs) else data
+    fold = _folds(sub.n, sub.gid, by, n_folds, seed)
+    nees = np.full(data.n, np.nan)
     for f in np.unique(fold):
         test = fold == f
-        train = ~test
         try:
-            fit = fit_budget(r[train], J[train], R[train], g[train], free=free, **fit_options)
+            fit = fit_compact(sub.subset(~test), free=free, **fit_options)
         except (InputError, np.linalg.LinAlgError):
             continue
-        nees[test] = nees_of(r[test], J[test], R[test], fit.to_budget(), object_sigma_m=fit.object_sigma_m,
-                             object_ground_sigma_m=fit.object_ground_sigma_m, bias_m=fit.bias_m)
+        nees[rows[test]] = _nees_compact(sub.subset(test), fit)
     ok = np.isfinite(nees)
     inside = nees[:, None] <= -2 * np.log1p(-lv)[None, :]
     cov = inside[ok].mean(0) if ok.any() else np.full(lv.size, np.nan)
-    return CrossValidation(by, int(np.unique(fold).size), lv, cov, nees, inside & ok[:, None])
+    return CrossValidation(by, int(np.unique(fold).size), lv, cov, nees, inside & ok[:, None], int(sub.n))

@@ -2,8 +2,9 @@
 
 Readers and pairs are those of ``validate`` (:mod:`footprint_uq.viz.validation_run`,
 :mod:`footprint_uq.validation.pairs`); the fit is :func:`footprint_uq.validation.fit.fit_budget`, the
-cross-validated coverage :func:`footprint_uq.validation.fit.cross_validate`.  Writes the fitted budget
-(YAML, readable by every command) and a JSON summary; both atomically.
+cross-validated coverage :func:`footprint_uq.validation.fit.cross_validate`; the pairs are streamed into
+the fit's compact records (:func:`footprint_uq.validation.fit.compact_inputs`), never all held in memory.
+Writes the fitted budget (YAML, readable by every command) and a JSON summary; both atomically.
 """
 
 from __future__ import annotations
@@ -20,8 +21,8 @@ from ..io.camera_files import save_budget
 from ..products.geo import GeoReference
 from ..uncertainty.budget import ErrorBudget, load_budget
 from ..validation import readers as R
-from ..validation.fit import cross_validate, fit_budget
-from ..validation.pairs import GroupIndex, collect_pairs
+from ..validation.fit import compact_inputs, cross_validate_compact, fit_compact
+from ..validation.pairs import STATUS_OK, GroupIndex, iter_pairs
 from .validation_run import KINDS, detect_kind, label_chunks
 
 __all__ = ["run_budget_fit", "DEFAULT_FREE", "BUDGET_FIT_FILES"]
@@ -41,13 +42,31 @@ def _jsonable(x):
     return None if isinstance(x, float) and not np.isfinite(x) else x
 
 
-def _pairs(labels, kind, budget, contact, folder, **reader):
+def _records(labels, kind, budget, contact, folder, free, **reader):
+    """Stream the labelled data chunk by chunk into the fit's compact records (``fit.compact_inputs``):
+    memory is the records (about 100 bytes a usable pair) plus one chunk, never every pair's arrays."""
     kind = kind or detect_kind(labels)
     if kind not in KINDS:
         raise InputError("kind", kind, f"one of {KINDS}")
     groups = GroupIndex()
+    statuses: Counter = Counter()
     chunks = label_chunks(labels, kind, folder, budget=budget, **reader)
-    return kind, collect_pairs(chunks, budget, contact=contact, groups=groups), groups
+
+    def usable():
+        for p in iter_pairs(chunks, budget, contact=contact, groups=groups):
+            statuses.update(p.status.tolist())
+            ok = p.usable
+            yield p.residual_m[ok], p.dxy_dp[ok], p.cov_object_m2[ok], p.group[ok]
+
+    try:
+        data = compact_inputs(usable(), free=free, base_budget=budget)
+    except InputError as e:
+        n_ok = statuses.get(STATUS_OK, 0)
+        if n_ok >= 2 or e.field != "residual_m":
+            raise
+        raise InputError("labels", str(labels), f"at least 2 usable detection/truth pairs (found {n_ok}; "
+                         f"statuses {dict(statuses)})") from None
+    return kind, data, dict(statuses), groups
 
 
 def run_budget_fit(labels, out_dir, *, base_budget=None, free=DEFAULT_FREE, kind: str | None = None,
@@ -70,23 +89,18 @@ def run_budget_fit(labels, out_dir, *, base_budget=None, free=DEFAULT_FREE, kind
     if origin_lat_deg is not None or origin_lon_deg is not None:
         georef = GeoReference(heading_offset_deg, origin_lat_deg, origin_lon_deg)
     folder = R.FolderReport()
-    kind, pairs, groups = _pairs(labels, kind, base, contact, folder, camera=camera, registry=registry,
-                                 calibration=calibration, image_size_px=image_size_px, georef=georef,
-                                 chunk_rows=131_072)
-    use = pairs.subset(pairs.usable)
-    if len(use) < 2:
-        raise InputError("labels", str(labels), f"at least 2 usable detection/truth pairs (found {len(use)}; "
-                         f"statuses {dict(Counter(pairs.status.tolist()))})")
-    args = (use.residual_m, use.dxy_dp, use.cov_object_m2, use.group)
     opts = {"free": list(free), "base_budget": base, "method": method, "min_groups": min_groups}
-    fit = fit_budget(*args, **opts)
+    kind, data, statuses, groups = _records(labels, kind, base, contact, folder, list(free), camera=camera,
+                                            registry=registry, calibration=calibration, image_size_px=image_size_px,
+                                            georef=georef, chunk_rows=131_072)
+    fit = fit_compact(data, **opts)
     summary = {"labels": str(labels), "kind": kind, "contact": contact if isinstance(contact, str) else "custom",
-               "statuses": dict(Counter(pairs.status.tolist())), "groups": groups.names(), "folder": folder.to_dict(),
+               "statuses": statuses, "groups": groups.names(), "folder": folder.to_dict(),
                "fit": fit.to_dict(), "cross_validation": {}}
-    if cross_validation:
-        summary["cross_validation"]["object"] = cross_validate(*args, by="object", **opts).to_dict()
-        if len(np.unique(use.group)) >= 2:
-            summary["cross_validation"]["group"] = cross_validate(*args, by="group", **opts).to_dict()
+    if cross_validation:  # above fit.CV_MAX_PAIRS pairs: on a seeded subsample, reported in the summary
+        summary["cross_validation"]["object"] = cross_validate_compact(data, by="object", **opts).to_dict()
+        if data.groups_present() >= 2:
+            summary["cross_validation"]["group"] = cross_validate_compact(data, by="group", **opts).to_dict()
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     files = {k: out / v for k, v in BUDGET_FIT_FILES.items()}
