@@ -301,7 +301,10 @@ def test_report_helpers(tmp_path):
 
     t = html_table([{"a": "<b>", "b": float("nan"), "c": None, "d": 0.123456789, "e": True}], floatfmt=".3g")
     assert "&lt;b&gt;" in t and "<b>" not in t
-    assert "<td>NaN</td>" in t and "<td>&ndash;</td>" in t and "<td>0.123</td>" in t and "<td>yes</td>" in t
+    # a missing number (None or NaN) is a dash unless the column says what it means: never "NaN" (issue 24)
+    assert "NaN" not in t and t.count("<td>&ndash;</td>") == 2 and "<td>0.123</td>" in t and "<td>yes</td>" in t
+    t = html_table([{"b": float("nan")}], missing={"b": "no ground point"})
+    assert "<td>no ground point</td>" in t
     png = b"\x89PNG\r\n\x1a\n" + b"0" * 10
     tag = img_tag(png, "a <caption>")
     uri = tag.split('src="')[1].split('"')[0]

@@ -204,7 +204,7 @@ def _gcp_page(out: Path) -> Path:
     import numpy as np
 
     from footprint_uq import PanTiltCamera
-    from footprint_uq.calibration.gcp import run_gcp
+    from footprint_uq.calibration.gcp_run import run_gcp
 
     cam = PanTiltCamera(focal_px=1400.0, image_size_px=(1920, 1080), height_m=8.0, pan_deg=30.0, tilt_deg=20.0)
     xy = np.array([[x, y] for x in (-6.0, 0.0, 6.0) for y in (15.0, 25.0, 40.0)])

@@ -27,7 +27,8 @@ __all__ = ["budget_cmd"]
               help=f"Comma-separated terms to fit: {', '.join([*FITTABLE_TERMS, *OBJECT_TERMS])}.")
 @click.option("--contact", type=click.Choice(sorted(CONTACT_MODELS)), default="bottom-centre", show_default=True,
               help="Where a 2-D box touches the ground.")
-@click.option("--method", type=click.Choice(["reml", "ml"]), default="reml", show_default=True)
+@click.option("--method", type=click.Choice(["reml", "ml"]), default="reml", show_default=True,
+              help="Restricted (REML: the bias's degrees of freedom accounted for) or plain maximum likelihood.")
 @click.option("--min-groups", type=click.IntRange(min=1), default=3, show_default=True,
               help="Calibration groups (cameras) a shared term needs to be fitted.")
 @click.option("--no-cv", is_flag=True, help="No cross-validated coverage (faster).")
