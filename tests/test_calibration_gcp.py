@@ -46,7 +46,7 @@ def test_coverage_200_campaigns(known):
     assert abs(pix - 0.95) <= 0.03, pix
 
 
-@pytest.mark.slow
+@pytest.mark.long  # ~2 min each on 2 cores since the solves check their own weakness (multi-start, k1 test)
 @pytest.mark.parametrize("known", [True, False], ids=["intrinsics", "focal"])
 def test_coverage_1000_campaigns(known):
     pose, pix = coverage(1000, known_intrinsics=known, seed=0)
