@@ -4,6 +4,7 @@ intrinsics' covariance, degenerate input, the GCP table, the CLI outputs."""
 from __future__ import annotations
 
 import csv
+import warnings
 from pathlib import Path
 
 import cv2
@@ -60,9 +61,11 @@ def test_covariance_matches_monte_carlo():
     rng = np.random.default_rng(5)
     intr = Intrinsics(cam.K, np.zeros(5), SIZE)
     ests = []
-    for _ in range(300):
-        g = GCPSet(uv + rng.normal(0, 1.0, uv.shape), xyz + rng.normal(0, 0.05, xyz.shape), 1.0, 0.05)
-        ests.append(solve_gcp(g, SIZE, intrinsics=intr, leave_one_out=False).params[POSE])
+    with warnings.catch_warnings():  # a few of 300 draws exceed the chi-square test's 1e-3 level, as they should
+        warnings.simplefilter("ignore", ConsistencyWarning)
+        for _ in range(300):
+            g = GCPSet(uv + rng.normal(0, 1.0, uv.shape), xyz + rng.normal(0, 0.05, xyz.shape), 1.0, 0.05)
+            ests.append(solve_gcp(g, SIZE, intrinsics=intr, leave_one_out=False).params[POSE])
     ref = solve_gcp(GCPSet(uv, xyz, 1.0, 0.05), SIZE, intrinsics=intr, leave_one_out=False)
     sd_mc = np.std(ests, axis=0, ddof=1)
     sd_lin = ref.sigma_params()[POSE]
@@ -144,9 +147,10 @@ def test_chessboard_outlier_is_named(chess_cal):
     cal = chess_cal
     k = cal.labels.index("right05.jpg")
     obj = parse_board("9x6", 0.025).object_points() @ np.diag([1.0, -1.0, -1.0])
-    with pytest.warns(ConsistencyWarning, match=r"GCP 46: residual"):
+    with pytest.warns(ConsistencyWarning) as caught:  # the point named, and the chi-square it inflates
         solve_gcp(GCPSet(cal.image_points_px[k], obj, 0.25, 0.0), cal.image_size_px, intrinsics=cal,
                   leave_one_out=False)
+    assert any("GCP 46: residual" in str(w.message) for w in caught)
 
 
 # ------------------------------------------------------------------------------------------ degenerate input

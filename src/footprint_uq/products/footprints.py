@@ -551,14 +551,16 @@ def footprints_from_corners(camera, budget, corners_px, *, pixel_cov_px2=None, a
     Sp = budget.param_covariance()
     used = np.flatnonzero(np.any(Sp != 0, axis=0))
     Jp = bp.dxy_dp[..., used].reshape(N, 2 * K, used.size)
-    joint = Jp @ Sp[np.ix_(used, used)] @ np.swapaxes(Jp, -1, -2)
+    with np.errstate(over="ignore", invalid="ignore"):  # overflow: not finite, marked OVERFLOW below
+        joint = Jp @ Sp[np.ix_(used, used)] @ np.swapaxes(Jp, -1, -2)
     Juv = np.zeros((N, 2 * K, 2 * K))
     for k in range(K):
         Juv[:, 2 * k:2 * k + 2, 2 * k:2 * k + 2] = bp.dxy_duv[:, k]
     Spx = np.broadcast_to(np.kron(np.eye(K), budget.pixel_covariance()), (N, 2 * K, 2 * K))
     if det is not None:
         Spx = Spx + det
-    joint = joint + Juv @ Spx @ np.swapaxes(Juv, -1, -2)
+    with np.errstate(over="ignore", invalid="ignore"):
+        joint = joint + Juv @ Spx @ np.swapaxes(Juv, -1, -2)
     bad_rows = np.repeat(~computed, 2, axis=1)
     joint = np.where(bad_rows[:, :, None] | bad_rows[:, None, :], np.nan, joint)
     idx = np.arange(K)
