@@ -132,8 +132,6 @@ def test_chessboard_corners_as_gcps_recover_opencv_pose(chess_cal):
 
 class _no_warning:
     def __enter__(self):
-        import warnings
-
         self._w = warnings.catch_warnings()
         self._w.__enter__()
         warnings.simplefilter("error", ConsistencyWarning)
