@@ -6,9 +6,7 @@ from __future__ import annotations
 import json
 import os
 import re
-import shutil
 import subprocess
-from pathlib import Path
 
 import pyarrow as pa
 import pyarrow.parquet as pq
@@ -18,12 +16,9 @@ from footprint_uq.io import save_camera
 from footprint_uq.uncertainty.budget import ErrorBudget
 from footprint_uq.validation.synthetic import campaign_table, random_cameras
 from footprint_uq.viz.validation_run import run_validation
+from test_report_browser import CHROMIUM, FLAGS
 
 pytestmark = pytest.mark.browser
-
-FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-         "--disable-background-networking", "--disable-component-update", "--disable-sync",
-         "--disable-dev-shm-usage", "--allow-file-access-from-files"]
 
 CHECK = """<script>
 window.__fuq = {errors: []};
@@ -48,16 +43,9 @@ window.addEventListener('load', function () {
 </script>"""
 
 
-def _chromium() -> str | None:
-    for name in ("chromium", "chromium-browser"):
-        if shutil.which(name):
-            return shutil.which(name)
-    return "/usr/bin/chromium" if Path("/usr/bin/chromium").exists() else None
-
-
 @pytest.fixture(scope="module")
 def report(tmp_path_factory):
-    if _chromium() is None:
+    if CHROMIUM is None:
         if os.environ.get("CI"):
             pytest.fail("chromium not found in CI (.ci/run should have installed it)")
         pytest.skip("chromium not installed (apt-get install -y chromium); the browser check needs it")
@@ -77,7 +65,7 @@ def report(tmp_path_factory):
 def _probe(html: str, tmp_path, width: int) -> dict:
     probe = tmp_path / "probe.html"
     probe.write_text(html.replace("<head>", "<head>" + CHECK, 1), encoding="utf-8")
-    cmd = [_chromium(), *FLAGS, f"--user-data-dir={tmp_path / 'profile'}", "--virtual-time-budget=10000",
+    cmd = [CHROMIUM, *FLAGS, f"--user-data-dir={tmp_path / 'profile'}", "--virtual-time-budget=10000",
            f"--window-size={width},900", "--dump-dom", probe.as_uri()]
     p = subprocess.run(cmd, capture_output=True, text=True, timeout=120, env={**os.environ, "HOME": str(tmp_path)})
     assert p.returncode == 0, p.stderr[-2000:]
