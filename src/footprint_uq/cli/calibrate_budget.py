@@ -11,7 +11,7 @@ import click
 from ..validation.fit import FITTABLE_TERMS, OBJECT_TERMS
 from ..validation.pairs import CONTACT_MODELS
 from ..viz.budget_fit_run import DEFAULT_FREE, run_budget_fit
-from ..viz.validation_run import KINDS
+from .validate import label_source_options
 
 __all__ = ["budget_cmd"]
 
@@ -32,16 +32,7 @@ __all__ = ["budget_cmd"]
 @click.option("--min-groups", type=click.IntRange(min=1), default=3, show_default=True,
               help="Calibration groups (cameras) a shared term needs to be fitted.")
 @click.option("--no-cv", is_flag=True, help="No cross-validated coverage (faster).")
-@click.option("--kind", type=click.Choice(KINDS), default=None, help="Input kind (default: from the path).")
-@click.option("--camera", "camera_path", default=None, metavar="FILE", help="Camera file of a one-camera pairs table.")
-@click.option("--registry", default=None, metavar="FILE_OR_DIR", help="Camera registry of a multi-camera pairs table.")
-@click.option("--calibration", default=None, metavar="FILE", help="TUMTraf calibration JSON of OpenLABEL labels.")
-@click.option("--image-size", nargs=2, type=click.IntRange(min=1), default=None, metavar="W H",
-              help="Image size where the files do not give it (Rope3D: 1920 1080, the default there).")
-@click.option("--origin-lat", type=float, default=None, metavar="LAT", help="WGS84 latitude of the world origin.")
-@click.option("--origin-lon", type=float, default=None, metavar="LON", help="WGS84 longitude of the world origin.")
-@click.option("--heading-offset-deg", type=float, default=0.0, show_default=True, metavar="D",
-              help="Compass bearing of the world +y axis (truth given as lat_deg, lon_deg).")
+@label_source_options
 def budget_cmd(labels, out_dir, budget_spec, free, contact, method, min_groups, no_cv, kind, camera_path, registry,
                calibration, image_size, origin_lat, origin_lon, heading_offset_deg):
     """Fit the error budget to labelled detections: REML with the calibration error shared per camera.

@@ -15,7 +15,32 @@ from ..validation.coverage import DEFAULT_RANGE_BANDS_M
 from ..validation.pairs import CONTACT_MODELS
 from ..viz.validation_run import KINDS, run_validation
 
-__all__ = ["validate_cmd"]
+__all__ = ["validate_cmd", "label_source_options"]
+
+
+def label_source_options(f):
+    """The options that say where labelled data come from and how to read them (``validate``, ``calibrate
+    budget``): ``--kind``, ``--camera``, ``--registry``, ``--calibration``, ``--image-size``, ``--origin-lat``,
+    ``--origin-lon``, ``--heading-offset-deg``."""
+    for opt in reversed(_LABEL_SOURCE_OPTIONS):
+        f = opt(f)
+    return f
+
+
+_LABEL_SOURCE_OPTIONS = [
+    click.option("--kind", type=click.Choice(KINDS), default=None, help="Input kind (default: from the path)."),
+    click.option("--camera", "camera_path", default=None, metavar="FILE",
+                 help="Camera file of a one-camera pairs table."),
+    click.option("--registry", default=None, metavar="FILE_OR_DIR",
+                 help="Camera registry (camera_id -> camera, budget, origin) of a multi-camera pairs table."),
+    click.option("--calibration", default=None, metavar="FILE", help="TUMTraf calibration JSON of OpenLABEL labels."),
+    click.option("--image-size", nargs=2, type=click.IntRange(min=1), default=None, metavar="W H",
+                 help="Image size where the files do not give it (Rope3D: 1920 1080, the default there)."),
+    click.option("--origin-lat", type=float, default=None, metavar="LAT", help="WGS84 latitude of the world origin."),
+    click.option("--origin-lon", type=float, default=None, metavar="LON", help="WGS84 longitude of the world origin."),
+    click.option("--heading-offset-deg", type=float, default=0.0, show_default=True, metavar="D",
+                 help="Compass bearing of the world +y axis (truth given as lat_deg, lon_deg)."),
+]
 
 
 def _bands(text: str) -> tuple[float, ...]:
@@ -38,17 +63,7 @@ def _bands(text: str) -> tuple[float, ...]:
                    "budget file (a camera registry's per-camera budgets win).")
 @click.option("--contact", type=click.Choice(sorted(CONTACT_MODELS)), default="bottom-centre", show_default=True,
               help="Where a 2-D box touches the ground.")
-@click.option("--kind", type=click.Choice(KINDS), default=None, help="Input kind (default: from the path).")
-@click.option("--camera", "camera_path", default=None, metavar="FILE", help="Camera file of a one-camera pairs table.")
-@click.option("--registry", default=None, metavar="FILE_OR_DIR",
-              help="Camera registry (camera_id -> camera, budget, origin) of a multi-camera pairs table.")
-@click.option("--calibration", default=None, metavar="FILE", help="TUMTraf calibration JSON of OpenLABEL labels.")
-@click.option("--image-size", nargs=2, type=click.IntRange(min=1), default=None, metavar="W H",
-              help="Image size where the files do not give it (Rope3D: 1920 1080, the default there).")
-@click.option("--origin-lat", type=float, default=None, metavar="LAT", help="WGS84 latitude of the world origin.")
-@click.option("--origin-lon", type=float, default=None, metavar="LON", help="WGS84 longitude of the world origin.")
-@click.option("--heading-offset-deg", type=float, default=0.0, show_default=True, metavar="D",
-              help="Compass bearing of the world +y axis (truth given as lat_deg, lon_deg).")
+@label_source_options
 @click.option("--range-bands", default=",".join(f"{v:g}" for v in DEFAULT_RANGE_BANDS_M), show_default=True,
               metavar="EDGES", help="Range band edges in metres (the last band is open).")
 @click.option("--alpha", type=click.FloatRange(0.0, 0.5, min_open=True), default=0.05, show_default=True,
