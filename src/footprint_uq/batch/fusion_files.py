@@ -277,33 +277,99 @@ def _codes(arr: pa.Array) -> tuple[np.ndarray, pa.Array]:
     return codes, values.take(pa.array(order))
 
 
-def _fuse_parts(parts: list[_Part], key, *, confidence: float, ellipse_confidence: float | None,
-                heading_offset_deg: float) -> FusedFootprints:
-    t0 = time.perf_counter()
-    key = tuple(key)
-    thr2 = chi2_threshold(confidence, 2)  # validates confidence
-    # -- stack every row of every input (parsed rows, then the unparseable ones) ---------------------
-    inp, srow, cam, reason, det_row, keyvals = [], [], [], [], [], {k: [] for k in key}
-    X = []
-    summary = FuseSummary()
+@dataclass
+class _Rows:
+    """Every row of every input stacked (parsed rows of a part first, then its unparseable ones)."""
+
+    inp: np.ndarray       # (R,) int32 index of the input
+    srow: np.ndarray      # (R,) int64 0-based row in that input
+    cam: pa.Array         # (R,) camera id (text)
+    reason: np.ndarray    # (R,) object: None, or why the row is not used
+    det_row: np.ndarray   # (R,) detection row of the footprint (NaN if absent)
+    X: np.ndarray         # (R, 5) ESTIMATE_COLUMNS as float64
+    keyvals: dict         # key column -> (R,) Arrow array
+
+
+def _part_camera(part: _Part, n: int, m: int) -> pa.Array:
+    """Camera id of each of the ``n + m`` rows of ``part`` (its file's id, or its ``camera_id`` column)."""
+    if part.camera is None:
+        return _column(part.table, "camera_id", pa.string(), m)
+    c = pa.DictionaryArray.from_arrays(pa.array(np.zeros(n + m, np.int32)), pa.array([part.camera]))
+    return c.cast(pa.string())
+
+
+def _mark_status_reasons(t: pa.Table, rs: np.ndarray, todo: np.ndarray) -> None:
+    """Rows whose input ``status`` is not ok get ``input status S: R`` in ``rs`` (in place, ``todo`` too)."""
+    st_col = _column(t, "status", pa.string(), 0)
+    not_ok = pc.fill_null(pc.not_equal(st_col, _STATUS_OK), True).to_numpy(zero_copy_only=False)
+    bad = np.flatnonzero(todo & not_ok)
+    if not bad.size:
+        return
+    # only the rows without a centre are turned into Python strings
+    st = st_col.take(pa.array(bad)).to_pylist()
+    why = (_column(t, "reason", pa.string(), 0).take(pa.array(bad)).to_pylist()
+           if "reason" in t.column_names else [None] * bad.size)
+    for j, a, b in zip(bad.tolist(), st, why, strict=True):
+        rs[j] = f"input status {a}: {b}" if b not in (None, "") else f"input status {a}"
+    todo[bad] = False
+
+
+def _mark_estimate_reasons(est: np.ndarray, rs: np.ndarray, todo: np.ndarray) -> None:
+    """Rows with a non-finite, out-of-range or non positive definite estimate get their reason in ``rs``."""
+    for j, name in enumerate(ESTIMATE_COLUMNS):
+        bad = todo & ~np.isfinite(est[:, j])
+        rs[bad] = f"missing or non-finite field {name}"
+        todo &= ~bad
+    for j, name in enumerate(ESTIMATE_COLUMNS[:2]):
+        bad = todo & (np.abs(est[:, j]) > MAX_COORD_M)
+        rs[bad] = f"field {name} out of range (|{name}| > {MAX_COORD_M:g} m)"
+        todo &= ~bad
+    cxx, cxy, cyy = est[:, 2], est[:, 3], est[:, 4]
+    with np.errstate(invalid="ignore", over="ignore"):
+        pd_ok = (cxx > 0) & (cyy > 0) & (cxx * cyy - cxy * cxy > 0)
+        scale_ok = (np.maximum(cxx, cyy) <= MAX_VAR_M2) & (np.minimum(cxx, cyy) >= MIN_VAR_M2)
+    rs[todo & ~pd_ok] = "covariance not positive definite"
+    todo &= pd_ok
+    rs[todo & ~scale_ok] = f"covariance out of range (variances must lie in [{MIN_VAR_M2:g}, {MAX_VAR_M2:g}] m^2)"
+
+
+def _part_reasons(part: _Part, key, keyvals: dict, cam: pa.Array, est: np.ndarray) -> np.ndarray:
+    """Per-row reasons of one part, first applicable wins (vectorised masks; loops over a few columns only)."""
+    t = part.table
+    n, m = t.num_rows, len(part.malformed)
+    rs = np.empty(n + m, dtype=object)
+    rs[:n] = part.pre
+    rs[n:] = [r for _, r in part.malformed]
+    parsed = rs[:n]  # a view: writing into it writes into rs
+    todo = parsed == None  # noqa: E711 - elementwise on an object array
+    for k in key:
+        miss = todo & keyvals[k].slice(0, n).is_null().to_numpy(zero_copy_only=False)
+        parsed[miss] = f"missing key field {k}"
+        todo &= ~miss
+    if part.camera is None:
+        miss = todo & cam.slice(0, n).is_null().to_numpy(zero_copy_only=False)
+        parsed[miss] = "missing camera_id"
+        todo &= ~miss
+    if "status" in t.column_names:
+        _mark_status_reasons(t, parsed, todo)
+    _mark_estimate_reasons(est[:n], parsed, todo)
+    return rs
+
+
+def _stack_parts(parts: list[_Part], key, summary: FuseSummary) -> _Rows:
+    """Stack every row of every input, with the reason of each row that cannot be used (None: usable)."""
+    inp, srow, cam, reason, det_row, X, keyvals = [], [], [], [], [], [], {k: [] for k in key}
     for i, part in enumerate(parts):
         t = part.table
-        n = t.num_rows
-        m = len(part.malformed)
+        n, m = t.num_rows, len(part.malformed)
         inp.append(np.full(n + m, i, dtype=np.int32))
         srow.append(np.concatenate([part.source_rows.astype(np.int64),
                                     np.asarray([r for r, _ in part.malformed], dtype=np.int64)]))
-        if part.camera is not None:
-            c = pa.DictionaryArray.from_arrays(pa.array(np.zeros(n + m, np.int32)), pa.array([part.camera]))
-            c = c.cast(pa.string())
-        else:
-            c = _column(t, "camera_id", pa.string(), m)
+        c = _part_camera(part, n, m)
         cam.append(c)
-        rs = np.empty(n + m, dtype=object)
-        rs[:n] = part.pre
-        rs[n:] = [r for _, r in part.malformed]
+        kv = {k: _column(t, k, _key_type(k), m) for k in key}
         for k in key:
-            keyvals[k].append(_column(t, k, _key_type(k), m))
+            keyvals[k].append(kv[k])
         est = np.full((n + m, 5), np.nan)
         for j, name in enumerate(ESTIMATE_COLUMNS):
             est[:n, j] = _floats(t, name)
@@ -312,126 +378,106 @@ def _fuse_parts(parts: list[_Part], key, *, confidence: float, ellipse_confidenc
         if "row" in t.column_names:
             dr[:n] = _floats(t, "row")
         det_row.append(dr)
-        # per-row reasons, first applicable wins (vectorised masks; loops over a few columns only)
-        todo = rs[:n] == None  # noqa: E711 - elementwise on an object array
-        for k in key:
-            miss = todo & keyvals[k][-1].slice(0, n).is_null().to_numpy(zero_copy_only=False)
-            rs[:n][miss] = f"missing key field {k}"
-            todo &= ~miss
-        if part.camera is None:
-            miss = todo & c.slice(0, n).is_null().to_numpy(zero_copy_only=False)
-            rs[:n][miss] = "missing camera_id"
-            todo &= ~miss
-        if "status" in t.column_names:
-            st_col = _column(t, "status", pa.string(), 0)
-
-            not_ok = pc.fill_null(pc.not_equal(st_col, _STATUS_OK), True).to_numpy(zero_copy_only=False)
-            bad = np.flatnonzero(todo & not_ok)
-            if bad.size:  # only the rows without a centre are turned into Python strings
-                st = st_col.take(pa.array(bad)).to_pylist()
-                why = (_column(t, "reason", pa.string(), 0).take(pa.array(bad)).to_pylist()
-                       if "reason" in t.column_names else [None] * bad.size)
-                for j, a, b in zip(bad.tolist(), st, why, strict=True):
-                    rs[j] = f"input status {a}: {b}" if b not in (None, "") else f"input status {a}"
-                todo[bad] = False
-        for j, name in enumerate(ESTIMATE_COLUMNS):
-            bad = todo & ~np.isfinite(est[:n, j])
-            rs[:n][bad] = f"missing or non-finite field {name}"
-            todo &= ~bad
-        for j, name in enumerate(ESTIMATE_COLUMNS[:2]):
-            bad = todo & (np.abs(est[:n, j]) > MAX_COORD_M)
-            rs[:n][bad] = f"field {name} out of range (|{name}| > {MAX_COORD_M:g} m)"
-            todo &= ~bad
-        cxx, cxy, cyy = est[:n, 2], est[:n, 3], est[:n, 4]
-        with np.errstate(invalid="ignore", over="ignore"):
-            pd_ok = (cxx > 0) & (cyy > 0) & (cxx * cyy - cxy * cxy > 0)
-            scale_ok = (np.maximum(cxx, cyy) <= MAX_VAR_M2) & (np.minimum(cxx, cyy) >= MIN_VAR_M2)
-        rs[:n][todo & ~pd_ok] = "covariance not positive definite"
-        todo &= pd_ok
-        rs[:n][todo & ~scale_ok] = (f"covariance out of range (variances must lie in [{MIN_VAR_M2:g}, "
-                                    f"{MAX_VAR_M2:g}] m^2)")
-        reason.append(rs)
+        reason.append(_part_reasons(part, key, kv, c, est))
         summary.inputs.append({"input": part.name, "camera_id": part.camera, "rows": n + m})
-    if parts:
-        inp, srow, reason = (np.concatenate(a) for a in (inp, srow, reason))
-        cam = pa.concat_arrays(cam)
-        det_row, X = np.concatenate(det_row), np.concatenate(X)
-        keyvals = {k: pa.concat_arrays(v) for k, v in keyvals.items()}
-    else:
-        inp, srow = np.zeros(0, np.int32), np.zeros(0, np.int64)
-        reason = np.zeros(0, dtype=object)
-        cam = pa.array([], pa.string())
-        det_row, X = np.zeros(0), np.zeros((0, 5))
-        keyvals = {k: pa.array([], _key_type(k)) for k in key}
-    R = inp.shape[0]
-    # -- association: group rows by key ------------------------------------------------------------
-    kcodes = []
-    kuniq = []
+    if not parts:
+        return _Rows(np.zeros(0, np.int32), np.zeros(0, np.int64), pa.array([], pa.string()),
+                     np.zeros(0, dtype=object), np.zeros(0), np.zeros((0, 5)),
+                     {k: pa.array([], _key_type(k)) for k in key})
+    return _Rows(np.concatenate(inp), np.concatenate(srow), pa.concat_arrays(cam), np.concatenate(reason),
+                 np.concatenate(det_row), np.concatenate(X), {k: pa.concat_arrays(v) for k, v in keyvals.items()})
+
+
+@dataclass
+class _Groups:
+    """Rows grouped by key: one group per object."""
+
+    keyed: np.ndarray     # (R,) bool: every key field present
+    group: np.ndarray     # (R,) int64 group of the row (-1 if not keyed)
+    groups: np.ndarray    # (M, k) key codes of each group
+    kuniq: list           # per key column, the sorted distinct values (codes index them)
+    camc: np.ndarray      # (R,) camera code (-1: null)
+    cam_uniq: pa.Array    # sorted distinct camera ids
+
+    @property
+    def M(self) -> int:
+        return self.groups.shape[0]
+
+
+def _associate(rows: _Rows, key) -> _Groups:
+    """Group rows by key; rows of one camera seen twice for a key are rejected (``duplicate: ...``)."""
+    R = rows.inp.shape[0]
+    kcodes, kuniq = [], []
     for k in key:
-        c, u = _codes(keyvals[k])
+        c, u = _codes(rows.keyvals[k])
         kcodes.append(c)
         kuniq.append(u)
     kc = np.stack(kcodes, 1) if R else np.zeros((0, len(key)), np.int64)
     keyed = (kc >= 0).all(1)
     groups, ginv = _row_codes(kc[keyed])
-    M = groups.shape[0]
     group = np.full(R, -1, dtype=np.int64)
     group[keyed] = ginv
     # same camera twice for one key: shared calibration error, not independent -> reject all of them
-    camc, cam_uniq = _codes(cam)
-    cand = (reason == None) & keyed  # noqa: E711
+    camc, cam_uniq = _codes(rows.cam)
+    cand = (rows.reason == None) & keyed  # noqa: E711
     if np.any(cand):
         pairs = np.stack([group[cand], np.maximum(camc[cand], 0)], 1)
         _, pinv = _row_codes(pairs)
         cnt = np.bincount(pinv)[pinv]
         idx = np.flatnonzero(cand)[cnt > 1]
         for j, n_dup in zip(idx.tolist(), cnt[cnt > 1].tolist(), strict=True):
-            reason[j] = f"duplicate: {n_dup} rows of one camera for this key"
-    used_in = (reason == None) & keyed  # noqa: E711
-    # -- fusion (information form) on the keyed rows; rejected rows enter as NaN (unused) -------------
+            rows.reason[j] = f"duplicate: {n_dup} rows of one camera for this key"
+    return _Groups(keyed, group, groups, kuniq, camc, cam_uniq)
+
+
+@dataclass
+class _Fused:
+    """Per-object fusion results (M objects) and per-row test results (R rows)."""
+
+    fx: np.ndarray        # (M, 2) fused centre (m)
+    fP: np.ndarray        # (M, 2, 2) fused covariance (m^2)
+    nsrc: np.ndarray      # (M,) cameras used
+    chi2: np.ndarray      # (M,)
+    chi2_thr: np.ndarray  # (M,)
+    cons: np.ndarray      # (M,) bool
+    d2: np.ndarray        # (R,) squared Mahalanobis distance of each row to the fused centre
+    flag: np.ndarray      # (R,) bool: row inconsistent with the fused centre
+    overflow: np.ndarray  # (M,) bool: fused result not finite
+
+
+def _fuse_groups(rows: _Rows, g: _Groups, used_in: np.ndarray, confidence: float) -> _Fused:
+    """Fuse the usable rows of each group in information form; rejected rows enter as NaN (unused)."""
+    R, M, keyed, group, X = rows.inp.shape[0], g.M, g.keyed, g.group, rows.X
     xy = np.where(used_in[:, None], X[:, :2], np.nan)
     C = np.empty((R, 2, 2))
     C[:, 0, 0], C[:, 0, 1], C[:, 1, 0], C[:, 1, 1] = X[:, 2], X[:, 3], X[:, 3], X[:, 4]
     C = np.where(used_in[:, None, None], C, np.nan)
     d2 = np.full(R, np.nan)
     flag = np.zeros(R, dtype=bool)
-    if M:
-        fr = fuse_by_id(group[keyed], xy[keyed], C[keyed], confidence=confidence)
-        fx, fP, nsrc = fr.xy_world_m, fr.cov_m2, fr.n_sources
-        chi2, chi2_thr, cons = fr.chi2, fr.chi2_threshold, fr.consistent
-        d2[keyed] = fr.source_d2
-        flag[keyed] = fr.source_inconsistent
-    else:
-        fx, fP = np.zeros((0, 2)), np.zeros((0, 2, 2))
-        nsrc = np.zeros(0, np.int64)
-        chi2 = chi2_thr = np.zeros(0)
-        cons = np.zeros(0, bool)
-    reason = np.where(used_in, "ok", reason).astype(object)
-    if M:  # one usable estimate: pass it through bit for bit (the information form would round it)
-        single = used_in & (group >= 0)
-        single[single] = nsrc[group[single]] == 1
-        fx, fP = fx.copy(), fP.copy()
-        fx[group[single]] = xy[single]
-        fP[group[single]] = C[single]
-    # -- per object ----------------------------------------------------------------------------------
-    n_rows = np.bincount(group[keyed], minlength=M)
-    n_incons = np.bincount(group[keyed], weights=flag[keyed], minlength=M).astype(np.int64)
-    max_d2 = np.full(M, np.nan)
-    ok_d2 = keyed & np.isfinite(d2)
-    if np.any(ok_d2):
-        np.fmax.at(max_d2, group[ok_d2], d2[ok_d2])
-    cams_used = _join_per_group(group, camc, cam_uniq, used_in, M)
-    cams_flag = _join_per_group(group, camc, cam_uniq, flag, M)
+    if not M:
+        z = np.zeros(0)
+        return _Fused(np.zeros((0, 2)), np.zeros((0, 2, 2)), np.zeros(0, np.int64), z, z, np.zeros(0, bool),
+                      d2, flag, np.zeros(0, bool))
+    fr = fuse_by_id(group[keyed], xy[keyed], C[keyed], confidence=confidence)
+    fx, fP, nsrc = fr.xy_world_m.copy(), fr.cov_m2.copy(), fr.n_sources
+    d2[keyed] = fr.source_d2
+    flag[keyed] = fr.source_inconsistent
+    # one usable estimate: pass it through bit for bit (the information form would round it)
+    single = used_in & (group >= 0)
+    single[single] = nsrc[group[single]] == 1
+    fx[group[single]] = xy[single]
+    fP[group[single]] = C[single]
     # outputs are checked too: a fused centre or covariance that is not finite is never "ok"
     overflow = (nsrc > 0) & ~(np.isfinite(fx).all(-1) & np.isfinite(fP).all((-2, -1)))
     if np.any(overflow):
-        fx, fP = fx.copy(), fP.copy()
         fx[overflow], fP[overflow] = np.nan, np.nan
         nsrc = np.where(overflow, 0, nsrc)
-    smaj, smin, ori = ellipse_axes(fP)
-    v2x = {**cpm_fields(fP, heading_offset_deg), **j2735_fields(fP, heading_offset_deg)}
-    has = nsrc > 0
-    # reasons of objects without any usable row: the (first) reason of their rows
+    return _Fused(fx, fP, nsrc, fr.chi2, fr.chi2_threshold, fr.consistent, d2, flag, overflow)
+
+
+def _object_reasons(g: _Groups, f: _Fused, reason: np.ndarray) -> np.ndarray:
+    """``ok``, or for objects without any usable row ``no usable estimate: <the first row's reason>``."""
+    M, group, keyed, has = g.M, g.group, g.keyed, f.nsrc > 0
     obj_reason = np.full(M, "ok", dtype=object)
     if np.any(~has):
         first_reason = np.full(M, None, dtype=object)
@@ -441,16 +487,32 @@ def _fuse_parts(parts: list[_Part], key, *, confidence: float, ellipse_confidenc
         firsts = order[np.r_[True, g_sorted[1:] != g_sorted[:-1]]] if order.size else order
         first_reason[group[firsts]] = reason[firsts]
         obj_reason[~has] = ["no usable estimate: " + str(r) for r in first_reason[~has]]
-        obj_reason[overflow] = "fused result not finite (overflow)"
+        obj_reason[f.overflow] = "fused result not finite (overflow)"
+    return obj_reason
+
+
+def _objects_table(key, g: _Groups, f: _Fused, used_in: np.ndarray, reason: np.ndarray, *,
+                   ellipse_confidence: float | None, heading_offset_deg: float) -> pa.Table:
+    """One row per object: fused centre, covariance, ellipse, consistency and V2X fields."""
+    M, group, keyed, nsrc, fP = g.M, g.group, g.keyed, f.nsrc, f.fP
+    n_rows = np.bincount(group[keyed], minlength=M)
+    n_incons = np.bincount(group[keyed], weights=f.flag[keyed], minlength=M).astype(np.int64)
+    max_d2 = np.full(M, np.nan)
+    ok_d2 = keyed & np.isfinite(f.d2)
+    if np.any(ok_d2):
+        np.fmax.at(max_d2, group[ok_d2], f.d2[ok_d2])
+    smaj, smin, ori = ellipse_axes(fP)
+    v2x = {**cpm_fields(fP, heading_offset_deg), **j2735_fields(fP, heading_offset_deg)}
+    has = nsrc > 0
     cols: dict[str, pa.Array] = {}
     for j, k in enumerate(key):
-        cols[k] = kuniq[j].take(pa.array(groups[:, j])) if M else pa.array([], _key_type(k))
+        cols[k] = g.kuniq[j].take(pa.array(g.groups[:, j])) if M else pa.array([], _key_type(k))
     cols["status"] = pa.array(np.where(has, "ok", "error").tolist(), pa.string())
-    cols["reason"] = pa.array(obj_reason, pa.string())
+    cols["reason"] = pa.array(_object_reasons(g, f, reason), pa.string())
     cols["n_cameras"] = pa.array(nsrc.astype(np.int32))
     cols["n_rows"] = pa.array(n_rows.astype(np.int32))
-    cols["cameras"] = pa.array(cams_used, pa.string())
-    for name, v in (("x_m", fx[:, 0]), ("y_m", fx[:, 1]), ("cov_xx_m2", fP[:, 0, 0]),
+    cols["cameras"] = pa.array(_join_per_group(group, g.camc, g.cam_uniq, used_in, M), pa.string())
+    for name, v in (("x_m", f.fx[:, 0]), ("y_m", f.fx[:, 1]), ("cov_xx_m2", fP[:, 0, 0]),
                     ("cov_xy_m2", 0.5 * (fP[:, 0, 1] + fP[:, 1, 0])), ("cov_yy_m2", fP[:, 1, 1]),
                     ("sigma_major_m", smaj), ("sigma_minor_m", smin), ("orientation_deg", ori)):
         cols[name] = pa.array(np.asarray(v, dtype=np.float64))
@@ -458,48 +520,76 @@ def _fuse_parts(parts: list[_Part], key, *, confidence: float, ellipse_confidenc
         a, b, _ = ellipse_axes(fP, confidence=ellipse_confidence)
         cols["semi_major_m"] = pa.array(a)
         cols["semi_minor_m"] = pa.array(b)
-    cols["chi2"] = pa.array(np.asarray(chi2, dtype=np.float64))
+    cols["chi2"] = pa.array(np.asarray(f.chi2, dtype=np.float64))
     cols["chi2_dof"] = pa.array((2 * np.maximum(nsrc - 1, 0)).astype(np.int32))
-    cols["chi2_threshold"] = pa.array(np.asarray(chi2_thr, dtype=np.float64))
+    cols["chi2_threshold"] = pa.array(np.asarray(f.chi2_thr, dtype=np.float64))
     cols["max_d2"] = pa.array(max_d2)
-    cols["consistent"] = pa.array(np.asarray(cons, dtype=bool), mask=~has)
+    cols["consistent"] = pa.array(np.asarray(f.cons, dtype=bool), mask=~has)
     cols["n_inconsistent"] = pa.array(n_incons.astype(np.int32))
-    cols["inconsistent_cameras"] = pa.array(cams_flag, pa.string())
+    cols["inconsistent_cameras"] = pa.array(_join_per_group(group, g.camc, g.cam_uniq, f.flag, M), pa.string())
     for name in V2X_FIELDS:
         cols[name] = pa.array(np.asarray(v2x[name], dtype=np.int32))
-    objects = pa.table(cols)
-    # -- per source row ------------------------------------------------------------------------------
+    return pa.table(cols)
+
+
+def _sources_table(parts: list[_Part], key, rows: _Rows, f: _Fused, used_in: np.ndarray,
+                   reason: np.ndarray) -> pa.Table:
+    """One row per input row: where it came from, whether it was used and why not, its d2."""
     names = pa.array([p.name for p in parts], pa.string())
     sc: dict[str, pa.Array] = {
-        "input": pa.DictionaryArray.from_arrays(pa.array(inp, pa.int32()), names),
-        "source_row": pa.array(srow),
-        "camera_id": cam,
+        "input": pa.DictionaryArray.from_arrays(pa.array(rows.inp, pa.int32()), names),
+        "source_row": pa.array(rows.srow),
+        "camera_id": rows.cam,
     }
     for k in key:
-        sc[k] = keyvals[k]
+        sc[k] = rows.keyvals[k]
+    det_row = rows.det_row
     sc["detection_row"] = pa.array(np.where(np.isfinite(det_row), det_row, 0).astype(np.int64),
                                    mask=~np.isfinite(det_row))
     sc["used"] = pa.array(used_in)
     sc["reason"] = pa.array(reason, pa.string()).dictionary_encode()
-    sc["d2"] = pa.array(d2)
-    sc["inconsistent"] = pa.array(flag)
-    sources = pa.table(sc)
-    # -- summary ---------------------------------------------------------------------------------------
+    sc["d2"] = pa.array(f.d2)
+    sc["inconsistent"] = pa.array(f.flag)
+    return pa.table(sc)
+
+
+def _fill_summary(summary: FuseSummary, parts: list[_Part], f: _Fused, used_in: np.ndarray,
+                  reason: np.ndarray) -> None:
+    """Row and object counts of the job into ``summary`` (rows by reason, objects by outcome)."""
+    R, nsrc = used_in.shape[0], f.nsrc
     summary.rows_in = R
     if all(p.lines is not None for p in parts):
         summary.lines_in = int(sum(p.lines for p in parts))
     summary.rows_used = int(used_in.sum())
     summary.rows_rejected = R - summary.rows_used
-    summary.objects_out = M
+    summary.objects_out = nsrc.shape[0]
     summary.objects_fused = int((nsrc >= 2).sum())
     summary.objects_single = int((nsrc == 1).sum())
     summary.objects_unavailable = int((nsrc == 0).sum())
-    summary.objects_inconsistent = int(((nsrc >= 2) & ~np.asarray(cons, dtype=bool)).sum())
-    summary.sources_inconsistent = int(flag.sum())
+    summary.objects_inconsistent = int(((nsrc >= 2) & ~np.asarray(f.cons, dtype=bool)).sum())
+    summary.sources_inconsistent = int(f.flag.sum())
     rj = reason[~used_in]
     if rj.size:
         u, c = np.unique(rj.astype(str), return_counts=True)
         summary.reasons = dict(zip(u.tolist(), c.tolist(), strict=True))
+
+
+def _fuse_parts(parts: list[_Part], key, *, confidence: float, ellipse_confidence: float | None,
+                heading_offset_deg: float) -> FusedFootprints:
+    """Stack the inputs, group rows by key, fuse each group, and tabulate objects, sources and summary."""
+    t0 = time.perf_counter()
+    key = tuple(key)
+    thr2 = chi2_threshold(confidence, 2)  # validates confidence
+    summary = FuseSummary()
+    rows = _stack_parts(parts, key, summary)
+    g = _associate(rows, key)
+    used_in = (rows.reason == None) & g.keyed  # noqa: E711
+    f = _fuse_groups(rows, g, used_in, confidence)
+    reason = np.where(used_in, "ok", rows.reason).astype(object)
+    objects = _objects_table(key, g, f, used_in, reason, ellipse_confidence=ellipse_confidence,
+                             heading_offset_deg=heading_offset_deg)
+    sources = _sources_table(parts, key, rows, f, used_in, reason)
+    _fill_summary(summary, parts, f, used_in, reason)
     summary.info = {"key": list(key), "confidence": float(confidence), "d2_threshold": thr2,
                     "ellipse_confidence": ellipse_confidence, "heading_offset_deg": float(heading_offset_deg)}
     summary.elapsed_s = time.perf_counter() - t0
@@ -610,6 +700,63 @@ def fuse_footprints(tables, *, camera_ids=None, key=DEFAULT_KEY, confidence: flo
                        heading_offset_deg=heading_offset_deg)
 
 
+def _check_out_paths(inputs: list[Path], out, sources_out) -> Path:
+    """Validate ``out`` and ``sources_out`` (formats, distinct, not an input); returns ``sources_out``."""
+    fmt = detect_out_format(out)
+    if fmt == "geojson":
+        raise InputError("out", str(out), "a .parquet, .csv or .jsonl file (GeoJSON needs footprint polygons)")
+    sources_out = sources_path(out) if sources_out is None else Path(sources_out)
+    detect_out_format(sources_out)
+    if Path(sources_out).absolute() == Path(out).absolute() or same_file(sources_out, out):
+        raise InputError("sources_out", str(sources_out), "a different file from out")
+    for p in inputs:
+        if not p.is_file():
+            raise InputError("INPUT", str(p), "an existing footprint file (.csv, .jsonl/.ndjson, .parquet/.pq)")
+        for o in (out, sources_out, summary_path(out)):
+            if same_file(p, o):
+                raise InputError("out", str(o), f"a file that is not an input (it is the same file as {p})")
+    return sources_out
+
+
+def _resolve_camera_id_from(inputs: list[Path], camera_id_from: str | None) -> str:
+    """``camera_id_from`` checked (None: "column" if every input has ``camera_id``, else "filename")."""
+    if camera_id_from is None:
+        has_col = all("camera_id" in open_detections(p).columns for p in inputs)
+        camera_id_from = "column" if has_col else "filename"
+    if camera_id_from not in CAMERA_ID_FROM:
+        raise InputError("camera_id_from", camera_id_from, f"one of {CAMERA_ID_FROM}")
+    if camera_id_from == "filename":
+        stems = [p.stem for p in inputs]
+        if len(inputs) < 2:
+            raise InputError("INPUT", [str(p) for p in inputs],
+                             "two or more files (one per camera), or one file with a camera_id column "
+                             "and --camera-id-from column")
+        dup = sorted({s for s in stems if stems.count(s) > 1})
+        if dup:
+            raise InputError("INPUT", f"camera id {dup[0]!r} from two file names",
+                             "file names (without extension) that differ between cameras")
+    return camera_id_from
+
+
+def _write_tables(res: FusedFootprints, out, sources_out: Path, compression: str | None) -> None:
+    """Both tables complete under temporary names, then renamed; the old summary removed first."""
+    comp = compression or "none"
+    writers = []
+    try:
+        for path, table in ((out, res.objects), (sources_out, res.sources)):
+            kw = {"compression": comp} if detect_out_format(path) == "parquet" else {}
+            w = open_writer(path, table.schema, **kw)
+            writers.append(w)
+            w.write(table)
+        summary_path(out).unlink(missing_ok=True)
+        for w in writers:
+            w.close()
+    except BaseException:
+        for w in writers:
+            w.abort()
+        raise
+
+
 def fuse_files(inputs, out, *, camera_id_from: str | None = None, key=DEFAULT_KEY, confidence: float = 0.99,
                ellipse_confidence: float | None = 0.95, heading_offset_deg: float = 0.0, sources_out=None,
                compression: str | None = "snappy", chunk_rows: int = 262_144) -> FuseSummary:
@@ -642,55 +789,15 @@ def fuse_files(inputs, out, *, camera_id_from: str | None = None, key=DEFAULT_KE
     inputs = [Path(p) for p in inputs]
     if not inputs:
         raise InputError("INPUT", [], "one or more footprint files")
-    fmt = detect_out_format(out)
-    if fmt == "geojson":
-        raise InputError("out", str(out), "a .parquet, .csv or .jsonl file (GeoJSON needs footprint polygons)")
-    sources_out = sources_path(out) if sources_out is None else Path(sources_out)
-    detect_out_format(sources_out)
-    if Path(sources_out).absolute() == Path(out).absolute() or same_file(sources_out, out):
-        raise InputError("sources_out", str(sources_out), "a different file from out")
-    for p in inputs:
-        if not p.is_file():
-            raise InputError("INPUT", str(p), "an existing footprint file (.csv, .jsonl/.ndjson, .parquet/.pq)")
-        for o in (out, sources_out, summary_path(out)):
-            if same_file(p, o):
-                raise InputError("out", str(o), f"a file that is not an input (it is the same file as {p})")
-    if camera_id_from is None:
-        has_col = all("camera_id" in open_detections(p).columns for p in inputs)
-        camera_id_from = "column" if has_col else "filename"
-    if camera_id_from not in CAMERA_ID_FROM:
-        raise InputError("camera_id_from", camera_id_from, f"one of {CAMERA_ID_FROM}")
-    if camera_id_from == "filename":
-        stems = [p.stem for p in inputs]
-        if len(inputs) < 2:
-            raise InputError("INPUT", [str(p) for p in inputs],
-                             "two or more files (one per camera), or one file with a camera_id column "
-                             "and --camera-id-from column")
-        dup = sorted({s for s in stems if stems.count(s) > 1})
-        if dup:
-            raise InputError("INPUT", f"camera id {dup[0]!r} from two file names",
-                             "file names (without extension) that differ between cameras")
+    sources_out = _check_out_paths(inputs, out, sources_out)
+    camera_id_from = _resolve_camera_id_from(inputs, camera_id_from)
     parts = [_read_footprints(p, key=key, camera_id_from=camera_id_from, chunk_rows=chunk_rows) for p in inputs]
     res = _fuse_parts(parts, key, confidence=confidence, ellipse_confidence=ellipse_confidence,
                       heading_offset_deg=heading_offset_deg)
     s = res.summary
     if not s.consistent:  # pragma: no cover - a bug, not bad input
         raise RuntimeError(f"row accounting broken: {s.text()} (lines in {s.lines_in})")
-    comp = compression or "none"
-    writers = []
-    try:  # both tables complete under temporary names, then renamed; the old summary removed first
-        for path, table in ((out, res.objects), (sources_out, res.sources)):
-            kw = {"compression": comp} if detect_out_format(path) == "parquet" else {}
-            w = open_writer(path, table.schema, **kw)
-            writers.append(w)
-            w.write(table)
-        summary_path(out).unlink(missing_ok=True)
-        for w in writers:
-            w.close()
-    except BaseException:
-        for w in writers:
-            w.abort()
-        raise
+    _write_tables(res, out, sources_out, compression)
     s.elapsed_s = time.perf_counter() - t0
     s.info.update({"camera_id_from": camera_id_from, "out": str(out), "sources_out": str(sources_out)})
     atomic_write_text(summary_path(out), json.dumps(s.to_dict(), indent=2) + "\n")

@@ -576,6 +576,147 @@ def _corr(c):
     return c / np.outer(s, s)
 
 
+_LM_CRIT = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_COUNT, 200, 1e-14)
+
+
+def _ground_frame(T_ground_lidar, ground_plane, ground: str, warn_list: list) -> tuple[np.ndarray, str, dict]:
+    """The LiDAR -> ground transform ``(T_gl (4, 4), its source in words, ground-plane info)``."""
+    if T_ground_lidar is not None:
+        return load_transform(T_ground_lidar), "given T_ground_lidar", {}
+    if ground_plane is not None:
+        plane_info = {"normal_lidar": ground_plane.normal.tolist(), "offset_m": float(ground_plane.offset_m),
+                      "n_inliers": ground_plane.n_inliers, "rms_m": ground_plane.rms_m,
+                      "lidar_height_m": float(abs(ground_plane.offset_m))}
+        return (ground_frame_from_plane(ground_plane),
+                "ground-plane fit of the scans (z up, origin below the LiDAR, x = LiDAR x projected)", plane_info)
+    if ground == "identity":
+        warn_list.append("ground frame = LiDAR frame: height_m is measured from the LiDAR origin, not the ground")
+        return np.eye(4), "LiDAR frame (identity)", {}
+    raise InputError("ground", ground, "a T_ground_lidar, a fitted ground plane (clouds), or 'identity'")
+
+
+def _solve_frames(frames, intr, ransac_threshold_px: float, seed: int) -> tuple[list, list]:
+    """Per frame, its status (``ok`` or why not) and its candidate poses (one per LiDAR corner ordering)."""
+    status = []
+    cands: list[list[FramePose]] = []
+    for k, f in enumerate(frames):
+        if not f.ok:
+            status.append(f.reason)
+            cands.append([])
+            continue
+        if f.uv_px is None or len(f.uv_px) < 6:
+            status.append("fewer than 6 image corners")
+            cands.append([])
+            continue
+        cs = []
+        for ci, X in enumerate(f.xyz_candidates):
+            if X.shape[0] != f.uv_px.shape[0]:
+                raise InputError(f"frame {f.name}", f"{X.shape[0]} 3D vs {f.uv_px.shape[0]} 2D corners",
+                                 "as many 3D as 2D corners (same board size)")
+            fp = solve_frame(X, f.uv_px, intr, ransac_threshold_px=ransac_threshold_px, seed=seed + k, name=f.name,
+                             candidate=ci)
+            if fp is None or (len(f.xyz_candidates) > 1 and _camera_behind_board(fp)):
+                continue
+            cs.append(fp)
+        cands.append(cs)
+        status.append("ok" if cs else "PnP failed (no pose with >= 6 inliers in front of the camera)")
+    return status, cands
+
+
+def _screen_chosen(chosen, status: list, max_frame_rms_px: float | None) -> None:
+    """Mark in ``status`` the frames without a consistent pose, or above ``max_frame_rms_px``."""
+    for k, c in enumerate(chosen):
+        if status[k] == "ok" and c is None:
+            status[k] = "pose inconsistent with the other frames (outlier, or board misdetected in the cloud)"
+        elif status[k] == "ok" and max_frame_rms_px is not None and c.rms_px > max_frame_rms_px:
+            status[k] = f"reprojection RMS {c.rms_px:.3g} px > max_frame_rms_px {max_frame_rms_px:g}"
+
+
+def _joint_refine(chosen, used: list, X_all, U_all, intr) -> tuple[np.ndarray, np.ndarray]:
+    """Joint LM solution ``(rvec, tvec)`` over all used frames' inliers, from the best-supported frame pose."""
+    best = None
+    for k in used:
+        rv, tv = cv2.solvePnPRefineLM(X_all, U_all, intr.K, intr.dist, chosen[k].rvec.copy().reshape(3, 1),
+                                      chosen[k].tvec.copy().reshape(3, 1), _LM_CRIT)
+        cost = float(np.sum(_reproj(rv, tv, X_all, U_all, intr) ** 2))
+        if best is None or cost < best[0] - 1e-9:
+            best = (cost, rv.ravel(), tv.ravel())
+        if len(used) > 5 and k == used[2]:
+            break  # three starts are plenty: they all converge to the same minimum
+    return best[1], best[2]
+
+
+def _bootstrap_cov(Xs, Us, per_frame, pose, rvec, tvec, T_gl, intr, *, estimator: str, bootstrap: int,
+                   seed: int) -> np.ndarray:
+    """(6, 6) covariance of the pose over ``bootstrap`` resamples of the used frames."""
+    rng = np.random.default_rng(seed)
+    samples = np.empty((int(bootstrap), 6))
+    n = len(Xs)
+    for b in range(int(bootstrap)):
+        pick = rng.integers(0, n, n)
+        if estimator == "mean":
+            samples[b] = per_frame[pick].mean(axis=0)
+            continue
+        Xb = np.concatenate([Xs[i] for i in pick])
+        Ub = np.concatenate([Us[i] for i in pick])
+        rv, tv = cv2.solvePnPRefineLM(Xb, Ub, intr.K, intr.dist, rvec.copy().reshape(3, 1),
+                                      tvec.copy().reshape(3, 1), _LM_CRIT)
+        samples[b] = pose_in_ground(rv, tv, T_gl)
+    samples[:, 3] = pose[3] + _wrap_deg(samples[:, 3] - pose[3])
+    return np.cov(samples, rowvar=False, ddof=1)
+
+
+@dataclass
+class _PoseFit:
+    """The pose of the used frames: joint and mean estimates, the reported one, and their covariances."""
+
+    Xs: list               # per used frame, (n_k, 3) inlier LiDAR corners (m)
+    Us: list               # per used frame, (n_k, 2) inlier image corners (px)
+    pose: np.ndarray       # (6,) reported pose (x, y, z m; angles deg)
+    rvec: np.ndarray       # (3,) OpenCV LiDAR -> camera rotation of ``pose``
+    tvec: np.ndarray       # (3,) and translation (m)
+    rms_px: float          # reprojection RMS of ``pose`` over all inliers
+    per_frame: np.ndarray  # (n_used, 6) single-frame poses
+    cov_pf: np.ndarray     # (6, 6) spread of the single-frame poses
+    cov_j: np.ndarray      # (6, 6) first-order covariance of ``pose``
+    cov_jf: np.ndarray     # (n_used, 6, 6) first-order covariance of each single-frame pose
+    sigma_px: float        # pixel noise estimated from the residuals
+    pose_joint: np.ndarray  # (6,)
+    pose_mean: np.ndarray   # (6,)
+
+
+def _fit_pose(chosen, used: list, T_gl, intr, estimator: str) -> _PoseFit:
+    """Joint and mean poses over the ``used`` frames; the reported one per ``estimator``, with covariances."""
+    Xs = [chosen[k].xyz_m[chosen[k].inliers] for k in used]
+    Us = [chosen[k].uv_px[chosen[k].inliers] for k in used]
+    X_all, U_all = np.concatenate(Xs), np.concatenate(Us)
+    rvec_j, tvec_j = _joint_refine(chosen, used, X_all, U_all, intr)
+    pose_joint = pose_in_ground(rvec_j, tvec_j, T_gl)
+    per_frame = np.array([pose_in_ground(chosen[k].rvec, chosen[k].tvec, T_gl) for k in used])
+    per_frame[:, 3] = pose_joint[3] + _wrap_deg(per_frame[:, 3] - pose_joint[3])
+    pose_mean = per_frame.mean(axis=0)
+    cov_pf = np.cov(per_frame, rowvar=False, ddof=1)
+    cov_jf = np.array([jacobian_covariance(per_frame[i], transform_points(T_gl, Xk), Uk, intr)[0]
+                       for i, (Xk, Uk) in enumerate(zip(Xs, Us, strict=True))])
+    Xg_all = transform_points(T_gl, X_all)
+    if estimator == "joint":
+        pose, rvec, tvec = pose_joint, rvec_j, tvec_j
+        cov_j, sigma_px, _ = jacobian_covariance(pose, Xg_all, U_all, intr)
+    else:  # mean of the single-frame poses; first order: frames independent
+        pose = pose_mean
+        rvec, tvec = _rt_from_pose(pose, T_gl)
+        _, sigma_px, _ = jacobian_covariance(pose, Xg_all, U_all, intr)
+        cov_j = cov_jf.sum(axis=0) / len(used) ** 2
+    rms_px = float(np.sqrt(np.mean(np.sum(_reproj(rvec, tvec, X_all, U_all, intr) ** 2, axis=1))))
+    return _PoseFit(Xs, Us, pose, rvec, tvec, rms_px, per_frame, cov_pf, cov_j, cov_jf, sigma_px, pose_joint,
+                    pose_mean)
+
+
+def _failures(frames, status: list) -> list[str]:
+    """``name: reason`` of each frame that is not ok."""
+    return [f"{f.name}: {s}" for f, s in zip(frames, status, strict=True) if s != "ok"]
+
+
 # ---------------------------------------------------------------------------------------------
 # the pipeline
 # ---------------------------------------------------------------------------------------------
@@ -627,120 +768,34 @@ def calibrate_extrinsics(frames, intrinsics, *, T_ground_lidar=None, ground: str
     if min_frames < 2:
         raise InputError("min_frames", min_frames, "an integer >= 2")
     warn_list = []
-    plane_info = {}
-    if T_ground_lidar is not None:
-        T_gl = load_transform(T_ground_lidar)
-        gsrc = "given T_ground_lidar"
-    elif ground_plane is not None:
-        T_gl = ground_frame_from_plane(ground_plane)
-        gsrc = "ground-plane fit of the scans (z up, origin below the LiDAR, x = LiDAR x projected)"
-        plane_info = {"normal_lidar": ground_plane.normal.tolist(), "offset_m": float(ground_plane.offset_m),
-                      "n_inliers": ground_plane.n_inliers, "rms_m": ground_plane.rms_m,
-                      "lidar_height_m": float(abs(ground_plane.offset_m))}
-    elif ground == "identity":
-        T_gl = np.eye(4)
-        gsrc = "LiDAR frame (identity)"
-        warn_list.append("ground frame = LiDAR frame: height_m is measured from the LiDAR origin, not the ground")
-    else:
-        raise InputError("ground", ground, "a T_ground_lidar, a fitted ground plane (clouds), or 'identity'")
-    status = []
-    cands: list[list[FramePose]] = []
-    for k, f in enumerate(frames):
-        if not f.ok:
-            status.append(f.reason)
-            cands.append([])
-            continue
-        if f.uv_px is None or len(f.uv_px) < 6:
-            status.append("fewer than 6 image corners")
-            cands.append([])
-            continue
-        cs = []
-        for ci, X in enumerate(f.xyz_candidates):
-            if X.shape[0] != f.uv_px.shape[0]:
-                raise InputError(f"frame {f.name}", f"{X.shape[0]} 3D vs {f.uv_px.shape[0]} 2D corners",
-                                 "as many 3D as 2D corners (same board size)")
-            fp = solve_frame(X, f.uv_px, intr, ransac_threshold_px=ransac_threshold_px, seed=seed + k, name=f.name,
-                             candidate=ci)
-            if fp is None or (len(f.xyz_candidates) > 1 and _camera_behind_board(fp)):
-                continue
-            cs.append(fp)
-        cands.append(cs)
-        status.append("ok" if cs else "PnP failed (no pose with >= 6 inliers in front of the camera)")
+    T_gl, gsrc, plane_info = _ground_frame(T_ground_lidar, ground_plane, ground, warn_list)
+    status, cands = _solve_frames(frames, intr, ransac_threshold_px, seed)
     if sum(s == "ok" for s in status) < min_frames:
-        bad = [f"{f.name}: {s}" for f, s in zip(frames, status, strict=True) if s != "ok"]
+        bad = _failures(frames, status)
         raise InputError("frames", f"{sum(s == 'ok' for s in status)} usable of {len(frames)}",
                          f"at least {min_frames} frames with the board in both image and cloud "
                          f"(failures: {'; '.join(bad[:6])}{' ...' if len(bad) > 6 else ''})")
     chosen, ambiguous = resolve_orientation(cands, position_tol_m=position_tol_m, angle_tol_deg=angle_tol_deg)
-    for k, c in enumerate(chosen):
-        if status[k] == "ok" and c is None:
-            status[k] = "pose inconsistent with the other frames (outlier, or board misdetected in the cloud)"
-        elif status[k] == "ok" and max_frame_rms_px is not None and c.rms_px > max_frame_rms_px:
-            status[k] = f"reprojection RMS {c.rms_px:.3g} px > max_frame_rms_px {max_frame_rms_px:g}"
+    _screen_chosen(chosen, status, max_frame_rms_px)
     used = [k for k, s in enumerate(status) if s == "ok"]
     if len(used) < min_frames:
-        bad = [f"{frames[k].name}: {status[k]}" for k in range(len(frames)) if status[k] != "ok"]
+        bad = _failures(frames, status)
         raise InputError("frames", f"{len(used)} consistent of {len(frames)}",
                          f"at least {min_frames} frames giving one camera pose (failures: {'; '.join(bad[:6])})")
     if ambiguous and any(len(f.xyz_candidates) > 1 for f in frames):
         warn_list.append("grid orientation on the LiDAR rectangle decided without support from other frames")
-    # joint solution over all used frames' inliers, from the best-supported frame pose
-    crit = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_COUNT, 200, 1e-14)
-    Xs = [chosen[k].xyz_m[chosen[k].inliers] for k in used]
-    Us = [chosen[k].uv_px[chosen[k].inliers] for k in used]
-    X_all, U_all = np.concatenate(Xs), np.concatenate(Us)
-    best = None
-    for k in used:
-        rv, tv = cv2.solvePnPRefineLM(X_all, U_all, intr.K, intr.dist, chosen[k].rvec.copy().reshape(3, 1),
-                                      chosen[k].tvec.copy().reshape(3, 1), crit)
-        cost = float(np.sum(_reproj(rv, tv, X_all, U_all, intr) ** 2))
-        if best is None or cost < best[0] - 1e-9:
-            best = (cost, rv.ravel(), tv.ravel())
-        if len(used) > 5 and k == used[2]:
-            break  # three starts are plenty: they all converge to the same minimum
-    _, rvec_j, tvec_j = best
-    pose_joint = pose_in_ground(rvec_j, tvec_j, T_gl)
-    per_frame = np.array([pose_in_ground(chosen[k].rvec, chosen[k].tvec, T_gl) for k in used])
-    per_frame[:, 3] = pose_joint[3] + _wrap_deg(per_frame[:, 3] - pose_joint[3])
-    pose_mean = per_frame.mean(axis=0)
-    cov_pf = np.cov(per_frame, rowvar=False, ddof=1)
-    cov_jf = []
-    for k, Xk, Uk in zip(used, Xs, Us, strict=True):
-        cov_jf.append(jacobian_covariance(per_frame[used.index(k)], transform_points(T_gl, Xk), Uk, intr)[0])
-    cov_jf = np.array(cov_jf)
-    Xg_all = transform_points(T_gl, X_all)
-    if estimator == "joint":
-        pose, rvec, tvec = pose_joint, rvec_j, tvec_j
-        cov_j, sigma_px, _ = jacobian_covariance(pose, Xg_all, U_all, intr)
-    else:  # mean of the single-frame poses; first order: frames independent
-        pose = pose_mean
-        rvec, tvec = _rt_from_pose(pose, T_gl)
-        _, sigma_px, _ = jacobian_covariance(pose, Xg_all, U_all, intr)
-        cov_j = cov_jf.sum(axis=0) / len(used) ** 2
-    rms = float(np.sqrt(np.mean(np.sum(_reproj(rvec, tvec, X_all, U_all, intr) ** 2, axis=1))))
+    fit = _fit_pose(chosen, used, T_gl, intr, estimator)
     cov_bs = None
     if bootstrap and bootstrap > 0:
-        rng = np.random.default_rng(seed)
-        samples = np.empty((int(bootstrap), 6))
-        n = len(used)
-        for b in range(int(bootstrap)):
-            pick = rng.integers(0, n, n)
-            if estimator == "mean":
-                samples[b] = per_frame[pick].mean(axis=0)
-                continue
-            Xb = np.concatenate([Xs[i] for i in pick])
-            Ub = np.concatenate([Us[i] for i in pick])
-            rv, tv = cv2.solvePnPRefineLM(Xb, Ub, intr.K, intr.dist, rvec.copy().reshape(3, 1),
-                                          tvec.copy().reshape(3, 1), crit)
-            samples[b] = pose_in_ground(rv, tv, T_gl)
-        samples[:, 3] = pose[3] + _wrap_deg(samples[:, 3] - pose[3])
-        cov_bs = np.cov(samples, rowvar=False, ddof=1)
+        cov_bs = _bootstrap_cov(fit.Xs, fit.Us, fit.per_frame, fit.pose, fit.rvec, fit.tvec, T_gl, intr,
+                                estimator=estimator, bootstrap=bootstrap, seed=seed)
     poses_all = [c if status[k] == "ok" else None for k, c in enumerate(chosen)]
     for w in warn_list:
         warnings.warn(w, stacklevel=2)
-    return ExtrinsicCalibration(intr, T_gl, gsrc, list(frames), poses_all, status, pose, rvec, tvec, rms, per_frame,
-                                cov_pf, cov_bs, cov_j, cov_jf, sigma_px, int(bootstrap or 0), int(seed),
-                                bool(ambiguous), plane_info, warn_list, estimator, pose_joint, pose_mean)
+    return ExtrinsicCalibration(intr, T_gl, gsrc, list(frames), poses_all, status, fit.pose, fit.rvec, fit.tvec,
+                                fit.rms_px, fit.per_frame, fit.cov_pf, cov_bs, fit.cov_j, fit.cov_jf, fit.sigma_px,
+                                int(bootstrap or 0), int(seed), bool(ambiguous), plane_info, warn_list, estimator,
+                                fit.pose_joint, fit.pose_mean)
 
 
 def _rt_from_pose(pose6, T_ground_lidar):
