@@ -324,18 +324,18 @@ def scene_to_recording(scene, path) -> Path:
                                    "ground_z_m": gz.pop() if len(gz) == 1 else 0.0})
 
 
-def read_recording(path, *, actor_id: int | None = None, ground_z_m: float | None = None):
-    """Read a recording into a :class:`~footprint_uq.scenario.case_study.Scene` (W coordinates).
+def _check_header(rec, kind, where: str) -> None:
+    """A recording's first record must be its header, of this format and a version this reader knows."""
+    if kind != "header" or rec.get("format") != RECORDING_FORMAT:
+        raise ConfigError(where, kind, f"a header record with format {RECORDING_FORMAT!r}")
+    if int(rec.get("version", 0)) > RECORDING_VERSION:
+        raise ConfigError(f"{where}: version", rec.get("version"), f"<= {RECORDING_VERSION}")
+    if rec.get("coordinates", "carla") != "carla":
+        raise ConfigError(f"{where}: coordinates", rec.get("coordinates"), "'carla'")
 
-    The vehicle is ``actor_id``, else the header's ``ego_actor_id``, else the actor with
-    ``"role": "ego"``, else the only actor.  A malformed frame line is reported as a warning
-    naming its line number and skipped; a malformed header, camera or road record raises
-    :class:`~footprint_uq.errors.ConfigError`.
-    """
 
-    p = Path(path)
-    if not p.exists():
-        raise ConfigError("recording", str(path), "an existing JSON Lines recording")
+def _read_records(p: Path) -> tuple[dict, dict, tuple | None, list]:
+    """The records of a recording: ``(header, {camera: (rec, where)}, (road, where) or None, [(frame, where)])``."""
     header = None
     cams_raw: dict = {}
     road = None
@@ -350,16 +350,11 @@ def read_recording(path, *, actor_id: int | None = None, ground_z_m: float | Non
             except json.JSONDecodeError as e:
                 if header is None:
                     raise ConfigError(where, line[:60], f"a JSON header record ({e.msg})") from None
-                warnings.warn(f"{where}: not valid JSON ({e.msg}); line skipped", stacklevel=2)
+                warnings.warn(f"{where}: not valid JSON ({e.msg}); line skipped", stacklevel=3)
                 continue
             kind = rec.get("type") if isinstance(rec, dict) else None
             if header is None:
-                if kind != "header" or rec.get("format") != RECORDING_FORMAT:
-                    raise ConfigError(where, kind, f"a header record with format {RECORDING_FORMAT!r}")
-                if int(rec.get("version", 0)) > RECORDING_VERSION:
-                    raise ConfigError(f"{where}: version", rec.get("version"), f"<= {RECORDING_VERSION}")
-                if rec.get("coordinates", "carla") != "carla":
-                    raise ConfigError(f"{where}: coordinates", rec.get("coordinates"), "'carla'")
+                _check_header(rec, kind, where)
                 header = rec
             elif kind == "camera":
                 name = str(rec.get("name", f"camera{len(cams_raw) + 1}"))
@@ -371,12 +366,16 @@ def read_recording(path, *, actor_id: int | None = None, ground_z_m: float | Non
             elif kind == "frame":
                 frames.append((rec, where))
             else:
-                warnings.warn(f"{where}: unknown record type {kind!r}; line skipped", stacklevel=2)
+                warnings.warn(f"{where}: unknown record type {kind!r}; line skipped", stacklevel=3)
     if header is None:
         raise ConfigError(p.name, "empty file", "a recording starting with a header record")
     if not cams_raw:
         raise ConfigError(p.name, "no camera records", "at least one camera record")
-    gz = float(header.get("ground_z_m", 0.0)) if ground_z_m is None else float(ground_z_m)
+    return header, cams_raw, road, frames
+
+
+def _cameras_from_records(cams_raw: dict, gz: float) -> tuple[dict, dict]:
+    """``({name: Camera}, {name: settings})`` from the camera records (ground at CARLA z ``gz`` m)."""
     cameras, settings = {}, {}
     for name, (rec, where) in cams_raw.items():
         tr = rec.get("transform") or {}
@@ -391,25 +390,44 @@ def read_recording(path, *, actor_id: int | None = None, ground_z_m: float | Non
         cameras[name] = camera_from_carla(loc, rot, size, fov, ground_z_m=gz)
         settings[name] = {"description": rec.get("description", ""), "carla_location": loc, "carla_rotation": rot,
                           "fov_deg": fov}
-    # road layout
-    if road is not None:
-        rec, where = road
-        try:
-            layout = RoadLayout(
-                [np.asarray(_xy_to_carla(np.asarray(pg, dtype=np.float64))) for pg in rec.get("road_polygons", [])],
-                [Marking(str(m.get("kind", "lane")), _xy_to_carla(np.asarray(m["points"], dtype=np.float64)),
-                         bool(m.get("dashed", False)), float(m.get("width_m", 0.15))) for m in rec.get("markings", [])],
-                as_float("lane_width_m", rec.get("lane_width_m", 3.5), positive=True),
-                None if rec.get("junction_box") is None else
-                (float(rec["junction_box"][0]), -float(rec["junction_box"][3]), float(rec["junction_box"][2]),
-                 -float(rec["junction_box"][1])))
-        except (KeyError, TypeError, ValueError, IndexError) as e:
-            raise ConfigError(f"{where}: road", type(e).__name__, "road_polygons, markings (kind, points) and "
-                                                                  "lane_width_m as documented") from None
-    else:
-        layout = RoadLayout([], [], float(header.get("lane_width_m", 3.5)), None)
-    # frames
-    want = actor_id if actor_id is not None else header.get("ego_actor_id")
+    return cameras, settings
+
+
+def _road_layout(road: tuple | None, header: dict) -> RoadLayout:
+    """The road record as a :class:`RoadLayout` in W (empty layout if the recording has none)."""
+    if road is None:
+        return RoadLayout([], [], float(header.get("lane_width_m", 3.5)), None)
+    rec, where = road
+    try:
+        return RoadLayout(
+            [np.asarray(_xy_to_carla(np.asarray(pg, dtype=np.float64))) for pg in rec.get("road_polygons", [])],
+            [Marking(str(m.get("kind", "lane")), _xy_to_carla(np.asarray(m["points"], dtype=np.float64)),
+                     bool(m.get("dashed", False)), float(m.get("width_m", 0.15))) for m in rec.get("markings", [])],
+            as_float("lane_width_m", rec.get("lane_width_m", 3.5), positive=True),
+            None if rec.get("junction_box") is None else
+            (float(rec["junction_box"][0]), -float(rec["junction_box"][3]), float(rec["junction_box"][2]),
+             -float(rec["junction_box"][1])))
+    except (KeyError, TypeError, ValueError, IndexError) as e:
+        raise ConfigError(f"{where}: road", type(e).__name__, "road_polygons, markings (kind, points) and "
+                                                              "lane_width_m as documented") from None
+
+
+def _vehicle_box(a: dict, where: str) -> np.ndarray:
+    """The vehicle's 3-D box in W from an actor record (transform and bounding box)."""
+    bb = a["bounding_box"]
+    return box_from_carla(_vec(a["transform"]["location"], "xyz", f"{where}: transform.location"),
+                          _vec(a["transform"]["rotation"], ("pitch", "yaw", "roll"), f"{where}: transform.rotation"),
+                          _vec(bb.get("location", {"x": 0, "y": 0, "z": 0}), "xyz", f"{where}: bb.location"),
+                          _vec(bb["extent"], "xyz", f"{where}: bounding_box.extent"),
+                          _vec(bb.get("rotation", {"pitch": 0, "yaw": 0, "roll": 0}), ("pitch", "yaw", "roll"),
+                               f"{where}: bounding_box.rotation"))
+
+
+def _vehicle_rows(frames: list, want) -> list[tuple]:
+    """``[(frame, timestamp_s, box, segment)]`` of the vehicle ``want`` (None: the ego, or the only actor).
+
+    Frames without a unique vehicle or with a malformed record are skipped with a warning.
+    """
     rows = []
     for rec, where in frames:
         try:
@@ -420,20 +438,33 @@ def read_recording(path, *, actor_id: int | None = None, ground_z_m: float | Non
                 cand = [a for a in actors if a.get("role") == "ego"] or (actors if len(actors) == 1 else [])
             if len(cand) != 1:
                 warnings.warn(f"{where}: frame {rec.get('frame')} has no unique vehicle "
-                              f"(actor_id={want}); frame skipped", stacklevel=2)
+                              f"(actor_id={want}); frame skipped", stacklevel=3)
                 continue
-            a = cand[0]
-            bb = a["bounding_box"]
-            box = box_from_carla(_vec(a["transform"]["location"], "xyz", f"{where}: transform.location"),
-                                 _vec(a["transform"]["rotation"], ("pitch", "yaw", "roll"),
-                                      f"{where}: transform.rotation"),
-                                 _vec(bb.get("location", {"x": 0, "y": 0, "z": 0}), "xyz", f"{where}: bb.location"),
-                                 _vec(bb["extent"], "xyz", f"{where}: bounding_box.extent"),
-                                 _vec(bb.get("rotation", {"pitch": 0, "yaw": 0, "roll": 0}), ("pitch", "yaw", "roll"),
-                                      f"{where}: bounding_box.rotation"))
+            box = _vehicle_box(cand[0], where)
             rows.append((int(rec["frame"]), float(rec["timestamp_s"]), box, rec.get("segment")))
         except (KeyError, TypeError, ValueError, InputError) as e:
-            warnings.warn(f"{where}: malformed frame record ({type(e).__name__}: {e}); frame skipped", stacklevel=2)
+            warnings.warn(f"{where}: malformed frame record ({type(e).__name__}: {e}); frame skipped", stacklevel=3)
+    return rows
+
+
+def read_recording(path, *, actor_id: int | None = None, ground_z_m: float | None = None):
+    """Read a recording into a :class:`~footprint_uq.scenario.case_study.Scene` (W coordinates).
+
+    The vehicle is ``actor_id``, else the header's ``ego_actor_id``, else the actor with
+    ``"role": "ego"``, else the only actor.  A malformed frame line is reported as a warning
+    naming its line number and skipped; a malformed header, camera or road record raises
+    :class:`~footprint_uq.errors.ConfigError`.
+    """
+
+    p = Path(path)
+    if not p.exists():
+        raise ConfigError("recording", str(path), "an existing JSON Lines recording")
+    header, cams_raw, road, frames = _read_records(p)
+    gz = float(header.get("ground_z_m", 0.0)) if ground_z_m is None else float(ground_z_m)
+    cameras, settings = _cameras_from_records(cams_raw, gz)
+    layout = _road_layout(road, header)
+    want = actor_id if actor_id is not None else header.get("ego_actor_id")
+    rows = _vehicle_rows(frames, want)
     if not rows:
         raise ConfigError(p.name, "no usable frame records", "frames with the vehicle's transform and bounding box")
     rows.sort(key=lambda r: r[1])
