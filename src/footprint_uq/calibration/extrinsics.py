@@ -861,6 +861,58 @@ def _read_corners_csv(path: Path) -> np.ndarray:
     return np.array(rows, dtype=np.float64).reshape(-1, 2)
 
 
+def _read_clouds(pairs) -> tuple[list, list[str]]:
+    """Each pair's point cloud (None if missing or unreadable) and the reason it cannot be used ("" if usable)."""
+    clouds: list[PointCloud | None] = []
+    reasons: list[str] = []
+    for name, _, c in pairs:
+        if c is None:
+            clouds.append(None)
+            reasons.append("no point cloud for this frame")
+            continue
+        try:
+            cl = c if isinstance(c, PointCloud) else (read_point_cloud(c) if isinstance(c, (str, Path))
+                                                      else PointCloud.from_arrays(c, source=name))
+            clouds.append(cl)
+            reasons.append("" if len(cl) else f"empty point cloud ({cl.n_nonfinite_dropped} non-finite points)")
+        except InputError as e:
+            clouds.append(None)
+            reasons.append(f"unreadable point cloud: {e}")
+    return clouds, reasons
+
+
+def _corners_from_image_file(p: Path, board, detect_method, image_size_px) -> tuple[np.ndarray | None, str]:
+    """Image corners ``(n, 2)`` px from a corners CSV or an image file, or ``(None, why not)``."""
+    if p.name.endswith("_corners.csv") or p.suffix.lower() == ".csv":
+        return _read_corners_csv(p), ""
+    img = cv2.imread(str(p), cv2.IMREAD_UNCHANGED)
+    if img is None:
+        return None, f"unreadable image {p.name}"
+    if image_size_px is not None and (img.shape[1], img.shape[0]) != tuple(image_size_px):
+        return None, f"image size {img.shape[1]}x{img.shape[0]} differs from the intrinsics {image_size_px}"
+    uv, _ = detect_corners(img, board, method=detect_method)
+    return uv, "" if uv is not None else "no board found in the image"
+
+
+def _image_corners(im, board, detect_method, image_size_px) -> tuple[np.ndarray | None, str]:
+    """A frame's image corners ``(n_corners, 2)`` px (from an array, corners CSV or image), or ``(None, why)``."""
+    uv, why = None, ""
+    if im is None:
+        why = "no image or corners file for this frame"
+    elif isinstance(im, np.ndarray) and im.ndim == 2 and im.shape[1] == 2:
+        uv = np.asarray(im, float)
+    else:
+        try:
+            uv, why = _corners_from_image_file(Path(im), board, detect_method, image_size_px)
+        except InputError as e:
+            why = str(e)
+    if uv is not None and len(uv) != board.n_corners:
+        why, uv = f"{len(uv)} image corners, expected {board.n_corners} ({board.label()})", None
+    if uv is not None and not np.all(np.isfinite(uv)):
+        why, uv = "non-finite image corners", None
+    return uv, why
+
+
 def frames_from_pairs(pairs, board, *, region=None, ground="fit", plane_threshold_m: float = 0.05,
                       cluster_radius_m: float = 0.2, ground_up=(0.0, 0.0, 1.0), seed: int = 0, detect_method="auto",
                       image_size_px=None):
@@ -890,21 +942,7 @@ def frames_from_pairs(pairs, board, *, region=None, ground="fit", plane_threshol
     if isinstance(pairs, (str, Path)):
         pairs = pairs_from_directory(pairs)
     region = parse_region(region)
-    clouds: list[PointCloud | None] = []
-    reasons: list[str] = []
-    for name, _, c in pairs:
-        if c is None:
-            clouds.append(None)
-            reasons.append("no point cloud for this frame")
-            continue
-        try:
-            cl = c if isinstance(c, PointCloud) else (read_point_cloud(c) if isinstance(c, (str, Path))
-                                                      else PointCloud.from_arrays(c, source=name))
-            clouds.append(cl)
-            reasons.append("" if len(cl) else f"empty point cloud ({cl.n_nonfinite_dropped} non-finite points)")
-        except InputError as e:
-            clouds.append(None)
-            reasons.append(f"unreadable point cloud: {e}")
+    clouds, reasons = _read_clouds(pairs)
     plane = None
     if ground == "fit":
         good = [c for c in clouds if c is not None and len(c)]
@@ -915,34 +953,7 @@ def frames_from_pairs(pairs, board, *, region=None, ground="fit", plane_threshol
     frames = []
     for k, ((name, im, _), cl) in enumerate(zip(pairs, clouds, strict=True)):
         stats = cl.stats() if cl is not None else {}
-        uv, why = None, ""
-        if im is None:
-            why = "no image or corners file for this frame"
-        elif isinstance(im, np.ndarray) and im.ndim == 2 and im.shape[1] == 2:
-            uv = np.asarray(im, float)
-        else:
-            p = Path(im)
-            try:
-                if p.name.endswith("_corners.csv") or p.suffix.lower() == ".csv":
-                    uv = _read_corners_csv(p)
-                else:
-                    img = cv2.imread(str(p), cv2.IMREAD_UNCHANGED)
-                    if img is None:
-                        why = f"unreadable image {p.name}"
-                    else:
-                        if image_size_px is not None and (img.shape[1], img.shape[0]) != tuple(image_size_px):
-                            why = (f"image size {img.shape[1]}x{img.shape[0]} differs from the intrinsics "
-                                   f"{image_size_px}")
-                        else:
-                            uv, _ = detect_corners(img, board, method=detect_method)
-                            if uv is None:
-                                why = "no board found in the image"
-            except InputError as e:
-                why = str(e)
-        if uv is not None and len(uv) != board.n_corners:
-            why, uv = f"{len(uv)} image corners, expected {board.n_corners} ({board.label()})", None
-        if uv is not None and not np.all(np.isfinite(uv)):
-            why, uv = "non-finite image corners", None
+        uv, why = _image_corners(im, board, detect_method, image_size_px)
         also = f"; also: {why}" if why else ""
         if reasons[k]:
             frames.append(FrameData(name, uv, [], False, reasons[k] + also, stats))

@@ -705,6 +705,57 @@ def render_report(summ: dict) -> str:
 MAX_RMS_PX = 2.0
 
 
+def _view_points(image_points_px, board) -> list[np.ndarray]:
+    """Each view's corners as ``(n_corners, 2)`` px, checked (count of the board, finite)."""
+    imgs = []
+    for i, c in enumerate(image_points_px):
+        a = np.asarray(c, dtype=np.float64).reshape(-1, 2)
+        if a.shape[0] != board.n_corners:
+            raise InputError(f"image_points_px[{i}]", f"{a.shape[0]} corners", f"{board.n_corners} corners "
+                             f"({board.label()} board)")
+        if not np.all(np.isfinite(a)):
+            raise InputError(f"image_points_px[{i}]", "non-finite corner", "finite pixel coordinates")
+        imgs.append(a)
+    return imgs
+
+
+def _filter_views(obj, imgs: list, labels: list, size: tuple, flags: int, thr: float | None, mv: int,
+                  max_rounds: int):
+    """Calibrate, drop views whose mean reprojection error exceeds ``thr``, repeat until none is dropped.
+
+    Returns ``(fit, active view indices, rounds, dropped views)``.
+    """
+    active = list(range(len(imgs)))
+    rounds: list[FilterRound] = []
+    dropped: list[dict] = []
+    converged = thr is None
+    for rnd in range(int(max_rounds)):
+        fit = _calibrate(obj, [imgs[i] for i in active], size, flags)
+        means = np.array([np.linalg.norm(imgs[i] - _project(obj, fit.rvecs[k], fit.tvecs[k], fit.K, fit.dist),
+                                         axis=-1).mean() for k, i in enumerate(active)])
+        bad = np.zeros(len(active), bool) if thr is None else means > thr
+        rounds.append(FilterRound(rnd, len(active), fit.rms_px, float(means.max()),
+                                  [labels[active[k]] for k in np.nonzero(bad)[0]]))
+        if not bad.any():
+            converged = True
+            break
+        keep = [i for k, i in enumerate(active) if not bad[k]]
+        if len(keep) < mv:
+            raise InputError("max_mean_reproj_px", thr,
+                             f"a threshold that leaves at least {mv} views (round {rnd}: {len(keep)} of "
+                             f"{len(active)} views at or below it; view mean errors range "
+                             f"{means.min():.3f}..{means.max():.3f} px)")
+        for k in np.nonzero(bad)[0]:
+            dropped.append({"label": labels[active[k]], "round": rnd, "mean_error_px": float(means[k]),
+                            "reason": f"mean reprojection error {means[k]:.4f} px > {thr:g} px (round {rnd})"})
+        active = keep
+    if not converged:  # the last round dropped frames: solve once more on the remaining ones
+        warnings.warn(f"frame filter did not settle in {max_rounds} rounds; the result uses the {len(active)} "
+                      "frames left after the last round", RuntimeWarning, stacklevel=3)
+        fit = _calibrate(obj, [imgs[i] for i in active], size, flags)
+    return fit, active, rounds, dropped
+
+
 def calibrate_corners(image_points_px, board, image_size_px, *, labels=None, max_mean_reproj_px=None,
                       bootstrap: int = 0, seed: int = 0, min_views: int = 3, flags: int = 0, max_rounds: int = 50,
                       detections=None, workers: int = 1, progress: bool = False,
@@ -755,15 +806,7 @@ def calibrate_corners(image_points_px, board, image_size_px, *, labels=None, max
         w, h = (int(v) for v in image_size_px)
     except (TypeError, ValueError):
         raise InputError("image_size_px", image_size_px, "(width, height) in pixels") from None
-    imgs = []
-    for i, c in enumerate(image_points_px):
-        a = np.asarray(c, dtype=np.float64).reshape(-1, 2)
-        if a.shape[0] != board.n_corners:
-            raise InputError(f"image_points_px[{i}]", f"{a.shape[0]} corners", f"{board.n_corners} corners "
-                             f"({board.label()} board)")
-        if not np.all(np.isfinite(a)):
-            raise InputError(f"image_points_px[{i}]", "non-finite corner", "finite pixel coordinates")
-        imgs.append(a)
+    imgs = _view_points(image_points_px, board)
     labels = [f"view{i:03d}" for i in range(len(imgs))] if labels is None else [str(s) for s in labels]
     if len(labels) != len(imgs):
         raise InputError("labels", len(labels), f"{len(imgs)} labels (one per view)")
@@ -776,34 +819,7 @@ def calibrate_corners(image_points_px, board, image_size_px, *, labels=None, max
         if not (np.isfinite(thr) and thr > 0):
             raise InputError("max_mean_reproj_px", max_mean_reproj_px, "a threshold > 0 px")
     obj = board.object_points()
-    active = list(range(len(imgs)))
-    rounds: list[FilterRound] = []
-    dropped: list[dict] = []
-    converged = thr is None
-    for rnd in range(int(max_rounds)):
-        fit = _calibrate(obj, [imgs[i] for i in active], (w, h), flags)
-        means = np.array([np.linalg.norm(imgs[i] - _project(obj, fit.rvecs[k], fit.tvecs[k], fit.K, fit.dist),
-                                         axis=-1).mean() for k, i in enumerate(active)])
-        bad = np.zeros(len(active), bool) if thr is None else means > thr
-        rounds.append(FilterRound(rnd, len(active), fit.rms_px, float(means.max()),
-                                  [labels[active[k]] for k in np.nonzero(bad)[0]]))
-        if not bad.any():
-            converged = True
-            break
-        keep = [i for k, i in enumerate(active) if not bad[k]]
-        if len(keep) < mv:
-            raise InputError("max_mean_reproj_px", thr,
-                             f"a threshold that leaves at least {mv} views (round {rnd}: {len(keep)} of "
-                             f"{len(active)} views at or below it; view mean errors range "
-                             f"{means.min():.3f}..{means.max():.3f} px)")
-        for k in np.nonzero(bad)[0]:
-            dropped.append({"label": labels[active[k]], "round": rnd, "mean_error_px": float(means[k]),
-                            "reason": f"mean reprojection error {means[k]:.4f} px > {thr:g} px (round {rnd})"})
-        active = keep
-    if not converged:  # the last round dropped frames: solve once more on the remaining ones
-        warnings.warn(f"frame filter did not settle in {max_rounds} rounds; the result uses the {len(active)} "
-                      "frames left after the last round", RuntimeWarning, stacklevel=2)
-        fit = _calibrate(obj, [imgs[i] for i in active], (w, h), flags)
+    fit, active, rounds, dropped = _filter_views(obj, imgs, labels, (w, h), flags, thr, mv, max_rounds)
     _check_fit(fit, board, (w, h), max_rms_px)
     used = [imgs[i] for i in active]
     residuals = [c - _project(obj, rv, tv, fit.K, fit.dist)
