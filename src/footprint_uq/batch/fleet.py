@@ -35,7 +35,6 @@ import csv
 import io
 import json
 import os
-import shutil
 import sys
 import time
 import uuid
@@ -53,7 +52,17 @@ from tqdm import tqdm
 from .._parse import load_yaml
 from ..errors import ConfigError, InputError
 from ..io import load_camera
-from ..io.atomic import atomic_write_text, clean_temporaries, commit, discard, fsync_dir, path_component, temp_path
+from ..io.atomic import (
+    atomic_write_text,
+    clean_temporaries,
+    commit,
+    discard,
+    path_component,
+    recover_folder,
+    remove_tree,
+    swap_in_folder,
+    temp_path,
+)
 from ..uncertainty.budget import load_budget
 from . import schema as S
 from .process import BatchProcessor, Summary, prefetch
@@ -362,6 +371,90 @@ def _out_path(task: Task, camera_id: str) -> Path:
     return Path(task.out_dir, _partition_name(camera_id), task.out_rel or _strip_camera(task.rel))
 
 
+class _CameraWriters:
+    """One Parquet file per camera of a partition: written under temporary names in a background thread
+    (one write in flight, as process_file), renamed into place together by :meth:`commit`."""
+
+    def __init__(self, task: Task):
+        self.task = task
+        self.writers: dict[str, tuple] = {}  # camera_id -> (ParquetWriter, temporary path, final path)
+        self.counts: dict[str, Summary] = {}
+        self.pool = ThreadPoolExecutor(1, thread_name_prefix="footprint-uq-writer")
+        self.pending = None
+
+    def write(self, cam_id: str, out: pa.Table, n_in: int) -> None:
+        """Queue ``out`` (footprints of ``n_in`` input rows of ``cam_id``) for writing; count it."""
+        if cam_id not in self.writers:
+            path = _out_path(self.task, cam_id)
+            path.parent.mkdir(parents=True, exist_ok=True)
+            tmp = temp_path(path)
+            opts = parquet_options(out.schema, self.task.compression)
+            self.writers[cam_id] = (pq.ParquetWriter(tmp, out.schema, **opts), tmp, path)
+            self.counts[cam_id] = Summary()
+        if self.pending is not None:
+            self.pending.result()
+        self.pending = self.pool.submit(self.writers[cam_id][0].write_table, out)
+        self.counts[cam_id].add_table(out, n_in)
+
+    def commit(self) -> list[str]:
+        """Finish the writes and rename every file into place; returns their paths relative to the output."""
+        if self.pending is not None:
+            self.pending.result()
+        for w, tmp, path in self.writers.values():
+            w.close()
+            commit(tmp, path, fsync=self.task.fsync)  # a retried task replaces its files, never duplicates them
+        self.pool.shutdown()
+        return [Path(p).relative_to(self.task.out_dir).as_posix() for _, _, p in self.writers.values()]
+
+    def abort(self) -> None:
+        """Wait for the write in flight, then drop every temporary file."""
+        self.pool.shutdown(wait=True)
+        for w, tmp, _ in self.writers.values():
+            try:
+                w.close()
+            except Exception:  # noqa: BLE001 - the file is dropped: its close error does not matter
+                pass
+            finally:
+                discard(tmp)
+
+
+def _chunk_camera_ids(t: pa.Table, cam_in_file: bool, part_cam: str | None):
+    """A chunk with its ``camera_id`` column set (file column, else the partition's, else unknown).
+
+    Returns ``(table, camera ids, original ids of the ids too long to route (or None))``.
+    """
+    n = t.num_rows
+    if cam_in_file:
+        cid = pc.cast(t.column("camera_id"), pa.string()).combine_chunks()
+        if part_cam is not None:
+            cid = pc.fill_null(cid, part_cam)
+        t = t.drop_columns(["camera_id"])
+    else:
+        cid = pa.nulls(n, pa.string()) if part_cam is None else pc.cast(
+            pa.DictionaryArray.from_arrays(pa.array(np.zeros(n, np.int32)), pa.array([part_cam])), pa.string())
+    cid, original = _route_long_ids(pc.fill_null(cid, UNKNOWN_CAMERA))
+    return t.append_column("camera_id", cid), cid, original
+
+
+def _process_camera(task: Task, cam_id: str, sub: pa.Table, rows: np.ndarray, sub_pre, original, sel, template,
+                    probe: list, id_fields: list) -> pa.Table:
+    """Footprints of one camera's rows of a chunk, with their ``source`` file; unknown cameras give error rows."""
+    entry = task.cameras.get(cam_id)
+    if entry is None:
+        sub_pre = (_unknown_reasons(original, sel) if cam_id == UNKNOWN_CAMERA
+                   else ["camera_id not in the registry"] * sel.size)
+        bp = template
+    else:
+        bp = _processor(entry, task.options, probe, id_fields, task.threads)
+    if cam_id == UNKNOWN_CAMERA:
+        sub = sub.set_column(sub.column_names.index("camera_id"), "camera_id", pa.nulls(sub.num_rows, pa.string()))
+    out = bp.process(sub, rows=rows, pre_errors=sub_pre)
+    m = out.num_rows
+    src = pa.DictionaryArray.from_arrays(pa.array(np.zeros(m, np.int32)), pa.array([task.rel]))
+    out = out.append_column(pa.field("source", pa.string()), pc.cast(src, pa.string()))
+    return _normalise(out)
+
+
 def process_partition(task: Task) -> dict:
     """Process one input file: write its footprints per camera, return the per-camera counts.
 
@@ -370,53 +463,27 @@ def process_partition(task: Task) -> dict:
     dict: ``{"index", "rel", "files": [...], "cameras": {camera_id: Summary.to_dict() counts}, "elapsed_s"}``
     """
 
-
     t0 = time.perf_counter()
     pf = open_parquet(task.path, f"detections file {task.rel}")
     names = list(pf.schema_arrow.names)
     cam_in_file = "camera_id" in names
     part_cam = task.partition_keys.get("camera_id")
-    entries = task.cameras
     probe = list(dict.fromkeys(names + ["camera_id"]))
     id_fields = _id_fields(pf.schema_arrow)
-    tmpl_entry = task.template if task.template is not None else next(iter(entries.values()))
+    tmpl_entry = task.template if task.template is not None else next(iter(task.cameras.values()))
     template = _processor(tmpl_entry, task.options, probe, id_fields, task.threads)
     numeric = S.numeric_input_columns(template.box_type, names)
     read_cols = [c for c in dict.fromkeys([c for c in S.ID_COLUMNS if c in names] + list(numeric))]
-    writers: dict[str, tuple] = {}
-    counts: dict[str, Summary] = {}
     start = 0
-    overlap = True  # read ahead and write in background threads, as process_file
-    tables = iter_parquet_tables(pf, read_cols, task.chunk_rows, use_threads=False, where=task.path)
-    if overlap:
-        tables = prefetch(tables, 1)
-    pool = ThreadPoolExecutor(1, thread_name_prefix="footprint-uq-writer") if overlap else None
-    pending = None
-
-    def write(w, table):
-        if pool is None:
-            w.write_table(table)
-            return None
-        if pending is not None:
-            pending.result()
-        return pool.submit(w.write_table, table)
-
+    # read ahead and write in background threads, as process_file
+    tables = prefetch(iter_parquet_tables(pf, read_cols, task.chunk_rows, use_threads=False, where=task.path), 1)
+    out = _CameraWriters(task)
     try:
         for t in tables:
             n = t.num_rows
             rows = np.arange(start, start + n, dtype=np.int64)
             start += n
-            if cam_in_file:
-                cid = pc.cast(t.column("camera_id"), pa.string()).combine_chunks()
-                if part_cam is not None:
-                    cid = pc.fill_null(cid, part_cam)
-                t = t.drop_columns(["camera_id"])
-            else:
-                cid = pa.nulls(n, pa.string()) if part_cam is None else pc.cast(
-                    pa.DictionaryArray.from_arrays(pa.array(np.zeros(n, np.int32)), pa.array([part_cam])),
-                    pa.string())
-            cid, original = _route_long_ids(pc.fill_null(cid, UNKNOWN_CAMERA))
-            t = t.append_column("camera_id", cid)
+            t, cid, original = _chunk_camera_ids(t, cam_in_file, part_cam)
             t, pre = coerce_table(t, numeric)
             cams = sorted(pc.unique(cid).to_pylist())
             for cam_id in cams:
@@ -427,52 +494,14 @@ def process_partition(task: Task) -> dict:
                     sel = np.flatnonzero(mask.to_numpy(zero_copy_only=False))
                     sub = t.filter(mask)
                 sub_pre = None if pre is None else [pre[i] for i in sel]
-                entry = entries.get(cam_id)
-                if entry is None:
-                    sub_pre = (_unknown_reasons(original, sel) if cam_id == UNKNOWN_CAMERA
-                               else ["camera_id not in the registry"] * sel.size)
-                    bp = template
-                else:
-                    bp = _processor(entry, task.options, probe, id_fields, task.threads)
-                if cam_id == UNKNOWN_CAMERA:
-                    sub = sub.set_column(sub.column_names.index("camera_id"), "camera_id",
-                                         pa.nulls(sub.num_rows, pa.string()))
-                out = bp.process(sub, rows=rows[sel], pre_errors=sub_pre)
-                m = out.num_rows
-                src = pa.DictionaryArray.from_arrays(pa.array(np.zeros(m, np.int32)), pa.array([task.rel]))
-                out = out.append_column(pa.field("source", pa.string()), pc.cast(src, pa.string()))
-                out = _normalise(out)
-                if cam_id not in writers:
-                    path = _out_path(task, cam_id)
-                    path.parent.mkdir(parents=True, exist_ok=True)
-                    tmp = temp_path(path)
-                    writers[cam_id] = (pq.ParquetWriter(tmp, out.schema, **parquet_options(out.schema,
-                                                                                           task.compression)), tmp,
-                                       path)
-                    counts[cam_id] = Summary()
-                pending = write(writers[cam_id][0], out)
-                counts[cam_id].add_table(out, sel.size)
-        if pending is not None:
-            pending.result()
-        for w, tmp, path in writers.values():
-            w.close()
-            commit(tmp, path, fsync=task.fsync)  # a retried task replaces its files, never duplicates them
-        writers_done = [Path(p).relative_to(task.out_dir).as_posix() for _, _, p in writers.values()]
+                fp = _process_camera(task, cam_id, sub, rows[sel], sub_pre, original, sel, template, probe, id_fields)
+                out.write(cam_id, fp, sel.size)
+        files = out.commit()
     except BaseException:
-        if pool is not None:
-            pool.shutdown(wait=True)
-        for w, tmp, _ in writers.values():
-            try:
-                w.close()
-            except Exception:  # noqa: BLE001 - the file is dropped: its close error does not matter
-                pass
-            finally:
-                discard(tmp)
+        out.abort()
         raise
-    if pool is not None:
-        pool.shutdown()
-    return {"index": task.index, "rel": task.rel, "files": writers_done, "rows_in": start,
-            "cameras": {k: _counts(v) for k, v in counts.items()}, "elapsed_s": time.perf_counter() - t0}
+    return {"index": task.index, "rel": task.rel, "files": files, "rows_in": start,
+            "cameras": {k: _counts(v) for k, v in out.counts.items()}, "elapsed_s": time.perf_counter() - t0}
 
 
 def _id_fields(schema: pa.Schema) -> list[pa.Field]:
@@ -606,7 +635,8 @@ def _run_fleet(reg, detections, out: Path, out_dir, t0, *, chunk_rows, compressi
     """The body of :func:`process_fleet` once ``out`` is checked and locked."""
     staging = temp_path(out)
     tasks = plan(detections, staging, reg, chunk_rows=chunk_rows, compression=compression, fsync=fsync, **options)
-    _clean_stale(out)
+    recover_folder(out)  # a killed job's staging folder (or, killed mid-swap, its previous output back)
+    clean_temporaries(out)
     staging.mkdir(parents=True)
     summ = FleetSummary()
     show = sys.stderr.isatty() if progress is None else bool(progress)
@@ -639,7 +669,7 @@ def _run_fleet(reg, detections, out: Path, out_dir, t0, *, chunk_rows, compressi
         done = True
     finally:
         if not done:
-            _rmtree(staging)
+            remove_tree(staging)
         bar.close()
         if own is not None:
             cluster = getattr(own, "cluster", None)
@@ -656,9 +686,9 @@ def _run_fleet(reg, detections, out: Path, out_dir, t0, *, chunk_rows, compressi
         clean_temporaries(staging)  # files of killed or retried attempts
         atomic_write_text(staging / "_summary.json", json.dumps(summ.to_dict(), indent=2, default=str) + "\n",
                           fsync=fsync)
-        _swap_in(staging, out, fsync=fsync)
+        swap_in_folder(staging, out, fsync=fsync)
     except BaseException:
-        _rmtree(staging)
+        remove_tree(staging)
         raise
     return summ
 
@@ -727,34 +757,3 @@ def _check_out(out: Path, detections, overwrite: bool) -> None:
             raise InputError("out", str(out), "a folder that does not hold the detections")
     if out.is_dir() and any(out.iterdir()) and not overwrite:
         raise InputError("out", str(out), "an empty or new folder (or --overwrite to replace its contents)")
-
-
-def _clean_stale(out: Path) -> None:
-    """Remove the hidden staging / old folders of killed jobs on ``out`` (``.<name>.tmp-*``, ``.<name>.old-*``)."""
-    parent = out.parent if str(out.parent) else Path(".")
-    if not parent.is_dir():
-        return
-    for p in list(parent.glob(f".{out.name}.tmp-*")) + list(parent.glob(f".{out.name}.old-*")):
-        _rmtree(p)
-    clean_temporaries(out)
-
-
-def _rmtree(p: Path) -> None:
-
-    if p.is_dir() and not p.is_symlink():
-        shutil.rmtree(p, ignore_errors=True)
-    elif p.exists() or p.is_symlink():
-        discard(p)
-
-
-def _swap_in(staging: Path, out: Path, *, fsync: bool = True) -> None:
-    """Put the finished folder ``staging`` in place of ``out`` (the old one removed after the rename)."""
-    old = None
-    if out.exists():
-        old = out.with_name(f".{out.name}.old-{uuid.uuid4().hex[:8]}")
-        os.rename(out, old)
-    os.rename(staging, out)
-    if fsync:
-        fsync_dir(out.parent if str(out.parent) else ".")
-    if old is not None:
-        _rmtree(old)

@@ -28,7 +28,7 @@ from urllib.parse import quote
 
 __all__ = ["TMP_MARK", "atomic_path", "atomic_write_text", "atomic_write_bytes", "commit", "discard", "temp_path",
            "clean_temporaries", "clean_temporaries_of", "fsync_dir", "path_component", "same_file", "swap_in_folder",
-           "recover_folder", "OLD_MARK"]
+           "recover_folder", "remove_tree", "OLD_MARK"]
 
 #: part of every temporary name (``.<stem>.tmp-<hex><suffix>``)
 TMP_MARK = ".tmp-"
@@ -178,7 +178,9 @@ def _exchange(a, b) -> bool:
     return fn(at_fdcwd, os.fsencode(a), at_fdcwd, os.fsencode(b), rename_exchange) == 0
 
 
-def _rmtree(p: Path) -> None:
+def remove_tree(p) -> None:
+    """Remove a folder and everything under it, or a file or symbolic link (never follows a link; never raises)."""
+    p = Path(p)
     if p.is_dir() and not p.is_symlink():
         shutil.rmtree(p, ignore_errors=True)
     else:
@@ -198,7 +200,7 @@ def swap_in_folder(staging, out, *, fsync: bool = True) -> None:
     if out.exists() and _exchange(staging, out):
         if fsync:
             fsync_dir(parent)
-        _rmtree(staging)  # now the old folder
+        remove_tree(staging)  # now the old folder
         return
     old = None
     if out.exists():
@@ -208,7 +210,7 @@ def swap_in_folder(staging, out, *, fsync: bool = True) -> None:
     if fsync:
         fsync_dir(parent)
     if old is not None:
-        _rmtree(old)
+        remove_tree(old)
 
 
 def recover_folder(out) -> None:
@@ -219,9 +221,9 @@ def recover_folder(out) -> None:
     if not parent.is_dir():
         return
     for p in parent.glob(f".{out.name}{TMP_MARK}*"):
-        _rmtree(p)
+        remove_tree(p)
     olds = sorted(parent.glob(f".{out.name}{OLD_MARK}*"), key=lambda q: q.stat().st_mtime)
     if olds and not out.exists() and olds[-1].is_dir():
         os.rename(olds.pop(), out)
     for p in olds:
-        _rmtree(p)
+        remove_tree(p)
