@@ -286,6 +286,81 @@ def _plausible(R, t, gz) -> tuple[bool, float, float]:
     return 0 < h < MAX_PLAUSIBLE_HEIGHT_M and tilt > 0, h, tilt
 
 
+_USES = (None, "extrinsics", "projection_matrix", "station_base", "lidar_projection")
+
+
+def _refuse_no_pose(d: dict, where: str):
+    """Raise the error of a file without a usable pose (a vehicle camera, placeholders, or nothing)."""
+    if Path(where).name.lower().startswith("vehicle"):
+        raise ConfigError(C.label(where, "pose"), "a vehicle camera",
+                          "a camera with a fixed ground pose (a vehicle-mounted camera moves with the vehicle: "
+                          "its files hold -1 placeholders; give a per-frame pose with pose=)")
+    ph = f" (the file holds placeholders of -1 in {', '.join(d['placeholders'])})" if d["placeholders"] else ""
+    raise ConfigError(C.label(where, "pose"), "no usable extrinsics in the file", NO_POSE_HELP + ph)
+
+
+def _check_use(use, d: dict, where: str, lidar) -> None:
+    """The pose asked for by ``use`` must be in the file."""
+    if use == "extrinsics" and d["R"] is None:
+        raise ConfigError(C.label(where, "rotation_matrix"), "missing", "extrinsics (use='extrinsics')")
+    if use == "projection_matrix" and d["P"] is None:
+        raise ConfigError(C.label(where, "projection_matrix"), "missing", "a 3x4 projection matrix "
+                          "(use='projection_matrix')")
+    if use == "station_base" and d["station_base"] is None:
+        raise ConfigError(C.label(where, "rotation_matrix_sensor_station_base_to_sensor"), "missing",
+                          "the station-base pose (use='station_base')")
+    if use == "lidar_projection" and lidar is None:
+        _require_lidar(d, where)
+
+
+def _camera_from_file_extrinsics(d: dict, size, gz: float, where: str, use, lidar):
+    """The camera of the file's ``rotation_matrix``/translation, or, when they give no camera above the
+    ground looking down, of its other pose (warned), or refused."""
+    R, t = d["R"], d["t"]
+    ok, h, tilt = _plausible(R, t, gz)
+    other = "camera_to_world" if d["convention"] == "world_to_camera" else "world_to_camera"
+    ok2 = _plausible(*_to_world_to_camera(d["R_file"], d["t_file"], other), gz)[0]
+    alt = ("projection_matrix", None) if d["P"] is not None else (
+        ("station_base", None) if d["station_base"] is not None else lidar)
+    if ok or use == "extrinsics" or (ok2 and alt is None):
+        cam = _camera_from_extrinsics(d, size, gz, where)
+        if d["P"] is not None and d["a9_r0"]:
+            _check_a9_projection(d["P"], cam, where)
+        elif d["P"] is not None:
+            C.check_projection_matrix(where, "projection_matrix", d["P"], cam, alt_K=d["alt_K"], other_K_ok=True)
+        return cam
+    # the implied direction gives no camera above the ground looking down: another pose of the file, or refuse
+    keys = "/".join(d["pose_keys"])
+    scale = float(np.abs(d["t_file"]).max())
+    why = f"camera {h:.4g} m above the ground, tilt {tilt:.3g} deg"
+    hint = f" (translation values up to {scale:.4g}: not metres?)" if scale > 100 else ""
+    if alt is None:
+        if d["lidar_projections"]:
+            _require_lidar(d, where)
+        raise ConfigError(C.label(where, keys), why, "a camera above the ground looking down" + hint +
+                          f"; the file has no other pose ({', '.join(d['empty']) or 'no projection_matrix'} "
+                          "empty): pass pose=")
+    cam = (_camera_from_station_base(d, size, gz, where) if alt[0] == "station_base" else
+           _camera_from_P(d["P"] if alt[1] is None else alt[1], size, gz, where, d, alt[0]))
+    warnings.warn(f"{where}: {keys} not used ({why}{hint}); camera from {alt[0]}", ConsistencyWarning,
+                  stacklevel=3)
+    return cam
+
+
+def _camera_from_file_projection(d: dict, size, gz: float, where: str, use):
+    """The pinhole camera of the file's ``projection_matrix``; with ``use="projection_matrix"`` and
+    extrinsics in the file too, warns how far their pose differs."""
+    cam = _camera_from_P(d["P"], size, gz, where, d, "projection_matrix")
+    if d["R"] is not None and use == "projection_matrix":  # report how the extrinsics differ
+        Rx, tx = d["R"], d["t"]
+        ang = float(np.degrees(np.arccos(np.clip((np.trace(cam.R.T @ Rx) - 1) / 2, -1, 1))))
+        dC = float(np.linalg.norm(cam.position_world_m - (-Rx.T @ tx)))
+        if ang > 1e-6 or dC > 1e-6:
+            warnings.warn(f"{where}: projection_matrix pose differs from {'/'.join(d['pose_keys'])} by "
+                          f"{ang:.3g} deg and {dC:.3g} m; using projection_matrix", ConsistencyWarning, stacklevel=3)
+    return cam
+
+
 def camera_from_tumtraf_file(path, *, ground_z_m=None, image_size_px=None, pose=None,
                              pose_convention: str | None = None, use: str | None = None, lidar_to_base=None):
     """An :class:`OpenCVCamera` from a TUMTraf/A9 calibration JSON.
@@ -312,7 +387,7 @@ def camera_from_tumtraf_file(path, *, ground_z_m=None, image_size_px=None, pose=
         camera is then in the base frame (e.g. ``s110_base``, ground ``z = 0``).
     """
 
-    if use not in (None, "extrinsics", "projection_matrix", "station_base", "lidar_projection"):
+    if use not in _USES:
         raise ConfigError("use", use, "None, 'extrinsics', 'projection_matrix', 'station_base' or "
                           "'lidar_projection'")
     d = read_tumtraf_calibration(path, pose_convention=pose_convention)
@@ -330,72 +405,21 @@ def camera_from_tumtraf_file(path, *, ground_z_m=None, image_size_px=None, pose=
                               f"no pose argument: the file has one ({', '.join(keys)})")
         return pose_camera(d["K"], d["dist"], size, read_pose(pose), gz, where)
     if not has_pose:
-
-        if Path(where).name.lower().startswith("vehicle"):
-            raise ConfigError(C.label(where, "pose"), "a vehicle camera",
-                              "a camera with a fixed ground pose (a vehicle-mounted camera moves with the vehicle: "
-                              "its files hold -1 placeholders; give a per-frame pose with pose=)")
-        ph = f" (the file holds placeholders of -1 in {', '.join(d['placeholders'])})" if d["placeholders"] else ""
-        raise ConfigError(C.label(where, "pose"), "no usable extrinsics in the file", NO_POSE_HELP + ph)
-    if use == "extrinsics" and d["R"] is None:
-        raise ConfigError(C.label(where, "rotation_matrix"), "missing", "extrinsics (use='extrinsics')")
-    if use == "projection_matrix" and d["P"] is None:
-        raise ConfigError(C.label(where, "projection_matrix"), "missing", "a 3x4 projection matrix "
-                          "(use='projection_matrix')")
-    if use == "station_base" and d["station_base"] is None:
-        raise ConfigError(C.label(where, "rotation_matrix_sensor_station_base_to_sensor"), "missing",
-                          "the station-base pose (use='station_base')")
-    if use == "lidar_projection" and lidar is None:
-        _require_lidar(d, where)
+        _refuse_no_pose(d, where)
+    _check_use(use, d, where, lidar)
     if use == "station_base":
         return _camera_from_station_base(d, size, gz, where)
     if use == "lidar_projection":
         return _camera_from_P(lidar[1], size, gz, where, d, lidar[0])
     if d["R"] is not None and use != "projection_matrix":
-        R, t = d["R"], d["t"]
-        ok, h, tilt = _plausible(R, t, gz)
-        other = "camera_to_world" if d["convention"] == "world_to_camera" else "world_to_camera"
-        ok2 = _plausible(*_to_world_to_camera(d["R_file"], d["t_file"], other), gz)[0]
-        alt = ("projection_matrix", None) if d["P"] is not None else (
-            ("station_base", None) if d["station_base"] is not None else lidar)
-        if ok or use == "extrinsics" or (ok2 and alt is None):
-            cam = _camera_from_extrinsics(d, size, gz, where)
-            if d["P"] is not None and d["a9_r0"]:
-                _check_a9_projection(d["P"], cam, where)
-            elif d["P"] is not None:
-                C.check_projection_matrix(where, "projection_matrix", d["P"], cam, alt_K=d["alt_K"], other_K_ok=True)
-            return cam
-        # the implied direction gives no camera above the ground looking down: another pose of the file, or refuse
-        keys = "/".join(d["pose_keys"])
-        scale = float(np.abs(d["t_file"]).max())
-        why = f"camera {h:.4g} m above the ground, tilt {tilt:.3g} deg"
-        hint = f" (translation values up to {scale:.4g}: not metres?)" if scale > 100 else ""
-        if alt is None:
-            if d["lidar_projections"]:
-                _require_lidar(d, where)
-            raise ConfigError(C.label(where, keys), why, "a camera above the ground looking down" + hint +
-                              f"; the file has no other pose ({', '.join(d['empty']) or 'no projection_matrix'} "
-                              "empty): pass pose=")
-        cam = (_camera_from_station_base(d, size, gz, where) if alt[0] == "station_base" else
-               _camera_from_P(d["P"] if alt[1] is None else alt[1], size, gz, where, d, alt[0]))
-        warnings.warn(f"{where}: {keys} not used ({why}{hint}); camera from {alt[0]}", ConsistencyWarning,
-                      stacklevel=2)
-        return cam
+        return _camera_from_file_extrinsics(d, size, gz, where, use, lidar)
     if d["P"] is None:
         if d["station_base"] is not None:
             return _camera_from_station_base(d, size, gz, where)
         if lidar is None:
             _require_lidar(d, where)
         return _camera_from_P(lidar[1], size, gz, where, d, lidar[0])
-    cam = _camera_from_P(d["P"], size, gz, where, d, "projection_matrix")
-    if d["R"] is not None and use == "projection_matrix":  # report how the extrinsics differ
-        Rx, tx = d["R"], d["t"]
-        ang = float(np.degrees(np.arccos(np.clip((np.trace(cam.R.T @ Rx) - 1) / 2, -1, 1))))
-        dC = float(np.linalg.norm(cam.position_world_m - (-Rx.T @ tx)))
-        if ang > 1e-6 or dC > 1e-6:
-            warnings.warn(f"{where}: projection_matrix pose differs from {'/'.join(d['pose_keys'])} by "
-                          f"{ang:.3g} deg and {dC:.3g} m; using projection_matrix", ConsistencyWarning, stacklevel=2)
-    return cam
+    return _camera_from_file_projection(d, size, gz, where, use)
 
 
 def _check_a9_projection(P_file, cam, where):
