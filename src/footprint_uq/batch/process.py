@@ -344,7 +344,6 @@ class BatchProcessor:
     def compute(self, X: np.ndarray, cov: np.ndarray | None, reason_id: np.ndarray) -> _Result:
         """Numbers of one chunk: ``X`` (n, m) box columns, ``cov`` (n, 3) or None, ``reason_id`` (n,) pre-errors."""
         n = X.shape[0]
-        K = self.n_corners
         self._validate(X, cov, reason_id)
         good = reason_id < 0
         all_good = bool(good.all())
@@ -356,28 +355,41 @@ class BatchProcessor:
             if np.any(cg):
                 P = np.empty((cg.shape[0], 2, 2))
                 P[:, 0, 0], P[:, 0, 1], P[:, 1, 0], P[:, 1, 1] = cg[:, 0], cg[:, 1], cg[:, 1], cg[:, 2]
-        res = _Result(n=n, K=K, reason_id=reason_id, status_id=np.full(n, 2, dtype=np.int32))
-        ests = [self._kernel(Xg, P)] if Xg.shape[0] else []
+        res = _Result(n=n, K=self.n_corners, reason_id=reason_id, status_id=np.full(n, 2, dtype=np.int32))
+        est = self._kernel(Xg, P) if Xg.shape[0] else None
+        creason, cbad, corner_reason = self._gather(res, est, good, all_good)
+        partial, failed = self._set_status(res, good, creason, corner_reason, reason_id)
+        for mask, prefix in ((partial, "no centre: "), (failed, "no usable corner: ")):
+            if mask.any():
+                reason_id[mask] = self._failure_reason_ids(prefix, creason[mask], cbad[mask], corner_reason[mask])
+        return res
+
+    def _gather(self, res: _Result, est, good: np.ndarray, all_good: bool):
+        """The kernel's results for the ``good`` rows spread into ``res`` (n rows, fills elsewhere).
+
+        Returns ``(centre reason, centre's bad corner, corner reasons)`` of every row.
+        """
+        n, K = res.n, res.K
 
         def gather(attr, shape_tail, fill, dtype=np.float64):
-            if ests and all_good:
-                return getattr(ests[0], attr)
+            if est is not None and all_good:
+                return getattr(est, attr)
             out = np.full((n,) + shape_tail, fill, dtype=dtype)
-            if ests:
-                out[good] = getattr(ests[0], attr)
+            if est is not None:
+                out[good] = getattr(est, attr)
             return out
 
         def gather_rows(block, nrows, fill, dtype):  # (nrows, n) blocks of the kernel's per-object rows
-            if ests and all_good:
+            if est is not None and all_good:
                 return block
             out = np.full((nrows, n), fill, dtype=dtype)
-            if ests:
+            if est is not None:
                 out[:, good] = block
             return out
 
-        res.obj = gather_rows(ests[0].object_rows if ests else None, len(OBJ_ROWS), np.nan, np.float64)
+        res.obj = gather_rows(est.object_rows if est is not None else None, len(OBJ_ROWS), np.nan, np.float64)
         res.largest_index = gather("largest_index", (), -1, np.int64)
-        res.v2x = gather_rows(ests[0].v2x_codes.T if ests else None, len(V2X_FIELDS), 0, np.int32)
+        res.v2x = gather_rows(est.v2x_codes.T if est is not None else None, len(V2X_FIELDS), 0, np.int32)
         if not all_good:
             unavailable = np.array([S.V2X_UNAVAILABLE[f] for f in V2X_FIELDS], dtype=np.int32)
             res.v2x[:, ~good] = unavailable[:, None]
@@ -393,8 +405,14 @@ class BatchProcessor:
             res.corner_reason = corner_reason
         if self.tracks:
             res.shared = gather("centre_shared_m", (2, self._shared_at.rank), np.nan)
-        # status and reason of the processed rows; outputs are checked too: a centre, covariance or
-        # largest point that overflowed (absurd but finite inputs) is never "ok"/"partial"
+        return creason, cbad, corner_reason
+
+    def _set_status(self, res: _Result, good, creason, corner_reason, reason_id) -> tuple[np.ndarray, np.ndarray]:
+        """Status and reason of the processed rows (``ok``, ``partial``, overflow); returns the masks of the
+        partial and the failed rows, whose reasons :meth:`_failure_reason_ids` gives."""
+        # outputs are checked too: a centre, covariance or largest point that overflowed (absurd but finite
+        # inputs) is never "ok"/"partial"
+        n = res.n
         o = res.obj
         with np.errstate(invalid="ignore"):
             centre_fin = np.isfinite(o[_CENTRE_ROWS]).all(0) if n else np.zeros(0, bool)
@@ -418,28 +436,29 @@ class BatchProcessor:
             unavailable = np.array([S.V2X_UNAVAILABLE[f] for f in V2X_FIELDS], dtype=np.int32)
             res.v2x = np.array(res.v2x, copy=True) if not res.v2x.flags.writeable else res.v2x
             res.v2x[:, overflow] = unavailable[:, None]
-        for mask, prefix in ((partial, "no centre: "), (failed, "no usable corner: ")):
-            if not mask.any():
-                continue
-            key = creason[mask].astype(np.int64) * 64 + (cbad[mask] + 1)
-            if prefix == "no usable corner: ":  # summarise: every corner's code the same?
-                cr = corner_reason[mask]
-                same = (cr == cr[:, :1]).all(1)
-                key = np.where(same, -1 - cr[:, 0].astype(np.int64), key)
-            uk, inv = np.unique(key, return_inverse=True)
-            ids = np.empty(uk.size, dtype=np.int32)
-            for i, k in enumerate(uk.tolist()):
-                if k < 0:
-                    text = f"all {K} corners: {st.REASONS[-1 - k]}" if K > 1 else st.REASONS[-1 - k]
+        return partial, failed
+
+    def _failure_reason_ids(self, prefix: str, creason, cbad, corner_reason) -> np.ndarray:
+        """Reason ids of rows without a centre (``prefix`` "no centre: ") or without any usable corner
+        ("no usable corner: "; summarised when every corner has the same code); one text per distinct case."""
+        K = self.n_corners
+        key = creason.astype(np.int64) * 64 + (cbad + 1)
+        if prefix == "no usable corner: ":  # summarise: every corner's code the same?
+            same = (corner_reason == corner_reason[:, :1]).all(1)
+            key = np.where(same, -1 - corner_reason[:, 0].astype(np.int64), key)
+        uk, inv = np.unique(key, return_inverse=True)
+        ids = np.empty(uk.size, dtype=np.int32)
+        for i, k in enumerate(uk.tolist()):
+            if k < 0:
+                text = f"all {K} corners: {st.REASONS[-1 - k]}" if K > 1 else st.REASONS[-1 - k]
+            else:
+                code, bad = divmod(k, 64)
+                if code == DEGENERATE:
+                    text = st.REASONS[DEGENERATE]
                 else:
-                    code, bad = divmod(k, 64)
-                    if code == DEGENERATE:
-                        text = st.REASONS[DEGENERATE]
-                    else:
-                        text = f"corner {bad - 1} of {K}: {st.REASONS[code]}"
-                ids[i] = self.reasons.id(prefix + text)
-            reason_id[mask] = ids[inv]
-        return res
+                    text = f"corner {bad - 1} of {K}: {st.REASONS[code]}"
+            ids[i] = self.reasons.id(prefix + text)
+        return ids[inv]
 
     # -- tables -----------------------------------------------------------------------------------
     def inputs_from_table(self, table: pa.Table):
@@ -785,6 +804,61 @@ def process_chunk(bp: BatchProcessor, chunk) -> pa.Table:
     return out
 
 
+def _check_out_file(out, detections) -> None:
+    """``out`` (and its summary) must be a file path other than the detections."""
+    for p in (out, summary_path(out)):
+        if same_file(p, detections):
+            raise InputError("out", str(p), "a file other than the detections (this is the same file)")
+    if Path(out).is_dir():
+        raise InputError("out", str(out), "a file path (this is a folder)")
+
+
+def _stream_to_file(reader, bp, out, schema, bar, *, fmt_out: str, compression, fsync: bool,
+                    summary: bool) -> Summary:
+    """Process every chunk of ``reader`` into ``out`` (read ahead, one write in flight in a background
+    thread); the file is committed only when every row is accounted for."""
+    summ = Summary()
+    pool = _Pool(1, thread_name_prefix="footprint-uq-writer")
+    pending = None
+    writer = None
+    try:
+        writer = open_writer(out, schema, format=fmt_out, compression=compression, fsync=fsync)
+        for chunk in prefetch(iter(reader), 1):
+            table = process_chunk(bp, chunk)
+            summ.add_table(table, chunk.table.num_rows + len(chunk.malformed))
+            if pending is not None:
+                pending.result()
+            pending = pool.submit(writer.write, table)
+            bar.update(chunk.progress)
+        if pending is not None:
+            pending.result()
+        summ.lines_in = reader.lines
+        if not summ.consistent:  # pragma: no cover - a bug, not bad input
+            raise RuntimeError(f"row accounting broken: {summ.text()} (lines in {summ.lines_in})")
+        # the previous summary goes first: a summary never stands beside another output than its own
+        writer.before_commit = (lambda: summary_path(out).unlink(missing_ok=True)) if summary else None
+        writer.close()
+    except BaseException:
+        pool.shutdown(wait=True)  # an in-flight write finishes before its file is dropped
+        if writer is not None:
+            writer.abort()
+        raise
+    finally:
+        pool.shutdown()
+    return summ
+
+
+def _file_info(detections, out, reader, fmt_out: str, bp, fsync: bool, info: dict | None) -> dict:
+    """The ``info`` entries of a file job's summary (inputs, formats, options, origin, budget)."""
+    return {"detections": str(detections), "out": str(out), "format_in": reader.format, "format_out": fmt_out,
+            "box_type": bp.box_type, "contact": bp.contact if bp.box_type == "2d" else None,
+            "n_corners": bp.n_corners, "confidence": bp.confidence, "heading_offset_deg": bp.heading_offset_deg,
+            "origin": None if bp.geo is None else {
+                "origin_lat_deg": bp.geo.origin_lat_deg, "origin_lon_deg": bp.geo.origin_lon_deg,
+                "heading_offset_deg": bp.geo.heading_offset_deg}, "chunk_rows": reader.chunk_rows,
+            "budget": bp.budget.name if hasattr(bp.budget, "name") else None, "fsync": bool(fsync), **(info or {})}
+
+
 def process_file(camera, budget, detections, out, *, chunk_rows: int = S.DEFAULT_CHUNK_ROWS,
                  format_in: str | None = None, format_out: str | None = None, progress: bool | None = None,
                  summary: bool = True, compression: str | None = "auto", info: dict | None = None,
@@ -825,8 +899,6 @@ def process_file(camera, budget, detections, out, *, chunk_rows: int = S.DEFAULT
     Summary
     """
 
-
-
     t0 = time.perf_counter()
     fmt_out = detect_out_format(out, format_out)
     if fmt_out == "geojson":
@@ -839,53 +911,18 @@ def process_file(camera, budget, detections, out, *, chunk_rows: int = S.DEFAULT
     names = reader.columns if bp.box_type is not None else reader.family_columns  # JSON Lines: one rule per family
     schema = bp.resolve(names, reader.id_fields)
     reader.select(S.numeric_input_columns(bp.box_type, names))
-    for p in (out, summary_path(out)):
-        if same_file(p, detections):
-            raise InputError("out", str(p), "a file other than the detections (this is the same file)")
-    if Path(out).is_dir():
-        raise InputError("out", str(out), "a file path (this is a folder)")
-    summ = Summary()
+    _check_out_file(out, detections)
     show = sys.stderr.isatty() if progress is None else bool(progress)
     bar = tqdm(total=reader.total, unit=reader.unit, unit_scale=True, disable=not show, file=sys.stderr,
                desc="footprints", leave=False)
-    pool = _Pool(1, thread_name_prefix="footprint-uq-writer")
-    pending = None
-    writer = None
     try:
-        writer = open_writer(out, schema, format=fmt_out, compression=compression, fsync=fsync)
-        for chunk in prefetch(iter(reader), 1):
-            table = process_chunk(bp, chunk)
-            summ.add_table(table, chunk.table.num_rows + len(chunk.malformed))
-            if pending is not None:
-                pending.result()
-            pending = pool.submit(writer.write, table)
-            bar.update(chunk.progress)
-        if pending is not None:
-            pending.result()
-        summ.lines_in = reader.lines
-        if not summ.consistent:  # pragma: no cover - a bug, not bad input
-            raise RuntimeError(f"row accounting broken: {summ.text()} (lines in {summ.lines_in})")
-        # the previous summary goes first: a summary never stands beside another output than its own
-        writer.before_commit = (lambda: summary_path(out).unlink(missing_ok=True)) if summary else None
-        writer.close()
-    except BaseException:
-        pool.shutdown(wait=True)  # an in-flight write finishes before its file is dropped
-        if writer is not None:
-            writer.abort()
-        raise
+        summ = _stream_to_file(reader, bp, out, schema, bar, fmt_out=fmt_out, compression=compression,
+                               fsync=fsync, summary=summary)
     finally:
-        pool.shutdown()
         bar.close()
         bp.close()
     summ.elapsed_s = time.perf_counter() - t0
-    summ.info = {"detections": str(detections), "out": str(out), "format_in": reader.format, "format_out": fmt_out,
-                 "box_type": bp.box_type, "contact": bp.contact if bp.box_type == "2d" else None,
-                 "n_corners": bp.n_corners, "confidence": bp.confidence, "heading_offset_deg": bp.heading_offset_deg,
-                 "origin": None if bp.geo is None else {
-                     "origin_lat_deg": bp.geo.origin_lat_deg, "origin_lon_deg": bp.geo.origin_lon_deg,
-                     "heading_offset_deg": bp.geo.heading_offset_deg}, "chunk_rows": reader.chunk_rows,
-                 "budget": bp.budget.name if hasattr(bp.budget, "name") else None, "fsync": bool(fsync), **(info or {})}
+    summ.info = _file_info(detections, out, reader, fmt_out, bp, fsync, info)
     if summary:
-
         atomic_write_text(summary_path(out), json.dumps(summ.to_dict(), indent=2) + "\n", fsync=fsync)
     return summ

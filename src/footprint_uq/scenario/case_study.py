@@ -502,6 +502,100 @@ def _xy_statement(r, cam, ct, system, quantity, layout, majority: float = 0.8) -
             "crossing_in_junction": bool(mid), "holds": holds}
 
 
+def _camera_columns(scene: Scene, cam_name: str, cam, boxes: np.ndarray, corners3d: np.ndarray) -> dict:
+    """Per-frame columns of one camera that do not depend on the camera type: the box in the world and
+    camera frames, its image bounding box and corners (px), whether all corners are in the image."""
+    N = boxes.shape[0]
+    T = cam.T_cam_world
+    c_cam = corners3d @ T[:3, :3].T + T[:3, 3]  # (N, 8, 3) OpenCV camera frame
+    ctr_cam = boxes[:, :3] @ T[:3, :3].T + T[:3, 3]
+    pr = cam.project(corners3d)
+    uv8 = np.where(pr.valid[..., None], pr.uv_px, np.nan)
+    in_img = pr.valid & cam.in_image(np.nan_to_num(pr.uv_px, nan=-1e9))
+    base = {"camera": cam_name, "frame": scene.frame, "t_s": scene.t_s, "segment": scene.segment,
+            "segment_name": np.array(SEGMENTS)[scene.segment]}
+    for j, nm in enumerate(("x", "y", "z", "length", "width", "height")):
+        base[f"box_{nm}_m"] = boxes[:, j]
+    base["box_yaw_rad"] = boxes[:, 6]
+    for j, nm in enumerate("xyz"):
+        base[f"box_cam_{nm}_m"] = ctr_cam[:, j]
+    with np.errstate(invalid="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # all corners behind the camera: NaN box
+        base["bbox_u_min_px"] = np.nanmin(uv8[..., 0], 1) if N else np.zeros(0)
+        base["bbox_v_min_px"] = np.nanmin(uv8[..., 1], 1) if N else np.zeros(0)
+        base["bbox_u_max_px"] = np.nanmax(uv8[..., 0], 1) if N else np.zeros(0)
+        base["bbox_v_max_px"] = np.nanmax(uv8[..., 1], 1) if N else np.zeros(0)
+    base["box_in_view"] = in_img.all(1)
+    for k in range(8):
+        for j, nm in enumerate("xyz"):
+            base[f"box_corner{k}_cam_{nm}_m"] = c_cam[:, k, j]
+        base[f"box_corner{k}_u_px"] = uv8[:, k, 0]
+        base[f"box_corner{k}_v_px"] = uv8[:, k, 1]
+    return base
+
+
+def _corner_columns(fp, corner_nl: np.ndarray, row: dict) -> None:
+    """Each footprint corner's pixel, ground position, sigmas, reason and nonlinearity into ``row``."""
+    N = fp.corners_px.shape[0]
+    for k in range(fp.n_corners):
+        row[f"corner{k}_u_px"] = fp.corners_px[:, k, 0]
+        row[f"corner{k}_v_px"] = fp.corners_px[:, k, 1]
+        row[f"corner{k}_x_m"] = fp.corners_xy_world_m[:, k, 0]
+        row[f"corner{k}_y_m"] = fp.corners_xy_world_m[:, k, 1]
+        row[f"corner{k}_sigma_x_m"] = np.sqrt(fp.corners_cov_m2[:, k, 0, 0])
+        row[f"corner{k}_sigma_y_m"] = np.sqrt(fp.corners_cov_m2[:, k, 1, 1])
+        row[f"corner{k}_cov_xy_m2"] = fp.corners_cov_m2[:, k, 0, 1]
+        row[f"corner{k}_reason"] = fp.corner_reason[:, k]
+        row[f"corner{k}_nonlinearity"] = corner_nl[:, k]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # all corners invalid: NaN
+        row["footprint_nonlinearity_max"] = np.nanmax(corner_nl, axis=1) if N else np.zeros(0)
+    row["footprint_linear_ok"] = fp.centre_valid & np.all(corner_nl <= DEFAULT_LINEAR_THRESHOLD, axis=1)
+
+
+def _point_columns(fp, cam, confidence: float, k_conf: float, row: dict) -> None:
+    """The largest-uncertainty corner's and the centre's position, sigmas and ellipse (in every axis
+    system) into ``row``."""
+    for q, cov, xy in (("largest", fp.largest_cov_m2, fp.largest_xy_world_m),
+                       ("centre", fp.centre_cov_m2, fp.centre_xy_world_m)):
+        a, b, th = ellipse_axes(cov)
+        row[f"{q}_x_m"] = xy[:, 0]
+        row[f"{q}_y_m"] = xy[:, 1]
+        row[f"{q}_sigma_x_m"] = np.sqrt(cov[:, 0, 0])
+        row[f"{q}_sigma_y_m"] = np.sqrt(cov[:, 1, 1])
+        row[f"{q}_cov_xy_m2"] = cov[:, 0, 1]
+        row[f"{q}_semi_major_m"] = a
+        row[f"{q}_semi_minor_m"] = b
+        row[f"{q}_orientation_deg"] = th
+        row[f"{q}_semi_major_{int(round(confidence * 100))}_m"] = a * k_conf
+        for system in (*AXIS_SYSTEMS, "range"):
+            sX, sY = axis_components(cov, system, cam, xy)
+            row[f"{q}_sigma_X_{system}_m"] = sX
+            row[f"{q}_sigma_Y_{system}_m"] = sY
+
+
+def _type_rows(cam, budget, boxes: np.ndarray, base: dict, ct: str, confidence: float, k_conf: float):
+    """Footprints of the boxes for one camera and camera type: ``(rows as a DataFrame, footprints, contributions)``."""
+    fp = footprints_from_boxes3d(cam, budget, boxes)
+    contrib = centre_contributions(cam, budget, fp)
+    with np.errstate(invalid="ignore"):
+        corner_nl = nonlinearity(cam, budget, np.nan_to_num(fp.corners_px, nan=-1e6))
+    corner_nl = np.where(np.isfinite(fp.corners_xy_world_m).all(-1), corner_nl, np.nan)
+    row = dict(base)
+    row["camera_type"] = ct
+    _corner_columns(fp, corner_nl, row)
+    _point_columns(fp, cam, confidence, k_conf, row)
+    row["largest_index"] = fp.largest_index
+    row["centre_valid"] = fp.centre_valid
+    row["centre_reason"] = fp.centre_reason
+    row["centre_reason_text"] = fp.centre_reason_text()
+    for src, cov in contrib.items():
+        row[f"contrib_{src}_m2"] = cov[:, 0, 0] + cov[:, 1, 1]
+    for name, v in fp.v2x.items():
+        row[f"v2x_{name}"] = v
+    return pd.DataFrame(row), fp, contrib
+
+
 def analyse(scene: Scene, camera_types=None, *, confidence: float = 0.95):
     """Run the case study on a scene: per camera, camera type and frame.
 
@@ -523,87 +617,17 @@ def analyse(scene: Scene, camera_types=None, *, confidence: float = 0.95):
     budgets = {k: load_budget(v) for k, v in camera_types.items()}
     k_conf = chi2_scale(confidence)
     boxes = np.asarray(scene.boxes_world, dtype=np.float64)
-    N = boxes.shape[0]
     corners3d = box_corners(boxes)  # (N, 8, 3)
     frames = []
     footprints = {}
     contributions = {}
     for cam_name, cam in scene.cameras.items():
-        T = cam.T_cam_world
-        c_cam = corners3d @ T[:3, :3].T + T[:3, 3]  # (N, 8, 3) OpenCV camera frame
-        ctr_cam = boxes[:, :3] @ T[:3, :3].T + T[:3, 3]
-        pr = cam.project(corners3d)
-        uv8 = np.where(pr.valid[..., None], pr.uv_px, np.nan)
-        in_img = pr.valid & cam.in_image(np.nan_to_num(pr.uv_px, nan=-1e9))
-        base = {"camera": cam_name, "frame": scene.frame, "t_s": scene.t_s, "segment": scene.segment,
-                "segment_name": np.array(SEGMENTS)[scene.segment]}
-        for j, nm in enumerate(("x", "y", "z", "length", "width", "height")):
-            base[f"box_{nm}_m"] = boxes[:, j]
-        base["box_yaw_rad"] = boxes[:, 6]
-        for j, nm in enumerate("xyz"):
-            base[f"box_cam_{nm}_m"] = ctr_cam[:, j]
-        with np.errstate(invalid="ignore"), warnings.catch_warnings():
-            warnings.simplefilter("ignore", RuntimeWarning)  # all corners behind the camera: NaN box
-            base["bbox_u_min_px"] = np.nanmin(uv8[..., 0], 1) if N else np.zeros(0)
-            base["bbox_v_min_px"] = np.nanmin(uv8[..., 1], 1) if N else np.zeros(0)
-            base["bbox_u_max_px"] = np.nanmax(uv8[..., 0], 1) if N else np.zeros(0)
-            base["bbox_v_max_px"] = np.nanmax(uv8[..., 1], 1) if N else np.zeros(0)
-        base["box_in_view"] = in_img.all(1)
-        for k in range(8):
-            for j, nm in enumerate("xyz"):
-                base[f"box_corner{k}_cam_{nm}_m"] = c_cam[:, k, j]
-            base[f"box_corner{k}_u_px"] = uv8[:, k, 0]
-            base[f"box_corner{k}_v_px"] = uv8[:, k, 1]
+        base = _camera_columns(scene, cam_name, cam, boxes, corners3d)
         for ct, budget in budgets.items():
-            fp = footprints_from_boxes3d(cam, budget, boxes)
-            contrib = centre_contributions(cam, budget, fp)
-            with np.errstate(invalid="ignore"):
-                corner_nl = nonlinearity(cam, budget, np.nan_to_num(fp.corners_px, nan=-1e6))
-            corner_nl = np.where(np.isfinite(fp.corners_xy_world_m).all(-1), corner_nl, np.nan)
+            df, fp, contrib = _type_rows(cam, budget, boxes, base, ct, confidence, k_conf)
             footprints[(cam_name, ct)] = fp
             contributions[(cam_name, ct)] = contrib
-            row = dict(base)
-            row["camera_type"] = ct
-            K = fp.n_corners
-            for k in range(K):
-                row[f"corner{k}_u_px"] = fp.corners_px[:, k, 0]
-                row[f"corner{k}_v_px"] = fp.corners_px[:, k, 1]
-                row[f"corner{k}_x_m"] = fp.corners_xy_world_m[:, k, 0]
-                row[f"corner{k}_y_m"] = fp.corners_xy_world_m[:, k, 1]
-                row[f"corner{k}_sigma_x_m"] = np.sqrt(fp.corners_cov_m2[:, k, 0, 0])
-                row[f"corner{k}_sigma_y_m"] = np.sqrt(fp.corners_cov_m2[:, k, 1, 1])
-                row[f"corner{k}_cov_xy_m2"] = fp.corners_cov_m2[:, k, 0, 1]
-                row[f"corner{k}_reason"] = fp.corner_reason[:, k]
-                row[f"corner{k}_nonlinearity"] = corner_nl[:, k]
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore", RuntimeWarning)  # all corners invalid: NaN
-                row["footprint_nonlinearity_max"] = np.nanmax(corner_nl, axis=1) if N else np.zeros(0)
-            row["footprint_linear_ok"] = fp.centre_valid & np.all(corner_nl <= DEFAULT_LINEAR_THRESHOLD, axis=1)
-            for q, cov, xy in (("largest", fp.largest_cov_m2, fp.largest_xy_world_m),
-                               ("centre", fp.centre_cov_m2, fp.centre_xy_world_m)):
-                a, b, th = ellipse_axes(cov)
-                row[f"{q}_x_m"] = xy[:, 0]
-                row[f"{q}_y_m"] = xy[:, 1]
-                row[f"{q}_sigma_x_m"] = np.sqrt(cov[:, 0, 0])
-                row[f"{q}_sigma_y_m"] = np.sqrt(cov[:, 1, 1])
-                row[f"{q}_cov_xy_m2"] = cov[:, 0, 1]
-                row[f"{q}_semi_major_m"] = a
-                row[f"{q}_semi_minor_m"] = b
-                row[f"{q}_orientation_deg"] = th
-                row[f"{q}_semi_major_{int(round(confidence * 100))}_m"] = a * k_conf
-                for system in (*AXIS_SYSTEMS, "range"):
-                    sX, sY = axis_components(cov, system, cam, xy)
-                    row[f"{q}_sigma_X_{system}_m"] = sX
-                    row[f"{q}_sigma_Y_{system}_m"] = sY
-            row["largest_index"] = fp.largest_index
-            row["centre_valid"] = fp.centre_valid
-            row["centre_reason"] = fp.centre_reason
-            row["centre_reason_text"] = fp.centre_reason_text()
-            for src, cov in contrib.items():
-                row[f"contrib_{src}_m2"] = cov[:, 0, 0] + cov[:, 1, 1]
-            for name, v in fp.v2x.items():
-                row[f"v2x_{name}"] = v
-            frames.append(pd.DataFrame(row))
+            frames.append(df)
     table = pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
     lead = ["camera", "camera_type", "frame", "t_s", "segment", "segment_name"]
     table = table[lead + [c for c in table.columns if c not in lead]]
