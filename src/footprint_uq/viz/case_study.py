@@ -586,20 +586,11 @@ def _claims_html(claims: list[dict], esc, reproduction_link: str | None) -> str:
             "<th>per camera</th><th>verdict</th><th>why</th></tr>" + "".join(rows) + "</table>")
 
 
-def _findings_html(result, esc) -> str:
-    """The closing note: what the reproduction shows, computed from the data."""
+def _xy_sequence_items(result, esc) -> str:
+    """``<li>`` per camera and X/Y reading: is the X-then-Y sequence reproduced, with the median ratios."""
     st = result.statements()
-    cams, types = result.camera_names, result.type_names
-    parts = ["<h2>What the data show</h2>"]
-    # statement 1
-    parts.append("<p><b>Paper:</b> &ldquo;the uncertainty in X dominating in the beginning and equaling the "
-                 "uncertainty in Y in the middle of the intersection. The uncertainty in Y dominates from that "
-                 "point onward.&rdquo; The verdict above uses X = north, Y = east. For information, the same "
-                 "sequence in three readings of X/Y (north-east is the verdict's), per camera and camera type: "
-                 "σ_X &gt; σ_Y in at least 80 % of the entry-lane frames, σ_Y &gt; σ_X in at least 80 % of the "
-                 "exit-lane frames, and σ_X falls below σ_Y inside the intersection box or during the turn.</p>")
     items = []
-    for cam in cams:
+    for cam in result.camera_names:
         for system in AXIS_SYSTEMS:
             rows = [s for s in st if s["camera"] == cam and s["axes"] == system]
             n_hold = sum(s["holds"] for s in rows)
@@ -613,41 +604,76 @@ def _findings_html(result, esc) -> str:
             items.append(f"<li>{esc(cam)}, X = {esc(AXIS_SYSTEMS[system][0])}, Y = {esc(AXIS_SYSTEMS[system][1])}: "
                          f"{verdict} ({n_hold}/{len(rows)} camera types); median σ_X/σ_Y on the entry lane "
                          f"{ent:.2f}, in the turn {trn:.2f}, on the exit lane {ext:.2f}.</li>")
-    parts.append("<ul>" + "".join(items) + "</ul>")
+    return "".join(items)
+
+
+def _line_of_sight_item(result, cam: str, esc) -> str:
+    """``<li>`` of one camera (first camera type): bearing of the line of sight, the ellipse's deviation from it,
+    the largest variance shares and where sigma_X = sigma_Y, from the data."""
+    types = result.type_names
+    r = result.rows(cam, types[0])
+    ok = r["centre_valid"].to_numpy(bool)
+    camobj = result.scene.cameras[cam]
+    d = r[["box_x_m", "box_y_m"]].to_numpy() - camobj.position_world_m[:2]
+    bearing = np.mod(np.rad2deg(np.arctan2(d[:, 0], d[:, 1])), 360.0)  # compass, from the camera foot
+    seg = r["segment"].to_numpy()
+    b_txt = ", ".join(f"{name} {_circ_median(bearing[ok & (seg == k)]):.0f}°" for k, name in
+                      enumerate(("entry lane", "turn", "exit lane")) if np.any(ok & (seg == k)))
+    los_ori = np.mod(90.0 - bearing, 180.0)  # line of sight as an axis orientation, ccw from east
+    maj = np.mod(r["centre_orientation_deg"].to_numpy(), 180.0)
+    dev = np.abs((maj - los_ori + 90.0) % 180.0 - 90.0)[ok]
+    sr = r["centre_sigma_X_range_m"].to_numpy()[ok]
+    sc = r["centre_sigma_Y_range_m"].to_numpy()[ok]
+    ratio = float(np.median(sr / sc)) if sr.size else float("nan")
+    contrib = [c for c in r.columns if c.startswith("contrib_")]
+    tot = r[contrib].sum(axis=1).to_numpy()[ok]
+    shares = {c[8:-3]: _nanmedian(r[c].to_numpy()[ok] / tot) for c in contrib} if tot.size else {}
+    top = sorted(shares.items(), key=lambda kv: -kv[1])[:3]
+    cr = result.crossings(cam, types[0], "north-east")
+    cr_txt = ""
+    if cr:
+        c0 = cr[0]
+        bc = np.mod(np.rad2deg(np.arctan2(c0["x_m"] - camobj.position_world_m[0],
+                                          c0["y_m"] - camobj.position_world_m[1])), 360.0)
+        cr_txt = (f" In the north-east reading σ_X = σ_Y at ({c0['x_m']:.1f}, {c0['y_m']:.1f}) m, where the line "
+                  f"of sight has bearing {bc:.0f}° (45° off north-south would be 45°, 135°, 225° or 315°).")
+    return (f"<li>{esc(cam)} ({esc(camera_type_label(types[0]))}): median bearing of the line of sight "
+            f"(camera foot to vehicle, clockwise from north): {b_txt}. The ellipse's major axis deviates from "
+            f"the line of sight by {np.median(dev) if dev.size else float('nan'):.1f}° (median over frames; "
+            f"σ_range/σ_cross-range median {ratio:.2f}). Largest variance shares: "
+            + ", ".join(f"{esc(k)} {100 * v:.0f} %" for k, v in top) + "." + cr_txt + "</li>")
+
+
+def _lane_width_html(result, esc) -> list[str]:
+    """The sizes next to the lane width, per camera type (descriptive; the verdict is claim (b))."""
+    lw = result.lane_width_statements()
+    parts = ["<p><b>Sizes next to the lane width</b> "
+             f"({result.scene.layout.lane_width_m:g} m; footprint centre in the intersection box, median over "
+             "frames, then over cameras; the verdict is statement (b) above):</p><ul>"]
+    for ct in result.type_names:
+        rows = [s for s in lw if s["camera_type"] == ct]
+        txt = "; ".join(f"{esc(s['measure'])} {s['value_m']:.2f} m = {s['ratio_to_lane_width']:.2f} lane widths"
+                        for s in rows)
+        largest = " &mdash; the largest of the camera types" if rows and rows[0]["is_largest_type"] else ""
+        parts.append(f"<li>{esc(camera_type_label(ct))}: {txt}{largest}.</li>")
+    parts.append("</ul>")
+    return parts
+
+
+def _findings_html(result, esc) -> str:
+    """The closing note: what the reproduction shows, computed from the data."""
+    cams = result.camera_names
+    parts = ["<h2>What the data show</h2>"]
+    # statement 1
+    parts.append("<p><b>Paper:</b> &ldquo;the uncertainty in X dominating in the beginning and equaling the "
+                 "uncertainty in Y in the middle of the intersection. The uncertainty in Y dominates from that "
+                 "point onward.&rdquo; The verdict above uses X = north, Y = east. For information, the same "
+                 "sequence in three readings of X/Y (north-east is the verdict's), per camera and camera type: "
+                 "σ_X &gt; σ_Y in at least 80 % of the entry-lane frames, σ_Y &gt; σ_X in at least 80 % of the "
+                 "exit-lane frames, and σ_X falls below σ_Y inside the intersection box or during the turn.</p>")
+    parts.append("<ul>" + _xy_sequence_items(result, esc) + "</ul>")
     # why: line of sight and ellipse orientation, from the data
-    why = []
-    for cam in cams:
-        r = result.rows(cam, types[0])
-        ok = r["centre_valid"].to_numpy(bool)
-        camobj = result.scene.cameras[cam]
-        d = r[["box_x_m", "box_y_m"]].to_numpy() - camobj.position_world_m[:2]
-        bearing = np.mod(np.rad2deg(np.arctan2(d[:, 0], d[:, 1])), 360.0)  # compass, from the camera foot
-        seg = r["segment"].to_numpy()
-        b_txt = ", ".join(f"{name} {_circ_median(bearing[ok & (seg == k)]):.0f}°" for k, name in
-                          enumerate(("entry lane", "turn", "exit lane")) if np.any(ok & (seg == k)))
-        los_ori = np.mod(90.0 - bearing, 180.0)  # line of sight as an axis orientation, ccw from east
-        maj = np.mod(r["centre_orientation_deg"].to_numpy(), 180.0)
-        dev = np.abs((maj - los_ori + 90.0) % 180.0 - 90.0)[ok]
-        sr = r["centre_sigma_X_range_m"].to_numpy()[ok]
-        sc = r["centre_sigma_Y_range_m"].to_numpy()[ok]
-        ratio = float(np.median(sr / sc)) if sr.size else float("nan")
-        contrib = [c for c in r.columns if c.startswith("contrib_")]
-        tot = r[contrib].sum(axis=1).to_numpy()[ok]
-        shares = {c[8:-3]: _nanmedian(r[c].to_numpy()[ok] / tot) for c in contrib} if tot.size else {}
-        top = sorted(shares.items(), key=lambda kv: -kv[1])[:3]
-        cr = result.crossings(cam, types[0], "north-east")
-        cr_txt = ""
-        if cr:
-            c0 = cr[0]
-            bc = np.mod(np.rad2deg(np.arctan2(c0["x_m"] - camobj.position_world_m[0],
-                                              c0["y_m"] - camobj.position_world_m[1])), 360.0)
-            cr_txt = (f" In the north-east reading σ_X = σ_Y at ({c0['x_m']:.1f}, {c0['y_m']:.1f}) m, where the line "
-                      f"of sight has bearing {bc:.0f}° (45° off north-south would be 45°, 135°, 225° or 315°).")
-        why.append(f"<li>{esc(cam)} ({esc(camera_type_label(types[0]))}): median bearing of the line of sight "
-                   f"(camera foot to vehicle, clockwise from north): {b_txt}. The ellipse's major axis deviates from "
-                   f"the line of sight by {np.median(dev) if dev.size else float('nan'):.1f}° (median over frames; "
-                   f"σ_range/σ_cross-range median {ratio:.2f}). Largest variance shares: "
-                   + ", ".join(f"{esc(k)} {100 * v:.0f} %" for k, v in top) + "." + cr_txt + "</li>")
+    why = [_line_of_sight_item(result, cam, esc) for cam in cams]
     parts.append("<p><b>Why.</b> The footprint-centre ellipse is stretched along the camera's line of sight, "
                  "because the dominant camera-level error (here the camera height; in general also tilt and "
                  "row errors) moves a ground point along its ray; σ_X and σ_Y are that ellipse projected on two "
@@ -656,19 +682,96 @@ def _findings_html(result, esc) -> str:
                  "within about 45° of X, Y beyond. The paper's sequence therefore appears when the line of "
                  "sight swings across 45° from X during the turn, which depends on where the camera stands "
                  "and on how X is tied to the ground; the numbers per camera:</p><ul>" + "".join(why) + "</ul>")
-    # statement 2: descriptive sizes (the verdict is claim (b) above)
-    lw = result.lane_width_statements()
-    parts.append("<p><b>Sizes next to the lane width</b> "
-                 f"({result.scene.layout.lane_width_m:g} m; footprint centre in the intersection box, median over "
-                 "frames, then over cameras; the verdict is statement (b) above):</p><ul>")
-    for ct in types:
-        rows = [s for s in lw if s["camera_type"] == ct]
-        txt = "; ".join(f"{esc(s['measure'])} {s['value_m']:.2f} m = {s['ratio_to_lane_width']:.2f} lane widths"
-                        for s in rows)
-        largest = " &mdash; the largest of the camera types" if rows and rows[0]["is_largest_type"] else ""
-        parts.append(f"<li>{esc(camera_type_label(ct))}: {txt}{largest}.</li>")
-    parts.append("</ul>")
+    parts += _lane_width_html(result, esc)
     return "\n".join(parts)
+
+
+def _scroll_table(*a, **k) -> str:
+    """:func:`footprint_uq.viz.report.html_table` in a box that scrolls sideways when wider than the page."""
+    return '<div style="overflow-x:auto">' + _html_table(*a, **k) + "</div>"
+
+
+_SUMMARY_HEADERS = {
+    "frames_centre_valid": "frames with centre", "centre_sigma_major_median_m": "centre σ_major median [m]",
+    "centre_sigma_major_max_m": "centre σ_major max [m]",
+    "centre_semi_major_95_max_m": "centre 95 % semi-major max [m]",
+    "centre_semi_major_95_junction_median_m": "centre 95 % semi-major, junction median [m]",
+    "centre_axis_95_junction_median_over_lane": "95 % major axis / lane width (junction)",
+    "largest_sigma_major_max_m": "largest-point σ_major max [m]",
+    "frames_centre_95_over_half_lane": "frames with 95 % semi-major > half lane",
+    "frames_not_linear_ok": "frames with a corner's linearisation error > 5 %"}
+
+
+def _write_figures(result, out: Path, *, ellipse_every: int, heatmap: dict | None, dpi: int) -> tuple[dict, dict]:
+    """Every figure as ``<stem>.png`` in ``out``: ``({stem: path}, {stem: PNG bytes})``."""
+    figs = case_study_figures(result, ellipse_every=ellipse_every, heatmap=heatmap)
+    paths, pngs = {}, {}
+    for stem, fig in figs.items():
+        # camera names come from data (a recording): percent-encoded before they touch a path
+        p = out / f"{path_component(stem)}.png"
+        with atomic_path(p) as tmp:
+            fig.savefig(tmp, dpi=dpi)  # constrained layout: no second (tight) layout pass
+        paths[stem] = p
+        pngs[stem] = p.read_bytes()
+    return paths, pngs
+
+
+def _intro_html(result) -> str:
+    """The report's opening paragraph: what is reproduced, the scene, the confidence of the ellipses."""
+    scene = result.scene
+    return (f"<p>Reproduction of the case study of Kusari et al., &ldquo;Object level footprint uncertainty "
+            f"quantification in infrastructure based sensing&rdquo; (Section &ldquo;Case study&rdquo;, Figures 8 "
+            f"and 9): a vehicle turns left through an intersection watched by two roadside cameras, each "
+            f"evaluated with the error budgets of three camera types. Scene: {esc(scene.source)}; "
+            f"{len(scene)} frames; lane width {scene.layout.lane_width_m:g} m. Ellipses and the "
+            f"<code>*_95</code> numbers are 2-D {100 * result.confidence:g} % regions "
+            f"({chi2_scale(result.confidence):.4g} σ). All numbers are first-order propagation "
+            f"(<code>footprint_uq.products.footprints.footprints_from_boxes3d</code>).</p>")
+
+
+def _figures_html(result, pngs: dict) -> list[str]:
+    """The figures section: per camera its five figures (embedded) with captions."""
+    parts = ["<h2>Figures</h2>"]
+    for i, cam in enumerate(result.camera_names):
+        parts.append(f"<h3>{esc(cam)}</h3>")
+        for kind in ("view", "birdseye", "sigma", "contributions", "heatmap"):
+            stem = f"{cam}_{kind}"
+            cap = _FIG_CAPTIONS[kind].format(cam=cam, conf=f"{100 * result.confidence:g} %", fig=8 + i)
+            parts.append(img_tag(pngs[stem], cap))
+    return parts
+
+
+def _settings_html(result, settings: dict | None) -> list[str]:
+    """The settings section: cameras, camera types (error budgets) and the scenario's settings."""
+    scene = result.scene
+    parts = ["<h2>Settings</h2><h3>Cameras</h3>"]
+    cam_rows = []
+    for name, cam in scene.cameras.items():
+        s = dict(scene.camera_settings.get(name, {}))
+        w, h = cam.image_size_px
+        cam_rows.append({"camera": name, "x_m": cam.position_world_m[0], "y_m": cam.position_world_m[1],
+                         "height_m": cam.height_m, "pan_deg": cam.pan_deg % 360.0, "tilt_deg": cam.tilt_deg,
+                         "roll_deg": cam.roll_deg, "focal_px": float(cam.K[0, 0]),
+                         "hfov_deg": float(np.rad2deg(2 * np.arctan(w / (2 * cam.K[0, 0])))),
+                         "image_px": f"{w}x{h}", "where": s.get("description", "")})
+    parts.append(_scroll_table(cam_rows, floatfmt=".4g"))
+    parts.append("<h3>Camera types (error budgets, 1-σ)</h3>")
+    # one column per camera type (a row each had 20 columns: wider than the page)
+    rows = {camera_type_label(k): b.table_row() for k, b in result.budgets.items()}
+    keys = [k for k in next(iter(rows.values())) if k != "name"] if rows else []
+    parts.append(_scroll_table([{"parameter (1-σ)": k, **{t: r[k] for t, r in rows.items()}} for k in keys],
+                            floatfmt=".4g"))
+    if settings:
+        parts.append("<h3>Scenario</h3>")
+        flat = []
+        for sect in ("intersection", "vehicle", "trajectory", "heatmap"):
+            for k, v in (settings.get(sect) or {}).items():
+                flat.append({"section": sect, "setting": k, "value": "default" if v is None else v})
+        if "turn_radius_m" in scene.extra:
+            flat.append({"section": "trajectory", "setting": "turn radius used [m]",
+                         "value": scene.extra["turn_radius_m"]})
+        parts.append(_scroll_table(flat, floatfmt=".4g"))
+    return parts
 
 
 def write_case_study_report(result, out_dir, *, settings: dict | None = None, ellipse_every: int = 4,
@@ -680,21 +783,9 @@ def write_case_study_report(result, out_dir, *, settings: dict | None = None, el
     Returns a dict with the paths (``figures``: stem -> path, ``csv``, ``summary``, ``report``).
     """
 
-    def html_table(*a, **k):
-        return '<div style="overflow-x:auto">' + _html_table(*a, **k) + "</div>"
-
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    figs = case_study_figures(result, ellipse_every=ellipse_every, heatmap=heatmap)
-    paths = {}
-    pngs = {}
-    for stem, fig in figs.items():
-        # camera names come from data (a recording): percent-encoded before they touch a path
-        p = out / f"{path_component(stem)}.png"
-        with atomic_path(p) as tmp:
-            fig.savefig(tmp, dpi=dpi)  # constrained layout: no second (tight) layout pass
-        paths[stem] = p
-        pngs[stem] = p.read_bytes()
+    paths, pngs = _write_figures(result, out, ellipse_every=ellipse_every, heatmap=heatmap, dpi=dpi)
     csv_path = out / "case_study_frames.csv"
     with atomic_path(csv_path) as tmp:
         result.table.to_csv(tmp, index=False, float_format="%.9g")
@@ -705,67 +796,18 @@ def write_case_study_report(result, out_dir, *, settings: dict | None = None, el
     claims = evaluate_claims(result)
     atomic_write_text(summary_path, json.dumps({"summary": summary, "claims": claims, "xy_statements": statements,
                                                 "lane_width_statements": lane}, indent=1, default=_json_default))
-    # settings tables
-    scene = result.scene
-    parts = [f"<p>Reproduction of the case study of Kusari et al., &ldquo;Object level footprint uncertainty "
-             f"quantification in infrastructure based sensing&rdquo; (Section &ldquo;Case study&rdquo;, Figures 8 "
-             f"and 9): a vehicle turns left through an intersection watched by two roadside cameras, each "
-             f"evaluated with the error budgets of three camera types. Scene: {esc(scene.source)}; "
-             f"{len(scene)} frames; lane width {scene.layout.lane_width_m:g} m. Ellipses and the "
-             f"<code>*_95</code> numbers are 2-D {100 * result.confidence:g} % regions "
-             f"({chi2_scale(result.confidence):.4g} σ). All numbers are first-order propagation "
-             f"(<code>footprint_uq.products.footprints.footprints_from_boxes3d</code>).</p>"]
+    parts = [_intro_html(result)]
     parts.append(_claims_html(claims, esc, reproduction_link))
     parts.append(_findings_html(result, esc).replace("&nbsp;", " "))
     parts.append("<h2>Summary per camera and camera type</h2>")
-    parts.append(html_table(summary, headers={
-        "frames_centre_valid": "frames with centre", "centre_sigma_major_median_m": "centre σ_major median [m]",
-        "centre_sigma_major_max_m": "centre σ_major max [m]",
-        "centre_semi_major_95_max_m": "centre 95 % semi-major max [m]",
-        "centre_semi_major_95_junction_median_m": "centre 95 % semi-major, junction median [m]",
-        "centre_axis_95_junction_median_over_lane": "95 % major axis / lane width (junction)",
-        "largest_sigma_major_max_m": "largest-point σ_major max [m]",
-        "frames_centre_95_over_half_lane": "frames with 95 % semi-major > half lane",
-        "frames_not_linear_ok": "frames with a corner's linearisation error > 5 %"}, floatfmt=".3g"))
-    parts.append("<h2>Figures</h2>")
-    for i, cam in enumerate(result.camera_names):
-        parts.append(f"<h3>{esc(cam)}</h3>")
-        for kind in ("view", "birdseye", "sigma", "contributions", "heatmap"):
-            stem = f"{cam}_{kind}"
-            cap = _FIG_CAPTIONS[kind].format(cam=cam, conf=f"{100 * result.confidence:g} %", fig=8 + i)
-            parts.append(img_tag(pngs[stem], cap))
+    parts.append(_scroll_table(summary, headers=_SUMMARY_HEADERS, floatfmt=".3g"))
+    parts += _figures_html(result, pngs)
     parts.append("<h2>X/Y statement in detail (per camera, camera type and axis reading)</h2>")
     st_rows = [dict(s, first_X_to_Y_crossing_xy_m=_fmt_xy(s["first_X_to_Y_crossing_xy_m"]),
                     camera_type=camera_type_label(s["camera_type"])) for s in statements]
-    parts.append(html_table(st_rows, columns=list(_DETAIL_HEADERS), headers=_DETAIL_HEADERS,
+    parts.append(_scroll_table(st_rows, columns=list(_DETAIL_HEADERS), headers=_DETAIL_HEADERS,
                             missing=_DETAIL_MISSING, floatfmt=".3g"))
-    parts.append("<h2>Settings</h2><h3>Cameras</h3>")
-    cam_rows = []
-    for name, cam in scene.cameras.items():
-        s = dict(scene.camera_settings.get(name, {}))
-        w, h = cam.image_size_px
-        cam_rows.append({"camera": name, "x_m": cam.position_world_m[0], "y_m": cam.position_world_m[1],
-                         "height_m": cam.height_m, "pan_deg": cam.pan_deg % 360.0, "tilt_deg": cam.tilt_deg,
-                         "roll_deg": cam.roll_deg, "focal_px": float(cam.K[0, 0]),
-                         "hfov_deg": float(np.rad2deg(2 * np.arctan(w / (2 * cam.K[0, 0])))),
-                         "image_px": f"{w}x{h}", "where": s.get("description", "")})
-    parts.append(html_table(cam_rows, floatfmt=".4g"))
-    parts.append("<h3>Camera types (error budgets, 1-σ)</h3>")
-    # one column per camera type (a row each had 20 columns: wider than the page)
-    rows = {camera_type_label(k): b.table_row() for k, b in result.budgets.items()}
-    keys = [k for k in next(iter(rows.values())) if k != "name"] if rows else []
-    parts.append(html_table([{"parameter (1-σ)": k, **{t: r[k] for t, r in rows.items()}} for k in keys],
-                            floatfmt=".4g"))
-    if settings:
-        parts.append("<h3>Scenario</h3>")
-        flat = []
-        for sect in ("intersection", "vehicle", "trajectory", "heatmap"):
-            for k, v in (settings.get(sect) or {}).items():
-                flat.append({"section": sect, "setting": k, "value": "default" if v is None else v})
-        if "turn_radius_m" in scene.extra:
-            flat.append({"section": "trajectory", "setting": "turn radius used [m]",
-                         "value": scene.extra["turn_radius_m"]})
-        parts.append(html_table(flat, floatfmt=".4g"))
+    parts += _settings_html(result, settings)
     parts.append(f"<h2>Files</h2><p><code>{esc(csv_path.name)}</code>: every per-frame value (one row per "
                  f"camera, camera type and frame; columns in docs/case-study.md); <code>{esc(summary_path.name)}"
                  f"</code>: the tables above; one PNG per figure.</p>")
