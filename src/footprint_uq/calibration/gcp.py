@@ -163,6 +163,70 @@ def _float_cell(path, row_no, col, text):
     return x
 
 
+def _read_gcp_rows(p: Path) -> list[list[str]]:
+    """The CSV rows of a GCP table (header first), comments and blank lines dropped."""
+    try:
+        text = p.read_text(encoding="utf-8-sig")
+    except OSError as e:
+        raise InputError("--points", str(p), f"a readable CSV file ({e.strerror or e})") from None
+    except UnicodeDecodeError:
+        raise InputError("--points", str(p), "a UTF-8 text CSV file") from None
+    lines = [line for line in text.splitlines() if line.strip() and not line.lstrip().startswith("#")]
+    if len(lines) - 1 > MAX_POINTS:
+        raise InputError(f"{p}: rows", len(lines) - 1, f"at most {MAX_POINTS} ground control points (thin the table)")
+    rows = list(csv.reader(lines))
+    if not rows:
+        raise InputError(str(p), "an empty file", "a header row u_px, v_px, x_m, y_m[, z_m] and one row per point")
+    return rows
+
+
+def _check_gcp_header(p: Path, header: list[str]) -> bool:
+    """Check the header's columns; True for world coordinates (x_m, y_m), False for lat_deg/lon_deg."""
+    unknown = [h for h in header if h not in GCP_COLUMNS]
+    if unknown:
+        raise InputError(f"{p}: column", unknown[0], f"one of {', '.join(GCP_COLUMNS)} (units in the names)")
+    if len(set(header)) != len(header):
+        raise InputError(f"{p}: header", header, "each column once")
+    has_xy = "x_m" in header or "y_m" in header
+    has_ll = "lat_deg" in header or "lon_deg" in header
+    if has_xy == has_ll:
+        raise InputError(f"{p}: header", header, "either x_m, y_m[, z_m] (world frame) or lat_deg, lon_deg[, alt_m]")
+    need = ["u_px", "v_px"] + (["x_m", "y_m"] if has_xy else ["lat_deg", "lon_deg"])
+    for c in need:
+        if c not in header:
+            raise InputError(f"{p}: header", header, f"a column {c}")
+    if has_xy and "alt_m" in header or has_ll and "z_m" in header:
+        raise InputError(f"{p}: header", header, "z_m with x_m/y_m, alt_m with lat_deg/lon_deg")
+    return has_xy
+
+
+def _local_from_wgs84(p: Path, a: dict, n: int, origin_lat_deg, origin_lon_deg, origin_alt_m):
+    """World points ``(n, 3)`` m in the local east/north/up frame of the origin, and the georeference."""
+    lat, lon = a["lat_deg"], a["lon_deg"]
+    if np.any(np.abs(lat) > 90) or np.any(np.abs(lon) > 180):
+        raise InputError(f"{p}: lat_deg/lon_deg", (lat.tolist()[:3], lon.tolist()[:3]),
+                         "latitudes in [-90, 90] and longitudes in [-180, 180] degrees")
+    olat = float(np.mean(lat)) if origin_lat_deg is None else float(origin_lat_deg)
+    olon = _mean_longitude_deg(lon) if origin_lon_deg is None else float(origin_lon_deg)
+    g = GeoReference(origin_lat_deg=olat, origin_lon_deg=olon)
+    xy = g.from_wgs84(lat, lon)
+    far = np.flatnonzero(~(np.hypot(*xy.T) <= MAX_ORIGIN_DISTANCE_M))
+    if far.size:
+        raise InputError(f"{p}: row {far[0] + 2} lat_deg/lon_deg",
+                         f"{float(np.hypot(*xy[far[0]])):.4g} m from the origin ({olat:.6f}, {olon:.6f})",
+                         f"points within {MAX_ORIGIN_DISTANCE_M:g} m of the origin (the local frame is flat)")
+    if "alt_m" in a:
+        oalt = float(np.median(a["alt_m"])) if origin_alt_m is None else float(origin_alt_m)
+        z = a["alt_m"] - oalt
+    else:
+        oalt = None if origin_alt_m is None else float(origin_alt_m)
+        z = np.zeros(n)
+    georef = {"origin_lat_deg": olat, "origin_lon_deg": olon}
+    if oalt is not None:
+        georef["origin_alt_m"] = oalt
+    return np.concatenate([xy, z[:, None]], -1), georef
+
+
 def read_gcp_csv(path, *, pixel_sigma_px: float = 1.0, survey_sigma_m: float = 0.05, origin_lat_deg=None,
                  origin_lon_deg=None, origin_alt_m=None) -> GCPSet:
     """Read a GCP table.
@@ -183,34 +247,9 @@ def read_gcp_csv(path, *, pixel_sigma_px: float = 1.0, survey_sigma_m: float = 0
         Altitude of the ground plane ``z = 0`` (default: the median ``alt_m`` of the points).
     """
     p = Path(path)
-    try:
-        text = p.read_text(encoding="utf-8-sig")
-    except OSError as e:
-        raise InputError("--points", str(p), f"a readable CSV file ({e.strerror or e})") from None
-    except UnicodeDecodeError:
-        raise InputError("--points", str(p), "a UTF-8 text CSV file") from None
-    lines = [line for line in text.splitlines() if line.strip() and not line.lstrip().startswith("#")]
-    if len(lines) - 1 > MAX_POINTS:
-        raise InputError(f"{p}: rows", len(lines) - 1, f"at most {MAX_POINTS} ground control points (thin the table)")
-    rows = list(csv.reader(lines))
-    if not rows:
-        raise InputError(str(p), "an empty file", "a header row u_px, v_px, x_m, y_m[, z_m] and one row per point")
+    rows = _read_gcp_rows(p)
     header = [h.strip().lower() for h in rows[0]]
-    unknown = [h for h in header if h not in GCP_COLUMNS]
-    if unknown:
-        raise InputError(f"{p}: column", unknown[0], f"one of {', '.join(GCP_COLUMNS)} (units in the names)")
-    if len(set(header)) != len(header):
-        raise InputError(f"{p}: header", header, "each column once")
-    has_xy = "x_m" in header or "y_m" in header
-    has_ll = "lat_deg" in header or "lon_deg" in header
-    if has_xy == has_ll:
-        raise InputError(f"{p}: header", header, "either x_m, y_m[, z_m] (world frame) or lat_deg, lon_deg[, alt_m]")
-    need = ["u_px", "v_px"] + (["x_m", "y_m"] if has_xy else ["lat_deg", "lon_deg"])
-    for c in need:
-        if c not in header:
-            raise InputError(f"{p}: header", header, f"a column {c}")
-    if has_xy and "alt_m" in header or has_ll and "z_m" in header:
-        raise InputError(f"{p}: header", header, "z_m with x_m/y_m, alt_m with lat_deg/lon_deg")
+    has_xy = _check_gcp_header(p, header)
     col = {h: i for i, h in enumerate(header)}
     data = {h: [] for h in header if h != "name"}
     names = []
@@ -232,30 +271,7 @@ def read_gcp_csv(path, *, pixel_sigma_px: float = 1.0, survey_sigma_m: float = 0
         if origin_lat_deg is not None:
             georef = {"origin_lat_deg": float(origin_lat_deg), "origin_lon_deg": float(origin_lon_deg)}
     else:
-
-        lat, lon = a["lat_deg"], a["lon_deg"]
-        if np.any(np.abs(lat) > 90) or np.any(np.abs(lon) > 180):
-            raise InputError(f"{p}: lat_deg/lon_deg", (lat.tolist()[:3], lon.tolist()[:3]),
-                             "latitudes in [-90, 90] and longitudes in [-180, 180] degrees")
-        olat = float(np.mean(lat)) if origin_lat_deg is None else float(origin_lat_deg)
-        olon = _mean_longitude_deg(lon) if origin_lon_deg is None else float(origin_lon_deg)
-        g = GeoReference(origin_lat_deg=olat, origin_lon_deg=olon)
-        xy = g.from_wgs84(lat, lon)
-        far = np.flatnonzero(~(np.hypot(*xy.T) <= MAX_ORIGIN_DISTANCE_M))
-        if far.size:
-            raise InputError(f"{p}: row {far[0] + 2} lat_deg/lon_deg",
-                             f"{float(np.hypot(*xy[far[0]])):.4g} m from the origin ({olat:.6f}, {olon:.6f})",
-                             f"points within {MAX_ORIGIN_DISTANCE_M:g} m of the origin (the local frame is flat)")
-        if "alt_m" in a:
-            oalt = float(np.median(a["alt_m"])) if origin_alt_m is None else float(origin_alt_m)
-            z = a["alt_m"] - oalt
-        else:
-            oalt = None if origin_alt_m is None else float(origin_alt_m)
-            z = np.zeros(n)
-        xyz = np.concatenate([xy, z[:, None]], -1)
-        georef = {"origin_lat_deg": olat, "origin_lon_deg": olon}
-        if oalt is not None:
-            georef["origin_alt_m"] = oalt
+        xyz, georef = _local_from_wgs84(p, a, n, origin_lat_deg, origin_lon_deg, origin_alt_m)
     spx = a.get("sigma_px", np.full(n, float(pixel_sigma_px)))
     sm = a.get("sigma_m", np.full(n, float(survey_sigma_m)))
     _check_sigmas(spx, sm, lambda k: f"{p}: row {k + 2}")

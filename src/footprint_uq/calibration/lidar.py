@@ -488,6 +488,40 @@ class BoardDetection:
         return d
 
 
+def _search_points(cloud, region, max_range_m, ground, ground_clearance_m) -> np.ndarray:
+    """The finite points ``(n, 3)`` m of ``cloud`` inside ``region`` and range, above the ground's clearance."""
+    xyz = np.asarray(getattr(cloud, "xyz_m", cloud), dtype=np.float64)
+    if xyz.ndim != 2 or xyz.shape[1] != 3:
+        raise InputError("cloud", getattr(xyz, "shape", None), "points of shape (N, 3)")
+    xyz = xyz[np.isfinite(xyz).all(axis=1)]
+    region = parse_region(region)
+    if region is not None:
+        xyz = xyz[region.contains(xyz)]
+    if max_range_m is not None:
+        xyz = xyz[np.linalg.norm(xyz, axis=1) <= max_range_m]
+    if ground is not None:
+        xyz = xyz[ground.distance_m(xyz) * np.sign(ground.offset_m or 1.0) > ground_clearance_m]
+    return xyz
+
+
+def _patches(pts: np.ndarray, cluster_radius_m: float) -> tuple[np.ndarray, int]:
+    """Connected patches of a plane's points: ``(label per point, number of patches)``.
+
+    On a voxel grid of half the radius (bounded work however dense the plane is): voxels whose mean points
+    are within ``cluster_radius_m`` are connected.
+    """
+    vox = np.floor(pts / (cluster_radius_m / 2.0)).astype(np.int64)
+    _, first, inv = np.unique(vox, axis=0, return_index=True, return_inverse=True)
+    inv = inv.ravel()
+    centres = np.zeros((len(first), 3))
+    np.add.at(centres, inv, pts)
+    centres /= np.bincount(inv, minlength=len(first))[:, None]
+    pairs = cKDTree(centres).query_pairs(cluster_radius_m, output_type="ndarray")
+    g = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(first), len(first)))
+    n_comp, vlab = connected_components(g, directed=False)
+    return vlab[inv], n_comp
+
+
 def detect_board(cloud, board, *, region=None, ground: PlaneFit | None = None, ground_clearance_m: float = 0.15,
                  plane_threshold_m: float = 0.05, cluster_radius_m: float = 0.2, size_tolerance: float = 0.1,
                  max_planes: int = 8, min_points: int = 30, max_range_m: float | None = None,
@@ -525,17 +559,7 @@ def detect_board(cloud, board, *, region=None, ground: PlaneFit | None = None, g
     """
 
     board = parse_board(board) if not isinstance(board, Checkerboard) else board
-    xyz = np.asarray(getattr(cloud, "xyz_m", cloud), dtype=np.float64)
-    if xyz.ndim != 2 or xyz.shape[1] != 3:
-        raise InputError("cloud", getattr(xyz, "shape", None), "points of shape (N, 3)")
-    xyz = xyz[np.isfinite(xyz).all(axis=1)]
-    region = parse_region(region)
-    if region is not None:
-        xyz = xyz[region.contains(xyz)]
-    if max_range_m is not None:
-        xyz = xyz[np.linalg.norm(xyz, axis=1) <= max_range_m]
-    if ground is not None:
-        xyz = xyz[ground.distance_m(xyz) * np.sign(ground.offset_m or 1.0) > ground_clearance_m]
+    xyz = _search_points(cloud, region, max_range_m, ground, ground_clearance_m)
     if xyz.shape[0] < min_points:
         return BoardDetection(False, f"only {xyz.shape[0]} points in the search region (after ground removal)",
                               board)
@@ -552,17 +576,7 @@ def detect_board(cloud, board, *, region=None, ground: PlaneFit | None = None, g
             break
         pts = rest[fit.inliers]
         rest = rest[~fit.inliers]
-        # connected patches, on a voxel grid (bounded work however dense the plane is)
-        vox = np.floor(pts / (cluster_radius_m / 2.0)).astype(np.int64)
-        _, first, inv = np.unique(vox, axis=0, return_index=True, return_inverse=True)
-        inv = inv.ravel()
-        centres = np.zeros((len(first), 3))
-        np.add.at(centres, inv, pts)
-        centres /= np.bincount(inv, minlength=len(first))[:, None]
-        pairs = cKDTree(centres).query_pairs(cluster_radius_m, output_type="ndarray")
-        g = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(first), len(first)))
-        n_comp, vlab = connected_components(g, directed=False)
-        lab = vlab[inv]
+        lab, n_comp = _patches(pts, cluster_radius_m)
         counts = np.bincount(lab, minlength=n_comp)
         for comp in np.argsort(counts)[::-1]:
             if counts[comp] < min_points:

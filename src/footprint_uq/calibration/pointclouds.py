@@ -260,13 +260,8 @@ def _pcd_header(path, raw: bytes):
             raise _bad(path, "PCD header", line[:40], "PCD header keys (VERSION FIELDS SIZE TYPE COUNT WIDTH ...)")
 
 
-def read_pcd(path, *, drop_zero: bool = True) -> PointCloud:
-    """Read a PCD file (DATA ascii, binary or binary_compressed); see :class:`PointCloud`."""
-    path = Path(path)
-    raw = _read_bytes(path)
-    if not (raw.startswith(b"#") or raw.startswith(b"VERSION") or raw.startswith(b"FIELDS")):
-        raise _bad(path, "PCD header", raw[:20], "a PCD file starting with '# .PCD' or 'VERSION'")
-    hdr, pos = _pcd_header(path, raw)
+def _pcd_layout(path: Path, hdr: dict) -> tuple[list, list, int, list]:
+    """The point layout of a PCD header: ``(field names, counts, number of points, numpy dtype fields)``."""
     for k in ("FIELDS", "SIZE", "TYPE"):
         if k not in hdr:
             raise _bad(path, "PCD header", f"no {k} line", "FIELDS, SIZE and TYPE lines")
@@ -296,29 +291,68 @@ def read_pcd(path, *, drop_zero: bool = True) -> PointCloud:
         uniq = name if name not in seen else f"{name}__{seen[name]}"
         seen[name] = seen.get(name, 0) + 1
         dtypes.append((uniq, "<" + _PCD_TYPES[key], (c,) if c > 1 else ()))
-    dt = np.dtype(dtypes)
     lower = [n.lower() for n in names]
     for ax in "xyz":
         if ax not in lower:
             raise _bad(path, "PCD FIELDS", names, "fields x, y and z")
+    return names, counts, n_pts, dtypes
+
+
+def _pcd_ascii(path: Path, body: bytes, n_pts: int, dtypes: list, counts: list) -> dict:
+    """Columns of a ``DATA ascii`` body (float64)."""
+    text = body.decode("ascii", errors="replace")
+    ncol = sum(counts)
+    rows = [ln for ln in text.splitlines() if ln.strip()]
+    if len(rows) < n_pts:
+        raise _bad(path, "PCD data", f"{len(rows)} rows", f"{n_pts} rows (POINTS)")
+    try:
+        table = np.loadtxt(rows[:n_pts], dtype=np.float64, ndmin=2) if n_pts else np.zeros((0, ncol))
+    except ValueError:
+        _raise_bad_row(path, rows[:n_pts], ncol, first_row=1)
+    if table.shape[1] != ncol:
+        raise _bad(path, "PCD data", f"{table.shape[1]} columns", f"{ncol} columns (sum of COUNT)")
+    cols, off = {}, 0
+    for (uniq, _, _shp), c in zip(dtypes, counts, strict=True):
+        cols[uniq] = table[:, off] if c == 1 else table[:, off:off + c]
+        off += c
+    return cols
+
+
+def _pcd_binary_compressed(path: Path, body: bytes, n_pts: int, dtypes: list, dt: np.dtype) -> dict:
+    """Columns of a ``DATA binary_compressed`` body (LZF, structure of arrays)."""
+    if len(body) < 8:
+        raise _bad(path, "PCD binary_compressed data", f"{len(body)} bytes", "8 size bytes then LZF data")
+    csize, usize = struct.unpack("<II", body[:8])
+    if len(body) < 8 + csize:
+        raise _bad(path, "PCD binary_compressed data", f"{len(body) - 8} bytes", f"{csize} compressed bytes")
+    if usize != n_pts * dt.itemsize:
+        raise _bad(path, "PCD binary_compressed size", usize, f"{n_pts * dt.itemsize} bytes ({n_pts} points)")
+    try:
+        dec = lzf_decompress(body[8:8 + csize], usize)
+    except ValueError as e:
+        raise _bad(path, "PCD binary_compressed data", str(e), "a valid LZF stream") from None
+    cols, off = {}, 0
+    for uniq, typ, shp in dtypes:  # structure-of-arrays: one field after the other
+        fdt = np.dtype((typ, shp)) if shp else np.dtype(typ)
+        nb = fdt.itemsize * n_pts
+        cols[uniq] = np.frombuffer(dec[off:off + nb], dtype=fdt.base).reshape((n_pts,) + tuple(shp))
+        off += nb
+    return cols
+
+
+def read_pcd(path, *, drop_zero: bool = True) -> PointCloud:
+    """Read a PCD file (DATA ascii, binary or binary_compressed); see :class:`PointCloud`."""
+    path = Path(path)
+    raw = _read_bytes(path)
+    if not (raw.startswith(b"#") or raw.startswith(b"VERSION") or raw.startswith(b"FIELDS")):
+        raise _bad(path, "PCD header", raw[:20], "a PCD file starting with '# .PCD' or 'VERSION'")
+    hdr, pos = _pcd_header(path, raw)
+    names, counts, n_pts, dtypes = _pcd_layout(path, hdr)
+    dt = np.dtype(dtypes)
     mode = hdr["DATA"][0].lower() if hdr["DATA"] else ""
     body = raw[pos:]
     if mode == "ascii":
-        text = body.decode("ascii", errors="replace")
-        ncol = sum(counts)
-        rows = [ln for ln in text.splitlines() if ln.strip()]
-        if len(rows) < n_pts:
-            raise _bad(path, "PCD data", f"{len(rows)} rows", f"{n_pts} rows (POINTS)")
-        try:
-            table = np.loadtxt(rows[:n_pts], dtype=np.float64, ndmin=2) if n_pts else np.zeros((0, ncol))
-        except ValueError:
-            _raise_bad_row(path, rows[:n_pts], ncol, first_row=1)
-        if table.shape[1] != ncol:
-            raise _bad(path, "PCD data", f"{table.shape[1]} columns", f"{ncol} columns (sum of COUNT)")
-        cols, off = {}, 0
-        for (uniq, _, _shp), c in zip(dtypes, counts, strict=True):
-            cols[uniq] = table[:, off] if c == 1 else table[:, off:off + c]
-            off += c
+        cols = _pcd_ascii(path, body, n_pts, dtypes, counts)
     elif mode == "binary":
         need = n_pts * dt.itemsize
         if len(body) < need:
@@ -326,23 +360,7 @@ def read_pcd(path, *, drop_zero: bool = True) -> PointCloud:
         arr = np.frombuffer(body, dtype=dt, count=n_pts)
         cols = {n: arr[n] for n in dt.names}
     elif mode == "binary_compressed":
-        if len(body) < 8:
-            raise _bad(path, "PCD binary_compressed data", f"{len(body)} bytes", "8 size bytes then LZF data")
-        csize, usize = struct.unpack("<II", body[:8])
-        if len(body) < 8 + csize:
-            raise _bad(path, "PCD binary_compressed data", f"{len(body) - 8} bytes", f"{csize} compressed bytes")
-        if usize != n_pts * dt.itemsize:
-            raise _bad(path, "PCD binary_compressed size", usize, f"{n_pts * dt.itemsize} bytes ({n_pts} points)")
-        try:
-            dec = lzf_decompress(body[8:8 + csize], usize)
-        except ValueError as e:
-            raise _bad(path, "PCD binary_compressed data", str(e), "a valid LZF stream") from None
-        cols, off = {}, 0
-        for uniq, typ, shp in dtypes:  # structure-of-arrays: one field after the other
-            fdt = np.dtype((typ, shp)) if shp else np.dtype(typ)
-            nb = fdt.itemsize * n_pts
-            cols[uniq] = np.frombuffer(dec[off:off + nb], dtype=fdt.base).reshape((n_pts,) + tuple(shp))
-            off += nb
+        cols = _pcd_binary_compressed(path, body, n_pts, dtypes, dt)
     else:
         raise _bad(path, "PCD DATA", hdr["DATA"], "ascii, binary or binary_compressed")
     return _assemble(path, names, dtypes, cols, drop_zero)

@@ -147,6 +147,18 @@ def _pose_ok(camera, board, rvec, tvec, margin_px, max_view_deg) -> bool:
                        & (uv[:, 1] >= margin_px) & (uv[:, 1] <= h - 1 - margin_px)))
 
 
+def _board_rotation(c_cam, roll_rad: float, tilt_rad: float, phi_rad: float) -> np.ndarray:
+    """Board -> camera rotation (3, 3): facing the camera along the line of sight to ``c_cam``, rolled
+    in-plane by ``roll_rad``, then tilted out of plane by ``tilt_rad`` about the in-plane axis at ``phi_rad``."""
+    z = c_cam / np.linalg.norm(c_cam)
+    x = np.cross([0.0, 1.0, 0.0], z)
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)
+    R0 = np.stack([x, y, z], axis=1)
+    R = _rot(R0[:, 2], roll_rad) @ R0
+    return _rot(np.cos(phi_rad) * R[:, 0] + np.sin(phi_rad) * R[:, 1], tilt_rad) @ R
+
+
 def make_board_poses(camera: SyntheticCamera = DEFAULT_CAMERA, board=PAPER_BOARD, n: int = 20, *,
                      fill: tuple[float, float] = (0.3, 0.55), min_tilt_deg: float = 10.0, max_tilt_deg: float = 40.0,
                      max_roll_deg: float = 15.0, margin_px: float = 8.0, max_view_deg: float = 70.0,
@@ -213,14 +225,7 @@ def make_board_poses(camera: SyntheticCamera = DEFAULT_CAMERA, board=PAPER_BOARD
             tilt = np.radians(rng.uniform(min_tilt_deg, max_tilt_deg))
             phi = rng.uniform(0, 2 * np.pi)
             roll = np.radians(rng.uniform(-max_roll_deg, max_roll_deg))
-            # start facing the camera along its line of sight, then roll in-plane and tilt out of plane
-            z = c_cam / np.linalg.norm(c_cam)
-            x = np.cross([0.0, 1.0, 0.0], z)
-            x /= np.linalg.norm(x)
-            y = np.cross(z, x)
-            R0 = np.stack([x, y, z], axis=1)
-            R = _rot(R0[:, 2], roll) @ R0
-            R = _rot(np.cos(phi) * R[:, 0] + np.sin(phi) * R[:, 1], tilt) @ R
+            R = _board_rotation(c_cam, roll, tilt, phi)
             t = c_cam - R @ centre_b
             r = _rodrigues(R)
             if _pose_ok(camera, board, r, t, margin_px, max_view_deg):

@@ -167,6 +167,48 @@ def _intersect_quad(o, d, centre, ax_u, ax_v, half_u, half_v):
     return np.where(ok, t, np.inf)
 
 
+def _stand_hits(o, d, centre, bx, by, ground_z_m) -> np.ndarray:
+    """Ray distances ``(n_rays,)`` m to the board's stand (6 cm wide, 5 cm behind the board centre, down to
+    the ground); inf where missed."""
+    nb = np.cross(bx, by)
+    nh = nb - nb[2] * np.array([0, 0, 1.0])
+    if np.linalg.norm(nh) <= 1e-6:
+        return np.full(d.shape[0], np.inf)
+    nh /= np.linalg.norm(nh)
+    if nh @ (centre - o) < 0:
+        nh = -nh  # away from the LiDAR
+    zt = centre[2]
+    zb = 0.0 if ground_z_m is None else ground_z_m
+    sc = centre + 0.05 * nh
+    sc = np.array([sc[0], sc[1], (zt + zb) / 2.0])
+    u = np.cross([0, 0, 1.0], nh)
+    return _intersect_quad(o, d, sc, u / np.linalg.norm(u), np.array([0, 0, 1.0]), 0.03, max((zt - zb) / 2.0, 0.0))
+
+
+def _plane_hits(o, d, p, n) -> np.ndarray:
+    """Ray distances ``(n_rays,)`` m to the plane through ``p`` with normal ``n`` (inf: parallel or behind)."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = ((p - o) @ n) / (d @ n)
+    return np.where(t > 0, t, np.inf)
+
+
+def _intensities(board: Checkerboard, TB, o, d, t, surf) -> np.ndarray:
+    """Return intensity per ray: black squares 10, white 200, ground 60, stand 30, walls 90 (float32)."""
+    s = board.square_m
+    inten = np.zeros(surf.shape[0], np.float32)
+    inten[surf == 2], inten[surf == 3], inten[surf == 4] = 60, 30, 90
+    on_b = surf == 1
+    if on_b.any():
+        bx, by = TB[:3, 0], TB[:3, 1]
+        pb = (o + t[on_b, None] * d[on_b]) - TB[:3, 3]
+        xb, yb = pb @ bx, pb @ by
+        i, j = np.floor(xb / s + 1.0), np.floor(yb / s + 1.0)
+        in_sq = (i >= 0) & (i <= board.cols) & (j >= 0) & (j <= board.rows)
+        black = in_sq & ((i + j) % 2 == 0)
+        inten[on_b] = np.where(black, 10.0, 200.0)
+    return inten
+
+
 def simulate_scan(board: Checkerboard, T_world_board, T_world_lidar, *, scanner: SpinningLidar = OS1_128,
                   ground_z_m: float = 0.0, stand: bool = True, walls=(), seed=0, no_return: str = "drop",
                   with_board: bool = True) -> PointCloud:
@@ -216,44 +258,19 @@ def simulate_scan(board: Checkerboard, T_world_board, T_world_lidar, *, scanner:
     if with_board:
         T_hit[1] = _intersect_quad(o, d, centre, bx, by, (x1 - x0) / 2, (y1 - y0) / 2)
     if ground_z_m is not None:
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = (ground_z_m - o[2]) / d[:, 2]
-        T_hit[2] = np.where(t > 0, t, np.inf)
+        T_hit[2] = _plane_hits(o, d, np.array([0.0, 0.0, ground_z_m]), np.array([0.0, 0.0, 1.0]))
     if stand and with_board:
-        nb = np.cross(bx, by)
-        nh = nb - nb[2] * np.array([0, 0, 1.0])
-        if np.linalg.norm(nh) > 1e-6:
-            nh /= np.linalg.norm(nh)
-            if nh @ (centre - o) < 0:
-                nh = -nh  # away from the LiDAR
-            zt = centre[2]
-            zb = 0.0 if ground_z_m is None else ground_z_m
-            sc = centre + 0.05 * nh
-            sc = np.array([sc[0], sc[1], (zt + zb) / 2.0])
-            u = np.cross([0, 0, 1.0], nh)
-            T_hit[3] = _intersect_quad(o, d, sc, u / np.linalg.norm(u), np.array([0, 0, 1.0]), 0.03,
-                                       max((zt - zb) / 2.0, 0.0))
+        T_hit[3] = _stand_hits(o, d, centre, bx, by, ground_z_m)
     for pw, nw in walls:
         pw, nw = np.asarray(pw, float), np.asarray(nw, float) / np.linalg.norm(nw)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = ((pw - o) @ nw) / (d @ nw)
-        T_hit[4] = np.minimum(T_hit[4], np.where(t > 0, t, np.inf))
+        T_hit[4] = np.minimum(T_hit[4], _plane_hits(o, d, pw, nw))
     surf = np.argmin(T_hit, axis=0)
     t = T_hit[surf, np.arange(n_r)]
     hit = np.isfinite(t) & (t >= scanner.min_range_m) & (t <= scanner.max_range_m)
     surf = np.where(hit, surf, 0).astype(np.uint8)
     r = np.where(hit, t, np.nan) + rng.normal(0.0, scanner.range_noise_m, n_r)
     xyz = dL * r[:, None]
-    inten = np.zeros(n_r, np.float32)
-    inten[surf == 2], inten[surf == 3], inten[surf == 4] = 60, 30, 90
-    on_b = surf == 1
-    if on_b.any():
-        pb = (o + t[on_b, None] * d[on_b]) - TB[:3, 3]
-        xb, yb = pb @ bx, pb @ by
-        i, j = np.floor(xb / s + 1.0), np.floor(yb / s + 1.0)
-        in_sq = (i >= 0) & (i <= board.cols) & (j >= 0) & (j <= board.rows)
-        black = in_sq & ((i + j) % 2 == 0)
-        inten[on_b] = np.where(black, 10.0, 200.0)
+    inten = _intensities(board, TB, o, d, t, surf)
     if no_return == "drop":
         keep = hit
         xyz, ring, inten, surf = xyz[keep], ring[keep], inten[keep], surf[keep]
