@@ -39,6 +39,7 @@ from ..io.atomic import atomic_write_text
 from ..io.camera_files import save_budget
 from ..uncertainty.budget import ErrorBudget, load_budget
 from .fit_compact import MEMORY_PAIRS, CompactModel, CompactPairs, check_chunk, compact_chunks
+from .fit_likelihood import GroupLikelihood, GroupTerms
 
 __all__ = ["FITTABLE_TERMS", "OBJECT_TERM", "OBJECT_GROUND_TERM", "OBJECT_TERMS", "BudgetFit", "TermFit",
            "fit_budget", "cross_validate", "compact_inputs", "fit_compact", "cross_validate_compact", "CompactPairs",
@@ -117,10 +118,11 @@ def _prepare(residual_m, dxy_dp, cov_object_m2, group, cols) -> _Data:
     return _Data(r[order], J[order][:, :, cols], R[order], starts, gid, order, labels, cols)
 
 
-class _Model:
+class _Model(GroupLikelihood):
     """The (restricted) log-likelihood of the variances ``v`` of the free terms, and its score: the dense
     reference (every per-object array in memory) of :class:`~footprint_uq.validation.fit_compact.CompactModel`,
-    which the fit uses; kept for :func:`log_likelihood` and the tests."""
+    which the fit uses; kept for :func:`log_likelihood` and the tests.  The per-group sums are computed here
+    with numpy; the algebra from the sums on is :class:`~footprint_uq.validation.fit_likelihood.GroupLikelihood`."""
 
     def __init__(self, data: _Data, Sfixed, A, E, fit_bias: bool, reml: bool):
         self.d, self.Sf, self.A, self.E = data, Sfixed, A, E   # A: (m_shared, k, k); E: (q, N, 2, 2)
@@ -135,6 +137,7 @@ class _Model:
                                  "positive-definite per-object covariances (or a free 'object_m' term)")
 
     def _object_sums(self, vo) -> dict | None:
+        """Per-group sums for the per-object variances ``vo`` (None: a per-object covariance is singular)."""
         d = self.d
         D = d.R.copy()
         for v, Eq in zip(vo, self.E, strict=True):
@@ -152,64 +155,25 @@ class _Model:
                 "Dsum": red(Di), "Dr": red(Dr), "rDr": red(np.einsum("na,na->n", d.r, Dr)),
                 "ld": red(np.log(det))}
 
-    def sigma(self, v) -> np.ndarray:
-        ns = self.A.shape[0]
-        return self.Sf + np.tensordot(v[:ns], self.A, 1)
+    def _group_sums(self, vo, grad: bool) -> dict | None:
+        return self._object_sums(vo)
 
-    def evaluate(self, v, grad: bool = True):
-        """(log-likelihood, score (m,) or None, bias (2,), bias covariance (2, 2))."""
-        v = np.asarray(v, dtype=np.float64)
-        s = self._cache if not self.object_free else self._object_sums(v[self.A.shape[0]:])
-        if s is None:
-            return -np.inf, None, None, None
-        S = self.sigma(v)
-        k = S.shape[0]
-        Hm = np.eye(k) + s["M"] @ S                      # (G, k, k)
-        sign, ldH = np.linalg.slogdet(Hm)
-        if np.any(sign <= 0):
-            return -np.inf, None, None, None
-        K = np.swapaxes(np.linalg.solve(np.swapaxes(Hm, 1, 2), np.broadcast_to(S, Hm.shape)), 1, 2)
-        KP = K @ s["P"]
-        Phi_g = s["Dsum"] - np.swapaxes(s["P"], 1, 2) @ KP
-        Xr_g = s["Dr"] - np.einsum("gka,gk->ga", KP, s["b"])
-        Phi = Phi_g.sum(0)
-        beta = np.linalg.solve(Phi, Xr_g.sum(0)) if self.fit_bias else np.zeros(2)
-        bt = s["b"] - np.einsum("gka,a->gk", s["P"], beta)   # U^T D^-1 (r - beta)
-        quad = (s["rDr"] - 2 * s["Dr"] @ beta + np.einsum("a,gab,b->g", beta, s["Dsum"], beta)
-                - np.einsum("gk,gkl,gl->g", bt, K, bt))
-        ll = -0.5 * (np.sum(s["ld"] + ldH) + np.sum(quad) + self.d.r.size * np.log(2 * np.pi))
-        if self.fit_bias and self.reml:
-            ll -= 0.5 * np.linalg.slogdet(Phi)[1]
-        cov_beta = np.linalg.inv(Phi) if self.fit_bias else np.zeros((2, 2))
-        if not grad:
-            return ll, None, beta, cov_beta
-        return ll, self._score(s, S, K, bt, beta, Phi), beta, cov_beta
-
-    def _score(self, s, S, K, bt, beta, Phi):
-        M = s["M"]
-        w = bt - np.einsum("gkl,gl->gk", M @ K, bt)       # U^T C^-1 (r - beta)
-        Q = M - M @ K @ M                                 # U^T C^-1 U
-        g = -0.5 * (np.einsum("jab,gba->j", self.A, Q) - np.einsum("ga,jab,gb->j", w, self.A, w))
-        use_reml = self.fit_bias and self.reml
-        if use_reml:
-            Phi_i = np.linalg.inv(Phi)
-            Y = s["P"] - M @ K @ s["P"]                   # U^T C^-1 X  (G, k, 2)
-            g += 0.5 * np.einsum("gka,jkl,glb,ba->j", Y, self.A, Y, Phi_i)
-        if not self.object_free:
-            return g
+    def _object_score(self, s: dict, t: GroupTerms, Phi_i) -> np.ndarray:
+        """Score of the per-object variances, from the per-object arrays."""
         d, E, V, Di = self.d, self.E, s["V"], s["Di"]
-        Kb = np.einsum("gkl,gl->gk", K, bt)[d.gid]                                # (N, k)
+        K, beta = t.K, t.beta
+        Kb = np.einsum("gkl,gl->gk", K, t.bt)[d.gid]                              # (N, k)
         z = (Di @ (d.r - beta)[..., None])[..., 0] - np.einsum("nak,nk->na", V, Kb)  # C^-1 (r - beta), per object
-        Z = Di - V @ (K @ s["P"])[d.gid] if use_reml else None                    # rows of C^-1 X (N, 2, 2)
+        Z = Di - V @ t.KP[d.gid] if Phi_i is not None else None                   # rows of C^-1 X (N, 2, 2)
         go = np.empty(E.shape[0])
         for q, Eq in enumerate(E):
             EV = Eq @ V
             SE = np.add.reduceat(np.swapaxes(V, 1, 2) @ EV, d.starts, axis=0)       # (G, k, k)
             tr = np.einsum("nab,nba->", Di, Eq) - np.einsum("gkl,glk->", K, SE)
             go[q] = -0.5 * (tr - np.einsum("na,na->", z, (Eq @ z[..., None])[..., 0]))
-            if use_reml:
+            if Phi_i is not None:
                 go[q] += 0.5 * np.trace(Phi_i @ (np.swapaxes(Z, 1, 2) @ (Eq @ Z)).sum(0))
-        return np.r_[g, go]
+        return go
 
 
 def log_likelihood(residual_m, dxy_dp, cov_object_m2, group, budget, *, object_sigma_m: float = 0.0,

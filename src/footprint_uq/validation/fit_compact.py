@@ -27,6 +27,7 @@ import numpy as np
 from .. import params as P
 from ..errors import InputError
 from ..fast.fit_kernels import group_sums
+from .fit_likelihood import GroupLikelihood, GroupTerms
 
 __all__ = ["CompactPairs", "SpilledPairs", "compact_chunks", "check_chunk", "CompactModel", "MEMORY_PAIRS", "PART_ROWS"]
 
@@ -227,9 +228,10 @@ def _sorted_labels(index: dict):
     return remap, np.array([keys[i] for i in order])
 
 
-class CompactModel:
+class CompactModel(GroupLikelihood):
     """The (restricted) log-likelihood of the variances ``v`` of the free terms and its score, from
-    per-group sums (same interface and numbers as the dense ``fit._Model``).
+    per-group sums (same interface and numbers as the dense ``fit._Model``; the algebra from the sums on is
+    :class:`~footprint_uq.validation.fit_likelihood.GroupLikelihood`).
 
     ``A`` (m_shared, k, k): unit covariances of the free shared terms; ``kinds`` (q,): 0 for
     ``object_m``, 1 for ``object_ground_m``.
@@ -244,12 +246,13 @@ class CompactModel:
         self.n_groups = int(data.labels.size)
         self._cache = None
         if not self.object_free:
-            self._cache = self._sums(np.zeros(0), False)
+            self._cache = self._group_sums(np.zeros(0), False)
             if self._cache is None:
                 raise InputError("cov_object_m2", "a singular covariance",
                                  "positive-definite per-object covariances (or a free 'object_m' term)")
 
-    def _sums(self, vo, with_score):
+    def _group_sums(self, vo, with_score):
+        """Per-group sums over every part of the records (one pass; None: a singular per-object covariance)."""
         total = None
         for d in self.d.parts():
             s = group_sums(d.r, d.U, d.R3, d.jg, d.gid, self.n_groups, vo, self.kinds, with_score=with_score)
@@ -258,57 +261,11 @@ class CompactModel:
             total = s if total is None else {k: total[k] + s[k] for k in total}
         return total
 
-    def sigma(self, v) -> np.ndarray:
-        ns = self.A.shape[0]
-        return self.Sf + np.tensordot(v[:ns], self.A, 1)
-
-    def evaluate(self, v, grad: bool = True):
-        """(log-likelihood, score (m,) or None, bias (2,), bias covariance (2, 2))."""
-        v = np.asarray(v, dtype=np.float64)
-        ns = self.A.shape[0]
-        s = self._cache if not self.object_free else self._sums(v[ns:], grad)
-        if s is None:
-            return -np.inf, None, None, None
-        S = self.sigma(v)
-        k = S.shape[0]
-        Hm = np.eye(k) + s["M"] @ S                      # (G, k, k)
-        sign, ldH = np.linalg.slogdet(Hm)
-        if np.any(sign <= 0):
-            return -np.inf, None, None, None
-        K = np.swapaxes(np.linalg.solve(np.swapaxes(Hm, 1, 2), np.broadcast_to(S, Hm.shape)), 1, 2)
-        KP = K @ s["P"]
-        Phi = (s["Dsum"] - np.swapaxes(s["P"], 1, 2) @ KP).sum(0)
-        Xr = (s["Dr"] - np.einsum("gka,gk->ga", KP, s["b"])).sum(0)
-        beta = np.linalg.solve(Phi, Xr) if self.fit_bias else np.zeros(2)
-        bt = s["b"] - np.einsum("gka,a->gk", s["P"], beta)   # U^T D^-1 (r - beta)
-        quad = (s["rDr"] - 2 * s["Dr"] @ beta + np.einsum("a,gab,b->g", beta, s["Dsum"], beta)
-                - np.einsum("gk,gkl,gl->g", bt, K, bt))
-        ll = -0.5 * (np.sum(s["ld"] + ldH) + np.sum(quad) + 2 * self.n * np.log(2 * np.pi))
-        if self.fit_bias and self.reml:
-            ll -= 0.5 * np.linalg.slogdet(Phi)[1]
-        cov_beta = np.linalg.inv(Phi) if self.fit_bias else np.zeros((2, 2))
-        if not grad:
-            return ll, None, beta, cov_beta
-        return ll, self._score(s, K, KP, bt, beta, Phi), beta, cov_beta
-
-    def _score(self, s, K, KP, bt, beta, Phi):
-        M = s["M"]
-        w = bt - np.einsum("gkl,gl->gk", M @ K, bt)       # U^T C^-1 (r - beta)
-        Q = M - M @ K @ M                                 # U^T C^-1 U
-        g = -0.5 * (np.einsum("jab,gba->j", self.A, Q) - np.einsum("ga,jab,gb->j", w, self.A, w))
-        use_reml = self.fit_bias and self.reml
-        Phi_i = np.linalg.inv(Phi) if use_reml else None
-        if use_reml:
-            Y = s["P"] - M @ KP                           # U^T C^-1 X  (G, k, 2)
-            g += 0.5 * np.einsum("gka,jkl,glb,ba->j", Y, self.A, Y, Phi_i)
-        if not self.object_free:
-            return g
-        return np.r_[g, self._object_score(s, K, KP, bt, beta, Phi_i)]
-
-    def _object_score(self, s, K, KP, bt, beta, Phi_i):
+    def _object_score(self, s: dict, t: GroupTerms, Phi_i) -> np.ndarray:
         """Score of the per-object variances: ``-1/2 (tr(C^-1 E) - z^T E z) [+ 1/2 tr(Phi^-1 Z^T E Z)]`` with
         ``z = C^-1 (r - beta)``, ``Z = C^-1 X``, summed per group from the pass's sums."""
-        c = np.einsum("gkl,gl->gk", K, bt)                # z_i = D_i^-1 (r_i - beta) - V_i c_g
+        K, KP, beta = t.K, t.KP, t.beta
+        c = np.einsum("gkl,gl->gk", K, t.bt)              # z_i = D_i^-1 (r_i - beta) - V_i c_g
         go = np.empty(self.kinds.size)
         for q in range(self.kinds.size):
             W, Y, X = s["W"][:, q], s["Y"][:, q], s["X"][:, q]
