@@ -1,7 +1,7 @@
 """The planner's pages in headless Chromium: the report (no horizontal overflow, every figure loaded) and the
 interactive page of ``plan --serve`` (loads, a slider move re-draws the map, no console errors).
 
-The report is checked as tests/test_report_browser.py does (a checking script in a copy, ``--dump-dom``).
+The report is checked with the probe of tests/browser_probe.py (a checking script in a copy, ``--dump-dom``).
 The interactive page needs a live server, so it is driven through the Chrome DevTools protocol with the
 small standard-library WebSocket client below (RFC 6455 text frames, client-masked).  Stated time for a
 re-draw: within 20 s (a liveness bound for a loaded 2-core VM; a re-draw takes well under a second on a
@@ -26,42 +26,15 @@ import pytest
 import yaml
 from click.testing import CliRunner
 
+from browser_probe import CHROMIUM, FLAGS, need_chromium, probe
 from footprint_uq.cli.main import main
 from footprint_uq.planning.layout import read_layout
 from footprint_uq.planning.site import load_site
 from footprint_uq.viz.plan_server import HOST, PlanSession, make_server
 from test_planning import small_site_dict
-from test_report_browser import CHROMIUM, FLAGS
 
 pytestmark = pytest.mark.browser
 REDRAW_LIMIT_S = 20.0
-
-CHECK = """<script>
-window.__fuq = {errors: []};
-window.addEventListener('error', function (e) {
-  var t = e.target || {};
-  window.__fuq.errors.push(e.message || ('resource failed: ' + (t.src || t.href || t.tagName)));
-}, true);
-window.addEventListener('load', function () {
-  var imgs = Array.prototype.slice.call(document.images);
-  var de = document.documentElement;
-  var out = {errors: window.__fuq.errors, scroll_w: de.scrollWidth, client_w: de.clientWidth,
-             imgs: imgs.map(function (i) { return {complete: i.complete, w: i.naturalWidth,
-                                                   shown_w: i.getBoundingClientRect().width}; })};
-  var pre = document.createElement('pre');
-  pre.id = 'fuq-check';
-  pre.textContent = JSON.stringify(out);
-  document.body.appendChild(pre);
-});
-</script>"""
-
-
-def _need_chromium():
-    if CHROMIUM is None:
-        if os.environ.get("CI"):
-            pytest.fail("chromium not found in CI")
-        pytest.skip("chromium not installed (apt-get install -y chromium)")
-
 
 @pytest.fixture(scope="module")
 def planned(tmp_path_factory):
@@ -77,21 +50,14 @@ def planned(tmp_path_factory):
 
 @pytest.mark.parametrize("width", [1200, 700])
 def test_report_has_no_horizontal_overflow_and_every_figure_loads(planned, tmp_path, width):
-    _need_chromium()
+    need_chromium()
     html = (planned[1] / "report.html").read_text(encoding="utf-8")
-    probe = tmp_path / "probe.html"
-    probe.write_text(html.replace("<head>", "<head>" + CHECK, 1), encoding="utf-8")
-    cmd = [CHROMIUM, *FLAGS, f"--user-data-dir={tmp_path / 'profile'}", "--virtual-time-budget=10000",
-           f"--window-size={width},900", "--dump-dom", probe.as_uri()]
-    p = subprocess.run(cmd, capture_output=True, text=True, timeout=120, env={**os.environ, "HOME": str(tmp_path)})
-    m = re.search(r'<pre id="fuq-check">(.*?)</pre>', p.stdout, re.S)
-    assert m, p.stderr[-2000:]
-    res = json.loads(m.group(1).replace("&quot;", '"').replace("&amp;", "&"))
+    res = probe(html, tmp_path, width=width)
     assert res["errors"] == []
-    assert res["scroll_w"] <= res["client_w"], res
+    assert res["scroll_w"] <= res["view_w"], res
     assert len(res["imgs"]) == html.count("<img") >= 4
     for img in res["imgs"]:
-        assert img["complete"] and img["w"] > 100 and 100 < img["shown_w"] <= res["client_w"], img
+        assert img["complete"] and img["w"] > 100 and 100 < img["shown_w"] <= res["view_w"], img
 
 
 # -- a minimal DevTools-protocol client -------------------------------------------------------------------------
@@ -168,7 +134,7 @@ class _DevTools:
 
 @pytest.fixture
 def browser(tmp_path):
-    _need_chromium()
+    need_chromium()
     profile = tmp_path / "profile"
     flags = [f for f in FLAGS if f != "--allow-file-access-from-files"]
     proc = subprocess.Popen([CHROMIUM, *flags, f"--user-data-dir={profile}", "--remote-debugging-port=0",
@@ -232,7 +198,7 @@ def test_interactive_page_redraws_on_a_slider_move(browser, served):
                        timeout=int(REDRAW_LIMIT_S * 1000))["result"]["value"]
     assert res["changed"] and res["redraws"] == "1", res
     assert res["ms"] < REDRAW_LIMIT_S * 1000, res
-    assert res["scroll_w"] <= res["client_w"], res
+    assert res["scroll_w"] <= res["view_w"], res
     assert session.cameras[0].camera.tilt_deg == pytest.approx(res["tilt"]) != pytest.approx(before)
     bad = [e for e in browser.events if e.get("method") == "Runtime.exceptionThrown"
            or (e.get("method") == "Runtime.consoleAPICalled" and e["params"]["type"] in ("error", "assert"))

@@ -1,66 +1,24 @@
 """The case-study report opened in headless Chromium: loads without errors, every figure displayed.
 
-Needs Debian's ``chromium`` (``apt-get install -y chromium``; ``.ci/run`` installs it).
-A copy of the report gets a small inline checking script (the report itself has none):
-it records every error event (script errors and failed resources, captured at the
-window) and, after ``load``, each ``<img>``'s ``complete``/``naturalWidth``; Chromium's
-``--dump-dom`` prints the resulting page.  A screenshot is kept in the test's directory
-(``tmp_path``; set ``FOOTPRINT_UQ_TEST_OUT`` to keep it elsewhere).
+The pages are checked with the probe of tests/browser_probe.py (a checking script in a copy, ``--dump-dom``).
+A screenshot is kept in the test's directory (``tmp_path``; set ``FOOTPRINT_UQ_TEST_OUT`` to keep it elsewhere).
 """
 
 from __future__ import annotations
 
-import json
 import os
-import re
-import shutil
-import subprocess
 from pathlib import Path
 
 import pytest
 
+from browser_probe import need_chromium, probe, run_chromium
+
 pytestmark = pytest.mark.browser
-
-
-def _chromium() -> str | None:
-    for name in ("chromium", "chromium-browser"):
-        p = shutil.which(name)
-        if p:
-            return p
-    return "/usr/bin/chromium" if Path("/usr/bin/chromium").exists() else None
-
-
-CHROMIUM = _chromium()
-FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-         "--disable-background-networking", "--disable-component-update", "--disable-sync",
-         "--disable-dev-shm-usage", "--allow-file-access-from-files"]
-
-CHECK = """<script>
-window.__fuq = {errors: []};
-window.addEventListener('error', function (e) {
-  var t = e.target || {};
-  window.__fuq.errors.push(e.message || ('resource failed: ' + (t.src || t.href || t.tagName)));
-}, true);
-window.addEventListener('load', function () {
-  var imgs = Array.prototype.slice.call(document.images);
-  var out = {n_img: imgs.length, errors: window.__fuq.errors,
-             imgs: imgs.map(function (i) { return {complete: i.complete, w: i.naturalWidth, h: i.naturalHeight,
-                                                   shown_w: i.getBoundingClientRect().width}; }),
-             title: document.title, h2: document.querySelectorAll('h2').length};
-  var pre = document.createElement('pre');
-  pre.id = 'fuq-check';
-  pre.textContent = JSON.stringify(out);
-  document.body.appendChild(pre);
-});
-</script>"""
 
 
 @pytest.fixture(scope="module")
 def report(tmp_path_factory):
-    if CHROMIUM is None:
-        if os.environ.get("CI"):  # .ci/run installs chromium: a missing browser in CI is a failure, not a skip
-            pytest.fail("chromium not found in CI (.ci/run should have installed it)")
-        pytest.skip("chromium not installed (apt-get install -y chromium); the browser check needs it")
+    need_chromium()
     from footprint_uq.scenario import CaseStudyConfig
     from footprint_uq.viz.case_study_run import run_case_study
 
@@ -70,28 +28,10 @@ def report(tmp_path_factory):
     return paths
 
 
-def _run(args, tmp_path, timeout=120):
-    profile = tmp_path / "profile"
-    cmd = [CHROMIUM, *FLAGS, f"--user-data-dir={profile}", *args]
-    env = {**os.environ, "HOME": str(tmp_path)}
-    return subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, env=env)
-
-
-def _probe(html: str, tmp_path) -> dict:
-    """Open ``html`` with the checking script; return what it recorded."""
-    probe = tmp_path / "probe.html"
-    probe.write_text(html.replace("<head>", "<head>" + CHECK, 1), encoding="utf-8")
-    p = _run(["--virtual-time-budget=10000", "--window-size=1200,900", "--dump-dom", probe.as_uri()], tmp_path)
-    assert p.returncode == 0, p.stderr[-2000:]
-    m = re.search(r'<pre id="fuq-check">(.*?)</pre>', p.stdout, re.S)
-    assert m, "the page did not finish loading (no check output)\n" + p.stderr[-2000:]
-    return json.loads(m.group(1).replace("&quot;", '"').replace("&amp;", "&"))
-
-
 def test_report_loads_and_every_figure_is_displayed(report, tmp_path):
     html = report["report"].read_text(encoding="utf-8")
     n_fig = len(report["figures"])
-    res = _probe(html, tmp_path)
+    res = probe(html, tmp_path)
     assert res["errors"] == []
     assert res["n_img"] == n_fig == 10
     for i, img in enumerate(res["imgs"]):
@@ -106,7 +46,7 @@ def test_probe_detects_a_broken_figure(report, tmp_path):
     html = report["report"].read_text(encoding="utf-8")
     i = html.index("data:image/png;base64,") + len("data:image/png;base64,")
     broken = html[:i] + "AAAA" + html[i + 40:]
-    res = _probe(broken, tmp_path)
+    res = probe(broken, tmp_path)
     assert res["n_img"] == len(report["figures"])
     assert res["imgs"][0]["w"] == 0 and all(img["w"] > 0 for img in res["imgs"][1:])
     assert len(res["errors"]) == 1
@@ -116,7 +56,7 @@ def test_report_screenshot_kept(report, tmp_path):
     keep = Path(os.environ.get("FOOTPRINT_UQ_TEST_OUT", tmp_path))
     keep.mkdir(parents=True, exist_ok=True)
     shot = keep / "report_screenshot.png"
-    p = _run([f"--screenshot={shot}", "--window-size=1200,2400", "--hide-scrollbars",
+    p = run_chromium([f"--screenshot={shot}", "--window-size=1200,2400", "--hide-scrollbars",
               report["report"].as_uri()], tmp_path)
     assert p.returncode == 0, p.stderr[-2000:]
     data = shot.read_bytes()
@@ -124,49 +64,9 @@ def test_report_screenshot_kept(report, tmp_path):
 
 
 # -- every HTML page the project writes: no horizontal overflow, every image loaded (issue 24) ----------------------
-LAYOUT = """<script>
-window.__fuq = {errors: []};
-window.addEventListener('error', function (e) {
-  var t = e.target || {};
-  window.__fuq.errors.push(e.message || ('resource failed: ' + (t.src || t.href || t.tagName)));
-}, true);
-window.addEventListener('load', function () {
-  var vw = document.documentElement.clientWidth;
-  var wide = Array.prototype.slice.call(document.body.querySelectorAll('*')).filter(function (el) {
-    var r = el.getBoundingClientRect();
-    var clipped = false;
-    for (var p = el.parentElement; p && p !== document.body; p = p.parentElement) {
-      if (getComputedStyle(p).overflowX !== 'visible') { clipped = true; break; }
-    }
-    return !clipped && r.width > 0 && r.right > vw + 1;
-  }).slice(0, 5).map(function (el) { return el.tagName + ':' + (el.textContent || '').slice(0, 40); });
-  var scrolled = Array.prototype.slice.call(document.body.querySelectorAll('*')).filter(function (el) {
-    return getComputedStyle(el).overflowX !== 'visible' && el.scrollWidth > el.clientWidth + 1;
-  }).map(function (el) { return (el.textContent || '').slice(0, 60); });
-  var imgs = Array.prototype.slice.call(document.images).map(function (i) {
-    return {complete: i.complete, w: i.naturalWidth, alt: i.alt.slice(0, 40)};
-  });
-  var out = {errors: window.__fuq.errors, scroll_w: document.documentElement.scrollWidth, view_w: vw, wide: wide,
-             scrolled: scrolled, imgs: imgs};
-  var pre = document.createElement('pre');
-  pre.id = 'fuq-check';
-  pre.textContent = JSON.stringify(out);
-  document.body.appendChild(pre);
-});
-</script>"""
-
-
 def _layout(html: str, tmp_path) -> dict:
-    """Open ``html`` at 1200 px with the layout probe; what it recorded (overflowing elements, images)."""
-    probe = tmp_path / "layout.html"
-    probe.write_text(html.replace("<head>", "<head>" + LAYOUT, 1), encoding="utf-8")
-    p = _run(["--virtual-time-budget=10000", "--window-size=1200,900", "--hide-scrollbars", "--dump-dom",
-              probe.as_uri()], tmp_path)
-    assert p.returncode == 0, p.stderr[-2000:]
-    m = re.search(r'<pre id="fuq-check">(.*?)</pre>', p.stdout, re.S)
-    assert m, "the page did not finish loading (no check output)\n" + p.stderr[-2000:]
-    return json.loads(m.group(1).replace("&quot;", '"').replace("&amp;", "&").replace("&lt;", "<")
-                      .replace("&gt;", ">"))
+    """Open ``html`` at 1200 px (scrollbars hidden) with the probe: overflowing elements, images."""
+    return probe(html, tmp_path, hide_scrollbars=True)
 
 
 def _assert_laid_out(res: dict, n_img_min: int):
