@@ -24,6 +24,7 @@ import pytest
 
 
 def _chromium() -> str | None:
+    """Path of the chromium binary, or None."""
     for name in ("chromium", "chromium-browser"):
         p = shutil.which(name)
         if p:

@@ -401,6 +401,7 @@ class _Groups:
 
     @property
     def M(self) -> int:
+        """Number of groups (objects)."""
         return self.groups.shape[0]
 
 

@@ -156,6 +156,7 @@ class _Model(GroupLikelihood):
                 "ld": red(np.log(det))}
 
     def _group_sums(self, vo, grad: bool) -> dict | None:
+        """:meth:`_object_sums` (the dense sums serve the score too: ``grad`` changes nothing)."""
         return self._object_sums(vo)
 
     def _object_score(self, s: dict, t: GroupTerms, Phi_i) -> np.ndarray:
