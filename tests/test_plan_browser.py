@@ -198,7 +198,7 @@ def test_interactive_page_redraws_on_a_slider_move(browser, served):
                        timeout=int(REDRAW_LIMIT_S * 1000))["result"]["value"]
     assert res["changed"] and res["redraws"] == "1", res
     assert res["ms"] < REDRAW_LIMIT_S * 1000, res
-    assert res["scroll_w"] <= res["view_w"], res
+    assert res["scroll_w"] <= res["client_w"], res
     assert session.cameras[0].camera.tilt_deg == pytest.approx(res["tilt"]) != pytest.approx(before)
     bad = [e for e in browser.events if e.get("method") == "Runtime.exceptionThrown"
            or (e.get("method") == "Runtime.consoleAPICalled" and e["params"]["type"] in ("error", "assert"))
