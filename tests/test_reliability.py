@@ -25,7 +25,15 @@ from click.testing import CliRunner
 
 from footprint_uq import PanTiltCamera, save_camera
 from footprint_uq.cli.main import main
-from footprint_uq.io.atomic import TMP_MARK, atomic_path, atomic_write_text, path_component
+from footprint_uq.io.atomic import (
+    TMP_MARK,
+    atomic_path,
+    atomic_write_text,
+    clean_temporaries_of,
+    path_component,
+    recover_folder,
+    temp_path,
+)
 
 SRC = Path(__file__).resolve().parents[1] / "src"
 CAM = dict(focal_px=1400.0, image_size_px=(1920, 1080), height_m=8.0, pan_deg=30.0, tilt_deg=20.0)
@@ -365,3 +373,21 @@ def test_fuse_out_hardlinked_to_an_input_is_refused(tmp_path):
     r = CliRunner().invoke(main, ["fuse", str(a), str(b), "--out", str(link)])
     assert r.exit_code == 2 and "same file" in r.stderr and len(r.stderr.strip().splitlines()) == 1
     assert b.read_bytes() == before and _temps(tmp_path) == []
+
+
+@pytest.mark.parametrize("name", ["fp", "fp.d", "out.v2.parquet"])
+def test_recover_folder_finds_its_own_staging_only(tmp_path, name):
+    """A killed job's staging folder (named by temp_path: ``.<stem>.tmp-<hex><suffix>``) is removed on the next
+    run for any ``--out`` name, a dotted one included; another folder's staging beside it is left alone."""
+    out = tmp_path / name
+    mine = temp_path(out)
+    mine.mkdir()
+    (mine / "part.csv").write_text("x\n")
+    other = temp_path(tmp_path / (name + ".d"))  # a different --out whose name starts like ours
+    other.mkdir()
+    stray_file = temp_path(tmp_path / (name + "x"))
+    stray_file.write_text("y")
+    recover_folder(out)
+    assert not mine.exists()
+    assert other.is_dir() and stray_file.is_file()
+    assert clean_temporaries_of(tmp_path / (name + "x")) == 1 and not stray_file.exists()

@@ -18,7 +18,9 @@ from __future__ import annotations
 
 import contextlib
 import ctypes
+import glob
 import os
+import re
 import shutil
 import sys
 import uuid
@@ -132,15 +134,24 @@ def clean_temporaries(folder, *, recursive: bool = True) -> int:
     return n
 
 
-def clean_temporaries_of(final) -> int:
-    """Remove the temporaries of ``final`` left by killed runs (``.<stem>.tmp-*<suffix>`` beside it)."""
+def _temporaries_of(final) -> list[Path]:
+    """The names :func:`temp_path` gives ``final`` that exist beside it: exactly ``.<stem>.tmp-<8 hex><suffix>``
+    (a looser pattern would take ``fp.d``'s temporaries for those of ``fp``)."""
     final = Path(final)
+    parent = final.parent if str(final.parent) else Path(".")
+    if not parent.is_dir():
+        return []
+    exact = re.compile(re.escape(f".{final.stem}{TMP_MARK}") + "[0-9a-f]{8}" + re.escape(final.suffix))
+    return [p for p in parent.glob(f".{glob.escape(final.stem)}{TMP_MARK}*") if exact.fullmatch(p.name)]
+
+
+def clean_temporaries_of(final) -> int:
+    """Remove the temporaries of ``final`` left by killed runs (``.<stem>.tmp-<8 hex><suffix>`` beside it)."""
     n = 0
-    if final.parent.is_dir() or str(final.parent) == "":
-        for p in (final.parent if str(final.parent) else Path(".")).glob(f".{final.stem}{TMP_MARK}*{final.suffix}"):
-            if p.is_file() and not p.is_symlink():
-                discard(p)
-                n += 1
+    for p in _temporaries_of(final):
+        if p.is_file() and not p.is_symlink():
+            discard(p)
+            n += 1
     return n
 
 
@@ -220,7 +231,7 @@ def recover_folder(out) -> None:
     parent = out.parent if str(out.parent) else Path(".")
     if not parent.is_dir():
         return
-    for p in parent.glob(f".{out.name}{TMP_MARK}*"):
+    for p in _temporaries_of(out):  # staging folders are named by temp_path
         remove_tree(p)
     olds = sorted(parent.glob(f".{out.name}{OLD_MARK}*"), key=lambda q: q.stat().st_mtime)
     if olds and not out.exists() and olds[-1].is_dir():
