@@ -254,13 +254,19 @@ def project_ground(xy, cam, uv):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def motion_fields(v, cov, ch, sh, ratio, out, cov_out):  # pragma: no cover - compiled
+def motion_fields(v, cov, ch, sh, ratio, yaw_rad, sigma_yaw_rad, heading_offset_deg, out,
+                  cov_out):  # pragma: no cover - compiled
     """:func:`footprint_uq.tracking.motion.object_motion`'s arithmetic in one pass: velocities ``v (n, 2)`` and
     covariances ``cov (n, 2, 2)`` in W, rotated to east / north by ``(ch, sh)`` = cos / sin of the heading offset,
-    into ``out (7, n)`` = v_east, v_north, speed, sigma_speed, heading_deg, sigma_heading_deg (NaN below ``ratio``
-    velocity sigmas of speed) and ``cov_out (n, 2, 2)``."""
+    into ``out (8, n)`` = v_east, v_north, speed, sigma_speed, heading_deg, sigma_heading_deg (NaN below ``ratio``
+    velocity sigmas of speed), yaw_deg (compass, :func:`~footprint_uq.tracking.motion.yaw_compass_deg` of
+    ``yaw_rad (n,)``), sigma_yaw_deg (of ``sigma_yaw_rad (n,)``) and ``cov_out (n, 2, 2)``; a ``(0,)`` yaw or
+    sigma: NaN."""
     nan = math.nan
+    has_yaw, has_syaw = yaw_rad.shape[0] > 0, sigma_yaw_rad.shape[0] > 0
     for i in range(v.shape[0]):
+        out[6, i] = np.mod(90.0 - np.rad2deg(yaw_rad[i]) + heading_offset_deg, 360.0) if has_yaw else nan
+        out[7, i] = np.rad2deg(sigma_yaw_rad[i]) if has_syaw else nan
         ve = ch * v[i, 0] + sh * v[i, 1]
         vn = -sh * v[i, 0] + ch * v[i, 1]
         c00, c01, c11 = cov[i, 0, 0], cov[i, 0, 1], cov[i, 1, 1]
