@@ -14,15 +14,18 @@ run, interleaved frame by frame (medians over ``frames`` frames after a warm-up 
 * ``total`` -- ``positions_split + track``: positions and motion of one frame.
 
 Run ``.venv/bin/python bench/bench_tracking.py [--objects N] [--frames F] [--json]``; :func:`run` returns the
-figures as a dict.  Nothing is asserted.
+figures as a dict.  ``--runs 3 --out bench/results/tracking-cost.json`` writes that many runs (each with the load
+average before and after it) to the results file.  Nothing is asserted.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import statistics
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -96,7 +99,26 @@ def main(argv=None) -> None:
     ap.add_argument("--objects", type=int, default=100)
     ap.add_argument("--frames", type=int, default=300)
     ap.add_argument("--json", action="store_true")
+    ap.add_argument("--runs", type=int, default=1, help="runs written to --out")
+    ap.add_argument("--out", type=Path, help="write the runs (with the load averages) to this JSON file")
     a = ap.parse_args(argv)
+    if a.out is not None:
+        runs = []
+        for _ in range(a.runs):
+            load0 = os.getloadavg()[0]
+            runs.append({**run(a.objects, a.frames), "load_average_1min_start": round(load0, 2),
+                         "load_average_1min_end": round(os.getloadavg()[0], 2)})
+        doc = {"note": f"bench/bench_tracking.py --frames {a.frames} --runs {a.runs} --out {a.out}; track = IMM "
+                       "(default), track_cv = single constant-velocity mode, same frames, interleaved; figures are "
+                       "medians over the frames in us, on a shared 2-core VM unless said otherwise",
+               "runs": runs}
+        tmp = a.out.with_suffix(".tmp")
+        tmp.write_text(json.dumps(doc, indent=1) + "\n")
+        tmp.replace(a.out)
+        for r in runs:
+            print(f"total {r['total']:.1f} us (positions_split {r['positions_split']:.1f} + track {r['track']:.1f}); "
+                  f"positions {r['positions']:.1f}; load {r['load_average_1min_start']:.2f}")
+        return
     res = run(a.objects, a.frames)
     if a.json:
         print(json.dumps(res))
