@@ -6,9 +6,10 @@ run, interleaved frame by frame (medians over ``frames`` frames after a warm-up 
 * ``positions`` -- :meth:`FrameProcessor.boxes3d` as the service runs it without tracks (the reference);
 * ``positions_split`` -- the same with ``shared_jacobian=True`` (the centre's whitened calibration Jacobian);
 * ``shared_at`` -- :class:`~footprint_uq.tracking.table.SharedJacobianAt` at the 100 predicted positions alone;
-* ``track`` -- :meth:`TrackTable.step` (deleter, ids, predict, ``shared_at``, gate, update, outputs; vectorised
-  over the objects, no loop over tracks) + :func:`~footprint_uq.tracking.motion.object_motion`, the default
-  two-mode IMM filter;
+* ``track`` -- :meth:`TrackTable.step` (deleter, ids, the per-frame covariance, predict, ``shared_at``, gate,
+  update, outputs; one dictionary pass over the ids and compiled passes over the objects) +
+  :func:`~footprint_uq.tracking.motion.object_motion`, the default two-mode IMM filter, as the service calls them
+  (``cov_m2=`` the estimate's whole covariance);
 * ``track_cv`` -- the same with the single constant-velocity mode (``manoeuvre_accel_psd_m2ps3=None``: the tracker
   before the IMM), on the same frames;
 * ``total`` -- ``positions_split + track``: positions and motion of one frame.
@@ -75,13 +76,13 @@ def run(n_objects: int = 100, frames: int = 300) -> dict:
         t1 = time.perf_counter()
         est = split.boxes3d(boxes, pixel_cov_px2=det)
         t2 = time.perf_counter()
-        out = table.step(t, ids, est.centre_xy_world_m, est.centre_cov_frame_m2, est.centre_shared_m)
+        out = table.step(t, ids, est.centre_xy_world_m, shared_m=est.centre_shared_m, cov_m2=est.centre_cov_m2)
         object_motion(out, yaw_rad=boxes[:, 6])
         t3 = time.perf_counter()
         at(est.centre_xy_world_m)
         t4 = time.perf_counter()
-        object_motion(table_cv.step(t, ids, est.centre_xy_world_m, est.centre_cov_frame_m2, est.centre_shared_m),
-                      yaw_rad=boxes[:, 6])
+        object_motion(table_cv.step(t, ids, est.centre_xy_world_m, shared_m=est.centre_shared_m,
+                                    cov_m2=est.centre_cov_m2), yaw_rad=boxes[:, 6])
         t5 = time.perf_counter()
         restarts += int(out.new_track.sum()) if k else 0
         if k >= 30:

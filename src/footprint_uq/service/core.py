@@ -518,7 +518,7 @@ class Service:
         N = len(ids)
         B = est.centre_shared_m if est.centre_shared_m is not None else np.full((N, 2, setup.tracks.rank), np.nan)
         with setup.tracks_lock:
-            out = setup.tracks.step(ts, ids, est.centre_xy_world_m, est.centre_cov_frame_m2, B)
+            out = setup.tracks.step(ts, ids, est.centre_xy_world_m, shared_m=B, cov_m2=est.centre_cov_m2)
         return out.track_id, object_motion(out, heading_offset_deg=setup.georef.heading_offset_deg, yaw_rad=yaw)
 
     def _objects_json(self, setup: CameraSetup, est, ids: list, classes: list, P, ts: float = 0.0,

@@ -292,8 +292,12 @@ ROW_SKIP, ROW_UPDATE, ROW_START = 0, 1, 2
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def frame_rows(slots, xy, cov, B, t, t_last, seen, stamp, X, act, old, pred):  # pragma: no cover - compiled
+def frame_rows(slots, xy, cov, B, subtract, R, t, t_last, seen, stamp, X, act, old,
+               pred):  # pragma: no cover - compiled
     """First pass of a frame of n objects over a table's storage: what to do with each object.
+
+    ``subtract``: ``cov (n, 2, 2)`` is each centre's whole covariance and ``R (n, 2, 2)`` receives its per-frame
+    part ``cov - B B^T``; else ``cov`` is the per-frame part already (``R`` is not written).
 
     ``slots (n,)`` are the objects' rows in the storage from the id lookup (-1: an unknown id, -2: an id that is
     never tracked).  ``act (n,)`` receives :data:`ROW_UPDATE` for the first object of a known id with a finite
@@ -305,11 +309,19 @@ def frame_rows(slots, xy, cov, B, t, t_last, seen, stamp, X, act, old, pred):  #
     k = 0
     r = B.shape[2]
     for i in range(slots.shape[0]):
+        if subtract:
+            for a in range(2):
+                for b in range(a, 2):
+                    acc = 0.0
+                    for c in range(r):
+                        acc += B[i, a, c] * B[i, b, c]
+                    R[i, a, b] = cov[i, a, b] - acc
+            R[i, 1, 0] = R[i, 0, 1]
         s = slots[i]
         ok = math.isfinite(xy[i, 0]) and math.isfinite(xy[i, 1])
         for a in range(2):
             for b in range(2):
-                ok = ok and math.isfinite(cov[i, a, b])
+                ok = ok and math.isfinite(R[i, a, b] if subtract else cov[i, a, b])
             for c in range(r):
                 ok = ok and math.isfinite(B[i, a, c])
         if s < 0:

@@ -218,7 +218,8 @@ class TrackTable:
         R = cov_frame_m2 + (shared_m @ np.swapaxes(shared_m, -1, -2) if mode == "white" else 0.0)
         return SplitMeasurement(xy_m, R, np.zeros((xy_m.shape[0], 2, 0)))
 
-    def step(self, time_s: float, object_ids, xy_m, cov_frame_m2, shared_m) -> TrackOutput:
+    def step(self, time_s: float, object_ids, xy_m, cov_frame_m2=None, shared_m=None, *,
+             cov_m2=None) -> TrackOutput:
         """One frame of n objects: update their tracks and return their motion (:class:`TrackOutput`).
 
         Parameters
@@ -231,6 +232,10 @@ class TrackTable:
         xy_m : (n, 2)               centres in W (NaN: no centre this frame; the track waits, it may time out)
         cov_frame_m2 : (n, 2, 2)    per-frame part of their covariance, m^2
         shared_m : (n, 2, r)        their whitened parameter Jacobians (the calibration part ``B B^T``)
+        cov_m2 : (n, 2, 2), optional
+            Instead of ``cov_frame_m2``: their whole covariance (``FootprintEstimate.centre_cov_m2``); the
+            per-frame part ``cov_m2 - B B^T`` is then taken in the compiled pass (what
+            ``FootprintEstimate.centre_cov_frame_m2`` gives, without its dozen numpy calls).
         """
         t = as_float("time_s", time_s)
         xy = _c64(xy_m).reshape(-1, 2)
@@ -242,9 +247,13 @@ class TrackTable:
         if B.shape != (n, 2, B.shape[2] if B.ndim == 3 else -1) or (self.config.calibration == "consider"
                                                                     and B.shape[2] != self.rank):
             raise InputError("shared_m", B.shape, f"shape ({n}, 2, {self.rank})")
-        cov = _c64(cov_frame_m2)
+        if (cov_frame_m2 is None) == (cov_m2 is None):
+            raise InputError("cov_frame_m2/cov_m2", "both" if cov_m2 is not None else "neither",
+                             "exactly one of the per-frame or the whole covariance")
+        subtract = cov_m2 is not None
+        cov = _c64(cov_m2 if subtract else cov_frame_m2)
         if cov.shape != (n, 2, 2):
-            raise InputError("cov_frame_m2", cov.shape, f"shape ({n}, 2, 2)")
+            raise InputError("cov_m2" if subtract else "cov_frame_m2", cov.shape, f"shape ({n}, 2, 2)")
         if t < self._last_time:
             self.n_stale_frames += 1
             return TrackOutput.untracked(n)
@@ -253,13 +262,15 @@ class TrackTable:
         slots = np.fromiter(map(self._index.get, ids, repeat(-1)), np.int64, n)
         self._stamp += 1
         act, old, pred = np.empty(n, np.int8), np.empty(n, np.int64), np.empty((n, 2))
-        k = frame_rows(slots, xy, cov, B, t, self._t_last, self._seen, self._stamp, self._x, act, old, pred)
+        R = np.empty((n, 2, 2)) if subtract else cov
+        k = frame_rows(slots, xy, cov, B, subtract, R, t, self._t_last, self._seen, self._stamp, self._x, act, old,
+                       pred)
         self._claim(ids, slots, act)
         if self.shared_at is not None and self.rank and k:  # B at the predicted positions (see the class doc)
             Bp = _c64(self.shared_at(pred[:k]))
         else:
             Bp = _NO_B
-        meas = self._measurement(xy, cov, B)
+        meas = self._measurement(xy, R, B)
         out = TrackOutput(np.empty(n, np.int64), np.empty(n, bool), np.empty(n, np.int64), np.empty(n),
                           np.empty((n, 2)), np.empty((n, 2, 2)), np.empty((n, 2)), np.empty((n, 2, 2)))
         self._next_id = frame_update(act, slots, old, k, self._x, self._P, self._xm, self._Pm, self._Cm, self._mu,
