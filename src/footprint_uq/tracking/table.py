@@ -14,7 +14,7 @@ from ..errors import InputError
 from ..fast.footprint_kernels import camera_constants
 from ..products.footprints import FrameProcessor
 from .filter import Initiator, SplitMeasurement
-from .kernels import ROW_START, frame_rows, frame_update, project_ground
+from .kernels import ROW_SKIP, ROW_START, frame_rows, frame_update, project_ground
 from .models import ConstantVelocity
 
 __all__ = ["TrackerConfig", "TrackOutput", "TrackTable", "SharedJacobianAt", "CALIBRATION_MODES", "DEFAULT_GATE_CHI2"]
@@ -136,9 +136,10 @@ class TrackTable:
         self.config = config or TrackerConfig()
         self.shared_at = shared_at
         self.rank = int(rank) if self.config.calibration == "consider" else 0
-        #: the modes the compiled update runs (:func:`~footprint_uq.tracking.kernels.update_slots` is
-        #: :class:`~footprint_uq.tracking.filter.InteractingModels` -- mixing, each mode's SchmidtPredictor +
-        #: SchmidtUpdater, mode probabilities, combination -- in one pass; the tests hold them equal)
+        #: the modes the compiled update runs (its per-track step, in :func:`~footprint_uq.tracking.kernels.
+        #: update_slots` and :func:`~footprint_uq.tracking.kernels.frame_update`, is :class:`~footprint_uq.tracking.
+        #: filter.InteractingModels` -- mixing, each mode's SchmidtPredictor + SchmidtUpdater, mode probabilities,
+        #: combination -- in one pass; the tests hold them equal)
         cfg = self.config
         self.models = tuple(ConstantVelocity(q) for q in (cfg.accel_psd_m2ps3, cfg.manoeuvre_accel_psd_m2ps3)
                             if q is not None)
@@ -282,7 +283,7 @@ class TrackTable:
     def _claim(self, ids: list, slots: np.ndarray, act: np.ndarray) -> None:
         """Rows for the unknown ids of a frame (``slots == -1``), in place: the first object of each with finite
         inputs (``act == ROW_START``) gets a free row (the table grows when none is left); a later object of the
-        same id is not tracked (``act`` set to 0)."""
+        same id is not tracked (``act`` set to ``ROW_SKIP``)."""
         miss = np.flatnonzero(slots == -1)
         if miss.size == 0:
             return
@@ -290,7 +291,7 @@ class TrackTable:
         for i in miss.tolist():
             key = ids[i]
             if key in first:
-                act[i] = 0
+                act[i] = ROW_SKIP
                 continue
             first.add(key)
             if act[i] == ROW_START:
@@ -305,8 +306,6 @@ def _c64(a) -> np.ndarray:
     """``a`` as a C-contiguous, writable float64 array (a copy only if it is not one): one compiled signature."""
     a = np.asarray(a, dtype=np.float64)
     return a if a.flags.c_contiguous and a.flags.writeable else np.array(a, order="C")
-
-
 
 
 class SharedJacobianAt:
