@@ -93,7 +93,7 @@ def in_process_times(objects: int, repeats: int, tracks: bool = False) -> dict:
     from footprint_uq.service import Service
 
     cam = PanTiltCamera(**CAMERA)
-    svc = Service(cam, "basler1", tracks=tracks)
+    svc = Service(cam, "basler1", linearity=True, tracks=tracks)  # as `serve` runs it (--linearity is its default)
     dets = make_detections(objects, 0)
     body, t_frame = json.dumps(dets).encode(), [time.time()]
 
