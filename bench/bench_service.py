@@ -1,6 +1,7 @@
 """Edge-service load through a real Mosquitto on loopback: 8 cameras x 30 frames/s x 100 objects.
 
     .venv/bin/python bench/bench_service.py [--seconds 60] [--cameras 8] [--fps 30] [--objects 100] [--quick]
+        [--tracks] [--stagger] [--serve-args='--queue-depth 1']
 
 Starts ``mosquitto`` on a free loopback port and ``footprint-uq serve --registry ... --mqtt ...
 --output mqtt`` as a subprocess (the real CLI, default overload policy ``newest``), then publishes,
@@ -23,20 +24,23 @@ from this process, one frame per camera every 1/fps s (QoS 1, 100 2D boxes each,
   the broker, the publisher (this process) and the receiver (a process of its own, so that reading
   ~33 MB/s of records does not compete with the publisher for the GIL), and the load average.
 
-``--quick`` runs 5 s.  :func:`run` returns rows for ``bench/run.py`` (section ``service``).
+``--quick`` runs 5 s; ``--tracks`` runs the service with ``--tracks`` (issue 22's configuration: motion per
+``object_id``, in the records, the CPM and the SDSM; the boxes stand still, which costs the tracker what moving
+ones do).  ``latency_split_ms`` says where the latency goes (processing, queueing, MQTT).  :func:`run` returns
+rows for ``bench/run.py`` (section ``service``).
 Nothing is asserted: the figures depend on the machine and its load (a shared 2-core VM).
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import re
 import shlex
 import shutil
 import signal
-import socket
 import subprocess
 import sys
 import tempfile
@@ -45,26 +49,13 @@ import time
 from pathlib import Path
 
 import numpy as np
+from mqtt_broker import mosquitto
+from mqtt_broker import wait as _wait
 
 TARGET_P99_MS = 20.0
 TARGET_US = 300.0
 CAMERA = dict(focal_px=1400.0, image_size_px=(1920, 1080), height_m=8.0, pan_deg=30.0, tilt_deg=20.0)
 _TS = re.compile(rb'"timestamp_s":([0-9.eE+-]+)')
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-def _wait(cond, timeout_s, what):
-    end = time.monotonic() + timeout_s
-    while time.monotonic() < end:
-        if cond():
-            return
-        time.sleep(0.02)
-    raise RuntimeError(f"timed out waiting for {what}")
 
 
 def make_detections(n: int, seed: int) -> list[dict]:
@@ -79,8 +70,9 @@ def make_detections(n: int, seed: int) -> list[dict]:
             for k, (a, b, c) in enumerate(zip(u, v, w, strict=True))]
 
 
-def in_process_times(objects: int, repeats: int) -> dict:
-    """Median microseconds per 100-object frame, measured in this process on the bench frame.
+def in_process_times(objects: int, repeats: int, tracks: bool = False) -> dict:
+    """Median microseconds per 100-object frame, measured in this process on the bench frame (``tracks``: the
+    service with ``--tracks``; every call gets a later ``timestamp_s``, so that each is a new frame of the tracks).
 
     * ``mqtt_payload_parse_us``: ``orjson.loads`` of the frame's MQTT payload (the service's worker does it
       before ``process_frame_json``; not in ``processing_us``);
@@ -101,13 +93,18 @@ def in_process_times(objects: int, repeats: int) -> dict:
     from footprint_uq.service import Service
 
     cam = PanTiltCamera(**CAMERA)
-    svc = Service(cam, "basler1")
+    svc = Service(cam, "basler1", linearity=True, tracks=tracks)  # as `serve` runs it (--linearity is its default)
     dets = make_detections(objects, 0)
-    payload = json.dumps({"camera_id": "cam0", "frame": 0, "timestamp_s": time.time(), "detections": dets}).encode()
+    body, t_frame = json.dumps(dets).encode(), [time.time()]
+
+    def payload() -> bytes:  # the next frame (1/30 s later), as the publisher writes it
+        t_frame[0] += 1.0 / 30.0
+        return b'{"camera_id":"cam0","frame":0,"timestamp_s":%.6f,"detections":%s}' % (t_frame[0], body)
+
     proc = FrameProcessor(cam, "basler1", joint_cov=False)
     boxes = np.array([[d["u_min_px"], d["v_min_px"], d["u_max_px"], d["v_max_px"]] for d in dets])
     for _ in range(20):
-        svc.process_frame(orjson.loads(payload))
+        svc.process_frame(orjson.loads(payload()))
         proc.boxes2d(boxes)
     gc.collect()
     gc.freeze()  # as the service does
@@ -115,15 +112,16 @@ def in_process_times(objects: int, repeats: int) -> dict:
     stages: list[dict] = []
     wall, cpu = time.perf_counter, time.thread_time
     for _ in range(repeats):  # interleaved, so that a change of the machine's load reaches every figure alike
+        text = payload()
         t0 = wall()
-        frame = orjson.loads(payload)
+        frame = orjson.loads(text)
         t.setdefault("mqtt_payload_parse_us", []).append(wall() - t0)
         c0 = cpu()
         out = svc.process_frame_json(frame)
         t.setdefault("process_frame_json_cpu_us", []).append(cpu() - c0)
         k = out.data.rindex(b'"processing_us":')
         stages.append(orjson.loads(out.data[k + 16:-1]))
-        frame = orjson.loads(payload)
+        frame = orjson.loads(payload())
         t0 = wall()
         svc.process_frame(frame)
         t.setdefault("process_frame_dict_us", []).append(wall() - t0)
@@ -139,30 +137,25 @@ def in_process_times(objects: int, repeats: int) -> dict:
 
 
 def measure(seconds: float = 60.0, cameras: int = 8, fps: float = 30.0, objects: int = 100, workers: int = 1,
-            stagger: bool = False, serve_args: tuple = ()) -> dict:
+            stagger: bool = False, serve_args: tuple = (), tracks: bool = False) -> dict:
+    """One run (see the module doc); ``tracks`` adds ``--tracks`` to the service's options."""
+    serve_args = tuple(serve_args) + (("--tracks",) if tracks and "--tracks" not in serve_args else ())
     import paho.mqtt.client as mqtt
 
+    from footprint_uq import PanTiltCamera, save_camera
     from footprint_uq.service import tcp_no_delay
 
-    mosquitto = shutil.which("mosquitto") or "/usr/sbin/mosquitto"
-    if not Path(mosquitto).exists():
-        raise RuntimeError("mosquitto not installed (apt-get install mosquitto)")
-    from footprint_uq import PanTiltCamera, save_camera
-
     tmp = Path(tempfile.mkdtemp(prefix="bench_service_"))
-    port = _free_port()
-    (tmp / "mosquitto.conf").write_text(f"listener {port} 127.0.0.1\nallow_anonymous true\npersistence false\n"
-                                        "max_queued_messages 100000\nset_tcp_nodelay true\n")
     save_camera(PanTiltCamera(**CAMERA), tmp / "cam.yaml")
     ids = [f"cam{i}" for i in range(cameras)]
     (tmp / "reg.csv").write_text("camera_id,camera,budget\n" + "".join(f"{c},cam.yaml,basler1\n" for c in ids))
-    broker = subprocess.Popen([mosquitto, "-c", str(tmp / "mosquitto.conf")], stdout=subprocess.DEVNULL,
-                              stderr=subprocess.DEVNULL)
+    stack = contextlib.ExitStack()
+    stack.callback(shutil.rmtree, tmp, ignore_errors=True)
+    broker, port = stack.enter_context(mosquitto(tmp))
     env = {**os.environ, "NUMBA_NUM_THREADS": "1"}
     serve = rx = None
     load_start = os.getloadavg()[0]
     try:
-        _wait(lambda: _port_open(port), 10, "mosquitto")
         serve = subprocess.Popen([sys.executable, "-m", "footprint_uq.cli", "serve", "--registry", str(tmp / "reg.csv"),
                                   "--mqtt", f"mqtt://127.0.0.1:{port}", "--output", "mqtt", "--client-id", "bench",
                                   "--workers", str(workers), *serve_args],
@@ -247,9 +240,7 @@ def measure(seconds: float = 60.0, cameras: int = 8, fps: float = 30.0, objects:
             serve.kill()
         if rx is not None and rx.poll() is None:
             rx.kill()
-        broker.terminate()
-        broker.wait(10)
-        shutil.rmtree(tmp, ignore_errors=True)
+        stack.close()
     lat = np.array(result["latency_ms"])
     # the service's own view (receipt -> record handed to paho), per health interval of the run
     svc_p50 = [r["latency_ms_p50"] for r in health if r.get("latency_ms_p50") is not None]
@@ -257,6 +248,7 @@ def measure(seconds: float = 60.0, cameras: int = 8, fps: float = 30.0, objects:
     proc_us = result["processing_us"]
     stages = {k: float(np.median([p[k] for p in proc_us])) for k in proc_us[0]} if proc_us else {}
     return {
+        "serve_args": " ".join(serve_args), "tracks": "--tracks" in serve_args,
         "seconds": round(t_pub, 2), "workers": workers, "staggered": stagger,
         "cameras": cameras, "fps_per_camera": fps, "objects": objects,
         "frames_published": sent, "frames_in": h["frames_in"], "frames_out": h["frames_out"],
@@ -273,16 +265,31 @@ def measure(seconds: float = 60.0, cameras: int = 8, fps: float = 30.0, objects:
         "bench_receiver_cpu_s": result["cpu_s"],
         "load_average_1min_start": load_start, "load_average_1min": os.getloadavg()[0],
         "service_processing_us_median": stages,
-        "all_processed": h["frames_out"] == sent and h["frames_dropped"] == 0 and h["errors"] == 0,
+        "latency_split_ms": _latency_split(lat, svc_p50, svc_p99, proc_us),
+        # every frame accounted for: published = out + dropped + errors, and every output received
+        "frames_unaccounted": sent - h["frames_out"] - h["frames_dropped"] - h["errors"],
+        "all_processed": (h["frames_out"] == sent and h["frames_dropped"] == 0 and h["errors"] == 0
+                          and result["received"] == sent),
     }
 
 
-def _port_open(port: int) -> bool:
-    try:
-        socket.create_connection(("127.0.0.1", port), timeout=0.2).close()
-        return True
-    except OSError:
-        return False
+def _latency_split(lat_ms: np.ndarray, svc_p50: list, svc_p99: list, proc_us: list) -> dict:
+    """Where the end-to-end latency goes (ms, p50 and p99; the parts' percentiles do not add up exactly):
+    ``processing`` -- one frame's ``processing_us`` (a sample of the records); ``service`` -- receipt -> record
+    handed to paho (the health records' per-interval percentiles, median over the intervals); ``queue`` ~
+    service - processing (waiting behind other frames: with synchronised cameras the k-th frame of a burst waits
+    for k - 1 others); ``mqtt`` ~ end-to-end - service (publish -> broker -> service and service -> broker ->
+    receiver)."""
+    if not (proc_us and svc_p50 and svc_p99 and lat_ms.size):
+        return {}
+    tot = np.array([p["total"] for p in proc_us]) / 1e3
+    out = {"processing_p50": float(np.percentile(tot, 50)), "processing_p99": float(np.percentile(tot, 99)),
+           "service_p50": float(np.median(svc_p50)), "service_p99": float(np.median(svc_p99)),
+           "end_to_end_p50": float(np.percentile(lat_ms, 50)), "end_to_end_p99": float(np.percentile(lat_ms, 99))}
+    for q in ("p50", "p99"):
+        out[f"queue_{q}"] = out[f"service_{q}"] - out[f"processing_{q}"]
+        out[f"mqtt_{q}"] = out[f"end_to_end_{q}"] - out[f"service_{q}"]
+    return {k: round(v, 2) for k, v in out.items()}
 
 
 def _descendants(pid: int) -> list[int]:
@@ -410,12 +417,15 @@ def main(argv=None) -> int:
     ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--stagger", action="store_true", help="cameras spread over the frame period (not in a burst)")
     ap.add_argument("--quick", action="store_true", help="5 s instead of --seconds")
-    ap.add_argument("--serve-args", default="", help="more `footprint-uq serve` options, e.g. '--queue-depth 1'")
+    ap.add_argument("--serve-args", default="",
+                    help="more `footprint-uq serve` options, e.g. --serve-args='--queue-depth 1' (with '=')")
+    ap.add_argument("--tracks", action="store_true",
+                    help="issue 22's load: the service with --tracks (motion per object_id, in the CPM and SDSM)")
     args = ap.parse_args(argv)
     res = measure(seconds=5.0 if args.quick else args.seconds, cameras=args.cameras, fps=args.fps,
                   objects=args.objects, workers=args.workers, stagger=args.stagger,
-                  serve_args=tuple(shlex.split(args.serve_args)))
-    res["in_process"] = in_process_times(args.objects, 200)
+                  serve_args=tuple(shlex.split(args.serve_args)), tracks=args.tracks)
+    res["in_process"] = in_process_times(args.objects, 200, tracks=res["tracks"])
     print(json.dumps(res, indent=1))
     return 0
 

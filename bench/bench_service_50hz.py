@@ -16,7 +16,6 @@ import os
 import shlex
 import shutil
 import signal
-import socket
 import subprocess
 import sys
 import tempfile
@@ -25,38 +24,30 @@ import time
 from pathlib import Path
 
 import numpy as np
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-def _wait(cond, timeout_s, what):
-    end = time.monotonic() + timeout_s
-    while time.monotonic() < end:
-        if cond():
-            return
-        time.sleep(0.02)
-    raise SystemExit(f"timed out waiting for {what}")
+from mqtt_broker import mosquitto
+from mqtt_broker import wait as _wait
 
 
 def main(argv=None) -> int:
-    import paho.mqtt.client as mqtt
-
-    from footprint_uq import PanTiltCamera, save_camera
-
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--frames", type=int, default=250)
     ap.add_argument("--rate-hz", type=float, default=50.0)
     ap.add_argument("--extra-args", default="", help="more serve options")
     a = ap.parse_args(argv)
     tmp = Path(tempfile.mkdtemp())
-    port = _free_port()
-    (tmp / "m.conf").write_text(f"listener {port} 127.0.0.1\nallow_anonymous true\n")  # Mosquitto's defaults
-    broker = subprocess.Popen([shutil.which("mosquitto") or "/usr/sbin/mosquitto", "-c", str(tmp / "m.conf")],
-                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        with mosquitto(tmp, tuned=False) as broker:  # Mosquitto's defaults
+            _run(a, tmp, broker.port)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    return 0
+
+
+def _run(a, tmp: Path, port: int) -> None:
+    import paho.mqtt.client as mqtt
+
+    from footprint_uq import PanTiltCamera, save_camera
+
     save_camera(PanTiltCamera(focal_px=1400, image_size_px=(1920, 1080), height_m=8.0, pan_deg=30.0, tilt_deg=20.0),
                 tmp / "cam.yaml")
     health, gaps, lock = [], [], threading.Lock()
@@ -68,7 +59,6 @@ def main(argv=None) -> int:
             elif m.topic.startswith("detections/"):
                 gaps.append(time.monotonic())
 
-    time.sleep(0.5)
     rx = mqtt.Client(mqtt.CallbackAPIVersion.VERSION2, client_id="bench50-rx")
     rx.on_message = on_msg
     rx.connect("127.0.0.1", port)
@@ -105,9 +95,6 @@ def main(argv=None) -> int:
         serve.wait(30)
         rx.disconnect()
         rx.loop_stop()
-        broker.terminate()
-        broker.wait(10)
-    return 0
 
 
 if __name__ == "__main__":

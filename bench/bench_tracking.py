@@ -6,23 +6,27 @@ run, interleaved frame by frame (medians over ``frames`` frames after a warm-up 
 * ``positions`` -- :meth:`FrameProcessor.boxes3d` as the service runs it without tracks (the reference);
 * ``positions_split`` -- the same with ``shared_jacobian=True`` (the centre's whitened calibration Jacobian);
 * ``shared_at`` -- :class:`~footprint_uq.tracking.table.SharedJacobianAt` at the 100 predicted positions alone;
-* ``track`` -- :meth:`TrackTable.step` (deleter, ids, predict, ``shared_at``, gate, update, outputs; vectorised
-  over the objects, no loop over tracks) + :func:`~footprint_uq.tracking.motion.object_motion`, the default
-  two-mode IMM filter;
+* ``track`` -- :meth:`TrackTable.step` (deleter, ids, the per-frame covariance, predict, ``shared_at``, gate,
+  update, outputs; one dictionary pass over the ids and compiled passes over the objects) +
+  :func:`~footprint_uq.tracking.motion.object_motion`, the default two-mode IMM filter, as the service calls them
+  (``cov_m2=`` the estimate's whole covariance);
 * ``track_cv`` -- the same with the single constant-velocity mode (``manoeuvre_accel_psd_m2ps3=None``: the tracker
   before the IMM), on the same frames;
 * ``total`` -- ``positions_split + track``: positions and motion of one frame.
 
 Run ``.venv/bin/python bench/bench_tracking.py [--objects N] [--frames F] [--json]``; :func:`run` returns the
-figures as a dict.  Nothing is asserted.
+figures as a dict.  ``--runs 3 --out bench/results/tracking-cost.json`` writes that many runs (each with the load
+average before and after it) to the results file.  Nothing is asserted.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import statistics
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -72,13 +76,13 @@ def run(n_objects: int = 100, frames: int = 300) -> dict:
         t1 = time.perf_counter()
         est = split.boxes3d(boxes, pixel_cov_px2=det)
         t2 = time.perf_counter()
-        out = table.step(t, ids, est.centre_xy_world_m, est.centre_cov_frame_m2, est.centre_shared_m)
+        out = table.step(t, ids, est.centre_xy_world_m, shared_m=est.centre_shared_m, cov_m2=est.centre_cov_m2)
         object_motion(out, yaw_rad=boxes[:, 6])
         t3 = time.perf_counter()
         at(est.centre_xy_world_m)
         t4 = time.perf_counter()
-        object_motion(table_cv.step(t, ids, est.centre_xy_world_m, est.centre_cov_frame_m2, est.centre_shared_m),
-                      yaw_rad=boxes[:, 6])
+        object_motion(table_cv.step(t, ids, est.centre_xy_world_m, shared_m=est.centre_shared_m,
+                                    cov_m2=est.centre_cov_m2), yaw_rad=boxes[:, 6])
         t5 = time.perf_counter()
         restarts += int(out.new_track.sum()) if k else 0
         if k >= 30:
@@ -96,7 +100,26 @@ def main(argv=None) -> None:
     ap.add_argument("--objects", type=int, default=100)
     ap.add_argument("--frames", type=int, default=300)
     ap.add_argument("--json", action="store_true")
+    ap.add_argument("--runs", type=int, default=1, help="runs written to --out")
+    ap.add_argument("--out", type=Path, help="write the runs (with the load averages) to this JSON file")
     a = ap.parse_args(argv)
+    if a.out is not None:
+        runs = []
+        for _ in range(a.runs):
+            load0 = os.getloadavg()[0]
+            runs.append({**run(a.objects, a.frames), "load_average_1min_start": round(load0, 2),
+                         "load_average_1min_end": round(os.getloadavg()[0], 2)})
+        doc = {"note": f"bench/bench_tracking.py --frames {a.frames} --runs {a.runs} --out {a.out}; track = IMM "
+                       "(default), track_cv = single constant-velocity mode, same frames, interleaved; figures are "
+                       "medians over the frames in us, on a shared 2-core VM unless said otherwise",
+               "runs": runs}
+        tmp = a.out.with_suffix(".tmp")
+        tmp.write_text(json.dumps(doc, indent=1) + "\n")
+        tmp.replace(a.out)
+        for r in runs:
+            print(f"total {r['total']:.1f} us (positions_split {r['positions_split']:.1f} + track {r['track']:.1f}); "
+                  f"positions {r['positions']:.1f}; load {r['load_average_1min_start']:.2f}")
+        return
     res = run(a.objects, a.frames)
     if a.json:
         print(json.dumps(res))

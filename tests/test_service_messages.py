@@ -15,7 +15,7 @@ from footprint_uq.errors import InputError
 from footprint_uq.service import Service
 from footprint_uq.service.messages.cpm import CPM_CLASSES_BY_CDD, coordinate_cm
 from footprint_uq.service.messages.ids import MESSAGE_ID_HOLD_S, MessageIdMap, preferred_number
-from footprint_uq.service.messages.motion import ObjectMotion, motion_codes, unknown_motion
+from footprint_uq.service.messages.motion import ObjectMotion, motion_codes, motion_codes_reference, unknown_motion
 
 T0 = 1714564800.0
 
@@ -134,6 +134,41 @@ def test_motion_checks_name_the_field():
         motion_codes(m._replace(v_east_mps=np.zeros(3)), 2)
     with pytest.raises(InputError, match="motion.heading_deg"):
         motion_codes(m._replace(heading_deg=np.array([np.inf, 0.0])), 2)
+
+
+def _random_motion(rng, n):
+    """n objects' motion over and beyond every field's range, NaN in 20 % of each field, a tenth of the values on
+    the fields' steps (0.01 m/s, ...)."""
+    def col(lo, hi):
+        a = rng.uniform(lo, hi, n)
+        k = rng.random(n) < 0.1
+        a[k] = np.round(a[k], 2)
+        a[rng.random(n) < 0.2] = np.nan
+        return a
+    cov = np.zeros((n, 2, 2))
+    cov[:, 0, 0], cov[:, 1, 1] = col(0, 2), col(0, 2)
+    cov[:, 0, 1] = cov[:, 1, 0] = col(-0.5, 0.5)
+    return ObjectMotion(col(-200, 200), col(-200, 200), cov, col(0, 300), col(0, 60), col(-720, 720), col(0, 12),
+                        col(-720, 720), col(0, 20), col(0, 5))
+
+
+def test_motion_codes_compiled_equals_the_numpy_reference():
+    """The compiled pass gives the numpy reference's codes value for value (ceil / rint / mod at the steps, NaN,
+    beyond range) and the same error for the same first bad field."""
+    rng = np.random.default_rng(8)
+    for _ in range(40):
+        m = _random_motion(rng, 120)
+        got, want = motion_codes(m, 120), motion_codes_reference(m, 120)
+        for name, a, b in zip(got._fields, got, want, strict=True):
+            assert a.dtype == b.dtype and np.array_equal(a, b), name
+    m = _random_motion(rng, 5)
+    for field, value in (("age_s", -1.0), ("speed_mps", -0.5), ("yaw_deg", -np.inf), ("v_north_mps", np.inf)):
+        bad = m._replace(**{field: np.where(np.arange(5) == 3, value, getattr(m, field))})
+        with pytest.raises(InputError) as e1:
+            motion_codes(bad, 5)
+        with pytest.raises(InputError) as e2:
+            motion_codes_reference(bad, 5)
+        assert str(e1.value) == str(e2.value) and f"motion.{field}" in str(e1.value)
 
 
 # -- classes ---------------------------------------------------------------------------------------------------------

@@ -298,6 +298,26 @@ def test_track_table_timeout_gate_reuse_and_nan_policy():
         tab.step(0.8, ["x", "y"], *_meas(1, [[0, 0]]))
 
 
+def test_track_table_takes_the_whole_covariance():
+    """``cov_m2=`` (the whole covariance, the per-frame part taken in the compiled pass) tracks as
+    ``cov_frame_m2`` = cov - B B^T does; exactly one of the two."""
+    rng = np.random.default_rng(3)
+    n, r = 5, 3
+    B = rng.normal(0.0, 0.2, (n, 2, r))
+    R = np.broadcast_to(0.01 * np.eye(2), (n, 2, 2))
+    total = R + B @ np.swapaxes(B, 1, 2)
+    a, b = TrackTable(rank=r), TrackTable(rank=r)
+    for k in range(4):
+        xy = np.column_stack([np.arange(n) * 10.0 + k, np.full(n, 1.0 * k)]) + rng.normal(0, 0.05, (n, 2))
+        oa = a.step(0.1 * k, list("abcde"), xy, R, B)
+        ob = b.step(0.1 * k, list("abcde"), xy, shared_m=B, cov_m2=total)
+        for x, y in zip(oa, ob, strict=True):
+            np.testing.assert_allclose(x, y, rtol=1e-9, atol=1e-12)
+    assert np.isfinite(ob.v_mps).all()
+    with pytest.raises(InputError, match="cov_frame_m2/cov_m2"):
+        a.step(1.0, ["a"], np.zeros((1, 2)), R[:1], B[:1], cov_m2=total[:1])
+
+
 def test_track_table_grows_and_keeps_tracks_apart(rng):
     """200 objects (beyond the initial capacity), ids in a shuffled order each frame: every track follows its own
     object (velocities of all 200 recovered)."""

@@ -47,7 +47,7 @@ from ..products.geo import GeoReference
 from ..products.v2x import J2735_POSITION_CONFIDENCE_NAMES
 from ..tracking import SharedJacobianAt, TrackerConfig, TrackTable, object_motion
 from ..uncertainty.ellipse import chi2_scale, ellipse_axes
-from ..uncertainty.propagation import DEFAULT_LINEAR_THRESHOLD, nonlinearity
+from ..uncertainty.propagation import DEFAULT_LINEAR_THRESHOLD
 from .jsonrows import Table
 from .messages.asn1_cpm import DEFAULT_CDD
 from .messages.cpm import (
@@ -402,10 +402,10 @@ class Service:
         if not isinstance(dets, list):
             raise _FrameError("detections", f"field detections is not a list: {type(dets).__name__}")
         ref_ms = timestamp_its_ms(ts) if self.messages else None
-        est, ids, classes, class_p, P = self._footprints(setup, dets)
+        est, ids, classes, class_p, _pixel_cov = self._footprints(setup, dets)
         motion = self._motion(setup, est, ids, ts, dets) if self.tracks else None
         t1 = time.perf_counter()
-        objects, ok_idx, msg_ids = self._objects_json(setup, est, ids, classes, P, ts, motion)
+        objects, ok_idx, msg_ids = self._objects_json(setup, est, ids, classes, ts, motion)
         t2 = time.perf_counter()
         head = {"type": RECORD_FOOTPRINTS, "camera_id": camera_id, "frame": fno, "timestamp_s": ts,
                 "station_id": setup.station_id, "heading_offset_deg": setup.georef.heading_offset_deg,
@@ -490,17 +490,15 @@ class Service:
             raise _FrameError(_detection_field(e.field), str(e)) from None
         return est, ids, classes, class_p, P
 
-    def _linearity(self, setup: CameraSetup, est, P):
+    def _linearity(self, est):
         """Per object: the largest predicted relative error of the linear 1-sigma semi-major axis over its
         usable ground-contact points (:func:`footprint_uq.uncertainty.propagation.nonlinearity`, with the detector's
-        pixel covariance) and ``linear_ok`` = that <= the threshold (False where nothing is usable)."""
+        pixel covariance) and ``linear_ok`` = that <= the threshold (False where nothing is usable).
 
-        uv = est.corners_px
-        N, K = uv.shape[:2]
-        Pk = None if P is None else np.broadcast_to(P[:, None], (N, K, 2, 2)).reshape(N * K, 2, 2)
-        proc = setup.processor
-        with np.errstate(invalid="ignore"):
-            nl = nonlinearity(proc.camera, proc.budget, uv.reshape(N * K, 2), pixel_cov_px2=Pk).reshape(N, K)
+        The points' values are the fused kernel's (``est.corners_nonlinearity``: the frame processor computes
+        them for the V2X policy anyway; ``tests/test_service.py`` holds them to the library's function), not a
+        second numpy pass over the frame (~1.7 ms per 100 objects)."""
+        nl = est.corners_nonlinearity
         usable = est.corner_usable & np.isfinite(nl)
         worst = np.where(usable.any(1), np.max(np.where(usable, nl, -np.inf), axis=1), np.nan)
         with np.errstate(invalid="ignore"):
@@ -518,10 +516,10 @@ class Service:
         N = len(ids)
         B = est.centre_shared_m if est.centre_shared_m is not None else np.full((N, 2, setup.tracks.rank), np.nan)
         with setup.tracks_lock:
-            out = setup.tracks.step(ts, ids, est.centre_xy_world_m, est.centre_cov_frame_m2, B)
+            out = setup.tracks.step(ts, ids, est.centre_xy_world_m, shared_m=B, cov_m2=est.centre_cov_m2)
         return out.track_id, object_motion(out, heading_offset_deg=setup.georef.heading_offset_deg, yaw_rad=yaw)
 
-    def _objects_json(self, setup: CameraSetup, est, ids: list, classes: list, P, ts: float = 0.0,
+    def _objects_json(self, setup: CameraSetup, est, ids: list, classes: list, ts: float = 0.0,
                       motion=None) -> tuple[bytes, np.ndarray, list]:
         """The ``objects`` list of the record as JSON text, written column-wise (:class:`.jsonrows.Table`); and
         the indices of the objects in the messages (with a centre, at most 255) and their ``message_object_id``."""
@@ -557,7 +555,7 @@ class Service:
             lat, lon = geo.to_wgs84(centre) if N else (np.zeros(0), np.zeros(0))
             layout += [b',"lat_deg":', t.column(lat), b',"lon_deg":', t.column(lon)]
         if self.linearity:
-            nonlin, linear = self._linearity(setup, est, P) if N else (np.zeros(0), np.zeros(0, bool))
+            nonlin, linear = self._linearity(est) if N else (np.zeros(0), np.zeros(0, bool))
             layout += [b',"nonlinearity":', t.column(nonlin), b',"linear_ok":', t.column(linear)]
         if motion is not None:  # null where unknown (no track, no velocity yet, heading sigma unavailable, ...)
             tid, m = motion

@@ -30,6 +30,7 @@ returns exit status 0.
 from __future__ import annotations
 
 import collections
+import contextlib
 import gc
 import io
 import multiprocessing as mp
@@ -539,152 +540,192 @@ def serve(service: Service, *, input: str | None = "-", mqtt: str | None = None,
     stop = stop or threading.Event()
     metrics = Metrics()
     queue = FrameQueue(policy, depth=queue_depth, max_bytes=max_pending_bytes)
-    client = None
-    subscribed = threading.Event()
+    client = topics = None
     if mqtt:
         host, port = parse_mqtt_url(mqtt)
         client = _mqtt_client(host, port, client_id or f"footprint-uq-serve-{os.getpid()}")
         topics = [f"{input_prefix}/+"] if cameras is None else [f"{input_prefix}/{c}" for c in cameras]
-
-        def on_connect(c, userdata, flags, reason_code, properties):
-            if not reason_code.is_failure and input is None and not stop.is_set():
-                c.subscribe([(t, 1) for t in topics])
-                subscribed.set()
-
-        def on_message(c, userdata, msg):
-            # the network thread only queues the payload: the worker parses it (a frame replaced by a newer one
-            # of its camera is never parsed, and the network thread is free for the next packet)
-            t = time.monotonic()
-            quick_ack(c.socket())
-            metrics.received()
-            cam = msg.topic[len(input_prefix) + 1:]
-            src = f"mqtt {msg.topic}"
-            if len(msg.payload) > max_frame_bytes:  # refused before it is queued (paho frees it on return)
-                rec = error_record(f"frame of {len(msg.payload)} bytes is larger than the limit of {max_frame_bytes} "
-                                   "bytes (--max-frame-bytes)", camera_id=cam, source=src)
-                _queue_error(queue, cam, rec, src, t, sink, metrics)
-                return
-            if not queue.put(cam, (msg.payload, src, t, cam), len(msg.payload)):
-                rec = error_record("service stopping or too many cameras pending", camera_id=cam, source=src)
-                sink.write(rec)
-                metrics.done(rec, time.monotonic() - t)
-
-        client.on_connect = on_connect
-        client.on_message = on_message
-        client.on_publish = lambda c, *a: quick_ack(c.socket())  # the PUBACK of a record: ACK it at once
-        client.connect_async(host, port, keepalive=5)
-        client.loop_start()
     out_stream = stdout if stdout is not None else sys.stdout.buffer
     sink = _MqttSink(client, output_prefix, metrics) if output == "mqtt" else _StdoutSink(out_stream, stop.set)
+    if client is not None:
+        _mqtt_input(client, topics if input is None else None, input_prefix, queue, sink, metrics, stop,
+                    max_frame_bytes)
+        client.connect_async(host, port, keepalive=5)
+        client.loop_start()
 
     old_handlers = {}
     if install_signals and threading.current_thread() is threading.main_thread():
         for sig in (signal.SIGTERM, signal.SIGINT):
             old_handlers[sig] = signal.signal(sig, lambda s, f: stop.set())
 
-    def work():
-        while True:
-            item = queue.get(timeout=0.1)
-            if item is None:
-                if queue._closed:
-                    return
-                continue
-            frame, src, t, topic_camera = item
-            try:
-                if topic_camera is _READY:  # an error record found on receipt, in its place in the line
-                    out = frame
-                elif output == "mqtt" and isinstance(frame, dict) and \
-                        (why := _topic_level_error(frame.get("camera_id"))) is not None:
-                    rec = error_record(why, field="camera_id", camera_id=_plain(frame.get("camera_id")),
-                                       frame=_plain(frame.get("frame")), source=src)
-                    out = FrameOutput(_dumps(rec), RECORD_ERROR, None, None, rec)
-                elif topic_camera is not None:  # an MQTT payload: parsed here, its camera_id checked against the topic
-                    frame, out = _mqtt_frame(frame, topic_camera, src)
-                    if out is None:
-                        out = service.process_frame_json(frame, source=src)
-                else:
-                    out = service.process_frame_json(frame, source=src)
-            except Exception as e:  # noqa: BLE001 - a bug met by one frame is reported in its record, not fatal
-                rec = error_record(f"internal error (please report): {type(e).__name__}: {e}", source=src,
-                                   camera_id=frame.get("camera_id") if isinstance(frame, dict) else None)
-                out = FrameOutput(_dumps(rec), RECORD_ERROR, rec["camera_id"], None, rec)
-            try:
-                sink.write_json(out.type, out.camera_id, out.data)
-            except BrokenPipeError:  # stdout closed by the reader: nothing more can be delivered
-                stop.set()
-                return
-            except Exception as e:  # noqa: BLE001 - e.g. the MQTT client refusing a publish: counted, never fatal
-                with metrics._lock:
-                    metrics.publish_failed += 1
-                _log(f"output failed ({type(e).__name__}: {e}); counted in publish_failed")
-            metrics.done_output(out.type, out.processing_us, time.monotonic() - t)
-
-    def snapshot():
+    def snapshot() -> dict:
         rec = metrics.snapshot(queue.dropped, len(queue))
         if worker is not None:
             rec["worker"] = worker
         return rec
 
-    def health():
-        while not stop.wait(health_interval_s):
-            try:
-                sink.write(snapshot())
-            except BrokenPipeError:
-                stop.set()
+    with _steady_runtime():
+        threads = [threading.Thread(target=_work, args=(service, queue, sink, metrics, output, stop),
+                                    name="footprint-uq-worker", daemon=True)]
+        if input == "-":
+            stream = stdin if stdin is not None else sys.stdin.buffer
+            threads.append(threading.Thread(target=_stdin_reader, args=(stream, queue, sink, metrics, stop,
+                                                                        max_frame_bytes),
+                                            name="footprint-uq-stdin", daemon=True))
+        if health_interval_s and health_interval_s > 0:
+            threads.append(threading.Thread(target=_health, args=(sink, snapshot, stop, health_interval_s),
+                                            name="footprint-uq-health", daemon=True))
+        for t in threads:
+            t.start()
+        _log(f"ready: input {'stdin' if input == '-' else mqtt + ' ' + ', '.join(topics)}, output "
+             f"{'stdout' if output == '-' else mqtt + ' ' + output_prefix + '/...'}, overload policy {policy}"
+             + (f", worker {worker}" if worker else ""))
+        try:
+            # run until a stop request or the end of the input (stdin: the reader closes the queue)
+            while not stop.wait(0.05):
+                if input == "-" and not threads[0].is_alive():
+                    break
+        finally:
+            _shutdown(stop, client, topics if input is None else None, queue, threads, input == "-", sink, snapshot,
+                      drain_timeout_s)
+            for sig, h in old_handlers.items():
+                signal.signal(sig, h)
+            _log(f"stopped: frames in {metrics.frames_in}, out {metrics.frames_out}, dropped {queue.dropped}, "
+                 f"errors {metrics.errors}")
+    return 0
 
-    # The cyclic garbage collector would otherwise traverse the ~10^5 long-lived objects of numpy, numba, pyproj
-    # and paho every few frames (a frame allocates thousands of short-lived dicts and lists, all freed by
-    # reference counting): measured 100+ ms stalls at the 99th percentile.  Freeze what exists now and
-    # collect the young generation less often; restored on exit.
+
+def _mqtt_input(client, topics: list | None, input_prefix: str, queue: FrameQueue, sink, metrics: Metrics,
+                stop: threading.Event, max_frame_bytes: int) -> None:
+    """The MQTT client's callbacks: subscribe to ``topics`` on (re)connection (None: MQTT is the output only) and
+    queue each payload as it comes (refused with an error record beyond ``max_frame_bytes``)."""
+
+    def on_connect(c, userdata, flags, reason_code, properties):
+        if not reason_code.is_failure and topics is not None and not stop.is_set():
+            c.subscribe([(t, 1) for t in topics])
+
+    def on_message(c, userdata, msg):
+        # the network thread only queues the payload: the worker parses it (a frame replaced by a newer one
+        # of its camera is never parsed, and the network thread is free for the next packet)
+        t = time.monotonic()
+        quick_ack(c.socket())
+        metrics.received()
+        cam = msg.topic[len(input_prefix) + 1:]
+        src = f"mqtt {msg.topic}"
+        if len(msg.payload) > max_frame_bytes:  # refused before it is queued (paho frees it on return)
+            rec = error_record(f"frame of {len(msg.payload)} bytes is larger than the limit of {max_frame_bytes} "
+                               "bytes (--max-frame-bytes)", camera_id=cam, source=src)
+            _queue_error(queue, cam, rec, src, t, sink, metrics)
+            return
+        if not queue.put(cam, (msg.payload, src, t, cam), len(msg.payload)):
+            rec = error_record("service stopping or too many cameras pending", camera_id=cam, source=src)
+            sink.write(rec)
+            metrics.done(rec, time.monotonic() - t)
+
+    client.on_connect = on_connect
+    client.on_message = on_message
+    client.on_publish = lambda c, *a: quick_ack(c.socket())  # the PUBACK of a record: ACK it at once
+
+
+def _frame_output(service: Service, item: tuple, output: str) -> FrameOutput:
+    """The output of one queued item ``(frame, source, receipt time, topic camera)``: a ready error record, a
+    ``camera_id`` that cannot name an output topic, an MQTT payload (parsed here, checked against its topic) or a
+    stdin frame through :meth:`Service.process_frame_json`."""
+    frame, src, t, topic_camera = item
+    try:
+        if topic_camera is _READY:  # an error record found on receipt, in its place in the line
+            return frame
+        if output == "mqtt" and isinstance(frame, dict) and \
+                (why := _topic_level_error(frame.get("camera_id"))) is not None:
+            rec = error_record(why, field="camera_id", camera_id=_plain(frame.get("camera_id")),
+                               frame=_plain(frame.get("frame")), source=src)
+            return FrameOutput(_dumps(rec), RECORD_ERROR, None, None, rec)
+        if topic_camera is not None:  # an MQTT payload: parsed here, its camera_id checked against the topic
+            frame, out = _mqtt_frame(frame, topic_camera, src)
+            if out is not None:
+                return out
+        return service.process_frame_json(frame, source=src)
+    except Exception as e:  # noqa: BLE001 - a bug met by one frame is reported in its record, not fatal
+        rec = error_record(f"internal error (please report): {type(e).__name__}: {e}", source=src,
+                           camera_id=frame.get("camera_id") if isinstance(frame, dict) else None)
+        return FrameOutput(_dumps(rec), RECORD_ERROR, rec["camera_id"], None, rec)
+
+
+def _work(service: Service, queue: FrameQueue, sink, metrics: Metrics, output: str, stop: threading.Event) -> None:
+    """The worker thread: each queued frame in turn to its record, written to the sink, until the queue is closed
+    and drained (or the sink's reader has gone)."""
+    while True:
+        item = queue.get(timeout=0.1)
+        if item is None:
+            if queue._closed:
+                return
+            continue
+        out = _frame_output(service, item, output)
+        try:
+            sink.write_json(out.type, out.camera_id, out.data)
+        except BrokenPipeError:  # stdout closed by the reader: nothing more can be delivered
+            stop.set()
+            return
+        except Exception as e:  # noqa: BLE001 - e.g. the MQTT client refusing a publish: counted, never fatal
+            with metrics._lock:
+                metrics.publish_failed += 1
+            _log(f"output failed ({type(e).__name__}: {e}); counted in publish_failed")
+        metrics.done_output(out.type, out.processing_us, time.monotonic() - item[2])
+
+
+def _health(sink, snapshot, stop: threading.Event, interval_s: float) -> None:
+    """The health thread: ``snapshot()`` written every ``interval_s`` until the stop request."""
+    while not stop.wait(interval_s):
+        try:
+            sink.write(snapshot())
+        except BrokenPipeError:
+            stop.set()
+
+
+@contextlib.contextmanager
+def _steady_runtime():
+    """The interpreter set for steady per-frame latency while the service runs; restored on exit.
+
+    The cyclic garbage collector would otherwise traverse the ~10^5 long-lived objects of numpy, numba, pyproj
+    and paho every few frames (a frame allocates thousands of short-lived dicts and lists, all freed by
+    reference counting): measured 100+ ms stalls at the 99th percentile.  Freeze what exists now and collect the
+    young generation less often.  The GIL's switch interval 0.5 ms: the network thread gets the GIL within
+    0.5 ms of a packet (default 5 ms).
+    """
     old_gc = gc.get_threshold()
     gc.collect()
     gc.freeze()
     gc.set_threshold(50_000, 20, 100)
     old_switch = sys.getswitchinterval()
-    sys.setswitchinterval(0.0005)  # the network thread gets the GIL within 0.5 ms of a packet (default 5 ms)
-    threads = [threading.Thread(target=work, name="footprint-uq-worker", daemon=True)]
-    if input == "-":
-        stream = stdin if stdin is not None else sys.stdin.buffer
-        threads.append(threading.Thread(target=_stdin_reader, args=(stream, queue, sink, metrics, stop,
-                                                                    max_frame_bytes),
-                                        name="footprint-uq-stdin", daemon=True))
-    if health_interval_s and health_interval_s > 0:
-        threads.append(threading.Thread(target=health, name="footprint-uq-health", daemon=True))
-    for t in threads:
-        t.start()
-    _log(f"ready: input {'stdin' if input == '-' else mqtt + ' ' + ', '.join(topics)}, output "
-         f"{'stdout' if output == '-' else mqtt + ' ' + output_prefix + '/...'}, overload policy {policy}"
-         + (f", worker {worker}" if worker else ""))
+    sys.setswitchinterval(0.0005)
     try:
-        # run until a stop request or the end of the input (stdin: the reader closes the queue)
-        while not stop.wait(0.05):
-            if input == "-" and not threads[0].is_alive():
-                break
+        yield
     finally:
-        stop.set()
-        if client is not None and input is None:
-            client.unsubscribe(topics)
-            time.sleep(0.2)  # messages already on the way are still taken in
-        queue.close()
-        threads[0].join(drain_timeout_s)
-        if input == "-":
-            threads[1].join(1.0)  # the stdin reader sees the stop within 0.1 s (select), even on an idle open pipe
-        try:
-            sink.write(snapshot())
-            sink.close(drain_timeout_s)
-        except BrokenPipeError:  # stdout's reader has gone (e.g. `| head`): nothing more to deliver
-            pass
-        if client is not None:
-            client.disconnect()
-            client.loop_stop()
-        for sig, h in old_handlers.items():
-            signal.signal(sig, h)
         gc.set_threshold(*old_gc)
         gc.unfreeze()
-        _log(f"stopped: frames in {metrics.frames_in}, out {metrics.frames_out}, dropped {queue.dropped}, "
-             f"errors {metrics.errors}")
         sys.setswitchinterval(old_switch)
-    return 0
+
+
+def _shutdown(stop: threading.Event, client, topics: list | None, queue: FrameQueue, threads: list,
+              stdin_input: bool, sink, snapshot, drain_timeout_s: float) -> None:
+    """Stop taking frames in, drain the queue through the worker, write the last health record, close the output
+    and the MQTT client."""
+    stop.set()
+    if client is not None and topics is not None:
+        client.unsubscribe(topics)
+        time.sleep(0.2)  # messages already on the way are still taken in
+    queue.close()
+    threads[0].join(drain_timeout_s)
+    if stdin_input:
+        threads[1].join(1.0)  # the stdin reader sees the stop within 0.1 s (select), even on an idle open pipe
+    try:
+        sink.write(snapshot())
+        sink.close(drain_timeout_s)
+    except BrokenPipeError:  # stdout's reader has gone (e.g. `| head`): nothing more to deliver
+        pass
+    if client is not None:
+        client.disconnect()
+        client.loop_stop()
 
 
 def run(*, camera=None, budget=None, registry=None, camera_id: str | None = None, heading_offset_deg: float = 0.0,

@@ -17,7 +17,8 @@ from numba import njit
 
 from ..fast import core
 
-__all__ = ["predict_update", "update_slots", "project_ground", "motion_fields", "gather_outputs"]
+__all__ = ["predict_update", "update_slots", "frame_rows", "frame_update", "project_ground", "motion_fields",
+           "ROW_SKIP", "ROW_UPDATE", "ROW_START"]
 
 
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
@@ -145,6 +146,68 @@ def _mix(Xm, Pm, Cm, mu, pij, cbar, xs, Ps, Cs):  # pragma: no cover - compiled
                     Ps[j, a, b] += wt * (Pm[i, a, b] + da * (Xm[i, b] - xs[j, b]))
 
 
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _imm_one(s, X, P, Xm, Pm, Cm, mu, t_last, n_upd, t, qs, rates, z, R, B, gate, Pp, Cp, K, cross, xs, Ps, Cs, pij,
+             cbar, lik):  # pragma: no cover - compiled
+    """One track's IMM Schmidt step (storage row ``s``; measurement ``z (2,)``, ``R (2, 2)``, ``B (2, r)``), in
+    place if it passes the gate (see :func:`update_slots`); returns the smallest of the modes' squared Mahalanobis
+    distances (NaN if a mode's is not finite).  The rest are scratch."""
+    M, r = Xm.shape[1], Cm.shape[3]
+    h = t - t_last[s]
+    _switch_probs(h, rates, pij)
+    _mix(Xm[s], Pm[s], Cm[s], mu[s], pij, cbar, xs, Ps, Cs)
+    best, bad = math.inf, False
+    for j in range(M):
+        mj, det = _step_one(xs[j], Ps[j], Cs[j], h, qs[j], z, R, B, math.inf, Pp, Cp, K, cross)
+        lik[j] = -0.5 * mj - 0.5 * math.log(det) + math.log(cbar[j]) if math.isfinite(mj) else -math.inf
+        if not math.isfinite(mj):
+            bad = True
+        elif mj < best:
+            best = mj
+    best = math.nan if bad else best  # a singular mode fails the gate
+    if not best <= gate:
+        return best
+    top = lik[0]
+    for j in range(1, M):
+        top = max(top, lik[j])
+    tot = 0.0
+    for j in range(M):
+        lik[j] = max(math.exp(lik[j] - top), 1e-9)  # a mode never dies out: it must be able to come back
+        tot += lik[j]
+    for a in range(4):
+        X[s, a] = 0.0
+        for b in range(4):
+            P[s, a, b] = 0.0
+    for j in range(M):
+        mu[s, j] = lik[j] / tot
+        for a in range(4):
+            Xm[s, j, a] = xs[j, a]
+            X[s, a] += mu[s, j] * xs[j, a]
+            for c in range(r):
+                Cm[s, j, a, c] = Cs[j, a, c]
+            for b in range(4):
+                Pm[s, j, a, b] = Ps[j, a, b]
+    for j in range(M):
+        for a in range(4):
+            da = xs[j, a] - X[s, a]
+            for b in range(4):
+                P[s, a, b] += mu[s, j] * (Ps[j, a, b] + da * (xs[j, b] - X[s, b]))
+    t_last[s] = t
+    n_upd[s] += 1
+    return best
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _pick_B(B_pred, k, B_frame, i):  # pragma: no cover - compiled
+    """``B_pred[k]`` (``B`` at the predicted position) where it is given and finite, else ``B_frame[i]``."""
+    if B_pred.shape[0] == 0:
+        return B_frame[i]
+    for c in range(B_pred.shape[2]):
+        if not (math.isfinite(B_pred[k, 0, c]) and math.isfinite(B_pred[k, 1, c])):
+            return B_frame[i]
+    return B_pred[k]
+
+
 @njit(cache=True, nogil=True, error_model="numpy")
 def update_slots(X, P, Xm, Pm, Cm, mu, t_last, n_upd, slots, t, qs, rates, z, R, B_pred, B_frame, gate,
                  d2):  # pragma: no cover - compiled
@@ -154,66 +217,17 @@ def update_slots(X, P, Xm, Pm, Cm, mu, t_last, n_upd, slots, t, qs, rates, z, R,
     leaving rates ``rates (M,)`` in 1/s, M <= 2) are ``Xm (cap, M, 4)``, ``Pm (cap, M, 4, 4)``, ``Cm (cap, M, 4,
     r)`` with probabilities ``mu (cap, M)``; ``X (cap, 4)``, ``P (cap, 4, 4)`` receive their moment-matched
     combination.  Each mode is mixed (:func:`_mix`), predicted to ``t`` from ``t_last`` and updated with ``z[i]``,
-    ``R[i]`` and ``B_pred[i]`` (``B`` at the predicted position) where finite, else ``B_frame[i]``.  ``d2[i]``
-    receives the smallest of the modes' squared Mahalanobis distances; the track is updated only if it is ``<=
-    gate`` (then ``t_last = t`` and one more update in ``n_upd``), else left as it was.  With one mode this is
-    :func:`predict_update`."""
+    ``R[i]`` and ``B_pred[i]`` (``B`` at the predicted position; ``(0, 2, 0)``: none) where finite, else
+    ``B_frame[i]``.  ``d2[i]`` receives the smallest of the modes' squared Mahalanobis distances; the track is
+    updated only if it is ``<= gate`` (then ``t_last = t`` and one more update in ``n_upd``), else left as it was.
+    With one mode this is :func:`predict_update`."""
     M, r = Xm.shape[1], Cm.shape[3]
     Pp, Cp, K, cross = np.empty((4, 4)), np.empty((4, r)), np.empty((4, 2)), np.empty((4, 2))
     xs, Ps, Cs = np.empty((M, 4)), np.empty((M, 4, 4)), np.empty((M, 4, r))
     pij, cbar, lik = np.empty((2, 2)), np.empty(M), np.empty(M)
-    use_pred = B_pred.shape[0] == slots.shape[0]
     for i in range(slots.shape[0]):
-        s = slots[i]
-        B = B_frame[i]
-        if use_pred:
-            fin = True
-            for c in range(r):
-                fin = fin & math.isfinite(B_pred[i, 0, c]) & math.isfinite(B_pred[i, 1, c])
-            if fin:
-                B = B_pred[i]
-        h = t - t_last[s]
-        _switch_probs(h, rates, pij)
-        _mix(Xm[s], Pm[s], Cm[s], mu[s], pij, cbar, xs, Ps, Cs)
-        best, bad = math.inf, False
-        for j in range(M):
-            mj, det = _step_one(xs[j], Ps[j], Cs[j], h, qs[j], z[i], R[i], B, math.inf, Pp, Cp, K, cross)
-            lik[j] = -0.5 * mj - 0.5 * math.log(det) + math.log(cbar[j]) if math.isfinite(mj) else -math.inf
-            if not math.isfinite(mj):
-                bad = True
-            elif mj < best:
-                best = mj
-        best = math.nan if bad else best  # a singular mode fails the gate
-        d2[i] = best
-        if not best <= gate:
-            continue
-        top = lik[0]
-        for j in range(1, M):
-            top = max(top, lik[j])
-        tot = 0.0
-        for j in range(M):
-            lik[j] = max(math.exp(lik[j] - top), 1e-9)  # a mode never dies out: it must be able to come back
-            tot += lik[j]
-        for a in range(4):
-            X[s, a] = 0.0
-            for b in range(4):
-                P[s, a, b] = 0.0
-        for j in range(M):
-            mu[s, j] = lik[j] / tot
-            for a in range(4):
-                Xm[s, j, a] = xs[j, a]
-                X[s, a] += mu[s, j] * xs[j, a]
-                for c in range(r):
-                    Cm[s, j, a, c] = Cs[j, a, c]
-                for b in range(4):
-                    Pm[s, j, a, b] = Ps[j, a, b]
-        for j in range(M):
-            for a in range(4):
-                da = xs[j, a] - X[s, a]
-                for b in range(4):
-                    P[s, a, b] += mu[s, j] * (Ps[j, a, b] + da * (xs[j, b] - X[s, b]))
-        t_last[s] = t
-        n_upd[s] += 1
+        d2[i] = _imm_one(slots[i], X, P, Xm, Pm, Cm, mu, t_last, n_upd, t, qs, rates, z[i], R[i],
+                         _pick_B(B_pred, i, B_frame, i), gate, Pp, Cp, K, cross, xs, Ps, Cs, pij, cbar, lik)
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -240,13 +254,19 @@ def project_ground(xy, cam, uv):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def motion_fields(v, cov, ch, sh, ratio, out, cov_out):  # pragma: no cover - compiled
+def motion_fields(v, cov, ch, sh, ratio, yaw_rad, sigma_yaw_rad, heading_offset_deg, out,
+                  cov_out):  # pragma: no cover - compiled
     """:func:`footprint_uq.tracking.motion.object_motion`'s arithmetic in one pass: velocities ``v (n, 2)`` and
     covariances ``cov (n, 2, 2)`` in W, rotated to east / north by ``(ch, sh)`` = cos / sin of the heading offset,
-    into ``out (7, n)`` = v_east, v_north, speed, sigma_speed, heading_deg, sigma_heading_deg (NaN below ``ratio``
-    velocity sigmas of speed) and ``cov_out (n, 2, 2)``."""
+    into ``out (8, n)`` = v_east, v_north, speed, sigma_speed, heading_deg, sigma_heading_deg (NaN below ``ratio``
+    velocity sigmas of speed), yaw_deg (compass, :func:`~footprint_uq.tracking.motion.yaw_compass_deg` of
+    ``yaw_rad (n,)``), sigma_yaw_deg (of ``sigma_yaw_rad (n,)``) and ``cov_out (n, 2, 2)``; a ``(0,)`` yaw or
+    sigma: NaN."""
     nan = math.nan
+    has_yaw, has_syaw = yaw_rad.shape[0] > 0, sigma_yaw_rad.shape[0] > 0
     for i in range(v.shape[0]):
+        out[6, i] = np.mod(90.0 - np.rad2deg(yaw_rad[i]) + heading_offset_deg, 360.0) if has_yaw else nan
+        out[7, i] = np.rad2deg(sigma_yaw_rad[i]) if has_syaw else nan
         ve = ch * v[i, 0] + sh * v[i, 1]
         vn = -sh * v[i, 0] + ch * v[i, 1]
         c00, c01, c11 = cov[i, 0, 0], cov[i, 0, 1], cov[i, 1, 1]
@@ -267,17 +287,137 @@ def motion_fields(v, cov, ch, sh, ratio, out, cov_out):  # pragma: no cover - co
             out[3, i], out[4, i], out[5, i] = nan, nan, nan
 
 
-@njit(cache=True, nogil=True)
-def gather_outputs(rows, slots, new, tid, n_upd, t_first, X, P, t, o_tid, o_new, o_n, o_age, o_xy, o_cxy, o_v,
-                   o_cv):  # pragma: no cover - compiled
-    """Per tracked object ``rows[j]`` of a frame (table row ``slots[j]``): its track's id, whether it is new, its
-    updates, age, filtered position and covariance, and (from the second update on) its velocity and covariance,
-    into the frame's output arrays (:class:`~footprint_uq.tracking.table.TrackOutput`, prefilled as untracked)."""
-    for j in range(rows.shape[0]):
-        i, s = rows[j], slots[j]
-        o_tid[i], o_new[i], o_n[i], o_age[i] = tid[s], new[j], n_upd[s], t - t_first[s]
+#: row actions of :func:`frame_rows` / :func:`frame_update`: not tracked, update the row's track, start a track
+ROW_SKIP, ROW_UPDATE, ROW_START = 0, 1, 2
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def frame_rows(slots, xy, cov, B, subtract, R, t, t_last, seen, stamp, X, act, old,
+               pred):  # pragma: no cover - compiled
+    """First pass of a frame of n objects over a table's storage: what to do with each object.
+
+    ``subtract``: ``cov (n, 2, 2)`` is each centre's whole covariance and ``R (n, 2, 2)`` receives its per-frame
+    part ``cov - B B^T``; else ``cov`` is the per-frame part already (``R`` is not written).
+
+    ``slots (n,)`` are the objects' rows in the storage from the id lookup (-1: an unknown id, -2: an id that is
+    never tracked).  ``act (n,)`` receives :data:`ROW_UPDATE` for the first object of a known id with a finite
+    centre, covariance and ``B (n, 2, r)`` whose track was not updated at ``t`` already; :data:`ROW_START` for an
+    unknown id with finite inputs (the caller keeps the first object of each unknown id); :data:`ROW_SKIP`
+    otherwise (repeated ids: ``seen (cap,)`` is stamped with ``stamp`` per frame).  The k objects to update are
+    listed in ``old[:k]`` in frame order with their tracks' positions predicted to ``t`` in ``pred[:k]`` (for
+    ``B`` at the predicted position); returns k."""
+    k = 0
+    r = B.shape[2]
+    for i in range(slots.shape[0]):
+        if subtract:
+            for a in range(2):
+                for b in range(a, 2):
+                    acc = 0.0
+                    for c in range(r):
+                        acc += B[i, a, c] * B[i, b, c]
+                    R[i, a, b] = cov[i, a, b] - acc
+            R[i, 1, 0] = R[i, 0, 1]
+        s = slots[i]
+        ok = math.isfinite(xy[i, 0]) and math.isfinite(xy[i, 1])
+        for a in range(2):
+            for b in range(2):
+                ok = ok and math.isfinite(R[i, a, b] if subtract else cov[i, a, b])
+            for c in range(r):
+                ok = ok and math.isfinite(B[i, a, c])
+        if s < 0:
+            act[i] = ROW_START if (s == -1 and ok) else ROW_SKIP
+            continue
+        if seen[s] == stamp or not ok or t_last[s] == t:  # a repeated id (in this frame or at this time)
+            seen[s] = stamp
+            act[i] = ROW_SKIP
+            continue
+        seen[s] = stamp
+        act[i] = ROW_UPDATE
+        h = t - t_last[s]
+        pred[k, 0] = X[s, 0] + h * X[s, 2]
+        pred[k, 1] = X[s, 1] + h * X[s, 3]
+        old[k] = i
+        k += 1
+    return k
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _initiate(s, X, P, Xm, Pm, Cm, mu, mu0, var_v0, z, R, B):  # pragma: no cover - compiled
+    """A new track in storage row ``s`` from one measurement (:class:`~footprint_uq.tracking.filter.Initiator`:
+    the position is the measurement, its calibration share ``C = -B``; the velocity zero with variance
+    ``var_v0``), the same in every mode, mode probabilities ``mu0``."""
+    r = B.shape[1]
+    for a in range(4):
+        for b in range(4):
+            P[s, a, b] = 0.0
+    X[s, 0], X[s, 1], X[s, 2], X[s, 3] = z[0], z[1], 0.0, 0.0
+    for a in range(2):
+        for b in range(2):
+            acc = 0.0
+            for c in range(r):
+                acc += B[a, c] * B[b, c]
+            P[s, a, b] = R[a, b] + acc
+    off = 0.5 * (P[s, 0, 1] + P[s, 1, 0])
+    P[s, 0, 1] = P[s, 1, 0] = off
+    P[s, 2, 2] = P[s, 3, 3] = var_v0
+    for j in range(Xm.shape[1]):
+        mu[s, j] = mu0[j]
+        for a in range(4):
+            Xm[s, j, a] = X[s, a]
+            for b in range(4):
+                Pm[s, j, a, b] = P[s, a, b]
+            for c in range(Cm.shape[3]):
+                Cm[s, j, a, c] = -B[a, c] if a < 2 else 0.0
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def frame_update(act, slots, old, n_old, X, P, Xm, Pm, Cm, mu, t_last, t_first, n_upd, tid, next_id, t, qs, rates,
+                 mu0, var_v0, z, R, B_pred, B_frame, gate, o_tid, o_new, o_n, o_age, o_xy, o_cxy, o_v,
+                 o_cv):  # pragma: no cover - compiled
+    """Second pass of a frame (after :func:`frame_rows` and the slots of new ids): every update, start and output.
+
+    The objects ``old[:n_old]`` get the IMM Schmidt step of :func:`update_slots` (``B_pred[k]`` is ``B`` at the
+    k-th one's predicted position; ``(0, 2, 0)``: none, use ``B_frame``); one beyond the ``gate`` becomes a start
+    (its id was reused: a new track in the same row).  Then in frame order the starts (:func:`_initiate`, track
+    ids ``next_id, next_id + 1, ...``) and the outputs of every object (:class:`~footprint_uq.tracking.table.
+    TrackOutput`: -1 / False / 0 / NaN for :data:`ROW_SKIP`; the velocity from the second update on).  Returns the
+    next free track id."""
+    M, r = Xm.shape[1], Cm.shape[3]
+    Pp, Cp, K, cross = np.empty((4, 4)), np.empty((4, r)), np.empty((4, 2)), np.empty((4, 2))
+    xs, Ps, Cs = np.empty((M, 4)), np.empty((M, 4, 4)), np.empty((M, 4, r))
+    pij, cbar, lik = np.empty((2, 2)), np.empty(M), np.empty(M)
+    for k in range(n_old):
+        i = old[k]
+        d2 = _imm_one(slots[i], X, P, Xm, Pm, Cm, mu, t_last, n_upd, t, qs, rates, z[i], R[i],
+                      _pick_B(B_pred, k, B_frame, i), gate, Pp, Cp, K, cross, xs, Ps, Cs, pij, cbar, lik)
+        if not d2 <= gate:  # NaN (a singular S) fails the gate too
+            act[i] = ROW_START
+    nan = math.nan
+    for i in range(act.shape[0]):
+        s = slots[i]
+        if act[i] == ROW_SKIP:
+            o_tid[i], o_new[i], o_n[i], o_age[i] = -1, False, 0, nan
+            o_xy[i, 0] = o_xy[i, 1] = o_v[i, 0] = o_v[i, 1] = nan
+            for a in range(2):
+                for b in range(2):
+                    o_cxy[i, a, b] = o_cv[i, a, b] = nan
+            continue
+        started = act[i] == ROW_START
+        if started:
+            _initiate(s, X, P, Xm, Pm, Cm, mu, mu0, var_v0, z[i], R[i], B_frame[i])
+            t_last[s] = t_first[s] = t
+            n_upd[s] = 1
+            tid[s] = next_id
+            next_id += 1
+        o_tid[i], o_new[i], o_n[i], o_age[i] = tid[s], started, n_upd[s], t - t_first[s]
         o_xy[i, 0], o_xy[i, 1] = X[s, 0], X[s, 1]
         o_cxy[i, 0, 0], o_cxy[i, 0, 1], o_cxy[i, 1, 0], o_cxy[i, 1, 1] = P[s, 0, 0], P[s, 0, 1], P[s, 1, 0], P[s, 1, 1]
         if n_upd[s] >= 2:
             o_v[i, 0], o_v[i, 1] = X[s, 2], X[s, 3]
             o_cv[i, 0, 0], o_cv[i, 0, 1], o_cv[i, 1, 0], o_cv[i, 1, 1] = P[s, 2, 2], P[s, 2, 3], P[s, 3, 2], P[s, 3, 3]
+        else:
+            o_v[i, 0] = o_v[i, 1] = nan
+            for a in range(2):
+                for b in range(2):
+                    o_cv[i, a, b] = nan
+    return next_id

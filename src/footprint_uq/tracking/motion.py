@@ -21,6 +21,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .._checks import as_float
+from ..errors import InputError
 from .kernels import motion_fields
 from .table import TrackOutput
 
@@ -91,12 +92,22 @@ def object_motion(tracks: TrackOutput, *, heading_offset_deg: float = 0.0, yaw_r
     h = as_float("heading_offset_deg", heading_offset_deg)
     ratio = as_float("heading_min_ratio", heading_min_ratio, positive=True)
     n = tracks.track_id.shape[0]
-    out = np.empty((6, n))
+    out = np.empty((8, n))
     cov = np.empty((n, 2, 2))
     hr = math.radians(h)
     motion_fields(np.ascontiguousarray(tracks.v_mps, dtype=np.float64),
-                  np.ascontiguousarray(tracks.cov_v_m2ps2, dtype=np.float64), math.cos(hr), math.sin(hr), ratio, out,
-                  cov)
-    yaw = np.full(n, np.nan) if yaw_rad is None else yaw_compass_deg(yaw_rad, h)
-    sig_yaw = np.full(n, np.nan) if sigma_yaw_rad is None else np.rad2deg(np.asarray(sigma_yaw_rad, np.float64))
-    return ObjectMotion(out[0], out[1], cov, out[2], out[3], out[4], out[5], yaw, sig_yaw, tracks.age_s.copy())
+                  np.ascontiguousarray(tracks.cov_v_m2ps2, dtype=np.float64), math.cos(hr), math.sin(hr), ratio,
+                  _NONE if yaw_rad is None else _column("yaw_rad", yaw_rad, n),
+                  _NONE if sigma_yaw_rad is None else _column("sigma_yaw_rad", sigma_yaw_rad, n), h, out, cov)
+    return ObjectMotion(out[0], out[1], cov, out[2], out[3], out[4], out[5], out[6], out[7], tracks.age_s.copy())
+
+
+_NONE = np.empty(0)
+
+
+def _column(name: str, a, n: int) -> np.ndarray:
+    """``a`` as a contiguous float64 (n,) array (one compiled signature of motion_fields)."""
+    a = np.ascontiguousarray(a, dtype=np.float64).reshape(-1)
+    if a.shape[0] != n:
+        raise InputError(name, a.shape, f"{n} values, one per object")
+    return a

@@ -14,7 +14,7 @@ from ..errors import InputError
 from ..fast.footprint_kernels import camera_constants
 from ..products.footprints import FrameProcessor
 from .filter import Initiator, SplitMeasurement
-from .kernels import gather_outputs, project_ground, update_slots
+from .kernels import ROW_SKIP, ROW_START, frame_rows, frame_update, project_ground
 from .models import ConstantVelocity
 
 __all__ = ["TrackerConfig", "TrackOutput", "TrackTable", "SharedJacobianAt", "CALIBRATION_MODES", "DEFAULT_GATE_CHI2"]
@@ -110,7 +110,10 @@ class TrackTable:
     Each :meth:`step` takes one frame: tracks not updated for longer than ``timeout_s`` are deleted first (the
     deleter); then every object whose id has a track is predicted to the frame's time and gated (a jump with
     ``y^T S^-1 y > gate_chi2`` restarts the track under a new ``track_id``), the others start tracks
-    (the initiator); all updates of a frame run together, vectorised over its objects.  Each track runs the
+    (the initiator).  Per frame, the ids are looked up in one pass over a dictionary (the only per-object Python
+    work; unknown ids, a few per frame, are then given rows); the rest is two compiled passes over the frame
+    (:func:`~footprint_uq.tracking.kernels.frame_rows`, :func:`~footprint_uq.tracking.kernels.frame_update`) and
+    one evaluation of ``shared_at`` at the predicted positions.  Each track runs the
     interacting-multiple-model filter over :attr:`models` (a quiet and a manoeuvre constant-velocity mode; one
     mode if ``manoeuvre_accel_psd_m2ps3`` is None); its reported state is the modes' moment-matched combination,
     and the gate cuts a track only if the detection is beyond it for every mode.
@@ -133,9 +136,10 @@ class TrackTable:
         self.config = config or TrackerConfig()
         self.shared_at = shared_at
         self.rank = int(rank) if self.config.calibration == "consider" else 0
-        #: the modes the compiled update runs (:func:`~footprint_uq.tracking.kernels.update_slots` is
-        #: :class:`~footprint_uq.tracking.filter.InteractingModels` -- mixing, each mode's SchmidtPredictor +
-        #: SchmidtUpdater, mode probabilities, combination -- in one pass; the tests hold them equal)
+        #: the modes the compiled update runs (its per-track step, in :func:`~footprint_uq.tracking.kernels.
+        #: update_slots` and :func:`~footprint_uq.tracking.kernels.frame_update`, is :class:`~footprint_uq.tracking.
+        #: filter.InteractingModels` -- mixing, each mode's SchmidtPredictor + SchmidtUpdater, mode probabilities,
+        #: combination -- in one pass; the tests hold them equal)
         cfg = self.config
         self.models = tuple(ConstantVelocity(q) for q in (cfg.accel_psd_m2ps3, cfg.manoeuvre_accel_psd_m2ps3)
                             if q is not None)
@@ -145,26 +149,26 @@ class TrackTable:
         #: the modes' probabilities of a new track: the chain's stationary distribution
         self.mu0 = (1.0 / self._rates) / (1.0 / self._rates).sum()
         self.initiator = Initiator(self.config.sigma_v0_mps)
-        self._index: dict = {}  # object_id -> slot
+        self._var_v0 = self.initiator.sigma_v0_mps ** 2
+        self._index: dict = {None: -2}  # object_id -> slot (-2: never tracked)
         self._cap = 0
         self._grow(64)
+        self._stamp = 0  # frames seen: the repeated-id stamp of frame_rows
         self._next_id = 0
         self._last_time: float = -math.inf
         #: frames not tracked because their time was earlier than the previous frame's
         self.n_stale_frames = 0
 
     def __len__(self) -> int:
-        return len(self._index)
+        return len(self._index) - 1  # (the entry of None)
 
     def warm_up(self) -> None:
-        """Load the compiled steps (numba's cache, or compile them) without touching the tracks."""
-        r = self.rank
-        Bp = _NO_B if self.shared_at is None else np.ascontiguousarray(self.shared_at(np.zeros((1, 2))))
-        M = len(self.models)
-        update_slots(np.zeros((1, 4)), np.eye(4)[None].copy(), np.zeros((1, M, 4)), np.tile(np.eye(4), (1, M, 1, 1)),
-                     np.zeros((1, M, 4, r)), np.full((1, M), 1.0 / M), np.zeros(1), np.zeros(1, np.int64),
-                     np.zeros(1, np.int64), 1.0, self._qs, self._rates, np.zeros((1, 2)), np.eye(2)[None].copy(),
-                     Bp if Bp.shape == (1, 2, r) else _NO_B, np.zeros((1, 2, r)), 1.0, np.empty(1))
+        """Load the compiled steps (numba's cache, or compile them) without touching the tracks: two frames of one
+        object through a scratch table of the same configuration (a start, then an update)."""
+        scratch = TrackTable(self.config, rank=self.rank, shared_at=self.shared_at)
+        meas = (np.zeros((1, 2)), np.eye(2)[None].copy(), np.zeros((1, 2, self.rank)))
+        scratch.step(0.0, [0], *meas)
+        scratch.step(0.1, [0], *meas)
 
     def _grow(self, cap: int) -> None:
         old = self._cap
@@ -190,6 +194,7 @@ class TrackTable:
         self._t_first = extend(g("_t_first"), (), np.nan)
         self._n = extend(g("_n"), (), 0).astype(np.int64)
         self._tid = extend(g("_tid"), (), -1).astype(np.int64)
+        self._seen = extend(g("_seen"), (), -1).astype(np.int64)
         keys = np.empty(cap, dtype=object)
         if old:
             keys[:old] = self._keys
@@ -199,11 +204,9 @@ class TrackTable:
 
     def _delete_expired(self, time_s: float) -> None:
         """The deleter: drop tracks whose last update is more than ``timeout_s`` before ``time_s``."""
-        if not self._index:
+        if len(self._index) <= 1:
             return
-        with np.errstate(invalid="ignore"):
-            old = np.flatnonzero(time_s - self._t_last > self.config.timeout_s)
-        for s in old.tolist():
+        for s in np.flatnonzero(time_s - self._t_last > self.config.timeout_s).tolist():  # (NaN: a free row)
             del self._index[self._keys[s]]
             self._keys[s] = None
             self._t_last[s] = np.nan
@@ -216,7 +219,8 @@ class TrackTable:
         R = cov_frame_m2 + (shared_m @ np.swapaxes(shared_m, -1, -2) if mode == "white" else 0.0)
         return SplitMeasurement(xy_m, R, np.zeros((xy_m.shape[0], 2, 0)))
 
-    def step(self, time_s: float, object_ids, xy_m, cov_frame_m2, shared_m) -> TrackOutput:
+    def step(self, time_s: float, object_ids, xy_m, cov_frame_m2=None, shared_m=None, *,
+             cov_m2=None) -> TrackOutput:
         """One frame of n objects: update their tracks and return their motion (:class:`TrackOutput`).
 
         Parameters
@@ -229,91 +233,79 @@ class TrackTable:
         xy_m : (n, 2)               centres in W (NaN: no centre this frame; the track waits, it may time out)
         cov_frame_m2 : (n, 2, 2)    per-frame part of their covariance, m^2
         shared_m : (n, 2, r)        their whitened parameter Jacobians (the calibration part ``B B^T``)
+        cov_m2 : (n, 2, 2), optional
+            Instead of ``cov_frame_m2``: their whole covariance (``FootprintEstimate.centre_cov_m2``); the
+            per-frame part ``cov_m2 - B B^T`` is then taken in the compiled pass (what
+            ``FootprintEstimate.centre_cov_frame_m2`` gives, without its dozen numpy calls).
         """
         t = as_float("time_s", time_s)
-        xy = np.asarray(xy_m, dtype=np.float64).reshape(-1, 2)
+        xy = _c64(xy_m).reshape(-1, 2)
         n = xy.shape[0]
-        ids = list(object_ids)
+        ids = object_ids if isinstance(object_ids, list) else list(object_ids)
         if len(ids) != n:
             raise InputError("object_ids", len(ids), f"{n} ids, one per object")
-        B = np.asarray(shared_m, dtype=np.float64)
+        B = _c64(shared_m)
         if B.shape != (n, 2, B.shape[2] if B.ndim == 3 else -1) or (self.config.calibration == "consider"
                                                                     and B.shape[2] != self.rank):
             raise InputError("shared_m", B.shape, f"shape ({n}, 2, {self.rank})")
-        out = TrackOutput.untracked(n)
+        if (cov_frame_m2 is None) == (cov_m2 is None):
+            raise InputError("cov_frame_m2/cov_m2", "both" if cov_m2 is not None else "neither",
+                             "exactly one of the per-frame or the whole covariance")
+        subtract = cov_m2 is not None
+        cov = _c64(cov_m2 if subtract else cov_frame_m2)
+        if cov.shape != (n, 2, 2):
+            raise InputError("cov_m2" if subtract else "cov_frame_m2", cov.shape, f"shape ({n}, 2, 2)")
         if t < self._last_time:
             self.n_stale_frames += 1
-            return out
+            return TrackOutput.untracked(n)
         self._last_time = t
         self._delete_expired(t)
-        # the first object of each id with a centre (dict keeps the first index when built from the end)
-        ok = np.isfinite(xy).all(1) & np.isfinite(cov_frame_m2).all((1, 2)) & np.isfinite(B).all((1, 2))
-        first = dict(zip(reversed(ids), range(n - 1, -1, -1), strict=True))
-        first.pop(None, None)
-        rows = np.sort(np.fromiter(first.values(), np.int64, len(first)))
-        rows = rows[ok[rows]]
-        if rows.size == 0:
-            return out
-        keys = [ids[i] for i in rows.tolist()]
-        slots = np.fromiter(map(self._index.get, keys, repeat(-1)), np.int64, rows.size)
-        meas = self._measurement(xy[rows], np.asarray(cov_frame_m2, dtype=np.float64)[rows], B[rows])
-        again = slots >= 0
-        again[again] = self._t_last[slots[again]] == t  # updated at this time already: a repeated id
-        if again.any():
-            rows, slots, keys = rows[~again], slots[~again], [k for k, a in zip(keys, again.tolist(), strict=True)
-                                                             if not a]
-            meas = _take(meas, np.flatnonzero(~again))
-        new = slots < 0
-        old = np.flatnonzero(~new)
-        if old.size:
-            keep = self._update(t, slots[old], _take(meas, old))
-            new[old[~keep]] = True
-        self._start(t, keys, slots, new, meas)
-        gather_outputs(rows, slots, new, self._tid, self._n, self._t_first, self._x, self._P, t, *out)
-        return out
-
-    def _update(self, t: float, s: np.ndarray, m: SplitMeasurement) -> np.ndarray:
-        """Predict and update the tracks in slots ``s`` in place (the compiled :func:`~footprint_uq.tracking.kernels.
-        update_slots`, i.e. :class:`SchmidtPredictor` + :class:`SchmidtUpdater`); returns which passed the gate."""
-        if self.shared_at is not None and self.rank:  # B at the predicted positions (see the class doc)
-            x = self._x[s]
-            Bp = np.ascontiguousarray(self.shared_at(x[:, :2] + (t - self._t_last[s])[:, None] * x[:, 2:]),
-                                      dtype=np.float64)
+        slots = np.fromiter(map(self._index.get, ids, repeat(-1)), np.int64, n)
+        self._stamp += 1
+        act, old, pred = np.empty(n, np.int8), np.empty(n, np.int64), np.empty((n, 2))
+        R = np.empty((n, 2, 2)) if subtract else cov
+        k = frame_rows(slots, xy, cov, B, subtract, R, t, self._t_last, self._seen, self._stamp, self._x, act, old,
+                       pred)
+        self._claim(ids, slots, act)
+        if self.shared_at is not None and self.rank and k:  # B at the predicted positions (see the class doc)
+            Bp = _c64(self.shared_at(pred[:k]))
         else:
             Bp = _NO_B
-        d2 = np.empty(s.size)
-        update_slots(self._x, self._P, self._xm, self._Pm, self._Cm, self._mu, self._t_last, self._n, s, t, self._qs,
-                     self._rates, m.xy_m, m.cov_frame_m2, Bp, np.ascontiguousarray(m.shared_m), self.config.gate_chi2,
-                     d2)
-        return d2 <= self.config.gate_chi2  # NaN (a singular S) fails the gate too
+        meas = self._measurement(xy, R, B)
+        out = TrackOutput(np.empty(n, np.int64), np.empty(n, bool), np.empty(n, np.int64), np.empty(n),
+                          np.empty((n, 2)), np.empty((n, 2, 2)), np.empty((n, 2)), np.empty((n, 2, 2)))
+        self._next_id = frame_update(act, slots, old, k, self._x, self._P, self._xm, self._Pm, self._Cm, self._mu,
+                                     self._t_last, self._t_first, self._n, self._tid, self._next_id, t, self._qs,
+                                     self._rates, self.mu0, self._var_v0, meas.xy_m, meas.cov_frame_m2, Bp,
+                                     meas.shared_m, self.config.gate_chi2, *out)
+        return out
 
-    def _start(self, t: float, keys: list, slots: np.ndarray, new: np.ndarray, meas: SplitMeasurement) -> None:
-        """The initiator's tracks for the objects ``new`` (slots filled in place; restarted ids keep their slot)."""
-        idx = np.flatnonzero(new)
-        if idx.size == 0:
+    def _claim(self, ids: list, slots: np.ndarray, act: np.ndarray) -> None:
+        """Rows for the unknown ids of a frame (``slots == -1``), in place: the first object of each with finite
+        inputs (``act == ROW_START``) gets a free row (the table grows when none is left); a later object of the
+        same id is not tracked (``act`` set to ``ROW_SKIP``)."""
+        miss = np.flatnonzero(slots == -1)
+        if miss.size == 0:
             return
-        need = int(np.count_nonzero(slots[idx] < 0))
-        if need > len(self._free):
-            self._grow(max(2 * self._cap, self._cap + need))
-        for i in idx[slots[idx] < 0].tolist():
-            s = self._free.pop()
-            slots[i] = s
-            self._keys[s] = keys[i]
-            self._index[keys[i]] = s
-        s = slots[idx]
-        st = self.initiator.initiate(_take(meas, idx))
-        self._x[s], self._P[s] = st.x, st.P
-        self._xm[s], self._Pm[s], self._Cm[s] = st.x[:, None], st.P[:, None], st.C[:, None]
-        self._mu[s] = self.mu0
-        self._t_last[s] = self._t_first[s] = t
-        self._n[s] = 1
-        self._tid[s] = np.arange(self._next_id, self._next_id + idx.size)
-        self._next_id += idx.size
+        first: set = set()
+        for i in miss.tolist():
+            key = ids[i]
+            if key in first:
+                act[i] = ROW_SKIP
+                continue
+            first.add(key)
+            if act[i] == ROW_START:
+                if not self._free:
+                    self._grow(2 * self._cap)
+                slots[i] = s = self._free.pop()
+                self._keys[s] = key
+                self._index[key] = s
 
 
-def _take(m: SplitMeasurement, i: np.ndarray) -> SplitMeasurement:
-    return SplitMeasurement(m.xy_m[i], m.cov_frame_m2[i], m.shared_m[i])
-
+def _c64(a) -> np.ndarray:
+    """``a`` as a C-contiguous, writable float64 array (a copy only if it is not one): one compiled signature."""
+    a = np.asarray(a, dtype=np.float64)
+    return a if a.flags.c_contiguous and a.flags.writeable else np.array(a, order="C")
 
 
 class SharedJacobianAt:

@@ -49,15 +49,17 @@ A confidence never understates: every rule above rounds the 95 % value up to a l
 
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
 import numpy as np
+from numba import njit
 
 from ...errors import InputError
 from ...tracking.motion import ObjectMotion
 
-__all__ = ["ObjectMotion", "MotionCodes", "motion_codes", "unknown_motion", "SPEED_CONFIDENCE_NAMES",
-           "HEADING_CONFIDENCE_NAMES", "SPEED_CONFIDENCE_MPS", "HEADING_CONFIDENCE_DEG"]
+__all__ = ["ObjectMotion", "MotionCodes", "motion_codes", "motion_codes_reference", "unknown_motion",
+           "SPEED_CONFIDENCE_NAMES", "HEADING_CONFIDENCE_NAMES", "SPEED_CONFIDENCE_MPS", "HEADING_CONFIDENCE_DEG"]
 
 Z95 = 1.96
 #: relative guard against binary rounding pushing a value exactly on a step up (as products.v2x)
@@ -111,7 +113,7 @@ class MotionCodes(NamedTuple):
 
 
 def _arr(name, v, n, shape=()):
-    a = np.asarray(v, dtype=np.float64)
+    a = np.ascontiguousarray(v, dtype=np.float64)
     if a.shape != (n, *shape):
         raise InputError(f"motion.{name}", a.shape, f"an array of shape {(n, *shape)}")
     return a
@@ -154,9 +156,115 @@ def _level_code(c95, levels):
     return np.where(ok.any(1) & ~np.isnan(c95.ravel()), code, 0).reshape(c95.shape).astype(np.int64)
 
 
+#: the fields :func:`motion_codes` checks, in its order: sigmas and ages (>= 0), then values (finite or NaN)
+_NONNEGATIVE = ("sigma_speed_mps", "sigma_heading_deg", "sigma_yaw_deg", "age_s", "speed_mps", "cov_v_m2ps2[0, 0]",
+                "cov_v_m2ps2[1, 1]")
+_FINITE = ("v_east_mps", "v_north_mps", "heading_deg", "yaw_deg")
+
+
 def motion_codes(motion: ObjectMotion, n: int) -> MotionCodes:
     """The CPM and SDSM fields of ``motion`` (module doc), checked: shapes ``(n,)`` / ``(n, 2, 2)``, sigmas
-    and ages >= 0 -> :class:`~footprint_uq.errors.InputError` naming the field."""
+    and ages >= 0 -> :class:`~footprint_uq.errors.InputError` naming the field.  One compiled pass
+    (:func:`_codes_kernel`; :func:`motion_codes_reference` is the same in numpy)."""
+    ve, vn = _arr("v_east_mps", motion.v_east_mps, n), _arr("v_north_mps", motion.v_north_mps, n)
+    cov = _arr("cov_v_m2ps2", motion.cov_v_m2ps2, n, (2, 2))
+    sp, ssp = _arr("speed_mps", motion.speed_mps, n), _arr("sigma_speed_mps", motion.sigma_speed_mps, n)
+    hd, shd = _arr("heading_deg", motion.heading_deg, n), _arr("sigma_heading_deg", motion.sigma_heading_deg, n)
+    yw, syw = _arr("yaw_deg", motion.yaw_deg, n), _arr("sigma_yaw_deg", motion.sigma_yaw_deg, n)
+    age = _arr("age_s", motion.age_s, n)
+    codes, has = np.empty((11, n), np.int64), np.empty((3, n), np.bool_)
+    bad, row = _codes_kernel(ve, vn, cov, sp, ssp, hd, shd, yw, syw, age, np.asarray(SPEED_CONFIDENCE_MPS),
+                             np.asarray(HEADING_CONFIDENCE_DEG), codes, has)
+    if bad >= len(_NONNEGATIVE):
+        name = _FINITE[bad - len(_NONNEGATIVE)]
+        value = (ve, vn, hd, yw)[bad - len(_NONNEGATIVE)][row]
+        raise InputError(f"motion.{name}", float(value), "a finite number (NaN = unknown)")
+    if bad >= 0:
+        value = (ssp, shd, syw, age, sp, cov[:, 0, 0], cov[:, 1, 1])[bad][row]
+        raise InputError(f"motion.{_NONNEGATIVE[bad]}", float(value), "a standard deviation >= 0 (NaN = unknown)")
+    return MotionCodes(has[0], codes[0], codes[1], codes[2], codes[3], has[1], codes[4], codes[5], has[2], codes[6],
+                       codes[7], codes[8], codes[9], codes[10])
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _ceil_k(x):  # pragma: no cover - compiled
+    return np.ceil(x * (1.0 - _GUARD) - _GUARD)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _conf_k(sigma, unit, out_of_range_above):  # pragma: no cover - compiled
+    c = Z95 * sigma
+    if math.isnan(c):
+        return CONF_UNAVAILABLE
+    if c > out_of_range_above:
+        return CONF_OUT_OF_RANGE
+    return int(min(max(_ceil_k(c / unit), 1.0), 125.0))
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _velocity_k(v):  # pragma: no cover - compiled
+    if math.isnan(v):
+        return VELOCITY_UNAVAILABLE
+    if v >= 163.81:
+        return VELOCITY_MAX
+    if v <= -163.83:
+        return VELOCITY_MIN
+    return int(min(max(_ceil_k(v * 100.0), float(VELOCITY_MIN)), float(VELOCITY_MAX)))
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _level_k(c95, levels):  # pragma: no cover - compiled
+    if math.isnan(c95):
+        return 0
+    best, code = math.inf, 0
+    for k in range(levels.shape[0]):
+        if levels[k] >= c95 * (1.0 - _GUARD) and levels[k] < best:
+            best, code = levels[k], k + 1
+    return code
+
+
+@njit(cache=True, nogil=True)
+def _codes_kernel(ve, vn, cov, sp, ssp, hd, shd, yw, syw, age, speed_levels, heading_levels, codes,
+                  has):  # pragma: no cover - compiled
+    """:func:`motion_codes_reference`'s arithmetic in one pass into ``codes (11, n)`` (vx, vx_conf, vy, vy_conf, yaw,
+    yaw_conf, age_ms, sdsm speed, speed conf, heading, heading conf) and ``has (3, n)`` (velocity, yaw, age).
+    Returns ``(field, row)`` of the first bad input (``field`` indexes ``_NONNEGATIVE + _FINITE``), ``(-1, -1)``
+    if none."""
+    n = ve.shape[0]
+    for f in range(7):
+        for i in range(n):
+            v = (ssp[i], shd[i], syw[i], age[i], sp[i], cov[i, 0, 0], cov[i, 1, 1])[f]
+            if v < 0.0:
+                return f, i
+    for f in range(4):
+        for i in range(n):
+            if math.isinf((ve[i], vn[i], hd[i], yw[i])[f]):
+                return 7 + f, i
+    for i in range(n):
+        has[0, i] = not (math.isnan(ve[i]) and math.isnan(vn[i]))
+        codes[0, i], codes[2, i] = _velocity_k(ve[i]), _velocity_k(vn[i])
+        codes[1, i] = _conf_k(math.sqrt(cov[i, 0, 0]), 0.01, 1.25)
+        codes[3, i] = _conf_k(math.sqrt(cov[i, 1, 1]), 0.01, 1.25)
+        z = np.mod(90.0 - yw[i], 360.0)
+        has[1, i] = not math.isnan(yw[i])
+        codes[4, i] = ANGLE_UNAVAILABLE if math.isnan(z) else int(np.mod(_ceil_k(z * 10.0), 3600.0))
+        codes[5, i] = _conf_k(syw[i], 0.1, 12.5)
+        a = age[i]
+        has[2, i] = not math.isnan(a)
+        codes[6, i] = 0 if math.isnan(a) else int(min(math.floor(a * 1000.0 + 1e-6), float(AGE_MAX_MS)))
+        s = sp[i]
+        codes[7, i] = SDSM_SPEED_UNAVAILABLE if math.isnan(s) else int(min(np.rint(s / 0.02), 8190.0))
+        codes[8, i] = _level_k(Z95 * ssp[i], speed_levels)
+        h = hd[i]
+        codes[9, i] = (SDSM_HEADING_UNAVAILABLE if math.isnan(h)
+                       else int(np.mod(np.rint(np.mod(h, 360.0) / 0.0125), 28800.0)))
+        codes[10, i] = _level_k(Z95 * shd[i], heading_levels)
+    return -1, -1
+
+
+def motion_codes_reference(motion: ObjectMotion, n: int) -> MotionCodes:
+    """:func:`motion_codes` in numpy: the readable reference (~100 array operations per frame) that
+    tests/test_service_messages.py holds the compiled pass to, value for value."""
     ve, vn = _arr("v_east_mps", motion.v_east_mps, n), _arr("v_north_mps", motion.v_north_mps, n)
     cov = _arr("cov_v_m2ps2", motion.cov_v_m2ps2, n, (2, 2))
     sp, ssp = _arr("speed_mps", motion.speed_mps, n), _arr("sigma_speed_mps", motion.sigma_speed_mps, n)
