@@ -19,7 +19,7 @@ import time
 import numpy as np
 
 from footprint_uq import OpenCVCamera, PanTiltCamera
-from footprint_uq.fast.map_kernels import covariance_points
+from footprint_uq.products.covariance import covariance_points
 
 SIZES = (2, 100, 10_000)
 
