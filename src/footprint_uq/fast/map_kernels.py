@@ -245,8 +245,8 @@ def _finish(q00, q01, q11, Q00, Q01, Q10, Q11, ax, ay, ox, oy, Ccc, bq, has_qc):
 
 
 @nb.njit(inline="always", **_JIT1)
-def _flag(c00, c01, c11, dn, lam, dxr, dyr, ox, oy, ax, ay, Q00, Q01, Q10, Q11, g0, g1, q00, q01, q11, zq0, zq1, zz,
-          cc, has_qc, bq, bz):
+def _flag(c00, c01, c11, dn, idn, lam, dxr, dyr, ox, oy, ax, ay, Q00, Q01, Q10, Q11, g0, g1, q00, q01, q11, zq0, zq1,
+          zz, cc, has_qc, bq, bz):
     """Nonlinearity of one pixel (:func:`footprint_uq.fast.core.nonlinearity_point`) from its state covariance.
 
     State ``(q0, q1 | z | x0, y0, h, dz, gx, gy)``: ``z`` is the component of a rotation's ray
@@ -256,7 +256,8 @@ def _flag(c00, c01, c11, dn, lam, dxr, dyr, ox, oy, ax, ay, Q00, Q01, Q10, Q11, 
     ``g^T Sigma g = a_g . C_s a_g`` and ``J Sigma E = A_J C_s[:, (x0, y0)]``.  Pieces of ``C_s``:
     ``q00, q01, q11`` (ray, pixel noise included), ``zq0, zq1, zz`` (z rows), ``cc`` the constants'
     covariance ``Ccc`` (6, 6) as a flat tuple (row-major: a pixel loop then reads no array and
-    vectorises), and with ``has_qc`` ``bq`` (2, 6) / ``bz`` (6,) the ray / constant cross terms.
+    vectorises), and with ``has_qc`` ``bq`` (2, 6) / ``bz`` (6,) the ray / constant cross terms.  ``idn = 1 / Dn``
+    (``-lam / Hn``, which the caller holds: no division by ``Dn`` here).
     """
     uq0 = q00 * g0 + q01 * g1 + zq0 * dn
     uq1 = q01 * g0 + q11 * g1 + zq1 * dn
@@ -291,8 +292,8 @@ def _flag(c00, c01, c11, dn, lam, dxr, dyr, ox, oy, ax, ay, Q00, Q01, Q10, Q11, 
     hg = uc2 - uc3 - ox * uc4 - oy * uc5
     jg0 = Q00 * uq0 + Q01 * uq1 + uc0 + ax * hg
     jg1 = Q10 * uq0 + Q11 * uq1 + uc1 + ay * hg
-    return core.nonlinearity_point(c00, c01, c11, dn, lam, dxr, dyr, jg0, jg1, gamma, uc0, uc1, X00, X01, X10, X11,
-                                   cc[0], cc[1], cc[7])
+    return core.nonlinearity_point_idn(c00, c01, c11, idn, lam, dxr, dyr, jg0, jg1, gamma, uc0, uc1, X00, X01, X10,
+                                       X11, cc[0], cc[1], cc[7])
 
 
 # --------------------------------------------------------------------------------------
@@ -480,8 +481,8 @@ def _row_undistorted_flag(cst, cxs, dx0, dy0, dn0, P00, P01, P11, ZQ, ZZ, Ccc, x
         zq0 = _horner8(zq0c, x)
         zq1 = _horner8(zq1c, x)
         zz = zzc[0] + x * (zzc[1] + x * zzc[2])
-        nl = _flag(c00, c01, c11, dn, lam, dxr, dyr, ox, oy, ax, ay, Q00, Q01, Q10, Q11, g0, g1, q00, q01, q11, zq0,
-                   zq1, zz, cc, False, bq, bz)
+        nl = _flag(c00, c01, c11, dn, -lam * cs[26], lam, dxr, dyr, ox, oy, ax, ay, Q00, Q01, Q10, Q11, g0, g1, q00,
+                   q01, q11, zq0, zq1, zz, cc, False, bq, bz)
         good = _store_pixel(xr, cr, vr, iu, ok, x0 + ox, y0 + oy, c00, c01, c11)
         nr[iu] = nl if good else np.nan
 
@@ -529,8 +530,8 @@ def _row_undistorted_qc(cst, cxs, dx0, dy0, dn0, P00, P01, P11, BQ, ZQ, ZZ, BZ, 
             zq0 = _horner8(ZQ[0], x)
             zq1 = _horner8(ZQ[1], x)
             zz = ZZ[0] + x * (ZZ[1] + x * ZZ[2])
-            nl = _flag(c00, c01, c11, dn, lam, dxr, dyr, ox, oy, ax, ay, Q00, Q01, Q10, Q11, g0, g1, q00, q01, q11,
-                       zq0, zq1, zz, cc, True, bq, bz)
+            nl = _flag(c00, c01, c11, dn, -lam * cs[26], lam, dxr, dyr, ox, oy, ax, ay, Q00, Q01, Q10, Q11, g0, g1,
+                       q00, q01, q11, zq0, zq1, zz, cc, True, bq, bz)
             nr[iu] = nl if good else np.nan
 
 
@@ -643,8 +644,8 @@ def _point_general(u, v, S00, S01, S11, prm, R, om, colptr, rowidx, vals, vc, Cc
         return status.OVERFLOW, np.nan, np.nan, np.nan, np.nan, np.nan, np.nan
     nl = np.nan
     if flag:
-        nl = _flag(c00, c01, c11, dn, lam, dxr, dyr, ox, oy, ax, ay, Q00, Q01, Q10, Q11, g0, g1, q00, q01, q11, zq0,
-                   zq1, zz, to_fixed_tuple(Ccc.ravel(), 36), has_qc, bq, bz)
+        nl = _flag(c00, c01, c11, dn, 1.0 / dn, lam, dxr, dyr, ox, oy, ax, ay, Q00, Q01, Q10, Q11, g0, g1, q00, q01,
+                   q11, zq0, zq1, zz, to_fixed_tuple(Ccc.ravel(), 36), has_qc, bq, bz)
     return status.OK, x, y, c00, c01, c11, nl
 
 
@@ -734,7 +735,7 @@ _ROWS_PER_BLOCK_DIV = 16
 BUF_ROWS = (
     ("XD", "distorted normalised x"), ("XN", "undistorted normalised x"), ("YN", "undistorted normalised y"),
     ("M00", "d(undistorted)/d(distorted) 00"), ("M01", "01"), ("M10", "10"), ("M11", "11"),
-    ("Q00", "ray-state covariance C_qq 00 (with the flag: the total, pixel noise and rotations included)"),
+    ("Q00", "ray-state covariance C_qq 00 of the mixed factor columns (_ray_cov adds the rest)"),
     ("Q01", "C_qq 01"), ("Q11", "C_qq 11"), ("V0", "one factor column's dq_0"), ("V1", "its dq_1"),
     ("CONV", "previous row's y_d where that pixel converged, else NaN"), ("IDEN", "1 / distortion denominator"),
     ("YDB", "the row's y_d, broadcast"),
@@ -1038,29 +1039,47 @@ def _ray_state(x, y, cst, R00, R01, R02, R10, R11, R12):
     return dxr, dyr, dn, lam, ox, oy, Q00, Q01, Q10, Q11
 
 
-@nb.njit(**_JIT1)
-def _row_pixels(cst, R, Om, pre, flag, buf, xr, cr, vr, rr):
-    """Per pixel: ray, ground point, Q, the ray-state covariance (mixed columns + ``M C_pre M^T`` +
-    rotations ``G Om G^T``), the covariance; codes into ``rr``.  With ``flag`` the total ray-state
-    covariance goes back to ``buf[Q00/Q01/Q11]`` (for :func:`_row_flag`)."""
-    if flag:
-        _row_pixels_loop(cst, R, Om, pre, True, buf, xr, cr, vr, rr)
-    else:
-        _row_pixels_loop(cst, R, Om, pre, False, buf, xr, cr, vr, rr)
-
-
 @nb.njit(inline="always", **_JIT1)
-def _row_pixels_loop(cst, R, Om, pre, store_q, buf, xr, cr, vr, rr):
-    """:func:`_row_pixels` with ``store_q`` a constant (two compiled loops: LLVM vectorises a loop whose
-    stores do not depend on a run-time flag)."""
+def _ray_cov(x, y, xdi, m00_, m01_, m10_, m11_, b00, b01, b11, pre, Omt):
+    """Total ray-state covariance ``C_qq`` of one pixel: the mixed columns' part ``b`` + ``M C_pre M^T``
+    (intrinsics and pixel noise, ``C_pre`` a polynomial in ``x_d`` with coefficients ``pre``) + the
+    rotations' ``G Om G^T`` (``Omt`` the upper triangle of ``Om``).  Shared by the pixel pass and the
+    flag pass, which recomputes it (a few dozen vectorised multiply-adds) rather than have the pixel
+    loop store it: a loop that stores to rows of ``buf`` it also reads no longer vectorises."""
+    c00_0, c00_1, c00_2, c01_0, c01_1, c11_0 = pre
+    O00, O01, O02, O11, O12, O22 = Omt
+    e00 = c00_0 + xdi * (c00_1 + xdi * c00_2)
+    e01 = c01_0 + xdi * c01_1
+    e11 = c11_0
+    T00 = m00_ * e00 + m01_ * e01
+    T01 = m00_ * e01 + m01_ * e11
+    T10 = m10_ * e00 + m11_ * e01
+    T11 = m10_ * e01 + m11_ * e11
+    # rotations: dq = G omega, G = [[-x y, 1 + x^2, -y], [-(1 + y^2), x y, x]], Cov(omega) = Om
+    xy_ = x * y
+    G00, G01, G02, G10, G11, G12 = -xy_, 1.0 + x * x, -y, -(1.0 + y * y), xy_, x
+    H0 = G00 * O00 + G01 * O01 + G02 * O02
+    H1 = G00 * O01 + G01 * O11 + G02 * O12
+    H2 = G00 * O02 + G01 * O12 + G02 * O22
+    K0 = G10 * O00 + G11 * O01 + G12 * O02
+    K1 = G10 * O01 + G11 * O11 + G12 * O12
+    K2 = G10 * O02 + G11 * O12 + G12 * O22
+    a00 = b00 + T00 * m00_ + T01 * m01_ + H0 * G00 + H1 * G01 + H2 * G02
+    a01 = b01 + T00 * m10_ + T01 * m11_ + H0 * G10 + H1 * G11 + H2 * G12
+    a11 = b11 + T10 * m10_ + T11 * m11_ + K0 * G10 + K1 * G11 + K2 * G12
+    return a00, a01, a11
+
+
+@nb.njit(**_JIT1)
+def _row_pixels(cst, R, Omt, pre, buf, xr, cr, vr, rr):
+    """Per pixel: ray, ground point, Q, the ray-state covariance (:func:`_ray_cov`), the covariance; codes
+    into ``rr``."""
     cs = to_fixed_tuple(cst, 30)  # constants as scalars: stores to the outputs cannot make the loop reload them
     x0, y0, iHn = cst[0], cst[1], cst[26]
     p00, p01, p11 = cst[11], cst[12], cst[13]
     s0, s1, s2, s3, s4, s5 = cst[14], cst[15], cst[16], cst[17], cst[18], cst[19]
     m00, m01, m02, m10, m11, m12 = cst[20], cst[21], cst[22], cst[23], cst[24], cst[25]
-    c00_0, c00_1, c00_2, c01_0, c01_1, c11_0 = pre
     R00, R01, R02, R10, R11, R12 = R[0, 0], R[0, 1], R[0, 2], R[1, 0], R[1, 1], R[1, 2]
-    O00, O01, O02, O11, O12, O22 = Om[0, 0], Om[0, 1], Om[0, 2], Om[1, 1], Om[1, 2], Om[2, 2]
     xd, xn, yn = buf[_XD], buf[_XN], buf[_YN]
     M00, M01, M10, M11 = buf[_M00], buf[_M01], buf[_M10], buf[_M11]
     q00, q01, q11 = buf[_Q00], buf[_Q01], buf[_Q11]
@@ -1072,31 +1091,7 @@ def _row_pixels_loop(cst, R, Om, pre, store_q, buf, xr, cr, vr, rr):
         dxr, dyr, dn, lam, ox, oy, Q00, Q01, Q10, Q11 = _ray_state(x, y, cs, R00, R01, R02, R10, R11, R12)
         lens = ok[i]
         oki = lens & (dn < 0.0)
-        # intrinsics + pixel noise: M C_pre M^T, C_pre polynomial in x_d
-        xdi = xd[i]
-        e00 = c00_0 + xdi * (c00_1 + xdi * c00_2)
-        e01 = c01_0 + xdi * c01_1
-        e11 = c11_0
-        m00_, m01_, m10_, m11_ = M00[i], M01[i], M10[i], M11[i]
-        T00 = m00_ * e00 + m01_ * e01
-        T01 = m00_ * e01 + m01_ * e11
-        T10 = m10_ * e00 + m11_ * e01
-        T11 = m10_ * e01 + m11_ * e11
-        # rotations: dq = G omega, G = [[-x y, 1 + x^2, -y], [-(1 + y^2), x y, x]], Cov(omega) = Om
-        xy_ = x * y
-        G00, G01, G02, G10, G11, G12 = -xy_, 1.0 + x * x, -y, -(1.0 + y * y), xy_, x
-        H0 = G00 * O00 + G01 * O01 + G02 * O02
-        H1 = G00 * O01 + G01 * O11 + G02 * O12
-        H2 = G00 * O02 + G01 * O12 + G02 * O22
-        K0 = G10 * O00 + G11 * O01 + G12 * O02
-        K1 = G10 * O01 + G11 * O11 + G12 * O12
-        K2 = G10 * O02 + G11 * O12 + G12 * O22
-        b00, b01, b11 = q00[i], q01[i], q11[i]
-        a00 = b00 + T00 * m00_ + T01 * m01_ + H0 * G00 + H1 * G01 + H2 * G02
-        a01 = b01 + T00 * m10_ + T01 * m11_ + H0 * G10 + H1 * G11 + H2 * G12
-        a11 = b11 + T10 * m10_ + T11 * m11_ + K0 * G10 + K1 * G11 + K2 * G12
-        if store_q:  # (a constant once inlined: the loop without the flag has no stores to buf and vectorises)
-            q00[i], q01[i], q11[i] = a00, a01, a11
+        a00, a01, a11 = _ray_cov(x, y, xd[i], M00[i], M01[i], M10[i], M11[i], q00[i], q01[i], q11[i], pre, Omt)
         A00 = Q00 * a00 + Q01 * a01
         A01 = Q00 * a01 + Q01 * a11
         A10 = Q10 * a00 + Q11 * a01
@@ -1146,11 +1141,12 @@ def _row_qc(cst, R, buf, BQ, cr, vr):
 
 
 @nb.njit(inline="always", **_JIT1)
-def _pixel_flag(i, cs, R, Om, cc, has_qc, buf, BQ, cr, bq, bz):
+def _pixel_flag(i, cs, R, Om, pre, cc, has_qc, buf, BQ, cr, bq, bz):
     """The linearity flag of pixel ``i`` of a row of the general kernel (:func:`_flag`).
 
-    The rotation-only factor columns (``Om``) add ``C_qz = G Om h`` and ``C_zz = h^T Om h`` with
-    ``z = h . omega``, ``h = (y, -x, 0)``; the mixed columns' parts are in ``buf`` and ``BQ``.
+    The rotation-only factor columns (``Om``, upper triangle) add ``C_qz = G Om h`` and
+    ``C_zz = h^T Om h`` with ``z = h . omega``, ``h = (y, -x, 0)``; the mixed columns' parts are in
+    ``buf`` and ``BQ``; the total ``C_qq`` is recomputed (:func:`_ray_cov`, ``pre`` as there).
     ``buf`` is indexed as a 2-D array (one base pointer: the loop needs few alias checks).
     """
     x = buf[_XN, i]
@@ -1167,13 +1163,15 @@ def _pixel_flag(i, cs, R, Om, cc, has_qc, buf, BQ, cr, bq, bz):
             bq[0, c] = BQ[c, i]
             bq[1, c] = BQ[6 + c, i]
             bz[c] = BQ[12 + c, i]
+    a00, a01, a11 = _ray_cov(x, y, buf[_XD, i], buf[_M00, i], buf[_M01, i], buf[_M10, i], buf[_M11, i],
+                             buf[_Q00, i], buf[_Q01, i], buf[_Q11, i], pre, Om)
     iHn = cs[26]
-    return _flag(cr[4 * i], cr[4 * i + 1], cr[4 * i + 3], dn, lam, dxr, dyr, ox, oy, ox * iHn, oy * iHn, Q00, Q01,
-                 Q10, Q11, cs[3], cs[4], buf[_Q00, i], buf[_Q01, i], buf[_Q11, i], zq0, zq1, zz, cc, has_qc, bq, bz)
+    return _flag(cr[4 * i], cr[4 * i + 1], cr[4 * i + 3], dn, -lam * iHn, lam, dxr, dyr, ox, oy, ox * iHn, oy * iHn,
+                 Q00, Q01, Q10, Q11, cs[3], cs[4], a00, a01, a11, zq0, zq1, zz, cc, has_qc, bq, bz)
 
 
 @nb.njit(**_JIT1)
-def _row_flag(cst, R, Om, Ccc, has_qc, buf, BQ, cr, vr, nr):
+def _row_flag(cst, R, Omt, pre, Ccc, has_qc, buf, BQ, cr, vr, nr):
     """The linearity flag of every pixel of a row (:func:`_pixel_flag`) into ``nr`` (NaN where not valid).
 
     Constants travel as tuples and ``buf`` is read as one 2-D array, so that the loop without the
@@ -1182,17 +1180,16 @@ def _row_flag(cst, R, Om, Ccc, has_qc, buf, BQ, cr, vr, nr):
     cs = to_fixed_tuple(cst, 30)
     cc = to_fixed_tuple(Ccc.ravel(), 36)
     Rt = (R[0, 0], R[0, 1], R[0, 2], R[1, 0], R[1, 1], R[1, 2])
-    Omt = (Om[0, 0], Om[0, 1], Om[0, 2], Om[1, 1], Om[1, 2])
     bq = np.zeros((2, 6))
     bz = np.zeros(6)
     nan = np.nan
     if has_qc:
         for i in range(vr.shape[0]):
-            nl = _pixel_flag(i, cs, Rt, Omt, cc, True, buf, BQ, cr, bq, bz)
+            nl = _pixel_flag(i, cs, Rt, Omt, pre, cc, True, buf, BQ, cr, bq, bz)
             nr[i] = nl if vr[i] else nan
     else:
         for i in range(vr.shape[0]):
-            nl = _pixel_flag(i, cs, Rt, Omt, cc, False, buf, BQ, cr, bq, bz)
+            nl = _pixel_flag(i, cs, Rt, Omt, pre, cc, False, buf, BQ, cr, bq, bz)
             nr[i] = nl if vr[i] else nan
 
 
@@ -1219,12 +1216,13 @@ def _row_general(v, prm, R, om, colptr, rowidx, vals, vc, colkind, Om, Ccc, has_
         BQ[:] = 0.0
     pre = _row_intrinsics(yd, prm, colptr, rowidx, vals, colkind, Suv)
     _row_mixed(yd, prm, om, colptr, rowidx, vals, vc, colkind, has_qc, flag, buf, BQ)
-    _row_pixels(cst, R, Om, pre, flag, buf, xr, cr, vr, rr)
+    Omt = (Om[0, 0], Om[0, 1], Om[0, 2], Om[1, 1], Om[1, 2], Om[2, 2])
+    _row_pixels(cst, R, Omt, pre, buf, xr, cr, vr, rr)
     if has_qc:
         _row_qc(cst, R, buf, BQ, cr, vr)
         _finish_row(xr, cr, vr, rr)  # the cross terms may overflow what _row_pixels checked
     if flag:
-        _row_flag(cst, R, Om, Ccc, has_qc, buf, BQ, cr, vr, nr)
+        _row_flag(cst, R, Omt, pre, Ccc, has_qc, buf, BQ, cr, vr, nr)
 
 
 @nb.njit(**_JIT1)
