@@ -85,6 +85,7 @@ from .. import params as P
 from .. import status
 from . import core
 from .buffers import thread_buffer
+from .cores import free_cores
 
 __all__ = ["map_into", "points_into", "SERIAL_BELOW", "BUF_ROWS", "MAP_KERNELS", "POINT_KERNELS"]
 
@@ -1393,9 +1394,15 @@ def points_into(k: dict, dom, uv, Suv, xy, cov, valid, reason, nlin) -> None:
     ``k`` as in :func:`map_into`; ``uv`` (n, 2) pixels, ``Suv`` (n, 2, 2) per-point pixel covariance,
     C-contiguous; outputs ``xy`` (n, 2), ``cov`` (n, 2, 2), ``valid`` (n,) bool, ``reason`` (n,) int8 and
     ``nlin`` (n,) or (0,) (not computed), filled in place.  Below :data:`SERIAL_BELOW` points the kernel
-    runs on the calling thread only.
+    runs on the calling thread only, and so it does when no second core is free at the moment of the call
+    (:func:`footprint_uq.fast.cores.free_cores`: a threaded call would wait for a busy core, up to a scheduler
+    slice, instead of using one).
     """
-    kernel = _points_general_serial if uv.shape[0] < SERIAL_BELOW else _points_general
+    threaded = uv.shape[0] >= SERIAL_BELOW
+    if threaded:
+        free = free_cores()
+        threaded = free is None or free >= 2
+    kernel = _points_general if threaded else _points_general_serial
     kernel(uv, Suv, k["params"], k["R"], k["omega"], k["colptr"], k["rowidx"], k["vals"], k["vc"],
            k["Ccc"], k["has_qc"], dom, xy, cov, valid, reason, nlin)
 
