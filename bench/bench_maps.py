@@ -23,7 +23,7 @@ import time
 import numpy as np
 
 from footprint_uq import ErrorBudget, OpenCVCamera, PanTiltCamera, propagate
-from footprint_uq.fast.map_kernels import covariance_map
+from footprint_uq.products.covariance import covariance_map
 
 W, H = 1920, 1080
 DIST = [-0.2, 0.05, 1e-3, -2e-3, 0.01]  # moderate barrel distortion (k1, k2, p1, p2, k3)

@@ -10,7 +10,7 @@ bench cameras of ``bench_maps.py`` (pan-tilt, and OpenCV with distortion) with t
   model through the general back-projection, camera-level errors shared by all points of a sample,
   per-point pixel noise), ``10^4`` samples per point (``--quick``: 2000 samples on 100 points);
 * **linear, numpy** -- :func:`footprint_uq.uncertainty.propagation.propagate` (closed-form Jacobians, ``J S J^T``);
-* **linear, fused** -- :func:`footprint_uq.fast.map_kernels.covariance_points` (the numba kernel on scattered pixels).
+* **linear, fused** -- :func:`footprint_uq.products.covariance.covariance_points` (numba kernel, scattered pixels).
 
 Times are medians (Monte Carlo: of ``mc_runs`` runs, 1 in the full run, it takes about a minute per
 camera on 2 cores); the speed ratio is Monte Carlo time / linear time.  Agreement: the ratio
@@ -31,7 +31,7 @@ from bench_maps import cameras
 from bench_uncertainties import budget
 
 from footprint_uq import ellipse_axes, monte_carlo, propagate
-from footprint_uq.fast.map_kernels import covariance_points
+from footprint_uq.products.covariance import covariance_points
 
 #: ground range (m from the camera foot) of the "near" statistics: a roadside camera's working range
 NEAR_M = 200.0

@@ -3,7 +3,8 @@ distortion, on a quiet machine and with every other core busy (a spinning proces
 to a detector), median and 90th percentile of many calls, wall clock and CPU time (issue 24: the distorted
 path's p90 was 8 ms against a 0.39 ms median with the other core busy).  A wall p90 far above the CPU p90
 is time spent waiting: for a thread or, on an oversubscribed machine (load average above the core count), for
-the scheduler.
+the scheduler.  From 4096 points (``fast.map_kernels.SERIAL_BELOW``) the kernel runs threaded only when a second
+core is idle at the moment of the call (``fast.cores.free_cores``); with the other core busy it stays serial.
 
 Run ``.venv/bin/python bench/bench_small_calls.py [--calls N]``; prints one JSON line per case.
 """
@@ -19,7 +20,7 @@ import time
 import numpy as np
 
 from footprint_uq import OpenCVCamera, PanTiltCamera
-from footprint_uq.fast.map_kernels import covariance_points
+from footprint_uq.products.covariance import covariance_points
 
 SIZES = (2, 100, 10_000)
 

@@ -2,7 +2,7 @@
 
 Four implementations of the same per-pixel 2x2 covariance, timed in one run on the same machine:
 
-* **ours** -- :func:`footprint_uq.fast.map_kernels.covariance_map` (fused numba kernel) on the full
+* **ours** -- :func:`footprint_uq.products.covariance.covariance_map` (fused numba kernel) on the full
   1920x1080 grid, into preallocated output;
 * **numpy** -- :func:`footprint_uq.uncertainty.propagation.propagate` (naive vectorised numpy, full Jacobians),
   on the full grid (``--quick``: every 4th pixel; its rate is per pixel either way);
@@ -34,7 +34,7 @@ from uncertainties import umath
 from footprint_uq import params as P
 from footprint_uq import propagate
 from footprint_uq.cameras.pantilt import paper_xy
-from footprint_uq.fast.map_kernels import covariance_map
+from footprint_uq.products.covariance import covariance_map
 
 #: the bench_maps budget (every term of the kernel runs)
 BUDGET_CHANGES = dict(roll_deg=0.05, ground_height_m=0.05, ground_slope_deg=0.5)

@@ -228,3 +228,51 @@ def test_tracking_layer():
                 if tl == "tracking" and layer not in TRACKING_IMPORTED_BY:
                     bad.append(f"{mod}:{n.lineno}: imports {t[0]}")
     assert any(m.startswith(f"{PKG}.tracking.") for m in MODS) and bad == []
+
+
+#: the compiled layer is the floor: fast/ imports only itself and the floor's leaf modules (which import nothing of
+#: the package), never cameras/, uncertainty/, products/ or anything above (docs/architecture.md)
+FLOOR_LEAVES = ("params", "status", "v2x_codes")
+FAST_MAY_IMPORT = ("fast",) + FLOOR_LEAVES
+
+
+def _layer(target: str) -> str:
+    return target.split(".")[1] if target.count(".") else ""
+
+
+def _imports_above(layer: str, allowed: tuple[str, ...]) -> list[str]:
+    """Every import (at the top, in a function or for type checking alike) of a module of ``layer`` whose
+    target's layer is not in ``allowed``."""
+    bad = []
+    for mod, scan in SCANS.items():
+        if _layer(mod) != layer:
+            continue
+        for n, _, _, targets in scan.imports:
+            for t in filter(None, targets):
+                if _layer(t[0]) not in allowed:
+                    bad.append(f"{mod}:{n.lineno}: {t[0]}")
+    return bad
+
+
+def test_fast_is_the_floor():
+    """fast/ (the compiled core) imports nothing above it: constants it needs live in params / status /
+    v2x_codes, the rotations it needs in fast/rotation.py, the public map/points API in products/covariance.py."""
+    assert any(m.startswith(f"{PKG}.fast.") for m in MODS)
+    assert _imports_above("fast", FAST_MAY_IMPORT) == []
+
+
+def test_floor_leaves_import_no_layer():
+    """The floor modules fast/ may import are leaves: they import nothing of the package."""
+    for leaf in FLOOR_LEAVES:
+        assert f"{PKG}.{leaf}" in MODS
+        assert _imports_above(leaf, ()) == [], leaf
+
+
+def test_floor_check_can_fail(monkeypatch):
+    """The check above sees an import of products from fast/ (a scan of a synthetic module)."""
+    scan = _Scan.__new__(_Scan)
+    scan.mod, scan.is_pkg = f"{PKG}.fast.fake", False
+    scan.tree = ast.parse("from ..products import v2x\nfrom .. import status\n")
+    scan.imports = [(n, False, False, scan._targets(n)) for n in scan.tree.body]
+    monkeypatch.setitem(SCANS, f"{PKG}.fast.fake", scan)
+    assert _imports_above("fast", FAST_MAY_IMPORT) == [f"{PKG}.fast.fake:1: {PKG}.products.v2x"]

@@ -5,7 +5,7 @@ import pytest
 
 from footprint_uq import ErrorBudget, InputError, OpenCVCamera, PanTiltCamera, propagate
 from footprint_uq import params as P
-from footprint_uq.fast.map_kernels import covariance_map, covariance_points
+from footprint_uq.products.covariance import covariance_map, covariance_points
 
 SEED = 77
 

@@ -319,7 +319,7 @@ def test_report_helpers(tmp_path):
 def test_returned_reason_is_never_the_internal_scratch():
     """covariance_map reuses a per-thread status buffer only when the codes are not returned: a returned
     ``reason`` is the caller's own array, untouched by later maps (of this or another size)."""
-    from footprint_uq.fast.map_kernels import covariance_map
+    from footprint_uq.products.covariance import covariance_map
 
     cam = PanTiltCamera(800.0, (64, 48), 6.0, 0.0, 0.5)  # the horizon crosses the image
     cam2 = PanTiltCamera(800.0, (64, 48), 6.0, 0.0, 1.5)  # other codes: more of the image sees the ground

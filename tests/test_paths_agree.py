@@ -27,7 +27,7 @@ from footprint_uq.cameras.distortion import distort
 from footprint_uq.cameras.opencv import OpenCVCamera
 from footprint_uq.cameras.pantilt import PanTiltCamera
 from footprint_uq.cameras.rotation import R_W_C
-from footprint_uq.fast.map_kernels import covariance_map, covariance_points
+from footprint_uq.products.covariance import covariance_map, covariance_points
 from footprint_uq.products.footprints import FrameProcessor, footprints_from_boxes3d, footprints_from_corners
 from footprint_uq.uncertainty.budget import load_budget
 from footprint_uq.uncertainty.propagation import DEFAULT_LINEAR_THRESHOLD, propagate

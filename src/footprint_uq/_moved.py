@@ -20,7 +20,7 @@ __all__ = ["MOVED", "install"]
 #: it was split into one module per command (cli/locate, map, presets, demo) and its logic moved to
 #: the library (products.locate, viz.map_report, uncertainty.preset_tables, viz.demo).
 MOVED = {
-    "kernels": "fast.map_kernels",
+    "kernels": "products.covariance",
     "footprint_kernels": "fast.footprint_kernels",
     "budget": "uncertainty.budget",
     "presets": "uncertainty.presets",

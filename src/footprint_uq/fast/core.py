@@ -30,7 +30,8 @@ __all__ = [
     "UNDISTORT_TOL", "UNDISTORT_MAX_ITER", "R_CAP", "STRETCH_MAX", "DOM_M", "DOM_RD_IN2", "DOM_RD_OUT2",
     "DOM_RU_IN2", "DOM_RU_OUT2", "DOM_TAB", "distort_point", "distort_jac", "in_domain_distorted",
     "in_domain_undistorted", "undistort_point", "undistort_vec", "undistort_row", "fold_radius", "undistort_many",
-    "contains_many", "major_axis", "nonlinearity_forms", "nonlinearity_point", "ground_of_ray",
+    "contains_many", "major_axis", "nonlinearity_forms", "nonlinearity_forms_idn", "nonlinearity_point",
+    "nonlinearity_point_idn", "ground_of_ray",
 ]
 
 _INL = dict(inline="always", cache=True, error_model="numpy", fastmath={"contract"})
@@ -454,11 +455,20 @@ def nonlinearity_forms(lam_max_m2, e0, e1, dn, lam_m, dx, dy, mu, gamma, s_num_m
     down (``1 + delta / lam_max < 0``), 0 where ``delta`` is 0 (also with ``lam_max`` 0: no uncertainty),
     NaN where an input is not finite.
     """
+    return nonlinearity_forms_idn(lam_max_m2, e0, e1, 1.0 / dn, lam_m, dx, dy, mu, gamma, s_num_m2, s_cross_m2,
+                                  mu_num)
+
+
+@nb.njit(**_INL)
+def nonlinearity_forms_idn(lam_max_m2, e0, e1, idn, lam_m, dx, dy, mu, gamma, s_num_m2, s_cross_m2, mu_num):
+    """:func:`nonlinearity_forms` given ``idn = 1 / Dn`` instead of ``Dn``: a kernel that already holds the
+    reciprocal (every ray/ground intersection computes it) saves four divisions per point, which are most of
+    the flag's cost in a map's vectorised pixel loop."""
     b = lam_m * (dx * e0 + dy * e1)
-    q2 = gamma / (dn * dn)
-    w = -b / dn
-    c_L = mu / dn
-    c_A = (mu_num - w * gamma) / dn
+    q2 = gamma * (idn * idn)
+    w = -b * idn
+    c_L = mu * idn
+    c_A = (mu_num - w * gamma) * idn
     s_A = s_num_m2 - 2.0 * w * mu_num + w * w * gamma
     s_LA = s_cross_m2 - w * mu
     delta = (2.0 * q2 * q2 * b * b - 4.0 * q2 * b * c_A + q2 * s_A + c_A * c_A - 6.0 * q2 * c_L * b
@@ -492,6 +502,14 @@ def nonlinearity_point(c00, c01, c11, dn, lam_m, dx, dy, jg0, jg1, gamma, gp0, g
     2 e^T X e + e^T Sigma_pos e`` (``r' = J'^T e`` with ``J' = J - E^T``); then
     :func:`nonlinearity_forms`.
     """
+    return nonlinearity_point_idn(c00, c01, c11, 1.0 / dn, lam_m, dx, dy, jg0, jg1, gamma, gp0, gp1, x00, x01, x10,
+                                  x11, sp00, sp01, sp11)
+
+
+@nb.njit(**_INL)
+def nonlinearity_point_idn(c00, c01, c11, idn, lam_m, dx, dy, jg0, jg1, gamma, gp0, gp1, x00, x01, x10, x11,
+                           sp00, sp01, sp11):
+    """:func:`nonlinearity_point` given ``idn = 1 / Dn`` instead of ``Dn`` (:func:`nonlinearity_forms_idn`)."""
     lam_max, e0, e1 = major_axis(c00, c01, c11)
     mu = e0 * jg0 + e1 * jg1
     mu_num = mu - (e0 * gp0 + e1 * gp1)
@@ -499,7 +517,7 @@ def nonlinearity_point(c00, c01, c11, dn, lam_m, dx, dy, jg0, jg1, gamma, gp0, g
     epe = e0 * (sp00 * e0 + sp01 * e1) + e1 * (sp01 * e0 + sp11 * e1)
     s_crs = lam_max - exe
     s_num = lam_max - 2.0 * exe + epe
-    return nonlinearity_forms(lam_max, e0, e1, dn, lam_m, dx, dy, mu, gamma, s_num, s_crs, mu_num)
+    return nonlinearity_forms_idn(lam_max, e0, e1, idn, lam_m, dx, dy, mu, gamma, s_num, s_crs, mu_num)
 
 
 # --------------------------------------------------------------------------------------

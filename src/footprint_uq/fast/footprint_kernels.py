@@ -44,9 +44,9 @@ from numba import njit
 
 from .. import params as P
 from .. import status
-from ..cameras.rotation import R_W_C, dR_W_C
-from ..products import v2x
+from .. import v2x_codes as v2x
 from . import core
+from .rotation import R_W_C, dR_W_C
 
 
 class KernelCamera(NamedTuple):

@@ -1,5 +1,11 @@
 """Fused per-pixel kernels: ground point and 2x2 covariance of every pixel (numba).
 
+The public entries (budget loading, input checks, the camera's constants) are
+:func:`footprint_uq.products.covariance.covariance_map` and
+:func:`~footprint_uq.products.covariance.covariance_points`; this module holds the kernels and the
+array-level :func:`map_into` / :func:`points_into` that dispatch to them, and imports nothing above
+``fast/`` (``docs/architecture.md``).
+
 These compute exactly what :func:`footprint_uq.uncertainty.propagation.propagate` computes
 (first-order ``Cov = J_p Sigma_p J_p^T + J_uv Sigma_uv J_uv^T``), without ever
 materialising the ``(..., 2, 22)`` Jacobians, so that a full-HD map takes
@@ -77,69 +83,18 @@ from numba.np.unsafe.ndarray import to_fixed_tuple
 
 from .. import params as P
 from .. import status
-from .._checks import as_points, check_cov
-from ..cameras.rotation import R_W_C, dR_W_C
-from ..errors import InputError
-from ..uncertainty.budget import load_budget
 from . import core
 from .buffers import thread_buffer
+from .cores import free_cores
 
-__all__ = ["covariance_map", "covariance_points", "kernel_constants", "SERIAL_BELOW", "MAP_KERNELS", "POINT_KERNELS"]
+__all__ = ["map_into", "points_into", "SERIAL_BELOW", "BUF_ROWS", "MAP_KERNELS", "POINT_KERNELS"]
 
 _JIT = dict(parallel=True, fastmath={"contract"}, cache=True, error_model="numpy")
 _JIT1 = dict(fastmath={"contract"}, cache=True, error_model="numpy")
 
-# index of the constant state rows for the position/height/ground parameters
-_CONST_ROW = {P.XM: 0, P.YM: 1, P.HM: 2, P.GDZ: 3, P.GSX: 4, P.GSY: 5}
-
 
 # --------------------------------------------------------------------------------------
-# camera / budget constants
-# --------------------------------------------------------------------------------------
-def kernel_constants(camera, budget) -> dict:
-    """Camera- and budget-level constants the kernels use (exposed for tests and debugging).
-
-    Returns a dict with ``params`` (22,), ``R`` (3, 3) camera->world rotation,
-    ``omega`` (3, 3) rotation generators (row k: ``R^T dR/d angle_k`` as a vector),
-    the sparse factor ``colptr``, ``rowidx``, ``vals`` of the budget's parameter
-    covariance, ``vc`` (r, 6) the constant state rows of each factor column,
-    ``Ccc`` (6, 6) their covariance, ``has_qc`` (ray/constant cross-covariance
-    present) and ``Suv`` (2, 2) the budget's per-point pixel covariance.
-    """
-    budget = load_budget(budget)
-    p = np.ascontiguousarray(camera.params, dtype=np.float64)
-    if p.shape != (P.N_PARAMS,) or not np.all(np.isfinite(p)):
-        raise InputError("camera.params", p, f"{P.N_PARAMS} finite numbers")
-    ang = (p[P.PAN], p[P.TILT], p[P.ROLL])
-    R = np.ascontiguousarray(R_W_C(*ang))
-    dR = dR_W_C(*ang)
-    omega = np.empty((3, 3))
-    for k in range(3):
-        A = R.T @ dR[k]
-        omega[k] = (A[2, 1], A[0, 2], A[1, 0])
-    colptr, rowidx, vals = budget.param_factor()
-    r = colptr.size - 1
-    vc = np.zeros((r, 6))
-    has_qc = False
-    for j in range(r):
-        ray = False
-        const = False
-        for nz in range(colptr[j], colptr[j + 1]):
-            k = int(rowidx[nz])
-            if k in _CONST_ROW:
-                vc[j, _CONST_ROW[k]] += vals[nz]
-                const = True
-            else:
-                ray = True
-        has_qc = has_qc or (ray and const)
-    Ccc = vc.T @ vc
-    return dict(params=p, R=R, omega=np.ascontiguousarray(omega), colptr=colptr, rowidx=rowidx, vals=vals,
-                vc=np.ascontiguousarray(vc), Ccc=np.ascontiguousarray(Ccc), has_qc=has_qc,
-                Suv=np.ascontiguousarray(budget.pixel_covariance()))
-
-
-# --------------------------------------------------------------------------------------
-# shared numba helpers
+# per-row polynomials of the undistorted kernel
 # --------------------------------------------------------------------------------------
 @nb.njit(**_JIT1)
 def _add_ray_poly(k, lv, yn, prm, om, a, b):
@@ -291,8 +246,8 @@ def _finish(q00, q01, q11, Q00, Q01, Q10, Q11, ax, ay, ox, oy, Ccc, bq, has_qc):
 
 
 @nb.njit(inline="always", **_JIT1)
-def _flag(c00, c01, c11, dn, lam, dxr, dyr, ox, oy, ax, ay, Q00, Q01, Q10, Q11, g0, g1, q00, q01, q11, zq0, zq1, zz,
-          cc, has_qc, bq, bz):
+def _flag(c00, c01, c11, dn, idn, lam, dxr, dyr, ox, oy, ax, ay, Q00, Q01, Q10, Q11, g0, g1, q00, q01, q11, zq0, zq1,
+          zz, cc, has_qc, bq, bz):
     """Nonlinearity of one pixel (:func:`footprint_uq.fast.core.nonlinearity_point`) from its state covariance.
 
     State ``(q0, q1 | z | x0, y0, h, dz, gx, gy)``: ``z`` is the component of a rotation's ray
@@ -302,7 +257,8 @@ def _flag(c00, c01, c11, dn, lam, dxr, dyr, ox, oy, ax, ay, Q00, Q01, Q10, Q11, 
     ``g^T Sigma g = a_g . C_s a_g`` and ``J Sigma E = A_J C_s[:, (x0, y0)]``.  Pieces of ``C_s``:
     ``q00, q01, q11`` (ray, pixel noise included), ``zq0, zq1, zz`` (z rows), ``cc`` the constants'
     covariance ``Ccc`` (6, 6) as a flat tuple (row-major: a pixel loop then reads no array and
-    vectorises), and with ``has_qc`` ``bq`` (2, 6) / ``bz`` (6,) the ray / constant cross terms.
+    vectorises), and with ``has_qc`` ``bq`` (2, 6) / ``bz`` (6,) the ray / constant cross terms.  ``idn = 1 / Dn``
+    (``-lam / Hn``, which the caller holds: no division by ``Dn`` here).
     """
     uq0 = q00 * g0 + q01 * g1 + zq0 * dn
     uq1 = q01 * g0 + q11 * g1 + zq1 * dn
@@ -337,8 +293,8 @@ def _flag(c00, c01, c11, dn, lam, dxr, dyr, ox, oy, ax, ay, Q00, Q01, Q10, Q11, 
     hg = uc2 - uc3 - ox * uc4 - oy * uc5
     jg0 = Q00 * uq0 + Q01 * uq1 + uc0 + ax * hg
     jg1 = Q10 * uq0 + Q11 * uq1 + uc1 + ay * hg
-    return core.nonlinearity_point(c00, c01, c11, dn, lam, dxr, dyr, jg0, jg1, gamma, uc0, uc1, X00, X01, X10, X11,
-                                   cc[0], cc[1], cc[7])
+    return core.nonlinearity_point_idn(c00, c01, c11, idn, lam, dxr, dyr, jg0, jg1, gamma, uc0, uc1, X00, X01, X10,
+                                       X11, cc[0], cc[1], cc[7])
 
 
 # --------------------------------------------------------------------------------------
@@ -526,8 +482,8 @@ def _row_undistorted_flag(cst, cxs, dx0, dy0, dn0, P00, P01, P11, ZQ, ZZ, Ccc, x
         zq0 = _horner8(zq0c, x)
         zq1 = _horner8(zq1c, x)
         zz = zzc[0] + x * (zzc[1] + x * zzc[2])
-        nl = _flag(c00, c01, c11, dn, lam, dxr, dyr, ox, oy, ax, ay, Q00, Q01, Q10, Q11, g0, g1, q00, q01, q11, zq0,
-                   zq1, zz, cc, False, bq, bz)
+        nl = _flag(c00, c01, c11, dn, -lam * cs[26], lam, dxr, dyr, ox, oy, ax, ay, Q00, Q01, Q10, Q11, g0, g1, q00,
+                   q01, q11, zq0, zq1, zz, cc, False, bq, bz)
         good = _store_pixel(xr, cr, vr, iu, ok, x0 + ox, y0 + oy, c00, c01, c11)
         nr[iu] = nl if good else np.nan
 
@@ -575,8 +531,8 @@ def _row_undistorted_qc(cst, cxs, dx0, dy0, dn0, P00, P01, P11, BQ, ZQ, ZZ, BZ, 
             zq0 = _horner8(ZQ[0], x)
             zq1 = _horner8(ZQ[1], x)
             zz = ZZ[0] + x * (ZZ[1] + x * ZZ[2])
-            nl = _flag(c00, c01, c11, dn, lam, dxr, dyr, ox, oy, ax, ay, Q00, Q01, Q10, Q11, g0, g1, q00, q01, q11,
-                       zq0, zq1, zz, cc, True, bq, bz)
+            nl = _flag(c00, c01, c11, dn, -lam * cs[26], lam, dxr, dyr, ox, oy, ax, ay, Q00, Q01, Q10, Q11, g0, g1,
+                       q00, q01, q11, zq0, zq1, zz, cc, True, bq, bz)
             nr[iu] = nl if good else np.nan
 
 
@@ -689,8 +645,8 @@ def _point_general(u, v, S00, S01, S11, prm, R, om, colptr, rowidx, vals, vc, Cc
         return status.OVERFLOW, np.nan, np.nan, np.nan, np.nan, np.nan, np.nan
     nl = np.nan
     if flag:
-        nl = _flag(c00, c01, c11, dn, lam, dxr, dyr, ox, oy, ax, ay, Q00, Q01, Q10, Q11, g0, g1, q00, q01, q11, zq0,
-                   zq1, zz, to_fixed_tuple(Ccc.ravel(), 36), has_qc, bq, bz)
+        nl = _flag(c00, c01, c11, dn, 1.0 / dn, lam, dxr, dyr, ox, oy, ax, ay, Q00, Q01, Q10, Q11, g0, g1, q00, q01,
+                   q11, zq0, zq1, zz, to_fixed_tuple(Ccc.ravel(), 36), has_qc, bq, bz)
     return status.OK, x, y, c00, c01, c11, nl
 
 
@@ -780,7 +736,7 @@ _ROWS_PER_BLOCK_DIV = 16
 BUF_ROWS = (
     ("XD", "distorted normalised x"), ("XN", "undistorted normalised x"), ("YN", "undistorted normalised y"),
     ("M00", "d(undistorted)/d(distorted) 00"), ("M01", "01"), ("M10", "10"), ("M11", "11"),
-    ("Q00", "ray-state covariance C_qq 00 (with the flag: the total, pixel noise and rotations included)"),
+    ("Q00", "ray-state covariance C_qq 00 of the mixed factor columns (_ray_cov adds the rest)"),
     ("Q01", "C_qq 01"), ("Q11", "C_qq 11"), ("V0", "one factor column's dq_0"), ("V1", "its dq_1"),
     ("CONV", "previous row's y_d where that pixel converged, else NaN"), ("IDEN", "1 / distortion denominator"),
     ("YDB", "the row's y_d, broadcast"),
@@ -1084,29 +1040,47 @@ def _ray_state(x, y, cst, R00, R01, R02, R10, R11, R12):
     return dxr, dyr, dn, lam, ox, oy, Q00, Q01, Q10, Q11
 
 
-@nb.njit(**_JIT1)
-def _row_pixels(cst, R, Om, pre, flag, buf, xr, cr, vr, rr):
-    """Per pixel: ray, ground point, Q, the ray-state covariance (mixed columns + ``M C_pre M^T`` +
-    rotations ``G Om G^T``), the covariance; codes into ``rr``.  With ``flag`` the total ray-state
-    covariance goes back to ``buf[Q00/Q01/Q11]`` (for :func:`_row_flag`)."""
-    if flag:
-        _row_pixels_loop(cst, R, Om, pre, True, buf, xr, cr, vr, rr)
-    else:
-        _row_pixels_loop(cst, R, Om, pre, False, buf, xr, cr, vr, rr)
-
-
 @nb.njit(inline="always", **_JIT1)
-def _row_pixels_loop(cst, R, Om, pre, store_q, buf, xr, cr, vr, rr):
-    """:func:`_row_pixels` with ``store_q`` a constant (two compiled loops: LLVM vectorises a loop whose
-    stores do not depend on a run-time flag)."""
+def _ray_cov(x, y, xdi, m00_, m01_, m10_, m11_, b00, b01, b11, pre, Omt):
+    """Total ray-state covariance ``C_qq`` of one pixel: the mixed columns' part ``b`` + ``M C_pre M^T``
+    (intrinsics and pixel noise, ``C_pre`` a polynomial in ``x_d`` with coefficients ``pre``) + the
+    rotations' ``G Om G^T`` (``Omt`` the upper triangle of ``Om``).  Shared by the pixel pass and the
+    flag pass, which recomputes it (a few dozen vectorised multiply-adds) rather than have the pixel
+    loop store it: a loop that stores to rows of ``buf`` it also reads no longer vectorises."""
+    c00_0, c00_1, c00_2, c01_0, c01_1, c11_0 = pre
+    O00, O01, O02, O11, O12, O22 = Omt
+    e00 = c00_0 + xdi * (c00_1 + xdi * c00_2)
+    e01 = c01_0 + xdi * c01_1
+    e11 = c11_0
+    T00 = m00_ * e00 + m01_ * e01
+    T01 = m00_ * e01 + m01_ * e11
+    T10 = m10_ * e00 + m11_ * e01
+    T11 = m10_ * e01 + m11_ * e11
+    # rotations: dq = G omega, G = [[-x y, 1 + x^2, -y], [-(1 + y^2), x y, x]], Cov(omega) = Om
+    xy_ = x * y
+    G00, G01, G02, G10, G11, G12 = -xy_, 1.0 + x * x, -y, -(1.0 + y * y), xy_, x
+    H0 = G00 * O00 + G01 * O01 + G02 * O02
+    H1 = G00 * O01 + G01 * O11 + G02 * O12
+    H2 = G00 * O02 + G01 * O12 + G02 * O22
+    K0 = G10 * O00 + G11 * O01 + G12 * O02
+    K1 = G10 * O01 + G11 * O11 + G12 * O12
+    K2 = G10 * O02 + G11 * O12 + G12 * O22
+    a00 = b00 + T00 * m00_ + T01 * m01_ + H0 * G00 + H1 * G01 + H2 * G02
+    a01 = b01 + T00 * m10_ + T01 * m11_ + H0 * G10 + H1 * G11 + H2 * G12
+    a11 = b11 + T10 * m10_ + T11 * m11_ + K0 * G10 + K1 * G11 + K2 * G12
+    return a00, a01, a11
+
+
+@nb.njit(**_JIT1)
+def _row_pixels(cst, R, Omt, pre, buf, xr, cr, vr, rr):
+    """Per pixel: ray, ground point, Q, the ray-state covariance (:func:`_ray_cov`), the covariance; codes
+    into ``rr``."""
     cs = to_fixed_tuple(cst, 30)  # constants as scalars: stores to the outputs cannot make the loop reload them
     x0, y0, iHn = cst[0], cst[1], cst[26]
     p00, p01, p11 = cst[11], cst[12], cst[13]
     s0, s1, s2, s3, s4, s5 = cst[14], cst[15], cst[16], cst[17], cst[18], cst[19]
     m00, m01, m02, m10, m11, m12 = cst[20], cst[21], cst[22], cst[23], cst[24], cst[25]
-    c00_0, c00_1, c00_2, c01_0, c01_1, c11_0 = pre
     R00, R01, R02, R10, R11, R12 = R[0, 0], R[0, 1], R[0, 2], R[1, 0], R[1, 1], R[1, 2]
-    O00, O01, O02, O11, O12, O22 = Om[0, 0], Om[0, 1], Om[0, 2], Om[1, 1], Om[1, 2], Om[2, 2]
     xd, xn, yn = buf[_XD], buf[_XN], buf[_YN]
     M00, M01, M10, M11 = buf[_M00], buf[_M01], buf[_M10], buf[_M11]
     q00, q01, q11 = buf[_Q00], buf[_Q01], buf[_Q11]
@@ -1118,31 +1092,7 @@ def _row_pixels_loop(cst, R, Om, pre, store_q, buf, xr, cr, vr, rr):
         dxr, dyr, dn, lam, ox, oy, Q00, Q01, Q10, Q11 = _ray_state(x, y, cs, R00, R01, R02, R10, R11, R12)
         lens = ok[i]
         oki = lens & (dn < 0.0)
-        # intrinsics + pixel noise: M C_pre M^T, C_pre polynomial in x_d
-        xdi = xd[i]
-        e00 = c00_0 + xdi * (c00_1 + xdi * c00_2)
-        e01 = c01_0 + xdi * c01_1
-        e11 = c11_0
-        m00_, m01_, m10_, m11_ = M00[i], M01[i], M10[i], M11[i]
-        T00 = m00_ * e00 + m01_ * e01
-        T01 = m00_ * e01 + m01_ * e11
-        T10 = m10_ * e00 + m11_ * e01
-        T11 = m10_ * e01 + m11_ * e11
-        # rotations: dq = G omega, G = [[-x y, 1 + x^2, -y], [-(1 + y^2), x y, x]], Cov(omega) = Om
-        xy_ = x * y
-        G00, G01, G02, G10, G11, G12 = -xy_, 1.0 + x * x, -y, -(1.0 + y * y), xy_, x
-        H0 = G00 * O00 + G01 * O01 + G02 * O02
-        H1 = G00 * O01 + G01 * O11 + G02 * O12
-        H2 = G00 * O02 + G01 * O12 + G02 * O22
-        K0 = G10 * O00 + G11 * O01 + G12 * O02
-        K1 = G10 * O01 + G11 * O11 + G12 * O12
-        K2 = G10 * O02 + G11 * O12 + G12 * O22
-        b00, b01, b11 = q00[i], q01[i], q11[i]
-        a00 = b00 + T00 * m00_ + T01 * m01_ + H0 * G00 + H1 * G01 + H2 * G02
-        a01 = b01 + T00 * m10_ + T01 * m11_ + H0 * G10 + H1 * G11 + H2 * G12
-        a11 = b11 + T10 * m10_ + T11 * m11_ + K0 * G10 + K1 * G11 + K2 * G12
-        if store_q:  # (a constant once inlined: the loop without the flag has no stores to buf and vectorises)
-            q00[i], q01[i], q11[i] = a00, a01, a11
+        a00, a01, a11 = _ray_cov(x, y, xd[i], M00[i], M01[i], M10[i], M11[i], q00[i], q01[i], q11[i], pre, Omt)
         A00 = Q00 * a00 + Q01 * a01
         A01 = Q00 * a01 + Q01 * a11
         A10 = Q10 * a00 + Q11 * a01
@@ -1192,11 +1142,12 @@ def _row_qc(cst, R, buf, BQ, cr, vr):
 
 
 @nb.njit(inline="always", **_JIT1)
-def _pixel_flag(i, cs, R, Om, cc, has_qc, buf, BQ, cr, bq, bz):
+def _pixel_flag(i, cs, R, Om, pre, cc, has_qc, buf, BQ, cr, bq, bz):
     """The linearity flag of pixel ``i`` of a row of the general kernel (:func:`_flag`).
 
-    The rotation-only factor columns (``Om``) add ``C_qz = G Om h`` and ``C_zz = h^T Om h`` with
-    ``z = h . omega``, ``h = (y, -x, 0)``; the mixed columns' parts are in ``buf`` and ``BQ``.
+    The rotation-only factor columns (``Om``, upper triangle) add ``C_qz = G Om h`` and
+    ``C_zz = h^T Om h`` with ``z = h . omega``, ``h = (y, -x, 0)``; the mixed columns' parts are in
+    ``buf`` and ``BQ``; the total ``C_qq`` is recomputed (:func:`_ray_cov`, ``pre`` as there).
     ``buf`` is indexed as a 2-D array (one base pointer: the loop needs few alias checks).
     """
     x = buf[_XN, i]
@@ -1213,13 +1164,15 @@ def _pixel_flag(i, cs, R, Om, cc, has_qc, buf, BQ, cr, bq, bz):
             bq[0, c] = BQ[c, i]
             bq[1, c] = BQ[6 + c, i]
             bz[c] = BQ[12 + c, i]
+    a00, a01, a11 = _ray_cov(x, y, buf[_XD, i], buf[_M00, i], buf[_M01, i], buf[_M10, i], buf[_M11, i],
+                             buf[_Q00, i], buf[_Q01, i], buf[_Q11, i], pre, Om)
     iHn = cs[26]
-    return _flag(cr[4 * i], cr[4 * i + 1], cr[4 * i + 3], dn, lam, dxr, dyr, ox, oy, ox * iHn, oy * iHn, Q00, Q01,
-                 Q10, Q11, cs[3], cs[4], buf[_Q00, i], buf[_Q01, i], buf[_Q11, i], zq0, zq1, zz, cc, has_qc, bq, bz)
+    return _flag(cr[4 * i], cr[4 * i + 1], cr[4 * i + 3], dn, -lam * iHn, lam, dxr, dyr, ox, oy, ox * iHn, oy * iHn,
+                 Q00, Q01, Q10, Q11, cs[3], cs[4], a00, a01, a11, zq0, zq1, zz, cc, has_qc, bq, bz)
 
 
 @nb.njit(**_JIT1)
-def _row_flag(cst, R, Om, Ccc, has_qc, buf, BQ, cr, vr, nr):
+def _row_flag(cst, R, Omt, pre, Ccc, has_qc, buf, BQ, cr, vr, nr):
     """The linearity flag of every pixel of a row (:func:`_pixel_flag`) into ``nr`` (NaN where not valid).
 
     Constants travel as tuples and ``buf`` is read as one 2-D array, so that the loop without the
@@ -1228,17 +1181,16 @@ def _row_flag(cst, R, Om, Ccc, has_qc, buf, BQ, cr, vr, nr):
     cs = to_fixed_tuple(cst, 30)
     cc = to_fixed_tuple(Ccc.ravel(), 36)
     Rt = (R[0, 0], R[0, 1], R[0, 2], R[1, 0], R[1, 1], R[1, 2])
-    Omt = (Om[0, 0], Om[0, 1], Om[0, 2], Om[1, 1], Om[1, 2])
     bq = np.zeros((2, 6))
     bz = np.zeros(6)
     nan = np.nan
     if has_qc:
         for i in range(vr.shape[0]):
-            nl = _pixel_flag(i, cs, Rt, Omt, cc, True, buf, BQ, cr, bq, bz)
+            nl = _pixel_flag(i, cs, Rt, Omt, pre, cc, True, buf, BQ, cr, bq, bz)
             nr[i] = nl if vr[i] else nan
     else:
         for i in range(vr.shape[0]):
-            nl = _pixel_flag(i, cs, Rt, Omt, cc, False, buf, BQ, cr, bq, bz)
+            nl = _pixel_flag(i, cs, Rt, Omt, pre, cc, False, buf, BQ, cr, bq, bz)
             nr[i] = nl if vr[i] else nan
 
 
@@ -1265,12 +1217,13 @@ def _row_general(v, prm, R, om, colptr, rowidx, vals, vc, colkind, Om, Ccc, has_
         BQ[:] = 0.0
     pre = _row_intrinsics(yd, prm, colptr, rowidx, vals, colkind, Suv)
     _row_mixed(yd, prm, om, colptr, rowidx, vals, vc, colkind, has_qc, flag, buf, BQ)
-    _row_pixels(cst, R, Om, pre, flag, buf, xr, cr, vr, rr)
+    Omt = (Om[0, 0], Om[0, 1], Om[0, 2], Om[1, 1], Om[1, 2], Om[2, 2])
+    _row_pixels(cst, R, Omt, pre, buf, xr, cr, vr, rr)
     if has_qc:
         _row_qc(cst, R, buf, BQ, cr, vr)
         _finish_row(xr, cr, vr, rr)  # the cross terms may overflow what _row_pixels checked
     if flag:
-        _row_flag(cst, R, Om, Ccc, has_qc, buf, BQ, cr, vr, nr)
+        _row_flag(cst, R, Omt, pre, Ccc, has_qc, buf, BQ, cr, vr, nr)
 
 
 @nb.njit(**_JIT1)
@@ -1353,7 +1306,7 @@ SERIAL_BELOW = _SERIAL_BELOW
 
 
 # --------------------------------------------------------------------------------------
-# public API
+# array-level entries (the public covariance_map / covariance_points are in products.covariance)
 # --------------------------------------------------------------------------------------
 def _column_kinds(k: dict):
     """Kind of each factor column (1: intrinsics only, 2: rotations only, 0: other) and the
@@ -1373,110 +1326,47 @@ def _column_kinds(k: dict):
     return kind, np.ascontiguousarray(Om)
 
 
-def _check_out(out, H, W, get_nonlinearity):
-    """``(xy, cov, valid, nonlinearity or None)`` of a caller's ``out`` tuple, checked."""
-    n_ok = (3, 4) if get_nonlinearity else (3,)
-    if not (isinstance(out, tuple | list) and len(out) in n_ok):
-        raise InputError("out", type(out).__name__ if not isinstance(out, tuple | list) else f"{len(out)} arrays",
-                         "a tuple (xy_world_m, cov_m2, valid) of preallocated arrays"
-                         + (" (and nonlinearity, with get_nonlinearity)" if get_nonlinearity else ""))
-    specs = [("out[0] (xy_world_m)", (H, W, 2), np.float64), ("out[1] (cov_m2)", (H, W, 2, 2), np.float64),
-             ("out[2] (valid)", (H, W), np.bool_), ("out[3] (nonlinearity)", (H, W), np.float64)]
-    for a, (name, shape, dt) in zip(out, specs, strict=False):
-        if not isinstance(a, np.ndarray) or a.shape != shape or a.dtype != dt or not a.flags.c_contiguous \
-                or not a.flags.writeable:
-            got = (getattr(a, "shape", None), str(getattr(a, "dtype", type(a).__name__)))
-            raise InputError(name, got, f"a writeable C-contiguous {np.dtype(dt).name} array of shape {shape}")
-    return out[0], out[1], out[2], (out[3] if len(out) == 4 else None)
-
-
 def _pixel_cov_q(prm, Suv):
     fx, fy, sk = prm[0], prm[1], prm[4]
     A = np.array([[1.0 / fx, -sk / (fx * fy)], [0.0, 1.0 / fy]])
     return np.ascontiguousarray(A @ Suv @ A.T)
 
 
-def covariance_map(camera, budget, step_px: int = 1, *, out=None, get_reason: bool = False,
-                   get_nonlinearity: bool = False):
-    """Ground point, 2x2 covariance and validity of every pixel of a regular grid.
+def map_into(k: dict, dom, step: int, xy, cov, valid, reason, nlin) -> None:
+    """Fill a map's preallocated outputs (the kernel behind :func:`footprint_uq.products.covariance.covariance_map`).
 
     Parameters
     ----------
-    camera : Camera
-        :class:`~footprint_uq.cameras.pantilt.PanTiltCamera` or
-        :class:`~footprint_uq.cameras.opencv.OpenCVCamera`.  Cameras with zero
-        nominal distortion use the closed-form kernel (per-row polynomials), others
-        the general kernel with Newton undistortion.
-    budget : ErrorBudget, preset name, path or mapping
-        Every source is honoured, including a full parameter covariance; per-point
-        imaging and resolution noise come from ``budget.pixel_covariance()``.
-    step_px : int
-        Grid step: pixel centres ``camera.pixel_grid(step_px)``.
-    out : tuple of ndarray, optional
-        Preallocated ``(xy_world_m (H, W, 2) float64, cov_m2 (H, W, 2, 2) float64,
-        valid (H, W) bool)``, C-contiguous, for the grid's H, W; filled in place.  With
-        ``get_nonlinearity`` a fourth array ``nonlinearity (H, W) float64`` may follow.
-    get_reason : bool
-        Also return the :mod:`footprint_uq.status` code of every pixel.
-    get_nonlinearity : bool
-        Also return the linearity flag's ``nonlinearity`` of every pixel, computed in the same
-        pass (:func:`footprint_uq.fast.core.nonlinearity_point`; the number
-        :func:`footprint_uq.propagation.propagate` gives; ``linear_ok = nonlinearity <= threshold``).
-
-    Returns
-    -------
-    xy_world_m : ndarray (H, W, 2)
-        Ground points in W (x east, y north), metres; NaN where invalid.
-    cov_m2 : ndarray (H, W, 2, 2)
-        Covariance, m^2; NaN where invalid.
-    valid : ndarray of bool (H, W)
-        False at or above the horizon, or outside the lens's valid domain.
-    reason : ndarray of int8 (H, W), with ``get_reason``
-        The same codes as :func:`footprint_uq.cameras.general.backproject`.
-    nonlinearity : ndarray (H, W), with ``get_nonlinearity``
-        Predicted relative error of the linear 1-sigma semi-major axis (dimensionless); NaN where
-        not valid.  After ``reason`` when both are asked for.
+    k : dict
+        Camera and budget constants (:func:`footprint_uq.products.covariance.kernel_constants`).
+    dom : ndarray
+        The camera's packed lens domain (``camera.lens_domain.packed``).
+    step : int
+        Grid step in pixels, > 0.
+    xy, cov, valid : ndarray (H, W, 2), (H, W, 2, 2), (H, W)
+        C-contiguous outputs, filled in place.
+    reason : ndarray of int8 (H, W) or None
+        Status codes, filled in place; None when the caller does not want them.
+    nlin : ndarray (H, W) or None
+        The linearity flag's nonlinearity, filled in place; None: not computed.
     """
-    try:
-        step = int(step_px)
-    except (TypeError, ValueError):
-        raise InputError("step_px", step_px, "a positive integer") from None
-    if step != step_px or step <= 0:
-        raise InputError("step_px", step_px, "a positive integer")
-    w_img, h_img = camera.image_size_px
-    W = (w_img + step - 1) // step
-    H = (h_img + step - 1) // step
-    if out is None:
-        out = (np.empty((H, W, 2)), np.empty((H, W, 2, 2)), np.empty((H, W), dtype=np.bool_))
-    xy, cov, valid, nlin = _check_out(out, H, W, get_nonlinearity)
-    k = kernel_constants(camera, budget)
+    H, W = valid.shape
     prm = k["params"]
     general = bool(np.any(prm[P.DIST_SLICE]))
     # the general kernel needs the codes in any case: a per-thread buffer when not returned (fast.buffers: a
     # fresh 2 MB array first touched by both kernel threads cost up to 40 % of a full-HD map); the undistorted
     # kernel writes them only when asked for
-    if get_reason:
-        reason = np.empty((H, W), dtype=np.int8)
-    else:
+    if reason is None:
         reason = thread_buffer("map_reason", (H, W), np.int8) if general else np.empty((0, W), dtype=np.int8)
     if nlin is None:
-        nlin = np.empty((H, W) if get_nonlinearity else (0, W))
-
-    def result():
-        res = (xy, cov, valid)
-        if get_reason:
-            res = res + (reason,)
-        if get_nonlinearity:
-            res = res + (nlin,)
-        return res
-
+        nlin = np.empty((0, W))
     if not prm[P.HM] - prm[P.GDZ] > 0:  # camera at or below the ground: no pixel sees it
         xy[:] = np.nan
         cov[:] = np.nan
         valid[:] = False
         reason[:] = status.ABOVE_HORIZON
         nlin[:] = np.nan
-        return result()
+        return
     # dynamic scheduling in small chunks: on a shared machine a descheduled thread then
     # delays only its current chunk instead of half of the image
     old_chunk = nb.set_parallel_chunksize(1)
@@ -1485,7 +1375,7 @@ def covariance_map(camera, budget, step_px: int = 1, *, out=None, get_reason: bo
         if general:
             colkind, Om = _column_kinds(k)
             _map_general(prm, k["R"], k["omega"], k["colptr"], k["rowidx"], k["vals"], k["vc"], colkind, Om,
-                         k["Ccc"], k["has_qc"], camera.lens_domain.packed, _undistorted_constants(k, step), k["Suv"],
+                         k["Ccc"], k["has_qc"], dom, _undistorted_constants(k, step), k["Suv"],
                          step, xy.reshape(-1), cov.reshape(-1), valid.reshape(-1), reason.reshape(-1),
                          nlin.reshape(-1), W, nblk)
         else:
@@ -1495,67 +1385,26 @@ def covariance_map(camera, budget, step_px: int = 1, *, out=None, get_reason: bo
                              nlin.reshape(-1), W, nblk)
     finally:
         nb.set_parallel_chunksize(old_chunk)
-    return result()
 
 
-def covariance_points(camera, budget, uv_px, pixel_cov_px2=None, *, get_reason: bool = False,
-                      get_nonlinearity: bool = False):
-    """Ground point, 2x2 covariance and validity of scattered pixels (general kernel).
+def points_into(k: dict, dom, uv, Suv, xy, cov, valid, reason, nlin) -> None:
+    """Fill the outputs of scattered points (the kernel behind
+    :func:`footprint_uq.products.covariance.covariance_points`).
 
-    Parameters
-    ----------
-    camera : Camera
-    budget : ErrorBudget, preset name, path or mapping
-    uv_px : array_like (..., 2)
-        Pixel coordinates (u right, v down); non-finite rows give ``valid = False``.
-    pixel_cov_px2 : array_like (2, 2) or (..., 2, 2), optional
-        Extra per-point pixel covariance (e.g. a detector's), added to the budget's
-        imaging and resolution noise, as in :func:`footprint_uq.uncertainty.propagation.propagate`.
-    get_reason : bool
-        Also return the :mod:`footprint_uq.status` code of every point.
-    get_nonlinearity : bool
-        Also return the linearity flag's ``nonlinearity`` of every point (the same number as
-        :func:`footprint_uq.propagation.propagate`'s; ``linear_ok = nonlinearity <= threshold``).
-
-    Returns
-    -------
-    xy_world_m : ndarray (..., 2)
-    cov_m2 : ndarray (..., 2, 2)
-    valid : ndarray of bool (...)
-    reason : ndarray of int8 (...), with ``get_reason``
-        The same codes as :func:`footprint_uq.cameras.general.backproject`.
-    nonlinearity : ndarray (...), with ``get_nonlinearity``
-        Predicted relative error of the linear 1-sigma semi-major axis (dimensionless); NaN where
-        not valid.  After ``reason`` when both are asked for.
+    ``k`` as in :func:`map_into`; ``uv`` (n, 2) pixels, ``Suv`` (n, 2, 2) per-point pixel covariance,
+    C-contiguous; outputs ``xy`` (n, 2), ``cov`` (n, 2, 2), ``valid`` (n,) bool, ``reason`` (n,) int8 and
+    ``nlin`` (n,) or (0,) (not computed), filled in place.  Below :data:`SERIAL_BELOW` points the kernel
+    runs on the calling thread only, and so it does when no second core is free at the moment of the call
+    (:func:`footprint_uq.fast.cores.free_cores`: a threaded call would wait for a busy core, up to a scheduler
+    slice, instead of using one).
     """
-    budget = load_budget(budget)
-    uv = as_points("uv_px", uv_px, 2)
-    lead = uv.shape[:-1]
-    flat = np.ascontiguousarray(uv.reshape(-1, 2))
-    n = flat.shape[0]
-    Suv = budget.pixel_covariance()
-    if pixel_cov_px2 is not None:
-        c = check_cov("pixel_cov_px2", pixel_cov_px2, 2)
-        try:
-            Suv = np.broadcast_to(Suv + c, lead + (2, 2))
-        except ValueError:
-            raise InputError("pixel_cov_px2", c.shape, f"a covariance of shape (2, 2) or {lead + (2, 2)}") from None
-    Suv = np.ascontiguousarray(np.broadcast_to(Suv, lead + (2, 2)).reshape(n, 2, 2))
-    k = kernel_constants(camera, budget)
-    xy = np.empty((n, 2))
-    cov = np.empty((n, 2, 2))
-    valid = np.empty(n, dtype=np.bool_)
-    reason = np.empty(n, dtype=np.int8)
-    nlin = np.empty(n if get_nonlinearity else 0)
-    kernel = _points_general_serial if n < _SERIAL_BELOW else _points_general
-    kernel(flat, Suv, k["params"], k["R"], k["omega"], k["colptr"], k["rowidx"], k["vals"], k["vc"],
-           k["Ccc"], k["has_qc"], camera.lens_domain.packed, xy, cov, valid, reason, nlin)
-    out = xy.reshape(lead + (2,)), cov.reshape(lead + (2, 2)), valid.reshape(lead)
-    if get_reason:
-        out = out + (reason.reshape(lead),)
-    if get_nonlinearity:
-        out = out + (nlin.reshape(lead),)
-    return out
+    threaded = uv.shape[0] >= SERIAL_BELOW
+    if threaded:
+        free = free_cores()
+        threaded = free is None or free >= 2
+    kernel = _points_general if threaded else _points_general_serial
+    kernel(uv, Suv, k["params"], k["R"], k["omega"], k["colptr"], k["rowidx"], k["vals"], k["vc"],
+           k["Ccc"], k["has_qc"], dom, xy, cov, valid, reason, nlin)
 
 
 #: the entry kernels, by use (:mod:`footprint_uq.products.warmup` checks their cache and compiles them ahead)

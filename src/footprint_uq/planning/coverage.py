@@ -4,7 +4,7 @@ For each ground sample the planner needs the covariance of the ground point a ca
 there.  The map kernels go from pixels to the ground; here the direction is the inverse: every
 ground sample is projected into the candidate camera (:meth:`Camera.project_ground`), samples that
 land in the image, in the lens's valid domain and are not occluded (:func:`geometry.occluded`) are
-back-projected with their covariance (:func:`footprint_uq.fast.map_kernels.covariance_points`,
+back-projected with their covariance (:func:`footprint_uq.products.covariance.covariance_points`,
 the same numbers as :func:`footprint_uq.uncertainty.propagation.propagate`).
 
 Covariances are kept in information form ``I = C^-1`` (3 numbers per sample: I_xx, I_xy, I_yy):
@@ -25,7 +25,7 @@ import numpy as np
 from ..cameras.opencv import OpenCVCamera
 from ..cameras.pantilt import PanTiltCamera
 from ..errors import InputError
-from ..fast.map_kernels import covariance_points
+from ..products.covariance import covariance_points
 from ..uncertainty.ellipse import chi2_scale
 from .geometry import GroundSamples, occluded
 

@@ -31,8 +31,8 @@ from ..cameras import general
 from ..cameras.rotation import R_W_C, dR_W_C
 from ..errors import ConfigError, InputError
 from ..fast import contact_kernels as ck
-from ..fast.map_kernels import covariance_points
 from ..uncertainty.budget import load_budget
+from .covariance import covariance_points
 from .footprints import box2d_contact_points
 
 __all__ = ["ContactResult", "SizePrior", "CONTACT_MODELS", "SIZE_PRIORS_FILE", "load_size_priors",
@@ -411,7 +411,7 @@ def bottom_centre(camera, budget, boxes_xyxy_px, classes=None, *, yaw_rad=None, 
 
 def bottom_centre_nonlinearity(camera, budget, boxes_xyxy_px, cov_uv_px2=None, valid=None) -> np.ndarray:
     """The linearity flag's ``nonlinearity`` (N,) of each box's bottom-centre pixel (the compiled kernel's,
-    :func:`~footprint_uq.fast.map_kernels.covariance_points`, equal to
+    :func:`~footprint_uq.products.covariance.covariance_points`, equal to
     :func:`~footprint_uq.uncertainty.propagation.propagate`'s and ~20x faster than the numpy form); NaN where
     the pixel has none, and where ``valid`` (N,) bool is given and False."""
     box = as_points("boxes_xyxy_px", boxes_xyxy_px, 4)

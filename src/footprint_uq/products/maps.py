@@ -57,12 +57,12 @@ from ..cameras.distortion import undistort
 from ..cameras.ground import intersect_ground
 from ..cameras.pinhole import pixel_to_normalised
 from ..errors import InputError
-from ..fast.map_kernels import covariance_map
 from ..io import camera_from_dict, camera_to_dict
 from ..io.atomic import atomic_path
 from ..uncertainty.budget import ErrorBudget, load_budget
 from ..uncertainty.ellipse import chi2_scale, ellipse_axes
 from ..uncertainty.propagation import DEFAULT_LINEAR_THRESHOLD, check_linear_threshold, propagate
+from .covariance import covariance_map
 
 __all__ = ["UncertaintyMap", "uncertainty_map", "ground_sampling_distance", "pixel_jacobian", "GSD_DEFINITION",
            "SUMMARY_RANGES_M"]
@@ -452,7 +452,7 @@ def uncertainty_map(camera, budget, step_px: int = 1, *, max_range_m: float | No
         (reason :data:`footprint_uq.status.BEYOND_RANGE`).  Near the horizon the
         ground range grows without bound; this keeps maps and figures readable.
     use_kernel : bool
-        Use the fused ``footprint_uq.fast.map_kernels.covariance_map`` when it is available;
+        Use the fused ``footprint_uq.products.covariance.covariance_map`` when it is available;
         False forces the reference path (:func:`footprint_uq.uncertainty.propagation.propagate`).
     linearity : bool
         Also compute the ``nonlinearity`` layer (in the same kernel pass) and the ``linear_ok`` mask.
@@ -517,7 +517,7 @@ def uncertainty_map(camera, budget, step_px: int = 1, *, max_range_m: float | No
         problem = _kernel_disagreement(camera, budget, flat, xy, cov, valid, xy_ref, reason == status.OK,
                                        gsd_r + gsd_c, nonlinearity=nl)
         if problem:
-            warnings.warn(f"fast.map_kernels.covariance_map disagrees with the reference path ({problem}); "
+            warnings.warn(f"products.covariance.covariance_map disagrees with the reference path ({problem}); "
                           "using uncertainty.propagation.propagate for this map", RuntimeWarning, stacklevel=2)
             for s in range(0, n, _BLOCK_PX):
                 blk = slice(s, min(n, s + _BLOCK_PX))

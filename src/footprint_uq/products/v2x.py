@@ -75,6 +75,26 @@ import numpy as np
 
 from .._checks import as_float
 from ..errors import InputError
+from ..v2x_codes import (
+    CIRCULAR_RTOL,
+    CPM_COORD_MAX_M,
+    CPM_COORD_OUT_OF_RANGE,
+    CPM_COORD_UNAVAILABLE,
+    CPM_COORD_UNIT_M,
+    CPM_CORR_UNAVAILABLE,
+    J2735_AXIS_MAX,
+    J2735_AXIS_MAX_M,
+    J2735_AXIS_UNAVAILABLE,
+    J2735_AXIS_UNIT_M,
+    J2735_ORIENTATION_UNAVAILABLE,
+    J2735_ORIENTATION_UNIT_DEG,
+    J2735_POSITION_CONFIDENCE_M,
+    J2735_POSITION_CONFIDENCE_NAMES,
+    K95_2D,
+    PSD_RTOL,
+    STEP_GUARD,
+    Z95_1D,
+)
 
 __all__ = [
     "Z95_1D", "K95_2D", "CPM_COORD_OUT_OF_RANGE", "CPM_COORD_UNAVAILABLE", "CPM_CORR_UNAVAILABLE",
@@ -83,35 +103,8 @@ __all__ = [
     "rotate_to_true_north", "cpm_coordinate_confidence", "cpm_correlation", "cpm_fields",
     "j2735_axis_accuracy", "j2735_orientation", "j2735_position_confidence", "j2735_fields",
 ]
-
-#: 1-D 95 % multiplier used for CPM confidences (the issue's 1.96 sigma)
-Z95_1D = 1.96
-#: 2-D 95 % multiplier sqrt(chi2_2(0.95)) = sqrt(-2 ln 0.05)
-K95_2D = float(np.sqrt(-2.0 * np.log(0.05)))
-
-CPM_COORD_UNIT_M = 0.01
-CPM_COORD_MAX_M = 40.94
-CPM_COORD_OUT_OF_RANGE = 4095
-CPM_COORD_UNAVAILABLE = 4096
-CPM_CORR_UNAVAILABLE = 101
-
-J2735_AXIS_UNIT_M = 0.05
-J2735_AXIS_MAX = 254  # any value >= 12.70 m
-J2735_AXIS_MAX_M = 12.70
-J2735_AXIS_UNAVAILABLE = 255
-J2735_ORIENTATION_UNIT_DEG = 360.0 / 65535.0
-J2735_ORIENTATION_UNAVAILABLE = 65535
-
-#: radius (m) of PositionConfidence levels 1..15 (index 0 = unavailable)
-J2735_POSITION_CONFIDENCE_M = (np.nan, 500.0, 200.0, 100.0, 50.0, 20.0, 10.0, 5.0, 2.0, 1.0,
-                               0.5, 0.2, 0.1, 0.05, 0.02, 0.01)
-J2735_POSITION_CONFIDENCE_NAMES = ("unavailable", "a500m", "a200m", "a100m", "a50m", "a20m", "a10m",
-                                   "a5m", "a2m", "a1m", "a50cm", "a20cm", "a10cm", "a5cm", "a2cm", "a1cm")
-
-CIRCULAR_RTOL = 1e-9  # axes this close: orientation reported as 0 (north)
-STEP_GUARD = 1e-9  # relative guard against binary rounding pushing an exact step up
-#: relative tolerance of the PSD / symmetry test of the covariances (rounding of a computed covariance is ~1e-16)
-PSD_RTOL = 1e-9
+# the code values above live in the floor module footprint_uq.v2x_codes (the compiled per-frame kernel
+# encodes with them); this module re-exports them beside the rules that use them
 
 
 def _cov(cov_m2) -> np.ndarray:

@@ -24,6 +24,7 @@ from ..cameras.pantilt import PanTiltCamera
 from ..fast import footprint_kernels as fk
 from ..fast import map_kernels as mk
 from ..uncertainty.budget import load_budget
+from .covariance import covariance_points
 from .footprints import FrameProcessor
 from .maps import uncertainty_map
 
@@ -86,7 +87,7 @@ def _warm_points(budget) -> None:
     for cam in _cameras():
         for n in (4, mk.SERIAL_BELOW):  # the serial and the threaded kernel
             uv = np.c_[np.linspace(0.0, 319.0, n), np.linspace(150.0, 239.0, n)]
-            mk.covariance_points(cam, budget, uv, get_nonlinearity=True)
+            covariance_points(cam, budget, uv, get_nonlinearity=True)
 
 
 def _warm_objects(budget) -> None:

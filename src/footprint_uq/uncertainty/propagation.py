@@ -22,8 +22,8 @@ pixel outside the lens's valid domain, or a result that is not finite although e
 input is -- ``OVERFLOW``) the mean and covariance are NaN and ``valid`` is
 False; the ``reason`` array says why.  Derivatives are never returned for an
 undefined point and no invalid point is ever replaced by a plausible number.
-The fused kernels (:func:`footprint_uq.fast.map_kernels.covariance_map`,
-:func:`~footprint_uq.fast.map_kernels.covariance_points`) apply the same output check.
+The fused kernels (:func:`footprint_uq.products.covariance.covariance_map`,
+:func:`~footprint_uq.products.covariance.covariance_points`) apply the same output check.
 """
 
 from __future__ import annotations
