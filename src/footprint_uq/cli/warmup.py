@@ -15,9 +15,14 @@ __all__ = ["warmup_cmd"]
 @click.option("--only", "only", type=click.Choice(list(GROUPS)), multiple=True,
               help="Compile only these kernel groups (repeat; default: all): map (map, demo), points "
                    "(scattered pixels), objects (objects, serve, FrameProcessor).")
-def warmup_cmd(only):
+@click.option("--background", is_flag=True, hidden=True,
+              help="The detached compile a command starts: skip a group another process is compiling; no output.")
+def warmup_cmd(only, background):
     """Compile every kernel once into numba's cache folder (later runs of every command start at once)."""
     groups = list(only) or list(GROUPS)
+    if background:
+        warmup(groups, background=True)
+        return
     cold = set(cold_groups(groups))
     times = warmup(groups, progress=lambda g: click.echo(f"footprint-uq: warmup: {g} kernels "
                                                          f"{'compiling' if g in cold else 'cached'}", err=True))

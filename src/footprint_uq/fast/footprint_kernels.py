@@ -185,11 +185,18 @@ def camera_constants(camera) -> tuple[KernelCamera, np.ndarray]:
     w, h = camera.image_size_px
     cam = KernelCamera(
         fx=float(p[P.FX]), fy=float(p[P.FY]), cx=float(p[P.CX]), cy=float(p[P.CY]), skew=float(p[P.SKEW]),
-        ifx=1.0 / p[P.FX], ify=1.0 / p[P.FY], dist=np.ascontiguousarray(p[P.DIST_SLICE]),
+        ifx=1.0 / p[P.FX], ify=1.0 / p[P.FY], dist=_writable(p[P.DIST_SLICE]),
         has_dist=bool(np.any(p[P.DIST_SLICE] != 0)), x0=float(p[P.XM]), y0=float(p[P.YM]), h=float(p[P.HM]),
         gdz=float(p[P.GDZ]), gsx=float(p[P.GSX]), gsy=float(p[P.GSY]), R=np.ascontiguousarray(R_W_C(*ang).ravel()),
-        width_px=float(w), height_px=float(h), ground_z_m=float(camera.ground_z_m), dom=camera.lens_domain.packed)
-    return cam, np.ascontiguousarray(dR_W_C(*ang))
+        width_px=float(w), height_px=float(h), ground_z_m=float(camera.ground_z_m),
+        dom=_writable(camera.lens_domain.packed))
+    return cam, _writable(dR_W_C(*ang))
+
+
+def _writable(a) -> np.ndarray:
+    """A writable C-contiguous float64 copy: numba types a read-only array (an OpenCV camera's lens domain,
+    a read-only ``params``) as another type, so every camera's constants would compile the kernels again."""
+    return np.array(a, dtype=np.float64, order="C", copy=True)
 
 
 @njit(cache=True, error_model="numpy", nogil=True)

@@ -962,6 +962,24 @@ class FrameProcessor:
         #: whether per-corner coordinates and covariances (and the largest point's covariance) are
         #: formed at all; the batch sets False when it writes no corner columns (leaner, faster)
         self.corner_outputs = True
+        self._kernels = False  # the compiled kernels run (footprint_uq._notices; asked until they do)
+
+    def _use_kernels(self) -> bool:
+        """Whether this call runs the compiled kernel (else the numpy reference: a command line whose kernels
+        are still compiling in the background, :class:`footprint_uq.products.warmup.KernelGate`)."""
+        if not self._kernels:
+            self._kernels = before_kernels("objects")
+        return self._kernels
+
+    def _reference(self, est: FootprintEstimate) -> FootprintEstimate:
+        """A reference estimate shaped as this processor's: the kernel's per-object rows (the batch reads
+        them), no joint covariance or centre Jacobian unless asked for."""
+        est.object_rows = _object_rows(est)
+        if not self.joint_cov:
+            est.joint_cov_m2 = None
+        if not self.shared_jacobian:
+            est.centre_shared_m = None
+        return est
 
     def _det(self, pixel_cov_px2, N: int, K: int):
         if pixel_cov_px2 is None:
@@ -987,18 +1005,16 @@ class FrameProcessor:
 
     def _run(self, uv, extra, pixel_cov_px2) -> FootprintEstimate:
         N, K = uv.shape[0], uv.shape[1]
-        if K > self._fk.MAX_CORNERS:  # beyond the kernel's chunk layout: the numpy reference
-            return footprints_from_corners(self.camera, self.budget, uv, pixel_cov_px2=pixel_cov_px2,
-                                           allow_outside_image=self.allow_outside_image,
-                                           heading_offset_deg=self.heading_offset_deg,
-                                           extra_reason=extra if extra.shape[0] == N else None,
-                                           **self._flag_options())
         det, mode = self._det(pixel_cov_px2, N, K)
+        if K > self._fk.MAX_CORNERS or not self._use_kernels():  # (beyond the kernel's chunk layout)
+            return self._reference(footprints_from_corners(
+                self.camera, self.budget, uv, pixel_cov_px2=pixel_cov_px2, allow_outside_image=self.allow_outside_image,
+                heading_offset_deg=self.heading_offset_deg, extra_reason=extra if extra.shape[0] == N else None,
+                **self._flag_options()))
         r = self._r if self.shared_jacobian else None
         alloc = reusable_allocator(self._fk.outputs_max_bytes(N, K, joint=self.joint_cov, shared_rank=r))
         out = self._fk.alloc_outputs(N, K, joint=self.joint_cov, corners=self.corner_outputs, alloc=alloc,
                                      shared_rank=r)
-        before_kernels("objects")
         n_over = self._fk.process_corners(uv, extra, self._no_boxes, False, True, self._cam, self._dR, self._Lr,
                                           self._Lc, self._Lv, self._r, self._spx, det, mode, self.allow_outside_image,
                                           self._ch, self._sh, self.linearity, out, self._scratch())
@@ -1034,8 +1050,10 @@ class FrameProcessor:
         where a pixel has no ground point.  One kernel pass without the rest of an estimate (the tracker evaluates
         ``B`` at every track's predicted position in every frame: ~4x less than :meth:`corners`)."""
         uv = np.ascontiguousarray(uv_px, dtype=np.float64).reshape(-1, 1, 2)
+        if not self._use_kernels():
+            return footprints_from_corners(self.camera, self.budget, uv, allow_outside_image=True, linearity=False,
+                                           v2x_policy="linear").centre_shared_m
         out = self._fk.alloc_outputs(uv.shape[0], 1, corners=False, shared_rank=self._r)
-        before_kernels("objects")
         self._fk.process_corners(uv, self._no_extra, self._no_boxes, False, True, self._cam, self._dR, self._Lr,
                                  self._Lc, self._Lv, self._r, self._spx, self._no_det, 0, True, self._ch, self._sh,
                                  False, out, self._scratch())
@@ -1072,12 +1090,16 @@ class FrameProcessor:
             raise InputError("yaw_unit", yaw_unit, "'rad' (column yaw_rad) or 'deg' (column yaw_deg)")
         N = b.shape[0]
         det, mode = self._det(pixel_cov_px2, N, 4)
+        if not self._use_kernels():
+            return self._reference(footprints_from_boxes3d(
+                self.camera, self.budget, b, yaw_unit=yaw_unit, bottom_on_ground=bottom_on_ground,
+                pixel_cov_px2=pixel_cov_px2, allow_outside_image=self.allow_outside_image,
+                heading_offset_deg=self.heading_offset_deg, **self._flag_options()))
         r = self._r if self.shared_jacobian else None
         alloc = reusable_allocator(self._fk.outputs_max_bytes(N, 4, joint=self.joint_cov, shared_rank=r))
         uv = alloc((N if self.corner_outputs else 0, 4, 2), np.float64)
         out = self._fk.alloc_outputs(N, 4, joint=self.joint_cov, corners=self.corner_outputs, alloc=alloc,
                                      shared_rank=r)
-        before_kernels("objects")
         bad, n_over = self._fk.process_boxes3d(b, yaw_unit == "deg", bool(bottom_on_ground), self._cam, self._dR,
                                                self._Lr, self._Lc, self._Lv, self._r, self._spx, det, mode,
                                                self.allow_outside_image, self._ch, self._sh, self.linearity, uv, out,
@@ -1093,6 +1115,25 @@ class FrameProcessor:
             return self.camera.project(X).uv_px
 
         return self._pack(uv, out, corners_of, det, mode, n_over)
+
+
+def _object_rows(est: FootprintEstimate) -> np.ndarray:
+    """The fused kernel's per-object rows (:data:`footprint_uq.fast.footprint_kernels.OBJ_ROWS`, (R, N)) of a
+    reference estimate: the centre, its covariance and 1-sigma ellipse, the largest point, the area, the flags."""
+    row = fk.OBJ_ROW
+    obj = np.full((len(fk.OBJ_ROWS), len(est)), np.nan)
+    c = est.centre_cov_m2
+    obj[row["x_m"]], obj[row["y_m"]] = est.centre_xy_world_m[:, 0], est.centre_xy_world_m[:, 1]
+    obj[row["cov_xx_m2"]], obj[row["cov_xy_m2"]] = c[:, 0, 0], c[:, 0, 1]
+    obj[row["cov_yx_m2"]], obj[row["cov_yy_m2"]] = c[:, 1, 0], c[:, 1, 1]
+    obj[row["sigma_major_m"]], obj[row["sigma_minor_m"]], obj[row["orientation_deg"]] = ellipse_axes(c)
+    obj[row["largest_sigma_major_m"]] = est.largest_semi_major_m
+    obj[row["largest_x_m"]], obj[row["largest_y_m"]] = est.largest_xy_world_m[:, 0], est.largest_xy_world_m[:, 1]
+    obj[row["area_m2"]] = est.area_m2
+    if est.centre_nonlinearity is not None:
+        obj[row["nonlinearity"]] = est.centre_nonlinearity
+        obj[row["largest_nonlinearity"]] = est.largest_nonlinearity
+    return obj
 
 
 def _det_joint_rows(det, mode: int, rows, K: int):
