@@ -247,3 +247,27 @@ def test_cold_cache_first_run_compiles_in_the_background(tmp_path):
     r = subprocess.run(_objects_cmd(tmp_path, "second.parquet"), env=env, capture_output=True, text=True)
     assert r.returncode == 0 and "compiling" not in r.stderr, r.stderr
     _same_records(tmp_path / "first.parquet", tmp_path / "second.parquet")
+
+
+def test_warmup_compiles_every_signature_the_commands_use(tmp_path):
+    """`warmup` (and so the background compile of a first run) leaves nothing for `objects` (2-D and 3-D
+    boxes, lean and with corners), the tracker or `serve` to compile: a kernel signature it missed would be a
+    second full compile in the foreground (the batch's column-major boxes once were)."""
+    from footprint_uq.batch.process import process_file
+    from footprint_uq.fast import footprint_kernels as fk
+    from footprint_uq.service.core import Service
+
+    W.warmup(["objects"])
+    before = {k: set(k.signatures) for k in W.GROUPS["objects"]}
+    cam = _cams()[0]
+    _write_inputs(tmp_path, cam)
+    process_file(cam, "basler1", tmp_path / "boxes.csv", tmp_path / "a.parquet")
+    process_file(cam, "basler1", tmp_path / "boxes.csv", tmp_path / "b.parquet", corners=True)
+    (tmp_path / "b2d.csv").write_text("frame,object_id,u_min_px,v_min_px,u_max_px,v_max_px,timestamp_s\n"
+                                      "0,1,900,600,1000,700,0.0\n1,1,905,602,1005,702,0.1\n")
+    process_file(cam, "basler1", tmp_path / "b2d.csv", tmp_path / "c.parquet", tracks=True)
+    service = Service(cam, "basler1", camera_id="cam1")
+    service.process_frame({"camera_id": "cam1", "frame": 1, "timestamp_s": 1.0, "detections": [
+        {"object_id": 7, "class": "car", "u_min_px": 900, "v_min_px": 600, "u_max_px": 1000, "v_max_px": 700}]})
+    assert {k: set(k.signatures) for k in W.GROUPS["objects"]} == before
+    assert fk.process_boxes3d in W.GROUPS["objects"]
