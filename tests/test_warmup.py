@@ -271,3 +271,24 @@ def test_warmup_compiles_every_signature_the_commands_use(tmp_path):
         {"object_id": 7, "class": "car", "u_min_px": 900, "v_min_px": 600, "u_max_px": 1000, "v_max_px": 700}]})
     assert {k: set(k.signatures) for k in W.GROUPS["objects"]} == before
     assert fk.process_boxes3d in W.GROUPS["objects"]
+
+
+def test_a_long_job_switches_to_the_kernels_between_chunks(tmp_path):
+    """A batch whose kernels become ready while it runs (the background compile done after the third chunk)
+    takes the reference path, then the kernels: the records are those of a run on the kernels alone."""
+    from footprint_uq.batch.process import process_file
+
+    cam = _cams()[1]
+    _write_inputs(tmp_path, cam)
+    asked = []
+
+    def gate(group):
+        asked.append(group)
+        return len(asked) > 3
+
+    _notices.set_compile_handler(gate)
+    process_file(cam, "basler1", tmp_path / "boxes.csv", tmp_path / "mixed.parquet", chunk_rows=10, threads=1)
+    assert asked == ["objects"] * 4  # asked before every chunk until the kernels ran, then never again
+    _notices.set_compile_handler(None)
+    process_file(cam, "basler1", tmp_path / "boxes.csv", tmp_path / "kernels.parquet", chunk_rows=10, threads=1)
+    _same_records(tmp_path / "mixed.parquet", tmp_path / "kernels.parquet")
