@@ -1,5 +1,8 @@
 """``footprint-uq warmup``: compile the kernels ahead of time (:func:`footprint_uq.products.warmup.warmup`), e.g.
-while building a container image or before a service starts, so that no command pays for it later."""
+while building a container image or before a service starts, so that no command pays for it later.
+
+Without it a command whose kernels are not in the cache compiles them in a detached background process and
+runs the numpy reference path meanwhile (``FOOTPRINT_UQ_COMPILE``: background, foreground, reference)."""
 
 from __future__ import annotations
 
@@ -18,7 +21,10 @@ __all__ = ["warmup_cmd"]
 @click.option("--background", is_flag=True, hidden=True,
               help="The detached compile a command starts: skip a group another process is compiling; no output.")
 def warmup_cmd(only, background):
-    """Compile every kernel once into numba's cache folder (later runs of every command start at once)."""
+    """Compile every kernel once into numba's cache folder (later runs of every command start at once).
+
+    Without it, a command whose kernels are not cached compiles them in the background and runs the (slower)
+    reference path meanwhile; FOOTPRINT_UQ_COMPILE=foreground makes it compile first, =reference never."""
     groups = list(only) or list(GROUPS)
     if background:
         warmup(groups, background=True)

@@ -547,61 +547,11 @@ def footprints_from_corners(camera, budget, corners_px, *, pixel_cov_px2=None, a
     computed = bp.valid & ((reason == status.OK) | (reason == status.OUTSIDE_IMAGE))
     usable = computed & ((reason == status.OK) | allow_outside_image)
     xy = np.where(computed[..., None], bp.xy_world_m, np.nan)
-    # joint covariance: shared camera parameters + per-point (budget) + detector
-    Sp = budget.param_covariance()
-    used = np.flatnonzero(np.any(Sp != 0, axis=0))
-    Jp = bp.dxy_dp[..., used].reshape(N, 2 * K, used.size)
-    with np.errstate(over="ignore", invalid="ignore"):  # overflow: not finite, marked OVERFLOW below
-        joint = Jp @ Sp[np.ix_(used, used)] @ np.swapaxes(Jp, -1, -2)
-    Juv = np.zeros((N, 2 * K, 2 * K))
-    for k in range(K):
-        Juv[:, 2 * k:2 * k + 2, 2 * k:2 * k + 2] = bp.dxy_duv[:, k]
-    Spx = np.broadcast_to(np.kron(np.eye(K), budget.pixel_covariance()), (N, 2 * K, 2 * K))
-    if det is not None:
-        Spx = Spx + det
-    with np.errstate(over="ignore", invalid="ignore"):
-        joint = joint + Juv @ Spx @ np.swapaxes(Juv, -1, -2)
-    bad_rows = np.repeat(~computed, 2, axis=1)
-    joint = np.where(bad_rows[:, :, None] | bad_rows[:, None, :], np.nan, joint)
-    idx = np.arange(K)
-    ccov = np.stack([joint[:, 2 * idx, 2 * idx], joint[:, 2 * idx, 2 * idx + 1],
-                     joint[:, 2 * idx + 1, 2 * idx], joint[:, 2 * idx + 1, 2 * idx + 1]], -1).reshape(N, K, 2, 2)
-    # largest point over the usable corners
-    a, b, d = ccov[..., 0, 0], ccov[..., 0, 1], ccov[..., 1, 1]
-    with np.errstate(invalid="ignore"):
-        semi = np.sqrt(0.5 * (a + d) + np.hypot(0.5 * (a - d), b))
-    semi_u = np.where(usable, semi, -np.inf)
-    li = np.argmax(semi_u, axis=1)
-    any_usable = usable.any(1)
-    largest_index = np.where(any_usable, li, -1)
-    rows = np.arange(N)
-    largest_semi = np.where(any_usable, semi[rows, li], np.nan)
-    largest_xy = np.where(any_usable[:, None], xy[rows, li], np.nan)
-    largest_cov = np.where(any_usable[:, None, None], ccov[rows, li], np.nan)
-    # centre
-    all_usable = usable.all(1)
-    first_bad = np.argmax(~usable, axis=1)
-    centre_bad = np.where(all_usable, -1, first_bad)
-    centre_reason = np.where(all_usable, status.OK, reason[rows, first_bad]).astype(np.int32)
-    # outside-image corners that are computed but not allowed keep the OUTSIDE_IMAGE code
-    xy_c = np.where(all_usable[:, None, None], xy, 0.0)
-    with np.errstate(invalid="ignore", over="ignore"):  # overflow on absurd inputs: _mark_overflow flags it
-        C, area, G = footprint_centre(xy_c, get_gradients=True)
-    if K >= 3:
-        degenerate = all_usable & ~np.isfinite(C).all(-1)
-        centre_reason = np.where(degenerate, DEGENERATE, centre_reason)
-    ok = centre_reason == status.OK
-    joint_c = np.where(all_usable[:, None, None], joint, 0.0)
-    G = np.where(ok[:, None, None], G, 0.0)
-    with np.errstate(invalid="ignore", over="ignore"):
-        ccov_c = G @ joint_c @ np.swapaxes(G, -1, -2)
-    centre = np.where(ok[:, None], C, np.nan)
-    centre_cov = np.where(ok[:, None, None], ccov_c, np.nan)
-    with np.errstate(invalid="ignore", over="ignore"):  # the centre's whitened parameter Jacobian dC/dp L
-        L = budget.param_factor().dense()
-        shared = G @ (np.where(bad_rows[:, :, None], 0.0, bp.dxy_dp.reshape(N, 2 * K, bp.dxy_dp.shape[-1])) @ L)
-    shared = np.where(ok[:, None, None], shared, np.nan)
-    area = np.where(all_usable, area, np.nan)
+    joint, ccov, Sp = _joint_covariance(budget, bp, det, computed)
+    largest_index, largest_semi, largest_xy, largest_cov = _largest_point(xy, ccov, usable)
+    any_usable, li, rows = largest_index >= 0, np.maximum(largest_index, 0), np.arange(N)
+    centre, centre_cov, ok, centre_reason, centre_bad, area, shared = _centre(budget, bp, xy, joint, reason, usable,
+                                                                            computed)
     fields = {**cpm_fields(centre_cov, heading_offset_deg), **j2735_fields(centre_cov, heading_offset_deg)}
     v2x = np.stack([fields[name] for name in V2X_FIELDS], -1).astype(np.int32)
     cnl = largest_nl = centre_nl = None
@@ -624,6 +574,78 @@ def footprints_from_corners(camera, budget, corners_px, *, pixel_cov_px2=None, a
         centre_shared_m=shared))
     return _apply_v2x_policy(est, camera, budget, v2x_policy, v2x_samples, v2x_seed,
                              corners_of=lambda r: uv[r], det_of=lambda r: None if det is None else det[r])
+
+
+def _joint_covariance(budget, bp, det, computed):
+    """``(joint (N, 2K, 2K), per-corner (N, K, 2, 2), the budget's parameter covariance (22, 22))`` of the
+    reference path: shared camera parameters + per-point pixel noise (budget) + detector; NaN rows and columns
+    for the corners not computed."""
+    N, K = computed.shape
+    Sp = budget.param_covariance()
+    used = np.flatnonzero(np.any(Sp != 0, axis=0))
+    Jp = bp.dxy_dp[..., used].reshape(N, 2 * K, used.size)
+    with np.errstate(over="ignore", invalid="ignore"):  # overflow: not finite, marked OVERFLOW below
+        joint = Jp @ Sp[np.ix_(used, used)] @ np.swapaxes(Jp, -1, -2)
+    Juv = np.zeros((N, 2 * K, 2 * K))
+    for k in range(K):
+        Juv[:, 2 * k:2 * k + 2, 2 * k:2 * k + 2] = bp.dxy_duv[:, k]
+    Spx = np.broadcast_to(np.kron(np.eye(K), budget.pixel_covariance()), (N, 2 * K, 2 * K))
+    if det is not None:
+        Spx = Spx + det
+    with np.errstate(over="ignore", invalid="ignore"):
+        joint = joint + Juv @ Spx @ np.swapaxes(Juv, -1, -2)
+    bad_rows = np.repeat(~computed, 2, axis=1)
+    joint = np.where(bad_rows[:, :, None] | bad_rows[:, None, :], np.nan, joint)
+    idx = np.arange(K)
+    ccov = np.stack([joint[:, 2 * idx, 2 * idx], joint[:, 2 * idx, 2 * idx + 1],
+                     joint[:, 2 * idx + 1, 2 * idx], joint[:, 2 * idx + 1, 2 * idx + 1]], -1).reshape(N, K, 2, 2)
+    return joint, ccov, Sp
+
+
+def _largest_point(xy, ccov, usable):
+    """The usable corner with the largest 1-sigma semi-major axis: ``(index (-1: none), semi-major, point,
+    covariance)``."""
+    a, b, d = ccov[..., 0, 0], ccov[..., 0, 1], ccov[..., 1, 1]
+    with np.errstate(invalid="ignore"):
+        semi = np.sqrt(0.5 * (a + d) + np.hypot(0.5 * (a - d), b))
+    li = np.argmax(np.where(usable, semi, -np.inf), axis=1)
+    any_usable = usable.any(1)
+    rows = np.arange(xy.shape[0])
+    return (np.where(any_usable, li, -1), np.where(any_usable, semi[rows, li], np.nan),
+            np.where(any_usable[:, None], xy[rows, li], np.nan), np.where(any_usable[:, None, None], ccov[rows, li],
+                                                                           np.nan))
+
+
+def _centre(budget, bp, xy, joint, reason, usable, computed):
+    """The centre of the reference path: ``(point, covariance, valid, reason, first unusable corner, area,
+    whitened parameter Jacobian dC/dp L)``, NaN where there is no centre."""
+    N, K = usable.shape
+    rows = np.arange(N)
+    all_usable = usable.all(1)
+    first_bad = np.argmax(~usable, axis=1)
+    centre_bad = np.where(all_usable, -1, first_bad)
+    centre_reason = np.where(all_usable, status.OK, reason[rows, first_bad]).astype(np.int32)
+    # outside-image corners that are computed but not allowed keep the OUTSIDE_IMAGE code
+    xy_c = np.where(all_usable[:, None, None], xy, 0.0)
+    with np.errstate(invalid="ignore", over="ignore"):  # overflow on absurd inputs: _mark_overflow flags it
+        C, area, G = footprint_centre(xy_c, get_gradients=True)
+    if K >= 3:
+        degenerate = all_usable & ~np.isfinite(C).all(-1)
+        centre_reason = np.where(degenerate, DEGENERATE, centre_reason)
+    ok = centre_reason == status.OK
+    joint_c = np.where(all_usable[:, None, None], joint, 0.0)
+    G = np.where(ok[:, None, None], G, 0.0)
+    with np.errstate(invalid="ignore", over="ignore"):
+        ccov_c = G @ joint_c @ np.swapaxes(G, -1, -2)
+    centre = np.where(ok[:, None], C, np.nan)
+    centre_cov = np.where(ok[:, None, None], ccov_c, np.nan)
+    bad_rows = np.repeat(~computed, 2, axis=1)
+    with np.errstate(invalid="ignore", over="ignore"):  # the centre's whitened parameter Jacobian dC/dp L
+        L = budget.param_factor().dense()
+        shared = G @ (np.where(bad_rows[:, :, None], 0.0, bp.dxy_dp.reshape(N, 2 * K, bp.dxy_dp.shape[-1])) @ L)
+    shared = np.where(ok[:, None, None], shared, np.nan)
+    area = np.where(all_usable, area, np.nan)
+    return centre, centre_cov, ok, centre_reason, centre_bad, area, shared
 
 
 def _mark_overflow(est: FootprintEstimate) -> FootprintEstimate:
