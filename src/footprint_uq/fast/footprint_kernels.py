@@ -93,7 +93,12 @@ _ORIENT_UNIT, _ORIENT_UNAV = v2x.J2735_ORIENTATION_UNIT_DEG, float(v2x.J2735_ORI
 #: the stages of :func:`process_corners` are inlined into it (numba IR): a call between compiled functions
 #: passes every array as a reference-counted struct (S, the camera, the factor, the 12 outputs), and those
 #: calls, ~20 per chunk, cost ~15 % of the per-frame kernel (measured: 100 3D boxes 37.8 -> 33.8 us
-#: without the linearity flag, 48.6 -> 43.4 us with it; the first compilation takes ~20 s longer)
+#: without the linearity flag, 48.6 -> 43.4 us with it; the first compilation takes ~20 s longer).
+#: Measured again 2026-11-26 (2-core VM, load average 6-8, best of 3 interleaved runs, joint covariance off):
+#: without inlining 100 boxes take 9-19 % longer (pan-tilt 87.9 -> 99.6 us with the flag, 68.7 -> 81.6 us
+#: without; OpenCV 106.9 -> 117.1, 90.9 -> 99.2 us) and the objects group compiles in 55 instead of 135 CPU
+#: seconds.  Kept: a command no longer waits for this compile (it runs in the background while the command
+#: takes the reference path: products.warmup.KernelGate), the per-frame time is what a service pays forever.
 _STAGE = dict(cache=True, error_model="numpy", nogil=True, inline="always")
 
 # Chunk scratch: ONE float64 buffer; row r of a chunk is S[r * _ST : r * _ST + m].  Every access
