@@ -6,6 +6,9 @@ runs the numpy reference path meanwhile (``FOOTPRINT_UQ_COMPILE``: background, f
 
 from __future__ import annotations
 
+import contextlib
+import os
+
 import click
 
 from .._numba_cache import cache_dir
@@ -27,6 +30,8 @@ def warmup_cmd(only, background):
     reference path meanwhile; FOOTPRINT_UQ_COMPILE=foreground makes it compile first, =reference never."""
     groups = list(only) or list(GROUPS)
     if background:
+        with contextlib.suppress(OSError):  # the command the user waits for runs first where cores are scarce
+            os.nice(10)
         warmup(groups, background=True)
         return
     cold = set(cold_groups(groups))

@@ -161,8 +161,8 @@ def group_lock(group: str, *, wait: bool):
 
 def start_background(group: str) -> subprocess.Popen | None:
     """Start ``footprint-uq warmup --only group --background`` as a detached process (its own session: it
-    outlives the command, and a Ctrl-C of the command does not stop it); None when another process is
-    compiling the group already."""
+    outlives the command, and a Ctrl-C of the command does not stop it; niceness +10: the command comes first
+    where cores are scarce); None when another process is compiling the group already."""
     if _holder(_lock_path(group)) is not None:
         return None
     env = {**os.environ, "FOOTPRINT_UQ_COMPILE": "foreground", "NUMBA_CACHE_DIR": str(cache_dir())}
