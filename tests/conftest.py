@@ -28,6 +28,20 @@ settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "explore"))
 
 IMAGE_SIZE_PX = (1920, 1080)
 
+# A command line whose kernels are not in numba's cache would run on the reference path while they compile in a
+# detached process (products.warmup.KernelGate); the suite compiles them in the test instead (deterministic,
+# no process left behind).  tests/test_warmup.py sets the other modes itself.
+os.environ.setdefault("FOOTPRINT_UQ_COMPILE", "foreground")
+
+
+@pytest.fixture(autouse=True)
+def _no_compile_handler_left():
+    """A command line's compile handler (footprint_uq._notices) does not outlive its test."""
+    yield
+    from footprint_uq import _notices
+
+    _notices.set_compile_handler(None)
+
 # Real data shared beside the repository (../shared/data: Rope3D, TUMTraf, ETSI ASN.1, OpenCV boards;
 # each folder has a SOURCE.txt). FOOTPRINT_UQ_SHARED_DATA overrides the location.
 SHARED_DATA = Path(os.environ.get("FOOTPRINT_UQ_SHARED_DATA",
@@ -211,6 +225,7 @@ SLOW_TESTS = (
     "test_centre_linearity.py",           # the footprint centre's Monte Carlo sweep
     "test_examples.py",                   # every example script end to end
     "test_cli.py::test_demo_writes_report",
+    "test_warmup.py::test_cold_cache_first_run_compiles_in_the_background",  # a full compile of the objects kernels
 )
 
 

@@ -2,14 +2,22 @@
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
+import time
 from pathlib import Path
 from types import SimpleNamespace
 
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
 from click.testing import CliRunner
 
-from footprint_uq import _numba_cache
+from footprint_uq import OpenCVCamera, PanTiltCamera, _notices, _numba_cache, save_camera
 from footprint_uq.cli.main import main
 from footprint_uq.products import warmup as W
+from footprint_uq.products.footprints import FrameProcessor
 
 
 def test_cache_folder_is_the_users_when_the_package_is_read_only(monkeypatch, tmp_path):
@@ -50,8 +58,6 @@ def test_warmup_fills_the_cache_and_the_command_reports_it():
 def test_the_notice_never_comes_before_an_input_error(monkeypatch, tmp_path):
     """A cold cache's notice is said right before the kernels run, after every input is checked: a bad option is
     still one line on stderr; a good run says the notice once, before its output."""
-    from footprint_uq import PanTiltCamera, save_camera
-
     monkeypatch.setattr(W, "cold_groups", lambda groups: list(groups))  # every group "cold"
     cam = tmp_path / "cam.yaml"
     save_camera(PanTiltCamera(focal_px=400.0, image_size_px=(320, 240), height_m=8.0, pan_deg=0.0, tilt_deg=20.0),
@@ -62,3 +68,227 @@ def test_the_notice_never_comes_before_an_input_error(monkeypatch, tmp_path):
     r = CliRunner().invoke(main, [*base, "--step-px", "16"])
     assert r.exit_code == 0, r.output
     assert r.stderr.count("compiling the map kernels once") == 1
+
+
+class _Job:
+    """A stand-in for the detached compile's process."""
+
+    def __init__(self):
+        self.returncode = None
+
+    def poll(self):
+        return self.returncode
+
+
+def test_gate_modes(monkeypatch, tmp_path):
+    """Cold group: "reference" never compiles and says nothing; "foreground" says the notice and compiles;
+    "background" says it starts the compile, takes the reference path until the compile is done, then the
+    kernels.  A warm group: the kernels, nothing said."""
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))
+    cold = {"objects"}
+    monkeypatch.setattr(W, "cold_groups", lambda groups: [g for g in groups if g in cold])
+    monkeypatch.setattr(W, "_POLL_S", 0.0)
+    said = []
+    gate = W.KernelGate(said.append, "reference")
+    assert [gate("objects"), gate("objects"), gate("map")] == [False, False, False] and said == []
+    gate = W.KernelGate(said.append, "foreground")
+    assert gate("objects") and gate("map") and len(said) == 1 and "compiling the objects kernels once" in said[0]
+    said.clear()
+    job = _Job()
+    monkeypatch.setattr(W, "start_background", lambda group: job)
+    assert W.compile_mode({}) == W.compile_mode({"FOOTPRINT_UQ_COMPILE": ""}) == "background"  # the default
+    gate = W.KernelGate(said.append, "background")
+    assert not gate("objects") and not gate("objects")
+    assert len(said) == 1 and "in the background" in said[0] and "reference path meanwhile" in said[0]
+    job.returncode = 0  # the compile ends ...
+    assert not gate("objects")  # ... but left the group cold (failed): the reference path for this run
+    gate = W.KernelGate(said.append, "background")
+    job.returncode = None
+    assert not gate("objects")
+    job.returncode, cold = 0, set()
+    assert gate("objects") and gate("objects") and gate("map") and len(said) == 2
+
+
+def test_bad_mode_is_one_line(monkeypatch, tmp_path):
+    monkeypatch.setenv("FOOTPRINT_UQ_COMPILE", "later")
+    cam = tmp_path / "cam.yaml"
+    save_camera(PanTiltCamera(focal_px=400.0, image_size_px=(320, 240), height_m=8.0, pan_deg=0.0, tilt_deg=20.0),
+                cam)
+    r = CliRunner().invoke(main, ["map", "--camera", str(cam), "--budget", "basler1", "--out", str(tmp_path / "m")])
+    assert r.exit_code == 2 and r.stderr.count("\n") == 1 and "FOOTPRINT_UQ_COMPILE" in r.stderr, r.stderr
+
+
+def test_group_lock(monkeypatch, tmp_path):
+    """One holder at a time; a lock whose process is gone is taken over; the lock file goes with its holder."""
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "cache"))
+    path = W._lock_path("map")
+    with W.group_lock("map", wait=False) as held:
+        assert held and path.read_text() == str(os.getpid()) and W._holder(path) == os.getpid()
+        with W.group_lock("map", wait=False) as again:
+            assert not again
+        assert W.start_background("map") is None  # compiling already: nothing started
+    assert not path.exists()
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    path.write_text(dead.stdout.strip())  # a crashed compile's lock
+    assert W._holder(path) is None
+    with W.group_lock("map", wait=False) as held:
+        assert held
+
+
+def _cams():
+    pt = PanTiltCamera(focal_px=1400.0, image_size_px=(1920, 1080), height_m=8.0, pan_deg=30.0, tilt_deg=20.0)
+    T = pt.T_cam_world
+    cv = OpenCVCamera(pt.K, np.array([-0.17, 0.12, -1.2e-4, -2.35e-3, -0.03]), T[:3, :3], T[:3, 3], (1920, 1080))
+    return pt, cv
+
+
+def _close(a, b):
+    if a is None or b is None:
+        return a is None and b is None
+    a, b = np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64)
+    return a.shape == b.shape and np.allclose(a, b, rtol=1e-9, atol=1e-12, equal_nan=True)
+
+
+@pytest.mark.parametrize("cam", _cams(), ids=["pantilt", "opencv"])
+def test_frame_processor_reference_path_gives_the_kernels_numbers(cam):
+    """While the kernels compile in the background a command's FrameProcessor runs the numpy reference: the
+    same estimate, per-object rows (the batch's columns) and V2X fields as the compiled kernel."""
+    rng = np.random.default_rng(3)
+    n = 40
+    r, a = rng.uniform(8.0, 90.0, n), np.deg2rad(30.0 + rng.uniform(-40.0, 40.0, n))
+    boxes = np.c_[r * np.sin(a), r * np.cos(a), np.full(n, 0.75), np.full(n, 4.5), np.full(n, 1.8),
+                  np.full(n, 1.5), rng.uniform(0.0, 3.0, n)]
+    boxes[0, 0:2] = [0.0, -20.0]  # behind the camera
+    boxes2d = np.c_[rng.uniform(0, 1800, n), rng.uniform(300, 900, n)]
+    boxes2d = np.c_[boxes2d, boxes2d + rng.uniform(20.0, 120.0, (n, 2))]
+    boxes2d[1] = [900.0, 50.0, 950.0, 100.0]  # above the horizon
+    P = np.tile(np.diag([4.0, 9.0]), (n, 1, 1))
+    for kw in ({}, {"joint_cov": False, "linearity": False}, {"shared_jacobian": True}):
+        fast, ref = FrameProcessor(cam, "basler1", **kw), FrameProcessor(cam, "basler1", **kw)
+        _notices.set_compile_handler(lambda group: False)
+        ests_ref = [ref.boxes3d(boxes), ref.boxes2d(boxes2d, pixel_cov_px2=P), ref.corners(boxes2d.reshape(n, 2, 2))]
+        shared_ref = ref.point_shared_jacobian(boxes2d[:, :2])
+        _notices.set_compile_handler(None)
+        ests_fast = [fast.boxes3d(boxes), fast.boxes2d(boxes2d, pixel_cov_px2=P),
+                     fast.corners(boxes2d.reshape(n, 2, 2))]
+        assert fast._kernels and not ref._kernels
+        assert _close(shared_ref, fast.point_shared_jacobian(boxes2d[:, :2]))
+        for e_ref, e_fast in zip(ests_ref, ests_fast, strict=True):
+            assert np.array_equal(e_ref.v2x_codes, e_fast.v2x_codes)
+            assert np.array_equal(e_ref.v2x_source, e_fast.v2x_source)
+            assert np.array_equal(e_ref.centre_reason, e_fast.centre_reason)
+            assert np.array_equal(e_ref.corner_reason, e_fast.corner_reason)
+            assert np.array_equal(e_ref.largest_index, e_fast.largest_index)
+            for name in ("centre_xy_world_m", "centre_cov_m2", "largest_semi_major_m", "largest_xy_world_m",
+                         "corners_xy_world_m", "corners_cov_m2", "joint_cov_m2", "centre_nonlinearity",
+                         "corners_nonlinearity", "centre_shared_m", "area_m2", "object_rows"):
+                assert _close(getattr(e_ref, name), getattr(e_fast, name)), name
+            assert np.isfinite(e_ref.object_rows[:2]).any()
+
+
+def _objects_cmd(d: Path, out: str) -> list[str]:
+    return [sys.executable, "-m", "footprint_uq.cli", "objects", "--camera", str(d / "cam.yaml"), "--budget",
+            "basler1", "--detections", str(d / "boxes.csv"), "--out", str(d / out), "--quiet"]
+
+
+def _write_inputs(d: Path, cam) -> None:
+    save_camera(cam, d / "cam.yaml")
+    rng = np.random.default_rng(0)
+    r, a = rng.uniform(10.0, 80.0, 60), np.deg2rad(30.0 + rng.uniform(-30.0, 30.0, 60))
+    lines = ["frame,object_id,x_m,y_m,z_m,length_m,width_m,height_m,yaw_rad"]
+    lines += [f"{k // 10},{k},{r[k] * np.sin(a[k]):.3f},{r[k] * np.cos(a[k]):.3f},0.75,4.5,1.8,1.5,"
+              f"{rng.uniform(0, 3):.3f}" for k in range(60)]
+    (d / "boxes.csv").write_text("\n".join(lines) + "\n")
+
+
+def _same_records(a: Path, b: Path) -> None:
+    ta, tb = pq.read_table(a), pq.read_table(b)
+    assert ta.column_names == tb.column_names and ta.num_rows == tb.num_rows == 60
+    for name in ta.column_names:
+        x, y = ta.column(name).to_pylist(), tb.column(name).to_pylist()
+        if isinstance(x[0], float):
+            assert np.allclose(np.array(x, dtype=float), np.array(y, dtype=float), rtol=1e-9, atol=1e-12,
+                               equal_nan=True), name
+        else:
+            assert x == y, name
+
+
+def test_objects_on_the_reference_path_writes_the_same_records(tmp_path):
+    """`objects` with FOOTPRINT_UQ_COMPILE=reference (the path of a cold cache's first run) and with the
+    kernels: the same records."""
+    _write_inputs(tmp_path, _cams()[1])
+    env = {**os.environ, "FOOTPRINT_UQ_COMPILE": "reference"}
+    r = subprocess.run(_objects_cmd(tmp_path, "ref.parquet"), env=env, capture_output=True, text=True)
+    assert r.returncode == 0 and "compiling" not in r.stderr, r.stderr
+    env["FOOTPRINT_UQ_COMPILE"] = "foreground"
+    r = subprocess.run(_objects_cmd(tmp_path, "fast.parquet"), env=env, capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    _same_records(tmp_path / "ref.parquet", tmp_path / "fast.parquet")
+
+
+def test_cold_cache_first_run_compiles_in_the_background(tmp_path):
+    """A fresh NUMBA_CACHE_DIR: the first `objects` says it compiles in the background, finishes on the
+    reference path, and leaves a detached compile behind (its lock in the cache folder); once it is done the
+    group is warm and a second run writes the same records with the kernels (slow: a full compile)."""
+    cache = tmp_path / "numba"
+    _write_inputs(tmp_path, _cams()[0])
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(cache), "FOOTPRINT_UQ_COMPILE": "background"}
+    r = subprocess.run(_objects_cmd(tmp_path, "first.parquet"), env=env, capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    assert r.stderr.count("compiling the objects kernels in the background") == 1, r.stderr
+    lock = cache / "footprint-uq-warmup-objects.lock"
+    t0 = time.monotonic()
+    while (lock.exists() or not list(cache.rglob("*process_boxes3d*.nbi"))) and time.monotonic() - t0 < 900:
+        time.sleep(1.0)
+    assert not lock.exists()
+    check = ("from footprint_uq.products.warmup import cold_groups; import sys; "
+             "sys.exit(1 if cold_groups(['objects']) else 0)")
+    assert subprocess.run([sys.executable, "-c", check], env=env).returncode == 0
+    r = subprocess.run(_objects_cmd(tmp_path, "second.parquet"), env=env, capture_output=True, text=True)
+    assert r.returncode == 0 and "compiling" not in r.stderr, r.stderr
+    _same_records(tmp_path / "first.parquet", tmp_path / "second.parquet")
+
+
+def test_warmup_compiles_every_signature_the_commands_use(tmp_path):
+    """`warmup` (and so the background compile of a first run) leaves nothing for `objects` (2-D and 3-D
+    boxes, lean and with corners), the tracker or `serve` to compile: a kernel signature it missed would be a
+    second full compile in the foreground (the batch's column-major boxes once were)."""
+    from footprint_uq.batch.process import process_file
+    from footprint_uq.fast import footprint_kernels as fk
+    from footprint_uq.service.core import Service
+
+    W.warmup(["objects"])
+    before = {k: set(k.signatures) for k in W.GROUPS["objects"]}
+    cam = _cams()[0]
+    _write_inputs(tmp_path, cam)
+    process_file(cam, "basler1", tmp_path / "boxes.csv", tmp_path / "a.parquet")
+    process_file(cam, "basler1", tmp_path / "boxes.csv", tmp_path / "b.parquet", corners=True)
+    (tmp_path / "b2d.csv").write_text("frame,object_id,u_min_px,v_min_px,u_max_px,v_max_px,timestamp_s\n"
+                                      "0,1,900,600,1000,700,0.0\n1,1,905,602,1005,702,0.1\n")
+    process_file(cam, "basler1", tmp_path / "b2d.csv", tmp_path / "c.parquet", tracks=True)
+    service = Service(cam, "basler1", camera_id="cam1")
+    service.process_frame({"camera_id": "cam1", "frame": 1, "timestamp_s": 1.0, "detections": [
+        {"object_id": 7, "class": "car", "u_min_px": 900, "v_min_px": 600, "u_max_px": 1000, "v_max_px": 700}]})
+    assert {k: set(k.signatures) for k in W.GROUPS["objects"]} == before
+    assert fk.process_boxes3d in W.GROUPS["objects"]
+
+
+def test_a_long_job_switches_to_the_kernels_between_chunks(tmp_path):
+    """A batch whose kernels become ready while it runs (the background compile done after the third chunk)
+    takes the reference path, then the kernels: the records are those of a run on the kernels alone."""
+    from footprint_uq.batch.process import process_file
+
+    cam = _cams()[1]
+    _write_inputs(tmp_path, cam)
+    asked = []
+
+    def gate(group):
+        asked.append(group)
+        return len(asked) > 3
+
+    _notices.set_compile_handler(gate)
+    process_file(cam, "basler1", tmp_path / "boxes.csv", tmp_path / "mixed.parquet", chunk_rows=10, threads=1)
+    assert asked == ["objects"] * 4  # asked before every chunk until the kernels ran, then never again
+    _notices.set_compile_handler(None)
+    process_file(cam, "basler1", tmp_path / "boxes.csv", tmp_path / "kernels.parquet", chunk_rows=10, threads=1)
+    _same_records(tmp_path / "mixed.parquet", tmp_path / "kernels.parquet")

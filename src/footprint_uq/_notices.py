@@ -1,10 +1,12 @@
-"""One hook for "the compiled kernels are about to be compiled": a command line says so on stderr, a library
-user sees nothing.
+"""One hook for "the compiled kernels are about to run": a command line says so on stderr when they still have
+to be compiled (and may run the numpy reference path meanwhile); a library user sees nothing.
 
 The command sets a handler (:func:`set_compile_handler`); the library calls :func:`before_kernels` with the
 kernel group's name right before it calls a group's kernels, i.e. after every input has been checked -- so a
-notice never comes before a one-line input error. The handler runs at most once per group and process, and
-decides itself whether anything needs compiling (``products.warmup.compile_notice``).
+notice never comes before a one-line input error.  The handler decides itself whether anything needs
+compiling (``products.warmup.KernelGate``) and answers whether the compiled kernels run now: False means the
+caller takes its numpy reference path this time (the same numbers, 1e-9 relative) and asks again before its
+next chunk or frame.  Without a handler (library use) the kernels always run, compiled on first use.
 """
 
 from __future__ import annotations
@@ -13,20 +15,19 @@ from collections.abc import Callable
 
 __all__ = ["set_compile_handler", "before_kernels"]
 
-_handler: Callable[[str], None] | None = None
-_done: set[str] = set()
+_handler: Callable[[str], bool | None] | None = None
 
 
-def set_compile_handler(handler: Callable[[str], None] | None) -> None:
-    """``handler(group)`` is called before the first use of each kernel group (None: no handler)."""
+def set_compile_handler(handler: Callable[[str], bool | None] | None) -> None:
+    """``handler(group)`` is called before every use of a kernel group (None: no handler); it returns whether
+    the compiled kernels run now (None counts as True)."""
     global _handler
     _handler = handler
-    _done.clear()
 
 
-def before_kernels(group: str) -> None:
-    """Called by the library right before it runs the kernels of ``group`` ("map", "points", "objects")."""
-    if _handler is None or group in _done:
-        return
-    _done.add(group)
-    _handler(group)
+def before_kernels(group: str) -> bool:
+    """Called by the library right before it runs the kernels of ``group`` ("map", "points", "objects"):
+    True to run them (compiled now if they are not in the cache), False to take the reference path this time."""
+    if _handler is None:
+        return True
+    return _handler(group) is not False

@@ -92,7 +92,7 @@ class LensDomain(NamedTuple):
         flat = np.ascontiguousarray(a.reshape(-1, 2))
         n = flat.shape[0]
         out, ok, minv = np.empty((n, 2)), np.empty(n, dtype=np.bool_), np.empty((n, 4))
-        k = np.broadcast_to(np.ascontiguousarray(self.dist), (n, 8))
+        k = np.repeat(np.asarray(self.dist, dtype=np.float64)[None], n, 0)  # (one array type for the kernel)
         core.undistort_many(self.packed, k, flat, out, ok, minv)
         return ok.reshape(a.shape[:-1])
 
@@ -109,6 +109,8 @@ def _unlimited(dist: np.ndarray) -> LensDomain:
     ang = np.linspace(-np.pi, np.pi, N_BINS + 1)
     inf = np.full(N_BINS + 1, np.inf)
     packed = np.concatenate([[N_BINS, np.inf, np.inf, np.inf, np.inf], inf, inf])
+    for a in (dist, packed, inf, ang):  # read-only as :func:`_build`'s: one array type for the compiled kernels
+        a.setflags(write=False)
     return LensDomain(dist, packed, inf, inf, ang, True)
 
 

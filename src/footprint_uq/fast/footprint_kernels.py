@@ -93,7 +93,12 @@ _ORIENT_UNIT, _ORIENT_UNAV = v2x.J2735_ORIENTATION_UNIT_DEG, float(v2x.J2735_ORI
 #: the stages of :func:`process_corners` are inlined into it (numba IR): a call between compiled functions
 #: passes every array as a reference-counted struct (S, the camera, the factor, the 12 outputs), and those
 #: calls, ~20 per chunk, cost ~15 % of the per-frame kernel (measured: 100 3D boxes 37.8 -> 33.8 us
-#: without the linearity flag, 48.6 -> 43.4 us with it; the first compilation takes ~20 s longer)
+#: without the linearity flag, 48.6 -> 43.4 us with it; the first compilation takes ~20 s longer).
+#: Measured again 2026-11-26 (2-core VM, load average 6-8, best of 3 interleaved runs, joint covariance off):
+#: without inlining 100 boxes take 9-19 % longer (pan-tilt 87.9 -> 99.6 us with the flag, 68.7 -> 81.6 us
+#: without; OpenCV 106.9 -> 117.1, 90.9 -> 99.2 us) and the objects group compiles in 55 instead of 135 CPU
+#: seconds.  Kept: a command no longer waits for this compile (it runs in the background while the command
+#: takes the reference path: products.warmup.KernelGate), the per-frame time is what a service pays forever.
 _STAGE = dict(cache=True, error_model="numpy", nogil=True, inline="always")
 
 # Chunk scratch: ONE float64 buffer; row r of a chunk is S[r * _ST : r * _ST + m].  Every access
@@ -185,11 +190,18 @@ def camera_constants(camera) -> tuple[KernelCamera, np.ndarray]:
     w, h = camera.image_size_px
     cam = KernelCamera(
         fx=float(p[P.FX]), fy=float(p[P.FY]), cx=float(p[P.CX]), cy=float(p[P.CY]), skew=float(p[P.SKEW]),
-        ifx=1.0 / p[P.FX], ify=1.0 / p[P.FY], dist=np.ascontiguousarray(p[P.DIST_SLICE]),
+        ifx=1.0 / p[P.FX], ify=1.0 / p[P.FY], dist=_writable(p[P.DIST_SLICE]),
         has_dist=bool(np.any(p[P.DIST_SLICE] != 0)), x0=float(p[P.XM]), y0=float(p[P.YM]), h=float(p[P.HM]),
         gdz=float(p[P.GDZ]), gsx=float(p[P.GSX]), gsy=float(p[P.GSY]), R=np.ascontiguousarray(R_W_C(*ang).ravel()),
-        width_px=float(w), height_px=float(h), ground_z_m=float(camera.ground_z_m), dom=camera.lens_domain.packed)
-    return cam, np.ascontiguousarray(dR_W_C(*ang))
+        width_px=float(w), height_px=float(h), ground_z_m=float(camera.ground_z_m),
+        dom=_writable(camera.lens_domain.packed))
+    return cam, _writable(dR_W_C(*ang))
+
+
+def _writable(a) -> np.ndarray:
+    """A writable C-contiguous float64 copy: numba types a read-only array (an OpenCV camera's lens domain,
+    a read-only ``params``) as another type, so every camera's constants would compile the kernels again."""
+    return np.array(a, dtype=np.float64, order="C", copy=True)
 
 
 @njit(cache=True, error_model="numpy", nogil=True)

@@ -547,61 +547,11 @@ def footprints_from_corners(camera, budget, corners_px, *, pixel_cov_px2=None, a
     computed = bp.valid & ((reason == status.OK) | (reason == status.OUTSIDE_IMAGE))
     usable = computed & ((reason == status.OK) | allow_outside_image)
     xy = np.where(computed[..., None], bp.xy_world_m, np.nan)
-    # joint covariance: shared camera parameters + per-point (budget) + detector
-    Sp = budget.param_covariance()
-    used = np.flatnonzero(np.any(Sp != 0, axis=0))
-    Jp = bp.dxy_dp[..., used].reshape(N, 2 * K, used.size)
-    with np.errstate(over="ignore", invalid="ignore"):  # overflow: not finite, marked OVERFLOW below
-        joint = Jp @ Sp[np.ix_(used, used)] @ np.swapaxes(Jp, -1, -2)
-    Juv = np.zeros((N, 2 * K, 2 * K))
-    for k in range(K):
-        Juv[:, 2 * k:2 * k + 2, 2 * k:2 * k + 2] = bp.dxy_duv[:, k]
-    Spx = np.broadcast_to(np.kron(np.eye(K), budget.pixel_covariance()), (N, 2 * K, 2 * K))
-    if det is not None:
-        Spx = Spx + det
-    with np.errstate(over="ignore", invalid="ignore"):
-        joint = joint + Juv @ Spx @ np.swapaxes(Juv, -1, -2)
-    bad_rows = np.repeat(~computed, 2, axis=1)
-    joint = np.where(bad_rows[:, :, None] | bad_rows[:, None, :], np.nan, joint)
-    idx = np.arange(K)
-    ccov = np.stack([joint[:, 2 * idx, 2 * idx], joint[:, 2 * idx, 2 * idx + 1],
-                     joint[:, 2 * idx + 1, 2 * idx], joint[:, 2 * idx + 1, 2 * idx + 1]], -1).reshape(N, K, 2, 2)
-    # largest point over the usable corners
-    a, b, d = ccov[..., 0, 0], ccov[..., 0, 1], ccov[..., 1, 1]
-    with np.errstate(invalid="ignore"):
-        semi = np.sqrt(0.5 * (a + d) + np.hypot(0.5 * (a - d), b))
-    semi_u = np.where(usable, semi, -np.inf)
-    li = np.argmax(semi_u, axis=1)
-    any_usable = usable.any(1)
-    largest_index = np.where(any_usable, li, -1)
-    rows = np.arange(N)
-    largest_semi = np.where(any_usable, semi[rows, li], np.nan)
-    largest_xy = np.where(any_usable[:, None], xy[rows, li], np.nan)
-    largest_cov = np.where(any_usable[:, None, None], ccov[rows, li], np.nan)
-    # centre
-    all_usable = usable.all(1)
-    first_bad = np.argmax(~usable, axis=1)
-    centre_bad = np.where(all_usable, -1, first_bad)
-    centre_reason = np.where(all_usable, status.OK, reason[rows, first_bad]).astype(np.int32)
-    # outside-image corners that are computed but not allowed keep the OUTSIDE_IMAGE code
-    xy_c = np.where(all_usable[:, None, None], xy, 0.0)
-    with np.errstate(invalid="ignore", over="ignore"):  # overflow on absurd inputs: _mark_overflow flags it
-        C, area, G = footprint_centre(xy_c, get_gradients=True)
-    if K >= 3:
-        degenerate = all_usable & ~np.isfinite(C).all(-1)
-        centre_reason = np.where(degenerate, DEGENERATE, centre_reason)
-    ok = centre_reason == status.OK
-    joint_c = np.where(all_usable[:, None, None], joint, 0.0)
-    G = np.where(ok[:, None, None], G, 0.0)
-    with np.errstate(invalid="ignore", over="ignore"):
-        ccov_c = G @ joint_c @ np.swapaxes(G, -1, -2)
-    centre = np.where(ok[:, None], C, np.nan)
-    centre_cov = np.where(ok[:, None, None], ccov_c, np.nan)
-    with np.errstate(invalid="ignore", over="ignore"):  # the centre's whitened parameter Jacobian dC/dp L
-        L = budget.param_factor().dense()
-        shared = G @ (np.where(bad_rows[:, :, None], 0.0, bp.dxy_dp.reshape(N, 2 * K, bp.dxy_dp.shape[-1])) @ L)
-    shared = np.where(ok[:, None, None], shared, np.nan)
-    area = np.where(all_usable, area, np.nan)
+    joint, ccov, Sp = _joint_covariance(budget, bp, det, computed)
+    largest_index, largest_semi, largest_xy, largest_cov = _largest_point(xy, ccov, usable)
+    any_usable, li, rows = largest_index >= 0, np.maximum(largest_index, 0), np.arange(N)
+    centre, centre_cov, ok, centre_reason, centre_bad, area, shared = _centre(budget, bp, xy, joint, reason, usable,
+                                                                            computed)
     fields = {**cpm_fields(centre_cov, heading_offset_deg), **j2735_fields(centre_cov, heading_offset_deg)}
     v2x = np.stack([fields[name] for name in V2X_FIELDS], -1).astype(np.int32)
     cnl = largest_nl = centre_nl = None
@@ -624,6 +574,78 @@ def footprints_from_corners(camera, budget, corners_px, *, pixel_cov_px2=None, a
         centre_shared_m=shared))
     return _apply_v2x_policy(est, camera, budget, v2x_policy, v2x_samples, v2x_seed,
                              corners_of=lambda r: uv[r], det_of=lambda r: None if det is None else det[r])
+
+
+def _joint_covariance(budget, bp, det, computed):
+    """``(joint (N, 2K, 2K), per-corner (N, K, 2, 2), the budget's parameter covariance (22, 22))`` of the
+    reference path: shared camera parameters + per-point pixel noise (budget) + detector; NaN rows and columns
+    for the corners not computed."""
+    N, K = computed.shape
+    Sp = budget.param_covariance()
+    used = np.flatnonzero(np.any(Sp != 0, axis=0))
+    Jp = bp.dxy_dp[..., used].reshape(N, 2 * K, used.size)
+    with np.errstate(over="ignore", invalid="ignore"):  # overflow: not finite, marked OVERFLOW below
+        joint = Jp @ Sp[np.ix_(used, used)] @ np.swapaxes(Jp, -1, -2)
+    Juv = np.zeros((N, 2 * K, 2 * K))
+    for k in range(K):
+        Juv[:, 2 * k:2 * k + 2, 2 * k:2 * k + 2] = bp.dxy_duv[:, k]
+    Spx = np.broadcast_to(np.kron(np.eye(K), budget.pixel_covariance()), (N, 2 * K, 2 * K))
+    if det is not None:
+        Spx = Spx + det
+    with np.errstate(over="ignore", invalid="ignore"):
+        joint = joint + Juv @ Spx @ np.swapaxes(Juv, -1, -2)
+    bad_rows = np.repeat(~computed, 2, axis=1)
+    joint = np.where(bad_rows[:, :, None] | bad_rows[:, None, :], np.nan, joint)
+    idx = np.arange(K)
+    ccov = np.stack([joint[:, 2 * idx, 2 * idx], joint[:, 2 * idx, 2 * idx + 1],
+                     joint[:, 2 * idx + 1, 2 * idx], joint[:, 2 * idx + 1, 2 * idx + 1]], -1).reshape(N, K, 2, 2)
+    return joint, ccov, Sp
+
+
+def _largest_point(xy, ccov, usable):
+    """The usable corner with the largest 1-sigma semi-major axis: ``(index (-1: none), semi-major, point,
+    covariance)``."""
+    a, b, d = ccov[..., 0, 0], ccov[..., 0, 1], ccov[..., 1, 1]
+    with np.errstate(invalid="ignore"):
+        semi = np.sqrt(0.5 * (a + d) + np.hypot(0.5 * (a - d), b))
+    li = np.argmax(np.where(usable, semi, -np.inf), axis=1)
+    any_usable = usable.any(1)
+    rows = np.arange(xy.shape[0])
+    return (np.where(any_usable, li, -1), np.where(any_usable, semi[rows, li], np.nan),
+            np.where(any_usable[:, None], xy[rows, li], np.nan), np.where(any_usable[:, None, None], ccov[rows, li],
+                                                                           np.nan))
+
+
+def _centre(budget, bp, xy, joint, reason, usable, computed):
+    """The centre of the reference path: ``(point, covariance, valid, reason, first unusable corner, area,
+    whitened parameter Jacobian dC/dp L)``, NaN where there is no centre."""
+    N, K = usable.shape
+    rows = np.arange(N)
+    all_usable = usable.all(1)
+    first_bad = np.argmax(~usable, axis=1)
+    centre_bad = np.where(all_usable, -1, first_bad)
+    centre_reason = np.where(all_usable, status.OK, reason[rows, first_bad]).astype(np.int32)
+    # outside-image corners that are computed but not allowed keep the OUTSIDE_IMAGE code
+    xy_c = np.where(all_usable[:, None, None], xy, 0.0)
+    with np.errstate(invalid="ignore", over="ignore"):  # overflow on absurd inputs: _mark_overflow flags it
+        C, area, G = footprint_centre(xy_c, get_gradients=True)
+    if K >= 3:
+        degenerate = all_usable & ~np.isfinite(C).all(-1)
+        centre_reason = np.where(degenerate, DEGENERATE, centre_reason)
+    ok = centre_reason == status.OK
+    joint_c = np.where(all_usable[:, None, None], joint, 0.0)
+    G = np.where(ok[:, None, None], G, 0.0)
+    with np.errstate(invalid="ignore", over="ignore"):
+        ccov_c = G @ joint_c @ np.swapaxes(G, -1, -2)
+    centre = np.where(ok[:, None], C, np.nan)
+    centre_cov = np.where(ok[:, None, None], ccov_c, np.nan)
+    bad_rows = np.repeat(~computed, 2, axis=1)
+    with np.errstate(invalid="ignore", over="ignore"):  # the centre's whitened parameter Jacobian dC/dp L
+        L = budget.param_factor().dense()
+        shared = G @ (np.where(bad_rows[:, :, None], 0.0, bp.dxy_dp.reshape(N, 2 * K, bp.dxy_dp.shape[-1])) @ L)
+    shared = np.where(ok[:, None, None], shared, np.nan)
+    area = np.where(all_usable, area, np.nan)
+    return centre, centre_cov, ok, centre_reason, centre_bad, area, shared
 
 
 def _mark_overflow(est: FootprintEstimate) -> FootprintEstimate:
@@ -962,6 +984,24 @@ class FrameProcessor:
         #: whether per-corner coordinates and covariances (and the largest point's covariance) are
         #: formed at all; the batch sets False when it writes no corner columns (leaner, faster)
         self.corner_outputs = True
+        self._kernels = False  # the compiled kernels run (footprint_uq._notices; asked until they do)
+
+    def _use_kernels(self) -> bool:
+        """Whether this call runs the compiled kernel (else the numpy reference: a command line whose kernels
+        are still compiling in the background, :class:`footprint_uq.products.warmup.KernelGate`)."""
+        if not self._kernels:
+            self._kernels = before_kernels("objects")
+        return self._kernels
+
+    def _reference(self, est: FootprintEstimate) -> FootprintEstimate:
+        """A reference estimate shaped as this processor's: the kernel's per-object rows (the batch reads
+        them), no joint covariance or centre Jacobian unless asked for."""
+        est.object_rows = _object_rows(est)
+        if not self.joint_cov:
+            est.joint_cov_m2 = None
+        if not self.shared_jacobian:
+            est.centre_shared_m = None
+        return est
 
     def _det(self, pixel_cov_px2, N: int, K: int):
         if pixel_cov_px2 is None:
@@ -987,18 +1027,16 @@ class FrameProcessor:
 
     def _run(self, uv, extra, pixel_cov_px2) -> FootprintEstimate:
         N, K = uv.shape[0], uv.shape[1]
-        if K > self._fk.MAX_CORNERS:  # beyond the kernel's chunk layout: the numpy reference
-            return footprints_from_corners(self.camera, self.budget, uv, pixel_cov_px2=pixel_cov_px2,
-                                           allow_outside_image=self.allow_outside_image,
-                                           heading_offset_deg=self.heading_offset_deg,
-                                           extra_reason=extra if extra.shape[0] == N else None,
-                                           **self._flag_options())
         det, mode = self._det(pixel_cov_px2, N, K)
+        if K > self._fk.MAX_CORNERS or not self._use_kernels():  # (beyond the kernel's chunk layout)
+            return self._reference(footprints_from_corners(
+                self.camera, self.budget, uv, pixel_cov_px2=pixel_cov_px2, allow_outside_image=self.allow_outside_image,
+                heading_offset_deg=self.heading_offset_deg, extra_reason=extra if extra.shape[0] == N else None,
+                **self._flag_options()))
         r = self._r if self.shared_jacobian else None
         alloc = reusable_allocator(self._fk.outputs_max_bytes(N, K, joint=self.joint_cov, shared_rank=r))
         out = self._fk.alloc_outputs(N, K, joint=self.joint_cov, corners=self.corner_outputs, alloc=alloc,
                                      shared_rank=r)
-        before_kernels("objects")
         n_over = self._fk.process_corners(uv, extra, self._no_boxes, False, True, self._cam, self._dR, self._Lr,
                                           self._Lc, self._Lv, self._r, self._spx, det, mode, self.allow_outside_image,
                                           self._ch, self._sh, self.linearity, out, self._scratch())
@@ -1034,8 +1072,10 @@ class FrameProcessor:
         where a pixel has no ground point.  One kernel pass without the rest of an estimate (the tracker evaluates
         ``B`` at every track's predicted position in every frame: ~4x less than :meth:`corners`)."""
         uv = np.ascontiguousarray(uv_px, dtype=np.float64).reshape(-1, 1, 2)
+        if not self._use_kernels():
+            return footprints_from_corners(self.camera, self.budget, uv, allow_outside_image=True, linearity=False,
+                                           v2x_policy="linear").centre_shared_m
         out = self._fk.alloc_outputs(uv.shape[0], 1, corners=False, shared_rank=self._r)
-        before_kernels("objects")
         self._fk.process_corners(uv, self._no_extra, self._no_boxes, False, True, self._cam, self._dR, self._Lr,
                                  self._Lc, self._Lv, self._r, self._spx, self._no_det, 0, True, self._ch, self._sh,
                                  False, out, self._scratch())
@@ -1063,21 +1103,25 @@ class FrameProcessor:
     def boxes3d(self, boxes_world, *, yaw_unit: str = "rad", bottom_on_ground: bool = True,
                 pixel_cov_px2=None) -> FootprintEstimate:
         """Footprints of 3D world boxes ``(N, 7)`` (see :func:`footprints_from_boxes3d`)."""
-        b = np.asarray(boxes_world, dtype=np.float64)
-        if not (b.flags.c_contiguous or b.flags.f_contiguous):  # (a column-major table is taken as it is)
-            b = np.ascontiguousarray(b)
+        # row-major always: a column-major table (the batch's) would be another kernel signature, i.e. a second
+        # full compile of the per-frame kernel (~1 min) for a copy of 56 bytes per box (~1 % of the kernel's time)
+        b = np.ascontiguousarray(boxes_world, dtype=np.float64)
         if b.ndim != 2 or b.shape[1] != 7:
             raise InputError("boxes_world", b.shape, f"an array of shape (N, 7): {', '.join(BOX3D_COLUMNS)}")
         if yaw_unit not in ("rad", "deg"):
             raise InputError("yaw_unit", yaw_unit, "'rad' (column yaw_rad) or 'deg' (column yaw_deg)")
         N = b.shape[0]
         det, mode = self._det(pixel_cov_px2, N, 4)
+        if not self._use_kernels():
+            return self._reference(footprints_from_boxes3d(
+                self.camera, self.budget, b, yaw_unit=yaw_unit, bottom_on_ground=bottom_on_ground,
+                pixel_cov_px2=pixel_cov_px2, allow_outside_image=self.allow_outside_image,
+                heading_offset_deg=self.heading_offset_deg, **self._flag_options()))
         r = self._r if self.shared_jacobian else None
         alloc = reusable_allocator(self._fk.outputs_max_bytes(N, 4, joint=self.joint_cov, shared_rank=r))
         uv = alloc((N if self.corner_outputs else 0, 4, 2), np.float64)
         out = self._fk.alloc_outputs(N, 4, joint=self.joint_cov, corners=self.corner_outputs, alloc=alloc,
                                      shared_rank=r)
-        before_kernels("objects")
         bad, n_over = self._fk.process_boxes3d(b, yaw_unit == "deg", bool(bottom_on_ground), self._cam, self._dR,
                                                self._Lr, self._Lc, self._Lv, self._r, self._spx, det, mode,
                                                self.allow_outside_image, self._ch, self._sh, self.linearity, uv, out,
@@ -1093,6 +1137,25 @@ class FrameProcessor:
             return self.camera.project(X).uv_px
 
         return self._pack(uv, out, corners_of, det, mode, n_over)
+
+
+def _object_rows(est: FootprintEstimate) -> np.ndarray:
+    """The fused kernel's per-object rows (:data:`footprint_uq.fast.footprint_kernels.OBJ_ROWS`, (R, N)) of a
+    reference estimate: the centre, its covariance and 1-sigma ellipse, the largest point, the area, the flags."""
+    row = fk.OBJ_ROW
+    obj = np.full((len(fk.OBJ_ROWS), len(est)), np.nan)
+    c = est.centre_cov_m2
+    obj[row["x_m"]], obj[row["y_m"]] = est.centre_xy_world_m[:, 0], est.centre_xy_world_m[:, 1]
+    obj[row["cov_xx_m2"]], obj[row["cov_xy_m2"]] = c[:, 0, 0], c[:, 0, 1]
+    obj[row["cov_yx_m2"]], obj[row["cov_yy_m2"]] = c[:, 1, 0], c[:, 1, 1]
+    obj[row["sigma_major_m"]], obj[row["sigma_minor_m"]], obj[row["orientation_deg"]] = ellipse_axes(c)
+    obj[row["largest_sigma_major_m"]] = est.largest_semi_major_m
+    obj[row["largest_x_m"]], obj[row["largest_y_m"]] = est.largest_xy_world_m[:, 0], est.largest_xy_world_m[:, 1]
+    obj[row["area_m2"]] = est.area_m2
+    if est.centre_nonlinearity is not None:
+        obj[row["nonlinearity"]] = est.centre_nonlinearity
+        obj[row["largest_nonlinearity"]] = est.largest_nonlinearity
+    return obj
 
 
 def _det_joint_rows(det, mode: int, rows, K: int):

@@ -8,10 +8,25 @@ numba compiles a kernel on its first call and keeps the machine code in its cach
 * ``map``: the per-pixel map kernels (``footprint-uq map``, ``demo``);
 * ``points``: the scattered-point kernels (``covariance_points``, the fusion and service checks);
 * ``objects``: the fused per-frame kernel (``footprint-uq objects``, ``serve``, :class:`FrameProcessor`).
+
+A command line does not wait for a cold group (:class:`KernelGate`, the handler of
+:mod:`footprint_uq._notices`): it says so in one line, starts ``footprint-uq warmup --only GROUP
+--background`` as a detached process (which outlives the command, so that the next run finds the kernels in
+the cache; a lock file in the cache folder keeps two commands from compiling the same group twice) and runs
+on the numpy reference path meanwhile -- the same numbers to 1e-9 relative, slower per row.  A long job
+(``objects`` on a large file, ``serve``) asks again before each chunk or frame and switches to the compiled
+kernels once the background compile is done (loading them from the cache takes about a second).
+``FOOTPRINT_UQ_COMPILE`` chooses otherwise: ``foreground`` (compile in the command itself, as a library
+call does), ``reference`` (never compile: the reference path only).
 """
 
 from __future__ import annotations
 
+import contextlib
+import os
+import subprocess
+import sys
+import threading
 import time
 from collections.abc import Callable, Iterable
 from pathlib import Path
@@ -21,6 +36,7 @@ import numpy as np
 from .._numba_cache import cache_dir
 from ..cameras.opencv import OpenCVCamera
 from ..cameras.pantilt import PanTiltCamera
+from ..errors import InputError
 from ..fast import footprint_kernels as fk
 from ..fast import map_kernels as mk
 from ..uncertainty.budget import load_budget
@@ -28,16 +44,23 @@ from .covariance import covariance_points
 from .footprints import FrameProcessor
 from .maps import uncertainty_map
 
-__all__ = ["GROUPS", "ABOUT_S", "cold_groups", "compile_notice", "compile_handler", "warmup"]
+__all__ = ["GROUPS", "ABOUT_S", "MODES", "cold_groups", "compile_notice", "compile_handler", "KernelGate",
+           "compile_mode", "group_lock", "start_background", "warmup"]
 
 #: the entry kernels of each group (their cache index files tell whether the group is compiled)
 GROUPS = {
     "map": mk.MAP_KERNELS,
     "points": mk.POINT_KERNELS,
-    "objects": (fk.process_corners,),
+    "objects": (fk.process_corners, fk.process_boxes3d),
 }
 #: first compile of each group on the reference machine (2-core VM, quiet), seconds: the notice's "about"
 ABOUT_S = {"map": 10, "points": 6, "objects": 35}
+#: values of ``FOOTPRINT_UQ_COMPILE``: what a command does when a kernel group is cold (default: background)
+MODES = ("background", "foreground", "reference")
+#: a lock older than this is taken for a crashed compile's, whatever its process id says (seconds)
+_LOCK_STALE_S = 1800.0
+#: how often a running command looks whether the background compile is done (seconds)
+_POLL_S = 0.5
 
 
 def _cached(dispatcher) -> bool:
@@ -61,14 +84,157 @@ def compile_notice(groups: Iterable[str]) -> str | None:
             "start at once; `footprint-uq warmup` does it ahead of time)")
 
 
-def compile_handler(emit: Callable[[str], None]) -> Callable[[str], None]:
-    """A handler for :func:`footprint_uq._notices.set_compile_handler`: ``emit(compile_notice([group]))`` when
-    the group's kernels are cold (a command line passes its stderr printer)."""
-    def handler(group: str) -> None:
-        msg = compile_notice([group])
-        if msg is not None:
-            emit(msg)
-    return handler
+def compile_handler(emit: Callable[[str], None]) -> KernelGate:
+    """The handler a command line passes to :func:`footprint_uq._notices.set_compile_handler` (``emit``: its
+    stderr printer): a :class:`KernelGate` in the mode ``FOOTPRINT_UQ_COMPILE`` says."""
+    return KernelGate(emit)
+
+
+def compile_mode(environ=os.environ) -> str:
+    """``FOOTPRINT_UQ_COMPILE`` (:data:`MODES`; unset or empty: "background")."""
+    mode = environ.get("FOOTPRINT_UQ_COMPILE", "").strip().lower() or "background"
+    if mode not in MODES:
+        raise InputError("FOOTPRINT_UQ_COMPILE", mode, f"one of {', '.join(MODES)}")
+    return mode
+
+
+def background_notice(group: str) -> str:
+    """The line a command says when it leaves a cold group to a background compile."""
+    return (f"compiling the {group} kernels in the background, about {ABOUT_S[group]} s on 2 cores, once (cached in "
+            f"{cache_dir()}); this run uses the numpy reference path meanwhile (the same numbers, slower per row; a "
+            "long run switches when they are ready); `footprint-uq warmup` compiles them ahead of time")
+
+
+def _lock_path(group: str) -> Path:
+    return cache_dir() / f"footprint-uq-warmup-{group}.lock"
+
+
+def _holder(path: Path) -> int | None:
+    """The process id of the live compile that holds the lock file ``path``, or None (no lock, or a stale one:
+    its process is gone, or it is older than :data:`_LOCK_STALE_S`)."""
+    try:
+        text, age = path.read_text().strip(), time.time() - path.stat().st_mtime
+    except OSError:
+        return None
+    if age > _LOCK_STALE_S:
+        return None
+    if not text.isdigit():  # created a moment ago, its process id not written yet
+        return -1 if age < 5.0 else None
+    pid = int(text)
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return None
+    except PermissionError:  # alive, another user's
+        pass
+    return pid
+
+
+@contextlib.contextmanager
+def group_lock(group: str, *, wait: bool):
+    """Hold the compile lock of ``group`` -- a file in the cache folder holding this process id -- in the
+    ``with`` block; yields whether it is held.  Another live process holding it: ``wait=True`` waits for it to
+    finish, ``wait=False`` yields False at once.  A stale lock (crashed compile) is taken over."""
+    path = _lock_path(group)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    held = False
+    while not held:
+        try:
+            fd = os.open(path, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
+        except FileExistsError:
+            if _holder(path) is None:
+                with contextlib.suppress(FileNotFoundError):
+                    path.unlink()
+                continue
+            if not wait:
+                break
+            time.sleep(_POLL_S)
+            continue
+        with os.fdopen(fd, "w") as f:
+            f.write(str(os.getpid()))
+        held = True
+    try:
+        yield held
+    finally:
+        if held:
+            path.unlink(missing_ok=True)
+
+
+def start_background(group: str) -> subprocess.Popen | None:
+    """Start ``footprint-uq warmup --only group --background`` as a detached process (its own session: it
+    outlives the command, and a Ctrl-C of the command does not stop it; niceness +10: the command comes first
+    where cores are scarce); None when another process is compiling the group already."""
+    if _holder(_lock_path(group)) is not None:
+        return None
+    env = {**os.environ, "FOOTPRINT_UQ_COMPILE": "foreground", "NUMBA_CACHE_DIR": str(cache_dir())}
+    if not os.environ.get("NUMBA_CACHE_DIR"):  # numba's default (beside the sources): leave it so
+        env.pop("NUMBA_CACHE_DIR")
+    cmd = [sys.executable, "-m", "footprint_uq.cli", "warmup", "--only", group, "--background"]
+    return subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                            env=env, start_new_session=True, close_fds=True)
+
+
+class KernelGate:
+    """A command line's handler for :func:`footprint_uq._notices.set_compile_handler`: whether a group's compiled
+    kernels run now (see the module doc).
+
+    A warm group: True.  A cold group, mode "background" (default): one line through ``emit``
+    (:func:`background_notice`), the compile started in a detached process (:func:`start_background`), False
+    (the reference path) until that compile is done -- asked at most every :data:`_POLL_S` seconds -- then True.
+    Mode "foreground": the notice of :func:`compile_notice`, True (the caller compiles).  Mode "reference":
+    always False, nothing said.  Thread-safe (a batch's chunks run on two threads).
+    """
+
+    def __init__(self, emit: Callable[[str], None], mode: str | None = None):
+        self.emit = emit
+        self.mode = compile_mode() if mode is None else mode
+        self._state: dict[str, str] = {}  # group -> "ready" | "waiting" | "reference"
+        self._jobs: dict[str, list] = {}  # group -> [Popen or None, next poll time]
+        self._lock = threading.Lock()
+
+    def __call__(self, group: str) -> bool:
+        state = self._state.get(group)
+        if state == "ready":
+            return True
+        if state == "reference":
+            return False
+        with self._lock:
+            if group not in self._state:
+                self._state[group] = self._first(group)
+            elif self._state[group] == "waiting":
+                self._state[group] = self._poll(group)
+            return self._state[group] == "ready"
+
+    def _first(self, group: str) -> str:
+        if self.mode == "reference":
+            return "reference"
+        if not cold_groups([group]):
+            return "ready"
+        if self.mode == "foreground":
+            self.emit(compile_notice([group]))
+            return "ready"
+        self._jobs[group] = [start_background(group), time.monotonic() + _POLL_S]
+        self.emit(background_notice(group))
+        return "waiting"
+
+    def _poll(self, group: str) -> str:
+        job = self._jobs[group]
+        now = time.monotonic()
+        if now < job[1]:
+            return "waiting"
+        job[1] = now + _POLL_S
+        if job[0] is not None and job[0].poll() is None:
+            return "waiting"
+        if _holder(_lock_path(group)) is not None:  # another command's compile
+            return "waiting"
+        # done; a compile that failed (still cold) leaves this run on the reference path
+        return "reference" if cold_groups([group]) else "ready"
+
+    def wait(self, timeout_s: float | None = None) -> None:
+        """Wait for the background compiles this gate started (tests; a command never waits)."""
+        for job in self._jobs.values():
+            if job[0] is not None:
+                job[0].wait(timeout_s)
 
 
 def _cameras():
@@ -101,14 +267,22 @@ def _warm_objects(budget) -> None:
 _WARM = {"map": _warm_map, "points": _warm_points, "objects": _warm_objects}
 
 
-def warmup(groups: Iterable[str] | None = None, *, progress: Callable[[str], None] | None = None) -> dict[str, float]:
-    """Compile (or load from the cache) every kernel of ``groups`` (default: all); returns seconds per group."""
+def warmup(groups: Iterable[str] | None = None, *, progress: Callable[[str], None] | None = None,
+           background: bool = False) -> dict[str, float]:
+    """Compile (or load from the cache) every kernel of ``groups`` (default: all); returns seconds per group.
+
+    Each group is compiled under its lock (:func:`group_lock`): a compile of the same group already running
+    elsewhere is waited for (then its kernels load from the cache), or with ``background=True`` (the detached
+    compile a command starts) the group is skipped."""
     budget = load_budget("basler1")
     out = {}
     for g in list(groups) if groups is not None else list(GROUPS):
-        if progress is not None:
-            progress(g)
-        t0 = time.perf_counter()
-        _WARM[g](budget)
-        out[g] = time.perf_counter() - t0
+        with group_lock(g, wait=not background) as held:
+            if not held:
+                continue
+            if progress is not None:
+                progress(g)
+            t0 = time.perf_counter()
+            _WARM[g](budget)
+            out[g] = time.perf_counter() - t0
     return out

@@ -46,10 +46,11 @@ from urllib.parse import urlparse
 import numpy as np
 import orjson
 
+from .._notices import set_compile_handler
 from ..batch.fleet import load_registry
 from ..errors import ConfigError, InputError
 from ..io import load_camera
-from ..products.warmup import compile_notice
+from ..products.warmup import compile_handler
 from .core import RECORD_ERROR, RECORD_FOOTPRINTS, FrameOutput, Service, error_record
 from .messages.asn1_cpm import DEFAULT_CDD
 
@@ -765,9 +766,7 @@ def run(*, camera=None, budget=None, registry=None, camera_id: str | None = None
         for sig in (signal.SIGTERM, signal.SIGINT):
             old[sig] = signal.signal(sig, lambda s, f: stop.set())
     _log("starting: loading the cameras and the compiled kernels")
-    cold = compile_notice(["objects"])
-    if cold is not None:  # after "starting": the signal handlers are in place
-        _log(cold)
+    set_compile_handler(compile_handler(_log))  # a cold cache's notice, said when the kernels are first used
     try:
         cam = None
         if camera is not None:
