@@ -1387,7 +1387,7 @@ def map_into(k: dict, dom, step: int, xy, cov, valid, reason, nlin) -> None:
         nb.set_parallel_chunksize(old_chunk)
 
 
-def points_into(k: dict, dom, uv, Suv, xy, cov, valid, reason, nlin) -> None:
+def points_into(k: dict, dom, uv, Suv, xy, cov, valid, reason, nlin, *, threaded: bool | None = None) -> None:
     """Fill the outputs of scattered points (the kernel behind
     :func:`footprint_uq.products.covariance.covariance_points`).
 
@@ -1396,12 +1396,13 @@ def points_into(k: dict, dom, uv, Suv, xy, cov, valid, reason, nlin) -> None:
     ``nlin`` (n,) or (0,) (not computed), filled in place.  Below :data:`SERIAL_BELOW` points the kernel
     runs on the calling thread only, and so it does when no second core is free at the moment of the call
     (:func:`footprint_uq.fast.cores.free_cores`: a threaded call would wait for a busy core, up to a scheduler
-    slice, instead of using one).
+    slice, instead of using one).  ``threaded`` True / False forces the threaded / serial kernel (warm-up).
     """
-    threaded = uv.shape[0] >= SERIAL_BELOW
-    if threaded:
-        free = free_cores()
-        threaded = free is None or free >= 2
+    if threaded is None:
+        threaded = uv.shape[0] >= SERIAL_BELOW
+        if threaded:
+            free = free_cores()
+            threaded = free is None or free >= 2
     kernel = _points_general if threaded else _points_general_serial
     kernel(uv, Suv, k["params"], k["R"], k["omega"], k["colptr"], k["rowidx"], k["vals"], k["vc"],
            k["Ccc"], k["has_qc"], dom, xy, cov, valid, reason, nlin)

@@ -40,7 +40,7 @@ from ..errors import InputError
 from ..fast import footprint_kernels as fk
 from ..fast import map_kernels as mk
 from ..uncertainty.budget import load_budget
-from .covariance import covariance_points
+from .covariance import covariance_points, kernel_constants
 from .footprints import FrameProcessor
 from .maps import uncertainty_map
 
@@ -250,10 +250,15 @@ def _warm_map(budget) -> None:
 
 
 def _warm_points(budget) -> None:
+    """The serial kernel through :func:`covariance_points`, the threaded one called directly: the public call picks
+    the threaded kernel only when a second core is free at that instant (``fast.cores.free_cores``)."""
+    n = 8
+    uv = np.c_[np.linspace(0.0, 319.0, n), np.linspace(150.0, 239.0, n)]
+    Suv = np.ascontiguousarray(np.broadcast_to(budget.pixel_covariance(), (n, 2, 2)))
     for cam in _cameras():
-        for n in (4, mk.SERIAL_BELOW):  # the serial and the threaded kernel
-            uv = np.c_[np.linspace(0.0, 319.0, n), np.linspace(150.0, 239.0, n)]
-            covariance_points(cam, budget, uv, get_nonlinearity=True)
+        covariance_points(cam, budget, uv, get_nonlinearity=True)
+        out = np.empty((n, 2)), np.empty((n, 2, 2)), np.empty(n, np.bool_), np.empty(n, np.int8), np.empty(n)
+        mk.points_into(kernel_constants(cam, budget), cam.lens_domain.packed, uv, Suv, *out, threaded=True)
 
 
 def _warm_objects(budget) -> None:
