@@ -24,7 +24,7 @@ demo: $(STAMP)
 test: $(STAMP) sysdeps
 	$(BIN)/ruff check src tests bench
 	find src -name '*.nbi' -delete -o -name '*.nbc' -delete
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q --durations=15
 
 # the suite less the tests marked slow (tests/conftest.py SLOW_TESTS and @pytest.mark.slow); keeps numba's cache:
 # after an edit of src/footprint_uq/fast/ run `make test` (or delete src/**/*.nbi|*.nbc) once

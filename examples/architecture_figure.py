@@ -42,7 +42,7 @@ BOXES = {  # name: (x, y, text)
     "ground": (5.0, 3.9, "cameras/ground.py, distortion.py,\nrotation.py, lens_domain.py"),
     "core": (2.9, 2.2, "fast/core.py  (written once)\nundistort_point, in-domain test,\n"
              "distort + Jacobian, status codes"),
-    "mkern": (6.0, 2.2, "fast/map_kernels.py\ncovariance_map / _points"),
+    "mkern": (6.0, 2.2, "fast/map_kernels.py\nmap_into / points_into"),
     "fkern": (9.2, 2.2, "fast/footprint_kernels.py\nprocess_corners"),
     "out_json": (1.6, 0.6, "JSON / CSV record\nxy_world_m, cov_m2, nonlinearity"),
     "out_map": (5.4, 0.6, "map.npz, PNG figures,\nsummary.json"),

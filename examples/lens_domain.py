@@ -19,7 +19,7 @@ from _common import output_dir
 from footprint_uq import propagate
 from footprint_uq.cameras.opencv import OpenCVCamera
 from footprint_uq.cameras.rotation import R_W_C
-from footprint_uq.fast.map_kernels import covariance_map, covariance_points
+from footprint_uq.products.covariance import covariance_map, covariance_points
 from footprint_uq.products.footprints import FrameProcessor
 from footprint_uq.status import UNDISTORT_FAILED
 from footprint_uq.viz import save_figure
