@@ -162,16 +162,23 @@ _NONNEGATIVE = ("sigma_speed_mps", "sigma_heading_deg", "sigma_yaw_deg", "age_s"
 _FINITE = ("v_east_mps", "v_north_mps", "heading_deg", "yaw_deg")
 
 
-def motion_codes(motion: ObjectMotion, n: int) -> MotionCodes:
-    """The CPM and SDSM fields of ``motion`` (module doc), checked: shapes ``(n,)`` / ``(n, 2, 2)``, sigmas
-    and ages >= 0 -> :class:`~footprint_uq.errors.InputError` naming the field.  One compiled pass
-    (:func:`_codes_kernel`; :func:`motion_codes_reference` is the same in numpy)."""
+def _motion_arrays(motion: ObjectMotion, n: int) -> tuple:
+    """``motion``'s fields as float arrays of shape ``(n,)`` (``cov_v_m2ps2``: ``(n, 2, 2)``), shapes checked:
+    v_east, v_north, cov_v, speed, sigma_speed, heading, sigma_heading, yaw, sigma_yaw, age."""
     ve, vn = _arr("v_east_mps", motion.v_east_mps, n), _arr("v_north_mps", motion.v_north_mps, n)
     cov = _arr("cov_v_m2ps2", motion.cov_v_m2ps2, n, (2, 2))
     sp, ssp = _arr("speed_mps", motion.speed_mps, n), _arr("sigma_speed_mps", motion.sigma_speed_mps, n)
     hd, shd = _arr("heading_deg", motion.heading_deg, n), _arr("sigma_heading_deg", motion.sigma_heading_deg, n)
     yw, syw = _arr("yaw_deg", motion.yaw_deg, n), _arr("sigma_yaw_deg", motion.sigma_yaw_deg, n)
     age = _arr("age_s", motion.age_s, n)
+    return ve, vn, cov, sp, ssp, hd, shd, yw, syw, age
+
+
+def motion_codes(motion: ObjectMotion, n: int) -> MotionCodes:
+    """The CPM and SDSM fields of ``motion`` (module doc), checked: shapes ``(n,)`` / ``(n, 2, 2)``, sigmas
+    and ages >= 0 -> :class:`~footprint_uq.errors.InputError` naming the field.  One compiled pass
+    (:func:`_codes_kernel`; :func:`motion_codes_reference` is the same in numpy)."""
+    ve, vn, cov, sp, ssp, hd, shd, yw, syw, age = _motion_arrays(motion, n)
     codes, has = np.empty((11, n), np.int64), np.empty((3, n), np.bool_)
     bad, row = _codes_kernel(ve, vn, cov, sp, ssp, hd, shd, yw, syw, age, np.asarray(SPEED_CONFIDENCE_MPS),
                              np.asarray(HEADING_CONFIDENCE_DEG), codes, has)
@@ -265,12 +272,7 @@ def _codes_kernel(ve, vn, cov, sp, ssp, hd, shd, yw, syw, age, speed_levels, hea
 def motion_codes_reference(motion: ObjectMotion, n: int) -> MotionCodes:
     """:func:`motion_codes` in numpy: the readable reference (~100 array operations per frame) that
     tests/test_service_messages.py holds the compiled pass to, value for value."""
-    ve, vn = _arr("v_east_mps", motion.v_east_mps, n), _arr("v_north_mps", motion.v_north_mps, n)
-    cov = _arr("cov_v_m2ps2", motion.cov_v_m2ps2, n, (2, 2))
-    sp, ssp = _arr("speed_mps", motion.speed_mps, n), _arr("sigma_speed_mps", motion.sigma_speed_mps, n)
-    hd, shd = _arr("heading_deg", motion.heading_deg, n), _arr("sigma_heading_deg", motion.sigma_heading_deg, n)
-    yw, syw = _arr("yaw_deg", motion.yaw_deg, n), _arr("sigma_yaw_deg", motion.sigma_yaw_deg, n)
-    age = _arr("age_s", motion.age_s, n)
+    ve, vn, cov, sp, ssp, hd, shd, yw, syw, age = _motion_arrays(motion, n)
     for name, s in (("sigma_speed_mps", ssp), ("sigma_heading_deg", shd), ("sigma_yaw_deg", syw), ("age_s", age),
                     ("speed_mps", sp), ("cov_v_m2ps2[0, 0]", cov[:, 0, 0]), ("cov_v_m2ps2[1, 1]", cov[:, 1, 1])):
         _check_sigma(name, s)
