@@ -465,12 +465,7 @@ def uncertainty_map(camera, budget, step_px: int = 1, *, max_range_m: float | No
         Arrays of shape ``(H, W, ...)`` with ``H = ceil(height / step_px)``,
         ``W = ceil(width / step_px)``.
     """
-    try:
-        step = int(step_px)
-    except (TypeError, ValueError):
-        raise InputError("step_px", step_px, "a positive integer") from None
-    if step != step_px or step < 1:
-        raise InputError("step_px", step_px, "a positive integer")
+    step = _check_step(step_px)
     if max_range_m is not None:
         max_range_m = as_float("max_range_m", max_range_m, positive=True)
     thr = check_linear_threshold(linear_threshold)
@@ -479,52 +474,33 @@ def uncertainty_map(camera, budget, step_px: int = 1, *, max_range_m: float | No
     H, W = uv.shape[:2]
     flat = uv.reshape(-1, 2)
     n = flat.shape[0]
-
-    xy = np.empty((n, 2))
-    cov = np.empty((n, 2, 2))
-    valid = np.empty(n, dtype=bool)
     reason = np.empty(n, dtype=np.int8)
     xy_ref = np.empty((n, 2))
     gsd_r, gsd_c, area, rng = (np.empty(n) for _ in range(4))
-    nl = np.full(n, np.nan) if linearity else None
 
     # (a command line whose map kernels still compile in the background takes the reference path: _notices)
-    kernel = covariance_map if use_kernel and before_kernels("map") else None
-    if kernel is not None:
-        res = kernel(camera, budget, step, get_nonlinearity=True) if linearity else kernel(camera, budget, step)
-        kxy, kcov, kvalid = (np.asarray(a) for a in res[:3])
-        if kxy.shape != (H, W, 2) or kcov.shape != (H, W, 2, 2) or kvalid.shape != (H, W):
-            raise RuntimeError(f"kernels.covariance_map returned shapes {kxy.shape}, {kcov.shape}, "
-                               f"{kvalid.shape}; expected ({H}, {W}, 2), ({H}, {W}, 2, 2), ({H}, {W})")
-        xy[:] = kxy.reshape(-1, 2)
-        cov[:] = kcov.reshape(-1, 2, 2)
-        valid[:] = kvalid.reshape(-1)
-        if linearity:
-            nl[:] = np.asarray(res[3]).reshape(-1)
+    use_kernel = use_kernel and before_kernels("map")
+    if use_kernel:
+        xy, cov, valid, nl = _kernel_layers(camera, budget, step, (H, W), linearity)
+    else:
+        xy, cov, valid = np.empty((n, 2)), np.empty((n, 2, 2)), np.empty(n, dtype=bool)
+        nl = np.full(n, np.nan) if linearity else None
     for s in range(0, n, _BLOCK_PX):
         blk = slice(s, min(n, s + _BLOCK_PX))
         xy_b, J_b, _, reason[blk] = pixel_jacobian(camera, flat[blk], full=True)
         xy_ref[blk] = xy_b
         gsd_r[blk], gsd_c[blk], area[blk], rng[blk] = ground_sampling_distance(camera, xy_b, J_b)
-        if kernel is None:
-            est = propagate(camera, budget, flat[blk], linearity=linearity)
-            xy[blk] = est.xy_world_m
-            cov[blk] = est.cov_m2
-            valid[blk] = est.valid
-            if linearity:
-                nl[blk] = est.nonlinearity
-    if kernel is not None:
+        if not use_kernel:
+            _reference_block(camera, budget, flat, blk, linearity, xy, cov, valid, nl)
+    if use_kernel:
         problem = _kernel_disagreement(camera, budget, flat, xy, cov, valid, xy_ref, reason == status.OK,
                                        gsd_r + gsd_c, nonlinearity=nl)
         if problem:
             warnings.warn(f"products.covariance.covariance_map disagrees with the reference path ({problem}); "
                           "using uncertainty.propagation.propagate for this map", RuntimeWarning, stacklevel=2)
             for s in range(0, n, _BLOCK_PX):
-                blk = slice(s, min(n, s + _BLOCK_PX))
-                est = propagate(camera, budget, flat[blk], linearity=linearity)
-                xy[blk], cov[blk], valid[blk] = est.xy_world_m, est.cov_m2, est.valid
-                if linearity:
-                    nl[blk] = est.nonlinearity
+                _reference_block(camera, budget, flat, slice(s, min(n, s + _BLOCK_PX)), linearity, xy, cov, valid,
+                                 nl)
     if max_range_m is not None:
         far = valid & (rng > max_range_m)
         valid &= ~far
@@ -546,3 +522,37 @@ def uncertainty_map(camera, budget, step_px: int = 1, *, max_range_m: float | No
         budget=budget, max_range_m=max_range_m, nonlinearity=None if nl is None else nl.reshape(sh),
         linear_threshold=thr,
     )
+
+
+def _check_step(step_px) -> int:
+    """``step_px`` as a positive int, else :class:`~footprint_uq.errors.InputError`."""
+    try:
+        step = int(step_px)
+    except (TypeError, ValueError):
+        raise InputError("step_px", step_px, "a positive integer") from None
+    if step != step_px or step < 1:
+        raise InputError("step_px", step_px, "a positive integer")
+    return step
+
+
+def _kernel_layers(camera, budget, step: int, hw: tuple[int, int], linearity: bool):
+    """The fused kernel's ground points (n, 2), covariances (n, 2, 2), validity (n,) and nonlinearity (n,) (None
+    without ``linearity``), flattened; its shapes checked against the grid ``hw``."""
+    H, W = hw
+    res = covariance_map(camera, budget, step, get_nonlinearity=True) if linearity else \
+        covariance_map(camera, budget, step)
+    kxy, kcov, kvalid = (np.asarray(a) for a in res[:3])
+    if kxy.shape != (H, W, 2) or kcov.shape != (H, W, 2, 2) or kvalid.shape != (H, W):
+        raise RuntimeError(f"kernels.covariance_map returned shapes {kxy.shape}, {kcov.shape}, "
+                           f"{kvalid.shape}; expected ({H}, {W}, 2), ({H}, {W}, 2, 2), ({H}, {W})")
+    nl = np.array(res[3], dtype=float).reshape(-1) if linearity else None
+    return (np.array(kxy, dtype=float).reshape(-1, 2), np.array(kcov, dtype=float).reshape(-1, 2, 2),
+            np.array(kvalid, dtype=bool).reshape(-1), nl)
+
+
+def _reference_block(camera, budget, flat, blk: slice, linearity: bool, xy, cov, valid, nl) -> None:
+    """Fill block ``blk`` of the layers with the reference path (:func:`propagate`), in place."""
+    est = propagate(camera, budget, flat[blk], linearity=linearity)
+    xy[blk], cov[blk], valid[blk] = est.xy_world_m, est.cov_m2, est.valid
+    if linearity:
+        nl[blk] = est.nonlinearity
