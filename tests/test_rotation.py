@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 from footprint_uq.cameras.rotation import R_G_P, R_P_C, R_W_C, R_W_G, dR_W_C, pan_tilt_roll_from_R_W_C
 
@@ -89,3 +91,15 @@ def test_broadcasting():
     assert dR_W_C(0.0, 0.2).shape == (3, 3, 3)
     p, t, r = pan_tilt_roll_from_R_W_C(R)
     assert p.shape == t.shape == r.shape == (4, 5)
+
+
+@given(st.floats(-7.0, 7.0), st.floats(-1.6, 1.6), st.floats(-0.5, 0.5))
+def test_scalar_path_equals_the_broadcasting_path(pan, tilt, roll):
+    """Scalar angles take a path of their own (``math``, six small arrays: the kernels' per-call camera
+    constants); it gives the broadcasting path's rotation and derivatives to rounding."""
+    for f in (R_G_P, R_W_C, dR_W_C):
+        scalar = f(pan, tilt, roll)
+        batch = f(np.array([pan]), np.array([tilt]), np.array([roll]))[0]
+        assert scalar.shape == batch.shape
+        np.testing.assert_allclose(scalar, batch, rtol=0, atol=1e-15)
+    assert R_W_C(np.float64(pan), np.float32(tilt), 0).shape == (3, 3)
