@@ -229,13 +229,13 @@ SLOW_TESTS = (
 )
 
 
-#: `@pytest.mark.long`: sweeps of several minutes (more precise twins of faster tests); skipped -- and listed with
+#: `@pytest.mark.long`: sweeps or compiles of several minutes (twins of faster tests); skipped -- and listed with
 #: this reason at the end of the run -- unless FOOTPRINT_UQ_LONG_TESTS=1
 RUN_LONG = os.environ.get("FOOTPRINT_UQ_LONG_TESTS") == "1"
 
 
 def pytest_collection_modifyitems(config, items):
-    skip_long = pytest.mark.skip(reason="long sweep (minutes): run with FOOTPRINT_UQ_LONG_TESTS=1 make test")
+    skip_long = pytest.mark.skip(reason="long (minutes): run with FOOTPRINT_UQ_LONG_TESTS=1 make test")
     for item in items:
         nodeid = item.nodeid.removeprefix("tests/")
         if any(nodeid == s or nodeid.startswith(s + "::") or nodeid.startswith(s + "[") for s in SLOW_TESTS):

@@ -226,6 +226,7 @@ def test_objects_on_the_reference_path_writes_the_same_records(tmp_path):
     _same_records(tmp_path / "ref.parquet", tmp_path / "fast.parquet")
 
 
+@pytest.mark.long  # ~100 s of compile on a 2-core VM: FOOTPRINT_UQ_LONG_TESTS=1 make test (bench_first_run does it too)
 def test_cold_cache_first_run_compiles_in_the_background(tmp_path):
     """A fresh NUMBA_CACHE_DIR: the first `objects` says it compiles in the background, finishes on the
     reference path, and leaves a detached compile behind (its lock in the cache folder); once it is done the
