@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from footprint_uq import ErrorBudget, InputError, OpenCVCamera, PanTiltCamera, ellipse_axes, propagate, status
+from footprint_uq.products.covariance import covariance_map
 from footprint_uq.products.maps import UncertaintyMap, ground_sampling_distance, uncertainty_map
 
 BUDGET = ErrorBudget.preset("bw-bullet1").replace(ground_height_m=0.05, ground_slope_deg=0.5, roll_deg=0.01)
@@ -215,9 +216,11 @@ def test_npz_round_trip(tmp_path, cam, cam_cv):
 
 
 def test_bad_input(cam):
-    for step in (0, -2, 1.5, "a"):
+    for step in (0, -2, 1.5, "a", float("inf"), float("nan"), None):
         with pytest.raises(InputError, match="step_px"):
             uncertainty_map(cam, BUDGET, step)
+        with pytest.raises(InputError, match="step_px"):
+            covariance_map(cam, BUDGET, step)
     with pytest.raises(InputError, match="max_range_m"):
         uncertainty_map(cam, BUDGET, 4, max_range_m=-1)
     with pytest.raises(InputError, match="budget"):
@@ -319,7 +322,6 @@ def test_report_helpers(tmp_path):
 def test_returned_reason_is_never_the_internal_scratch():
     """covariance_map reuses a per-thread status buffer only when the codes are not returned: a returned
     ``reason`` is the caller's own array, untouched by later maps (of this or another size)."""
-    from footprint_uq.products.covariance import covariance_map
 
     cam = PanTiltCamera(800.0, (64, 48), 6.0, 0.0, 0.5)  # the horizon crosses the image
     cam2 = PanTiltCamera(800.0, (64, 48), 6.0, 0.0, 1.5)  # other codes: more of the image sees the ground

@@ -45,6 +45,18 @@ def as_float(name: str, value, *, positive: bool = False, nonnegative: bool = Fa
     return x
 
 
+def as_int(name: str, value, *, minimum: int, expected: str) -> int:
+    """Return ``value`` as an int equal to it and ``>= minimum``, else :class:`InputError` with ``expected``
+    ("a positive integer"); infinities and NaN included."""
+    try:
+        n = int(value)
+    except (TypeError, ValueError, OverflowError):
+        raise InputError(name, value, expected) from None
+    if n != value or n < minimum:
+        raise InputError(name, value, expected)
+    return n
+
+
 def check_finite(name: str, a: np.ndarray) -> np.ndarray:
     if not np.all(np.isfinite(a)):
         bad = np.argwhere(~np.isfinite(a))[0]

@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from .. import params as P
-from .._checks import as_points, check_cov
+from .._checks import as_int, as_points, check_cov
 from ..cameras.rotation import R_W_C, dR_W_C
 from ..errors import InputError
 from ..fast import map_kernels as mk
@@ -125,12 +125,7 @@ def covariance_map(camera, budget, step_px: int = 1, *, out=None, get_reason: bo
         Predicted relative error of the linear 1-sigma semi-major axis (dimensionless); NaN where
         not valid.  After ``reason`` when both are asked for.
     """
-    try:
-        step = int(step_px)
-    except (TypeError, ValueError):
-        raise InputError("step_px", step_px, "a positive integer") from None
-    if step != step_px or step <= 0:
-        raise InputError("step_px", step_px, "a positive integer")
+    step = as_int("step_px", step_px, minimum=1, expected="a positive integer")
     w_img, h_img = camera.image_size_px
     W = (w_img + step - 1) // step
     H = (h_img + step - 1) // step

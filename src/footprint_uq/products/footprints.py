@@ -102,7 +102,7 @@ import numpy as np
 import pyarrow as pa
 
 from .. import status
-from .._checks import as_float, as_points, check_cov
+from .._checks import as_float, as_int, as_points, check_cov
 from .._notices import before_kernels
 from ..errors import InputError
 from ..fast import footprint_kernels as fk
@@ -735,13 +735,7 @@ def _check_flag_options(linear_threshold, v2x_policy, v2x_samples):
     thr = check_linear_threshold(linear_threshold)
     if v2x_policy not in V2X_POLICIES:
         raise InputError("v2x_policy", v2x_policy, f"one of {V2X_POLICIES}")
-    try:
-        n = int(v2x_samples)
-    except (TypeError, ValueError):
-        raise InputError("v2x_samples", v2x_samples, "an integer >= 100") from None
-    if n != v2x_samples or n < 100:
-        raise InputError("v2x_samples", v2x_samples, "an integer >= 100")
-    return thr, n
+    return thr, as_int("v2x_samples", v2x_samples, minimum=100, expected="an integer >= 100")
 
 
 def centre_covariance_sampled(camera, budget, corners_px, *, pixel_cov_px2=None, n_samples: int = V2X_SAMPLES,

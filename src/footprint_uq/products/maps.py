@@ -51,12 +51,11 @@ import numpy as np
 
 from .. import params as P
 from .. import status
-from .._checks import as_float
+from .._checks import as_float, as_int
 from .._notices import before_kernels
 from ..cameras.distortion import undistort
 from ..cameras.ground import intersect_ground
 from ..cameras.pinhole import pixel_to_normalised
-from ..errors import InputError
 from ..io import camera_from_dict, camera_to_dict
 from ..io.atomic import atomic_path
 from ..uncertainty.budget import ErrorBudget, load_budget
@@ -465,7 +464,7 @@ def uncertainty_map(camera, budget, step_px: int = 1, *, max_range_m: float | No
         Arrays of shape ``(H, W, ...)`` with ``H = ceil(height / step_px)``,
         ``W = ceil(width / step_px)``.
     """
-    step = _check_step(step_px)
+    step = as_int("step_px", step_px, minimum=1, expected="a positive integer")
     if max_range_m is not None:
         max_range_m = as_float("max_range_m", max_range_m, positive=True)
     thr = check_linear_threshold(linear_threshold)
@@ -522,17 +521,6 @@ def uncertainty_map(camera, budget, step_px: int = 1, *, max_range_m: float | No
         budget=budget, max_range_m=max_range_m, nonlinearity=None if nl is None else nl.reshape(sh),
         linear_threshold=thr,
     )
-
-
-def _check_step(step_px) -> int:
-    """``step_px`` as a positive int, else :class:`~footprint_uq.errors.InputError`."""
-    try:
-        step = int(step_px)
-    except (TypeError, ValueError):
-        raise InputError("step_px", step_px, "a positive integer") from None
-    if step != step_px or step < 1:
-        raise InputError("step_px", step_px, "a positive integer")
-    return step
 
 
 def _kernel_layers(camera, budget, step: int, hw: tuple[int, int], linearity: bool):
