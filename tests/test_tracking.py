@@ -95,6 +95,30 @@ def test_schmidt_update_is_the_augmented_kalman_filter_on_the_state(rng):
     assert (init.P[:, 2:, 2:] == 49.0 * np.eye(2)).all() and (init.x[:, 2:] == 0).all()
 
 
+def test_compiled_initiation_equals_the_initiator(rng):
+    """kernels._initiate (the tracker's new tracks, inside frame_update) = Initiator.initiate in every mode of the
+    IMM: position the measurement, P its whole error R + B B^T, C = -B, velocity 0 with variance sigma_v0^2."""
+    from footprint_uq.tracking.kernels import _initiate
+
+    n, m, r = 5, 2, 3
+    z, B = rng.normal(0, 30, (n, 2)), rng.normal(0, 0.4, (n, 2, r))
+    A = rng.normal(0, 0.3, (n, 2, 2))
+    R = A @ np.swapaxes(A, -1, -2) + 0.01 * np.eye(2)
+    ref = Initiator(7.0).initiate(SplitMeasurement(z, R, B))
+    X, P = np.full((n, 4), np.nan), np.full((n, 4, 4), np.nan)
+    Xm, Pm, Cm = np.full((n, m, 4), np.nan), np.full((n, m, 4, 4), np.nan), np.full((n, m, 4, r), np.nan)
+    mu, mu0 = np.full((n, m), np.nan), np.array([0.7, 0.3])
+    for s in range(n):
+        _initiate(s, X, P, Xm, Pm, Cm, mu, mu0, 49.0, z[s], R[s], B[s])
+    np.testing.assert_allclose(X, ref.x, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(P, ref.P, rtol=1e-12, atol=1e-12)
+    for j in range(m):
+        np.testing.assert_allclose(Xm[:, j], ref.x, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(Pm[:, j], ref.P, rtol=1e-12, atol=1e-12)
+        np.testing.assert_array_equal(Cm[:, j], ref.C)
+    np.testing.assert_array_equal(mu, np.broadcast_to(mu0, (n, m)))
+
+
 def test_compiled_step_equals_the_numpy_components(rng, random_opencv_camera):
     """kernels.predict_update = SchmidtPredictor + SchmidtUpdater (gate-rejected tracks untouched);
     kernels.project_ground = camera.project on the ground (distortion, points behind the camera)."""
