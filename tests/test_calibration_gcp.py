@@ -130,6 +130,32 @@ def test_chessboard_corners_as_gcps_recover_opencv_pose(chess_cal):
         assert np.all(s.sigma_params()[POSE] > 0)
 
 
+def test_a_tolerance_below_round_off_ends_as_converged_never_cycles(chess_cal, monkeypatch):
+    """At the round-off floor a Levenberg-Marquardt run must end, whatever the tolerance.
+
+    A CI machine once cycled on right03.jpg: the Gauss-Newton step stayed at 1.1e-6 sigma (the
+    tolerance is 1e-6), a step at lambda 1e6 left the cost equal, was accepted, lowered lambda,
+    the next was refused, and so on until max_iter ("no convergence"). With the tolerance set
+    below anything double precision reaches, every view must still end converged (as 'stuck' at
+    the round-off limit) on OpenCV's pose, and so must tiny (1e-7 px) perturbations of it.
+    """
+    from footprint_uq.calibration import gcp as G
+
+    monkeypatch.setattr(G, "_CONV_SIGMA", 1e-14)
+    cal = chess_cal
+    M = np.diag([1.0, -1.0, -1.0])
+    obj = parse_board("9x6", 0.025).object_points() @ M.T
+    rng = np.random.default_rng(3)
+    for label, uv, rv, tv in zip(cal.labels, cal.image_points_px, cal.rvecs, cal.tvecs, strict=True):
+        p_ref = _params_from_Rt(cal.K, cal.dist, cv2.Rodrigues(rv)[0] @ M, tv)
+        for noise in (0.0, 1e-7):
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", ConsistencyWarning)
+                s = solve_gcp(GCPSet(uv + rng.normal(0.0, noise, uv.shape), obj, cal.rms_px, 0.0),
+                              cal.image_size_px, intrinsics=cal, leave_one_out=False)
+            assert np.abs(s.params[POSE][:3] - p_ref[POSE][:3]).max() < 1e-6, label
+
+
 class _no_warning:
     def __enter__(self):
         self._w = warnings.catch_warnings()

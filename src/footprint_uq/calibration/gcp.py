@@ -85,6 +85,7 @@ MIN_POINTS_POSE = 4
 MIN_POINTS_FOCAL = 6
 _CONV_SIGMA = 1e-6  # stop when the Gauss-Newton step is below this many standard deviations
 _ROUNDOFF_SIGMA = 1e-3  # ... or below this many when no step lowers the cost (round-off limited)
+_ROUNDOFF_RTOL = 1e-12  # a cost decrease below this fraction of the cost is round-off, not progress
 _COLLINEAR_RTOL = 1e-3  # second singular value / first below this: the points are on one line
 #: most ground control points one solve takes (the solve is O(N) in memory and time; beyond this a
 #: table is a point cloud, not a survey: thin it)
@@ -552,8 +553,11 @@ def _lm_fixed(theta, base, A, uv, xyz, S, mask, max_iter, active0, prior=None):
         new = theta + step
         c2, H2, g2, ok2, _ = _normal_equations(base + new @ A.T, uv, xyz, S, mask, A, prior)
         better = active & ok2 & (c2 <= cost)
+        # a decrease within round-off is no progress: lambda grows, so a run whose Gauss-Newton step
+        # is just above the tolerance but at the round-off floor ends as 'stuck' instead of cycling
+        progress = better & (cost - c2 > _ROUNDOFF_RTOL * np.abs(cost))
         theta[better], cost[better], H[better], g[better] = new[better], c2[better], H2[better], g2[better]
-        lam = np.where(better, np.maximum(lam / 10.0, 1e-12), np.where(active, lam * 10.0, lam))
+        lam = np.where(progress, np.maximum(lam / 10.0, 1e-12), np.where(active, lam * 10.0, lam))
         stuck = active & (lam > 1e12)
         # no step lowers the cost any more: at the minimum to round-off if the Gauss-Newton step is tiny
         conv |= stuck & (_gn_step_sigma(H, g) < _ROUNDOFF_SIGMA)
