@@ -85,7 +85,7 @@ MIN_POINTS_POSE = 4
 MIN_POINTS_FOCAL = 6
 _CONV_SIGMA = 1e-6  # stop when the Gauss-Newton step is below this many standard deviations
 _ROUNDOFF_SIGMA = 1e-3  # ... or below this many when no step lowers the cost (round-off limited)
-_ROUNDOFF_RTOL = 1e-12  # a cost decrease below this fraction of the cost is round-off, not progress
+_ROUNDOFF_RTOL = 1e-13  # a cost decrease below this fraction of the cost is round-off, not progress
 _COLLINEAR_RTOL = 1e-3  # second singular value / first below this: the points are on one line
 #: most ground control points one solve takes (the solve is O(N) in memory and time; beyond this a
 #: table is a point cloud, not a survey: thin it)
@@ -98,6 +98,8 @@ MAX_POINT_SIGMA = MAX_SIGMA
 MAX_LOO_POINTS = 400
 #: an other pose minimum whose cost exceeds the best one's by less than this is reported as ambiguous
 AMBIGUOUS_DELTA_CHI2 = 25.0
+#: a start whose cost is this far above the best start's is refined to 1e-3 sigma only (a far worse minimum)
+_FAR_MINIMUM_DELTA_CHI2 = 40.0 * AMBIGUOUS_DELTA_CHI2
 #: p-values below which the residual tests (chi-square, normalised leave-one-out) flag the result
 RESIDUAL_TEST_P = 1e-3
 #: p-value below which the k1 score test flags the lens model
@@ -531,9 +533,10 @@ def _gn_step_sigma(H, g):
     return np.where(np.isfinite(out), out, np.inf)
 
 
-def _lm_fixed(theta, base, A, uv, xyz, S, mask, max_iter, active0, prior=None):
-    """Levenberg-Marquardt with the point covariances S held fixed; B problems at once."""
+def _lm_fixed(theta, base, A, uv, xyz, S, mask, max_iter, active0, prior=None, tol=None):
+    """Levenberg-Marquardt with the point covariances S held fixed; B problems at once (``tol``: scalar or (B,))."""
     B, k = theta.shape
+    tol = _CONV_SIGMA if tol is None else tol
     cost, H, g, _, _ = _normal_equations(base + theta @ A.T, uv, xyz, S, mask, A, prior)
     lam = np.full(B, 1e-3)
     conv = ~active0.copy()
@@ -541,7 +544,7 @@ def _lm_fixed(theta, base, A, uv, xyz, S, mask, max_iter, active0, prior=None):
     iters = np.zeros(B, int)
     eye = np.eye(k)
     for _ in range(max_iter):
-        conv |= ~failed & (_gn_step_sigma(H, g) < _CONV_SIGMA)
+        conv |= ~failed & (_gn_step_sigma(H, g) < tol)
         active = ~conv & ~failed
         if not active.any():
             break
@@ -565,13 +568,17 @@ def _lm_fixed(theta, base, A, uv, xyz, S, mask, max_iter, active0, prior=None):
     return theta, conv & ~failed, iters
 
 
-def _lm(theta, base, A, uv, xyz, s_px2, s_m2, mask, max_iter=100, max_outer=20, prior=None):
+def _lm(theta, base, A, uv, xyz, s_px2, s_m2, mask, max_iter=100, max_outer=20, prior=None, loose_above=None):
     """Minimise the effective-variance cost for B problems at once.
 
     The point covariances S depend (weakly) on the pose through d uv / d xyz: they are held
     fixed during a Levenberg-Marquardt run, recomputed at its solution, and the run repeated
     until the Gauss-Newton step with the updated S is below 1e-6 sigma (Orear's effective
     variance iteration; 2-3 rounds).
+
+    ``loose_above`` (chi-square): the B rows are starts of one problem, and a row whose cost is more
+    than this above the lowest is refined to 1e-3 sigma only (a far worse minimum: its position and
+    cost serve the diagnostics, and its effective-variance rounds converge slowly).
 
     Returns theta (B, k), converged (B,), iterations (B,), and the normal equations at the end.
     """
@@ -580,17 +587,19 @@ def _lm(theta, base, A, uv, xyz, s_px2, s_m2, mask, max_iter=100, max_outer=20, 
     iters = np.zeros(B, int)
     active = np.ones(B, bool)
     conv = np.zeros(B, bool)
-    tol = _CONV_SIGMA
     for _ in range(max_outer):
         S = _point_covariance(base + theta @ A.T, xyz, s_px2, s_m2, mask)
-        _, H, g, ok, _ = _normal_equations(base + theta @ A.T, uv, xyz, S, mask, A, prior)
+        cost, H, g, ok, _ = _normal_equations(base + theta @ A.T, uv, xyz, S, mask, A, prior)
+        tol = np.full(B, _CONV_SIGMA)
+        if loose_above is not None and np.isfinite(cost).any():
+            tol[cost > np.min(cost) + loose_above] = _ROUNDOFF_SIGMA
         done = ok & (_gn_step_sigma(H, g) < tol)
         conv |= active & done
         active &= ~done
         if not active.any():
             break
         before = theta.copy()
-        theta, c, it = _lm_fixed(theta, base, A, uv, xyz, S, mask, max_iter, active, prior)
+        theta, c, it = _lm_fixed(theta, base, A, uv, xyz, S, mask, max_iter, active, prior, tol)
         iters += it
         still = np.all(theta == before, -1)  # converged without moving: at the round-off limit
         conv |= active & c & still
@@ -880,7 +889,8 @@ def _minima(theta0, base, A, gcps, max_iter, prior=None) -> list:
         sl = slice(i0, min(S, i0 + step))
         th[sl], conv[sl], iters[sl], _ = _lm(theta0[sl], np.repeat(base[None], len(theta0[sl]), 0), A,
                                              gcps.uv_px[None], gcps.xyz_world_m[None], gcps.sigma_px[None] ** 2,
-                                             gcps.sigma_m[None] ** 2, mask, max_iter, prior=prior)
+                                             gcps.sigma_m[None] ** 2, mask, max_iter, prior=prior,
+                                             loose_above=_FAR_MINIMUM_DELTA_CHI2)
     ja = [int(np.argmax(A[a])) for a in (P.PAN, P.TILT, P.ROLL)]
     for b in range(len(th)):  # the same camera in the canonical angles (|tilt| <= 90 deg, as PnP's starts)
         if np.isfinite(th[b, ja]).all():
