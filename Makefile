@@ -21,16 +21,20 @@ demo: $(STAMP)
 
 # numba's on-disk cache is keyed on each function's own file only: a kernel that inlines the scalar core
 # (src/footprint_uq/fast/core.py) would keep running the old core after an edit. Tests start from a clean cache.
+# The kernels are compiled first, two groups at once (both cores), then two pytest workers share them
+# (pytest-xdist; --dist worksteal: a worker that runs out of tests takes some of the other's).
 test: $(STAMP) sysdeps
 	$(BIN)/ruff check src tests bench
 	find src -name '*.nbi' -delete -o -name '*.nbc' -delete
-	$(BIN)/python -m pytest -q --durations=15
+	$(BIN)/footprint-uq warmup --only objects & pid=$$!; \
+	  $(BIN)/footprint-uq warmup --only map --only points && wait $$pid
+	$(BIN)/python -m pytest -q -n 2 --dist worksteal --durations=15
 
 # the suite less the tests marked slow (tests/conftest.py SLOW_TESTS and @pytest.mark.slow); keeps numba's cache:
 # after an edit of src/footprint_uq/fast/ run `make test` (or delete src/**/*.nbi|*.nbc) once
 test-quick: $(STAMP)
 	$(BIN)/ruff check src tests bench
-	$(BIN)/python -m pytest -q -m "not slow"
+	$(BIN)/python -m pytest -q -n 2 --dist worksteal -m "not slow"
 
 # chromium (browser tests) and mosquitto (MQTT tests): installed as root with apt-get, else the tests that need
 # them are skipped and listed at the end of the run
