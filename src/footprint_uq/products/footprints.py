@@ -107,6 +107,7 @@ from .._notices import before_kernels
 from ..errors import InputError
 from ..fast import footprint_kernels as fk
 from ..fast.buffers import thread_buffer
+from ..fast.cov_checks import first_bad_cov2
 from ..uncertainty.budget import load_budget
 from ..uncertainty.ellipse import ellipse_axes
 from ..uncertainty.propagation import (
@@ -887,6 +888,8 @@ def footprints_from_boxes3d(camera, budget, boxes_world, *, yaw_unit: str = "rad
 # -- the per-frame fast path ---------------------------------------------------------------------
 #: outputs of at least this many bytes come from pyarrow's memory pool (see :func:`empty_reusable`)
 _POOL_MIN_BYTES = 1 << 20
+#: the pixel covariances' positive semi-definiteness tolerance (relative to each matrix's largest entry)
+_COV_TOL = 1e-12
 
 
 def empty_reusable(shape, dtype=np.float64) -> np.ndarray:
@@ -1002,12 +1005,20 @@ class FrameProcessor:
             return self._no_det, 0
         c = np.asarray(pixel_cov_px2, dtype=np.float64)
         if c.shape == (N, 2, 2):
-            return np.ascontiguousarray(check_cov("pixel_cov_px2", c, 2)[:, None]), 1
+            return self._checked_cov2(c)[:, None], 1
         if c.shape == (N, K, 2, 2):
-            return np.ascontiguousarray(check_cov("pixel_cov_px2", c, 2)), 2
+            return self._checked_cov2(c), 2
         if c.shape == (N, 2 * K, 2 * K):
             return np.ascontiguousarray(check_cov("pixel_cov_px2", c, 2 * K)[:, None]), 3
         raise InputError("pixel_cov_px2", c.shape, f"shape ({N}, 2, 2), ({N}, {K}, 2, 2) or ({N}, {2 * K}, {2 * K})")
+
+    def _checked_cov2(self, c: np.ndarray) -> np.ndarray:
+        """``c`` (..., 2, 2) C-contiguous, checked as :func:`check_cov` does: in one compiled pass when the kernels
+        run (the numpy checks only for a frame that fails it, for their one-line error)."""
+        c = np.ascontiguousarray(c)
+        if self._use_kernels() and first_bad_cov2(c.reshape(-1, 2, 2), _COV_TOL) < 0:
+            return c
+        return check_cov("pixel_cov_px2", c, 2, tol=_COV_TOL)
 
     @staticmethod
     def _scratch() -> np.ndarray:

@@ -39,6 +39,7 @@ from ..cameras.pantilt import PanTiltCamera
 from ..errors import InputError
 from ..fast import footprint_kernels as fk
 from ..fast import map_kernels as mk
+from ..fast.cov_checks import first_bad_cov2
 from ..uncertainty.budget import load_budget
 from .covariance import covariance_points, kernel_constants
 from .footprints import FrameProcessor
@@ -51,7 +52,7 @@ __all__ = ["GROUPS", "ABOUT_S", "MODES", "cold_groups", "compile_notice", "compi
 GROUPS = {
     "map": mk.MAP_KERNELS,
     "points": mk.POINT_KERNELS,
-    "objects": (fk.process_corners, fk.process_boxes3d),
+    "objects": (fk.process_corners, fk.process_boxes3d, first_bad_cov2),
 }
 #: the notice's "about": a group's background compile on the 2-core VM of 2026-11-26, quiet (bench/bench_first_run.py
 #: ``compile_s``: objects 92 s, map 98 s; points 43 s by ``warmup``), rounded up; 2026-11-24's VM took ~40 % of it
@@ -263,6 +264,7 @@ def _warm_points(budget) -> None:
 
 
 def _warm_objects(budget) -> None:
+    first_bad_cov2(np.zeros((1, 2, 2)), 1e-12)  # FrameProcessor's check of a frame's pixel covariances
     for cam in _cameras():
         fp = FrameProcessor(cam, budget)
         fp.boxes2d(np.array([[100.0, 150.0, 140.0, 200.0]]))
