@@ -356,3 +356,25 @@ def test_bad_input_names_the_field(cam, call, field):
     with pytest.raises(InputError) as e:
         call(cam)
     assert str(e.value).startswith(field)
+
+
+def test_object_rows_ellipse_is_the_centre_covariances_also_after_an_overflow():
+    """The kernel's per-object ellipse rows (the service's records read them) equal ellipse_axes of the centre
+    covariance, and a centre that an overflowing corner invalidates loses its ellipse there too."""
+    from footprint_uq.fast.footprint_kernels import OBJ_ROW
+    from footprint_uq.products.footprints import FrameProcessor, _mark_overflow
+
+    cam = PanTiltCamera(focal_px=1400.0, image_size_px=(1920, 1080), height_m=8.0, pan_deg=10.0, tilt_deg=20.0)
+    rng = np.random.default_rng(4)
+    boxes = np.column_stack([rng.uniform(-15, 15, 30), rng.uniform(10, 80, 30), np.full(30, 0.8),
+                             rng.uniform(3.5, 5, 30), rng.uniform(1.6, 2, 30), np.full(30, 1.5),
+                             rng.uniform(-3, 3, 30)])
+    est = FrameProcessor(cam, "basler1").boxes3d(boxes)
+    rows = [est.object_rows[OBJ_ROW[k]] for k in ("sigma_major_m", "sigma_minor_m", "orientation_deg")]
+    for got, want in zip(rows, ellipse_axes(est.centre_cov_m2), strict=True):
+        np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-12)
+    assert est.centre_valid[7]
+    est.corners_cov_m2[7, 2] = np.inf  # a corner whose covariance overflowed
+    est = _mark_overflow(est)
+    assert not est.centre_valid[7] and est.centre_reason[7] == status.OVERFLOW
+    assert all(np.isnan(r[7]) for r in rows) and all(np.isfinite(r[8]) for r in rows)

@@ -720,6 +720,10 @@ def _mark_overflow(est: FootprintEstimate) -> FootprintEstimate:
     est.centre_valid[objs] = ~bad
     est.centre_xy_world_m[objs[bad]] = np.nan
     est.centre_cov_m2[objs[bad]] = np.nan
+    rows = getattr(est, "object_rows", None)
+    if rows is not None and rows.shape[1] == reason.shape[0]:  # the kernel's ellipse of the centre follows it
+        rows[[fk.OBJ_ROW["sigma_major_m"], fk.OBJ_ROW["sigma_minor_m"], fk.OBJ_ROW["orientation_deg"]],
+             objs[bad][:, None]] = np.nan
     if est.centre_nonlinearity is not None:
         est.centre_nonlinearity[objs[bad]] = np.nan
     est.area_m2[objs[~all_usable]] = np.nan

@@ -42,6 +42,7 @@ from ..batch import schema as S
 from ..batch.fleet import load_registry
 from ..batch.process import MAX_PIXEL_VAR_PX2
 from ..errors import FootprintUQError, InputError
+from ..fast.footprint_kernels import OBJ_ROW
 from ..products.footprints import CONTACT_MODES, V2X_FIELDS, V2X_POLICIES, FrameProcessor
 from ..products.geo import GeoReference
 from ..products.v2x import J2735_POSITION_CONFIDENCE_NAMES
@@ -92,6 +93,8 @@ RECORD_FOOTPRINTS = "footprints"
 RECORD_ERROR = "error"
 _CPM_INDEX = V2X_FIELDS.index("cpm_x_confidence")
 _J_POS = V2X_FIELDS.index("j2735_position_confidence")
+#: rows of FootprintEstimate.object_rows: the centre's 1-sigma ellipse
+_ROW_SMAJ, _ROW_SMIN, _ROW_ORI = (OBJ_ROW[k] for k in ("sigma_major_m", "sigma_minor_m", "orientation_deg"))
 
 
 def station_id_of(camera_id: str) -> int:
@@ -526,7 +529,11 @@ class Service:
         N = len(ids)
         geo = setup.georef
         cov = est.centre_cov_m2
-        a, b, ori = ellipse_axes(cov)
+        rows = est.object_rows
+        if rows is not None:  # the kernel's ellipse of each centre (the formulas of ellipse_axes)
+            a, b, ori = rows[_ROW_SMAJ], rows[_ROW_SMIN], rows[_ROW_ORI]
+        else:
+            a, b, ori = ellipse_axes(cov)
         valid = est.centre_valid
         centre = est.centre_xy_world_m
         t = Table(N)
