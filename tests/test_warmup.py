@@ -285,11 +285,14 @@ def test_a_long_job_switches_to_the_kernels_between_chunks(tmp_path):
 
     def gate(group):
         asked.append(group)
-        return len(asked) > 3
+        if group == "lens":  # the reference path's undistortion (an OpenCV camera): its Python twin meanwhile
+            return False
+        return asked.count("objects") > 3
 
     _notices.set_compile_handler(gate)
     process_file(cam, "basler1", tmp_path / "boxes.csv", tmp_path / "mixed.parquet", chunk_rows=10, threads=1)
-    assert asked == ["objects"] * 4  # asked before every chunk until the kernels ran, then never again
+    # asked before every chunk until the kernels ran, then never again
+    assert [g for g in asked if g != "lens"] == ["objects"] * 4 and "lens" in asked
     _notices.set_compile_handler(None)
     process_file(cam, "basler1", tmp_path / "boxes.csv", tmp_path / "kernels.parquet", chunk_rows=10, threads=1)
     _same_records(tmp_path / "mixed.parquet", tmp_path / "kernels.parquet")

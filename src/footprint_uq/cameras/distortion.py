@@ -19,7 +19,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from .._notices import before_kernels
 from ..fast import core
+from ..fast.python_twins import TWIN_ERRORS, python_twin
 from .lens_domain import lens_domain
 
 __all__ = ["distort", "undistort", "in_principal_region"]
@@ -110,6 +112,23 @@ def _groups(kf: np.ndarray, domain):
     return [(rows[inv.ravel() == j], lens_domain(uniq[j])) for j in range(uniq.shape[0])]
 
 
+_UNDISTORT_MANY_PY = python_twin(core.undistort_many)
+#: at most this many points go through the pure-Python twin of the undistortion while its compiled kernel is not
+#: cached (~60 us each; more are faster to compile for: ~14 s)
+PY_MAX_POINTS = 2000
+
+
+def _undistort_many(packed, ks, xs, out, ok, minv) -> None:
+    """:func:`footprint_uq.fast.core.undistort_many`; for a few points, while a command line's kernels are still
+    compiling (:func:`footprint_uq._notices.before_kernels`, group "lens"), its pure-Python twin instead."""
+    if xs.shape[0] <= PY_MAX_POINTS and not before_kernels("lens"):
+        try:
+            return _UNDISTORT_MANY_PY(packed, ks, xs, out, ok, minv)
+        except TWIN_ERRORS:  # where the compiled kernel gives inf or NaN, CPython raises: the kernel decides
+            pass
+    core.undistort_many(packed, ks, xs, out, ok, minv)
+
+
 def _solve(xf: np.ndarray, kf: np.ndarray, domain):
     """The scalar core (:func:`footprint_uq.fast.core.undistort_point`) over flat arrays."""
     n = xf.shape[0]
@@ -120,7 +139,7 @@ def _solve(xf: np.ndarray, kf: np.ndarray, domain):
         xs = np.ascontiguousarray(xf[rows])
         ks = np.ascontiguousarray(kf[rows])
         o, c, m = np.empty_like(xs), np.empty(xs.shape[0], dtype=bool), np.empty((xs.shape[0], 4))
-        core.undistort_many(dom.packed, ks, xs, o, c, m)
+        _undistort_many(dom.packed, ks, xs, o, c, m)
         out[rows], ok[rows], minv[rows] = o, c, m
     return out, ok, minv
 

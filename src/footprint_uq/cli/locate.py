@@ -8,11 +8,13 @@ import json
 import click
 import numpy as np
 
+from .._notices import set_compile_handler
 from ..errors import InputError
 from ..products.gcp_support import add_support, load_gcp_support
 from ..products.locate import locate_csv, locate_records
+from ..products.warmup import compile_handler
 from ..uncertainty.presets import PRESET_NAMES
-from .common import check_confidence, load_camera_and_budget, pose_options, warn
+from .common import check_confidence, load_camera_and_budget, note, pose_options, warn
 
 __all__ = ["locate_cmd", "MAX_PIXEL_PX"]
 
@@ -64,6 +66,7 @@ def locate_cmd(camera_path, budget_spec, pixels, fmt, confidence, linear_thresho
     w, h = camera.image_size_px
     for i in np.flatnonzero(~camera.in_image(uv)):
         warn(f"--pixel #{i + 1} ({uv[i, 0]:g}, {uv[i, 1]:g}) is outside the {w}x{h} image; computed anyway")
+    set_compile_handler(compile_handler(note))  # a lens's undistortion not compiled yet: said, not waited for
     records = locate_records(camera, budget, uv, confidence=confidence, linear_threshold=linear_threshold)
     if gcp_summary is not None:
         add_support(records, camera, budget, load_gcp_support(gcp_summary, budget))

@@ -20,7 +20,8 @@ __all__ = ["warmup_cmd"]
 @click.command("warmup")
 @click.option("--only", "only", type=click.Choice(list(GROUPS)), multiple=True,
               help="Compile only these kernel groups (repeat; default: all): map (map, demo), points "
-                   "(scattered pixels), objects (objects, serve, FrameProcessor).")
+                   "(scattered pixels), objects (objects, serve, FrameProcessor), lens (undistortion: every command on "
+                   "a camera with lens distortion).")
 @click.option("--background", is_flag=True, hidden=True,
               help="The detached compile a command starts: skip a group another process is compiling; no output.")
 def warmup_cmd(only, background):

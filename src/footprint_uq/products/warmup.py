@@ -34,9 +34,11 @@ from pathlib import Path
 import numpy as np
 
 from .._numba_cache import cache_dir
+from ..cameras import general
 from ..cameras.opencv import OpenCVCamera
 from ..cameras.pantilt import PanTiltCamera
 from ..errors import InputError
+from ..fast import core
 from ..fast import footprint_kernels as fk
 from ..fast import map_kernels as mk
 from ..fast.cov_checks import first_bad_cov2
@@ -53,10 +55,11 @@ GROUPS = {
     "map": mk.MAP_KERNELS,
     "points": mk.POINT_KERNELS,
     "objects": (fk.process_corners, fk.process_boxes3d, first_bad_cov2),
+    "lens": (core.undistort_many,),
 }
 #: the notice's "about": a group's background compile on the 2-core VM of 2026-11-26, quiet (bench/bench_first_run.py
 #: ``compile_s``: objects 92 s, map 98 s; points 43 s by ``warmup``), rounded up; 2026-11-24's VM took ~40 % of it
-ABOUT_S = {"map": 100, "points": 45, "objects": 95}
+ABOUT_S = {"map": 100, "points": 45, "objects": 95, "lens": 15}
 #: values of ``FOOTPRINT_UQ_COMPILE``: what a command does when a kernel group is cold (default: background)
 MODES = ("background", "foreground", "reference")
 #: a lock older than this is taken for a crashed compile's, whatever its process id says (seconds)
@@ -272,7 +275,13 @@ def _warm_objects(budget) -> None:
         fp.corners(np.array([[[100.0, 200.0], [140.0, 200.0], [140.0, 210.0], [100.0, 210.0]]]))
 
 
-_WARM = {"map": _warm_map, "points": _warm_points, "objects": _warm_objects}
+def _warm_lens(budget) -> None:
+    """The undistortion of a camera with lens distortion (every command's reference path needs it)."""
+    cv = _cameras()[1]
+    general.backproject(cv.params, np.array([[10.0, 200.0]]))
+
+
+_WARM = {"map": _warm_map, "points": _warm_points, "objects": _warm_objects, "lens": _warm_lens}
 
 
 def warmup(groups: Iterable[str] | None = None, *, progress: Callable[[str], None] | None = None,
