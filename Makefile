@@ -27,7 +27,7 @@ test: $(STAMP) sysdeps
 	$(BIN)/ruff check src tests bench
 	find src -name '*.nbi' -delete -o -name '*.nbc' -delete
 	$(BIN)/footprint-uq warmup --only objects --only points & pid=$$!; \
-	  $(BIN)/footprint-uq warmup --only map && wait $$pid
+	  $(BIN)/footprint-uq warmup --only map --only lens && wait $$pid
 	$(BIN)/python -m pytest -q -n 2 --dist worksteal --durations=15
 
 # the suite less the tests marked slow (tests/conftest.py SLOW_TESTS and @pytest.mark.slow); keeps numba's cache:
