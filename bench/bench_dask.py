@@ -74,7 +74,7 @@ def measure(cameras: int = 4, files_per_camera: int = 2, rows_per_file: int = 40
         fleet.process_fleet(registry, data, out, progress=False)  # warm-up (numba cache)
         t_in = statistics.median(once() for _ in range(repeats))
         cluster = distributed.LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                                           dashboard_address=None)
+                                           dashboard_address=":0")
         try:
             with distributed.Client(cluster) as client:
                 client.run(lambda: __import__("footprint_uq.batch.fleet"))

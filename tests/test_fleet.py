@@ -161,7 +161,7 @@ def test_dask_equals_in_process_with_retried_failure(fleet_data, tmp_path, monke
         return real(task)
 
     monkeypatch.setattr(fleet, "process_partition", flaky)
-    with distributed.Client(n_workers=2, threads_per_worker=1, processes=False, dashboard_address=None) as client:
+    with distributed.Client(n_workers=2, threads_per_worker=1, processes=False, dashboard_address=":0") as client:
         out = tmp_path / "dask"
         s = fleet.process_fleet(fleet_data["registry"], fleet_data["data"], out, client=client, retries=2,
                                 progress=False, chunk_rows=100)
@@ -184,7 +184,7 @@ def test_no_retry_fails_loudly(fleet_data, tmp_path, monkeypatch):
         raise OSError("disk gone")
 
     monkeypatch.setattr(fleet, "process_partition", broken)
-    with distributed.Client(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None) as client:
+    with distributed.Client(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=":0") as client:
         with pytest.raises(OSError, match="disk gone"):
             fleet.process_fleet(fleet_data["registry"], fleet_data["data"], tmp_path / "o", client=client, retries=0,
                                 progress=False)
@@ -210,7 +210,7 @@ def test_cli_fleet(fleet_data, tmp_path):
     r = CliRunner().invoke(main, args + ["--out", str(tmp_path / "a")])
     assert r.exit_code == 0, r.output
     assert "over 5 cameras" in r.output
-    with distributed.Client(n_workers=2, threads_per_worker=1, processes=False, dashboard_address=None) as client:
+    with distributed.Client(n_workers=2, threads_per_worker=1, processes=False, dashboard_address=":0") as client:
         r = CliRunner().invoke(main, args + ["--out", str(tmp_path / "b"), "--scheduler", client.scheduler.address])
     assert r.exit_code == 0, r.output
     _assert_equal(_read(tmp_path / "a"), _read(tmp_path / "b"))

@@ -305,7 +305,7 @@ def test_dask_worker_killed_mid_job(fleet, tmp_path):
     from footprint_uq.batch.fleet import process_fleet
 
     out = tmp_path / "out"
-    cluster = distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None)
+    cluster = distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0")
     client = distributed.Client(cluster)
     try:
         pids = client.run(os.getpid)

@@ -658,7 +658,7 @@ def _run_fleet(reg, detections, out: Path, out_dir, t0, *, chunk_rows, compressi
                     client = own = distributed.Client(scheduler)
                 else:
                     cluster = distributed.LocalCluster(n_workers=int(workers), threads_per_worker=1, processes=True,
-                                                       dashboard_address=None)
+                                                       dashboard_address=":0")
                     client = own = distributed.Client(cluster)
             futs = client.map(fn, tasks, retries=int(retries), pure=False, key=[f"footprints-{uuid.uuid4().hex[:6]}-"
                                                                               f"{t.index}" for t in tasks])
