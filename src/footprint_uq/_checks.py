@@ -71,7 +71,11 @@ def check_positive(name: str, a: np.ndarray) -> np.ndarray:
     return a
 
 
-def check_cov(name: str, cov, n: int, *, tol: float = 1e-12) -> np.ndarray:
+#: check_cov's default tolerance: an eigenvalue may be this far below 0, relative to the matrix's largest entry
+COV_PSD_RTOL = 1e-12
+
+
+def check_cov(name: str, cov, n: int, *, tol: float = COV_PSD_RTOL) -> np.ndarray:
     """Check a symmetric positive semi-definite ``(..., n, n)`` covariance."""
     c = np.asarray(cov, dtype=np.float64)
     if c.ndim < 2 or c.shape[-2:] != (n, n):

@@ -533,10 +533,10 @@ def _gn_step_sigma(H, g):
     return np.where(np.isfinite(out), out, np.inf)
 
 
-def _lm_fixed(theta, base, A, uv, xyz, S, mask, max_iter, active0, prior=None, tol=None):
-    """Levenberg-Marquardt with the point covariances S held fixed; B problems at once (``tol``: scalar or (B,))."""
+def _lm_fixed(theta, base, A, uv, xyz, S, mask, max_iter, active0, prior, tol):
+    """Levenberg-Marquardt with the point covariances S held fixed; B problems at once (``tol`` (B,): the
+    Gauss-Newton step, in sigmas, at which each has converged)."""
     B, k = theta.shape
-    tol = _CONV_SIGMA if tol is None else tol
     cost, H, g, _, _ = _normal_equations(base + theta @ A.T, uv, xyz, S, mask, A, prior)
     lam = np.full(B, 1e-3)
     conv = ~active0.copy()

@@ -102,7 +102,7 @@ import numpy as np
 import pyarrow as pa
 
 from .. import status
-from .._checks import as_float, as_int, as_points, check_cov
+from .._checks import COV_PSD_RTOL, as_float, as_int, as_points, check_cov
 from .._notices import before_kernels
 from ..errors import InputError
 from ..fast import footprint_kernels as fk
@@ -720,7 +720,7 @@ def _mark_overflow(est: FootprintEstimate) -> FootprintEstimate:
     est.centre_valid[objs] = ~bad
     est.centre_xy_world_m[objs[bad]] = np.nan
     est.centre_cov_m2[objs[bad]] = np.nan
-    rows = getattr(est, "object_rows", None)
+    rows = est.object_rows
     if rows is not None and rows.shape[1] == reason.shape[0]:  # the kernel's ellipse of the centre follows it
         rows[[fk.OBJ_ROW["sigma_major_m"], fk.OBJ_ROW["sigma_minor_m"], fk.OBJ_ROW["orientation_deg"]],
              objs[bad][:, None]] = np.nan
@@ -892,8 +892,6 @@ def footprints_from_boxes3d(camera, budget, boxes_world, *, yaw_unit: str = "rad
 # -- the per-frame fast path ---------------------------------------------------------------------
 #: outputs of at least this many bytes come from pyarrow's memory pool (see :func:`empty_reusable`)
 _POOL_MIN_BYTES = 1 << 20
-#: the pixel covariances' positive semi-definiteness tolerance (relative to each matrix's largest entry)
-_COV_TOL = 1e-12
 
 
 def empty_reusable(shape, dtype=np.float64) -> np.ndarray:
@@ -1020,9 +1018,9 @@ class FrameProcessor:
         """``c`` (..., 2, 2) C-contiguous, checked as :func:`check_cov` does: in one compiled pass when the kernels
         run (the numpy checks only for a frame that fails it, for their one-line error)."""
         c = np.ascontiguousarray(c)
-        if self._use_kernels() and first_bad_cov2(c.reshape(-1, 2, 2), _COV_TOL) < 0:
+        if self._use_kernels() and first_bad_cov2(c.reshape(-1, 2, 2), COV_PSD_RTOL) < 0:
             return c
-        return check_cov("pixel_cov_px2", c, 2, tol=_COV_TOL)
+        return check_cov("pixel_cov_px2", c, 2)
 
     @staticmethod
     def _scratch() -> np.ndarray:

@@ -33,6 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .._checks import COV_PSD_RTOL
 from .._numba_cache import cache_dir
 from ..cameras import general
 from ..cameras.opencv import OpenCVCamera
@@ -267,7 +268,7 @@ def _warm_points(budget) -> None:
 
 
 def _warm_objects(budget) -> None:
-    first_bad_cov2(np.zeros((1, 2, 2)), 1e-12)  # FrameProcessor's check of a frame's pixel covariances
+    first_bad_cov2(np.zeros((1, 2, 2)), COV_PSD_RTOL)  # FrameProcessor's check of a frame's pixel covariances
     for cam in _cameras():
         fp = FrameProcessor(cam, budget)
         fp.boxes2d(np.array([[100.0, 150.0, 140.0, 200.0]]))

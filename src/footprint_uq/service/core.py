@@ -47,7 +47,7 @@ from ..products.footprints import CONTACT_MODES, V2X_FIELDS, V2X_POLICIES, Frame
 from ..products.geo import GeoReference
 from ..products.v2x import J2735_POSITION_CONFIDENCE_NAMES
 from ..tracking import SharedJacobianAt, TrackerConfig, TrackTable, object_motion
-from ..uncertainty.ellipse import chi2_scale, ellipse_axes
+from ..uncertainty.ellipse import chi2_scale
 from ..uncertainty.propagation import DEFAULT_LINEAR_THRESHOLD
 from .jsonrows import Table
 from .messages.asn1_cpm import DEFAULT_CDD
@@ -529,11 +529,8 @@ class Service:
         N = len(ids)
         geo = setup.georef
         cov = est.centre_cov_m2
-        rows = est.object_rows
-        if rows is not None:  # the kernel's ellipse of each centre (the formulas of ellipse_axes)
-            a, b, ori = rows[_ROW_SMAJ], rows[_ROW_SMIN], rows[_ROW_ORI]
-        else:
-            a, b, ori = ellipse_axes(cov)
+        rows = est.object_rows  # (every FrameProcessor estimate has them: the kernel's or the reference's)
+        a, b, ori = rows[_ROW_SMAJ], rows[_ROW_SMIN], rows[_ROW_ORI]  # the centre's ellipse, as ellipse_axes
         valid = est.centre_valid
         centre = est.centre_xy_world_m
         t = Table(N)
