@@ -1358,3 +1358,36 @@ def process_boxes3d(boxes, yaw_deg, bottom_on_ground, cam, dR, Lr, Lc, Lv, r, sp
         n_over = process_corners(uv, np.zeros((0, 0), dtype=np.int8), boxes, yaw_deg, bottom_on_ground, cam, dR, Lr,
                                  Lc, Lv, r, spx, det, det_mode, allow_outside, ch, sh, flag, out, S)
     return bad, n_over
+
+
+@njit(cache=True, error_model="numpy", nogil=True)
+def point_outputs(N, r):
+    """:func:`alloc_outputs` ``(N, 1, corners=False, shared_rank=r)``, allocated in compiled code (one-point
+    footprints whose only wanted output is the centre's whitened Jacobian; the arrays are small, so numba's
+    allocator reuses its memory)."""
+    return (np.empty((0, 1, 2)), np.empty((0, 1, 2, 2)), np.empty((0, 2, 2)), np.empty((N, 1), np.int8),
+            np.empty((N, 1), np.bool_), np.empty(N, np.int64), np.empty((0, 2, 2)), np.empty(N, np.int32),
+            np.empty(N, np.int64), np.empty((len(OBJ_ROWS), N)), np.empty((7, N), np.int32), np.empty((0, 1)),
+            np.empty((N, 2, r)))
+
+
+@njit(cache=True, error_model="numpy", nogil=True)
+def point_shared_jacobian(uv, no_extra, no_boxes, yaw_deg, on_ground, cam, dR, Lr, Lc, Lv, r, spx, no_det, det_mode,
+                          allow_outside, ch, sh, flag, S):
+    """The centre's whitened parameter Jacobian ``B`` (N, 2, r) of one-point footprints ``uv`` (N, 1, 2) (pixels
+    outside the image included), NaN where a pixel has no ground point: :func:`process_corners` with
+    :func:`point_outputs`, in one call (the tracker asks for it at every track's predicted position in every
+    frame).  ``no_extra`` (0, 0) int8, ``no_boxes`` (0, 7), ``no_det`` any 4-D array: the processor's empties;
+    ``yaw_deg, on_ground, det_mode, allow_outside, flag`` must be False, True, 0, True, False -- arguments, not
+    constants, so that the call below has the argument types of the processor's own calls and reuses that
+    compiled :func:`process_corners` (a literal would make numba compile a second one, ~1 min)."""
+    out = point_outputs(uv.shape[0], r)
+    process_corners(uv, no_extra, no_boxes, yaw_deg, on_ground, cam, dR, Lr, Lc, Lv, r, spx, no_det, det_mode,
+                    allow_outside, ch, sh, flag, out, S)
+    shared, creason = out[12], out[7]
+    for i in range(uv.shape[0]):
+        if creason[i] != _OK:
+            for a in range(2):
+                for c in range(r):
+                    shared[i, a, c] = math.nan
+    return shared

@@ -1082,13 +1082,9 @@ class FrameProcessor:
         if not self._use_kernels():
             return footprints_from_corners(self.camera, self.budget, uv, allow_outside_image=True, linearity=False,
                                            v2x_policy="linear").centre_shared_m
-        out = self._fk.alloc_outputs(uv.shape[0], 1, corners=False, shared_rank=self._r)
-        self._fk.process_corners(uv, self._no_extra, self._no_boxes, False, True, self._cam, self._dR, self._Lr,
-                                 self._Lc, self._Lv, self._r, self._spx, self._no_det, 0, True, self._ch, self._sh,
-                                 False, out, self._scratch())
-        shared = out[12]
-        shared[out[7] != status.OK] = np.nan
-        return shared
+        return self._fk.point_shared_jacobian(uv, self._no_extra, self._no_boxes, False, True, self._cam, self._dR,
+                                              self._Lr, self._Lc, self._Lv, self._r, self._spx, self._no_det, 0, True,
+                                              self._ch, self._sh, False, self._scratch())
 
     def corners(self, corners_px, *, pixel_cov_px2=None) -> FootprintEstimate:
         """Footprints from corners in pixels ``(N, K, 2)`` (see :func:`footprints_from_corners`)."""

@@ -156,6 +156,9 @@ class TrackTable:
         self._stamp = 0  # frames seen: the repeated-id stamp of frame_rows
         self._next_id = 0
         self._last_time: float = -math.inf
+        #: a lower bound of every live track's last update time (no track can have expired while
+        #: ``time_s - _oldest_s <= timeout_s``: the deleter's sweep runs about once per timeout, not every frame)
+        self._oldest_s = math.inf
         #: frames not tracked because their time was earlier than the previous frame's
         self.n_stale_frames = 0
 
@@ -204,13 +207,15 @@ class TrackTable:
 
     def _delete_expired(self, time_s: float) -> None:
         """The deleter: drop tracks whose last update is more than ``timeout_s`` before ``time_s``."""
-        if len(self._index) <= 1:
+        if len(self._index) <= 1 or not time_s - self._oldest_s > self.config.timeout_s:
             return
         for s in np.flatnonzero(time_s - self._t_last > self.config.timeout_s).tolist():  # (NaN: a free row)
             del self._index[self._keys[s]]
             self._keys[s] = None
             self._t_last[s] = np.nan
             self._free.append(s)
+        live = self._t_last[np.isfinite(self._t_last)]
+        self._oldest_s = float(live.min()) if live.size else math.inf
 
     def _measurement(self, xy_m, cov_frame_m2, shared_m) -> SplitMeasurement:
         mode = self.config.calibration
@@ -278,6 +283,8 @@ class TrackTable:
                                      self._t_last, self._t_first, self._n, self._tid, self._next_id, t, self._qs,
                                      self._rates, self.mu0, self._var_v0, meas.xy_m, meas.cov_frame_m2, Bp,
                                      meas.shared_m, self.config.gate_chi2, *out)
+        if t < self._oldest_s:  # (every row started or updated now has t_last = t)
+            self._oldest_s = t
         return out
 
     def _claim(self, ids: list, slots: np.ndarray, act: np.ndarray) -> None:
