@@ -12,6 +12,8 @@ import numpy as np
 import pyarrow.parquet as pq
 import pytest
 from click.testing import CliRunner
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from footprint_uq import PanTiltCamera
 from footprint_uq.batch.process import TRACK_COLUMNS, process_table
@@ -320,6 +322,24 @@ def test_track_table_timeout_gate_reuse_and_nan_policy():
         tab.step(0.8, ["x"], np.zeros((1, 2)), np.zeros((1, 2, 2)), np.zeros((1, 2, 5)))
     with pytest.raises(InputError, match="object_ids"):
         tab.step(0.8, ["x", "y"], *_meas(1, [[0, 0]]))
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.tuples(st.floats(0.0, 0.8), st.lists(st.sampled_from("abcdef"), max_size=5)), min_size=1,
+                max_size=25), st.floats(0.05, 1.0))
+def test_deleter_sweeps_only_when_needed_and_deletes_the_same(frames, timeout_s):
+    """The deleter skips its sweep while no track can have expired (a lower bound of the last updates): the same
+    tracks, ids and outputs as a table that sweeps every frame, over random gaps, ids and timeouts."""
+    cfg = TrackerConfig(timeout_s=timeout_s)
+    lazy, eager = TrackTable(cfg, rank=2), TrackTable(cfg, rank=2)
+    t = 0.0
+    for dt, ids in frames:
+        t += dt
+        xy = [[10.0 * "abcdef".index(i), 0.0] for i in ids]
+        eager._oldest_s = -math.inf  # (forces the sweep)
+        a, b = lazy.step(t, ids, *_meas(len(ids), xy)), eager.step(t, ids, *_meas(len(ids), xy))
+        assert a.track_id.tolist() == b.track_id.tolist() and a.new_track.tolist() == b.new_track.tolist()
+        assert len(lazy) == len(eager) and set(lazy._index) == set(eager._index)
 
 
 def test_track_table_takes_the_whole_covariance():
