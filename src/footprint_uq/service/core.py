@@ -451,7 +451,7 @@ class Service:
             om = None if motion is None else motion[1]
             cpm, cpm_hex, sdsm = self._messages_json(setup, est, classes, class_p, ok_idx, msg_ids, int(fno), ts,
                                                      ref_ms, motion=om)
-            parts += [b',"cpm":', cpm, b',"cpm_uper_hex":"', cpm_hex.encode(), b'","sdsm":', sdsm]
+            parts += [b',"cpm":', *cpm, b',"cpm_uper_hex":"', cpm_hex.encode(), b'","sdsm":', *sdsm]
             omitted = int(np.count_nonzero(est.centre_valid)) - len(ok_idx)
             if omitted:  # said, never silent: objects with a centre that did not fit in the messages
                 parts += [b',"objects_not_in_messages":', b"%d" % omitted]
@@ -531,11 +531,8 @@ class Service:
         The points' values are the fused kernel's (``est.corners_nonlinearity``: the frame processor computes
         them for the V2X policy anyway; ``tests/test_service.py`` holds them to the library's function), not a
         second numpy pass over the frame (~1.7 ms per 100 objects)."""
-        nl = est.corners_nonlinearity
-        usable = est.corner_usable & np.isfinite(nl)
-        worst = np.where(usable.any(1), np.max(np.where(usable, nl, -np.inf), axis=1), np.nan)
-        with np.errstate(invalid="ignore"):
-            ok = np.isfinite(worst) & (worst <= self.linear_threshold)
+        worst, ok = np.empty(len(est)), np.empty(len(est), np.bool_)
+        _worst_usable(est.corners_nonlinearity, est.corner_usable, self.linear_threshold, worst, ok)
         return worst, ok
 
     @staticmethod
@@ -617,13 +614,14 @@ class Service:
                 sent[ok_idx] = True
                 layout += [b',"message_object_id":', t.when(sent, t.column(col)), t.when(~sent, b"null")]
         layout.append(b"}")
-        return t.json(layout), ok_idx, msg_ids
+        return t.json_buffer(layout), ok_idx, msg_ids
 
     def _messages_json(self, setup: CameraSetup, est, classes: list, class_p, ok_idx: np.ndarray,
                        msg_ids: np.ndarray, fno: int, ts: float, ref_ms: int, motion: ObjectMotion | None = None
-                       ) -> tuple[bytes, str, bytes]:
-        """The CPM (JSON text), its UPER encoding (hex) and the SDSM (JSON text, ``null`` without objects) of
-        the objects ``ok_idx``, written column-wise; UPER by the compiled column writer.  ``motion``: the
+                       ) -> tuple[tuple, str, tuple]:
+        """The CPM (JSON text, as pieces to join), its UPER encoding (hex) and the SDSM (JSON text as pieces,
+        ``null`` without objects) of the objects ``ok_idx``, written column-wise; UPER by the compiled column
+        writer.  ``motion``: the
         :class:`~.messages.motion.ObjectMotion` of all the frame's objects (None: no motion is sent)."""
         geo = setup.georef
         N, m = len(classes), len(ok_idx)
@@ -635,7 +633,7 @@ class Service:
                 else np.full(m, _DEFAULT_CLASS_ROW, np.intp))
         cls = self._cls
         has_cls = cls.bits_width[crow] > 0
-        mc = None if motion is None else motion_codes(motion.take(ok_idx), m)
+        mc = None if motion is None else motion_codes(motion if m == N else motion.take(ok_idx), m)  # (sorted rows)
         t = Table(m)
         oid = t.column(msg_ids)
         if class_p is None:
@@ -651,7 +649,7 @@ class Service:
             pct = t.column(np.where(none, 0.0, np.rint(100.0 * p)).astype(np.int64))
         cx, cy, xv, yv, r = t.columns(np.array([x_conf, y_conf, x_cm, y_cm, corr], dtype=np.int64))
         vel, age = _motion_layout(t, mc)
-        po = t.json([b'{"objectId":', oid, b',"measurementDeltaTime":0,"position":{"xCoordinate":{"value":', xv,
+        po = t.json_buffer([b'{"objectId":', oid, b',"measurementDeltaTime":0,"position":{"xCoordinate":{"value":', xv,
                      b',"confidence":', cx, b'},"yCoordinate":{"value":', yv, b',"confidence":', cy, b"}}", *vel,
                      t.when(corr != 101, _CORR_OPEN, r, _CORR_CLOSE), *age,
                      t.when(has_cls, b',"classification":[{"objectClass":', t.column(cls.object_json[crow].tolist()),
@@ -662,17 +660,17 @@ class Service:
                         latitude=LATITUDE_UNAVAILABLE if lat_e7 is None else lat_e7,
                         longitude=LONGITUDE_UNAVAILABLE if lon_e7 is None else lon_e7)
         cpm["payload"]["cpmContainers"][1]["containerData"]["numberOfPerceivedObjects"] = m
-        cpm_json = _splice(orjson.dumps(cpm), b'"perceivedObjects":[]', po)
+        cpm_json = _splice(orjson.dumps(cpm), b'"perceivedObjects":[]', po)  # (pieces of the text)
         if self.uper_encoder == "fast":
             container = perceived_object_container_uper_arrays(
                 msg_ids, x_cm, x_conf, y_cm, y_conf, corr, cls.bits_value[crow], cls.bits_width[crow], level,
                 cdd=self.cpm_cdd, motion=mc)
             cpm_hex = setup.uper.encode(ref_ms, container).hex()
         else:
-            cpm_hex = self._encode(orjson.loads(cpm_json)).hex()
+            cpm_hex = self._encode(orjson.loads(b"".join(cpm_json))).hex()
         # J3224's DetectedObjectList has 1..256 entries: a frame without objects has no SDSM (null)
         if m == 0:
-            return cpm_json, cpm_hex, b"null"
+            return cpm_json, cpm_hex, (b"null",)
         xd, yd = t.columns(np.array([x_dm, y_dm]))
         if mc is None:
             tail = [_SDSM_TAIL_NO_MOTION]
@@ -681,9 +679,9 @@ class Service:
             tail = [_SDSM_SPEED, sp, b',"speedConfidence":', t.column(_SPEED_CONF[mc.sdsm_speed_conf].tolist()),
                     b',"heading":', hd, b',"headingConf":', t.column(_HEADING_CONF[mc.sdsm_heading_conf].tolist()),
                     b"}}"]
-        objs = t.json([b'{"detObjCommon":{"objType":', t.column(_SDSM_TYPE[crow].tolist()), b',"objTypeCfd":', pct,
-                       b',"objectID":', oid, _SDSM_AFTER_ID, xd, b',"offsetY":', yd, b'},"posConfidence":{"pos":',
-                       t.column(_POS_NAMES[codes[:, _J_POS]].tolist()), *tail])
+        objs = t.json_buffer([b'{"detObjCommon":{"objType":', t.column(_SDSM_TYPE[crow].tolist()),
+                              b',"objTypeCfd":', pct, b',"objectID":', oid, _SDSM_AFTER_ID, xd, b',"offsetY":', yd,
+                              b'},"posConfidence":{"pos":', t.column(_POS_NAMES[codes[:, _J_POS]].tolist()), *tail])
         sdsm = build_sdsm(setup.station_id, fno, ts, [],
                           **({} if lat_e7 is None else {"lat_1e7deg": lat_e7, "lon_1e7deg": lon_e7}))
         return cpm_json, cpm_hex, _splice(orjson.dumps(sdsm), b'"objects":[]', objs)
@@ -700,6 +698,22 @@ def _motion_layout(t: Table, mc) -> tuple[list, list]:
                   b',"confidence":', vxc, b'},"yVelocity":{"value":', vy, b',"confidence":', vyc, b"}}}"),
            t.when(mc.has_yaw, b',"angles":{"zAngle":{"value":', z, b',"confidence":', zc, b"}}")]
     return vel, [t.when(mc.has_age, b',"objectAge":', age)]
+
+
+@njit(cache=True, nogil=True)
+def _worst_usable(nl, usable, threshold, worst, ok):  # pragma: no cover - compiled
+    """Per row of ``nl (N, K)``: the largest finite value among the ``usable`` ones into ``worst`` (NaN if none)
+    and ``ok`` = that <= ``threshold`` (False if none): :meth:`Service._linearity` in one pass."""
+    for i in range(nl.shape[0]):
+        w = -math.inf
+        found = False
+        for k in range(nl.shape[1]):
+            v = nl[i, k]
+            if usable[i, k] and math.isfinite(v):
+                found = True
+                w = max(w, v)
+        worst[i] = w if found else math.nan
+        ok[i] = found and w <= threshold
 
 
 @njit(cache=True, nogil=True)
@@ -724,10 +738,11 @@ def _cm_dm(en: np.ndarray, rows: np.ndarray):
                          float(COORD_MIN), float(COORD_MAX), float(OFFSET_MAX), COORD_GUARD_CM)
 
 
-def _splice(doc: bytes, empty_list: bytes, items: bytes) -> bytes:
-    """``doc`` with its (only) ``"key":[]`` replaced by ``"key":<items>``."""
+def _splice(doc: bytes, empty_list: bytes, items) -> tuple:
+    """``doc`` with its (only) ``"key":[]`` replaced by ``"key":<items>``, as three pieces for the record's one
+    final join (``items``: bytes or :meth:`.jsonrows.Table.json_buffer`'s array)."""
     i = doc.rindex(empty_list) + len(empty_list) - 2
-    return doc[:i] + items + doc[i + 2:]
+    return doc[:i], items, doc[i + 2:]
 
 
 def _v2x_source_layout(t: Table, est, cxx, cxy, cyy) -> list:

@@ -160,6 +160,13 @@ class Table:
         return (len(self._masks) - 1, parts)
 
     def json(self, layout) -> bytes:
+        """The rows as JSON text (``bytes``); :meth:`json_buffer` without the copy into ``bytes``."""
+        out = self.json_buffer(layout)
+        return out if isinstance(out, bytes) else out.tobytes()
+
+    def json_buffer(self, layout):
+        """:meth:`json`'s text as a 1-D uint8 array (or ``b"[]"``): a bytes-like object that ``bytes.join``, file
+        writes and MQTT publishes take as it is (a record of ~200 kB is then copied once, by the final join)."""
         n = self.n
         if n == 0:
             return b"[]"
@@ -179,7 +186,7 @@ class Table:
             raise ValueError(f"columns hold {got} values, expected {want} ({self._ncols} columns x {n} rows)")
         masks = np.array(self._masks) if self._masks else _NO_MASKS
         size = 2 + n * (per_row + 1) + reuse * buf.shape[0]  # an upper bound (a column may be written twice)
-        return _weave(buf, starts, ends, n, lit, ops, masks, size).tobytes()
+        return _weave(buf, starts, ends, n, lit, ops, masks, size)
 
 
 _LAYOUTS: dict = {}
