@@ -24,48 +24,63 @@ _NUMPY = orjson.OPT_SERIALIZE_NUMPY
 _COMMA, _LBRACKET, _RBRACKET, _QUOTE, _BACKSLASH, _LBRACE, _RBRACE = b",[]\"\\{}"
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _skip_string(buf, i):  # pragma: no cover - compiled
+    """``buf[i]`` is a string's opening quote: the index just after its closing quote (escapes honoured)."""
+    one, two = np.uint64(1), np.uint64(2)
+    i += one
+    while buf[i] != _QUOTE:
+        i += two if buf[i] == _BACKSLASH else one
+    return i + one
+
+
 @njit(cache=True, nogil=True)
-def _scan(buf, starts, ends):  # pragma: no cover - compiled
-    """Start and end of every value of the JSON arrays in ``buf`` (orjson's compact text, arrays of arrays
-    allowed): numbers, literals, strings (escapes honoured) and objects; returns how many were found."""
-    L = buf.shape[0]
+def _scan(buf, seg_len, plain, starts, ends):  # pragma: no cover - compiled
+    """Start and end of every value of the JSON arrays in ``buf``: orjson's compact texts of the columns, one after
+    the other (``seg_len`` bytes each; arrays of arrays allowed).  A ``plain`` text holds only numbers and literals
+    (a numpy array's: no strings, no objects), and its values end at the next ``,`` or ``]``: one comparison loop
+    per byte.  Any other text: strings (escapes honoured) and objects too.  Indices are unsigned (no negative-index
+    wrap-around test per byte).  Returns how many values were found."""
     cap = starts.shape[0]
+    one = np.uint64(1)
     t = 0
-    i = 0
-    while i < L:
-        c = buf[i]
-        if c == _LBRACKET or c == _RBRACKET or c == _COMMA:
-            i += 1
-            continue
-        s = i
-        if c == _QUOTE:
-            i += 1
-            while buf[i] != _QUOTE:
-                i += 2 if buf[i] == _BACKSLASH else 1
-            i += 1
-        elif c == _LBRACE:
-            depth = 0
-            while True:
+    i = np.uint64(0)
+    for g in range(seg_len.shape[0]):
+        end = i + np.uint64(seg_len[g])
+        fast = plain[g]
+        while i < end:
+            c = buf[i]
+            if c == _LBRACKET or c == _RBRACKET or c == _COMMA:
+                i += one
+                continue
+            s = i
+            if fast or (c != _QUOTE and c != _LBRACE):  # a number or a literal: up to the next , or ]
+                i += one
                 c = buf[i]
-                if c == _QUOTE:
-                    i += 1
-                    while buf[i] != _QUOTE:
-                        i += 2 if buf[i] == _BACKSLASH else 1
-                elif c == _LBRACE:
-                    depth += 1
-                elif c == _RBRACE:
-                    depth -= 1
-                    if depth == 0:
-                        i += 1
-                        break
-                i += 1
-        else:
-            while i < L and buf[i] != _COMMA and buf[i] != _RBRACKET:
-                i += 1
-        if t < cap:
-            starts[t] = s
-            ends[t] = i
-        t += 1
+                while c != _COMMA and c != _RBRACKET:
+                    i += one
+                    c = buf[i]
+            elif c == _QUOTE:
+                i = _skip_string(buf, i)
+            else:  # an object: to its matching brace (braces inside strings skipped)
+                depth = 0
+                while True:
+                    c = buf[i]
+                    if c == _QUOTE:
+                        i = _skip_string(buf, i)
+                        continue
+                    if c == _LBRACE:
+                        depth += 1
+                    elif c == _RBRACE:
+                        depth -= 1
+                        if depth == 0:
+                            i += one
+                            break
+                    i += one
+            if t < cap:
+                starts[t] = s
+                ends[t] = i
+            t += 1
     return t
 
 
@@ -130,19 +145,22 @@ class Table:
     ``t.json([b'{"x":', x, b'}'])`` gives ``[{"x":1.5},{"x":2.0},{"x":null}]``.
     """
 
-    __slots__ = ("n", "_texts", "_ncols", "_masks")
+    __slots__ = ("n", "_texts", "_plain", "_ncols", "_masks")
 
     def __init__(self, n: int):
         self.n = int(n)
         self._texts: list[bytes] = []
+        self._plain: list[bool] = []  # per text: numbers and literals only (a numeric or boolean array's)
         self._ncols = 0
         self._masks: list[np.ndarray] = []
 
     def column(self, values) -> int:
         if isinstance(values, np.ndarray):
             text = orjson.dumps(np.ascontiguousarray(values), option=_NUMPY)
+            self._plain.append(values.dtype.kind in _PLAIN_KINDS)
         else:
             text = orjson.dumps(values)
+            self._plain.append(False)
         self._texts.append(text)
         self._ncols += 1
         return self._ncols - 1
@@ -150,6 +168,7 @@ class Table:
     def columns(self, matrix: np.ndarray) -> list[int]:
         m = np.ascontiguousarray(matrix)
         self._texts.append(orjson.dumps(m, option=_NUMPY))
+        self._plain.append(m.dtype.kind in _PLAIN_KINDS)
         first = self._ncols
         self._ncols += m.shape[0]
         return list(range(first, self._ncols))
@@ -181,7 +200,8 @@ class Table:
         want = self._ncols * n
         starts = np.empty(want, np.int64)
         ends = np.empty(want, np.int64)
-        got = _scan(buf, starts, ends)
+        got = _scan(buf, np.fromiter(map(len, self._texts), np.int64, len(self._texts)),
+                    np.array(self._plain, dtype=np.bool_), starts, ends)
         if got != want:
             raise ValueError(f"columns hold {got} values, expected {want} ({self._ncols} columns x {n} rows)")
         masks = np.array(self._masks) if self._masks else _NO_MASKS
@@ -190,6 +210,8 @@ class Table:
 
 
 _LAYOUTS: dict = {}
+#: numpy dtype kinds whose orjson text holds only numbers and literals (bool, int, uint, float)
+_PLAIN_KINDS = frozenset("biuf")
 _NO_MASKS = np.zeros((1, 1), dtype=bool)
 
 
