@@ -305,8 +305,9 @@ def frame_rows(slots, xy, cov, B, subtract, R, t, t_last, seen, stamp, X, act, o
     unknown id with finite inputs (the caller keeps the first object of each unknown id); :data:`ROW_SKIP`
     otherwise (repeated ids: ``seen (cap,)`` is stamped with ``stamp`` per frame).  The k objects to update are
     listed in ``old[:k]`` in frame order with their tracks' positions predicted to ``t`` in ``pred[:k]`` (for
-    ``B`` at the predicted position); returns k."""
+    ``B`` at the predicted position); returns k and the number of unknown ids (``slots == -1``)."""
     k = 0
+    n_unknown = 0
     r = B.shape[2]
     for i in range(slots.shape[0]):
         if subtract:
@@ -326,6 +327,7 @@ def frame_rows(slots, xy, cov, B, subtract, R, t, t_last, seen, stamp, X, act, o
                 ok = ok and math.isfinite(B[i, a, c])
         if s < 0:
             act[i] = ROW_START if (s == -1 and ok) else ROW_SKIP
+            n_unknown += s == -1
             continue
         if seen[s] == stamp or not ok or t_last[s] == t:  # a repeated id (in this frame or at this time)
             seen[s] = stamp
@@ -338,7 +340,7 @@ def frame_rows(slots, xy, cov, B, subtract, R, t, t_last, seen, stamp, X, act, o
         pred[k, 1] = X[s, 1] + h * X[s, 3]
         old[k] = i
         k += 1
-    return k
+    return k, n_unknown
 
 
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
