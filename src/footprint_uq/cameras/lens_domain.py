@@ -14,7 +14,10 @@ ground), so the domain is made explicit, once per camera:
   grows without bound and no root can be resolved in double precision).  It is star-shaped; its
   boundary radius ``r_fold(phi)`` is found per direction by a scan and bisection
   (:func:`footprint_uq.fast.core.fold_radius`), capped at :data:`R_MAX` (87 deg off-axis, in
-  undistorted and in distorted coordinates);
+  undistorted and in distorted coordinates).  With a tangential term it can jump between two
+  neighbouring directions (the determinant turns negative over a range of angles only); the solver
+  slides along such walls (:func:`footprint_uq.fast.core.undistort_point`).  A fold thinner than the
+  scan's grid can be missed (a known gap, pinned in ``tests/test_lens_domain.py``);
 * the **valid domain** ``D = distort(U)`` (distorted normalised coordinates, i.e. pixels):
   the pixels whose root lies in ``U``.  Membership is decided by the solver itself
   (:func:`footprint_uq.fast.core.undistort_point`: its answer is accepted only in ``U``), so

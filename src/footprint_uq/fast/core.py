@@ -45,6 +45,9 @@ UNDISTORT_MAX_ITER = 50
 #: continuation steps from the optical axis when Newton from the start point fails
 _N_CONTINUATION = 16
 _N_HALVINGS = 12
+#: a move along the principal region's boundary (:func:`_newton`, a step blocked by it) must lower the squared
+#: residual to this fraction: a smaller gain means the iterate rests in a corner, and sliding on spends iterations
+_SLIDE_GAIN = 0.99
 
 #: largest normalised radius, undistorted and distorted, of the valid domain (tan 87 deg): beyond it the
 #: distortion polynomial is evaluated where no calibration constrains it (and near a rational lens's
@@ -132,14 +135,46 @@ def in_domain_undistorted(dom, x, y):
 
 
 @nb.njit(**_INL)
-def _newton(dom, xd, yd, k, x, y, max_iter, tol):
+def _damped_move(dom, xd, yd, k, x, y, dx, dy, rot, r0, gain):
+    """Try the move ``(dx, dy)`` from ``(x, y)`` -- with ``rot`` (a literal): the rotation by ``dx`` radians about
+    the axis -- halving it (up to 12 times) until it lands in the principal region with a squared residual below
+    ``gain * r0``.  Returns ``(moved, x', y')``."""
+    lam = 1.0
+    for _h in range(_N_HALVINGS):
+        if rot:
+            ca, sa = math.cos(lam * dx), math.sin(lam * dx)
+            xn, yn = ca * x - sa * y, sa * x + ca * y
+        else:
+            xn, yn = x + lam * dx, y + lam * dy
+        gx, gy = distort_point(xn, yn, k)
+        if (gx - xd) ** 2 + (gy - yd) ** 2 < gain * r0 and in_domain_undistorted(dom, xn, yn):
+            return True, xn, yn
+        lam *= 0.5
+    return False, x, y
+
+
+@nb.njit(**_INL)
+def _newton(dom, xd, yd, k, x, y, max_iter, tol, slide):
     """Damped Newton for ``distort(x, y) = (xd, yd)`` from ``(x, y)`` in the principal region.
 
     A step is halved (up to 12 times) until it lowers the residual AND stays in the principal
     region: the iteration never leaves the region where the lens model is one-to-one, so it
-    cannot jump over the fold onto another branch, and where a root exists there it converges
-    to it.  Returns the last iterate (convergence is judged by the caller).
+    cannot jump over the fold onto another branch.  Returns the last iterate (convergence is
+    judged by the caller).
+
+    A step can be blocked by the region's boundary although the root lies inside: the boundary
+    table is a staircase -- an arc per angular bin, and a radial wall where the fold radius
+    jumps between two bins (a tangential term turns the Jacobian's determinant negative over a
+    range of angles only; near such a fold the Jacobian is nearly singular and Newton's steps
+    are long and cross the wall).  With ``slide`` (a literal) a blocked iterate moves along the
+    boundary instead: by a Gauss-Newton step along its ray (clipped to its bin's radius: along a
+    wall), else by a Gauss-Newton rotation about the axis (along an arc), each only if it lowers
+    the squared residual by 1 % at least (:data:`_SLIDE_GAIN`); else, in a corner of the
+    staircase (the bin the Newton step turns to reaches farther than the iterate's radius), it
+    hops across the bin's edge at the same radius, if the residual has dropped since the last
+    hop.  Every iterate stays in the principal region.
     """
+    r_hop = np.inf
     for _ in range(max_iter):
         fx, fy, j00, j01, j10, j11, _r, _d = distort_jac(x, y, k)
         ex = fx - xd
@@ -150,18 +185,41 @@ def _newton(dom, xd, yd, k, x, y, max_iter, tol):
         sx = (j11 * ex - j01 * ey) * idet
         sy = (j00 * ey - j10 * ex) * idet
         r0 = ex * ex + ey * ey
-        lam = 1.0
-        moved = False
-        for _h in range(_N_HALVINGS):
-            xn, yn = x - lam * sx, y - lam * sy
-            gx, gy = distort_point(xn, yn, k)
-            if (gx - xd) ** 2 + (gy - yd) ** 2 < r0 and in_domain_undistorted(dom, xn, yn):
-                x, y = xn, yn
-                moved = True
-                break
-            lam *= 0.5
-        if not moved:
+        moved, x, y = _damped_move(dom, xd, yd, k, x, y, -sx, -sy, False, r0, 1.0)
+        if moved:
+            continue
+        if not slide:
             break
+        rr = math.sqrt(x * x + y * y)
+        if not rr > 0.0:
+            break
+        m = int(dom[DOM_M])
+        off = DOM_TAB + m + 1
+        w = 2.0 * math.pi / m
+        j = min(max(int((math.atan2(y, x) + math.pi) / w), 0), m - 1)
+        rb = min(dom[off + j], dom[off + j + 1])  # the bin's radius, as in_domain_undistorted reads it
+        # along the ray
+        ux, uy = x / rr, y / rr
+        gx, gy = j00 * ux + j01 * uy, j10 * ux + j11 * uy
+        t = min(max(-(gx * ex + gy * ey) / (gx * gx + gy * gy), -rr), rb - rr)
+        moved, x, y = _damped_move(dom, xd, yd, k, x, y, t * ux, t * uy, False, r0, _SLIDE_GAIN)
+        if moved:
+            continue
+        # about the axis
+        tx, ty = j01 * x - j00 * y, j11 * x - j10 * y
+        al = min(max(-(tx * ex + ty * ey) / (tx * tx + ty * ty), -math.pi), math.pi)
+        moved, x, y = _damped_move(dom, xd, yd, k, x, y, al, 0.0, True, r0, _SLIDE_GAIN)
+        if moved:
+            continue
+        # across the bin's edge the Newton step turns to
+        side = 1 if x * sy - y * sx < 0.0 else -1
+        jn = (j + side) % m
+        rn = min(dom[off + jn], dom[off + jn + 1])
+        if not (r0 < r_hop and rr < rn and rn > rb):
+            break
+        an = (-math.pi + (j + 1) * w if side > 0 else -math.pi + j * w) + side * 1e-6 * w
+        x, y = rr * math.cos(an), rr * math.sin(an)
+        r_hop = r0
     return x, y
 
 
@@ -207,8 +265,9 @@ def undistort_point(dom, k, xd, yd, x0, y0):
     held inside the principal region (:func:`_newton`), starts from ``(x0, y0)`` (callers pass
     ``(xd, yd)``, or a neighbour's solution continued to first order) if that lies in the
     region, and from the radial part's own inverse (:func:`_radial_start`) if not or if it
-    does not converge; last, by continuation from the optical axis (``distort(x) = t x_d`` for
-    t = 1/16 .. 1).
+    does not converge -- from there sliding along the region's boundary where a step is blocked
+    by it (:func:`_newton`); last, by continuation from the optical axis (``distort(x) = t x_d``
+    for t = 1/16 .. 1).
     The accepted root is polished by one more Newton step, so that every start gives
     the same answer to rounding.
 
@@ -220,18 +279,18 @@ def undistort_point(dom, k, xd, yd, x0, y0):
     tol = UNDISTORT_TOL * max(1.0, max(abs(xd), abs(yd)))
     ok = False
     if in_domain_undistorted(dom, x0, y0):
-        x, y = _newton(dom, xd, yd, k, x0, y0, UNDISTORT_MAX_ITER, tol)
+        x, y = _newton(dom, xd, yd, k, x0, y0, UNDISTORT_MAX_ITER, tol, False)
         ok = _accept(dom, xd, yd, k, x, y, tol)
     if not ok:  # the radial start only when needed: its bisection costs more than the Newton steps
         rx, ry = _radial_start(dom, k, xd, yd)
-        x, y = _newton(dom, xd, yd, k, rx, ry, UNDISTORT_MAX_ITER, tol)
+        x, y = _newton(dom, xd, yd, k, rx, ry, UNDISTORT_MAX_ITER, tol, True)
         ok = _accept(dom, xd, yd, k, x, y, tol)
     if not ok:
         x, y = 0.0, 0.0
         for i in range(1, _N_CONTINUATION + 1):
             t = i / _N_CONTINUATION
-            x, y = _newton(dom, t * xd, t * yd, k, x, y, 8, tol)
-        x, y = _newton(dom, xd, yd, k, x, y, UNDISTORT_MAX_ITER, tol)
+            x, y = _newton(dom, t * xd, t * yd, k, x, y, 8, tol, False)
+        x, y = _newton(dom, xd, yd, k, x, y, UNDISTORT_MAX_ITER, tol, False)
         if not _accept(dom, xd, yd, k, x, y, tol):
             return False, nan, nan, nan, nan, nan, nan
     fx, fy, j00, j01, j10, j11, _r, _d = distort_jac(x, y, k)
