@@ -337,3 +337,13 @@ def test_centre_shared_jacobian_splits_the_covariance(camera, budget, rng):
             xy.append(footprints_from_corners(cam, quiet, uv, linearity=False).centre_xy_world_m)
         num = (xy[0] - xy[1]) / (2 * h)
         np.testing.assert_allclose(ref.centre_shared_m[i, :, c], num, rtol=1e-5, atol=1e-7)
+
+
+@pytest.mark.parametrize("n, r", [(0, 1), (3, 13)])
+def test_point_outputs_are_alloc_outputs_layout(n, r):
+    """fk.point_outputs (allocated in compiled code for point_shared_jacobian) is alloc_outputs(n, 1,
+    corners=False, shared_rank=r) array for array: shapes and dtypes (the twin must not drift)."""
+    from footprint_uq.fast import footprint_kernels as fk
+
+    got, ref = fk.point_outputs(n, r), fk.alloc_outputs(n, 1, corners=False, shared_rank=r)
+    assert [(a.shape, a.dtype) for a in got] == [(a.shape, a.dtype) for a in ref]

@@ -318,11 +318,7 @@ class Service:
 
     def warm_up(self) -> None:
         """Load the compiled kernels (and pyproj, with an origin) once, before the first frame."""
-        for setup in self.cameras.values():
-            cam = setup.processor.camera
-            w, h = cam.image_size_px
-            setup.processor.corners(np.array([[[0.5 * w, 0.9 * h]]]))
-            setup.processor.boxes3d(np.zeros((0, 7)))
+        for setup in self.cameras.values():  # (the per-frame kernels: by _warm_frames' frames)
             if setup.georef.has_origin:
                 setup.georef.to_wgs84(np.zeros((1, 2)))
             if self.messages:

@@ -277,13 +277,13 @@ class TrackTable:
             Bp = _c64(self.shared_at(pred[:k]))
         else:
             Bp = _NO_B
-        meas = (xy, R, B) if self.config.calibration == "consider" else self._measurement(xy, R, B)
+        meas = self._measurement(xy, R, B)
         out = TrackOutput(np.empty(n, np.int64), np.empty(n, bool), np.empty(n, np.int64), np.empty(n),
                           np.empty((n, 2)), np.empty((n, 2, 2)), np.empty((n, 2)), np.empty((n, 2, 2)))
         self._next_id = frame_update(act, slots, old, k, self._x, self._P, self._xm, self._Pm, self._Cm, self._mu,
                                      self._t_last, self._t_first, self._n, self._tid, self._next_id, t, self._qs,
-                                     self._rates, self.mu0, self._var_v0, *meas[:2], Bp, meas[2],
-                                     self.config.gate_chi2, *out)
+                                     self._rates, self.mu0, self._var_v0, meas.xy_m, meas.cov_frame_m2, Bp,
+                                     meas.shared_m, self.config.gate_chi2, *out)
         if t < self._oldest_s:  # (every row started or updated now has t_last = t)
             self._oldest_s = t
         return out
