@@ -304,9 +304,44 @@ def undistort_point(dom, k, xd, yd, x0, y0):
 def _regular(x, y, k):
     """The lens model is locally invertible, not folded over, within :data:`R_CAP` and stretching by
     less than :data:`STRETCH_MAX` at ``(x, y)``."""
+    return _regularity(x, y, k)[0]
+
+
+@nb.njit(**_INL)
+def _regularity(x, y, k):
+    """``(regular, positivity)`` at ``(x, y)``: :func:`_regular`, and the smallest of the quantities it needs
+    positive -- the Jacobian determinant, the radial factor and its denominator -- from one evaluation."""
     xd, yd, j00, j01, j10, j11, rad, den = distort_jac(x, y, k)
-    return ((j00 * j11 - j01 * j10 > 0.0) and (rad > 0.0) and (den > 0.0) and (xd * xd + yd * yd < R_CAP * R_CAP)
-            and (j00 * j00 + j01 * j01 + j10 * j10 + j11 * j11 < STRETCH_MAX * STRETCH_MAX))
+    det = j00 * j11 - j01 * j10
+    ok = ((det > 0.0) and (rad > 0.0) and (den > 0.0) and (xd * xd + yd * yd < R_CAP * R_CAP)
+          and (j00 * j00 + j01 * j01 + j10 * j10 + j11 * j11 < STRETCH_MAX * STRETCH_MAX))
+    return ok, min(det, min(rad, den))
+
+
+@nb.njit(**_INL)
+def _positivity(r, c, s, k):
+    """:func:`_regularity`'s positivity at ``r (c, s)``."""
+    return _regularity(r * c, r * s, k)[1]
+
+
+@nb.njit(**_INL)
+def _dip_minimum(k, c, s, lo, hi):
+    """The radius in ``[lo, hi]`` where :func:`_positivity` is smallest, by golden-section search (60 steps:
+    the bracket shrinks to 1e-12 of its width); the sampled values bracket one dip."""
+    g = 0.5 * (math.sqrt(5.0) - 1.0)
+    a, b = lo, hi
+    x1, x2 = b - g * (b - a), a + g * (b - a)
+    f1, f2 = _positivity(x1, c, s, k), _positivity(x2, c, s, k)
+    for _ in range(60):
+        if f1 <= f2:
+            b, x2, f2 = x2, x1, f1
+            x1 = b - g * (b - a)
+            f1 = _positivity(x1, c, s, k)
+        else:
+            a, x1, f1 = x1, x2, f2
+            x2 = a + g * (b - a)
+            f2 = _positivity(x2, c, s, k)
+    return x1 if f1 <= f2 else x2
 
 
 @nb.njit(**_JIT)
@@ -316,13 +351,27 @@ def fold_radius(k, c, s, r_max, n_grid):
     Scans ``n_grid`` radii spaced quadratically (dense near the axis) for the first point
     where the Jacobian determinant, the radial factor or its denominator stops being
     positive (or the distorted radius reaches :data:`R_CAP`, or the local stretch
-    :data:`STRETCH_MAX`), then bisects to the last regular radius (60 halvings).
+    :data:`STRETCH_MAX`), then bisects to the last regular radius (60 halvings).  A fold
+    thinner than the grid (the determinant dipping below 0 between two samples, e.g. where
+    ``d(r rad)/dr`` touches 0 and a tangential term pushes it under) is found at every sampled
+    local minimum of those three quantities: a golden-section search for the dip's minimum
+    (:func:`_dip_minimum`), and, where that is not regular, bisection from the sample before.
     """
-    prev = 0.0
+    prev2, prev = 0.0, 0.0
+    g2, g1 = 1.0, 1.0  # _positivity at prev2, prev (1 on the axis)
     for i in range(1, n_grid + 1):
         r = r_max * (i / n_grid) ** 2
-        if not _regular(r * c, r * s, k):
+        hi = -1.0
+        ok, g0 = _regularity(r * c, r * s, k)
+        if not ok:
             lo, hi = prev, r
+        else:
+            if g1 < g2 and g1 <= g0:  # a sampled local minimum at prev: does the dip cross 0 between samples?
+                m = _dip_minimum(k, c, s, prev2, r)
+                if not _regular(m * c, m * s, k):
+                    lo, hi = prev2, m
+            prev2, g2, g1 = prev, g1, g0
+        if hi >= 0.0:
             for _ in range(60):
                 mid = 0.5 * (lo + hi)
                 if _regular(mid * c, mid * s, k):
