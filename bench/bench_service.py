@@ -22,7 +22,10 @@ from this process, one frame per camera every 1/fps s (QoS 1, 100 2D boxes each,
   per 100-object frame;
 * CPU seconds of the service (and of each of its threads: the worker, paho's network thread, ...),
   the broker, the publisher (this process) and the receiver (a process of its own, so that reading
-  ~33 MB/s of records does not compete with the publisher for the GIL), and the load average.
+  ~33 MB/s of records does not compete with the publisher for the GIL), and the load average;
+* ``chain_cpu_ms_per_frame`` (all of them per frame) and, synchronised, ``burst_cpu_floor_ms`` = cameras x
+  that / cores: the end-to-end latency no arrangement of workers can beat on this machine for the last frame
+  of a burst (the p99 target is out of reach where the floor is near it).
 
 ``--quick`` runs 5 s; ``--tracks`` runs the service with ``--tracks`` (issue 22's configuration: motion per
 ``object_id``, in the records, the CPM and the SDSM; the boxes stand still, which costs the tracker what moving
@@ -264,6 +267,7 @@ def measure(seconds: float = 60.0, cameras: int = 8, fps: float = 30.0, objects:
         "serve_threads_cpu_s": threads_cpu_s, "broker_cpu_s": cpu_broker, "bench_publisher_cpu_s": cpu_bench,
         "bench_receiver_cpu_s": result["cpu_s"],
         "load_average_1min_start": load_start, "load_average_1min": os.getloadavg()[0],
+        **_cpu_floor(cpu_s + cpu_broker + cpu_bench + result["cpu_s"], h["frames_in"], cameras, stagger),
         "service_processing_us_median": stages,
         "latency_split_ms": _latency_split(lat, svc_p50, svc_p99, proc_us),
         # every frame accounted for: published = out + dropped + errors, and every output received
@@ -290,6 +294,18 @@ def _latency_split(lat_ms: np.ndarray, svc_p50: list, svc_p99: list, proc_us: li
         out[f"queue_{q}"] = out[f"service_{q}"] - out[f"processing_{q}"]
         out[f"mqtt_{q}"] = out[f"end_to_end_{q}"] - out[f"service_{q}"]
     return {k: round(v, 2) for k, v in out.items()}
+
+
+def _cpu_floor(chain_cpu_s: float, frames: int, cameras: int, stagger: bool) -> dict:
+    """The CPU the whole chain spends per frame (service, broker, publisher, receiver: everything on this machine
+    that a frame passes through) and, for synchronised cameras, the latency floor that implies: a burst of
+    ``cameras`` frames needs ``cameras x chain`` ms of CPU, which this machine's cores (``os.cpu_count()``) cannot
+    finish sooner than ``cameras x chain / cores`` ms even with perfect parallelism -- the last frame of a burst
+    cannot be answered faster, whatever the number of workers."""
+    per_frame_ms = 1e3 * chain_cpu_s / max(frames, 1)
+    cores = os.cpu_count() or 1
+    return {"chain_cpu_ms_per_frame": round(per_frame_ms, 3), "cores": cores,
+            "burst_cpu_floor_ms": None if stagger else round(cameras * per_frame_ms / cores, 2)}
 
 
 def _descendants(pid: int) -> list[int]:
