@@ -25,7 +25,8 @@ from this process, one frame per camera every 1/fps s (QoS 1, 100 2D boxes each,
   ~33 MB/s of records does not compete with the publisher for the GIL), and the load average;
 * ``chain_cpu_ms_per_frame`` (all of them per frame) and, synchronised, ``burst_cpu_floor_ms`` = cameras x
   that / cores: the end-to-end latency no arrangement of workers can beat on this machine for the last frame
-  of a burst (the p99 target is out of reach where the floor is near it).
+  of a burst (the p99 target is out of reach where the floor is near it); ``vm_steal_s``: CPU seconds the
+  hypervisor took from this virtual machine during the run (``/proc/stat``), where a stall came from.
 
 ``--quick`` runs 5 s; ``--tracks`` runs the service with ``--tracks`` (issue 22's configuration: motion per
 ``object_id``, in the records, the CPM and the SDSM; the boxes stand still, which costs the tracker what moving
@@ -196,6 +197,7 @@ def measure(seconds: float = 60.0, cameras: int = 8, fps: float = 30.0, objects:
         sent = 0
         cpu0_s = sum(_cpu_s(p) for p in [serve.pid, *_descendants(serve.pid)])
         cpu0_broker, cpu0_bench = _cpu_s(broker.pid), _cpu_s(os.getpid())
+        steal0_s = _steal_s()
         period = 1.0 / fps
         t_start = time.monotonic()
         next_t = t_start
@@ -233,6 +235,7 @@ def measure(seconds: float = 60.0, cameras: int = 8, fps: float = 30.0, objects:
         cpu_s = sum(_cpu_s(p) for p in pids) - cpu0_s
         threads_cpu_s = sorted((_cpu_s(serve.pid, tid) for tid in _tids(serve.pid)), reverse=True)
         cpu_broker, cpu_bench = _cpu_s(broker.pid) - cpu0_broker, _cpu_s(os.getpid()) - cpu0_bench
+        steal_s = None if steal0_s is None else _steal_s() - steal0_s
         serve.send_signal(signal.SIGTERM)
         rc = serve.wait(60)
         h = totals()
@@ -268,6 +271,7 @@ def measure(seconds: float = 60.0, cameras: int = 8, fps: float = 30.0, objects:
         "bench_receiver_cpu_s": result["cpu_s"],
         "load_average_1min_start": load_start, "load_average_1min": os.getloadavg()[0],
         **_cpu_floor(cpu_s + cpu_broker + cpu_bench + result["cpu_s"], h["frames_in"], cameras, stagger),
+        "vm_steal_s": steal_s,
         "service_processing_us_median": stages,
         "latency_split_ms": _latency_split(lat, svc_p50, svc_p99, proc_us),
         # every frame accounted for: published = out + dropped + errors, and every output received
@@ -306,6 +310,16 @@ def _cpu_floor(chain_cpu_s: float, frames: int, cameras: int, stagger: bool) -> 
     cores = os.cpu_count() or 1
     return {"chain_cpu_ms_per_frame": round(per_frame_ms, 3), "cores": cores,
             "burst_cpu_floor_ms": None if stagger else round(cameras * per_frame_ms / cores, 2)}
+
+
+def _steal_s() -> float | None:
+    """CPU seconds the hypervisor took from this (virtual) machine so far, all cores (``/proc/stat``'s steal; None
+    where there is none to read): a run's difference says whether the host, not the service, stalled it."""
+    try:
+        fields = Path("/proc/stat").read_text().split("\n", 1)[0].split()
+        return int(fields[8]) / os.sysconf("SC_CLK_TCK")
+    except (OSError, IndexError, ValueError):
+        return None
 
 
 def _descendants(pid: int) -> list[int]:
