@@ -192,8 +192,8 @@ def _corner_points(dom, rng, n):
 
 def _beyond_a_thin_fold(x, k):
     """Whether the Jacobian's determinant is <= 0 somewhere on the segment from the axis to each point (2e5
-    samples): a fold thinner than the radial scan of U's table, which the table misses
-    (test_a_fold_thinner_than_the_scan_is_found)."""
+    samples): a fold thinner than the radial scan of U's table, which the table missed before fold_radius searched
+    the scan's dips (test_a_fold_thinner_than_the_scan_is_found)."""
     t = np.linspace(0.0, 1.0, 200_001)[1:, None]
     return np.array([np.any(np.linalg.det(distort(t * p, k, get_gradients=True)[1]) <= 0) for p in x], dtype=bool)
 
@@ -238,7 +238,8 @@ thin_fold_lenses = st.builds(_near_fold, st.floats(-0.45, -0.1), st.floats(-0.00
 @given(k=st.one_of(thin_fold_lenses, near_fold_lenses, strong_tangential_lenses), offset=st.floats(0.0, 2 * np.pi / 16))
 def test_fold_radius_leaves_no_fold_inside_along_its_ray(k, offset):
     """Soundness of the scan against a denser one it did not produce (40,000 radii per direction, 16 directions):
-    no point of the segment from the axis to ``fold_radius`` (exclusive) is folded (determinant, radial factor or
+    no point of the segment from the axis to ``fold_radius`` (exclusive; checked up to r = 3, where the near-fold
+    lenses fold) is folded (determinant, radial factor or
     its denominator <= 0), and, where the scan stopped before its end, the lens is not regular just beyond (or its
     determinant touches 0 there)."""
     from footprint_uq.fast import core
@@ -262,8 +263,9 @@ def test_fold_radius_leaves_no_fold_inside_along_its_ray(k, offset):
 def test_a_fold_thinner_than_the_scan_is_found():
     """Found by the sweep above (with other seeds): k2 = 9 k1^2 / 20 makes d(r rad)/dr touch 0 at r = 1.217, and a
     tangential term of 1e-5 turns the determinant negative on a sliver 0.0023 wide there (r = 1.2160 .. 1.2183 in
-    this direction); U's table misses it in some directions, so a point just beyond the sliver counts as in U (its
-    pixel has a second root, 0.0036 nearer the axis, which is the one undistortion returns)."""
+    this direction); U's table missed it in some directions (before fold_radius searched the scan's dips), so a
+    point just beyond the sliver counted as in U (its pixel has a second root, 0.0036 nearer the axis, which is the
+    one undistortion returns)."""
     k = np.array([-0.45, 0.45 * 0.45**2, 0, 1e-5, 0, 0, 0, 0.0])
     x = np.array([[-0.05955316, -1.2170719]])
     assert _beyond_a_thin_fold(x, k).all()

@@ -17,7 +17,9 @@ ground), so the domain is made explicit, once per camera:
   undistorted and in distorted coordinates).  With a tangential term it can jump between two
   neighbouring directions (the determinant turns negative over a range of angles only); the solver
   slides along such walls (:func:`footprint_uq.fast.core.undistort_point`).  A fold thinner than the
-  scan's grid can be missed (a known gap, pinned in ``tests/test_lens_domain.py``);
+  scan's grid is found by a search at each sampled dip of the determinant
+  (:func:`~footprint_uq.fast.core.fold_radius`); one confined to an angular range narrower than a bin
+  of the table can still fall between two;
 * the **valid domain** ``D = distort(U)`` (distorted normalised coordinates, i.e. pixels):
   the pixels whose root lies in ``U``.  Membership is decided by the solver itself
   (:func:`footprint_uq.fast.core.undistort_point`: its answer is accepted only in ``U``), so
