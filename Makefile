@@ -19,8 +19,9 @@ $(STAMP): pyproject.toml | $(BIN)/python
 demo: $(STAMP)
 	$(BIN)/footprint-uq demo --out out/demo
 
-# numba's on-disk cache is keyed on each function's own file only: a kernel that inlines the scalar core
-# (src/footprint_uq/fast/core.py) would keep running the old core after an edit. Tests start from a clean cache.
+# numba's on-disk cache: each kernel of the package is keyed on all its kernel sources (_numba_cache.py), so an
+# edit never leaves a stale kernel behind; the tests still start from a clean cache, so that every kernel is
+# also compiled from scratch once per run.
 # The kernels are compiled first, two groups at once (both cores), then two pytest workers share them
 # (pytest-xdist; --dist worksteal: a worker that runs out of tests takes some of the other's).
 test: $(STAMP) sysdeps
@@ -30,8 +31,8 @@ test: $(STAMP) sysdeps
 	  $(BIN)/footprint-uq warmup --only map --only lens && wait $$pid
 	$(BIN)/python -m pytest -q -n 2 --dist worksteal --durations=15
 
-# the suite less the tests marked slow (tests/conftest.py SLOW_TESTS and @pytest.mark.slow); keeps numba's cache:
-# after an edit of src/footprint_uq/fast/ run `make test` (or delete src/**/*.nbi|*.nbc) once
+# the suite less the tests marked slow (tests/conftest.py SLOW_TESTS and @pytest.mark.slow); keeps numba's cache
+# (kernels whose sources changed compile again on first use)
 test-quick: $(STAMP)
 	$(BIN)/ruff check src tests bench
 	$(BIN)/python -m pytest -q -n 2 --dist worksteal -m "not slow"

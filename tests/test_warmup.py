@@ -32,6 +32,77 @@ def test_cache_folder_is_the_users_when_the_package_is_read_only(monkeypatch, tm
     assert _numba_cache.user_cache_dir({}) == Path.home() / ".cache" / "footprint-uq" / "numba"
 
 
+_STALE_SCRIPT = """
+import sys
+from pathlib import Path
+sys.path.insert(0, {root!r})
+from footprint_uq import _numba_cache
+from footprint_uq.products.warmup import _cached
+_numba_cache.install_sources_stamp(Path({root!r}) / "mini")
+import mini.b as b
+print(_cached(b.g), b.g(1.0))
+"""
+
+
+def test_an_edit_of_a_called_kernel_makes_its_callers_cache_stale(tmp_path):
+    """numba keys a cached kernel on its own file only, but compiles the kernels it calls from other files into
+    it: without the sources stamp, b.g would load 2 * (1 + 1) from the cache after a.f changed to x + 100 (numba
+    0.68 does, checked by hand).  With it, the edit makes b.g's cache stale: `warmup` sees it cold, and it is
+    compiled again with the new a.f."""
+    pkg = tmp_path / "mini"
+    pkg.mkdir()
+    (pkg / "__init__.py").write_text("")
+    (pkg / "a.py").write_text("from numba import njit\n\n\n@njit(cache=True)\ndef f(x):\n    return x + 1.0\n")
+    (pkg / "b.py").write_text("from numba import njit\n\nfrom . import a\n\n\n@njit(cache=True)\ndef g(x):\n"
+                              "    return a.f(x) * 2.0\n")
+    env = {k: v for k, v in os.environ.items() if k not in ("NUMBA_CACHE_DIR", "NUMBA_CACHE_LOCATOR_CLASSES")}
+
+    def run() -> str:
+        out = subprocess.run([sys.executable, "-c", _STALE_SCRIPT.format(root=str(tmp_path))], capture_output=True,
+                             text=True, timeout=300, env=env)
+        assert out.returncode == 0, out.stderr
+        return out.stdout.split()
+
+    assert run() == ["False", "4.0"]  # cold, compiled
+    assert run() == ["True", "4.0"]   # loaded from the cache
+    (pkg / "a.py").write_text((pkg / "a.py").read_text().replace("x + 1.0", "x + 100.0"))
+    assert run() == ["False", "202.0"]  # stale: compiled again with the edited a.f
+    assert run() == ["True", "202.0"]
+    assert list((pkg / "__pycache__").glob("b.g-*.nbi")), "the cache lives where numba puts it (beside b.py)"
+
+
+def test_sources_stamp_follows_the_kernel_files_only(tmp_path):
+    (tmp_path / "k.py").write_text("from numba import njit\n")
+    (tmp_path / "sub").mkdir()
+    (tmp_path / "sub" / "plain.py").write_text("x = 1\n")
+    first = _numba_cache.sources_stamp(tmp_path)
+    (tmp_path / "sub" / "plain.py").write_text("x = 2\n")
+    assert _numba_cache.sources_stamp(tmp_path) == first  # no kernel: not part of the stamp
+    (tmp_path / "sub" / "plain.py").write_text("from numba import njit\n")
+    second = _numba_cache.sources_stamp(tmp_path)
+    assert second != first  # a file that gains a kernel is
+    (tmp_path / "k.py").write_text("from numba import njit  # edited\n")
+    assert _numba_cache.sources_stamp(tmp_path) not in (first, second)
+
+
+def test_the_packages_kernels_carry_the_sources_stamp():
+    from numba.core import caching
+
+    from footprint_uq.fast import core
+    from footprint_uq.tracking import kernels
+
+    root = Path(_numba_cache.__file__).parent
+    impls = (getattr(caching, "CacheImpl", None) or caching._CacheImpl)._locator_classes
+    n = len(impls)
+    _numba_cache.install_sources_stamp(root)  # a second call for the same root does nothing
+    assert len(impls) == n
+    for kernel in (core.fold_radius, kernels.frame_update):
+        locator = kernel._cache._impl._locator
+        assert locator.sources_root == os.path.join(str(root), "")
+        assert locator.get_source_stamp()[1] == _numba_cache.sources_stamp(root)
+        assert type(locator._inner).__module__ == caching.__name__  # numba's locator says where the cache is
+
+
 def _fake(index: Path):
     return SimpleNamespace(_cache=SimpleNamespace(_cache_file=SimpleNamespace(_index_path=str(index))))
 

@@ -4,15 +4,27 @@ so that an install into a read-only site-packages compiles once, not on every ru
 
 :func:`configure` runs when the package is imported, before any kernel module (numba reads the folder when a
 kernel is defined); an explicit ``NUMBA_CACHE_DIR`` always wins.
+
+**When a cached kernel is stale.** numba keys each cached kernel on its own file's source only, but a kernel
+compiles into itself every kernel it calls from other files (``fast/core.py``'s scalar functions are in nearly
+all of them): after an edit of ``core.py`` the kernels of ``footprint_kernels.py`` would load their cached code,
+the old core, from disk -- silently, in a notebook or a test run of a checkout.  :func:`install_sources_stamp`
+therefore adds to the key of every kernel of the package a hash of *all* the package's kernel sources (the files
+that mention ``njit``): any edit of one of them makes every cached kernel of the package stale, and each is
+compiled again on its first use.  It is installed for the package on import (a cache locator in front of
+numba's own, which it otherwise defers to); an explicit ``NUMBA_CACHE_LOCATOR_CLASSES`` bypasses it.
 """
 
 from __future__ import annotations
 
+import hashlib
 import os
 import sys
 from pathlib import Path
 
-__all__ = ["configure", "user_cache_dir", "cache_dir"]
+from numba.core import caching  # (configure() below sets numba's configuration after this import)
+
+__all__ = ["configure", "user_cache_dir", "cache_dir", "install_sources_stamp", "sources_stamp"]
 
 _FAST = Path(__file__).parent / "fast"
 
@@ -47,4 +59,64 @@ def cache_dir() -> Path:
     return Path(d) if d else _FAST / "__pycache__"
 
 
+def sources_stamp(root: Path) -> str:
+    """SHA-256 (hex) of the kernel sources under ``root``: every ``*.py`` file whose text mentions ``njit``, with
+    its path relative to ``root``, in path order (a file that gains or loses a kernel changes it too)."""
+    h = hashlib.sha256()
+    for path in sorted(Path(root).rglob("*.py")):
+        text = path.read_bytes()
+        if b"njit" in text:
+            h.update(path.relative_to(root).as_posix().encode() + b"\0" + text + b"\0")
+    return h.hexdigest()
+
+
+def install_sources_stamp(root: Path) -> None:
+    """Key every cached numba kernel defined in a file under ``root`` also on :func:`sources_stamp` of ``root``
+    (see the module doc); kernels elsewhere are left to numba.  Must run before the kernels are defined; once per
+    root (a second call does nothing)."""
+    root_s = os.path.join(os.path.abspath(root), "")
+    impl = getattr(caching, "CacheImpl", None) or caching._CacheImpl  # (public from numba 0.6x on)
+    impls = impl._locator_classes
+    if any(getattr(c, "sources_root", None) == root_s for c in impls):
+        return
+    stamp: list[str] = []  # computed on the first kernel's use, once per process
+
+    class SourcesStampLocator(caching._CacheLocator):
+        """numba's own locator for the file (where the cache lives), with ``(its stamp, the sources' stamp)``."""
+
+        sources_root = root_s
+
+        def __init__(self, inner):
+            self._inner = inner
+            self._py_file = getattr(inner, "_py_file", None)  # (numba's warnings name it)
+
+        def ensure_cache_path(self):
+            self._inner.ensure_cache_path()
+
+        def get_cache_path(self):
+            return self._inner.get_cache_path()
+
+        def get_disambiguator(self):
+            return self._inner.get_disambiguator()
+
+        def get_source_stamp(self):
+            if not stamp:
+                stamp.append(sources_stamp(Path(root_s)))
+            return self._inner.get_source_stamp(), stamp[0]
+
+        @classmethod
+        def from_function(cls, py_func, py_file):
+            if not os.path.abspath(py_file).startswith(cls.sources_root):
+                return None
+            for other in impls:
+                if getattr(other, "sources_root", None) is None:  # numba's (the first that takes the file)
+                    inner = other.from_function(py_func, py_file)
+                    if inner is not None:
+                        return cls(inner)
+            return None
+
+    impls.insert(0, SourcesStampLocator)
+
+
 configure()  # on import: the package imports this module before any kernel module
+install_sources_stamp(Path(__file__).parent)

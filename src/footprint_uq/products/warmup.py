@@ -70,9 +70,16 @@ _POLL_S = 0.5
 
 
 def _cached(dispatcher) -> bool:
-    cache = getattr(dispatcher, "_cache", None)
-    index = getattr(getattr(cache, "_cache_file", None), "_index_path", None)
-    return index is None or Path(index).is_file()  # no on-disk cache at all: nothing to say
+    """Whether numba will load ``dispatcher``'s kernel from its on-disk cache: an index file that is current (one
+    written for other sources -- ``_numba_cache.install_sources_stamp`` -- or another numba loads as empty)."""
+    cache_file = getattr(getattr(dispatcher, "_cache", None), "_cache_file", None)
+    index = getattr(cache_file, "_index_path", None)
+    if index is None:
+        return True  # no on-disk cache at all: nothing to say
+    if not Path(index).is_file():
+        return False
+    load = getattr(cache_file, "_load_index", None)
+    return load is None or bool(load())
 
 
 def cold_groups(groups: Iterable[str]) -> list[str]:
