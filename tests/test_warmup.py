@@ -71,6 +71,19 @@ def test_an_edit_of_a_called_kernel_makes_its_callers_cache_stale(tmp_path):
     assert list((pkg / "__pycache__").glob("b.g-*.nbi")), "the cache lives where numba puts it (beside b.py)"
 
 
+def test_an_index_numba_cannot_read_is_cold(tmp_path):
+    from footprint_uq.fast import core
+
+    index = tmp_path / "k.nbi"
+    index.write_bytes(b"\x80")  # a truncated pickle
+    real = core.fold_radius._cache._cache_file
+    fake = SimpleNamespace(_index_path=str(index), _load_index=type(real)._load_index.__get__(
+        SimpleNamespace(_index_path=str(index), _version=real._version, _source_stamp=real._source_stamp)))
+    assert W._cached(SimpleNamespace(_cache=SimpleNamespace(_cache_file=fake))) is False
+    core.fold_radius(np.zeros(8), 1.0, 0.0, 1.0, 16)  # compiled (or loaded) and cached
+    assert W._cached(core.fold_radius) is True
+
+
 def test_sources_stamp_follows_the_kernel_files_only(tmp_path):
     (tmp_path / "k.py").write_text("from numba import njit\n")
     (tmp_path / "sub").mkdir()

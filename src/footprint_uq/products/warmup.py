@@ -79,7 +79,10 @@ def _cached(dispatcher) -> bool:
     if not Path(index).is_file():
         return False
     load = getattr(cache_file, "_load_index", None)
-    return load is None or bool(load())
+    try:
+        return load is None or bool(load())
+    except Exception:  # noqa: BLE001 - an index numba cannot read (truncated, foreign pickle) is no cache
+        return False
 
 
 def cold_groups(groups: Iterable[str]) -> list[str]:
