@@ -64,9 +64,14 @@ def sources_stamp(root: Path) -> str:
     its path relative to ``root``, in path order (a file that gains or loses a kernel changes it too)."""
     h = hashlib.sha256()
     for path in sorted(Path(root).rglob("*.py")):
-        text = path.read_bytes()
+        name = path.relative_to(root).as_posix().encode()
+        try:
+            text = path.read_bytes()
+        except OSError:  # (numba could not compile a kernel from it either; its name still counts)
+            h.update(name + b"\0?\0")
+            continue
         if b"njit" in text:
-            h.update(path.relative_to(root).as_posix().encode() + b"\0" + text + b"\0")
+            h.update(name + b"\0" + text + b"\0")
     return h.hexdigest()
 
 
@@ -74,7 +79,7 @@ def install_sources_stamp(root: Path) -> None:
     """Key every cached numba kernel defined in a file under ``root`` also on :func:`sources_stamp` of ``root``
     (see the module doc); kernels elsewhere are left to numba.  Must run before the kernels are defined; once per
     root (a second call does nothing)."""
-    root_s = os.path.join(os.path.abspath(root), "")
+    root_s = os.path.normcase(os.path.join(os.path.abspath(root), ""))
     impl = getattr(caching, "CacheImpl", None) or caching._CacheImpl  # (public from numba 0.6x on)
     impls = impl._locator_classes
     if any(getattr(c, "sources_root", None) == root_s for c in impls):
@@ -106,7 +111,7 @@ def install_sources_stamp(root: Path) -> None:
 
         @classmethod
         def from_function(cls, py_func, py_file):
-            if not os.path.abspath(py_file).startswith(cls.sources_root):
+            if not os.path.normcase(os.path.abspath(py_file)).startswith(cls.sources_root):
                 return None
             for other in impls:
                 if getattr(other, "sources_root", None) is None:  # numba's (the first that takes the file)
