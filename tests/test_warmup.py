@@ -71,6 +71,15 @@ def test_an_edit_of_a_called_kernel_makes_its_callers_cache_stale(tmp_path):
     assert list((pkg / "__pycache__").glob("b.g-*.nbi")), "the cache lives where numba puts it (beside b.py)"
 
 
+def test_a_numba_without_the_expected_locators_gets_a_warning_not_an_import_error(monkeypatch, tmp_path):
+    from numba.core import caching
+
+    for name in ("CacheImpl", "_CacheImpl"):
+        monkeypatch.delattr(caching, name, raising=False)
+    with pytest.warns(RuntimeWarning, match="cache locators are not where expected"):
+        _numba_cache.install_sources_stamp(tmp_path)
+
+
 def test_an_index_numba_cannot_read_is_cold(tmp_path):
     from footprint_uq.fast import core
 

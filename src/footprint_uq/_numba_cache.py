@@ -20,6 +20,7 @@ from __future__ import annotations
 import hashlib
 import os
 import sys
+import warnings
 from pathlib import Path
 
 from numba.core import caching  # (configure() below sets numba's configuration after this import)
@@ -80,13 +81,19 @@ def install_sources_stamp(root: Path) -> None:
     (see the module doc); kernels elsewhere are left to numba.  Must run before the kernels are defined; once per
     root (a second call does nothing)."""
     root_s = os.path.normcase(os.path.join(os.path.abspath(root), ""))
-    impl = getattr(caching, "CacheImpl", None) or caching._CacheImpl  # (public from numba 0.6x on)
-    impls = impl._locator_classes
+    impl = getattr(caching, "CacheImpl", None) or getattr(caching, "_CacheImpl", None)  # (public from 0.6x on)
+    impls = getattr(impl, "_locator_classes", None)
+    base = getattr(caching, "_CacheLocator", None)
+    if not isinstance(impls, list) or base is None:  # a numba whose cache is laid out otherwise: say so, go on
+        warnings.warn("footprint-uq: this numba's cache locators are not where expected; a cached kernel may "
+                      "keep the code of a kernel it calls after an edit (delete the *.nbi / *.nbc files then)",
+                      RuntimeWarning, stacklevel=2)
+        return
     if any(getattr(c, "sources_root", None) == root_s for c in impls):
         return
     stamp: list[str] = []  # computed on the first kernel's use, once per process
 
-    class SourcesStampLocator(caching._CacheLocator):
+    class SourcesStampLocator(base):
         """numba's own locator for the file (where the cache lives), with ``(its stamp, the sources' stamp)``."""
 
         sources_root = root_s
