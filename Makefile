@@ -5,18 +5,30 @@ PY ?= python3.11
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed-dev
+DEMO_STAMP := $(VENV)/.installed
 
 .PHONY: demo test test-quick sysdeps lint bench clean
 
+# Every step says what it does (pip's own progress, not -q): a fresh install takes minutes.
 $(BIN)/python:
+	@echo "== creating the virtual environment $(VENV) ($(PY))"
 	$(PY) -m venv $(VENV) || python3 -m venv $(VENV)
-	$(BIN)/python -m pip install --upgrade pip -q
+	$(BIN)/python -m pip install --upgrade --progress-bar on pip
 
+# the demo needs the package and its core dependencies only (numpy, scipy, numba, opencv, matplotlib, ...)
+$(DEMO_STAMP): pyproject.toml | $(BIN)/python
+	@echo "== installing footprint-uq and its core dependencies into $(VENV) (pip install -e .)"
+	$(BIN)/python -m pip install --progress-bar on -e .
+	touch $(DEMO_STAMP)
+
+# the tests need the development extras too (pytest, hypothesis, dask, carla, the ASN.1 decoders, ROS 2 bags, ...)
 $(STAMP): pyproject.toml | $(BIN)/python
-	$(BIN)/python -m pip install -q -e '.[dev]'
-	touch $(STAMP)
+	@echo "== installing footprint-uq with its development extras into $(VENV) (pip install -e '.[dev]')"
+	$(BIN)/python -m pip install --progress-bar on -e '.[dev]'
+	touch $(STAMP) $(DEMO_STAMP)
 
-demo: $(STAMP)
+demo: $(DEMO_STAMP)
+	@echo "== running the demo: uncertainty maps of a roadside camera and the paper's case study -> out/demo/"
 	$(BIN)/footprint-uq demo --out out/demo
 
 # numba's on-disk cache: each kernel of the package is keyed on all its kernel sources (_numba_cache.py), so an
