@@ -42,19 +42,33 @@ def _no_compile_handler_left():
 
     _notices.set_compile_handler(None)
 
-# Real data shared beside the repository (../shared/data: Rope3D, TUMTraf, ETSI ASN.1, OpenCV boards;
-# each folder has a SOURCE.txt). FOOTPRINT_UQ_SHARED_DATA overrides the location.
+# Real data (Rope3D, TUMTraf, ETSI ASN.1, OpenCV boards; each folder has a SOURCE.txt and its licence): the copies
+# in tests/data (tests/data/real/README.md), so that a fresh clone runs every real-data test, else
+# ../shared/data beside the repository; FOOTPRINT_UQ_SHARED_DATA overrides both.
+TEST_DATA = Path(__file__).resolve().parent / "data"
+REAL_DATA = {"rope3d-demo": TEST_DATA / "rope3d-demo", "etsi-its-asn1": TEST_DATA / "real" / "etsi-its-asn1",
+             "tumtraf-calib": TEST_DATA / "real" / "tumtraf-calib",
+             "opencv-chessboard-left": TEST_DATA / "real" / "opencv-chessboard-left",
+             "opencv-chessboard-right": TEST_DATA / "opencv-chessboard-right"}
 SHARED_DATA = Path(os.environ.get("FOOTPRINT_UQ_SHARED_DATA",
                                   Path(__file__).resolve().parents[2] / "shared" / "data"))
+
+
+def real_data_folder(name: str) -> Path | None:
+    """The folder of the real data set ``name`` (see :data:`REAL_DATA`), or None where it is nowhere."""
+    candidates = [SHARED_DATA / name] if "FOOTPRINT_UQ_SHARED_DATA" in os.environ else []
+    candidates += [REAL_DATA[name]] if name in REAL_DATA else []
+    candidates += [SHARED_DATA / name]
+    return next((c for c in candidates if c.is_dir()), None)
 
 
 @pytest.fixture(scope="session")
 def shared_data():
     """``shared_data("rope3d-demo")`` -> the folder's path, or the test is skipped with a message."""
     def get(name: str) -> Path:
-        folder = SHARED_DATA / name
-        if not folder.is_dir():
-            pytest.skip(f"real data folder {folder} is missing (../shared/data beside the repository)")
+        folder = real_data_folder(name)
+        if folder is None:
+            pytest.skip(f"real data folder {name} is neither in tests/data nor in {SHARED_DATA}")
         return folder
     return get
 
