@@ -31,18 +31,14 @@ from pathlib import Path
 import numpy as np
 import pyarrow as pa
 import pyarrow.compute as pc
-from mcap.writer import CompressionType
-from mcap.writer import Writer as McapWriter
-from rosbags.rosbag2 import StoragePlugin
-from rosbags.rosbag2 import Writer as Rosbag2Writer
 
 from ...batch import schema as S
 from ...batch.writers import FootprintWriter
-from ...errors import InputError
+from ...errors import ConfigError, InputError
 from ...io.atomic import discard, fsync_dir, remove_tree, swap_in_folder, temp_path
 from . import foxglove_scene
 from .messages import FrameFootprints, detection3d_array, ellipse_marker_array
-from .types import DEFAULT_DISTRO, typestore
+from .types import DEFAULT_DISTRO, EXTRA, typestore
 
 __all__ = ["BagOptions", "RosBagOut", "bag_out_kind", "bag_writer_factory", "STORAGES", "DETECTIONS_TYPE",
            "MARKERS_TYPE"]
@@ -93,6 +89,11 @@ class _McapFile:
     """A single MCAP file (ROS 2 profile) written with the ``mcap`` library."""
 
     def __init__(self, tmp: Path):
+        try:
+            from mcap.writer import CompressionType
+            from mcap.writer import Writer as McapWriter
+        except ImportError as e:
+            raise ConfigError("out", f"{e.name} not installed", EXTRA) from None
         self._f = open(tmp, "wb")
         self._w = McapWriter(self._f, compression=CompressionType.ZSTD)
         self._w.start(profile="ros2", library="footprint-uq")
@@ -118,6 +119,9 @@ class _Rosbag2Folder:
     """A rosbag2 folder (metadata.yaml + one storage file) written with rosbags."""
 
     def __init__(self, bag_path: Path, storage: str):
+        from rosbags.rosbag2 import StoragePlugin  # installed: typestore() checked it
+        from rosbags.rosbag2 import Writer as Rosbag2Writer
+
         self._w = Rosbag2Writer(bag_path, version=9, storage_plugin=getattr(StoragePlugin, storage.upper()))
         self._w.open()
         self._conn = {}
@@ -185,7 +189,7 @@ class RosBagOut(FootprintWriter):
                                              ts.generate_msgdef(typ, ros_version=2)[0].encode(), "cdr")
                               for topic, typ in topics]
             if o.foxglove:
-                sch = foxglove_scene.SCHEMA
+                sch = foxglove_scene.scene_schema()
                 self._channels.append(self._sink.add(f"{prefix}/scene", sch.name, sch.encoding, bytes(sch.data),
                                                      "protobuf"))
         else:

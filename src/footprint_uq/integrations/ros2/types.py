@@ -12,12 +12,13 @@ import functools
 from importlib import resources
 
 import numpy as np
-from rosbags.typesys import Stores, get_types_from_msg, get_typestore
-from rosbags.typesys.store import Typestore
 
-from ...errors import InputError
+from ...errors import ConfigError, InputError
 
-__all__ = ["DISTROS", "DEFAULT_DISTRO", "VISION_MSGS", "typestore", "default_message", "zero_fields"]
+__all__ = ["DISTROS", "DEFAULT_DISTRO", "VISION_MSGS", "EXTRA", "typestore", "default_message", "zero_fields"]
+
+#: the optional extra of the ROS 2 / Foxglove integration (rosbags, mcap, foxglove-sdk)
+EXTRA = "pip install 'footprint-uq[ros]' (rosbags, mcap, foxglove-sdk)"
 
 #: the ROS 2 distributions whose message definitions a bag can be written with
 DISTROS = ("humble", "iron", "jazzy", "kilted")
@@ -33,10 +34,14 @@ _NUMPY = {"bool": np.bool_, "byte": np.uint8, "char": np.uint8, "int8": np.int8,
 
 
 @functools.cache
-def typestore(distro: str = DEFAULT_DISTRO) -> Typestore:
-    """The type store of ``distro`` (one of :data:`DISTROS`) with vision_msgs registered (cached)."""
+def typestore(distro: str = DEFAULT_DISTRO):
+    """The rosbags ``Typestore`` of ``distro`` (one of :data:`DISTROS`) with vision_msgs registered (cached)."""
     if distro not in DISTROS:
         raise InputError("ros_distro", distro, f"one of {list(DISTROS)}")
+    try:
+        from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+    except ImportError as e:
+        raise ConfigError("ROS 2 bags", f"{e.name} not installed", EXTRA) from None
     ts = get_typestore(getattr(Stores, f"ROS2_{distro.upper()}"))
     folder = resources.files(__package__) / "msg"
     types = {}
@@ -47,7 +52,7 @@ def typestore(distro: str = DEFAULT_DISTRO) -> Typestore:
     return ts
 
 
-def _zero(ts: Typestore, node: tuple):
+def _zero(ts, node: tuple):
     kind, spec = node
     kind = int(kind)
     if kind == 1:  # BASE: (type, string bound)
@@ -61,7 +66,7 @@ def _zero(ts: Typestore, node: tuple):
     return [_zero(ts, sub) for _ in range(length)] if kind == 3 else []
 
 
-def zero_fields(ts: Typestore, typename: str) -> dict:
+def zero_fields(ts, typename: str) -> dict:
     """Every field of a ``typename`` message of ``ts`` at its zero value (numbers 0, strings empty, sequences
     empty, fixed arrays of zeros, nested messages likewise): ``ts.types[typename](**{**zero, **given})`` builds
     a message from the fields given (the zero values may be shared by the messages of one call: serialising
@@ -70,7 +75,7 @@ def zero_fields(ts: Typestore, typename: str) -> dict:
     return {name: _zero(ts, node) for name, node in defs}
 
 
-def default_message(ts: Typestore, typename: str, **fields):
+def default_message(ts, typename: str, **fields):
     """A ``typename`` message of ``ts`` with ``fields`` set and every other field at its zero value."""
     values = zero_fields(ts, typename)
     unknown = sorted(set(fields) - set(values))
