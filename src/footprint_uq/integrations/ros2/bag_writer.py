@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import os
 from collections import Counter
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -116,40 +117,51 @@ class _McapFile:
 
 
 class _Rosbag2Folder:
-    """A rosbag2 folder (metadata.yaml + one storage file) written with rosbags."""
+    """A rosbag2 folder (metadata.yaml + one storage file) written with rosbags.
+
+    Every call runs in one thread of its own: the batch writes from its writer thread and closes from the
+    caller's, and an sqlite3 connection may only be used by the thread that made it."""
 
     def __init__(self, bag_path: Path, storage: str):
         from rosbags.rosbag2 import StoragePlugin  # installed: typestore() checked it
         from rosbags.rosbag2 import Writer as Rosbag2Writer
 
+        self._pool = ThreadPoolExecutor(1, thread_name_prefix="footprint-uq-rosbag2")
         self._w = Rosbag2Writer(bag_path, version=9, storage_plugin=getattr(StoragePlugin, storage.upper()))
-        self._w.open()
-        self._conn = {}
+        self._call(self._w.open)
+
+    def _call(self, fn, *args, **kw):
+        return self._pool.submit(fn, *args, **kw).result()
 
     def add_ros(self, topic: str, msgtype: str, ts) -> object:
-        return self._w.add_connection(topic, msgtype, typestore=ts)
+        return self._call(self._w.add_connection, topic, msgtype, typestore=ts)
 
     def write(self, connection, stamp_ns: int, data: bytes) -> None:
-        self._w.write(connection, stamp_ns, data)
+        self._call(self._w.write, connection, stamp_ns, data)
 
     def close(self) -> None:
-        self._w.close()
+        try:
+            self._call(self._w.close)
+        finally:
+            self._pool.shutdown()
 
     def abort(self) -> None:
-        self._w.abort()
+        try:
+            self._call(self._w.abort)
+        finally:
+            self._pool.shutdown()
 
 
 class RosBagOut(FootprintWriter):
-    """A ROS 2 bag of footprint tables (module docstring).  ``write(table)`` per chunk, ``close()`` at the end."""
+    """A ROS 2 bag of footprint tables (module docstring): ``path`` ending in ``.mcap`` is one MCAP file, any
+    other path a bag folder.  ``write(table)`` per chunk, ``close()`` at the end."""
 
     format = "rosbag"
 
     def __init__(self, path, schema: pa.Schema, options: BagOptions | None = None):
         super().__init__(path, schema)
         self.options = o = options or BagOptions()
-        self.kind = bag_out_kind(path)
-        if self.kind is None:
-            raise InputError("out", str(path), "a .mcap file or a bag folder (a path ending in '/')")
+        self.kind = "mcap" if str(path).lower().endswith(".mcap") else "folder"  # a bag is asked for: else a folder
         if "timestamp_s" not in schema.names:
             raise InputError("timestamp_s", "missing", "a timestamp_s column (Unix time, s): the messages' "
                              "header.stamp")
