@@ -36,12 +36,13 @@ import pyarrow.compute as pc
 from ...batch import schema as S
 from ...batch.writers import FootprintWriter
 from ...errors import ConfigError, InputError
-from ...io.atomic import discard, fsync_dir, remove_tree, swap_in_folder, temp_path
+from ...io.atomic import clean_temporaries_of, commit, fsync_dir, remove_tree, swap_in_folder, temp_path
 from . import foxglove_scene
 from .messages import FrameFootprints, detection3d_array, ellipse_marker_array
 from .types import DEFAULT_DISTRO, EXTRA, typestore
 
-__all__ = ["BagOptions", "RosBagOut", "bag_out_kind", "bag_writer_factory", "STORAGES", "DETECTIONS_TYPE",
+__all__ = ["BagOptions", "BagRecorder", "RosBagOut", "bag_out_kind", "bag_writer_factory", "STORAGES",
+           "DETECTIONS_TYPE",
            "MARKERS_TYPE"]
 
 DETECTIONS_TYPE = "vision_msgs/msg/Detection3DArray"
@@ -152,36 +153,34 @@ class _Rosbag2Folder:
             self._pool.shutdown()
 
 
-class RosBagOut(FootprintWriter):
-    """A ROS 2 bag of footprint tables (module docstring): ``path`` ending in ``.mcap`` is one MCAP file, any
-    other path a bag folder.  ``write(table)`` per chunk, ``close()`` at the end."""
+class BagRecorder:
+    """Frames (:class:`~.messages.FrameFootprints`) -> a ROS 2 bag at ``path``: a ``.mcap`` path is one MCAP file,
+    any other a bag folder.  Built under a hidden temporary name; :meth:`close` puts it in place, :meth:`abort`
+    removes it.  Used by :class:`RosBagOut` (the batch) and by ``serve --output rosbag:PATH`` (:mod:`.live`)."""
 
-    format = "rosbag"
-
-    def __init__(self, path, schema: pa.Schema, options: BagOptions | None = None):
-        super().__init__(path, schema)
+    def __init__(self, path, options: BagOptions | None = None):
         self.options = o = options or BagOptions()
-        self.kind = "mcap" if str(path).lower().endswith(".mcap") else "folder"  # a bag is asked for: else a folder
-        if "timestamp_s" not in schema.names:
-            raise InputError("timestamp_s", "missing", "a timestamp_s column (Unix time, s): the messages' "
-                             "header.stamp")
+        self.kind = "mcap" if str(path).lower().endswith(".mcap") else "folder"
         if o.foxglove and self.kind != "mcap":
             raise InputError("foxglove", str(path), "an .mcap output file (Foxglove scenes are protobuf channels, "
                              "which a rosbag2 folder cannot hold)")
         if o.storage not in STORAGES:
             raise InputError("storage", o.storage, f"one of {list(STORAGES)}")
-        self.path = Path(str(path).rstrip("/" + os.sep)) if self.kind == "folder" else self.path
+        self.path = Path(str(path).rstrip("/" + os.sep) or str(path))
         if self.kind == "folder":
             self._check_folder()
-        self._ts = typestore(o.distro)
-        self._ground_z_m = float(o.camera.ground_z_m) if o.camera is not None else float(o.ground_z_m)
-        self._carry: pa.Table | None = None
+        elif self.path.is_dir():
+            raise InputError("out", str(self.path), "an .mcap file path (this is a folder)")
+        clean_temporaries_of(self.path)  # left by a killed run on the same output
+        self.tmp = temp_path(self.path)
+        self.ts = typestore(o.distro)
+        self.ground_z_m = float(o.camera.ground_z_m) if o.camera is not None else float(o.ground_z_m)
         self.frames = 0
         self.objects = 0
-        self.omitted: Counter = Counter()
+        self.messages: Counter = Counter()
+        self._done = False
         self._open()
 
-    # -- storage -------------------------------------------------------------------------------------
     def _check_folder(self) -> None:
         p = self.path
         if p.exists() and not p.is_dir():
@@ -189,10 +188,9 @@ class RosBagOut(FootprintWriter):
         if p.is_dir() and any(p.iterdir()) and not (p / "metadata.yaml").exists():
             raise InputError("out", str(p), "a new, empty or bag folder (this folder holds other files: not "
                              "replaced)")
-        self.tmp = temp_path(p)
 
     def _open(self) -> None:
-        o, ts = self.options, self._ts
+        o, ts = self.options, self.ts
         prefix = o.topic_prefix.rstrip("/")
         topics = [(f"{prefix}/detections", DETECTIONS_TYPE), (f"{prefix}/ellipses", MARKERS_TYPE)]
         if self.kind == "mcap":
@@ -209,9 +207,86 @@ class RosBagOut(FootprintWriter):
             self._sink = _Rosbag2Folder(self.tmp / self.path.name, o.storage)
             self._channels = [self._sink.add_ros(topic, typ, ts) for topic, typ in topics]
         self.topics = [t for t, _ in topics] + ([f"{prefix}/scene"] if o.foxglove else [])
-        self.messages = Counter()
 
-    # -- frames --------------------------------------------------------------------------------------
+    def write_frame(self, f: FrameFootprints) -> None:
+        """Record one frame: its Detection3DArray, MarkerArray (and SceneUpdate), stamped ``f.stamp_ns``."""
+        ts = self.ts
+        payloads = [ts.serialize_cdr(detection3d_array(ts, f), DETECTIONS_TYPE),
+                    ts.serialize_cdr(ellipse_marker_array(ts, f), MARKERS_TYPE)]
+        if self.options.foxglove:
+            payloads.append(foxglove_scene.scene_update(f, self.options.camera).encode())
+        for ch, topic, data in zip(self._channels, self.topics, payloads, strict=True):
+            self._sink.write(ch, f.stamp_ns, bytes(data))
+            self.messages[topic] += 1
+        self.frames += 1
+        self.objects += len(f.object_ids)
+
+    def info(self) -> dict:
+        """What the bag holds."""
+        return {"kind": self.kind, "path": str(self.path), "storage": "mcap" if self.kind == "mcap" else
+                self.options.storage, "frame_id": self.options.frame_id, "distro": self.options.distro,
+                "topics": self.topics, "frames": self.frames, "objects": self.objects,
+                "messages": dict(self.messages)}
+
+    def close(self, *, fsync: bool = True, before_commit=None) -> None:
+        """Finish the bag and put it in place (``before_commit`` runs just before)."""
+        if self._done:
+            return
+        self._done = True
+        try:
+            self._sink.close()
+            if before_commit is not None:
+                before_commit()
+            if self.kind == "mcap":
+                commit(self.tmp, self.path, fsync=fsync)
+                return
+            staged = self.tmp / self.path.name
+            if fsync:
+                for p in staged.iterdir():
+                    with open(p, "rb") as fh:
+                        os.fsync(fh.fileno())
+                fsync_dir(staged)
+            swap_in_folder(staged, self.path, fsync=fsync)
+            remove_tree(self.tmp)
+        except BaseException:
+            remove_tree(self.tmp)
+            raise
+
+    def abort(self) -> None:
+        """Drop the bag (never raises)."""
+        if self._done:
+            return
+        self._done = True
+        try:
+            self._sink.abort()
+        except Exception:  # noqa: BLE001 - the output is being dropped
+            pass
+        finally:
+            remove_tree(self.tmp)
+
+
+class RosBagOut(FootprintWriter):
+    """A ROS 2 bag of footprint tables (module docstring; :class:`BagRecorder`): ``write(table)`` per chunk,
+    ``close()`` at the end."""
+
+    format = "rosbag"
+
+    def __init__(self, path, schema: pa.Schema, options: BagOptions | None = None):
+        if "timestamp_s" not in schema.names:
+            raise InputError("timestamp_s", "missing", "a timestamp_s column (Unix time, s): the messages' "
+                             "header.stamp")
+        self.path = Path(path)
+        self.schema = schema
+        self.rows = 0
+        self.before_commit = None
+        self.fsync = True
+        self._done = False
+        self._fd = None
+        self.rec = BagRecorder(path, options)
+        self.tmp = self.rec.tmp
+        self._carry: pa.Table | None = None
+        self.omitted: Counter = Counter()
+
     def _write(self, table: pa.Table) -> None:
         if self._carry is not None:
             table = pa.concat_tables([self._carry, table.cast(self._carry.schema)]) if table.num_rows else self._carry
@@ -231,73 +306,42 @@ class RosBagOut(FootprintWriter):
             return
         if (~ok).any():
             self.omitted["no centre (status partial or error)"] += int((~ok).sum())
-        f = _frame_footprints(t.filter(pa.array(ok)), int(round(ts_s * _NS)), self.options.frame_id,
-                              self._ground_z_m)
-        ts = self._ts
-        payloads = [ts.serialize_cdr(detection3d_array(ts, f), DETECTIONS_TYPE),
-                    ts.serialize_cdr(ellipse_marker_array(ts, f), MARKERS_TYPE)]
-        if self.options.foxglove:
-            payloads.append(foxglove_scene.scene_update(f, self.options.camera).encode())
-        for ch, topic, data in zip(self._channels, self.topics, payloads, strict=True):
-            self._sink.write(ch, f.stamp_ns, bytes(data))
-            self.messages[topic] += 1
-        self.frames += 1
-        self.objects += len(f.object_ids)
+        self.rec.write_frame(_frame_footprints(t.filter(pa.array(ok)), int(round(ts_s * _NS)),
+                                               self.rec.options.frame_id, self.rec.ground_z_m))
 
     def info(self) -> dict:
         """What the bag holds (the job summary's ``bag`` entry)."""
-        return {"bag": {"kind": self.kind, "storage": "mcap" if self.kind == "mcap" else self.options.storage,
-                        "frame_id": self.options.frame_id, "distro": self.options.distro, "topics": self.topics,
-                        "frames": self.frames, "objects": self.objects, "messages": dict(self.messages),
-                        "rows_not_in_bag": int(sum(self.omitted.values())), "not_in_bag": dict(self.omitted)}}
+        return {"bag": {**self.rec.info(), "rows_not_in_bag": int(sum(self.omitted.values())),
+                        "not_in_bag": dict(self.omitted)}}
 
-    # -- commit ---------------------------------------------------------------------------------------
     def _close(self) -> None:
         if self._carry is not None:
             carry, self._carry = self._carry, None
             self._frame(carry)
-        self._sink.close()
+
+    def _sync(self) -> None:
+        if self.rec.kind == "mcap":
+            super()._sync()
 
     def close(self) -> None:
-        if self.kind == "mcap":
-            return super().close()
         if self._done:
             return
         self._done = True
         try:
             self._close()
-            if self.before_commit is not None:
-                self.before_commit()
-            staged = self.tmp / self.path.name
-            if self.fsync:
-                for p in staged.iterdir():
-                    with open(p, "rb") as fh:
-                        os.fsync(fh.fileno())
-                fsync_dir(staged)
-            swap_in_folder(staged, self.path, fsync=self.fsync)
-            remove_tree(self.tmp)
         except BaseException:
-            remove_tree(self.tmp)
+            self._close_fd()
+            self.rec.abort()
             raise
+        self._close_fd()
+        self.rec.close(fsync=self.fsync, before_commit=self.before_commit)
 
     def abort(self) -> None:
         if self._done:
             return
         self._done = True
-        try:
-            self._sink.abort()
-        except Exception:  # noqa: BLE001 - the output is being dropped
-            pass
-        finally:
-            self._close_fd()
-            if self.kind == "mcap":
-                discard(self.tmp)
-            else:
-                remove_tree(self.tmp)
-
-    def _sync(self) -> None:
-        if self.kind == "mcap":
-            super()._sync()
+        self._close_fd()
+        self.rec.abort()
 
 
 def _floats(t: pa.Table, name: str) -> np.ndarray:
