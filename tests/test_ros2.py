@@ -369,3 +369,55 @@ def test_quaternions_pinned():
     np.testing.assert_allclose(quaternion_x_to([0, 2, 0]), [0, 0, np.sqrt(0.5), np.sqrt(0.5)], atol=1e-15)
     np.testing.assert_allclose(quaternion_x_to([0, 0, -1]), [0, np.sqrt(0.5), 0, np.sqrt(0.5)], atol=1e-15)
     np.testing.assert_allclose(quaternion_x_to([-1, 0, 0]), [0, 0, 1, 0], atol=1e-15)
+
+
+# -- serve --output rosbag:PATH -----------------------------------------------------------------------------------
+def _serve(cam, frames: list[dict], output: str) -> tuple[int, list[dict]]:
+    import io
+
+    import orjson
+
+    from footprint_uq.service.core import Service
+    from footprint_uq.service.runner import serve
+
+    stdin = io.BytesIO(b"".join(orjson.dumps(f) + b"\n" for f in frames))
+    stdout = io.BytesIO()
+    rc = serve(Service(cam, BUDGET), input="-", output=output, stdin=stdin, stdout=stdout, install_signals=False,
+               health_interval_s=0)
+    return rc, [orjson.loads(ln) for ln in stdout.getvalue().splitlines()]
+
+
+@pytest.mark.parametrize("name", ["live.mcap", "live_bag/"])
+def test_serve_records_the_footprints_into_a_bag(cam, tmp_path, name):
+    rows = good_rows()
+    frames = []
+    for fr in range(4):
+        dets = [{k: r[k] for k in ("object_id", "class", "u_min_px", "v_min_px", "u_max_px", "v_max_px")}
+                for r in rows if r["frame"] == fr]
+        frames.append({"camera_id": "cam1", "frame": fr, "timestamp_s": T0 + fr / 30.0, "detections": dets})
+    frames.insert(2, {"camera_id": "cam1", "frame": 9, "timestamp_s": "late"})  # an error record: on stdout
+    rc, records = _serve(cam, frames, "-")
+    assert rc == 0
+    out = tmp_path / name
+    rc, rest = _serve(cam, frames, f"rosbag:{out}")
+    assert rc == 0 and [r["type"] for r in rest] == ["error", "health"]
+    foot = [r for r in records if r["type"] == "footprints"]
+    msgs = read_bag(Path(str(out).rstrip("/")))
+    dets = msgs["/footprints/detections"]
+    assert len(dets) == len(foot) == 4
+    for (t, arr), rec in zip(dets, foot, strict=True):
+        ok = [o for o in rec["objects"] if o.get("status", "ok") == "ok"]
+        assert t == round(rec["timestamp_s"] * 1e9) and len(arr.detections) == len(ok)
+        for d, o in zip(arr.detections, ok, strict=True):
+            c = np.asarray(d.results[0].pose.covariance).reshape(6, 6)
+            np.testing.assert_array_equal(c[:2, :2], o["cov_m2"])
+            assert d.id == str(o["object_id"]) and d.results[0].pose.pose.position.x == o["x_m"]
+    assert not list(tmp_path.glob(".*"))
+
+
+def test_serve_rosbag_output_refuses_a_folder_of_other_files(cam, tmp_path):
+    (tmp_path / "x").mkdir()
+    (tmp_path / "x" / "keep.txt").write_text("mine")
+    with pytest.raises(InputError, match="holds other files"):
+        _serve(cam, [], f"rosbag:{tmp_path / 'x'}/")
+    assert (tmp_path / "x" / "keep.txt").exists()
