@@ -421,3 +421,22 @@ def test_serve_rosbag_output_refuses_a_folder_of_other_files(cam, tmp_path):
     with pytest.raises(InputError, match="holds other files"):
         _serve(cam, [], f"rosbag:{tmp_path / 'x'}/")
     assert (tmp_path / "x" / "keep.txt").exists()
+
+
+def test_the_documented_example_runs(tmp_path, monkeypatch):
+    """docs/integrations-ros2.md's copy-paste example, as written, from the repository's root."""
+    import re
+    import shlex
+
+    root = Path(__file__).resolve().parents[1]
+    text = (root / "docs" / "integrations-ros2.md").read_text()
+    cmd = re.search(r"```sh\n(footprint-uq objects .*?)\n```", text, re.S).group(1).replace("\\\n", " ")
+    argv = shlex.split(cmd)
+    assert argv[:2] == ["footprint-uq", "objects"]
+    monkeypatch.chdir(root)
+    out = tmp_path / "run.mcap"
+    argv = [str(out) if a == "run.mcap" else a for a in argv]
+    r = CliRunner().invoke(main, argv[1:] + ["--quiet"])
+    assert r.exit_code == 0, r.output
+    assert json.loads(summary_path(out).read_text())["bag"]["messages"] == {
+        "/footprints/detections": 2, "/footprints/ellipses": 2, "/footprints/scene": 2}
