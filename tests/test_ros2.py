@@ -440,3 +440,31 @@ def test_the_documented_example_runs(tmp_path, monkeypatch):
     assert r.exit_code == 0, r.output
     assert json.loads(summary_path(out).read_text())["bag"]["messages"] == {
         "/footprints/detections": 2, "/footprints/ellipses": 2, "/footprints/scene": 2}
+
+
+def test_without_the_ros_extra_one_line_names_it(tmp_path, monkeypatch, cam):
+    """rosbags / mcap / foxglove-sdk missing: a ConfigError naming the extra (the CLI's one line, exit 2)."""
+    import sys
+
+    from footprint_uq.errors import ConfigError
+    from footprint_uq.integrations.ros2 import foxglove_scene, types
+
+    monkeypatch.setitem(sys.modules, "rosbags.typesys", None)
+    types.typestore.cache_clear()
+    try:
+        with pytest.raises(ConfigError, match=r"footprint-uq\[ros\]"):
+            types.typestore()
+        save_camera(cam, tmp_path / "cam.yaml")
+        src = write_csv(detections(), tmp_path / "d.csv")
+        r = _objects("--camera", tmp_path / "cam.yaml", "--detections", src, "--out", tmp_path / "o.mcap")
+        assert r.exit_code == 2 and r.output.count("\n") == 1 and "footprint-uq[ros]" in r.output
+        assert not list(tmp_path.glob("*.mcap*")) and not list(tmp_path.glob(".*"))
+    finally:
+        types.typestore.cache_clear()
+    monkeypatch.setitem(sys.modules, "foxglove", None)
+    foxglove_scene._fm.cache_clear()
+    try:
+        with pytest.raises(ConfigError, match=r"footprint-uq\[ros\]"):
+            foxglove_scene.scene_schema()
+    finally:
+        foxglove_scene._fm.cache_clear()
