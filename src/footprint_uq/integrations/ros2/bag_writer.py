@@ -275,15 +275,9 @@ class RosBagOut(FootprintWriter):
         if "timestamp_s" not in schema.names:
             raise InputError("timestamp_s", "missing", "a timestamp_s column (Unix time, s): the messages' "
                              "header.stamp")
-        self.path = Path(path)
-        self.schema = schema
-        self.rows = 0
-        self.before_commit = None
-        self.fsync = True
-        self._done = False
-        self._fd = None
+        super().__init__(path, schema)  # (cleans what a killed run left; the recorder makes the temporary)
         self.rec = BagRecorder(path, options)
-        self.tmp = self.rec.tmp
+        self.path, self.tmp = self.rec.path, self.rec.tmp
         self._carry: pa.Table | None = None
         self.omitted: Counter = Counter()
 
