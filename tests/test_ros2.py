@@ -14,6 +14,8 @@ import numpy as np
 import pyarrow.parquet as pq
 import pytest
 from click.testing import CliRunner
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 pytest.importorskip("rosbags")
 pytest.importorskip("mcap")
@@ -468,3 +470,41 @@ def test_without_the_ros_extra_one_line_names_it(tmp_path, monkeypatch, cam):
             foxglove_scene.scene_schema()
     finally:
         foxglove_scene._fm.cache_clear()
+
+
+@settings(max_examples=60, deadline=None)
+@given(sx=st.floats(1e-3, 30.0), sy=st.floats(1e-3, 30.0), theta=st.floats(-np.pi, np.pi),
+       x=st.floats(-1e4, 1e4), y=st.floats(-1e4, 1e4))
+def test_markers_and_scene_give_back_the_covariance(sx, sy, theta, x, y):
+    """Over SPD covariances of any shape and orientation: the marker's and the Foxglove cylinder's full axes and
+    yaw rebuild ``chi2_scale(0.95)^2 cov`` (the 95 % ellipse), and the 6x6 block is ``cov`` itself."""
+    from footprint_uq.integrations.ros2.foxglove_scene import scene_update
+    from footprint_uq.uncertainty.ellipse import chi2_scale
+
+    c, s = np.cos(theta), np.sin(theta)
+    R = np.array([[c, -s], [s, c]])
+    cov = R @ np.diag([sx**2, sy**2]) @ R.T
+    f = M.FrameFootprints(0, "map", ["a"], ["car"], np.array([0.5]), np.array([[x, y]]), cov[None])
+    ts = typestore()
+    k2 = chi2_scale(0.95) ** 2
+
+    def rebuilt(half_x, half_y, qz, qw):
+        yaw = 2 * np.arctan2(qz, qw)
+        Ry = np.array([[np.cos(yaw), -np.sin(yaw)], [np.sin(yaw), np.cos(yaw)]])
+        return Ry @ np.diag([half_x**2, half_y**2]) @ Ry.T / k2
+
+    m = ts.deserialize_cdr(ts.serialize_cdr(M.ellipse_marker_array(ts, f), "visualization_msgs/msg/MarkerArray"),
+                           "visualization_msgs/msg/MarkerArray").markers[1]
+    tol = 1e-9 * max(sx, sy) ** 2
+    np.testing.assert_allclose(rebuilt(m.scale.x / 2, m.scale.y / 2, m.pose.orientation.z, m.pose.orientation.w),
+                               cov, atol=tol)
+    assert m.scale.x >= m.scale.y
+    from foxglove import messages as fm
+
+    upd = decode(message_types(fm.SceneUpdate.get_schema().data), ".foxglove.SceneUpdate", scene_update(f).encode())
+    cyl = upd["entities"][0]["cylinders"][0]
+    q = cyl["pose"].get("orientation", {})
+    np.testing.assert_allclose(rebuilt(cyl["size"]["x"] / 2, cyl["size"]["y"] / 2, q.get("z", 0.0), q.get("w", 0.0)),
+                               cov, atol=tol)
+    d = M.detection3d_array(ts, f).detections[0]
+    np.testing.assert_array_equal(np.asarray(d.results[0].pose.covariance).reshape(6, 6)[:2, :2], cov)
