@@ -508,3 +508,49 @@ def test_markers_and_scene_give_back_the_covariance(sx, sy, theta, x, y):
                                cov, atol=tol)
     d = M.detection3d_array(ts, f).detections[0]
     np.testing.assert_array_equal(np.asarray(d.results[0].pose.covariance).reshape(6, 6)[:2, :2], cov)
+
+
+#: vision_msgs 3 (ROS 2 Foxy / Galactic), the definitions of its foxy branch (fields only)
+FOXY_VISION_MSGS = {
+    "Detection2DArray": "std_msgs/Header header\nDetection2D[] detections\n",
+    "Detection2D": "std_msgs/Header header\nObjectHypothesisWithPose[] results\nBoundingBox2D bbox\n"
+                   "sensor_msgs/Image source_img\nbool is_tracking\nstring tracking_id\n",
+    "ObjectHypothesisWithPose": "string id\nfloat64 score\ngeometry_msgs/PoseWithCovariance pose\n",
+    "BoundingBox2D": "geometry_msgs/Pose2D center\nfloat64 size_x\nfloat64 size_y\n",
+}
+
+
+def test_bag_in_of_vision_msgs_3(tmp_path, cam):
+    """A Foxy-era bag (vision_msgs 3: center.x, results[].id / score, tracking_id) reads as the same rows."""
+    ts = get_typestore(Stores.ROS2_FOXY)
+    for name, text in FOXY_VISION_MSGS.items():
+        ts.register(get_types_from_msg(text, f"vision_msgs/msg/{name}"))
+    T = ts.types
+    rows = good_rows()[:7]
+    w = Writer(tmp_path / "foxy", version=8)
+    w.open()
+    conn = w.add_connection("/dets", "vision_msgs/msg/Detection2DArray", typestore=ts)
+    header = T["std_msgs/msg/Header"](stamp=M.stamp(ts, round(T0 * 1e9)), frame_id="camera")
+    dets = []
+    for r in rows:
+        u0, v0, u1, v1 = (float(r[k]) for k in ("u_min_px", "v_min_px", "u_max_px", "v_max_px"))
+        hyp = T["vision_msgs/msg/ObjectHypothesisWithPose"](
+            id=r["class"], score=r["score"], pose=default_message(ts, "geometry_msgs/msg/PoseWithCovariance"))
+        dets.append(default_message(
+            ts, "vision_msgs/msg/Detection2D", header=header, results=[hyp], is_tracking=True,
+            tracking_id=r["object_id"], bbox=T["vision_msgs/msg/BoundingBox2D"](
+                center=T["geometry_msgs/msg/Pose2D"](x=0.5 * (u0 + u1), y=0.5 * (v0 + v1), theta=0.0),
+                size_x=u1 - u0, size_y=v1 - v0)))
+    w.write(conn, round(T0 * 1e9), ts.serialize_cdr(T["vision_msgs/msg/Detection2DArray"](header=header,
+                                                                                          detections=dets),
+                                                    "vision_msgs/msg/Detection2DArray"))
+    w.close()
+    from footprint_uq.integrations.ros2.bag_reader import read_bag_detections
+
+    t, pre = read_bag_detections(tmp_path / "foxy")
+    assert pre is None and t.num_rows == 7
+    got = t.to_pylist()
+    for g, r in zip(got, rows, strict=True):
+        assert (g["object_id"], g["class"], g["score"], g["frame"]) == (r["object_id"], r["class"], r["score"], 0)
+        for k in ("u_min_px", "v_min_px", "u_max_px", "v_max_px"):
+            assert g[k] == pytest.approx(float(r[k]), abs=1e-9)
