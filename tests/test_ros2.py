@@ -342,6 +342,21 @@ def test_cli_bag_folder_replaces_a_bag(tmp_path, cam):
     assert msgs["/footprints/detections"][0][1].header.frame_id == "odom"
 
 
+def test_a_killed_runs_staging_is_cleaned(tmp_path, cam):
+    """What a killed run left (a hidden staging folder of the bag folder, a temporary of the MCAP file) is removed by
+    the next run on the same output; other hidden files are not touched."""
+    save_camera(cam, tmp_path / "cam.yaml")
+    src = write_csv(detections(), tmp_path / "d.csv")
+    (tmp_path / ".bag.tmp-0123abcd" / "bag").mkdir(parents=True)
+    (tmp_path / ".bag.tmp-0123abcd" / "bag" / "bag.mcap").write_bytes(b"partial")
+    (tmp_path / ".run.tmp-0123abcd.mcap").write_bytes(b"partial")
+    (tmp_path / ".keep").write_text("mine")
+    for out in (f"{tmp_path / 'bag'}/", tmp_path / "run.mcap"):
+        r = _objects("--camera", tmp_path / "cam.yaml", "--detections", src, "--out", out)
+        assert r.exit_code == 0, r.output
+    assert sorted(p.name for p in tmp_path.glob(".*")) == [".keep"]
+
+
 def test_writer_abort_leaves_nothing(tmp_path, cam):
     from footprint_uq.batch.process import BatchProcessor
 

@@ -36,7 +36,7 @@ import pyarrow.compute as pc
 from ...batch import schema as S
 from ...batch.writers import FootprintWriter
 from ...errors import ConfigError, InputError
-from ...io.atomic import clean_temporaries_of, commit, fsync_dir, remove_tree, swap_in_folder, temp_path
+from ...io.atomic import clean_temporaries_of, commit, fsync_dir, recover_folder, remove_tree, swap_in_folder, temp_path
 from . import foxglove_scene
 from .messages import FrameFootprints, detection3d_array, ellipse_marker_array
 from .types import DEFAULT_DISTRO, EXTRA, typestore
@@ -171,7 +171,10 @@ class BagRecorder:
             self._check_folder()
         elif self.path.is_dir():
             raise InputError("out", str(self.path), "an .mcap file path (this is a folder)")
-        clean_temporaries_of(self.path)  # left by a killed run on the same output
+        if self.kind == "folder":
+            recover_folder(self.path)  # staging folders (and a half-done swap) of a killed run on the same output
+        else:
+            clean_temporaries_of(self.path)  # left by a killed run on the same output
         self.tmp = temp_path(self.path)
         self.ts = typestore(o.distro)
         self.ground_z_m = float(o.camera.ground_z_m) if o.camera is not None else float(o.ground_z_m)
