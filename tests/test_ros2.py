@@ -183,6 +183,8 @@ def test_mcap_with_foxglove_every_channel_and_message_decodes(cam, tmp_path):
         assert size["x"] == pytest.approx(2 * a, rel=1e-12) and size["y"] == pytest.approx(2 * b, rel=1e-12)
         pos = e["cylinders"][0]["pose"]["position"]
         assert (pos["x"], pos["y"]) == (r["x_m"], r["y_m"])
+    with pytest.raises(InputError, match=r"/footprints/scene \(protobuf\) are not ROS 2"):  # as input: one line
+        BagDetectionReader(out)
     arrow = next(e for e in ents if e["id"] == "camera")["arrows"][0]["pose"]["position"]
     np.testing.assert_allclose([arrow.get(k, 0.0) for k in "xyz"], cam.T_world_cam[:3, 3], atol=1e-12)  # 0: omitted
     assert all(u["deletions"][0]["type"] == 1 for u in decoded["/footprints/scene"])  # ALL (MATCHING_ID is 0)

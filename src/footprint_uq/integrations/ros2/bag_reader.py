@@ -69,8 +69,30 @@ def _open(path):
     try:
         reader.open()
     except (AnyReaderError, KeyError, ValueError, OSError) as e:
-        raise InputError("detections", str(path), f"a readable ROS 2 bag ({type(e).__name__}: {e})") from None
+        other = _non_ros_channels(p)
+        why = (f"its channels {', '.join(other)} are not ROS 2 (ros2msg / CDR), which rosbags cannot read; e.g. the "
+               "--foxglove scene: write the bag without --foxglove") if other else f"{type(e).__name__}: {e}"
+        raise InputError("detections", str(path), f"a readable ROS 2 bag ({why})") from None
     return reader
+
+
+def _non_ros_channels(p: Path) -> list[str]:
+    """``topic (schema encoding)`` of an MCAP file's channels that are not ROS 2 messages (empty when none or
+    not an MCAP file)."""
+    if p.suffix.lower() != ".mcap" or not p.is_file():
+        return []
+    try:
+        from mcap.reader import make_reader
+
+        with open(p, "rb") as f:
+            summary = make_reader(f).get_summary()
+    except Exception:  # noqa: BLE001 - only a better message is at stake
+        return []
+    if summary is None:
+        return []
+    return sorted(f"{c.topic} ({summary.schemas[c.schema_id].encoding})" for c in summary.channels.values()
+                  if c.schema_id in summary.schemas and summary.schemas[c.schema_id].encoding not in
+                  ("ros2msg", "ros2idl", "omgidl"))
 
 
 def bag_topics(reader) -> dict[str, str]:
