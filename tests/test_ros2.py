@@ -571,3 +571,19 @@ def test_bag_in_of_vision_msgs_3(tmp_path, cam):
         assert (g["object_id"], g["class"], g["score"], g["frame"]) == (r["object_id"], r["class"], r["score"], 0)
         for k in ("u_min_px", "v_min_px", "u_max_px", "v_max_px"):
             assert g[k] == pytest.approx(float(r[k]), abs=1e-9)
+
+
+def test_frames_without_a_time_are_counted_not_recorded(tmp_path, cam):
+    rows = good_rows()
+    for r in rows:
+        if r["frame"] == 2:
+            r["timestamp_s"] = ""  # empty: null
+        if r["frame"] == 4:
+            r["timestamp_s"] = -1.0
+    res = write_bag(tmp_path / "t.mcap", BagOptions(), cam, tmp_path, rows=rows)
+    bag = res["summary"].info["bag"]
+    assert bag["frames"] == 4 and bag["not_in_bag"] == {"timestamp_s nan is not a time >= 0": 7,
+                                                        "timestamp_s -1.0 is not a time >= 0": 7,
+                                                        "no centre (status partial or error)": 1}
+    stamps = [t for t, _ in read_bag(tmp_path / "t.mcap")["/footprints/detections"]]
+    assert stamps == [round((T0 + k / 30.0) * 1e9) for k in (0, 1, 3, 5)]

@@ -299,7 +299,7 @@ class RosBagOut(FootprintWriter):
         ts_s = _floats(t, "timestamp_s")[0]
         ok = np.asarray(t.column("status").cast(pa.string()).to_pylist(), dtype=object) == S.STATUS_OK
         if not (np.isfinite(ts_s) and ts_s >= 0.0):
-            self.omitted[f"timestamp_s {ts_s!r} is not a time >= 0"] += t.num_rows
+            self.omitted[f"timestamp_s {float(ts_s)!r} is not a time >= 0"] += t.num_rows
             return
         if (~ok).any():
             self.omitted["no centre (status partial or error)"] += int((~ok).sum())
