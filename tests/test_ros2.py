@@ -368,6 +368,8 @@ def test_writer_abort_leaves_nothing(tmp_path, cam):
         w = RosBagOut(out, schema, BagOptions())
         w.abort()
     assert list(tmp_path.iterdir()) == []
+    with pytest.raises(InputError, match="frame_id"):
+        RosBagOut(tmp_path / "d.mcap", schema, BagOptions(frame_id=" "))
     with pytest.raises(InputError, match="timestamp_s"):
         RosBagOut(tmp_path / "c.mcap", bp.resolve(["u_min_px", "v_min_px", "u_max_px", "v_max_px"]), BagOptions())
 

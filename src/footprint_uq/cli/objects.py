@@ -56,7 +56,7 @@ __all__ = ["objects_cmd"]
               help="ROS 2 bag out: the distribution whose message definitions the bag records.")
 @click.option("--foxglove", is_flag=True,
               help="ROS 2 .mcap out: also the Foxglove scene (ellipses, object ids, the camera) as "
-                   "foxglove.SceneUpdate messages on <prefix>/scene.")
+                   "foxglove.SceneUpdate messages on /footprints/scene.")
 @click.option("--box-type", type=click.Choice(["2d", "3d", "corners"]), default=None,
               help="Box family (default: detected from the columns).")
 @click.option("--contact", type=click.Choice(list(CONTACT_MODES)), default="bottom-centre", show_default=True,

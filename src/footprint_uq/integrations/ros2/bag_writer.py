@@ -166,6 +166,8 @@ class BagRecorder:
                              "which a rosbag2 folder cannot hold)")
         if o.storage not in STORAGES:
             raise InputError("storage", o.storage, f"one of {list(STORAGES)}")
+        if not isinstance(o.frame_id, str) or not o.frame_id.strip() or o.frame_id != o.frame_id.strip():
+            raise InputError("frame_id", o.frame_id, "a frame name (non-empty, no surrounding spaces)")
         self.path = Path(str(path).rstrip("/" + os.sep) or str(path))
         if self.kind == "folder":
             self._check_folder()
