@@ -16,7 +16,8 @@ import pytest
 SRC = Path(__file__).resolve().parents[1] / "src"
 PKG = "footprint_uq"
 #: optional extras: imported where used, so that the core runs without them
-OPTIONAL = {"dask", "distributed", "carla", "pyproj", "paho", "asn1tools", "uncertainties", "atheris"}
+OPTIONAL = {"dask", "distributed", "carla", "pyproj", "paho", "asn1tools", "uncertainties", "atheris", "rosbags",
+            "mcap", "foxglove"}
 
 
 def _modules() -> dict[str, tuple[Path, bool]]:

@@ -814,7 +814,7 @@ def _check_out_file(out, detections) -> None:
 
 
 def _stream_to_file(reader, bp, out, schema, bar, *, fmt_out: str, compression, fsync: bool,
-                    summary: bool) -> Summary:
+                    summary: bool, writer_factory=None) -> Summary:
     """Process every chunk of ``reader`` into ``out`` (read ahead, one write in flight in a background
     thread); the file is committed only when every row is accounted for."""
     summ = Summary()
@@ -822,7 +822,8 @@ def _stream_to_file(reader, bp, out, schema, bar, *, fmt_out: str, compression, 
     pending = None
     writer = None
     try:
-        writer = open_writer(out, schema, format=fmt_out, compression=compression, fsync=fsync)
+        writer = open_writer(out, schema, format=fmt_out, compression=compression, fsync=fsync) \
+            if writer_factory is None else writer_factory(out, schema, fsync=fsync)
         for chunk in prefetch(iter(reader), 1):
             table = process_chunk(bp, chunk)
             summ.add_table(table, chunk.table.num_rows + len(chunk.malformed))
@@ -838,6 +839,7 @@ def _stream_to_file(reader, bp, out, schema, bar, *, fmt_out: str, compression, 
         # the previous summary goes first: a summary never stands beside another output than its own
         writer.before_commit = (lambda: summary_path(out).unlink(missing_ok=True)) if summary else None
         writer.close()
+        summ.info.update(writer.info())
     except BaseException:
         pool.shutdown(wait=True)  # an in-flight write finishes before its file is dropped
         if writer is not None:
@@ -862,7 +864,7 @@ def _file_info(detections, out, reader, fmt_out: str, bp, fsync: bool, info: dic
 def process_file(camera, budget, detections, out, *, chunk_rows: int = S.DEFAULT_CHUNK_ROWS,
                  format_in: str | None = None, format_out: str | None = None, progress: bool | None = None,
                  summary: bool = True, compression: str | None = "auto", info: dict | None = None,
-                 fsync: bool = True, **options) -> Summary:
+                 fsync: bool = True, reader=None, writer_factory=None, **options) -> Summary:
     """Stream a detection file through the footprint pipeline, chunk by chunk.
 
     Parameters
@@ -891,6 +893,14 @@ def process_file(camera, budget, detections, out, *, chunk_rows: int = S.DEFAULT
         folder are fsynced before the rename (default).  False only renames: the output is still never
         partial under its name for a killed job, but a power loss or an operating-system crash may leave
         it empty or missing (scratch outputs, tmpfs; saves the disk write on the job's critical path).
+    reader : optional
+        A reader of another source than a detection file (the interface of
+        :class:`~footprint_uq.batch.readers.DetectionReader`: ``columns``, ``family_columns``, ``id_fields``,
+        ``select``, iteration over :class:`~footprint_uq.batch.readers.Chunk`; e.g. a ROS 2 bag's,
+        :mod:`footprint_uq.integrations.ros2.bag_reader`); ``detections`` then only names it.
+    writer_factory : callable, optional
+        ``(out, schema, fsync=) -> FootprintWriter`` for another output than the file formats (e.g. a ROS 2 bag,
+        :func:`footprint_uq.integrations.ros2.bag_writer.bag_writer_factory`); its ``info()`` joins the summary.
     **options
         Keyword arguments of :class:`BatchProcessor`.
 
@@ -900,29 +910,34 @@ def process_file(camera, budget, detections, out, *, chunk_rows: int = S.DEFAULT
     """
 
     t0 = time.perf_counter()
-    fmt_out = detect_out_format(out, format_out)
+    fmt_out = detect_out_format(out, format_out) if writer_factory is None else \
+        getattr(writer_factory, "format", "custom")
     if fmt_out == "geojson":
         if options.get("origin_lat_deg") is None:
             raise InputError("out", str(out), "an origin (--origin-lat/--origin-lon) for GeoJSON output: GeoJSON "
                              "coordinates are WGS84 longitude/latitude")
         options["corners"] = True  # the polygon
-    reader = open_detections(detections, chunk_rows=chunk_rows, format=format_in)
+    if reader is None:
+        reader = open_detections(detections, chunk_rows=chunk_rows, format=format_in)
     bp = BatchProcessor(camera, budget, **options)
     names = reader.columns if bp.box_type is not None else reader.family_columns  # JSON Lines: one rule per family
     schema = bp.resolve(names, reader.id_fields)
     reader.select(S.numeric_input_columns(bp.box_type, names))
-    _check_out_file(out, detections)
+    if writer_factory is None:
+        _check_out_file(out, detections)
+    elif same_file(out, detections):
+        raise InputError("out", str(out), "another path than the detections (this is the same)")
     show = sys.stderr.isatty() if progress is None else bool(progress)
     bar = tqdm(total=reader.total, unit=reader.unit, unit_scale=True, disable=not show, file=sys.stderr,
                desc="footprints", leave=False)
     try:
         summ = _stream_to_file(reader, bp, out, schema, bar, fmt_out=fmt_out, compression=compression,
-                               fsync=fsync, summary=summary)
+                               fsync=fsync, summary=summary, writer_factory=writer_factory)
     finally:
         bar.close()
         bp.close()
     summ.elapsed_s = time.perf_counter() - t0
-    summ.info = _file_info(detections, out, reader, fmt_out, bp, fsync, info)
+    summ.info = {**_file_info(detections, out, reader, fmt_out, bp, fsync, info), **summ.info}
     if summary:
         atomic_write_text(summary_path(out), json.dumps(summ.to_dict(), indent=2) + "\n", fsync=fsync)
     return summ

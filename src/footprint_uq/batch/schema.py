@@ -5,7 +5,8 @@ The full description, with examples, is ``docs/batch.md``.  Names carry their un
 
 Input
 -----
-* identification (all optional, passed through to the output): :data:`ID_COLUMNS`;
+* identification (all optional, passed through to the output): :data:`ID_COLUMNS` (``score``: the
+  detector's confidence of the class, e.g. a ROS 2 bag's ``hypothesis.score``);
 * one box family, chosen with ``box_type`` or detected from the columns present:
 
   - ``"2d"``: :data:`BOX2D_COLUMNS` (axis-aligned image box, pixels);
@@ -42,10 +43,10 @@ __all__ = ["DEFAULT_CHUNK_ROWS", "ID_COLUMNS", "ID_TYPES",
 DEFAULT_CHUNK_ROWS = 131_072
 
 #: identification columns passed through unchanged (all optional)
-ID_COLUMNS = ("camera_id", "frame", "timestamp_s", "object_id", "class")
+ID_COLUMNS = ("camera_id", "frame", "timestamp_s", "object_id", "class", "score")
 #: their types when read from text formats (CSV, JSON Lines); Parquet keeps its own types
 ID_TYPES = {"camera_id": pa.string(), "frame": pa.int64(), "timestamp_s": pa.float64(), "object_id": pa.string(),
-            "class": pa.string()}
+            "class": pa.string(), "score": pa.float64()}
 BOX2D_COLUMNS = ("u_min_px", "v_min_px", "u_max_px", "v_max_px")
 BOX3D_COLUMNS = ("x_m", "y_m", "z_m", "length_m", "width_m", "height_m")
 YAW_COLUMNS = ("yaw_rad", "yaw_deg")

@@ -150,6 +150,10 @@ class FootprintWriter(abc.ABC):
             self._close_fd()
             discard(self.tmp)
 
+    def info(self) -> dict:
+        """Entries this output adds to the job's summary (none for the file formats)."""
+        return {}
+
     def __enter__(self):
         return self
 

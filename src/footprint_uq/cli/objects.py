@@ -18,10 +18,14 @@ from ..batch.fleet import process_fleet
 from ..batch.process import process_file
 from ..batch.schema import DEFAULT_CHUNK_ROWS
 from ..errors import InputError
+from ..integrations.ros2.bag_reader import BagDetectionReader, bag_camera_info, camera_from_bag, is_bag
+from ..integrations.ros2.bag_writer import BagOptions, bag_out_kind, bag_writer_factory
+from ..integrations.ros2.types import DEFAULT_DISTRO, DISTROS
 from ..products.footprints import CONTACT_MODES, V2X_POLICIES
 from ..products.warmup import compile_handler
+from ..uncertainty.budget import load_budget
 from ..uncertainty.presets import PRESET_NAMES
-from .common import load_camera_and_budget, note, pose_options
+from .common import budget_notice, load_camera_and_budget, note, pose_options, warn
 
 __all__ = ["objects_cmd"]
 
@@ -32,10 +36,27 @@ __all__ = ["objects_cmd"]
 @click.option("--budget", "budget_spec", metavar="FILE_OR_PRESET",
               help=f"Error budget: a preset ({', '.join(PRESET_NAMES)}) or a YAML/JSON budget file.")
 @click.option("--detections", "detections", required=True, metavar="FILE_OR_DIR",
-              help="Detections: .csv, .jsonl/.ndjson or .parquet file; with --registry a Parquet dataset folder.")
+              help="Detections: .csv, .jsonl/.ndjson or .parquet file, or a ROS 2 bag (.mcap, .db3 or a bag folder: "
+                   "its vision_msgs/msg/Detection2DArray topic, --topic; docs/integrations-ros2.md); with --registry "
+                   "a Parquet dataset folder.")
 @click.option("--out", "out", required=True, metavar="FILE_OR_DIR",
-              help="Output: .parquet, .csv, .jsonl or .geojson (needs --origin-lat/--origin-lon); with --registry "
-                   "a folder (partitioned Parquet).")
+              help="Output: .parquet, .csv, .jsonl or .geojson (needs --origin-lat/--origin-lon), or a ROS 2 bag: "
+                   "run.mcap (one MCAP file) or run_bag/ (a bag folder, --bag-storage); with --registry a folder "
+                   "(partitioned Parquet).")
+@click.option("--topic", default=None, metavar="TOPIC",
+              help="ROS 2 bag in: its Detection2DArray topic (default: the bag's only one).")
+@click.option("--camera-info-topic", default=None, metavar="TOPIC",
+              help="ROS 2 bag in: its sensor_msgs/msg/CameraInfo topic (default: the only one); K, D and the image "
+                   "size make the camera when no --camera is given (its pose from the pose options).")
+@click.option("--frame-id", default="map", show_default=True, metavar="NAME",
+              help="ROS 2 bag out: header.frame_id of the messages (the world frame: x east, y north, z up).")
+@click.option("--bag-storage", type=click.Choice(["mcap", "sqlite3"]), default="mcap", show_default=True,
+              help="ROS 2 bag folder out: its storage.")
+@click.option("--ros-distro", type=click.Choice(list(DISTROS)), default=DEFAULT_DISTRO, show_default=True,
+              help="ROS 2 bag out: the distribution whose message definitions the bag records.")
+@click.option("--foxglove", is_flag=True,
+              help="ROS 2 .mcap out: also the Foxglove scene (ellipses, object ids, the camera) as "
+                   "foxglove.SceneUpdate messages on /footprints/scene.")
 @click.option("--box-type", type=click.Choice(["2d", "3d", "corners"]), default=None,
               help="Box family (default: detected from the columns).")
 @click.option("--contact", type=click.Choice(list(CONTACT_MODES)), default="bottom-centre", show_default=True,
@@ -87,7 +108,7 @@ __all__ = ["objects_cmd"]
 def objects_cmd(camera_path, budget_spec, detections, out, box_type, contact, chunk_rows, confidence,
                 heading_offset_deg, origin_lat, origin_lon, corners, allow_outside_image, linearity, linear_threshold,
                 v2x_policy, compression, fsync, tracks, quiet, registry, scheduler, workers, retries, overwrite,
-                pose):
+                topic, camera_info_topic, frame_id, bag_storage, ros_distro, foxglove, pose):
     """Footprints (centre, covariance, largest point, V2X fields) of every detection in a file.
 
     Every input row gives one output row with its 0-based row number, a status (ok,
@@ -101,6 +122,14 @@ def objects_cmd(camera_path, budget_spec, detections, out, box_type, contact, ch
         options["tracks"] = True
     comp = None if compression == "none" else compression
     set_compile_handler(compile_handler(note))  # said before the kernels' first compile, after the inputs are checked
+    ros = dict(topic=topic, camera_info_topic=camera_info_topic, frame_id=frame_id, bag_storage=bag_storage,
+               ros_distro=ros_distro, foxglove=foxglove)
+    if registry is None and (is_bag(detections) or bag_out_kind(out) is not None):
+        summ = _objects_ros(camera_path, budget_spec, detections, out, pose, ros, chunk_rows=chunk_rows,
+                            progress=None if not quiet else False, compression=comp, fsync=fsync, **options)
+        click.echo(f"footprint-uq objects: {summ.text()}; {summ.elapsed_s:.2f} s", err=True)
+        return
+    _no_ros_options(ros)
     if registry is not None:
         if camera_path is not None:
             raise InputError("--camera", camera_path, "no --camera with --registry (the registry names the cameras)")
@@ -126,3 +155,57 @@ def objects_cmd(camera_path, budget_spec, detections, out, box_type, contact, ch
                                                       "budget_missing_terms": list(bud.missing_terms())},
                             fsync=fsync, **options)
     click.echo(f"footprint-uq objects: {summ.text()}; {summ.elapsed_s:.2f} s", err=True)
+
+
+def _no_ros_options(ros: dict) -> None:
+    """The ROS 2 options need a bag in or out (InputError naming the first one given)."""
+    given = [k for k in ("topic", "camera_info_topic") if ros[k] is not None]
+    given += ["foxglove"] if ros["foxglove"] else []
+    if given:
+        raise InputError(f"--{given[0].replace('_', '-')}", ros[given[0]],
+                         "a ROS 2 bag as --detections (.mcap, .db3, a bag folder) or as --out (.mcap, a folder/)")
+
+
+def _ros_camera(camera_path, budget_spec, detections, pose, ros: dict):
+    """The camera and budget of a job with a ROS 2 bag in or out: a --camera file (checked against the bag's
+    CameraInfo size when there is one), or the bag's CameraInfo at the pose of the pose options."""
+    if budget_spec is None:
+        raise InputError("--budget", None, "a preset or budget file")
+    if not is_bag(detections):
+        if ros["topic"] is not None or ros["camera_info_topic"] is not None:
+            raise InputError("--topic" if ros["topic"] is not None else "--camera-info-topic", ros["topic"] or
+                             ros["camera_info_topic"], "a ROS 2 bag as --detections")
+        if camera_path is None:
+            raise InputError("--camera", None, "a camera file")
+        return load_camera_and_budget(camera_path, budget_spec, pose)
+    if camera_path is None:
+        camera = camera_from_bag(detections, pose=pose, topic=ros["camera_info_topic"])
+        budget = load_budget(budget_spec)
+        if (msg := budget_notice(budget)) is not None:
+            warn(msg)
+        return camera, budget
+    camera, budget = load_camera_and_budget(camera_path, budget_spec, pose)
+    info = bag_camera_info(detections, topic=ros["camera_info_topic"])
+    if info is not None and info["image_size_px"] is not None and \
+            tuple(info["image_size_px"]) != tuple(camera.image_size_px):
+        raise InputError("--camera", str(camera_path), f"a camera of the bag's image size "
+                         f"{tuple(info['image_size_px'])} (its CameraInfo; the camera file's is "
+                         f"{tuple(camera.image_size_px)})")
+    return camera, budget
+
+
+def _objects_ros(camera_path, budget_spec, detections, out, pose, ros: dict, **kw):
+    """``objects`` with a ROS 2 bag as input and/or output (docs/integrations-ros2.md)."""
+    camera, budget = _ros_camera(camera_path, budget_spec, detections, pose, ros)
+    reader = BagDetectionReader(detections, topic=ros["topic"], chunk_rows=kw["chunk_rows"]) \
+        if is_bag(detections) else None
+    if bag_out_kind(out) is not None:
+        kw["writer_factory"] = bag_writer_factory(BagOptions(
+            frame_id=ros["frame_id"], distro=ros["ros_distro"], storage=ros["bag_storage"], foxglove=ros["foxglove"],
+            camera=camera))
+    elif ros["foxglove"]:
+        raise InputError("--foxglove", True, "a ROS 2 .mcap file as --out")
+    info = {"camera": str(camera_path) if camera_path is not None else f"{detections} (CameraInfo)",
+            "budget": str(budget_spec), **({} if pose is None else {"pose": pose}),
+            "budget_missing_terms": list(budget.missing_terms())}
+    return process_file(camera, budget, detections, out, reader=reader, info=info, **kw)

@@ -32,9 +32,10 @@ __all__ = ["serve_cmd"]
 @click.option("--input", "input_", default=None, metavar="-", help="'-': JSON Lines frames on stdin.")
 @click.option("--mqtt", default=None, metavar="mqtt://HOST:PORT",
               help="MQTT broker: input from topics detections/<camera_id> (without --input), and/or output.")
-@click.option("--output", default="-", show_default=True, type=click.Choice(["-", "mqtt"]),
+@click.option("--output", default="-", show_default=True, metavar="-|mqtt|rosbag:PATH",
               help="'-': JSON Lines on stdout; 'mqtt': topics footprints/<camera_id>, footprints/errors, "
-                   "footprints/health.")
+                   "footprints/health; 'rosbag:PATH': the footprints recorded into a ROS 2 bag (PATH.mcap or a "
+                   "folder; docs/integrations-ros2.md), error and health records on stdout.")
 @click.option("--input-prefix", default="detections", show_default=True, help="MQTT input topic prefix.")
 @click.option("--output-prefix", default="footprints", show_default=True, help="MQTT output topic prefix.")
 @click.option("--overload", "policy", type=click.Choice(["newest", "block"]), default=None,

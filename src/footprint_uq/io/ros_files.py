@@ -30,7 +30,8 @@ from ..errors import ConfigError, ConsistencyWarning
 from . import _common as C
 from .pose import NO_POSE_HELP, pose_camera, read_pose, resolve_ground_z, resolve_image_size
 
-__all__ = ["read_ros_camera_info", "camera_from_ros_file", "ROS_DISTORTION_MODELS"]
+__all__ = ["read_ros_camera_info", "ros_camera_info", "camera_from_ros_info", "camera_from_ros_file",
+           "ROS_DISTORTION_MODELS"]
 
 #: distortion_model -> accepted numbers of coefficients
 ROS_DISTORTION_MODELS = {"plumb_bob": (0, 4, 5), "rational_polynomial": (0, 8), "": (0,)}
@@ -70,7 +71,13 @@ def _ros_matrix(where, key, node, shape=None):
 def read_ros_camera_info(path) -> dict:
     """Read a ROS CameraInfo YAML: ``{"K", "dist", "image_size_px", "camera_name", "where"}``."""
     p, d = C.read_mapping(path)
-    where = str(p)
+    return ros_camera_info(d, str(p))
+
+
+def ros_camera_info(d: dict, where: str) -> dict:
+    """The CameraInfo mapping ``d`` (a YAML file's, or a ``sensor_msgs/msg/CameraInfo`` message's fields ``k``,
+    ``d``, ``r``, ``distortion_model``, ``width``, ``height``) checked: ``{"K", "dist", "image_size_px",
+    "camera_name", "where"}`` (errors name ``where``)."""
     kkey = "camera_matrix" if "camera_matrix" in d else ("K" if "K" in d else "k" if "k" in d else None)
     if kkey is None:
         raise ConfigError(C.label(where, "camera_matrix"), "missing", "a {rows: 3, cols: 3, data: [9 numbers]} "
@@ -109,8 +116,12 @@ def read_ros_camera_info(path) -> dict:
 
 def camera_from_ros_file(path, *, ground_z_m=None, image_size_px=None, pose=None):
     """An :class:`OpenCVCamera` from a ROS CameraInfo YAML and a ``pose`` (CameraInfo has none)."""
+    return camera_from_ros_info(read_ros_camera_info(path), ground_z_m=ground_z_m, image_size_px=image_size_px,
+                                pose=pose)
 
-    d = read_ros_camera_info(path)
+
+def camera_from_ros_info(d: dict, *, ground_z_m=None, image_size_px=None, pose=None):
+    """An :class:`OpenCVCamera` from a checked CameraInfo (:func:`ros_camera_info`) and a ``pose``."""
     where = d["where"]
     size = resolve_image_size(where, d["image_size_px"], image_size_px)
     if pose is None:

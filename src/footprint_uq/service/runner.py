@@ -49,6 +49,7 @@ import orjson
 from .._notices import set_compile_handler
 from ..batch.fleet import load_registry
 from ..errors import ConfigError, InputError
+from ..integrations.ros2.live import ROSBAG_PREFIX, LiveBag
 from ..io import load_camera
 from ..products.warmup import compile_handler
 from .core import RECORD_ERROR, RECORD_FOOTPRINTS, FrameOutput, Service, error_record
@@ -230,8 +231,9 @@ class Metrics:
 def _check_transport(input, mqtt, output) -> None:
     if input not in ("-", None):
         raise InputError("--input", input, "'-' (stdin); use --mqtt for MQTT input")
-    if output not in ("-", "mqtt"):
-        raise InputError("--output", output, "'-' (stdout) or 'mqtt'")
+    if output not in ("-", "mqtt") and not (isinstance(output, str) and output.startswith(ROSBAG_PREFIX)
+                                            and len(output) > len(ROSBAG_PREFIX)):
+        raise InputError("--output", output, "'-' (stdout), 'mqtt' or 'rosbag:PATH' (a .mcap file or a bag folder)")
     if (input is None or output == "mqtt") and not mqtt:
         raise InputError("--mqtt", None, "mqtt://HOST:PORT for MQTT input or output")
     if mqtt:
@@ -289,6 +291,37 @@ class _StdoutSink:
                     self._out.flush()
                 except BrokenPipeError:
                     self._broken = True
+
+
+class _BagSink:
+    """``--output rosbag:PATH``: footprints records into the bag (:class:`~footprint_uq.integrations.ros2.live.
+    LiveBag`), error and health records on to ``rest`` (stdout); the bag is put in place at :meth:`close`."""
+
+    def __init__(self, bag: LiveBag, rest: _StdoutSink):
+        self._bag = bag
+        self._rest = rest
+
+    def write(self, record: dict) -> None:
+        self._rest.write(record)
+
+    def write_json(self, kind, camera_id, data: bytes) -> None:
+        if kind == RECORD_FOOTPRINTS:
+            self._bag.write_record(data)
+        else:
+            self._rest.write_json(kind, camera_id, data)
+
+    def close(self, timeout_s: float) -> None:
+        try:
+            info = self._bag.close()
+            _log(f"bag {info['path']}: {info['frames']} frames, {info['objects']} objects"
+                 + "".join(f", {n} objects not in it ({why})" for why, n in info["objects_not_in_bag"].items()))
+        finally:
+            self._rest.close(timeout_s)
+
+
+def _bag_sink(service: Service, output: str, rest: _StdoutSink) -> _BagSink:
+    grounds = {cid: float(setup.processor.camera.ground_z_m) for cid, setup in service.cameras.items()}
+    return _BagSink(LiveBag(output[len(ROSBAG_PREFIX):], ground_z_m=grounds), rest)
 
 
 class _MqttSink:
@@ -548,6 +581,8 @@ def serve(service: Service, *, input: str | None = "-", mqtt: str | None = None,
         topics = [f"{input_prefix}/+"] if cameras is None else [f"{input_prefix}/{c}" for c in cameras]
     out_stream = stdout if stdout is not None else sys.stdout.buffer
     sink = _MqttSink(client, output_prefix, metrics) if output == "mqtt" else _StdoutSink(out_stream, stop.set)
+    if output.startswith(ROSBAG_PREFIX):
+        sink = _bag_sink(service, output, sink)
     if client is not None:
         _mqtt_input(client, topics if input is None else None, input_prefix, queue, sink, metrics, stop,
                     max_frame_bytes)
@@ -579,7 +614,8 @@ def serve(service: Service, *, input: str | None = "-", mqtt: str | None = None,
         for t in threads:
             t.start()
         _log(f"ready: input {'stdin' if input == '-' else mqtt + ' ' + ', '.join(topics)}, output "
-             f"{'stdout' if output == '-' else mqtt + ' ' + output_prefix + '/...'}, overload policy {policy}"
+             f"{'stdout' if output == '-' else output if output != 'mqtt' else mqtt + ' ' + output_prefix + '/...'}"
+             f", overload policy {policy}"
              + (f", worker {worker}" if worker else ""))
         try:
             # run until a stop request or the end of the input (stdin: the reader closes the queue)
@@ -750,6 +786,8 @@ def run(*, camera=None, budget=None, registry=None, camera_id: str | None = None
                          "one camera (--camera with --budget) or many (--registry)")
     _check_transport(serve_options.get("input", "-"), serve_options.get("mqtt"), serve_options.get("output", "-"))
     if workers > 1:
+        if str(serve_options.get("output", "-")).startswith(ROSBAG_PREFIX):
+            raise InputError("--workers", workers, "1 with --output rosbag:PATH (one process records the bag)")
         if registry is None or serve_options.get("input", "-") is not None:
             raise InputError("--workers", workers, "1, unless the input is MQTT (--mqtt without --input) and "
                                                    "the cameras come from a --registry")
