@@ -627,7 +627,7 @@ def test_objects_and_messages_are_the_documented_layout(camera):
 
 def test_message_coordinates_are_coordinate_cm_and_offset_dm():
     """The service's one-pass conversion gives cpm.coordinate_cm / sdsm.offset_dm exactly (halves, clamps, NaN)."""
-    from footprint_uq.service.core import _cm_dm
+    from footprint_uq.service.frame_kernels import cm_dm
     from footprint_uq.service.messages.cpm import coordinate_cm
     from footprint_uq.service.messages.sdsm import offset_dm
 
@@ -638,5 +638,5 @@ def test_message_coordinates_are_coordinate_cm_and_offset_dm():
     rows = rng.permutation(len(en))
     with np.errstate(over="ignore"):
         ref = [coordinate_cm(en[rows, 0]), coordinate_cm(en[rows, 1]), offset_dm(en[rows, 0]), offset_dm(en[rows, 1])]
-    for got, want in zip(_cm_dm(en, rows), ref, strict=True):
+    for got, want in zip(cm_dm(en, rows), ref, strict=True):
         np.testing.assert_array_equal(got, want)

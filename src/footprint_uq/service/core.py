@@ -24,38 +24,33 @@ from __future__ import annotations
 import functools
 import json
 import math
-import operator
 import re
 import threading
 import time
 import zlib
 from dataclasses import dataclass, field
-from itertools import chain
-from itertools import repeat as _repeat
 from typing import NamedTuple
 
 import numpy as np
 import orjson
-from numba import njit
 
-from ..batch import schema as S
-from ..batch.fleet import load_registry
-from ..batch.process import MAX_PIXEL_VAR_PX2
 from ..errors import FootprintUQError, InputError
 from ..fast.footprint_kernels import OBJ_ROW
+from ..io.class_names import ClassNames, load_class_names
+from ..io.registry import load_registry
+from ..products import detection_columns as S
 from ..products.footprints import CONTACT_MODES, V2X_FIELDS, V2X_POLICIES, FrameProcessor
 from ..products.geo import GeoReference
 from ..products.v2x import J2735_POSITION_CONFIDENCE_NAMES
 from ..tracking import SharedJacobianAt, TrackerConfig, TrackTable, object_motion
 from ..uncertainty.ellipse import chi2_scale
 from ..uncertainty.propagation import DEFAULT_LINEAR_THRESHOLD
+from .detections import DetectionError, parse_detections
+from .frame_kernels import cm_dm, worst_usable
 from .jsonrows import Table
 from .messages.asn1_cpm import DEFAULT_CDD
 from .messages.cpm import (
     CONFIDENCE_LEVEL_UNAVAILABLE,
-    COORD_GUARD_CM,
-    COORD_MAX,
-    COORD_MIN,
     CPM_CLASS_OF,
     LATITUDE_UNAVAILABLE,
     LONGITUDE_UNAVAILABLE,
@@ -74,7 +69,7 @@ from .messages.motion import (
     ObjectMotion,
     motion_codes,
 )
-from .messages.sdsm import OFFSET_MAX, SDSM_OBJECT_TYPES, build_sdsm
+from .messages.sdsm import SDSM_OBJECT_TYPES, build_sdsm
 from .messages.uper_cpm import (
     CpmUperWriter,
     class_bits,
@@ -123,6 +118,8 @@ class FrameOutput(NamedTuple):
     processing_us: float | None
     #: an error record as a dict (None for a footprints record: parse ``data``)
     record: dict | None
+    #: a footprints record's bad detections (its ``detection_errors``: each one's index and reason)
+    n_detection_errors: int = 0
 
 
 def _dumps_error(rec: dict) -> bytes:
@@ -239,6 +236,10 @@ class Service:
         (null where unknown; docs/service.md).  Frames of a camera must then come in time order.
     tracker : TrackerConfig, optional
         The tracker's options (timeout, gate, acceleration noise).
+    class_names : "coco", path or ClassNames, optional
+        Names of integer class ids (``"class": 2``): the COCO 80 names built in or a names file
+        (:func:`footprint_uq.io.class_names.load_class_names`).  Without it an integer class, and with it an id the
+        map does not name, is that detection's error entry (the frame's other detections go on).
     """
 
     def __init__(self, camera=None, budget=None, *, registry=None, camera_id: str | None = None,
@@ -247,7 +248,8 @@ class Service:
                  allow_outside_image: bool = False, station_id: int | None = None, messages: bool = True,
                  uper_encoder: str = "fast", linearity: bool = False, linear_threshold: float | None = None,
                  warm_up: bool = True, cpm_cdd: str = DEFAULT_CDD, v2x_policy: str = "sampled",
-                 tracks: bool = False, tracker: TrackerConfig | None = None):
+                 tracks: bool = False, tracker: TrackerConfig | None = None,
+                 class_names: str | ClassNames | None = None):
         if (camera is None) == (registry is None):
             raise InputError("camera/registry", "both" if camera is not None else "neither",
                              "exactly one of a camera (with a budget) or a registry")
@@ -269,6 +271,7 @@ class Service:
         self._encode = functools.partial(encode_cpm_uper if uper_encoder == "asn1tools" else encode_cpm_uper_fast,
                                          cdd=self.cpm_cdd)
         self._cls = _class_tables(self.cpm_cdd)
+        self.class_names = None if class_names is None else load_class_names(class_names)
         self.cameras: dict[str | None, CameraSetup] = {}
         if camera is not None:
             if budget is None:
@@ -329,7 +332,7 @@ class Service:
         t.json([b'{"a":', t.column(np.zeros(1)), t.when(np.ones(1, bool), b',"b":', t.column(["x"])), b"}"])
         one = np.ones(1, np.int64)
         perceived_object_container_uper_arrays(one, one, one, one, one, one, one, one, one, cdd=self.cpm_cdd)
-        _cm_dm(np.zeros((1, 2)), np.zeros(1, np.int64))
+        cm_dm(np.zeros((1, 2)), np.zeros(1, np.int64))
 
     def _warm_frames(self) -> None:
         """Two dummy frames of 2D boxes and two of 3D boxes through the whole path of each camera (records,
@@ -431,14 +434,16 @@ class Service:
         if not isinstance(dets, list):
             raise _FrameError("detections", f"field detections is not a list: {type(dets).__name__}")
         ref_ms = timestamp_its_ms(ts) if self.messages else None
-        est, ids, classes, class_p, _pixel_cov = self._footprints(setup, dets)
-        motion = self._motion(setup, est, ids, ts, dets) if self.tracks else None
+        est, found = self._footprints(setup, dets)
+        ids, classes, class_p = found.object_ids, found.classes, found.class_confidence
+        motion = self._motion(setup, est, ids, ts, found.yaw_rad) if self.tracks else None
         t1 = time.perf_counter()
         objects, ok_idx, msg_ids = self._objects_json(setup, est, ids, classes, ts, motion)
         t2 = time.perf_counter()
         head = {"type": RECORD_FOOTPRINTS, "camera_id": camera_id, "frame": fno, "timestamp_s": ts,
                 "station_id": setup.station_id, "heading_offset_deg": setup.georef.heading_offset_deg,
-                "confidence": self.confidence, "n_objects": len(ids)}
+                "confidence": self.confidence, "n_objects": len(ids),
+                "detection_errors": [e.as_dict() for e in found.errors]}
         if self.messages:
             head["cpm_cdd"] = self.cpm_cdd
         parts = [orjson.dumps(head)[:-1], b',"objects":', objects]
@@ -456,68 +461,36 @@ class Service:
         parts += [b',"processing_us":', orjson.dumps({
             "footprints": round(1e6 * (t1 - t0), 1), "records": round(1e6 * (t2 - t1), 1),
             "messages": round(1e6 * (t3 - t2), 1), "total": total}), b"}"]
-        return FrameOutput(b"".join(parts), RECORD_FOOTPRINTS, camera_id, total, None)
+        return FrameOutput(b"".join(parts), RECORD_FOOTPRINTS, camera_id, total, None, len(found.errors))
 
-    def _footprints(self, setup: CameraSetup, dets: list):
-        """Parse the detections into arrays and run the camera's kernel.
+    def _footprints(self, setup: CameraSetup, dets: list) -> tuple:
+        """The detections into columns (:func:`.detections.parse_detections`: each bad one an error entry) and the
+        camera's kernel over the good ones: ``(estimate, FrameDetections)``.
 
-        Each field is taken from every detection in one C-level pass (``map``) and checked on its set
-        of types; only a frame with something wrong goes through the per-detection checks, which name
-        the first bad field (the same error records as before the fast paths)."""
-        N = len(dets)
-        if N and set(map(type, dets)) != _DICT_ONLY:
-            i = next(i for i, d in enumerate(dets) if type(d) is not dict)
-            raise _FrameError(f"detections[{i}]", f"detection {i} is not a JSON object")
-        keys = set().union(*dets) if N else set()
-        # object ids: absent -> the detection's index; explicit null stays None
-        if "object_id" not in keys:
-            ids = list(range(N))
-        else:
-            try:
-                ids = list(map(_GET_ID, dets))
-            except KeyError:
-                ids = [d.get("object_id", i) for i, d in enumerate(dets)]
-            if not set(map(type, ids)) <= _ID_TYPES_SET:
-                _check_ids(ids)
-        if "class" not in keys:
-            classes = [None] * N
-        else:
-            classes = list(map(dict.get, dets, _repeat("class")))
-            if not set(map(type, classes)) <= _CLASS_TYPES:
-                _check_classes(classes)
-        if "class_confidence" not in keys:
-            class_p = None
-        else:
-            class_p = _class_confidences(dets)
+        A value the processor refuses that the parser's checks did not catch (none is known) costs that detection,
+        not the frame: it joins the error entries and the kernel runs again without it."""
+        found = parse_detections(dets, self.class_names)
         proc = setup.processor
-        if N == 0:
-            return proc.corners(np.zeros((0, 1, 2))), ids, classes, class_p, None
-        family = S.detect_box_type(dets[0].keys())
-        if family is None:
-            raise _FrameError("detections[0]", "no complete box: 2D (u_min_px, v_min_px, u_max_px, v_max_px), 3D "
-                                               "(x_m, y_m, z_m, length_m, width_m, height_m, yaw_rad|yaw_deg) or "
-                                               "corners (u0_px, v0_px, ...), one family per frame")
-        cols = S.box_columns(family, dets[0].keys())
-        if family == "corners":
-            _check_corner_counts(dets, cols)
-        X = _box_array(dets, cols)
-        P = None
-        if not keys.isdisjoint(S.COV_COLUMNS):
-            P = _fast_cov(dets)
-            if P is None:
-                P = _slow_cov(dets)
-            if P is not None:
-                _check_pixel_cov_range(P)
-        try:
-            if family == "2d":
-                est = proc.boxes2d(X, contact=self.contact, pixel_cov_px2=P)
-            elif family == "3d":
-                est = proc.boxes3d(X, yaw_unit="deg" if cols[-1] == "yaw_deg" else "rad", pixel_cov_px2=P)
-            else:
-                est = proc.corners(X.reshape(N, -1, 2), pixel_cov_px2=P)
-        except InputError as e:
-            raise _FrameError(_detection_field(e.field), str(e)) from None
-        return est, ids, classes, class_p, P
+        while True:
+            if found.family is None:
+                return proc.corners(np.zeros((0, 1, 2))), found
+            X, P = found.boxes, found.pixel_cov_px2
+            try:
+                if found.family == "2d":
+                    return proc.boxes2d(X, contact=self.contact, pixel_cov_px2=P), found
+                if found.family == "3d":
+                    return proc.boxes3d(X, yaw_unit="deg" if found.columns[-1] == "yaw_deg" else "rad",
+                                        pixel_cov_px2=P), found
+                return proc.corners(X.reshape(len(found), -1, 2), pixel_cov_px2=P), found
+            except InputError as e:
+                m = re.search(r"\[(\d+)", e.field or "")
+                if m is None or int(m.group(1)) >= len(found):
+                    raise _FrameError("detections", str(e)) from None
+                r = int(m.group(1))
+                bad = np.zeros(len(found), bool)
+                bad[r] = True
+                i = int(found.index[r])
+                found = found.without(bad, [DetectionError(i, f"detections[{i}]", str(e))])
 
     def _linearity(self, est):
         """Per object: the largest predicted relative error of the linear 1-sigma semi-major axis over its
@@ -528,17 +501,14 @@ class Service:
         them for the V2X policy anyway; ``tests/test_service.py`` holds them to the library's function), not a
         second numpy pass over the frame (~1.7 ms per 100 objects)."""
         worst, ok = np.empty(len(est)), np.empty(len(est), np.bool_)
-        _worst_usable(est.corners_nonlinearity, est.corner_usable, self.linear_threshold, worst, ok)
+        worst_usable(est.corners_nonlinearity, est.corner_usable, self.linear_threshold, worst, ok)
         return worst, ok
 
     @staticmethod
-    def _motion(setup: CameraSetup, est, ids: list, ts: float, dets: list):
-        """The frame's objects through the camera's tracks: ``(track_id (N,), ObjectMotion)``."""
-        yaw = None
-        if dets and ("yaw_rad" in dets[0] or "yaw_deg" in dets[0]):  # 3D boxes: their yaw (checked by then)
-            key = "yaw_rad" if "yaw_rad" in dets[0] else "yaw_deg"
-            yaw = np.fromiter(map(dict.get, dets, _repeat(key)), np.float64, len(dets))
-            yaw = yaw if key == "yaw_rad" else np.deg2rad(yaw)
+    def _motion(setup: CameraSetup, est, ids: list, ts: float, yaw_rad: np.ndarray | None):
+        """The frame's objects through the camera's tracks: ``(track_id (N,), ObjectMotion)``; ``yaw_rad``: the
+        3-D boxes' yaw (None for other boxes)."""
+        yaw = yaw_rad
         N = len(ids)
         B = est.centre_shared_m if est.centre_shared_m is not None else np.full((N, 2, setup.tracks.rank), np.nan)
         with setup.tracks_lock:
@@ -622,7 +592,7 @@ class Service:
         geo = setup.georef
         N, m = len(classes), len(ok_idx)
         en = geo.world_to_enu(est.centre_xy_world_m) if N else np.zeros((0, 2))
-        x_cm, y_cm, x_dm, y_dm = _cm_dm(en, ok_idx)
+        x_cm, y_cm, x_dm, y_dm = cm_dm(en, ok_idx)
         codes = est.v2x_codes[ok_idx]
         x_conf, y_conf, corr = codes[:, _CPM_INDEX], codes[:, _CPM_INDEX + 1], codes[:, _CPM_INDEX + 2]
         crow = (np.fromiter(map(_CLASS_ROWS.__getitem__, classes), np.intp, N)[ok_idx] if any(classes)
@@ -694,44 +664,6 @@ def _motion_layout(t: Table, mc) -> tuple[list, list]:
                   b',"confidence":', vxc, b'},"yVelocity":{"value":', vy, b',"confidence":', vyc, b"}}}"),
            t.when(mc.has_yaw, b',"angles":{"zAngle":{"value":', z, b',"confidence":', zc, b"}}")]
     return vel, [t.when(mc.has_age, b',"objectAge":', age)]
-
-
-@njit(cache=True, nogil=True)
-def _worst_usable(nl, usable, threshold, worst, ok):  # pragma: no cover - compiled
-    """Per row of ``nl (N, K)``: the largest finite value among the ``usable`` ones into ``worst`` (NaN if none)
-    and ``ok`` = that <= ``threshold`` (False if none): :meth:`Service._linearity` in one pass."""
-    for i in range(nl.shape[0]):
-        w = -math.inf
-        found = False
-        for k in range(nl.shape[1]):
-            v = nl[i, k]
-            if usable[i, k] and math.isfinite(v):
-                found = True
-                w = max(w, v)
-        worst[i] = w if found else math.nan
-        ok[i] = found and w <= threshold
-
-
-@njit(cache=True, nogil=True)
-def _cm_dm_kernel(en, rows, cm_min, cm_max, dm_max, cm_guard):  # pragma: no cover - compiled
-    out = np.empty((4, rows.shape[0]), np.int64)
-    for j in range(rows.shape[0]):
-        for a in range(2):
-            v = en[rows[j], a]
-            if v != v:  # NaN -> 0, as numpy.nan_to_num (only from absurd coordinates: inf - inf)
-                v = 0.0
-            c = np.ceil(v * 100.0 - cm_guard)  # CartesianCoordinateLarge: (n-1) x 0.01 < v <= n x 0.01
-            d = np.rint(v * 10.0)
-            out[a, j] = int(min(max(c, cm_min), cm_max))
-            out[2 + a, j] = int(min(max(d, -dm_max), dm_max))
-    return out
-
-
-def _cm_dm(en: np.ndarray, rows: np.ndarray):
-    """:func:`~.messages.cpm.coordinate_cm` and :func:`~.messages.sdsm.offset_dm` of the east/north metres
-    ``en[rows]``: x cm, y cm, x dm, y dm (the same numbers in one compiled pass)."""
-    return _cm_dm_kernel(np.ascontiguousarray(en, dtype=np.float64), np.asarray(rows, dtype=np.int64),
-                         float(COORD_MIN), float(COORD_MAX), float(OFFSET_MAX), COORD_GUARD_CM)
 
 
 def _splice(doc: bytes, empty_list: bytes, items) -> tuple:
@@ -817,145 +749,5 @@ _V2X_SOURCE_NAMES = np.array(["linear", "sampled", "unavailable"], dtype=object)
 _V2X_UNAVAILABLE = 2
 _STATUS_ALL_OK = b',"status":%s,"reason":"ok"' % orjson.dumps(S.STATUS_OK)
 _V2X_KEYS = [b',"%s":' % k.encode() for k in V2X_FIELDS]
-_DICT_ONLY = {dict}
-_ID_TYPES_SET = {int, str, type(None)}
-_CLASS_TYPES = {str, type(None)}
-_INT_ONLY = {int}
-_GET_ID = operator.itemgetter("object_id")
-
-
-def _check_ids(ids: list) -> None:
-    """Per object (in place): numpy integers and str subclasses -> int / str; anything else -> _FrameError."""
-    for i, oid in enumerate(ids):
-        if type(oid) not in _ID_TYPES:  # numpy scalars from embedding code are taken as their Python value
-            if isinstance(oid, str):
-                ids[i] = str(oid)
-            elif isinstance(oid, (int, np.integer)) and not isinstance(oid, (bool, np.bool_)):
-                ids[i] = int(oid)
-            else:
-                raise _FrameError(f"detections[{i}].object_id", f"object_id is not a string or integer: {oid!r}")
-
-
-def _check_classes(classes: list) -> None:
-    for i, cls in enumerate(classes):
-        if cls is not None and type(cls) is not str:
-            if not isinstance(cls, str):
-                raise _FrameError(f"detections[{i}].class", f"class is not a string: {cls!r}")
-            classes[i] = str(cls)
-
-
-def _class_confidences(dets: list) -> np.ndarray:
-    """(N,) class confidences in [0, 1], NaN where absent or null; a bad value -> _FrameError (the first)."""
-    cc = list(map(dict.get, dets, _repeat("class_confidence")))
-    if set(map(type, cc)) <= _CONF_TYPES:
-        try:
-            p = np.array(cc, dtype=np.float64)
-        except OverflowError:
-            pass
-        else:
-            fin = np.isfinite(p)
-            if int(fin.sum()) == len(cc) - cc.count(None) and not ((p[fin] < 0.0) | (p[fin] > 1.0)).any():
-                return p
-    for i, c in enumerate(cc):
-        if c is not None:
-            c = _finite_number(dets[i], "class_confidence", f"detections[{i}]")
-            if not 0.0 <= c <= 1.0:
-                raise _FrameError(f"detections[{i}].class_confidence", f"class_confidence {c} not in [0, 1]")
-    return np.array(cc, dtype=np.float64)
-
-
-def _fast_cov(dets: list):
-    """(N, 2, 2) pixel covariances when every detection has all three numbers (finite), else None."""
-    try:
-        vals = list(map(_GET_COV, dets))
-    except KeyError:
-        return None
-    if not set(map(type, chain.from_iterable(vals))) <= _NUMBER_SET:
-        return None
-    try:
-        c = np.array(vals, dtype=np.float64)
-    except OverflowError:
-        return None
-    if not np.isfinite(c).all():
-        return None
-    return c[:, [0, 1, 1, 2]].reshape(-1, 2, 2)
-
-
-def _slow_cov(dets: list):
-    """Per detection: all three covariance entries or none (absent or null); names the first bad field."""
-    P = None
-    N = len(dets)
-    for i, d in enumerate(dets):
-        where = f"detections[{i}]"
-        if "cov_uu_px2" not in d and "cov_uv_px2" not in d and "cov_vv_px2" not in d:
-            continue
-        present = [c for c in S.COV_COLUMNS if d.get(c) is not None]
-        if present:
-            if len(present) != 3:
-                missing = [c for c in S.COV_COLUMNS if c not in present]
-                raise _FrameError(f"{where}.{missing[0]}", f"incomplete pixel covariance: {missing[0]} missing "
-                                                           "(give cov_uu_px2, cov_uv_px2, cov_vv_px2 or none)")
-            uu, uv, vv = (_finite_number(d, c, where) for c in S.COV_COLUMNS)
-            if P is None:
-                P = np.zeros((N, 2, 2))
-            P[i] = ((uu, uv), (uv, vv))
-    return P
-
-
-_CORNER_KEY = re.compile(r"^[uv]\d+_px$")
-
-
-def _check_corner_counts(dets: list, cols) -> None:
-    """Every detection of a corners frame has the corner columns of the first one (no more, no fewer)."""
-    want = set(cols)
-    for i, d in enumerate(dets):
-        have = {k for k in d if _CORNER_KEY.match(k)}
-        if have != want:
-            extra = sorted(have - want)
-            name = extra[0] if extra else sorted(want - have)[0]
-            raise _FrameError(f"detections[{i}].{name}", f"detection {i} has {len(have) // 2} corners "
-                              f"({len(have)} corner columns), detection 0 has {len(want) // 2}: one corner count per "
-                              "frame")
-
-
-def _check_pixel_cov_range(P: np.ndarray) -> None:
-    """Detector pixel (co)variances within the batch's limit (:data:`footprint_uq.batch.process.MAX_PIXEL_VAR_PX2`)."""
-    big = np.abs(P) > MAX_PIXEL_VAR_PX2
-    if big.any():
-        i, r, c = (int(v) for v in np.argwhere(big)[0])
-        name = S.COV_COLUMNS[0 if r == c == 0 else (2 if r == c else 1)]
-        raise _FrameError(f"detections[{i}].{name}", f"pixel covariance out of range: {name} {float(P[i, r, c]):g} "
-                                                     f"(entries up to {MAX_PIXEL_VAR_PX2:g} px^2)")
-
-
-_ID_TYPES = (int, str, type(None))
-_NUMBER_SET = {int, float}  # (bool is not int here: type() is exact)
-_CONF_TYPES = {int, float, type(None)}
-_GET_COV = operator.itemgetter(*S.COV_COLUMNS)
-
-
-def _box_array(dets: list, cols) -> np.ndarray:
-    """The (N, len(cols)) box values; a frame with a missing, non-numeric or non-finite value -> _FrameError."""
-    try:
-        flat = list(chain.from_iterable(map(operator.itemgetter(*cols), dets)))
-        if set(map(type, flat)) <= _NUMBER_SET:
-            X = np.array(flat, dtype=np.float64).reshape(len(dets), len(cols))
-            if np.isfinite(X).all():
-                return X
-    except (KeyError, TypeError, OverflowError):
-        pass
-    X = np.empty((len(dets), len(cols)))
-    for i, d in enumerate(dets):  # the slow path names the first bad field
-        X[i] = [_finite_number(d, c, f"detections[{i}]") for c in cols]
-    return X
-
-
-def _detection_field(field: str) -> str:
-    # "boxes_px[3]" / "boxes_world[3] (...)" / "pixel_cov_px2" -> "detections[3]"
-
-    m = re.search(r"\[(\d+)\]", field or "")
-    return f"detections[{m.group(1)}]" if m else "detections"
-
-
 def _jsonable(v):
     return v if v is None or isinstance(v, (str, int, float, bool)) else repr(v)

@@ -47,9 +47,9 @@ import numpy as np
 import orjson
 
 from .._notices import set_compile_handler
-from ..batch.fleet import load_registry
 from ..errors import ConfigError, InputError
 from ..io import load_camera
+from ..io.registry import load_registry
 from ..products.warmup import compile_handler
 from .core import RECORD_ERROR, RECORD_FOOTPRINTS, FrameOutput, Service, error_record
 from .messages.asn1_cpm import DEFAULT_CDD
@@ -185,6 +185,8 @@ class Metrics:
         self.frames_out = 0
         self.errors = 0
         self.publish_failed = 0
+        #: bad detections reported inside footprints records (their ``detection_errors``; the frames went on)
+        self.detection_errors = 0
         self._lat_ms: list[float] = []
         self._proc_us: list[float] = []
         self._lat_total = collections.deque(maxlen=100_000)
@@ -195,13 +197,15 @@ class Metrics:
 
     def done(self, record: dict, latency_s: float) -> None:
         self.done_output(record.get("type"), record["processing_us"]["total"] if record.get("type") ==
-                         RECORD_FOOTPRINTS else None, latency_s)
+                         RECORD_FOOTPRINTS else None, latency_s, len(record.get("detection_errors") or ()))
 
-    def done_output(self, kind, processing_us: float | None, latency_s: float) -> None:
-        """One output written: a footprints record (with its total processing time) or an error record."""
+    def done_output(self, kind, processing_us: float | None, latency_s: float, detection_errors: int = 0) -> None:
+        """One output written: a footprints record (with its total processing time and its number of bad
+        detections) or an error record."""
         with self._lock:
             if kind == RECORD_FOOTPRINTS:
                 self.frames_out += 1
+                self.detection_errors += detection_errors
                 self._proc_us.append(processing_us)
             else:
                 self.errors += 1
@@ -216,7 +220,7 @@ class Metrics:
             rec = {"type": "health", "time_s": time.time(), "uptime_s": round(time.monotonic() - self.t_start, 3),
                    "frames_in": self.frames_in, "frames_out": self.frames_out, "frames_dropped": dropped,
                    "errors": self.errors, "pending": pending, "publish_failed": self.publish_failed,
-                   "interval_frames": len(lat)}
+                   "detection_errors": self.detection_errors, "interval_frames": len(lat)}
         q = np.percentile(lat, [50, 99]).tolist() if lat else [None, None]
         p = np.percentile(proc, [50, 99]).tolist() if proc else [None, None]
         rec.update(latency_ms_p50=q[0], latency_ms_p99=q[1], processing_us_p50=p[0], processing_us_p99=p[1])
@@ -671,7 +675,7 @@ def _work(service: Service, queue: FrameQueue, sink, metrics: Metrics, output: s
             with metrics._lock:
                 metrics.publish_failed += 1
             _log(f"output failed ({type(e).__name__}: {e}); counted in publish_failed")
-        metrics.done_output(out.type, out.processing_us, time.monotonic() - item[2])
+        metrics.done_output(out.type, out.processing_us, time.monotonic() - item[2], out.n_detection_errors)
 
 
 def _health(sink, snapshot, stop: threading.Event, interval_s: float) -> None:
@@ -779,7 +783,8 @@ def run(*, camera=None, budget=None, registry=None, camera_id: str | None = None
                           contact=contact, allow_outside_image=allow_outside_image, station_id=station_id,
                           uper_encoder=uper_encoder, linearity=linearity, linear_threshold=linear_threshold,
                           cpm_cdd=cpm_cdd, v2x_policy=v2x_policy,
-                          tracks=serve_options.pop("tracks", False))
+                          tracks=serve_options.pop("tracks", False),
+                          class_names=serve_options.pop("class_names", None))
         return serve(service, stop=stop, **serve_options)
     finally:
         for sig, h in old.items():
