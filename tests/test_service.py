@@ -247,27 +247,116 @@ def test_geodetic_reference_position(camera):
     ({"frame": 1, "timestamp_s": None, "detections": []}, "frame.timestamp_s", "missing"),
     ({"frame": 1, "timestamp_s": 1e9, "detections": []}, "timestamp_s", "2004"),
     ({"frame": 1, "timestamp_s": T0, "detections": {}}, "detections", "not a list"),
-    ({"frame": 1, "timestamp_s": T0, "detections": [{"u_min_px": 1.0}]}, "detections[0]", "no complete box"),
-    ({"frame": 1, "timestamp_s": T0, "detections": [
-        {"u_min_px": 1.0, "v_min_px": 2.0, "u_max_px": 3.0, "v_max_px": 4.0},
-        {"u_min_px": 1.0, "v_min_px": "x", "u_max_px": 3.0, "v_max_px": 4.0}]},
-     "detections[1].v_min_px", "not a number"),
-    ({"frame": 1, "timestamp_s": T0, "detections": [
-        {"u_min_px": 1.0, "v_min_px": 2.0, "u_max_px": 3.0, "v_max_px": True}]}, "detections[0].v_max_px", "number"),
-    ({"frame": 1, "timestamp_s": T0, "detections": [
-        {"u_min_px": 5.0, "v_min_px": 2.0, "u_max_px": 3.0, "v_max_px": 4.0}]}, "detections[0]", "u_min <= u_max"),
-    ({"frame": 1, "timestamp_s": T0, "detections": [
-        {"u_min_px": 1.0, "v_min_px": 2.0, "u_max_px": 3.0, "v_max_px": 4.0, "cov_uu_px2": 1.0}]},
-     "detections[0].cov_uv_px2", "incomplete pixel covariance"),
-    ({"frame": 1, "timestamp_s": T0, "detections": [
-        {"u_min_px": 1.0, "v_min_px": 2.0, "u_max_px": 3.0, "v_max_px": 4.0, "cov_uu_px2": 1.0,
-         "cov_uv_px2": 5.0, "cov_vv_px2": 1.0}]}, "detections[0]", "positive semi-definite"),
 ])
 def test_malformed_frames_give_error_records(service, frame, field, words):
     rec = service.process_frame(frame, source="test line 3")
     assert rec["type"] == "error", rec
     assert rec["field"] == field and words in rec["reason"] and rec["source"] == "test line 3"
     json.dumps(rec, allow_nan=False)
+
+
+GOOD_BOX = {"u_min_px": 900.0, "v_min_px": 600.0, "u_max_px": 1000.0, "v_max_px": 700.0}
+
+
+@pytest.mark.parametrize("bad, field, words", [
+    ({"u_min_px": 1.0}, "detections[1]", "no complete box"),
+    ({"u_min_px": 1.0, "v_min_px": "x", "u_max_px": 3.0, "v_max_px": 4.0}, "detections[1].v_min_px", "not a number"),
+    ({"u_min_px": 1.0, "v_min_px": 2.0, "u_max_px": 3.0, "v_max_px": True}, "detections[1].v_max_px", "number"),
+    ({"u_min_px": 1.0, "v_min_px": 2.0, "u_max_px": 3.0, "v_max_px": float("inf")}, "detections[1].v_max_px",
+     "not finite"),
+    ({"u_min_px": 5.0, "v_min_px": 2.0, "u_max_px": 3.0, "v_max_px": 4.0}, "detections[1]", "u_min <= u_max"),
+    ({**GOOD_BOX, "cov_uu_px2": 1.0}, "detections[1].cov_uv_px2", "incomplete pixel covariance"),
+    ({**GOOD_BOX, "cov_uu_px2": 1.0, "cov_uv_px2": 5.0, "cov_vv_px2": 1.0}, "detections[1]", "positive semi-definite"),
+    ({**GOOD_BOX, "object_id": [1]}, "detections[1].object_id", "not a string or integer"),
+    ({**GOOD_BOX, "class": 2}, "detections[1].class", "--class-names"),
+    ({**GOOD_BOX, "class": 2.5}, "detections[1].class", "not a name or an integer class id"),
+    ({**GOOD_BOX, "class": True}, "detections[1].class", "not a name or an integer class id"),
+    ({**GOOD_BOX, "class_confidence": 1.5}, "detections[1].class_confidence", "not in [0, 1]"),
+    ({"x_m": 1.0, "y_m": 20.0, "z_m": 0.0, "length_m": 4.0, "width_m": 2.0, "height_m": 1.5, "yaw_rad": 0.0},
+     "detections[1]", "a 3d box in a frame of 2d boxes"),
+    ("car", "detections[1]", "not a JSON object"),
+])
+def test_a_bad_detection_is_its_own_error_entry(service, bad, field, words):
+    """The frame's other detections are processed and the record published; the bad one is named (index, field,
+    reason) in ``detection_errors``, never the frame's error."""
+    good = [dict(GOOD_BOX, object_id=f"g{k}", u_min_px=800.0 + 30 * k, u_max_px=900.0 + 30 * k) for k in range(3)]
+    rec = service.process_frame({"frame": 1, "timestamp_s": T0, "detections": [good[0], bad, good[1], good[2]]})
+    assert rec["type"] == "footprints", rec
+    (err,) = rec["detection_errors"]
+    assert err["index"] == 1 and err["field"] == field and words in err["reason"], err
+    assert rec["n_objects"] == 3 and [o["object_id"] for o in rec["objects"]] == ["g0", "g1", "g2"]
+    alone = service.process_frame({"frame": 1, "timestamp_s": T0, "detections": good})
+    assert alone["detection_errors"] == [] and alone["objects"] == rec["objects"]  # the same numbers without it
+    json.dumps(rec, allow_nan=False)
+
+
+def test_one_bad_detection_among_ten_nine_processed_and_published(camera):
+    """Issue 33: integer class ids named through the COCO map; one id the map does not name is that detection's
+    error entry; the nine others are in the record, its CPM and its SDSM."""
+    svc = Service(camera, "basler1", heading_offset_deg=HEADING, class_names="coco")
+    dets = [dict(GOOD_BOX, u_min_px=700.0 + 40 * k, u_max_px=760.0 + 40 * k, **{"class": [2, 0, 7, 5][k % 4]})
+            for k in range(10)]
+    dets[6]["class"] = 80  # COCO has ids 0..79
+    rec = svc.process_frame({"frame": 1, "timestamp_s": T0, "detections": dets})
+    assert rec["type"] == "footprints" and rec["n_objects"] == 9 and len(rec["objects"]) == 9
+    assert rec["detection_errors"] == [{"index": 6, "field": "detections[6].class",
+                                        "reason": "class id 80 is not in the names map (coco, 80 names)"}]
+    # object ids default to the detection's position in the frame: the bad one's position is skipped
+    assert [o["object_id"] for o in rec["objects"]] == [0, 1, 2, 3, 4, 5, 7, 8, 9]
+    assert [o["class"] for o in rec["objects"]] == ["car", "person", "truck", "bus", "car", "person", "bus", "car",
+                                                    "person"]
+    assert rec["cpm"]["payload"]["cpmContainers"][1]["containerData"]["numberOfPerceivedObjects"] == 9
+    assert len(rec["sdsm"]["objects"]) == 9 and decode_cpm_uper(rec["cpm_uper_hex"]) == rec["cpm"]
+    # the numbers are those of the nine alone (names given as text)
+    named = [dict(d, **{"class": rec["objects"][j]["class"]}) for j, d in enumerate(dets[:6] + dets[7:])]
+    alone = svc.process_frame({"frame": 1, "timestamp_s": T0, "detections": named})
+    ids = ("object_id", "message_object_id")  # (the message ids follow the object ids)
+    assert [{k: v for k, v in o.items() if k not in ids} for o in alone["objects"]] == \
+        [{k: v for k, v in o.items() if k not in ids} for o in rec["objects"]]
+
+
+def test_every_bad_detection_of_a_frame_is_named_once(service):
+    """Several bad detections, several faults each: one entry per bad detection (its first fault), in order."""
+    dets = [dict(GOOD_BOX, u_min_px=2000.0), dict(GOOD_BOX), dict(GOOD_BOX, cov_uu_px2=-1.0, cov_uv_px2=0.0,
+            cov_vv_px2=1.0, u_max_px=1.0), {"v_min_px": 1.0}, dict(GOOD_BOX, cov_uu_px2=1e13, cov_uv_px2=0.0,
+                                                                    cov_vv_px2=1.0)]
+    rec = service.process_frame({"frame": 1, "timestamp_s": T0, "detections": dets})
+    assert [e["index"] for e in rec["detection_errors"]] == [0, 2, 3, 4] and rec["n_objects"] == 1
+    assert "u_min <= u_max" in rec["detection_errors"][1]["reason"]  # (the box's fault first, then the covariance)
+    assert rec["detection_errors"][3]["field"] == "detections[4].cov_uu_px2"
+    none = service.process_frame({"frame": 1, "timestamp_s": T0, "detections": [dets[0], dets[3]]})
+    assert none["type"] == "footprints" and none["n_objects"] == 0 and len(none["detection_errors"]) == 2
+    assert none["sdsm"] is None
+
+
+def test_class_names_files(tmp_path, camera):
+    """A names map from an ultralytics data.yaml (list or mapping), JSON, or one name per line; bad files are one
+    line naming the file."""
+    from footprint_uq.errors import ConfigError
+    from footprint_uq.io.class_names import COCO_NAMES, load_class_names
+
+    assert len(COCO_NAMES) == 80 and COCO_NAMES[2] == "car" and COCO_NAMES[79] == "toothbrush"
+    (tmp_path / "data.yaml").write_text("path: x\nnames:\n  0: car\n  3: Pedestrian\n")
+    (tmp_path / "list.yaml").write_text("names: [car, person]\n")
+    (tmp_path / "n.json").write_text('["truck", "bus"]')
+    (tmp_path / "obj.names").write_text("car\nperson\n\n")
+    assert load_class_names(tmp_path / "data.yaml").names == {0: "car", 3: "Pedestrian"}
+    assert load_class_names(tmp_path / "list.yaml").names == {0: "car", 1: "person"}
+    assert load_class_names(tmp_path / "n.json").names == {0: "truck", 1: "bus"}
+    assert load_class_names(tmp_path / "obj.names").names == {0: "car", 1: "person"}
+    for name, text in (("gap.names", "car\n\nperson\n"), ("neg.yaml", "names: {-1: car}\n"),
+                       ("empty.txt", ""), ("num.yaml", "names: [car, 3]\n"), ("dup.yaml", "names: {0: a, 0: b}\n")):
+        (tmp_path / name).write_text(text)
+        with pytest.raises(ConfigError) as e:
+            load_class_names(tmp_path / name)
+        assert "\n" not in str(e.value)
+    with pytest.raises(ConfigError):
+        load_class_names(tmp_path / "missing.yaml")
+    svc = Service(camera, "basler1", class_names=tmp_path / "data.yaml", messages=False)
+    rec = svc.process_frame({"frame": 1, "timestamp_s": T0, "detections": [
+        dict(GOOD_BOX, **{"class": 3}), dict(GOOD_BOX, **{"class": 1}), dict(GOOD_BOX, **{"class": 0.0})]})
+    assert [o["class"] for o in rec["objects"]] == ["Pedestrian", "car"]
+    assert rec["detection_errors"][0]["index"] == 1 and "not in the names map" in rec["detection_errors"][0]["reason"]
 
 
 def test_registry_routes_frames_by_camera_id(tmp_path, camera):
@@ -404,6 +493,7 @@ def test_bad_service_options_are_refused(camera):
     (["--camera", "cam.yaml", "--input", "-"], "--budget"),
     (["--camera", "cam.yaml", "--budget", "basler1", "--cpm-cdd", "2.4.1"], "--cpm-cdd"),
     (["--camera", "cam.yaml", "--budget", "basler1", "--queue-depth", "0"], "--queue-depth"),
+    (["--camera", "cam.yaml", "--budget", "basler1", "--class-names", "nope.names"], "nope.names"),
 ])
 def test_serve_bad_options_exit_2_with_one_line(tmp_path, monkeypatch, camera, args, words):
     from click.testing import CliRunner
