@@ -558,10 +558,7 @@ def serve(service: Service, *, input: str | None = "-", mqtt: str | None = None,
         client.connect_async(host, port, keepalive=5)
         client.loop_start()
 
-    old_handlers = {}
-    if install_signals and threading.current_thread() is threading.main_thread():
-        for sig in (signal.SIGTERM, signal.SIGINT):
-            old_handlers[sig] = signal.signal(sig, lambda s, f: stop.set())
+    old_handlers = _stop_on_signals(stop) if install_signals else {}
 
     def snapshot() -> dict:
         rec = metrics.snapshot(queue.dropped, len(queue))
@@ -570,18 +567,9 @@ def serve(service: Service, *, input: str | None = "-", mqtt: str | None = None,
         return rec
 
     with _steady_runtime():
-        threads = [threading.Thread(target=_work, args=(service, queue, sink, metrics, output, stop),
-                                    name="footprint-uq-worker", daemon=True)]
-        if input == "-":
-            stream = stdin if stdin is not None else sys.stdin.buffer
-            threads.append(threading.Thread(target=_stdin_reader, args=(stream, queue, sink, metrics, stop,
-                                                                        max_frame_bytes),
-                                            name="footprint-uq-stdin", daemon=True))
-        if health_interval_s and health_interval_s > 0:
-            threads.append(threading.Thread(target=_health, args=(sink, snapshot, stop, health_interval_s),
-                                            name="footprint-uq-health", daemon=True))
-        for t in threads:
-            t.start()
+        threads = _start_threads(service, queue, sink, metrics, output, stop, snapshot,
+                                 stdin=(stdin if stdin is not None else sys.stdin.buffer) if input == "-" else None,
+                                 max_frame_bytes=max_frame_bytes, health_interval_s=health_interval_s)
         _log(f"ready: input {'stdin' if input == '-' else mqtt + ' ' + ', '.join(topics)}, output "
              f"{'stdout' if output == '-' else mqtt + ' ' + output_prefix + '/...'}, overload policy {policy}"
              + (f", worker {worker}" if worker else ""))
@@ -598,6 +586,32 @@ def serve(service: Service, *, input: str | None = "-", mqtt: str | None = None,
             _log(f"stopped: frames in {metrics.frames_in}, out {metrics.frames_out}, dropped {queue.dropped}, "
                  f"errors {metrics.errors}")
     return 0
+
+
+def _stop_on_signals(stop: threading.Event) -> dict:
+    """SIGTERM / SIGINT set ``stop`` (in the main thread only); returns the handlers they replaced."""
+    old = {}
+    if threading.current_thread() is threading.main_thread():
+        for sig in (signal.SIGTERM, signal.SIGINT):
+            old[sig] = signal.signal(sig, lambda s, f: stop.set())
+    return old
+
+
+def _start_threads(service: Service, queue: FrameQueue, sink, metrics: Metrics, output: str, stop: threading.Event,
+                   snapshot, *, stdin, max_frame_bytes: int, health_interval_s: float) -> list[threading.Thread]:
+    """Start the service's threads: the worker (always first), the stdin reader (``stdin`` a stream) and the health
+    thread (``health_interval_s`` > 0)."""
+    threads = [threading.Thread(target=_work, args=(service, queue, sink, metrics, output, stop),
+                                name="footprint-uq-worker", daemon=True)]
+    if stdin is not None:
+        threads.append(threading.Thread(target=_stdin_reader, args=(stdin, queue, sink, metrics, stop, max_frame_bytes),
+                                        name="footprint-uq-stdin", daemon=True))
+    if health_interval_s and health_interval_s > 0:
+        threads.append(threading.Thread(target=_health, args=(sink, snapshot, stop, health_interval_s),
+                                        name="footprint-uq-health", daemon=True))
+    for t in threads:
+        t.start()
+    return threads
 
 
 def _mqtt_input(client, topics: list | None, input_prefix: str, queue: FrameQueue, sink, metrics: Metrics,
