@@ -45,7 +45,7 @@ from ..products.v2x import J2735_POSITION_CONFIDENCE_NAMES
 from ..tracking import SharedJacobianAt, TrackerConfig, TrackTable, object_motion
 from ..uncertainty.ellipse import chi2_scale
 from ..uncertainty.propagation import DEFAULT_LINEAR_THRESHOLD
-from .detections import DetectionError, parse_detections
+from .detections import DetectionError, check_values, parse_detections
 from .frame_kernels import cm_dm, worst_usable
 from .jsonrows import Table
 from .messages.asn1_cpm import DEFAULT_CDD
@@ -155,7 +155,23 @@ class CameraSetup:
     #: object_id -> the messages' object id (unique per message, stable across frames; messages/ids.py)
     ids: MessageIdMap = field(default_factory=MessageIdMap)
 
+    #: the map tie's constants, read once (a frame calls no method of the GeoReference but ``to_wgs84``)
+    has_origin: bool = False
+    enu_origin_m: np.ndarray | None = None
+    enu_rotation_t: np.ndarray | None = None
+
     def __post_init__(self):
+        geo = self.georef
+        self.has_origin = geo.has_origin
+        self.enu_origin_m, self.enu_rotation_t = np.asarray(geo.origin_world_m), geo.R_enu_world.T
+        self._message_origin()
+
+    def world_to_enu(self, xy_world_m: np.ndarray) -> np.ndarray:
+        """:meth:`~footprint_uq.products.geo.GeoReference.world_to_enu` of checked ``(N, 2)`` world points (the same
+        operations on the constants read once)."""
+        return (xy_world_m - self.enu_origin_m) @ self.enu_rotation_t
+
+    def _message_origin(self) -> None:
         geo = self.georef
         if geo.has_origin:
             self.lat_1e7deg, self.lon_1e7deg = round(geo.origin_lat_deg * 1e7), round(geo.origin_lon_deg * 1e7)
@@ -467,10 +483,13 @@ class Service:
         """The detections into columns (:func:`.detections.parse_detections`: each bad one an error entry) and the
         camera's kernel over the good ones: ``(estimate, FrameDetections)``.
 
-        A value the processor refuses that the parser's checks did not catch (none is known) costs that detection,
-        not the frame: it joins the error entries and the kernel runs again without it."""
+        A frame the processor refuses (a pixel covariance that is not positive semi-definite: its compiled check)
+        is checked in full (:func:`.detections.check_values`: every bad detection an error entry) and run again;
+        a value refused beyond those checks (none is known) costs that detection, not the frame: it joins the
+        error entries and the kernel runs again without it."""
         found = parse_detections(dets, self.class_names)
         proc = setup.processor
+        checked = False
         while True:
             if found.family is None:
                 return proc.corners(np.zeros((0, 1, 2))), found
@@ -483,6 +502,9 @@ class Service:
                                         pixel_cov_px2=P), found
                 return proc.corners(X.reshape(len(found), -1, 2), pixel_cov_px2=P), found
             except InputError as e:
+                if not checked:  # every covariance that is not PSD, at once (the processor names the first)
+                    found, checked = check_values(found), True
+                    continue
                 m = re.search(r"\[(\d+)", e.field or "")
                 if m is None or int(m.group(1)) >= len(found):
                     raise _FrameError("detections", str(e)) from None
@@ -548,7 +570,7 @@ class Service:
         for key, col in zip(_V2X_KEYS, t.columns(est.v2x_codes.T), strict=True):
             layout += [key, col]
         layout += _v2x_source_layout(t, est, cxx, cxy, cyy)
-        if geo.has_origin:
+        if setup.has_origin:
             lat, lon = geo.to_wgs84(centre) if N else (np.zeros(0), np.zeros(0))
             layout += [b',"lat_deg":', t.column(lat), b',"lon_deg":', t.column(lon)]
         if self.linearity:
@@ -589,9 +611,8 @@ class Service:
         ``null`` without objects) of the objects ``ok_idx``, written column-wise; UPER by the compiled column
         writer.  ``motion``: the
         :class:`~.messages.motion.ObjectMotion` of all the frame's objects (None: no motion is sent)."""
-        geo = setup.georef
         N, m = len(classes), len(ok_idx)
-        en = geo.world_to_enu(est.centre_xy_world_m) if N else np.zeros((0, 2))
+        en = setup.world_to_enu(est.centre_xy_world_m) if N else np.zeros((0, 2))
         x_cm, y_cm, x_dm, y_dm = cm_dm(en, ok_idx)
         codes = est.v2x_codes[ok_idx]
         x_conf, y_conf, corr = codes[:, _CPM_INDEX], codes[:, _CPM_INDEX + 1], codes[:, _CPM_INDEX + 2]

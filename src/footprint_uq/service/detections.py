@@ -11,9 +11,10 @@ The usual frame (every detection well-formed) is read field by field over all de
 (``map`` over the dicts, one ``numpy.array`` per field) and checked on the set of its types; only a frame
 with something wrong goes through the per-detection checks, which name the first bad field of each bad
 detection.  The value checks the frame processor would make (box corners in order, 3-D sizes >= 0, pixel
-covariances within :data:`~footprint_uq.products.detection_columns.MAX_PIXEL_VAR_PX2` and positive
-semi-definite) run here on the columns, so that each bad box is found in one pass rather than by the kernel's
-first-error exception.
+covariances within :data:`~footprint_uq.products.detection_columns.MAX_PIXEL_VAR_PX2`) run here on the columns,
+so that each bad box is found in one pass rather than by the processor's first-error exception; whether the
+pixel covariances are positive semi-definite the processor checks in a compiled pass, and only a frame it
+refuses gets :func:`check_values` (all of them at once).
 
 The box family of a frame is that of its first detection with a complete box (2D, 3D or corners,
 :mod:`footprint_uq.products.detection_columns`); a detection of another family, or with other columns (a 3-D
@@ -48,7 +49,7 @@ from ..products.detection_columns import (
     detect_box_type,
 )
 
-__all__ = ["DetectionError", "FrameDetections", "parse_detections", "NO_BOX_REASON"]
+__all__ = ["DetectionError", "FrameDetections", "parse_detections", "check_values", "NO_BOX_REASON"]
 
 NO_BOX_REASON = ("no complete box: 2D (u_min_px, v_min_px, u_max_px, v_max_px), 3D (x_m, y_m, z_m, length_m, "
                  "width_m, height_m, yaw_rad|yaw_deg) or corners (u0_px, v0_px, ...), one family per frame")
@@ -167,10 +168,9 @@ def _fast(dets: list, names: ClassNames | None) -> FrameDetections | None:
         class_p = _fast_confidences(dets)
         if class_p is None:
             return None
-    family = detect_box_type(dets[0].keys())
+    family, cols = _family_of(dets[0])
     if family is None:
         return None
-    cols = box_columns(family, dets[0].keys())
     if family == "corners" and any(_corner_keys(d) != set(cols) for d in dets):
         return None
     X = _fast_boxes(dets, cols)
@@ -182,6 +182,22 @@ def _fast(dets: list, names: ClassNames | None) -> FrameDetections | None:
         if P is None:
             return None
     return FrameDetections(family, cols, X, P, ids, classes, class_p, np.arange(N, dtype=np.int64))
+
+
+def _family_of(d: dict) -> tuple:
+    """``(family, columns)`` of a detection's keys (``(None, ())`` without a complete box), remembered for the
+    4096 first key layouts (a detector writes one or two: no call per frame)."""
+    key = tuple(d)
+    got = _FAMILIES.get(key)
+    if got is None:
+        family = detect_box_type(key)
+        got = (family, box_columns(family, key) if family is not None else ())
+        if len(_FAMILIES) < 4096:
+            _FAMILIES[key] = got
+    return got
+
+
+_FAMILIES: dict = {}
 
 
 def _fast_ids(dets: list, keys: set) -> list | None:
@@ -382,9 +398,10 @@ def _check_corners(d: dict, i: int, cols) -> None:
 
 
 # -- the values the frame processor would refuse, every row at once -----------------------------------------------
-def _value_checks(f: FrameDetections) -> FrameDetections:
-    """Box corners in order (2D), sizes >= 0 (3D), pixel covariances in range and positive semi-definite: each
-    failing detection an error entry (its first fault), found on the columns in one pass."""
+def _value_checks(f: FrameDetections, psd: bool = False) -> FrameDetections:
+    """Box corners in order (2D), sizes >= 0 (3D), pixel covariances in range (and, with ``psd``, positive
+    semi-definite; the processor checks that itself in a compiled pass, :func:`check_values`): each failing
+    detection an error entry (its first fault), found on the columns in one pass."""
     M = len(f)
     if M == 0:
         return f
@@ -411,12 +428,20 @@ def _value_checks(f: FrameDetections) -> FrameDetections:
         mark(big.any(axis=(1, 2)), lambda i, r: f"detections[{i}].{COV_COLUMNS[first[r]]}",
              lambda r: f"pixel covariance out of range: {COV_COLUMNS[first[r]]} "
                        f"{float(P[r].reshape(4)[[0, 1, 3][first[r]]]):g} (entries up to {MAX_PIXEL_VAR_PX2:g} px^2)")
-        with np.errstate(invalid="ignore", over="ignore"):  # (entries beyond the limit: marked above already)
-            _, neg, w_min = cov2_faults(P)
-        mark(neg, lambda i, r: f"detections[{i}]",
-             lambda r: str(InputError("pixel covariance", f"min eigenvalue {w_min[r]:.3g}",
-                                      "a positive semi-definite covariance matrix")))
+        if psd:
+            with np.errstate(invalid="ignore", over="ignore"):  # (entries beyond the limit: marked above already)
+                _, neg, w_min = cov2_faults(P)
+            mark(neg, lambda i, r: f"detections[{i}]",
+                 lambda r: str(InputError("pixel covariance", f"min eigenvalue {w_min[r]:.3g}",
+                                          "a positive semi-definite covariance matrix")))
     return f.without(bad, errors) if errors else f
+
+
+def check_values(found: FrameDetections) -> FrameDetections:
+    """Every value check of :func:`parse_detections` and the pixel covariances positive semi-definite, each
+    failing detection an error entry: for a frame the processor refused (its own compiled check finds the first
+    covariance that is not; this finds them all, so that the frame is run once more, not once per bad one)."""
+    return _value_checks(found, psd=True)
 
 
 _EXPECT_2D_FIELD = ", ".join(BOX2D_COLUMNS)
