@@ -494,6 +494,7 @@ def test_bad_service_options_are_refused(camera):
     (["--camera", "cam.yaml", "--budget", "basler1", "--cpm-cdd", "2.4.1"], "--cpm-cdd"),
     (["--camera", "cam.yaml", "--budget", "basler1", "--queue-depth", "0"], "--queue-depth"),
     (["--camera", "cam.yaml", "--budget", "basler1", "--class-names", "nope.names"], "nope.names"),
+    (["--camera", "cam.yaml", "--budget", "basler1", "--record", "compact"], "--record"),
 ])
 def test_serve_bad_options_exit_2_with_one_line(tmp_path, monkeypatch, camera, args, words):
     from click.testing import CliRunner
@@ -730,3 +731,93 @@ def test_message_coordinates_are_coordinate_cm_and_offset_dm():
         ref = [coordinate_cm(en[rows, 0]), coordinate_cm(en[rows, 1]), offset_dm(en[rows, 0]), offset_dm(en[rows, 1])]
     for got, want in zip(cm_dm(en, rows), ref, strict=True):
         np.testing.assert_array_equal(got, want)
+
+
+# -- lean records on the wire (record="compact") ---------------------------------------------------------------------
+def _tracked_frames(n: int, k: int = 3):
+    """``k`` frames of ``n`` 2-D boxes moving right, some reaching past the image (partial / error objects)."""
+    rng = np.random.default_rng(5)
+    u, v = rng.uniform(-60, 1800, n), rng.uniform(450, 1070, n)
+    u[::17] = -400.0  # wholly left of the image
+    for i in range(k):
+        yield {"camera_id": "c", "frame": i, "timestamp_s": T0 + i / 30, "detections": [
+            {"object_id": j, "class": ["car", "person", None][j % 3], "class_confidence": 0.8,
+             "u_min_px": float(a + 3 * i), "v_min_px": float(b - 80), "u_max_px": float(a + 90 + 3 * i),
+             "v_max_px": float(b), "cov_uu_px2": 4.0, "cov_uv_px2": 0.0, "cov_vv_px2": 4.0}
+            for j, (a, b) in enumerate(zip(u, v, strict=True))]}
+
+
+def test_compact_record_is_the_full_records_numbers_and_the_cpm_bytes(camera):
+    """Every field of a compact record is the full record's (same bytes of the numbers); its CPM's UPER bytes are the
+    full record's ``cpm_uper_hex`` and decode (asn1tools) to its CPM JSON; the compact record is the documented
+    field list."""
+    from footprint_uq.service.core import COMPACT_OBJECT_FIELDS
+
+    kw = dict(heading_offset_deg=HEADING, tracks=True, linearity=True, contact="bottom-corners")
+    full_svc, lean_svc = Service(camera, "basler1", **kw), Service(camera, "basler1", record="compact", **kw)
+    for f in _tracked_frames(60):
+        full, lean = full_svc.process_frame_json(f), lean_svc.process_frame_json(f)
+    assert full.cpm_uper is None and lean.cpm_uper is not None
+    rf, rl = json.loads(full.data), json.loads(lean.data)
+    assert rl["record"] == "compact" and "cpm" not in rl and "sdsm" not in rl and "cpm_uper_hex" not in rl
+    assert {o["status"] for o in rl["objects"]} == {"ok", "partial", "error"}  # (every status exercised)
+    for key in ("camera_id", "frame", "timestamp_s", "station_id", "heading_offset_deg", "n_objects",
+                "detection_errors", "cpm_cdd"):
+        assert rl[key] == rf[key], key
+    for of, ol in zip(rf["objects"], rl["objects"], strict=True):
+        assert set(ol) <= set(COMPACT_OBJECT_FIELDS)
+        assert ol == {k: of[k] for k in COMPACT_OBJECT_FIELDS if k in of and (k != "reason" or of["status"] != "ok")}
+    assert lean.cpm_uper == bytes.fromhex(rf["cpm_uper_hex"]) and rl["cpm_uper_bytes"] == len(lean.cpm_uper)
+    assert decode_cpm_uper(lean.cpm_uper.hex()) == rf["cpm"]
+
+
+def test_compact_record_and_cpm_are_at_most_a_quarter_of_the_full_record(camera):
+    """Issue 31: the bytes on the wire of a tracked 100-object frame (compact record + the CPM's UPER bytes) at most a
+    quarter of the full record's (measured: ~42 kB of ~206 kB)."""
+    full_svc = Service(camera, "basler1", tracks=True, linearity=True)
+    lean_svc = Service(camera, "basler1", tracks=True, linearity=True, record="compact")
+    for f in _tracked_frames(100):
+        full, lean = full_svc.process_frame_json(f), lean_svc.process_frame_json(f)
+    assert json.loads(lean.data)["n_objects"] == 100
+    assert len(lean.data) + len(lean.cpm_uper) <= 0.25 * len(full.data), (len(lean.data), len(full.data))
+
+
+def test_compact_record_without_messages_or_with_asn1tools(camera):
+    svc = Service(camera, "basler1", record="compact", messages=False)
+    out = svc.process_frame_json(next(_tracked_frames(5, 1)))
+    rec = json.loads(out.data)
+    assert out.cpm_uper is None and "cpm_uper_bytes" not in rec and rec["n_objects"] == 5
+    a = Service(camera, "basler1", record="compact", uper_encoder="asn1tools").process_frame_json(
+        next(_tracked_frames(5, 1)))
+    b = Service(camera, "basler1", record="compact").process_frame_json(next(_tracked_frames(5, 1)))
+    assert a.cpm_uper == b.cpm_uper and a.cpm_uper
+    with pytest.raises(ValueError, match="record"):
+        Service(camera, "basler1", record="lean", warm_up=False)
+
+
+def test_mqtt_sink_publishes_the_record_then_the_cpm_bytes(camera):
+    """The worker hands a compact frame's two outputs to the MQTT sink: the record on <prefix>/<camera_id>, the CPM's
+    bytes on <prefix>/<camera_id>/cpm (a fake client: the broker tests run where Mosquitto is installed)."""
+    from footprint_uq.service.runner import FrameQueue, Metrics, _MqttSink, _work
+
+    class FakeClient:
+        def __init__(self):
+            self.sent = []
+
+        def publish(self, topic, payload, qos):
+            self.sent.append((topic, payload, qos))
+            return type("Info", (), {"rc": 0, "is_published": lambda self: True})()
+
+        def want_write(self):
+            return False
+
+    svc = Service(camera, "basler1", record="compact")
+    q, client, metrics = FrameQueue("block"), FakeClient(), Metrics()
+    f = next(_tracked_frames(5, 1))
+    q.put("c", (json.dumps(f).encode(), "mqtt detections/c", time.monotonic(), "c"))
+    q.close()
+    _work(svc, q, _MqttSink(client, "fp", metrics), metrics, "mqtt", threading.Event())
+    (t1, rec, q1), (t2, cpm, q2) = client.sent
+    assert (t1, t2, q1, q2) == ("fp/c", "fp/c/cpm", 1, 1)
+    assert json.loads(rec)["cpm_uper_bytes"] == len(cpm) and decode_cpm_uper(cpm.hex())
+    assert metrics.frames_out == 1 and metrics.publish_failed == 0

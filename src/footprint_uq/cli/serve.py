@@ -82,11 +82,15 @@ __all__ = ["serve_cmd"]
               help="Names of integer class ids (\"class\": 2): 'coco' (the 80 COCO names of YOLO / ultralytics "
                    "models) or a names file (data.yaml 'names:', JSON, or one name per line). Without it an "
                    "integer class is that detection's error entry.")
+@click.option("--record", type=click.Choice(["compact", "full"]), default=None,
+              help="Record layout: 'compact' (default with --output mqtt: per object id, class, status, position, "
+                   "cov_m2, message id and motion; the CPM as UPER bytes on <prefix>/<camera_id>/cpm) or 'full' "
+                   "(default on stdout: every field, the CPM as JSON and UPER hex, the SDSM). docs/service.md.")
 @pose_options
 def serve_cmd(camera_path, budget_spec, registry, camera_id, input_, mqtt, output, input_prefix, output_prefix,
               policy, health_interval_s, workers, client_id, heading_offset_deg, origin_lat, origin_lon, confidence,
               contact, allow_outside_image, station_id, uper_encoder, linearity, linear_threshold, cpm_cdd, v2x_policy,
-              queue_depth, max_frame_bytes, tracks, class_names, pose):
+              queue_depth, max_frame_bytes, tracks, class_names, record, pose):
     """Edge service: detector frames in, positions with uncertainty and V2X messages (CPM, SDSM) out.
 
     One output record per frame (or an error record), a health record every second;
@@ -106,6 +110,7 @@ def serve_cmd(camera_path, budget_spec, registry, camera_id, input_, mqtt, outpu
                  station_id=station_id, uper_encoder=uper_encoder, linearity=linearity,
                  linear_threshold=linear_threshold, workers=workers, cpm_cdd=cpm_cdd, v2x_policy=v2x_policy,
                  queue_depth=queue_depth, max_frame_bytes=max_frame_bytes, tracks=tracks, class_names=class_names,
+                 record=record,
                  input=input_ if input_ is not None else (None if mqtt else "-"), mqtt=mqtt, output=output,
                  input_prefix=input_prefix, output_prefix=output_prefix, policy=policy,
                  health_interval_s=health_interval_s, client_id=client_id))

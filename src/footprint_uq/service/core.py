@@ -78,9 +78,14 @@ from .messages.uper_cpm import (
 )
 
 __all__ = ["Service", "CameraSetup", "FrameOutput", "error_record", "station_id_of", "RECORD_FOOTPRINTS",
-           "RECORD_ERROR", "UPER_ENCODERS"]
+           "RECORD_ERROR", "UPER_ENCODERS", "RECORD_LAYOUTS", "COMPACT_OBJECT_FIELDS"]
 
 UPER_ENCODERS = ("fast", "asn1tools")
+#: the record layouts (``Service(record=...)``, ``serve --record``)
+RECORD_LAYOUTS = ("full", "compact")
+#: per object in a compact record (with ``tracks``: the last four too); the full record has these and more
+COMPACT_OBJECT_FIELDS = ("object_id", "class", "status", "reason", "x_m", "y_m", "cov_m2", "message_object_id",
+                         "track_id", "v_east_mps", "v_north_mps", "cov_v_m2ps2")
 #: most perceived objects in one CPM (``PerceivedObjects ::= SEQUENCE SIZE (0..255, ...)``); the SDSM follows
 MAX_MESSAGE_OBJECTS = 255
 
@@ -120,6 +125,9 @@ class FrameOutput(NamedTuple):
     record: dict | None
     #: a footprints record's bad detections (its ``detection_errors``: each one's index and reason)
     n_detection_errors: int = 0
+    #: ``record="compact"``: the frame's CPM, UPER-encoded (bytes for a V2X stack; the record says its length);
+    #: None for a full record (its CPM is in the record) or without messages
+    cpm_uper: bytes | None = None
 
 
 def _dumps_error(rec: dict) -> bytes:
@@ -256,6 +264,11 @@ class Service:
         Names of integer class ids (``"class": 2``): the COCO 80 names built in or a names file
         (:func:`footprint_uq.io.class_names.load_class_names`).  Without it an integer class, and with it an id the
         map does not name, is that detection's error entry (the frame's other detections go on).
+    record : {"full", "compact"}
+        The record's layout: ``full`` (default) every field, the CPM as JSON and UPER hex, the SDSM; ``compact``
+        the fields of :data:`COMPACT_OBJECT_FIELDS` per object and, without the CPM JSON and the SDSM, the CPM's
+        UPER bytes beside the record (:attr:`FrameOutput.cpm_uper`; ``serve --output mqtt`` publishes them on
+        ``<prefix>/<camera_id>/cpm``).  docs/service.md, "Lean records on the wire".
     """
 
     def __init__(self, camera=None, budget=None, *, registry=None, camera_id: str | None = None,
@@ -265,7 +278,7 @@ class Service:
                  uper_encoder: str = "fast", linearity: bool = False, linear_threshold: float | None = None,
                  warm_up: bool = True, cpm_cdd: str = DEFAULT_CDD, v2x_policy: str = "sampled",
                  tracks: bool = False, tracker: TrackerConfig | None = None,
-                 class_names: str | ClassNames | None = None):
+                 class_names: str | ClassNames | None = None, record: str = "full"):
         if (camera is None) == (registry is None):
             raise InputError("camera/registry", "both" if camera is not None else "neither",
                              "exactly one of a camera (with a budget) or a registry")
@@ -288,6 +301,9 @@ class Service:
                                          cdd=self.cpm_cdd)
         self._cls = _class_tables(self.cpm_cdd)
         self.class_names = None if class_names is None else load_class_names(class_names)
+        if record not in RECORD_LAYOUTS:
+            raise InputError("record", record, f"one of {RECORD_LAYOUTS}")
+        self.record = record
         self.cameras: dict[str | None, CameraSetup] = {}
         if camera is not None:
             if budget is None:
@@ -456,19 +472,30 @@ class Service:
         t1 = time.perf_counter()
         objects, ok_idx, msg_ids = self._objects_json(setup, est, ids, classes, ts, motion)
         t2 = time.perf_counter()
-        head = {"type": RECORD_FOOTPRINTS, "camera_id": camera_id, "frame": fno, "timestamp_s": ts,
-                "station_id": setup.station_id, "heading_offset_deg": setup.georef.heading_offset_deg,
-                "confidence": self.confidence, "n_objects": len(ids),
+        compact = self.record == "compact"
+        head = {"type": RECORD_FOOTPRINTS, **({"record": "compact"} if compact else {}), "camera_id": camera_id,
+                "frame": fno, "timestamp_s": ts, "station_id": setup.station_id,
+                "heading_offset_deg": setup.georef.heading_offset_deg,
+                **({} if compact else {"confidence": self.confidence}), "n_objects": len(ids),
                 "detection_errors": [e.as_dict() for e in found.errors]}
         if self.messages:
             head["cpm_cdd"] = self.cpm_cdd
         parts = [orjson.dumps(head)[:-1], b',"objects":', objects]
+        cpm_uper = None
         if self.messages:
             # motion: the tracker's motion of the frame's objects (None: the messages carry no motion)
             om = None if motion is None else motion[1]
-            cpm, cpm_hex, sdsm = self._messages_json(setup, est, classes, class_p, ok_idx, msg_ids, int(fno), ts,
-                                                     ref_ms, motion=om)
-            parts += [b',"cpm":', *cpm, b',"cpm_uper_hex":"', cpm_hex.encode(), b'","sdsm":', *sdsm]
+            if compact and self.uper_encoder == "fast":  # the CPM's bytes only (on their own topic)
+                cpm_uper = self._cpm_uper(setup, self._message_columns(setup, est, classes, class_p, ok_idx, om),
+                                          msg_ids, ref_ms)
+            else:
+                cpm, cpm_uper, sdsm = self._messages_json(setup, est, classes, class_p, ok_idx, msg_ids, int(fno),
+                                                          ts, ref_ms, motion=om)
+            if compact:
+                parts += [b',"cpm_uper_bytes":', b"%d" % len(cpm_uper)]
+            else:
+                parts += [b',"cpm":', *cpm, b',"cpm_uper_hex":"', cpm_uper.hex().encode(), b'","sdsm":', *sdsm]
+                cpm_uper = None  # (in the record)
             omitted = int(np.count_nonzero(est.centre_valid)) - len(ok_idx)
             if omitted:  # said, never silent: objects with a centre that did not fit in the messages
                 parts += [b',"objects_not_in_messages":', b"%d" % omitted]
@@ -477,7 +504,7 @@ class Service:
         parts += [b',"processing_us":', orjson.dumps({
             "footprints": round(1e6 * (t1 - t0), 1), "records": round(1e6 * (t2 - t1), 1),
             "messages": round(1e6 * (t3 - t2), 1), "total": total}), b"}"]
-        return FrameOutput(b"".join(parts), RECORD_FOOTPRINTS, camera_id, total, None, len(found.errors))
+        return FrameOutput(b"".join(parts), RECORD_FOOTPRINTS, camera_id, total, None, len(found.errors), cpm_uper)
 
     def _footprints(self, setup: CameraSetup, dets: list) -> tuple:
         """The detections into columns (:func:`.detections.parse_detections`: each bad one an error entry) and the
@@ -540,107 +567,105 @@ class Service:
     def _objects_json(self, setup: CameraSetup, est, ids: list, classes: list, ts: float = 0.0,
                       motion=None) -> tuple[bytes, np.ndarray, list]:
         """The ``objects`` list of the record as JSON text, written column-wise (:class:`.jsonrows.Table`); and
-        the indices of the objects in the messages (with a centre, at most 255) and their ``message_object_id``."""
+        the indices of the objects in the messages (with a centre, at most 255) and their ``message_object_id``.
+        ``record="compact"``: the fields of :data:`COMPACT_OBJECT_FIELDS` only."""
         N = len(ids)
-        geo = setup.georef
         cov = est.centre_cov_m2
-        rows = est.object_rows  # (every FrameProcessor estimate has them: the kernel's or the reference's)
-        a, b, ori = rows[_ROW_SMAJ], rows[_ROW_SMIN], rows[_ROW_ORI]  # the centre's ellipse, as ellipse_axes
         valid = est.centre_valid
         centre = est.centre_xy_world_m
         t = Table(N)
-        oid, cls = t.column(ids), t.column(classes)
-        x, y, cxx, cxy, cyy, sa, sb, so, ka, kb, ls, lx, ly = t.columns(np.array([
-            centre[:, 0], centre[:, 1], cov[:, 0, 0], cov[:, 0, 1], cov[:, 1, 1], a, b, ori, self._k * a, self._k * b,
-            est.largest_semi_major_m, est.largest_xy_world_m[:, 0], est.largest_xy_world_m[:, 1]]))
-        layout = [b'{"object_id":', oid, b',"class":', cls]
-        if valid.all():
-            layout.append(_STATUS_ALL_OK)
-        else:
-            li = est.largest_index.tolist()
-            reasons = est.centre_reason_text()
-            layout += [b',"status":', t.column([S.STATUS_OK if ok else (S.STATUS_PARTIAL if j >= 0 else S.STATUS_ERROR)
-                                                for ok, j in zip(valid.tolist(), li, strict=True)]),
-                       b',"reason":', t.column(["ok" if ok else f"no centre: {r}"
-                                                for ok, r in zip(valid.tolist(), reasons, strict=True)])]
-        layout += [b',"x_m":', x, b',"y_m":', y, b',"cov_m2":[[', cxx, b",", cxy, b"],[", cxy, b",", cyy,
-                   b']],"sigma_major_m":', sa, b',"sigma_minor_m":', sb, b',"orientation_deg":', so,
-                   b',"semi_major_m":', ka, b',"semi_minor_m":', kb, b',"largest_index":', t.column(est.largest_index),
-                   b',"largest_sigma_major_m":', ls, b',"largest_x_m":', lx, b',"largest_y_m":', ly]
+        compact = self.record == "compact"
+        x, y, cxx, cxy, cyy = t.columns(np.array([centre[:, 0], centre[:, 1], cov[:, 0, 0], cov[:, 0, 1],
+                                                  cov[:, 1, 1]]))
+        layout = [b'{"object_id":', t.column(ids), b',"class":', t.column(classes), *_status_layout(t, est, compact),
+                  b',"x_m":', x, b',"y_m":', y, b',"cov_m2":[[', cxx, b",", cxy, b"],[", cxy, b",", cyy, b"]]"]
+        if not compact:
+            layout += self._full_object_layout(setup, t, est, cxx, cxy, cyy)
+        if motion is not None:
+            layout += _motion_object_layout(t, motion, compact)
+        ok_idx = msg_ids = None
+        if self.messages:
+            ok_idx, msg_ids, ids_layout = _message_id_layout(t, setup, ids, valid, ts)
+            layout += ids_layout
+        layout.append(b"}")
+        return t.json_buffer(layout), ok_idx, msg_ids
+
+    def _full_object_layout(self, setup: CameraSetup, t: Table, est, cxx, cxy, cyy) -> list:
+        """The full record's object fields after ``cov_m2``: ellipses, largest point, V2X fields and their source,
+        the WGS84 position (with an origin), the linearity flag (``linearity``)."""
+        rows = est.object_rows  # (every FrameProcessor estimate has them: the kernel's or the reference's)
+        a, b, ori = rows[_ROW_SMAJ], rows[_ROW_SMIN], rows[_ROW_ORI]  # the centre's ellipse, as ellipse_axes
+        sa, sb, so, ka, kb, ls, lx, ly = t.columns(np.array([
+            a, b, ori, self._k * a, self._k * b, est.largest_semi_major_m, est.largest_xy_world_m[:, 0],
+            est.largest_xy_world_m[:, 1]]))
+        layout = [b',"sigma_major_m":', sa, b',"sigma_minor_m":', sb, b',"orientation_deg":', so,
+                  b',"semi_major_m":', ka, b',"semi_minor_m":', kb, b',"largest_index":', t.column(est.largest_index),
+                  b',"largest_sigma_major_m":', ls, b',"largest_x_m":', lx, b',"largest_y_m":', ly]
         for key, col in zip(_V2X_KEYS, t.columns(est.v2x_codes.T), strict=True):
             layout += [key, col]
         layout += _v2x_source_layout(t, est, cxx, cxy, cyy)
         if setup.has_origin:
-            lat, lon = geo.to_wgs84(centre) if N else (np.zeros(0), np.zeros(0))
+            N = len(est)
+            lat, lon = setup.georef.to_wgs84(est.centre_xy_world_m) if N else (np.zeros(0), np.zeros(0))
             layout += [b',"lat_deg":', t.column(lat), b',"lon_deg":', t.column(lon)]
         if self.linearity:
-            nonlin, linear = self._linearity(est) if N else (np.zeros(0), np.zeros(0, bool))
+            nonlin, linear = self._linearity(est) if len(est) else (np.zeros(0), np.zeros(0, bool))
             layout += [b',"nonlinearity":', t.column(nonlin), b',"linear_ok":', t.column(linear)]
-        if motion is not None:  # null where unknown (no track, no velocity yet, heading sigma unavailable, ...)
-            tid, m = motion
-            tracked = tid >= 0
-            ve, vn, c00, c01, c11, sp, ssp, hd, shd, yw, syw, age = t.columns(np.array([
-                m.v_east_mps, m.v_north_mps, m.cov_v_m2ps2[:, 0, 0], m.cov_v_m2ps2[:, 0, 1], m.cov_v_m2ps2[:, 1, 1],
-                m.speed_mps, m.sigma_speed_mps, m.heading_deg, m.sigma_heading_deg, m.yaw_deg, m.sigma_yaw_deg,
-                m.age_s]))
-            layout += [b',"track_id":', t.when(tracked, t.column(tid)), t.when(~tracked, b"null"),
-                       b',"v_east_mps":', ve, b',"v_north_mps":', vn, b',"cov_v_m2ps2":[[', c00, b",", c01, b"],[",
-                       c01, b",", c11, b']],"speed_mps":', sp, b',"sigma_speed_mps":', ssp, b',"heading_deg":', hd,
-                       b',"sigma_heading_deg":', shd, b',"yaw_deg":', yw, b',"sigma_yaw_deg":', syw, b',"age_s":',
-                       age]
-        ok_idx = msg_ids = None
-        if self.messages:
-            ok_all = np.flatnonzero(valid)
-            ok_idx = ok_all[:MAX_MESSAGE_OBJECTS]  # a CPM carries at most 255 perceived objects
-            msg_ids = setup.ids.assign(ids, ok_idx, ts)
-            if len(ok_idx) == N:
-                layout += [b',"message_object_id":', t.column(msg_ids)]
-            else:  # null: not in the CPM / SDSM (no centre, or beyond 255)
-                col = np.zeros(N, np.int64)
-                col[ok_idx] = msg_ids
-                sent = np.zeros(N, bool)
-                sent[ok_idx] = True
-                layout += [b',"message_object_id":', t.when(sent, t.column(col)), t.when(~sent, b"null")]
-        layout.append(b"}")
-        return t.json_buffer(layout), ok_idx, msg_ids
+        return layout
 
-    def _messages_json(self, setup: CameraSetup, est, classes: list, class_p, ok_idx: np.ndarray,
-                       msg_ids: np.ndarray, fno: int, ts: float, ref_ms: int, motion: ObjectMotion | None = None
-                       ) -> tuple[tuple, str, tuple]:
-        """The CPM (JSON text, as pieces to join), its UPER encoding (hex) and the SDSM (JSON text as pieces,
-        ``null`` without objects) of the objects ``ok_idx``, written column-wise; UPER by the compiled column
-        writer.  ``motion``: the
-        :class:`~.messages.motion.ObjectMotion` of all the frame's objects (None: no motion is sent)."""
+    def _message_columns(self, setup: CameraSetup, est, classes: list, class_p, ok_idx: np.ndarray,
+                         motion: ObjectMotion | None) -> _MessageColumns:
+        """The columns of the CPM / SDSM objects ``ok_idx`` (:class:`_MessageColumns`)."""
         N, m = len(classes), len(ok_idx)
         en = setup.world_to_enu(est.centre_xy_world_m) if N else np.zeros((0, 2))
         x_cm, y_cm, x_dm, y_dm = cm_dm(en, ok_idx)
-        codes = est.v2x_codes[ok_idx]
-        x_conf, y_conf, corr = codes[:, _CPM_INDEX], codes[:, _CPM_INDEX + 1], codes[:, _CPM_INDEX + 2]
         crow = (np.fromiter(map(_CLASS_ROWS.__getitem__, classes), np.intp, N)[ok_idx] if any(classes)
                 else np.full(m, _DEFAULT_CLASS_ROW, np.intp))
-        cls = self._cls
-        has_cls = cls.bits_width[crow] > 0
         mc = None if motion is None else motion_codes(motion if m == N else motion.take(ok_idx), m)  # (sorted rows)
-        t = Table(m)
-        oid = t.column(msg_ids)
+        p = level = None
         if class_p is None:
             level = np.full(m, CONFIDENCE_LEVEL_UNAVAILABLE, np.int64)
-            lv = b"%d" % CONFIDENCE_LEVEL_UNAVAILABLE
-            pct = b"0"
         else:
             p = class_p[ok_idx]
-            none = np.isnan(p)
-            level = np.where(none, CONFIDENCE_LEVEL_UNAVAILABLE, np.maximum(1.0, np.ceil(100.0 * p - 1e-9))
+            level = np.where(np.isnan(p), CONFIDENCE_LEVEL_UNAVAILABLE, np.maximum(1.0, np.ceil(100.0 * p - 1e-9))
                              ).astype(np.int64)
-            lv = t.column(level)
-            pct = t.column(np.where(none, 0.0, np.rint(100.0 * p)).astype(np.int64))
-        cx, cy, xv, yv, r = t.columns(np.array([x_conf, y_conf, x_cm, y_cm, corr], dtype=np.int64))
+        return _MessageColumns(m, x_cm, y_cm, x_dm, y_dm, est.v2x_codes[ok_idx], crow, level, p, mc)
+
+    def _cpm_uper(self, setup: CameraSetup, c: _MessageColumns, msg_ids: np.ndarray, ref_ms: int) -> bytes:
+        """The UPER CPM of the message columns, by the compiled column writer (``uper_encoder="fast"``)."""
+        cls = self._cls
+        codes = c.codes
+        container = perceived_object_container_uper_arrays(
+            msg_ids, c.x_cm, codes[:, _CPM_INDEX], c.y_cm, codes[:, _CPM_INDEX + 1], codes[:, _CPM_INDEX + 2],
+            cls.bits_value[c.crow], cls.bits_width[c.crow], c.level, cdd=self.cpm_cdd, motion=c.mc)
+        return setup.uper.encode(ref_ms, container)
+
+    def _messages_json(self, setup: CameraSetup, est, classes: list, class_p, ok_idx: np.ndarray,
+                       msg_ids: np.ndarray, fno: int, ts: float, ref_ms: int, motion: ObjectMotion | None = None
+                       ) -> tuple[tuple, bytes, tuple]:
+        """The CPM (JSON text, as pieces to join), its UPER encoding (bytes) and the SDSM (JSON text as pieces,
+        ``null`` without objects) of the objects ``ok_idx``, written column-wise; UPER by the compiled column
+        writer.  ``motion``: the :class:`~.messages.motion.ObjectMotion` of all the frame's objects (None: no
+        motion is sent)."""
+        c = self._message_columns(setup, est, classes, class_p, ok_idx, motion)
+        m, codes, crow, mc = c.m, c.codes, c.crow, c.mc
+        cls = self._cls
+        t = Table(m)
+        oid = t.column(msg_ids)
+        if c.class_p is None:
+            lv, pct = b"%d" % CONFIDENCE_LEVEL_UNAVAILABLE, b"0"
+        else:
+            lv = t.column(c.level)
+            pct = t.column(np.where(np.isnan(c.class_p), 0.0, np.rint(100.0 * c.class_p)).astype(np.int64))
+        corr = codes[:, _CPM_INDEX + 2]
+        cx, cy, xv, yv, r = t.columns(np.array([codes[:, _CPM_INDEX], codes[:, _CPM_INDEX + 1], c.x_cm, c.y_cm, corr],
+                                               dtype=np.int64))
         vel, age = _motion_layout(t, mc)
         po = t.json_buffer([b'{"objectId":', oid, b',"measurementDeltaTime":0,"position":{"xCoordinate":{"value":', xv,
                      b',"confidence":', cx, b'},"yCoordinate":{"value":', yv, b',"confidence":', cy, b"}}", *vel,
                      t.when(corr != 101, _CORR_OPEN, r, _CORR_CLOSE), *age,
-                     t.when(has_cls, b',"classification":[{"objectClass":', t.column(cls.object_json[crow].tolist()),
-                            b',"confidence":', lv, b"}]"),
+                     t.when(cls.bits_width[crow] > 0, b',"classification":[{"objectClass":',
+                            t.column(cls.object_json[crow].tolist()), b',"confidence":', lv, b"}]"),
                      b"}"])
         lat_e7, lon_e7 = setup.lat_1e7deg, setup.lon_1e7deg
         cpm = build_cpm(setup.station_id, ref_ms, [],
@@ -649,16 +674,13 @@ class Service:
         cpm["payload"]["cpmContainers"][1]["containerData"]["numberOfPerceivedObjects"] = m
         cpm_json = _splice(orjson.dumps(cpm), b'"perceivedObjects":[]', po)  # (pieces of the text)
         if self.uper_encoder == "fast":
-            container = perceived_object_container_uper_arrays(
-                msg_ids, x_cm, x_conf, y_cm, y_conf, corr, cls.bits_value[crow], cls.bits_width[crow], level,
-                cdd=self.cpm_cdd, motion=mc)
-            cpm_hex = setup.uper.encode(ref_ms, container).hex()
+            cpm_uper = self._cpm_uper(setup, c, msg_ids, ref_ms)
         else:
-            cpm_hex = self._encode(orjson.loads(b"".join(cpm_json))).hex()
+            cpm_uper = self._encode(orjson.loads(b"".join(cpm_json)))
         # J3224's DetectedObjectList has 1..256 entries: a frame without objects has no SDSM (null)
         if m == 0:
-            return cpm_json, cpm_hex, (b"null",)
-        xd, yd = t.columns(np.array([x_dm, y_dm]))
+            return cpm_json, cpm_uper, (b"null",)
+        xd, yd = t.columns(np.array([c.x_dm, c.y_dm]))
         if mc is None:
             tail = [_SDSM_TAIL_NO_MOTION]
         else:
@@ -671,7 +693,73 @@ class Service:
                               b'},"posConfidence":{"pos":', t.column(_POS_NAMES[codes[:, _J_POS]].tolist()), *tail])
         sdsm = build_sdsm(setup.station_id, fno, ts, [],
                           **({} if lat_e7 is None else {"lat_1e7deg": lat_e7, "lon_1e7deg": lon_e7}))
-        return cpm_json, cpm_hex, _splice(orjson.dumps(sdsm), b'"objects":[]', objs)
+        return cpm_json, cpm_uper, _splice(orjson.dumps(sdsm), b'"objects":[]', objs)
+
+
+class _MessageColumns(NamedTuple):
+    """The CPM / SDSM objects of a frame as columns (m rows): positions (CPM cm, SDSM dm, east / north), the V2X
+    codes (m, 7), class rows of the class tables, CPM confidence levels, class confidences (None: none given) and
+    the motion codes (None: no motion)."""
+
+    m: int
+    x_cm: np.ndarray
+    y_cm: np.ndarray
+    x_dm: np.ndarray
+    y_dm: np.ndarray
+    codes: np.ndarray
+    crow: np.ndarray
+    level: np.ndarray
+    class_p: np.ndarray | None
+    mc: object
+
+
+def _status_layout(t: Table, est, compact: bool) -> list:
+    """``status`` and ``reason`` of every object (compact: ``reason`` only where the status is not ``ok``)."""
+    valid = est.centre_valid
+    if valid.all():
+        return [_STATUS_ALL_OK_COMPACT if compact else _STATUS_ALL_OK]
+    li = est.largest_index.tolist()
+    reasons = est.centre_reason_text()
+    status = t.column([S.STATUS_OK if ok else (S.STATUS_PARTIAL if j >= 0 else S.STATUS_ERROR)
+                       for ok, j in zip(valid.tolist(), li, strict=True)])
+    if compact:
+        return [b',"status":', status, t.when(~valid, b',"reason":', t.column([
+            "" if ok else f"no centre: {r}" for ok, r in zip(valid.tolist(), reasons, strict=True)]))]
+    return [b',"status":', status, b',"reason":', t.column(["ok" if ok else f"no centre: {r}"
+                                                           for ok, r in zip(valid.tolist(), reasons, strict=True)])]
+
+
+def _motion_object_layout(t: Table, motion, compact: bool) -> list:
+    """The motion fields of every object (null where unknown: no track, no velocity yet, heading sigma
+    unavailable, ...); compact: ``track_id``, the velocity and its covariance."""
+    tid, m = motion
+    tracked = tid >= 0
+    ve, vn, c00, c01, c11, sp, ssp, hd, shd, yw, syw, age = t.columns(np.array([
+        m.v_east_mps, m.v_north_mps, m.cov_v_m2ps2[:, 0, 0], m.cov_v_m2ps2[:, 0, 1], m.cov_v_m2ps2[:, 1, 1],
+        m.speed_mps, m.sigma_speed_mps, m.heading_deg, m.sigma_heading_deg, m.yaw_deg, m.sigma_yaw_deg,
+        m.age_s]))
+    layout = [b',"track_id":', t.when(tracked, t.column(tid)), t.when(~tracked, b"null"),
+              b',"v_east_mps":', ve, b',"v_north_mps":', vn, b',"cov_v_m2ps2":[[', c00, b",", c01, b"],[",
+              c01, b",", c11, b"]]"]
+    if not compact:
+        layout += [b',"speed_mps":', sp, b',"sigma_speed_mps":', ssp, b',"heading_deg":', hd,
+                   b',"sigma_heading_deg":', shd, b',"yaw_deg":', yw, b',"sigma_yaw_deg":', syw, b',"age_s":', age]
+    return layout
+
+
+def _message_id_layout(t: Table, setup: CameraSetup, ids: list, valid: np.ndarray, ts: float) -> tuple:
+    """``(ok_idx, msg_ids, layout)``: the objects in the messages (with a centre, at most 255), their message ids
+    (stable per object_id) and the ``message_object_id`` field (null: not in the CPM / SDSM)."""
+    N = len(ids)
+    ok_idx = np.flatnonzero(valid)[:MAX_MESSAGE_OBJECTS]  # a CPM carries at most 255 perceived objects
+    msg_ids = setup.ids.assign(ids, ok_idx, ts)
+    if len(ok_idx) == N:
+        return ok_idx, msg_ids, [b',"message_object_id":', t.column(msg_ids)]
+    col = np.zeros(N, np.int64)
+    col[ok_idx] = msg_ids
+    sent = np.zeros(N, bool)
+    sent[ok_idx] = True
+    return ok_idx, msg_ids, [b',"message_object_id":', t.when(sent, t.column(col)), t.when(~sent, b"null")]
 
 
 def _motion_layout(t: Table, mc) -> tuple[list, list]:
@@ -769,6 +857,7 @@ _HEADING_CONF = np.array(HEADING_CONFIDENCE_NAMES, dtype=object)
 _V2X_SOURCE_NAMES = np.array(["linear", "sampled", "unavailable"], dtype=object)  # FootprintEstimate.v2x_source
 _V2X_UNAVAILABLE = 2
 _STATUS_ALL_OK = b',"status":%s,"reason":"ok"' % orjson.dumps(S.STATUS_OK)
+_STATUS_ALL_OK_COMPACT = b',"status":%s' % orjson.dumps(S.STATUS_OK)
 _V2X_KEYS = [b',"%s":' % k.encode() for k in V2X_FIELDS]
 def _jsonable(v):
     return v if v is None or isinstance(v, (str, int, float, bool)) else repr(v)

@@ -51,7 +51,7 @@ from ..errors import ConfigError, InputError
 from ..io import load_camera
 from ..io.registry import load_registry
 from ..products.warmup import compile_handler
-from .core import RECORD_ERROR, RECORD_FOOTPRINTS, FrameOutput, Service, error_record
+from .core import RECORD_ERROR, RECORD_FOOTPRINTS, RECORD_LAYOUTS, FrameOutput, Service, error_record
 from .messages.asn1_cpm import DEFAULT_CDD
 
 __all__ = ["FrameQueue", "Metrics", "serve", "run", "parse_mqtt_url", "POLICIES"]
@@ -315,6 +315,16 @@ class _MqttSink:
             topic = f"{self._prefix}/health"
         info = self._c.publish(topic, data, qos=1)
         if info.rc != 0:  # queue full (broker away for long): counted, never unbounded
+            with self._metrics._lock:
+                self._metrics.publish_failed += 1
+        else:
+            self._last = info
+
+    def write_cpm(self, camera_id, cpm_uper: bytes) -> None:
+        """A compact record's CPM, UPER-encoded, as bytes on ``<prefix>/<camera_id>/cpm`` (after its record)."""
+        info = self._c.publish(f"{self._prefix}/{camera_id if camera_id is not None else 'camera'}/cpm", cpm_uper,
+                               qos=1)
+        if info.rc != 0:
             with self._metrics._lock:
                 self._metrics.publish_failed += 1
         else:
@@ -682,6 +692,8 @@ def _work(service: Service, queue: FrameQueue, sink, metrics: Metrics, output: s
         out = _frame_output(service, item, output)
         try:
             sink.write_json(out.type, out.camera_id, out.data)
+            if out.cpm_uper is not None:  # a compact record's CPM (MQTT output only: run() checks)
+                sink.write_cpm(out.camera_id, out.cpm_uper)
         except BrokenPipeError:  # stdout closed by the reader: nothing more can be delivered
             stop.set()
             return
@@ -767,6 +779,7 @@ def run(*, camera=None, budget=None, registry=None, camera_id: str | None = None
         raise InputError("--camera/--registry", "both" if camera is not None else "neither",
                          "one camera (--camera with --budget) or many (--registry)")
     _check_transport(serve_options.get("input", "-"), serve_options.get("mqtt"), serve_options.get("output", "-"))
+    serve_options["record"] = _record_layout(serve_options.get("record"), serve_options.get("output", "-"))
     if workers > 1:
         if registry is None or serve_options.get("input", "-") is not None:
             raise InputError("--workers", workers, "1, unless the input is MQTT (--mqtt without --input) and "
@@ -798,11 +811,24 @@ def run(*, camera=None, budget=None, registry=None, camera_id: str | None = None
                           uper_encoder=uper_encoder, linearity=linearity, linear_threshold=linear_threshold,
                           cpm_cdd=cpm_cdd, v2x_policy=v2x_policy,
                           tracks=serve_options.pop("tracks", False),
-                          class_names=serve_options.pop("class_names", None))
+                          class_names=serve_options.pop("class_names", None), record=serve_options.pop("record"))
         return serve(service, stop=stop, **serve_options)
     finally:
         for sig, h in old.items():
             signal.signal(sig, h)
+
+
+def _record_layout(record: str | None, output: str) -> str:
+    """The record layout of ``serve``: ``compact`` by default with MQTT output (the CPM's bytes on their own topic),
+    ``full`` otherwise; ``compact`` needs MQTT output (JSON Lines carry no bytes beside the record)."""
+    if record is None:
+        return "compact" if output == "mqtt" else "full"
+    if record not in RECORD_LAYOUTS:
+        raise InputError("--record", record, f"one of {RECORD_LAYOUTS}")
+    if record == "compact" and output != "mqtt":
+        raise InputError("--record", record, "'full' with --output - (a compact record's CPM goes as bytes on its own "
+                                             "MQTT topic), or --output mqtt")
+    return record
 
 
 def _worker_main(options: dict, cameras: list[str], label: str) -> None:  # pragma: no cover - child process
