@@ -821,3 +821,14 @@ def test_mqtt_sink_publishes_the_record_then_the_cpm_bytes(camera):
     assert (t1, t2, q1, q2) == ("fp/c", "fp/c/cpm", 1, 1)
     assert json.loads(rec)["cpm_uper_bytes"] == len(cpm) and decode_cpm_uper(cpm.hex())
     assert metrics.frames_out == 1 and metrics.publish_failed == 0
+
+
+def test_default_workers_is_min_of_cores_minus_one_and_cameras(monkeypatch):
+    """``serve``'s default --workers with MQTT input and a registry: one core left to the broker and the detector,
+    never more workers than cameras, at least one."""
+    from footprint_uq.service import runner
+
+    assert [runner.default_workers(8, cores=c) for c in (1, 2, 3, 4, 16)] == [1, 1, 2, 3, 8]
+    assert runner.default_workers(2, cores=16) == 2 and runner.default_workers(1, cores=4) == 1
+    monkeypatch.setattr(runner, "usable_cores", lambda: 5)
+    assert runner.default_workers(8) == 4

@@ -43,8 +43,9 @@ __all__ = ["serve_cmd"]
                    "(default for MQTT), or block the reader (default for stdin).")
 @click.option("--health-interval-s", type=click.FloatRange(min=0), default=1.0, show_default=True,
               help="Period of the health/metrics message (0: none).")
-@click.option("--workers", type=click.IntRange(min=1), default=1, show_default=True,
-              help="Worker processes (MQTT input with --registry): the cameras are split over them.")
+@click.option("--workers", type=click.IntRange(min=1), default=None,
+              help="Worker processes (MQTT input with --registry): the cameras are split over them. Default: "
+                   "min(cores - 1, cameras) with MQTT input and a registry (1 on a 2-core machine), else 1.")
 @click.option("--client-id", default=None, help="MQTT client id (persistent session; default footprint-uq-serve-PID).")
 @click.option("--heading-offset-deg", type=float, default=0.0, show_default=True, metavar="D",
               help="Compass bearing of the world +y axis (V2X fields, message east/north offsets).")

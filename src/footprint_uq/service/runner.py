@@ -763,7 +763,7 @@ def run(*, camera=None, budget=None, registry=None, camera_id: str | None = None
         origin_lat_deg: float | None = None, origin_lon_deg: float | None = None, confidence: float = 0.95,
         contact: str = "bottom-centre", allow_outside_image: bool = False, station_id: int | None = None,
         uper_encoder: str = "fast", linearity: bool = False, linear_threshold: float | None = None,
-        workers: int = 1, cpm_cdd: str = DEFAULT_CDD, v2x_policy: str = "sampled", pose=None,
+        workers: int | None = 1, cpm_cdd: str = DEFAULT_CDD, v2x_policy: str = "sampled", pose=None,
         **serve_options) -> int:
     """``footprint-uq serve``: build the :class:`Service` from files (a camera file and budget, or a
     registry) and :func:`serve` it; returns the exit status.
@@ -772,14 +772,22 @@ def run(*, camera=None, budget=None, registry=None, camera_id: str | None = None
     worker processes (camera ``i`` of the sorted ids goes to worker ``i mod workers``), each with its
     own MQTT client (``<client_id>-w<k>``) subscribed to its cameras' topics and its own health
     records (labelled ``"k/N"``); SIGTERM/SIGINT is passed on to them and the exit status is the
-    largest of theirs.  ``pose`` (a pose mapping or file) completes an intrinsics-only ``camera`` file
-    (:func:`footprint_uq.io.load_camera`).
+    largest of theirs.  ``workers=None`` (the command's default): :func:`default_workers` of the registry's
+    cameras with MQTT input, else 1.  ``pose`` (a pose mapping or file) completes an intrinsics-only ``camera``
+    file (:func:`footprint_uq.io.load_camera`).
     """
     if (camera is None) == (registry is None):
         raise InputError("--camera/--registry", "both" if camera is not None else "neither",
                          "one camera (--camera with --budget) or many (--registry)")
     _check_transport(serve_options.get("input", "-"), serve_options.get("mqtt"), serve_options.get("output", "-"))
     serve_options["record"] = _record_layout(serve_options.get("record"), serve_options.get("output", "-"))
+    if workers is None:
+        workers = 1
+        if registry is not None and serve_options.get("input", "-") is None:
+            n_cameras = len(registry) if isinstance(registry, dict) else len(load_registry(registry, budget=budget))
+            workers = default_workers(n_cameras)
+            _log(f"--workers {workers} (the default: min(cores - 1, cameras) = min({usable_cores()} - 1, "
+                 f"{n_cameras}))")
     if workers > 1:
         if registry is None or serve_options.get("input", "-") is not None:
             raise InputError("--workers", workers, "1, unless the input is MQTT (--mqtt without --input) and "
@@ -818,6 +826,22 @@ def run(*, camera=None, budget=None, registry=None, camera_id: str | None = None
             signal.signal(sig, h)
 
 
+def usable_cores() -> int:
+    """The cores this process may run on (its CPU affinity, e.g. under ``taskset``; else the machine's)."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):  # (not every platform has affinities)
+        return os.cpu_count() or 1
+
+
+def default_workers(n_cameras: int, cores: int | None = None) -> int:
+    """``serve``'s default ``--workers`` with MQTT input and a registry: ``min(cores - 1, cameras)``, at least 1 --
+    one core left to the broker, paho's network threads and the detector; never more workers than cameras
+    (docs/service.md, "Workers")."""
+    cores = usable_cores() if cores is None else int(cores)
+    return max(1, min(cores - 1, int(n_cameras)))
+
+
 def _record_layout(record: str | None, output: str) -> str:
     """The record layout of ``serve``: ``compact`` by default with MQTT output (the CPM's bytes on their own topic),
     ``full`` otherwise; ``compact`` needs MQTT output (JSON Lines carry no bytes beside the record)."""
@@ -835,7 +859,7 @@ def _worker_main(options: dict, cameras: list[str], label: str) -> None:  # prag
 
     entries = load_registry(options.pop("registry"), budget=options["budget"])
     sub = {c: entries[c] for c in cameras}
-    sys.exit(run(registry=sub, cameras=cameras, worker=label, **options))
+    sys.exit(run(registry=sub, cameras=cameras, worker=label, workers=1, **options))
 
 
 def _run_workers(n: int, options: dict) -> int:
