@@ -247,6 +247,8 @@ def test_geodetic_reference_position(camera):
     ({"frame": 1, "timestamp_s": None, "detections": []}, "frame.timestamp_s", "missing"),
     ({"frame": 1, "timestamp_s": 1e9, "detections": []}, "timestamp_s", "2004"),
     ({"frame": 1, "timestamp_s": T0, "detections": {}}, "detections", "not a list"),
+    (b'\xff{"frame": 1}', None, "not UTF-8"),
+    ('{"frame": 1, "timestamp_s": NaN, "detections": []}', None, "invalid JSON"),  # (strict JSON, as over MQTT)
 ])
 def test_malformed_frames_give_error_records(service, frame, field, words):
     rec = service.process_frame(frame, source="test line 3")

@@ -130,6 +130,22 @@ class FrameOutput(NamedTuple):
     cpm_uper: bytes | None = None
 
 
+def _parse_frame_text(text) -> object:
+    """A frame's JSON text (bytes or str) parsed by orjson, as the MQTT path does (strict JSON: no NaN literals,
+    integers within 64 bits); bytes that are not UTF-8 or text that is not JSON -> a frame error."""
+    if isinstance(text, memoryview):
+        text = bytes(text)
+    try:
+        return orjson.loads(text)
+    except orjson.JSONDecodeError as e:
+        if isinstance(text, (bytes, bytearray)):
+            try:
+                bytes(text).decode("utf-8")
+            except UnicodeDecodeError as u:
+                raise _FrameError(None, f"frame is not UTF-8 text: {u}") from None
+        raise _FrameError(None, f"invalid JSON: {e}") from None
+
+
 def _dumps_error(rec: dict) -> bytes:
     try:
         return orjson.dumps(rec)
@@ -412,16 +428,8 @@ class Service:
         t0 = time.perf_counter()
         camera_id = frame_no = None
         try:
-            if isinstance(frame, (bytes, bytearray, memoryview)):
-                try:
-                    frame = bytes(frame).decode("utf-8")
-                except UnicodeDecodeError as e:
-                    raise _FrameError(None, f"frame is not UTF-8 text: {e}") from None
-            if isinstance(frame, str):
-                try:
-                    frame = json.loads(frame)
-                except json.JSONDecodeError as e:
-                    raise _FrameError(None, f"invalid JSON: {e}") from None
+            if isinstance(frame, (bytes, bytearray, memoryview, str)):
+                frame = _parse_frame_text(frame)
             if not isinstance(frame, dict):
                 raise _FrameError(None, f"frame is not a JSON object: {type(frame).__name__}")
             camera_id = frame.get("camera_id")
