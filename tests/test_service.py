@@ -725,7 +725,8 @@ def _same_floats(a, b, rel: float) -> bool:
     if isinstance(a, dict):
         return isinstance(b, dict) and list(a) == list(b) and all(_same_floats(a[k], b[k], rel) for k in a)
     if isinstance(a, list):
-        return isinstance(b, list) and len(a) == len(b) and all(_same_floats(x, y, rel) for x, y in zip(a, b, strict=True))
+        return isinstance(b, list) and len(a) == len(b) and all(_same_floats(x, y, rel)
+                                                                for x, y in zip(a, b, strict=True))
     if isinstance(a, float) and isinstance(b, float):
         return math.isclose(a, b, rel_tol=rel, abs_tol=0.0)
     return type(a) is type(b) and a == b
