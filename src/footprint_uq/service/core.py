@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import functools
 import json
-import math
 import re
 import threading
 import time
@@ -45,7 +44,7 @@ from ..products.v2x import J2735_POSITION_CONFIDENCE_NAMES
 from ..tracking import SharedJacobianAt, TrackerConfig, TrackTable, object_motion
 from ..uncertainty.ellipse import chi2_scale
 from ..uncertainty.propagation import DEFAULT_LINEAR_THRESHOLD
-from .detections import DetectionError, check_values, parse_detections
+from .detections import DetectionError, FieldError, check_values, finite_number, parse_detections
 from .frame_kernels import cm_dm, worst_usable
 from .jsonrows import Table
 from .messages.asn1_cpm import DEFAULT_CDD
@@ -204,15 +203,12 @@ class CameraSetup:
                                   self.lon_1e7deg)
 
 
-def _finite_number(d: dict, key: str, where: str) -> float:
-    v = d.get(key)
-    if v is None:
-        raise _FrameError(f"{where}.{key}", f"missing field {key}")
-    if isinstance(v, bool) or not isinstance(v, (int, float)):
-        raise _FrameError(f"{where}.{key}", f"field {key} is not a number: {v!r}")
-    if not math.isfinite(v):
-        raise _FrameError(f"{where}.{key}", f"field {key} is not finite: {v!r}")
-    return float(v)
+def _frame_number(frame: dict, key: str) -> float:
+    """A frame's own number field (``timestamp_s``), finite; a frame error otherwise."""
+    try:
+        return finite_number(frame, key, "frame")
+    except FieldError as e:
+        raise _FrameError(e.field, e.reason) from None
 
 
 class Service:
@@ -469,7 +465,7 @@ class Service:
             raise _FrameError("frame", "missing field frame")
         if isinstance(fno, bool) or not isinstance(fno, int):
             raise _FrameError("frame", f"field frame is not an integer: {fno!r}")
-        ts = _finite_number(frame, "timestamp_s", "frame")
+        ts = _frame_number(frame, "timestamp_s")
         dets = frame.get("detections")
         if not isinstance(dets, list):
             raise _FrameError("detections", f"field detections is not a list: {type(dets).__name__}")

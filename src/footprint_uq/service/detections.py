@@ -49,7 +49,8 @@ from ..products.detection_columns import (
     detect_box_type,
 )
 
-__all__ = ["DetectionError", "FrameDetections", "parse_detections", "check_values", "NO_BOX_REASON"]
+__all__ = ["DetectionError", "FrameDetections", "FieldError", "parse_detections", "check_values", "finite_number",
+           "NO_BOX_REASON"]
 
 NO_BOX_REASON = ("no complete box: 2D (u_min_px, v_min_px, u_max_px, v_max_px), 3D (x_m, y_m, z_m, length_m, "
                  "width_m, height_m, yaw_rad|yaw_deg) or corners (u0_px, v0_px, ...), one family per frame")
@@ -67,8 +68,10 @@ class DetectionError(NamedTuple):
         return {"index": self.index, "field": self.field, "reason": self.reason}
 
 
-class _Bad(Exception):
-    """A detection's first fault (raised and caught inside this module only)."""
+class FieldError(Exception):
+    """A field's fault: the field (``detections[3].u_max_px``, ``frame.timestamp_s``) and the one-line reason.  Inside
+    this module the first fault of a detection (its error entry); :func:`finite_number` raises it for the frame's
+    own fields too."""
 
     def __init__(self, field: str, reason: str):
         super().__init__(reason)
@@ -287,7 +290,7 @@ def _slow(dets: list, names: ClassNames | None) -> FrameDetections:
         try:
             rows.append(_one(d, i, names, family, cols))
             index.append(i)
-        except _Bad as e:
+        except FieldError as e:
             errors.append(DetectionError(i, e.field, e.reason))
     M = len(rows)
     P = None
@@ -306,29 +309,29 @@ def _slow(dets: list, names: ClassNames | None) -> FrameDetections:
 
 
 def _one(d, i: int, names: ClassNames | None, family: str | None, cols) -> _Row:
-    """Detection ``i`` checked: its fields, or :class:`_Bad` naming its first fault."""
+    """Detection ``i`` checked: its fields, or :class:`FieldError` naming its first fault."""
     where = f"detections[{i}]"
     if type(d) is not dict:
-        raise _Bad(where, f"detection {i} is not a JSON object")
+        raise FieldError(where, f"detection {i} is not a JSON object")
     oid = _object_id(d.get("object_id", i), where)
     cls = _class(d.get("class"), where, names)
     p = d.get("class_confidence")
     if p is not None:
-        p = _finite_number(d, "class_confidence", where)
+        p = finite_number(d, "class_confidence", where)
         if not 0.0 <= p <= 1.0:
-            raise _Bad(f"{where}.class_confidence", f"class_confidence {p} not in [0, 1]")
+            raise FieldError(f"{where}.class_confidence", f"class_confidence {p} not in [0, 1]")
     own = detect_box_type(d.keys())
     if own is None:
-        raise _Bad(where, NO_BOX_REASON)
+        raise FieldError(where, NO_BOX_REASON)
     if own != family:
-        raise _Bad(where, f"detection {i} is a {own} box in a frame of {family} boxes (one family per frame: the "
-                          "first complete detection's)")
+        raise FieldError(where, f"detection {i} is a {own} box in a frame of {family} boxes (one family per frame: "
+                                "the first complete detection's)")
     if family == "corners":
         _check_corners(d, i, cols)
     elif box_columns(family, d.keys()) != cols:
-        raise _Bad(where, f"detection {i} gives its yaw as {box_columns(family, d.keys())[-1]}, the frame's first "
-                          f"box as {cols[-1]}: one yaw column per frame")
-    box = [_finite_number(d, c, where) for c in cols]
+        raise FieldError(where, f"detection {i} gives its yaw as {box_columns(family, d.keys())[-1]}, the frame's "
+                                f"first box as {cols[-1]}: one yaw column per frame")
+    box = [finite_number(d, c, where) for c in cols]
     return _Row(oid, cls, math.nan if p is None else p, box, _cov(d, where))
 
 
@@ -339,7 +342,7 @@ def _object_id(oid, where: str):
         return str(oid)
     if isinstance(oid, (int, np.integer)) and not isinstance(oid, (bool, np.bool_)):
         return int(oid)  # numpy integers from embedding code: their Python value
-    raise _Bad(f"{where}.object_id", f"object_id is not a string or integer: {oid!r}")
+    raise FieldError(f"{where}.object_id", f"object_id is not a string or integer: {oid!r}")
 
 
 def _class(cls, where: str, names: ClassNames | None) -> str | None:
@@ -349,24 +352,26 @@ def _class(cls, where: str, names: ClassNames | None) -> str | None:
         return str(cls)
     cid = class_id_of(cls)
     if cid is None:
-        raise _Bad(f"{where}.class", f"class is not a name or an integer class id: {cls!r}")
+        raise FieldError(f"{where}.class", f"class is not a name or an integer class id: {cls!r}")
     if names is None:
-        raise _Bad(f"{where}.class", f"class {cls!r} is an integer class id and the service has no names map "
-                                     "(serve --class-names coco|FILE)")
+        raise FieldError(f"{where}.class", f"class {cls!r} is an integer class id and the service has no names "
+                                           "map (serve --class-names coco|FILE)")
     name = names.name_of(cid)
     if name is None:
-        raise _Bad(f"{where}.class", f"class id {cid} is not in the names map ({names.source}, {len(names)} names)")
+        raise FieldError(f"{where}.class",
+                         f"class id {cid} is not in the names map ({names.source}, {len(names)} names)")
     return name
 
 
-def _finite_number(d: dict, key: str, where: str) -> float:
+def finite_number(d: dict, key: str, where: str) -> float:
+    """``d[key]`` as a finite float (bool is not a number); :class:`FieldError` ``<where>.<key>`` otherwise."""
     v = d.get(key)
     if v is None:
-        raise _Bad(f"{where}.{key}", f"missing field {key}")
+        raise FieldError(f"{where}.{key}", f"missing field {key}")
     if isinstance(v, bool) or not isinstance(v, (int, float)):
-        raise _Bad(f"{where}.{key}", f"field {key} is not a number: {v!r}")
+        raise FieldError(f"{where}.{key}", f"field {key} is not a number: {v!r}")
     if not math.isfinite(v):
-        raise _Bad(f"{where}.{key}", f"field {key} is not finite: {v!r}")
+        raise FieldError(f"{where}.{key}", f"field {key} is not finite: {v!r}")
     return float(v)
 
 
@@ -377,9 +382,9 @@ def _cov(d: dict, where: str) -> tuple | None:
         return None
     if len(present) != 3:
         missing = next(c for c in COV_COLUMNS if c not in present)
-        raise _Bad(f"{where}.{missing}", f"incomplete pixel covariance: {missing} missing (give cov_uu_px2, "
-                                         "cov_uv_px2, cov_vv_px2 or none)")
-    return tuple(_finite_number(d, c, where) for c in COV_COLUMNS)
+        raise FieldError(f"{where}.{missing}", f"incomplete pixel covariance: {missing} missing (give cov_uu_px2, "
+                                               "cov_uv_px2, cov_vv_px2 or none)")
+    return tuple(finite_number(d, c, where) for c in COV_COLUMNS)
 
 
 def _corner_keys(d: dict) -> set:
@@ -392,9 +397,9 @@ def _check_corners(d: dict, i: int, cols) -> None:
     if have != want:
         extra = sorted(have - want)
         name = extra[0] if extra else sorted(want - have)[0]
-        raise _Bad(f"detections[{i}].{name}", f"detection {i} has {len(have) // 2} corners ({len(have)} corner "
-                                              f"columns), the frame's first box has {len(want) // 2}: one corner "
-                                              "count per frame")
+        raise FieldError(f"detections[{i}].{name}", f"detection {i} has {len(have) // 2} corners ({len(have)} corner "
+                                                    f"columns), the frame's first box has {len(want) // 2}: one corner "
+                                                    "count per frame")
 
 
 # -- the values the frame processor would refuse, every row at once -----------------------------------------------
