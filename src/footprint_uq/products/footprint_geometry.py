@@ -27,8 +27,10 @@ def box2d_contact_points(boxes_px, contact: str = "bottom-centre"):
     A : (2K, 4)
         ``corners.reshape(N, 2K) = boxes @ A.T`` (for mapping box covariances).
     """
-    b = as_points("boxes_px", boxes_px, 4)
-    if b.ndim != 2:
+    # a float64 array (the service's and the batch's columns) is taken as it is: no call per frame into _checks
+    b = boxes_px if type(boxes_px) is np.ndarray and boxes_px.dtype == np.float64 else as_points("boxes_px",
+                                                                                                  boxes_px, 4)
+    if b.ndim != 2 or b.shape[1] != 4:
         raise InputError("boxes_px", b.shape, "an array of shape (N, 4): u_min, v_min, u_max, v_max")
     if contact == "bottom-centre":
         A = np.array([[0.5, 0.0, 0.5, 0.0], [0.0, 0.0, 0.0, 1.0]])
