@@ -74,7 +74,7 @@ def make_detections(n: int, seed: int) -> list[dict]:
             for k, (a, b, c) in enumerate(zip(u, v, w, strict=True))]
 
 
-def in_process_times(objects: int, repeats: int, tracks: bool = False) -> dict:
+def in_process_times(objects: int, repeats: int, tracks: bool = False, record: str = "compact") -> dict:
     """Median microseconds per 100-object frame, measured in this process on the bench frame (``tracks``: the
     service with ``--tracks``; every call gets a later ``timestamp_s``, so that each is a new frame of the tracks).
 
@@ -87,7 +87,9 @@ def in_process_times(objects: int, repeats: int, tracks: bool = False) -> dict:
     * ``process_frame_json_cpu_us``: the same call's thread CPU time (immune to waiting for a core);
     * ``process_frame_dict_us``: ``Service.process_frame`` (the embedding API: the same text, parsed into dicts);
     * ``frame_processor_us`` (and ``_cpu_us``): ``FrameProcessor.boxes2d`` alone on the same boxes (the
-      kernel's share; the reference measured in the same run).
+      kernel's share; the reference measured in the same run);
+    * ``record_bytes`` / ``cpm_bytes``: the record's length and (``record="compact"``, serve's default with MQTT
+      output) the CPM's UPER bytes beside it.
     """
     import gc
 
@@ -97,7 +99,7 @@ def in_process_times(objects: int, repeats: int, tracks: bool = False) -> dict:
     from footprint_uq.service import Service
 
     cam = PanTiltCamera(**CAMERA)
-    svc = Service(cam, "basler1", linearity=True, tracks=tracks)  # as `serve` runs it (--linearity is its default)
+    svc = Service(cam, "basler1", linearity=True, tracks=tracks, record=record)  # as `serve` runs it (--linearity)
     dets = make_detections(objects, 0)
     body, t_frame = json.dumps(dets).encode(), [time.time()]
 
@@ -125,6 +127,8 @@ def in_process_times(objects: int, repeats: int, tracks: bool = False) -> dict:
         t.setdefault("process_frame_json_cpu_us", []).append(cpu() - c0)
         k = out.data.rindex(b'"processing_us":')
         stages.append(orjson.loads(out.data[k + 16:-1]))
+        t.setdefault("record_bytes", []).append(len(out.data) / 1e6)  # (scaled back below)
+        t.setdefault("cpm_bytes", []).append(len(out.cpm_uper or b"") / 1e6)
         frame = orjson.loads(payload())
         t0 = wall()
         svc.process_frame(frame)
@@ -137,6 +141,7 @@ def in_process_times(objects: int, repeats: int, tracks: bool = False) -> dict:
     out = {f"process_frame_{k}_us": float(np.median([s[k] for s in stages])) for k in stages[0]}
     out.update({k: 1e6 * float(np.median(v)) for k, v in t.items()})
     out["total_over_kernel"] = out["process_frame_total_us"] / out["frame_processor_us"]
+    out["record"] = record
     return out
 
 
@@ -273,6 +278,10 @@ def measure(seconds: float = 60.0, cameras: int = 8, fps: float = 30.0, objects:
         **_cpu_floor(cpu_s + cpu_broker + cpu_bench + result["cpu_s"], h["frames_in"], cameras, stagger),
         "vm_steal_s": steal_s,
         "service_processing_us_median": stages,
+        # bytes on the wire per output frame, as received: the record and (compact records) the CPM's UPER bytes
+        "record": "full" if "full" in serve_args else "compact",
+        "bytes_per_frame_record": result.get("record_bytes", 0) / max(result["received"], 1),
+        "bytes_per_frame_cpm": result.get("cpm_bytes", 0) / max(result["received"], 1),
         "latency_split_ms": _latency_split(lat, svc_p50, svc_p99, proc_us),
         # every frame accounted for: published = out + dropped + errors, and every output received
         "frames_unaccounted": sent - h["frames_out"] - h["frames_dropped"] - h["errors"],
@@ -398,8 +407,15 @@ def _receiver(port: int) -> None:
             sys.stdout.write(json.dumps(d) + "\n")
             sys.stdout.flush()
 
+    sizes = {"record_bytes": 0, "cpm_bytes": 0, "cpm_messages": 0}
+
     def on_message(c, u, msg):
         t = time.time()
+        if msg.topic.endswith("/cpm"):  # a compact record's CPM: UPER bytes on a topic of their own
+            with lock:
+                sizes["cpm_bytes"] += len(msg.payload)
+                sizes["cpm_messages"] += 1
+            return
         if msg.topic.endswith("/health"):
             say({"health": json.loads(msg.payload)})
             return
@@ -407,6 +423,7 @@ def _receiver(port: int) -> None:
             return
         m = _TS.search(msg.payload, 0, 400)
         with lock:
+            sizes["record_bytes"] += len(msg.payload)
             lat_ms.append(1e3 * (t - float(m.group(1))))
             if len(lat_ms) % 10 == 0:  # a sample of the per-stage times (parsing every record would load the VM)
                 k = msg.payload.rfind(b'"processing_us":')
@@ -432,7 +449,7 @@ def _receiver(port: int) -> None:
     rx.loop_stop()
     with lock:
         say({"result": {"latency_ms": lat_ms, "processing_us": proc_us, "received": len(lat_ms),
-                        "cpu_s": time.process_time()}})
+                        "cpu_s": time.process_time(), **sizes}})
 
 
 def main(argv=None) -> int:
@@ -455,7 +472,7 @@ def main(argv=None) -> int:
     res = measure(seconds=5.0 if args.quick else args.seconds, cameras=args.cameras, fps=args.fps,
                   objects=args.objects, workers=args.workers, stagger=args.stagger,
                   serve_args=tuple(shlex.split(args.serve_args)), tracks=args.tracks)
-    res["in_process"] = in_process_times(args.objects, 200, tracks=res["tracks"])
+    res["in_process"] = in_process_times(args.objects, 200, tracks=res["tracks"], record=res["record"])
     print(json.dumps(res, indent=1))
     return 0
 

@@ -362,7 +362,8 @@ def test_object_rows_ellipse_is_the_centre_covariances_also_after_an_overflow():
     """The kernel's per-object ellipse rows (the service's records read them) equal ellipse_axes of the centre
     covariance, and a centre that an overflowing corner invalidates loses its ellipse there too."""
     from footprint_uq.fast.footprint_kernels import OBJ_ROW
-    from footprint_uq.products.footprints import FrameProcessor, _mark_overflow
+    from footprint_uq.products.footprint_estimate import mark_overflow as _mark_overflow
+    from footprint_uq.products.footprints import FrameProcessor
 
     cam = PanTiltCamera(focal_px=1400.0, image_size_px=(1920, 1080), height_m=8.0, pan_deg=10.0, tilt_deg=20.0)
     rng = np.random.default_rng(4)

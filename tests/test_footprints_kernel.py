@@ -262,7 +262,7 @@ def test_reference_empty_frame():
 
 
 def test_empty_reusable_shapes_and_memory():
-    from footprint_uq.products.footprints import _POOL_MIN_BYTES, empty_reusable
+    from footprint_uq.products.frame_processor import _POOL_MIN_BYTES, empty_reusable
 
     for shape, dtype in (((3, 2), np.float64), ((_POOL_MIN_BYTES // 8 + 5, 2, 2), np.float64), ((1 << 21,), np.int8),
                          ((0, 4, 2), np.float64)):

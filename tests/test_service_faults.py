@@ -38,9 +38,12 @@ def test_a_detection_with_more_corners_than_the_first_is_refused(service):
     one = {"u0_px": 900.0, "v0_px": 700.0}
     four = {f"{a}{k}_px": v for k in range(4) for a, v in (("u", 900.0 + 40 * (k % 2)), ("v", 650.0 + 40 * (k // 2)))}
     rec = service.process_frame({"frame": 1, "timestamp_s": T0, "detections": [one, four]})
-    assert rec["type"] == "error" and rec["field"] == "detections[1].u1_px" and "4 corners" in rec["reason"]
+    (err,) = rec["detection_errors"]  # that detection's error; the frame's other detection goes on
+    assert rec["type"] == "footprints" and rec["n_objects"] == 1
+    assert err["index"] == 1 and err["field"] == "detections[1].u1_px" and "4 corners" in err["reason"]
     rec = service.process_frame({"frame": 2, "timestamp_s": T0, "detections": [four, one]})
-    assert rec["type"] == "error" and rec["field"].startswith("detections[1].") and "1 corners" in rec["reason"]
+    (err,) = rec["detection_errors"]
+    assert err["field"].startswith("detections[1].") and "1 corners" in err["reason"] and rec["n_objects"] == 1
     ok = service.process_frame({"frame": 3, "timestamp_s": T0, "detections": [four, four]})
     assert ok["type"] == "footprints" and ok["n_objects"] == 2
 
@@ -52,9 +55,11 @@ def test_pixel_covariance_beyond_the_batch_limit_is_refused(service, cov, field)
     dets = [dict(box, cov_uu_px2=4.0, cov_uv_px2=0.0, cov_vv_px2=9.0),
             dict(box, **dict(zip(("cov_uu_px2", "cov_uv_px2", "cov_vv_px2"), cov, strict=True)))]
     rec = service.process_frame({"frame": 1, "timestamp_s": T0, "detections": dets})
-    assert rec["type"] == "error" and rec["field"] == f"detections[1].{field}" and "1e+12" in rec["reason"]
+    (err,) = rec["detection_errors"]
+    assert err["field"] == f"detections[1].{field}" and "1e+12" in err["reason"] and rec["n_objects"] == 1
     dets[1].update(cov_uu_px2=1e12, cov_uv_px2=0.0, cov_vv_px2=1e12)  # the limit itself is accepted
-    assert service.process_frame({"frame": 1, "timestamp_s": T0, "detections": dets})["type"] == "footprints"
+    rec = service.process_frame({"frame": 1, "timestamp_s": T0, "detections": dets})
+    assert rec["detection_errors"] == [] and rec["n_objects"] == 2
 
 
 # -- the queue ---------------------------------------------------------------------------------------------------
@@ -126,6 +131,26 @@ def test_stdin_records_leave_in_input_order_and_big_lines_are_refused(camera_fil
         "reason"]
     h = recs[-1]
     assert h["frames_in"] == 6 == h["frames_out"] + h["errors"] + h["frames_dropped"] and h["errors"] == 2
+
+
+def test_stdin_one_bad_detection_among_ten_is_counted_and_the_frame_published(camera_file):  # noqa: F811
+    """Issue 33 through the command: ``--class-names coco``, integer classes, one id COCO does not name: the
+    frame's record has nine objects and one error entry, and the health record counts the bad detection."""
+    f = frame("cam1", 0, n=10)
+    for k, d in enumerate(f["detections"]):
+        d["class"] = [2, 0, 7][k % 3]
+    f["detections"][3]["class"] = 80
+    p = subprocess.run(CLI + ["--camera", str(camera_file), "--budget", "basler1", "--input", "-",
+                              "--health-interval-s", "0", "--class-names", "coco", "--no-linearity"],
+                       input=(json.dumps(f) + "\n").encode(), capture_output=True, timeout=120,
+                       env={**os.environ, "NUMBA_NUM_THREADS": "1"})
+    assert p.returncode == 0, p.stderr.decode()[-2000:]
+    rec, health = (json.loads(x) for x in p.stdout.decode().splitlines())
+    assert rec["type"] == "footprints" and rec["n_objects"] == 9
+    assert [e["index"] for e in rec["detection_errors"]] == [3] and "not in the names map" in \
+        rec["detection_errors"][0]["reason"]
+    assert {o["class"] for o in rec["objects"]} == {"car", "person", "truck"}
+    assert health["frames_out"] == 1 and health["errors"] == 0 and health["detection_errors"] == 1
 
 
 # -- through Mosquitto ---------------------------------------------------------------------------------------------

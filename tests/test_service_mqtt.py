@@ -122,8 +122,9 @@ class Client:
                 c.subscribe(subscribe, qos=1)
 
         def on_message(c, u, msg):
-            with self.lock:
-                self.records.append((msg.topic, json.loads(msg.payload)))
+            with self.lock:  # a compact record's CPM: UPER bytes on <prefix>/<camera_id>/cpm
+                self.records.append((msg.topic, {"type": "cpm", "bytes": msg.payload} if msg.topic.endswith("/cpm")
+                                     else json.loads(msg.payload)))
 
         self.c.on_connect = on_connect
         self.c.on_message = on_message
@@ -160,6 +161,21 @@ def check_footprints(rec: dict, heading_offset_deg: float = 0.0):
         cov = np.array(o["cov_m2"])
         f = {**cpm_fields(cov, heading_offset_deg), **j2735_fields(cov, heading_offset_deg)}
         assert {k: int(v) for k, v in f.items()} == {k: o[k] for k in f}
+
+
+def check_compact(rx, camera_id: str):
+    """The compact records of one camera (serve's default with --output mqtt) and the CPMs on their own topic: one
+    CPM per record, in order, of the length the record says, decoding (asn1tools) to the record's objects in the
+    messages (their message ids)."""
+    with rx.lock:
+        recs = [r for t, r in rx.records if t == f"footprints/{camera_id}" and r["type"] == "footprints"]
+        cpms = [r["bytes"] for t, r in rx.records if t == f"footprints/{camera_id}/cpm"]
+    assert recs and len(recs) == len(cpms)
+    for rec, cpm in zip(recs, cpms, strict=True):
+        assert rec["record"] == "compact" and "cpm" not in rec and rec["cpm_uper_bytes"] == len(cpm)
+        objs = decode_cpm_uper(cpm.hex())["payload"]["cpmContainers"][1]["containerData"]["perceivedObjects"]
+        assert [o["objectId"] for o in objs] == [o["message_object_id"] for o in rec["objects"]
+                                                 if o["message_object_id"] is not None]
 
 
 def start_serve(args, **kw):
@@ -211,11 +227,13 @@ def test_mqtt_end_to_end_registry(broker, camera_file, tmp_path):
         assert h["frames_out"] + h["errors"] + h["frames_dropped"] == sent
         assert h["frames_out"] >= 12  # paced publishing: at most a few frames replaced by newer ones
         assert {e["camera_id"] for e in errs} == {"cam1", "cam2", "cam3"}
-        for rec in fps:
-            check_footprints(rec, 20.0 if rec["camera_id"] == "cam2" else 0.0)
+        for cam in ("cam1", "cam2"):
+            check_compact(rx, cam)
         with rx.lock:
             topics = {t for t, r in rx.records if r["type"] == "footprints"}
+            cpm_topics = {t for t, r in rx.records if r["type"] == "cpm"}
         assert topics == {"footprints/cam1", "footprints/cam2"}
+        assert cpm_topics == {"footprints/cam1/cpm", "footprints/cam2/cpm"}
         tx.close()
     finally:
         rc, _, err = stop_serve(p)
@@ -226,7 +244,7 @@ def test_mqtt_end_to_end_registry(broker, camera_file, tmp_path):
 def test_broker_restart_mid_stream(broker, camera_file):
     rx = Client(broker, "rx-restart", "footprints/#")
     p = start_serve(["--camera", str(camera_file), "--budget", "basler1", "--mqtt", broker.url, "--output", "mqtt",
-                     "--overload", "block", "--client-id", "serve-restart"])
+                     "--overload", "block", "--client-id", "serve-restart", "--record", "full"])
     try:
         _wait(lambda: len(rx.of("health")) >= 1, 60, "the service's first health message")
         tx = Client(broker, "tx-restart")
@@ -291,10 +309,12 @@ def test_stdin_with_a_malformed_line_in_the_middle(camera_file):
     fps = [r for r in recs if r["type"] == "footprints"]
     errs = [r for r in recs if r["type"] == "error"]
     health = [r for r in recs if r["type"] == "health"]
-    assert [r["frame"] for r in fps] == [0, 1, 2, 3, 4]  # 'block' policy on stdin: nothing dropped, in order
-    assert len(errs) == 2 and len(health) == 1  # the final health message
+    assert [r["frame"] for r in fps] == [0, 1, 2, 3, 4, 5]  # 'block' policy on stdin: nothing dropped, in order
+    assert len(errs) == 1 and len(health) == 1  # the final health message
     assert errs[0]["source"] == "stdin line 3" and "invalid JSON" in errs[0]["reason"]
-    assert errs[1]["field"] == "detections[1].u_max_px" and errs[1]["frame"] == 5
+    # the bad detection of frame 5 is that detection's error entry; the frame's other detections are published
+    assert [e["field"] for e in fps[-1]["detection_errors"]] == ["detections[1].u_max_px"]
+    assert fps[-1]["n_objects"] == 4 and health[0]["detection_errors"] == 1
     assert health[0]["frames_in"] == 7 == health[0]["frames_out"] + health[0]["errors"]
     for rec in fps:
         check_footprints(rec)

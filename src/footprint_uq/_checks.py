@@ -8,7 +8,7 @@ import numpy as np
 
 from .errors import InputError
 
-__all__ = ["as_points", "check_finite", "check_positive", "check_cov", "as_float"]
+__all__ = ["as_points", "check_finite", "check_positive", "check_cov", "cov2_faults", "as_float"]
 
 
 def as_points(name: str, a, last: int) -> np.ndarray:
@@ -100,17 +100,24 @@ def _check_cov_eig(name: str, c: np.ndarray, tol: float) -> np.ndarray:
     return c
 
 
-def _check_cov_2x2(name: str, c: np.ndarray, tol: float) -> np.ndarray:
-    """:func:`check_cov` of finite (..., 2, 2) matrices: the same tests and messages, the smaller eigenvalue of
-    ``[[a, b], [c, d]]`` as ``(a + d) / 2 - hypot((a - d) / 2, c)`` in closed form (its rounding error, ~1e-16 of
-    the scale, is far below the tolerance of ``tol`` times the scale)."""
+def cov2_faults(c: np.ndarray, tol: float = COV_PSD_RTOL) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per finite ``(..., 2, 2)`` matrix: ``(asym, neg, w_min)`` -- not symmetric (beyond 1e-9 of its largest
+    entry), not positive semi-definite (smallest eigenvalue below ``-tol`` times that scale), and the smaller
+    eigenvalue of ``[[a, b], [c, d]]`` as ``(a + d) / 2 - hypot((a - d) / 2, c)`` in closed form (its rounding
+    error, ~1e-16 of the scale, is far below the tolerance).  The tests of :func:`check_cov`, row by row (the
+    service reports each bad detection, not only the first)."""
     a, b, b2, d = c[..., 0, 0], c[..., 0, 1], c[..., 1, 0], c[..., 1, 1]
     scale = np.maximum(np.maximum(np.maximum(np.abs(a), np.abs(d)), np.maximum(np.abs(b), np.abs(b2))), 1e-300)
     asym = np.abs(b - b2) > 1e-9 * scale
+    w_min = 0.5 * (a + d) - np.hypot(0.5 * (a - d), b2)  # the lower triangle, as eigvalsh reads it
+    return asym, w_min < -tol * scale, w_min
+
+
+def _check_cov_2x2(name: str, c: np.ndarray, tol: float) -> np.ndarray:
+    """:func:`check_cov` of finite (..., 2, 2) matrices: the same tests and messages (:func:`cov2_faults`)."""
+    asym, neg, w_min = cov2_faults(c, tol)
     if asym.any():
         raise InputError(_at(name, asym), "non-symmetric matrix", "a symmetric covariance matrix")
-    w_min = 0.5 * (a + d) - np.hypot(0.5 * (a - d), b2)  # the lower triangle, as eigvalsh reads it
-    neg = w_min < -tol * scale
     if neg.any():
         raise InputError(_at(name, neg), f"min eigenvalue {w_min.min():.3g}",
                          "a positive semi-definite covariance matrix")

@@ -5,8 +5,8 @@ Input
 * a **Parquet dataset**: a folder of ``.parquet`` files, optionally hive-partitioned
   (``camera_id=cam07/date=2024-05-01/part-0.parquet``); the camera of a row is its
   ``camera_id`` column or partition key; other columns as in :mod:`footprint_uq.batch.schema`;
-* a **camera registry** (:func:`load_registry`): camera id -> camera, budget and optional
-  heading offset / geodetic origin.
+* a **camera registry** (:func:`load_registry`, from :mod:`footprint_uq.io.registry`): camera id ->
+  camera, budget and optional heading offset / geodetic origin.
 
 Work
 ----
@@ -31,8 +31,6 @@ ok + partial + error.
 
 from __future__ import annotations
 
-import csv
-import io
 import json
 import os
 import sys
@@ -46,12 +44,9 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.compute as pc
 import pyarrow.parquet as pq
-import yaml
 from tqdm import tqdm
 
-from .._parse import load_yaml
 from ..errors import ConfigError, InputError
-from ..io import load_camera
 from ..io.atomic import (
     atomic_write_text,
     clean_temporaries,
@@ -63,7 +58,7 @@ from ..io.atomic import (
     swap_in_folder,
     temp_path,
 )
-from ..uncertainty.budget import load_budget
+from ..io.registry import RegistryEntry, load_registry
 from . import schema as S
 from .process import BatchProcessor, Summary, prefetch
 from .readers import coerce_table, iter_parquet_tables, open_parquet
@@ -92,137 +87,6 @@ def require_dask():
                           "the optional dependency: pip install 'footprint-uq[dask]' "
                           "(dask[distributed,dataframe])") from None
     return distributed
-
-
-# -- registry ------------------------------------------------------------------------------------
-@dataclass
-class RegistryEntry:
-    """One camera of the fleet: its loaded camera and budget and optional map tie."""
-
-    camera_id: str
-    camera: object
-    budget: object
-    heading_offset_deg: float | None = None
-    origin_lat_deg: float | None = None
-    origin_lon_deg: float | None = None
-    source: str = ""
-
-
-_REG_KEYS = {"camera_id", "camera", "budget", "heading_offset_deg", "origin_lat_deg", "origin_lon_deg"}
-
-
-def _entry(rec: dict, where: str, base: Path, default_budget) -> RegistryEntry:
-
-    unknown = set(rec) - _REG_KEYS
-    if unknown:
-        raise ConfigError(f"{where}: {sorted(unknown)[0]}", rec[sorted(unknown)[0]], f"one of {sorted(_REG_KEYS)}")
-    cid = rec.get("camera_id")
-    if cid is None or str(cid).strip() == "":
-        raise ConfigError(f"{where}: camera_id", cid, "a camera id")
-    cam = rec.get("camera")
-    if not cam:
-        raise ConfigError(f"{where}: camera", cam, "a camera file path")
-    cpath = Path(str(cam))
-    cpath = cpath if cpath.is_absolute() else base / cpath
-    bud = rec.get("budget")
-    if bud is None or (isinstance(bud, float) and np.isnan(bud)) or str(bud).strip() == "":
-        if default_budget is None:
-            raise ConfigError(f"{where}: budget", bud, "a budget (preset or file) in the registry, or --budget")
-        budget = load_budget(default_budget)
-    else:
-        b = str(bud)
-        bp = Path(b) if Path(b).is_absolute() else base / b
-        budget = load_budget(str(bp) if bp.suffix.lower() in (".yaml", ".yml", ".json") else b)
-
-    def num(key):
-        v = rec.get(key)
-        if v is None or (isinstance(v, float) and np.isnan(v)) or (isinstance(v, str) and not v.strip()):
-            return None
-        try:
-            return float(v)
-        except (TypeError, ValueError):
-            raise ConfigError(f"{where}: {key}", v, "a number (degrees)") from None
-
-    return RegistryEntry(str(cid), load_camera(cpath), budget, num("heading_offset_deg"), num("origin_lat_deg"),
-                         num("origin_lon_deg"), str(cpath))
-
-
-def load_registry(path, *, budget=None) -> dict[str, RegistryEntry]:
-    """Read a camera registry.
-
-    Parameters
-    ----------
-    path : folder or file
-        * a **folder**: every ``<camera_id>.yaml`` / ``.yml`` / ``.json`` camera file in it
-          (budget: ``budget``, or a ``<camera_id>.budget.yaml`` next to it);
-        * a **table** -- ``.csv`` (header), ``.yaml``/``.json`` (a list of mappings, or a
-          mapping with key ``cameras``) -- with keys ``camera_id``, ``camera`` (camera file,
-          relative to the registry's folder), optional ``budget`` (preset or file; default
-          ``budget``), ``heading_offset_deg``, ``origin_lat_deg``, ``origin_lon_deg``.
-    budget : preset, path or ErrorBudget, optional
-        Default budget.
-
-    Returns
-    -------
-    dict camera_id -> RegistryEntry
-    """
-    p = Path(path)
-    if not p.exists():
-        raise ConfigError("registry", str(path), "an existing folder or file")
-    recs: list[tuple[dict, str]] = []
-    if p.is_dir():
-        base = p
-        for f in sorted(p.iterdir()):
-            if f.suffix.lower() not in (".yaml", ".yml", ".json") or ".budget." in f.name:
-                continue
-            rec = {"camera_id": f.stem, "camera": f.name}
-            for ext in (".yaml", ".yml", ".json"):
-                b = p / f"{f.stem}.budget{ext}"
-                if b.exists():
-                    rec["budget"] = b.name
-            recs.append((rec, str(f)))
-    else:
-        base = p.parent
-        suffix = p.suffix.lower()
-        try:
-            text = p.read_text(encoding="utf-8-sig")
-        except (OSError, UnicodeDecodeError) as e:
-            raise ConfigError("registry", str(p), f"a readable UTF-8 text file ({type(e).__name__}: {e})") from None
-        if "\x00" in text:
-            raise ConfigError("registry", str(p), "a text file (it holds NUL bytes)")
-        if suffix == ".csv":
-
-            try:
-                recs = [({k: v for k, v in r.items() if v != ""}, f"{p}: line {i + 2}")
-                        for i, r in enumerate(csv.DictReader(io.StringIO(text, newline=""), strict=True))]
-            except csv.Error as e:
-                raise ConfigError("registry", str(p), f"a valid CSV table ({e})") from None
-            for rec, where in recs:
-                if None in rec or any(v is None for v in rec.values()):
-                    raise ConfigError(where, "wrong number of fields", "as many fields as the header")
-        elif suffix in (".yaml", ".yml", ".json"):
-
-            try:
-                data = load_yaml(text, str(p))
-            except (yaml.YAMLError, ValueError, RecursionError) as e:
-                first = (str(e).strip().splitlines() or [type(e).__name__])[0]
-                raise ConfigError("registry", str(p), f"a valid YAML/JSON registry ({first})") from None
-            if isinstance(data, dict) and "cameras" in data:
-                data = data["cameras"]
-            if not isinstance(data, list) or not all(isinstance(r, dict) for r in data):
-                raise ConfigError(f"{p}", type(data).__name__, "a list of camera entries (or a mapping 'cameras:')")
-            recs = [(r, f"{p}: cameras[{i}]") for i, r in enumerate(data)]
-        else:
-            raise ConfigError("registry", str(p), "a folder, or a .csv/.yaml/.json registry table")
-    out: dict[str, RegistryEntry] = {}
-    for rec, where in recs:
-        e = _entry(rec, where, base, budget)
-        if e.camera_id in out:
-            raise ConfigError(f"{where}: camera_id", e.camera_id, "unique camera ids")
-        out[e.camera_id] = e
-    if not out:
-        raise ConfigError("registry", str(path), "at least one camera")
-    return out
 
 
 # -- planning ------------------------------------------------------------------------------------

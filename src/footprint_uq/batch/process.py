@@ -48,6 +48,7 @@ from ..errors import InputError
 from ..fast import footprint_kernels as fk
 from ..fast.footprint_kernels import OBJ_ROWS
 from ..io.atomic import atomic_write_text, same_file
+from ..products.detection_columns import MAX_PIXEL_VAR_PX2
 from ..products.footprints import CONTACT_MODES, DEGENERATE, V2X_FIELDS, FrameProcessor
 from ..products.geo import GeoReference
 from ..tracking import SharedJacobianAt, TrackerConfig, TrackOutput, TrackTable, object_motion
@@ -68,8 +69,6 @@ _OBJ = {name: i for i, name in enumerate(OBJ_ROWS)}
 #: kernel rows that must be finite in an "ok" row (centre and covariance) / a "partial" row (largest point)
 _CENTRE_ROWS = [_OBJ[c] for c in ("x_m", "y_m", "cov_xx_m2", "cov_xy_m2", "cov_yy_m2", "sigma_major_m")]
 _LARGEST_ROWS = [_OBJ[c] for c in ("largest_sigma_major_m", "largest_x_m", "largest_y_m")]
-#: largest detector pixel (co)variance accepted, px^2 (a 1e6-px sigma: far beyond any image)
-MAX_PIXEL_VAR_PX2 = 1e12
 #: reason of a row whose numbers overflowed (inputs finite but absurd, e.g. a box at 1e300 px)
 OVERFLOW_REASON = "result is not finite (overflow: input values far out of range)"
 #: below this many rows a chunk is processed in one thread

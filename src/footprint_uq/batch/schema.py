@@ -1,5 +1,8 @@
 """Column names and types of the batch detections (input) and footprints (output).
 
+The box families, their columns and the status words are
+:mod:`footprint_uq.products.detection_columns` (shared with the edge service), re-exported here.
+
 The full description, with examples, is ``docs/batch.md``.  Names carry their unit
 (``_px``, ``_m``, ``_m2``, ``_deg``, ``_rad``, ``_s``) as everywhere in footprint-uq.
 
@@ -27,10 +30,23 @@ optionally lat/lon and per-corner columns.
 
 from __future__ import annotations
 
-import re
-
 import pyarrow as pa
 
+from ..products.detection_columns import (
+    BOX2D_COLUMNS,
+    BOX3D_COLUMNS,
+    BOX_TYPES,
+    COV_COLUMNS,
+    STATUS_ERROR,
+    STATUS_OK,
+    STATUS_PARTIAL,
+    STATUSES,
+    YAW_COLUMNS,
+    box_columns,
+    corner_columns,
+    count_corners,
+    detect_box_type,
+)
 from ..products.footprints import V2X_FIELDS
 
 __all__ = ["DEFAULT_CHUNK_ROWS", "ID_COLUMNS", "ID_TYPES",
@@ -47,17 +63,6 @@ ID_COLUMNS = ("camera_id", "frame", "timestamp_s", "object_id", "class", "score"
 #: their types when read from text formats (CSV, JSON Lines); Parquet keeps its own types
 ID_TYPES = {"camera_id": pa.string(), "frame": pa.int64(), "timestamp_s": pa.float64(), "object_id": pa.string(),
             "class": pa.string(), "score": pa.float64()}
-BOX2D_COLUMNS = ("u_min_px", "v_min_px", "u_max_px", "v_max_px")
-BOX3D_COLUMNS = ("x_m", "y_m", "z_m", "length_m", "width_m", "height_m")
-YAW_COLUMNS = ("yaw_rad", "yaw_deg")
-COV_COLUMNS = ("cov_uu_px2", "cov_uv_px2", "cov_vv_px2")
-BOX_TYPES = ("2d", "3d", "corners")
-
-STATUS_OK = "ok"            # footprint centre computed
-STATUS_PARTIAL = "partial"  # centre not computable, but at least one corner usable (largest point given)
-STATUS_ERROR = "error"      # nothing computed: bad row or no usable corner
-STATUSES = (STATUS_OK, STATUS_PARTIAL, STATUS_ERROR)
-
 #: V2X codes written for rows without a centre covariance (the messages' "unavailable" values)
 V2X_UNAVAILABLE = {"cpm_x_confidence": 4096, "cpm_y_confidence": 4096, "cpm_xy_correlation": 101,
                    "j2735_semi_major": 255, "j2735_semi_minor": 255, "j2735_orientation": 65535,
@@ -65,42 +70,6 @@ V2X_UNAVAILABLE = {"cpm_x_confidence": 4096, "cpm_y_confidence": 4096, "cpm_xy_c
 
 #: status and reason are dictionary-encoded strings (few distinct values)
 REASON_TYPE = pa.dictionary(pa.int32(), pa.string())
-
-_CORNER_RE = re.compile(r"^[uv](\d+)_px$")
-
-
-def corner_columns(K: int) -> tuple[str, ...]:
-    """Input corner columns for K corners: ``u0_px, v0_px, u1_px, v1_px, ...``."""
-    return tuple(name for k in range(K) for name in (f"u{k}_px", f"v{k}_px"))
-
-
-def count_corners(names) -> int:
-    """Number K of consecutive corners ``u0_px, v0_px ... u{K-1}_px, v{K-1}_px`` present (0 if none)."""
-    names = set(names)
-    K = 0
-    while f"u{K}_px" in names and f"v{K}_px" in names:
-        K += 1
-    return K
-
-
-def detect_box_type(names) -> str | None:
-    """The box family of a set of column names (None if none is complete)."""
-    names = set(names)
-    found = [t for t, ok in (("2d", all(c in names for c in BOX2D_COLUMNS)),
-                             ("3d", all(c in names for c in BOX3D_COLUMNS) and any(y in names for y in YAW_COLUMNS)),
-                             ("corners", count_corners(names) > 0)) if ok]
-    return found[0] if len(found) == 1 else None
-
-
-def box_columns(box_type: str, names) -> tuple[str, ...]:
-    """Numeric box columns of ``box_type`` in kernel order (3D: the yaw column present; yaw_rad preferred)."""
-    if box_type == "2d":
-        return BOX2D_COLUMNS
-    if box_type == "3d":
-        yaw = "yaw_rad" if "yaw_rad" in set(names) else "yaw_deg"
-        return BOX3D_COLUMNS + (yaw,)
-    return corner_columns(count_corners(names))
-
 
 def numeric_input_columns(box_type: str, names) -> tuple[str, ...]:
     """Every numeric input column used (box columns, then the covariance columns present)."""

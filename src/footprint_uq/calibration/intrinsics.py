@@ -813,11 +813,7 @@ def calibrate_corners(image_points_px, board, image_size_px, *, labels=None, max
     if len(imgs) < mv:
         raise InputError("views", len(imgs), f"at least {mv} views with the whole {board.label()} board detected"
                          + _not_found_note(detections))
-    thr = None
-    if max_mean_reproj_px is not None:
-        thr = float(max_mean_reproj_px)
-        if not (np.isfinite(thr) and thr > 0):
-            raise InputError("max_mean_reproj_px", max_mean_reproj_px, "a threshold > 0 px")
+    thr = _reproj_threshold(max_mean_reproj_px)
     obj = board.object_points()
     fit, active, rounds, dropped = _filter_views(obj, imgs, labels, (w, h), flags, thr, mv, max_rounds)
     _check_fit(fit, board, (w, h), max_rms_px)
@@ -837,6 +833,16 @@ def calibrate_corners(image_points_px, board, image_size_px, *, labels=None, max
         [Detection(FrameSource(lab), True, c, (w, h), "", "given") for lab, c in zip(labels, imgs, strict=True)],
         rounds=rounds, dropped=dropped, bootstrap=boot, max_mean_reproj_px=thr, flags=int(flags),
         opencv_version=cv2.__version__)
+
+
+def _reproj_threshold(max_mean_reproj_px) -> float | None:
+    """The frame filter's threshold (px), checked: None (no filter) or a finite number > 0."""
+    if max_mean_reproj_px is None:
+        return None
+    thr = float(max_mean_reproj_px)
+    if not (np.isfinite(thr) and thr > 0):
+        raise InputError("max_mean_reproj_px", max_mean_reproj_px, "a threshold > 0 px")
+    return thr
 
 
 def _check_fit(fit, board, size, max_rms_px) -> None:

@@ -10,6 +10,7 @@ import sys
 import click
 
 from ..errors import InputError
+from ..io.class_names import load_class_names
 from ..products.footprints import CONTACT_MODES, V2X_POLICIES
 from ..service.messages.asn1_cpm import CDD_RELEASES, DEFAULT_CDD
 from ..service.runner import MAX_FRAME_BYTES, QUEUE_DEPTH, run
@@ -43,8 +44,9 @@ __all__ = ["serve_cmd"]
                    "(default for MQTT), or block the reader (default for stdin).")
 @click.option("--health-interval-s", type=click.FloatRange(min=0), default=1.0, show_default=True,
               help="Period of the health/metrics message (0: none).")
-@click.option("--workers", type=click.IntRange(min=1), default=1, show_default=True,
-              help="Worker processes (MQTT input with --registry): the cameras are split over them.")
+@click.option("--workers", type=click.IntRange(min=1), default=None,
+              help="Worker processes (MQTT input with --registry): the cameras are split over them. Default: "
+                   "min(cores - 1, cameras) with MQTT input and a registry (1 on a 2-core machine), else 1.")
 @click.option("--client-id", default=None, help="MQTT client id (persistent session; default footprint-uq-serve-PID).")
 @click.option("--heading-offset-deg", type=float, default=0.0, show_default=True, metavar="D",
               help="Compass bearing of the world +y axis (V2X fields, message east/north offsets).")
@@ -78,11 +80,19 @@ __all__ = ["serve_cmd"]
 @click.option("--v2x-policy", type=click.Choice(list(V2X_POLICIES)), default="sampled", show_default=True,
               help="What the V2X fields encode where an object's centre is not linear_ok (far objects): "
                    "docs/uncertainty-model.md; each object's record names it (v2x_source, v2x_cov_m2).")
+@click.option("--class-names", "class_names", default=None, metavar="coco|FILE",
+              help="Names of integer class ids (\"class\": 2): 'coco' (the 80 COCO names of YOLO / ultralytics "
+                   "models) or a names file (data.yaml 'names:', JSON, or one name per line). Without it an "
+                   "integer class is that detection's error entry.")
+@click.option("--record", type=click.Choice(["compact", "full"]), default=None,
+              help="Record layout: 'compact' (default with --output mqtt: per object id, class, status, position, "
+                   "cov_m2, message id and motion; the CPM as UPER bytes on <prefix>/<camera_id>/cpm) or 'full' "
+                   "(default on stdout: every field, the CPM as JSON and UPER hex, the SDSM). docs/service.md.")
 @pose_options
 def serve_cmd(camera_path, budget_spec, registry, camera_id, input_, mqtt, output, input_prefix, output_prefix,
               policy, health_interval_s, workers, client_id, heading_offset_deg, origin_lat, origin_lon, confidence,
               contact, allow_outside_image, station_id, uper_encoder, linearity, linear_threshold, cpm_cdd, v2x_policy,
-              queue_depth, max_frame_bytes, tracks, pose):
+              queue_depth, max_frame_bytes, tracks, class_names, record, pose):
     """Edge service: detector frames in, positions with uncertainty and V2X messages (CPM, SDSM) out.
 
     One output record per frame (or an error record), a health record every second;
@@ -90,6 +100,8 @@ def serve_cmd(camera_path, budget_spec, registry, camera_id, input_, mqtt, outpu
     """
     if pose is not None and camera_path is None:
         raise InputError("--pose-file/--height-m", pose, "--camera too (a registry's camera files hold the poses)")
+    if class_names is not None:
+        load_class_names(class_names)  # a bad names file: one line, exit 2, before the service starts
     if budget_spec is not None:
         msg = budget_notice(load_budget(budget_spec))
         if msg is not None:
@@ -99,7 +111,8 @@ def serve_cmd(camera_path, budget_spec, registry, camera_id, input_, mqtt, outpu
                  confidence=confidence, contact=contact, allow_outside_image=allow_outside_image,
                  station_id=station_id, uper_encoder=uper_encoder, linearity=linearity,
                  linear_threshold=linear_threshold, workers=workers, cpm_cdd=cpm_cdd, v2x_policy=v2x_policy,
-                 queue_depth=queue_depth, max_frame_bytes=max_frame_bytes, tracks=tracks,
+                 queue_depth=queue_depth, max_frame_bytes=max_frame_bytes, tracks=tracks, class_names=class_names,
+                 record=record,
                  input=input_ if input_ is not None else (None if mqtt else "-"), mqtt=mqtt, output=output,
                  input_prefix=input_prefix, output_prefix=output_prefix, policy=policy,
                  health_interval_s=health_interval_s, client_id=client_id))

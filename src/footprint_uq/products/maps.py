@@ -500,6 +500,16 @@ def uncertainty_map(camera, budget, step_px: int = 1, *, max_range_m: float | No
             for s in range(0, n, _BLOCK_PX):
                 _reference_block(camera, budget, flat, slice(s, min(n, s + _BLOCK_PX)), linearity, xy, cov, valid,
                                  nl)
+    return _finished_map(camera, budget, uv, step, max_range_m, thr, xy, cov, valid, reason, nl, gsd_r, gsd_c, area,
+                         rng)
+
+
+def _finished_map(camera, budget, uv, step: int, max_range_m, thr: float, xy, cov, valid, reason, nl, gsd_r, gsd_c,
+                  area, rng) -> UncertaintyMap:
+    """The flat per-pixel layers of :func:`uncertainty_map` masked (invalid and beyond ``max_range_m``: NaN), their
+    ellipses, and the map of shape ``uv.shape[:2]``."""
+    linearity = nl is not None
+    H, W = uv.shape[:2]
     if max_range_m is not None:
         far = valid & (rng > max_range_m)
         valid &= ~far

@@ -23,39 +23,33 @@ from __future__ import annotations
 
 import functools
 import json
-import math
-import operator
 import re
 import threading
 import time
 import zlib
 from dataclasses import dataclass, field
-from itertools import chain
-from itertools import repeat as _repeat
 from typing import NamedTuple
 
 import numpy as np
 import orjson
-from numba import njit
 
-from ..batch import schema as S
-from ..batch.fleet import load_registry
-from ..batch.process import MAX_PIXEL_VAR_PX2
 from ..errors import FootprintUQError, InputError
 from ..fast.footprint_kernels import OBJ_ROW
+from ..io.class_names import ClassNames, load_class_names
+from ..io.registry import load_registry
+from ..products import detection_columns as S
 from ..products.footprints import CONTACT_MODES, V2X_FIELDS, V2X_POLICIES, FrameProcessor
 from ..products.geo import GeoReference
 from ..products.v2x import J2735_POSITION_CONFIDENCE_NAMES
 from ..tracking import SharedJacobianAt, TrackerConfig, TrackTable, object_motion
 from ..uncertainty.ellipse import chi2_scale
 from ..uncertainty.propagation import DEFAULT_LINEAR_THRESHOLD
+from .detections import DetectionError, FieldError, check_values, finite_number, parse_detections
+from .frame_kernels import cm_dm, worst_usable
 from .jsonrows import Table
 from .messages.asn1_cpm import DEFAULT_CDD
 from .messages.cpm import (
     CONFIDENCE_LEVEL_UNAVAILABLE,
-    COORD_GUARD_CM,
-    COORD_MAX,
-    COORD_MIN,
     CPM_CLASS_OF,
     LATITUDE_UNAVAILABLE,
     LONGITUDE_UNAVAILABLE,
@@ -74,7 +68,7 @@ from .messages.motion import (
     ObjectMotion,
     motion_codes,
 )
-from .messages.sdsm import OFFSET_MAX, SDSM_OBJECT_TYPES, build_sdsm
+from .messages.sdsm import SDSM_OBJECT_TYPES, build_sdsm
 from .messages.uper_cpm import (
     CpmUperWriter,
     class_bits,
@@ -83,9 +77,14 @@ from .messages.uper_cpm import (
 )
 
 __all__ = ["Service", "CameraSetup", "FrameOutput", "error_record", "station_id_of", "RECORD_FOOTPRINTS",
-           "RECORD_ERROR", "UPER_ENCODERS"]
+           "RECORD_ERROR", "UPER_ENCODERS", "RECORD_LAYOUTS", "COMPACT_OBJECT_FIELDS"]
 
 UPER_ENCODERS = ("fast", "asn1tools")
+#: the record layouts (``Service(record=...)``, ``serve --record``)
+RECORD_LAYOUTS = ("full", "compact")
+#: per object in a compact record (with ``tracks``: the last four too); the full record has these and more
+COMPACT_OBJECT_FIELDS = ("object_id", "class", "status", "reason", "x_m", "y_m", "cov_m2", "message_object_id",
+                         "track_id", "v_east_mps", "v_north_mps", "cov_v_m2ps2")
 #: most perceived objects in one CPM (``PerceivedObjects ::= SEQUENCE SIZE (0..255, ...)``); the SDSM follows
 MAX_MESSAGE_OBJECTS = 255
 
@@ -123,6 +122,27 @@ class FrameOutput(NamedTuple):
     processing_us: float | None
     #: an error record as a dict (None for a footprints record: parse ``data``)
     record: dict | None
+    #: a footprints record's bad detections (its ``detection_errors``: each one's index and reason)
+    n_detection_errors: int = 0
+    #: ``record="compact"``: the frame's CPM, UPER-encoded (bytes for a V2X stack; the record says its length);
+    #: None for a full record (its CPM is in the record) or without messages
+    cpm_uper: bytes | None = None
+
+
+def _parse_frame_text(text) -> object:
+    """A frame's JSON text (bytes or str) parsed by orjson, as the MQTT path does (strict JSON: no NaN literals,
+    integers within 64 bits); bytes that are not UTF-8 or text that is not JSON -> a frame error."""
+    if isinstance(text, memoryview):
+        text = bytes(text)
+    try:
+        return orjson.loads(text)
+    except orjson.JSONDecodeError as e:
+        if isinstance(text, (bytes, bytearray)):
+            try:
+                bytes(text).decode("utf-8")
+            except UnicodeDecodeError as u:
+                raise _FrameError(None, f"frame is not UTF-8 text: {u}") from None
+        raise _FrameError(None, f"invalid JSON: {e}") from None
 
 
 def _dumps_error(rec: dict) -> bytes:
@@ -158,7 +178,23 @@ class CameraSetup:
     #: object_id -> the messages' object id (unique per message, stable across frames; messages/ids.py)
     ids: MessageIdMap = field(default_factory=MessageIdMap)
 
+    #: the map tie's constants, read once (a frame calls no method of the GeoReference but ``to_wgs84``)
+    has_origin: bool = False
+    enu_origin_m: np.ndarray | None = None
+    enu_rotation_t: np.ndarray | None = None
+
     def __post_init__(self):
+        geo = self.georef
+        self.has_origin = geo.has_origin
+        self.enu_origin_m, self.enu_rotation_t = np.asarray(geo.origin_world_m), geo.R_enu_world.T
+        self._message_origin()
+
+    def world_to_enu(self, xy_world_m: np.ndarray) -> np.ndarray:
+        """:meth:`~footprint_uq.products.geo.GeoReference.world_to_enu` of checked ``(N, 2)`` world points (the same
+        operations on the constants read once)."""
+        return (xy_world_m - self.enu_origin_m) @ self.enu_rotation_t
+
+    def _message_origin(self) -> None:
         geo = self.georef
         if geo.has_origin:
             self.lat_1e7deg, self.lon_1e7deg = round(geo.origin_lat_deg * 1e7), round(geo.origin_lon_deg * 1e7)
@@ -167,15 +203,12 @@ class CameraSetup:
                                   self.lon_1e7deg)
 
 
-def _finite_number(d: dict, key: str, where: str) -> float:
-    v = d.get(key)
-    if v is None:
-        raise _FrameError(f"{where}.{key}", f"missing field {key}")
-    if isinstance(v, bool) or not isinstance(v, (int, float)):
-        raise _FrameError(f"{where}.{key}", f"field {key} is not a number: {v!r}")
-    if not math.isfinite(v):
-        raise _FrameError(f"{where}.{key}", f"field {key} is not finite: {v!r}")
-    return float(v)
+def _frame_number(frame: dict, key: str) -> float:
+    """A frame's own number field (``timestamp_s``), finite; a frame error otherwise."""
+    try:
+        return finite_number(frame, key, "frame")
+    except FieldError as e:
+        raise _FrameError(e.field, e.reason) from None
 
 
 class Service:
@@ -239,6 +272,15 @@ class Service:
         (null where unknown; docs/service.md).  Frames of a camera must then come in time order.
     tracker : TrackerConfig, optional
         The tracker's options (timeout, gate, acceleration noise).
+    class_names : "coco", path or ClassNames, optional
+        Names of integer class ids (``"class": 2``): the COCO 80 names built in or a names file
+        (:func:`footprint_uq.io.class_names.load_class_names`).  Without it an integer class, and with it an id the
+        map does not name, is that detection's error entry (the frame's other detections go on).
+    record : {"full", "compact"}
+        The record's layout: ``full`` (default) every field, the CPM as JSON and UPER hex, the SDSM; ``compact``
+        the fields of :data:`COMPACT_OBJECT_FIELDS` per object and, without the CPM JSON and the SDSM, the CPM's
+        UPER bytes beside the record (:attr:`FrameOutput.cpm_uper`; ``serve --output mqtt`` publishes them on
+        ``<prefix>/<camera_id>/cpm``).  docs/service.md, "Lean records on the wire".
     """
 
     def __init__(self, camera=None, budget=None, *, registry=None, camera_id: str | None = None,
@@ -247,7 +289,8 @@ class Service:
                  allow_outside_image: bool = False, station_id: int | None = None, messages: bool = True,
                  uper_encoder: str = "fast", linearity: bool = False, linear_threshold: float | None = None,
                  warm_up: bool = True, cpm_cdd: str = DEFAULT_CDD, v2x_policy: str = "sampled",
-                 tracks: bool = False, tracker: TrackerConfig | None = None):
+                 tracks: bool = False, tracker: TrackerConfig | None = None,
+                 class_names: str | ClassNames | None = None, record: str = "full"):
         if (camera is None) == (registry is None):
             raise InputError("camera/registry", "both" if camera is not None else "neither",
                              "exactly one of a camera (with a budget) or a registry")
@@ -269,6 +312,10 @@ class Service:
         self._encode = functools.partial(encode_cpm_uper if uper_encoder == "asn1tools" else encode_cpm_uper_fast,
                                          cdd=self.cpm_cdd)
         self._cls = _class_tables(self.cpm_cdd)
+        self.class_names = None if class_names is None else load_class_names(class_names)
+        if record not in RECORD_LAYOUTS:
+            raise InputError("record", record, f"one of {RECORD_LAYOUTS}")
+        self.record = record
         self.cameras: dict[str | None, CameraSetup] = {}
         if camera is not None:
             if budget is None:
@@ -329,7 +376,7 @@ class Service:
         t.json([b'{"a":', t.column(np.zeros(1)), t.when(np.ones(1, bool), b',"b":', t.column(["x"])), b"}"])
         one = np.ones(1, np.int64)
         perceived_object_container_uper_arrays(one, one, one, one, one, one, one, one, one, cdd=self.cpm_cdd)
-        _cm_dm(np.zeros((1, 2)), np.zeros(1, np.int64))
+        cm_dm(np.zeros((1, 2)), np.zeros(1, np.int64))
 
     def _warm_frames(self) -> None:
         """Two dummy frames of 2D boxes and two of 3D boxes through the whole path of each camera (records,
@@ -377,16 +424,8 @@ class Service:
         t0 = time.perf_counter()
         camera_id = frame_no = None
         try:
-            if isinstance(frame, (bytes, bytearray, memoryview)):
-                try:
-                    frame = bytes(frame).decode("utf-8")
-                except UnicodeDecodeError as e:
-                    raise _FrameError(None, f"frame is not UTF-8 text: {e}") from None
-            if isinstance(frame, str):
-                try:
-                    frame = json.loads(frame)
-                except json.JSONDecodeError as e:
-                    raise _FrameError(None, f"invalid JSON: {e}") from None
+            if isinstance(frame, (bytes, bytearray, memoryview, str)):
+                frame = _parse_frame_text(frame)
             if not isinstance(frame, dict):
                 raise _FrameError(None, f"frame is not a JSON object: {type(frame).__name__}")
             camera_id = frame.get("camera_id")
@@ -426,28 +465,41 @@ class Service:
             raise _FrameError("frame", "missing field frame")
         if isinstance(fno, bool) or not isinstance(fno, int):
             raise _FrameError("frame", f"field frame is not an integer: {fno!r}")
-        ts = _finite_number(frame, "timestamp_s", "frame")
+        ts = _frame_number(frame, "timestamp_s")
         dets = frame.get("detections")
         if not isinstance(dets, list):
             raise _FrameError("detections", f"field detections is not a list: {type(dets).__name__}")
         ref_ms = timestamp_its_ms(ts) if self.messages else None
-        est, ids, classes, class_p, _pixel_cov = self._footprints(setup, dets)
-        motion = self._motion(setup, est, ids, ts, dets) if self.tracks else None
+        est, found = self._footprints(setup, dets)
+        ids, classes, class_p = found.object_ids, found.classes, found.class_confidence
+        motion = self._motion(setup, est, ids, ts, found.yaw_rad) if self.tracks else None
         t1 = time.perf_counter()
         objects, ok_idx, msg_ids = self._objects_json(setup, est, ids, classes, ts, motion)
         t2 = time.perf_counter()
-        head = {"type": RECORD_FOOTPRINTS, "camera_id": camera_id, "frame": fno, "timestamp_s": ts,
-                "station_id": setup.station_id, "heading_offset_deg": setup.georef.heading_offset_deg,
-                "confidence": self.confidence, "n_objects": len(ids)}
+        compact = self.record == "compact"
+        head = {"type": RECORD_FOOTPRINTS, **({"record": "compact"} if compact else {}), "camera_id": camera_id,
+                "frame": fno, "timestamp_s": ts, "station_id": setup.station_id,
+                "heading_offset_deg": setup.georef.heading_offset_deg,
+                **({} if compact else {"confidence": self.confidence}), "n_objects": len(ids),
+                "detection_errors": [e.as_dict() for e in found.errors]}
         if self.messages:
             head["cpm_cdd"] = self.cpm_cdd
         parts = [orjson.dumps(head)[:-1], b',"objects":', objects]
+        cpm_uper = None
         if self.messages:
             # motion: the tracker's motion of the frame's objects (None: the messages carry no motion)
             om = None if motion is None else motion[1]
-            cpm, cpm_hex, sdsm = self._messages_json(setup, est, classes, class_p, ok_idx, msg_ids, int(fno), ts,
-                                                     ref_ms, motion=om)
-            parts += [b',"cpm":', *cpm, b',"cpm_uper_hex":"', cpm_hex.encode(), b'","sdsm":', *sdsm]
+            if compact and self.uper_encoder == "fast":  # the CPM's bytes only (on their own topic)
+                cpm_uper = self._cpm_uper(setup, self._message_columns(setup, est, classes, class_p, ok_idx, om),
+                                          msg_ids, ref_ms)
+            else:
+                cpm, cpm_uper, sdsm = self._messages_json(setup, est, classes, class_p, ok_idx, msg_ids, int(fno),
+                                                          ts, ref_ms, motion=om)
+            if compact:
+                parts += [b',"cpm_uper_bytes":', b"%d" % len(cpm_uper)]
+            else:
+                parts += [b',"cpm":', *cpm, b',"cpm_uper_hex":"', cpm_uper.hex().encode(), b'","sdsm":', *sdsm]
+                cpm_uper = None  # (in the record)
             omitted = int(np.count_nonzero(est.centre_valid)) - len(ok_idx)
             if omitted:  # said, never silent: objects with a centre that did not fit in the messages
                 parts += [b',"objects_not_in_messages":', b"%d" % omitted]
@@ -456,68 +508,42 @@ class Service:
         parts += [b',"processing_us":', orjson.dumps({
             "footprints": round(1e6 * (t1 - t0), 1), "records": round(1e6 * (t2 - t1), 1),
             "messages": round(1e6 * (t3 - t2), 1), "total": total}), b"}"]
-        return FrameOutput(b"".join(parts), RECORD_FOOTPRINTS, camera_id, total, None)
+        return FrameOutput(b"".join(parts), RECORD_FOOTPRINTS, camera_id, total, None, len(found.errors), cpm_uper)
 
-    def _footprints(self, setup: CameraSetup, dets: list):
-        """Parse the detections into arrays and run the camera's kernel.
+    def _footprints(self, setup: CameraSetup, dets: list) -> tuple:
+        """The detections into columns (:func:`.detections.parse_detections`: each bad one an error entry) and the
+        camera's kernel over the good ones: ``(estimate, FrameDetections)``.
 
-        Each field is taken from every detection in one C-level pass (``map``) and checked on its set
-        of types; only a frame with something wrong goes through the per-detection checks, which name
-        the first bad field (the same error records as before the fast paths)."""
-        N = len(dets)
-        if N and set(map(type, dets)) != _DICT_ONLY:
-            i = next(i for i, d in enumerate(dets) if type(d) is not dict)
-            raise _FrameError(f"detections[{i}]", f"detection {i} is not a JSON object")
-        keys = set().union(*dets) if N else set()
-        # object ids: absent -> the detection's index; explicit null stays None
-        if "object_id" not in keys:
-            ids = list(range(N))
-        else:
-            try:
-                ids = list(map(_GET_ID, dets))
-            except KeyError:
-                ids = [d.get("object_id", i) for i, d in enumerate(dets)]
-            if not set(map(type, ids)) <= _ID_TYPES_SET:
-                _check_ids(ids)
-        if "class" not in keys:
-            classes = [None] * N
-        else:
-            classes = list(map(dict.get, dets, _repeat("class")))
-            if not set(map(type, classes)) <= _CLASS_TYPES:
-                _check_classes(classes)
-        if "class_confidence" not in keys:
-            class_p = None
-        else:
-            class_p = _class_confidences(dets)
+        A frame the processor refuses (a pixel covariance that is not positive semi-definite: its compiled check)
+        is checked in full (:func:`.detections.check_values`: every bad detection an error entry) and run again;
+        a value refused beyond those checks (none is known) costs that detection, not the frame: it joins the
+        error entries and the kernel runs again without it."""
+        found = parse_detections(dets, self.class_names)
         proc = setup.processor
-        if N == 0:
-            return proc.corners(np.zeros((0, 1, 2))), ids, classes, class_p, None
-        family = S.detect_box_type(dets[0].keys())
-        if family is None:
-            raise _FrameError("detections[0]", "no complete box: 2D (u_min_px, v_min_px, u_max_px, v_max_px), 3D "
-                                               "(x_m, y_m, z_m, length_m, width_m, height_m, yaw_rad|yaw_deg) or "
-                                               "corners (u0_px, v0_px, ...), one family per frame")
-        cols = S.box_columns(family, dets[0].keys())
-        if family == "corners":
-            _check_corner_counts(dets, cols)
-        X = _box_array(dets, cols)
-        P = None
-        if not keys.isdisjoint(S.COV_COLUMNS):
-            P = _fast_cov(dets)
-            if P is None:
-                P = _slow_cov(dets)
-            if P is not None:
-                _check_pixel_cov_range(P)
-        try:
-            if family == "2d":
-                est = proc.boxes2d(X, contact=self.contact, pixel_cov_px2=P)
-            elif family == "3d":
-                est = proc.boxes3d(X, yaw_unit="deg" if cols[-1] == "yaw_deg" else "rad", pixel_cov_px2=P)
-            else:
-                est = proc.corners(X.reshape(N, -1, 2), pixel_cov_px2=P)
-        except InputError as e:
-            raise _FrameError(_detection_field(e.field), str(e)) from None
-        return est, ids, classes, class_p, P
+        checked = False
+        while True:
+            if found.family is None:
+                return proc.corners(np.zeros((0, 1, 2))), found
+            X, P = found.boxes, found.pixel_cov_px2
+            try:
+                if found.family == "2d":
+                    return proc.boxes2d(X, contact=self.contact, pixel_cov_px2=P), found
+                if found.family == "3d":
+                    return proc.boxes3d(X, yaw_unit="deg" if found.columns[-1] == "yaw_deg" else "rad",
+                                        pixel_cov_px2=P), found
+                return proc.corners(X.reshape(len(found), -1, 2), pixel_cov_px2=P), found
+            except InputError as e:
+                if not checked:  # every covariance that is not PSD, at once (the processor names the first)
+                    found, checked = check_values(found), True
+                    continue
+                m = re.search(r"\[(\d+)", e.field or "")
+                if m is None or int(m.group(1)) >= len(found):
+                    raise _FrameError("detections", str(e)) from None
+                r = int(m.group(1))
+                bad = np.zeros(len(found), bool)
+                bad[r] = True
+                i = int(found.index[r])
+                found = found.without(bad, [DetectionError(i, f"detections[{i}]", str(e))])
 
     def _linearity(self, est):
         """Per object: the largest predicted relative error of the linear 1-sigma semi-major axis over its
@@ -528,17 +554,14 @@ class Service:
         them for the V2X policy anyway; ``tests/test_service.py`` holds them to the library's function), not a
         second numpy pass over the frame (~1.7 ms per 100 objects)."""
         worst, ok = np.empty(len(est)), np.empty(len(est), np.bool_)
-        _worst_usable(est.corners_nonlinearity, est.corner_usable, self.linear_threshold, worst, ok)
+        worst_usable(est.corners_nonlinearity, est.corner_usable, self.linear_threshold, worst, ok)
         return worst, ok
 
     @staticmethod
-    def _motion(setup: CameraSetup, est, ids: list, ts: float, dets: list):
-        """The frame's objects through the camera's tracks: ``(track_id (N,), ObjectMotion)``."""
-        yaw = None
-        if dets and ("yaw_rad" in dets[0] or "yaw_deg" in dets[0]):  # 3D boxes: their yaw (checked by then)
-            key = "yaw_rad" if "yaw_rad" in dets[0] else "yaw_deg"
-            yaw = np.fromiter(map(dict.get, dets, _repeat(key)), np.float64, len(dets))
-            yaw = yaw if key == "yaw_rad" else np.deg2rad(yaw)
+    def _motion(setup: CameraSetup, est, ids: list, ts: float, yaw_rad: np.ndarray | None):
+        """The frame's objects through the camera's tracks: ``(track_id (N,), ObjectMotion)``; ``yaw_rad``: the
+        3-D boxes' yaw (None for other boxes)."""
+        yaw = yaw_rad
         N = len(ids)
         B = est.centre_shared_m if est.centre_shared_m is not None else np.full((N, 2, setup.tracks.rank), np.nan)
         with setup.tracks_lock:
@@ -548,108 +571,105 @@ class Service:
     def _objects_json(self, setup: CameraSetup, est, ids: list, classes: list, ts: float = 0.0,
                       motion=None) -> tuple[bytes, np.ndarray, list]:
         """The ``objects`` list of the record as JSON text, written column-wise (:class:`.jsonrows.Table`); and
-        the indices of the objects in the messages (with a centre, at most 255) and their ``message_object_id``."""
+        the indices of the objects in the messages (with a centre, at most 255) and their ``message_object_id``.
+        ``record="compact"``: the fields of :data:`COMPACT_OBJECT_FIELDS` only."""
         N = len(ids)
-        geo = setup.georef
         cov = est.centre_cov_m2
-        rows = est.object_rows  # (every FrameProcessor estimate has them: the kernel's or the reference's)
-        a, b, ori = rows[_ROW_SMAJ], rows[_ROW_SMIN], rows[_ROW_ORI]  # the centre's ellipse, as ellipse_axes
         valid = est.centre_valid
         centre = est.centre_xy_world_m
         t = Table(N)
-        oid, cls = t.column(ids), t.column(classes)
-        x, y, cxx, cxy, cyy, sa, sb, so, ka, kb, ls, lx, ly = t.columns(np.array([
-            centre[:, 0], centre[:, 1], cov[:, 0, 0], cov[:, 0, 1], cov[:, 1, 1], a, b, ori, self._k * a, self._k * b,
-            est.largest_semi_major_m, est.largest_xy_world_m[:, 0], est.largest_xy_world_m[:, 1]]))
-        layout = [b'{"object_id":', oid, b',"class":', cls]
-        if valid.all():
-            layout.append(_STATUS_ALL_OK)
-        else:
-            li = est.largest_index.tolist()
-            reasons = est.centre_reason_text()
-            layout += [b',"status":', t.column([S.STATUS_OK if ok else (S.STATUS_PARTIAL if j >= 0 else S.STATUS_ERROR)
-                                                for ok, j in zip(valid.tolist(), li, strict=True)]),
-                       b',"reason":', t.column(["ok" if ok else f"no centre: {r}"
-                                                for ok, r in zip(valid.tolist(), reasons, strict=True)])]
-        layout += [b',"x_m":', x, b',"y_m":', y, b',"cov_m2":[[', cxx, b",", cxy, b"],[", cxy, b",", cyy,
-                   b']],"sigma_major_m":', sa, b',"sigma_minor_m":', sb, b',"orientation_deg":', so,
-                   b',"semi_major_m":', ka, b',"semi_minor_m":', kb, b',"largest_index":', t.column(est.largest_index),
-                   b',"largest_sigma_major_m":', ls, b',"largest_x_m":', lx, b',"largest_y_m":', ly]
-        for key, col in zip(_V2X_KEYS, t.columns(est.v2x_codes.T), strict=True):
-            layout += [key, col]
-        layout += _v2x_source_layout(t, est, cxx, cxy, cyy)
-        if geo.has_origin:
-            lat, lon = geo.to_wgs84(centre) if N else (np.zeros(0), np.zeros(0))
-            layout += [b',"lat_deg":', t.column(lat), b',"lon_deg":', t.column(lon)]
-        if self.linearity:
-            nonlin, linear = self._linearity(est) if N else (np.zeros(0), np.zeros(0, bool))
-            layout += [b',"nonlinearity":', t.column(nonlin), b',"linear_ok":', t.column(linear)]
-        if motion is not None:  # null where unknown (no track, no velocity yet, heading sigma unavailable, ...)
-            tid, m = motion
-            tracked = tid >= 0
-            ve, vn, c00, c01, c11, sp, ssp, hd, shd, yw, syw, age = t.columns(np.array([
-                m.v_east_mps, m.v_north_mps, m.cov_v_m2ps2[:, 0, 0], m.cov_v_m2ps2[:, 0, 1], m.cov_v_m2ps2[:, 1, 1],
-                m.speed_mps, m.sigma_speed_mps, m.heading_deg, m.sigma_heading_deg, m.yaw_deg, m.sigma_yaw_deg,
-                m.age_s]))
-            layout += [b',"track_id":', t.when(tracked, t.column(tid)), t.when(~tracked, b"null"),
-                       b',"v_east_mps":', ve, b',"v_north_mps":', vn, b',"cov_v_m2ps2":[[', c00, b",", c01, b"],[",
-                       c01, b",", c11, b']],"speed_mps":', sp, b',"sigma_speed_mps":', ssp, b',"heading_deg":', hd,
-                       b',"sigma_heading_deg":', shd, b',"yaw_deg":', yw, b',"sigma_yaw_deg":', syw, b',"age_s":',
-                       age]
+        compact = self.record == "compact"
+        x, y, cxx, cxy, cyy = t.columns(np.array([centre[:, 0], centre[:, 1], cov[:, 0, 0], cov[:, 0, 1],
+                                                  cov[:, 1, 1]]))
+        layout = [b'{"object_id":', t.column(ids), b',"class":', t.column(classes), *_status_layout(t, est, compact),
+                  b',"x_m":', x, b',"y_m":', y, b',"cov_m2":[[', cxx, b",", cxy, b"],[", cxy, b",", cyy, b"]]"]
+        if not compact:
+            layout += self._full_object_layout(setup, t, est, cxx, cxy, cyy)
+        if motion is not None:
+            layout += _motion_object_layout(t, motion, compact)
         ok_idx = msg_ids = None
         if self.messages:
-            ok_all = np.flatnonzero(valid)
-            ok_idx = ok_all[:MAX_MESSAGE_OBJECTS]  # a CPM carries at most 255 perceived objects
-            msg_ids = setup.ids.assign(ids, ok_idx, ts)
-            if len(ok_idx) == N:
-                layout += [b',"message_object_id":', t.column(msg_ids)]
-            else:  # null: not in the CPM / SDSM (no centre, or beyond 255)
-                col = np.zeros(N, np.int64)
-                col[ok_idx] = msg_ids
-                sent = np.zeros(N, bool)
-                sent[ok_idx] = True
-                layout += [b',"message_object_id":', t.when(sent, t.column(col)), t.when(~sent, b"null")]
+            ok_idx, msg_ids, ids_layout = _message_id_layout(t, setup, ids, valid, ts)
+            layout += ids_layout
         layout.append(b"}")
         return t.json_buffer(layout), ok_idx, msg_ids
 
-    def _messages_json(self, setup: CameraSetup, est, classes: list, class_p, ok_idx: np.ndarray,
-                       msg_ids: np.ndarray, fno: int, ts: float, ref_ms: int, motion: ObjectMotion | None = None
-                       ) -> tuple[tuple, str, tuple]:
-        """The CPM (JSON text, as pieces to join), its UPER encoding (hex) and the SDSM (JSON text as pieces,
-        ``null`` without objects) of the objects ``ok_idx``, written column-wise; UPER by the compiled column
-        writer.  ``motion``: the
-        :class:`~.messages.motion.ObjectMotion` of all the frame's objects (None: no motion is sent)."""
-        geo = setup.georef
+    def _full_object_layout(self, setup: CameraSetup, t: Table, est, cxx, cxy, cyy) -> list:
+        """The full record's object fields after ``cov_m2``: ellipses, largest point, V2X fields and their source,
+        the WGS84 position (with an origin), the linearity flag (``linearity``)."""
+        rows = est.object_rows  # (every FrameProcessor estimate has them: the kernel's or the reference's)
+        a, b, ori = rows[_ROW_SMAJ], rows[_ROW_SMIN], rows[_ROW_ORI]  # the centre's ellipse, as ellipse_axes
+        sa, sb, so, ka, kb, ls, lx, ly = t.columns(np.array([
+            a, b, ori, self._k * a, self._k * b, est.largest_semi_major_m, est.largest_xy_world_m[:, 0],
+            est.largest_xy_world_m[:, 1]]))
+        layout = [b',"sigma_major_m":', sa, b',"sigma_minor_m":', sb, b',"orientation_deg":', so,
+                  b',"semi_major_m":', ka, b',"semi_minor_m":', kb, b',"largest_index":', t.column(est.largest_index),
+                  b',"largest_sigma_major_m":', ls, b',"largest_x_m":', lx, b',"largest_y_m":', ly]
+        for key, col in zip(_V2X_KEYS, t.columns(est.v2x_codes.T), strict=True):
+            layout += [key, col]
+        layout += _v2x_source_layout(t, est, cxx, cxy, cyy)
+        if setup.has_origin:
+            N = len(est)
+            lat, lon = setup.georef.to_wgs84(est.centre_xy_world_m) if N else (np.zeros(0), np.zeros(0))
+            layout += [b',"lat_deg":', t.column(lat), b',"lon_deg":', t.column(lon)]
+        if self.linearity:
+            nonlin, linear = self._linearity(est) if len(est) else (np.zeros(0), np.zeros(0, bool))
+            layout += [b',"nonlinearity":', t.column(nonlin), b',"linear_ok":', t.column(linear)]
+        return layout
+
+    def _message_columns(self, setup: CameraSetup, est, classes: list, class_p, ok_idx: np.ndarray,
+                         motion: ObjectMotion | None) -> _MessageColumns:
+        """The columns of the CPM / SDSM objects ``ok_idx`` (:class:`_MessageColumns`)."""
         N, m = len(classes), len(ok_idx)
-        en = geo.world_to_enu(est.centre_xy_world_m) if N else np.zeros((0, 2))
-        x_cm, y_cm, x_dm, y_dm = _cm_dm(en, ok_idx)
-        codes = est.v2x_codes[ok_idx]
-        x_conf, y_conf, corr = codes[:, _CPM_INDEX], codes[:, _CPM_INDEX + 1], codes[:, _CPM_INDEX + 2]
+        en = setup.world_to_enu(est.centre_xy_world_m) if N else np.zeros((0, 2))
+        x_cm, y_cm, x_dm, y_dm = cm_dm(en, ok_idx)
         crow = (np.fromiter(map(_CLASS_ROWS.__getitem__, classes), np.intp, N)[ok_idx] if any(classes)
                 else np.full(m, _DEFAULT_CLASS_ROW, np.intp))
-        cls = self._cls
-        has_cls = cls.bits_width[crow] > 0
         mc = None if motion is None else motion_codes(motion if m == N else motion.take(ok_idx), m)  # (sorted rows)
-        t = Table(m)
-        oid = t.column(msg_ids)
+        p = level = None
         if class_p is None:
             level = np.full(m, CONFIDENCE_LEVEL_UNAVAILABLE, np.int64)
-            lv = b"%d" % CONFIDENCE_LEVEL_UNAVAILABLE
-            pct = b"0"
         else:
             p = class_p[ok_idx]
-            none = np.isnan(p)
-            level = np.where(none, CONFIDENCE_LEVEL_UNAVAILABLE, np.maximum(1.0, np.ceil(100.0 * p - 1e-9))
+            level = np.where(np.isnan(p), CONFIDENCE_LEVEL_UNAVAILABLE, np.maximum(1.0, np.ceil(100.0 * p - 1e-9))
                              ).astype(np.int64)
-            lv = t.column(level)
-            pct = t.column(np.where(none, 0.0, np.rint(100.0 * p)).astype(np.int64))
-        cx, cy, xv, yv, r = t.columns(np.array([x_conf, y_conf, x_cm, y_cm, corr], dtype=np.int64))
+        return _MessageColumns(m, x_cm, y_cm, x_dm, y_dm, est.v2x_codes[ok_idx], crow, level, p, mc)
+
+    def _cpm_uper(self, setup: CameraSetup, c: _MessageColumns, msg_ids: np.ndarray, ref_ms: int) -> bytes:
+        """The UPER CPM of the message columns, by the compiled column writer (``uper_encoder="fast"``)."""
+        cls = self._cls
+        codes = c.codes
+        container = perceived_object_container_uper_arrays(
+            msg_ids, c.x_cm, codes[:, _CPM_INDEX], c.y_cm, codes[:, _CPM_INDEX + 1], codes[:, _CPM_INDEX + 2],
+            cls.bits_value[c.crow], cls.bits_width[c.crow], c.level, cdd=self.cpm_cdd, motion=c.mc)
+        return setup.uper.encode(ref_ms, container)
+
+    def _messages_json(self, setup: CameraSetup, est, classes: list, class_p, ok_idx: np.ndarray,
+                       msg_ids: np.ndarray, fno: int, ts: float, ref_ms: int, motion: ObjectMotion | None = None
+                       ) -> tuple[tuple, bytes, tuple]:
+        """The CPM (JSON text, as pieces to join), its UPER encoding (bytes) and the SDSM (JSON text as pieces,
+        ``null`` without objects) of the objects ``ok_idx``, written column-wise; UPER by the compiled column
+        writer.  ``motion``: the :class:`~.messages.motion.ObjectMotion` of all the frame's objects (None: no
+        motion is sent)."""
+        c = self._message_columns(setup, est, classes, class_p, ok_idx, motion)
+        m, codes, crow, mc = c.m, c.codes, c.crow, c.mc
+        cls = self._cls
+        t = Table(m)
+        oid = t.column(msg_ids)
+        if c.class_p is None:
+            lv, pct = b"%d" % CONFIDENCE_LEVEL_UNAVAILABLE, b"0"
+        else:
+            lv = t.column(c.level)
+            pct = t.column(np.where(np.isnan(c.class_p), 0.0, np.rint(100.0 * c.class_p)).astype(np.int64))
+        corr = codes[:, _CPM_INDEX + 2]
+        cx, cy, xv, yv, r = t.columns(np.array([codes[:, _CPM_INDEX], codes[:, _CPM_INDEX + 1], c.x_cm, c.y_cm, corr],
+                                               dtype=np.int64))
         vel, age = _motion_layout(t, mc)
         po = t.json_buffer([b'{"objectId":', oid, b',"measurementDeltaTime":0,"position":{"xCoordinate":{"value":', xv,
                      b',"confidence":', cx, b'},"yCoordinate":{"value":', yv, b',"confidence":', cy, b"}}", *vel,
                      t.when(corr != 101, _CORR_OPEN, r, _CORR_CLOSE), *age,
-                     t.when(has_cls, b',"classification":[{"objectClass":', t.column(cls.object_json[crow].tolist()),
-                            b',"confidence":', lv, b"}]"),
+                     t.when(cls.bits_width[crow] > 0, b',"classification":[{"objectClass":',
+                            t.column(cls.object_json[crow].tolist()), b',"confidence":', lv, b"}]"),
                      b"}"])
         lat_e7, lon_e7 = setup.lat_1e7deg, setup.lon_1e7deg
         cpm = build_cpm(setup.station_id, ref_ms, [],
@@ -658,16 +678,13 @@ class Service:
         cpm["payload"]["cpmContainers"][1]["containerData"]["numberOfPerceivedObjects"] = m
         cpm_json = _splice(orjson.dumps(cpm), b'"perceivedObjects":[]', po)  # (pieces of the text)
         if self.uper_encoder == "fast":
-            container = perceived_object_container_uper_arrays(
-                msg_ids, x_cm, x_conf, y_cm, y_conf, corr, cls.bits_value[crow], cls.bits_width[crow], level,
-                cdd=self.cpm_cdd, motion=mc)
-            cpm_hex = setup.uper.encode(ref_ms, container).hex()
+            cpm_uper = self._cpm_uper(setup, c, msg_ids, ref_ms)
         else:
-            cpm_hex = self._encode(orjson.loads(b"".join(cpm_json))).hex()
+            cpm_uper = self._encode(orjson.loads(b"".join(cpm_json)))
         # J3224's DetectedObjectList has 1..256 entries: a frame without objects has no SDSM (null)
         if m == 0:
-            return cpm_json, cpm_hex, (b"null",)
-        xd, yd = t.columns(np.array([x_dm, y_dm]))
+            return cpm_json, cpm_uper, (b"null",)
+        xd, yd = t.columns(np.array([c.x_dm, c.y_dm]))
         if mc is None:
             tail = [_SDSM_TAIL_NO_MOTION]
         else:
@@ -680,7 +697,73 @@ class Service:
                               b'},"posConfidence":{"pos":', t.column(_POS_NAMES[codes[:, _J_POS]].tolist()), *tail])
         sdsm = build_sdsm(setup.station_id, fno, ts, [],
                           **({} if lat_e7 is None else {"lat_1e7deg": lat_e7, "lon_1e7deg": lon_e7}))
-        return cpm_json, cpm_hex, _splice(orjson.dumps(sdsm), b'"objects":[]', objs)
+        return cpm_json, cpm_uper, _splice(orjson.dumps(sdsm), b'"objects":[]', objs)
+
+
+class _MessageColumns(NamedTuple):
+    """The CPM / SDSM objects of a frame as columns (m rows): positions (CPM cm, SDSM dm, east / north), the V2X
+    codes (m, 7), class rows of the class tables, CPM confidence levels, class confidences (None: none given) and
+    the motion codes (None: no motion)."""
+
+    m: int
+    x_cm: np.ndarray
+    y_cm: np.ndarray
+    x_dm: np.ndarray
+    y_dm: np.ndarray
+    codes: np.ndarray
+    crow: np.ndarray
+    level: np.ndarray
+    class_p: np.ndarray | None
+    mc: object
+
+
+def _status_layout(t: Table, est, compact: bool) -> list:
+    """``status`` and ``reason`` of every object (compact: ``reason`` only where the status is not ``ok``)."""
+    valid = est.centre_valid
+    if valid.all():
+        return [_STATUS_ALL_OK_COMPACT if compact else _STATUS_ALL_OK]
+    li = est.largest_index.tolist()
+    reasons = est.centre_reason_text()
+    status = t.column([S.STATUS_OK if ok else (S.STATUS_PARTIAL if j >= 0 else S.STATUS_ERROR)
+                       for ok, j in zip(valid.tolist(), li, strict=True)])
+    if compact:
+        return [b',"status":', status, t.when(~valid, b',"reason":', t.column([
+            "" if ok else f"no centre: {r}" for ok, r in zip(valid.tolist(), reasons, strict=True)]))]
+    return [b',"status":', status, b',"reason":', t.column(["ok" if ok else f"no centre: {r}"
+                                                           for ok, r in zip(valid.tolist(), reasons, strict=True)])]
+
+
+def _motion_object_layout(t: Table, motion, compact: bool) -> list:
+    """The motion fields of every object (null where unknown: no track, no velocity yet, heading sigma
+    unavailable, ...); compact: ``track_id``, the velocity and its covariance."""
+    tid, m = motion
+    tracked = tid >= 0
+    ve, vn, c00, c01, c11, sp, ssp, hd, shd, yw, syw, age = t.columns(np.array([
+        m.v_east_mps, m.v_north_mps, m.cov_v_m2ps2[:, 0, 0], m.cov_v_m2ps2[:, 0, 1], m.cov_v_m2ps2[:, 1, 1],
+        m.speed_mps, m.sigma_speed_mps, m.heading_deg, m.sigma_heading_deg, m.yaw_deg, m.sigma_yaw_deg,
+        m.age_s]))
+    layout = [b',"track_id":', t.when(tracked, t.column(tid)), t.when(~tracked, b"null"),
+              b',"v_east_mps":', ve, b',"v_north_mps":', vn, b',"cov_v_m2ps2":[[', c00, b",", c01, b"],[",
+              c01, b",", c11, b"]]"]
+    if not compact:
+        layout += [b',"speed_mps":', sp, b',"sigma_speed_mps":', ssp, b',"heading_deg":', hd,
+                   b',"sigma_heading_deg":', shd, b',"yaw_deg":', yw, b',"sigma_yaw_deg":', syw, b',"age_s":', age]
+    return layout
+
+
+def _message_id_layout(t: Table, setup: CameraSetup, ids: list, valid: np.ndarray, ts: float) -> tuple:
+    """``(ok_idx, msg_ids, layout)``: the objects in the messages (with a centre, at most 255), their message ids
+    (stable per object_id) and the ``message_object_id`` field (null: not in the CPM / SDSM)."""
+    N = len(ids)
+    ok_idx = np.flatnonzero(valid)[:MAX_MESSAGE_OBJECTS]  # a CPM carries at most 255 perceived objects
+    msg_ids = setup.ids.assign(ids, ok_idx, ts)
+    if len(ok_idx) == N:
+        return ok_idx, msg_ids, [b',"message_object_id":', t.column(msg_ids)]
+    col = np.zeros(N, np.int64)
+    col[ok_idx] = msg_ids
+    sent = np.zeros(N, bool)
+    sent[ok_idx] = True
+    return ok_idx, msg_ids, [b',"message_object_id":', t.when(sent, t.column(col)), t.when(~sent, b"null")]
 
 
 def _motion_layout(t: Table, mc) -> tuple[list, list]:
@@ -694,44 +777,6 @@ def _motion_layout(t: Table, mc) -> tuple[list, list]:
                   b',"confidence":', vxc, b'},"yVelocity":{"value":', vy, b',"confidence":', vyc, b"}}}"),
            t.when(mc.has_yaw, b',"angles":{"zAngle":{"value":', z, b',"confidence":', zc, b"}}")]
     return vel, [t.when(mc.has_age, b',"objectAge":', age)]
-
-
-@njit(cache=True, nogil=True)
-def _worst_usable(nl, usable, threshold, worst, ok):  # pragma: no cover - compiled
-    """Per row of ``nl (N, K)``: the largest finite value among the ``usable`` ones into ``worst`` (NaN if none)
-    and ``ok`` = that <= ``threshold`` (False if none): :meth:`Service._linearity` in one pass."""
-    for i in range(nl.shape[0]):
-        w = -math.inf
-        found = False
-        for k in range(nl.shape[1]):
-            v = nl[i, k]
-            if usable[i, k] and math.isfinite(v):
-                found = True
-                w = max(w, v)
-        worst[i] = w if found else math.nan
-        ok[i] = found and w <= threshold
-
-
-@njit(cache=True, nogil=True)
-def _cm_dm_kernel(en, rows, cm_min, cm_max, dm_max, cm_guard):  # pragma: no cover - compiled
-    out = np.empty((4, rows.shape[0]), np.int64)
-    for j in range(rows.shape[0]):
-        for a in range(2):
-            v = en[rows[j], a]
-            if v != v:  # NaN -> 0, as numpy.nan_to_num (only from absurd coordinates: inf - inf)
-                v = 0.0
-            c = np.ceil(v * 100.0 - cm_guard)  # CartesianCoordinateLarge: (n-1) x 0.01 < v <= n x 0.01
-            d = np.rint(v * 10.0)
-            out[a, j] = int(min(max(c, cm_min), cm_max))
-            out[2 + a, j] = int(min(max(d, -dm_max), dm_max))
-    return out
-
-
-def _cm_dm(en: np.ndarray, rows: np.ndarray):
-    """:func:`~.messages.cpm.coordinate_cm` and :func:`~.messages.sdsm.offset_dm` of the east/north metres
-    ``en[rows]``: x cm, y cm, x dm, y dm (the same numbers in one compiled pass)."""
-    return _cm_dm_kernel(np.ascontiguousarray(en, dtype=np.float64), np.asarray(rows, dtype=np.int64),
-                         float(COORD_MIN), float(COORD_MAX), float(OFFSET_MAX), COORD_GUARD_CM)
 
 
 def _splice(doc: bytes, empty_list: bytes, items) -> tuple:
@@ -816,146 +861,7 @@ _HEADING_CONF = np.array(HEADING_CONFIDENCE_NAMES, dtype=object)
 _V2X_SOURCE_NAMES = np.array(["linear", "sampled", "unavailable"], dtype=object)  # FootprintEstimate.v2x_source
 _V2X_UNAVAILABLE = 2
 _STATUS_ALL_OK = b',"status":%s,"reason":"ok"' % orjson.dumps(S.STATUS_OK)
+_STATUS_ALL_OK_COMPACT = b',"status":%s' % orjson.dumps(S.STATUS_OK)
 _V2X_KEYS = [b',"%s":' % k.encode() for k in V2X_FIELDS]
-_DICT_ONLY = {dict}
-_ID_TYPES_SET = {int, str, type(None)}
-_CLASS_TYPES = {str, type(None)}
-_INT_ONLY = {int}
-_GET_ID = operator.itemgetter("object_id")
-
-
-def _check_ids(ids: list) -> None:
-    """Per object (in place): numpy integers and str subclasses -> int / str; anything else -> _FrameError."""
-    for i, oid in enumerate(ids):
-        if type(oid) not in _ID_TYPES:  # numpy scalars from embedding code are taken as their Python value
-            if isinstance(oid, str):
-                ids[i] = str(oid)
-            elif isinstance(oid, (int, np.integer)) and not isinstance(oid, (bool, np.bool_)):
-                ids[i] = int(oid)
-            else:
-                raise _FrameError(f"detections[{i}].object_id", f"object_id is not a string or integer: {oid!r}")
-
-
-def _check_classes(classes: list) -> None:
-    for i, cls in enumerate(classes):
-        if cls is not None and type(cls) is not str:
-            if not isinstance(cls, str):
-                raise _FrameError(f"detections[{i}].class", f"class is not a string: {cls!r}")
-            classes[i] = str(cls)
-
-
-def _class_confidences(dets: list) -> np.ndarray:
-    """(N,) class confidences in [0, 1], NaN where absent or null; a bad value -> _FrameError (the first)."""
-    cc = list(map(dict.get, dets, _repeat("class_confidence")))
-    if set(map(type, cc)) <= _CONF_TYPES:
-        try:
-            p = np.array(cc, dtype=np.float64)
-        except OverflowError:
-            pass
-        else:
-            fin = np.isfinite(p)
-            if int(fin.sum()) == len(cc) - cc.count(None) and not ((p[fin] < 0.0) | (p[fin] > 1.0)).any():
-                return p
-    for i, c in enumerate(cc):
-        if c is not None:
-            c = _finite_number(dets[i], "class_confidence", f"detections[{i}]")
-            if not 0.0 <= c <= 1.0:
-                raise _FrameError(f"detections[{i}].class_confidence", f"class_confidence {c} not in [0, 1]")
-    return np.array(cc, dtype=np.float64)
-
-
-def _fast_cov(dets: list):
-    """(N, 2, 2) pixel covariances when every detection has all three numbers (finite), else None."""
-    try:
-        vals = list(map(_GET_COV, dets))
-    except KeyError:
-        return None
-    if not set(map(type, chain.from_iterable(vals))) <= _NUMBER_SET:
-        return None
-    try:
-        c = np.array(vals, dtype=np.float64)
-    except OverflowError:
-        return None
-    if not np.isfinite(c).all():
-        return None
-    return c[:, [0, 1, 1, 2]].reshape(-1, 2, 2)
-
-
-def _slow_cov(dets: list):
-    """Per detection: all three covariance entries or none (absent or null); names the first bad field."""
-    P = None
-    N = len(dets)
-    for i, d in enumerate(dets):
-        where = f"detections[{i}]"
-        if "cov_uu_px2" not in d and "cov_uv_px2" not in d and "cov_vv_px2" not in d:
-            continue
-        present = [c for c in S.COV_COLUMNS if d.get(c) is not None]
-        if present:
-            if len(present) != 3:
-                missing = [c for c in S.COV_COLUMNS if c not in present]
-                raise _FrameError(f"{where}.{missing[0]}", f"incomplete pixel covariance: {missing[0]} missing "
-                                                           "(give cov_uu_px2, cov_uv_px2, cov_vv_px2 or none)")
-            uu, uv, vv = (_finite_number(d, c, where) for c in S.COV_COLUMNS)
-            if P is None:
-                P = np.zeros((N, 2, 2))
-            P[i] = ((uu, uv), (uv, vv))
-    return P
-
-
-_CORNER_KEY = re.compile(r"^[uv]\d+_px$")
-
-
-def _check_corner_counts(dets: list, cols) -> None:
-    """Every detection of a corners frame has the corner columns of the first one (no more, no fewer)."""
-    want = set(cols)
-    for i, d in enumerate(dets):
-        have = {k for k in d if _CORNER_KEY.match(k)}
-        if have != want:
-            extra = sorted(have - want)
-            name = extra[0] if extra else sorted(want - have)[0]
-            raise _FrameError(f"detections[{i}].{name}", f"detection {i} has {len(have) // 2} corners "
-                              f"({len(have)} corner columns), detection 0 has {len(want) // 2}: one corner count per "
-                              "frame")
-
-
-def _check_pixel_cov_range(P: np.ndarray) -> None:
-    """Detector pixel (co)variances within the batch's limit (:data:`footprint_uq.batch.process.MAX_PIXEL_VAR_PX2`)."""
-    big = np.abs(P) > MAX_PIXEL_VAR_PX2
-    if big.any():
-        i, r, c = (int(v) for v in np.argwhere(big)[0])
-        name = S.COV_COLUMNS[0 if r == c == 0 else (2 if r == c else 1)]
-        raise _FrameError(f"detections[{i}].{name}", f"pixel covariance out of range: {name} {float(P[i, r, c]):g} "
-                                                     f"(entries up to {MAX_PIXEL_VAR_PX2:g} px^2)")
-
-
-_ID_TYPES = (int, str, type(None))
-_NUMBER_SET = {int, float}  # (bool is not int here: type() is exact)
-_CONF_TYPES = {int, float, type(None)}
-_GET_COV = operator.itemgetter(*S.COV_COLUMNS)
-
-
-def _box_array(dets: list, cols) -> np.ndarray:
-    """The (N, len(cols)) box values; a frame with a missing, non-numeric or non-finite value -> _FrameError."""
-    try:
-        flat = list(chain.from_iterable(map(operator.itemgetter(*cols), dets)))
-        if set(map(type, flat)) <= _NUMBER_SET:
-            X = np.array(flat, dtype=np.float64).reshape(len(dets), len(cols))
-            if np.isfinite(X).all():
-                return X
-    except (KeyError, TypeError, OverflowError):
-        pass
-    X = np.empty((len(dets), len(cols)))
-    for i, d in enumerate(dets):  # the slow path names the first bad field
-        X[i] = [_finite_number(d, c, f"detections[{i}]") for c in cols]
-    return X
-
-
-def _detection_field(field: str) -> str:
-    # "boxes_px[3]" / "boxes_world[3] (...)" / "pixel_cov_px2" -> "detections[3]"
-
-    m = re.search(r"\[(\d+)\]", field or "")
-    return f"detections[{m.group(1)}]" if m else "detections"
-
-
 def _jsonable(v):
     return v if v is None or isinstance(v, (str, int, float, bool)) else repr(v)

@@ -47,12 +47,12 @@ import numpy as np
 import orjson
 
 from .._notices import set_compile_handler
-from ..batch.fleet import load_registry
 from ..errors import ConfigError, InputError
 from ..integrations.ros2.live import ROSBAG_PREFIX, LiveBag
 from ..io import load_camera
+from ..io.registry import load_registry
 from ..products.warmup import compile_handler
-from .core import RECORD_ERROR, RECORD_FOOTPRINTS, FrameOutput, Service, error_record
+from .core import RECORD_ERROR, RECORD_FOOTPRINTS, RECORD_LAYOUTS, FrameOutput, Service, error_record
 from .messages.asn1_cpm import DEFAULT_CDD
 
 __all__ = ["FrameQueue", "Metrics", "serve", "run", "parse_mqtt_url", "POLICIES"]
@@ -186,6 +186,8 @@ class Metrics:
         self.frames_out = 0
         self.errors = 0
         self.publish_failed = 0
+        #: bad detections reported inside footprints records (their ``detection_errors``; the frames went on)
+        self.detection_errors = 0
         self._lat_ms: list[float] = []
         self._proc_us: list[float] = []
         self._lat_total = collections.deque(maxlen=100_000)
@@ -196,13 +198,15 @@ class Metrics:
 
     def done(self, record: dict, latency_s: float) -> None:
         self.done_output(record.get("type"), record["processing_us"]["total"] if record.get("type") ==
-                         RECORD_FOOTPRINTS else None, latency_s)
+                         RECORD_FOOTPRINTS else None, latency_s, len(record.get("detection_errors") or ()))
 
-    def done_output(self, kind, processing_us: float | None, latency_s: float) -> None:
-        """One output written: a footprints record (with its total processing time) or an error record."""
+    def done_output(self, kind, processing_us: float | None, latency_s: float, detection_errors: int = 0) -> None:
+        """One output written: a footprints record (with its total processing time and its number of bad
+        detections) or an error record."""
         with self._lock:
             if kind == RECORD_FOOTPRINTS:
                 self.frames_out += 1
+                self.detection_errors += detection_errors
                 self._proc_us.append(processing_us)
             else:
                 self.errors += 1
@@ -217,7 +221,7 @@ class Metrics:
             rec = {"type": "health", "time_s": time.time(), "uptime_s": round(time.monotonic() - self.t_start, 3),
                    "frames_in": self.frames_in, "frames_out": self.frames_out, "frames_dropped": dropped,
                    "errors": self.errors, "pending": pending, "publish_failed": self.publish_failed,
-                   "interval_frames": len(lat)}
+                   "detection_errors": self.detection_errors, "interval_frames": len(lat)}
         q = np.percentile(lat, [50, 99]).tolist() if lat else [None, None]
         p = np.percentile(proc, [50, 99]).tolist() if proc else [None, None]
         rec.update(latency_ms_p50=q[0], latency_ms_p99=q[1], processing_us_p50=p[0], processing_us_p99=p[1])
@@ -344,6 +348,16 @@ class _MqttSink:
             topic = f"{self._prefix}/health"
         info = self._c.publish(topic, data, qos=1)
         if info.rc != 0:  # queue full (broker away for long): counted, never unbounded
+            with self._metrics._lock:
+                self._metrics.publish_failed += 1
+        else:
+            self._last = info
+
+    def write_cpm(self, camera_id, cpm_uper: bytes) -> None:
+        """A compact record's CPM, UPER-encoded, as bytes on ``<prefix>/<camera_id>/cpm`` (after its record)."""
+        info = self._c.publish(f"{self._prefix}/{camera_id if camera_id is not None else 'camera'}/cpm", cpm_uper,
+                               qos=1)
+        if info.rc != 0:
             with self._metrics._lock:
                 self._metrics.publish_failed += 1
         else:
@@ -589,10 +603,7 @@ def serve(service: Service, *, input: str | None = "-", mqtt: str | None = None,
         client.connect_async(host, port, keepalive=5)
         client.loop_start()
 
-    old_handlers = {}
-    if install_signals and threading.current_thread() is threading.main_thread():
-        for sig in (signal.SIGTERM, signal.SIGINT):
-            old_handlers[sig] = signal.signal(sig, lambda s, f: stop.set())
+    old_handlers = _stop_on_signals(stop) if install_signals else {}
 
     def snapshot() -> dict:
         rec = metrics.snapshot(queue.dropped, len(queue))
@@ -601,18 +612,9 @@ def serve(service: Service, *, input: str | None = "-", mqtt: str | None = None,
         return rec
 
     with _steady_runtime():
-        threads = [threading.Thread(target=_work, args=(service, queue, sink, metrics, output, stop),
-                                    name="footprint-uq-worker", daemon=True)]
-        if input == "-":
-            stream = stdin if stdin is not None else sys.stdin.buffer
-            threads.append(threading.Thread(target=_stdin_reader, args=(stream, queue, sink, metrics, stop,
-                                                                        max_frame_bytes),
-                                            name="footprint-uq-stdin", daemon=True))
-        if health_interval_s and health_interval_s > 0:
-            threads.append(threading.Thread(target=_health, args=(sink, snapshot, stop, health_interval_s),
-                                            name="footprint-uq-health", daemon=True))
-        for t in threads:
-            t.start()
+        threads = _start_threads(service, queue, sink, metrics, output, stop, snapshot,
+                                 stdin=(stdin if stdin is not None else sys.stdin.buffer) if input == "-" else None,
+                                 max_frame_bytes=max_frame_bytes, health_interval_s=health_interval_s)
         _log(f"ready: input {'stdin' if input == '-' else mqtt + ' ' + ', '.join(topics)}, output "
              f"{'stdout' if output == '-' else output if output != 'mqtt' else mqtt + ' ' + output_prefix + '/...'}"
              f", overload policy {policy}"
@@ -630,6 +632,32 @@ def serve(service: Service, *, input: str | None = "-", mqtt: str | None = None,
             _log(f"stopped: frames in {metrics.frames_in}, out {metrics.frames_out}, dropped {queue.dropped}, "
                  f"errors {metrics.errors}")
     return 0
+
+
+def _stop_on_signals(stop: threading.Event) -> dict:
+    """SIGTERM / SIGINT set ``stop`` (in the main thread only); returns the handlers they replaced."""
+    old = {}
+    if threading.current_thread() is threading.main_thread():
+        for sig in (signal.SIGTERM, signal.SIGINT):
+            old[sig] = signal.signal(sig, lambda s, f: stop.set())
+    return old
+
+
+def _start_threads(service: Service, queue: FrameQueue, sink, metrics: Metrics, output: str, stop: threading.Event,
+                   snapshot, *, stdin, max_frame_bytes: int, health_interval_s: float) -> list[threading.Thread]:
+    """Start the service's threads: the worker (always first), the stdin reader (``stdin`` a stream) and the health
+    thread (``health_interval_s`` > 0)."""
+    threads = [threading.Thread(target=_work, args=(service, queue, sink, metrics, output, stop),
+                                name="footprint-uq-worker", daemon=True)]
+    if stdin is not None:
+        threads.append(threading.Thread(target=_stdin_reader, args=(stdin, queue, sink, metrics, stop, max_frame_bytes),
+                                        name="footprint-uq-stdin", daemon=True))
+    if health_interval_s and health_interval_s > 0:
+        threads.append(threading.Thread(target=_health, args=(sink, snapshot, stop, health_interval_s),
+                                        name="footprint-uq-health", daemon=True))
+    for t in threads:
+        t.start()
+    return threads
 
 
 def _mqtt_input(client, topics: list | None, input_prefix: str, queue: FrameQueue, sink, metrics: Metrics,
@@ -700,6 +728,8 @@ def _work(service: Service, queue: FrameQueue, sink, metrics: Metrics, output: s
         out = _frame_output(service, item, output)
         try:
             sink.write_json(out.type, out.camera_id, out.data)
+            if out.cpm_uper is not None:  # a compact record's CPM (MQTT output only: run() checks)
+                sink.write_cpm(out.camera_id, out.cpm_uper)
         except BrokenPipeError:  # stdout closed by the reader: nothing more can be delivered
             stop.set()
             return
@@ -707,7 +737,7 @@ def _work(service: Service, queue: FrameQueue, sink, metrics: Metrics, output: s
             with metrics._lock:
                 metrics.publish_failed += 1
             _log(f"output failed ({type(e).__name__}: {e}); counted in publish_failed")
-        metrics.done_output(out.type, out.processing_us, time.monotonic() - item[2])
+        metrics.done_output(out.type, out.processing_us, time.monotonic() - item[2], out.n_detection_errors)
 
 
 def _health(sink, snapshot, stop: threading.Event, interval_s: float) -> None:
@@ -769,7 +799,7 @@ def run(*, camera=None, budget=None, registry=None, camera_id: str | None = None
         origin_lat_deg: float | None = None, origin_lon_deg: float | None = None, confidence: float = 0.95,
         contact: str = "bottom-centre", allow_outside_image: bool = False, station_id: int | None = None,
         uper_encoder: str = "fast", linearity: bool = False, linear_threshold: float | None = None,
-        workers: int = 1, cpm_cdd: str = DEFAULT_CDD, v2x_policy: str = "sampled", pose=None,
+        workers: int | None = 1, cpm_cdd: str = DEFAULT_CDD, v2x_policy: str = "sampled", pose=None,
         **serve_options) -> int:
     """``footprint-uq serve``: build the :class:`Service` from files (a camera file and budget, or a
     registry) and :func:`serve` it; returns the exit status.
@@ -778,13 +808,22 @@ def run(*, camera=None, budget=None, registry=None, camera_id: str | None = None
     worker processes (camera ``i`` of the sorted ids goes to worker ``i mod workers``), each with its
     own MQTT client (``<client_id>-w<k>``) subscribed to its cameras' topics and its own health
     records (labelled ``"k/N"``); SIGTERM/SIGINT is passed on to them and the exit status is the
-    largest of theirs.  ``pose`` (a pose mapping or file) completes an intrinsics-only ``camera`` file
-    (:func:`footprint_uq.io.load_camera`).
+    largest of theirs.  ``workers=None`` (the command's default): :func:`default_workers` of the registry's
+    cameras with MQTT input, else 1.  ``pose`` (a pose mapping or file) completes an intrinsics-only ``camera``
+    file (:func:`footprint_uq.io.load_camera`).
     """
     if (camera is None) == (registry is None):
         raise InputError("--camera/--registry", "both" if camera is not None else "neither",
                          "one camera (--camera with --budget) or many (--registry)")
     _check_transport(serve_options.get("input", "-"), serve_options.get("mqtt"), serve_options.get("output", "-"))
+    serve_options["record"] = _record_layout(serve_options.get("record"), serve_options.get("output", "-"))
+    if workers is None:
+        workers = 1
+        if registry is not None and serve_options.get("input", "-") is None:
+            n_cameras = len(registry) if isinstance(registry, dict) else len(load_registry(registry, budget=budget))
+            workers = default_workers(n_cameras)
+            _log(f"--workers {workers} (the default: min(cores - 1, cameras) = min({usable_cores()} - 1, "
+                 f"{n_cameras}))")
     if workers > 1:
         if str(serve_options.get("output", "-")).startswith(ROSBAG_PREFIX):
             raise InputError("--workers", workers, "1 with --output rosbag:PATH (one process records the bag)")
@@ -817,18 +856,48 @@ def run(*, camera=None, budget=None, registry=None, camera_id: str | None = None
                           contact=contact, allow_outside_image=allow_outside_image, station_id=station_id,
                           uper_encoder=uper_encoder, linearity=linearity, linear_threshold=linear_threshold,
                           cpm_cdd=cpm_cdd, v2x_policy=v2x_policy,
-                          tracks=serve_options.pop("tracks", False))
+                          tracks=serve_options.pop("tracks", False),
+                          class_names=serve_options.pop("class_names", None), record=serve_options.pop("record"))
         return serve(service, stop=stop, **serve_options)
     finally:
         for sig, h in old.items():
             signal.signal(sig, h)
 
 
+def usable_cores() -> int:
+    """The cores this process may run on (its CPU affinity, e.g. under ``taskset``; else the machine's)."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):  # (not every platform has affinities)
+        return os.cpu_count() or 1
+
+
+def default_workers(n_cameras: int, cores: int | None = None) -> int:
+    """``serve``'s default ``--workers`` with MQTT input and a registry: ``min(cores - 1, cameras)``, at least 1 --
+    one core left to the broker, paho's network threads and the detector; never more workers than cameras
+    (docs/service.md, "Workers")."""
+    cores = usable_cores() if cores is None else int(cores)
+    return max(1, min(cores - 1, int(n_cameras)))
+
+
+def _record_layout(record: str | None, output: str) -> str:
+    """The record layout of ``serve``: ``compact`` by default with MQTT output (the CPM's bytes on their own topic),
+    ``full`` otherwise; ``compact`` needs MQTT output (JSON Lines carry no bytes beside the record)."""
+    if record is None:
+        return "compact" if output == "mqtt" else "full"
+    if record not in RECORD_LAYOUTS:
+        raise InputError("--record", record, f"one of {RECORD_LAYOUTS}")
+    if record == "compact" and output != "mqtt":
+        raise InputError("--record", record, "'full' with --output - (a compact record's CPM goes as bytes on its own "
+                                             "MQTT topic), or --output mqtt")
+    return record
+
+
 def _worker_main(options: dict, cameras: list[str], label: str) -> None:  # pragma: no cover - child process
 
     entries = load_registry(options.pop("registry"), budget=options["budget"])
     sub = {c: entries[c] for c in cameras}
-    sys.exit(run(registry=sub, cameras=cameras, worker=label, **options))
+    sys.exit(run(registry=sub, cameras=cameras, worker=label, workers=1, **options))
 
 
 def _run_workers(n: int, options: dict) -> int:
