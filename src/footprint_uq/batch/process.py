@@ -54,7 +54,7 @@ from ..tracking import SharedJacobianAt, TrackerConfig, TrackOutput, TrackTable,
 from ..uncertainty.budget import load_budget
 from ..uncertainty.ellipse import chi2_scale
 from . import schema as S
-from .readers import open_detections
+from .formats import open_reader
 from .writers import detect_out_format, open_writer
 
 __all__ = ["prefetch", "BatchProcessor", "process_table", "process_file", "process_chunk", "Summary", "summary_path",
@@ -862,7 +862,7 @@ def _file_info(detections, out, reader, fmt_out: str, bp, fsync: bool, info: dic
 def process_file(camera, budget, detections, out, *, chunk_rows: int = S.DEFAULT_CHUNK_ROWS,
                  format_in: str | None = None, format_out: str | None = None, progress: bool | None = None,
                  summary: bool = True, compression: str | None = "auto", info: dict | None = None,
-                 fsync: bool = True, **options) -> Summary:
+                 fsync: bool = True, class_names=None, unknown_class: str = "error", **options) -> Summary:
     """Stream a detection file through the footprint pipeline, chunk by chunk.
 
     Parameters
@@ -870,7 +870,8 @@ def process_file(camera, budget, detections, out, *, chunk_rows: int = S.DEFAULT
     camera : Camera
     budget : ErrorBudget, preset name, path or mapping
     detections : path
-        CSV (``.csv``), JSON Lines (``.jsonl``/``.ndjson``) or Parquet (``.parquet``/``.pq``).
+        CSV (``.csv``), JSON Lines (``.jsonl``/``.ndjson``) or Parquet (``.parquet``/``.pq``), or a detector
+        format (:mod:`footprint_uq.batch.formats`: YOLO labels, YOLOv5 CSV, COCO results, MOTChallenge).
     out : path
         ``.parquet``/``.pq``, ``.csv``, ``.jsonl``/``.ndjson`` or ``.geojson`` (needs an origin).
     chunk_rows : int
@@ -891,6 +892,11 @@ def process_file(camera, budget, detections, out, *, chunk_rows: int = S.DEFAULT
         folder are fsynced before the rename (default).  False only renames: the output is still never
         partial under its name for a killed job, but a power loss or an operating-system crash may leave
         it empty or missing (scratch outputs, tmpfs; saves the disk write on the job's critical path).
+    format_in : str, optional
+        One of :data:`footprint_uq.batch.formats.INPUT_FORMATS` (default: detected from the file).
+    class_names, unknown_class
+        Integer class ids -> names (:func:`footprint_uq.batch.formats.open_reader`).  Normalised boxes are
+        scaled to the camera's image size; a file stating another image size is refused.
     **options
         Keyword arguments of :class:`BatchProcessor`.
 
@@ -906,7 +912,8 @@ def process_file(camera, budget, detections, out, *, chunk_rows: int = S.DEFAULT
             raise InputError("out", str(out), "an origin (--origin-lat/--origin-lon) for GeoJSON output: GeoJSON "
                              "coordinates are WGS84 longitude/latitude")
         options["corners"] = True  # the polygon
-    reader = open_detections(detections, chunk_rows=chunk_rows, format=format_in)
+    reader = open_reader(detections, chunk_rows=chunk_rows, format=format_in, class_names=class_names,
+                         unknown_class=unknown_class, image_size_px=camera.image_size_px)
     bp = BatchProcessor(camera, budget, **options)
     names = reader.columns if bp.box_type is not None else reader.family_columns  # JSON Lines: one rule per family
     schema = bp.resolve(names, reader.id_fields)

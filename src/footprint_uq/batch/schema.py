@@ -41,11 +41,13 @@ __all__ = ["DEFAULT_CHUNK_ROWS", "ID_COLUMNS", "ID_TYPES",
 #: rows per chunk by default: peak memory about 0.35 GB + 0.8 kB x chunk_rows (docs/batch.md)
 DEFAULT_CHUNK_ROWS = 131_072
 
-#: identification columns passed through unchanged (all optional)
-ID_COLUMNS = ("camera_id", "frame", "timestamp_s", "object_id", "class")
+#: identification columns passed through unchanged (all optional); ``score`` (the detector's confidence),
+#: ``image`` (the image / label file a detection comes from) and ``line`` (its 1-based line in that file) are
+#: what the detector-format readers carry (:mod:`footprint_uq.batch.formats`, docs/integrations.md)
+ID_COLUMNS = ("camera_id", "frame", "timestamp_s", "object_id", "class", "score", "image", "line")
 #: their types when read from text formats (CSV, JSON Lines); Parquet keeps its own types
 ID_TYPES = {"camera_id": pa.string(), "frame": pa.int64(), "timestamp_s": pa.float64(), "object_id": pa.string(),
-            "class": pa.string()}
+            "class": pa.string(), "score": pa.float64(), "image": pa.string(), "line": pa.int64()}
 BOX2D_COLUMNS = ("u_min_px", "v_min_px", "u_max_px", "v_max_px")
 BOX3D_COLUMNS = ("x_m", "y_m", "z_m", "length_m", "width_m", "height_m")
 YAW_COLUMNS = ("yaw_rad", "yaw_deg")
