@@ -58,7 +58,8 @@ def test_geojson_feature_collection(tmp_path):
     g = GeoReference(heading_offset_deg=12.0, origin_lat_deg=48.1, origin_lon_deg=11.6)
     est = footprints_from_boxes3d(cam, "basler1", boxes, heading_offset_deg=12.0)
     fc = footprints_geojson(est, g, object_ids=np.array([7, 8]), properties=[{"class": "car"}, {"class": "van"}])
-    assert fc["type"] == "FeatureCollection" and len(fc["features"]) == 4
+    assert fc["type"] == "FeatureCollection" and len(fc["features"]) == 6
+    assert [f["properties"]["role"] for f in fc["features"]] == ["footprint", "centroid", "ellipse"] * 2
     poly, pt = fc["features"][0], fc["features"][1]
     assert poly["geometry"]["type"] == "Polygon" and pt["geometry"]["type"] == "Point"
     ring = np.array(poly["geometry"]["coordinates"][0])

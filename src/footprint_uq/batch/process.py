@@ -822,7 +822,8 @@ def _stream_to_file(reader, bp, out, schema, bar, *, fmt_out: str, compression, 
     pending = None
     writer = None
     try:
-        writer = open_writer(out, schema, format=fmt_out, compression=compression, fsync=fsync)
+        writer = open_writer(out, schema, format=fmt_out, compression=compression, fsync=fsync, georef=bp.geo,
+                             ellipse_confidence=bp.confidence or 0.95)
         for chunk in prefetch(iter(reader), 1):
             table = process_chunk(bp, chunk)
             summ.add_table(table, chunk.table.num_rows + len(chunk.malformed))
