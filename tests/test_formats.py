@@ -13,7 +13,7 @@ import numpy as np
 import pyarrow.parquet as pq
 import pytest
 from click.testing import CliRunner
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 from footprint_uq import PanTiltCamera, footprints_from_supervision, footprints_from_xyxy, read_detections
@@ -348,6 +348,10 @@ def _yolo_line_ok(s: str) -> bool:
 
 @settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(junk=_JUNK, where=st.integers(0, 3))
+@example(junk="0 0.5 0.5 0.1", where=1).via("four numbers")
+@example(junk="0 0.5 0.5 0.1 0.1 0.9 0.3", where=0).via("seven numbers (a segment)")
+@example(junk="0.5 0.5 0.5 0.1 0.1", where=3).via("a class id that is not an integer")
+@example(junk="", where=2).via("an empty line")
 def test_malformed_yolo_line_is_one_error_row(tmp_path_factory, junk, where):
     """Any line among valid ones: one row per line, valid rows unchanged, a line that does not parse is an error
     row naming the file and the line, never a stop."""
@@ -376,6 +380,10 @@ def read_detections_lines(lines, factory):
 @settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(junk=st.one_of(st.text(max_size=40).filter(lambda s: "\n" not in s and "\r" not in s),
                       st.lists(st.sampled_from(["1", "2.5", "-1", "x", "", "nan", "1e400"]), max_size=11).map(",".join)))
+@example(junk="1,3,101,201,50,80").via("six numbers")
+@example(junk="1,3,101,201,50,80,1,1,1,1,1").via("eleven numbers")
+@example(junk="1,3,101,201,50,80,1,2.5,1").via("a class id that is not an integer")
+@example(junk="1,3,101,201,50,80,1,-1,-1").via("gt with class -1")
 def test_malformed_mot_line_is_one_error_row(tmp_path_factory, junk):
     good = "1,3,101,201,50,80,0.9,-1,-1,-1"
     path = tmp_path_factory.mktemp("m") / "det.txt"
