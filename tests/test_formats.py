@@ -205,7 +205,8 @@ def test_supervision_and_xyxy_round_trip(cam, ref):
         assert_same_footprints(out, want.filter(np.asarray(sel)))
         assert out.column("class").to_pylist() == [d["class"][i] for i in np.flatnonzero(sel)]
         assert out.column("object_id").to_pylist() == [str(v) for v in d["object_id"][sel]]
-        plain = footprints_from_xyxy(cam, BUDGET, d["box"][sel], class_id=d["cid"][sel], box_coordinates="pixel-centres")
+        plain = footprints_from_xyxy(cam, BUDGET, d["box"][sel], class_id=d["cid"][sel],
+                                     box_coordinates="pixel-centres")
         assert_same_footprints(plain, want.filter(np.asarray(sel)))
     # data["class_name"] wins over the ids; an id without a name is that detection's error only
     dets = sv.Detections(xyxy=d["box"][:3] + 0.5, class_id=np.array([2, 500, 0]))
@@ -331,8 +332,9 @@ def test_detection_of_formats(tmp_path):
 
 
 # -- malformed lines (Hypothesis) ------------------------------------------------------------------------------
-_JUNK = st.one_of(st.text(max_size=40).filter(lambda s: "\n" not in s and "\r" not in s),
-                  st.lists(st.sampled_from(["0", "1.5", "nan", "-1", "x", "1e400", "", "0.5"]), max_size=8).map(" ".join))
+_ONE_LINE = st.text(max_size=40).filter(lambda s: "\n" not in s and "\r" not in s)
+_JUNK = st.one_of(_ONE_LINE, st.lists(st.sampled_from(["0", "1.5", "nan", "-1", "x", "1e400", "", "0.5"]),
+                                      max_size=8).map(" ".join))
 
 
 def _yolo_line_ok(s: str) -> bool:
@@ -378,8 +380,8 @@ def read_detections_lines(lines, factory):
 
 
 @settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
-@given(junk=st.one_of(st.text(max_size=40).filter(lambda s: "\n" not in s and "\r" not in s),
-                      st.lists(st.sampled_from(["1", "2.5", "-1", "x", "", "nan", "1e400"]), max_size=11).map(",".join)))
+@given(junk=st.one_of(_ONE_LINE, st.lists(st.sampled_from(["1", "2.5", "-1", "x", "", "nan", "1e400"]),
+                                          max_size=11).map(",".join)))
 @example(junk="1,3,101,201,50,80").via("six numbers")
 @example(junk="1,3,101,201,50,80,1,1,1,1,1").via("eleven numbers")
 @example(junk="1,3,101,201,50,80,1,2.5,1").via("a class id that is not an integer")
