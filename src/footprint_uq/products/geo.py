@@ -166,7 +166,7 @@ def footprints_geojson(estimate, georef: GeoReference, *, object_ids=None, prope
     object_ids : sequence (N,), optional    default 0..N-1
     properties : sequence of dict (N,), optional    merged into each object's properties
     """
-    N, K = len(estimate), estimate.n_corners
+    N = len(estimate)
     ids = list(range(N)) if object_ids is None else list(object_ids)
     if len(ids) != N:
         raise InputError("object_ids", len(ids), f"{N} ids (one per object)")
@@ -185,19 +185,7 @@ def footprints_geojson(estimate, georef: GeoReference, *, object_ids=None, prope
     rings = _ellipse_rings(estimate, georef, confidence, ellipse_vertices) if ellipse_polygons else [None] * N
     feats = []
     for i in range(N):
-        ok = np.isfinite(lat_c[i]).all() & np.isfinite(lon_c[i]).all()
-        ring = [[float(lon_c[i, k]), float(lat_c[i, k])] for k in range(K)]
-        if not ok:
-            geom = None
-        elif K == 1:
-            geom = {"type": "Point", "coordinates": ring[0]}
-        elif K == 2:
-            geom = {"type": "LineString", "coordinates": ring}
-        else:
-            x, y = lon_c[i], lat_c[i]
-            if 0.5 * np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y) < 0:
-                ring = ring[::-1]
-            geom = {"type": "Polygon", "coordinates": [ring + [ring[0]]]}
+        geom = _footprint_geometry(lon_c[i], lat_c[i])
         props = {
             "object_id": ids[i].item() if hasattr(ids[i], "item") else ids[i],
             "role": "footprint",
@@ -224,6 +212,21 @@ def footprints_geojson(estimate, georef: GeoReference, *, object_ids=None, prope
             feats.append({"type": "Feature", "geometry": {"type": "Polygon", "coordinates": [rings[i]]},
                           "properties": {**props, "role": "ellipse", "ellipse_confidence": confidence}})
     return {"type": "FeatureCollection", "features": feats}
+
+
+def _footprint_geometry(lon, lat) -> dict | None:
+    """GeoJSON geometry of one footprint's K corners (``lon``, ``lat`` (K,)): a Point (K = 1), a LineString
+    (K = 2), a counter-clockwise Polygon (K >= 3), or None when a corner is missing."""
+    if not (np.isfinite(lat).all() and np.isfinite(lon).all()):
+        return None
+    ring = [[float(x), float(y)] for x, y in zip(lon, lat, strict=True)]
+    if len(ring) == 1:
+        return {"type": "Point", "coordinates": ring[0]}
+    if len(ring) == 2:
+        return {"type": "LineString", "coordinates": ring}
+    if 0.5 * np.sum(lon * np.roll(lat, -1) - np.roll(lon, -1) * lat) < 0:
+        ring = ring[::-1]
+    return {"type": "Polygon", "coordinates": [ring + [ring[0]]]}
 
 
 def _ellipse_rings(estimate, georef: GeoReference, confidence: float, n: int) -> list:
