@@ -318,6 +318,26 @@ def test_canonical_csv_integer_classes_through_names(cam, tmp_path):
     assert run(cam, src, tmp_path, "plain").column("class").to_pylist() == d["class"]  # no map: kept as written
 
 
+EXAMPLES = Path(__file__).resolve().parents[1] / "examples" / "data"
+
+
+@pytest.mark.parametrize("name", ["yolo_labels", "yolov5.csv", "coco_results.json", "mot_det.txt"])
+def test_example_files(name, tmp_path):
+    """The example of each format (docs/integrations.md): five lines, every detection on the ground, the same
+    footprints whatever the format (the boxes are the same ones, rounded to 0.1 px)."""
+    from footprint_uq import load_camera
+
+    src = EXAMPLES / name
+    files = sorted(src.glob("*.txt")) if src.is_dir() else [src]
+    assert sum(len(p.read_text().splitlines()) for p in files) == 5
+    cam = load_camera(EXAMPLES / "camera.yaml")
+    t = run(cam, src, tmp_path, "ex")
+    assert set(t.column("status").to_pylist()) == {"ok"}
+    assert t.column("class").to_pylist()[:2] == (["car", "car"] if name != "mot_det.txt" else [None, None])
+    x = t.column("x_m").to_numpy()
+    assert x[:4] == pytest.approx([12.0, 20.0, 8.0, 25.0], abs=0.01)  # the ground points the boxes were drawn at
+
+
 def test_detection_of_formats(tmp_path):
     (tmp_path / "a.csv").write_text("u_min_px,v_min_px,u_max_px,v_max_px\n1,2,3,4\n")
     (tmp_path / "one.txt").write_text("0 0.5 0.5 0.1 0.1\n")

@@ -441,6 +441,7 @@ class CocoResults(FormatReader):
             images = names.images
         self.names = names or self._class_names("coco91")
         self.images = _image_index(images, str(self.path)) if images is not None else None
+        self.id_columns = ("frame", "class", "score") + (("image",) if self.images is not None else ())
         if self.images is not None:
             used = {d.get("image_id") for d in self.dets if isinstance(d, dict)}
             for iid, (fname, size) in self.images.items():
@@ -454,6 +455,10 @@ class CocoResults(FormatReader):
             yield ids, box, err, 1
 
     def _entry(self, i: int, d):
+        ids, box, err = self._parse_entry(i, d)
+        return ids[:len(self.id_columns)], box, err
+
+    def _parse_entry(self, i: int, d):
         where = f"{self.path.name} detection {i}"
         if not isinstance(d, dict):
             return (None, None, None, None), None, f"{where}: not a JSON object"
