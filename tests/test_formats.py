@@ -432,3 +432,43 @@ def _cli():
     from footprint_uq.cli.main import main
 
     return main
+
+
+# -- validate with a detector's own files ------------------------------------------------------------------------
+def test_validate_pairs_detector_files_with_a_truth_table(cam, tmp_path):
+    """MOT gt.txt + truth table by (frame, object_id): pairs, a detection without truth, a truth without
+    detection, a duplicate truth (error row); the residuals of exact boxes are ~0 (the pixel shifts agree)."""
+    from footprint_uq.viz.validation_run import run_validation
+
+    rng = np.random.default_rng(11)
+    n = 8
+    d, a = rng.uniform(15.0, 50.0, n), np.deg2rad(30.0 + rng.uniform(-15.0, 15.0, n))
+    xy = np.stack([d * np.sin(a), d * np.cos(a)], 1)
+    uv = cam.project(np.c_[xy, np.zeros(n)]).uv_px
+    box = np.stack([uv[:, 0] - 20, uv[:, 1] - 40, uv[:, 0] + 20, uv[:, 1]], 1)
+    det = {"frame": np.arange(n) // 2 + 1, "object_id": np.arange(n) + 1, "box": box, "score": np.ones(n)}
+    src = write_mot(det, tmp_path / "gt.txt", gt=True)
+    lines = ["frame,object_id,x_m,y_m"] + [f"{det['frame'][i]},{i + 1},{_r(xy[i, 0])},{_r(xy[i, 1])}"
+                                           for i in range(n - 1)]  # object 8: no truth
+    lines += ["9,99,1.0,2.0", f"1,1,{_r(xy[0, 0])},{_r(xy[0, 1])}"]  # a truth without detection; a duplicate
+    (tmp_path / "truth.csv").write_text("\n".join(lines) + "\n")
+    camf = tmp_path / "cam.yaml"
+    save_camera(cam, camf)
+    summary, files = run_validation(tmp_path / "truth.csv", tmp_path / "val", BUDGET, camera=camf, detections=src,
+                                    report=False, fsync=False)
+    un = summary["unpaired"]
+    assert summary["n_pairs"] == n - 1 and summary["detections"] == str(src)
+    assert (un["detections_without_truth"], un["truth_without_detection"], un["error_rows"]) == (1, 1, 1)
+    rows = list(csv.DictReader(open(files["objects"])))
+    ok = [r for r in rows if r["status"] == "ok"]
+    assert max(float(r["error_m"]) for r in ok) < 1e-6 and {r["class"] for r in ok} == {"car"}
+    dup = next(r for r in rows if r["status"] == "error")
+    assert "a second truth of frame 1 object '1'" in dup["reason"] and dup["line"] == "10"
+    r = CliRunner().invoke(_cli(), ["validate", "--labels", str(tmp_path / "truth.csv"), "--detections", str(src),
+                                    "--camera", str(camf), "--budget", BUDGET, "--out", str(tmp_path / "v2"),
+                                    "--no-report", "--no-fsync", "--format", "mot", "--class-names", "coco"])
+    assert r.exit_code == 0, r.output
+    assert {row["class"] for row in csv.DictReader(open(tmp_path / "v2" / "objects.csv"))} >= {"motorcycle"}
+    r = CliRunner().invoke(_cli(), ["validate", "--labels", str(tmp_path / "truth.csv"), "--camera", str(camf),
+                                    "--budget", BUDGET, "--out", str(tmp_path / "v3"), "--format", "mot"])
+    assert r.exit_code == 2 and "--detections too" in r.output and len(r.output.strip().splitlines()) == 1
