@@ -137,6 +137,13 @@ def test_yolo_round_trip(cam, ref, tmp_path):
     assert t.column("class").to_pylist() == d["class"] and t.column("frame").to_pylist() == d["frame"].tolist()
     assert t.column("score").to_pylist() == d["score"].tolist()
     assert t.column("image").to_pylist()[:2] == ["000001", "000001"] and t.column("line").to_pylist()[:3] == [1, 2, 3]
+    # a LabelImg classes.txt beside the labels: the names, never a label file; the summary says which map
+    (folder / "classes.txt").write_text("".join(f"k{i}\n" for i in range(80)))
+    out = tmp_path / "k.parquet"
+    s = process_file(cam, BUDGET, folder, out, progress=False, fsync=False)
+    assert pq.read_table(out).column("class").to_pylist() == [f"k{c}" for c in d["cid"]]
+    assert s.info["class_names"] == str(folder / "classes.txt") and s.rows_in == len(d["cid"])
+    (folder / "classes.txt").unlink()
     # a data.yaml with other names: the names follow it
     names = tmp_path / "data.yaml"
     names.write_text("names:\n" + "".join(f"  {i}: c{i}\n" for i in range(80)))

@@ -219,8 +219,8 @@ class YoloLabels(FormatReader):
     with ``save_txt=True``) or one label file.  Files are read in name order; ``frame`` is the number the
     file names end in when every name ends in one and those numbers are distinct (``000123.txt``,
     ``frame_17.txt``), else the file's 0-based position in name order; ``image`` is the file name without
-    ``.txt``, ``line`` the 1-based line.  Class names: ``FormatOptions.class_names`` (a ``data.yaml``),
-    default COCO's 80.
+    ``.txt``, ``line`` the 1-based line.  Class names: ``FormatOptions.class_names`` (a ``data.yaml``), else
+    the ``classes.txt`` beside the labels (LabelImg, darknet tools; never read as a label file), else COCO's 80.
     """
 
     name = "yolo"
@@ -235,11 +235,14 @@ class YoloLabels(FormatReader):
         first = _first_content_line(path)
         return first is not None and "," not in first and len(first.split()) in (5, 6)
 
-    @staticmethod
-    def _files(path: Path) -> list[Path]:
-        files = sorted(p for p in path.glob("*.txt") if p.is_file())
+    #: the class list LabelImg / darknet tools write beside the labels: not a label file
+    NAMES_FILE = "classes.txt"
+
+    @classmethod
+    def _files(cls, path: Path) -> list[Path]:
+        files = sorted(p for p in path.glob("*.txt") if p.is_file() and p.name != cls.NAMES_FILE)
         if not files and (path / "labels").is_dir():
-            files = sorted(p for p in (path / "labels").glob("*.txt") if p.is_file())
+            files = sorted(p for p in (path / "labels").glob("*.txt") if p.is_file() and p.name != cls.NAMES_FILE)
         return files
 
     def _setup(self) -> None:
@@ -249,7 +252,11 @@ class YoloLabels(FormatReader):
         self.frames = _frames_of(self.files)
         self.total, self.unit = sum(p.stat().st_size for p in self.files), "B"
         self.size = self._require_size()
-        self.names = self._class_names("coco")
+        beside = self.files[0].parent / self.NAMES_FILE
+        if self.options.class_names is None and beside.is_file():
+            self.names = ClassNames.load(beside, unknown=self.options.unknown_class)
+        else:
+            self.names = self._class_names("coco")
 
     def records(self):
         for path, frame in zip(self.files, self.frames, strict=True):

@@ -851,7 +851,9 @@ def _stream_to_file(reader, bp, out, schema, bar, *, fmt_out: str, compression, 
 
 def _file_info(detections, out, reader, fmt_out: str, bp, fsync: bool, info: dict | None) -> dict:
     """The ``info`` entries of a file job's summary (inputs, formats, options, origin, budget)."""
+    names = getattr(reader, "names", None)
     return {"detections": str(detections), "out": str(out), "format_in": reader.format, "format_out": fmt_out,
+            "class_names": getattr(names, "source", None),
             "box_type": bp.box_type, "contact": bp.contact if bp.box_type == "2d" else None,
             "n_corners": bp.n_corners, "confidence": bp.confidence, "heading_offset_deg": bp.heading_offset_deg,
             "origin": None if bp.geo is None else {
