@@ -80,14 +80,17 @@ def _first_line(e: BaseException) -> str:
 
 
 def _int(text: str) -> int:
-    """An integer field (``"3"``, also ``"3.0"``); ValueError otherwise."""
+    """An integer field of the 64-bit range (``"3"``, also ``"3.0"``); ValueError otherwise."""
     try:
-        return int(text)
+        v = int(text)
     except ValueError:
         x = float(text)
         if not (math.isfinite(x) and x.is_integer()):
-            raise ValueError(f"{text!r} is not an integer") from None
-        return int(x)
+            raise ValueError(f"{text[:40]!r} is not an integer") from None
+        v = int(x)
+    if not -(2**63) <= v < 2**63:
+        raise ValueError(f"{text[:40]!r} is out of the 64-bit integer range")
+    return v
 
 
 def _float(text: str) -> float:
