@@ -199,6 +199,9 @@ def test_mot_round_trip(cam, ref, tmp_path, gt):
     assert oid == [str(v) for v in d["object_id"]]
     assert t.column("timestamp_s").to_pylist() == pytest.approx(((d["frame"] - 1) / 30.0).tolist(), abs=1e-15)
     assert t.column("class").to_pylist() == (["car"] * len(oid) if gt else [None] * len(oid))
+    if gt:  # the ids and the seqinfo.ini's frame rate are what --tracks needs
+        tr = run(cam, src, tmp_path, "tracks", tracks=True)
+        assert tr.column("track_id").null_count == 0 and tr.column("age_s").to_numpy().max() > 0
 
 
 def test_supervision_and_xyxy_round_trip(cam, ref):
