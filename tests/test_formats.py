@@ -482,3 +482,47 @@ def test_validate_pairs_detector_files_with_a_truth_table(cam, tmp_path):
     r = CliRunner().invoke(_cli(), ["validate", "--labels", str(tmp_path / "truth.csv"), "--camera", str(camf),
                                     "--budget", BUDGET, "--out", str(tmp_path / "v3"), "--format", "mot"])
     assert r.exit_code == 2 and "--detections too" in r.output and len(r.output.strip().splitlines()) == 1
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(junk=_ONE_LINE)
+@example(junk='900,"500,980,560,0.9,2,car').via("a stray quote")
+@example(junk="900,500,980,560,0.9,2").via("a field short")
+@example(junk="900,500,980,560,0.9,x,").via("a class that is not an integer, no name")
+def test_malformed_yolov5_csv_line_is_one_error_row(tmp_path_factory, junk):
+    good = "900,500,980,560,0.9,2,car"
+    path = tmp_path_factory.mktemp("v") / "y.csv"
+    path.write_text("\n".join(["xmin,ymin,xmax,ymax,confidence,class,name", good, junk, good]) + "\n")
+    t = read_detections(path)
+    assert t.num_rows == 3 and t.column("line").to_pylist() == [2, 3, 4]
+    err = t.column("error").to_pylist()
+    assert err[0] is None and err[2] is None and t.column("class").to_pylist()[2] == "car"
+    try:
+        fields = next(csv.reader([junk], strict=True)) if junk else []
+    except csv.Error:
+        fields = None
+    if fields is None or len(fields) != 7:
+        assert err[1].startswith("y.csv line 3: malformed CSV line")
+
+
+_JSON = st.recursive(st.none() | st.booleans() | st.integers(-2**70, 2**70) | st.floats(allow_nan=False,
+                                                                                       allow_infinity=False)
+                     | st.text(max_size=8), lambda c: st.lists(c, max_size=5) | st.dictionaries(st.text(max_size=8), c,
+                                                                                                 max_size=5),
+                     max_leaves=12)
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(entry=st.one_of(_JSON, st.fixed_dictionaries({"image_id": _JSON, "category_id": _JSON, "bbox": _JSON,
+                                                     "score": _JSON})))
+def test_any_coco_entry_is_one_row(tmp_path_factory, entry):
+    """Whatever an entry holds, it is one row (an error row when it is not a detection); its neighbours stay."""
+    good = {"image_id": 1, "category_id": 3, "bbox": [900, 500, 80, 60], "score": 0.9}
+    path = tmp_path_factory.mktemp("c") / "r.json"
+    path.write_text(json.dumps([good, entry, good]))
+    t = read_detections(path)
+    assert t.num_rows == 3 and t.column("row").to_pylist() == [0, 1, 2]
+    err = t.column("error").to_pylist()
+    assert err[0] is None and err[2] is None and t.column("u_min_px")[2].as_py() == 899.5
+    if not isinstance(entry, dict):
+        assert err[1] == "r.json detection 1: not a JSON object"
