@@ -18,7 +18,7 @@ from hypothesis import strategies as st
 
 from footprint_uq import PanTiltCamera, footprints_from_supervision, footprints_from_xyxy, read_detections
 from footprint_uq.batch.class_names import COCO80_NAMES, COCO91_IDS, ClassNames
-from footprint_uq.batch.formats import READERS, detect_input_format, open_reader
+from footprint_uq.batch.formats import READERS, detect_input_format, open_reader, table_format
 from footprint_uq.batch.process import process_file
 from footprint_uq.errors import InputError
 from footprint_uq.io import save_camera
@@ -526,3 +526,35 @@ def test_any_coco_entry_is_one_row(tmp_path_factory, entry):
     assert err[0] is None and err[2] is None and t.column("u_min_px")[2].as_py() == 899.5
     if not isinstance(entry, dict):
         assert err[1] == "r.json detection 1: not a JSON object"
+
+
+def test_a_format_from_a_table_function_is_one_line(cam, ref, tmp_path, monkeypatch):
+    """A reader that returns canonical tables (the ROS 2 bag reader's shape) registers with one line and gives the
+    canonical path's footprints; its ``error`` column becomes error rows."""
+    import pyarrow as pa
+
+    d, want = ref
+
+    def tables(path, options):
+        box = d["box"]
+        n = len(box)
+        for lo in range(0, n, 7):
+            sl = slice(lo, min(n, lo + 7))
+            yield pa.table({"frame": d["frame"][sl], "class": d["class"][sl], "object_id": d["object_id"][sl],
+                            **{c: box[sl, j] for j, c in enumerate(("u_min_px", "v_min_px", "u_max_px", "v_max_px"))},
+                            "error": [None] * (sl.stop - lo)})
+
+    src = _w_bytes(tmp_path / "run.fake", b"FAKE")
+    monkeypatch.setitem(READERS, "fake", table_format("fake", tables, sniff=lambda p: p.suffix == ".fake",
+                                                      id_columns=("frame", "object_id", "class", "score")))
+    assert detect_input_format(src) == "fake"
+    t = run(cam, src, tmp_path, "fake")
+    assert_same_footprints(t, want)
+    assert t.column("object_id").to_pylist() == [str(v) for v in d["object_id"]] and t.column("score").null_count == 18
+    with pytest.raises(InputError, match="^id_columns"):
+        table_format("bad", tables, id_columns=("speed",))
+
+
+def _w_bytes(path: Path, data: bytes) -> Path:
+    path.write_bytes(data)
+    return path

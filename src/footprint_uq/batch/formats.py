@@ -46,7 +46,7 @@ from .readers import Chunk, DetectionReader
 
 __all__ = ["FormatOptions", "FormatReader", "YoloLabels", "Yolov5Csv", "CocoResults", "MotChallenge", "READERS",
            "INPUT_FORMATS", "EDGE_SHIFT_PX", "MOT_SHIFT_PX", "NORMALISED_TOL", "detect_input_format", "open_reader",
-           "read_detections", "NamedClasses"]
+           "read_detections", "NamedClasses", "table_format"]
 
 #: continuous image coordinates (the image spans [0, W]) -> pixel centres at integers
 EDGE_SHIFT_PX = 0.5
@@ -616,15 +616,64 @@ class MotChallenge(FormatReader):
         return tuple(values.get(c) for c in self.id_columns)
 
 
+# -- readers from functions that return tables ------------------------------------------------------------
+def table_format(name: str, tables, *, sniff=None, id_columns: tuple[str, ...] = ()) -> type[FormatReader]:
+    """A :class:`FormatReader` class from a function that returns canonical tables (e.g. a ROS 2 bag reader).
+
+    Parameters
+    ----------
+    name : the ``--format`` name
+    tables : callable ``(path, options: FormatOptions) -> iterable of pyarrow.Table``; each table holds
+        ``u_min_px, v_min_px, u_max_px, v_max_px`` (pixel centres at integers), the id columns it has (of
+        ``id_columns``; missing ones are null) and optionally ``error`` (text, null where the row is fine)
+    sniff : callable ``(Path) -> bool`` for ``--format auto`` (default: never detected)
+    id_columns : the id columns of :data:`~footprint_uq.batch.schema.ID_COLUMNS` the tables carry
+
+    Registering it is one line: ``READERS["ros2-bag"] = table_format("ros2-bag", bag_tables, sniff=is_bag,
+    id_columns=("frame", "timestamp_s", "object_id", "class", "score"))``.
+    """
+    bad = [c for c in id_columns if c not in S.ID_COLUMNS]
+    if bad:
+        raise InputError("id_columns", bad, f"columns of {S.ID_COLUMNS}")
+
+    class _TableFormat(FormatReader):
+        def __iter__(self) -> Iterator[Chunk]:
+            for t in tables(self.path, self.options):
+                yield self._table_chunk(t)
+
+        def _table_chunk(self, t: pa.Table) -> Chunk:
+            """A :class:`Chunk` of a canonical table (id columns typed, absent ones null; ``error``: pre-errors)."""
+            n = t.num_rows
+            missing = [c for c in S.BOX2D_COLUMNS if c not in t.column_names]
+            if missing:
+                raise InputError(f"{self.name} table", missing, f"the box columns {list(S.BOX2D_COLUMNS)}")
+            cols = {c: (t.column(c).cast(S.ID_TYPES[c]) if c in t.column_names else pa.nulls(n, S.ID_TYPES[c]))
+                    for c in self.id_columns}
+            cols.update({c: t.column(c).cast(pa.float64()) for c in S.BOX2D_COLUMNS})
+            pre = t.column("error").to_pylist() if "error" in t.column_names else None
+            row0 = self.lines
+            self.lines += n
+            return Chunk(pa.table(cols), np.arange(row0, row0 + n, dtype=np.int64),
+                         pre if pre is not None and any(p is not None for p in pre) else None, [], n)
+
+    tag = re.sub(r"\W", "_", name)
+    _TableFormat.name = name
+    _TableFormat.id_columns = tuple(id_columns)
+    _TableFormat.sniff = classmethod(lambda cls, path: bool(sniff(path)) if sniff is not None else False)
+    _TableFormat.__name__ = _TableFormat.__qualname__ = f"TableFormat_{tag}"
+    return _TableFormat
+
+
 # -- the registry ------------------------------------------------------------------------------------------
-#: detector formats by name: registering one more is one line here (a FormatReader subclass)
+#: detector formats by name: registering one more is one line here (a FormatReader subclass, or
+#: :func:`table_format` of a function returning canonical tables)
 READERS: dict[str, type[FormatReader]] = {
     "yolo": YoloLabels,
     "yolov5-csv": Yolov5Csv,
     "coco": CocoResults,
     "mot": MotChallenge,
 }
-#: every ``--format``: the canonical tables (csv, jsonl, parquet) and the detector formats
+#: every ``--format`` (the CLI's choices): the canonical tables (csv, jsonl, parquet) and the detector formats
 INPUT_FORMATS = ("csv", "jsonl", "parquet", *READERS)
 
 
@@ -662,8 +711,8 @@ def open_reader(path, *, format: str | None = None, chunk_rows: int = S.DEFAULT_
     image_size_px : (width, height) of the camera's images (normalised boxes; sizes a file states are checked)
     """
     fmt = detect_input_format(path) if format in (None, "auto") else format
-    if fmt not in INPUT_FORMATS:
-        raise InputError("format", format, f"one of {['auto', *INPUT_FORMATS]}")
+    if fmt not in TABLE_FORMATS.values() and fmt not in READERS:
+        raise InputError("format", format, f"one of {['auto', 'csv', 'jsonl', 'parquet', *READERS]}")
     names = None if class_names is None else ClassNames.load(class_names, unknown=unknown_class)
     if fmt in READERS:
         size = None if image_size_px is None else tuple(int(v) for v in image_size_px)
