@@ -245,6 +245,57 @@ def _detections(d: Path, camera: Path) -> list[Case]:
     return out
 
 
+def _detector_formats(d: Path, camera: Path) -> list[Case]:
+    """Detector files (docs/integrations.md) with bad lines (rows, one per line) or unusable as a whole (exit 2)."""
+    yolo = ["2 0.5 0.6 0.05 0.1 0.9"] * 5
+    mot = ["1,3,901,501,80,60,0.9,-1,-1,-1"] * 5
+    v5 = ["xmin,ymin,xmax,ymax,confidence,class,name"] + ["900,500,980,560,0.9,2,car"] * 5
+
+    def rows_case(name, body, lines: int, ext: str):
+        p = _w(d / f"{name.replace(' ', '_')}.{ext}", body)
+        o = d / f"{name.replace(' ', '_')}.out.csv"
+        return Case(name, ["objects", "--camera", str(camera), "--budget", "basler1", "--detections", str(p),
+                           "--out", str(o), "--quiet"], "rows", o, lines)
+
+    def exit2(name, path, stderr_has=None):
+        o = d / f"{name.replace(' ', '_')}.out.csv"
+        return Case(name, ["objects", "--camera", str(camera), "--budget", "basler1", "--detections", str(path),
+                           "--out", str(o), "--quiet"], "exit2", o, stderr_has=stderr_has)
+
+    out = [
+        rows_case("yolo latin-1, NUL and blank lines", (yolo[0] + "\n2 caf\xe9 0.6 0.1 0.1\n\n2 0.5\x00 0.6 0.1 0.1\n"
+                                                       + "\n".join(yolo[1:]) + "\n").encode("latin-1"), 8, "txt"),
+        rows_case("yolo segment polygon and 1e400", "\n".join(yolo[:2] + ["0 0.1 0.1 0.2 0.1 0.2 0.2 0.1 0.2",
+                                                                         "0 1e400 0.5 0.1 0.1"] + yolo[2:]) + "\n",
+                  7, "txt"),
+        rows_case("yolo binary lines", yolo[0].encode() + b"\n" + bytes(range(1, 256)) * 4 + b"\n"
+                  + "\n".join(yolo[1:]).encode() + b"\n", 5 + 1 + (bytes(range(1, 256)) * 4).count(b"\n"), "txt"),
+        rows_case("mot frame 10^23 and no final newline", "\n".join(mot[:2] + ["1" + "0" * 23 + mot[0][1:]] + mot[2:]),
+                  6, "txt"),
+        rows_case("yolov5 csv stray quote and latin-1", ("\n".join(v5[:2] + ['900,"500,980,560,0.9,2,car',
+                                                                            "900,500,980,560,0.9,2,caf\xe9"] + v5[2:])
+                                                       + "\n").encode("latin-1"), 7, "csv"),
+        rows_case("coco entries that are not detections", json.dumps(
+            [{"image_id": 1, "category_id": 3, "bbox": [900, 500, 80, 60], "score": 0.9}, None, [1, 2],
+             {"image_id": True, "category_id": 3, "bbox": [900, 500, 80, 60]},
+             {"image_id": 1, "category_id": 3, "bbox": [900, 500, -80, 60]},
+             {"image_id": 10**30, "category_id": "3", "bbox": "x"}]), 6, "json"),
+    ]
+    out.append(exit2("coco truncated JSON", _w(d / "trunc.json", '[{"image_id": 1, "bbox": [1, 2'), "COCO"))
+    out.append(exit2("coco binary JSON", _w(d / "bin.json", bytes(range(256)) * 16), "COCO"))
+    out.append(exit2("coco images of another size", _w(d / "size.json", json.dumps(
+        {"images": [{"id": 1, "file_name": "a.jpg", "width": 1280, "height": 720}], "categories": [],
+         "annotations": [{"image_id": 1, "category_id": 3, "bbox": [1, 2, 3, 4]}]})), "1280 x 720"))
+    seq = d / "seq"
+    _w(seq / "seqinfo.ini", "[Sequence]\nimWidth=640\nimHeight=480\nframeRate=30\n")
+    out.append(exit2("mot seqinfo of another size", _w(seq / "det" / "det.txt", "\n".join(mot) + "\n"), "640 x 480"))
+    _w(seq / "bad" / "seqinfo.ini", bytes(range(256)) * 4)
+    out.append(exit2("mot binary seqinfo", _w(seq / "bad" / "det.txt", "\n".join(mot) + "\n"), "seqinfo"))
+    (d / "empty_dir").mkdir(parents=True, exist_ok=True)
+    out.append(exit2("a folder without label files", d / "empty_dir", "detections"))
+    return out
+
+
 def _truncated_parquet(d: Path, camera: Path) -> list[Case]:
     import numpy as np
     import pyarrow as pa
@@ -442,7 +493,8 @@ def build(d: Path) -> list[Case]:
     camera = _w(d / "camera.yaml", CAMERA)
     budget = _w(d / "budget.yaml", BUDGET)
     return (_camera_cases(d / "cam", budget) + _budget_cases(d / "bud", camera) + _locate_cases(camera)
-            + _detections(d / "det", camera) + _truncated_parquet(d / "pq", camera) + _fleet_cases(d / "fleet")
+            + _detections(d / "det", camera) + _detector_formats(d / "fmt", camera)
+            + _truncated_parquet(d / "pq", camera) + _fleet_cases(d / "fleet")
             + _fuse_cases(d / "fuse")
             + _calibration_cases(d / "cal") + _gcp_cases(d / "gcp") + _other_commands(d / "other", camera))
 

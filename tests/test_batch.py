@@ -367,11 +367,16 @@ def test_geojson(cam, tmp_path):
     s = process_file(cam, BUDGET, src, out, chunk_rows=7, progress=False, origin_lat_deg=lat0, origin_lon_deg=lon0,
                      heading_offset_deg=head)
     gj = json.loads(out.read_text())
-    assert gj["type"] == "FeatureCollection" and len(gj["features"]) == 30 == s.rows_out
+    feats = [f for f in gj["features"] if f["properties"]["role"] == "footprint"]
+    ellipses = [f for f in gj["features"] if f["properties"]["role"] == "ellipse"]
+    assert gj["type"] == "FeatureCollection" and len(feats) == 30 == s.rows_out
+    assert len(feats) + len(ellipses) == len(gj["features"])
+    assert [f["properties"]["row"] for f in ellipses] == [f["properties"]["row"] for f in feats
+                                                          if f["properties"]["status"] == "ok"]
     ref = process_table(cam, BUDGET, d, corners=True, heading_offset_deg=head)
     geod = Geod(ellps="WGS84")
     n_poly = 0
-    for i, f in enumerate(gj["features"]):
+    for i, f in enumerate(feats):
         assert f["type"] == "Feature" and f["properties"]["row"] == i
         g = f["geometry"]
         st = f["properties"]["status"]
@@ -408,7 +413,7 @@ def test_geojson(cam, tmp_path):
     process_file(cam, BUDGET, tmp_path / "d2.parquet", tmp_path / "o2.geojson", progress=False,
                  origin_lat_deg=lat0, origin_lon_deg=lon0)
     g2 = json.loads((tmp_path / "o2.geojson").read_text())
-    assert [f["geometry"]["type"] for f in g2["features"]] == ["Point"] * 5
+    assert [f["geometry"]["type"] for f in g2["features"] if f["properties"]["role"] == "footprint"] == ["Point"] * 5
 
 
 @pytest.mark.parametrize("ext_in", [".csv", ".jsonl", ".parquet"])

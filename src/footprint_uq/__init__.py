@@ -6,6 +6,8 @@ closed-form Jacobians, ``Cov = J Sigma J^T`` and the footprint uncertainty of
 detected objects, generalised to OpenCV cameras with distortion.
 """
 
+import importlib
+
 from . import _moved, _numba_cache  # noqa: F401 - _numba_cache: numba's cache folder, set before any kernel module
 from .cameras.opencv import OpenCVCamera
 from .cameras.pantilt import PanTiltCamera
@@ -47,4 +49,17 @@ __all__ = [
     "propagate_joint", "unscented", "__version__",
     "FootprintEstimate", "FrameProcessor", "footprints_from_boxes2d", "footprints_from_boxes3d",
     "footprints_from_corners", "fuse_by_id", "GeoReference", "footprints_geojson", "cpm_fields", "j2735_fields",
+    "read_detections", "footprints_from_supervision", "footprints_from_xyxy",
 ]
+
+#: detector files and in-memory detections (docs/integrations.md): loaded on first use, so that
+#: ``import footprint_uq`` does not pay for the batch package (~0.2 s) when they are not used
+_LAZY = {"read_detections": "footprint_uq.batch.formats", "footprints_from_supervision": "footprint_uq.batch.arrays",
+         "footprints_from_xyxy": "footprint_uq.batch.arrays"}
+
+
+def __getattr__(name: str):
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    return getattr(importlib.import_module(module), name)

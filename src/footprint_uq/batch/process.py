@@ -55,7 +55,7 @@ from ..tracking import SharedJacobianAt, TrackerConfig, TrackOutput, TrackTable,
 from ..uncertainty.budget import load_budget
 from ..uncertainty.ellipse import chi2_scale
 from . import schema as S
-from .readers import open_detections
+from .formats import open_reader
 from .writers import detect_out_format, open_writer
 
 __all__ = ["prefetch", "BatchProcessor", "process_table", "process_file", "process_chunk", "Summary", "summary_path",
@@ -821,7 +821,8 @@ def _stream_to_file(reader, bp, out, schema, bar, *, fmt_out: str, compression, 
     pending = None
     writer = None
     try:
-        writer = open_writer(out, schema, format=fmt_out, compression=compression, fsync=fsync) \
+        writer = open_writer(out, schema, format=fmt_out, compression=compression, fsync=fsync, georef=bp.geo,
+                             ellipse_confidence=bp.confidence or 0.95) \
             if writer_factory is None else writer_factory(out, schema, fsync=fsync)
         for chunk in prefetch(iter(reader), 1):
             table = process_chunk(bp, chunk)
@@ -851,7 +852,9 @@ def _stream_to_file(reader, bp, out, schema, bar, *, fmt_out: str, compression, 
 
 def _file_info(detections, out, reader, fmt_out: str, bp, fsync: bool, info: dict | None) -> dict:
     """The ``info`` entries of a file job's summary (inputs, formats, options, origin, budget)."""
+    names = getattr(reader, "names", None)
     return {"detections": str(detections), "out": str(out), "format_in": reader.format, "format_out": fmt_out,
+            "class_names": getattr(names, "source", None),
             "box_type": bp.box_type, "contact": bp.contact if bp.box_type == "2d" else None,
             "n_corners": bp.n_corners, "confidence": bp.confidence, "heading_offset_deg": bp.heading_offset_deg,
             "origin": None if bp.geo is None else {
@@ -863,7 +866,8 @@ def _file_info(detections, out, reader, fmt_out: str, bp, fsync: bool, info: dic
 def process_file(camera, budget, detections, out, *, chunk_rows: int = S.DEFAULT_CHUNK_ROWS,
                  format_in: str | None = None, format_out: str | None = None, progress: bool | None = None,
                  summary: bool = True, compression: str | None = "auto", info: dict | None = None,
-                 fsync: bool = True, reader=None, writer_factory=None, **options) -> Summary:
+                 fsync: bool = True, reader=None, writer_factory=None, class_names=None, unknown_class: str = "error",
+                 **options) -> Summary:
     """Stream a detection file through the footprint pipeline, chunk by chunk.
 
     Parameters
@@ -871,7 +875,8 @@ def process_file(camera, budget, detections, out, *, chunk_rows: int = S.DEFAULT
     camera : Camera
     budget : ErrorBudget, preset name, path or mapping
     detections : path
-        CSV (``.csv``), JSON Lines (``.jsonl``/``.ndjson``) or Parquet (``.parquet``/``.pq``).
+        CSV (``.csv``), JSON Lines (``.jsonl``/``.ndjson``) or Parquet (``.parquet``/``.pq``), or a detector
+        format (:mod:`footprint_uq.batch.formats`: YOLO labels, YOLOv5 CSV, COCO results, MOTChallenge).
     out : path
         ``.parquet``/``.pq``, ``.csv``, ``.jsonl``/``.ndjson`` or ``.geojson`` (needs an origin).
     chunk_rows : int
@@ -892,6 +897,11 @@ def process_file(camera, budget, detections, out, *, chunk_rows: int = S.DEFAULT
         folder are fsynced before the rename (default).  False only renames: the output is still never
         partial under its name for a killed job, but a power loss or an operating-system crash may leave
         it empty or missing (scratch outputs, tmpfs; saves the disk write on the job's critical path).
+    format_in : str, optional
+        One of :data:`footprint_uq.batch.formats.INPUT_FORMATS` (default: detected from the file).
+    class_names, unknown_class
+        Integer class ids -> names (:func:`footprint_uq.batch.formats.open_reader`).  Normalised boxes are
+        scaled to the camera's image size; a file stating another image size is refused.
     reader : optional
         A reader of another source than a detection file (the interface of
         :class:`~footprint_uq.batch.readers.DetectionReader`: ``columns``, ``family_columns``, ``id_fields``,
@@ -917,7 +927,8 @@ def process_file(camera, budget, detections, out, *, chunk_rows: int = S.DEFAULT
                              "coordinates are WGS84 longitude/latitude")
         options["corners"] = True  # the polygon
     if reader is None:
-        reader = open_detections(detections, chunk_rows=chunk_rows, format=format_in)
+        reader = open_reader(detections, chunk_rows=chunk_rows, format=format_in, class_names=class_names,
+                             unknown_class=unknown_class, image_size_px=camera.image_size_px)
     bp = BatchProcessor(camera, budget, **options)
     names = reader.columns if bp.box_type is not None else reader.family_columns  # JSON Lines: one rule per family
     schema = bp.resolve(names, reader.id_fields)

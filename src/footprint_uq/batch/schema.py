@@ -58,11 +58,14 @@ __all__ = ["DEFAULT_CHUNK_ROWS", "ID_COLUMNS", "ID_TYPES",
 #: rows per chunk by default: peak memory about 0.35 GB + 0.8 kB x chunk_rows (docs/batch.md)
 DEFAULT_CHUNK_ROWS = 131_072
 
-#: identification columns passed through unchanged (all optional)
-ID_COLUMNS = ("camera_id", "frame", "timestamp_s", "object_id", "class", "score")
+#: identification columns passed through unchanged (all optional); ``score`` (the detector's confidence),
+#: ``image`` (the image / label file a detection comes from) and ``line`` (its 1-based line in that file) are
+#: what the detector-format readers carry (:mod:`footprint_uq.batch.formats`, docs/integrations.md)
+ID_COLUMNS = ("camera_id", "frame", "timestamp_s", "object_id", "class", "score", "image", "line")
 #: their types when read from text formats (CSV, JSON Lines); Parquet keeps its own types
 ID_TYPES = {"camera_id": pa.string(), "frame": pa.int64(), "timestamp_s": pa.float64(), "object_id": pa.string(),
-            "class": pa.string(), "score": pa.float64()}
+            "class": pa.string(), "score": pa.float64(), "image": pa.string(), "line": pa.int64()}
+
 #: V2X codes written for rows without a centre covariance (the messages' "unavailable" values)
 V2X_UNAVAILABLE = {"cpm_x_confidence": 4096, "cpm_y_confidence": 4096, "cpm_xy_correlation": 101,
                    "j2735_semi_major": 255, "j2735_semi_minor": 255, "j2735_orientation": 65535,

@@ -7,10 +7,14 @@ All writers take the output schema once and then one table per chunk.
 * CSV and JSON Lines write ``status``/``reason`` as text; CSV writes NaN as an empty field,
   JSON Lines as ``null``;
 * GeoJSON (RFC 7946) needs WGS84 coordinates, i.e. a geodetic origin: one Feature per
-  row; geometry a Polygon of the footprint corners (K >= 3, every corner computed; exterior
-  ring counter-clockwise and closed), a Point (K = 1, or the centre / largest point when the
-  polygon is not available) or null (error rows); properties: every output column except
-  the per-corner ones, which the geometry carries.
+  row (``"role": "footprint"``); geometry a Polygon of the footprint corners (K >= 3, every
+  corner computed; exterior ring counter-clockwise and closed), a Point (K = 1, or the centre /
+  largest point when the polygon is not available) or null (error rows); properties: every
+  output column except the per-corner ones, which the geometry carries.  With the writer's
+  georeference, every row with a centre covariance also gets a Feature ``"role": "ellipse"``:
+  the ellipse at ``ellipse_confidence`` (95 % by default) as a Polygon of
+  :data:`ELLIPSE_VERTICES` vertices (:func:`~footprint_uq.uncertainty.ellipse.ellipse_ring`,
+  computed in the world frame, then put on WGS84), so that a GIS draws it as a shape.
 """
 
 from __future__ import annotations
@@ -31,10 +35,14 @@ import pyarrow.parquet as pq
 from ..errors import InputError
 from ..io.atomic import clean_temporaries_of, commit, discard, temp_path
 from ..products.footprints import V2X_FIELDS
+from ..uncertainty.ellipse import ellipse_ring
 
 __all__ = ["AUTO", "is_code_column", "OUT_FORMATS", "detect_out_format", "open_writer", "FootprintWriter",
            "decode_dictionaries", "parquet_options"]
 
+#: vertices of a GeoJSON ellipse polygon (before the closing one): 64 keep the polygon's area within 0.2 %
+#: of the ellipse's
+ELLIPSE_VERTICES = 64
 OUT_FORMATS = {".csv": "csv", ".jsonl": "jsonl", ".ndjson": "jsonl", ".parquet": "parquet", ".pq": "parquet",
                ".geojson": "geojson"}
 
@@ -262,8 +270,10 @@ def _num(x):
 class GeoJsonOut(FootprintWriter):
     format = "geojson"
 
-    def __init__(self, path, schema):
+    def __init__(self, path, schema, *, georef=None, ellipse_confidence: float = 0.95):
         super().__init__(path, schema)
+        self.georef = georef
+        self.ellipse_confidence = float(ellipse_confidence)
         if "lat_deg" not in schema.names:
             raise InputError("out", str(path), "an origin (origin_lat_deg/origin_lon_deg) for GeoJSON output: "
                              "GeoJSON coordinates are WGS84 longitude/latitude")
@@ -290,6 +300,7 @@ class GeoJsonOut(FootprintWriter):
             area = 0.5 * np.sum(cx * np.roll(cy, -1, 1) - np.roll(cx, -1, 1) * cy, axis=1)
         clat = t.column("lat_deg").to_numpy(zero_copy_only=False)
         clon = t.column("lon_deg").to_numpy(zero_copy_only=False)
+        rings = self._ellipse_rings(t)
         parts = []
         for i, p in enumerate(props):
             geom = None
@@ -302,11 +313,38 @@ class GeoJsonOut(FootprintWriter):
                 geom = {"type": "Point", "coordinates": [float(clon[i]), float(clat[i])]}
             elif K and 0 <= (k := int(p.get("largest_index", -1))) < K and math.isfinite(lat[i, k]):
                 geom = {"type": "Point", "coordinates": [float(lon[i, k]), float(lat[i, k])]}
-            feat = {"type": "Feature", "geometry": geom, "properties": {k: _num(v) for k, v in p.items()}}
-            parts.append(json.dumps(feat, allow_nan=False, default=str))
+            props = {"role": "footprint", **{k: _num(v) for k, v in p.items()}}
+            parts.append(json.dumps({"type": "Feature", "geometry": geom, "properties": props}, allow_nan=False,
+                                    default=str))
+            if rings is not None and rings[i] is not None:
+                props = {**props, "role": "ellipse", "ellipse_confidence": self.ellipse_confidence}
+                parts.append(json.dumps({"type": "Feature", "geometry": {"type": "Polygon", "coordinates": [rings[i]]},
+                                         "properties": props}, allow_nan=False, default=str))
         sep = ",\n"
         self._f.write(("" if self._first else sep) + sep.join(parts))
         self._first = False
+
+    def _ellipse_rings(self, t: pa.Table) -> list | None:
+        """Per row: the ellipse's closed ``[lon, lat]`` ring (a list), or None (no centre covariance)."""
+        if self.georef is None:
+            return None
+        col = {c: t.column(c).to_numpy(zero_copy_only=False) for c in ("x_m", "y_m", "cov_xx_m2", "cov_xy_m2",
+                                                                        "cov_yy_m2", "sigma_minor_m")}
+        centre = np.stack([col["x_m"], col["y_m"]], -1)
+        cov = np.stack([np.stack([col["cov_xx_m2"], col["cov_xy_m2"]], -1),
+                        np.stack([col["cov_xy_m2"], col["cov_yy_m2"]], -1)], -2)
+        with np.errstate(invalid="ignore"):
+            ok = np.isfinite(centre).all(-1) & np.isfinite(cov).all((-1, -2)) & (col["sigma_minor_m"] > 0)
+        out: list = [None] * t.num_rows
+        if not ok.any():
+            return out
+        ring = ellipse_ring(centre[ok], cov[ok], confidence=self.ellipse_confidence, n=ELLIPSE_VERTICES)
+        lat, lon = self.georef.to_wgs84(ring)
+        for j, i in enumerate(np.flatnonzero(ok).tolist()):
+            if np.isfinite(lat[j]).all() and np.isfinite(lon[j]).all():
+                out[i] = np.stack([lon[j], lat[j]], -1).tolist()
+                out[i][-1] = out[i][0]  # closed exactly, whatever the projection's rounding
+        return out
 
     def _close(self):
         try:
@@ -316,8 +354,10 @@ class GeoJsonOut(FootprintWriter):
 
 
 def open_writer(path, schema: pa.Schema, *, format: str | None = None, compression: str | None = AUTO,
-                fsync: bool = True):
-    """A :class:`FootprintWriter` for ``path`` (format from the extension; ``fsync`` as in :class:`FootprintWriter`)."""
+                fsync: bool = True, georef=None, ellipse_confidence: float = 0.95):
+    """A :class:`FootprintWriter` for ``path`` (format from the extension; ``fsync`` as in :class:`FootprintWriter`;
+    GeoJSON: with ``georef``, a :class:`~footprint_uq.products.geo.GeoReference`, also the
+    ``ellipse_confidence`` ellipses as polygons)."""
     fmt = detect_out_format(path, format)
     if fmt == "parquet":
         w = ParquetOut(path, schema, compression=compression)
@@ -326,6 +366,6 @@ def open_writer(path, schema: pa.Schema, *, format: str | None = None, compressi
     elif fmt == "jsonl":
         w = JsonlOut(path, schema)
     else:
-        w = GeoJsonOut(path, schema)
+        w = GeoJsonOut(path, schema, georef=georef, ellipse_confidence=ellipse_confidence)
     w.fsync = bool(fsync)
     return w

@@ -14,7 +14,9 @@ from __future__ import annotations
 import click
 
 from .._notices import set_compile_handler
+from ..batch.class_names import UNKNOWN_POLICIES
 from ..batch.fleet import process_fleet
+from ..batch.formats import INPUT_FORMATS
 from ..batch.process import process_file
 from ..batch.schema import DEFAULT_CHUNK_ROWS
 from ..errors import InputError
@@ -36,9 +38,21 @@ __all__ = ["objects_cmd"]
 @click.option("--budget", "budget_spec", metavar="FILE_OR_PRESET",
               help=f"Error budget: a preset ({', '.join(PRESET_NAMES)}) or a YAML/JSON budget file.")
 @click.option("--detections", "detections", required=True, metavar="FILE_OR_DIR",
-              help="Detections: .csv, .jsonl/.ndjson or .parquet file, or a ROS 2 bag (.mcap, .db3 or a bag folder: "
-                   "its vision_msgs/msg/Detection2DArray topic, --topic; docs/integrations-ros2.md); with --registry "
-                   "a Parquet dataset folder.")
+              help="Detections: .csv, .jsonl/.ndjson or .parquet file, a detector's output (--format), or a ROS 2 "
+                   "bag (.mcap, .db3 or a bag folder: its vision_msgs/msg/Detection2DArray topic, --topic; "
+                   "docs/integrations-ros2.md); with --registry a Parquet dataset folder.")
+@click.option("--format", "format_in", type=click.Choice(["auto", *INPUT_FORMATS]), default="auto", show_default=True,
+              help="Input format: the canonical tables (csv, jsonl, parquet), a folder of YOLO / ultralytics .txt "
+                   "labels (yolo), a YOLOv5 pandas CSV (yolov5-csv), COCO results JSON (coco), a MOTChallenge "
+                   "det.txt / gt.txt (mot); auto: from the file (docs/integrations.md).")
+@click.option("--class-names", default=None, metavar="coco|coco91|mot|FILE",
+              help="Integer class ids -> names: a built-in map, an ultralytics data.yaml (names:), a JSON list / "
+                   "mapping / COCO dataset (categories, images), or a text file of one name per line (default: "
+                   "the format's own: COCO for YOLO).")
+@click.option("--unknown-class", type=click.Choice(UNKNOWN_POLICIES), default="error", show_default=True,
+              help="A class id without a name: that detection's error, or the class 'unknown'.")
+@click.option("--image-size", nargs=2, type=click.IntRange(min=1), default=None, metavar="W H",
+              help="Size of the images the detections were made on (checked: it must be the camera's).")
 @click.option("--out", "out", required=True, metavar="FILE_OR_DIR",
               help="Output: .parquet, .csv, .jsonl or .geojson (needs --origin-lat/--origin-lon), or a ROS 2 bag: "
                    "run.mcap (one MCAP file) or run_bag/ (a bag folder, --bag-storage); with --registry a folder "
@@ -105,7 +119,8 @@ __all__ = ["objects_cmd"]
 @click.option("--overwrite", is_flag=True,
               help="Fleet mode: replace a non-empty --out folder as a whole (refused otherwise).")
 @pose_options
-def objects_cmd(camera_path, budget_spec, detections, out, box_type, contact, chunk_rows, confidence,
+def objects_cmd(camera_path, budget_spec, detections, format_in, class_names, unknown_class, image_size, out, box_type,
+                contact, chunk_rows, confidence,
                 heading_offset_deg, origin_lat, origin_lon, corners, allow_outside_image, linearity, linear_threshold,
                 v2x_policy, compression, fsync, tracks, quiet, registry, scheduler, workers, retries, overwrite,
                 topic, camera_info_topic, frame_id, bag_storage, ros_distro, foxglove, pose):
@@ -124,15 +139,24 @@ def objects_cmd(camera_path, budget_spec, detections, out, box_type, contact, ch
     set_compile_handler(compile_handler(note))  # said before the kernels' first compile, after the inputs are checked
     ros = dict(topic=topic, camera_info_topic=camera_info_topic, frame_id=frame_id, bag_storage=bag_storage,
                ros_distro=ros_distro, foxglove=foxglove)
+    reader_opts = dict(format_in=None if format_in == "auto" else format_in, class_names=class_names,
+                       unknown_class=unknown_class)
     if registry is None and (is_bag(detections) or bag_out_kind(out) is not None):
+        if is_bag(detections) and (reader_opts["format_in"] is not None or class_names is not None):
+            raise InputError("--format/--class-names", (format_in, class_names),
+                             "neither with a ROS 2 bag in (its Detection2DArray messages name their classes)")
         summ = _objects_ros(camera_path, budget_spec, detections, out, pose, ros, chunk_rows=chunk_rows,
-                            progress=None if not quiet else False, compression=comp, fsync=fsync, **options)
+                            progress=None if not quiet else False, compression=comp, fsync=fsync,
+                            **({} if is_bag(detections) else reader_opts), **options)
         click.echo(f"footprint-uq objects: {summ.text()}; {summ.elapsed_s:.2f} s", err=True)
         return
     _no_ros_options(ros)
     if registry is not None:
         if camera_path is not None:
             raise InputError("--camera", camera_path, "no --camera with --registry (the registry names the cameras)")
+        if format_in not in ("auto", "parquet") or class_names is not None or image_size is not None:
+            raise InputError("--format/--class-names/--image-size", (format_in, class_names, image_size),
+                             "none of them with --registry (fleet mode reads a Parquet dataset of canonical columns)")
         if tracks:
             raise InputError("--tracks", True, "a single detections file (--camera): fleet partitions run in "
                                                "parallel, out of time order")
@@ -149,11 +173,15 @@ def objects_cmd(camera_path, budget_spec, detections, out, box_type, contact, ch
         if camera_path is None or budget_spec is None:
             raise InputError("--camera/--budget", (camera_path, budget_spec), "both a camera file and a budget")
         cam, bud = load_camera_and_budget(camera_path, budget_spec, pose)
+        if image_size is not None and tuple(image_size) != tuple(cam.image_size_px):
+            raise InputError("--image-size", f"{image_size[0]} x {image_size[1]}", f"the camera's image size "
+                             f"{cam.image_size_px[0]} x {cam.image_size_px[1]} (the detections must be made on the "
+                             "camera's images)")
         summ = process_file(cam, bud, detections, out, chunk_rows=chunk_rows, progress=None if not quiet else False,
                             compression=comp, info={"camera": str(camera_path), "budget": str(budget_spec),
                                                       **({} if pose is None else {"pose": pose}),
                                                       "budget_missing_terms": list(bud.missing_terms())},
-                            fsync=fsync, **options)
+                            fsync=fsync, **reader_opts, **options)
     click.echo(f"footprint-uq objects: {summ.text()}; {summ.elapsed_s:.2f} s", err=True)
 
 

@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import click
 
+from ..batch.class_names import UNKNOWN_POLICIES
+from ..batch.formats import INPUT_FORMATS
 from ..errors import InputError
 from ..uncertainty.presets import PRESET_NAMES
 from ..validation.coverage import DEFAULT_RANGE_BANDS_M
@@ -64,6 +66,16 @@ def _bands(text: str) -> tuple[float, ...]:
 @click.option("--contact", type=click.Choice(sorted(CONTACT_MODELS)), default="bottom-centre", show_default=True,
               help="Where a 2-D box touches the ground.")
 @label_source_options
+@click.option("--detections", default=None, metavar="FILE_OR_DIR",
+              help="A detector's own files (YOLO labels, YOLOv5 CSV, COCO results, MOTChallenge, a canonical table), "
+                   "paired with --labels, a truth table of frame, object_id, x_m, y_m (or lat_deg, lon_deg), by "
+                   "frame and object_id (docs/integrations.md).")
+@click.option("--format", "detections_format", type=click.Choice(["auto", *INPUT_FORMATS]), default="auto",
+              show_default=True, help="Format of --detections (auto: from the file).")
+@click.option("--class-names", default=None, metavar="coco|coco91|mot|FILE",
+              help="Integer class ids of --detections -> names (default: the format's own).")
+@click.option("--unknown-class", type=click.Choice(UNKNOWN_POLICIES), default="error", show_default=True,
+              help="A class id without a name: that detection's error, or the class 'unknown'.")
 @click.option("--range-bands", default=",".join(f"{v:g}" for v in DEFAULT_RANGE_BANDS_M), show_default=True,
               metavar="EDGES", help="Range band edges in metres (the last band is open).")
 @click.option("--alpha", type=click.FloatRange(0.0, 0.5, min_open=True), default=0.05, show_default=True,
@@ -73,18 +85,25 @@ def _bands(text: str) -> tuple[float, ...]:
 @click.option("--no-report", is_flag=True, help="No report.html / calibration.png (summary and objects only).")
 @click.option("--fsync/--no-fsync", default=True, show_default=True, help="Durable outputs (fsync before rename).")
 def validate_cmd(labels, out_dir, budget_spec, contact, kind, camera_path, registry, calibration, image_size,
-                 origin_lat, origin_lon, heading_offset_deg, range_bands, alpha, objects_format, no_report, fsync):
+                 origin_lat, origin_lon, heading_offset_deg, detections, detections_format, class_names, unknown_class,
+                 range_bands, alpha, objects_format, no_report, fsync):
     """Do the uncertainty ellipses contain the real errors?  Coverage, bias and a verdict.
 
     Writes summary.json, objects.csv (one row per input object, with its status) and report.html into
     OUT; prints the verdict.
     """
+    if detections is None and (detections_format != "auto" or class_names is not None or unknown_class != "error"):
+        raise InputError("--format/--class-names/--unknown-class", (detections_format, class_names, unknown_class),
+                         "--detections too (they say how to read a detector's files)")
     summary, files = run_validation(labels, out_dir, budget_spec, kind=kind, contact=contact, camera=camera_path,
                                     registry=registry, calibration=calibration,
                                     image_size_px=tuple(image_size) if image_size else None,
                                     origin_lat_deg=origin_lat, origin_lon_deg=origin_lon,
                                     heading_offset_deg=heading_offset_deg, range_bands_m=_bands(range_bands),
-                                    alpha=alpha, objects_format=objects_format, report=not no_report, fsync=fsync)
+                                    alpha=alpha, objects_format=objects_format, report=not no_report, fsync=fsync,
+                                    detections=detections,
+                                    detections_format=None if detections_format == "auto" else detections_format,
+                                    class_names=class_names, unknown_class=unknown_class)
     t = summary["nees_test"]
     c95 = next((c for c in summary["coverage"] if c["nominal"] == 0.95), None)
     un = summary["unpaired"]

@@ -32,7 +32,7 @@ from .. import status
 from .._checks import as_float, as_points
 from ..errors import InputError
 from ..io.atomic import atomic_write_text
-from ..uncertainty.ellipse import ellipse_axes
+from ..uncertainty.ellipse import ellipse_axes, ellipse_ring
 from .v2x import cpm_fields, j2735_fields, rotate_to_true_north
 
 __all__ = ["GeoReference", "footprints_geojson", "write_geojson"]
@@ -142,13 +142,18 @@ def _num(x):
 
 
 def footprints_geojson(estimate, georef: GeoReference, *, object_ids=None, properties=None,
-                       centroid_points: bool = True, confidence: float = 0.95) -> dict:
+                       centroid_points: bool = True, confidence: float = 0.95, ellipse_polygons: bool = True,
+                       ellipse_vertices: int = 64) -> dict:
     """GeoJSON FeatureCollection (RFC 7946, lon/lat WGS84) of a frame's footprints.
 
     One ``Polygon`` feature per object (the footprint, exterior ring counter-clockwise;
     a ``LineString`` for two contact points, a ``Point`` for one; ``null`` geometry when
     a corner could not be computed, with the reasons in the properties), and with
-    ``centroid_points`` one ``Point`` feature per object at its centre.  Properties:
+    ``centroid_points`` one ``Point`` feature per object at its centre, and with ``ellipse_polygons``
+    one ``Polygon`` feature per object with a centre covariance (``"role": "ellipse"``): the
+    ``confidence`` ellipse as a closed counter-clockwise ring of ``ellipse_vertices`` vertices
+    (:func:`~footprint_uq.uncertainty.ellipse.ellipse_ring` in the world frame, put on WGS84), so
+    that a GIS draws it.  Properties:
     ``object_id``, ``role`` ("footprint"/"centroid"), centre lat/lon, centre ellipse at
     1 sigma and at ``confidence`` (semi-axes in m, ``orientation_deg_from_north``), the
     largest-point bound, the CPM and J2735 fields (computed for the georeference's heading
@@ -161,7 +166,7 @@ def footprints_geojson(estimate, georef: GeoReference, *, object_ids=None, prope
     object_ids : sequence (N,), optional    default 0..N-1
     properties : sequence of dict (N,), optional    merged into each object's properties
     """
-    N, K = len(estimate), estimate.n_corners
+    N = len(estimate)
     ids = list(range(N)) if object_ids is None else list(object_ids)
     if len(ids) != N:
         raise InputError("object_ids", len(ids), f"{N} ids (one per object)")
@@ -177,21 +182,10 @@ def footprints_geojson(estimate, georef: GeoReference, *, object_ids=None, prope
            **j2735_fields(estimate.centre_cov_m2, georef.heading_offset_deg)}
     reasons = estimate.centre_reason_text()
     conf_pct = f"{100 * confidence:g}"
+    rings = _ellipse_rings(estimate, georef, confidence, ellipse_vertices) if ellipse_polygons else [None] * N
     feats = []
     for i in range(N):
-        ok = np.isfinite(lat_c[i]).all() & np.isfinite(lon_c[i]).all()
-        ring = [[float(lon_c[i, k]), float(lat_c[i, k])] for k in range(K)]
-        if not ok:
-            geom = None
-        elif K == 1:
-            geom = {"type": "Point", "coordinates": ring[0]}
-        elif K == 2:
-            geom = {"type": "LineString", "coordinates": ring}
-        else:
-            x, y = lon_c[i], lat_c[i]
-            if 0.5 * np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y) < 0:
-                ring = ring[::-1]
-            geom = {"type": "Polygon", "coordinates": [ring + [ring[0]]]}
+        geom = _footprint_geometry(lon_c[i], lat_c[i])
         props = {
             "object_id": ids[i].item() if hasattr(ids[i], "item") else ids[i],
             "role": "footprint",
@@ -214,7 +208,42 @@ def footprints_geojson(estimate, georef: GeoReference, *, object_ids=None, prope
             if estimate.centre_valid[i]:
                 cg = {"type": "Point", "coordinates": [float(lon_m[i]), float(lat_m[i])]}
             feats.append({"type": "Feature", "geometry": cg, "properties": {**props, "role": "centroid"}})
+        if rings[i] is not None:
+            feats.append({"type": "Feature", "geometry": {"type": "Polygon", "coordinates": [rings[i]]},
+                          "properties": {**props, "role": "ellipse", "ellipse_confidence": confidence}})
     return {"type": "FeatureCollection", "features": feats}
+
+
+def _footprint_geometry(lon, lat) -> dict | None:
+    """GeoJSON geometry of one footprint's K corners (``lon``, ``lat`` (K,)): a Point (K = 1), a LineString
+    (K = 2), a counter-clockwise Polygon (K >= 3), or None when a corner is missing."""
+    if not (np.isfinite(lat).all() and np.isfinite(lon).all()):
+        return None
+    ring = [[float(x), float(y)] for x, y in zip(lon, lat, strict=True)]
+    if len(ring) == 1:
+        return {"type": "Point", "coordinates": ring[0]}
+    if len(ring) == 2:
+        return {"type": "LineString", "coordinates": ring}
+    if 0.5 * np.sum(lon * np.roll(lat, -1) - np.roll(lon, -1) * lat) < 0:
+        ring = ring[::-1]
+    return {"type": "Polygon", "coordinates": [ring + [ring[0]]]}
+
+
+def _ellipse_rings(estimate, georef: GeoReference, confidence: float, n: int) -> list:
+    """Per object: the ``confidence`` ellipse's closed ``[lon, lat]`` ring, or None (no centre covariance)."""
+    centre, cov = estimate.centre_xy_world_m, estimate.centre_cov_m2
+    _, b, _ = ellipse_axes(cov)
+    with np.errstate(invalid="ignore"):
+        ok = np.asarray(estimate.centre_valid, bool) & np.isfinite(centre).all(-1) & np.isfinite(cov).all((-1, -2)) \
+            & (b > 0)
+    out: list = [None] * len(ok)
+    if ok.any():
+        lat, lon = georef.to_wgs84(ellipse_ring(centre[ok], cov[ok], confidence=confidence, n=n))
+        for j, i in enumerate(np.flatnonzero(ok).tolist()):
+            ring = np.stack([lon[j], lat[j]], -1).tolist()
+            ring[-1] = ring[0]
+            out[i] = ring
+    return out
 
 
 def write_geojson(path, feature_collection: dict) -> Path:

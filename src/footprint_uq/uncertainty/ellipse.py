@@ -16,7 +16,7 @@ from scipy.special import chdtri
 from .._checks import as_float
 from ..errors import InputError
 
-__all__ = ["chi2_scale", "ellipse_axes", "ellipse_points", "heading_deg"]
+__all__ = ["chi2_scale", "ellipse_axes", "ellipse_points", "ellipse_ring", "heading_deg"]
 
 
 def chi2_scale(confidence: float, dof: int = 2) -> float:
@@ -70,3 +70,34 @@ def ellipse_points(center_m, cov_m2, *, confidence: float | None = None, n: int 
     circle = np.stack([np.cos(t), np.sin(t)], -1)  # (n, 2)
     A = V * (k * np.sqrt(np.maximum(w, 0.0)))[..., None, :]  # (..., 2, 2)
     return m[..., None, :] + np.einsum("...ij,nj->...ni", A, circle)
+
+
+def ellipse_ring(center_m, cov_m2, *, confidence: float = 0.95, n: int = 64):
+    """Closed counter-clockwise rings ``(..., n + 1, 2)`` of the ``confidence`` ellipses (GeoJSON polygons).
+
+    Vertex ``j`` is ``c + a cos t_j e_major + b sin t_j e_minor`` with ``t_j = 2 pi j / n``, the semi-axes
+    ``a, b`` and the major axis ``e_major`` of :func:`ellipse_axes` (``e_minor`` = ``e_major`` turned 90 deg
+    counter-clockwise), so every vertex lies on the ellipse and the ring runs counter-clockwise in a
+    right-handed x-y frame (RFC 7946's exterior rings); the last vertex is the first one again (closed).
+
+    Parameters
+    ----------
+    center_m : (..., 2) centres; cov_m2 : (..., 2, 2) covariances (m^2)
+    confidence : probability inside the ellipse (2-D chi-square), default 0.95
+    n : vertices before the closing one (>= 8)
+
+    Returns
+    -------
+    ndarray (..., n + 1, 2): NaN where the covariance or the centre is NaN
+    """
+    if int(n) < 8:
+        raise InputError("n", n, "at least 8 vertices")
+    a, b, ang = ellipse_axes(cov_m2, confidence=confidence)
+    th = np.radians(ang)[..., None]
+    t = 2.0 * np.pi * np.arange(int(n)) / int(n)
+    ca, sa = a[..., None] * np.cos(t), b[..., None] * np.sin(t)
+    m = np.asarray(center_m, dtype=np.float64)
+    x = m[..., 0:1] + ca * np.cos(th) - sa * np.sin(th)
+    y = m[..., 1:2] + ca * np.sin(th) + sa * np.cos(th)
+    ring = np.stack([x, y], -1)
+    return np.concatenate([ring, ring[..., :1, :]], -2)

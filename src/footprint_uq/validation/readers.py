@@ -29,6 +29,9 @@ Formats (docs/validation.md, "Inputs"):
   of docs/batch.md (``u_min_px v_min_px u_max_px v_max_px``, optional ``cov_uu_px2 cov_uv_px2
   cov_vv_px2``, ``camera_id frame object_id class``) and the truth ``x_m, y_m`` (world frame) or
   ``lat_deg, lon_deg`` (WGS84, with the camera's geodetic origin): the probe-vehicle workflow.
+* **A detector's own files + a truth table** (:func:`read_detections_with_truth`): YOLO labels, a YOLOv5
+  CSV, COCO results, MOTChallenge files (:mod:`footprint_uq.batch.formats`) paired with a table of
+  ``frame, object_id`` and the truth by ``(frame, object_id)``.
 """
 
 from __future__ import annotations
@@ -43,6 +46,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.compute as pc
 
+from ..batch.formats import open_reader
 from ..batch.readers import open_detections
 from ..batch.schema import BOX2D_COLUMNS, COV_COLUMNS
 from ..errors import ConfigError, InputError
@@ -50,7 +54,8 @@ from ..io.dataset_files import camera_from_dair_v2x, camera_from_rope3d, camera_
 from ..products.geo import GeoReference
 
 __all__ = ["LabelChunk", "FolderReport", "read_kitti_folder", "parse_kitti_labels", "read_dair_v2x_folder",
-           "parse_dair_v2x_labels", "read_openlabel", "read_pairs_table", "TRUTH_XY_COLUMNS",
+           "parse_dair_v2x_labels", "read_openlabel", "read_pairs_table", "read_detections_with_truth",
+           "TRUTH_XY_COLUMNS",
            "TRUTH_GEO_COLUMNS", "NO_TRUTH", "NO_DETECTION", "ROPE3D_IMAGE_SIZE_PX"]
 
 #: truth columns of a pairs table: world frame, or WGS84 (needs the camera's geodetic origin)
@@ -608,3 +613,92 @@ def _split_table_chunk(ch, path, cams, single, truth_cols, georef, off):
                          cls=ids["class"][sel], box_xyxy_px=box[sel], truth_xy_world_m=tr,
                          truth_z_m=np.full(len(sel), np.nan), yaw_world_rad=np.full(len(sel), np.nan), error=err,
                          cov_uv_px2=None if cov is None else cov[sel], budget=bud)
+
+
+# ---------------------------------------------------------------------------------------------------
+# A detector's own files + a truth table, paired by (frame, object_id)
+# ---------------------------------------------------------------------------------------------------
+def _truth_index(path, georef: GeoReference | None, chunk_rows: int):
+    """``({(frame, object_id): [xy, line, used]}, error rows)`` of a truth table (frame, object_id, truth)."""
+    reader = open_detections(path, chunk_rows=chunk_rows)
+    cols = _truth_columns(reader.columns, str(path))
+    missing = [c for c in ("frame", "object_id") if c not in reader.columns]
+    if missing:
+        raise InputError(f"{path}: columns", missing, "frame and object_id (the keys that pair the truth with "
+                         "the detections)")
+    if cols == TRUTH_GEO_COLUMNS and (georef is None or not georef.has_origin):
+        raise InputError("origin", "missing", "--origin-lat/--origin-lon (the truth is lat_deg, lon_deg)")
+    reader.select(cols)
+    off = _line_of(reader.format)
+    index: dict = {}
+    bad: list = []
+    for ch in reader:
+        bad += [{"line": r + off, "error": f"malformed truth line ({why})"} for r, why in ch.malformed]
+        t, n = ch.table, ch.table.num_rows
+        xy = np.stack([_column(t, c, n) for c in cols], 1)
+        if cols == TRUTH_GEO_COLUMNS and n:
+            xy = georef.from_wgs84(xy[:, 0], xy[:, 1])
+        frames, oids = _ids(t, "frame", n), _ids(t, "object_id", n)
+        for i in range(n):
+            line = int(ch.rows[i]) + off
+            key = (frames[i], oids[i])
+            why = ch.pre_errors[i] if ch.pre_errors is not None else None
+            if why is None and (key[0] is None or key[1] is None):
+                why = "truth row without frame or object_id"
+            if why is None and not np.isfinite(xy[i]).all():
+                why = "truth row without a finite truth point"
+            if why is None and key in index:
+                why = f"a second truth of frame {key[0]} object {key[1]!r} (the first is line {index[key][1]})"
+            if why is not None:
+                bad.append({"line": line, "frame": key[0], "object_id": key[1], "error": why})
+            else:
+                index[key] = [xy[i], line, False]
+    return index, bad
+
+
+def read_detections_with_truth(detections, truth, camera, *, format: str | None = None, class_names=None,
+                               unknown_class: str = "error", georef: GeoReference | None = None,
+                               chunk_rows: int = 131_072) -> Iterator[LabelChunk]:
+    """A detector's own files (any format of :mod:`footprint_uq.batch.formats`) paired with a truth table.
+
+    Parameters
+    ----------
+    detections : file or folder; ``format``, ``class_names``, ``unknown_class`` as
+        :func:`footprint_uq.batch.formats.open_reader` (normalised boxes: the camera's image size)
+    truth : CSV / JSON Lines / Parquet with ``frame``, ``object_id`` and ``x_m, y_m`` (world frame) or
+        ``lat_deg, lon_deg`` (WGS84, with ``georef``)
+    camera : Camera (one camera: every detection is seen by it)
+
+    Yields :class:`LabelChunk` objects: the detections in input order (``line``: the detection's line in its
+    file where the format has one, else its 0-based index), paired with the truth of the same ``(frame,
+    object_id)`` (none: ``no truth``), then the truth rows no detection paired (``no detection``) and the
+    truth rows that cannot be used (error rows with their line).
+    """
+    index, bad = _truth_index(truth, georef, chunk_rows)
+    reader = open_reader(detections, format=format, chunk_rows=chunk_rows, class_names=class_names,
+                         unknown_class=unknown_class, image_size_px=camera.image_size_px)
+    if not all(c in reader.columns for c in BOX2D_COLUMNS):
+        raise InputError(f"{detections}: columns", sorted(reader.columns)[:12], "the 2-D box columns "
+                         f"{list(BOX2D_COLUMNS)}")
+    reader.select(BOX2D_COLUMNS)
+    for ch in reader:
+        rows = [{"line": r, "error": f"malformed line ({why})"} for r, why in ch.malformed]
+        t, n = ch.table, ch.table.num_rows
+        box = np.stack([_column(t, c, n) for c in BOX2D_COLUMNS], 1)
+        ids = {k: _ids(t, k, n) for k in ("frame", "object_id", "class", "line")}
+        for i in range(n):
+            key = (ids["frame"][i], ids["object_id"][i])
+            hit = index.get(key) if key[1] is not None else None
+            err = ch.pre_errors[i] if ch.pre_errors is not None else None
+            row = {"line": ids["line"][i] if ids["line"][i] is not None else int(ch.rows[i]), "frame": key[0],
+                   "object_id": key[1], "cls": ids["class"][i], "box": box[i],
+                   "error": err if err is not None else (None if hit is not None else NO_TRUTH)}
+            if hit is not None:
+                row["truth"], hit[2] = hit[0], True
+            rows.append(row)
+        if rows:
+            yield _chunk(detections, "camera", camera, rows)
+    rest = [{"line": v[1], "frame": k[0], "object_id": k[1], "truth": v[0], "error": NO_DETECTION}
+            for k, v in index.items() if not v[2]]
+    if rest or bad:
+        yield _chunk(truth, "camera", camera, sorted(rest + bad, key=lambda r: r["line"]))

@@ -59,8 +59,22 @@ def detect_kind(labels) -> str:
     raise InputError("labels", str(labels), "a folder, an OpenLABEL .json or a pairs table (.csv, .jsonl, .parquet)")
 
 
-def label_chunks(labels, kind, report, *, camera, registry, budget, calibration, image_size_px, georef, chunk_rows):
-    """The reader of ``labels`` (one of :data:`KINDS`): an iterator of LabelChunk (also for ``calibrate budget``)."""
+def label_chunks(labels, kind, report, *, camera, registry, budget, calibration, image_size_px, georef, chunk_rows,
+                 detections=None, detections_options=None):
+    """The reader of ``labels`` (one of :data:`KINDS`): an iterator of LabelChunk (also for ``calibrate budget``).
+
+    ``detections``: a detector's own files (``detections_options``: ``format``, ``class_names``,
+    ``unknown_class``), paired with the truth table ``labels`` by ``(frame, object_id)``
+    (:func:`footprint_uq.validation.readers.read_detections_with_truth`)."""
+    if detections is not None:
+        if kind != "table" or camera is None or registry is not None:
+            raise InputError("--detections", str(detections), "a truth table as --labels (.csv, .jsonl, .parquet) "
+                             "and one --camera (the detections of one camera)")
+        cam = load_camera(camera)
+        if image_size_px is not None and tuple(image_size_px) != tuple(cam.image_size_px):
+            raise InputError("--image-size", tuple(image_size_px), f"the camera's image size {cam.image_size_px}")
+        return R.read_detections_with_truth(detections, labels, cam, georef=georef, chunk_rows=chunk_rows,
+                                            **(detections_options or {}))
     if kind == "kitti":
         return R.read_kitti_folder(labels, image_size_px=image_size_px or R.ROPE3D_IMAGE_SIZE_PX, report=report)
     if kind == "dair-v2x":
@@ -95,7 +109,8 @@ def run_validation(labels, out_dir, budget, *, kind: str | None = None, contact=
                    registry=None, calibration=None, image_size_px=None, origin_lat_deg=None, origin_lon_deg=None,
                    heading_offset_deg: float = 0.0, range_bands_m=DEFAULT_RANGE_BANDS_M, alpha: float = 0.05,
                    objects_format: str = "csv", chunk_rows: int = 131_072, report: bool = True, dpi: int = 110,
-                   fsync: bool = True, progress=None) -> tuple[dict, dict]:
+                   fsync: bool = True, progress=None, detections=None, detections_format: str | None = None,
+                   class_names=None, unknown_class: str = "error") -> tuple[dict, dict]:
     """Validate labelled data and write the outputs into ``out_dir``.
 
     Parameters
@@ -112,6 +127,9 @@ def run_validation(labels, out_dir, budget, *, kind: str | None = None, contact=
     range_bands_m : range band edges; alpha : test significance
     objects_format : ``csv`` or ``parquet`` (the per-object file)
     report : also write ``report.html`` and ``calibration.png``
+    detections : a detector's own files (YOLO labels, YOLOv5 CSV, COCO results, MOTChallenge, a canonical table;
+        ``detections_format`` / ``class_names`` / ``unknown_class`` as :func:`footprint_uq.batch.formats.open_reader`)
+        paired with ``labels``, a truth table of ``frame, object_id`` and the truth point (docs/integrations.md)
 
     Returns
     -------
@@ -130,12 +148,17 @@ def run_validation(labels, out_dir, budget, *, kind: str | None = None, contact=
     out.mkdir(parents=True, exist_ok=True)
     folder = R.FolderReport()
     chunks = label_chunks(labels, kind, folder, camera=camera, registry=registry, budget=budget,
-                          calibration=calibration, image_size_px=image_size_px, georef=georef, chunk_rows=chunk_rows)
+                          calibration=calibration, image_size_px=image_size_px, georef=georef, chunk_rows=chunk_rows,
+                          detections=detections, detections_options=dict(format=detections_format,
+                                                                          class_names=class_names,
+                                                                          unknown_class=unknown_class))
     files = {"objects": out / f"objects.{objects_format}", "summary": out / VALIDATION_FILES["summary"]}
     res = validate(chunks, budget, contact=contact, objects_out=files["objects"], range_bands_m=range_bands_m,
                    alpha=alpha, fsync=fsync, progress=progress)
     summary = res.summary
     summary.update(labels=str(labels), kind=kind, folder=folder.to_dict())
+    if detections is not None:
+        summary["detections"] = str(detections)
     summary["files"] = {k: v.name for k, v in files.items()}
     if report:
         figs = validation_figures(summary, res.accumulator.sample)
