@@ -7,7 +7,6 @@ own requests still work) is ``tests/test_plan_browser.py``."""
 from __future__ import annotations
 
 import contextlib
-import io
 import json
 import socket
 import threading
@@ -30,8 +29,9 @@ def session():
 
 
 @pytest.fixture
-def served(session, monkeypatch):
-    """(port, session, drawings, stderr): the server in a thread; ``drawings`` counts the maps drawn."""
+def served(session, monkeypatch, capsys):
+    """(port, session, drawings, stderr): the server in a thread; ``drawings`` counts the maps drawn,
+    ``stderr()`` is what the process printed on stderr so far (tracebacks of the server's threads included)."""
     drawings = []
     real = S.PlanSession.map_png
 
@@ -42,16 +42,14 @@ def served(session, monkeypatch):
     monkeypatch.setattr(S.PlanSession, "map_png", counted)
     monkeypatch.setattr(S, "READ_TIMEOUT_S", 1.0)
     monkeypatch.setattr(S._Handler, "timeout", 1.0)
-    err = io.StringIO()
     server = S.make_server(session, 0)
     th = threading.Thread(target=server.serve_forever, daemon=True)
-    with contextlib.redirect_stderr(err):
-        th.start()
-        try:
-            yield server.server_address[1], session, drawings, err
-        finally:
-            server.shutdown()
-            server.server_close()
+    th.start()
+    try:
+        yield server.server_address[1], session, drawings, lambda: capsys.readouterr().err
+    finally:
+        server.shutdown()
+        server.server_close()
 
 
 def _raw(port, data: bytes, *, close_write=True, timeout=10.0) -> tuple[int | None, dict | str]:
@@ -101,7 +99,7 @@ def test_the_page_carries_its_token_and_its_own_requests_work(served):
     assert code == 200 and res["png"].startswith("data:image/png;base64,"), res
     code, res = _raw(port, _post(port, GOOD, session=session, host=f"localhost:{port}"), close_write=False)
     assert code == 200, res
-    assert err.getvalue() == ""
+    assert err() == ""
 
 
 @pytest.mark.parametrize("host", ["evil.example:{port}", "127.0.0.1.nip.io:{port}", "127.0.0.1:1", "localhost",
@@ -115,7 +113,7 @@ def test_dns_rebinding_a_foreign_host_is_refused(served, host):
         code, res = _raw(port, req, close_write=False)
         assert code == 421 and "is not this server" in res["error"], (host, code, res)
     assert _raw(port, b"GET /api/state HTTP/1.0\r\n\r\n", close_write=False)[0] == 421  # no Host at all
-    assert drawings == [] and err.getvalue() == ""
+    assert drawings == [] and err() == ""
 
 
 def test_cross_origin_and_token_less_posts_are_refused(served):
@@ -128,7 +126,7 @@ def test_cross_origin_and_token_less_posts_are_refused(served):
         assert code in (400, 403) and "\n" not in res["error"], (kw, code, res)
         assert code == (400 if "ctype" in kw else 403), kw
     assert session.cameras[0].camera.tilt_deg == before and drawings == []
-    assert err.getvalue() == ""
+    assert err() == ""
 
 
 @pytest.mark.parametrize("body,length,what", [
@@ -148,7 +146,7 @@ def test_malformed_requests_are_400_with_one_line_and_no_traceback(served, body,
     port, session, drawings, err = served
     code, res = _raw(port, _post(port, body, session=session, length=length))
     assert code == 400 and what in res["error"] and "\n" not in res["error"], (code, res)
-    assert drawings == [] and err.getvalue() == ""
+    assert drawings == [] and err() == ""
 
 
 def test_missing_content_length_and_a_stalled_body(served):
@@ -159,7 +157,7 @@ def test_missing_content_length_and_a_stalled_body(served):
     t0 = time.monotonic()  # 20 bytes of 80 and the connection held open: the read timeout answers
     code, res = _raw(port, _post(port, GOOD[:20], session=session, length=str(len(GOOD))), close_write=False)
     assert code == 400 and "body of 20 bytes" in res["error"] and time.monotonic() - t0 < 8, res
-    assert drawings == [] and err.getvalue() == ""
+    assert drawings == [] and err() == ""
 
 
 def test_clients_that_go_away_are_quiet_and_cost_no_drawing(served, monkeypatch):
@@ -185,8 +183,12 @@ def test_clients_that_go_away_are_quiet_and_cost_no_drawing(served, monkeypatch)
         s.sendall(b"POST /api/update HTTP/1.1\r\nHost: 127.0.0.1:")
     with socket.create_connection(("127.0.0.1", port)) as s:  # connects and says nothing
         pass
+    for path in ("/api/state", "/nowhere"):  # the whole request, then a reset: the answer meets a closed socket
+        with socket.create_connection(("127.0.0.1", port)) as s:
+            s.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, b"\x01\x00\x00\x00\x00\x00\x00\x00")
+            s.sendall(f"GET {path} HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\n\r\n".encode())
     time.sleep(3.0)  # every handler done (the read timeout is 1 s here)
-    assert drawings == [] and err.getvalue() == ""
+    assert drawings == [] and err() == ""
     code, res = _raw(port, _post(port, GOOD, session=session), close_write=False)
     assert code == 200 and len(drawings) == 1 and session.cameras[0].camera.tilt_deg == pytest.approx(32.0)
 
