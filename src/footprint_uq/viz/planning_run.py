@@ -31,7 +31,7 @@ EVALUATE_OWN = ("evaluation.json", "report.html")
 class PlanOptions:
     """Options of ``footprint-uq plan`` (None: the site file's ``search`` section)."""
 
-    method: str = "greedy"
+    method: str = "best"
     max_cameras: int | None = None
     max_cost: float | None = None
     fusion: bool = True
@@ -43,6 +43,7 @@ class PlanOptions:
     progress: bool = False
     dpi: int = 100
     workers: int | None = 1
+    time_limit_s: float | None = 300.0
 
 
 def _summary(evaluation) -> dict:
@@ -70,12 +71,15 @@ def run_plan(site_path, out_dir, opts: PlanOptions | None = None):
     check_output_folder(out_dir, PLAN_OWN, "plan")  # before the search, not after
     res = plan(site, method=opts.method, max_cameras=opts.max_cameras, max_cost=opts.max_cost, fusion=opts.fusion,
                refine_layout=opts.refine, seed=opts.seed, screen_step=opts.screen_step,
-               max_refine_evals=opts.max_refine_evals, workers=opts.workers, progress=opts.progress)
+               max_refine_evals=opts.max_refine_evals, workers=opts.workers, progress=opts.progress,
+               time_limit_s=opts.time_limit_s)
     cameras = layout_from_configs(site, res.configs)
     extra = {"site": str(Path(site_path).resolve()), "method": res.method, "candidates": res.n_candidates,
              "samples": len(res.samples), "seed": opts.seed, "screen_step": opts.screen_step,
              "fusion": opts.fusion, "discrete_value_m2": res.discrete_value, "refined_value_m2": res.value,
-             "seconds_total": res.seconds.get("total"),
+             "seconds_total": res.seconds.get("total"), "grid_upper_bound_m2": res.bound.get("upper_bound_m2"),
+             "grid_gap": res.bound.get("gap"), "grid_bound_kind": res.bound.get("kind"), "grid_bound": res.bound,
+             "starts": res.starts,
              "cameras": [c.__dict__ for c in res.configs]}
     with output_set(out_dir, PLAN_OWN, "plan") as stage:
         files = write_layout(cameras, stage, site_path=Path(site_path).resolve())
