@@ -1,6 +1,8 @@
 """Every multi-file output as one set (issue 35, part 3): ``validate``, ``calibrate budget``, ``plan``,
-``plan --evaluate`` and ``map`` build their files in a hidden folder and swap them in together
-(:func:`footprint_uq.io.atomic.output_set`).
+``plan --evaluate``, ``map`` and ``calibrate synthetic`` (killed here), ``calibrate intrinsics`` /
+``extrinsics``, ``demo`` and ``case-study`` (the same helper, not killed here) build their files in a hidden
+folder and swap them in together (:func:`footprint_uq.io.atomic.output_set`; ``calibrate gcp`` does the
+same with its own code, killed in ``tests/test_calibration_gcp.py``).
 
 The kill test runs each command in forked processes, each SIGKILLed right after its k-th rename (every
 rename and atomic exchange the process makes: the per-file commits inside the hidden folder, then the swap),
@@ -180,11 +182,15 @@ def _case(tmp_path, name):
             assert r.exit_code == 0, r.output
         evl = ["plan", "--site", str(site), "--no-sensitivity", "--evaluate"]
         return evl + [str(la / "layout.yaml")], evl + [str(lb / "layout.yaml")], set()
+    if name == "calibrate synthetic":
+        syn = ["calibrate", "synthetic", "--views", "3", "--scale", "0.2"]
+        return syn + ["--seed", "1"], syn + ["--seed", "2"], set()
     mp = ["map", "--camera", str(DATA / "cameras" / "pantilt.yaml")]
     return mp + ["--budget", "basler1", "--step-px", "96"], mp + ["--budget", "basler2", "--step-px", "80"], set()
 
 
-@pytest.mark.parametrize("name", ["validate", "calibrate budget", "plan", "plan --evaluate", "map"])
+@pytest.mark.parametrize("name", ["validate", "calibrate budget", "plan", "plan --evaluate", "map",
+                                  "calibrate synthetic"])
 def test_kill_after_every_rename_leaves_the_old_set_or_the_new_set(tmp_path, name):
     args_a, args_b, volatile = _case(tmp_path, name)
     for tag, args in (("A", args_a), ("B", args_b)):
