@@ -94,6 +94,18 @@ def test_output_set_refuses_a_folder_holding_other_files_and_a_file(tmp_path):
         pass
 
 
+def test_output_set_refuses_the_current_folder_and_its_parents(tmp_path, monkeypatch):
+    work = tmp_path / "w"
+    work.mkdir()
+    monkeypatch.chdir(work)
+    for out in (".", "..", str(work), "/", "sub/.."):
+        with pytest.raises(InputError, match="a folder of its own"), output_set(out, ("a.txt",), "job"):
+            raise AssertionError("never reached")
+    with output_set("sub/../o", ("a.txt",), "job") as stage:  # a named folder, however it is spelt
+        (stage / "a.txt").write_text("1")
+    assert _snapshot(work / "o") == {"a.txt": b"1"} and sorted(p.name for p in work.iterdir()) == ["o"]
+
+
 def test_output_set_puts_right_what_a_killed_swap_left(tmp_path):
     out = tmp_path / "o"
     old = tmp_path / f".o{OLD_MARK}0123abcd"  # killed between the two renames of the fallback swap

@@ -253,6 +253,10 @@ def check_output_folder(out, own: Iterable[str], command: str) -> None:
     -- the user's own files -- would be lost: refused, with the first such name).
     """
     out = Path(out)
+    here = Path(os.path.abspath(out))
+    if here.parent == here or here == Path.cwd() or Path.cwd().is_relative_to(here):
+        raise InputError("--out", str(out), "a folder of its own (not the current folder, one above it or a root: "
+                         "the whole folder is replaced)")
     if out.exists() and not out.is_dir():
         raise InputError("--out", str(out), "a folder (this is a file)")
     if out.is_dir():
@@ -279,7 +283,8 @@ def output_set(out, own: Iterable[str], command: str, *, fsync: bool = True) -> 
     >>> with output_set(out_dir, ("summary.json", "objects.*"), "validate") as stage:
     ...     write_summary(stage / "summary.json"); write_objects(stage / "objects.csv")
     """
-    out = Path(out)
+    out = Path(os.path.abspath(out))  # "dir/." and "dir/.." named as the folder they are
+    check_output_folder(out, own, command)
     recover_folder(out)
     check_output_folder(out, own, command)
     parent = out.parent if str(out.parent) else Path(".")
