@@ -29,7 +29,7 @@ Discrete stage, over the grid of :func:`candidate_grid` (mount x height x camera
   objective grows, which also counts the samples only three or more fused cameras meet), each refined,
   the best kept; all within ``time_limit_s``.  The result states how far from the grid's optimum its
   discrete layout can be (:func:`grid_bound`: the integer program's proven optimum or dual bound where its
-  objective is exact, else the LP relaxation of a necessary condition for a sample to be met).
+  objective is exact, else the LP relaxation of necessary conditions for a sample to be met).
 
 Continuous refinement (:func:`refine`): pattern search over each chosen camera's pan, tilt and height
 (within its mount's range), seeded; a move is kept only if it strictly increases the objective, so
@@ -422,40 +422,58 @@ def swap_search(cov: Coverage, obj: Objective, picks, max_cameras: int, max_cost
     return picks, value
 
 
-def grid_bound(cov: Coverage, obj: Objective, max_cameras: int, max_cost: float | None = None) -> float | None:
-    """An upper bound of the objective over every layout of the grid: the LP relaxation of a necessary
-    condition for a sample to be met (None above :data:`LP_MAX_NNZ`).
+#: the directions (deg) of the necessary conditions of :func:`grid_bound` with fusion
+BOUND_DIRECTIONS_DEG = (0.0, 45.0, 90.0, 135.0)
 
-    With fusion, sample ``i`` can be met by a layout ``S`` only if ``sum_{c in S} tr(I_ci) / 2 >= t_i``
-    (``lambda_min`` of the fused information is at most half its trace, and traces add), so
-    ``y_i <= sum_c min(1, tr(I_ci) / (2 t_i)) x_c`` holds for every integer layout; without fusion
-    ``y_i <= sum_c [c meets i] x_c``.  Maximising ``sum_i w_i y_i`` with ``0 <= x, y <= 1``, at most K
-    cameras, one per mount and the cost gives the bound (loose where the ellipses are long and thin).
-    """
+
+def _cover_block(cov: Coverage, obj: Objective, angle_deg: float | None) -> sparse.coo_matrix:
+    """Rows ``y_i - sum_c a_ci x_c <= 0`` of :func:`grid_bound`: ``a_ci = min(1, u^T I_ci u / t_i)`` along the
+    unit vector at ``angle_deg`` (fusion), or ``[c meets i alone]`` (``angle_deg`` None)."""
     n, C = obj.weight.shape[0], len(cov.configs)
-    nnz = sum(i.size for i in cov.index)
-    if nnz > LP_MAX_NNZ or C == 0:
-        return None if C else 0.0
     thr = obj.threshold
     rows, cols, vals = [], [], []
+    if angle_deg is not None:
+        cu, su = np.cos(np.radians(angle_deg)), np.sin(np.radians(angle_deg))
     for c, (idx, inf) in enumerate(zip(cov.index, cov.info, strict=True)):
-        a = np.minimum(1.0, 0.5 * (inf[:, 0] + inf[:, 2]) / thr[idx]) if obj.fusion else obj.meets(inf, idx) * 1.0
+        if angle_deg is None:
+            a = obj.meets(inf, idx) * 1.0
+        else:
+            a = np.minimum(1.0, (inf[:, 0] * cu * cu + 2.0 * inf[:, 1] * cu * su + inf[:, 2] * su * su) / thr[idx])
         keep = a > 0
         rows.append(idx[keep])
         cols.append(np.full(int(keep.sum()), c))
         vals.append(-a[keep])
     r, cl, v = np.concatenate(rows), np.concatenate(cols), np.concatenate(vals)
-    cover = sparse.coo_matrix((np.concatenate([v, np.ones(n)]), (np.concatenate([r, np.arange(n)]),
+    return sparse.coo_matrix((np.concatenate([v, np.ones(n)]), (np.concatenate([r, np.arange(n)]),
                                                                  np.concatenate([cl, C + np.arange(n)]))),
-                              shape=(n, C + n))
+                             shape=(n, C + n))
+
+
+def grid_bound(cov: Coverage, obj: Objective, max_cameras: int, max_cost: float | None = None) -> float | None:
+    """An upper bound of the objective over every layout of the grid: the LP relaxation of necessary
+    conditions for a sample to be met (None above :data:`LP_MAX_NNZ` nonzeros).
+
+    With fusion, sample ``i`` can be met by a layout ``S`` only if ``sum_{c in S} u^T I_ci u >= t_i`` for
+    every unit vector ``u`` (``lambda_min`` of the fused information is at most ``u^T (sum_c I_ci) u``), so
+    ``y_i <= sum_c min(1, u^T I_ci u / t_i) x_c`` holds for every integer layout, here for the directions
+    :data:`BOUND_DIRECTIONS_DEG`; without fusion ``y_i <= sum_c [c meets i] x_c``.  Maximising
+    ``sum_i w_i y_i`` with ``0 <= x, y <= 1``, at most K cameras, one per mount and the cost gives the bound.
+    """
+    n, C = obj.weight.shape[0], len(cov.configs)
+    angles = BOUND_DIRECTIONS_DEG if obj.fusion else (None,)
+    if C == 0:
+        return 0.0
+    if sum(i.size for i in cov.index) * len(angles) > LP_MAX_NNZ:
+        return None
+    cover = [_cover_block(cov, obj, a) for a in angles]
     M = int(cov.mount.max()) + 1
     per_mount = sparse.coo_matrix((np.ones(C), (cov.mount, np.arange(C))), shape=(M, C + n))
     totals, ub = [np.concatenate([np.ones(C), np.zeros(n)])], [float(max_cameras)]
     if max_cost is not None:
         totals.append(np.concatenate([cov.cost, np.zeros(n)]))
         ub.append(float(max_cost))
-    A = sparse.vstack([cover, per_mount, sparse.csr_matrix(np.array(totals))]).tocsr()
-    hi = np.concatenate([np.zeros(n), np.ones(M), ub])
+    A = sparse.vstack([*cover, per_mount, sparse.csr_matrix(np.array(totals))]).tocsr()
+    hi = np.concatenate([np.zeros(n * len(angles)), np.ones(M), ub])
     res = milp(np.concatenate([np.zeros(C), -obj.weight]), constraints=LinearConstraint(A, -np.inf, hi),
                integrality=np.zeros(C + n), bounds=Bounds(0, 1), options={"disp": False})
     return None if res.x is None else float(-res.fun) * (1 + 1e-9) + 1e-9
