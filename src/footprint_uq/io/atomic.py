@@ -304,6 +304,8 @@ def final_paths(files, staging, out):
     staging, out = Path(staging), Path(out)
 
     def one(p):
+        if p is None:
+            return None
         p = Path(p)
         try:
             return out / p.relative_to(staging)
