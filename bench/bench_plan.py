@@ -7,8 +7,8 @@ corner, 12 candidate poles (4 existing corner poles, 8 new ones along the arms),
 a wide distorted or a normal lens, full-HD telephoto, 4K), pans every 30 deg, tilts 12/20/30 deg, two heights
 per pole: 3456 candidate configurations; K = 4 cameras.
 
-Per run: :func:`footprint_uq.planning.optimise.plan` (greedy, screening every 2nd sample in both directions,
-refinement of at most 120 evaluations at full resolution), timed end to end; and the naive layout
+Per run: :func:`footprint_uq.planning.optimise.plan` (the default method ``best``, screening every 2nd sample
+in both directions, refinement of at most 120 evaluations at full resolution), timed end to end; and the naive layout
 (:func:`footprint_uq.planning.intersection.naive_layout`: one camera per arm on the arm's nearer pole, at
 the top of its range, boresight on the centre) evaluated on the same samples.  Prints a table and writes
 ``bench/results/plan.json`` (``--out``).  Goal: a plan in under a minute on the 2-core machine.
@@ -60,6 +60,7 @@ def run(runs: int = 3, quick: bool = False) -> dict:
         "fraction_met_plan_discrete_only": res.discrete_value / float(res.evaluation.value / res.evaluation.fraction),
         "zones_plan": [z.row() for z in res.evaluation.zones], "zones_naive": [z.row() for z in naive.zones],
         "layout": [c.__dict__ for c in res.configs], "naive_evaluation_s": t_naive,
+        "method": res.method, "grid_bound": res.bound, "starts": res.starts,
         "same_layout_every_run": all(r.configs == res.configs for r in results),
         "loadavg_start": load0, "loadavg_end": os.getloadavg(), "cpus": os.cpu_count(),
         "python": platform.python_version(),

@@ -231,6 +231,7 @@ SLOW_TESTS = (
     "test_calibration_gcp.py::test_coverage_200_campaigns",
     "test_calibration_gcp.py::test_sigma_at_the_limit_never_writes_a_budget_locate_refuses",
     "test_calibration_gcp.py::test_kill_after_every_rename_leaves_the_old_set_or_the_new_set",
+    "test_output_sets.py::test_kill_after_every_rename_leaves_the_old_set_or_the_new_set",  # 5 commands, ~2-3 min
     "test_report_browser.py",             # headless chromium over every HTML page the project writes
     "test_plan_browser.py",
     "test_validation_browser.py",

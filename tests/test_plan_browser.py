@@ -206,8 +206,9 @@ def test_interactive_page_redraws_on_a_slider_move(browser, served):
     assert bad == []
 
 
-def _post(url, body: bytes):
-    req = urllib.request.Request(url + "api/update", data=body, headers={"Content-Type": "application/json"})
+def _post(url, body: bytes, token: str):
+    req = urllib.request.Request(url + "api/update", data=body,
+                                 headers={"Content-Type": "application/json", "X-FUQ-Token": token})
     try:
         with urllib.request.urlopen(req, timeout=60) as r:
             return r.status, json.load(r)
@@ -221,9 +222,11 @@ def test_server_is_loopback_only_and_rejects_bad_input(served):
     for body, field in ((b"not json", "request"), (json.dumps({"camera": 9}).encode(), "camera"),
                         (json.dumps({"camera": 0, "height_m": 8, "pan_deg": 0, "tilt_deg": 95}).encode(),
                          "tilt_deg")):
-        code, res = _post(url, body)
+        code, res = _post(url, body, session.token)
         assert code == 400 and res["error"].startswith(field), res
-    code, res = _post(url, json.dumps({"camera": 0, "height_m": 7.0, "pan_deg": 10.0, "tilt_deg": 30.0}).encode())
+    code, res = _post(url, json.dumps({"camera": 0, "height_m": 7.0, "pan_deg": 10.0, "tilt_deg": 30.0}).encode(),
+                      session.token)
+    assert _post(url, b"{}", "not-the-token")[0] == 403  # tests/test_plan_server.py: the hostile cases
     assert code == 200 and res["png"].startswith("data:image/png;base64,") and 0 <= res["fraction_met"] <= 1
     with urllib.request.urlopen(url + "api/state", timeout=30) as r:
         assert json.load(r)["cameras"][0]["tilt_deg"] == pytest.approx(30.0)

@@ -21,7 +21,7 @@ import numpy as np
 from ..errors import InputError
 from ..io import save_budget, save_camera
 from ..io._common import read_text
-from ..io.atomic import atomic_path, atomic_write_text
+from ..io.atomic import atomic_path, atomic_write_text, check_output_folder, final_paths, output_set
 from ..viz.extrinsics import plot_board_poses, plot_pose_spread
 from .boards import Checkerboard, parse_board
 from .extrinsics import (
@@ -153,8 +153,20 @@ def _write_poses(path: Path, cal: ExtrinsicCalibration) -> Path:
     return path
 
 
-def _write_outputs(out: Path, frames, cal: ExtrinsicCalibration, board: Checkerboard, o: ExtrinsicsOptions) -> list:
-    out.mkdir(parents=True, exist_ok=True)
+#: every name a run writes into its folder (swapped in as one set; anything else there: refused)
+EXTRINSICS_OWN = ("budget.yaml", "camera.yaml", "summary.json", "frames.csv", "correspondences.csv", "board_poses.png",
+                  "pose_spread.png", "poses.npz")
+
+
+def _write_outputs(out_dir: Path, frames, cal: ExtrinsicCalibration, board: Checkerboard,
+                   o: ExtrinsicsOptions) -> list:
+    """The run's files as one set (:func:`footprint_uq.io.atomic.output_set`); their final paths."""
+    with output_set(out_dir, EXTRINSICS_OWN, "calibrate extrinsics") as stage:
+        files = _write_files(stage, frames, cal, board, o)
+    return final_paths(files, stage, out_dir)
+
+
+def _write_files(out: Path, frames, cal: ExtrinsicCalibration, board: Checkerboard, o: ExtrinsicsOptions) -> list:
     files = [save_budget(cal.budget(o.budget_from, correlations=o.correlations), out / "budget.yaml"),
              save_camera(cal.camera(), out / "camera.yaml")]
     summ = cal.summary()
@@ -210,6 +222,7 @@ def run_extrinsics(pairs, camera, board: str, square_m: float, out_dir, options:
     o = options if options is not None else ExtrinsicsOptions()
     say = echo or (lambda m: None)
     b = parse_board(board, square_m, o.margin_m)
+    check_output_folder(out_dir, EXTRINSICS_OWN, "calibrate extrinsics")  # before the work, not after
     intr = load_intrinsics(camera)
     T_gl = load_transform(o.ground) if o.ground not in GROUND_CHOICES else None
     frames, plane = _read_frames(pairs, b, intr, o)

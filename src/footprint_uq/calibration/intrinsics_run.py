@@ -14,11 +14,17 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ..errors import InputError
+from ..io.atomic import check_output_folder, final_paths, output_set
 from .boards import parse_board
 from .detect import detect_frames
 from .intrinsics import calibrate_detections, write_frames_csv
 
-__all__ = ["IntrinsicsOptions", "run_intrinsics"]
+__all__ = ["IntrinsicsOptions", "run_intrinsics", "INTRINSICS_OWN"]
+
+#: every name a run writes into its folder (the folder is swapped in as one set; anything else there: refused)
+INTRINSICS_OWN = ("frames.csv", "camera.yaml", "intrinsics.yaml", "budget.yaml", "maps.npz", "summary.json",
+                  "report.md", "report.html", "coverage.png", "reprojection_error.png", "asymmetry.png",
+                  "view_errors.png", "sigmas.png")
 
 
 @dataclass(frozen=True)
@@ -98,12 +104,18 @@ def run_intrinsics(images, board: str, square_m: float, out_dir, options: Intrin
     Raises
     ------
     InputError
-        The calibration cannot proceed (too few frames, RMS too large, ...); ``frames.csv``
-        is written first, so that the frame list survives.
+        The calibration cannot proceed (too few frames, RMS too large, ...); the run's set is then
+        ``frames.csv`` alone, so that the frame list survives (it replaces the previous set: the folder
+        always describes one run).
+
+    The files are one set: built in a hidden folder beside ``out_dir`` and swapped in together
+    (:func:`footprint_uq.io.atomic.output_set`); ``out_dir`` must be new or hold only a previous run's
+    files (:data:`INTRINSICS_OWN`).
     """
     o = options if options is not None else IntrinsicsOptions()
     say = echo or (lambda msg: None)
     b = parse_board(board, square_m)
+    check_output_folder(out_dir, INTRINSICS_OWN, "calibrate intrinsics")  # before the detection, not after
     dets = detect_frames(images, b, video_step=o.video_step, workers=o.workers, method=o.method, progress=progress)
     for d in dets:
         if not d.found:
@@ -115,13 +127,14 @@ def run_intrinsics(images, board: str, square_m: float, out_dir, options: Intrin
                                    workers=(os.cpu_count() or 1) if o.workers is None else o.workers,
                                    progress=progress, max_rms_px=o.max_rms_px)
     except InputError:
-        out.mkdir(parents=True, exist_ok=True)
-        write_frames_csv([{"label": d.label, "path": d.source.path, "frame_index": d.source.frame_index,
-                           "found": d.found, "method": d.method, "used": False, "reason": d.reason} for d in dets],
-                         out / "frames.csv")
+        with output_set(out, INTRINSICS_OWN, "calibrate intrinsics") as stage:
+            write_frames_csv([{"label": d.label, "path": d.source.path, "frame_index": d.source.frame_index,
+                               "found": d.found, "method": d.method, "used": False, "reason": d.reason}
+                              for d in dets], stage / "frames.csv")
         raise
     for d in cal.dropped:
         say(f"frame {d['label']}: dropped, {d['reason']}")
-    files = cal.save(out, grid_px=o.grid_px, hull=o.hull, budget_source=o.budget_source,
-                     full_covariance=o.full_covariance)
-    return {"calibration": cal, "files": files}
+    with output_set(out, INTRINSICS_OWN, "calibrate intrinsics") as stage:
+        files = cal.save(stage, grid_px=o.grid_px, hull=o.hull, budget_source=o.budget_source,
+                         full_covariance=o.full_covariance)
+    return {"calibration": cal, "files": {k: str(v) for k, v in final_paths(files, stage, out).items()}}

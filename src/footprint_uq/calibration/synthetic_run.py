@@ -18,11 +18,14 @@ import numpy as np
 
 from ..errors import InputError
 from ..io import load_intrinsics
-from ..io.atomic import atomic_write_text
+from ..io.atomic import atomic_write_text, check_output_folder, output_set
 from .boards import parse_board
 from .synthetic import DEFAULT_CAMERA, SyntheticCamera, simulate_campaigns, write_campaign
 
-__all__ = ["SyntheticOptions", "synthetic_camera", "run_synthetic"]
+__all__ = ["SyntheticOptions", "synthetic_camera", "run_synthetic", "SYNTHETIC_OWN"]
+
+#: every name a run writes into its folder (swapped in as one set; anything else there: refused)
+SYNTHETIC_OWN = ("board_*.png", "truth.json", "plan.json")
 
 
 @dataclass(frozen=True)
@@ -131,7 +134,9 @@ def run_synthetic(out_dir, board: str = "14x9", square_m: float = 0.1, *, margin
     ----------
     out_dir : path
         Output directory (created): ``board_NNN.png`` and ``truth.json`` when rendering,
-        ``plan.json`` with a planning study.
+        ``plan.json`` with a planning study; one set, swapped in together
+        (:func:`footprint_uq.io.atomic.output_set`; the folder must be new or hold only a previous run's
+        files, :data:`SYNTHETIC_OWN`).
     board : str
         Inner corners, ``"COLSxROWS"`` (default: the paper's board).
     square_m, margin_m : float
@@ -157,14 +162,17 @@ def run_synthetic(out_dir, board: str = "14x9", square_m: float = 0.1, *, margin
     else:
         cam = synthetic_camera(camera, scale)
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    check_output_folder(out, SYNTHETIC_OWN, "calibrate synthetic")  # before the work, not after
     pose_kw = {"fill": tuple(o.fill), "max_tilt_deg": o.max_tilt_deg}
-    if o.render:
-        write_campaign(out, cam, b, o.views, seed=o.seed, pose_kw=pose_kw, supersample=o.supersample,
-                       blur_sigma_px=o.blur_sigma_px, noise_sigma_dn=o.noise_sigma_dn)
     plan = plan_file = None
     if o.campaigns:
         plan = simulate_campaigns(cam, b, o.views, corner_noise_px=o.corner_noise_px, n_campaigns=o.campaigns,
                                   bootstrap=o.plan_bootstrap, seed=o.seed, pose_kw=pose_kw)
-        plan_file = atomic_write_text(out / "plan.json", json.dumps(_plain(plan), indent=2))
+    with output_set(out, SYNTHETIC_OWN, "calibrate synthetic") as stage:
+        if o.render:
+            write_campaign(stage, cam, b, o.views, seed=o.seed, pose_kw=pose_kw, supersample=o.supersample,
+                           blur_sigma_px=o.blur_sigma_px, noise_sigma_dn=o.noise_sigma_dn)
+        if plan is not None:
+            atomic_write_text(stage / "plan.json", json.dumps(_plain(plan), indent=2))
+            plan_file = out / "plan.json"
     return {"board": b, "camera": cam, "rendered": o.render, "plan": plan, "plan_file": plan_file}

@@ -44,8 +44,12 @@ def _echo_zones(ev):
 @click.option("--cameras", "max_cameras", type=click.IntRange(min=1), default=None,
               help="Number of cameras K (default: search.max_cameras of the site file).")
 @click.option("--max-cost", type=click.FloatRange(min=0), default=None, help="Largest total cost (mounts + cameras).")
-@click.option("--method", type=click.Choice(["greedy", "milp", "both"]), default="greedy", show_default=True,
-              help="Discrete stage: lazy greedy, scipy milp (exact over the grid for pairs), or both.")
+@click.option("--method", type=click.Choice(["best", "greedy", "milp", "both"]), default="best", show_default=True,
+              help="Discrete stage: best (milp where the grid allows it, greedy, swap search, each refined, the "
+                   "best kept, with a bound on the distance to the grid's optimum), lazy greedy, scipy milp "
+                   "(exact over the grid for pairs), or greedy and milp.")
+@click.option("--time-limit-s", type=click.FloatRange(min=0, min_open=True), default=300.0, show_default=True,
+              help="Time limit of the discrete stage (best: all of it; milp: the integer program).")
 @click.option("--fusion/--no-fusion", default=True, show_default=True,
               help="Count a sample as met by the fused covariance of every camera that sees it (or one camera).")
 @click.option("--refine/--no-refine", default=True, show_default=True,
@@ -60,12 +64,12 @@ def _echo_zones(ev):
 @click.option("--workers", type=click.IntRange(min=1), default=1, show_default=True,
               help="Processes screening the candidates (e.g. the number of cores).")
 @click.option("--progress/--no-progress", default=True, show_default=True, help="Progress bar on stderr.")
-def plan_cmd(site_path, out_dir, layout_path, serve, serve_layout, port, max_cameras, max_cost, method, fusion,
-             refine, seed, screen_step, max_refine_evals, sensitivity, workers, progress):
+def plan_cmd(site_path, out_dir, layout_path, serve, serve_layout, port, max_cameras, max_cost, method, time_limit_s,
+             fusion, refine, seed, screen_step, max_refine_evals, sensitivity, workers, progress):
     """Choose K mounts and, for each, camera, lens, height, pan and tilt to maximise the weighted area whose
     95 % position uncertainty meets its zone's requirement; or evaluate / interactively adjust a layout."""
     opts = PlanOptions(method, max_cameras, max_cost, fusion, refine, seed, screen_step, max_refine_evals,
-                       sensitivity, progress, workers=workers)
+                       sensitivity, progress, workers=workers, time_limit_s=time_limit_s)
     if serve:
         serve_plan(site_path, serve_layout, port=port, fusion=fusion)
         return
@@ -78,6 +82,11 @@ def plan_cmd(site_path, out_dir, layout_path, serve, serve_layout, port, max_cam
         ev = res.evaluation
         click.echo(f"{res.n_candidates} candidates, {res.method}: {res.discrete_value:.0f} m^2 -> refined "
                    f"{res.value:.0f} m^2 (weighted) in {res.seconds['total']:.1f} s")
+        b = res.bound
+        if b.get("upper_bound_m2") is not None:
+            click.echo(f"  over the candidate grid: {b['value_m2']:.0f} m^2 of at most {b['upper_bound_m2']:.0f} m^2 "
+                       f"(gap {_pct(b['gap'])}, bound: {b['kind']}"
+                       + (f", on every {b['screen_step']}th sample" if b.get("screen_step", 1) > 1 else "") + ")")
         if not res.configs:
             warn("no candidate camera meets any sample's requirement within the constraints (cost, count): "
                  "the layout is empty")

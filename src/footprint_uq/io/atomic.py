@@ -11,26 +11,31 @@ skip) and carries :data:`TMP_MARK` (``.<stem>.tmp-<hex><suffix>``), so :func:`cl
 * :func:`path_component` -- a name from data (a camera id) made safe to be one path component;
 * :func:`swap_in_folder` / :func:`recover_folder` -- a folder of outputs built under a hidden name
   (``temp_path(out)``) put in place of ``out`` as one unit (an atomic exchange where the system has
-  one), and what a killed swap left behind put right.
+  one), and what a killed swap left behind put right;
+* :func:`output_set` -- a job's several files as one set: the context manager every multi-file command
+  writes through (recover, check the folder holds only the job's own files, build hidden, swap in).
 """
 
 from __future__ import annotations
 
 import contextlib
 import ctypes
+import fnmatch
 import glob
 import os
 import re
 import shutil
 import sys
 import uuid
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 from urllib.parse import quote
 
+from ..errors import InputError
+
 __all__ = ["TMP_MARK", "atomic_path", "atomic_write_text", "atomic_write_bytes", "commit", "discard", "temp_path",
            "clean_temporaries", "clean_temporaries_of", "fsync_dir", "path_component", "same_file", "swap_in_folder",
-           "recover_folder", "remove_tree", "OLD_MARK"]
+           "recover_folder", "remove_tree", "OLD_MARK", "output_set", "check_output_folder", "final_paths"]
 
 #: part of every temporary name (``.<stem>.tmp-<hex><suffix>``)
 TMP_MARK = ".tmp-"
@@ -238,3 +243,75 @@ def recover_folder(out) -> None:
         os.rename(olds.pop(), out)
     for p in olds:
         remove_tree(p)
+
+
+def check_output_folder(out, own: Iterable[str], command: str) -> None:
+    """Refuse an output that is a file, or a folder holding anything but ``command``'s own files.
+
+    ``own`` are the names (``fnmatch`` patterns: ``objects.*``) a previous run of the job writes; hidden
+    temporaries of killed runs are ignored (the swap replaces the whole folder, so anything else in it
+    -- the user's own files -- would be lost: refused, with the first such name).
+    """
+    out = Path(out)
+    here = Path(os.path.abspath(out))
+    if here.parent == here or here == Path.cwd() or Path.cwd().is_relative_to(here):
+        raise InputError("--out", str(out), "a folder of its own (not the current folder, one above it or a root: "
+                         "the whole folder is replaced)")
+    if out.exists() and not out.is_dir():
+        raise InputError("--out", str(out), "a folder (this is a file)")
+    if out.is_dir():
+        pats = tuple(own)
+        other = sorted(p.name for p in out.iterdir()
+                       if TMP_MARK not in p.name and not any(fnmatch.fnmatchcase(p.name, q) for q in pats))
+        if other:
+            raise InputError(f"--out {out}", f"a folder holding {other[0]!r}",
+                             f"a new folder or one holding only a previous `{command}` run's files "
+                             "(the whole folder is replaced)")
+
+
+@contextlib.contextmanager
+def output_set(out, own: Iterable[str], command: str, *, fsync: bool = True) -> Iterator[Path]:
+    """A job's several output files as one set: yield a hidden staging folder beside ``out``; on a clean
+    exit it replaces ``out`` as one unit (:func:`swap_in_folder`), else it is removed and ``out`` is untouched.
+
+    Before it yields: what a killed run left is put right (:func:`recover_folder`) and ``out`` is checked
+    (:func:`check_output_folder`: new, empty, or holding only ``own`` files of a previous run).  A reader of
+    ``out`` sees the previous set or the new one at every moment, never a mix.
+
+    Examples
+    --------
+    >>> with output_set(out_dir, ("summary.json", "objects.*"), "validate") as stage:
+    ...     write_summary(stage / "summary.json"); write_objects(stage / "objects.csv")
+    """
+    out = Path(os.path.abspath(out))  # "dir/." and "dir/.." named as the folder they are
+    check_output_folder(out, own, command)
+    recover_folder(out)
+    check_output_folder(out, own, command)
+    parent = out.parent if str(out.parent) else Path(".")
+    parent.mkdir(parents=True, exist_ok=True)
+    staging = temp_path(out)
+    staging.mkdir()
+    try:
+        yield staging
+        swap_in_folder(staging, out, fsync=fsync)
+    except BaseException:
+        remove_tree(staging)
+        raise
+
+
+def final_paths(files, staging, out):
+    """The paths of ``files`` (a dict or list of paths under ``staging``) once ``staging`` is ``out``."""
+    staging, out = Path(staging), Path(out)
+
+    def one(p):
+        if p is None:
+            return None
+        p = Path(p)
+        try:
+            return out / p.relative_to(staging)
+        except ValueError:
+            return p
+
+    if isinstance(files, dict):
+        return {k: final_paths(v, staging, out) if isinstance(v, dict | list) else one(v) for k, v in files.items()}
+    return [one(p) for p in files]

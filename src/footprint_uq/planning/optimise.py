@@ -23,6 +23,13 @@ Discrete stage, over the grid of :func:`candidate_grid` (mount x height x camera
   chosen layout is evaluated), so for ``max_cameras <= 2`` it is the exact optimum over the grid.
   Its size grows with the square of the grid: meant for small and medium grids.
 * ``both``: run both and keep the better layout (by the full objective).
+* ``best`` (the default of :func:`plan` and the command): every start it has -- the integer program where
+  the grid allows it (:data:`MILP_MAX_WORK`), greedy by progress and greedy by met area -- each improved by
+  a swap search over the grid (:func:`swap_search`: replace one camera by any other candidate while the
+  objective grows, which also counts the samples only three or more fused cameras meet), each refined,
+  the best kept; all within ``time_limit_s``.  The result states how far from the grid's optimum its
+  discrete layout can be (:func:`grid_bound`: the integer program's proven optimum or dual bound where its
+  objective is exact, else the LP relaxation of necessary conditions for a sample to be met).
 
 Continuous refinement (:func:`refine`): pattern search over each chosen camera's pan, tilt and height
 (within its mount's range), seeded; a move is kept only if it strictly increases the objective, so
@@ -58,9 +65,12 @@ from .coverage import (
 from .geometry import GroundSamples, ground_samples
 
 __all__ = ["candidate_grid", "Coverage", "precompute", "Objective", "greedy", "milp_select", "refine",
-           "PlanResult", "plan", "config_cost", "layout_information"]
+           "PlanResult", "plan", "config_cost", "layout_information", "swap_search", "grid_bound", "METHODS"]
 
-METHODS = ("greedy", "milp", "both")
+#: the discrete stages; ``best`` is the default
+METHODS = ("best", "greedy", "milp", "both")
+#: largest number of nonzeros (candidate, sample) the LP relaxation of :func:`grid_bound` is built with
+LP_MAX_NNZ = 20_000_000
 #: largest (candidates^2 x samples) for which the integer program is built (its pair enumeration)
 MILP_MAX_WORK = 1e8
 
@@ -299,9 +309,15 @@ def milp_select(cov: Coverage, obj: Objective, max_cameras: int, max_cost: float
     return _milp(cov, obj, max_cameras, max_cost, time_limit_s)[0]
 
 
-def _milp(cov, obj, max_cameras, max_cost, time_limit_s) -> tuple[list[int], bool]:
+def milp_allowed(cov: Coverage, obj: Objective) -> bool:
+    """Whether the integer program is built for this grid (candidates^2 x samples <= :data:`MILP_MAX_WORK`)."""
+    return float(len(cov.configs)) ** 2 * obj.weight.shape[0] <= MILP_MAX_WORK
+
+
+def _milp(cov, obj, max_cameras, max_cost, time_limit_s) -> tuple[list[int], bool, float | None]:
+    """``(picks, proven optimal, upper bound of the program's objective or None)``."""
     n, C = obj.weight.shape[0], len(cov.configs)
-    if float(C) * C * n > MILP_MAX_WORK:
+    if not milp_allowed(cov, obj):
         raise InputError("method", "milp", f"a grid with candidates^2 x samples <= {MILP_MAX_WORK:g} (this one: "
                          f"{C}^2 x {n}): use method greedy, a coarser grid or a larger --screen-step")
     D = _dense(cov, n)
@@ -341,11 +357,126 @@ def _milp(cov, obj, max_cameras, max_cost, time_limit_s) -> tuple[list[int], boo
     if res.x is None and res.status != 1:
         raise InputError("method", "milp", f"a solvable integer program ({res.message})")
     picks = [] if res.x is None else [int(i) for i in np.flatnonzero(res.x[:C] > 0.5)]
+    dual = getattr(res, "mip_dual_bound", None)
+    bound = None if dual is None or not np.isfinite(dual) else float(-dual)
     if res.status != 0:
         warnings.warn(f"milp stopped before proving its optimum ({res.message}); its best layout so far is kept "
                       "(plan() compares it with greedy's)", RuntimeWarning, stacklevel=2)
-        return picks, False
-    return picks, True
+        return picks, False, bound
+    return picks, True, float(-res.fun) if bound is None else max(bound, float(-res.fun))
+
+
+def _state_without(cov, obj, picks, skip) -> tuple[np.ndarray, np.ndarray]:
+    """The fused information ``(n, 3)`` (or, without fusion, the count of cameras meeting each sample alone)
+    of ``picks`` without position ``skip``, and its met mask."""
+    n = obj.weight.shape[0]
+    if obj.fusion:
+        total = np.zeros((n, 3))
+        for j, c in enumerate(picks):
+            if j != skip:
+                np.add.at(total, cov.index[c], cov.info[c])
+        return total, obj.meets(total, slice(None))
+    count = np.zeros(n, dtype=np.int64)
+    for j, c in enumerate(picks):
+        if j != skip:
+            count[cov.index[c]] += obj.meets(cov.info[c], cov.index[c])
+    return count, count > 0
+
+
+def _gains(cov, obj, state, met, single) -> np.ndarray:
+    """The objective's gain of adding each candidate to the layout of ``state`` / ``met`` (delta on its samples)."""
+    out = np.empty(len(cov.configs))
+    for c, (idx, inf) in enumerate(zip(cov.index, cov.info, strict=True)):
+        new = obj.meets(state[idx] + inf, idx) if obj.fusion else single[c]
+        out[c] = float(obj.weight[idx] @ (new & ~met[idx]))
+    return out
+
+
+def swap_search(cov: Coverage, obj: Objective, picks, max_cameras: int, max_cost: float | None = None, *,
+                deadline: float | None = None) -> tuple[list[int], float]:
+    """Improve a layout over the grid: add a candidate while there is room, or replace one camera by any
+    other candidate (one per mount, within the cost), as long as the objective grows; returns ``(picks,
+    value)``.  The objective is the full one (fusion of any number of cameras), so the search also finds
+    the samples that only three or more cameras meet together.  Stops at ``deadline``
+    (``time.perf_counter()``); the result is never worse than ``picks``.
+    """
+    picks = [int(c) for c in picks]
+    single = [obj.meets(inf, idx) for idx, inf in zip(cov.index, cov.info, strict=True)] if not obj.fusion else None
+    value = obj.value([(cov.index[c], cov.info[c]) for c in picks])
+    improved = True
+    while improved and (deadline is None or time.perf_counter() < deadline):
+        improved = False
+        slots = list(range(len(picks))) + ([len(picks)] if len(picks) < max_cameras else [])
+        for j in slots:
+            rest = picks[:j] + picks[j + 1:]
+            state, met = _state_without(cov, obj, picks, j)
+            base = float(obj.weight[met].sum())
+            ok = _affordable(cov, {int(cov.mount[c]) for c in rest}, float(cov.cost[rest].sum()), max_cost)
+            gains = np.where(ok, _gains(cov, obj, state, met, single), -np.inf)
+            c = int(np.argmax(gains))
+            if base + gains[c] > value + 1e-9 * max(1.0, value):
+                picks = rest[:j] + [c] + rest[j:]
+                value = obj.value([(cov.index[q], cov.info[q]) for q in picks])
+                improved = True
+                break
+    return picks, value
+
+
+#: the directions (deg) of the necessary conditions of :func:`grid_bound` with fusion
+BOUND_DIRECTIONS_DEG = (0.0, 45.0, 90.0, 135.0)
+
+
+def _cover_block(cov: Coverage, obj: Objective, angle_deg: float | None) -> sparse.coo_matrix:
+    """Rows ``y_i - sum_c a_ci x_c <= 0`` of :func:`grid_bound`: ``a_ci = min(1, u^T I_ci u / t_i)`` along the
+    unit vector at ``angle_deg`` (fusion), or ``[c meets i alone]`` (``angle_deg`` None)."""
+    n, C = obj.weight.shape[0], len(cov.configs)
+    thr = obj.threshold
+    rows, cols, vals = [], [], []
+    if angle_deg is not None:
+        cu, su = np.cos(np.radians(angle_deg)), np.sin(np.radians(angle_deg))
+    for c, (idx, inf) in enumerate(zip(cov.index, cov.info, strict=True)):
+        if angle_deg is None:
+            a = obj.meets(inf, idx) * 1.0
+        else:
+            a = np.minimum(1.0, (inf[:, 0] * cu * cu + 2.0 * inf[:, 1] * cu * su + inf[:, 2] * su * su) / thr[idx])
+        keep = a > 0
+        rows.append(idx[keep])
+        cols.append(np.full(int(keep.sum()), c))
+        vals.append(-a[keep])
+    r, cl, v = np.concatenate(rows), np.concatenate(cols), np.concatenate(vals)
+    return sparse.coo_matrix((np.concatenate([v, np.ones(n)]), (np.concatenate([r, np.arange(n)]),
+                                                                 np.concatenate([cl, C + np.arange(n)]))),
+                             shape=(n, C + n))
+
+
+def grid_bound(cov: Coverage, obj: Objective, max_cameras: int, max_cost: float | None = None) -> float | None:
+    """An upper bound of the objective over every layout of the grid: the LP relaxation of necessary
+    conditions for a sample to be met (None above :data:`LP_MAX_NNZ` nonzeros).
+
+    With fusion, sample ``i`` can be met by a layout ``S`` only if ``sum_{c in S} u^T I_ci u >= t_i`` for
+    every unit vector ``u`` (``lambda_min`` of the fused information is at most ``u^T (sum_c I_ci) u``), so
+    ``y_i <= sum_c min(1, u^T I_ci u / t_i) x_c`` holds for every integer layout, here for the directions
+    :data:`BOUND_DIRECTIONS_DEG`; without fusion ``y_i <= sum_c [c meets i] x_c``.  Maximising
+    ``sum_i w_i y_i`` with ``0 <= x, y <= 1``, at most K cameras, one per mount and the cost gives the bound.
+    """
+    n, C = obj.weight.shape[0], len(cov.configs)
+    angles = BOUND_DIRECTIONS_DEG if obj.fusion else (None,)
+    if C == 0:
+        return 0.0
+    if sum(i.size for i in cov.index) * len(angles) > LP_MAX_NNZ:
+        return None
+    cover = [_cover_block(cov, obj, a) for a in angles]
+    M = int(cov.mount.max()) + 1
+    per_mount = sparse.coo_matrix((np.ones(C), (cov.mount, np.arange(C))), shape=(M, C + n))
+    totals, ub = [np.concatenate([np.ones(C), np.zeros(n)])], [float(max_cameras)]
+    if max_cost is not None:
+        totals.append(np.concatenate([cov.cost, np.zeros(n)]))
+        ub.append(float(max_cost))
+    A = sparse.vstack([*cover, per_mount, sparse.csr_matrix(np.array(totals))]).tocsr()
+    hi = np.concatenate([np.zeros(n * len(angles)), np.ones(M), ub])
+    res = milp(np.concatenate([np.zeros(C), -obj.weight]), constraints=LinearConstraint(A, -np.inf, hi),
+               integrality=np.zeros(C + n), bounds=Bounds(0, 1), options={"disp": False})
+    return None if res.x is None else float(-res.fun) * (1 + 1e-9) + 1e-9
 
 
 def layout_information(site, samples: GroundSamples, configs, *, budget_scale: float = 1.0):
@@ -420,7 +551,11 @@ class PlanResult:
     """A plan: the chosen configurations, their evaluation and how they were found.
 
     ``discrete_value`` is the objective after the discrete stage, ``value`` after the refinement
-    (m^2 of weighted met area; ``value >= discrete_value``); ``seconds`` per stage.
+    (m^2 of weighted met area; ``value >= discrete_value``); ``seconds`` per stage.  ``bound`` (method
+    ``best``): how far from the grid's optimum the discrete layout can be, ``{"upper_bound_m2", "value_m2",
+    "gap", "kind", "screen_step"}`` on the samples the discrete stage sees (``gap = 1 - value / bound``; 0:
+    proven optimal over the grid; the refinement leaves the grid and may exceed the bound); ``starts``: each
+    start's discrete and refined value (m^2, every sample).
     """
 
     configs: list[CameraConfig]
@@ -432,6 +567,8 @@ class PlanResult:
     samples: GroundSamples
     seconds: dict = field(default_factory=dict)
     discrete_configs: list[CameraConfig] = field(default_factory=list)
+    bound: dict = field(default_factory=dict)
+    starts: dict = field(default_factory=dict)
 
 
 def _discrete(cov, obj, method, k, max_cost, lazy, time_limit_s):
@@ -441,7 +578,7 @@ def _discrete(cov, obj, method, k, max_cost, lazy, time_limit_s):
     if method in ("milp", "both"):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)
-            picks["milp"], optimal = _milp(cov, obj, k, max_cost, time_limit_s)
+            picks["milp"], optimal, _ = _milp(cov, obj, k, max_cost, time_limit_s)
         if not optimal and "greedy" not in picks:  # stopped early: its incumbent against greedy's layout
             picks["greedy"] = greedy(cov, obj, k, max_cost, lazy=lazy)
     vals = {m: obj.value([(cov.index[c], cov.info[c]) for c in p]) for m, p in picks.items()}
@@ -449,7 +586,56 @@ def _discrete(cov, obj, method, k, max_cost, lazy, time_limit_s):
     return [cov.configs[c] for c in picks[best]], vals[best], best
 
 
-def plan(site, *, method: str = "greedy", max_cameras: int | None = None, max_cost: float | None = None,
+def _best_starts(cov, obj, k, max_cost, lazy, time_limit_s) -> tuple[dict, dict]:
+    """Method ``best``'s discrete stage: every start (milp where allowed, greedy by progress and by met area),
+    each through :func:`swap_search`; returns ``(name -> picks, bound dict)``."""
+    t0 = time.perf_counter()
+    deadline = None if time_limit_s is None else t0 + float(time_limit_s)
+    starts, bounds = {"greedy": greedy(cov, obj, k, max_cost, lazy=lazy)}, []
+    if obj.fusion:
+        starts["greedy-met-area"] = greedy(cov, obj, k, max_cost, lazy=lazy, soft=False)
+    if milp_allowed(cov, obj):
+        left = None if deadline is None else max(deadline - time.perf_counter(), 1.0)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            starts["milp"], optimal, mb = _milp(cov, obj, k, max_cost, left)
+        if mb is not None and (k <= 2 or not obj.fusion):  # the program's objective is the full one
+            bounds.append((mb, "milp (proven optimum)" if optimal else "milp (dual bound, stopped early)"))
+    out, seen = {}, set()
+    for name, picks in starts.items():
+        picks, _ = swap_search(cov, obj, picks, k, max_cost, deadline=deadline)
+        if frozenset(picks) not in seen:
+            seen.add(frozenset(picks))
+            out[name] = picks
+    lp = grid_bound(cov, obj, k, max_cost)
+    if lp is not None:
+        bounds.append((lp, "LP relaxation"))
+    best = max(obj.value([(cov.index[c], cov.info[c]) for c in p]) for p in out.values())
+    bound = {"value_m2": best, "upper_bound_m2": None, "gap": None, "kind": None}
+    if bounds:
+        ub, kind = min(bounds)
+        ub = max(ub, best)
+        bound.update(upper_bound_m2=ub, kind=kind, gap=0.0 if ub <= 0 else max(0.0, 1.0 - best / ub))
+    return out, bound
+
+
+def _refine_starts(site, samples, cov, obj_all, starts, refine_layout, seed, max_refine_evals, progress):
+    """Refine every start on all samples; the best final layout: ``(discrete, final, dval, value, name, table)``."""
+    table, best = {}, None
+    for name, picks in starts.items():
+        chosen = [cov.configs[c] for c in picks]
+        dval = value = obj_all.value(layout_information(site, samples, chosen))
+        final = chosen
+        if refine_layout and chosen:
+            final, _, value, _ = refine(site, samples, chosen, obj_all, seed=seed, max_evals=max_refine_evals,
+                                        progress=progress)
+        table[name] = {"discrete_m2": dval, "refined_m2": value}
+        if best is None or value > best[3] + 1e-9 * max(1.0, value):
+            best = (chosen, final, dval, value, name)
+    return (*best, table)
+
+
+def plan(site, *, method: str = "best", max_cameras: int | None = None, max_cost: float | None = None,
          fusion: bool = True, refine_layout: bool = True, seed: int = 0, lazy: bool = True,
          max_refine_evals: int = 200, time_limit_s: float | None = 300.0, screen_step: int = 1,
          workers: int | None = 1, progress: bool = False) -> PlanResult:
@@ -459,8 +645,9 @@ def plan(site, *, method: str = "greedy", max_cameras: int | None = None, max_co
     ----------
     site : Site
         From :func:`footprint_uq.planning.site.load_site`.
-    method : {"greedy", "milp", "both"}
-        The discrete stage.
+    method : {"best", "greedy", "milp", "both"}
+        The discrete stage (``best``, the default: every start, each improved and refined, the best kept,
+        with a bound on its distance to the grid's optimum; see the module docstring).
     max_cameras, max_cost : int, float, optional
         K and the cost limit (mounts + cameras); default: the site file's ``search`` section.
     fusion : bool
@@ -474,7 +661,8 @@ def plan(site, *, method: str = "greedy", max_cameras: int | None = None, max_co
     max_refine_evals : int
         Largest number of layouts the refinement evaluates.
     time_limit_s : float, optional
-        Time limit of the integer program (HiGHS keeps its best layout found by then).
+        Time limit of the integer program (HiGHS keeps its best layout found by then); with ``best``, of
+        the whole discrete stage (the program and the swap searches).
     screen_step : int
         ``> 1``: the discrete stage sees every ``screen_step``-th sample in both directions, each standing
         for ``screen_step^2`` cells (about ``screen_step^2`` times faster); the refinement and the
@@ -504,17 +692,21 @@ def plan(site, *, method: str = "greedy", max_cameras: int | None = None, max_co
     configs = candidate_grid(site)
     cov = precompute(site, screen, configs, progress=progress, workers=workers)
     t["precompute"] = time.perf_counter()
-    chosen, _, used = _discrete(cov, Objective.of(site, screen, fusion=fusion), method, k, cost, lazy, time_limit_s)
+    obj_screen = Objective.of(site, screen, fusion=fusion)
+    if method == "best":
+        starts, bound = _best_starts(cov, obj_screen, k, cost, lazy, time_limit_s)
+        bound["screen_step"] = int(screen_step)
+    else:
+        chosen, _, used = _discrete(cov, obj_screen, method, k, cost, lazy, time_limit_s)
+        starts, bound = {used: [cov.configs.index(c) for c in chosen]}, {}
     t["discrete"] = time.perf_counter()
-    final = chosen
-    dval = value = obj.value(layout_information(site, samples, chosen))
-    if refine_layout and chosen:
-        final, _, value, _ = refine(site, samples, chosen, obj, seed=seed, max_evals=max_refine_evals,
-                                        progress=progress)
+    chosen, final, dval, value, used, table = _refine_starts(site, samples, cov, obj, starts, refine_layout, seed,
+                                                             max_refine_evals, progress)
     t["refine"] = time.perf_counter()
     ev = evaluate_information(site, samples, layout_information(site, samples, final), fusion=fusion)
     t["evaluate"] = time.perf_counter()
     keys = list(t)
     secs = {b: t[b] - t[a] for a, b in zip(keys, keys[1:], strict=False)}
     secs["total"] = t[keys[-1]] - t["start"]
-    return PlanResult(final, ev, dval, value, used, len(configs), samples, secs, chosen)
+    return PlanResult(final, ev, dval, value, used if method != "best" else f"best ({used})", len(configs), samples,
+                      secs, chosen, bound, table)

@@ -4,7 +4,8 @@ Readers and pairs are those of ``validate`` (:mod:`footprint_uq.viz.validation_r
 :mod:`footprint_uq.validation.pairs`); the fit is :func:`footprint_uq.validation.fit.fit_budget`, the
 cross-validated coverage :func:`footprint_uq.validation.fit.cross_validate`; the pairs are streamed into
 the fit's compact records (:func:`footprint_uq.validation.fit.compact_inputs`), never all held in memory.
-Writes the fitted budget (YAML, readable by every command) and a JSON summary; both atomically.
+Writes the fitted budget (YAML, readable by every command) and a JSON summary as one set (built in a hidden
+folder and swapped in together, :func:`footprint_uq.io.atomic.output_set`).
 """
 
 from __future__ import annotations
@@ -16,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
-from ..io.atomic import atomic_write_text
+from ..io.atomic import atomic_write_text, check_output_folder, final_paths, output_set
 from ..io.camera_files import save_budget
 from ..products.geo import GeoReference
 from ..uncertainty.budget import ErrorBudget, load_budget
@@ -85,6 +86,7 @@ def run_budget_fit(labels, out_dir, *, base_budget=None, free=DEFAULT_FREE, kind
     summary : dict (also in ``fit.json``); files : dict name -> Path
     """
     base = ErrorBudget() if base_budget is None else load_budget(base_budget)
+    check_output_folder(out_dir, BUDGET_FIT_FILES.values(), "calibrate budget")  # before the fit, not after
     georef = None
     if origin_lat_deg is not None or origin_lon_deg is not None:
         georef = GeoReference(heading_offset_deg, origin_lat_deg, origin_lon_deg)
@@ -101,10 +103,10 @@ def run_budget_fit(labels, out_dir, *, base_budget=None, free=DEFAULT_FREE, kind
         summary["cross_validation"]["object"] = cross_validate_compact(data, by="object", **opts).to_dict()
         if data.groups_present() >= 2:
             summary["cross_validation"]["group"] = cross_validate_compact(data, by="group", **opts).to_dict()
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    files = {k: out / v for k, v in BUDGET_FIT_FILES.items()}
-    save_budget(fit.to_budget(name=f"fitted to {Path(str(labels)).name}"), files["budget"])
-    summary["files"] = {k: v.name for k, v in files.items()}
-    atomic_write_text(files["summary"], json.dumps(_jsonable(summary), indent=1, allow_nan=False) + "\n", fsync=fsync)
-    return summary, files
+    with output_set(out_dir, tuple(BUDGET_FIT_FILES.values()), "calibrate budget", fsync=fsync) as stage:
+        files = {k: stage / v for k, v in BUDGET_FIT_FILES.items()}
+        save_budget(fit.to_budget(name=f"fitted to {Path(str(labels)).name}"), files["budget"])
+        summary["files"] = {k: v.name for k, v in files.items()}
+        text = json.dumps(_jsonable(summary), indent=1, allow_nan=False) + "\n"
+        atomic_write_text(files["summary"], text, fsync=fsync)
+    return summary, final_paths(files, stage, out_dir)

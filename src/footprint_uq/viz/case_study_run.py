@@ -3,7 +3,9 @@
 :func:`run_case_study` builds the scene (the generator of :mod:`footprint_uq.scenario`, or a
 CARLA recording), analyses it for each camera type and writes the figures, the per-frame CSV,
 ``summary.json``, ``report.html`` (:func:`footprint_uq.viz.case_study.write_case_study_report`)
-and ``paper-reproduction.md`` (:mod:`footprint_uq.scenario.reproduction`).
+and ``paper-reproduction.md`` (:mod:`footprint_uq.scenario.reproduction`), as one set: built in a hidden
+folder and swapped in together (:func:`footprint_uq.io.atomic.output_set`; the folder must be new or hold
+only a previous run's files, :data:`CASE_STUDY_OWN`).
 """
 
 from __future__ import annotations
@@ -13,12 +15,16 @@ from pathlib import Path
 import matplotlib
 
 from ..integrations.carla.bridge import read_recording, scene_to_recording
+from ..io.atomic import check_output_folder, final_paths, output_set
 from ..scenario.case_study import CaseStudyConfig, analyse, build_scene, load_config
 from ..scenario.claims import evaluate_claims
 from ..scenario.reproduction import write_paper_reproduction
 from .case_study import write_case_study_report
 
-__all__ = ["run_case_study"]
+__all__ = ["run_case_study", "CASE_STUDY_OWN"]
+
+#: the names a run writes into its folder (figures are named after cameras and types: every PNG)
+CASE_STUDY_OWN = ("*.png", "case_study_frames.csv", "summary.json", "report.html", "paper-reproduction.md")
 
 
 def run_case_study(out_dir, *, config=None, recording=None, camera_types=None, ellipse_every: int = 4,
@@ -55,6 +61,7 @@ def run_case_study(out_dir, *, config=None, recording=None, camera_types=None, e
         ``reproduction`` (the path of ``paper-reproduction.md``, or None).
     """
     matplotlib.use("Agg")
+    check_output_folder(out_dir, CASE_STUDY_OWN, "case-study")  # before the work, not after
     if config is None:
         cfg = CaseStudyConfig()
     elif isinstance(config, CaseStudyConfig):
@@ -67,10 +74,13 @@ def run_case_study(out_dir, *, config=None, recording=None, camera_types=None, e
         scene_to_recording(scene, write_recording_to)
     result = analyse(scene, types, confidence=cfg.confidence)
     settings = cfg.to_dict() if recording is None else {"heatmap": cfg.heatmap}
-    repro = write_paper_reproduction(Path(out_dir) / "paper-reproduction.md") if reproduction else None
-    paths = write_case_study_report(result, out_dir, settings=settings, ellipse_every=ellipse_every,
-                                    heatmap=cfg.heatmap, dpi=dpi,
-                                    reproduction_link=repro.name if repro is not None else None)
+    with output_set(out_dir, CASE_STUDY_OWN, "case-study") as stage:
+        repro = write_paper_reproduction(stage / "paper-reproduction.md") if reproduction else None
+        paths = write_case_study_report(result, stage, settings=settings, ellipse_every=ellipse_every,
+                                        heatmap=cfg.heatmap, dpi=dpi,
+                                        reproduction_link=repro.name if repro is not None else None)
+    paths = final_paths(paths, stage, out_dir)
+    repro = None if repro is None else Path(out_dir) / repro.name
     paths["result"] = result
     paths["claims"] = evaluate_claims(result)
     paths["reproduction"] = repro

@@ -2,7 +2,9 @@
 
 :func:`write_demo` writes, per budget, the map report of :mod:`.map_report` (with a colour scale
 common to all budgets), a range profile and one self-contained ``report.html``; optionally the
-left-turn case study (:func:`.case_study_run.run_case_study`), linked from the report.
+left-turn case study (:func:`.case_study_run.run_case_study`), linked from the report.  The folder is one
+set, built hidden and swapped in together (:func:`footprint_uq.io.atomic.output_set`); it must be new or
+hold only a previous demo's files.
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from ..io import camera_from_dict, camera_to_dict, save_camera
+from ..io.atomic import check_output_folder, output_set
 from ..products.locate import locate_records
 from ..products.maps import GSD_DEFINITION, uncertainty_map
 from ..uncertainty.budget import ErrorBudget
@@ -78,9 +81,17 @@ def write_demo(out_dir, *, step_px: int = 4, max_range_m: float = 120.0, presets
         per preset with the map report (:func:`.map_report.write_map_report`) and
         ``range_profile.png``.
     """
+    own = ("camera.yaml", "report.html", "range_profile.png", "case-study", *(ErrorBudget.preset(p).name
+                                                                              for p in presets))
+    check_output_folder(out_dir, own, "demo")
+    with output_set(out_dir, own, "demo") as stage:
+        _write_demo(stage, step_px, max_range_m, presets, progress, warn, case_study)
+    return Path(out_dir) / "report.html"
+
+
+def _write_demo(out: Path, step_px, max_range_m, presets, progress, warn, case_study) -> Path:
+    """:func:`write_demo`'s files, into ``out`` (its staging folder)."""
     say = progress or (lambda msg: None)
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     camera = camera_from_dict(dict(DEMO_CAMERA))
     cam_path = save_camera(camera, out / "camera.yaml")
     budgets = [ErrorBudget.preset(p) for p in presets]

@@ -1,7 +1,9 @@
 """An uncertainty map on disk: its arrays, three figures and a summary (the ``footprint-uq map`` output).
 
 :func:`write_map_report` computes (or takes) an :class:`~footprint_uq.products.maps.UncertaintyMap`
-and writes the files named in :data:`MAP_FILES` into one directory, each atomically.
+and writes the files named in :data:`MAP_FILES` into one directory as one set (built in a hidden folder
+beside it and swapped in together, :func:`footprint_uq.io.atomic.output_set`; the folder must be new or
+hold only a previous map's files, :data:`MAP_OWN`).
 """
 
 from __future__ import annotations
@@ -10,11 +12,12 @@ import json
 from pathlib import Path
 
 from ..io import camera_to_dict
-from ..io.atomic import atomic_write_text
+from ..io.atomic import atomic_write_text, check_output_folder, final_paths, output_set
+from ..products.gcp_support import save_support_map
 from ..products.maps import uncertainty_map
 from .maps import plot_ground_map, plot_gsd_maps, plot_image_map, plot_nonlinearity_map, save_figure
 
-__all__ = ["MAP_FILES", "write_map_report"]
+__all__ = ["MAP_FILES", "MAP_OWN", "write_map_report"]
 
 #: the files of a map report: key -> file name inside the output directory
 MAP_FILES = {
@@ -25,11 +28,14 @@ MAP_FILES = {
     "nonlinearity_png": "nonlinearity.png",
     "summary_json": "summary.json",
 }
+#: every name a map run writes into its folder (``gcp_support.npz``: ``map --gcp-summary``)
+MAP_OWN = (*MAP_FILES.values(), "gcp_support.npz")
 
 
 def write_map_report(camera, budget, out_dir, *, step_px: int = 4, max_range_m: float | None = None,
                      confidence: float | None = None, vmin_m: float | None = None, vmax_m: float | None = None,
-                     dpi: int = 150, umap=None, linearity: bool = True, linear_threshold: float = 0.05):
+                     dpi: int = 150, umap=None, linearity: bool = True, linear_threshold: float = 0.05,
+                     gcp_support: dict | None = None):
     """Compute an uncertainty map and write its arrays, figures and summary into ``out_dir``.
 
     Parameters
@@ -59,6 +65,9 @@ def write_map_report(camera, budget, out_dir, *, step_px: int = 4, max_range_m: 
         ``nonlinearity.png`` shows the layer.
     linear_threshold : float
         ``linear_ok`` where the predicted relative error of the linear semi-major axis is at most this.
+    gcp_support : dict, optional
+        The support of a GCP solve (:func:`footprint_uq.products.gcp_support.load_gcp_support`): also
+        ``gcp_support.npz`` (key ``gcp_support``), in the same set.
 
     Returns
     -------
@@ -69,11 +78,20 @@ def write_map_report(camera, budget, out_dir, *, step_px: int = 4, max_range_m: 
         :meth:`UncertaintyMap.summary`, the camera, the budget and the file names (no
         ``nonlinearity_png`` when the map has no flag).
     """
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    check_output_folder(out_dir, MAP_OWN, "map")  # before the map is computed, not after
     if umap is None:
         umap = uncertainty_map(camera, budget, step_px, max_range_m=max_range_m, linearity=linearity,
                                linear_threshold=linear_threshold)
+    with output_set(out_dir, MAP_OWN, "map") as stage:
+        files = _write_files(umap, camera, stage, confidence, vmin_m, vmax_m, dpi)
+        if gcp_support is not None:
+            files["gcp_support"] = save_support_map(stage / "gcp_support.npz", camera, umap.budget, gcp_support,
+                                                    umap.uv_px)
+    return umap, final_paths(files, stage, out_dir)
+
+
+def _write_files(umap, camera, out: Path, confidence, vmin_m, vmax_m, dpi) -> dict:
+    """The map's arrays, figures and summary written into ``out`` (the staging folder)."""
     files = {k: out / v for k, v in MAP_FILES.items()}
     if umap.nonlinearity is None:
         del files["nonlinearity_png"]
@@ -90,4 +108,4 @@ def write_map_report(camera, budget, out_dir, *, step_px: int = 4, max_range_m: 
     summary["budget_parameters"] = umap.budget.to_dict()
     summary["files"] = {k: p.name for k, p in files.items()}
     atomic_write_text(files["summary_json"], json.dumps(summary, indent=2, allow_nan=False) + "\n")
-    return umap, files
+    return files

@@ -10,14 +10,33 @@ The server is :class:`http.server.ThreadingHTTPServer` from the standard library
   ``k`` and returns the new evaluation and map (a PNG data URI).  Bad input: status 400 and a one-line
   ``{"error": ...}``.
 
+Safe on a laptop, where any web page the user visits can make the browser send requests to the loopback
+interface:
+
+* the ``Host`` header must name the address and port served (``127.0.0.1:PORT`` or ``localhost:PORT``):
+  anything else -- a DNS-rebinding page, whose ``Host`` is its own name -- is answered 421;
+* a POST must carry the session's token (:attr:`PlanSession.token`, random, embedded in the page and sent
+  back in the ``X-FUQ-Token`` header) and ``Content-Type: application/json``, and an ``Origin`` header,
+  when present, must be the page's own: a cross-origin page can neither read the token nor send the header
+  without a CORS preflight, which the server never grants (403 otherwise);
+* bodies are at most :data:`MAX_BODY_BYTES`, strict UTF-8 JSON nested at most :data:`MAX_JSON_DEPTH` deep;
+  a malformed request (bad or missing ``Content-Length``, a body shorter than it says within
+  :data:`READ_TIMEOUT_S`, deep nesting, bytes that are not UTF-8) is answered 400 with a one-line error;
+* a client that goes away is quiet (no traceback), and a request whose client has gone by the time its
+  map would be drawn costs no drawing (the move is applied; the map is drawn for the next request).
+
 The page sets ``document.body.dataset.redraws`` (a counter) and ``dataset.lastRedrawMs`` after each
 re-draw and fires a ``fuq-redrawn`` event: the browser test waits on them.
 """
 
 from __future__ import annotations
 
+import hmac
 import json
 import math
+import secrets
+import socket
+import sys
 import threading
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 
@@ -31,11 +50,19 @@ from ..planning.site import load_site
 from .planning import plot_semi_major
 from .report import esc, fig_to_png_bytes, png_data_uri
 
-__all__ = ["PlanSession", "make_server", "serve_plan", "HOST"]
+__all__ = ["PlanSession", "make_server", "serve_plan", "HOST", "MAX_BODY_BYTES", "MAX_JSON_DEPTH", "READ_TIMEOUT_S",
+           "TOKEN_HEADER", "json_depth"]
 
 #: the only interface the server listens on
 HOST = "127.0.0.1"
-_MAX_BODY = 4096
+#: largest request body (bytes; an update is about 80)
+MAX_BODY_BYTES = 4096
+#: deepest nesting of arrays and objects in a request body (an update is one object: depth 1)
+MAX_JSON_DEPTH = 4
+#: a connection that sends nothing for this long (seconds) is answered 400 (a body shorter than it said) or closed
+READ_TIMEOUT_S = 10.0
+#: the header a POST carries the session's token in
+TOKEN_HEADER = "X-FUQ-Token"
 
 
 class PlanSession:
@@ -47,6 +74,8 @@ class PlanSession:
         self.base = list(cameras)
         self.cameras = list(cameras)
         self.lock = threading.Lock()
+        #: the per-session secret a POST must carry (embedded in the page, never in a URL)
+        self.token = secrets.token_urlsafe(32)
         self.evaluation, self.infos = evaluate_cameras(site, self.samples, self.cameras, fusion=fusion)
 
     def _ranges(self, k: int) -> dict:
@@ -72,8 +101,12 @@ class PlanSession:
                               )
         return fig_to_png_bytes(fig, dpi=self.dpi)
 
-    def update(self, body: dict) -> dict:
-        """Move one camera (see the module docstring); returns the new state and map."""
+    def update(self, body: dict, still_wanted=None) -> dict | None:
+        """Move one camera (see the module docstring); returns the new state and map.
+
+        ``still_wanted`` (a callable, optional) is asked before the map is drawn: False (the client has gone)
+        returns None after the move, without drawing.
+        """
         if not isinstance(body, dict):
             raise InputError("request", body, "a JSON object")
         k = body.get("camera")
@@ -92,6 +125,8 @@ class PlanSession:
             lc = self.cameras[k]
             self.cameras[k] = LayoutCamera(lc.name, cam, lc.budget, lc.config, lc.budget_spec)
             self.evaluation, self.infos = evaluate_cameras(self.site, self.samples, self.cameras, fusion=self.fusion)
+            if still_wanted is not None and not still_wanted():
+                return None
             return {**self.state(), "png": png_data_uri(self.map_png())}
 
 
@@ -134,7 +169,9 @@ _PAGE_JS = """
     var body = {camera: k};
     ids.forEach(function (id) { body[id] = Number(el(id).value); });
     el('status').textContent = 'computing...';
-    fetch('api/update', {method: 'POST', headers: {'Content-Type': 'application/json'}, body: JSON.stringify(body)})
+    var token = document.querySelector('meta[name="fuq-token"]').content;
+    fetch('api/update', {method: 'POST', headers: {'Content-Type': 'application/json', 'X-FUQ-Token': token},
+                         body: JSON.stringify(body)})
       .then(function (r) { return r.json().then(function (j) { if (!r.ok) { throw new Error(j.error); } return j; }); })
       .then(function (s) {
         state.cameras = s.cameras; state.zones = s.zones; state.fraction_met = s.fraction_met;
@@ -175,6 +212,7 @@ def page_html(session: PlanSession) -> str:
     state_json = json.dumps(st).replace("</", "<\\/")
     return (f'<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8">'
             f'<meta name="viewport" content="width=device-width, initial-scale=1"><link rel="icon" href="data:,">'
+            f'<meta name="fuq-token" content="{esc(session.token)}">'
             f"<title>Site plan (interactive): {esc(session.site.name)}</title><style>{_PAGE_CSS}</style></head>"
             f"<body><h1>Site plan: {esc(session.site.name)}</h1>"
             f'<p>Weighted met area: <b id="fraction"></b> <span id="status"></span></p>'
@@ -186,53 +224,179 @@ def page_html(session: PlanSession) -> str:
             f"<script>{_PAGE_JS}</script></body></html>\n")
 
 
+def json_depth(text: str) -> int:
+    """The deepest nesting of arrays and objects in JSON ``text`` (brackets inside strings not counted);
+    linear, no recursion: checked before ``json.loads``, whose parser recurses once per level."""
+    depth = deepest = 0
+    in_str = esc_next = False
+    for ch in text:
+        if in_str:
+            if esc_next:
+                esc_next = False
+            elif ch == "\\":
+                esc_next = True
+            elif ch == '"':
+                in_str = False
+        elif ch == '"':
+            in_str = True
+        elif ch in "[{":
+            depth += 1
+            deepest = max(deepest, depth)
+        elif ch in "]}":
+            depth -= 1
+    return deepest
+
+
+class _Refused(Exception):
+    """A request refused with an HTTP status and a one-line message."""
+
+    def __init__(self, code: int, message: str):
+        super().__init__(message)
+        self.code = code
+
+
 class _Handler(BaseHTTPRequestHandler):
     session: PlanSession = None
     server_version = "footprint-uq-plan"
+    timeout = READ_TIMEOUT_S  # socket timeout of every connection: a stalled client cannot hold a thread
 
     def log_message(self, fmt, *args):  # quiet: the CLI prints the URL, not every request
         return
 
     def _send(self, code: int, body: bytes, ctype: str):
-        self.send_response(code)
-        self.send_header("Content-Type", ctype)
-        self.send_header("Content-Length", str(len(body)))
-        self.send_header("Cache-Control", "no-store")
-        self.end_headers()
-        self.wfile.write(body)
+        try:
+            self.send_response(code)
+            self.send_header("Content-Type", ctype)
+            self.send_header("Content-Length", str(len(body)))
+            self.send_header("Cache-Control", "no-store")
+            self.send_header("X-Content-Type-Options", "nosniff")
+            self.send_header("X-Frame-Options", "DENY")  # no other page can frame the sliders
+            self.end_headers()
+            self.wfile.write(body)
+        except OSError:  # the client went away: nothing to tell anyone
+            self.close_connection = True
 
     def _json(self, code: int, data):
+        if code >= 400:
+            self.close_connection = True  # a refused request ends its connection
         self._send(code, json.dumps(data, allow_nan=False).encode(), "application/json")
 
+    def _client_gone(self) -> bool:
+        """True when the client has closed its side (or reset): what it asked for would be drawn for nobody."""
+        sock = self.connection
+        try:
+            sock.setblocking(False)
+            try:
+                return sock.recv(1, socket.MSG_PEEK) == b""
+            finally:
+                sock.settimeout(self.timeout)
+        except BlockingIOError:  # nothing to read and still open: the client waits for its answer
+            return False
+        except OSError:
+            return True
+
+    def _check_host(self) -> None:
+        """421 unless ``Host`` names the address and port served (a DNS-rebinding page sends its own name)."""
+        port = self.server.server_address[1]
+        host = (self.headers.get("Host") or "").strip().lower()
+        allowed = {f"{HOST}:{port}", f"localhost:{port}"} | ({HOST, "localhost"} if port == 80 else set())
+        if host not in allowed:
+            raise _Refused(421, f"Host {host[:80]!r} is not this server (http://{HOST}:{port}/)")
+
+    def _check_post(self) -> None:
+        """403 unless the request comes from the page: the session's token and, if sent, the page's Origin."""
+        port = self.server.server_address[1]
+        origin = self.headers.get("Origin")
+        if origin is not None and origin.lower() not in (f"http://{HOST}:{port}", f"http://localhost:{port}"):
+            raise _Refused(403, f"Origin {origin[:80]!r} is not this page's")
+        token = self.headers.get(TOKEN_HEADER) or ""
+        if not hmac.compare_digest(token.encode("utf-8", "replace"), self.session.token.encode()):
+            raise _Refused(403, f"missing or wrong {TOKEN_HEADER} (send requests from the page)")
+        ctype = (self.headers.get("Content-Type") or "").split(";")[0].strip().lower()
+        if ctype != "application/json":
+            raise _Refused(400, f"Content-Type {ctype[:60]!r}; expected application/json")
+
+    def _read_body(self) -> dict:
+        """The request's JSON body: bounded, complete, strict UTF-8, not deeper than MAX_JSON_DEPTH; else 400."""
+        text = self.headers.get("Content-Length")
+        try:
+            n = int(text) if text is not None and text.strip().isdigit() else -1
+        except ValueError:
+            n = -1
+        if not 0 < n <= MAX_BODY_BYTES:
+            self.close_connection = True  # the rest of the stream cannot be framed
+            shown = "missing" if text is None else repr(text[:40])
+            raise _Refused(400, f"Content-Length {shown}; expected 1 to {MAX_BODY_BYTES} bytes")
+        parts, got = [], 0
+        try:
+            while got < n:  # a client that stops sending: the socket's timeout ends the wait
+                part = self.rfile.read1(n - got)
+                if not part:
+                    break
+                parts.append(part)
+                got += len(part)
+        except OSError:
+            pass
+        if got != n:
+            self.close_connection = True
+            raise _Refused(400, f"body of {got} bytes; Content-Length said {n}")
+        try:
+            body = b"".join(parts).decode("utf-8")
+        except UnicodeDecodeError:
+            raise _Refused(400, "request: the body is not UTF-8; expected a JSON object") from None
+        if json_depth(body) > MAX_JSON_DEPTH:
+            raise _Refused(400, f"request: JSON nested deeper than {MAX_JSON_DEPTH}; expected a JSON object")
+        try:
+            return json.loads(body)
+        except (ValueError, RecursionError):
+            raise _Refused(400, "request: not JSON; expected a JSON object") from None
+
     def do_GET(self):  # noqa: N802 (http.server's name)
+        try:
+            self._check_host()
+        except _Refused as e:
+            self._json(e.code, {"error": str(e)})
+            return
         if self.path in ("/", "/index.html"):
-            self._send(200, page_html(self.session).encode(), "text/html; charset=utf-8")
+            if not self._client_gone():  # the page embeds a drawn map: not for a client that has gone
+                self._send(200, page_html(self.session).encode(), "text/html; charset=utf-8")
         elif self.path == "/api/state":
             self._json(200, self.session.state())
         else:
             self._json(404, {"error": f"no such page: {self.path[:80]}"})
 
     def do_POST(self):  # noqa: N802
-        if self.path != "/api/update":
-            self._json(404, {"error": f"no such endpoint: {self.path[:80]}"})
-            return
         try:
-            n = int(self.headers.get("Content-Length", "0"))
-            if not 0 < n <= _MAX_BODY:
-                raise InputError("Content-Length", n, f"a JSON body of 1 to {_MAX_BODY} bytes")
-            try:
-                body = json.loads(self.rfile.read(n))
-            except ValueError:
-                raise InputError("request", "not JSON", "a JSON object") from None
-            self._json(200, self.session.update(body))
+            self._check_host()
+            if self.path != "/api/update":
+                raise _Refused(404, f"no such endpoint: {self.path[:80]}")
+            self._check_post()
+            body = self._read_body()
+            res = self.session.update(body, still_wanted=lambda: not self._client_gone())
+            if res is not None:
+                self._json(200, res)
+        except _Refused as e:
+            self._json(e.code, {"error": str(e)})
         except InputError as e:
             self._json(400, {"error": str(e)})
+
+
+class _Server(ThreadingHTTPServer):
+    daemon_threads = True
+
+    def handle_error(self, request, client_address):
+        """Quiet for a client that went away or stalled; one line (never a traceback) for anything else."""
+        exc = sys.exc_info()[1]
+        if isinstance(exc, OSError):  # resets, broken pipes, timeouts
+            return
+        print(f"footprint-uq plan --serve: request failed: {type(exc).__name__}: {exc}"[:300], file=sys.stderr,
+              flush=True)
 
 
 def make_server(session: PlanSession, port: int = 0) -> ThreadingHTTPServer:
     """A server for ``session`` on ``127.0.0.1:port`` (0: any free port; ``server.server_address[1]``)."""
     handler = type("PlanHandler", (_Handler,), {"session": session})
-    return ThreadingHTTPServer((HOST, int(port)), handler)
+    return _Server((HOST, int(port)), handler)
 
 
 def session_from_files(site_path, layout_path=None, *, fusion: bool = True, progress: bool = True) -> PlanSession:

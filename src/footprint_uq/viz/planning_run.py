@@ -1,7 +1,10 @@
 """The jobs behind ``footprint-uq plan`` and ``plan --evaluate``: options -> files written.
 
 ``out_dir`` receives ``layout.yaml`` and ``cameras/*.yaml`` (plan only), ``plan.json`` (or
-``evaluation.json``) and ``report.html``; every file is written atomically.
+``evaluation.json``) and ``report.html``, as one set: built in a hidden folder beside ``out_dir`` and
+swapped in together (:func:`footprint_uq.io.atomic.output_set`), so that a reader never sees the report
+of one layout beside the evaluation of another.  ``out_dir`` must be new or hold only a previous run's
+files of the same job (:data:`PLAN_OWN`, :data:`EVALUATE_OWN`).
 """
 
 from __future__ import annotations
@@ -9,20 +12,26 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
+from ..io.atomic import check_output_folder, final_paths, output_set
 from ..planning.geometry import ground_samples
 from ..planning.layout import evaluate_cameras, layout_from_configs, read_layout, sensitivity, write_json, write_layout
 from ..planning.optimise import plan
 from ..planning.site import load_site
 from .planning import write_plan_report
 
-__all__ = ["PlanOptions", "run_plan", "run_evaluate"]
+__all__ = ["PlanOptions", "run_plan", "run_evaluate", "PLAN_OWN", "EVALUATE_OWN"]
+
+#: the names a ``plan`` run writes into its folder (anything else there: the folder is refused, not replaced)
+PLAN_OWN = ("layout.yaml", "cameras", "plan.json", "report.html")
+#: the names a ``plan --evaluate`` run writes
+EVALUATE_OWN = ("evaluation.json", "report.html")
 
 
 @dataclass
 class PlanOptions:
     """Options of ``footprint-uq plan`` (None: the site file's ``search`` section)."""
 
-    method: str = "greedy"
+    method: str = "best"
     max_cameras: int | None = None
     max_cost: float | None = None
     fusion: bool = True
@@ -34,6 +43,7 @@ class PlanOptions:
     progress: bool = False
     dpi: int = 100
     workers: int | None = 1
+    time_limit_s: float | None = 300.0
 
 
 def _summary(evaluation) -> dict:
@@ -58,19 +68,23 @@ def run_plan(site_path, out_dir, opts: PlanOptions | None = None):
     """
     opts = opts or PlanOptions()
     site = load_site(site_path)
+    check_output_folder(out_dir, PLAN_OWN, "plan")  # before the search, not after
     res = plan(site, method=opts.method, max_cameras=opts.max_cameras, max_cost=opts.max_cost, fusion=opts.fusion,
                refine_layout=opts.refine, seed=opts.seed, screen_step=opts.screen_step,
-               max_refine_evals=opts.max_refine_evals, workers=opts.workers, progress=opts.progress)
-    out = Path(out_dir)
+               max_refine_evals=opts.max_refine_evals, workers=opts.workers, progress=opts.progress,
+               time_limit_s=opts.time_limit_s)
     cameras = layout_from_configs(site, res.configs)
-    files = write_layout(cameras, out, site_path=Path(site_path).resolve())
     extra = {"site": str(Path(site_path).resolve()), "method": res.method, "candidates": res.n_candidates,
              "samples": len(res.samples), "seed": opts.seed, "screen_step": opts.screen_step,
              "fusion": opts.fusion, "discrete_value_m2": res.discrete_value, "refined_value_m2": res.value,
-             "seconds_total": res.seconds.get("total"),
+             "seconds_total": res.seconds.get("total"), "grid_upper_bound_m2": res.bound.get("upper_bound_m2"),
+             "grid_gap": res.bound.get("gap"), "grid_bound_kind": res.bound.get("kind"), "grid_bound": res.bound,
+             "starts": res.starts,
              "cameras": [c.__dict__ for c in res.configs]}
-    files.update(_finish(site, res.samples, cameras, out, "plan", extra, opts))
-    return res, files
+    with output_set(out_dir, PLAN_OWN, "plan") as stage:
+        files = write_layout(cameras, stage, site_path=Path(site_path).resolve())
+        files.update(_finish(site, res.samples, cameras, stage, "plan", extra, opts))
+    return res, final_paths(files, stage, out_dir)
 
 
 def run_evaluate(site_path, layout_path, out_dir, opts: PlanOptions | None = None):
@@ -82,7 +96,9 @@ def run_evaluate(site_path, layout_path, out_dir, opts: PlanOptions | None = Non
     site = load_site(site_path)
     cameras = read_layout(layout_path, site)
     samples = ground_samples(site)
-    files = _finish(site, samples, cameras, Path(out_dir), "evaluation",
-                    {"site": str(Path(site_path).resolve()), "layout": str(Path(layout_path).resolve()),
-                     "fusion": opts.fusion, "samples": len(samples)}, opts)
+    with output_set(out_dir, EVALUATE_OWN, "plan --evaluate") as stage:
+        files = _finish(site, samples, cameras, stage, "evaluation",
+                        {"site": str(Path(site_path).resolve()), "layout": str(Path(layout_path).resolve()),
+                         "fusion": opts.fusion, "samples": len(samples)}, opts)
+    files = final_paths(files, stage, out_dir)
     return evaluate_cameras(site, samples, cameras, fusion=opts.fusion)[0], files

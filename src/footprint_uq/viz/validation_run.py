@@ -1,7 +1,10 @@
 """The whole ``footprint-uq validate`` job: labelled data in, report, summary and per-object file out.
 
 :func:`run_validation` picks the reader from the input (:func:`detect_kind`), streams the pairs through
-:func:`footprint_uq.validation.job.validate` and writes into one folder, each file atomically:
+:func:`footprint_uq.validation.job.validate` and writes into one folder, the files as one set (built
+in a hidden folder beside it and swapped in together, :func:`footprint_uq.io.atomic.output_set`: a
+reader never sees the summary of one run beside the per-object file of another; the folder must be
+new or hold only a previous run's files, :data:`VALIDATION_OWN`):
 
 =================  ========================================================================
 ``summary.json``   coverage, intervals, breakdowns, bias, NEES test and verdict, unpaired counts
@@ -22,7 +25,7 @@ import numpy as np
 from ..batch.fleet import load_registry
 from ..errors import InputError
 from ..io import load_camera
-from ..io.atomic import atomic_write_bytes, atomic_write_text
+from ..io.atomic import atomic_write_bytes, atomic_write_text, final_paths, output_set
 from ..products.geo import GeoReference
 from ..validation import readers as R
 from ..validation.coverage import DEFAULT_RANGE_BANDS_M
@@ -34,6 +37,8 @@ __all__ = ["run_validation", "detect_kind", "label_chunks", "KINDS", "VALIDATION
 
 KINDS = ("kitti", "dair-v2x", "openlabel", "table")
 VALIDATION_FILES = {"summary": "summary.json", "report": "report.html", "calibration_png": "calibration.png"}
+#: every name a run writes into its folder (a folder holding anything else is refused, not replaced)
+VALIDATION_OWN = ("summary.json", "report.html", "calibration.png", "objects.csv", "objects.parquet")
 
 
 def detect_kind(labels) -> str:
@@ -144,14 +149,21 @@ def run_validation(labels, out_dir, budget, *, kind: str | None = None, contact=
     georef = None
     if origin_lat_deg is not None or origin_lon_deg is not None:
         georef = GeoReference(heading_offset_deg, origin_lat_deg, origin_lon_deg)
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     folder = R.FolderReport()
     chunks = label_chunks(labels, kind, folder, camera=camera, registry=registry, budget=budget,
                           calibration=calibration, image_size_px=image_size_px, georef=georef, chunk_rows=chunk_rows,
                           detections=detections, detections_options=dict(format=detections_format,
                                                                           class_names=class_names,
                                                                           unknown_class=unknown_class))
+    with output_set(out_dir, VALIDATION_OWN, "validate", fsync=fsync) as stage:
+        summary, files = _write_validation(stage, labels, kind, folder, chunks, budget, contact, range_bands_m,
+                                           alpha, objects_format, report, dpi, fsync, progress)
+    return summary, final_paths(files, stage, out_dir)
+
+
+def _write_validation(out: Path, labels, kind, folder, chunks, budget, contact, range_bands_m, alpha, objects_format,
+                      report, dpi, fsync, progress) -> tuple[dict, dict]:
+    """The job's files written into ``out`` (the hidden staging folder of :func:`run_validation`)."""
     files = {"objects": out / f"objects.{objects_format}", "summary": out / VALIDATION_FILES["summary"]}
     res = validate(chunks, budget, contact=contact, objects_out=files["objects"], range_bands_m=range_bands_m,
                    alpha=alpha, fsync=fsync, progress=progress)
