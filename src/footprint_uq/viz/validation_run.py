@@ -157,12 +157,12 @@ def run_validation(labels, out_dir, budget, *, kind: str | None = None, contact=
                                                                           unknown_class=unknown_class))
     with output_set(out_dir, VALIDATION_OWN, "validate", fsync=fsync) as stage:
         summary, files = _write_validation(stage, labels, kind, folder, chunks, budget, contact, range_bands_m,
-                                           alpha, objects_format, report, dpi, fsync, progress)
+                                           alpha, objects_format, report, dpi, fsync, progress, detections)
     return summary, final_paths(files, stage, out_dir)
 
 
 def _write_validation(out: Path, labels, kind, folder, chunks, budget, contact, range_bands_m, alpha, objects_format,
-                      report, dpi, fsync, progress) -> tuple[dict, dict]:
+                      report, dpi, fsync, progress, detections=None) -> tuple[dict, dict]:
     """The job's files written into ``out`` (the hidden staging folder of :func:`run_validation`)."""
     files = {"objects": out / f"objects.{objects_format}", "summary": out / VALIDATION_FILES["summary"]}
     res = validate(chunks, budget, contact=contact, objects_out=files["objects"], range_bands_m=range_bands_m,
