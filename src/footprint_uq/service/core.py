@@ -46,7 +46,8 @@ from ..fast.footprint_kernels import OBJ_ROW
 from ..products.footprints import CONTACT_MODES, V2X_FIELDS, V2X_POLICIES, FrameProcessor
 from ..products.geo import GeoReference
 from ..products.v2x import J2735_POSITION_CONFIDENCE_NAMES
-from ..tracking import SharedJacobianAt, TrackerConfig, TrackTable, object_motion
+from ..tracking import SharedJacobianAt, TrackerConfig, object_motion
+from ..tracking.classes import ClassTracks, tracker_configs
 from ..uncertainty.ellipse import chi2_scale
 from ..uncertainty.propagation import DEFAULT_LINEAR_THRESHOLD
 from .jsonrows import Table
@@ -152,8 +153,8 @@ class CameraSetup:
     lon_1e7deg: int | None = None
     #: the fixed part of its CPMs' UPER encoding
     uper: CpmUperWriter | None = None
-    #: its tracks by object_id (``tracks=True``; one frame at a time: ``tracks_lock``)
-    tracks: TrackTable | None = None
+    #: its tracks by object_id, a motion model per class (``tracks=True``; one frame at a time: ``tracks_lock``)
+    tracks: ClassTracks | None = None
     tracks_lock: threading.Lock | None = None
     #: object_id -> the messages' object id (unique per message, stable across frames; messages/ids.py)
     ids: MessageIdMap = field(default_factory=MessageIdMap)
@@ -297,7 +298,8 @@ class Service:
                 proc = setup.processor
                 proc.shared_jacobian = True
                 at = SharedJacobianAt(proc.camera, proc.budget)
-                setup.tracks, setup.tracks_lock = TrackTable(cfg, rank=at.rank, shared_at=at), threading.Lock()
+                configs = tracker_configs(getattr(proc.budget, "motion", None), cfg)  # (docs/motion-fit.md)
+                setup.tracks, setup.tracks_lock = ClassTracks(*configs, rank=at.rank, shared_at=at), threading.Lock()
                 if warm_up:
                     setup.tracks.warm_up()
 
@@ -347,7 +349,7 @@ class Service:
                 for box in (box2d, box3d):
                     setup.ids = MessageIdMap()
                     if saved[0] is not None:
-                        setup.tracks = TrackTable(saved[0].config, rank=saved[0].rank, shared_at=saved[0].shared_at)
+                        setup.tracks = saved[0].fresh()
                     for k in range(2):
                         dets = [{"object_id": j, "class": "car", **box} for j in range(2)]
                         try:
@@ -432,7 +434,7 @@ class Service:
             raise _FrameError("detections", f"field detections is not a list: {type(dets).__name__}")
         ref_ms = timestamp_its_ms(ts) if self.messages else None
         est, ids, classes, class_p, _pixel_cov = self._footprints(setup, dets)
-        motion = self._motion(setup, est, ids, ts, dets) if self.tracks else None
+        motion = self._motion(setup, est, ids, classes, ts, dets) if self.tracks else None
         t1 = time.perf_counter()
         objects, ok_idx, msg_ids = self._objects_json(setup, est, ids, classes, ts, motion)
         t2 = time.perf_counter()
@@ -532,7 +534,7 @@ class Service:
         return worst, ok
 
     @staticmethod
-    def _motion(setup: CameraSetup, est, ids: list, ts: float, dets: list):
+    def _motion(setup: CameraSetup, est, ids: list, classes: list, ts: float, dets: list):
         """The frame's objects through the camera's tracks: ``(track_id (N,), ObjectMotion)``."""
         yaw = None
         if dets and ("yaw_rad" in dets[0] or "yaw_deg" in dets[0]):  # 3D boxes: their yaw (checked by then)
@@ -542,7 +544,7 @@ class Service:
         N = len(ids)
         B = est.centre_shared_m if est.centre_shared_m is not None else np.full((N, 2, setup.tracks.rank), np.nan)
         with setup.tracks_lock:
-            out = setup.tracks.step(ts, ids, est.centre_xy_world_m, shared_m=B, cov_m2=est.centre_cov_m2)
+            out = setup.tracks.step(ts, ids, classes, est.centre_xy_world_m, shared_m=B, cov_m2=est.centre_cov_m2)
         return out.track_id, object_motion(out, heading_offset_deg=setup.georef.heading_offset_deg, yaw_rad=yaw)
 
     def _objects_json(self, setup: CameraSetup, est, ids: list, classes: list, ts: float = 0.0,
