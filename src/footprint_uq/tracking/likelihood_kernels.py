@@ -202,9 +202,10 @@ def bank_frame(rows, start, cls, t, z, R, B_pred, B_frame, X, P, C, MU, t_last, 
     Object ``i`` of the frame is bank row ``rows[i]`` (-1: not tracked, skipped); ``start[i]``: its track starts
     here (every member initiated from ``z[i]``, ``R[i]``, ``B_frame[i]``, mode probabilities ``mu0[g]``); else
     every member ``g`` (modes ``nm[g]`` of densities ``qs[g]``) steps from ``t_last`` to ``t`` with ``B_pred[i]``
-    (``B`` at the track's predicted position; ``(0, 2, 0)``: none) where finite, else ``B_frame[i]``, and adds its innovation's log-density to
-    ``LL[cls[i], g]`` and its NIS to ``NIS[cls[i], g]``; ``n_upd[cls[i]]`` counts the updates, ``n_bad[cls[i]]``
-    those where a member's innovation covariance was singular (the whole update is then left out)."""
+    (``B`` at the track's predicted position; ``(0, 2, 0)``: none) where finite, else ``B_frame[i]``, and adds
+    its innovation's log-density to ``LL[cls[i], g]`` and its NIS to ``NIS[cls[i], g]``; ``n_upd[cls[i]]``
+    counts the updates, ``n_bad[cls[i]]`` those where a member's innovation covariance was singular (the whole
+    update is then left out)."""
     G, r = qs.shape[0], C.shape[4]
     Pp, Cp, K, cross = np.empty((4, 4)), np.empty((4, r)), np.empty((4, 2)), np.empty((4, 2))
     xs, Ps, Cs = np.empty((2, 4)), np.empty((2, 4, 4)), np.empty((2, 4, r))
