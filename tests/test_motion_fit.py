@@ -109,7 +109,7 @@ def test_bank_likelihood_equals_the_numpy_filter(seed):
     nm = np.array([1, 1, 2])
     stat = (1 / rates) / (1 / rates).sum()
     mu0 = np.array([[1.0, 0.0], [1.0, 0.0], stat])
-    got = _bank_ll(t, z, R, B, qs, nm, rates, mu0, 50.0 ** 2)
+    got = _bank_ll(t, z, R, B, qs, nm, np.tile(rates, (3, 1)), mu0, 50.0 ** 2)
     for g in range(3):
         want = _reference_ll(t, z, R, B, qs[g, :nm[g]], rates, mu0[g], 50.0 ** 2)
         np.testing.assert_allclose(got[:, g], want, rtol=1e-9, atol=1e-9)
@@ -218,7 +218,7 @@ def test_bank_follows_the_tracker_association():
     z[6:, 1] += 500.0  # id 1 jumps: the tracker restarts its track
     cfg = TrackerConfig(accel_psd_m2ps3=1.0, manoeuvre_accel_psd_m2ps3=None)
     grid = MotionGrid(q_m2ps3=np.array([0.1, 1.0, 3.0, 10.0]), imm_q_m2ps3=np.zeros(0), prior=cfg)
-    bank = MotionBank(grid, rank=R_RANK)
+    bank = MotionBank.from_grid(grid, rank=R_RANK)
     tab = TrackTable(cfg, rank=R_RANK)
     for k in range(10):
         out = tab.step(t[k], [0, 1, 2], z[k], R[k], B[k])

@@ -43,7 +43,8 @@ class _Banks:
     def __call__(self, camera_id, time_s, classes, out, xy_m, cov_frame_m2, shared_m) -> None:
         bank = self.banks.get(camera_id)
         if bank is None:
-            bank = self.banks[camera_id] = MotionBank(self.grid, rank=self.shared_at.rank, shared_at=self.shared_at)
+            bank = self.banks[camera_id] = MotionBank.from_grid(self.grid, rank=self.shared_at.rank,
+                                                                shared_at=self.shared_at)
         bank.observe(time_s, out, classes, xy_m, cov_frame_m2, shared_m)
         self.frames += 1
 

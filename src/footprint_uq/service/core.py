@@ -48,6 +48,7 @@ from ..products.geo import GeoReference
 from ..products.v2x import J2735_POSITION_CONFIDENCE_NAMES
 from ..tracking import SharedJacobianAt, TrackerConfig, object_motion
 from ..tracking.classes import ClassTracks, tracker_configs
+from ..tracking.consistency import DEFAULT_WINDOW_S, NisMonitor, health_section
 from ..uncertainty.ellipse import chi2_scale
 from ..uncertainty.propagation import DEFAULT_LINEAR_THRESHOLD
 from .jsonrows import Table
@@ -156,6 +157,8 @@ class CameraSetup:
     #: its tracks by object_id, a motion model per class (``tracks=True``; one frame at a time: ``tracks_lock``)
     tracks: ClassTracks | None = None
     tracks_lock: threading.Lock | None = None
+    #: the NIS of its tracks per class over a window (``tracks=True``; under ``tracks_lock``): docs/motion-fit.md
+    nis: NisMonitor | None = None
     #: object_id -> the messages' object id (unique per message, stable across frames; messages/ids.py)
     ids: MessageIdMap = field(default_factory=MessageIdMap)
 
@@ -239,7 +242,11 @@ class Service:
         ``sigma_speed_mps``, ``heading_deg``, ``sigma_heading_deg``, ``yaw_deg``, ``sigma_yaw_deg``, ``age_s``
         (null where unknown; docs/service.md).  Frames of a camera must then come in time order.
     tracker : TrackerConfig, optional
-        The tracker's options (timeout, gate, acceleration noise).
+        The tracker's options (timeout, gate, acceleration noise); a camera budget's ``motion`` section sets the
+        motion model per class over it (docs/motion-fit.md).
+    consistency_window_s : float
+        With tracks: the window of the on-line NIS check of the motion model per camera and class
+        (:class:`~footprint_uq.tracking.consistency.NisMonitor`, :meth:`motion_health`); 0: no check.
     """
 
     def __init__(self, camera=None, budget=None, *, registry=None, camera_id: str | None = None,
@@ -248,7 +255,8 @@ class Service:
                  allow_outside_image: bool = False, station_id: int | None = None, messages: bool = True,
                  uper_encoder: str = "fast", linearity: bool = False, linear_threshold: float | None = None,
                  warm_up: bool = True, cpm_cdd: str = DEFAULT_CDD, v2x_policy: str = "sampled",
-                 tracks: bool = False, tracker: TrackerConfig | None = None):
+                 tracks: bool = False, tracker: TrackerConfig | None = None,
+                 consistency_window_s: float = DEFAULT_WINDOW_S):
         if (camera is None) == (registry is None):
             raise InputError("camera/registry", "both" if camera is not None else "neither",
                              "exactly one of a camera (with a budget) or a registry")
@@ -300,6 +308,8 @@ class Service:
                 at = SharedJacobianAt(proc.camera, proc.budget)
                 configs = tracker_configs(getattr(proc.budget, "motion", None), cfg)  # (docs/motion-fit.md)
                 setup.tracks, setup.tracks_lock = ClassTracks(*configs, rank=at.rank, shared_at=at), threading.Lock()
+                if consistency_window_s:
+                    setup.nis = NisMonitor(setup.tracks, window_s=consistency_window_s)
                 if warm_up:
                     setup.tracks.warm_up()
 
@@ -313,6 +323,24 @@ class Service:
     def _processor(self, camera, budget, geo: GeoReference, allow_outside_image: bool) -> FrameProcessor:
         return FrameProcessor(camera, budget, heading_offset_deg=geo.heading_offset_deg,
                               allow_outside_image=allow_outside_image, joint_cov=False, v2x_policy=self.v2x_policy)
+
+    def motion_health(self) -> tuple[dict | None, list[str]]:
+        """The health record's ``motion_consistency`` entry (:func:`~footprint_uq.tracking.consistency.
+        health_section`; None without tracks or check) and one log line per camera and class newly found
+        inconsistent (docs/motion-fit.md)."""
+        cams, bad, lines = {}, [], []
+        for cid, setup in self.cameras.items():
+            if setup.nis is None:
+                continue
+            with setup.tracks_lock:
+                sec = health_section({cid: setup.nis})
+                news = setup.nis.new_flags()
+            cams.update(sec["cameras"])
+            bad += sec["inconsistent"]
+            lines += [f"motion model inconsistent: camera {cid}, class {c or '(no class)'}: mean NIS / 2 = "
+                      f"{r['nis_ratio']:.3f} over {r['n_updates']} updates (p = {r['p_value']:.2g}): the traffic is "
+                      f"{'more agitated' if r['nis_ratio'] > 1 else 'calmer'} than the motion model" for c, r in news]
+        return ({"cameras": cams, "inconsistent": bad} if cams else None), lines
 
     @property
     def camera_ids(self) -> list:
@@ -344,12 +372,13 @@ class Service:
             xy = setup.processor.corners(np.array([[[0.5 * w, 0.85 * h]]])).centre_xy_world_m[0]
             x, y = (float(v) for v in (xy if np.isfinite(xy).all() else (0.0, 0.0)))
             box3d = {"x_m": x, "y_m": y, "z_m": 0.0, "length_m": 4.0, "width_m": 2.0, "height_m": 1.5, "yaw_rad": 0.0}
-            saved = setup.tracks, setup.ids
+            saved = setup.tracks, setup.ids, setup.nis
             try:
                 for box in (box2d, box3d):
                     setup.ids = MessageIdMap()
                     if saved[0] is not None:
                         setup.tracks = saved[0].fresh()
+                        setup.nis = None if saved[2] is None else NisMonitor(setup.tracks, window_s=saved[2].window_s)
                     for k in range(2):
                         dets = [{"object_id": j, "class": "car", **box} for j in range(2)]
                         try:
@@ -358,7 +387,7 @@ class Service:
                         except (_FrameError, FootprintUQError):  # (a camera that cannot see the dummy box: the
                             pass  # kernels ran all the same; real frames report their own errors)
             finally:
-                setup.tracks, setup.ids = saved
+                setup.tracks, setup.ids, setup.nis = saved
 
     # -- one frame ------------------------------------------------------------------------------------
     def process_frame(self, frame, *, source: str | None = None) -> dict:
@@ -545,6 +574,9 @@ class Service:
         B = est.centre_shared_m if est.centre_shared_m is not None else np.full((N, 2, setup.tracks.rank), np.nan)
         with setup.tracks_lock:
             out = setup.tracks.step(ts, ids, classes, est.centre_xy_world_m, shared_m=B, cov_m2=est.centre_cov_m2)
+            if setup.nis is not None:
+                setup.nis.observe(ts, out, classes, est.centre_xy_world_m,
+                                  est.centre_cov_m2 - B @ np.swapaxes(B, -1, -2), B)
         return out.track_id, object_motion(out, heading_offset_deg=setup.georef.heading_offset_deg, yaw_rad=yaw)
 
     def _objects_json(self, setup: CameraSetup, est, ids: list, classes: list, ts: float = 0.0,

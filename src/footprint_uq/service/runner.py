@@ -563,6 +563,11 @@ def serve(service: Service, *, input: str | None = "-", mqtt: str | None = None,
         rec = metrics.snapshot(queue.dropped, len(queue))
         if worker is not None:
             rec["worker"] = worker
+        motion, lines = service.motion_health() if service.tracks else (None, [])
+        if motion is not None:
+            rec["motion_consistency"] = motion  # (docs/motion-fit.md, "Consistency on line")
+        for line in lines:
+            _log(line)
         return rec
 
     with _steady_runtime():

@@ -201,11 +201,11 @@ def bank_frame(rows, start, cls, t, z, R, B_pred, B_frame, X, P, C, MU, t_last, 
 
     Object ``i`` of the frame is bank row ``rows[i]`` (-1: not tracked, skipped); ``start[i]``: its track starts
     here (every member initiated from ``z[i]``, ``R[i]``, ``B_frame[i]``, mode probabilities ``mu0[g]``); else
-    every member ``g`` (modes ``nm[g]`` of densities ``qs[g]``) steps from ``t_last`` to ``t`` with ``B_pred[i]``
-    (``B`` at the track's predicted position; ``(0, 2, 0)``: none) where finite, else ``B_frame[i]``, and adds
-    its innovation's log-density to ``LL[cls[i], g]`` and its NIS to ``NIS[cls[i], g]``; ``n_upd[cls[i]]``
-    counts the updates, ``n_bad[cls[i]]`` those where a member's innovation covariance was singular (the whole
-    update is then left out)."""
+    every member ``g`` (modes ``nm[g]`` of densities ``qs[g]``, leaving rates ``rates[g]`` in 1/s) steps from
+    ``t_last`` to ``t`` with ``B_pred[i]`` (``B`` at the track's predicted position; ``(0, 2, 0)``: none) where
+    finite, else ``B_frame[i]``, and adds its innovation's log-density to ``LL[cls[i], g]`` and its NIS to
+    ``NIS[cls[i], g]``; ``n_upd[cls[i]]`` counts the updates, ``n_bad[cls[i]]`` those where a member's innovation
+    covariance was singular (the whole update is then left out)."""
     G, r = qs.shape[0], C.shape[4]
     Pp, Cp, K, cross = np.empty((4, 4)), np.empty((4, r)), np.empty((4, 2)), np.empty((4, 2))
     xs, Ps, Cs = np.empty((2, 4)), np.empty((2, 4, 4)), np.empty((2, 4, r))
@@ -224,7 +224,7 @@ def bank_frame(rows, start, cls, t, z, R, B_pred, B_frame, X, P, C, MU, t_last, 
         B = _pick(B_pred, i, B_frame)
         ok = True
         for g in range(G):
-            ll_g[g], nis_g[g] = _member_step(X[s, g], P[s, g], C[s, g], MU[s, g], h, qs[g], nm[g], rates, z[i],
+            ll_g[g], nis_g[g] = _member_step(X[s, g], P[s, g], C[s, g], MU[s, g], h, qs[g], nm[g], rates[g], z[i],
                                              R[i], B, Pp, Cp, K, cross, xs, Ps, Cs, cbar, lik, ys)
             ok = ok and math.isfinite(ll_g[g])
         t_last[s] = t

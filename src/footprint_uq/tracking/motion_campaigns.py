@@ -102,7 +102,7 @@ def run_campaigns(q_true: float, *, n_campaigns: int = 200, n_objects: int = 20,
     at = SharedJacobianAt(camera, load_budget(budget))
     kw = dict(duration_s=duration_s, rate_hz=rate_hz, seed=seed, budget=budget, camera=camera)
     assoc = TrackTable(grid.prior, rank=at.rank, shared_at=at)
-    bank = MotionBank(grid, rank=at.rank, shared_at=at)
+    bank = MotionBank.from_grid(grid, rank=at.rank, shared_at=at)
     for t, ids, classes, xy, cov, B, _ in campaign_frames(q_true, n_campaigns, n_objects, **kw):
         bank.observe(t, assoc.step(t, ids, xy, cov, B), classes, xy, cov, B)
     sums = bank.sums()

@@ -29,8 +29,8 @@ from ..errors import InputError
 from .likelihood_kernels import bank_frame, bank_predicted
 from .table import TrackerConfig, TrackOutput
 
-__all__ = ["MotionGrid", "MotionBank", "ClassProfile", "fit_profile", "fit_classes", "CHI2_95_1DOF",
-           "MODE_MARGIN_NATS", "DEFAULT_Q_GRID_M2PS3"]
+__all__ = ["MotionGrid", "MotionBank", "ClassProfile", "members_of", "fit_profile", "fit_class", "fit_classes",
+           "CHI2_95_1DOF", "MODE_MARGIN_NATS", "DEFAULT_Q_GRID_M2PS3"]
 
 #: 95 % quantile of chi-square with 1 dof (the profile-likelihood interval)
 CHI2_95_1DOF = 3.841458820694124
@@ -66,7 +66,7 @@ class MotionGrid:
         return self.q_m2ps3.size
 
     def members(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """``qs (G, 2)``, modes ``nm (G,)``, start probabilities ``mu0 (G, 2)``, leaving rates ``(2,)`` 1/s."""
+        """``qs (G, 2)``, modes ``nm (G,)``, start probabilities ``mu0 (G, 2)``, leaving rates ``(G, 2)`` 1/s."""
         p = self.prior
         n1, n2 = self.q_m2ps3.size, self.imm_q_m2ps3.size
         qs = np.zeros((n1 + n2, 2))
@@ -78,7 +78,7 @@ class MotionGrid:
         mu0 = np.zeros((n1 + n2, 2))
         mu0[:n1, 0] = 1.0
         mu0[n1:] = (1.0 / rates) / (1.0 / rates).sum()  # the chain's stationary distribution, as the tracker
-        return qs, nm, mu0, rates
+        return qs, nm, mu0, np.tile(rates, (n1 + n2, 1))
 
     def reference_member(self) -> int:
         """The one-mode member nearest the prior's quiet density: its predictions place ``B`` for every member."""
@@ -86,24 +86,31 @@ class MotionGrid:
 
 
 class MotionBank:
-    """One camera's tracks through a bank of filters (:class:`MotionGrid`), fed frame by frame with the tracker's
-    association (:class:`~footprint_uq.tracking.table.TrackOutput`: ``track_id``, ``new_track``).
+    """One camera's tracks through a bank of filters, fed frame by frame with the tracker's association
+    (:class:`~footprint_uq.tracking.table.TrackOutput`: ``track_id``, ``new_track``).
 
     Parameters
     ----------
-    grid : MotionGrid
+    members : tuple ``(qs (G, 2), nm (G,), mu0 (G, 2), rates (G, 2))``
+        The models (:meth:`MotionGrid.members`; :func:`members_of` for tracker configurations).
     rank : int
         Columns r of the frames' ``shared_m``.
     shared_at : callable ``(n, 2) -> (n, 2, r)``, optional
         ``B`` at world points (:class:`~footprint_uq.tracking.table.SharedJacobianAt`), evaluated at the tracks'
-        positions predicted by the grid's reference member (as the tracker evaluates it at its predictions).
+        positions predicted by member ``g_ref`` (as the tracker evaluates it at its predictions).
+    sigma_v0_mps : float
+        Prior sigma of a new track's velocity (the tracker's ``sigma_v0_mps``).
+    timeout_s : float
+        The tracker's timeout: rows of tracks not seen for twice as long are freed.
     """
 
-    def __init__(self, grid: MotionGrid, *, rank: int, shared_at=None):
-        self.grid, self.rank, self.shared_at = grid, int(rank), shared_at
-        self._qs, self._nm, self._mu0, self._rates = grid.members()
-        self._g_ref = grid.reference_member()
-        self._var_v0 = grid.prior.sigma_v0_mps ** 2
+    def __init__(self, members, *, rank: int, shared_at=None, sigma_v0_mps: float = 50.0, timeout_s: float = 1.0,
+                 g_ref: int = 0):
+        self.rank, self.shared_at = int(rank), shared_at
+        self._qs, self._nm, self._mu0, self._rates = (np.ascontiguousarray(a) for a in members)
+        self._g_ref = int(g_ref)
+        self._var_v0 = float(sigma_v0_mps) ** 2
+        self.timeout_s = float(timeout_s)
         self.classes: dict = {}  # class name -> index
         G = self._qs.shape[0]
         self.LL, self.NIS = np.zeros((0, G)), np.zeros((0, G))
@@ -113,6 +120,13 @@ class MotionBank:
         self._cap = 0
         self._grow(64)
         self._swept_s = -math.inf
+
+    @classmethod
+    def from_grid(cls, grid: MotionGrid, *, rank: int, shared_at=None) -> MotionBank:
+        """The bank of a fit's grid (reference member: the one-mode density nearest the prior's quiet one)."""
+        p = grid.prior
+        return cls(grid.members(), rank=rank, shared_at=shared_at, sigma_v0_mps=p.sigma_v0_mps,
+                   timeout_s=p.timeout_s, g_ref=grid.reference_member())
 
     def _grow(self, cap: int) -> None:
         G, r, old = self._qs.shape[0], self.rank, self._cap
@@ -179,7 +193,7 @@ class MotionBank:
         """One frame of n objects: the tracker's output for them, their classes (n names or None), centres ``xy_m
         (n, 2)``, per-frame covariances ``cov_frame_m2 (n, 2, 2)`` and shared Jacobians ``shared_m (n, 2, r)``."""
         n = out.track_id.shape[0]
-        self._sweep(time_s, 2.0 * self.grid.prior.timeout_s)
+        self._sweep(time_s, 2.0 * self.timeout_s)
         cls = self._class_index(classes, n)
         rows, start = self._rows_of(out, cls)
         z = np.ascontiguousarray(xy_m, dtype=np.float64).reshape(n, 2)
@@ -202,6 +216,21 @@ class MotionBank:
 class ClassProfile(dict):
     """One profile-likelihood fit (a dict: ``q_hat``, ``ci95`` ``[lo, hi]`` (hi None: unbounded above),
     ``ll_max``, ``at_lower_edge``)."""
+
+
+def members_of(configs) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The bank members (:class:`MotionBank`) of tracker configurations (:class:`~footprint_uq.tracking.table.
+    TrackerConfig`), one each: its modes, densities, switching rates and start probabilities, as the tracker."""
+    G = len(configs)
+    qs, nm, mu0, rates = np.zeros((G, 2)), np.ones(G, np.int64), np.zeros((G, 2)), np.ones((G, 2))
+    for g, c in enumerate(configs):
+        qs[g] = c.accel_psd_m2ps3
+        mu0[g, 0] = 1.0
+        if c.manoeuvre_accel_psd_m2ps3 is not None:
+            qs[g, 1], nm[g] = c.manoeuvre_accel_psd_m2ps3, 2
+            rates[g] = 1.0 / c.quiet_sojourn_s, 1.0 / c.manoeuvre_sojourn_s
+            mu0[g] = (1.0 / rates[g]) / (1.0 / rates[g]).sum()
+    return qs, nm, mu0, rates
 
 
 def fit_profile(q_grid, ll) -> ClassProfile:
