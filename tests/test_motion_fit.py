@@ -289,3 +289,40 @@ def test_calibrate_motion_cli(tmp_path):
     # bad options: one line, exit 2
     r3 = CliRunner().invoke(main, [*args[:-4], "--q-min", "nan"])
     assert r3.exit_code == 2 and "q grid" in r3.output and "Traceback" not in r3.output
+
+
+# -- the on-line check (serve --tracks) ----------------------------------------------------------------------------
+@pytest.mark.slow
+def test_nis_monitor_flags_agitated_traffic_and_stays_quiet_otherwise():
+    """Seeded steady traffic tracked with its own density: no flag in unchanged runs; the density x4 halfway: flagged
+    within the window, with the ratio above 1 (more agitated than the model)."""
+    from footprint_uq.tracking.motion_campaigns import monitor_runs
+
+    calm = monitor_runs(2.5, 2.5, change_s=20.0, n_runs=4, n_objects=20, duration_s=40.0, window_s=20.0, seed=3)
+    assert np.isnan(calm.first_flag_s).all()
+    assert np.all(np.abs(calm.last_ratio - 1.0) < 0.05)
+    x4 = monitor_runs(2.5, 10.0, change_s=20.0, n_runs=4, n_objects=20, duration_s=40.0, window_s=20.0, seed=3)
+    assert np.all((x4.first_flag_s > 20.0) & (x4.first_flag_s <= 40.0)) and np.all(x4.flag_ratio > 1.0)
+
+
+def test_service_health_carries_the_motion_check():
+    """serve --tracks: the health entry per camera and class, and a log line once per new flag."""
+    from footprint_uq.service.core import Service
+
+    camera = default_camera()
+    svc = Service(camera, "basler1@deg", camera_id="cam1", tracks=True, messages=False)
+    assert svc.cameras["cam1"].nis is not None
+    for k in range(4):
+        svc.process_frame({"camera_id": "cam1", "frame": k, "timestamp_s": 0.1 * k, "detections": [
+            {"object_id": 1, "class": "car", "u_min_px": 900, "v_min_px": 700 - 20 * k, "u_max_px": 960,
+             "v_max_px": 760 - 20 * k}]})
+    sec, lines = svc.motion_health()
+    rec = sec["cameras"]["cam1"]["car"]
+    assert rec["n_updates"] == 3 and rec["consistent"] is None and sec["inconsistent"] == [] and lines == []
+    mon = svc.cameras["cam1"].nis
+    mon._sums["car"] = [2.0 * 1.5 * 1000, 1000]  # a window whose mean NIS is 1.5 x its expectation
+    sec, lines = svc.motion_health()
+    assert sec["inconsistent"] == ["cam1/car"] and "class car" in lines[0] and "more agitated" in lines[0]
+    assert svc.motion_health()[1] == []  # said once
+    off = Service(camera, "basler1@deg", camera_id="cam1", tracks=True, messages=False, consistency_window_s=0)
+    assert off.motion_health() == (None, [])
