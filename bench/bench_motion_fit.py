@@ -45,7 +45,8 @@ def write_recording(path: Path, n_objects: int, duration_s: float, seed: int = 0
     cols: dict = {k: [] for k in ("camera_id", "frame", "timestamp_s", "object_id", "class", "u_min_px", "v_min_px",
                                   "u_max_px", "v_max_px")}
     for k, (t, ids, _, xy, _, _, _) in enumerate(campaign_frames(2.5, 1, n_objects, duration_s=duration_s,
-                                                                 rate_hz=30.0, seed=seed, camera=cam)):
+                                                                 rate_hz=30.0, seed=seed, camera=cam,
+                                                                 detector_sigma_px=1e-3)):
         uv = general.project(cam.params, np.column_stack([xy, np.zeros(len(ids))]), domain=cam.lens_domain).uv_px
         ok = np.flatnonzero(np.isfinite(uv).all(1) & (uv[:, 1] < 1080) & (uv[:, 0] > 20) & (uv[:, 0] < 1900))
         cols["camera_id"] += ["c1"] * ok.size

@@ -21,6 +21,7 @@ import numpy as np
 
 from footprint_uq.tracking.motion_campaigns import run_campaigns
 from footprint_uq.tracking.motion_fit import MotionGrid
+from footprint_uq.uncertainty.budget import load_budget
 
 Q_TRUE = (0.0, 0.5, 2.5, 5.0)
 
@@ -32,16 +33,21 @@ def main(argv=None) -> None:
     ap.add_argument("--duration", type=float, default=4.0)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--modes", choices=["auto", "one"], default="auto")
+    ap.add_argument("--budget", default="basler1@deg", help="the cameras' budget (preset or file)")
+    ap.add_argument("--budget-scale", type=float, default=1.0,
+                    help="its sigmas times this (a small calibration error: the consider model's linear regime)")
     ap.add_argument("--json", default=None)
     ap.add_argument("--md", default=None)
     a = ap.parse_args(argv)
     grid = MotionGrid() if a.modes == "auto" else MotionGrid(imm_q_m2ps3=np.zeros(0))
+    budget = load_budget(a.budget) if a.budget_scale == 1.0 else load_budget(a.budget).scaled(a.budget_scale)
     rows = []
     for q in Q_TRUE:
         t0 = time.perf_counter()
         r = run_campaigns(q, n_campaigns=a.campaigns, n_objects=a.objects, duration_s=a.duration, seed=a.seed,
-                          grid=grid)
-        row = {"q_true_m2ps3": q, "campaigns": a.campaigns, "objects": a.objects, "duration_s": a.duration,
+                          grid=grid, budget=budget)
+        row = {"q_true_m2ps3": q, "budget": a.budget, "budget_scale": a.budget_scale, "campaigns": a.campaigns,
+               "objects": a.objects, "duration_s": a.duration,
                "identified": float(r.identified.mean()), "truth_in_interval": float(r.within.mean()),
                "q_hat_median": float(np.median(r.q_hat)), "q_hat_p05": float(np.percentile(r.q_hat, 5)),
                "q_hat_p95": float(np.percentile(r.q_hat, 95)),
@@ -64,8 +70,9 @@ def main(argv=None) -> None:
                          f"{100 * r['prior_coverage_velocity']:.1f} % | {100 * r['fitted_coverage_heading']:.1f} / "
                          f"{100 * r['prior_coverage_heading']:.1f} % |")
         with open(a.md, "w") as f:
-            f.write(f"{a.campaigns} campaigns x {a.objects} objects x {a.duration:g} s at 30 Hz per row, seed "
-                    f"{a.seed}, modes {a.modes} (bench/motion_fit_campaigns.py)\n\n" + "\n".join(lines) + "\n")
+            f.write(f"{a.campaigns} campaigns x {a.objects} objects x {a.duration:g} s at 30 Hz per row, budget "
+                    f"{a.budget} x {a.budget_scale:g}, seed {a.seed}, modes {a.modes} (bench/motion_fit_campaigns.py)"
+                    "\n\n" + "\n".join(lines) + "\n")
 
 
 if __name__ == "__main__":

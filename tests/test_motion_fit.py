@@ -249,7 +249,8 @@ def _write_recording(path, q_true, n_objects=12, duration_s=3.0, seed=2):
     """2D boxes (bottom centre at the true pixel) of one seeded campaign as a CSV recording, two classes."""
     cam = default_camera()
     rows = []
-    frames = campaign_frames(q_true, 1, n_objects, duration_s=duration_s, rate_hz=30.0, seed=seed, camera=cam)
+    frames = campaign_frames(q_true, 1, n_objects, duration_s=duration_s, rate_hz=30.0, seed=seed, camera=cam,
+                             detector_sigma_px=1e-3)  # (the pixel noise: the budget's, which `objects` knows)
     for k, (t, ids, _, xy, _, _, _) in enumerate(frames):
         uv = general.project(cam.params, np.column_stack([xy, np.zeros(len(ids))]), domain=cam.lens_domain).uv_px
         for i in ids:
