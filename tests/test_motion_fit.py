@@ -276,6 +276,7 @@ def test_calibrate_motion_cli(tmp_path):
     assert r.exit_code == 0, r.output
     summary = json.loads((tmp_path / "fit" / "motion_fit.json").read_text())
     assert summary["rows"]["rows_in"] == n and summary["rows"]["rows_error"] == 1
+    assert summary["bad_rows"][0][0] == n - 1 and "u_max_px" in summary["bad_rows"][0][2]
     b = load_budget(str(tmp_path / "fit" / "budget.yaml"))
     assert set(b.motion["classes"]) == {"car", "truck"} and b.motion["default"]["n_tracks"] == 12
     for e in b.motion["classes"].values():

@@ -31,6 +31,8 @@ __all__ = ["run_motion_fit", "MOTION_FIT_FILES"]
 
 #: the job's outputs in its folder
 MOTION_FIT_FILES = {"budget": "budget.yaml", "summary": "motion_fit.json"}
+#: bad rows listed by number in ``motion_fit.json`` (all of them are counted by reason)
+MAX_BAD_ROWS_LISTED = 1000
 
 
 class _Banks:
@@ -97,10 +99,12 @@ def run_motion_fit(camera, budget, detections, out_dir, *, chunk_rows: int = S.D
     reader.select(S.numeric_input_columns(bp.box_type, names))
     banks = _Banks(grid, SharedJacobianAt(camera, bud))
     bp.track_observer = banks
-    summ = Summary()
+    summ, bad = Summary(), []
     try:
         for chunk in reader:
-            summ.add_table(process_chunk(bp, chunk), chunk.table.num_rows + len(chunk.malformed))
+            table = process_chunk(bp, chunk)
+            summ.add_table(table, chunk.table.num_rows + len(chunk.malformed))
+            _bad_rows(table, bad)
     finally:
         bp.close()
     summ.lines_in = reader.lines
@@ -108,7 +112,8 @@ def run_motion_fit(camera, budget, detections, out_dir, *, chunk_rows: int = S.D
     section = _keep_priors(section, bud.motion, prior_classes)
     section["source"] = f"fitted to {Path(str(detections)).name} ({len(banks.banks)} camera(s), {banks.frames} frames)"
     fitted = ErrorBudget.from_dict({**bud.to_dict(), "motion": section})
-    summary = {"detections": str(detections), "rows": summ.to_dict(), "grid_m2ps3": grid.q_m2ps3.tolist(),
+    summary = {"detections": str(detections), "rows": summ.to_dict(), "bad_rows": bad[:MAX_BAD_ROWS_LISTED],
+               "grid_m2ps3": grid.q_m2ps3.tolist(),
                "imm_grid_m2ps3": grid.imm_q_m2ps3.tolist(), "motion": section,
                "log_likelihood": _profiles(banks), "elapsed_s": time.perf_counter() - t0, **(info or {})}
     out = Path(out_dir)
@@ -117,6 +122,18 @@ def run_motion_fit(camera, budget, detections, out_dir, *, chunk_rows: int = S.D
     atomic_write_text(files["summary"], json.dumps(summary, indent=1, allow_nan=False) + "\n", fsync=fsync)
     save_budget(fitted, files["budget"])
     return summary, files
+
+
+def _bad_rows(table, bad: list) -> None:
+    """Rows of an output table that give no tracked centre (status error / partial), as ``[row, status, reason]``
+    (their 0-based row numbers of the recording; they are counted by reason in the summary's ``rows``)."""
+    if len(bad) >= MAX_BAD_ROWS_LISTED:
+        return
+    status = table.column("status").to_pylist()
+    idx = [i for i, s in enumerate(status) if s != "ok"][:MAX_BAD_ROWS_LISTED - len(bad)]
+    if idx:
+        rows, reasons = table.column("row").to_pylist(), table.column("reason").to_pylist()
+        bad += [[rows[i], status[i], reasons[i]] for i in idx]
 
 
 def _keep_priors(section: dict, prior_motion: dict | None, prior_classes: dict) -> dict:

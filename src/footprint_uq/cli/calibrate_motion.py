@@ -61,6 +61,10 @@ def motion_cmd(camera_path, budget_spec, detections, out_dir, box_type, contact,
                                     info={"camera": str(camera_path), "budget": str(budget_spec)})
     rows = summary["rows"]
     click.echo(f"footprint-uq calibrate motion: {rows['rows_in']} rows, {summary['motion']['source']}")
+    if rows["rows_error"] or rows["rows_partial"]:
+        first = ", ".join(f"row {r} ({why})" for r, _, why in summary["bad_rows"][:3])
+        click.echo(f"  {rows['rows_error']} rows with errors, {rows['rows_partial']} partial, not tracked (listed in "
+                   f"{files['summary'].name}): {first}{', ...' if len(summary['bad_rows']) > 3 else ''}", err=True)
     entries = dict(summary["motion"]["classes"])
     if "default" in summary["motion"]:
         entries["(default: all classes)"] = summary["motion"]["default"]
