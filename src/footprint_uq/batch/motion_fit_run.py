@@ -62,7 +62,7 @@ def _grid(prior: TrackerConfig, q_min: float, q_max: float, per_decade: int, mod
 
 def run_motion_fit(camera, budget, detections, out_dir, *, chunk_rows: int = S.DEFAULT_CHUNK_ROWS,
                    format_in: str | None = None, box_type: str | None = None, contact: str = "bottom-centre",
-                   modes: str = "auto", q_min_m2ps3: float = 0.01, q_max_m2ps3: float = 100.0, per_decade: int = 8,
+                   modes: str = "auto", q_min_m2ps3: float = 1e-4, q_max_m2ps3: float = 100.0, per_decade: int = 6,
                    min_tracks: int = 10, min_updates: int = 300, fsync: bool = True,
                    info: dict | None = None) -> tuple[dict, dict]:
     """Fit the manoeuvre noise per class to a recording; write ``budget.yaml`` (the budget with its ``motion``

@@ -34,11 +34,11 @@ __all__ = ["motion_cmd"]
 @click.option("--modes", type=click.Choice(["auto", "one"]), default="auto", show_default=True,
               help="auto: also try the prior's two-mode (IMM) model, kept per class where the data favour it; "
                    "one: the one-mode model only (half the work).")
-@click.option("--q-min", "q_min", type=float, default=0.01, show_default=True, metavar="Q",
+@click.option("--q-min", "q_min", type=float, default=1e-4, show_default=True, metavar="Q",
               help="Lowest acceleration density of the grid, m^2/s^3.")
 @click.option("--q-max", "q_max", type=float, default=100.0, show_default=True, metavar="Q",
               help="Highest acceleration density of the grid, m^2/s^3.")
-@click.option("--per-decade", type=click.IntRange(min=2), default=8, show_default=True,
+@click.option("--per-decade", type=click.IntRange(min=2), default=6, show_default=True,
               help="Grid densities per decade.")
 @click.option("--min-tracks", type=click.IntRange(min=1), default=10, show_default=True,
               help="Tracks a class needs to be fitted (else the prior is kept).")

@@ -6,12 +6,16 @@ model of the tracks (the same filter, the same association: the tracker's own in
 ``y^T S^-1 y`` (2 dof; for two modes, of the predicted mode mixture's moments) is summed per class and frame.
 Over the last ``window_s`` seconds the class's sum of ``n`` NIS is, if the model is right, chi-square with ``2 n``
 degrees of freedom (the innovations of a consistent filter are white, so one track's successive NIS are
-independent); :meth:`NisMonitor.status` tests it two-sided at ``alpha`` and reports the ratio ``mean NIS / 2``
-(above 1: the traffic is more agitated than the model says, the velocity ellipses too small; below 1: calmer).
+independent); :meth:`NisMonitor.status` tests it two-sided at ``alpha`` against a tolerance band -- the sum is
+flagged only beyond ``(1 + tolerance)`` times the upper quantile or below the lower one divided by it -- and
+reports the ratio ``mean NIS / 2`` (above 1: the traffic is more agitated than the model says, the velocity
+ellipses too small; below 1: calmer).
 
 The window's effective count is the number of updates in it, capped at ``max_updates`` (a ring of per-frame sums:
-beyond the cap the oldest frames leave first) so that a model that is right to a few per cent is not flagged by
-the sheer size of the window.  docs/motion-fit.md, "Consistency on line".
+beyond the cap the oldest frames leave first).  The band is there because a real model is never exact: with the
+tracker's linearised measurement model a correct density gives mean NIS / 2 ~0.99 in the seeded traffic of
+``bench/motion_nis_monitor.py``, which a window of 20 000 updates would flag without it (1 run in 4); a density x4
+gives 1.2-1.4.  docs/motion-fit.md, "Consistency on line".
 """
 
 from __future__ import annotations
@@ -24,11 +28,13 @@ from scipy import stats
 from .._checks import as_float
 from .motion_fit import MotionBank, members_of
 
-__all__ = ["NisMonitor", "health_section", "DEFAULT_WINDOW_S", "DEFAULT_ALPHA"]
+__all__ = ["NisMonitor", "health_section", "DEFAULT_WINDOW_S", "DEFAULT_ALPHA", "DEFAULT_TOLERANCE"]
 
 #: the window, s, and the two-sided false-alarm probability of one test
 DEFAULT_WINDOW_S = 30.0
 DEFAULT_ALPHA = 1e-4
+#: relative tolerance of the NIS sum (a model right to this is consistent)
+DEFAULT_TOLERANCE = 0.05
 
 
 class NisMonitor:
@@ -46,13 +52,16 @@ class NisMonitor:
         Fewer updates in the window: no verdict (``consistent`` None).
     max_updates : int
         At most this many updates in the window (the oldest frames leave first).
+    tolerance : float
+        Relative tolerance band of the test (module doc).
     """
 
     def __init__(self, tracks, *, window_s: float = DEFAULT_WINDOW_S, alpha: float = DEFAULT_ALPHA,
-                 min_updates: int = 300, max_updates: int = 20_000):
+                 min_updates: int = 300, max_updates: int = 20_000, tolerance: float = DEFAULT_TOLERANCE):
         self.window_s = as_float("window_s", window_s, positive=True)
         self.alpha = as_float("alpha", alpha, positive=True, hi=0.5)
         self.min_updates, self.max_updates = int(min_updates), int(max_updates)
+        self.tolerance = as_float("tolerance", tolerance, nonnegative=True)
         self.tracks = tracks
         cfg0 = tracks.configs[0]
         self.bank = MotionBank(members_of(tracks.configs), rank=tracks.rank, shared_at=tracks.shared_at,
@@ -92,8 +101,9 @@ class NisMonitor:
 
     def status(self) -> dict:
         """class (``""``: no class) -> ``{"n_updates", "nis_ratio", "p_value", "consistent", "window_s"}``:
-        ``nis_ratio`` = mean NIS / 2, ``p_value`` two-sided of chi-square with ``2 n`` dof, ``consistent`` False
-        where ``p_value < alpha`` (None: fewer than ``min_updates`` updates)."""
+        ``nis_ratio`` = mean NIS / 2, ``p_value`` two-sided of chi-square with ``2 n`` dof for the sum brought to
+        the tolerance band's nearer edge (1 inside it), ``consistent`` False where ``p_value < alpha`` (None:
+        fewer than ``min_updates`` updates)."""
         out = {}
         for cls, (s, n) in self._sums.items():
             rec = {"n_updates": int(n), "window_s": self.window_s, "nis_ratio": None, "p_value": None,
@@ -101,8 +111,8 @@ class NisMonitor:
             if n > 0:
                 rec["nis_ratio"] = s / (2.0 * n)
             if n >= self.min_updates:
-                dof = 2.0 * n
-                p = 2.0 * min(stats.chi2.cdf(s, dof), stats.chi2.sf(s, dof))
+                dof, k = 2.0 * n, 1.0 + self.tolerance
+                p = 2.0 * min(stats.chi2.cdf(s * k, dof), stats.chi2.sf(s / k, dof))
                 rec["p_value"] = float(min(p, 1.0))
                 rec["consistent"] = bool(p >= self.alpha)
             out[cls] = rec

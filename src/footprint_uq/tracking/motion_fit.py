@@ -36,8 +36,9 @@ __all__ = ["MotionGrid", "MotionBank", "ClassProfile", "members_of", "fit_profil
 CHI2_95_1DOF = 3.841458820694124
 #: the IMM is kept only where its log-likelihood exceeds the one-mode model's by this (half chi2_1's 99 % quantile)
 MODE_MARGIN_NATS = 0.5 * 6.634896601021214
-#: the one-mode grid: 0.01 to 100 m^2/s^3, 8 points per decade
-DEFAULT_Q_GRID_M2PS3 = np.geomspace(0.01, 100.0, 33)
+#: the one-mode grid: 1e-4 to 100 m^2/s^3, 6 points per decade (down to 1e-4: a calm site's velocity sigmas
+#: are still ~5 x too large at q = 0.01 after a few seconds of track, docs/motion-fit.md)
+DEFAULT_Q_GRID_M2PS3 = np.geomspace(1e-4, 100.0, 37)
 
 
 @dataclass(frozen=True)
