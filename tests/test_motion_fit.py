@@ -232,12 +232,14 @@ def test_bank_follows_the_tracker_association():
 
 
 # -- seeded campaigns (the bench's bench/motion_fit_campaigns.py on a smaller scale) -------------------------------
-@pytest.mark.slow
 @pytest.mark.parametrize("q_true", [0.0, 0.5, 2.5, 5.0])
 def test_campaigns_interval_and_coverage_after_the_fit(q_true):
-    """Seeded traffic of known manoeuvre noise: the truth in the fitted 95 % interval of nearly every campaign,
-    and the fitted trackers' 95 % velocity / heading regions cover 95 +- 2.5 % (pooled over the campaigns)."""
-    r = run_campaigns(q_true, n_campaigns=12, n_objects=10, duration_s=4.0, seed=11, prior_coverage=False)
+    """Seeded traffic of known manoeuvre noise, cameras with a small calibration error (the consider model's linear
+    regime; docs/motion-fit.md for the full basler1@deg, where the fit absorbs the linearisation's misfit): the
+    truth in the fitted 95 % interval of nearly every campaign, and the fitted trackers' 95 % velocity / heading
+    regions cover 95 +- 2.5 % (pooled over the campaigns)."""
+    r = run_campaigns(q_true, n_campaigns=12, n_objects=10, duration_s=4.0, seed=11, prior_coverage=False,
+                      budget=load_budget("basler1@deg").scaled(0.25))
     assert r.identified.all()
     assert r.within.sum() >= 10
     assert 0.925 <= r.coverage_velocity <= 0.975 and 0.925 <= r.coverage_heading <= 0.975
