@@ -9,10 +9,12 @@ import sys
 
 import click
 
+from .._checks import as_float
 from ..errors import InputError
 from ..products.footprints import CONTACT_MODES, V2X_POLICIES
 from ..service.messages.asn1_cpm import CDD_RELEASES, DEFAULT_CDD
 from ..service.runner import MAX_FRAME_BYTES, QUEUE_DEPTH, run
+from ..tracking.consistency import DEFAULT_WINDOW_S
 from ..uncertainty.budget import load_budget
 from ..uncertainty.presets import PRESET_NAMES
 from .common import budget_notice, pose_options, warn
@@ -67,6 +69,9 @@ __all__ = ["serve_cmd"]
 @click.option("--tracks", is_flag=True,
               help="Track each camera's objects by object_id and add their velocity, speed, heading, yaw, their "
                    "sigmas and age (docs/service.md); frames of a camera must come in time order.")
+@click.option("--motion-window-s", "motion_window_s", type=float, default=DEFAULT_WINDOW_S, show_default=True,
+              metavar="S", help="With --tracks: window of the on-line check of the motion model per camera and class "
+                                "(NIS; health record motion_consistency, docs/motion-fit.md); 0: no check.")
 @click.option("--cpm-cdd", type=click.Choice(list(CDD_RELEASES)), default=DEFAULT_CDD, show_default=True,
               help="ETSI-ITS-CDD release of the CPM (2.2.1 also covers 2.4.1); receivers decode only the release "
                    "they compiled (docs/service.md).")
@@ -81,7 +86,7 @@ __all__ = ["serve_cmd"]
 def serve_cmd(camera_path, budget_spec, registry, camera_id, input_, mqtt, output, input_prefix, output_prefix,
               policy, health_interval_s, workers, client_id, heading_offset_deg, origin_lat, origin_lon, confidence,
               contact, allow_outside_image, station_id, uper_encoder, linearity, linear_threshold, cpm_cdd, v2x_policy,
-              queue_depth, max_frame_bytes, tracks, pose):
+              queue_depth, max_frame_bytes, tracks, motion_window_s, pose):
     """Edge service: detector frames in, positions with uncertainty and V2X messages (CPM, SDSM) out.
 
     One output record per frame (or an error record), a health record every second;
@@ -99,6 +104,7 @@ def serve_cmd(camera_path, budget_spec, registry, camera_id, input_, mqtt, outpu
                  station_id=station_id, uper_encoder=uper_encoder, linearity=linearity,
                  linear_threshold=linear_threshold, workers=workers, cpm_cdd=cpm_cdd, v2x_policy=v2x_policy,
                  queue_depth=queue_depth, max_frame_bytes=max_frame_bytes, tracks=tracks,
+                 consistency_window_s=as_float("--motion-window-s", motion_window_s, nonnegative=True),
                  input=input_ if input_ is not None else (None if mqtt else "-"), mqtt=mqtt, output=output,
                  input_prefix=input_prefix, output_prefix=output_prefix, policy=policy,
                  health_interval_s=health_interval_s, client_id=client_id))

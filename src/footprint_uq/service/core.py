@@ -38,6 +38,7 @@ import numpy as np
 import orjson
 from numba import njit
 
+from .._checks import as_float
 from ..batch import schema as S
 from ..batch.fleet import load_registry
 from ..batch.process import MAX_PIXEL_VAR_PX2
@@ -302,14 +303,15 @@ class Service:
         self.tracks = bool(tracks)
         if self.tracks:
             cfg = tracker or TrackerConfig()
+            window_s = as_float("consistency_window_s", consistency_window_s, nonnegative=True)
             for setup in self.cameras.values():
                 proc = setup.processor
                 proc.shared_jacobian = True
                 at = SharedJacobianAt(proc.camera, proc.budget)
                 configs = tracker_configs(getattr(proc.budget, "motion", None), cfg)  # (docs/motion-fit.md)
                 setup.tracks, setup.tracks_lock = ClassTracks(*configs, rank=at.rank, shared_at=at), threading.Lock()
-                if consistency_window_s:
-                    setup.nis = NisMonitor(setup.tracks, window_s=consistency_window_s)
+                if window_s:
+                    setup.nis = NisMonitor(setup.tracks, window_s=window_s)
                 if warm_up:
                     setup.tracks.warm_up()
 

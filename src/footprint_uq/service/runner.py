@@ -51,6 +51,7 @@ from ..batch.fleet import load_registry
 from ..errors import ConfigError, InputError
 from ..io import load_camera
 from ..products.warmup import compile_handler
+from ..tracking.consistency import DEFAULT_WINDOW_S
 from .core import RECORD_ERROR, RECORD_FOOTPRINTS, FrameOutput, Service, error_record
 from .messages.asn1_cpm import DEFAULT_CDD
 
@@ -784,7 +785,8 @@ def run(*, camera=None, budget=None, registry=None, camera_id: str | None = None
                           contact=contact, allow_outside_image=allow_outside_image, station_id=station_id,
                           uper_encoder=uper_encoder, linearity=linearity, linear_threshold=linear_threshold,
                           cpm_cdd=cpm_cdd, v2x_policy=v2x_policy,
-                          tracks=serve_options.pop("tracks", False))
+                          tracks=serve_options.pop("tracks", False),
+                          consistency_window_s=serve_options.pop("consistency_window_s", DEFAULT_WINDOW_S))
         return serve(service, stop=stop, **serve_options)
     finally:
         for sig, h in old.items():

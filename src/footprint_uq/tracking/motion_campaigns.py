@@ -33,8 +33,8 @@ __all__ = ["CampaignResult", "campaign_frames", "run_campaigns", "MonitorRuns", 
 
 class CampaignResult(NamedTuple):
     """Per campaign: the fitted density, its 95 % interval (``ci_hi`` inf: unbounded), whether the truth lies in
-    it, the entry's status; and the pooled 95 % coverage of velocity and heading after the fit (and before it,
-    with the prior tracker), with their counts."""
+    it, the entry's status; the pooled 95 % coverage of velocity and heading after the fit (and before it, with
+    the prior tracker), with their counts; and how many campaigns kept the two-mode model."""
 
     q_true: float
     q_hat: np.ndarray
@@ -48,18 +48,21 @@ class CampaignResult(NamedTuple):
     n_heading: int
     prior_coverage_velocity: float
     prior_coverage_heading: float
+    n_two_modes: int = 0
 
 
 def campaign_frames(q_true: float, n_campaigns: int, n_objects: int, *, duration_s: float, rate_hz: float, seed: int,
-                    budget="basler1@deg", detector_sigma_px: float = 1.5, camera=None):
+                    budget="basler1@deg", detector_sigma_px: float = 1.5, camera=None, scenario: str = "straight"):
     """Yield the seeded frames of the campaigns: ``(t_s, ids (R,), classes (R,), xy_m (R, 2), cov_frame_m2
     (R, 2, 2), shared_m (R, 2, r), v_true_mps (R, 2))`` with ``R = n_campaigns * n_objects`` (object ``i`` is in
-    campaign ``i // n_objects``, its class the campaign's number as text).  The same seed gives the same frames."""
+    campaign ``i // n_objects``, its class the campaign's number as text).  The same seed gives the same frames.
+    ``scenario``: the trajectories' (:data:`~footprint_uq.tracking.synthetic.SCENARIOS`; "turning": sustained
+    turns, a manoeuvre the one-mode model cannot explain)."""
     rng = np.random.default_rng(seed)
     camera = camera or default_camera()
     budget = load_budget(budget)
     R = n_campaigns * n_objects
-    tr = trajectories("straight", R, rate_hz, duration_s, rng, truth_accel_psd_m2ps3=q_true)
+    tr = trajectories(scenario, R, rate_hz, duration_s, rng, truth_accel_psd_m2ps3=q_true)
     proc = FrameProcessor(camera, budget, joint_cov=False, linearity=False, shared_jacobian=True, v2x_policy="linear")
     L = budget.param_factor().dense()
     p_cam = camera.params + rng.standard_normal((n_campaigns, L.shape[1])) @ L.T  # one calibration error per camera
@@ -95,13 +98,14 @@ def _coverage_pass(frames, tracks, hits: np.ndarray, counts: np.ndarray) -> None
 
 def run_campaigns(q_true: float, *, n_campaigns: int = 200, n_objects: int = 20, duration_s: float = 5.0,
                   rate_hz: float = 30.0, seed: int = 0, grid: MotionGrid | None = None, budget="basler1@deg",
-                  min_tracks: int = 10, min_updates: int = 300, prior_coverage: bool = True) -> CampaignResult:
+                  min_tracks: int = 10, min_updates: int = 300, prior_coverage: bool = True,
+                  scenario: str = "straight") -> CampaignResult:
     """Fit ``n_campaigns`` seeded campaigns of traffic with manoeuvre noise ``q_true`` (module doc) and check the
     fit: is the truth in each interval, and what do the fitted trackers' 95 % regions cover."""
     grid = grid or MotionGrid()
     camera = default_camera()
     at = SharedJacobianAt(camera, load_budget(budget))
-    kw = dict(duration_s=duration_s, rate_hz=rate_hz, seed=seed, budget=budget, camera=camera)
+    kw = dict(duration_s=duration_s, rate_hz=rate_hz, seed=seed, budget=budget, camera=camera, scenario=scenario)
     assoc = TrackTable(grid.prior, rank=at.rank, shared_at=at)
     bank = MotionBank.from_grid(grid, rank=at.rank, shared_at=at)
     for t, ids, classes, xy, cov, B, _ in campaign_frames(q_true, n_campaigns, n_objects, **kw):
@@ -109,6 +113,7 @@ def run_campaigns(q_true: float, *, n_campaigns: int = 200, n_objects: int = 20,
     sums = bank.sums()
     entries = [fit_class(grid, sums[str(c)], min_tracks=min_tracks, min_updates=min_updates)
                for c in range(n_campaigns)]
+    n_imm = sum(e.get("manoeuvre_accel_psd_m2ps3") is not None for e in entries)
     q_hat = np.array([e["accel_psd_m2ps3"] for e in entries])
     ci = np.array([e.get("accel_psd_ci95_m2ps3", [0.0, None]) for e in entries], dtype=object)
     lo = ci[:, 0].astype(float)
@@ -125,7 +130,7 @@ def run_campaigns(q_true: float, *, n_campaigns: int = 200, n_objects: int = 20,
     cov = hits / np.maximum(counts, 1)
     pcov = ph / np.maximum(pc, 1) if prior_coverage else np.full(2, np.nan)
     return CampaignResult(float(q_true), q_hat, lo, hi, ident, (lo <= q_true) & (q_true <= hi), float(cov[0]),
-                          float(cov[1]), int(counts[0]), int(counts[1]), float(pcov[0]), float(pcov[1]))
+                          float(cov[1]), int(counts[0]), int(counts[1]), float(pcov[0]), float(pcov[1]), n_imm)
 
 
 
