@@ -43,10 +43,9 @@ def write_recording(path: Path, n_objects: int, duration_s: float, seed: int = 0
 
     cam = default_camera()
     cols: dict = {k: [] for k in ("camera_id", "frame", "timestamp_s", "object_id", "class", "u_min_px", "v_min_px",
-                                  "u_max_px", "v_max_px")}
+                                  "u_max_px", "v_max_px", "cov_uu_px2", "cov_uv_px2", "cov_vv_px2")}
     for k, (t, ids, _, xy, _, _, _) in enumerate(campaign_frames(2.5, 1, n_objects, duration_s=duration_s,
-                                                                 rate_hz=30.0, seed=seed, camera=cam,
-                                                                 detector_sigma_px=1e-3)):
+                                                                 rate_hz=30.0, seed=seed, camera=cam)):
         uv = general.project(cam.params, np.column_stack([xy, np.zeros(len(ids))]), domain=cam.lens_domain).uv_px
         ok = np.flatnonzero(np.isfinite(uv).all(1) & (uv[:, 1] < 1080) & (uv[:, 0] > 20) & (uv[:, 0] < 1900))
         cols["camera_id"] += ["c1"] * ok.size
@@ -58,6 +57,9 @@ def write_recording(path: Path, n_objects: int, duration_s: float, seed: int = 0
         cols["v_min_px"] += (uv[ok, 1] - 40).tolist()
         cols["u_max_px"] += (uv[ok, 0] + 20).tolist()
         cols["v_max_px"] += uv[ok, 1].tolist()
+        cols["cov_uu_px2"] += [2.25] * ok.size  # the detector's 1.5 px (campaign_frames' default)
+        cols["cov_uv_px2"] += [0.0] * ok.size
+        cols["cov_vv_px2"] += [2.25] * ok.size
     pq.write_table(pa.table(cols), path)
     return len(cols["frame"])
 

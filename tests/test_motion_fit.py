@@ -248,11 +248,12 @@ def test_campaigns_interval_and_coverage_after_the_fit(q_true):
 
 # -- the command --------------------------------------------------------------------------------------------------
 def _write_recording(path, q_true, n_objects=12, duration_s=3.0, seed=2):
-    """2D boxes (bottom centre at the true pixel) of one seeded campaign as a CSV recording, two classes."""
+    """2D boxes of one seeded campaign as a CSV recording, two classes: the bottom centre at the measured pixel
+    (:func:`campaign_frames`' ground point, with its detector noise of 1.5 px, projected by the nominal camera) and
+    the detector's pixel covariance, so that `objects` sees what the campaign's tracker sees."""
     cam = default_camera()
     rows = []
-    frames = campaign_frames(q_true, 1, n_objects, duration_s=duration_s, rate_hz=30.0, seed=seed, camera=cam,
-                             detector_sigma_px=1e-3)  # (the pixel noise: the budget's, which `objects` knows)
+    frames = campaign_frames(q_true, 1, n_objects, duration_s=duration_s, rate_hz=30.0, seed=seed, camera=cam)
     for k, (t, ids, _, xy, _, _, _) in enumerate(frames):
         uv = general.project(cam.params, np.column_stack([xy, np.zeros(len(ids))]), domain=cam.lens_domain).uv_px
         for i in ids:
@@ -260,7 +261,8 @@ def _write_recording(path, q_true, n_objects=12, duration_s=3.0, seed=2):
                 continue
             rows.append({"camera_id": "c1", "frame": k, "timestamp_s": t, "object_id": f"o{i}",
                          "class": "car" if i % 2 else "truck", "u_min_px": uv[i, 0] - 20, "v_min_px": uv[i, 1] - 40,
-                         "u_max_px": uv[i, 0] + 20, "v_max_px": uv[i, 1]})
+                         "u_max_px": uv[i, 0] + 20, "v_max_px": uv[i, 1],  # the detector's 1.5 px noise:
+                         "cov_uu_px2": 2.25, "cov_uv_px2": 0.0, "cov_vv_px2": 2.25})
     rows.append({**rows[-1], "u_max_px": float("nan")})  # one bad row: reported, the rest goes on
     pcsv.write_csv(pa.table({k: [r[k] for r in rows] for k in rows[0]}), path)
     return len(rows)
@@ -283,6 +285,8 @@ def test_calibrate_motion_cli(tmp_path):
     assert set(b.motion["classes"]) == {"car", "truck"} and b.motion["default"]["n_tracks"] == 12
     for e in b.motion["classes"].values():
         assert e["n_tracks"] == 6 and e["status"] == "identified" and e["manoeuvre_accel_psd_m2ps3"] is None
+        lo, hi = e["accel_psd_ci95_m2ps3"]
+        assert lo < e["accel_psd_m2ps3"] < hi and 0.2 < e["accel_psd_m2ps3"] < 2.0  # (truth 0.5; ~+20 %, docs)
     assert "car" in r.output and "wrote" in r.output
     # the fitted budget drives `objects --tracks`: each class its own model
     out = tmp_path / "o.parquet"
