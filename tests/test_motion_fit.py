@@ -334,3 +334,19 @@ def test_service_health_carries_the_motion_check():
     assert svc.motion_health()[1] == []  # said once
     off = Service(camera, "basler1@deg", camera_id="cam1", tracks=True, messages=False, consistency_window_s=0)
     assert off.motion_health() == (None, [])
+
+
+def test_serve_motion_window_option(tmp_path):
+    """--motion-window-s: 0 turns the check off; NaN or a negative window is refused in one line (exit 2)."""
+    from footprint_uq.cli.main import main
+
+    save_camera(default_camera(), tmp_path / "cam.yaml")
+    base = ["serve", "--camera", str(tmp_path / "cam.yaml"), "--budget", "basler1@deg", "--tracks", "--input", "-",
+            "--health-interval-s", "0"]
+    for bad in ("nan", "-1"):
+        r = CliRunner().invoke(main, [*base, "--motion-window-s", bad], input="")
+        assert r.exit_code == 2 and "--motion-window-s" in r.output and "Traceback" not in r.output
+    frame = {"camera_id": "c", "frame": 0, "timestamp_s": 0.0, "detections": [
+        {"object_id": 1, "class": "car", "u_min_px": 900, "v_min_px": 700, "u_max_px": 960, "v_max_px": 760}]}
+    r = CliRunner().invoke(main, [*base, "--motion-window-s", "0"], input=json.dumps(frame) + "\n")
+    assert r.exit_code == 0, r.output
