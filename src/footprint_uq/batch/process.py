@@ -51,7 +51,8 @@ from ..io.atomic import atomic_write_text, same_file
 from ..products.detection_columns import MAX_PIXEL_VAR_PX2
 from ..products.footprints import CONTACT_MODES, DEGENERATE, V2X_FIELDS, FrameProcessor
 from ..products.geo import GeoReference
-from ..tracking import SharedJacobianAt, TrackerConfig, TrackOutput, TrackTable, object_motion
+from ..tracking import SharedJacobianAt, TrackerConfig, TrackOutput, object_motion
+from ..tracking.classes import ClassTracks, tracker_configs
 from ..uncertainty.budget import load_budget
 from ..uncertainty.ellipse import chi2_scale
 from . import schema as S
@@ -225,7 +226,12 @@ class BatchProcessor:
         self._layout = None  # (box_type, box columns, cov columns, id fields, K) fixed by the first table
         self.tracks = bool(tracks)
         self.tracker = tracker or TrackerConfig()
-        self._track_tables: dict = {}  # camera_id -> TrackTable
+        #: the motion model per class: the budget's motion section over ``tracker`` (docs/motion-fit.md)
+        self._track_configs = tracker_configs(getattr(self.budget, "motion", None), self.tracker)
+        self._track_tables: dict = {}  # camera_id -> ClassTracks
+        #: called after each frame's tracking step with ``(camera_id, time_s, classes, TrackOutput, xy_m (n, 2),
+        #: cov_frame_m2 (n, 2, 2), shared_m (n, 2, r))`` (``calibrate motion`` feeds its likelihood bank from it)
+        self.track_observer = None
         if self.tracks:
             self.proc.shared_jacobian = True
             self._shared_at = SharedJacobianAt(camera, self.budget)
@@ -529,11 +535,13 @@ class BatchProcessor:
 
     def _track(self, res: _Result, table: pa.Table, X: np.ndarray) -> dict:
         """The motion columns of a chunk: its frames (runs of rows with the same camera and time) in order,
-        each through its camera's :class:`~footprint_uq.tracking.table.TrackTable`."""
+        each through its camera's tracks (:class:`~footprint_uq.tracking.classes.ClassTracks`: a
+        :class:`~footprint_uq.tracking.table.TrackTable` per motion model of the budget's motion section)."""
         n = res.n
         t = _column_float(table, "timestamp_s")
         ids = table.column("object_id").to_pylist()
         cams = table.column("camera_id").to_pylist() if "camera_id" in table.column_names else [None] * n
+        classes = table.column("class").to_pylist() if "class" in table.column_names else [None] * n
         o = res.obj
         xy = np.ascontiguousarray(o[[_OBJ["x_m"], _OBJ["y_m"]]].T)
         cov = o[[_OBJ["cov_xx_m2"], _OBJ["cov_xy_m2"], _OBJ["cov_yx_m2"], _OBJ["cov_yy_m2"]]].T.reshape(n, 2, 2)
@@ -545,12 +553,14 @@ class BatchProcessor:
         for a, b in zip(np.r_[0, cut].tolist(), np.r_[cut, n].tolist(), strict=True):
             table_c = self._track_tables.get(cams[a])
             if table_c is None:
-                table_c = self._track_tables[cams[a]] = TrackTable(self.tracker, rank=self._shared_at.rank,
-                                                                   shared_at=self._shared_at)
+                table_c = self._track_tables[cams[a]] = ClassTracks(*self._track_configs, rank=self._shared_at.rank,
+                                                                    shared_at=self._shared_at)
             if not np.isfinite(t[a]):  # no time: not tracked
                 pieces.append(TrackOutput.untracked(b - a))
                 continue
-            pieces.append(table_c.step(t[a], ids[a:b], xy[a:b], cov_frame[a:b], B[a:b]))
+            pieces.append(table_c.step(t[a], ids[a:b], classes[a:b], xy[a:b], cov_frame[a:b], B[a:b]))
+            if self.track_observer is not None:
+                self.track_observer(cams[a], t[a], classes[a:b], pieces[-1], xy[a:b], cov_frame[a:b], B[a:b])
         tout = TrackOutput(*[np.concatenate(f) for f in zip(*pieces, strict=True)]) if pieces else None
         yaw = None
         if self.box_type == "3d" and n:

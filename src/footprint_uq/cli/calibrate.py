@@ -17,6 +17,7 @@ from .calibrate_budget import budget_cmd
 from .calibrate_extrinsics import extrinsics_cmd
 from .calibrate_gcp import gcp_cmd
 from .calibrate_intrinsics import intrinsics_cmd
+from .calibrate_motion import motion_cmd
 from .calibrate_synthetic import synthetic_cmd
 
 __all__ = ["calibrate"]
@@ -33,3 +34,4 @@ calibrate.add_command(synthetic_cmd)
 calibrate.add_command(extrinsics_cmd)
 calibrate.add_command(gcp_cmd)
 calibrate.add_command(budget_cmd)
+calibrate.add_command(motion_cmd)

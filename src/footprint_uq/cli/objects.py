@@ -105,8 +105,9 @@ __all__ = ["objects_cmd"]
                    "missing): for scratch outputs and tmpfs.")
 @click.option("--tracks", is_flag=True,
               help="Track objects across frames (needs timestamp_s and object_id; one camera's frames in time "
-                   "order) and add track_id, velocity, speed, heading, yaw, their sigmas and age (docs/batch.md). "
-                   "Not in fleet mode.")
+                   "order) and add track_id, velocity, speed, heading, yaw, their sigmas and age (docs/batch.md); "
+                   "a budget with a motion section (calibrate motion) sets the motion model per class "
+                   "(docs/motion-fit.md). Not in fleet mode.")
 @click.option("--quiet", "-q", is_flag=True, help="No progress bar.")
 @click.option("--registry", "registry", default=None, metavar="FILE_OR_DIR",
               help="Fleet mode: camera registry (camera_id -> camera file, budget); docs/batch.md.")

@@ -9,11 +9,13 @@ import sys
 
 import click
 
+from .._checks import as_float
 from ..errors import InputError
 from ..io.class_names import load_class_names
 from ..products.footprints import CONTACT_MODES, V2X_POLICIES
 from ..service.messages.asn1_cpm import CDD_RELEASES, DEFAULT_CDD
 from ..service.runner import MAX_FRAME_BYTES, QUEUE_DEPTH, run
+from ..tracking.consistency import DEFAULT_WINDOW_S
 from ..uncertainty.budget import load_budget
 from ..uncertainty.presets import PRESET_NAMES
 from .common import budget_notice, pose_options, warn
@@ -69,7 +71,11 @@ __all__ = ["serve_cmd"]
               help="linear_ok is nonlinearity <= E (default 0.05).")
 @click.option("--tracks", is_flag=True,
               help="Track each camera's objects by object_id and add their velocity, speed, heading, yaw, their "
-                   "sigmas and age (docs/service.md); frames of a camera must come in time order.")
+                   "sigmas and age (docs/service.md); frames of a camera must come in time order. A budget with a "
+                   "motion section (calibrate motion) sets the motion model per class (docs/motion-fit.md).")
+@click.option("--motion-window-s", "motion_window_s", type=float, default=DEFAULT_WINDOW_S, show_default=True,
+              metavar="S", help="With --tracks: window of the on-line check of the motion model per camera and class "
+                                "(NIS; health record motion_consistency, docs/motion-fit.md); 0: no check.")
 @click.option("--cpm-cdd", type=click.Choice(list(CDD_RELEASES)), default=DEFAULT_CDD, show_default=True,
               help="ETSI-ITS-CDD release of the CPM (2.2.1 also covers 2.4.1); receivers decode only the release "
                    "they compiled (docs/service.md).")
@@ -92,7 +98,7 @@ __all__ = ["serve_cmd"]
 def serve_cmd(camera_path, budget_spec, registry, camera_id, input_, mqtt, output, input_prefix, output_prefix,
               policy, health_interval_s, workers, client_id, heading_offset_deg, origin_lat, origin_lon, confidence,
               contact, allow_outside_image, station_id, uper_encoder, linearity, linear_threshold, cpm_cdd, v2x_policy,
-              queue_depth, max_frame_bytes, tracks, class_names, record, pose):
+              queue_depth, max_frame_bytes, tracks, class_names, record, motion_window_s, pose):
     """Edge service: detector frames in, positions with uncertainty and V2X messages (CPM, SDSM) out.
 
     One output record per frame (or an error record), a health record every second;
@@ -112,7 +118,7 @@ def serve_cmd(camera_path, budget_spec, registry, camera_id, input_, mqtt, outpu
                  station_id=station_id, uper_encoder=uper_encoder, linearity=linearity,
                  linear_threshold=linear_threshold, workers=workers, cpm_cdd=cpm_cdd, v2x_policy=v2x_policy,
                  queue_depth=queue_depth, max_frame_bytes=max_frame_bytes, tracks=tracks, class_names=class_names,
-                 record=record,
+                 record=record, consistency_window_s=as_float("--motion-window-s", motion_window_s, nonnegative=True),
                  input=input_ if input_ is not None else (None if mqtt else "-"), mqtt=mqtt, output=output,
                  input_prefix=input_prefix, output_prefix=output_prefix, policy=policy,
                  health_interval_s=health_interval_s, client_id=client_id))

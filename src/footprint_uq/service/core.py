@@ -33,6 +33,7 @@ from typing import NamedTuple
 import numpy as np
 import orjson
 
+from .._checks import as_float
 from ..errors import FootprintUQError, InputError
 from ..fast.footprint_kernels import OBJ_ROW
 from ..io.class_names import ClassNames, load_class_names
@@ -41,7 +42,9 @@ from ..products import detection_columns as S
 from ..products.footprints import CONTACT_MODES, V2X_FIELDS, V2X_POLICIES, FrameProcessor
 from ..products.geo import GeoReference
 from ..products.v2x import J2735_POSITION_CONFIDENCE_NAMES
-from ..tracking import SharedJacobianAt, TrackerConfig, TrackTable, object_motion
+from ..tracking import SharedJacobianAt, TrackerConfig, object_motion
+from ..tracking.classes import ClassTracks, tracker_configs
+from ..tracking.consistency import DEFAULT_WINDOW_S, NisMonitor, health_section
 from ..uncertainty.ellipse import chi2_scale
 from ..uncertainty.propagation import DEFAULT_LINEAR_THRESHOLD
 from .detections import DetectionError, FieldError, check_values, finite_number, parse_detections
@@ -172,9 +175,11 @@ class CameraSetup:
     lon_1e7deg: int | None = None
     #: the fixed part of its CPMs' UPER encoding
     uper: CpmUperWriter | None = None
-    #: its tracks by object_id (``tracks=True``; one frame at a time: ``tracks_lock``)
-    tracks: TrackTable | None = None
+    #: its tracks by object_id, a motion model per class (``tracks=True``; one frame at a time: ``tracks_lock``)
+    tracks: ClassTracks | None = None
     tracks_lock: threading.Lock | None = None
+    #: the NIS of its tracks per class over a window (``tracks=True``; under ``tracks_lock``): docs/motion-fit.md
+    nis: NisMonitor | None = None
     #: object_id -> the messages' object id (unique per message, stable across frames; messages/ids.py)
     ids: MessageIdMap = field(default_factory=MessageIdMap)
 
@@ -271,7 +276,8 @@ class Service:
         ``sigma_speed_mps``, ``heading_deg``, ``sigma_heading_deg``, ``yaw_deg``, ``sigma_yaw_deg``, ``age_s``
         (null where unknown; docs/service.md).  Frames of a camera must then come in time order.
     tracker : TrackerConfig, optional
-        The tracker's options (timeout, gate, acceleration noise).
+        The tracker's options (timeout, gate, acceleration noise); a camera budget's ``motion`` section sets the
+        motion model per class over it (docs/motion-fit.md).
     class_names : "coco", path or ClassNames, optional
         Names of integer class ids (``"class": 2``): the COCO 80 names built in or a names file
         (:func:`footprint_uq.io.class_names.load_class_names`).  Without it an integer class, and with it an id the
@@ -281,6 +287,9 @@ class Service:
         the fields of :data:`COMPACT_OBJECT_FIELDS` per object and, without the CPM JSON and the SDSM, the CPM's
         UPER bytes beside the record (:attr:`FrameOutput.cpm_uper`; ``serve --output mqtt`` publishes them on
         ``<prefix>/<camera_id>/cpm``).  docs/service.md, "Lean records on the wire".
+    consistency_window_s : float
+        With tracks: the window of the on-line NIS check of the motion model per camera and class
+        (:class:`~footprint_uq.tracking.consistency.NisMonitor`, :meth:`motion_health`); 0: no check.
     """
 
     def __init__(self, camera=None, budget=None, *, registry=None, camera_id: str | None = None,
@@ -290,7 +299,8 @@ class Service:
                  uper_encoder: str = "fast", linearity: bool = False, linear_threshold: float | None = None,
                  warm_up: bool = True, cpm_cdd: str = DEFAULT_CDD, v2x_policy: str = "sampled",
                  tracks: bool = False, tracker: TrackerConfig | None = None,
-                 class_names: str | ClassNames | None = None, record: str = "full"):
+                 class_names: str | ClassNames | None = None, record: str = "full",
+                 consistency_window_s: float = DEFAULT_WINDOW_S):
         if (camera is None) == (registry is None):
             raise InputError("camera/registry", "both" if camera is not None else "neither",
                              "exactly one of a camera (with a budget) or a registry")
@@ -340,11 +350,15 @@ class Service:
         self.tracks = bool(tracks)
         if self.tracks:
             cfg = tracker or TrackerConfig()
+            window_s = as_float("consistency_window_s", consistency_window_s, nonnegative=True)
             for setup in self.cameras.values():
                 proc = setup.processor
                 proc.shared_jacobian = True
                 at = SharedJacobianAt(proc.camera, proc.budget)
-                setup.tracks, setup.tracks_lock = TrackTable(cfg, rank=at.rank, shared_at=at), threading.Lock()
+                configs = tracker_configs(getattr(proc.budget, "motion", None), cfg)  # (docs/motion-fit.md)
+                setup.tracks, setup.tracks_lock = ClassTracks(*configs, rank=at.rank, shared_at=at), threading.Lock()
+                if window_s:
+                    setup.nis = NisMonitor(setup.tracks, window_s=window_s)
                 if warm_up:
                     setup.tracks.warm_up()
 
@@ -358,6 +372,24 @@ class Service:
     def _processor(self, camera, budget, geo: GeoReference, allow_outside_image: bool) -> FrameProcessor:
         return FrameProcessor(camera, budget, heading_offset_deg=geo.heading_offset_deg,
                               allow_outside_image=allow_outside_image, joint_cov=False, v2x_policy=self.v2x_policy)
+
+    def motion_health(self) -> tuple[dict | None, list[str]]:
+        """The health record's ``motion_consistency`` entry (:func:`~footprint_uq.tracking.consistency.
+        health_section`; None without tracks or check) and one log line per camera and class newly found
+        inconsistent (docs/motion-fit.md)."""
+        cams, bad, lines = {}, [], []
+        for cid, setup in self.cameras.items():
+            if setup.nis is None:
+                continue
+            with setup.tracks_lock:
+                sec = health_section({cid: setup.nis})
+                news = setup.nis.new_flags()
+            cams.update(sec["cameras"])
+            bad += sec["inconsistent"]
+            lines += [f"motion model inconsistent: camera {cid}, class {c or '(no class)'}: mean NIS / 2 = "
+                      f"{r['nis_ratio']:.3f} over {r['n_updates']} updates (p = {r['p_value']:.2g}): the traffic is "
+                      f"{'more agitated' if r['nis_ratio'] > 1 else 'calmer'} than the motion model" for c, r in news]
+        return ({"cameras": cams, "inconsistent": bad} if cams else None), lines
 
     @property
     def camera_ids(self) -> list:
@@ -389,12 +421,13 @@ class Service:
             xy = setup.processor.corners(np.array([[[0.5 * w, 0.85 * h]]])).centre_xy_world_m[0]
             x, y = (float(v) for v in (xy if np.isfinite(xy).all() else (0.0, 0.0)))
             box3d = {"x_m": x, "y_m": y, "z_m": 0.0, "length_m": 4.0, "width_m": 2.0, "height_m": 1.5, "yaw_rad": 0.0}
-            saved = setup.tracks, setup.ids
+            saved = setup.tracks, setup.ids, setup.nis
             try:
                 for box in (box2d, box3d):
                     setup.ids = MessageIdMap()
                     if saved[0] is not None:
-                        setup.tracks = TrackTable(saved[0].config, rank=saved[0].rank, shared_at=saved[0].shared_at)
+                        setup.tracks = saved[0].fresh()
+                        setup.nis = None if saved[2] is None else NisMonitor(setup.tracks, window_s=saved[2].window_s)
                     for k in range(2):
                         dets = [{"object_id": j, "class": "car", **box} for j in range(2)]
                         try:
@@ -403,7 +436,7 @@ class Service:
                         except (_FrameError, FootprintUQError):  # (a camera that cannot see the dummy box: the
                             pass  # kernels ran all the same; real frames report their own errors)
             finally:
-                setup.tracks, setup.ids = saved
+                setup.tracks, setup.ids, setup.nis = saved
 
     # -- one frame ------------------------------------------------------------------------------------
     def process_frame(self, frame, *, source: str | None = None) -> dict:
@@ -472,7 +505,7 @@ class Service:
         ref_ms = timestamp_its_ms(ts) if self.messages else None
         est, found = self._footprints(setup, dets)
         ids, classes, class_p = found.object_ids, found.classes, found.class_confidence
-        motion = self._motion(setup, est, ids, ts, found.yaw_rad) if self.tracks else None
+        motion = self._motion(setup, est, ids, classes, ts, found.yaw_rad) if self.tracks else None
         t1 = time.perf_counter()
         objects, ok_idx, msg_ids = self._objects_json(setup, est, ids, classes, ts, motion)
         t2 = time.perf_counter()
@@ -558,14 +591,17 @@ class Service:
         return worst, ok
 
     @staticmethod
-    def _motion(setup: CameraSetup, est, ids: list, ts: float, yaw_rad: np.ndarray | None):
+    def _motion(setup: CameraSetup, est, ids: list, classes: list, ts: float, yaw_rad: np.ndarray | None):
         """The frame's objects through the camera's tracks: ``(track_id (N,), ObjectMotion)``; ``yaw_rad``: the
         3-D boxes' yaw (None for other boxes)."""
         yaw = yaw_rad
         N = len(ids)
         B = est.centre_shared_m if est.centre_shared_m is not None else np.full((N, 2, setup.tracks.rank), np.nan)
         with setup.tracks_lock:
-            out = setup.tracks.step(ts, ids, est.centre_xy_world_m, shared_m=B, cov_m2=est.centre_cov_m2)
+            out = setup.tracks.step(ts, ids, classes, est.centre_xy_world_m, shared_m=B, cov_m2=est.centre_cov_m2)
+            if setup.nis is not None:
+                setup.nis.observe(ts, out, classes, est.centre_xy_world_m,
+                                  est.centre_cov_m2 - B @ np.swapaxes(B, -1, -2), B)
         return out.track_id, object_motion(out, heading_offset_deg=setup.georef.heading_offset_deg, yaw_rad=yaw)
 
     def _objects_json(self, setup: CameraSetup, est, ids: list, classes: list, ts: float = 0.0,

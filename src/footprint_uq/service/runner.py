@@ -52,6 +52,7 @@ from ..integrations.ros2.live import ROSBAG_PREFIX, LiveBag
 from ..io import load_camera
 from ..io.registry import load_registry
 from ..products.warmup import compile_handler
+from ..tracking.consistency import DEFAULT_WINDOW_S
 from .core import RECORD_ERROR, RECORD_FOOTPRINTS, RECORD_LAYOUTS, FrameOutput, Service, error_record
 from .messages.asn1_cpm import DEFAULT_CDD
 
@@ -609,6 +610,11 @@ def serve(service: Service, *, input: str | None = "-", mqtt: str | None = None,
         rec = metrics.snapshot(queue.dropped, len(queue))
         if worker is not None:
             rec["worker"] = worker
+        motion, lines = service.motion_health() if service.tracks else (None, [])
+        if motion is not None:
+            rec["motion_consistency"] = motion  # (docs/motion-fit.md, "Consistency on line")
+        for line in lines:
+            _log(line)
         return rec
 
     with _steady_runtime():
@@ -857,7 +863,8 @@ def run(*, camera=None, budget=None, registry=None, camera_id: str | None = None
                           uper_encoder=uper_encoder, linearity=linearity, linear_threshold=linear_threshold,
                           cpm_cdd=cpm_cdd, v2x_policy=v2x_policy,
                           tracks=serve_options.pop("tracks", False),
-                          class_names=serve_options.pop("class_names", None), record=serve_options.pop("record"))
+                          class_names=serve_options.pop("class_names", None), record=serve_options.pop("record"),
+                          consistency_window_s=serve_options.pop("consistency_window_s", DEFAULT_WINDOW_S))
         return serve(service, stop=stop, **serve_options)
     finally:
         for sig, h in old.items():

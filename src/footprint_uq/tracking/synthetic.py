@@ -32,7 +32,7 @@ from .models import ConstantVelocity
 from .motion import object_motion
 from .table import SharedJacobianAt, TrackerConfig, TrackTable
 
-__all__ = ["SCENARIOS", "Trajectories", "trajectories", "CoverageResult", "coverage", "default_camera"]
+__all__ = ["SCENARIOS", "Trajectories", "trajectories", "CoverageResult", "coverage", "default_camera", "true_pixels"]
 
 _XM, _YM, _GDZ, _GSX, _GSY = (P.PARAM_NAMES.index(k) for k in ("x_m", "y_m", "ground_dz_m", "ground_slope_x",
                                                                  "ground_slope_y"))
@@ -82,8 +82,9 @@ def trajectories(scenario: str, n_runs: int, rate_hz: float, duration_s: float, 
     # deterministic part by fine Euler steps (10 per frame) -> velocity and position at frame times
     xy = np.empty((n_f, R, 2))
     v = np.empty((n_f, R, 2))
-    F, Q = ConstantVelocity(truth_accel_psd_m2ps3).matrices(np.full(1, dt))
-    Lq = np.linalg.cholesky(Q[0][np.ix_([0, 2], [0, 2])])  # one axis: (position, velocity)
+    F, Q = ConstantVelocity(max(truth_accel_psd_m2ps3, 1e-300)).matrices(np.full(1, dt))
+    # one axis: (position, velocity); a calm truth (density 0) moves at constant velocity
+    Lq = np.linalg.cholesky(Q[0][np.ix_([0, 2], [0, 2])]) if truth_accel_psd_m2ps3 > 0 else np.zeros((2, 2))
     pos, spd, ang = start.copy(), speed.copy(), course.copy()
     noise_p, noise_v = np.zeros((R, 2)), np.zeros((R, 2))
     sub = 10
@@ -146,7 +147,7 @@ def coverage(scenario: str, rate_hz: float, *, n_runs: int = 500, duration_s: fl
     counts = np.zeros(3)
     sig_sum = err_sum = 0.0
     for k, t in enumerate(tr.t_s):
-        uv = _true_pixels(camera, p_true, tr.xy_m[k]) + rng.standard_normal((n_runs, 2)) @ A_px.T
+        uv = true_pixels(camera, p_true, tr.xy_m[k]) + rng.standard_normal((n_runs, 2)) @ A_px.T
         est = proc.corners(uv[:, None, :], pixel_cov_px2=det)
         out = table.step(t, ids, est.centre_xy_world_m, est.centre_cov_frame_m2, est.centre_shared_m)
         mo = object_motion(out)
@@ -171,7 +172,7 @@ def coverage(scenario: str, rate_hz: float, *, n_runs: int = 500, duration_s: fl
     return CoverageResult(cv, ch, cp, int(counts[0]), int(counts[1]), n_runs, sig_sum / nv, math.sqrt(err_sum / nv))
 
 
-def _true_pixels(camera, p_true: np.ndarray, xy_m: np.ndarray) -> np.ndarray:
+def true_pixels(camera, p_true: np.ndarray, xy_m: np.ndarray) -> np.ndarray:
     """Pixels of ground points ``xy_m (R, 2)`` in the true cameras ``p_true (R, 22)`` (each on its own ground)."""
     p = p_true
     z = p[:, _GDZ] + p[:, _GSX] * (xy_m[:, 0] - p[:, _XM]) + p[:, _GSY] * (xy_m[:, 1] - p[:, _YM])

@@ -28,7 +28,8 @@ covariance          mapping      optional full covariance: ``names`` (from
                                  ``matrix``; replaces the sigmas of those names
 ==================  ===========  =============================================
 
-plus optional ``name`` and ``description``.
+plus optional ``name``, ``description`` and ``motion`` (the tracker's manoeuvre noise per object class, written by
+``calibrate motion``: :mod:`footprint_uq.uncertainty.motion_section`, docs/motion-fit.md).
 """
 
 from __future__ import annotations
@@ -45,6 +46,7 @@ from .._checks import check_cov
 from .._parse import load_yaml_or_json
 from ..errors import ConfigError, InputError
 from . import presets
+from .motion_section import parse_motion_section
 
 __all__ = ["ErrorBudget", "SHARED_SOURCES", "POINT_SOURCES", "TERM_GROUPS", "SparseFactor", "load_budget",
            "psd_factor"]
@@ -76,7 +78,7 @@ POINT_SOURCES = ("imaging", "resolution", "detector")
 _PAIR_KEYS = ("principal_point_px", "position_m", "imaging_px", "resolution_px")
 _SCALAR_KEYS = ("focal_px", "height_m", "pan_deg", "tilt_deg", "roll_deg", "ground_height_m",
                 "ground_slope_deg")
-_ALLOWED = set(_PAIR_KEYS) | set(_SCALAR_KEYS) | {"distortion", "covariance", "name", "description"}
+_ALLOWED = set(_PAIR_KEYS) | set(_SCALAR_KEYS) | {"distortion", "covariance", "name", "description", "motion"}
 _DEG_ALIASES = {"pan_deg": "pan_rad", "tilt_deg": "tilt_rad", "roll_deg": "roll_rad"}
 #: largest standard deviation accepted, in the key's unit (beyond it products overflow; issue 11)
 MAX_SIGMA = 1e6
@@ -131,6 +133,8 @@ class ErrorBudget:
     covariance_matrix: np.ndarray | None = field(default=None, compare=False, repr=False)
     name: str = "custom"
     description: str = ""
+    #: the ``motion`` section (:func:`~footprint_uq.uncertainty.motion_section.parse_motion_section`), or None
+    motion: dict | None = field(default=None, compare=False, repr=False)
 
     def __post_init__(self):
         # direct construction is validated like a budget file (from_dict gives checked values)
@@ -195,6 +199,8 @@ class ErrorBudget:
             kw["covariance_names"], kw["covariance_matrix"] = names, mat
         kw["name"] = str(d.get("name", "custom"))
         kw["description"] = str(d.get("description", ""))
+        if d.get("motion") is not None:
+            kw["motion"] = parse_motion_section(d["motion"], f"{where}: motion" if where else "motion")
         return cls(**kw)
 
     def to_dict(self) -> dict:
@@ -212,6 +218,8 @@ class ErrorBudget:
         if self.covariance_matrix is not None:
             out["covariance"] = {"names": list(self.covariance_names),
                                  "matrix": np.asarray(self.covariance_matrix).tolist()}
+        if self.motion is not None:
+            out["motion"] = self.motion
         return out
 
     def replace(self, **changes) -> ErrorBudget:
