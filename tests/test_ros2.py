@@ -2,7 +2,8 @@
 
 Every bag written is read back with rosbags (every message deserialised); the single MCAP file also with the
 ``mcap`` reader (every channel's schema and every message decoded: CDR through the schema's own ros2msg text,
-the Foxglove SceneUpdate through its protobuf FileDescriptorSet, tests/protobuf_wire.py)."""
+the Foxglove SceneUpdate through its protobuf FileDescriptorSet with the official protobuf library via
+mcap-protobuf-support)."""
 
 from __future__ import annotations
 
@@ -21,7 +22,11 @@ pytest.importorskip("rosbags")
 pytest.importorskip("mcap")
 pytest.importorskip("foxglove")
 
+from google.protobuf import json_format  # noqa: E402
+from google.protobuf.message import DecodeError  # noqa: E402
+from google.protobuf.unknown_fields import UnknownFieldSet  # noqa: E402
 from mcap.reader import make_reader  # noqa: E402
+from mcap_protobuf.decoder import DecoderFactory  # noqa: E402
 from rosbags.highlevel import AnyReader  # noqa: E402
 from rosbags.rosbag2 import StoragePlugin, Writer  # noqa: E402
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore  # noqa: E402
@@ -37,7 +42,23 @@ from footprint_uq.integrations.ros2.foxglove_scene import quaternion_x_to  # noq
 from footprint_uq.integrations.ros2.types import default_message, typestore  # noqa: E402
 from footprint_uq.io import save_camera  # noqa: E402
 from footprint_uq.uncertainty.ellipse import ellipse_axes  # noqa: E402
-from protobuf_wire import decode, message_types  # noqa: E402
+
+
+def _protobuf_dict(decoder, data: bytes) -> dict:
+    """A protobuf message decoded with the official library from its channel's schema (mcap-protobuf-support), as
+    a dict (snake_case names, enums as numbers); refused where a field of it, or of any message inside it, is
+    not in the schema (the library keeps such fields as unknown instead of failing)."""
+    msg = decoder(data)
+
+    def known_only(m):
+        assert len(UnknownFieldSet(m)) == 0, f"{m.DESCRIPTOR.full_name}: a field outside the schema"
+        for fd, v in m.ListFields():
+            if fd.message_type is not None:
+                for sub in (v if fd.is_repeated else [v]):
+                    known_only(sub)
+
+    known_only(msg)
+    return json_format.MessageToDict(msg, preserving_proto_field_name=True, use_integers_for_enums=True)
 
 BUDGET = "basler1"
 POSE = dict(height_m=8.0, pan_deg=30.0, tilt_deg=20.0)
@@ -160,14 +181,14 @@ def test_mcap_with_foxglove_every_channel_and_message_decodes(cam, tmp_path):
                 stores[sid] = ts
             else:
                 assert (sc.name, sc.encoding) == ("foxglove.SceneUpdate", "protobuf")
-                stores[sid] = message_types(sc.data)
+                stores[sid] = DecoderFactory().decoder_for("protobuf", sc)
         for schema, channel, message in reader.iter_messages():
             if schema.encoding == "ros2msg":
                 assert channel.message_encoding == "cdr"
                 msg = stores[schema.id].deserialize_cdr(message.data, schema.name)
             else:
                 assert channel.message_encoding == "protobuf"
-                msg = decode(stores[schema.id], ".foxglove.SceneUpdate", message.data)
+                msg = _protobuf_dict(stores[schema.id], message.data)
             decoded.setdefault(channel.topic, []).append(msg)
     assert sorted(decoded) == ["/footprints/detections", "/footprints/ellipses", "/footprints/scene"]
     assert all(len(v) == 6 for v in decoded.values())
@@ -190,15 +211,27 @@ def test_mcap_with_foxglove_every_channel_and_message_decodes(cam, tmp_path):
     assert all(u["deletions"][0]["type"] == 1 for u in decoded["/footprints/scene"])  # ALL (MATCHING_ID is 0)
 
 
-def test_protobuf_decoder_refuses_a_field_outside_the_schema(tmp_path):
-    """The decoder behind the check above can fail: field 9 is not in SceneUpdate."""
+def _scene_decoder():
+    """The protobuf decoder of foxglove-sdk's SceneUpdate schema, as mcap's reader builds it from a channel."""
     from foxglove import messages as fm
 
-    types = message_types(fm.SceneUpdate.get_schema().data)
-    good = fm.SceneUpdate(entities=[fm.SceneEntity(id="x")]).encode()
-    assert decode(types, ".foxglove.SceneUpdate", good)["entities"][0]["id"] == "x"
-    with pytest.raises(ValueError, match="field 9"):
-        decode(types, ".foxglove.SceneUpdate", good + bytes([9 << 3, 1]))
+    class _Schema:  # what mcap's reader hands the decoder factory
+        id, name, encoding, data = 1, "foxglove.SceneUpdate", "protobuf", fm.SceneUpdate.get_schema().data
+
+    return DecoderFactory().decoder_for("protobuf", _Schema)
+
+
+def test_protobuf_check_refuses_a_field_outside_the_schema_and_a_truncated_message(tmp_path):
+    """The check behind the test above can fail: field 9 is not in SceneUpdate; a cut message does not parse."""
+    from foxglove import messages as fm
+
+    decoder = _scene_decoder()
+    good = fm.SceneUpdate(entities=[fm.SceneEntity(id="x", frame_id="map")]).encode()
+    assert _protobuf_dict(decoder, good)["entities"][0]["id"] == "x"
+    with pytest.raises(AssertionError, match="outside the schema"):
+        _protobuf_dict(decoder, good + bytes([9 << 3, 1]))
+    with pytest.raises(DecodeError):
+        decoder(good[:-3])
 
 
 # -- bags in -------------------------------------------------------------------------------------------------------
@@ -518,9 +551,8 @@ def test_markers_and_scene_give_back_the_covariance(sx, sy, theta, x, y):
     np.testing.assert_allclose(rebuilt(m.scale.x / 2, m.scale.y / 2, m.pose.orientation.z, m.pose.orientation.w),
                                cov, atol=tol)
     assert m.scale.x >= m.scale.y
-    from foxglove import messages as fm
 
-    upd = decode(message_types(fm.SceneUpdate.get_schema().data), ".foxglove.SceneUpdate", scene_update(f).encode())
+    upd = _protobuf_dict(_scene_decoder(), scene_update(f).encode())
     cyl = upd["entities"][0]["cylinders"][0]
     q = cyl["pose"].get("orientation", {})
     np.testing.assert_allclose(rebuilt(cyl["size"]["x"] / 2, cyl["size"]["y"] / 2, q.get("z", 0.0), q.get("w", 0.0)),
