@@ -52,7 +52,9 @@ def test_with_every_term_free_the_angles_confounded_with_the_principal_point_are
     """Every term free (8 cameras x 120 objects): the principal point, pan and tilt cannot be told apart well
     enough for an interval; the terms still called identified hold the truth."""
     truth, hits, called = _truth(ALL_TRUTH), 0, 0
-    for seed in range(6):
+    # seeds 1000, 1008, 1017 and 1054: campaigns where pan or tilt passed every other check with an interval that
+    # excluded the truth (found while tuning the checks; without fit.CONFOUNDED this test fails on them)
+    for seed in (1, 2, 1000, 1008, 1017, 1054):
         c = synthetic_campaign(ALL_TRUTH, 8, 120, object_sigma_m=0.3, seed=seed)
         fit = F.fit_budget(c.residual_m, c.dxy_dp, c.cov_object_m2, c.group, free=ALL_FREE)
         d = fit.to_dict()["terms"]

@@ -747,7 +747,7 @@ def _term_fits(model, scale, v, H, names, merged, first) -> dict[str, TermFit]:
         infl = max(float(vif[i]), float(vif0.get(t, vif[i])))
         if t in merged:
             st, note = "merged", f"the data cannot tell it from {', '.join(merged[t])}: their joint effect"
-        elif CONFOUNDED.get(t) in names:
+        elif CONFOUNDED.get(t) in (first[1] if first is not None else names):  # free, even if merged away since
             st, note = "weakly identified", (f"confounded with {CONFOUNDED[t]} (free too): a principal-point shift "
                                              "is a rotation, told apart only by the cameras' focal lengths; the "
                                              "interval is not to be trusted, the estimate is kept")
