@@ -93,6 +93,11 @@ def test_a_folder_of_openlabel_sequences_each_with_its_calibration(tmp_path):
     d = json.loads((tmp_path / "v" / "summary.json").read_text())
     assert d["kind"] == "openlabel-sequences" and d["n_pairs"] == 8 and len(d["groups"]) == 2
     assert "seq1/001" in (tmp_path / "v" / "objects.csv").read_text()
+    r = _run("validate", "--labels", tmp_path / "seqs" / "seq0", "--budget", "basler1@deg", "--out", tmp_path / "one",
+             "--no-report")  # one sequence folder: its calibration.json is its calibration, not a frame
+    assert r.exit_code == 0, r.output + r.stderr
+    d = json.loads((tmp_path / "one" / "summary.json").read_text())
+    assert d["kind"] == "openlabel" and d["n_pairs"] == 4 and d["unpaired"]["error_rows"] == 0
     _openlabel_sequence(tmp_path / "seqs" / "seq2", cams["cam000"], calib=False)  # no calibration, no --calibration
     r = _run("validate", "--labels", tmp_path / "seqs", "--budget", "basler1", "--out", tmp_path / "w")
     assert r.exit_code == 2 and "seq2" in r.stderr and len(r.stderr.strip().splitlines()) == 1
