@@ -27,7 +27,7 @@ eigenvalue below ``collinear_tol``) are merged -- fitted as one, reported as mer
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import NamedTuple
 
 import numpy as np
@@ -466,8 +466,20 @@ def _polish(model, v: np.ndarray, scale: np.ndarray, H: np.ndarray, steps: int =
     return v, H
 
 
+#: the normalised eigenvalue below which a merge is exact (terms with the same effect to rounding, as the camera
+#: height and the ground offset on flat ground); above it, merging fixes at zero terms the data do see a little
+EXACT_MERGE = 1e-6
+
+
+def _weakest(H: np.ndarray) -> float:
+    """The smallest eigenvalue of the normalised information."""
+    d = np.sqrt(np.clip(np.diag(H), 0, None))
+    return float(np.linalg.eigvalsh(H / np.outer(d, d))[0]) if H.shape[0] and np.all(d > 0) else 0.0
+
+
 def _collinear(H: np.ndarray, names: list[str], tol: float) -> list[str] | None:
-    """The terms of the weakest direction of the normalised information, if it is (nearly) null."""
+    """The terms of the weakest direction of the normalised information, if it is (nearly) null (its eigenvalue:
+    :func:`_weakest`)."""
     d = np.sqrt(np.clip(np.diag(H), 0, None))
     if H.shape[0] < 2 or np.any(d == 0):
         return None
@@ -677,6 +689,7 @@ def _fit_active(data, base, shared, objects, Sf, A, active, terms, fit_bias, rem
     """Fit the active shared terms (+ the object term); merge collinear sets and fit again; judge each interval."""
     merged: dict[str, tuple[str, ...]] = {}
     first = None  # (information, names) of the fit with every active term: what a merge leaves behind
+    approximate: list[str] = []  # merges of terms whose effects differ by more than rounding
     while True:
         obj, kinds = objects
         names = [shared[j] for j in active] + obj
@@ -692,6 +705,8 @@ def _fit_active(data, base, shared, objects, Sf, A, active, terms, fit_bias, rem
         group_ = _collinear(H, names, tol)
         if group_ is None or len(group_) < 2:
             break
+        if abs(_weakest(H)) > EXACT_MERGE:  # (an indefinite information, negative, is no exact merge either)
+            approximate.append(", ".join(sorted(group_)))
         info = {t: H[names.index(t), names.index(t)] * scale[names.index(t)] ** 2 for t in group_}
         keep = max(group_, key=info.get)
         if keep in OBJECT_TERMS:  # a per-object term stays free; a shared term it absorbs is dropped
@@ -701,6 +716,11 @@ def _fit_active(data, base, shared, objects, Sf, A, active, terms, fit_bias, rem
         active = [j for j in active if shared[j] == keep or shared[j] not in group_]
     ll, _, beta, cov_beta = model.evaluate(v, grad=False)
     terms.update(_term_fits(model, scale, v, H, names, merged, first, profile_check))
+    if approximate:  # the other terms' intervals are conditional on members fixed at zero that were not redundant
+        why = (f"the fit merged terms whose effects differ ({'; '.join(approximate)}: fixed at zero but for one, "
+               "their effect leaks into the other terms): the interval is not to be trusted, the estimate is kept")
+        terms.update({t: replace(tf, status="weakly identified", note=why) for t, tf in terms.items()
+                      if tf.status == "identified"})
     order = [t for t in [*shared, *OBJECT_TERMS] if t in terms]
     return BudgetFit({t: terms[t] for t in order}, beta, cov_beta, float(ll), "reml" if reml else "ml",
                      data.n, data.groups_present(), base, ok, msg, H, tuple(names))
