@@ -70,6 +70,22 @@ def test_with_every_term_free_the_angles_confounded_with_the_principal_point_are
     assert called >= 12 and hits >= called - 2, (hits, called)
 
 
+def test_an_exact_merge_leaves_the_other_intervals_alone_an_approximate_one_does_not():
+    """Camera height and ground offset have the same effect on flat ground (an exact merge: pan and the per-object
+    term stay identified); with every term free, seed 7 merges roll, ground slope, pan and the principal point,
+    whose effects differ: the terms left are weakly identified, their intervals conditional on that merge."""
+    c = synthetic_campaign({"height_m": 0.3, "pan_deg": 0.1}, 8, 60, object_sigma_m=0.3, seed=3)
+    fit = F.fit_budget(c.residual_m, c.dxy_dp, c.cov_object_m2, c.group,
+                       free=["height_m", "ground_height_m", "pan_deg", "object_m"])
+    assert fit.terms["height_m"].status == fit.terms["ground_height_m"].status == "merged"
+    assert fit.terms["pan_deg"].status == fit.terms["object_m"].status == "identified", fit.terms
+    c = synthetic_campaign(ALL_TRUTH, 8, 120, object_sigma_m=0.3, seed=7)
+    fit = F.fit_budget(c.residual_m, c.dxy_dp, c.cov_object_m2, c.group, free=ALL_FREE)
+    assert fit.terms["roll_deg"].status == "merged" and "ground_slope_deg" in fit.terms["roll_deg"].merged_with
+    for k in ("focal_px", "position_m", "object_m"):
+        assert fit.terms[k].status == "weakly identified" and "merged terms whose effects differ" in fit.terms[k].note
+
+
 def test_profile_deviance_is_the_likelihood_drop_with_the_others_refitted():
     c = synthetic_campaign(DEFAULT_TRUTH, 8, 60, object_sigma_m=0.3, seed=4)
     data = F.compact_inputs([(c.residual_m, c.dxy_dp, c.cov_object_m2, c.group)], free=DEFAULT_FREE)
