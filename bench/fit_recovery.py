@@ -4,7 +4,11 @@ drawn once per camera, the fit's 95 % intervals against the truth -- for the ter
 Usage::
 
     .venv/bin/python bench/fit_recovery.py [--campaigns 200] [--cameras 8] [--objects 120] [--terms default,all]
-                                           [--out bench/results]
+                                           [--first-seed 0] [--out bench/results]
+    .venv/bin/python bench/fit_recovery.py --combine A.json B.json ... [--out bench/results]
+
+(``--first-seed``: campaigns ``first-seed .. first-seed + campaigns - 1``, for runs split over processes;
+``--combine`` adds up the counts of such runs, configuration by configuration.)
 
 Two configurations, each on ``--campaigns`` seeded campaigns (``synthetic_campaign``,
 ``footprint_uq.validation.campaigns``; per-object sigma 0.3 m, bias (0.2, -0.1) m):
@@ -50,12 +54,12 @@ def _sigma(v) -> float:
     return float(v[0] if isinstance(v, list) else v)
 
 
-def run(config: str, n_campaigns: int, n_cameras: int, n_objects: int) -> dict:
+def run(config: str, n_campaigns: int, n_cameras: int, n_objects: int, first_seed: int = 0) -> dict:
     truth_budget, free = CONFIGS[config]
     truth = {**{k: _sigma(v) for k, v in truth_budget.items()}, "object_m": OBJECT_SIGMA_M}
     rows = {k: [] for k in free}
     times, conv, contradict, single_ok = [], 0, 0, 0
-    for seed in range(n_campaigns):
+    for seed in range(first_seed, first_seed + n_campaigns):
         c = synthetic_campaign(truth_budget, n_cameras, n_objects, object_sigma_m=OBJECT_SIGMA_M,
                                bias_m=(0.2, -0.1), seed=seed)
         t0 = time.perf_counter()
@@ -78,10 +82,11 @@ def run(config: str, n_campaigns: int, n_cameras: int, n_objects: int) -> dict:
         terms[k] = {"truth": truth[k], "statuses": {s: sum(st == s for st, *_ in r) for s in STATUSES},
                     "identified": len(ident), "covered_when_identified": hits,
                     "coverage_95_when_identified": hits / len(ident) if ident else None,
-                    "median_estimate": float(np.median([x[1] for x in r]))}
+                    "estimates": [float(x[1]) for x in r], "median_estimate": float(np.median([x[1] for x in r]))}
     out = {"config": config, "campaigns": n_campaigns, "cameras": n_cameras, "objects_per_camera": n_objects,
            "free": free, "truth": truth_budget, "terms": terms, "converged": conv,
-           "converged_contradicts_message": contradict, "seconds_per_fit_median": float(np.median(times))}
+           "converged_contradicts_message": contradict, "seconds_per_fit": times,
+           "seconds_per_fit_median": float(np.median(times)), "first_seed": first_seed}
     if config == "default":
         out["single_camera_unidentifiable"] = single_ok
     return out
@@ -114,15 +119,49 @@ def goals_met(res: dict) -> bool:
     return all(c >= GOAL for c in cov) and res["converged_contradicts_message"] == 0
 
 
+def combine(parts: list[dict]) -> list[dict]:
+    """Runs of the same configuration (disjoint seeds) added up: one result per configuration."""
+    out: dict[str, dict] = {}
+    for r in parts:
+        c = out.get(r["config"])
+        if c is None:
+            out[r["config"]] = json.loads(json.dumps(r))
+            continue
+        for k in ("campaigns", "converged", "converged_contradicts_message", "single_camera_unidentifiable"):
+            if k in c:
+                c[k] += r[k]
+        c["seconds_per_fit"] += r["seconds_per_fit"]
+        c["seconds_per_fit_median"] = float(np.median(c["seconds_per_fit"]))
+        c["first_seed"] = min(c["first_seed"], r["first_seed"])
+        for k, t in c["terms"].items():
+            u = r["terms"][k]
+            for s in STATUSES:
+                t["statuses"][s] += u["statuses"][s]
+            t["identified"] += u["identified"]
+            t["covered_when_identified"] += u["covered_when_identified"]
+            t["coverage_95_when_identified"] = (t["covered_when_identified"] / t["identified"]) if t["identified"] \
+                else None
+            t["estimates"] += u["estimates"]
+            t["median_estimate"] = float(np.median(t["estimates"]))
+    return list(out.values())
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--campaigns", type=int, default=200)
     ap.add_argument("--cameras", type=int, default=8)
     ap.add_argument("--objects", type=int, default=120)
     ap.add_argument("--terms", default="default,all", help="configurations, comma-separated: default, all")
+    ap.add_argument("--first-seed", type=int, default=0)
+    ap.add_argument("--combine", nargs="+", type=Path, default=None, metavar="JSON",
+                    help="add up fit_recovery.json files of runs over disjoint seeds (no campaign is run)")
     ap.add_argument("--out", type=Path, default=ROOT / "bench" / "results")
     a = ap.parse_args(argv)
-    results = [run(c.strip(), a.campaigns, a.cameras, a.objects) for c in a.terms.split(",") if c.strip()]
+    if a.combine:
+        results = combine([r for f in a.combine for r in json.loads(f.read_text())])
+    else:
+        results = [run(c.strip(), a.campaigns, a.cameras, a.objects, a.first_seed) for c in a.terms.split(",")
+                   if c.strip()]
     a.out.mkdir(parents=True, exist_ok=True)
     (a.out / "fit_recovery.json").write_text(json.dumps(results, indent=2) + "\n")
     md = markdown(results)
