@@ -67,7 +67,7 @@ def test_with_every_term_free_the_angles_confounded_with_the_principal_point_are
                 called += 1
                 hits += t.ci95[0] <= truth[k] <= t.ci95[1]
                 assert t.dof >= F.MIN_DOF and t.vif <= F.MAX_VIF
-    assert called >= 12 and hits >= called - 2, (hits, called)
+    assert called >= 8 and hits >= called - 1, (hits, called)
 
 
 def test_an_exact_merge_leaves_the_other_intervals_alone_an_approximate_one_does_not():
