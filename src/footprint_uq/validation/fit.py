@@ -21,7 +21,10 @@ Satterthwaite's kind (the variance as a scaled chi-square with its effective deg
 ``nu = 2 v^2 / se_v^2``).  Identifiability: a
 shared term needs draws from at least ``min_groups`` groups (one camera and one frame give one draw
 of its calibration error: no sigma); terms the information matrix cannot tell apart (normalised
-eigenvalue below ``collinear_tol``) are merged -- fitted as one, reported as merged, never split.
+eigenvalue below ``collinear_tol``) are merged -- fitted as one, reported as merged, never split.  A fitted
+term is "identified" only where its interval can be trusted (enough degrees of freedom, not entangled with
+other terms, the profile likelihood falling off beyond both ends, no angle beside a free principal point, no
+approximate merge), else "weakly identified" (docs/budget-fit.md, "What the data cannot tell").
 """
 
 from __future__ import annotations
