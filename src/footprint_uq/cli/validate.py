@@ -17,7 +17,13 @@ from ..validation.coverage import DEFAULT_RANGE_BANDS_M
 from ..validation.pairs import CONTACT_MODELS
 from ..viz.validation_run import KINDS, run_validation
 
-__all__ = ["validate_cmd", "label_source_options"]
+__all__ = ["validate_cmd", "label_source_options", "size_priors_option"]
+
+#: ``--size-priors FILE`` of ``validate`` and ``calibrate budget`` (the footprint-centre contact's class sizes)
+size_priors_option = click.option(
+    "--size-priors", "size_priors", default=None, metavar="FILE",
+    help="Class size priors of --contact footprint-centre: a YAML file in the layout of the shipped "
+         "presets/size_priors.yaml, overriding it class by class (docs/validation.md).")
 
 
 def label_source_options(f):
@@ -65,6 +71,7 @@ def _bands(text: str) -> tuple[float, ...]:
                    "budget file (a camera registry's per-camera budgets win).")
 @click.option("--contact", type=click.Choice(sorted(CONTACT_MODELS)), default="bottom-centre", show_default=True,
               help="Where a 2-D box touches the ground.")
+@size_priors_option
 @label_source_options
 @click.option("--detections", default=None, metavar="FILE_OR_DIR",
               help="A detector's own files (YOLO labels, YOLOv5 CSV, COCO results, MOTChallenge, a canonical table), "
@@ -84,9 +91,9 @@ def _bands(text: str) -> tuple[float, ...]:
               help="Format of the per-object file.")
 @click.option("--no-report", is_flag=True, help="No report.html / calibration.png (summary and objects only).")
 @click.option("--fsync/--no-fsync", default=True, show_default=True, help="Durable outputs (fsync before rename).")
-def validate_cmd(labels, out_dir, budget_spec, contact, kind, camera_path, registry, calibration, image_size,
-                 origin_lat, origin_lon, heading_offset_deg, detections, detections_format, class_names, unknown_class,
-                 range_bands, alpha, objects_format, no_report, fsync):
+def validate_cmd(labels, out_dir, budget_spec, contact, size_priors, kind, camera_path, registry, calibration,
+                 image_size, origin_lat, origin_lon, heading_offset_deg, detections, detections_format, class_names,
+                 unknown_class, range_bands, alpha, objects_format, no_report, fsync):
     """Do the uncertainty ellipses contain the real errors?  Coverage, bias and a verdict.
 
     Writes summary.json, objects.csv (one row per input object, with its status) and report.html into
@@ -95,7 +102,8 @@ def validate_cmd(labels, out_dir, budget_spec, contact, kind, camera_path, regis
     if detections is None and (detections_format != "auto" or class_names is not None or unknown_class != "error"):
         raise InputError("--format/--class-names/--unknown-class", (detections_format, class_names, unknown_class),
                          "--detections too (they say how to read a detector's files)")
-    summary, files = run_validation(labels, out_dir, budget_spec, kind=kind, contact=contact, camera=camera_path,
+    summary, files = run_validation(labels, out_dir, budget_spec, kind=kind, contact=contact, size_priors=size_priors,
+                                    camera=camera_path,
                                     registry=registry, calibration=calibration,
                                     image_size_px=tuple(image_size) if image_size else None,
                                     origin_lat_deg=origin_lat, origin_lon_deg=origin_lon,

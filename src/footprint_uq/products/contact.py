@@ -129,6 +129,10 @@ def load_size_priors(path=None) -> tuple[dict[str, SizePrior], dict[str, str], s
         if f is None:
             continue
         d = _read_priors(f)
+        for key in ("classes", "aliases"):
+            if not isinstance(d.get(key) or {}, dict):
+                raise ConfigError(f"{f}: {key}", d[key], "a mapping" + (" class -> {length_m, width_m, height_m}"
+                                                                       if key == "classes" else " alias -> class"))
         for name, entry in (d.get("classes") or {}).items():
             priors[str(name).lower()] = _prior(str(f), str(name), entry)
         aliases.update({str(k).lower(): str(v).lower() for k, v in (d.get("aliases") or {}).items()})

@@ -133,7 +133,7 @@ def check_chunk(r, J, R, g, offset: int = 0):
     if g.shape != (n,):
         raise InputError("group", f"shape {g.shape}", f"an array ({n},) of calibration-draw labels")
     for name, a in (("residual_m", r), ("dxy_dp", J), ("cov_object_m2", R)):
-        bad = ~np.isfinite(a.reshape(n, -1)).all(1)
+        bad = ~np.isfinite(a.reshape(n, int(np.prod(a.shape[1:])))).all(1)  # n = 0: an empty chunk
         if bad.any():
             i = int(np.flatnonzero(bad)[0]) + offset
             raise InputError(f"{name}[{i}]", "non-finite", "finite numbers (drop invalid objects first)")

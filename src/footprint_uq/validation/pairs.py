@@ -21,6 +21,7 @@ Jacobian, the per-object covariance and the calibration group (one integer per c
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, fields
 
@@ -29,12 +30,20 @@ import numpy as np
 from .. import params as P
 from .. import status
 from ..errors import InputError
-from ..products.contact import CONTACT_MODELS, ContactResult, bottom_centre, bottom_centre_nonlinearity
+from ..products.contact import (
+    CONTACT_MODELS,
+    ContactResult,
+    bottom_centre,
+    bottom_centre_nonlinearity,
+    footprint_centre,
+    load_size_priors,
+)
 from ..uncertainty.budget import load_budget
 from ..uncertainty.propagation import DEFAULT_LINEAR_THRESHOLD
 from .readers import NO_DETECTION, NO_TRUTH, LabelChunk
 
-__all__ = ["ContactResult", "bottom_centre", "CONTACT_MODELS", "contact_model", "Pairs", "GroupIndex",
+__all__ = ["ContactResult", "bottom_centre", "CONTACT_MODELS", "contact_model", "with_size_priors", "Pairs",
+           "GroupIndex",
            "build_pairs", "iter_pairs", "collect_pairs", "STATUS_OK", "STATUS_ERROR", "STATUS_NO_TRUTH",
            "STATUS_NO_DETECTION", "STATUS_NO_GROUND"]
 
@@ -53,6 +62,21 @@ def contact_model(name):
     if name not in CONTACT_MODELS:
         raise InputError("contact", name, f"one of {sorted(CONTACT_MODELS)}")
     return CONTACT_MODELS[name]
+
+
+def with_size_priors(contact, size_priors):
+    """The contact model ``contact`` with the class size priors of the YAML file ``size_priors`` (``--size-priors
+    FILE``: the shipped priors overridden class by class, :func:`footprint_uq.products.contact.load_size_priors`,
+    read and checked here, once).  ``None``: ``contact`` unchanged.  Only the footprint-centre contact has size
+    priors: with any other, a one-line error (an option that would change nothing is refused, not ignored)."""
+    if size_priors is None:
+        return contact
+    if contact != "footprint-centre":
+        raise InputError("--size-priors", str(size_priors), "only with --contact footprint-centre (the "
+                         f"{contact if isinstance(contact, str) else 'given'} contact has no size priors)")
+    fn = functools.partial(footprint_centre, size_priors=load_size_priors(size_priors))
+    fn.__name__ = "footprint-centre"  # the name the summaries report
+    return fn
 
 
 class GroupIndex:

@@ -25,6 +25,9 @@ Formats (docs/validation.md, "Inputs"):
   the station frame of the calibration) and, for camera labels, a 2-D ``bbox`` (``val`` = u_centre,
   v_centre, width, height, pixels); the camera from
   :func:`footprint_uq.io.dataset_files.camera_from_tumtraf_file`.
+* **Campaigns as recorded**: a folder of camera folders, each a KITTI layout and one calibration group
+  (:func:`read_camera_folders`), and a folder of OpenLABEL sequences, each with its camera's
+  ``calibration.json`` (:func:`read_openlabel_sequences`).
 * **Pairs table** (:func:`read_pairs_table`): CSV / JSON Lines / Parquet with the 2-D detection columns
   of docs/batch.md (``u_min_px v_min_px u_max_px v_max_px``, optional ``cov_uu_px2 cov_uv_px2
   cov_vv_px2``, ``camera_id frame object_id class``) and the truth ``x_m, y_m`` (world frame) or
@@ -55,8 +58,9 @@ from ..products.geo import GeoReference
 
 __all__ = ["LabelChunk", "FolderReport", "read_kitti_folder", "parse_kitti_labels", "read_dair_v2x_folder",
            "parse_dair_v2x_labels", "read_openlabel", "read_pairs_table", "read_detections_with_truth",
-           "TRUTH_XY_COLUMNS",
-           "TRUTH_GEO_COLUMNS", "NO_TRUTH", "NO_DETECTION", "ROPE3D_IMAGE_SIZE_PX"]
+           "TRUTH_XY_COLUMNS", "TRUTH_GEO_COLUMNS", "NO_TRUTH", "NO_DETECTION", "ROPE3D_IMAGE_SIZE_PX",
+           "camera_folders", "read_camera_folders", "openlabel_sequences", "read_openlabel_sequences",
+           "SEQUENCE_CALIBRATION"]
 
 #: truth columns of a pairs table: world frame, or WGS84 (needs the camera's geodetic origin)
 TRUTH_XY_COLUMNS = ("x_m", "y_m")
@@ -263,6 +267,83 @@ def read_kitti_folder(folder, *, image_size_px=ROPE3D_IMAGE_SIZE_PX, report: Fol
             yield _chunk(lab, key, None, [{"line": i + 1, "frame": fid, "error": err} for i in range(n)])
             continue
         yield _chunk(lab, key, cam, parse_kitti_labels(text, camera=cam, frame=fid))
+
+
+# ---------------------------------------------------------------------------------------------------
+# campaigns as recorded: a folder of camera folders, a folder of OpenLABEL sequences
+# ---------------------------------------------------------------------------------------------------
+def camera_folders(folder) -> list[Path]:
+    """The camera folders of a campaign folder: its sub-folders with ``label_2/`` (KITTI layout), by name;
+    [] if there are none."""
+    root = Path(folder)
+    return sorted((p for p in root.iterdir() if p.is_dir() and (p / "label_2").is_dir()), key=lambda p: p.name) \
+        if root.is_dir() else []
+
+
+def read_camera_folders(folder, *, image_size_px=ROPE3D_IMAGE_SIZE_PX, report: FolderReport | None = None
+                        ) -> Iterator[LabelChunk]:
+    """A campaign recorded as one folder per camera -> :class:`LabelChunk` objects, camera by camera.
+
+    ``folder/<camera>/`` is a KITTI layout (``calib/``, ``denorm/``, ``label_2/``: :func:`read_kitti_folder`)
+    and **one calibration group**: every frame of a camera folder shares its calibration draw
+    (``camera_key`` ``camera-folder:<camera>``), whatever its per-frame calibration files say.  The frames of
+    ``report`` are named ``<camera>/<frame id>``.  Sub-folders without ``label_2/`` are not read (listed in
+    ``report.calibration_without_labels`` as ``<name>/``)."""
+    report = report if report is not None else FolderReport()
+    cams = camera_folders(folder)
+    if not cams:
+        raise ConfigError("labels", str(folder), "a folder of camera folders, each a KITTI layout (label_2/, "
+                          "calib/, denorm/)")
+    names = {c.name for c in cams}
+    report.calibration_without_labels.extend(f"{p.name}/" for p in sorted(Path(folder).iterdir())
+                                             if p.is_dir() and p.name not in names)
+    for cam in cams:
+        sub = FolderReport()
+        for ch in read_kitti_folder(cam, image_size_px=image_size_px, report=sub):
+            if ch.camera is not None:
+                ch.camera_key = f"camera-folder:{cam.name}"
+            ch.frame = _obj(f"{cam.name}/{f}" for f in ch.frame)
+            yield ch
+        report.frames += sub.frames
+        report.labels_without_calibration.extend(f"{cam.name}/{f}" for f in sub.labels_without_calibration)
+        report.calibration_without_labels.extend(f"{cam.name}/{f}" for f in sub.calibration_without_labels)
+
+
+#: the calibration file of an OpenLABEL sequence folder (not a frame file)
+SEQUENCE_CALIBRATION = "calibration.json"
+
+
+def openlabel_sequences(folder) -> list[Path]:
+    """The sequence folders of a campaign folder: its sub-folders holding OpenLABEL ``.json`` files, by name."""
+    root = Path(folder)
+    if not root.is_dir():
+        return []
+    return sorted((p for p in root.iterdir() if p.is_dir() and any(q.name != SEQUENCE_CALIBRATION
+                                                                   for q in p.glob("*.json"))), key=lambda p: p.name)
+
+
+def read_openlabel_sequences(folder, *, calibration=None, ground_z_m: float = 0.0, image_size_px=None
+                             ) -> Iterator[LabelChunk]:
+    """A folder of OpenLABEL sequences -> :class:`LabelChunk` objects, sequence by sequence.
+
+    ``folder/<sequence>/`` holds the sequence's OpenLABEL files (``*.json``, :func:`read_openlabel`) and its
+    camera's TUMTraf calibration as ``calibration.json``; a sequence without one uses ``calibration`` (the
+    ``--calibration`` file), and neither is a one-line error naming the sequence.  The calibration group is the
+    calibration file's content: the sequences of one camera (same calibration) share its draw.  Frames are named
+    ``<sequence>/<frame>``."""
+    seqs = openlabel_sequences(folder)
+    if not seqs:
+        raise ConfigError("labels", str(folder), "a folder of OpenLABEL sequence folders (each with *.json frames)")
+    for seq in seqs:
+        own = seq / SEQUENCE_CALIBRATION
+        calib = own if own.is_file() else calibration
+        if calib is None:
+            raise InputError("--calibration", f"missing for sequence {seq.name!r}",
+                             f"a {SEQUENCE_CALIBRATION} in the sequence folder or --calibration CAMERA.json")
+        files = sorted(p for p in seq.glob("*.json") if p.name != SEQUENCE_CALIBRATION)
+        for ch in read_openlabel(files, calibration=calib, ground_z_m=ground_z_m, image_size_px=image_size_px):
+            ch.frame = _obj(f"{seq.name}/{f}" for f in ch.frame)
+            yield ch
 
 
 # ---------------------------------------------------------------------------------------------------

@@ -23,7 +23,7 @@ from ..products.geo import GeoReference
 from ..uncertainty.budget import ErrorBudget, load_budget
 from ..validation import readers as R
 from ..validation.fit import compact_inputs, cross_validate_compact, fit_compact
-from ..validation.pairs import STATUS_OK, GroupIndex, iter_pairs
+from ..validation.pairs import STATUS_OK, GroupIndex, iter_pairs, with_size_priors
 from .validation_run import KINDS, detect_kind, label_chunks
 
 __all__ = ["run_budget_fit", "DEFAULT_FREE", "BUDGET_FIT_FILES"]
@@ -71,12 +71,14 @@ def _records(labels, kind, budget, contact, folder, free, **reader):
 
 
 def run_budget_fit(labels, out_dir, *, base_budget=None, free=DEFAULT_FREE, kind: str | None = None,
-                   contact="bottom-centre", camera=None, registry=None, calibration=None, image_size_px=None,
+                   contact="bottom-centre", size_priors=None, camera=None, registry=None, calibration=None,
+                   image_size_px=None,
                    origin_lat_deg=None, origin_lon_deg=None, heading_offset_deg: float = 0.0, method: str = "reml",
                    min_groups: int = 3, cross_validation: bool = True, fsync: bool = True) -> tuple[dict, dict]:
     """Fit the free terms of a budget to labelled data and write ``budget.yaml`` and ``fit.json``.
 
-    Parameters as :func:`footprint_uq.viz.validation_run.run_validation` for the input; ``base_budget``
+    Parameters as :func:`footprint_uq.viz.validation_run.run_validation` for the input (``size_priors``: the
+    class size priors of the footprint-centre contact, ``--size-priors FILE``); ``base_budget``
     (default: all zero) gives the terms that are not free; ``free``, ``method``, ``min_groups`` as
     :func:`footprint_uq.validation.fit.fit_budget`; ``cross_validation`` adds leave-one-object-out (and,
     with two groups or more, leave-one-group-out) coverage to the summary.
@@ -87,16 +89,18 @@ def run_budget_fit(labels, out_dir, *, base_budget=None, free=DEFAULT_FREE, kind
     """
     base = ErrorBudget() if base_budget is None else load_budget(base_budget)
     check_output_folder(out_dir, BUDGET_FIT_FILES.values(), "calibrate budget")  # before the fit, not after
+    contact_fn = with_size_priors(contact, size_priors)
     georef = None
     if origin_lat_deg is not None or origin_lon_deg is not None:
         georef = GeoReference(heading_offset_deg, origin_lat_deg, origin_lon_deg)
     folder = R.FolderReport()
     opts = {"free": list(free), "base_budget": base, "method": method, "min_groups": min_groups}
-    kind, data, statuses, groups = _records(labels, kind, base, contact, folder, list(free), camera=camera,
+    kind, data, statuses, groups = _records(labels, kind, base, contact_fn, folder, list(free), camera=camera,
                                             registry=registry, calibration=calibration, image_size_px=image_size_px,
                                             georef=georef, chunk_rows=131_072)
     fit = fit_compact(data, **opts)
     summary = {"labels": str(labels), "kind": kind, "contact": contact if isinstance(contact, str) else "custom",
+               "size_priors": None if size_priors is None else str(size_priors),
                "statuses": statuses, "groups": groups.names(), "folder": folder.to_dict(),
                "fit": fit.to_dict(), "cross_validation": {}}
     if cross_validation:  # above fit.CV_MAX_PAIRS pairs: on a seeded subsample, reported in the summary

@@ -30,12 +30,13 @@ from ..products.geo import GeoReference
 from ..validation import readers as R
 from ..validation.coverage import DEFAULT_RANGE_BANDS_M
 from ..validation.job import validate
+from ..validation.pairs import with_size_priors
 from .report import fig_to_png_bytes
 from .validation import validation_figures, validation_html
 
 __all__ = ["run_validation", "detect_kind", "label_chunks", "KINDS", "VALIDATION_FILES"]
 
-KINDS = ("kitti", "dair-v2x", "openlabel", "table")
+KINDS = ("kitti", "kitti-cameras", "dair-v2x", "openlabel", "openlabel-sequences", "table")
 VALIDATION_FILES = {"summary": "summary.json", "report": "report.html", "calibration_png": "calibration.png"}
 #: every name a run writes into its folder (a folder holding anything else is refused, not replaced)
 VALIDATION_OWN = ("summary.json", "report.html", "calibration.png", "objects.csv", "objects.parquet")
@@ -43,7 +44,9 @@ VALIDATION_OWN = ("summary.json", "report.html", "calibration.png", "objects.csv
 
 def detect_kind(labels) -> str:
     """``kitti`` (a folder with ``label_2/``), ``dair-v2x`` (``label/camera/``), ``openlabel`` (``.json``
-    file or a folder of them) or ``table`` (``.csv``, ``.jsonl``, ``.ndjson``, ``.parquet``, ``.pq``)."""
+    file or a folder of them), ``kitti-cameras`` (a folder of camera folders, each with ``label_2/``),
+    ``openlabel-sequences`` (a folder of folders of ``.json`` files) or ``table`` (``.csv``, ``.jsonl``,
+    ``.ndjson``, ``.parquet``, ``.pq``)."""
     p = Path(labels)
     if not p.exists():
         raise InputError("labels", str(labels), "an existing folder or file")
@@ -54,8 +57,13 @@ def detect_kind(labels) -> str:
             return "dair-v2x"
         if any(p.glob("*.json")):
             return "openlabel"
-        raise InputError("labels", str(labels), "a KITTI-layout folder (label_2/, calib/, denorm/), a DAIR-V2X-I "
-                         "folder (label/camera/, calib/) or a folder of OpenLABEL .json files")
+        if R.camera_folders(p):
+            return "kitti-cameras"
+        if R.openlabel_sequences(p):
+            return "openlabel-sequences"
+        raise InputError("labels", str(labels), "a KITTI-layout folder (label_2/, calib/, denorm/), a folder of "
+                         "such camera folders, a DAIR-V2X-I folder (label/camera/, calib/), a folder of OpenLABEL "
+                         ".json files or a folder of such sequence folders")
     suffix = p.suffix.lower()
     if suffix == ".json":
         return "openlabel"
@@ -82,13 +90,19 @@ def label_chunks(labels, kind, report, *, camera, registry, budget, calibration,
                                             **(detections_options or {}))
     if kind == "kitti":
         return R.read_kitti_folder(labels, image_size_px=image_size_px or R.ROPE3D_IMAGE_SIZE_PX, report=report)
+    if kind == "kitti-cameras":
+        return R.read_camera_folders(labels, image_size_px=image_size_px or R.ROPE3D_IMAGE_SIZE_PX, report=report)
     if kind == "dair-v2x":
         return R.read_dair_v2x_folder(labels, report=report)
+    if kind == "openlabel-sequences":
+        return R.read_openlabel_sequences(labels, calibration=calibration, image_size_px=image_size_px)
     if kind == "openlabel":
+        p = Path(labels)
+        own = p / R.SEQUENCE_CALIBRATION if p.is_dir() else None
+        calibration = calibration if calibration is not None or own is None or not own.is_file() else own
         if calibration is None:
             raise InputError("--calibration", "missing", "the camera's TUMTraf calibration JSON (OpenLABEL labels)")
-        p = Path(labels)
-        files = sorted(p.glob("*.json")) if p.is_dir() else [p]
+        files = sorted(f for f in p.glob("*.json") if f.name != R.SEQUENCE_CALIBRATION) if p.is_dir() else [p]
         return R.read_openlabel(files, calibration=calibration, image_size_px=image_size_px)
     if (camera is None) == (registry is None):
         raise InputError("--camera/--registry", (camera, registry), "exactly one of them for a pairs table")
@@ -110,7 +124,8 @@ def _jsonable(obj):
     return obj
 
 
-def run_validation(labels, out_dir, budget, *, kind: str | None = None, contact="bottom-centre", camera=None,
+def run_validation(labels, out_dir, budget, *, kind: str | None = None, contact="bottom-centre", size_priors=None,
+                   camera=None,
                    registry=None, calibration=None, image_size_px=None, origin_lat_deg=None, origin_lon_deg=None,
                    heading_offset_deg: float = 0.0, range_bands_m=DEFAULT_RANGE_BANDS_M, alpha: float = 0.05,
                    objects_format: str = "csv", chunk_rows: int = 131_072, report: bool = True, dpi: int = 110,
@@ -125,6 +140,7 @@ def run_validation(labels, out_dir, budget, *, kind: str | None = None, contact=
     budget : preset name, budget file, mapping or ErrorBudget (a registry's per-camera budgets win)
     kind : one of :data:`KINDS`, default from :func:`detect_kind`
     contact : contact model name or function
+    size_priors : YAML file of class size priors for ``contact="footprint-centre"`` (``--size-priors``)
     camera : camera file of a pairs table with one camera; registry : camera registry of a multi-camera table
     calibration : TUMTraf calibration JSON of OpenLABEL labels
     image_size_px : (width, height) where the files do not give it (Rope3D default 1920 x 1080)
@@ -144,6 +160,7 @@ def run_validation(labels, out_dir, budget, *, kind: str | None = None, contact=
     kind = kind or detect_kind(labels)
     if kind not in KINDS:
         raise InputError("kind", kind, f"one of {KINDS}")
+    contact_fn = with_size_priors(contact, size_priors)
     if objects_format not in ("csv", "parquet"):
         raise InputError("objects_format", objects_format, "csv or parquet")
     georef = None
@@ -156,19 +173,21 @@ def run_validation(labels, out_dir, budget, *, kind: str | None = None, contact=
                                                                           class_names=class_names,
                                                                           unknown_class=unknown_class))
     with output_set(out_dir, VALIDATION_OWN, "validate", fsync=fsync) as stage:
-        summary, files = _write_validation(stage, labels, kind, folder, chunks, budget, contact, range_bands_m,
-                                           alpha, objects_format, report, dpi, fsync, progress, detections)
+        summary, files = _write_validation(stage, labels, kind, folder, chunks, budget, contact_fn, range_bands_m,
+                                           alpha, objects_format, report, dpi, fsync, progress, detections,
+                                           size_priors)
     return summary, final_paths(files, stage, out_dir)
 
 
 def _write_validation(out: Path, labels, kind, folder, chunks, budget, contact, range_bands_m, alpha, objects_format,
-                      report, dpi, fsync, progress, detections=None) -> tuple[dict, dict]:
+                      report, dpi, fsync, progress, detections=None, size_priors=None) -> tuple[dict, dict]:
     """The job's files written into ``out`` (the hidden staging folder of :func:`run_validation`)."""
     files = {"objects": out / f"objects.{objects_format}", "summary": out / VALIDATION_FILES["summary"]}
     res = validate(chunks, budget, contact=contact, objects_out=files["objects"], range_bands_m=range_bands_m,
                    alpha=alpha, fsync=fsync, progress=progress)
     summary = res.summary
-    summary.update(labels=str(labels), kind=kind, folder=folder.to_dict())
+    summary.update(labels=str(labels), kind=kind, folder=folder.to_dict(),
+                   size_priors=None if size_priors is None else str(size_priors))
     if detections is not None:
         summary["detections"] = str(detections)
     summary["files"] = {k: v.name for k, v in files.items()}
