@@ -9,11 +9,11 @@ from __future__ import annotations
 
 import click
 
-from ..errors import InputError
 from ..uncertainty.presets import PRESET_NAMES
 from ..validation.coverage import DEFAULT_RANGE_BANDS_M
 from ..validation.pairs import CONTACT_MODELS
 from ..viz.validation_run import KINDS, run_validation
+from .common import FINITE, LATITUDE_DEG, LONGITUDE_DEG, AscendingFloats, FiniteFloatRange
 
 __all__ = ["validate_cmd", "label_source_options"]
 
@@ -36,21 +36,13 @@ _LABEL_SOURCE_OPTIONS = [
     click.option("--calibration", default=None, metavar="FILE", help="TUMTraf calibration JSON of OpenLABEL labels."),
     click.option("--image-size", nargs=2, type=click.IntRange(min=1), default=None, metavar="W H",
                  help="Image size where the files do not give it (Rope3D: 1920 1080, the default there)."),
-    click.option("--origin-lat", type=float, default=None, metavar="LAT", help="WGS84 latitude of the world origin."),
-    click.option("--origin-lon", type=float, default=None, metavar="LON", help="WGS84 longitude of the world origin."),
-    click.option("--heading-offset-deg", type=float, default=0.0, show_default=True, metavar="D",
+    click.option("--origin-lat", type=LATITUDE_DEG, default=None, metavar="LAT",
+              help="WGS84 latitude of the world origin."),
+    click.option("--origin-lon", type=LONGITUDE_DEG, default=None, metavar="LON",
+              help="WGS84 longitude of the world origin."),
+    click.option("--heading-offset-deg", type=FINITE, default=0.0, show_default=True, metavar="D",
                  help="Compass bearing of the world +y axis (truth given as lat_deg, lon_deg)."),
 ]
-
-
-def _bands(text: str) -> tuple[float, ...]:
-    try:
-        edges = tuple(float(v) for v in text.split(","))
-    except ValueError:
-        raise InputError("--range-bands", text, "comma-separated distances in metres, e.g. 0,25,50,100") from None
-    if len(edges) < 1 or any(b <= a for a, b in zip(edges, edges[1:], strict=False)) or edges[0] < 0:
-        raise InputError("--range-bands", text, "ascending non-negative distances in metres, e.g. 0,25,50,100")
-    return edges
 
 
 @click.command("validate")
@@ -64,9 +56,9 @@ def _bands(text: str) -> tuple[float, ...]:
 @click.option("--contact", type=click.Choice(sorted(CONTACT_MODELS)), default="bottom-centre", show_default=True,
               help="Where a 2-D box touches the ground.")
 @label_source_options
-@click.option("--range-bands", default=",".join(f"{v:g}" for v in DEFAULT_RANGE_BANDS_M), show_default=True,
-              metavar="EDGES", help="Range band edges in metres (the last band is open).")
-@click.option("--alpha", type=click.FloatRange(0.0, 0.5, min_open=True), default=0.05, show_default=True,
+@click.option("--range-bands", type=AscendingFloats(0.0), default=",".join(f"{v:g}" for v in DEFAULT_RANGE_BANDS_M),
+              show_default=True, metavar="EDGES", help="Range band edges in metres (the last band is open).")
+@click.option("--alpha", type=FiniteFloatRange(0.0, 0.5, min_open=True), default=0.05, show_default=True,
               help="Significance of the NEES test (two-sided) and of the bias test.")
 @click.option("--objects-format", type=click.Choice(["csv", "parquet"]), default="csv", show_default=True,
               help="Format of the per-object file.")
@@ -83,7 +75,7 @@ def validate_cmd(labels, out_dir, budget_spec, contact, kind, camera_path, regis
                                     registry=registry, calibration=calibration,
                                     image_size_px=tuple(image_size) if image_size else None,
                                     origin_lat_deg=origin_lat, origin_lon_deg=origin_lon,
-                                    heading_offset_deg=heading_offset_deg, range_bands_m=_bands(range_bands),
+                                    heading_offset_deg=heading_offset_deg, range_bands_m=range_bands,
                                     alpha=alpha, objects_format=objects_format, report=not no_report, fsync=fsync)
     t = summary["nees_test"]
     c95 = next((c for c in summary["coverage"] if c["nominal"] == 0.95), None)
