@@ -117,7 +117,8 @@ def test_list_options_refuse_empty_and_non_monotone(path, opt, value):
 
 
 def test_tuple_options_are_classified():
-    tuples = {(" ".join(p), o.opts[-1]) for p, o in (x.values for x in FLOAT_OPTIONS) if isinstance(o.type, click.Tuple)}
+    tuples = {(" ".join(p), o.opts[-1]) for p, o in (x.values for x in FLOAT_OPTIONS)
+              if isinstance(o.type, click.Tuple)}
     unclassified = {t for t in tuples if t not in RANGE_PAIRS and t[1] not in NOT_RANGE_PAIRS}
     assert not unclassified, f"classify these (min, max) or not: {unclassified}"
 

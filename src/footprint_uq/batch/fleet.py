@@ -49,6 +49,7 @@ import pyarrow.parquet as pq
 import yaml
 from tqdm import tqdm
 
+from .._files import read_input_text
 from .._parse import load_yaml
 from ..errors import ConfigError, InputError
 from ..io import load_camera
@@ -185,7 +186,7 @@ def load_registry(path, *, budget=None) -> dict[str, RegistryEntry]:
         base = p.parent
         suffix = p.suffix.lower()
         try:
-            text = p.read_text(encoding="utf-8-sig")
+            text = read_input_text(p, "registry", encoding="utf-8-sig")  # a FIFO: a stream
         except (OSError, UnicodeDecodeError) as e:
             raise ConfigError("registry", str(p), f"a readable UTF-8 text file ({type(e).__name__}: {e})") from None
         if "\x00" in text:

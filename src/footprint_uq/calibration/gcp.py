@@ -61,6 +61,7 @@ from scipy.stats import chi2
 
 from .. import params as P
 from .._checks import check_cov
+from .._files import read_input_text
 from ..cameras import general
 from ..cameras.lens_domain import lens_domain
 from ..cameras.opencv import OpenCVCamera
@@ -169,7 +170,7 @@ def _float_cell(path, row_no, col, text):
 def _read_gcp_rows(p: Path) -> list[list[str]]:
     """The CSV rows of a GCP table (header first), comments and blank lines dropped."""
     try:
-        text = p.read_text(encoding="utf-8-sig")
+        text = read_input_text(p, "--points", encoding="utf-8-sig")  # a FIFO: a stream
     except OSError as e:
         raise InputError("--points", str(p), f"a readable CSV file ({e.strerror or e})") from None
     except UnicodeDecodeError:

@@ -17,8 +17,8 @@ from ..uncertainty.budget import load_budget
 from ..uncertainty.ellipse import chi2_scale
 
 __all__ = ["FiniteFloat", "FiniteFloatRange", "AscendingFloats", "FINITE", "LATITUDE_DEG", "LONGITUDE_DEG",
-           "min_max_callback", "load_camera_and_budget", "check_confidence", "note", "warn", "pose_options", "pose_from_options",
-           "budget_notice", "DEFAULT_STEP_PX"]
+           "min_max_callback", "load_camera_and_budget", "check_confidence", "note", "warn", "pose_options",
+           "pose_from_options", "budget_notice", "DEFAULT_STEP_PX"]
 
 #: the default grid step of every map the command line draws (``map``, ``demo``), pixels
 DEFAULT_STEP_PX = 4

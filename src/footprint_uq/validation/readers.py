@@ -43,6 +43,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.compute as pc
 
+from .._files import is_stream, read_input_bytes
 from ..batch.readers import open_detections
 from ..batch.schema import BOX2D_COLUMNS, COV_COLUMNS
 from ..errors import ConfigError, InputError
@@ -144,8 +145,8 @@ def _chunk(source, key, camera, rows: list[dict], *, budget=None) -> LabelChunk:
 def _file_key(*paths) -> str:
     """Calibration group key: a hash of the calibration files' bytes (identical calibrations share a draw)."""
     h = hashlib.sha1()
-    for p in paths:
-        h.update(Path(p).read_bytes())
+    for p in paths:  # a FIFO was read once already (the camera): its name stands for it
+        h.update(str(Path(p).resolve()).encode() if is_stream(p) else Path(p).read_bytes())
     return h.hexdigest()[:12]
 
 
@@ -207,11 +208,13 @@ def parse_kitti_labels(text: str, *, camera, frame: str = "") -> list[dict]:
 
 def _read_label_text(path) -> tuple[str | None, str | None]:
     try:
-        return Path(path).read_bytes().decode("utf-8-sig"), None
+        return read_input_bytes(path, "labels").decode("utf-8-sig"), None
     except UnicodeDecodeError as e:
         return None, f"label file not UTF-8 (byte 0x{e.object[e.start]:02x} at offset {e.start})"
     except OSError as e:
         return None, f"label file unreadable ({e.strerror or e})"
+    except InputError as e:  # a device, a FIFO nobody writes
+        return None, f"label file unreadable ({e.expected})"
 
 
 def _folder(folder, sub: str) -> Path:
@@ -315,8 +318,8 @@ def parse_dair_v2x_labels(objects, *, frame: str = "") -> list[dict]:
 
 def _json_list(path):
     try:
-        data = json.loads(Path(path).read_bytes().decode("utf-8-sig"))
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
+        data = json.loads(read_input_bytes(path, "labels").decode("utf-8-sig"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError, InputError) as e:
         return None, f"label file not readable JSON ({type(e).__name__}: {str(e).splitlines()[0][:120]})"
     if not isinstance(data, list):
         return None, f"label file holds a {type(data).__name__}, expected a list of objects"
@@ -410,7 +413,7 @@ def _openlabel_object(uid, obj, i, frame, ground_z_m) -> dict:
 
 def _openlabel_frames(path):
     try:
-        data = json.loads(Path(path).read_bytes().decode("utf-8-sig"))
+        data = json.loads(read_input_bytes(path, "labels").decode("utf-8-sig"))
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
         raise ConfigError("labels", str(path), f"a readable OpenLABEL JSON file ({type(e).__name__})") from None
     top = data.get("openlabel") if isinstance(data, dict) else None
