@@ -351,3 +351,17 @@ def test_reason_kinds_mask_values():
     assert reason_kind("malformed label line (7 fields, expected 15 or 16)") == \
         "malformed label line (# fields, expected # or #)"
     assert reason_kind("field u_min_px is empty") == "field u_min_px is empty"
+
+
+def test_budget_fit_counts_the_refused_rows_and_fits_the_pairs_only(tmp_path):
+    from footprint_uq.viz.budget_fit_run import run_budget_fit
+
+    path = _csv(tmp_path / "pairs.csv", _table_rows())
+    cam = tmp_path / "cam.yaml"
+    save_camera(CAM, cam)
+    summary, _ = run_budget_fit(path, tmp_path / "fit", base_budget=BUDGET, free=["object_m"], camera=cam,
+                                cross_validation=False, fsync=False)
+    assert summary["statuses"] == {"ok": N_GOOD, "error": len(HOSTILE)}
+    assert summary["fit"]["n_objects"] == N_GOOD
+    assert summary["refused"]["rows"] == len(HOSTILE) == sum(summary["refused"]["by_reason"].values())
+    assert summary["refused"]["by_reason"]["truth out of range (a coordinate beyond # m)"] == 1

@@ -83,11 +83,15 @@ from .messages.uper_cpm import (
 )
 
 __all__ = ["Service", "CameraSetup", "FrameOutput", "error_record", "station_id_of", "RECORD_FOOTPRINTS",
-           "RECORD_ERROR", "UPER_ENCODERS"]
+           "RECORD_ERROR", "UPER_ENCODERS", "MAX_FRAME_DETECTIONS"]
 
 UPER_ENCODERS = ("fast", "asn1tools")
 #: most perceived objects in one CPM (``PerceivedObjects ::= SEQUENCE SIZE (0..255, ...)``); the SDSM follows
 MAX_MESSAGE_OBJECTS = 255
+#: most detections one frame may hold (``Service(max_frame_detections=...)``); a frame with more is one error
+#: record, refused before any parsing.  40 CPMs' worth: a detector's frame holds tens to hundreds; 100,000
+#: detections (16 MB of JSON, over the transports' 4 MiB --max-frame-bytes) took 4 s and an 82 MB record
+MAX_FRAME_DETECTIONS = 10_000
 
 RECORD_FOOTPRINTS = "footprints"
 #: the dummy frames' time of :meth:`Service.warm_up` (a valid TimestampIts: 2023-11-14)
@@ -239,6 +243,9 @@ class Service:
         (null where unknown; docs/service.md).  Frames of a camera must then come in time order.
     tracker : TrackerConfig, optional
         The tracker's options (timeout, gate, acceleration noise).
+    max_frame_detections : int
+        Most detections of one frame (default :data:`MAX_FRAME_DETECTIONS`); a frame with more is refused
+        with one error record (field ``detections``) before it is parsed.
     """
 
     def __init__(self, camera=None, budget=None, *, registry=None, camera_id: str | None = None,
@@ -247,13 +254,18 @@ class Service:
                  allow_outside_image: bool = False, station_id: int | None = None, messages: bool = True,
                  uper_encoder: str = "fast", linearity: bool = False, linear_threshold: float | None = None,
                  warm_up: bool = True, cpm_cdd: str = DEFAULT_CDD, v2x_policy: str = "sampled",
-                 tracks: bool = False, tracker: TrackerConfig | None = None):
+                 tracks: bool = False, tracker: TrackerConfig | None = None,
+                 max_frame_detections: int = MAX_FRAME_DETECTIONS):
         if (camera is None) == (registry is None):
             raise InputError("camera/registry", "both" if camera is not None else "neither",
                              "exactly one of a camera (with a budget) or a registry")
         if contact not in CONTACT_MODES:
             raise InputError("contact", contact, f"one of {CONTACT_MODES}")
         self.contact = contact
+        if isinstance(max_frame_detections, bool) or not isinstance(max_frame_detections, int) or \
+                max_frame_detections < 1:
+            raise InputError("max_frame_detections", max_frame_detections, "an integer >= 1")
+        self.max_frame_detections = max_frame_detections
         self.confidence = float(confidence)
         if not 0.0 < self.confidence < 1.0:
             raise InputError("confidence", confidence, "a probability in (0, 1)")
@@ -430,6 +442,9 @@ class Service:
         dets = frame.get("detections")
         if not isinstance(dets, list):
             raise _FrameError("detections", f"field detections is not a list: {type(dets).__name__}")
+        if len(dets) > self.max_frame_detections:  # the frame size limit: one error record, nothing parsed
+            raise _FrameError("detections", f"{len(dets)} detections in one frame, more than the frame limit of "
+                              f"{self.max_frame_detections} (split the frame)")
         ref_ms = timestamp_its_ms(ts) if self.messages else None
         est, ids, classes, class_p, _pixel_cov = self._footprints(setup, dets)
         motion = self._motion(setup, est, ids, ts, dets) if self.tracks else None
