@@ -365,3 +365,38 @@ def test_budget_fit_counts_the_refused_rows_and_fits_the_pairs_only(tmp_path):
     assert summary["fit"]["n_objects"] == N_GOOD
     assert summary["refused"]["rows"] == len(HOSTILE) == sum(summary["refused"]["by_reason"].values())
     assert summary["refused"]["by_reason"]["truth out of range (a coordinate beyond # m)"] == 1
+
+
+# -- DAIR-V2X-I ------------------------------------------------------------------------------------------
+def test_dair_v2x_hostile_numbers(tmp_path):
+    from footprint_uq.validation.readers import read_dair_v2x_folder
+
+    root = tmp_path / "dair"
+    for sub in ("calib/camera_intrinsic", "calib/virtuallidar_to_camera", "label/camera"):
+        (root / sub).mkdir(parents=True)
+    T = CAM.T_cam_world
+    (root / "calib/camera_intrinsic/1.json").write_text(json.dumps(
+        {"cam_K": CAM.K.ravel().tolist(), "cam_D": [0, 0, 0, 0, 0], "width": 1920, "height": 1080}))
+    (root / "calib/virtuallidar_to_camera/1.json").write_text(json.dumps(
+        {"rotation": T[:3, :3].tolist(), "translation": [[v] for v in T[:3, 3]]}))
+    g = _good_rows(1)[0]
+    box = {"xmin": g["u_min_px"], "ymin": g["v_min_px"], "xmax": g["u_max_px"], "ymax": g["v_max_px"]}
+    loc = {"x": g["x_m"], "y": g["y_m"], "z": 0.8}
+    dims = {"h": 1.6, "w": 1.8, "l": 4.4}
+
+    def obj(**kw):
+        o = {"type": "Car", "2d_box": dict(box), "3d_dimensions": dict(dims), "3d_location": dict(loc),
+             "rotation": 0.2}
+        for k, v in kw.items():
+            part, key = k.split("__")
+            o[part][key] = v
+        return o
+
+    objs = [obj(), obj(**{"3d_location__x": 1e308}), obj(**{"3d_location__y": float("inf")}),
+            obj(**{"3d_dimensions__h": 1e308}), obj(**{"2d_box__xmax": 1e308}), obj(**{"3d_location__x": -0.0})]
+    text = json.dumps(objs).replace("Infinity", "1e400")  # 1e400: a number that overflows when read
+    (root / "label/camera/1.json").write_text(text)
+    pairs = collect_pairs(read_dair_v2x_folder(root), BUDGET)
+    assert pairs.status[0] == "ok" and pairs.status[5] in ("ok", "no ground point")
+    for i in range(1, 5):
+        assert pairs.status[i] == "error" and pairs.line[i] == i, (i, pairs.reason[i])
