@@ -194,3 +194,27 @@ def test_cli_fifo_nobody_writes_exits_2_in_one_line(tmp_path):
         lines = r.stderr.strip().splitlines()
         assert len(lines) == 1 and lines[0].startswith("footprint-uq: error:") and str(p) in lines[0], r.stderr
         assert ("nothing was written" if name.endswith(".csv") else "Parquet needs a seekable file") in lines[0]
+
+
+def test_validate_reads_a_pairs_table_and_a_camera_from_fifos(tmp_path):
+    """validate end to end (in process): the pairs table and the camera file are FIFOs fed by writer threads."""
+    from footprint_uq import PanTiltCamera
+    from footprint_uq.io import save_camera
+    from footprint_uq.viz.validation_run import run_validation
+
+    cam = PanTiltCamera(focal_px=1400.0, image_size_px=(1920, 1080), height_m=8.0, pan_deg=30.0, tilt_deg=18.0)
+    save_camera(cam, tmp_path / "cam_file.yaml")
+    rng = np.random.default_rng(2)
+    uv = np.c_[rng.uniform(300, 1600, 20), rng.uniform(700, 1050, 20)]
+    xy = cam.backproject(uv).xy_world_m + rng.normal(0, 0.05, (20, 2))
+    text = "u_min_px,v_min_px,u_max_px,v_max_px,x_m,y_m\n" + "".join(
+        f"{u - 30},{v - 60},{u + 30},{v},{x},{y}\n" for (u, v), (x, y) in zip(uv, xy, strict=True))
+    text += "1,2,3,4,inf,5\n"  # and a hostile row, line 22
+    pairs, camera = _fifo(tmp_path, "pairs.csv"), _fifo(tmp_path, "cam.yaml")
+    _writer(pairs, text.encode())
+    _writer(camera, (tmp_path / "cam_file.yaml").read_bytes())
+    summary, files = _bounded(lambda: run_validation(pairs, tmp_path / "out", "basler1", camera=camera,
+                                                     report=False, fsync=False), timeout_s=600)
+    assert summary["n_pairs"] == 20 and summary["rows"] == {"ok": 20, "error": 1}
+    rows = files["objects"].read_text().splitlines()
+    assert len(rows) == 22 and ',22,' in rows[-1]

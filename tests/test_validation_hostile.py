@@ -400,3 +400,19 @@ def test_dair_v2x_hostile_numbers(tmp_path):
     assert pairs.status[0] == "ok" and pairs.status[5] in ("ok", "no ground point")
     for i in range(1, 5):
         assert pairs.status[i] == "error" and pairs.line[i] == i, (i, pairs.reason[i])
+
+
+def test_cli_validate_says_how_many_rows_were_refused_and_why(tmp_path):
+    from click.testing import CliRunner
+
+    from footprint_uq.cli.main import main
+
+    path = _csv(tmp_path / "pairs.csv", _table_rows())
+    cam = tmp_path / "cam.yaml"
+    save_camera(CAM, cam)
+    r = CliRunner().invoke(main, ["validate", "--labels", str(path), "--camera", str(cam), "--budget", "basler1",
+                                  "--out", str(tmp_path / "out"), "--no-report", "--no-fsync"])
+    assert r.exit_code == 0, r.output
+    assert f"{N_GOOD} pairs" in r.stdout and f"{len(HOSTILE)} error rows" in r.stdout
+    line = [ln for ln in r.stderr.splitlines() if "rows refused" in ln]
+    assert len(line) == 1 and line[0].startswith(f"footprint-uq: {len(HOSTILE)} rows refused (3 x truth not finite")

@@ -13,7 +13,7 @@ from ..uncertainty.presets import PRESET_NAMES
 from ..validation.coverage import DEFAULT_RANGE_BANDS_M
 from ..validation.pairs import CONTACT_MODELS
 from ..viz.validation_run import KINDS, run_validation
-from .common import FINITE, LATITUDE_DEG, LONGITUDE_DEG, AscendingFloats, FiniteFloatRange
+from .common import FINITE, LATITUDE_DEG, LONGITUDE_DEG, AscendingFloats, FiniteFloatRange, note
 
 __all__ = ["validate_cmd", "label_source_options"]
 
@@ -89,3 +89,9 @@ def validate_cmd(labels, out_dir, budget_spec, contact, kind, camera_path, regis
     click.echo(f"footprint-uq validate: {msg}; unpaired: {un['detections_without_truth']} detections without truth, "
                f"{un['truth_without_detection']} truths without detection, {un['error_rows']} error rows, "
                f"{un['no_ground_point']} without ground point; {out_dir}/{files['summary'].name}")
+    refused = summary.get("refused", {})
+    if refused.get("rows"):  # why rows were refused, the most frequent reasons first (all in summary.json)
+        top = list(refused["by_reason"].items())
+        why = "; ".join(f"{n} x {k}" for k, n in top[:3]) + ("; ..." if len(top) > 3 else "")
+        note(f"{refused['rows']} rows refused ({why}); per row in {files['objects'].name}, by reason in "
+             f"{files['summary'].name} ('refused')")
