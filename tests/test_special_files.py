@@ -218,3 +218,15 @@ def test_validate_reads_a_pairs_table_and_a_camera_from_fifos(tmp_path):
     assert summary["n_pairs"] == 20 and summary["rows"] == {"ok": 20, "error": 1}
     rows = files["objects"].read_text().splitlines()
     assert len(rows) == 22 and ',22,' in rows[-1]
+
+
+def test_fleet_dataset_with_a_parquet_fifo_is_refused_by_name(tmp_path):
+    """A FIFO named .parquet inside a fleet dataset folder is refused naming it (before: skipped silently)."""
+    from footprint_uq.batch.fleet import plan
+
+    ds = tmp_path / "ds" / "camera_id=a"
+    ds.mkdir(parents=True)
+    fifo = _fifo(ds, "part-0.parquet")
+    with pytest.raises(InputError, match=r"part-0\.parquet.*got a FIFO"):
+        _bounded(lambda: plan(tmp_path / "ds", tmp_path / "out", {}))
+    assert fifo.exists()
