@@ -230,3 +230,14 @@ def test_fleet_dataset_with_a_parquet_fifo_is_refused_by_name(tmp_path):
     with pytest.raises(InputError, match=r"part-0\.parquet.*got a FIFO"):
         _bounded(lambda: plan(tmp_path / "ds", tmp_path / "out", {}))
     assert fifo.exists()
+
+
+def test_image_fifos_are_refused_not_waited_on(tmp_path):
+    """Images are read with seeking (OpenCV, the header reader of `calibrate gcp --image`): a FIFO is refused."""
+    from footprint_uq.calibration.detect import expand_inputs
+    from footprint_uq.calibration.gcp_run import _image_header_size
+
+    p = _fifo(tmp_path, "photo.png")
+    for call in (lambda: expand_inputs([str(p)]), lambda: _image_header_size(p)):
+        with pytest.raises(InputError, match="got a FIFO"):
+            _bounded(call)
