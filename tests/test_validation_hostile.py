@@ -416,3 +416,15 @@ def test_cli_validate_says_how_many_rows_were_refused_and_why(tmp_path):
     assert f"{N_GOOD} pairs" in r.stdout and f"{len(HOSTILE)} error rows" in r.stdout
     line = [ln for ln in r.stderr.splitlines() if "rows refused" in ln]
     assert len(line) == 1 and line[0].startswith(f"footprint-uq: {len(HOSTILE)} rows refused (3 x truth not finite")
+
+
+@pytest.mark.parametrize(("kw", "field"), [({"alpha": float("nan")}, "alpha"), ({"alpha": 0.0}, "alpha"),
+                                           ({"alpha": 0.7}, "alpha"),
+                                           ({"range_bands_m": (0.0, float("nan"))}, "range_bands_m"),
+                                           ({"range_bands_m": (0.0, float("inf"))}, "range_bands_m")])
+def test_the_library_refuses_a_nan_significance_and_bands(kw, field):
+    """The API as the command line: no verdict computed at significance NaN, no band named 0-nan m."""
+    from footprint_uq.errors import InputError
+
+    with pytest.raises(InputError, match=field):
+        CoverageAccumulator(**kw)

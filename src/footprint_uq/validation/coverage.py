@@ -149,9 +149,12 @@ class CoverageAccumulator:
 
     def __init__(self, *, range_bands_m=DEFAULT_RANGE_BANDS_M, alpha: float = 0.05, seed: int = 0):
         self.edges = np.asarray(range_bands_m, dtype=np.float64)
-        if self.edges.ndim != 1 or self.edges.size < 1 or np.any(np.diff(self.edges) <= 0):
-            raise InputError("range_bands_m", list(np.ravel(range_bands_m)), "ascending distances in metres")
+        if (self.edges.ndim != 1 or self.edges.size < 1 or not np.all(np.isfinite(self.edges))
+                or np.any(np.diff(self.edges) <= 0)):
+            raise InputError("range_bands_m", list(np.ravel(range_bands_m)), "finite ascending distances in metres")
         self.alpha = float(alpha)
+        if not 0.0 < self.alpha <= 0.5:  # (NaN fails too: a verdict at significance NaN would say "consistent")
+            raise InputError("alpha", alpha, "a significance in (0, 0.5]")
         self.band_labels = range_band_labels(self.edges)
         self.groups: dict[int, _Group] = {}
         self.by = {"range": {}, "class": {}, "linear_ok": {}}
