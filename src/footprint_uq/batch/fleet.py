@@ -46,6 +46,7 @@ import pyarrow.compute as pc
 import pyarrow.parquet as pq
 from tqdm import tqdm
 
+from .._files import require_regular
 from ..errors import ConfigError, InputError
 from ..io.atomic import (
     atomic_write_text,
@@ -126,8 +127,10 @@ def plan(dataset, out_dir, registry: dict, *, chunk_rows: int = S.DEFAULT_CHUNK_
         files = [root]
         root = root.parent
     elif root.is_dir():
-        files = sorted(f for f in root.rglob("*") if f.is_file() and f.suffix.lower() in (".parquet", ".pq")
+        files = sorted(f for f in root.rglob("*") if not f.is_dir() and f.suffix.lower() in (".parquet", ".pq")
                        and not any(part.startswith((".", "_")) for part in f.relative_to(root).parts))
+        for f in files:  # a FIFO / device named .parquet in the dataset: refused by name, never skipped silently
+            require_regular(f, f"detections: {f.relative_to(root).as_posix()}", "Parquet needs a seekable file")
     else:
         raise InputError("detections", str(dataset), "a Parquet file or a folder of Parquet files")
     if not files:

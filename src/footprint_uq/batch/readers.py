@@ -25,12 +25,17 @@ last line may have no terminator), so that rows in = lines in, whatever a line h
 * JSON Lines: the line (line ``row + 1``); a blank line is an error row (``empty line``);
 * Parquet: the row in file order (an empty, truncated or garbage file: :class:`InputError`).
 
+A FIFO (a named pipe, ``/dev/stdin`` of a pipe) is read once, as a stream, in CSV and JSON Lines (the
+header / the first 1000 objects are kept and replayed); Parquet needs seeking and refuses it in one line;
+a device, socket or directory is refused (:mod:`footprint_uq._files`: never a hang).
+
 :attr:`DetectionReader.lines` counts the physical lines read, independently of the
 parser; the batch checks rows in against it.
 """
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import io
 import json
@@ -47,6 +52,7 @@ import pyarrow.csv as pcsv
 import pyarrow.json as pjson
 import pyarrow.parquet as pq
 
+from .._files import is_stream, open_input, require_regular
 from ..errors import InputError
 from . import schema as S
 
@@ -68,6 +74,30 @@ def detect_format(path, format: str | None = None) -> str:
     if suffix in FORMATS:
         return FORMATS[suffix]
     raise InputError("detections", str(path), f"a file ending in one of {sorted(FORMATS)}")
+
+
+class _Prefixed:
+    """A read-once stream with bytes already taken from it put back in front (``read(n)`` may return fewer
+    than ``n`` bytes; an empty result is the end)."""
+
+    def __init__(self, prefix: bytes, f):
+        self.prefix, self.f = prefix, f
+
+    def read(self, n: int = -1) -> bytes:
+        if self.prefix:
+            out = self.prefix if n < 0 else self.prefix[:n]
+            self.prefix = self.prefix[len(out):]
+            return out
+        return self.f.read(n)
+
+    def close(self) -> None:
+        self.f.close()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
 
 
 @dataclass
@@ -222,6 +252,15 @@ class DetectionReader:
         if not self.path.exists():
             raise InputError("detections", str(path), "an existing file")
         self.format = detect_format(path, format)
+        #: a FIFO's stream (read once: CSV and JSON Lines), None for a regular file
+        self._stream = None
+        if self.format == "parquet":
+            require_regular(self.path, "detections", "Parquet needs a seekable file; convert the stream to CSV or "
+                            "JSON Lines, or save it to a file first")
+        elif is_stream(self.path):
+            self._stream = open_input(self.path, "detections")
+        else:
+            open_input(self.path, "detections").close()  # a device, socket or directory: refused here
         if int(chunk_rows) < 1:
             raise InputError("chunk_rows", chunk_rows, "an integer >= 1")
         self.chunk_rows = int(chunk_rows)
@@ -236,12 +275,27 @@ class DetectionReader:
             self.total, self.unit = self._pf.metadata.num_rows, "rows"
         elif self.format == "csv":
             self.columns = self._csv_header()
-            self.total, self.unit = self.path.stat().st_size, "B"
+            self.total, self.unit = self._size(), "B"
         else:
             self.columns, self.family_columns = self._jsonl_columns()
-            self.total, self.unit = self.path.stat().st_size, "B"
+            self.total, self.unit = self._size(), "B"
         if self.family_columns is None:
             self.family_columns = list(self.columns)
+
+    def _size(self) -> int | None:
+        return None if self._stream is not None else self.path.stat().st_size
+
+    def _body(self):
+        """The file after what :meth:`_csv_header` / :meth:`_jsonl_columns` took (a stream: once only)."""
+        if self._stream is None:
+            f = open(self.path, "rb")  # noqa: SIM115 - closed by the caller
+            if self.format == "csv":
+                f.seek(self._header_bytes)
+            return f
+        f, self._stream = self._stream, _USED
+        if f is _USED:
+            raise InputError("detections", str(self.path), "a regular file to read twice (a FIFO is read once)")
+        return f
 
     # layout
     def select(self, numeric: tuple[str, ...]) -> None:
@@ -281,9 +335,12 @@ class DetectionReader:
 
     # csv
     def _csv_header(self) -> list[str]:
-
-        with open(self.path, "rb") as f:
-            raw = f.readline()
+        if self._stream is not None:
+            raw = _read_line(self._stream)
+            self._stream = _Prefixed(b"", self._stream)
+        else:
+            with open(self.path, "rb") as f:
+                raw = f.readline()
         self._header_bytes = len(raw)
         text = raw[3:] if raw.startswith(_BOM) else raw
         try:
@@ -304,8 +361,7 @@ class DetectionReader:
         return names
 
     def _iter_csv(self):
-        with open(self.path, "rb") as f:
-            f.seek(self._header_bytes)
+        with self._body() as f:
             row = 0
             for block, ends in _line_blocks(f, self.chunk_rows):
                 n = ends.size
@@ -431,10 +487,13 @@ class DetectionReader:
         missing) as it is at row 300,000 -- never a refusal of the whole file.
         """
         keys: list[tuple[str, ...]] = []
-        with open(self.path, "rb") as f:
-            for i, line in enumerate(f):
-                if i >= 1000:
+        head: list[bytes] = []
+        with (open(self.path, "rb") if self._stream is None else contextlib.nullcontext(self._stream)) as f:
+            for i in range(1000):
+                line = _read_line(f)
+                if not line:
                     break
+                head.append(line)
                 if i == 0 and line.startswith(_BOM):
                     line = line[3:]
                 try:
@@ -443,6 +502,8 @@ class DetectionReader:
                     continue
                 if isinstance(obj, dict):
                     keys.append(tuple(str(k) for k in obj))
+        if self._stream is not None:  # the lines read are replayed in front of the rest of the stream
+            self._stream = _Prefixed(b"".join(head), self._stream)
         families = [S.detect_box_type(k) for k in keys]
         votes = Counter(f for f in families if f is not None)
         top = max(votes, key=lambda f: (votes[f], -families.index(f))) if votes else None
@@ -455,8 +516,7 @@ class DetectionReader:
         return list(names), list(family)
 
     def _iter_jsonl(self):
-
-        with open(self.path, "rb") as f:
+        with self._body() as f:
             row0 = 0
             first = True
             for block, ends in _line_blocks(f, self.chunk_rows):
@@ -537,6 +597,21 @@ class _SlowPath(Exception):
 
 
 _BOM = b"\xef\xbb\xbf"
+#: a reader's stream once handed out (a FIFO is read once)
+_USED = object()
+
+
+def _read_line(f) -> bytes:
+    """One physical line (with its LF) of a binary file or stream, b"" at the end."""
+    if hasattr(f, "readline"):
+        return f.readline()
+    out = bytearray()
+    while not out.endswith(b"\n"):
+        b = f.read(1)
+        if not b:
+            break
+        out += b
+    return bytes(out)
 
 
 def _utf8_error(e: UnicodeDecodeError) -> str:

@@ -34,6 +34,7 @@ import cv2
 import numpy as np
 from tqdm.auto import tqdm
 
+from .._files import require_regular
 from ..errors import InputError
 from .boards import Checkerboard, parse_board
 
@@ -130,7 +131,8 @@ def expand_inputs(inputs, *, video_step: int = 1) -> list[FrameSource]:
                            if p.is_file() and p.suffix.lower() in IMAGE_EXTENSIONS + VIDEO_EXTENSIONS)
             for p in files:
                 out.append(FrameSource(str(p), -1 if _is_video(str(p)) else None))
-        elif os.path.exists(s):
+        elif os.path.exists(s):  # a FIFO or device: refused (OpenCV would wait on it for a writer)
+            require_regular(s, "images", "an image or video file, which OpenCV reads with seeking")
             out.append(FrameSource(s, -1 if _is_video(s) else None))
         elif glob.has_magic(s):
             matches = sorted(glob.glob(s))

@@ -54,11 +54,12 @@ import numpy as np
 import yaml
 
 from .. import params as P
+from .._files import file_kind, read_input_text
 from .._parse import load_yaml
 from ..cameras import general
 from ..cameras.opencv import OpenCVCamera
 from ..cameras.rotation import R_W_C, pan_tilt_roll_from_R_W_C
-from ..errors import ConfigError, InputError
+from ..errors import InputError
 from ..io import load_camera
 from ..io.atomic import atomic_write_text
 from ..uncertainty.budget import ErrorBudget
@@ -143,8 +144,8 @@ def _intrinsics_mapping(path):
     the intrinsic calibration writes them; None if the file is not such a mapping."""
 
     try:
-        d = load_yaml(Path(path).read_text(), str(path))
-    except (OSError, yaml.YAMLError, UnicodeDecodeError, ConfigError):
+        d = load_yaml(read_input_text(path, "intrinsics"), str(path))
+    except (OSError, yaml.YAMLError, UnicodeDecodeError, InputError):  # (ConfigError is an InputError)
         return None
     if not isinstance(d, dict) or "K" not in d or "image_size_px" not in d or any(k in d for k in ("R", "t", "P")):
         return None
@@ -226,10 +227,10 @@ def load_transform(spec) -> np.ndarray:
         if p.suffix.lower() == ".npy":
             T = np.load(p, allow_pickle=False)
         elif p.suffix.lower() in (".txt", ".csv"):
-            T = np.array([float(v) for v in p.read_text().replace(",", " ").split()])
+            T = np.array([float(v) for v in read_input_text(p, "ground transform").replace(",", " ").split()])
         else:
 
-            d = load_yaml(p.read_text(), str(p))
+            d = load_yaml(read_input_text(p, "ground transform"), str(p))
             if isinstance(d, dict):
                 for k in ("T_ground_lidar", "T", "matrix", "transform"):
                     if k in d:
@@ -845,7 +846,7 @@ def pairs_from_directory(directory) -> list[tuple[str, Path | None, Path | None]
 
 def _read_corners_csv(path: Path) -> np.ndarray:
     rows = []
-    for i, ln in enumerate(path.read_text().splitlines(), 1):
+    for i, ln in enumerate(read_input_text(path, "corners").splitlines(), 1):
         s = ln.strip()
         if not s or s.startswith("#"):
             continue
@@ -885,6 +886,8 @@ def _corners_from_image_file(p: Path, board, detect_method, image_size_px) -> tu
     """Image corners ``(n, 2)`` px from a corners CSV or an image file, or ``(None, why not)``."""
     if p.name.endswith("_corners.csv") or p.suffix.lower() == ".csv":
         return _read_corners_csv(p), ""
+    if file_kind(p) not in (None, "regular file"):  # OpenCV would wait on a FIFO for its writer
+        return None, f"image {p.name} is a {file_kind(p)}, not a regular file"
     img = cv2.imread(str(p), cv2.IMREAD_UNCHANGED)
     if img is None:
         return None, f"unreadable image {p.name}"
@@ -979,7 +982,7 @@ def read_correspondences_csv(path) -> list[FrameData]:
     p = Path(path)
     if not p.exists():
         raise InputError("correspondences", str(p), "an existing CSV file (frame, X, Y, Z, u, v)")
-    lines = p.read_text().splitlines()
+    lines = read_input_text(p, "correspondences").splitlines()
     header = None
     data: dict = {}
     bad: dict = {}

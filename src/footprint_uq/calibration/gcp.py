@@ -61,6 +61,7 @@ from scipy.stats import chi2
 
 from .. import params as P
 from .._checks import check_cov
+from .._files import read_input_text
 from ..cameras import general
 from ..cameras.lens_domain import lens_domain
 from ..cameras.opencv import OpenCVCamera
@@ -111,6 +112,10 @@ MAX_COST_RATIO = 2.0
 #: without intrinsics the lens is unknown: k1 is solved with a zero-mean prior of this standard deviation
 LENS_K1_SIGMA = 0.1
 MAX_STARTS = 4  # distinct PnP starts refined by Levenberg-Marquardt (the other pose minima among them)
+#: the PnP starts are computed from at most this many points (evenly spread over the table's rows): a start is
+#: only where Levenberg-Marquardt on every point begins, and OpenCV's refinement of the 45 focal-length grid's
+#: candidates on 10,000 points was 70 % of such a solve (issue 35: 10,000 points in well under a minute)
+START_POINTS = 1000
 _LOO_CHUNK = 200_000  # problems x points per batched leave-one-out run (bounds its memory to ~100 MB)
 #: lat/lon tables: farthest point from the origin of W (m); the local frame ignores the Earth's curvature
 #: (0.31 m drop at 2 km)
@@ -169,7 +174,7 @@ def _float_cell(path, row_no, col, text):
 def _read_gcp_rows(p: Path) -> list[list[str]]:
     """The CSV rows of a GCP table (header first), comments and blank lines dropped."""
     try:
-        text = p.read_text(encoding="utf-8-sig")
+        text = read_input_text(p, "--points", encoding="utf-8-sig")  # a FIFO: a stream
     except OSError as e:
         raise InputError("--points", str(p), f"a readable CSV file ({e.strerror or e})") from None
     except UnicodeDecodeError:
@@ -422,7 +427,11 @@ def _usable_candidates(cands):
 def _initial_params(uv, xyz, image_size_px, K, dist, max_starts: int = MAX_STARTS) -> np.ndarray:
     """Starting parameter vectors (S, 22), best first: the PnP solution family with K (SQPnP, EPnP, and
     IPPE's two planar solutions on the points and on the points flattened to z = 0), or with K from a grid
-    of focal lengths; every distinct start up to ``max_starts`` (the other pose minima are among them)."""
+    of focal lengths; every distinct start up to ``max_starts`` (the other pose minima are among them).  Above
+    :data:`START_POINTS` points the starts come from that many, evenly spread over the rows."""
+    if len(uv) > START_POINTS:  # the starts from a spread subset; the refinement uses every point
+        sel = np.unique(np.linspace(0, len(uv) - 1, START_POINTS).round().astype(np.int64))
+        uv, xyz = uv[sel], xyz[sel]
     if K is not None:
         grid = [(K, dist)]
     else:

@@ -25,6 +25,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 import yaml
 
+from .._files import file_kind, require_regular
 from ..errors import ConsistencyWarning, InputError
 from ..io._common import sanitize
 from ..io.atomic import TMP_MARK, atomic_write_text, recover_folder, swap_in_folder, temp_path
@@ -75,6 +76,8 @@ def _csv_text(rows: list[dict]) -> str:
 
 def _image_header_size(path) -> tuple[int, int]:
     """(width, height) from a PNG or JPEG file's header, without decoding it; InputError otherwise."""
+    if file_kind(path) not in (None, "regular file"):  # a FIFO, a device: refused, never waited on
+        require_regular(path, "--image", "a PNG or JPEG file, read with seeking")
     try:
         with open(path, "rb") as fh:
             head = fh.read(24)

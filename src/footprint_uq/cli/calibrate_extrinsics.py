@@ -12,7 +12,7 @@ import click
 from ..calibration.extrinsics import POSE_NAMES
 from ..calibration.extrinsics_run import ExtrinsicsOptions, run_extrinsics
 from ..errors import InputError
-from .common import note
+from .common import FINITE, FiniteFloatRange, note
 
 __all__ = ["extrinsics_cmd"]
 
@@ -23,8 +23,8 @@ __all__ = ["extrinsics_cmd"]
                    "or a CSV of correspondences frame,X,Y,Z,u,v (X, Y, Z in the LiDAR frame).")
 @click.option("--camera", required=True, metavar="FILE", help="Camera/intrinsics file (any format load_camera reads).")
 @click.option("--board", required=True, metavar="COLSxROWS", help="Inner corners, e.g. 14x9.")
-@click.option("--square-m", type=float, required=True, metavar="S", help="Square size in metres.")
-@click.option("--margin-m", type=float, default=0.0, show_default=True, metavar="M",
+@click.option("--square-m", type=FINITE, required=True, metavar="S", help="Square size in metres.")
+@click.option("--margin-m", type=FINITE, default=0.0, show_default=True, metavar="M",
               help="White border around the squares, metres (the board's outer size matters to the LiDAR).")
 @click.option("--region", default=None, metavar="SPEC",
               help="Search region in the LiDAR frame: box:xmin,ymin,zmin,xmax,ymax,zmax or sphere:cx,cy,cz,r.")
@@ -36,13 +36,13 @@ __all__ = ["extrinsics_cmd"]
 @click.option("--budget-from", type=click.Choice(["per_frame", "bootstrap", "jacobian"]), default="per_frame",
               show_default=True, help="Which variability goes into budget.yaml (per_frame = the paper's Table 3).")
 @click.option("--no-correlations", is_flag=True, help="Write sigmas only (no 6x6 covariance) into budget.yaml.")
-@click.option("--ransac-px", type=click.FloatRange(min=0.1), default=4.0, show_default=True,
+@click.option("--ransac-px", type=FiniteFloatRange(min=0.1), default=4.0, show_default=True,
               help="RANSAC / inlier reprojection threshold, px.")
-@click.option("--plane-threshold-m", type=click.FloatRange(min=0.001), default=0.05, show_default=True,
+@click.option("--plane-threshold-m", type=FiniteFloatRange(min=0.001), default=0.05, show_default=True,
               help="Plane inlier distance in the clouds (about 3x the range noise).")
 @click.option("--min-frames", type=click.IntRange(min=2), default=3, show_default=True,
               help="Usable frames needed (a spread from fewer than 3 frames is meaningless).")
-@click.option("--max-frame-rms-px", type=click.FloatRange(min=0.0, min_open=True), default=None, metavar="T",
+@click.option("--max-frame-rms-px", type=FiniteFloatRange(min=0.0, min_open=True), default=None, metavar="T",
               help="Drop frames whose own reprojection RMS exceeds T px (reported in frames.csv).")
 @click.option("--estimator", type=click.Choice(["joint", "mean"]), default="joint", show_default=True,
               help="Reported pose: joint fit of all corners, or mean of the single-frame poses (more robust when "

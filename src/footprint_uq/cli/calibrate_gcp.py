@@ -9,6 +9,7 @@ from __future__ import annotations
 import click
 
 from ..calibration.gcp_run import run_gcp
+from .common import FINITE, LATITUDE_DEG, LONGITUDE_DEG, FiniteFloatRange
 
 __all__ = ["gcp_cmd"]
 
@@ -22,20 +23,20 @@ __all__ = ["gcp_cmd"]
               help="Camera/intrinsics file (K, distortion); without it the focal length is solved too (>= 6 points).")
 @click.option("--intrinsics-budget", default=None, metavar="FILE",
               help="Budget file of the intrinsics (e.g. from `calibrate intrinsics`): its covariance is propagated.")
-@click.option("--pixel-sigma-px", type=click.FloatRange(min=0.0), default=1.0, show_default=True,
+@click.option("--pixel-sigma-px", type=FiniteFloatRange(min=0.0), default=1.0, show_default=True,
               help="Default 1-sigma click noise per image axis.")
-@click.option("--survey-sigma-m", type=click.FloatRange(min=0.0), default=0.05, show_default=True,
+@click.option("--survey-sigma-m", type=FiniteFloatRange(min=0.0), default=0.05, show_default=True,
               help="Default 1-sigma survey noise per world axis.")
-@click.option("--origin-lat", "origin_lat", type=click.FloatRange(-90, 90), default=None, metavar="DEG",
+@click.option("--origin-lat", "origin_lat", type=LATITUDE_DEG, default=None, metavar="DEG",
               help="Latitude of the world origin (lat/lon tables; default: mean of the points).")
-@click.option("--origin-lon", "origin_lon", type=click.FloatRange(-180, 180), default=None, metavar="DEG",
+@click.option("--origin-lon", "origin_lon", type=LONGITUDE_DEG, default=None, metavar="DEG",
               help="Longitude of the world origin.")
-@click.option("--origin-alt-m", type=float, default=None, metavar="M",
+@click.option("--origin-alt-m", type=FINITE, default=None, metavar="M",
               help="Altitude of the ground plane z = 0 (alt_m tables; default: median of the points).")
 @click.option("--image", default=None, metavar="FILE",
               help="The photo (PNG/JPEG, at most 60 Mpx), drawn behind the points in gcp.png.")
 @click.option("--solve-k1", is_flag=True, help="Solve the radial distortion k1 freely (one more point needed).")
-@click.option("--lens-k1-sigma", type=click.FloatRange(0.0, 1.0), default=0.1, show_default=True,
+@click.option("--lens-k1-sigma", type=FiniteFloatRange(0.0, 1.0), default=0.1, show_default=True,
               help="Without --intrinsics: the prior standard deviation of the unknown lens's k1 (0: no distortion).")
 @click.option("--out", "out_dir", required=True, metavar="DIR", help="Output directory (created).")
 def gcp_cmd(points, image_size, intrinsics, intrinsics_budget, pixel_sigma_px, survey_sigma_m, origin_lat, origin_lon,

@@ -8,7 +8,7 @@ import click
 from ..calibration.intrinsics_run import IntrinsicsOptions, run_intrinsics
 from ..errors import InputError
 from .calibrate_common import board_callback
-from .common import note
+from .common import FiniteFloatRange, note
 
 __all__ = ["intrinsics_cmd"]
 
@@ -17,15 +17,15 @@ __all__ = ["intrinsics_cmd"]
 @click.argument("images", nargs=-1, required=True)
 @click.option("--board", "board", required=True, metavar="COLSxROWS", callback=board_callback,
               help="Inner corners, e.g. 9x6 (the paper's board: 14x9).")
-@click.option("--square-m", type=click.FloatRange(min=0.0, min_open=True, max=100.0), required=True, metavar="M",
+@click.option("--square-m", type=FiniteFloatRange(min=0.0, min_open=True, max=100.0), required=True, metavar="M",
               help="Square size in metres.")
 @click.option("--out", "out_dir", required=True, metavar="DIR", help="Output directory (created).")
-@click.option("--max-mean-reproj-px", type=click.FloatRange(min=0.0, min_open=True), default=None, metavar="T",
+@click.option("--max-mean-reproj-px", type=FiniteFloatRange(min=0.0, min_open=True), default=None, metavar="T",
               help="Frame filter: drop frames whose mean reprojection error exceeds T px, recalibrate, repeat.")
 @click.option("--bootstrap", type=click.IntRange(min=0), default=0, show_default=True, metavar="N",
               help="Bootstrap resamples over frames (0: none).")
 @click.option("--seed", type=int, default=0, show_default=True, help="Bootstrap seed.")
-@click.option("--grid-px", type=click.FloatRange(min=1.0), default=5.0, show_default=True,
+@click.option("--grid-px", type=FiniteFloatRange(min=1.0), default=5.0, show_default=True,
               help="Cell size of the coverage and reprojection-error maps (px).")
 @click.option("--hull", type=click.Choice(["corners", "squares"]), default="corners", show_default=True,
               help="Coverage footprint: hull of the detected corners or of the projected squares.")
@@ -41,7 +41,7 @@ __all__ = ["intrinsics_cmd"]
 @click.option("--full-covariance", is_flag=True, help="Also write the 9x9 intrinsic covariance into budget.yaml.")
 @click.option("--min-views", type=click.IntRange(min=3), default=3, show_default=True,
               help="Fewest frames accepted.")
-@click.option("--max-rms-px", type=click.FloatRange(min=0.0, min_open=True), default=2.0, show_default=True,
+@click.option("--max-rms-px", type=FiniteFloatRange(min=0.0, min_open=True), default=2.0, show_default=True,
               metavar="PX", help="Refuse a calibration whose RMS reprojection error exceeds PX (wrong --board?).")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 def intrinsics_cmd(images, board, square_m, out_dir, max_mean_reproj_px, bootstrap, seed, grid_px, hull, video_step,

@@ -11,6 +11,7 @@ from ..calibration.synthetic_run import SyntheticOptions, run_synthetic
 from ..errors import InputError
 from ..params import PAPER_COLUMNS
 from .calibrate_common import board_callback
+from .common import FiniteFloatRange, min_max_callback
 
 __all__ = ["synthetic_cmd"]
 
@@ -20,29 +21,29 @@ __all__ = ["synthetic_cmd"]
 @click.option("--views", type=click.IntRange(min=3), default=20, show_default=True, help="Board poses.")
 @click.option("--board", "board", default="14x9", show_default=True, metavar="COLSxROWS",
               callback=board_callback, help="Inner corners (default: the paper's board).")
-@click.option("--square-m", type=click.FloatRange(min=0.0, min_open=True, max=100.0), default=0.1, show_default=True,
+@click.option("--square-m", type=FiniteFloatRange(min=0.0, min_open=True, max=100.0), default=0.1, show_default=True,
               help="Square size in metres.")
-@click.option("--margin-m", type=click.FloatRange(min=0.0, max=100.0), default=0.05, show_default=True,
+@click.option("--margin-m", type=FiniteFloatRange(min=0.0, max=100.0), default=0.05, show_default=True,
               help="White border around the squares.")
 @click.option("--camera", "camera_file", default=None, metavar="FILE",
               help="Camera/intrinsics file to simulate (default: a Basler-ace-2-like 1920x1200 camera).")
-@click.option("--scale", type=click.FloatRange(min=0.05, max=4.0), default=1.0, show_default=True,
+@click.option("--scale", type=FiniteFloatRange(min=0.05, max=4.0), default=1.0, show_default=True,
               help="Scale the sensor (same field of view), e.g. 0.4 for quick tests.")
-@click.option("--fill", type=(click.FloatRange(0.01, 1.0), click.FloatRange(0.01, 1.0)), default=(0.3, 0.55),
-              show_default=True,
+@click.option("--fill", type=(FiniteFloatRange(0.01, 1.0), FiniteFloatRange(0.01, 1.0)), default=(0.3, 0.55),
+              show_default=True, callback=min_max_callback,
               help="Board width as a fraction of the image width (min max).")
-@click.option("--max-tilt-deg", type=click.FloatRange(min=10.0, max=80.0), default=40.0, show_default=True,
+@click.option("--max-tilt-deg", type=FiniteFloatRange(min=10.0, max=80.0), default=40.0, show_default=True,
               help="Largest board tilt (10..80 deg: the tilts are drawn from 10 deg up; beyond 80 the board is "
                    "seen edge-on).")
 @click.option("--supersample", type=click.IntRange(min=1, max=8), default=4, show_default=True,
               help="Rendering: sub-pixels per pixel side (box filter).")
-@click.option("--blur-sigma-px", type=click.FloatRange(min=0.0, max=100.0), default=0.6, show_default=True,
+@click.option("--blur-sigma-px", type=FiniteFloatRange(min=0.0, max=100.0), default=0.6, show_default=True,
               help="Rendering: Gaussian optical blur, px (0: none).")
-@click.option("--noise-sigma-dn", type=click.FloatRange(min=0.0, max=255.0), default=2.0, show_default=True,
+@click.option("--noise-sigma-dn", type=FiniteFloatRange(min=0.0, max=255.0), default=2.0, show_default=True,
               help="Sensor noise, grey levels.")
 @click.option("--plan", "campaigns", type=click.IntRange(min=0), default=0, metavar="M",
               help="Also run a planning study: M repeated campaigns with --corner-noise-px (no rendering).")
-@click.option("--corner-noise-px", type=click.FloatRange(min=0.0, max=1000.0), default=0.1, show_default=True,
+@click.option("--corner-noise-px", type=FiniteFloatRange(min=0.0, max=1000.0), default=0.1, show_default=True,
               help="Corner noise per coordinate for --plan.")
 @click.option("--plan-bootstrap", type=click.IntRange(min=0), default=100, show_default=True, metavar="N",
               help="Bootstrap resamples of the first planning campaign (0: none).")

@@ -12,6 +12,7 @@ from pathlib import Path
 import click
 
 from ..integrations.carla.capture import CaptureOptions, record_left_turn
+from .common import FiniteFloatRange
 
 __all__ = ["capture"]
 
@@ -21,15 +22,15 @@ __all__ = ["capture"]
 @click.option("--port", default=2000, show_default=True, type=click.IntRange(1, 65535), help="CARLA RPC port.")
 @click.option("--out", "out_file", required=True, type=click.Path(dir_okay=False, path_type=Path),
               help="Recording to write (JSON Lines).")
-@click.option("--timeout", "timeout_s", default=5.0, show_default=True, type=click.FloatRange(0.1, 600),
+@click.option("--timeout", "timeout_s", default=5.0, show_default=True, type=FiniteFloatRange(0.1, 600),
               help="Seconds to wait for the server.")
 @click.option("--map", "map_name", default=None, help="Load this map first (e.g. Town03); default: the current one.")
-@click.option("--fps", default=10.0, show_default=True, type=click.FloatRange(1, 100), help="Frame rate.")
-@click.option("--speed", "speed_mps", default=8.0, show_default=True, type=click.FloatRange(0.5, 40),
+@click.option("--fps", default=10.0, show_default=True, type=FiniteFloatRange(1, 100), help="Frame rate.")
+@click.option("--speed", "speed_mps", default=8.0, show_default=True, type=FiniteFloatRange(0.5, 40),
               help="Vehicle speed, m/s.")
-@click.option("--lead-in", "lead_in_m", default=35.0, show_default=True, type=click.FloatRange(0, 200),
+@click.option("--lead-in", "lead_in_m", default=35.0, show_default=True, type=FiniteFloatRange(0, 200),
               help="Path length before the junction connection, metres.")
-@click.option("--lead-out", "lead_out_m", default=35.0, show_default=True, type=click.FloatRange(0, 200),
+@click.option("--lead-out", "lead_out_m", default=35.0, show_default=True, type=FiniteFloatRange(0, 200),
               help="Path length after the junction connection, metres.")
 @click.option("--vehicle", "vehicle_filter", default="vehicle.lincoln.mkz*", show_default=True,
               help="Blueprint filter of the vehicle (falls back to any four-wheeled vehicle).")

@@ -7,6 +7,7 @@ commands do not load the calibration package.)
 from __future__ import annotations
 
 import functools
+import math
 
 import click
 
@@ -15,11 +16,94 @@ from ..io import load_camera
 from ..uncertainty.budget import load_budget
 from ..uncertainty.ellipse import chi2_scale
 
-__all__ = ["load_camera_and_budget", "check_confidence", "note", "warn", "pose_options", "pose_from_options",
-           "budget_notice", "DEFAULT_STEP_PX"]
+__all__ = ["FiniteFloat", "FiniteFloatRange", "AscendingFloats", "FINITE", "LATITUDE_DEG", "LONGITUDE_DEG",
+           "min_max_callback", "load_camera_and_budget", "check_confidence", "note", "warn", "pose_options",
+           "pose_from_options", "budget_notice", "DEFAULT_STEP_PX"]
 
 #: the default grid step of every map the command line draws (``map``, ``demo``), pixels
 DEFAULT_STEP_PX = 4
+
+class FiniteFloat(click.types.FloatParamType):
+    """A float option that refuses ``nan``, ``inf`` and ``-inf`` (click's ``float`` takes them).
+
+    Every float option of the command line uses this type or :class:`FiniteFloatRange`
+    (``tests/test_cli_options.py`` walks the command tree and gives each float option ``nan``, ``inf``
+    and ``-inf``): a NaN option would otherwise become a verdict computed with NaN, a band named
+    "0-nan m", a cost limit nothing meets.
+    """
+
+    name = "finite float"
+
+    def convert(self, value, param, ctx):
+        rv = super().convert(value, param, ctx)
+        if not math.isfinite(rv):
+            self.fail(f"{value!r} is not a finite number (expected a finite number)", param, ctx)
+        return rv
+
+
+class FiniteFloatRange(click.FloatRange):
+    """:class:`click.FloatRange` that refuses ``nan``, ``inf`` and ``-inf`` first (click's range check
+    lets NaN through: every comparison with NaN is false)."""
+
+    name = "finite float range"
+
+    def convert(self, value, param, ctx):
+        rv = click.types.FloatParamType.convert(self, value, param, ctx)
+        if not math.isfinite(rv):
+            self.fail(f"{value!r} is not a finite number (expected a finite number in {self._describe_range()})",
+                      param, ctx)
+        return super().convert(rv, param, ctx)
+
+
+class AscendingFloats(click.ParamType):
+    """A comma-separated list of finite, strictly ascending numbers (``--range-bands 0,25,50,100``).
+
+    Parameters
+    ----------
+    min_value : float or None
+        Smallest value allowed (None: any).
+    example : str
+        An example shown in the error message.
+    """
+
+    name = "ascending list"
+
+    def __init__(self, min_value: float | None = 0.0, example: str = "0,25,50,100"):
+        self.min_value = min_value
+        self.example = example
+
+    def convert(self, value, param, ctx):
+        if isinstance(value, tuple):
+            return value
+        expected = "comma-separated finite numbers in ascending order"
+        if self.min_value is not None:
+            expected += f", none below {self.min_value:g}"
+        expected += f", e.g. {self.example}"
+        try:
+            edges = tuple(float(v) for v in str(value).split(","))
+        except ValueError:
+            self.fail(f"{value!r} (expected {expected})", param, ctx)
+        bad = (not all(math.isfinite(v) for v in edges)
+               or any(b <= a for a, b in zip(edges, edges[1:], strict=False))
+               or (self.min_value is not None and edges[0] < self.min_value))
+        if bad:
+            self.fail(f"{value!r} (expected {expected})", param, ctx)
+        return edges
+
+
+def min_max_callback(ctx, param, value):
+    """Callback of a ``(min, max)`` option (``type=(FiniteFloatRange(..), FiniteFloatRange(..))``): refuses
+    ``min > max`` with click's one-line message."""
+    if value is not None and len(value) == 2 and value[0] > value[1]:
+        raise click.BadParameter(f"{value[0]:g} {value[1]:g} (expected MIN MAX with MIN <= MAX)", ctx, param)
+    return value
+
+
+#: the shared instance of :class:`FiniteFloat` (``type=FINITE``)
+FINITE = FiniteFloat()
+#: a WGS84 latitude / longitude option, degrees
+LATITUDE_DEG = FiniteFloatRange(-90.0, 90.0)
+LONGITUDE_DEG = FiniteFloatRange(-180.0, 180.0)
 
 _POSE_HELP = "; with an intrinsics-only camera file (e.g. the camera.yaml of `calibrate intrinsics`)."
 _POSE_OPTIONS = (
@@ -27,16 +111,16 @@ _POSE_OPTIONS = (
                  help="The camera's pose, a YAML/JSON file with R and t (world -> camera), rvec and tvec, or "
                       "height_m, pan_deg, tilt_deg [, roll_deg, position_m, ground_z_m] (docs/file-formats.md)"
                       + _POSE_HELP),
-    click.option("--height-m", type=float, default=None, metavar="H",
+    click.option("--height-m", type=FINITE, default=None, metavar="H",
                  help="Pose: camera height above the ground plane, metres (with --pan-deg and --tilt-deg)"
                       + _POSE_HELP),
-    click.option("--pan-deg", type=float, default=None, metavar="DEG",
+    click.option("--pan-deg", type=FINITE, default=None, metavar="DEG",
                  help="Pose: compass heading of the optical axis, degrees clockwise from north."),
-    click.option("--tilt-deg", type=float, default=None, metavar="DEG",
+    click.option("--tilt-deg", type=FINITE, default=None, metavar="DEG",
                  help="Pose: tilt below the horizontal, degrees (positive down)."),
-    click.option("--roll-deg", type=float, default=None, metavar="DEG",
+    click.option("--roll-deg", type=FINITE, default=None, metavar="DEG",
                  help="Pose: roll about the optical axis, degrees (default 0)."),
-    click.option("--position-m", type=(float, float), default=None, metavar="X Y",
+    click.option("--position-m", type=(FINITE, FINITE), default=None, metavar="X Y",
                  help="Pose: camera foot point, metres east and north of the world origin (default 0 0)."),
 )
 _POSE_ARGS = ("pose_file", "height_m", "pan_deg", "tilt_deg", "roll_deg", "position_m")

@@ -14,6 +14,7 @@ from __future__ import annotations
 import click
 
 from ..batch.fusion_files import CAMERA_ID_FROM, DEFAULT_KEY, fuse_files
+from .common import FINITE
 
 __all__ = ["fuse_cmd"]
 
@@ -29,11 +30,11 @@ __all__ = ["fuse_cmd"]
                    "(default: column if every input has one, else filename).")
 @click.option("--key", default=",".join(DEFAULT_KEY), show_default=True, metavar="COL[,COL...]",
               help="Association key: rows with equal values are the same object (ids shared across cameras).")
-@click.option("--confidence", type=float, default=0.99, show_default=True, metavar="P",
+@click.option("--confidence", type=FINITE, default=0.99, show_default=True, metavar="P",
               help="Level of the chi-square consistency tests (per source d^2 and per object).")
-@click.option("--ellipse-confidence", type=float, default=0.95, show_default=True, metavar="P",
+@click.option("--ellipse-confidence", type=FINITE, default=0.95, show_default=True, metavar="P",
               help="Probability of the semi_major_m/semi_minor_m ellipse of the fused centre.")
-@click.option("--heading-offset-deg", type=float, default=0.0, show_default=True, metavar="D",
+@click.option("--heading-offset-deg", type=FINITE, default=0.0, show_default=True, metavar="D",
               help="Compass bearing of the world +y axis (V2X fields).")
 @click.option("--compression", type=click.Choice(["snappy", "zstd", "lz4", "gzip", "none"]), default="snappy",
               show_default=True, help="Parquet compression.")

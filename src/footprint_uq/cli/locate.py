@@ -14,7 +14,7 @@ from ..products.gcp_support import add_support, load_gcp_support
 from ..products.locate import locate_csv, locate_records
 from ..products.warmup import compile_handler
 from ..uncertainty.presets import PRESET_NAMES
-from .common import check_confidence, load_camera_and_budget, note, pose_options, warn
+from .common import FINITE, check_confidence, load_camera_and_budget, note, pose_options, warn
 
 __all__ = ["locate_cmd", "MAX_PIXEL_PX"]
 
@@ -28,14 +28,14 @@ MAX_PIXEL_PX = 1e9
 @click.option("--budget", "budget_spec", required=True, metavar="FILE_OR_PRESET",
               help=f"Error budget: a preset ({', '.join(PRESET_NAMES)}; append @deg to read Table 3's "
                    "angles as degrees instead of the printed 1e-3 deg) or a YAML/JSON budget file.")
-@click.option("--pixel", "pixels", type=(float, float), multiple=True, required=True, metavar="U V",
+@click.option("--pixel", "pixels", type=(FINITE, FINITE), multiple=True, required=True, metavar="U V",
               help="Pixel (u right, v down, origin at the centre of the top-left pixel); repeat for more.")
 @click.option("--format", "fmt", type=click.Choice(["json", "csv"]), default="json", show_default=True,
               help="Output: a JSON list of records, or CSV with the covariance flattened (cov_xx_m2, cov_xy_m2, "
                    "cov_yy_m2).")
-@click.option("--confidence", type=float, default=None, metavar="P",
+@click.option("--confidence", type=FINITE, default=None, metavar="P",
               help="Also report the semi-axes of the P-confidence ellipse (2-D chi-square, 0.95 -> 2.4477 sigma).")
-@click.option("--linear-threshold", type=float, default=0.05, show_default=True, metavar="E",
+@click.option("--linear-threshold", type=FINITE, default=0.05, show_default=True, metavar="E",
               help="linear_ok is true where the predicted relative error of the linear 1-sigma semi-major axis "
                    "(nonlinearity) is at most E.")
 @click.option("--gcp-summary", default=None, metavar="FILE",

@@ -8,7 +8,7 @@ from .._notices import set_compile_handler
 from ..products.gcp_support import load_gcp_support
 from ..products.warmup import compile_handler
 from ..viz.map_report import write_map_report
-from .common import DEFAULT_STEP_PX, check_confidence, load_camera_and_budget, note, pose_options, warn
+from .common import DEFAULT_STEP_PX, FINITE, check_confidence, load_camera_and_budget, note, pose_options, warn
 
 __all__ = ["map_cmd"]
 
@@ -20,14 +20,14 @@ __all__ = ["map_cmd"]
 @click.option("--out", "out_dir", required=True, metavar="DIR", help="Output directory (created).")
 @click.option("--step-px", type=click.IntRange(min=1), default=DEFAULT_STEP_PX, show_default=True,
               help="Grid step in pixels (1 = every pixel).")
-@click.option("--max-range-m", type=float, default=None, metavar="M",
+@click.option("--max-range-m", type=FINITE, default=None, metavar="M",
               help="Mask ground points farther than M metres from the camera foot point.")
-@click.option("--confidence", type=float, default=None, metavar="P",
+@click.option("--confidence", type=FINITE, default=None, metavar="P",
               help="Draw P-confidence semi-axes instead of 1 sigma (0.95 -> 2.4477 sigma).")
 @click.option("--linearity/--no-linearity", default=True, show_default=True,
               help="Compute the linearity flag: the nonlinearity layer (map.npz, nonlinearity.png) and, in the "
                    "figures, the pixels that are not linear_ok hatched with the threshold's contour.")
-@click.option("--linear-threshold", type=float, default=0.05, show_default=True, metavar="E",
+@click.option("--linear-threshold", type=FINITE, default=0.05, show_default=True, metavar="E",
               help="linear_ok where the predicted relative error of the linear 1-sigma semi-major axis is at most E.")
 @click.option("--gcp-summary", default=None, metavar="FILE",
               help="summary.json of the `calibrate gcp` run the camera and budget come from: also writes "

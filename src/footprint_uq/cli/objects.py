@@ -27,7 +27,7 @@ from ..products.footprints import CONTACT_MODES, V2X_POLICIES
 from ..products.warmup import compile_handler
 from ..uncertainty.budget import load_budget
 from ..uncertainty.presets import PRESET_NAMES
-from .common import budget_notice, load_camera_and_budget, note, pose_options, warn
+from .common import FINITE, LATITUDE_DEG, LONGITUDE_DEG, budget_notice, load_camera_and_budget, note, pose_options, warn
 
 __all__ = ["objects_cmd"]
 
@@ -77,12 +77,14 @@ __all__ = ["objects_cmd"]
               help="Ground contact of 2D boxes: the bottom-edge centre, or its two corners.")
 @click.option("--chunk-rows", type=click.IntRange(min=1), default=DEFAULT_CHUNK_ROWS, show_default=True,
               help="Rows per chunk (memory grows with it, not with the file size).")
-@click.option("--confidence", type=float, default=None, metavar="P",
+@click.option("--confidence", type=FINITE, default=None, metavar="P",
               help="Also write semi_major_m/semi_minor_m of the P-confidence ellipse (2-D chi-square).")
-@click.option("--heading-offset-deg", type=float, default=0.0, show_default=True, metavar="D",
+@click.option("--heading-offset-deg", type=FINITE, default=0.0, show_default=True, metavar="D",
               help="Compass bearing of the world +y axis (V2X fields, lat/lon).")
-@click.option("--origin-lat", type=float, default=None, metavar="LAT", help="WGS84 latitude of the world origin.")
-@click.option("--origin-lon", type=float, default=None, metavar="LON", help="WGS84 longitude of the world origin.")
+@click.option("--origin-lat", type=LATITUDE_DEG, default=None, metavar="LAT",
+              help="WGS84 latitude of the world origin.")
+@click.option("--origin-lon", type=LONGITUDE_DEG, default=None, metavar="LON",
+              help="WGS84 longitude of the world origin.")
 @click.option("--corners", is_flag=True, help="Also write every corner's pixel, ground position and covariance.")
 @click.option("--allow-outside-image", is_flag=True,
               help="Let corners outside the image enter the centre and the largest point.")
@@ -90,7 +92,7 @@ __all__ = ["objects_cmd"]
               help="Compute the centre's linearity flag (columns nonlinearity, linear_ok, c<k>_nonlinearity) and "
                    "apply --v2x-policy to the centres that are not linear_ok; --no-linearity: no flag columns, "
                    "every V2X field from the linear covariance (faster).")
-@click.option("--linear-threshold", type=float, default=0.05, show_default=True, metavar="E",
+@click.option("--linear-threshold", type=FINITE, default=0.05, show_default=True, metavar="E",
               help="linear_ok is true where the centre's nonlinearity (predicted relative error of the linear "
                    "sigma_major_m) is at most E.")
 @click.option("--v2x-policy", type=click.Choice(list(V2X_POLICIES)), default="sampled", show_default=True,

@@ -15,7 +15,7 @@ import click
 from ..errors import InputError
 from ..viz.plan_server import serve_plan
 from ..viz.planning_run import PlanOptions, run_evaluate, run_plan
-from .common import warn
+from .common import FiniteFloatRange, warn
 
 __all__ = ["plan_cmd"]
 
@@ -43,12 +43,12 @@ def _echo_zones(ev):
               help="--serve: port on 127.0.0.1 (0: any free port).")
 @click.option("--cameras", "max_cameras", type=click.IntRange(min=1), default=None,
               help="Number of cameras K (default: search.max_cameras of the site file).")
-@click.option("--max-cost", type=click.FloatRange(min=0), default=None, help="Largest total cost (mounts + cameras).")
+@click.option("--max-cost", type=FiniteFloatRange(min=0), default=None, help="Largest total cost (mounts + cameras).")
 @click.option("--method", type=click.Choice(["best", "greedy", "milp", "both"]), default="best", show_default=True,
               help="Discrete stage: best (milp where the grid allows it, greedy, swap search, each refined, the "
                    "best kept, with a bound on the distance to the grid's optimum), lazy greedy, scipy milp "
                    "(exact over the grid for pairs), or greedy and milp.")
-@click.option("--time-limit-s", type=click.FloatRange(min=0, min_open=True), default=300.0, show_default=True,
+@click.option("--time-limit-s", type=FiniteFloatRange(min=0, min_open=True), default=300.0, show_default=True,
               help="Time limit of the discrete stage (best: all of it; milp: the integer program).")
 @click.option("--fusion/--no-fusion", default=True, show_default=True,
               help="Count a sample as met by the fused covariance of every camera that sees it (or one camera).")

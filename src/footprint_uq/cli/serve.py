@@ -18,7 +18,7 @@ from ..service.runner import MAX_FRAME_BYTES, QUEUE_DEPTH, run
 from ..tracking.consistency import DEFAULT_WINDOW_S
 from ..uncertainty.budget import load_budget
 from ..uncertainty.presets import PRESET_NAMES
-from .common import budget_notice, pose_options, warn
+from .common import FINITE, LATITUDE_DEG, LONGITUDE_DEG, FiniteFloatRange, budget_notice, pose_options, warn
 
 __all__ = ["serve_cmd"]
 
@@ -44,17 +44,19 @@ __all__ = ["serve_cmd"]
 @click.option("--overload", "policy", type=click.Choice(["newest", "block"]), default=None,
               help="When input outruns processing: keep the newest frame per camera and count the dropped ones "
                    "(default for MQTT), or block the reader (default for stdin).")
-@click.option("--health-interval-s", type=click.FloatRange(min=0), default=1.0, show_default=True,
+@click.option("--health-interval-s", type=FiniteFloatRange(min=0), default=1.0, show_default=True,
               help="Period of the health/metrics message (0: none).")
 @click.option("--workers", type=click.IntRange(min=1), default=None,
               help="Worker processes (MQTT input with --registry): the cameras are split over them. Default: "
                    "min(cores - 1, cameras) with MQTT input and a registry (1 on a 2-core machine), else 1.")
 @click.option("--client-id", default=None, help="MQTT client id (persistent session; default footprint-uq-serve-PID).")
-@click.option("--heading-offset-deg", type=float, default=0.0, show_default=True, metavar="D",
+@click.option("--heading-offset-deg", type=FINITE, default=0.0, show_default=True, metavar="D",
               help="Compass bearing of the world +y axis (V2X fields, message east/north offsets).")
-@click.option("--origin-lat", type=float, default=None, metavar="LAT", help="WGS84 latitude of the world origin.")
-@click.option("--origin-lon", type=float, default=None, metavar="LON", help="WGS84 longitude of the world origin.")
-@click.option("--confidence", type=click.FloatRange(0, 1, min_open=True, max_open=True), default=0.95,
+@click.option("--origin-lat", type=LATITUDE_DEG, default=None, metavar="LAT",
+              help="WGS84 latitude of the world origin.")
+@click.option("--origin-lon", type=LONGITUDE_DEG, default=None, metavar="LON",
+              help="WGS84 longitude of the world origin.")
+@click.option("--confidence", type=FiniteFloatRange(0, 1, min_open=True, max_open=True), default=0.95,
               show_default=True, help="Probability of the semi_major_m/semi_minor_m ellipse.")
 @click.option("--contact", type=click.Choice(list(CONTACT_MODES)), default="bottom-centre", show_default=True,
               help="Ground contact of 2D boxes.")
@@ -67,7 +69,7 @@ __all__ = ["serve_cmd"]
               help="Add per object nonlinearity (predicted relative error of the linear sigma_major_m, worst "
                    "ground-contact point) and linear_ok, as map and objects do; costs ~1.7 ms per 100 points "
                    "(--no-linearity: without).")
-@click.option("--linear-threshold", type=click.FloatRange(min=0, min_open=True), default=None, metavar="E",
+@click.option("--linear-threshold", type=FiniteFloatRange(min=0, min_open=True), default=None, metavar="E",
               help="linear_ok is nonlinearity <= E (default 0.05).")
 @click.option("--tracks", is_flag=True,
               help="Track each camera's objects by object_id and add their velocity, speed, heading, yaw, their "

@@ -16,6 +16,7 @@ from ..uncertainty.presets import PRESET_NAMES
 from ..validation.coverage import DEFAULT_RANGE_BANDS_M
 from ..validation.pairs import CONTACT_MODELS
 from ..viz.validation_run import KINDS, run_validation
+from .common import FINITE, LATITUDE_DEG, LONGITUDE_DEG, AscendingFloats, FiniteFloatRange, note
 
 __all__ = ["validate_cmd", "label_source_options", "size_priors_option"]
 
@@ -44,21 +45,13 @@ _LABEL_SOURCE_OPTIONS = [
     click.option("--calibration", default=None, metavar="FILE", help="TUMTraf calibration JSON of OpenLABEL labels."),
     click.option("--image-size", nargs=2, type=click.IntRange(min=1), default=None, metavar="W H",
                  help="Image size where the files do not give it (Rope3D: 1920 1080, the default there)."),
-    click.option("--origin-lat", type=float, default=None, metavar="LAT", help="WGS84 latitude of the world origin."),
-    click.option("--origin-lon", type=float, default=None, metavar="LON", help="WGS84 longitude of the world origin."),
-    click.option("--heading-offset-deg", type=float, default=0.0, show_default=True, metavar="D",
+    click.option("--origin-lat", type=LATITUDE_DEG, default=None, metavar="LAT",
+              help="WGS84 latitude of the world origin."),
+    click.option("--origin-lon", type=LONGITUDE_DEG, default=None, metavar="LON",
+              help="WGS84 longitude of the world origin."),
+    click.option("--heading-offset-deg", type=FINITE, default=0.0, show_default=True, metavar="D",
                  help="Compass bearing of the world +y axis (truth given as lat_deg, lon_deg)."),
 ]
-
-
-def _bands(text: str) -> tuple[float, ...]:
-    try:
-        edges = tuple(float(v) for v in text.split(","))
-    except ValueError:
-        raise InputError("--range-bands", text, "comma-separated distances in metres, e.g. 0,25,50,100") from None
-    if len(edges) < 1 or any(b <= a for a, b in zip(edges, edges[1:], strict=False)) or edges[0] < 0:
-        raise InputError("--range-bands", text, "ascending non-negative distances in metres, e.g. 0,25,50,100")
-    return edges
 
 
 @click.command("validate")
@@ -83,9 +76,9 @@ def _bands(text: str) -> tuple[float, ...]:
               help="Integer class ids of --detections -> names (default: the format's own).")
 @click.option("--unknown-class", type=click.Choice(UNKNOWN_POLICIES), default="error", show_default=True,
               help="A class id without a name: that detection's error, or the class 'unknown'.")
-@click.option("--range-bands", default=",".join(f"{v:g}" for v in DEFAULT_RANGE_BANDS_M), show_default=True,
-              metavar="EDGES", help="Range band edges in metres (the last band is open).")
-@click.option("--alpha", type=click.FloatRange(0.0, 0.5, min_open=True), default=0.05, show_default=True,
+@click.option("--range-bands", type=AscendingFloats(0.0), default=",".join(f"{v:g}" for v in DEFAULT_RANGE_BANDS_M),
+              show_default=True, metavar="EDGES", help="Range band edges in metres (the last band is open).")
+@click.option("--alpha", type=FiniteFloatRange(0.0, 0.5, min_open=True), default=0.05, show_default=True,
               help="Significance of the NEES test (two-sided) and of the bias test.")
 @click.option("--objects-format", type=click.Choice(["csv", "parquet"]), default="csv", show_default=True,
               help="Format of the per-object file.")
@@ -107,7 +100,7 @@ def validate_cmd(labels, out_dir, budget_spec, contact, size_priors, kind, camer
                                     registry=registry, calibration=calibration,
                                     image_size_px=tuple(image_size) if image_size else None,
                                     origin_lat_deg=origin_lat, origin_lon_deg=origin_lon,
-                                    heading_offset_deg=heading_offset_deg, range_bands_m=_bands(range_bands),
+                                    heading_offset_deg=heading_offset_deg, range_bands_m=range_bands,
                                     alpha=alpha, objects_format=objects_format, report=not no_report, fsync=fsync,
                                     detections=detections,
                                     detections_format=None if detections_format == "auto" else detections_format,
@@ -124,3 +117,9 @@ def validate_cmd(labels, out_dir, budget_spec, contact, size_priors, kind, camer
     click.echo(f"footprint-uq validate: {msg}; unpaired: {un['detections_without_truth']} detections without truth, "
                f"{un['truth_without_detection']} truths without detection, {un['error_rows']} error rows, "
                f"{un['no_ground_point']} without ground point; {out_dir}/{files['summary'].name}")
+    refused = summary.get("refused", {})
+    if refused.get("rows"):  # why rows were refused, the most frequent reasons first (all in summary.json)
+        top = list(refused["by_reason"].items())
+        why = "; ".join(f"{n} x {k}" for k, n in top[:3]) + ("; ..." if len(top) > 3 else "")
+        note(f"{refused['rows']} rows refused ({why}); per row in {files['objects'].name}, by reason in "
+             f"{files['summary'].name} ('refused')")

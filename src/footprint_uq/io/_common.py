@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .._files import file_kind, read_input_text
 from .._parse import load_yaml_or_json
 from ..errors import ConfigError, ConsistencyWarning, InputError
 
@@ -52,10 +53,11 @@ def rewrap(e: InputError, where: str) -> ConfigError:
 
 def read_text(path) -> tuple[Path, str]:
     p = Path(path)
-    if not p.is_file():
-        raise ConfigError("camera file", str(path), "an existing file")
+    if file_kind(p) not in ("regular file", "FIFO"):  # a FIFO: read once, as a stream (never a hang)
+        raise ConfigError("camera file", str(path), "an existing file" if not p.exists() else
+                          f"a regular file or a FIFO (got a {file_kind(p) or 'path that cannot be read'})")
     try:
-        return p, p.read_text(encoding="utf-8")
+        return p, read_input_text(p, "camera file")
     except (OSError, UnicodeDecodeError) as e:
         raise ConfigError(str(p), type(e).__name__, f"a readable UTF-8 text file ({e})") from None
 

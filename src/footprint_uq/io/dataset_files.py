@@ -645,6 +645,8 @@ def _numbers_line(where, field, text, n):
         raise ConfigError(C.label(where, field), text.strip()[:60], f"{n} numbers") from None
     if len(vals) != n or not np.all(np.isfinite(vals)):
         raise ConfigError(C.label(where, field), text.strip()[:60], f"{n} finite numbers")
+    if np.any(np.abs(vals) > C.MAX_MAGNITUDE):  # the camera files' limit: beyond it products overflow
+        raise ConfigError(C.label(where, field), text.strip()[:60], f"{n} numbers of magnitude <= {C.MAX_MAGNITUDE:g}")
     return np.array(vals)
 
 

@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from .._files import read_input_text
 from .._parse import load_yaml
 from ..errors import ConfigError
 from ..uncertainty.budget import load_budget
@@ -113,7 +114,7 @@ def load_registry(path, *, budget=None) -> dict[str, RegistryEntry]:
         base = p.parent
         suffix = p.suffix.lower()
         try:
-            text = p.read_text(encoding="utf-8-sig")
+            text = read_input_text(p, "registry", encoding="utf-8-sig")  # a FIFO: a stream
         except (OSError, UnicodeDecodeError) as e:
             raise ConfigError("registry", str(p), f"a readable UTF-8 text file ({type(e).__name__}: {e})") from None
         if "\x00" in text:

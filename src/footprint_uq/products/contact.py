@@ -27,6 +27,7 @@ import yaml
 from .. import params as P
 from .. import status
 from .._checks import as_points, check_cov
+from .._files import read_input_text
 from ..cameras import general
 from ..cameras.rotation import R_W_C, dR_W_C
 from ..errors import ConfigError, InputError
@@ -97,7 +98,7 @@ def _read_priors(path) -> dict:
 def _parse_priors(path: str, stamp) -> dict:
     p = Path(path)
     try:
-        d = yaml.safe_load(p.read_text(encoding="utf-8"))
+        d = yaml.safe_load(read_input_text(p, "size priors"))
     except (OSError, UnicodeDecodeError, yaml.YAMLError) as e:
         raise ConfigError(str(p), type(e).__name__, f"a readable YAML size-prior file ({str(e).splitlines()[0]})") \
             from None

@@ -23,6 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .._files import read_input_text
 from ..cameras import general
 from ..errors import InputError
 from ..io.atomic import atomic_path
@@ -73,7 +74,7 @@ def load_gcp_support(path, budget=None) -> dict:
     ``budget``'s (a budget named ``gcp-<id>`` must have the summary's ``solve_id``)."""
     p = Path(path)
     try:
-        data = json.loads(p.read_text(encoding="utf-8"))
+        data = json.loads(read_input_text(p, "--gcp-summary"))
         sup = data["support"]
         hull = np.asarray(sup["hull_uv_px"], dtype=np.float64).reshape(-1, 2)
         lev = float(sup["leverage_max_px2"])

@@ -80,7 +80,7 @@ from .messages.uper_cpm import (
 )
 
 __all__ = ["Service", "CameraSetup", "FrameOutput", "error_record", "station_id_of", "RECORD_FOOTPRINTS",
-           "RECORD_ERROR", "UPER_ENCODERS", "RECORD_LAYOUTS", "COMPACT_OBJECT_FIELDS"]
+           "RECORD_ERROR", "UPER_ENCODERS", "RECORD_LAYOUTS", "COMPACT_OBJECT_FIELDS", "MAX_FRAME_DETECTIONS"]
 
 UPER_ENCODERS = ("fast", "asn1tools")
 #: the record layouts (``Service(record=...)``, ``serve --record``)
@@ -90,6 +90,10 @@ COMPACT_OBJECT_FIELDS = ("object_id", "class", "status", "reason", "x_m", "y_m",
                          "track_id", "v_east_mps", "v_north_mps", "cov_v_m2ps2")
 #: most perceived objects in one CPM (``PerceivedObjects ::= SEQUENCE SIZE (0..255, ...)``); the SDSM follows
 MAX_MESSAGE_OBJECTS = 255
+#: most detections one frame may hold (``Service(max_frame_detections=...)``); a frame with more is one error
+#: record, refused before any parsing.  40 CPMs' worth: a detector's frame holds tens to hundreds; 100,000
+#: detections (16 MB of JSON, over the transports' 4 MiB --max-frame-bytes) took 4 s and an 82 MB record
+MAX_FRAME_DETECTIONS = 10_000
 
 RECORD_FOOTPRINTS = "footprints"
 #: the dummy frames' time of :meth:`Service.warm_up` (a valid TimestampIts: 2023-11-14)
@@ -290,6 +294,9 @@ class Service:
     consistency_window_s : float
         With tracks: the window of the on-line NIS check of the motion model per camera and class
         (:class:`~footprint_uq.tracking.consistency.NisMonitor`, :meth:`motion_health`); 0: no check.
+    max_frame_detections : int
+        Most detections of one frame (default :data:`MAX_FRAME_DETECTIONS`); a frame with more is refused
+        with one error record (field ``detections``) before it is parsed.
     """
 
     def __init__(self, camera=None, budget=None, *, registry=None, camera_id: str | None = None,
@@ -300,13 +307,18 @@ class Service:
                  warm_up: bool = True, cpm_cdd: str = DEFAULT_CDD, v2x_policy: str = "sampled",
                  tracks: bool = False, tracker: TrackerConfig | None = None,
                  class_names: str | ClassNames | None = None, record: str = "full",
-                 consistency_window_s: float = DEFAULT_WINDOW_S):
+                 consistency_window_s: float = DEFAULT_WINDOW_S,
+                 max_frame_detections: int = MAX_FRAME_DETECTIONS):
         if (camera is None) == (registry is None):
             raise InputError("camera/registry", "both" if camera is not None else "neither",
                              "exactly one of a camera (with a budget) or a registry")
         if contact not in CONTACT_MODES:
             raise InputError("contact", contact, f"one of {CONTACT_MODES}")
         self.contact = contact
+        if isinstance(max_frame_detections, bool) or not isinstance(max_frame_detections, int) or \
+                max_frame_detections < 1:
+            raise InputError("max_frame_detections", max_frame_detections, "an integer >= 1")
+        self.max_frame_detections = max_frame_detections
         self.confidence = float(confidence)
         if not 0.0 < self.confidence < 1.0:
             raise InputError("confidence", confidence, "a probability in (0, 1)")
@@ -502,6 +514,9 @@ class Service:
         dets = frame.get("detections")
         if not isinstance(dets, list):
             raise _FrameError("detections", f"field detections is not a list: {type(dets).__name__}")
+        if len(dets) > self.max_frame_detections:  # the frame size limit: one error record, nothing parsed
+            raise _FrameError("detections", f"{len(dets)} detections in one frame, more than the frame limit of "
+                              f"{self.max_frame_detections} (split the frame)")
         ref_ms = timestamp_its_ms(ts) if self.messages else None
         est, found = self._footprints(setup, dets)
         ids, classes, class_p = found.object_ids, found.classes, found.class_confidence

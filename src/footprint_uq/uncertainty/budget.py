@@ -43,6 +43,7 @@ import numpy as np
 
 from .. import params as P
 from .._checks import check_cov
+from .._files import read_input_text
 from .._parse import load_yaml_or_json
 from ..errors import ConfigError, InputError
 from . import presets
@@ -469,7 +470,7 @@ def load_budget(spec) -> ErrorBudget:
     if not path.exists():
         raise ConfigError("budget", s, f"a preset ({_preset_choices()}) or an existing file")
     try:
-        text = path.read_text(encoding="utf-8")
+        text = read_input_text(path, "budget")  # a FIFO: a stream; a device: refused
     except (OSError, UnicodeDecodeError) as e:
         raise ConfigError(str(path), type(e).__name__, f"a readable UTF-8 budget file ({e})") from None
     try:

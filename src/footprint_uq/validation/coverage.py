@@ -39,6 +39,7 @@ from scipy.special import chdtrc, ndtri
 from .. import params as P
 from ..errors import InputError
 from ..uncertainty.ellipse import ellipse_axes
+from .pairs import STATUS_ERROR, refused_reasons
 
 __all__ = ["LEVELS", "DEFAULT_RANGE_BANDS_M", "object_metrics", "nees_threshold", "wilson_interval",
            "CoverageAccumulator", "VERDICTS", "range_band_labels"]
@@ -52,6 +53,8 @@ GRID = np.round(np.arange(0.05, 0.995, 0.01), 2)
 VERDICTS = ("consistent", "over-confident", "under-confident")
 #: objects kept (seeded random sample) for the figures and the error quantiles
 SAMPLE_SIZE = 20_000
+#: most kinds of refusal listed in the summary (the rest are counted as one)
+MAX_REFUSAL_KINDS = 50
 
 
 def nees_threshold(level) -> np.ndarray:
@@ -146,14 +149,18 @@ class CoverageAccumulator:
 
     def __init__(self, *, range_bands_m=DEFAULT_RANGE_BANDS_M, alpha: float = 0.05, seed: int = 0):
         self.edges = np.asarray(range_bands_m, dtype=np.float64)
-        if self.edges.ndim != 1 or self.edges.size < 1 or np.any(np.diff(self.edges) <= 0):
-            raise InputError("range_bands_m", list(np.ravel(range_bands_m)), "ascending distances in metres")
+        if (self.edges.ndim != 1 or self.edges.size < 1 or not np.all(np.isfinite(self.edges))
+                or np.any(np.diff(self.edges) <= 0)):
+            raise InputError("range_bands_m", list(np.ravel(range_bands_m)), "finite ascending distances in metres")
         self.alpha = float(alpha)
+        if not 0.0 < self.alpha <= 0.5:  # (NaN fails too: a verdict at significance NaN would say "consistent")
+            raise InputError("alpha", alpha, "a significance in (0, 0.5]")
         self.band_labels = range_band_labels(self.edges)
         self.groups: dict[int, _Group] = {}
         self.by = {"range": {}, "class": {}, "linear_ok": {}}
         self.grid_counts = np.zeros(len(GRID), dtype=np.int64)
         self.status_counts: dict[str, int] = {}
+        self.refused: dict[str, int] = {}
         self.n = 0
         self.rng = np.random.default_rng(seed)
         self.sample: dict[str, np.ndarray] | None = None
@@ -166,10 +173,16 @@ class CoverageAccumulator:
         ``budgets`` maps each group number to its parameter covariance (22, 22) (the budget's
         ``param_covariance()``).
         """
+        m = object_metrics(pairs.residual_m, pairs.cov_m2)
+        lost = pairs.usable & ~np.isfinite(m["nees"])
+        if np.any(lost):  # never an "ok" row outside the count: an error row (in place: the per-object file agrees)
+            pairs.status[lost] = STATUS_ERROR
+            pairs.reason[lost] = "NEES not finite (residual or covariance beyond the float range)"
         for s, c in zip(*np.unique(pairs.status.astype(str), return_counts=True), strict=True):
             self.status_counts[str(s)] = self.status_counts.get(str(s), 0) + int(c)
-        m = object_metrics(pairs.residual_m, pairs.cov_m2)
-        ok = pairs.usable & np.isfinite(m["nees"])
+        for k, c in refused_reasons(pairs.status, pairs.reason).items():
+            self.refused[k] = self.refused.get(k, 0) + c
+        ok = pairs.usable
         if not np.any(ok):
             return m
         idx = np.flatnonzero(ok)
@@ -342,10 +355,21 @@ class CoverageAccumulator:
         return {"median_m": float(np.median(e)), "p95_m": float(np.percentile(e, 95)), "max_m": float(e.max()),
                 "exact": bool(self.n <= SAMPLE_SIZE)}
 
+    def refusals(self) -> dict:
+        """The error rows: how many, and how many per kind of reason (values masked; the most frequent
+        :data:`MAX_REFUSAL_KINDS` kinds, the rest as ``"(other reasons)"``)."""
+        kinds = sorted(self.refused.items(), key=lambda kv: (-kv[1], kv[0]))
+        by = dict(kinds[:MAX_REFUSAL_KINDS])
+        rest = sum(c for _, c in kinds[MAX_REFUSAL_KINDS:])
+        if rest:
+            by["(other reasons)"] = rest
+        return {"rows": sum(self.refused.values()), "by_reason": by}
+
     def summary(self) -> dict:
         """Everything, as a JSON-ready dict."""
         test = self.nees_test()
-        return {"n_pairs": self.n, "rows": self.status_counts, "verdict": test.get("verdict"), "nees_test": test,
+        return {"n_pairs": self.n, "rows": self.status_counts, "refused": self.refusals(),
+                "verdict": test.get("verdict"), "nees_test": test,
                 "coverage": self.coverage(), "bias": self.bias(), "error": self.error_quantiles(),
                 "by_range": self.breakdown("range"), "by_class": self.breakdown("class"),
                 "by_linear_ok": self.breakdown("linear_ok"), "calibration_curve": self.calibration_curve(),

@@ -22,6 +22,7 @@ Jacobian, the per-object covariance and the calibration group (one integer per c
 from __future__ import annotations
 
 import functools
+import re
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, fields
 
@@ -40,12 +41,12 @@ from ..products.contact import (
 )
 from ..uncertainty.budget import load_budget
 from ..uncertainty.propagation import DEFAULT_LINEAR_THRESHOLD
-from .readers import NO_DETECTION, NO_TRUTH, LabelChunk
+from .readers import NO_DETECTION, NO_TRUTH, LabelChunk, row_problems
 
 __all__ = ["ContactResult", "bottom_centre", "CONTACT_MODELS", "contact_model", "with_size_priors", "Pairs",
            "GroupIndex",
            "build_pairs", "iter_pairs", "collect_pairs", "STATUS_OK", "STATUS_ERROR", "STATUS_NO_TRUTH",
-           "STATUS_NO_DETECTION", "STATUS_NO_GROUND"]
+           "STATUS_NO_DETECTION", "STATUS_NO_GROUND", "refused_reasons", "reason_kind"]
 
 #: per-object status of a pair
 STATUS_OK = "ok"                    # residual computed
@@ -162,7 +163,10 @@ def _status_of(chunk: LabelChunk) -> tuple[np.ndarray, np.ndarray]:
     n = len(chunk)
     st = np.full(n, STATUS_OK, dtype=object)
     why = np.full(n, "ok", dtype=object)
+    numbers = row_problems(chunk)  # a number out of its range: an error row, whatever the reader said
     for i, e in enumerate(chunk.error):
+        if numbers[i] is not None and (e is None or e in (NO_TRUTH, NO_DETECTION)):
+            e = numbers[i]
         if e is None:
             continue
         st[i] = {NO_TRUTH: STATUS_NO_TRUTH, NO_DETECTION: STATUS_NO_DETECTION}.get(e, STATUS_ERROR)
@@ -207,17 +211,49 @@ def build_pairs(chunk: LabelChunk, budget, *, contact="bottom-centre", groups: G
         codes = np.asarray(res.status)[~np.asarray(res.valid, dtype=bool)]
         st[bad] = np.where(st[bad] == STATUS_OK, STATUS_NO_GROUND, st[bad])
         why[bad] = [status.REASONS.get(int(c), f"status {int(c)}") for c in codes]
-    ok = st == STATUS_OK
-    resid = np.where(ok[:, None], chunk.truth_xy_world_m - xy, np.nan)
+    resid = np.where((st == STATUS_OK)[:, None], chunk.truth_xy_world_m - xy, np.nan)
+    _refuse_unusable(st, why, resid, cov)
     g = -1 if chunk.camera is None else groups(chunk.camera_key)
     ref = np.where(np.isfinite(chunk.truth_xy_world_m).all(1)[:, None], chunk.truth_xy_world_m, xy)
-    rng = (np.linalg.norm(ref - np.asarray(chunk.camera.position_world_m)[:2], axis=1)
-           if chunk.camera is not None else np.full(n, np.nan))
+    with np.errstate(over="ignore", invalid="ignore"):  # (a truth refused as out of range may overflow here)
+        rng = (np.hypot(*(ref - np.asarray(chunk.camera.position_world_m)[:2]).T)
+               if chunk.camera is not None else np.full(n, np.nan))
     return Pairs(source=np.full(n, chunk.source, dtype=object), line=np.asarray(chunk.line, dtype=np.int64),
                  frame=chunk.frame, object_id=chunk.object_id, cls=chunk.cls, group=np.full(n, g, dtype=np.int64),
                  status=st, reason=why, box_xyxy_px=chunk.box_xyxy_px, truth_xy_world_m=chunk.truth_xy_world_m,
                  xy_world_m=xy, residual_m=resid, cov_m2=cov, cov_object_m2=cov_obj, dxy_dp=J, range_m=rng,
                  truth_z_m=chunk.truth_z_m, nonlinearity=nl, linear_ok=np.isfinite(nl) & (nl <= linear_threshold))
+
+
+def _refuse_unusable(st: np.ndarray, why: np.ndarray, resid: np.ndarray, cov: np.ndarray) -> None:
+    """Rows ``ok`` whose residual is not finite or whose covariance is not finite and positive definite become
+    error rows (in place): no row counts as a pair without a finite NEES."""
+    ok = st == STATUS_OK
+    a, b, d = cov[:, 0, 0], cov[:, 0, 1], cov[:, 1, 1]
+    with np.errstate(invalid="ignore", over="ignore"):
+        pd = np.isfinite(cov).all((1, 2)) & (a > 0) & (a * d - b * b > 0)
+    for i in np.flatnonzero(ok & ~np.isfinite(resid).all(1)):
+        st[i], why[i] = STATUS_ERROR, "residual not finite (truth or prediction beyond the float range)"
+    for i in np.flatnonzero((st == STATUS_OK) & ~pd):
+        st[i], why[i] = STATUS_ERROR, "ground covariance not finite and positive definite (no NEES)"
+
+
+def refused_reasons(status_, reason) -> dict:
+    """``{kind: count}`` of the error rows of some pairs, the kinds being their reasons with the values
+    (numbers, quoted text, lists) masked as ``#`` (so "box [1.0, 2.0, ...]" rows count as one kind)."""
+    out: dict[str, int] = {}
+    for r in np.asarray(reason, dtype=object)[np.asarray(status_, dtype=object) == STATUS_ERROR]:
+        k = reason_kind(str(r))
+        out[k] = out.get(k, 0) + 1
+    return out
+
+
+_VALUE = re.compile(r"\[[^\]]*\]|'[^']*'|\"[^\"]*\"|(?<![\w.])[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?(?![\w.])")
+
+
+def reason_kind(reason: str) -> str:
+    """A reason with its values masked (``#``): the key of :func:`refused_reasons`."""
+    return _VALUE.sub("#", reason)
 
 
 def iter_pairs(chunks: Iterable[LabelChunk], budget, *, contact="bottom-centre", groups: GroupIndex | None = None,

@@ -49,7 +49,9 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.compute as pc
 
+from .._files import is_stream, read_input_bytes
 from ..batch.formats import open_reader
+from ..batch.process import MAX_PIXEL_VAR_PX2, PSD_TOL
 from ..batch.readers import open_detections
 from ..batch.schema import BOX2D_COLUMNS, COV_COLUMNS
 from ..errors import ConfigError, InputError
@@ -60,7 +62,7 @@ __all__ = ["LabelChunk", "FolderReport", "read_kitti_folder", "parse_kitti_label
            "parse_dair_v2x_labels", "read_openlabel", "read_pairs_table", "read_detections_with_truth",
            "TRUTH_XY_COLUMNS", "TRUTH_GEO_COLUMNS", "NO_TRUTH", "NO_DETECTION", "ROPE3D_IMAGE_SIZE_PX",
            "camera_folders", "read_camera_folders", "openlabel_sequences", "read_openlabel_sequences",
-           "SEQUENCE_CALIBRATION"]
+           "SEQUENCE_CALIBRATION", "row_problems", "MAX_BOX_PX", "MAX_TRUTH_RANGE_M", "MAX_TRUTH_Z_M", "MAX_COORD_M"]
 
 #: truth columns of a pairs table: world frame, or WGS84 (needs the camera's geodetic origin)
 TRUTH_XY_COLUMNS = ("x_m", "y_m")
@@ -70,6 +72,13 @@ NO_TRUTH = "no truth"
 NO_DETECTION = "no detection"
 #: Rope3D images are 1920 x 1080 (the size is not in its calibration files)
 ROPE3D_IMAGE_SIZE_PX = (1920, 1080)
+#: sane ranges of a labelled row's numbers (beyond them the row is an error row, never a pair): a box corner
+#: this far from the image is no detection; a truth this far from its camera (horizontally) or from its ground
+#: plane was not seen by it; a coordinate beyond MAX_COORD_M is beyond any local or projected frame (UTM, ECEF)
+MAX_BOX_PX = 1e6
+MAX_TRUTH_RANGE_M = 1e5
+MAX_TRUTH_Z_M = 1e4
+MAX_COORD_M = 1e9
 #: KITTI label fields after the type: truncated occluded alpha bbox(4) dimensions(3) location(3) rotation_y
 _KITTI_FIELDS = 14
 
@@ -153,8 +162,8 @@ def _chunk(source, key, camera, rows: list[dict], *, budget=None) -> LabelChunk:
 def _file_key(*paths) -> str:
     """Calibration group key: a hash of the calibration files' bytes (identical calibrations share a draw)."""
     h = hashlib.sha1()
-    for p in paths:
-        h.update(Path(p).read_bytes())
+    for p in paths:  # a FIFO was read once already (the camera): its name stands for it
+        h.update(str(Path(p).resolve()).encode() if is_stream(p) else Path(p).read_bytes())
     return h.hexdigest()[:12]
 
 
@@ -216,11 +225,13 @@ def parse_kitti_labels(text: str, *, camera, frame: str = "") -> list[dict]:
 
 def _read_label_text(path) -> tuple[str | None, str | None]:
     try:
-        return Path(path).read_bytes().decode("utf-8-sig"), None
+        return read_input_bytes(path, "labels").decode("utf-8-sig"), None
     except UnicodeDecodeError as e:
         return None, f"label file not UTF-8 (byte 0x{e.object[e.start]:02x} at offset {e.start})"
     except OSError as e:
         return None, f"label file unreadable ({e.strerror or e})"
+    except InputError as e:  # a device, a FIFO nobody writes
+        return None, f"label file unreadable ({e.expected})"
 
 
 def _folder(folder, sub: str) -> Path:
@@ -401,8 +412,8 @@ def parse_dair_v2x_labels(objects, *, frame: str = "") -> list[dict]:
 
 def _json_list(path):
     try:
-        data = json.loads(Path(path).read_bytes().decode("utf-8-sig"))
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
+        data = json.loads(read_input_bytes(path, "labels").decode("utf-8-sig"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError, InputError) as e:
         return None, f"label file not readable JSON ({type(e).__name__}: {str(e).splitlines()[0][:120]})"
     if not isinstance(data, list):
         return None, f"label file holds a {type(data).__name__}, expected a list of objects"
@@ -496,7 +507,7 @@ def _openlabel_object(uid, obj, i, frame, ground_z_m) -> dict:
 
 def _openlabel_frames(path):
     try:
-        data = json.loads(Path(path).read_bytes().decode("utf-8-sig"))
+        data = json.loads(read_input_bytes(path, "labels").decode("utf-8-sig"))
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
         raise ConfigError("labels", str(path), f"a readable OpenLABEL JSON file ({type(e).__name__})") from None
     top = data.get("openlabel") if isinstance(data, dict) else None
@@ -565,8 +576,8 @@ def _table_errors(box, truth, cov_cols, pre) -> list:
     out = list(pre) if pre is not None else [None] * n
     bad_box = box_nan.any(1) & ~box_nan.all(1)
     bad_truth = truth_nan.any(1) & ~truth_nan.all(1)
-    with np.errstate(invalid="ignore"):
-        order = ~box_nan.any(1) & ((box[:, 2] < box[:, 0]) | (box[:, 3] < box[:, 1]))
+    with np.errstate(invalid="ignore"):  # (an inf box is not "inverted": row_problems names it)
+        order = np.isfinite(box).all(1) & ((box[:, 2] < box[:, 0]) | (box[:, 3] < box[:, 1]))
     for i in np.flatnonzero(bad_box | bad_truth | order | box_nan.all(1) | truth_nan.all(1) | cov_cols):
         if out[i] is not None:
             continue
@@ -661,6 +672,29 @@ def _camera_groups(t: pa.Table, n: int, single: bool):
     return [(None if u < 0 else names[u], p) for _, u, p in sorted(zip(first, uniq.tolist(), parts, strict=True))]
 
 
+def _nan_values(t: pa.Table, names, pre) -> list | None:
+    """``pre`` with the reason of rows holding a NaN value (not an empty field / null: JSON Lines, Parquet;
+    in CSV, pyarrow reads nan, NaN, NA, null as empty) in one of the numeric columns ``names``."""
+    out = list(pre) if pre is not None else None
+    for name in names:
+        if name not in t.column_names or not pa.types.is_floating(t.column(name).type):
+            continue
+        nan = pc.fill_null(pc.is_nan(t.column(name)), False).to_numpy(zero_copy_only=False)
+        for i in np.flatnonzero(nan):
+            out = out if out is not None else [None] * t.num_rows
+            if out[i] is None:
+                out[i] = f"field {name} is NaN (leave it empty, or null, where there is none)"
+    return out
+
+
+def _geo_range(truth: np.ndarray, errors: list) -> None:
+    """Error rows where a lat_deg / lon_deg truth is outside [-90, 90] / [-180, 180] or not finite."""
+    lat, lon = truth[:, 0], truth[:, 1]
+    with np.errstate(invalid="ignore"):
+        bad = ~np.isnan(truth).all(1) & ~((np.abs(lat) <= 90) & (np.abs(lon) <= 180))
+    _first(errors, bad, "truth lat_deg / lon_deg out of range (expected -90..90 and -180..180 degrees)")
+
+
 def _split_table_chunk(ch, path, cams, single, truth_cols, georef, off):
     t, n = ch.table, ch.table.num_rows
     lines = ch.rows + off
@@ -671,7 +705,10 @@ def _split_table_chunk(ch, path, cams, single, truth_cols, georef, off):
     box = np.stack([_column(t, c, n) for c in BOX2D_COLUMNS], 1)
     truth = np.stack([_column(t, c, n) for c in truth_cols], 1)
     cov, partial = _pixel_cov(t, n)
-    errors = _table_errors(box, truth, partial, ch.pre_errors)
+    pre = _nan_values(t, BOX2D_COLUMNS + truth_cols + COV_COLUMNS, ch.pre_errors)
+    errors = _table_errors(box, truth, partial, pre)
+    if truth_cols == TRUTH_GEO_COLUMNS:
+        _geo_range(truth, errors)
     ids = {k: _ids(t, k, n) for k in ("frame", "object_id", "class")}
     for k, sel in _camera_groups(t, n, single):
         entry = cams.get(k)
@@ -688,7 +725,8 @@ def _split_table_chunk(ch, path, cams, single, truth_cols, georef, off):
             if g is None or not g.has_origin:
                 raise InputError("origin", f"camera {k!r}", "a geodetic origin (registry origin_lat_deg/"
                                  "origin_lon_deg or --origin-lat/--origin-lon): the truth is lat_deg, lon_deg")
-            tr = g.from_wgs84(tr[:, 0], tr[:, 1])
+            with np.errstate(invalid="ignore", over="ignore"):  # rows out of range are error rows already
+                tr = g.from_wgs84(tr[:, 0], tr[:, 1])
         yield LabelChunk(source=str(path), camera_key=f"camera:{k}" if k is not None else "camera", camera=cam,
                          line=lines[sel], frame=ids["frame"][sel], object_id=ids["object_id"][sel],
                          cls=ids["class"][sel], box_xyxy_px=box[sel], truth_xy_world_m=tr,
@@ -783,3 +821,81 @@ def read_detections_with_truth(detections, truth, camera, *, format: str | None 
             for k, v in index.items() if not v[2]]
     if rest or bad:
         yield _chunk(truth, "camera", camera, sorted(rest + bad, key=lambda r: r["line"]))
+
+
+# ---------------------------------------------------------------------------------------------------
+# The numbers of every row, checked (every reader's chunks pass here: pairs.build_pairs)
+# ---------------------------------------------------------------------------------------------------
+def _first(out: list, mask: np.ndarray, reason) -> None:
+    """``out[i] = reason`` (a str, or a callable of i) where ``mask`` and no reason yet."""
+    for i in np.flatnonzero(mask):
+        if out[i] is None:
+            out[i] = reason(i) if callable(reason) else reason
+
+
+def _box_checks(out: list, box: np.ndarray) -> None:
+    given = ~np.isnan(box).all(1)
+    with np.errstate(invalid="ignore"):
+        _first(out, given & ~np.isfinite(box).all(1), "box not finite (a coordinate is inf or NaN)")
+        _first(out, given & (np.abs(box) > MAX_BOX_PX).any(1),
+               f"box out of range (a coordinate beyond {MAX_BOX_PX:g} px)")
+        _first(out, given & ((box[:, 2] < box[:, 0]) | (box[:, 3] < box[:, 1])),
+               "box inverted: expected u_min <= u_max and v_min <= v_max")
+
+
+def _truth_checks(out: list, truth: np.ndarray, z: np.ndarray, yaw: np.ndarray, camera) -> None:
+    given = ~np.isnan(truth).all(1)
+    with np.errstate(invalid="ignore", over="ignore"):
+        _first(out, given & ~np.isfinite(truth).all(1), "truth not finite (a coordinate is inf or NaN)")
+        _first(out, given & (np.abs(truth) > MAX_COORD_M).any(1),
+               f"truth out of range (a coordinate beyond {MAX_COORD_M:g} m)")
+        if camera is not None:
+            foot = np.asarray(camera.position_world_m, dtype=np.float64)[:2]
+            far = np.hypot(truth[:, 0] - foot[0], truth[:, 1] - foot[1]) > MAX_TRUTH_RANGE_M
+            _first(out, given & far, f"truth out of range (more than {MAX_TRUTH_RANGE_M:g} m from the camera)")
+        _first(out, given & np.isinf(z), "truth height not finite")
+        _first(out, given & (np.abs(z) > MAX_TRUTH_Z_M),
+               f"truth height out of range (beyond {MAX_TRUTH_Z_M:g} m of the ground plane)")
+        _first(out, given & np.isinf(yaw), "truth yaw not finite")
+
+
+def _cov_checks(out: list, cov: np.ndarray) -> None:
+    """The batch's tests of a detector pixel covariance (``footprint_uq.batch.process``), per row."""
+    a, b, b2, d = cov[:, 0, 0], cov[:, 0, 1], cov[:, 1, 0], cov[:, 1, 1]
+    fin = np.isfinite(cov).all((1, 2))
+    _first(out, ~fin, "pixel covariance not finite (cov_uu_px2, cov_uv_px2, cov_vv_px2)")
+    with np.errstate(invalid="ignore", over="ignore"):
+        scale = np.maximum(np.maximum(np.abs(a), np.abs(d)), np.maximum(np.abs(b), np.abs(b2)))
+        lmin = 0.5 * (a + d) - np.hypot(0.5 * (a - d), b)
+        _first(out, fin & ((a < 0) | (d < 0)), "pixel covariance with a negative variance (cov_uu_px2 or "
+               "cov_vv_px2 < 0)")
+        _first(out, fin & ~(lmin >= -PSD_TOL * scale), "pixel covariance not positive semi-definite "
+               "(cov_uv_px2^2 > cov_uu_px2 cov_vv_px2)")
+        _first(out, fin & (scale > MAX_PIXEL_VAR_PX2), f"pixel covariance out of range (entries above "
+               f"{MAX_PIXEL_VAR_PX2:g} px^2)")
+
+
+def row_problems(chunk: LabelChunk) -> list:
+    """Per row of a chunk: why its numbers cannot make a pair (a str), or None.
+
+    Every number a pair is made of is checked, whatever the reader: the box (finite, within
+    :data:`MAX_BOX_PX`, not inverted), the truth (finite, within :data:`MAX_COORD_M` and within
+    :data:`MAX_TRUTH_RANGE_M` of the camera's foot point; its height within :data:`MAX_TRUTH_Z_M`; its yaw
+    finite), the detector pixel covariance (finite, variances >= 0, positive semi-definite, within the batch's
+    ``MAX_PIXEL_VAR_PX2``).  NaN means "absent" (no detection, no truth, unknown height) and is no problem
+    here: the readers decide what is absent.
+
+    Returns
+    -------
+    list of (str or None), one per row
+    """
+    n = len(chunk)
+    out: list = [None] * n
+    box = np.asarray(chunk.box_xyxy_px, dtype=np.float64).reshape(n, 4)
+    truth = np.asarray(chunk.truth_xy_world_m, dtype=np.float64).reshape(n, 2)
+    _box_checks(out, box)
+    _truth_checks(out, truth, np.asarray(chunk.truth_z_m, dtype=np.float64),
+                  np.asarray(chunk.yaw_world_rad, dtype=np.float64), chunk.camera)
+    if chunk.cov_uv_px2 is not None:
+        _cov_checks(out, np.asarray(chunk.cov_uv_px2, dtype=np.float64).reshape(n, 2, 2))
+    return out

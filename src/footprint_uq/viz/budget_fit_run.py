@@ -23,7 +23,7 @@ from ..products.geo import GeoReference
 from ..uncertainty.budget import ErrorBudget, load_budget
 from ..validation import readers as R
 from ..validation.fit import compact_inputs, cross_validate_compact, fit_compact
-from ..validation.pairs import STATUS_OK, GroupIndex, iter_pairs, with_size_priors
+from ..validation.pairs import STATUS_OK, GroupIndex, iter_pairs, refused_reasons, with_size_priors
 from .validation_run import KINDS, detect_kind, label_chunks
 
 __all__ = ["run_budget_fit", "DEFAULT_FREE", "BUDGET_FIT_FILES"]
@@ -51,11 +51,13 @@ def _records(labels, kind, budget, contact, folder, free, **reader):
         raise InputError("kind", kind, f"one of {KINDS}")
     groups = GroupIndex()
     statuses: Counter = Counter()
+    refused: Counter = Counter()  # error rows by kind of reason (the summary's "refused")
     chunks = label_chunks(labels, kind, folder, budget=budget, **reader)
 
     def usable():
         for p in iter_pairs(chunks, budget, contact=contact, groups=groups):
             statuses.update(p.status.tolist())
+            refused.update(refused_reasons(p.status, p.reason))
             ok = p.usable
             yield p.residual_m[ok], p.dxy_dp[ok], p.cov_object_m2[ok], p.group[ok]
 
@@ -67,7 +69,7 @@ def _records(labels, kind, budget, contact, folder, free, **reader):
             raise
         raise InputError("labels", str(labels), f"at least 2 usable detection/truth pairs (found {n_ok}; "
                          f"statuses {dict(statuses)})") from None
-    return kind, data, dict(statuses), groups
+    return kind, data, dict(statuses), groups, {"rows": sum(refused.values()), "by_reason": dict(refused.most_common())}
 
 
 def run_budget_fit(labels, out_dir, *, base_budget=None, free=DEFAULT_FREE, kind: str | None = None,
@@ -95,13 +97,13 @@ def run_budget_fit(labels, out_dir, *, base_budget=None, free=DEFAULT_FREE, kind
         georef = GeoReference(heading_offset_deg, origin_lat_deg, origin_lon_deg)
     folder = R.FolderReport()
     opts = {"free": list(free), "base_budget": base, "method": method, "min_groups": min_groups}
-    kind, data, statuses, groups = _records(labels, kind, base, contact_fn, folder, list(free), camera=camera,
+    kind, data, statuses, groups, refused = _records(labels, kind, base, contact_fn, folder, list(free), camera=camera,
                                             registry=registry, calibration=calibration, image_size_px=image_size_px,
                                             georef=georef, chunk_rows=131_072)
     fit = fit_compact(data, **opts)
     summary = {"labels": str(labels), "kind": kind, "contact": contact if isinstance(contact, str) else "custom",
                "size_priors": None if size_priors is None else str(size_priors),
-               "statuses": statuses, "groups": groups.names(), "folder": folder.to_dict(),
+               "statuses": statuses, "refused": refused, "groups": groups.names(), "folder": folder.to_dict(),
                "fit": fit.to_dict(), "cross_validation": {}}
     if cross_validation:  # above fit.CV_MAX_PAIRS pairs: on a seeded subsample, reported in the summary
         summary["cross_validation"]["object"] = cross_validate_compact(data, by="object", **opts).to_dict()
