@@ -296,7 +296,9 @@ def test_calibrate_motion_cli(tmp_path):
     assert r2.exit_code == 0, r2.output
     # bad options: one line, exit 2
     r3 = CliRunner().invoke(main, [*args[:-4], "--q-min", "nan"])
-    assert r3.exit_code == 2 and "q grid" in r3.output and "Traceback" not in r3.output
+    assert r3.exit_code == 2 and "--q-min" in r3.output and "Traceback" not in r3.output
+    r4 = CliRunner().invoke(main, [*args[:-4], "--q-min", "10", "--q-max", "1"])  # the grid's own check
+    assert r4.exit_code == 2 and "q grid" in r4.output and len(r4.output.strip().splitlines()) == 1
 
 
 # -- the on-line check (serve --tracks) ----------------------------------------------------------------------------

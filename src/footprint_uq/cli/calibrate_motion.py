@@ -12,7 +12,7 @@ from ..batch.motion_fit_run import run_motion_fit
 from ..batch.schema import DEFAULT_CHUNK_ROWS
 from ..products.footprints import CONTACT_MODES
 from ..uncertainty.presets import PRESET_NAMES
-from .common import load_camera_and_budget, pose_options
+from .common import FiniteFloatRange, load_camera_and_budget, pose_options
 
 __all__ = ["motion_cmd"]
 
@@ -34,9 +34,11 @@ __all__ = ["motion_cmd"]
 @click.option("--modes", type=click.Choice(["auto", "one"]), default="auto", show_default=True,
               help="auto: also try the prior's two-mode (IMM) model, kept per class where the data favour it; "
                    "one: the one-mode model only (half the work).")
-@click.option("--q-min", "q_min", type=float, default=1e-4, show_default=True, metavar="Q",
+@click.option("--q-min", "q_min", type=FiniteFloatRange(min=0, min_open=True), default=1e-4, show_default=True,
+              metavar="Q",
               help="Lowest acceleration density of the grid, m^2/s^3.")
-@click.option("--q-max", "q_max", type=float, default=100.0, show_default=True, metavar="Q",
+@click.option("--q-max", "q_max", type=FiniteFloatRange(min=0, min_open=True), default=100.0, show_default=True,
+              metavar="Q",
               help="Highest acceleration density of the grid, m^2/s^3.")
 @click.option("--per-decade", type=click.IntRange(min=2), default=6, show_default=True,
               help="Grid densities per decade.")

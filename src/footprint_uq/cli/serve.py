@@ -75,7 +75,8 @@ __all__ = ["serve_cmd"]
               help="Track each camera's objects by object_id and add their velocity, speed, heading, yaw, their "
                    "sigmas and age (docs/service.md); frames of a camera must come in time order. A budget with a "
                    "motion section (calibrate motion) sets the motion model per class (docs/motion-fit.md).")
-@click.option("--motion-window-s", "motion_window_s", type=float, default=DEFAULT_WINDOW_S, show_default=True,
+@click.option("--motion-window-s", "motion_window_s", type=FiniteFloatRange(min=0), default=DEFAULT_WINDOW_S,
+              show_default=True,
               metavar="S", help="With --tracks: window of the on-line check of the motion model per camera and class "
                                 "(NIS; health record motion_consistency, docs/motion-fit.md); 0: no check.")
 @click.option("--cpm-cdd", type=click.Choice(list(CDD_RELEASES)), default=DEFAULT_CDD, show_default=True,
