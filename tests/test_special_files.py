@@ -241,3 +241,15 @@ def test_image_fifos_are_refused_not_waited_on(tmp_path):
     for call in (lambda: expand_inputs([str(p)]), lambda: _image_header_size(p)):
         with pytest.raises(InputError, match="got a FIFO"):
             _bounded(call)
+
+
+def test_detector_formats_never_sniff_or_wait_on_a_fifo(tmp_path):
+    """Auto-detection reads a file's first bytes: on a FIFO it would take them from the reader (or wait for a
+    writer forever).  A FIFO is taken by its extension (a canonical table streams), a detector format is refused."""
+    from footprint_uq.batch.formats import detect_input_format, open_reader
+
+    assert detect_input_format(_fifo(tmp_path, "d.csv")) == "csv"  # returns at once, nothing read
+    for name, fmt in (("det.txt", None), ("results.json", "coco"), ("labels.txt", "mot")):
+        p = _fifo(tmp_path, name)
+        with pytest.raises(InputError, match="FIFO"):
+            open_reader(p, format=fmt)

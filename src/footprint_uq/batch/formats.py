@@ -38,6 +38,7 @@ import orjson
 import pyarrow as pa
 import pyarrow.compute as pc
 
+from .._files import file_kind, is_stream
 from ..errors import InputError
 from . import schema as S
 from .class_names import ClassNames
@@ -685,6 +686,13 @@ def detect_input_format(path) -> str:
     p = Path(path)
     if not p.exists():
         raise InputError("detections", str(path), "an existing file or folder")
+    if is_stream(p) or file_kind(p) not in ("regular file", "directory"):
+        # a FIFO is read once: sniffing its first bytes would take them from the reader (and wait on a writer);
+        # its extension says which canonical table it streams (the table reader waits, then reads or refuses)
+        if p.suffix.lower() in TABLE_FORMATS:
+            return TABLE_FORMATS[p.suffix.lower()]
+        raise InputError("detections", str(path), f"a regular file (this is a {file_kind(p)}): a detector format "
+                         "is sniffed and read more than once; stream a canonical table (.csv, .jsonl) instead")
     for name, cls in READERS.items():
         if cls.sniff(p):
             return name
@@ -715,6 +723,9 @@ def open_reader(path, *, format: str | None = None, chunk_rows: int = S.DEFAULT_
         raise InputError("format", format, f"one of {['auto', 'csv', 'jsonl', 'parquet', *READERS]}")
     names = None if class_names is None else ClassNames.load(class_names, unknown=unknown_class)
     if fmt in READERS:
+        if file_kind(path) not in ("regular file", "directory"):
+            raise InputError("detections", str(path), f"a regular file or folder for --format {fmt} (this is a "
+                             f"{file_kind(path)}): stream a canonical table (.csv, .jsonl) instead")
         size = None if image_size_px is None else tuple(int(v) for v in image_size_px)
         return READERS[fmt](path, chunk_rows=chunk_rows, options=FormatOptions(names, size, unknown_class))
     reader = DetectionReader(path, chunk_rows=chunk_rows, format=fmt)
