@@ -18,11 +18,12 @@ from .calibrate_extrinsics import extrinsics_cmd
 from .calibrate_gcp import gcp_cmd
 from .calibrate_intrinsics import intrinsics_cmd
 from .calibrate_synthetic import synthetic_cmd
+from .groups import SuggestingGroup
 
 __all__ = ["calibrate"]
 
 
-@click.group("calibrate")
+@click.group("calibrate", cls=SuggestingGroup)
 def calibrate():
     """Error budgets from calibration data (checkerboard images, ...)."""
 
