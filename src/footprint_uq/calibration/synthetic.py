@@ -366,8 +366,9 @@ def noisy_corners(camera: SyntheticCamera, board, rvecs, tvecs, corner_noise_px:
 
 
 def render_campaign(camera: SyntheticCamera = DEFAULT_CAMERA, board=PAPER_BOARD, n: int = 20, *, seed: int = 0,
-                    pose_kw: dict | None = None, **render_kw) -> tuple[list, list, np.ndarray, np.ndarray]:
-    """Poses from :func:`make_board_poses` and one rendered image per pose.
+                    pose_kw: dict | None = None, progress=None,
+                    **render_kw) -> tuple[list, list, np.ndarray, np.ndarray]:
+    """Poses from :func:`make_board_poses` and one rendered image per pose (``progress(done, n)`` after each).
 
     Returns
     -------
@@ -383,17 +384,21 @@ def render_campaign(camera: SyntheticCamera = DEFAULT_CAMERA, board=PAPER_BOARD,
         im, c = render_board(camera, board, rv, tv, seed=rng, **render_kw)
         images.append(im)
         corners.append(c)
+        if progress is not None:
+            progress(len(images), len(rvecs))
     return images, corners, rvecs, tvecs
 
 
 def write_campaign(out_dir, camera: SyntheticCamera = DEFAULT_CAMERA, board=PAPER_BOARD, n: int = 20, *,
-                   seed: int = 0, pose_kw: dict | None = None, **render_kw) -> Path:
-    """Render a campaign into ``out_dir`` (``board_000.png``...) with ``truth.json`` (camera, board, poses, corners)."""
+                   seed: int = 0, pose_kw: dict | None = None, progress=None, **render_kw) -> Path:
+    """Render a campaign into ``out_dir`` (``board_000.png``...) with ``truth.json`` (camera, board, poses, corners);
+    ``progress(done, n)`` after each image is rendered."""
 
     board = parse_board(board)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    images, corners, rvecs, tvecs = render_campaign(camera, board, n, seed=seed, pose_kw=pose_kw, **render_kw)
+    images, corners, rvecs, tvecs = render_campaign(camera, board, n, seed=seed, pose_kw=pose_kw, progress=progress,
+                                                    **render_kw)
     names = []
     for k, im in enumerate(images):
         name = f"board_{k:03d}.png"

@@ -7,8 +7,11 @@ commands do not load the calibration package.)
 from __future__ import annotations
 
 import functools
+import sys
+import time
 
 import click
+from tqdm import tqdm
 
 from ..errors import InputError
 from ..io import load_camera
@@ -16,7 +19,7 @@ from ..uncertainty.budget import load_budget
 from ..uncertainty.ellipse import chi2_scale
 
 __all__ = ["load_camera_and_budget", "check_confidence", "note", "warn", "pose_options", "pose_from_options",
-           "budget_notice", "DEFAULT_STEP_PX"]
+           "budget_notice", "DEFAULT_STEP_PX", "Stages"]
 
 #: the default grid step of every map the command line draws (``map``, ``demo``), pixels
 DEFAULT_STEP_PX = 4
@@ -115,6 +118,43 @@ def check_confidence(confidence: float | None) -> float | None:
 def note(msg: str) -> None:
     """One line on stderr: ``footprint-uq: MSG``."""
     click.echo(f"footprint-uq: {msg}", err=True)
+
+
+class Stages:
+    """A long command's progress on stderr: one line per stage, ``footprint-uq: COMMAND: STAGE [12 s]`` (the
+    seconds since the command started), and for counted steps a tqdm bar when stderr is a terminal (else a line
+    when the count starts and one when it ends: no bar in a log file).  ``bar``: None (a terminal decides), True,
+    False.
+
+    >>> say = Stages("demo"); say("maps")          # doctest: +SKIP
+    footprint-uq: demo: maps [0 s]
+    """
+
+    def __init__(self, command: str, *, bar: bool | None = None):
+        self.command = command
+        self.t0 = time.monotonic()
+        self.bar = sys.stderr.isatty() if bar is None else bar
+        self._tqdm = None
+
+    def __call__(self, msg: str) -> None:
+        self.close()
+        click.echo(f"footprint-uq: {self.command}: {msg} [{time.monotonic() - self.t0:.0f} s]", err=True)
+
+    def count(self, done: int, total: int) -> None:
+        """``done`` of ``total`` steps of the current stage are done."""
+        if self.bar:
+            if self._tqdm is None:
+                self._tqdm = tqdm(total=total, file=sys.stderr, leave=False, unit="step")
+            self._tqdm.update(done - self._tqdm.n)
+        if done >= total:
+            self.close()
+            click.echo(f"footprint-uq: {self.command}: {done} of {total} done [{time.monotonic() - self.t0:.0f} s]",
+                       err=True)
+
+    def close(self) -> None:
+        if self._tqdm is not None:
+            self._tqdm.close()
+            self._tqdm = None
 
 
 def warn(msg: str) -> None:

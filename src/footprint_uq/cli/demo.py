@@ -7,7 +7,7 @@ import sys
 import click
 
 from ..viz.demo import write_demo
-from .common import DEFAULT_STEP_PX, warn
+from .common import DEFAULT_STEP_PX, Stages, warn
 
 __all__ = ["demo_cmd"]
 
@@ -25,6 +25,6 @@ def demo_cmd(out_dir, step_px, case_study):
     left-turn case study into DIR/case-study unless --no-case-study).
     """
     report = write_demo(out_dir, step_px=step_px, case_study=case_study, warn=warn,
-                        progress=lambda m: click.echo(f"demo: {m}", err=True))
+                        progress=Stages("demo"))
     click.echo(f"report: {report}")
     sys.stdout.flush()

@@ -10,7 +10,7 @@ from .._notices import set_compile_handler
 from ..products.gcp_support import load_gcp_support, save_support_map
 from ..products.warmup import compile_handler
 from ..viz.map_report import write_map_report
-from .common import DEFAULT_STEP_PX, check_confidence, load_camera_and_budget, note, pose_options, warn
+from .common import DEFAULT_STEP_PX, Stages, check_confidence, load_camera_and_budget, note, pose_options, warn
 
 __all__ = ["map_cmd"]
 
@@ -44,7 +44,8 @@ def map_cmd(camera_path, budget_spec, out_dir, step_px, max_range_m, confidence,
     support = load_gcp_support(gcp_summary, budget) if gcp_summary is not None else None
     set_compile_handler(compile_handler(note))  # said before the kernels' first compile, after the inputs are checked
     umap, files = write_map_report(camera, budget, out_dir, step_px=step_px, max_range_m=max_range_m,
-                                   confidence=confidence, linearity=linearity, linear_threshold=linear_threshold)
+                                   confidence=confidence, linearity=linearity, linear_threshold=linear_threshold,
+                                   progress=Stages("map"))
     if support is not None:
         files["gcp_support"] = save_support_map(Path(out_dir) / "gcp_support.npz", camera, budget, support, umap.uv_px)
     for p in files.values():

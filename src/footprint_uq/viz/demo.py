@@ -129,7 +129,7 @@ def _intro(cam_path: Path) -> str:
 def _case_study_section(out: Path, say, warn) -> list[str]:
     say("case study")
     try:
-        cs = run_case_study(out / "case-study")
+        cs = run_case_study(out / "case-study", progress=lambda msg: say(f"case study: {msg}"))
     except ModuleNotFoundError as e:  # an optional dependency of the case study is not installed
         msg = f"case study skipped: it needs the Python package '{e.name}' (pip install {e.name})"
         warn(msg)

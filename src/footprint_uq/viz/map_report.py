@@ -29,7 +29,8 @@ MAP_FILES = {
 
 def write_map_report(camera, budget, out_dir, *, step_px: int = 4, max_range_m: float | None = None,
                      confidence: float | None = None, vmin_m: float | None = None, vmax_m: float | None = None,
-                     dpi: int = 150, umap=None, linearity: bool = True, linear_threshold: float = 0.05):
+                     dpi: int = 150, umap=None, linearity: bool = True, linear_threshold: float = 0.05,
+                     progress=None):
     """Compute an uncertainty map and write its arrays, figures and summary into ``out_dir``.
 
     Parameters
@@ -59,6 +60,8 @@ def write_map_report(camera, budget, out_dir, *, step_px: int = 4, max_range_m: 
         ``nonlinearity.png`` shows the layer.
     linear_threshold : float
         ``linear_ok`` where the predicted relative error of the linear semi-major axis is at most this.
+    progress : callable(str), optional
+        Called with a short message as each stage starts (the map, the figures).
 
     Returns
     -------
@@ -69,12 +72,16 @@ def write_map_report(camera, budget, out_dir, *, step_px: int = 4, max_range_m: 
         :meth:`UncertaintyMap.summary`, the camera, the budget and the file names (no
         ``nonlinearity_png`` when the map has no flag).
     """
+    say = progress or (lambda msg: None)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     if umap is None:
+        w, h = camera.image_size_px
+        say(f"computing {-(-w // step_px)} x {-(-h // step_px)} pixels (every {step_px} px)")
         umap = uncertainty_map(camera, budget, step_px, max_range_m=max_range_m, linearity=linearity,
                                linear_threshold=linear_threshold)
     files = {k: out / v for k, v in MAP_FILES.items()}
+    say("figures and arrays")
     if umap.nonlinearity is None:
         del files["nonlinearity_png"]
     else:

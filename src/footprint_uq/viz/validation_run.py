@@ -95,7 +95,7 @@ def run_validation(labels, out_dir, budget, *, kind: str | None = None, contact=
                    registry=None, calibration=None, image_size_px=None, origin_lat_deg=None, origin_lon_deg=None,
                    heading_offset_deg: float = 0.0, range_bands_m=DEFAULT_RANGE_BANDS_M, alpha: float = 0.05,
                    objects_format: str = "csv", chunk_rows: int = 131_072, report: bool = True, dpi: int = 110,
-                   fsync: bool = True, progress=None) -> tuple[dict, dict]:
+                   fsync: bool = True, progress=None, stage=None) -> tuple[dict, dict]:
     """Validate labelled data and write the outputs into ``out_dir``.
 
     Parameters
@@ -112,6 +112,7 @@ def run_validation(labels, out_dir, budget, *, kind: str | None = None, contact=
     range_bands_m : range band edges; alpha : test significance
     objects_format : ``csv`` or ``parquet`` (the per-object file)
     report : also write ``report.html`` and ``calibration.png``
+    progress : callable(n_pairs) after every chunk; stage : callable(str) as each stage starts
 
     Returns
     -------
@@ -132,12 +133,16 @@ def run_validation(labels, out_dir, budget, *, kind: str | None = None, contact=
     chunks = label_chunks(labels, kind, folder, camera=camera, registry=registry, budget=budget,
                           calibration=calibration, image_size_px=image_size_px, georef=georef, chunk_rows=chunk_rows)
     files = {"objects": out / f"objects.{objects_format}", "summary": out / VALIDATION_FILES["summary"]}
+    say = stage or (lambda msg: None)
+    say(f"reading the {kind} labels and pairing detections with truth (contact model {contact})")
     res = validate(chunks, budget, contact=contact, objects_out=files["objects"], range_bands_m=range_bands_m,
                    alpha=alpha, fsync=fsync, progress=progress)
     summary = res.summary
     summary.update(labels=str(labels), kind=kind, folder=folder.to_dict())
     summary["files"] = {k: v.name for k, v in files.items()}
+    say(f"{summary.get('n_pairs', 0)} pairs; coverage and verdict done")
     if report:
+        say("report and figures")
         figs = validation_figures(summary, res.accumulator.sample)
         files["report"] = out / VALIDATION_FILES["report"]
         files["calibration_png"] = out / VALIDATION_FILES["calibration_png"]
