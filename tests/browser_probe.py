@@ -61,8 +61,17 @@ window.addEventListener('load', function () {
     return {complete: i.complete, w: i.naturalWidth, h: i.naturalHeight, shown_w: i.getBoundingClientRect().width,
             alt: i.alt.slice(0, 40)};
   });
+  var first = document.querySelector('h1') ? document.querySelector('h1').nextElementSibling : null;
+  var lead = null;
+  if (first) {
+    var v = first.querySelector('p.verdict'), im = first.querySelector('figure img');
+    lead = {tag: first.tagName, cls: first.className, verdict: v ? v.textContent : null,
+            img_w: im ? im.naturalWidth : 0, img_top: im ? im.getBoundingClientRect().top : null,
+            tables_before: first.querySelectorAll('table').length};
+  }
   var out = {errors: window.__fuq.errors, n_img: imgs.length, imgs: imgs, scroll_w: de.scrollWidth, view_w: vw,
-             wide: wide, scrolled: scrolled, title: document.title, h2: document.querySelectorAll('h2').length};
+             wide: wide, scrolled: scrolled, title: document.title, h2: document.querySelectorAll('h2').length,
+             lead: lead};
   var pre = document.createElement('pre');
   pre.id = 'fuq-check';
   pre.textContent = JSON.stringify(out);
