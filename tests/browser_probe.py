@@ -106,3 +106,24 @@ def probe(page_html: str, tmp_path, *, width: int = 1200, hide_scrollbars: bool 
     m = re.search(r'<pre id="fuq-check">(.*?)</pre>', p.stdout, re.S)
     assert m, "the page did not finish loading (no check output)\n" + p.stderr[-2000:]
     return json.loads(_html.unescape(m.group(1)))
+
+
+def assert_leads_with_figure_and_verdict(res: dict, window_h: int = 900) -> None:
+    """The page opens (right under its title) with its main figure and a one-sentence verdict, no table before
+    them, and the figure starts on the first screen."""
+    lead = res["lead"]
+    assert lead is not None and lead["tag"] == "SECTION" and lead["cls"] == "lead", lead
+    assert lead["verdict"] and lead["verdict"].count(". ") == 0 and lead["verdict"].endswith("."), lead["verdict"]
+    assert lead["img_w"] > 300 and lead["img_top"] < window_h and lead["tables_before"] == 0, lead
+
+
+def keep_screenshot(path: Path, name: str, tmp_path) -> Path:
+    """A full-page screenshot of ``path`` kept as a test artefact (``FOOTPRINT_UQ_TEST_OUT``, else ``tmp_path``)."""
+    keep = Path(os.environ.get("FOOTPRINT_UQ_TEST_OUT", tmp_path))
+    keep.mkdir(parents=True, exist_ok=True)
+    shot = keep / f"{name.replace(' ', '_')}.png"
+    p = run_chromium([f"--screenshot={shot}", "--window-size=1200,1600", "--hide-scrollbars", path.as_uri()],
+                     tmp_path)
+    assert p.returncode == 0, p.stderr[-2000:]
+    assert shot.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    return shot
