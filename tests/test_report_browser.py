@@ -131,7 +131,7 @@ def test_reports_lead_with_their_figure_and_verdict(pages, kind, tmp_path):
     assert_leads_with_figure_and_verdict(_layout(html, tmp_path))
     keep_screenshot(path, f"report_{kind}", tmp_path)
     if kind == "case study":  # PASS and FAIL are explained before the first verdict is listed
-        assert html.index("How to read the verdicts") < html.index("<b>PASS</b>") < html.index("<td><b>")
+        assert html.index("How to read the verdicts") < html.index("<strong>FAIL</strong>") < html.index("<td><b>")
     # negative control: the same page with a table moved in front of the lead fails the check
     moved = html.replace("<section class=\"lead\">", "<table><tr><td>x</td></tr></table><section class=\"lead\">", 1)
     with pytest.raises(AssertionError):

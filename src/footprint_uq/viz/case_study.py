@@ -568,11 +568,11 @@ def _fmt_xy(v):
 
 #: what PASS and FAIL mean, said before any verdict is listed
 _VERDICT_KEY = ("<p><b>How to read the verdicts.</b> Each row is a statement the paper makes about its case study, "
-                "turned into a measurement with a tolerance. <b>PASS</b>: our numbers for this scene and these error "
-                "budgets agree with the statement within that tolerance, for every camera. <b>FAIL</b>: they do not "
-                "for at least one camera (the per-camera column says which); it is a finding about the statement "
-                "under these settings, not an error of the software, and the &ldquo;why&rdquo; column gives the "
-                "reason.</p>")
+                "turned into a measurement with a tolerance. <strong>PASS</strong>: our numbers for this scene and "
+                "these error budgets agree with the statement within that tolerance, for every camera. "
+                "<strong>FAIL</strong>: they do not for at least one camera (the per-camera column says which); it "
+                "is a finding about the statement under these settings, not an error of the software, and the "
+                "&ldquo;why&rdquo; column gives the reason.</p>")
 
 
 def _lead_html(result, claims: list[dict], pngs: dict) -> str:
