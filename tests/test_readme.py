@@ -40,7 +40,13 @@ def blocks(lang: str, page: Path = README) -> list[str]:
 
 def _commands(lang: str, body: str) -> list[str]:
     """The command lines of a shell block (a console block: the ``$ `` lines), comments dropped."""
-    lines = [ln[2:] for ln in body.splitlines() if ln.startswith("$ ")] if lang == "console" else body.splitlines()
+    lines, cont = [], False
+    for ln in body.splitlines():
+        if lang != "console" or cont:
+            lines.append(ln)
+        elif ln.startswith("$ "):
+            lines.append(ln[2:])
+        cont = ln.rstrip().endswith("\\")  # a command continued on the next line (its output follows it)
     return [ln for ln in (x.strip() for x in lines) if ln and not ln.startswith("#")]
 
 
@@ -54,7 +60,8 @@ def code_blocks() -> list[tuple[str, str, str, str | None]]:
             lang, body = m.group(1), m.group(2)
             if lang in SHELLS:
                 cmds = _commands(lang, body)
-                if not cmds or not all(c.startswith("footprint-uq ") for c in cmds):
+                starts = [c for i, c in enumerate(cmds) if i == 0 or not cmds[i - 1].endswith("\\")]
+                if not starts or not all(c.startswith("footprint-uq ") for c in starts):
                     continue
                 code = "set -e\n" + "\n".join(cmds) + "\n"
             elif lang == "python":
