@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import io
 import re
+import time
 
 from click.testing import CliRunner
 
@@ -55,3 +56,23 @@ def test_bar_only_when_asked_or_on_a_terminal(monkeypatch):
         bar.count(k, 3)
     assert "/3 [" in err.getvalue() and "\r" in err.getvalue()  # tqdm drew its bar (and cleared it)
     assert _stages(err.getvalue(), "x") == ["3 of 3 done"]
+
+
+def test_a_stage_cut_short_by_an_error_says_nothing(monkeypatch):
+    """Bad input stays the one line of its error: a stage that fails within the delay is not said; one that runs
+    longer is said while it runs (a timer), and the last one at the end of the block."""
+    said = []
+    monkeypatch.setattr(common.click, "echo", lambda msg, err=False: said.append(msg))
+    try:
+        with common.Stages("x", delay_s=5.0) as say:
+            say("reading")
+            raise ValueError("bad input")
+    except ValueError:
+        pass
+    assert said == []
+    with common.Stages("x", delay_s=0.05) as say:
+        say("a long stage")
+        time.sleep(0.5)
+        assert len(said) == 1 and _stages(said[0], "x") == ["a long stage"]  # said while it runs
+        say("the last stage")
+    assert _stages("\n".join(said), "x") == ["a long stage", "the last stage"]

@@ -65,9 +65,9 @@ def synthetic_cmd(out_dir, views, board, square_m, margin_m, camera_file, scale,
                                blur_sigma_px=blur_sigma_px, noise_sigma_dn=noise_sigma_dn, render=not no_render,
                                campaigns=campaigns, corner_noise_px=corner_noise_px, plan_bootstrap=plan_bootstrap,
                                seed=seed)
-    say = Stages("calibrate synthetic")
-    res = run_synthetic(out_dir, board, square_m, margin_m=margin_m, camera=camera_file, scale=scale, options=options,
-                        stage=say, progress=say.count)
+    with Stages("calibrate synthetic") as say:
+        res = run_synthetic(out_dir, board, square_m, margin_m=margin_m, camera=camera_file, scale=scale,
+                            options=options, stage=say, progress=say.count)
     cam = res["camera"]
     if res["rendered"]:
         click.echo(f"rendered {views} images of a {res['board'].label()} board ({cam.image_size_px[0]}x"

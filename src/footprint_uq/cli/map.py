@@ -43,9 +43,10 @@ def map_cmd(camera_path, budget_spec, out_dir, step_px, max_range_m, confidence,
     camera, budget = load_camera_and_budget(camera_path, budget_spec, pose)
     support = load_gcp_support(gcp_summary, budget) if gcp_summary is not None else None
     set_compile_handler(compile_handler(note))  # said before the kernels' first compile, after the inputs are checked
-    umap, files = write_map_report(camera, budget, out_dir, step_px=step_px, max_range_m=max_range_m,
-                                   confidence=confidence, linearity=linearity, linear_threshold=linear_threshold,
-                                   progress=Stages("map"))
+    with Stages("map") as say:
+        umap, files = write_map_report(camera, budget, out_dir, step_px=step_px, max_range_m=max_range_m,
+                                       confidence=confidence, linearity=linearity, linear_threshold=linear_threshold,
+                                       progress=say)
     if support is not None:
         files["gcp_support"] = save_support_map(Path(out_dir) / "gcp_support.npz", camera, budget, support, umap.uv_px)
     for p in files.values():

@@ -80,14 +80,14 @@ def validate_cmd(labels, out_dir, budget_spec, contact, kind, camera_path, regis
     Writes summary.json, objects.csv (one row per input object, with its status) and report.html into
     OUT; prints the verdict.
     """
-    say = Stages("validate")
-    summary, files = run_validation(labels, out_dir, budget_spec, kind=kind, contact=contact, camera=camera_path,
-                                    registry=registry, calibration=calibration,
-                                    image_size_px=tuple(image_size) if image_size else None,
-                                    origin_lat_deg=origin_lat, origin_lon_deg=origin_lon,
-                                    heading_offset_deg=heading_offset_deg, range_bands_m=_bands(range_bands),
-                                    alpha=alpha, objects_format=objects_format, report=not no_report, fsync=fsync,
-                                    stage=say, progress=lambda n: say(f"{n} pairs so far"))
+    with Stages("validate") as say:
+        summary, files = run_validation(labels, out_dir, budget_spec, kind=kind, contact=contact, camera=camera_path,
+                                        registry=registry, calibration=calibration,
+                                        image_size_px=tuple(image_size) if image_size else None,
+                                        origin_lat_deg=origin_lat, origin_lon_deg=origin_lon,
+                                        heading_offset_deg=heading_offset_deg, range_bands_m=_bands(range_bands),
+                                        alpha=alpha, objects_format=objects_format, report=not no_report, fsync=fsync,
+                                        stage=say, progress=lambda n: say(f"{n} pairs so far"))
     t = summary["nees_test"]
     c95 = next((c for c in summary["coverage"] if c["nominal"] == 0.95), None)
     un = summary["unpaired"]
