@@ -24,7 +24,8 @@ from ..uncertainty.presets import display_name
 __all__ = ["plot_camera_view", "box_corners_m"]
 
 _SKY, _GROUND, _GRID = "#dbe9f6", "#c9c9c2", "#f4f4ef"
-_COLOURS = ("#d95f02", "#1b9e77", "#7570b3", "#e7298a")
+#: one colour per budget: matplotlib's default cycle, as in the demo's range profile (the same budget, the same colour)
+_COLOURS = ("C0", "C1", "C2", "C3")
 #: the 12 edges of a box from :func:`box_corners_m` (4 bottom, 4 top, 4 vertical)
 _EDGES = ((0, 1), (1, 2), (2, 3), (3, 0), (4, 5), (5, 6), (6, 7), (7, 4), (0, 4), (1, 5), (2, 6), (3, 7))
 
@@ -125,7 +126,8 @@ def plot_camera_view(camera, budgets, boxes3d_world, *, confidence: float = 0.95
             if k == len(budgets) - 1:
                 right = e_uv[np.argmax(e_uv[:, 0])]
                 ax.annotate(f"{semi_major[n]:.2g} m", right, xytext=(4, 0), textcoords="offset points", va="center",
-                            fontsize=7.5, color=col, fontweight="bold", zorder=6)
+                            fontsize=7.5, color=col, fontweight="bold", zorder=6,
+                            bbox={"boxstyle": "round,pad=0.15", "fc": "white", "ec": "none", "alpha": 0.8})
     ax.set_xlim(-0.5, w - 0.5)
     ax.set_ylim(h - 0.5, -0.5)
     ax.set_aspect("equal")

@@ -144,7 +144,8 @@ def _lead(camera, budgets, maps, view: Path) -> str:
         spans.append(f"{a.min():.2g}&ndash;{a.max():.2g}&nbsp;m with {esc(display_name(b.name))}")
     rng = np.hypot(DEMO_OBJECTS[:, 0], DEMO_OBJECTS[:, 1])
     lin = [m.summary()["fraction_linear_ok"] for m in maps]
-    lin_text = ("the first-order covariances hold for every pixel within the range (all <code>linear_ok</code>)"
+    lin_text = (f"the first-order covariances hold for every pixel within {maps[0].max_range_m:g}&nbsp;m (all "
+                "<code>linear_ok</code>)"
                 if all(f == 1.0 for f in lin if f is not None) else
                 "pixels where the first-order covariance is not reliable are hatched in the maps below")
     verdict = (f"For {len(DEMO_OBJECTS)} cars {rng.min():.0f}&ndash;{rng.max():.0f}&nbsp;m from this 8-m pole the "
