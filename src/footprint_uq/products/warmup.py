@@ -68,6 +68,8 @@ ABOUT_S = {"map": 100, "points": 45, "objects": 95, "lens": 15}
 MODES = ("background", "foreground", "reference")
 #: how often a running command looks whether the background compile is done (seconds)
 _POLL_S = 0.5
+#: how long ``group_lock(wait=False)`` tries: another process's probe holds the lock for microseconds (seconds)
+_PROBE_GRACE_S = 0.25
 
 
 def _cached(dispatcher) -> bool:
@@ -165,12 +167,13 @@ def wait_for_compile(group: str, timeout_s: float) -> bool:
 def group_lock(group: str, *, wait: bool):
     """Hold the compile lock of ``group`` (an OS file lock in the cache folder, ``filelock``: released by the OS
     when its process ends, a crash included) in the ``with`` block; yields whether it is held.  Another process
-    holding it: ``wait=True`` waits for it to finish, ``wait=False`` yields False at once."""
+    holding it: ``wait=True`` waits for it to finish, ``wait=False`` yields False after :data:`_PROBE_GRACE_S` (a
+    moment: long enough not to mistake another process's probe, :func:`compiling_elsewhere`, for a compile)."""
     path = _lock_path(group)
     path.parent.mkdir(parents=True, exist_ok=True)
     lock = FileLock(path, thread_local=False)
     try:
-        lock.acquire(timeout=-1 if wait else 0, poll_interval=_POLL_S)
+        lock.acquire(timeout=-1 if wait else _PROBE_GRACE_S, poll_interval=_POLL_S if wait else 0.02)
     except Timeout:
         yield False
         return
@@ -293,7 +296,7 @@ class LibraryGate:
     """The library's handler (:func:`footprint_uq._notices.set_library_handler`, installed on import): whether a
     library call runs a group's compiled kernels now.
 
-    Nobody else compiling the group (no lock held: the usual case, one file-existence check): True -- the kernels
+    Nobody else compiling the group (no lock held: the usual case, a lock probe of microseconds): True -- the kernels
     run, compiled on first use in this process.  Another process compiling it: one :class:`CompileWaitWarning`
     per group (:func:`wait_notice`), a wait of at most ``wait_s`` seconds (``FOOTPRINT_UQ_COMPILE_WAIT_S``,
     default :data:`WAIT_S`) for that compile, then True if it is over, else False (the reference path) until it
