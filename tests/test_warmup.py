@@ -455,3 +455,24 @@ def test_a_long_job_switches_to_the_kernels_between_chunks(tmp_path):
     _notices.set_compile_handler(None)
     process_file(cam, "basler1", tmp_path / "boxes.csv", tmp_path / "kernels.parquet", chunk_rows=10, threads=1)
     _same_records(tmp_path / "mixed.parquet", tmp_path / "kernels.parquet")
+
+
+def test_warmup_says_when_it_waits_for_another_compile(monkeypatch, tmp_path):
+    """`footprint-uq warmup` behind another process's compile of a group says so before it waits."""
+    import threading
+
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.setitem(W._WARM, "lens", lambda budget: None)
+    (tmp_path / "cache").mkdir()
+    proc = _hold_lock(W._lock_path("lens"))
+    said, out = [], {}
+    job = threading.Thread(target=lambda: out.update(W.warmup(["lens"], on_wait=said.append)))
+    try:
+        job.start()
+        job.join(1.0)
+        assert job.is_alive() and said == ["lens"]  # waiting, and said so
+    finally:
+        proc.kill()
+        proc.wait()
+    job.join(30.0)
+    assert not job.is_alive() and set(out) == {"lens"}

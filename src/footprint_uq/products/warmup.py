@@ -374,15 +374,17 @@ _WARM = {"map": _warm_map, "points": _warm_points, "objects": _warm_objects, "le
 
 
 def warmup(groups: Iterable[str] | None = None, *, progress: Callable[[str], None] | None = None,
-           background: bool = False) -> dict[str, float]:
+           background: bool = False, on_wait: Callable[[str], None] | None = None) -> dict[str, float]:
     """Compile (or load from the cache) every kernel of ``groups`` (default: all); returns seconds per group.
 
     Each group is compiled under its lock (:func:`group_lock`): a compile of the same group already running
     elsewhere is waited for (then its kernels load from the cache), or with ``background=True`` (the detached
-    compile a command starts) the group is skipped."""
+    compile a command starts) the group is skipped; ``on_wait(group)`` is called before such a wait."""
     budget = load_budget("basler1")
     out = {}
     for g in list(groups) if groups is not None else list(GROUPS):
+        if on_wait is not None and not background and compiling_elsewhere(g):
+            on_wait(g)  # (said, not waited for silently)
         with group_lock(g, wait=not background) as held:
             if not held:
                 continue
