@@ -217,3 +217,14 @@ def test_reliability_figures_come_from_the_script():
     assert block == mod.render(res).strip()
     assert res["rows_lost"] == 0 and res["tracebacks"] == 0
     assert res["hostile_ok"] == res["hostile_inputs"] and res["kills_survived"] == res["kills"] > 0
+
+
+def test_extras_table_matches_pyproject():
+    """The README's install table names every extra of pyproject.toml, and only those."""
+    import tomllib
+
+    extras = set(tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["optional-dependencies"])
+    text = README.read_text(encoding="utf-8")
+    table = text[text.index("| extra |"):]
+    named = set(re.findall(r"^\| `([a-z0-9-]+)` \|", table[:table.index("\n\n")], re.M))
+    assert named == extras
