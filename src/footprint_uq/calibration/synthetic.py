@@ -417,8 +417,9 @@ def write_campaign(out_dir, camera: SyntheticCamera = DEFAULT_CAMERA, board=PAPE
 
 def simulate_campaigns(camera: SyntheticCamera = DEFAULT_CAMERA, board=PAPER_BOARD, n_views: int = 20, *,
                        corner_noise_px: float = 0.1, n_campaigns: int = 50, bootstrap: int = 0, seed: int = 0,
-                       pose_kw: dict | None = None) -> dict:
-    """Planning study: the intrinsic error sizes a campaign of ``n_views`` boards delivers.
+                       pose_kw: dict | None = None, progress=None) -> dict:
+    """Planning study: the intrinsic error sizes a campaign of ``n_views`` boards delivers (``progress(done,
+    n_campaigns)`` after each campaign).
 
     One set of poses (:func:`make_board_poses`), ``n_campaigns`` repetitions of
     independent Gaussian corner noise (``corner_noise_px`` per coordinate, the fast
@@ -449,6 +450,8 @@ def simulate_campaigns(camera: SyntheticCamera = DEFAULT_CAMERA, board=PAPER_BOA
         stds.append(cal.std_opencv)
         if k == 0 and cal.bootstrap is not None and len(cal.bootstrap.samples) > 1:
             boot = cal.bootstrap.std
+        if progress is not None:
+            progress(k + 1, m)
     vals, stds = np.array(vals), np.array(stds)
     out = {"names": list(INTRINSIC_NAMES), "truth": camera.values, "mean": vals.mean(0),
            "scatter": vals.std(0, ddof=1), "opencv": np.sqrt(np.mean(stds**2, 0)), "n_views": int(n_views),

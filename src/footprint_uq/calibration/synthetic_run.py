@@ -146,7 +146,7 @@ def run_synthetic(out_dir, board: str = "14x9", square_m: float = 0.1, *, margin
     stage : callable(str), optional
         Called with a short message as each stage starts (rendering, planning study).
     progress : callable(done, total), optional
-        Called after each rendered image.
+        Called after each rendered image and after each campaign of the planning study.
 
     Returns
     -------
@@ -174,6 +174,6 @@ def run_synthetic(out_dir, board: str = "14x9", square_m: float = 0.1, *, margin
     if o.campaigns:
         say(f"planning study: {o.campaigns} campaigns of {o.views} views, {o.plan_bootstrap} bootstrap resamples")
         plan = simulate_campaigns(cam, b, o.views, corner_noise_px=o.corner_noise_px, n_campaigns=o.campaigns,
-                                  bootstrap=o.plan_bootstrap, seed=o.seed, pose_kw=pose_kw)
+                                  bootstrap=o.plan_bootstrap, seed=o.seed, pose_kw=pose_kw, progress=progress)
         plan_file = atomic_write_text(out / "plan.json", json.dumps(_plain(plan), indent=2))
     return {"board": b, "camera": cam, "rendered": o.render, "plan": plan, "plan_file": plan_file}
