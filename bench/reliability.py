@@ -1,4 +1,4 @@
-"""Reliability figures of docs/benchmarks.md (issue 11; the README's until issue 34): hostile inputs, killed jobs, rows lost, tracebacks.
+"""Reliability figures of docs/benchmarks.md (issue 11): hostile inputs, killed jobs, rows lost, tracebacks.
 
 Usage::
 
