@@ -1,4 +1,4 @@
-"""Reliability figures of the README (issue 11): hostile inputs, killed jobs, rows lost, tracebacks.
+"""Reliability figures of docs/benchmarks.md (issue 11): hostile inputs, killed jobs, rows lost, tracebacks.
 
 Usage::
 
@@ -15,7 +15,7 @@ Usage::
   (must be 0); **tracebacks**: over every run (must be 0).
 
 Results go to ``DIR/reliability.json`` and ``DIR/reliability.md`` (default ``bench/results``);
-``--update-readme`` rewrites the README block between ``<!-- reliability:begin -->`` and
+``--update-readme`` rewrites the block of docs/benchmarks.md between ``<!-- reliability:begin -->`` and
 ``<!-- reliability:end -->`` from them (``tests/test_readme.py`` checks the two agree).
 """
 
@@ -222,7 +222,7 @@ def render(res: dict) -> str:
     return "\n".join(lines)
 
 
-def update_readme(res: dict, readme: Path = ROOT / "README.md") -> None:
+def update_readme(res: dict, readme: Path = ROOT / "docs" / "benchmarks.md") -> None:
     text = readme.read_text(encoding="utf-8")
     i, j = text.index(BEGIN) + len(BEGIN), text.index(END)
     readme.write_text(text[:i] + "\n" + render(res) + "\n" + text[j:], encoding="utf-8")

@@ -61,8 +61,17 @@ window.addEventListener('load', function () {
     return {complete: i.complete, w: i.naturalWidth, h: i.naturalHeight, shown_w: i.getBoundingClientRect().width,
             alt: i.alt.slice(0, 40)};
   });
+  var first = document.querySelector('h1') ? document.querySelector('h1').nextElementSibling : null;
+  var lead = null;
+  if (first) {
+    var v = first.querySelector('p.verdict'), im = first.querySelector('figure img');
+    lead = {tag: first.tagName, cls: first.className, verdict: v ? v.textContent : null,
+            img_w: im ? im.naturalWidth : 0, img_top: im ? im.getBoundingClientRect().top : null,
+            tables_before: first.querySelectorAll('table').length};
+  }
   var out = {errors: window.__fuq.errors, n_img: imgs.length, imgs: imgs, scroll_w: de.scrollWidth, view_w: vw,
-             wide: wide, scrolled: scrolled, title: document.title, h2: document.querySelectorAll('h2').length};
+             wide: wide, scrolled: scrolled, title: document.title, h2: document.querySelectorAll('h2').length,
+             lead: lead};
   var pre = document.createElement('pre');
   pre.id = 'fuq-check';
   pre.textContent = JSON.stringify(out);
@@ -97,3 +106,24 @@ def probe(page_html: str, tmp_path, *, width: int = 1200, hide_scrollbars: bool 
     m = re.search(r'<pre id="fuq-check">(.*?)</pre>', p.stdout, re.S)
     assert m, "the page did not finish loading (no check output)\n" + p.stderr[-2000:]
     return json.loads(_html.unescape(m.group(1)))
+
+
+def assert_leads_with_figure_and_verdict(res: dict, window_h: int = 900) -> None:
+    """The page opens (right under its title) with its main figure and a one-sentence verdict, no table before
+    them, and the figure starts on the first screen."""
+    lead = res["lead"]
+    assert lead is not None and lead["tag"] == "SECTION" and lead["cls"] == "lead", lead
+    assert lead["verdict"] and lead["verdict"].count(". ") == 0 and lead["verdict"].endswith("."), lead["verdict"]
+    assert lead["img_w"] > 300 and lead["img_top"] < window_h and lead["tables_before"] == 0, lead
+
+
+def keep_screenshot(path: Path, name: str, tmp_path) -> Path:
+    """A full-page screenshot of ``path`` kept as a test artefact (``FOOTPRINT_UQ_TEST_OUT``, else ``tmp_path``)."""
+    keep = Path(os.environ.get("FOOTPRINT_UQ_TEST_OUT", tmp_path))
+    keep.mkdir(parents=True, exist_ok=True)
+    shot = keep / f"{name.replace(' ', '_')}.png"
+    p = run_chromium([f"--screenshot={shot}", "--window-size=1200,1600", "--hide-scrollbars", path.as_uri()],
+                     tmp_path)
+    assert p.returncode == 0, p.stderr[-2000:]
+    assert shot.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    return shot

@@ -176,7 +176,8 @@ def test_report_written_with_every_figure(small_report):
         data = p.read_bytes()
         assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 10_000
     html = paths["report"].read_text()
-    assert html.count('src="data:image/png;base64,') == len(expected)
+    assert html.count('src="data:image/png;base64,') == len(expected) + 1  # the first view also leads the page
+    assert html.index('<section class="lead">') < html.index("<h2>") and "How to read the verdicts" in html
     # self-contained: no external resources
     assert not re.search(r'(src|href)\s*=\s*"(https?:)?//', html)
     assert "<script" not in html.lower()

@@ -197,6 +197,12 @@ def test_demo_writes_report(tmp_path):
     assert "http://" not in html and "https://" not in html  # self-contained
     for name in ("Basler1", "BW-Bullet1", "BW-Cube1"):
         assert name in html
+    # it opens with the camera view (also a file: the README's picture) and a one-sentence verdict, tables after
+    assert (out / "camera_view.png").read_bytes()[:4] == b"\x89PNG"
+    body = html[html.index("</h1>") + 5:].lstrip()
+    assert body.startswith('<section class="lead"><p class="verdict">For 6 cars') and body.index("<table") > \
+        body.index("</section>")
+    assert "footprint-uq: demo: camera view [" in r.stderr  # a line per stage
     for sub in ("basler1", "bw-bullet1", "bw-cube1"):
         assert (out / sub / "map.npz").is_file() and (out / sub / "uncertainty_ground.png").is_file()
     # the left-turn case study runs too and is linked from the report (or, without its optional

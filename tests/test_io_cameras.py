@@ -479,7 +479,7 @@ def test_file_level_errors(tmp_path):
         load_camera(tmp_path / "nope.yaml")
     bad = tmp_path / "bad.yaml"
     bad.write_text("model: pan-tilt\nfocal_px: [1, 2\n")
-    with pytest.raises(ConfigError, match="bad.yaml: got .*valid YAML"):
+    with pytest.raises(ConfigError, match=r"bad.yaml: line 3, column 1: got .*valid YAML syntax"):
         load_camera(bad)
     badj = tmp_path / "bad.json"
     badj.write_text("{'model': 'pan-tilt'}")

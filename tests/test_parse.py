@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import pytest
+import yaml
 
 from footprint_uq import _parse
+from footprint_uq._parse import YAMLSyntaxError, load_yaml
 from footprint_uq.errors import ConfigError
 from hostile_cases import ANCHOR_BOMB
 
@@ -37,3 +39,31 @@ def test_size_limit(monkeypatch):
     with pytest.raises(ConfigError, match="at most 10 characters"):
         _parse.load_yaml("a: 12345678901\n", "big.yaml")
     assert _parse.load_json("[1, 2]", "small.json") == [1, 2]
+
+
+@pytest.mark.parametrize("text, line, column", [
+    ("model: pan-tilt\nimage_size_px: [1920, 1080\nfocal_px: 1400\n", 3, 9),  # an unclosed list
+    ("a: 1\nb: c: d\n", 2, 5),  # a mapping where a value goes
+    ("a: 1\n\tb: 2\n", 2, 1),  # a tab
+    ("a: 'open\n", 2, 1),  # an unclosed quote
+])
+def test_yaml_syntax_error_names_file_line_and_column(text, line, column):
+    """A YAML syntax error is one ConfigError naming the file, the line and the column (1-based) -- and still a
+    yaml.YAMLError for the callers that catch that."""
+    with pytest.raises(YAMLSyntaxError) as e:
+        load_yaml(text, "site/camera.yaml")
+    assert str(e.value).startswith(f"site/camera.yaml: line {line}, column {column}: got "), str(e.value)
+    assert "expected valid YAML syntax" in str(e.value) and "\n" not in str(e.value)
+    assert isinstance(e.value, ConfigError) and isinstance(e.value, yaml.YAMLError)
+
+
+def test_yaml_syntax_error_reaches_the_command_line(tmp_path):
+    from click.testing import CliRunner
+
+    from footprint_uq.cli.main import main
+
+    bad = tmp_path / "camera.yaml"
+    bad.write_text("model: pan-tilt\nimage_size_px: [1920, 1080\nfocal_px: 1400\n")
+    r = CliRunner().invoke(main, ["locate", "--camera", str(bad), "--budget", "basler1", "--pixel", "1", "1"])
+    assert r.exit_code == 2 and r.stderr.count("\n") == 1, r.output
+    assert f"{bad}: line 3, column 9" in r.stderr, r.stderr

@@ -26,7 +26,7 @@ import pytest
 import yaml
 from click.testing import CliRunner
 
-from browser_probe import CHROMIUM, FLAGS, need_chromium, probe
+from browser_probe import CHROMIUM, FLAGS, assert_leads_with_figure_and_verdict, keep_screenshot, need_chromium, probe
 from footprint_uq.cli.main import main
 from footprint_uq.planning.layout import read_layout
 from footprint_uq.planning.site import load_site
@@ -58,6 +58,10 @@ def test_report_has_no_horizontal_overflow_and_every_figure_loads(planned, tmp_p
     assert len(res["imgs"]) == html.count("<img") >= 4
     for img in res["imgs"]:
         assert img["complete"] and img["w"] > 100 and 100 < img["shown_w"] <= res["view_w"], img
+    assert_leads_with_figure_and_verdict(res)  # the met-area map and the verdict first, tables after
+    assert "meets the accuracy requirement on" in res["lead"]["verdict"]
+    if width == 1200:
+        keep_screenshot(planned[1] / "report.html", "report_plan", tmp_path)
 
 
 # -- a minimal DevTools-protocol client -------------------------------------------------------------------------

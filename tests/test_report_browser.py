@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from browser_probe import need_chromium, probe, run_chromium
+from browser_probe import assert_leads_with_figure_and_verdict, keep_screenshot, need_chromium, probe, run_chromium
 
 pytestmark = pytest.mark.browser
 
@@ -33,7 +33,7 @@ def test_report_loads_and_every_figure_is_displayed(report, tmp_path):
     n_fig = len(report["figures"])
     res = probe(html, tmp_path)
     assert res["errors"] == []
-    assert res["n_img"] == n_fig == 10
+    assert res["n_img"] == n_fig + 1 == 11  # the first camera's view twice: leading the page and in its section
     for i, img in enumerate(res["imgs"]):
         assert img["complete"] and img["w"] > 100 and img["h"] > 100, (i, img)
         assert img["shown_w"] > 100, (i, img)  # laid out, not hidden
@@ -47,8 +47,8 @@ def test_probe_detects_a_broken_figure(report, tmp_path):
     i = html.index("data:image/png;base64,") + len("data:image/png;base64,")
     broken = html[:i] + "AAAA" + html[i + 40:]
     res = probe(broken, tmp_path)
-    assert res["n_img"] == len(report["figures"])
     assert res["imgs"][0]["w"] == 0 and all(img["w"] > 0 for img in res["imgs"][1:])
+    assert res["n_img"] == len(report["figures"]) + 1
     assert len(res["errors"]) == 1
 
 
@@ -122,6 +122,38 @@ def _gcp_page(out: Path) -> Path:
 def test_every_page_fits_the_window_and_every_image_loads(pages, kind, tmp_path):
     path, n_img = pages[kind]
     _assert_laid_out(_layout(path.read_text(encoding="utf-8"), tmp_path), n_img)
+
+
+@pytest.mark.parametrize("kind", ["case study", "demo", "intrinsic calibration", "ground control points"])
+def test_reports_lead_with_their_figure_and_verdict(pages, kind, tmp_path):
+    path, _ = pages[kind]
+    html = path.read_text(encoding="utf-8")
+    assert_leads_with_figure_and_verdict(_layout(html, tmp_path))
+    keep_screenshot(path, f"report_{kind}", tmp_path)
+    if kind == "case study":  # PASS and FAIL are explained before the first verdict is listed
+        assert html.index("How to read the verdicts") < html.index("<strong>FAIL</strong>") < html.index("<td><b>")
+    # negative control: the same page with a table moved in front of the lead fails the check
+    moved = html.replace("<section class=\"lead\">", "<table><tr><td>x</td></tr></table><section class=\"lead\">", 1)
+    with pytest.raises(AssertionError):
+        assert_leads_with_figure_and_verdict(_layout(moved, tmp_path))
+
+
+def test_demo_map_legends_say_what_they_draw(pages):
+    """The demo's maps: the sky and the masked ground beyond the range are told apart; a linearity map with
+    nothing to show (all linear_ok) is one sentence, not an empty image."""
+    from footprint_uq.io import camera_from_dict
+    from footprint_uq.products.maps import uncertainty_map
+    from footprint_uq.viz.demo import DEMO_CAMERA
+    from footprint_uq.viz.maps import _invalid_handles  # noqa: PLC2701 - the legend's entries themselves
+
+    m = uncertainty_map(camera_from_dict(dict(DEMO_CAMERA)), "basler1", 48, max_range_m=120.0)
+    labels = [h.get_label() for h in _invalid_handles(m)]
+    assert labels[0].startswith("above the horizon") and labels[1].startswith("ground beyond 120 m")
+    colours = [h.get_facecolor() for h in _invalid_handles(m)]
+    assert colours[0] != colours[1]
+    html = pages["demo"][0].read_text(encoding="utf-8")
+    if m.summary()["fraction_linear_ok"] == 1.0:
+        assert "every valid pixel is <code>linear_ok</code>" in html and "Linearity flag: predicted" not in html
 
 
 def test_layout_probe_detects_overflow_and_a_broken_image(pages, tmp_path):

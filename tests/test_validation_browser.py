@@ -9,7 +9,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 
-from browser_probe import need_chromium, probe
+from browser_probe import assert_leads_with_figure_and_verdict, keep_screenshot, need_chromium, probe
 from footprint_uq.io import save_camera
 from footprint_uq.uncertainty.budget import ErrorBudget
 from footprint_uq.validation.synthetic import campaign_table, random_cameras
@@ -40,6 +40,10 @@ def test_validation_report_loads_figures_and_fits_the_width(report, tmp_path, wi
     res = probe(files["report"].read_text(encoding="utf-8"), tmp_path, width=width)
     assert res["errors"] == []
     assert res["n_img"] == 4
+    assert_leads_with_figure_and_verdict(res)  # the coverage figure and the verdict first, tables after
+    assert "Verdict:" in res["lead"]["verdict"]
+    if width == 1200:
+        keep_screenshot(files["report"], "report_validation", tmp_path)
     for img in res["imgs"]:
         assert img["complete"] and img["w"] > 100 and img["shown_w"] > 100, img
     assert res["scroll_w"] <= res["view_w"], res["wide"][:10]

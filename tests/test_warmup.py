@@ -14,7 +14,7 @@ import pyarrow.parquet as pq
 import pytest
 from click.testing import CliRunner
 
-from footprint_uq import OpenCVCamera, PanTiltCamera, _notices, _numba_cache, save_camera
+from footprint_uq import InputError, OpenCVCamera, PanTiltCamera, _notices, _numba_cache, save_camera
 from footprint_uq.cli.main import main
 from footprint_uq.products import warmup as W
 from footprint_uq.products.footprints import FrameProcessor
@@ -211,21 +211,86 @@ def test_bad_mode_is_one_line(monkeypatch, tmp_path):
     assert r.exit_code == 2 and r.stderr.count("\n") == 1 and "FOOTPRINT_UQ_COMPILE" in r.stderr, r.stderr
 
 
+_HOLD = ("import sys, time\nfrom filelock import FileLock\nlock = FileLock(sys.argv[1], thread_local=False)\n"
+         "lock.acquire()\nprint('held', flush=True)\ntime.sleep(120)\n")
+
+
+def _hold_lock(path: Path) -> subprocess.Popen:
+    """A second process that holds the compile lock ``path`` (a compile under way elsewhere) until killed."""
+    proc = subprocess.Popen([sys.executable, "-c", _HOLD, str(path)], stdout=subprocess.PIPE, text=True)
+    assert proc.stdout.readline().strip() == "held"
+    return proc
+
+
 def test_group_lock(monkeypatch, tmp_path):
-    """One holder at a time; a lock whose process is gone is taken over; the lock file goes with its holder."""
+    """One holder at a time, across processes; a holder that dies (killed: no clean-up) holds nothing."""
     monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "cache"))
-    path = W._lock_path("map")
     with W.group_lock("map", wait=False) as held:
-        assert held and path.read_text() == str(os.getpid()) and W._holder(path) == os.getpid()
-        with W.group_lock("map", wait=False) as again:
-            assert not again
+        assert held and not W.compiling_elsewhere("map")  # our own compile is not another's
+        other = subprocess.run([sys.executable, "-c", "import sys; from footprint_uq.products import warmup as W; "
+                                "sys.exit(0 if W.compiling_elsewhere('map') else 1)"], env=dict(os.environ))
+        assert other.returncode == 0  # seen from another process: held
+    path = W._lock_path("map")
+    proc = _hold_lock(path)
+    try:
+        assert W.compiling_elsewhere("map") and not W.compiling_elsewhere("objects")
+        with W.group_lock("map", wait=False) as held:
+            assert not held
         assert W.start_background("map") is None  # compiling already: nothing started
-    assert not path.exists()
-    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
-    path.write_text(dead.stdout.strip())  # a crashed compile's lock
-    assert W._holder(path) is None
+        t0 = time.monotonic()
+        assert not W.wait_for_compile("map", 0.3) and time.monotonic() - t0 < 2.0
+    finally:
+        proc.kill()
+        proc.wait()
+    assert not W.compiling_elsewhere("map")  # SIGKILL: the OS released the lock
     with W.group_lock("map", wait=False) as held:
         assert held
+
+
+def test_a_library_call_waits_for_another_compile_at_most_the_bound(monkeypatch, tmp_path):
+    """A library call (no command's handler) whose kernels another process is compiling warns once, naming the
+    wait and `footprint-uq warmup`, waits at most FOOTPRINT_UQ_COMPILE_WAIT_S, then returns the reference path's
+    numbers (those of the kernels); once that compile is over, the kernels run."""
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.setenv("FOOTPRINT_UQ_COMPILE_WAIT_S", "1.5")
+    monkeypatch.setattr(W, "cold_groups", lambda groups: list(groups))  # every group "cold"
+    monkeypatch.setattr(W, "_POLL_S", 0.05)
+    _notices.set_compile_handler(None)
+    cam = _cams()[0]
+    boxes = np.array([[6.0, 11.0, 0.75, 4.8, 1.9, 1.5, 0.3], [-4.0, 30.0, 0.75, 4.5, 1.8, 1.5, 1.0]])
+    fast = FrameProcessor(cam, "basler1").boxes3d(boxes)  # the kernels (nobody else compiling)
+    monkeypatch.setattr(_notices, "_library_handler", W.LibraryGate())  # a fresh process's gate
+    (tmp_path / "cache").mkdir()
+    proc = _hold_lock(W._lock_path("objects"))
+    try:
+        fp = FrameProcessor(cam, "basler1")
+        t0 = time.monotonic()
+        with pytest.warns(W.CompileWaitWarning) as caught:
+            est = fp.boxes3d(boxes)
+            est2 = fp.boxes3d(boxes)
+        elapsed = time.monotonic() - t0
+        assert len(caught) == 1, [str(w.message) for w in caught]
+        msg = str(caught[0].message)
+        assert "another process is compiling the objects kernels" in msg and "footprint-uq warmup" in msg
+        assert "1.5 s" in msg and "reference path" in msg
+        assert 1.4 <= elapsed < 10.0  # the bound, not the other compile's length (it never ends by itself)
+        assert not fp._kernels and not _close(fast.centre_cov_m2, 2 * fast.centre_cov_m2)
+        for e in (est, est2):
+            assert _close(e.centre_xy_world_m, fast.centre_xy_world_m)
+            assert _close(e.centre_cov_m2, fast.centre_cov_m2)
+    finally:
+        proc.kill()
+        proc.wait()
+    time.sleep(0.1)
+    fp.boxes3d(boxes)
+    assert fp._kernels  # the other compile is over: the kernels, nothing said again
+
+
+def test_bad_compile_wait_is_named():
+    assert W.compile_wait_s({}) == W.WAIT_S and W.compile_wait_s({"FOOTPRINT_UQ_COMPILE_WAIT_S": "0"}) == 0.0
+    for bad in ("nan", "-1", "inf", "soon"):
+        with pytest.raises(InputError, match="FOOTPRINT_UQ_COMPILE_WAIT_S"):
+            W.compile_wait_s({"FOOTPRINT_UQ_COMPILE_WAIT_S": bad})
 
 
 def _cams():
@@ -330,11 +395,12 @@ def test_cold_cache_first_run_compiles_in_the_background(tmp_path):
     r = subprocess.run(_objects_cmd(tmp_path, "first.parquet"), env=env, capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
     assert r.stderr.count("compiling the objects kernels in the background") == 1, r.stderr
-    lock = cache / "footprint-uq-warmup-objects.lock"
+    probe = ("import sys; from footprint_uq.products import warmup as W; "
+             "sys.exit(0 if W.compiling_elsewhere('objects') else 1)")
     t0 = time.monotonic()
-    while (lock.exists() or not list(cache.rglob("*process_boxes3d*.nbi"))) and time.monotonic() - t0 < 900:
+    while ((subprocess.run([sys.executable, "-c", probe], env=env).returncode == 0
+            or not list(cache.rglob("*process_boxes3d*.nbi"))) and time.monotonic() - t0 < 900):
         time.sleep(1.0)
-    assert not lock.exists()
     check = ("from footprint_uq.products.warmup import cold_groups; import sys; "
              "sys.exit(1 if cold_groups(['objects']) else 0)")
     assert subprocess.run([sys.executable, "-c", check], env=env).returncode == 0
@@ -389,3 +455,24 @@ def test_a_long_job_switches_to_the_kernels_between_chunks(tmp_path):
     _notices.set_compile_handler(None)
     process_file(cam, "basler1", tmp_path / "boxes.csv", tmp_path / "kernels.parquet", chunk_rows=10, threads=1)
     _same_records(tmp_path / "mixed.parquet", tmp_path / "kernels.parquet")
+
+
+def test_warmup_says_when_it_waits_for_another_compile(monkeypatch, tmp_path):
+    """`footprint-uq warmup` behind another process's compile of a group says so before it waits."""
+    import threading
+
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.setitem(W._WARM, "lens", lambda budget: None)
+    (tmp_path / "cache").mkdir()
+    proc = _hold_lock(W._lock_path("lens"))
+    said, out = [], {}
+    job = threading.Thread(target=lambda: out.update(W.warmup(["lens"], on_wait=said.append)))
+    try:
+        job.start()
+        job.join(1.0)
+        assert job.is_alive() and said == ["lens"]  # waiting, and said so
+    finally:
+        proc.kill()
+        proc.wait()
+    job.join(30.0)
+    assert not job.is_alive() and set(out) == {"lens"}

@@ -8,7 +8,7 @@ detected objects, generalised to OpenCV cameras with distortion.
 
 import importlib
 
-from . import _moved, _numba_cache  # noqa: F401 - _numba_cache: numba's cache folder, set before any kernel module
+from . import _moved, _notices, _numba_cache  # noqa: F401 - _numba_cache: numba's cache folder, set before any kernel module
 from .cameras.opencv import OpenCVCamera
 from .cameras.pantilt import PanTiltCamera
 from .errors import ConfigError, ConsistencyWarning, FootprintUQError, InputError
@@ -24,6 +24,7 @@ from .products.footprints import (
 from .products.fusion import fuse_by_id
 from .products.geo import GeoReference, footprints_geojson
 from .products.v2x import cpm_fields, j2735_fields  # noqa: E402
+from .products.warmup import LibraryGate
 from .uncertainty.budget import ErrorBudget, load_budget
 from .uncertainty.ellipse import chi2_scale, ellipse_axes, ellipse_points
 from .uncertainty.propagation import (
@@ -39,6 +40,7 @@ from .uncertainty.propagation import (
 __version__ = "0.1.0"
 
 _moved.install(__name__)  # the module paths of 0.1 stay importable (DeprecationWarning)
+_notices.set_library_handler(LibraryGate())  # a library call never waits silently on another process's compile
 
 __all__ = [
     "ErrorBudget", "load_budget", "OpenCVCamera", "PanTiltCamera", "chi2_scale", "ellipse_axes",

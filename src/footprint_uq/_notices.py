@@ -6,16 +6,21 @@ kernel group's name right before it calls a group's kernels, i.e. after every in
 notice never comes before a one-line input error.  The handler decides itself whether anything needs
 compiling (``products.warmup.KernelGate``) and answers whether the compiled kernels run now: False means the
 caller takes its numpy reference path this time (the same numbers, 1e-9 relative) and asks again before its
-next chunk or frame.  Without a handler (library use) the kernels always run, compiled on first use.
+next chunk or frame.  Without a command's handler (library use) the library's handler answers
+(:func:`set_library_handler`; ``products.warmup.LibraryGate``, installed when the package is imported): the
+kernels run, compiled on first use -- unless another process is compiling the same group right now; then the
+call says so once (a warning naming ``footprint-uq warmup``), waits for it at most a bound, and takes the
+reference path until that compile is done.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
 
-__all__ = ["set_compile_handler", "before_kernels"]
+__all__ = ["set_compile_handler", "set_library_handler", "before_kernels"]
 
 _handler: Callable[[str], bool | None] | None = None
+_library_handler: Callable[[str], bool | None] | None = None
 
 
 def set_compile_handler(handler: Callable[[str], bool | None] | None) -> None:
@@ -25,9 +30,16 @@ def set_compile_handler(handler: Callable[[str], bool | None] | None) -> None:
     _handler = handler
 
 
+def set_library_handler(handler: Callable[[str], bool | None] | None) -> None:
+    """The handler asked when no command set one (library use; None: the kernels always run)."""
+    global _library_handler
+    _library_handler = handler
+
+
 def before_kernels(group: str) -> bool:
     """Called by the library right before it runs the kernels of ``group`` ("map", "points", "objects"):
     True to run them (compiled now if they are not in the cache), False to take the reference path this time."""
-    if _handler is None:
+    handler = _handler if _handler is not None else _library_handler
+    if handler is None:
         return True
-    return _handler(group) is not False
+    return handler(group) is not False

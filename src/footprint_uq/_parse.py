@@ -9,8 +9,10 @@ with three guards the standard loaders lack:
 * **duplicate keys** (YAML and JSON): both loaders keep the last value silently (``tilt_deg: 70``
   after ``tilt_deg: 20``); here a key given twice in one mapping is refused, naming the key.
 
-Errors are :class:`footprint_uq.errors.ConfigError` naming the file (and the key); syntax errors stay
-``yaml.YAMLError`` / ``json.JSONDecodeError`` for the callers' own messages.
+Errors are :class:`footprint_uq.errors.ConfigError` naming the file (and the key).  A YAML syntax error is a
+:class:`YAMLSyntaxError` -- a ``ConfigError`` and a ``yaml.YAMLError`` at once (callers that catch either keep
+working) -- naming the file, the line and the column (1-based) and what the parser expected there; JSON
+syntax errors stay ``json.JSONDecodeError`` (whose message has the line and column already).
 """
 
 from __future__ import annotations
@@ -21,7 +23,7 @@ import yaml
 
 from .errors import ConfigError
 
-__all__ = ["load_yaml", "load_json", "load_yaml_or_json", "MAX_NODES", "MAX_CHARS"]
+__all__ = ["load_yaml", "load_json", "load_yaml_or_json", "MAX_NODES", "MAX_CHARS", "YAMLSyntaxError"]
 
 #: largest number of YAML nodes once aliases are expanded (a 10^6-node file is ~5 MB of text)
 MAX_NODES = 1_000_000
@@ -32,6 +34,21 @@ _MERGE = "tag:yaml.org,2002:merge"
 
 def _label(where: str, field: str) -> str:
     return f"{where}: {field}" if where else field
+
+
+class YAMLSyntaxError(ConfigError, yaml.YAMLError):
+    """YAML text that does not parse: ``FILE: line L, column C: got PROBLEM, expected valid YAML (CONTEXT)``."""
+
+
+def _syntax_error(e: yaml.MarkedYAMLError, where: str) -> YAMLSyntaxError:
+    mark = e.problem_mark or e.context_mark
+    at = f"line {mark.line + 1}, column {mark.column + 1}" if mark is not None else "somewhere"
+    context = e.context or ""
+    if context and e.context_mark is not None and e.context_mark is not mark:
+        context += f" (line {e.context_mark.line + 1}, column {e.context_mark.column + 1})"
+    problem = (e.problem or type(e).__name__).strip()
+    return YAMLSyntaxError(f"{where or 'input'}: {at}", problem,
+                           f"valid YAML syntax{'; ' + context if context else ''}")
 
 
 def _check_size(text: str, where: str) -> None:
@@ -87,6 +104,8 @@ def load_yaml(text: str, where: str = ""):
     try:
         try:
             node = loader.get_single_node()
+        except yaml.MarkedYAMLError as e:
+            raise _syntax_error(e, where) from None
         except RecursionError:
             raise ConfigError(where or "input file", "nested too deeply", "a YAML document of ordinary depth") from None
         if node is None:

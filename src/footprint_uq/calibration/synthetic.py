@@ -366,8 +366,9 @@ def noisy_corners(camera: SyntheticCamera, board, rvecs, tvecs, corner_noise_px:
 
 
 def render_campaign(camera: SyntheticCamera = DEFAULT_CAMERA, board=PAPER_BOARD, n: int = 20, *, seed: int = 0,
-                    pose_kw: dict | None = None, **render_kw) -> tuple[list, list, np.ndarray, np.ndarray]:
-    """Poses from :func:`make_board_poses` and one rendered image per pose.
+                    pose_kw: dict | None = None, progress=None,
+                    **render_kw) -> tuple[list, list, np.ndarray, np.ndarray]:
+    """Poses from :func:`make_board_poses` and one rendered image per pose (``progress(done, n)`` after each).
 
     Returns
     -------
@@ -383,17 +384,21 @@ def render_campaign(camera: SyntheticCamera = DEFAULT_CAMERA, board=PAPER_BOARD,
         im, c = render_board(camera, board, rv, tv, seed=rng, **render_kw)
         images.append(im)
         corners.append(c)
+        if progress is not None:
+            progress(len(images), len(rvecs))
     return images, corners, rvecs, tvecs
 
 
 def write_campaign(out_dir, camera: SyntheticCamera = DEFAULT_CAMERA, board=PAPER_BOARD, n: int = 20, *,
-                   seed: int = 0, pose_kw: dict | None = None, **render_kw) -> Path:
-    """Render a campaign into ``out_dir`` (``board_000.png``...) with ``truth.json`` (camera, board, poses, corners)."""
+                   seed: int = 0, pose_kw: dict | None = None, progress=None, **render_kw) -> Path:
+    """Render a campaign into ``out_dir`` (``board_000.png``...) with ``truth.json`` (camera, board, poses, corners);
+    ``progress(done, n)`` after each image is rendered."""
 
     board = parse_board(board)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    images, corners, rvecs, tvecs = render_campaign(camera, board, n, seed=seed, pose_kw=pose_kw, **render_kw)
+    images, corners, rvecs, tvecs = render_campaign(camera, board, n, seed=seed, pose_kw=pose_kw, progress=progress,
+                                                    **render_kw)
     names = []
     for k, im in enumerate(images):
         name = f"board_{k:03d}.png"
@@ -412,8 +417,9 @@ def write_campaign(out_dir, camera: SyntheticCamera = DEFAULT_CAMERA, board=PAPE
 
 def simulate_campaigns(camera: SyntheticCamera = DEFAULT_CAMERA, board=PAPER_BOARD, n_views: int = 20, *,
                        corner_noise_px: float = 0.1, n_campaigns: int = 50, bootstrap: int = 0, seed: int = 0,
-                       pose_kw: dict | None = None) -> dict:
-    """Planning study: the intrinsic error sizes a campaign of ``n_views`` boards delivers.
+                       pose_kw: dict | None = None, progress=None) -> dict:
+    """Planning study: the intrinsic error sizes a campaign of ``n_views`` boards delivers (``progress(done,
+    n_campaigns)`` after each campaign).
 
     One set of poses (:func:`make_board_poses`), ``n_campaigns`` repetitions of
     independent Gaussian corner noise (``corner_noise_px`` per coordinate, the fast
@@ -444,6 +450,8 @@ def simulate_campaigns(camera: SyntheticCamera = DEFAULT_CAMERA, board=PAPER_BOA
         stds.append(cal.std_opencv)
         if k == 0 and cal.bootstrap is not None and len(cal.bootstrap.samples) > 1:
             boot = cal.bootstrap.std
+        if progress is not None:
+            progress(k + 1, m)
     vals, stds = np.array(vals), np.array(stds)
     out = {"names": list(INTRINSIC_NAMES), "truth": camera.values, "mean": vals.mean(0),
            "scatter": vals.std(0, ddof=1), "opencv": np.sqrt(np.mean(stds**2, 0)), "n_views": int(n_views),

@@ -127,7 +127,8 @@ def _plain(o):
 
 
 def run_synthetic(out_dir, board: str = "14x9", square_m: float = 0.1, *, margin_m: float = 0.05,
-                  camera=None, scale: float = 1.0, options: SyntheticOptions | None = None) -> dict:
+                  camera=None, scale: float = 1.0, options: SyntheticOptions | None = None, stage=None,
+                  progress=None) -> dict:
     """Render a synthetic checkerboard campaign and/or run its planning study into ``out_dir``.
 
     Parameters
@@ -147,6 +148,10 @@ def run_synthetic(out_dir, board: str = "14x9", square_m: float = 0.1, *, margin
     scale : float
         Scale the sensor, same field of view.
     options : SyntheticOptions, optional
+    stage : callable(str), optional
+        Called with a short message as each stage starts (rendering, planning study).
+    progress : callable(done, total), optional
+        Called after each rendered image and after each campaign of the planning study.
 
     Returns
     -------
@@ -156,6 +161,7 @@ def run_synthetic(out_dir, board: str = "14x9", square_m: float = 0.1, *, margin
         ``plan_file`` (path or None).
     """
     o = options if options is not None else SyntheticOptions()
+    say = stage or (lambda msg: None)
     b = parse_board(board, square_m, margin_m)
     if isinstance(camera, SyntheticCamera):
         cam = camera if scale == 1.0 else camera.scaled(scale)
@@ -166,12 +172,15 @@ def run_synthetic(out_dir, board: str = "14x9", square_m: float = 0.1, *, margin
     pose_kw = {"fill": tuple(o.fill), "max_tilt_deg": o.max_tilt_deg}
     plan = plan_file = None
     if o.campaigns:
+        say(f"planning study: {o.campaigns} campaigns of {o.views} views, {o.plan_bootstrap} bootstrap resamples")
         plan = simulate_campaigns(cam, b, o.views, corner_noise_px=o.corner_noise_px, n_campaigns=o.campaigns,
-                                  bootstrap=o.plan_bootstrap, seed=o.seed, pose_kw=pose_kw)
+                                  bootstrap=o.plan_bootstrap, seed=o.seed, pose_kw=pose_kw, progress=progress)
     with output_set(out, SYNTHETIC_OWN, "calibrate synthetic") as stage:
         if o.render:
+            say(f"rendering {o.views} images ({cam.image_size_px[0]}x{cam.image_size_px[1]} px, supersampled "
+                f"{o.supersample}x)")
             write_campaign(stage, cam, b, o.views, seed=o.seed, pose_kw=pose_kw, supersample=o.supersample,
-                           blur_sigma_px=o.blur_sigma_px, noise_sigma_dn=o.noise_sigma_dn)
+                           blur_sigma_px=o.blur_sigma_px, noise_sigma_dn=o.noise_sigma_dn, progress=progress)
         if plan is not None:
             atomic_write_text(stage / "plan.json", json.dumps(_plain(plan), indent=2))
             plan_file = out / "plan.json"

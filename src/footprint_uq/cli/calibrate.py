@@ -19,11 +19,12 @@ from .calibrate_gcp import gcp_cmd
 from .calibrate_intrinsics import intrinsics_cmd
 from .calibrate_motion import motion_cmd
 from .calibrate_synthetic import synthetic_cmd
+from .groups import SuggestingGroup
 
 __all__ = ["calibrate"]
 
 
-@click.group("calibrate")
+@click.group("calibrate", cls=SuggestingGroup)
 def calibrate():
     """Error budgets from calibration data (checkerboard images, ...)."""
 

@@ -11,7 +11,7 @@ from ..calibration.synthetic_run import SyntheticOptions, run_synthetic
 from ..errors import InputError
 from ..params import PAPER_COLUMNS
 from .calibrate_common import board_callback
-from .common import FiniteFloatRange, min_max_callback
+from .common import FiniteFloatRange, Stages, min_max_callback
 
 __all__ = ["synthetic_cmd"]
 
@@ -65,7 +65,9 @@ def synthetic_cmd(out_dir, views, board, square_m, margin_m, camera_file, scale,
                                blur_sigma_px=blur_sigma_px, noise_sigma_dn=noise_sigma_dn, render=not no_render,
                                campaigns=campaigns, corner_noise_px=corner_noise_px, plan_bootstrap=plan_bootstrap,
                                seed=seed)
-    res = run_synthetic(out_dir, board, square_m, margin_m=margin_m, camera=camera_file, scale=scale, options=options)
+    with Stages("calibrate synthetic") as say:
+        res = run_synthetic(out_dir, board, square_m, margin_m=margin_m, camera=camera_file, scale=scale,
+                            options=options, stage=say, progress=say.count)
     cam = res["camera"]
     if res["rendered"]:
         click.echo(f"rendered {views} images of a {res['board'].label()} board ({cam.image_size_px[0]}x"

@@ -13,11 +13,12 @@ import click
 from ..errors import InputError
 from ..io import load_camera, save_camera
 from .common import pose_options
+from .groups import SuggestingGroup
 
 __all__ = ["camera"]
 
 
-@click.group("camera")
+@click.group("camera", cls=SuggestingGroup)
 def camera():
     """Camera files: compose intrinsics and a pose into one file."""
 

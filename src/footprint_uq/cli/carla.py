@@ -14,11 +14,12 @@ import click
 
 from .carla_capture import capture
 from .carla_export import export
+from .groups import SuggestingGroup
 
 __all__ = ["carla"]
 
 
-@click.group("carla")
+@click.group("carla", cls=SuggestingGroup)
 def carla():
     """CARLA simulator: capture the case study, export our scenario (docs/carla-recording.md)."""
 

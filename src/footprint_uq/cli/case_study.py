@@ -8,6 +8,7 @@ from pathlib import Path
 import click
 
 from ..viz.case_study_run import run_case_study
+from .common import Stages
 
 __all__ = ["case_study"]
 
@@ -35,8 +36,10 @@ def case_study(out_dir, config, recording, camera_types, ellipse_every, dpi, sav
     of the paper under both readings of Table 3's angles). Camera types accept
     NAME@deg (Table 3's angles read as degrees).
     """
-    paths = run_case_study(out_dir, config=config, recording=recording, camera_types=list(camera_types) or None,
-                           ellipse_every=ellipse_every, dpi=dpi, write_recording_to=save_recording)
+    with Stages("case-study") as say:
+        paths = run_case_study(out_dir, config=config, recording=recording,
+                               camera_types=list(camera_types) or None, ellipse_every=ellipse_every, dpi=dpi,
+                               write_recording_to=save_recording, progress=say)
     res = paths["result"]
     click.echo(f"case study: {len(res.scene)} frames, {len(res.camera_names)} cameras x {len(res.type_names)} "
                f"camera types")

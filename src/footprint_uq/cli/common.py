@@ -8,8 +8,12 @@ from __future__ import annotations
 
 import functools
 import math
+import sys
+import threading
+import time
 
 import click
+from tqdm import tqdm
 
 from ..errors import InputError
 from ..io import load_camera
@@ -18,7 +22,7 @@ from ..uncertainty.ellipse import chi2_scale
 
 __all__ = ["FiniteFloat", "FiniteFloatRange", "AscendingFloats", "FINITE", "LATITUDE_DEG", "LONGITUDE_DEG",
            "min_max_callback", "load_camera_and_budget", "check_confidence", "note", "warn", "pose_options",
-           "pose_from_options", "budget_notice", "DEFAULT_STEP_PX"]
+           "pose_from_options", "budget_notice", "DEFAULT_STEP_PX", "Stages"]
 
 #: the default grid step of every map the command line draws (``map``, ``demo``), pixels
 DEFAULT_STEP_PX = 4
@@ -199,6 +203,85 @@ def check_confidence(confidence: float | None) -> float | None:
 def note(msg: str) -> None:
     """One line on stderr: ``footprint-uq: MSG``."""
     click.echo(f"footprint-uq: {msg}", err=True)
+
+
+class Stages:
+    """A long command's progress on stderr: one line per stage, ``footprint-uq: COMMAND: STAGE [12 s]`` (the
+    seconds since the command started), and for counted steps a tqdm bar when stderr is a terminal (else a line
+    when the count ends: no bar in a log file).  ``bar``: None (a terminal decides), True, False.
+
+    Used as a context manager around the library call.  A stage's line is said once the stage has run for
+    ``delay_s`` (default 1 s) or when the next stage starts, whichever comes first, and at the end of the ``with``
+    block; a stage cut short by an error within ``delay_s`` says nothing, so that a bad input is still the one line
+    of its error (inputs are checked at once; a long stage is said within a second).
+
+    >>> with Stages("demo") as say:                  # doctest: +SKIP
+    ...     say("maps")
+    footprint-uq: demo: maps [0 s]
+    """
+
+    def __init__(self, command: str, *, bar: bool | None = None, delay_s: float = 1.0):
+        self.command = command
+        self.t0 = time.monotonic()
+        self.bar = sys.stderr.isatty() if bar is None else bar
+        self.delay_s = delay_s
+        self._tqdm = None
+        self._pending: str | None = None
+        self._timer: threading.Timer | None = None
+        self._lock = threading.Lock()
+
+    def __enter__(self) -> Stages:
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        if exc_type is None:
+            self.flush()
+        else:  # an error: its one line, not the stage it cut short
+            self._cancel()
+        self.close()
+
+    def __call__(self, msg: str) -> None:
+        self.close()
+        self.flush()
+        with self._lock:
+            self._pending = f"footprint-uq: {self.command}: {msg} [{time.monotonic() - self.t0:.0f} s]"
+            self._timer = threading.Timer(self.delay_s, self.flush)
+            self._timer.daemon = True
+            self._timer.start()
+
+    def flush(self) -> None:
+        """Say the pending stage's line now (if any)."""
+        with self._lock:
+            line, self._pending = self._pending, None
+            if self._timer is not None:
+                self._timer.cancel()
+                self._timer = None
+        if line is not None:
+            click.echo(line, err=True)
+
+    def _cancel(self) -> None:
+        with self._lock:
+            self._pending = None
+            if self._timer is not None:
+                self._timer.cancel()
+                self._timer = None
+
+    def count(self, done: int, total: int) -> None:
+        """``done`` of ``total`` steps of the current stage are done."""
+        self.flush()
+        if self.bar:
+            if self._tqdm is None:
+                self._tqdm = tqdm(total=total, file=sys.stderr, leave=False, unit="step")
+            self._tqdm.update(done - self._tqdm.n)
+        if done >= total:
+            self.close()
+            click.echo(f"footprint-uq: {self.command}: {done} of {total} done [{time.monotonic() - self.t0:.0f} s]",
+                       err=True)
+
+    def close(self) -> None:
+        if self._tqdm is not None:
+            self._tqdm.close()
+            self._tqdm = None
 
 
 def warn(msg: str) -> None:

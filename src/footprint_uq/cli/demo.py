@@ -7,7 +7,7 @@ import sys
 import click
 
 from ..viz.demo import write_demo
-from .common import DEFAULT_STEP_PX, warn
+from .common import DEFAULT_STEP_PX, Stages, warn
 
 __all__ = ["demo_cmd"]
 
@@ -24,7 +24,7 @@ def demo_cmd(out_dir, step_px, case_study):
     Writes maps, figures and a self-contained report.html into DIR (and the
     left-turn case study into DIR/case-study unless --no-case-study).
     """
-    report = write_demo(out_dir, step_px=step_px, case_study=case_study, warn=warn,
-                        progress=lambda m: click.echo(f"demo: {m}", err=True))
+    with Stages("demo") as say:
+        report = write_demo(out_dir, step_px=step_px, case_study=case_study, warn=warn, progress=say)
     click.echo(f"report: {report}")
     sys.stdout.flush()

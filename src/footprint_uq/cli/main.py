@@ -31,6 +31,7 @@ import click
 import yaml
 
 from ..errors import FootprintUQError
+from .groups import SuggestingGroup
 
 __all__ = ["main", "FootprintUQGroup", "EXIT_BAD_INPUT", "EXIT_BUG"]
 
@@ -72,7 +73,7 @@ def _bug(e: BaseException, args) -> None:
     sys.exit(EXIT_BUG)
 
 
-class FootprintUQGroup(click.Group):
+class FootprintUQGroup(SuggestingGroup):
     """A click group that turns bad-input exceptions into one-line messages and exit status 2.
 
     Commands are added as usual (:meth:`add_command`) or lazily (:meth:`add_lazy_command`): a

@@ -8,7 +8,7 @@ from .._notices import set_compile_handler
 from ..products.gcp_support import load_gcp_support
 from ..products.warmup import compile_handler
 from ..viz.map_report import write_map_report
-from .common import DEFAULT_STEP_PX, FINITE, check_confidence, load_camera_and_budget, note, pose_options, warn
+from .common import DEFAULT_STEP_PX, FINITE, Stages, check_confidence, load_camera_and_budget, note, pose_options, warn
 
 __all__ = ["map_cmd"]
 
@@ -41,9 +41,10 @@ def map_cmd(camera_path, budget_spec, out_dir, step_px, max_range_m, confidence,
     camera, budget = load_camera_and_budget(camera_path, budget_spec, pose)
     support = load_gcp_support(gcp_summary, budget) if gcp_summary is not None else None
     set_compile_handler(compile_handler(note))  # said before the kernels' first compile, after the inputs are checked
-    umap, files = write_map_report(camera, budget, out_dir, step_px=step_px, max_range_m=max_range_m,
-                                   confidence=confidence, linearity=linearity, linear_threshold=linear_threshold,
-                                   gcp_support=support)
+    with Stages("map") as say:
+        umap, files = write_map_report(camera, budget, out_dir, step_px=step_px, max_range_m=max_range_m,
+                                       confidence=confidence, linearity=linearity, linear_threshold=linear_threshold,
+                                       gcp_support=support, progress=say)
     for p in files.values():
         click.echo(f"wrote {p}")
     s = umap.summary(confidence=confidence)

@@ -16,7 +16,7 @@ from ..uncertainty.presets import PRESET_NAMES
 from ..validation.coverage import DEFAULT_RANGE_BANDS_M
 from ..validation.pairs import CONTACT_MODELS
 from ..viz.validation_run import KINDS, run_validation
-from .common import FINITE, LATITUDE_DEG, LONGITUDE_DEG, AscendingFloats, FiniteFloatRange, note
+from .common import FINITE, LATITUDE_DEG, LONGITUDE_DEG, AscendingFloats, FiniteFloatRange, Stages, note
 
 __all__ = ["validate_cmd", "label_source_options", "size_priors_option"]
 
@@ -95,16 +95,18 @@ def validate_cmd(labels, out_dir, budget_spec, contact, size_priors, kind, camer
     if detections is None and (detections_format != "auto" or class_names is not None or unknown_class != "error"):
         raise InputError("--format/--class-names/--unknown-class", (detections_format, class_names, unknown_class),
                          "--detections too (they say how to read a detector's files)")
-    summary, files = run_validation(labels, out_dir, budget_spec, kind=kind, contact=contact, size_priors=size_priors,
-                                    camera=camera_path,
-                                    registry=registry, calibration=calibration,
-                                    image_size_px=tuple(image_size) if image_size else None,
-                                    origin_lat_deg=origin_lat, origin_lon_deg=origin_lon,
-                                    heading_offset_deg=heading_offset_deg, range_bands_m=range_bands,
-                                    alpha=alpha, objects_format=objects_format, report=not no_report, fsync=fsync,
-                                    detections=detections,
-                                    detections_format=None if detections_format == "auto" else detections_format,
-                                    class_names=class_names, unknown_class=unknown_class)
+    with Stages("validate") as say:
+        summary, files = run_validation(labels, out_dir, budget_spec, kind=kind, contact=contact,
+                                        size_priors=size_priors, camera=camera_path,
+                                        registry=registry, calibration=calibration,
+                                        image_size_px=tuple(image_size) if image_size else None,
+                                        origin_lat_deg=origin_lat, origin_lon_deg=origin_lon,
+                                        heading_offset_deg=heading_offset_deg, range_bands_m=range_bands,
+                                        alpha=alpha, objects_format=objects_format, report=not no_report, fsync=fsync,
+                                        detections=detections,
+                                        detections_format=None if detections_format == "auto" else detections_format,
+                                        class_names=class_names, unknown_class=unknown_class,
+                                        stage=say, progress=lambda n: say(f"{n} pairs so far"))
     t = summary["nees_test"]
     c95 = next((c for c in summary["coverage"] if c["nominal"] == 0.95), None)
     un = summary["unpaired"]

@@ -37,7 +37,9 @@ def warmup_cmd(only, background):
         return
     cold = set(cold_groups(groups))
     times = warmup(groups, progress=lambda g: click.echo(f"footprint-uq: warmup: {g} kernels "
-                                                         f"{'compiling' if g in cold else 'cached'}", err=True))
+                                                         f"{'compiling' if g in cold else 'cached'}", err=True),
+                   on_wait=lambda g: click.echo(f"footprint-uq: warmup: another process is compiling the {g} kernels; "
+                                                "waiting for it (then they load from the cache)", err=True))
     for g, s in times.items():
         click.echo(f"{g}: {s:.1f} s ({'compiled' if g in cold else 'loaded from the cache'})")
     click.echo(f"cache: {cache_dir()}")

@@ -28,10 +28,12 @@ import subprocess
 import sys
 import threading
 import time
+import warnings
 from collections.abc import Callable, Iterable
 from pathlib import Path
 
 import numpy as np
+from filelock import FileLock, Timeout
 
 from .._checks import COV_PSD_RTOL
 from .._numba_cache import cache_dir
@@ -49,7 +51,8 @@ from .footprints import FrameProcessor
 from .maps import uncertainty_map
 
 __all__ = ["GROUPS", "ABOUT_S", "MODES", "cold_groups", "compile_notice", "compile_handler", "KernelGate",
-           "compile_mode", "group_lock", "start_background", "warmup"]
+           "compile_mode", "group_lock", "start_background", "warmup", "compiling_elsewhere", "wait_for_compile",
+           "LibraryGate", "CompileWaitWarning", "WAIT_S", "compile_wait_s", "wait_notice"]
 
 #: the entry kernels of each group (their cache index files tell whether the group is compiled)
 GROUPS = {
@@ -63,10 +66,10 @@ GROUPS = {
 ABOUT_S = {"map": 100, "points": 45, "objects": 95, "lens": 15}
 #: values of ``FOOTPRINT_UQ_COMPILE``: what a command does when a kernel group is cold (default: background)
 MODES = ("background", "foreground", "reference")
-#: a lock older than this is taken for a crashed compile's, whatever its process id says (seconds)
-_LOCK_STALE_S = 1800.0
 #: how often a running command looks whether the background compile is done (seconds)
 _POLL_S = 0.5
+#: how long ``group_lock(wait=False)`` tries: another process's probe holds the lock for microseconds (seconds)
+_PROBE_GRACE_S = 0.25
 
 
 def _cached(dispatcher) -> bool:
@@ -125,62 +128,68 @@ def _lock_path(group: str) -> Path:
     return cache_dir() / f"footprint-uq-warmup-{group}.lock"
 
 
-def _holder(path: Path) -> int | None:
-    """The process id of the live compile that holds the lock file ``path``, or None (no lock, or a stale one:
-    its process is gone, or it is older than :data:`_LOCK_STALE_S`)."""
+#: the groups whose compile lock this process holds (:func:`group_lock`): its own compile is not "another's"
+_HELD: set[str] = set()
+
+
+def compiling_elsewhere(group: str) -> bool:
+    """Whether another process holds the compile lock of ``group`` right now (a compile under way).  The lock is
+    an OS file lock (``filelock``): a compile that crashed or was killed holds nothing."""
+    if group in _HELD:
+        return False
+    path = _lock_path(group)
+    if not path.exists():
+        return False
+    probe = FileLock(path, thread_local=False)
     try:
-        text, age = path.read_text().strip(), time.time() - path.stat().st_mtime
-    except OSError:
-        return None
-    if age > _LOCK_STALE_S:
-        return None
-    if not text.isdigit():  # created a moment ago, its process id not written yet
-        return -1 if age < 5.0 else None
-    pid = int(text)
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return None
-    except PermissionError:  # alive, another user's
-        pass
-    return pid
+        probe.acquire(timeout=0)
+    except Timeout:
+        return True
+    except OSError:  # a cache folder we cannot lock in: nobody can compile there either
+        return False
+    probe.release()
+    return False
+
+
+def wait_for_compile(group: str, timeout_s: float) -> bool:
+    """Wait at most ``timeout_s`` seconds for another process's compile of ``group`` (its lock); whether it is
+    over (the lock free)."""
+    deadline = time.monotonic() + timeout_s
+    while compiling_elsewhere(group):
+        left = deadline - time.monotonic()
+        if left <= 0:
+            return False
+        time.sleep(min(_POLL_S, left))
+    return True
 
 
 @contextlib.contextmanager
 def group_lock(group: str, *, wait: bool):
-    """Hold the compile lock of ``group`` -- a file in the cache folder holding this process id -- in the
-    ``with`` block; yields whether it is held.  Another live process holding it: ``wait=True`` waits for it to
-    finish, ``wait=False`` yields False at once.  A stale lock (crashed compile) is taken over."""
+    """Hold the compile lock of ``group`` (an OS file lock in the cache folder, ``filelock``: released by the OS
+    when its process ends, a crash included) in the ``with`` block; yields whether it is held.  Another process
+    holding it: ``wait=True`` waits for it to finish, ``wait=False`` yields False after :data:`_PROBE_GRACE_S` (a
+    moment: long enough not to mistake another process's probe, :func:`compiling_elsewhere`, for a compile)."""
     path = _lock_path(group)
     path.parent.mkdir(parents=True, exist_ok=True)
-    held = False
-    while not held:
-        try:
-            fd = os.open(path, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
-        except FileExistsError:
-            if _holder(path) is None:
-                with contextlib.suppress(FileNotFoundError):
-                    path.unlink()
-                continue
-            if not wait:
-                break
-            time.sleep(_POLL_S)
-            continue
-        with os.fdopen(fd, "w") as f:
-            f.write(str(os.getpid()))
-        held = True
+    lock = FileLock(path, thread_local=False)
     try:
-        yield held
+        lock.acquire(timeout=-1 if wait else _PROBE_GRACE_S, poll_interval=_POLL_S if wait else 0.02)
+    except Timeout:
+        yield False
+        return
+    _HELD.add(group)
+    try:
+        yield True
     finally:
-        if held:
-            path.unlink(missing_ok=True)
+        _HELD.discard(group)
+        lock.release()
 
 
 def start_background(group: str) -> subprocess.Popen | None:
     """Start ``footprint-uq warmup --only group --background`` as a detached process (its own session: it
     outlives the command, and a Ctrl-C of the command does not stop it; niceness +10: the command comes first
     where cores are scarce); None when another process is compiling the group already."""
-    if _holder(_lock_path(group)) is not None:
+    if compiling_elsewhere(group):
         return None
     env = {**os.environ, "FOOTPRINT_UQ_COMPILE": "foreground", "NUMBA_CACHE_DIR": str(cache_dir())}
     if not os.environ.get("NUMBA_CACHE_DIR"):  # numba's default (beside the sources): leave it so
@@ -241,7 +250,7 @@ class KernelGate:
         job[1] = now + _POLL_S
         if job[0] is not None and job[0].poll() is None:
             return "waiting"
-        if _holder(_lock_path(group)) is not None:  # another command's compile
+        if compiling_elsewhere(group):  # another command's compile
             return "waiting"
         # done; a compile that failed (still cold) leaves this run on the reference path
         return "reference" if cold_groups([group]) else "ready"
@@ -251,6 +260,75 @@ class KernelGate:
         for job in self._jobs.values():
             if job[0] is not None:
                 job[0].wait(timeout_s)
+
+
+class CompileWaitWarning(RuntimeWarning):
+    """A library call found its kernels being compiled by another process and did not wait for it past a bound."""
+
+
+#: how long a library call waits, at most, for another process's compile of its kernels (seconds)
+WAIT_S = 20.0
+
+
+def compile_wait_s(environ=os.environ) -> float:
+    """``FOOTPRINT_UQ_COMPILE_WAIT_S`` (seconds, finite and >= 0; unset or empty: :data:`WAIT_S`)."""
+    text = environ.get("FOOTPRINT_UQ_COMPILE_WAIT_S", "").strip()
+    if not text:
+        return WAIT_S
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not (0.0 <= value < float("inf")):
+        raise InputError("FOOTPRINT_UQ_COMPILE_WAIT_S", text, "a finite number of seconds >= 0")
+    return value
+
+
+def wait_notice(group: str, wait_s: float) -> str:
+    """The warning of a library call whose kernels another process is compiling."""
+    return (f"footprint-uq: another process is compiling the {group} kernels (lock {_lock_path(group)}); this call "
+            f"waits for it at most {wait_s:g} s, then runs on the numpy reference path (the same numbers, slower) "
+            "until that compile is done. Run `footprint-uq warmup` ahead of time to avoid the wait "
+            "(FOOTPRINT_UQ_COMPILE_WAIT_S sets the bound)")
+
+
+class LibraryGate:
+    """The library's handler (:func:`footprint_uq._notices.set_library_handler`, installed on import): whether a
+    library call runs a group's compiled kernels now.
+
+    Nobody else compiling the group (no lock held: the usual case, a lock probe of microseconds): True -- the kernels
+    run, compiled on first use in this process.  Another process compiling it: one :class:`CompileWaitWarning`
+    per group (:func:`wait_notice`), a wait of at most ``wait_s`` seconds (``FOOTPRINT_UQ_COMPILE_WAIT_S``,
+    default :data:`WAIT_S`) for that compile, then True if it is over, else False (the reference path) until it
+    is -- asked again at most every :data:`_POLL_S` seconds.  Thread-safe."""
+
+    def __init__(self, wait_s: float | None = None):
+        self.wait_s = wait_s
+        self._ready: set[str] = set()
+        self._next_poll: dict[str, float] = {}
+        self._lock = threading.Lock()
+
+    def __call__(self, group: str) -> bool:
+        if group in self._ready:
+            return True
+        with self._lock:
+            if group in self._ready:
+                return True
+            if group in self._next_poll:  # waited once already: look again now and then, never wait
+                now = time.monotonic()
+                if now < self._next_poll[group]:
+                    return False
+                self._next_poll[group] = now + _POLL_S
+                if compiling_elsewhere(group):
+                    return False
+            elif compiling_elsewhere(group) and cold_groups([group]):
+                wait_s = compile_wait_s() if self.wait_s is None else self.wait_s
+                warnings.warn(wait_notice(group, wait_s), CompileWaitWarning, stacklevel=4)
+                if not wait_for_compile(group, wait_s):
+                    self._next_poll[group] = time.monotonic() + _POLL_S
+                    return False
+            self._ready.add(group)  # (a compile elsewhere that failed leaves the group cold: compiled here)
+            return True
 
 
 def _cameras():
@@ -296,15 +374,17 @@ _WARM = {"map": _warm_map, "points": _warm_points, "objects": _warm_objects, "le
 
 
 def warmup(groups: Iterable[str] | None = None, *, progress: Callable[[str], None] | None = None,
-           background: bool = False) -> dict[str, float]:
+           background: bool = False, on_wait: Callable[[str], None] | None = None) -> dict[str, float]:
     """Compile (or load from the cache) every kernel of ``groups`` (default: all); returns seconds per group.
 
     Each group is compiled under its lock (:func:`group_lock`): a compile of the same group already running
     elsewhere is waited for (then its kernels load from the cache), or with ``background=True`` (the detached
-    compile a command starts) the group is skipped."""
+    compile a command starts) the group is skipped; ``on_wait(group)`` is called before such a wait."""
     budget = load_budget("basler1")
     out = {}
     for g in list(groups) if groups is not None else list(GROUPS):
+        if on_wait is not None and not background and compiling_elsewhere(g):
+            on_wait(g)  # (said, not waited for silently)
         with group_lock(g, wait=not background) as held:
             if not held:
                 continue

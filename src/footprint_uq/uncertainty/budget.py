@@ -174,7 +174,7 @@ class ErrorBudget:
         (world east, north).
         """
         if presets.parse_preset_name(name) is None:
-            raise ConfigError("budget preset", name, f"one of {_preset_choices()}")
+            raise ConfigError("budget preset", name, f"one of {_preset_choices()}{_did_you_mean(name)}")
         return cls.from_dict(presets.preset_dict(str(name)))
 
     @classmethod
@@ -332,6 +332,11 @@ def _preset_choices() -> str:
             f"or one of them with '@deg' (angles read as degrees)")
 
 
+def _did_you_mean(name) -> str:
+    close = presets.suggest_preset(name)
+    return f"; did you mean '{close}'?" if close else ""
+
+
 def _parse_covariance(c, where):
     label = f"{where}: covariance" if where else "covariance"
     if not isinstance(c, dict) or "names" not in c or "matrix" not in c:
@@ -468,7 +473,7 @@ def load_budget(spec) -> ErrorBudget:
         return _preset(s)  # one (frozen) object per name: its factor is computed once, not on every call
     path = Path(s)
     if not path.exists():
-        raise ConfigError("budget", s, f"a preset ({_preset_choices()}) or an existing file")
+        raise ConfigError("budget", s, f"a preset ({_preset_choices()}) or an existing file{_did_you_mean(s)}")
     try:
         text = read_input_text(path, "budget")  # a FIFO: a stream; a device: refused
     except (OSError, UnicodeDecodeError) as e:

@@ -27,6 +27,8 @@ Roll and ground-plane errors are not measured in the paper and are 0.
 
 from __future__ import annotations
 
+import difflib
+
 #: per camera: (sigma fx, sigma fy, sigma f, sigma c, sigma r, k1, k2, p1, p2, k3) -- Table 2
 PAPER_TABLE2 = {
     "basler1": (0.1992, 0.1923, 0.2768, 0.1713, 0.1314, 5e-4, 0.0019, 3e-5, 5e-5, 0.0002),
@@ -86,6 +88,23 @@ def parse_preset_name(name) -> tuple[str, str] | None:
     if suffix != "deg":
         return None
     return base, suffix
+
+
+def suggest_preset(name) -> str | None:
+    """The preset name closest to ``name`` (a typo's "did you mean"), or None when nothing is close:
+    ``"basler"`` -> ``"basler1"``, ``"bw-cub1@deg"`` -> ``"bw-cube1@deg"``, ``"basler1@rad"`` -> ``"basler1@deg"``."""
+    if parse_preset_name(name) is not None:
+        return None
+    key = str(name).strip().lower()
+    base, sep, _ = key.partition(READING_SEPARATOR)
+    if base.strip() in PAPER_TABLE2:
+        return f"{base.strip()}{READING_SEPARATOR}deg" if sep else None
+    scores = [difflib.SequenceMatcher(None, base.strip(), p).ratio() for p in PAPER_TABLE2]
+    best = max(range(len(scores)), key=lambda i: (scores[i], -i))  # ties: the first in the table's order
+    if scores[best] < 0.6:
+        return None
+    close = list(PAPER_TABLE2)[best]
+    return f"{close}{READING_SEPARATOR}deg" if sep else close
 
 
 def preset_label(name: str, angle_reading: str = DEFAULT_ANGLE_READING) -> str:

@@ -15,7 +15,7 @@ from matplotlib.figure import Figure
 
 from ..io.atomic import atomic_path
 from ..params import INTRINSIC_NAMES, PAPER_COLUMNS
-from .report import esc, html_page, html_table, img_tag, write_html
+from .report import esc, html_page, html_table, img_tag, lead_block, write_html
 
 __all__ = ["plot_coverage", "plot_error_map", "plot_asymmetry", "plot_view_errors", "plot_sigma_comparison",
            "save_calibration_figures"]
@@ -187,7 +187,16 @@ def write_calibration_html(summary: dict, out_dir, *, figures=("coverage.png", "
     out = Path(out_dir)
     s = summary
     fr = s["frames"]
-    parts = [f"<p>OpenCV {esc(s['opencv_version'])}; board {s['board']['inner_corners'][0]}x"
+    pt = s["paper_table"].get("opencv") or next(iter(s["paper_table"].values()), {})
+    verdict = (f"Calibrated from {fr['used']} of {fr['input']} images with an RMS reprojection error of "
+               f"{s['rms_reprojection_error_px']:.3g}&nbsp;px: focal length {s['intrinsics']['fx_px']:.5g}&nbsp;px, "
+               f"1-&sigma; {pt.get('sigma_f_px', float('nan')):.2g}&nbsp;px by OpenCV's estimate (the error budget "
+               "is in <code>budget.yaml</code>).")
+    lead_png = next((out / n for n in figures if (out / n).is_file()), None)
+    lead = (lead_block(lead_png.read_bytes(), f"{lead_png.name}: where on the image the board's corners were "
+                       "seen, and how well they are fitted.", verdict) if lead_png is not None
+            else f'<p class="verdict">{verdict}</p>')
+    parts = [lead, f"<p>OpenCV {esc(s['opencv_version'])}; board {s['board']['inner_corners'][0]}x"
              f"{s['board']['inner_corners'][1]} inner corners, square {s['board']['square_m']} m; image "
              f"{s['image_size_px'][0]}x{s['image_size_px'][1]} px. Frames: {fr['input']} input, {fr['board_found']} "
              f"with the board, {fr['used']} used, {fr['dropped_by_filter']} dropped by the filter. RMS reprojection "
@@ -212,7 +221,7 @@ def write_calibration_html(summary: dict, out_dir, *, figures=("coverage.png", "
     parts.append("<h2>Maps</h2>")
     for name in figures:
         p = out / name
-        if p.is_file():
+        if p.is_file() and p != lead_png:
             parts.append(img_tag(p.read_bytes(), name))
     a = s["maps"]["asymmetry"]
     parts.append("<p>Asymmetry: " + esc(", ".join(f"{k} = {v:.4g}" if isinstance(v, float) else f"{k} = {v}"

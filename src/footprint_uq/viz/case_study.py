@@ -37,7 +37,7 @@ from ..scenario.claims import evaluate_claims
 from ..scenario.intersection import RoadLayout
 from ..scenario.trajectory import box_corners
 from ..uncertainty.ellipse import chi2_scale, ellipse_points
-from .report import esc, html_page, img_tag, write_html
+from .report import esc, html_page, img_tag, lead_block, write_html
 from .report import html_table as _html_table
 
 __all__ = ["plot_camera_views", "plot_birdseye", "plot_sigma_profiles", "plot_contributions", "plot_heatmaps",
@@ -566,6 +566,28 @@ def _fmt_xy(v):
     return "&ndash;" if v is None else f"({v[0]:.1f}, {v[1]:.1f})"
 
 
+#: what PASS and FAIL mean, said before any verdict is listed
+_VERDICT_KEY = ("<p><b>How to read the verdicts.</b> Each row is a statement the paper makes about its case study, "
+                "turned into a measurement with a tolerance. <strong>PASS</strong>: our numbers for this scene and "
+                "these error budgets agree with the statement within that tolerance, for every camera. "
+                "<strong>FAIL</strong>: they do not for at least one camera (the per-camera column says which); it "
+                "is a finding about the statement under these settings, not an error of the software, and the "
+                "&ldquo;why&rdquo; column gives the reason.</p>")
+
+
+def _lead_html(result, claims: list[dict], pngs: dict) -> str:
+    """The report's opening: the first camera's view with the ellipses (the paper's Figure 8) and one sentence of
+    verdicts, PASS and FAIL explained."""
+    n_pass = sum(c["verdict"] == "PASS" for c in claims)
+    cam = result.camera_names[0]
+    verdict = (f"The left turn is reproduced with {len(result.camera_names)} cameras &times; "
+               f"{len(result.type_names)} camera types: {n_pass} of the paper&rsquo;s {len(claims)} statements "
+               f"hold within tolerances fixed in advance (PASS) and {len(claims) - n_pass} do not (FAIL: our numbers "
+               "contradict the statement under these settings, explained below).")
+    cap = _FIG_CAPTIONS["view"].format(cam=cam, conf=f"{100 * result.confidence:g} %", fig=8)
+    return lead_block(pngs[f"{cam}_view"], cap, verdict)
+
+
 def _claims_html(claims: list[dict], esc, reproduction_link: str | None) -> str:
     """The paper's statements with their fixed tolerances and verdicts (:mod:`footprint_uq.scenario.claims`)."""
     rows = []
@@ -578,7 +600,7 @@ def _claims_html(claims: list[dict], esc, reproduction_link: str | None) -> str:
         link = (f' Every table and statement of the paper, under both readings of Table 3&rsquo;s angles: '
                 f'<a href="{esc(reproduction_link)}">{esc(reproduction_link)}</a> (also '
                 '<code>docs/paper-reproduction.md</code> in the footprint-uq sources).')
-    return ("<h2>The paper&rsquo;s statements, tested</h2><p>Tolerances fixed in "
+    return ("<h2>The paper&rsquo;s statements, tested</h2>" + _VERDICT_KEY + "<p>Tolerances fixed in "
             "<code>footprint_uq.scenario.claims</code> before the results were looked at; X = north and Y = east "
             "are the paper&rsquo;s earth-frame axes (pan read as a compass heading)." + link + "</p>"
             '<table class="wide"><colgroup><col style="width:24%"><col style="width:22%"><col style="width:18%">'
@@ -796,7 +818,7 @@ def write_case_study_report(result, out_dir, *, settings: dict | None = None, el
     claims = evaluate_claims(result)
     atomic_write_text(summary_path, json.dumps({"summary": summary, "claims": claims, "xy_statements": statements,
                                                 "lane_width_statements": lane}, indent=1, default=_json_default))
-    parts = [_intro_html(result)]
+    parts = [_lead_html(result, claims, pngs), _intro_html(result)]
     parts.append(_claims_html(claims, esc, reproduction_link))
     parts.append(_findings_html(result, esc).replace("&nbsp;", " "))
     parts.append("<h2>Summary per camera and camera type</h2>")

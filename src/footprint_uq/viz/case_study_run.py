@@ -28,7 +28,7 @@ CASE_STUDY_OWN = ("*.png", "case_study_frames.csv", "summary.json", "report.html
 
 
 def run_case_study(out_dir, *, config=None, recording=None, camera_types=None, ellipse_every: int = 4,
-                   dpi: int = 130, write_recording_to=None, reproduction: bool = True) -> dict:
+                   dpi: int = 130, write_recording_to=None, reproduction: bool = True, progress=None) -> dict:
     """Run the case study and write its report.
 
     Parameters
@@ -50,6 +50,8 @@ def run_case_study(out_dir, *, config=None, recording=None, camera_types=None, e
     reproduction : bool
         Also write ``paper-reproduction.md`` (the paper's tables and statements under both
         readings of Table 3's angles, default scene) and link it from the report.
+    progress : callable(str), optional
+        Called with a short message as each stage starts (scene, analysis, reproduction, figures and report).
 
     Returns
     -------
@@ -62,6 +64,7 @@ def run_case_study(out_dir, *, config=None, recording=None, camera_types=None, e
     """
     matplotlib.use("Agg")
     check_output_folder(out_dir, CASE_STUDY_OWN, "case-study")  # before the work, not after
+    say = progress or (lambda msg: None)
     if config is None:
         cfg = CaseStudyConfig()
     elif isinstance(config, CaseStudyConfig):
@@ -69,13 +72,18 @@ def run_case_study(out_dir, *, config=None, recording=None, camera_types=None, e
     else:
         cfg = load_config(config)
     types = cfg.camera_types if not camera_types else {str(k): k for k in camera_types}
+    say("scene: reading the recording" if recording is not None else "scene: the left turn")
     scene = read_recording(recording) if recording is not None else build_scene(cfg)
     if write_recording_to is not None:
         scene_to_recording(scene, write_recording_to)
+    say(f"analysis: {len(scene)} frames x {len(types)} camera types")
     result = analyse(scene, types, confidence=cfg.confidence)
     settings = cfg.to_dict() if recording is None else {"heatmap": cfg.heatmap}
     with output_set(out_dir, CASE_STUDY_OWN, "case-study") as stage:
+        if reproduction:
+            say("paper reproduction: every table and statement, both readings of Table 3's angles")
         repro = write_paper_reproduction(stage / "paper-reproduction.md") if reproduction else None
+        say("figures and report")
         paths = write_case_study_report(result, stage, settings=settings, ellipse_every=ellipse_every,
                                         heatmap=cfg.heatmap, dpi=dpi,
                                         reproduction_link=repro.name if repro is not None else None)

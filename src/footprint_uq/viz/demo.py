@@ -17,16 +17,19 @@ import numpy as np
 
 from ..io import camera_from_dict, camera_to_dict, save_camera
 from ..io.atomic import check_output_folder, output_set
+from ..products.footprints import FrameProcessor
 from ..products.locate import locate_records
 from ..products.maps import GSD_DEFINITION, uncertainty_map
 from ..uncertainty.budget import ErrorBudget
+from ..uncertainty.ellipse import ellipse_axes
 from ..uncertainty.presets import display_name
+from .camera_view import plot_camera_view
 from .case_study_run import run_case_study
 from .map_report import write_map_report
 from .maps import plot_range_profile, save_figure
-from .report import esc, html_page, html_table, img_tag, write_html
+from .report import esc, html_page, html_table, img_tag, lead_block, write_html
 
-__all__ = ["DEMO_CAMERA", "DEMO_PRESETS", "DEMO_PIXELS", "write_demo"]
+__all__ = ["DEMO_CAMERA", "DEMO_PRESETS", "DEMO_PIXELS", "DEMO_OBJECTS", "write_demo"]
 
 #: the demonstration camera: a roadside pole, full-HD camera (our pan-tilt camera-file keys)
 DEMO_CAMERA = {
@@ -45,6 +48,17 @@ DEMO_PRESETS = ("basler1", "bw-bullet1", "bw-cube1")
 DEMO_PIXELS = ((959.5, 1079.0), (959.5, 800.0), (959.5, 539.5), (200.0, 400.0), (1700.0, 300.0), (959.5, 20.0))
 
 _CASE_STUDY_TITLE = "<h2>Case study: left turn seen by two roadside cameras</h2>"
+
+
+def _car(range_m: float, bearing_deg: float, yaw_deg: float, size_m=(4.6, 1.9, 1.5)) -> list[float]:
+    b = np.deg2rad(bearing_deg)
+    return [range_m * np.sin(b), range_m * np.cos(b), size_m[2] / 2.0, *size_m, float(np.deg2rad(yaw_deg))]
+
+
+#: the demo's detected objects (3-D boxes in the world frame: x_m, y_m, z_m, length_m, width_m, height_m,
+#: yaw_rad), 13 to 85 m from the pole, drawn with their ellipses in ``camera_view.png``
+DEMO_OBJECTS = np.array([_car(13.0, 25.0, 60.0), _car(20.0, 42.0, 60.0), _car(28.0, 18.0, 150.0),
+                         _car(42.0, 34.0, 60.0), _car(60.0, 22.0, 150.0), _car(85.0, 38.0, 60.0, (12.0, 2.5, 3.5))])
 
 
 def _warn(msg: str) -> None:
@@ -77,12 +91,13 @@ def write_demo(out_dir, *, step_px: int = 4, max_range_m: float = 120.0, presets
     Returns
     -------
     Path
-        The report, ``out_dir/report.html``.  Next to it: ``camera.yaml``, one sub-directory
-        per preset with the map report (:func:`.map_report.write_map_report`) and
+        The report, ``out_dir/report.html``.  Next to it: ``camera.yaml``, ``camera_view.png`` (the camera's
+        image with the 95 % ellipses of :data:`DEMO_OBJECTS` under every budget: the report's first figure), one
+        sub-directory per preset with the map report (:func:`.map_report.write_map_report`) and
         ``range_profile.png``.
     """
-    own = ("camera.yaml", "report.html", "range_profile.png", "case-study", *(ErrorBudget.preset(p).name
-                                                                              for p in presets))
+    own = ("camera.yaml", "camera_view.png", "report.html", "range_profile.png", "case-study",
+           *(ErrorBudget.preset(p).name for p in presets))
     check_output_folder(out_dir, own, "demo")
     with output_set(out_dir, own, "demo") as stage:
         _write_demo(stage, step_px, max_range_m, presets, progress, warn, case_study)
@@ -97,14 +112,19 @@ def _write_demo(out: Path, step_px, max_range_m, presets, progress, warn, case_s
     budgets = [ErrorBudget.preset(p) for p in presets]
     maps, files, prof = _maps_and_figures(camera, budgets, out, step_px, max_range_m, say)
 
+    say("camera view")
+    view = save_figure(plot_camera_view(camera, budgets, DEMO_OBJECTS, confidence=0.95,
+                                        title="What the camera sees: detected cars and the 95 % ellipses of their "
+                                              "ground positions"), out / "camera_view.png", dpi=110)
+    cs_parts = _case_study_section(out, say, warn or _warn) if case_study else []
     say("report")
-    parts = [_intro(cam_path)]
-    if case_study:
-        parts += _case_study_section(out, say, warn or _warn)
-    parts += _camera_and_budget_sections(camera, budgets)
+    parts = [_lead(camera, budgets, maps, view), _intro(cam_path)]
+    parts += _figure_sections(budgets, maps, files, prof)
     parts += _summary_sections(budgets, maps, step_px, max_range_m)
     parts += _example_pixel_section(camera, budgets)
-    parts += _figure_sections(budgets, files, prof)
+    parts += _camera_and_budget_sections(camera, budgets)
+    parts += cs_parts
+    parts += _ASSUMPTIONS
     return write_html(out / "report.html", html_page("footprint-uq demo: roadside camera uncertainty maps", parts))
 
 
@@ -126,6 +146,27 @@ def _maps_and_figures(camera, budgets, out: Path, step_px, max_range_m, say):
     return maps, files, prof
 
 
+def _lead(camera, budgets, maps, view: Path) -> str:
+    """The report's opening: the camera view with the ellipses, and one sentence saying what it shows."""
+    spans = []
+    for b in budgets:
+        est = FrameProcessor(camera, b).boxes3d(DEMO_OBJECTS)
+        a = ellipse_axes(est.centre_cov_m2, confidence=0.95)[0]
+        spans.append(f"{a.min():.2g}&ndash;{a.max():.2g}&nbsp;m with {esc(display_name(b.name))}")
+    rng = np.hypot(DEMO_OBJECTS[:, 0], DEMO_OBJECTS[:, 1])
+    lin = [m.summary()["fraction_linear_ok"] for m in maps]
+    lin_text = (f"the first-order covariances hold for every pixel within {maps[0].max_range_m:g}&nbsp;m (all "
+                "<code>linear_ok</code>)"
+                if all(f == 1.0 for f in lin if f is not None) else
+                "pixels where the first-order covariance is not reliable are hatched in the maps below")
+    verdict = (f"For {len(DEMO_OBJECTS)} cars {rng.min():.0f}&ndash;{rng.max():.0f}&nbsp;m from this 8-m pole the "
+               f"95&nbsp;% ellipse of each ground position has a semi-major axis of {', '.join(spans)}, growing "
+               f"with range; {lin_text}.")
+    return lead_block(view.read_bytes(), "The demo camera's image (drawn from its model): each car's 3-D box and the "
+                      "95 % ellipse of its footprint centre under the three budgets, labelled with the largest "
+                      "budget's semi-major axis; dotted: range rings from the pole's foot.", verdict)
+
+
 def _intro(cam_path: Path) -> str:
     return (
         "<p>Ground-position uncertainty of every pixel of a roadside camera under the error budgets measured in "
@@ -140,7 +181,7 @@ def _intro(cam_path: Path) -> str:
 def _case_study_section(out: Path, say, warn) -> list[str]:
     say("case study")
     try:
-        cs = run_case_study(out / "case-study")
+        cs = run_case_study(out / "case-study", progress=lambda msg: say(f"case study: {msg}"))
     except ModuleNotFoundError as e:  # an optional dependency of the case study is not installed
         msg = f"case study skipped: it needs the Python package '{e.name}' (pip install {e.name})"
         warn(msg)
@@ -204,7 +245,22 @@ def _example_pixel_section(camera, budgets) -> list[str]:
     return ["<h2>Example pixels (95&nbsp;% ellipse)</h2>", html_table(prow, floatfmt=".4g")]
 
 
-def _figure_sections(budgets, files, prof: Path) -> list[str]:
+def _linearity_part(m, f) -> str:
+    """The linearity map, or one sentence when it has nothing to show (every valid pixel ``linear_ok``)."""
+    s = m.summary()
+    if s["fraction_linear_ok"] is None:
+        return ""
+    if s["fraction_linear_ok"] == 1.0:
+        worst = np.nanmax(np.where(m.valid, m.nonlinearity, np.nan))
+        return (f'<p class="note">Linearity flag: every valid pixel is <code>linear_ok</code> (the largest predicted '
+                f"error of the linear 1-&sigma; semi-major axis is {100 * worst:.2g}&nbsp;%, threshold "
+                f"{100 * m.linear_threshold:g}&nbsp;%), so there is no map to show.</p>")
+    return img_tag(Path(f["nonlinearity_png"]).read_bytes(),
+                   "Linearity flag: predicted relative error of the linear 1-sigma semi-major axis per pixel, with the "
+                   f"{100 * m.linear_threshold:g} % contour (beyond it the covariance underestimates the spread).")
+
+
+def _figure_sections(budgets, maps, files, prof: Path) -> list[str]:
     parts = ["<h2>Uncertainty along the image centre column</h2>",
              img_tag(prof.read_bytes(), "1-sigma semi-axes against ground range for the three budgets.")]
     for b in budgets:
@@ -214,18 +270,18 @@ def _figure_sections(budgets, files, prof: Path) -> list[str]:
                              "scale across budgets; grey: no ground intersection or beyond the maximum range."))
         parts.append(img_tag(f["ground_png"].read_bytes(), "The same on the ground (bird's-eye view)."))
         if f.get("nonlinearity_png") is not None and Path(f["nonlinearity_png"]).exists():
-            parts.append(img_tag(Path(f["nonlinearity_png"]).read_bytes(),
-                                 "Linearity flag: predicted relative error of the linear 1-sigma semi-major axis per "
-                                 "pixel, with the 5 % contour (beyond it the covariance underestimates the spread)."))
+            parts.append(_linearity_part(maps[budgets.index(b)], f))
     parts.append("<h2>Ground sampling distance</h2>")
     parts.append(img_tag(files[budgets[0].name]["gsd_png"].read_bytes(),
                          "Metres of ground per pixel, along and across the line of sight (camera only, no budget)."))
     parts.append(f"<p>Definition: <code>{esc(GSD_DEFINITION)}</code>.</p>")
-    parts.append("<h2>Assumptions</h2><ul>"
-                 "<li>Flat ground plane; first-order (linear) propagation, accurate well below the horizon and "
-                 "under-estimating close to it (see <code>footprint_uq.linearity_ratio</code>).</li>"
-                 "<li>Camera-level errors (calibration, pose) are shared by all pixels of an image; the imaging and "
-                 "resolution noise is independent per pixel.</li>"
-                 "<li>The error sizes are those measured in the paper for its six cameras; use a budget file with "
-                 "your own calibration results for a real site.</li></ul>")
     return parts
+
+
+_ASSUMPTIONS = ["<h2>Assumptions</h2><ul>"
+                "<li>Flat ground plane; first-order (linear) propagation, accurate well below the horizon and "
+                "under-estimating close to it (see <code>footprint_uq.linearity_ratio</code>).</li>"
+                "<li>Camera-level errors (calibration, pose) are shared by all pixels of an image; the imaging and "
+                "resolution noise is independent per pixel.</li>"
+                "<li>The error sizes are those measured in the paper for its six cameras; use a budget file with "
+                "your own calibration results for a real site.</li></ul>"]

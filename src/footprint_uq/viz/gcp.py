@@ -18,7 +18,7 @@ from matplotlib.collections import LineCollection
 from matplotlib.figure import Figure
 
 from ..uncertainty.ellipse import ellipse_points
-from .report import esc, html_page, html_table, img_tag
+from .report import esc, html_page, html_table, lead_block
 
 __all__ = ["plot_gcp", "gcp_report_html", "MAX_NAMED_POINTS"]
 
@@ -115,7 +115,12 @@ def plot_gcp(solution, *, image=None, confidence: float = 0.95) -> Figure:
 def gcp_report_html(solution, fig=None, notes=(), *, title: str = "Camera from ground control points") -> str:
     """A self-contained one-page HTML summary of a GCP solve."""
     s = solution
-    parts = []
+    verdict = (f"Camera solved from {len(s.gcps.uv_px)} ground control points: RMS reprojection "
+               f"{s.rms_px:.3g}&nbsp;px, reduced chi-square {s.reduced_chi2:.3g} (about 1 when the stated pixel and "
+               "survey sigmas match the residuals; far above 1, the covariance is optimistic).")
+    caption = ("Left: clicked pixels, reprojected survey points and residual arrows (magnified). Right: survey points "
+               "with the 95 % ellipse of the solve's ground uncertainty and the leave-one-out ground errors.")
+    parts = [lead_block(fig, caption, verdict) if fig is not None else f'<p class="verdict">{verdict}</p>']
     stats = [{"points": len(s.gcps.uv_px), "solved": ", ".join(s.estimated), "RMS (px)": s.rms_px,
               "chi-square": s.chi2, "dof": s.dof, "reduced chi-square": s.reduced_chi2,
               "intrinsics covariance": s.intrinsics_cov_given}]
@@ -129,10 +134,6 @@ def gcp_report_html(solution, fig=None, notes=(), *, title: str = "Camera from g
         parts.append("<h2>Geodetic origin of W</h2>" + html_table([s.gcps.georef], floatfmt=".9g"))
     if notes:
         parts.append("<h2>Warnings</h2><ul>" + "".join(f"<li>{esc(n)}</li>" for n in notes) + "</ul>")
-    if fig is not None:
-        parts.append(img_tag(fig, "Left: clicked pixels, reprojected survey points and residual arrows (magnified). "
-                                  "Right: survey points with the 95 % ellipse of the solve's ground uncertainty and "
-                                  "the leave-one-out ground errors."))
     cols = ["name", "u_px", "v_px", "x_m", "y_m", "z_m", "du_px", "dv_px", "residual_sigma", "loo_residual_px",
             "loo_ground_error_m", "loo_status"]
     rows = s.residual_rows()

@@ -35,7 +35,7 @@ MAP_OWN = (*MAP_FILES.values(), "gcp_support.npz")
 def write_map_report(camera, budget, out_dir, *, step_px: int = 4, max_range_m: float | None = None,
                      confidence: float | None = None, vmin_m: float | None = None, vmax_m: float | None = None,
                      dpi: int = 150, umap=None, linearity: bool = True, linear_threshold: float = 0.05,
-                     gcp_support: dict | None = None):
+                     gcp_support: dict | None = None, progress=None):
     """Compute an uncertainty map and write its arrays, figures and summary into ``out_dir``.
 
     Parameters
@@ -68,6 +68,8 @@ def write_map_report(camera, budget, out_dir, *, step_px: int = 4, max_range_m: 
     gcp_support : dict, optional
         The support of a GCP solve (:func:`footprint_uq.products.gcp_support.load_gcp_support`): also
         ``gcp_support.npz`` (key ``gcp_support``), in the same set.
+    progress : callable(str), optional
+        Called with a short message as each stage starts (the map, the figures).
 
     Returns
     -------
@@ -79,20 +81,24 @@ def write_map_report(camera, budget, out_dir, *, step_px: int = 4, max_range_m: 
         ``nonlinearity_png`` when the map has no flag).
     """
     check_output_folder(out_dir, MAP_OWN, "map")  # before the map is computed, not after
+    say = progress or (lambda msg: None)
     if umap is None:
+        w, h = camera.image_size_px
+        say(f"computing {-(-w // step_px)} x {-(-h // step_px)} pixels (every {step_px} px)")
         umap = uncertainty_map(camera, budget, step_px, max_range_m=max_range_m, linearity=linearity,
                                linear_threshold=linear_threshold)
     with output_set(out_dir, MAP_OWN, "map") as stage:
-        files = _write_files(umap, camera, stage, confidence, vmin_m, vmax_m, dpi)
+        files = _write_files(umap, camera, stage, confidence, vmin_m, vmax_m, dpi, say)
         if gcp_support is not None:
             files["gcp_support"] = save_support_map(stage / "gcp_support.npz", camera, umap.budget, gcp_support,
                                                     umap.uv_px)
     return umap, final_paths(files, stage, out_dir)
 
 
-def _write_files(umap, camera, out: Path, confidence, vmin_m, vmax_m, dpi) -> dict:
+def _write_files(umap, camera, out: Path, confidence, vmin_m, vmax_m, dpi, say) -> dict:
     """The map's arrays, figures and summary written into ``out`` (the staging folder)."""
     files = {k: out / v for k, v in MAP_FILES.items()}
+    say("figures and arrays")
     if umap.nonlinearity is None:
         del files["nonlinearity_png"]
     else:

@@ -48,6 +48,8 @@ GSD_LEVELS_M = (0.005, 0.01, 0.02, 0.05, 0.1, 0.2, 0.5, 1.0, 2.0, 5.0)
 
 _CMAP = "viridis"
 _BAD = "#d9d9d9"
+#: the pixels above the horizon (sky: no ground intersection), drawn apart from the masked ground beyond the range
+_SKY = "#dbe9f6"
 #: colour of the linearity threshold's contour
 FLAG_COLOR = "#d62728"
 #: hatch of the pixels that are not linear_ok
@@ -216,6 +218,7 @@ def plot_image_map(umap, *, confidence: float | None = None, levels_m=DEFAULT_LE
     ax = fig.add_subplot()
     im = ax.imshow(np.ma.masked_invalid(a), cmap=_cmap(), norm=norm, extent=_extent(umap), origin="upper",
                    interpolation="nearest", zorder=1)
+    _draw_sky(ax, umap)
     _contours(ax, umap.uv_px[..., 0], umap.uv_px[..., 1], a, levels_m, norm)
     flag = _draw_linearity(ax, umap.uv_px[..., 0], umap.uv_px[..., 1], umap.nonlinearity, umap.valid,
                            umap.linear_threshold) if show_linearity else []
@@ -236,15 +239,25 @@ def plot_image_map(umap, *, confidence: float | None = None, levels_m=DEFAULT_LE
     return fig
 
 
+def _draw_sky(ax, umap) -> None:
+    """The pixels above the horizon in their own colour (:data:`_SKY`), over the grey of the masked pixels: the
+    band of ground beyond the maximum range (below the horizon) stays grey and is labelled as such."""
+    sky = umap.reason == status.ABOVE_HORIZON
+    if sky.any():
+        ax.imshow(np.ma.masked_where(~sky, np.ones(sky.shape)), cmap=colors.ListedColormap([_SKY]),
+                  extent=_extent(umap), origin="upper", interpolation="nearest", zorder=1.05)
+
+
 def _invalid_handles(umap):
-    """Legend patches for the greyed-out (invalid) pixels, by reason."""
+    """Legend patches for the invalid pixels, by reason: sky (above the horizon), ground beyond the range, other."""
 
     beyond = getattr(status, "BEYOND_RANGE", -1)
     out = []
     if np.any(umap.reason == status.ABOVE_HORIZON):
-        out.append(Patch(color=_BAD, label="no ground intersection (above horizon)"))
+        out.append(Patch(facecolor=_SKY, edgecolor="#999", label="above the horizon: no ground intersection"))
     if np.any(umap.reason == beyond):
-        out.append(Patch(facecolor=_BAD, edgecolor="#999", label=f"beyond {umap.max_range_m:g} m"))
+        out.append(Patch(facecolor=_BAD, edgecolor="#999",
+                         label=f"ground beyond {umap.max_range_m:g} m (masked; below the horizon)"))
     other = ~umap.valid & (umap.reason != status.ABOVE_HORIZON) & (umap.reason != beyond)
     if np.any(other):
         out.append(Patch(color=_BAD, label="invalid (see reason codes)"))
@@ -499,6 +512,7 @@ def plot_nonlinearity_map(umap, *, vmin=1e-4, vmax=1.0, title: str | None = None
         ax.contour(umap.uv_px[..., 0], umap.uv_px[..., 1], zm, levels=[thr], colors=FLAG_COLOR, linewidths=1.6,
                    zorder=4)
         ax.plot([], [], color=FLAG_COLOR, lw=1.6, label=f"threshold {thr:g}: linear_ok below (nearer)")
+    _draw_sky(ax, umap)
     _draw_horizon(ax, umap)
     ax.set_xlim(-0.5, w - 0.5)
     ax.set_ylim(h - 0.5, -0.5)

@@ -16,10 +16,11 @@ import matplotlib
 import numpy as np
 from matplotlib import colors
 from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
 from matplotlib.patches import Patch, Polygon
 
 from ..planning.coverage import semi_major_from_info
-from .report import esc, html_page, html_table, img_tag, write_html
+from .report import esc, html_page, html_table, img_tag, lead_block, write_html
 
 __all__ = ["raster", "plot_site", "plot_semi_major", "plot_met", "best_single", "layout_rows", "plan_report_html",
            "write_plan_report", "CAMERA_COLOURS"]
@@ -94,6 +95,8 @@ def plot_site(site, samples, cameras, infos, *, title: str = "Site and camera fo
         handles.append(Patch(fc=c, alpha=0.5, label=lc.name))
     mounts = np.array([m.position_m for m in site.mounts])
     ax.plot(mounts[:, 0], mounts[:, 1], "^", ms=6, mfc="none", mec="#444", label="candidate mounts")
+    handles.append(Line2D([], [], ls="none", marker="^", ms=6, mfc="none", mec="#444", label="candidate mount"))
+    handles.append(Line2D([], [], ls="none", marker="o", ms=7, mfc="#bbb", mec="k", label="chosen camera (arrow: pan)"))
     _draw_cameras(ax, cameras)
     if site.occluders:
         handles.append(Patch(fc="#888", hatch="xx", label="occluders"))
@@ -188,22 +191,26 @@ def plan_report_html(site, samples, cameras, evaluation, infos, *, sensitivity_r
     conf = 100 * evaluation.confidence
     how = "fused over every camera that sees it (information form)" if evaluation.fusion else \
         "of the best single camera"
-    parts = [f'<p class="note">Site <b>{esc(site.name)}</b>: {len(site.zones)} zones sampled every '
+    title = (f"Fused {conf:g} % semi-major axis" if evaluation.fusion
+             else f"{conf:g} % semi-major axis (best single camera)")
+    zones = "; ".join(f"{esc(z.name)} {100 * z.fraction_met:.0f}&nbsp;%" if np.isfinite(z.fraction_met)
+                      else f"{esc(z.name)} unseen" for z in evaluation.zones)
+    verdict = (f"This layout of {len(cameras)} camera{'s' if len(cameras) != 1 else ''} meets the accuracy "
+               f"requirement on <b>{100 * evaluation.fraction:.1f}&nbsp;%</b> of the weighted zone area ({zones}).")
+    parts = [lead_block(plot_semi_major(site, samples, evaluation.semi_major_m, cameras, title=title),
+                        "Bird's-eye map of the semi-major axis over the zones; red contours: each zone's requirement; "
+                        "circles: the chosen cameras, arrows: their headings.", verdict, dpi=dpi)]
+    parts += [f'<p class="note">Site <b>{esc(site.name)}</b>: {len(site.zones)} zones sampled every '
              f"{site.resolution_m:g} m ({len(samples)} samples), {len(site.mounts)} candidate mounts, "
              f"{len(cameras)} cameras. A sample is <i>met</i> when the {conf:g} % semi-major axis of its ground "
              f"position {how} "
              f"is at most its zone's requirement. Weighted met area: <b>{100 * evaluation.fraction:.1f} %</b>.</p>"]
+    parts.append(img_tag(plot_site(site, samples, cameras, infos), "The site to scale: zones (light blue), "
+                         "occluders (hatched), candidate mounts (open triangles), the chosen cameras (filled circles, "
+                         "arrow: heading) and each camera's footprint on the zones (its colour).", dpi=dpi))
     parts += ["<h2>Zones</h2>", _table([z.row() for z in evaluation.zones], floatfmt=".3g")]
     parts += ["<h2>Layout</h2>", _table(layout_rows(cameras), floatfmt=".4g")]
-    parts.append(img_tag(plot_site(site, samples, cameras, infos), "The site to scale: zones (blue), occluders "
-                         "(hatched), candidate mounts (triangles), each camera's footprint on the zones and heading.",
-                         dpi=dpi))
     parts.append("<h2>Maps</h2>")
-    parts.append(img_tag(plot_semi_major(site, samples, evaluation.semi_major_m, cameras,
-                                         title=f"Fused {conf:g} % semi-major axis" if evaluation.fusion else
-                                         f"{conf:g} % semi-major axis (best single camera)"),
-                         "Bird's-eye map of the semi-major axis over the zones; red contours: each zone's "
-                         "requirement.", dpi=dpi))
     if evaluation.fusion and len(cameras) > 1:
         parts.append(img_tag(plot_semi_major(site, samples, best_single(samples, infos, evaluation.confidence),
                                              cameras, title=f"Best single camera, {conf:g} % semi-major axis"),

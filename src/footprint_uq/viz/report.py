@@ -17,7 +17,7 @@ from pathlib import Path
 
 from ..io.atomic import atomic_write_text
 
-__all__ = ["fig_to_png_bytes", "png_data_uri", "img_tag", "html_table", "html_page", "write_html", "esc"]
+__all__ = ["lead_block", "fig_to_png_bytes", "png_data_uri", "img_tag", "html_table", "html_page", "write_html", "esc"]
 
 _CSS = """
 body { font-family: -apple-system, "Segoe UI", Helvetica, Arial, sans-serif; max-width: 1100px;
@@ -34,6 +34,8 @@ code { background: #f3f3f3; padding: 0 .2em; }
 table.wide { width: 100%; table-layout: fixed; }
 table.wide th, table.wide td { white-space: normal; text-align: left; vertical-align: top; overflow-wrap: anywhere; }
 .scroll { overflow-x: auto; max-width: 100%; }
+section.lead { margin: .6em 0 1.2em; } section.lead figure { margin: .4em 0; }
+p.verdict { font-size: 1.08em; background: #eef4fb; border-left: 4px solid #4a7ab5; padding: .45em 1em; margin: 0; }
 """
 
 
@@ -59,6 +61,13 @@ def img_tag(fig_or_png, caption: str = "", *, dpi: int = 130) -> str:
     png = fig_or_png if isinstance(fig_or_png, bytes | bytearray) else fig_to_png_bytes(fig_or_png, dpi=dpi)
     cap = f"<figcaption>{esc(caption)}</figcaption>" if caption else ""
     return f'<figure><img alt="{esc(caption)}" src="{png_data_uri(bytes(png))}">{cap}</figure>'
+
+
+def lead_block(fig_or_png, caption: str, verdict_html: str, *, dpi: int = 130) -> str:
+    """What every report opens with: its main figure and a one-sentence verdict (HTML, escaped by the caller)
+    above it, before any table (``<section class="lead">``; tests/test_report_browser.py checks it comes first)."""
+    figure = img_tag(fig_or_png, caption, dpi=dpi)
+    return f'<section class="lead"><p class="verdict">{verdict_html}</p>{figure}</section>'
 
 
 def _fmt(v, floatfmt: str, missing: str = "&ndash;") -> str:

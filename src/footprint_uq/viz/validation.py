@@ -16,7 +16,7 @@ from matplotlib.figure import Figure
 
 from ..uncertainty.ellipse import chi2_scale
 from ..validation.coverage import LEVELS
-from .report import esc, html_page, html_table, img_tag
+from .report import esc, html_page, html_table, img_tag, lead_block
 
 __all__ = ["plot_calibration", "plot_nees", "plot_residuals", "plot_by_range", "validation_figures",
            "validation_html"]
@@ -166,19 +166,37 @@ def _breakdown(rows, key) -> str:
     return html_table([{c: r[c] for c in cols} for r in rows], cols, floatfmt=".3g")
 
 
+def _lead_html(summary, figures: dict, dpi: int) -> str:
+    """The report's opening: the coverage calibration figure and the verdict in one sentence."""
+    t = summary["nees_test"]
+    v = summary.get("verdict")
+    if v is None or "calibration" not in figures:
+        return _verdict_html(summary)
+    col = _VERDICT_COLOUR.get(v, "#555")
+    c95 = next((c for c in summary["coverage"] if c["nominal"] == 0.95), None)
+    cover = (f"the 95&nbsp;% ellipses contain {100 * c95['empirical']:.0f}&nbsp;% of the {summary['n_pairs']} "
+             "true positions, " if c95 is not None else "")
+    verdict = (f'Verdict: <b style="color:{col}">{esc(v)}</b> &mdash; {cover}mean NEES {t["nees_mean"]:.3g} '
+               f"(expected 2 if the uncertainty is right; effective number of independent objects "
+               f"{t['n_eff']:.3g}).")
+    return lead_block(figures["calibration"], "Coverage calibration: the fraction of true positions inside the "
+                      "ellipse against the ellipse's nominal coverage (on the diagonal: the uncertainty is right; "
+                      "above: over-cautious; below: over-confident).", verdict, dpi=dpi)
+
+
 def _verdict_html(summary) -> str:
     t = summary["nees_test"]
     v = summary.get("verdict")
     col = _VERDICT_COLOUR.get(v, "#555")
     if v is None:
-        return '<p class="note">No usable pair: no verdict.</p>'
+        return '<p class="verdict">No usable pair: no verdict.</p>'
     weak = ""
     if t["n_eff"] < WEAK_N_EFF:
         weak = (f'<p class="note">Weak evidence: the pairs carry the information of about {t["n_eff"]:.2g} independent '
                 "objects (their calibration draws are shared), so only a gross misfit can be detected; "
                 f"&ldquo;{esc(v)}&rdquo; means &ldquo;not refuted by these data&rdquo;. More cameras or calibration "
                 "campaigns, not more objects, make the test sharper (docs/validation.md).</p>")
-    return (f'<p style="font-size:1.2em">Verdict: <b style="color:{col}">{esc(v)}</b> '
+    return (f'<p>Verdict in detail: <b style="color:{col}">{esc(v)}</b> '
             f"(mean NEES {t['nees_mean']:.3g}, expected 2; p(too large) = {t['p_value_too_large']:.3g}, "
             f"p(too small) = {t['p_value_too_small']:.3g}; n = {t['n']}, effective n = {t['n_eff']:.3g}).</p>" + weak)
 
@@ -199,13 +217,13 @@ def validation_html(summary: dict, figures: dict, *, title: str = "Validation of
     un = summary.get("unpaired", {})
     err = summary.get("error", {})
     b = summary["bias"]
-    parts = [_verdict_html(summary),
+    detail = summary.get("verdict") is not None and "calibration" in figures
+    parts = [_lead_html(summary, figures, dpi), _verdict_html(summary) if detail else "",
              f"<p>Budget <code>{esc(summary.get('budget'))}</code>, contact model "
              f"<code>{esc(summary.get('contact'))}</code>, {summary.get('n_groups', 0)} calibration group(s).</p>",
              "<h2>Coverage of the ellipses</h2>",
              _raw_table(_coverage_rows(summary), ["nominal", "inside", "empirical", "Wilson 95 % (independent)",
                                                   "at n_eff", "SE at n_eff", "cluster SE"]),
-             img_tag(figures["calibration"], "Coverage calibration: empirical against nominal", dpi=dpi),
              f'<p class="note">{esc(_NOTE)}</p>',
              "<h2>Pairs</h2>",
              html_table([{"rows": sum(summary["rows"].values()), "pairs used": summary["n_pairs"],

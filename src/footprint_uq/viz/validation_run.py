@@ -130,7 +130,7 @@ def run_validation(labels, out_dir, budget, *, kind: str | None = None, contact=
                    heading_offset_deg: float = 0.0, range_bands_m=DEFAULT_RANGE_BANDS_M, alpha: float = 0.05,
                    objects_format: str = "csv", chunk_rows: int = 131_072, report: bool = True, dpi: int = 110,
                    fsync: bool = True, progress=None, detections=None, detections_format: str | None = None,
-                   class_names=None, unknown_class: str = "error") -> tuple[dict, dict]:
+                   class_names=None, unknown_class: str = "error", stage=None) -> tuple[dict, dict]:
     """Validate labelled data and write the outputs into ``out_dir``.
 
     Parameters
@@ -151,6 +151,7 @@ def run_validation(labels, out_dir, budget, *, kind: str | None = None, contact=
     detections : a detector's own files (YOLO labels, YOLOv5 CSV, COCO results, MOTChallenge, a canonical table;
         ``detections_format`` / ``class_names`` / ``unknown_class`` as :func:`footprint_uq.batch.formats.open_reader`)
         paired with ``labels``, a truth table of ``frame, object_id`` and the truth point (docs/integrations.md)
+    progress : callable(n_pairs) after every chunk; stage : callable(str) as each stage starts
 
     Returns
     -------
@@ -172,17 +173,21 @@ def run_validation(labels, out_dir, budget, *, kind: str | None = None, contact=
                           detections=detections, detections_options=dict(format=detections_format,
                                                                           class_names=class_names,
                                                                           unknown_class=unknown_class))
-    with output_set(out_dir, VALIDATION_OWN, "validate", fsync=fsync) as stage:
-        summary, files = _write_validation(stage, labels, kind, folder, chunks, budget, contact_fn, range_bands_m,
+    with output_set(out_dir, VALIDATION_OWN, "validate", fsync=fsync) as staging:
+        summary, files = _write_validation(staging, labels, kind, folder, chunks, budget, contact_fn, range_bands_m,
                                            alpha, objects_format, report, dpi, fsync, progress, detections,
-                                           size_priors)
-    return summary, final_paths(files, stage, out_dir)
+                                           size_priors, stage)
+    return summary, final_paths(files, staging, out_dir)
 
 
 def _write_validation(out: Path, labels, kind, folder, chunks, budget, contact, range_bands_m, alpha, objects_format,
-                      report, dpi, fsync, progress, detections=None, size_priors=None) -> tuple[dict, dict]:
+                      report, dpi, fsync, progress, detections=None, size_priors=None,
+                      stage=None) -> tuple[dict, dict]:
     """The job's files written into ``out`` (the hidden staging folder of :func:`run_validation`)."""
     files = {"objects": out / f"objects.{objects_format}", "summary": out / VALIDATION_FILES["summary"]}
+    say = stage or (lambda msg: None)
+    contact_name = contact if isinstance(contact, str) else getattr(contact, "__name__", "custom")
+    say(f"reading the {kind} labels and pairing detections with truth (contact model {contact_name})")
     res = validate(chunks, budget, contact=contact, objects_out=files["objects"], range_bands_m=range_bands_m,
                    alpha=alpha, fsync=fsync, progress=progress)
     summary = res.summary
@@ -191,7 +196,9 @@ def _write_validation(out: Path, labels, kind, folder, chunks, budget, contact, 
     if detections is not None:
         summary["detections"] = str(detections)
     summary["files"] = {k: v.name for k, v in files.items()}
+    say(f"{summary.get('n_pairs', 0)} pairs; coverage and verdict done")
     if report:
+        say("report and figures")
         figs = validation_figures(summary, res.accumulator.sample)
         files["report"] = out / VALIDATION_FILES["report"]
         files["calibration_png"] = out / VALIDATION_FILES["calibration_png"]
