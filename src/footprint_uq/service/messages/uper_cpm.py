@@ -622,7 +622,8 @@ def encode_cpm_uper_fast(cpm: dict, *, cdd: str = DEFAULT_CDD, perceived_objects
     for w in cpm["payload"]["cpmContainers"]:
         cid = w["containerId"]
         if not CONTAINER_ID_RSU <= cid <= CONTAINER_ID_PERCEIVED_OBJECTS:
-            raise InputError("containerId", cid, f"{CONTAINER_ID_RSU}..{CONTAINER_ID_PERCEIVED_OBJECTS} (the subset sent)")
+            raise InputError("containerId", cid,
+                             f"{CONTAINER_ID_RSU}..{CONTAINER_ID_PERCEIVED_OBJECTS} (the subset sent)")
         data = perceived_objects_uper if (cid == CONTAINER_ID_PERCEIVED_OBJECTS and perceived_objects_uper
                                           is not None) else _container_bytes(cid, w["containerData"], check_cdd(cdd))
         v, nb = _append_container(v, nb, cid, data)
