@@ -54,7 +54,8 @@ SWEEP = settings(max_examples=14, deadline=None, derandomize=True,
 
 
 def _polygon(rng, far: bool) -> np.ndarray:
-    """A star-shaped polygon of 3..16 vertices (0.01 m); ``far``: centred up to ~300 m away, vertices up to ~600 m (a reference point)."""
+    """A star-shaped polygon of 3..16 vertices (0.01 m); ``far``: centred up to ~300 m away, vertices up to ~600 m
+    (sent with a reference point)."""
     m = int(rng.integers(3, 17))
     ang = np.sort(rng.uniform(0, 2 * np.pi, m))
     r = rng.uniform(500, 30000, m)

@@ -36,6 +36,13 @@ beyond -1310.72 / +1310.70 m they take the out-of-range values (-131072 / 131071
 (:mod:`.motion`) an object also carries ``velocity`` (``cartesianVelocity``: east, north with their
 ``SpeedConfidence``), ``angles.zAngle`` (its yaw) and ``objectAge``.
 
+The CP service's parts (:mod:`footprint_uq.service.cp_segments`): ``managementContainer.segmentationInfo``
+(``{"totalMsgNo": t, "thisMsgNo": k}``), the Sensor Information container (``containerId`` 3, a list of
+:func:`sensor_information`), the Perception Region container (4, a list of :func:`perception_region_entry`), a
+``Shape`` as ``{"polygonal": {"polygon": [{"xCoordinate": .., "yCoordinate": ..}, ...]}}`` (0.01 m east / north,
+:func:`polygonal_shape`), and per object ``objectPerceptionQuality`` and ``sensorIdList`` (docs/service.md, "The
+CPM's containers").
+
 CDD releases: the JSON and the UPER follow the release given as ``cdd`` (:data:`~.asn1_cpm.CDD_RELEASES`;
 :mod:`.asn1_cpm` says what differs).  A VRU sub-profile is a name in V2.1.1 and a number in V2.2.1.
 

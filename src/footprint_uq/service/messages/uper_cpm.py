@@ -12,10 +12,11 @@ Layout (X.691 unaligned PER; ``n`` bits of ``v - lower bound`` for a constrained
 CollectivePerceptionMessage
   header                               protocolVersion 8, messageId 8, stationId 32
   payload                              extension bit 0
-    managementContainer                extension bit 0, 2 presence bits 00, referenceTime 42,
-                                       latitude 31 (+900000000), longitude 32 (+1800000000),
-                                       semiMajor 12, semiMinor 12, orientation 12,
-                                       altitudeValue 20 (+100000), altitudeConfidence 4 (index)
+    managementContainer                extension bit 0, 2 presence bits (segmentationInfo, 0),
+                                       referenceTime 42, latitude 31 (+900000000), longitude 32
+                                       (+1800000000), semiMajor 12, semiMinor 12, orientation 12,
+                                       altitudeValue 20 (+100000), altitudeConfidence 4 (index),
+                                       [segmentationInfo: totalMsgNo 3 (-1), thisMsgNo 3 (-1)]
     cpmContainers                      extension bit 0, count 3 (n - 1), then per container:
                                        containerId 4 (id - 1), open type = length determinant
                                        (8 bits '0'+len if len < 128, 16 bits '10'+len if < 16384)
@@ -28,10 +29,24 @@ PerceivedObject                        extension bit 0, 14 presence bits, object
                                        [correlation: count 2 (n - 1), per matrix: extension bit 0 +
                                        13 component bits, columns 4 (n - 1), per column: extension
                                        bit 0 + count 4 (n - 1), cells 8 (+100)];
+                                       [velocity 46], [angles 21], [objectAge 11],
+                                       [objectPerceptionQuality 4], [sensorIdList: extension bit 0,
+                                       count 7 (n - 1), ids 8 each];
                                        [classification: count 3 (n - 1), per class: CHOICE extension
                                        bit 0 + index 2, vehicleSubClass 4 | vruSubClass (extension
                                        bit 0 + index 2 + pedestrian enumeration index 3) |
                                        otherSubClass 8, confidence 7 (-1)]
+SensorInformationContainer             extension bit 0, count 7 (n - 1), per entry: extension bit 0,
+                                       2 presence bits, sensorId 8, sensorType 5, [Shape],
+                                       [confidence 7 (-1)], shadowingApplies 1
+PerceptionRegionContainer              extension bit 0, count 8 (n - 1), per entry: extension bit 0,
+                                       3 presence bits, measurementDeltaTime 12 (+2048), confidence 7
+                                       (-1), Shape, shadowingApplies 1, [sensorIdList], [number 8],
+                                       [perceivedObjectIds: extension 0, count 8, ids 16 each]
+Shape (polygonal)                      CHOICE extension bit 0, index 3 (2), presence bits of
+                                       shapeReferencePoint and height, [point: 0 + x 16 + y 16
+                                       (+32768)], polygon: extension bit 0, count 4 (n - 3), vertices
+                                       as the point
 OriginatingRsuContainer                extension bit 0, presence bit 0 -> one octet 0x00
 =====================================  ==========================================================
 
