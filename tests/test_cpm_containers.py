@@ -161,6 +161,25 @@ def test_polygon_count_bits_are_pinned():
         "SensorInformationContainer", [{**info, "perceptionRegionShape": ("polygonal", shape["polygonal"])}])
 
 
+def test_a_far_polygon_goes_with_a_reference_point(official):  # noqa: F811
+    """Vertices beyond +-327.67 m: sent relative to the bounding box's centre; the decoded polygon + the point is the
+    given polygon (official decoders)."""
+    verts = np.array([[5000, 20000], [55000, 21000], [54000, 40000], [6000, 39000]])
+    shape = polygonal_shape(verts)
+    ref = shape["polygonal"]["shapeReferencePoint"]
+    assert ref == {"xCoordinate": 30000, "yCoordinate": 30000}
+    cpm = build_cpm(5, REF_MS, [], sensor_information=[sensor_information(1, shape, 95, False)])
+    payload = encode_cpm_uper(cpm, "2.1.1")
+    assert encode_cpm_uper_fast(cpm, cdd="2.1.1") == payload
+    _check_official(payload, cpm, "2.1.1", official)
+    got = decode_cpm_uper(payload, "2.1.1")["payload"]["cpmContainers"][1]["containerData"][0]
+    poly = got["perceptionRegionShape"]["polygonal"]
+    back = [[v["xCoordinate"] + poly["shapeReferencePoint"]["xCoordinate"],
+             v["yCoordinate"] + poly["shapeReferencePoint"]["yCoordinate"]] for v in poly["polygon"]]
+    assert back == verts.tolist()
+    assert "shapeReferencePoint" not in polygonal_shape(verts // 10)["polygonal"]  # within range: none
+
+
 def test_a_flipped_bit_in_a_sensor_container_fails_or_changes_the_decode(official):  # noqa: F811
     rng = np.random.default_rng(3)
     shapes = [polygonal_shape(_polygon(rng, False)) for _ in range(2)]
