@@ -329,3 +329,29 @@ def test_bad_inputs_name_the_field():
     with pytest.raises(InputError, match="measurementDeltaTime"):
         perceived_object_container_uper_arrays([1], [0], [1], [0], [1], [101], [0], [0], [1],
                                                measurement_delta_ms=[-2049])
+
+
+@settings(max_examples=20, deadline=None, derandomize=True)
+@given(n=st.integers(0, 400), max_size=st.integers(300, 1500), due=st.booleans(), seed=st.integers(0, 2 ** 32 - 1))
+def test_segments_hold_every_object_once_within_the_size(n, max_size, due, seed):
+    """Over object counts and size limits: every segment <= the limit and a CPM that decodes (the subset) to its
+    objects, in order; objects beyond 8 segments returned; the sensor containers only in the first segment."""
+    rng = np.random.default_rng(seed)
+    objs = _event_objects(rng, n, "2.2.1")
+    srs = [SensorRegion(k, _polygon(rng, False)) for k in range(3)]
+    clock = GenerationClock(CpRules(max_size_bytes=max_size))
+    if not due:
+        clock.sent(-0.5, sensor_info=True)
+    ev = event_segments(3, REF_MS, objs, srs, clock, 0.0, number_of_perceived_objects=n)
+    assert ev.sensor_information == due
+    assert np.array_equal(np.concatenate([*ev.segments, ev.not_sent]), np.arange(n))
+    assert len(ev.payloads) <= 8 and (len(ev.not_sent) == 0 or len(ev.payloads) == 8)
+    for k, (payload, idx) in enumerate(zip(ev.payloads, ev.segments, strict=True)):
+        assert len(payload) <= max_size
+        cpm = decode_cpm_uper(payload, "2.2.1")
+        ids = [c["containerId"] for c in cpm["payload"]["cpmContainers"]]
+        assert ids == ([2, 3, 4, 5] if k == 0 and due else [2, 5])
+        pos = cpm["payload"]["cpmContainers"][-1]["containerData"]["perceivedObjects"]
+        assert [p["objectId"] for p in pos] == objs.object_id[idx].tolist()
+        seg = cpm["payload"]["managementContainer"].get("segmentationInfo")
+        assert seg == (None if len(ev.payloads) == 1 else {"totalMsgNo": len(ev.payloads), "thisMsgNo": k + 1})

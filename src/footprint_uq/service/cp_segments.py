@@ -153,14 +153,15 @@ class CpmObjectColumns:
         """The objects ``index`` (int array), in that order."""
         idx = np.asarray(index, dtype=np.int64)
         ptr, val = self.sensor_ids
-        lens = np.diff(ptr)[idx]
-        sub_val = np.concatenate([val[ptr[i]:ptr[i + 1]] for i in idx]) if len(idx) else np.zeros(0, np.int64)
+        starts = ptr[idx]
+        lens = ptr[idx + 1] - starts
+        new_ptr = np.concatenate([[0], np.cumsum(lens)]).astype(np.int64)
+        sub_val = val[np.repeat(starts - new_ptr[:-1], lens) + np.arange(new_ptr[-1])]
         pick = {name: None if getattr(self, name) is None else getattr(self, name)[idx]
                 for name in ("object_id", "x_cm", "y_cm", "x_conf", "y_conf", "xy_corr", "class_value",
                              "class_width", "class_level", "measurement_delta_ms", "quality")}
         motion = None if self.motion is None else MotionCodes(*(a[idx] for a in self.motion))
-        return replace(self, **pick, motion=motion,
-                       sensor_ids=(np.concatenate([[0], np.cumsum(lens)]).astype(np.int64), sub_val.astype(np.int64)))
+        return replace(self, **pick, motion=motion, sensor_ids=(new_ptr, sub_val.astype(np.int64)))
 
     def container_uper(self, cdd: str, number_of_perceived_objects: int) -> bytes:
         """The Perceived Object Container of these objects (the compiled writer)."""
