@@ -355,3 +355,11 @@ def test_segments_hold_every_object_once_within_the_size(n, max_size, due, seed)
         assert [p["objectId"] for p in pos] == objs.object_id[idx].tolist()
         seg = cpm["payload"]["managementContainer"].get("segmentationInfo")
         assert seg == (None if len(ev.payloads) == 1 else {"totalMsgNo": len(ev.payloads), "thisMsgNo": k + 1})
+
+
+def test_sensor_containers_too_large_for_a_segment_are_refused_in_one_line():
+    rng = np.random.default_rng(6)
+    srs = [SensorRegion(k, _polygon(rng, False)) for k in range(12)]
+    with pytest.raises(InputError, match="max_size_bytes.*Sensor Information"):
+        event_segments(1, REF_MS, _event_objects(rng, 5, "2.2.1"), srs, GenerationClock(CpRules(max_size_bytes=300)),
+                       0.0)

@@ -242,6 +242,11 @@ def _plan(bits: np.ndarray, skeletons: list[dict], cdd: str, max_size_bytes: int
     the second.  A segment's bits: the message with an empty object container (3 octets: 18 bits), less those 3
     octets, plus the container's 18 bits, its objects, its padding (<= 7) and a longer length determinant (<= 8)."""
     head = [8 * len(encode_cpm_uper_fast(s, cdd=cdd)) - 24 + 18 + 7 + 8 for s in skeletons]
+    largest = int(np.max(bits, initial=0))
+    if max(head) + largest > 8 * max_size_bytes:
+        raise InputError("max_size_bytes", max_size_bytes,
+                         f"room for a segment's containers ({-(-max(head) // 8)} bytes, the Sensor Information and "
+                         f"Perception Region containers included) and its largest object ({-(-largest // 8)} bytes)")
     first, rest = plan_segments(bits, header_bytes=head[0], max_size_bytes=8 * max_size_bytes, max_segments=1)
     if not len(rest):
         return first, rest
