@@ -31,7 +31,9 @@ bits of what we send are those of the full standard:
 * ``PolygonalShape.polygon`` is ``SequenceOfCartesianPosition3d (SIZE(3..16,...))`` in the CDD: a SIZE
   constraint applied serially to a type that has its own ``SIZE(1..16,...)``.  X.680 (serial application of
   constraints) makes the effective constraint of the result the last one, ``SIZE(3..16,...)``: PER writes the
-  count as ``n - 3`` in 4 bits after the extension bit.  The subset writes that effective constraint.
+  count as ``n - 3`` in 4 bits after the extension bit (as asn1c does: its PER constraint for ``polygon`` in
+  etsi_its_messages' generated ``cpm_ts_PolygonalShape.c`` is ``SIZE(3..16,...)``).  The subset writes that
+  effective constraint.
   asn1tools 0.169 ignores the serial constraint (it writes ``n - 1``) and pycrate cannot parse it; the tests
   give both the effective constraint, in memory (``tests/test_cpm_official.py``);
 * a ``Shape`` is always ``polygonal`` here (the other alternatives are ``NotSent``), without
