@@ -9,8 +9,12 @@ around **in memory** (never in the files; ``SOURCE.txt`` there names them):
   ``(unknown|passengerCar..tram|agricultural)`` wrongly: written as its PER effective constraint
   ``(0..14)`` (X.691 clause 10.3; the encoding of every permitted value is unchanged);
 * pycrate cannot parse unions of ``WITH COMPONENT(S)`` inner subtypes (not PER-visible, X.691 B.2.2):
-  removed; and it fails on the serial SIZE constraint of ``PolygonalShape.polygon``: written as the one
-  effective constraint.
+  removed;
+* ``PolygonalShape.polygon`` is ``SequenceOfCartesianPosition3d (SIZE(3..16,...))``, a SIZE constraint applied
+  serially to a type with its own ``SIZE(1..16,...)``: pycrate fails on it and asn1tools ignores the second
+  constraint (it writes the vertex count as ``n - 1``); both get the effective constraint (X.680, serial
+  application: ``SIZE(3..16,...)``, the count written as ``n - 3``), as the project's subset writes it
+  (``footprint_uq.service.messages.asn1_cpm``; ``tests/test_cpm_containers.py`` pins those bits).
 
 Every payload of a seeded Hypothesis sweep -- classes, 0 to 255 objects, near and far objects, ids of
 every kind, with and without origin and motion, both releases -- decodes with both decoders to exactly
@@ -75,9 +79,11 @@ def _texts(folder, for_pycrate: bool) -> list[str]:
         t = f.read_bytes().decode("utf-8", errors="replace").replace(  # V2.4.1 has a Latin-1 octet in a comment
             "TrafficParticipantType (unknown|passengerCar..tram|agricultural)",
                                                   "TrafficParticipantType (0..14)")
+        # the polygon's serial SIZE constraint as its effective constraint (both decoders, see the module doc)
+        t = t.replace("SequenceOfCartesianPosition3d (SIZE(3..16,...))",
+                      "SEQUENCE (SIZE(3..16,...)) OF CartesianPosition3d")
         if for_pycrate:
-            t = _strip_component_unions(t).replace("SequenceOfCartesianPosition3d (SIZE(3..16,...))",
-                                                   "SEQUENCE (SIZE(3..16,...)) OF CartesianPosition3d")
+            t = _strip_component_unions(t)
         texts.append(t)
     assert texts, folder
     return texts
@@ -131,7 +137,8 @@ def _json(v):
     return v
 
 
-_CONTAINER_TYPES = {2: "OriginatingRsuContainer", 5: "PerceivedObjectContainer"}
+_CONTAINER_TYPES = {2: "OriginatingRsuContainer", 3: "SensorInformationContainer", 4: "PerceptionRegionContainer",
+                    5: "PerceivedObjectContainer"}
 
 
 def decode_official(payload: bytes, spec, pycrate_cpm) -> list[dict]:

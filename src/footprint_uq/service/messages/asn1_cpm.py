@@ -26,7 +26,19 @@ bits of what we send are those of the full standard:
   length in octets -- bit for bit an unconstrained ``OCTET STRING``.  The subset declares
   it ``OCTET STRING`` and :mod:`footprint_uq.service.messages.cpm` puts the UPER encoding
   of the container in it (``OriginatingRsuContainer`` for ``containerId`` 2,
-  ``PerceivedObjectContainer`` for 5);
+  ``SensorInformationContainer`` for 3, ``PerceptionRegionContainer`` for 4,
+  ``PerceivedObjectContainer`` for 5: the ids of ``CPM-PDU-Descriptions``);
+* ``PolygonalShape.polygon`` is ``SequenceOfCartesianPosition3d (SIZE(3..16,...))`` in the CDD: a SIZE
+  constraint applied serially to a type that has its own ``SIZE(1..16,...)``.  X.680 (serial application of
+  constraints) makes the effective constraint of the result the last one, ``SIZE(3..16,...)``: PER writes the
+  count as ``n - 3`` in 4 bits after the extension bit (as asn1c does: its PER constraint for ``polygon`` in
+  etsi_its_messages' generated ``cpm_ts_PolygonalShape.c`` is ``SIZE(3..16,...)``).  The subset writes that
+  effective constraint.
+  asn1tools 0.169 ignores the serial constraint (it writes ``n - 1``) and pycrate cannot parse it; the tests
+  give both the effective constraint, in memory (``tests/test_cpm_official.py``);
+* a ``Shape`` is always ``polygonal`` here (the other alternatives are ``NotSent``), without
+  ``height``; ``SensorType`` is written as its range ``(0..31)`` (``monovideo`` = 3, the named numbers
+  are not PER-visible);
 * the constraint ``TrafficParticipantType (unknown|passengerCar..tram|agricultural)`` of
   ``ObjectClass.vehicleSubClass`` is written as its PER effective constraint ``(0..14)``
   (X.691 clause 10.3: the smallest range containing the union);
@@ -34,22 +46,28 @@ bits of what we send are those of the full standard:
   header is not PER-visible (X.691 B.2.2) and is not written; the encoder sets 2 and 14.
 
 A message from another station that uses components this subset does not define (acceleration,
-polar velocity, dimensions, sensor information, ...) does not decode with this module; every message
+polar velocity, dimensions, a shape other than a polygon, ...) does not decode with this module; every message
 footprint-uq sends decodes with the full standard's module.
 """
 
 from __future__ import annotations
 
 __all__ = ["CPM_ASN1", "CPM_ASN1_BY_CDD", "CDD_RELEASES", "DEFAULT_CDD", "VRU_SUBPROFILES", "CPM_PROTOCOL_VERSION",
-           "MESSAGE_ID_CPM", "CONTAINER_ID_RSU", "CONTAINER_ID_PERCEIVED_OBJECTS"]
+           "MESSAGE_ID_CPM", "CONTAINER_ID_RSU", "CONTAINER_ID_SENSOR_INFORMATION", "CONTAINER_ID_PERCEPTION_REGION",
+           "CONTAINER_ID_PERCEIVED_OBJECTS", "SENSOR_TYPE_MONOVIDEO"]
 
 #: ItsPduHeader.protocolVersion of a TS 103 324 Release 2 CPM
 CPM_PROTOCOL_VERSION = 2
 #: MessageId of the CPM (CDD ``MessageId``: cpm (14))
 MESSAGE_ID_CPM = 14
-#: CpmContainerId values (TS 103 324 ``originatingRsuContainer``, ``perceivedObjectContainer``)
+#: CpmContainerId values (TS 103 324 ``CPM-PDU-Descriptions``: ``originatingRsuContainer``,
+#: ``sensorInformationContainer``, ``perceptionRegionContainer``, ``perceivedObjectContainer``)
 CONTAINER_ID_RSU = 2
+CONTAINER_ID_SENSOR_INFORMATION = 3
+CONTAINER_ID_PERCEPTION_REGION = 4
 CONTAINER_ID_PERCEIVED_OBJECTS = 5
+#: CDD ``SensorType`` monovideo (a single camera)
+SENSOR_TYPE_MONOVIDEO = 3
 
 #: the CDD releases the subset is written for; the newest is the default
 CDD_RELEASES = ("2.1.1", "2.2.1")
@@ -90,7 +108,7 @@ CpmPayload ::= SEQUENCE {
 ManagementContainer ::= SEQUENCE {
     referenceTime      TimestampIts,
     referencePosition  ReferencePosition,
-    segmentationInfo   NotSent OPTIONAL,
+    segmentationInfo   MessageSegmentationInfo OPTIONAL,
     messageRateRange   NotSent OPTIONAL,
     ...
 }
@@ -109,6 +127,34 @@ OriginatingRsuContainer ::= SEQUENCE {
     mapReference  NotSent OPTIONAL,
     ...
 }
+
+-- TS 103 324 CPM-SensorInformationContainer
+SensorInformationContainer ::= SEQUENCE SIZE (1..128, ...) OF SensorInformation
+
+SensorInformation ::= SEQUENCE {
+    sensorId                    Identifier1B,
+    sensorType                  SensorType,
+    perceptionRegionShape       Shape OPTIONAL,
+    perceptionRegionConfidence  ConfidenceLevel OPTIONAL,
+    shadowingApplies            BOOLEAN,
+    ...
+}
+
+-- TS 103 324 CPM-PerceptionRegionContainer
+PerceptionRegionContainer ::= SEQUENCE SIZE (1..256, ...) OF PerceptionRegion
+
+PerceptionRegion ::= SEQUENCE {
+    measurementDeltaTime        DeltaTimeMilliSecondSigned,
+    perceptionRegionConfidence  ConfidenceLevel,
+    perceptionRegionShape       Shape,
+    shadowingApplies            BOOLEAN,
+    sensorIdList                SequenceOfIdentifier1B OPTIONAL,
+    numberOfPerceivedObjects    CardinalNumber1B OPTIONAL,
+    perceivedObjectIds          PerceivedObjectIds OPTIONAL,
+    ...
+}
+
+PerceivedObjectIds ::= SEQUENCE SIZE (0..255, ...) OF Identifier2B
 
 -- TS 103 324 CPM-PerceivedObjectContainer
 PerceivedObjectContainer ::= SEQUENCE {
@@ -130,6 +176,45 @@ OrdinalNumber1B ::= INTEGER (0..255)
 CardinalNumber1B ::= INTEGER (0..255)
 MessageId ::= INTEGER (0..255)
 StationId ::= INTEGER (0..4294967295)
+Identifier1B ::= INTEGER (0..255)
+SequenceOfIdentifier1B ::= SEQUENCE SIZE (1..128, ...) OF Identifier1B
+ObjectPerceptionQuality ::= INTEGER (0..15)
+SensorType ::= INTEGER (0..31)
+StandardLength12b ::= INTEGER (0..4095)
+
+MessageSegmentationInfo ::= SEQUENCE {
+    totalMsgNo  CardinalNumber3b,
+    thisMsgNo   OrdinalNumber3b
+}
+
+CardinalNumber3b ::= INTEGER (1..8)
+OrdinalNumber3b ::= INTEGER (1..8)
+
+Shape ::= CHOICE {
+    rectangular   NotSent,
+    circular      NotSent,
+    polygonal     PolygonalShape,
+    elliptical    NotSent,
+    radial        NotSent,
+    radialShapes  NotSent,
+    ...
+}
+
+-- the standard's polygon is SequenceOfCartesianPosition3d (SIZE (1..16, ...)) constrained serially by
+-- (SIZE (3..16, ...)): the effective constraint, written here, is SIZE (3..16, ...) (see the module doc)
+PolygonalShape ::= SEQUENCE {
+    shapeReferencePoint  CartesianPosition3d OPTIONAL,
+    polygon              SEQUENCE (SIZE (3..16, ...)) OF CartesianPosition3d,
+    height               StandardLength12b OPTIONAL
+}
+
+CartesianPosition3d ::= SEQUENCE {
+    xCoordinate  CartesianCoordinate,
+    yCoordinate  CartesianCoordinate,
+    zCoordinate  CartesianCoordinate OPTIONAL
+}
+
+CartesianCoordinate ::= INTEGER (-32768..32767)
 TimestampIts ::= INTEGER (0..4398046511103)
 
 ReferencePosition ::= SEQUENCE {
@@ -177,8 +262,8 @@ PerceivedObject ::= SEQUENCE {
     objectDimensionY                    NotSent OPTIONAL,
     objectDimensionX                    NotSent OPTIONAL,
     objectAge                           DeltaTimeMilliSecondSigned (0..2047) OPTIONAL,
-    objectPerceptionQuality             NotSent OPTIONAL,
-    sensorIdList                        NotSent OPTIONAL,
+    objectPerceptionQuality             ObjectPerceptionQuality OPTIONAL,
+    sensorIdList                        SequenceOfIdentifier1B OPTIONAL,
     classification                      ObjectClassDescription OPTIONAL,
     mapPosition                         NotSent OPTIONAL,
     ...

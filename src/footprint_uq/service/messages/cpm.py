@@ -36,6 +36,13 @@ beyond -1310.72 / +1310.70 m they take the out-of-range values (-131072 / 131071
 (:mod:`.motion`) an object also carries ``velocity`` (``cartesianVelocity``: east, north with their
 ``SpeedConfidence``), ``angles.zAngle`` (its yaw) and ``objectAge``.
 
+The CP service's parts (:mod:`footprint_uq.service.cp_segments`): ``managementContainer.segmentationInfo``
+(``{"totalMsgNo": t, "thisMsgNo": k}``), the Sensor Information container (``containerId`` 3, a list of
+:func:`sensor_information`), the Perception Region container (4, a list of :func:`perception_region_entry`), a
+``Shape`` as ``{"polygonal": {"polygon": [{"xCoordinate": .., "yCoordinate": ..}, ...]}}`` (0.01 m east / north,
+:func:`polygonal_shape`), and per object ``objectPerceptionQuality`` and ``sensorIdList`` (docs/service.md, "The
+CPM's containers").
+
 CDD releases: the JSON and the UPER follow the release given as ``cdd`` (:data:`~.asn1_cpm.CDD_RELEASES`;
 :mod:`.asn1_cpm` says what differs).  A VRU sub-profile is a name in V2.1.1 and a number in V2.2.1.
 
@@ -57,18 +64,21 @@ from ...errors import InputError
 from .asn1_cpm import (
     CDD_RELEASES,
     CONTAINER_ID_PERCEIVED_OBJECTS,
+    CONTAINER_ID_PERCEPTION_REGION,
     CONTAINER_ID_RSU,
+    CONTAINER_ID_SENSOR_INFORMATION,
     CPM_ASN1_BY_CDD,
     CPM_PROTOCOL_VERSION,
     DEFAULT_CDD,
     MESSAGE_ID_CPM,
+    SENSOR_TYPE_MONOVIDEO,
     VRU_SUBPROFILES,
 )
 
 __all__ = ["build_cpm", "encode_cpm_uper", "decode_cpm_uper", "cpm_to_asn1_value", "timestamp_its_ms",
            "perceived_object", "coordinate_cm", "LATITUDE_UNAVAILABLE", "LONGITUDE_UNAVAILABLE", "CPM_CLASSES",
            "MATRIX_COMPONENTS", "unavailable_reference_ellipse", "CPM_CLASS_OF", "CPM_CLASSES_BY_CDD",
-           "object_class_json", "check_cdd"]
+           "object_class_json", "check_cdd", "polygonal_shape", "sensor_information", "perception_region_entry"]
 
 LATITUDE_UNAVAILABLE = 900000001
 LONGITUDE_UNAVAILABLE = 1800000001
@@ -181,11 +191,18 @@ def coordinate_cm(v_m):
 def perceived_object(object_id: int, east_cm: int, north_cm: int, x_conf: int, y_conf: int, xy_corr: int,
                      object_class: dict | None, class_confidence: int = CONFIDENCE_LEVEL_UNAVAILABLE,
                      measurement_delta_ms: int = 0, *, velocity: tuple | None = None, yaw: tuple | None = None,
-                     age_ms: int | None = None) -> dict:
+                     age_ms: int | None = None, quality: int | None = None,
+                     sensor_ids: list[int] | None = None) -> dict:
     """One ``PerceivedObject`` (JSON form): position east/north of the reference position in 0.01 m
     (:func:`coordinate_cm`) with its CPM confidences (:func:`footprint_uq.products.v2x.cpm_fields`), the x/y
     correlation cell when available; with motion (:mod:`.motion` codes) ``velocity = (vx, vx_conf, vy, vy_conf)``
-    (``cartesianVelocity``), ``yaw = (zAngle value, confidence)`` and ``age_ms`` (``objectAge``)."""
+    (``cartesianVelocity``), ``yaw = (zAngle value, confidence)`` and ``age_ms`` (``objectAge``).
+
+    ``measurement_delta_ms``: the object's measurement time minus the CPM's ``referenceTime`` (ms,
+    ``DeltaTimeMilliSecondSigned``: -2048..2047, checked); ``quality``: ``objectPerceptionQuality`` (0..15,
+    :func:`footprint_uq.service.cp_segments.object_perception_quality`); ``sensor_ids``: ``sensorIdList``
+    (the ``sensorId`` of every camera that contributed, 1..128 ids of 0..255)."""
+    _int_in("measurementDeltaTime", measurement_delta_ms, -2048, 2047, "ms after referenceTime")
     po = {"objectId": int(object_id), "measurementDeltaTime": int(measurement_delta_ms),
           "position": {"xCoordinate": {"value": int(east_cm), "confidence": int(x_conf)},
                        "yCoordinate": {"value": int(north_cm), "confidence": int(y_conf)}}}
@@ -200,14 +217,102 @@ def perceived_object(object_id: int, east_cm: int, north_cm: int, x_conf: int, y
             {"componentsIncludedIntheMatrix": ["xPosition", "yPosition"], "matrix": [[int(xy_corr)]]}]
     if age_ms is not None:
         po["objectAge"] = int(age_ms)
+    if quality is not None:
+        po["objectPerceptionQuality"] = _int_in("objectPerceptionQuality", quality, 0, 15, "ObjectPerceptionQuality")
+    if sensor_ids is not None:
+        po["sensorIdList"] = _sensor_id_list("sensorIdList", sensor_ids)
     if object_class is not None:
         po["classification"] = [{"objectClass": object_class, "confidence": int(class_confidence)}]
     return po
 
 
+def _int_in(name: str, v, lo: int, hi: int, what: str) -> int:
+    if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or not lo <= int(v) <= hi:
+        raise InputError(name, v, f"an integer in {lo}..{hi} ({what})")
+    return int(v)
+
+
+def _sensor_id_list(name: str, ids) -> list[int]:
+    ids = [_int_in(f"{name}[{k}]", v, 0, 255, "Identifier1B") for k, v in enumerate(ids)]
+    if not 1 <= len(ids) <= 128:
+        raise InputError(name, len(ids), "1..128 sensor ids (SequenceOfIdentifier1B)")
+    return ids
+
+
+#: CDD ``CartesianCoordinate`` (0.01 m) of a polygon vertex / shape reference point
+SHAPE_COORD_MIN, SHAPE_COORD_MAX = -32768, 32767
+
+
+def polygonal_shape(vertices_cm) -> dict:
+    """The ``Shape`` (JSON form, ``polygonal``) of a polygon given as east/north offsets (0.01 m, ``(M, 2)`` int,
+    3 <= M <= 16) from the CPM's reference position
+    (:func:`footprint_uq.products.perception_region.polygon_east_north_cm`).
+
+    ``CartesianCoordinate`` holds +-327.67 m: a polygon with a vertex beyond that is sent relative to a
+    ``shapeReferencePoint`` (the centre of its bounding box, rounded to 0.01 m; the CDD's vertices are relative to
+    it); a polygon that does not fit even then is refused (:class:`InputError`).
+    """
+    v = np.asarray(vertices_cm)
+    if v.ndim != 2 or v.shape[1] != 2 or not 3 <= v.shape[0] <= 16:
+        raise InputError("perceptionRegionShape.polygon", f"shape {v.shape}", "3..16 vertices (M, 2) (PolygonalShape)")
+    if not np.issubdtype(v.dtype, np.integer):
+        raise InputError("perceptionRegionShape.polygon", v.dtype, "integer offsets in 0.01 m")
+    v = v.astype(np.int64)
+    shape: dict = {}
+    if v.min() < SHAPE_COORD_MIN or v.max() > SHAPE_COORD_MAX:
+        ref = (v.min(axis=0) + v.max(axis=0)) // 2
+        v = v - ref
+        if (np.abs(ref).max() > SHAPE_COORD_MAX or v.min() < SHAPE_COORD_MIN or v.max() > SHAPE_COORD_MAX):
+            raise InputError("perceptionRegionShape.polygon", f"extent {np.ptp(v, axis=0).tolist()} cm",
+                             "a polygon within +-327 m of its reference point (CartesianCoordinate)")
+        shape["shapeReferencePoint"] = {"xCoordinate": int(ref[0]), "yCoordinate": int(ref[1])}
+    shape["polygon"] = [{"xCoordinate": int(x), "yCoordinate": int(y)} for x, y in v.tolist()]
+    return {"polygonal": shape}
+
+
+def sensor_information(sensor_id: int, shape: dict | None, confidence: int | None, shadowing_applies: bool,
+                       sensor_type: int = SENSOR_TYPE_MONOVIDEO) -> dict:
+    """One ``SensorInformation`` (JSON form): ``sensorId`` (0..255), ``sensorType`` (monovideo = 3 for a camera),
+    the perception region's ``Shape`` (:func:`polygonal_shape`) and its ``perceptionRegionConfidence``
+    (``ConfidenceLevel`` 1..101, percent; the region's ellipse probability), ``shadowingApplies``."""
+    out = {"sensorId": _int_in("sensorId", sensor_id, 0, 255, "Identifier1B"),
+           "sensorType": _int_in("sensorType", sensor_type, 0, 31, "SensorType")}
+    if shape is not None:
+        out["perceptionRegionShape"] = shape
+    if confidence is not None:
+        out["perceptionRegionConfidence"] = _int_in("perceptionRegionConfidence", confidence, 1, 101,
+                                                    "ConfidenceLevel")
+    out["shadowingApplies"] = bool(shadowing_applies)
+    return out
+
+
+def perception_region_entry(shape: dict, confidence: int, shadowing_applies: bool, *, measurement_delta_ms: int = 0,
+                            sensor_ids=None, object_ids=None, number_of_objects: int | None = None) -> dict:
+    """One ``PerceptionRegion`` (JSON form): ``measurementDeltaTime`` (ms after ``referenceTime``, -2048..2047),
+    ``perceptionRegionConfidence`` (1..101), the ``Shape``, ``shadowingApplies``, and where given
+    ``sensorIdList``, ``numberOfPerceivedObjects`` (0..255) and ``perceivedObjectIds`` (at most 255)."""
+    out = {"measurementDeltaTime": _int_in("measurementDeltaTime", measurement_delta_ms, -2048, 2047,
+                                           "ms after referenceTime"),
+           "perceptionRegionConfidence": _int_in("perceptionRegionConfidence", confidence, 1, 101, "ConfidenceLevel"),
+           "perceptionRegionShape": shape, "shadowingApplies": bool(shadowing_applies)}
+    if sensor_ids is not None:
+        out["sensorIdList"] = _sensor_id_list("sensorIdList", sensor_ids)
+    if number_of_objects is not None:
+        out["numberOfPerceivedObjects"] = _int_in("numberOfPerceivedObjects", number_of_objects, 0, 255,
+                                                  "CardinalNumber1B")
+    if object_ids is not None:
+        ids = [_int_in(f"perceivedObjectIds[{k}]", v, 0, 65535, "Identifier2B") for k, v in enumerate(object_ids)]
+        if len(ids) > 255:
+            raise InputError("perceivedObjectIds", len(ids), "at most 255 ids (PerceivedObjectIds)")
+        out["perceivedObjectIds"] = ids
+    return out
+
+
 def build_cpm(station_id: int, reference_time_ms: int, perceived_objects: list[dict], *,
-              latitude: int = LATITUDE_UNAVAILABLE, longitude: int = LONGITUDE_UNAVAILABLE) -> dict:
-    """The CPM (JSON form, see the module doc) of one frame.
+              latitude: int = LATITUDE_UNAVAILABLE, longitude: int = LONGITUDE_UNAVAILABLE,
+              segmentation: tuple[int, int] | None = None, sensor_information: list[dict] | None = None,
+              perception_regions: list[dict] | None = None, number_of_perceived_objects: int | None = None) -> dict:
+    """The CPM (JSON form, see the module doc) of one frame or one segment of a generation event.
 
     Parameters
     ----------
@@ -217,25 +322,47 @@ def build_cpm(station_id: int, reference_time_ms: int, perceived_objects: list[d
     latitude, longitude : int
         Reference position in 0.1 microdegree (unavailable by default: positions are then
         relative to an unknown point and only their confidences are meaningful).
+    segmentation : (thisMsgNo, totalMsgNo), optional
+        ``managementContainer.segmentationInfo`` (both 1..8, this <= total).
+    sensor_information : list of :func:`sensor_information` dicts (1..128), optional
+        The Sensor Information container (``containerId`` 3).
+    perception_regions : list of :func:`perception_region_entry` dicts (1..256), optional
+        The Perception Region container (``containerId`` 4).
+    number_of_perceived_objects : int, optional
+        ``numberOfPerceivedObjects``: the total number of objects perceived at the time of generation (0..255,
+        larger counts are sent as 255); default: the objects of this CPM.
     """
-    if not 0 <= int(station_id) <= 4294967295:
+    if isinstance(station_id, bool) or not 0 <= int(station_id) <= 4294967295:
         raise InputError("station_id", station_id, "an integer in 0..4294967295 (StationId)")
     if len(perceived_objects) > 255:
         raise InputError("perceived_objects", len(perceived_objects), "at most 255 objects per CPM")
+    mc = {"referenceTime": int(reference_time_ms),
+          "referencePosition": {"latitude": int(latitude), "longitude": int(longitude),
+                                "positionConfidenceEllipse": unavailable_reference_ellipse(),
+                                "altitude": {"altitudeValue": ALTITUDE_UNAVAILABLE,
+                                             "altitudeConfidence": "unavailable"}}}
+    if segmentation is not None:
+        this, total = segmentation
+        _int_in("segmentationInfo.totalMsgNo", total, 1, 8, "CardinalNumber3b")
+        mc["segmentationInfo"] = {"totalMsgNo": int(total),
+                                  "thisMsgNo": _int_in("segmentationInfo.thisMsgNo", this, 1, int(total),
+                                                       "OrdinalNumber3b, at most totalMsgNo")}
+    containers = [{"containerId": CONTAINER_ID_RSU, "containerData": {}}]
+    for cid, items, hi in ((CONTAINER_ID_SENSOR_INFORMATION, sensor_information, 128),
+                           (CONTAINER_ID_PERCEPTION_REGION, perception_regions, 256)):
+        if items is not None:
+            if not 1 <= len(items) <= hi:
+                raise InputError(_CONTAINER_TYPES[cid], len(items), f"1..{hi} entries")
+            containers.append({"containerId": cid, "containerData": list(items)})
+    n_total = len(perceived_objects) if number_of_perceived_objects is None else number_of_perceived_objects
+    if isinstance(n_total, bool) or not isinstance(n_total, (int, np.integer)) or n_total < 0:
+        raise InputError("number_of_perceived_objects", n_total, "a count >= 0")
+    containers.append({"containerId": CONTAINER_ID_PERCEIVED_OBJECTS,
+                       "containerData": {"numberOfPerceivedObjects": min(int(n_total), 255),
+                                         "perceivedObjects": perceived_objects}})
     return {
         "header": {"protocolVersion": CPM_PROTOCOL_VERSION, "messageId": MESSAGE_ID_CPM, "stationId": int(station_id)},
-        "payload": {
-            "managementContainer": {
-                "referenceTime": int(reference_time_ms),
-                "referencePosition": {"latitude": int(latitude), "longitude": int(longitude),
-                                      "positionConfidenceEllipse": unavailable_reference_ellipse(),
-                                      "altitude": {"altitudeValue": ALTITUDE_UNAVAILABLE,
-                                                   "altitudeConfidence": "unavailable"}}},
-            "cpmContainers": [
-                {"containerId": CONTAINER_ID_RSU, "containerData": {}},
-                {"containerId": CONTAINER_ID_PERCEIVED_OBJECTS,
-                 "containerData": {"numberOfPerceivedObjects": len(perceived_objects),
-                                   "perceivedObjects": perceived_objects}}]}}
+        "payload": {"managementContainer": mc, "cpmContainers": containers}}
 
 
 @functools.cache
@@ -298,7 +425,20 @@ def _po_from_asn1(po: dict) -> dict:
     return out
 
 
+def _shaped_to_asn1(items: list[dict]) -> list[dict]:
+    """SensorInformation / PerceptionRegion entries with their ``Shape`` CHOICE as asn1tools' (name, value)."""
+    return [{**e, "perceptionRegionShape": next(iter(e["perceptionRegionShape"].items()))}
+            if "perceptionRegionShape" in e else e for e in items]
+
+
+def _shaped_from_asn1(items: list[dict]) -> list[dict]:
+    return [{**e, "perceptionRegionShape": dict([e["perceptionRegionShape"]])}
+            if "perceptionRegionShape" in e else e for e in items]
+
+
 _CONTAINER_TYPES = {CONTAINER_ID_RSU: "OriginatingRsuContainer",
+                    CONTAINER_ID_SENSOR_INFORMATION: "SensorInformationContainer",
+                    CONTAINER_ID_PERCEPTION_REGION: "PerceptionRegionContainer",
                     CONTAINER_ID_PERCEIVED_OBJECTS: "PerceivedObjectContainer"}
 
 
@@ -313,6 +453,8 @@ def cpm_to_asn1_value(cpm: dict, cdd: str = DEFAULT_CDD) -> dict:
         data = w["containerData"]
         if cid == CONTAINER_ID_PERCEIVED_OBJECTS:
             data = {**data, "perceivedObjects": [_po_to_asn1(p) for p in data["perceivedObjects"]]}
+        elif cid != CONTAINER_ID_RSU:
+            data = _shaped_to_asn1(data)
         containers.append({"containerId": cid, "containerData": spec.encode(_CONTAINER_TYPES[cid], data)})
     return {"header": cpm["header"],
             "payload": {"managementContainer": cpm["payload"]["managementContainer"], "cpmContainers": containers}}
@@ -337,6 +479,8 @@ def decode_cpm_uper(data: bytes | str, cdd: str = DEFAULT_CDD) -> dict:
         data_ = spec.decode(_CONTAINER_TYPES[cid], w["containerData"])
         if cid == CONTAINER_ID_PERCEIVED_OBJECTS:
             data_ = {**data_, "perceivedObjects": [_po_from_asn1(p) for p in data_["perceivedObjects"]]}
+        elif cid != CONTAINER_ID_RSU:
+            data_ = _shaped_from_asn1(data_)
         containers.append({"containerId": cid, "containerData": data_})
     return {"header": msg["header"], "payload": {"managementContainer": msg["payload"]["managementContainer"],
                                                  "cpmContainers": containers}}

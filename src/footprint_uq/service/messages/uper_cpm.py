@@ -12,10 +12,11 @@ Layout (X.691 unaligned PER; ``n`` bits of ``v - lower bound`` for a constrained
 CollectivePerceptionMessage
   header                               protocolVersion 8, messageId 8, stationId 32
   payload                              extension bit 0
-    managementContainer                extension bit 0, 2 presence bits 00, referenceTime 42,
-                                       latitude 31 (+900000000), longitude 32 (+1800000000),
-                                       semiMajor 12, semiMinor 12, orientation 12,
-                                       altitudeValue 20 (+100000), altitudeConfidence 4 (index)
+    managementContainer                extension bit 0, 2 presence bits (segmentationInfo, 0),
+                                       referenceTime 42, latitude 31 (+900000000), longitude 32
+                                       (+1800000000), semiMajor 12, semiMinor 12, orientation 12,
+                                       altitudeValue 20 (+100000), altitudeConfidence 4 (index),
+                                       [segmentationInfo: totalMsgNo 3 (-1), thisMsgNo 3 (-1)]
     cpmContainers                      extension bit 0, count 3 (n - 1), then per container:
                                        containerId 4 (id - 1), open type = length determinant
                                        (8 bits '0'+len if len < 128, 16 bits '10'+len if < 16384)
@@ -28,10 +29,24 @@ PerceivedObject                        extension bit 0, 14 presence bits, object
                                        [correlation: count 2 (n - 1), per matrix: extension bit 0 +
                                        13 component bits, columns 4 (n - 1), per column: extension
                                        bit 0 + count 4 (n - 1), cells 8 (+100)];
+                                       [velocity 46], [angles 21], [objectAge 11],
+                                       [objectPerceptionQuality 4], [sensorIdList: extension bit 0,
+                                       count 7 (n - 1), ids 8 each];
                                        [classification: count 3 (n - 1), per class: CHOICE extension
                                        bit 0 + index 2, vehicleSubClass 4 | vruSubClass (extension
                                        bit 0 + index 2 + pedestrian enumeration index 3) |
                                        otherSubClass 8, confidence 7 (-1)]
+SensorInformationContainer             extension bit 0, count 7 (n - 1), per entry: extension bit 0,
+                                       2 presence bits, sensorId 8, sensorType 5, [Shape],
+                                       [confidence 7 (-1)], shadowingApplies 1
+PerceptionRegionContainer              extension bit 0, count 8 (n - 1), per entry: extension bit 0,
+                                       3 presence bits, measurementDeltaTime 12 (+2048), confidence 7
+                                       (-1), Shape, shadowingApplies 1, [sensorIdList], [number 8],
+                                       [perceivedObjectIds: extension 0, count 8, ids 16 each]
+Shape (polygonal)                      CHOICE extension bit 0, index 3 (2), presence bits of
+                                       shapeReferencePoint and height, [point: 0 + x 16 + y 16
+                                       (+32768)], polygon: extension bit 0, count 4 (n - 3), vertices
+                                       as the point
 OriginatingRsuContainer                extension bit 0, presence bit 0 -> one octet 0x00
 =====================================  ==========================================================
 
@@ -44,19 +59,26 @@ import numpy as np
 from numba import njit
 
 from ...errors import InputError
-from .asn1_cpm import CONTAINER_ID_PERCEIVED_OBJECTS, CONTAINER_ID_RSU, DEFAULT_CDD, VRU_SUBPROFILES
+from .asn1_cpm import (
+    CONTAINER_ID_PERCEIVED_OBJECTS,
+    CONTAINER_ID_PERCEPTION_REGION,
+    CONTAINER_ID_RSU,
+    CONTAINER_ID_SENSOR_INFORMATION,
+    DEFAULT_CDD,
+    VRU_SUBPROFILES,
+)
 from .cpm import LATITUDE_UNAVAILABLE, LONGITUDE_UNAVAILABLE, MATRIX_COMPONENTS, build_cpm, check_cdd
 from .motion import ObjectMotion, motion_codes
 
 __all__ = ["encode_cpm_uper_fast", "perceived_object_container_uper", "perceived_object_container_uper_arrays",
-           "class_bits", "CpmUperWriter"]
+           "class_bits", "CpmUperWriter", "object_bits", "sensor_id_columns"]
 
 _ALT_CONF = ("alt-000-01", "alt-000-02", "alt-000-05", "alt-000-10", "alt-000-20", "alt-000-50", "alt-001-00",
              "alt-002-00", "alt-005-00", "alt-010-00", "alt-020-00", "alt-050-00", "alt-100-00", "alt-200-00",
              "outOfRange", "unavailable")
 _VRU_ALTS = tuple(VRU_SUBPROFILES)
 #: bit position (from the left of the 14 presence bits) of the optional components we may send
-_P_OBJECT_ID, _P_VELOCITY, _P_ANGLES, _P_CORR, _P_AGE, _P_CLASS = 13, 12, 10, 8, 4, 1
+_P_OBJECT_ID, _P_VELOCITY, _P_ANGLES, _P_CORR, _P_AGE, _P_QUALITY, _P_SENSORS, _P_CLASS = 13, 12, 10, 8, 4, 3, 2, 1
 
 
 def _vru_bits(val: dict, cdd: str) -> tuple[int, int]:
@@ -167,6 +189,13 @@ def _object_bits(po: dict, cdd: str = DEFAULT_CDD) -> tuple[int, int]:
     if gn:
         pres |= 1 << _P_AGE
         v, n = (v << gn) | gv, n + gn
+    if po.get("objectPerceptionQuality") is not None:
+        pres |= 1 << _P_QUALITY
+        v, n = (v << 4) | _check("objectPerceptionQuality", po["objectPerceptionQuality"], 0, 15), n + 4
+    if po.get("sensorIdList") is not None:
+        pres |= 1 << _P_SENSORS
+        sv, sn = _id_list_bits("sensorIdList", po["sensorIdList"])
+        v, n = (v << sn) | sv, n + sn
     classes = po.get("classification")
     if classes is not None:
         pres |= 1 << _P_CLASS
@@ -193,16 +222,97 @@ def _object_bits(po: dict, cdd: str = DEFAULT_CDD) -> tuple[int, int]:
     return v | (pres << (n - 15)), n
 
 
+def _id_list_bits(name: str, ids, width: int = 8, count_bits: int = 7, lo: int = 1) -> tuple[int, int]:
+    """(value, bits) of an extensible ``SEQUENCE SIZE (lo..hi, ...) OF INTEGER (0..2^width - 1)``: extension bit 0,
+    the count (``count_bits`` bits of ``n - lo``), the ids (``width`` bits each)."""
+    hi = lo + (1 << count_bits) - 1
+    v = _check(f"{name} count", len(ids), lo, hi)
+    for k, i in enumerate(ids):
+        v = (v << width) | _check(f"{name}[{k}]", i, 0, (1 << width) - 1)
+    return v, 1 + count_bits + width * len(ids)
+
+
+def _shape_bits(shape: dict) -> tuple[int, int]:
+    """(value, bits) of a ``Shape``: CHOICE extension bit 0, index 2 (polygonal) in 3 bits, the PolygonalShape:
+    presence bits of shapeReferencePoint and height, [the point], the polygon (extension bit 0, ``n - 3`` in 4
+    bits, per vertex: no zCoordinate 0, x 16, y 16)."""
+    (alt, poly), = shape.items()
+    if alt != "polygonal" or set(poly) - {"shapeReferencePoint", "polygon"}:
+        raise InputError("perceptionRegionShape", alt, "polygonal, without height (the subset sent)")
+    v, n = 2, 4
+    ref = poly.get("shapeReferencePoint")
+    v, n = (v << 2) | (2 if ref is not None else 0), n + 2
+    verts = poly["polygon"]
+    points = ([ref] if ref is not None else []) + list(verts)
+    for k, pt in enumerate(points):
+        if k == len(points) - len(verts):
+            v, n = (v << 5) | _check("polygon vertices", len(verts), 3, 16), n + 5
+        if "zCoordinate" in pt:
+            raise InputError("polygon.zCoordinate", pt["zCoordinate"], "absent (not in the subset sent)")
+        v = (v << 33) | (_check("xCoordinate", pt["xCoordinate"], -32768, 32767) << 16) | \
+            _check("yCoordinate", pt["yCoordinate"], -32768, 32767)
+        n += 33
+    return v, n
+
+
+def _sensor_information_bytes(items: list[dict]) -> bytes:
+    """UPER of a SensorInformationContainer (1..128 SensorInformation, extensible)."""
+    v, n = _check("SensorInformationContainer count", len(items), 1, 128), 8
+    for e in items:
+        if set(e) - {"sensorId", "sensorType", "perceptionRegionShape", "perceptionRegionConfidence",
+                     "shadowingApplies"}:
+            raise InputError("SensorInformation", sorted(e), "the components of SensorInformation")
+        shape, conf = e.get("perceptionRegionShape"), e.get("perceptionRegionConfidence")
+        pres = (2 if shape is not None else 0) | (1 if conf is not None else 0)
+        v = (v << 16) | (pres << 13) | (_check("sensorId", e["sensorId"], 0, 255) << 5) | \
+            _check("sensorType", e["sensorType"], 0, 31)
+        n += 16
+        if shape is not None:
+            sv, sn = _shape_bits(shape)
+            v, n = (v << sn) | sv, n + sn
+        if conf is not None:
+            v, n = (v << 7) | _check("perceptionRegionConfidence", conf, 1, 101), n + 7
+        v, n = (v << 1) | bool(e["shadowingApplies"]), n + 1
+    return _pad_bytes(v, n)
+
+
+def _perception_region_bytes(items: list[dict]) -> bytes:
+    """UPER of a PerceptionRegionContainer (1..256 PerceptionRegion, extensible)."""
+    v, n = _check("PerceptionRegionContainer count", len(items), 1, 256), 9
+    for e in items:
+        sensors, count, ids = e.get("sensorIdList"), e.get("numberOfPerceivedObjects"), e.get("perceivedObjectIds")
+        pres = (4 if sensors is not None else 0) | (2 if count is not None else 0) | (1 if ids is not None else 0)
+        v = (v << 4) | pres
+        v = (v << 12) | _check("measurementDeltaTime", e["measurementDeltaTime"], -2048, 2047)
+        v = (v << 7) | _check("perceptionRegionConfidence", e["perceptionRegionConfidence"], 1, 101)
+        n += 23
+        sv, sn = _shape_bits(e["perceptionRegionShape"])
+        v, n = (v << sn + 1) | (sv << 1) | bool(e["shadowingApplies"]), n + sn + 1
+        if sensors is not None:
+            sv, sn = _id_list_bits("sensorIdList", sensors)
+            v, n = (v << sn) | sv, n + sn
+        if count is not None:
+            v, n = (v << 8) | _check("numberOfPerceivedObjects", count, 0, 255), n + 8
+        if ids is not None:
+            sv, sn = _id_list_bits("perceivedObjectIds", ids, width=16, count_bits=8, lo=0)
+            v, n = (v << sn) | sv, n + sn
+    return _pad_bytes(v, n)
+
+
 def _pad_bytes(v: int, n: int) -> bytes:
     pad = -n % 8
     return (v << pad).to_bytes((n + pad) // 8, "big") if n else b"\x00"
 
 
-def _container_bytes(cid: int, data: dict, cdd: str = DEFAULT_CDD) -> bytes:
+def _container_bytes(cid: int, data, cdd: str = DEFAULT_CDD) -> bytes:
     if cid == CONTAINER_ID_RSU:
         if data:
             raise InputError("OriginatingRsuContainer", data, "empty (mapReference is not sent)")
         return b"\x00"
+    if cid == CONTAINER_ID_SENSOR_INFORMATION:
+        return _sensor_information_bytes(data)
+    if cid == CONTAINER_ID_PERCEPTION_REGION:
+        return _perception_region_bytes(data)
     objs = data["perceivedObjects"]
     head = (_check("numberOfPerceivedObjects", data["numberOfPerceivedObjects"], 0, 255) << 9) | \
         _check("perceivedObjects count", len(objs), 0, 255)
@@ -242,12 +352,13 @@ def class_bits(object_class: dict, cdd: str = DEFAULT_CDD) -> tuple[int, int]:
 
 
 def perceived_object_container_uper(object_ids, x_cm, x_conf, y_cm, y_conf, xy_corr, classes, *,
-                                    cdd: str = DEFAULT_CDD, motion=None) -> bytes:
-    """UPER bytes of a ``PerceivedObjectContainer`` from columns (one entry per object, measured at the
-    reference time): objectId, x/y (0.01 m) and their CoordinateConfidence, the CorrelationCellValue (101:
-    no matrix) and ``(class_bits(..., cdd), ConfidenceLevel)`` or None; ``motion``: the objects'
-    :class:`~.motion.MotionCodes` or None.  The same bytes as :func:`encode_cpm_uper_fast` writes for the JSON
-    form (the tests decode both with asn1tools and with the official modules)."""
+                                    cdd: str = DEFAULT_CDD, motion=None, **extra) -> bytes:
+    """UPER bytes of a ``PerceivedObjectContainer`` from columns (one entry per object): objectId, x/y (0.01 m)
+    and their CoordinateConfidence, the CorrelationCellValue (101: no matrix) and ``(class_bits(..., cdd),
+    ConfidenceLevel)`` or None; ``motion``: the objects' :class:`~.motion.MotionCodes` or None; ``extra``: the
+    per-object fields of :func:`perceived_object_container_uper_arrays` (measurement_delta_ms, quality,
+    sensor_ids, number_of_perceived_objects).  The same bytes as :func:`encode_cpm_uper_fast` writes for the
+    JSON form (the tests decode both with asn1tools and with the official modules)."""
     n = len(object_ids)
     cv = np.zeros(n, np.int64)
     cw = np.zeros(n, np.int64)
@@ -256,7 +367,7 @@ def perceived_object_container_uper(object_ids, x_cm, x_conf, y_cm, y_conf, xy_c
         if c is not None:
             (cv[i], cw[i]), lv[i] = c
     return perceived_object_container_uper_arrays(object_ids, x_cm, x_conf, y_cm, y_conf, xy_corr, cv, cw, lv,
-                                                  cdd=cdd, motion=motion)
+                                                  cdd=cdd, motion=motion, **extra)
 
 
 _COLUMN_RANGES = (("objectId", 0, 65535), ("xCoordinate.value", -131072, 131071),
@@ -265,11 +376,15 @@ _COLUMN_RANGES = (("objectId", 0, 65535), ("xCoordinate.value", -131072, 131071)
                   ("velocity present", 0, 1), ("xVelocity.value", -16383, 16383), ("xVelocity.confidence", 1, 127),
                   ("yVelocity.value", -16383, 16383), ("yVelocity.confidence", 1, 127), ("angles present", 0, 1),
                   ("zAngle.value", 0, 3601), ("zAngle.confidence", 1, 127), ("objectAge present", 0, 1),
-                  ("objectAge", 0, 2047))
+                  ("objectAge", 0, 2047), ("measurementDeltaTime", -2048, 2047),
+                  ("objectPerceptionQuality present", 0, 1), ("objectPerceptionQuality", 0, 15))
 _LO = np.array([lo for _, lo, _ in _COLUMN_RANGES], dtype=np.int64)
 _HI = np.array([hi for _, _, hi in _COLUMN_RANGES], dtype=np.int64)
-#: rows of the column array: 0-5 position (objectId, x, y, x conf, y conf, correlation), 6-15 motion
+#: rows of the column array: 0-5 position (objectId, x, y, x conf, y conf, correlation), 6-15 motion,
+#: 16 measurementDeltaTime, 17-18 objectPerceptionQuality (present, value)
 _NCOLS = len(_COLUMN_RANGES)
+#: error codes of the kernel beyond a column: ConfidenceLevel, more than 255 objects, a sensorIdList
+_ERR_LEVEL, _ERR_COUNT, _ERR_SENSORS = _NCOLS, _NCOLS + 1, _NCOLS + 2
 
 
 @njit(cache=True, nogil=True)
@@ -286,36 +401,58 @@ def _put(out, acc, nacc, k, v, w):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
-def _container_kernel(cols, lo, hi, cv, cw, lv, corr_prefix, corr_bits):  # pragma: no cover - compiled
-    """UPER octets of a PerceivedObjectContainer from the (16, n) columns (:data:`_COLUMN_RANGES`); or an error:
-    (empty, column, object) -- column 16 = ConfidenceLevel, 17 = more than 255 objects."""
+def _container_size(cols, lo, hi, cw, lv, sid_ptr, sid_val, corr_bits):  # pragma: no cover - compiled
+    """(bits of the container, error column, error object): the columns' ranges, the ConfidenceLevels, the
+    sensorIdLists (0 or 1..128 ids of 0..255) checked; the error column is -1 when all is well."""
     n = cols.shape[1]
     for j in range(cols.shape[0]):
         for i in range(n):
             if cols[j, i] < lo[j] or cols[j, i] > hi[j]:
-                return np.zeros(0, np.uint8), j, i
+                return 0, j, i
     if n > 255:
-        return np.zeros(0, np.uint8), 17, 0
+        return 0, lo.shape[0] + 1, 0
     nbits = 18
     for i in range(n):
-        nbits += 104 + 46 * cols[6, i] + 21 * cols[11, i] + 11 * cols[14, i]
+        ns = sid_ptr[i + 1] - sid_ptr[i]
+        if ns > 128:
+            return 0, lo.shape[0] + 2, i
+        for q in range(sid_ptr[i], sid_ptr[i + 1]):
+            if sid_val[q] < 0 or sid_val[q] > 255:
+                return 0, lo.shape[0] + 2, i
+        if cw[i] > 0 and (lv[i] < 1 or lv[i] > 101):
+            return 0, lo.shape[0], i
+        nbits += 104 + 46 * cols[6, i] + 21 * cols[11, i] + 11 * cols[14, i] + 4 * cols[17, i]
+        if ns > 0:
+            nbits += 8 + 8 * ns
         if cols[5, i] != 101:
             nbits += corr_bits
         if cw[i] > 0:
             nbits += cw[i] + 7
+    return nbits, -1, -1
+
+
+@njit(cache=True, nogil=True)
+def _container_kernel(cols, lo, hi, cv, cw, lv, sid_ptr, sid_val, n_total, corr_prefix,
+                      corr_bits):  # pragma: no cover - compiled
+    """UPER octets of a PerceivedObjectContainer from the (19, n) columns (:data:`_COLUMN_RANGES`), the objects'
+    sensorIdLists (``sid_val[sid_ptr[i]:sid_ptr[i + 1]]``, empty: not sent) and numberOfPerceivedObjects
+    ``n_total``; or an error: (empty, column, object) -- see :data:`_ERR_LEVEL` and the next two."""
+    n = cols.shape[1]
+    nbits, col, bad = _container_size(cols, lo, hi, cw, lv, sid_ptr, sid_val, corr_bits)
+    if col >= 0:
+        return np.zeros(0, np.uint8), col, bad
     out = np.zeros((nbits + 7) // 8, np.uint8)
     acc, nacc, k = np.int64(0), 0, 0
-    acc, nacc, k = _put(out, acc, nacc, k, (n << 9) | n, 18)  # extension 0, numberOf..., list extension 0, count
+    acc, nacc, k = _put(out, acc, nacc, k, (n_total << 9) | n, 18)  # extension 0, numberOf..., list ext 0, count
     for i in range(n):
         corr, cls = cols[5, i] != 101, cw[i] > 0
-        vel, ang, age = cols[6, i] == 1, cols[11, i] == 1, cols[14, i] == 1
-        if cls and (lv[i] < 1 or lv[i] > 101):
-            return np.zeros(0, np.uint8), 16, i
+        vel, ang, age, opq = cols[6, i] == 1, cols[11, i] == 1, cols[14, i] == 1, cols[17, i] == 1
+        ns = sid_ptr[i + 1] - sid_ptr[i]
         pres = (0x2000 | (0x1000 if vel else 0) | (0x400 if ang else 0) | (0x100 if corr else 0)
-                | (0x10 if age else 0) | (0x2 if cls else 0))
+                | (0x10 if age else 0) | (0x8 if opq else 0) | (0x4 if ns > 0 else 0) | (0x2 if cls else 0))
         acc, nacc, k = _put(out, acc, nacc, k, pres, 15)  # extension 0 + 14 presence bits
         acc, nacc, k = _put(out, acc, nacc, k, cols[0, i], 16)
-        acc, nacc, k = _put(out, acc, nacc, k, 2048, 12)  # measurementDeltaTime 0
+        acc, nacc, k = _put(out, acc, nacc, k, cols[16, i] + 2048, 12)  # measurementDeltaTime
         acc, nacc, k = _put(out, acc, nacc, k, cols[1, i] + 131072, 19)  # the 0 bit before x: no zCoordinate
         acc, nacc, k = _put(out, acc, nacc, k, cols[3, i] - 1, 12)
         acc, nacc, k = _put(out, acc, nacc, k, cols[2, i] + 131072, 18)
@@ -330,6 +467,12 @@ def _container_kernel(cols, lo, hi, cv, cw, lv, corr_prefix, corr_bits):  # prag
             acc, nacc, k = _put(out, acc, nacc, k, (corr_prefix << 8) | (cols[5, i] + 100), corr_bits)
         if age:
             acc, nacc, k = _put(out, acc, nacc, k, cols[15, i], 11)
+        if opq:
+            acc, nacc, k = _put(out, acc, nacc, k, cols[18, i], 4)
+        if ns > 0:  # extension 0, count - 1 (7 bits), the ids
+            acc, nacc, k = _put(out, acc, nacc, k, ns - 1, 8)
+            for q in range(sid_ptr[i], sid_ptr[i + 1]):
+                acc, nacc, k = _put(out, acc, nacc, k, sid_val[q], 8)
         if cls:
             acc, nacc, k = _put(out, acc, nacc, k, (cv[i] << 7) | (lv[i] - 1), cw[i] + 7)
     if nacc:
@@ -346,14 +489,54 @@ def _motion_rows(motion, n: int):
                      m.age_ms], dtype=np.int64).reshape(10, n)
 
 
+def sensor_id_columns(sensor_ids, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """The objects' sensorIdLists as (pointers ``(n + 1,)``, ids): ``sensor_ids`` is None (none sent), such a
+    pair already, or one sequence per object (None or empty: not sent)."""
+    if sensor_ids is None:
+        return np.zeros(n + 1, np.int64), np.zeros(0, np.int64)
+    if isinstance(sensor_ids, tuple) and len(sensor_ids) == 2 and isinstance(sensor_ids[0], np.ndarray):
+        ptr, val = (np.asarray(a, dtype=np.int64) for a in sensor_ids)
+    else:
+        if len(sensor_ids) != n:
+            raise InputError("sensor_ids", len(sensor_ids), f"one list per object ({n})")
+        lens = np.array([0 if s is None else len(s) for s in sensor_ids], dtype=np.int64)
+        ptr = np.concatenate([[0], np.cumsum(lens)]).astype(np.int64)
+        val = np.array([v for s in sensor_ids if s is not None for v in s], dtype=np.int64)
+    if ptr.shape != (n + 1,) or ptr[0] != 0 or np.any(np.diff(ptr) < 0) or ptr[-1] != len(val):
+        raise InputError("sensor_ids", f"pointers of shape {ptr.shape}", f"(n + 1,) = ({n + 1},) non-decreasing")
+    return ptr, val
+
+
+def object_bits(xy_corr, class_width, *, cdd: str = DEFAULT_CDD, motion=None, quality=None,
+                sensor_ids=None) -> np.ndarray:
+    """Bits of every PerceivedObject (int ``(n,)``) the writer encodes from these columns (the sizes
+    :func:`~footprint_uq.service.cp_rules.plan_segments` splits by): 104 fixed, the motion, the correlation cell,
+    the objectPerceptionQuality (4), the sensorIdList (8 + 8 per id) and the classification."""
+    corr = np.asarray(xy_corr, dtype=np.int64).reshape(-1)
+    n = len(corr)
+    m = _motion_rows(motion, n)
+    ptr, _ = sensor_id_columns(sensor_ids, n)
+    ns = np.diff(ptr)
+    q = np.zeros(n, np.int64) if quality is None else (np.asarray(quality, dtype=np.int64).reshape(-1) >= 0)
+    cw = np.asarray(class_width, dtype=np.int64).reshape(-1)
+    return (104 + 46 * m[0] + 21 * m[5] + 11 * m[8] + 4 * q + np.where(ns > 0, 8 + 8 * ns, 0)
+            + np.where(corr != 101, _CORR_PREFIX[check_cdd(cdd)][1], 0) + np.where(cw > 0, cw + 7, 0))
+
+
 def perceived_object_container_uper_arrays(object_ids, x_cm, x_conf, y_cm, y_conf, xy_corr, class_value,
-                                           class_width, level, *, cdd: str = DEFAULT_CDD, motion=None) -> bytes:
+                                           class_width, level, *, cdd: str = DEFAULT_CDD, motion=None,
+                                           measurement_delta_ms=None, quality=None, sensor_ids=None,
+                                           number_of_perceived_objects: int | None = None) -> bytes:
     """:func:`perceived_object_container_uper` from integer arrays (one compiled pass, no per-object Python).
 
     ``class_value``, ``class_width``: :func:`class_bits` of each object's class (in release ``cdd``), width 0
     for an object without a classification (its value and ``level`` are then ignored); ``level``: its
     ConfidenceLevel; ``motion``: the objects' :class:`~.motion.ObjectMotion` (converted by
-    :func:`~.motion.motion_codes`), their :class:`~.motion.MotionCodes`, or None (no motion sent).
+    :func:`~.motion.motion_codes`), their :class:`~.motion.MotionCodes`, or None (no motion sent);
+    ``measurement_delta_ms``: measurementDeltaTime (ms, -2048..2047; default 0); ``quality``:
+    objectPerceptionQuality (0..15, a negative entry: not sent; default none sent); ``sensor_ids``: the
+    sensorIdLists (:func:`sensor_id_columns`); ``number_of_perceived_objects``: the count sent (default the
+    objects of this container; more than 255 is sent as 255).
     """
     n = len(object_ids)
     cols = np.empty((_NCOLS, n), np.int64)
@@ -363,19 +546,33 @@ def perceived_object_container_uper_arrays(object_ids, x_cm, x_conf, y_cm, y_con
         except OverflowError:  # beyond 64 bits: out of range anyway
             name, lo, hi = _COLUMN_RANGES[j]
             raise InputError(name, next(v for v in c if not lo <= v <= hi), f"an integer in {lo}..{hi}") from None
-    cols[6:] = _motion_rows(motion, n)
+    cols[6:16] = _motion_rows(motion, n)
+    cols[16] = 0 if measurement_delta_ms is None else measurement_delta_ms
+    q = np.full(n, -1, np.int64) if quality is None else np.asarray(quality, dtype=np.int64).reshape(n)
+    cols[17], cols[18] = q >= 0, np.maximum(q, 0)
+    ptr, val = sensor_id_columns(sensor_ids, n)
+    total = n if number_of_perceived_objects is None else int(number_of_perceived_objects)
+    if total < 0:
+        raise InputError("numberOfPerceivedObjects", total, "a count >= 0")
     prefix, bits = _CORR_PREFIX[check_cdd(cdd)]
     out, col, i = _container_kernel(cols, _LO, _HI, np.asarray(class_value, dtype=np.int64),
                                     np.asarray(class_width, dtype=np.int64), np.asarray(level, dtype=np.int64),
-                                    prefix, bits)
+                                    ptr, val, min(total, 255), prefix, bits)
     if col >= 0:
-        if col == 17:
-            raise InputError("perceivedObjects count", n, "at most 255")
-        if col == 16:
-            raise InputError("ConfidenceLevel", int(np.asarray(level)[i]), "an integer in 1..101")
-        name, lo, hi = _COLUMN_RANGES[col]
-        raise InputError(name, int(cols[col, i]), f"an integer in {lo}..{hi}")
+        _raise_column(col, i, n, cols, level, ptr, val)
     return out.tobytes()
+
+
+def _raise_column(col: int, i: int, n: int, cols, level, ptr, val):
+    """The one-line error of a kernel's error code (column ``col``, object ``i``)."""
+    if col == _ERR_COUNT:
+        raise InputError("perceivedObjects count", n, "at most 255")
+    if col == _ERR_LEVEL:
+        raise InputError(f"ConfidenceLevel[{i}]", int(np.asarray(level)[i]), "an integer in 1..101")
+    if col == _ERR_SENSORS:
+        raise InputError(f"sensorIdList[{i}]", val[ptr[i]:ptr[i + 1]].tolist(), "1..128 sensor ids of 0..255")
+    name, lo, hi = _COLUMN_RANGES[col]
+    raise InputError(f"{name}[{i}]", int(cols[col, i]), f"an integer in {lo}..{hi}")
 
 
 def _head_bits(cpm: dict) -> tuple[int, int]:
@@ -385,13 +582,14 @@ def _head_bits(cpm: dict) -> tuple[int, int]:
     rp = mc["referencePosition"]
     el = rp["positionConfidenceEllipse"]
     alt = rp["altitude"]
-    if set(mc) - {"referenceTime", "referencePosition"}:
-        raise InputError("managementContainer", sorted(mc), "referenceTime and referencePosition only")
+    if set(mc) - {"referenceTime", "referencePosition", "segmentationInfo"}:
+        raise InputError("managementContainer", sorted(mc), "referenceTime, referencePosition, segmentationInfo")
+    seg = mc.get("segmentationInfo")
     fields = [
         (_check("protocolVersion", h["protocolVersion"], 0, 255), 8),
         (_check("messageId", h["messageId"], 0, 255), 8),
         (_check("stationId", h["stationId"], 0, 4294967295), 32),
-        (0, 1), (0, 3),  # payload extension bit; management container extension + 2 presence bits
+        (0, 1), (0 if seg is None else 2, 3),  # payload extension bit; management container extension + 2 presence
         (_check("referenceTime", mc["referenceTime"], 0, 4398046511103), 42),
         (_check("latitude", rp["latitude"], -900000000, 900000001), 31),
         (_check("longitude", rp["longitude"], -1800000000, 1800000001), 32),
@@ -400,6 +598,8 @@ def _head_bits(cpm: dict) -> tuple[int, int]:
         (_check("semiMajorOrientation", el["semiMajorOrientation"], 0, 3601), 12),
         (_check("altitudeValue", alt["altitudeValue"], -100000, 800001), 20),
         (_ALT_CONF.index(alt["altitudeConfidence"]), 4),
+        *(() if seg is None else ((_check("totalMsgNo", seg["totalMsgNo"], 1, 8), 3),
+                                  (_check("thisMsgNo", seg["thisMsgNo"], 1, 8), 3))),
         (0, 1),  # cpmContainers extension bit
         (_check("cpmContainers count", len(cpm["payload"]["cpmContainers"]), 1, 8), 3),
     ]
@@ -436,8 +636,9 @@ def encode_cpm_uper_fast(cpm: dict, *, cdd: str = DEFAULT_CDD, perceived_objects
     v, nb = _head_bits(cpm)
     for w in cpm["payload"]["cpmContainers"]:
         cid = w["containerId"]
-        if cid not in (CONTAINER_ID_RSU, CONTAINER_ID_PERCEIVED_OBJECTS):
-            raise InputError("containerId", cid, f"{CONTAINER_ID_RSU} or {CONTAINER_ID_PERCEIVED_OBJECTS}")
+        if not CONTAINER_ID_RSU <= cid <= CONTAINER_ID_PERCEIVED_OBJECTS:
+            raise InputError("containerId", cid,
+                             f"{CONTAINER_ID_RSU}..{CONTAINER_ID_PERCEIVED_OBJECTS} (the subset sent)")
         data = perceived_objects_uper if (cid == CONTAINER_ID_PERCEIVED_OBJECTS and perceived_objects_uper
                                           is not None) else _container_bytes(cid, w["containerData"], check_cdd(cdd))
         v, nb = _append_container(v, nb, cid, data)
