@@ -461,6 +461,15 @@ class RsuFusion:
             n_src[k] = len(obj.members)
         return FusedObjects(np.array(ids, np.int64), xy, P, v, Pv, age, sensors, classes, n_src, t)
 
+    def contributions(self, object_id: int, time_s: float) -> tuple[list, np.ndarray, np.ndarray]:
+        """Each camera's own estimate of object ``object_id`` predicted to ``time_s``, before fusion: the camera
+        ids, positions ``(k, 2)`` (m) and covariances ``(k, 2, 2)`` (m^2; the clock term included)."""
+        obj = self._objects.get(object_id)
+        if obj is None:
+            raise InputError("object_id", object_id, "the objectId of a live fused object")
+        xs, Ps, _, _ = self._predicted(obj, as_float("time_s", time_s))
+        return list(obj.members), np.array(xs), np.array(Ps)
+
     def pairs(self) -> dict:
         """``(camera id, track id) -> objectId`` of every live contribution (a copy)."""
         return dict(self._pairs)
