@@ -26,6 +26,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .. import params as P
 from ..cameras import general
 from ..cameras.pantilt import PanTiltCamera
 from ..products.footprints import FrameProcessor
@@ -36,6 +37,8 @@ from .table import SharedJacobianAt, TrackerConfig, TrackTable
 
 __all__ = ["intersection_cameras", "LANES", "RsuSimResult", "simulate", "coverage_sweep"]
 
+_XM, _YM, _GDZ, _GSX, _GSY = (P.PARAM_NAMES.index(k) for k in ("x_m", "y_m", "ground_dz_m", "ground_slope_x",
+                                                                 "ground_slope_y"))
 _HALF_M = 7.0  # half the paved width: 2 lanes x 3.5 m
 #: the eight straight-through lanes: (a point on the centre line, the unit travel direction, phase 0 or 1)
 LANES = tuple(
@@ -166,12 +169,20 @@ def _detect(cam: _Camera, xy: np.ndarray, A_px: np.ndarray, max_range_m: float, 
     live = np.flatnonzero(np.isfinite(xy).all(1))
     if live.size == 0:
         return live, np.zeros((0, 2))
-    xyz = np.column_stack([xy[live], np.zeros(live.size)])
-    pr = general.project(cam.p_true, xyz, domain=cam.camera.lens_domain)
+    p = cam.p_true
+    rel = xy[live] - p[[_XM, _YM]]
+    z = p[_GDZ] + rel @ p[[_GSX, _GSY]]  # on the true camera's ground
+    pr = general.project(p, np.column_stack([xy[live], z]), domain=cam.camera.lens_domain)
     w, h = cam.camera.image_size_px
     uv = pr.uv_px + rng.standard_normal((live.size, 2)) @ A_px.T
-    rng_m = np.hypot(*(xy[live] - np.asarray(cam.camera.position_m)).T)
-    ok = pr.valid & (uv[:, 0] >= 0) & (uv[:, 0] < w) & (uv[:, 1] >= 0) & (uv[:, 1] < h) & (rng_m <= max_range_m)
+    pan = math.radians(cam.camera.pan_deg)
+    fwd = rel @ np.array([math.sin(pan), math.cos(pan)])
+    side = rel @ np.array([math.cos(pan), -math.sin(pan)])
+    # inside the horizontal field of view (a point behind the camera, or far off its axis where the drawn
+    # distortion folds back, can project into the picture too)
+    ahead = (fwd > 0.0) & (np.abs(side) < fwd * (0.5 * w / cam.camera.focal_px))
+    ok = (pr.valid & ahead & (uv[:, 0] >= 0) & (uv[:, 0] < w) & (uv[:, 1] >= 0) & (uv[:, 1] < h)
+          & (np.hypot(*rel.T) <= max_range_m))
     return live[ok], uv[ok]
 
 
@@ -241,14 +252,14 @@ def _evaluate(fusion: RsuFusion, cams, truth_xy: np.ndarray, t: float, seen: set
         r.n_cover += 1
         r.n_cover_hits += hit
         _, xs, Ps = fusion.contributions(oid, t)
-        for x, P in zip(xs, Ps, strict=True):
+        for xc, Pc in zip(xs, Ps, strict=True):
             r.n_camera += 1
-            r.n_camera_hits += _inside(x, P, truth)
+            r.n_camera_hits += _inside(xc, Pc, truth)
         if len(xs) > 1:
             r.n_multi += 1
             r.n_multi_hits += hit
             scale = np.abs(Ps).max()
-            r.n_larger += any(np.linalg.eigvalsh(P - objs.cov_xy_m2[k]).min() < -1e-9 * scale for P in Ps)
+            r.n_larger += any(np.linalg.eigvalsh(Pc - objs.cov_xy_m2[k]).min() < -1e-9 * scale for Pc in Ps)
     return r
 
 
