@@ -236,3 +236,13 @@ def test_intersection_every_vehicle_once_seeded():
     assert r.n_duplicates == 0 and r.n_missing == 0 and r.n_mixed == 0
     assert r.n_larger == 0
     assert r.fusion_counts["clock_backwards"] == 0 and r.fusion_counts["dropped_late"] == 0
+
+
+def test_a_second_track_of_a_camera_never_joins_its_first_tracks_object():
+    f = _unit()
+    f.step("cam0", 0.0, **_frame([[0.0, 0.0]], v=(0, 0)))
+    f.step("cam1", 0.0, **_frame([[0.1, 0.0]], v=(0, 0)))
+    f.step("cam0", 0.1, **_frame([[0.0, 0.0]], v=(0, 0)))
+    r = f.step("cam1", 0.1, **_frame([[0.1, 0.0], [0.05, 0.0]], v=(0, 0), tids=[0, 1]))
+    assert r.object_id.tolist() == [0, 1]  # track 1 is as close, but camera 1 is already in object 0
+    assert f.objects().sensor_ids == [(1, 2), (2,)]
