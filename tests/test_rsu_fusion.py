@@ -246,3 +246,23 @@ def test_a_second_track_of_a_camera_never_joins_its_first_tracks_object():
     r = f.step("cam1", 0.1, **_frame([[0.1, 0.0], [0.05, 0.0]], v=(0, 0), tids=[0, 1]))
     assert r.object_id.tolist() == [0, 1]  # track 1 is as close, but camera 1 is already in object 0
     assert f.objects().sensor_ids == [(1, 2), (2,)]
+
+
+def test_cost_matrix_equals_the_per_pair_distance():
+    """The assignment's vectorised d^2 matrix equals the readable per-pair distance (clock term, unknown
+    velocities, late members included)."""
+    rng = np.random.default_rng(5)
+    f = RsuFusion()
+    f.add_camera("a", 1, clock_offset_sigma_s=0.02)
+    f.add_camera("b", 2, clock_offset_sigma_s=0.01)
+    fa = _frame(rng.uniform(-20, 20, (6, 2)), var=0.3, v=(4.0, -3.0))
+    fa["v_mps"][2] = np.nan
+    f.step("a", 0.0, **fa)
+    fb = _frame(rng.uniform(-20, 20, (5, 2)), var=0.2, v=(-1.0, 6.0))
+    fb["v_mps"][1] = np.nan
+    fb["cov_xy_m2"][3] = [[0.5, 0.2], [0.2, 0.3]]
+    cands = sorted(f._objects)
+    cost = f._cost("b", 0.05, list(range(5)), cands, fb["xy_m"], fb["cov_xy_m2"], fb["v_mps"], fb["cov_v_m2ps2"])
+    ref = [[f._d2("b", 0.05, fb["xy_m"][i], fb["cov_xy_m2"][i], fb["v_mps"][i], fb["cov_v_m2ps2"][i],
+                  f._objects[o], exclude="b") for o in cands] for i in range(5)]
+    assert np.allclose(cost, ref, rtol=1e-10)

@@ -347,12 +347,7 @@ class RsuFusion:
         taken = {int(out[i]) for i in range(out.shape[0]) if out[i] >= 0 and not self._alone(int(out[i]), camera_id)}
         cands = [o for o, obj in self._objects.items() if o not in taken and
                  any(c != camera_id for c in obj.members)]
-        cost = np.full((len(free), len(cands)), _BIG)
-        for a, i in enumerate(free):
-            for b, oid in enumerate(cands):
-                if oid != out[i]:
-                    cost[a, b] = self._d2(camera_id, t, xy[i], P[i], v[i], Pv[i], self._objects[oid],
-                                          exclude=camera_id)
+        cost = self._cost(camera_id, t, free, cands, xy, P, v, Pv)
         match = {}
         if cands:
             cost = np.where(cost <= self.gate, cost, _BIG)
@@ -370,6 +365,26 @@ class RsuFusion:
                     continue  # (reported by _store: no free objectId)
                 self._objects[oid] = _Object(t)
                 self._pairs[key] = out[i] = oid
+
+    def _cost(self, camera_id, t, free, cands, xy, P, v, Pv) -> np.ndarray:
+        """``d^2 (len(free), len(cands))`` of the free rows to the candidates' estimates from the other cameras: each
+        candidate's estimate once, then every pair at once (no Python loop over pairs)."""
+        if not cands:
+            return np.zeros((len(free), 0))
+        xo, Po = np.empty((len(cands), 2)), np.empty((len(cands), 2, 2))
+        for b, oid in enumerate(cands):
+            xs, Ps, _, _ = self._predicted(self._objects[oid], t, exclude=camera_id)
+            xo[b], Po[b] = fuse_estimates(np.array(xs), np.array(Ps), self.config.method)
+        rows = np.asarray(free)
+        vr = np.where(np.isfinite(v[rows]), v[rows], 0.0)  # (unknown velocity: no clock term, as in _d2)
+        known = np.isfinite(v[rows]).all(1)[:, None, None]
+        s2 = self.cameras[camera_id].sigma_t_s ** 2
+        Pc = P[rows] + np.where(known, s2 * (vr[:, :, None] * vr[:, None, :] + np.nan_to_num(Pv[rows])), 0.0)
+        S = Pc[:, None] + Po[None]
+        d = xy[rows][:, None] - xo[None]
+        det = S[..., 0, 0] * S[..., 1, 1] - S[..., 0, 1] * S[..., 1, 0]
+        return (S[..., 1, 1] * d[..., 0] ** 2 - (S[..., 0, 1] + S[..., 1, 0]) * d[..., 0] * d[..., 1]
+                + S[..., 0, 0] * d[..., 1] ** 2) / det
 
     def _alone(self, oid: int, camera_id) -> bool:
         obj = self._objects.get(oid)
