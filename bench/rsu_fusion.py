@@ -11,8 +11,12 @@ Two parts, both seeded (:mod:`footprint_uq.tracking.rsu_synthetic`):
   same objects (the baseline) and fused covariances larger than a camera's (Loewner order; must be 0 for the
   information form).
 
+* ``throughput``: the fusion alone (no tracker): ``--cameras`` cameras that each see the same ``--objects`` objects
+  (given tracks: truth plus noise), 40 frames; median wall time of one camera frame's :meth:`RsuFusion.step` and of
+  one :meth:`RsuFusion.objects` call.
+
     PYTHONPATH=src .venv/bin/python bench/rsu_fusion.py [--frames 1000] [--runs 100] [--run-frames 150]
-        [--json bench/results/rsu_fusion.json]
+        [--cameras 3] [--objects 100] [--json bench/results/rsu_fusion.json]
 
 The small seeded versions are in ``tests/test_rsu_fusion.py``.  Nothing is asserted here.
 """
@@ -22,9 +26,12 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import statistics
 import time
 
-from footprint_uq.tracking.rsu_fusion import FUSION_METHODS, RsuFusionConfig
+import numpy as np
+
+from footprint_uq.tracking.rsu_fusion import FUSION_METHODS, RsuFusion, RsuFusionConfig
 from footprint_uq.tracking.rsu_synthetic import coverage_sweep, simulate
 
 
@@ -35,17 +42,47 @@ def _row(r, seconds: float) -> dict:
     return d
 
 
+def throughput(n_cameras: int, n_objects: int, n_frames: int = 40, seed: int = 0) -> dict:
+    """Median seconds of one camera frame's step and of one objects() call (module doc)."""
+    rng = np.random.default_rng(seed)
+    unit = RsuFusion()
+    for c in range(n_cameras):
+        unit.add_camera(c, c + 1, clock_offset_sigma_s=0.005)
+    xy0 = np.column_stack([rng.uniform(-60, 60, n_objects), rng.uniform(-60, 60, n_objects)])
+    v = rng.normal(0, 8, (n_objects, 2))
+    cov = np.broadcast_to(0.25 * np.eye(2), (n_objects, 2, 2))
+    cov_v = np.broadcast_to(0.5 * np.eye(2), (n_objects, 2, 2))
+    bias = rng.normal(0, 0.5, (n_cameras, 2))
+    steps, lists = [], []
+    for k in range(n_frames):
+        t = 0.1 * k
+        for c in range(n_cameras):
+            xy = xy0 + v * t + bias[c] + rng.normal(0, 0.1, (n_objects, 2))
+            t0 = time.perf_counter()
+            unit.step(c, t, np.arange(n_objects), xy, cov, v, cov_v, np.full(n_objects, t))
+            steps.append(time.perf_counter() - t0)
+        t0 = time.perf_counter()
+        objs = unit.objects(t)
+        lists.append(time.perf_counter() - t0)
+    return {"cameras": n_cameras, "objects": n_objects, "fused_objects": len(objs.object_id),
+            "median_step_s": statistics.median(steps[n_cameras:]), "median_objects_s": statistics.median(lists[1:])}
+
+
 def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--frames", type=int, default=1000)
     ap.add_argument("--runs", type=int, default=100)
     ap.add_argument("--run-frames", type=int, default=150)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--cameras", type=int, default=3)
+    ap.add_argument("--objects", type=int, default=100)
     ap.add_argument("--json", default="bench/results/rsu_fusion.json")
     a = ap.parse_args(argv)
+    out_t = throughput(a.cameras, a.objects)
+    print(f"throughput: {out_t}", flush=True)
     simulate(3, seed=a.seed)  # load the compiled kernels before timing
     out: dict = {"frames": a.frames, "runs": a.runs, "run_frames": a.run_frames, "rate_hz": 10.0,
-                 "budget": "basler1@deg", "clock_offset_sigma_s": 0.005}
+                 "budget": "basler1@deg", "clock_offset_sigma_s": 0.005, "throughput": out_t}
     t0 = time.perf_counter()
     r = simulate(a.frames, seed=a.seed)
     out["identity"] = _row(r, time.perf_counter() - t0)

@@ -308,29 +308,40 @@ class RsuFusion:
         """Rows whose pair has an object: kept there unless the gate against the other cameras is broken
         ``unstick_frames`` times in a row (then detached).  Returns the rows left to :meth:`_assign`: new pairs,
         detached ones and those whose object has no other camera (they may belong to another object)."""
-        free = []
+        free, check = [], []
         for i in rows:
-            key = (camera_id, int(tid[i]))
-            oid = self._pairs.get(key)
+            oid = self._pairs.get((camera_id, int(tid[i])))
             if oid is None:
                 free.append(i)
-                continue
-            obj = self._objects[oid]
-            others = [c for c in obj.members if c != camera_id]
-            if not others:
+            elif all(c == camera_id for c in self._objects[oid].members):
                 out[i] = oid
                 free.append(i)  # alone: may still join (or be joined by) another camera's object
-                continue
-            d2 = self._d2(camera_id, t, xy[i], P[i], v[i], Pv[i], obj, exclude=camera_id)
-            member = obj.members[camera_id]
-            member.misses = 0 if d2 <= self.gate else member.misses + 1
-            if member.misses >= self.config.unstick_frames:
-                self._detach(key, oid)
-                self.n_unstuck += 1
-                free.append(i)
             else:
                 out[i] = oid
+                check.append(i)
+        if not check:
+            return free
+        oids = [int(out[i]) for i in check]
+        xo, Po, _, _ = self._estimates(oids, t, exclude=camera_id)
+        d2 = _mahalanobis2(xy[check] - xo, self._row_cov(camera_id, check, P, v, Pv) + Po)
+        for i, oid, dd in zip(check, oids, d2.tolist(), strict=True):
+            member = self._objects[oid].members[camera_id]
+            member.misses = 0 if dd <= self.gate else member.misses + 1
+            if member.misses >= self.config.unstick_frames:
+                self._detach((camera_id, int(tid[i])), oid)
+                self.n_unstuck += 1
+                out[i] = -1
+                free.append(i)
         return free
+
+    def _row_cov(self, camera_id, rows, P, v, Pv) -> np.ndarray:
+        """The rows' position covariances ``(k, 2, 2)`` with their camera's clock term (none where the velocity is
+        not known yet)."""
+        vr = v[rows]
+        known = np.isfinite(vr).all(1)[:, None, None]
+        vr = np.where(np.isfinite(vr), vr, 0.0)
+        s2 = self.cameras[camera_id].sigma_t_s ** 2
+        return P[rows] + np.where(known, s2 * (vr[:, :, None] * vr[:, None, :] + np.nan_to_num(Pv[rows])), 0.0)
 
     def _detach(self, key, oid: int) -> None:
         obj = self._objects[oid]
@@ -367,24 +378,13 @@ class RsuFusion:
                 self._pairs[key] = out[i] = oid
 
     def _cost(self, camera_id, t, free, cands, xy, P, v, Pv) -> np.ndarray:
-        """``d^2 (len(free), len(cands))`` of the free rows to the candidates' estimates from the other cameras: each
-        candidate's estimate once, then every pair at once (no Python loop over pairs)."""
+        """``d^2 (len(free), len(cands))`` of the free rows to the candidates' estimates from the other cameras:
+        each candidate's estimate once, then every pair at once (no Python loop over pairs)."""
         if not cands:
             return np.zeros((len(free), 0))
-        xo, Po = np.empty((len(cands), 2)), np.empty((len(cands), 2, 2))
-        for b, oid in enumerate(cands):
-            xs, Ps, _, _ = self._predicted(self._objects[oid], t, exclude=camera_id)
-            xo[b], Po[b] = fuse_estimates(np.array(xs), np.array(Ps), self.config.method)
-        rows = np.asarray(free)
-        vr = np.where(np.isfinite(v[rows]), v[rows], 0.0)  # (unknown velocity: no clock term, as in _d2)
-        known = np.isfinite(v[rows]).all(1)[:, None, None]
-        s2 = self.cameras[camera_id].sigma_t_s ** 2
-        Pc = P[rows] + np.where(known, s2 * (vr[:, :, None] * vr[:, None, :] + np.nan_to_num(Pv[rows])), 0.0)
-        S = Pc[:, None] + Po[None]
-        d = xy[rows][:, None] - xo[None]
-        det = S[..., 0, 0] * S[..., 1, 1] - S[..., 0, 1] * S[..., 1, 0]
-        return (S[..., 1, 1] * d[..., 0] ** 2 - (S[..., 0, 1] + S[..., 1, 0]) * d[..., 0] * d[..., 1]
-                + S[..., 0, 0] * d[..., 1] ** 2) / det
+        xo, Po, _, _ = self._estimates(cands, t, exclude=camera_id)
+        Pc = self._row_cov(camera_id, free, P, v, Pv)
+        return _mahalanobis2(xy[free][:, None] - xo[None], Pc[:, None] + Po[None])
 
     def _alone(self, oid: int, camera_id) -> bool:
         obj = self._objects.get(oid)
@@ -422,59 +422,53 @@ class RsuFusion:
         obj.first_time_s = min(obj.first_time_s, first_s)
 
     # -- estimates -------------------------------------------------------------------------------------------
-    def _predicted(self, obj: _Object, t: float, exclude=None):
-        """The members' positions and velocities predicted to ``t`` (lists of arrays), excluding one camera."""
+    def _contributions(self, oids, t: float, exclude=None):
+        """Every member of objects ``oids`` (but camera ``exclude``'s) predicted to ``t``, all at once (module doc):
+        the object index of each ``(K,)``, positions ``(K, 2)``, covariances ``(K, 2, 2)``, whether its velocity is
+        known ``(K,)``, velocities ``(K, 2)`` and their covariances ``(K, 2, 2)`` at ``t``."""
         cfg = self.config
-        xs, Ps, vs, Pvs = [], [], [], []
-        for cid, m in obj.members.items():
-            if cid == exclude:
-                continue
-            tau = t - m.time_s
-            known = bool(np.isfinite(m.v_mps).all())
-            v = m.v_mps if known else np.zeros(2)
-            Pv = m.cov_v_m2ps2 if known else cfg.unknown_velocity_sigma_mps ** 2 * np.eye(2)
-            x, Px = predict_position(m.xy_m, m.cov_xy_m2, v, Pv, tau, sigma_t_s=self.cameras[cid].sigma_t_s)
-            Px = Px + cfg.accel_psd_m2ps3 * abs(tau) ** 3 / 3.0 * np.eye(2)
-            xs.append(x)
-            Ps.append(Px)
-            if known:
-                vs.append(v)
-                Pvs.append(Pv + cfg.accel_psd_m2ps3 * abs(tau) * np.eye(2))
-        return xs, Ps, vs, Pvs
+        idx, ms, sig = [], [], []
+        for k, oid in enumerate(oids):
+            for cid, m in self._objects[oid].members.items():
+                if cid != exclude:
+                    idx.append(k)
+                    ms.append(m)
+                    sig.append(self.cameras[cid].sigma_t_s)
+        if not ms:
+            z = np.zeros((0, 2))
+            return np.zeros(0, np.int64), z, np.zeros((0, 2, 2)), np.zeros(0, bool), z, np.zeros((0, 2, 2))
+        tau = t - np.array([m.time_s for m in ms])
+        v = np.array([m.v_mps for m in ms])
+        known = np.isfinite(v).all(1)
+        v = np.where(known[:, None], v, 0.0)
+        Pv = np.where(known[:, None, None], np.array([m.cov_v_m2ps2 for m in ms]),
+                      cfg.unknown_velocity_sigma_mps ** 2 * np.eye(2))
+        x, Px = predict_position(np.array([m.xy_m for m in ms]), np.array([m.cov_xy_m2 for m in ms]), v, Pv, tau,
+                                 sigma_t_s=np.array(sig))
+        q = cfg.accel_psd_m2ps3 * np.abs(tau)
+        Px = Px + (q * tau ** 2 / 3.0)[:, None, None] * np.eye(2)
+        return np.array(idx), x, Px, known, v, Pv + q[:, None, None] * np.eye(2)
 
-    def _d2(self, camera_id, t, x, P, v, Pv, obj: _Object, *, exclude) -> float:
-        """Squared Mahalanobis distance of a row (with its camera's clock term) to the object's estimate from
-        the other cameras at ``t``."""
-        xs, Ps, _, _ = self._predicted(obj, t, exclude=exclude)
-        if not xs:
-            return _BIG
-        xo, Po = fuse_estimates(np.array(xs), np.array(Ps), self.config.method)
-        known = bool(np.isfinite(v).all())
-        s2 = self.cameras[camera_id].sigma_t_s ** 2
-        Pc = P + (s2 * (np.outer(v, v) + Pv) if known else 0.0)
-        d = x - xo
-        return float(d @ np.linalg.solve(Pc + Po, d))
+    def _estimates(self, oids, t: float, exclude=None):
+        """Fused position ``(m, 2)``, its covariance, velocity and its covariance of objects ``oids`` at ``t`` from
+        their members but camera ``exclude``'s (NaN where none is left / no velocity is known)."""
+        idx, x, Px, known, v, Pv = self._contributions(oids, t, exclude)
+        m = len(oids)
+        xf, Pf = _fuse_groups(idx, x, Px, m, self.config.method)
+        vf, Pvf = _fuse_groups(idx[known], v[known], Pv[known], m, self.config.method)
+        return xf, Pf, vf, Pvf
 
     def objects(self, time_s: float | None = None) -> FusedObjects:
         """The unit's object list predicted to ``time_s`` (default: the latest fused time)."""
         t = self.last_time_s if time_s is None else as_float("time_s", time_s)
         ids = sorted(self._objects)
-        m = len(ids)
-        xy, P = np.full((m, 2), np.nan), np.full((m, 2, 2), np.nan)
-        v, Pv = np.full((m, 2), np.nan), np.full((m, 2, 2), np.nan)
-        age, sensors, classes = np.empty(m), [], []
-        n_src = np.empty(m, np.int64)
-        for k, oid in enumerate(ids):
-            obj = self._objects[oid]
-            xs, Ps, vs, Pvs = self._predicted(obj, t)
-            xy[k], P[k] = fuse_estimates(np.array(xs), np.array(Ps), self.config.method)
-            if vs:
-                v[k], Pv[k] = fuse_estimates(np.array(vs), np.array(Pvs), self.config.method)
-            age[k] = t - obj.first_time_s
-            sensors.append(tuple(sorted(self.cameras[c].sensor_id for c in obj.members)))
-            classes.append(max(obj.members.values(), key=lambda mm: mm.time_s).class_id)
-            n_src[k] = len(obj.members)
-        return FusedObjects(np.array(ids, np.int64), xy, P, v, Pv, age, sensors, classes, n_src, t)
+        xy, P, v, Pv = self._estimates(ids, t)
+        objs = [self._objects[o] for o in ids]
+        return FusedObjects(np.array(ids, np.int64), xy, P, v, Pv,
+                            np.array([t - o.first_time_s for o in objs]),
+                            [tuple(sorted(self.cameras[c].sensor_id for c in o.members)) for o in objs],
+                            [max(o.members.values(), key=lambda mm: mm.time_s).class_id for o in objs],
+                            np.array([len(o.members) for o in objs], np.int64), t)
 
     def contributions(self, object_id: int, time_s: float) -> tuple[list, np.ndarray, np.ndarray]:
         """Each camera's own estimate of object ``object_id`` predicted to ``time_s``, before fusion: the camera
@@ -482,8 +476,8 @@ class RsuFusion:
         obj = self._objects.get(object_id)
         if obj is None:
             raise InputError("object_id", object_id, "the objectId of a live fused object")
-        xs, Ps, _, _ = self._predicted(obj, as_float("time_s", time_s))
-        return list(obj.members), np.array(xs), np.array(Ps)
+        _, xs, Ps, _, _, _ = self._contributions([object_id], as_float("time_s", time_s))
+        return list(obj.members), xs, Ps
 
     def pairs(self) -> dict:
         """``(camera id, track id) -> objectId`` of every live contribution (a copy)."""
@@ -491,7 +485,7 @@ class RsuFusion:
 
 
 def fuse_estimates(x, P, method: str = "information") -> tuple[np.ndarray, np.ndarray]:
-    """Fuse k estimates ``x (k, d)`` with covariances ``P (k, d, d)`` of one quantity.
+    """Fuse k estimates ``x (k, d=2)`` with covariances ``P (k, 2, 2)`` of one quantity.
 
     ``"information"``: ``P_f = (sum P_i^-1)^-1``, ``x_f = P_f sum P_i^-1 x_i`` (independent errors).
     ``"ci"``: covariance intersection with the weights ``w_i = (1 / tr P_i) / sum_j (1 / tr P_j)`` (Niehsen's fast
@@ -499,15 +493,42 @@ def fuse_estimates(x, P, method: str = "information") -> tuple[np.ndarray, np.nd
     """
     x = np.asarray(x, dtype=np.float64)
     P = np.asarray(P, dtype=np.float64)
-    if x.shape[0] == 1:
-        return x[0].copy(), P[0].copy()
-    info = np.linalg.inv(P)
+    if x.ndim != 2 or x.shape[1] != 2 or P.shape != (x.shape[0], 2, 2) or x.shape[0] < 1:
+        raise InputError("x, P", (x.shape, P.shape), "shapes (k, 2) and (k, 2, 2) with k >= 1")
+    if method not in FUSION_METHODS:
+        raise InputError("method", method, f"one of {FUSION_METHODS}")
+    xf, Pf = _fuse_groups(np.zeros(x.shape[0], np.int64), x, P, 1, method)
+    return xf[0], Pf[0]
+
+
+def _fuse_groups(idx, x, P, m: int, method: str) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`fuse_estimates` of m groups at once: estimate j belongs to group ``idx[j]`` (NaN: an empty group)."""
+    info = _inv2(P)
     if method == "ci":
         w = 1.0 / np.trace(P, axis1=1, axis2=2)
-        info = info * (w / w.sum())[:, None, None]
-    Pf = np.linalg.inv(info.sum(0))
-    Pf = 0.5 * (Pf + Pf.T)
-    return Pf @ np.einsum("kij,kj->i", info, x), Pf
+        info = info * (w / np.bincount(idx, w, m)[idx])[:, None, None]
+    total = np.zeros((m, 2, 2))
+    np.add.at(total, idx, info)
+    eta = np.zeros((m, 2))
+    np.add.at(eta, idx, np.einsum("kij,kj->ki", info, x))
+    has = np.bincount(idx, minlength=m) > 0
+    Pf = _inv2(np.where(has[:, None, None], total, np.eye(2)))
+    Pf = 0.5 * (Pf + np.swapaxes(Pf, -1, -2))
+    xf = np.einsum("mij,mj->mi", Pf, eta)
+    return np.where(has[:, None], xf, np.nan), np.where(has[:, None, None], Pf, np.nan)
+
+
+def _inv2(S: np.ndarray) -> np.ndarray:
+    """Inverses of ``(..., 2, 2)`` matrices (closed form)."""
+    a, b, c, d = S[..., 0, 0], S[..., 0, 1], S[..., 1, 0], S[..., 1, 1]
+    det = (a * d - b * c)[..., None, None]
+    return np.stack([np.stack([d, -b], -1), np.stack([-c, a], -1)], -2) / det
+
+
+def _mahalanobis2(d: np.ndarray, S: np.ndarray) -> np.ndarray:
+    """``d^T S^-1 d`` of ``d (..., 2)``, ``S (..., 2, 2)`` (closed form)."""
+    a, b, c, e = S[..., 0, 0], S[..., 0, 1], S[..., 1, 0], S[..., 1, 1]
+    return (e * d[..., 0] ** 2 - (b + c) * d[..., 0] * d[..., 1] + a * d[..., 1] ** 2) / (a * e - b * c)
 
 
 def _frame_columns(track_id, xy_m, cov_xy_m2, v_mps, cov_v_m2ps2, age_s, class_id):
