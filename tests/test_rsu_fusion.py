@@ -272,3 +272,17 @@ def test_cost_matrix_equals_the_per_pair_distance():
             xo, Po = fuse_estimates(xs, Ps)
             d = fb["xy_m"][i] - xo
             assert cost[i, b] == pytest.approx(d @ np.linalg.solve(Pc + Po, d), rel=1e-9)
+
+
+@pytest.mark.slow
+def test_fused_coverage_small_seeded_sweep():
+    """8 independent runs (each its own calibration draws and clock offsets): the 95 % ellipse of objects fused from
+    2+ cameras holds the truth 95 +- 4 % (the 200-run sweep, +-2 %: bench/rsu_fusion.py, docs/rsu-fusion.md), fusion
+    covers at least as well as the cameras' own estimates of the same objects, and is never larger than any."""
+    from footprint_uq.tracking.rsu_synthetic import coverage_sweep
+
+    r = coverage_sweep(8, 100, seed=1000)
+    assert r.n_multi > 1000
+    assert 0.91 <= r.coverage_multi <= 0.99
+    assert r.coverage >= r.coverage_camera - 0.01
+    assert r.n_larger == 0
