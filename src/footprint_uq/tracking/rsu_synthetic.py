@@ -1,0 +1,276 @@
+"""Seeded Monte Carlo of the roadside unit's fusion: three cameras over a signalised intersection.
+
+The geometry is the case study's (:mod:`footprint_uq.scenario.intersection` defaults: two roads crossing at the
+origin, two 3.5 m lanes per direction, right-hand traffic) without importing it (the tracker's layer is below
+``scenario/``): the eight straight-through lanes run 50 m each side of the centre.  A two-phase signal lets the
+north-south lanes and the east-west lanes drive in turn (``phase_s`` each; vehicles enter during the first 40 % of
+their phase, so crossing streams never meet in the box).  Vehicles enter a lane at random headways (>= 2.5 s) at
+the lane's speed for that phase (+-0.4 m/s each) with random longitudinal accelerations of density
+``truth_accel_psd_m2ps3``.
+
+Three roadside cameras see it (:func:`intersection_cameras`; the case study's two and a third on the south-west
+corner looking north-east), each with its own calibration error drawn once per run from the budget and its own
+clock offset (drawn once per run, ``N(0, clock_offset_sigma_s^2)``: the camera stamps its frames ``t + offset``).
+Per frame, a vehicle whose centre the true camera images inside the picture within ``max_range_m`` is detected
+with the budget's pixel noise plus ``detector_sigma_px``, back-projected by the nominal camera
+(:class:`~footprint_uq.products.footprints.FrameProcessor`), tracked by the camera's
+:class:`~footprint_uq.tracking.table.TrackTable` (the truth's id as ``object_id``) and handed to one
+:class:`~footprint_uq.tracking.rsu_fusion.RsuFusion`; after the three cameras, the unit's list at the true time
+``t`` is compared with the truth (:class:`RsuSimResult`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .. import params as P
+from ..cameras import general
+from ..cameras.pantilt import PanTiltCamera
+from ..products.footprints import FrameProcessor
+from ..uncertainty.budget import load_budget
+from .rsu_fusion import RsuFusion, RsuFusionConfig
+from .synthetic import CHI2_95_2D
+from .table import SharedJacobianAt, TrackerConfig, TrackTable
+
+__all__ = ["intersection_cameras", "LANES", "RsuSimResult", "simulate", "coverage_sweep"]
+
+_XM, _YM, _GDZ, _GSX, _GSY = (P.PARAM_NAMES.index(k) for k in ("x_m", "y_m", "ground_dz_m", "ground_slope_x",
+                                                                 "ground_slope_y"))
+_HALF_M = 7.0  # half the paved width: 2 lanes x 3.5 m
+#: the eight straight-through lanes: (a point on the centre line, the unit travel direction, phase 0 or 1)
+LANES = tuple(
+    (np.array(p, dtype=float), np.array(d, dtype=float), ph) for p, d, ph in (
+        ((1.75, 0.0), (0.0, 1.0), 0), ((5.25, 0.0), (0.0, 1.0), 0),        # northbound (east of the centre line)
+        ((-1.75, 0.0), (0.0, -1.0), 0), ((-5.25, 0.0), (0.0, -1.0), 0),    # southbound
+        ((0.0, -1.75), (1.0, 0.0), 1), ((0.0, -5.25), (1.0, 0.0), 1),      # eastbound (south of the centre line)
+        ((0.0, 1.75), (-1.0, 0.0), 1), ((0.0, 5.25), (-1.0, 0.0), 1)))     # westbound
+_LANE_HALF_LENGTH_M = 50.0
+
+
+def intersection_cameras() -> list[PanTiltCamera]:
+    """Three 1920x1080 roadside cameras, 2 m back from the corners of the box: north-east (8 m, looking south-west,
+    80 deg), on the north arm 12 m further (10 m, pan 190 deg, 90 deg) and south-west (8 m, looking north-east,
+    80 deg); tilted 20 deg down (the case study's first two and a third across from them)."""
+    c = _HALF_M + 2.0
+    out = []
+    for pos, h, pan, hfov in (((c, c), 8.0, 225.0, 80.0), ((-c, c + 12.0), 10.0, 190.0, 90.0),
+                              ((-c, -c), 8.0, 45.0, 80.0)):
+        f = 1920 / (2.0 * math.tan(math.radians(hfov) / 2.0))
+        out.append(PanTiltCamera(f, (1920, 1080), h, pan, 20.0, position_m=pos, principal_point_px=(960, 540)))
+    return out
+
+
+@dataclass
+class RsuSimResult:
+    """Counts of a run (or of several, :meth:`add`).
+
+    n_frames                   unit frames (all cameras' frames at one time, then the list)
+    n_truth_frames             (frame, vehicle) pairs with the vehicle fused from at least one camera's track
+    n_duplicates               of those, a vehicle in more than one fused object
+    n_missing                  a vehicle detected by a camera this frame and in no fused object
+    n_mixed                    (frame, fused object) pairs holding tracks of more than one vehicle
+    n_cover, n_cover_hits      fused objects (one vehicle, every contribution with a velocity) evaluated / whose
+                               95 % position ellipse holds the truth at ``t``
+    n_multi, n_multi_hits      the same for objects fused from 2 or more cameras
+    n_camera, n_camera_hits    the cameras' own predicted estimates of the same objects (the baseline)
+    n_larger                   multi-camera objects whose fused covariance exceeds a camera's (Loewner order)
+    max_objects                most fused objects in one frame
+    """
+
+    n_frames: int = 0
+    n_truth_frames: int = 0
+    n_duplicates: int = 0
+    n_missing: int = 0
+    n_mixed: int = 0
+    n_cover: int = 0
+    n_cover_hits: int = 0
+    n_multi: int = 0
+    n_multi_hits: int = 0
+    n_camera: int = 0
+    n_camera_hits: int = 0
+    n_larger: int = 0
+    max_objects: int = 0
+    fusion_counts: dict = field(default_factory=dict)
+
+    def add(self, other: RsuSimResult) -> RsuSimResult:
+        for k, v in vars(other).items():
+            if k == "max_objects":
+                self.max_objects = max(self.max_objects, v)
+            elif k == "fusion_counts":
+                for kk, vv in v.items():
+                    self.fusion_counts[kk] = self.fusion_counts.get(kk, 0) + vv
+            else:
+                setattr(self, k, getattr(self, k) + v)
+        return self
+
+    @property
+    def coverage(self) -> float:
+        return self.n_cover_hits / max(self.n_cover, 1)
+
+    @property
+    def coverage_multi(self) -> float:
+        return self.n_multi_hits / max(self.n_multi, 1)
+
+    @property
+    def coverage_camera(self) -> float:
+        return self.n_camera_hits / max(self.n_camera, 1)
+
+
+def _traffic(n_frames: int, rate_hz: float, phase_s: float, accel_psd: float, rng):
+    """Truth: ``xy (F, V, 2)`` (NaN off the lanes) of V vehicles over F frames at ``rate_hz``."""
+    dt = 1.0 / rate_hz
+    duration = n_frames * dt
+    starts, lanes, speeds = [], [], []
+    n_cycles = int(duration // (2 * phase_s)) + 1
+    for li, (_, _, ph) in enumerate(LANES):
+        for cyc in range(n_cycles):
+            lane_speed = rng.uniform(8.0, 12.0)
+            t0 = (2 * cyc + ph) * phase_s + rng.uniform(0.0, 2.0)
+            while t0 < (2 * cyc + ph + 0.4) * phase_s:
+                starts.append(t0)
+                lanes.append(li)
+                speeds.append(lane_speed + rng.uniform(-0.4, 0.4))
+                t0 += 2.5 + rng.exponential(2.0)
+    V = len(starts)
+    t = np.arange(n_frames) * dt
+    s = np.full((n_frames, V), np.nan)  # distance along the lane from its entry, m
+    pert = np.zeros(V)
+    pv = np.zeros(V)
+    q = accel_psd
+    for k in range(n_frames):
+        tau = t[k] - np.asarray(starts)
+        s[k] = np.where(tau >= 0, np.asarray(speeds) * np.maximum(tau, 0) + pert, np.nan)
+        z = rng.standard_normal((2, V))
+        pert = pert + dt * pv + math.sqrt(q * dt ** 3 / 12.0) * z[0]  # (exact CV noise, approximately)
+        pv = pv + math.sqrt(q * dt) * z[1]
+    s[s > 2 * _LANE_HALF_LENGTH_M] = np.nan
+    xy = np.full((n_frames, V, 2), np.nan)
+    for v in range(V):
+        p, d, _ = LANES[lanes[v]]
+        xy[:, v] = p - _LANE_HALF_LENGTH_M * d + s[:, v, None] * d
+    return t, xy
+
+
+@dataclass
+class _Camera:
+    camera: PanTiltCamera
+    p_true: np.ndarray
+    offset_s: float
+    proc: FrameProcessor
+    table: TrackTable
+    track_truth: dict = field(default_factory=dict)
+
+
+def _detect(cam: _Camera, xy: np.ndarray, A_px: np.ndarray, max_range_m: float, rng):
+    """Pixels of the vehicles the true camera sees this frame (indices, (n, 2))."""
+    live = np.flatnonzero(np.isfinite(xy).all(1))
+    if live.size == 0:
+        return live, np.zeros((0, 2))
+    p = cam.p_true
+    rel = xy[live] - p[[_XM, _YM]]
+    z = p[_GDZ] + rel @ p[[_GSX, _GSY]]  # on the true camera's ground
+    pr = general.project(p, np.column_stack([xy[live], z]), domain=cam.camera.lens_domain)
+    w, h = cam.camera.image_size_px
+    uv = pr.uv_px + rng.standard_normal((live.size, 2)) @ A_px.T
+    pan = math.radians(cam.camera.pan_deg)
+    fwd = rel @ np.array([math.sin(pan), math.cos(pan)])
+    side = rel @ np.array([math.cos(pan), -math.sin(pan)])
+    # inside the horizontal field of view (a point behind the camera, or far off its axis where the drawn
+    # distortion folds back, can project into the picture too)
+    ahead = (fwd > 0.0) & (np.abs(side) < fwd * (0.5 * w / cam.camera.focal_px))
+    ok = (pr.valid & ahead & (uv[:, 0] >= 0) & (uv[:, 0] < w) & (uv[:, 1] >= 0) & (uv[:, 1] < h)
+          & (np.hypot(*rel.T) <= max_range_m))
+    return live[ok], uv[ok]
+
+
+def simulate(n_frames: int = 300, *, rate_hz: float = 10.0, seed: int = 0, budget="basler1@deg",
+             detector_sigma_px: float = 1.5, clock_offset_sigma_s: float = 0.005, phase_s: float = 20.0,
+             max_range_m: float = 60.0, truth_accel_psd_m2ps3: float = 1.0, config: RsuFusionConfig | None = None,
+             tracker: TrackerConfig | None = None, warmup_frames: int = 0) -> RsuSimResult:
+    """One seeded run (module doc); frames before ``warmup_frames`` are run but not counted."""
+    rng = np.random.default_rng(seed)
+    budget = load_budget(budget)
+    t, truth = _traffic(n_frames, rate_hz, phase_s, truth_accel_psd_m2ps3, rng)
+    L = budget.param_factor().dense()
+    det = detector_sigma_px ** 2 * np.eye(2)
+    A_px = np.linalg.cholesky(budget.pixel_covariance() + det)
+    fusion = RsuFusion(config)
+    cams = []
+    for j, camera in enumerate(intersection_cameras()):
+        fusion.add_camera(j, j + 1, clock_offset_sigma_s=clock_offset_sigma_s)
+        proc = FrameProcessor(camera, budget, joint_cov=False, linearity=False, shared_jacobian=True,
+                              v2x_policy="linear")
+        table = TrackTable(tracker, rank=L.shape[1], shared_at=SharedJacobianAt(camera, budget))
+        p_true = camera.params + L @ rng.standard_normal(L.shape[1])
+        cams.append(_Camera(camera, p_true, float(rng.normal(0.0, clock_offset_sigma_s)), proc, table))
+    res = RsuSimResult()
+    for k in range(n_frames):
+        seen = set()
+        for j, cam in enumerate(cams):
+            idx, uv = _detect(cam, truth[k], A_px, max_range_m, rng)
+            est = cam.proc.corners(uv[:, None, :], pixel_cov_px2=np.broadcast_to(det, (idx.size, 2, 2)))
+            stamp = t[k] + cam.offset_s
+            out = cam.table.step(stamp, idx.tolist(), est.centre_xy_world_m, est.centre_cov_frame_m2,
+                                 est.centre_shared_m)
+            for i, tid in zip(idx.tolist(), out.track_id.tolist(), strict=True):
+                cam.track_truth[tid] = i
+            ff = fusion.step_tracks(j, stamp, out, ["vehicle"] * idx.size)
+            seen.update(idx[ff.object_id >= 0].tolist())
+        if k >= warmup_frames:
+            res.add(_evaluate(fusion, cams, truth[k], t[k], seen))
+    res.fusion_counts = {**fusion.counts, "merged": fusion.n_merged, "unstuck": fusion.n_unstuck}
+    return res
+
+
+def _evaluate(fusion: RsuFusion, cams, truth_xy: np.ndarray, t: float, seen: set) -> RsuSimResult:
+    """One frame's counts (:class:`RsuSimResult`)."""
+    r = RsuSimResult(n_frames=1)
+    members: dict = {}
+    for (cid, tid), oid in fusion.pairs().items():
+        members.setdefault(oid, set()).add(cams[cid].track_truth[tid])
+    objs = fusion.objects(t)
+    r.max_objects = len(objs.object_id)
+    where: dict = {}
+    for oid, vs in members.items():
+        for v in vs:
+            where.setdefault(v, []).append(oid)
+        r.n_mixed += len(vs) > 1
+    r.n_truth_frames = len(where)
+    r.n_duplicates = sum(len(o) > 1 for o in where.values())
+    r.n_missing = len(seen - set(where))
+    for k, oid in enumerate(objs.object_id.tolist()):
+        vs = members.get(oid, set())
+        if len(vs) != 1 or not np.isfinite(objs.v_mps[k]).all():
+            continue
+        truth = truth_xy[next(iter(vs))]
+        if not np.isfinite(truth).all():
+            continue
+        hit = _inside(objs.xy_m[k], objs.cov_xy_m2[k], truth)
+        r.n_cover += 1
+        r.n_cover_hits += hit
+        _, xs, Ps = fusion.contributions(oid, t)
+        for xc, Pc in zip(xs, Ps, strict=True):
+            r.n_camera += 1
+            r.n_camera_hits += _inside(xc, Pc, truth)
+        if len(xs) > 1:
+            r.n_multi += 1
+            r.n_multi_hits += hit
+            scale = np.abs(Ps).max()
+            r.n_larger += any(np.linalg.eigvalsh(Pc - objs.cov_xy_m2[k]).min() < -1e-9 * scale for Pc in Ps)
+    return r
+
+
+def _inside(x, P, truth) -> bool:
+    d = truth - x
+    return bool(d @ np.linalg.solve(P, d) <= CHI2_95_2D)
+
+
+def coverage_sweep(n_runs: int, n_frames: int, *, seed: int = 0, **kw) -> RsuSimResult:
+    """``n_runs`` independent runs (each its own calibration draws and clock offsets), counts summed."""
+    total = RsuSimResult()
+    for r in range(n_runs):
+        total.add(simulate(n_frames, seed=seed + r, **kw))
+    return total
