@@ -325,7 +325,7 @@ def test_registry_loads_every_command_lazily():
     assert main.list_commands(None) == names
     for name in names:
         assert main.get_command(None, name).name == name
-    assert sorted(calibrate.commands) == ["budget", "extrinsics", "gcp", "intrinsics", "synthetic"]
+    assert sorted(calibrate.commands) == ["budget", "extrinsics", "gcp", "intrinsics", "motion", "synthetic"]
     assert sorted(carla.commands) == ["capture", "export"]
     code = ("import sys; from footprint_uq.cli.main import main; "
             "before = 'footprint_uq.viz.map_report' in sys.modules; main.get_command(None, 'presets'); "
