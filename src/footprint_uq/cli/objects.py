@@ -14,7 +14,6 @@ from __future__ import annotations
 import click
 
 from .._notices import set_compile_handler
-from ..batch.class_names import UNKNOWN_POLICIES
 from ..batch.fleet import process_fleet
 from ..batch.formats import INPUT_FORMATS
 from ..batch.process import process_file
@@ -23,6 +22,7 @@ from ..errors import InputError
 from ..integrations.ros2.bag_reader import BagDetectionReader, bag_camera_info, camera_from_bag, is_bag
 from ..integrations.ros2.bag_writer import BagOptions, bag_out_kind, bag_writer_factory
 from ..integrations.ros2.types import DEFAULT_DISTRO, DISTROS
+from ..io.class_names import UNKNOWN_POLICIES
 from ..products.footprints import CONTACT_MODES, V2X_POLICIES
 from ..products.warmup import compile_handler
 from ..uncertainty.budget import load_budget

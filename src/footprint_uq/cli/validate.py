@@ -9,9 +9,9 @@ from __future__ import annotations
 
 import click
 
-from ..batch.class_names import UNKNOWN_POLICIES
 from ..batch.formats import INPUT_FORMATS
 from ..errors import InputError
+from ..io.class_names import UNKNOWN_POLICIES
 from ..uncertainty.presets import PRESET_NAMES
 from ..validation.coverage import DEFAULT_RANGE_BANDS_M
 from ..validation.pairs import CONTACT_MODELS
