@@ -1,4 +1,4 @@
-"""ROS 2 bags out and in, and the Foxglove scene (footprint_uq.integrations.ros2; docs/integrations-ros2.md).
+"""ROS 2 bags out and in, and the Foxglove scene (footprint_uq.integrations.ros2; docs/integrations.md).
 
 Every bag written is read back with rosbags (every message deserialised); the single MCAP file also with the
 ``mcap`` reader (every channel's schema and every message decoded: CDR through the schema's own ros2msg text,
@@ -445,12 +445,13 @@ def test_serve_rosbag_output_refuses_a_folder_of_other_files(cam, tmp_path):
 
 
 def test_the_documented_example_runs(tmp_path, monkeypatch):
-    """docs/integrations-ros2.md's copy-paste example, as written, from the repository's root."""
+    """docs/integrations.md's copy-paste example of "ROS 2 bags and Foxglove", as written, from the repository's
+    root."""
     import re
     import shlex
 
     root = Path(__file__).resolve().parents[1]
-    text = (root / "docs" / "integrations-ros2.md").read_text()
+    text = (root / "docs" / "integrations.md").read_text().split("\n## ROS 2 bags and Foxglove\n", 1)[1]
     cmd = re.search(r"```sh\n(footprint-uq objects .*?)\n```", text, re.S).group(1).replace("\\\n", " ")
     argv = shlex.split(cmd)
     assert argv[:2] == ["footprint-uq", "objects"]

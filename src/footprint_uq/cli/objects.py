@@ -40,7 +40,7 @@ __all__ = ["objects_cmd"]
 @click.option("--detections", "detections", required=True, metavar="FILE_OR_DIR",
               help="Detections: .csv, .jsonl/.ndjson or .parquet file, a detector's output (--format), or a ROS 2 "
                    "bag (.mcap, .db3 or a bag folder: its vision_msgs/msg/Detection2DArray topic, --topic; "
-                   "docs/integrations-ros2.md); with --registry a Parquet dataset folder.")
+                   "docs/integrations.md); with --registry a Parquet dataset folder.")
 @click.option("--format", "format_in", type=click.Choice(["auto", *INPUT_FORMATS]), default="auto", show_default=True,
               help="Input format: the canonical tables (csv, jsonl, parquet), a folder of YOLO / ultralytics .txt "
                    "labels (yolo), a YOLOv5 pandas CSV (yolov5-csv), COCO results JSON (coco), a MOTChallenge "
@@ -224,7 +224,7 @@ def _ros_camera(camera_path, budget_spec, detections, pose, ros: dict):
 
 
 def _objects_ros(camera_path, budget_spec, detections, out, pose, ros: dict, **kw):
-    """``objects`` with a ROS 2 bag as input and/or output (docs/integrations-ros2.md)."""
+    """``objects`` with a ROS 2 bag as input and/or output (docs/integrations.md)."""
     camera, budget = _ros_camera(camera_path, budget_spec, detections, pose, ros)
     reader = BagDetectionReader(detections, topic=ros["topic"], chunk_rows=kw["chunk_rows"]) \
         if is_bag(detections) else None

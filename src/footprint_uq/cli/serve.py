@@ -38,7 +38,7 @@ __all__ = ["serve_cmd"]
 @click.option("--output", default="-", show_default=True, metavar="-|mqtt|rosbag:PATH",
               help="'-': JSON Lines on stdout; 'mqtt': topics footprints/<camera_id>, footprints/errors, "
                    "footprints/health; 'rosbag:PATH': the footprints recorded into a ROS 2 bag (PATH.mcap or a "
-                   "folder; docs/integrations-ros2.md), error and health records on stdout.")
+                   "folder; docs/integrations.md), error and health records on stdout.")
 @click.option("--input-prefix", default="detections", show_default=True, help="MQTT input topic prefix.")
 @click.option("--output-prefix", default="footprints", show_default=True, help="MQTT output topic prefix.")
 @click.option("--overload", "policy", type=click.Choice(["newest", "block"]), default=None,

@@ -1,4 +1,4 @@
-"""ROS 2 bags out and in, and the Foxglove scene, without a ROS installation (docs/integrations-ros2.md).
+"""ROS 2 bags out and in, and the Foxglove scene, without a ROS installation (docs/integrations.md, "ROS 2 bags and Foxglove").
 
 * :mod:`.types` -- the rosbags type store with vision_msgs registered from its ``.msg`` texts (``msg/``);
 * :mod:`.messages` -- a frame's footprints as Detection3DArray and MarkerArray messages;
