@@ -21,7 +21,7 @@ from footprint_uq.batch.formats import READERS, detect_input_format, open_reader
 from footprint_uq.batch.process import process_file
 from footprint_uq.errors import InputError
 from footprint_uq.io import save_camera
-from footprint_uq.io.class_names import COCO80_NAMES, COCO91_IDS, ClassNames
+from footprint_uq.io.class_names import COCO80_NAMES, COCO91_IDS
 
 W, H = 1920, 1080
 CAM = dict(focal_px=1400.0, image_size_px=(W, H), height_m=8.0, pan_deg=30.0, tilt_deg=20.0)
@@ -252,20 +252,6 @@ def test_pixel_conventions_pinned(tmp_path):
     assert t.column("class")[0].as_py() == "car" and t.column("frame")[0].as_py() == 4
 
 
-def test_builtin_names():
-    assert len(COCO80_NAMES) == 80 == len(set(COCO80_NAMES)) == len(COCO91_IDS) == len(set(COCO91_IDS))
-    assert COCO80_NAMES[2] == "car" and COCO80_NAMES[79] == "toothbrush" and COCO91_IDS[-1] == 90
-    names = ClassNames.load("coco91")
-    assert names.lookup(3) == ("car", None) and names.lookup(12)[0] is None  # 12 is one of COCO's gaps
-    assert ClassNames.load("coco91", unknown="unknown").lookup(12) == ("unknown", None)
-    assert ClassNames.load(["a", "b"]).lookup(1) == ("b", None)
-    assert ClassNames.load({"7": "tram"}).lookup(7) == ("tram", None)
-    with pytest.raises(InputError, match="^class_names"):
-        ClassNames.load("nope-not-a-file.yaml")
-    with pytest.raises(InputError, match="^unknown_class"):
-        ClassNames.load("coco", unknown="skip")
-
-
 # -- bad input -----------------------------------------------------------------------------------------------
 def test_bad_detections_are_their_own_errors(cam, tmp_path):
     (tmp_path / "y").mkdir()
@@ -358,7 +344,7 @@ def test_detection_of_formats(tmp_path):
         detect_input_format(tmp_path / "x.bin")
     with pytest.raises(InputError, match="^format"):
         open_reader(tmp_path / "a.csv", format="kitti")
-    assert set(READERS) == {"yolo", "yolov5-csv", "coco", "mot"}
+    assert set(READERS) == {"ros2-bag", "yolo", "yolov5-csv", "coco", "mot"}
 
 
 # -- malformed lines (Hypothesis) ------------------------------------------------------------------------------

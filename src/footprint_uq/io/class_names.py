@@ -108,12 +108,14 @@ class ClassNames:
             raise InputError("unknown_class", self.unknown, f"one of {UNKNOWN_POLICIES}")
 
     @classmethod
-    def load(cls, spec, *, unknown: str = "error") -> ClassNames:
-        """A :class:`ClassNames` from a built-in name, a file, a sequence, a mapping or a :class:`ClassNames`
-        (given the policy ``unknown``); see the module doc.  A bad source is a one-line
-        :class:`~footprint_uq.errors.InputError` (a bad file: :class:`~footprint_uq.errors.ConfigError`)."""
+    def load(cls, spec, *, unknown: str | None = None) -> ClassNames:
+        """A :class:`ClassNames` from a built-in name, a file, a sequence, a mapping or a :class:`ClassNames`,
+        with the policy ``unknown`` (None: a given :class:`ClassNames`' own, else ``"error"``); see the module
+        doc.  A bad source is a one-line :class:`~footprint_uq.errors.InputError` (a bad file:
+        :class:`~footprint_uq.errors.ConfigError`)."""
         if isinstance(spec, ClassNames):
-            return cls(spec.names, spec.source, unknown, spec.images)
+            return cls(spec.names, spec.source, unknown or spec.unknown, spec.images)
+        unknown = unknown or "error"
         if isinstance(spec, str) and spec.lower() in BUILTIN_NAMES:
             return cls(BUILTIN_NAMES[spec.lower()], spec.lower(), unknown)
         if isinstance(spec, Mapping):
@@ -145,7 +147,7 @@ class ClassNames:
         return len(self.names)
 
 
-def load_class_names(spec, *, unknown: str = "error") -> ClassNames:
+def load_class_names(spec, *, unknown: str | None = None) -> ClassNames:
     """:meth:`ClassNames.load` (the service's and the CLI's entry: ``--class-names``, ``--unknown-class``)."""
     return ClassNames.load(spec, unknown=unknown)
 

@@ -282,9 +282,9 @@ class Service:
         Names of integer class ids (``"class": 2``): a built-in map or a names file (data.yaml, JSON, one name per
         line), the one names map of the package (:class:`footprint_uq.io.class_names.ClassNames`).  Without it an
         integer class is that detection's error entry (the frame's other detections go on).
-    unknown_class : {"error", "unknown"}
-        With ``class_names``: an id the map does not name is that detection's error entry (default), or the class
-        ``"unknown"``.
+    unknown_class : {"error", "unknown"}, optional
+        With ``class_names``: an id the map does not name is that detection's error entry, or the class
+        ``"unknown"`` (default: a given ClassNames' own policy, else ``"error"``).
     record : {"full", "compact"}
         The record's layout: ``full`` (default) every field, the CPM as JSON and UPER hex, the SDSM; ``compact``
         the fields of :data:`COMPACT_OBJECT_FIELDS` per object and, without the CPM JSON and the SDSM, the CPM's
@@ -302,7 +302,8 @@ class Service:
                  uper_encoder: str = "fast", linearity: bool = False, linear_threshold: float | None = None,
                  warm_up: bool = True, cpm_cdd: str = DEFAULT_CDD, v2x_policy: str = "sampled",
                  tracks: bool = False, tracker: TrackerConfig | None = None,
-                 class_names: str | ClassNames | None = None, unknown_class: str = "error", record: str = "full",
+                 class_names: str | ClassNames | None = None, unknown_class: str | None = None,
+                 record: str = "full",
                  consistency_window_s: float = DEFAULT_WINDOW_S):
         if (camera is None) == (registry is None):
             raise InputError("camera/registry", "both" if camera is not None else "neither",
@@ -326,7 +327,7 @@ class Service:
                                          cdd=self.cpm_cdd)
         self._cls = _class_tables(self.cpm_cdd)
         self.class_names = None if class_names is None else load_class_names(class_names, unknown=unknown_class)
-        if class_names is None and unknown_class not in UNKNOWN_POLICIES:
+        if class_names is None and unknown_class not in (None, *UNKNOWN_POLICIES):
             raise InputError("unknown_class", unknown_class, f"one of {UNKNOWN_POLICIES}")
         if record not in RECORD_LAYOUTS:
             raise InputError("record", record, f"one of {RECORD_LAYOUTS}")

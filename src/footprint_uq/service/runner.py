@@ -864,7 +864,7 @@ def run(*, camera=None, budget=None, registry=None, camera_id: str | None = None
                           cpm_cdd=cpm_cdd, v2x_policy=v2x_policy,
                           tracks=serve_options.pop("tracks", False),
                           class_names=serve_options.pop("class_names", None),
-                          unknown_class=serve_options.pop("unknown_class", "error"), record=serve_options.pop("record"),
+                          unknown_class=serve_options.pop("unknown_class", None), record=serve_options.pop("record"),
                           consistency_window_s=serve_options.pop("consistency_window_s", DEFAULT_WINDOW_S))
         return serve(service, stop=stop, **serve_options)
     finally:
