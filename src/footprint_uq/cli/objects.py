@@ -44,7 +44,7 @@ __all__ = ["objects_cmd"]
 @click.option("--format", "format_in", type=click.Choice(["auto", *INPUT_FORMATS]), default="auto", show_default=True,
               help="Input format: the canonical tables (csv, jsonl, parquet), a folder of YOLO / ultralytics .txt "
                    "labels (yolo), a YOLOv5 pandas CSV (yolov5-csv), COCO results JSON (coco), a MOTChallenge "
-                   "det.txt / gt.txt (mot); auto: from the file (docs/integrations.md).")
+                   "det.txt / gt.txt (mot), a ROS 2 bag (ros2-bag); auto: from the file (docs/integrations.md).")
 @click.option("--class-names", default=None, metavar="coco|coco91|mot|FILE",
               help="Integer class ids -> names: a built-in map, an ultralytics data.yaml (names:), a JSON list / "
                    "mapping / COCO dataset (categories, images), or a text file of one name per line (default: "
@@ -143,7 +143,7 @@ def objects_cmd(camera_path, budget_spec, detections, format_in, class_names, un
     reader_opts = dict(format_in=None if format_in == "auto" else format_in, class_names=class_names,
                        unknown_class=unknown_class)
     if registry is None and (is_bag(detections) or bag_out_kind(out) is not None):
-        if is_bag(detections) and (reader_opts["format_in"] is not None or class_names is not None):
+        if is_bag(detections) and (reader_opts["format_in"] not in (None, "ros2-bag") or class_names is not None):
             raise InputError("--format/--class-names", (format_in, class_names),
                              "neither with a ROS 2 bag in (its Detection2DArray messages name their classes)")
         summ = _objects_ros(camera_path, budget_spec, detections, out, pose, ros, chunk_rows=chunk_rows,

@@ -67,7 +67,8 @@ def _bands(text: str) -> tuple[float, ...]:
               help="Where a 2-D box touches the ground.")
 @label_source_options
 @click.option("--detections", default=None, metavar="FILE_OR_DIR",
-              help="A detector's own files (YOLO labels, YOLOv5 CSV, COCO results, MOTChallenge, a canonical table), "
+              help="A detector's own files (YOLO labels, YOLOv5 CSV, COCO results, MOTChallenge, a ROS 2 bag's "
+                   "Detection2DArray topic (its only one), a canonical table), "
                    "paired with --labels, a truth table of frame, object_id, x_m, y_m (or lat_deg, lon_deg), by "
                    "frame and object_id (docs/integrations.md).")
 @click.option("--format", "detections_format", type=click.Choice(["auto", *INPUT_FORMATS]), default="auto",
