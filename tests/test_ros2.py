@@ -383,6 +383,21 @@ def test_cli_bag_in_mcap_out_with_foxglove(tmp_path):
     assert not list(tmp_path.glob(".*"))  # no temporary left
 
 
+def test_cli_bag_in_with_class_names(tmp_path):
+    """objects --detections bag --class-names coco --unknown-class unknown: the bag's integer class ids named (an id
+    without a name: the class 'unknown'); --format other than ros2-bag with a bag: one line, exit 2."""
+    rows = [{**r, "class": ["2", "0", "95"][i % 3]} for i, r in enumerate(good_rows()[:6])]
+    bag = bag_in(tmp_path / "in_bag", rows)
+    pose = ["--height-m", 8, "--pan-deg", 30, "--tilt-deg", 20]
+    r = _objects("--detections", bag, "--out", tmp_path / "o.csv", "--format", "ros2-bag", "--class-names", "coco",
+                 "--unknown-class", "unknown", *pose)
+    assert r.exit_code == 0, r.output
+    got = list(csv.DictReader(open(tmp_path / "o.csv")))
+    assert [g["class"] for g in got] == ["car", "person", "unknown"] * 2
+    r = _objects("--detections", bag, "--out", tmp_path / "p.csv", "--format", "coco", *pose)
+    assert r.exit_code == 2 and "--format" in r.output and len(r.output.strip().splitlines()) == 1
+
+
 @pytest.mark.parametrize("args, field", [
     (["--topic", "/nope"], "topic"),
     (["--camera", "CAMFILE"], "--camera"),  # 1280 x 720 camera, 1920 x 1080 CameraInfo
