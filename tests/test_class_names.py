@@ -84,6 +84,7 @@ def test_names_files(tmp_path):
     ("bad.json", "[\"car\"", "class_names"),
     ("cats.json", '{"categories": [{"id": "x", "name": "car"}]}', "categories"),
     ("dupcats.json", '{"categories": [{"id": 1, "name": "a"}, {"id": 1, "name": "b"}]}', "categories"),
+    ("nocats.json", '{"categories": []}', "at least one category"),
     ("latin1.names", b"caf\xe9\n", "class_names"),
 ])
 def test_bad_names_files_are_one_line_naming_the_file(tmp_path, name, text, field):

@@ -251,12 +251,14 @@ def _names_from_file(path: Path) -> tuple[dict, list | None]:
 
 
 def names_from_categories(cats, where: str) -> dict:
-    """The id -> name map of a COCO ``categories`` list ``[{id, name}, ...]``, checked."""
+    """The id -> name map of a COCO ``categories`` list ``[{id, name}, ...]``, checked (empty for an empty list)."""
     if not isinstance(cats, list) or not all(isinstance(c, Mapping) and isinstance(c.get("id"), int)
                                              and not isinstance(c["id"], bool) and "name" in c for c in cats):
         raise ConfigError(f"{where}: categories", str(cats)[:60], "a list of {id, name} objects (integer ids)")
     if len({c["id"] for c in cats}) != len(cats):
         raise ConfigError(f"{where}: categories", str(cats)[:60], "each category id once")
+    if not cats:  # a COCO file's own empty list: every category id is its detection's error (a names file: refused)
+        return {}
     return _id_map({c["id"]: c["name"] for c in cats}, f"{where}: categories")
 
 
@@ -264,7 +266,10 @@ def names_from_json(doc, where: str) -> dict:
     """The id -> name map of a JSON document: a COCO dataset's ``categories``, ``{"names": ...}``, a list or a
     mapping."""
     if isinstance(doc, Mapping) and "categories" in doc:
-        return names_from_categories(doc["categories"], where)
+        names = names_from_categories(doc["categories"], where)
+        if not names:
+            raise ConfigError(f"{where}: categories", "[]", "at least one category {id, name}")
+        return names
     if isinstance(doc, Mapping) and "names" in doc:
         return _structure(doc["names"], f"{where}: names")
     return _structure(doc, where)
