@@ -293,6 +293,17 @@ def _detector_formats(d: Path, camera: Path) -> list[Case]:
     out.append(exit2("mot binary seqinfo", _w(seq / "bad" / "det.txt", "\n".join(mot) + "\n"), "seqinfo"))
     (d / "empty_dir").mkdir(parents=True, exist_ok=True)
     out.append(exit2("a folder without label files", d / "empty_dir", "detections"))
+    labels = _w(d / "names_labels" / "000001.txt", "\n".join(yolo) + "\n")
+    for name, fname, body in (("class names yaml anchor bomb", "bomb.yaml", ANCHOR_BOMB.replace("model:", "names:")),
+                              ("class names binary file", "bin.names", bytes(range(256)) * 16),
+                              ("class names negative id", "neg.yaml", "names: {-1: car, 2: car}\n"),
+                              ("class names COCO categories without ids", "cats.json",
+                               '{"categories": [{"name": 1}]}')):
+        names = _w(d / "names" / fname, body)
+        o = d / f"{name.replace(' ', '_')}.out.csv"
+        out.append(Case(name, ["objects", "--camera", str(camera), "--budget", "basler1", "--detections", str(labels),
+                               "--class-names", str(names), "--out", str(o), "--quiet"], "exit2", o,
+                        stderr_has=fname))
     return out
 
 

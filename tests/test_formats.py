@@ -1,4 +1,4 @@
-"""Detector formats in (batch/formats.py, batch/arrays.py, batch/class_names.py): every format round-trips to
+"""Detector formats in (batch/formats.py, batch/arrays.py, io/class_names.py): every format round-trips to
 the canonical CSV path's footprints (1e-12), ids / classes / scores carried, pinned pixel conventions, bad lines
 are error rows with file and line (Hypothesis), bad detections are their own errors, other image sizes stop."""
 
@@ -17,11 +17,11 @@ from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 from footprint_uq import PanTiltCamera, footprints_from_supervision, footprints_from_xyxy, read_detections
-from footprint_uq.batch.class_names import COCO80_NAMES, COCO91_IDS, ClassNames
 from footprint_uq.batch.formats import READERS, detect_input_format, open_reader, table_format
 from footprint_uq.batch.process import process_file
 from footprint_uq.errors import InputError
 from footprint_uq.io import save_camera
+from footprint_uq.io.class_names import COCO80_NAMES, COCO91_IDS
 
 W, H = 1920, 1080
 CAM = dict(focal_px=1400.0, image_size_px=(W, H), height_m=8.0, pan_deg=30.0, tilt_deg=20.0)
@@ -222,7 +222,7 @@ def test_supervision_and_xyxy_round_trip(cam, ref):
     dets = sv.Detections(xyxy=d["box"][:3] + 0.5, class_id=np.array([2, 500, 0]))
     out = footprints_from_supervision(cam, BUDGET, dets)
     assert out.column("status").to_pylist() == ["ok", "error", "ok"]
-    assert out.column("reason").to_pylist()[1] == "class id 500 has no name in coco"
+    assert out.column("reason").to_pylist()[1] == "class id 500 is not in the names map (coco, 80 names)"
     dets.data["class_name"] = np.array(["car", "tram", "person"])
     assert footprints_from_supervision(cam, BUDGET, dets).column("class").to_pylist() == ["car", "tram", "person"]
     with pytest.raises(InputError, match="^class_id: got 'dtype float64'"):
@@ -252,20 +252,6 @@ def test_pixel_conventions_pinned(tmp_path):
     assert t.column("class")[0].as_py() == "car" and t.column("frame")[0].as_py() == 4
 
 
-def test_builtin_names():
-    assert len(COCO80_NAMES) == 80 == len(set(COCO80_NAMES)) == len(COCO91_IDS) == len(set(COCO91_IDS))
-    assert COCO80_NAMES[2] == "car" and COCO80_NAMES[79] == "toothbrush" and COCO91_IDS[-1] == 90
-    names = ClassNames.load("coco91")
-    assert names.lookup(3) == ("car", None) and names.lookup(12)[0] is None  # 12 is one of COCO's gaps
-    assert ClassNames.load("coco91", unknown="unknown").lookup(12) == ("unknown", None)
-    assert ClassNames.load(["a", "b"]).lookup(1) == ("b", None)
-    assert ClassNames.load({"7": "tram"}).lookup(7) == ("tram", None)
-    with pytest.raises(InputError, match="^class_names"):
-        ClassNames.load("nope-not-a-file.yaml")
-    with pytest.raises(InputError, match="^unknown_class"):
-        ClassNames.load("coco", unknown="skip")
-
-
 # -- bad input -----------------------------------------------------------------------------------------------
 def test_bad_detections_are_their_own_errors(cam, tmp_path):
     (tmp_path / "y").mkdir()
@@ -276,7 +262,7 @@ def test_bad_detections_are_their_own_errors(cam, tmp_path):
     st_, why = t.column("status").to_pylist(), t.column("reason").to_pylist()
     assert st_ == ["ok", "error", "error", "error", "error", "ok"]
     assert why[1].startswith("box width or height <= 0") and why[2].startswith("normalised box outside [0, 1]")
-    assert why[3] == "class id 95 has no name in coco"
+    assert why[3] == "class id 95 is not in the names map (coco, 80 names)"
     assert why[4] == "000007.txt line 5: malformed YOLO label line (4 fields; expected 5 or 6: class cx cy w h [conf])"
     assert t.column("line").to_pylist() == [1, 2, 3, 4, 5, 6] and set(t.column("frame").to_pylist()) == {7}
     t2 = run(cam, tmp_path / "y", tmp_path, "unk", unknown_class="unknown")
@@ -358,7 +344,19 @@ def test_detection_of_formats(tmp_path):
         detect_input_format(tmp_path / "x.bin")
     with pytest.raises(InputError, match="^format"):
         open_reader(tmp_path / "a.csv", format="kitti")
-    assert set(READERS) == {"yolo", "yolov5-csv", "coco", "mot"}
+    assert set(READERS) == {"ros2-bag", "yolo", "yolov5-csv", "coco", "mot"}
+
+
+def test_lazy_entries_name_a_reader_of_their_format():
+    """A registry entry above batch/ (integrations/) is a module path in text: it still names a FormatReader of its
+    own format (a rename there fails here, with or without the ROS extra installed)."""
+    from footprint_uq.batch.formats import FormatReader, LazyFormat
+
+    lazy = {name: e for name, e in READERS.items() if isinstance(e, LazyFormat)}
+    assert set(lazy) == {"ros2-bag"}
+    for name, entry in lazy.items():
+        cls = entry.load()
+        assert issubclass(cls, FormatReader) and cls.name == name
 
 
 # -- malformed lines (Hypothesis) ------------------------------------------------------------------------------

@@ -1,4 +1,4 @@
-"""ROS 2 bags out and in, and the Foxglove scene (footprint_uq.integrations.ros2; docs/integrations-ros2.md).
+"""ROS 2 bags out and in, and the Foxglove scene (footprint_uq.integrations.ros2; docs/integrations.md).
 
 Every bag written is read back with rosbags (every message deserialised); the single MCAP file also with the
 ``mcap`` reader (every channel's schema and every message decoded: CDR through the schema's own ros2msg text,
@@ -309,6 +309,88 @@ def test_bag_in_gives_the_footprints_of_the_csv_path(tmp_path, storage):
             np.testing.assert_allclose(y[k], x[k], rtol=1e-12, atol=1e-12, equal_nan=True)
 
 
+def _single_mcap(bag: Path) -> Path:
+    """The bag folder's one MCAP storage file (a bare .mcap file, as detectors record them)."""
+    (f,) = bag.glob("*.mcap")
+    return f
+
+
+def test_bag_through_the_format_registry_gives_the_csv_footprints(tmp_path):
+    """read_detections / process_file of a bag with no reader given: the registry's ros2-bag (detected from a bag
+    folder and a bare .mcap) gives the CSV path's table and footprints (1e-12); --class-names names integer ids."""
+    from footprint_uq import read_detections
+    from footprint_uq.batch.formats import detect_input_format
+
+    rows = good_rows()
+    bag = bag_in(tmp_path / "in_bag", rows, theta_row=5)
+    cam = camera_from_bag(bag, pose=dict(POSE))
+    ref = write_csv([{**r, "camera_id": None} for r in rows], tmp_path / "d.csv")
+    assert detect_input_format(bag) == detect_input_format(_single_mcap(bag)) == "ros2-bag"
+    want, got = read_detections(ref), read_detections(_single_mcap(bag))
+    assert got.column("row").to_pylist() == list(range(len(rows)))
+    for c in ("frame", "object_id", "class", "score"):
+        assert got.column(c).to_pylist() == want.column(c).to_pylist(), c
+    for c in ("u_min_px", "v_min_px", "u_max_px", "v_max_px"):
+        np.testing.assert_allclose(got.column(c).to_numpy(), want.column(c).to_numpy(), rtol=1e-12, atol=1e-9)
+    err = got.column("error").to_pylist()
+    assert "bbox.center.theta" in err[5] and err[:5] + err[6:] == [None] * (len(rows) - 1)
+    process_file(cam, BUDGET, ref, tmp_path / "csv.parquet", progress=False)
+    process_file(cam, BUDGET, bag, tmp_path / "bag.parquet", progress=False, chunk_rows=4)
+    a, b = pq.read_table(tmp_path / "csv.parquet").to_pylist(), pq.read_table(tmp_path / "bag.parquet").to_pylist()
+    assert len(a) == len(b) == len(rows)
+    for i, (x, y) in enumerate(zip(a, b, strict=True)):
+        assert (y["row"], y["frame"], y["object_id"], y["class"]) == (i, x["frame"], x["object_id"], x["class"])
+        if i == 5:
+            assert y["status"] == "error" and "bbox.center.theta" in y["reason"]
+            continue
+        assert y["status"] == x["status"]
+        for k in ("x_m", "y_m", "cov_xx_m2", "cov_xy_m2", "cov_yy_m2"):
+            np.testing.assert_allclose(y[k], x[k], rtol=1e-12, atol=1e-12, equal_nan=True)
+    ids = bag_in(tmp_path / "ids_bag", [{**r, "class": ["2", "0", "95"][i % 3]} for i, r in enumerate(rows[:6])])
+    named = read_detections(ids, class_names="coco")
+    assert named.column("class").to_pylist() == ["car", "person", "95"] * 2
+    assert named.column("error").to_pylist()[2] == "class id 95 is not in the names map (coco, 80 names)"
+    with pytest.raises(InputError, match="^topic"):
+        read_detections(bag, topic="/yolo/detections")
+    with pytest.raises(InputError, match="CameraInfo: got '1920 x 1080 px'"):
+        read_detections(bag, image_size_px=(1280, 720))
+
+
+def test_the_registry_imports_the_bag_reader_only_to_read_a_bag(tmp_path):
+    """batch/ does not import integrations/: detecting a bag leaves it unimported, reading one imports it."""
+    import subprocess
+    import sys
+
+    bag = bag_in(tmp_path / "b", good_rows()[:7])
+    code = ("import sys; from footprint_uq.batch.formats import detect_input_format, read_detections\n"
+            f"assert detect_input_format({str(bag)!r}) == 'ros2-bag'\n"
+            "assert not [m for m in sys.modules if m.startswith('footprint_uq.integrations')]\n"
+            f"assert read_detections({str(bag)!r}).num_rows == 7\n"
+            "assert 'footprint_uq.integrations.ros2.bag_reader' in sys.modules\n")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr[-2000:]
+
+
+def test_cli_validate_pairs_a_bag_with_a_truth_table(tmp_path, cam):
+    """validate --detections bag.mcap: the bag's detections paired with a truth table by frame and object_id."""
+    rows = good_rows()
+    bag = _single_mcap(bag_in(tmp_path / "in_bag", rows))
+    ref = write_csv([{**r, "camera_id": None} for r in rows], tmp_path / "d.csv")
+    process_file(cam, BUDGET, ref, tmp_path / "csv.parquet", progress=False)
+    ok = [r for r in pq.read_table(tmp_path / "csv.parquet").to_pylist() if r["status"] == "ok"]
+    (tmp_path / "truth.csv").write_text("frame,object_id,x_m,y_m\n" + "".join(
+        f"{r['frame']},{r['object_id']},{r['x_m']!r},{r['y_m']!r}\n" for r in ok))
+    save_camera(cam, tmp_path / "cam.yaml")
+    r = CliRunner().invoke(main, ["validate", "--labels", str(tmp_path / "truth.csv"), "--detections", str(bag),
+                                  "--camera", str(tmp_path / "cam.yaml"), "--budget", BUDGET, "--out",
+                                  str(tmp_path / "val"), "--no-report", "--no-fsync"])
+    assert r.exit_code == 0, r.output
+    summary = json.loads((tmp_path / "val" / "summary.json").read_text())
+    assert summary["n_pairs"] == len(ok) and summary["unpaired"]["truth_without_detection"] == 0
+    objects = list(csv.DictReader(open(tmp_path / "val" / "objects.csv")))
+    assert max(float(o["error_m"]) for o in objects if o["status"] == "ok") < 1e-9
+
+
 def test_bag_without_the_topic_names_its_topics(tmp_path):
     bag = bag_in(tmp_path / "b", good_rows()[:7])
     with pytest.raises(InputError) as e:
@@ -332,6 +414,21 @@ def test_cli_bag_in_mcap_out_with_foxglove(tmp_path):
     assert js["bag"]["frames"] == 6 and js["bag"]["topics"][-1] == "/footprints/scene"
     assert js["camera"].endswith("(CameraInfo)") and js["format_in"] == "rosbag"
     assert not list(tmp_path.glob(".*"))  # no temporary left
+
+
+def test_cli_bag_in_with_class_names(tmp_path):
+    """objects --detections bag --class-names coco --unknown-class unknown: the bag's integer class ids named (an id
+    without a name: the class 'unknown'); --format other than ros2-bag with a bag: one line, exit 2."""
+    rows = [{**r, "class": ["2", "0", "95"][i % 3]} for i, r in enumerate(good_rows()[:6])]
+    bag = bag_in(tmp_path / "in_bag", rows)
+    pose = ["--height-m", 8, "--pan-deg", 30, "--tilt-deg", 20]
+    r = _objects("--detections", bag, "--out", tmp_path / "o.csv", "--format", "ros2-bag", "--class-names", "coco",
+                 "--unknown-class", "unknown", *pose)
+    assert r.exit_code == 0, r.output
+    got = list(csv.DictReader(open(tmp_path / "o.csv")))
+    assert [g["class"] for g in got] == ["car", "person", "unknown"] * 2
+    r = _objects("--detections", bag, "--out", tmp_path / "p.csv", "--format", "coco", *pose)
+    assert r.exit_code == 2 and "--format" in r.output and len(r.output.strip().splitlines()) == 1
 
 
 @pytest.mark.parametrize("args, field", [
@@ -478,12 +575,13 @@ def test_serve_rosbag_output_refuses_a_folder_of_other_files(cam, tmp_path):
 
 
 def test_the_documented_example_runs(tmp_path, monkeypatch):
-    """docs/integrations-ros2.md's copy-paste example, as written, from the repository's root."""
+    """docs/integrations.md's copy-paste example of "ROS 2 bags and Foxglove", as written, from the repository's
+    root."""
     import re
     import shlex
 
     root = Path(__file__).resolve().parents[1]
-    text = (root / "docs" / "integrations-ros2.md").read_text()
+    text = (root / "docs" / "integrations.md").read_text().split("\n## ROS 2 bags and Foxglove\n", 1)[1]
     cmd = re.search(r"```sh\n(footprint-uq objects .*?)\n```", text, re.S).group(1).replace("\\\n", " ")
     argv = shlex.split(cmd)
     assert argv[:2] == ["footprint-uq", "objects"]

@@ -21,6 +21,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from footprint_uq import FrameProcessor, PanTiltCamera
+from footprint_uq.errors import InputError
 from footprint_uq.products.footprints import V2X_FIELDS
 from footprint_uq.products.v2x import J2735_POSITION_CONFIDENCE_NAMES, cpm_fields, j2735_fields
 from footprint_uq.service import Service
@@ -332,33 +333,25 @@ def test_every_bad_detection_of_a_frame_is_named_once(service):
 
 
 def test_class_names_files(tmp_path, camera):
-    """A names map from an ultralytics data.yaml (list or mapping), JSON, or one name per line; bad files are one
-    line naming the file."""
-    from footprint_uq.errors import ConfigError
-    from footprint_uq.io.class_names import COCO_NAMES, load_class_names
-
-    assert len(COCO_NAMES) == 80 and COCO_NAMES[2] == "car" and COCO_NAMES[79] == "toothbrush"
+    """The service names integer classes (ints and integral floats) through a names file; an id it does not name is
+    that detection's error entry, or the class 'unknown' with unknown_class="unknown" (the loader's own tests:
+    tests/test_class_names.py)."""
     (tmp_path / "data.yaml").write_text("path: x\nnames:\n  0: car\n  3: Pedestrian\n")
-    (tmp_path / "list.yaml").write_text("names: [car, person]\n")
-    (tmp_path / "n.json").write_text('["truck", "bus"]')
-    (tmp_path / "obj.names").write_text("car\nperson\n\n")
-    assert load_class_names(tmp_path / "data.yaml").names == {0: "car", 3: "Pedestrian"}
-    assert load_class_names(tmp_path / "list.yaml").names == {0: "car", 1: "person"}
-    assert load_class_names(tmp_path / "n.json").names == {0: "truck", 1: "bus"}
-    assert load_class_names(tmp_path / "obj.names").names == {0: "car", 1: "person"}
-    for name, text in (("gap.names", "car\n\nperson\n"), ("neg.yaml", "names: {-1: car}\n"),
-                       ("empty.txt", ""), ("num.yaml", "names: [car, 3]\n"), ("dup.yaml", "names: {0: a, 0: b}\n")):
-        (tmp_path / name).write_text(text)
-        with pytest.raises(ConfigError) as e:
-            load_class_names(tmp_path / name)
-        assert "\n" not in str(e.value)
-    with pytest.raises(ConfigError):
-        load_class_names(tmp_path / "missing.yaml")
     svc = Service(camera, "basler1", class_names=tmp_path / "data.yaml", messages=False)
     rec = svc.process_frame({"frame": 1, "timestamp_s": T0, "detections": [
         dict(GOOD_BOX, **{"class": 3}), dict(GOOD_BOX, **{"class": 1}), dict(GOOD_BOX, **{"class": 0.0})]})
     assert [o["class"] for o in rec["objects"]] == ["Pedestrian", "car"]
     assert rec["detection_errors"][0]["index"] == 1 and "not in the names map" in rec["detection_errors"][0]["reason"]
+    unk = Service(camera, "basler1", class_names=tmp_path / "data.yaml", unknown_class="unknown", messages=False)
+    for second in (1, 1.0):  # ints only (the frame's fast path) and a float among them (detection by detection)
+        rec = unk.process_frame({"frame": 1, "timestamp_s": T0, "detections": [
+            dict(GOOD_BOX, **{"class": 3}), dict(GOOD_BOX, **{"class": second}), dict(GOOD_BOX, **{"class": 0})]})
+        assert [o["class"] for o in rec["objects"]] == ["Pedestrian", "unknown", "car"], second
+        assert rec["detection_errors"] == []
+    with pytest.raises(InputError, match="^unknown_class"):
+        Service(camera, "basler1", class_names="coco", unknown_class="skip", messages=False)
+    with pytest.raises(InputError, match="^unknown_class"):
+        Service(camera, "basler1", unknown_class="skip", messages=False)
 
 
 def test_registry_routes_frames_by_camera_id(tmp_path, camera):
@@ -496,6 +489,7 @@ def test_bad_service_options_are_refused(camera):
     (["--camera", "cam.yaml", "--budget", "basler1", "--cpm-cdd", "2.4.1"], "--cpm-cdd"),
     (["--camera", "cam.yaml", "--budget", "basler1", "--queue-depth", "0"], "--queue-depth"),
     (["--camera", "cam.yaml", "--budget", "basler1", "--class-names", "nope.names"], "nope.names"),
+    (["--camera", "cam.yaml", "--budget", "basler1", "--unknown-class", "unknown"], "--unknown-class"),
     (["--camera", "cam.yaml", "--budget", "basler1", "--record", "compact"], "--record"),
 ])
 def test_serve_bad_options_exit_2_with_one_line(tmp_path, monkeypatch, camera, args, words):

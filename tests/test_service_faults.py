@@ -135,7 +135,8 @@ def test_stdin_records_leave_in_input_order_and_big_lines_are_refused(camera_fil
 
 def test_stdin_one_bad_detection_among_ten_is_counted_and_the_frame_published(camera_file):  # noqa: F811
     """Issue 33 through the command: ``--class-names coco``, integer classes, one id COCO does not name: the
-    frame's record has nine objects and one error entry, and the health record counts the bad detection."""
+    frame's record has nine objects and one error entry, and the health record counts the bad detection; with
+    ``--unknown-class unknown`` ten objects, that one of the class 'unknown'."""
     f = frame("cam1", 0, n=10)
     for k, d in enumerate(f["detections"]):
         d["class"] = [2, 0, 7][k % 3]
@@ -151,6 +152,14 @@ def test_stdin_one_bad_detection_among_ten_is_counted_and_the_frame_published(ca
         rec["detection_errors"][0]["reason"]
     assert {o["class"] for o in rec["objects"]} == {"car", "person", "truck"}
     assert health["frames_out"] == 1 and health["errors"] == 0 and health["detection_errors"] == 1
+    # --unknown-class unknown (as objects): the id without a name is the class 'unknown', no error entry
+    p = subprocess.run(CLI + ["--camera", str(camera_file), "--budget", "basler1", "--input", "-",
+                              "--health-interval-s", "0", "--class-names", "coco", "--unknown-class", "unknown",
+                              "--no-linearity"], input=(json.dumps(f) + "\n").encode(), capture_output=True,
+                       timeout=120, env={**os.environ, "NUMBA_NUM_THREADS": "1"})
+    assert p.returncode == 0, p.stderr.decode()[-2000:]
+    rec = json.loads(p.stdout.decode().splitlines()[0])
+    assert rec["n_objects"] == 10 and rec["detection_errors"] == [] and rec["objects"][3]["class"] == "unknown"
 
 
 # -- through Mosquitto ---------------------------------------------------------------------------------------------

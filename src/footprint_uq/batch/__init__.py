@@ -4,9 +4,9 @@
 * :func:`process_file` -- a CSV / JSON Lines / Parquet file, streamed in chunks, -> CSV /
   JSON Lines / Parquet / GeoJSON, with a :class:`Summary`;
 * :mod:`footprint_uq.batch.fleet` -- many cameras, a Parquet dataset, optionally on Dask;
-* :func:`read_detections` -- a detector's files (YOLO, YOLOv5 CSV, COCO, MOTChallenge: :mod:`.formats`) as the
-  canonical table; :func:`footprints_from_supervision` / :func:`footprints_from_xyxy` -- detections in
-  Python (:mod:`.arrays`).
+* :func:`read_detections` -- a detector's files (YOLO, YOLOv5 CSV, COCO, MOTChallenge, a ROS 2 bag:
+  :mod:`.formats`) as the canonical table; :func:`footprints_from_supervision` / :func:`footprints_from_xyxy` --
+  detections in Python (:mod:`.arrays`).
 
 Columns and row accounting: ``docs/batch.md`` and :mod:`footprint_uq.batch.schema`.
 """

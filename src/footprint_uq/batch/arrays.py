@@ -7,7 +7,7 @@ the same for a ``supervision.Detections`` (``xyxy``, ``confidence``, ``class_id`
 :func:`footprints_from_xyxy` and :func:`footprints_from_supervision` run the batch on them
 (:func:`footprint_uq.batch.process.process_table`).
 
-Class ids go through a names map (:class:`~footprint_uq.batch.class_names.ClassNames`; default COCO's 80,
+Class ids go through a names map (:class:`~footprint_uq.io.class_names.ClassNames`; default COCO's 80,
 the map of a COCO-trained detector); an id without a name is that detection's error row (or the class
 ``"unknown"`` with ``unknown_class="unknown"``), never the frame's.  Boxes of detectors are continuous
 coordinates in which the image spans ``[0, W]`` (``box_coordinates="image-edges"``, the default: shifted
@@ -21,8 +21,8 @@ import numpy as np
 import pyarrow as pa
 
 from ..errors import InputError
+from ..io.class_names import ClassNames
 from . import schema as S
-from .class_names import ClassNames
 from .formats import EDGE_SHIFT_PX
 from .process import process_table
 

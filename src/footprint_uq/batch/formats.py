@@ -1,4 +1,4 @@
-"""Detector formats in: YOLO / ultralytics labels, YOLOv5 pandas CSV, COCO results, MOTChallenge files.
+"""Detector formats in: YOLO / ultralytics labels, YOLOv5 pandas CSV, COCO results, MOTChallenge files, ROS 2 bags.
 
 Each format is one small reader (a :class:`FormatReader`) that turns its files into the canonical
 detection table the batch processes (:mod:`footprint_uq.batch.schema`: ``u_min_px, v_min_px, u_max_px,
@@ -7,7 +7,9 @@ the same interface as :class:`~footprint_uq.batch.readers.DetectionReader` (``co
 ``select``, iteration over :class:`~footprint_uq.batch.readers.Chunk`), so that ``objects``, ``validate``
 and :func:`read_detections` take them unchanged.  :data:`READERS` is the registry (one line per format);
 :func:`detect_input_format` picks a format from what the file says (extension, CSV header, a folder of
-``.txt``, the first label line), :func:`open_reader` opens any of them.
+``.txt``, the first label line), :func:`open_reader` opens any of them.  The ROS 2 bag's reader
+(``ros2-bag``) lives in ``integrations/ros2/``, a layer above this one: its entry is a :class:`LazyFormat`
+that names it and imports it only when a bag is opened (docs/integrations.md, "ROS 2 bags and Foxglove").
 
 Nothing is dropped or guessed: every label line / result entry is one row (empty lines included), and a
 line that cannot be parsed, a box with ``w <= 0`` or outside ``[0, 1]`` (normalised formats), or a class
@@ -26,6 +28,7 @@ from __future__ import annotations
 
 import configparser
 import csv
+import importlib
 import math
 import re
 from collections.abc import Iterator
@@ -40,14 +43,14 @@ import pyarrow.compute as pc
 
 from .._files import file_kind, is_stream
 from ..errors import InputError
+from ..io.class_names import ClassNames, names_from_categories
 from . import schema as S
-from .class_names import ClassNames
 from .readers import FORMATS as TABLE_FORMATS
 from .readers import Chunk, DetectionReader
 
 __all__ = ["FormatOptions", "FormatReader", "YoloLabels", "Yolov5Csv", "CocoResults", "MotChallenge", "READERS",
            "INPUT_FORMATS", "EDGE_SHIFT_PX", "MOT_SHIFT_PX", "NORMALISED_TOL", "detect_input_format", "open_reader",
-           "read_detections", "NamedClasses", "table_format"]
+           "read_detections", "NamedClasses", "table_format", "name_classes", "LazyFormat", "is_ros2_bag"]
 
 #: continuous image coordinates (the image spans [0, W]) -> pixel centres at integers
 EDGE_SHIFT_PX = 0.5
@@ -68,11 +71,13 @@ class FormatOptions:
         are scaled to; a file that states another size is refused
     unknown_class : {"error", "unknown"}   the policy of the format's own names (its default map, COCO's
         categories)
+    topic : str, optional   the topic of a ROS 2 bag (``ros2-bag``; default: the bag's only Detection2DArray topic)
     """
 
     class_names: ClassNames | None = None
     image_size_px: tuple[int, int] | None = None
     unknown_class: str = "error"
+    topic: str | None = None
 
 
 def _first_line(e: BaseException) -> str:
@@ -446,7 +451,7 @@ class CocoResults(FormatReader):
         names = self.options.class_names
         images = doc.get("images") if isinstance(doc.get("images"), list) else None
         if names is None and isinstance(doc.get("categories"), list):
-            names = ClassNames(_category_names(doc["categories"], str(self.path)), f"{self.path.name} categories",
+            names = ClassNames(names_from_categories(doc["categories"], str(self.path)), f"{self.path.name} categories",
                                self.options.unknown_class)
         if images is None and names is not None and names.images is not None:
             images = names.images
@@ -512,12 +517,6 @@ def _coco_box(b):
     if not (w > 0 and h > 0):
         return box, f"box width or height <= 0 (bbox w {w:g}, h {h:g})"
     return box, None
-
-
-def _category_names(cats, where: str) -> dict:
-    if not all(isinstance(c, dict) and isinstance(c.get("id"), int) and isinstance(c.get("name"), str) for c in cats):
-        raise InputError(f"{where}: categories", str(cats)[:60], "a list of {id, name} objects")
-    return {c["id"]: c["name"] for c in cats}
 
 
 def _image_index(images, where: str) -> dict:
@@ -654,8 +653,10 @@ def table_format(name: str, tables, *, sniff=None, id_columns: tuple[str, ...] =
             pre = t.column("error").to_pylist() if "error" in t.column_names else None
             row0 = self.lines
             self.lines += n
-            return Chunk(pa.table(cols), np.arange(row0, row0 + n, dtype=np.int64),
-                         pre if pre is not None and any(p is not None for p in pre) else None, [], n)
+            ch = Chunk(pa.table(cols), np.arange(row0, row0 + n, dtype=np.int64),
+                       pre if pre is not None and any(p is not None for p in pre) else None, [], n)
+            names = self.options.class_names
+            return ch if names is None or "class" not in self.id_columns else name_classes(ch, names)
 
     tag = re.sub(r"\W", "_", name)
     _TableFormat.name = name
@@ -665,10 +666,43 @@ def table_format(name: str, tables, *, sniff=None, id_columns: tuple[str, ...] =
     return _TableFormat
 
 
+# -- formats whose reader lives above batch/ ------------------------------------------------------------------
+def is_ros2_bag(path) -> bool:
+    """A ROS 2 bag: a ``.mcap`` or ``.db3`` file, or a folder with ``metadata.yaml`` (rosbag2)."""
+    p = Path(path)
+    return p.suffix.lower() in (".mcap", ".db3") or (p.is_dir() and (p / "metadata.yaml").is_file())
+
+
+@dataclass(frozen=True)
+class LazyFormat:
+    """A registry entry whose reader class lives in a layer above ``batch/`` (``integrations/``), which
+    ``batch/`` never imports: the class is named by its module and attribute and imported when a file of the
+    format is opened, never to detect one (:meth:`sniff` is this entry's own test of the path).
+
+    Calling the entry opens a reader as calling a :class:`FormatReader` class does.
+    """
+
+    module: str
+    attr: str
+    sniff_path: object  # callable (Path) -> bool
+
+    def sniff(self, path: Path) -> bool:
+        return bool(self.sniff_path(path))
+
+    def load(self) -> type[FormatReader]:
+        """The reader class (its module imported on first use)."""
+        return getattr(importlib.import_module(self.module), self.attr)
+
+    def __call__(self, path, **kwargs) -> FormatReader:
+        return self.load()(path, **kwargs)
+
+
 # -- the registry ------------------------------------------------------------------------------------------
 #: detector formats by name: registering one more is one line here (a FormatReader subclass, or
-#: :func:`table_format` of a function returning canonical tables)
-READERS: dict[str, type[FormatReader]] = {
+#: :func:`table_format` of a function returning canonical tables; a reader above batch/: a :class:`LazyFormat`).
+#: Detection tries them in this order: a bag folder may hold other files, so the bag comes first.
+READERS: dict[str, type[FormatReader] | LazyFormat] = {
+    "ros2-bag": LazyFormat("footprint_uq.integrations.ros2.bag_reader", "BagFormat", is_ros2_bag),
     "yolo": YoloLabels,
     "yolov5-csv": Yolov5Csv,
     "coco": CocoResults,
@@ -679,7 +713,8 @@ INPUT_FORMATS = ("csv", "jsonl", "parquet", *READERS)
 
 
 def detect_input_format(path) -> str:
-    """The format of ``path`` from what it says: a folder of ``.txt`` (YOLO), a ``.json`` (COCO), a ``.txt``
+    """The format of ``path`` from what it says: a ROS 2 bag (``.mcap``, ``.db3``, a folder with ``metadata.yaml``),
+    a folder of ``.txt`` (YOLO), a ``.json`` (COCO), a ``.txt``
     whose first line has 7-10 comma-separated fields (MOTChallenge) or 5-6 blank-separated ones (one YOLO
     label file), a CSV whose header has ``xmin, ymin, xmax, ymax`` (YOLOv5), else the canonical table of
     the extension (``.csv``, ``.jsonl``, ``.ndjson``, ``.parquet``, ``.pq``)."""
@@ -699,11 +734,12 @@ def detect_input_format(path) -> str:
     if p.is_file() and p.suffix.lower() in TABLE_FORMATS:
         return TABLE_FORMATS[p.suffix.lower()]
     raise InputError("detections", str(path), f"a detections file in one of {list(INPUT_FORMATS)} (--format), "
-                     "e.g. .csv, .jsonl, .parquet, a folder of YOLO .txt labels, a COCO .json, a MOT det.txt")
+                     "e.g. .csv, .jsonl, .parquet, a folder of YOLO .txt labels, a COCO .json, a MOT det.txt, a ROS 2 "
+                     "bag")
 
 
 def open_reader(path, *, format: str | None = None, chunk_rows: int = S.DEFAULT_CHUNK_ROWS,
-                class_names=None, unknown_class: str = "error", image_size_px=None):
+                class_names=None, unknown_class: str = "error", image_size_px=None, topic: str | None = None):
     """A reader of ``path`` in any input format: a :class:`FormatReader` or a
     :class:`~footprint_uq.batch.readers.DetectionReader` (canonical tables; with ``class_names``, its integer
     ``class`` values are mapped to names, :class:`NamedClasses`).
@@ -717,8 +753,11 @@ def open_reader(path, *, format: str | None = None, chunk_rows: int = S.DEFAULT_
         None: the format's own
     unknown_class : ``"error"`` (a class id without a name is that detection's error) or ``"unknown"``
     image_size_px : (width, height) of the camera's images (normalised boxes; sizes a file states are checked)
+    topic : the Detection2DArray topic of a ROS 2 bag (default: its only one); only with a bag
     """
     fmt = detect_input_format(path) if format in (None, "auto") else format
+    if topic is not None and fmt != "ros2-bag":
+        raise InputError("topic", topic, f"a ROS 2 bag as the detections (the format is {fmt})")
     if fmt not in TABLE_FORMATS.values() and fmt not in READERS:
         raise InputError("format", format, f"one of {['auto', 'csv', 'jsonl', 'parquet', *READERS]}")
     names = None if class_names is None else ClassNames.load(class_names, unknown=unknown_class)
@@ -727,7 +766,7 @@ def open_reader(path, *, format: str | None = None, chunk_rows: int = S.DEFAULT_
             raise InputError("detections", str(path), f"a regular file or folder for --format {fmt} (this is a "
                              f"{file_kind(path)}): stream a canonical table (.csv, .jsonl) instead")
         size = None if image_size_px is None else tuple(int(v) for v in image_size_px)
-        return READERS[fmt](path, chunk_rows=chunk_rows, options=FormatOptions(names, size, unknown_class))
+        return READERS[fmt](path, chunk_rows=chunk_rows, options=FormatOptions(names, size, unknown_class, topic))
     reader = DetectionReader(path, chunk_rows=chunk_rows, format=fmt)
     return reader if names is None else NamedClasses(reader, names)
 
@@ -756,39 +795,46 @@ class NamedClasses:
             yield ch
 
     def _map(self, ch: Chunk) -> Chunk:
-        col = ch.table.column("class")
-        values = col.to_pylist()
-        lookup: dict = {}
-        pre = list(ch.pre_errors) if ch.pre_errors is not None else [None] * len(values)
-        out = []
-        for i, v in enumerate(values):
-            if v is None:
-                out.append(None)
-                continue
-            if v not in lookup:
-                try:
-                    lookup[v] = self.names.lookup(int(str(v).strip()))
-                except ValueError:
-                    lookup[v] = (v, None)
-            name, err = lookup[v]
-            out.append(name if name is not None else v)
-            if err is not None and pre[i] is None:
-                pre[i] = err
-        j = ch.table.column_names.index("class")
-        table = ch.table.set_column(j, ch.table.schema.field(j), pa.array(out, type=col.type))
-        return Chunk(table, ch.rows, pre if any(p is not None for p in pre) else None, ch.malformed, ch.progress)
+        return name_classes(ch, self.names)
+
+
+def name_classes(ch: Chunk, names: ClassNames) -> Chunk:
+    """``ch`` with its integer ``class`` values (``"0"``, ``"2"``) turned into names through ``names``: a value that
+    is not an integer stays as it is (already a name), an integer without a name is that row's error (or the class
+    ``"unknown"``, as the map's policy says)."""
+    col = ch.table.column("class")
+    values = col.to_pylist()
+    lookup: dict = {}
+    pre = list(ch.pre_errors) if ch.pre_errors is not None else [None] * len(values)
+    out = []
+    for i, v in enumerate(values):
+        if v is None:
+            out.append(None)
+            continue
+        if v not in lookup:
+            try:
+                lookup[v] = names.lookup(int(str(v).strip()))
+            except ValueError:
+                lookup[v] = (v, None)
+        name, err = lookup[v]
+        out.append(name if name is not None else v)
+        if err is not None and pre[i] is None:
+            pre[i] = err
+    j = ch.table.column_names.index("class")
+    table = ch.table.set_column(j, ch.table.schema.field(j), pa.array(out, type=col.type))
+    return Chunk(table, ch.rows, pre if any(p is not None for p in pre) else None, ch.malformed, ch.progress)
 
 
 # -- Python entry ------------------------------------------------------------------------------------------
 def read_detections(path, format: str | None = None, *, class_names=None, unknown_class: str = "error",
-                    image_size_px=None) -> pa.Table:
+                    image_size_px=None, topic: str | None = None) -> pa.Table:
     """Every detection of a detector file (or folder) as one canonical table.
 
     Parameters
     ----------
-    path : file or folder (YOLO labels, YOLOv5 CSV, COCO results, MOTChallenge, or a canonical table)
+    path : file or folder (YOLO labels, YOLOv5 CSV, COCO results, MOTChallenge, a ROS 2 bag, or a canonical table)
     format : one of :data:`INPUT_FORMATS`, or None (detected from the file: :func:`detect_input_format`)
-    class_names, unknown_class, image_size_px : as :func:`open_reader` (YOLO needs ``image_size_px``: the
+    class_names, unknown_class, image_size_px, topic : as :func:`open_reader` (YOLO needs ``image_size_px``: the
         camera's ``image_size_px``)
 
     Returns
@@ -801,7 +847,7 @@ def read_detections(path, format: str | None = None, *, class_names=None, unknow
         ``footprint-uq objects --format ...`` for files.
     """
     reader = open_reader(path, format=format, class_names=class_names, unknown_class=unknown_class,
-                         image_size_px=image_size_px)
+                         image_size_px=image_size_px, topic=topic)
     if isinstance(reader, DetectionReader | NamedClasses) and not all(c in reader.columns for c in S.BOX2D_COLUMNS):
         raise InputError(f"{path}: columns", sorted(reader.columns)[:12], f"the 2-D box columns "
                          f"{list(S.BOX2D_COLUMNS)}")

@@ -14,15 +14,15 @@ from __future__ import annotations
 import click
 
 from .._notices import set_compile_handler
-from ..batch.class_names import UNKNOWN_POLICIES
 from ..batch.fleet import process_fleet
-from ..batch.formats import INPUT_FORMATS
+from ..batch.formats import INPUT_FORMATS, NamedClasses
 from ..batch.process import process_file
 from ..batch.schema import DEFAULT_CHUNK_ROWS
 from ..errors import InputError
 from ..integrations.ros2.bag_reader import BagDetectionReader, bag_camera_info, camera_from_bag, is_bag
 from ..integrations.ros2.bag_writer import BagOptions, bag_out_kind, bag_writer_factory
 from ..integrations.ros2.types import DEFAULT_DISTRO, DISTROS
+from ..io.class_names import UNKNOWN_POLICIES, ClassNames
 from ..products.footprints import CONTACT_MODES, V2X_POLICIES
 from ..products.warmup import compile_handler
 from ..uncertainty.budget import load_budget
@@ -40,11 +40,11 @@ __all__ = ["objects_cmd"]
 @click.option("--detections", "detections", required=True, metavar="FILE_OR_DIR",
               help="Detections: .csv, .jsonl/.ndjson or .parquet file, a detector's output (--format), or a ROS 2 "
                    "bag (.mcap, .db3 or a bag folder: its vision_msgs/msg/Detection2DArray topic, --topic; "
-                   "docs/integrations-ros2.md); with --registry a Parquet dataset folder.")
+                   "docs/integrations.md); with --registry a Parquet dataset folder.")
 @click.option("--format", "format_in", type=click.Choice(["auto", *INPUT_FORMATS]), default="auto", show_default=True,
               help="Input format: the canonical tables (csv, jsonl, parquet), a folder of YOLO / ultralytics .txt "
                    "labels (yolo), a YOLOv5 pandas CSV (yolov5-csv), COCO results JSON (coco), a MOTChallenge "
-                   "det.txt / gt.txt (mot); auto: from the file (docs/integrations.md).")
+                   "det.txt / gt.txt (mot), a ROS 2 bag (ros2-bag); auto: from the file (docs/integrations.md).")
 @click.option("--class-names", default=None, metavar="coco|coco91|mot|FILE",
               help="Integer class ids -> names: a built-in map, an ultralytics data.yaml (names:), a JSON list / "
                    "mapping / COCO dataset (categories, images), or a text file of one name per line (default: "
@@ -145,9 +145,9 @@ def objects_cmd(camera_path, budget_spec, detections, format_in, class_names, un
     reader_opts = dict(format_in=None if format_in == "auto" else format_in, class_names=class_names,
                        unknown_class=unknown_class)
     if registry is None and (is_bag(detections) or bag_out_kind(out) is not None):
-        if is_bag(detections) and (reader_opts["format_in"] is not None or class_names is not None):
-            raise InputError("--format/--class-names", (format_in, class_names),
-                             "neither with a ROS 2 bag in (its Detection2DArray messages name their classes)")
+        if is_bag(detections) and reader_opts["format_in"] not in (None, "ros2-bag"):
+            raise InputError("--format", format_in, "auto or ros2-bag with a ROS 2 bag in")
+        ros["names"] = None if class_names is None else ClassNames.load(class_names, unknown=unknown_class)
         summ = _objects_ros(camera_path, budget_spec, detections, out, pose, ros, chunk_rows=chunk_rows,
                             progress=None if not quiet else False, compression=comp, fsync=fsync,
                             **({} if is_bag(detections) else reader_opts), **options)
@@ -226,10 +226,12 @@ def _ros_camera(camera_path, budget_spec, detections, pose, ros: dict):
 
 
 def _objects_ros(camera_path, budget_spec, detections, out, pose, ros: dict, **kw):
-    """``objects`` with a ROS 2 bag as input and/or output (docs/integrations-ros2.md)."""
+    """``objects`` with a ROS 2 bag as input and/or output (docs/integrations.md)."""
     camera, budget = _ros_camera(camera_path, budget_spec, detections, pose, ros)
     reader = BagDetectionReader(detections, topic=ros["topic"], chunk_rows=kw["chunk_rows"]) \
         if is_bag(detections) else None
+    if reader is not None and ros["names"] is not None:  # integer class ids of the bag's hypotheses -> names
+        reader = NamedClasses(reader, ros["names"])
     if bag_out_kind(out) is not None:
         kw["writer_factory"] = bag_writer_factory(BagOptions(
             frame_id=ros["frame_id"], distro=ros["ros_distro"], storage=ros["bag_storage"], foxglove=ros["foxglove"],

@@ -11,7 +11,7 @@ import click
 
 from .._checks import as_float
 from ..errors import InputError
-from ..io.class_names import load_class_names
+from ..io.class_names import UNKNOWN_POLICIES, load_class_names
 from ..products.footprints import CONTACT_MODES, V2X_POLICIES
 from ..service.messages.asn1_cpm import CDD_RELEASES, DEFAULT_CDD
 from ..service.runner import MAX_FRAME_BYTES, QUEUE_DEPTH, run
@@ -38,7 +38,7 @@ __all__ = ["serve_cmd"]
 @click.option("--output", default="-", show_default=True, metavar="-|mqtt|rosbag:PATH",
               help="'-': JSON Lines on stdout; 'mqtt': topics footprints/<camera_id>, footprints/errors, "
                    "footprints/health; 'rosbag:PATH': the footprints recorded into a ROS 2 bag (PATH.mcap or a "
-                   "folder; docs/integrations-ros2.md), error and health records on stdout.")
+                   "folder; docs/integrations.md), error and health records on stdout.")
 @click.option("--input-prefix", default="detections", show_default=True, help="MQTT input topic prefix.")
 @click.option("--output-prefix", default="footprints", show_default=True, help="MQTT output topic prefix.")
 @click.option("--overload", "policy", type=click.Choice(["newest", "block"]), default=None,
@@ -89,10 +89,14 @@ __all__ = ["serve_cmd"]
 @click.option("--v2x-policy", type=click.Choice(list(V2X_POLICIES)), default="sampled", show_default=True,
               help="What the V2X fields encode where an object's centre is not linear_ok (far objects): "
                    "docs/uncertainty-model.md; each object's record names it (v2x_source, v2x_cov_m2).")
-@click.option("--class-names", "class_names", default=None, metavar="coco|FILE",
-              help="Names of integer class ids (\"class\": 2): 'coco' (the 80 COCO names of YOLO / ultralytics "
-                   "models) or a names file (data.yaml 'names:', JSON, or one name per line). Without it an "
-                   "integer class is that detection's error entry.")
+@click.option("--class-names", "class_names", default=None, metavar="coco|coco91|mot|FILE",
+              help="Integer class ids (\"class\": 2) -> names: a built-in map (coco: the 80 COCO names of YOLO / "
+                   "ultralytics models by index; coco91: by COCO category id; mot: MOTChallenge), an ultralytics "
+                   "data.yaml (names:), a JSON list / mapping / COCO dataset (categories), or a text file of one "
+                   "name per line. Without it an integer class is that detection's error entry.")
+@click.option("--unknown-class", type=click.Choice(UNKNOWN_POLICIES), default="error", show_default=True,
+              help="With --class-names: a class id without a name is that detection's error entry, or the class "
+                   "'unknown'.")
 @click.option("--record", type=click.Choice(["compact", "full"]), default=None,
               help="Record layout: 'compact' (default with --output mqtt: per object id, class, status, position, "
                    "cov_m2, message id and motion; the CPM as UPER bytes on <prefix>/<camera_id>/cpm) or 'full' "
@@ -101,7 +105,7 @@ __all__ = ["serve_cmd"]
 def serve_cmd(camera_path, budget_spec, registry, camera_id, input_, mqtt, output, input_prefix, output_prefix,
               policy, health_interval_s, workers, client_id, heading_offset_deg, origin_lat, origin_lon, confidence,
               contact, allow_outside_image, station_id, uper_encoder, linearity, linear_threshold, cpm_cdd, v2x_policy,
-              queue_depth, max_frame_bytes, tracks, class_names, record, motion_window_s, pose):
+              queue_depth, max_frame_bytes, tracks, class_names, unknown_class, record, motion_window_s, pose):
     """Edge service: detector frames in, positions with uncertainty and V2X messages (CPM, SDSM) out.
 
     One output record per frame (or an error record), a health record every second;
@@ -111,6 +115,9 @@ def serve_cmd(camera_path, budget_spec, registry, camera_id, input_, mqtt, outpu
         raise InputError("--pose-file/--height-m", pose, "--camera too (a registry's camera files hold the poses)")
     if class_names is not None:
         load_class_names(class_names)  # a bad names file: one line, exit 2, before the service starts
+    elif unknown_class != "error":
+        raise InputError("--unknown-class", unknown_class, "--class-names too (the policy of the names map's "
+                         "unnamed ids)")
     if budget_spec is not None:
         msg = budget_notice(load_budget(budget_spec))
         if msg is not None:
@@ -121,6 +128,7 @@ def serve_cmd(camera_path, budget_spec, registry, camera_id, input_, mqtt, outpu
                  station_id=station_id, uper_encoder=uper_encoder, linearity=linearity,
                  linear_threshold=linear_threshold, workers=workers, cpm_cdd=cpm_cdd, v2x_policy=v2x_policy,
                  queue_depth=queue_depth, max_frame_bytes=max_frame_bytes, tracks=tracks, class_names=class_names,
+                 unknown_class=unknown_class,
                  record=record, consistency_window_s=as_float("--motion-window-s", motion_window_s, nonnegative=True),
                  input=input_ if input_ is not None else (None if mqtt else "-"), mqtt=mqtt, output=output,
                  input_prefix=input_prefix, output_prefix=output_prefix, policy=policy,

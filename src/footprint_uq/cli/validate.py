@@ -9,9 +9,9 @@ from __future__ import annotations
 
 import click
 
-from ..batch.class_names import UNKNOWN_POLICIES
 from ..batch.formats import INPUT_FORMATS
 from ..errors import InputError
+from ..io.class_names import UNKNOWN_POLICIES
 from ..uncertainty.presets import PRESET_NAMES
 from ..validation.coverage import DEFAULT_RANGE_BANDS_M
 from ..validation.pairs import CONTACT_MODELS
@@ -67,7 +67,8 @@ _LABEL_SOURCE_OPTIONS = [
 @size_priors_option
 @label_source_options
 @click.option("--detections", default=None, metavar="FILE_OR_DIR",
-              help="A detector's own files (YOLO labels, YOLOv5 CSV, COCO results, MOTChallenge, a canonical table), "
+              help="A detector's own files (YOLO labels, YOLOv5 CSV, COCO results, MOTChallenge, a ROS 2 bag's "
+                   "Detection2DArray topic (its only one), a canonical table), "
                    "paired with --labels, a truth table of frame, object_id, x_m, y_m (or lat_deg, lon_deg), by "
                    "frame and object_id (docs/integrations.md).")
 @click.option("--format", "detections_format", type=click.Choice(["auto", *INPUT_FORMATS]), default="auto",

@@ -36,7 +36,7 @@ import orjson
 from .._checks import as_float
 from ..errors import FootprintUQError, InputError
 from ..fast.footprint_kernels import OBJ_ROW
-from ..io.class_names import ClassNames, load_class_names
+from ..io.class_names import UNKNOWN_POLICIES, ClassNames, load_class_names
 from ..io.registry import load_registry
 from ..products import detection_columns as S
 from ..products.footprints import CONTACT_MODES, V2X_FIELDS, V2X_POLICIES, FrameProcessor
@@ -282,10 +282,13 @@ class Service:
     tracker : TrackerConfig, optional
         The tracker's options (timeout, gate, acceleration noise); a camera budget's ``motion`` section sets the
         motion model per class over it (docs/motion-fit.md).
-    class_names : "coco", path or ClassNames, optional
-        Names of integer class ids (``"class": 2``): the COCO 80 names built in or a names file
-        (:func:`footprint_uq.io.class_names.load_class_names`).  Without it an integer class, and with it an id the
-        map does not name, is that detection's error entry (the frame's other detections go on).
+    class_names : "coco", "coco91", "mot", path, list, mapping or ClassNames, optional
+        Names of integer class ids (``"class": 2``): a built-in map or a names file (data.yaml, JSON, one name per
+        line), the one names map of the package (:class:`footprint_uq.io.class_names.ClassNames`).  Without it an
+        integer class is that detection's error entry (the frame's other detections go on).
+    unknown_class : {"error", "unknown"}, optional
+        With ``class_names``: an id the map does not name is that detection's error entry, or the class
+        ``"unknown"`` (default: a given ClassNames' own policy, else ``"error"``).
     record : {"full", "compact"}
         The record's layout: ``full`` (default) every field, the CPM as JSON and UPER hex, the SDSM; ``compact``
         the fields of :data:`COMPACT_OBJECT_FIELDS` per object and, without the CPM JSON and the SDSM, the CPM's
@@ -306,8 +309,8 @@ class Service:
                  uper_encoder: str = "fast", linearity: bool = False, linear_threshold: float | None = None,
                  warm_up: bool = True, cpm_cdd: str = DEFAULT_CDD, v2x_policy: str = "sampled",
                  tracks: bool = False, tracker: TrackerConfig | None = None,
-                 class_names: str | ClassNames | None = None, record: str = "full",
-                 consistency_window_s: float = DEFAULT_WINDOW_S,
+                 class_names: str | ClassNames | None = None, unknown_class: str | None = None,
+                 record: str = "full", consistency_window_s: float = DEFAULT_WINDOW_S,
                  max_frame_detections: int = MAX_FRAME_DETECTIONS):
         if (camera is None) == (registry is None):
             raise InputError("camera/registry", "both" if camera is not None else "neither",
@@ -334,7 +337,9 @@ class Service:
         self._encode = functools.partial(encode_cpm_uper if uper_encoder == "asn1tools" else encode_cpm_uper_fast,
                                          cdd=self.cpm_cdd)
         self._cls = _class_tables(self.cpm_cdd)
-        self.class_names = None if class_names is None else load_class_names(class_names)
+        self.class_names = None if class_names is None else load_class_names(class_names, unknown=unknown_class)
+        if class_names is None and unknown_class not in (None, *UNKNOWN_POLICIES):
+            raise InputError("unknown_class", unknown_class, f"one of {UNKNOWN_POLICIES}")
         if record not in RECORD_LAYOUTS:
             raise InputError("record", record, f"one of {RECORD_LAYOUTS}")
         self.record = record

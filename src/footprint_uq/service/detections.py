@@ -21,9 +21,10 @@ The box family of a frame is that of its first detection with a complete box (2D
 box with ``yaw_deg`` where the first has ``yaw_rad``, another corner count), is an error entry.
 
 Integer class ids (YOLO / ultralytics ``cls``, COCO ``category_id``; an integral float such as ``2.0`` too)
-are named through the service's names map (:func:`footprint_uq.io.class_names.load_class_names`,
-``serve --class-names coco|FILE``); without a map, or with an id the map does not name, the detection is an
-error entry -- never a guessed class.
+are named through the service's names map (:class:`footprint_uq.io.class_names.ClassNames`, the one of the
+batch too: ``serve --class-names coco|coco91|mot|FILE``); without a map the detection is an error entry, and so is
+an id the map does not name unless the map's policy is ``unknown`` (``--unknown-class unknown``: the class
+``"unknown"``) -- never a guessed class.
 """
 
 from __future__ import annotations
@@ -222,7 +223,7 @@ def _fast_classes(dets: list, keys: set, names: ClassNames | None) -> list | Non
         return classes
     if names is None or not types <= _CLASS_OR_ID_TYPES:
         return None
-    named = [names.names.get(c) if type(c) is int else c for c in classes]
+    named = [names.name_of(c) if type(c) is int else c for c in classes]
     return None if any(n is None and c is not None for n, c in zip(named, classes, strict=True)) else named
 
 
@@ -356,10 +357,9 @@ def _class(cls, where: str, names: ClassNames | None) -> str | None:
     if names is None:
         raise FieldError(f"{where}.class", f"class {cls!r} is an integer class id and the service has no names "
                                            "map (serve --class-names coco|FILE)")
-    name = names.name_of(cid)
+    name, reason = names.lookup(cid)
     if name is None:
-        raise FieldError(f"{where}.class",
-                         f"class id {cid} is not in the names map ({names.source}, {len(names)} names)")
+        raise FieldError(f"{where}.class", reason)
     return name
 
 

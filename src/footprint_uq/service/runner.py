@@ -863,7 +863,8 @@ def run(*, camera=None, budget=None, registry=None, camera_id: str | None = None
                           uper_encoder=uper_encoder, linearity=linearity, linear_threshold=linear_threshold,
                           cpm_cdd=cpm_cdd, v2x_policy=v2x_policy,
                           tracks=serve_options.pop("tracks", False),
-                          class_names=serve_options.pop("class_names", None), record=serve_options.pop("record"),
+                          class_names=serve_options.pop("class_names", None),
+                          unknown_class=serve_options.pop("unknown_class", None), record=serve_options.pop("record"),
                           consistency_window_s=serve_options.pop("consistency_window_s", DEFAULT_WINDOW_S))
         return serve(service, stop=stop, **serve_options)
     finally:

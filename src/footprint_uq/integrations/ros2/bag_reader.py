@@ -4,7 +4,9 @@
 :class:`BagDetectionReader` has the interface of :class:`~footprint_uq.batch.readers.DetectionReader`
 (``columns``, ``id_fields``, ``select``, iteration over :class:`~footprint_uq.batch.readers.Chunk`), so
 ``process_file(..., reader=BagDetectionReader(bag, topic=...))`` computes the footprints of a bag exactly as of a
-CSV file.  :func:`read_bag_detections` is the same as one table (the format registry's entry point).
+CSV file.  :func:`read_bag_detections` is the same as one table.  :data:`BagFormat` is the bag in the batch's
+format registry (``ros2-bag``: :func:`footprint_uq.read_detections`, ``validate --detections bag.mcap``), entered
+there by name (:class:`~footprint_uq.batch.formats.LazyFormat`: ``batch/`` does not import this layer).
 
 A bag is a rosbag2 folder (``metadata.yaml``; MCAP or sqlite3 storage) or a bare ``.mcap`` / ``.db3`` file, read
 by rosbags (``AnyReader``: the message definitions come from the bag itself, so vision_msgs 3 (Foxy, Galactic)
@@ -36,13 +38,14 @@ import numpy as np
 import pyarrow as pa
 
 from ...batch import schema as S
+from ...batch.formats import FormatOptions, is_ros2_bag, table_format
 from ...batch.readers import Chunk, coerce_table
 from ...errors import InputError
 from ...io.ros_files import camera_from_ros_info, ros_camera_info
 from .types import typestore
 
 __all__ = ["DETECTION2D_ARRAY", "CAMERA_INFO", "BagDetectionReader", "read_bag_detections", "bag_camera_info",
-           "camera_from_bag", "is_bag", "bag_topics"]
+           "camera_from_bag", "is_bag", "bag_topics", "bag_tables", "BagFormat"]
 
 DETECTION2D_ARRAY = "vision_msgs/msg/Detection2DArray"
 CAMERA_INFO = "sensor_msgs/msg/CameraInfo"
@@ -50,10 +53,8 @@ _COLUMNS = ("frame", "timestamp_s", "object_id", "class", "score") + S.BOX2D_COL
 _NUMERIC = S.BOX2D_COLUMNS
 
 
-def is_bag(path) -> bool:
-    """A ROS 2 bag: a ``.mcap`` or ``.db3`` file, or a folder with ``metadata.yaml``."""
-    p = Path(path)
-    return p.suffix.lower() in (".mcap", ".db3") or (p.is_dir() and (p / "metadata.yaml").exists())
+#: a ROS 2 bag: a ``.mcap`` or ``.db3`` file, or a folder with ``metadata.yaml`` (the format registry's test)
+is_bag = is_ros2_bag
 
 
 def _open(path):
@@ -259,3 +260,23 @@ def camera_from_bag(path, *, pose, topic: str | None = None, ground_z_m=None):
     if info is None:
         raise InputError("camera", None, f"a --camera file, or a {CAMERA_INFO} topic in the bag {path}")
     return camera_from_ros_info(info, pose=pose, ground_z_m=ground_z_m)
+
+
+def bag_tables(path, options: FormatOptions) -> Iterator[pa.Table]:
+    """The canonical tables of a bag's Detection2DArray topic (``options.topic``, default its only one) with their
+    ``error`` column, for the format registry; a CameraInfo of another size than ``options.image_size_px`` stops
+    the job (one line)."""
+    if options.image_size_px is not None:
+        info = bag_camera_info(path)
+        want = tuple(int(v) for v in options.image_size_px)
+        got = None if info is None else tuple(int(v) for v in info["image_size_px"])
+        if got is not None and got != want:
+            raise InputError(f"{path}: CameraInfo", f"{got[0]} x {got[1]} px", f"images of the "
+                             f"camera's size {want[0]} x {want[1]} px (detections made on the camera's images)")
+    for ch in BagDetectionReader(path, topic=options.topic):
+        err = ch.pre_errors if ch.pre_errors is not None else [None] * ch.table.num_rows
+        yield ch.table.append_column("error", pa.array(err, pa.string()))
+
+
+#: the bag as a detector format (``--format ros2-bag``; detected from .mcap / .db3 / a bag folder)
+BagFormat = table_format("ros2-bag", bag_tables, sniff=is_bag, id_columns=_COLUMNS[:5])

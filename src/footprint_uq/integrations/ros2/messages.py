@@ -1,7 +1,7 @@
 """One frame's footprints as ROS 2 messages: ``vision_msgs/msg/Detection3DArray`` and ``visualization_msgs/msg/
 MarkerArray`` (rosbags message objects; :mod:`.bag_writer` serialises and records them).
 
-Conventions (docs/integrations-ros2.md, docs/conventions.md "ROS 2 messages"):
+Conventions (docs/integrations.md "ROS 2 bags and Foxglove", docs/conventions.md "ROS 2 messages"):
 
 * ``header.frame_id`` is the world frame W (x east, y north, z up, metres: REP 103's ENU), by default ``"map"``
   (REP 105's world-fixed frame); ``header.stamp`` is ``timestamp_s`` (Unix time, UTC) in sec / nanosec;
