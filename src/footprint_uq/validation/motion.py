@@ -1,0 +1,232 @@
+"""Velocity and heading scored against labelled truth: the tracker's 95 % regions, checked as the positions are.
+
+The detections of a validation job (their back-projected contact points, with the split covariance of
+:mod:`footprint_uq.validation.pairs`: the calibration part ``dxy_dp Sigma_params dxy_dp^T`` and the per-object
+part) are run, per camera, through the tracker of ``footprint-uq objects --tracks``
+(:class:`~footprint_uq.tracking.classes.ClassTracks` with the budget's motion section, the consider-state filter),
+frame by frame in time order.  Where a row carries a truth velocity (``truth_v_world_mps``), the tracker's
+velocity and heading are scored:
+
+* velocity: ``NEES_v = dv^T C_v^-1 dv`` (``dv = truth - track``, chi-square with 2 dof if the model is right);
+  inside the ``p`` region when ``NEES_v <= -2 ln(1 - p)``;
+* heading: ``z = (truth heading - track heading) / sigma_heading`` (wrapped to +-180 deg), ``NEES_h = z^2`` (1
+  dof); inside when ``|z| <= Phi^-1((1 + p) / 2)``.  Only where the tracker states a heading sigma (speed large
+  against the velocity's sigma: :mod:`footprint_uq.tracking.motion`) and the truth speed is not zero.
+
+Rows without a truth velocity, without a time or an ``object_id``, and a track's first detection (no velocity
+yet) are counted, never scored.  Consecutive estimates of one track are strongly correlated, so the verdict
+treats each **track** as one cluster: ``mean NEES`` is compared with its expectation (2, resp. 1) with the
+cluster-robust standard error across tracks; ``n_eff = var(chi2_k) / (N var(mean))`` is the number of independent
+objects carrying the same information (docs/validation.md, "Velocity and heading").
+"""
+
+from __future__ import annotations
+
+from collections import defaultdict
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.special import ndtr, ndtri
+
+from ..tracking import SharedJacobianAt, TrackerConfig, object_motion
+from ..tracking.classes import ClassTracks, tracker_configs
+from ..uncertainty.budget import load_budget
+from .coverage import LEVELS, nees_threshold, wilson_interval
+
+__all__ = ["MotionScorer", "score_rows", "MOTION_COLUMNS"]
+
+#: per-row outputs of :func:`score_rows`
+#: the spread between cameras enters the verdict's standard error from this many calibration groups on
+MIN_CAMERAS = 5
+MOTION_COLUMNS = ("track_id", "v_x_mps", "v_y_mps", "nees_v", "heading_err_deg", "sigma_heading_deg", "nees_h")
+
+
+@dataclass
+class _CameraRows:
+    camera: object
+    budget: object
+    parts: list = field(default_factory=list)
+
+
+def _z(level: float) -> float:
+    return float(ndtri(0.5 + level / 2))
+
+
+def score_rows(camera, budget, time_s, object_id, cls, xy_m, cov_object_m2, dxy_dp, truth_v_mps, *,
+               config: TrackerConfig | None = None) -> dict:
+    """Track one camera's detections and score them against the truth velocity.
+
+    Parameters
+    ----------
+    camera : Camera;  budget : ErrorBudget (its ``motion`` section, if any, sets the model per class)
+    time_s : (n,) s;  object_id, cls : (n,) object
+    xy_m : (n, 2) contact points in W;  cov_object_m2 : (n, 2, 2) their per-object covariance, m^2
+    dxy_dp : (n, 2, 22) their Jacobian w.r.t. the camera parameters
+    truth_v_mps : (n, 2) truth velocity in W, m/s (NaN: none)
+    config : the tracker's options (default :class:`~footprint_uq.tracking.table.TrackerConfig`)
+
+    Returns
+    -------
+    dict of (n,) arrays: :data:`MOTION_COLUMNS` (NaN / -1 where not tracked or not scored), in input order
+    """
+    n = len(time_s)
+    at = SharedJacobianAt(camera, budget)
+    L = budget.param_factor().dense()  # (22, r): Sigma_params = L L^T
+    B = np.einsum("nij,jk->nik", np.nan_to_num(dxy_dp), L)
+    tracks = ClassTracks(*tracker_configs(getattr(budget, "motion", None), config), rank=at.rank, shared_at=at)
+    out = {k: np.full(n, np.nan) for k in MOTION_COLUMNS}
+    out["track_id"] = np.full(n, -1, np.int64)
+    order = np.argsort(time_s, kind="stable")
+    ts = time_s[order]
+    starts = np.flatnonzero(np.r_[True, ts[1:] != ts[:-1]])
+    for a, b in zip(starts, np.r_[starts[1:], n], strict=True):
+        rows = order[a:b]
+        o = tracks.step(float(ts[a]), list(object_id[rows]), list(cls[rows]), xy_m[rows], cov_object_m2[rows],
+                        B[rows])
+        mo = object_motion(o)
+        out["track_id"][rows] = o.track_id
+        out["v_x_mps"][rows], out["v_y_mps"][rows] = o.v_mps[:, 0], o.v_mps[:, 1]
+        vt = truth_v_mps[rows]
+        dv = vt - o.v_mps
+        ok = np.isfinite(dv).all(1)
+        if ok.any():
+            d2 = np.full(len(rows), np.nan)
+            d2[ok] = np.einsum("ni,nij,nj->n", dv[ok], np.linalg.inv(o.cov_v_m2ps2[ok]), dv[ok])
+            out["nees_v"][rows] = d2
+        head = np.rad2deg(np.arctan2(vt[:, 0], vt[:, 1]))  # compass in W (+y as north), as object_motion's
+        hok = ok & np.isfinite(mo.sigma_heading_deg) & (np.hypot(vt[:, 0], vt[:, 1]) > 0)
+        dh = np.where(hok, np.mod(head - mo.heading_deg + 180.0, 360.0) - 180.0, np.nan)
+        out["heading_err_deg"][rows] = dh
+        out["sigma_heading_deg"][rows] = np.where(hok, mo.sigma_heading_deg, np.nan)
+        out["nees_h"][rows] = (dh / mo.sigma_heading_deg) ** 2
+    return out
+
+
+def _cluster_var(nees: np.ndarray, cluster: np.ndarray, mean: float) -> tuple[float, int]:
+    """Cluster-robust variance of the mean (CR1) and the number of clusters."""
+    _, inv = np.unique(cluster, return_inverse=True)
+    C = int(inv.max()) + 1
+    s = np.bincount(inv, weights=nees - mean, minlength=C)
+    return (float((s ** 2).sum()) / len(nees) ** 2 * (C / (C - 1)) if C > 1 else np.inf), C
+
+
+def _clustered_test(nees: np.ndarray, track: np.ndarray, camera: np.ndarray, dof: int, alpha: float) -> dict:
+    """Mean NEES against ``dof`` with a cluster-robust standard error: the larger of the spread between tracks and,
+    with :data:`MIN_CAMERAS` calibration groups or more, between cameras (tracks of one camera share its
+    calibration error)."""
+    N = len(nees)
+    if N == 0:
+        return {"n": 0, "nees_mean": None, "n_tracks": 0, "n_cameras": 0, "n_eff": 0.0, "p_value": None,
+                "verdict": None}
+    mean = float(nees.mean())
+    var_t, n_t = _cluster_var(nees, track, mean)
+    var_c, n_c = _cluster_var(nees, camera, mean)
+    var_mean = max(var_t, var_c if n_c >= MIN_CAMERAS else 0.0)
+    n_eff = float(min(N, 2.0 * dof / var_mean)) if var_mean > 0 else float(N)
+    se = float(np.sqrt(var_mean))
+    if not np.isfinite(se) or se == 0:
+        return {"n": N, "nees_mean": mean, "nees_expected": float(dof), "n_tracks": n_t, "n_cameras": n_c,
+                "n_eff": 0.0, "p_value": None, "verdict": None}
+    z = (mean - dof) / se
+    p = float(2 * ndtr(-abs(z)))
+    verdict = "consistent" if p >= alpha else ("over-confident" if z > 0 else "under-confident")
+    return {"n": N, "nees_mean": mean, "nees_expected": float(dof), "n_tracks": n_t, "n_cameras": n_c,
+            "se_mean": se, "n_eff": n_eff, "z": float(z), "p_value": p, "verdict": verdict,
+            "evidence": "weak" if n_eff < 10 or n_t < 10 else "ok"}
+
+
+def _coverage(inside_by_level: dict, n_eff: float, alpha: float) -> list:
+    out = []
+    for lv, inside in inside_by_level.items():
+        N = len(inside)
+        k = int(np.count_nonzero(inside))
+        lo, hi = wilson_interval(k, N, 1 - alpha)
+        ne = max(n_eff, 1.0)
+        lo_e, hi_e = wilson_interval(k * (ne / N if N else 0), ne, 1 - alpha)
+        out.append({"nominal": lv, "empirical": k / N if N else None, "inside": k, "n": N,
+                    "interval": [float(lo), float(hi)], "interval_n_eff": [float(lo_e), float(hi_e)],
+                    "se_n_eff": float(np.sqrt(lv * (1 - lv) / ne))})
+    return out
+
+
+def _block(nees: np.ndarray, cluster: np.ndarray, dof: int, alpha: float) -> dict:
+    camera = np.array([c.rsplit("#", 1)[0] for c in cluster], dtype=object)
+    test = _clustered_test(nees, cluster, camera, dof, alpha)
+    if dof == 2:
+        inside = {lv: nees <= nees_threshold(lv) for lv in LEVELS}
+    else:
+        inside = {lv: np.sqrt(nees) <= _z(lv) for lv in LEVELS}
+    return {"test": test, "coverage": _coverage(inside, test["n_eff"], alpha), "verdict": test["verdict"]}
+
+
+class MotionScorer:
+    """Collects a validation job's detections per camera (:meth:`add`), tracks and scores them (:meth:`summary`).
+
+    Parameters
+    ----------
+    config : TrackerConfig, optional (the budget's motion section, if any, is applied over it)
+    alpha : significance of the tests
+    """
+
+    def __init__(self, config: TrackerConfig | None = None, *, alpha: float = 0.05):
+        self.config = config or TrackerConfig()
+        self.alpha = float(alpha)
+        self.cameras: dict[str, _CameraRows] = {}
+        self.counts: dict[str, int] = defaultdict(int)
+
+    def add(self, chunk, pairs, budget) -> None:
+        """Keep the rows of one chunk that can be tracked (a detection with a ground point, a time and an id)."""
+        n = len(chunk)
+        tv = chunk.truth_v_world_mps if chunk.truth_v_world_mps is not None else np.full((n, 2), np.nan)
+        t = chunk.time_s if chunk.time_s is not None else np.full(n, np.nan)
+        has_tv = np.isfinite(tv).all(1) & (pairs.status != "error")
+        self.counts["rows_with_truth_velocity"] += int(has_tv.sum())
+        det = np.isin(pairs.status, ("ok", "no truth")) & np.isfinite(pairs.xy_world_m).all(1)
+        keep = det & np.isfinite(t) & np.array([o is not None for o in chunk.object_id], dtype=bool)
+        self.counts["truth_velocity_not_tracked"] += int((has_tv & ~keep).sum())
+        self.counts["detections_without_truth_velocity"] += int((det & ~has_tv).sum())
+        if not keep.any() or chunk.camera is None:
+            return
+        bud = load_budget(chunk.budget if chunk.budget is not None else budget)
+        cam = self.cameras.setdefault(chunk.camera_key, _CameraRows(chunk.camera, bud))
+        cam.parts.append(dict(time_s=t[keep], object_id=chunk.object_id[keep], cls=chunk.cls[keep],
+                              xy_m=pairs.xy_world_m[keep], cov_object_m2=pairs.cov_object_m2[keep],
+                              dxy_dp=pairs.dxy_dp[keep], truth_v_mps=tv[keep], line=pairs.line[keep]))
+
+    def summary(self) -> dict | None:
+        """The ``motion`` entry of the summary (None when no row carries a truth velocity)."""
+        if self.counts["rows_with_truth_velocity"] == 0:
+            return None
+        cols = defaultdict(list)
+        for key, cam in self.cameras.items():
+            rows = {k: np.concatenate([p[k] for p in cam.parts]) for k in cam.parts[0]}
+            sc = score_rows(cam.camera, cam.budget, rows["time_s"], rows["object_id"], rows["cls"], rows["xy_m"],
+                            rows["cov_object_m2"], rows["dxy_dp"], rows["truth_v_mps"], config=self.config)
+            cols["cluster"].append(np.array([f"{key}#{i}" for i in sc["track_id"]], dtype=object))
+            cols["cls"].append(rows["cls"])
+            cols["has_tv"].append(np.isfinite(rows["truth_v_mps"]).all(1))
+            for k in ("nees_v", "nees_h", "track_id"):
+                cols[k].append(sc[k])
+        c = {k: np.concatenate(v) for k, v in cols.items()} if cols else {}
+        return self._summarise(c)
+
+    def _summarise(self, c: dict) -> dict:
+        counts = dict(self.counts)
+        if not c:
+            counts.update(velocity_scored=0, heading_scored=0)
+            return {"counts": counts, "velocity": _block(np.zeros(0), np.zeros(0), 2, self.alpha),
+                    "heading": _block(np.zeros(0), np.zeros(0), 1, self.alpha), "by_class": {}}
+        v_ok, h_ok = np.isfinite(c["nees_v"]), np.isfinite(c["nees_h"])
+        counts.update(tracked_with_truth_velocity=int(c["has_tv"].sum()),
+                      first_detection=int((c["has_tv"] & (c["track_id"] >= 0) & ~v_ok).sum()),
+                      not_tracked=int((c["has_tv"] & (c["track_id"] < 0)).sum()),
+                      velocity_scored=int(v_ok.sum()), heading_scored=int(h_ok.sum()),
+                      heading_unavailable=int((v_ok & ~h_ok).sum()))
+        out = {"counts": counts, "velocity": _block(c["nees_v"][v_ok], c["cluster"][v_ok], 2, self.alpha),
+               "heading": _block(c["nees_h"][h_ok], c["cluster"][h_ok], 1, self.alpha), "by_class": {}}
+        cls = np.array(["" if v is None else str(v) for v in c["cls"]], dtype=object)
+        for name in sorted(set(cls[v_ok])):
+            mv, mh = v_ok & (cls == name), h_ok & (cls == name)
+            out["by_class"][name] = {"velocity": _block(c["nees_v"][mv], c["cluster"][mv], 2, self.alpha),
+                                     "heading": _block(c["nees_h"][mh], c["cluster"][mh], 1, self.alpha)}
+        return out
