@@ -82,11 +82,15 @@ def _bands(text: str) -> tuple[float, ...]:
               help="Significance of the NEES test (two-sided) and of the bias test.")
 @click.option("--objects-format", type=click.Choice(["csv", "parquet"]), default="csv", show_default=True,
               help="Format of the per-object file.")
+@click.option("--tracks", is_flag=True,
+              help="Also track the detections (timestamp_s and object_id; per camera, as objects --tracks, with the "
+                   "budget's motion section) and score velocity and heading where the labels carry a truth velocity "
+                   "(v_east_mps, v_north_mps; docs/validation.md).")
 @click.option("--no-report", is_flag=True, help="No report.html / calibration.png (summary and objects only).")
 @click.option("--fsync/--no-fsync", default=True, show_default=True, help="Durable outputs (fsync before rename).")
 def validate_cmd(labels, out_dir, budget_spec, contact, kind, camera_path, registry, calibration, image_size,
                  origin_lat, origin_lon, heading_offset_deg, detections, detections_format, class_names, unknown_class,
-                 range_bands, alpha, objects_format, no_report, fsync):
+                 range_bands, alpha, objects_format, tracks, no_report, fsync):
     """Do the uncertainty ellipses contain the real errors?  Coverage, bias and a verdict.
 
     Writes summary.json, objects.csv (one row per input object, with its status) and report.html into
@@ -103,7 +107,8 @@ def validate_cmd(labels, out_dir, budget_spec, contact, kind, camera_path, regis
                                     alpha=alpha, objects_format=objects_format, report=not no_report, fsync=fsync,
                                     detections=detections,
                                     detections_format=None if detections_format == "auto" else detections_format,
-                                    class_names=class_names, unknown_class=unknown_class)
+                                    class_names=class_names, unknown_class=unknown_class,
+                                    tracks=True if tracks else None)
     t = summary["nees_test"]
     c95 = next((c for c in summary["coverage"] if c["nominal"] == 0.95), None)
     un = summary["unpaired"]
@@ -116,3 +121,21 @@ def validate_cmd(labels, out_dir, budget_spec, contact, kind, camera_path, regis
     click.echo(f"footprint-uq validate: {msg}; unpaired: {un['detections_without_truth']} detections without truth, "
                f"{un['truth_without_detection']} truths without detection, {un['error_rows']} error rows, "
                f"{un['no_ground_point']} without ground point; {out_dir}/{files['summary'].name}")
+    if tracks:
+        click.echo(f"footprint-uq validate --tracks: {_motion_message(summary.get('motion'))}")
+
+
+def _motion_message(motion) -> str:
+    """One line on the velocity and heading scores (``summary["motion"]``)."""
+    if motion is None:
+        return "no row carries a truth velocity (v_east_mps, v_north_mps): velocity and heading not scored"
+    out = []
+    for what in ("velocity", "heading"):
+        t = motion[what]["test"]
+        c95 = next(c for c in motion[what]["coverage"] if c["nominal"] == 0.95)
+        out.append(f"{what} {t['verdict'] or 'no verdict'} ({t['n']} scored" + (
+            f", 95 % region covers {100 * c95['empirical']:.1f} %, mean NEES {t['nees_mean']:.3g}, n_eff "
+            f"{t['n_eff']:.3g})" if t["n"] else ")"))
+    c = motion["counts"]
+    return "; ".join(out) + (f"; {c.get('detections_without_truth_velocity', 0)} detections without truth velocity, "
+                             f"{c.get('first_detection', 0)} first detections (no velocity yet)")
