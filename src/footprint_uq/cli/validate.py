@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import click
 
+from .._checks import as_float
 from ..batch.class_names import UNKNOWN_POLICIES
 from ..batch.formats import INPUT_FORMATS
 from ..errors import InputError
@@ -86,11 +87,15 @@ def _bands(text: str) -> tuple[float, ...]:
               help="Also track the detections (timestamp_s and object_id; per camera, as objects --tracks, with the "
                    "budget's motion section) and score velocity and heading where the labels carry a truth velocity "
                    "(v_east_mps, v_north_mps; docs/validation.md).")
+@click.option("--truth-sigma-m", type=float, default=0.1, show_default=True, metavar="M",
+              help="With --tracks: position sigma (per axis, m) of the labels, for truth velocities from consecutive "
+                   "labelled frames (finite differences; docs/validation.md).")
 @click.option("--no-report", is_flag=True, help="No report.html / calibration.png (summary and objects only).")
 @click.option("--fsync/--no-fsync", default=True, show_default=True, help="Durable outputs (fsync before rename).")
 def validate_cmd(labels, out_dir, budget_spec, contact, kind, camera_path, registry, calibration, image_size,
                  origin_lat, origin_lon, heading_offset_deg, detections, detections_format, class_names, unknown_class,
-                 range_bands, alpha, objects_format, tracks, no_report, fsync):
+                 range_bands, alpha, objects_format, tracks, truth_sigma_m, no_report,
+                 fsync):
     """Do the uncertainty ellipses contain the real errors?  Coverage, bias and a verdict.
 
     Writes summary.json, objects.csv (one row per input object, with its status) and report.html into
@@ -108,7 +113,8 @@ def validate_cmd(labels, out_dir, budget_spec, contact, kind, camera_path, regis
                                     detections=detections,
                                     detections_format=None if detections_format == "auto" else detections_format,
                                     class_names=class_names, unknown_class=unknown_class,
-                                    tracks=True if tracks else None)
+                                    tracks=True if tracks else None, motion_options={
+                                        "truth_sigma_m": as_float("--truth-sigma-m", truth_sigma_m, positive=True)})
     t = summary["nees_test"]
     c95 = next((c for c in summary["coverage"] if c["nominal"] == 0.95), None)
     un = summary["unpaired"]

@@ -134,7 +134,7 @@ class ObjectWriter:
 def validate(chunks: Iterable[LabelChunk], budget, *, contact="bottom-centre", objects_out=None,
              range_bands_m=DEFAULT_RANGE_BANDS_M, alpha: float = 0.05, linear_threshold: float =
              DEFAULT_LINEAR_THRESHOLD, extra: dict | None = None, fsync: bool = True, progress=None,
-             tracks=None) -> ValidationResult:
+             tracks=None, motion_options: dict | None = None) -> ValidationResult:
     """Validate the uncertainty of every pair of a stream of chunks.
 
     Parameters
@@ -151,6 +151,8 @@ def validate(chunks: Iterable[LabelChunk], budget, *, contact="bottom-centre", o
         Also track the detections (per camera, by ``object_id`` and ``time_s``) and score velocity and heading
         where the chunks carry a truth velocity (:mod:`footprint_uq.validation.motion`): the summary's
         ``motion`` entry.  True: the default tracker (a budget's motion section applies over it).
+    motion_options : keyword arguments of :class:`~footprint_uq.validation.motion.MotionScorer` (``differences``,
+        ``truth_sigma_m``, ``max_span_s``: truth velocities from consecutive labelled frames)
 
     Returns
     -------
@@ -164,7 +166,7 @@ def validate(chunks: Iterable[LabelChunk], budget, *, contact="bottom-centre", o
     S_of: dict[int, np.ndarray] = {}
     writer = ObjectWriter(objects_out, fsync=fsync) if objects_out is not None else None
     scorer = None if tracks is None or tracks is False else MotionScorer(None if tracks is True else tracks,
-                                                                          alpha=alpha)
+                                                                          alpha=alpha, **(motion_options or {}))
     ok = False
     try:
         for ch in chunks:

@@ -28,12 +28,13 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.special import ndtr, ndtri
 
+from .._checks import as_float
 from ..tracking import SharedJacobianAt, TrackerConfig, object_motion
 from ..tracking.classes import ClassTracks, tracker_configs
 from ..uncertainty.budget import load_budget
 from .coverage import LEVELS, nees_threshold, wilson_interval
 
-__all__ = ["MotionScorer", "score_rows", "MOTION_COLUMNS"]
+__all__ = ["MotionScorer", "score_rows", "truth_differences", "MOTION_COLUMNS"]
 
 #: per-row outputs of :func:`score_rows`
 #: the spread between cameras enters the verdict's standard error from this many calibration groups on
@@ -53,7 +54,7 @@ def _z(level: float) -> float:
 
 
 def score_rows(camera, budget, time_s, object_id, cls, xy_m, cov_object_m2, dxy_dp, truth_v_mps, *,
-               config: TrackerConfig | None = None) -> dict:
+               config: TrackerConfig | None = None, truth_cov_v_m2ps2=None) -> dict:
     """Track one camera's detections and score them against the truth velocity.
 
     Parameters
@@ -64,6 +65,9 @@ def score_rows(camera, budget, time_s, object_id, cls, xy_m, cov_object_m2, dxy_
     dxy_dp : (n, 2, 22) their Jacobian w.r.t. the camera parameters
     truth_v_mps : (n, 2) truth velocity in W, m/s (NaN: none)
     config : the tracker's options (default :class:`~footprint_uq.tracking.table.TrackerConfig`)
+    truth_cov_v_m2ps2 : (n, 2, 2), optional
+        Covariance of the truth velocity (finite differences: :func:`truth_differences`), added to the tracker's
+        in both scores; None: the truth is exact
 
     Returns
     -------
@@ -76,6 +80,7 @@ def score_rows(camera, budget, time_s, object_id, cls, xy_m, cov_object_m2, dxy_
     tracks = ClassTracks(*tracker_configs(getattr(budget, "motion", None), config), rank=at.rank, shared_at=at)
     out = {k: np.full(n, np.nan) for k in MOTION_COLUMNS}
     out["track_id"] = np.full(n, -1, np.int64)
+    Ct = np.zeros((n, 2, 2)) if truth_cov_v_m2ps2 is None else np.nan_to_num(truth_cov_v_m2ps2)
     order = np.argsort(time_s, kind="stable")
     ts = time_s[order]
     starts = np.flatnonzero(np.r_[True, ts[1:] != ts[:-1]])
@@ -91,15 +96,54 @@ def score_rows(camera, budget, time_s, object_id, cls, xy_m, cov_object_m2, dxy_
         ok = np.isfinite(dv).all(1)
         if ok.any():
             d2 = np.full(len(rows), np.nan)
-            d2[ok] = np.einsum("ni,nij,nj->n", dv[ok], np.linalg.inv(o.cov_v_m2ps2[ok]), dv[ok])
+            d2[ok] = np.einsum("ni,nij,nj->n", dv[ok], np.linalg.inv(o.cov_v_m2ps2[ok] + Ct[rows][ok]), dv[ok])
             out["nees_v"][rows] = d2
         head = np.rad2deg(np.arctan2(vt[:, 0], vt[:, 1]))  # compass in W (+y as north), as object_motion's
         hok = ok & np.isfinite(mo.sigma_heading_deg) & (np.hypot(vt[:, 0], vt[:, 1]) > 0)
         dh = np.where(hok, np.mod(head - mo.heading_deg + 180.0, 360.0) - 180.0, np.nan)
         out["heading_err_deg"][rows] = dh
-        out["sigma_heading_deg"][rows] = np.where(hok, mo.sigma_heading_deg, np.nan)
-        out["nees_h"][rows] = (dh / mo.sigma_heading_deg) ** 2
+        g = np.stack([vt[:, 1], -vt[:, 0]], 1) / np.maximum(np.hypot(vt[:, 0], vt[:, 1]), 1e-300)[:, None] ** 2
+        var_truth_deg2 = np.rad2deg(1.0) ** 2 * np.einsum("ni,nij,nj->n", g, Ct[rows], g)  # delta method
+        sig = np.sqrt(mo.sigma_heading_deg ** 2 + np.where(hok, var_truth_deg2, 0.0))
+        out["sigma_heading_deg"][rows] = np.where(hok, sig, np.nan)
+        out["nees_h"][rows] = (dh / sig) ** 2
     return out
+
+
+def truth_differences(object_id, time_s, truth_xy_m, *, sigma_m: float, accel_psd_m2ps3: float,
+                      max_span_s: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """Truth velocities from consecutive labelled frames: central differences of one object's truth positions.
+
+    Per row with a previous and a next row of the same ``object_id`` (in time) within ``max_span_s``:
+    ``v = (x_next - x_prev) / D`` with ``D = t_next - t_prev``, and its covariance (per axis, independent)
+    ``2 sigma_m^2 / D^2 + q D / 12``: the labels' position noise (``sigma_m`` per axis, independent between frames)
+    and the difference between the mean velocity over the span and the velocity at its middle for a white-noise
+    acceleration of density ``q`` (the motion model's).  Rows at a track's ends, with a gap longer than
+    ``max_span_s``, or without a finite truth get NaN.
+
+    Parameters
+    ----------
+    object_id : (n,) object;  time_s : (n,) s;  truth_xy_m : (n, 2) truth positions in W (NaN: none)
+
+    Returns
+    -------
+    v_mps : (n, 2);  cov_v_m2ps2 : (n, 2, 2)
+    """
+    n = len(time_s)
+    v, cov = np.full((n, 2), np.nan), np.full((n, 2, 2), np.nan)
+    key = np.array([str(o) for o in object_id], dtype=object)
+    order = np.lexsort((time_s, key))
+    k, t, x = key[order], time_s[order], truth_xy_m[order]
+    if n < 3:
+        return v, cov
+    same = (k[:-2] == k[2:]) & (k[:-2] == k[1:-1])
+    D = t[2:] - t[:-2]
+    ok = same & (D > 0) & (D <= max_span_s) & np.isfinite(x[2:]).all(1) & np.isfinite(x[:-2]).all(1)
+    mid = order[1:-1][ok]
+    v[mid] = (x[2:][ok] - x[:-2][ok]) / D[ok][:, None]
+    var = 2.0 * sigma_m ** 2 / D[ok] ** 2 + accel_psd_m2ps3 * D[ok] / 12.0
+    cov[mid] = var[:, None, None] * np.eye(2)
+    return v, cov
 
 
 def _cluster_var(nees: np.ndarray, cluster: np.ndarray, mean: float) -> tuple[float, int]:
@@ -166,10 +210,17 @@ class MotionScorer:
     ----------
     config : TrackerConfig, optional (the budget's motion section, if any, is applied over it)
     alpha : significance of the tests
+    differences : derive a truth velocity from consecutive labelled frames where none is given
+        (:func:`truth_differences`, with ``truth_sigma_m`` the labels' position sigma per axis, m, and
+        ``max_span_s``)
     """
 
-    def __init__(self, config: TrackerConfig | None = None, *, alpha: float = 0.05):
+    def __init__(self, config: TrackerConfig | None = None, *, alpha: float = 0.05, differences: bool = True,
+                 truth_sigma_m: float = 0.1, max_span_s: float = 1.0):
         self.config = config or TrackerConfig()
+        self.differences = bool(differences)
+        self.truth_sigma_m = as_float("truth_sigma_m", truth_sigma_m, nonnegative=True)
+        self.max_span_s = as_float("max_span_s", max_span_s, positive=True)
         self.alpha = float(alpha)
         self.cameras: dict[str, _CameraRows] = {}
         self.counts: dict[str, int] = defaultdict(int)
@@ -191,22 +242,35 @@ class MotionScorer:
         cam = self.cameras.setdefault(chunk.camera_key, _CameraRows(chunk.camera, bud))
         cam.parts.append(dict(time_s=t[keep], object_id=chunk.object_id[keep], cls=chunk.cls[keep],
                               xy_m=pairs.xy_world_m[keep], cov_object_m2=pairs.cov_object_m2[keep],
-                              dxy_dp=pairs.dxy_dp[keep], truth_v_mps=tv[keep], line=pairs.line[keep]))
+                              dxy_dp=pairs.dxy_dp[keep], truth_v_mps=tv[keep], line=pairs.line[keep],
+                              truth_xy_m=np.where((pairs.status[keep] == "ok")[:, None],
+                                                  pairs.truth_xy_world_m[keep], np.nan)))
 
     def summary(self) -> dict | None:
         """The ``motion`` entry of the summary (None when no row carries a truth velocity)."""
-        if self.counts["rows_with_truth_velocity"] == 0:
-            return None
         cols = defaultdict(list)
         for key, cam in self.cameras.items():
             rows = {k: np.concatenate([p[k] for p in cam.parts]) for k in cam.parts[0]}
+            tv, ct = rows["truth_v_mps"], None
+            if self.differences:
+                dv, dc = truth_differences(rows["object_id"], rows["time_s"], rows["truth_xy_m"],
+                                           sigma_m=self.truth_sigma_m, accel_psd_m2ps3=self.config.accel_psd_m2ps3,
+                                           max_span_s=self.max_span_s)
+                use = ~np.isfinite(tv).all(1) & np.isfinite(dv).all(1)
+                self.counts["truth_velocity_from_differences"] += int(use.sum())
+                self.counts["detections_without_truth_velocity"] -= int(use.sum())
+                tv = np.where(use[:, None], dv, tv)
+                ct = np.where(use[:, None, None], dc, 0.0)
+            rows["truth_v_mps"] = tv
             sc = score_rows(cam.camera, cam.budget, rows["time_s"], rows["object_id"], rows["cls"], rows["xy_m"],
-                            rows["cov_object_m2"], rows["dxy_dp"], rows["truth_v_mps"], config=self.config)
+                            rows["cov_object_m2"], rows["dxy_dp"], tv, config=self.config, truth_cov_v_m2ps2=ct)
             cols["cluster"].append(np.array([f"{key}#{i}" for i in sc["track_id"]], dtype=object))
             cols["cls"].append(rows["cls"])
             cols["has_tv"].append(np.isfinite(rows["truth_v_mps"]).all(1))
             for k in ("nees_v", "nees_h", "track_id"):
                 cols[k].append(sc[k])
+        if self.counts["rows_with_truth_velocity"] + self.counts["truth_velocity_from_differences"] == 0:
+            return None
         c = {k: np.concatenate(v) for k, v in cols.items()} if cols else {}
         return self._summarise(c)
 

@@ -151,7 +151,9 @@ def _chunk(source, key, camera, rows: list[dict], *, budget=None) -> LabelChunk:
         truth_xy_world_m=np.array([r.get("truth", nan2) for r in rows], dtype=np.float64).reshape(n, 2),
         truth_z_m=np.array([r.get("z", np.nan) for r in rows], dtype=np.float64),
         yaw_world_rad=np.array([r.get("yaw", np.nan) for r in rows], dtype=np.float64),
-        error=[r.get("error") for r in rows], budget=budget)
+        error=[r.get("error") for r in rows], budget=budget,
+        time_s=np.array([r.get("time", np.nan) for r in rows], dtype=np.float64) if any("time" in r for r in rows)
+        else None)
 
 
 def _file_key(*paths) -> str:
@@ -433,6 +435,17 @@ def _openlabel_frames(path):
     return frames
 
 
+def _frame_time(frame) -> float | None:
+    """``frame_properties.timestamp`` (s) of an OpenLABEL frame, or None (absent or not a finite number)."""
+    props = frame.get("frame_properties") if isinstance(frame, dict) else None
+    t = props.get("timestamp") if isinstance(props, dict) else None
+    try:
+        t = float(t)
+    except (TypeError, ValueError):
+        return None
+    return t if np.isfinite(t) else None
+
+
 def read_openlabel(paths, *, calibration, ground_z_m: float = 0.0, image_size_px=None) -> Iterator[LabelChunk]:
     """TUMTraf OpenLABEL JSON file(s) of one camera -> one :class:`LabelChunk` per frame.
 
@@ -452,6 +465,10 @@ def read_openlabel(paths, *, calibration, ground_z_m: float = 0.0, image_size_px
                                                "error": "malformed OpenLABEL frame (objects is not a mapping)"}])
                 continue
             rows = [_openlabel_object(u, o, i, str(fname), ground_z_m) for i, (u, o) in enumerate(objs.items())]
+            t = _frame_time(fr)
+            if t is not None:  # the frame's time: tracks and truth velocities from consecutive frames
+                for r in rows:
+                    r["time"] = t
             if rows:
                 yield _chunk(path, key, cam, rows)
 

@@ -115,7 +115,8 @@ def run_validation(labels, out_dir, budget, *, kind: str | None = None, contact=
                    heading_offset_deg: float = 0.0, range_bands_m=DEFAULT_RANGE_BANDS_M, alpha: float = 0.05,
                    objects_format: str = "csv", chunk_rows: int = 131_072, report: bool = True, dpi: int = 110,
                    fsync: bool = True, progress=None, detections=None, detections_format: str | None = None,
-                   class_names=None, unknown_class: str = "error", tracks=None) -> tuple[dict, dict]:
+                   class_names=None, unknown_class: str = "error", tracks=None,
+                   motion_options: dict | None = None) -> tuple[dict, dict]:
     """Validate labelled data and write the outputs into ``out_dir``.
 
     Parameters
@@ -136,7 +137,8 @@ def run_validation(labels, out_dir, budget, *, kind: str | None = None, contact=
         ``detections_format`` / ``class_names`` / ``unknown_class`` as :func:`footprint_uq.batch.formats.open_reader`)
         paired with ``labels``, a truth table of ``frame, object_id`` and the truth point (docs/integrations.md)
     tracks : None, True or a TrackerConfig: also score velocity and heading where the labels carry a truth
-        velocity (:func:`footprint_uq.validation.job.validate`, docs/validation.md "Velocity and heading")
+        velocity (:func:`footprint_uq.validation.job.validate`, docs/validation.md "Velocity and heading");
+        ``motion_options`` as there
 
     Returns
     -------
@@ -159,16 +161,19 @@ def run_validation(labels, out_dir, budget, *, kind: str | None = None, contact=
                                                                           unknown_class=unknown_class))
     with output_set(out_dir, VALIDATION_OWN, "validate", fsync=fsync) as stage:
         summary, files = _write_validation(stage, labels, kind, folder, chunks, budget, contact, range_bands_m,
-                                           alpha, objects_format, report, dpi, fsync, progress, detections, tracks)
+                                           alpha, objects_format, report, dpi, fsync, progress, detections, tracks,
+                                           motion_options)
     return summary, final_paths(files, stage, out_dir)
 
 
 def _write_validation(out: Path, labels, kind, folder, chunks, budget, contact, range_bands_m, alpha, objects_format,
-                      report, dpi, fsync, progress, detections=None, tracks=None) -> tuple[dict, dict]:
+                      report, dpi, fsync, progress, detections=None, tracks=None, motion_options=None
+                      ) -> tuple[dict, dict]:
     """The job's files written into ``out`` (the hidden staging folder of :func:`run_validation`)."""
     files = {"objects": out / f"objects.{objects_format}", "summary": out / VALIDATION_FILES["summary"]}
     res = validate(chunks, budget, contact=contact, objects_out=files["objects"], range_bands_m=range_bands_m,
-                   alpha=alpha, fsync=fsync, progress=progress, tracks=tracks)
+                   alpha=alpha, fsync=fsync, progress=progress, tracks=tracks,
+                   motion_options=motion_options)
     summary = res.summary
     summary.update(labels=str(labels), kind=kind, folder=folder.to_dict())
     if detections is not None:
