@@ -177,3 +177,42 @@ def test_truth_velocity_from_consecutive_frames_is_scored_with_its_error():
     assert m["counts"]["rows_with_truth_velocity"] == 0 and m["counts"]["truth_velocity_from_differences"] > 10_000
     assert 0.945 < _c95(m["velocity"])["empirical"] < 0.975
     assert _motion(cfg, drop_every=1, n_campaigns=2, options={"differences": False}) is None
+
+
+def test_cli_openlabel_sequence_truth_velocity_from_consecutive_frames(tmp_path):
+    """An OpenLABEL sequence (10 frames at 10 Hz with frame_properties.timestamp, 5 cars at constant velocity, no
+    velocity in the labels) through the CLI: the 8 inner frames of each car get a truth velocity by central
+    differences and are scored (the first and last frame are counted, not scored)."""
+    cam = default_camera()
+    T = cam.T_cam_world
+    calib = tmp_path / "s110_camera_test.json"
+    calib.write_text(json.dumps({"image_width": 1920, "image_height": 1080, "intrinsic_camera_matrix": cam.K.tolist(),
+                                 "dist_coefficients": [0, 0, 0, 0, 0], "rotation_matrix": T[:3, :3].tolist(),
+                                 "translation_matrix": T[:3, 3].tolist()}))
+    rng = np.random.default_rng(3)
+    start = np.c_[rng.uniform(-8, 8, 5), rng.uniform(25, 45, 5)]
+    vel = rng.uniform(-6, 6, (5, 2))
+    frames = {}
+    for k in range(10):
+        t = 100.0 + 0.1 * k
+        xy = start + vel * (t - 100.0)
+        uv = cam.project_ground(xy).uv_px + rng.standard_normal((5, 2))
+        objs = {}
+        for i in range(5):
+            objs[f"car-{i}"] = {"object_data": {
+                "type": "CAR", "cuboid": {"val": [xy[i, 0], xy[i, 1], 0.75, 0, 0, 0, 1, 4, 1.8, 1.5]},
+                "bbox": {"val": [uv[i, 0], uv[i, 1] - 30, 60, 60]}}}
+        frames[str(k)] = {"frame_properties": {"timestamp": t}, "objects": objs}
+    lab = tmp_path / "sequence.json"
+    lab.write_text(json.dumps({"openlabel": {"frames": frames}}))
+    out = tmp_path / "val"
+    r = CliRunner().invoke(main, ["validate", "--labels", str(lab), "--calibration", str(calib), "--budget", BUDGET,
+                                  "--out", str(out), "--tracks", "--truth-sigma-m", "0.05", "--no-fsync"])
+    assert r.exit_code == 0, r.output
+    m = json.loads((out / "summary.json").read_text())["motion"]
+    assert m["counts"]["truth_velocity_from_differences"] == 40 and m["counts"]["rows_with_truth_velocity"] == 0
+    assert m["velocity"]["test"]["n"] == 40 and m["velocity"]["test"]["n_tracks"] == 5
+    assert m["counts"]["detections_without_truth_velocity"] == 10
+    r = CliRunner().invoke(main, ["validate", "--labels", str(lab), "--calibration", str(calib), "--budget", BUDGET,
+                                  "--out", str(tmp_path / "v2"), "--tracks", "--truth-sigma-m", "nan"])
+    assert r.exit_code == 2 and "--truth-sigma-m" in r.output and "Traceback" not in r.output
