@@ -137,6 +137,9 @@ def test_cli_pairs_table_with_truth_velocity_and_bad_velocity_rows(tmp_path):
     objects = pcsv.read_csv(out / "objects.csv").to_pylist()
     err = {o["line"]: o["reason"] for o in objects if o["status"] == "error"}
     assert set(err) == {42, 43, 44, 45}
+    mrows = pcsv.read_csv(out / "motion.csv").to_pylist()
+    assert not {42, 43, 44, 45} & {r["line"] for r in mrows}
+    assert sum(r["nees_v"] is not None for r in mrows) == m["velocity"]["test"]["n"]
     assert "one empty" in err[42] and "v_east_mps" in err[43] and "finite" in err[44] and "timestamp_s" in err[45]
     assert "Velocity and heading" in (out / "report.html").read_text()
 
@@ -213,6 +216,13 @@ def test_cli_openlabel_sequence_truth_velocity_from_consecutive_frames(tmp_path)
     assert m["counts"]["truth_velocity_from_differences"] == 40 and m["counts"]["rows_with_truth_velocity"] == 0
     assert m["velocity"]["test"]["n"] == 40 and m["velocity"]["test"]["n_tracks"] == 5
     assert m["counts"]["detections_without_truth_velocity"] == 10
+    rows = pcsv.read_csv(out / "motion.csv").to_pylist()
+    assert len(rows) == 50 and sum(r["truth_velocity"] == "differences" for r in rows) == 40
+    inner = [r for r in rows if r["truth_velocity"] == "differences"]
+    truth = {f"car-{i}": vel[i] for i in range(5)}  # constant velocity: the central difference is exact
+    np.testing.assert_allclose([[r["truth_v_x_mps"], r["truth_v_y_mps"]] for r in inner],
+                               [truth[r["object_id"]] for r in inner], atol=1e-6)
+    assert all(r["nees_v"] >= 0 for r in inner)
     r = CliRunner().invoke(main, ["validate", "--labels", str(lab), "--calibration", str(calib), "--budget", BUDGET,
                                   "--out", str(tmp_path / "v2"), "--tracks", "--truth-sigma-m", "nan"])
     assert r.exit_code == 2 and "--truth-sigma-m" in r.output and "Traceback" not in r.output

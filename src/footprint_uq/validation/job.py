@@ -134,7 +134,7 @@ class ObjectWriter:
 def validate(chunks: Iterable[LabelChunk], budget, *, contact="bottom-centre", objects_out=None,
              range_bands_m=DEFAULT_RANGE_BANDS_M, alpha: float = 0.05, linear_threshold: float =
              DEFAULT_LINEAR_THRESHOLD, extra: dict | None = None, fsync: bool = True, progress=None,
-             tracks=None, motion_options: dict | None = None) -> ValidationResult:
+             tracks=None, motion_options: dict | None = None, motion_out=None) -> ValidationResult:
     """Validate the uncertainty of every pair of a stream of chunks.
 
     Parameters
@@ -153,6 +153,7 @@ def validate(chunks: Iterable[LabelChunk], budget, *, contact="bottom-centre", o
         ``motion`` entry.  True: the default tracker (a budget's motion section applies over it).
     motion_options : keyword arguments of :class:`~footprint_uq.validation.motion.MotionScorer` (``differences``,
         ``truth_sigma_m``, ``max_span_s``: truth velocities from consecutive labelled frames)
+    motion_out : path of the per-row motion scores (``motion.csv``, with ``tracks``), or None
 
     Returns
     -------
@@ -195,6 +196,8 @@ def validate(chunks: Iterable[LabelChunk], budget, *, contact="bottom-centre", o
                            "no_ground_point": rows.get("no ground point", 0), "error_rows": rows.get("error", 0)}
     if scorer is not None:
         summary["motion"] = scorer.summary()
+        if motion_out is not None:
+            scorer.write_rows(motion_out, fsync=fsync)
     if extra:
         summary.update(extra)
     return ValidationResult(summary, acc, Path(objects_out) if objects_out is not None else None)

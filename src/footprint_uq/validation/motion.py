@@ -24,18 +24,27 @@ from __future__ import annotations
 
 from collections import defaultdict
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
+import pyarrow as pa
+import pyarrow.csv as pcsv
 from scipy.special import ndtr, ndtri
 
 from .._checks import as_float
+from ..io.atomic import commit, discard, temp_path
 from ..tracking import SharedJacobianAt, TrackerConfig, object_motion
 from ..tracking.classes import ClassTracks, tracker_configs
 from ..uncertainty.budget import load_budget
 from .coverage import LEVELS, nees_threshold, wilson_interval
 
-__all__ = ["MotionScorer", "score_rows", "truth_differences", "MOTION_COLUMNS"]
+__all__ = ["MotionScorer", "score_rows", "truth_differences", "MOTION_COLUMNS", "MOTION_ROW_COLUMNS"]
 
+#: columns of the per-row file (``motion.csv``): where the row comes from, the truth velocity (W, m/s; its kind:
+#: ``given``, ``differences`` or empty) and the scores (velocity in W, m/s; NaN where not scored)
+MOTION_ROW_COLUMNS = ("source", "line", "camera", "frame", "object_id", "class", "time_s", "track_id",
+                      "truth_velocity", "truth_v_x_mps", "truth_v_y_mps", "v_x_mps", "v_y_mps", "nees_v",
+                      "heading_err_deg", "sigma_heading_deg", "nees_h")
 #: per-row outputs of :func:`score_rows`
 #: the spread between cameras enters the verdict's standard error from this many calibration groups on
 MIN_CAMERAS = 5
@@ -224,6 +233,29 @@ class MotionScorer:
         self.alpha = float(alpha)
         self.cameras: dict[str, _CameraRows] = {}
         self.counts: dict[str, int] = defaultdict(int)
+        #: per-row scores after :meth:`summary` (column -> (n,) array)
+        self.rows: dict = {}
+
+    def write_rows(self, path, *, fsync: bool = True) -> Path:
+        """:attr:`rows` as a CSV file (:data:`MOTION_ROW_COLUMNS`), written atomically."""
+        n = len(self.rows.get("line", ()))
+        cols = {}
+        for k in MOTION_ROW_COLUMNS:
+            a = self.rows.get("cls" if k == "class" else k, np.zeros(0))
+            if n == 0:
+                cols[k] = pa.array([], pa.string())
+            elif np.asarray(a).dtype == object:
+                cols[k] = pa.array([None if v is None else str(v) for v in a], pa.string())
+            else:
+                cols[k] = pa.array(np.asarray(a), from_pandas=True)
+        tmp = temp_path(Path(path))
+        try:
+            pcsv.write_csv(pa.table(cols), tmp)
+        except BaseException:
+            discard(tmp)
+            raise
+        commit(tmp, Path(path), fsync=fsync)
+        return Path(path)
 
     def add(self, chunk, pairs, budget) -> None:
         """Keep the rows of one chunk that can be tracked (a detection with a ground point, a time and an id)."""
@@ -243,47 +275,55 @@ class MotionScorer:
         cam.parts.append(dict(time_s=t[keep], object_id=chunk.object_id[keep], cls=chunk.cls[keep],
                               xy_m=pairs.xy_world_m[keep], cov_object_m2=pairs.cov_object_m2[keep],
                               dxy_dp=pairs.dxy_dp[keep], truth_v_mps=tv[keep], line=pairs.line[keep],
+                              source=pairs.source[keep], frame=chunk.frame[keep],
                               truth_xy_m=np.where((pairs.status[keep] == "ok")[:, None],
                                                   pairs.truth_xy_world_m[keep], np.nan)))
 
-    def summary(self) -> dict | None:
-        """The ``motion`` entry of the summary (None when no row carries a truth velocity)."""
-        cols = defaultdict(list)
-        for key, cam in self.cameras.items():
-            rows = {k: np.concatenate([p[k] for p in cam.parts]) for k in cam.parts[0]}
-            tv, ct = rows["truth_v_mps"], None
-            if self.differences:
-                dv, dc = truth_differences(rows["object_id"], rows["time_s"], rows["truth_xy_m"],
-                                           sigma_m=self.truth_sigma_m, accel_psd_m2ps3=self.config.accel_psd_m2ps3,
-                                           max_span_s=self.max_span_s)
-                use = ~np.isfinite(tv).all(1) & np.isfinite(dv).all(1)
-                self.counts["truth_velocity_from_differences"] += int(use.sum())
-                self.counts["detections_without_truth_velocity"] -= int(use.sum())
-                tv = np.where(use[:, None], dv, tv)
-                ct = np.where(use[:, None, None], dc, 0.0)
-            rows["truth_v_mps"] = tv
-            sc = score_rows(cam.camera, cam.budget, rows["time_s"], rows["object_id"], rows["cls"], rows["xy_m"],
-                            rows["cov_object_m2"], rows["dxy_dp"], tv, config=self.config, truth_cov_v_m2ps2=ct)
-            cols["cluster"].append(np.array([f"{key}#{i}" for i in sc["track_id"]], dtype=object))
-            cols["cls"].append(rows["cls"])
-            cols["has_tv"].append(np.isfinite(rows["truth_v_mps"]).all(1))
-            for k in ("nees_v", "nees_h", "track_id"):
-                cols[k].append(sc[k])
-        if self.counts["rows_with_truth_velocity"] + self.counts["truth_velocity_from_differences"] == 0:
-            return None
-        c = {k: np.concatenate(v) for k, v in cols.items()} if cols else {}
-        return self._summarise(c)
+    def _camera_scores(self, key: str, cam: _CameraRows) -> dict:
+        """Track one camera's rows and score them (truth velocity given, or from differences)."""
+        rows = {k: np.concatenate([p[k] for p in cam.parts]) for k in cam.parts[0]}
+        tv, ct = rows["truth_v_mps"], None
+        use = np.zeros(len(tv), dtype=bool)
+        if self.differences:
+            dv, dc = truth_differences(rows["object_id"], rows["time_s"], rows["truth_xy_m"],
+                                       sigma_m=self.truth_sigma_m, accel_psd_m2ps3=self.config.accel_psd_m2ps3,
+                                       max_span_s=self.max_span_s)
+            use = ~np.isfinite(tv).all(1) & np.isfinite(dv).all(1)
+            tv = np.where(use[:, None], dv, tv)
+            ct = np.where(use[:, None, None], dc, 0.0)
+        sc = score_rows(cam.camera, cam.budget, rows["time_s"], rows["object_id"], rows["cls"], rows["xy_m"],
+                        rows["cov_object_m2"], rows["dxy_dp"], tv, config=self.config, truth_cov_v_m2ps2=ct)
+        truth_kind = np.where(use, "differences", np.where(np.isfinite(tv).all(1), "given", ""))
+        return {"source": rows["source"], "line": rows["line"], "camera": np.full(len(tv), key, dtype=object),
+                "frame": rows["frame"], "object_id": rows["object_id"], "cls": rows["cls"], "time_s": rows["time_s"],
+                "truth_velocity": truth_kind.astype(object), "truth_v_x_mps": tv[:, 0], "truth_v_y_mps": tv[:, 1],
+                **sc, "cluster": np.array([f"{key}#{i}" for i in sc["track_id"]], dtype=object)}
 
-    def _summarise(self, c: dict) -> dict:
+    def summary(self) -> dict | None:
+        """The ``motion`` entry of the summary (None when no row carries a truth velocity); the per-row scores are
+        then in :attr:`rows` (:data:`MOTION_ROW_COLUMNS`, one row per tracked detection, per camera in input
+        order)."""
+        parts = [self._camera_scores(key, cam) for key, cam in self.cameras.items()]
+        c = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]} if parts else {}
+        self.rows = c
+        derived = int(np.count_nonzero(c["truth_velocity"] == "differences")) if c else 0
+        if self.counts["rows_with_truth_velocity"] + derived == 0:
+            return None
+        return self._summarise(c, derived)
+
+    def _summarise(self, c: dict, derived: int) -> dict:
         counts = dict(self.counts)
+        counts["truth_velocity_from_differences"] = derived
+        counts["detections_without_truth_velocity"] = counts.get("detections_without_truth_velocity", 0) - derived
         if not c:
             counts.update(velocity_scored=0, heading_scored=0)
             return {"counts": counts, "velocity": _block(np.zeros(0), np.zeros(0), 2, self.alpha),
                     "heading": _block(np.zeros(0), np.zeros(0), 1, self.alpha), "by_class": {}}
         v_ok, h_ok = np.isfinite(c["nees_v"]), np.isfinite(c["nees_h"])
-        counts.update(tracked_with_truth_velocity=int(c["has_tv"].sum()),
-                      first_detection=int((c["has_tv"] & (c["track_id"] >= 0) & ~v_ok).sum()),
-                      not_tracked=int((c["has_tv"] & (c["track_id"] < 0)).sum()),
+        has_tv = c["truth_velocity"] != ""
+        counts.update(tracked_with_truth_velocity=int(has_tv.sum()),
+                      first_detection=int((has_tv & (c["track_id"] >= 0) & ~v_ok).sum()),
+                      not_tracked=int((has_tv & (c["track_id"] < 0)).sum()),
                       velocity_scored=int(v_ok.sum()), heading_scored=int(h_ok.sum()),
                       heading_unavailable=int((v_ok & ~h_ok).sum()))
         out = {"counts": counts, "velocity": _block(c["nees_v"][v_ok], c["cluster"][v_ok], 2, self.alpha),

@@ -11,6 +11,7 @@ new or hold only a previous run's files, :data:`VALIDATION_OWN`):
 ``objects.csv``    one row per input object (``--objects-format parquet``: ``objects.parquet``)
 ``report.html``    self-contained report with the figures
 ``calibration.png`` the coverage-calibration figure
+``motion.csv``     with ``tracks``: per tracked detection, the truth velocity and the velocity / heading scores
 =================  ========================================================================
 """
 
@@ -38,7 +39,7 @@ __all__ = ["run_validation", "detect_kind", "label_chunks", "KINDS", "VALIDATION
 KINDS = ("kitti", "dair-v2x", "openlabel", "table")
 VALIDATION_FILES = {"summary": "summary.json", "report": "report.html", "calibration_png": "calibration.png"}
 #: every name a run writes into its folder (a folder holding anything else is refused, not replaced)
-VALIDATION_OWN = ("summary.json", "report.html", "calibration.png", "objects.csv", "objects.parquet")
+VALIDATION_OWN = ("summary.json", "report.html", "calibration.png", "objects.csv", "objects.parquet", "motion.csv")
 
 
 def detect_kind(labels) -> str:
@@ -171,9 +172,11 @@ def _write_validation(out: Path, labels, kind, folder, chunks, budget, contact, 
                       ) -> tuple[dict, dict]:
     """The job's files written into ``out`` (the hidden staging folder of :func:`run_validation`)."""
     files = {"objects": out / f"objects.{objects_format}", "summary": out / VALIDATION_FILES["summary"]}
+    if tracks:
+        files["motion"] = out / "motion.csv"
     res = validate(chunks, budget, contact=contact, objects_out=files["objects"], range_bands_m=range_bands_m,
                    alpha=alpha, fsync=fsync, progress=progress, tracks=tracks,
-                   motion_options=motion_options)
+                   motion_options=motion_options, motion_out=files.get("motion"))
     summary = res.summary
     summary.update(labels=str(labels), kind=kind, folder=folder.to_dict())
     if detections is not None:
