@@ -16,10 +16,12 @@ from click.testing import CliRunner
 
 from footprint_uq.cli.main import main
 from footprint_uq.io import save_camera
+from footprint_uq.products.geo import GeoReference
 from footprint_uq.tracking import TrackerConfig
 from footprint_uq.tracking.synthetic import default_camera, trajectories
 from footprint_uq.validation.job import validate
 from footprint_uq.validation.motion import _clustered_test, truth_differences
+from footprint_uq.validation.readers import read_pairs_table
 from footprint_uq.validation.synthetic import motion_chunks
 
 BUDGET = "basler1@deg"
@@ -226,3 +228,14 @@ def test_cli_openlabel_sequence_truth_velocity_from_consecutive_frames(tmp_path)
     r = CliRunner().invoke(main, ["validate", "--labels", str(lab), "--calibration", str(calib), "--budget", BUDGET,
                                   "--out", str(tmp_path / "v2"), "--tracks", "--truth-sigma-m", "nan"])
     assert r.exit_code == 2 and "--truth-sigma-m" in r.output and "Traceback" not in r.output
+
+
+def test_truth_velocity_east_north_rotated_into_the_world_frame(tmp_path):
+    """W's +y bears 90 deg (east): a velocity of 1 m/s east is +y in W, 2 m/s north is -x."""
+    table = tmp_path / "p.csv"
+    table.write_text("u_min_px,v_min_px,u_max_px,v_max_px,x_m,y_m,object_id,timestamp_s,v_east_mps,v_north_mps\n"
+                     "900,500,960,540,0,40,a,0.0,1,2\n")
+    ch = next(read_pairs_table(table, default_camera(), georef=GeoReference(90.0)))
+    np.testing.assert_allclose(ch.truth_v_world_mps, [[-2.0, 1.0]], atol=1e-12)
+    ch = next(read_pairs_table(table, default_camera()))
+    np.testing.assert_allclose(ch.truth_v_world_mps, [[1.0, 2.0]])

@@ -152,7 +152,8 @@ def run_validation(labels, out_dir, budget, *, kind: str | None = None, contact=
     if objects_format not in ("csv", "parquet"):
         raise InputError("objects_format", objects_format, "csv or parquet")
     georef = None
-    if origin_lat_deg is not None or origin_lon_deg is not None:
+    if origin_lat_deg is not None or origin_lon_deg is not None or heading_offset_deg:
+        # (the heading offset alone rotates truth velocities given east / north into W)
         georef = GeoReference(heading_offset_deg, origin_lat_deg, origin_lon_deg)
     folder = R.FolderReport()
     chunks = label_chunks(labels, kind, folder, camera=camera, registry=registry, budget=budget,
