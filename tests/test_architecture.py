@@ -212,7 +212,9 @@ def test_planning_layer():
 #: the tracker's layer: above products/ and uncertainty/ (it builds on FrameProcessor), below service/, batch/ and cli/
 TRACKING_MAY_IMPORT = ("params", "errors", "status", "_checks", "fast", "cameras", "uncertainty", "products",
                        "tracking")
-TRACKING_IMPORTED_BY = ("tracking", "service", "batch", "cli")
+#: validation/ too: `validate --tracks` scores the tracker's velocity and heading against labelled truth
+#: (validation.motion), and its synthetic sequences use the tracker's trajectories (validation.synthetic)
+TRACKING_IMPORTED_BY = ("tracking", "service", "batch", "cli", "validation")
 
 
 def test_tracking_layer():

@@ -83,11 +83,19 @@ _LABEL_SOURCE_OPTIONS = [
               help="Significance of the NEES test (two-sided) and of the bias test.")
 @click.option("--objects-format", type=click.Choice(["csv", "parquet"]), default="csv", show_default=True,
               help="Format of the per-object file.")
+@click.option("--tracks", is_flag=True,
+              help="Also track the detections (timestamp_s and object_id; per camera, as objects --tracks, with the "
+                   "budget's motion section) and score velocity and heading where the labels carry a truth velocity "
+                   "(v_east_mps, v_north_mps; docs/validation.md).")
+@click.option("--truth-sigma-m", type=FiniteFloatRange(min=0, min_open=True), default=0.1, show_default=True,
+              metavar="M",
+              help="With --tracks: position sigma (per axis, m) of the labels, for truth velocities from consecutive "
+                   "labelled frames (finite differences; docs/validation.md).")
 @click.option("--no-report", is_flag=True, help="No report.html / calibration.png (summary and objects only).")
 @click.option("--fsync/--no-fsync", default=True, show_default=True, help="Durable outputs (fsync before rename).")
 def validate_cmd(labels, out_dir, budget_spec, contact, size_priors, kind, camera_path, registry, calibration,
                  image_size, origin_lat, origin_lon, heading_offset_deg, detections, detections_format, class_names,
-                 unknown_class, range_bands, alpha, objects_format, no_report, fsync):
+                 unknown_class, range_bands, alpha, objects_format, tracks, truth_sigma_m, no_report, fsync):
     """Do the uncertainty ellipses contain the real errors?  Coverage, bias and a verdict.
 
     Writes summary.json, objects.csv (one row per input object, with its status) and report.html into
@@ -107,7 +115,9 @@ def validate_cmd(labels, out_dir, budget_spec, contact, size_priors, kind, camer
                                         detections=detections,
                                         detections_format=None if detections_format == "auto" else detections_format,
                                         class_names=class_names, unknown_class=unknown_class,
-                                        stage=say, progress=lambda n: say(f"{n} pairs so far"))
+                                        stage=say, progress=lambda n: say(f"{n} pairs so far"),
+                                        tracks=True if tracks else None,
+                                        motion_options={"truth_sigma_m": truth_sigma_m})
     t = summary["nees_test"]
     c95 = next((c for c in summary["coverage"] if c["nominal"] == 0.95), None)
     un = summary["unpaired"]
@@ -126,3 +136,21 @@ def validate_cmd(labels, out_dir, budget_spec, contact, size_priors, kind, camer
         why = "; ".join(f"{n} x {k}" for k, n in top[:3]) + ("; ..." if len(top) > 3 else "")
         note(f"{refused['rows']} rows refused ({why}); per row in {files['objects'].name}, by reason in "
              f"{files['summary'].name} ('refused')")
+    if tracks:
+        click.echo(f"footprint-uq validate --tracks: {_motion_message(summary.get('motion'))}")
+
+
+def _motion_message(motion) -> str:
+    """One line on the velocity and heading scores (``summary["motion"]``)."""
+    if motion is None:
+        return "no row carries a truth velocity (v_east_mps, v_north_mps): velocity and heading not scored"
+    out = []
+    for what in ("velocity", "heading"):
+        t = motion[what]["test"]
+        c95 = next(c for c in motion[what]["coverage"] if c["nominal"] == 0.95)
+        out.append(f"{what} {t['verdict'] or 'no verdict'} ({t['n']} scored" + (
+            f", 95 % region covers {100 * c95['empirical']:.1f} %, mean NEES {t['nees_mean']:.3g}, n_eff "
+            f"{t['n_eff']:.3g})" if t["n"] else ")"))
+    c = motion["counts"]
+    return "; ".join(out) + (f"; {c.get('detections_without_truth_velocity', 0)} detections without truth velocity, "
+                             f"{c.get('first_detection', 0)} first detections (no velocity yet)")

@@ -21,6 +21,7 @@ from ..io.atomic import commit, discard, temp_path
 from ..uncertainty.budget import load_budget
 from ..uncertainty.propagation import DEFAULT_LINEAR_THRESHOLD
 from .coverage import DEFAULT_RANGE_BANDS_M, LEVELS, CoverageAccumulator
+from .motion import MotionScorer
 from .pairs import GroupIndex, build_pairs, contact_model
 from .readers import LabelChunk
 
@@ -132,8 +133,8 @@ class ObjectWriter:
 
 def validate(chunks: Iterable[LabelChunk], budget, *, contact="bottom-centre", objects_out=None,
              range_bands_m=DEFAULT_RANGE_BANDS_M, alpha: float = 0.05, linear_threshold: float =
-             DEFAULT_LINEAR_THRESHOLD, extra: dict | None = None, fsync: bool = True, progress=None
-             ) -> ValidationResult:
+             DEFAULT_LINEAR_THRESHOLD, extra: dict | None = None, fsync: bool = True, progress=None,
+             tracks=None, motion_options: dict | None = None, motion_out=None) -> ValidationResult:
     """Validate the uncertainty of every pair of a stream of chunks.
 
     Parameters
@@ -146,6 +147,13 @@ def validate(chunks: Iterable[LabelChunk], budget, *, contact="bottom-centre", o
     alpha : significance of the NEES test and the bias test
     extra : entries added to the summary (e.g. the folder report)
     progress : callable(n_rows) called after every chunk, or None
+    tracks : None, True or a :class:`~footprint_uq.tracking.table.TrackerConfig`
+        Also track the detections (per camera, by ``object_id`` and ``time_s``) and score velocity and heading
+        where the chunks carry a truth velocity (:mod:`footprint_uq.validation.motion`): the summary's
+        ``motion`` entry.  True: the default tracker (a budget's motion section applies over it).
+    motion_options : keyword arguments of :class:`~footprint_uq.validation.motion.MotionScorer` (``differences``,
+        ``truth_sigma_m``, ``max_span_s``: truth velocities from consecutive labelled frames)
+    motion_out : path of the per-row motion scores (``motion.csv``, with ``tracks``), or None
 
     Returns
     -------
@@ -158,6 +166,8 @@ def validate(chunks: Iterable[LabelChunk], budget, *, contact="bottom-centre", o
     groups = GroupIndex()
     S_of: dict[int, np.ndarray] = {}
     writer = ObjectWriter(objects_out, fsync=fsync) if objects_out is not None else None
+    scorer = None if tracks is None or tracks is False else MotionScorer(None if tracks is True else tracks,
+                                                                          alpha=alpha, **(motion_options or {}))
     ok = False
     try:
         for ch in chunks:
@@ -166,6 +176,8 @@ def validate(chunks: Iterable[LabelChunk], budget, *, contact="bottom-centre", o
                 g = groups.keys[ch.camera_key]
                 S_of.setdefault(g, load_budget(ch.budget if ch.budget is not None else bud).param_covariance())
             m = acc.add(pairs, S_of, groups.names())
+            if scorer is not None:
+                scorer.add(ch, pairs, bud)
             if writer is not None:
                 writer.write(_object_table(pairs, m, groups.names()))
             if progress is not None:
@@ -182,6 +194,10 @@ def validate(chunks: Iterable[LabelChunk], budget, *, contact="bottom-centre", o
     summary["unpaired"] = {"detections_without_truth": rows.get("no truth", 0),
                            "truth_without_detection": rows.get("no detection", 0),
                            "no_ground_point": rows.get("no ground point", 0), "error_rows": rows.get("error", 0)}
+    if scorer is not None:
+        summary["motion"] = scorer.summary()
+        if motion_out is not None:
+            scorer.write_rows(motion_out, fsync=fsync)
     if extra:
         summary.update(extra)
     return ValidationResult(summary, acc, Path(objects_out) if objects_out is not None else None)

@@ -60,13 +60,17 @@ from ..products.geo import GeoReference
 
 __all__ = ["LabelChunk", "FolderReport", "read_kitti_folder", "parse_kitti_labels", "read_dair_v2x_folder",
            "parse_dair_v2x_labels", "read_openlabel", "read_pairs_table", "read_detections_with_truth",
-           "TRUTH_XY_COLUMNS", "TRUTH_GEO_COLUMNS", "NO_TRUTH", "NO_DETECTION", "ROPE3D_IMAGE_SIZE_PX",
-           "camera_folders", "read_camera_folders", "openlabel_sequences", "read_openlabel_sequences",
-           "SEQUENCE_CALIBRATION", "row_problems", "MAX_BOX_PX", "MAX_TRUTH_RANGE_M", "MAX_TRUTH_Z_M", "MAX_COORD_M"]
+           "TRUTH_XY_COLUMNS", "TRUTH_VELOCITY_COLUMNS", "TRUTH_GEO_COLUMNS", "NO_TRUTH", "NO_DETECTION",
+           "ROPE3D_IMAGE_SIZE_PX", "camera_folders", "read_camera_folders", "openlabel_sequences",
+           "read_openlabel_sequences", "SEQUENCE_CALIBRATION", "row_problems", "MAX_BOX_PX", "MAX_TRUTH_RANGE_M",
+           "MAX_TRUTH_Z_M", "MAX_COORD_M"]
 
 #: truth columns of a pairs table: world frame, or WGS84 (needs the camera's geodetic origin)
 TRUTH_XY_COLUMNS = ("x_m", "y_m")
 TRUTH_GEO_COLUMNS = ("lat_deg", "lon_deg")
+#: optional truth velocity of a pairs table: true east / north, m/s (as ``objects --tracks`` writes its velocity);
+#: with them, ``timestamp_s`` and ``object_id`` are needed (docs/validation.md, "Velocity and heading")
+TRUTH_VELOCITY_COLUMNS = ("v_east_mps", "v_north_mps")
 #: reasons of the two kinds of unpaired rows (not errors: counted apart)
 NO_TRUTH = "no truth"
 NO_DETECTION = "no detection"
@@ -102,6 +106,9 @@ class LabelChunk:
     cov_uv_px2 : (n, 2, 2) or None  detector pixel covariance of the contact point
     error : list of (str or None)   why the row cannot be used (malformed, no truth, no detection, ...)
     budget : ErrorBudget or None    the camera's own budget (registry), None: the job's budget
+    time_s : (n,) float or None     the frame's time, s (NaN: none): tracks for velocity and heading
+    truth_v_world_mps : (n, 2) float or None   truth velocity in W, m/s (NaN: none; docs/validation.md,
+                                    "Velocity and heading")
     """
 
     source: str
@@ -118,6 +125,8 @@ class LabelChunk:
     error: list
     cov_uv_px2: np.ndarray | None = None
     budget: object = None
+    time_s: np.ndarray | None = None
+    truth_v_world_mps: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.line)
@@ -156,7 +165,9 @@ def _chunk(source, key, camera, rows: list[dict], *, budget=None) -> LabelChunk:
         truth_xy_world_m=np.array([r.get("truth", nan2) for r in rows], dtype=np.float64).reshape(n, 2),
         truth_z_m=np.array([r.get("z", np.nan) for r in rows], dtype=np.float64),
         yaw_world_rad=np.array([r.get("yaw", np.nan) for r in rows], dtype=np.float64),
-        error=[r.get("error") for r in rows], budget=budget)
+        error=[r.get("error") for r in rows], budget=budget,
+        time_s=np.array([r.get("time", np.nan) for r in rows], dtype=np.float64) if any("time" in r for r in rows)
+        else None)
 
 
 def _file_key(*paths) -> str:
@@ -517,6 +528,17 @@ def _openlabel_frames(path):
     return frames
 
 
+def _frame_time(frame) -> float | None:
+    """``frame_properties.timestamp`` (s) of an OpenLABEL frame, or None (absent or not a finite number)."""
+    props = frame.get("frame_properties") if isinstance(frame, dict) else None
+    t = props.get("timestamp") if isinstance(props, dict) else None
+    try:
+        t = float(t)
+    except (TypeError, ValueError):
+        return None
+    return t if np.isfinite(t) else None
+
+
 def read_openlabel(paths, *, calibration, ground_z_m: float = 0.0, image_size_px=None) -> Iterator[LabelChunk]:
     """TUMTraf OpenLABEL JSON file(s) of one camera -> one :class:`LabelChunk` per frame.
 
@@ -536,6 +558,10 @@ def read_openlabel(paths, *, calibration, ground_z_m: float = 0.0, image_size_px
                                                "error": "malformed OpenLABEL frame (objects is not a mapping)"}])
                 continue
             rows = [_openlabel_object(u, o, i, str(fname), ground_z_m) for i, (u, o) in enumerate(objs.items())]
+            t = _frame_time(fr)
+            if t is not None:  # the frame's time: tracks and truth velocities from consecutive frames
+                for r in rows:
+                    r["time"] = t
             if rows:
                 yield _chunk(path, key, cam, rows)
 
@@ -647,10 +673,35 @@ def read_pairs_table(path, cameras, *, georef: GeoReference | None = None, chunk
     geo_needed = truth_cols == TRUTH_GEO_COLUMNS
     if geo_needed and single and (georef is None or not georef.has_origin):
         raise InputError("origin", "missing", "--origin-lat/--origin-lon (the truth is lat_deg, lon_deg)")
-    reader.select(BOX2D_COLUMNS + truth_cols + tuple(c for c in COV_COLUMNS if c in reader.columns))
+    vel = all(c in reader.columns for c in TRUTH_VELOCITY_COLUMNS)
+    if vel or any(c in reader.columns for c in TRUTH_VELOCITY_COLUMNS):
+        need = [c for c in (*TRUTH_VELOCITY_COLUMNS, "timestamp_s", "object_id") if c not in reader.columns]
+        if need:
+            raise InputError(f"{path}: columns", need[0], "v_east_mps and v_north_mps (truth velocity) together with "
+                             "timestamp_s and object_id (the tracks that estimate the velocity)")
+    reader.select(BOX2D_COLUMNS + truth_cols + tuple(c for c in COV_COLUMNS if c in reader.columns)
+                  + (TRUTH_VELOCITY_COLUMNS if vel else ()))
     off = _line_of(reader.format)
     for ch in reader:
-        yield from _split_table_chunk(ch, path, cams, single, truth_cols, georef, off)
+        yield from _split_table_chunk(ch, path, cams, single, truth_cols, georef, off, vel)
+
+
+def _velocity_errors(v: np.ndarray, t: np.ndarray, errors: list) -> np.ndarray:
+    """Truth velocity rows checked in place of ``errors`` (a partial or non-finite velocity, a velocity without
+    a time: that row's error); returns ``v`` with NaN where the row is an error."""
+    nan = np.isnan(v)
+    for i in np.flatnonzero(nan.any(1) & ~nan.all(1) | (np.isinf(v).any(1)) | (~nan.all(1) & ~np.isfinite(t))):
+        if errors[i] is not None and errors[i] not in (NO_TRUTH, NO_DETECTION):
+            continue
+        if np.isinf(v[i]).any():
+            j = int(np.flatnonzero(np.isinf(v[i]))[0])
+            errors[i] = f"field {TRUTH_VELOCITY_COLUMNS[j]} is {v[i, j]}: expected a finite velocity in m/s"
+        elif nan[i].any():
+            errors[i] = "v_east_mps/v_north_mps: one empty (both or neither)"
+        else:
+            errors[i] = f"timestamp_s {t[i]}: a truth velocity needs a finite time"
+    bad = np.array([e is not None and e not in (NO_TRUTH, NO_DETECTION) for e in errors], dtype=bool)
+    return np.where(bad[:, None] | ~np.isfinite(v), np.nan, v)
 
 
 def _camera_groups(t: pa.Table, n: int, single: bool):
@@ -695,7 +746,7 @@ def _geo_range(truth: np.ndarray, errors: list) -> None:
     _first(errors, bad, "truth lat_deg / lon_deg out of range (expected -90..90 and -180..180 degrees)")
 
 
-def _split_table_chunk(ch, path, cams, single, truth_cols, georef, off):
+def _split_table_chunk(ch, path, cams, single, truth_cols, georef, off, vel=False):
     t, n = ch.table, ch.table.num_rows
     lines = ch.rows + off
     if ch.malformed:
@@ -705,10 +756,14 @@ def _split_table_chunk(ch, path, cams, single, truth_cols, georef, off):
     box = np.stack([_column(t, c, n) for c in BOX2D_COLUMNS], 1)
     truth = np.stack([_column(t, c, n) for c in truth_cols], 1)
     cov, partial = _pixel_cov(t, n)
-    pre = _nan_values(t, BOX2D_COLUMNS + truth_cols + COV_COLUMNS, ch.pre_errors)
+    pre = _nan_values(t, BOX2D_COLUMNS + truth_cols + COV_COLUMNS + (TRUTH_VELOCITY_COLUMNS if vel else ()),
+                      ch.pre_errors)
     errors = _table_errors(box, truth, partial, pre)
     if truth_cols == TRUTH_GEO_COLUMNS:
         _geo_range(truth, errors)
+    time_s = _column(t, "timestamp_s", n)
+    v_en = _velocity_errors(np.stack([_column(t, c, n) for c in TRUTH_VELOCITY_COLUMNS], 1), time_s, errors) \
+        if vel else None
     ids = {k: _ids(t, k, n) for k in ("frame", "object_id", "class")}
     for k, sel in _camera_groups(t, n, single):
         entry = cams.get(k)
@@ -727,11 +782,16 @@ def _split_table_chunk(ch, path, cams, single, truth_cols, georef, off):
                                  "origin_lon_deg or --origin-lat/--origin-lon): the truth is lat_deg, lon_deg")
             with np.errstate(invalid="ignore", over="ignore"):  # rows out of range are error rows already
                 tr = g.from_wgs84(tr[:, 0], tr[:, 1])
+        v_w = None
+        if v_en is not None:  # east / north -> W by the camera's heading offset (none given: W is east / north)
+            g = geo or georef
+            v_w = v_en[sel] @ g.R_enu_world if g is not None else v_en[sel]  # a rotation, no origin
         yield LabelChunk(source=str(path), camera_key=f"camera:{k}" if k is not None else "camera", camera=cam,
                          line=lines[sel], frame=ids["frame"][sel], object_id=ids["object_id"][sel],
                          cls=ids["class"][sel], box_xyxy_px=box[sel], truth_xy_world_m=tr,
                          truth_z_m=np.full(len(sel), np.nan), yaw_world_rad=np.full(len(sel), np.nan), error=err,
-                         cov_uv_px2=None if cov is None else cov[sel], budget=bud)
+                         cov_uv_px2=None if cov is None else cov[sel], budget=bud, time_s=time_s[sel],
+                         truth_v_world_mps=v_w)
 
 
 # ---------------------------------------------------------------------------------------------------

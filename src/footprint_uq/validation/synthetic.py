@@ -15,10 +15,11 @@ import pyarrow as pa
 
 from ..cameras.general import backproject
 from ..cameras.pantilt import PanTiltCamera
+from ..tracking.synthetic import default_camera, trajectories, true_pixels
 from ..uncertainty.budget import load_budget
-from .readers import LabelChunk
+from .readers import NO_DETECTION, LabelChunk
 
-__all__ = ["random_cameras", "campaign_chunks", "campaign_table"]
+__all__ = ["random_cameras", "campaign_chunks", "campaign_table", "motion_chunks"]
 
 
 def random_cameras(n_cameras: int, *, seed: int = 0, image_size_px=(1920, 1080)) -> dict[str, PanTiltCamera]:
@@ -76,3 +77,43 @@ def campaign_table(cameras: dict, budget, n_per_camera: int, *, seed: int = 0) -
             cols[c] = pa.array(ch.box_xyxy_px[:, j])
         cols["x_m"], cols["y_m"] = pa.array(ch.truth_xy_world_m[:, 0]), pa.array(ch.truth_xy_world_m[:, 1])
         yield pa.table(cols)
+
+
+def motion_chunks(n_campaigns: int, n_objects: int, budget="basler1@deg", *, duration_s: float = 4.0,
+                  rate_hz: float = 10.0, truth_accel_psd_m2ps3: float = 1.5, detector_sigma_px: float = 1.5,
+                  scenario: str = "straight", seed: int = 0) -> Iterator[LabelChunk]:
+    """Seeded labelled sequences with a known truth velocity: one :class:`LabelChunk` per campaign (one camera,
+    :func:`~footprint_uq.tracking.synthetic.default_camera`, with one calibration draw), every frame's objects
+    with ``time_s``, ``object_id`` and ``truth_v_world_mps``.
+
+    The truth moves as :func:`~footprint_uq.tracking.synthetic.trajectories` (``scenario``, white-noise
+    acceleration of density ``truth_accel_psd_m2ps3``, m^2/s^3); each detection is a box whose bottom centre is
+    the truth's pixel in the true camera plus the budget's pixel noise and the detector's (``detector_sigma_px``,
+    given as the rows' ``cov_uv_px2``).
+    """
+    bud = load_budget(budget)
+    rng = np.random.default_rng(seed)
+    cam = default_camera()
+    L = bud.param_factor().dense()
+    det = detector_sigma_px ** 2 * np.eye(2)
+    A_px = np.linalg.cholesky(bud.pixel_covariance() + det)
+    for c in range(n_campaigns):
+        tr = trajectories(scenario, n_objects, rate_hz, duration_s, rng, truth_accel_psd_m2ps3=truth_accel_psd_m2ps3)
+        p_true = np.repeat((cam.params + L @ rng.standard_normal(L.shape[1]))[None], n_objects, axis=0)
+        F = len(tr.t_s)
+        uv = np.concatenate([true_pixels(cam, p_true, tr.xy_m[k]) for k in range(F)])
+        uv = uv + rng.standard_normal(uv.shape) @ A_px.T
+        n = len(uv)
+        half_w, h = np.repeat(rng.uniform(20, 60, n_objects)[None], F, 0).ravel(), 40.0
+        boxes = np.stack([uv[:, 0] - half_w, uv[:, 1] - h, uv[:, 0] + half_w, uv[:, 1]], 1)
+        W, H = cam.image_size_px  # a road user that leaves the image (under the camera) is a truth without detection
+        seen = np.isfinite(uv).all(1) & (uv[:, 0] >= 0) & (uv[:, 0] <= W) & (uv[:, 1] >= 0) & (uv[:, 1] <= H)
+        boxes[~seen] = np.nan
+        ids = np.array([f"{c}-{i}" for _ in range(F) for i in range(n_objects)], dtype=object)
+        yield LabelChunk(source="synthetic", camera_key=f"camera:{c}", camera=cam, line=np.arange(n),
+                         frame=np.repeat(np.arange(F), n_objects).astype(object), object_id=ids,
+                         cls=np.full(n, "car", dtype=object), box_xyxy_px=boxes,
+                         truth_xy_world_m=tr.xy_m.reshape(n, 2), truth_z_m=np.zeros(n),
+                         yaw_world_rad=np.full(n, np.nan), error=[None if s else NO_DETECTION for s in seen],
+                         cov_uv_px2=np.broadcast_to(det, (n, 2, 2)).copy(), time_s=np.repeat(tr.t_s, n_objects),
+                         truth_v_world_mps=tr.v_mps.reshape(n, 2))

@@ -249,7 +249,58 @@ def validation_html(summary: dict, figures: dict, *, title: str = "Validation of
     if groups:
         parts += [f"<h2>Calibration groups ({len(groups)})</h2>",
                   html_table(groups[:100], ["group", "n", "nees_mean", "coverage_95"], floatfmt=".3g")]
+    if "motion" in summary:
+        parts += _motion_html(summary["motion"])
     return html_page(title, parts)
+
+
+_MOTION_NOTE = ("Velocity: NEES = dv^T C_v^-1 dv against chi-square(2); heading: ((truth - track) / sigma)^2 against "
+                "chi-square(1), only where the tracker states a heading sigma and the truth moves. The verdict tests "
+                "the mean NEES with a cluster-robust standard error (tracks, and cameras from 5 on, as clusters: "
+                "consecutive estimates of one track are correlated); n_eff is the number of independent objects "
+                "with the same information (docs/validation.md, \"Velocity and heading\").")
+
+
+def _motion_rows(block: dict) -> list[dict]:
+    return [{"nominal": _pct(r["nominal"]), "inside": r["inside"], "n": r["n"], "empirical": _pct(r["empirical"]),
+             "at n_eff": f"{_pct(r['interval_n_eff'][0])} &ndash; {_pct(r['interval_n_eff'][1])}"}
+            for r in block["coverage"]]
+
+
+def _motion_line(what: str, block: dict) -> str:
+    t = block["test"]
+    v = t.get("verdict")
+    if v is None:
+        return f"<p>{esc(what)}: no verdict ({t['n']} scored).</p>"
+    col = _VERDICT_COLOUR.get(v, "#555")
+    weak = " (weak evidence)" if t.get("evidence") == "weak" else ""
+    return (f'<p>{esc(what)}: <b style="color:{col}">{esc(v)}</b>{weak} (mean NEES {t["nees_mean"]:.3g}, expected '
+            f'{t["nees_expected"]:.0f}; p = {t["p_value"]:.3g}; n = {t["n"]}, {t["n_tracks"]} tracks, '
+            f'effective n = {t["n_eff"]:.3g}).</p>')
+
+
+def _motion_html(motion: dict | None) -> list[str]:
+    """The report's "Velocity and heading" section (``summary["motion"]``)."""
+    if motion is None:
+        return ["<h2>Velocity and heading</h2>", '<p class="note">No row carries a truth velocity: velocity and '
+                "heading not scored.</p>"]
+    cols = ["nominal", "inside", "n", "empirical", "at n_eff"]
+    parts = ["<h2>Velocity and heading</h2>", _motion_line("Velocity", motion["velocity"]),
+             _raw_table(_motion_rows(motion["velocity"]), cols), _motion_line("Heading", motion["heading"]),
+             _raw_table(_motion_rows(motion["heading"]), cols),
+             html_table([{k.replace("_", " "): v for k, v in motion["counts"].items()}]),
+             f'<p class="note">{esc(_MOTION_NOTE)}</p>']
+    rows = []
+    for cls, b in motion.get("by_class", {}).items():
+        for what in ("velocity", "heading"):
+            t = b[what]["test"]
+            c95 = next((r for r in b[what]["coverage"] if r["nominal"] == 0.95), None)
+            rows.append({"class": cls, "quantity": what, "n": t["n"], "nees_mean": t["nees_mean"],
+                         "coverage_95": None if c95 is None else c95["empirical"], "verdict": t.get("verdict")})
+    if rows:
+        parts += ["<h3>Velocity and heading by class</h3>",
+                  html_table(rows, ["class", "quantity", "n", "nees_mean", "coverage_95", "verdict"], floatfmt=".3g")]
+    return parts
 
 
 def _folder_note(folder) -> str:

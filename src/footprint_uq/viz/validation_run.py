@@ -11,6 +11,7 @@ new or hold only a previous run's files, :data:`VALIDATION_OWN`):
 ``objects.csv``    one row per input object (``--objects-format parquet``: ``objects.parquet``)
 ``report.html``    self-contained report with the figures
 ``calibration.png`` the coverage-calibration figure
+``motion.csv``     with ``tracks``: per tracked detection, the truth velocity and the velocity / heading scores
 =================  ========================================================================
 """
 
@@ -39,7 +40,7 @@ __all__ = ["run_validation", "detect_kind", "label_chunks", "KINDS", "VALIDATION
 KINDS = ("kitti", "kitti-cameras", "dair-v2x", "openlabel", "openlabel-sequences", "table")
 VALIDATION_FILES = {"summary": "summary.json", "report": "report.html", "calibration_png": "calibration.png"}
 #: every name a run writes into its folder (a folder holding anything else is refused, not replaced)
-VALIDATION_OWN = ("summary.json", "report.html", "calibration.png", "objects.csv", "objects.parquet")
+VALIDATION_OWN = ("summary.json", "report.html", "calibration.png", "objects.csv", "objects.parquet", "motion.csv")
 
 
 def detect_kind(labels) -> str:
@@ -130,7 +131,8 @@ def run_validation(labels, out_dir, budget, *, kind: str | None = None, contact=
                    heading_offset_deg: float = 0.0, range_bands_m=DEFAULT_RANGE_BANDS_M, alpha: float = 0.05,
                    objects_format: str = "csv", chunk_rows: int = 131_072, report: bool = True, dpi: int = 110,
                    fsync: bool = True, progress=None, detections=None, detections_format: str | None = None,
-                   class_names=None, unknown_class: str = "error", stage=None) -> tuple[dict, dict]:
+                   class_names=None, unknown_class: str = "error", stage=None, tracks=None,
+                   motion_options: dict | None = None) -> tuple[dict, dict]:
     """Validate labelled data and write the outputs into ``out_dir``.
 
     Parameters
@@ -152,6 +154,9 @@ def run_validation(labels, out_dir, budget, *, kind: str | None = None, contact=
         ``detections_format`` / ``class_names`` / ``unknown_class`` as :func:`footprint_uq.batch.formats.open_reader`)
         paired with ``labels``, a truth table of ``frame, object_id`` and the truth point (docs/integrations.md)
     progress : callable(n_pairs) after every chunk; stage : callable(str) as each stage starts
+    tracks : None, True or a TrackerConfig: also score velocity and heading where the labels carry a truth
+        velocity (:func:`footprint_uq.validation.job.validate`, docs/validation.md "Velocity and heading");
+        ``motion_options`` as there
 
     Returns
     -------
@@ -165,7 +170,8 @@ def run_validation(labels, out_dir, budget, *, kind: str | None = None, contact=
     if objects_format not in ("csv", "parquet"):
         raise InputError("objects_format", objects_format, "csv or parquet")
     georef = None
-    if origin_lat_deg is not None or origin_lon_deg is not None:
+    if origin_lat_deg is not None or origin_lon_deg is not None or heading_offset_deg:
+        # (the heading offset alone rotates truth velocities given east / north into W)
         georef = GeoReference(heading_offset_deg, origin_lat_deg, origin_lon_deg)
     folder = R.FolderReport()
     chunks = label_chunks(labels, kind, folder, camera=camera, registry=registry, budget=budget,
@@ -176,20 +182,26 @@ def run_validation(labels, out_dir, budget, *, kind: str | None = None, contact=
     with output_set(out_dir, VALIDATION_OWN, "validate", fsync=fsync) as staging:
         summary, files = _write_validation(staging, labels, kind, folder, chunks, budget, contact_fn, range_bands_m,
                                            alpha, objects_format, report, dpi, fsync, progress, detections,
-                                           size_priors, stage)
+                                           dict(size_priors=size_priors, stage=stage, tracks=tracks,
+                                                motion_options=motion_options))
     return summary, final_paths(files, staging, out_dir)
 
 
 def _write_validation(out: Path, labels, kind, folder, chunks, budget, contact, range_bands_m, alpha, objects_format,
-                      report, dpi, fsync, progress, detections=None, size_priors=None,
-                      stage=None) -> tuple[dict, dict]:
-    """The job's files written into ``out`` (the hidden staging folder of :func:`run_validation`)."""
+                      report, dpi, fsync, progress, detections=None, extra: dict | None = None) -> tuple[dict, dict]:
+    """The job's files written into ``out`` (the hidden staging folder of :func:`run_validation`); ``extra``:
+    ``size_priors``, ``stage`` (the stage lines), ``tracks`` and ``motion_options`` of :func:`run_validation`."""
+    extra = extra or {}
+    size_priors, tracks, motion_options = extra.get("size_priors"), extra.get("tracks"), extra.get("motion_options")
     files = {"objects": out / f"objects.{objects_format}", "summary": out / VALIDATION_FILES["summary"]}
-    say = stage or (lambda msg: None)
+    if tracks:
+        files["motion"] = out / "motion.csv"
+    say = extra.get("stage") or (lambda msg: None)
     contact_name = contact if isinstance(contact, str) else getattr(contact, "__name__", "custom")
     say(f"reading the {kind} labels and pairing detections with truth (contact model {contact_name})")
     res = validate(chunks, budget, contact=contact, objects_out=files["objects"], range_bands_m=range_bands_m,
-                   alpha=alpha, fsync=fsync, progress=progress)
+                   alpha=alpha, fsync=fsync, progress=progress, tracks=tracks,
+                   motion_options=motion_options, motion_out=files.get("motion"))
     summary = res.summary
     summary.update(labels=str(labels), kind=kind, folder=folder.to_dict(),
                    size_priors=None if size_priors is None else str(size_priors))
