@@ -384,7 +384,8 @@ def run(quick: bool = False) -> list[dict]:
          "target": f"<= {TARGET_US:.0f} us", "met": st.get("total", times["process_frame_total_us"]) <= TARGET_US,
          "notes": "stages (median us, in the service under load): " + ", ".join(f"{k} {v:.0f}" for k, v in st.items())
                   + "; in the bench process after the load run: "
-                  + ", ".join(f"{k} {v:.0f}" for k, v in times.items())},
+                  + ", ".join(f"{k} {v:.0f}" if isinstance(v, int | float) else f"{k} {v}"
+                              for k, v in times.items())},
     ]
 
 

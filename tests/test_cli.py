@@ -333,3 +333,13 @@ def test_registry_loads_every_command_lazily():
             "print(before, mid, 'footprint_uq.viz.map_report' in sys.modules)")
     p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert p.stdout.split() == ["False", "False", "True"], p.stderr
+
+
+def test_a_long_value_keeps_its_start_and_end_in_the_message():
+    """A long path in a one-line error keeps its file name (the end), not only its first 77 characters."""
+    from footprint_uq.errors import InputError
+
+    path = "/tmp/" + "deep/" * 30 + "d.parquet"
+    msg = str(InputError("detections", path, "a regular file"))
+    assert "d.parquet'" in msg and "'/tmp/deep/" in msg and "..." in msg
+    assert len(msg) < 160

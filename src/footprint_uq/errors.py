@@ -18,7 +18,8 @@ def _fmt_value(value: object) -> str:
         text = repr(value)
     except ValueError:  # an integer beyond Python's int -> str digit limit
         text = f"<{type(value).__name__} too long to print>"
-    return text if len(text) <= 80 else text[:77] + "..."
+    # a long value keeps its start and its end (a long path keeps its file name)
+    return text if len(text) <= 80 else text[:38] + "..." + text[-39:]
 
 
 class InputError(FootprintUQError, ValueError):

@@ -356,12 +356,19 @@ def read_openlabel_sequences(folder, *, calibration=None, ground_z_m: float = 0.
     seqs = openlabel_sequences(folder)
     if not seqs:
         raise ConfigError("labels", str(folder), "a folder of OpenLABEL sequence folders (each with *.json frames)")
-    for seq in seqs:
-        own = seq / SEQUENCE_CALIBRATION
+    calibs = []
+    for seq in seqs:  # every sequence's calibration known before the first is read: a missing one fails the job up
+        own = seq / SEQUENCE_CALIBRATION  # front, not after minutes of work on the others
         calib = own if own.is_file() else calibration
         if calib is None:
             raise InputError("--calibration", f"missing for sequence {seq.name!r}",
                              f"a {SEQUENCE_CALIBRATION} in the sequence folder or --calibration CAMERA.json")
+        calibs.append(calib)
+    return _openlabel_sequence_chunks(seqs, calibs, ground_z_m, image_size_px)
+
+
+def _openlabel_sequence_chunks(seqs, calibs, ground_z_m, image_size_px) -> Iterator[LabelChunk]:
+    for seq, calib in zip(seqs, calibs, strict=True):
         files = sorted(p for p in seq.glob("*.json") if p.name != SEQUENCE_CALIBRATION)
         for ch in read_openlabel(files, calibration=calib, ground_z_m=ground_z_m, image_size_px=image_size_px):
             ch.frame = _obj(f"{seq.name}/{f}" for f in ch.frame)
