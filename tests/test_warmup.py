@@ -476,3 +476,25 @@ def test_warmup_says_when_it_waits_for_another_compile(monkeypatch, tmp_path):
         proc.wait()
     job.join(30.0)
     assert not job.is_alive() and set(out) == {"lens"}
+
+
+def test_a_library_call_that_compiles_in_its_own_process_says_so_once(monkeypatch):
+    """The README's first Python call in a cold cache compiles for tens of seconds: never in silence. The gate
+    says once per group that it compiles (naming `footprint-uq warmup`), runs the kernels, and is quiet after."""
+    import warnings
+
+    monkeypatch.setattr(W, "cold_groups", lambda groups: list(groups))
+    monkeypatch.setattr(W, "compiling_elsewhere", lambda group: False)
+    gate = W.LibraryGate()
+    with pytest.warns(W.CompileNotice) as caught:
+        assert gate("objects") is True
+    assert len(caught) == 1
+    msg = str(caught[0].message)
+    assert "compiling the objects kernels once" in msg and "footprint-uq warmup" in msg
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert gate("objects") is True  # said once: the group is ready
+    monkeypatch.setattr(W, "cold_groups", lambda groups: [])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert gate("map") is True  # a cached group: nothing to say

@@ -52,7 +52,7 @@ from .maps import uncertainty_map
 
 __all__ = ["GROUPS", "ABOUT_S", "MODES", "cold_groups", "compile_notice", "compile_handler", "KernelGate",
            "compile_mode", "group_lock", "start_background", "warmup", "compiling_elsewhere", "wait_for_compile",
-           "LibraryGate", "CompileWaitWarning", "WAIT_S", "compile_wait_s", "wait_notice"]
+           "LibraryGate", "CompileWaitWarning", "CompileNotice", "WAIT_S", "compile_wait_s", "wait_notice"]
 
 #: the entry kernels of each group (their cache index files tell whether the group is compiled)
 GROUPS = {
@@ -266,6 +266,12 @@ class CompileWaitWarning(RuntimeWarning):
     """A library call found its kernels being compiled by another process and did not wait for it past a bound."""
 
 
+class CompileNotice(UserWarning):
+    """A library call is about to compile a kernel group in its own process (once per installation): said once,
+    so that a first call of tens of seconds is never silent (``warnings.simplefilter("ignore", CompileNotice)``
+    silences it; ``footprint-uq warmup`` avoids the wait)."""
+
+
 #: how long a library call waits, at most, for another process's compile of its kernels (seconds)
 WAIT_S = 20.0
 
@@ -321,12 +327,15 @@ class LibraryGate:
                 self._next_poll[group] = now + _POLL_S
                 if compiling_elsewhere(group):
                     return False
-            elif compiling_elsewhere(group) and cold_groups([group]):
-                wait_s = compile_wait_s() if self.wait_s is None else self.wait_s
-                warnings.warn(wait_notice(group, wait_s), CompileWaitWarning, stacklevel=4)
-                if not wait_for_compile(group, wait_s):
-                    self._next_poll[group] = time.monotonic() + _POLL_S
-                    return False
+            elif cold_groups([group]):
+                if compiling_elsewhere(group):
+                    wait_s = compile_wait_s() if self.wait_s is None else self.wait_s
+                    warnings.warn(wait_notice(group, wait_s), CompileWaitWarning, stacklevel=4)
+                    if not wait_for_compile(group, wait_s):
+                        self._next_poll[group] = time.monotonic() + _POLL_S
+                        return False
+                else:  # compiled here, now: said once, never a silent wait of tens of seconds
+                    warnings.warn(f"footprint-uq: {compile_notice([group])}", CompileNotice, stacklevel=4)
             self._ready.add(group)  # (a compile elsewhere that failed leaves the group cold: compiled here)
             return True
 
