@@ -498,3 +498,17 @@ def test_a_library_call_that_compiles_in_its_own_process_says_so_once(monkeypatc
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         assert gate("map") is True  # a cached group: nothing to say
+
+
+def test_warmup_itself_says_no_compile_notice(monkeypatch):
+    """`footprint-uq warmup` (and a command's background compile) compiles on purpose: the library's notice
+    would only repeat what its own progress line says."""
+    import warnings
+
+    monkeypatch.setattr(W, "cold_groups", lambda groups: list(groups))
+    monkeypatch.setattr(W, "compiling_elsewhere", lambda group: False)
+    monkeypatch.setattr(_notices, "_library_handler", W.LibraryGate())  # a fresh process's gate, every group cold
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", W.CompileNotice)
+        out = W.warmup(["objects"])
+    assert set(out) == {"objects"}

@@ -400,6 +400,8 @@ def warmup(groups: Iterable[str] | None = None, *, progress: Callable[[str], Non
             if progress is not None:
                 progress(g)
             t0 = time.perf_counter()
-            _WARM[g](budget)
+            with warnings.catch_warnings():  # compiling is what was asked for: no CompileNotice about it
+                warnings.simplefilter("ignore", CompileNotice)
+                _WARM[g](budget)
             out[g] = time.perf_counter() - t0
     return out
