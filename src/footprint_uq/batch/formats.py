@@ -149,7 +149,9 @@ class FormatReader:
         return False
 
     def records(self) -> Iterator[tuple[tuple, tuple | None, str | None, int]]:
-        raise NotImplementedError
+        """``(ids, box or None, reason or None, bytes)`` of every detection, in input order: each format's own
+        parser (every registered subclass defines it; the base class is never instantiated)."""
+        raise NotImplementedError(f"{type(self).__name__} defines no records(): every FormatReader subclass must")
 
     # DetectionReader's interface
     def select(self, numeric) -> None:
