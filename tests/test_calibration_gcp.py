@@ -24,6 +24,7 @@ from footprint_uq.cli.main import main
 from footprint_uq.errors import ConsistencyWarning, InputError
 from footprint_uq.io import load_camera
 from gcp_campaigns import SIZE, campaign, coverage
+from kill_driver import KILL_DRIVER
 
 CHESS = Path(__file__).parent / "data" / "opencv-chessboard-right"
 POSE = list(range(P.XM, P.ROLL + 1))
@@ -456,31 +457,6 @@ def test_image_checked_from_its_header_before_decoding(tmp_path):
 
 
 # ------------------------------------------------------------------------------------------ outputs as one unit
-_KILL_DRIVER = """
-import os, signal, sys
-import footprint_uq.io.atomic as A
-from footprint_uq.calibration import gcp_run  # imported once, before the forks
-from footprint_uq.cli.main import main
-outs, args = sys.argv[1].split(","), sys.argv[2:]
-for k, out in enumerate(outs, start=1):  # one forked run per kill point: killed after its k-th rename
-    pid = os.fork()
-    if pid == 0:
-        n = [0]
-        def hook(f):
-            def w(*a, **kw):
-                r = f(*a, **kw)
-                n[0] += 1
-                if n[0] == k:
-                    os.kill(os.getpid(), signal.SIGKILL)
-                return r
-            return w
-        os.replace, os.rename, A._exchange = hook(os.replace), hook(os.rename), hook(A._exchange)
-        try:
-            main(args + ["--out", out], standalone_mode=False)
-        finally:
-            os._exit(0)
-    print("STATUS", k, os.waitpid(pid, 0)[1], flush=True)
-"""
 
 
 def _gcp_sets(tmp_path):
@@ -516,7 +492,7 @@ def test_kill_after_every_rename_leaves_the_old_set_or_the_new_set(tmp_path):
     for k in range(1, 9):  # 6 files written in the hidden folder, then the swap; 8: past the end
         outs.append(tmp_path / f"out{k}")
         shutil.copytree(tmp_path / "A", outs[-1])
-    p = subprocess.run([sys.executable, "-c", _KILL_DRIVER, ",".join(map(str, outs)), *args, "--points", str(b)],
+    p = subprocess.run([sys.executable, "-c", KILL_DRIVER, ",".join(map(str, outs)), *args, "--points", str(b)],
                        env=env, capture_output=True, text=True, timeout=600)
     status = dict(line.split()[1:] for line in p.stdout.splitlines() if line.startswith("STATUS "))
     assert len(status) == 8, p.stderr[-800:]

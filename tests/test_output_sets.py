@@ -27,6 +27,7 @@ from click.testing import CliRunner
 from footprint_uq.cli.main import main
 from footprint_uq.errors import InputError
 from footprint_uq.io.atomic import OLD_MARK, TMP_MARK, final_paths, output_set
+from kill_driver import KILL_DRIVER
 from test_planning import small_site_dict
 
 DATA = Path(__file__).resolve().parent / "data"
@@ -133,36 +134,6 @@ def test_commands_refuse_a_folder_with_the_users_files_in_one_line(tmp_path, arg
 
 
 # ------------------------------------------------------------------------------------------------ killed runs
-_KILL_DRIVER = """
-import os, signal, sys
-import footprint_uq.io.atomic as A
-from footprint_uq.cli.main import main
-main.get_command(None, sys.argv[2])  # the command's modules imported once, before the forks
-outs, args = sys.argv[1].split(","), sys.argv[2:]
-for k, out in enumerate(outs, start=1):  # one forked run per kill point: killed after its k-th rename
-    pid = os.fork()
-    if pid == 0:
-        n = [0]
-        def hook(f):
-            def w(*a, **kw):
-                r = f(*a, **kw)
-                n[0] += 1
-                if n[0] == k:
-                    os.kill(os.getpid(), signal.SIGKILL)
-                return r
-            return w
-        os.replace, os.rename, A._exchange = hook(os.replace), hook(os.rename), hook(A._exchange)
-        try:
-            main(args + ["--out", out], standalone_mode=False)
-        except BaseException as e:
-            print("ERROR", k, type(e).__name__, e, file=sys.stderr, flush=True)
-            os._exit(1)
-        os._exit(0)
-    status = os.waitpid(pid, 0)[1]
-    print("STATUS", k, status, flush=True)
-    if status != signal.SIGKILL:  # past the last rename: the rest would not be killed either
-        break
-"""
 
 
 def _site_files(tmp_path):
@@ -225,7 +196,7 @@ def test_kill_after_every_rename_leaves_the_old_set_or_the_new_set(tmp_path, nam
         shutil.copytree(tmp_path / "A", outs[-1])
     env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(SRC), str(Path(__file__).parent),
                                                        os.environ.get("PYTHONPATH", "")]))
-    p = subprocess.run([sys.executable, "-c", _KILL_DRIVER, ",".join(map(str, outs)), *args_b], env=env,
+    p = subprocess.run([sys.executable, "-c", KILL_DRIVER, ",".join(map(str, outs)), *args_b], env=env,
                        capture_output=True, text=True, timeout=900)
     status = [line.split()[1:] for line in p.stdout.splitlines() if line.startswith("STATUS ")]
     assert status and status[-1][1] == "0" and all(s[1] == "9" for s in status[:-1]), (status, p.stderr[-800:])
