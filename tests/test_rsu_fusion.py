@@ -123,6 +123,20 @@ def test_sticky_until_gate_broken_for_unstick_frames():
     assert f.objects().sensor_ids == [(1,), (2,)]
 
 
+@pytest.mark.parametrize("leave, stays", [(0.999, True), (0.99, False)])
+def test_a_sticky_pair_leaves_only_beyond_the_wider_leave_gate(leave, stays):
+    """Hysteresis: joining needs d^2 <= 9.21 (99 %), leaving needs d^2 > 13.8 (99.9 %) in unstick_frames frames
+    running; a pair at d^2 ~ 11 (a camera whose calibration error is ~3 sigma in a region) stays in its object."""
+    f = _unit(unstick_frames=3, leave_confidence=leave)
+    f.step("cam0", 0.0, **_frame([[0.0, 0.0]], v=(0, 0)))
+    f.step("cam1", 0.0, **_frame([[0.1, 0.0]], v=(0, 0)))
+    dx = math.sqrt(11.0 * 0.08)  # P_c + P_o = 0.08 I: d^2 = 11
+    for k in range(1, 6):
+        f.step("cam0", 0.1 * k, **_frame([[0.0, 0.0]], v=(0, 0)))
+        f.step("cam1", 0.1 * k, **_frame([[dx, 0.0]], v=(0, 0)))
+    assert (len(f) == 1 and f.n_unstuck == 0) == stays
+
+
 def test_merge_keeps_older_id():
     """Two objects seen by one camera each (first seen apart), later consistent: merged under the older id."""
     f = _unit()
@@ -200,6 +214,7 @@ def test_bad_rows_reported_with_index_rest_fused():
 @pytest.mark.parametrize("kw, field", [
     (dict(gate_confidence=math.nan), "gate_confidence"), (dict(gate_confidence=1.0), "gate_confidence"),
     (dict(unstick_frames=0), "unstick_frames"), (dict(max_lateness_s=math.nan), "max_lateness_s"),
+    (dict(leave_confidence=0.95), "leave_confidence"), (dict(leave_confidence=1.0), "leave_confidence"),
     (dict(member_timeout_s=-1.0), "member_timeout_s"), (dict(method="mean"), "method")])
 def test_config_refuses_bad_values(kw, field):
     with pytest.raises(InputError) as e:

@@ -6,9 +6,10 @@ objects (track ids, time, position / velocity and their covariances, class) and 
 (docs/rsu-fusion.md, "One object list per roadside unit"):
 
 **Association** (per camera frame, in two steps).  A (camera, track id) pair that is already part of a fused object
-stays in it (*sticky*) while its position passes the gate against the object's estimate from the *other* cameras
-(predicted to the frame's time); once the gate is broken in ``unstick_frames`` consecutive frames of that camera
-the pair leaves the object and is associated afresh.  Every other row (a new pair, a pair that left, a pair whose
+stays in it (*sticky*) while its position passes the *leave gate* (chi-square, 2 dof, ``leave_confidence`` 99.9 %:
+13.8; wider than the joining gate: hysteresis) against the object's estimate from the *other* cameras (predicted to
+the frame's time); once that gate is broken in ``unstick_frames`` consecutive frames of that camera the pair leaves
+the object and is associated afresh.  Every other row (a new pair, a pair that left, a pair whose
 object no other camera sees) is associated by one globally optimal assignment per frame
 (:func:`scipy.optimize.linear_sum_assignment` on the squared Mahalanobis distances): cost
 ``d^2 = (x_c - x_o)^T (P_c + P_o)^-1 (x_c - x_o)`` between the row and the object's estimate from the other cameras,
@@ -80,6 +81,8 @@ class RsuFusionConfig:
     """Options of :class:`RsuFusion` (module doc).
 
     gate_confidence : float           chi-square (2 dof) level of the association gate (0.99: d^2 <= 9.21)
+    leave_confidence : float          chi-square level a sticky pair must break (``unstick_frames`` times running)
+                                      to leave its object (0.999: d^2 > 13.8; >= ``gate_confidence``: hysteresis)
     unstick_frames : int              consecutive frames of a camera with the gate broken before its pair leaves
                                       its fused object
     member_timeout_s : float          a camera's contribution not updated for this long leaves the object (s)
@@ -91,6 +94,7 @@ class RsuFusionConfig:
     """
 
     gate_confidence: float = 0.99
+    leave_confidence: float = 0.999
     unstick_frames: int = 3
     member_timeout_s: float = 1.0
     max_lateness_s: float = 0.5
@@ -101,6 +105,10 @@ class RsuFusionConfig:
     def __post_init__(self):
         object.__setattr__(self, "gate_confidence", as_float("gate_confidence", self.gate_confidence))
         gate_chi2(self.gate_confidence)
+        object.__setattr__(self, "leave_confidence", as_float("leave_confidence", self.leave_confidence))
+        if not self.gate_confidence <= self.leave_confidence < 1.0:
+            raise InputError("leave_confidence", self.leave_confidence,
+                             f"a probability in [gate_confidence ({self.gate_confidence}), 1)")
         object.__setattr__(self, "unstick_frames", as_int("unstick_frames", self.unstick_frames, minimum=1,
                                                                    expected="an integer >= 1"))
         for name in ("member_timeout_s", "accel_psd_m2ps3", "unknown_velocity_sigma_mps"):
@@ -212,6 +220,7 @@ class RsuFusion:
     def __init__(self, config: RsuFusionConfig | None = None):
         self.config = config or RsuFusionConfig()
         self.gate = gate_chi2(self.config.gate_confidence)
+        self.leave_gate = gate_chi2(self.config.leave_confidence)
         self.cameras: dict = {}
         self._objects: dict[int, _Object] = {}
         self._pairs: dict = {}  # (camera id, track id) -> object id
@@ -329,7 +338,7 @@ class RsuFusion:
         d2 = _mahalanobis2(xy[check] - xo, self._row_cov(camera_id, check, P, v, Pv) + Po)
         for i, oid, dd in zip(check, oids, d2.tolist(), strict=True):
             member = self._objects[oid].members[camera_id]
-            member.misses = 0 if dd <= self.gate else member.misses + 1
+            member.misses = 0 if dd <= self.leave_gate else member.misses + 1
             if member.misses >= self.config.unstick_frames:
                 self._detach((camera_id, int(tid[i])), oid)
                 self.n_unstuck += 1
