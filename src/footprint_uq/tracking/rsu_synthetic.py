@@ -22,7 +22,9 @@ with the budget's pixel noise plus ``detector_sigma_px``, back-projected by the 
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 
@@ -33,9 +35,10 @@ from ..products.footprints import FrameProcessor
 from ..uncertainty.budget import load_budget
 from .rsu_fusion import RsuFusion, RsuFusionConfig
 from .synthetic import CHI2_95_2D
-from .table import SharedJacobianAt, TrackerConfig, TrackTable
+from .table import SharedJacobianAt, TrackerConfig, TrackOutput, TrackTable
 
-__all__ = ["intersection_cameras", "LANES", "RsuSimResult", "simulate", "coverage_sweep"]
+__all__ = ["intersection_cameras", "LANES", "RsuSimResult", "simulate", "coverage_sweep", "camera_frames",
+           "CameraFrame", "UnitFrame", "evaluate"]
 
 _XM, _YM, _GDZ, _GSX, _GSY = (P.PARAM_NAMES.index(k) for k in ("x_m", "y_m", "ground_dz_m", "ground_slope_x",
                                                                  "ground_slope_y"))
@@ -186,29 +189,49 @@ def _detect(cam: _Camera, xy: np.ndarray, A_px: np.ndarray, max_range_m: float, 
     return live[ok], uv[ok]
 
 
-def simulate(n_frames: int = 300, *, rate_hz: float = 10.0, seed: int = 0, budget="basler1@deg",
-             detector_sigma_px: float = 1.5, clock_offset_sigma_s: float = 0.005, phase_s: float = 20.0,
-             max_range_m: float = 60.0, truth_accel_psd_m2ps3: float = 1.0, config: RsuFusionConfig | None = None,
-             tracker: TrackerConfig | None = None, warmup_frames: int = 0) -> RsuSimResult:
-    """One seeded run (module doc); frames before ``warmup_frames`` are run but not counted."""
+class CameraFrame(NamedTuple):
+    """One camera's frame of a run: the camera's index, its stamp (its own clock: ``t + offset``, s), its
+    :class:`~footprint_uq.tracking.table.TrackTable` output and the truth index of every row."""
+
+    camera: int
+    stamp_s: float
+    tracks: TrackOutput
+    truth_index: np.ndarray
+
+
+class UnitFrame(NamedTuple):
+    """One unit frame: its number, the true time ``t_s`` (s from the run's start), the truth ``(V, 2)`` (NaN: not
+    on the road), the cameras' frames, and per camera the map track id -> truth index (live, updated per frame)."""
+
+    k: int
+    t_s: float
+    truth_xy: np.ndarray
+    cameras: list
+    track_truth: list
+
+
+def camera_frames(n_frames: int = 300, *, rate_hz: float = 10.0, seed: int = 0, budget="basler1@deg",
+                  detector_sigma_px: float = 1.5, clock_offset_sigma_s: float = 0.005, phase_s: float = 20.0,
+                  max_range_m: float = 60.0, truth_accel_psd_m2ps3: float = 1.0,
+                  tracker: TrackerConfig | None = None) -> Iterator[UnitFrame]:
+    """The run's unit frames, one after the other (module doc): the three cameras' tracked frames of every true
+    time, for any fusion (:func:`simulate` feeds an :class:`~.rsu_fusion.RsuFusion`; the CP service's proof feeds
+    a :class:`~footprint_uq.service.cp_service.CpBasicService`)."""
     rng = np.random.default_rng(seed)
     budget = load_budget(budget)
     t, truth = _traffic(n_frames, rate_hz, phase_s, truth_accel_psd_m2ps3, rng)
     L = budget.param_factor().dense()
     det = detector_sigma_px ** 2 * np.eye(2)
     A_px = np.linalg.cholesky(budget.pixel_covariance() + det)
-    fusion = RsuFusion(config)
     cams = []
-    for j, camera in enumerate(intersection_cameras()):
-        fusion.add_camera(j, j + 1, clock_offset_sigma_s=clock_offset_sigma_s)
+    for camera in intersection_cameras():
         proc = FrameProcessor(camera, budget, joint_cov=False, linearity=False, shared_jacobian=True,
                               v2x_policy="linear")
         table = TrackTable(tracker, rank=L.shape[1], shared_at=SharedJacobianAt(camera, budget))
         p_true = camera.params + L @ rng.standard_normal(L.shape[1])
         cams.append(_Camera(camera, p_true, float(rng.normal(0.0, clock_offset_sigma_s)), proc, table))
-    res = RsuSimResult()
     for k in range(n_frames):
-        seen = set()
+        frames = []
         for j, cam in enumerate(cams):
             idx, uv = _detect(cam, truth[k], A_px, max_range_m, rng)
             est = cam.proc.corners(uv[:, None, :], pixel_cov_px2=np.broadcast_to(det, (idx.size, 2, 2)))
@@ -217,22 +240,60 @@ def simulate(n_frames: int = 300, *, rate_hz: float = 10.0, seed: int = 0, budge
                                  est.centre_shared_m)
             for i, tid in zip(idx.tolist(), out.track_id.tolist(), strict=True):
                 cam.track_truth[tid] = i
-            ff = fusion.step_tracks(j, stamp, out, ["vehicle"] * idx.size)
-            seen.update(idx[ff.object_id >= 0].tolist())
-        if k >= warmup_frames:
-            res.add(_evaluate(fusion, cams, truth[k], t[k], seen))
+            frames.append(CameraFrame(j, stamp, out, idx))
+        yield UnitFrame(k, float(t[k]), truth[k], frames, [c.track_truth for c in cams])
+
+
+def simulate(n_frames: int = 300, *, rate_hz: float = 10.0, seed: int = 0, budget="basler1@deg",
+             detector_sigma_px: float = 1.5, clock_offset_sigma_s: float = 0.005, phase_s: float = 20.0,
+             max_range_m: float = 60.0, truth_accel_psd_m2ps3: float = 1.0, config: RsuFusionConfig | None = None,
+             tracker: TrackerConfig | None = None, warmup_frames: int = 0) -> RsuSimResult:
+    """One seeded run (module doc); frames before ``warmup_frames`` are run but not counted."""
+    fusion = RsuFusion(config)
+    for j in range(len(intersection_cameras())):
+        fusion.add_camera(j, j + 1, clock_offset_sigma_s=clock_offset_sigma_s)
+    res = RsuSimResult()
+    for fr in camera_frames(n_frames, rate_hz=rate_hz, seed=seed, budget=budget, detector_sigma_px=detector_sigma_px,
+                            clock_offset_sigma_s=clock_offset_sigma_s, phase_s=phase_s, max_range_m=max_range_m,
+                            truth_accel_psd_m2ps3=truth_accel_psd_m2ps3, tracker=tracker):
+        seen = set()
+        for cf in fr.cameras:
+            ff = fusion.step_tracks(cf.camera, cf.stamp_s, cf.tracks, ["vehicle"] * cf.truth_index.size)
+            seen.update(cf.truth_index[ff.object_id >= 0].tolist())
+        if fr.k >= warmup_frames:
+            objs = fusion.objects(fr.t_s)
+            res.add(evaluate(fusion.pairs(), fr.track_truth, objs.object_id, objs.xy_m, objs.cov_xy_m2, objs.v_mps,
+                             fr.truth_xy, seen, lambda oid, _t=fr.t_s: fusion.contributions(oid, _t)))
     res.fusion_counts = {**fusion.counts, "merged": fusion.n_merged, "unstuck": fusion.n_unstuck}
     return res
 
 
-def _evaluate(fusion: RsuFusion, cams, truth_xy: np.ndarray, t: float, seen: set) -> RsuSimResult:
-    """One frame's counts (:class:`RsuSimResult`)."""
+def evaluate(pairs: dict, track_truth: list, object_id, xy_m, cov_xy_m2, v_mps, truth_xy: np.ndarray, seen: set,
+             contributions=None) -> RsuSimResult:
+    """One unit frame's counts (:class:`RsuSimResult`) of a fused list against the truth.
+
+    Parameters
+    ----------
+    pairs : dict
+        ``(camera index, track id) -> objectId`` of the live contributions (:meth:`RsuFusion.pairs`).
+    track_truth : list of dict
+        Per camera, track id -> truth index (:attr:`UnitFrame.track_truth`).
+    object_id : (m,), xy_m : (m, 2), cov_xy_m2 : (m, 2, 2), v_mps : (m, 2)
+        The fused list at the truth's time (m, m^2, m/s; W).
+    truth_xy : (V, 2)
+        The truth at that time.
+    seen : set
+        Truth indices some camera's row was fused for this frame.
+    contributions : callable, optional
+        ``objectId -> (camera ids, xs (k, 2), Ps (k, 2, 2))`` at that time (:meth:`RsuFusion.contributions`): the
+        cameras' own estimates (the baseline, and the Loewner check); None: not evaluated.
+    """
     r = RsuSimResult(n_frames=1)
     members: dict = {}
-    for (cid, tid), oid in fusion.pairs().items():
-        members.setdefault(oid, set()).add(cams[cid].track_truth[tid])
-    objs = fusion.objects(t)
-    r.max_objects = len(objs.object_id)
+    for (cid, tid), oid in pairs.items():
+        members.setdefault(oid, set()).add(track_truth[cid][tid])
+    oids = np.asarray(object_id).tolist()
+    r.max_objects = len(oids)
     where: dict = {}
     for oid, vs in members.items():
         for v in vs:
@@ -241,17 +302,19 @@ def _evaluate(fusion: RsuFusion, cams, truth_xy: np.ndarray, t: float, seen: set
     r.n_truth_frames = len(where)
     r.n_duplicates = sum(len(o) > 1 for o in where.values())
     r.n_missing = len(seen - set(where))
-    for k, oid in enumerate(objs.object_id.tolist()):
+    for k, oid in enumerate(oids):
         vs = members.get(oid, set())
-        if len(vs) != 1 or not np.isfinite(objs.v_mps[k]).all():
+        if len(vs) != 1 or not np.isfinite(v_mps[k]).all():
             continue
         truth = truth_xy[next(iter(vs))]
         if not np.isfinite(truth).all():
             continue
-        hit = _inside(objs.xy_m[k], objs.cov_xy_m2[k], truth)
+        hit = _inside(xy_m[k], cov_xy_m2[k], truth)
         r.n_cover += 1
         r.n_cover_hits += hit
-        _, xs, Ps = fusion.contributions(oid, t)
+        if contributions is None:
+            continue
+        _, xs, Ps = contributions(oid)
         for xc, Pc in zip(xs, Ps, strict=True):
             r.n_camera += 1
             r.n_camera_hits += _inside(xc, Pc, truth)
@@ -259,7 +322,7 @@ def _evaluate(fusion: RsuFusion, cams, truth_xy: np.ndarray, t: float, seen: set
             r.n_multi += 1
             r.n_multi_hits += hit
             scale = np.abs(Ps).max()
-            r.n_larger += any(np.linalg.eigvalsh(Pc - objs.cov_xy_m2[k]).min() < -1e-9 * scale for Pc in Ps)
+            r.n_larger += any(np.linalg.eigvalsh(Pc - cov_xy_m2[k]).min() < -1e-9 * scale for Pc in Ps)
     return r
 
 
