@@ -344,14 +344,16 @@ class CpBasicService:
         fields = cpm_fields(f.cov_xy_m2, h) if n else {k: np.zeros(0, np.int64) for k in
                                                          ("cpm_x_confidence", "cpm_y_confidence",
                                                           "cpm_xy_correlation")}
-        tracks = TrackOutput(f.object_id, np.zeros(n, bool), np.zeros(n, np.int64), f.age_s, f.xy_m, f.cov_xy_m2,
+        # a first detection stamped by a camera clock ahead of referenceTime: age 0, not negative
+        age = np.maximum(f.age_s, 0.0)
+        tracks = TrackOutput(f.object_id, np.zeros(n, bool), np.zeros(n, np.int64), age, f.xy_m, f.cov_xy_m2,
                              f.v_mps, f.cov_v_m2ps2)
         motion = object_motion(tracks, heading_offset_deg=h)
         mc = motion_codes(motion, n)
         classes = [None if c is None else str(c) for c in f.class_id]
         codes = np.array([self._class_code(c) for c in classes], np.int64).reshape(n, 2)
         oid = f.object_id
-        quality = object_perception_quality(self._conf[oid], f.age_s, self._rate[oid], self._linear[oid])
+        quality = object_perception_quality(self._conf[oid], age, self._rate[oid], self._linear[oid])
         fx, fy, fr = (fields[k].astype(np.int64) for k in ("cpm_x_confidence", "cpm_y_confidence",
                                                            "cpm_xy_correlation"))
         cols = CpmObjectColumns(oid, coordinate_cm(en[:, 0]), coordinate_cm(en[:, 1]), fx, fy, fr, codes[:, 0],
@@ -378,8 +380,8 @@ class CpBasicService:
                     "measurement_age_ms": int(ma), "quality": q, "segment": seg or None, "reason": r}
                    for i, xy, cov, vv, s, c, a, ma, q, seg, r in zip(
                        f.object_id.tolist(), f.xy_m.tolist(), f.cov_xy_m2.tolist(), v.tolist(), f.sensor_ids,
-                       ev.classes, f.age_s.tolist(), age_ms.tolist(), ev.columns.quality.tolist(), segment.tolist(),
-                       reason.tolist(), strict=True)]
+                       ev.classes, np.maximum(f.age_s, 0.0).tolist(), age_ms.tolist(), ev.columns.quality.tolist(),
+                       segment.tolist(), reason.tolist(), strict=True)]
         frames = {k: v - self._frames_at_event.get(k, 0) for k, v in self.fusion.counts.items()}
         self._frames_at_event = dict(self.fusion.counts)
         counts = {"perceived": n, "included": int(np.count_nonzero(reasons > 0)),
