@@ -301,3 +301,37 @@ def test_fused_coverage_small_seeded_sweep():
     assert 0.91 <= r.coverage_multi <= 0.99
     assert r.coverage >= r.coverage_camera - 0.01
     assert r.n_larger == 0
+
+
+def _usable_rows_reference(tid, xy, P):
+    """The readable per-row rule (the order of the checks; a repeat only of an accepted row)."""
+    rejected, rows, seen = [], [], set()
+    for i in range(tid.shape[0]):
+        if tid[i] < 0:
+            rejected.append((i, "not tracked (track_id -1)"))
+        elif int(tid[i]) in seen:
+            rejected.append((i, f"track_id {int(tid[i])} repeated in the frame"))
+        elif not (np.isfinite(xy[i]).all() and np.isfinite(P[i]).all()):
+            rejected.append((i, "position or covariance not finite"))
+        elif not (P[i, 0, 0] > 0 and np.linalg.det(P[i]) > 0):
+            rejected.append((i, "covariance not positive definite"))
+        else:
+            rows.append(i)
+            seen.add(int(tid[i]))
+    return rejected, rows
+
+
+@settings(max_examples=60, deadline=None, derandomize=True)
+@given(seed=st.integers(0, 2 ** 32 - 1), n=st.integers(0, 25))
+def test_usable_rows_column_wise_equals_the_per_row_rule(seed, n):
+    from footprint_uq.tracking.rsu_fusion import _usable_rows
+
+    rng = np.random.default_rng(seed)
+    tid = rng.integers(-1, 6, n)
+    xy = rng.normal(0, 5, (n, 2))
+    P = np.broadcast_to(0.1 * EYE, (n, 2, 2)).copy()
+    bad = rng.random(n)
+    xy[bad < 0.15, 0] = np.nan
+    P[(bad >= 0.15) & (bad < 0.3)] = [[0.1, 0.2], [0.2, 0.1]]   # not positive definite
+    P[(bad >= 0.3) & (bad < 0.35), 1, 1] = np.inf
+    assert _usable_rows(tid, xy, P) == _usable_rows_reference(tid, xy, P)

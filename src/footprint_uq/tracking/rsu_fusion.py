@@ -567,18 +567,29 @@ def _frame_columns(track_id, xy_m, cov_xy_m2, v_mps, cov_v_m2ps2, age_s, class_i
 
 
 def _usable_rows(tid, xy, P) -> tuple[list, list]:
-    """Rows that can be fused and the others with their reason (nothing dropped silently)."""
-    rejected, rows, seen = [], [], set()
-    for i in range(tid.shape[0]):
+    """Rows that can be fused and the others with their reason (nothing dropped silently), in row order: a track id
+    -1, a track id already accepted in an earlier row, a non-finite position or covariance, a covariance that is
+    not positive definite (column-wise; a Python loop only over the rejected rows)."""
+    n = tid.shape[0]
+    finite = np.isfinite(xy).all(1) & np.isfinite(P).all((1, 2))
+    with np.errstate(invalid="ignore"):
+        pd = (P[:, 0, 0] > 0) & (P[:, 0, 0] * P[:, 1, 1] - P[:, 0, 1] * P[:, 1, 0] > 0)
+    valid = (tid >= 0) & finite & pd
+    earlier = np.zeros(n, bool)  # an earlier row with the same track id was accepted
+    if valid.any():
+        u, first = np.unique(tid[valid], return_index=True)
+        first = np.flatnonzero(valid)[first]
+        pos = np.minimum(np.searchsorted(u, tid), len(u) - 1)
+        earlier = (u[pos] == tid) & (first[pos] < np.arange(n))
+    ok = valid & ~earlier
+    rejected = []
+    for i in np.flatnonzero(~ok).tolist():
         if tid[i] < 0:
             rejected.append((i, "not tracked (track_id -1)"))
-        elif int(tid[i]) in seen:
+        elif earlier[i]:
             rejected.append((i, f"track_id {int(tid[i])} repeated in the frame"))
-        elif not (np.isfinite(xy[i]).all() and np.isfinite(P[i]).all()):
+        elif not finite[i]:
             rejected.append((i, "position or covariance not finite"))
-        elif not (P[i, 0, 0] > 0 and np.linalg.det(P[i]) > 0):
-            rejected.append((i, "covariance not positive definite"))
         else:
-            rows.append(i)
-            seen.add(int(tid[i]))
-    return rejected, rows
+            rejected.append((i, "covariance not positive definite"))
+    return rejected, np.flatnonzero(ok).tolist()
