@@ -92,6 +92,11 @@ def test_rate_and_inclusion_follow_the_rules(t_gen_s):
     reasons = {o["reason"] for ev in events[1:] for o in ev.record["objects"] if o["objectId"] == ids["parked"]}
     assert reasons == {"not_due", "interval"}
     assert svc.counts()["events"] == len(events) and svc.counts()["cpms"] == sum(len(e.segments) for e in events)
+    info = [round(ev.time_s - T0, 6) for ev in events if ev.record["sensor_information"]]
+    assert info[0] == 0.0 and max(np.diff([*info, 3.0])) <= 1.0 + t_gen_s  # at least once a second
+    for ev in events:  # in the first segment, and only when due
+        ids = [c["containerId"] for c in decode_cpm_uper(ev.segments[0], "2.2.1")["payload"]["cpmContainers"]]
+        assert (3 in ids) == ev.record["sensor_information"]
 
 
 def test_nothing_owed_sends_a_cpm_every_t_gen_cpm_max_with_the_sensor_information():
