@@ -389,6 +389,10 @@ def test_bad_input_is_named_in_one_line_and_bad_frames_are_reported():
         svc.ingest("c0", T0, tr, detection_confidence=[0.5, 1.5])
     with pytest.raises(InputError, match="linear_ok"):
         svc.ingest("c0", T0, tr, linear_ok=[True])
+    with pytest.raises(InputError, match="detection_confidence"):
+        svc.ingest("c0", T0, tr, detection_confidence=["high", "low"])
+    with pytest.raises(InputError, match="tracks"):
+        svc.ingest("c0", T0, tr._asdict())
     with pytest.raises(InputError, match="time_s"):
         svc.ingest("c0", math.nan, tr)
     with pytest.raises(InputError, match="time_s"):

@@ -158,7 +158,10 @@ def _reference_time(t_s: float) -> tuple[int, float]:
 def _column(name: str, a, n: int, default, dtype) -> np.ndarray:
     if a is None:
         return np.full(n, default, dtype=dtype)
-    arr = np.asarray(a, dtype=dtype).reshape(-1) if not isinstance(a, np.ndarray) else a.astype(dtype).reshape(-1)
+    try:
+        arr = np.asarray(a, dtype=dtype).reshape(-1)
+    except (TypeError, ValueError):
+        raise InputError(name, a, f"{n} values of type {np.dtype(dtype).name}, one per track") from None
     if arr.shape != (n,):
         raise InputError(name, arr.shape, f"one value per track ({n})")
     return arr
