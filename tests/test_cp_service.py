@@ -99,6 +99,22 @@ def test_rate_and_inclusion_follow_the_rules(t_gen_s):
         assert (3 in ids) == ev.record["sensor_information"]
 
 
+def test_a_parked_car_with_a_noisy_velocity_is_still_sent_once_a_second():
+    """The tracker's velocity of a parked car is noise (here 0.2 m/s in a random direction every frame): its heading
+    points anywhere, is not known (no sigma), and never triggers the 4 deg rule."""
+    svc = _service(n_cams=1)
+    rng = np.random.default_rng(1)
+    sent = []
+    for k in range(90):
+        t = T0 + k / 30.0
+        v = rng.normal(0.0, 0.2, 2)
+        svc.ingest("c0", t, _tracks([[5.0, 5.0]], v, var_v=0.04, age=k / 30.0, n_updates=k + 1), class_id=["car"])
+        ev = svc.poll(t)
+        if ev is not None and ev.record["objects"][0]["segment"]:
+            sent.append(round(ev.time_s - T0, 3))
+    assert sent == pytest.approx([0.0, 1.0, 2.0], abs=0.034)
+
+
 def test_nothing_owed_sends_a_cpm_every_t_gen_cpm_max_with_the_sensor_information():
     svc = _service()
     sent = []

@@ -9,7 +9,9 @@
   :class:`~.cp_rules.GenerationClock` says whether a generation event is due (every ``T_GenCpm`` on a fixed grid;
   a CPM at least every ``T_GenCpmMax``; the Sensor Information container at least once a second), an
   :class:`~.cp_rules.InclusionMemory` which objects the event includes (clause 6.1.2's rules: new objects at once,
-  4 m, 0.5 m/s, 4 deg, 1 s, persons / cyclists / animals (the VRU classes) at least every 0.5 s);
+  4 m, 0.5 m/s, 4 deg, 1 s, persons / cyclists / animals (the VRU classes) at least every 0.5 s; the heading rule
+  only where the direction of motion is known: :func:`~footprint_uq.tracking.motion.object_motion` gives its sigma
+  where the speed is at least 3 sigma of the velocity, so that a parked car's noisy velocity never triggers it);
 * **time**: every fused object is **predicted to the event's referenceTime**: each camera's latest estimate is
   moved from its frame time to referenceTime at constant velocity and its covariance grown
   (:func:`~footprint_uq.uncertainty.timing.predict_position`: ``tau^2 P_v`` + the camera's clock term
@@ -366,7 +368,10 @@ class CpBasicService:
                                 sensor_ids=[list(s) for s in f.sensor_ids])
         is_vru = np.array([c is not None and c.lower() in VRU_CLASSES for c in classes], bool)
         semi = _semi_major_95(f.cov_xy_m2)
-        return _EventObjects(f, cols, motion.speed_mps, motion.heading_deg, is_vru, classes,
+        # the heading rule only where the direction of motion is known (its sigma is given only where the speed is at
+        # least 3 sigma of the velocity): a parked car's noisy velocity points anywhere and must not trigger it
+        heading = np.where(np.isnan(motion.sigma_heading_deg), np.nan, motion.heading_deg)
+        return _EventObjects(f, cols, motion.speed_mps, heading, is_vru, classes,
                              j2735_position_confidence(semi).astype(np.int64), offset_dm(en[:, 0]),
                              offset_dm(en[:, 1]))
 
