@@ -102,3 +102,18 @@ def test_segments_hold_every_object_once_each_within_the_size(sizes, limit, head
 def test_an_object_larger_than_a_segment_is_named():
     with pytest.raises(InputError, match=r"object_bytes\[2\]"):
         plan_segments([10, 10, 2000], header_bytes=50, max_size_bytes=1100)
+
+
+def test_reasons_name_the_first_rule_that_holds_and_retain_forgets_the_rest():
+    from footprint_uq.service.cp_rules import INCLUSION_REASONS
+
+    m = InclusionMemory()
+    m.included(0.0, [1, 2, 3, 4, 5], np.zeros((5, 2)), [5.0] * 5, [90.0] * 5)
+    r = m.reasons(0.3, [1, 2, 3, 4, 5, 6], [[0, 0], [5, 0], [0, 0], [0, 0], [5, 0], [0, 0]],
+                  [5.0, 5.0, 5.6, 5.0, 9.0, 0.0], [90.0, 90.0, 90.0, 95.0, 180.0, 0.0], [False, False, False, False,
+                                                                                     False, False])
+    assert [INCLUSION_REASONS[k] for k in r] == ["not_due", "position", "speed", "heading", "position", "new"]
+    assert [INCLUSION_REASONS[k] for k in m.reasons(1.0, [1], [[5, 0]], [9.0], [0.0], [False])] == ["interval"]
+    assert m.last_included_s([1, 6]).tolist() == [0.0, -np.inf]
+    m.retain([2, 4, 99])
+    assert len(m) == 2 and m.last_included_s([1, 2, 4]).tolist() == [-np.inf, 0.0, 0.0]
