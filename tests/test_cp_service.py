@@ -29,12 +29,12 @@ T0 = 1714564800.0
 EYE = np.eye(2)
 
 
-def _tracks(xy, v, tids=None, var=0.04, var_v=0.1, age=0.0, n_updates=1) -> TrackOutput:
+def _tracks(xy, v, tids=None, var=0.04, var_v=0.1, age=0.0, n_updates=1, cov=None) -> TrackOutput:
     xy = np.atleast_2d(np.asarray(xy, dtype=float))
     n = xy.shape[0]
     return TrackOutput(np.arange(n, dtype=np.int64) if tids is None else np.asarray(tids, np.int64),
                        np.zeros(n, bool), np.full(n, n_updates, np.int64), np.full(n, float(age)), xy,
-                       np.broadcast_to(var * EYE, (n, 2, 2)).copy(),
+                       np.broadcast_to(var * EYE, (n, 2, 2)).copy() if cov is None else np.asarray(cov, float),
                        np.broadcast_to(np.asarray(v, float), (n, 2)).copy(),
                        np.broadcast_to(var_v * EYE, (n, 2, 2)).copy())
 
@@ -228,26 +228,31 @@ def _check_against_record(cpm: dict, ev, svc, k: int, regions) -> None:
 
 @pytest.mark.parametrize("cdd", ["2.1.1", "2.2.1"])
 def test_every_segment_of_a_seeded_sweep_decodes_officially_to_the_record(official, regions, cdd):  # noqa: F811
-    """Seeded traffic (cars, persons, cyclists, a dog, an unknown class; 5..60 objects; segments of 300..1100 bytes)
+    """Seeded traffic (cars, persons, cyclists, a dog, an unknown class; 5..60 objects with elongated, correlated
+    covariances; segments of 400..1100 bytes: the two regions need ~330)
     through a 2-camera service with perception regions: every segment of every event decodes with asn1tools and
     pycrate (V2.1.1: the CPM V2.1.1 modules; V2.2.1: the CDD V2.2.1 and V2.4.1 modules) to exactly the subset's
     decode, and its values equal the event's record."""
     rng = np.random.default_rng(7 if cdd == "2.1.1" else 8)
     classes = ["car", "person", "bicycle", "dog", "bus", "thing"]
-    n_checked = 0
+    n_checked = n_multi = 0
     for case in range(3):
         n = int(rng.integers(5, 61))
         svc = _service(regions=regions, cdd=cdd, heading_offset_deg=12.0, origin_lat_deg=48.1, origin_lon_deg=11.5,
-                       rules=CpRules(max_size_bytes=int(rng.integers(300, 1101))))
+                       rules=CpRules(max_size_bytes=int(rng.integers(400, 1101))))
         xy = rng.uniform(-60, 60, (n, 2)) + np.arange(n)[:, None] * [3.0, 0.0]
         v = rng.normal(0, 6, (n, 2))
+        A = rng.normal(0, 0.4, (n, 2, 2))
+        cov = A @ np.swapaxes(A, 1, 2) + 0.01 * EYE  # elongated, correlated: a wrong rotation shows
         cls = [classes[i] for i in rng.integers(0, len(classes), n)]
         for k in range(4):
             t = T0 + 100.0 * case + 0.1 * k
             for j in range(2):
-                svc.ingest(f"c{j}", t + 0.004 * j, _tracks(xy + v * 0.1 * k, v, age=0.1 * k, n_updates=k + 1),
+                svc.ingest(f"c{j}", t + 0.004 * j, _tracks(xy + v * 0.1 * k, v, age=0.1 * k, n_updates=k + 1,
+                                                           cov=cov),
                            class_id=cls, linear_ok=rng.random(n) < 0.8, detection_confidence=rng.random(n))
             ev = svc.poll(t + 0.004)
+            n_multi += len(ev.segments) > 1
             for s, payload in enumerate(ev.segments):
                 cpm = decode_cpm_uper(payload, cdd)
                 for folder in OFFICIAL[cdd]:
@@ -255,7 +260,7 @@ def test_every_segment_of_a_seeded_sweep_decodes_officially_to_the_record(offici
                         assert decoded == cpm
                 _check_against_record(cpm, ev, svc, s, regions)
                 n_checked += 1
-    assert n_checked >= 8
+    assert n_checked >= 8 and n_multi >= 1
 
 
 def test_a_flipped_bit_in_the_object_container_fails_the_decode_or_the_record(official, regions):  # noqa: F811
