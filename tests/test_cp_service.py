@@ -233,6 +233,7 @@ def test_every_segment_of_a_seeded_sweep_decodes_officially_to_the_record(offici
     through a 2-camera service with perception regions: every segment of every event decodes with asn1tools and
     pycrate (V2.1.1: the CPM V2.1.1 modules; V2.2.1: the CDD V2.2.1 and V2.4.1 modules) to exactly the subset's
     decode, and its values equal the event's record."""
+    pytest.importorskip("pycrate_asn1c")
     rng = np.random.default_rng(7 if cdd == "2.1.1" else 8)
     classes = ["car", "person", "bicycle", "dog", "bus", "thing"]
     n_checked = n_multi = 0
@@ -256,8 +257,8 @@ def test_every_segment_of_a_seeded_sweep_decodes_officially_to_the_record(offici
             for s, payload in enumerate(ev.segments):
                 cpm = decode_cpm_uper(payload, cdd)
                 for folder in OFFICIAL[cdd]:
-                    for decoded in decode_official(payload, *official(folder)):
-                        assert decoded == cpm
+                    both = decode_official(payload, *official(folder))
+                    assert len(both) == 2 and all(d == cpm for d in both)  # asn1tools and pycrate
                 _check_against_record(cpm, ev, svc, s, regions)
                 n_checked += 1
     assert n_checked >= 8 and n_multi >= 1
