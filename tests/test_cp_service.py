@@ -9,6 +9,8 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from footprint_uq import PanTiltCamera
 from footprint_uq.errors import InputError
@@ -463,3 +465,42 @@ def test_the_services_lists_are_the_fusions_at_the_same_times():
     for k in ("n_truth_frames", "n_duplicates", "n_missing", "n_mixed", "n_cover", "n_cover_hits", "n_multi",
               "n_camera", "n_camera_hits", "n_larger"):
         assert abs(getattr(svc, k) - getattr(alone, k)) <= max(2, 0.002 * getattr(alone, k)), k
+
+
+@settings(max_examples=12, deadline=None, derandomize=True)
+@given(n=st.integers(0, 80), max_size=st.integers(160, 1100), t_gen=st.sampled_from([0.1, 0.2, 0.5]),
+       rate=st.sampled_from([10.0, 25.0, 30.0]), seed=st.integers(0, 2 ** 32 - 1))
+def test_every_event_keeps_the_invariants(n, max_size, t_gen, rate, seed):
+    """Over scenes (0-80 objects of random speeds and classes, segment limits, T_GenCpm, frame rates): every segment
+    within the limit and decoding to the record's objects of that segment; sent + not_sent = included;
+    at most 8 segments; no object waits longer than 1 s (+ T_GenCpm and a frame) between two inclusions unless
+    objects were left over."""
+    rng = np.random.default_rng(seed)
+    svc = _service(n_cams=1, rules=CpRules(t_gen_cpm_s=t_gen, max_size_bytes=max_size))
+    xy = np.column_stack([np.arange(n) * 6.0 - 200.0, rng.uniform(-50, 50, n)])
+    v = rng.normal(0, 5, (n, 2)) * (rng.random((n, 1)) < 0.7)
+    cls = [["car", "person", "bicycle", "dog", None][i] for i in rng.integers(0, 5, n)]
+    last: dict = {}
+    leftovers = False
+    for k in range(int(2.0 * rate)):
+        t = T0 + k / rate
+        svc.ingest("c0", t, _tracks(xy + v * k / rate, v, age=k / rate, n_updates=k + 1), class_id=cls)
+        ev = svc.poll(t)
+        if ev is None:
+            continue
+        c = ev.record["counts"]
+        assert c["sent"] + c["not_sent"] == c["included"] and len(ev.segments) <= 8
+        leftovers |= c["not_sent"] > 0
+        for s, payload in enumerate(ev.segments):
+            assert len(payload) <= max_size
+            pos = decode_cpm_uper(payload, svc.cdd)["payload"]["cpmContainers"][-1]["containerData"]
+            assert sorted(p["objectId"] for p in pos["perceivedObjects"]) == [
+                o["objectId"] for o in ev.record["objects"] if o["segment"] == s + 1]  # (the record: by objectId)
+        for o in ev.record["objects"]:
+            if o["segment"]:
+                gap = ev.time_s - last.get(o["objectId"], ev.time_s)
+                assert leftovers or gap <= 1.0 + t_gen + 1.0 / rate + 1e-6
+                last[o["objectId"]] = ev.time_s
+            else:
+                assert o["reason"] in ("not_due", "not_sent")
+    assert leftovers or len(last) == n
