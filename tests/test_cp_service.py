@@ -421,6 +421,8 @@ def test_bad_input_is_named_in_one_line_and_bad_frames_are_reported():
         svc.ingest("c0", math.nan, tr)
     with pytest.raises(InputError, match="time_s"):
         svc.poll(math.inf)
+    with pytest.raises(InputError, match="time_s.*Unix time"):
+        svc.poll(12.5)  # seconds since some start, not Unix time
     assert svc.ingest("c0", T0 + 1.0, tr).error is None
     back = svc.ingest("c0", T0 + 0.5, tr)           # the camera's clock went backwards: the frame's error
     assert back.status == "clock_backwards" and "earlier" in back.error and len(svc.fusion) == 2

@@ -301,6 +301,8 @@ class CpBasicService:
     def poll(self, time_s: float) -> CpEvent | None:
         """The generation event due at ``time_s`` (the newest frame time, Unix s), or None (module doc)."""
         t = as_float("time_s", time_s)
+        if t < _UNIX_2004_S:  # (checked before the clock moves: a refused poll changes nothing)
+            raise InputError("time_s", time_s, "Unix time in seconds (UTC), on or after 2004-01-01 (TimestampIts)")
         if not self.clock.tick(t):
             return None
         ref_ms, t_ref = _reference_time(t)
