@@ -5,6 +5,7 @@ SDSM, bad input, and the 3-camera intersection (identity over 1,000 frames; cove
 
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
@@ -94,6 +95,8 @@ def test_rate_and_inclusion_follow_the_rules(t_gen_s):
     reasons = {o["reason"] for ev in events[1:] for o in ev.record["objects"] if o["objectId"] == ids["parked"]}
     assert reasons == {"not_due", "interval"}
     assert svc.counts()["events"] == len(events) and svc.counts()["cpms"] == sum(len(e.segments) for e in events)
+    for ev in events:  # the record and the SDSM are JSON as they are (no NaN, no numpy types)
+        json.dumps({"record": ev.record, "sdsm": ev.sdsm}, allow_nan=False)
     info = [round(ev.time_s - T0, 6) for ev in events if ev.record["sensor_information"]]
     assert info[0] == 0.0 and max(np.diff([*info, 3.0])) <= 1.0 + t_gen_s  # at least once a second
     for ev in events:  # in the first segment, and only when due
@@ -387,6 +390,15 @@ def test_the_event_sdsm_carries_the_cpm_objects_at_the_same_time():
         assert d["measurementTime"] == 0 and d["objType"] == ("vehicle" if o["class"] == "car" else "vru")
     assert ev.sdsm["refPos"] == {"lat": 481000000, "long": 115000000}
     assert ev.sdsm["sDSMTimeStamp"]["second"] % 1000 == 50  # the referenceTime's ms
+    svc.ingest("c1", T0 + 0.12, _tracks([[40.0, 40.0]], [np.nan, np.nan]), class_id=["car"])  # no velocity yet
+    ev = svc.poll(T0 + 0.15)
+    new = next(o for o in ev.record["objects"] if o["reason"] == "new")
+    assert new["v_mps"] is None and new["sensorIdList"] == [11]
+    json.dumps({"record": ev.record, "sdsm": ev.sdsm}, allow_nan=False)
+    po = decode_cpm_uper(ev.segments[0], svc.cdd)["payload"]["cpmContainers"][-1]["containerData"]["perceivedObjects"]
+    assert "velocity" not in next(p for p in po if p["objectId"] == new["objectId"])
+    sd = next(o["detObjCommon"] for o in ev.sdsm["objects"] if o["detObjCommon"]["objectID"] == new["objectId"])
+    assert sd["speed"] == 8191 and sd["heading"] == 28800  # unavailable
 
 
 # -- bad input ---------------------------------------------------------------------------------------------------
