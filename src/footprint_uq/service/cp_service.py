@@ -25,8 +25,9 @@
   time given to :meth:`~CpBasicService.poll`, rounded to the millisecond; the prediction goes to that exact ms);
 * **columns for the codec** (:class:`~.cp_segments.CpmObjectColumns`): east / north offsets from the reference
   position (W's origin, rotated by ``heading_offset_deg``), the confidences and correlation of the fused covariance
-  (:func:`~footprint_uq.products.v2x.cpm_fields`), velocity and yaw codes with their confidences from the fused
-  velocity (:func:`~footprint_uq.tracking.motion.object_motion`, :func:`~.messages.motion.motion_codes`),
+  (:func:`~footprint_uq.products.v2x.cpm_fields`), the velocity codes with their confidences from the fused
+  velocity and its covariance (:func:`~footprint_uq.tracking.motion.object_motion`,
+  :func:`~.messages.motion.motion_codes`; no yaw: the fused list has none),
   ``objectAge``, ``sensorIdList``, ``objectPerceptionQuality`` (:func:`~.cp_segments.object_perception_quality`:
   the frame's detection confidence, the age, the detection success rate, ``linear_ok``); then
   :func:`~.cp_segments.event_segments` writes the event's CPMs (segments of at most ``max_size_bytes``, the sensor
