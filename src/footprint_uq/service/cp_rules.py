@@ -44,10 +44,13 @@ import numpy as np
 from .._checks import as_float, as_int
 from ..errors import InputError
 
-__all__ = ["CpRules", "GenerationClock", "InclusionMemory", "plan_segments", "MAX_SEGMENTS"]
+__all__ = ["CpRules", "GenerationClock", "InclusionMemory", "plan_segments", "MAX_SEGMENTS", "INCLUSION_REASONS"]
 
 #: ``MessageSegmentationInfo.totalMsgNo`` is a ``CardinalNumber3b`` (1..8)
 MAX_SEGMENTS = 8
+#: why an event includes an object (:meth:`InclusionMemory.reasons`: the index; 0 = not due), the first rule that
+#: holds in this order
+INCLUSION_REASONS = ("not_due", "new", "interval", "position", "speed", "heading")
 
 
 @dataclass(frozen=True)
@@ -154,20 +157,35 @@ class InclusionMemory:
         is_vru : array_like of bool (n,)
             Persons and animals (the 0.5 s rule).
         """
+        return self.reasons(t_s, ids, xy_m, speed_mps, heading_deg, is_vru) > 0
+
+    def reasons(self, t_s: float, ids, xy_m, speed_mps, heading_deg, is_vru) -> np.ndarray:
+        """:meth:`select` with the reason: int ``(n,)``, the index in :data:`INCLUSION_REASONS` of the first rule
+        that includes the object (new, interval, position, speed, heading), 0 where none does."""
         ids = np.asarray(ids, dtype=np.int64).reshape(-1)
         xy = np.asarray(xy_m, dtype=np.float64).reshape(-1, 2)
         rows = self._rows(ids)
         new = rows < 0
+        out = np.where(new, 1, 0).astype(np.int64)
         if np.all(new):
-            return new
+            return out
         r = np.where(new, 0, rows)
         limit = np.where(np.asarray(is_vru, dtype=bool), self.rules.vru_max_interval_s, self.rules.max_interval_s)
         with np.errstate(invalid="ignore"):
-            due = t_s - self._t[r] >= limit - 1e-9
-            due |= np.linalg.norm(xy - self._xy[r], axis=1) > self.rules.position_change_m
-            due |= np.abs(np.asarray(speed_mps, dtype=float) - self._speed[r]) > self.rules.speed_change_mps
-            due |= _angle_diff_deg(heading_deg, self._heading[r]) > self.rules.heading_change_deg
-        return new | due
+            tests = (t_s - self._t[r] >= limit - 1e-9,
+                     np.linalg.norm(xy - self._xy[r], axis=1) > self.rules.position_change_m,
+                     np.abs(np.asarray(speed_mps, dtype=float) - self._speed[r]) > self.rules.speed_change_mps,
+                     _angle_diff_deg(heading_deg, self._heading[r]) > self.rules.heading_change_deg)
+        for code, hit in zip(range(len(tests) + 1, 1, -1), tests[::-1], strict=True):
+            out = np.where(~new & hit, code, out)
+        return out
+
+    def last_included_s(self, ids) -> np.ndarray:
+        """When each object was last included (s; -inf where never): the order in which an event fills its
+        segments (the longest-waiting first, so that objects left over by a full event are sent first next)."""
+        ids = np.asarray(ids, dtype=np.int64).reshape(-1)
+        rows = self._rows(ids)
+        return np.where(rows >= 0, self._t[np.maximum(rows, 0)] if len(self._t) else -np.inf, -np.inf)
 
     def included(self, t_s: float, ids, xy_m, speed_mps, heading_deg) -> None:
         """Record the objects a CPM sent at ``t_s`` actually carried (ids unique)."""
@@ -192,7 +210,13 @@ class InclusionMemory:
             col[rows[ok]] = v[ok]
 
     def forget(self, ids) -> None:
-        keep = ~np.isin(self._ids, np.asarray(ids, dtype=np.int64))
+        self._keep(~np.isin(self._ids, np.asarray(ids, dtype=np.int64)))
+
+    def retain(self, ids) -> None:
+        """Forget every object but ``ids`` (the live ones: an ended object's id may be handed out again)."""
+        self._keep(np.isin(self._ids, np.asarray(ids, dtype=np.int64)))
+
+    def _keep(self, keep: np.ndarray) -> None:
         self._ids, self._t, self._xy = self._ids[keep], self._t[keep], self._xy[keep]
         self._speed, self._heading = self._speed[keep], self._heading[keep]
 

@@ -182,15 +182,19 @@ class SensorRegion:
     """A camera as the CPM describes it: its ``sensorId`` (0..255), its perception region's polygon as east/north
     offsets from the CPM's reference position (0.01 m, ``(M, 2)``, 3 <= M <= 16), the region's confidence
     (``ConfidenceLevel``, percent) and ``shadowingApplies`` (a camera does not see behind what it sees: True by
-    default)."""
+    default).  ``polygon_east_north_cm`` None: a camera without a region (no pixel meets the limit, or none was
+    computed): its ``SensorInformation`` carries no shape and no confidence, and it has no Perception Region
+    entry."""
 
     sensor_id: int
-    polygon_east_north_cm: np.ndarray
+    polygon_east_north_cm: np.ndarray | None
     confidence_pct: int = 95
     shadowing_applies: bool = True
     sensor_type: int = SENSOR_TYPE_MONOVIDEO
 
-    def shape(self) -> dict:
+    def shape(self) -> dict | None:
+        if self.polygon_east_north_cm is None:
+            return None
         return polygonal_shape(np.asarray(self.polygon_east_north_cm))
 
 
@@ -225,16 +229,19 @@ class EventSegments:
     sensor_information: bool
 
 
-def _sensor_containers(regions: list[SensorRegion]) -> tuple[list[dict], list[dict]]:
+def _sensor_containers(regions: list[SensorRegion]) -> tuple[list[dict], list[dict] | None]:
+    """The Sensor Information entries (one per camera) and the Perception Region entries (one per camera with a
+    region; None when no camera has one: the container is left out)."""
     if not regions:
         raise InputError("regions", 0, "at least one camera (the Sensor Information container needs one)")
     if len({r.sensor_id for r in regions}) != len(regions):
         raise InputError("regions.sensor_id", [r.sensor_id for r in regions], "unique sensor ids")
-    info = [sensor_information(r.sensor_id, r.shape(), r.confidence_pct, r.shadowing_applies, r.sensor_type)
-            for r in regions]
-    pr = [perception_region_entry(r.shape(), r.confidence_pct, r.shadowing_applies, sensor_ids=[r.sensor_id])
-          for r in regions]
-    return info, pr
+    shapes = [r.shape() for r in regions]
+    info = [sensor_information(r.sensor_id, sh, None if sh is None else r.confidence_pct, r.shadowing_applies,
+                               r.sensor_type) for r, sh in zip(regions, shapes, strict=True)]
+    pr = [perception_region_entry(sh, r.confidence_pct, r.shadowing_applies, sensor_ids=[r.sensor_id])
+          for r, sh in zip(regions, shapes, strict=True) if sh is not None]
+    return info, (pr or None)
 
 
 def _plan(bits: np.ndarray, skeletons: list[dict], cdd: str, max_size_bytes: int):

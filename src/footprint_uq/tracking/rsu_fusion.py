@@ -137,6 +137,8 @@ class FusedObjects(NamedTuple):
     class_id : list of m                    the class of the most recently updated contribution
     n_sources : (m,) int64                  cameras fused
     time_s : float
+    last_time_s : (m,)                      the newest frame time of any live contribution (the object's latest
+                                            measurement, s)
     """
 
     object_id: np.ndarray
@@ -149,6 +151,7 @@ class FusedObjects(NamedTuple):
     class_id: list
     n_sources: np.ndarray
     time_s: float
+    last_time_s: np.ndarray | None = None
 
 
 @dataclass
@@ -468,7 +471,8 @@ class RsuFusion:
                             np.array([t - o.first_time_s for o in objs]),
                             [tuple(sorted(self.cameras[c].sensor_id for c in o.members)) for o in objs],
                             [max(o.members.values(), key=lambda mm: mm.time_s).class_id for o in objs],
-                            np.array([len(o.members) for o in objs], np.int64), t)
+                            np.array([len(o.members) for o in objs], np.int64), t,
+                            np.array([max(mm.time_s for mm in o.members.values()) for o in objs], np.float64))
 
     def contributions(self, object_id: int, time_s: float) -> tuple[list, np.ndarray, np.ndarray]:
         """Each camera's own estimate of object ``object_id`` predicted to ``time_s``, before fusion: the camera
