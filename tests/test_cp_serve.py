@@ -286,3 +286,6 @@ def test_docs_cpm_example_is_a_real_cpm_of_the_service(site):
         page = DOC.read_text(encoding="utf-8")
     assert page[start:page.index("```", start)] == text + "\n"
     assert json.loads(text)["payload"]["managementContainer"]["referenceTime"] == ev["reference_time_ms"]
+    # what the page says of it
+    assert ev["time_s"] == pytest.approx(T0 + 1.0) and ev["counts"]["perceived"] == 6 and ev["counts"]["sent"] == 5
+    assert [o["class"] for o in ev["objects"] if o["segment"] is None] == ["person"]
