@@ -179,6 +179,11 @@ class CpServe:
             self._own["internal_errors"] += 1
             self._pending.append(_Out(error_record(reason, camera_id=camera_id, frame=frame, source=src), None))
 
+    def count(self, key: str, n: int = 1) -> None:
+        """Add ``n`` to this layer's count ``key`` (thread-safe; the health record reads it)."""
+        with self._lock:
+            self._own[key] += n
+
     def counts(self) -> dict:
         """The health record's ``cp_service``: :meth:`~.cp_service.CpBasicService.counts` and this layer's own
         (frames ingested, frame errors, CPM messages published, internal errors)."""
@@ -245,8 +250,7 @@ class _CpSink:
                 if ev.sdsm is not None:
                     self._sink.publish(f"{CP_TOPIC}/sdsm", orjson.dumps(ev.sdsm))
                 self._sink.publish(f"{CP_TOPIC}/events", orjson.dumps(rec))
-                with self._cp._lock:
-                    self._cp._own["cpm_messages_published"] += len(ev.segments)
+                self._cp.count("cpm_messages_published", len(ev.segments))
             else:
                 self._sink.write_json(RECORD_CP_EVENT, None, orjson.dumps(rec))
 
@@ -271,9 +275,10 @@ def start_cp_service(service: Service, options: CpServeOptions, *, registry: dic
                      station_id: int | None, cdd: str, heading_offset_deg: float = 0.0,
                      origin_lat_deg: float | None = None, origin_lon_deg: float | None = None, log=None) -> CpServe:
     """The :class:`CpServe` of ``serve --cp-service`` (:func:`~.runner.run`): the cameras of ``registry`` (entries by
-    id) or the one ``camera`` (``(camera_id or None, Camera, budget)``), their perception regions computed now; the
-    unit's StationId ``station_id`` (default :func:`unit_station_id`); the unit's map tie (``heading_offset_deg``,
-    origin) -- a registry entry with another one is refused (the fused list has one frame)."""
+    id) or the one ``camera`` (``(camera_id or None, Camera)``, with the service's budget), their perception regions
+    computed now; the unit's StationId ``station_id`` (default :func:`unit_station_id`); the unit's map tie
+    (``heading_offset_deg``, origin) -- a registry entry with another one is refused (the fused list has one
+    frame)."""
     if not service.tracks:
         raise InputError("--cp-service", "without --tracks", "--tracks too (the CP service fuses the cameras' tracks)")
     if registry is not None:
@@ -286,9 +291,8 @@ def start_cp_service(service: Service, options: CpServeOptions, *, registry: dic
                     raise ConfigError(f"registry: {cid}: {key}", own, f"the unit's value ({unit}, from the command "
                                       "line): --cp-service fuses every camera into one list, in one map tie")
     else:
-        cid, cam, budget = camera
-        entries = {cid if cid is not None else "camera": (cam, service.cameras[cid].processor.budget
-                                                          if budget is None else budget)}
+        cid, cam = camera
+        entries = {cid if cid is not None else "camera": (cam, service.cameras[cid].processor.budget)}
     if CP_TOPIC in entries:
         raise ConfigError("camera_id", CP_TOPIC, f"another camera id with --cp-service (the unit's topics are "
                                                  f"<prefix>/{CP_TOPIC}/...)")

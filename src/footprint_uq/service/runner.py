@@ -883,7 +883,7 @@ def run(*, camera=None, budget=None, registry=None, camera_id: str | None = None
                           unknown_class=serve_options.pop("unknown_class", None), record=serve_options.pop("record"),
                           consistency_window_s=serve_options.pop("consistency_window_s", DEFAULT_WINDOW_S))
         cp = None if cp_options is None else start_cp_service(
-            service, cp_options, registry=registry, camera=(camera_id, cam, budget), station_id=station_id,
+            service, cp_options, registry=registry, camera=(camera_id, cam), station_id=station_id,
             cdd=cpm_cdd, heading_offset_deg=heading_offset_deg, origin_lat_deg=origin_lat_deg,
             origin_lon_deg=origin_lon_deg, log=_log)
         return serve(service, stop=stop, cp=cp, **serve_options)
