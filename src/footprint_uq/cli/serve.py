@@ -63,7 +63,8 @@ __all__ = ["serve_cmd"]
               help="Ground contact of 2D boxes.")
 @click.option("--allow-outside-image", is_flag=True, help="Let corners outside the image enter the centre.")
 @click.option("--station-id", type=click.IntRange(0, 4294967295), default=None,
-              help="StationId of the messages (one camera; default: CRC-32 of the camera id).")
+              help="StationId of the messages (one camera; default: CRC-32 of the camera id); with --cp-service the "
+                   "unit's CPMs and SDSMs (default: CRC-32 of the sorted camera ids joined by commas).")
 @click.option("--uper-encoder", type=click.Choice(["fast", "asn1tools"]), default="fast", show_default=True,
               help="CPM UPER writer: the direct writer, or asn1tools (same bytes, ~6 ms per 100 objects).")
 @click.option("--linearity/--no-linearity", default=True, show_default=True,
@@ -112,7 +113,7 @@ __all__ = ["serve_cmd"]
 @click.option("--cpm-max-bytes", type=click.IntRange(min=64), default=None, metavar="B",
               help="With --cp-service: a CPM larger than B bytes of UPER is split into segments (default 1100).")
 @click.option("--region-max-semi-major-m", type=FiniteFloatRange(min=0, min_open=True), default=None, metavar="M",
-              help="With --cp-service: each camera's perception region is where its 95 %% position ellipse's "
+              help="With --cp-service: each camera's perception region is where its 95 % position ellipse's "
                    "semi-major axis is <= M metres (default 1.0).")
 @click.option("--per-camera-output/--no-per-camera-output", default=None,
               help="With --cp-service: write every camera frame's record too (default: yes; a debugging output).")
