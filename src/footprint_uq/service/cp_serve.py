@@ -33,6 +33,9 @@ from .core import RECORD_ERROR, RECORD_FOOTPRINTS, Service, error_record, statio
 from .cp_rules import CpRules
 from .cp_service import CpBasicService, CpCamera, CpEvent
 from .frame_kernels import worst_usable
+from .messages.cpm import CPM_CLASS_OF, object_class_json
+from .messages.motion import MotionCodes
+from .messages.uper_cpm import class_bits, object_bits
 
 __all__ = ["CpServeOptions", "CpServe", "cp_cameras", "RECORD_CP_EVENT", "CP_TOPIC", "unit_station_id"]
 
@@ -302,6 +305,40 @@ def start_cp_service(service: Service, options: CpServeOptions, *, registry: dic
             f"{options.cpm_max_bytes} bytes")
     cams = cp_cameras(entries, max_semi_major_m=options.region_max_semi_major_m, log=log)
     sid = unit_station_id(entries) if station_id is None else int(station_id)
+    _check_room(cams, options, sid, cdd, heading_offset_deg)
     alias = None if registry is not None else cams[0].camera_id
     return CpServe(service, cams, options, station_id=sid, cdd=cdd, heading_offset_deg=heading_offset_deg,
                    origin_lat_deg=origin_lat_deg, origin_lon_deg=origin_lon_deg, camera_alias=alias)
+
+
+def _check_room(cams: list, options: CpServeOptions, station_id: int, cdd: str, heading_offset_deg: float) -> None:
+    """Refuse at start, in one line, a ``--cpm-max-bytes`` that cannot hold the first segment of an event: the Sensor
+    Information and Perception Region containers of every camera (their size from a real encoding of an event
+    without objects) and the largest object (:func:`largest_object_bytes`).  Without it every event that carries
+    the containers would fail, once a second."""
+    probe = CpBasicService(cams, station_id=station_id, rules=CpRules(t_gen_cpm_s=options.t_gen_cpm_ms / 1000.0,
+                                                                      max_size_bytes=65535),
+                           cdd=cdd, heading_offset_deg=heading_offset_deg)
+    ev = probe.poll(_PROBE_TIME_S)
+    head = len(ev.segments[0]) if ev is not None and ev.segments else 0
+    # + 4 bytes: the segmentationInfo of a split event, the object container's longer length determinant, padding
+    need = head + largest_object_bytes(len(cams), cdd) + 4
+    if options.cpm_max_bytes < need:
+        raise InputError("--cpm-max-bytes", options.cpm_max_bytes,
+                         f"at least {need} bytes: an event's first segment carries the Sensor Information and "
+                         f"Perception Region containers of the {len(cams)} camera(s) ({head} bytes) and an object")
+
+
+#: the time of the probe event of :func:`_check_room` (a valid TimestampIts: 2023-11-14)
+_PROBE_TIME_S = 1.7e9
+
+
+def largest_object_bytes(n_cameras: int, cdd: str) -> int:
+    """The most bytes one PerceivedObject takes (:func:`~.messages.uper_cpm.object_bits`): velocity, angle, age,
+    correlation, quality, the widest class of the release and a ``sensorIdList`` of every camera."""
+    one = np.ones(1, np.int64)
+    motion = MotionCodes(*(one for _ in MotionCodes._fields))
+    width = max(class_bits(object_class_json(spec, cdd), cdd)[1] for spec in set(CPM_CLASS_OF.values()))
+    bits = object_bits(np.zeros(1, np.int64), np.array([width]), cdd=cdd, motion=motion, quality=np.array([15]),
+                       sensor_ids=[list(range(max(int(n_cameras), 1)))])
+    return -(-int(bits[0]) // 8)
