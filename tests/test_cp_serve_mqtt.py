@@ -8,7 +8,8 @@ real CLI in a subprocess.  A receiver subscribed to ``footprints/#`` checks:
 * every CPM on ``footprints/rsu/cpm`` decodes with BOTH official decoders (asn1tools and pycrate, the ETSI modules of
   CDD 2.2.1 and 2.4.1: tests/test_cpm_official.py) to the same JSON as the project's decoder;
 * the events on ``footprints/rsu/events``: one every T_GenCpm (100 ms) of data time, each event's segments those of
-  its referenceTime (numbered, every object the record sends in exactly the segment it names, no other object);
+  its referenceTime (numbered, every object the record sends in exactly the segment it names, no other object;
+  ``--cpm-max-bytes 520`` splits the events that carry the sensor containers);
 * the Sensor Information container in the first event's first segment and again at the first event once a second
   has passed;
 * the SDSM on ``footprints/rsu/sdsm`` of each event: the same fused objects (ids) and positions as the record, the
@@ -122,7 +123,7 @@ def test_cp_service_over_mosquitto_decodes_with_both_official_decoders(broker, t
     reg = write_site(tmp_path)
     rx = Receiver(broker, "rx-cp")
     p = start_serve(["--registry", str(reg), "--mqtt", broker.url, "--output", "mqtt", "--tracks", "--cp-service",
-                     "--overload", "block", "--client-id", "serve-cp"])
+                     "--overload", "block", "--client-id", "serve-cp", "--cpm-max-bytes", "520"])
     try:
         _wait(lambda: len(rx.health()) >= 1, 90, "the service's first health message")
         sent = _publish_frames(broker)
@@ -168,6 +169,7 @@ def test_cp_service_over_mosquitto_decodes_with_both_official_decoders(broker, t
     assert np.all(np.diff(t) > 0.1 - 1e-6) and np.all(np.diff(t) < 0.1 + 1.0 / RATE_HZ + 1e-6)
     assert t[0] == pytest.approx(T0, abs=1e-6)
     assert sum(len(v) for v in by_ref.values()) == len(payloads)
+    assert any(len(v) >= 2 for v in by_ref.values())  # 520 bytes: the events with the sensor containers are split
     info_t = []
     for ev in events:
         cpms = by_ref.get(ev["reference_time_ms"], [])
