@@ -290,3 +290,18 @@ def test_docs_cpm_example_is_a_real_cpm_of_the_service(site):
     # what the page says of it
     assert ev["time_s"] == pytest.approx(T0 + 1.0) and ev["counts"]["perceived"] == 6 and ev["counts"]["sent"] == 5
     assert [o["class"] for o in ev["objects"] if o["segment"] is None] == ["person"]
+
+
+def test_sensor_ids_default_to_the_sorted_index_plus_one_and_never_meet(tmp_path, camera_files):
+    from footprint_uq.service.cp_serve import cp_cameras
+
+    reg = _registry(tmp_path, camera_files, "camera_id,camera,budget,sensor_id",
+                    [f"z,{camera_files[0]},basler1@deg,", f"a,{camera_files[1]},basler1@deg,",
+                     f"m,{camera_files[2]},basler1@deg,9"])
+    cams = cp_cameras(load_registry(reg))
+    assert [(c.camera_id, c.sensor_id) for c in cams] == [("a", 1), ("m", 9), ("z", 3)]
+    assert all(c.region is not None and c.region.max_semi_major_inside_m <= 1.0 for c in cams)
+    clash = _registry(tmp_path, camera_files, "camera_id,camera,budget,sensor_id",
+                      [f"a,{camera_files[0]},basler1@deg,", f"b,{camera_files[1]},basler1@deg,1"], "clash.csv")
+    with pytest.raises(ConfigError, match=r"registry: b: sensor_id.*camera 'a' has it"):
+        cp_cameras(load_registry(clash))
