@@ -177,7 +177,7 @@ def test_events_follow_t_gen_cpm_with_sensor_information_every_second(site):
     health = _serve_stdin(site, frames(5), "--no-per-camera-output")
     assert Counter(r["type"] for r in health) == {RECORD_CP_EVENT: 5, "health": 1}
     cp = health[-1]["cp_service"]
-    assert cp["events"] == 5 and cp["frames_ingested"] == 15 and cp["cpms"] == sum(
+    assert cp["events"] == 5 and cp["frames_ingested"] == 15 and cp["internal_errors"] == 0 and cp["cpms"] == sum(
         len(r["cpm_uper_hex"]) for r in health[:-1])
 
 
