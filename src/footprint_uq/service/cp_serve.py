@@ -37,7 +37,8 @@ from .messages.cpm import CPM_CLASS_OF, object_class_json
 from .messages.motion import MotionCodes
 from .messages.uper_cpm import class_bits, object_bits
 
-__all__ = ["CpServeOptions", "CpServe", "cp_cameras", "RECORD_CP_EVENT", "CP_TOPIC", "unit_station_id"]
+__all__ = ["CpServeOptions", "CpServe", "cp_cameras", "cp_workers", "start_cp_service", "largest_object_bytes",
+           "unit_station_id", "RECORD_CP_EVENT", "CP_TOPIC"]
 
 #: the record kind of a generation event on stdout (and on ``<prefix>/rsu/events``)
 RECORD_CP_EVENT = "cp_event"
