@@ -236,6 +236,7 @@ SLOW_TESTS = (
     "test_plan_browser.py",
     "test_validation_browser.py",
     "test_service_faults.py",             # the service's hostile cases through a real Mosquitto
+    "test_cp_serve_mqtt.py",              # serve --cp-service through a real Mosquitto, both official decoders
     "test_cpm_official.py::test_every_payload_decodes_with_the_official_modules_to_the_records_numbers",
     "test_centre_linearity.py",           # the footprint centre's Monte Carlo sweep
     "test_examples.py",                   # every example script end to end

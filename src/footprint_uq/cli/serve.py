@@ -13,6 +13,7 @@ from .._checks import as_float
 from ..errors import InputError
 from ..io.class_names import UNKNOWN_POLICIES, load_class_names
 from ..products.footprints import CONTACT_MODES, V2X_POLICIES
+from ..service.cp_serve import CpServeOptions
 from ..service.messages.asn1_cpm import CDD_RELEASES, DEFAULT_CDD
 from ..service.runner import MAX_FRAME_BYTES, QUEUE_DEPTH, run
 from ..tracking.consistency import DEFAULT_WINDOW_S
@@ -62,7 +63,8 @@ __all__ = ["serve_cmd"]
               help="Ground contact of 2D boxes.")
 @click.option("--allow-outside-image", is_flag=True, help="Let corners outside the image enter the centre.")
 @click.option("--station-id", type=click.IntRange(0, 4294967295), default=None,
-              help="StationId of the messages (one camera; default: CRC-32 of the camera id).")
+              help="StationId of the messages (one camera; default: CRC-32 of the camera id); with --cp-service the "
+                   "unit's CPMs and SDSMs (default: CRC-32 of the sorted camera ids joined by commas).")
 @click.option("--uper-encoder", type=click.Choice(["fast", "asn1tools"]), default="fast", show_default=True,
               help="CPM UPER writer: the direct writer, or asn1tools (same bytes, ~6 ms per 100 objects).")
 @click.option("--linearity/--no-linearity", default=True, show_default=True,
@@ -101,11 +103,26 @@ __all__ = ["serve_cmd"]
               help="Record layout: 'compact' (default with --output mqtt: per object id, class, status, position, "
                    "cov_m2, message id and motion; the CPM as UPER bytes on <prefix>/<camera_id>/cpm) or 'full' "
                    "(default on stdout: every field, the CPM as JSON and UPER hex, the SDSM). docs/service.md.")
+@click.option("--cp-service", "cp_service", is_flag=True,
+              help="The roadside unit's Collective Perception service: every camera's tracks fused into one object "
+                   "list, CPMs by ETSI TS 103 324's generation and inclusion rules (segmented, with Sensor Information "
+                   "and perception regions), one SDSM per event; MQTT <prefix>/rsu/cpm, /sdsm, /events, or "
+                   "'cp_event' JSON lines on stdout. Needs --tracks; one process (--workers 1). docs/service.md.")
+@click.option("--t-gen-cpm-ms", type=click.IntRange(100, 1000), default=None, metavar="MS",
+              help="With --cp-service: T_GenCpm, the generation event period (100..1000 ms; default 100).")
+@click.option("--cpm-max-bytes", type=click.IntRange(min=64), default=None, metavar="B",
+              help="With --cp-service: a CPM larger than B bytes of UPER is split into segments (default 1100).")
+@click.option("--region-max-semi-major-m", type=FiniteFloatRange(min=0, min_open=True), default=None, metavar="M",
+              help="With --cp-service: each camera's perception region is where its 95 % position ellipse's "
+                   "semi-major axis is <= M metres (default 1.0).")
+@click.option("--per-camera-output/--no-per-camera-output", default=None,
+              help="With --cp-service: write every camera frame's record too (default: yes; a debugging output).")
 @pose_options
 def serve_cmd(camera_path, budget_spec, registry, camera_id, input_, mqtt, output, input_prefix, output_prefix,
               policy, health_interval_s, workers, client_id, heading_offset_deg, origin_lat, origin_lon, confidence,
               contact, allow_outside_image, station_id, uper_encoder, linearity, linear_threshold, cpm_cdd, v2x_policy,
-              queue_depth, max_frame_bytes, tracks, class_names, unknown_class, record, motion_window_s, pose):
+              queue_depth, max_frame_bytes, tracks, class_names, unknown_class, record, motion_window_s, cp_service,
+              t_gen_cpm_ms, cpm_max_bytes, region_max_semi_major_m, per_camera_output, pose):
     """Edge service: detector frames in, positions with uncertainty and V2X messages (CPM, SDSM) out.
 
     One output record per frame (or an error record), a health record every second;
@@ -118,6 +135,7 @@ def serve_cmd(camera_path, budget_spec, registry, camera_id, input_, mqtt, outpu
     elif unknown_class != "error":
         raise InputError("--unknown-class", unknown_class, "--class-names too (the policy of the names map's "
                          "unnamed ids)")
+    cp = _cp_options(cp_service, tracks, t_gen_cpm_ms, cpm_max_bytes, region_max_semi_major_m, per_camera_output)
     if budget_spec is not None:
         msg = budget_notice(load_budget(budget_spec))
         if msg is not None:
@@ -132,4 +150,24 @@ def serve_cmd(camera_path, budget_spec, registry, camera_id, input_, mqtt, outpu
                  record=record, consistency_window_s=as_float("--motion-window-s", motion_window_s, nonnegative=True),
                  input=input_ if input_ is not None else (None if mqtt else "-"), mqtt=mqtt, output=output,
                  input_prefix=input_prefix, output_prefix=output_prefix, policy=policy,
-                 health_interval_s=health_interval_s, client_id=client_id))
+                 health_interval_s=health_interval_s, client_id=client_id, cp_service=cp))
+
+
+def _cp_options(cp_service: bool, tracks: bool, t_gen_cpm_ms, cpm_max_bytes, region_max_semi_major_m,
+                per_camera_output) -> CpServeOptions | None:
+    """The options of ``--cp-service`` (None without it); an option of it given alone, or ``--cp-service`` without
+    ``--tracks``, is one line."""
+    given = {"--t-gen-cpm-ms": t_gen_cpm_ms, "--cpm-max-bytes": cpm_max_bytes,
+             "--region-max-semi-major-m": region_max_semi_major_m, "--per-camera-output": per_camera_output}
+    if not cp_service:
+        for name, v in given.items():
+            if v is not None:
+                raise InputError(name, v, "--cp-service too (an option of the roadside unit's CP service)")
+        return None
+    if not tracks:
+        raise InputError("--cp-service", "without --tracks", "--tracks too (the CP service fuses the cameras' tracks)")
+    d = CpServeOptions()
+    return CpServeOptions(d.t_gen_cpm_ms if t_gen_cpm_ms is None else t_gen_cpm_ms,
+                          d.cpm_max_bytes if cpm_max_bytes is None else cpm_max_bytes,
+                          d.region_max_semi_major_m if region_max_semi_major_m is None else region_max_semi_major_m,
+                          True if per_camera_output is None else per_camera_output)

@@ -35,9 +35,52 @@ class RegistryEntry:
     origin_lat_deg: float | None = None
     origin_lon_deg: float | None = None
     source: str = ""
+    #: the camera's ``sensorId`` in the roadside unit's CPMs (0..255; None: the default of ``serve --cp-service``,
+    #: its index in the sorted camera ids + 1)
+    sensor_id: int | None = None
+    #: the sigmas of the camera's clock offset and jitter (s; the CP service's time term, docs/rsu-fusion.md)
+    clock_offset_sigma_s: float = 0.0
+    clock_jitter_sigma_s: float = 0.0
 
 
-_REG_KEYS = {"camera_id", "camera", "budget", "heading_offset_deg", "origin_lat_deg", "origin_lon_deg"}
+_REG_KEYS = {"camera_id", "camera", "budget", "heading_offset_deg", "origin_lat_deg", "origin_lon_deg", "sensor_id",
+             "clock_offset_sigma_s", "clock_jitter_sigma_s"}
+#: the largest ``sensor_id`` (the CPM's ``Identifier1B``)
+MAX_SENSOR_ID = 255
+
+
+def _absent(v) -> bool:
+    return v is None or (isinstance(v, float) and np.isnan(v)) or (isinstance(v, str) and not v.strip())
+
+
+def _sensor_id(v, where: str) -> int | None:
+    """An optional ``sensor_id``: an integer 0..255 (a CSV cell's text too); None when absent."""
+    if _absent(v):
+        return None
+    expected = f"an integer sensor id in 0..{MAX_SENSOR_ID} (the CPM's sensorId)"
+    if isinstance(v, bool):
+        raise ConfigError(f"{where}: sensor_id", v, expected)
+    try:
+        n = int(v.strip()) if isinstance(v, str) else int(v)
+    except (TypeError, ValueError, OverflowError):
+        raise ConfigError(f"{where}: sensor_id", v, expected) from None
+    if (not isinstance(v, str) and n != v) or not 0 <= n <= MAX_SENSOR_ID:
+        raise ConfigError(f"{where}: sensor_id", v, expected)
+    return n
+
+
+def _clock_sigma(rec: dict, key: str, where: str) -> float:
+    """An optional clock sigma (s): a finite number >= 0; 0 when absent."""
+    v = rec.get(key)
+    if _absent(v):
+        return 0.0
+    try:
+        x = float(v) if not isinstance(v, bool) else float("nan")
+    except (TypeError, ValueError):
+        x = float("nan")
+    if not (np.isfinite(x) and x >= 0.0):
+        raise ConfigError(f"{where}: {key}", v, "a finite number of seconds >= 0")
+    return x
 
 
 def _entry(rec: dict, where: str, base: Path, default_budget) -> RegistryEntry:
@@ -73,7 +116,9 @@ def _entry(rec: dict, where: str, base: Path, default_budget) -> RegistryEntry:
             raise ConfigError(f"{where}: {key}", v, "a number (degrees)") from None
 
     return RegistryEntry(str(cid), load_camera(cpath), budget, num("heading_offset_deg"), num("origin_lat_deg"),
-                         num("origin_lon_deg"), str(cpath))
+                         num("origin_lon_deg"), str(cpath), _sensor_id(rec.get("sensor_id"), where),
+                         _clock_sigma(rec, "clock_offset_sigma_s", where),
+                         _clock_sigma(rec, "clock_jitter_sigma_s", where))
 
 
 def load_registry(path, *, budget=None) -> dict[str, RegistryEntry]:
@@ -87,7 +132,8 @@ def load_registry(path, *, budget=None) -> dict[str, RegistryEntry]:
         * a **table** -- ``.csv`` (header), ``.yaml``/``.json`` (a list of mappings, or a
           mapping with key ``cameras``) -- with keys ``camera_id``, ``camera`` (camera file,
           relative to the registry's folder), optional ``budget`` (preset or file; default
-          ``budget``), ``heading_offset_deg``, ``origin_lat_deg``, ``origin_lon_deg``.
+          ``budget``), ``heading_offset_deg``, ``origin_lat_deg``, ``origin_lon_deg``, ``sensor_id`` (0..255,
+          unique), ``clock_offset_sigma_s``, ``clock_jitter_sigma_s`` (s, >= 0; default 0).
     budget : preset, path or ErrorBudget, optional
         Default budget.
 
@@ -148,6 +194,8 @@ def load_registry(path, *, budget=None) -> dict[str, RegistryEntry]:
         e = _entry(rec, where, base, budget)
         if e.camera_id in out:
             raise ConfigError(f"{where}: camera_id", e.camera_id, "unique camera ids")
+        if e.sensor_id is not None and any(o.sensor_id == e.sensor_id for o in out.values()):
+            raise ConfigError(f"{where}: sensor_id", e.sensor_id, "a sensor id no other camera of the registry has")
         out[e.camera_id] = e
     if not out:
         raise ConfigError("registry", str(path), "at least one camera")

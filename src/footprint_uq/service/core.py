@@ -186,6 +186,8 @@ class CameraSetup:
     nis: NisMonitor | None = None
     #: object_id -> the messages' object id (unique per message, stable across frames; messages/ids.py)
     ids: MessageIdMap = field(default_factory=MessageIdMap)
+    #: the tracker's output of the camera's latest frame (``tracks=True``; read by :attr:`Service.on_tracked`)
+    last_tracks: object = None
 
     #: the map tie's constants, read once (a frame calls no method of the GeoReference but ``to_wgs84``)
     has_origin: bool = False
@@ -379,6 +381,9 @@ class Service:
                 if warm_up:
                     setup.tracks.warm_up()
 
+        #: called after each tracked frame as ``on_tracked(camera_id, frame, timestamp_s, TrackOutput, estimate,
+        #: FrameDetections)`` (the CP service of ``serve --cp-service``: :mod:`.cp_serve`); None: nothing
+        self.on_tracked = None
         self.linearity = bool(linearity)
         self.linear_threshold = DEFAULT_LINEAR_THRESHOLD if linear_threshold is None else float(linear_threshold)
         if not self.linear_threshold > 0:
@@ -526,6 +531,8 @@ class Service:
         est, found = self._footprints(setup, dets)
         ids, classes, class_p = found.object_ids, found.classes, found.class_confidence
         motion = self._motion(setup, est, ids, classes, ts, found.yaw_rad) if self.tracks else None
+        if self.on_tracked is not None and motion is not None:
+            self.on_tracked(camera_id, fno, ts, setup.last_tracks, est, found)
         t1 = time.perf_counter()
         objects, ok_idx, msg_ids = self._objects_json(setup, est, ids, classes, ts, motion)
         t2 = time.perf_counter()
@@ -618,7 +625,8 @@ class Service:
         N = len(ids)
         B = est.centre_shared_m if est.centre_shared_m is not None else np.full((N, 2, setup.tracks.rank), np.nan)
         with setup.tracks_lock:
-            out = setup.tracks.step(ts, ids, classes, est.centre_xy_world_m, shared_m=B, cov_m2=est.centre_cov_m2)
+            out = setup.last_tracks = setup.tracks.step(ts, ids, classes, est.centre_xy_world_m, shared_m=B,
+                                                        cov_m2=est.centre_cov_m2)
             if setup.nis is not None:
                 setup.nis.observe(ts, out, classes, est.centre_xy_world_m,
                                   est.centre_cov_m2 - B @ np.swapaxes(B, -1, -2), B)

@@ -54,6 +54,7 @@ from ..io.registry import load_registry
 from ..products.warmup import compile_handler
 from ..tracking.consistency import DEFAULT_WINDOW_S
 from .core import RECORD_ERROR, RECORD_FOOTPRINTS, RECORD_LAYOUTS, FrameOutput, Service, error_record
+from .cp_serve import cp_workers, start_cp_service
 from .messages.asn1_cpm import DEFAULT_CDD
 
 __all__ = ["FrameQueue", "Metrics", "serve", "run", "parse_mqtt_url", "POLICIES"]
@@ -356,8 +357,11 @@ class _MqttSink:
 
     def write_cpm(self, camera_id, cpm_uper: bytes) -> None:
         """A compact record's CPM, UPER-encoded, as bytes on ``<prefix>/<camera_id>/cpm`` (after its record)."""
-        info = self._c.publish(f"{self._prefix}/{camera_id if camera_id is not None else 'camera'}/cpm", cpm_uper,
-                               qos=1)
+        self.publish(f"{camera_id if camera_id is not None else 'camera'}/cpm", cpm_uper)
+
+    def publish(self, subtopic: str, data: bytes) -> None:
+        """``data`` on ``<prefix>/<subtopic>`` (QoS 1; a refused publish is counted in ``publish_failed``)."""
+        info = self._c.publish(f"{self._prefix}/{subtopic}", data, qos=1)
         if info.rc != 0:
             with self._metrics._lock:
                 self._metrics.publish_failed += 1
@@ -558,7 +562,7 @@ def serve(service: Service, *, input: str | None = "-", mqtt: str | None = None,
           worker: str | None = None, stdin=None, stdout=None,
           stop: threading.Event | None = None, install_signals: bool = True, drain_timeout_s: float = 10.0,
           queue_depth: int = QUEUE_DEPTH, max_frame_bytes: int = MAX_FRAME_BYTES,
-          max_pending_bytes: int = MAX_PENDING_BYTES) -> int:
+          max_pending_bytes: int = MAX_PENDING_BYTES, cp=None) -> int:
     """Run the service until SIGTERM/SIGINT, ``stop`` or the end of stdin; return the exit status (0).
 
     Parameters
@@ -583,6 +587,9 @@ def serve(service: Service, *, input: str | None = "-", mqtt: str | None = None,
         A frame (MQTT payload, stdin line) larger than ``max_frame_bytes`` is refused with an error record
         before it is queued (a stdin line is skipped without being held); the frames pending in all hold at
         most ``max_pending_bytes`` (beyond: dropped and counted with ``newest``, waiting with ``block``).
+    cp : CpServe, optional
+        The roadside unit's CP service (``--cp-service``, :mod:`.cp_serve`): its outputs follow each frame's record,
+        its counts go into the health record (``cp_service``).
     """
     _check_transport(input, mqtt, output)
     policy = policy or ("block" if input == "-" else "newest")
@@ -598,6 +605,8 @@ def serve(service: Service, *, input: str | None = "-", mqtt: str | None = None,
     sink = _MqttSink(client, output_prefix, metrics) if output == "mqtt" else _StdoutSink(out_stream, stop.set)
     if output.startswith(ROSBAG_PREFIX):
         sink = _bag_sink(service, output, sink)
+    if cp is not None:
+        sink = cp.wrap(sink, mqtt=output == "mqtt")
     if client is not None:
         _mqtt_input(client, topics if input is None else None, input_prefix, queue, sink, metrics, stop,
                     max_frame_bytes)
@@ -615,6 +624,8 @@ def serve(service: Service, *, input: str | None = "-", mqtt: str | None = None,
             rec["motion_consistency"] = motion  # (docs/motion-fit.md, "Consistency on line")
         for line in lines:
             _log(line)
+        if cp is not None:
+            rec["cp_service"] = cp.counts()
         return rec
 
     with _steady_runtime():
@@ -823,6 +834,11 @@ def run(*, camera=None, budget=None, registry=None, camera_id: str | None = None
                          "one camera (--camera with --budget) or many (--registry)")
     _check_transport(serve_options.get("input", "-"), serve_options.get("mqtt"), serve_options.get("output", "-"))
     serve_options["record"] = _record_layout(serve_options.get("record"), serve_options.get("output", "-"))
+    cp_options = serve_options.pop("cp_service", None)
+    if cp_options is not None:  # the fusion needs every camera in one process (docs/service.md, "Workers")
+        workers = cp_workers(workers, registry is not None and serve_options.get("input", "-") is None, _log)
+        registry = registry if registry is None or isinstance(registry, dict) else load_registry(registry,
+                                                                                                 budget=budget)
     if workers is None:
         workers = 1
         if registry is not None and serve_options.get("input", "-") is None:
@@ -866,7 +882,11 @@ def run(*, camera=None, budget=None, registry=None, camera_id: str | None = None
                           class_names=serve_options.pop("class_names", None),
                           unknown_class=serve_options.pop("unknown_class", None), record=serve_options.pop("record"),
                           consistency_window_s=serve_options.pop("consistency_window_s", DEFAULT_WINDOW_S))
-        return serve(service, stop=stop, **serve_options)
+        cp = None if cp_options is None else start_cp_service(
+            service, cp_options, registry=registry, camera=(camera_id, cam), station_id=station_id,
+            cdd=cpm_cdd, heading_offset_deg=heading_offset_deg, origin_lat_deg=origin_lat_deg,
+            origin_lon_deg=origin_lon_deg, log=_log)
+        return serve(service, stop=stop, cp=cp, **serve_options)
     finally:
         for sig, h in old.items():
             signal.signal(sig, h)
