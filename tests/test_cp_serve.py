@@ -288,8 +288,8 @@ def test_docs_cpm_example_is_a_real_cpm_of_the_service(site):
     assert page[start:page.index("```", start)] == text + "\n"
     assert json.loads(text)["payload"]["managementContainer"]["referenceTime"] == ev["reference_time_ms"]
     # what the page says of it
-    assert ev["time_s"] == pytest.approx(T0 + 1.0) and ev["counts"]["perceived"] == 6 and ev["counts"]["sent"] == 5
-    assert [o["class"] for o in ev["objects"] if o["segment"] is None] == ["person"]
+    assert ev["time_s"] == pytest.approx(T0 + 1.0) and ev["counts"]["perceived"] == 6 and ev["counts"]["sent"] == 6
+    assert [o["reason"] for o in ev["objects"] if o["class"] == "person"] == ["speed"]
 
 
 def test_sensor_ids_default_to_the_sorted_index_plus_one_and_never_meet(tmp_path, camera_files):
