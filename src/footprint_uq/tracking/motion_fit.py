@@ -26,11 +26,12 @@ import numpy as np
 from scipy.interpolate import CubicSpline
 
 from ..errors import InputError
+from .joint_likelihood_kernels import joint_bank_frame
 from .likelihood_kernels import bank_frame, bank_predicted
 from .table import TrackerConfig, TrackOutput
 
 __all__ = ["MotionGrid", "MotionBank", "ClassProfile", "members_of", "fit_profile", "fit_class", "fit_classes",
-           "CHI2_95_1DOF", "MODE_MARGIN_NATS", "DEFAULT_Q_GRID_M2PS3"]
+           "CHI2_95_1DOF", "MODE_MARGIN_NATS", "DEFAULT_Q_GRID_M2PS3", "LIKELIHOODS"]
 
 #: 95 % quantile of chi-square with 1 dof (the profile-likelihood interval)
 CHI2_95_1DOF = 3.841458820694124
@@ -39,6 +40,10 @@ MODE_MARGIN_NATS = 0.5 * 6.634896601021214
 #: the one-mode grid: 1e-4 to 100 m^2/s^3, 6 points per decade (down to 1e-4: a calm site's velocity sigmas
 #: are still ~5 x too large at q = 0.01 after a few seconds of track, docs/motion-fit.md)
 DEFAULT_Q_GRID_M2PS3 = np.geomspace(1e-4, 100.0, 37)
+#: what a bank's members run: "joint" (the calibration error estimated with the state: the track's exact
+#: likelihood, what the fit maximises) or "tracker" (the tracker's own Schmidt filter: its innovations and NIS, what
+#: the on-line check watches; their product is not a likelihood, docs/motion-fit.md section 2a)
+LIKELIHOODS = ("joint", "tracker")
 
 
 @dataclass(frozen=True)
@@ -103,10 +108,16 @@ class MotionBank:
         Prior sigma of a new track's velocity (the tracker's ``sigma_v0_mps``).
     timeout_s : float
         The tracker's timeout: rows of tracks not seen for twice as long are freed.
+    likelihood : {"joint", "tracker"}
+        :data:`LIKELIHOODS`: members with the calibration error in their state (the exact likelihood; storage
+        ``(4 + r)^2`` per mode and member) or the tracker's Schmidt filter (its NIS).
     """
 
     def __init__(self, members, *, rank: int, shared_at=None, sigma_v0_mps: float = 50.0, timeout_s: float = 1.0,
-                 g_ref: int = 0):
+                 g_ref: int = 0, likelihood: str = "tracker"):
+        if likelihood not in LIKELIHOODS:
+            raise InputError("likelihood", likelihood, f"one of {LIKELIHOODS}")
+        self.likelihood = likelihood
         self.rank, self.shared_at = int(rank), shared_at
         self._qs, self._nm, self._mu0, self._rates = (np.ascontiguousarray(a) for a in members)
         self._g_ref = int(g_ref)
@@ -123,11 +134,12 @@ class MotionBank:
         self._swept_s = -math.inf
 
     @classmethod
-    def from_grid(cls, grid: MotionGrid, *, rank: int, shared_at=None) -> MotionBank:
-        """The bank of a fit's grid (reference member: the one-mode density nearest the prior's quiet one)."""
+    def from_grid(cls, grid: MotionGrid, *, rank: int, shared_at=None, likelihood: str = "joint") -> MotionBank:
+        """The bank of a fit's grid (reference member: the one-mode density nearest the prior's quiet one; members:
+        the exact likelihood)."""
         p = grid.prior
         return cls(grid.members(), rank=rank, shared_at=shared_at, sigma_v0_mps=p.sigma_v0_mps,
-                   timeout_s=p.timeout_s, g_ref=grid.reference_member())
+                   timeout_s=p.timeout_s, g_ref=grid.reference_member(), likelihood=likelihood)
 
     def _grow(self, cap: int) -> None:
         G, r, old = self._qs.shape[0], self.rank, self._cap
@@ -138,9 +150,10 @@ class MotionBank:
                 b[:old] = a
             return b
 
-        self._X = ext(getattr(self, "_X", None), (G, 2, 4))
-        self._P = ext(getattr(self, "_P", None), (G, 2, 4, 4))
-        self._C = ext(getattr(self, "_C", None), (G, 2, 4, r))
+        n, rc = (4 + r, 0) if self.likelihood == "joint" else (4, r)  # (joint: w in the state, no C)
+        self._X = ext(getattr(self, "_X", None), (G, 2, n))
+        self._P = ext(getattr(self, "_P", None), (G, 2, n, n))
+        self._C = ext(getattr(self, "_C", None), (G, 2, 4, rc))
         self._MU = ext(getattr(self, "_MU", None), (G, 2))
         t = np.full(cap, np.nan)
         t[:old] = self._t_last[:old] if old else t[:old]
@@ -205,6 +218,11 @@ class MotionBank:
             pred = np.empty((n, 2))
             bank_predicted(rows, start, float(time_s), self._X, self._MU, self._t_last, self._g_ref, pred)
             Bp = np.ascontiguousarray(self.shared_at(pred), dtype=np.float64)
+        if self.likelihood == "joint":
+            joint_bank_frame(rows, start, cls, float(time_s), z, R, Bp, Bf, self._X, self._P, self._MU,
+                             self._t_last, self._qs, self._nm, self._rates, self._mu0, self._var_v0, self.LL, self.NIS,
+                             self.n_upd, self.n_bad)
+            return
         bank_frame(rows, start, cls, float(time_s), z, R, Bp, Bf, self._X, self._P, self._C, self._MU, self._t_last,
                    self._qs, self._nm, self._rates, self._mu0, self._var_v0, self.LL, self.NIS, self.n_upd, self.n_bad)
 
