@@ -1,10 +1,12 @@
 """The manoeuvre noise of a site's traffic, fitted to its tracks by maximum likelihood (docs/motion-fit.md).
 
-The likelihood is the tracker's own: the innovations of the filter of :class:`~footprint_uq.tracking.table.
-TrackTable` (constant-velocity modes, the calibration error as the Schmidt consider state, IMM mixing), each
-track's ``sum_k log p(z_k | z_1..k-1; q)``.  It is evaluated for a grid of models at once (a *bank* of filters
-run side by side on the same tracks, :mod:`footprint_uq.tracking.likelihood_kernels`), in one streamed pass over a
-recording: per object class, the log-likelihood of every grid model, nothing else is kept.
+The likelihood is that of the tracker's model (:class:`~footprint_uq.tracking.table.TrackTable`: constant-velocity
+modes, the split measurement model with the calibration error ``w`` shared by a track's frames, IMM mixing), each
+track's ``sum_k log p(z_k | z_1..k-1; q)``, computed by the filter that estimates ``w`` with the state
+(:mod:`footprint_uq.tracking.joint_likelihood_kernels`): the tracker's own Schmidt innovations are correlated
+through ``w``, their product is not a likelihood and its maximum lies above the truth (docs/motion-fit.md, section
+2a).  It is evaluated for a grid of models at once (a *bank* of filters run side by side on the same tracks), in one
+streamed pass over a recording: per object class, the log-likelihood of every grid model, nothing else is kept.
 
 * one mode (a plain constant-velocity filter) of acceleration density ``q`` on a log grid: the profile
   likelihood of ``q`` gives the estimate and its 95 % interval (``2 (l_max - l(q)) <= chi2_1(0.95)``);
