@@ -28,12 +28,16 @@ from footprint_uq.tracking.motion_fit import (
     MotionGrid,
     fit_class,
     fit_profile,
+    scale_gradient,
+    scale_sigma,
+    widen_interval,
 )
 from footprint_uq.tracking.synthetic import default_camera
-from footprint_uq.tracking.table import TrackTable
+from footprint_uq.tracking.table import SharedJacobianAt, TrackTable
 from footprint_uq.uncertainty.budget import ErrorBudget, load_budget
 
 R_RANK = 3
+DEFAULT_Q = np.geomspace(1e-4, 100.0, 37)
 
 
 def _tracks(rng, n_tracks=4, n_frames=12, r=R_RANK):
@@ -250,6 +254,41 @@ def test_fit_profile_pinned_on_a_quadratic_log_likelihood():
     assert fit_profile(q, np.log(q))["ci95"][1] is None
     with pytest.raises(InputError, match="log-likelihood"):
         fit_profile(q, np.r_[ll[:-1], np.nan])
+
+
+def test_scale_sigma_pinned_for_a_height_error():
+    """A camera whose only calibration error is its height (sigma 0.1936 m at 8 m) sees the ground scaled about its
+    foot point by 1 + dh/h: ``tr(dB/dx) = 2 sigma_h / h = 0.0484`` at every point (hand value); with the whole
+    basler1@deg budget the tilt adds a range-dependent stretch (0.062 over the campaigns' area, docs)."""
+    cam = default_camera()
+    d = load_budget("basler1@deg").to_dict()
+    only_h = {k: ([0.0] * len(v) if isinstance(v, list) else 0.0) for k, v in d.items()
+              if k not in ("name", "description")}
+    only_h.update(height_m=0.1936, imaging_px=[0.1, 0.1])
+    at = SharedJacobianAt(cam, ErrorBudget.from_dict({**d, **only_h}))
+    rng = np.random.default_rng(0)
+    xy = np.column_stack([rng.uniform(-12, 12, 200), rng.uniform(25, 55, 200)])
+    assert at.rank == 1
+    assert scale_gradient(at, xy) == pytest.approx([0.0484], rel=1e-6)
+    assert scale_sigma(at, xy[:3]) == pytest.approx(2 * 0.1936 / 8.0, rel=1e-6)
+    full = scale_sigma(SharedJacobianAt(cam, load_budget("basler1@deg")), xy)
+    assert 0.055 < full < 0.07
+    assert scale_sigma(at, np.zeros((0, 2))) == 0.0
+
+
+def test_widen_interval_pinned():
+    """Half-widths in log q combined with 1.96 sigma in quadrature; 0 and unbounded ends kept."""
+    lo, hi = widen_interval(2.0, [1.5, 2.6], 0.05)
+    z = 1.959963984540054 * 0.05
+    assert lo == pytest.approx(2.0 * math.exp(-math.hypot(math.log(2.0 / 1.5), z)), rel=1e-12)
+    assert hi == pytest.approx(2.0 * math.exp(math.hypot(math.log(2.6 / 2.0), z)), rel=1e-12)
+    assert lo < 1.5 and hi > 2.6
+    assert widen_interval(2.0, [0.0, None], 0.05) == [0.0, None]
+    assert widen_interval(2.0, [1.5, 2.6], 0.0) == [1.5, 2.6]
+    e = fit_class(MotionGrid(imm_q_m2ps3=np.zeros(0)),
+                  _sums(-0.5 * ((np.log(DEFAULT_Q) - math.log(0.5)) / 0.1) ** 2), scale_sigma_log=0.05)
+    assert "widened by the camera's scale (5.0 % in q)" in e["note"]
+    assert e["accel_psd_ci95_m2ps3"][0] < 0.5 * math.exp(-math.sqrt(CHI2_95_1DOF) * 0.1) * 0.99
 
 
 def _sums(ll, n_upd=5000, n_tracks=50):
