@@ -33,7 +33,7 @@ from footprint_uq.tracking.motion_fit import (
     widen_interval,
 )
 from footprint_uq.tracking.synthetic import default_camera
-from footprint_uq.tracking.table import SharedJacobianAt, TrackTable
+from footprint_uq.tracking.table import SharedJacobianAt, TrackOutput, TrackTable
 from footprint_uq.uncertainty.budget import ErrorBudget, load_budget
 
 R_RANK = 3
@@ -274,6 +274,35 @@ def test_scale_sigma_pinned_for_a_height_error():
     full = scale_sigma(SharedJacobianAt(cam, load_budget("basler1@deg")), xy)
     assert 0.055 < full < 0.07
     assert scale_sigma(at, np.zeros((0, 2))) == 0.0
+
+
+def test_bank_samples_positions_over_the_whole_recording(monkeypatch):
+    """The joint bank keeps at most SCALE_SAMPLE_CAP positions per class, spread over the whole recording (the
+    stride doubles when full): with ``B(x) = 0.001 x^2`` per axis (``tr dB/dx = 0.002 (x + y)``) and objects
+    moving steadily, the sigma from the kept positions is the mean over every update's position (hand value)."""
+    import footprint_uq.tracking.motion_fit as mf
+
+    monkeypatch.setattr(mf, "SCALE_SAMPLE_CAP", 64)
+    shared_at = lambda xy: 0.001 * (np.asarray(xy) ** 2)[:, :, None]  # noqa: E731
+    grid = MotionGrid(q_m2ps3=np.array([0.1, 1.0, 3.0, 10.0]), imm_q_m2ps3=np.zeros(0),
+                      prior=TrackerConfig(accel_psd_m2ps3=1.0, manoeuvre_accel_psd_m2ps3=None))
+    bank = MotionBank.from_grid(grid, rank=1, shared_at=shared_at)
+    n, frames = 3, 600
+    every = []
+    for k in range(frames):
+        xy = np.column_stack([np.full(n, 0.05 * k), 10.0 + np.arange(n)])
+        out = TrackOutput(np.arange(n), np.full(n, k == 0), np.zeros(n, np.int64), np.zeros(n),
+                          np.zeros((n, 2)), np.zeros((n, 2, 2)), np.zeros((n, 2)), np.zeros((n, 2, 2)))
+        bank.observe(k / 30.0, out, ["a"] * n, xy, np.broadcast_to(0.01 * np.eye(2), (n, 2, 2)),
+                     shared_at(xy))
+        if k:
+            every.append(xy)
+    rec = bank._scale_xy[bank.classes["a"]]
+    assert rec[3] <= 64 and rec[1] > 1 and rec[3] == sum(a.shape[0] for a in rec[0])
+    want = 0.002 * np.concatenate(every).sum(1).mean()  # (x from 0.05 to 30 m: a sample of the start only is far off)
+    sigma, n_upd = bank.scale_sigmas()["a"]
+    assert n_upd == n * (frames - 1) and sigma == pytest.approx(want, rel=0.03)
+    assert MotionBank.from_grid(grid, rank=1, shared_at=shared_at, likelihood="tracker").scale_sigmas() == {}
 
 
 def test_widen_interval_pinned():

@@ -139,7 +139,7 @@ class MotionBank:
         self._cap = 0
         self._grow(64)
         self._swept_s = -math.inf
-        self._scale_xy: dict = {}  # class index -> [list of (m, 2) position arrays, stride, counter]
+        self._scale_xy: dict = {}  # class index -> [(m, 2) position arrays, stride, positions seen, kept]
 
     @classmethod
     def from_grid(cls, grid: MotionGrid, *, rank: int, shared_at=None, likelihood: str = "joint") -> MotionBank:
@@ -226,8 +226,8 @@ class MotionBank:
             pred = np.empty((n, 2))
             bank_predicted(rows, start, float(time_s), self._X, self._MU, self._t_last, self._g_ref, pred)
             Bp = np.ascontiguousarray(self.shared_at(pred), dtype=np.float64)
-        self._sample_positions(cls, rows, start, z)
         if self.likelihood == "joint":
+            self._sample_positions(cls, rows, start, z)
             joint_bank_frame(rows, start, cls, float(time_s), z, R, Bp, Bf, self._X, self._P, self._MU,
                              self._t_last, self._qs, self._nm, self._rates, self._mu0, self._var_v0, self.LL, self.NIS,
                              self.n_upd, self.n_bad)
@@ -239,17 +239,20 @@ class MotionBank:
         """Keep every ``stride``-th updated position of each class (for :meth:`scale_sigmas`)."""
         upd = (rows >= 0) & ~start
         for k in np.unique(cls[upd]).tolist():
-            rec = self._scale_xy.setdefault(k, [[], 1, 0])
+            rec = self._scale_xy.setdefault(k, [[], 1, 0, 0])  # [arrays, stride, seen, kept]
             pts = z[upd & (cls == k)]
-            take = (rec[2] + np.arange(pts.shape[0])) % rec[1] == 0
+            kept = pts[(rec[2] + np.arange(pts.shape[0])) % rec[1] == 0]
             rec[2] += pts.shape[0]
-            rec[0].append(pts[take])
-            if sum(a.shape[0] for a in rec[0]) > SCALE_SAMPLE_CAP:
-                rec[0], rec[1] = [np.concatenate(rec[0])[::2]], 2 * rec[1]
+            if kept.shape[0]:
+                rec[0].append(kept)
+                rec[3] += kept.shape[0]
+            if rec[3] > SCALE_SAMPLE_CAP:
+                half = np.concatenate(rec[0])[::2]
+                rec[0], rec[1], rec[3] = [half], 2 * rec[1], half.shape[0]
 
     def scale_sigmas(self) -> dict:
         """class name -> ``(sigma, n_updates)``: :func:`scale_sigma` over the class's sampled positions (0 without
-        ``shared_at``)."""
+        ``shared_at``, and for a ``"tracker"`` bank, which keeps no positions)."""
         out = {}
         for c, k in self.classes.items():
             rec = self._scale_xy.get(k)
