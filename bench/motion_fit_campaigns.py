@@ -71,7 +71,8 @@ def main(argv=None) -> None:
                          f"{100 * r['prior_coverage_heading']:.1f} % |")
         with open(a.md, "w") as f:
             f.write(f"{a.campaigns} campaigns x {a.objects} objects x {a.duration:g} s at 30 Hz per row, budget "
-                    f"{a.budget} x {a.budget_scale:g}, seed {a.seed}, modes {a.modes} (bench/motion_fit_campaigns.py)"
+                    f"{a.budget} x {a.budget_scale:g}, seed {a.seed}, modes {a.modes}, the joint (exact) likelihood "
+                    "(bench/motion_fit_campaigns.py)"
                     "\n\n" + "\n".join(lines) + "\n")
 
 

@@ -20,7 +20,7 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["bank_frame", "bank_predicted", "LOG_2PI"]
+__all__ = ["bank_frame", "bank_predicted", "pick_shared", "LOG_2PI"]
 
 LOG_2PI = math.log(2.0 * math.pi)
 
@@ -184,7 +184,7 @@ def _start(Xm, Pm, Cm, mu, mu0, var_v0, z, R, B):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
-def _pick(B_pred, i, B_frame):  # pragma: no cover - compiled
+def pick_shared(B_pred, i, B_frame):  # pragma: no cover - compiled
     """``B_pred[i]`` where it is given and finite, else ``B_frame[i]`` (as the tracker)."""
     if B_pred.shape[0] == 0:
         return B_frame[i]
@@ -221,7 +221,7 @@ def bank_frame(rows, start, cls, t, z, R, B_pred, B_frame, X, P, C, MU, t_last, 
             t_last[s] = t
             continue
         h = t - t_last[s]
-        B = _pick(B_pred, i, B_frame)
+        B = pick_shared(B_pred, i, B_frame)
         ok = True
         for g in range(G):
             ll_g[g], nis_g[g] = _member_step(X[s, g], P[s, g], C[s, g], MU[s, g], h, qs[g], nm[g], rates[g], z[i],

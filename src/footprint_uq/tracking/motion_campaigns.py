@@ -110,9 +110,9 @@ def run_campaigns(q_true: float, *, n_campaigns: int = 200, n_objects: int = 20,
     bank = MotionBank.from_grid(grid, rank=at.rank, shared_at=at)
     for t, ids, classes, xy, cov, B, _ in campaign_frames(q_true, n_campaigns, n_objects, **kw):
         bank.observe(t, assoc.step(t, ids, xy, cov, B), classes, xy, cov, B)
-    sums = bank.sums()
-    entries = [fit_class(grid, sums[str(c)], min_tracks=min_tracks, min_updates=min_updates)
-               for c in range(n_campaigns)]
+    sums, scale = bank.sums(), bank.scale_sigmas()
+    entries = [fit_class(grid, sums[str(c)], min_tracks=min_tracks, min_updates=min_updates,
+                         scale_sigma_log=scale[str(c)][0]) for c in range(n_campaigns)]
     n_imm = sum(e.get("manoeuvre_accel_psd_m2ps3") is not None for e in entries)
     q_hat = np.array([e["accel_psd_m2ps3"] for e in entries])
     ci = np.array([e.get("accel_psd_ci95_m2ps3", [0.0, None]) for e in entries], dtype=object)

@@ -24,6 +24,7 @@ import numpy as np
 
 from .. import params as P
 from ..cameras import general
+from ..cameras.lens_domain import lens_domain
 from ..cameras.pantilt import PanTiltCamera
 from ..errors import InputError
 from ..products.footprints import FrameProcessor
@@ -173,8 +174,18 @@ def coverage(scenario: str, rate_hz: float, *, n_runs: int = 500, duration_s: fl
 
 
 def true_pixels(camera, p_true: np.ndarray, xy_m: np.ndarray) -> np.ndarray:
-    """Pixels of ground points ``xy_m (R, 2)`` in the true cameras ``p_true (R, 22)`` (each on its own ground)."""
-    p = p_true
+    """Pixels ``(R, 2)`` of ground points ``xy_m (R, 2)`` in the true cameras ``p_true (R, 22)`` (each on its own
+    ground); NaN where a point lies outside its true lens's valid region (:func:`~footprint_uq.cameras.lens_domain.
+    lens_domain` of the drawn distortion: past its fold the polynomial sends a ray from far outside the field of
+    view -- a road user 70 deg to the side of the camera -- back into the image, where no real lens images it).
+
+    ``camera`` is the nominal camera (kept for the signature; the true cameras' parameters are ``p_true``)."""
+    p = np.asarray(p_true, dtype=np.float64)
     z = p[:, _GDZ] + p[:, _GSX] * (xy_m[:, 0] - p[:, _XM]) + p[:, _GSY] * (xy_m[:, 1] - p[:, _YM])
-    pr = general.project(p, np.column_stack([xy_m, z]), domain=camera.lens_domain)
-    return pr.uv_px
+    xyz = np.column_stack([xy_m, z])
+    uv = np.empty((p.shape[0], 2))
+    lenses, lens_of = np.unique(p[:, P.DIST_SLICE], axis=0, return_inverse=True)
+    for j, dist in enumerate(lenses):  # (one lens per drawn camera: a few per frame)
+        sel = lens_of.ravel() == j
+        uv[sel] = general.project(p[sel], xyz[sel], domain=lens_domain(dist)).uv_px
+    return uv
