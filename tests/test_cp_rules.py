@@ -32,6 +32,21 @@ def test_events_fall_every_t_gen_cpm_on_a_fixed_grid_whatever_the_frame_rate(t_g
     assert np.all(events >= grid - 1e-9) and np.all(events - grid < 1 / 30 + 0.01)
 
 
+@pytest.mark.parametrize("t_gen_s", [0.1, 0.2, 0.3])
+def test_frames_on_the_grid_in_unix_seconds_are_events_where_the_grid_says(t_gen_s):
+    """Unix times near 1.7e9 s resolve to ~2.4e-7 s: a frame on the grid (10 Hz frames, T0 + i / 10) is the event
+    it is on, never one frame late; and the sent-interval rules hold at their boundary in unix time."""
+    t0 = 1714564800.0
+    t = t0 + np.arange(300) / 10.0
+    clock = GenerationClock(CpRules(t_gen_cpm_s=t_gen_s))
+    events = np.flatnonzero([clock.tick(x) for x in t])
+    step = round(t_gen_s * 10)
+    assert events.tolist() == list(range(0, 300, step))
+    clock = GenerationClock(CpRules(t_gen_cpm_s=0.1, t_gen_cpm_max_s=0.3))
+    clock.sent(t[0], sensor_info=True)
+    assert clock.must_send(t[3]) and clock.sensor_info_due(t[10]) and not clock.sensor_info_due(t[9])
+
+
 def test_a_cpm_is_owed_at_least_every_t_gen_cpm_max_and_sensor_information_once_a_second():
     clock = GenerationClock(CpRules(t_gen_cpm_s=0.1, t_gen_cpm_max_s=0.5))
     assert clock.must_send(0.0) and clock.sensor_info_due(0.0)

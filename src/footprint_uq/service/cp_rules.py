@@ -46,6 +46,9 @@ from ..errors import InputError
 
 __all__ = ["CpRules", "GenerationClock", "InclusionMemory", "plan_segments", "MAX_SEGMENTS", "INCLUSION_REASONS"]
 
+#: times closer than this are equal (s): unix times near 1.7e9 s resolve to ~2.4e-7 s, so a frame stamped on an
+#: event's grid may compute a hair before it; far below any frame period
+TIME_TOLERANCE_S = 1e-6
 #: ``MessageSegmentationInfo.totalMsgNo`` is a ``CardinalNumber3b`` (1..8)
 MAX_SEGMENTS = 8
 #: why an event includes an object (:meth:`InclusionMemory.reasons`: the index; 0 = not due), the first rule that
@@ -88,28 +91,33 @@ class GenerationClock:
     """
 
     rules: CpRules = field(default_factory=CpRules)
-    _next_s: float | None = None
+    _origin_s: float | None = None
+    _next_k: int = 0
     _last_cpm_s: float | None = None
     _last_sensor_info_s: float | None = None
 
+    @property
+    def _next_s(self) -> float | None:
+        """The next event's time: the first call's time + k T_GenCpm (computed, never accumulated)."""
+        return None if self._origin_s is None else self._origin_s + self._next_k * self.rules.t_gen_cpm_s
+
     def tick(self, t_s: float) -> bool:
         t = as_float("t_s", t_s)
-        if self._next_s is None:
-            self._next_s = t
-        if t + 1e-9 < self._next_s:
+        if self._origin_s is None:
+            self._origin_s = t
+        if t + TIME_TOLERANCE_S < self._next_s:
             return False
         # the next event on the grid after t (a late call skips the events it missed: they are not made up)
-        k = np.floor((t - self._next_s) / self.rules.t_gen_cpm_s + 1e-9) + 1.0
-        self._next_s += k * self.rules.t_gen_cpm_s
+        self._next_k = int(np.floor((t - self._origin_s + TIME_TOLERANCE_S) / self.rules.t_gen_cpm_s)) + 1
         return True
 
     def must_send(self, t_s: float) -> bool:
         """At an event: a CPM is owed even with no object (``T_GenCpmMax`` since the last one)."""
-        return self._last_cpm_s is None or t_s - self._last_cpm_s >= self.rules.t_gen_cpm_max_s - 1e-9
+        return self._last_cpm_s is None or t_s - self._last_cpm_s >= self.rules.t_gen_cpm_max_s - TIME_TOLERANCE_S
 
     def sensor_info_due(self, t_s: float) -> bool:
         return (self._last_sensor_info_s is None
-                or t_s - self._last_sensor_info_s >= self.rules.sensor_info_interval_s - 1e-9)
+                or t_s - self._last_sensor_info_s >= self.rules.sensor_info_interval_s - TIME_TOLERANCE_S)
 
     def sent(self, t_s: float, *, sensor_info: bool) -> None:
         """Record a CPM sent at ``t_s`` (with the Sensor Information container or not)."""
@@ -172,7 +180,7 @@ class InclusionMemory:
         r = np.where(new, 0, rows)
         limit = np.where(np.asarray(is_vru, dtype=bool), self.rules.vru_max_interval_s, self.rules.max_interval_s)
         with np.errstate(invalid="ignore"):
-            tests = (t_s - self._t[r] >= limit - 1e-9,
+            tests = (t_s - self._t[r] >= limit - TIME_TOLERANCE_S,
                      np.linalg.norm(xy - self._xy[r], axis=1) > self.rules.position_change_m,
                      np.abs(np.asarray(speed_mps, dtype=float) - self._speed[r]) > self.rules.speed_change_mps,
                      _angle_diff_deg(heading_deg, self._heading[r]) > self.rules.heading_change_deg)
