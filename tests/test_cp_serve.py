@@ -289,7 +289,7 @@ def test_docs_cpm_example_is_a_real_cpm_of_the_service(site):
     assert json.loads(text)["payload"]["managementContainer"]["referenceTime"] == ev["reference_time_ms"]
     # what the page says of it
     assert ev["time_s"] == pytest.approx(T0 + 1.0) and ev["counts"]["perceived"] == 6 and ev["counts"]["sent"] == 6
-    assert [o["reason"] for o in ev["objects"] if o["class"] == "person"] == ["speed"]
+    assert [o["reason"] for o in ev["objects"] if o["class"] == "person"] == ["interval"]
 
 
 def test_sensor_ids_default_to_the_sorted_index_plus_one_and_never_meet(tmp_path, camera_files):
@@ -305,3 +305,18 @@ def test_sensor_ids_default_to_the_sorted_index_plus_one_and_never_meet(tmp_path
                       [f"a,{camera_files[0]},basler1@deg,", f"b,{camera_files[1]},basler1@deg,1"], "clash.csv")
     with pytest.raises(ConfigError, match=r"registry: b: sensor_id.*camera 'a' has it"):
         cp_cameras(load_registry(clash))
+
+
+def test_a_parked_car_is_sent_once_a_second_whatever_its_fused_speed_noise(site):
+    """The parked car of the traffic (fused speed noise of 0.3-1.5 m/s) is included at its first event and then by
+    the 1 s rule only: neither the speed nor the heading rule fires on a speed the data cannot tell from zero."""
+    out = _serve_stdin(site, frames(50), "--no-per-camera-output")
+    evs = [r for r in out if r["type"] == RECORD_CP_EVENT]
+    parked = {}
+    for e in evs:
+        for o in e["objects"]:
+            if o["segment"] is not None and np.hypot(o["xy_m"][0] - 3.0, o["xy_m"][1] + 12.0) < 0.5:
+                parked.setdefault(o["objectId"], []).append((round(e["time_s"] - T0, 3), o["reason"]))
+    (sent,) = parked.values()  # one fused object
+    assert [r for _, r in sent] == ["new"] + ["interval"] * (len(sent) - 1)
+    assert [t for t, _ in sent] == pytest.approx([0.0, 1.0, 2.0, 3.0, 4.0][:len(sent)]) and len(sent) >= 4

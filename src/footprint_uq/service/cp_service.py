@@ -11,7 +11,9 @@
   :class:`~.cp_rules.InclusionMemory` which objects the event includes (clause 6.1.2's rules: new objects at once,
   4 m, 0.5 m/s, 4 deg, 1 s, persons / cyclists / animals (the VRU classes) at least every 0.5 s; the heading rule
   only where the direction of motion is known: :func:`~footprint_uq.tracking.motion.object_motion` gives its sigma
-  where the speed is at least 3 sigma of the velocity, so that a parked car's noisy velocity never triggers it);
+  where the speed is at least 3 sigma of the velocity, so that a parked car's noisy velocity never triggers it; the
+  speed rule likewise only between two states whose motion is known: starting and stopping are caught by the 4 m
+  and 1 s rules);
 * **time**: every fused object is **predicted to the event's referenceTime**: each camera's latest estimate is
   moved from its frame time to referenceTime at constant velocity and its covariance grown
   (:func:`~footprint_uq.uncertainty.timing.predict_position`: ``tau^2 P_v`` + the camera's clock term
@@ -373,8 +375,13 @@ class CpBasicService:
         semi = _semi_major_95(f.cov_xy_m2)
         # the heading rule only where the direction of motion is known (its sigma is given only where the speed is at
         # least 3 sigma of the velocity): a parked car's noisy velocity points anywhere and must not trigger it
-        heading = np.where(np.isnan(motion.sigma_heading_deg), np.nan, motion.heading_deg)
-        return _EventObjects(f, cols, motion.speed_mps, heading, is_vru, classes,
+        moving = ~np.isnan(motion.sigma_heading_deg)
+        heading = np.where(moving, motion.heading_deg, np.nan)
+        # the speed rule likewise only between states whose motion is known (a parked car's fused speed reads
+        # 0.3-1.5 m/s of noise and changed by more than 0.5 m/s at most events; treating it as 0 instead makes each
+        # 3-sigma excursion and its return two changes); starting and stopping are caught by the 4 m and 1 s rules
+        speed = np.where(moving, motion.speed_mps, np.nan)
+        return _EventObjects(f, cols, speed, heading, is_vru, classes,
                              j2735_position_confidence(semi).astype(np.int64), offset_dm(en[:, 0]),
                              offset_dm(en[:, 1]))
 
