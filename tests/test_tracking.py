@@ -98,9 +98,9 @@ def test_schmidt_update_is_the_augmented_kalman_filter_on_the_state(rng):
 
 
 def test_compiled_initiation_equals_the_initiator(rng):
-    """kernels._initiate (the tracker's new tracks, inside frame_update) = Initiator.initiate in every mode of the
+    """kernels.initiate_row (the tracker's new tracks, inside frame_update) = Initiator.initiate in every mode of the
     IMM: position the measurement, P its whole error R + B B^T, C = -B, velocity 0 with variance sigma_v0^2."""
-    from footprint_uq.tracking.kernels import _initiate
+    from footprint_uq.tracking.kernels import initiate_row
 
     n, m, r = 5, 2, 3
     z, B = rng.normal(0, 30, (n, 2)), rng.normal(0, 0.4, (n, 2, r))
@@ -111,7 +111,7 @@ def test_compiled_initiation_equals_the_initiator(rng):
     Xm, Pm, Cm = np.full((n, m, 4), np.nan), np.full((n, m, 4, 4), np.nan), np.full((n, m, 4, r), np.nan)
     mu, mu0 = np.full((n, m), np.nan), np.array([0.7, 0.3])
     for s in range(n):
-        _initiate(s, X, P, Xm, Pm, Cm, mu, mu0, 49.0, z[s], R[s], B[s])
+        initiate_row(s, X, P, Xm, Pm, Cm, mu, mu0, 49.0, z[s], R[s], B[s])
     np.testing.assert_allclose(X, ref.x, rtol=0, atol=1e-12)
     np.testing.assert_allclose(P, ref.P, rtol=1e-12, atol=1e-12)
     for j in range(m):

@@ -14,6 +14,7 @@ from ..errors import InputError
 from ..fast.footprint_kernels import camera_constants
 from ..products.footprints import FrameProcessor
 from .filter import Initiator, SplitMeasurement
+from .imm_kernels import frame_pass, scratch
 from .kernels import ROW_SKIP, ROW_START, frame_rows, frame_update, project_ground
 from .models import ConstantVelocity
 
@@ -132,14 +133,19 @@ class TrackTable:
         Always give it for real use; the frame's ``shared_m`` then serves new tracks and points it cannot map.
     """
 
+    #: True: run the compiled reference of the update (:func:`~footprint_uq.tracking.kernels.frame_update`, the
+    #: filter as the numpy classes read, ~2.5x slower) instead of :func:`~footprint_uq.tracking.imm_kernels.
+    #: frame_pass`; for the agreement tests and ``bench/bench_tracking.py``
+    _reference_pass = False
+
     def __init__(self, config: TrackerConfig | None = None, *, rank: int, shared_at=None):
         self.config = config or TrackerConfig()
         self.shared_at = shared_at
         self.rank = int(rank) if self.config.calibration == "consider" else 0
-        #: the modes the compiled update runs (its per-track step, in :func:`~footprint_uq.tracking.kernels.
-        #: update_slots` and :func:`~footprint_uq.tracking.kernels.frame_update`, is :class:`~footprint_uq.tracking.
-        #: filter.InteractingModels` -- mixing, each mode's SchmidtPredictor + SchmidtUpdater, mode probabilities,
-        #: combination -- in one pass; the tests hold them equal)
+        #: the modes the compiled update runs (its per-track step, in :func:`~footprint_uq.tracking.imm_kernels.
+        #: frame_pass` and its reference :func:`~footprint_uq.tracking.kernels.frame_update`, is
+        #: :class:`~footprint_uq.tracking.filter.InteractingModels` -- mixing, each mode's SchmidtPredictor +
+        #: SchmidtUpdater, mode probabilities, combination -- in one pass; the tests hold them equal)
         cfg = self.config
         self.models = tuple(ConstantVelocity(q) for q in (cfg.accel_psd_m2ps3, cfg.manoeuvre_accel_psd_m2ps3)
                             if q is not None)
@@ -153,6 +159,8 @@ class TrackTable:
         self._index: dict = {None: -2}  # object_id -> slot (-2: never tracked)
         self._cap = 0
         self._grow(64)
+        #: the compiled pass's working arrays (it allocates nothing itself)
+        self._scratch = scratch(len(self.models), self.rank)
         self._stamp = 0  # frames seen: the repeated-id stamp of frame_rows
         self._next_id = 0
         self._last_time: float = -math.inf
@@ -280,10 +288,10 @@ class TrackTable:
         meas = self._measurement(xy, R, B)
         out = TrackOutput(np.empty(n, np.int64), np.empty(n, bool), np.empty(n, np.int64), np.empty(n),
                           np.empty((n, 2)), np.empty((n, 2, 2)), np.empty((n, 2)), np.empty((n, 2, 2)))
-        self._next_id = frame_update(act, slots, old, k, self._x, self._P, self._xm, self._Pm, self._Cm, self._mu,
-                                     self._t_last, self._t_first, self._n, self._tid, self._next_id, t, self._qs,
-                                     self._rates, self.mu0, self._var_v0, meas.xy_m, meas.cov_frame_m2, Bp,
-                                     meas.shared_m, self.config.gate_chi2, *out)
+        args = (act, slots, old, k, self._x, self._P, self._xm, self._Pm, self._Cm, self._mu, self._t_last,
+                self._t_first, self._n, self._tid, self._next_id, t, self._qs, self._rates, self.mu0, self._var_v0,
+                meas.xy_m, meas.cov_frame_m2, Bp, meas.shared_m, self.config.gate_chi2, *out)
+        self._next_id = frame_update(*args) if self._reference_pass else frame_pass(*args, *self._scratch)
         if t < self._oldest_s:  # (every row started or updated now has t_last = t)
             self._oldest_s = t
         return out
