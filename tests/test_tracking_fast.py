@@ -12,7 +12,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from footprint_uq.tracking import TrackerConfig, TrackTable
+from footprint_uq.errors import InputError
+from footprint_uq.tracking import TrackerConfig, TrackTable, object_motion
 from footprint_uq.tracking.imm_kernels import frame_pass, scratch
 from footprint_uq.tracking.kernels import ROW_START, ROW_UPDATE, frame_update
 
@@ -146,3 +147,22 @@ def test_track_table_equals_the_reference_pass_over_a_sequence(cfg, shared_at):
         live = np.isfinite(ref._t_last)
         _close(getattr(fast, name)[live], getattr(ref, name)[live], name)
     assert fast._index == ref._index and fast._next_id == ref._next_id > 40  # restarts, timeouts
+
+
+@pytest.mark.parametrize("bad", [float("nan"), float("inf"), np.float64("nan"), "0.1", True, None])
+def test_bad_frame_time_and_motion_options_are_named(bad):
+    """The fast paths for finite floats (no call into _checks) still send everything else to its one-line check."""
+    tab = TrackTable(rank=2)
+    meas = (np.zeros((1, 2)), 0.01 * np.eye(2)[None], np.zeros((1, 2, 2)))
+    if isinstance(bad, str):  # a numeric string is a number to as_float: accepted, as before
+        assert tab.step(bad, [1], *meas).track_id.tolist() == [0]
+        return
+    with pytest.raises(InputError, match="time_s"):
+        tab.step(bad, [1], *meas)
+    out = tab.step(0.5, [1], *meas)
+    with pytest.raises(InputError, match="heading_offset_deg"):
+        object_motion(out, heading_offset_deg=bad)
+    for ratio in (bad, 0.0, -1.0):
+        with pytest.raises(InputError, match="heading_min_ratio"):
+            object_motion(out, heading_min_ratio=ratio)
+    assert np.isfinite(object_motion(out, heading_offset_deg=np.float64(12.5)).age_s).all()

@@ -251,7 +251,8 @@ class TrackTable:
             per-frame part ``cov_m2 - B B^T`` is then taken in the compiled pass (what
             ``FootprintEstimate.centre_cov_frame_m2`` gives, without its dozen numpy calls).
         """
-        t = as_float("time_s", time_s)
+        # (a finite float passes without a call into _checks: one climb less per frame; anything else gets its check)
+        t = time_s if isinstance(time_s, float) and math.isfinite(time_s) else as_float("time_s", time_s)
         xy = _c64(xy_m).reshape(-1, 2)
         n = xy.shape[0]
         ids = object_ids if isinstance(object_ids, list) else list(object_ids)
