@@ -166,3 +166,16 @@ def test_bad_frame_time_and_motion_options_are_named(bad):
         with pytest.raises(InputError, match="heading_min_ratio"):
             object_motion(out, heading_min_ratio=ratio)
     assert np.isfinite(object_motion(out, heading_offset_deg=np.float64(12.5)).age_s).all()
+
+
+def test_repeated_unknown_ids_the_first_object_decides():
+    """A new id twice in one frame: only its first object is tracked (the kernel lists the unknown ids' objects for
+    the table's new rows; their frame order decides), even when that first object has no centre."""
+    tab = TrackTable(rank=2)
+    meas = (np.array([[0.0, 10.0], [5.0, 10.0], [40.0, 10.0], [np.nan, np.nan], [9.0, 9.0], [60.0, 9.0]]),
+            np.broadcast_to(0.01 * np.eye(2), (6, 2, 2)), np.full((6, 2, 2), 0.05))
+    o = tab.step(0.0, ["p", "q", "p", "r", "s", "r"], *meas)
+    assert o.track_id.tolist() == [0, 1, -1, -1, 2, -1]
+    assert np.allclose(o.xy_m[[0, 1, 4]], meas[0][[0, 1, 4]]) and len(tab) == 3  # "r" got no row
+    o = tab.step(0.1, ["r", "p", "r"], *(a[[5, 0, 2]] for a in meas))
+    assert o.track_id.tolist() == [3, 0, -1] and o.n_updates.tolist() == [1, 2, 0]

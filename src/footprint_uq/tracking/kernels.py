@@ -295,7 +295,7 @@ def motion_fields(v, cov, ch, sh, ratio, yaw_rad, sigma_yaw_rad, heading_offset_
 ROW_SKIP, ROW_UPDATE, ROW_START = 0, 1, 2
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy", _nrt=False)  # (no refcounting: it allocates nothing)
 def frame_rows(slots, xy, cov, B, subtract, R, t, t_last, seen, stamp, X, act, old,
                pred):  # pragma: no cover - compiled
     """First pass of a frame of n objects over a table's storage: what to do with each object.
@@ -309,7 +309,8 @@ def frame_rows(slots, xy, cov, B, subtract, R, t, t_last, seen, stamp, X, act, o
     unknown id with finite inputs (the caller keeps the first object of each unknown id); :data:`ROW_SKIP`
     otherwise (repeated ids: ``seen (cap,)`` is stamped with ``stamp`` per frame).  The k objects to update are
     listed in ``old[:k]`` in frame order with their tracks' positions predicted to ``t`` in ``pred[:k]`` (for
-    ``B`` at the predicted position); returns k and the number of unknown ids (``slots == -1``)."""
+    ``B`` at the predicted position); returns k and the number u of unknown ids (``slots == -1``), whose objects
+    are listed at the end of ``old`` in reverse frame order (``old[n - u:][::-1]``)."""
     k = 0
     n_unknown = 0
     r = B.shape[2]
@@ -331,7 +332,9 @@ def frame_rows(slots, xy, cov, B, subtract, R, t, t_last, seen, stamp, X, act, o
                 ok = ok and math.isfinite(B[i, a, c])
         if s < 0:
             act[i] = ROW_START if (s == -1 and ok) else ROW_SKIP
-            n_unknown += s == -1
+            if s == -1:
+                n_unknown += 1
+                old[slots.shape[0] - n_unknown] = i
             continue
         if seen[s] == stamp or not ok or t_last[s] == t:  # a repeated id (in this frame or at this time)
             seen[s] = stamp

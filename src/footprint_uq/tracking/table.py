@@ -281,7 +281,7 @@ class TrackTable:
         k, n_unknown = frame_rows(slots, xy, cov, B, subtract, R, t, self._t_last, self._seen, self._stamp, self._x,
                                   act, old, pred)
         if n_unknown:
-            self._claim(ids, slots, act)
+            self._claim(ids, slots, act, old[n - n_unknown:][::-1].tolist())
         if self.shared_at is not None and self.rank and k:  # B at the predicted positions (see the class doc)
             Bp = _c64(self.shared_at(pred[:k]))
         else:
@@ -297,15 +297,12 @@ class TrackTable:
             self._oldest_s = t
         return out
 
-    def _claim(self, ids: list, slots: np.ndarray, act: np.ndarray) -> None:
-        """Rows for the unknown ids of a frame (``slots == -1``), in place: the first object of each with finite
-        inputs (``act == ROW_START``) gets a free row (the table grows when none is left); a later object of the
-        same id is not tracked (``act`` set to ``ROW_SKIP``)."""
-        miss = np.flatnonzero(slots == -1)
-        if miss.size == 0:
-            return
+    def _claim(self, ids: list, slots: np.ndarray, act: np.ndarray, miss: list) -> None:
+        """Rows for the unknown ids of a frame (the objects ``miss``, in frame order, from ``frame_rows``), in place:
+        the first object of each with finite inputs (``act == ROW_START``) gets a free row (the table grows when
+        none is left); a later object of the same id is not tracked (``act`` set to ``ROW_SKIP``)."""
         first: set = set()
-        for i in miss.tolist():
+        for i in miss:
             key = ids[i]
             if key in first:
                 act[i] = ROW_SKIP
