@@ -465,6 +465,17 @@ def test_shared_jacobian_at_world_points():
 
     uv = cam.project(np.column_stack([xy[:2], np.zeros(2)])).uv_px[:, None, :]
     np.testing.assert_allclose(B[:2], footprints_from_corners(cam, "basler1@deg", uv).centre_shared_m, rtol=1e-9)
+    # the compiled call taken from the processor's hook (no products/ frame per call) gives the method's numbers;
+    # a second thread meanwhile (its scratch busy) takes the method's path, with the same numbers
+    assert at._kernel is not None
+    uv3 = np.empty((3, 1, 2))
+    from footprint_uq.tracking.kernels import project_ground
+
+    project_ground(xy, at._cam, uv3[:, 0])
+    via_method = at.processor.point_shared_jacobian(uv3)
+    np.testing.assert_array_equal(B, via_method)
+    with at._busy:
+        np.testing.assert_array_equal(at(xy), via_method)
 
 
 def _frames(n_frames=4, dt=0.1):

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import threading
 from dataclasses import dataclass
 from itertools import repeat
 from typing import NamedTuple
@@ -11,7 +12,7 @@ import numpy as np
 
 from .._checks import as_float
 from ..errors import InputError
-from ..fast.footprint_kernels import camera_constants
+from ..fast.footprint_kernels import SCRATCH_SHAPE, camera_constants
 from ..products.footprints import FrameProcessor
 from .filter import Initiator, SplitMeasurement
 from .imm_kernels import frame_pass, scratch
@@ -343,9 +344,23 @@ class SharedJacobianAt:
         self.camera = camera
         self.rank = int(self.processor.budget.param_factor().rank)
         self._cam = camera_constants(camera)[0]
+        #: the processor's compiled call (:meth:`FrameProcessor.point_jacobian_kernel`; None until its kernels
+        #: are ready) and this object's own scratch for it, used by one thread at a time (``_busy``)
+        self._kernel = None
+        self._scratch = np.empty(SCRATCH_SHAPE)
+        self._busy = threading.Lock()
 
     def __call__(self, xy_m) -> np.ndarray:
         xy = np.ascontiguousarray(xy_m, dtype=np.float64).reshape(-1, 2)
         uv = np.empty((xy.shape[0], 1, 2))
         project_ground(xy, self._cam, uv[:, 0])
-        return self.processor.point_shared_jacobian(uv)
+        # the kernel called from here, not through the processor's method: the tracker's frame does not climb back
+        # up from products/ (bench/frame_walk.py --tracks); another thread meanwhile takes the processor's path
+        if self._kernel is None:
+            self._kernel = self.processor.point_jacobian_kernel()
+        if self._kernel is None or not self._busy.acquire(blocking=False):
+            return self.processor.point_shared_jacobian(uv)
+        try:
+            return self._kernel[0](uv, *self._kernel[1], self._scratch)
+        finally:
+            self._busy.release()
