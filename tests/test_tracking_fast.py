@@ -179,3 +179,53 @@ def test_repeated_unknown_ids_the_first_object_decides():
     assert np.allclose(o.xy_m[[0, 1, 4]], meas[0][[0, 1, 4]]) and len(tab) == 3  # "r" got no row
     o = tab.step(0.1, ["r", "p", "r"], *(a[[5, 0, 2]] for a in meas))
     assert o.track_id.tolist() == [3, 0, -1] and o.n_updates.tolist() == [1, 2, 0]
+
+
+_TRUCKS = {"truck": TrackerConfig(timeout_s=1.0, accel_psd_m2ps3=0.5, manoeuvre_accel_psd_m2ps3=None)}
+
+
+@pytest.mark.parametrize("cfg, per_class", [(TrackerConfig(timeout_s=1.0), None),
+                                            (TrackerConfig(timeout_s=1.0, manoeuvre_accel_psd_m2ps3=None), None),
+                                            (TrackerConfig(timeout_s=1.0), _TRUCKS)], ids=["imm", "cv", "two-models"])
+def test_nis_monitor_takes_the_tracks_b_with_the_same_numbers(cfg, per_class):
+    """The on-line check's bank takes B at the predicted positions from the tracks' step
+    (ClassTracks.shared_predicted) instead of evaluating ``shared_at`` again: its NIS, likelihood and counts are
+    those of a bank that evaluates ``shared_at`` at its own predictions (the path before), to 1e-9, over the
+    sequence's starts, restarts, repeated / None ids, NaN centres and timeouts.  With two motion models the
+    default model's class agrees; the other class now gets B at its own table's predictions (before: at the
+    default model's), so only its counts are compared."""
+    from footprint_uq.tracking.classes import ClassTracks
+    from footprint_uq.tracking.consistency import NisMonitor
+    from footprint_uq.tracking.motion_fit import MotionBank, members_of
+
+    calls = [0, 0]
+
+    def counted(xy, which=0):
+        calls[which] += 1
+        return _shared_at(xy)
+
+    tracks = ClassTracks(cfg, per_class, rank=13, shared_at=counted)
+    alone = ClassTracks(cfg, per_class, rank=13, shared_at=lambda xy: counted(xy, 1))  # without a monitor
+    mon = NisMonitor(tracks, window_s=100.0)
+    before = MotionBank(members_of(tracks.configs), rank=13, shared_at=_shared_at, sigma_v0_mps=cfg.sigma_v0_mps,
+                        timeout_s=cfg.timeout_s)
+    frames = 0
+    for t, ids, xy, cov, B in _sequence():
+        classes = ["car" if i % 3 or per_class is None else "truck" for i in range(len(ids))]
+        out = tracks.step(t, ids, classes, xy, shared_m=B, cov_m2=cov)
+        R = cov - B @ np.swapaxes(B, 1, 2)
+        mon.observe(t, out, classes, xy, R, B)
+        before.observe(t, out, classes, xy, R, B)
+        alone.step(t, ids, classes, xy, shared_m=B, cov_m2=cov)
+        frames += 1
+    assert calls[0] == calls[1] > frames // 2  # the tracks' own evaluations only: none by the monitor
+    assert mon.bank.n_upd.tolist() == before.n_upd.tolist() and before.n_upd.sum() > 500
+    assert mon.bank.n_bad.tolist() == before.n_bad.tolist() and mon.bank.n_tracks.tolist() == before.n_tracks.tolist()
+    car = mon.bank.classes["car"]
+    _close(mon.bank.NIS[car], before.NIS[car], "NIS")
+    _close(mon.bank.LL[car], before.LL[car], "LL")
+    assert mon.status()["car"]["n_updates"] == before.n_upd[car]
+    if per_class:
+        truck = mon.bank.classes["truck"]
+        assert np.isfinite(mon.bank.NIS[truck]).all() and mon.bank.n_upd[truck] > 200
+        _close(mon.bank.NIS[truck], before.NIS[truck], "NIS of the second model's class", rel=1e-4)

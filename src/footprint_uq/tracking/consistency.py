@@ -64,7 +64,8 @@ class NisMonitor:
         self.tolerance = as_float("tolerance", tolerance, nonnegative=True)
         self.tracks = tracks
         cfg0 = tracks.configs[0]
-        self.bank = MotionBank(members_of(tracks.configs), rank=tracks.rank, shared_at=tracks.shared_at,
+        at = None if tracks.shared_at is None else _TracksJacobian(tracks)
+        self.bank = MotionBank(members_of(tracks.configs), rank=tracks.rank, shared_at=at,
                                sigma_v0_mps=cfg0.sigma_v0_mps, timeout_s=cfg0.timeout_s)
         self._frames: dict = {}  # class -> deque of (time_s, nis_sum, n)
         self._sums: dict = {}  # class -> [nis_sum, n] over the deque
@@ -130,6 +131,24 @@ class NisMonitor:
             elif rec["consistent"] and cls in self.flagged:
                 del self.flagged[cls]
         return news
+
+
+class _TracksJacobian:
+    """The monitor's bank's ``shared_at``: ``B`` at the predicted positions as the tracks' last step evaluated it
+    (:meth:`~footprint_uq.tracking.classes.ClassTracks.shared_predicted`; the bank runs the tracker's filter on
+    the same objects right after it, so its predictions are the tracks' own), instead of a second evaluation of
+    the footprint kernel.  A frame that is not the tracks' last one (another object count) gets ``B`` evaluated
+    at its points by ``tracks.shared_at``, as before.  With several motion models per camera each class's ``B``
+    is its own table's (the bank evaluated every class's at the default model's prediction)."""
+
+    def __init__(self, tracks):
+        self.tracks = tracks
+
+    def __call__(self, xy_m):
+        B = self.tracks.shared_predicted()
+        if B.shape[0] != len(xy_m):
+            return self.tracks.shared_at(xy_m)
+        return B
 
 
 def _finite_or_none(x):
