@@ -109,6 +109,17 @@ class ClassTracks:
             out.track_id[sel] = np.where(o.track_id >= 0, o.track_id * k + j, -1)
         return out
 
+    def frame_nis(self) -> np.ndarray:
+        """The NIS of the last :meth:`step`'s objects, ``(n,)`` in frame order, each from its table
+        (:meth:`~footprint_uq.tracking.table.TrackTable.frame_nis`: NaN where the object updated no track)."""
+        if len(self.tables) == 1:
+            return self.tables[0].frame_nis()
+        out = np.full(self._last_n, np.nan)
+        for sel, table in self._last_parts:
+            if sel.size:
+                out[sel] = table.frame_nis()
+        return out
+
     def shared_predicted(self) -> np.ndarray:
         """``B`` at the predicted positions of the last :meth:`step`'s objects, ``(n, 2, r)`` in frame order, each
         from its table (:meth:`~footprint_uq.tracking.table.TrackTable.shared_predicted`)."""

@@ -41,7 +41,7 @@ def scratch(n_modes: int, rank: int) -> tuple:
     (allocated once per table: the pass itself allocates nothing)."""
     M = int(n_modes)
     return (np.empty((2, 2)), np.empty((M, 4)), np.empty((M, 4, 4)), np.empty((M, 4, 2)), np.empty((M, 4, 2)),
-            np.empty((M, 4, int(rank))))
+            np.empty((M, 4, int(rank))), np.empty((M, 3)))
 
 
 _INL = dict(cache=True, nogil=True, error_model="numpy", fastmath={"contract"}, inline="always")
@@ -174,14 +174,15 @@ def _mode_predict(s, j, h, q, Xm, Pm, W, xp, Pp):  # pragma: no cover - compiled
 
 
 @njit(**_INL)
-def _mode_gain(j, G, bb, R, z, zi, xp, Pp, Kg, Cx):  # pragma: no cover - compiled
+def _mode_gain(j, G, bb, R, z, zi, xp, Pp, Kg, Cx, Sm):  # pragma: no cover - compiled
     """Mode ``j``'s innovation: ``S = P_pp + G_p + G_p^T + B B^T + R`` (``G`` from :func:`_columns_mix_predict`,
-    ``bb`` = the 3 entries of ``B B^T``), the gain ``K = (P H^T + G) S^-1`` into ``Kg[j] (4, 2)`` and ``P H^T + G``
-    into ``Cx[j] (4, 2)``; returns the squared Mahalanobis distance (NaN if ``S`` is singular or anything is not
-    finite) and ``det S``."""
+    ``bb`` = the 3 entries of ``B B^T``; into ``Sm[j] (3,)``: s00, s01, s11), the gain ``K = (P H^T + G) S^-1``
+    into ``Kg[j] (4, 2)`` and ``P H^T + G`` into ``Cx[j] (4, 2)``; returns the squared Mahalanobis distance (NaN
+    if ``S`` is singular or anything is not finite) and ``det S``."""
     s00 = Pp[j, 0, 0] + R[zi, 0, 0] + 2.0 * G[0] + bb[0]
     s01 = Pp[j, 0, 1] + R[zi, 0, 1] + G[1] + G[2] + bb[1]
     s11 = Pp[j, 1, 1] + R[zi, 1, 1] + 2.0 * G[3] + bb[2]
+    Sm[j, 0], Sm[j, 1], Sm[j, 2] = s00, s01, s11
     det = s00 * s11 - s01 * s01
     i00, i01, i11 = s11 / det, -s01 / det, s00 / det
     y0, y1 = z[zi, 0] - xp[j, 0], z[zi, 1] - xp[j, 1]
@@ -226,6 +227,21 @@ def _mode_probabilities(m0, det0, cb0, m1, det1, cb1):  # pragma: no cover - com
 
 
 @njit(**_INL)
+def _mixture_nis(z, zi, xp, Sm, cb0, cb1):  # pragma: no cover - compiled
+    """The normalised innovation squared ``y^T S^-1 y`` of the two modes' predicted mixture's moments
+    (``y = sum cbar_j y_j``, ``S = sum cbar_j (S_j + (y_j - y)(y_j - y)^T)``; the on-line consistency check's
+    statistic, :mod:`~footprint_uq.tracking.likelihood_kernels` computes the same for its bank)."""
+    y00, y01 = z[zi, 0] - xp[0, 0], z[zi, 1] - xp[0, 1]
+    y10, y11 = z[zi, 0] - xp[1, 0], z[zi, 1] - xp[1, 1]
+    ym0, ym1 = cb0 * y00 + cb1 * y10, cb0 * y01 + cb1 * y11
+    d00, d01, d10, d11 = y00 - ym0, y01 - ym1, y10 - ym0, y11 - ym1
+    s00 = cb0 * (Sm[0, 0] + d00 * d00) + cb1 * (Sm[1, 0] + d10 * d10)
+    s01 = cb0 * (Sm[0, 1] + d00 * d01) + cb1 * (Sm[1, 1] + d10 * d11)
+    s11 = cb0 * (Sm[0, 2] + d01 * d01) + cb1 * (Sm[1, 2] + d11 * d11)
+    return (ym0 * ym0 * s11 - 2.0 * ym0 * ym1 * s01 + ym1 * ym1 * s00) / (s00 * s11 - s01 * s01)
+
+
+@njit(**_INL)
 def _combine(s, X, P, Xm, Pm, mu):  # pragma: no cover - compiled
     """The reported state of row ``s``: the modes' moment-matched combination (two modes: ``sum mu_j P_j +
     mu_0 mu_1 e e^T``, ``e = x_0 - x_1``)."""
@@ -245,19 +261,20 @@ def _combine(s, X, P, Xm, Pm, mu):  # pragma: no cover - compiled
 
 @njit(**_INL)
 def _track_step(s, X, P, Xm, Pm, Cm, mu, t_last, n_upd, t, qs, rates, z, R, zi, B, bi, gate, W, xp, Pp, Kg, Cx,
-                Cps):  # pragma: no cover - compiled
+                Cps, Sm, nis):  # pragma: no cover - compiled
     """One track's IMM Schmidt step (storage row ``s``, measurement ``z[zi]``, ``R[zi]``, ``B[bi]``), in place if
     the smallest of its modes' squared Mahalanobis distances is ``<= gate`` (returned; NaN if a mode's is not
-    finite: the track is then left as it was, as one beyond the gate).  The rest are scratch."""
+    finite: the track is then left as it was, as one beyond the gate), with its innovation's NIS (one mode: the
+    distance; two: :func:`_mixture_nis`) into ``nis[zi]``.  The rest are scratch."""
     M, r = Xm.shape[1], Cm.shape[3]
     h = t - t_last[s]
     cb0, cb1 = _weights(s, h, mu, rates, W)
     if M == 2:
         G0, G1, bb = _columns_both(s, h, Cm, W, B, bi, Cps)
         _mode_predict(s, 0, h, qs[0], Xm, Pm, W, xp, Pp)
-        m0, det0 = _mode_gain(0, G0, bb, R, z, zi, xp, Pp, Kg, Cx)
+        m0, det0 = _mode_gain(0, G0, bb, R, z, zi, xp, Pp, Kg, Cx, Sm)
         _mode_predict(s, 1, h, qs[1], Xm, Pm, W, xp, Pp)
-        m1, det1 = _mode_gain(1, G1, bb, R, z, zi, xp, Pp, Kg, Cx)
+        m1, det1 = _mode_gain(1, G1, bb, R, z, zi, xp, Pp, Kg, Cx, Sm)
     else:
         bb00 = bb01 = bb11 = 0.0
         for c in range(r):
@@ -267,11 +284,13 @@ def _track_step(s, X, P, Xm, Pm, Cm, mu, t_last, n_upd, t, qs, rates, z, R, zi, 
             bb11 += b1 * b1
         bb = (bb00, bb01, bb11)
         _mode_predict(s, 0, h, qs[0], Xm, Pm, W, xp, Pp)
-        m0, det0 = _mode_gain(0, _columns_mix_predict(s, 0, h, Cm, W, B, bi, Cps), bb, R, z, zi, xp, Pp, Kg, Cx)
+        m0, det0 = _mode_gain(0, _columns_mix_predict(s, 0, h, Cm, W, B, bi, Cps), bb, R, z, zi, xp, Pp, Kg, Cx,
+                              Sm)
         m1, det1 = m0, det0
     best = min(m0, m1) if (math.isfinite(m0) and math.isfinite(m1)) else math.nan
     if not best <= gate:
         return best
+    nis[zi] = _mixture_nis(z, zi, xp, Sm, cb0, cb1) if M == 2 else m0
     if M == 2:
         mu[s, 0], mu[s, 1] = _mode_probabilities(m0, det0, cb0, m1, det1, cb1)
     for j in range(M):
@@ -285,10 +304,12 @@ def _track_step(s, X, P, Xm, Pm, Cm, mu, t_last, n_upd, t, qs, rates, z, R, zi, 
 @njit(**_JIT)
 def frame_pass(act, slots, old, n_old, X, P, Xm, Pm, Cm, mu, t_last, t_first, n_upd, tid, next_id, t, qs, rates,
                mu0, var_v0, z, R, B_pred, B_frame, gate, o_tid, o_new, o_n, o_age, o_xy, o_cxy, o_v,
-               o_cv, W, xp, Pp, Kg, Cx, Cps):  # pragma: no cover - compiled
+               o_cv, W, xp, Pp, Kg, Cx, Cps, Sm, nis):  # pragma: no cover - compiled
     """:func:`~footprint_uq.tracking.kernels.frame_update` (same arguments, same results to rounding) with the
     caller's scratch (:func:`scratch`: ``W (2, 2)``, ``xp (M, 4)``, ``Pp (M, 4, 4)``, ``Kg, Cx (M, 4, 2)``,
-    ``Cps (M, 4, r)``; compiled without numba's reference counting, it allocates nothing): the objects
+    ``Cps (M, 4, r)``, ``Sm (M, 3)``; compiled without numba's reference counting, it allocates nothing) and
+    ``nis (n,)``, which receives the NIS of each updated object's innovation (left as it is for the others;
+    the on-line consistency check's statistic, :class:`~footprint_uq.tracking.consistency.NisMonitor`): the objects
     ``old[:n_old]`` get :func:`_track_step` (``B_pred[k]``, ``B`` at the k-th one's predicted position, where given
     and finite, else ``B_frame``); one beyond the gate becomes a start; then the starts and every object's
     outputs.  Returns the next free track id."""
@@ -302,7 +323,7 @@ def frame_pass(act, slots, old, n_old, X, P, Xm, Pm, Cm, mu, t_last, t_first, n_
                 use_pred &= math.isfinite(B_pred[k, 0, c]) & math.isfinite(B_pred[k, 1, c])
         Bs, bi = (B_pred, k) if use_pred else (B_frame, i)
         d2 = _track_step(slots[i], X, P, Xm, Pm, Cm, mu, t_last, n_upd, t, qs, rates, z, R, i, Bs, bi, gate, W, xp,
-                         Pp, Kg, Cx, Cps)
+                         Pp, Kg, Cx, Cps, Sm, nis)
         if not d2 <= gate:  # NaN (a singular S) fails the gate too
             act[i] = ROW_START
     return _starts_and_outputs(act, slots, X, P, Xm, Pm, Cm, mu, t_last, t_first, n_upd, tid, next_id, t, mu0,

@@ -172,7 +172,9 @@ class TrackTable:
         #: frames not tracked because their time was earlier than the previous frame's
         self.n_stale_frames = 0
         #: the last step's ``B`` at the predicted positions: ``(n, objects, B (k, 2, r))`` (:meth:`shared_predicted`)
-        self._last_B: tuple = (0, np.zeros(0, np.int64), _NO_B)
+        self._last_B: tuple = (0, _NO_ROWS, _NO_B)
+        #: the NIS of the last step's objects (:meth:`frame_nis`)
+        self._nis = np.zeros(0)
 
     def __len__(self) -> int:
         return len(self._index) - 1  # (the entry of None)
@@ -275,7 +277,7 @@ class TrackTable:
             raise InputError("cov_m2" if subtract else "cov_frame_m2", cov.shape, f"shape ({n}, 2, 2)")
         if t < self._last_time:
             self.n_stale_frames += 1
-            self._last_B = (n, _NO_ROWS, _NO_B)
+            self._last_B, self._nis = (n, _NO_ROWS, _NO_B), np.full(n, np.nan)
             return TrackOutput.untracked(n)
         self._last_time = t
         self._delete_expired(t)
@@ -298,10 +300,19 @@ class TrackTable:
         args = (act, slots, old, k, self._x, self._P, self._xm, self._Pm, self._Cm, self._mu, self._t_last,
                 self._t_first, self._n, self._tid, self._next_id, t, self._qs, self._rates, self.mu0, self._var_v0,
                 meas.xy_m, meas.cov_frame_m2, Bp, meas.shared_m, self.config.gate_chi2, *out)
-        self._next_id = frame_update(*args) if self._reference_pass else frame_pass(*args, *self._scratch)
+        self._nis = nis = np.full(n, np.nan)
+        self._next_id = frame_update(*args) if self._reference_pass else frame_pass(*args, *self._scratch, nis)
         if t < self._oldest_s:  # (every row started or updated now has t_last = t)
             self._oldest_s = t
         return out
+
+    def frame_nis(self) -> np.ndarray:
+        """The normalised innovation squared ``y^T S^-1 y`` (2 dof; two modes: of the predicted mode mixture's
+        moments) of each of the last :meth:`step`'s objects that updated a track, ``(n,)`` in frame order; NaN for
+        the others (new tracks, restarts beyond the gate, untracked objects, a stale frame) and for every object
+        under the compiled reference pass (``_reference_pass``, which does not compute it).  The on-line
+        consistency check's statistic (:class:`~footprint_uq.tracking.consistency.NisMonitor`)."""
+        return self._nis
 
     def shared_predicted(self) -> np.ndarray:
         """``B`` at the predicted positions of the last :meth:`step`'s objects, ``(n, 2, r)`` in frame order, as
