@@ -20,6 +20,12 @@ run, interleaved frame by frame (medians over ``frames`` frames after a warm-up 
   ``step`` minus its three compiled calls (``frame_rows``, ``shared_at``, ``frame_pass``), timed around them
   (issue 31's target: < 20 us); ``frame_rows``, ``frame_pass`` and ``shared_at`` in the same frames.
 
+:func:`monitor_cost` (a separate pass over the same frames, so as not to disturb the ratio's caches): ``monitor``,
+the on-line NIS check (:class:`~footprint_uq.tracking.consistency.NisMonitor`, as ``serve --tracks`` runs it by
+default: the tracker's own NIS summed per class), and ``monitor_bank``, the same check as it was before 2026-11-28
+(a :class:`~footprint_uq.tracking.motion_fit.MotionBank` re-running the filter with ``B`` evaluated again, the
+per-frame covariance ``cov - B B^T`` computed for it), after the same tracks' step.
+
 Run ``.venv/bin/python bench/bench_tracking.py [--objects N] [--frames F] [--json]``; :func:`run` returns the
 figures as a dict.  ``--runs 3 --out bench/results/tracking-cost.json`` writes that many runs (each with the load
 average before and after it) to the results file.  Nothing is asserted.
@@ -40,6 +46,9 @@ from footprint_uq import PanTiltCamera
 from footprint_uq.products.footprints import FrameProcessor
 from footprint_uq.tracking import SharedJacobianAt, TrackerConfig, TrackTable, object_motion
 from footprint_uq.tracking import table as table_module
+from footprint_uq.tracking.classes import ClassTracks
+from footprint_uq.tracking.consistency import NisMonitor
+from footprint_uq.tracking.motion_fit import MotionBank, members_of
 
 TARGET_US = 300.0
 CAMERA = dict(focal_px=1400.0, image_size_px=(1920, 1080), height_m=8.0, pan_deg=30.0, tilt_deg=20.0)
@@ -110,6 +119,33 @@ def step_python(n_objects: int = 100, frames: int = 300) -> dict:
     return {k: round(statistics.median(v), 1) for k, v in times.items()}
 
 
+def monitor_cost(n_objects: int = 100, frames: int = 300) -> dict:
+    """Medians (us) of the on-line NIS check per frame, now (``monitor``) and its path before (``monitor_bank``),
+    after the same tracks' step on the frames of :func:`run`."""
+    cam = PanTiltCamera(**CAMERA)
+    split = FrameProcessor(cam, BUDGET, joint_cov=False, linearity=False, v2x_policy="linear", shared_jacobian=True)
+    at = SharedJacobianAt(cam, BUDGET)
+    tracks = ClassTracks(TrackerConfig(timeout_s=1e9), rank=at.rank, shared_at=at)
+    mon = NisMonitor(tracks)
+    bank = MotionBank(members_of(tracks.configs), rank=at.rank, shared_at=at, timeout_s=1e9)
+    det = np.broadcast_to(np.eye(2), (n_objects, 2, 2))
+    classes = ["car"] * n_objects
+    times: dict = {"monitor": [], "monitor_bank": []}
+    for k, (t, ids, boxes) in enumerate(_frames(cam, n_objects, frames + 30)):
+        est = split.boxes3d(boxes, pixel_cov_px2=det)
+        B = est.centre_shared_m
+        out = tracks.step(t, ids, classes, est.centre_xy_world_m, shared_m=B, cov_m2=est.centre_cov_m2)
+        t0 = time.perf_counter()
+        mon.observe(t, out, classes)
+        t1 = time.perf_counter()
+        bank.observe(t, out, classes, est.centre_xy_world_m, est.centre_cov_m2 - B @ np.swapaxes(B, -1, -2), B)
+        t2 = time.perf_counter()
+        if k >= 30:
+            times["monitor"].append((t1 - t0) * 1e6)
+            times["monitor_bank"].append((t2 - t1) * 1e6)
+    return {k: round(statistics.median(v), 1) for k, v in times.items()}
+
+
 def run(n_objects: int = 100, frames: int = 300) -> dict:
     cam = PanTiltCamera(**CAMERA)
     plain = FrameProcessor(cam, BUDGET, joint_cov=False, linearity=False, v2x_policy="linear")
@@ -167,12 +203,15 @@ def main(argv=None) -> None:
         for _ in range(a.runs):
             load0 = os.getloadavg()[0]
             runs.append({**run(a.objects, a.frames), "python": step_python(a.objects, a.frames),
+                         "monitor": monitor_cost(a.objects, a.frames),
                          "load_average_1min_start": round(load0, 2),
                          "load_average_1min_end": round(os.getloadavg()[0], 2)})
         doc = {"note": f"bench/bench_tracking.py --frames {a.frames} --runs {a.runs} --out {a.out}; track = IMM "
                        "(default) with imm_kernels.frame_pass, track_reference = the same with the compiled "
                        "reference pass (kernels.frame_update), track_cv = single constant-velocity mode, same "
-                       "frames, interleaved; ratio = median over frames of total / positions; python = "
+                       "frames, interleaved; monitor = the on-line NIS check now / its path before 2026-11-28 (a "
+                       "MotionBank re-running the filter), separate pass; "
+                       "ratio = median over frames of total / positions; python = "
                        "TrackTable.step's own Python and its compiled calls (separate pass over the same frames); "
                        "figures are medians over the frames in us, on a shared 2-core VM unless said otherwise",
                "runs": runs}
@@ -182,7 +221,8 @@ def main(argv=None) -> None:
         for r in runs:
             print(f"total {r['total']:.1f} us (positions_split {r['positions_split']:.1f} + track {r['track']:.1f}); "
                   f"positions {r['positions']:.1f}; ratio {r['ratio']:.2f}; track_reference "
-                  f"{r['track_reference']:.1f}; step Python {r['python']['step_python']:.1f} us; "
+                  f"{r['track_reference']:.1f}; monitor {r['monitor']['monitor']:.1f} (before: "
+                  f"{r['monitor']['monitor_bank']:.1f}); step Python {r['python']['step_python']:.1f} us; "
                   f"load {r['load_average_1min_start']:.2f}")
         return
     res = run(a.objects, a.frames)
@@ -195,6 +235,8 @@ def main(argv=None) -> None:
     print(f"ratio total / positions {res['ratio']:.2f} (issue 31: <= 2)")
     for k, v in step_python(a.objects, a.frames).items():
         print(f"{k:16s} {v:8.1f} us (TrackTable.step and its parts)")
+    for k, v in monitor_cost(a.objects, a.frames).items():
+        print(f"{k:16s} {v:8.1f} us (the on-line NIS check; _bank: its path before)")
 
 
 if __name__ == "__main__":
