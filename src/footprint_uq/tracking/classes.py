@@ -119,14 +119,3 @@ class ClassTracks:
             if sel.size:
                 out[sel] = table.frame_nis()
         return out
-
-    def shared_predicted(self) -> np.ndarray:
-        """``B`` at the predicted positions of the last :meth:`step`'s objects, ``(n, 2, r)`` in frame order, each
-        from its table (:meth:`~footprint_uq.tracking.table.TrackTable.shared_predicted`)."""
-        if len(self.tables) == 1:
-            return self.tables[0].shared_predicted()
-        out = np.full((self._last_n, 2, self.rank), np.nan)
-        for sel, table in self._last_parts:
-            if sel.size:
-                out[sel] = table.shared_predicted()
-        return out

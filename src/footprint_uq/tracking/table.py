@@ -22,7 +22,6 @@ from .models import ConstantVelocity
 __all__ = ["TrackerConfig", "TrackOutput", "TrackTable", "SharedJacobianAt", "CALIBRATION_MODES", "DEFAULT_GATE_CHI2"]
 
 _NO_B = np.zeros((0, 2, 0))
-_NO_ROWS = np.zeros(0, np.int64)
 #: how the calibration error enters the filter: "consider" (the split model, the only honest one), "white" (the
 #: whole per-frame covariance as white noise) and "ignore" (only the per-frame part) are kept to show what goes
 #: wrong (docs/uncertainty-model.md)
@@ -171,8 +170,6 @@ class TrackTable:
         self._oldest_s = math.inf
         #: frames not tracked because their time was earlier than the previous frame's
         self.n_stale_frames = 0
-        #: the last step's ``B`` at the predicted positions: ``(n, objects, B (k, 2, r))`` (:meth:`shared_predicted`)
-        self._last_B: tuple = (0, _NO_ROWS, _NO_B)
         #: the NIS of the last step's objects (:meth:`frame_nis`)
         self._nis = np.zeros(0)
 
@@ -277,7 +274,7 @@ class TrackTable:
             raise InputError("cov_m2" if subtract else "cov_frame_m2", cov.shape, f"shape ({n}, 2, 2)")
         if t < self._last_time:
             self.n_stale_frames += 1
-            self._last_B, self._nis = (n, _NO_ROWS, _NO_B), np.full(n, np.nan)
+            self._nis = np.full(n, np.nan)
             return TrackOutput.untracked(n)
         self._last_time = t
         self._delete_expired(t)
@@ -293,7 +290,6 @@ class TrackTable:
             Bp = _c64(self.shared_at(pred[:k]))
         else:
             Bp = _NO_B
-        self._last_B = (n, old, Bp)  # (old[:k]: the objects of Bp's rows)
         meas = self._measurement(xy, R, B)
         out = TrackOutput(np.empty(n, np.int64), np.empty(n, bool), np.empty(n, np.int64), np.empty(n),
                           np.empty((n, 2)), np.empty((n, 2, 2)), np.empty((n, 2)), np.empty((n, 2, 2)))
@@ -313,20 +309,6 @@ class TrackTable:
         under the compiled reference pass (``_reference_pass``, which does not compute it).  The on-line
         consistency check's statistic (:class:`~footprint_uq.tracking.consistency.NisMonitor`)."""
         return self._nis
-
-    def shared_predicted(self) -> np.ndarray:
-        """``B`` at the predicted positions of the last :meth:`step`'s objects, ``(n, 2, r)`` in frame order, as
-        its update used it: the ``shared_at`` value at the track's predicted position for every object that
-        updated a track (NaN where ``shared_at`` gave none), NaN for the others (new tracks, untracked objects,
-        a stale frame, no ``shared_at``).  For the on-line consistency check
-        (:class:`~footprint_uq.tracking.consistency.NisMonitor`), which runs the tracker's filter on the same
-        objects and so needs ``B`` at the same points: taken from here, not evaluated a second time."""
-        n, objects, Bp = self._last_B
-        out = np.full((n, 2, self.rank), np.nan)
-        k = Bp.shape[0]
-        if k:
-            out[objects[:k]] = Bp
-        return out
 
     def _claim(self, ids: list, slots: np.ndarray, act: np.ndarray, miss: list) -> None:
         """Rows for the unknown ids of a frame (the objects ``miss``, in frame order, from ``frame_rows``), in place:
