@@ -12,7 +12,19 @@ run, interleaved frame by frame (medians over ``frames`` frames after a warm-up 
   (``cov_m2=`` the estimate's whole covariance);
 * ``track_cv`` -- the same with the single constant-velocity mode (``manoeuvre_accel_psd_m2ps3=None``: the tracker
   before the IMM), on the same frames;
-* ``total`` -- ``positions_split + track``: positions and motion of one frame.
+* ``track_reference`` -- ``track`` with the update's compiled reference (:func:`~footprint_uq.tracking.kernels.
+  frame_update`, the pass the table ran before :func:`~footprint_uq.tracking.imm_kernels.frame_pass`), same frames;
+* ``total`` -- ``positions_split + track``: positions and motion of one frame; ``ratio`` = ``total / positions``
+  (issue 31's target: <= 2);
+* ``step_python`` -- the Python of :meth:`TrackTable.step` alone (checks, id lookup, new ids' rows, allocations):
+  ``step`` minus its three compiled calls (``frame_rows``, ``shared_at``, ``frame_pass``), timed around them
+  (issue 31's target: < 20 us); ``frame_rows``, ``frame_pass`` and ``shared_at`` in the same frames.
+
+:func:`monitor_cost` (a separate pass over the same frames, so as not to disturb the ratio's caches): ``monitor``,
+the on-line NIS check (:class:`~footprint_uq.tracking.consistency.NisMonitor`, as ``serve --tracks`` runs it by
+default: the tracker's own NIS summed per class), and ``monitor_bank``, the same check as it was before 2026-11-28
+(a :class:`~footprint_uq.tracking.motion_fit.MotionBank` re-running the filter with ``B`` evaluated again, the
+per-frame covariance ``cov - B B^T`` computed for it), after the same tracks' step.
 
 Run ``.venv/bin/python bench/bench_tracking.py [--objects N] [--frames F] [--json]``; :func:`run` returns the
 figures as a dict.  ``--runs 3 --out bench/results/tracking-cost.json`` writes that many runs (each with the load
@@ -33,6 +45,10 @@ import numpy as np
 from footprint_uq import PanTiltCamera
 from footprint_uq.products.footprints import FrameProcessor
 from footprint_uq.tracking import SharedJacobianAt, TrackerConfig, TrackTable, object_motion
+from footprint_uq.tracking import table as table_module
+from footprint_uq.tracking.classes import ClassTracks
+from footprint_uq.tracking.consistency import NisMonitor
+from footprint_uq.tracking.motion_fit import MotionBank, members_of
 
 TARGET_US = 300.0
 CAMERA = dict(focal_px=1400.0, image_size_px=(1920, 1080), height_m=8.0, pan_deg=30.0, tilt_deg=20.0)
@@ -59,6 +75,77 @@ def _frames(camera, n: int, count: int, seed: int = 0, life_s: float = 3.0):
         yield t, ids, np.column_stack([xy0 + v * age[:, None], size, course])
 
 
+class _Timed:
+    """A callable that adds the time of each call of ``fn`` to ``spent[0]`` (s)."""
+
+    def __init__(self, fn, spent: list):
+        self.fn, self.spent = fn, spent
+
+    def __call__(self, *args):
+        t0 = time.perf_counter()
+        res = self.fn(*args)
+        self.spent[0] += time.perf_counter() - t0
+        return res
+
+
+def step_python(n_objects: int = 100, frames: int = 300) -> dict:
+    """Medians (us) of :meth:`TrackTable.step`'s own Python per frame and of its three compiled calls, on the frames
+    of :func:`run`: the module's ``frame_rows`` / ``frame_pass`` and the table's ``shared_at`` wrapped by timers."""
+    cam = PanTiltCamera(**CAMERA)
+    split = FrameProcessor(cam, BUDGET, joint_cov=False, linearity=False, v2x_policy="linear", shared_jacobian=True)
+    spent = {k: [0.0] for k in ("frame_rows", "frame_pass", "shared_at")}
+    at = SharedJacobianAt(cam, BUDGET)
+    table = TrackTable(TrackerConfig(timeout_s=1e9), rank=at.rank, shared_at=_Timed(at, spent["shared_at"]))
+    det = np.broadcast_to(np.eye(2), (n_objects, 2, 2))
+    saved = table_module.frame_rows, table_module.frame_pass
+    table_module.frame_rows, table_module.frame_pass = (_Timed(f, spent[k]) for f, k in zip(
+        saved, ("frame_rows", "frame_pass"), strict=True))
+    times: dict = {k: [] for k in ("step", "step_python", *spent)}
+    try:
+        for k, (t, ids, boxes) in enumerate(_frames(cam, n_objects, frames + 30)):
+            est = split.boxes3d(boxes, pixel_cov_px2=det)
+            for v in spent.values():
+                v[0] = 0.0
+            t0 = time.perf_counter()
+            table.step(t, ids, est.centre_xy_world_m, shared_m=est.centre_shared_m, cov_m2=est.centre_cov_m2)
+            dt = time.perf_counter() - t0
+            if k >= 30:
+                times["step"].append(dt * 1e6)
+                times["step_python"].append((dt - sum(v[0] for v in spent.values())) * 1e6)
+                for key, v in spent.items():
+                    times[key].append(v[0] * 1e6)
+    finally:
+        table_module.frame_rows, table_module.frame_pass = saved
+    return {k: round(statistics.median(v), 1) for k, v in times.items()}
+
+
+def monitor_cost(n_objects: int = 100, frames: int = 300) -> dict:
+    """Medians (us) of the on-line NIS check per frame, now (``monitor``) and its path before (``monitor_bank``),
+    after the same tracks' step on the frames of :func:`run`."""
+    cam = PanTiltCamera(**CAMERA)
+    split = FrameProcessor(cam, BUDGET, joint_cov=False, linearity=False, v2x_policy="linear", shared_jacobian=True)
+    at = SharedJacobianAt(cam, BUDGET)
+    tracks = ClassTracks(TrackerConfig(timeout_s=1e9), rank=at.rank, shared_at=at)
+    mon = NisMonitor(tracks)
+    bank = MotionBank(members_of(tracks.configs), rank=at.rank, shared_at=at, timeout_s=1e9)
+    det = np.broadcast_to(np.eye(2), (n_objects, 2, 2))
+    classes = ["car"] * n_objects
+    times: dict = {"monitor": [], "monitor_bank": []}
+    for k, (t, ids, boxes) in enumerate(_frames(cam, n_objects, frames + 30)):
+        est = split.boxes3d(boxes, pixel_cov_px2=det)
+        B = est.centre_shared_m
+        out = tracks.step(t, ids, classes, est.centre_xy_world_m, shared_m=B, cov_m2=est.centre_cov_m2)
+        t0 = time.perf_counter()
+        mon.observe(t, out, classes)
+        t1 = time.perf_counter()
+        bank.observe(t, out, classes, est.centre_xy_world_m, est.centre_cov_m2 - B @ np.swapaxes(B, -1, -2), B)
+        t2 = time.perf_counter()
+        if k >= 30:
+            times["monitor"].append((t1 - t0) * 1e6)
+            times["monitor_bank"].append((t2 - t1) * 1e6)
+    return {k: round(statistics.median(v), 1) for k, v in times.items()}
+
+
 def run(n_objects: int = 100, frames: int = 300) -> dict:
     cam = PanTiltCamera(**CAMERA)
     plain = FrameProcessor(cam, BUDGET, joint_cov=False, linearity=False, v2x_policy="linear")
@@ -66,9 +153,11 @@ def run(n_objects: int = 100, frames: int = 300) -> dict:
     at = SharedJacobianAt(cam, BUDGET)
     table = TrackTable(TrackerConfig(timeout_s=1e9), rank=at.rank, shared_at=at)
     table_cv = TrackTable(TrackerConfig(timeout_s=1e9, manoeuvre_accel_psd_m2ps3=None), rank=at.rank, shared_at=at)
+    table_ref = TrackTable(TrackerConfig(timeout_s=1e9), rank=at.rank, shared_at=at)
+    table_ref._reference_pass = True
     det = np.broadcast_to(np.eye(2), (n_objects, 2, 2))
     restarts = 0
-    keys = ("positions", "positions_split", "shared_at", "track", "track_cv", "total")
+    keys = ("positions", "positions_split", "shared_at", "track", "track_cv", "track_reference", "total")
     times = {k: [] for k in keys}
     for k, (t, ids, boxes) in enumerate(_frames(cam, n_objects, frames + 30)):
         t0 = time.perf_counter()
@@ -84,12 +173,18 @@ def run(n_objects: int = 100, frames: int = 300) -> dict:
         object_motion(table_cv.step(t, ids, est.centre_xy_world_m, shared_m=est.centre_shared_m,
                                     cov_m2=est.centre_cov_m2), yaw_rad=boxes[:, 6])
         t5 = time.perf_counter()
+        object_motion(table_ref.step(t, ids, est.centre_xy_world_m, shared_m=est.centre_shared_m,
+                                     cov_m2=est.centre_cov_m2), yaw_rad=boxes[:, 6])
+        t6 = time.perf_counter()
         restarts += int(out.new_track.sum()) if k else 0
         if k >= 30:
             for key, dt in (("positions", t1 - t0), ("positions_split", t2 - t1), ("track", t3 - t2),
-                            ("shared_at", t4 - t3), ("track_cv", t5 - t4), ("total", t3 - t1)):
+                            ("shared_at", t4 - t3), ("track_cv", t5 - t4), ("track_reference", t6 - t5),
+                            ("total", t3 - t1)):
                 times[key].append(dt * 1e6)
     res = {k: round(statistics.median(v), 1) for k, v in times.items()}
+    res["ratio"] = round(statistics.median(np.divide(times["total"], times["positions"])), 2)
+    res["ratio_of_medians"] = round(res["total"] / res["positions"], 2)
     res.update(n_objects=n_objects, frames=frames, target_us=TARGET_US, tracked=int((out.n_updates > 1).sum()),
                new_tracks_after_first_frame=restarts)
     return res
@@ -107,26 +202,41 @@ def main(argv=None) -> None:
         runs = []
         for _ in range(a.runs):
             load0 = os.getloadavg()[0]
-            runs.append({**run(a.objects, a.frames), "load_average_1min_start": round(load0, 2),
+            runs.append({**run(a.objects, a.frames), "python": step_python(a.objects, a.frames),
+                         "monitor": monitor_cost(a.objects, a.frames),
+                         "load_average_1min_start": round(load0, 2),
                          "load_average_1min_end": round(os.getloadavg()[0], 2)})
         doc = {"note": f"bench/bench_tracking.py --frames {a.frames} --runs {a.runs} --out {a.out}; track = IMM "
-                       "(default), track_cv = single constant-velocity mode, same frames, interleaved; figures are "
-                       "medians over the frames in us, on a shared 2-core VM unless said otherwise",
+                       "(default) with imm_kernels.frame_pass, track_reference = the same with the compiled "
+                       "reference pass (kernels.frame_update), track_cv = single constant-velocity mode, same "
+                       "frames, interleaved; monitor = the on-line NIS check now / its path before 2026-11-28 (a "
+                       "MotionBank re-running the filter), separate pass; "
+                       "ratio = median over frames of total / positions; python = "
+                       "TrackTable.step's own Python and its compiled calls (separate pass over the same frames); "
+                       "figures are medians over the frames in us, on a shared 2-core VM unless said otherwise",
                "runs": runs}
         tmp = a.out.with_suffix(".tmp")
         tmp.write_text(json.dumps(doc, indent=1) + "\n")
         tmp.replace(a.out)
         for r in runs:
             print(f"total {r['total']:.1f} us (positions_split {r['positions_split']:.1f} + track {r['track']:.1f}); "
-                  f"positions {r['positions']:.1f}; load {r['load_average_1min_start']:.2f}")
+                  f"positions {r['positions']:.1f}; ratio {r['ratio']:.2f}; track_reference "
+                  f"{r['track_reference']:.1f}; monitor {r['monitor']['monitor']:.1f} (before: "
+                  f"{r['monitor']['monitor_bank']:.1f}); step Python {r['python']['step_python']:.1f} us; "
+                  f"load {r['load_average_1min_start']:.2f}")
         return
     res = run(a.objects, a.frames)
     if a.json:
         print(json.dumps(res))
         return
-    for k in ("positions", "positions_split", "shared_at", "track", "track_cv", "total"):
+    for k in ("positions", "positions_split", "shared_at", "track", "track_cv", "track_reference", "total"):
         print(f"{k:16s} {res[k]:8.1f} us per frame of {res['n_objects']} objects (median of {res['frames']})")
     print(f"target: total <= {TARGET_US:.0f} us -> {'met' if res['total'] <= TARGET_US else 'NOT met'}")
+    print(f"ratio total / positions {res['ratio']:.2f} (issue 31: <= 2)")
+    for k, v in step_python(a.objects, a.frames).items():
+        print(f"{k:16s} {v:8.1f} us (TrackTable.step and its parts)")
+    for k, v in monitor_cost(a.objects, a.frames).items():
+        print(f"{k:16s} {v:8.1f} us (the on-line NIS check; _bank: its path before)")
 
 
 if __name__ == "__main__":

@@ -98,9 +98,9 @@ def test_schmidt_update_is_the_augmented_kalman_filter_on_the_state(rng):
 
 
 def test_compiled_initiation_equals_the_initiator(rng):
-    """kernels._initiate (the tracker's new tracks, inside frame_update) = Initiator.initiate in every mode of the
+    """kernels.initiate_row (the tracker's new tracks, inside frame_update) = Initiator.initiate in every mode of the
     IMM: position the measurement, P its whole error R + B B^T, C = -B, velocity 0 with variance sigma_v0^2."""
-    from footprint_uq.tracking.kernels import _initiate
+    from footprint_uq.tracking.kernels import initiate_row
 
     n, m, r = 5, 2, 3
     z, B = rng.normal(0, 30, (n, 2)), rng.normal(0, 0.4, (n, 2, r))
@@ -111,7 +111,7 @@ def test_compiled_initiation_equals_the_initiator(rng):
     Xm, Pm, Cm = np.full((n, m, 4), np.nan), np.full((n, m, 4, 4), np.nan), np.full((n, m, 4, r), np.nan)
     mu, mu0 = np.full((n, m), np.nan), np.array([0.7, 0.3])
     for s in range(n):
-        _initiate(s, X, P, Xm, Pm, Cm, mu, mu0, 49.0, z[s], R[s], B[s])
+        initiate_row(s, X, P, Xm, Pm, Cm, mu, mu0, 49.0, z[s], R[s], B[s])
     np.testing.assert_allclose(X, ref.x, rtol=0, atol=1e-12)
     np.testing.assert_allclose(P, ref.P, rtol=1e-12, atol=1e-12)
     for j in range(m):
@@ -465,6 +465,17 @@ def test_shared_jacobian_at_world_points():
 
     uv = cam.project(np.column_stack([xy[:2], np.zeros(2)])).uv_px[:, None, :]
     np.testing.assert_allclose(B[:2], footprints_from_corners(cam, "basler1@deg", uv).centre_shared_m, rtol=1e-9)
+    # the compiled call taken from the processor's hook (no products/ frame per call) gives the method's numbers;
+    # a second thread meanwhile (its scratch busy) takes the method's path, with the same numbers
+    assert at._kernel is not None
+    uv3 = np.empty((3, 1, 2))
+    from footprint_uq.tracking.kernels import project_ground
+
+    project_ground(xy, at._cam, uv3[:, 0])
+    via_method = at.processor.point_shared_jacobian(uv3)
+    np.testing.assert_array_equal(B, via_method)
+    with at._busy:
+        np.testing.assert_array_equal(at(xy), via_method)
 
 
 def _frames(n_frames=4, dt=0.1):

@@ -628,8 +628,7 @@ class Service:
             out = setup.last_tracks = setup.tracks.step(ts, ids, classes, est.centre_xy_world_m, shared_m=B,
                                                         cov_m2=est.centre_cov_m2)
             if setup.nis is not None:
-                setup.nis.observe(ts, out, classes, est.centre_xy_world_m,
-                                  est.centre_cov_m2 - B @ np.swapaxes(B, -1, -2), B)
+                setup.nis.observe(ts, out, classes)  # (the NIS of the step's own innovations: nothing to recompute)
         return out.track_id, object_motion(out, heading_offset_deg=setup.georef.heading_offset_deg, yaw_rad=yaw)
 
     def _objects_json(self, setup: CameraSetup, est, ids: list, classes: list, ts: float = 0.0,

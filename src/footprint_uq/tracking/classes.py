@@ -61,6 +61,8 @@ class ClassTracks:
         self.tables = [TrackTable(c, rank=rank, shared_at=shared_at) for c in self.configs]
         self._table_of = {cls: self.configs.index(c) for cls, c in self.per_class.items()}
         self.rank, self.shared_at = self.tables[0].rank, shared_at
+        self._last_parts: list = []  # the last step's (objects, table) per table (several tables only)
+        self._last_n = 0
 
     @property
     def config(self) -> TrackerConfig:
@@ -96,11 +98,24 @@ class ClassTracks:
         which = self.table_index(classes, n)
         k = len(self.tables)
         out = TrackOutput.untracked(n)
+        self._last_parts, self._last_n = [], n
         for j, table in enumerate(self.tables):
             sel = np.flatnonzero(which == j)  # (every table steps, an empty part included: its clock and deleter)
+            self._last_parts.append((sel, table))
             part = [None if a is None else np.asarray(a)[sel] for a in (xy_m, cov_frame_m2, shared_m, cov_m2)]
             o = table.step(time_s, [ids[i] for i in sel.tolist()], *part[:3], cov_m2=part[3])
             for f, v in zip(out, o, strict=True):
                 f[sel] = v
             out.track_id[sel] = np.where(o.track_id >= 0, o.track_id * k + j, -1)
+        return out
+
+    def frame_nis(self) -> np.ndarray:
+        """The NIS of the last :meth:`step`'s objects, ``(n,)`` in frame order, each from its table
+        (:meth:`~footprint_uq.tracking.table.TrackTable.frame_nis`: NaN where the object updated no track)."""
+        if len(self.tables) == 1:
+            return self.tables[0].frame_nis()
+        out = np.full(self._last_n, np.nan)
+        for sel, table in self._last_parts:
+            if sel.size:
+                out[sel] = table.frame_nis()
         return out

@@ -1,9 +1,11 @@
 """On-line consistency of the tracker's motion model: the normalised innovation squared (NIS) per class over a window.
 
-:class:`NisMonitor` runs beside one camera's :class:`~footprint_uq.tracking.classes.ClassTracks`: every frame's
-tracked objects go through a :class:`~footprint_uq.tracking.motion_fit.MotionBank` with one member per motion
-model of the tracks (the same filter, the same association: the tracker's own innovations), whose NIS
-``y^T S^-1 y`` (2 dof; for two modes, of the predicted mode mixture's moments) is summed per class and frame.
+:class:`NisMonitor` runs beside one camera's :class:`~footprint_uq.tracking.classes.ClassTracks`: the NIS
+``y^T S^-1 y`` (2 dof; for two modes, of the predicted mode mixture's moments) of every innovation the tracks'
+update used in a frame (:meth:`~footprint_uq.tracking.classes.ClassTracks.frame_nis`, computed in the tracker's
+compiled pass: the tracker's own innovations) is summed per class and frame.  (Before 2026-11-28 a
+:class:`~footprint_uq.tracking.motion_fit.MotionBank` re-ran the tracker's filter on the frame for it, ~100 us
+per 100-object frame; ``tests/test_tracking_fast.py`` holds the two to 1e-9.)
 Over the last ``window_s`` seconds the class's sum of ``n`` NIS is, if the model is right, chi-square with ``2 n``
 degrees of freedom (the innovations of a consistent filter are white, so one track's successive NIS are
 independent); :meth:`NisMonitor.status` tests it two-sided at ``alpha`` against a tolerance band -- the sum is
@@ -23,10 +25,11 @@ from __future__ import annotations
 import collections
 import math
 
+import numpy as np
 from scipy import stats
 
 from .._checks import as_float
-from .motion_fit import MotionBank, members_of
+from ..errors import InputError
 
 __all__ = ["NisMonitor", "health_section", "DEFAULT_WINDOW_S", "DEFAULT_ALPHA", "DEFAULT_TOLERANCE"]
 
@@ -63,33 +66,29 @@ class NisMonitor:
         self.min_updates, self.max_updates = int(min_updates), int(max_updates)
         self.tolerance = as_float("tolerance", tolerance, nonnegative=True)
         self.tracks = tracks
-        cfg0 = tracks.configs[0]
-        self.bank = MotionBank(members_of(tracks.configs), rank=tracks.rank, shared_at=tracks.shared_at,
-                               sigma_v0_mps=cfg0.sigma_v0_mps, timeout_s=cfg0.timeout_s)
         self._frames: dict = {}  # class -> deque of (time_s, nis_sum, n)
         self._sums: dict = {}  # class -> [nis_sum, n] over the deque
         self.flagged: dict = {}  # class -> the last verdict that was "inconsistent" (for the log: new flags only)
 
-    def _member(self, cls: str) -> int:
-        c = self.tracks.per_class.get(cls)
-        return 0 if c is None else self.tracks.configs.index(c)
-
-    def observe(self, time_s: float, out, classes, xy_m, cov_frame_m2, shared_m) -> None:
-        """One frame (as :meth:`~footprint_uq.tracking.motion_fit.MotionBank.observe`, after the tracks' step)."""
-        before_nis, before_n = self.bank.NIS.copy(), self.bank.n_upd.copy()
-        self.bank.observe(time_s, out, classes, xy_m, cov_frame_m2, shared_m)
-        for cls, k in self.bank.classes.items():
-            n = int(self.bank.n_upd[k] - (before_n[k] if k < before_n.shape[0] else 0))
-            if n == 0:
-                continue
-            g = self._member(cls)
-            s = float(self.bank.NIS[k, g] - (before_nis[k, g] if k < before_nis.shape[0] else 0.0))
-            dq = self._frames.setdefault(cls, collections.deque())
-            tot = self._sums.setdefault(cls, [0.0, 0])
-            dq.append((float(time_s), s, n))
-            tot[0] += s
-            tot[1] += n
-        self._expire(float(time_s))
+    def observe(self, time_s: float, out, classes, xy_m=None, cov_frame_m2=None, shared_m=None) -> None:
+        """One frame, right after the tracks' step on it: ``out`` that step's output (n objects) and ``classes``
+        their n class names (None: no class, ``""``).  The NIS come from the step itself
+        (:meth:`~footprint_uq.tracking.classes.ClassTracks.frame_nis`); ``xy_m``, ``cov_frame_m2`` and
+        ``shared_m`` are not needed any more (accepted for the callers of the earlier signature)."""
+        nis = self.tracks.frame_nis()
+        n = out.track_id.shape[0]
+        if nis.shape[0] != n:
+            raise InputError("out", n, f"the output of the tracks' last step ({nis.shape[0]} objects)")
+        now = float(time_s)
+        ok = np.isfinite(nis)
+        if ok.any():
+            for cls, (s, k) in _class_sums(nis, ok, classes, n).items():
+                dq = self._frames.setdefault(cls, collections.deque())
+                tot = self._sums.setdefault(cls, [0.0, 0])
+                dq.append((now, s, k))
+                tot[0] += s
+                tot[1] += k
+        self._expire(now)
 
     def _expire(self, now_s: float) -> None:
         for cls, dq in self._frames.items():
@@ -130,6 +129,25 @@ class NisMonitor:
             elif rec["consistent"] and cls in self.flagged:
                 del self.flagged[cls]
         return news
+
+
+def _class_sums(nis, ok, classes, n: int) -> dict:
+    """class (``""``: None) -> (sum of the finite ``nis`` of its objects, their count); one class's frame (the
+    common case) without a loop over its objects."""
+    if classes is None:
+        return {"": (float(nis[ok].sum()), int(ok.sum()))}
+    names = classes if isinstance(classes, list) else list(classes)
+    if len(names) != n:
+        raise InputError("classes", len(names), f"{n} class names, one per object")
+    if names.count(names[0]) == n:
+        return {"" if names[0] is None else str(names[0]): (float(nis[ok].sum()), int(ok.sum()))}
+    sums: dict = {}
+    for i in np.flatnonzero(ok).tolist():
+        c = names[i]
+        key = "" if c is None else str(c)
+        s, k = sums.get(key, (0.0, 0))
+        sums[key] = (s + float(nis[i]), k + 1)
+    return sums
 
 
 def _finite_or_none(x):

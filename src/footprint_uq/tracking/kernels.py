@@ -6,6 +6,10 @@ SchmidtUpdater`, :class:`~footprint_uq.tracking.filter.InteractingModels`) are t
 ``tests/test_tracking.py`` holds these kernels to them (1e-9).  A frame of 100 tracks as ~40 small numpy operations
 on (100, 4, 4) / (100, 4, r) stacks costs ~400 us of call overhead (several times that for two modes); compiled,
 ~10-50 us.
+
+:func:`frame_update` is the compiled reference of a frame's update, written as the numpy classes read;
+:class:`~footprint_uq.tracking.table.TrackTable` runs :func:`~footprint_uq.tracking.imm_kernels.frame_pass`, the
+same filter arranged for speed, held to it in ``tests/test_tracking_fast.py``.
 """
 
 from __future__ import annotations
@@ -17,8 +21,8 @@ from numba import njit
 
 from ..fast import core
 
-__all__ = ["predict_update", "update_slots", "frame_rows", "frame_update", "project_ground", "motion_fields",
-           "ROW_SKIP", "ROW_UPDATE", "ROW_START"]
+__all__ = ["predict_update", "update_slots", "frame_rows", "frame_update", "initiate_row", "project_ground",
+           "motion_fields", "ROW_SKIP", "ROW_UPDATE", "ROW_START"]
 
 
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
@@ -291,7 +295,7 @@ def motion_fields(v, cov, ch, sh, ratio, yaw_rad, sigma_yaw_rad, heading_offset_
 ROW_SKIP, ROW_UPDATE, ROW_START = 0, 1, 2
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(cache=True, nogil=True, error_model="numpy", _nrt=False)  # (no refcounting: it allocates nothing)
 def frame_rows(slots, xy, cov, B, subtract, R, t, t_last, seen, stamp, X, act, old,
                pred):  # pragma: no cover - compiled
     """First pass of a frame of n objects over a table's storage: what to do with each object.
@@ -305,7 +309,8 @@ def frame_rows(slots, xy, cov, B, subtract, R, t, t_last, seen, stamp, X, act, o
     unknown id with finite inputs (the caller keeps the first object of each unknown id); :data:`ROW_SKIP`
     otherwise (repeated ids: ``seen (cap,)`` is stamped with ``stamp`` per frame).  The k objects to update are
     listed in ``old[:k]`` in frame order with their tracks' positions predicted to ``t`` in ``pred[:k]`` (for
-    ``B`` at the predicted position); returns k and the number of unknown ids (``slots == -1``)."""
+    ``B`` at the predicted position); returns k and the number u of unknown ids (``slots == -1``), whose objects
+    are listed at the end of ``old`` in reverse frame order (``old[n - u:][::-1]``)."""
     k = 0
     n_unknown = 0
     r = B.shape[2]
@@ -327,7 +332,9 @@ def frame_rows(slots, xy, cov, B, subtract, R, t, t_last, seen, stamp, X, act, o
                 ok = ok and math.isfinite(B[i, a, c])
         if s < 0:
             act[i] = ROW_START if (s == -1 and ok) else ROW_SKIP
-            n_unknown += s == -1
+            if s == -1:
+                n_unknown += 1
+                old[slots.shape[0] - n_unknown] = i
             continue
         if seen[s] == stamp or not ok or t_last[s] == t:  # a repeated id (in this frame or at this time)
             seen[s] = stamp
@@ -344,7 +351,7 @@ def frame_rows(slots, xy, cov, B, subtract, R, t, t_last, seen, stamp, X, act, o
 
 
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
-def _initiate(s, X, P, Xm, Pm, Cm, mu, mu0, var_v0, z, R, B):  # pragma: no cover - compiled
+def initiate_row(s, X, P, Xm, Pm, Cm, mu, mu0, var_v0, z, R, B):  # pragma: no cover - compiled
     """A new track in storage row ``s`` from one measurement (:class:`~footprint_uq.tracking.filter.Initiator`:
     the position is the measurement, its calibration share ``C = -B``; the velocity zero with variance
     ``var_v0``), the same in every mode, mode probabilities ``mu0``."""
@@ -380,7 +387,7 @@ def frame_update(act, slots, old, n_old, X, P, Xm, Pm, Cm, mu, t_last, t_first, 
 
     The objects ``old[:n_old]`` get the IMM Schmidt step of :func:`update_slots` (``B_pred[k]`` is ``B`` at the
     k-th one's predicted position; ``(0, 2, 0)``: none, use ``B_frame``); one beyond the ``gate`` becomes a start
-    (its id was reused: a new track in the same row).  Then in frame order the starts (:func:`_initiate`, track
+    (its id was reused: a new track in the same row).  Then in frame order the starts (:func:`initiate_row`, track
     ids ``next_id, next_id + 1, ...``) and the outputs of every object (:class:`~footprint_uq.tracking.table.
     TrackOutput`: -1 / False / 0 / NaN for :data:`ROW_SKIP`; the velocity from the second update on).  Returns the
     next free track id."""
@@ -406,7 +413,7 @@ def frame_update(act, slots, old, n_old, X, P, Xm, Pm, Cm, mu, t_last, t_first, 
             continue
         started = act[i] == ROW_START
         if started:
-            _initiate(s, X, P, Xm, Pm, Cm, mu, mu0, var_v0, z[i], R[i], B_frame[i])
+            initiate_row(s, X, P, Xm, Pm, Cm, mu, mu0, var_v0, z[i], R[i], B_frame[i])
             t_last[s] = t_first[s] = t
             n_upd[s] = 1
             tid[s] = next_id

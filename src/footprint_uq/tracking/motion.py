@@ -89,8 +89,11 @@ def object_motion(tracks: TrackOutput, *, heading_offset_deg: float = 0.0, yaw_r
     heading_min_ratio : float
         Speed / largest velocity sigma below which the heading's sigma is NaN.
     """
-    h = as_float("heading_offset_deg", heading_offset_deg)
-    ratio = as_float("heading_min_ratio", heading_min_ratio, positive=True)
+    # (finite floats pass without a call into _checks, as in TrackTable.step: the frame's walk stays in tracking/)
+    h = (heading_offset_deg if isinstance(heading_offset_deg, float) and math.isfinite(heading_offset_deg)
+         else as_float("heading_offset_deg", heading_offset_deg))
+    ratio = (heading_min_ratio if isinstance(heading_min_ratio, float) and math.isfinite(heading_min_ratio)
+             and heading_min_ratio > 0.0 else as_float("heading_min_ratio", heading_min_ratio, positive=True))
     n = tracks.track_id.shape[0]
     out = np.empty((8, n))
     cov = np.empty((n, 2, 2))

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import threading
 from dataclasses import dataclass
 from itertools import repeat
 from typing import NamedTuple
@@ -11,9 +12,10 @@ import numpy as np
 
 from .._checks import as_float
 from ..errors import InputError
-from ..fast.footprint_kernels import camera_constants
+from ..fast.footprint_kernels import SCRATCH_SHAPE, camera_constants
 from ..products.footprints import FrameProcessor
 from .filter import Initiator, SplitMeasurement
+from .imm_kernels import frame_pass, scratch
 from .kernels import ROW_SKIP, ROW_START, frame_rows, frame_update, project_ground
 from .models import ConstantVelocity
 
@@ -132,14 +134,19 @@ class TrackTable:
         Always give it for real use; the frame's ``shared_m`` then serves new tracks and points it cannot map.
     """
 
+    #: True: run the compiled reference of the update (:func:`~footprint_uq.tracking.kernels.frame_update`, the
+    #: filter as the numpy classes read, ~2.5x slower) instead of :func:`~footprint_uq.tracking.imm_kernels.
+    #: frame_pass`; for the agreement tests and ``bench/bench_tracking.py``
+    _reference_pass = False
+
     def __init__(self, config: TrackerConfig | None = None, *, rank: int, shared_at=None):
         self.config = config or TrackerConfig()
         self.shared_at = shared_at
         self.rank = int(rank) if self.config.calibration == "consider" else 0
-        #: the modes the compiled update runs (its per-track step, in :func:`~footprint_uq.tracking.kernels.
-        #: update_slots` and :func:`~footprint_uq.tracking.kernels.frame_update`, is :class:`~footprint_uq.tracking.
-        #: filter.InteractingModels` -- mixing, each mode's SchmidtPredictor + SchmidtUpdater, mode probabilities,
-        #: combination -- in one pass; the tests hold them equal)
+        #: the modes the compiled update runs (its per-track step, in :func:`~footprint_uq.tracking.imm_kernels.
+        #: frame_pass` and its reference :func:`~footprint_uq.tracking.kernels.frame_update`, is
+        #: :class:`~footprint_uq.tracking.filter.InteractingModels` -- mixing, each mode's SchmidtPredictor +
+        #: SchmidtUpdater, mode probabilities, combination -- in one pass; the tests hold them equal)
         cfg = self.config
         self.models = tuple(ConstantVelocity(q) for q in (cfg.accel_psd_m2ps3, cfg.manoeuvre_accel_psd_m2ps3)
                             if q is not None)
@@ -153,6 +160,8 @@ class TrackTable:
         self._index: dict = {None: -2}  # object_id -> slot (-2: never tracked)
         self._cap = 0
         self._grow(64)
+        #: the compiled pass's working arrays (it allocates nothing itself)
+        self._scratch = scratch(len(self.models), self.rank)
         self._stamp = 0  # frames seen: the repeated-id stamp of frame_rows
         self._next_id = 0
         self._last_time: float = -math.inf
@@ -161,6 +170,8 @@ class TrackTable:
         self._oldest_s = math.inf
         #: frames not tracked because their time was earlier than the previous frame's
         self.n_stale_frames = 0
+        #: the NIS of the last step's objects (:meth:`frame_nis`)
+        self._nis = np.zeros(0)
 
     def __len__(self) -> int:
         return len(self._index) - 1  # (the entry of None)
@@ -243,7 +254,8 @@ class TrackTable:
             per-frame part ``cov_m2 - B B^T`` is then taken in the compiled pass (what
             ``FootprintEstimate.centre_cov_frame_m2`` gives, without its dozen numpy calls).
         """
-        t = as_float("time_s", time_s)
+        # (a finite float passes without a call into _checks: one climb less per frame; anything else gets its check)
+        t = time_s if isinstance(time_s, float) and math.isfinite(time_s) else as_float("time_s", time_s)
         xy = _c64(xy_m).reshape(-1, 2)
         n = xy.shape[0]
         ids = object_ids if isinstance(object_ids, list) else list(object_ids)
@@ -262,6 +274,7 @@ class TrackTable:
             raise InputError("cov_m2" if subtract else "cov_frame_m2", cov.shape, f"shape ({n}, 2, 2)")
         if t < self._last_time:
             self.n_stale_frames += 1
+            self._nis = np.full(n, np.nan)
             return TrackOutput.untracked(n)
         self._last_time = t
         self._delete_expired(t)
@@ -272,7 +285,7 @@ class TrackTable:
         k, n_unknown = frame_rows(slots, xy, cov, B, subtract, R, t, self._t_last, self._seen, self._stamp, self._x,
                                   act, old, pred)
         if n_unknown:
-            self._claim(ids, slots, act)
+            self._claim(ids, slots, act, old[n - n_unknown:][::-1].tolist())
         if self.shared_at is not None and self.rank and k:  # B at the predicted positions (see the class doc)
             Bp = _c64(self.shared_at(pred[:k]))
         else:
@@ -280,23 +293,29 @@ class TrackTable:
         meas = self._measurement(xy, R, B)
         out = TrackOutput(np.empty(n, np.int64), np.empty(n, bool), np.empty(n, np.int64), np.empty(n),
                           np.empty((n, 2)), np.empty((n, 2, 2)), np.empty((n, 2)), np.empty((n, 2, 2)))
-        self._next_id = frame_update(act, slots, old, k, self._x, self._P, self._xm, self._Pm, self._Cm, self._mu,
-                                     self._t_last, self._t_first, self._n, self._tid, self._next_id, t, self._qs,
-                                     self._rates, self.mu0, self._var_v0, meas.xy_m, meas.cov_frame_m2, Bp,
-                                     meas.shared_m, self.config.gate_chi2, *out)
+        args = (act, slots, old, k, self._x, self._P, self._xm, self._Pm, self._Cm, self._mu, self._t_last,
+                self._t_first, self._n, self._tid, self._next_id, t, self._qs, self._rates, self.mu0, self._var_v0,
+                meas.xy_m, meas.cov_frame_m2, Bp, meas.shared_m, self.config.gate_chi2, *out)
+        self._nis = nis = np.full(n, np.nan)
+        self._next_id = frame_update(*args) if self._reference_pass else frame_pass(*args, *self._scratch, nis)
         if t < self._oldest_s:  # (every row started or updated now has t_last = t)
             self._oldest_s = t
         return out
 
-    def _claim(self, ids: list, slots: np.ndarray, act: np.ndarray) -> None:
-        """Rows for the unknown ids of a frame (``slots == -1``), in place: the first object of each with finite
-        inputs (``act == ROW_START``) gets a free row (the table grows when none is left); a later object of the
-        same id is not tracked (``act`` set to ``ROW_SKIP``)."""
-        miss = np.flatnonzero(slots == -1)
-        if miss.size == 0:
-            return
+    def frame_nis(self) -> np.ndarray:
+        """The normalised innovation squared ``y^T S^-1 y`` (2 dof; two modes: of the predicted mode mixture's
+        moments) of each of the last :meth:`step`'s objects that updated a track, ``(n,)`` in frame order; NaN for
+        the others (new tracks, restarts beyond the gate, untracked objects, a stale frame) and for every object
+        under the compiled reference pass (``_reference_pass``, which does not compute it).  The on-line
+        consistency check's statistic (:class:`~footprint_uq.tracking.consistency.NisMonitor`)."""
+        return self._nis
+
+    def _claim(self, ids: list, slots: np.ndarray, act: np.ndarray, miss: list) -> None:
+        """Rows for the unknown ids of a frame (the objects ``miss``, in frame order, from ``frame_rows``), in place:
+        the first object of each with finite inputs (``act == ROW_START``) gets a free row (the table grows when
+        none is left); a later object of the same id is not tracked (``act`` set to ``ROW_SKIP``)."""
         first: set = set()
-        for i in miss.tolist():
+        for i in miss:
             key = ids[i]
             if key in first:
                 act[i] = ROW_SKIP
@@ -337,9 +356,23 @@ class SharedJacobianAt:
         self.camera = camera
         self.rank = int(self.processor.budget.param_factor().rank)
         self._cam = camera_constants(camera)[0]
+        #: the processor's compiled call (:meth:`FrameProcessor.point_jacobian_kernel`; None until its kernels
+        #: are ready) and this object's own scratch for it, used by one thread at a time (``_busy``)
+        self._kernel = None
+        self._scratch = np.empty(SCRATCH_SHAPE)
+        self._busy = threading.Lock()
 
     def __call__(self, xy_m) -> np.ndarray:
         xy = np.ascontiguousarray(xy_m, dtype=np.float64).reshape(-1, 2)
         uv = np.empty((xy.shape[0], 1, 2))
         project_ground(xy, self._cam, uv[:, 0])
-        return self.processor.point_shared_jacobian(uv)
+        # the kernel called from here, not through the processor's method: the tracker's frame does not climb back
+        # up from products/ (bench/frame_walk.py --tracks); another thread meanwhile takes the processor's path
+        if self._kernel is None:
+            self._kernel = self.processor.point_jacobian_kernel()
+        if self._kernel is None or not self._busy.acquire(blocking=False):
+            return self.processor.point_shared_jacobian(uv)
+        try:
+            return self._kernel[0](uv, *self._kernel[1], self._scratch)
+        finally:
+            self._busy.release()
