@@ -492,12 +492,16 @@ class Service:
 
         The footprints record is written as text directly from the frame's arrays, without building the
         per-object dicts: the bytes orjson writes for :meth:`process_frame`'s record, in a fraction of the time.
+        ``frame``: a dict, the frame's JSON text (bytes or str: a frame in the common layout is read straight into
+        columns by :func:`.frame_scan.scan_frame`, any other parsed in full) or a
+        :class:`~.frame_scan.ScannedFrame` a transport has read already.
         """
         t0 = time.perf_counter()
         camera_id = frame_no = None
         try:
-            if isinstance(frame, (bytes, bytearray, memoryview, str)):
-                scanned = _scan_text(frame)  # the common layout, read by one compiled pass (frame_scan)
+            if isinstance(frame, (bytes, bytearray, memoryview, str, ScannedFrame)):
+                # the common layout, read by one compiled pass (frame_scan); a transport may have read it already
+                scanned = frame if isinstance(frame, ScannedFrame) else _scan_text(frame)
                 if scanned is not None:
                     camera_id, frame_no = scanned.camera_id, scanned.frame
                     return self._process_scanned(scanned, t0)
@@ -836,14 +840,16 @@ def _motion_object_layout(t: Table, motion, compact: bool) -> list:
     unavailable, ...); compact: ``track_id``, the velocity and its covariance."""
     tid, m = motion
     tracked = tid >= 0
-    ve, vn, c00, c01, c11, sp, ssp, hd, shd, yw, syw, age = t.columns(np.array([
-        m.v_east_mps, m.v_north_mps, m.cov_v_m2ps2[:, 0, 0], m.cov_v_m2ps2[:, 0, 1], m.cov_v_m2ps2[:, 1, 1],
-        m.speed_mps, m.sigma_speed_mps, m.heading_deg, m.sigma_heading_deg, m.yaw_deg, m.sigma_yaw_deg,
-        m.age_s]))
+    rows = [m.v_east_mps, m.v_north_mps, m.cov_v_m2ps2[:, 0, 0], m.cov_v_m2ps2[:, 0, 1], m.cov_v_m2ps2[:, 1, 1]]
+    if not compact:  # (a compact record formats only the five columns it writes)
+        rows += [m.speed_mps, m.sigma_speed_mps, m.heading_deg, m.sigma_heading_deg, m.yaw_deg, m.sigma_yaw_deg,
+                 m.age_s]
+    ve, vn, c00, c01, c11, *more = t.columns(np.array(rows))
     layout = [b',"track_id":', t.when(tracked, t.column(tid)), t.when(~tracked, b"null"),
               b',"v_east_mps":', ve, b',"v_north_mps":', vn, b',"cov_v_m2ps2":[[', c00, b",", c01, b"],[",
               c01, b",", c11, b"]]"]
     if not compact:
+        sp, ssp, hd, shd, yw, syw, age = more
         layout += [b',"speed_mps":', sp, b',"sigma_speed_mps":', ssp, b',"heading_deg":', hd,
                    b',"sigma_heading_deg":', shd, b',"yaw_deg":', yw, b',"sigma_yaw_deg":', syw, b',"age_s":', age]
     return layout

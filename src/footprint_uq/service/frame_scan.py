@@ -21,7 +21,9 @@ with its error entries and messages unchanged:
   decoded by Python);
 * numbers follow JSON's grammar, integers of at most 18 digits, and every float is read exactly: a decimal
   mantissa below 2^53 scaled by a power of ten up to 10^22 (Clinger's exact case: one correctly rounded
-  operation, the double ``orjson`` reads); any other number (more digits, a larger exponent) -> ``None``.
+  operation, the double ``orjson`` reads); any other number (more digits, a larger exponent) -> ``None``,
+  except ``timestamp_s``, whose text (``json.dumps(time.time())`` writes 17 digits) Python's correctly rounded
+  ``float`` reads.  Detections' values of full precision (16-17 digits) take the general path.
 
 So a frame this pass reads gives the same values as the general path, bit for bit
 (``tests/test_service_scan.py`` compares the two on random and hostile texts).
@@ -29,6 +31,7 @@ So a frame this pass reads gives the same values as the general path, bit for bi
 
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
 import numpy as np
@@ -69,13 +72,10 @@ def _ws(buf, i):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _string(buf, i):  # pragma: no cover - compiled
-    """``buf[i]`` should open a plain string (no escape, no control character): the index of its closing quote,
+def _string_end(buf, i):  # pragma: no cover - compiled
+    """From ``buf[i]`` inside a plain string (no escape, no control character): the index of its closing quote,
     or -1."""
     n = buf.shape[0]
-    if i >= n or buf[i] != 34:
-        return -1
-    i += 1
     while i < n:
         c = buf[i]
         if c == 34:
@@ -84,6 +84,25 @@ def _string(buf, i):  # pragma: no cover - compiled
             return -1
         i += 1
     return -1
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _string(buf, i):  # pragma: no cover - compiled
+    """``buf[i]`` should open a plain string: the index of its closing quote, or -1."""
+    if i >= buf.shape[0] or buf[i] != 34:
+        return -1
+    return _string_end(buf, i + 1)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _same(buf, i, s, n):  # pragma: no cover - compiled
+    """``buf[i:i + n] == buf[s:s + n]`` (no early exit: a loop LLVM vectorises)."""
+    if i + n > buf.shape[0]:
+        return False
+    d = 0
+    for j in range(n):
+        d |= buf[i + j] ^ buf[s + j]
+    return d == 0
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -170,15 +189,68 @@ def _number(buf, i, pow10):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
-def _detection(buf, i, r, fv, iv, pow10, dk, dk_at):  # pragma: no cover - compiled
+def _number_end(buf, i):  # pragma: no cover - compiled
+    """The end of the JSON number at ``buf[i]`` (its grammar only, any length), or -1."""
+    n = buf.shape[0]
+    if i < n and buf[i] == 45:
+        i += 1
+    s = i
+    while i < n and 48 <= buf[i] <= 57:
+        i += 1
+    if i == s or (i - s > 1 and buf[s] == 48):
+        return -1
+    if i < n and buf[i] == 46:
+        i += 1
+        s = i
+        while i < n and 48 <= buf[i] <= 57:
+            i += 1
+        if i == s:
+            return -1
+    if i < n and (buf[i] == 101 or buf[i] == 69):
+        i += 1
+        if i < n and (buf[i] == 43 or buf[i] == 45):
+            i += 1
+        s = i
+        while i < n and 48 <= buf[i] <= 57:
+            i += 1
+        if i == s:
+            return -1
+    return i
+
+
+@njit(cache=True, nogil=True)
+def _value(buf, i, r, k, fv, iv, pow10):  # pragma: no cover - compiled
+    """The value of key ``k`` at ``buf[i]`` (a class: just after its opening quote) into row ``r``: the index just
+    after it (a class: its closing quote), or -1."""
+    if k == _K_CLASS:
+        e = _string_end(buf, i)
+        if e >= 0:
+            iv[r, 1], iv[r, 2] = i, e
+        return e
+    i, is_int, ival, fval, ok = _number(buf, i, pow10)
+    if not ok or (k == _K_OBJECT_ID and not is_int):
+        return -1
+    if k == _K_OBJECT_ID:
+        iv[r, 0] = ival
+    else:
+        fv[r, k] = float(ival) if is_int else fval
+    return i
+
+
+@njit(cache=True, nogil=True)
+def _detection(buf, i, r, fv, iv, pow10, dk, dk_at, tpl):  # pragma: no cover - compiled
     """The detection object opening at ``buf[i]`` into row ``r`` of ``fv (cap, 8)`` and ``iv (cap, 4)`` (object id,
-    class start, class end, seen-keys mask): the index after its ``}``, or -1 (not in the subset)."""
+    class start, class end, seen-keys mask): the index after its ``}``, or -1 (not in the subset).  Its text as a
+    template into ``tpl (11, 3)``: per value the constant text before it (start, end in ``buf``) and its key, then
+    the text after the last value (start, end, -1); ``tpl[10, 2]``: the number of values."""
     if buf[i] != 123:
         return -1
+    lit = i
     i = _ws(buf, i + 1)
     seen = 0
     iv[r, 1], iv[r, 2] = -1, -1
     fv[r, 7] = np.nan
+    j = 0
     if i < buf.shape[0] and buf[i] == 125:
         return -1  # an empty detection: the general path names it
     while True:
@@ -194,26 +266,24 @@ def _detection(buf, i, r, fv, iv, pow10, dk, dk_at):  # pragma: no cover - compi
             return -1
         i = _ws(buf, i + 1)
         if k == _K_CLASS:
-            e = _string(buf, i)
-            if e < 0:
+            if i >= buf.shape[0] or buf[i] != 34:
                 return -1
-            iv[r, 1], iv[r, 2] = i + 1, e
-            i = e + 1
-        else:
-            i, is_int, ival, fval, ok = _number(buf, i, pow10)
-            if not ok:
-                return -1
-            if k == _K_OBJECT_ID:
-                if not is_int:
-                    return -1
-                iv[r, 0] = ival
-            else:
-                fv[r, k] = float(ival) if is_int else fval
+            i += 1  # (the opening quote belongs to the constant text)
+        tpl[j, 0], tpl[j, 1], tpl[j, 2] = lit, i, k
+        j += 1
+        i = _value(buf, i, r, k, fv, iv, pow10)
+        if i < 0:
+            return -1
+        lit = i
+        if k == _K_CLASS:
+            i += 1
         i = _ws(buf, i)
         if i >= buf.shape[0]:
             return -1
         if buf[i] == 125:
             iv[r, 3] = seen
+            tpl[j, 0], tpl[j, 1], tpl[j, 2] = lit, i + 1, -1
+            tpl[10, 2] = j
             return i + 1
         if buf[i] != 44:
             return -1
@@ -221,29 +291,155 @@ def _detection(buf, i, r, fv, iv, pow10, dk, dk_at):  # pragma: no cover - compi
 
 
 @njit(cache=True, nogil=True)
+def _templated_run(buf, i, r, fv, iv, pow10, tpl, seen):  # pragma: no cover - compiled
+    """Detections from ``buf[i]`` (row ``r`` on) read as the first one's template ``tpl`` (the same constant text
+    byte for byte: the same keys in the same order, the same spacing), as long as they follow it: ``(i, r,
+    stopped)`` -- the index after the last one read (and its separator), the next row, and whether a detection
+    did not follow the template (it opens at ``i``: read it in full).
+
+    One loop without calls (a compiled call per value, or per inlined helper taking the text, costs ~10 ns in
+    reference counting: more than reading the value): the constant texts compared without early exit, the numbers
+    read as :func:`_number` does (the same subset, the same doubles)."""
+    n = buf.shape[0]
+    nv = tpl[10, 2]
+    cap = fv.shape[0]
+    while r < cap:
+        start = i
+        iv[r, 1], iv[r, 2] = -1, -1
+        fv[r, 7] = np.nan
+        good = True
+        for j in range(nv + 1):
+            s = tpl[j, 0]
+            L = tpl[j, 1] - s
+            if i + L > n:
+                good = False
+                break
+            d = 0
+            for q in range(L):
+                d |= buf[i + q] ^ buf[s + q]
+            if d != 0:
+                good = False
+                break
+            i += L
+            if j == nv:
+                break
+            k = tpl[j, 2]
+            if k == _K_CLASS:
+                e = i
+                while e < n and buf[e] != 34 and buf[e] != 92 and buf[e] >= 32:
+                    e += 1
+                if e >= n or buf[e] != 34:
+                    good = False
+                    break
+                iv[r, 1], iv[r, 2] = i, e
+                i = e
+                continue
+            neg = i < n and buf[i] == 45
+            if neg:
+                i += 1
+            st = i
+            m = 0
+            while i < n:
+                dg = np.int64(buf[i]) - 48
+                if dg < 0 or dg > 9:
+                    break
+                m = m * 10 + dg
+                i += 1
+            nd = i - st
+            if nd == 0 or nd > 18 or (nd > 1 and buf[st] == 48):
+                good = False
+                break
+            integer = True
+            e10 = 0
+            if i < n and buf[i] == 46:
+                integer = False
+                f = i + 1
+                i = f
+                while i < n:
+                    dg = np.int64(buf[i]) - 48
+                    if dg < 0 or dg > 9:
+                        break
+                    m = m * 10 + dg
+                    i += 1
+                if i == f or nd + i - f > 18:
+                    good = False
+                    break
+                e10 = f - i
+            if i < n and (buf[i] == 101 or buf[i] == 69):
+                integer = False
+                i += 1
+                eneg = False
+                if i < n and (buf[i] == 43 or buf[i] == 45):
+                    eneg = buf[i] == 45
+                    i += 1
+                f = i
+                ex = 0
+                while i < n:
+                    dg = np.int64(buf[i]) - 48
+                    if dg < 0 or dg > 9:
+                        break
+                    ex = ex * 10 + dg
+                    i += 1
+                if i == f or i - f > 4:
+                    good = False
+                    break
+                e10 += -ex if eneg else ex
+            if k == _K_OBJECT_ID:
+                if not integer:
+                    good = False
+                    break
+                iv[r, 0] = -m if neg else m
+            elif integer:
+                fv[r, k] = float(-m if neg else m)
+            else:
+                if m > 9007199254740992 or e10 > 22 or e10 < -22:
+                    good = False
+                    break
+                v = float(m)
+                v = v * pow10[e10] if e10 >= 0 else v / pow10[-e10]
+                fv[r, k] = -v if neg else v
+        if not good:
+            return start, r, True
+        iv[r, 3] = seen
+        r += 1
+        while i < n and (buf[i] == 32 or buf[i] == 10 or buf[i] == 13 or buf[i] == 9):
+            i += 1
+        if i >= n or buf[i] != 44:
+            return i, r, False
+        i += 1
+        while i < n and (buf[i] == 32 or buf[i] == 10 or buf[i] == 13 or buf[i] == 9):
+            i += 1
+    return i, r, True
+
+
+@njit(cache=True, nogil=True)
 def _detections(buf, i, fv, iv, pow10, dk, dk_at):  # pragma: no cover - compiled
-    """The detections list opening at ``buf[i]``: ``(index after its ]``, count)``; index -1: not in the subset."""
+    """The detections list opening at ``buf[i]``: ``(index after its ]``, count)``; index -1: not in the subset.
+    The first detection is read in full and sets the template of the others (:func:`_templated_run`); one that
+    does not follow it is read in full."""
     if buf[i] != 91:
         return -1, 0
     i = _ws(buf, i + 1)
-    r = 0
     if i < buf.shape[0] and buf[i] == 93:
         return i + 1, 0
+    tpl = np.zeros((11, 3), np.int64)
+    scratch = np.zeros((11, 3), np.int64)
+    r = 0
     while True:
         if r >= fv.shape[0]:
             return -1, 0
-        i = _detection(buf, i, r, fv, iv, pow10, dk, dk_at)
+        i = _detection(buf, i, r, fv, iv, pow10, dk, dk_at, tpl if r == 0 else scratch)
         if i < 0:
             return -1, 0
         r += 1
         i = _ws(buf, i)
-        if i >= buf.shape[0]:
+        if i < buf.shape[0] and buf[i] == 44:
+            i, r, stopped = _templated_run(buf, _ws(buf, i + 1), r, fv, iv, pow10, tpl, iv[0, 3])
+            if stopped:
+                continue  # (a detection that does not follow the template, or no room: read in full)
+        if i >= buf.shape[0] or buf[i] != 93:
             return -1, 0
-        if buf[i] == 93:
-            return i + 1, r
-        if buf[i] != 44:
-            return -1, 0
-        i = _ws(buf, i + 1)
+        return i + 1, r
 
 
 @njit(cache=True, nogil=True)
@@ -256,8 +452,8 @@ def _scan(buf, pow10, fk, fk_at, dk, dk_at):  # pragma: no cover - compiled
         cap += c == 123
     fv = np.empty((cap, N_VALUES))
     iv = np.zeros((cap, 4), np.int64)
-    head = np.zeros(6, np.int64)
-    head[1], head[2] = -1, -1
+    head = np.zeros(7, np.int64)
+    head[1], head[2], head[5], head[6] = -1, -1, -1, -1
     ts = 0.0
     bad = (False, head, ts, fv[:0], iv[:0], np.zeros(0, np.int64))
     i = _ws(buf, 0)
@@ -291,7 +487,14 @@ def _scan(buf, pow10, fk, fk_at, dk, dk_at):  # pragma: no cover - compiled
             if i < 0:
                 return bad
         else:
+            st = i
             i, is_int, ival, fval, ok = _number(buf, i, pow10)
+            if k == 2 and not ok:  # a time stamp of full precision (17 digits): its text, for Python's float
+                i = _number_end(buf, st)
+                if i < 0:
+                    return bad
+                head[5], head[6] = st, i
+                ok, is_int = True, False
             if not ok or (k == 1 and not is_int):
                 return bad
             if k == 1:
@@ -310,6 +513,37 @@ def _scan(buf, pow10, fk, fk_at, dk, dk_at):  # pragma: no cover - compiled
         return bad
     head[0], head[4] = n, seen
     return True, head, ts, fv[:n], iv[:n], _class_first(buf, iv[:n])
+
+
+@njit(cache=True, nogil=True)
+def _columns(fv, iv):  # pragma: no cover - compiled
+    """The detections' columns as the service takes them, and whether they are the common layout: ``(ok, boxes
+    (n, 4), pixel covariances (n, 2, 2), ids (n,), has_cov, has_conf)``.  ``ok`` False: a detection without a
+    complete 2-D box, some with a covariance and some without (or one incomplete), a confidence outside [0, 1]
+    -- cases whose error entries the general path writes.  Absent object ids: the detection's index."""
+    n = fv.shape[0]
+    boxes = np.empty((n, 4))
+    cov = np.empty((n, 2, 2))
+    ids = np.empty(n, np.int64)
+    n_cov = 0
+    has_conf = False
+    ok = True
+    for r in range(n):
+        mask = iv[r, 3]
+        ok &= (mask & _ALL_BOX) == _ALL_BOX
+        c = mask & _ALL_COV
+        ok &= (c == 0) | (c == _ALL_COV)
+        n_cov += c == _ALL_COV
+        if (mask >> 7) & 1:
+            has_conf = True
+            p = fv[r, 7]
+            ok &= (p >= 0.0) & (p <= 1.0)
+        ids[r] = iv[r, 0] if (mask >> _K_OBJECT_ID) & 1 else r
+        for q in range(4):
+            boxes[r, q] = fv[r, q]
+        cov[r, 0, 0], cov[r, 0, 1], cov[r, 1, 0], cov[r, 1, 1] = fv[r, 4], fv[r, 5], fv[r, 5], fv[r, 6]
+    ok &= (n_cov == 0) | (n_cov == n)
+    return ok, boxes, cov, ids, n_cov > 0, has_conf
 
 
 @njit(cache=True, nogil=True)
@@ -364,30 +598,23 @@ def scan_frame(text) -> ScannedFrame | None:
     if buf.size == 0:
         return None
     ok, head, ts, fv, iv, first = _scan(buf, _POW10, _FK, _FK_AT, _DK, _DK_AT)
+    if not ok or head[4] != 0b1111:  # (a frame field missing: the general path's frame error)
+        return None
+    ok, boxes, cov, ids, has_cov, has_conf = _columns(fv, iv)
     if not ok:
         return None
-    n, seen = int(head[0]), int(head[4])
-    if seen != 0b1111:
-        return None  # a frame field missing: the general path's frame error
-    masks = iv[:, 3]
-    if n and not ((masks & _ALL_BOX) == _ALL_BOX).all():
-        return None  # a detection without a complete 2-D box: the general path names it
-    cov = masks & _ALL_COV
-    has_cov = cov == _ALL_COV
-    if has_cov.any() and not has_cov.all() or ((cov != 0) & ~has_cov).any():
-        return None  # some detections without a covariance, or one incomplete: the general path
-    raw = bytes(buf)  # (the text's own bytes: decoded only where a string is)
+    raw = text if type(text) is bytes else bytes(buf)  # (decoded only where a string is)
     try:
-        camera = raw[head[1]:head[2]].decode("utf-8") if head[1] >= 0 else None
+        camera = raw[head[1]:head[2]].decode("utf-8")
         classes = _classes(raw, iv, first)
     except UnicodeDecodeError:
         return None
-    ids = np.where((masks >> _K_OBJECT_ID) & 1 == 1, iv[:, 0], np.arange(n)).tolist()
-    P = fv[:, [4, 5, 5, 6]].reshape(n, 2, 2) if n and has_cov.all() else None
-    conf = fv[:, 7] if ((masks >> 7) & 1).any() else None
-    if conf is not None and ((conf < 0.0) | (conf > 1.0)).any():
-        return None  # (NaN where absent compares False) a confidence out of range: the general path names it
-    return ScannedFrame(camera, int(head[3]), ts, np.ascontiguousarray(fv[:, :4]), P, ids, classes, conf)
+    if head[6] >= 0:  # a time stamp beyond the exact subset: Python's correctly rounded float of its JSON text
+        ts = float(raw[head[5]:head[6]])
+        if not math.isfinite(ts):
+            return None
+    return ScannedFrame(camera, int(head[3]), ts, boxes, cov if has_cov else None, ids.tolist(), classes,
+                        fv[:, 7].copy() if has_conf else None)
 
 
 def _classes(raw: bytes, iv: np.ndarray, first: np.ndarray) -> list:
@@ -395,10 +622,10 @@ def _classes(raw: bytes, iv: np.ndarray, first: np.ndarray) -> list:
     n = len(first)
     if n == 0:
         return []
-    rows = np.flatnonzero(first == np.arange(n))
-    if rows.size == 0:
-        return [None] * n
+    f0 = int(first[0])
+    if (first == f0).all():  # one class for all (or none): no per-detection work
+        return [None if f0 < 0 else raw[iv[0, 1]:iv[0, 2]].decode("utf-8")] * n
     names = np.empty(n + 1, dtype=object)  # (the last entry: None, for -1)
-    for r in rows.tolist():
+    for r in np.flatnonzero(first == np.arange(n)).tolist():
         names[r] = raw[iv[r, 1]:iv[r, 2]].decode("utf-8")
     return names[first].tolist()
