@@ -181,7 +181,7 @@ def test_frames_read_either_way_give_the_same_record(camera, record, tracks, cov
         dets = _dets(rng, 30, cov=cov, conf=conf)
         dets[4]["u_min_px"], dets[4]["u_max_px"] = 900.0, 800.0  # upside down: its error entry
         if cov:
-            dets[9]["cov_uu_px2"] = 1e12  # out of range: its error entry
+            dets[9]["cov_uu_px2"] = 1e13  # out of range: its error entry
         text = _frame(dets, frame=k, ts=round(T0 + k / 30, 6))
         assert scan_frame(text) is not None
         out_a = a.process_frame_json(text)
