@@ -725,8 +725,10 @@ class Service:
         N, m = len(classes), len(ok_idx)
         en = setup.world_to_enu(est.centre_xy_world_m) if N else np.zeros((0, 2))
         x_cm, y_cm, x_dm, y_dm = cm_dm(en, ok_idx)
-        crow = (np.fromiter(map(_CLASS_ROWS.__getitem__, classes), np.intp, N)[ok_idx] if any(classes)
-                else np.full(m, _DEFAULT_CLASS_ROW, np.intp))
+        if N and classes.count(classes[0]) == N:  # one class for the frame (or none): one look-up
+            crow = np.full(m, _CLASS_ROWS[classes[0]], np.intp)
+        else:
+            crow = np.fromiter(map(_CLASS_ROWS.__getitem__, classes), np.intp, N)[ok_idx]
         mc = None if motion is None else motion_codes(motion if m == N else motion.take(ok_idx), m)  # (sorted rows)
         p = level = None
         if class_p is None:

@@ -431,6 +431,10 @@ def _value_checks(f: FrameDetections, psd: bool = False) -> FrameDetections:
     M = len(f)
     if M == 0:
         return f
+    X, P = f.boxes, f.pixel_cov_px2
+    if f.family == "2d" and not psd and not ((X[:, 0] > X[:, 2]) | (X[:, 1] > X[:, 3])).any() and \
+            (P is None or not (np.abs(P) > MAX_PIXEL_VAR_PX2).any()):
+        return f  # the usual frame: nothing to mark
     bad = np.zeros(M, bool)
     errors: list = []
 
@@ -440,14 +444,12 @@ def _value_checks(f: FrameDetections, psd: bool = False) -> FrameDetections:
             errors.append(DetectionError(i, field_of(i, r), reason_of(r)))
         bad[rows] = True
 
-    X = f.boxes
     if f.family == "2d":
         mark((X[:, 0] > X[:, 2]) | (X[:, 1] > X[:, 3]), lambda i, r: f"detections[{i}]",
              lambda r: str(InputError(_EXPECT_2D_FIELD, X[r].tolist(), _EXPECT_2D)))
     elif f.family == "3d":
         mark((X[:, 3:6] < 0.0).any(axis=1), lambda i, r: f"detections[{i}]",
              lambda r: str(InputError("length_m, width_m, height_m", X[r, 3:6].tolist(), "sizes >= 0")))
-    P = f.pixel_cov_px2
     if P is not None:
         big = np.abs(P) > MAX_PIXEL_VAR_PX2
         first = np.array([0, 1, 2])[np.argmax(big.reshape(M, 4)[:, [0, 1, 3]], axis=1)]
