@@ -14,7 +14,8 @@ the same loop so that a change of the machine's load reaches every figure alike:
 * ``orjson_parse_us``: ``orjson.loads`` of the payload (what the transports spent before the scanner);
 * ``boxes2d_us``: ``FrameProcessor.boxes2d`` alone on the same boxes (the reference of the ratios);
 * tracked: ``tracker_step_us``, the tracker's own ``step`` inside the frame (timed around the call), and
-  ``frame_bytes_minus_step_us``: the frame without it (the service's part; the tracker is issue 31 part 3).
+  ``frame_bytes_minus_step_us``: the frame without it (the tracker is issue 31 part 3); ``tracker_nis_check_us``:
+  the tracks' on-line NIS check (``tracking/consistency.py``, on by default) and the frame without both.
 
 Medians over the repeats; ``*_over_boxes2d``: ratios of medians within this run.  Nothing is asserted.
 """
@@ -39,6 +40,16 @@ from footprint_uq.service import Service
 TARGETS = {False: 1.5, True: 3.0}  # issue 31: untracked <= 1.5x boxes2d, tracked <= 3x
 
 
+def _timed(inner, into: list):
+    """``inner`` with the seconds of each call appended to ``into``."""
+    def timed(*a, **k):
+        t0 = time.perf_counter()
+        out = inner(*a, **k)
+        into.append(time.perf_counter() - t0)
+        return out
+    return timed
+
+
 def measure(tracked: bool, record: str, objects: int, repeats: int) -> dict:
     """The figures of one case (see the module doc)."""
     cam = PanTiltCamera(**CAMERA)
@@ -52,17 +63,12 @@ def measure(tracked: bool, record: str, objects: int, repeats: int) -> dict:
         return b'{"camera_id":"cam0","frame":0,"timestamp_s":%.6f,"detections":%s}' % (t_frame[0], body)
 
     step_s: list[float] = []
-    if tracked:  # the tracker's own step, timed around the call
-        tracks = next(iter(svc.cameras.values())).tracks
-        inner = tracks.step
-
-        def timed_step(*a, **k):
-            t0 = time.perf_counter()
-            out = inner(*a, **k)
-            step_s.append(time.perf_counter() - t0)
-            return out
-
-        tracks.step = timed_step
+    nis_s: list[float] = []
+    if tracked:  # the tracker's own step and its on-line NIS check (tracking/), timed around the calls
+        setup = next(iter(svc.cameras.values()))
+        setup.tracks.step = _timed(setup.tracks.step, step_s)
+        if setup.nis is not None:
+            setup.nis.observe = _timed(setup.nis.observe, nis_s)
     proc = FrameProcessor(cam, "basler1", joint_cov=False)
     boxes = np.array([[d["u_min_px"], d["v_min_px"], d["u_max_px"], d["v_max_px"]] for d in dets])
     for _ in range(30):
@@ -70,17 +76,20 @@ def measure(tracked: bool, record: str, objects: int, repeats: int) -> dict:
         svc.process_frame_json(orjson.loads(payload()))
         proc.boxes2d(boxes)
     step_s.clear()
+    nis_s.clear()
     gc.collect()
     gc.freeze()
-    t: dict[str, list] = {k: [] for k in ("frame_bytes", "frame_dict", "orjson_parse", "boxes2d", "step_bytes")}
+    t: dict[str, list] = {k: [] for k in ("frame_bytes", "frame_dict", "orjson_parse", "boxes2d", "step_bytes",
+                                           "nis_bytes")}
     wall = time.perf_counter
     for _ in range(repeats):
         text = payload()
-        n_steps = len(step_s)
+        n_steps, n_nis = len(step_s), len(nis_s)
         t0 = wall()
         out = svc.process_frame_json(text)
         t["frame_bytes"].append(wall() - t0)
         t["step_bytes"].append(step_s[-1] if len(step_s) > n_steps else 0.0)
+        t["nis_bytes"].append(nis_s[-1] if len(nis_s) > n_nis else 0.0)
         text = payload()
         t0 = wall()
         frame = orjson.loads(text)
@@ -93,7 +102,7 @@ def measure(tracked: bool, record: str, objects: int, repeats: int) -> dict:
         proc.boxes2d(boxes)
         t["boxes2d"].append(wall() - t0)
     gc.unfreeze()
-    res = {f"{k}_us": 1e6 * float(np.median(v)) for k, v in t.items() if k != "step_bytes"}
+    res = {f"{k}_us": 1e6 * float(np.median(v)) for k, v in t.items() if k not in ("step_bytes", "nis_bytes")}
     res["record_bytes"] = len(out.data)
     res["cpm_uper_bytes"] = len(out.cpm_uper or b"")
     ref = res["boxes2d_us"]
@@ -105,6 +114,9 @@ def measure(tracked: bool, record: str, objects: int, repeats: int) -> dict:
         res["tracker_step_us"] = 1e6 * float(np.median(t["step_bytes"]))
         res["frame_bytes_minus_step_us"] = 1e6 * float(np.median(minus))
         res["frame_bytes_minus_step_over_boxes2d"] = res["frame_bytes_minus_step_us"] / ref
+        res["tracker_nis_check_us"] = 1e6 * float(np.median(t["nis_bytes"]))
+        res["frame_bytes_minus_step_and_nis_us"] = 1e6 * float(np.median(minus - np.array(t["nis_bytes"])))
+        res["frame_bytes_minus_step_and_nis_over_boxes2d"] = res["frame_bytes_minus_step_and_nis_us"] / ref
     mine = res["frame_bytes_minus_step_over_boxes2d" if tracked else "frame_bytes_over_boxes2d"]
     res["target_ratio"] = TARGETS[tracked]
     res["met"] = bool(mine <= TARGETS[tracked])
@@ -129,7 +141,9 @@ def main(argv=None) -> int:
             print(f"{name:18s} bytes {c['frame_bytes_us']:6.1f} us ({c['frame_bytes_over_boxes2d']:.2f}x)  dict "
                   f"{c['frame_dict_us']:6.1f} us + parse {c['orjson_parse_us']:5.1f}  boxes2d {c['boxes2d_us']:5.1f} us"
                   + (f"  minus step {c['frame_bytes_minus_step_us']:6.1f} us "
-                     f"({c['frame_bytes_minus_step_over_boxes2d']:.2f}x, step {c['tracker_step_us']:.1f} us)"
+                     f"({c['frame_bytes_minus_step_over_boxes2d']:.2f}x, step {c['tracker_step_us']:.1f} us; "
+                     f"minus NIS check too {c['frame_bytes_minus_step_and_nis_us']:.1f} us, "
+                     f"{c['frame_bytes_minus_step_and_nis_over_boxes2d']:.2f}x)"
                      if tracked else ""), flush=True)
     out["load_average_1min_end"] = os.getloadavg()[0]
     if args.out:
