@@ -291,31 +291,24 @@ def _detection(buf, i, r, fv, iv, pow10, dk, dk_at, tpl):  # pragma: no cover - 
 
 
 @njit(cache=True, nogil=True)
-def _templated_run(buf, i, r, fv, iv, pow10, tpl, seen):  # pragma: no cover - compiled
+def _templated_run(buf, i, r, iv, tpl, seen, spans, ns):  # pragma: no cover - compiled
     """Detections from ``buf[i]`` (row ``r`` on) read as the first one's template ``tpl`` (the same constant text
-    byte for byte: the same keys in the same order, the same spacing), as long as they follow it: ``(i, r,
-    stopped)`` -- the index after the last one read (and its separator), the next row, and whether a detection
-    did not follow the template (it opens at ``i``: read it in full).
-
-    One loop without calls (a compiled call per value, or per inlined helper taking the text, costs ~10 ns in
-    reference counting: more than reading the value): the constant texts compared without early exit, the numbers
-    read as :func:`_number` does (the same subset, the same doubles)."""
+    byte for byte: the same keys in the same order, the same spacing), as long as they follow it: ``(i, r, ns,
+    stopped)`` -- the index after the last one read (and its separator), the next row, the numbers' spans so
+    far (``spans (ns, 4)``: start, end, row, key; :func:`_read_numbers` reads them) and whether a detection did
+    not follow the template (it opens at ``i``: read it in full).  One loop without calls (a compiled call per
+    value, or per inlined helper taking the text, costs ~10 ns in reference counting: more than its work)."""
     n = buf.shape[0]
     nv = tpl[10, 2]
-    cap = fv.shape[0]
-    while r < cap:
-        start = i
+    while r < iv.shape[0]:
+        start, ns0 = i, ns
         iv[r, 1], iv[r, 2] = -1, -1
-        fv[r, 7] = np.nan
         good = True
         for j in range(nv + 1):
             s = tpl[j, 0]
             L = tpl[j, 1] - s
-            if i + L > n:
-                good = False
-                break
-            d = 0
-            for q in range(L):
+            d = 0 if i + L <= n else 1
+            for q in range(L if d == 0 else 0):
                 d |= buf[i + q] ^ buf[s + q]
             if d != 0:
                 good = False
@@ -323,93 +316,82 @@ def _templated_run(buf, i, r, fv, iv, pow10, tpl, seen):  # pragma: no cover - c
             i += L
             if j == nv:
                 break
-            k = tpl[j, 2]
-            if k == _K_CLASS:
-                e = i
+            e = i
+            if tpl[j, 2] == _K_CLASS:  # a plain string up to its closing quote
                 while e < n and buf[e] != 34 and buf[e] != 92 and buf[e] >= 32:
                     e += 1
                 if e >= n or buf[e] != 34:
                     good = False
                     break
                 iv[r, 1], iv[r, 2] = i, e
-                i = e
-                continue
-            neg = i < n and buf[i] == 45
-            if neg:
-                i += 1
-            st = i
-            m = 0
-            while i < n:
-                dg = np.int64(buf[i]) - 48
-                if dg < 0 or dg > 9:
-                    break
-                m = m * 10 + dg
-                i += 1
-            nd = i - st
-            if nd == 0 or nd > 18 or (nd > 1 and buf[st] == 48):
-                good = False
-                break
-            integer = True
-            e10 = 0
-            if i < n and buf[i] == 46:
-                integer = False
-                f = i + 1
-                i = f
-                while i < n:
-                    dg = np.int64(buf[i]) - 48
-                    if dg < 0 or dg > 9:
-                        break
-                    m = m * 10 + dg
-                    i += 1
-                if i == f or nd + i - f > 18:
-                    good = False
-                    break
-                e10 = f - i
-            if i < n and (buf[i] == 101 or buf[i] == 69):
-                integer = False
-                i += 1
-                eneg = False
-                if i < n and (buf[i] == 43 or buf[i] == 45):
-                    eneg = buf[i] == 45
-                    i += 1
-                f = i
-                ex = 0
-                while i < n:
-                    dg = np.int64(buf[i]) - 48
-                    if dg < 0 or dg > 9:
-                        break
-                    ex = ex * 10 + dg
-                    i += 1
-                if i == f or i - f > 4:
-                    good = False
-                    break
-                e10 += -ex if eneg else ex
-            if k == _K_OBJECT_ID:
-                if not integer:
-                    good = False
-                    break
-                iv[r, 0] = -m if neg else m
-            elif integer:
-                fv[r, k] = float(-m if neg else m)
-            else:
-                if m > 9007199254740992 or e10 > 22 or e10 < -22:
-                    good = False
-                    break
-                v = float(m)
-                v = v * pow10[e10] if e10 >= 0 else v / pow10[-e10]
-                fv[r, k] = -v if neg else v
+            else:  # a number's extent (its grammar: _read_numbers)
+                while e < n and (48 <= buf[e] <= 57 or buf[e] == 45 or buf[e] == 43 or buf[e] == 46
+                                 or buf[e] == 101 or buf[e] == 69):
+                    e += 1
+                spans[ns, 0], spans[ns, 1], spans[ns, 2], spans[ns, 3] = i, e, r, tpl[j, 2]
+                ns += 1
+            i = e
         if not good:
-            return start, r, True
+            return start, r, ns0, True
         iv[r, 3] = seen
         r += 1
-        while i < n and (buf[i] == 32 or buf[i] == 10 or buf[i] == 13 or buf[i] == 9):
-            i += 1
+        i = _ws(buf, i)
         if i >= n or buf[i] != 44:
-            return i, r, False
-        i += 1
-        while i < n and (buf[i] == 32 or buf[i] == 10 or buf[i] == 13 or buf[i] == 9):
+            return i, r, ns, False
+        i = _ws(buf, i + 1)
+    return i, r, ns, True
+
+
+@njit(cache=True, nogil=True)
+def _read_numbers(buf, spans, fv, iv, pow10):  # pragma: no cover - compiled
+    """The numbers at ``spans (ns, 4)`` (start, end, row, key) into their rows, each read as :func:`_number` does
+    (JSON's grammar, the same exact subset, the same doubles) and filling its span: False at the first that is
+    not."""
+    for t in range(spans.shape[0]):
+        i, end, r, k = spans[t, 0], spans[t, 1], spans[t, 2], spans[t, 3]
+        neg = i < end and buf[i] == 45
+        i += 1 if neg else 0
+        st, m, nd, e10, ex, nexp, pt, ep, eneg = i, 0, 0, 0, 0, 0, -1, -1, False
+        while i < end:
+            c = buf[i]
+            if 48 <= c <= 57:
+                if ep >= 0:
+                    ex = min(ex * 10 + np.int64(c) - 48, 100000)
+                    nexp += 1
+                else:
+                    m = m * 10 + np.int64(c) - 48
+                    nd += 1
+                    e10 -= 1 if pt >= 0 else 0  # a fraction digit moves the point
+            elif c == 46 and pt < 0 and ep < 0:
+                pt = i
+            elif (c == 101 or c == 69) and ep < 0:
+                ep = i
+                if i + 1 < end and (buf[i + 1] == 43 or buf[i + 1] == 45):
+                    eneg = buf[i + 1] == 45
+                    i += 1
+            else:
+                return False
             i += 1
-    return i, r, True
+        n_int = (pt if pt >= 0 else (ep if ep >= 0 else end)) - st
+        if n_int < 1 or (n_int > 1 and buf[st] == 48) or nd > 18 or (ep >= 0 and not 1 <= nexp <= 4):
+            return False
+        if pt >= 0 and (ep if ep >= 0 else end) - pt < 2:  # a point needs a digit after it
+            return False
+        integer = pt < 0 and ep < 0
+        e10 += -ex if eneg else ex
+        if k == _K_OBJECT_ID:
+            if not integer:
+                return False
+            iv[r, 0] = -m if neg else m
+        elif integer:
+            fv[r, k] = float(-m if neg else m)
+        else:
+            if m > 9007199254740992 or e10 > 22 or e10 < -22:
+                return False
+            v = float(m)
+            v = v * pow10[e10] if e10 >= 0 else v / pow10[-e10]
+            fv[r, k] = -v if neg else v
+    return True
 
 
 @njit(cache=True, nogil=True)
@@ -424,7 +406,9 @@ def _detections(buf, i, fv, iv, pow10, dk, dk_at):  # pragma: no cover - compile
         return i + 1, 0
     tpl = np.zeros((11, 3), np.int64)
     scratch = np.zeros((11, 3), np.int64)
-    r = 0
+    spans = np.empty((fv.shape[0] * 9, 4), np.int64)
+    fv[:, 7] = np.nan  # (class_confidence: NaN where absent)
+    r = ns = 0
     while True:
         if r >= fv.shape[0]:
             return -1, 0
@@ -434,10 +418,10 @@ def _detections(buf, i, fv, iv, pow10, dk, dk_at):  # pragma: no cover - compile
         r += 1
         i = _ws(buf, i)
         if i < buf.shape[0] and buf[i] == 44:
-            i, r, stopped = _templated_run(buf, _ws(buf, i + 1), r, fv, iv, pow10, tpl, iv[0, 3])
+            i, r, ns, stopped = _templated_run(buf, _ws(buf, i + 1), r, iv, tpl, iv[0, 3], spans, ns)
             if stopped:
                 continue  # (a detection that does not follow the template, or no room: read in full)
-        if i >= buf.shape[0] or buf[i] != 93:
+        if i >= buf.shape[0] or buf[i] != 93 or not _read_numbers(buf, spans[:ns], fv, iv, pow10):
             return -1, 0
         return i + 1, r
 
