@@ -360,7 +360,7 @@ def _read_numbers(buf, spans, fv, iv, pow10):  # pragma: no cover - compiled
                     nexp += 1
                 else:
                     m = m * 10 + np.int64(c) - 48
-                    nd += 1
+                    nd += 1 if m > 0 else 0  # (leading zeros are no digits of the mantissa: as _number)
                     e10 -= 1 if pt >= 0 else 0  # a fraction digit moves the point
             elif c == 46 and pt < 0 and ep < 0:
                 pt = i
