@@ -78,10 +78,12 @@ def in_process_times(objects: int, repeats: int, tracks: bool = False, record: s
     """Median microseconds per 100-object frame, measured in this process on the bench frame (``tracks``: the
     service with ``--tracks``; every call gets a later ``timestamp_s``, so that each is a new frame of the tracks).
 
-    * ``mqtt_payload_parse_us``: ``orjson.loads`` of the frame's MQTT payload (the service's worker does it
-      before ``process_frame_json``; not in ``processing_us``);
-    * ``process_frame_<stage>_us``: ``processing_us`` of the records of ``Service.process_frame_json`` (wall
-      clock): ``footprints`` = the detections parsed into arrays + the fused kernel, ``records`` = the
+    * ``mqtt_payload_parse_us``: ``orjson.loads`` of the frame's MQTT payload (what a payload outside the common
+      layout costs the worker before ``process_frame_json``; the common layout is read by ``service/frame_scan.py``
+      inside it);
+    * ``process_frame_<stage>_us``: ``processing_us`` of the records of ``Service.process_frame_json`` of the
+      payload's bytes, as the transports hand it (wall clock): ``footprints`` = the frame read into columns +
+      the fused kernel, ``records`` = the
       per-object records' JSON, ``messages`` = CPM JSON + UPER + SDSM JSON, ``total`` = all of it, the
       record's JSON text included;
     * ``process_frame_json_cpu_us``: the same call's thread CPU time (immune to waiting for a core);
@@ -120,10 +122,10 @@ def in_process_times(objects: int, repeats: int, tracks: bool = False, record: s
     for _ in range(repeats):  # interleaved, so that a change of the machine's load reaches every figure alike
         text = payload()
         t0 = wall()
-        frame = orjson.loads(text)
+        orjson.loads(text)
         t.setdefault("mqtt_payload_parse_us", []).append(wall() - t0)
         c0 = cpu()
-        out = svc.process_frame_json(frame)
+        out = svc.process_frame_json(text)
         t.setdefault("process_frame_json_cpu_us", []).append(cpu() - c0)
         k = out.data.rindex(b'"processing_us":')
         stages.append(orjson.loads(out.data[k + 16:-1]))

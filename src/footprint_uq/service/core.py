@@ -47,8 +47,17 @@ from ..tracking.classes import ClassTracks, tracker_configs
 from ..tracking.consistency import DEFAULT_WINDOW_S, NisMonitor, health_section
 from ..uncertainty.ellipse import chi2_scale
 from ..uncertainty.propagation import DEFAULT_LINEAR_THRESHOLD
-from .detections import DetectionError, FieldError, check_values, finite_number, parse_detections
+from .detections import (
+    DetectionError,
+    FieldError,
+    FrameDetections,
+    boxes2d_detections,
+    check_values,
+    finite_number,
+    parse_detections,
+)
 from .frame_kernels import cm_dm, worst_usable
+from .frame_scan import ScannedFrame, scan_frame
 from .jsonrows import Table
 from .messages.asn1_cpm import DEFAULT_CDD
 from .messages.cpm import (
@@ -150,6 +159,17 @@ def _parse_frame_text(text) -> object:
             except UnicodeDecodeError as u:
                 raise _FrameError(None, f"frame is not UTF-8 text: {u}") from None
         raise _FrameError(None, f"invalid JSON: {e}") from None
+
+
+def _scan_text(text) -> ScannedFrame | None:
+    """:func:`.frame_scan.scan_frame` of a frame's text (bytes-like or str); None: not the common layout (or a str
+    that is not valid Unicode), for the general path."""
+    if isinstance(text, str):
+        try:
+            text = text.encode("utf-8")
+        except UnicodeEncodeError:
+            return None
+    return scan_frame(text)
 
 
 def _dumps_error(rec: dict) -> bytes:
@@ -431,6 +451,8 @@ class Service:
         one = np.ones(1, np.int64)
         perceived_object_container_uper_arrays(one, one, one, one, one, one, one, one, one, cdd=self.cpm_cdd)
         cm_dm(np.zeros((1, 2)), np.zeros(1, np.int64))
+        scan_frame(b'{"camera_id":"c","frame":0,"timestamp_s":0,"detections":[{"object_id":1,"class":"car",'
+                   b'"u_min_px":1,"v_min_px":1.5,"u_max_px":2,"v_max_px":3}]}')
 
     def _warm_frames(self) -> None:
         """Two dummy frames of 2D boxes and two of 3D boxes through the whole path of each camera (records,
@@ -475,11 +497,19 @@ class Service:
 
         The footprints record is written as text directly from the frame's arrays, without building the
         per-object dicts: the bytes orjson writes for :meth:`process_frame`'s record, in a fraction of the time.
+        ``frame``: a dict, the frame's JSON text (bytes or str: a frame in the common layout is read straight into
+        columns by :func:`.frame_scan.scan_frame`, any other parsed in full) or a
+        :class:`~.frame_scan.ScannedFrame` a transport has read already.
         """
         t0 = time.perf_counter()
         camera_id = frame_no = None
         try:
-            if isinstance(frame, (bytes, bytearray, memoryview, str)):
+            if isinstance(frame, (bytes, bytearray, memoryview, str, ScannedFrame)):
+                # the common layout, read by one compiled pass (frame_scan); a transport may have read it already
+                scanned = frame if isinstance(frame, ScannedFrame) else _scan_text(frame)
+                if scanned is not None:
+                    camera_id, frame_no = scanned.camera_id, scanned.frame
+                    return self._process_scanned(scanned, t0)
                 frame = _parse_frame_text(frame)
             if not isinstance(frame, dict):
                 raise _FrameError(None, f"frame is not a JSON object: {type(frame).__name__}")
@@ -527,8 +557,25 @@ class Service:
         if len(dets) > self.max_frame_detections:  # the frame size limit: one error record, nothing parsed
             raise _FrameError("detections", f"{len(dets)} detections in one frame, more than the frame limit of "
                               f"{self.max_frame_detections} (split the frame)")
+        return self._frame(setup, camera_id, fno, ts, parse_detections(dets, self.class_names), t0)
+
+    def _process_scanned(self, scanned: ScannedFrame, t0: float) -> FrameOutput:
+        """A frame read by :func:`.frame_scan.scan_frame` (its fields of the right types already): the same checks
+        and record as :meth:`_process`."""
+        setup = self._setup(scanned.camera_id)
+        n = len(scanned.object_ids)
+        if n > self.max_frame_detections:
+            raise _FrameError("detections", f"{n} detections in one frame, more than the frame limit of "
+                              f"{self.max_frame_detections} (split the frame)")
+        found = boxes2d_detections(scanned.boxes, scanned.pixel_cov_px2, scanned.object_ids, scanned.classes,
+                                   scanned.class_confidence)
+        return self._frame(setup, scanned.camera_id, scanned.frame, scanned.timestamp_s, found, t0)
+
+    def _frame(self, setup: CameraSetup, camera_id, fno: int, ts: float, found: FrameDetections, t0: float
+               ) -> FrameOutput:
+        """The record of a frame whose fields are checked and whose detections are in columns."""
         ref_ms = timestamp_its_ms(ts) if self.messages else None
-        est, found = self._footprints(setup, dets)
+        est, found = self._footprints(setup, found)
         ids, classes, class_p = found.object_ids, found.classes, found.class_confidence
         motion = self._motion(setup, est, ids, classes, ts, found.yaw_rad) if self.tracks else None
         if self.on_tracked is not None and motion is not None:
@@ -570,15 +617,14 @@ class Service:
             "messages": round(1e6 * (t3 - t2), 1), "total": total}), b"}"]
         return FrameOutput(b"".join(parts), RECORD_FOOTPRINTS, camera_id, total, None, len(found.errors), cpm_uper)
 
-    def _footprints(self, setup: CameraSetup, dets: list) -> tuple:
-        """The detections into columns (:func:`.detections.parse_detections`: each bad one an error entry) and the
-        camera's kernel over the good ones: ``(estimate, FrameDetections)``.
+    def _footprints(self, setup: CameraSetup, found: FrameDetections) -> tuple:
+        """The camera's kernel over the frame's good detections (in columns: :func:`.detections.parse_detections`,
+        each bad one an error entry): ``(estimate, FrameDetections)``.
 
         A frame the processor refuses (a pixel covariance that is not positive semi-definite: its compiled check)
         is checked in full (:func:`.detections.check_values`: every bad detection an error entry) and run again;
         a value refused beyond those checks (none is known) costs that detection, not the frame: it joins the
         error entries and the kernel runs again without it."""
-        found = parse_detections(dets, self.class_names)
         proc = setup.processor
         checked = False
         while True:
@@ -686,8 +732,10 @@ class Service:
         N, m = len(classes), len(ok_idx)
         en = setup.world_to_enu(est.centre_xy_world_m) if N else np.zeros((0, 2))
         x_cm, y_cm, x_dm, y_dm = cm_dm(en, ok_idx)
-        crow = (np.fromiter(map(_CLASS_ROWS.__getitem__, classes), np.intp, N)[ok_idx] if any(classes)
-                else np.full(m, _DEFAULT_CLASS_ROW, np.intp))
+        if N and classes.count(classes[0]) == N:  # one class for the frame (or none): one look-up
+            crow = np.full(m, _CLASS_ROWS[classes[0]], np.intp)
+        else:
+            crow = np.fromiter(map(_CLASS_ROWS.__getitem__, classes), np.intp, N)[ok_idx]
         mc = None if motion is None else motion_codes(motion if m == N else motion.take(ok_idx), m)  # (sorted rows)
         p = level = None
         if class_p is None:
@@ -801,14 +849,16 @@ def _motion_object_layout(t: Table, motion, compact: bool) -> list:
     unavailable, ...); compact: ``track_id``, the velocity and its covariance."""
     tid, m = motion
     tracked = tid >= 0
-    ve, vn, c00, c01, c11, sp, ssp, hd, shd, yw, syw, age = t.columns(np.array([
-        m.v_east_mps, m.v_north_mps, m.cov_v_m2ps2[:, 0, 0], m.cov_v_m2ps2[:, 0, 1], m.cov_v_m2ps2[:, 1, 1],
-        m.speed_mps, m.sigma_speed_mps, m.heading_deg, m.sigma_heading_deg, m.yaw_deg, m.sigma_yaw_deg,
-        m.age_s]))
+    rows = [m.v_east_mps, m.v_north_mps, m.cov_v_m2ps2[:, 0, 0], m.cov_v_m2ps2[:, 0, 1], m.cov_v_m2ps2[:, 1, 1]]
+    if not compact:  # (a compact record formats only the five columns it writes)
+        rows += [m.speed_mps, m.sigma_speed_mps, m.heading_deg, m.sigma_heading_deg, m.yaw_deg, m.sigma_yaw_deg,
+                 m.age_s]
+    ve, vn, c00, c01, c11, *more = t.columns(np.array(rows))
     layout = [b',"track_id":', t.when(tracked, t.column(tid)), t.when(~tracked, b"null"),
               b',"v_east_mps":', ve, b',"v_north_mps":', vn, b',"cov_v_m2ps2":[[', c00, b",", c01, b"],[",
               c01, b",", c11, b"]]"]
     if not compact:
+        sp, ssp, hd, shd, yw, syw, age = more
         layout += [b',"speed_mps":', sp, b',"sigma_speed_mps":', ssp, b',"heading_deg":', hd,
                    b',"sigma_heading_deg":', shd, b',"yaw_deg":', yw, b',"sigma_yaw_deg":', syw, b',"age_s":', age]
     return layout

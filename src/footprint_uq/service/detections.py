@@ -50,8 +50,8 @@ from ..products.detection_columns import (
     detect_box_type,
 )
 
-__all__ = ["DetectionError", "FrameDetections", "FieldError", "parse_detections", "check_values", "finite_number",
-           "NO_BOX_REASON"]
+__all__ = ["DetectionError", "FrameDetections", "FieldError", "parse_detections", "boxes2d_detections",
+           "check_values", "finite_number", "NO_BOX_REASON"]
 
 NO_BOX_REASON = ("no complete box: 2D (u_min_px, v_min_px, u_max_px, v_max_px), 3D (x_m, y_m, z_m, length_m, "
                  "width_m, height_m, yaw_rad|yaw_deg) or corners (u0_px, v0_px, ...), one family per frame")
@@ -154,6 +154,27 @@ def parse_detections(dets: list, names: ClassNames | None = None) -> FrameDetect
     if out is None:
         out = _slow(dets, names)
     return _value_checks(out)
+
+
+def boxes2d_detections(boxes: np.ndarray, pixel_cov_px2: np.ndarray | None, object_ids: list, classes: list,
+                       class_confidence: np.ndarray | None) -> FrameDetections:
+    """Well-formed 2-D box detections already in columns (:func:`.frame_scan.scan_frame`: every field of the
+    right type, confidences in [0, 1]) into :class:`FrameDetections`, with :func:`parse_detections`' value checks
+    (box corners in order, pixel covariances in range: each failing detection an error entry).
+
+    Parameters
+    ----------
+    boxes : ndarray (M, 4)
+        ``u_min_px, v_min_px, u_max_px, v_max_px``, finite.
+    pixel_cov_px2 : ndarray (M, 2, 2) or None
+    object_ids, classes : list (M)
+    class_confidence : ndarray (M,) or None
+        NaN where absent.
+    """
+    if len(object_ids) == 0:
+        return FrameDetections(None, (), np.zeros((0, 0)), None, [], [], None, np.zeros(0, np.int64))
+    return _value_checks(FrameDetections("2d", BOX2D_COLUMNS, boxes, pixel_cov_px2, object_ids, classes,
+                                         class_confidence, np.arange(len(object_ids), dtype=np.int64)))
 
 
 # -- the usual frame: one pass per field over all detections ---------------------------------------------------
@@ -410,6 +431,10 @@ def _value_checks(f: FrameDetections, psd: bool = False) -> FrameDetections:
     M = len(f)
     if M == 0:
         return f
+    X, P = f.boxes, f.pixel_cov_px2
+    if f.family == "2d" and not psd and not ((X[:, 0] > X[:, 2]) | (X[:, 1] > X[:, 3])).any() and \
+            (P is None or not (np.abs(P) > MAX_PIXEL_VAR_PX2).any()):
+        return f  # the usual frame: nothing to mark
     bad = np.zeros(M, bool)
     errors: list = []
 
@@ -419,14 +444,12 @@ def _value_checks(f: FrameDetections, psd: bool = False) -> FrameDetections:
             errors.append(DetectionError(i, field_of(i, r), reason_of(r)))
         bad[rows] = True
 
-    X = f.boxes
     if f.family == "2d":
         mark((X[:, 0] > X[:, 2]) | (X[:, 1] > X[:, 3]), lambda i, r: f"detections[{i}]",
              lambda r: str(InputError(_EXPECT_2D_FIELD, X[r].tolist(), _EXPECT_2D)))
     elif f.family == "3d":
         mark((X[:, 3:6] < 0.0).any(axis=1), lambda i, r: f"detections[{i}]",
              lambda r: str(InputError("length_m, width_m, height_m", X[r, 3:6].tolist(), "sizes >= 0")))
-    P = f.pixel_cov_px2
     if P is not None:
         big = np.abs(P) > MAX_PIXEL_VAR_PX2
         first = np.array([0, 1, 2])[np.argmax(big.reshape(M, 4)[:, [0, 1, 3]], axis=1)]

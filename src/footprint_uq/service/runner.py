@@ -55,6 +55,7 @@ from ..products.warmup import compile_handler
 from ..tracking.consistency import DEFAULT_WINDOW_S
 from .core import RECORD_ERROR, RECORD_FOOTPRINTS, RECORD_LAYOUTS, FrameOutput, Service, error_record
 from .cp_serve import cp_workers, start_cp_service
+from .frame_scan import ScannedFrame, scan_frame
 from .messages.asn1_cpm import DEFAULT_CDD
 
 __all__ = ["FrameQueue", "Metrics", "serve", "run", "parse_mqtt_url", "POLICIES"]
@@ -449,12 +450,16 @@ def _stdin_reader(stream, queue: FrameQueue, sink, metrics: Metrics, stop: threa
                                "(--max-frame-bytes)", source=src)
             _queue_error(queue, last_key, rec, src, t, sink, metrics)
             continue
-        try:
-            frame = _loads(line)
-        except ValueError as e:
-            _queue_error(queue, last_key, error_record(f"invalid JSON: {e}", source=src), src, t, sink, metrics)
-            continue
-        key = frame.get("camera_id") if isinstance(frame, dict) else None
+        frame = scan_frame(line)  # the common layout straight into columns (frame_scan); else parsed in full
+        if frame is not None:
+            key = frame.camera_id
+        else:
+            try:
+                frame = _loads(line)
+            except ValueError as e:
+                _queue_error(queue, last_key, error_record(f"invalid JSON: {e}", source=src), src, t, sink, metrics)
+                continue
+            key = frame.get("camera_id") if isinstance(frame, dict) else None
         key = last_key = key if isinstance(key, str) else repr(key)
         if not queue.put(key, (frame, src, t, None), nbytes):
             rec = error_record("service stopping, too many cameras or bytes pending", source=src,
@@ -492,7 +497,12 @@ def _topic_level_error(camera_id) -> str | None:
 
 
 def _mqtt_frame(payload: bytes, cam: str, src: str):
-    """(frame, None) from an MQTT payload of topic ``<prefix>/<cam>``, or (None, the error output)."""
+    """(frame, None) from an MQTT payload of topic ``<prefix>/<cam>``, or (None, the error output).  A payload in
+    the common layout naming the topic's camera is read straight into columns (:func:`.frame_scan.scan_frame`);
+    any other is parsed in full."""
+    scanned = scan_frame(payload)
+    if scanned is not None and scanned.camera_id == cam:
+        return scanned, None
     try:
         frame = _loads(payload)
     except ValueError as e:
@@ -717,10 +727,12 @@ def _frame_output(service: Service, item: tuple, output: str) -> FrameOutput:
     try:
         if topic_camera is _READY:  # an error record found on receipt, in its place in the line
             return frame
-        if output == "mqtt" and isinstance(frame, dict) and \
-                (why := _topic_level_error(frame.get("camera_id"))) is not None:
-            rec = error_record(why, field="camera_id", camera_id=_plain(frame.get("camera_id")),
-                               frame=_plain(frame.get("frame")), source=src)
+        scanned = isinstance(frame, ScannedFrame)  # (a stdin frame read straight into columns)
+        if output == "mqtt" and (scanned or isinstance(frame, dict)) and (why := _topic_level_error(
+                frame.camera_id if scanned else frame.get("camera_id"))) is not None:
+            rec = error_record(why, field="camera_id", camera_id=_plain(frame.camera_id if scanned else
+                                                                        frame.get("camera_id")),
+                               frame=_plain(frame.frame if scanned else frame.get("frame")), source=src)
             return FrameOutput(_dumps(rec), RECORD_ERROR, None, None, rec)
         if topic_camera is not None:  # an MQTT payload: parsed here, its camera_id checked against the topic
             frame, out = _mqtt_frame(frame, topic_camera, src)

@@ -112,5 +112,5 @@ class MessageIdMap:
             for j, n in enumerate(nums):
                 if n is None:
                     nums[j] = self._assign(keys[j], sel[j], rows[j], 0 if occ is None else occ[j], in_frame)
-        self._seen.update(zip(keys, [t_s] * len(keys), strict=True))
+        self._seen.update(dict.fromkeys(keys, t_s))
         return np.array(nums, dtype=np.int64)

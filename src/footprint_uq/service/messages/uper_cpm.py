@@ -387,9 +387,10 @@ _NCOLS = len(_COLUMN_RANGES)
 _ERR_LEVEL, _ERR_COUNT, _ERR_SENSORS = _NCOLS, _NCOLS + 1, _NCOLS + 2
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def _put(out, acc, nacc, k, v, w):  # pragma: no cover - compiled
-    """Append the ``w`` (<= 40) low bits of ``v`` to the bit accumulator; full octets go to ``out[k]``."""
+    """Append the ``w`` (<= 40) low bits of ``v`` to the bit accumulator; full octets go to ``out[k]``.  Inlined:
+    a compiled call per field (about ten per object) cost as much as the writing."""
     acc = (acc << w) | v
     nacc += w
     while nacc >= 8:
@@ -480,10 +481,14 @@ def _container_kernel(cols, lo, hi, cv, cw, lv, sid_ptr, sid_val, n_total, corr_
     return out, -1, -1
 
 
+#: the 10 motion rows of objects without motion (a column, broadcast over the objects)
+_NO_MOTION_ROWS = np.array([0, 0, 1, 0, 1, 0, 0, 1, 0, 0], dtype=np.int64)[:, None]
+
+
 def _motion_rows(motion, n: int):
     """The 10 motion rows (velocity present, x, x conf, y, y conf, angles present, z, conf, age present, age)."""
     if motion is None:
-        return np.zeros((10, n), np.int64) + np.array([0, 0, 1, 0, 1, 0, 0, 1, 0, 0])[:, None]
+        return np.zeros((10, n), np.int64) + _NO_MOTION_ROWS
     m = motion_codes(motion, n) if isinstance(motion, ObjectMotion) else motion
     return np.array([m.has_velocity, m.vx, m.vx_conf, m.vy, m.vy_conf, m.has_yaw, m.yaw, m.yaw_conf, m.has_age,
                      m.age_ms], dtype=np.int64).reshape(10, n)
@@ -546,10 +551,13 @@ def perceived_object_container_uper_arrays(object_ids, x_cm, x_conf, y_cm, y_con
         except OverflowError:  # beyond 64 bits: out of range anyway
             name, lo, hi = _COLUMN_RANGES[j]
             raise InputError(name, next(v for v in c if not lo <= v <= hi), f"an integer in {lo}..{hi}") from None
-    cols[6:16] = _motion_rows(motion, n)
+    cols[6:16] = _NO_MOTION_ROWS if motion is None else _motion_rows(motion, n)
     cols[16] = 0 if measurement_delta_ms is None else measurement_delta_ms
-    q = np.full(n, -1, np.int64) if quality is None else np.asarray(quality, dtype=np.int64).reshape(n)
-    cols[17], cols[18] = q >= 0, np.maximum(q, 0)
+    if quality is None:  # (none sent: present 0, value 0)
+        cols[17:19] = 0
+    else:
+        q = np.asarray(quality, dtype=np.int64).reshape(n)
+        cols[17], cols[18] = q >= 0, np.maximum(q, 0)
     ptr, val = sensor_id_columns(sensor_ids, n)
     total = n if number_of_perceived_objects is None else int(number_of_perceived_objects)
     if total < 0:

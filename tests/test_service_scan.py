@@ -1,0 +1,201 @@
+"""The compiled frame reader (service/frame_scan.py) against the general path (orjson -> dicts -> parse_detections).
+
+* numbers: every text the reader accepts gives orjson's double bit for bit (Hypothesis over floats written
+  in several ways, and pinned cases at the edges of the exact subset);
+* hostile and unusual texts: the reader declines (None) and the service's record is the general path's;
+* whole frames: ``Service.process_frame_json`` of the bytes (the reader) and of the parsed dict (the general
+  path) give the same record, byte for byte but the timing, for good frames, bad detections, tracks and both
+  record layouts.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+
+import numpy as np
+import orjson
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from footprint_uq import PanTiltCamera
+from footprint_uq.service import Service
+from footprint_uq.service.frame_scan import scan_frame
+
+T0 = 1714564800.0
+_TIMING = re.compile(rb',"processing_us":\{[^}]*\}')
+
+
+@pytest.fixture(scope="module")
+def camera():
+    return PanTiltCamera(focal_px=1400, image_size_px=(1920, 1080), height_m=8.0, pan_deg=30.0, tilt_deg=20.0)
+
+
+def _frame(dets, frame=3, ts=T0 + 0.033333, camera="cam0") -> bytes:
+    return b'{"camera_id":%s,"frame":%d,"timestamp_s":%r,"detections":%s}' % (
+        json.dumps(camera).encode(), frame, ts, json.dumps(dets, ensure_ascii=False).encode())
+
+
+def _dets(rng, n, cov=False, conf=False):
+    out = []
+    for k in range(n):
+        u, v, w = rng.uniform(50, 1800), rng.uniform(420, 1070), rng.uniform(20, 120)
+        d = {"object_id": k, "class": str(rng.choice(["car", "pedestrian", "truck", "Fahrrad-ü"])),
+             "u_min_px": round(u, 2), "v_min_px": round(v - 0.8 * w, 3), "u_max_px": round(u + w, 1),
+             "v_max_px": int(v)}
+        if cov:
+            d.update(cov_uu_px2=4.0, cov_uv_px2=-0.5, cov_vv_px2=9)
+        if conf and k % 3:
+            d["class_confidence"] = round(rng.uniform(0, 1), 4)
+        out.append(d)
+    return out
+
+
+def _record(out) -> bytes:
+    return _TIMING.sub(b"", out.data)
+
+
+def _scan_number(text: bytes):
+    """``text`` as a detection's value, read by the reader's two paths: in the first detection (read in full) and
+    in the second (read by the first one's template); they must agree (None: declined)."""
+    det = b'{"u_min_px":0,"v_min_px":0,"u_max_px":1,"v_max_px":%s}'
+    got = []
+    for dets in (det % text + b"," + det % b"2", det % b"2" + b"," + det % text):
+        s = scan_frame(b'{"camera_id":"c","frame":1,"timestamp_s":0,"detections":[%s]}' % dets)
+        got.append(None if s is None else s.boxes[0 if dets.startswith(det % text) else 1, 3])
+    assert got[0] == got[1] or got[0] is got[1] is None, (text, got)
+    return got[0]
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.floats(allow_nan=False, allow_infinity=False, min_value=-1e30, max_value=1e30),
+       st.sampled_from(["%r", "%.17g", "%.3f", "%.6e", "%.1E", "%.0f", "%.15g"]))
+def test_numbers_are_orjson_doubles(x, fmt):
+    text = (fmt % x).encode()
+    if b"inf" in text or b"nan" in text:
+        return
+    want = orjson.loads(text)
+    got = _scan_number(text)
+    if got is not None:  # (declined: the general path reads it)
+        assert got == float(want) and math.copysign(1.0, got) == math.copysign(1.0, float(want)), text
+
+
+@pytest.mark.parametrize("text, value", [
+    (b"0", 0.0), (b"-0.0", -0.0), (b"1714564800.033333", 1714564800.033333), (b"9007199254740992", 2.0 ** 53),
+    (b"1e22", 1e22), (b"1.5e-21", 1.5e-21), (b"1.5e-22", None), (b"0.000001", 1e-6),
+    (b"123456789012345678", 123456789012345678.0), (b"0.0003911144233402361", 0.0003911144233402361),
+    (b"1e23", None), (b"1e-23", None), (b"9007199254740993.5", None), (b"1234567890123456789", None),
+    (b"01", None), (b"1.", None), (b".5", None), (b"1e", None), (b"+1", None), (b"-", None), (b"NaN", None),
+    (b"Infinity", None), (b"true", None), (b"null", None), (b'"1"', None)])
+def test_numbers_pinned(text, value):
+    got = _scan_number(text)
+    if value is None:
+        assert got is None
+    else:
+        assert got == value and math.copysign(1.0, got) == math.copysign(1.0, value)
+
+
+@pytest.mark.parametrize("text", [b"1714564800.0333333", b"1764329048.1234567", b"1e23", b"1.5", b"-2", b"1e-400"])
+def test_timestamp_of_full_precision(text):
+    """The time stamp (17 digits from ``json.dumps(time.time())``) beyond the exact subset: Python's float of its
+    text, orjson's double; not finite: declined."""
+    frame = b'{"camera_id":"c","frame":1,"timestamp_s":%s,"detections":[]}' % text
+    s = scan_frame(frame)
+    assert s is not None and s.timestamp_s == orjson.loads(frame)["timestamp_s"]
+    assert scan_frame(frame.replace(text, b"1e400")) is None
+    assert scan_frame(frame.replace(text, b"01.5")) is None
+
+
+def test_reads_the_common_layout():
+    rng = np.random.default_rng(1)
+    dets = _dets(rng, 40, cov=True, conf=True)
+    del dets[7]["object_id"]
+    text = _frame(dets).replace(b",", b" ,\n\t ").replace(b":", b" :  ")  # JSON whitespace anywhere
+    s = scan_frame(text)
+    f = orjson.loads(text)
+    assert s is not None and (s.camera_id, s.frame, s.timestamp_s) == ("cam0", 3, f["timestamp_s"])
+    cols = ("u_min_px", "v_min_px", "u_max_px", "v_max_px")
+    np.testing.assert_array_equal(s.boxes, [[d[c] for c in cols] for d in f["detections"]])
+    assert s.object_ids == [d.get("object_id", i) for i, d in enumerate(f["detections"])]
+    assert s.classes == [d["class"] for d in f["detections"]]
+    np.testing.assert_array_equal(s.class_confidence, [d.get("class_confidence", np.nan) for d in f["detections"]])
+    np.testing.assert_array_equal(s.pixel_cov_px2, np.broadcast_to([[4.0, -0.5], [-0.5, 9.0]], (40, 2, 2)))
+
+
+_GOOD = _frame(_dets(np.random.default_rng(2), 5, cov=True, conf=True))
+_HOSTILE = {
+    "escape in a class": _GOOD.replace(b'"car"', b'"c\\u0061r"', 1).replace(b'"truck"', b'"tr\\"uck"', 1),
+    "string object_id": _GOOD.replace(b'"object_id": 1', b'"object_id": "1"'),
+    "float object_id": _GOOD.replace(b'"object_id": 1', b'"object_id": 1.0'),
+    "null class": _GOOD.replace(b'"class": "', b'"class": null, "x": "', 1),
+    "unknown key": _GOOD.replace(b'"object_id": 1', b'"object_id": 1, "score": 0.5'),
+    "duplicate key": _GOOD.replace(b'"object_id": 1', b'"object_id": 1, "object_id": 2'),
+    "frame as float": _GOOD.replace(b'"frame":3', b'"frame":3.0'),
+    "missing frame": _GOOD.replace(b'"frame":3,', b""),
+    "trailing text": _GOOD + b" x",
+    "truncated": _GOOD[:-3],
+    "confidence out of range": re.sub(rb'"class_confidence": [0-9.]+', b'"class_confidence": 1.5', _GOOD, count=1),
+    "missing box column": _GOOD.replace(b'"u_min_px": ', b'"uu_min_px": ', 1),
+    "one detection without covariance": re.sub(rb', "cov_uu_px2": 4.0, "cov_uv_px2": -0.5, "cov_vv_px2": 9', b"",
+                                               _GOOD, count=1),
+    "detection not an object": _GOOD.replace(b'"detections":[', b'"detections":[7, '),
+    "leading zero": _GOOD.replace(b'"cov_vv_px2": 9', b'"cov_vv_px2": 09', 1),
+    "huge number": _GOOD.replace(b'"cov_vv_px2": 9', b'"cov_vv_px2": 1e400', 1),
+    "bad utf-8": _GOOD.replace(b'"cam0"', b'"cam\xff"'),
+    "control character": _GOOD.replace(b'"cam0"', b'"cam\x010"'),
+    "a 3-D box frame": _frame([{"object_id": 1, "x_m": 1, "y_m": 20, "z_m": 0, "length_m": 4, "width_m": 2,
+                                "height_m": 1.5, "yaw_rad": 0}]),
+    "not an object": b"[1, 2]",
+    "empty": b"",
+}
+
+
+@pytest.mark.parametrize("name", sorted(_HOSTILE))
+def test_hostile_texts_take_the_general_path(camera, name):
+    """Each text the reader declines (None); the service's record for it is the general path's (an error record
+    or a record with that detection's error entry), whether given as bytes or as the parsed frame."""
+    text = _HOSTILE[name]
+    assert scan_frame(text) is None
+    a, b = (Service(camera, "basler1", camera_id="cam0", record="full") for _ in range(2))
+    out = a.process_frame_json(text)
+    try:
+        frame = orjson.loads(text)
+    except orjson.JSONDecodeError:
+        assert out.type == "error"
+        return
+    assert _record(out) == _record(b.process_frame_json(frame))
+
+
+@pytest.mark.parametrize("record, tracks, cov, conf", [
+    ("full", False, False, False), ("full", False, True, True), ("compact", False, True, False),
+    ("compact", True, False, True), ("full", True, True, False)])
+def test_frames_read_either_way_give_the_same_record(camera, record, tracks, cov, conf):
+    """Bytes through the compiled reader == the parsed dict through parse_detections, frame after frame (message
+    ids and tracks carried on), bad detections (boxes upside down, covariances out of range) included."""
+    rng = np.random.default_rng(3)
+    a, b = (Service(camera, "basler1", camera_id="cam0", record=record, tracks=tracks, linearity=True)
+            for _ in range(2))
+    for k in range(4):
+        dets = _dets(rng, 30, cov=cov, conf=conf)
+        dets[4]["u_min_px"], dets[4]["u_max_px"] = 900.0, 800.0  # upside down: its error entry
+        if cov:
+            dets[9]["cov_uu_px2"] = 1e13  # out of range: its error entry
+        text = _frame(dets, frame=k, ts=round(T0 + k / 30, 6))
+        assert scan_frame(text) is not None
+        out_a = a.process_frame_json(text)
+        out_b = b.process_frame_json(orjson.loads(text))
+        assert out_a.type == "footprints" and out_a.n_detection_errors == (2 if cov else 1)
+        assert _record(out_a) == _record(out_b)
+        assert out_a.cpm_uper == out_b.cpm_uper
+
+
+def test_frame_level_errors_as_the_general_path(camera):
+    """Errors after the reading (camera not this service's, too many detections) are the same records."""
+    dets = _dets(np.random.default_rng(4), 6)
+    for kwargs, text in [({}, _frame(dets, camera="cam9")), ({"max_frame_detections": 5}, _frame(dets))]:
+        a, b = (Service(camera, "basler1", camera_id="cam0", **kwargs) for _ in range(2))
+        assert scan_frame(text) is not None
+        out = a.process_frame_json(text, source="t")
+        assert out.type == "error" and out.record == b.process_frame_json(orjson.loads(text), source="t").record
