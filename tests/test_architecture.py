@@ -279,3 +279,27 @@ def test_floor_check_can_fail(monkeypatch):
     scan.imports = [(n, False, False, scan._targets(n)) for n in scan.tree.body]
     monkeypatch.setitem(SCANS, f"{PKG}.fast.fake", scan)
     assert _imports_above("fast", FAST_MAY_IMPORT) == [f"{PKG}.fast.fake:1: {PKG}.products.v2x"]
+
+
+MAX_FUNCTION_LINES = 80
+
+
+def _code_lines(fn: ast.FunctionDef) -> int:
+    """A function's lines without its docstring (signature and body)."""
+    body = fn.body
+    if body and isinstance(body[0], ast.Expr) and isinstance(getattr(body[0], "value", None), ast.Constant) \
+            and isinstance(body[0].value.value, str):
+        doc = body[0].end_lineno - body[0].lineno + 1
+    else:
+        doc = 0
+    return fn.end_lineno - fn.lineno + 1 - doc
+
+
+def test_no_function_over_80_lines_of_code():
+    """Each function small enough to hold in one's head: at most 80 lines without its docstring."""
+    long = []
+    for path in sorted(SRC.rglob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)) and _code_lines(node) > MAX_FUNCTION_LINES:
+                long.append(f"{path.relative_to(SRC)}:{node.lineno} {node.name} ({_code_lines(node)} lines)")
+    assert not long, long

@@ -171,21 +171,8 @@ def _object_bits(po: dict, cdd: str = DEFAULT_CDD) -> tuple[int, int]:
     mats = po.get("lowerTriangularCorrelationMatrices")
     if mats is not None:
         pres |= 1 << _P_CORR
-        v = (v << 2) | _check("lowerTriangularCorrelationMatrices count", len(mats), 1, 4)
-        n += 2
-        for m in mats:
-            bits = 0
-            for name in m["componentsIncludedIntheMatrix"]:
-                bits |= 1 << (12 - MATRIX_COMPONENTS.index(name))
-            cols = m["matrix"]
-            v = (v << 18 + ext) | (bits << 4 + ext) | _check("matrix columns", len(cols), 1, 13)
-            n += 18 + ext
-            for col in cols:
-                v = (v << 5) | _check("correlation column size", len(col), 1, 13)
-                n += 5
-                for cell in col:
-                    v = (v << 8) | _check("CorrelationCellValue", cell, -100, 101)
-                    n += 8
+        mv, mn = _correlation_bits(mats, ext)
+        v, n = (v << mn) | mv, n + mn
     if gn:
         pres |= 1 << _P_AGE
         v, n = (v << gn) | gv, n + gn
@@ -199,27 +186,52 @@ def _object_bits(po: dict, cdd: str = DEFAULT_CDD) -> tuple[int, int]:
     classes = po.get("classification")
     if classes is not None:
         pres |= 1 << _P_CLASS
-        v = (v << 3) | _check("classification count", len(classes), 1, 8)
-        n += 3
-        for c in classes:
-            (alt, val), = c["objectClass"].items()
-            if alt == "vehicleSubClass":
-                if val not in _VEHICLE_SUBCLASSES:
-                    raise InputError("vehicleSubClass", val, "0, 5..11 or 14 (unknown|passengerCar..tram|agricultural)")
-                v = (v << 7) | (0 << 4) | val
-                n += 7
-            elif alt == "vruSubClass":
-                bv, bw = _vru_bits(val, cdd)
-                v = (v << 3 + bw) | (1 << bw) | bv
-                n += 3 + bw
-            elif alt == "otherSubClass":
-                v = (v << 11) | (3 << 8) | _check("otherSubClass", val, 0, 255)
-                n += 11
-            else:
-                raise InputError("objectClass", alt, "vehicleSubClass, vruSubClass or otherSubClass")
-            v = (v << 7) | _check("ConfidenceLevel", c["confidence"], 1, 101)
-            n += 7
+        cv, cn = _classification_bits(classes, cdd)
+        v, n = (v << cn) | cv, n + cn
     return v | (pres << (n - 15)), n
+
+
+def _correlation_bits(mats, ext: int) -> tuple[int, int]:
+    """(value, bits) of ``lowerTriangularCorrelationMatrices`` (``ext``: 1 where the columns type is extensible)."""
+    v, n = _check("lowerTriangularCorrelationMatrices count", len(mats), 1, 4), 2
+    for m in mats:
+        bits = 0
+        for name in m["componentsIncludedIntheMatrix"]:
+            bits |= 1 << (12 - MATRIX_COMPONENTS.index(name))
+        cols = m["matrix"]
+        v = (v << 18 + ext) | (bits << 4 + ext) | _check("matrix columns", len(cols), 1, 13)
+        n += 18 + ext
+        for col in cols:
+            v = (v << 5) | _check("correlation column size", len(col), 1, 13)
+            n += 5
+            for cell in col:
+                v = (v << 8) | _check("CorrelationCellValue", cell, -100, 101)
+                n += 8
+    return v, n
+
+
+def _classification_bits(classes, cdd: str) -> tuple[int, int]:
+    """(value, bits) of ``classification`` (1..8 ObjectClassWithConfidence)."""
+    v, n = _check("classification count", len(classes), 1, 8), 3
+    for c in classes:
+        (alt, val), = c["objectClass"].items()
+        if alt == "vehicleSubClass":
+            if val not in _VEHICLE_SUBCLASSES:
+                raise InputError("vehicleSubClass", val, "0, 5..11 or 14 (unknown|passengerCar..tram|agricultural)")
+            v = (v << 7) | (0 << 4) | val
+            n += 7
+        elif alt == "vruSubClass":
+            bv, bw = _vru_bits(val, cdd)
+            v = (v << 3 + bw) | (1 << bw) | bv
+            n += 3 + bw
+        elif alt == "otherSubClass":
+            v = (v << 11) | (3 << 8) | _check("otherSubClass", val, 0, 255)
+            n += 11
+        else:
+            raise InputError("objectClass", alt, "vehicleSubClass, vruSubClass or otherSubClass")
+        v = (v << 7) | _check("ConfidenceLevel", c["confidence"], 1, 101)
+        n += 7
+    return v, n
 
 
 def _id_list_bits(name: str, ids, width: int = 8, count_bits: int = 7, lo: int = 1) -> tuple[int, int]:
