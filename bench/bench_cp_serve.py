@@ -6,7 +6,8 @@ CPMs at 10 Hz, through a real Mosquitto on loopback.
 The site (:func:`site`): the 8 straight-through lanes of :mod:`footprint_uq.tracking.rsu_synthetic` and eight
 1920x1080 cameras around the box (four on the corners, 8 m high, four on the arms 25 m out, 10 m high), each looking
 at the centre, 80 deg wide, tilted 20 deg down, views overlapping.  100 road users (:func:`road_users`): 60 vehicles
-driving the lanes at 8-12 m/s (wrapping at 50 m), 25 parked cars along the kerbs, 15 persons walking the pavements.
+driving the lanes at 8-12 m/s (evenly spaced, one speed per lane; one that leaves
+at 50 m comes back at -50 m as a new road user), 25 parked cars along the kerbs, 15 persons walking the pavements.
 Each camera's frame holds the users it images inside the picture, ahead of it, within 60 m, as 2D boxes (bottom
 centre = the ground contact point + 1 px of noise, class and confidence), every frame prepared before the run; at
 publish time the frame gets ``timestamp_s`` = the publish time (the same clock as the receiver's).
@@ -76,18 +77,22 @@ def site() -> list:
 
 
 def road_users(n: int = N_OBJECTS, seed: int = 0):
-    """``(xy_at(t) -> (n, 2) m, classes (n,))``: 60 % vehicles on the lanes, 25 % parked, 15 % persons (module
-    doc)."""
+    """``(xy_at(t) -> ((n, 2) m, object ids (n,)), classes (n,))``: 60 % vehicles on the lanes, 25 % parked,
+    15 % persons (module doc)."""
     from footprint_uq.tracking.rsu_synthetic import LANES
 
     rng = np.random.default_rng(seed)
     n_move, n_park = int(round(0.6 * n)), int(round(0.25 * n))
     n_walk = n - n_move - n_park
+    # each lane: its vehicles evenly spaced over its 100 m at the lane's one speed (nobody drives through anybody);
+    # a vehicle that leaves at +50 m enters again at -50 m as a new road user (a new object_id)
     lane = np.arange(n_move) % len(LANES)
     base = np.array([LANES[k][0] for k in lane])
     step = np.array([LANES[k][1] for k in lane])
-    s0 = rng.uniform(-50.0, 50.0, n_move)
-    speed = rng.uniform(8.0, 12.0, n_move)
+    per_lane = np.bincount(lane, minlength=len(LANES))
+    rank = np.array([np.count_nonzero(lane[:i] == lane[i]) for i in range(n_move)])
+    s0 = rng.uniform(0.0, 100.0, len(LANES))[lane] + 100.0 * rank / per_lane[lane]
+    speed = rng.uniform(8.0, 12.0, len(LANES))[lane]
     # parked: along the kerbs (8.5 m from an axis), outside the box
     axis = rng.integers(0, 2, n_park)
     along = rng.choice([-1.0, 1.0], n_park) * rng.uniform(14.0, 45.0, n_park)
@@ -99,12 +104,16 @@ def road_users(n: int = N_OBJECTS, seed: int = 0):
     w_s0 = rng.uniform(-40.0, 40.0, n_walk)
     w_dir = rng.choice([-1.0, 1.0], n_walk)
 
-    def xy_at(t: float) -> np.ndarray:
-        s = (s0 + speed * t + 50.0) % 100.0 - 50.0
-        move = base + s[:, None] * step
-        ws = (w_s0 + 1.4 * w_dir * t + 40.0) % 80.0 - 40.0
+    def xy_at(t: float) -> tuple[np.ndarray, np.ndarray]:
+        lap, s = np.divmod(s0 + speed * t, 100.0)
+        move = base + (s - 50.0)[:, None] * step
+        ids = np.arange(n)
+        ids[:n_move] += n * lap.astype(np.int64)  # (a road user that wraps round comes back as a new one)
+        w_lap, ws = np.divmod(w_s0 + 1.4 * w_dir * t + 40.0, 80.0)
+        ws = ws - 40.0
+        ids[n - n_walk:] += n * np.abs(w_lap).astype(np.int64)
         walk = np.where(w_axis[:, None] == 0, np.column_stack([w_side, ws]), np.column_stack([ws, w_side]))
-        return np.concatenate([move, parked, walk])
+        return np.concatenate([move, parked, walk]), ids
 
     classes = ["car"] * (n_move + n_park) + ["person"] * n_walk
     return xy_at, classes
@@ -116,7 +125,7 @@ def frame_bodies(cams: list, n_frames: int, seed: int = 0) -> list[list[bytes]]:
     rng = np.random.default_rng(seed + 1)
     out = []
     for k in range(n_frames):
-        xy = xy_at(k / RATE_HZ)
+        xy, oid = xy_at(k / RATE_HZ)
         row = []
         for cam in cams:
             pr = cam.project_ground(xy)
@@ -133,7 +142,7 @@ def frame_bodies(cams: list, n_frames: int, seed: int = 0) -> list[list[bytes]]:
             for i in np.flatnonzero(seen):
                 wpx = float(min(cam.focal_px * (0.6 if classes[i] == "person" else 1.8) / max(rng_m[i], 1.0), 600.0))
                 u, v = float(uv[i, 0]), float(uv[i, 1])
-                dets.append({"object_id": int(i), "class": classes[i], "class_confidence": 0.9,
+                dets.append({"object_id": int(oid[i]), "class": classes[i], "class_confidence": 0.9,
                              "u_min_px": round(u - wpx / 2, 2), "v_min_px": round(v - 0.8 * wpx, 2),
                              "u_max_px": round(u + wpx / 2, 2), "v_max_px": round(v, 2)})
             row.append(orjson.dumps(dets))

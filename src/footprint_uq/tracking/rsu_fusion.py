@@ -171,16 +171,40 @@ class _Camera:
 
 @dataclass
 class _Member:
-    """One camera's latest estimate of a fused object."""
+    """One camera's latest estimate of a fused object.
+
+    ``state`` (12,): position (m), its covariance (m^2, row-major), velocity (m/s), its covariance (m^2/s^2) -- a
+    row of its frame's block (:func:`_state_block`), so that :meth:`RsuFusion._contributions` stacks every member
+    with one ``np.array`` call.
+    """
 
     track_id: int
     time_s: float
-    xy_m: np.ndarray
-    cov_xy_m2: np.ndarray
-    v_mps: np.ndarray
-    cov_v_m2ps2: np.ndarray
+    state: np.ndarray
     class_id: object
     misses: int = 0
+
+    @property
+    def xy_m(self) -> np.ndarray:
+        return self.state[0:2]
+
+    @property
+    def cov_xy_m2(self) -> np.ndarray:
+        return self.state[2:6].reshape(2, 2)
+
+    @property
+    def v_mps(self) -> np.ndarray:
+        return self.state[6:8]
+
+    @property
+    def cov_v_m2ps2(self) -> np.ndarray:
+        return self.state[8:12].reshape(2, 2)
+
+
+def _state_block(xy, P, v, Pv) -> np.ndarray:
+    """A frame's rows as :attr:`_Member.state` ``(n, 12)`` (a new array: the members never alias the caller's)."""
+    n = xy.shape[0]
+    return np.concatenate([xy, P.reshape(n, 4), v, Pv.reshape(n, 4)], axis=1)
 
 
 @dataclass
@@ -227,6 +251,8 @@ class RsuFusion:
         self._ids = _IdPool()
         #: the unit's latest fused time (the latest frame time of any camera), s
         self.last_time_s = -math.inf
+        # a lower bound of every member's time (exact after each scan of _expire, lowered by every frame stored)
+        self._oldest_member_s = -math.inf
         #: frames by outcome: "ok", "late", "dropped_late", "clock_backwards"
         self.counts = {"ok": 0, "late": 0, "dropped_late": 0, "clock_backwards": 0}
         #: objects merged (one camera's object found to be another's), pairs that left their object (gate broken)
@@ -290,9 +316,13 @@ class RsuFusion:
         free_rows = self._keep_sticky(camera_id, t, rows, tid, xy, P, v, Pv, out)
         self._assign(camera_id, t, free_rows, tid, xy, P, v, Pv, out)
         rejected += [(i, "no free objectId (65,536 objects live)") for i in free_rows if out[i] < 0]
+        block = _state_block(xy, P, v, Pv)
+        first = np.where(np.isfinite(age), t - age, t).tolist()
+        oids, tids = out.tolist(), tid.tolist()
         for i in rows:
-            self._store(camera_id, int(out[i]), t, int(tid[i]), xy[i], P[i], v[i], Pv[i], cls[i],
-                        t - age[i] if np.isfinite(age[i]) else t)
+            self._store(camera_id, oids[i], t, tids[i], block[i], cls[i], first[i])
+        if rows:
+            self._oldest_member_s = min(self._oldest_member_s, t)
         return FrameFusion(out, status, None, rejected)
 
     def _frame_status(self, cam: _Camera, camera_id, t: float) -> tuple[str, str | None]:
@@ -308,6 +338,9 @@ class RsuFusion:
     def _expire(self, now_s: float) -> None:
         """Drop contributions older than ``member_timeout_s``; an object without any ends (its id is freed)."""
         limit = self.config.member_timeout_s
+        if now_s - self._oldest_member_s <= limit:
+            return  # no member can be older than the limit
+        oldest = math.inf
         for oid in list(self._objects):
             obj = self._objects[oid]
             for cid in [c for c, m in obj.members.items() if now_s - m.time_s > limit]:
@@ -315,6 +348,9 @@ class RsuFusion:
             if not obj.members:
                 del self._objects[oid]
                 self._ids.free(oid)
+            else:
+                oldest = min(oldest, min(m.time_s for m in obj.members.values()))
+        self._oldest_member_s = oldest
 
     def _keep_sticky(self, camera_id, t, rows, tid, xy, P, v, Pv, out) -> list:
         """Rows whose pair has an object: kept there unless the gate against the other cameras is broken
@@ -424,13 +460,13 @@ class RsuFusion:
             self._pairs[(cid, m.track_id)] = keep
         return keep
 
-    def _store(self, camera_id, oid, t, tid, xy, P, v, Pv, cls, first_s) -> None:
+    def _store(self, camera_id, oid, t, tid, state, cls, first_s) -> None:
         if oid < 0:
             return
         obj = self._objects[oid]
         prev = obj.members.get(camera_id)
         misses = prev.misses if prev is not None and prev.track_id == tid else 0
-        obj.members[camera_id] = _Member(tid, t, xy.copy(), P.copy(), v.copy(), Pv.copy(), cls, misses)
+        obj.members[camera_id] = _Member(tid, t, state, cls, misses)
         obj.first_time_s = min(obj.first_time_s, first_s)
 
     # -- estimates -------------------------------------------------------------------------------------------
@@ -450,13 +486,14 @@ class RsuFusion:
             z = np.zeros((0, 2))
             return np.zeros(0, np.int64), z, np.zeros((0, 2, 2)), np.zeros(0, bool), z, np.zeros((0, 2, 2))
         tau = t - np.array([m.time_s for m in ms])
-        v = np.array([m.v_mps for m in ms])
+        S = np.array([m.state for m in ms])  # (K, 12): one call for every member (_Member.state)
+        K = S.shape[0]
+        v = S[:, 6:8]
         known = np.isfinite(v).all(1)
         v = np.where(known[:, None], v, 0.0)
-        Pv = np.where(known[:, None, None], np.array([m.cov_v_m2ps2 for m in ms]),
+        Pv = np.where(known[:, None, None], S[:, 8:12].reshape(K, 2, 2),
                       cfg.unknown_velocity_sigma_mps ** 2 * np.eye(2))
-        x, Px = predict_position(np.array([m.xy_m for m in ms]), np.array([m.cov_xy_m2 for m in ms]), v, Pv, tau,
-                                 sigma_t_s=np.array(sig))
+        x, Px = predict_position(S[:, 0:2], S[:, 2:6].reshape(K, 2, 2), v, Pv, tau, sigma_t_s=np.array(sig))
         q = cfg.accel_psd_m2ps3 * np.abs(tau)
         Px = Px + (q * tau ** 2 / 3.0)[:, None, None] * np.eye(2)
         return np.array(idx), x, Px, known, v, Pv + q[:, None, None] * np.eye(2)
