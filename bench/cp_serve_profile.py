@@ -124,7 +124,8 @@ def main(argv=None) -> int:
             run_once(svc, out, pl)
             pr.disable()
             s = io.StringIO()
-            pstats.Stats(pr, stream=s).sort_stats("tottime").print_stats(25)
+            pstats.Stats(pr, stream=s).sort_stats("tottime").print_stats(30)
+            pstats.Stats(pr, stream=s).sort_stats("cumulative").print_stats(40)
             print(s.getvalue(), file=sys.stderr)
     out = {"cpu_s_per_traffic_s_cp": float(np.median(res["cp"])),
            "cpu_s_per_traffic_s_reference": float(np.median(res["reference"])),

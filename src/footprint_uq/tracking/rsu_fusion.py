@@ -357,11 +357,12 @@ class RsuFusion:
         ``unstick_frames`` times in a row (then detached).  Returns the rows left to :meth:`_assign`: new pairs,
         detached ones and those whose object has no other camera (they may belong to another object)."""
         free, check = [], []
+        pairs, objects, tids = self._pairs, self._objects, tid.tolist()
         for i in rows:
-            oid = self._pairs.get((camera_id, int(tid[i])))
+            oid = pairs.get((camera_id, tids[i]))
             if oid is None:
                 free.append(i)
-            elif all(c == camera_id for c in self._objects[oid].members):
+            elif _only(objects[oid].members, camera_id):
                 out[i] = oid
                 free.append(i)  # alone: may still join (or be joined by) another camera's object
             else:
@@ -403,9 +404,8 @@ class RsuFusion:
         """One globally optimal assignment of the free rows to the objects they may join (module doc)."""
         if not free:
             return
-        taken = {int(out[i]) for i in range(out.shape[0]) if out[i] >= 0 and not self._alone(int(out[i]), camera_id)}
-        cands = [o for o, obj in self._objects.items() if o not in taken and
-                 any(c != camera_id for c in obj.members)]
+        taken = {o for o in set(out.tolist()) if o >= 0 and not self._alone(o, camera_id)}
+        cands = [o for o, obj in self._objects.items() if o not in taken and not _only(obj.members, camera_id)]
         cost = self._cost(camera_id, t, free, cands, xy, P, v, Pv)
         match = {}
         if cands:
@@ -436,7 +436,7 @@ class RsuFusion:
 
     def _alone(self, oid: int, camera_id) -> bool:
         obj = self._objects.get(oid)
-        return obj is not None and all(c == camera_id for c in obj.members)
+        return obj is not None and _only(obj.members, camera_id)
 
     def _join(self, key, own: int, oid: int) -> int:
         """Pair ``key`` (in object ``own``, -1 if none, where it is alone) joins object ``oid``; two objects
@@ -475,18 +475,21 @@ class RsuFusion:
         the object index of each ``(K,)``, positions ``(K, 2)``, covariances ``(K, 2, 2)``, whether its velocity is
         known ``(K,)``, velocities ``(K, 2)`` and their covariances ``(K, 2, 2)`` at ``t``."""
         cfg = self.config
-        idx, ms, sig = [], [], []
+        idx, times, states, sig = [], [], [], []
+        sigma = {cid: c.sigma_t_s for cid, c in self.cameras.items()}
+        objects = self._objects
         for k, oid in enumerate(oids):
-            for cid, m in self._objects[oid].members.items():
+            for cid, m in objects[oid].members.items():
                 if cid != exclude:
                     idx.append(k)
-                    ms.append(m)
-                    sig.append(self.cameras[cid].sigma_t_s)
-        if not ms:
+                    times.append(m.time_s)
+                    states.append(m.state)
+                    sig.append(sigma[cid])
+        if not idx:
             z = np.zeros((0, 2))
             return np.zeros(0, np.int64), z, np.zeros((0, 2, 2)), np.zeros(0, bool), z, np.zeros((0, 2, 2))
-        tau = t - np.array([m.time_s for m in ms])
-        S = np.array([m.state for m in ms])  # (K, 12): one call for every member (_Member.state)
+        tau = t - np.array(times)
+        S = np.array(states)  # (K, 12): one call for every member (_Member.state)
         K = S.shape[0]
         v = S[:, 6:8]
         known = np.isfinite(v).all(1)
@@ -496,7 +499,7 @@ class RsuFusion:
         x, Px = predict_position(S[:, 0:2], S[:, 2:6].reshape(K, 2, 2), v, Pv, tau, sigma_t_s=np.array(sig))
         q = cfg.accel_psd_m2ps3 * np.abs(tau)
         Px = Px + (q * tau ** 2 / 3.0)[:, None, None] * np.eye(2)
-        return np.array(idx), x, Px, known, v, Pv + q[:, None, None] * np.eye(2)
+        return np.array(idx, np.int64), x, Px, known, v, Pv + q[:, None, None] * np.eye(2)
 
     def _estimates(self, oids, t: float, exclude=None):
         """Fused position ``(m, 2)``, its covariance, velocity and its covariance of objects ``oids`` at ``t`` from
@@ -557,10 +560,10 @@ def _fuse_groups(idx, x, P, m: int, method: str) -> tuple[np.ndarray, np.ndarray
     if method == "ci":
         w = 1.0 / np.trace(P, axis1=1, axis2=2)
         info = info * (w / np.bincount(idx, w, m)[idx])[:, None, None]
-    total = np.zeros((m, 2, 2))
-    np.add.at(total, idx, info)
-    eta = np.zeros((m, 2))
-    np.add.at(eta, idx, np.einsum("kij,kj->ki", info, x))
+    # the sums per group by bincount (in the estimates' order, as np.add.at would add them; several times faster)
+    total = np.stack([np.bincount(idx, info[:, i, j], m) for i in (0, 1) for j in (0, 1)], -1).reshape(m, 2, 2)
+    ix = np.einsum("kij,kj->ki", info, x)
+    eta = np.stack([np.bincount(idx, ix[:, 0], m), np.bincount(idx, ix[:, 1], m)], -1)
     has = np.bincount(idx, minlength=m) > 0
     Pf = _inv2(np.where(has[:, None, None], total, np.eye(2)))
     Pf = 0.5 * (Pf + np.swapaxes(Pf, -1, -2))
@@ -568,11 +571,18 @@ def _fuse_groups(idx, x, P, m: int, method: str) -> tuple[np.ndarray, np.ndarray
     return np.where(has[:, None], xf, np.nan), np.where(has[:, None, None], Pf, np.nan)
 
 
+def _only(members: dict, camera_id) -> bool:
+    """Whether no camera but ``camera_id`` contributes (an object without members too)."""
+    return not members or (len(members) == 1 and camera_id in members)
+
+
 def _inv2(S: np.ndarray) -> np.ndarray:
     """Inverses of ``(..., 2, 2)`` matrices (closed form)."""
     a, b, c, d = S[..., 0, 0], S[..., 0, 1], S[..., 1, 0], S[..., 1, 1]
-    det = (a * d - b * c)[..., None, None]
-    return np.stack([np.stack([d, -b], -1), np.stack([-c, a], -1)], -2) / det
+    det = a * d - b * c
+    out = np.empty(np.shape(S))
+    out[..., 0, 0], out[..., 0, 1], out[..., 1, 0], out[..., 1, 1] = d / det, -b / det, -c / det, a / det
+    return out
 
 
 def _mahalanobis2(d: np.ndarray, S: np.ndarray) -> np.ndarray:
