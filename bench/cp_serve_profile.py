@@ -56,6 +56,25 @@ class NullSink:
         pass
 
 
+def old_fusion(rev: str):
+    """``RsuFusion`` of ``tracking/rsu_fusion.py`` at git revision ``rev``, imported beside today's (a module of the
+    same package, so that its relative imports resolve): a before/after in one run."""
+    import importlib.util
+    import subprocess
+
+    import footprint_uq.tracking as pkg
+
+    text = subprocess.run(["git", "show", f"{rev}:src/footprint_uq/tracking/rsu_fusion.py"], check=True,
+                          capture_output=True, text=True, cwd=Path(__file__).resolve().parent).stdout
+    path = Path(tempfile.mkdtemp()) / "_rsu_fusion_rev.py"
+    path.write_text(text)
+    spec = importlib.util.spec_from_file_location(f"{pkg.__name__}._rsu_fusion_rev", path)
+    mod = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = mod
+    spec.loader.exec_module(mod)
+    return mod.RsuFusion
+
+
 def build(reg: Path, cp: bool, keep: bool = False):
     from footprint_uq.io.registry import load_registry
     from footprint_uq.service import Service
@@ -96,21 +115,31 @@ def main(argv=None) -> int:
     ap.add_argument("--seconds", type=float, default=4.0)
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--profile", action="store_true")
+    ap.add_argument("--fusion-from", default=None, metavar="REV",
+                    help="also run the CP service with RsuFusion of git revision REV (interleaved): before / after")
     ap.add_argument("--dump", type=Path, default=None,
                     help="write every CP output of one run (topic and hex of each message, JSON) to compare versions")
     args = ap.parse_args(argv)
     cams = site()
     bodies = frame_bodies(cams, int(round(args.seconds * RATE_HZ)))
     res: dict = {"cp": [], "reference": []}
+    import footprint_uq.service.cp_service as cps_mod
+
+    fusions = {"cp": cps_mod.RsuFusion, "reference": cps_mod.RsuFusion}
+    if args.fusion_from:
+        fusions["cp_fusion_" + args.fusion_from] = old_fusion(args.fusion_from)
+        res["cp_fusion_" + args.fusion_from] = []
     with tempfile.TemporaryDirectory() as d:
         reg = write_site(Path(d), cams)
         t0 = 1.75e9
         for r in range(args.repeats):
-            for key in ("cp", "reference"):
-                svc, out, sink = build(reg, key == "cp")
+            for key in fusions:
+                cps_mod.RsuFusion = fusions[key]
+                svc, out, sink = build(reg, key != "reference")
                 run_once(svc, out, payloads_of(bodies[:15], t0 - 10.0))  # warm up (kernels, caches)
                 res[key].append(run_once(svc, out, payloads_of(bodies, t0 + 100.0 * r)) / args.seconds)
                 res[f"{key}_bytes"] = sink.bytes
+            cps_mod.RsuFusion = fusions["cp"]
         if args.dump is not None:
             svc, out, sink = build(reg, True, keep=True)
             run_once(svc, out, payloads_of(bodies, t0))
@@ -132,6 +161,14 @@ def main(argv=None) -> int:
            "runs_cp": res["cp"], "runs_reference": res["reference"], "bytes_cp": res["cp_bytes"]}
     out["cp_over_reference"] = out["cpu_s_per_traffic_s_cp"] / out["cpu_s_per_traffic_s_reference"]
     out["cp_share_s_per_traffic_s"] = out["cpu_s_per_traffic_s_cp"] - out["cpu_s_per_traffic_s_reference"]
+    for key in fusions:
+        if key.startswith("cp_fusion_"):
+            old = float(np.median(res[key]))
+            ref = out["cpu_s_per_traffic_s_reference"]
+            out[key] = {"cpu_s_per_traffic_s": old, "runs": res[key], "over_reference": old / ref,
+                        "cp_share_s_per_traffic_s": old - ref,
+                        "cp_share_now_over_then": out["cp_share_s_per_traffic_s"] / (old - ref),
+                        "same_bytes": res[f"{key}_bytes"] == res["cp_bytes"]}
     print(json.dumps(out, indent=1))
     return 0
 
