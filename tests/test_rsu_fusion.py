@@ -4,7 +4,7 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from footprint_uq.errors import InputError
@@ -335,3 +335,32 @@ def test_usable_rows_column_wise_equals_the_per_row_rule(seed, n):
     P[(bad >= 0.15) & (bad < 0.3)] = [[0.1, 0.2], [0.2, 0.1]]   # not positive definite
     P[(bad >= 0.3) & (bad < 0.35), 1, 1] = np.inf
     assert _usable_rows(tid, xy, P) == _usable_rows_reference(tid, xy, P)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.tuples(st.integers(0, 2), st.sampled_from([-0.45, -0.2, 0.0, 0.05, 0.3, 0.6, 1.2]),
+                          st.lists(st.integers(0, 4), max_size=4)), min_size=1, max_size=40))
+@example([(0, 0.0, [1]), (0, 0.7, []), (0, 0.7, [])])
+def test_expiry_shortcut_equals_a_full_scan_every_frame(steps):
+    """``_expire`` skips its scan while no member can be past ``member_timeout_s`` (a lower bound of the members'
+    times): the same frames through a unit that scans every frame give the same pairs, objects and ids, also with
+    late frames (a camera's frame up to 0.45 s behind the unit) and gaps longer than the timeout
+    (mutation-checked: without the bound lowered by each frame stored, objects never end)."""
+    fast, full = _unit(3), _unit(3)
+    t_cam, t_unit = [0.0, 0.0, 0.0], 0.0
+    for cam, dt, tids in steps:
+        t = max(t_cam[cam], t_unit + dt)  # a camera's clock never goes backwards; late by up to 0.45 s
+        t_cam[cam], t_unit = t, max(t_unit, t)
+        tids = sorted(set(tids))
+        xy = [[10.0 * k + 0.1 * cam, 0.0] for k in tids]
+        for f in (fast, full):
+            if f is full:
+                f._oldest_member_s = -math.inf  # the scan every frame
+            ff = f.step(f"cam{cam}", 100.0 + t, **_frame(xy if tids else np.zeros((0, 2)), tids=tids, v=(0.0, 0.0)))
+        assert fast.pairs() == full.pairs()
+        assert ff.status == "ok" or ff.status == "late"
+        a, b = fast.objects(), full.objects()
+        assert a.object_id.tolist() == b.object_id.tolist() and a.sensor_ids == b.sensor_ids
+        assert np.array_equal(a.xy_m, b.xy_m, equal_nan=True)
+        for obj in fast._objects.values():
+            assert all(fast.last_time_s - m.time_s <= fast.config.member_timeout_s for m in obj.members.values())

@@ -171,16 +171,40 @@ class _Camera:
 
 @dataclass
 class _Member:
-    """One camera's latest estimate of a fused object."""
+    """One camera's latest estimate of a fused object.
+
+    ``state`` (12,): position (m), its covariance (m^2, row-major), velocity (m/s), its covariance (m^2/s^2) -- a
+    row of its frame's block (:func:`_state_block`), so that :meth:`RsuFusion._contributions` stacks every member
+    with one ``np.array`` call.
+    """
 
     track_id: int
     time_s: float
-    xy_m: np.ndarray
-    cov_xy_m2: np.ndarray
-    v_mps: np.ndarray
-    cov_v_m2ps2: np.ndarray
+    state: np.ndarray
     class_id: object
     misses: int = 0
+
+    @property
+    def xy_m(self) -> np.ndarray:
+        return self.state[0:2]
+
+    @property
+    def cov_xy_m2(self) -> np.ndarray:
+        return self.state[2:6].reshape(2, 2)
+
+    @property
+    def v_mps(self) -> np.ndarray:
+        return self.state[6:8]
+
+    @property
+    def cov_v_m2ps2(self) -> np.ndarray:
+        return self.state[8:12].reshape(2, 2)
+
+
+def _state_block(xy, P, v, Pv) -> np.ndarray:
+    """A frame's rows as :attr:`_Member.state` ``(n, 12)`` (a new array: the members never alias the caller's)."""
+    n = xy.shape[0]
+    return np.concatenate([xy, P.reshape(n, 4), v, Pv.reshape(n, 4)], axis=1)
 
 
 @dataclass
@@ -227,6 +251,8 @@ class RsuFusion:
         self._ids = _IdPool()
         #: the unit's latest fused time (the latest frame time of any camera), s
         self.last_time_s = -math.inf
+        # a lower bound of every member's time (exact after each scan of _expire, lowered by every frame stored)
+        self._oldest_member_s = -math.inf
         #: frames by outcome: "ok", "late", "dropped_late", "clock_backwards"
         self.counts = {"ok": 0, "late": 0, "dropped_late": 0, "clock_backwards": 0}
         #: objects merged (one camera's object found to be another's), pairs that left their object (gate broken)
@@ -290,9 +316,13 @@ class RsuFusion:
         free_rows = self._keep_sticky(camera_id, t, rows, tid, xy, P, v, Pv, out)
         self._assign(camera_id, t, free_rows, tid, xy, P, v, Pv, out)
         rejected += [(i, "no free objectId (65,536 objects live)") for i in free_rows if out[i] < 0]
+        block = _state_block(xy, P, v, Pv)
+        first = np.where(np.isfinite(age), t - age, t).tolist()
+        oids, tids = out.tolist(), tid.tolist()
         for i in rows:
-            self._store(camera_id, int(out[i]), t, int(tid[i]), xy[i], P[i], v[i], Pv[i], cls[i],
-                        t - age[i] if np.isfinite(age[i]) else t)
+            self._store(camera_id, oids[i], t, tids[i], block[i], cls[i], first[i])
+        if rows:
+            self._oldest_member_s = min(self._oldest_member_s, t)
         return FrameFusion(out, status, None, rejected)
 
     def _frame_status(self, cam: _Camera, camera_id, t: float) -> tuple[str, str | None]:
@@ -308,6 +338,9 @@ class RsuFusion:
     def _expire(self, now_s: float) -> None:
         """Drop contributions older than ``member_timeout_s``; an object without any ends (its id is freed)."""
         limit = self.config.member_timeout_s
+        if now_s - self._oldest_member_s <= limit:
+            return  # no member can be older than the limit
+        oldest = math.inf
         for oid in list(self._objects):
             obj = self._objects[oid]
             for cid in [c for c, m in obj.members.items() if now_s - m.time_s > limit]:
@@ -315,17 +348,21 @@ class RsuFusion:
             if not obj.members:
                 del self._objects[oid]
                 self._ids.free(oid)
+            else:
+                oldest = min(oldest, min(m.time_s for m in obj.members.values()))
+        self._oldest_member_s = oldest
 
     def _keep_sticky(self, camera_id, t, rows, tid, xy, P, v, Pv, out) -> list:
         """Rows whose pair has an object: kept there unless the gate against the other cameras is broken
         ``unstick_frames`` times in a row (then detached).  Returns the rows left to :meth:`_assign`: new pairs,
         detached ones and those whose object has no other camera (they may belong to another object)."""
         free, check = [], []
+        pairs, objects, tids = self._pairs, self._objects, tid.tolist()
         for i in rows:
-            oid = self._pairs.get((camera_id, int(tid[i])))
+            oid = pairs.get((camera_id, tids[i]))
             if oid is None:
                 free.append(i)
-            elif all(c == camera_id for c in self._objects[oid].members):
+            elif _only(objects[oid].members, camera_id):
                 out[i] = oid
                 free.append(i)  # alone: may still join (or be joined by) another camera's object
             else:
@@ -367,9 +404,8 @@ class RsuFusion:
         """One globally optimal assignment of the free rows to the objects they may join (module doc)."""
         if not free:
             return
-        taken = {int(out[i]) for i in range(out.shape[0]) if out[i] >= 0 and not self._alone(int(out[i]), camera_id)}
-        cands = [o for o, obj in self._objects.items() if o not in taken and
-                 any(c != camera_id for c in obj.members)]
+        taken = {o for o in set(out.tolist()) if o >= 0 and not self._alone(o, camera_id)}
+        cands = [o for o, obj in self._objects.items() if o not in taken and not _only(obj.members, camera_id)]
         cost = self._cost(camera_id, t, free, cands, xy, P, v, Pv)
         match = {}
         if cands:
@@ -400,7 +436,7 @@ class RsuFusion:
 
     def _alone(self, oid: int, camera_id) -> bool:
         obj = self._objects.get(oid)
-        return obj is not None and all(c == camera_id for c in obj.members)
+        return obj is not None and _only(obj.members, camera_id)
 
     def _join(self, key, own: int, oid: int) -> int:
         """Pair ``key`` (in object ``own``, -1 if none, where it is alone) joins object ``oid``; two objects
@@ -424,13 +460,13 @@ class RsuFusion:
             self._pairs[(cid, m.track_id)] = keep
         return keep
 
-    def _store(self, camera_id, oid, t, tid, xy, P, v, Pv, cls, first_s) -> None:
+    def _store(self, camera_id, oid, t, tid, state, cls, first_s) -> None:
         if oid < 0:
             return
         obj = self._objects[oid]
         prev = obj.members.get(camera_id)
         misses = prev.misses if prev is not None and prev.track_id == tid else 0
-        obj.members[camera_id] = _Member(tid, t, xy.copy(), P.copy(), v.copy(), Pv.copy(), cls, misses)
+        obj.members[camera_id] = _Member(tid, t, state, cls, misses)
         obj.first_time_s = min(obj.first_time_s, first_s)
 
     # -- estimates -------------------------------------------------------------------------------------------
@@ -439,27 +475,31 @@ class RsuFusion:
         the object index of each ``(K,)``, positions ``(K, 2)``, covariances ``(K, 2, 2)``, whether its velocity is
         known ``(K,)``, velocities ``(K, 2)`` and their covariances ``(K, 2, 2)`` at ``t``."""
         cfg = self.config
-        idx, ms, sig = [], [], []
+        idx, times, states, sig = [], [], [], []
+        sigma = {cid: c.sigma_t_s for cid, c in self.cameras.items()}
+        objects = self._objects
         for k, oid in enumerate(oids):
-            for cid, m in self._objects[oid].members.items():
+            for cid, m in objects[oid].members.items():
                 if cid != exclude:
                     idx.append(k)
-                    ms.append(m)
-                    sig.append(self.cameras[cid].sigma_t_s)
-        if not ms:
+                    times.append(m.time_s)
+                    states.append(m.state)
+                    sig.append(sigma[cid])
+        if not idx:
             z = np.zeros((0, 2))
             return np.zeros(0, np.int64), z, np.zeros((0, 2, 2)), np.zeros(0, bool), z, np.zeros((0, 2, 2))
-        tau = t - np.array([m.time_s for m in ms])
-        v = np.array([m.v_mps for m in ms])
+        tau = t - np.array(times)
+        S = np.array(states)  # (K, 12): one call for every member (_Member.state)
+        K = S.shape[0]
+        v = S[:, 6:8]
         known = np.isfinite(v).all(1)
         v = np.where(known[:, None], v, 0.0)
-        Pv = np.where(known[:, None, None], np.array([m.cov_v_m2ps2 for m in ms]),
+        Pv = np.where(known[:, None, None], S[:, 8:12].reshape(K, 2, 2),
                       cfg.unknown_velocity_sigma_mps ** 2 * np.eye(2))
-        x, Px = predict_position(np.array([m.xy_m for m in ms]), np.array([m.cov_xy_m2 for m in ms]), v, Pv, tau,
-                                 sigma_t_s=np.array(sig))
+        x, Px = predict_position(S[:, 0:2], S[:, 2:6].reshape(K, 2, 2), v, Pv, tau, sigma_t_s=np.array(sig))
         q = cfg.accel_psd_m2ps3 * np.abs(tau)
         Px = Px + (q * tau ** 2 / 3.0)[:, None, None] * np.eye(2)
-        return np.array(idx), x, Px, known, v, Pv + q[:, None, None] * np.eye(2)
+        return np.array(idx, np.int64), x, Px, known, v, Pv + q[:, None, None] * np.eye(2)
 
     def _estimates(self, oids, t: float, exclude=None):
         """Fused position ``(m, 2)``, its covariance, velocity and its covariance of objects ``oids`` at ``t`` from
@@ -520,10 +560,10 @@ def _fuse_groups(idx, x, P, m: int, method: str) -> tuple[np.ndarray, np.ndarray
     if method == "ci":
         w = 1.0 / np.trace(P, axis1=1, axis2=2)
         info = info * (w / np.bincount(idx, w, m)[idx])[:, None, None]
-    total = np.zeros((m, 2, 2))
-    np.add.at(total, idx, info)
-    eta = np.zeros((m, 2))
-    np.add.at(eta, idx, np.einsum("kij,kj->ki", info, x))
+    # the sums per group by bincount (in the estimates' order, as np.add.at would add them; several times faster)
+    total = np.stack([np.bincount(idx, info[:, i, j], m) for i in (0, 1) for j in (0, 1)], -1).reshape(m, 2, 2)
+    ix = np.einsum("kij,kj->ki", info, x)
+    eta = np.stack([np.bincount(idx, ix[:, 0], m), np.bincount(idx, ix[:, 1], m)], -1)
     has = np.bincount(idx, minlength=m) > 0
     Pf = _inv2(np.where(has[:, None, None], total, np.eye(2)))
     Pf = 0.5 * (Pf + np.swapaxes(Pf, -1, -2))
@@ -531,11 +571,18 @@ def _fuse_groups(idx, x, P, m: int, method: str) -> tuple[np.ndarray, np.ndarray
     return np.where(has[:, None], xf, np.nan), np.where(has[:, None, None], Pf, np.nan)
 
 
+def _only(members: dict, camera_id) -> bool:
+    """Whether no camera but ``camera_id`` contributes (an object without members too)."""
+    return not members or (len(members) == 1 and camera_id in members)
+
+
 def _inv2(S: np.ndarray) -> np.ndarray:
     """Inverses of ``(..., 2, 2)`` matrices (closed form)."""
     a, b, c, d = S[..., 0, 0], S[..., 0, 1], S[..., 1, 0], S[..., 1, 1]
-    det = (a * d - b * c)[..., None, None]
-    return np.stack([np.stack([d, -b], -1), np.stack([-c, a], -1)], -2) / det
+    det = a * d - b * c
+    out = np.empty(np.shape(S))
+    out[..., 0, 0], out[..., 0, 1], out[..., 1, 0], out[..., 1, 1] = d / det, -b / det, -c / det, a / det
+    return out
 
 
 def _mahalanobis2(d: np.ndarray, S: np.ndarray) -> np.ndarray:
