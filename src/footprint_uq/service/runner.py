@@ -890,6 +890,8 @@ def run(*, camera=None, budget=None, registry=None, camera_id: str | None = None
                           contact=contact, allow_outside_image=allow_outside_image, station_id=station_id,
                           uper_encoder=uper_encoder, linearity=linearity, linear_threshold=linear_threshold,
                           cpm_cdd=cpm_cdd, v2x_policy=v2x_policy,
+                          # the per-camera CPM / SDSM only where the per-camera record is written
+                          messages=cp_options is None or cp_options.per_camera_output,
                           tracks=serve_options.pop("tracks", False),
                           class_names=serve_options.pop("class_names", None),
                           unknown_class=serve_options.pop("unknown_class", None), record=serve_options.pop("record"),
