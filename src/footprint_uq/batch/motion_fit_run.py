@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
-from ..io.atomic import atomic_write_text
+from ..io.atomic import atomic_write_text, check_output_folder, final_paths, output_set
 from ..io.camera_files import save_budget
 from ..tracking.classes import tracker_configs
 from ..tracking.motion_fit import MotionBank, MotionGrid, fit_classes
@@ -66,7 +66,9 @@ def run_motion_fit(camera, budget, detections, out_dir, *, chunk_rows: int = S.D
                    min_tracks: int = 10, min_updates: int = 300, fsync: bool = True,
                    info: dict | None = None) -> tuple[dict, dict]:
     """Fit the manoeuvre noise per class to a recording; write ``budget.yaml`` (the budget with its ``motion``
-    section replaced) and ``motion_fit.json`` (every class's profile and counts) into ``out_dir``.
+    section replaced) and ``motion_fit.json`` (every class's profile and counts) into ``out_dir``, as one set
+    (:func:`~footprint_uq.io.atomic.output_set`: built in a hidden folder and swapped in together; ``out_dir`` must
+    be new or hold only a previous run's two files, checked before the recording is read).
 
     Parameters
     ----------
@@ -88,6 +90,7 @@ def run_motion_fit(camera, budget, detections, out_dir, *, chunk_rows: int = S.D
     t0 = time.perf_counter()
     if modes not in ("auto", "one"):
         raise InputError("modes", modes, "'auto' or 'one'")
+    check_output_folder(out_dir, tuple(MOTION_FIT_FILES.values()), "calibrate motion")  # before the long pass
     bud = load_budget(budget)
     prior_default, prior_classes = tracker_configs(bud.motion)
     grid = _grid(prior_default, q_min_m2ps3, q_max_m2ps3, per_decade, modes)
@@ -116,12 +119,11 @@ def run_motion_fit(camera, budget, detections, out_dir, *, chunk_rows: int = S.D
                "grid_m2ps3": grid.q_m2ps3.tolist(),
                "imm_grid_m2ps3": grid.imm_q_m2ps3.tolist(), "motion": section,
                "log_likelihood": _profiles(banks), "elapsed_s": time.perf_counter() - t0, **(info or {})}
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    files = {k: out / v for k, v in MOTION_FIT_FILES.items()}
-    atomic_write_text(files["summary"], json.dumps(summary, indent=1, allow_nan=False) + "\n", fsync=fsync)
-    save_budget(fitted, files["budget"])
-    return summary, files
+    with output_set(out_dir, tuple(MOTION_FIT_FILES.values()), "calibrate motion", fsync=fsync) as stage:
+        files = {k: stage / v for k, v in MOTION_FIT_FILES.items()}
+        save_budget(fitted, files["budget"])
+        atomic_write_text(files["summary"], json.dumps(summary, indent=1, allow_nan=False) + "\n", fsync=fsync)
+    return summary, final_paths(files, stage, out_dir)
 
 
 def _bad_rows(table, bad: list) -> None:

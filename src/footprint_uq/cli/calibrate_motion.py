@@ -26,7 +26,8 @@ __all__ = ["motion_cmd"]
               help="A recording of the site's detections (.csv, .jsonl, .parquet, as `objects` reads) with "
                    "timestamp_s and object_id (class: one fit per class; camera_id: tracks per camera).")
 @click.option("--out", "out_dir", required=True, metavar="DIR",
-              help="Output folder (created): budget.yaml (the budget with its motion section), motion_fit.json.")
+              help="Output folder: budget.yaml (the budget with its motion section) and motion_fit.json, written as "
+                   "one set (the folder must be new or hold only a previous run's files).")
 @click.option("--box-type", type=click.Choice(["2d", "3d", "corners"]), default=None,
               help="Box family (default: detected from the columns).")
 @click.option("--contact", type=click.Choice(list(CONTACT_MODES)), default="bottom-centre", show_default=True,
