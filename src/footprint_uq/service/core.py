@@ -45,6 +45,7 @@ from ..products.v2x import J2735_POSITION_CONFIDENCE_NAMES
 from ..tracking import SharedJacobianAt, TrackerConfig, object_motion
 from ..tracking.classes import ClassTracks, tracker_configs
 from ..tracking.consistency import DEFAULT_WINDOW_S, NisMonitor, health_section
+from ..tracking.contact_slide import ContactSlide
 from ..uncertainty.ellipse import chi2_scale
 from ..uncertainty.propagation import DEFAULT_LINEAR_THRESHOLD
 from .detections import DetectionError, FieldError, check_values, finite_number, parse_detections
@@ -184,6 +185,8 @@ class CameraSetup:
     tracks_lock: threading.Lock | None = None
     #: the NIS of its tracks per class over a window (``tracks=True``; under ``tracks_lock``): docs/motion-fit.md
     nis: NisMonitor | None = None
+    #: the velocity term of 2-D boxes' sliding contact (``tracks=True``; tracking/contact_slide.py)
+    slide: ContactSlide | None = None
     #: object_id -> the messages' object id (unique per message, stable across frames; messages/ids.py)
     ids: MessageIdMap = field(default_factory=MessageIdMap)
 
@@ -374,6 +377,7 @@ class Service:
                 at = SharedJacobianAt(proc.camera, proc.budget)
                 configs = tracker_configs(getattr(proc.budget, "motion", None), cfg)  # (docs/motion-fit.md)
                 setup.tracks, setup.tracks_lock = ClassTracks(*configs, rank=at.rank, shared_at=at), threading.Lock()
+                setup.slide = ContactSlide.for_camera(proc.camera)
                 if window_s:
                     setup.nis = NisMonitor(setup.tracks, window_s=window_s)
                 if warm_up:
@@ -525,7 +529,7 @@ class Service:
         ref_ms = timestamp_its_ms(ts) if self.messages else None
         est, found = self._footprints(setup, dets)
         ids, classes, class_p = found.object_ids, found.classes, found.class_confidence
-        motion = self._motion(setup, est, ids, classes, ts, found.yaw_rad) if self.tracks else None
+        motion = self._motion(setup, est, ids, classes, ts, found.yaw_rad, found.family) if self.tracks else None
         t1 = time.perf_counter()
         objects, ok_idx, msg_ids = self._objects_json(setup, est, ids, classes, ts, motion)
         t2 = time.perf_counter()
@@ -611,9 +615,10 @@ class Service:
         return worst, ok
 
     @staticmethod
-    def _motion(setup: CameraSetup, est, ids: list, classes: list, ts: float, yaw_rad: np.ndarray | None):
+    def _motion(setup: CameraSetup, est, ids: list, classes: list, ts: float, yaw_rad: np.ndarray | None,
+                family: str | None = None):
         """The frame's objects through the camera's tracks: ``(track_id (N,), ObjectMotion)``; ``yaw_rad``: the
-        3-D boxes' yaw (None for other boxes)."""
+        3-D boxes' yaw (None for other boxes); 2-D boxes (``family``) add their sliding contact's velocity term."""
         yaw = yaw_rad
         N = len(ids)
         B = est.centre_shared_m if est.centre_shared_m is not None else np.full((N, 2, setup.tracks.rank), np.nan)
@@ -622,6 +627,8 @@ class Service:
             if setup.nis is not None:
                 setup.nis.observe(ts, out, classes, est.centre_xy_world_m,
                                   est.centre_cov_m2 - B @ np.swapaxes(B, -1, -2), B)
+        if family == "2d" and setup.slide is not None:
+            out = setup.slide.apply(out, classes)
         return out.track_id, object_motion(out, heading_offset_deg=setup.georef.heading_offset_deg, yaw_rad=yaw)
 
     def _objects_json(self, setup: CameraSetup, est, ids: list, classes: list, ts: float = 0.0,
