@@ -14,6 +14,7 @@ from footprint_uq.tracking.contact_slide import (
     ContactSlide,
     contact_point,
     slide_covariance,
+    slide_moments,
     slide_velocity,
 )
 from footprint_uq.tracking.synthetic import default_camera
@@ -80,11 +81,14 @@ def test_slide_covariance_is_the_size_priors_second_moment():
     c_true = np.array([[-12.0, 20.0], [-6.0, 24.0]])
     x = contact_point(CAM, c_true, mean, np.full(2, np.pi / 4))[0]
     M = slide_covariance(CAM, x, v, mean, sig)
+    m, M2 = slide_moments(CAM, x, v, mean, sig)
+    np.testing.assert_array_equal(M, M2)
     for i in range(2):
         sizes = mean[i] + rng.standard_normal((20000, 3)) * sig[i]
         u, ok = slide_velocity(CAM, np.repeat(c_true[i:i + 1], 20000, 0), np.repeat(v[i:i + 1], 20000, 0), sizes)
         mc = np.einsum("ki,kj->ij", u[ok], u[ok]) / ok.sum()
         np.testing.assert_allclose(M[i], mc, rtol=0.05, atol=1e-3)
+        np.testing.assert_allclose(m[i], u[ok].mean(0), rtol=0.03, atol=1e-3)
     # zero spread: the term is u u^T of the prior's mean size at the centre
     M0 = slide_covariance(CAM, x, v, mean, np.zeros_like(sig))
     u, _ = slide_velocity(CAM, c_true, v, mean)

@@ -29,7 +29,7 @@ from ..errors import InputError
 from ..products.contact import class_size_priors, load_size_priors, rendered_bottom_centre
 from .table import TrackOutput
 
-__all__ = ["contact_point", "slide_velocity", "slide_covariance", "ContactSlide", "SIZE_NODES"]
+__all__ = ["contact_point", "slide_velocity", "slide_covariance", "slide_moments", "ContactSlide", "SIZE_NODES"]
 
 #: the unscented nodes of a Gaussian size (length, width, height): ``mean + sigma * SIZE_NODES[k]``, weight 1/6
 SIZE_NODES = np.sqrt(3.0) * np.vstack([np.eye(3), -np.eye(3)])
@@ -72,9 +72,17 @@ def slide_velocity(camera, centre_xy_m, v_mps, sizes_m) -> tuple[np.ndarray, np.
 def slide_covariance(camera, xy_contact_m, v_mps, size_mean_m, size_sigma_m) -> np.ndarray:
     """The velocity covariance term ``E[u u^T]`` (n, 2, 2), m^2/s^2, of tracks of contacts ``xy_contact_m``
     (n, 2) moving at ``v_mps`` (n, 2), over the unscented nodes of their size priors ``size_mean_m``,
-    ``size_sigma_m`` (n, 3).  The footprint centre is found from the contact by one fixed-point step (``c = x -
-    (g(x) - x)``, its error second order in the offset's change over the offset).  Nodes whose box does not
-    render are left out; NaN where none renders (the velocity is then not reported with a covariance)."""
+    ``size_sigma_m`` (n, 3) (:func:`slide_moments`' second moment)."""
+    return slide_moments(camera, xy_contact_m, v_mps, size_mean_m, size_sigma_m)[1]
+
+
+def slide_moments(camera, xy_contact_m, v_mps, size_mean_m, size_sigma_m) -> tuple[np.ndarray, np.ndarray]:
+    """The mean ``E[u]`` (n, 2), m/s, and second moment ``E[u u^T]`` (n, 2, 2), m^2/s^2, of the slide of tracks
+    of contacts ``xy_contact_m`` (n, 2) moving at ``v_mps`` (n, 2) over the unscented nodes of their size priors
+    ``size_mean_m``, ``size_sigma_m`` (n, 3).  The footprint centre is found from the contact by one fixed-point
+    step (``c = x - (g(x) - x)``, its error second order in the offset's change over the offset).  Nodes whose
+    box does not render are left out; NaN where none renders (the velocity is then not reported with a
+    covariance)."""
     x = np.asarray(xy_contact_m, dtype=np.float64).reshape(-1, 2)
     v = np.asarray(v_mps, dtype=np.float64).reshape(-1, 2)
     mean = np.asarray(size_mean_m, dtype=np.float64).reshape(-1, 3)
@@ -92,8 +100,9 @@ def slide_covariance(camera, xy_contact_m, v_mps, size_mean_m, size_sigma_m) -> 
     k = ok.sum(1)
     with np.errstate(invalid="ignore", divide="ignore"):
         M = np.einsum("nki,nkj->nij", u, u) / k[:, None, None]
-    M[k == 0] = np.nan
-    return M
+        m = u.sum(1) / k[:, None]
+    M[k == 0], m[k == 0] = np.nan, np.nan
+    return m, M
 
 
 class ContactSlide:
