@@ -13,6 +13,7 @@ from footprint_uq.tracking.contact_slide import (
     SIZE_NODES,
     ContactSlide,
     contact_point,
+    slide_along_path,
     slide_covariance,
     slide_moments,
     slide_velocity,
@@ -56,6 +57,19 @@ def test_slide_matches_the_contacts_motion_along_the_path():
     g1 = contact_point(CAM, c + dt * v, size, course)[0]
     g0 = contact_point(CAM, c - dt * v, size, course)[0]
     np.testing.assert_allclose(u, (g1 - g0) / (2 * dt) - v, atol=1e-5)
+
+
+def test_slide_along_the_path_equals_the_closed_form():
+    """The on-line form (a central difference of the rendered contact along the path, no derivatives) equals the
+    closed form away from the kinks where an extreme corner changes."""
+    rng = np.random.default_rng(6)
+    c, size, _ = _random_boxes(rng, 50)
+    course = rng.uniform(-np.pi, np.pi, 50)
+    v = rng.uniform(1, 20, (50, 1)) * np.column_stack([np.cos(course), np.sin(course)])
+    u, ok = slide_velocity(CAM, c, v, size)
+    u2, ok2 = slide_along_path(CAM, c, v, size)
+    assert ok.all() and ok2.all()
+    np.testing.assert_allclose(u2, u, atol=2e-5)
 
 
 def test_slide_pinned_on_the_diagonal_path():

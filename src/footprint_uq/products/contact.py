@@ -522,7 +522,8 @@ CONTACT_MODELS = {"bottom-centre": bottom_centre, "footprint-centre": footprint_
 # ---------------------------------------------------------------------------------------------
 # the rendered model for other modules (tracking.contact_slide)
 # ---------------------------------------------------------------------------------------------
-def rendered_bottom_centre(camera, centre_xy_m, sizes_m, yaw_rad) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def rendered_bottom_centre(camera, centre_xy_m, sizes_m, yaw_rad, *,
+                           gradients: bool = True) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
     """The bottom-centre pixel of the 2-D box of cuboids standing on the ground, and its derivative.
 
     Parameters
@@ -536,9 +537,13 @@ def rendered_bottom_centre(camera, centre_xy_m, sizes_m, yaw_rad) -> tuple[np.nd
     -------
     uv_px : (..., 2)           ``((u_min + u_max) / 2, v_max)`` of the box around the 8 projected corners
     duv_dc_px_per_m : (..., 2, 2)   its derivative w.r.t. the centre (the extreme corners held: exact where no two
-                               corners tie for an edge)
+                               corners tie for an edge); None with ``gradients=False`` (a third of the work)
     valid : (...) bool         every corner projects
     """
+    if not gradients:
+        uv, valid = _bottom_uv(camera, np.asarray(centre_xy_m, dtype=np.float64), np.asarray(sizes_m, dtype=np.float64),
+                               np.asarray(yaw_rad, dtype=np.float64))
+        return uv, None, valid
     E, dE_dc, _, valid = _render(camera, np.asarray(centre_xy_m, dtype=np.float64),
                                  np.asarray(sizes_m, dtype=np.float64), np.asarray(yaw_rad, dtype=np.float64))
     return E @ _FB.T, _FB @ dE_dc, valid
