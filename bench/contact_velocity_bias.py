@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import time
 
 import numpy as np
 
@@ -154,18 +155,52 @@ def coverage(n_runs: int = 40, seed: int = 0, sigma_px: float = 1.5, speed_mps: 
     return rows
 
 
+def timing(n_objects: int = 100, n_frames: int = 60, seed: int = 0) -> dict:
+    """The term's cost per frame of ``n_objects`` tracked 2-D box contacts, against the tracker's own step in the
+    same run (the reference): medians over ``n_frames`` frames (after two warm-up frames)."""
+    camera, budget = default_camera(), load_budget("basler1@deg")
+    rng = np.random.default_rng(seed)
+    at = SharedJacobianAt(camera, budget)
+    table, slide = TrackTable(rank=at.rank, shared_at=at), ContactSlide(camera)
+    proc = FrameProcessor(camera, budget, joint_cov=False, linearity=False, shared_jacobian=True,
+                          v2x_policy="linear", allow_outside_image=True)
+    xy = np.column_stack([rng.uniform(-12, 12, n_objects), rng.uniform(20, 50, n_objects)])
+    v = rng.normal(0.0, 7.0, (n_objects, 2))
+    classes = list(rng.choice(["car", "truck", "pedestrian"], n_objects))
+    step_s, term_s = [], []
+    for k in range(n_frames + 2):
+        uv = camera.project_ground(xy + v * k / 30.0).uv_px + rng.normal(0.0, 1.5, (n_objects, 2))
+        est = proc.corners(uv[:, None, :], pixel_cov_px2=np.broadcast_to(2.25 * np.eye(2), (n_objects, 2, 2)))
+        t0 = time.perf_counter()
+        out = table.step(k / 30.0, list(range(n_objects)), est.centre_xy_world_m, est.centre_cov_frame_m2,
+                         est.centre_shared_m)
+        t1 = time.perf_counter()
+        slide.apply(out, classes)
+        t2 = time.perf_counter()
+        if k >= 2:
+            step_s.append(t1 - t0)
+            term_s.append(t2 - t1)
+    res = {"n_objects": n_objects, "tracker_step_ms": 1e3 * float(np.median(step_s)),
+           "slide_term_ms": 1e3 * float(np.median(term_s))}
+    res["ratio"] = res["slide_term_ms"] / res["tracker_step_ms"]
+    print(json.dumps(res), flush=True)
+    return res
+
+
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--json", default=None)
     ap.add_argument("--md", default=None)
+    ap.add_argument("--timing", action="store_true", help="also time the term against the tracker's step")
     ap.add_argument("--coverage", type=int, default=0, metavar="RUNS",
                     help="also track RUNS seeded noisy runs per vehicle and path: coverage before/after the term")
     a = ap.parse_args(argv)
     rows = run()
     cov = coverage(a.coverage) if a.coverage > 0 else []
+    tim = timing() if a.timing else None
     if a.json:
         with open(a.json, "w") as f:
-            json.dump({"bias": rows, "coverage": cov}, f, indent=1)
+            json.dump({"bias": rows, "coverage": cov, "timing": tim}, f, indent=1)
     if a.md:
         lines = ["| vehicle | path | bottom-centre: mean / max velocity error (m/s) | footprint-centre: mean / max "
                  "(m/s) |", "|---|---|---|---|"]
@@ -185,6 +220,10 @@ def main(argv=None) -> None:
                              f"{100 * r['coverage_corrected']:.1f} % | {r['median_sigma_before_mps']:.2f} / "
                              f"{r['median_sigma_after_mps']:.2f} / {r['median_sigma_corrected_mps']:.2f} | "
                              f"{r['n_updates']} |")
+        if tim:
+            lines += ["", f"Cost per frame of {tim['n_objects']} tracked objects (median of 60 frames): the tracker's "
+                      f"step {tim['tracker_step_ms']:.2f} ms, the slide term {tim['slide_term_ms']:.2f} ms "
+                      f"(x{tim['ratio']:.2f})."]
         with open(a.md, "w") as f:
             f.write("10 m/s, 3 s at 30 Hz, noise-free boxes (bench/contact_velocity_bias.py)\n\n" + "\n".join(lines)
                     + "\n")
