@@ -86,13 +86,14 @@ def slide_along_path(camera, centre_xy_m, v_mps, sizes_m, *, step_s: float = PAT
     v = np.asarray(v_mps, dtype=np.float64)
     sizes = np.asarray(sizes_m, dtype=np.float64)
     yaw = np.arctan2(v[..., 1], v[..., 0])
-    shape = c.shape[:-1]
-    g, ok = [], np.ones(shape, bool)
-    for sign in (1.0, -1.0):
-        uv, _, valid = rendered_bottom_centre(camera, c + sign * step_s * v, sizes, yaw, gradients=False)
-        bp = camera.backproject(uv.reshape(-1, 2))
-        g.append(bp.xy_world_m.reshape(shape + (2,)))
-        ok &= valid & bp.valid.reshape(shape)
+    shape = np.broadcast_shapes(c.shape[:-1], v.shape[:-1], sizes.shape[:-1])
+    c, v = np.broadcast_to(c, shape + (2,)), np.broadcast_to(v, shape + (2,))
+    sizes, yaw = np.broadcast_to(sizes, shape + (3,)), np.broadcast_to(yaw, shape)
+    uv, _, valid = rendered_bottom_centre(camera, np.stack([c + step_s * v, c - step_s * v]),
+                                          np.stack([sizes, sizes]), np.stack([yaw, yaw]), gradients=False)
+    bp = camera.backproject(uv.reshape(-1, 2))
+    g = bp.xy_world_m.reshape((2,) + shape + (2,))
+    ok = (valid & bp.valid.reshape((2,) + shape)).all(0)
     u = (g[0] - g[1]) / (2.0 * step_s) - v
     return u, ok & np.isfinite(u).all(-1)
 
