@@ -12,7 +12,8 @@ moves its contact at ``(dg/dc) v``, not ``v``: the tracker's velocity is off by 
 (docs/motion-fit.md, section 6).  ``dg/dc`` is closed form: the rendered box's edge derivatives
 (:func:`~footprint_uq.products.contact.rendered_bottom_centre`) through the back-projection's ``d(x, y)/d(u, v)``.
 It is the contact's offset differentiated along the path, i.e. its derivative w.r.t. the angle of the line of
-sight times that angle's rate (cross-range speed / range), for any camera model and with the box's top corners.
+sight times that angle's rate (cross-range speed / range), with the camera's own model (lens, pose) and the box's
+top corners (parametric cameras: a homography camera cannot render a box, :meth:`ContactSlide.for_camera`).
 
 On line, ``u`` is taken by a central difference of the rendered contact along the path (:func:`slide_along_path`,
 held equal to the closed form by the tests): the closed form's projection derivatives w.r.t. all 22 camera
