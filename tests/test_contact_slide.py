@@ -4,9 +4,14 @@ Carlo, and the hooks of `objects --tracks` and `serve --tracks`."""
 
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
+from footprint_uq import params as P
 from footprint_uq.products.contact import class_size_priors
 from footprint_uq.tracking import TrackOutput
 from footprint_uq.tracking.contact_slide import (
@@ -16,6 +21,7 @@ from footprint_uq.tracking.contact_slide import (
     slide_along_path,
     slide_covariance,
     slide_moments,
+    slide_moments_reference,
     slide_velocity,
 )
 from footprint_uq.tracking.synthetic import default_camera
@@ -108,6 +114,55 @@ def test_slide_covariance_is_the_size_priors_second_moment():
     u, _ = slide_velocity(CAM, c_true, v, mean)
     np.testing.assert_allclose(M0, np.einsum("ni,nj->nij", u, u), rtol=2e-3, atol=1e-6)
     assert SIZE_NODES.shape == (6, 3)
+
+
+def _camera_with(**changes):
+    """The default camera with parameters changed by name (a lens, skew, a sloped ground: every branch of the
+    compiled term)."""
+    cam = copy.copy(CAM)
+    p = np.array(CAM.params, dtype=np.float64)
+    for name, value in changes.items():
+        p[P.PARAM_NAMES.index(name)] = value
+    cam.params = p
+    return cam
+
+
+CAMERAS = {"plain": CAM, "lens, skew, sloped ground": _camera_with(k1=-0.12, k2=0.03, p1=4e-4, skew_px=1.5,
+                                                                     ground_slope_x=0.03, ground_slope_y=-0.02,
+                                                                     ground_dz_m=0.2, roll_rad=0.04)}
+CLASSES = ["car", "truck", "bus", "pedestrian", "cyclist", "van", None, "no such class"]
+
+
+@settings(max_examples=40, deadline=None, derandomize=True)
+@given(st.sampled_from(sorted(CAMERAS)), st.integers(1, 6), st.integers(0, 2**32 - 1))
+def test_compiled_moments_equal_the_closed_form(camera, n, seed):
+    """The compiled term (fast/slide_kernels) equals the numpy closed form to rounding over positions, velocities
+    and classes (seeded Hypothesis sweep; a lens, skew and a sloped ground take the kernel's other branches).  (The
+    central difference along the path differs from both where an extreme corner changes within its step: checked
+    away from such kinks in test_slide_along_the_path_equals_the_closed_form.)"""
+    cam = CAMERAS[camera]
+    rng = np.random.default_rng(seed)
+    xy = np.column_stack([rng.uniform(-15, 15, n), rng.uniform(15, 60, n)])
+    course, speed = rng.uniform(-np.pi, np.pi, n), rng.uniform(0.0, 25.0, n)
+    v = speed[:, None] * np.column_stack([np.cos(course), np.sin(course)])
+    mean, sig = class_size_priors([CLASSES[i] or "" for i in rng.integers(0, len(CLASSES), n)], n)
+    m, M = slide_moments(cam, xy, v, mean, sig)
+    mr, Mr = slide_moments_reference(cam, xy, v, mean, sig)
+    assert np.isfinite(M).all() and np.isfinite(m).all()
+    scale = np.abs(Mr).max((1, 2))[:, None, None]
+    np.testing.assert_allclose(M, Mr, rtol=0, atol=1e-9 * scale.max() + 1e-13)
+    np.testing.assert_allclose(m, mr, rtol=0, atol=1e-9 * np.sqrt(scale.max()) + 1e-12)
+
+
+def test_compiled_moments_nan_where_nothing_renders():
+    """A contact behind the camera (its box does not render) or without a velocity: NaN, the other rows
+    unchanged."""
+    xy = np.array([[0.0, 30.0], [0.0, -30.0], [0.0, 30.0]])
+    v = np.array([[5.0, 5.0], [5.0, 5.0], [np.nan, np.nan]])
+    mean, sig = class_size_priors(["car"] * 3, 3)
+    m, M = slide_moments(CAM, xy, v, mean, sig)
+    assert np.isfinite(M[0]).all() and np.isnan(M[1:]).all() and np.isnan(m[1:]).all()
+    np.testing.assert_array_equal(M[0], slide_moments(CAM, xy[:1], v[:1], mean[:1], sig[:1])[1][0])
 
 
 def _output(xy, v):

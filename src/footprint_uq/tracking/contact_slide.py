@@ -15,9 +15,12 @@ It is the contact's offset differentiated along the path, i.e. its derivative w.
 sight times that angle's rate (cross-range speed / range), with the camera's own model (lens, pose) and the box's
 top corners (parametric cameras: a homography camera cannot render a box, :meth:`ContactSlide.for_camera`).
 
-On line, ``u`` is taken by a central difference of the rendered contact along the path (:func:`slide_along_path`,
-held equal to the closed form by the tests): the closed form's projection derivatives w.r.t. all 22 camera
-parameters cost 60 x the render.
+On line (:func:`slide_moments`, :class:`ContactSlide`) the closed form runs compiled
+(:func:`footprint_uq.fast.slide_kernels.slide_moments`): per size node one render of the box, the bottom-centre
+pixel's derivative along the path only (every corner moves by the same vector) and the back-projection's derivative
+at that pixel -- the same numbers as the numpy closed form (:func:`slide_moments_reference`) to rounding, ~0.1 ms
+per frame of 100 tracked objects.  :func:`slide_along_path` (a central difference of the rendered contact along
+the path, the earlier on-line form) stays as a check.
 
 The size is not known per object: the term is the second moment of ``u`` over the six unscented nodes of the
 class's size prior (``mean +- sqrt(3) sigma`` per axis, :mod:`footprint_uq.products.contact`), added to the
@@ -27,20 +30,27 @@ the filter, so it is not fed back into the track.  A turning vehicle's yaw rate 
 
 from __future__ import annotations
 
+import threading
+
 import numpy as np
 
 from .. import params as P
+from ..cameras.rotation import R_W_C
 from ..errors import InputError
+from ..fast import slide_kernels
 from ..products.contact import class_size_priors, load_size_priors, rendered_bottom_centre
 from .table import TrackOutput
 
-__all__ = ["contact_point", "slide_velocity", "slide_along_path", "slide_covariance", "slide_moments", "ContactSlide",
-           "SIZE_NODES", "PATH_STEP_S"]
+__all__ = ["contact_point", "slide_velocity", "slide_along_path", "slide_covariance", "slide_moments",
+           "slide_moments_reference", "ContactSlide", "SIZE_NODES", "PATH_STEP_S"]
 
 #: the time step of :func:`slide_along_path`'s central difference, s (1 cm at 10 m/s)
 PATH_STEP_S = 1e-3
 #: the unscented nodes of a Gaussian size (length, width, height): ``mean + sigma * SIZE_NODES[k]``, weight 1/6
 SIZE_NODES = np.sqrt(3.0) * np.vstack([np.eye(3), -np.eye(3)])
+_NODES = SIZE_NODES.copy()   # (the kernel's argument: a private copy, C-contiguous float64)
+#: distinct class names a :class:`ContactSlide` remembers the prior of (then it starts afresh)
+CLASS_CACHE_SIZE = 1024
 
 
 def contact_point(camera, centre_xy_m, sizes_m, yaw_rad) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -106,27 +116,63 @@ def slide_covariance(camera, xy_contact_m, v_mps, size_mean_m, size_sigma_m) -> 
     return slide_moments(camera, xy_contact_m, v_mps, size_mean_m, size_sigma_m)[1]
 
 
-def slide_moments(camera, xy_contact_m, v_mps, size_mean_m, size_sigma_m) -> tuple[np.ndarray, np.ndarray]:
-    """The mean ``E[u]`` (n, 2), m/s, and second moment ``E[u u^T]`` (n, 2, 2), m^2/s^2, of the slide of tracks
-    of contacts ``xy_contact_m`` (n, 2) moving at ``v_mps`` (n, 2) over the unscented nodes of their size priors
-    ``size_mean_m``, ``size_sigma_m`` (n, 3).  The footprint centre is found from the contact by one fixed-point
-    step (``c = x - (g(x) - x)``, its error second order in the offset's change over the offset).  Nodes whose
-    box does not render are left out; NaN where none renders (the velocity is then not reported with a
-    covariance)."""
-    x = np.asarray(xy_contact_m, dtype=np.float64).reshape(-1, 2)
-    v = np.asarray(v_mps, dtype=np.float64).reshape(-1, 2)
-    mean = np.asarray(size_mean_m, dtype=np.float64).reshape(-1, 3)
-    sig = np.asarray(size_sigma_m, dtype=np.float64).reshape(-1, 3)
+def _rows_of(a, width: int) -> np.ndarray:
+    """``a`` as writeable C-contiguous float64 (n, width) (copied only when it is not one: a read-only array is
+    another numba type, a second compilation of the kernel)."""
+    r = np.ascontiguousarray(np.asarray(a, dtype=np.float64).reshape(-1, width))
+    return r if r.flags.writeable else r.copy()
+
+
+def _moment_inputs(xy_contact_m, v_mps, size_mean_m, size_sigma_m):
+    """The four inputs (n, 2), (n, 2), (n, 3), (n, 3), one row per contact (:func:`_rows_of`)."""
+    x, v = _rows_of(xy_contact_m, 2), _rows_of(v_mps, 2)
+    mean, sig = _rows_of(size_mean_m, 3), _rows_of(size_sigma_m, 3)
     n = x.shape[0]
     if v.shape[0] != n or mean.shape[0] != n or sig.shape[0] != n:
         raise InputError("v_mps/size_mean_m/size_sigma_m", (v.shape, mean.shape, sig.shape),
                          f"{n} rows, one per contact")
+    return x, v, mean, sig
+
+
+def kernel_camera(camera) -> tuple:
+    """The camera as :func:`footprint_uq.fast.slide_kernels.slide_moments` takes it: ``(prm (22,), R_W_C (3, 3),
+    packed lens domain, has_dist)`` (writeable C-contiguous float64 arrays: one numba signature)."""
+    p = np.array(camera.params, dtype=np.float64, order="C")
+    R = np.array(R_W_C(p[P.PAN], p[P.TILT], p[P.ROLL]), dtype=np.float64, order="C")
+    return p, R, np.array(camera.lens_domain.packed, dtype=np.float64, order="C"), bool(np.any(p[P.DIST_SLICE]))
+
+
+def slide_moments(camera, xy_contact_m, v_mps, size_mean_m, size_sigma_m, *,
+                  constants=None) -> tuple[np.ndarray, np.ndarray]:
+    """The mean ``E[u]`` (n, 2), m/s, and second moment ``E[u u^T]`` (n, 2, 2), m^2/s^2, of the slide of tracks
+    of contacts ``xy_contact_m`` (n, 2) moving at ``v_mps`` (n, 2) over the unscented nodes of their size priors
+    ``size_mean_m``, ``size_sigma_m`` (n, 3).  The footprint centre is found from the contact by one fixed-point
+    step (``c = x - (g(x) - x)``, its error second order in the offset's change over the offset); at each node the
+    slide is the closed form ``(dg/dc - I) v``.  Nodes whose box does not render are left out; NaN where none
+    renders (the velocity is then not reported with a covariance).
+
+    Compiled (:func:`footprint_uq.fast.slide_kernels.slide_moments`); :func:`slide_moments_reference` is its numpy
+    form, the same numbers to rounding.  ``constants``: :func:`kernel_camera` of ``camera`` (computed when None).
+    """
+    x, v, mean, sig = _moment_inputs(xy_contact_m, v_mps, size_mean_m, size_sigma_m)
+    m, M = np.empty((x.shape[0], 2)), np.empty((x.shape[0], 2, 2))
+    slide_kernels.slide_moments(*(constants or kernel_camera(camera)), x, v, mean, sig, _NODES, m, M)
+    return m, M
+
+
+def slide_moments_reference(camera, xy_contact_m, v_mps, size_mean_m, size_sigma_m, *,
+                            along_path: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`slide_moments` in numpy: the centre by the same fixed-point step, the slide at each node by
+    :func:`slide_velocity` (closed form) or, with ``along_path``, by :func:`slide_along_path` (a central difference
+    along the path: within 1e-6 m^2/s^2 of the closed form at the tests' points)."""
+    x, v, mean, sig = _moment_inputs(xy_contact_m, v_mps, size_mean_m, size_sigma_m)
     yaw = np.arctan2(v[:, 1], v[:, 0])
     uv0, _, _ = rendered_bottom_centre(camera, x, mean, yaw, gradients=False)
     g0 = camera.backproject(uv0).xy_world_m
     c = 2.0 * x - g0                                        # the centre whose contact is x (one step)
     sizes = np.clip(mean[:, None, :] + SIZE_NODES[None] * sig[:, None, :], 0.02, None)   # (n, 6, 3)
-    u, ok = slide_along_path(camera, np.repeat(c[:, None], 6, 1), np.repeat(v[:, None], 6, 1), sizes)
+    slide = slide_along_path if along_path else slide_velocity
+    u, ok = slide(camera, np.repeat(c[:, None], 6, 1), np.repeat(v[:, None], 6, 1), sizes)
     u = np.where(ok[..., None], u, 0.0)
     k = ok.sum(1)
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -151,6 +197,10 @@ class ContactSlide:
     def __init__(self, camera, size_priors=None):
         self.camera = camera
         self.size_priors = size_priors if isinstance(size_priors, tuple) else load_size_priors(size_priors)
+        self._constants = None            # kernel_camera(camera), on first use
+        self._rows: dict = {}             # class name -> row of the prior tables
+        self._lock = threading.Lock()
+        self._mean, self._sigma = np.empty((0, 3)), np.empty((0, 3))
 
     @classmethod
     def for_camera(cls, camera, size_priors=None) -> ContactSlide | None:
@@ -162,13 +212,30 @@ class ContactSlide:
     def covariance(self, out: TrackOutput, classes) -> np.ndarray:
         """The term (n, 2, 2) of a frame's tracked objects (zero where no velocity is reported)."""
         n = out.track_id.shape[0]
-        names = ["" if c is None else c for c in (classes if classes is not None else [None] * n)]
-        term = np.zeros((n, 2, 2))
-        sel = np.flatnonzero(np.isfinite(out.v_mps).all(1) & np.isfinite(out.xy_m).all(1))
-        if sel.size:
-            mean, sig = class_size_priors([names[i] for i in sel.tolist()], sel.size, self.size_priors)
-            term[sel] = slide_covariance(self.camera, out.xy_m[sel], out.v_mps[sel], mean, sig)
-        return term
+        mean, sig = self._priors(classes, n)
+        if self._constants is None:
+            self._constants = kernel_camera(self.camera)
+        _, M = slide_moments(self.camera, out.xy_m, out.v_mps, mean, sig, constants=self._constants)
+        sel = np.isfinite(out.v_mps).all(1) & np.isfinite(out.xy_m).all(1)
+        return np.where(sel[:, None, None], M, 0.0)
+
+    def _priors(self, classes, n: int) -> tuple[np.ndarray, np.ndarray]:
+        """Per object, its class's size prior ``(mean_m (n, 3), sigma_m (n, 3))``; a class seen first is looked up
+        once (:func:`~footprint_uq.products.contact.class_size_priors`: the fallback for None and unknowns)."""
+        names = [None] * n if classes is None else classes
+        if len(names) != n:
+            raise InputError("classes", f"{len(names)} names", f"one class name (or None) per object ({n})")
+        with self._lock:  # (the service may run frames of one camera in several threads)
+            new = [c for c in set(names) if c not in self._rows]
+            if new:
+                if len(self._rows) + len(new) > CLASS_CACHE_SIZE:
+                    self._rows, self._mean, self._sigma = {}, np.empty((0, 3)), np.empty((0, 3))
+                    new = list(set(names))
+                mean, sig = class_size_priors(["" if c is None else c for c in new], len(new), self.size_priors)
+                self._rows.update({c: len(self._rows) + k for k, c in enumerate(new)})
+                self._mean, self._sigma = np.vstack([self._mean, mean]), np.vstack([self._sigma, sig])
+            rows = np.fromiter((self._rows[c] for c in names), dtype=np.intp, count=n)
+            return self._mean[rows], self._sigma[rows]
 
     def apply(self, out: TrackOutput, classes) -> TrackOutput:
         """``out`` with the term added to ``cov_v_m2ps2`` (the track's own state is not changed)."""
