@@ -154,20 +154,9 @@ def _size(size_mean, size_sigma, nodes, i, q, a):
     return MIN_SIZE_M if s < MIN_SIZE_M else s
 
 
-@nb.njit(**_JIT)
-def slide_moments(prm, R, dom, has_dist, xy, v, size_mean, size_sigma, nodes, mean_out, second_out):
-    """The slide's mean and second moment over the size nodes of every tracked contact.
-
-    Parameters
-    ----------
-    prm (22,), R (3, 3), dom (packed lens domain), has_dist (bool): the camera
-    xy : (n, 2)            tracked contacts, frame W, m
-    v : (n, 2)             their velocities, m/s (the yaw: their course)
-    size_mean, size_sigma : (n, 3)   the class's size prior (length, width, height), m
-    nodes : (K, 3)         the size nodes in sigmas (``contact_slide.SIZE_NODES``), weight 1/K each
-
-    Outputs (filled): ``mean_out`` (n, 2) m/s and ``second_out`` (n, 2, 2) m^2/s^2; NaN where no node renders.
-    """
+@nb.njit(**_INL)
+def _moments(prm, R, dom, has_dist, xy, v, size_mean, size_sigma, nodes, mean_out, second_out):
+    """:func:`slide_moments`' loop (``has_dist`` a constant in each compiled entry)."""
     k = prm[5:13]
     for i in range(xy.shape[0]):
         vx, vy = v[i, 0], v[i, 1]
@@ -195,3 +184,32 @@ def slide_moments(prm, R, dom, has_dist, xy, v, size_mean, size_sigma, nodes, me
         mean_out[i, 0], mean_out[i, 1] = s0 * w, s1 * w
         second_out[i, 0, 0], second_out[i, 1, 1] = m00 * w, m11 * w
         second_out[i, 0, 1] = second_out[i, 1, 0] = m01 * w
+
+
+@nb.njit(**_JIT)
+def _moments_pinhole(prm, R, dom, xy, v, size_mean, size_sigma, nodes, mean_out, second_out):
+    """:func:`_moments` of a lens without distortion (the lens code compiled out: 0.6 x the time)."""
+    _moments(prm, R, dom, False, xy, v, size_mean, size_sigma, nodes, mean_out, second_out)
+
+
+@nb.njit(**_JIT)
+def _moments_lens(prm, R, dom, xy, v, size_mean, size_sigma, nodes, mean_out, second_out):
+    """:func:`_moments` of a distorting lens."""
+    _moments(prm, R, dom, True, xy, v, size_mean, size_sigma, nodes, mean_out, second_out)
+
+
+def slide_moments(prm, R, dom, has_dist, xy, v, size_mean, size_sigma, nodes, mean_out, second_out) -> None:
+    """The slide's mean and second moment over the size nodes of every tracked contact.
+
+    Parameters
+    ----------
+    prm (22,), R (3, 3), dom (packed lens domain), has_dist (bool): the camera
+    xy : (n, 2)            tracked contacts, frame W, m
+    v : (n, 2)             their velocities, m/s (the yaw: their course)
+    size_mean, size_sigma : (n, 3)   the class's size prior (length, width, height), m
+    nodes : (K, 3)         the size nodes in sigmas (``contact_slide.SIZE_NODES``), weight 1/K each
+
+    Outputs (filled): ``mean_out`` (n, 2) m/s and ``second_out`` (n, 2, 2) m^2/s^2; NaN where no node renders.
+    """
+    (_moments_lens if has_dist else _moments_pinhole)(prm, R, dom, xy, v, size_mean, size_sigma, nodes, mean_out,
+                                                       second_out)
