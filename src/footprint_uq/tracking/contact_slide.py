@@ -17,10 +17,11 @@ top corners (parametric cameras: a homography camera cannot render a box, :meth:
 
 On line (:func:`slide_moments`, :class:`ContactSlide`) the closed form runs compiled
 (:func:`footprint_uq.fast.slide_kernels.slide_moments`): per size node one render of the box, the bottom-centre
-pixel's derivative along the path only (every corner moves by the same vector) and the back-projection's derivative
-at that pixel -- the same numbers as the numpy closed form (:func:`slide_moments_reference`) to rounding, ~0.1 ms
-per frame of 100 tracked objects.  :func:`slide_along_path` (a central difference of the rendered contact along
-the path, the earlier on-line form) stays as a check.
+pixel's derivative along the path only (every corner moves by the same vector) and the back-projection's
+derivative at that pixel -- the same numbers as the numpy closed form (:func:`slide_moments_reference`) to
+rounding; ~0.1 ms per frame of 100 tracked objects, 0.7 x the tracker's step (docs/motion-fit.md, section 6).
+:func:`slide_along_path` (a central difference of the rendered contact along the path, the earlier on-line form)
+stays as a check.
 
 The size is not known per object: the term is the second moment of ``u`` over the six unscented nodes of the
 class's size prior (``mean +- sqrt(3) sigma`` per axis, :mod:`footprint_uq.products.contact`), added to the
