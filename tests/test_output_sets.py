@@ -1,5 +1,5 @@
 """Every multi-file output as one set (issue 35, part 3): ``validate``, ``calibrate budget``, ``plan``,
-``plan --evaluate``, ``map``, ``calibrate synthetic`` and ``calibrate intrinsics`` (killed here),
+``plan --evaluate``, ``map``, ``calibrate synthetic``, ``calibrate intrinsics`` and ``calibrate motion`` (killed here),
 ``calibrate extrinsics``, ``demo`` and ``case-study`` (the same helper, not killed here) build their files in a hidden
 folder and swap them in together (:func:`footprint_uq.io.atomic.output_set`; ``calibrate gcp`` does the
 same with its own code, killed in ``tests/test_calibration_gcp.py``).
@@ -26,8 +26,11 @@ from click.testing import CliRunner
 
 from footprint_uq.cli.main import main
 from footprint_uq.errors import InputError
+from footprint_uq.io import save_camera
 from footprint_uq.io.atomic import OLD_MARK, TMP_MARK, final_paths, output_set
+from footprint_uq.tracking.synthetic import default_camera
 from kill_driver import KILL_DRIVER
+from test_motion_fit import _write_recording
 from test_planning import small_site_dict
 
 DATA = Path(__file__).resolve().parent / "data"
@@ -176,12 +179,18 @@ def _case(tmp_path, name):
     if name == "calibrate synthetic":
         syn = ["calibrate", "synthetic", "--views", "3", "--scale", "0.2"]
         return syn + ["--seed", "1"], syn + ["--seed", "2"], set()
+    if name == "calibrate motion":  # run A keeps the prior (too few tracks), run B fits
+        save_camera(default_camera(), tmp_path / "cam.yaml")
+        _write_recording(tmp_path / "d.csv", 0.5, n_objects=6, duration_s=2.0)
+        mot = ["calibrate", "motion", "--camera", str(tmp_path / "cam.yaml"), "--budget", "basler1@deg",
+               "--detections", str(tmp_path / "d.csv"), "--modes", "one", "--min-updates", "50"]
+        return mot + ["--min-tracks", "100"], mot + ["--min-tracks", "2"], set()
     mp = ["map", "--camera", str(DATA / "cameras" / "pantilt.yaml")]
     return mp + ["--budget", "basler1", "--step-px", "96"], mp + ["--budget", "basler2", "--step-px", "80"], set()
 
 
 @pytest.mark.parametrize("name", ["validate", "calibrate budget", "plan", "plan --evaluate", "map",
-                                  "calibrate synthetic", "calibrate intrinsics"])
+                                  "calibrate synthetic", "calibrate intrinsics", "calibrate motion"])
 def test_kill_after_every_rename_leaves_the_old_set_or_the_new_set(tmp_path, name):
     args_a, args_b, volatile = _case(tmp_path, name)
     for tag, args in (("A", args_a), ("B", args_b)):

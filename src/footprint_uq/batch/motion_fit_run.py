@@ -17,9 +17,10 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
-from ..io.atomic import atomic_write_text
+from ..io.atomic import atomic_write_text, check_output_folder, final_paths, output_set
 from ..io.camera_files import save_budget
 from ..tracking.classes import tracker_configs
+from ..tracking.imm_fit import IMM_PARAMETERS, ImmGrid, fit_imm_classes
 from ..tracking.motion_fit import MotionBank, MotionGrid, fit_classes
 from ..tracking.table import SharedJacobianAt, TrackerConfig
 from ..uncertainty.budget import ErrorBudget, load_budget
@@ -27,10 +28,12 @@ from . import schema as S
 from .process import BatchProcessor, Summary, process_chunk
 from .readers import open_detections
 
-__all__ = ["run_motion_fit", "MOTION_FIT_FILES"]
+__all__ = ["run_motion_fit", "MOTION_FIT_FILES", "MODES"]
 
 #: the job's outputs in its folder
 MOTION_FIT_FILES = {"budget": "budget.yaml", "summary": "motion_fit.json"}
+#: ``--modes``: one mode only; also the prior's IMM (its quiet density on the grid); also the IMM fitted whole
+MODES = ("auto", "one", "imm")
 #: bad rows listed by number in ``motion_fit.json`` (all of them are counted by reason)
 MAX_BAD_ROWS_LISTED = 1000
 
@@ -51,11 +54,13 @@ class _Banks:
         self.frames += 1
 
 
-def _grid(prior: TrackerConfig, q_min: float, q_max: float, per_decade: int, modes: str) -> MotionGrid:
+def _grid(prior: TrackerConfig, q_min: float, q_max: float, per_decade: int, modes: str) -> MotionGrid | ImmGrid:
     if not (0 < q_min < q_max) or per_decade < 2:
         raise InputError("q grid", (q_min, q_max, per_decade), "0 < q_min < q_max and at least 2 points per decade")
     n = int(round(np.log10(q_max / q_min) * per_decade)) + 1
     q = np.geomspace(q_min, q_max, max(n, 4))
+    if modes == "imm":  # the IMM's parameters fitted too (tracking/imm_fit.py)
+        return ImmGrid(q, prior=prior)
     imm = q[::2] if modes == "auto" and prior.manoeuvre_accel_psd_m2ps3 is not None else np.zeros(0)
     return MotionGrid(q, imm if imm.size >= 4 else np.zeros(0), prior)
 
@@ -66,7 +71,9 @@ def run_motion_fit(camera, budget, detections, out_dir, *, chunk_rows: int = S.D
                    min_tracks: int = 10, min_updates: int = 300, fsync: bool = True,
                    info: dict | None = None) -> tuple[dict, dict]:
     """Fit the manoeuvre noise per class to a recording; write ``budget.yaml`` (the budget with its ``motion``
-    section replaced) and ``motion_fit.json`` (every class's profile and counts) into ``out_dir``.
+    section replaced) and ``motion_fit.json`` (every class's profile and counts) into ``out_dir``, as one set
+    (:func:`~footprint_uq.io.atomic.output_set`: built in a hidden folder and swapped in together; ``out_dir`` must
+    be new or hold only a previous run's two files, checked before the recording is read).
 
     Parameters
     ----------
@@ -75,9 +82,10 @@ def run_motion_fit(camera, budget, detections, out_dir, *, chunk_rows: int = S.D
         The camera's budget; its ``motion`` section, if any, is the prior (else the tracker's defaults).
     detections : path
         Any file ``objects`` reads, with ``timestamp_s``, ``object_id`` (and ``class``, ``camera_id``).
-    modes : {"auto", "one"}
+    modes : {"auto", "one", "imm"}
         "auto": also try the prior's two-mode IMM (kept where it wins, :func:`~footprint_uq.tracking.motion_fit.
-        fit_class`); "one": the one-mode model only (half the work).
+        fit_class`); "one": the one-mode model only (half the work); "imm": also fit the IMM's manoeuvre density
+        and sojourns (:mod:`footprint_uq.tracking.imm_fit`: 780 IMM members, ~10 x the work of "auto").
     q_min_m2ps3, q_max_m2ps3, per_decade : the grid of densities (log-spaced).
     min_tracks, min_updates : a class with less keeps the prior (status "prior", with the reason).
 
@@ -86,8 +94,9 @@ def run_motion_fit(camera, budget, detections, out_dir, *, chunk_rows: int = S.D
     summary : dict (also in ``motion_fit.json``); files : dict name -> Path
     """
     t0 = time.perf_counter()
-    if modes not in ("auto", "one"):
-        raise InputError("modes", modes, "'auto' or 'one'")
+    if modes not in MODES:
+        raise InputError("modes", modes, f"one of {MODES}")
+    check_output_folder(out_dir, tuple(MOTION_FIT_FILES.values()), "calibrate motion")  # before the long pass
     bud = load_budget(budget)
     prior_default, prior_classes = tracker_configs(bud.motion)
     grid = _grid(prior_default, q_min_m2ps3, q_max_m2ps3, per_decade, modes)
@@ -108,20 +117,28 @@ def run_motion_fit(camera, budget, detections, out_dir, *, chunk_rows: int = S.D
     finally:
         bp.close()
     summ.lines_in = reader.lines
-    section = fit_classes(grid, banks.banks.values(), min_tracks=min_tracks, min_updates=min_updates)
+    fit = fit_imm_classes if isinstance(grid, ImmGrid) else fit_classes
+    section = fit(grid, banks.banks.values(), min_tracks=min_tracks, min_updates=min_updates)
     section = _keep_priors(section, bud.motion, prior_classes)
     section["source"] = f"fitted to {Path(str(detections)).name} ({len(banks.banks)} camera(s), {banks.frames} frames)"
     fitted = ErrorBudget.from_dict({**bud.to_dict(), "motion": section})
     summary = {"detections": str(detections), "rows": summ.to_dict(), "bad_rows": bad[:MAX_BAD_ROWS_LISTED],
                "grid_m2ps3": grid.q_m2ps3.tolist(),
-               "imm_grid_m2ps3": grid.imm_q_m2ps3.tolist(), "motion": section,
+               **_imm_grid(grid), "motion": section,
                "log_likelihood": _profiles(banks), "elapsed_s": time.perf_counter() - t0, **(info or {})}
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    files = {k: out / v for k, v in MOTION_FIT_FILES.items()}
-    atomic_write_text(files["summary"], json.dumps(summary, indent=1, allow_nan=False) + "\n", fsync=fsync)
-    save_budget(fitted, files["budget"])
-    return summary, files
+    with output_set(out_dir, tuple(MOTION_FIT_FILES.values()), "calibrate motion", fsync=fsync) as stage:
+        files = {k: stage / v for k, v in MOTION_FIT_FILES.items()}
+        save_budget(fitted, files["budget"])
+        atomic_write_text(files["summary"], json.dumps(summary, indent=1, allow_nan=False) + "\n", fsync=fsync)
+    return summary, final_paths(files, stage, out_dir)
+
+
+def _imm_grid(grid) -> dict:
+    """The IMM members' grid for ``motion_fit.json``: the quiet densities of the prior's IMM (``auto``), or the
+    fitted IMM's four axes (``imm``: the log-likelihoods after the one-mode ones, in C order of these axes)."""
+    if isinstance(grid, ImmGrid):
+        return {"imm_grid": {k: a.tolist() for k, a in zip(IMM_PARAMETERS, grid.axes, strict=True)}}
+    return {"imm_grid_m2ps3": grid.imm_q_m2ps3.tolist()}
 
 
 def _bad_rows(table, bad: list) -> None:

@@ -53,6 +53,7 @@ from ..products.footprints import CONTACT_MODES, DEGENERATE, V2X_FIELDS, FramePr
 from ..products.geo import GeoReference
 from ..tracking import SharedJacobianAt, TrackerConfig, TrackOutput, object_motion
 from ..tracking.classes import ClassTracks, tracker_configs
+from ..tracking.contact_slide import ContactSlide
 from ..uncertainty.budget import load_budget
 from ..uncertainty.ellipse import chi2_scale
 from . import schema as S
@@ -235,6 +236,7 @@ class BatchProcessor:
         if self.tracks:
             self.proc.shared_jacobian = True
             self._shared_at = SharedJacobianAt(camera, self.budget)
+            self._slide = ContactSlide.for_camera(camera)  # 2-D boxes' sliding contact (tracking/contact_slide.py)
 
     # -- layout -----------------------------------------------------------------------------------
     def resolve(self, names, id_fields: list[pa.Field] | None = None):
@@ -567,6 +569,8 @@ class BatchProcessor:
             yaw = X[:, 6] if self._layout[1][-1] == "yaw_rad" else np.deg2rad(X[:, 6])
         if tout is None:
             return {name: np.zeros(0, np.int64 if name == "track_id" else np.float64) for name in TRACK_COLUMNS}
+        if self.box_type == "2d" and self._slide is not None:
+            tout = self._slide.apply(tout, classes)
         m = object_motion(tout, heading_offset_deg=self.heading_offset_deg, yaw_rad=yaw)
         c = m.cov_v_m2ps2
         return dict(zip(TRACK_COLUMNS, (tout.track_id, m.v_east_mps, m.v_north_mps, c[:, 0, 0], c[:, 0, 1], c[:, 1, 1],

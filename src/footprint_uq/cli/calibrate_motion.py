@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import click
 
-from ..batch.motion_fit_run import run_motion_fit
+from ..batch.motion_fit_run import MODES, run_motion_fit
 from ..batch.schema import DEFAULT_CHUNK_ROWS
 from ..products.footprints import CONTACT_MODES
 from ..uncertainty.presets import PRESET_NAMES
@@ -26,14 +26,16 @@ __all__ = ["motion_cmd"]
               help="A recording of the site's detections (.csv, .jsonl, .parquet, as `objects` reads) with "
                    "timestamp_s and object_id (class: one fit per class; camera_id: tracks per camera).")
 @click.option("--out", "out_dir", required=True, metavar="DIR",
-              help="Output folder (created): budget.yaml (the budget with its motion section), motion_fit.json.")
+              help="Output folder: budget.yaml (the budget with its motion section) and motion_fit.json, written as "
+                   "one set (the folder must be new or hold only a previous run's files).")
 @click.option("--box-type", type=click.Choice(["2d", "3d", "corners"]), default=None,
               help="Box family (default: detected from the columns).")
 @click.option("--contact", type=click.Choice(list(CONTACT_MODES)), default="bottom-centre", show_default=True,
               help="Ground contact of 2D boxes.")
-@click.option("--modes", type=click.Choice(["auto", "one"]), default="auto", show_default=True,
+@click.option("--modes", type=click.Choice(list(MODES)), default="auto", show_default=True,
               help="auto: also try the prior's two-mode (IMM) model, kept per class where the data favour it; "
-                   "one: the one-mode model only (half the work).")
+                   "one: the one-mode model only (half the work); imm: also fit the IMM's manoeuvre density and "
+                   "mean sojourns where the data identify them (~10 x the work of auto; docs/motion-fit.md).")
 @click.option("--q-min", "q_min", type=FiniteFloatRange(min=0, min_open=True), default=1e-4, show_default=True,
               metavar="Q",
               help="Lowest acceleration density of the grid, m^2/s^3.")
@@ -74,7 +76,10 @@ def motion_cmd(camera_path, budget_spec, detections, out_dir, box_type, contact,
         ci = e.get("accel_psd_ci95_m2ps3")
         ci_text = "" if ci is None else f"  95 % [{ci[0]:.3g}, {'inf' if ci[1] is None else f'{ci[1]:.3g}'}]"
         man = e.get("manoeuvre_accel_psd_m2ps3")
+        man_text = "none" if man is None else f"{man:.3g}"
+        if man is not None and "quiet_sojourn_s" in e:
+            man_text += f" (sojourns {e['quiet_sojourn_s']:.3g} / {e['manoeuvre_sojourn_s']:.3g} s)"
         click.echo(f"  {name:24s} q {e['accel_psd_m2ps3']:.3g} m^2/s^3{ci_text}  manoeuvre "
-                   f"{'none' if man is None else f'{man:g}'}  {e['status']} ({e['n_tracks']} tracks, "
+                   f"{man_text}  {e['status']} ({e['n_tracks']} tracks, "
                    f"{e['n_updates']} updates){': ' + e['note'] if e.get('note') else ''}")
     click.echo(f"  wrote {files['budget']} and {files['summary']}")

@@ -38,7 +38,7 @@ from .footprints import box2d_contact_points
 
 __all__ = ["ContactResult", "SizePrior", "CONTACT_MODELS", "SIZE_PRIORS_FILE", "load_size_priors",
            "bottom_centre", "bottom_centre_nonlinearity", "footprint_centre", "YAW_NODES_UNKNOWN",
-           "DEFAULT_YAW_SIGMA_RAD"]
+           "DEFAULT_YAW_SIGMA_RAD", "rendered_bottom_centre", "class_size_priors"]
 
 #: the shipped priors (per-class length, width, height: mean and sigma, metres)
 SIZE_PRIORS_FILE = Path(__file__).resolve().parents[1] / "presets" / "size_priors.yaml"
@@ -517,3 +517,40 @@ def footprint_centre(camera, budget, boxes_xyxy_px, classes, *, yaw_rad=None, ya
 #: the contact models by name (``contact=`` of the validation, ``footprint-uq validate / calibrate budget
 #: --contact NAME``): the one registry, re-exported by :mod:`footprint_uq.validation.pairs`
 CONTACT_MODELS = {"bottom-centre": bottom_centre, "footprint-centre": footprint_centre}
+
+
+# ---------------------------------------------------------------------------------------------
+# the rendered model for other modules (tracking.contact_slide)
+# ---------------------------------------------------------------------------------------------
+def rendered_bottom_centre(camera, centre_xy_m, sizes_m, yaw_rad, *,
+                           gradients: bool = True) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
+    """The bottom-centre pixel of the 2-D box of cuboids standing on the ground, and its derivative.
+
+    Parameters
+    ----------
+    camera : Camera (a parametric model: ``params``, ``lens_domain``)
+    centre_xy_m : (..., 2)   footprint centres, frame W, metres
+    sizes_m : (..., 3)       length (along the yaw), width, height, metres
+    yaw_rad : (...)          yaw, radians counter-clockwise from W's x axis
+
+    Returns
+    -------
+    uv_px : (..., 2)           ``((u_min + u_max) / 2, v_max)`` of the box around the 8 projected corners
+    duv_dc_px_per_m : (..., 2, 2)   its derivative w.r.t. the centre (the extreme corners held: exact where no two
+                               corners tie for an edge); None with ``gradients=False`` (a third of the work)
+    valid : (...) bool         every corner projects
+    """
+    if not gradients:
+        uv, valid = _bottom_uv(camera, np.asarray(centre_xy_m, dtype=np.float64), np.asarray(sizes_m, dtype=np.float64),
+                               np.asarray(yaw_rad, dtype=np.float64))
+        return uv, None, valid
+    E, dE_dc, _, valid = _render(camera, np.asarray(centre_xy_m, dtype=np.float64),
+                                 np.asarray(sizes_m, dtype=np.float64), np.asarray(yaw_rad, dtype=np.float64))
+    return E @ _FB.T, _FB @ dE_dc, valid
+
+
+def class_size_priors(classes, n: int, size_priors=None, unknown_class: str = "fallback"):
+    """Per object, the size prior of its class: ``(mean_m (n, 3), sigma_m (n, 3))`` (length, width, height);
+    ``size_priors``: a file, or :func:`load_size_priors`' result; unknown classes: the fallback ('other') or an
+    error naming the first (``unknown_class="error"``)."""
+    return _class_priors(classes, n, size_priors, unknown_class)

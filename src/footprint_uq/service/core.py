@@ -45,6 +45,7 @@ from ..products.v2x import J2735_POSITION_CONFIDENCE_NAMES
 from ..tracking import SharedJacobianAt, TrackerConfig, object_motion
 from ..tracking.classes import ClassTracks, tracker_configs
 from ..tracking.consistency import DEFAULT_WINDOW_S, NisMonitor, health_section
+from ..tracking.contact_slide import ContactSlide
 from ..uncertainty.ellipse import chi2_scale
 from ..uncertainty.propagation import DEFAULT_LINEAR_THRESHOLD
 from .detections import (
@@ -204,6 +205,8 @@ class CameraSetup:
     tracks_lock: threading.Lock | None = None
     #: the NIS of its tracks per class over a window (``tracks=True``; under ``tracks_lock``): docs/motion-fit.md
     nis: NisMonitor | None = None
+    #: the velocity term of 2-D boxes' sliding contact (``tracks=True``; tracking/contact_slide.py)
+    slide: ContactSlide | None = None
     #: object_id -> the messages' object id (unique per message, stable across frames; messages/ids.py)
     ids: MessageIdMap = field(default_factory=MessageIdMap)
     #: the tracker's output of the camera's latest frame (``tracks=True``; read by :attr:`Service.on_tracked`)
@@ -380,6 +383,7 @@ class Service:
                 at = SharedJacobianAt(proc.camera, proc.budget)
                 configs = tracker_configs(getattr(proc.budget, "motion", None), cfg)  # (docs/motion-fit.md)
                 setup.tracks, setup.tracks_lock = ClassTracks(*configs, rank=at.rank, shared_at=at), threading.Lock()
+                setup.slide = ContactSlide.for_camera(proc.camera)
                 if window_s:
                     setup.nis = NisMonitor(setup.tracks, window_s=window_s)
                 if warm_up:
@@ -582,7 +586,7 @@ class Service:
         ref_ms = timestamp_its_ms(ts) if self.messages else None
         est, found = self._footprints(setup, found)
         ids, classes, class_p = found.object_ids, found.classes, found.class_confidence
-        motion = self._motion(setup, est, ids, classes, ts, found.yaw_rad) if self.tracks else None
+        motion = self._motion(setup, est, ids, classes, ts, found.yaw_rad, found.family) if self.tracks else None
         if self.on_tracked is not None and motion is not None:
             self.on_tracked(camera_id, fno, ts, setup.last_tracks, est, found)
         t1 = time.perf_counter()
@@ -669,17 +673,21 @@ class Service:
         return worst, ok
 
     @staticmethod
-    def _motion(setup: CameraSetup, est, ids: list, classes: list, ts: float, yaw_rad: np.ndarray | None):
+    def _motion(setup: CameraSetup, est, ids: list, classes: list, ts: float, yaw_rad: np.ndarray | None,
+                family: str | None = None):
         """The frame's objects through the camera's tracks: ``(track_id (N,), ObjectMotion)``; ``yaw_rad``: the
-        3-D boxes' yaw (None for other boxes)."""
+        3-D boxes' yaw (None for other boxes); 2-D boxes (``family``) add their sliding contact's velocity term."""
         yaw = yaw_rad
         N = len(ids)
         B = est.centre_shared_m if est.centre_shared_m is not None else np.full((N, 2, setup.tracks.rank), np.nan)
         with setup.tracks_lock:
-            out = setup.last_tracks = setup.tracks.step(ts, ids, classes, est.centre_xy_world_m, shared_m=B,
-                                                        cov_m2=est.centre_cov_m2)
+            out = setup.tracks.step(ts, ids, classes, est.centre_xy_world_m, shared_m=B, cov_m2=est.centre_cov_m2)
             if setup.nis is not None:
                 setup.nis.observe(ts, out, classes)  # (the NIS of the step's own innovations: nothing to recompute)
+        if family == "2d" and setup.slide is not None:
+            out = setup.slide.apply(out, classes)
+        # what the CP service fuses (on_tracked): the tracks with the sliding contact's velocity term
+        setup.last_tracks = out
         return out.track_id, object_motion(out, heading_offset_deg=setup.georef.heading_offset_deg, yaw_rad=yaw)
 
     def _objects_json(self, setup: CameraSetup, est, ids: list, classes: list, ts: float = 0.0,

@@ -20,7 +20,9 @@ Written by ``footprint-uq calibrate motion`` (:mod:`footprint_uq.tracking.motion
 Entry keys (units in the names): ``accel_psd_m2ps3`` (> 0, required), ``manoeuvre_accel_psd_m2ps3`` (> 0 or
 null), ``quiet_sojourn_s`` and ``manoeuvre_sojourn_s`` (> 0), and the fit's record: ``accel_psd_ci95_m2ps3``
 (``[lo, hi]``, ``hi`` null when unbounded), ``status``, ``note``, ``n_tracks``, ``n_updates``,
-``log_likelihood_gain`` (informational, never used by the tracker).
+``log_likelihood_gain`` (informational, never used by the tracker); with a fitted IMM (``calibrate motion --modes
+imm``, :mod:`footprint_uq.tracking.imm_fit`) also ``manoeuvre_accel_psd_ci95_m2ps3``, ``quiet_sojourn_ci95_s``,
+``manoeuvre_sojourn_ci95_s`` (``[lo, hi]``, either null where not bounded within the grid; informational).
 """
 
 from __future__ import annotations
@@ -36,7 +38,10 @@ __all__ = ["parse_motion_section", "MOTION_ENTRY_KEYS", "MOTION_STATUSES"]
 _MODEL_KEYS = ("accel_psd_m2ps3", "manoeuvre_accel_psd_m2ps3", "quiet_sojourn_s", "manoeuvre_sojourn_s")
 #: keys that record the fit
 _RECORD_KEYS = ("accel_psd_ci95_m2ps3", "status", "note", "n_tracks", "n_updates", "log_likelihood_gain")
-MOTION_ENTRY_KEYS = _MODEL_KEYS + _RECORD_KEYS
+#: the fitted IMM's intervals of its other parameters (``calibrate motion --modes imm``; ``[lo, hi]``, either null
+#: where not bounded within the grid; informational)
+_IMM_CI_KEYS = ("manoeuvre_accel_psd_ci95_m2ps3", "quiet_sojourn_ci95_s", "manoeuvre_sojourn_ci95_s")
+MOTION_ENTRY_KEYS = _MODEL_KEYS + _RECORD_KEYS + _IMM_CI_KEYS
 MOTION_STATUSES = ("identified", "prior")
 
 
@@ -45,6 +50,16 @@ def _positive(where: str, key: str, value) -> float:
         return as_float(key, value, positive=True)
     except InputError:
         raise ConfigError(f"{where}.{key}", value, "a finite number > 0 (m^2/s^3 or s, as the key names)") from None
+
+
+def _bounds(where: str, key: str, ci) -> list:
+    """An interval ``[lo, hi]`` of numbers > 0, either null (not bounded within the fit's grid)."""
+    ok = isinstance(ci, list | tuple) and len(ci) == 2 and all(
+        v is None or (isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v) and v > 0)
+        for v in ci)
+    if not ok:
+        raise ConfigError(f"{where}.{key}", ci, "[lo, hi]: numbers > 0 or null (not bounded within the grid)")
+    return [None if v is None else float(v) for v in ci]
 
 
 def _entry(e, where: str) -> dict:
@@ -70,6 +85,9 @@ def _entry(e, where: str) -> dict:
         if not ok:
             raise ConfigError(f"{where}.accel_psd_ci95_m2ps3", ci, "[lo, hi] with 0 <= lo and hi a number or null")
         out["accel_psd_ci95_m2ps3"] = [float(ci[0]), None if ci[1] is None else float(ci[1])]
+    for k in _IMM_CI_KEYS:
+        if e.get(k) is not None:
+            out[k] = _bounds(where, k, e[k])
     if "status" in e:
         if e["status"] not in MOTION_STATUSES:
             raise ConfigError(f"{where}.status", e["status"], f"one of {list(MOTION_STATUSES)}")

@@ -1,0 +1,249 @@
+"""The sliding contact of 2-D boxes (issue 36, part 4; tracking/contact_slide.py, docs/motion-fit.md section 6):
+the contact's Jacobian and slide vs seeded central differences, pinned values, the size-prior term vs Monte
+Carlo, and the hooks of `objects --tracks` and `serve --tracks`."""
+
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from footprint_uq import params as P
+from footprint_uq.products.contact import class_size_priors
+from footprint_uq.tracking import TrackOutput
+from footprint_uq.tracking.contact_slide import (
+    SIZE_NODES,
+    ContactSlide,
+    contact_point,
+    slide_along_path,
+    slide_covariance,
+    slide_moments,
+    slide_moments_reference,
+    slide_velocity,
+)
+from footprint_uq.tracking.synthetic import default_camera
+
+CAM = default_camera()
+
+
+def _random_boxes(rng, n):
+    c = np.column_stack([rng.uniform(-15, 15, n), rng.uniform(18, 50, n)])
+    size = np.column_stack([rng.uniform(3.5, 12, n), rng.uniform(1.6, 2.6, n), rng.uniform(1.4, 3.5, n)])
+    return c, size, rng.uniform(-np.pi, np.pi, n)
+
+
+def test_contact_jacobian_matches_central_differences():
+    rng = np.random.default_rng(3)
+    c, size, yaw = _random_boxes(rng, 40)
+    g, J, ok = contact_point(CAM, c, size, yaw)
+    assert ok.all()
+    h = 1e-4
+    fd = np.empty_like(J)
+    for j in range(2):
+        e = np.zeros(2)
+        e[j] = h
+        fd[:, :, j] = (contact_point(CAM, c + e, size, yaw)[0] - contact_point(CAM, c - e, size, yaw)[0]) / (2 * h)
+    # (a box whose extreme corner changes within +-h has a kink there: none at these seeded points)
+    np.testing.assert_allclose(J, fd, atol=1e-6)
+    assert np.abs(J - np.eye(2)).max() > 1e-3  # the contact does not move with the centre
+
+
+def test_slide_matches_the_contacts_motion_along_the_path():
+    """u = (dg/dc - I) v equals the central difference of the rendered contact along a straight path."""
+    rng = np.random.default_rng(4)
+    c, size, _ = _random_boxes(rng, 30)
+    course = rng.uniform(-np.pi, np.pi, 30)
+    v = 10.0 * np.column_stack([np.cos(course), np.sin(course)])
+    u, ok = slide_velocity(CAM, c, v, size)
+    assert ok.all()
+    dt = 1e-5
+    g1 = contact_point(CAM, c + dt * v, size, course)[0]
+    g0 = contact_point(CAM, c - dt * v, size, course)[0]
+    np.testing.assert_allclose(u, (g1 - g0) / (2 * dt) - v, atol=1e-5)
+
+
+def test_slide_along_the_path_equals_the_closed_form():
+    """The on-line form (a central difference of the rendered contact along the path, no derivatives) equals the
+    closed form away from the kinks where an extreme corner changes."""
+    rng = np.random.default_rng(6)
+    c, size, _ = _random_boxes(rng, 50)
+    course = rng.uniform(-np.pi, np.pi, 50)
+    v = rng.uniform(1, 20, (50, 1)) * np.column_stack([np.cos(course), np.sin(course)])
+    u, ok = slide_velocity(CAM, c, v, size)
+    u2, ok2 = slide_along_path(CAM, c, v, size)
+    assert ok.all() and ok2.all()
+    np.testing.assert_allclose(u2, u, atol=2e-5)
+
+
+def test_slide_pinned_on_the_diagonal_path():
+    """The bench's diagonal path (docs/motion-fit.md, section 6) at its start: a car's contact slides at 0.991 m/s,
+    a 12 m truck's at 1.931 m/s (the bench's frame differences of the noise-free render: up to 0.97 / 1.89 m/s).
+    Hand-checked: the camera is level-rolled and looks north, so a box's lowest row is its nearest corner's
+    northing, which moves with the vehicle: the slide has no north component; it is a westward lag."""
+    v = 10.0 / np.sqrt(2.0) * np.ones((2, 2))
+    u, ok = slide_velocity(CAM, np.array([[-12.0, 20.0]] * 2), v, np.array([[4.5, 1.8, 1.5], [12.0, 2.5, 3.5]]))
+    assert ok.all()
+    np.testing.assert_allclose(u[:, 1], 0.0, atol=1e-9)
+    np.testing.assert_allclose(u[:, 0], [-0.9909, -1.9314], atol=5e-4)
+    u0, _ = slide_velocity(CAM, np.array([[-12.0, 20.0]]), np.zeros((1, 2)), np.array([[4.5, 1.8, 1.5]]))
+    np.testing.assert_allclose(u0, 0.0, atol=1e-12)  # standing: no slide
+
+
+def test_slide_covariance_is_the_size_priors_second_moment():
+    """The term over the unscented size nodes vs a seeded Monte Carlo over the size prior (car and truck), and
+    its centre: the contact of the centre it finds is the given contact (to second order)."""
+    rng = np.random.default_rng(5)
+    v = np.array([[7.07, 7.07], [7.07, 7.07]])
+    mean, sig = class_size_priors(["car", "truck"], 2)
+    c_true = np.array([[-12.0, 20.0], [-6.0, 24.0]])
+    x = contact_point(CAM, c_true, mean, np.full(2, np.pi / 4))[0]
+    M = slide_covariance(CAM, x, v, mean, sig)
+    m, M2 = slide_moments(CAM, x, v, mean, sig)
+    np.testing.assert_array_equal(M, M2)
+    for i in range(2):
+        sizes = mean[i] + rng.standard_normal((20000, 3)) * sig[i]
+        u, ok = slide_velocity(CAM, np.repeat(c_true[i:i + 1], 20000, 0), np.repeat(v[i:i + 1], 20000, 0), sizes)
+        mc = np.einsum("ki,kj->ij", u[ok], u[ok]) / ok.sum()
+        np.testing.assert_allclose(M[i], mc, rtol=0.05, atol=1e-3)
+        np.testing.assert_allclose(m[i], u[ok].mean(0), rtol=0.03, atol=1e-3)
+    # zero spread: the term is u u^T of the prior's mean size at the centre
+    M0 = slide_covariance(CAM, x, v, mean, np.zeros_like(sig))
+    u, _ = slide_velocity(CAM, c_true, v, mean)
+    np.testing.assert_allclose(M0, np.einsum("ni,nj->nij", u, u), rtol=2e-3, atol=1e-6)
+    assert SIZE_NODES.shape == (6, 3)
+
+
+def _camera_with(**changes):
+    """The default camera with parameters changed by name (a lens, skew, a sloped ground: every branch of the
+    compiled term)."""
+    cam = copy.copy(CAM)
+    p = np.array(CAM.params, dtype=np.float64)
+    for name, value in changes.items():
+        p[P.PARAM_NAMES.index(name)] = value
+    cam.params = p
+    return cam
+
+
+CAMERAS = {"plain": CAM, "lens, skew, sloped ground": _camera_with(k1=-0.12, k2=0.03, p1=4e-4, skew_px=1.5,
+                                                                     ground_slope_x=0.03, ground_slope_y=-0.02,
+                                                                     ground_dz_m=0.2, roll_rad=0.04)}
+CLASSES = ["car", "truck", "bus", "pedestrian", "cyclist", "van", None, "no such class"]
+
+
+@settings(max_examples=40, deadline=None, derandomize=True)
+@given(st.sampled_from(sorted(CAMERAS)), st.integers(1, 6), st.integers(0, 2**32 - 1))
+def test_compiled_moments_equal_the_closed_form(camera, n, seed):
+    """The compiled term (fast/slide_kernels) equals the numpy closed form to rounding over positions, velocities
+    and classes (seeded Hypothesis sweep; a lens, skew and a sloped ground take the kernel's other branches).  (The
+    central difference along the path differs from both where an extreme corner changes within its step: checked
+    away from such kinks in test_slide_along_the_path_equals_the_closed_form.)"""
+    cam = CAMERAS[camera]
+    rng = np.random.default_rng(seed)
+    xy = np.column_stack([rng.uniform(-15, 15, n), rng.uniform(15, 60, n)])
+    course, speed = rng.uniform(-np.pi, np.pi, n), rng.uniform(0.0, 25.0, n)
+    v = speed[:, None] * np.column_stack([np.cos(course), np.sin(course)])
+    mean, sig = class_size_priors([CLASSES[i] or "" for i in rng.integers(0, len(CLASSES), n)], n)
+    m, M = slide_moments(cam, xy, v, mean, sig)
+    mr, Mr = slide_moments_reference(cam, xy, v, mean, sig)
+    assert np.isfinite(M).all() and np.isfinite(m).all()
+    scale = np.abs(Mr).max((1, 2))[:, None, None]
+    np.testing.assert_allclose(M, Mr, rtol=0, atol=1e-9 * scale.max() + 1e-13)
+    np.testing.assert_allclose(m, mr, rtol=0, atol=1e-9 * np.sqrt(scale.max()) + 1e-12)
+
+
+def test_compiled_moments_nan_where_nothing_renders():
+    """A contact behind the camera (its box does not render) or without a velocity: NaN, the other rows
+    unchanged."""
+    xy = np.array([[0.0, 30.0], [0.0, -30.0], [0.0, 30.0]])
+    v = np.array([[5.0, 5.0], [5.0, 5.0], [np.nan, np.nan]])
+    mean, sig = class_size_priors(["car"] * 3, 3)
+    m, M = slide_moments(CAM, xy, v, mean, sig)
+    assert np.isfinite(M[0]).all() and np.isnan(M[1:]).all() and np.isnan(m[1:]).all()
+    np.testing.assert_array_equal(M[0], slide_moments(CAM, xy[:1], v[:1], mean[:1], sig[:1])[1][0])
+
+
+def _output(xy, v):
+    n = xy.shape[0]
+    out = TrackOutput.untracked(n)
+    out.track_id[:] = np.arange(n)
+    out.xy_m[:], out.v_mps[:] = xy, v
+    out.cov_v_m2ps2[:] = 0.04 * np.eye(2)
+    return out
+
+
+def test_apply_adds_the_term_where_a_velocity_is_reported():
+    slide = ContactSlide(CAM)
+    xy = np.array([[-12.0, 18.0], [-12.0, 18.0], [-12.0, 18.0], [0.0, 30.0]])
+    v = np.array([[7.0, 7.0], [7.0, 7.0], [7.0, 7.0], [np.nan, np.nan]])
+    out = slide.apply(_output(xy, v), ["truck", "car", None, "car"])
+    extra = out.cov_v_m2ps2 - 0.04 * np.eye(2)
+    assert extra[0, 0, 0] > extra[1, 0, 0] > 0.1  # a truck slides more than a car
+    assert 0 < extra[2, 0, 0] < extra[1, 0, 0]  # no class: the fallback prior (2 +- 1.5 m)
+    assert (extra[3] == 0).all()  # no velocity: untouched
+    assert np.all(np.linalg.eigvalsh(extra[:3]) >= -1e-12)
+
+
+def test_for_camera_refuses_a_camera_that_cannot_render_a_box():
+    class Flat:  # a camera without the parametric model (as a homography camera)
+        pass
+
+    assert ContactSlide.for_camera(Flat()) is None
+    assert isinstance(ContactSlide.for_camera(CAM), ContactSlide)
+
+
+def _boxes_of_a_diagonal_truck(n_frames=45):
+    """2-D boxes of a 12 m truck driving diagonally past the default camera (bench/contact_velocity_bias.py)."""
+    from footprint_uq.cameras import general
+
+    t = np.arange(n_frames) / 30.0
+    v = 10.0 / np.sqrt(2.0) * np.ones(2)
+    centre = np.array([-12.0, 20.0]) + t[:, None] * v
+    c, s = np.cos(np.pi / 4), np.sin(np.pi / 4)
+    dx, dy = np.array([1, 1, -1, -1]) * 6.0, np.array([1, -1, -1, 1]) * 1.25
+    pts = np.zeros((n_frames, 8, 3))
+    for k, z in enumerate((0.0, 3.5)):
+        pts[:, 4 * k:4 * k + 4, 0] = centre[:, :1] + c * dx - s * dy
+        pts[:, 4 * k:4 * k + 4, 1] = centre[:, 1:] + s * dx + c * dy
+        pts[:, 4 * k:4 * k + 4, 2] = z
+    uv = general.project(CAM.params, pts.reshape(-1, 3), domain=CAM.lens_domain).uv_px.reshape(n_frames, 8, 2)
+    return t, np.column_stack([uv[..., 0].min(1), uv[..., 1].min(1), uv[..., 0].max(1), uv[..., 1].max(1)])
+
+
+@pytest.mark.parametrize("where", ["service", "batch"])
+def test_tracks_of_2d_boxes_carry_the_term(where, monkeypatch):
+    """`serve --tracks` and `objects --tracks` report the velocity sigma with the term (larger than without it);
+    3-D boxes never get it."""
+    from footprint_uq.tracking import contact_slide
+
+    t, boxes = _boxes_of_a_diagonal_truck()
+
+    def sigma(with_term: bool) -> float:
+        if not with_term:
+            monkeypatch.setattr(contact_slide.ContactSlide, "for_camera", classmethod(lambda cls, cam, sp=None: None))
+        else:
+            monkeypatch.undo()
+        if where == "service":
+            from footprint_uq.service.core import Service
+
+            svc = Service(CAM, "basler1@deg", camera_id="cam1", tracks=True, messages=False)
+            rec = None
+            for k, (tk, b) in enumerate(zip(t, boxes, strict=True)):
+                rec = svc.process_frame({"camera_id": "cam1", "frame": k, "timestamp_s": float(tk), "detections": [
+                    {"object_id": 1, "class": "truck", **dict(zip(("u_min_px", "v_min_px", "u_max_px", "v_max_px"),
+                                                                  map(float, b), strict=True))}]})
+            return float(rec["objects"][0]["sigma_speed_mps"])
+        import pyarrow as pa
+
+        from footprint_uq.batch.process import process_table
+
+        tab = pa.table({"timestamp_s": t, "object_id": ["a"] * len(t), "class": ["truck"] * len(t),
+                        "u_min_px": boxes[:, 0], "v_min_px": boxes[:, 1], "u_max_px": boxes[:, 2],
+                        "v_max_px": boxes[:, 3]})
+        out = process_table(CAM, "basler1@deg", tab, tracks=True)
+        return float(out.column("sigma_speed_mps").to_numpy()[-1])
+
+    without, with_term = sigma(False), sigma(True)
+    assert with_term > 1.1 * without, (without, with_term)
