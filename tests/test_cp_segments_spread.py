@@ -151,7 +151,7 @@ def test_serve_start_check_accepts_the_default_and_refuses_only_what_cannot_work
             assert str(e).startswith("--cpm-max-bytes: got") and "\n" not in str(e)
             lo = mid + 1
     assert lo < 400
-    with pytest.raises(InputError, match="--cpm-max-bytes.*camera"):
+    with pytest.raises(InputError, match="--cpm-max-bytes.*sensor"):
         _check_room(cp_cams, CpServeOptions(cpm_max_bytes=lo - 1), 7, "2.2.1", 0.0)
     srs = [sensor_region(c.sensor_id, c.region, (0.0, 0.0)) for c in cp_cams]
     rules = CpRules(max_size_bytes=lo)

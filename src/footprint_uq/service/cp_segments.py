@@ -308,7 +308,7 @@ def sensor_groups(regions: list[SensorRegion], skeleton, *, cdd: str, max_size_b
             need = -(-(bits + reserve_bits) // 8)
             raise InputError("max_size_bytes", max_size_bytes,
                              f"at least {need} bytes: a segment with the Sensor Information and Perception Region "
-                             f"entries of camera {regions[start].sensor_id} and an object of "
+                             f"entries of sensor {regions[start].sensor_id} and an object of "
                              f"{-(-reserve_bits // 8)} bytes")
         groups.append(np.arange(start, stop))
         start = stop
