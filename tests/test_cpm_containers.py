@@ -332,21 +332,23 @@ def test_bad_inputs_name_the_field():
 
 
 @settings(max_examples=20, deadline=None, derandomize=True)
-@given(n=st.integers(0, 400), max_size=st.integers(300, 1500), due=st.booleans(), seed=st.integers(0, 2 ** 32 - 1))
-def test_segments_hold_every_object_once_within_the_size(n, max_size, due, seed):
+@given(n=st.integers(0, 400), max_size=st.integers(300, 1500), due=st.booleans(), seed=st.integers(0, 2 ** 32 - 1),
+       n_cams=st.integers(1, 8))
+def test_segments_hold_every_object_once_within_the_size(n, max_size, due, seed, n_cams):
     """Over object counts and size limits: every segment <= the limit and a CPM that decodes (the subset) to its
     objects, in order; objects beyond 8 segments returned; the sensor containers, when due, spread over the first
     segments camera by camera (each camera once), and only there."""
     rng = np.random.default_rng(seed)
     objs = _event_objects(rng, n, "2.2.1")
-    srs = [SensorRegion(k, _polygon(rng, False)) for k in range(3)]
+    srs = [SensorRegion(k, _polygon(rng, False)) for k in range(n_cams)]
     clock = GenerationClock(CpRules(max_size_bytes=max_size))
     if not due:
         clock.sent(-0.5, sensor_info=True)
     ev = event_segments(3, REF_MS, objs, srs, clock, 0.0, number_of_perceived_objects=n)
     assert ev.sensor_information == due
     # when due, every camera's entries once over the segments (in camera order); the first segment has some
-    assert np.array_equal(np.concatenate([np.zeros(0, np.int64), *ev.sensor_segments]), np.arange(3 if due else 0))
+    assert np.array_equal(np.concatenate([np.zeros(0, np.int64), *ev.sensor_segments]),
+                          np.arange(n_cams if due else 0))
     assert not due or len(ev.sensor_segments[0]) > 0
     assert np.array_equal(np.concatenate([*ev.segments, ev.not_sent]), np.arange(n))
     assert len(ev.payloads) <= 8 and (len(ev.not_sent) == 0 or len(ev.payloads) == 8)
