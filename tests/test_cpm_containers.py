@@ -13,6 +13,8 @@ compiles them), for each CDD release.
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, example, given, settings
@@ -376,7 +378,13 @@ def test_sensor_containers_that_cannot_fit_are_refused_in_one_line():
     assert len([g for g in ev.sensor_segments if len(g)]) > 1 and all(len(p) <= 300 for p in ev.payloads)
     big = [SensorRegion(k, np.array([[30000 * np.cos(a), 30000 * np.sin(a)] for a in np.arange(16) * np.pi / 8],
                                     dtype=np.int64)) for k in range(40)]
-    for regions, limit, words in ((big[:1], 120, "entries of sensor 0 and an object"), (big, 300, "in 8 segments")):
+    not_due = GenerationClock(CpRules(max_size_bytes=64))  # containers not due: a header and a 120-sensor object
+    not_due.sent(-0.5, sensor_info=True)
+    wide = dataclasses.replace(objs.take(np.arange(1)), sensor_ids=[list(range(120))])
+    for regions, clock, words in ((big[:1], GenerationClock(CpRules(max_size_bytes=120)),
+                                   "entries of sensor 0 and an object"),
+                                  (big, GenerationClock(CpRules(max_size_bytes=300)), "in 8 segments"),
+                                  (big, not_due, r"header \(\d+ bytes\) and its largest object")):
         with pytest.raises(InputError, match=f"max_size_bytes.*{words}") as e:
-            event_segments(1, REF_MS, objs, regions, GenerationClock(CpRules(max_size_bytes=limit)), 0.0)
+            event_segments(1, REF_MS, objs if clock is not not_due else wide, regions, clock, 0.0)
         assert "\n" not in str(e.value)

@@ -319,6 +319,11 @@ def _plan(bits: np.ndarray, heads: list[int], max_size_bytes: int, n_groups: int
     """:func:`~.cp_rules.plan_segments` in bits: segment ``k`` with header ``heads[k]`` (the last value for the
     segments beyond), then empty segments up to ``n_groups`` (every group of cameras gets its segment, with or
     without objects)."""
+    largest = int(np.max(bits, initial=0))
+    if heads[-1] + largest > 8 * max_size_bytes:
+        raise InputError("max_size_bytes", max_size_bytes,
+                         f"room for a segment's header ({-(-heads[-1] // 8)} bytes) and its largest object "
+                         f"({-(-largest // 8)} bytes)")
     segments, not_sent = plan_segments(bits, header_bytes=heads, max_size_bytes=8 * max_size_bytes,
                                        max_segments=MAX_SEGMENTS)
     if not len(bits):
