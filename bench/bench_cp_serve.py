@@ -13,8 +13,9 @@ centre = the ground contact point + 1 px of noise, class and confidence), every 
 publish time the frame gets ``timestamp_s`` = the publish time (the same clock as the receiver's).
 
 Two runs in one invocation, the same frames: ``serve --registry R --tracks --cp-service --mqtt ... --output mqtt
---no-per-camera-output`` and, the reference, the same without the CP service (``serve --registry R --tracks``: every
-camera frame's record, as before issue 32).  The 8 cameras' frames are published synchronised (one burst every
+--no-per-camera-output`` (serve's default ``--cpm-max-bytes``, 1,100 bytes, unless ``--cpm-max-bytes`` is given)
+and, the reference, the same without the CP service (``serve --registry R --tracks``: every camera frame's record,
+as before issue 32).  The 8 cameras' frames are published synchronised (one burst every
 1/30 s); a receiver in a process of its own takes every message on ``footprints/#``.  Measured:
 
 * ``serve_cpu_s_per_traffic_s``: CPU seconds of the service process (all threads, ``/proc``) per second of traffic;
@@ -56,9 +57,10 @@ HERE = Path(__file__).resolve().parent
 RATE_HZ = 30.0
 N_CAMERAS = 8
 N_OBJECTS = 100
-#: the CPM size limit of the runs: the default 1,100 bytes cannot hold the first segment of 8 cameras (their Sensor
-#: Information and Perception Region containers take 1,119 bytes; serve refuses to start with it)
-CPM_MAX_BYTES = 1300
+#: the CPM size limit of the runs: None = serve's default (1,100 bytes).  The 8 cameras' Sensor Information and
+#: Perception Region entries (1,119 bytes together) no longer fit one segment: an event spreads them over its first
+#: segments (docs/service.md, "Segmentation"); before that, the bench needed --cpm-max-bytes 1300
+CPM_MAX_BYTES = None
 
 
 def site() -> list:
@@ -161,7 +163,8 @@ def write_site(folder: Path, cams: list) -> Path:
     return folder / "registry.csv"
 
 
-def measure(seconds: float, *, cp: bool, bodies: list, reg_dir: Path, cpm_max_bytes: int = CPM_MAX_BYTES) -> dict:
+def measure(seconds: float, *, cp: bool, bodies: list, reg_dir: Path,
+            cpm_max_bytes: int | None = CPM_MAX_BYTES) -> dict:
     """One run (module doc): the CP service (``cp``) or the reference; ``bodies`` from :func:`frame_bodies`."""
     import paho.mqtt.client as mqtt
 
@@ -175,7 +178,9 @@ def measure(seconds: float, *, cp: bool, bodies: list, reg_dir: Path, cpm_max_by
     args = ["--registry", str(reg_dir / "registry.csv"), "--tracks", "--mqtt", f"mqtt://127.0.0.1:{port}",
             "--output", "mqtt", "--client-id", "bench-cp"]
     if cp:
-        args += ["--cp-service", "--no-per-camera-output", "--cpm-max-bytes", str(cpm_max_bytes)]
+        args += ["--cp-service", "--no-per-camera-output"]
+        if cpm_max_bytes is not None:
+            args += ["--cpm-max-bytes", str(cpm_max_bytes)]
     serve = rx = None
     load_start = os.getloadavg()
     n_frames = min(len(bodies), int(round(seconds * RATE_HZ)))
@@ -383,6 +388,8 @@ def main(argv=None) -> int:
     ap.add_argument("--seconds", type=float, default=40.0)
     ap.add_argument("--quick", action="store_true", help="5 s instead of --seconds")
     ap.add_argument("--no-reference", action="store_true", help="skip the run without --cp-service")
+    ap.add_argument("--cpm-max-bytes", type=int, default=CPM_MAX_BYTES,
+                    help="serve's --cpm-max-bytes (default: not given, serve's default 1,100 bytes)")
     ap.add_argument("--json", type=Path, default=None,
                     help="where to write the results (default bench/results/cp-serve-<date>.json)")
     args = ap.parse_args(argv)
@@ -394,7 +401,8 @@ def main(argv=None) -> int:
     n_det = [len(orjson.loads(b)) for row in bodies[:30] for b in row]
     with tempfile.TemporaryDirectory(prefix="bench_cp_site_") as d:
         write_site(Path(d), cams)
-        runs = {"cp_service": measure(seconds, cp=True, bodies=bodies, reg_dir=Path(d))}
+        runs = {"cp_service": measure(seconds, cp=True, bodies=bodies, reg_dir=Path(d),
+                                      cpm_max_bytes=args.cpm_max_bytes)}
         if not args.no_reference:
             runs["reference_without_cp_service"] = measure(seconds, cp=False, bodies=bodies, reg_dir=Path(d))
     for r in runs.values():

@@ -114,6 +114,35 @@ def test_segments_hold_every_object_once_each_within_the_size(sizes, limit, head
             assert header + s[a].sum() + s[b[0]] > limit
 
 
+@settings(max_examples=80, deadline=None, derandomize=True)
+@given(sizes=st.lists(st.integers(1, 300), max_size=120), limit=st.integers(400, 1400),
+       heads=st.lists(st.integers(20, 1000), min_size=1, max_size=4), plain=st.integers(20, 90))
+def test_segments_with_their_own_headers(sizes, limit, heads, plain):
+    """A header per segment (the first ones carry the cameras' containers): each segment within the limit with its
+    own header, every object once in order, a segment ends only where the next object would not fit its room."""
+    header = [min(h, limit) for h in heads] + [plain]
+    segs, not_sent = plan_segments(sizes, header_bytes=header, max_size_bytes=limit)
+    flat = np.concatenate(segs + [not_sent])
+    assert flat.tolist() == list(range(len(sizes)))
+    assert 1 <= len(segs) <= MAX_SEGMENTS and (len(not_sent) == 0 or len(segs) == MAX_SEGMENTS)
+    s = np.asarray(sizes, dtype=int)
+    head = [header[min(k, len(header) - 1)] for k in range(len(segs))]
+    for k, seg in enumerate(segs):
+        assert head[k] + s[seg].sum() <= limit
+        if k + 1 < len(segs) and len(segs[k + 1]):
+            assert head[k] + s[seg].sum() + s[segs[k + 1][0]] > limit
+
+
+def test_a_full_first_header_sends_the_objects_on_pinned():
+    # room 100, 10, 100, then 900 - 100 = 800: the 60-byte object skips the second segment (left empty)
+    segs, not_sent = plan_segments([50, 40, 60, 500], header_bytes=[800, 890, 800, 100], max_size_bytes=900)
+    assert [g.tolist() for g in segs] == [[0, 1], [], [2], [3]] and len(not_sent) == 0
+    # an object that fits no room left to it (in order) is named, never dropped
+    with pytest.raises(InputError, match=r"object_bytes\[1\]"):
+        plan_segments([50, 850], header_bytes=[10, 100], max_size_bytes=900)
+    assert [g.tolist() for g in plan_segments([850, 10], header_bytes=[10, 100], max_size_bytes=900)[0]] == [[0, 1]]
+
+
 def test_an_object_larger_than_a_segment_is_named():
     with pytest.raises(InputError, match=r"object_bytes\[2\]"):
         plan_segments([10, 10, 2000], header_bytes=50, max_size_bytes=1100)

@@ -99,7 +99,7 @@ _REG = ["--registry", "registry.csv", "--input", "-"]
     ([*_REG, "--tracks", "--cp-service", "--region-max-semi-major-m", "nan"], "--region-max-semi-major-m"),
     ([*_REG, "--tracks", "--cp-service", "--region-max-semi-major-m", "0"], "--region-max-semi-major-m"),
     ([*_REG, "--tracks", "--cp-service", "--cpm-max-bytes", "10"], "--cpm-max-bytes"),
-    ([*_REG, "--tracks", "--cp-service", "--cpm-max-bytes", "300"], "Sensor Information"),  # 3 regions: ~470 B
+    ([*_REG, "--tracks", "--cp-service", "--cpm-max-bytes", "150"], "Sensor Information"),  # one camera + object: 213 B
     (["--registry", "registry.csv", "--mqtt", "mqtt://127.0.0.1:9", "--tracks", "--cp-service", "--workers", "2"],
      "--workers"),
     (["--registry", "nopose.csv", "--input", "-", "--tracks", "--cp-service"], "pose"),

@@ -13,6 +13,8 @@ compiles them), for each CDD release.
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, example, given, settings
@@ -332,34 +334,57 @@ def test_bad_inputs_name_the_field():
 
 
 @settings(max_examples=20, deadline=None, derandomize=True)
-@given(n=st.integers(0, 400), max_size=st.integers(300, 1500), due=st.booleans(), seed=st.integers(0, 2 ** 32 - 1))
-def test_segments_hold_every_object_once_within_the_size(n, max_size, due, seed):
+@given(n=st.integers(0, 400), max_size=st.integers(300, 1500), due=st.booleans(), seed=st.integers(0, 2 ** 32 - 1),
+       n_cams=st.integers(1, 8))
+def test_segments_hold_every_object_once_within_the_size(n, max_size, due, seed, n_cams):
     """Over object counts and size limits: every segment <= the limit and a CPM that decodes (the subset) to its
-    objects, in order; objects beyond 8 segments returned; the sensor containers only in the first segment."""
+    objects, in order; objects beyond 8 segments returned; the sensor containers, when due, spread over the first
+    segments camera by camera (each camera once), and only there."""
     rng = np.random.default_rng(seed)
     objs = _event_objects(rng, n, "2.2.1")
-    srs = [SensorRegion(k, _polygon(rng, False)) for k in range(3)]
+    srs = [SensorRegion(k, _polygon(rng, False)) for k in range(n_cams)]
     clock = GenerationClock(CpRules(max_size_bytes=max_size))
     if not due:
         clock.sent(-0.5, sensor_info=True)
     ev = event_segments(3, REF_MS, objs, srs, clock, 0.0, number_of_perceived_objects=n)
     assert ev.sensor_information == due
+    # when due, every camera's entries once over the segments (in camera order); the first segment has some
+    assert np.array_equal(np.concatenate([np.zeros(0, np.int64), *ev.sensor_segments]),
+                          np.arange(n_cams if due else 0))
+    assert not due or len(ev.sensor_segments[0]) > 0
     assert np.array_equal(np.concatenate([*ev.segments, ev.not_sent]), np.arange(n))
     assert len(ev.payloads) <= 8 and (len(ev.not_sent) == 0 or len(ev.payloads) == 8)
     for k, (payload, idx) in enumerate(zip(ev.payloads, ev.segments, strict=True)):
         assert len(payload) <= max_size
         cpm = decode_cpm_uper(payload, "2.2.1")
         ids = [c["containerId"] for c in cpm["payload"]["cpmContainers"]]
-        assert ids == ([2, 3, 4, 5] if k == 0 and due else [2, 5])
+        cams = ev.sensor_segments[k].tolist()
+        assert ids == ([2, 3, 4, 5] if cams else [2, 5])
+        if cams:
+            assert [e["sensorId"] for e in cpm["payload"]["cpmContainers"][1]["containerData"]] == cams
         pos = cpm["payload"]["cpmContainers"][-1]["containerData"]["perceivedObjects"]
         assert [p["objectId"] for p in pos] == objs.object_id[idx].tolist()
         seg = cpm["payload"]["managementContainer"].get("segmentationInfo")
         assert seg == (None if len(ev.payloads) == 1 else {"totalMsgNo": len(ev.payloads), "thisMsgNo": k + 1})
 
 
-def test_sensor_containers_too_large_for_a_segment_are_refused_in_one_line():
+def test_sensor_containers_that_cannot_fit_are_refused_in_one_line():
+    """Twelve cameras at 300 bytes spread over the segments (no error); one camera's entries and an object that do
+    not fit one segment, or cameras that need more than 8 segments, are refused in one line naming the limit."""
     rng = np.random.default_rng(6)
     srs = [SensorRegion(k, _polygon(rng, False)) for k in range(12)]
-    with pytest.raises(InputError, match="max_size_bytes.*Sensor Information"):
-        event_segments(1, REF_MS, _event_objects(rng, 5, "2.2.1"), srs, GenerationClock(CpRules(max_size_bytes=300)),
-                       0.0)
+    objs = _event_objects(rng, 5, "2.2.1")
+    ev = event_segments(1, REF_MS, objs, srs, GenerationClock(CpRules(max_size_bytes=300)), 0.0)
+    assert len([g for g in ev.sensor_segments if len(g)]) > 1 and all(len(p) <= 300 for p in ev.payloads)
+    big = [SensorRegion(k, np.array([[30000 * np.cos(a), 30000 * np.sin(a)] for a in np.arange(16) * np.pi / 8],
+                                    dtype=np.int64)) for k in range(40)]
+    not_due = GenerationClock(CpRules(max_size_bytes=64))  # containers not due: a header and a 120-sensor object
+    not_due.sent(-0.5, sensor_info=True)
+    wide = dataclasses.replace(objs.take(np.arange(1)), sensor_ids=[list(range(120))])
+    for regions, clock, words in ((big[:1], GenerationClock(CpRules(max_size_bytes=120)),
+                                   "entries of sensor 0 and an object"),
+                                  (big, GenerationClock(CpRules(max_size_bytes=300)), "in 8 segments"),
+                                  (big, not_due, r"header \(\d+ bytes\) and its largest object")):
+        with pytest.raises(InputError, match=f"max_size_bytes.*{words}") as e:
+            event_segments(1, REF_MS, objs if clock is not not_due else wide, regions, clock, 0.0)
+        assert "\n" not in str(e.value)

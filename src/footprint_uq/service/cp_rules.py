@@ -232,7 +232,7 @@ class InclusionMemory:
         return len(self._ids)
 
 
-def plan_segments(object_bytes, *, header_bytes: int, max_size_bytes: int = 1100,
+def plan_segments(object_bytes, *, header_bytes, max_size_bytes: int = 1100,
                   max_segments: int = MAX_SEGMENTS) -> tuple[list[np.ndarray], np.ndarray]:
     """Split objects into CPM segments of at most ``max_size_bytes`` each, in their order.
 
@@ -240,27 +240,34 @@ def plan_segments(object_bytes, *, header_bytes: int, max_size_bytes: int = 1100
     ----------
     object_bytes : array_like of int (n,)
         The encoded size of every object (bytes, upper bound: its bits rounded up).
-    header_bytes : int
-        The size of a segment without objects (header, management container, the containers every segment
-        carries; upper bound).
+    header_bytes : int or sequence of int
+        The size of a segment without objects (header, management container, the containers the segment carries;
+        upper bound): one value for every segment, or one per segment (segment ``k`` uses ``header_bytes[k]``, the
+        segments beyond the sequence its last value) -- the segments that carry the cameras' containers have larger
+        headers than the others.
 
     Returns
     -------
     segments : list of int arrays
         The object indices of each segment (consecutive, each object in exactly one), at most ``max_segments``;
-        one empty segment when there are no objects.
+        one empty segment when there are no objects.  An object that does not fit the room left in a segment
+        starts the next one (a segment with a large header may stay without objects).
     not_sent : int array
         The indices of objects beyond ``max_segments`` full segments (counted by the caller, sent at the next
-        event).  An object larger than a segment's room on its own raises :class:`InputError`.
+        event).  An object larger than the room of an empty segment raises :class:`InputError`.
     """
     sizes = np.asarray(object_bytes, dtype=np.int64).reshape(-1)
-    room = int(max_size_bytes) - int(header_bytes)
-    if np.any(sizes > room):
-        i = int(np.argmax(sizes > room))
-        raise InputError(f"object_bytes[{i}]", int(sizes[i]), f"an object that fits a segment ({room} bytes)")
+    heads = np.atleast_1d(np.asarray(header_bytes, dtype=np.int64)).tolist()
+    rooms = [int(max_size_bytes) - h for h in heads]
+    room_last = rooms[-1]
+    if np.any(sizes > max(rooms)):
+        i = int(np.argmax(sizes > max(rooms)))
+        raise InputError(f"object_bytes[{i}]", int(sizes[i]), f"an object that fits a segment ({max(rooms)} bytes)")
     segments, start, used = [], 0, 0
     for i, s in enumerate(sizes.tolist()):
-        if used + s > room:
+        while used + s > (rooms[len(segments)] if len(segments) < len(rooms) else room_last):
+            if used == 0 and len(segments) >= len(rooms) - 1:
+                raise InputError(f"object_bytes[{i}]", s, f"an object that fits a segment ({room_last} bytes)")
             segments.append(np.arange(start, i))
             if len(segments) == max_segments:
                 return segments, np.arange(i, len(sizes))

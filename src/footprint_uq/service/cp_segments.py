@@ -15,8 +15,12 @@ and the cameras' perception regions (:class:`SensorRegion`), and writes the even
   ``not_sent`` (the caller counts them; they stay due at the next event);
 * the Sensor Information container (one ``SensorInformation`` per camera: ``sensorType`` monovideo, the region's
   polygon, ``perceptionRegionConfidence``, ``shadowingApplies``) and the Perception Region container (the same
-  polygons, ``sensorIdList`` = the camera) go into the **first** segment when the
-  :class:`~footprint_uq.service.cp_rules.GenerationClock` says they are due (at least once a second);
+  polygons, ``sensorIdList`` = the camera) go with an event when the
+  :class:`~footprint_uq.service.cp_rules.GenerationClock` says they are due (at least once a second): whole in the
+  **first** segment when every camera's entries fit there with room for the event's largest object; otherwise
+  spread over the first segments, camera by camera (:func:`sensor_groups`: a camera's two entries always in the
+  same segment, each segment's two containers listing the cameras of that segment), the objects filling the room
+  left.  The polygons are never cut for size: each is the region's own (<= 16 vertices, already conservative);
 * at an event with no objects a CPM is written only when ``T_GenCpmMax`` has passed since the last one
   (:meth:`~footprint_uq.service.cp_rules.GenerationClock.must_send`); the event is recorded on the clock.
 
@@ -27,7 +31,7 @@ available to us, so the rule is ours and is documented in docs/service.md ("The 
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -53,7 +57,7 @@ from .messages.uper_cpm import (
 )
 
 __all__ = ["object_perception_quality", "QUALITY_AGE_FULL_S", "CpmObjectColumns", "SensorRegion", "sensor_region",
-           "EventSegments", "event_segments"]
+           "EventSegments", "event_segments", "sensor_groups"]
 
 #: the age (s) from which an object's age no longer lowers its quality (the CDD's ``objectAge`` note: "1500
 #: indicates that the object has been observed for more than 1.5 s")
@@ -220,18 +224,22 @@ class EventSegments:
     not_sent : int array
         Objects beyond 8 full segments (not sent at this event).
     sensor_information : bool
-        Whether the first segment carries the Sensor Information and Perception Region containers.
+        Whether the event carries the Sensor Information and Perception Region containers.
+    sensor_segments : list of int arrays
+        The cameras (indices into the event's regions) whose Sensor Information and Perception Region entries each
+        segment carries (:func:`sensor_groups`; empty arrays when the containers are not due).
     """
 
     payloads: list
     segments: list
     not_sent: np.ndarray
     sensor_information: bool
+    sensor_segments: list = field(default_factory=list)
 
 
-def _sensor_containers(regions: list[SensorRegion]) -> tuple[list[dict], list[dict] | None]:
-    """The Sensor Information entries (one per camera) and the Perception Region entries (one per camera with a
-    region; None when no camera has one: the container is left out)."""
+def _sensor_containers(regions: list[SensorRegion]) -> tuple[list[dict], list[dict | None]]:
+    """The Sensor Information entry of every camera and its Perception Region entry (None for a camera without a
+    region: it has none)."""
     if not regions:
         raise InputError("regions", 0, "at least one camera (the Sensor Information container needs one)")
     if len({r.sensor_id for r in regions}) != len(regions):
@@ -239,27 +247,89 @@ def _sensor_containers(regions: list[SensorRegion]) -> tuple[list[dict], list[di
     shapes = [r.shape() for r in regions]
     info = [sensor_information(r.sensor_id, sh, None if sh is None else r.confidence_pct, r.shadowing_applies,
                                r.sensor_type) for r, sh in zip(regions, shapes, strict=True)]
-    pr = [perception_region_entry(sh, r.confidence_pct, r.shadowing_applies, sensor_ids=[r.sensor_id])
-          for r, sh in zip(regions, shapes, strict=True) if sh is not None]
-    return info, (pr or None)
+    pr = [None if sh is None else perception_region_entry(sh, r.confidence_pct, r.shadowing_applies,
+                                                          sensor_ids=[r.sensor_id])
+          for r, sh in zip(regions, shapes, strict=True)]
+    return info, pr
 
 
-def _plan(bits: np.ndarray, skeletons: list[dict], cdd: str, max_size_bytes: int):
-    """:func:`~.cp_rules.plan_segments` in bits: the first segment with its own (larger) skeleton, the others with
-    the second.  A segment's bits: the message with an empty object container (3 octets: 18 bits), less those 3
-    octets, plus the container's 18 bits, its objects, its padding (<= 7) and a longer length determinant (<= 8)."""
-    head = [8 * len(encode_cpm_uper_fast(s, cdd=cdd)) - 24 + 18 + 7 + 8 for s in skeletons]
+def _group_containers(info: list[dict], pr: list[dict | None], group) -> tuple[list[dict] | None, list[dict] | None]:
+    """The two containers' entries of the cameras ``group`` (None: the container is left out)."""
+    if group is None or len(group) == 0:
+        return None, None
+    regions = [pr[i] for i in group if pr[i] is not None]
+    return [info[i] for i in group], (regions or None)
+
+
+def _head_bits(skeleton: dict, cdd: str) -> int:
+    """A segment's bits without objects, as an upper bound: the message with an empty object container
+    (3 octets: 18 bits), less those 3 octets, plus the container's 18 bits, its padding (<= 7) and a longer
+    length determinant (<= 8)."""
+    return 8 * len(encode_cpm_uper_fast(skeleton, cdd=cdd)) - 24 + 18 + 7 + 8
+
+
+def sensor_groups(regions: list[SensorRegion], skeleton, *, cdd: str, max_size_bytes: int,
+                  reserve_bits: int = 0) -> list[np.ndarray]:
+    """Which cameras' Sensor Information and Perception Region entries go into which of an event's segments.
+
+    The cameras, in their order, fill consecutive segments: a segment takes cameras while its encoded size
+    without objects (``skeleton(k, info, regions)``: the CPM of segment ``k`` with those containers, segmentation
+    info included) plus ``reserve_bits`` (room kept for an object: the event's largest) stays within
+    ``max_size_bytes``.  Every camera's two entries go into the same segment, so a receiver that gets one segment
+    has the whole description of its cameras.  When they all fit, that is one group: the first segment carries
+    both containers whole.
+
+    Returns
+    -------
+    list of int arrays
+        The camera indices of segment 0, 1, ... (at most :data:`~.cp_rules.MAX_SEGMENTS` groups).
+
+    Raises
+    ------
+    InputError
+        ``max_size_bytes``: one camera's entries and the reserved object do not fit a segment, or the groups need
+        more than 8 segments (the limit cannot work for these cameras).
+    """
+    info, pr = _sensor_containers(regions)
+    limit_bits = 8 * int(max_size_bytes)
+    groups, start = [], 0
+    while start < len(regions):
+        if len(groups) == MAX_SEGMENTS:
+            raise InputError("max_size_bytes", max_size_bytes,
+                             f"room for the Sensor Information and Perception Region entries of {len(regions)} "
+                             f"cameras in {MAX_SEGMENTS} segments (with an object of {-(-reserve_bits // 8)} bytes)")
+        stop = start
+        while stop < len(regions):
+            bits = _head_bits(skeleton(len(groups), *_group_containers(info, pr, range(start, stop + 1))), cdd)
+            if bits + reserve_bits > limit_bits:
+                break
+            stop += 1
+        if stop == start:
+            need = -(-(bits + reserve_bits) // 8)
+            raise InputError("max_size_bytes", max_size_bytes,
+                             f"at least {need} bytes: a segment with the Sensor Information and Perception Region "
+                             f"entries of sensor {regions[start].sensor_id} and an object of "
+                             f"{-(-reserve_bits // 8)} bytes")
+        groups.append(np.arange(start, stop))
+        start = stop
+    return groups
+
+
+def _plan(bits: np.ndarray, heads: list[int], max_size_bytes: int, n_groups: int):
+    """:func:`~.cp_rules.plan_segments` in bits: segment ``k`` with header ``heads[k]`` (the last value for the
+    segments beyond), then empty segments up to ``n_groups`` (every group of cameras gets its segment, with or
+    without objects)."""
     largest = int(np.max(bits, initial=0))
-    if max(head) + largest > 8 * max_size_bytes:
+    if heads[-1] + largest > 8 * max_size_bytes:
         raise InputError("max_size_bytes", max_size_bytes,
-                         f"room for a segment's containers ({-(-max(head) // 8)} bytes, the Sensor Information and "
-                         f"Perception Region containers included) and its largest object ({-(-largest // 8)} bytes)")
-    first, rest = plan_segments(bits, header_bytes=head[0], max_size_bytes=8 * max_size_bytes, max_segments=1)
-    if not len(rest):
-        return first, rest
-    more, not_sent = plan_segments(bits[rest], header_bytes=head[1], max_size_bytes=8 * max_size_bytes,
-                                   max_segments=MAX_SEGMENTS - 1)
-    return first + [rest[m] for m in more], rest[not_sent]
+                         f"room for a segment's header ({-(-heads[-1] // 8)} bytes) and its largest object "
+                         f"({-(-largest // 8)} bytes)")
+    segments, not_sent = plan_segments(bits, header_bytes=heads, max_size_bytes=8 * max_size_bytes,
+                                       max_segments=MAX_SEGMENTS)
+    if not len(bits):
+        segments = []
+    segments += [np.zeros(0, np.int64) for _ in range(max(n_groups, 1) - len(segments))]
+    return segments, not_sent
 
 
 def event_segments(station_id: int, reference_time_ms: int, objects: CpmObjectColumns,
@@ -280,23 +350,31 @@ def event_segments(station_id: int, reference_time_ms: int, objects: CpmObjectCo
     if n == 0 and not clock.must_send(t_s):
         return EventSegments([], [], np.zeros(0, np.int64), False)
     due = clock.sensor_info_due(t_s)
-    info, pr = _sensor_containers(regions) if due else (None, None)
     total = n if number_of_perceived_objects is None else int(number_of_perceived_objects)
 
-    def skeleton(k: int, count: int) -> dict:
+    def skeleton(k: int, count: int, info=None, pr=None) -> dict:
         return build_cpm(station_id, reference_time_ms, [], latitude=latitude, longitude=longitude,
-                         segmentation=None if count == 1 else (k + 1, count),
-                         sensor_information=info if k == 0 else None, perception_regions=pr if k == 0 else None,
-                         number_of_perceived_objects=total)
+                         segmentation=None if count == 1 else (k + 1, count), sensor_information=info,
+                         perception_regions=pr, number_of_perceived_objects=total)
 
-    segments, not_sent = _plan(objects.bits(cdd), [skeleton(0, MAX_SEGMENTS), skeleton(1, MAX_SEGMENTS)], cdd,
-                               rules.max_size_bytes)
+    bits = objects.bits(cdd)
+    groups, info, pr = [], None, None
+    if due:
+        info, pr = _sensor_containers(regions)
+        groups = sensor_groups(regions, lambda k, i, r: skeleton(k, MAX_SEGMENTS, i, r), cdd=cdd,
+                               max_size_bytes=rules.max_size_bytes, reserve_bits=int(np.max(bits, initial=0)))
+    containers = [_group_containers(info, pr, g) for g in groups]
+    heads = [_head_bits(skeleton(k, MAX_SEGMENTS, *c), cdd) for k, c in enumerate(containers)]
+    heads.append(_head_bits(skeleton(min(len(groups), MAX_SEGMENTS - 1), MAX_SEGMENTS), cdd))
+    segments, not_sent = _plan(bits, heads, rules.max_size_bytes, len(groups))
     payloads = []
     for k, idx in enumerate(segments):
         poc = objects.take(idx).container_uper(cdd, total)
-        payload = encode_cpm_uper_fast(skeleton(k, len(segments)), cdd=cdd, perceived_objects_uper=poc)
+        cont = containers[k] if k < len(containers) else (None, None)
+        payload = encode_cpm_uper_fast(skeleton(k, len(segments), *cont), cdd=cdd, perceived_objects_uper=poc)
         if len(payload) > rules.max_size_bytes:  # the bound above is an upper bound: this is a bug if it fires
             raise RuntimeError(f"segment {k + 1} has {len(payload)} bytes > {rules.max_size_bytes}")
         payloads.append(payload)
     clock.sent(t_s, sensor_info=due)
-    return EventSegments(payloads, segments, not_sent, due)
+    return EventSegments(payloads, segments, not_sent, due,
+                         groups + [np.zeros(0, np.int64)] * (len(segments) - len(groups)))

@@ -30,10 +30,11 @@ from .._checks import as_float, as_int
 from ..errors import ConfigError, FootprintUQError, InputError
 from ..products.perception_region import perception_region
 from .core import RECORD_ERROR, RECORD_FOOTPRINTS, Service, error_record, station_id_of
-from .cp_rules import CpRules
+from .cp_rules import MAX_SEGMENTS, CpRules
+from .cp_segments import sensor_groups
 from .cp_service import CpBasicService, CpCamera, CpEvent
 from .frame_kernels import worst_usable
-from .messages.cpm import CPM_CLASS_OF, object_class_json
+from .messages.cpm import CPM_CLASS_OF, build_cpm, object_class_json
 from .messages.motion import MotionCodes
 from .messages.uper_cpm import class_bits, object_bits
 
@@ -313,25 +314,23 @@ def start_cp_service(service: Service, options: CpServeOptions, *, registry: dic
 
 
 def _check_room(cams: list, options: CpServeOptions, station_id: int, cdd: str, heading_offset_deg: float) -> None:
-    """Refuse at start, in one line, a ``--cpm-max-bytes`` that cannot hold the first segment of an event: the Sensor
-    Information and Perception Region containers of every camera (their size from a real encoding of an event
-    without objects) and the largest object (:func:`largest_object_bytes`).  Without it every event that carries
-    the containers would fail, once a second."""
-    probe = CpBasicService(cams, station_id=station_id, rules=CpRules(t_gen_cpm_s=options.t_gen_cpm_ms / 1000.0,
-                                                                      max_size_bytes=65535),
-                           cdd=cdd, heading_offset_deg=heading_offset_deg)
-    ev = probe.poll(_PROBE_TIME_S)
-    head = len(ev.segments[0]) if ev is not None and ev.segments else 0
-    # + 4 bytes: the segmentationInfo of a split event, the object container's longer length determinant, padding
-    need = head + largest_object_bytes(len(cams), cdd) + 4
-    if options.cpm_max_bytes < need:
-        raise InputError("--cpm-max-bytes", options.cpm_max_bytes,
-                         f"at least {need} bytes: an event's first segment carries the Sensor Information and "
-                         f"Perception Region containers of the {len(cams)} camera(s) ({head} bytes) and an object")
+    """Refuse at start, in one line, a ``--cpm-max-bytes`` that cannot work for these cameras: a segment too small
+    for one camera's Sensor Information and Perception Region entries and the largest object
+    (:func:`largest_object_bytes`), or cameras whose entries need more than 8 segments
+    (:func:`~.cp_segments.sensor_groups`; the sizes from real encodings of the cameras' entries).  A limit that holds
+    every camera's entries only over several segments works: an event spreads them over its segments."""
+    probe = CpBasicService(cams, station_id=station_id, rules=options.rules(), cdd=cdd,
+                           heading_offset_deg=heading_offset_deg)
 
+    def skeleton(k: int, info, regions) -> dict:
+        return build_cpm(station_id, 0, [], segmentation=(k + 1, MAX_SEGMENTS), sensor_information=info,
+                         perception_regions=regions)
 
-#: the time of the probe event of :func:`_check_room` (a valid TimestampIts: 2023-11-14)
-_PROBE_TIME_S = 1.7e9
+    try:
+        sensor_groups(probe.regions, skeleton, cdd=cdd, max_size_bytes=options.cpm_max_bytes,
+                      reserve_bits=8 * largest_object_bytes(len(cams), cdd))
+    except InputError as e:
+        raise InputError("--cpm-max-bytes", options.cpm_max_bytes, f"{e.expected} ({len(cams)} camera(s))") from None
 
 
 def largest_object_bytes(n_cameras: int, cdd: str) -> int:

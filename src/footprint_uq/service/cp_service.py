@@ -33,7 +33,7 @@
   ``objectAge``, ``sensorIdList``, ``objectPerceptionQuality`` (:func:`~.cp_segments.object_perception_quality`:
   the frame's detection confidence, the age, the detection success rate, ``linear_ok``); then
   :func:`~.cp_segments.event_segments` writes the event's CPMs (segments of at most ``max_size_bytes``, the sensor
-  containers in the first when due);
+  containers when due in the first, or spread camera by camera over the first ones when they do not fit there);
 * **SDSM** (:func:`~.cp_sdsm.fused_sdsm`): one per event with objects, the same fused objects at the same time
   (``measurementTime`` 0), at most 255 objects (the longest-unsent first), the rest counted.
 
