@@ -38,7 +38,7 @@ from .synthetic import CHI2_95_2D
 from .table import SharedJacobianAt, TrackerConfig, TrackOutput, TrackTable
 
 __all__ = ["intersection_cameras", "LANES", "RsuSimResult", "simulate", "coverage_sweep", "camera_frames",
-           "CameraFrame", "UnitFrame", "evaluate"]
+           "CameraFrame", "UnitFrame", "evaluate", "score_positions", "GHOST_RADIUS_M"]
 
 _XM, _YM, _GDZ, _GSX, _GSY = (P.PARAM_NAMES.index(k) for k in ("x_m", "y_m", "ground_dz_m", "ground_slope_x",
                                                                  "ground_slope_y"))
@@ -51,6 +51,8 @@ LANES = tuple(
         ((0.0, -1.75), (1.0, 0.0), 1), ((0.0, -5.25), (1.0, 0.0), 1),      # eastbound (south of the centre line)
         ((0.0, 1.75), (-1.0, 0.0), 1), ((0.0, 5.25), (-1.0, 0.0), 1)))     # westbound
 _LANE_HALF_LENGTH_M = 50.0
+#: a reported object farther than this from every true road user is a ghost (:func:`score_positions`), m
+GHOST_RADIUS_M = 3.0
 
 
 def intersection_cameras() -> list[PanTiltCamera]:
@@ -324,6 +326,39 @@ def evaluate(pairs: dict, track_truth: list, object_id, xy_m, cov_xy_m2, v_mps, 
             scale = np.abs(Ps).max()
             r.n_larger += any(np.linalg.eigvalsh(Pc - cov_xy_m2[k]).min() < -1e-9 * scale for Pc in Ps)
     return r
+
+
+def score_positions(xy_m, truth_xy, radius_m: float = GHOST_RADIUS_M) -> tuple[int, int]:
+    """Ghosts and duplicates of one reported list by position alone (what a receiver sees).
+
+    Parameters
+    ----------
+    xy_m : (m, 2)
+        The reported objects' positions (m, W).
+    truth_xy : (V, 2)
+        The true road users at the same time (m, W; NaN rows: not on the road, ignored).
+    radius_m : float
+        The matching radius (m).
+
+    Returns
+    -------
+    ghosts : int
+        Reported objects farther than ``radius_m`` from every road user.
+    duplicates : int
+        Road users that are the nearest road user of 2 or more reported objects within ``radius_m``.
+    """
+    xy = np.asarray(xy_m, np.float64).reshape(-1, 2)
+    truth = np.asarray(truth_xy, np.float64).reshape(-1, 2)
+    truth = truth[np.isfinite(truth).all(1)]
+    if xy.shape[0] == 0:
+        return 0, 0
+    if truth.shape[0] == 0:
+        return xy.shape[0], 0
+    dist = np.hypot(*(xy[:, None, :] - truth[None]).transpose(2, 0, 1))  # (m, V)
+    near = dist.argmin(1)
+    hit = dist[np.arange(xy.shape[0]), near] <= radius_m
+    per_truth = np.bincount(near[hit], minlength=truth.shape[0])
+    return int((~hit).sum()), int((per_truth > 1).sum())
 
 
 def _inside(x, P, truth) -> bool:
