@@ -215,11 +215,16 @@ class UnitFrame(NamedTuple):
 def camera_frames(n_frames: int = 300, *, rate_hz: float = 10.0, seed: int = 0, budget="basler1@deg",
                   detector_sigma_px: float = 1.5, clock_offset_sigma_s: float = 0.005, phase_s: float = 20.0,
                   max_range_m: float = 60.0, truth_accel_psd_m2ps3: float = 1.0,
-                  tracker: TrackerConfig | None = None) -> Iterator[UnitFrame]:
+                  tracker: TrackerConfig | None = None, relabel_rate: float = 0.0) -> Iterator[UnitFrame]:
     """The run's unit frames, one after the other (module doc): the three cameras' tracked frames of every true
     time, for any fusion (:func:`simulate` feeds an :class:`~.rsu_fusion.RsuFusion`; the CP service's proof feeds
-    a :class:`~footprint_uq.service.cp_service.CpBasicService`)."""
+    a :class:`~footprint_uq.service.cp_service.CpBasicService`).
+
+    ``relabel_rate``: the probability per camera, vehicle and frame that the camera's detector gives the vehicle a
+    new ``object_id`` (its track restarts under a new track id: track churn; drawn from a stream of its own, so that
+    0 leaves every other draw of the run as it was)."""
     rng = np.random.default_rng(seed)
+    churn = np.random.default_rng([seed, 32])
     budget = load_budget(budget)
     t, truth = _traffic(n_frames, rate_hz, phase_s, truth_accel_psd_m2ps3, rng)
     L = budget.param_factor().dense()
@@ -232,14 +237,18 @@ def camera_frames(n_frames: int = 300, *, rate_hz: float = 10.0, seed: int = 0, 
         table = TrackTable(tracker, rank=L.shape[1], shared_at=SharedJacobianAt(camera, budget))
         p_true = camera.params + L @ rng.standard_normal(L.shape[1])
         cams.append(_Camera(camera, p_true, float(rng.normal(0.0, clock_offset_sigma_s)), proc, table))
+    n_veh = truth.shape[1]
+    label = np.zeros((len(cams), n_veh), np.int64)  # each camera's detector's label generation per vehicle
     for k in range(n_frames):
         frames = []
         for j, cam in enumerate(cams):
             idx, uv = _detect(cam, truth[k], A_px, max_range_m, rng)
             est = cam.proc.corners(uv[:, None, :], pixel_cov_px2=np.broadcast_to(det, (idx.size, 2, 2)))
             stamp = t[k] + cam.offset_s
-            out = cam.table.step(stamp, idx.tolist(), est.centre_xy_world_m, est.centre_cov_frame_m2,
-                                 est.centre_shared_m)
+            if relabel_rate > 0.0:
+                label[j] += churn.random(n_veh) < relabel_rate
+            out = cam.table.step(stamp, (idx + n_veh * label[j, idx]).tolist(), est.centre_xy_world_m,
+                                 est.centre_cov_frame_m2, est.centre_shared_m)
             for i, tid in zip(idx.tolist(), out.track_id.tolist(), strict=True):
                 cam.track_truth[tid] = i
             frames.append(CameraFrame(j, stamp, out, idx))
@@ -291,10 +300,12 @@ def evaluate(pairs: dict, track_truth: list, object_id, xy_m, cov_xy_m2, v_mps, 
         cameras' own estimates (the baseline, and the Loewner check); None: not evaluated.
     """
     r = RsuSimResult(n_frames=1)
+    oids = np.asarray(object_id).tolist()
+    reported = set(oids)
     members: dict = {}
     for (cid, tid), oid in pairs.items():
-        members.setdefault(oid, set()).add(track_truth[cid][tid])
-    oids = np.asarray(object_id).tolist()
+        if oid in reported:  # (an object not in the list -- no fresh contribution -- is not sent)
+            members.setdefault(oid, set()).add(track_truth[cid][tid])
     r.max_objects = len(oids)
     where: dict = {}
     for oid, vs in members.items():
