@@ -408,3 +408,18 @@ def test_report_timeout_must_not_exceed_member_timeout():
     with pytest.raises(InputError) as e:
         RsuFusionConfig(report_timeout_s=math.nan)
     assert e.value.field == "report_timeout_s"
+
+
+def test_score_positions_pinned():
+    """Ghosts and duplicates by position (hand-checked): two road users 1 m apart with an object each are two
+    matches, not a duplicate; a third object by one of them is its duplicate; an object 10 m from everybody a
+    ghost; NaN road users ignored."""
+    from footprint_uq.tracking.rsu_synthetic import score_positions
+
+    truth = [[0.0, 0.0], [1.0, 0.0], [20.2, 0.0], [np.nan, np.nan]]
+    assert score_positions([[0.0, 0.0], [0.5, 0.0], [10.0, 0.0], [20.0, 0.0]], truth) == (1, 0)
+    assert score_positions([[0.0, 0.0], [0.5, 0.0], [0.7, 0.0], [20.0, 0.0]], truth) == (0, 1)
+    assert score_positions([[0.0, 0.0], [0.1, 0.0], [0.2, 0.0]], [[0.0, 0.0], [30.0, 0.0]]) == (0, 1)
+    assert score_positions([[3.1, 0.0]], [[0.0, 0.0]]) == (1, 0)
+    assert score_positions(np.zeros((0, 2)), truth) == (0, 0)
+    assert score_positions([[0.0, 0.0]], np.zeros((0, 2))) == (1, 0)

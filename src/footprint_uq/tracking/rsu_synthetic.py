@@ -27,6 +27,7 @@ from dataclasses import dataclass, field
 from typing import NamedTuple
 
 import numpy as np
+from scipy.optimize import linear_sum_assignment
 
 from .. import params as P
 from ..cameras import general
@@ -342,6 +343,10 @@ def evaluate(pairs: dict, track_truth: list, object_id, xy_m, cov_xy_m2, v_mps, 
 def score_positions(xy_m, truth_xy, radius_m: float = GHOST_RADIUS_M) -> tuple[int, int]:
     """Ghosts and duplicates of one reported list by position alone (what a receiver sees).
 
+    The reported objects are matched one-to-one to the road users within ``radius_m`` (the assignment of least
+    total distance, :func:`scipy.optimize.linear_sum_assignment`): two road users close together are two matches,
+    not a duplicate.
+
     Parameters
     ----------
     xy_m : (m, 2)
@@ -356,7 +361,8 @@ def score_positions(xy_m, truth_xy, radius_m: float = GHOST_RADIUS_M) -> tuple[i
     ghosts : int
         Reported objects farther than ``radius_m`` from every road user.
     duplicates : int
-        Road users that are the nearest road user of 2 or more reported objects within ``radius_m``.
+        Road users with a second reported object: the nearest road user of each object left unmatched within
+        ``radius_m`` (counted once per road user).
     """
     xy = np.asarray(xy_m, np.float64).reshape(-1, 2)
     truth = np.asarray(truth_xy, np.float64).reshape(-1, 2)
@@ -366,10 +372,12 @@ def score_positions(xy_m, truth_xy, radius_m: float = GHOST_RADIUS_M) -> tuple[i
     if truth.shape[0] == 0:
         return xy.shape[0], 0
     dist = np.hypot(*(xy[:, None, :] - truth[None]).transpose(2, 0, 1))  # (m, V)
-    near = dist.argmin(1)
-    hit = dist[np.arange(xy.shape[0]), near] <= radius_m
-    per_truth = np.bincount(near[hit], minlength=truth.shape[0])
-    return int((~hit).sum()), int((per_truth > 1).sum())
+    near = dist.min(1) <= radius_m
+    rows, cols = linear_sum_assignment(np.where(dist <= radius_m, dist, 1e9))
+    matched = np.zeros(xy.shape[0], bool)
+    matched[rows[dist[rows, cols] <= radius_m]] = True
+    extra = near & ~matched
+    return int((~near).sum()), len(set(dist[extra].argmin(1).tolist()))
 
 
 def _inside(x, P, truth) -> bool:
