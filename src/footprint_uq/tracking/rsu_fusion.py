@@ -14,12 +14,21 @@ object no other camera sees) is associated by one globally optimal assignment pe
 (:func:`scipy.optimize.linear_sum_assignment` on the squared Mahalanobis distances): cost
 ``d^2 = (x_c - x_o)^T (P_c + P_o)^-1 (x_c - x_o)`` between the row and the object's estimate from the other cameras,
 infeasible above the gate (chi-square, 2 dof, ``gate_confidence`` 99 %: 9.21).  A fused object is a candidate for a
-row of camera c only if no other row of c in this frame is in it (never two tracks of one camera on one object).
-A row that matches no object starts one; an object seen by camera c alone whose row matches another object is
-merged into it (the older ``objectId`` survives).  ``P_c + P_o`` is the difference's covariance because the two
-estimates come from cameras with independent calibration errors (and independent pixel noise).
+row of camera c only if no other row of c in this frame is in it (never two tracks of one camera on one object);
+an object that only camera c's *lapsed* track holds (a track not in this frame: it ended or restarted) is a
+candidate too, against that member's own prediction: a camera's new track takes over its old one's object.
+A row that matches no object starts one; when a row's object has no other camera's fresh contribution and the
+row matches another object, the two merge (the older ``objectId`` survives; a camera in both keeps its newer
+member).
+``P_c + P_o`` is the difference's covariance because the two estimates come from cameras with independent
+calibration errors (and independent pixel noise).
 
-**Fused estimate** (:meth:`RsuFusion.objects`).  Each camera's latest estimate of the object is predicted to the
+**Fresh and stale contributions.**  A camera's contribution is *fresh* while its track was updated within
+``report_timeout_s`` (0.3 s); :meth:`RsuFusion.objects` reports an object only while one of its contributions is
+fresh and fuses only those; the stale ones stay, until ``member_timeout_s`` (1 s), for re-association only (a
+track that comes back, another camera's track of the same road user).
+
+**Fused estimate** (:meth:`RsuFusion.objects`).  Each camera's latest fresh estimate of the object is predicted to the
 asked time at constant velocity (:func:`~footprint_uq.uncertainty.timing.predict_position`, with the camera's clock
 term ``sigma_t^2 (v v^T + P_v)`` and the acceleration noise ``q tau^3 / 3``), then fused in information form,
 ``P = (sum_c P_c^-1)^-1``, ``x = P sum_c P_c^-1 x_c`` (position and velocity separately: the tracker reports no
@@ -34,7 +43,7 @@ P_c^-1`` in the Loewner order); covariance intersection does not promise that.
 
 **Identity.**  ``objectId`` is 16-bit (0..65535), handed out in order and reused only after its object ended (all
 its cameras' contributions timed out, ``member_timeout_s``), oldest freed first.  ``sensorIdList``: the sensor ids
-of the cameras whose contribution is live.  ``objectAge``: from the first detection of any camera (the earliest
+of the cameras whose contribution is fresh.  ``objectAge``: from the first detection of any camera (the earliest
 ``time - age_s`` of the tracks that joined the object).
 
 **Clocks.**  Per camera ``clock_offset_sigma_s`` (and ``clock_jitter_sigma_s``) enter every prediction as above.
