@@ -423,3 +423,20 @@ def test_score_positions_pinned():
     assert score_positions([[3.1, 0.0]], [[0.0, 0.0]]) == (1, 0)
     assert score_positions(np.zeros((0, 2)), truth) == (0, 0)
     assert score_positions([[0.0, 0.0]], np.zeros((0, 2))) == (1, 0)
+
+
+def test_a_merge_keeps_each_cameras_newer_member():
+    """Two objects of one car, each with a track of both cameras: when camera 0's newer track (object 1) finds object
+    0 through camera 1's track there, the two merge under the older id and camera 1 keeps its newer member (track 1,
+    updated at 0.2 s; track 2 of 0.1 s leaves with its pair): never two members, or a dangling pair, of one camera."""
+    f = _unit()
+    still = dict(v=(0.0, 0.0))
+    f.step("cam0", 0.0, **_frame([[0.0, 0.0]], tids=[1], **still))
+    f.step("cam1", 0.0, **_frame([[0.0, 0.0]], tids=[1], **still))                  # object 0: cam0/1, cam1/1
+    f.step("cam0", 0.1, **_frame([[0.0, 0.0], [50.0, 0.0]], tids=[1, 2], **still))  # cam0/2: object 1
+    f.step("cam1", 0.1, **_frame([[0.0, 0.0], [50.0, 0.0]], tids=[1, 2], **still))  # cam1/2 joins object 1
+    f.step("cam1", 0.2, **_frame([[0.0, 0.0]], tids=[1], **still))
+    assert f.pairs() == {("cam0", 1): 0, ("cam1", 1): 0, ("cam0", 2): 1, ("cam1", 2): 1}
+    r = f.step("cam0", 0.5, **_frame([[0.0, 0.0]], tids=[2], **still))  # object 1's camera 1 is stale: it may merge
+    assert r.object_id.tolist() == [0] and f.n_merged == 1 and len(f) == 1
+    assert f.pairs() == {("cam0", 2): 0, ("cam1", 1): 0}
