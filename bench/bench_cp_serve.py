@@ -289,7 +289,7 @@ def _pct(a, qs=(50, 99)) -> dict:
 
 def _cp_figures(result: dict, stamps: np.ndarray, health: dict) -> dict:
     """Events and per-frame latencies from the receiver's event list (module doc)."""
-    ev = result["events"]  # [time_s, first segment rx, last segment rx, segments, perceived, sent, [bytes]]
+    ev = result["events"]  # [time_s, first segment rx, last segment rx, segments, perceived, sent, [bytes], [xy]]
     with_seg = [e for e in ev if e[3] > 0]
     t_ev = np.array([e[0] for e in with_seg])
     first = np.array([e[1] for e in with_seg])
@@ -307,9 +307,30 @@ def _cp_figures(result: dict, stamps: np.ndarray, health: dict) -> dict:
             "objects_perceived_per_event": _pct([e[4] for e in ev], (50, 99)),
             "objects_sent_per_event": _pct([e[5] for e in ev], (50, 99)),
             "frames_without_a_later_event": int((~ok).sum()),
+            **_ghosts(ev, stamps),
             "latency_to_first_segment_ms": _pct(1e3 * (first[k[ok]] - ts[ok])),
             "latency_to_event_complete_ms": _pct(1e3 * (last[k[ok]] - ts[ok])),
             "cp_service_counts": health.get("cp_service")}
+
+
+def _ghosts(ev: list, stamps: np.ndarray) -> dict:
+    """Ghosts (objects > 3 m from every road user) and duplicates (road users with a second object) per event
+    (:func:`footprint_uq.tracking.rsu_synthetic.score_positions`), against the road users of the frame whose publish
+    time the event's time is (the event is polled at that frame's ``timestamp_s``)."""
+    from footprint_uq.tracking.rsu_synthetic import score_positions
+
+    xy_at, _ = road_users()
+    first = stamps.min(1)
+    g, d = [], []
+    for e in ev:
+        k = int(np.abs(stamps - e[0]).min(1).argmin()) if abs(first - e[0]).min() < 1.0 else None
+        if k is None:
+            continue
+        gk, dk = score_positions(np.asarray(e[7], np.float64).reshape(-1, 2), xy_at(k / RATE_HZ)[0])
+        g.append(gk)
+        d.append(dk)
+    return {"ghosts_per_event": {**_pct(g, (50, 99)), "mean": round(float(np.mean(g)), 2)} if g else {},
+            "duplicates_per_event": {**_pct(d, (50, 99)), "mean": round(float(np.mean(d)), 2)} if d else {}}
 
 
 def _receiver(port: int) -> None:
@@ -347,7 +368,8 @@ def _receiver(port: int) -> None:
                     st["segment_mismatches"] += 1
                 del pending[:]
                 events.append([rec["time_s"], segs[0][0] if segs else None, segs[-1][0] if segs else None, n,
-                               rec["counts"]["perceived"], rec["counts"]["sent"], rec["counts"]["bytes"]])
+                               rec["counts"]["perceived"], rec["counts"]["sent"], rec["counts"]["bytes"],
+                               [o["xy_m"] for o in rec["objects"]]])
         elif topic == "footprints/health":
             say({"health": json.loads(msg.payload)})
         elif topic.count("/") == 1 and not topic.endswith(("/errors", "/rsu")):

@@ -151,9 +151,11 @@ def _intersection(a, parts: set, out: dict) -> None:
     r = run_intersection(a.frames, seed=a.seed)
     f = r.fused
     out["identity"] = {**_row(f, time.perf_counter() - t0), "events": r.events, "events_with_cpm": r.events_with_cpm,
-                       "segment_bytes": _pct(r.segment_bytes, (0, 50, 99, 100)), "counts": r.counts}
+                       "segment_bytes": _pct(r.segment_bytes, (0, 50, 99, 100)), "counts": r.counts,
+                       "ghosts": int(sum(r.ghosts)), "duplicates_by_position": int(sum(r.duplicates))}
     print(f"identity: {a.frames} frames, {f.n_truth_frames} (event, vehicle) pairs: duplicates {f.n_duplicates}, "
-          f"missing {f.n_missing}, mixed {f.n_mixed}, larger {f.n_larger}, events {r.events} "
+          f"missing {f.n_missing}, mixed {f.n_mixed}, larger {f.n_larger}, ghosts {sum(r.ghosts)}, duplicates by "
+          f"position {sum(r.duplicates)}, events {r.events} "
           f"({r.events_with_cpm} with a CPM)", flush=True)
     if "coverage" in parts:
         _coverage(a, out)
@@ -163,20 +165,25 @@ def _coverage(a, out: dict) -> None:
     t0 = time.perf_counter()
     total = RsuSimResult()
     per_run = []
+    ghosts = dups = events = 0
     for k in range(a.runs):
-        r = run_intersection(a.run_frames, seed=1000 + a.seed + k).fused
+        run = run_intersection(a.run_frames, seed=1000 + a.seed + k)
+        r = run.fused
         total.add(r)
         per_run.append((r.n_cover_hits, r.n_cover))
+        ghosts, dups, events = ghosts + sum(run.ghosts), dups + sum(run.duplicates), events + run.events
     # the coverage's sampling sd over runs (it varies with the calibration draws): a seeded bootstrap of the runs
     h, n = np.array(per_run, dtype=float).T
     rng = np.random.default_rng(0)
     boot = [h[i].sum() / n[i].sum() for i in (rng.integers(0, len(h), len(h)) for _ in range(2000))]
     out["coverage"] = {"runs": a.runs, "run_frames": a.run_frames, "coverage_bootstrap_sd": float(np.std(boot)),
-                       **_row(total, time.perf_counter() - t0)}
+                       **_row(total, time.perf_counter() - t0), "events": events, "ghosts": ghosts,
+                       "duplicates_by_position": dups}
     print(f"coverage: fused {total.coverage:.4f} +- {np.std(boot):.4f} (n {total.n_cover}), 2+ cameras "
           f"{total.coverage_multi:.4f} "
           f"(n {total.n_multi}), cameras alone {total.coverage_camera:.4f}, larger {total.n_larger}, duplicates "
-          f"{total.n_duplicates} of {total.n_truth_frames}, mixed {total.n_mixed}", flush=True)
+          f"{total.n_duplicates} of {total.n_truth_frames}, mixed {total.n_mixed}; ghosts {ghosts}, duplicates by "
+          f"position {dups} in {events} events", flush=True)
 
 
 if __name__ == "__main__":

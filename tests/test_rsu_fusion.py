@@ -364,3 +364,79 @@ def test_expiry_shortcut_equals_a_full_scan_every_frame(steps):
         assert np.array_equal(a.xy_m, b.xy_m, equal_nan=True)
         for obj in fast._objects.values():
             assert all(fast.last_time_s - m.time_s <= fast.config.member_timeout_s for m in obj.members.values())
+
+
+def test_an_object_is_reported_only_while_a_contribution_is_fresh():
+    """Issue 32 (ghosts): camera 0's track ends at 0.2 s; its object is reported up to report_timeout_s (0.3 s)
+    after its last update and not after, but kept (for re-association) until member_timeout_s; an object with one
+    fresh and one stale camera is fused from the fresh one only and lists only its sensor."""
+    f = _unit(report_timeout_s=0.3)
+    for k in range(3):
+        f.step("cam0", 0.1 * k, **_frame([[1.0 * k, 0.0]]))
+    assert f.objects(0.5).object_id.tolist() == [0]
+    assert f.objects(0.51).object_id.tolist() == [] and len(f) == 1
+    g = _unit(report_timeout_s=0.3)
+    g.step("cam0", 0.0, **_frame([[0.0, 0.0]]))
+    g.step("cam1", 0.0, **_frame([[0.2, 0.0]]))
+    g.step("cam1", 0.4, **_frame([[4.2, 0.0]]))
+    o = g.objects(0.4)
+    assert o.sensor_ids == [(2,)] and o.n_sources.tolist() == [1] and np.allclose(o.xy_m[0], [4.2, 0.0])
+    assert g.contributions(0, 0.4)[0] == ["cam1"]
+
+
+def test_a_cameras_new_track_takes_over_its_lapsed_member():
+    """Issue 32 (duplicates): a camera alone sees a car; its tracker restarts the track under a new id (same place):
+    the new track takes over the object (same objectId, one object reported), also when two of its objects became
+    one car's (they merge, the older id survives)."""
+    f = _unit()
+    for k in range(3):
+        f.step("cam0", 0.1 * k, **_frame([[1.0 * k, 0.0]], tids=[7]))
+    r = f.step("cam0", 0.3, **_frame([[3.0, 0.0]], tids=[8]))
+    assert r.object_id.tolist() == [0] and f.objects().object_id.tolist() == [0] and f.pairs() == {("cam0", 8): 0}
+    # a track whose own object (camera 1's stale member in it) has no fresh other camera may join another object
+    g = _unit()
+    g.step("cam0", 0.0, **_frame([[0.0, 0.0]], tids=[1]))
+    g.step("cam1", 0.0, **_frame([[0.1, 0.0]], tids=[5]))   # object 0: cam0/1, cam1/5
+    g.step("cam1", 0.5, **_frame([[5.0, 0.0]], tids=[6]))   # cam1's track restarts: joins object 0 (cam0's stale 1)
+    assert g.pairs() == {("cam0", 1): 0, ("cam1", 6): 0}
+
+
+def test_report_timeout_must_not_exceed_member_timeout():
+    with pytest.raises(InputError) as e:
+        RsuFusionConfig(report_timeout_s=2.0)
+    assert e.value.field == "report_timeout_s"
+    with pytest.raises(InputError) as e:
+        RsuFusionConfig(report_timeout_s=math.nan)
+    assert e.value.field == "report_timeout_s"
+
+
+def test_score_positions_pinned():
+    """Ghosts and duplicates by position (hand-checked): two road users 1 m apart with an object each are two
+    matches, not a duplicate; a third object by one of them is its duplicate; an object 10 m from everybody a
+    ghost; NaN road users ignored."""
+    from footprint_uq.tracking.rsu_synthetic import score_positions
+
+    truth = [[0.0, 0.0], [1.0, 0.0], [20.2, 0.0], [np.nan, np.nan]]
+    assert score_positions([[0.0, 0.0], [0.5, 0.0], [10.0, 0.0], [20.0, 0.0]], truth) == (1, 0)
+    assert score_positions([[0.0, 0.0], [0.5, 0.0], [0.7, 0.0], [20.0, 0.0]], truth) == (0, 1)
+    assert score_positions([[0.0, 0.0], [0.1, 0.0], [0.2, 0.0]], [[0.0, 0.0], [30.0, 0.0]]) == (0, 1)
+    assert score_positions([[3.1, 0.0]], [[0.0, 0.0]]) == (1, 0)
+    assert score_positions(np.zeros((0, 2)), truth) == (0, 0)
+    assert score_positions([[0.0, 0.0]], np.zeros((0, 2))) == (1, 0)
+
+
+def test_a_merge_keeps_each_cameras_newer_member():
+    """Two objects of one car, each with a track of both cameras: when camera 0's newer track (object 1) finds object
+    0 through camera 1's track there, the two merge under the older id and camera 1 keeps its newer member (track 1,
+    updated at 0.2 s; track 2 of 0.1 s leaves with its pair): never two members, or a dangling pair, of one camera."""
+    f = _unit()
+    still = dict(v=(0.0, 0.0))
+    f.step("cam0", 0.0, **_frame([[0.0, 0.0]], tids=[1], **still))
+    f.step("cam1", 0.0, **_frame([[0.0, 0.0]], tids=[1], **still))                  # object 0: cam0/1, cam1/1
+    f.step("cam0", 0.1, **_frame([[0.0, 0.0], [50.0, 0.0]], tids=[1, 2], **still))  # cam0/2: object 1
+    f.step("cam1", 0.1, **_frame([[0.0, 0.0], [50.0, 0.0]], tids=[1, 2], **still))  # cam1/2 joins object 1
+    f.step("cam1", 0.2, **_frame([[0.0, 0.0]], tids=[1], **still))
+    assert f.pairs() == {("cam0", 1): 0, ("cam1", 1): 0, ("cam0", 2): 1, ("cam1", 2): 1}
+    r = f.step("cam0", 0.5, **_frame([[0.0, 0.0]], tids=[2], **still))  # object 1's camera 1 is stale: it may merge
+    assert r.object_id.tolist() == [0] and f.n_merged == 1 and len(f) == 1
+    assert f.pairs() == {("cam0", 2): 0, ("cam1", 1): 0}

@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..tracking.rsu_fusion import RsuFusionConfig
-from ..tracking.rsu_synthetic import RsuSimResult, camera_frames, evaluate, intersection_cameras
+from ..tracking.rsu_synthetic import RsuSimResult, camera_frames, evaluate, intersection_cameras, score_positions
 from .cp_rules import CpRules
 from .cp_service import CpBasicService, CpCamera, CpEvent
 
@@ -37,6 +37,9 @@ class CpRunResult:
     segment_bytes : list of int the size of every CPM segment (bytes)
     counts : dict               :meth:`CpBasicService.counts` at the end
     kept : list of CpEvent      the events themselves (``keep_events``)
+    ghosts : list of int        per event, its objects farther than 3 m from every vehicle (what a receiver
+                                sees: :func:`~footprint_uq.tracking.rsu_synthetic.score_positions`)
+    duplicates : list of int    per event, vehicles nearest to 2+ of its objects within 3 m (likewise)
     """
 
     fused: RsuSimResult = field(default_factory=RsuSimResult)
@@ -46,6 +49,8 @@ class CpRunResult:
     segment_bytes: list = field(default_factory=list)
     counts: dict = field(default_factory=dict)
     kept: list = field(default_factory=list)
+    ghosts: list = field(default_factory=list)
+    duplicates: list = field(default_factory=list)
 
 
 def run_intersection(n_frames: int = 300, *, seed: int = 0, rules: CpRules | None = None,
@@ -86,6 +91,9 @@ def _score(out: CpRunResult, svc: CpBasicService, ev: CpEvent, fr, seen: set, in
     t_ref = T0_UNIX_S + fr.t_s
     out.fused.add(evaluate(pairs, fr.track_truth, oid, xy, cov, v, fr.truth_xy, seen,
                            lambda o: svc.fusion.contributions(o, t_ref)))
+    ghosts, dups = score_positions(xy, fr.truth_xy)
+    out.ghosts.append(ghosts)
+    out.duplicates.append(dups)
     out.events += 1
     if ev.segments:
         out.events_with_cpm += 1

@@ -14,12 +14,21 @@ object no other camera sees) is associated by one globally optimal assignment pe
 (:func:`scipy.optimize.linear_sum_assignment` on the squared Mahalanobis distances): cost
 ``d^2 = (x_c - x_o)^T (P_c + P_o)^-1 (x_c - x_o)`` between the row and the object's estimate from the other cameras,
 infeasible above the gate (chi-square, 2 dof, ``gate_confidence`` 99 %: 9.21).  A fused object is a candidate for a
-row of camera c only if no other row of c in this frame is in it (never two tracks of one camera on one object).
-A row that matches no object starts one; an object seen by camera c alone whose row matches another object is
-merged into it (the older ``objectId`` survives).  ``P_c + P_o`` is the difference's covariance because the two
-estimates come from cameras with independent calibration errors (and independent pixel noise).
+row of camera c only if no other row of c in this frame is in it (never two tracks of one camera on one object);
+an object that only camera c's *lapsed* track holds (a track not in this frame: it ended or restarted) is a
+candidate too, against that member's own prediction: a camera's new track takes over its old one's object.
+A row that matches no object starts one; when a row's object has no other camera's fresh contribution and the
+row matches another object, the two merge (the older ``objectId`` survives; a camera in both keeps its newer
+member).
+``P_c + P_o`` is the difference's covariance because the two estimates come from cameras with independent
+calibration errors (and independent pixel noise).
 
-**Fused estimate** (:meth:`RsuFusion.objects`).  Each camera's latest estimate of the object is predicted to the
+**Fresh and stale contributions.**  A camera's contribution is *fresh* while its track was updated within
+``report_timeout_s`` (0.3 s); :meth:`RsuFusion.objects` reports an object only while one of its contributions is
+fresh and fuses only those; the stale ones stay, until ``member_timeout_s`` (1 s), for re-association only (a
+track that comes back, another camera's track of the same road user).
+
+**Fused estimate** (:meth:`RsuFusion.objects`).  Each camera's latest fresh estimate of the object is predicted to the
 asked time at constant velocity (:func:`~footprint_uq.uncertainty.timing.predict_position`, with the camera's clock
 term ``sigma_t^2 (v v^T + P_v)`` and the acceleration noise ``q tau^3 / 3``), then fused in information form,
 ``P = (sum_c P_c^-1)^-1``, ``x = P sum_c P_c^-1 x_c`` (position and velocity separately: the tracker reports no
@@ -34,7 +43,7 @@ P_c^-1`` in the Loewner order); covariance intersection does not promise that.
 
 **Identity.**  ``objectId`` is 16-bit (0..65535), handed out in order and reused only after its object ended (all
 its cameras' contributions timed out, ``member_timeout_s``), oldest freed first.  ``sensorIdList``: the sensor ids
-of the cameras whose contribution is live.  ``objectAge``: from the first detection of any camera (the earliest
+of the cameras whose contribution is fresh.  ``objectAge``: from the first detection of any camera (the earliest
 ``time - age_s`` of the tracks that joined the object).
 
 **Clocks.**  Per camera ``clock_offset_sigma_s`` (and ``clock_jitter_sigma_s``) enter every prediction as above.
@@ -86,6 +95,10 @@ class RsuFusionConfig:
     unstick_frames : int              consecutive frames of a camera with the gate broken before its pair leaves
                                       its fused object
     member_timeout_s : float          a camera's contribution not updated for this long leaves the object (s)
+    report_timeout_s : float          a contribution is *fresh* while its camera's track was updated within this
+                                      (s, <= ``member_timeout_s``); :meth:`RsuFusion.objects` reports an object
+                                      only while one is, and fuses only the fresh ones (the stale ones stay, until
+                                      ``member_timeout_s``, for re-association only)
     max_lateness_s : float            a frame older than the unit's latest fused time by more is dropped (s)
     accel_psd_m2ps3 : float           acceleration noise of the prediction to a common time (m^2/s^3)
     unknown_velocity_sigma_mps : float  sigma per axis of the velocity of a track's first detection (no velocity
@@ -97,6 +110,7 @@ class RsuFusionConfig:
     leave_confidence: float = 0.999
     unstick_frames: int = 3
     member_timeout_s: float = 1.0
+    report_timeout_s: float = 0.3
     max_lateness_s: float = 0.5
     accel_psd_m2ps3: float = 30.0
     unknown_velocity_sigma_mps: float = 15.0
@@ -111,8 +125,11 @@ class RsuFusionConfig:
                              f"a probability in [gate_confidence ({self.gate_confidence}), 1)")
         object.__setattr__(self, "unstick_frames", as_int("unstick_frames", self.unstick_frames, minimum=1,
                                                                    expected="an integer >= 1"))
-        for name in ("member_timeout_s", "accel_psd_m2ps3", "unknown_velocity_sigma_mps"):
+        for name in ("member_timeout_s", "report_timeout_s", "accel_psd_m2ps3", "unknown_velocity_sigma_mps"):
             object.__setattr__(self, name, as_float(name, getattr(self, name), positive=True))
+        if self.report_timeout_s > self.member_timeout_s:
+            raise InputError("report_timeout_s", self.report_timeout_s,
+                             f"at most member_timeout_s ({self.member_timeout_s} s)")
         object.__setattr__(self, "max_lateness_s", as_float("max_lateness_s", self.max_lateness_s,
                                                             nonnegative=True))
         if self.method not in FUSION_METHODS:
@@ -362,9 +379,9 @@ class RsuFusion:
             oid = pairs.get((camera_id, tids[i]))
             if oid is None:
                 free.append(i)
-            elif _only(objects[oid].members, camera_id):
+            elif not self._fresh_other(objects[oid].members, camera_id, t):
                 out[i] = oid
-                free.append(i)  # alone: may still join (or be joined by) another camera's object
+                free.append(i)  # alone (no other camera's fresh member): may still join another object
             else:
                 out[i] = oid
                 check.append(i)
@@ -404,9 +421,19 @@ class RsuFusion:
         """One globally optimal assignment of the free rows to the objects they may join (module doc)."""
         if not free:
             return
-        taken = {o for o in set(out.tolist()) if o >= 0 and not self._alone(o, camera_id)}
-        cands = [o for o, obj in self._objects.items() if o not in taken and not _only(obj.members, camera_id)]
-        cost = self._cost(camera_id, t, free, cands, xy, P, v, Pv)
+        taken = set(out.tolist())  # the objects this frame's rows are in: never a second row of the camera
+        in_frame = set(tid.tolist())
+        cands, lapsed = [], []
+        for o, obj in self._objects.items():
+            if o in taken:
+                continue
+            if not _only(obj.members, camera_id):
+                cands.append(o)
+            elif obj.members and obj.members[camera_id].track_id not in in_frame:
+                lapsed.append(o)  # this camera's track of it ended or restarted: a new track may take it over
+        cost = np.concatenate([self._cost(camera_id, t, free, cands, xy, P, v, Pv),
+                               self._cost(camera_id, t, free, lapsed, xy, P, v, Pv, exclude=None)], axis=1)
+        cands += lapsed
         match = {}
         if cands:
             cost = np.where(cost <= self.gate, cost, _BIG)
@@ -425,18 +452,20 @@ class RsuFusion:
                 self._objects[oid] = _Object(t)
                 self._pairs[key] = out[i] = oid
 
-    def _cost(self, camera_id, t, free, cands, xy, P, v, Pv) -> np.ndarray:
-        """``d^2 (len(free), len(cands))`` of the free rows to the candidates' estimates from the other cameras:
-        each candidate's estimate once, then every pair at once (no Python loop over pairs)."""
+    def _cost(self, camera_id, t, free, cands, xy, P, v, Pv, exclude=True) -> np.ndarray:
+        """``d^2 (len(free), len(cands))`` of the free rows to the candidates' estimates from the other cameras
+        (``exclude=None``: from every member, the camera's lapsed one included): each candidate's estimate once, then
+        every pair at once (no Python loop over pairs)."""
         if not cands:
             return np.zeros((len(free), 0))
-        xo, Po, _, _ = self._estimates(cands, t, exclude=camera_id)
+        xo, Po, _, _ = self._estimates(cands, t, exclude=camera_id if exclude else None)
         Pc = self._row_cov(camera_id, free, P, v, Pv)
         return _mahalanobis2(xy[free][:, None] - xo[None], Pc[:, None] + Po[None])
 
-    def _alone(self, oid: int, camera_id) -> bool:
-        obj = self._objects.get(oid)
-        return obj is not None and _only(obj.members, camera_id)
+    def _fresh_other(self, members: dict, camera_id, t: float) -> bool:
+        """Whether a camera other than ``camera_id`` has a fresh member (updated within ``report_timeout_s``)."""
+        oldest = t - self.config.report_timeout_s
+        return any(c != camera_id and m.time_s >= oldest for c, m in members.items())
 
     def _join(self, key, own: int, oid: int) -> int:
         """Pair ``key`` (in object ``own``, -1 if none, where it is alone) joins object ``oid``; two objects
@@ -452,7 +481,16 @@ class RsuFusion:
         src = self._objects.pop(own)
         self.n_merged += 1
         keep, drop = (own, oid) if src.first_time_s < target.first_time_s else (oid, own)
-        merged = _Object(min(src.first_time_s, target.first_time_s), {**target.members, **src.members})
+        members = dict(target.members)
+        for cid, m in src.members.items():  # a camera in both: its newer member stays, the older one leaves
+            other = members.get(cid)
+            if other is None or m.time_s >= other.time_s:
+                members[cid], other = m, other
+            else:
+                other = m
+            if other is not None:
+                self._pairs.pop((cid, other.track_id), None)
+        merged = _Object(min(src.first_time_s, target.first_time_s), members)
         self._objects[keep] = merged
         self._objects.pop(drop, None)
         self._ids.free(drop)
@@ -470,17 +508,19 @@ class RsuFusion:
         obj.first_time_s = min(obj.first_time_s, first_s)
 
     # -- estimates -------------------------------------------------------------------------------------------
-    def _contributions(self, oids, t: float, exclude=None):
-        """Every member of objects ``oids`` (but camera ``exclude``'s) predicted to ``t``, all at once (module doc):
-        the object index of each ``(K,)``, positions ``(K, 2)``, covariances ``(K, 2, 2)``, whether its velocity is
-        known ``(K,)``, velocities ``(K, 2)`` and their covariances ``(K, 2, 2)`` at ``t``."""
+    def _contributions(self, oids, t: float, exclude=None, fresh: bool = False):
+        """Every member of objects ``oids`` (but camera ``exclude``'s; only the fresh ones with ``fresh``: updated
+        within ``report_timeout_s`` of ``t``) predicted to ``t``, all at once (module doc): the object index of each
+        ``(K,)``, positions ``(K, 2)``, covariances ``(K, 2, 2)``, whether its velocity is known ``(K,)``, velocities
+        ``(K, 2)`` and their covariances ``(K, 2, 2)`` at ``t``."""
         cfg = self.config
         idx, times, states, sig = [], [], [], []
         sigma = {cid: c.sigma_t_s for cid, c in self.cameras.items()}
         objects = self._objects
+        oldest = t - cfg.report_timeout_s if fresh else -math.inf
         for k, oid in enumerate(oids):
             for cid, m in objects[oid].members.items():
-                if cid != exclude:
+                if cid != exclude and m.time_s >= oldest:
                     idx.append(k)
                     times.append(m.time_s)
                     states.append(m.state)
@@ -501,36 +541,44 @@ class RsuFusion:
         Px = Px + (q * tau ** 2 / 3.0)[:, None, None] * np.eye(2)
         return np.array(idx, np.int64), x, Px, known, v, Pv + q[:, None, None] * np.eye(2)
 
-    def _estimates(self, oids, t: float, exclude=None):
+    def _estimates(self, oids, t: float, exclude=None, fresh: bool = False):
         """Fused position ``(m, 2)``, its covariance, velocity and its covariance of objects ``oids`` at ``t`` from
-        their members but camera ``exclude``'s (NaN where none is left / no velocity is known)."""
-        idx, x, Px, known, v, Pv = self._contributions(oids, t, exclude)
+        their members but camera ``exclude``'s (only the fresh ones with ``fresh``; NaN where none is left / no
+        velocity is known)."""
+        idx, x, Px, known, v, Pv = self._contributions(oids, t, exclude, fresh)
         m = len(oids)
         xf, Pf = _fuse_groups(idx, x, Px, m, self.config.method)
         vf, Pvf = _fuse_groups(idx[known], v[known], Pv[known], m, self.config.method)
         return xf, Pf, vf, Pvf
 
     def objects(self, time_s: float | None = None) -> FusedObjects:
-        """The unit's object list predicted to ``time_s`` (default: the latest fused time)."""
+        """The unit's object list predicted to ``time_s`` (default: the latest fused time): the objects with a fresh
+        contribution (updated within ``report_timeout_s`` of ``time_s``), each fused from its fresh ones only."""
         t = self.last_time_s if time_s is None else as_float("time_s", time_s)
-        ids = sorted(self._objects)
-        xy, P, v, Pv = self._estimates(ids, t)
-        objs = [self._objects[o] for o in ids]
+        oldest = t - self.config.report_timeout_s
+        live = [(o, [(c, m) for c, m in self._objects[o].members.items() if m.time_s >= oldest])
+                for o in sorted(self._objects)]
+        live = [(o, ms) for o, ms in live if ms]
+        ids = [o for o, _ in live]
+        xy, P, v, Pv = self._estimates(ids, t, fresh=True)
         return FusedObjects(np.array(ids, np.int64), xy, P, v, Pv,
-                            np.array([t - o.first_time_s for o in objs]),
-                            [tuple(sorted(self.cameras[c].sensor_id for c in o.members)) for o in objs],
-                            [max(o.members.values(), key=lambda mm: mm.time_s).class_id for o in objs],
-                            np.array([len(o.members) for o in objs], np.int64), t,
-                            np.array([max(mm.time_s for mm in o.members.values()) for o in objs], np.float64))
+                            np.array([t - self._objects[o].first_time_s for o in ids], np.float64),
+                            [tuple(sorted(self.cameras[c].sensor_id for c, _ in ms)) for _, ms in live],
+                            [max(ms, key=lambda cm: cm[1].time_s)[1].class_id for _, ms in live],
+                            np.array([len(ms) for _, ms in live], np.int64), t,
+                            np.array([max(m.time_s for _, m in ms) for _, ms in live], np.float64))
 
     def contributions(self, object_id: int, time_s: float) -> tuple[list, np.ndarray, np.ndarray]:
-        """Each camera's own estimate of object ``object_id`` predicted to ``time_s``, before fusion: the camera
-        ids, positions ``(k, 2)`` (m) and covariances ``(k, 2, 2)`` (m^2; the clock term included)."""
+        """Each camera's own estimate of object ``object_id`` predicted to ``time_s``, before fusion -- the fresh
+        ones, as :meth:`objects` fuses them: the camera ids, positions ``(k, 2)`` (m) and covariances ``(k, 2, 2)``
+        (m^2; the clock term included)."""
         obj = self._objects.get(object_id)
         if obj is None:
             raise InputError("object_id", object_id, "the objectId of a live fused object")
-        _, xs, Ps, _, _, _ = self._contributions([object_id], as_float("time_s", time_s))
-        return list(obj.members), xs, Ps
+        t = as_float("time_s", time_s)
+        _, xs, Ps, _, _, _ = self._contributions([object_id], t, fresh=True)
+        oldest = t - self.config.report_timeout_s
+        return [c for c, m in obj.members.items() if m.time_s >= oldest], xs, Ps
 
     def pairs(self) -> dict:
         """``(camera id, track id) -> objectId`` of every live contribution (a copy)."""

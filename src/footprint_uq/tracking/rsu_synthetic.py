@@ -27,6 +27,7 @@ from dataclasses import dataclass, field
 from typing import NamedTuple
 
 import numpy as np
+from scipy.optimize import linear_sum_assignment
 
 from .. import params as P
 from ..cameras import general
@@ -38,7 +39,7 @@ from .synthetic import CHI2_95_2D
 from .table import SharedJacobianAt, TrackerConfig, TrackOutput, TrackTable
 
 __all__ = ["intersection_cameras", "LANES", "RsuSimResult", "simulate", "coverage_sweep", "camera_frames",
-           "CameraFrame", "UnitFrame", "evaluate"]
+           "CameraFrame", "UnitFrame", "evaluate", "score_positions", "GHOST_RADIUS_M"]
 
 _XM, _YM, _GDZ, _GSX, _GSY = (P.PARAM_NAMES.index(k) for k in ("x_m", "y_m", "ground_dz_m", "ground_slope_x",
                                                                  "ground_slope_y"))
@@ -51,6 +52,8 @@ LANES = tuple(
         ((0.0, -1.75), (1.0, 0.0), 1), ((0.0, -5.25), (1.0, 0.0), 1),      # eastbound (south of the centre line)
         ((0.0, 1.75), (-1.0, 0.0), 1), ((0.0, 5.25), (-1.0, 0.0), 1)))     # westbound
 _LANE_HALF_LENGTH_M = 50.0
+#: a reported object farther than this from every true road user is a ghost (:func:`score_positions`), m
+GHOST_RADIUS_M = 3.0
 
 
 def intersection_cameras() -> list[PanTiltCamera]:
@@ -213,11 +216,16 @@ class UnitFrame(NamedTuple):
 def camera_frames(n_frames: int = 300, *, rate_hz: float = 10.0, seed: int = 0, budget="basler1@deg",
                   detector_sigma_px: float = 1.5, clock_offset_sigma_s: float = 0.005, phase_s: float = 20.0,
                   max_range_m: float = 60.0, truth_accel_psd_m2ps3: float = 1.0,
-                  tracker: TrackerConfig | None = None) -> Iterator[UnitFrame]:
+                  tracker: TrackerConfig | None = None, relabel_rate: float = 0.0) -> Iterator[UnitFrame]:
     """The run's unit frames, one after the other (module doc): the three cameras' tracked frames of every true
     time, for any fusion (:func:`simulate` feeds an :class:`~.rsu_fusion.RsuFusion`; the CP service's proof feeds
-    a :class:`~footprint_uq.service.cp_service.CpBasicService`)."""
+    a :class:`~footprint_uq.service.cp_service.CpBasicService`).
+
+    ``relabel_rate``: the probability per camera, vehicle and frame that the camera's detector gives the vehicle a
+    new ``object_id`` (its track restarts under a new track id: track churn; drawn from a stream of its own, so that
+    0 leaves every other draw of the run as it was)."""
     rng = np.random.default_rng(seed)
+    churn = np.random.default_rng([seed, 32])
     budget = load_budget(budget)
     t, truth = _traffic(n_frames, rate_hz, phase_s, truth_accel_psd_m2ps3, rng)
     L = budget.param_factor().dense()
@@ -230,14 +238,18 @@ def camera_frames(n_frames: int = 300, *, rate_hz: float = 10.0, seed: int = 0, 
         table = TrackTable(tracker, rank=L.shape[1], shared_at=SharedJacobianAt(camera, budget))
         p_true = camera.params + L @ rng.standard_normal(L.shape[1])
         cams.append(_Camera(camera, p_true, float(rng.normal(0.0, clock_offset_sigma_s)), proc, table))
+    n_veh = truth.shape[1]
+    label = np.zeros((len(cams), n_veh), np.int64)  # each camera's detector's label generation per vehicle
     for k in range(n_frames):
         frames = []
         for j, cam in enumerate(cams):
             idx, uv = _detect(cam, truth[k], A_px, max_range_m, rng)
             est = cam.proc.corners(uv[:, None, :], pixel_cov_px2=np.broadcast_to(det, (idx.size, 2, 2)))
             stamp = t[k] + cam.offset_s
-            out = cam.table.step(stamp, idx.tolist(), est.centre_xy_world_m, est.centre_cov_frame_m2,
-                                 est.centre_shared_m)
+            if relabel_rate > 0.0:
+                label[j] += churn.random(n_veh) < relabel_rate
+            out = cam.table.step(stamp, (idx + n_veh * label[j, idx]).tolist(), est.centre_xy_world_m,
+                                 est.centre_cov_frame_m2, est.centre_shared_m)
             for i, tid in zip(idx.tolist(), out.track_id.tolist(), strict=True):
                 cam.track_truth[tid] = i
             frames.append(CameraFrame(j, stamp, out, idx))
@@ -289,10 +301,12 @@ def evaluate(pairs: dict, track_truth: list, object_id, xy_m, cov_xy_m2, v_mps, 
         cameras' own estimates (the baseline, and the Loewner check); None: not evaluated.
     """
     r = RsuSimResult(n_frames=1)
+    oids = np.asarray(object_id).tolist()
+    reported = set(oids)
     members: dict = {}
     for (cid, tid), oid in pairs.items():
-        members.setdefault(oid, set()).add(track_truth[cid][tid])
-    oids = np.asarray(object_id).tolist()
+        if oid in reported:  # (an object not in the list -- no fresh contribution -- is not sent)
+            members.setdefault(oid, set()).add(track_truth[cid][tid])
     r.max_objects = len(oids)
     where: dict = {}
     for oid, vs in members.items():
@@ -324,6 +338,46 @@ def evaluate(pairs: dict, track_truth: list, object_id, xy_m, cov_xy_m2, v_mps, 
             scale = np.abs(Ps).max()
             r.n_larger += any(np.linalg.eigvalsh(Pc - cov_xy_m2[k]).min() < -1e-9 * scale for Pc in Ps)
     return r
+
+
+def score_positions(xy_m, truth_xy, radius_m: float = GHOST_RADIUS_M) -> tuple[int, int]:
+    """Ghosts and duplicates of one reported list by position alone (what a receiver sees).
+
+    The reported objects are matched one-to-one to the road users within ``radius_m`` (the assignment of least
+    total distance, :func:`scipy.optimize.linear_sum_assignment`): two road users close together are two matches,
+    not a duplicate.
+
+    Parameters
+    ----------
+    xy_m : (m, 2)
+        The reported objects' positions (m, W).
+    truth_xy : (V, 2)
+        The true road users at the same time (m, W; NaN rows: not on the road, ignored).
+    radius_m : float
+        The matching radius (m).
+
+    Returns
+    -------
+    ghosts : int
+        Reported objects farther than ``radius_m`` from every road user.
+    duplicates : int
+        Road users with a second reported object: the nearest road user of each object left unmatched within
+        ``radius_m`` (counted once per road user).
+    """
+    xy = np.asarray(xy_m, np.float64).reshape(-1, 2)
+    truth = np.asarray(truth_xy, np.float64).reshape(-1, 2)
+    truth = truth[np.isfinite(truth).all(1)]
+    if xy.shape[0] == 0:
+        return 0, 0
+    if truth.shape[0] == 0:
+        return xy.shape[0], 0
+    dist = np.hypot(*(xy[:, None, :] - truth[None]).transpose(2, 0, 1))  # (m, V)
+    near = dist.min(1) <= radius_m
+    rows, cols = linear_sum_assignment(np.where(dist <= radius_m, dist, 1e9))
+    matched = np.zeros(xy.shape[0], bool)
+    matched[rows[dist[rows, cols] <= radius_m]] = True
+    extra = near & ~matched
+    return int((~near).sum()), len(set(dist[extra].argmin(1).tolist()))
 
 
 def _inside(x, P, truth) -> bool:
