@@ -257,8 +257,10 @@ def run_imm_campaigns(q_true: float, *, scenario: str = "turning", n_campaigns: 
     kw = dict(duration_s=duration_s, rate_hz=rate_hz, seed=seed, budget=budget, camera=camera, scenario=scenario)
     assoc = TrackTable(grid.prior, rank=at.rank, shared_at=at)
     p = grid.prior
+    # the tracker's own innovations, as these campaigns were measured (docs/motion-fit.md, "The IMM fitted"):
+    # `calibrate motion --modes imm` fits with the joint likelihood (section 2a), ~14 x the memory per track
     bank = MotionBank(grid.members(), rank=at.rank, shared_at=at, sigma_v0_mps=p.sigma_v0_mps, timeout_s=p.timeout_s,
-                      g_ref=grid.reference_member())
+                      g_ref=grid.reference_member(), likelihood="tracker")
     for t, ids, classes, xy, cov, B, _ in campaign_frames(q_true, n_campaigns, n_objects, **kw):
         bank.observe(t, assoc.step(t, ids, xy, cov, B), classes, xy, cov, B)
     sums = bank.sums()
