@@ -49,7 +49,7 @@ from pathlib import Path
 
 import numpy as np
 import orjson
-from bench_service import _TS, _cpu_s, _descendants, _steal_s, _vm_hwm_mb
+from bench_service import _TS, _cpu_s, _descendants, _steal_s, _vm_hwm_mb, start_receiver
 from mqtt_broker import mosquitto
 from mqtt_broker import wait as _wait
 
@@ -187,26 +187,7 @@ def measure(seconds: float, *, cp: bool, bodies: list, reg_dir: Path,
     try:
         serve = subprocess.Popen([sys.executable, "-m", "footprint_uq.cli", "serve", *args],
                                  stdout=subprocess.DEVNULL, stderr=open(tmp / "serve.err", "wb"), env=env)
-        rx = subprocess.Popen([sys.executable, __file__, "--receiver", str(port)], stdin=subprocess.PIPE,
-                              stdout=subprocess.PIPE, env=env)
-        health: list[dict] = []
-        result: dict = {}
-        lock = threading.Lock()
-        ready = threading.Event()
-
-        def read_rx():
-            for line in rx.stdout:
-                d = json.loads(line)
-                with lock:
-                    if "health" in d:
-                        health.append(d["health"])
-                    elif "result" in d:
-                        result.update(d["result"])
-                if "ready" in d:
-                    ready.set()
-
-        threading.Thread(target=read_rx, daemon=True).start()
-        _wait(ready.is_set, 30, "the receiver")
+        rx, health, result, lock = start_receiver(__file__, port, env)
         def started() -> bool:
             if serve.poll() is not None:
                 raise RuntimeError(f"serve exited: {(tmp / 'serve.err').read_text()[-400:]}")

@@ -62,6 +62,33 @@ CAMERA = dict(focal_px=1400.0, image_size_px=(1920, 1080), height_m=8.0, pan_deg
 _TS = re.compile(rb'"timestamp_s":([0-9.eE+-]+)')
 
 
+
+def start_receiver(script: str, port: int, env: dict) -> tuple[subprocess.Popen, list, dict, threading.Lock]:
+    """The bench's receiver (``script --receiver PORT``) in a process of its own, and a thread that collects its JSON
+    lines: health records into a list, its final figures into a dict (both under the returned lock). Returns once
+    the receiver says it is ready: ``(process, health, result, lock)``."""
+    rx = subprocess.Popen([sys.executable, script, "--receiver", str(port)], stdin=subprocess.PIPE,
+                          stdout=subprocess.PIPE, env=env)
+    health: list[dict] = []
+    result: dict = {}
+    lock = threading.Lock()
+    ready = threading.Event()
+
+    def read_rx():
+        for line in rx.stdout:
+            d = json.loads(line)
+            with lock:
+                if "health" in d:
+                    health.append(d["health"])
+                elif "result" in d:
+                    result.update(d["result"])
+            if "ready" in d:
+                ready.set()
+
+    threading.Thread(target=read_rx, daemon=True).start()
+    _wait(ready.is_set, 30, "the receiver")
+    return rx, health, result, lock
+
 def make_detections(n: int, seed: int) -> list[dict]:
     """n 2D boxes below the horizon of the bench camera (pixels, bottom edge = ground contact)."""
     rng = np.random.default_rng(seed)
@@ -173,26 +200,7 @@ def measure(seconds: float = 60.0, cameras: int = 8, fps: float = 30.0, objects:
                                  stdout=subprocess.DEVNULL, stderr=open(tmp / "serve.err", "wb"), env=env)
         # the receiver runs in a process of its own (it reads ~33 MB/s of records through paho): in this
         # process it would compete with the publisher for the GIL and delay both the frames and the time stamps
-        rx = subprocess.Popen([sys.executable, __file__, "--receiver", str(port)], stdin=subprocess.PIPE,
-                              stdout=subprocess.PIPE, env=env)
-        health: list[dict] = []
-        result: dict = {}
-        lock = threading.Lock()
-        rx_ready = threading.Event()
-
-        def read_rx():
-            for line in rx.stdout:
-                d = json.loads(line)
-                with lock:
-                    if "health" in d:
-                        health.append(d["health"])
-                    elif "result" in d:
-                        result.update(d["result"])
-                if "ready" in d:
-                    rx_ready.set()
-
-        threading.Thread(target=read_rx, daemon=True).start()
-        _wait(rx_ready.is_set, 30, "the receiver")
+        rx, health, result, lock = start_receiver(__file__, port, env)
         _wait(lambda: len({h.get("worker") for h in health}) >= workers, 120, "every worker's first health message")
         tx = mqtt.Client(mqtt.CallbackAPIVersion.VERSION2, client_id="bench-tx")
         tx.on_socket_open = tcp_no_delay  # a detector's client, as docs/service.md advises
