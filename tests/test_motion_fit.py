@@ -51,6 +51,15 @@ def _tracks(rng, n_tracks=4, n_frames=12, r=R_RANK):
     return t, z, R, B
 
 
+def _mixture_step(logs):
+    """One update of the reference IMMs: the mixture's log-likelihood (the modes' log terms ``logs``, each (n,),
+    combined) and the new mode probabilities (n, M), floored as the kernels floor them."""
+    L = np.stack(logs, -1)
+    top = L.max(-1, keepdims=True)
+    lik = np.maximum(np.exp(L - top), 1e-9)
+    return (top[:, 0] + np.log(np.exp(L - top).sum(-1))) - LOG_2PI, lik / lik.sum(-1, keepdims=True)
+
+
 def _reference_ll(t, z, R, B, qs, rates, mu0, var_v0):
     """Per-track log-likelihood of the tracker's filter (IMM over ``qs``) from the numpy classes of filter.py."""
     F, n = z.shape[:2]
@@ -77,11 +86,8 @@ def _reference_ll(t, z, R, B, qs, rates, mu0, var_v0):
             m2 = np.einsum("ni,nij,nj->n", y, np.linalg.inv(S), y)
             logs.append(-0.5 * m2 - 0.5 * np.log(np.linalg.det(S)) + np.log(cbar[:, j]))
             post.append(upd.update(pred, meas)[0])
-        L = np.stack(logs, -1)
-        top = L.max(-1, keepdims=True)
-        ll += (top[:, 0] + np.log(np.exp(L - top).sum(-1))) - LOG_2PI
-        lik = np.maximum(np.exp(L - top), 1e-9)
-        mu = lik / lik.sum(-1, keepdims=True)
+        step_ll, mu = _mixture_step(logs)
+        ll += step_ll
         modes = post
     return ll
 
@@ -154,11 +160,8 @@ def _joint_reference_ll(t, z, R, B, qs, rates, mu0, var_v0):
             m2 = np.einsum("ni,nij,nj->n", y, np.linalg.inv(S), y)
             logs.append(-0.5 * m2 - 0.5 * np.log(np.linalg.det(S)) + np.log(cbar[:, j]))
             post.append((xp + np.einsum("nij,nj->ni", Kg, y), Pp - Kg @ S @ np.swapaxes(Kg, -1, -2)))
-        L = np.stack(logs, -1)
-        top = L.max(-1, keepdims=True)
-        ll += (top[:, 0] + np.log(np.exp(L - top).sum(-1))) - LOG_2PI
-        lik = np.maximum(np.exp(L - top), 1e-9)
-        mu = lik / lik.sum(-1, keepdims=True)
+        step_ll, mu = _mixture_step(logs)
+        ll += step_ll
         modes = post
     return ll
 
