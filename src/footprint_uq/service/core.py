@@ -370,8 +370,7 @@ class Service:
         self.record = record
         self.cameras: dict[str | None, CameraSetup] = self._camera_setups(
             camera, budget, registry, camera_id, station_id, allow_outside_image,
-            GeoReference(heading_offset_deg=heading_offset_deg, origin_lat_deg=origin_lat_deg,
-                         origin_lon_deg=origin_lon_deg))
+            dict(heading_offset_deg=heading_offset_deg, origin_lat_deg=origin_lat_deg, origin_lon_deg=origin_lon_deg))
         self._single = camera is not None
         self.tracks = bool(tracks)
         if self.tracks:
@@ -400,24 +399,22 @@ class Service:
             self.warm_up()
 
     def _camera_setups(self, camera, budget, registry, camera_id, station_id, allow_outside_image: bool,
-                       geo: GeoReference) -> dict:
-        """camera id -> :class:`CameraSetup`: the one camera (``geo``: the service's options), or the registry's
-        (each entry's heading offset and origin where it gives them, else ``geo``'s)."""
+                       tie: dict) -> dict:
+        """camera id -> :class:`CameraSetup`: the one camera (``tie``: the service's map-tie options), or the
+        registry's (each entry's heading offset and origin where it gives them, else ``tie``'s)."""
         if camera is not None:
             if budget is None:
                 raise InputError("budget", None, "an error budget (preset, file or ErrorBudget) for the camera")
+            geo = GeoReference(**tie)
             sid = station_id if station_id is not None else station_id_of(camera_id or "camera")
             return {camera_id: CameraSetup(camera_id, self._processor(camera, budget, geo, allow_outside_image),
                                            geo, int(sid))}
         setups = {}
         entries = registry if isinstance(registry, dict) else load_registry(registry, budget=budget)
         for cid, e in entries.items():
-            g = GeoReference(
-                heading_offset_deg=geo.heading_offset_deg if e.heading_offset_deg is None else e.heading_offset_deg,
-                origin_lat_deg=geo.origin_lat_deg if e.origin_lat_deg is None else e.origin_lat_deg,
-                origin_lon_deg=geo.origin_lon_deg if e.origin_lon_deg is None else e.origin_lon_deg)
-            setups[str(cid)] = CameraSetup(str(cid), self._processor(e.camera, e.budget, g, allow_outside_image),
-                                           g, station_id_of(cid))
+            geo = GeoReference(**{k: v if getattr(e, k) is None else getattr(e, k) for k, v in tie.items()})
+            setups[str(cid)] = CameraSetup(str(cid), self._processor(e.camera, e.budget, geo, allow_outside_image),
+                                           geo, station_id_of(cid))
         return setups
 
     def _processor(self, camera, budget, geo: GeoReference, allow_outside_image: bool) -> FrameProcessor:
