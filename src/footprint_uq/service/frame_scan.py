@@ -359,8 +359,11 @@ def _read_numbers(buf, spans, fv, iv, pow10):  # pragma: no cover - compiled
                     ex = min(ex * 10 + np.int64(c) - 48, 100000)
                     nexp += 1
                 else:
+                    if m > 0 or c != 48:  # (leading zeros are no digits of the mantissa: as _number)
+                        nd += 1
+                        if nd > 18:  # declined before ``m`` could overflow (a 19th digit wraps int64)
+                            return False
                     m = m * 10 + np.int64(c) - 48
-                    nd += 1 if m > 0 else 0  # (leading zeros are no digits of the mantissa: as _number)
                     e10 -= 1 if pt >= 0 else 0  # a fraction digit moves the point
             elif c == 46 and pt < 0 and ep < 0:
                 pt = i
