@@ -398,6 +398,19 @@ def test_queue_block_policy_waits_instead_of_dropping():
     assert got == [True] and q.get(0) == 2 and q.dropped == 0
 
 
+def test_queue_block_policy_serves_frames_in_the_order_they_were_read():
+    # stdin replays a recording: the CP service must see the frames as recorded, whatever the reader's lead
+    # (the fair cameras-in-turn order of ``newest`` would swap a late frame of one camera behind another's)
+    q = FrameQueue("block", depth=3)
+    for key, item in [("a", 1), ("b", 2), ("a", 3), ("a", 4), ("c", 5), ("b", 6)]:
+        assert q.put(key, item)
+    assert [q.get(0) for _ in range(6)] == [1, 2, 3, 4, 5, 6] and q.get(0.01) is None
+    n = FrameQueue("newest", depth=3)
+    for key, item in [("a", 1), ("b", 2), ("a", 3), ("a", 4), ("c", 5), ("b", 6)]:
+        n.put(key, item)
+    assert [n.get(0) for _ in range(6)] == [1, 2, 5, 3, 6, 4]  # cameras in turn
+
+
 def _random_motion(rng, n):
     """Motion codes of n objects, each component present or not, over the whole value ranges."""
     from footprint_uq.service.messages.motion import MotionCodes

@@ -10,7 +10,9 @@ Overload policy (:class:`FrameQueue`): at most **one pending frame per camera**.
 ``newest`` (the default for MQTT) a frame that arrives while its camera's previous frame is
 still waiting replaces it and the replaced one is counted in ``frames_dropped``; with ``block``
 (the default for stdin) the reader waits, so a pipe pushes back on the detector and nothing is
-dropped.  Memory is bounded by the number of cameras, never by the backlog.
+dropped, and the frames are processed in the order they were read (a recording replays as recorded,
+whatever the reader's lead: the CP service never sees two cameras' frames swapped by the queue).
+Memory is bounded by the number of cameras, never by the backlog.
 
 Accounting: ``frames_in = frames_out + errors + frames_dropped + pending`` at every health
 message; after a drain ``pending`` is 0.
@@ -93,6 +95,8 @@ class FrameQueue:
     depth : int
         Most frames pending per key: with ``newest`` a frame arriving when its key already has ``depth``
         frames pending replaces the oldest of them (counted in :attr:`dropped`); with ``block`` it waits.
+        ``newest`` serves the key waiting longest first (cameras in turn, fair under overload); ``block`` serves
+        every frame in the order it was put (a replay is deterministic).
     max_bytes : int
         Most bytes pending in all (the ``nbytes`` given to :meth:`put`): beyond it a frame is dropped
         (``newest``, counted) or waits (``block``), so memory stays bounded whatever the frames' sizes.
@@ -111,6 +115,7 @@ class FrameQueue:
         self._cv = threading.Condition()
         self._closed = False
         self._n = 0
+        self._seq = 0  # the order of the puts (``block`` serves by it)
         self.bytes = 0
         self.dropped = 0
 
@@ -129,7 +134,7 @@ class FrameQueue:
                 return False
             dq = self._items.get(key)
             if dq is not None and len(dq) >= self.depth:  # newest: the oldest pending frame of the key goes
-                _, nb = dq.popleft()
+                _, nb, _ = dq.popleft()
                 self._n -= 1
                 self.bytes -= nb
                 self.dropped += 1
@@ -139,15 +144,16 @@ class FrameQueue:
                 return False
             if dq is None:
                 dq = self._items[key] = collections.deque()  # keeps its place in line: cameras are served fairly
-            dq.append((item, nbytes))
+            dq.append((item, nbytes, self._seq))
+            self._seq += 1
             self._n += 1
             self.bytes += nbytes
             self._cv.notify_all()
             return True
 
     def get(self, timeout: float | None = None):
-        """The oldest pending item of the key waiting longest (None after ``timeout`` s, or when closed and
-        empty); a key's frames come out in the order they were put."""
+        """``newest``: the oldest pending item of the key waiting longest; ``block``: the item put first (None after
+        ``timeout`` s, or when closed and empty); a key's frames come out in the order they were put."""
         with self._cv:
             end = None if timeout is None else time.monotonic() + timeout
             while not self._items:
@@ -157,8 +163,12 @@ class FrameQueue:
                 if remaining is not None and remaining <= 0:
                     return None
                 self._cv.wait(remaining)
-            key, dq = next(iter(self._items.items()))
-            item, nb = dq.popleft()
+            if self.policy == "block":
+                key = min(self._items, key=lambda k: self._items[k][0][2])
+                dq = self._items[key]
+            else:
+                key, dq = next(iter(self._items.items()))
+            item, nb, _ = dq.popleft()
             if dq:
                 self._items.move_to_end(key)  # its next frame waits behind the other cameras' ones
             else:
