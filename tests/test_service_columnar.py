@@ -208,3 +208,29 @@ def _same_ids(fast, ref, frames) -> None:
     fast._sync()
     assert fast._num == ref._num and fast._owner == ref._owner
     assert list(fast._seen.items()) == list(ref._seen.items())
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(1, 30), st.integers(0, 2 ** 32 - 1), st.sampled_from(["bottom-centre", "bottom-corners"]))
+def test_checked_boxes_give_the_same_estimate(camera_proc, n, seed, contact):
+    """``FrameProcessor.boxes2d(..., boxes_checked=True)`` (the service's boxes, checked by its value checks: the
+    contact pixels formed without the checks) is the estimate of the checked call, array for array, bit for bit
+    (boxes across the image, beyond it and above the horizon, degenerate ones)."""
+    rng = np.random.default_rng(seed)
+    u, v = rng.uniform(-300, 2200, n), rng.uniform(-100, 1300, n)
+    w, h = rng.uniform(0, 200, n) * (rng.random(n) > 0.1), rng.uniform(0, 150, n)
+    boxes = np.column_stack([u, v - h, u + w, v])
+    cov = np.tile(np.diag([4.0, 9.0]), (n, 1, 1)) if seed % 2 else None
+    a = camera_proc.boxes2d(boxes, contact=contact, pixel_cov_px2=cov)
+    b = camera_proc.boxes2d(boxes, contact=contact, pixel_cov_px2=cov, boxes_checked=True)
+    for name in ("corners_px", "centre_xy_world_m", "centre_cov_m2", "largest_xy_world_m", "v2x_codes",
+                 "centre_reason", "object_rows"):
+        x, y = np.asarray(getattr(a, name)), np.asarray(getattr(b, name))
+        assert x.shape == y.shape and x.tobytes() == y.tobytes(), name
+
+
+@pytest.fixture(scope="module")
+def camera_proc(camera):
+    from footprint_uq import FrameProcessor
+
+    return FrameProcessor(camera, "basler1", joint_cov=False)

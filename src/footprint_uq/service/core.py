@@ -655,7 +655,7 @@ class Service:
             X, P = found.boxes, found.pixel_cov_px2
             try:
                 if found.family == "2d":
-                    return proc.boxes2d(X, contact=self.contact, pixel_cov_px2=P), found
+                    return proc.boxes2d(X, contact=self.contact, pixel_cov_px2=P, boxes_checked=True), found
                 if found.family == "3d":
                     return proc.boxes3d(X, yaw_unit="deg" if found.columns[-1] == "yaw_deg" else "rad",
                                         pixel_cov_px2=P), found
