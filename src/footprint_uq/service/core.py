@@ -768,14 +768,8 @@ class Service:
         """The UPER CPM of an untracked frame's objects ``co.ok_idx`` by :func:`.messages.uper_cpm.
         plain_container_uper` (the columns gathered in the compiled pass); the bytes of :meth:`_cpm_uper`.  None:
         a value out of range (the general writer then names it)."""
-        m = len(co.ok_idx)
         cm = cm_dm(setup.world_to_enu(est.centre_xy_world_m), co.ok_idx)
-        if class_p is None:
-            level = np.full(m, CONFIDENCE_LEVEL_UNAVAILABLE, np.int64)
-        else:
-            p = class_p[co.ok_idx]
-            level = np.where(np.isnan(p), CONFIDENCE_LEVEL_UNAVAILABLE, np.maximum(1.0, np.ceil(100.0 * p - 1e-9))
-                             ).astype(np.int64)
+        level, _ = _confidence_levels(class_p, co.ok_idx)
         cls = self._cls
         container = plain_container_uper(co.msg_ids, cm, np.ascontiguousarray(est.v2x_codes.T, dtype=np.int32),
                                          co.ok_idx, _CPM_INDEX, co.class_idx,
@@ -817,13 +811,7 @@ class Service:
         else:
             crow = np.fromiter(map(_CLASS_ROWS.__getitem__, classes), np.intp, N)[ok_idx]
         mc = None if motion is None else motion_codes(motion if m == N else motion.take(ok_idx), m)  # (sorted rows)
-        p = level = None
-        if class_p is None:
-            level = np.full(m, CONFIDENCE_LEVEL_UNAVAILABLE, np.int64)
-        else:
-            p = class_p[ok_idx]
-            level = np.where(np.isnan(p), CONFIDENCE_LEVEL_UNAVAILABLE, np.maximum(1.0, np.ceil(100.0 * p - 1e-9))
-                             ).astype(np.int64)
+        level, p = _confidence_levels(class_p, ok_idx)
         return _MessageColumns(m, x_cm, y_cm, x_dm, y_dm, est.v2x_codes[ok_idx], crow, level, p, mc)
 
     def _cpm_uper(self, setup: CameraSetup, c: _MessageColumns, msg_ids: np.ndarray, ref_ms: int) -> bytes:
@@ -934,6 +922,16 @@ def _status_layout(t: Table, est, compact: bool) -> list:
             "" if ok else f"no centre: {r}" for ok, r in zip(valid.tolist(), reasons, strict=True)]))]
     return [b',"status":', status, b',"reason":', t.column(["ok" if ok else f"no centre: {r}"
                                                            for ok, r in zip(valid.tolist(), reasons, strict=True)])]
+
+
+def _confidence_levels(class_p: np.ndarray | None, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+    """The CPM ConfidenceLevel (int64) of the objects ``rows`` from their class confidences (NaN or none given:
+    unavailable), and those confidences (None: none given)."""
+    if class_p is None:
+        return np.full(len(rows), CONFIDENCE_LEVEL_UNAVAILABLE, np.int64), None
+    p = class_p[rows]
+    return np.where(np.isnan(p), CONFIDENCE_LEVEL_UNAVAILABLE, np.maximum(1.0, np.ceil(100.0 * p - 1e-9))
+                    ).astype(np.int64), p
 
 
 def _compact_status(est) -> tuple[np.ndarray, list]:
