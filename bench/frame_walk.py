@@ -3,7 +3,7 @@ runs, in order, and how often it climbs back up a layer (a return from a lower l
 
 Standalone (not a section of ``run.py``; it measures structure, not time)::
 
-    PYTHONPATH=src .venv/bin/python bench/frame_walk.py [--tracks] [--objects 100]
+    PYTHONPATH=src .venv/bin/python bench/frame_walk.py [--tracks] [--objects 100] [--record full|compact]
 
 The walk is taken with ``sys.setprofile`` on the third frame of a warmed service (100 2-D boxes with a pixel
 covariance): every Python-level call and return inside ``footprint_uq`` (the compiled kernels' own code is not
@@ -75,9 +75,10 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--tracks", action="store_true", help="a tracked service (positions + motion)")
     ap.add_argument("--objects", type=int, default=100)
+    ap.add_argument("--record", choices=("full", "compact"), default="full", help="the record's layout")
     a = ap.parse_args(argv)
     cam = PanTiltCamera(focal_px=1400, image_size_px=(1920, 1080), height_m=8.0, pan_deg=30.0, tilt_deg=20.0)
-    svc = Service(cam, "basler1", tracks=a.tracks)
+    svc = Service(cam, "basler1", tracks=a.tracks, record=a.record)
     rng = np.random.default_rng(0)
     for i in range(2):
         svc.process_frame_json(_frame(rng, i, a.objects))

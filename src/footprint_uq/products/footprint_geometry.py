@@ -32,19 +32,30 @@ def box2d_contact_points(boxes_px, contact: str = "bottom-centre"):
                                                                                                   boxes_px, 4)
     if b.ndim != 2 or b.shape[1] != 4:
         raise InputError("boxes_px", b.shape, "an array of shape (N, 4): u_min, v_min, u_max, v_max")
-    if contact == "bottom-centre":
-        A = np.array([[0.5, 0.0, 0.5, 0.0], [0.0, 0.0, 0.0, 1.0]])
-    elif contact == "bottom-corners":
-        A = np.array([[1.0, 0, 0, 0], [0, 0, 0, 1.0], [0, 0, 1.0, 0], [0, 0, 0, 1.0]])
-    else:
+    A = _CONTACT_MAPS.get(contact)
+    if A is None:
         raise InputError("contact", contact, f"one of {CONTACT_MODES}")
-    K = A.shape[0] // 2
     with np.errstate(invalid="ignore"):
         bad = (b[:, 2] < b[:, 0]) | (b[:, 3] < b[:, 1])
     if np.any(bad):
         i = int(np.flatnonzero(bad)[0])
         raise InputError(f"boxes_px[{i}]", b[i].tolist(), "u_min <= u_max and v_min <= v_max")
-    return (b @ A.T).reshape(-1, K, 2), A
+    return (b @ A.T).reshape(-1, A.shape[0] // 2, 2), A.copy()
+
+
+def box2d_contact_points_checked(boxes_px: np.ndarray, contact: str = "bottom-centre") -> np.ndarray:
+    """:func:`box2d_contact_points`' pixels ``(N, K, 2)`` of boxes the caller has checked already: a float64 array
+    ``(N, 4)``, finite, ``u_min <= u_max`` and ``v_min <= v_max`` (the service's value checks,
+    ``service/detections.py``); the same arithmetic, without the checks (~4 us of a 100-box frame)."""
+    A = _CONTACT_MAPS[contact]
+    return (boxes_px @ A.T).reshape(-1, A.shape[0] // 2, 2)
+
+
+#: contact mode -> the linear map ``A (2K, 4)`` from a box to its contact pixels (read-only; callers get copies)
+_CONTACT_MAPS = {"bottom-centre": np.array([[0.5, 0.0, 0.5, 0.0], [0.0, 0.0, 0.0, 1.0]]),
+                 "bottom-corners": np.array([[1.0, 0, 0, 0], [0, 0, 0, 1.0], [0, 0, 1.0, 0], [0, 0, 0, 1.0]])}
+for _A in _CONTACT_MAPS.values():
+    _A.flags.writeable = False
 
 
 def box3d_bottom_corners(boxes_world, *, yaw_unit: str = "rad", bottom_on_ground: bool = True,

@@ -22,7 +22,12 @@ from ..uncertainty.propagation import (
 )
 from .footprint_estimate import BOX3D_COLUMNS, V2X_SAMPLES, FootprintEstimate, mark_overflow
 from .footprint_flags import apply_v2x_policy, check_flag_options
-from .footprint_geometry import box2d_contact_points, box3d_bottom_corners, box_cov_to_corners
+from .footprint_geometry import (
+    box2d_contact_points,
+    box2d_contact_points_checked,
+    box3d_bottom_corners,
+    box_cov_to_corners,
+)
 from .footprint_reference import footprints_from_boxes3d, footprints_from_corners
 
 # -- the per-frame fast path ---------------------------------------------------------------------
@@ -243,8 +248,15 @@ class FrameProcessor:
         return self._run(uv, self._no_extra, pixel_cov_px2)
 
     def boxes2d(self, boxes_px, *, contact: str = "bottom-centre", pixel_cov_px2=None,
-                box_cov_px2=None) -> FootprintEstimate:
-        """Footprints of image boxes ``(N, 4)`` (see :func:`footprints_from_boxes2d`)."""
+                box_cov_px2=None, boxes_checked: bool = False) -> FootprintEstimate:
+        """Footprints of image boxes ``(N, 4)`` (see :func:`footprints_from_boxes2d`).
+
+        ``boxes_checked``: the caller has checked the boxes already -- a float64 array ``(N, 4)``, finite, corners
+        in order (the service's value checks) -- and ``contact`` (:data:`CONTACT_MODES`); the contact pixels are then
+        formed without the checks (the same numbers)."""
+        if boxes_checked and box_cov_px2 is None and type(boxes_px) is np.ndarray and boxes_px.dtype == np.float64 \
+                and boxes_px.ndim == 2 and boxes_px.shape[1] == 4:
+            return self._run(box2d_contact_points_checked(boxes_px, contact), self._no_extra, pixel_cov_px2)
         corners, A = box2d_contact_points(boxes_px, contact)
         if box_cov_px2 is not None:
             if pixel_cov_px2 is not None:

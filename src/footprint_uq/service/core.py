@@ -59,7 +59,7 @@ from .detections import (
 )
 from .frame_kernels import cm_dm, worst_usable
 from .frame_scan import ScannedFrame, scan_frame
-from .jsonrows import Table
+from .jsonrows import Table, compact_objects_json
 from .messages.asn1_cpm import DEFAULT_CDD
 from .messages.cpm import (
     CONFIDENCE_LEVEL_UNAVAILABLE,
@@ -87,6 +87,7 @@ from .messages.uper_cpm import (
     class_bits,
     encode_cpm_uper_fast,
     perceived_object_container_uper_arrays,
+    plain_container_uper,
 )
 
 __all__ = ["Service", "CameraSetup", "FrameOutput", "error_record", "station_id_of", "RECORD_FOOTPRINTS",
@@ -327,6 +328,10 @@ class Service:
         with one error record (field ``detections``) before it is parsed.
     """
 
+    #: write the untracked compact record and its CPM from the columns in compiled passes (:meth:`_compact_objects`);
+    #: False: the general writers, the same bytes (the tests' reference path)
+    _columnar = True
+
     def __init__(self, camera=None, budget=None, *, registry=None, camera_id: str | None = None,
                  heading_offset_deg: float = 0.0, origin_lat_deg: float | None = None,
                  origin_lon_deg: float | None = None, confidence: float = 0.95, contact: str = "bottom-centre",
@@ -456,6 +461,10 @@ class Service:
         t.json([b'{"a":', t.column(np.zeros(1)), t.when(np.ones(1, bool), b',"b":', t.column(["x"])), b"}"])
         one = np.ones(1, np.int64)
         perceived_object_container_uper_arrays(one, one, one, one, one, one, one, one, one, cdd=self.cpm_cdd)
+        if self.record == "compact":  # (its compiled passes: _compact_objects, _plain_cpm_uper)
+            compact_objects_json(one, 0 * one, [b"null"], 0 * one, [b""], np.zeros((5, 1)), one)
+            plain_container_uper(one, np.ones((2, 1), np.int64), np.ones((7, 1), np.int32), 0 * one, 0, 0 * one,
+                                 0 * one, one, one, one, cdd=self.cpm_cdd)
         cm_dm(np.zeros((1, 2)), np.zeros(1, np.int64))
         scan_frame(b'{"camera_id":"c","frame":0,"timestamp_s":0,"detections":[{"object_id":1,"class":"car",'
                    b'"u_min_px":1,"v_min_px":1.5,"u_max_px":2,"v_max_px":3}]}')
@@ -587,9 +596,14 @@ class Service:
         if self.on_tracked is not None and motion is not None:
             self.on_tracked(camera_id, fno, ts, setup.last_tracks, est, found)
         t1 = time.perf_counter()
-        objects, ok_idx, msg_ids = self._objects_json(setup, est, ids, classes, ts, motion)
-        t2 = time.perf_counter()
         compact = self.record == "compact"
+        # the untracked compact record: its objects and messages from the columns in two compiled passes
+        co = self._compact_objects(setup, est, ids, classes, ts) if compact and motion is None else None
+        if co is None:
+            objects, ok_idx, msg_ids = self._objects_json(setup, est, ids, classes, ts, motion)
+        else:
+            objects, ok_idx, msg_ids = co.text, co.ok_idx, co.msg_ids
+        t2 = time.perf_counter()
         head = {"type": RECORD_FOOTPRINTS, **({"record": "compact"} if compact else {}), "camera_id": camera_id,
                 "frame": fno, "timestamp_s": ts, "station_id": setup.station_id,
                 "heading_offset_deg": setup.georef.heading_offset_deg,
@@ -603,8 +617,10 @@ class Service:
             # motion: the tracker's motion of the frame's objects (None: the messages carry no motion)
             om = None if motion is None else motion[1]
             if compact and self.uper_encoder == "fast":  # the CPM's bytes only (on their own topic)
-                cpm_uper = self._cpm_uper(setup, self._message_columns(setup, est, classes, class_p, ok_idx, om),
-                                          msg_ids, ref_ms)
+                cpm_uper = None if co is None else self._plain_cpm_uper(setup, est, class_p, co, ref_ms)
+                if cpm_uper is None:  # (tracked, or a value out of range: the general writer names it)
+                    cpm_uper = self._cpm_uper(setup, self._message_columns(setup, est, classes, class_p, ok_idx,
+                                                                           om), msg_ids, ref_ms)
             else:
                 cpm, cpm_uper, sdsm = self._messages_json(setup, est, classes, class_p, ok_idx, msg_ids, int(fno),
                                                           ts, ref_ms, motion=om)
@@ -639,7 +655,7 @@ class Service:
             X, P = found.boxes, found.pixel_cov_px2
             try:
                 if found.family == "2d":
-                    return proc.boxes2d(X, contact=self.contact, pixel_cov_px2=P), found
+                    return proc.boxes2d(X, contact=self.contact, pixel_cov_px2=P, boxes_checked=True), found
                 if found.family == "3d":
                     return proc.boxes3d(X, yaw_unit="deg" if found.columns[-1] == "yaw_deg" else "rad",
                                         pixel_cov_px2=P), found
@@ -713,6 +729,54 @@ class Service:
         layout.append(b"}")
         return t.json_buffer(layout), ok_idx, msg_ids
 
+    def _compact_objects(self, setup: CameraSetup, est, ids: list, classes: list, ts: float
+                         ) -> _CompactObjects | None:
+        """The compact record's ``objects`` without tracks by :func:`.jsonrows.compact_objects_json` (one compiled
+        pass; :meth:`_objects_json` writes the same bytes with its general layout), and the message ids as
+        :meth:`_objects_json` assigns them.  None: not this path's frame (no objects, an ``object_id`` that is not
+        an integer of 64 bits, or :attr:`_columnar` off: the reference path of the tests)."""
+        N = len(ids)
+        if not self._columnar or N == 0 or set(map(type, ids)) != _INT_ONLY:
+            return None
+        try:
+            id_arr = np.array(ids, dtype=np.int64)
+        except OverflowError:  # (beyond int64: JSON allows up to 2**64 - 1)
+            return None
+        if classes.count(classes[0]) == N:  # one class for the frame (or none): one entry
+            distinct, class_idx = [classes[0]], np.zeros(N, np.int64)
+        else:
+            first: dict = {}
+            class_idx = np.fromiter((first.setdefault(c, len(first)) for c in classes), np.int64, N)
+            distinct = list(first)
+        valid = est.centre_valid
+        status_idx, status_texts = (np.zeros(N, np.int64), [_STATUS_ALL_OK_COMPACT]) if valid.all() else \
+            _compact_status(est)
+        ok_idx = msg_ids = mid = None
+        if self.messages:  # (as _message_id_layout: the objects with a centre, at most 255)
+            ok_idx = np.flatnonzero(valid)[:MAX_MESSAGE_OBJECTS]
+            msg_ids = mid = setup.ids.assign(ids, ok_idx, ts, int_ids=id_arr)
+            if len(ok_idx) < N:
+                mid = np.full(N, -1, np.int64)
+                mid[ok_idx] = msg_ids
+        centre, cov = est.centre_xy_world_m, est.centre_cov_m2
+        text = compact_objects_json(id_arr, class_idx, [orjson.dumps(c) for c in distinct], status_idx, status_texts,
+                                    np.array([centre[:, 0], centre[:, 1], cov[:, 0, 0], cov[:, 0, 1], cov[:, 1, 1]]),
+                                    mid)
+        return _CompactObjects(text, ok_idx, msg_ids, class_idx, distinct)
+
+    def _plain_cpm_uper(self, setup: CameraSetup, est, class_p, co: _CompactObjects, ref_ms: int) -> bytes | None:
+        """The UPER CPM of an untracked frame's objects ``co.ok_idx`` by :func:`.messages.uper_cpm.
+        plain_container_uper` (the columns gathered in the compiled pass); the bytes of :meth:`_cpm_uper`.  None:
+        a value out of range (the general writer then names it)."""
+        cm = cm_dm(setup.world_to_enu(est.centre_xy_world_m), co.ok_idx)
+        level, _ = _confidence_levels(class_p, co.ok_idx)
+        cls = self._cls
+        container = plain_container_uper(co.msg_ids, cm, np.ascontiguousarray(est.v2x_codes.T, dtype=np.int32),
+                                         co.ok_idx, _CPM_INDEX, co.class_idx,
+                                         np.array([_CLASS_ROWS[c] for c in co.classes], np.int64), cls.bits_value,
+                                         cls.bits_width, level, cdd=self.cpm_cdd)
+        return None if container is None else setup.uper.encode(ref_ms, container)
+
     def _full_object_layout(self, setup: CameraSetup, t: Table, est, cxx, cxy, cyy) -> list:
         """The full record's object fields after ``cov_m2``: ellipses, largest point, V2X fields and their source,
         the WGS84 position (with an origin), the linearity flag (``linearity``)."""
@@ -747,13 +811,7 @@ class Service:
         else:
             crow = np.fromiter(map(_CLASS_ROWS.__getitem__, classes), np.intp, N)[ok_idx]
         mc = None if motion is None else motion_codes(motion if m == N else motion.take(ok_idx), m)  # (sorted rows)
-        p = level = None
-        if class_p is None:
-            level = np.full(m, CONFIDENCE_LEVEL_UNAVAILABLE, np.int64)
-        else:
-            p = class_p[ok_idx]
-            level = np.where(np.isnan(p), CONFIDENCE_LEVEL_UNAVAILABLE, np.maximum(1.0, np.ceil(100.0 * p - 1e-9))
-                             ).astype(np.int64)
+        level, p = _confidence_levels(class_p, ok_idx)
         return _MessageColumns(m, x_cm, y_cm, x_dm, y_dm, est.v2x_codes[ok_idx], crow, level, p, mc)
 
     def _cpm_uper(self, setup: CameraSetup, c: _MessageColumns, msg_ids: np.ndarray, ref_ms: int) -> bytes:
@@ -821,6 +879,18 @@ class Service:
         return cpm_json, cpm_uper, _splice(orjson.dumps(sdsm), b'"objects":[]', objs)
 
 
+class _CompactObjects(NamedTuple):
+    """An untracked compact record's objects (:meth:`Service._compact_objects`): their JSON text, the rows in the
+    messages and their message ids (None without messages), each row's class among the frame's distinct
+    ``classes``."""
+
+    text: object
+    ok_idx: np.ndarray | None
+    msg_ids: np.ndarray | None
+    class_idx: np.ndarray
+    classes: list
+
+
 class _MessageColumns(NamedTuple):
     """The CPM / SDSM objects of a frame as columns (m rows): positions (CPM cm, SDSM dm, east / north), the V2X
     codes (m, 7), class rows of the class tables, CPM confidence levels, class confidences (None: none given) and
@@ -852,6 +922,30 @@ def _status_layout(t: Table, est, compact: bool) -> list:
             "" if ok else f"no centre: {r}" for ok, r in zip(valid.tolist(), reasons, strict=True)]))]
     return [b',"status":', status, b',"reason":', t.column(["ok" if ok else f"no centre: {r}"
                                                            for ok, r in zip(valid.tolist(), reasons, strict=True)])]
+
+
+def _confidence_levels(class_p: np.ndarray | None, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+    """The CPM ConfidenceLevel (int64) of the objects ``rows`` from their class confidences (NaN or none given:
+    unavailable), and those confidences (None: none given)."""
+    if class_p is None:
+        return np.full(len(rows), CONFIDENCE_LEVEL_UNAVAILABLE, np.int64), None
+    p = class_p[rows]
+    return np.where(np.isnan(p), CONFIDENCE_LEVEL_UNAVAILABLE, np.maximum(1.0, np.ceil(100.0 * p - 1e-9))
+                    ).astype(np.int64), p
+
+
+def _compact_status(est) -> tuple[np.ndarray, list]:
+    """A compact record's ``status`` (and ``reason`` where it is not ``ok``) texts: each object's entry among the
+    frame's distinct ones and those texts (:func:`_status_layout`'s bytes)."""
+    reasons = est.centre_reason_text()
+    seen: dict = {}
+    idx = np.empty(len(est), np.int64)
+    for r, (ok, j, why) in enumerate(zip(est.centre_valid.tolist(), est.largest_index.tolist(), reasons,
+                                         strict=True)):
+        text = _STATUS_ALL_OK_COMPACT if ok else b',"status":%s,"reason":%s' % (
+            orjson.dumps(S.STATUS_PARTIAL if j >= 0 else S.STATUS_ERROR), orjson.dumps(f"no centre: {why}"))
+        idx[r] = seen.setdefault(text, len(seen))
+    return idx, list(seen)
 
 
 def _motion_object_layout(t: Table, motion, compact: bool) -> list:
@@ -985,6 +1079,7 @@ _V2X_SOURCE_NAMES = np.array(["linear", "sampled", "unavailable"], dtype=object)
 _V2X_UNAVAILABLE = 2
 _STATUS_ALL_OK = b',"status":%s,"reason":"ok"' % orjson.dumps(S.STATUS_OK)
 _STATUS_ALL_OK_COMPACT = b',"status":%s' % orjson.dumps(S.STATUS_OK)
+_INT_ONLY = {int}  # (bool is not int here: type() is exact)
 _V2X_KEYS = [b',"%s":' % k.encode() for k in V2X_FIELDS]
 def _jsonable(v):
     return v if v is None or isinstance(v, (str, int, float, bool)) else repr(v)

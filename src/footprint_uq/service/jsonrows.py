@@ -18,7 +18,7 @@ from numba import njit, types
 from numba.core import cgutils
 from numba.extending import intrinsic
 
-__all__ = ["Table"]
+__all__ = ["Table", "compact_objects_json"]
 
 _NUMPY = orjson.OPT_SERIALIZE_NUMPY
 _COMMA, _LBRACKET, _RBRACKET, _QUOTE, _BACKSLASH, _LBRACE, _RBRACE = b",[]\"\\{}"
@@ -241,3 +241,161 @@ def _compile(layout: tuple):
     cols = [o[1] for o in ops if o[0] == 1]
     reuse = max((cols.count(c) for c in set(cols)), default=1)
     return np.frombuffer(bytes(lit), np.uint8), np.array(ops, dtype=np.int64), len(lit), reuse
+
+
+# -- the compact record's objects: one compiled pass ---------------------------------------------------------
+@njit(cache=True, nogil=True, inline="always")
+def _put_int(out, p, v):  # pragma: no cover - compiled
+    """The decimal text of ``v`` (int64) at ``out[p]``; the index after it."""
+    if v < 0:
+        out[p] = 45
+        p += 1
+        m = np.uint64(-(v + 1)) + np.uint64(1)
+    else:
+        m = np.uint64(v)
+    n = 1
+    t = m
+    while t >= np.uint64(10):
+        t //= np.uint64(10)
+        n += 1
+    for q in range(p + n - 1, p - 1, -1):
+        out[q] = np.uint8(48) + np.uint8(m % np.uint64(10))
+        m //= np.uint64(10)
+    return p + n
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _put_span(out, p, src, a, b):  # pragma: no cover - compiled
+    """``src[a:b]`` at ``out[p]``; the index after it."""
+    _copy_bytes(out, p, src, a, b - a)
+    return p + b - a
+
+
+@njit(cache=True, nogil=True)
+def _split_values(ftext, nv):  # pragma: no cover - compiled
+    """Start and end of the values in orjson's text of a float array (numbers and ``null`` only: no string, no
+    object) and how many there are (at most ``nv`` are recorded)."""
+    starts = np.empty(nv, np.int64)
+    ends = np.empty(nv, np.int64)
+    t = 0
+    i = 0
+    L = ftext.shape[0]
+    while i < L:
+        c = ftext[i]
+        if c == 91 or c == 93 or c == 44:
+            i += 1
+            continue
+        s = i
+        i += 1
+        while ftext[i] != 44 and ftext[i] != 93:
+            i += 1
+        if t < nv:
+            starts[t] = s
+            ends[t] = i
+        t += 1
+    return starts, ends, t
+
+
+@njit(cache=True, nogil=True)
+def _compact_rows(ftext, ids, cls_idx, cls_buf, cls_at, st_idx, st_buf, st_at, mid, with_mid, lit, at,
+                  size):  # pragma: no cover - compiled
+    """The compact record's ``objects`` text (see :func:`compact_objects_json`): per row the constant texts
+    ``lit[at[k]:at[k + 1]]`` (:data:`_COMPACT_PIECES`) around the id, the class and status texts of the row's
+    entries in their tables, the five float values (``ftext``: orjson's text of the (5, n) array) and the message
+    id (``with_mid``; negative: null).  Empty: ``ftext`` does not hold 5 n values."""
+    n = ids.shape[0]
+    starts, ends, t = _split_values(ftext, 5 * n)
+    if t != 5 * n:
+        return np.zeros(0, np.uint8)
+    out = np.empty(size, np.uint8)
+    out[0] = 91
+    p = 1
+    for r in range(n):
+        if r:
+            out[p] = 44
+            p += 1
+        p = _put_span(out, p, lit, at[0], at[1])
+        p = _put_int(out, p, ids[r])
+        p = _put_span(out, p, lit, at[1], at[2])
+        j = cls_idx[r]
+        p = _put_span(out, p, cls_buf, cls_at[j], cls_at[j + 1])
+        j = st_idx[r]
+        p = _put_span(out, p, st_buf, st_at[j], st_at[j + 1])
+        for k in range(6):  # x, y, cxx, cxy, cxy, cyy after their texts
+            p = _put_span(out, p, lit, at[2 + k], at[3 + k])
+            v = (k if k < 4 else k - 1) * n + r
+            p = _put_span(out, p, ftext, starts[v], ends[v])
+        p = _put_span(out, p, lit, at[8], at[9])
+        if with_mid:
+            p = _put_span(out, p, lit, at[9], at[10])
+            if mid[r] < 0:
+                p = _put_span(out, p, lit, at[11], at[12])
+            else:
+                p = _put_int(out, p, mid[r])
+        p = _put_span(out, p, lit, at[10], at[11])
+    out[p] = 93
+    return out[:p + 1]
+
+
+#: the constant texts of a compact record's object (:func:`_compact_rows`' ``at`` indices 0..11)
+_COMPACT_PIECES = (b'{"object_id":', b',"class":', b',"x_m":', b',"y_m":', b',"cov_m2":[[', b",", b"],[", b",", b"]]",
+                   b',"message_object_id":', b"}", b"null")
+_COMPACT_LIT = np.frombuffer(b"".join(_COMPACT_PIECES), np.uint8)
+_COMPACT_AT = np.cumsum([0] + [len(p) for p in _COMPACT_PIECES]).astype(np.int64)
+
+
+def _text_table(texts: list) -> tuple[np.ndarray, np.ndarray]:
+    """Texts (bytes) as one byte array and their offsets ``(k + 1,)``; a frame's few class and status texts repeat
+    from frame to frame: up to 256 tables are kept (then forgotten at once; the kernels only read them)."""
+    key = tuple(texts)
+    table = _TEXT_TABLES.get(key)
+    if table is None:
+        at = np.zeros(len(texts) + 1, np.int64)
+        np.cumsum([len(t) for t in texts], out=at[1:])
+        table = np.frombuffer(b"".join(texts), np.uint8), at
+        if len(_TEXT_TABLES) >= 256:
+            _TEXT_TABLES.clear()
+        _TEXT_TABLES[key] = table
+    return table
+
+
+_TEXT_TABLES: dict = {}
+
+
+def compact_objects_json(ids: np.ndarray, class_idx: np.ndarray, class_texts: list, status_idx: np.ndarray,
+                         status_texts: list, values: np.ndarray, message_ids: np.ndarray | None = None):
+    """The ``objects`` list of a compact record without tracks, in one compiled pass: per object
+    ``{"object_id":<id>,"class":<class><status>,"x_m":..,"y_m":..,"cov_m2":[[xx,xy],[xy,yy]]`` (and
+    ``,"message_object_id":<id or null>``) ``}`` -- the bytes :class:`Table` writes for that layout.
+
+    Parameters
+    ----------
+    ids : ndarray (n,) int64
+        The detector's integer object ids (written by the kernel).
+    class_idx, class_texts : ndarray (n,) int64, list of bytes
+        Each object's entry in the frame's distinct class texts (their JSON: ``"car"``, ``null``).
+    status_idx, status_texts : ndarray (n,) int64, list of bytes
+        Each object's entry in the frame's distinct status texts (``,"status":"ok"``, or with a ``reason``).
+    values : ndarray (5, n) float64
+        ``x_m, y_m, cov_xx, cov_xy, cov_yy`` (m, m^2): one ``orjson.dumps``, non-finite values ``null``.
+    message_ids : ndarray (n,) int64, optional
+        The messages' object ids (negative: not in the messages, ``null``); None: no such field.
+
+    Returns
+    -------
+    The text as a uint8 array (``b"[]"`` without objects), as :meth:`Table.json_buffer`.
+    """
+    n = len(ids)
+    if n == 0:
+        return b"[]"
+    ftext = np.frombuffer(orjson.dumps(np.ascontiguousarray(values, dtype=np.float64), option=_NUMPY), np.uint8)
+    cb, ca = _text_table(class_texts)
+    sb, sa = _text_table(status_texts)
+    size = 2 + n * (len(_COMPACT_LIT) + 1 + 2 * 20 + max(map(len, class_texts)) + max(map(len, status_texts))) + \
+        2 * len(ftext)  # an upper bound: 20 digits and a sign per integer, a float written twice
+    with_mid = message_ids is not None
+    out = _compact_rows(ftext, ids, class_idx, cb, ca, status_idx, sb, sa, message_ids if with_mid else ids,
+                        with_mid, _COMPACT_LIT, _COMPACT_AT, size)
+    if len(out) == 0:
+        raise ValueError(f"values hold {len(ftext)} bytes of text, not 5 x {n} numbers")
+    return out

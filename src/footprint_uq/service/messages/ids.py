@@ -60,6 +60,14 @@ class MessageIdMap:
         self._seen: dict = {}  # key -> frame time last seen
         self._now = -np.inf
         self._next_sweep = -np.inf
+        # integer ids 0..65535 (the usual detector's) also by array, for :meth:`assign`'s ``int_ids`` path (1.5 MB,
+        # made on its first use): their numbers (-1: none), their latest frame time not yet written to ``_seen``
+        # and which ids those are (the writes are moved to ``_seen`` before anything reads or changes it: the same
+        # dicts, in the same order, as without the path)
+        self._small_num: np.ndarray | None = None
+        self._small_seen = self._mark = None
+        self._pending: list[np.ndarray] = []
+        self._frame_keys: list = []
 
     def __len__(self) -> int:
         return len(self._num)
@@ -67,8 +75,21 @@ class MessageIdMap:
     def _release(self, key) -> None:
         self._owner.pop(self._num.pop(key), None)
         self._seen.pop(key, None)
+        if self._small_num is not None and type(key) is int and 0 <= key < _N:
+            self._small_num[key] = -1
+
+    def _sync(self) -> None:
+        """The frame times of the ``int_ids`` path into ``_seen`` (its keys are there already)."""
+        if self._pending:
+            keys = np.unique(np.concatenate(self._pending))
+            self._pending = []
+            seen = self._seen
+            for k, t in zip(keys.tolist(), self._small_seen[keys].tolist(), strict=True):
+                if k in seen:
+                    seen[k] = t
 
     def _sweep(self) -> None:
+        self._sync()
         old = self._now - self.hold_s
         for key in [k for k, t in self._seen.items() if t < old]:
             self._release(key)
@@ -76,6 +97,9 @@ class MessageIdMap:
 
     def _assign(self, key, object_id, index: int, k: int, in_frame: set) -> int:
         if len(self._owner) >= _N:  # every number held: release the longest unseen id not in this frame
+            self._sync()
+            if in_frame is None:
+                in_frame = set(self._frame_keys)
             key_old = min((kk for kk in self._seen if kk not in in_frame), key=self._seen.__getitem__)
             self._release(key_old)
         num = preferred_number(object_id, index, k)
@@ -83,11 +107,21 @@ class MessageIdMap:
             num = (num + 1) % _N
         self._num[key] = num
         self._owner[num] = key
+        if self._small_num is not None and type(key) is int and 0 <= key < _N:
+            self._small_num[key] = num
         return num
 
-    def assign(self, ids: list, rows, t_s: float) -> np.ndarray:
+    def assign(self, ids: list, rows, t_s: float, int_ids: np.ndarray | None = None) -> np.ndarray:
         """Message ids (int64, one per entry of ``rows``: sorted, distinct indices) of the objects ``ids[rows]`` of a
-        frame at time ``t_s`` (s)."""
+        frame at time ``t_s`` (s).
+
+        ``int_ids``: the frame's ids as int64 (``ids`` all Python ints; the caller's promise): a frame of distinct ids
+        in 0..65535 is then assigned by array, its ids known before looked up in one step, only its new ids one by
+        one -- the same numbers and the same tables as without it (``tests/test_service_columnar.py``)."""
+        if int_ids is not None:
+            nums = self._assign_small(int_ids if len(rows) == len(int_ids) else int_ids[rows], rows, t_s)
+            if nums is not None:
+                return nums
         rows = np.asarray(rows, dtype=np.int64).tolist()
         sel = ids if len(rows) == len(ids) else [ids[i] for i in rows]  # (rows are sorted and unique)
         occ = None  # occurrence of each id in the frame (None: every id once, none null)
@@ -112,5 +146,39 @@ class MessageIdMap:
             for j, n in enumerate(nums):
                 if n is None:
                     nums[j] = self._assign(keys[j], sel[j], rows[j], 0 if occ is None else occ[j], in_frame)
+        self._sync()
         self._seen.update(dict.fromkeys(keys, t_s))
         return np.array(nums, dtype=np.int64)
+
+    def _assign_small(self, sel: np.ndarray, rows, t_s: float) -> np.ndarray | None:
+        """:meth:`assign` of the integer ids ``sel`` (int64) by array; None (nothing changed): not distinct ids in
+        0..65535, for the general path."""
+        m = len(sel)
+        if m == 0 or sel.min() < 0 or sel.max() >= _N:
+            return None
+        if self._small_num is None:  # (the ids the general path assigned so far, too)
+            self._small_num, self._small_seen = np.full(_N, -1, np.int64), np.zeros(_N)
+            self._mark = np.zeros(_N, np.int64)
+            for key, num in self._num.items():
+                if type(key) is int and 0 <= key < _N:
+                    self._small_num[key] = num
+        order = np.arange(m)
+        self._mark[sel] = order
+        if not (self._mark[sel] == order).all():  # an id twice: its occurrences are other objects
+            return None
+        if t_s > self._now:
+            self._now = t_s
+        if self._now >= self._next_sweep:
+            self._sweep()
+        nums = self._small_num[sel]
+        new = np.flatnonzero(nums < 0)
+        if len(new):  # (their keys enter ``_seen`` in the frame's order, as the general path's update does)
+            self._frame_keys = sel.tolist()
+            rows_l = np.asarray(rows, dtype=np.int64)[new].tolist()
+            for j, key, r in zip(new.tolist(), sel[new].tolist(), rows_l, strict=True):
+                nums[j] = self._assign(key, key, r, 0, None)
+            self._sync()
+            self._seen.update(dict.fromkeys(sel[new].tolist(), t_s))
+        self._small_seen[sel] = t_s
+        self._pending.append(sel.copy())
+        return nums

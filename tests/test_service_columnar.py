@@ -1,0 +1,236 @@
+"""The untracked compact record and its CPM written from the columns (issue 31 part 1) are the general writers' bytes.
+
+* :func:`footprint_uq.service.jsonrows.compact_objects_json` (one compiled pass: the integers formatted in compiled
+  code, the classes and statuses by index, every float of the frame in one ``orjson.dumps``) writes what
+  :class:`~footprint_uq.service.jsonrows.Table` writes for the same layout (Hypothesis over the whole int64 range,
+  every float including NaN / inf / subnormals, any text);
+* a :class:`~footprint_uq.service.Service` (``record="compact"``) writes the same record and UPER CPM bytes as the
+  same service with ``_columnar = False`` (the general writers, main's code path): seeded frames with bad
+  detections, partial and no-centre objects, > 255 objects, NaN / missing class confidences, several classes,
+  an origin or none, ``linearity`` on or off, messages on or off; string and > int64 object ids (the fallback),
+  through the scanned bytes and the dict API.
+"""
+
+from __future__ import annotations
+
+import json
+import zlib
+
+import numpy as np
+import orjson
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from footprint_uq import PanTiltCamera
+from footprint_uq.service import Service
+from footprint_uq.service.jsonrows import Table, compact_objects_json
+from footprint_uq.service.messages import ids as ids_mod
+
+T0 = 1714564800.0
+_INT64 = st.integers(-(2 ** 63), 2 ** 63 - 1)
+_FLOAT = st.floats(allow_nan=True, allow_infinity=True, allow_subnormal=True)
+
+
+@pytest.fixture(scope="module")
+def camera():
+    return PanTiltCamera(focal_px=1400, image_size_px=(1920, 1080), height_m=8.0, pan_deg=30.0, tilt_deg=20.0)
+
+
+def _table_text(ids, classes, statuses, reasons, values, mid) -> bytes:
+    """The general writer's text of the compact layout (as ``Service._objects_json`` lays it out)."""
+    n = len(ids)
+    t = Table(n)
+    valid = np.array([s == "ok" for s in statuses], bool)
+    x, y, cxx, cxy, cyy = t.columns(values)
+    layout = [b'{"object_id":', t.column(ids), b',"class":', t.column(classes), b',"status":', t.column(statuses),
+              t.when(~valid, b',"reason":', t.column(reasons)), b',"x_m":', x, b',"y_m":', y, b',"cov_m2":[[', cxx,
+              b",", cxy, b"],[", cxy, b",", cyy, b"]]"]
+    if mid is not None:
+        sent = mid >= 0
+        layout += [b',"message_object_id":', t.when(sent, t.column(np.where(sent, mid, 0))), t.when(~sent, b"null")]
+    layout.append(b"}")
+    return bytes(t.json_buffer(layout))
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.integers(1, 12).flatmap(lambda n: st.tuples(
+    st.lists(_INT64, min_size=n, max_size=n),
+    st.lists(st.none() | st.text(max_size=6), min_size=n, max_size=n),
+    st.lists(st.tuples(st.sampled_from(["ok", "partial", "error"]), st.text(max_size=8)), min_size=n, max_size=n),
+    st.lists(st.lists(_FLOAT, min_size=5, max_size=5), min_size=n, max_size=n),
+    st.none() | st.lists(st.integers(-1, 65535), min_size=n, max_size=n))))
+def test_compact_writer_is_the_table_writers_bytes(case):
+    ids, classes, status, values, mid = case
+    statuses = [s for s, _ in status]
+    reasons = ["" if s == "ok" else f"no centre: {r}" for s, r in status]
+    vals = np.array(values, dtype=np.float64).T.copy()
+    mid_arr = None if mid is None else np.array(mid, np.int64)
+    want = _table_text(ids, classes, statuses, reasons, vals, mid_arr)
+    cls: dict = {}
+    cidx = np.array([cls.setdefault(c, len(cls)) for c in classes], np.int64)
+    texts: dict = {}
+    pieces = [b',"status":' + orjson.dumps(s) + (b"" if s == "ok" else b',"reason":' + orjson.dumps(r))
+              for s, r in zip(statuses, reasons, strict=True)]
+    sidx = np.array([texts.setdefault(p, len(texts)) for p in pieces], np.int64)
+    got = compact_objects_json(np.array(ids, np.int64), cidx, [orjson.dumps(c) for c in cls], sidx, list(texts), vals,
+                               mid_arr)
+    assert bytes(got) == want
+    assert json.loads(bytes(got))[0]["object_id"] == ids[0]
+
+
+def test_compact_writer_pins_a_hand_written_row():
+    got = compact_objects_json(np.array([-12, 7], np.int64), np.array([0, 1]), [b'"car"', b"null"],
+                               np.array([0, 0]), [b',"status":"ok"'],
+                               np.array([[1.5, 2.0], [-0.25, np.nan], [1e-7, 4.0], [0.5, 0.0], [3.0, 1e20]]),
+                               np.array([65535, -1]))
+    assert bytes(got) == (b'[{"object_id":-12,"class":"car","status":"ok","x_m":1.5,"y_m":-0.25,'
+                          b'"cov_m2":[[1e-7,0.5],[0.5,3.0]],"message_object_id":65535},'
+                          b'{"object_id":7,"class":null,"status":"ok","x_m":2.0,"y_m":null,'
+                          b'"cov_m2":[[4.0,0.0],[0.0,1e+20]],"message_object_id":null}]')
+    assert compact_objects_json(np.zeros(0, np.int64), np.zeros(0, np.int64), [], np.zeros(0, np.int64), [],
+                                np.zeros((5, 0))) == b"[]"
+
+
+_CLASSES = ("car", "pedestrian", "truck", "Bicycle", "unknown")
+
+
+def _frame(rng, n: int, k: int, *, variant: str) -> dict:
+    """Frame ``k`` of a seeded sequence: boxes across the image and beyond, some above the horizon (no ground point)
+    and some reversed (a bad detection), ids persisting across frames."""
+    u = rng.uniform(-150, 1950, n)
+    v = rng.uniform(-40, 1150, n)
+    w = rng.uniform(10, 150, n)
+    dets = []
+    for i in range(n):
+        d = {"object_id": int(i + 3 * k // 2), "u_min_px": round(float(u[i]), 2),
+             "v_min_px": round(float(v[i] - 0.8 * w[i]), 2), "u_max_px": round(float(u[i] + w[i]), 2),
+             "v_max_px": round(float(v[i]), 2)}
+        if variant != "no-class":
+            d["class"] = "car" if variant == "one-class" else _CLASSES[i % len(_CLASSES)]
+        if variant == "confidence":
+            d["class_confidence"] = round(float(rng.uniform(0, 1)), 3)
+        if variant == "some-confidence" and i % 3:
+            d["class_confidence"] = round(float(rng.uniform(0, 1)), 3)
+        if variant == "string-ids":
+            d["object_id"] = f"t{d['object_id']}"
+        if variant == "huge-ids" and i == 0:
+            d["object_id"] = 2 ** 64 - 1
+        if variant == "covariance":
+            d.update(cov_uu_px2=4.0, cov_uv_px2=0.5, cov_vv_px2=9.0)
+        if i % 17 == 5:  # a reversed box: that detection's error entry
+            d["u_min_px"], d["u_max_px"] = d["u_max_px"], d["u_min_px"] - 1.0
+        dets.append(d)
+    return {"camera_id": "cam0", "frame": k, "timestamp_s": T0 + k / 30.0, "detections": dets}
+
+
+def _record(out) -> bytes:
+    """The record without its timings (``processing_us``, the last field)."""
+    return out.data[:out.data.rindex(b',"processing_us":')]
+
+
+_OPTIONS = {
+    "plain": {},
+    "linearity": {"linearity": True},
+    "origin": {"origin_lat_deg": 48.1, "origin_lon_deg": 11.6, "heading_offset_deg": 12.0},
+    "corners": {"contact": "bottom-corners", "linearity": True},
+    "no-messages": {"messages": False},
+    "cdd-2.1.1": {"cpm_cdd": "2.1.1", "v2x_policy": "unavailable"},
+}
+
+
+@pytest.mark.parametrize("variant", ["one-class", "classes", "no-class", "confidence", "some-confidence",
+                                     "string-ids", "huge-ids", "covariance"])
+@pytest.mark.parametrize("option", list(_OPTIONS))
+def test_untracked_compact_frames_are_the_general_writers_bytes(camera, option, variant):
+    kw = dict(record="compact", **_OPTIONS[option])
+    fast, ref = Service(camera, "basler1", **kw), Service(camera, "basler1", **kw)
+    ref._columnar = False
+    rng = np.random.default_rng(zlib.crc32(f"{option}/{variant}".encode()))
+    statuses: set = set()
+    for k in range(4):
+        frame = _frame(rng, 40 if k < 3 else 700, k, variant=variant)  # (the last: > 255 with a centre)
+        for a, b in ((fast.process_frame_json(orjson.dumps(frame)), ref.process_frame_json(orjson.dumps(frame))),
+                     (fast.process_frame_json(frame), ref.process_frame_json(frame))):
+            assert a.type == b.type == "footprints"
+            assert _record(a) == _record(b)
+            assert a.cpm_uper == b.cpm_uper
+            assert (a.cpm_uper is None) == (option == "no-messages")
+        rec = json.loads(a.data)
+        statuses |= {o["status"] for o in rec["objects"]}
+        assert rec["detection_errors"]  # (the reversed boxes)
+    assert {"ok", "error"} <= statuses
+    if option == "corners":
+        assert "partial" in statuses
+    if option != "no-messages":
+        assert rec["objects_not_in_messages"] > 0  # (the 700-object frame)
+
+
+def test_the_columnar_path_is_the_one_taken(camera, monkeypatch):
+    """The compact untracked frame goes through the compiled writers (not silently the general ones): a broken
+    compiled writer changes the record."""
+    from footprint_uq.service import core
+
+    svc = Service(camera, "basler1", record="compact")
+    frame = orjson.dumps(_frame(np.random.default_rng(3), 20, 0, variant="one-class"))
+    before = _record(svc.process_frame_json(frame))
+    monkeypatch.setattr(core, "compact_objects_json", lambda *a, **k: b"[]")
+    monkeypatch.setattr(core, "plain_container_uper", lambda *a, **k: b"")
+    out = svc.process_frame_json(frame)
+    assert b'"objects":[]' in _record(out) and before != _record(out)
+
+
+_IDS = st.tuples(st.lists(st.integers(0, 70), unique=True, max_size=24),
+                 st.sampled_from([None, None, None, None, "a", "7", 2 ** 40, -3, 5])).map(
+    lambda c: c[0] if c[1] is None else c[0] + [c[1]])  # (mostly distinct ints: the path by array)
+
+
+@settings(max_examples=150, deadline=None)
+@given(st.lists(st.tuples(_IDS, st.floats(-0.5, 2.0), st.integers(0, 2 ** 25)), max_size=25),
+       st.sampled_from([0.0, 0.7, 3.0]))
+def test_message_ids_by_array_are_the_general_paths(frames, hold_s):
+    """``MessageIdMap.assign(..., int_ids=...)`` (integer ids by array) gives the numbers of the general path and
+    leaves the same tables (keys, numbers, last-seen times, their order), frame after frame: new and known ids,
+    repeated ids, nulls and texts (the general path), time going back, numbers released after ``hold_s``, and every
+    number held (a table of 64 numbers here: the longest-unseen id released early)."""
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(ids_mod, "_N", 64)
+        _same_ids(ids_mod.MessageIdMap(hold_s), ids_mod.MessageIdMap(hold_s), frames)
+
+
+def _same_ids(fast, ref, frames) -> None:
+    t = T0
+    for ids, dt, pick in frames:
+        t += dt
+        rows = np.array([i for i in range(len(ids)) if (pick >> i) & 1], np.int64)
+        ints = None if set(map(type, ids)) - {int} else np.array(ids, np.int64)
+        assert fast.assign(ids, rows, t, int_ids=ints).tolist() == ref.assign(ids, rows, t).tolist()
+    fast._sync()
+    assert fast._num == ref._num and fast._owner == ref._owner
+    assert list(fast._seen.items()) == list(ref._seen.items())
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(1, 30), st.integers(0, 2 ** 32 - 1), st.sampled_from(["bottom-centre", "bottom-corners"]))
+def test_checked_boxes_give_the_same_estimate(camera_proc, n, seed, contact):
+    """``FrameProcessor.boxes2d(..., boxes_checked=True)`` (the service's boxes, checked by its value checks: the
+    contact pixels formed without the checks) is the estimate of the checked call, array for array, bit for bit
+    (boxes across the image, beyond it and above the horizon, degenerate ones)."""
+    rng = np.random.default_rng(seed)
+    u, v = rng.uniform(-300, 2200, n), rng.uniform(-100, 1300, n)
+    w, h = rng.uniform(0, 200, n) * (rng.random(n) > 0.1), rng.uniform(0, 150, n)
+    boxes = np.column_stack([u, v - h, u + w, v])
+    cov = np.tile(np.diag([4.0, 9.0]), (n, 1, 1)) if seed % 2 else None
+    a = camera_proc.boxes2d(boxes, contact=contact, pixel_cov_px2=cov)
+    b = camera_proc.boxes2d(boxes, contact=contact, pixel_cov_px2=cov, boxes_checked=True)
+    for name in ("corners_px", "centre_xy_world_m", "centre_cov_m2", "largest_xy_world_m", "v2x_codes",
+                 "centre_reason", "object_rows"):
+        x, y = np.asarray(getattr(a, name)), np.asarray(getattr(b, name))
+        assert x.shape == y.shape and x.tobytes() == y.tobytes(), name
+
+
+@pytest.fixture(scope="module")
+def camera_proc(camera):
+    from footprint_uq import FrameProcessor
+
+    return FrameProcessor(camera, "basler1", joint_cov=False)
