@@ -84,7 +84,8 @@ def _loads(data):
 
 
 class FrameQueue:
-    """Pending frames, at most ``depth`` per key (camera): ``newest`` serves the key waiting longest first, ``block`` the frames in the order they were put (see the module doc).
+    """Pending frames, at most ``depth`` per key (camera): ``newest`` serves the key waiting longest first,
+    ``block`` the frames in the order they were put (see the module doc).
 
     Parameters
     ----------
