@@ -5,6 +5,7 @@ compiled kernel (:mod:`footprint_uq.fast.footprint_kernels`) per frame, with the
 from __future__ import annotations
 
 import math
+import threading
 
 import numpy as np
 import pyarrow as pa
@@ -120,6 +121,7 @@ class FrameProcessor:
         #: formed at all; the batch sets False when it writes no corner columns (leaner, faster)
         self.corner_outputs = True
         self._kernels = False  # the compiled kernels run (footprint_uq._notices; asked until they do)
+        self._last_scratch = (None, None)  # (thread id, its scratch) of the last frame (_scratch)
 
     def _use_kernels(self) -> bool:
         """Whether this call runs the compiled kernel (else the numpy reference: a command line whose kernels
@@ -158,11 +160,23 @@ class FrameProcessor:
             return c
         return check_cov("pixel_cov_px2", c, 2)
 
-    @staticmethod
-    def _scratch() -> np.ndarray:
+    def __getstate__(self) -> dict:
+        state = self.__dict__.copy()
+        state["_last_scratch"] = (None, None)  # (a thread's buffer is not part of a copy: pickled for a worker)
+        return state
+
+    def _scratch(self) -> np.ndarray:
         """The per-frame kernel's scratch: one per thread (fast.buffers; a fresh one every frame cost ~9 us of
-        page touching), so one processor may serve several threads at once."""
-        return thread_buffer("frame_scratch", fk.SCRATCH_SHAPE)
+        page touching), so one processor may serve several threads at once.  The last caller's thread and buffer
+        are kept here: a frame of the same thread (the usual case) takes it without a call into ``fast/``
+        (bench/frame_walk.py counts such calls)."""
+        tid = threading.get_ident()
+        last = self._last_scratch  # (one tuple, read and replaced whole: safe under threads)
+        if last[0] == tid:
+            return last[1]
+        buf = thread_buffer("frame_scratch", fk.SCRATCH_SHAPE)
+        self._last_scratch = (tid, buf)
+        return buf
 
     def _flag_options(self) -> dict:
         return dict(linearity=self.linearity, linear_threshold=self.linear_threshold, v2x_policy=self.v2x_policy,
