@@ -237,17 +237,17 @@ class FrameProcessor:
                                               self._ch, self._sh, False, self._scratch())
 
     def point_jacobian_kernel(self) -> tuple | None:
-        """The compiled call behind :meth:`point_shared_jacobian`, for a caller that runs it from its own hot path
-        (the tracker, every frame, without a Python frame of this layer): ``(kernel, args)`` such that
-        ``kernel(uv, *args, scratch)`` with ``uv (n, 1, 2)`` float64 C-contiguous and ``scratch`` a float64 array
-        of shape ``footprint_kernels.SCRATCH_SHAPE`` owned by the caller (one per thread) returns what
-        :meth:`point_shared_jacobian` returns.  None while the kernels are not ready (a command whose kernels
-        compile in the background): call :meth:`point_shared_jacobian` then, and ask again later."""
+        """The compiled call behind :meth:`point_shared_jacobian`'s numbers, for a caller that runs it from its
+        own hot path (the tracker, every frame, without a Python frame of this layer): ``(kernel, args)`` such
+        that ``kernel(uv, *args, out, scratch)`` with ``uv (n, 2)`` float64 C-contiguous, ``out (n, 2, r)``
+        float64 C-contiguous and ``scratch`` a float64 array of shape ``footprint_kernels.SCRATCH_SHAPE`` owned
+        by the caller (one per thread) fills ``out`` with what :meth:`point_shared_jacobian` returns, to the bit
+        (``footprint_kernels.point_jacobian_into``: only the stages that form ``B``).  None while the kernels are
+        not ready (a command whose kernels compile in the background): call :meth:`point_shared_jacobian` then,
+        and ask again later."""
         if not self._use_kernels():
             return None
-        return self._fk.point_shared_jacobian, (self._no_extra, self._no_boxes, False, True, self._cam, self._dR,
-                                                self._Lr, self._Lc, self._Lv, self._r, self._spx, self._no_det, 0,
-                                                True, self._ch, self._sh, False)
+        return self._fk.point_jacobian_into, (self._cam, self._dR, self._Lr, self._Lc, self._Lv)
 
     def corners(self, corners_px, *, pixel_cov_px2=None) -> FootprintEstimate:
         """Footprints from corners in pixels ``(N, K, 2)`` (see :func:`footprints_from_corners`)."""

@@ -367,8 +367,8 @@ class SharedJacobianAt:
 
     def __call__(self, xy_m) -> np.ndarray:
         xy = np.ascontiguousarray(xy_m, dtype=np.float64).reshape(-1, 2)
-        uv = np.empty((xy.shape[0], 1, 2))
-        project_ground(xy, self._cam, uv[:, 0])
+        uv = np.empty((xy.shape[0], 2))
+        project_ground(xy, self._cam, uv)
         # the kernel called from here, not through the processor's method: the tracker's frame does not climb back
         # up from products/ (bench/frame_walk.py --tracks); another thread meanwhile takes the processor's path
         if self._kernel is None:
@@ -376,6 +376,8 @@ class SharedJacobianAt:
         if self._kernel is None or not self._busy.acquire(blocking=False):
             return self.processor.point_shared_jacobian(uv)
         try:
-            return self._kernel[0](uv, *self._kernel[1], self._scratch)
+            out = np.empty((xy.shape[0], 2, self.rank))
+            self._kernel[0](uv, *self._kernel[1], out, self._scratch)
+            return out
         finally:
             self._busy.release()
