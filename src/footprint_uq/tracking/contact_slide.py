@@ -19,7 +19,8 @@ On line (:func:`slide_moments`, :class:`ContactSlide`) the closed form runs comp
 (:func:`footprint_uq.fast.slide_kernels.slide_moments`): per size node one render of the box, the bottom-centre
 pixel's derivative along the path only (every corner moves by the same vector) and the back-projection's
 derivative at that pixel -- the same numbers as the numpy closed form (:func:`slide_moments_reference`) to
-rounding; ~0.1 ms per frame of 100 tracked objects, 0.7 x the tracker's step (docs/motion-fit.md, section 6).
+rounding; its kernel ~60 us per frame of 100 tracked objects, ~80 us with its inputs in a service frame
+(docs/uncertainty-model.md, "2026-11-28, evening"; docs/motion-fit.md, section 6).
 :func:`slide_along_path` (a central difference of the rendered contact along the path, the earlier on-line form)
 stays as a check.
 
