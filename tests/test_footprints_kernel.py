@@ -347,3 +347,26 @@ def test_point_outputs_are_alloc_outputs_layout(n, r):
 
     got, ref = fk.point_outputs(n, r), fk.alloc_outputs(n, 1, corners=False, shared_rank=r)
     assert [(a.shape, a.dtype) for a in got] == [(a.shape, a.dtype) for a in ref]
+
+
+@pytest.mark.parametrize("budget", [BUDGET, FULL_BUDGET], ids=["basler1", "full"])
+def test_point_jacobian_into_is_point_shared_jacobian(camera, budget, rng):
+    """fk.point_jacobian_into (the tracker's B at its predicted positions: only the stages that form B) gives
+    fk.point_shared_jacobian's B (the whole one-point footprint) to the bit, NaN rows included: pixels inside and
+    outside the image, above the horizon, beyond the lens's fold, NaN; three chunks of the kernel (150 points)."""
+    from footprint_uq.fast import footprint_kernels as fk
+
+    proc = FrameProcessor(camera, budget, joint_cov=False, linearity=False, v2x_policy="linear",
+                          shared_jacobian=True, allow_outside_image=True)
+    n = 150
+    uv = np.column_stack([rng.uniform(-900.0, 2800.0, n), rng.uniform(-300.0, 1600.0, n)])
+    uv[7] = np.nan
+    uv[8, 1] = np.inf
+    uv[70:76, 1] = -4000.0  # far above the horizon (every camera of the fixture looks down 15-37 deg)
+    ref = proc.point_shared_jacobian(uv)
+    kernel, args = proc.point_jacobian_kernel()
+    got = np.full((n, 2, ref.shape[2]), -1.0)
+    kernel(uv, *args, got, np.empty(fk.SCRATCH_SHAPE))
+    np.testing.assert_array_equal(got, ref)
+    ok = ~np.isnan(ref).any(axis=(1, 2))
+    assert ok.sum() > 100 and not ok[[7, 8, 70, 75]].any()  # (both kinds of rows)

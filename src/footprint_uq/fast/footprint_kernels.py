@@ -1391,3 +1391,32 @@ def point_shared_jacobian(uv, no_extra, no_boxes, yaw_deg, on_ground, cam, dR, L
                 for c in range(r):
                     shared[i, a, c] = math.nan
     return shared
+
+
+@njit(cache=True, error_model="numpy", nogil=True)
+def point_jacobian_into(uv, cam, dR, Lr, Lc, Lv, shared, S):
+    """:func:`point_shared_jacobian` without the rest of a footprint: ``B`` (N, 2, r) of the ground points of
+    pixels ``uv`` (N, 2) (pixels outside the image included) into ``shared`` (N, 2, r), NaN where a pixel has no
+    ground point.  Only the stages of :func:`process_corners` that form ``B`` run, in its chunks and order
+    (pixels, undistortion, ground and Jacobians, the codes, the centre's Jacobian, the whitening), so ``B`` is
+    the same to the bit; the covariances, ellipses, flags and V2X codes of a one-point footprint, and the outputs
+    :func:`point_outputs` allocated for them, are not formed (the tracker asks for ``B`` at every track's
+    predicted position in every frame).  ``S``: :func:`scratch`."""
+    N = uv.shape[0]
+    Jd, Jk = np.empty((2, 2)), np.empty((2, 8))
+    need = _needed_params(Lr)
+    nan = math.nan
+    for n0 in range(0, N, _M_TARGET):
+        nob = min(N - n0, _M_TARGET)
+        for i in range(nob):
+            S[_U * _ST + i], S[_V * _ST + i] = uv[n0 + i, 0], uv[n0 + i, 1]
+        _stage_undistort(S, nob, cam, Jd, Jk, need)
+        _stage_ground(S, nob, cam, dR, need)
+        _stage_corner_flags(S, nob, cam.width_px, cam.height_px, True)
+        _stage_centroid(S, nob, 1)
+        _stage_whiten(S, nob, nob, 1, Lr, Lc, Lv, False, shared, n0)
+        for i in range(nob):
+            if S[_US * _ST + i] == 0.0:  # (one corner: the centre's code is the corner's; usable = OK or outside)
+                for a in range(2):
+                    for c in range(shared.shape[2]):
+                        shared[n0 + i, a, c] = nan

@@ -24,7 +24,7 @@ import numba as nb
 from .. import params as P
 from . import core
 
-__all__ = ["slide_moments", "MIN_SIZE_M"]
+__all__ = ["slide_moments", "MOMENTS_KERNELS", "MIN_SIZE_M"]
 
 _INL = dict(inline="always", cache=True, error_model="numpy", fastmath={"contract"})
 _JIT = dict(cache=True, error_model="numpy", fastmath={"contract"})
@@ -198,6 +198,12 @@ def _moments_lens(prm, R, dom, xy, v, size_mean, size_sigma, nodes, mean_out, se
     _moments(prm, R, dom, True, xy, v, size_mean, size_sigma, nodes, mean_out, second_out)
 
 
+#: the compiled entries of :func:`slide_moments` by ``has_dist``, each called with its arguments less ``has_dist``:
+#: a caller on a per-frame path looks its camera's entry up once and calls it itself (no Python frame of this
+#: layer per frame, ``tracking/contact_slide.py``; ``bench/frame_walk.py`` counts them)
+MOMENTS_KERNELS = {False: _moments_pinhole, True: _moments_lens}
+
+
 def slide_moments(prm, R, dom, has_dist, xy, v, size_mean, size_sigma, nodes, mean_out, second_out) -> None:
     """The slide's mean and second moment over the size nodes of every tracked contact.
 
@@ -211,5 +217,4 @@ def slide_moments(prm, R, dom, has_dist, xy, v, size_mean, size_sigma, nodes, me
 
     Outputs (filled): ``mean_out`` (n, 2) m/s and ``second_out`` (n, 2, 2) m^2/s^2; NaN where no node renders.
     """
-    (_moments_lens if has_dist else _moments_pinhole)(prm, R, dom, xy, v, size_mean, size_sigma, nodes, mean_out,
-                                                       second_out)
+    MOMENTS_KERNELS[bool(has_dist)](prm, R, dom, xy, v, size_mean, size_sigma, nodes, mean_out, second_out)

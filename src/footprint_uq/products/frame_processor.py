@@ -5,6 +5,7 @@ compiled kernel (:mod:`footprint_uq.fast.footprint_kernels`) per frame, with the
 from __future__ import annotations
 
 import math
+import threading
 
 import numpy as np
 import pyarrow as pa
@@ -125,6 +126,7 @@ class FrameProcessor:
         #: formed at all; the batch sets False when it writes no corner columns (leaner, faster)
         self.corner_outputs = True
         self._kernels = False  # the compiled kernels run (footprint_uq._notices; asked until they do)
+        self._last_scratch = (None, None)  # (thread id, its scratch) of the last frame (_scratch)
 
     def _use_kernels(self) -> bool:
         """Whether this call runs the compiled kernel (else the numpy reference: a command line whose kernels
@@ -163,11 +165,23 @@ class FrameProcessor:
             return c
         return check_cov("pixel_cov_px2", c, 2)
 
-    @staticmethod
-    def _scratch() -> np.ndarray:
+    def __getstate__(self) -> dict:
+        state = self.__dict__.copy()
+        state["_last_scratch"] = (None, None)  # (a thread's buffer is not part of a copy: pickled for a worker)
+        return state
+
+    def _scratch(self) -> np.ndarray:
         """The per-frame kernel's scratch: one per thread (fast.buffers; a fresh one every frame cost ~9 us of
-        page touching), so one processor may serve several threads at once."""
-        return thread_buffer("frame_scratch", fk.SCRATCH_SHAPE)
+        page touching), so one processor may serve several threads at once.  The last caller's thread and buffer
+        are kept here: a frame of the same thread (the usual case) takes it without a call into ``fast/``
+        (bench/frame_walk.py counts such calls)."""
+        tid = threading.get_ident()
+        last = self._last_scratch  # (one tuple, read and replaced whole: safe under threads)
+        if last[0] == tid:
+            return last[1]
+        buf = thread_buffer("frame_scratch", fk.SCRATCH_SHAPE)
+        self._last_scratch = (tid, buf)
+        return buf
 
     def _flag_options(self) -> dict:
         return dict(linearity=self.linearity, linear_threshold=self.linear_threshold, v2x_policy=self.v2x_policy,
@@ -228,17 +242,17 @@ class FrameProcessor:
                                               self._ch, self._sh, False, self._scratch())
 
     def point_jacobian_kernel(self) -> tuple | None:
-        """The compiled call behind :meth:`point_shared_jacobian`, for a caller that runs it from its own hot path
-        (the tracker, every frame, without a Python frame of this layer): ``(kernel, args)`` such that
-        ``kernel(uv, *args, scratch)`` with ``uv (n, 1, 2)`` float64 C-contiguous and ``scratch`` a float64 array
-        of shape ``footprint_kernels.SCRATCH_SHAPE`` owned by the caller (one per thread) returns what
-        :meth:`point_shared_jacobian` returns.  None while the kernels are not ready (a command whose kernels
-        compile in the background): call :meth:`point_shared_jacobian` then, and ask again later."""
+        """The compiled call behind :meth:`point_shared_jacobian`'s numbers, for a caller that runs it from its
+        own hot path (the tracker, every frame, without a Python frame of this layer): ``(kernel, args)`` such
+        that ``kernel(uv, *args, out, scratch)`` with ``uv (n, 2)`` float64 C-contiguous, ``out (n, 2, r)``
+        float64 C-contiguous and ``scratch`` a float64 array of shape ``footprint_kernels.SCRATCH_SHAPE`` owned
+        by the caller (one per thread) fills ``out`` with what :meth:`point_shared_jacobian` returns, to the bit
+        (``footprint_kernels.point_jacobian_into``: only the stages that form ``B``).  None while the kernels are
+        not ready (a command whose kernels compile in the background): call :meth:`point_shared_jacobian` then,
+        and ask again later."""
         if not self._use_kernels():
             return None
-        return self._fk.point_shared_jacobian, (self._no_extra, self._no_boxes, False, True, self._cam, self._dR,
-                                                self._Lr, self._Lc, self._Lv, self._r, self._spx, self._no_det, 0,
-                                                True, self._ch, self._sh, False)
+        return self._fk.point_jacobian_into, (self._cam, self._dR, self._Lr, self._Lc, self._Lv)
 
     def corners(self, corners_px, *, pixel_cov_px2=None) -> FootprintEstimate:
         """Footprints from corners in pixels ``(N, K, 2)`` (see :func:`footprints_from_corners`)."""

@@ -58,7 +58,7 @@ __all__ = ["GROUPS", "ABOUT_S", "MODES", "cold_groups", "compile_notice", "compi
 GROUPS = {
     "map": mk.MAP_KERNELS,
     "points": mk.POINT_KERNELS,
-    "objects": (fk.process_corners, fk.process_boxes3d, first_bad_cov2),
+    "objects": (fk.process_corners, fk.process_boxes3d, first_bad_cov2, fk.point_jacobian_into),
     "lens": (core.undistort_many,),
 }
 #: the notice's "about": a group's background compile on the 2-core VM of 2026-11-26, quiet (bench/bench_first_run.py
@@ -371,6 +371,9 @@ def _warm_objects(budget) -> None:
         fp.boxes2d(np.array([[100.0, 150.0, 140.0, 200.0]]))
         fp.boxes3d(np.array([[0.0, 20.0, 0.8, 4.5, 1.8, 1.5, 0.3]]))
         fp.corners(np.array([[[100.0, 200.0], [140.0, 200.0], [140.0, 210.0], [100.0, 210.0]]]))
+        kernel, args = fp.point_jacobian_kernel()  # (the tracker's B at its predicted positions)
+        kernel(np.array([[120.0, 200.0]]), *args, np.empty((1, 2, fp.budget.param_factor().rank)),
+               np.empty(fk.SCRATCH_SHAPE))
 
 
 def _warm_lens(budget) -> None:

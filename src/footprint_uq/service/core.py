@@ -42,8 +42,9 @@ from ..products import detection_columns as S
 from ..products.footprints import CONTACT_MODES, V2X_FIELDS, V2X_POLICIES, FrameProcessor
 from ..products.geo import GeoReference
 from ..products.v2x import J2735_POSITION_CONFIDENCE_NAMES
-from ..tracking import SharedJacobianAt, TrackerConfig, object_motion
-from ..tracking.classes import ClassTracks, tracker_configs
+from ..tracking import TrackerConfig
+from ..tracking.camera_tracker import CameraTracker
+from ..tracking.classes import ClassTracks
 from ..tracking.consistency import DEFAULT_WINDOW_S, NisMonitor, health_section
 from ..tracking.contact_slide import ContactSlide
 from ..uncertainty.ellipse import chi2_scale
@@ -201,13 +202,9 @@ class CameraSetup:
     lon_1e7deg: int | None = None
     #: the fixed part of its CPMs' UPER encoding
     uper: CpmUperWriter | None = None
-    #: its tracks by object_id, a motion model per class (``tracks=True``; one frame at a time: ``tracks_lock``)
-    tracks: ClassTracks | None = None
-    tracks_lock: threading.Lock | None = None
-    #: the NIS of its tracks per class over a window (``tracks=True``; under ``tracks_lock``): docs/motion-fit.md
-    nis: NisMonitor | None = None
-    #: the velocity term of 2-D boxes' sliding contact (``tracks=True``; tracking/contact_slide.py)
-    slide: ContactSlide | None = None
+    #: its tracker (``tracks=True``): the tracks by object_id with a motion model per class, their NIS check
+    #: (docs/motion-fit.md) and the 2-D boxes' sliding-contact term, one call per frame (tracking/camera_tracker.py)
+    tracker: CameraTracker | None = None
     #: object_id -> the messages' object id (unique per message, stable across frames; messages/ids.py)
     ids: MessageIdMap = field(default_factory=MessageIdMap)
     #: the tracker's output of the camera's latest frame (``tracks=True``; read by :attr:`Service.on_tracked`)
@@ -217,6 +214,25 @@ class CameraSetup:
     has_origin: bool = False
     enu_origin_m: np.ndarray | None = None
     enu_rotation_t: np.ndarray | None = None
+
+    @property
+    def tracks(self) -> ClassTracks | None:
+        """The tracker's tracks (one frame at a time: :attr:`tracks_lock`)."""
+        return None if self.tracker is None else self.tracker.tracks
+
+    @property
+    def tracks_lock(self) -> threading.Lock | None:
+        return None if self.tracker is None else self.tracker.lock
+
+    @property
+    def nis(self) -> NisMonitor | None:
+        """The NIS of the tracks per class over a window (under :attr:`tracks_lock`; None: no check)."""
+        return None if self.tracker is None else self.tracker.nis
+
+    @property
+    def slide(self) -> ContactSlide | None:
+        """The velocity term of 2-D boxes' sliding contact (tracking/contact_slide.py)."""
+        return None if self.tracker is None else self.tracker.slide
 
     def __post_init__(self):
         geo = self.georef
@@ -384,14 +400,11 @@ class Service:
             for setup in self.cameras.values():
                 proc = setup.processor
                 proc.shared_jacobian = True
-                at = SharedJacobianAt(proc.camera, proc.budget)
-                configs = tracker_configs(getattr(proc.budget, "motion", None), cfg)  # (docs/motion-fit.md)
-                setup.tracks, setup.tracks_lock = ClassTracks(*configs, rank=at.rank, shared_at=at), threading.Lock()
-                setup.slide = ContactSlide.for_camera(proc.camera)
-                if window_s:
-                    setup.nis = NisMonitor(setup.tracks, window_s=window_s)
+                setup.tracker = CameraTracker.for_camera(  # (the budget's motion section: docs/motion-fit.md)
+                    proc.camera, proc.budget, cfg, window_s=window_s,
+                    heading_offset_deg=setup.georef.heading_offset_deg)
                 if warm_up:
-                    setup.tracks.warm_up()
+                    setup.tracker.warm_up()
 
         #: called after each tracked frame as ``on_tracked(camera_id, frame, timestamp_s, TrackOutput, estimate,
         #: FrameDetections)`` (the CP service of ``serve --cp-service``: :mod:`.cp_serve`); None: nothing
@@ -480,13 +493,12 @@ class Service:
             xy = setup.processor.corners(np.array([[[0.5 * w, 0.85 * h]]])).centre_xy_world_m[0]
             x, y = (float(v) for v in (xy if np.isfinite(xy).all() else (0.0, 0.0)))
             box3d = {"x_m": x, "y_m": y, "z_m": 0.0, "length_m": 4.0, "width_m": 2.0, "height_m": 1.5, "yaw_rad": 0.0}
-            saved = setup.tracks, setup.ids, setup.nis
+            saved = setup.tracker, setup.ids
             try:
                 for box in (box2d, box3d):
                     setup.ids = MessageIdMap()
                     if saved[0] is not None:
-                        setup.tracks = saved[0].fresh()
-                        setup.nis = None if saved[2] is None else NisMonitor(setup.tracks, window_s=saved[2].window_s)
+                        setup.tracker = saved[0].fresh()
                     for k in range(2):
                         dets = [{"object_id": j, "class": "car", **box} for j in range(2)]
                         try:
@@ -495,7 +507,7 @@ class Service:
                         except (_FrameError, FootprintUQError):  # (a camera that cannot see the dummy box: the
                             pass  # kernels ran all the same; real frames report their own errors)
             finally:
-                setup.tracks, setup.ids, setup.nis = saved
+                setup.tracker, setup.ids = saved
 
     # -- one frame ------------------------------------------------------------------------------------
     def process_frame(self, frame, *, source: str | None = None) -> dict:
@@ -688,20 +700,15 @@ class Service:
     @staticmethod
     def _motion(setup: CameraSetup, est, ids: list, classes: list, ts: float, yaw_rad: np.ndarray | None,
                 family: str | None = None):
-        """The frame's objects through the camera's tracks: ``(track_id (N,), ObjectMotion)``; ``yaw_rad``: the
-        3-D boxes' yaw (None for other boxes); 2-D boxes (``family``) add their sliding contact's velocity term."""
-        yaw = yaw_rad
-        N = len(ids)
-        B = est.centre_shared_m if est.centre_shared_m is not None else np.full((N, 2, setup.tracks.rank), np.nan)
-        with setup.tracks_lock:
-            out = setup.tracks.step(ts, ids, classes, est.centre_xy_world_m, shared_m=B, cov_m2=est.centre_cov_m2)
-            if setup.nis is not None:
-                setup.nis.observe(ts, out, classes)  # (the NIS of the step's own innovations: nothing to recompute)
-        if family == "2d" and setup.slide is not None:
-            out = setup.slide.apply(out, classes)
+        """The frame's objects through the camera's tracker, one call (:meth:`~footprint_uq.tracking.
+        camera_tracker.CameraTracker.step_frame`: step, NIS check, slide term, motion): ``(track_id (N,),
+        ObjectMotion)``; ``yaw_rad``: the 3-D boxes' yaw (None for other boxes); 2-D boxes (``family``) add their
+        sliding contact's velocity term."""
+        f = setup.tracker.step_frame(ts, ids, classes, est.centre_xy_world_m, est.centre_cov_m2, est.centre_shared_m,
+                                     yaw_rad=yaw_rad, contact_2d=family == "2d")
         # what the CP service fuses (on_tracked): the tracks with the sliding contact's velocity term
-        setup.last_tracks = out
-        return out.track_id, object_motion(out, heading_offset_deg=setup.georef.heading_offset_deg, yaw_rad=yaw)
+        setup.last_tracks = f.tracks
+        return f.track_id, f.motion
 
     def _objects_json(self, setup: CameraSetup, est, ids: list, classes: list, ts: float = 0.0,
                       motion=None) -> tuple[bytes, np.ndarray, list]:

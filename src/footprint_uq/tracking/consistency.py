@@ -81,8 +81,9 @@ class NisMonitor:
             raise InputError("out", n, f"the output of the tracks' last step ({nis.shape[0]} objects)")
         now = float(time_s)
         ok = np.isfinite(nis)
-        if ok.any():
-            for cls, (s, k) in _class_sums(nis, ok, classes, n).items():
+        count = int(np.count_nonzero(ok))
+        if count:
+            for cls, (s, k) in _class_sums(nis, ok, classes, n, count).items():
                 dq = self._frames.setdefault(cls, collections.deque())
                 tot = self._sums.setdefault(cls, [0.0, 0])
                 dq.append((now, s, k))
@@ -131,16 +132,16 @@ class NisMonitor:
         return news
 
 
-def _class_sums(nis, ok, classes, n: int) -> dict:
-    """class (``""``: None) -> (sum of the finite ``nis`` of its objects, their count); one class's frame (the
-    common case) without a loop over its objects."""
+def _class_sums(nis, ok, classes, n: int, count: int) -> dict:
+    """class (``""``: None) -> (sum of the finite ``nis`` of its objects, their count); ``count`` the finite ones
+    of the frame; one class's frame (the common case) without a loop over its objects."""
     if classes is None:
-        return {"": (float(nis[ok].sum()), int(ok.sum()))}
+        return {"": (float(nis[ok].sum()), count)}
     names = classes if isinstance(classes, list) else list(classes)
     if len(names) != n:
         raise InputError("classes", len(names), f"{n} class names, one per object")
     if names.count(names[0]) == n:
-        return {"" if names[0] is None else str(names[0]): (float(nis[ok].sum()), int(ok.sum()))}
+        return {"" if names[0] is None else str(names[0]): (float(nis[ok].sum()), count)}
     sums: dict = {}
     for i in np.flatnonzero(ok).tolist():
         c = names[i]

@@ -19,7 +19,8 @@ On line (:func:`slide_moments`, :class:`ContactSlide`) the closed form runs comp
 (:func:`footprint_uq.fast.slide_kernels.slide_moments`): per size node one render of the box, the bottom-centre
 pixel's derivative along the path only (every corner moves by the same vector) and the back-projection's
 derivative at that pixel -- the same numbers as the numpy closed form (:func:`slide_moments_reference`) to
-rounding; ~0.1 ms per frame of 100 tracked objects, 0.7 x the tracker's step (docs/motion-fit.md, section 6).
+rounding; its kernel ~60 us per frame of 100 tracked objects, ~80 us with its inputs in a service frame
+(docs/uncertainty-model.md, "2026-11-28, evening"; docs/motion-fit.md, section 6).
 :func:`slide_along_path` (a central difference of the rendered contact along the path, the earlier on-line form)
 stays as a check.
 
@@ -198,7 +199,8 @@ class ContactSlide:
     def __init__(self, camera, size_priors=None):
         self.camera = camera
         self.size_priors = size_priors if isinstance(size_priors, tuple) else load_size_priors(size_priors)
-        self._constants = None            # kernel_camera(camera), on first use
+        self._constants = None            # kernel_camera(camera) less has_dist, on first use
+        self._kernel = None               # its compiled entry (slide_kernels.MOMENTS_KERNELS), on first use
         self._rows: dict = {}             # class name -> row of the prior tables
         self._lock = threading.Lock()
         self._mean, self._sigma = np.empty((0, 3)), np.empty((0, 3))
@@ -211,23 +213,31 @@ class ContactSlide:
         return cls(camera, size_priors) if ok else None
 
     def covariance(self, out: TrackOutput, classes) -> np.ndarray:
-        """The term (n, 2, 2) of a frame's tracked objects (zero where no velocity is reported)."""
+        """The term (n, 2, 2) of a frame's tracked objects (zero where no velocity is reported).
+
+        :func:`slide_moments` with the camera's compiled entry called from here (looked up once: a frame does not
+        climb back up from ``fast/``, ``bench/frame_walk.py``); the tracker's rows as they come (C-contiguous
+        float64, :meth:`~footprint_uq.tracking.table.TrackTable.step`'s outputs) or copied as there."""
         n = out.track_id.shape[0]
         mean, sig = self._priors(classes, n)
-        if self._constants is None:
-            self._constants = kernel_camera(self.camera)
-        _, M = slide_moments(self.camera, out.xy_m, out.v_mps, mean, sig, constants=self._constants)
-        sel = np.isfinite(out.v_mps).all(1) & np.isfinite(out.xy_m).all(1)
-        return np.where(sel[:, None, None], M, 0.0)
+        if self._kernel is None:
+            prm, R, dom, has_dist = kernel_camera(self.camera)
+            self._constants, self._kernel = (prm, R, dom), slide_kernels.MOMENTS_KERNELS[has_dist]
+        x, v = _rows_of(out.xy_m, 2), _rows_of(out.v_mps, 2)
+        m, M = np.empty((n, 2)), np.empty((n, 2, 2))
+        self._kernel(*self._constants, x, v, mean, sig, _NODES, m, M)
+        M[~(np.isfinite(v).all(1) & np.isfinite(x).all(1))] = 0.0
+        return M
 
     def _priors(self, classes, n: int) -> tuple[np.ndarray, np.ndarray]:
         """Per object, its class's size prior ``(mean_m (n, 3), sigma_m (n, 3))``; a class seen first is looked up
         once (:func:`~footprint_uq.products.contact.class_size_priors`: the fallback for None and unknowns)."""
-        names = [None] * n if classes is None else classes
+        names = [None] * n if classes is None else classes if isinstance(classes, list) else list(classes)
         if len(names) != n:
             raise InputError("classes", f"{len(names)} names", f"one class name (or None) per object ({n})")
+        one = n > 0 and names.count(names[0]) == n  # (a frame of one class, the common case: one look-up)
         with self._lock:  # (the service may run frames of one camera in several threads)
-            new = [c for c in set(names) if c not in self._rows]
+            new = [c for c in ({names[0]} if one else set(names)) if c not in self._rows]
             if new:
                 if len(self._rows) + len(new) > CLASS_CACHE_SIZE:
                     self._rows, self._mean, self._sigma = {}, np.empty((0, 3)), np.empty((0, 3))
@@ -235,7 +245,8 @@ class ContactSlide:
                 mean, sig = class_size_priors(["" if c is None else c for c in new], len(new), self.size_priors)
                 self._rows.update({c: len(self._rows) + k for k, c in enumerate(new)})
                 self._mean, self._sigma = np.vstack([self._mean, mean]), np.vstack([self._sigma, sig])
-            rows = np.fromiter((self._rows[c] for c in names), dtype=np.intp, count=n)
+            rows = (np.full(n, self._rows[names[0]], np.intp) if one
+                    else np.fromiter(map(self._rows.__getitem__, names), dtype=np.intp, count=n))
             return self._mean[rows], self._sigma[rows]
 
     def apply(self, out: TrackOutput, classes) -> TrackOutput:

@@ -142,7 +142,8 @@ class TrackTable:
     def __init__(self, config: TrackerConfig | None = None, *, rank: int, shared_at=None):
         self.config = config or TrackerConfig()
         self.shared_at = shared_at
-        self.rank = int(rank) if self.config.calibration == "consider" else 0
+        self._consider = self.config.calibration == "consider"
+        self.rank = int(rank) if self._consider else 0
         #: the modes the compiled update runs (its per-track step, in :func:`~footprint_uq.tracking.imm_kernels.
         #: frame_pass` and its reference :func:`~footprint_uq.tracking.kernels.frame_update`, is
         #: :class:`~footprint_uq.tracking.filter.InteractingModels` -- mixing, each mode's SchmidtPredictor +
@@ -277,7 +278,8 @@ class TrackTable:
             self._nis = np.full(n, np.nan)
             return TrackOutput.untracked(n)
         self._last_time = t
-        self._delete_expired(t)
+        if len(self._index) > 1 and t - self._oldest_s > self.config.timeout_s:  # (the deleter's sweep is due)
+            self._delete_expired(t)
         slots = np.fromiter(map(self._index.get, ids, repeat(-1)), np.int64, n)
         self._stamp += 1
         act, old, pred = np.empty(n, np.int8), np.empty(n, np.int64), np.empty((n, 2))
@@ -290,13 +292,14 @@ class TrackTable:
             Bp = _c64(self.shared_at(pred[:k]))
         else:
             Bp = _NO_B
-        meas = self._measurement(xy, R, B)
+        z, Rf, Bf = (xy, R, B) if self._consider else self._measurement(xy, R, B)  # (consider: the split as given)
         out = TrackOutput(np.empty(n, np.int64), np.empty(n, bool), np.empty(n, np.int64), np.empty(n),
                           np.empty((n, 2)), np.empty((n, 2, 2)), np.empty((n, 2)), np.empty((n, 2, 2)))
         args = (act, slots, old, k, self._x, self._P, self._xm, self._Pm, self._Cm, self._mu, self._t_last,
                 self._t_first, self._n, self._tid, self._next_id, t, self._qs, self._rates, self.mu0, self._var_v0,
-                meas.xy_m, meas.cov_frame_m2, Bp, meas.shared_m, self.config.gate_chi2, *out)
-        self._nis = nis = np.full(n, np.nan)
+                z, Rf, Bp, Bf, self.config.gate_chi2, *out)
+        self._nis = nis = np.empty(n)
+        nis.fill(math.nan)
         self._next_id = frame_update(*args) if self._reference_pass else frame_pass(*args, *self._scratch, nis)
         if t < self._oldest_s:  # (every row started or updated now has t_last = t)
             self._oldest_s = t
@@ -364,8 +367,8 @@ class SharedJacobianAt:
 
     def __call__(self, xy_m) -> np.ndarray:
         xy = np.ascontiguousarray(xy_m, dtype=np.float64).reshape(-1, 2)
-        uv = np.empty((xy.shape[0], 1, 2))
-        project_ground(xy, self._cam, uv[:, 0])
+        uv = np.empty((xy.shape[0], 2))
+        project_ground(xy, self._cam, uv)
         # the kernel called from here, not through the processor's method: the tracker's frame does not climb back
         # up from products/ (bench/frame_walk.py --tracks); another thread meanwhile takes the processor's path
         if self._kernel is None:
@@ -373,6 +376,8 @@ class SharedJacobianAt:
         if self._kernel is None or not self._busy.acquire(blocking=False):
             return self.processor.point_shared_jacobian(uv)
         try:
-            return self._kernel[0](uv, *self._kernel[1], self._scratch)
+            out = np.empty((xy.shape[0], 2, self.rank))
+            self._kernel[0](uv, *self._kernel[1], out, self._scratch)
+            return out
         finally:
             self._busy.release()

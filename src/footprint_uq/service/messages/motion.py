@@ -174,14 +174,18 @@ def _motion_arrays(motion: ObjectMotion, n: int) -> tuple:
     return ve, vn, cov, sp, ssp, hd, shd, yw, syw, age
 
 
+#: the confidence levels as the compiled pass takes them (made once, not per frame)
+_SPEED_LEVELS, _HEADING_LEVELS = np.asarray(SPEED_CONFIDENCE_MPS), np.asarray(HEADING_CONFIDENCE_DEG)
+
+
 def motion_codes(motion: ObjectMotion, n: int) -> MotionCodes:
     """The CPM and SDSM fields of ``motion`` (module doc), checked: shapes ``(n,)`` / ``(n, 2, 2)``, sigmas
     and ages >= 0 -> :class:`~footprint_uq.errors.InputError` naming the field.  One compiled pass
     (:func:`_codes_kernel`; :func:`motion_codes_reference` is the same in numpy)."""
     ve, vn, cov, sp, ssp, hd, shd, yw, syw, age = _motion_arrays(motion, n)
     codes, has = np.empty((11, n), np.int64), np.empty((3, n), np.bool_)
-    bad, row = _codes_kernel(ve, vn, cov, sp, ssp, hd, shd, yw, syw, age, np.asarray(SPEED_CONFIDENCE_MPS),
-                             np.asarray(HEADING_CONFIDENCE_DEG), codes, has)
+    bad, row = _codes_kernel(ve, vn, cov, sp, ssp, hd, shd, yw, syw, age, _SPEED_LEVELS, _HEADING_LEVELS, codes,
+                             has)
     if bad >= len(_NONNEGATIVE):
         name = _FINITE[bad - len(_NONNEGATIVE)]
         value = (ve, vn, hd, yw)[bad - len(_NONNEGATIVE)][row]
