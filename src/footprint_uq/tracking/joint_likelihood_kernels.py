@@ -36,7 +36,7 @@ __all__ = ["joint_bank_frame"]
 def _predict(x, P, h, q):  # pragma: no cover - compiled
     """Constant velocity over ``h`` (s) with acceleration density ``q``, in place (``w`` does not move)."""
     x[0], x[1] = predict_position(x, h)
-    predict_cov_cv(P, h, q)
+    predict_cov_cv(P, h, q, x.shape[0])
 
 
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
@@ -64,7 +64,7 @@ def _update(x, P, z, R, B, PH, K):  # pragma: no cover - compiled
     m, det, i00, i01, i11 = innovation_distance(s00, s01, s11, y0, y1)
     if not (math.isfinite(m) and det > 0.0):
         return math.nan, det, y0, y1, s00, s01, s11
-    gain(PH, i00, i01, i11, K)
+    gain(PH, i00, i01, i11, K, n)
     for a in range(n):
         x[a] += K[a, 0] * y0 + K[a, 1] * y1
     for a in range(n):  # P - K S K^T = P - K PH^T (symmetric)
@@ -142,10 +142,16 @@ def joint_bank_frame(rows, start, cls, t, z, R, B_pred, B_frame, X, P, MU, t_las
     :func:`~footprint_uq.tracking.likelihood_kernels.bank_frame`, with ``X (cap, G, 2, 4 + r)`` and ``P (cap, G,
     2, 4 + r, 4 + r)`` the members' augmented states (no consider cross-covariance: ``w`` is in the state)."""
     G, n = qs.shape[0], X.shape[3]
-    PH, K, W = np.empty((n, 2)), np.empty((n, 2)), np.empty((2, 2))
-    xs, Ps = np.empty((2, n)), np.empty((2, n, n))
-    cbar, lik, ys = np.empty(2), np.empty(2), np.empty((2, 5))
-    ll_g, nis_g = np.empty(G), np.empty(G)
+    _joint_rows(rows, start, cls, t, z, R, B_pred, B_frame, X, P, MU, t_last, qs, nm, rates, mu0, var_v0, LL, NIS,
+                n_upd, n_bad, np.empty((n, 2)), np.empty((n, 2)), np.empty((2, 2)), np.empty((2, n)),
+                np.empty((2, n, n)), np.empty(2), np.empty(2), np.empty((2, 5)), np.empty(G), np.empty(G))
+
+
+@njit(cache=True, nogil=True, error_model="numpy", _nrt=False)  # (no refcounting: the scratch comes from the caller)
+def _joint_rows(rows, start, cls, t, z, R, B_pred, B_frame, X, P, MU, t_last, qs, nm, rates, mu0, var_v0, LL, NIS,
+                n_upd, n_bad, PH, K, W, xs, Ps, cbar, lik, ys, ll_g, nis_g):  # pragma: no cover - compiled
+    """:func:`joint_bank_frame`'s loop over the frame's objects, the working arrays given."""
+    G = qs.shape[0]
     for i in range(rows.shape[0]):
         s = rows[i]
         if s < 0:

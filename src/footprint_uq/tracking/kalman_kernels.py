@@ -24,7 +24,8 @@ from numba import njit
 __all__ = ["predict_position", "predict_cov_cv", "predict_consider", "innovation_consider", "innovation_distance",
            "gain", "update_consider", "schmidt_step", "start_cov2", "pick_shared"]
 
-_INL = dict(cache=True, nogil=True, error_model="numpy", inline="always")
+_JIT = dict(cache=True, nogil=True, error_model="numpy")
+_INL = dict(_JIT, inline="always")
 
 
 @njit(**_INL)
@@ -34,10 +35,10 @@ def predict_position(x, h):  # pragma: no cover - compiled
 
 
 @njit(**_INL)
-def predict_cov_cv(P, h, q):  # pragma: no cover - compiled
+def predict_cov_cv(P, h, q, n):  # pragma: no cover - compiled
     """``P (n, n)`` (n >= 4, its first 4 entries the state's) predicted in place: ``F P F^T + Q`` over ``h`` (s)
-    with acceleration density ``q`` (m^2/s^3); entries past the 4th (an augmented state's ``w``) do not move."""
-    n = P.shape[0]
+    with acceleration density ``q`` (m^2/s^3); entries past the 4th (an augmented state's ``w``) do not move.
+    ``n`` is passed, not read from ``P``: a literal 4 lets the compiler unroll the loops (as written out before)."""
     for a in range(n):  # F P
         P[0, a] += h * P[2, a]
         P[1, a] += h * P[3, a]
@@ -95,10 +96,10 @@ def innovation_distance(s00, s01, s11, y0, y1):  # pragma: no cover - compiled
 
 
 @njit(**_INL)
-def gain(cross, i00, i01, i11, K):  # pragma: no cover - compiled
+def gain(cross, i00, i01, i11, K, n):  # pragma: no cover - compiled
     """The Kalman gain ``K (n, 2) = cross S^-1`` of the cross term ``cross (n, 2)`` and ``S^-1 = [[i00, i01], [i01,
-    i11]]``."""
-    for a in range(cross.shape[0]):
+    i11]]`` (``n`` passed: see :func:`predict_cov_cv`)."""
+    for a in range(n):
         K[a, 0] = cross[a, 0] * i00 + cross[a, 1] * i01
         K[a, 1] = cross[a, 0] * i01 + cross[a, 1] * i11
 
@@ -144,7 +145,7 @@ def schmidt_step(x, P, C, h, q, z, R, B, gate, Pp, Cp, K, cross):  # pragma: no 
     for a in range(4):
         for b in range(4):
             Pp[a, b] = P[a, b]
-    predict_cov_cv(Pp, h, q)
+    predict_cov_cv(Pp, h, q, 4)
     predict_consider(C, h, Cp)
     x0, x1 = predict_position(x, h)
     s00, s01, s11 = innovation_consider(Pp, Cp, R, B, cross)
@@ -154,7 +155,7 @@ def schmidt_step(x, P, C, h, q, z, R, B, gate, Pp, Cp, K, cross):  # pragma: no 
         return math.nan, det, y0, y1, s00, s01, s11
     if not m <= gate:
         return m, det, y0, y1, s00, s01, s11
-    gain(cross, i00, i01, i11, K)
+    gain(cross, i00, i01, i11, K, 4)
     update_consider(x, P, C, x0, x1, y0, y1, Pp, Cp, K, cross, B)
     return m, det, y0, y1, s00, s01, s11
 

@@ -115,9 +115,10 @@ def _member_step(Xm, Pm, Cm, mu, h, q, nm, rates, z, R, B, Pp, Cp, K, cross, W, 
     mix2_weights(mu, h, rates, cbar, W)
     mix2_moments(Xm, Pm, W, xs, Ps)
     for j in range(2):  # the consider columns mix as the states
+        w0, w1 = W[0, j], W[1, j]
         for a in range(4):
             for c in range(r):
-                Cs[j, a, c] = W[0, j] * Cm[0, a, c] + W[1, j] * Cm[1, a, c]
+                Cs[j, a, c] = w0 * Cm[0, a, c] + w1 * Cm[1, a, c]
     for j in range(2):
         m, det, y0, y1, s00, s01, s11 = schmidt_step(xs[j], Ps[j], Cs[j], h, q[j], z, R, B, math.inf, Pp, Cp, K,
                                                      cross)
@@ -168,10 +169,17 @@ def bank_frame(rows, start, cls, t, z, R, B_pred, B_frame, X, P, C, MU, t_last, 
     ``NIS[cls[i], g]``; ``n_upd[cls[i]]`` counts the updates, ``n_bad[cls[i]]`` those where a member's innovation
     covariance was singular (the whole update is then left out)."""
     G, r = qs.shape[0], C.shape[4]
-    Pp, Cp, K, cross, W = np.empty((4, 4)), np.empty((4, r)), np.empty((4, 2)), np.empty((4, 2)), np.empty((2, 2))
-    xs, Ps, Cs = np.empty((2, 4)), np.empty((2, 4, 4)), np.empty((2, 4, r))
-    cbar, lik, ys = np.empty(2), np.empty(2), np.empty((2, 5))
-    ll_g, nis_g = np.empty(G), np.empty(G)
+    _bank_rows(rows, start, cls, t, z, R, B_pred, B_frame, X, P, C, MU, t_last, qs, nm, rates, mu0, var_v0, LL, NIS,
+               n_upd, n_bad, np.empty((4, 4)), np.empty((4, r)), np.empty((4, 2)), np.empty((4, 2)), np.empty((2, 2)),
+               np.empty((2, 4)), np.empty((2, 4, 4)), np.empty((2, 4, r)), np.empty(2), np.empty(2), np.empty((2, 5)),
+               np.empty(G), np.empty(G))
+
+
+@njit(cache=True, nogil=True, error_model="numpy", _nrt=False)  # (no refcounting: the scratch comes from the caller)
+def _bank_rows(rows, start, cls, t, z, R, B_pred, B_frame, X, P, C, MU, t_last, qs, nm, rates, mu0, var_v0, LL, NIS,
+               n_upd, n_bad, Pp, Cp, K, cross, W, xs, Ps, Cs, cbar, lik, ys, ll_g, nis_g):  # pragma: no cover
+    """:func:`bank_frame`'s loop over the frame's objects, the working arrays given."""
+    G = qs.shape[0]
     for i in range(rows.shape[0]):
         s = rows[i]
         if s < 0:
