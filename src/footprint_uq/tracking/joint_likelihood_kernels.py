@@ -27,7 +27,7 @@ import numpy as np
 from numba import njit
 
 from .kalman_kernels import gain, innovation_distance, pick_shared, predict_cov_cv, predict_position
-from .likelihood_kernels import LOG_2PI, add_member_terms, mix2_moments, mix2_weights, mixture_terms
+from .likelihood_kernels import LOG_2PI, add_member_terms, mix2_moments, mix2_weights, mixture_terms, mode_terms
 
 __all__ = ["joint_bank_frame"]
 
@@ -100,11 +100,8 @@ def _member_step(Xm, Pm, mu, h, q, nm, rates, z, R, B, PH, K, W, xs, Ps, cbar, l
     mix2_moments(Xm, Pm, W, xs, Ps)
     for j in range(2):
         _predict(xs[j], Ps[j], h, q[j])
-        m, det, y0, y1, s00, s01, s11 = _update(xs[j], Ps[j], z, R, B, PH, K)
-        if not math.isfinite(m):
+        if not mode_terms(j, _update(xs[j], Ps[j], z, R, B, PH, K), cbar, lik, ys):
             return math.nan, math.nan
-        lik[j] = -0.5 * m - 0.5 * math.log(det) + math.log(cbar[j])
-        ys[j, 0], ys[j, 1], ys[j, 2], ys[j, 3], ys[j, 4] = y0, y1, s00, s01, s11
     ll, nis = mixture_terms(lik, cbar, ys, mu)
     for j in range(2):
         _store(Xm, Pm, j, xs, Ps)

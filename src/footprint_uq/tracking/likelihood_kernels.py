@@ -22,8 +22,8 @@ from numba import njit
 
 from .kalman_kernels import pick_shared, schmidt_step, start_cov2
 
-__all__ = ["bank_frame", "bank_predicted", "mix2_weights", "mix2_moments", "mixture_terms", "add_member_terms",
-           "LOG_2PI"]
+__all__ = ["bank_frame", "bank_predicted", "mix2_weights", "mix2_moments", "mixture_terms", "mode_terms",
+           "add_member_terms", "LOG_2PI"]
 
 LOG_2PI = math.log(2.0 * math.pi)
 
@@ -88,6 +88,18 @@ def mixture_terms(lik, cbar, ys, mu):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def mode_terms(j, step, cbar, lik, ys):  # pragma: no cover - compiled
+    """Mode ``j``'s step ``(d2, det S, y0, y1, s00, s01, s11)`` (m, m^2) into ``lik[j] = log cbar_j N(y; 0, S)``
+    (without ``log 2 pi``) and ``ys[j] (5,)``; returns False (nothing written) when its distance is not finite."""
+    m, det = step[0], step[1]
+    if not math.isfinite(m):
+        return False
+    lik[j] = -0.5 * m - 0.5 * math.log(det) + math.log(cbar[j])
+    ys[j, 0], ys[j, 1], ys[j, 2], ys[j, 3], ys[j, 4] = step[2], step[3], step[4], step[5], step[6]
+    return True
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
 def add_member_terms(k, ok, ll_g, nis_g, LL, NIS, n_upd, n_bad):  # pragma: no cover - compiled
     """One update's terms of every member, ``ll_g (G,)`` and ``nis_g (G,)``, added to class ``k``'s sums ``LL[k]``,
     ``NIS[k]`` and counted in ``n_upd[k]``; ``ok`` False (a member's innovation covariance was singular): counted
@@ -120,12 +132,9 @@ def _member_step(Xm, Pm, Cm, mu, h, q, nm, rates, z, R, B, Pp, Cp, K, cross, W, 
             for c in range(r):
                 Cs[j, a, c] = w0 * Cm[0, a, c] + w1 * Cm[1, a, c]
     for j in range(2):
-        m, det, y0, y1, s00, s01, s11 = schmidt_step(xs[j], Ps[j], Cs[j], h, q[j], z, R, B, math.inf, Pp, Cp, K,
-                                                     cross)
-        if not math.isfinite(m):
+        if not mode_terms(j, schmidt_step(xs[j], Ps[j], Cs[j], h, q[j], z, R, B, math.inf, Pp, Cp, K, cross), cbar,
+                          lik, ys):
             return math.nan, math.nan
-        lik[j] = -0.5 * m - 0.5 * math.log(det) + math.log(cbar[j])
-        ys[j, 0], ys[j, 1], ys[j, 2], ys[j, 3], ys[j, 4] = y0, y1, s00, s01, s11
     ll, nis = mixture_terms(lik, cbar, ys, mu)
     for j in range(2):
         for a in range(4):
