@@ -26,7 +26,8 @@ import math
 import numpy as np
 from numba import njit
 
-from .likelihood_kernels import LOG_2PI, pick_shared
+from .kalman_kernels import gain, innovation_distance, pick_shared, predict_cov_cv, predict_position
+from .likelihood_kernels import LOG_2PI, add_member_terms, mix2_moments, mix2_weights, mixture_terms, mode_terms
 
 __all__ = ["joint_bank_frame"]
 
@@ -34,24 +35,8 @@ __all__ = ["joint_bank_frame"]
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
 def _predict(x, P, h, q):  # pragma: no cover - compiled
     """Constant velocity over ``h`` (s) with acceleration density ``q``, in place (``w`` does not move)."""
-    n = x.shape[0]
-    x[0] += h * x[2]
-    x[1] += h * x[3]
-    for a in range(n):
-        P[0, a] += h * P[2, a]
-        P[1, a] += h * P[3, a]
-    for a in range(n):
-        P[a, 0] += h * P[a, 2]
-        P[a, 1] += h * P[a, 3]
-    q3, q2, q1 = q * h * h * h / 3.0, q * h * h / 2.0, q * h
-    P[0, 0] += q3
-    P[1, 1] += q3
-    P[2, 2] += q1
-    P[3, 3] += q1
-    P[0, 2] += q2
-    P[2, 0] += q2
-    P[1, 3] += q2
-    P[3, 1] += q2
+    x[0], x[1] = predict_position(x, h)
+    predict_cov_cv(P, h, q, x.shape[0])
 
 
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
@@ -76,14 +61,10 @@ def _update(x, P, z, R, B, PH, K):  # pragma: no cover - compiled
         s10 += B[1, c] * PH[4 + c, 0]
         s11 += B[1, c] * PH[4 + c, 1]
     s01 = 0.5 * (s01 + s10)
-    det = s00 * s11 - s01 * s01
-    i00, i01, i11 = s11 / det, -s01 / det, s00 / det
-    m = y0 * y0 * i00 + 2.0 * y0 * y1 * i01 + y1 * y1 * i11
+    m, det, i00, i01, i11 = innovation_distance(s00, s01, s11, y0, y1)
     if not (math.isfinite(m) and det > 0.0):
         return math.nan, det, y0, y1, s00, s01, s11
-    for a in range(n):
-        K[a, 0] = PH[a, 0] * i00 + PH[a, 1] * i01
-        K[a, 1] = PH[a, 0] * i01 + PH[a, 1] * i11
+    gain(PH, i00, i01, i11, K, n)
     for a in range(n):
         x[a] += K[a, 0] * y0 + K[a, 1] * y1
     for a in range(n):  # P - K S K^T = P - K PH^T (symmetric)
@@ -92,29 +73,6 @@ def _update(x, P, z, R, B, PH, K):  # pragma: no cover - compiled
             P[a, b] = v
             P[b, a] = v
     return m, det, y0, y1, s00, s01, s11
-
-
-@njit(cache=True, nogil=True, error_model="numpy", inline="always")
-def _mix2(Xm, Pm, mu, h, rates, xs, Ps, cbar):  # pragma: no cover - compiled
-    """IMM mixing of one member's two augmented modes (``Xm (2, n)``, ``Pm (2, n, n)``, ``mu (2,)``) over a step
-    ``h``: the start states ``xs, Ps`` of each mode and the predicted mode probabilities ``cbar (2,)``."""
-    n = Xm.shape[1]
-    a_, b_ = rates[0], rates[1]
-    tot = a_ + b_
-    e = -math.expm1(-tot * h) / tot if tot > 0.0 else 0.0
-    p01, p10 = a_ * e, b_ * e
-    pij = ((1.0 - p01, p01), (p10, 1.0 - p10))
-    for j in range(2):
-        cb = pij[0][j] * mu[0] + pij[1][j] * mu[1]
-        cbar[j] = cb
-        w0, w1 = pij[0][j] * mu[0] / cb, pij[1][j] * mu[1] / cb
-        for a in range(n):
-            xs[j, a] = w0 * Xm[0, a] + w1 * Xm[1, a]
-        for a in range(n):
-            d0, d1 = Xm[0, a] - xs[j, a], Xm[1, a] - xs[j, a]
-            for b in range(n):
-                Ps[j, a, b] = (w0 * (Pm[0, a, b] + d0 * (Xm[0, b] - xs[j, b]))
-                               + w1 * (Pm[1, a, b] + d1 * (Xm[1, b] - xs[j, b])))
 
 
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
@@ -127,7 +85,7 @@ def _store(Xm, Pm, j, xs, Ps):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
-def _member_step(Xm, Pm, mu, h, q, nm, rates, z, R, B, PH, K, xs, Ps, cbar, lik, ys):  # pragma: no cover
+def _member_step(Xm, Pm, mu, h, q, nm, rates, z, R, B, PH, K, W, xs, Ps, cbar, lik, ys):  # pragma: no cover
     """One member's step on one track (in place): returns ``(log-likelihood, NIS)`` of the measurement (NaN: a
     singular innovation covariance; the state is then left as it was)."""
     if nm == 1:
@@ -138,31 +96,14 @@ def _member_step(Xm, Pm, mu, h, q, nm, rates, z, R, B, PH, K, xs, Ps, cbar, lik,
             return math.nan, math.nan
         _store(Xm, Pm, 0, xs, Ps)
         return -0.5 * m - 0.5 * math.log(det) - LOG_2PI, m
-    _mix2(Xm, Pm, mu, h, rates, xs, Ps, cbar)
+    mix2_weights(mu, h, rates, cbar, W)
+    mix2_moments(Xm, Pm, W, xs, Ps)
     for j in range(2):
         _predict(xs[j], Ps[j], h, q[j])
-        m, det, y0, y1, s00, s01, s11 = _update(xs[j], Ps[j], z, R, B, PH, K)
-        if not math.isfinite(m):
+        if not mode_terms(j, _update(xs[j], Ps[j], z, R, B, PH, K), cbar, lik, ys):
             return math.nan, math.nan
-        lik[j] = -0.5 * m - 0.5 * math.log(det) + math.log(cbar[j])
-        ys[j, 0], ys[j, 1], ys[j, 2], ys[j, 3], ys[j, 4] = y0, y1, s00, s01, s11
-    top = max(lik[0], lik[1])
-    ll = top + math.log(math.exp(lik[0] - top) + math.exp(lik[1] - top)) - LOG_2PI
-    ym0 = cbar[0] * ys[0, 0] + cbar[1] * ys[1, 0]  # NIS of the predicted mixture's moments
-    ym1 = cbar[0] * ys[0, 1] + cbar[1] * ys[1, 1]
-    s00 = s01 = s11 = 0.0
+    ll, nis = mixture_terms(lik, cbar, ys, mu)
     for j in range(2):
-        d0, d1 = ys[j, 0] - ym0, ys[j, 1] - ym1
-        s00 += cbar[j] * (ys[j, 2] + d0 * d0)
-        s01 += cbar[j] * (ys[j, 3] + d0 * d1)
-        s11 += cbar[j] * (ys[j, 4] + d1 * d1)
-    nis = (ym0 * ym0 * s11 - 2.0 * ym0 * ym1 * s01 + ym1 * ym1 * s00) / (s00 * s11 - s01 * s01)
-    tot = 0.0
-    for j in range(2):
-        lik[j] = max(math.exp(lik[j] - top), 1e-9)  # as the tracker: a mode never dies out
-        tot += lik[j]
-    for j in range(2):
-        mu[j] = lik[j] / tot
         _store(Xm, Pm, j, xs, Ps)
     return ll, nis
 
@@ -198,10 +139,16 @@ def joint_bank_frame(rows, start, cls, t, z, R, B_pred, B_frame, X, P, MU, t_las
     :func:`~footprint_uq.tracking.likelihood_kernels.bank_frame`, with ``X (cap, G, 2, 4 + r)`` and ``P (cap, G,
     2, 4 + r, 4 + r)`` the members' augmented states (no consider cross-covariance: ``w`` is in the state)."""
     G, n = qs.shape[0], X.shape[3]
-    PH, K = np.empty((n, 2)), np.empty((n, 2))
-    xs, Ps = np.empty((2, n)), np.empty((2, n, n))
-    cbar, lik, ys = np.empty(2), np.empty(2), np.empty((2, 5))
-    ll_g, nis_g = np.empty(G), np.empty(G)
+    _joint_rows(rows, start, cls, t, z, R, B_pred, B_frame, X, P, MU, t_last, qs, nm, rates, mu0, var_v0, LL, NIS,
+                n_upd, n_bad, np.empty((n, 2)), np.empty((n, 2)), np.empty((2, 2)), np.empty((2, n)),
+                np.empty((2, n, n)), np.empty(2), np.empty(2), np.empty((2, 5)), np.empty(G), np.empty(G))
+
+
+@njit(cache=True, nogil=True, error_model="numpy", _nrt=False)  # (no refcounting: the scratch comes from the caller)
+def _joint_rows(rows, start, cls, t, z, R, B_pred, B_frame, X, P, MU, t_last, qs, nm, rates, mu0, var_v0, LL, NIS,
+                n_upd, n_bad, PH, K, W, xs, Ps, cbar, lik, ys, ll_g, nis_g):  # pragma: no cover - compiled
+    """:func:`joint_bank_frame`'s loop over the frame's objects, the working arrays given."""
+    G = qs.shape[0]
     for i in range(rows.shape[0]):
         s = rows[i]
         if s < 0:
@@ -212,18 +159,11 @@ def joint_bank_frame(rows, start, cls, t, z, R, B_pred, B_frame, X, P, MU, t_las
             t_last[s] = t
             continue
         h = t - t_last[s]
-        B = pick_shared(B_pred, i, B_frame)
+        B = pick_shared(B_pred, i, B_frame, i)
         ok = True
         for g in range(G):
             ll_g[g], nis_g[g] = _member_step(X[s, g], P[s, g], MU[s, g], h, qs[g], nm[g], rates[g], z[i], R[i], B,
-                                             PH, K, xs, Ps, cbar, lik, ys)
+                                             PH, K, W, xs, Ps, cbar, lik, ys)
             ok = ok and math.isfinite(ll_g[g])
         t_last[s] = t
-        k = cls[i]
-        if not ok:
-            n_bad[k] += 1
-            continue
-        n_upd[k] += 1
-        for g in range(G):
-            LL[k, g] += ll_g[g]
-            NIS[k, g] += nis_g[g]
+        add_member_terms(cls[i], ok, ll_g, nis_g, LL, NIS, n_upd, n_bad)

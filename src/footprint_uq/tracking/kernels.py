@@ -20,78 +20,10 @@ import numpy as np
 from numba import njit
 
 from ..fast import core
+from .kalman_kernels import pick_shared, schmidt_step, start_cov2
 
 __all__ = ["predict_update", "update_slots", "frame_rows", "frame_update", "initiate_row", "project_ground",
            "motion_fields", "ROW_SKIP", "ROW_UPDATE", "ROW_START"]
-
-
-@njit(cache=True, nogil=True, error_model="numpy", inline="always")
-def _step_one(x, P, C, h, q, z, R, B, gate, Pp, Cp, K, cross):  # pragma: no cover - compiled
-    """One track (views ``x (4,)``, ``P (4, 4)``, ``C (4, r)``; measurement ``z (2,)``, ``R (2, 2)``, ``B (2, r)``):
-    predict by ``h`` and update in place if the innovation's squared Mahalanobis distance is ``<= gate``; returns
-    that distance (NaN if not finite) and ``det S``.  ``Pp, Cp, K, cross`` are scratch."""
-    r = C.shape[1]
-    # predict: F = [[I, h I], [0, I]], Q = q [[h^3/3 I, h^2/2 I], [h^2/2 I, h I]]
-    for a in range(4):
-        for b in range(4):
-            Pp[a, b] = P[a, b]
-    for a in range(4):  # F P
-        Pp[0, a] += h * Pp[2, a]
-        Pp[1, a] += h * Pp[3, a]
-    for a in range(4):  # (F P) F^T
-        Pp[a, 0] += h * Pp[a, 2]
-        Pp[a, 1] += h * Pp[a, 3]
-    q3, q2, q1 = q * h * h * h / 3.0, q * h * h / 2.0, q * h
-    Pp[0, 0] += q3
-    Pp[1, 1] += q3
-    Pp[2, 2] += q1
-    Pp[3, 3] += q1
-    Pp[0, 2] += q2
-    Pp[2, 0] += q2
-    Pp[1, 3] += q2
-    Pp[3, 1] += q2
-    for c in range(r):
-        Cp[0, c] = C[0, c] + h * C[2, c]
-        Cp[1, c] = C[1, c] + h * C[3, c]
-        Cp[2, c] = C[2, c]
-        Cp[3, c] = C[3, c]
-    x0, x1 = x[0] + h * x[2], x[1] + h * x[3]
-    # innovation: S = P_pp + C_p B^T + B C_p^T + B B^T + R; cross = P H^T + C B^T
-    s00, s01, s11 = Pp[0, 0] + R[0, 0], Pp[0, 1] + R[0, 1], Pp[1, 1] + R[1, 1]
-    for a in range(4):
-        cross[a, 0], cross[a, 1] = Pp[a, 0], Pp[a, 1]
-    for c in range(r):
-        b0, b1 = B[0, c], B[1, c]
-        s00 += 2.0 * Cp[0, c] * b0 + b0 * b0
-        s01 += Cp[0, c] * b1 + b0 * Cp[1, c] + b0 * b1
-        s11 += 2.0 * Cp[1, c] * b1 + b1 * b1
-        for a in range(4):
-            cross[a, 0] += Cp[a, c] * b0
-            cross[a, 1] += Cp[a, c] * b1
-    det = s00 * s11 - s01 * s01
-    i00, i01, i11 = s11 / det, -s01 / det, s00 / det
-    y0, y1 = z[0] - x0, z[1] - x1
-    m = y0 * y0 * i00 + 2.0 * y0 * y1 * i01 + y1 * y1 * i11
-    if not (math.isfinite(m) and det > 0.0):
-        return math.nan, det
-    if not m <= gate:
-        return m, det
-    for a in range(4):
-        K[a, 0] = cross[a, 0] * i00 + cross[a, 1] * i01
-        K[a, 1] = cross[a, 0] * i01 + cross[a, 1] * i11
-    x[0], x[1] = x0 + K[0, 0] * y0 + K[0, 1] * y1, x1 + K[1, 0] * y0 + K[1, 1] * y1
-    x[2] += K[2, 0] * y0 + K[2, 1] * y1
-    x[3] += K[3, 0] * y0 + K[3, 1] * y1
-    for a in range(4):
-        for b in range(a, 4):
-            v = Pp[a, b] - (K[a, 0] * cross[b, 0] + K[a, 1] * cross[b, 1])
-            w = Pp[b, a] - (K[b, 0] * cross[a, 0] + K[b, 1] * cross[a, 1])
-            P[a, b] = P[b, a] = 0.5 * (v + w)
-    for c in range(r):
-        e0, e1 = Cp[0, c] + B[0, c], Cp[1, c] + B[1, c]
-        for a in range(4):
-            C[a, c] = Cp[a, c] - (K[a, 0] * e0 + K[a, 1] * e1)
-    return m, det
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -102,7 +34,7 @@ def predict_update(x, P, C, dt, q, z, R, B, gate, d2):  # pragma: no cover - com
     r = C.shape[2]
     Pp, Cp, K, cross = np.empty((4, 4)), np.empty((4, r)), np.empty((4, 2)), np.empty((4, 2))
     for i in range(x.shape[0]):
-        d2[i] = _step_one(x[i], P[i], C[i], dt[i], q, z[i], R[i], B[i], gate, Pp, Cp, K, cross)[0]
+        d2[i] = schmidt_step(x[i], P[i], C[i], dt[i], q, z[i], R[i], B[i], gate, Pp, Cp, K, cross)[0]
 
 
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
@@ -162,7 +94,7 @@ def _imm_one(s, X, P, Xm, Pm, Cm, mu, t_last, n_upd, t, qs, rates, z, R, B, gate
     _mix(Xm[s], Pm[s], Cm[s], mu[s], pij, cbar, xs, Ps, Cs)
     best, bad = math.inf, False
     for j in range(M):
-        mj, det = _step_one(xs[j], Ps[j], Cs[j], h, qs[j], z, R, B, math.inf, Pp, Cp, K, cross)
+        mj, det, _, _, _, _, _ = schmidt_step(xs[j], Ps[j], Cs[j], h, qs[j], z, R, B, math.inf, Pp, Cp, K, cross)
         lik[j] = -0.5 * mj - 0.5 * math.log(det) + math.log(cbar[j]) if math.isfinite(mj) else -math.inf
         if not math.isfinite(mj):
             bad = True
@@ -201,17 +133,6 @@ def _imm_one(s, X, P, Xm, Pm, Cm, mu, t_last, n_upd, t, qs, rates, z, R, B, gate
     return best
 
 
-@njit(cache=True, nogil=True, error_model="numpy", inline="always")
-def _pick_B(B_pred, k, B_frame, i):  # pragma: no cover - compiled
-    """``B_pred[k]`` (``B`` at the predicted position) where it is given and finite, else ``B_frame[i]``."""
-    if B_pred.shape[0] == 0:
-        return B_frame[i]
-    for c in range(B_pred.shape[2]):
-        if not (math.isfinite(B_pred[k, 0, c]) and math.isfinite(B_pred[k, 1, c])):
-            return B_frame[i]
-    return B_pred[k]
-
-
 @njit(cache=True, nogil=True, error_model="numpy")
 def update_slots(X, P, Xm, Pm, Cm, mu, t_last, n_upd, slots, t, qs, rates, z, R, B_pred, B_frame, gate,
                  d2):  # pragma: no cover - compiled
@@ -231,7 +152,7 @@ def update_slots(X, P, Xm, Pm, Cm, mu, t_last, n_upd, slots, t, qs, rates, z, R,
     pij, cbar, lik = np.empty((2, 2)), np.empty(M), np.empty(M)
     for i in range(slots.shape[0]):
         d2[i] = _imm_one(slots[i], X, P, Xm, Pm, Cm, mu, t_last, n_upd, t, qs, rates, z[i], R[i],
-                         _pick_B(B_pred, i, B_frame, i), gate, Pp, Cp, K, cross, xs, Ps, Cs, pij, cbar, lik)
+                         pick_shared(B_pred, i, B_frame, i), gate, Pp, Cp, K, cross, xs, Ps, Cs, pij, cbar, lik)
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -355,19 +276,13 @@ def initiate_row(s, X, P, Xm, Pm, Cm, mu, mu0, var_v0, z, R, B):  # pragma: no c
     """A new track in storage row ``s`` from one measurement (:class:`~footprint_uq.tracking.filter.Initiator`:
     the position is the measurement, its calibration share ``C = -B``; the velocity zero with variance
     ``var_v0``), the same in every mode, mode probabilities ``mu0``."""
-    r = B.shape[1]
     for a in range(4):
         for b in range(4):
             P[s, a, b] = 0.0
     X[s, 0], X[s, 1], X[s, 2], X[s, 3] = z[0], z[1], 0.0, 0.0
-    for a in range(2):
-        for b in range(2):
-            acc = 0.0
-            for c in range(r):
-                acc += B[a, c] * B[b, c]
-            P[s, a, b] = R[a, b] + acc
-    off = 0.5 * (P[s, 0, 1] + P[s, 1, 0])
-    P[s, 0, 1] = P[s, 1, 0] = off
+    p00, p01, p11 = start_cov2(R, B)
+    P[s, 0, 0], P[s, 1, 1] = p00, p11
+    P[s, 0, 1] = P[s, 1, 0] = p01
     P[s, 2, 2] = P[s, 3, 3] = var_v0
     for j in range(Xm.shape[1]):
         mu[s, j] = mu0[j]
@@ -398,7 +313,7 @@ def frame_update(act, slots, old, n_old, X, P, Xm, Pm, Cm, mu, t_last, t_first, 
     for k in range(n_old):
         i = old[k]
         d2 = _imm_one(slots[i], X, P, Xm, Pm, Cm, mu, t_last, n_upd, t, qs, rates, z[i], R[i],
-                      _pick_B(B_pred, k, B_frame, i), gate, Pp, Cp, K, cross, xs, Ps, Cs, pij, cbar, lik)
+                      pick_shared(B_pred, k, B_frame, i), gate, Pp, Cp, K, cross, xs, Ps, Cs, pij, cbar, lik)
         if not d2 <= gate:  # NaN (a singular S) fails the gate too
             act[i] = ROW_START
     nan = math.nan

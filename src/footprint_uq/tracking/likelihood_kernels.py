@@ -20,81 +20,19 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["bank_frame", "bank_predicted", "pick_shared", "LOG_2PI"]
+from .kalman_kernels import pick_shared, schmidt_step, start_cov2
+
+__all__ = ["bank_frame", "bank_predicted", "mix2_weights", "mix2_moments", "mixture_terms", "mode_terms",
+           "add_member_terms", "LOG_2PI"]
 
 LOG_2PI = math.log(2.0 * math.pi)
 
 
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
-def _predict_update(x, P, C, h, q, z, R, B, Pp, Cp, K, cross):  # pragma: no cover - compiled
-    """One mode of one track, in place: predict by ``h`` (s) with acceleration density ``q`` and update with
-    ``z (2,)``, ``R (2, 2)``, ``B (2, r)`` (the split measurement model of :mod:`footprint_uq.tracking.filter`).
-    Returns ``(y^T S^-1 y, det S, y0, y1, s00, s01, s11)``; NaN distance (state untouched) if S is singular."""
-    r = C.shape[1]
-    for a in range(4):
-        for b in range(4):
-            Pp[a, b] = P[a, b]
-    for a in range(4):
-        Pp[0, a] += h * Pp[2, a]
-        Pp[1, a] += h * Pp[3, a]
-    for a in range(4):
-        Pp[a, 0] += h * Pp[a, 2]
-        Pp[a, 1] += h * Pp[a, 3]
-    q3, q2, q1 = q * h * h * h / 3.0, q * h * h / 2.0, q * h
-    Pp[0, 0] += q3
-    Pp[1, 1] += q3
-    Pp[2, 2] += q1
-    Pp[3, 3] += q1
-    Pp[0, 2] += q2
-    Pp[2, 0] += q2
-    Pp[1, 3] += q2
-    Pp[3, 1] += q2
-    for c in range(r):
-        Cp[0, c] = C[0, c] + h * C[2, c]
-        Cp[1, c] = C[1, c] + h * C[3, c]
-        Cp[2, c] = C[2, c]
-        Cp[3, c] = C[3, c]
-    x0, x1 = x[0] + h * x[2], x[1] + h * x[3]
-    s00, s01, s11 = Pp[0, 0] + R[0, 0], Pp[0, 1] + R[0, 1], Pp[1, 1] + R[1, 1]
-    for a in range(4):
-        cross[a, 0], cross[a, 1] = Pp[a, 0], Pp[a, 1]
-    for c in range(r):
-        b0, b1 = B[0, c], B[1, c]
-        s00 += 2.0 * Cp[0, c] * b0 + b0 * b0
-        s01 += Cp[0, c] * b1 + b0 * Cp[1, c] + b0 * b1
-        s11 += 2.0 * Cp[1, c] * b1 + b1 * b1
-        for a in range(4):
-            cross[a, 0] += Cp[a, c] * b0
-            cross[a, 1] += Cp[a, c] * b1
-    det = s00 * s11 - s01 * s01
-    i00, i01, i11 = s11 / det, -s01 / det, s00 / det
-    y0, y1 = z[0] - x0, z[1] - x1
-    m = y0 * y0 * i00 + 2.0 * y0 * y1 * i01 + y1 * y1 * i11
-    if not (math.isfinite(m) and det > 0.0):
-        return math.nan, det, y0, y1, s00, s01, s11
-    for a in range(4):
-        K[a, 0] = cross[a, 0] * i00 + cross[a, 1] * i01
-        K[a, 1] = cross[a, 0] * i01 + cross[a, 1] * i11
-    x[0], x[1] = x0 + K[0, 0] * y0 + K[0, 1] * y1, x1 + K[1, 0] * y0 + K[1, 1] * y1
-    x[2] += K[2, 0] * y0 + K[2, 1] * y1
-    x[3] += K[3, 0] * y0 + K[3, 1] * y1
-    for a in range(4):
-        for b in range(a, 4):
-            v = Pp[a, b] - (K[a, 0] * cross[b, 0] + K[a, 1] * cross[b, 1])
-            w = Pp[b, a] - (K[b, 0] * cross[a, 0] + K[b, 1] * cross[a, 1])
-            P[a, b] = P[b, a] = 0.5 * (v + w)
-    for c in range(r):
-        e0, e1 = Cp[0, c] + B[0, c], Cp[1, c] + B[1, c]
-        for a in range(4):
-            C[a, c] = Cp[a, c] - (K[a, 0] * e0 + K[a, 1] * e1)
-    return m, det, y0, y1, s00, s01, s11
-
-
-@njit(cache=True, nogil=True, error_model="numpy", inline="always")
-def _mix2(Xm, Pm, Cm, mu, h, rates, xs, Ps, Cs, cbar):  # pragma: no cover - compiled
-    """IMM mixing of one member's two modes (``Xm (2, 4)``, ``Pm``, ``Cm``, ``mu (2,)``) over a step ``h``: the
-    start states ``xs, Ps, Cs`` of each mode and the predicted mode probabilities ``cbar (2,)``."""
-    r = Cm.shape[2]
+def mix2_weights(mu, h, rates, cbar, W):  # pragma: no cover - compiled
+    """IMM mixing weights of two modes with probabilities ``mu (2,)`` over a step ``h`` (s) of the chain leaving
+    them at ``rates (2,)`` (1/s): ``W (2, 2)`` receives ``W[i, j]`` = P(mode i before | mode j after) and ``cbar
+    (2,)`` the predicted mode probabilities."""
     a_, b_ = rates[0], rates[1]
     tot = a_ + b_
     e = -math.expm1(-tot * h) / tot if tot > 0.0 else 0.0
@@ -103,35 +41,31 @@ def _mix2(Xm, Pm, Cm, mu, h, rates, xs, Ps, Cs, cbar):  # pragma: no cover - com
     for j in range(2):
         cb = pij[0][j] * mu[0] + pij[1][j] * mu[1]
         cbar[j] = cb
-        w0, w1 = pij[0][j] * mu[0] / cb, pij[1][j] * mu[1] / cb
-        for a in range(4):
+        W[0, j], W[1, j] = pij[0][j] * mu[0] / cb, pij[1][j] * mu[1] / cb
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def mix2_moments(Xm, Pm, W, xs, Ps):  # pragma: no cover - compiled
+    """The two modes' states ``Xm (2, n)`` and covariances ``Pm (2, n, n)`` mixed with the weights ``W (2, 2)`` of
+    :func:`mix2_weights` into each mode's start ``xs (2, n)``, ``Ps (2, n, n)`` (moment matching)."""
+    n = Xm.shape[1]
+    for j in range(2):
+        w0, w1 = W[0, j], W[1, j]
+        for a in range(n):
             xs[j, a] = w0 * Xm[0, a] + w1 * Xm[1, a]
-            for c in range(r):
-                Cs[j, a, c] = w0 * Cm[0, a, c] + w1 * Cm[1, a, c]
-        for a in range(4):
+        for a in range(n):
             d0, d1 = Xm[0, a] - xs[j, a], Xm[1, a] - xs[j, a]
-            for b in range(4):
+            for b in range(n):
                 Ps[j, a, b] = (w0 * (Pm[0, a, b] + d0 * (Xm[0, b] - xs[j, b]))
                                + w1 * (Pm[1, a, b] + d1 * (Xm[1, b] - xs[j, b])))
 
 
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
-def _member_step(Xm, Pm, Cm, mu, h, q, nm, rates, z, R, B, Pp, Cp, K, cross, xs, Ps, Cs, cbar, lik,
-                 ys):  # pragma: no cover - compiled
-    """One member's step on one track (in place): returns ``(log-likelihood, NIS)`` of the measurement (NaN: a
-    singular innovation covariance; the state is then left as it was)."""
-    if nm == 1:
-        m, det, _, _, _, _, _ = _predict_update(Xm[0], Pm[0], Cm[0], h, q[0], z, R, B, Pp, Cp, K, cross)
-        if not math.isfinite(m):
-            return math.nan, math.nan
-        return -0.5 * m - 0.5 * math.log(det) - LOG_2PI, m
-    _mix2(Xm, Pm, Cm, mu, h, rates, xs, Ps, Cs, cbar)
-    for j in range(2):
-        m, det, y0, y1, s00, s01, s11 = _predict_update(xs[j], Ps[j], Cs[j], h, q[j], z, R, B, Pp, Cp, K, cross)
-        if not math.isfinite(m):
-            return math.nan, math.nan
-        lik[j] = -0.5 * m - 0.5 * math.log(det) + math.log(cbar[j])
-        ys[j, 0], ys[j, 1], ys[j, 2], ys[j, 3], ys[j, 4] = y0, y1, s00, s01, s11
+def mixture_terms(lik, cbar, ys, mu):  # pragma: no cover - compiled
+    """A two-mode member's measurement terms from its modes' ``lik (2,)`` (``log cbar_j N(y_j; 0, S_j)`` without
+    ``log 2 pi``), predicted probabilities ``cbar (2,)`` and innovations ``ys (2, 5)`` (``y0, y1, s00, s01, s11``):
+    returns ``(log-likelihood, NIS)`` (the NIS of the predicted mixture's moments) and writes the posterior mode
+    probabilities ``mu (2,)`` (each at least 1e-9 of the other, as the tracker: a mode never dies out)."""
     top = max(lik[0], lik[1])
     ll = top + math.log(math.exp(lik[0] - top) + math.exp(lik[1] - top)) - LOG_2PI
     # NIS of the predicted mixture's moments: y = sum cbar_j y_j, S = sum cbar_j (S_j + (y_j - y)(y_j - y)^T)
@@ -146,15 +80,68 @@ def _member_step(Xm, Pm, Cm, mu, h, q, nm, rates, z, R, B, Pp, Cp, K, cross, xs,
     nis = (ym0 * ym0 * s11 - 2.0 * ym0 * ym1 * s01 + ym1 * ym1 * s00) / (s00 * s11 - s01 * s01)
     tot = 0.0
     for j in range(2):
-        lik[j] = max(math.exp(lik[j] - top), 1e-9)  # as the tracker: a mode never dies out
+        lik[j] = max(math.exp(lik[j] - top), 1e-9)
         tot += lik[j]
     for j in range(2):
         mu[j] = lik[j] / tot
+    return ll, nis
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def mode_terms(j, step, cbar, lik, ys):  # pragma: no cover - compiled
+    """Mode ``j``'s step ``(d2, det S, y0, y1, s00, s01, s11)`` (m, m^2) into ``lik[j] = log cbar_j N(y; 0, S)``
+    (without ``log 2 pi``) and ``ys[j] (5,)``; returns False (nothing written) when its distance is not finite."""
+    m, det = step[0], step[1]
+    if not math.isfinite(m):
+        return False
+    lik[j] = -0.5 * m - 0.5 * math.log(det) + math.log(cbar[j])
+    ys[j, 0], ys[j, 1], ys[j, 2], ys[j, 3], ys[j, 4] = step[2], step[3], step[4], step[5], step[6]
+    return True
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def add_member_terms(k, ok, ll_g, nis_g, LL, NIS, n_upd, n_bad):  # pragma: no cover - compiled
+    """One update's terms of every member, ``ll_g (G,)`` and ``nis_g (G,)``, added to class ``k``'s sums ``LL[k]``,
+    ``NIS[k]`` and counted in ``n_upd[k]``; ``ok`` False (a member's innovation covariance was singular): counted
+    in ``n_bad[k]`` only."""
+    if not ok:
+        n_bad[k] += 1
+        return
+    n_upd[k] += 1
+    for g in range(ll_g.shape[0]):
+        LL[k, g] += ll_g[g]
+        NIS[k, g] += nis_g[g]
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _member_step(Xm, Pm, Cm, mu, h, q, nm, rates, z, R, B, Pp, Cp, K, cross, W, xs, Ps, Cs, cbar, lik,
+                 ys):  # pragma: no cover - compiled
+    """One member's step on one track (in place): returns ``(log-likelihood, NIS)`` of the measurement (NaN: a
+    singular innovation covariance; the state is then left as it was)."""
+    if nm == 1:
+        m, det, _, _, _, _, _ = schmidt_step(Xm[0], Pm[0], Cm[0], h, q[0], z, R, B, math.inf, Pp, Cp, K, cross)
+        if not math.isfinite(m):
+            return math.nan, math.nan
+        return -0.5 * m - 0.5 * math.log(det) - LOG_2PI, m
+    r = Cm.shape[2]
+    mix2_weights(mu, h, rates, cbar, W)
+    mix2_moments(Xm, Pm, W, xs, Ps)
+    for j in range(2):  # the consider columns mix as the states
+        w0, w1 = W[0, j], W[1, j]
+        for a in range(4):
+            for c in range(r):
+                Cs[j, a, c] = w0 * Cm[0, a, c] + w1 * Cm[1, a, c]
+    for j in range(2):
+        if not mode_terms(j, schmidt_step(xs[j], Ps[j], Cs[j], h, q[j], z, R, B, math.inf, Pp, Cp, K, cross), cbar,
+                          lik, ys):
+            return math.nan, math.nan
+    ll, nis = mixture_terms(lik, cbar, ys, mu)
+    for j in range(2):
         for a in range(4):
             Xm[j, a] = xs[j, a]
             for b in range(4):
                 Pm[j, a, b] = Ps[j, a, b]
-            for c in range(Cm.shape[2]):
+            for c in range(r):
                 Cm[j, a, c] = Cs[j, a, c]
     return ll, nis
 
@@ -164,6 +151,7 @@ def _start(Xm, Pm, Cm, mu, mu0, var_v0, z, R, B):  # pragma: no cover - compiled
     """A new track in every mode of one member (the tracker's initiator: the position is the measurement, its
     calibration share ``C = -B``; the velocity zero with variance ``var_v0``)."""
     r = B.shape[1]
+    p00, p01, p11 = start_cov2(R, B)
     for j in range(Xm.shape[0]):
         mu[j] = mu0[j]
         for a in range(4):
@@ -172,26 +160,9 @@ def _start(Xm, Pm, Cm, mu, mu0, var_v0, z, R, B):  # pragma: no cover - compiled
                 Pm[j, a, b] = 0.0
             for c in range(r):
                 Cm[j, a, c] = -B[a, c] if a < 2 else 0.0
-        for a in range(2):
-            for b in range(2):
-                acc = 0.0
-                for c in range(r):
-                    acc += B[a, c] * B[b, c]
-                Pm[j, a, b] = R[a, b] + acc
-        off = 0.5 * (Pm[j, 0, 1] + Pm[j, 1, 0])
-        Pm[j, 0, 1] = Pm[j, 1, 0] = off
+        Pm[j, 0, 0], Pm[j, 1, 1] = p00, p11
+        Pm[j, 0, 1] = Pm[j, 1, 0] = p01
         Pm[j, 2, 2] = Pm[j, 3, 3] = var_v0
-
-
-@njit(cache=True, nogil=True, error_model="numpy", inline="always")
-def pick_shared(B_pred, i, B_frame):  # pragma: no cover - compiled
-    """``B_pred[i]`` where it is given and finite, else ``B_frame[i]`` (as the tracker)."""
-    if B_pred.shape[0] == 0:
-        return B_frame[i]
-    for c in range(B_pred.shape[2]):
-        if not (math.isfinite(B_pred[i, 0, c]) and math.isfinite(B_pred[i, 1, c])):
-            return B_frame[i]
-    return B_pred[i]
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -207,10 +178,17 @@ def bank_frame(rows, start, cls, t, z, R, B_pred, B_frame, X, P, C, MU, t_last, 
     ``NIS[cls[i], g]``; ``n_upd[cls[i]]`` counts the updates, ``n_bad[cls[i]]`` those where a member's innovation
     covariance was singular (the whole update is then left out)."""
     G, r = qs.shape[0], C.shape[4]
-    Pp, Cp, K, cross = np.empty((4, 4)), np.empty((4, r)), np.empty((4, 2)), np.empty((4, 2))
-    xs, Ps, Cs = np.empty((2, 4)), np.empty((2, 4, 4)), np.empty((2, 4, r))
-    cbar, lik, ys = np.empty(2), np.empty(2), np.empty((2, 5))
-    ll_g, nis_g = np.empty(G), np.empty(G)
+    _bank_rows(rows, start, cls, t, z, R, B_pred, B_frame, X, P, C, MU, t_last, qs, nm, rates, mu0, var_v0, LL, NIS,
+               n_upd, n_bad, np.empty((4, 4)), np.empty((4, r)), np.empty((4, 2)), np.empty((4, 2)), np.empty((2, 2)),
+               np.empty((2, 4)), np.empty((2, 4, 4)), np.empty((2, 4, r)), np.empty(2), np.empty(2), np.empty((2, 5)),
+               np.empty(G), np.empty(G))
+
+
+@njit(cache=True, nogil=True, error_model="numpy", _nrt=False)  # (no refcounting: the scratch comes from the caller)
+def _bank_rows(rows, start, cls, t, z, R, B_pred, B_frame, X, P, C, MU, t_last, qs, nm, rates, mu0, var_v0, LL, NIS,
+               n_upd, n_bad, Pp, Cp, K, cross, W, xs, Ps, Cs, cbar, lik, ys, ll_g, nis_g):  # pragma: no cover
+    """:func:`bank_frame`'s loop over the frame's objects, the working arrays given."""
+    G = qs.shape[0]
     for i in range(rows.shape[0]):
         s = rows[i]
         if s < 0:
@@ -221,21 +199,14 @@ def bank_frame(rows, start, cls, t, z, R, B_pred, B_frame, X, P, C, MU, t_last, 
             t_last[s] = t
             continue
         h = t - t_last[s]
-        B = pick_shared(B_pred, i, B_frame)
+        B = pick_shared(B_pred, i, B_frame, i)
         ok = True
         for g in range(G):
             ll_g[g], nis_g[g] = _member_step(X[s, g], P[s, g], C[s, g], MU[s, g], h, qs[g], nm[g], rates[g], z[i],
-                                             R[i], B, Pp, Cp, K, cross, xs, Ps, Cs, cbar, lik, ys)
+                                             R[i], B, Pp, Cp, K, cross, W, xs, Ps, Cs, cbar, lik, ys)
             ok = ok and math.isfinite(ll_g[g])
         t_last[s] = t
-        k = cls[i]
-        if not ok:
-            n_bad[k] += 1
-            continue
-        n_upd[k] += 1
-        for g in range(G):
-            LL[k, g] += ll_g[g]
-            NIS[k, g] += nis_g[g]
+        add_member_terms(cls[i], ok, ll_g, nis_g, LL, NIS, n_upd, n_bad)
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
