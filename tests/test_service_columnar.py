@@ -269,6 +269,28 @@ def test_the_tracked_columnar_path_is_the_one_taken(camera, monkeypatch):
     assert before != after and b'"track_id":' in after
 
 
+def test_the_tracked_cpm_takes_the_columnar_writer(camera, monkeypatch):
+    """A tracked compact frame's UPER CPM comes from ``plain_container_uper`` with the motion (not silently the
+    general writer): its container replaced, the CPM changes; and the motion reaches it (velocity present)."""
+    from footprint_uq.service import core
+
+    frames = [orjson.dumps(_tracked_frame(k, variant="classes")) for k in range(3)]
+    seen = []
+    real = core.plain_container_uper
+
+    def spy(*a, **k):
+        seen.append(k.get("motion"))
+        return real(*a, **k)
+
+    monkeypatch.setattr(core, "plain_container_uper", spy)
+    svc = Service(camera, "basler1", record="compact", tracks=True)
+    before = [svc.process_frame_json(f).cpm_uper for f in frames][-1]
+    assert seen[-1] is not None and np.asarray(seen[-1].has_velocity).any()
+    monkeypatch.setattr(core, "plain_container_uper", lambda *a, **k: b"")
+    svc = Service(camera, "basler1", record="compact", tracks=True)
+    assert [svc.process_frame_json(f).cpm_uper for f in frames][-1] != before
+
+
 def test_the_columnar_path_is_the_one_taken(camera, monkeypatch):
     """The compact untracked frame goes through the compiled writers (not silently the general ones): a broken
     compiled writer changes the record."""

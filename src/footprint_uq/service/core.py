@@ -630,8 +630,7 @@ class Service:
             # motion: the tracker's motion of the frame's objects (None: the messages carry no motion)
             om = None if motion is None else motion[1]
             if compact and self.uper_encoder == "fast":  # the CPM's bytes only (on their own topic)
-                cpm_uper = None if co is None or om is not None else self._plain_cpm_uper(setup, est, class_p, co,
-                                                                                           ref_ms)
+                cpm_uper = None if co is None else self._plain_cpm_uper(setup, est, class_p, co, ref_ms, om)
                 if cpm_uper is None:  # (tracked, or a value out of range: the general writer names it)
                     cpm_uper = self._cpm_uper(setup, self._message_columns(setup, est, classes, class_p, ok_idx,
                                                                            om), msg_ids, ref_ms)
@@ -776,17 +775,21 @@ class Service:
                                     values, mid, tid)
         return _CompactObjects(text, ok_idx, msg_ids, class_idx, distinct)
 
-    def _plain_cpm_uper(self, setup: CameraSetup, est, class_p, co: _CompactObjects, ref_ms: int) -> bytes | None:
-        """The UPER CPM of an untracked frame's objects ``co.ok_idx`` by :func:`.messages.uper_cpm.
-        plain_container_uper` (the columns gathered in the compiled pass); the bytes of :meth:`_cpm_uper`.  None:
-        a value out of range (the general writer then names it)."""
+    def _plain_cpm_uper(self, setup: CameraSetup, est, class_p, co: _CompactObjects, ref_ms: int,
+                        motion: ObjectMotion | None = None) -> bytes | None:
+        """The UPER CPM of a compact frame's objects ``co.ok_idx`` by :func:`.messages.uper_cpm.
+        plain_container_uper` (the columns gathered in the compiled pass); the bytes of :meth:`_cpm_uper`.
+        ``motion``: the tracker's motion of all the frame's objects (None: untracked).  None: a value out of
+        range (the general writer then names it)."""
         cm = cm_dm(setup.world_to_enu(est.centre_xy_world_m), co.ok_idx)
         level, _ = _confidence_levels(class_p, co.ok_idx)
         cls = self._cls
+        m = len(co.ok_idx)
+        mc = None if motion is None else motion_codes(motion if m == len(est) else motion.take(co.ok_idx), m)
         container = plain_container_uper(co.msg_ids, cm, np.ascontiguousarray(est.v2x_codes.T, dtype=np.int32),
                                          co.ok_idx, _CPM_INDEX, co.class_idx,
                                          np.array([_CLASS_ROWS[c] for c in co.classes], np.int64), cls.bits_value,
-                                         cls.bits_width, level, cdd=self.cpm_cdd)
+                                         cls.bits_width, level, cdd=self.cpm_cdd, motion=mc)
         return None if container is None else setup.uper.encode(ref_ms, container)
 
     def _full_object_layout(self, setup: CameraSetup, t: Table, est, cxx, cxy, cyy) -> list:
