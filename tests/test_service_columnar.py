@@ -279,13 +279,16 @@ def test_the_tracked_cpm_takes_the_columnar_writer(camera, monkeypatch):
     real = core.plain_container_uper
 
     def spy(*a, **k):
-        seen.append(k.get("motion"))
-        return real(*a, **k)
+        out = real(*a, **k)
+        seen.append((k.get("motion"), out))
+        return out
 
     monkeypatch.setattr(core, "plain_container_uper", spy)
     svc = Service(camera, "basler1", record="compact", tracks=True)
     before = [svc.process_frame_json(f).cpm_uper for f in frames][-1]
-    assert seen[-1] is not None and np.asarray(seen[-1].has_velocity).any()
+    motion, container = seen[-1]
+    assert motion is not None and np.asarray(motion.has_velocity).any()
+    assert container is not None  # (its bytes, not None: the general writer's fallback)
     monkeypatch.setattr(core, "plain_container_uper", lambda *a, **k: b"")
     svc = Service(camera, "basler1", record="compact", tracks=True)
     assert [svc.process_frame_json(f).cpm_uper for f in frames][-1] != before
