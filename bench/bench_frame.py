@@ -17,6 +17,9 @@ the same loop so that a change of the machine's load reaches every figure alike:
   ``frame_bytes_minus_step_us``: the frame without it (the tracker is issue 31 part 3); ``tracker_nis_check_us``:
   the tracks' on-line NIS check (``tracking/consistency.py``, on by default) and the frame without both.
 
+``--general-writers``: the compact cases once more with ``Service._columnar = False`` (the general ``Table``
+writers, the tests' reference path: the same bytes), in the same run (``<case>-general-writers``).
+
 Medians over the repeats; ``*_over_boxes2d``: ratios of medians within this run.  Nothing is asserted.
 """
 
@@ -128,23 +131,30 @@ def main(argv=None) -> int:
     ap.add_argument("--repeats", type=int, default=300)
     ap.add_argument("--objects", type=int, default=100)
     ap.add_argument("--out", type=Path, default=None, help="write the figures as JSON here")
+    ap.add_argument("--general-writers", action="store_true",
+                    help="also the compact cases by the general writers (Service._columnar = False)")
     args = ap.parse_args(argv)
     out = {"what": f"bench/bench_frame.py: one {args.objects}-object frame vs FrameProcessor.boxes2d, "
                    f"{args.repeats} interleaved repeats per case, medians",
            "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "cores": os.cpu_count(),
            "python": sys.version.split()[0], "load_average_1min_start": os.getloadavg()[0], "cases": {}}
-    for tracked in (False, True):
-        for record in ("compact", "full"):
-            name = f"{'tracked' if tracked else 'untracked'}-{record}"
+    cases = [(t, r, c) for t in (False, True) for r in ("compact", "full")
+             for c in ((True, False) if args.general_writers and r == "compact" else (True,))]
+    for tracked, record, columnar in cases:
+        name = f"{'tracked' if tracked else 'untracked'}-{record}{'' if columnar else '-general-writers'}"
+        Service._columnar = columnar
+        try:
             out["cases"][name] = measure(tracked, record, args.objects, args.repeats)
-            c = out["cases"][name]
-            print(f"{name:18s} bytes {c['frame_bytes_us']:6.1f} us ({c['frame_bytes_over_boxes2d']:.2f}x)  dict "
-                  f"{c['frame_dict_us']:6.1f} us + parse {c['orjson_parse_us']:5.1f}  boxes2d {c['boxes2d_us']:5.1f} us"
-                  + (f"  minus step {c['frame_bytes_minus_step_us']:6.1f} us "
-                     f"({c['frame_bytes_minus_step_over_boxes2d']:.2f}x, step {c['tracker_step_us']:.1f} us; "
-                     f"minus NIS check too {c['frame_bytes_minus_step_and_nis_us']:.1f} us, "
-                     f"{c['frame_bytes_minus_step_and_nis_over_boxes2d']:.2f}x)"
-                     if tracked else ""), flush=True)
+        finally:
+            Service._columnar = True
+        c = out["cases"][name]
+        print(f"{name:18s} bytes {c['frame_bytes_us']:6.1f} us ({c['frame_bytes_over_boxes2d']:.2f}x)  dict "
+              f"{c['frame_dict_us']:6.1f} us + parse {c['orjson_parse_us']:5.1f}  boxes2d {c['boxes2d_us']:5.1f} us"
+              + (f"  minus step {c['frame_bytes_minus_step_us']:6.1f} us "
+                 f"({c['frame_bytes_minus_step_over_boxes2d']:.2f}x, step {c['tracker_step_us']:.1f} us; "
+                 f"minus NIS check too {c['frame_bytes_minus_step_and_nis_us']:.1f} us, "
+                 f"{c['frame_bytes_minus_step_and_nis_over_boxes2d']:.2f}x)"
+                 if tracked else ""), flush=True)
     out["load_average_1min_end"] = os.getloadavg()[0]
     if args.out:
         args.out.write_text(json.dumps(out, indent=1) + "\n")

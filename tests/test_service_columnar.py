@@ -8,7 +8,10 @@
   same service with ``_columnar = False`` (the general writers, main's code path): seeded frames with bad
   detections, partial and no-centre objects, > 255 objects, NaN / missing class confidences, several classes,
   an origin or none, ``linearity`` on or off, messages on or off; string and > int64 object ids (the fallback),
-  through the scanned bytes and the dict API.
+  through the scanned bytes and the dict API;
+* the same for tracked compact frames (the record's motion fields ``track_id`` / ``v_east_mps`` / ``v_north_mps`` /
+  ``cov_v_m2ps2`` written by the same compiled pass): births, a missed frame, no-centre objects, > 255 objects,
+  several classes, and the UPER CPM with its motion codes.
 """
 
 from __future__ import annotations
@@ -24,8 +27,10 @@ from hypothesis import strategies as st
 
 from footprint_uq import PanTiltCamera
 from footprint_uq.service import Service
+from footprint_uq.service.core import _motion_object_layout
 from footprint_uq.service.jsonrows import Table, compact_objects_json
 from footprint_uq.service.messages import ids as ids_mod
+from footprint_uq.tracking.motion import ObjectMotion
 
 T0 = 1714564800.0
 _INT64 = st.integers(-(2 ** 63), 2 ** 63 - 1)
@@ -37,15 +42,21 @@ def camera():
     return PanTiltCamera(focal_px=1400, image_size_px=(1920, 1080), height_m=8.0, pan_deg=30.0, tilt_deg=20.0)
 
 
-def _table_text(ids, classes, statuses, reasons, values, mid) -> bytes:
-    """The general writer's text of the compact layout (as ``Service._objects_json`` lays it out)."""
+def _table_text(ids, classes, statuses, reasons, values, mid, tid=None) -> bytes:
+    """The general writer's text of the compact layout (as ``Service._objects_json`` lays it out; with ``tid``
+    the motion fields by the service's own ``_motion_object_layout`` of ``values[5:]``)."""
     n = len(ids)
     t = Table(n)
     valid = np.array([s == "ok" for s in statuses], bool)
-    x, y, cxx, cxy, cyy = t.columns(values)
+    x, y, cxx, cxy, cyy = t.columns(values[:5])
     layout = [b'{"object_id":', t.column(ids), b',"class":', t.column(classes), b',"status":', t.column(statuses),
               t.when(~valid, b',"reason":', t.column(reasons)), b',"x_m":', x, b',"y_m":', y, b',"cov_m2":[[', cxx,
               b",", cxy, b"],[", cxy, b",", cyy, b"]]"]
+    if tid is not None:
+        ve, vn, c00, c01, c11 = values[5:]
+        cov_v = np.stack([np.stack([c00, c01], -1), np.stack([c01, c11], -1)], -2)
+        nan = np.full(n, np.nan)
+        layout += _motion_object_layout(t, (tid, ObjectMotion(ve.copy(), vn.copy(), cov_v, *[nan] * 7)), True)
     if mid is not None:
         sent = mid >= 0
         layout += [b',"message_object_id":', t.when(sent, t.column(np.where(sent, mid, 0))), t.when(~sent, b"null")]
@@ -58,15 +69,18 @@ def _table_text(ids, classes, statuses, reasons, values, mid) -> bytes:
     st.lists(_INT64, min_size=n, max_size=n),
     st.lists(st.none() | st.text(max_size=6), min_size=n, max_size=n),
     st.lists(st.tuples(st.sampled_from(["ok", "partial", "error"]), st.text(max_size=8)), min_size=n, max_size=n),
-    st.lists(st.lists(_FLOAT, min_size=5, max_size=5), min_size=n, max_size=n),
-    st.none() | st.lists(st.integers(-1, 65535), min_size=n, max_size=n))))
+    st.lists(st.lists(_FLOAT, min_size=10, max_size=10), min_size=n, max_size=n),
+    st.none() | st.lists(st.integers(-1, 65535), min_size=n, max_size=n),
+    st.none() | st.lists(st.integers(-1, 2 ** 63 - 1), min_size=n, max_size=n))))
 def test_compact_writer_is_the_table_writers_bytes(case):
-    ids, classes, status, values, mid = case
+    """Untracked (5 floats per object) and tracked (``tid``: 10 floats, a track id or -1: null)."""
+    ids, classes, status, values, mid, tid = case
     statuses = [s for s, _ in status]
     reasons = ["" if s == "ok" else f"no centre: {r}" for s, r in status]
-    vals = np.array(values, dtype=np.float64).T.copy()
+    vals = np.array(values, dtype=np.float64).T.copy()[:5 if tid is None else 10]
     mid_arr = None if mid is None else np.array(mid, np.int64)
-    want = _table_text(ids, classes, statuses, reasons, vals, mid_arr)
+    tid_arr = None if tid is None else np.array(tid, np.int64)
+    want = _table_text(ids, classes, statuses, reasons, vals, mid_arr, tid_arr)
     cls: dict = {}
     cidx = np.array([cls.setdefault(c, len(cls)) for c in classes], np.int64)
     texts: dict = {}
@@ -74,7 +88,7 @@ def test_compact_writer_is_the_table_writers_bytes(case):
               for s, r in zip(statuses, reasons, strict=True)]
     sidx = np.array([texts.setdefault(p, len(texts)) for p in pieces], np.int64)
     got = compact_objects_json(np.array(ids, np.int64), cidx, [orjson.dumps(c) for c in cls], sidx, list(texts), vals,
-                               mid_arr)
+                               mid_arr, tid_arr)
     assert bytes(got) == want
     assert json.loads(bytes(got))[0]["object_id"] == ids[0]
 
@@ -90,6 +104,25 @@ def test_compact_writer_pins_a_hand_written_row():
                           b'"cov_m2":[[4.0,0.0],[0.0,1e+20]],"message_object_id":null}]')
     assert compact_objects_json(np.zeros(0, np.int64), np.zeros(0, np.int64), [], np.zeros(0, np.int64), [],
                                 np.zeros((5, 0))) == b"[]"
+
+
+def test_compact_writer_pins_a_hand_written_tracked_row():
+    """The motion fields: a track id or null, -0.0, NaN / inf as null, huge and tiny values as orjson writes them."""
+    got = compact_objects_json(np.array([-12, 7], np.int64), np.array([0, 1]), [b'"car"', b"null"],
+                               np.array([0, 0]), [b',"status":"ok"'],
+                               np.array([[1.5, 2.0], [-0.25, np.nan], [1e-7, 4.0], [0.5, 0.0], [3.0, 1e20],
+                                         [-0.0, np.nan], [1.0, np.inf], [0.1, 2.0], [0.0, -1e-300], [5e300, 1.0]]),
+                               np.array([65535, -1]), np.array([-1, 2 ** 62]))
+    assert bytes(got) == (b'[{"object_id":-12,"class":"car","status":"ok","x_m":1.5,"y_m":-0.25,'
+                          b'"cov_m2":[[1e-7,0.5],[0.5,3.0]],"track_id":null,"v_east_mps":-0.0,"v_north_mps":1.0,'
+                          b'"cov_v_m2ps2":[[0.1,0.0],[0.0,5e+300]],"message_object_id":65535},'
+                          b'{"object_id":7,"class":null,"status":"ok","x_m":2.0,"y_m":null,'
+                          b'"cov_m2":[[4.0,0.0],[0.0,1e+20]],"track_id":4611686018427387904,"v_east_mps":null,'
+                          b'"v_north_mps":null,"cov_v_m2ps2":[[2.0,-1e-300],[-1e-300,1.0]],'
+                          b'"message_object_id":null}]')
+    with pytest.raises(ValueError, match="10 x 2"):  # (tracked: 10 values per object)
+        compact_objects_json(np.array([1, 2]), np.zeros(2, np.int64), [b"null"], np.zeros(2, np.int64), [b""],
+                             np.zeros((5, 2)), None, np.array([1, 2]))
 
 
 _CLASSES = ("car", "pedestrian", "truck", "Bicycle", "unknown")
@@ -164,6 +197,101 @@ def test_untracked_compact_frames_are_the_general_writers_bytes(camera, option, 
         assert "partial" in statuses
     if option != "no-messages":
         assert rec["objects_not_in_messages"] > 0  # (the 700-object frame)
+
+
+def _tracked_frame(k: int, *, variant: str) -> dict:
+    """Frame ``k`` (0..5) of a tracked sequence: objects moving across the image (a few above the horizon: no
+    centre), new ids every frame (births), a quarter of them missed in frame 3, the last frame 700 objects (> 255
+    with a centre), a reversed box now and then (a detection error)."""
+    base = np.random.default_rng(31)
+    u0, v0, w = base.uniform(-150, 1950, 700), base.uniform(-40, 1150, 700), base.uniform(10, 150, 700)
+    du, dv = base.uniform(-20, 20, 700), base.uniform(-10, 10, 700)
+    n = 700 if k == 5 else 40 + 8 * k
+    dets = []
+    for i in range(n):
+        if k == 3 and i % 4 == 1:  # missed this frame, seen again in the next
+            continue
+        u, v = u0[i] + k * du[i], v0[i] + k * dv[i]
+        d = {"object_id": f"t{i}" if variant == "string-ids" else i, "u_min_px": round(float(u), 2),
+             "v_min_px": round(float(v - 0.8 * w[i]), 2), "u_max_px": round(float(u + w[i]), 2),
+             "v_max_px": round(float(v), 2)}
+        if variant != "no-class":
+            d["class"] = "car" if variant == "one-class" else _CLASSES[i % len(_CLASSES)]
+        if variant == "confidence":
+            d["class_confidence"] = round(float(0.1 + 0.8 * ((i * 7) % 10) / 10), 3)
+        if (i + k) % 17 == 5:
+            d["u_min_px"], d["u_max_px"] = d["u_max_px"], d["u_min_px"] - 1.0
+        dets.append(d)
+    return {"camera_id": "cam0", "frame": k, "timestamp_s": T0 + k / 10.0, "detections": dets}
+
+
+@pytest.mark.parametrize("variant", ["one-class", "classes", "no-class", "confidence", "string-ids"])
+@pytest.mark.parametrize("option", ["plain", "origin", "no-messages", "cdd-2.1.1"])
+def test_tracked_compact_frames_are_the_general_writers_bytes(camera, option, variant):
+    """A tracked compact frame's record (the motion fields from the compiled pass) and UPER CPM (with the motion
+    codes) are the general writers' bytes, frame after frame (the even frames as bytes, the odd ones as dicts)."""
+    kw = dict(record="compact", tracks=True, **_OPTIONS[option])
+    fast, ref = Service(camera, "basler1", **kw), Service(camera, "basler1", **kw)
+    ref._columnar = False
+    seen = {"null": 0, "id": 0, "v": 0, "no-v": 0}
+    for k in range(6):
+        frame = _tracked_frame(k, variant=variant)
+        payload = orjson.dumps(frame) if k % 2 == 0 else frame
+        a, b = fast.process_frame_json(payload), ref.process_frame_json(payload)
+        assert a.type == b.type == "footprints"
+        assert _record(a) == _record(b)
+        assert a.cpm_uper == b.cpm_uper
+        assert (a.cpm_uper is None) == (option == "no-messages")
+        for o in json.loads(a.data)["objects"]:
+            seen["null" if o["track_id"] is None else "id"] += 1
+            seen["no-v" if o["v_east_mps"] is None else "v"] += 1
+    assert all(seen.values()), seen  # (untracked no-centre objects, tracks with and without a velocity yet)
+
+
+def test_the_tracked_columnar_path_is_the_one_taken(camera, monkeypatch):
+    """A tracked compact frame's objects come from the compiled writer: a broken motion field there changes the
+    record."""
+    from footprint_uq.service import jsonrows
+
+    frames = [orjson.dumps(_tracked_frame(k, variant="classes")) for k in range(3)]
+    before = [_record(Service(camera, "basler1", record="compact", tracks=True).process_frame_json(f))
+              for f in frames][-1]
+    real = jsonrows._compact_rows
+
+    def broken(ftext, ids, *rest):  # (the track ids one off: the record's track_id then differs)
+        args = list(rest)
+        args[8] = args[8] + 1
+        return real(ftext, ids, *args)
+
+    monkeypatch.setattr(jsonrows, "_compact_rows", broken)
+    svc = Service(camera, "basler1", record="compact", tracks=True)
+    after = [_record(svc.process_frame_json(f)) for f in frames][-1]
+    assert before != after and b'"track_id":' in after
+
+
+def test_the_tracked_cpm_takes_the_columnar_writer(camera, monkeypatch):
+    """A tracked compact frame's UPER CPM comes from ``plain_container_uper`` with the motion (not silently the
+    general writer): its container replaced, the CPM changes; and the motion reaches it (velocity present)."""
+    from footprint_uq.service import core
+
+    frames = [orjson.dumps(_tracked_frame(k, variant="classes")) for k in range(3)]
+    seen = []
+    real = core.plain_container_uper
+
+    def spy(*a, **k):
+        out = real(*a, **k)
+        seen.append((k.get("motion"), out))
+        return out
+
+    monkeypatch.setattr(core, "plain_container_uper", spy)
+    svc = Service(camera, "basler1", record="compact", tracks=True)
+    before = [svc.process_frame_json(f).cpm_uper for f in frames][-1]
+    motion, container = seen[-1]
+    assert motion is not None and np.asarray(motion.has_velocity).any()
+    assert container is not None  # (its bytes, not None: the general writer's fallback)
+    monkeypatch.setattr(core, "plain_container_uper", lambda *a, **k: b"")
+    svc = Service(camera, "basler1", record="compact", tracks=True)
+    assert [svc.process_frame_json(f).cpm_uper for f in frames][-1] != before
 
 
 def test_the_columnar_path_is_the_one_taken(camera, monkeypatch):

@@ -344,8 +344,8 @@ class Service:
         with one error record (field ``detections``) before it is parsed.
     """
 
-    #: write the untracked compact record and its CPM from the columns in compiled passes (:meth:`_compact_objects`);
-    #: False: the general writers, the same bytes (the tests' reference path)
+    #: write the compact record (tracked or not) and the untracked frame's CPM from the columns in compiled passes
+    #: (:meth:`_compact_objects`); False: the general writers, the same bytes (the tests' reference path)
     _columnar = True
 
     def __init__(self, camera=None, budget=None, *, registry=None, camera_id: str | None = None,
@@ -609,8 +609,9 @@ class Service:
             self.on_tracked(camera_id, fno, ts, setup.last_tracks, est, found)
         t1 = time.perf_counter()
         compact = self.record == "compact"
-        # the untracked compact record: its objects and messages from the columns in two compiled passes
-        co = self._compact_objects(setup, est, ids, classes, ts) if compact and motion is None else None
+        # the compact record: its objects (with the motion when tracked) from the columns in one compiled pass, and
+        # the untracked frame's CPM in another
+        co = self._compact_objects(setup, est, ids, classes, ts, motion) if compact else None
         if co is None:
             objects, ok_idx, msg_ids = self._objects_json(setup, est, ids, classes, ts, motion)
         else:
@@ -629,7 +630,7 @@ class Service:
             # motion: the tracker's motion of the frame's objects (None: the messages carry no motion)
             om = None if motion is None else motion[1]
             if compact and self.uper_encoder == "fast":  # the CPM's bytes only (on their own topic)
-                cpm_uper = None if co is None else self._plain_cpm_uper(setup, est, class_p, co, ref_ms)
+                cpm_uper = None if co is None else self._plain_cpm_uper(setup, est, class_p, co, ref_ms, om)
                 if cpm_uper is None:  # (tracked, or a value out of range: the general writer names it)
                     cpm_uper = self._cpm_uper(setup, self._message_columns(setup, est, classes, class_p, ok_idx,
                                                                            om), msg_ids, ref_ms)
@@ -736,14 +737,18 @@ class Service:
         layout.append(b"}")
         return t.json_buffer(layout), ok_idx, msg_ids
 
-    def _compact_objects(self, setup: CameraSetup, est, ids: list, classes: list, ts: float
+    def _compact_objects(self, setup: CameraSetup, est, ids: list, classes: list, ts: float, motion=None
                          ) -> _CompactObjects | None:
-        """The compact record's ``objects`` without tracks by :func:`.jsonrows.compact_objects_json` (one compiled
-        pass; :meth:`_objects_json` writes the same bytes with its general layout), and the message ids as
-        :meth:`_objects_json` assigns them.  None: not this path's frame (no objects, an ``object_id`` that is not
-        an integer of 64 bits, or :attr:`_columnar` off: the reference path of the tests)."""
+        """The compact record's ``objects`` by :func:`.jsonrows.compact_objects_json` (one compiled pass;
+        :meth:`_objects_json` writes the same bytes with its general layout), and the message ids as
+        :meth:`_objects_json` assigns them.  ``motion``: the tracker's ``(track_id (N,), ObjectMotion)`` (None:
+        untracked).  None: not this path's frame (no objects, an ``object_id`` that is not an integer of 64 bits,
+        motion not in float64, or :attr:`_columnar` off: the reference path of the tests)."""
         N = len(ids)
         if not self._columnar or N == 0 or set(map(type, ids)) != _INT_ONLY:
+            return None
+        values = _compact_values(est, motion)
+        if values is None:
             return None
         try:
             id_arr = np.array(ids, dtype=np.int64)
@@ -765,23 +770,26 @@ class Service:
             if len(ok_idx) < N:
                 mid = np.full(N, -1, np.int64)
                 mid[ok_idx] = msg_ids
-        centre, cov = est.centre_xy_world_m, est.centre_cov_m2
+        tid = None if motion is None else np.asarray(motion[0], dtype=np.int64)
         text = compact_objects_json(id_arr, class_idx, [orjson.dumps(c) for c in distinct], status_idx, status_texts,
-                                    np.array([centre[:, 0], centre[:, 1], cov[:, 0, 0], cov[:, 0, 1], cov[:, 1, 1]]),
-                                    mid)
+                                    values, mid, tid)
         return _CompactObjects(text, ok_idx, msg_ids, class_idx, distinct)
 
-    def _plain_cpm_uper(self, setup: CameraSetup, est, class_p, co: _CompactObjects, ref_ms: int) -> bytes | None:
-        """The UPER CPM of an untracked frame's objects ``co.ok_idx`` by :func:`.messages.uper_cpm.
-        plain_container_uper` (the columns gathered in the compiled pass); the bytes of :meth:`_cpm_uper`.  None:
-        a value out of range (the general writer then names it)."""
+    def _plain_cpm_uper(self, setup: CameraSetup, est, class_p, co: _CompactObjects, ref_ms: int,
+                        motion: ObjectMotion | None = None) -> bytes | None:
+        """The UPER CPM of a compact frame's objects ``co.ok_idx`` by :func:`.messages.uper_cpm.
+        plain_container_uper` (the columns gathered in the compiled pass); the bytes of :meth:`_cpm_uper`.
+        ``motion``: the tracker's motion of all the frame's objects (None: untracked).  None: a value out of
+        range (the general writer then names it)."""
         cm = cm_dm(setup.world_to_enu(est.centre_xy_world_m), co.ok_idx)
         level, _ = _confidence_levels(class_p, co.ok_idx)
         cls = self._cls
+        m = len(co.ok_idx)
+        mc = None if motion is None else motion_codes(motion if m == len(est) else motion.take(co.ok_idx), m)
         container = plain_container_uper(co.msg_ids, cm, np.ascontiguousarray(est.v2x_codes.T, dtype=np.int32),
                                          co.ok_idx, _CPM_INDEX, co.class_idx,
                                          np.array([_CLASS_ROWS[c] for c in co.classes], np.int64), cls.bits_value,
-                                         cls.bits_width, level, cdd=self.cpm_cdd)
+                                         cls.bits_width, level, cdd=self.cpm_cdd, motion=mc)
         return None if container is None else setup.uper.encode(ref_ms, container)
 
     def _full_object_layout(self, setup: CameraSetup, t: Table, est, cxx, cxy, cyy) -> list:
@@ -953,6 +961,21 @@ def _compact_status(est) -> tuple[np.ndarray, list]:
             orjson.dumps(S.STATUS_PARTIAL if j >= 0 else S.STATUS_ERROR), orjson.dumps(f"no centre: {why}"))
         idx[r] = seen.setdefault(text, len(seen))
     return idx, list(seen)
+
+
+def _compact_values(est, motion) -> np.ndarray | None:
+    """The compact record's float columns: centre and covariance ``(5, N)`` (m, m^2), with ``motion`` also the
+    velocity and its covariance ``(10, N)`` (m/s, m^2/s^2).  None: a motion column not in float64 (the general
+    writer's text of it would differ)."""
+    centre, cov = est.centre_xy_world_m, est.centre_cov_m2
+    rows = [centre[:, 0], centre[:, 1], cov[:, 0, 0], cov[:, 0, 1], cov[:, 1, 1]]
+    if motion is not None:
+        m = motion[1]
+        cv = m.cov_v_m2ps2
+        rows += [m.v_east_mps, m.v_north_mps, cv[:, 0, 0], cv[:, 0, 1], cv[:, 1, 1]]
+        if any(np.asarray(a).dtype != np.float64 for a in (m.v_east_mps, m.v_north_mps, cv)):
+            return None
+    return np.array(rows)
 
 
 def _motion_object_layout(t: Table, motion, compact: bool) -> list:

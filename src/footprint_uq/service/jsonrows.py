@@ -297,15 +297,17 @@ def _split_values(ftext, nv):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
-def _compact_rows(ftext, ids, cls_idx, cls_buf, cls_at, st_idx, st_buf, st_at, mid, with_mid, lit, at,
-                  size):  # pragma: no cover - compiled
+def _compact_rows(ftext, ids, cls_idx, cls_buf, cls_at, st_idx, st_buf, st_at, mid, with_mid, tid, with_motion, lit,
+                  at, size):  # pragma: no cover - compiled
     """The compact record's ``objects`` text (see :func:`compact_objects_json`): per row the constant texts
     ``lit[at[k]:at[k + 1]]`` (:data:`_COMPACT_PIECES`) around the id, the class and status texts of the row's
-    entries in their tables, the five float values (``ftext``: orjson's text of the (5, n) array) and the message
-    id (``with_mid``; negative: null).  Empty: ``ftext`` does not hold 5 n values."""
+    entries in their tables, the five float values (``ftext``: orjson's text of the (5, n) array, or (10, n) with
+    the motion), the motion (``with_motion``: the track id, negative: null, and the five motion values) and the
+    message id (``with_mid``; negative: null).  Empty: ``ftext`` does not hold 5 n (10 n) values."""
     n = ids.shape[0]
-    starts, ends, t = _split_values(ftext, 5 * n)
-    if t != 5 * n:
+    nf = 10 if with_motion else 5
+    starts, ends, t = _split_values(ftext, nf * n)
+    if t != nf * n:
         return np.zeros(0, np.uint8)
     out = np.empty(size, np.uint8)
     out[0] = 91
@@ -326,6 +328,17 @@ def _compact_rows(ftext, ids, cls_idx, cls_buf, cls_at, st_idx, st_buf, st_at, m
             v = (k if k < 4 else k - 1) * n + r
             p = _put_span(out, p, ftext, starts[v], ends[v])
         p = _put_span(out, p, lit, at[8], at[9])
+        if with_motion:
+            p = _put_span(out, p, lit, at[12], at[13])
+            if tid[r] < 0:
+                p = _put_span(out, p, lit, at[11], at[12])
+            else:
+                p = _put_int(out, p, tid[r])
+            for k in range(6):  # v_east, v_north, cvv_ee, cvv_en, cvv_en, cvv_nn after their texts
+                p = _put_span(out, p, lit, at[13 + k], at[14 + k])
+                v = (5 + (k if k < 4 else k - 1)) * n + r
+                p = _put_span(out, p, ftext, starts[v], ends[v])
+            p = _put_span(out, p, lit, at[8], at[9])
         if with_mid:
             p = _put_span(out, p, lit, at[9], at[10])
             if mid[r] < 0:
@@ -337,9 +350,10 @@ def _compact_rows(ftext, ids, cls_idx, cls_buf, cls_at, st_idx, st_buf, st_at, m
     return out[:p + 1]
 
 
-#: the constant texts of a compact record's object (:func:`_compact_rows`' ``at`` indices 0..11)
+#: the constant texts of a compact record's object (:func:`_compact_rows`' ``at`` indices 0..18; 12..18: the motion)
 _COMPACT_PIECES = (b'{"object_id":', b',"class":', b',"x_m":', b',"y_m":', b',"cov_m2":[[', b",", b"],[", b",", b"]]",
-                   b',"message_object_id":', b"}", b"null")
+                   b',"message_object_id":', b"}", b"null", b',"track_id":', b',"v_east_mps":', b',"v_north_mps":',
+                   b',"cov_v_m2ps2":[[', b",", b"],[", b",")
 _COMPACT_LIT = np.frombuffer(b"".join(_COMPACT_PIECES), np.uint8)
 _COMPACT_AT = np.cumsum([0] + [len(p) for p in _COMPACT_PIECES]).astype(np.int64)
 
@@ -363,9 +377,11 @@ _TEXT_TABLES: dict = {}
 
 
 def compact_objects_json(ids: np.ndarray, class_idx: np.ndarray, class_texts: list, status_idx: np.ndarray,
-                         status_texts: list, values: np.ndarray, message_ids: np.ndarray | None = None):
-    """The ``objects`` list of a compact record without tracks, in one compiled pass: per object
-    ``{"object_id":<id>,"class":<class><status>,"x_m":..,"y_m":..,"cov_m2":[[xx,xy],[xy,yy]]`` (and
+                         status_texts: list, values: np.ndarray, message_ids: np.ndarray | None = None,
+                         track_ids: np.ndarray | None = None):
+    """The ``objects`` list of a compact record in one compiled pass: per object
+    ``{"object_id":<id>,"class":<class><status>,"x_m":..,"y_m":..,"cov_m2":[[xx,xy],[xy,yy]]``, with tracks
+    ``,"track_id":<id or null>,"v_east_mps":..,"v_north_mps":..,"cov_v_m2ps2":[[ee,en],[en,nn]]``, (and
     ``,"message_object_id":<id or null>``) ``}`` -- the bytes :class:`Table` writes for that layout.
 
     Parameters
@@ -376,10 +392,13 @@ def compact_objects_json(ids: np.ndarray, class_idx: np.ndarray, class_texts: li
         Each object's entry in the frame's distinct class texts (their JSON: ``"car"``, ``null``).
     status_idx, status_texts : ndarray (n,) int64, list of bytes
         Each object's entry in the frame's distinct status texts (``,"status":"ok"``, or with a ``reason``).
-    values : ndarray (5, n) float64
-        ``x_m, y_m, cov_xx, cov_xy, cov_yy`` (m, m^2): one ``orjson.dumps``, non-finite values ``null``.
+    values : ndarray (5, n) float64, or (10, n) with ``track_ids``
+        ``x_m, y_m, cov_xx, cov_xy, cov_yy`` (m, m^2), then with tracks ``v_east_mps, v_north_mps, cov_v_ee,
+        cov_v_en, cov_v_nn`` (m/s, m^2/s^2): one ``orjson.dumps``, non-finite values ``null``.
     message_ids : ndarray (n,) int64, optional
         The messages' object ids (negative: not in the messages, ``null``); None: no such field.
+    track_ids : ndarray (n,) int64, optional
+        The objects' track ids (negative: not tracked, ``null``); None: no motion fields.
 
     Returns
     -------
@@ -391,11 +410,12 @@ def compact_objects_json(ids: np.ndarray, class_idx: np.ndarray, class_texts: li
     ftext = np.frombuffer(orjson.dumps(np.ascontiguousarray(values, dtype=np.float64), option=_NUMPY), np.uint8)
     cb, ca = _text_table(class_texts)
     sb, sa = _text_table(status_texts)
-    size = 2 + n * (len(_COMPACT_LIT) + 1 + 2 * 20 + max(map(len, class_texts)) + max(map(len, status_texts))) + \
-        2 * len(ftext)  # an upper bound: 20 digits and a sign per integer, a float written twice
-    with_mid = message_ids is not None
+    # an upper bound: 20 digits and a sign per integer (3), "]]" and "null" twice, a float written twice
+    size = 2 + n * (len(_COMPACT_LIT) + 1 + 3 * 21 + 6 + max(map(len, class_texts)) +
+                    max(map(len, status_texts))) + 2 * len(ftext)
+    with_mid, with_motion = message_ids is not None, track_ids is not None
     out = _compact_rows(ftext, ids, class_idx, cb, ca, status_idx, sb, sa, message_ids if with_mid else ids,
-                        with_mid, _COMPACT_LIT, _COMPACT_AT, size)
+                        with_mid, track_ids if with_motion else ids, with_motion, _COMPACT_LIT, _COMPACT_AT, size)
     if len(out) == 0:
-        raise ValueError(f"values hold {len(ftext)} bytes of text, not 5 x {n} numbers")
+        raise ValueError(f"values hold {len(ftext)} bytes of text, not {10 if with_motion else 5} x {n} numbers")
     return out

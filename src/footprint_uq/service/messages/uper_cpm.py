@@ -495,12 +495,13 @@ def _container_kernel(cols, lo, hi, cv, cw, lv, sid_ptr, sid_val, n_total, corr_
 
 
 @njit(cache=True, nogil=True)
-def _plain_container_kernel(object_ids, cm, v2x, rows, at, class_idx, class_row, cv_tab, cw_tab, level, lo, hi,
-                            n_total, corr_prefix, corr_bits):  # pragma: no cover - compiled
-    """:func:`_container_kernel` of objects without motion, sensors or quality, its columns gathered here: object
+def _plain_container_kernel(object_ids, cm, v2x, rows, at, class_idx, class_row, cv_tab, cw_tab, level, motion,
+                            with_motion, lo, hi, n_total, corr_prefix, corr_bits):  # pragma: no cover - compiled
+    """:func:`_container_kernel` of objects without sensors or quality, its columns gathered here: object
     ``j`` is row ``rows[j]`` of the frame (``v2x`` (7, N): its x / y confidence and correlation at rows ``at``..
     ``at + 2``; ``class_row[class_idx[r]]``: its row of the class tables ``cv_tab`` / ``cw_tab``), ``cm`` (>= 2, m):
-    its x / y in cm."""
+    its x / y in cm; ``motion`` (10, m): its motion rows (:func:`_motion_rows`) where ``with_motion``, else
+    none."""
     m = rows.shape[0]
     cols = np.zeros((lo.shape[0], m), np.int64)
     cv = np.empty(m, np.int64)
@@ -509,7 +510,11 @@ def _plain_container_kernel(object_ids, cm, v2x, rows, at, class_idx, class_row,
         r = rows[j]
         cols[0, j], cols[1, j], cols[2, j] = object_ids[j], cm[0, j], cm[1, j]
         cols[3, j], cols[4, j], cols[5, j] = v2x[at, r], v2x[at + 1, r], v2x[at + 2, r]
-        cols[8, j] = cols[10, j] = cols[13, j] = 1  # the confidences of absent motion (_NO_MOTION_ROWS)
+        if with_motion:
+            for q in range(10):
+                cols[6 + q, j] = motion[q, j]
+        else:
+            cols[8, j] = cols[10, j] = cols[13, j] = 1  # the confidences of absent motion (_NO_MOTION_ROWS)
         c = class_row[class_idx[r]]
         cv[j], cw[j] = cv_tab[c], cw_tab[c]
     return _container_kernel(cols, lo, hi, cv, cw, level, np.zeros(m + 1, np.int64), np.zeros(0, np.int64), n_total,
@@ -517,24 +522,30 @@ def _plain_container_kernel(object_ids, cm, v2x, rows, at, class_idx, class_row,
 
 
 def plain_container_uper(object_ids, cm, v2x, rows, cpm_at: int, class_idx, class_row, class_value, class_width,
-                         level, *, cdd: str = DEFAULT_CDD) -> bytes | None:
-    """:func:`perceived_object_container_uper_arrays` of objects without motion (the untracked service frame's
+                         level, *, cdd: str = DEFAULT_CDD, motion=None) -> bytes | None:
+    """:func:`perceived_object_container_uper_arrays` of objects without sensors or quality (the service frame's
     container) from the frame's columns, gathered by the kernel: no (19, m) table built in Python.
 
     ``object_ids (m,)``: the message ids; ``cm (>= 2, m)`` int64: x, y (cm; :func:`~..frame_kernels.cm_dm`);
     ``v2x (7, N)``: the frame's V2X codes, the CPM x / y confidence and correlation at rows ``cpm_at``..``+ 2``;
     ``rows (m,)``: the objects' rows of the frame; ``class_idx (N,)``: each row's class among the frame's distinct
     classes, ``class_row``: their rows of the class tables ``class_value`` / ``class_width`` (:func:`class_bits`);
-    ``level (m,)``: the ConfidenceLevels.  None where a value is out of range: the caller's
+    ``level (m,)``: the ConfidenceLevels; ``motion``: the m objects' :class:`~.motion.ObjectMotion` or
+    :class:`~.motion.MotionCodes` (None: no motion sent).  None where a value is out of range: the caller's
     :func:`perceived_object_container_uper_arrays` then names it.
     """
     prefix, bits = _CORR_PREFIX[check_cdd(cdd)]
+    m = len(rows)
+    rows10 = _NO_MOTION_COLUMN if motion is None else np.ascontiguousarray(_motion_rows(motion, m))
     out, col, _ = _plain_container_kernel(object_ids, cm, v2x, rows, cpm_at, class_idx, class_row, class_value,
-                                          class_width, level, _LO, _HI, min(len(rows), 255), prefix, bits)
+                                          class_width, level, rows10, motion is not None, _LO, _HI, min(m, 255),
+                                          prefix, bits)
     return None if col >= 0 else out.tobytes()
 
 #: the 10 motion rows of objects without motion (a column, broadcast over the objects)
 _NO_MOTION_ROWS = np.array([0, 0, 1, 0, 1, 0, 0, 1, 0, 0], dtype=np.int64)[:, None]
+#: the same as a C-contiguous (10, 1) array: :func:`plain_container_uper`'s placeholder (not read without motion)
+_NO_MOTION_COLUMN = np.ascontiguousarray(_NO_MOTION_ROWS)
 
 
 def _motion_rows(motion, n: int):
