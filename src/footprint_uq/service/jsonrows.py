@@ -271,6 +271,15 @@ def _put_span(out, p, src, a, b):  # pragma: no cover - compiled
     return p + b - a
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _put_id(out, p, v, null_src, a, b):  # pragma: no cover - compiled
+    """An id at ``out[p]``: ``v`` as an integer, or ``null_src[a:b]`` (the text ``null``) where ``v`` < 0 (none);
+    the position after it."""
+    if v < 0:
+        return _put_span(out, p, null_src, a, b)
+    return _put_int(out, p, v)
+
+
 @njit(cache=True, nogil=True)
 def _split_values(ftext, nv):  # pragma: no cover - compiled
     """Start and end of the values in orjson's text of a float array (numbers and ``null`` only: no string, no
@@ -330,10 +339,7 @@ def _compact_rows(ftext, ids, cls_idx, cls_buf, cls_at, st_idx, st_buf, st_at, m
         p = _put_span(out, p, lit, at[8], at[9])
         if with_motion:
             p = _put_span(out, p, lit, at[12], at[13])
-            if tid[r] < 0:
-                p = _put_span(out, p, lit, at[11], at[12])
-            else:
-                p = _put_int(out, p, tid[r])
+            p = _put_id(out, p, tid[r], lit, at[11], at[12])
             for k in range(6):  # v_east, v_north, cvv_ee, cvv_en, cvv_en, cvv_nn after their texts
                 p = _put_span(out, p, lit, at[13 + k], at[14 + k])
                 v = (5 + (k if k < 4 else k - 1)) * n + r
@@ -341,10 +347,7 @@ def _compact_rows(ftext, ids, cls_idx, cls_buf, cls_at, st_idx, st_buf, st_at, m
             p = _put_span(out, p, lit, at[8], at[9])
         if with_mid:
             p = _put_span(out, p, lit, at[9], at[10])
-            if mid[r] < 0:
-                p = _put_span(out, p, lit, at[11], at[12])
-            else:
-                p = _put_int(out, p, mid[r])
+            p = _put_id(out, p, mid[r], lit, at[11], at[12])
         p = _put_span(out, p, lit, at[10], at[11])
     out[p] = 93
     return out[:p + 1]
