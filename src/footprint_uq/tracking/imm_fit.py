@@ -31,10 +31,9 @@ from scipy.stats import chi2
 from ..errors import InputError
 from ..uncertainty.budget import load_budget
 from .classes import ClassTracks, tracker_configs
-from .motion import object_motion
-from .motion_campaigns import campaign_frames
+from .motion_campaigns import campaign_frames, coverage_pass
 from .motion_fit import CHI2_95_1DOF, DEFAULT_Q_GRID_M2PS3, MotionBank, MotionGrid, fit_class, fit_profile
-from .synthetic import CHI2_95_2D, Z95, default_camera
+from .synthetic import default_camera
 from .table import SharedJacobianAt, TrackerConfig, TrackTable
 
 __all__ = ["ImmGrid", "IMM_PARAMETERS", "profile_interval", "fit_imm_class", "fit_imm_classes", "ImmCampaigns",
@@ -225,22 +224,9 @@ class ImmCampaigns(NamedTuple):
 
 def _coverage(frames, tracks: ClassTracks) -> tuple[np.ndarray, np.ndarray]:
     """Track the campaigns' frames; ``(hits, counts)`` of the 95 % velocity ellipse and heading interval
-    (the count of :func:`~footprint_uq.tracking.motion_campaigns.run_campaigns`: every update with a velocity;
-    heading where the truth moves)."""
+    (:func:`~footprint_uq.tracking.motion_campaigns.coverage_pass`, the count of ``run_campaigns``)."""
     hits, counts = np.zeros(2), np.zeros(2)
-    for t, ids, classes, xy, cov, B, v_true in frames:
-        out = tracks.step(t, ids, classes, xy, cov, B)
-        ok = np.isfinite(out.v_mps).all(1)
-        if not ok.any():
-            continue
-        mo = object_motion(out)
-        dv = out.v_mps[ok] - v_true[ok]
-        d2 = np.einsum("ni,nij,nj->n", dv, np.linalg.inv(out.cov_v_m2ps2[ok]), dv)
-        hok = ok & np.isfinite(mo.sigma_heading_deg) & (np.hypot(*v_true.T) > 0)
-        dh = np.mod(mo.heading_deg[hok] - np.rad2deg(np.arctan2(v_true[hok, 0], v_true[hok, 1])) + 180.0, 360.0)
-        hits += [np.count_nonzero(d2 <= CHI2_95_2D), np.count_nonzero(np.abs(dh - 180.0) <= Z95
-                                                                      * mo.sigma_heading_deg[hok])]
-        counts += [ok.sum(), hok.sum()]
+    coverage_pass(frames, tracks, hits, counts)
     return hits, counts
 
 

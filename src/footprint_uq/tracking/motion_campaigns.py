@@ -28,7 +28,8 @@ from .motion_fit import MotionBank, MotionGrid, fit_class
 from .synthetic import CHI2_95_2D, Z95, default_camera, trajectories, true_pixels
 from .table import SharedJacobianAt, TrackerConfig, TrackTable
 
-__all__ = ["CampaignResult", "campaign_frames", "run_campaigns", "MonitorRuns", "traffic_frames", "monitor_runs"]
+__all__ = ["CampaignResult", "campaign_frames", "coverage_pass", "run_campaigns", "MonitorRuns", "traffic_frames",
+           "monitor_runs"]
 
 
 class CampaignResult(NamedTuple):
@@ -78,7 +79,7 @@ def campaign_frames(q_true: float, n_campaigns: int, n_objects: int, *, duration
                tr.v_mps[k])
 
 
-def _coverage_pass(frames, tracks, hits: np.ndarray, counts: np.ndarray) -> None:
+def coverage_pass(frames, tracks, hits: np.ndarray, counts: np.ndarray) -> None:
     """Track the frames with ``tracks`` (:class:`ClassTracks`) and add the 95 % velocity / heading hits."""
     for t, ids, classes, xy, cov, B, v_true in frames:
         out = tracks.step(t, ids, classes, xy, cov, B)
@@ -121,11 +122,11 @@ def run_campaigns(q_true: float, *, n_campaigns: int = 200, n_objects: int = 20,
     ident = np.array([e["status"] == "identified" for e in entries])
     default, per_class = tracker_configs({"classes": {str(c): e for c, e in enumerate(entries)}}, grid.prior)
     hits, counts = np.zeros(2), np.zeros(2)
-    _coverage_pass(campaign_frames(q_true, n_campaigns, n_objects, **kw),
+    coverage_pass(campaign_frames(q_true, n_campaigns, n_objects, **kw),
                    ClassTracks(default, per_class, rank=at.rank, shared_at=at), hits, counts)
     ph, pc = np.zeros(2), np.zeros(2)
     if prior_coverage:
-        _coverage_pass(campaign_frames(q_true, n_campaigns, n_objects, **kw),
+        coverage_pass(campaign_frames(q_true, n_campaigns, n_objects, **kw),
                        ClassTracks(grid.prior, rank=at.rank, shared_at=at), ph, pc)
     cov = hits / np.maximum(counts, 1)
     pcov = ph / np.maximum(pc, 1) if prior_coverage else np.full(2, np.nan)
