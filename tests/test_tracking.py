@@ -108,7 +108,7 @@ def test_compiled_initiation_equals_the_initiator(rng):
     R = A @ np.swapaxes(A, -1, -2) + 0.01 * np.eye(2)
     ref = Initiator(7.0).initiate(SplitMeasurement(z, R, B))
     X, P = np.full((n, 4), np.nan), np.full((n, 4, 4), np.nan)
-    Xm, Pm, Cm = np.full((n, m, 4), np.nan), np.full((n, m, 4, 4), np.nan), np.full((n, m, 4, r), np.nan)
+    Xm, Pm, Cm = np.full((n, m, 4), np.nan), np.full((n, m, 4, 4), np.nan), np.full((n, m, r, 4), np.nan)
     mu, mu0 = np.full((n, m), np.nan), np.array([0.7, 0.3])
     for s in range(n):
         initiate_row(s, X, P, Xm, Pm, Cm, mu, mu0, 49.0, z[s], R[s], B[s])
@@ -117,7 +117,7 @@ def test_compiled_initiation_equals_the_initiator(rng):
     for j in range(m):
         np.testing.assert_allclose(Xm[:, j], ref.x, rtol=0, atol=1e-12)
         np.testing.assert_allclose(Pm[:, j], ref.P, rtol=1e-12, atol=1e-12)
-        np.testing.assert_array_equal(Cm[:, j], ref.C)
+        np.testing.assert_array_equal(np.swapaxes(Cm[:, j], 1, 2), ref.C)  # (the table's column-by-column C)
     np.testing.assert_array_equal(mu, np.broadcast_to(mu0, (n, m)))
 
 
@@ -184,7 +184,7 @@ def test_imm_kernel_equals_the_numpy_reference(rng):
     ref = InteractingModels([ConstantVelocity(q) for q in qs], sojourn)
     post, mu_ref, x_ref, P_ref, d2_ref = ref.step(modes, mu, -t_last, SplitMeasurement(z, R, B))
     Xm = np.stack([m.x for m in modes], 1)
-    Pm, Cm = np.stack([m.P for m in modes], 1), np.stack([m.C for m in modes], 1)
+    Pm, Cm = np.stack([m.P for m in modes], 1), _by_column(np.stack([m.C for m in modes], 1))
     X, P = np.zeros((n, 4)), np.zeros((n, 4, 4))
     st = [a.copy() for a in (Xm, Pm, Cm, mu, t_last)]
     n_upd, d2 = np.zeros(n, np.int64), np.empty(n)
@@ -195,7 +195,7 @@ def test_imm_kernel_equals_the_numpy_reference(rng):
     assert ok.sum() == n - 1 and (n_upd == ok).all() and (st[4][ok] == 0.0).all()
     for got, want, before in ((st[0], np.stack([p.x for p in post], 1), Xm), (st[1], np.stack([p.P for p in post], 1),
                                                                               Pm),
-                              (st[2], np.stack([p.C for p in post], 1), Cm), (st[3], mu_ref, mu)):
+                              (st[2], _by_column(np.stack([p.C for p in post], 1)), Cm), (st[3], mu_ref, mu)):
         np.testing.assert_allclose(got[ok], want[ok], rtol=1e-9, atol=1e-12)
         np.testing.assert_array_equal(got[~ok], before[~ok])
     np.testing.assert_allclose(X[ok], x_ref[ok], rtol=1e-9, atol=1e-12)
@@ -215,12 +215,17 @@ def test_imm_kernel_equals_the_numpy_reference(rng):
     st1 = [modes[0].x.copy(), modes[0].P.copy(), modes[0].C.copy()]
     predict_update(*st1, -t_last, 2.0, z, R, B, np.inf, np.empty(n))
     X1, P1 = np.zeros((n, 4)), np.zeros((n, 4, 4))
-    sm = [modes[0].x[:, None].copy(), modes[0].P[:, None].copy(), modes[0].C[:, None].copy(), np.ones((n, 1))]
+    sm = [modes[0].x[:, None].copy(), modes[0].P[:, None].copy(), _by_column(modes[0].C[:, None]), np.ones((n, 1))]
     update_slots(X1, P1, *sm, t_last.copy(), np.zeros(n, np.int64), np.arange(n), 0.0, qs[:1], 1.0 / sojourn[:1], z,
                  R, np.zeros((0, 2, 0)), B, np.inf, np.empty(n))
     np.testing.assert_allclose(X1, st1[0], rtol=1e-12, atol=1e-12)
     np.testing.assert_allclose(P1, st1[1], rtol=1e-12, atol=1e-12)
-    np.testing.assert_allclose(sm[2][:, 0], st1[2], rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(sm[2][:, 0], _by_column(st1[2]), rtol=1e-12, atol=1e-12)
+
+
+def _by_column(C):
+    """Consider columns ``(..., 4, r)`` in the table's storage order ``(..., r, 4)`` (contiguous)."""
+    return np.ascontiguousarray(np.swapaxes(C, -1, -2))
 
 
 def test_imm_finds_the_manoeuvre(rng):

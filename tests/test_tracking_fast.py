@@ -28,7 +28,8 @@ def _close(got, want, what: str, rel: float = 1e-9) -> None:
 
 
 def _storage(rng, cap: int, M: int, r: int):
-    """Random valid track storage: per mode a joint covariance of (x, w) with w's block the identity."""
+    """Random valid track storage: per mode a joint covariance of (x, w) with w's block the identity (the consider
+    columns ``Cm (cap, M, r, 4)``, column by column as :class:`TrackTable` stores them)."""
     Xm = rng.normal(0.0, 20.0, (cap, M, 4))
     Pm, Cm = np.empty((cap, M, 4, 4)), np.empty((cap, M, 4, r))
     for s in range(cap):
@@ -41,7 +42,7 @@ def _storage(rng, cap: int, M: int, r: int):
             full = T @ full @ T.T
             Pm[s, j], Cm[s, j] = full[:4, :4], full[:4, 4:]
     mu = rng.dirichlet(np.full(M, 2.0), cap) if M > 1 else np.ones((cap, 1))
-    return Xm, Pm, Cm, mu
+    return Xm, Pm, np.ascontiguousarray(np.swapaxes(Cm, -1, -2)), mu  # (C stored column by column, as the table)
 
 
 @settings(max_examples=40, deadline=None)

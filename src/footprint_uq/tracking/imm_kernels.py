@@ -13,6 +13,11 @@ the two to 1e-9 over frame sequences.  What is different (the arithmetic, not th
   then once per mode to write the posterior ``C = C_p - K (H C_p + B)``; the reference's scratch copies and
   per-mode zeroing are gone;
 * the mode likelihoods' ratio takes one ``log`` and one ``exp`` (the reference: four and two);
+* the table stores each mode's consider columns column by column (``Cm (cap, M, r, 4)``: a column's 4 entries
+  adjacent), so each walk over the columns reads and writes whole columns (~3 us less per 100-object frame than the
+  row-by-row ``(4, r)`` on the frozen frame below; the reference reads the same storage);
+* the mode switching factor ``(1 - exp(-(a + b) h)) / (a + b)`` is computed once per distinct step ``h`` of a frame
+  (most tracks share it), not once per track (the same numbers to the bit);
 * FMA contraction (``fastmath={"contract"}``, NaN / inf semantics kept), as the package's other kernels;
 * no reference counting (numba's ``_nrt=False``; the scratch comes from the caller): every inlined helper's array
   arguments were an atomic increment and decrement each, ~25 arrays per track, ~160 ns of the ~430 ns a track
@@ -41,7 +46,7 @@ def scratch(n_modes: int, rank: int) -> tuple:
     (allocated once per table: the pass itself allocates nothing)."""
     M = int(n_modes)
     return (np.empty((2, 2)), np.empty((M, 4)), np.empty((M, 4, 4)), np.empty((M, 4, 2)), np.empty((M, 4, 2)),
-            np.empty((M, 4, int(rank))), np.empty((M, 3)))
+            np.empty((M, int(rank), 4)), np.empty((M, 3)))
 
 
 _INL = dict(cache=True, nogil=True, error_model="numpy", fastmath={"contract"}, inline="always")
@@ -49,15 +54,23 @@ _JIT = dict(cache=True, nogil=True, error_model="numpy", fastmath={"contract"}, 
 
 
 @njit(**_INL)
-def _weights(s, h, mu, rates, W):  # pragma: no cover - compiled
-    """Mixing weights ``W[i, j]`` = P(mode i before | mode j after a step ``h``) of track row ``s``; returns the
-    predicted mode probabilities ``(cbar_0, cbar_1)`` (one mode: ``(1, 1)``)."""
+def _switching(h, rates):  # pragma: no cover - compiled
+    """The two-mode chain's ``(1 - exp(-(a + b) h)) / (a + b)`` over a step ``h`` (s) with switching rates ``rates
+    = (a, b)`` (1/s): ``P(0 -> 1) = a e``, ``P(1 -> 0) = b e`` (one mode: 0)."""
+    if rates.shape[0] == 1:
+        return 0.0
+    tot = rates[0] + rates[1]
+    return -math.expm1(-tot * h) / tot if tot > 0.0 else 0.0
+
+
+@njit(**_INL)
+def _weights(s, e, mu, rates, W):  # pragma: no cover - compiled
+    """Mixing weights ``W[i, j]`` = P(mode i before | mode j after a step with :func:`_switching` factor ``e``) of
+    track row ``s``; returns the predicted mode probabilities ``(cbar_0, cbar_1)`` (one mode: ``(1, 1)``)."""
     if rates.shape[0] == 1:
         W[0, 0] = 1.0
         return 1.0, 1.0
     a, b = rates[0], rates[1]
-    tot = a + b
-    e = -math.expm1(-tot * h) / tot if tot > 0.0 else 0.0
     p01, p10 = a * e, b * e
     p00, p11 = 1.0 - p01, 1.0 - p10
     m0, m1 = mu[s, 0], mu[s, 1]
@@ -69,23 +82,23 @@ def _weights(s, h, mu, rates, W):  # pragma: no cover - compiled
 
 @njit(**_INL)
 def _columns_mix_predict(s, j, h, Cm, W, B, bi, Cps):  # pragma: no cover - compiled
-    """Mode ``j``'s consider columns mixed and predicted into ``Cps[j] (4, r)`` (``F C``: rows 0, 1 gain ``h``
+    """Mode ``j``'s consider columns mixed and predicted into ``Cps[j] (r, 4)`` (``F C``: rows 0, 1 gain ``h``
     times rows 2, 3); returns ``G = C_p B^T`` (4 x 2, row-major, 8 floats) with ``B = B[bi] (2, r)``."""
-    r = Cm.shape[3]
+    r = Cm.shape[2]
     two = Cm.shape[1] == 2
     w0 = W[0, j]
     w1 = W[1, j] if two else 0.0
     g00 = g01 = g10 = g11 = g20 = g21 = g30 = g31 = 0.0
     for c in range(r):
-        c0, c1, c2, c3 = w0 * Cm[s, 0, 0, c], w0 * Cm[s, 0, 1, c], w0 * Cm[s, 0, 2, c], w0 * Cm[s, 0, 3, c]
+        c0, c1, c2, c3 = w0 * Cm[s, 0, c, 0], w0 * Cm[s, 0, c, 1], w0 * Cm[s, 0, c, 2], w0 * Cm[s, 0, c, 3]
         if two:
-            c0 += w1 * Cm[s, 1, 0, c]
-            c1 += w1 * Cm[s, 1, 1, c]
-            c2 += w1 * Cm[s, 1, 2, c]
-            c3 += w1 * Cm[s, 1, 3, c]
+            c0 += w1 * Cm[s, 1, c, 0]
+            c1 += w1 * Cm[s, 1, c, 1]
+            c2 += w1 * Cm[s, 1, c, 2]
+            c3 += w1 * Cm[s, 1, c, 3]
         c0 += h * c2
         c1 += h * c3
-        Cps[j, 0, c], Cps[j, 1, c], Cps[j, 2, c], Cps[j, 3, c] = c0, c1, c2, c3
+        Cps[j, c, 0], Cps[j, c, 1], Cps[j, c, 2], Cps[j, c, 3] = c0, c1, c2, c3
         b0, b1 = B[bi, 0, c], B[bi, 1, c]
         g00 += c0 * b0
         g01 += c0 * b1
@@ -102,21 +115,21 @@ def _columns_mix_predict(s, j, h, Cm, W, B, bi, Cps):  # pragma: no cover - comp
 def _columns_both(s, h, Cm, W, B, bi, Cps):  # pragma: no cover - compiled
     """:func:`_columns_mix_predict` of both modes in one walk over the columns (each column of the two modes' ``C``
     read once; 16 running sums), with ``B B^T``'s 3 entries: returns ``(G_0, G_1, bb)``."""
-    r = Cm.shape[3]
+    r = Cm.shape[2]
     w00, w10, w01, w11 = W[0, 0], W[1, 0], W[0, 1], W[1, 1]
     a00 = a01 = a10 = a11 = a20 = a21 = a30 = a31 = 0.0
     g00 = g01 = g10 = g11 = g20 = g21 = g30 = g31 = 0.0
     bb00 = bb01 = bb11 = 0.0
     for c in range(r):
-        x0, x1, x2, x3 = Cm[s, 0, 0, c], Cm[s, 0, 1, c], Cm[s, 0, 2, c], Cm[s, 0, 3, c]
-        y0, y1, y2, y3 = Cm[s, 1, 0, c], Cm[s, 1, 1, c], Cm[s, 1, 2, c], Cm[s, 1, 3, c]
+        x0, x1, x2, x3 = Cm[s, 0, c, 0], Cm[s, 0, c, 1], Cm[s, 0, c, 2], Cm[s, 0, c, 3]
+        y0, y1, y2, y3 = Cm[s, 1, c, 0], Cm[s, 1, c, 1], Cm[s, 1, c, 2], Cm[s, 1, c, 3]
         b0, b1 = B[bi, 0, c], B[bi, 1, c]
         bb00 += b0 * b0
         bb01 += b0 * b1
         bb11 += b1 * b1
         c2, c3 = w00 * x2 + w10 * y2, w00 * x3 + w10 * y3
         c0, c1 = w00 * x0 + w10 * y0 + h * c2, w00 * x1 + w10 * y1 + h * c3
-        Cps[0, 0, c], Cps[0, 1, c], Cps[0, 2, c], Cps[0, 3, c] = c0, c1, c2, c3
+        Cps[0, c, 0], Cps[0, c, 1], Cps[0, c, 2], Cps[0, c, 3] = c0, c1, c2, c3
         a00 += c0 * b0
         a01 += c0 * b1
         a10 += c1 * b0
@@ -127,7 +140,7 @@ def _columns_both(s, h, Cm, W, B, bi, Cps):  # pragma: no cover - compiled
         a31 += c3 * b1
         c2, c3 = w01 * x2 + w11 * y2, w01 * x3 + w11 * y3
         c0, c1 = w01 * x0 + w11 * y0 + h * c2, w01 * x1 + w11 * y1 + h * c3
-        Cps[1, 0, c], Cps[1, 1, c], Cps[1, 2, c], Cps[1, 3, c] = c0, c1, c2, c3
+        Cps[1, c, 0], Cps[1, c, 1], Cps[1, c, 2], Cps[1, c, 3] = c0, c1, c2, c3
         g00 += c0 * b0
         g01 += c0 * b1
         g10 += c1 * b0
@@ -206,13 +219,13 @@ def _mode_posterior(s, j, z, zi, B, bi, xp, Pp, Kg, Cx, Cps, Xm, Pm, Cm):  # pra
             Pm[s, j, a, b] = Pm[s, j, b, a] = Pp[j, a, b] - (Kg[j, a, 0] * Cx[j, b, 0] + Kg[j, a, 1] * Cx[j, b, 1])
     k00, k01, k10, k11 = Kg[j, 0, 0], Kg[j, 0, 1], Kg[j, 1, 0], Kg[j, 1, 1]
     k20, k21, k30, k31 = Kg[j, 2, 0], Kg[j, 2, 1], Kg[j, 3, 0], Kg[j, 3, 1]
-    for c in range(Cm.shape[3]):
-        c0, c1, c2, c3 = Cps[j, 0, c], Cps[j, 1, c], Cps[j, 2, c], Cps[j, 3, c]
+    for c in range(Cm.shape[2]):
+        c0, c1, c2, c3 = Cps[j, c, 0], Cps[j, c, 1], Cps[j, c, 2], Cps[j, c, 3]
         e0, e1 = c0 + B[bi, 0, c], c1 + B[bi, 1, c]
-        Cm[s, j, 0, c] = c0 - (k00 * e0 + k01 * e1)
-        Cm[s, j, 1, c] = c1 - (k10 * e0 + k11 * e1)
-        Cm[s, j, 2, c] = c2 - (k20 * e0 + k21 * e1)
-        Cm[s, j, 3, c] = c3 - (k30 * e0 + k31 * e1)
+        Cm[s, j, c, 0] = c0 - (k00 * e0 + k01 * e1)
+        Cm[s, j, c, 1] = c1 - (k10 * e0 + k11 * e1)
+        Cm[s, j, c, 2] = c2 - (k20 * e0 + k21 * e1)
+        Cm[s, j, c, 3] = c3 - (k30 * e0 + k31 * e1)
 
 
 @njit(**_INL)
@@ -260,15 +273,15 @@ def _combine(s, X, P, Xm, Pm, mu):  # pragma: no cover - compiled
 
 
 @njit(**_INL)
-def _track_step(s, X, P, Xm, Pm, Cm, mu, t_last, n_upd, t, qs, rates, z, R, zi, B, bi, gate, W, xp, Pp, Kg, Cx,
+def _track_step(s, X, P, Xm, Pm, Cm, mu, t_last, n_upd, t, e, qs, rates, z, R, zi, B, bi, gate, W, xp, Pp, Kg, Cx,
                 Cps, Sm, nis):  # pragma: no cover - compiled
     """One track's IMM Schmidt step (storage row ``s``, measurement ``z[zi]``, ``R[zi]``, ``B[bi]``), in place if
     the smallest of its modes' squared Mahalanobis distances is ``<= gate`` (returned; NaN if a mode's is not
     finite: the track is then left as it was, as one beyond the gate), with its innovation's NIS (one mode: the
     distance; two: :func:`_mixture_nis`) into ``nis[zi]``.  The rest are scratch."""
-    M, r = Xm.shape[1], Cm.shape[3]
+    M, r = Xm.shape[1], Cm.shape[2]
     h = t - t_last[s]
-    cb0, cb1 = _weights(s, h, mu, rates, W)
+    cb0, cb1 = _weights(s, e, mu, rates, W)
     if M == 2:
         G0, G1, bb = _columns_both(s, h, Cm, W, B, bi, Cps)
         _mode_predict(s, 0, h, qs[0], Xm, Pm, W, xp, Pp)
@@ -307,23 +320,27 @@ def frame_pass(act, slots, old, n_old, X, P, Xm, Pm, Cm, mu, t_last, t_first, n_
                o_cv, W, xp, Pp, Kg, Cx, Cps, Sm, nis):  # pragma: no cover - compiled
     """:func:`~footprint_uq.tracking.kernels.frame_update` (same arguments, same results to rounding) with the
     caller's scratch (:func:`scratch`: ``W (2, 2)``, ``xp (M, 4)``, ``Pp (M, 4, 4)``, ``Kg, Cx (M, 4, 2)``,
-    ``Cps (M, 4, r)``, ``Sm (M, 3)``; compiled without numba's reference counting, it allocates nothing) and
+    ``Cps (M, r, 4)``, ``Sm (M, 3)``; compiled without numba's reference counting, it allocates nothing) and
     ``nis (n,)``, which receives the NIS of each updated object's innovation (left as it is for the others;
     the on-line consistency check's statistic, :class:`~footprint_uq.tracking.consistency.NisMonitor`): the objects
     ``old[:n_old]`` get :func:`_track_step` (``B_pred[k]``, ``B`` at the k-th one's predicted position, where given
     and finite, else ``B_frame``); one beyond the gate becomes a start; then the starts and every object's
     outputs.  Returns the next free track id."""
-    r = Cm.shape[3]
+    r = Cm.shape[2]
     has_pred = B_pred.shape[0] > 0
+    h_last, e = math.nan, 0.0
     for k in range(n_old):
         i = old[k]
+        h = t - t_last[slots[i]]
+        if h != h_last:  # (most tracks of a frame share their step: one expm1 per distinct one)
+            h_last, e = h, _switching(h, rates)
         use_pred = has_pred
         if has_pred:
             for c in range(r):
                 use_pred &= math.isfinite(B_pred[k, 0, c]) & math.isfinite(B_pred[k, 1, c])
         Bs, bi = (B_pred, k) if use_pred else (B_frame, i)
-        d2 = _track_step(slots[i], X, P, Xm, Pm, Cm, mu, t_last, n_upd, t, qs, rates, z, R, i, Bs, bi, gate, W, xp,
-                         Pp, Kg, Cx, Cps, Sm, nis)
+        d2 = _track_step(slots[i], X, P, Xm, Pm, Cm, mu, t_last, n_upd, t, e, qs, rates, z, R, i, Bs, bi, gate, W,
+                         xp, Pp, Kg, Cx, Cps, Sm, nis)
         if not d2 <= gate:  # NaN (a singular S) fails the gate too
             act[i] = ROW_START
     return _starts_and_outputs(act, slots, X, P, Xm, Pm, Cm, mu, t_last, t_first, n_upd, tid, next_id, t, mu0,

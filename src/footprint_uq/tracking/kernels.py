@@ -53,10 +53,10 @@ def _switch_probs(h, rates, pij):  # pragma: no cover - compiled
 
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
 def _mix(Xm, Pm, Cm, mu, pij, cbar, xs, Ps, Cs):  # pragma: no cover - compiled
-    """IMM mixing of one track's mode-conditioned states ``Xm (M, 4)``, ``Pm``, ``Cm`` with mode probabilities ``mu``
-    into the start states ``xs``, ``Ps``, ``Cs`` of each mode's step; ``cbar`` receives the predicted mode
-    probabilities."""
-    M, r = Xm.shape[0], Cm.shape[2]
+    """IMM mixing of one track's mode-conditioned states ``Xm (M, 4)``, ``Pm (M, 4, 4)``, ``Cm (M, r, 4)`` (the
+    table's column-by-column consider columns) with mode probabilities ``mu`` into the start states ``xs``, ``Ps``,
+    ``Cs (M, 4, r)`` of each mode's step; ``cbar`` receives the predicted mode probabilities."""
+    M, r = Xm.shape[0], Cm.shape[1]
     for j in range(M):
         cb = 0.0
         for i in range(M):
@@ -73,7 +73,7 @@ def _mix(Xm, Pm, Cm, mu, pij, cbar, xs, Ps, Cs):  # pragma: no cover - compiled
             for a in range(4):
                 xs[j, a] += wt * Xm[i, a]
                 for c in range(r):
-                    Cs[j, a, c] += wt * Cm[i, a, c]
+                    Cs[j, a, c] += wt * Cm[i, c, a]
         for i in range(M):
             wt = pij[i, j] * mu[i] / cb
             for a in range(4):
@@ -88,7 +88,7 @@ def _imm_one(s, X, P, Xm, Pm, Cm, mu, t_last, n_upd, t, qs, rates, z, R, B, gate
     """One track's IMM Schmidt step (storage row ``s``; measurement ``z (2,)``, ``R (2, 2)``, ``B (2, r)``), in
     place if it passes the gate (see :func:`update_slots`); returns the smallest of the modes' squared Mahalanobis
     distances (NaN if a mode's is not finite).  The rest are scratch."""
-    M, r = Xm.shape[1], Cm.shape[3]
+    M, r = Xm.shape[1], Cm.shape[2]
     h = t - t_last[s]
     _switch_probs(h, rates, pij)
     _mix(Xm[s], Pm[s], Cm[s], mu[s], pij, cbar, xs, Ps, Cs)
@@ -120,7 +120,7 @@ def _imm_one(s, X, P, Xm, Pm, Cm, mu, t_last, n_upd, t, qs, rates, z, R, B, gate
             Xm[s, j, a] = xs[j, a]
             X[s, a] += mu[s, j] * xs[j, a]
             for c in range(r):
-                Cm[s, j, a, c] = Cs[j, a, c]
+                Cm[s, j, c, a] = Cs[j, a, c]
             for b in range(4):
                 Pm[s, j, a, b] = Ps[j, a, b]
     for j in range(M):
@@ -139,14 +139,14 @@ def update_slots(X, P, Xm, Pm, Cm, mu, t_last, n_upd, slots, t, qs, rates, z, R,
     """One frame's interacting-multiple-model (IMM) Schmidt update of a table's storage, in place.
 
     Track ``i`` of the frame is row ``slots[i]``: its M constant-velocity modes (acceleration densities ``qs (M,)``,
-    leaving rates ``rates (M,)`` in 1/s, M <= 2) are ``Xm (cap, M, 4)``, ``Pm (cap, M, 4, 4)``, ``Cm (cap, M, 4,
-    r)`` with probabilities ``mu (cap, M)``; ``X (cap, 4)``, ``P (cap, 4, 4)`` receive their moment-matched
-    combination.  Each mode is mixed (:func:`_mix`), predicted to ``t`` from ``t_last`` and updated with ``z[i]``,
-    ``R[i]`` and ``B_pred[i]`` (``B`` at the predicted position; ``(0, 2, 0)``: none) where finite, else
+    leaving rates ``rates (M,)`` in 1/s, M <= 2) are ``Xm (cap, M, 4)``, ``Pm (cap, M, 4, 4)``, ``Cm (cap, M, r,
+    4)`` (the consider columns stored column by column) with probabilities ``mu (cap, M)``; ``X (cap, 4)``,
+    ``P (cap, 4, 4)`` receive their moment-matched combination.  Each mode is mixed (:func:`_mix`), predicted to
+    ``t`` from ``t_last`` and updated with ``z[i]``, ``R[i]`` and ``B_pred[i]`` (``B`` at the predicted position; ``(0, 2, 0)``: none) where finite, else
     ``B_frame[i]``.  ``d2[i]`` receives the smallest of the modes' squared Mahalanobis distances; the track is
     updated only if it is ``<= gate`` (then ``t_last = t`` and one more update in ``n_upd``), else left as it was.
     With one mode this is :func:`predict_update`."""
-    M, r = Xm.shape[1], Cm.shape[3]
+    M, r = Xm.shape[1], Cm.shape[2]
     Pp, Cp, K, cross = np.empty((4, 4)), np.empty((4, r)), np.empty((4, 2)), np.empty((4, 2))
     xs, Ps, Cs = np.empty((M, 4)), np.empty((M, 4, 4)), np.empty((M, 4, r))
     pij, cbar, lik = np.empty((2, 2)), np.empty(M), np.empty(M)
@@ -290,8 +290,8 @@ def initiate_row(s, X, P, Xm, Pm, Cm, mu, mu0, var_v0, z, R, B):  # pragma: no c
             Xm[s, j, a] = X[s, a]
             for b in range(4):
                 Pm[s, j, a, b] = P[s, a, b]
-            for c in range(Cm.shape[3]):
-                Cm[s, j, a, c] = -B[a, c] if a < 2 else 0.0
+            for c in range(Cm.shape[2]):
+                Cm[s, j, c, a] = -B[a, c] if a < 2 else 0.0
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -306,7 +306,7 @@ def frame_update(act, slots, old, n_old, X, P, Xm, Pm, Cm, mu, t_last, t_first, 
     ids ``next_id, next_id + 1, ...``) and the outputs of every object (:class:`~footprint_uq.tracking.table.
     TrackOutput`: -1 / False / 0 / NaN for :data:`ROW_SKIP`; the velocity from the second update on).  Returns the
     next free track id."""
-    M, r = Xm.shape[1], Cm.shape[3]
+    M, r = Xm.shape[1], Cm.shape[2]
     Pp, Cp, K, cross = np.empty((4, 4)), np.empty((4, r)), np.empty((4, 2)), np.empty((4, 2))
     xs, Ps, Cs = np.empty((M, 4)), np.empty((M, 4, 4)), np.empty((M, 4, r))
     pij, cbar, lik = np.empty((2, 2)), np.empty(M), np.empty(M)

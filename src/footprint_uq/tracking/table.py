@@ -203,7 +203,9 @@ class TrackTable:
         M = len(self.models)
         self._xm = extend(g("_xm"), (M, 4), 0.0)
         self._Pm = extend(g("_Pm"), (M, 4, 4), 0.0)
-        self._Cm = extend(g("_Cm"), (M, 4, r), 0.0)
+        # (the consider columns C (4, r) of each mode stored column by column, (r, 4): a column's 4 entries adjacent,
+        # what the compiled pass walks; tracking/imm_kernels.py)
+        self._Cm = extend(g("_Cm"), (M, r, 4), 0.0)
         self._mu = extend(g("_mu"), (M,), 1.0 / M)
         self._t_last = extend(g("_t_last"), (), np.nan)
         self._t_first = extend(g("_t_first"), (), np.nan)
