@@ -35,7 +35,9 @@ import math
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
+from llvmlite import ir as llvm_ir
+from numba import njit, types
+from numba.extending import intrinsic
 
 __all__ = ["ScannedFrame", "scan_frame"]
 
@@ -290,14 +292,36 @@ def _detection(buf, i, r, fv, iv, pow10, dk, dk_at, tpl):  # pragma: no cover - 
         i = _ws(buf, i + 1)
 
 
+@intrinsic
+def _load8(typingctx, buf, at):
+    """The 8 bytes ``buf[at:at + 8]`` as one uint64 (an unaligned load; the callers guarantee the bounds), for
+    comparing constant text a word at a time."""
+    if not (isinstance(buf, types.Array) and buf.ndim == 1 and buf.layout == "C" and buf.dtype == types.uint8):
+        return None  # (no typing: only C-contiguous byte arrays, whose data pointer is the first byte)
+
+    def codegen(context, builder, signature, args):
+        a, i = args
+        data = context.make_array(signature.args[0])(context, builder, a).data
+        word = builder.bitcast(builder.gep(data, [i]), llvm_ir.IntType(64).as_pointer())
+        return builder.load(word, align=1)
+
+    return types.uint64(buf, types.intp), codegen
+
+
 @njit(cache=True, nogil=True)
-def _templated_run(buf, i, r, iv, tpl, seen, spans, ns):  # pragma: no cover - compiled
+def _templated_run(buf, i, r, fv, iv, tpl, seen, spans, ns, pow10):  # pragma: no cover - compiled
     """Detections from ``buf[i]`` (row ``r`` on) read as the first one's template ``tpl`` (the same constant text
     byte for byte: the same keys in the same order, the same spacing), as long as they follow it: ``(i, r, ns,
-    stopped)`` -- the index after the last one read (and its separator), the next row, the numbers' spans so
-    far (``spans (ns, 4)``: start, end, row, key; :func:`_read_numbers` reads them) and whether a detection did
-    not follow the template (it opens at ``i``: read it in full).  One loop without calls (a compiled call per
-    value, or per inlined helper taking the text, costs ~10 ns in reference counting: more than its work)."""
+    stopped)`` -- the index after the last one read (and its separator), the next row, the spans of the numbers
+    left to :func:`_read_numbers` (``spans (ns, 4)``: start, end, row, key) and whether a detection did not
+    follow the template (it opens at ``i``: read it in full).  One loop without calls (a compiled call per
+    value, or per inlined helper taking the text, costs ~10 ns in reference counting: more than its work).
+
+    The constant text is compared 8 bytes at a time.  A number of at most 18 digits, without exponent, whose
+    next byte cannot continue a number is read here, in the same pass: an integer, or ``m / 10^f`` with
+    ``m <= 2^53`` and ``f <= 22`` fraction digits (Clinger's exact case, one correctly rounded division by an
+    exact power of ten), the double :func:`_read_numbers` gives; any other (an exponent, more digits, not in
+    the exact subset or not JSON) goes by its span to :func:`_read_numbers`, which reads it or declines."""
     n = buf.shape[0]
     nv = tpl[10, 2]
     while r < iv.shape[0]:
@@ -307,28 +331,69 @@ def _templated_run(buf, i, r, iv, tpl, seen, spans, ns):  # pragma: no cover - c
         for j in range(nv + 1):
             s = tpl[j, 0]
             L = tpl[j, 1] - s
-            d = 0 if i + L <= n else 1
-            for q in range(L if d == 0 else 0):
-                d |= buf[i + q] ^ buf[s + q]
+            if i + L > n:
+                good = False
+                break
+            d = np.uint64(0)
+            q = 0
+            while q + 8 <= L:
+                d |= _load8(buf, i + q) ^ _load8(buf, s + q)
+                q += 8
+            if L >= 8:  # the tail: the last 8 bytes (overlapping the words above)
+                d |= _load8(buf, i + L - 8) ^ _load8(buf, s + L - 8)
+            else:
+                for t in range(q, L):
+                    d |= np.uint64(buf[i + t] ^ buf[s + t])
             if d != 0:
                 good = False
                 break
             i += L
             if j == nv:
                 break
+            k = tpl[j, 2]
             e = i
-            if tpl[j, 2] == _K_CLASS:  # a plain string up to its closing quote
+            if k == _K_CLASS:  # a plain string up to its closing quote
                 while e < n and buf[e] != 34 and buf[e] != 92 and buf[e] >= 32:
                     e += 1
                 if e >= n or buf[e] != 34:
                     good = False
                     break
                 iv[r, 1], iv[r, 2] = i, e
-            else:  # a number's extent (its grammar: _read_numbers)
+                i = e
+                continue
+            neg = e < n and buf[e] == 45
+            e += 1 if neg else 0
+            st = e
+            m = 0
+            while e < n and 48 <= buf[e] <= 57 and e - st < 18:  # (18 digits: m < 10^18, no int64 wrap)
+                m = m * 10 + (np.int64(buf[e]) - 48)
+                e += 1
+            n_int = e - st
+            n_frac = -1  # (no point)
+            if e < n and buf[e] == 46:
+                e += 1
+                fs = e
+                while e < n and 48 <= buf[e] <= 57 and e - fs + n_int < 18:
+                    m = m * 10 + (np.int64(buf[e]) - 48)
+                    e += 1
+                n_frac = e - fs
+            c = buf[e] if e < n else np.uint8(32)
+            fast = (1 <= n_int and (n_int == 1 or buf[st] != 48) and n_frac != 0 and n_int + max(n_frac, 0) <= 18
+                    and not (48 <= c <= 57 or c == 46 or c == 101 or c == 69 or c == 43 or c == 45))
+            if fast and n_frac < 0:  # an integer
+                if k == _K_OBJECT_ID:
+                    iv[r, 0] = -m if neg else m
+                else:
+                    fv[r, k] = float(-m if neg else m)
+            elif fast and k != _K_OBJECT_ID and m <= 9007199254740992 and n_frac <= 22:
+                v = float(m) / pow10[n_frac]
+                fv[r, k] = -v if neg else v
+            else:  # the number's extent (its grammar and value: _read_numbers)
+                e = i
                 while e < n and (48 <= buf[e] <= 57 or buf[e] == 45 or buf[e] == 43 or buf[e] == 46
                                  or buf[e] == 101 or buf[e] == 69):
                     e += 1
-                spans[ns, 0], spans[ns, 1], spans[ns, 2], spans[ns, 3] = i, e, r, tpl[j, 2]
+                spans[ns, 0], spans[ns, 1], spans[ns, 2], spans[ns, 3] = i, e, r, k
                 ns += 1
             i = e
         if not good:
@@ -421,7 +486,8 @@ def _detections(buf, i, fv, iv, pow10, dk, dk_at):  # pragma: no cover - compile
         r += 1
         i = _ws(buf, i)
         if i < buf.shape[0] and buf[i] == 44:
-            i, r, ns, stopped = _templated_run(buf, _ws(buf, i + 1), r, iv, tpl, iv[0, 3], spans, ns)
+            i, r, ns, stopped = _templated_run(buf, _ws(buf, i + 1), r, fv, iv, tpl, iv[0, 3], spans, ns,
+                                                 pow10)
             if stopped:
                 continue  # (a detection that does not follow the template, or no room: read in full)
         if i >= buf.shape[0] or buf[i] != 93 or not _read_numbers(buf, spans[:ns], fv, iv, pow10):
