@@ -35,9 +35,9 @@ import math
 from typing import NamedTuple
 
 import numpy as np
-from llvmlite import ir as llvm_ir
-from numba import njit, types
-from numba.extending import intrinsic
+from numba import njit
+
+from .bytewords import load8
 
 __all__ = ["ScannedFrame", "scan_frame"]
 
@@ -292,22 +292,6 @@ def _detection(buf, i, r, fv, iv, pow10, dk, dk_at, tpl):  # pragma: no cover - 
         i = _ws(buf, i + 1)
 
 
-@intrinsic
-def _load8(typingctx, buf, at):
-    """The 8 bytes ``buf[at:at + 8]`` as one uint64 (an unaligned load; the callers guarantee the bounds), for
-    comparing constant text a word at a time."""
-    if not (isinstance(buf, types.Array) and buf.ndim == 1 and buf.layout == "C" and buf.dtype == types.uint8):
-        return None  # (no typing: only C-contiguous byte arrays, whose data pointer is the first byte)
-
-    def codegen(context, builder, signature, args):
-        a, i = args
-        data = context.make_array(signature.args[0])(context, builder, a).data
-        word = builder.bitcast(builder.gep(data, [i]), llvm_ir.IntType(64).as_pointer())
-        return builder.load(word, align=1)
-
-    return types.uint64(buf, types.intp), codegen
-
-
 @njit(cache=True, nogil=True)
 def _templated_run(buf, i, r, fv, iv, tpl, seen, spans, ns, pow10):  # pragma: no cover - compiled
     """Detections from ``buf[i]`` (row ``r`` on) read as the first one's template ``tpl`` (the same constant text
@@ -337,10 +321,10 @@ def _templated_run(buf, i, r, fv, iv, tpl, seen, spans, ns, pow10):  # pragma: n
             d = np.uint64(0)
             q = 0
             while q + 8 <= L:
-                d |= _load8(buf, i + q) ^ _load8(buf, s + q)
+                d |= load8(buf, i + q) ^ load8(buf, s + q)
                 q += 8
             if L >= 8:  # the tail: the last 8 bytes (overlapping the words above)
-                d |= _load8(buf, i + L - 8) ^ _load8(buf, s + L - 8)
+                d |= load8(buf, i + L - 8) ^ load8(buf, s + L - 8)
             else:
                 for t in range(q, L):
                     d |= np.uint64(buf[i + t] ^ buf[s + t])
@@ -600,6 +584,18 @@ def _columns(fv, iv):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
+def _scan_columns(buf, pow10, fk, fk_at, dk, dk_at):  # pragma: no cover - compiled
+    """:func:`_scan` and :func:`_columns` in one call (one dispatch, the rows not boxed in between): ``(ok, head,
+    timestamp_s, boxes (n, 4), pixel covariances (n, 2, 2), ids (n,), class confidences (n,), has_cov, has_conf,
+    iv (n, 4), class_first (n,))``; ``ok`` False: not in the subset, a frame field missing or not the common
+    layout (:func:`scan_frame` then declines)."""
+    ok, head, ts, fv, iv, first = _scan(buf, pow10, fk, fk_at, dk, dk_at)
+    ok &= head[4] == 0b1111  # (a frame field missing: the general path's frame error)
+    good, boxes, cov, ids, has_cov, has_conf = _columns(fv, iv)
+    return ok and good, head, ts, boxes, cov, ids, fv[:, 7].copy(), has_cov, has_conf, iv, first
+
+
+@njit(cache=True, nogil=True)
 def _class_first(buf, iv):  # pragma: no cover - compiled
     """Per detection, the first detection whose class text is the same bytes (-1: no class)."""
     n = iv.shape[0]
@@ -650,10 +646,8 @@ def scan_frame(text) -> ScannedFrame | None:
     buf = np.frombuffer(text, np.uint8)
     if buf.size == 0:
         return None
-    ok, head, ts, fv, iv, first = _scan(buf, _POW10, _FK, _FK_AT, _DK, _DK_AT)
-    if not ok or head[4] != 0b1111:  # (a frame field missing: the general path's frame error)
-        return None
-    ok, boxes, cov, ids, has_cov, has_conf = _columns(fv, iv)
+    ok, head, ts, boxes, cov, ids, conf, has_cov, has_conf, iv, first = _scan_columns(buf, _POW10, _FK, _FK_AT, _DK,
+                                                                                      _DK_AT)
     if not ok:
         return None
     raw = text if type(text) is bytes else bytes(buf)  # (decoded only where a string is)
@@ -667,7 +661,7 @@ def scan_frame(text) -> ScannedFrame | None:
         if not math.isfinite(ts):
             return None
     return ScannedFrame(camera, int(head[3]), ts, boxes, cov if has_cov else None, ids.tolist(), classes,
-                        fv[:, 7].copy() if has_conf else None)
+                        conf if has_conf else None)
 
 
 def _classes(raw: bytes, iv: np.ndarray, first: np.ndarray) -> list:
