@@ -293,6 +293,17 @@ def _detection(buf, i, r, fv, iv, pow10, dk, dk_at, tpl):  # pragma: no cover - 
 
 
 @njit(cache=True, nogil=True)
+def _number_chars_end(buf, i):  # pragma: no cover - compiled
+    """The end of the run of bytes from ``buf[i]`` that a number's text can hold (digits, signs, point,
+    exponent): the span :func:`_read_numbers` reads or declines."""
+    n = buf.shape[0]
+    while i < n and (48 <= buf[i] <= 57 or buf[i] == 45 or buf[i] == 43 or buf[i] == 46 or buf[i] == 101
+                     or buf[i] == 69):
+        i += 1
+    return i
+
+
+@njit(cache=True, nogil=True)
 def _templated_run(buf, i, r, fv, iv, tpl, seen, spans, ns, pow10):  # pragma: no cover - compiled
     """Detections from ``buf[i]`` (row ``r`` on) read as the first one's template ``tpl`` (the same constant text
     byte for byte: the same keys in the same order, the same spacing), as long as they follow it: ``(i, r, ns,
@@ -318,8 +329,7 @@ def _templated_run(buf, i, r, fv, iv, tpl, seen, spans, ns, pow10):  # pragma: n
             if i + L > n:
                 good = False
                 break
-            d = np.uint64(0)
-            q = 0
+            d, q = np.uint64(0), 0
             while q + 8 <= L:
                 d |= load8(buf, i + q) ^ load8(buf, s + q)
                 q += 8
@@ -352,8 +362,7 @@ def _templated_run(buf, i, r, fv, iv, tpl, seen, spans, ns, pow10):  # pragma: n
             while e < n and 48 <= buf[e] <= 57 and e - st < 18:  # (18 digits: m < 10^18, no int64 wrap)
                 m = m * 10 + (np.int64(buf[e]) - 48)
                 e += 1
-            n_int = e - st
-            n_frac = -1  # (no point)
+            n_int, n_frac = e - st, -1  # (n_frac -1: no point)
             if e < n and buf[e] == 46:
                 e += 1
                 fs = e
@@ -373,10 +382,7 @@ def _templated_run(buf, i, r, fv, iv, tpl, seen, spans, ns, pow10):  # pragma: n
                 v = float(m) / pow10[n_frac]
                 fv[r, k] = -v if neg else v
             else:  # the number's extent (its grammar and value: _read_numbers)
-                e = i
-                while e < n and (48 <= buf[e] <= 57 or buf[e] == 45 or buf[e] == 43 or buf[e] == 46
-                                 or buf[e] == 101 or buf[e] == 69):
-                    e += 1
+                e = _number_chars_end(buf, i)
                 spans[ns, 0], spans[ns, 1], spans[ns, 2], spans[ns, 3] = i, e, r, k
                 ns += 1
             i = e
