@@ -41,7 +41,7 @@ from bench_service import make_detections
 from footprint_uq.service import core, frame_scan, jsonrows
 
 ROOT = Path(__file__).resolve().parent.parent
-REF = "10ea4e08"  # main before wave 8c (the kernels as they were)
+REF = "10ea4e0d"  # main before wave 8c (the kernels as they were)
 _NUMPY = orjson.OPT_SERIALIZE_NUMPY
 
 
