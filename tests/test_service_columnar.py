@@ -125,6 +125,30 @@ def test_compact_writer_pins_a_hand_written_tracked_row():
                              np.zeros((5, 2)), None, np.array([1, 2]))
 
 
+@pytest.mark.parametrize("tracked, n, position_n, motion_n", [
+    (False, 2, 2, 0), (False, 2, 1, 0), (False, 2, 3, 0), (False, 1, 0, 0), (True, 2, 2, 2), (True, 2, 2, 1),
+    (True, 2, 2, 3), (True, 2, 1, 2), (True, 2, 3, 3), (True, 1, 1, 0)])
+def test_compact_kernel_refuses_columns_of_another_length(tracked, n, position_n, motion_n):
+    """orjson's text of float columns of another length than the ids (a value short or one too many in every
+    column, only in the motion's five, empty columns) is refused (empty), not woven out of step; right lengths
+    are written."""
+    from footprint_uq.service import jsonrows
+
+    rows = [[1.5] * position_n] * 5 + ([[2.5] * motion_n] * 5 if tracked else [])
+    ftext = np.frombuffer(orjson.dumps(rows), np.uint8)
+    ids = np.arange(n, dtype=np.int64)
+    zeros = np.zeros(n, np.int64)
+    cb, ca = jsonrows._text_table([b"null"])
+    sb, sa = jsonrows._text_table([b""])
+    out = jsonrows._compact_rows(ftext, ids, zeros, cb, ca, zeros, sb, sa, ids, False, ids, tracked,
+                                 jsonrows._COMPACT_LIT, jsonrows._COMPACT_AT, 4096)
+    right = position_n == n and (motion_n == n or not tracked)
+    assert (len(out) > 0) == right
+    if not tracked and not right:
+        with pytest.raises(ValueError, match=f"not 5 x {n} numbers"):
+            compact_objects_json(ids, zeros, [b"null"], zeros, [b""], np.ones((5, position_n)))
+
+
 _CLASSES = ("car", "pedestrian", "truck", "Bicycle", "unknown")
 
 

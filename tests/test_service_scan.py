@@ -99,6 +99,92 @@ def test_numbers_pinned(text, value):
         assert got == value and math.copysign(1.0, got) == math.copysign(1.0, value)
 
 
+_JSON_NUMBER = re.compile(rb"-?(0|[1-9][0-9]*)(\.([0-9]+))?([eE]([+-]?)([0-9]+))?")
+
+
+def _exact_subset(text: bytes):
+    """What the reader must give for a detection's number: its double where the text is in the exact subset
+    (module doc: JSON's grammar, at most 18 significant digits; with a point or an exponent, a mantissa up to
+    2^53 scaled by at most 10^22), None (declined) elsewhere -- written from the doc, not from the reader."""
+    g = _JSON_NUMBER.fullmatch(text)
+    if g is None:
+        return None
+    whole, frac, exp = g[1], g[3] or b"", g[6]
+    if len((whole + frac).lstrip(b"0")) > 18:
+        return None
+    if g[2] is None and g[4] is None:
+        return float(int(text))
+    e10 = (int(exp) if g[5] != b"-" else -int(exp)) if g[4] else 0
+    if int(whole + frac) > 2 ** 53 or abs(e10 - len(frac)) > 22:
+        return None
+    return float(text)  # (Python's correctly rounded double: the exact subset's one operation gives it)
+
+
+def _scan_number_at(text: bytes, key: bytes):
+    """``text`` as the value of ``key`` (followed by ``,`` or ``}``) in the first detection (read in full) and in
+    the second (by the first one's template); both readings must agree."""
+    keys = (b"u_min_px", b"v_min_px", b"u_max_px", b"v_max_px")
+    det = b"{" + b",".join(b'"%s":%s' % (k, b"%s" if k == key else b"2") for k in keys) + b"}"
+    col = keys.index(key)
+    got = []
+    for row, dets in ((0, det % text + b"," + det % b"7"), (1, det % b"7" + b"," + det % text)):
+        s = scan_frame(b'{"camera_id":"c","frame":1,"timestamp_s":0,"detections":[%s]}' % dets)
+        got.append(None if s is None else s.boxes[row, col])
+    assert got[0] is got[1] is None or (None not in got and np.float64(got[0]).tobytes() ==
+                                        np.float64(got[1]).tobytes()), (text, got)  # (bit for bit: -0.0 too)
+    return got[0]
+
+
+_DIGITS = st.text("0123456789", max_size=22)
+
+
+@settings(max_examples=500, deadline=None)
+@given(st.sampled_from([b"", b"-"]), st.text("0123456789", min_size=1, max_size=22), st.none() | _DIGITS,
+       st.none() | st.tuples(st.sampled_from([b"e", b"E"]), st.sampled_from([b"", b"+", b"-"]),
+                             st.text("0123456789", max_size=4)),
+       st.sampled_from([b"u_min_px", b"v_max_px"]))
+def test_decimal_texts_of_every_length(sign, whole, frac, exp, key):
+    """Digit strings across the reader's limits (18 digits, 2^53, 22 places, leading zeros, a point or an exponent
+    without digits): read exactly where the exact subset holds them (orjson's double), declined elsewhere."""
+    text = sign + whole.encode() + (b"" if frac is None else b"." + frac.encode())
+    if exp is not None:
+        text += exp[0] + exp[1] + exp[2].encode()
+    want = _exact_subset(text)
+    got = _scan_number_at(text, key)
+    if want is None:
+        assert got is None, text
+    else:
+        assert got == want == float(orjson.loads(text)), text
+        assert math.copysign(1.0, got) == math.copysign(1.0, want), text
+
+
+@pytest.mark.parametrize("text", [
+    b"123456789012345678", b"1234567890123456789", b"12345678901234567.8", b"1234567890123456.78",
+    b"0.000000000000000000001234567890123456", b"0.00000000000000000000001", b"-0", b"-0.0", b"0.5e1", b"5.",
+    b"9007199254740993.0", b"9007199254740992.0", b"-1.25-", b"1.2.3", b"1e+", b"12e3", b"00.5", b"4.500000"])
+def test_decimal_texts_pinned(text):
+    """The fast reading's edges in both places of a detection: as the exact subset says (see above)."""
+    for key in (b"u_min_px", b"v_max_px"):
+        want, got = _exact_subset(text), _scan_number_at(text, key)
+        assert (got is None) if want is None else (got == want and math.copysign(1.0, got) ==
+                                                   math.copysign(1.0, want)), (text, got, want)
+
+
+def test_every_byte_of_a_templated_detections_constant_text_is_compared():
+    """A later detection read by the first one's template (its keys, quotes, colons, commas, spacing compared
+    8 bytes at a time): any one byte of that text changed (to ``Q``: an unknown key or not JSON) is not read as
+    the template -- the frame is declined, never read with the first detection's keys."""
+    det = (b'{"object_id": %d, "class":"car","u_min_px":1.5, "v_min_px" :2,"u_max_px":30.25,"v_max_px":40,'
+           b'"cov_uu_px2":4.0,"cov_uv_px2":0.5,"cov_vv_px2":9.0,"class_confidence":0.75}')
+    head = b'{"camera_id":"c","frame":1,"timestamp_s":0,"detections":['
+    second = det % 2
+    assert scan_frame(head + det % 1 + b"," + second + b"," + det % 3 + b"]}") is not None
+    values = {m.start() + k for m in re.finditer(rb"[0-9.]+|car", second) for k in range(m.end() - m.start())}
+    for p in sorted(set(range(len(second))) - values):
+        bad = second[:p] + b"Q" + second[p + 1:]
+        assert scan_frame(head + det % 1 + b"," + bad + b"," + det % 3 + b"]}") is None, bad
+
+
 @pytest.mark.parametrize("text", [b"1714564800.0333333", b"1764329048.1234567", b"1e23", b"1.5", b"-2", b"1e-400"])
 def test_timestamp_of_full_precision(text):
     """The time stamp (17 digits from ``json.dumps(time.time())``) beyond the exact subset: Python's float of its

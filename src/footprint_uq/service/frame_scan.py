@@ -37,6 +37,8 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
+from .bytewords import load8
+
 __all__ = ["ScannedFrame", "scan_frame"]
 
 # the keys (as bytes) this pass knows; detections' keys are numbered for their bit in the seen mask
@@ -291,13 +293,30 @@ def _detection(buf, i, r, fv, iv, pow10, dk, dk_at, tpl):  # pragma: no cover - 
 
 
 @njit(cache=True, nogil=True)
-def _templated_run(buf, i, r, iv, tpl, seen, spans, ns):  # pragma: no cover - compiled
+def _number_chars_end(buf, i):  # pragma: no cover - compiled
+    """The end of the run of bytes from ``buf[i]`` that a number's text can hold (digits, signs, point,
+    exponent): the span :func:`_read_numbers` reads or declines."""
+    n = buf.shape[0]
+    while i < n and (48 <= buf[i] <= 57 or buf[i] == 45 or buf[i] == 43 or buf[i] == 46 or buf[i] == 101
+                     or buf[i] == 69):
+        i += 1
+    return i
+
+
+@njit(cache=True, nogil=True)
+def _templated_run(buf, i, r, fv, iv, tpl, seen, spans, ns, pow10):  # pragma: no cover - compiled
     """Detections from ``buf[i]`` (row ``r`` on) read as the first one's template ``tpl`` (the same constant text
     byte for byte: the same keys in the same order, the same spacing), as long as they follow it: ``(i, r, ns,
-    stopped)`` -- the index after the last one read (and its separator), the next row, the numbers' spans so
-    far (``spans (ns, 4)``: start, end, row, key; :func:`_read_numbers` reads them) and whether a detection did
-    not follow the template (it opens at ``i``: read it in full).  One loop without calls (a compiled call per
-    value, or per inlined helper taking the text, costs ~10 ns in reference counting: more than its work)."""
+    stopped)`` -- the index after the last one read (and its separator), the next row, the spans of the numbers
+    left to :func:`_read_numbers` (``spans (ns, 4)``: start, end, row, key) and whether a detection did not
+    follow the template (it opens at ``i``: read it in full).  One loop without calls (a compiled call per
+    value, or per inlined helper taking the text, costs ~10 ns in reference counting: more than its work).
+
+    The constant text is compared 8 bytes at a time.  A number of at most 18 digits, without exponent, whose
+    next byte cannot continue a number is read here, in the same pass: an integer, or ``m / 10^f`` with
+    ``m <= 2^53`` and ``f <= 22`` fraction digits (Clinger's exact case, one correctly rounded division by an
+    exact power of ten), the double :func:`_read_numbers` gives; any other (an exponent, more digits, not in
+    the exact subset or not JSON) goes by its span to :func:`_read_numbers`, which reads it or declines."""
     n = buf.shape[0]
     nv = tpl[10, 2]
     while r < iv.shape[0]:
@@ -307,28 +326,64 @@ def _templated_run(buf, i, r, iv, tpl, seen, spans, ns):  # pragma: no cover - c
         for j in range(nv + 1):
             s = tpl[j, 0]
             L = tpl[j, 1] - s
-            d = 0 if i + L <= n else 1
-            for q in range(L if d == 0 else 0):
-                d |= buf[i + q] ^ buf[s + q]
+            if i + L > n:
+                good = False
+                break
+            d, q = np.uint64(0), 0
+            while q + 8 <= L:
+                d |= load8(buf, i + q) ^ load8(buf, s + q)
+                q += 8
+            if L >= 8:  # the tail: the last 8 bytes (overlapping the words above)
+                d |= load8(buf, i + L - 8) ^ load8(buf, s + L - 8)
+            else:
+                for t in range(q, L):
+                    d |= np.uint64(buf[i + t] ^ buf[s + t])
             if d != 0:
                 good = False
                 break
             i += L
             if j == nv:
                 break
+            k = tpl[j, 2]
             e = i
-            if tpl[j, 2] == _K_CLASS:  # a plain string up to its closing quote
+            if k == _K_CLASS:  # a plain string up to its closing quote
                 while e < n and buf[e] != 34 and buf[e] != 92 and buf[e] >= 32:
                     e += 1
                 if e >= n or buf[e] != 34:
                     good = False
                     break
                 iv[r, 1], iv[r, 2] = i, e
-            else:  # a number's extent (its grammar: _read_numbers)
-                while e < n and (48 <= buf[e] <= 57 or buf[e] == 45 or buf[e] == 43 or buf[e] == 46
-                                 or buf[e] == 101 or buf[e] == 69):
+                i = e
+                continue
+            neg = e < n and buf[e] == 45
+            e += 1 if neg else 0
+            st = e
+            m = 0
+            while e < n and 48 <= buf[e] <= 57 and e - st < 18:  # (18 digits: m < 10^18, no int64 wrap)
+                m = m * 10 + (np.int64(buf[e]) - 48)
+                e += 1
+            n_int, n_frac = e - st, -1  # (n_frac -1: no point)
+            if e < n and buf[e] == 46:
+                e += 1
+                fs = e
+                while e < n and 48 <= buf[e] <= 57 and e - fs + n_int < 18:
+                    m = m * 10 + (np.int64(buf[e]) - 48)
                     e += 1
-                spans[ns, 0], spans[ns, 1], spans[ns, 2], spans[ns, 3] = i, e, r, tpl[j, 2]
+                n_frac = e - fs
+            c = buf[e] if e < n else np.uint8(32)
+            fast = (1 <= n_int and (n_int == 1 or buf[st] != 48) and n_frac != 0 and n_int + max(n_frac, 0) <= 18
+                    and not (48 <= c <= 57 or c == 46 or c == 101 or c == 69 or c == 43 or c == 45))
+            if fast and n_frac < 0:  # an integer
+                if k == _K_OBJECT_ID:
+                    iv[r, 0] = -m if neg else m
+                else:
+                    fv[r, k] = float(-m if neg else m)
+            elif fast and k != _K_OBJECT_ID and m <= 9007199254740992 and n_frac <= 22:
+                v = float(m) / pow10[n_frac]
+                fv[r, k] = -v if neg else v
+            else:  # the number's extent (its grammar and value: _read_numbers)
+                e = _number_chars_end(buf, i)
+                spans[ns, 0], spans[ns, 1], spans[ns, 2], spans[ns, 3] = i, e, r, k
                 ns += 1
             i = e
         if not good:
@@ -421,7 +476,8 @@ def _detections(buf, i, fv, iv, pow10, dk, dk_at):  # pragma: no cover - compile
         r += 1
         i = _ws(buf, i)
         if i < buf.shape[0] and buf[i] == 44:
-            i, r, ns, stopped = _templated_run(buf, _ws(buf, i + 1), r, iv, tpl, iv[0, 3], spans, ns)
+            i, r, ns, stopped = _templated_run(buf, _ws(buf, i + 1), r, fv, iv, tpl, iv[0, 3], spans, ns,
+                                                 pow10)
             if stopped:
                 continue  # (a detection that does not follow the template, or no room: read in full)
         if i >= buf.shape[0] or buf[i] != 93 or not _read_numbers(buf, spans[:ns], fv, iv, pow10):
@@ -534,6 +590,18 @@ def _columns(fv, iv):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
+def _scan_columns(buf, pow10, fk, fk_at, dk, dk_at):  # pragma: no cover - compiled
+    """:func:`_scan` and :func:`_columns` in one call (one dispatch, the rows not boxed in between): ``(ok, head,
+    timestamp_s, boxes (n, 4), pixel covariances (n, 2, 2), ids (n,), class confidences (n,), has_cov, has_conf,
+    iv (n, 4), class_first (n,))``; ``ok`` False: not in the subset, a frame field missing or not the common
+    layout (:func:`scan_frame` then declines)."""
+    ok, head, ts, fv, iv, first = _scan(buf, pow10, fk, fk_at, dk, dk_at)
+    ok &= head[4] == 0b1111  # (a frame field missing: the general path's frame error)
+    good, boxes, cov, ids, has_cov, has_conf = _columns(fv, iv)
+    return ok and good, head, ts, boxes, cov, ids, fv[:, 7].copy(), has_cov, has_conf, iv, first
+
+
+@njit(cache=True, nogil=True)
 def _class_first(buf, iv):  # pragma: no cover - compiled
     """Per detection, the first detection whose class text is the same bytes (-1: no class)."""
     n = iv.shape[0]
@@ -584,10 +652,8 @@ def scan_frame(text) -> ScannedFrame | None:
     buf = np.frombuffer(text, np.uint8)
     if buf.size == 0:
         return None
-    ok, head, ts, fv, iv, first = _scan(buf, _POW10, _FK, _FK_AT, _DK, _DK_AT)
-    if not ok or head[4] != 0b1111:  # (a frame field missing: the general path's frame error)
-        return None
-    ok, boxes, cov, ids, has_cov, has_conf = _columns(fv, iv)
+    ok, head, ts, boxes, cov, ids, conf, has_cov, has_conf, iv, first = _scan_columns(buf, _POW10, _FK, _FK_AT, _DK,
+                                                                                      _DK_AT)
     if not ok:
         return None
     raw = text if type(text) is bytes else bytes(buf)  # (decoded only where a string is)
@@ -601,7 +667,7 @@ def scan_frame(text) -> ScannedFrame | None:
         if not math.isfinite(ts):
             return None
     return ScannedFrame(camera, int(head[3]), ts, boxes, cov if has_cov else None, ids.tolist(), classes,
-                        fv[:, 7].copy() if has_conf else None)
+                        conf if has_conf else None)
 
 
 def _classes(raw: bytes, iv: np.ndarray, first: np.ndarray) -> list:

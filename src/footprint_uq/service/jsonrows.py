@@ -18,6 +18,8 @@ from numba import njit, types
 from numba.core import cgutils
 from numba.extending import intrinsic
 
+from .bytewords import first_of_two, load8, store8
+
 __all__ = ["Table", "compact_objects_json"]
 
 _NUMPY = orjson.OPT_SERIALIZE_NUMPY
@@ -281,28 +283,63 @@ def _put_id(out, p, v, null_src, a, b):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
-def _split_values(ftext, nv):  # pragma: no cover - compiled
-    """Start and end of the values in orjson's text of a float array (numbers and ``null`` only: no string, no
-    object) and how many there are (at most ``nv`` are recorded)."""
-    starts = np.empty(nv, np.int64)
-    ends = np.empty(nv, np.int64)
-    t = 0
-    i = 0
+def _column_bounds(ftext, nf):  # pragma: no cover - compiled
+    """Where the ``nf`` inner arrays of orjson's text of a float array ``(nf, n)`` (numbers and ``null`` only)
+    begin and end: ``(first (nf,), close (nf,), ok)`` -- per column the index of its first value and of its
+    ``]``; ``ok`` False: the text is not ``nf`` non-empty arrays in one.  The ``]`` is searched 8 bytes at a
+    time."""
+    first = np.zeros(nf, np.int64)
+    close = np.zeros(nf, np.int64)
     L = ftext.shape[0]
-    while i < L:
-        c = ftext[i]
-        if c == 91 or c == 93 or c == 44:
-            i += 1
-            continue
-        s = i
+    i = 1
+    if L < 2 or ftext[0] != 91:
+        return first, close, False
+    for k in range(nf):
+        if i + 1 >= L or ftext[i] != 91 or ftext[i + 1] == 93:
+            return first, close, False
         i += 1
-        while ftext[i] != 44 and ftext[i] != 93:
+        first[k] = i
+        while i + 8 <= L:
+            f = first_of_two(load8(ftext, i), _RBRACKETS, _RBRACKETS)
+            i += f
+            if f < 8:
+                break
+        while i < L and ftext[i] != 93:
             i += 1
-        if t < nv:
-            starts[t] = s
-            ends[t] = i
-        t += 1
-    return starts, ends, t
+        if i >= L:
+            return first, close, False
+        close[k] = i
+        i += 1
+        if k + 1 < nf:
+            if i >= L or ftext[i] != 44:
+                return first, close, False
+            i += 1
+    return first, close, i == L - 1 and ftext[i] == 93
+
+
+_COMMAS = np.uint64(0x2C2C2C2C2C2C2C2C)
+_RBRACKETS = np.uint64(0x5D5D5D5D5D5D5D5D)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _put_value(out, p, ftext, c):  # pragma: no cover - compiled
+    """The value at ``ftext[c]`` (up to the next ``,`` or ``]``) at ``out[p]``, searched and copied 8 bytes at a
+    time (``out`` keeps 8 bytes of room: a word's bytes past the value are overwritten next): ``(p, c)`` after
+    it -- ``ftext[c]`` is then its ``,`` or ``]``."""
+    L = ftext.shape[0]
+    while c + 8 <= L:
+        w = load8(ftext, c)
+        store8(out, p, w)
+        f = first_of_two(w, _COMMAS, _RBRACKETS)
+        p += f
+        c += f
+        if f < 8:
+            return p, c
+    while ftext[c] != 44 and ftext[c] != 93:  # (the text's last bytes: it ends with "]]")
+        out[p] = ftext[c]
+        p += 1
+        c += 1
+    return p, c
 
 
 @njit(cache=True, nogil=True)
@@ -312,15 +349,20 @@ def _compact_rows(ftext, ids, cls_idx, cls_buf, cls_at, st_idx, st_buf, st_at, m
     ``lit[at[k]:at[k + 1]]`` (:data:`_COMPACT_PIECES`) around the id, the class and status texts of the row's
     entries in their tables, the five float values (``ftext``: orjson's text of the (5, n) array, or (10, n) with
     the motion), the motion (``with_motion``: the track id, negative: null, and the five motion values) and the
-    message id (``with_mid``; negative: null).  Empty: ``ftext`` does not hold 5 n (10 n) values."""
+    message id (``with_mid``; negative: null).  Empty: ``ftext`` does not hold 5 n (10 n) values.
+
+    One pass: a cursor per column of ``ftext`` (:func:`_column_bounds`) copies the row's value of that column
+    straight into place (:func:`_put_value`); the column's ``n``-th value must end at its ``]``, the others
+    before it."""
     n = ids.shape[0]
     nf = 10 if with_motion else 5
-    starts, ends, t = _split_values(ftext, nf * n)
-    if t != nf * n:
+    cur, close, ok = _column_bounds(ftext, nf)
+    if not ok:
         return np.zeros(0, np.uint8)
-    out = np.empty(size, np.uint8)
+    out = np.empty(size + 8, np.uint8)  # (8 bytes of room for the word copies)
     out[0] = 91
     p = 1
+    s_xy = e_xy = 0
     for r in range(n):
         if r:
             out[p] = 44
@@ -332,18 +374,23 @@ def _compact_rows(ftext, ids, cls_idx, cls_buf, cls_at, st_idx, st_buf, st_at, m
         p = _put_span(out, p, cls_buf, cls_at[j], cls_at[j + 1])
         j = st_idx[r]
         p = _put_span(out, p, st_buf, st_at[j], st_at[j + 1])
-        for k in range(6):  # x, y, cxx, cxy, cxy, cyy after their texts
-            p = _put_span(out, p, lit, at[2 + k], at[3 + k])
-            v = (k if k < 4 else k - 1) * n + r
-            p = _put_span(out, p, ftext, starts[v], ends[v])
-        p = _put_span(out, p, lit, at[8], at[9])
-        if with_motion:
-            p = _put_span(out, p, lit, at[12], at[13])
-            p = _put_id(out, p, tid[r], lit, at[11], at[12])
-            for k in range(6):  # v_east, v_north, cvv_ee, cvv_en, cvv_en, cvv_nn after their texts
-                p = _put_span(out, p, lit, at[13 + k], at[14 + k])
-                v = (5 + (k if k < 4 else k - 1)) * n + r
-                p = _put_span(out, p, ftext, starts[v], ends[v])
+        last = r == n - 1
+        for g in range(2 if with_motion else 1):  # the position (x, y, cov), then the motion (v, cov_v)
+            if g:
+                p = _put_span(out, p, lit, at[12], at[13])
+                p = _put_id(out, p, tid[r], lit, at[11], at[12])
+            base, t0 = 5 * g, 2 + 11 * g  # (the motion's texts: at[13..18], then "]]" at[8])
+            for k in range(6):  # x, y, cxx, cxy, cxy, cyy (v_east, v_north, cvv_ee, cvv_en, cvv_en, cvv_nn)
+                p = _put_span(out, p, lit, at[t0 + k], at[t0 + 1 + k])
+                if k == 4:  # the off-diagonal once more: the span just written
+                    p = _put_span(out, p, ftext, s_xy, e_xy)
+                    continue
+                q = base + (k if k < 4 else k - 1)
+                s_xy = cur[q]
+                p, e_xy = _put_value(out, p, ftext, s_xy)
+                if (e_xy == close[q]) != last:  # (a column with more or fewer than n values)
+                    return np.zeros(0, np.uint8)
+                cur[q] = e_xy + 1
             p = _put_span(out, p, lit, at[8], at[9])
         if with_mid:
             p = _put_span(out, p, lit, at[9], at[10])
