@@ -114,18 +114,19 @@ def _render(prm, dom, has_dist, k, q, ol, ow, oh, d0, d1, d2):
 
 
 @nb.njit(**_INL)
-def _ground(prm, R, dom, has_dist, k, u, v, du, dv, x0, y0):
+def _ground(prm, R, dom, has_dist, k, ifx, ify, u, v, du, dv, x0, y0):
     """The ground point (x, y) (m, frame W) of pixel (u, v), its rate (m/s) for a pixel moving at (du, dv) px/s,
     and whether it has one (the ray meets the ground plane in front of the camera; a distorting lens inverts
     there, its Newton steps started from the undistorted normalised point (x0, y0) when that is in the lens's
-    domain: the same root to rounding from any start, ``core.undistort_point``)."""
+    domain: the same root to rounding from any start, ``core.undistort_point``); ``ifx``, ``ify``: ``1 / f_x``,
+    ``1 / f_y`` (1/px, computed once per call: a division per node less)."""
     nan = math.nan
     if not (math.isfinite(u) and math.isfinite(v)):
         return nan, nan, nan, nan, False
-    yd = (v - prm[P.CY]) / prm[P.FY]
-    xd = (u - prm[P.CX] - prm[P.SKEW] * yd) / prm[P.FX]
-    dyd = dv / prm[P.FY]
-    dxd = (du - prm[P.SKEW] * dyd) / prm[P.FX]
+    yd = (v - prm[P.CY]) * ify
+    xd = (u - prm[P.CX] - prm[P.SKEW] * yd) * ifx
+    dyd = dv * ify
+    dxd = (du - prm[P.SKEW] * dyd) * ifx
     if has_dist:
         ok, x, y, m00, m01, m10, m11 = core.undistort_point(dom, k, xd, yd, x0, y0)
         if not ok:
@@ -139,21 +140,22 @@ def _ground(prm, R, dom, has_dist, k, u, v, du, dv, x0, y0):
     e0, e1, e2 = R[0, 0] * dx + R[0, 1] * dy, R[1, 0] * dx + R[1, 1] * dy, R[2, 0] * dx + R[2, 1] * dy
     num = prm[P.GDZ] - prm[P.HM]
     den = r2 - prm[P.GSX] * r0 - prm[P.GSY] * r1
-    lam = num / den
+    iden = 1.0 / den
+    lam = num * iden
     if not (den < 0.0 and num < 0.0 and math.isfinite(lam)):
         return nan, nan, nan, nan, False
-    dlam = -lam * (e2 - prm[P.GSX] * e0 - prm[P.GSY] * e1) / den
+    dlam = -lam * (e2 - prm[P.GSX] * e0 - prm[P.GSY] * e1) * iden
     return prm[P.XM] + lam * r0, prm[P.YM] + lam * r1, dlam * r0 + lam * e0, dlam * r1 + lam * e1, True
 
 
 @nb.njit(**_INL)
-def _contact(prm, R, dom, has_dist, k, q, ol, ow, oh, d0, d1, d2):
+def _contact(prm, R, dom, has_dist, k, ifx, ify, q, ol, ow, oh, d0, d1, d2):
     """The back-projected bottom-centre contact (x, y) (m) of the box ``q +- ol +- ow (+ oh)`` (:func:`_render`),
     its rate (m/s) when the box moves at camera-frame (d0, d1, d2) m/s, and whether it exists."""
     u, v, du, dv, ok, x0, y0 = _render(prm, dom, has_dist, k, q, ol, ow, oh, d0, d1, d2)
     if not ok:
         return math.nan, math.nan, math.nan, math.nan, False
-    return _ground(prm, R, dom, has_dist, k, u, v, du, dv, x0, y0)
+    return _ground(prm, R, dom, has_dist, k, ifx, ify, u, v, du, dv, x0, y0)
 
 
 @nb.njit(**_INL)
@@ -171,6 +173,7 @@ def _moments(prm, R, dom, has_dist, xy, v, size_mean, size_sigma, nodes, mean_ou
     once: a node's box is ``q +- L a +- W b (+ H e)``."""
     k = prm[5:13]
     e = (R[2, 0], R[2, 1], R[2, 2])
+    ifx, ify = 1.0 / prm[P.FX], 1.0 / prm[P.FY]
     for i in range(xy.shape[0]):
         vx, vy = v[i, 0], v[i, 1]
         cs, sn = _heading(vx, vy)
@@ -183,7 +186,7 @@ def _moments(prm, R, dom, has_dist, xy, v, size_mean, size_sigma, nodes, mean_ou
         b = (0.5 * (R[1, 0] * cs - R[0, 0] * sn), 0.5 * (R[1, 1] * cs - R[0, 1] * sn),
              0.5 * (R[1, 2] * cs - R[0, 2] * sn))
         L, W, H = size_mean[i, 0], size_mean[i, 1], size_mean[i, 2]
-        g0x, g0y = _contact(prm, R, dom, has_dist, k, _offset(prm, R, xy[i, 0], xy[i, 1]),
+        g0x, g0y = _contact(prm, R, dom, has_dist, k, ifx, ify, _offset(prm, R, xy[i, 0], xy[i, 1]),
                             (L * a[0], L * a[1], L * a[2]), (W * b[0], W * b[1], W * b[2]),
                             (H * e[0], H * e[1], H * e[2]), d0, d1, d2)[:2]
         # the centre whose contact is xy (one step), its camera-frame vector
@@ -193,7 +196,7 @@ def _moments(prm, R, dom, has_dist, xy, v, size_mean, size_sigma, nodes, mean_ou
             L = _size(size_mean, size_sigma, nodes, i, n, 0)
             W = _size(size_mean, size_sigma, nodes, i, n, 1)
             H = _size(size_mean, size_sigma, nodes, i, n, 2)
-            _, _, dgx, dgy, ok = _contact(prm, R, dom, has_dist, k, q, (L * a[0], L * a[1], L * a[2]),
+            _, _, dgx, dgy, ok = _contact(prm, R, dom, has_dist, k, ifx, ify, q, (L * a[0], L * a[1], L * a[2]),
                                           (W * b[0], W * b[1], W * b[2]), (H * e[0], H * e[1], H * e[2]),
                                           d0, d1, d2)
             ux, uy = dgx - vx, dgy - vy
