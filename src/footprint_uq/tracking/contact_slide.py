@@ -19,8 +19,8 @@ On line (:func:`slide_moments`, :class:`ContactSlide`) the closed form runs comp
 (:func:`footprint_uq.fast.slide_kernels.slide_moments`): per size node one render of the box, the bottom-centre
 pixel's derivative along the path only (every corner moves by the same vector) and the back-projection's
 derivative at that pixel -- the same numbers as the numpy closed form (:func:`slide_moments_reference`) to
-rounding; its kernel ~60 us per frame of 100 tracked objects, ~80 us with its inputs in a service frame
-(docs/uncertainty-model.md, "2026-11-28, evening"; docs/motion-fit.md, section 6).
+rounding; its kernel ~54 us per frame of 100 tracked objects (pinhole; 132 us with a distorting lens),
+:meth:`ContactSlide.covariance` ~57 us with its Python (``bench/bench_slide.py``; docs/motion-fit.md, section 6).
 :func:`slide_along_path` (a central difference of the rendered contact along the path, the earlier on-line form)
 stays as a check.
 
@@ -235,7 +235,9 @@ class ContactSlide:
 
     def _priors(self, classes, n: int) -> tuple[np.ndarray, np.ndarray]:
         """Per object, its class's size prior ``(mean_m (n, 3), sigma_m (n, 3))``; a class seen first is looked up
-        once (:func:`~footprint_uq.products.contact.class_size_priors`: the fallback for None and unknowns)."""
+        once (:func:`~footprint_uq.products.contact.class_size_priors`: the fallback for None and unknowns); a
+        frame of one class gets the rows of the last such frame when its class and size are the same (the kernel
+        only reads them)."""
         names = [None] * n if classes is None else classes if isinstance(classes, list) else list(classes)
         if len(names) != n:
             raise InputError("classes", f"{len(names)} names", f"one class name (or None) per object ({n})")
