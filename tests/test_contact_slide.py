@@ -247,3 +247,92 @@ def test_tracks_of_2d_boxes_carry_the_term(where, monkeypatch):
 
     without, with_term = sigma(False), sigma(True)
     assert with_term > 1.1 * without, (without, with_term)
+
+
+def _nodes_rendered(cam, xy, v, mean, sig):
+    """Per contact, how many of the six size nodes render in the numpy reference (its centre by the same one
+    fixed-point step): the cases of partly rendered nodes below are checked to be such."""
+    from footprint_uq.products.contact import rendered_bottom_centre
+
+    yaw = np.arctan2(v[:, 1], v[:, 0])
+    g0 = cam.backproject(rendered_bottom_centre(cam, xy, mean, yaw, gradients=False)[0]).xy_world_m
+    sizes = np.clip(mean[:, None, :] + SIZE_NODES[None] * sig[:, None, :], 0.02, None)
+    _, ok = slide_velocity(cam, np.repeat((2.0 * xy - g0)[:, None], 6, 1), np.repeat(v[:, None], 6, 1), sizes)
+    return ok.sum(1)
+
+
+@pytest.mark.parametrize("camera", sorted(CAMERAS))
+def test_compiled_moments_where_some_nodes_do_not_render(camera):
+    """Long trucks close below the camera: the longest nodes' rear corners are behind it (or, with the lens,
+    outside its domain), the others render; the compiled term averages over the same nodes as the reference."""
+    cam = CAMERAS[camera]
+    y = np.linspace(-3.0, 12.0, 61)
+    xy = np.column_stack([np.full_like(y, 0.5), y])
+    v = np.tile([0.3, 8.0], (y.size, 1))
+    mean, sig = class_size_priors(["truck"] * y.size, y.size)
+    sig = sig * np.array([6.0, 1.0, 1.0])
+    k = _nodes_rendered(cam, xy, v, mean, sig)
+    assert ((k > 0) & (k < 6)).sum() >= 3 and (k == 0).any() and (k == 6).any(), k
+    m, M = slide_moments(cam, xy, v, mean, sig)
+    mr, Mr = slide_moments_reference(cam, xy, v, mean, sig)
+    np.testing.assert_array_equal(np.isnan(M), np.isnan(Mr))
+    f = np.isfinite(Mr).all((1, 2))
+    scale = np.abs(Mr[f]).max()
+    np.testing.assert_allclose(M[f], Mr[f], rtol=0, atol=1e-9 * scale)
+    np.testing.assert_allclose(m[f], mr[f], rtol=0, atol=1e-9 * np.sqrt(scale))
+
+
+@pytest.mark.parametrize("camera", sorted(CAMERAS))
+def test_compiled_moments_of_standing_objects(camera):
+    """v = 0 (either sign of zero): the course is taken as 0 (the reference's atan2(0, 0)), no slide -- the
+    moments are exactly zero, not NaN -- and the other rows of the frame are unchanged by them."""
+    cam = CAMERAS[camera]
+    xy = np.array([[-4.0, 25.0], [3.0, 40.0], [0.0, 18.0], [6.0, 30.0]])
+    v = np.array([[0.0, 0.0], [-0.0, 0.0], [-0.0, -0.0], [4.0, -3.0]])
+    mean, sig = class_size_priors(["car", "truck", "pedestrian", "bus"], 4)
+    m, M = slide_moments(cam, xy, v, mean, sig)
+    mr, Mr = slide_moments_reference(cam, xy, v, mean, sig)
+    assert (m[:3] == 0).all() and (M[:3] == 0).all()
+    assert np.isfinite(M[3]).all() and np.abs(M[3]).max() > 1e-4
+    np.testing.assert_allclose(M, Mr, rtol=0, atol=1e-9 * np.abs(Mr).max())
+    np.testing.assert_allclose(m, mr, rtol=0, atol=1e-9 * np.sqrt(np.abs(Mr).max()))
+    np.testing.assert_array_equal(M[3], slide_moments(cam, xy[3:], v[3:], mean[3:], sig[3:])[1][0])
+
+
+def test_kernel_course_from_the_velocity():
+    """The kernel's course as ``v / |v|``: ``(1, 0)`` standing (atan2(0, 0) = 0), the unit vector otherwise (no
+    overflow or underflow of |v|: to 6e-15 at a subnormal speed), NaN for a NaN velocity."""
+    from footprint_uq.fast.slide_kernels import _heading
+
+    assert _heading(0.0, 0.0) == (1.0, 0.0) and _heading(-0.0, -0.0) == (1.0, 0.0)
+    for vx, vy in [(3.0, 4.0), (-3.0, 4.0), (0.0, -2.0), (1e-310, -1e-310), (1e300, 1e300), (-7.0, 0.0)]:
+        c, s = _heading(vx, vy)
+        yaw = np.arctan2(vy, vx)
+        assert abs(c - np.cos(yaw)) < 1e-12 and abs(s - np.sin(yaw)) < 1e-12, (vx, vy, c, s)  # (subnormal |v|: 6e-15)
+    assert all(np.isnan(_heading(np.nan, 1.0))) and all(np.isnan(_heading(1.0, np.nan)))
+
+
+def test_covariance_zero_only_without_a_velocity():
+    """`ContactSlide.covariance`: a row without a velocity or position gets zero, a row whose box does not render
+    (behind the camera) keeps NaN (not reported with a covariance), the others the compiled moments."""
+    slide = ContactSlide(CAM)
+    xy = np.array([[0.0, 30.0], [0.0, -30.0], [0.0, 30.0], [np.nan, 30.0], [-5.0, 22.0]])
+    v = np.array([[5.0, 5.0], [5.0, 5.0], [np.nan, 1.0], [2.0, 2.0], [0.0, 9.0]])
+    M = slide.covariance(_output(xy, v), ["car"] * 5)
+    mean, sig = class_size_priors(["car"] * 5, 5)
+    ref = slide_moments(CAM, xy, v, mean, sig)[1]
+    np.testing.assert_array_equal(M[[0, 4]], ref[[0, 4]])
+    assert np.isnan(M[1]).all() and (M[2:4] == 0).all()
+    M2 = slide.covariance(_output(xy[[0, 4]], v[[0, 4]]), ["car"] * 2)   # (no NaN row: nothing masked)
+    np.testing.assert_array_equal(M2, ref[[0, 4]])
+
+
+def test_priors_of_one_class_frames_follow_the_class_and_the_count():
+    """The priors of a one-class frame are kept for the next frame of that class and size only."""
+    slide = ContactSlide(CAM)
+    for classes in (["car"] * 3, ["car"] * 3, ["truck"] * 3, ["truck"] * 5, ["car"] * 5, ["car", "truck", None],
+                    ["car"] * 5, [None] * 2, []):
+        mean, sig = slide._priors(classes, len(classes))
+        rm, rs = class_size_priors([c or "" for c in classes], len(classes))
+        np.testing.assert_array_equal(mean, rm)
+        np.testing.assert_array_equal(sig, rs)

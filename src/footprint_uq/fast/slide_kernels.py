@@ -50,74 +50,85 @@ def _corner(q0, q1, q2, ol0, ol1, ol2, ow0, ow1, ow2, h0, h1, h2, j):
     jj = j & 3
     sl = 1.0 if (jj == 1 or jj == 2) else -1.0
     sw = 1.0 if jj >= 2 else -1.0
-    t = 1.0 if j >= 4 else 0.0
-    return q0 + sl * ol0 + sw * ow0 + t * h0, q1 + sl * ol1 + sw * ow1 + t * h1, q2 + sl * ol2 + sw * ow2 + t * h2
+    if j >= 4:
+        return q0 + sl * ol0 + sw * ow0 + h0, q1 + sl * ol1 + sw * ow1 + h1, q2 + sl * ol2 + sw * ow2 + h2
+    return q0 + sl * ol0 + sw * ow0, q1 + sl * ol1 + sw * ow1, q2 + sl * ol2 + sw * ow2
 
 
 @nb.njit(**_INL)
-def _render(prm, R, dom, has_dist, k, cx, cy, L, W, H, cs, sn, d0, d1, d2):
+def _heading(vx, vy):
+    """``(cos, sin)`` of the course of the velocity (vx, vy) m/s as ``v / |v|`` (no angle): ``(1, 0)`` standing
+    (the course ``atan2(0, 0) = 0``), NaN for a NaN velocity."""
+    s = math.hypot(vx, vy)
+    if s == 0.0:
+        return 1.0, 0.0
+    return vx / s, vy / s
+
+
+@nb.njit(**_INL)
+def _offset(prm, R, x, y):
+    """The camera-frame vector (m) from the camera to the ground point at (x, y) (m, frame W), ``R^T (x - X_m,
+    y - Y_m, z_ground(x, y) - h_m)``."""
+    r0, r1 = x - prm[P.XM], y - prm[P.YM]
+    r2 = prm[P.GDZ] + prm[P.GSX] * r0 + prm[P.GSY] * r1 - prm[P.HM]
+    return (R[0, 0] * r0 + R[1, 0] * r1 + R[2, 0] * r2, R[0, 1] * r0 + R[1, 1] * r1 + R[2, 1] * r2,
+            R[0, 2] * r0 + R[1, 2] * r1 + R[2, 2] * r2)
+
+
+@nb.njit(**_INL)
+def _render(prm, dom, has_dist, k, q, ol, ow, oh, d0, d1, d2):
     """The bottom-centre pixel ``((u_min + u_max) / 2, v_max)`` (px) of the box around the eight projected
-    corners of the cuboid centred at (cx, cy) (m, frame W; its base on the ground plane at the centre), its rate
-    (px/s) when every corner moves at camera-frame (d0, d1, d2) m/s (the extreme corners held, the first on a
-    tie), and whether every corner projects (in front, finite, inside the lens's domain)."""
+    corners ``q +- ol +- ow (+ oh)`` (camera frame, m: ``q`` the base's centre, ``ol``, ``ow`` the half-length and
+    half-width vectors, ``oh`` the height), its rate (px/s) when every corner moves at camera-frame (d0, d1, d2)
+    m/s (the extreme corners held, the first on a tie), whether every corner projects (in front, finite, inside
+    the lens's domain), and the undistorted normalised point ``(x, y)`` of the bottom-centre pixel's corners
+    (a start for the lens's inversion)."""
     nan = math.nan
-    zg = prm[P.GDZ] + prm[P.GSX] * (cx - prm[P.XM]) + prm[P.GSY] * (cy - prm[P.YM])
-    r0, r1, r2 = cx - prm[P.XM], cy - prm[P.YM], zg - prm[P.HM]
-    lx, ly, wx, wy = 0.5 * L * cs, 0.5 * L * sn, -0.5 * W * sn, 0.5 * W * cs
-    o = (R[0, 0] * r0 + R[1, 0] * r1 + R[2, 0] * r2, R[0, 1] * r0 + R[1, 1] * r1 + R[2, 1] * r2,
-         R[0, 2] * r0 + R[1, 2] * r1 + R[2, 2] * r2,
-         R[0, 0] * lx + R[1, 0] * ly, R[0, 1] * lx + R[1, 1] * ly, R[0, 2] * lx + R[1, 2] * ly,
-         R[0, 0] * wx + R[1, 0] * wy, R[0, 1] * wx + R[1, 1] * wy, R[0, 2] * wx + R[1, 2] * wy,
-         H * R[2, 0], H * R[2, 1], H * R[2, 2])
     fx, fy, sk, pcx, pcy = prm[P.FX], prm[P.FY], prm[P.SKEW], prm[P.CX], prm[P.CY]
     umin, umax, vmax = math.inf, -math.inf, -math.inf
-    imin, imax, iv = 0, 0, 0
+    xa, ya, za, xb, yb, zb, xc, yc, zc = nan, nan, nan, nan, nan, nan, nan, nan, nan
     ok = True
-    for j in range(8):
-        p0, p1, p2 = _corner(o[0], o[1], o[2], o[3], o[4], o[5], o[6], o[7], o[8], o[9], o[10], o[11], j)
+    for j in range(8):   # (unrolled: the corner's signs are constants)
+        p0, p1, p2 = _corner(q[0], q[1], q[2], ol[0], ol[1], ol[2], ow[0], ow[1], ow[2], oh[0], oh[1], oh[2], j)
         iz = 1.0 / p2
-        xd, yd = p0 * iz, p1 * iz
-        ok = ok and p2 > 0.0 and math.isfinite(xd) and math.isfinite(yd)
+        xn, yn = p0 * iz, p1 * iz
+        ok = ok & (p2 > 0.0) & math.isfinite(xn) & math.isfinite(yn)
+        xd, yd = xn, yn
         if has_dist:
-            ok = ok and core.in_domain_undistorted(dom, xd, yd)
-            xd, yd = core.distort_point(xd, yd, k)
+            ok = ok & core.in_domain_undistorted(dom, xn, yn)
+            xd, yd = core.distort_point(xn, yn, k)
         u = fx * xd + sk * yd + pcx
         v = fy * yd + pcy
         if u < umin:
-            umin, imin = u, j
+            umin, xa, ya, za = u, xn, yn, iz
         if u > umax:
-            umax, imax = u, j
+            umax, xb, yb, zb = u, xn, yn, iz
         if v > vmax:
-            vmax, iv = v, j
+            vmax, xc, yc, zc = v, xn, yn, iz
     if not ok:
-        return nan, nan, nan, nan, False
-    du = 0.0
-    for e in range(3):
-        p0, p1, p2 = _corner(o[0], o[1], o[2], o[3], o[4], o[5], o[6], o[7], o[8], o[9], o[10], o[11],
-                             imin if e == 0 else (imax if e == 1 else iv))
-        iz = 1.0 / p2
-        r = _pixel_rate(prm, k, has_dist, p0 * iz, p1 * iz, iz, d0, d1, d2)
-        if e < 2:
-            du += 0.5 * r[0]
-        else:
-            return 0.5 * (umin + umax), vmax, du, r[1], True
-    return nan, nan, nan, nan, False
+        return nan, nan, nan, nan, False, nan, nan
+    ra = _pixel_rate(prm, k, has_dist, xa, ya, za, d0, d1, d2)
+    rb = _pixel_rate(prm, k, has_dist, xb, yb, zb, d0, d1, d2)
+    rc = _pixel_rate(prm, k, has_dist, xc, yc, zc, d0, d1, d2)
+    return 0.5 * (umin + umax), vmax, 0.5 * ra[0] + 0.5 * rb[0], rc[1], True, 0.5 * (xa + xb), yc
 
 
 @nb.njit(**_INL)
-def _ground(prm, R, dom, has_dist, k, u, v, du, dv):
+def _ground(prm, R, dom, has_dist, k, ifx, ify, u, v, du, dv, x0, y0):
     """The ground point (x, y) (m, frame W) of pixel (u, v), its rate (m/s) for a pixel moving at (du, dv) px/s,
     and whether it has one (the ray meets the ground plane in front of the camera; a distorting lens inverts
-    there)."""
+    there, its Newton steps started from the undistorted normalised point (x0, y0) when that is in the lens's
+    domain: the same root to rounding from any start, ``core.undistort_point``); ``ifx``, ``ify``: ``1 / f_x``,
+    ``1 / f_y`` (1/px, computed once per call: a division per node less)."""
     nan = math.nan
     if not (math.isfinite(u) and math.isfinite(v)):
         return nan, nan, nan, nan, False
-    yd = (v - prm[P.CY]) / prm[P.FY]
-    xd = (u - prm[P.CX] - prm[P.SKEW] * yd) / prm[P.FX]
-    dyd = dv / prm[P.FY]
-    dxd = (du - prm[P.SKEW] * dyd) / prm[P.FX]
+    yd = (v - prm[P.CY]) * ify
+    xd = (u - prm[P.CX] - prm[P.SKEW] * yd) * ifx
+    dyd = dv * ify
+    dxd = (du - prm[P.SKEW] * dyd) * ifx
     if has_dist:
-        ok, x, y, m00, m01, m10, m11 = core.undistort_point(dom, k, xd, yd, xd, yd)
+        ok, x, y, m00, m01, m10, m11 = core.undistort_point(dom, k, xd, yd, x0, y0)
         if not ok:
             return nan, nan, nan, nan, False
         dx, dy = m00 * dxd + m01 * dyd, m10 * dxd + m11 * dyd
@@ -129,21 +140,22 @@ def _ground(prm, R, dom, has_dist, k, u, v, du, dv):
     e0, e1, e2 = R[0, 0] * dx + R[0, 1] * dy, R[1, 0] * dx + R[1, 1] * dy, R[2, 0] * dx + R[2, 1] * dy
     num = prm[P.GDZ] - prm[P.HM]
     den = r2 - prm[P.GSX] * r0 - prm[P.GSY] * r1
-    lam = num / den
+    iden = 1.0 / den
+    lam = num * iden
     if not (den < 0.0 and num < 0.0 and math.isfinite(lam)):
         return nan, nan, nan, nan, False
-    dlam = -lam * (e2 - prm[P.GSX] * e0 - prm[P.GSY] * e1) / den
+    dlam = -lam * (e2 - prm[P.GSX] * e0 - prm[P.GSY] * e1) * iden
     return prm[P.XM] + lam * r0, prm[P.YM] + lam * r1, dlam * r0 + lam * e0, dlam * r1 + lam * e1, True
 
 
 @nb.njit(**_INL)
-def _contact(prm, R, dom, has_dist, k, cx, cy, L, W, H, cs, sn, d0, d1, d2):
-    """The back-projected bottom-centre contact (x, y) (m) of the box centred at (cx, cy), its rate (m/s) when the
-    box moves at camera-frame (d0, d1, d2) m/s, and whether it exists."""
-    u, v, du, dv, ok = _render(prm, R, dom, has_dist, k, cx, cy, L, W, H, cs, sn, d0, d1, d2)
+def _contact(prm, R, dom, has_dist, k, ifx, ify, q, ol, ow, oh, d0, d1, d2):
+    """The back-projected bottom-centre contact (x, y) (m) of the box ``q +- ol +- ow (+ oh)`` (:func:`_render`),
+    its rate (m/s) when the box moves at camera-frame (d0, d1, d2) m/s, and whether it exists."""
+    u, v, du, dv, ok, x0, y0 = _render(prm, dom, has_dist, k, q, ol, ow, oh, d0, d1, d2)
     if not ok:
         return math.nan, math.nan, math.nan, math.nan, False
-    return _ground(prm, R, dom, has_dist, k, u, v, du, dv)
+    return _ground(prm, R, dom, has_dist, k, ifx, ify, u, v, du, dv, x0, y0)
 
 
 @nb.njit(**_INL)
@@ -156,25 +168,37 @@ def _size(size_mean, size_sigma, nodes, i, q, a):
 
 @nb.njit(**_INL)
 def _moments(prm, R, dom, has_dist, xy, v, size_mean, size_sigma, nodes, mean_out, second_out):
-    """:func:`slide_moments`' loop (``has_dist`` a constant in each compiled entry)."""
+    """:func:`slide_moments`' loop (``has_dist`` a constant in each compiled entry).  Per object the course's
+    camera-frame half-length and half-width unit vectors ``a``, ``b`` and the height's ``R^T e_z`` are computed
+    once: a node's box is ``q +- L a +- W b (+ H e)``."""
     k = prm[5:13]
+    e = (R[2, 0], R[2, 1], R[2, 2])
+    ifx, ify = 1.0 / prm[P.FX], 1.0 / prm[P.FY]
     for i in range(xy.shape[0]):
         vx, vy = v[i, 0], v[i, 1]
-        yaw = math.atan2(vy, vx)
-        cs, sn = math.cos(yaw), math.sin(yaw)
+        cs, sn = _heading(vx, vy)
         vz = prm[P.GSX] * vx + prm[P.GSY] * vy
         d0 = R[0, 0] * vx + R[1, 0] * vy + R[2, 0] * vz     # the box's camera-frame velocity
         d1 = R[0, 1] * vx + R[1, 1] * vy + R[2, 1] * vz
         d2 = R[0, 2] * vx + R[1, 2] * vy + R[2, 2] * vz
-        g0x, g0y = _contact(prm, R, dom, has_dist, k, xy[i, 0], xy[i, 1], size_mean[i, 0], size_mean[i, 1],
-                            size_mean[i, 2], cs, sn, d0, d1, d2)[:2]
-        cx, cy = 2.0 * xy[i, 0] - g0x, 2.0 * xy[i, 1] - g0y     # the centre whose contact is xy (one step)
+        a = (0.5 * (R[0, 0] * cs + R[1, 0] * sn), 0.5 * (R[0, 1] * cs + R[1, 1] * sn),
+             0.5 * (R[0, 2] * cs + R[1, 2] * sn))
+        b = (0.5 * (R[1, 0] * cs - R[0, 0] * sn), 0.5 * (R[1, 1] * cs - R[0, 1] * sn),
+             0.5 * (R[1, 2] * cs - R[0, 2] * sn))
+        L, W, H = size_mean[i, 0], size_mean[i, 1], size_mean[i, 2]
+        g0x, g0y = _contact(prm, R, dom, has_dist, k, ifx, ify, _offset(prm, R, xy[i, 0], xy[i, 1]),
+                            (L * a[0], L * a[1], L * a[2]), (W * b[0], W * b[1], W * b[2]),
+                            (H * e[0], H * e[1], H * e[2]), d0, d1, d2)[:2]
+        # the centre whose contact is xy (one step), its camera-frame vector
+        q = _offset(prm, R, 2.0 * xy[i, 0] - g0x, 2.0 * xy[i, 1] - g0y)
         cnt, s0, s1, m00, m01, m11 = 0, 0.0, 0.0, 0.0, 0.0, 0.0
-        for q in range(nodes.shape[0]):
-            L = _size(size_mean, size_sigma, nodes, i, q, 0)
-            W = _size(size_mean, size_sigma, nodes, i, q, 1)
-            H = _size(size_mean, size_sigma, nodes, i, q, 2)
-            _, _, dgx, dgy, ok = _contact(prm, R, dom, has_dist, k, cx, cy, L, W, H, cs, sn, d0, d1, d2)
+        for n in range(nodes.shape[0]):
+            L = _size(size_mean, size_sigma, nodes, i, n, 0)
+            W = _size(size_mean, size_sigma, nodes, i, n, 1)
+            H = _size(size_mean, size_sigma, nodes, i, n, 2)
+            _, _, dgx, dgy, ok = _contact(prm, R, dom, has_dist, k, ifx, ify, q, (L * a[0], L * a[1], L * a[2]),
+                                          (W * b[0], W * b[1], W * b[2]), (H * e[0], H * e[1], H * e[2]),
+                                          d0, d1, d2)
             ux, uy = dgx - vx, dgy - vy
             if ok and math.isfinite(ux) and math.isfinite(uy):
                 cnt += 1

@@ -19,8 +19,8 @@ On line (:func:`slide_moments`, :class:`ContactSlide`) the closed form runs comp
 (:func:`footprint_uq.fast.slide_kernels.slide_moments`): per size node one render of the box, the bottom-centre
 pixel's derivative along the path only (every corner moves by the same vector) and the back-projection's
 derivative at that pixel -- the same numbers as the numpy closed form (:func:`slide_moments_reference`) to
-rounding; its kernel ~60 us per frame of 100 tracked objects, ~80 us with its inputs in a service frame
-(docs/uncertainty-model.md, "2026-11-28, evening"; docs/motion-fit.md, section 6).
+rounding; its kernel ~54 us per frame of 100 tracked objects (pinhole; 132 us with a distorting lens),
+:meth:`ContactSlide.covariance` ~57 us with its Python (``bench/bench_slide.py``; docs/motion-fit.md, section 6).
 :func:`slide_along_path` (a central difference of the rendered contact along the path, the earlier on-line form)
 stays as a check.
 
@@ -204,6 +204,7 @@ class ContactSlide:
         self._rows: dict = {}             # class name -> row of the prior tables
         self._lock = threading.Lock()
         self._mean, self._sigma = np.empty((0, 3)), np.empty((0, 3))
+        self._last = ((None, -1), None)   # the last one-class frame's (class, n) and its prior rows (kept: read only)
 
     @classmethod
     def for_camera(cls, camera, size_priors=None) -> ContactSlide | None:
@@ -226,17 +227,24 @@ class ContactSlide:
         x, v = _rows_of(out.xy_m, 2), _rows_of(out.v_mps, 2)
         m, M = np.empty((n, 2)), np.empty((n, 2, 2))
         self._kernel(*self._constants, x, v, mean, sig, _NODES, m, M)
-        M[~(np.isfinite(v).all(1) & np.isfinite(x).all(1))] = 0.0
+        nan = np.isnan(M[:, 0, 0])   # (where no node renders; a row without a velocity or position is such a row)
+        if nan.any():
+            rows = np.flatnonzero(nan)
+            M[rows[~(np.isfinite(v[rows]).all(1) & np.isfinite(x[rows]).all(1))]] = 0.0
         return M
 
     def _priors(self, classes, n: int) -> tuple[np.ndarray, np.ndarray]:
         """Per object, its class's size prior ``(mean_m (n, 3), sigma_m (n, 3))``; a class seen first is looked up
-        once (:func:`~footprint_uq.products.contact.class_size_priors`: the fallback for None and unknowns)."""
+        once (:func:`~footprint_uq.products.contact.class_size_priors`: the fallback for None and unknowns); a
+        frame of one class gets the rows of the last such frame when its class and size are the same (the kernel
+        only reads them)."""
         names = [None] * n if classes is None else classes if isinstance(classes, list) else list(classes)
         if len(names) != n:
             raise InputError("classes", f"{len(names)} names", f"one class name (or None) per object ({n})")
         one = n > 0 and names.count(names[0]) == n  # (a frame of one class, the common case: one look-up)
         with self._lock:  # (the service may run frames of one camera in several threads)
+            if one and self._last[0] == (names[0], n):
+                return self._last[1]
             new = [c for c in ({names[0]} if one else set(names)) if c not in self._rows]
             if new:
                 if len(self._rows) + len(new) > CLASS_CACHE_SIZE:
@@ -245,9 +253,12 @@ class ContactSlide:
                 mean, sig = class_size_priors(["" if c is None else c for c in new], len(new), self.size_priors)
                 self._rows.update({c: len(self._rows) + k for k, c in enumerate(new)})
                 self._mean, self._sigma = np.vstack([self._mean, mean]), np.vstack([self._sigma, sig])
-            rows = (np.full(n, self._rows[names[0]], np.intp) if one
-                    else np.fromiter(map(self._rows.__getitem__, names), dtype=np.intp, count=n))
-            return self._mean[rows], self._sigma[rows]
+            if not one:
+                rows = np.fromiter(map(self._rows.__getitem__, names), dtype=np.intp, count=n)
+                return self._mean[rows], self._sigma[rows]
+            r = self._rows[names[0]]
+            self._last = ((names[0], n), (np.repeat(self._mean[r:r + 1], n, 0), np.repeat(self._sigma[r:r + 1], n, 0)))
+            return self._last[1]
 
     def apply(self, out: TrackOutput, classes) -> TrackOutput:
         """``out`` with the term added to ``cov_v_m2ps2`` (the track's own state is not changed)."""
