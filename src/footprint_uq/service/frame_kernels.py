@@ -8,10 +8,12 @@ import math
 import numpy as np
 from numba import njit
 
-from .messages.cpm import COORD_GUARD_CM, COORD_MAX, COORD_MIN
+from .messages.asn1_cpm import DEFAULT_CDD
+from .messages.cpm import CONFIDENCE_LEVEL_UNAVAILABLE, COORD_GUARD_CM, COORD_MAX, COORD_MIN, check_cdd
 from .messages.sdsm import OFFSET_MAX
+from .messages.uper_cpm import _CORR_PREFIX, _HI, _LO, _NO_MOTION_COLUMN, _motion_rows, _plain_container_kernel
 
-__all__ = ["worst_usable", "cm_dm"]
+__all__ = ["worst_usable", "cm_dm", "plain_cpm_container"]
 
 
 @njit(cache=True, nogil=True)
@@ -50,3 +52,66 @@ def cm_dm(en: np.ndarray, rows: np.ndarray):
     ``en[rows]``: x cm, y cm, x dm, y dm (the same numbers in one compiled pass)."""
     return _cm_dm_kernel(np.ascontiguousarray(en, dtype=np.float64), np.asarray(rows, dtype=np.int64),
                          float(COORD_MIN), float(COORD_MAX), float(OFFSET_MAX), COORD_GUARD_CM)
+
+
+@njit(cache=True, nogil=True)
+def _plain_cpm_kernel(en, rows, class_p, object_ids, v2x, at, class_idx, class_row, cv_tab, cw_tab, motion,
+                      with_motion, lo, hi, n_total, corr_prefix, corr_bits, cm_min, cm_max, dm_max, cm_guard,
+                      level_unavailable):  # pragma: no cover - compiled
+    """:func:`plain_cpm_container` in one compiled call: the objects' cm (:func:`_cm_dm_kernel`), their
+    ConfidenceLevels (``class_p (N,)``, NaN: unavailable; an empty array: none given) and the container
+    (:func:`~.messages.uper_cpm._plain_container_kernel`)."""
+    m = rows.shape[0]
+    cm = _cm_dm_kernel(en, rows, cm_min, cm_max, dm_max, cm_guard)
+    level = np.empty(m, np.int64)
+    for j in range(m):
+        if class_p.shape[0] == 0:
+            level[j] = level_unavailable
+            continue
+        p = class_p[rows[j]]
+        level[j] = level_unavailable if p != p else int(max(1.0, np.ceil(100.0 * p - 1e-9)))
+    return _plain_container_kernel(object_ids, cm, v2x, rows, at, class_idx, class_row, cv_tab, cw_tab, level,
+                                   motion, with_motion, lo, hi, n_total, corr_prefix, corr_bits)
+
+
+_NO_CLASS_P = np.zeros(0)
+
+
+def plain_cpm_container(en: np.ndarray, rows: np.ndarray, class_p: np.ndarray | None, object_ids: np.ndarray,
+                        v2x: np.ndarray, cpm_at: int, class_idx: np.ndarray, class_row: np.ndarray,
+                        class_value: np.ndarray, class_width: np.ndarray, *, cdd: str = DEFAULT_CDD,
+                        motion=None) -> bytes | None:
+    """The PerceivedObjectContainer (UPER octets) of a frame's objects ``rows`` from its columns, in one compiled
+    call: :func:`cm_dm`'s cm of ``en[rows]``, the ConfidenceLevels of ``class_p[rows]`` (the service's
+    ``_confidence_levels``) and :func:`~.messages.uper_cpm.plain_container_uper` -- the same bytes.
+
+    Parameters
+    ----------
+    en : ndarray (N, 2) float64, C-contiguous
+        The frame's objects east / north of the messages' reference (m).
+    rows : ndarray (m,) int64
+        The objects in the message (sorted rows of the frame).
+    class_p : ndarray (N,) float64 or None
+        Class confidences in [0, 1] (NaN: unavailable); None: none given.
+    object_ids : ndarray (m,) int64
+        Their message ids.
+    v2x : ndarray (7, N) int32, C-contiguous
+        The frame's V2X codes (the CPM's x / y confidence and correlation at rows ``cpm_at``..``cpm_at + 2``).
+    class_idx, class_row, class_value, class_width :
+        As :func:`~.messages.uper_cpm.plain_container_uper`.
+    motion : MotionCodes or ObjectMotion, optional
+        The m objects' motion (:func:`~.messages.motion.motion_codes`); None: no motion sent.
+
+    Returns
+    -------
+    The container's octets; None where a value is out of range (the general writer then names it).
+    """
+    prefix, bits = _CORR_PREFIX[check_cdd(cdd)]
+    m = len(rows)
+    motion_rows = None if motion is None else np.ascontiguousarray(_motion_rows(motion, m))
+    out, col, _ = _plain_cpm_kernel(en, rows, _NO_CLASS_P if class_p is None else class_p, object_ids, v2x, cpm_at,
+                                    class_idx, class_row, class_value, class_width,
+                                    _NO_MOTION_COLUMN if motion_rows is None else motion_rows, motion_rows is not None,
+                                    _LO, _HI, min(m, 255), prefix, bits, float(COORD_MIN), float(COORD_MAX),
+                                    float(OFFSET_MAX), COORD_GUARD_CM, CONFIDENCE_LEVEL_UNAVAILABLE)
+    return None if col >= 0 else out.tobytes()

@@ -503,11 +503,13 @@ def _scan(buf, pow10, fk, fk_at, dk, dk_at):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
-def _columns(fv, iv):  # pragma: no cover - compiled
+def _columns(fv, iv, first):  # pragma: no cover - compiled
     """The detections' columns as the service takes them, and whether they are the common layout: ``(ok, boxes
-    (n, 4), pixel covariances (n, 2, 2), ids (n,), has_cov, has_conf)``.  ``ok`` False: a detection without a
-    complete 2-D box, some with a covariance and some without (or one incomplete), a confidence outside [0, 1]
-    -- cases whose error entries the general path writes.  Absent object ids: the detection's index."""
+    (n, 4), pixel covariances (n, 2, 2), ids (n,), has_cov, has_conf, one_class)``.  ``ok`` False: a detection
+    without a complete 2-D box, some with a covariance and some without (or one incomplete), a confidence outside
+    [0, 1] -- cases whose error entries the general path writes.  Absent object ids: the detection's index.
+    ``one_class``: every detection's class text the first one's, or none has one (``first`` (n,):
+    :func:`_class_first`)."""
     n = fv.shape[0]
     boxes = np.empty((n, 4))
     cov = np.empty((n, 2, 2))
@@ -530,7 +532,10 @@ def _columns(fv, iv):  # pragma: no cover - compiled
             boxes[r, q] = fv[r, q]
         cov[r, 0, 0], cov[r, 0, 1], cov[r, 1, 0], cov[r, 1, 1] = fv[r, 4], fv[r, 5], fv[r, 5], fv[r, 6]
     ok &= (n_cov == 0) | (n_cov == n)
-    return ok, boxes, cov, ids, n_cov > 0, has_conf
+    one_class = True
+    for r in range(n):
+        one_class &= first[r] == first[0]
+    return ok, boxes, cov, ids, n_cov > 0, has_conf, one_class
 
 
 @njit(cache=True, nogil=True)
@@ -575,6 +580,7 @@ class ScannedFrame(NamedTuple):
     object_ids: list            # n ints (absent: the detection's index)
     classes: list               # n str or None
     class_confidence: np.ndarray | None  # (n,), NaN where absent; None: no detection has one
+    int_ids: np.ndarray | None = None  # (n,) int64: ``object_ids`` as an array (the scanner's ids are integers)
 
 
 def scan_frame(text) -> ScannedFrame | None:
@@ -587,13 +593,13 @@ def scan_frame(text) -> ScannedFrame | None:
     ok, head, ts, fv, iv, first = _scan(buf, _POW10, _FK, _FK_AT, _DK, _DK_AT)
     if not ok or head[4] != 0b1111:  # (a frame field missing: the general path's frame error)
         return None
-    ok, boxes, cov, ids, has_cov, has_conf = _columns(fv, iv)
+    ok, boxes, cov, ids, has_cov, has_conf, one_class = _columns(fv, iv, first)
     if not ok:
         return None
     raw = text if type(text) is bytes else bytes(buf)  # (decoded only where a string is)
     try:
         camera = raw[head[1]:head[2]].decode("utf-8")
-        classes = _classes(raw, iv, first)
+        classes = _classes(raw, iv, first, one_class)
     except UnicodeDecodeError:
         return None
     if head[6] >= 0:  # a time stamp beyond the exact subset: Python's correctly rounded float of its JSON text
@@ -601,16 +607,16 @@ def scan_frame(text) -> ScannedFrame | None:
         if not math.isfinite(ts):
             return None
     return ScannedFrame(camera, int(head[3]), ts, boxes, cov if has_cov else None, ids.tolist(), classes,
-                        fv[:, 7].copy() if has_conf else None)
+                        fv[:, 7].copy() if has_conf else None, ids)
 
 
-def _classes(raw: bytes, iv: np.ndarray, first: np.ndarray) -> list:
-    """The detections' class strings: each distinct text decoded once."""
+def _classes(raw: bytes, iv: np.ndarray, first: np.ndarray, one_class: bool) -> list:
+    """The detections' class strings: each distinct text decoded once (``one_class``: one text for all, or none)."""
     n = len(first)
     if n == 0:
         return []
     f0 = int(first[0])
-    if (first == f0).all():  # one class for all (or none): no per-detection work
+    if one_class:  # one class for all (or none): no per-detection work
         return [None if f0 < 0 else raw[iv[0, 1]:iv[0, 2]].decode("utf-8")] * n
     names = np.empty(n + 1, dtype=object)  # (the last entry: None, for -1)
     for r in np.flatnonzero(first == np.arange(n)).tolist():
