@@ -58,7 +58,7 @@ from .detections import (
     finite_number,
     parse_detections,
 )
-from .frame_kernels import cm_dm, plain_cpm_container, worst_usable
+from .frame_kernels import cm_dm, plain_cpm_uper, worst_usable
 from .frame_scan import ScannedFrame, scan_frame
 from .jsonrows import Table, compact_objects_json
 from .messages.asn1_cpm import DEFAULT_CDD
@@ -476,8 +476,9 @@ class Service:
         if self.record == "compact":  # (its compiled passes: _compact_objects, _plain_cpm_uper)
             compact_objects_json(one, 0 * one, [b"null"], 0 * one, [b""], np.zeros((5, 1)), one)
             cls = self._cls
-            plain_cpm_container(np.zeros((1, 2)), 0 * one, None, one, np.ones((7, 1), np.int32), 0, 0 * one, 0 * one,
-                                cls.bits_value, cls.bits_width, cdd=self.cpm_cdd)
+            for setup in self.cameras.values():
+                plain_cpm_uper(setup.uper, 0, np.zeros((1, 2)), 0 * one, None, one, np.ones((7, 1), np.int32), 0,
+                               0 * one, 0 * one, cls.bits_value, cls.bits_width, cdd=self.cpm_cdd)
         cm_dm(np.zeros((1, 2)), np.zeros(1, np.int64))
         scan_frame(b'{"camera_id":"c","frame":0,"timestamp_s":0,"detections":[{"object_id":1,"class":"car",'
                    b'"u_min_px":1,"v_min_px":1.5,"u_max_px":2,"v_max_px":3}]}')
@@ -595,7 +596,7 @@ class Service:
             raise _FrameError("detections", f"{n} detections in one frame, more than the frame limit of "
                               f"{self.max_frame_detections} (split the frame)")
         found = boxes2d_detections(scanned.boxes, scanned.pixel_cov_px2, scanned.object_ids, scanned.classes,
-                                   scanned.class_confidence, scanned.int_ids)
+                                   scanned.class_confidence, scanned.int_ids, scanned.values_checked)
         return self._frame(setup, scanned.camera_id, scanned.frame, scanned.timestamp_s, found, t0)
 
     def _frame(self, setup: CameraSetup, camera_id, fno: int, ts: float, found: FrameDetections, t0: float
@@ -647,9 +648,9 @@ class Service:
                 parts += [b',"objects_not_in_messages":', b"%d" % omitted]
         t3 = time.perf_counter()
         total = round(1e6 * (t3 - t0), 1)
-        parts += [b',"processing_us":', orjson.dumps({
-            "footprints": round(1e6 * (t1 - t0), 1), "records": round(1e6 * (t2 - t1), 1),
-            "messages": round(1e6 * (t3 - t2), 1), "total": total}), b"}"]
+        # (orjson's text of these rounded floats: one decimal, as "%.1f" writes them below 1e15)
+        parts.append(b',"processing_us":{"footprints":%.1f,"records":%.1f,"messages":%.1f,"total":%.1f}}' % (
+            1e6 * (t1 - t0), 1e6 * (t2 - t1), 1e6 * (t3 - t2), total))
         return FrameOutput(b"".join(parts), RECORD_FOOTPRINTS, camera_id, total, None, len(found.errors), cpm_uper)
 
     def _footprints(self, setup: CameraSetup, found: FrameDetections) -> tuple:
@@ -780,18 +781,17 @@ class Service:
 
     def _plain_cpm_uper(self, setup: CameraSetup, est, class_p, co: _CompactObjects, ref_ms: int,
                         motion: ObjectMotion | None = None) -> bytes | None:
-        """The UPER CPM of a compact frame's objects ``co.ok_idx`` by :func:`.frame_kernels.plain_cpm_container` (their
-        cm, confidence levels and container in one compiled call); the bytes of :meth:`_cpm_uper`.
+        """The UPER CPM of a compact frame's objects ``co.ok_idx`` by :func:`.frame_kernels.plain_cpm_uper` (their
+        cm, confidence levels, container and the message in one compiled call); the bytes of :meth:`_cpm_uper`.
         ``motion``: the tracker's motion of all the frame's objects (None: untracked).  None: a value out of
         range (the general writer then names it)."""
         cls = self._cls
         m = len(co.ok_idx)
         mc = None if motion is None else motion_codes(motion if m == len(est) else motion.take(co.ok_idx), m)
-        container = plain_cpm_container(setup.world_to_enu(est.centre_xy_world_m), co.ok_idx, class_p, co.msg_ids,
-                                        np.ascontiguousarray(est.v2x_codes.T, dtype=np.int32), _CPM_INDEX,
-                                        co.class_idx, _class_rows_of(co.classes), cls.bits_value, cls.bits_width,
-                                        cdd=self.cpm_cdd, motion=mc)
-        return None if container is None else setup.uper.encode(ref_ms, container)
+        return plain_cpm_uper(setup.uper, ref_ms, setup.world_to_enu(est.centre_xy_world_m), co.ok_idx, class_p,
+                              co.msg_ids, np.ascontiguousarray(est.v2x_codes.T, dtype=np.int32), _CPM_INDEX,
+                              co.class_idx, _class_rows_of(co.classes), cls.bits_value, cls.bits_width,
+                              cdd=self.cpm_cdd, motion=mc)
 
     def _full_object_layout(self, setup: CameraSetup, t: Table, est, cxx, cxy, cyy) -> list:
         """The full record's object fields after ``cov_m2``: ellipses, largest point, V2X fields and their source,

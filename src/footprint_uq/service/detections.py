@@ -161,7 +161,8 @@ def parse_detections(dets: list, names: ClassNames | None = None) -> FrameDetect
 
 
 def boxes2d_detections(boxes: np.ndarray, pixel_cov_px2: np.ndarray | None, object_ids: list, classes: list,
-                       class_confidence: np.ndarray | None, int_ids: np.ndarray | None = None) -> FrameDetections:
+                       class_confidence: np.ndarray | None, int_ids: np.ndarray | None = None,
+                       values_checked: bool = False) -> FrameDetections:
     """Well-formed 2-D box detections already in columns (:func:`.frame_scan.scan_frame`: every field of the
     right type, confidences in [0, 1]) into :class:`FrameDetections`, with :func:`parse_detections`' value checks
     (box corners in order, pixel covariances in range: each failing detection an error entry).
@@ -177,11 +178,15 @@ def boxes2d_detections(boxes: np.ndarray, pixel_cov_px2: np.ndarray | None, obje
     int_ids : ndarray (M,) int64, optional
         ``object_ids`` as an array (every id an integer of 64 bits: the scanner's), kept in
         :attr:`FrameDetections.int_ids`.
+    values_checked : bool
+        The caller found every box's corners in order and every covariance entry in range already (the scanner's
+        compiled pass): the value checks would mark nothing, and are skipped.
     """
     if len(object_ids) == 0:
         return FrameDetections(None, (), np.zeros((0, 0)), None, [], [], None, np.zeros(0, np.int64))
-    return _value_checks(FrameDetections("2d", BOX2D_COLUMNS, boxes, pixel_cov_px2, object_ids, classes,
-                                         class_confidence, np.arange(len(object_ids), dtype=np.int64), [], int_ids))
+    found = FrameDetections("2d", BOX2D_COLUMNS, boxes, pixel_cov_px2, object_ids, classes, class_confidence,
+                            np.arange(len(object_ids), dtype=np.int64), [], int_ids)
+    return found if values_checked else _value_checks(found)
 
 
 # -- the usual frame: one pass per field over all detections ---------------------------------------------------

@@ -8,12 +8,21 @@ import math
 import numpy as np
 from numba import njit
 
-from .messages.asn1_cpm import DEFAULT_CDD
+from .messages.asn1_cpm import CONTAINER_ID_PERCEIVED_OBJECTS, DEFAULT_CDD
 from .messages.cpm import CONFIDENCE_LEVEL_UNAVAILABLE, COORD_GUARD_CM, COORD_MAX, COORD_MIN, check_cdd
 from .messages.sdsm import OFFSET_MAX
-from .messages.uper_cpm import _CORR_PREFIX, _HI, _LO, _NO_MOTION_COLUMN, _motion_rows, _plain_container_kernel
+from .messages.uper_cpm import (
+    _CORR_PREFIX,
+    _HI,
+    _LO,
+    _NO_MOTION_COLUMN,
+    REFERENCE_TIME_AT,
+    CpmUperWriter,
+    _motion_rows,
+    _plain_container_kernel,
+)
 
-__all__ = ["worst_usable", "cm_dm", "plain_cpm_container"]
+__all__ = ["worst_usable", "cm_dm", "plain_cpm_container", "plain_cpm_uper"]
 
 
 @njit(cache=True, nogil=True)
@@ -74,7 +83,71 @@ def _plain_cpm_kernel(en, rows, class_p, object_ids, v2x, at, class_idx, class_r
                                    motion, with_motion, lo, hi, n_total, corr_prefix, corr_bits)
 
 
+@njit(cache=True, nogil=True)
+def _put_bits(out, pos, value, nbits):  # pragma: no cover - compiled
+    """The ``nbits`` low bits of ``value`` ORed into ``out`` (uint8, zero there) from bit ``pos`` on, most
+    significant first; the bit after them."""
+    for b in range(nbits - 1, -1, -1):
+        if (value >> b) & 1:
+            out[pos >> 3] |= np.uint8(0x80 >> (pos & 7))
+        pos += 1
+    return pos
+
+
+@njit(cache=True, nogil=True)
+def _cpm_message(head, head_bits, ref_at, ref, cid_m1, data):  # pragma: no cover - compiled
+    """The CPM's octets: its first ``head_bits`` bits (``head``, the reference time's 42 bits at ``ref_at`` zero
+    there), the reference time ``ref``, then the WrappedCpmContainer of id ``cid_m1 + 1`` holding the octets
+    ``data`` (containerId, the open type's length determinant, the octets), zero bits to the octet -- what
+    ``uper_cpm.CpmUperWriter.encode`` writes with Python integers.  Empty: ``data`` too long for an unfragmented
+    open type (16384 octets or more: the writer names it)."""
+    n = data.shape[0]
+    if n >= 16384:
+        return np.zeros(0, np.uint8)
+    hdr = 12 if n < 128 else 20
+    out = np.zeros((head_bits + hdr + 8 * n + 7) // 8, np.uint8)
+    out[:(head_bits + 7) // 8] = head[:(head_bits + 7) // 8]
+    _put_bits(out, ref_at, ref, 42)
+    pos = _put_bits(out, head_bits, (cid_m1 << 8) | n if n < 128 else (cid_m1 << 16) | 0x8000 | n, hdr)
+    k, o = pos >> 3, pos & 7
+    for i in range(n):
+        b = np.int64(data[i])
+        out[k + i] |= np.uint8(b >> o)
+        if o:
+            out[k + i + 1] |= np.uint8((b << (8 - o)) & 0xFF)
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _plain_cpm_message_kernel(head, head_bits, ref_at, ref, cid_m1, en, rows, class_p, object_ids, v2x, at, class_idx,
+                              class_row, cv_tab, cw_tab, motion, with_motion, lo, hi, n_total, corr_prefix,
+                              corr_bits, cm_min, cm_max, dm_max, cm_guard,
+                              level_unavailable):  # pragma: no cover - compiled
+    """:func:`plain_cpm_uper` in one compiled call: :func:`_plain_cpm_kernel`, then :func:`_cpm_message`;
+    ``(octets, col)``, ``col >= 0``: a value out of range (no octets)."""
+    out, col, _ = _plain_cpm_kernel(en, rows, class_p, object_ids, v2x, at, class_idx, class_row, cv_tab, cw_tab,
+                                    motion, with_motion, lo, hi, n_total, corr_prefix, corr_bits, cm_min, cm_max,
+                                    dm_max, cm_guard, level_unavailable)
+    if col >= 0:
+        return out, col
+    return _cpm_message(head, head_bits, ref_at, ref, cid_m1, out), col
+
+
 _NO_CLASS_P = np.zeros(0)
+#: the largest TimestampIts (ms)
+_REFERENCE_TIME_MAX = 4398046511103
+
+
+def _kernel_args(en, rows, class_p, object_ids, v2x, cpm_at, class_idx, class_row, class_value, class_width, cdd,
+                 motion) -> tuple:
+    """The arguments of :func:`_plain_cpm_kernel` (see :func:`plain_cpm_container`)."""
+    prefix, bits = _CORR_PREFIX[check_cdd(cdd)]
+    m = len(rows)
+    motion_rows = None if motion is None else np.ascontiguousarray(_motion_rows(motion, m))
+    return (en, rows, _NO_CLASS_P if class_p is None else class_p, object_ids, v2x, cpm_at, class_idx, class_row,
+            class_value, class_width, _NO_MOTION_COLUMN if motion_rows is None else motion_rows,
+            motion_rows is not None, _LO, _HI, min(m, 255), prefix, bits, float(COORD_MIN), float(COORD_MAX),
+            float(OFFSET_MAX), COORD_GUARD_CM, CONFIDENCE_LEVEL_UNAVAILABLE)
 
 
 def plain_cpm_container(en: np.ndarray, rows: np.ndarray, class_p: np.ndarray | None, object_ids: np.ndarray,
@@ -106,12 +179,30 @@ def plain_cpm_container(en: np.ndarray, rows: np.ndarray, class_p: np.ndarray | 
     -------
     The container's octets; None where a value is out of range (the general writer then names it).
     """
-    prefix, bits = _CORR_PREFIX[check_cdd(cdd)]
-    m = len(rows)
-    motion_rows = None if motion is None else np.ascontiguousarray(_motion_rows(motion, m))
-    out, col, _ = _plain_cpm_kernel(en, rows, _NO_CLASS_P if class_p is None else class_p, object_ids, v2x, cpm_at,
-                                    class_idx, class_row, class_value, class_width,
-                                    _NO_MOTION_COLUMN if motion_rows is None else motion_rows, motion_rows is not None,
-                                    _LO, _HI, min(m, 255), prefix, bits, float(COORD_MIN), float(COORD_MAX),
-                                    float(OFFSET_MAX), COORD_GUARD_CM, CONFIDENCE_LEVEL_UNAVAILABLE)
+    out, col, _ = _plain_cpm_kernel(*_kernel_args(en, rows, class_p, object_ids, v2x, cpm_at, class_idx, class_row,
+                                                  class_value, class_width, cdd, motion))
     return None if col >= 0 else out.tobytes()
+
+
+def plain_cpm_uper(writer: CpmUperWriter, reference_time_ms: int, en: np.ndarray, rows: np.ndarray,
+                   class_p: np.ndarray | None, object_ids: np.ndarray, v2x: np.ndarray, cpm_at: int,
+                   class_idx: np.ndarray, class_row: np.ndarray, class_value: np.ndarray, class_width: np.ndarray, *,
+                   cdd: str = DEFAULT_CDD, motion=None) -> bytes | None:
+    """The whole CPM (UPER octets) of :func:`plain_cpm_container`'s objects by the station's ``writer``, in one
+    compiled call: ``writer.encode(reference_time_ms, plain_cpm_container(...))``, the same bytes (its head
+    :attr:`~.messages.uper_cpm.CpmUperWriter.head` copied, the reference time and the container appended by
+    bits).  The parameters after ``reference_time_ms`` (ms, TimestampIts) are :func:`plain_cpm_container`'s.
+    None: a value out of range (the general writer then names it); a reference time or a container beyond what
+    the message holds: the writer's error (:class:`~footprint_uq.errors.InputError`), as ``encode`` raises it."""
+    args = _kernel_args(en, rows, class_p, object_ids, v2x, cpm_at, class_idx, class_row, class_value, class_width,
+                        cdd, motion)
+    if 0 <= reference_time_ms <= _REFERENCE_TIME_MAX:
+        out, col = _plain_cpm_message_kernel(writer.head, writer.head_bits, REFERENCE_TIME_AT, reference_time_ms,
+                                             CONTAINER_ID_PERCEIVED_OBJECTS - 1, *args)
+        if col >= 0:
+            return None
+        if out.size:
+            return out.tobytes()
+    container = plain_cpm_container(en, rows, class_p, object_ids, v2x, cpm_at, class_idx, class_row, class_value,
+                                    class_width, cdd=cdd, motion=motion)
+    return None if container is None else writer.encode(reference_time_ms, container)

@@ -37,6 +37,8 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
+from ..products.detection_columns import MAX_PIXEL_VAR_PX2
+
 __all__ = ["ScannedFrame", "scan_frame"]
 
 # the keys (as bytes) this pass knows; detections' keys are numbered for their bit in the seen mask
@@ -503,13 +505,14 @@ def _scan(buf, pow10, fk, fk_at, dk, dk_at):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
-def _columns(fv, iv, first):  # pragma: no cover - compiled
+def _columns(fv, iv, first, max_var):  # pragma: no cover - compiled
     """The detections' columns as the service takes them, and whether they are the common layout: ``(ok, boxes
-    (n, 4), pixel covariances (n, 2, 2), ids (n,), has_cov, has_conf, one_class)``.  ``ok`` False: a detection
-    without a complete 2-D box, some with a covariance and some without (or one incomplete), a confidence outside
-    [0, 1] -- cases whose error entries the general path writes.  Absent object ids: the detection's index.
+    (n, 4), pixel covariances (n, 2, 2), ids (n,), has_cov, has_conf, one_class, values_ok)``.  ``ok`` False: a
+    detection without a complete 2-D box, some with a covariance and some without (or one incomplete), a confidence
+    outside [0, 1] -- cases whose error entries the general path writes.  Absent object ids: the detection's index.
     ``one_class``: every detection's class text the first one's, or none has one (``first`` (n,):
-    :func:`_class_first`)."""
+    :func:`_class_first`); ``values_ok``: every box's corners in order and every pixel covariance entry within
+    ``max_var`` (px^2) -- :func:`.detections.boxes2d_detections`' value checks, nothing for them to mark."""
     n = fv.shape[0]
     boxes = np.empty((n, 4))
     cov = np.empty((n, 2, 2))
@@ -532,10 +535,14 @@ def _columns(fv, iv, first):  # pragma: no cover - compiled
             boxes[r, q] = fv[r, q]
         cov[r, 0, 0], cov[r, 0, 1], cov[r, 1, 0], cov[r, 1, 1] = fv[r, 4], fv[r, 5], fv[r, 5], fv[r, 6]
     ok &= (n_cov == 0) | (n_cov == n)
-    one_class = True
+    one_class = values_ok = True
     for r in range(n):
         one_class &= first[r] == first[0]
-    return ok, boxes, cov, ids, n_cov > 0, has_conf, one_class
+        values_ok &= (fv[r, 0] <= fv[r, 2]) & (fv[r, 1] <= fv[r, 3])
+        if n_cov > 0:
+            for q in range(4, 7):
+                values_ok &= abs(fv[r, q]) <= max_var
+    return ok, boxes, cov, ids, n_cov > 0, has_conf, one_class, values_ok
 
 
 @njit(cache=True, nogil=True)
@@ -581,6 +588,7 @@ class ScannedFrame(NamedTuple):
     classes: list               # n str or None
     class_confidence: np.ndarray | None  # (n,), NaN where absent; None: no detection has one
     int_ids: np.ndarray | None = None  # (n,) int64: ``object_ids`` as an array (the scanner's ids are integers)
+    values_checked: bool = False  # every box in order, every covariance in range (nothing for the value checks)
 
 
 def scan_frame(text) -> ScannedFrame | None:
@@ -593,7 +601,7 @@ def scan_frame(text) -> ScannedFrame | None:
     ok, head, ts, fv, iv, first = _scan(buf, _POW10, _FK, _FK_AT, _DK, _DK_AT)
     if not ok or head[4] != 0b1111:  # (a frame field missing: the general path's frame error)
         return None
-    ok, boxes, cov, ids, has_cov, has_conf, one_class = _columns(fv, iv, first)
+    ok, boxes, cov, ids, has_cov, has_conf, one_class, values_ok = _columns(fv, iv, first, MAX_PIXEL_VAR_PX2)
     if not ok:
         return None
     raw = text if type(text) is bytes else bytes(buf)  # (decoded only where a string is)
@@ -607,7 +615,7 @@ def scan_frame(text) -> ScannedFrame | None:
         if not math.isfinite(ts):
             return None
     return ScannedFrame(camera, int(head[3]), ts, boxes, cov if has_cov else None, ids.tolist(), classes,
-                        fv[:, 7].copy() if has_conf else None, ids)
+                        fv[:, 7].copy() if has_conf else None, ids, bool(values_ok))
 
 
 def _classes(raw: bytes, iv: np.ndarray, first: np.ndarray, one_class: bool) -> list:

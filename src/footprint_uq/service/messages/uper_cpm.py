@@ -683,7 +683,7 @@ def _head_bits(cpm: dict) -> tuple[int, int]:
 
 #: bit offset of ``referenceTime`` in the message (header 48 bits, payload extension bit, management container
 #: extension bit and 2 presence bits)
-_REFERENCE_TIME_AT = 52
+REFERENCE_TIME_AT = _REFERENCE_TIME_AT = 52
 
 
 def _append_container(v: int, nb: int, cid: int, data: bytes) -> tuple[int, int]:
@@ -726,6 +726,10 @@ class CpmUperWriter:
         v, nb = _head_bits(build_cpm(station_id, 0, [], latitude=latitude, longitude=longitude))
         self._v, self._nb = _append_container(v, nb, CONTAINER_ID_RSU, _container_bytes(CONTAINER_ID_RSU, {}))
         self._ref_shift = self._nb - _REFERENCE_TIME_AT - 42
+        #: the fixed part as octets (its reference time zero, bits after :attr:`head_bits` zero) and its length in
+        #: bits: what a compiled writer copies (``service/frame_kernels.py`` ``plain_cpm_uper``)
+        self.head = np.frombuffer(_pad_bytes(self._v, self._nb), np.uint8).copy()
+        self.head_bits = self._nb
 
     def encode(self, reference_time_ms: int, perceived_objects_uper: bytes) -> bytes:
         """The message with this ``TimestampIts`` and PerceivedObjectContainer (its UPER octets)."""
