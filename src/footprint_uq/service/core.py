@@ -787,7 +787,8 @@ class Service:
         range (the general writer then names it)."""
         cls = self._cls
         m = len(co.ok_idx)
-        mc = None if motion is None else motion_codes(motion if m == len(est) else motion.take(co.ok_idx), m)
+        every = m == est.centre_valid.shape[0]  # (not len(est): a call back up into products/, bench/frame_walk.py)
+        mc = None if motion is None else motion_codes(motion if every else motion.take(co.ok_idx), m)
         return plain_cpm_uper(setup.uper, ref_ms, setup.world_to_enu(est.centre_xy_world_m), co.ok_idx, class_p,
                               co.msg_ids, np.ascontiguousarray(est.v2x_codes.T, dtype=np.int32), _CPM_INDEX,
                               co.class_idx, _class_rows_of(co.classes), cls.bits_value, cls.bits_width,

@@ -9,17 +9,15 @@ import numpy as np
 from numba import njit
 
 from .messages.asn1_cpm import CONTAINER_ID_PERCEIVED_OBJECTS, DEFAULT_CDD
-from .messages.cpm import CONFIDENCE_LEVEL_UNAVAILABLE, COORD_GUARD_CM, COORD_MAX, COORD_MIN, check_cdd
+from .messages.cpm import CONFIDENCE_LEVEL_UNAVAILABLE, COORD_GUARD_CM, COORD_MAX, COORD_MIN
 from .messages.sdsm import OFFSET_MAX
 from .messages.uper_cpm import (
-    _CORR_PREFIX,
-    _HI,
-    _LO,
-    _NO_MOTION_COLUMN,
+    NO_MOTION_COLUMN,
     REFERENCE_TIME_AT,
     CpmUperWriter,
-    _motion_rows,
-    _plain_container_kernel,
+    container_constants,
+    motion_rows,
+    plain_container_kernel,
 )
 
 __all__ = ["worst_usable", "cm_dm", "plain_cpm_container", "plain_cpm_uper"]
@@ -69,7 +67,7 @@ def _plain_cpm_kernel(en, rows, class_p, object_ids, v2x, at, class_idx, class_r
                       level_unavailable):  # pragma: no cover - compiled
     """:func:`plain_cpm_container` in one compiled call: the objects' cm (:func:`_cm_dm_kernel`), their
     ConfidenceLevels (``class_p (N,)``, NaN: unavailable; an empty array: none given) and the container
-    (:func:`~.messages.uper_cpm._plain_container_kernel`)."""
+    (:func:`~.messages.uper_cpm.plain_container_kernel`)."""
     m = rows.shape[0]
     cm = _cm_dm_kernel(en, rows, cm_min, cm_max, dm_max, cm_guard)
     level = np.empty(m, np.int64)
@@ -79,7 +77,7 @@ def _plain_cpm_kernel(en, rows, class_p, object_ids, v2x, at, class_idx, class_r
             continue
         p = class_p[rows[j]]
         level[j] = level_unavailable if p != p else int(max(1.0, np.ceil(100.0 * p - 1e-9)))
-    return _plain_container_kernel(object_ids, cm, v2x, rows, at, class_idx, class_row, cv_tab, cw_tab, level,
+    return plain_container_kernel(object_ids, cm, v2x, rows, at, class_idx, class_row, cv_tab, cw_tab, level,
                                    motion, with_motion, lo, hi, n_total, corr_prefix, corr_bits)
 
 
@@ -141,13 +139,13 @@ _REFERENCE_TIME_MAX = 4398046511103
 def _kernel_args(en, rows, class_p, object_ids, v2x, cpm_at, class_idx, class_row, class_value, class_width, cdd,
                  motion) -> tuple:
     """The arguments of :func:`_plain_cpm_kernel` (see :func:`plain_cpm_container`)."""
-    prefix, bits = _CORR_PREFIX[check_cdd(cdd)]
+    lo, hi, prefix, bits = container_constants(cdd)
     m = len(rows)
-    motion_rows = None if motion is None else np.ascontiguousarray(_motion_rows(motion, m))
+    rows10 = None if motion is None else np.ascontiguousarray(motion_rows(motion, m))
     return (en, rows, _NO_CLASS_P if class_p is None else class_p, object_ids, v2x, cpm_at, class_idx, class_row,
-            class_value, class_width, _NO_MOTION_COLUMN if motion_rows is None else motion_rows,
-            motion_rows is not None, _LO, _HI, min(m, 255), prefix, bits, float(COORD_MIN), float(COORD_MAX),
-            float(OFFSET_MAX), COORD_GUARD_CM, CONFIDENCE_LEVEL_UNAVAILABLE)
+            class_value, class_width, NO_MOTION_COLUMN if rows10 is None else rows10, rows10 is not None, lo, hi,
+            min(m, 255), prefix, bits, float(COORD_MIN), float(COORD_MAX), float(OFFSET_MAX), COORD_GUARD_CM,
+            CONFIDENCE_LEVEL_UNAVAILABLE)
 
 
 def plain_cpm_container(en: np.ndarray, rows: np.ndarray, class_p: np.ndarray | None, object_ids: np.ndarray,
