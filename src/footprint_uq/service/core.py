@@ -758,18 +758,20 @@ class Service:
                 id_arr = np.array(ids, dtype=np.int64)
             except OverflowError:  # (beyond int64: JSON allows up to 2**64 - 1)
                 return None
+        zeros = np.zeros(N, np.int64)  # (read only by the writer: the class and the status of a uniform frame)
         if classes.count(classes[0]) == N:  # one class for the frame (or none): one entry
-            distinct, class_idx = [classes[0]], np.zeros(N, np.int64)
+            distinct, class_idx = [classes[0]], zeros
         else:
             first: dict = {}
             class_idx = np.fromiter((first.setdefault(c, len(first)) for c in classes), np.int64, N)
             distinct = list(first)
         valid = est.centre_valid
-        status_idx, status_texts = (np.zeros(N, np.int64), [_STATUS_ALL_OK_COMPACT]) if valid.all() else \
-            _compact_status(est)
+        all_valid = bool(valid.all())
+        status_idx, status_texts = (zeros, [_STATUS_ALL_OK_COMPACT]) if all_valid else _compact_status(est)
         ok_idx = msg_ids = mid = None
         if self.messages:  # (as _message_id_layout: the objects with a centre, at most 255)
-            ok_idx = np.flatnonzero(valid)[:MAX_MESSAGE_OBJECTS]
+            ok_idx = np.arange(min(N, MAX_MESSAGE_OBJECTS)) if all_valid else \
+                np.flatnonzero(valid)[:MAX_MESSAGE_OBJECTS]
             msg_ids = mid = setup.ids.assign(ids, ok_idx, ts, int_ids=id_arr)
             if len(ok_idx) < N:
                 mid = np.full(N, -1, np.int64)

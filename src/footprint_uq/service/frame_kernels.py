@@ -78,7 +78,7 @@ def _plain_cpm_kernel(en, rows, class_p, object_ids, v2x, at, class_idx, class_r
         p = class_p[rows[j]]
         level[j] = level_unavailable if p != p else int(max(1.0, np.ceil(100.0 * p - 1e-9)))
     return plain_container_kernel(object_ids, cm, v2x, rows, at, class_idx, class_row, cv_tab, cw_tab, level,
-                                   motion, with_motion, lo, hi, n_total, corr_prefix, corr_bits)
+                                  motion, with_motion, lo, hi, n_total, corr_prefix, corr_bits)
 
 
 @njit(cache=True, nogil=True)

@@ -497,7 +497,7 @@ def _container_kernel(cols, lo, hi, cv, cw, lv, sid_ptr, sid_val, n_total, corr_
 
 @njit(cache=True, nogil=True)
 def plain_container_kernel(object_ids, cm, v2x, rows, at, class_idx, class_row, cv_tab, cw_tab, level, motion,
-                            with_motion, lo, hi, n_total, corr_prefix, corr_bits):  # pragma: no cover - compiled
+                           with_motion, lo, hi, n_total, corr_prefix, corr_bits):  # pragma: no cover - compiled
     """:func:`_container_kernel` of objects without sensors or quality, its columns gathered here: object
     ``j`` is row ``rows[j]`` of the frame (``v2x`` (7, N): its x / y confidence and correlation at rows ``at``..
     ``at + 2``; ``class_row[class_idx[r]]``: its row of the class tables ``cv_tab`` / ``cw_tab``), ``cm`` (>= 2, m):
@@ -539,8 +539,8 @@ def plain_container_uper(object_ids, cm, v2x, rows, cpm_at: int, class_idx, clas
     m = len(rows)
     rows10 = NO_MOTION_COLUMN if motion is None else np.ascontiguousarray(motion_rows(motion, m))
     out, col, _ = plain_container_kernel(object_ids, cm, v2x, rows, cpm_at, class_idx, class_row, class_value,
-                                          class_width, level, rows10, motion is not None, _LO, _HI, min(m, 255),
-                                          prefix, bits)
+                                         class_width, level, rows10, motion is not None, _LO, _HI, min(m, 255),
+                                         prefix, bits)
     return None if col >= 0 else out.tobytes()
 
 def container_constants(cdd: str = DEFAULT_CDD) -> tuple[np.ndarray, np.ndarray, int, int]:
