@@ -30,6 +30,7 @@ from footprint_uq.service import Service
 from footprint_uq.service.core import _motion_object_layout
 from footprint_uq.service.jsonrows import Table, compact_objects_json
 from footprint_uq.service.messages import ids as ids_mod
+from footprint_uq.service.messages.uper_cpm import CpmUperWriter
 from footprint_uq.tracking.motion import ObjectMotion
 
 T0 = 1714564800.0
@@ -294,26 +295,27 @@ def test_the_tracked_columnar_path_is_the_one_taken(camera, monkeypatch):
 
 
 def test_the_tracked_cpm_takes_the_columnar_writer(camera, monkeypatch):
-    """A tracked compact frame's UPER CPM comes from ``plain_container_uper`` with the motion (not silently the
-    general writer): its container replaced, the CPM changes; and the motion reaches it (velocity present)."""
+    """A tracked compact frame's UPER CPM comes from ``plain_cpm_uper`` (``service/frame_kernels.py``) with the
+    motion (not silently the general writer): its container replaced, the CPM changes; and the motion reaches it
+    (velocity present)."""
     from footprint_uq.service import core
 
     frames = [orjson.dumps(_tracked_frame(k, variant="classes")) for k in range(3)]
     seen = []
-    real = core.plain_container_uper
+    real = core.plain_cpm_uper
 
     def spy(*a, **k):
         out = real(*a, **k)
         seen.append((k.get("motion"), out))
         return out
 
-    monkeypatch.setattr(core, "plain_container_uper", spy)
+    monkeypatch.setattr(core, "plain_cpm_uper", spy)
     svc = Service(camera, "basler1", record="compact", tracks=True)
     before = [svc.process_frame_json(f).cpm_uper for f in frames][-1]
     motion, container = seen[-1]
     assert motion is not None and np.asarray(motion.has_velocity).any()
     assert container is not None  # (its bytes, not None: the general writer's fallback)
-    monkeypatch.setattr(core, "plain_container_uper", lambda *a, **k: b"")
+    monkeypatch.setattr(core, "plain_cpm_uper", lambda *a, **k: b"")
     svc = Service(camera, "basler1", record="compact", tracks=True)
     assert [svc.process_frame_json(f).cpm_uper for f in frames][-1] != before
 
@@ -327,7 +329,7 @@ def test_the_columnar_path_is_the_one_taken(camera, monkeypatch):
     frame = orjson.dumps(_frame(np.random.default_rng(3), 20, 0, variant="one-class"))
     before = _record(svc.process_frame_json(frame))
     monkeypatch.setattr(core, "compact_objects_json", lambda *a, **k: b"[]")
-    monkeypatch.setattr(core, "plain_container_uper", lambda *a, **k: b"")
+    monkeypatch.setattr(core, "plain_cpm_uper", lambda *a, **k: b"")
     out = svc.process_frame_json(frame)
     assert b'"objects":[]' in _record(out) and before != _record(out)
 
@@ -386,3 +388,63 @@ def camera_proc(camera):
     from footprint_uq import FrameProcessor
 
     return FrameProcessor(camera, "basler1", joint_cov=False)
+
+
+_P_VALUES = st.one_of(st.floats(0.0, 1.0), st.just(float("nan")), st.sampled_from([0.0, 0.01, 0.015, 0.29, 0.5, 1.0]))
+
+
+@settings(max_examples=120, deadline=None)
+@given(st.integers(0, 300), st.integers(0, 2 ** 32 - 1), st.booleans(), st.sampled_from(["2.1.1", "2.2.1"]),
+       st.data())
+def test_plain_cpm_container_is_the_composed_writers(n, seed, with_p, cdd, data):
+    """``frame_kernels.plain_cpm_container`` (cm, confidence levels and container in one compiled call) gives the
+    bytes of what the service composed before: ``cm_dm`` + ``_confidence_levels`` + ``plain_container_uper``, and
+    ``plain_cpm_uper`` (the message too) ``CpmUperWriter.encode``'s --
+    over positions on and beyond the coordinate range (NaN, the cm rounding's edges), class confidences (NaN,
+    the level's edges, none given), subsets of rows (> 255 objects), several classes, CDD releases, and values
+    out of range (None from both)."""
+    from footprint_uq.service import core
+    from footprint_uq.service.frame_kernels import cm_dm, plain_cpm_container, plain_cpm_uper
+    from footprint_uq.service.messages.uper_cpm import plain_container_uper
+
+    rng = np.random.default_rng(seed)
+    en = rng.choice([1.0, 100.0, 1500.0], (n, 2)) * rng.uniform(-1, 1, (n, 2))
+    en[rng.random((n, 2)) < 0.05] = np.nan
+    en[rng.random((n, 2)) < 0.05] = 0.125  # (an exact cm edge)
+    rows = np.flatnonzero(rng.random(n) < 0.8)
+    class_p = np.array(data.draw(st.lists(_P_VALUES, min_size=n, max_size=n)), dtype=np.float64) if with_p else None
+    msg_ids = rng.integers(0, 65536, len(rows)).astype(np.int64)
+    if len(rows) and rng.random() < 0.1:
+        msg_ids[0] = 70000  # (out of range: None)
+    v2x = np.ascontiguousarray(rng.integers(1, 4096, (7, n)).astype(np.int32))
+    v2x[core._CPM_INDEX + 2] = rng.integers(-100, 101, n)
+    class_idx = rng.integers(0, 3, n).astype(np.int64)
+    class_row = core._class_rows_of(["car", None, "pedestrian"])
+    cls = core._class_tables(cdd)
+    got = plain_cpm_container(en, rows, class_p, msg_ids, v2x, core._CPM_INDEX, class_idx, class_row, cls.bits_value,
+                              cls.bits_width, cdd=cdd)
+    level, _ = core._confidence_levels(class_p, rows)
+    want = plain_container_uper(msg_ids, cm_dm(en, rows), v2x, rows, core._CPM_INDEX, class_idx, class_row,
+                                cls.bits_value, cls.bits_width, level, cdd=cdd)
+    assert got == want
+    # the whole message by bits (plain_cpm_uper) == the writer's Python integers, short and long containers
+    writer = CpmUperWriter(int(rng.integers(0, 2 ** 32)), latitude=int(rng.integers(-900000000, 900000001)),
+                           longitude=int(rng.integers(-1800000000, 1800000001)))
+    ref_ms = data.draw(st.one_of(st.integers(0, 4398046511103), st.sampled_from([0, 4398046511103])))
+    msg = plain_cpm_uper(writer, ref_ms, en, rows, class_p, msg_ids, v2x, core._CPM_INDEX, class_idx, class_row,
+                         cls.bits_value, cls.bits_width, cdd=cdd)
+    assert msg == (None if want is None else writer.encode(ref_ms, want))
+
+
+def test_plain_cpm_uper_names_a_reference_time_out_of_range():
+    """A reference time beyond TimestampIts: the writer's error, as ``CpmUperWriter.encode`` raises it."""
+    from footprint_uq.errors import InputError
+    from footprint_uq.service import core
+    from footprint_uq.service.frame_kernels import plain_cpm_uper
+
+    cls = core._class_tables("2.2.1")
+    one = np.ones(1, np.int64)
+    for ref_ms in (-1, 4398046511104):
+        with pytest.raises(InputError, match="referenceTime"):
+            plain_cpm_uper(CpmUperWriter(7), ref_ms, np.zeros((1, 2)), 0 * one, None, one, np.ones((7, 1), np.int32),
+                           core._CPM_INDEX, 0 * one, 0 * one, cls.bits_value, cls.bits_width)

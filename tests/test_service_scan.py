@@ -287,3 +287,34 @@ def test_frame_level_errors_as_the_general_path(camera):
         assert scan_frame(text) is not None
         out = a.process_frame_json(text, source="t")
         assert out.type == "error" and out.record == b.process_frame_json(orjson.loads(text), source="t").record
+
+
+@settings(max_examples=80, deadline=None)
+@given(st.integers(1, 12), st.integers(0, 2 ** 32 - 1), st.booleans(), st.booleans())
+def test_scanned_flags_are_the_numpy_checks(n, seed, cov, one_class):
+    """The reader's compiled flags: ``values_checked`` -- every box in order and every covariance entry within
+    ``MAX_PIXEL_VAR_PX2`` (the value checks would mark nothing: ``boxes2d_detections`` then skips them) -- and the
+    one-class shortcut of the classes, against numpy on the same columns: boxes flat, flipped or equal, covariances
+    at, below and beyond the limit (negative ones too)."""
+    from footprint_uq.products.detection_columns import MAX_PIXEL_VAR_PX2
+
+    rng = np.random.default_rng(seed)
+    dets = _dets(rng, n, cov=cov)
+    for d in dets:
+        if one_class:
+            d["class"] = "car"
+        pick = rng.integers(0, 6)
+        if pick == 0:  # upside down
+            d["v_min_px"], d["v_max_px"] = d["v_max_px"] + 1, d["v_min_px"]
+        elif pick == 1:  # flat (in order)
+            d["u_max_px"] = d["u_min_px"]
+        elif pick == 2 and cov:
+            d["cov_uv_px2"] = float(rng.choice([MAX_PIXEL_VAR_PX2, -MAX_PIXEL_VAR_PX2, 1.0000001e12, -2e12]))
+    s = scan_frame(_frame(dets))
+    assert s is not None
+    X = s.boxes
+    in_order = not ((X[:, 0] > X[:, 2]) | (X[:, 1] > X[:, 3])).any()
+    in_range = s.pixel_cov_px2 is None or not (np.abs(s.pixel_cov_px2) > MAX_PIXEL_VAR_PX2).any()
+    assert s.values_checked == (in_order and in_range)
+    assert s.int_ids.tolist() == s.object_ids and s.int_ids.dtype == np.int64
+    assert s.classes == [d["class"] for d in dets]  # (a wrong one-class flag: every class the first one's)

@@ -58,7 +58,7 @@ from .detections import (
     finite_number,
     parse_detections,
 )
-from .frame_kernels import cm_dm, worst_usable
+from .frame_kernels import cm_dm, plain_cpm_uper, worst_usable
 from .frame_scan import ScannedFrame, scan_frame
 from .jsonrows import Table, compact_objects_json
 from .messages.asn1_cpm import DEFAULT_CDD
@@ -88,7 +88,6 @@ from .messages.uper_cpm import (
     class_bits,
     encode_cpm_uper_fast,
     perceived_object_container_uper_arrays,
-    plain_container_uper,
 )
 
 __all__ = ["Service", "CameraSetup", "FrameOutput", "error_record", "station_id_of", "RECORD_FOOTPRINTS",
@@ -476,8 +475,10 @@ class Service:
         perceived_object_container_uper_arrays(one, one, one, one, one, one, one, one, one, cdd=self.cpm_cdd)
         if self.record == "compact":  # (its compiled passes: _compact_objects, _plain_cpm_uper)
             compact_objects_json(one, 0 * one, [b"null"], 0 * one, [b""], np.zeros((5, 1)), one)
-            plain_container_uper(one, np.ones((2, 1), np.int64), np.ones((7, 1), np.int32), 0 * one, 0, 0 * one,
-                                 0 * one, one, one, one, cdd=self.cpm_cdd)
+            cls = self._cls
+            for setup in self.cameras.values():
+                plain_cpm_uper(setup.uper, 0, np.zeros((1, 2)), 0 * one, None, one, np.ones((7, 1), np.int32), 0,
+                               0 * one, 0 * one, cls.bits_value, cls.bits_width, cdd=self.cpm_cdd)
         cm_dm(np.zeros((1, 2)), np.zeros(1, np.int64))
         scan_frame(b'{"camera_id":"c","frame":0,"timestamp_s":0,"detections":[{"object_id":1,"class":"car",'
                    b'"u_min_px":1,"v_min_px":1.5,"u_max_px":2,"v_max_px":3}]}')
@@ -595,7 +596,7 @@ class Service:
             raise _FrameError("detections", f"{n} detections in one frame, more than the frame limit of "
                               f"{self.max_frame_detections} (split the frame)")
         found = boxes2d_detections(scanned.boxes, scanned.pixel_cov_px2, scanned.object_ids, scanned.classes,
-                                   scanned.class_confidence)
+                                   scanned.class_confidence, scanned.int_ids, scanned.values_checked)
         return self._frame(setup, scanned.camera_id, scanned.frame, scanned.timestamp_s, found, t0)
 
     def _frame(self, setup: CameraSetup, camera_id, fno: int, ts: float, found: FrameDetections, t0: float
@@ -611,7 +612,7 @@ class Service:
         compact = self.record == "compact"
         # the compact record: its objects (with the motion when tracked) from the columns in one compiled pass, and
         # the untracked frame's CPM in another
-        co = self._compact_objects(setup, est, ids, classes, ts, motion) if compact else None
+        co = self._compact_objects(setup, est, ids, classes, ts, motion, found.int_ids) if compact else None
         if co is None:
             objects, ok_idx, msg_ids = self._objects_json(setup, est, ids, classes, ts, motion)
         else:
@@ -647,9 +648,9 @@ class Service:
                 parts += [b',"objects_not_in_messages":', b"%d" % omitted]
         t3 = time.perf_counter()
         total = round(1e6 * (t3 - t0), 1)
-        parts += [b',"processing_us":', orjson.dumps({
-            "footprints": round(1e6 * (t1 - t0), 1), "records": round(1e6 * (t2 - t1), 1),
-            "messages": round(1e6 * (t3 - t2), 1), "total": total}), b"}"]
+        # (orjson's text of these rounded floats: one decimal, as "%.1f" writes them below 1e15)
+        parts.append(b',"processing_us":{"footprints":%.1f,"records":%.1f,"messages":%.1f,"total":%.1f}}' % (
+            1e6 * (t1 - t0), 1e6 * (t2 - t1), 1e6 * (t3 - t2), total))
         return FrameOutput(b"".join(parts), RECORD_FOOTPRINTS, camera_id, total, None, len(found.errors), cpm_uper)
 
     def _footprints(self, setup: CameraSetup, found: FrameDetections) -> tuple:
@@ -737,35 +738,40 @@ class Service:
         layout.append(b"}")
         return t.json_buffer(layout), ok_idx, msg_ids
 
-    def _compact_objects(self, setup: CameraSetup, est, ids: list, classes: list, ts: float, motion=None
-                         ) -> _CompactObjects | None:
+    def _compact_objects(self, setup: CameraSetup, est, ids: list, classes: list, ts: float, motion=None,
+                         int_ids: np.ndarray | None = None) -> _CompactObjects | None:
         """The compact record's ``objects`` by :func:`.jsonrows.compact_objects_json` (one compiled pass;
         :meth:`_objects_json` writes the same bytes with its general layout), and the message ids as
         :meth:`_objects_json` assigns them.  ``motion``: the tracker's ``(track_id (N,), ObjectMotion)`` (None:
         untracked).  None: not this path's frame (no objects, an ``object_id`` that is not an integer of 64 bits,
-        motion not in float64, or :attr:`_columnar` off: the reference path of the tests)."""
+        motion not in float64, or :attr:`_columnar` off: the reference path of the tests).  ``int_ids``: ``ids`` as
+        int64 when the caller knows them all to be such integers (:attr:`.detections.FrameDetections.int_ids`)."""
         N = len(ids)
-        if not self._columnar or N == 0 or set(map(type, ids)) != _INT_ONLY:
+        if not self._columnar or N == 0 or (int_ids is None and set(map(type, ids)) != _INT_ONLY):
             return None
         values = _compact_values(est, motion)
         if values is None:
             return None
-        try:
-            id_arr = np.array(ids, dtype=np.int64)
-        except OverflowError:  # (beyond int64: JSON allows up to 2**64 - 1)
-            return None
+        id_arr = int_ids
+        if id_arr is None:
+            try:
+                id_arr = np.array(ids, dtype=np.int64)
+            except OverflowError:  # (beyond int64: JSON allows up to 2**64 - 1)
+                return None
+        zeros = np.zeros(N, np.int64)  # (read only by the writer: the class and the status of a uniform frame)
         if classes.count(classes[0]) == N:  # one class for the frame (or none): one entry
-            distinct, class_idx = [classes[0]], np.zeros(N, np.int64)
+            distinct, class_idx = [classes[0]], zeros
         else:
             first: dict = {}
             class_idx = np.fromiter((first.setdefault(c, len(first)) for c in classes), np.int64, N)
             distinct = list(first)
         valid = est.centre_valid
-        status_idx, status_texts = (np.zeros(N, np.int64), [_STATUS_ALL_OK_COMPACT]) if valid.all() else \
-            _compact_status(est)
+        all_valid = bool(valid.all())
+        status_idx, status_texts = (zeros, [_STATUS_ALL_OK_COMPACT]) if all_valid else _compact_status(est)
         ok_idx = msg_ids = mid = None
         if self.messages:  # (as _message_id_layout: the objects with a centre, at most 255)
-            ok_idx = np.flatnonzero(valid)[:MAX_MESSAGE_OBJECTS]
+            ok_idx = np.arange(min(N, MAX_MESSAGE_OBJECTS)) if all_valid else \
+                np.flatnonzero(valid)[:MAX_MESSAGE_OBJECTS]
             msg_ids = mid = setup.ids.assign(ids, ok_idx, ts, int_ids=id_arr)
             if len(ok_idx) < N:
                 mid = np.full(N, -1, np.int64)
@@ -777,20 +783,18 @@ class Service:
 
     def _plain_cpm_uper(self, setup: CameraSetup, est, class_p, co: _CompactObjects, ref_ms: int,
                         motion: ObjectMotion | None = None) -> bytes | None:
-        """The UPER CPM of a compact frame's objects ``co.ok_idx`` by :func:`.messages.uper_cpm.
-        plain_container_uper` (the columns gathered in the compiled pass); the bytes of :meth:`_cpm_uper`.
+        """The UPER CPM of a compact frame's objects ``co.ok_idx`` by :func:`.frame_kernels.plain_cpm_uper` (their
+        cm, confidence levels, container and the message in one compiled call); the bytes of :meth:`_cpm_uper`.
         ``motion``: the tracker's motion of all the frame's objects (None: untracked).  None: a value out of
         range (the general writer then names it)."""
-        cm = cm_dm(setup.world_to_enu(est.centre_xy_world_m), co.ok_idx)
-        level, _ = _confidence_levels(class_p, co.ok_idx)
         cls = self._cls
         m = len(co.ok_idx)
-        mc = None if motion is None else motion_codes(motion if m == len(est) else motion.take(co.ok_idx), m)
-        container = plain_container_uper(co.msg_ids, cm, np.ascontiguousarray(est.v2x_codes.T, dtype=np.int32),
-                                         co.ok_idx, _CPM_INDEX, co.class_idx,
-                                         np.array([_CLASS_ROWS[c] for c in co.classes], np.int64), cls.bits_value,
-                                         cls.bits_width, level, cdd=self.cpm_cdd, motion=mc)
-        return None if container is None else setup.uper.encode(ref_ms, container)
+        every = m == est.centre_valid.shape[0]  # (not len(est): a call back up into products/, bench/frame_walk.py)
+        mc = None if motion is None else motion_codes(motion if every else motion.take(co.ok_idx), m)
+        return plain_cpm_uper(setup.uper, ref_ms, setup.world_to_enu(est.centre_xy_world_m), co.ok_idx, class_p,
+                              co.msg_ids, np.ascontiguousarray(est.v2x_codes.T, dtype=np.int32), _CPM_INDEX,
+                              co.class_idx, _class_rows_of(co.classes), cls.bits_value, cls.bits_width,
+                              cdd=self.cpm_cdd, motion=mc)
 
     def _full_object_layout(self, setup: CameraSetup, t: Table, est, cxx, cxy, cyy) -> list:
         """The full record's object fields after ``cov_m2``: ellipses, largest point, V2X fields and their source,
@@ -1096,6 +1100,20 @@ class _ClassRowCache(dict):
 
 
 _CLASS_ROWS = _ClassRowCache()
+_CLASS_ROW_ARRAYS: dict = {}
+
+
+def _class_rows_of(classes: list) -> np.ndarray:
+    """The class-table rows (int64) of a frame's distinct ``classes`` (str or None), kept for the next frames
+    (at most 256 class lists: a detector's frames repeat a few)."""
+    key = tuple(classes)
+    rows = _CLASS_ROW_ARRAYS.get(key)
+    if rows is None:
+        rows = np.array([_CLASS_ROWS[c] for c in classes], np.int64)
+        if len(_CLASS_ROW_ARRAYS) >= 256:
+            _CLASS_ROW_ARRAYS.clear()
+        _CLASS_ROW_ARRAYS[key] = rows
+    return rows
 _CORR_OPEN = b',"lowerTriangularCorrelationMatrices":[{"componentsIncludedIntheMatrix":["xPosition","yPosition"],' \
              b'"matrix":[['
 _CORR_CLOSE = b"]]}]"

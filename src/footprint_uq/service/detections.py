@@ -103,6 +103,9 @@ class FrameDetections:
         Position of each good detection in the frame's ``detections`` list.
     errors : list of DetectionError
         The bad detections, by position.
+    int_ids : ndarray (M,) int64 or None
+        ``object_ids`` as an array when the caller knows them all to be integers of 64 bits (the frame scanner's);
+        None: not known (the record's writer then looks at the list).
     """
 
     family: str | None
@@ -114,6 +117,7 @@ class FrameDetections:
     class_confidence: np.ndarray | None
     index: np.ndarray
     errors: list = field(default_factory=list)
+    int_ids: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.object_ids)
@@ -135,7 +139,7 @@ class FrameDetections:
             None if self.pixel_cov_px2 is None else self.pixel_cov_px2[keep], [self.object_ids[r] for r in rows],
             [self.classes[r] for r in rows],
             None if self.class_confidence is None else self.class_confidence[keep], self.index[keep],
-            sorted(self.errors + errors))
+            sorted(self.errors + errors), None if self.int_ids is None else self.int_ids[keep])
 
 
 def parse_detections(dets: list, names: ClassNames | None = None) -> FrameDetections:
@@ -157,7 +161,8 @@ def parse_detections(dets: list, names: ClassNames | None = None) -> FrameDetect
 
 
 def boxes2d_detections(boxes: np.ndarray, pixel_cov_px2: np.ndarray | None, object_ids: list, classes: list,
-                       class_confidence: np.ndarray | None) -> FrameDetections:
+                       class_confidence: np.ndarray | None, int_ids: np.ndarray | None = None,
+                       values_checked: bool = False) -> FrameDetections:
     """Well-formed 2-D box detections already in columns (:func:`.frame_scan.scan_frame`: every field of the
     right type, confidences in [0, 1]) into :class:`FrameDetections`, with :func:`parse_detections`' value checks
     (box corners in order, pixel covariances in range: each failing detection an error entry).
@@ -170,11 +175,18 @@ def boxes2d_detections(boxes: np.ndarray, pixel_cov_px2: np.ndarray | None, obje
     object_ids, classes : list (M)
     class_confidence : ndarray (M,) or None
         NaN where absent.
+    int_ids : ndarray (M,) int64, optional
+        ``object_ids`` as an array (every id an integer of 64 bits: the scanner's), kept in
+        :attr:`FrameDetections.int_ids`.
+    values_checked : bool
+        The caller found every box's corners in order and every covariance entry in range already (the scanner's
+        compiled pass): the value checks would mark nothing, and are skipped.
     """
     if len(object_ids) == 0:
         return FrameDetections(None, (), np.zeros((0, 0)), None, [], [], None, np.zeros(0, np.int64))
-    return _value_checks(FrameDetections("2d", BOX2D_COLUMNS, boxes, pixel_cov_px2, object_ids, classes,
-                                         class_confidence, np.arange(len(object_ids), dtype=np.int64)))
+    found = FrameDetections("2d", BOX2D_COLUMNS, boxes, pixel_cov_px2, object_ids, classes, class_confidence,
+                            np.arange(len(object_ids), dtype=np.int64), [], int_ids)
+    return found if values_checked else _value_checks(found)
 
 
 # -- the usual frame: one pass per field over all detections ---------------------------------------------------

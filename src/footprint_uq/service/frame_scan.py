@@ -37,6 +37,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
+from ..products.detection_columns import MAX_PIXEL_VAR_PX2
 from .bytewords import load8
 
 __all__ = ["ScannedFrame", "scan_frame"]
@@ -559,11 +560,14 @@ def _scan(buf, pow10, fk, fk_at, dk, dk_at):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
-def _columns(fv, iv):  # pragma: no cover - compiled
+def _columns(fv, iv, first, max_var):  # pragma: no cover - compiled
     """The detections' columns as the service takes them, and whether they are the common layout: ``(ok, boxes
-    (n, 4), pixel covariances (n, 2, 2), ids (n,), has_cov, has_conf)``.  ``ok`` False: a detection without a
-    complete 2-D box, some with a covariance and some without (or one incomplete), a confidence outside [0, 1]
-    -- cases whose error entries the general path writes.  Absent object ids: the detection's index."""
+    (n, 4), pixel covariances (n, 2, 2), ids (n,), has_cov, has_conf, one_class, values_ok)``.  ``ok`` False: a
+    detection without a complete 2-D box, some with a covariance and some without (or one incomplete), a confidence
+    outside [0, 1] -- cases whose error entries the general path writes.  Absent object ids: the detection's index.
+    ``one_class``: every detection's class text the first one's, or none has one (``first`` (n,):
+    :func:`_class_first`); ``values_ok``: every box's corners in order and every pixel covariance entry within
+    ``max_var`` (px^2) -- :func:`.detections.boxes2d_detections`' value checks, nothing for them to mark."""
     n = fv.shape[0]
     boxes = np.empty((n, 4))
     cov = np.empty((n, 2, 2))
@@ -586,19 +590,28 @@ def _columns(fv, iv):  # pragma: no cover - compiled
             boxes[r, q] = fv[r, q]
         cov[r, 0, 0], cov[r, 0, 1], cov[r, 1, 0], cov[r, 1, 1] = fv[r, 4], fv[r, 5], fv[r, 5], fv[r, 6]
     ok &= (n_cov == 0) | (n_cov == n)
-    return ok, boxes, cov, ids, n_cov > 0, has_conf
+    one_class = values_ok = True
+    for r in range(n):
+        one_class &= first[r] == first[0]
+        values_ok &= (fv[r, 0] <= fv[r, 2]) & (fv[r, 1] <= fv[r, 3])
+        if n_cov > 0:
+            for q in range(4, 7):
+                values_ok &= abs(fv[r, q]) <= max_var
+    return ok, boxes, cov, ids, n_cov > 0, has_conf, one_class, values_ok
 
 
 @njit(cache=True, nogil=True)
-def _scan_columns(buf, pow10, fk, fk_at, dk, dk_at):  # pragma: no cover - compiled
+def _scan_columns(buf, pow10, fk, fk_at, dk, dk_at, max_var):  # pragma: no cover - compiled
     """:func:`_scan` and :func:`_columns` in one call (one dispatch, the rows not boxed in between): ``(ok, head,
     timestamp_s, boxes (n, 4), pixel covariances (n, 2, 2), ids (n,), class confidences (n,), has_cov, has_conf,
-    iv (n, 4), class_first (n,))``; ``ok`` False: not in the subset, a frame field missing or not the common
-    layout (:func:`scan_frame` then declines)."""
+    iv (n, 4), class_first (n,), one_class, values_ok)`` (the last two as :func:`_columns` says, ``max_var`` in
+    px^2); ``ok`` False: not in the subset, a frame field missing or not the common layout (:func:`scan_frame`
+    then declines)."""
     ok, head, ts, fv, iv, first = _scan(buf, pow10, fk, fk_at, dk, dk_at)
     ok &= head[4] == 0b1111  # (a frame field missing: the general path's frame error)
-    good, boxes, cov, ids, has_cov, has_conf = _columns(fv, iv)
-    return ok and good, head, ts, boxes, cov, ids, fv[:, 7].copy(), has_cov, has_conf, iv, first
+    good, boxes, cov, ids, has_cov, has_conf, one_class, values_ok = _columns(fv, iv, first, max_var)
+    return (ok and good, head, ts, boxes, cov, ids, fv[:, 7].copy(), has_cov, has_conf, iv, first, one_class,
+            values_ok)
 
 
 @njit(cache=True, nogil=True)
@@ -643,6 +656,8 @@ class ScannedFrame(NamedTuple):
     object_ids: list            # n ints (absent: the detection's index)
     classes: list               # n str or None
     class_confidence: np.ndarray | None  # (n,), NaN where absent; None: no detection has one
+    int_ids: np.ndarray | None = None  # (n,) int64: ``object_ids`` as an array (the scanner's ids are integers)
+    values_checked: bool = False  # every box in order, every covariance in range (nothing for the value checks)
 
 
 def scan_frame(text) -> ScannedFrame | None:
@@ -652,14 +667,14 @@ def scan_frame(text) -> ScannedFrame | None:
     buf = np.frombuffer(text, np.uint8)
     if buf.size == 0:
         return None
-    ok, head, ts, boxes, cov, ids, conf, has_cov, has_conf, iv, first = _scan_columns(buf, _POW10, _FK, _FK_AT, _DK,
-                                                                                      _DK_AT)
+    ok, head, ts, boxes, cov, ids, conf, has_cov, has_conf, iv, first, one_class, values_ok = _scan_columns(
+        buf, _POW10, _FK, _FK_AT, _DK, _DK_AT, MAX_PIXEL_VAR_PX2)
     if not ok:
         return None
     raw = text if type(text) is bytes else bytes(buf)  # (decoded only where a string is)
     try:
         camera = raw[head[1]:head[2]].decode("utf-8")
-        classes = _classes(raw, iv, first)
+        classes = _classes(raw, iv, first, one_class)
     except UnicodeDecodeError:
         return None
     if head[6] >= 0:  # a time stamp beyond the exact subset: Python's correctly rounded float of its JSON text
@@ -667,16 +682,16 @@ def scan_frame(text) -> ScannedFrame | None:
         if not math.isfinite(ts):
             return None
     return ScannedFrame(camera, int(head[3]), ts, boxes, cov if has_cov else None, ids.tolist(), classes,
-                        conf if has_conf else None)
+                        conf if has_conf else None, ids, bool(values_ok))
 
 
-def _classes(raw: bytes, iv: np.ndarray, first: np.ndarray) -> list:
-    """The detections' class strings: each distinct text decoded once."""
+def _classes(raw: bytes, iv: np.ndarray, first: np.ndarray, one_class: bool) -> list:
+    """The detections' class strings: each distinct text decoded once (``one_class``: one text for all, or none)."""
     n = len(first)
     if n == 0:
         return []
     f0 = int(first[0])
-    if (first == f0).all():  # one class for all (or none): no per-detection work
+    if one_class:  # one class for all (or none): no per-detection work
         return [None if f0 < 0 else raw[iv[0, 1]:iv[0, 2]].decode("utf-8")] * n
     names = np.empty(n + 1, dtype=object)  # (the last entry: None, for -1)
     for r in np.flatnonzero(first == np.arange(n)).tolist():

@@ -142,9 +142,10 @@ def update_slots(X, P, Xm, Pm, Cm, mu, t_last, n_upd, slots, t, qs, rates, z, R,
     leaving rates ``rates (M,)`` in 1/s, M <= 2) are ``Xm (cap, M, 4)``, ``Pm (cap, M, 4, 4)``, ``Cm (cap, M, r,
     4)`` (the consider columns stored column by column) with probabilities ``mu (cap, M)``; ``X (cap, 4)``,
     ``P (cap, 4, 4)`` receive their moment-matched combination.  Each mode is mixed (:func:`_mix`), predicted to
-    ``t`` from ``t_last`` and updated with ``z[i]``, ``R[i]`` and ``B_pred[i]`` (``B`` at the predicted position; ``(0, 2, 0)``: none) where finite, else
-    ``B_frame[i]``.  ``d2[i]`` receives the smallest of the modes' squared Mahalanobis distances; the track is
-    updated only if it is ``<= gate`` (then ``t_last = t`` and one more update in ``n_upd``), else left as it was.
+    ``t`` from ``t_last`` and updated with ``z[i]``, ``R[i]`` and ``B_pred[i]`` (``B`` at the predicted position;
+    ``(0, 2, 0)``: none) where finite, else ``B_frame[i]``.  ``d2[i]`` receives the smallest of the modes'
+    squared Mahalanobis distances; the track is updated only if it is ``<= gate`` (then ``t_last = t`` and one
+    more update in ``n_upd``), else left as it was.
     With one mode this is :func:`predict_update`."""
     M, r = Xm.shape[1], Cm.shape[2]
     Pp, Cp, K, cross = np.empty((4, 4)), np.empty((4, r)), np.empty((4, 2)), np.empty((4, 2))

@@ -21,6 +21,7 @@ from __future__ import annotations
 import zlib
 
 import numpy as np
+from numba import njit
 
 __all__ = ["MessageIdMap", "MESSAGE_ID_HOLD_S", "preferred_number"]
 
@@ -152,9 +153,10 @@ class MessageIdMap:
 
     def _assign_small(self, sel: np.ndarray, rows, t_s: float) -> np.ndarray | None:
         """:meth:`assign` of the integer ids ``sel`` (int64) by array; None (nothing changed): not distinct ids in
-        0..65535, for the general path."""
+        0..65535, for the general path.  The look-up of a frame whose ids are all known is one compiled pass
+        (:func:`_lookup_small`)."""
         m = len(sel)
-        if m == 0 or sel.min() < 0 or sel.max() >= _N:
+        if m == 0:
             return None
         if self._small_num is None:  # (the ids the general path assigned so far, too)
             self._small_num, self._small_seen = np.full(_N, -1, np.int64), np.zeros(_N)
@@ -162,23 +164,48 @@ class MessageIdMap:
             for key, num in self._num.items():
                 if type(key) is int and 0 <= key < _N:
                     self._small_num[key] = num
-        order = np.arange(m)
-        self._mark[sel] = order
-        if not (self._mark[sel] == order).all():  # an id twice: its occurrences are other objects
-            return None
+        # (the clock and its sweep before the look-up, as the general path does first when this one declines)
         if t_s > self._now:
             self._now = t_s
         if self._now >= self._next_sweep:
             self._sweep()
-        nums = self._small_num[sel]
-        new = np.flatnonzero(nums < 0)
-        if len(new):  # (their keys enter ``_seen`` in the frame's order, as the general path's update does)
+        nums = np.empty(m, np.int64)
+        n_new = _lookup_small(sel, self._small_num, self._mark, self._small_seen, t_s, nums)
+        if n_new < 0:  # ids out of 0..65535, or an id twice (its occurrences are other objects)
+            return None
+        if n_new:  # (their keys enter ``_seen`` in the frame's order, as the general path's update does)
+            new = np.flatnonzero(nums < 0)
             self._frame_keys = sel.tolist()
             rows_l = np.asarray(rows, dtype=np.int64)[new].tolist()
             for j, key, r in zip(new.tolist(), sel[new].tolist(), rows_l, strict=True):
                 nums[j] = self._assign(key, key, r, 0, None)
             self._sync()
             self._seen.update(dict.fromkeys(sel[new].tolist(), t_s))
-        self._small_seen[sel] = t_s
+            self._small_seen[sel] = t_s
         self._pending.append(sel.copy())
         return nums
+
+
+@njit(cache=True, nogil=True)
+def _lookup_small(sel, small_num, mark, small_seen, t_s, nums):  # pragma: no cover - compiled
+    """:meth:`MessageIdMap._assign_small`'s look-up in one pass: -1 when an id of ``sel (m,)`` is outside 0..65535
+    or there twice (``mark (65536,)``: scratch); else each id's number into ``nums`` (-1: new) and the count of
+    the new ones -- with none new, their frame time ``t_s`` into ``small_seen`` too (with some, the caller writes
+    it after assigning them)."""
+    m = sel.shape[0]
+    for j in range(m):
+        k = sel[j]
+        if k < 0 or k >= small_num.shape[0]:
+            return -1
+        mark[k] = j
+    n_new = 0
+    for j in range(m):
+        k = sel[j]
+        if mark[k] != j:
+            return -1
+        nums[j] = small_num[k]
+        n_new += nums[j] < 0
+    if n_new == 0:
+        for j in range(m):
+            small_seen[sel[j]] = t_s
+    return n_new
