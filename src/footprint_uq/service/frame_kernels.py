@@ -9,14 +9,13 @@ import numpy as np
 from numba import njit
 
 from .messages.asn1_cpm import CONTAINER_ID_PERCEIVED_OBJECTS, DEFAULT_CDD
-from .messages.cpm import CONFIDENCE_LEVEL_UNAVAILABLE, COORD_GUARD_CM, COORD_MAX, COORD_MIN
+from .messages.cpm import CONFIDENCE_LEVEL_UNAVAILABLE, COORD_GUARD_CM, COORD_MAX, COORD_MIN, TIMESTAMP_ITS_MAX
 from .messages.sdsm import OFFSET_MAX
 from .messages.uper_cpm import (
-    NO_MOTION_COLUMN,
     REFERENCE_TIME_AT,
     CpmUperWriter,
     container_constants,
-    motion_rows,
+    kernel_motion,
     plain_container_kernel,
 )
 
@@ -132,8 +131,6 @@ def _plain_cpm_message_kernel(head, head_bits, ref_at, ref, cid_m1, en, rows, cl
 
 
 _NO_CLASS_P = np.zeros(0)
-#: the largest TimestampIts (ms)
-_REFERENCE_TIME_MAX = 4398046511103
 
 
 def _kernel_args(en, rows, class_p, object_ids, v2x, cpm_at, class_idx, class_row, class_value, class_width, cdd,
@@ -141,11 +138,9 @@ def _kernel_args(en, rows, class_p, object_ids, v2x, cpm_at, class_idx, class_ro
     """The arguments of :func:`_plain_cpm_kernel` (see :func:`plain_cpm_container`)."""
     lo, hi, prefix, bits = container_constants(cdd)
     m = len(rows)
-    rows10 = None if motion is None else np.ascontiguousarray(motion_rows(motion, m))
     return (en, rows, _NO_CLASS_P if class_p is None else class_p, object_ids, v2x, cpm_at, class_idx, class_row,
-            class_value, class_width, NO_MOTION_COLUMN if rows10 is None else rows10, rows10 is not None, lo, hi,
-            min(m, 255), prefix, bits, float(COORD_MIN), float(COORD_MAX), float(OFFSET_MAX), COORD_GUARD_CM,
-            CONFIDENCE_LEVEL_UNAVAILABLE)
+            class_value, class_width, *kernel_motion(motion, m), lo, hi, min(m, 255), prefix, bits,
+            float(COORD_MIN), float(COORD_MAX), float(OFFSET_MAX), COORD_GUARD_CM, CONFIDENCE_LEVEL_UNAVAILABLE)
 
 
 def plain_cpm_container(en: np.ndarray, rows: np.ndarray, class_p: np.ndarray | None, object_ids: np.ndarray,
@@ -194,7 +189,7 @@ def plain_cpm_uper(writer: CpmUperWriter, reference_time_ms: int, en: np.ndarray
     the message holds: the writer's error (:class:`~footprint_uq.errors.InputError`), as ``encode`` raises it."""
     args = _kernel_args(en, rows, class_p, object_ids, v2x, cpm_at, class_idx, class_row, class_value, class_width,
                         cdd, motion)
-    if 0 <= reference_time_ms <= _REFERENCE_TIME_MAX:
+    if 0 <= reference_time_ms <= TIMESTAMP_ITS_MAX:
         out, col = _plain_cpm_message_kernel(writer.head, writer.head_bits, REFERENCE_TIME_AT, reference_time_ms,
                                              CONTAINER_ID_PERCEIVED_OBJECTS - 1, *args)
         if col >= 0:

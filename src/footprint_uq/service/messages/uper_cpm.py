@@ -67,12 +67,19 @@ from .asn1_cpm import (
     DEFAULT_CDD,
     VRU_SUBPROFILES,
 )
-from .cpm import LATITUDE_UNAVAILABLE, LONGITUDE_UNAVAILABLE, MATRIX_COMPONENTS, build_cpm, check_cdd
+from .cpm import (
+    LATITUDE_UNAVAILABLE,
+    LONGITUDE_UNAVAILABLE,
+    MATRIX_COMPONENTS,
+    TIMESTAMP_ITS_MAX,
+    build_cpm,
+    check_cdd,
+)
 from .motion import ObjectMotion, motion_codes
 
 __all__ = ["encode_cpm_uper_fast", "perceived_object_container_uper", "perceived_object_container_uper_arrays",
            "class_bits", "CpmUperWriter", "object_bits", "sensor_id_columns", "plain_container_uper",
-           "plain_container_kernel", "container_constants", "motion_rows", "NO_MOTION_COLUMN", "REFERENCE_TIME_AT"]
+           "plain_container_kernel", "container_constants", "kernel_motion", "REFERENCE_TIME_AT"]
 
 _ALT_CONF = ("alt-000-01", "alt-000-02", "alt-000-05", "alt-000-10", "alt-000-20", "alt-000-50", "alt-001-00",
              "alt-002-00", "alt-005-00", "alt-010-00", "alt-020-00", "alt-050-00", "alt-100-00", "alt-200-00",
@@ -501,7 +508,7 @@ def plain_container_kernel(object_ids, cm, v2x, rows, at, class_idx, class_row, 
     """:func:`_container_kernel` of objects without sensors or quality, its columns gathered here: object
     ``j`` is row ``rows[j]`` of the frame (``v2x`` (7, N): its x / y confidence and correlation at rows ``at``..
     ``at + 2``; ``class_row[class_idx[r]]``: its row of the class tables ``cv_tab`` / ``cw_tab``), ``cm`` (>= 2, m):
-    its x / y in cm; ``motion`` (10, m): its motion rows (:func:`motion_rows`) where ``with_motion``, else
+    its x / y in cm; ``motion`` (10, m): its motion rows (:func:`_motion_rows`) where ``with_motion``, else
     none."""
     m = rows.shape[0]
     cols = np.zeros((lo.shape[0], m), np.int64)
@@ -535,13 +542,13 @@ def plain_container_uper(object_ids, cm, v2x, rows, cpm_at: int, class_idx, clas
     :class:`~.motion.MotionCodes` (None: no motion sent).  None where a value is out of range: the caller's
     :func:`perceived_object_container_uper_arrays` then names it.
     """
-    prefix, bits = _CORR_PREFIX[check_cdd(cdd)]
+    lo, hi, prefix, bits = container_constants(cdd)
     m = len(rows)
-    rows10 = NO_MOTION_COLUMN if motion is None else np.ascontiguousarray(motion_rows(motion, m))
     out, col, _ = plain_container_kernel(object_ids, cm, v2x, rows, cpm_at, class_idx, class_row, class_value,
-                                         class_width, level, rows10, motion is not None, _LO, _HI, min(m, 255),
-                                         prefix, bits)
+                                         class_width, level, *kernel_motion(motion, m), lo, hi, min(m, 255), prefix,
+                                         bits)
     return None if col >= 0 else out.tobytes()
+
 
 def container_constants(cdd: str = DEFAULT_CDD) -> tuple[np.ndarray, np.ndarray, int, int]:
     """What :func:`plain_container_kernel` takes besides the columns, for CDD release ``cdd``: the 19 columns'
@@ -552,11 +559,20 @@ def container_constants(cdd: str = DEFAULT_CDD) -> tuple[np.ndarray, np.ndarray,
 
 #: the 10 motion rows of objects without motion (a column, broadcast over the objects)
 _NO_MOTION_ROWS = np.array([0, 0, 1, 0, 1, 0, 0, 1, 0, 0], dtype=np.int64)[:, None]
-#: the same as a C-contiguous (10, 1) array: :func:`plain_container_uper`'s placeholder (not read without motion)
-NO_MOTION_COLUMN = np.ascontiguousarray(_NO_MOTION_ROWS)
+#: the same as a C-contiguous (10, 1) array: :func:`plain_container_kernel`'s placeholder (not read without motion)
+_NO_MOTION_COLUMN = np.ascontiguousarray(_NO_MOTION_ROWS)
 
 
-def motion_rows(motion, n: int):
+def kernel_motion(motion, m: int) -> tuple[np.ndarray, bool]:
+    """What :func:`plain_container_kernel` takes for the motion of its ``m`` objects (``motion``: an
+    :class:`~.motion.ObjectMotion` or :class:`~.motion.MotionCodes`, or None): ``(rows, with_motion)``, the
+    10 motion rows ``(10, m)`` int64 C-contiguous and True, or a placeholder and False when there is none."""
+    if motion is None:
+        return _NO_MOTION_COLUMN, False
+    return np.ascontiguousarray(_motion_rows(motion, m)), True
+
+
+def _motion_rows(motion, n: int):
     """The 10 motion rows (velocity present, x, x conf, y, y conf, angles present, z, conf, age present, age)."""
     if motion is None:
         return np.zeros((10, n), np.int64) + _NO_MOTION_ROWS
@@ -590,7 +606,7 @@ def object_bits(xy_corr, class_width, *, cdd: str = DEFAULT_CDD, motion=None, qu
     the objectPerceptionQuality (4), the sensorIdList (8 + 8 per id) and the classification."""
     corr = np.asarray(xy_corr, dtype=np.int64).reshape(-1)
     n = len(corr)
-    m = motion_rows(motion, n)
+    m = _motion_rows(motion, n)
     ptr, _ = sensor_id_columns(sensor_ids, n)
     ns = np.diff(ptr)
     q = np.zeros(n, np.int64) if quality is None else (np.asarray(quality, dtype=np.int64).reshape(-1) >= 0)
@@ -622,7 +638,7 @@ def perceived_object_container_uper_arrays(object_ids, x_cm, x_conf, y_cm, y_con
         except OverflowError:  # beyond 64 bits: out of range anyway
             name, lo, hi = _COLUMN_RANGES[j]
             raise InputError(name, next(v for v in c if not lo <= v <= hi), f"an integer in {lo}..{hi}") from None
-    cols[6:16] = _NO_MOTION_ROWS if motion is None else motion_rows(motion, n)
+    cols[6:16] = _NO_MOTION_ROWS if motion is None else _motion_rows(motion, n)
     cols[16] = 0 if measurement_delta_ms is None else measurement_delta_ms
     if quality is None:  # (none sent: present 0, value 0)
         cols[17:19] = 0
@@ -669,7 +685,7 @@ def _head_bits(cpm: dict) -> tuple[int, int]:
         (_check("messageId", h["messageId"], 0, 255), 8),
         (_check("stationId", h["stationId"], 0, 4294967295), 32),
         (0, 1), (0 if seg is None else 2, 3),  # payload extension bit; management container extension + 2 presence
-        (_check("referenceTime", mc["referenceTime"], 0, 4398046511103), 42),
+        (_check("referenceTime", mc["referenceTime"], 0, TIMESTAMP_ITS_MAX), 42),
         (_check("latitude", rp["latitude"], -900000000, 900000001), 31),
         (_check("longitude", rp["longitude"], -1800000000, 1800000001), 32),
         (_check("semiMajorConfidence", el["semiMajorConfidence"], 0, 4095), 12),
@@ -691,7 +707,7 @@ def _head_bits(cpm: dict) -> tuple[int, int]:
 
 #: bit offset of ``referenceTime`` in the message (header 48 bits, payload extension bit, management container
 #: extension bit and 2 presence bits)
-REFERENCE_TIME_AT = _REFERENCE_TIME_AT = 52
+REFERENCE_TIME_AT = 52
 
 
 def _append_container(v: int, nb: int, cid: int, data: bytes) -> tuple[int, int]:
@@ -733,7 +749,7 @@ class CpmUperWriter:
                  longitude: int = LONGITUDE_UNAVAILABLE):
         v, nb = _head_bits(build_cpm(station_id, 0, [], latitude=latitude, longitude=longitude))
         self._v, self._nb = _append_container(v, nb, CONTAINER_ID_RSU, _container_bytes(CONTAINER_ID_RSU, {}))
-        self._ref_shift = self._nb - _REFERENCE_TIME_AT - 42
+        self._ref_shift = self._nb - REFERENCE_TIME_AT - 42
         #: the fixed part as octets (its reference time zero, bits after :attr:`head_bits` zero) and its length in
         #: bits: what a compiled writer copies (``service/frame_kernels.py`` ``plain_cpm_uper``)
         self.head = np.frombuffer(_pad_bytes(self._v, self._nb), np.uint8).copy()
@@ -741,7 +757,7 @@ class CpmUperWriter:
 
     def encode(self, reference_time_ms: int, perceived_objects_uper: bytes) -> bytes:
         """The message with this ``TimestampIts`` and PerceivedObjectContainer (its UPER octets)."""
-        ref = _check("referenceTime", reference_time_ms, 0, 4398046511103)
+        ref = _check("referenceTime", reference_time_ms, 0, TIMESTAMP_ITS_MAX)
         v, nb = _append_container(self._v | (ref << self._ref_shift), self._nb, CONTAINER_ID_PERCEIVED_OBJECTS,
                                   perceived_objects_uper)
         return _pad_bytes(v, nb)
