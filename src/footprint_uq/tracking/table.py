@@ -220,9 +220,8 @@ class TrackTable:
         self._cap = cap
 
     def _delete_expired(self, time_s: float) -> None:
-        """The deleter: drop tracks whose last update is more than ``timeout_s`` before ``time_s``."""
-        if len(self._index) <= 1 or not time_s - self._oldest_s > self.config.timeout_s:
-            return
+        """The deleter: drop tracks whose last update is more than ``timeout_s`` before ``time_s`` (called when its
+        sweep is due: :meth:`step` tests that first, two or more tracks and the oldest update expired)."""
         for s in np.flatnonzero(time_s - self._t_last > self.config.timeout_s).tolist():  # (NaN: a free row)
             del self._index[self._keys[s]]
             self._keys[s] = None
@@ -232,10 +231,9 @@ class TrackTable:
         self._oldest_s = float(live.min()) if live.size else math.inf
 
     def _measurement(self, xy_m, cov_frame_m2, shared_m) -> SplitMeasurement:
-        mode = self.config.calibration
-        if mode == "consider":
-            return SplitMeasurement(xy_m, cov_frame_m2, shared_m)
-        R = cov_frame_m2 + (shared_m @ np.swapaxes(shared_m, -1, -2) if mode == "white" else 0.0)
+        """The measurement of the ``white`` and ``ignore`` modes (``consider`` takes the split as given:
+        :meth:`step`): ``B B^T`` folded into the frame's covariance or left out, no consider columns."""
+        R = cov_frame_m2 + (shared_m @ np.swapaxes(shared_m, -1, -2) if self.config.calibration == "white" else 0.0)
         return SplitMeasurement(xy_m, R, np.zeros((xy_m.shape[0], 2, 0)))
 
     def step(self, time_s: float, object_ids, xy_m, cov_frame_m2=None, shared_m=None, *,
