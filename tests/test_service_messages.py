@@ -15,7 +15,14 @@ from footprint_uq.errors import InputError
 from footprint_uq.service import Service
 from footprint_uq.service.messages.cpm import CPM_CLASSES_BY_CDD, coordinate_cm
 from footprint_uq.service.messages.ids import MESSAGE_ID_HOLD_S, MessageIdMap, preferred_number
-from footprint_uq.service.messages.motion import ObjectMotion, motion_codes, motion_codes_reference, unknown_motion
+from footprint_uq.service.messages.motion import (
+    MOTION_ROWS,
+    ObjectMotion,
+    motion_codes,
+    motion_codes_reference,
+    motion_rows,
+    unknown_motion,
+)
 
 T0 = 1714564800.0
 
@@ -169,6 +176,116 @@ def test_motion_codes_compiled_equals_the_numpy_reference():
         with pytest.raises(InputError) as e2:
             motion_codes_reference(bad, 5)
         assert str(e1.value) == str(e2.value) and f"motion.{field}" in str(e1.value)
+
+
+def _reference_rows(m: ObjectMotion, n: int) -> np.ndarray:
+    """motion_codes_reference's fields as motion_rows' (14, n) int64 rows (MOTION_ROWS' order)."""
+    ref = motion_codes_reference(m, n)
+    return np.array([getattr(ref, name) for name in MOTION_ROWS], dtype=np.int64)
+
+
+def _edge_motion() -> ObjectMotion:
+    """One object per edge of the codes: velocities at and beside the CPM's bounds (163.81 / -163.83 m/s) and
+    steps, SDSM speeds at and beyond 8190 x 0.02 m/s, headings / yaws at the wrap and the steps, sigmas whose 95 %
+    value sits on a confidence level or just above it, ages at 2.047 s, NaN (unknown) in every field."""
+    ve = [163.81, 163.8099, -163.83, -163.8299, 0.01, -0.01, 0.0, np.nan, 1.0, np.nan, 2.5, 7.0]
+    vn = [0.0, 163.81, 163.82, -163.84, 0.02, np.nan, -0.0, np.nan, np.nan, 1.0, 1e-12, -7.0]
+    sp = [163.8, 163.81, 163.79, 0.01, 0.0, np.nan, 1e9, 0.02, 0.03, 5.0, 0.0101, 2.0]
+    hd = [359.995, 359.99375, 0.00625, -0.00625, 360.0, -360.0, 720.0125, np.nan, 90.0, 180.0, 0.0, 45.0]
+    yw = [90.0, 89.99, 90.01, 0.0, 359.99, -90.0, 450.0, np.nan, 180.05, 270.0, 0.05, 12.3]
+    lv = np.array([100.0, 10.0, 5.0, 1.0, 0.1, 0.05, 0.01]) / 1.96
+    ssp = [lv[0], lv[0] * 1.001, lv[3], lv[3] * 1.0001, lv[6], lv[6] * 0.5, 0.0, np.nan, lv[4], lv[5], 1.25 / 1.96,
+           60.0]
+    shd = [10.0 / 1.96, 5.0 / 1.96, 0.0125 / 1.96, 0.01 / 1.96, 0.0, np.nan, 0.05 / 1.96, 11.0, 0.1 / 1.96, 1.0,
+           0.011 / 1.96, 0.5]
+    syw = [12.5 / 1.96, 12.6 / 1.96, 0.0, 0.1 / 1.96, 0.05 / 1.96, np.nan, 1.0, 100.0, 0.2 / 1.96, 2.0, 0.3, 6.0]
+    age = [2.047, 2.0475, 2.046999, 0.0, 0.0009999, np.nan, 1e6, 0.5, 1.5, 0.001, 0.0125, 3.0]
+    n = len(ve)
+    sv = np.array([1.25 / 1.96, 1.26 / 1.96, 0.01 / 1.96, 0.0, np.nan, 0.5, 0.02 / 1.96, 0.64, 0.1, 0.2, 1e-9, 3.0])
+    cov = np.zeros((n, 2, 2))
+    cov[:, 0, 0], cov[:, 1, 1] = sv ** 2, sv[::-1] ** 2
+    return ObjectMotion(*(np.array(a, dtype=float) for a in (ve, vn)), cov,
+                        *(np.array(a, dtype=float) for a in (sp, ssp, hd, shd, yw, syw, age)))
+
+
+def test_motion_rows_are_the_reference_codes_at_the_edges_and_in_any_order():
+    """motion_rows (one compiled pass from the motion's columns; the service's compact CPM takes its first 10
+    rows) gives the numpy reference's codes value for value: at the codes' bounds and steps, NaN fields, random
+    motion over and beyond every range; and with ``rows`` the codes of those objects in that order (repeats, a
+    subset, none) -- what motion.take(rows) then the codes gave."""
+    m = _edge_motion()
+    n = len(m.age_s)
+    got = motion_rows(m, n)
+    assert got.shape == (14, n) and got.dtype == np.int64 and got.flags.c_contiguous
+    np.testing.assert_array_equal(got, _reference_rows(m, n))
+    # a few pinned by hand: 163.81 m/s -> 16382 (max), -163.83 -> -16383 (min), 0.01 -> 1, unknown -> 16383;
+    # SDSM speed 163.8 m/s -> 8190, beyond -> 8190; heading 359.995 deg -> 28799.6 -> 28800 -> 0 (wraps)
+    assert list(got[1, [0, 2, 4, 7]]) == [16382, -16383, 1, 16383]
+    assert list(got[10, [0, 1, 5]]) == [8190, 8190, 8191] and got[12, 0] == 0 and got[12, 7] == 28800
+    assert list(got[9, [0, 1, 5]]) == [2047, 2047, 0] and list(got[8, [0, 5]]) == [1, 0]
+    assert got[6, 0] == 0 and got[6, 7] == 3601 and got[5, 7] == 0  # yaw 90 (east) -> 0; unknown -> 3601
+    rng = np.random.default_rng(31)
+    for k in range(20):
+        r = _random_motion(rng, 300)
+        rows = rng.permutation(300)[:rng.integers(0, 300)] if k % 3 else rng.integers(0, 300, 400)
+        want = _reference_rows(r.take(rows), len(rows))
+        np.testing.assert_array_equal(motion_rows(r, 300, rows), want)
+        np.testing.assert_array_equal(motion_rows(r, 300, rows)[:, :0], want[:, :0])
+        np.testing.assert_array_equal(motion_rows(r, 300), _reference_rows(r, 300))
+    # fields that are not C-contiguous float64 (a column of a wider array, float32, lists) give the same codes
+    wide = np.stack([m.v_east_mps, m.v_north_mps], axis=1)
+    odd = m._replace(v_east_mps=wide[:, 0], speed_mps=m.speed_mps.astype(np.float32),
+                     age_s=list(m.age_s))
+    np.testing.assert_array_equal(motion_rows(odd, n), _reference_rows(odd, n))
+
+
+def test_motion_rows_name_the_first_bad_field_of_the_objects_it_codes():
+    """The check's order is motion_codes_reference's (field by field, then object by object), in one pass: a later
+    object bad in an earlier field is named before an earlier object bad in a later field; an object outside
+    ``rows`` is not checked; a bad shape or index is named."""
+    m = unknown_motion(6)
+    bad = m._replace(yaw_deg=np.array([0.0, np.inf, 0.0, 0.0, 0.0, 0.0]),
+                     age_s=np.array([0.0, 0.0, 0.0, -2.0, -1.0, 0.0]))
+    for fn in (lambda mm, k, rows=None: motion_rows(mm, k, rows), motion_codes):
+        with pytest.raises(InputError) as e:
+            fn(bad, 6)
+        assert "motion.age_s" in str(e.value) and "-2.0" in str(e.value)
+    with pytest.raises(InputError) as e2:
+        motion_codes_reference(bad, 6)
+    with pytest.raises(InputError) as e1:
+        motion_rows(bad, 6)
+    assert str(e1.value) == str(e2.value)
+    with pytest.raises(InputError, match="motion.yaw_deg"):
+        motion_rows(bad, 6, np.array([0, 1, 2]))  # (rows 3 and 4, the bad ages, not coded)
+    with pytest.raises(InputError, match="-1.0"):
+        motion_rows(bad, 6, np.array([4, 3]))  # (the first of the objects coded)
+    assert motion_rows(bad, 6, np.array([5, 0, 2])).shape == (14, 3)
+    with pytest.raises(InputError, match="motion.cov_v_m2ps2"):
+        motion_rows(m._replace(cov_v_m2ps2=np.zeros((6, 2))), 6)
+    with pytest.raises(InputError, match="rows"):
+        motion_rows(m, 6, np.array([0, 6]))
+    with pytest.raises(InputError, match="rows"):
+        motion_rows(m, 6, np.array([-1]))
+
+
+def test_the_container_kernel_takes_motion_rows_as_they_are():
+    """uper_cpm.kernel_motion hands motion_rows' first 10 rows to the container kernel without a copy (the same
+    container bytes as from the ObjectMotion or its MotionCodes), and names an array of another shape."""
+    from footprint_uq.service.messages.uper_cpm import kernel_motion, perceived_object_container_uper_arrays
+
+    m = _edge_motion()
+    n = len(m.age_s)
+    rows = motion_rows(m, n)
+    got, with_motion = kernel_motion(rows, n)
+    assert with_motion and np.shares_memory(got, rows) and got.flags.c_contiguous and got.shape == (10, n)
+    np.testing.assert_array_equal(got, kernel_motion(motion_codes(m, n), n)[0])
+    one = np.ones(n, np.int64)
+    cols = (np.arange(n), one, one, one, one, np.full(n, 101), 0 * one, 0 * one, one)
+    assert (perceived_object_container_uper_arrays(*cols, motion=rows)
+            == perceived_object_container_uper_arrays(*cols, motion=m))
+    for wrong in (rows[:10], rows[:, :3], rows.astype(np.int32), np.asfortranarray(rows)):
+        with pytest.raises(InputError, match="motion"):
+            kernel_motion(wrong, n)
 
 
 # -- classes ---------------------------------------------------------------------------------------------------------

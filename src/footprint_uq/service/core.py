@@ -81,6 +81,7 @@ from .messages.motion import (
     SPEED_CONFIDENCE_NAMES,
     ObjectMotion,
     motion_codes,
+    motion_rows,
 )
 from .messages.sdsm import SDSM_OBJECT_TYPES, build_sdsm
 from .messages.uper_cpm import (
@@ -788,9 +789,9 @@ class Service:
         ``motion``: the tracker's motion of all the frame's objects (None: untracked).  None: a value out of
         range (the general writer then names it)."""
         cls = self._cls
-        m = len(co.ok_idx)
-        every = m == est.centre_valid.shape[0]  # (not len(est): a call back up into products/, bench/frame_walk.py)
-        mc = None if motion is None else motion_codes(motion if every else motion.take(co.ok_idx), m)
+        n = est.centre_valid.shape[0]  # (not len(est): a call back up into products/, bench/frame_walk.py)
+        # the message's objects' motion codes in one compiled call, straight from the motion's columns (no copy)
+        mc = None if motion is None else motion_rows(motion, n, None if len(co.ok_idx) == n else co.ok_idx)
         return plain_cpm_uper(setup.uper, ref_ms, setup.world_to_enu(est.centre_xy_world_m), co.ok_idx, class_p,
                               co.msg_ids, np.ascontiguousarray(est.v2x_codes.T, dtype=np.int32), _CPM_INDEX,
                               co.class_idx, _class_rows_of(co.classes), cls.bits_value, cls.bits_width,

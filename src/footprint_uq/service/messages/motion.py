@@ -58,8 +58,9 @@ from numba import njit
 from ...errors import InputError
 from ...tracking.motion import ObjectMotion
 
-__all__ = ["ObjectMotion", "MotionCodes", "motion_codes", "motion_codes_reference", "unknown_motion",
-           "SPEED_CONFIDENCE_NAMES", "HEADING_CONFIDENCE_NAMES", "SPEED_CONFIDENCE_MPS", "HEADING_CONFIDENCE_DEG"]
+__all__ = ["ObjectMotion", "MotionCodes", "motion_codes", "motion_rows", "MOTION_ROWS", "motion_codes_reference",
+           "unknown_motion", "SPEED_CONFIDENCE_NAMES", "HEADING_CONFIDENCE_NAMES", "SPEED_CONFIDENCE_MPS",
+           "HEADING_CONFIDENCE_DEG"]
 
 Z95 = 1.96
 #: relative guard against binary rounding pushing a value exactly on a step up (as products.v2x)
@@ -164,37 +165,72 @@ _FINITE = ("v_east_mps", "v_north_mps", "heading_deg", "yaw_deg")
 
 def _motion_arrays(motion: ObjectMotion, n: int) -> tuple:
     """``motion``'s fields as float arrays of shape ``(n,)`` (``cov_v_m2ps2``: ``(n, 2, 2)``), shapes checked:
-    v_east, v_north, cov_v, speed, sigma_speed, heading, sigma_heading, yaw, sigma_yaw, age."""
-    ve, vn = _arr("v_east_mps", motion.v_east_mps, n), _arr("v_north_mps", motion.v_north_mps, n)
-    cov = _arr("cov_v_m2ps2", motion.cov_v_m2ps2, n, (2, 2))
-    sp, ssp = _arr("speed_mps", motion.speed_mps, n), _arr("sigma_speed_mps", motion.sigma_speed_mps, n)
-    hd, shd = _arr("heading_deg", motion.heading_deg, n), _arr("sigma_heading_deg", motion.sigma_heading_deg, n)
-    yw, syw = _arr("yaw_deg", motion.yaw_deg, n), _arr("sigma_yaw_deg", motion.sigma_yaw_deg, n)
-    age = _arr("age_s", motion.age_s, n)
+    v_east, v_north, cov_v, speed, sigma_speed, heading, sigma_heading, yaw, sigma_yaw, age.  Fields that are
+    already C-contiguous float64 arrays of those shapes (a tracker's, :func:`~footprint_uq.tracking.motion.
+    object_motion`) are taken as they are after one check of the ten (the compiled pass's one signature)."""
+    ve, vn, cov, sp, ssp, hd, shd, yw, syw, age = motion
+    try:
+        if ({(a.__class__, a.dtype, a.shape, a.strides) for a in (ve, vn, sp, ssp, hd, shd, yw, syw, age)}
+                == {(np.ndarray, _F8, (n,), _STRIDE_1D)} and cov.__class__ is np.ndarray and cov.dtype == _F8
+                and cov.shape == (n, 2, 2) and cov.strides == _STRIDE_COV):
+            return ve, vn, cov, sp, ssp, hd, shd, yw, syw, age
+    except AttributeError:  # (a field that is not an array: converted below)
+        pass
+    ve, vn = _arr("v_east_mps", ve, n), _arr("v_north_mps", vn, n)
+    cov = _arr("cov_v_m2ps2", cov, n, (2, 2))
+    sp, ssp = _arr("speed_mps", sp, n), _arr("sigma_speed_mps", ssp, n)
+    hd, shd = _arr("heading_deg", hd, n), _arr("sigma_heading_deg", shd, n)
+    yw, syw = _arr("yaw_deg", yw, n), _arr("sigma_yaw_deg", syw, n)
+    age = _arr("age_s", age, n)
     return ve, vn, cov, sp, ssp, hd, shd, yw, syw, age
 
 
-#: the confidence levels as the compiled pass takes them (made once, not per frame)
-_SPEED_LEVELS, _HEADING_LEVELS = np.asarray(SPEED_CONFIDENCE_MPS), np.asarray(HEADING_CONFIDENCE_DEG)
+_F8 = np.dtype(np.float64)
+_STRIDE_1D, _STRIDE_COV = (8,), (32, 16, 8)
+_ALL_ROWS = np.zeros(0, np.int64)
+#: :func:`motion_rows`' rows: the CPM PerceivedObject's 10 motion rows (velocity present, x, x confidence, y,
+#: y confidence, angles present, zAngle, its confidence, objectAge present, objectAge), then the SDSM's 4
+#: (speed, its confidence, heading, its confidence)
+MOTION_ROWS = ("has_velocity", "vx", "vx_conf", "vy", "vy_conf", "has_yaw", "yaw", "yaw_conf", "has_age", "age_ms",
+               "sdsm_speed", "sdsm_speed_conf", "sdsm_heading", "sdsm_heading_conf")
 
 
-def motion_codes(motion: ObjectMotion, n: int) -> MotionCodes:
+def motion_rows(motion: ObjectMotion, n: int, rows: np.ndarray | None = None) -> np.ndarray:
+    """The message codes of ``motion`` (n objects) as one ``(14, m)`` int64 array, C-contiguous, in one compiled
+    pass (:func:`_rows_kernel`): the rows of :data:`MOTION_ROWS` -- its first 10 rows are what the CPM's
+    container kernel takes (``uper_cpm.kernel_motion``), the last 4 the SDSM's -- of the objects ``rows``
+    ((m,) int64 indices into the n, in the message's order; None: all n in order, no copy of the motion).
+
+    Checked as :func:`motion_codes` (shapes ``(n,)`` / ``(n, 2, 2)``; sigmas, speeds, ages >= 0 and values not
+    infinite in the objects ``rows``): :class:`~footprint_uq.errors.InputError` naming the field, the first in
+    the order of the checks with a bad object, and that object's value."""
+    ve, vn, cov, sp, ssp, hd, shd, yw, syw, age = cols = _motion_arrays(motion, n)
+    every = rows is None
+    sel = _ALL_ROWS if every else np.ascontiguousarray(rows, dtype=np.int64)
+    if not every and sel.ndim != 1:
+        raise InputError("rows", sel.shape, "a 1-D array of object indices")
+    if not every and sel.size and (sel.min() < 0 or sel.max() >= n):
+        raise InputError("rows", int(sel.min() if sel.min() < 0 else sel.max()), f"object indices in [0, {n})")
+    out = np.empty((14, n if every else sel.shape[0]), np.int64)
+    bad, row = _rows_kernel(ve, vn, cov, sp, ssp, hd, shd, yw, syw, age, sel, every, out)
+    if bad >= 0:
+        i = row if every else int(sel[row])
+        if bad >= len(_NONNEGATIVE):
+            k = bad - len(_NONNEGATIVE)
+            raise InputError(f"motion.{_FINITE[k]}", float(cols[(0, 1, 5, 7)[k]][i]),
+                             "a finite number (NaN = unknown)")
+        value = (ssp[i], shd[i], syw[i], age[i], sp[i], cov[i, 0, 0], cov[i, 1, 1])[bad]
+        raise InputError(f"motion.{_NONNEGATIVE[bad]}", float(value), "a standard deviation >= 0 (NaN = unknown)")
+    return out
+
+
+def motion_codes(motion: ObjectMotion, n: int, rows: np.ndarray | None = None) -> MotionCodes:
     """The CPM and SDSM fields of ``motion`` (module doc), checked: shapes ``(n,)`` / ``(n, 2, 2)``, sigmas
     and ages >= 0 -> :class:`~footprint_uq.errors.InputError` naming the field.  One compiled pass
-    (:func:`_codes_kernel`; :func:`motion_codes_reference` is the same in numpy)."""
-    ve, vn, cov, sp, ssp, hd, shd, yw, syw, age = _motion_arrays(motion, n)
-    codes, has = np.empty((11, n), np.int64), np.empty((3, n), np.bool_)
-    bad, row = _codes_kernel(ve, vn, cov, sp, ssp, hd, shd, yw, syw, age, _SPEED_LEVELS, _HEADING_LEVELS, codes,
-                             has)
-    if bad >= len(_NONNEGATIVE):
-        name = _FINITE[bad - len(_NONNEGATIVE)]
-        value = (ve, vn, hd, yw)[bad - len(_NONNEGATIVE)][row]
-        raise InputError(f"motion.{name}", float(value), "a finite number (NaN = unknown)")
-    if bad >= 0:
-        value = (ssp, shd, syw, age, sp, cov[:, 0, 0], cov[:, 1, 1])[bad][row]
-        raise InputError(f"motion.{_NONNEGATIVE[bad]}", float(value), "a standard deviation >= 0 (NaN = unknown)")
-    return MotionCodes(has[0], codes[0], codes[1], codes[2], codes[3], has[1], codes[4], codes[5], has[2], codes[6],
-                       codes[7], codes[8], codes[9], codes[10])
+    (:func:`motion_rows`, whose ``rows`` selects objects; :func:`motion_codes_reference` is the same in numpy)."""
+    c = motion_rows(motion, n, rows)
+    return MotionCodes(c[0] != 0, c[1], c[2], c[3], c[4], c[5] != 0, c[6], c[7], c[8] != 0, c[9], c[10], c[11],
+                       c[12], c[13])
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -225,51 +261,84 @@ def _velocity_k(v):  # pragma: no cover - compiled
 
 @njit(cache=True, nogil=True, inline="always")
 def _level_k(c95, levels):  # pragma: no cover - compiled
+    """``levels``: a tuple (a compile-time constant: no array, whose reference count a call per object would
+    update)."""
     if math.isnan(c95):
         return 0
     best, code = math.inf, 0
-    for k in range(levels.shape[0]):
+    for k in range(len(levels)):
         if levels[k] >= c95 * (1.0 - _GUARD) and levels[k] < best:
             best, code = levels[k], k + 1
     return code
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _first_bad_k(ssp, shd, syw, age, sp, c00, c11, ve, vn, hd, yw):  # pragma: no cover - compiled
+    """The first check an object's values fail, as an index of ``_NONNEGATIVE + _FINITE`` (11: none).  Scalars
+    only (a function of the arrays, even inlined, cost ~0.2 us per object in reference counts)."""
+    if ssp < 0.0:
+        return 0
+    if shd < 0.0:
+        return 1
+    if syw < 0.0:
+        return 2
+    if age < 0.0:
+        return 3
+    if sp < 0.0:
+        return 4
+    if c00 < 0.0:
+        return 5
+    if c11 < 0.0:
+        return 6
+    if math.isinf(ve):
+        return 7
+    if math.isinf(vn):
+        return 8
+    if math.isinf(hd):
+        return 9
+    if math.isinf(yw):
+        return 10
+    return 11
+
+
 @njit(cache=True, nogil=True)
-def _codes_kernel(ve, vn, cov, sp, ssp, hd, shd, yw, syw, age, speed_levels, heading_levels, codes,
-                  has):  # pragma: no cover - compiled
-    """:func:`motion_codes_reference`'s arithmetic in one pass into ``codes (11, n)`` (vx, vx_conf, vy, vy_conf, yaw,
-    yaw_conf, age_ms, sdsm speed, speed conf, heading, heading conf) and ``has (3, n)`` (velocity, yaw, age).
-    Returns ``(field, row)`` of the first bad input (``field`` indexes ``_NONNEGATIVE + _FINITE``), ``(-1, -1)``
-    if none."""
-    n = ve.shape[0]
-    for f in range(7):
-        for i in range(n):
-            v = (ssp[i], shd[i], syw[i], age[i], sp[i], cov[i, 0, 0], cov[i, 1, 1])[f]
-            if v < 0.0:
-                return f, i
-    for f in range(4):
-        for i in range(n):
-            if math.isinf((ve[i], vn[i], hd[i], yw[i])[f]):
-                return 7 + f, i
-    for i in range(n):
-        has[0, i] = not (math.isnan(ve[i]) and math.isnan(vn[i]))
-        codes[0, i], codes[2, i] = _velocity_k(ve[i]), _velocity_k(vn[i])
-        codes[1, i] = _conf_k(math.sqrt(cov[i, 0, 0]), 0.01, 1.25)
-        codes[3, i] = _conf_k(math.sqrt(cov[i, 1, 1]), 0.01, 1.25)
-        z = np.mod(90.0 - yw[i], 360.0)
-        has[1, i] = not math.isnan(yw[i])
-        codes[4, i] = ANGLE_UNAVAILABLE if math.isnan(z) else int(np.mod(_ceil_k(z * 10.0), 3600.0))
-        codes[5, i] = _conf_k(syw[i], 0.1, 12.5)
-        a = age[i]
-        has[2, i] = not math.isnan(a)
-        codes[6, i] = 0 if math.isnan(a) else int(min(math.floor(a * 1000.0 + 1e-6), float(AGE_MAX_MS)))
-        s = sp[i]
-        codes[7, i] = SDSM_SPEED_UNAVAILABLE if math.isnan(s) else int(min(np.rint(s / 0.02), 8190.0))
-        codes[8, i] = _level_k(Z95 * ssp[i], speed_levels)
-        h = hd[i]
-        codes[9, i] = (SDSM_HEADING_UNAVAILABLE if math.isnan(h)
-                       else int(np.mod(np.rint(np.mod(h, 360.0) / 0.0125), 28800.0)))
-        codes[10, i] = _level_k(Z95 * shd[i], heading_levels)
+def _rows_kernel(ve, vn, cov, sp, ssp, hd, shd, yw, syw, age, rows, every, out):  # pragma: no cover - compiled
+    """:func:`motion_codes_reference`'s arithmetic in one pass into ``out (14, m)`` (:data:`MOTION_ROWS`) for the
+    objects ``rows`` (``every``: all, in order).  Returns ``(field, j)``: the first field (an index of
+    ``_NONNEGATIVE + _FINITE``, checked field by field) with a bad object and the first such object ``j`` (of
+    the m), ``(-1, -1)`` if none -- one pass: an object's own first bad field, kept where it is earlier than
+    every earlier object's."""
+    m = out.shape[1]
+    bad_f, bad_j = 11, -1
+    for j in range(m):
+        i = j if every else rows[j]
+        vei, vni, c00, c11, spi, sspi = ve[i], vn[i], cov[i, 0, 0], cov[i, 1, 1], sp[i], ssp[i]
+        hdi, shdi, ywi, sywi, a = hd[i], shd[i], yw[i], syw[i], age[i]
+        f = _first_bad_k(sspi, shdi, sywi, a, spi, c00, c11, vei, vni, hdi, ywi)
+        if f < bad_f:
+            bad_f, bad_j = f, j
+        out[0, j] = 0 if math.isnan(vei) and math.isnan(vni) else 1
+        out[1, j], out[3, j] = _velocity_k(vei), _velocity_k(vni)
+        out[2, j] = _conf_k(math.sqrt(c00), 0.01, 1.25)
+        out[4, j] = _conf_k(math.sqrt(c11), 0.01, 1.25)
+        if math.isnan(ywi):
+            out[5, j], out[6, j] = 0, ANGLE_UNAVAILABLE
+        else:
+            z = np.mod(90.0 - ywi, 360.0)
+            out[5, j] = 1
+            out[6, j] = ANGLE_UNAVAILABLE if math.isnan(z) else int(np.mod(_ceil_k(z * 10.0), 3600.0))
+        out[7, j] = _conf_k(sywi, 0.1, 12.5)
+        if math.isnan(a):
+            out[8, j], out[9, j] = 0, 0
+        else:
+            out[8, j], out[9, j] = 1, int(min(math.floor(a * 1000.0 + 1e-6), float(AGE_MAX_MS)))
+        out[10, j] = SDSM_SPEED_UNAVAILABLE if math.isnan(spi) else int(min(np.rint(spi / 0.02), 8190.0))
+        out[11, j] = _level_k(Z95 * sspi, SPEED_CONFIDENCE_MPS)
+        out[12, j] = (SDSM_HEADING_UNAVAILABLE if math.isnan(hdi)
+                      else int(np.mod(np.rint(np.mod(hdi, 360.0) / 0.0125), 28800.0)))
+        out[13, j] = _level_k(Z95 * shdi, HEADING_CONFIDENCE_DEG)
+    if bad_j >= 0:
+        return bad_f, bad_j
     return -1, -1
 
 

@@ -75,7 +75,7 @@ from .cpm import (
     build_cpm,
     check_cdd,
 )
-from .motion import ObjectMotion, motion_codes
+from .motion import MOTION_ROWS, ObjectMotion, motion_rows
 
 __all__ = ["encode_cpm_uper_fast", "perceived_object_container_uper", "perceived_object_container_uper_arrays",
            "class_bits", "CpmUperWriter", "object_bits", "sensor_id_columns", "plain_container_uper",
@@ -565,10 +565,18 @@ _NO_MOTION_COLUMN = np.ascontiguousarray(_NO_MOTION_ROWS)
 
 def kernel_motion(motion, m: int) -> tuple[np.ndarray, bool]:
     """What :func:`plain_container_kernel` takes for the motion of its ``m`` objects (``motion``: an
-    :class:`~.motion.ObjectMotion` or :class:`~.motion.MotionCodes`, or None): ``(rows, with_motion)``, the
-    10 motion rows ``(10, m)`` int64 C-contiguous and True, or a placeholder and False when there is none."""
+    :class:`~.motion.ObjectMotion`, :class:`~.motion.MotionCodes`, :func:`~.motion.motion_rows`' ``(14, m)``
+    int64 array, or None): ``(rows, with_motion)``, the 10 motion rows ``(10, m)`` int64 C-contiguous and True,
+    or a placeholder and False when there is none.  ``motion_rows``' array is taken as it is (its first 10
+    rows, a view): the service's compact frame computes the codes of its message's objects in one compiled
+    call and hands them here."""
     if motion is None:
         return _NO_MOTION_COLUMN, False
+    if isinstance(motion, np.ndarray):
+        if motion.dtype != np.int64 or motion.shape != (len(MOTION_ROWS), m) or not motion.flags.c_contiguous:
+            raise InputError("motion", f"{motion.dtype} array of shape {motion.shape}",
+                             f"motion_rows' C-contiguous int64 array of shape ({len(MOTION_ROWS)}, {m})")
+        return motion[:10], True
     return np.ascontiguousarray(_motion_rows(motion, m)), True
 
 
@@ -576,7 +584,11 @@ def _motion_rows(motion, n: int):
     """The 10 motion rows (velocity present, x, x conf, y, y conf, angles present, z, conf, age present, age)."""
     if motion is None:
         return np.zeros((10, n), np.int64) + _NO_MOTION_ROWS
-    m = motion_codes(motion, n) if isinstance(motion, ObjectMotion) else motion
+    if isinstance(motion, ObjectMotion):
+        return motion_rows(motion, n)[:10]
+    if isinstance(motion, np.ndarray):
+        return kernel_motion(motion, n)[0]
+    m = motion
     return np.array([m.has_velocity, m.vx, m.vx_conf, m.vy, m.vy_conf, m.has_yaw, m.yaw, m.yaw_conf, m.has_age,
                      m.age_ms], dtype=np.int64).reshape(10, n)
 
@@ -624,7 +636,8 @@ def perceived_object_container_uper_arrays(object_ids, x_cm, x_conf, y_cm, y_con
     ``class_value``, ``class_width``: :func:`class_bits` of each object's class (in release ``cdd``), width 0
     for an object without a classification (its value and ``level`` are then ignored); ``level``: its
     ConfidenceLevel; ``motion``: the objects' :class:`~.motion.ObjectMotion` (converted by
-    :func:`~.motion.motion_codes`), their :class:`~.motion.MotionCodes`, or None (no motion sent);
+    :func:`~.motion.motion_rows`), their :class:`~.motion.MotionCodes` or ``motion_rows``' array, or None (no
+    motion sent);
     ``measurement_delta_ms``: measurementDeltaTime (ms, -2048..2047; default 0); ``quality``:
     objectPerceptionQuality (0..15, a negative entry: not sent; default none sent); ``sensor_ids``: the
     sensorIdLists (:func:`sensor_id_columns`); ``number_of_perceived_objects``: the count sent (default the
