@@ -970,17 +970,31 @@ def _compact_status(est) -> tuple[np.ndarray, list]:
 
 def _compact_values(est, motion) -> np.ndarray | None:
     """The compact record's float columns: centre and covariance ``(5, N)`` (m, m^2), with ``motion`` also the
-    velocity and its covariance ``(10, N)`` (m/s, m^2/s^2).  None: a motion column not in float64 (the general
-    writer's text of it would differ)."""
+    velocity and its covariance ``(10, N)`` (m/s, m^2/s^2), written row by row into one array (no list of ten
+    strided views stacked).  None: a motion column not in float64 (the general writer's text of it would
+    differ)."""
     centre, cov = est.centre_xy_world_m, est.centre_cov_m2
-    rows = [centre[:, 0], centre[:, 1], cov[:, 0, 0], cov[:, 0, 1], cov[:, 1, 1]]
+    n = centre.shape[0]
+    out = np.empty((5 if motion is None else 10, n))
+    out[0:2] = centre.T
+    c = cov.reshape(n, 4)  # (xx, xy, yx, yy)
+    out[2], out[3], out[4] = c[:, 0], c[:, 1], c[:, 3]
     if motion is not None:
         m = motion[1]
-        cv = m.cov_v_m2ps2
-        rows += [m.v_east_mps, m.v_north_mps, cv[:, 0, 0], cv[:, 0, 1], cv[:, 1, 1]]
-        if any(np.asarray(a).dtype != np.float64 for a in (m.v_east_mps, m.v_north_mps, cv)):
+        ve, vn, cv = m.v_east_mps, m.v_north_mps, m.cov_v_m2ps2
+        try:
+            f8 = ve.dtype == _F8 and vn.dtype == _F8 and cv.dtype == _F8
+        except AttributeError:  # (not arrays: as numpy reads them)
+            f8 = all(np.asarray(a).dtype == _F8 for a in (ve, vn, cv))
+        if not f8:
             return None
-    return np.array(rows)
+        out[5], out[6] = ve, vn
+        d = np.asarray(cv).reshape(n, 4)
+        out[7], out[8], out[9] = d[:, 0], d[:, 1], d[:, 3]
+    return out
+
+
+_F8 = np.dtype(np.float64)
 
 
 def _motion_object_layout(t: Table, motion, compact: bool) -> list:
