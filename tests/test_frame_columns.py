@@ -109,7 +109,11 @@ def test_columns_entry_checks(procs):
         proc.boxes2d_columns(np.zeros((1, 4)), contact="top")
     assert proc.boxes2d_columns(np.zeros((2, 4)), np.zeros((3, 2, 2))) is None  # (another shape: boxes2d's call)
     assert proc.boxes2d_columns(np.zeros((1, 4), np.float32)) is None
-    assert proc.boxes2d_columns(np.zeros((4, 2)).T) is None  # (not C-contiguous)
+    boxes = np.array([[900.0, 600.0, 1000.0, 700.0], [100.0, 800.0, 160.0, 860.0]])
+    cov = np.array([[[4.0, 1.0], [1.0, 9.0]], [[2.0, 0.0], [0.0, 3.0]]])
+    want = proc.boxes2d_columns(boxes, cov)
+    got = proc.boxes2d_columns(np.asfortranarray(boxes), np.asfortranarray(cov))  # (copied to row-major)
+    assert all(np.array_equal(a, b) for a, b in zip(want, got, strict=True))
 
 
 def test_camera_parts_rebuild_the_camera(procs):

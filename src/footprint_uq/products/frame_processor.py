@@ -312,10 +312,10 @@ class FrameProcessor:
 
         Parameters
         ----------
-        boxes_px : (N, 4) float64, C-contiguous
+        boxes_px : (N, 4) float64
             ``u_min, v_min, u_max, v_max`` (px), checked by the caller: finite, corners in order (the service's value
             checks, as ``boxes2d(..., boxes_checked=True)``).
-        pixel_cov_px2 : (N, 2, 2) float64, C-contiguous, optional
+        pixel_cov_px2 : (N, 2, 2) float64, optional
             The detector's covariance per box (px^2); checked here (finite, symmetric, PSD).
         contact : {"bottom-centre", "bottom-corners"}
 
@@ -324,17 +324,21 @@ class FrameProcessor:
         :class:`FrameColumns`, or None where :meth:`boxes2d` is needed for this frame: the kernels are not ready
         (the numpy reference runs meanwhile), a covariance the check refuses (``boxes2d`` names it), an output that
         overflowed (``mark_overflow``), a valid centre that is not ``linear_ok`` under a V2X policy other than
-        ``"linear"`` (its fields are the policy's: sampled or unavailable), other arrays than these.
+        ``"linear"`` (its fields are the policy's: sampled or unavailable), arrays of another type or shape.
         """
         N = boxes_px.shape[0]
         if contact not in CONTACT_MODES:
             raise InputError("contact", contact, f"one of {CONTACT_MODES}")
         has_cov = pixel_cov_px2 is not None
         if not self._use_kernels() or type(boxes_px) is not np.ndarray or boxes_px.dtype != np.float64 or \
-                boxes_px.shape != (N, 4) or not boxes_px.flags.c_contiguous or (has_cov and (
-                    type(pixel_cov_px2) is not np.ndarray or pixel_cov_px2.dtype != np.float64 or
-                    pixel_cov_px2.shape != (N, 2, 2) or not pixel_cov_px2.flags.c_contiguous)):
+                boxes_px.shape != (N, 4) or (has_cov and (type(pixel_cov_px2) is not np.ndarray or
+                                                          pixel_cov_px2.dtype != np.float64 or
+                                                          pixel_cov_px2.shape != (N, 2, 2))):
             return None
+        if not boxes_px.flags.c_contiguous:  # (row-major always: one kernel signature)
+            boxes_px = np.ascontiguousarray(boxes_px)
+        if has_cov and not pixel_cov_px2.flags.c_contiguous:
+            pixel_cov_px2 = np.ascontiguousarray(pixel_cov_px2)
         values, v2x = np.empty((5, N)), np.empty((7, N), np.int32)
         li, creason, cbad = np.empty(N, np.int64), np.empty(N, np.int32), np.empty(N, np.int64)
         bad, n_over, n_valid, n_flagged = fc.boxes2d_columns(

@@ -604,7 +604,7 @@ class Service:
             # (nothing for the value checks: the columns go to the lean path as they are)
             ts = scanned.timestamp_s
             out = self._lean_frame(setup, scanned.camera_id, scanned.frame, ts,
-                                   timestamp_its_ms(ts) if self.messages else None, scanned, (), t0)
+                                   timestamp_its_ms(ts) if self.messages else None, scanned, scanned.int_ids, (), t0)
             if out is not None:
                 return out
             return self._frame(setup, scanned.camera_id, scanned.frame, ts, boxes2d_detections(
@@ -619,8 +619,10 @@ class Service:
         """The record of a frame whose fields are checked and whose detections are in columns (``lean``: by
         :meth:`_lean_frame` where it takes the frame; False: it declined it already)."""
         ref_ms = timestamp_its_ms(ts) if self.messages else None
-        if lean and self._lean and self._columnar and found.family == "2d" and found.int_ids is not None:
-            out = self._lean_frame(setup, camera_id, fno, ts, ref_ms, found, found.errors, t0)
+        if lean and self._lean and self._columnar and found.family == "2d":
+            int_ids = found.int_ids if found.int_ids is not None else _int_ids(found.object_ids)
+            out = None if int_ids is None else self._lean_frame(setup, camera_id, fno, ts, ref_ms, found, int_ids,
+                                                                found.errors, t0)
             if out is not None:
                 return out
         est, found = self._footprints(setup, found)
@@ -674,13 +676,14 @@ class Service:
         return FrameOutput(b"".join(parts), RECORD_FOOTPRINTS, camera_id, total, None, len(found.errors), cpm_uper)
 
     def _lean_frame(self, setup: CameraSetup, camera_id, fno: int, ts: float, ref_ms: int | None, found,
-                    errors, t0: float) -> FrameOutput | None:
+                    int_ids: np.ndarray, errors, t0: float) -> FrameOutput | None:
         """:meth:`_frame`'s record of an untracked compact frame of 2-D boxes with integer ids, by the columns
         alone: :meth:`~footprint_uq.products.frame_processor.FrameProcessor.boxes2d_columns` (one compiled call),
         :meth:`_compact_text` and :func:`.frame_kernels.plain_cpm_uper` -- no estimate, the same bytes
         (``tests/test_service_columnar.py``, ``tests/test_frame_columns.py``).  ``found``: the detections' columns
         (a :class:`.detections.FrameDetections` of 2-D boxes, or the :class:`.frame_scan.ScannedFrame` itself when
-        its values are checked), with ``int_ids``; ``errors``: its bad detections.  None: a frame for
+        its values are checked), ``int_ids`` its ids as int64 (every ``object_id`` an integer of 64 bits); ``errors``:
+        its bad detections.  None: a frame for
         :meth:`_frame`'s general path (the processor declines it -- a covariance it refuses, an overflow, a centre
         the V2X policy samples -- or a value out of the CPM's range, which the general writer names)."""
         cols = setup.processor.boxes2d_columns(found.boxes, found.pixel_cov_px2, contact=self.contact)
@@ -692,8 +695,7 @@ class Service:
         valid = None if all_valid else cols.centre_reason == 0
         status = None if all_valid else _compact_status_of(valid, cols.largest_index, centre_reason_texts(
             cols.centre_reason, cols.centre_bad_corner, cols.n_corners))
-        co = self._compact_text(setup, ids, found.int_ids, found.classes, ts, cols.values, valid, all_valid, status,
-                                None)
+        co = self._compact_text(setup, ids, int_ids, found.classes, ts, cols.values, valid, all_valid, status, None)
         t2 = time.perf_counter()
         head = {"type": RECORD_FOOTPRINTS, "record": "compact", "camera_id": camera_id, "frame": fno,
                 "timestamp_s": ts, "station_id": setup.station_id,
@@ -814,18 +816,12 @@ class Service:
         untracked).  None: not this path's frame (no objects, an ``object_id`` that is not an integer of 64 bits,
         motion not in float64, or :attr:`_columnar` off: the reference path of the tests).  ``int_ids``: ``ids`` as
         int64 when the caller knows them all to be such integers (:attr:`.detections.FrameDetections.int_ids`)."""
-        N = len(ids)
-        if not self._columnar or N == 0 or (int_ids is None and set(map(type, ids)) != _INT_ONLY):
+        if not self._columnar or len(ids) == 0:
             return None
-        values = _compact_values(est, motion)
+        id_arr = int_ids if int_ids is not None else _int_ids(ids)
+        values = None if id_arr is None else _compact_values(est, motion)
         if values is None:
             return None
-        id_arr = int_ids
-        if id_arr is None:
-            try:
-                id_arr = np.array(ids, dtype=np.int64)
-            except OverflowError:  # (beyond int64: JSON allows up to 2**64 - 1)
-                return None
         valid = est.centre_valid
         all_valid = bool(valid.all())
         status = None if all_valid else _compact_status(est)
@@ -1053,6 +1049,16 @@ def _class_index(classes: list) -> tuple[np.ndarray, list]:
     first: dict = {}
     class_idx = np.fromiter((first.setdefault(c, len(first)) for c in classes), np.int64, N)
     return class_idx, list(first)
+
+
+def _int_ids(ids: list) -> np.ndarray | None:
+    """``ids`` as int64 when every one is an integer (not a bool) of 64 bits, else None."""
+    if set(map(type, ids)) != _INT_ONLY:
+        return None
+    try:
+        return np.array(ids, dtype=np.int64)
+    except OverflowError:  # (beyond int64: JSON allows up to 2**64 - 1)
+        return None
 
 
 def _zeros(n: int) -> np.ndarray:
