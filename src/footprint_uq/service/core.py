@@ -682,10 +682,10 @@ class Service:
         :meth:`_compact_text` and :func:`.frame_kernels.plain_cpm_uper` -- no estimate, the same bytes
         (``tests/test_service_columnar.py``, ``tests/test_frame_columns.py``).  ``found``: the detections' columns
         (a :class:`.detections.FrameDetections` of 2-D boxes, or the :class:`.frame_scan.ScannedFrame` itself when
-        its values are checked), ``int_ids`` its ids as int64 (every ``object_id`` an integer of 64 bits); ``errors``:
-        its bad detections.  None: a frame for
-        :meth:`_frame`'s general path (the processor declines it -- a covariance it refuses, an overflow, a centre
-        the V2X policy samples -- or a value out of the CPM's range, which the general writer names)."""
+        its values are checked), ``int_ids`` its ids as int64 (every ``object_id`` an integer of 64 bits),
+        ``errors`` its bad detections.  None: a frame for :meth:`_frame`'s general path (the processor declines it
+        -- a covariance it refuses, an overflow, a centre the V2X policy samples -- or a value out of the CPM's
+        range, which the general writer names)."""
         cols = setup.processor.boxes2d_columns(found.boxes, found.pixel_cov_px2, contact=self.contact)
         if cols is None:
             return None
