@@ -415,6 +415,7 @@ def test_warmup_compiles_every_signature_the_commands_use(tmp_path):
     second full compile in the foreground (the batch's column-major boxes once were)."""
     from footprint_uq.batch.process import process_file
     from footprint_uq.fast import footprint_kernels as fk
+    from footprint_uq.fast import frame_columns as fc
     from footprint_uq.service.core import Service
 
     W.warmup(["objects"])
@@ -429,8 +430,14 @@ def test_warmup_compiles_every_signature_the_commands_use(tmp_path):
     service = Service(cam, "basler1", camera_id="cam1")
     service.process_frame({"camera_id": "cam1", "frame": 1, "timestamp_s": 1.0, "detections": [
         {"object_id": 7, "class": "car", "u_min_px": 900, "v_min_px": 600, "u_max_px": 1000, "v_max_px": 700}]})
+    lean = Service(cam, "basler1", record="compact")  # (serve's default record: the lean frame's one kernel)
+    for cov in ("", ',"cov_uu_px2":4,"cov_uv_px2":1,"cov_vv_px2":9'):
+        out = lean.process_frame_json(b'{"camera_id":"c","frame":1,"timestamp_s":1.7e9,"detections":[{"object_id":7,'
+                                      b'"class":"car","u_min_px":900,"v_min_px":600,"u_max_px":1000,"v_max_px":700'
+                                      + cov.encode() + b'}]}')
+        assert out.type == "footprints"
     assert {k: set(k.signatures) for k in W.GROUPS["objects"]} == before
-    assert fk.process_boxes3d in W.GROUPS["objects"]
+    assert fk.process_boxes3d in W.GROUPS["objects"] and fc.boxes2d_columns in W.GROUPS["objects"]
 
 
 def test_a_long_job_switches_to_the_kernels_between_chunks(tmp_path):

@@ -14,8 +14,9 @@ from ..uncertainty.ellipse import ellipse_axes
 from ..uncertainty.propagation import DEFAULT_LINEAR_THRESHOLD
 from .v2x import cpm_fields, j2735_fields
 
-__all__ = ["FootprintEstimate", "mark_overflow", "DEGENERATE", "CONTACT_MODES", "BOX3D_COLUMNS", "V2X_FIELDS",
-           "V2X_POLICIES", "V2X_UNAVAILABLE_ABOVE", "V2X_MIN_FRACTION_VALID", "V2X_SAMPLES"]
+__all__ = ["FootprintEstimate", "mark_overflow", "centre_reason_texts", "DEGENERATE", "CONTACT_MODES",
+           "BOX3D_COLUMNS", "V2X_FIELDS", "V2X_POLICIES", "V2X_UNAVAILABLE_ABOVE", "V2X_MIN_FRACTION_VALID",
+           "V2X_SAMPLES"]
 
 #: centre reason code: zero-area footprint polygon (K >= 3: not a footprint)
 DEGENERATE = status.DEGENERATE
@@ -172,21 +173,27 @@ class FootprintEstimate:
 
     def centre_reason_text(self) -> np.ndarray:
         """Object array (N,) of human-readable reasons ("ok" where the centre is valid)."""
-        out = np.empty(len(self), dtype=object)
-        K = self.n_corners
-        for i, (code, k) in enumerate(zip(self.centre_reason.tolist(), self.centre_bad_corner.tolist(), strict=True)):
-            if code == status.OK:
-                out[i] = "ok"
-            elif code in _CENTRE_TEXT:
-                out[i] = _CENTRE_TEXT[code]
-            else:
-                out[i] = f"corner {k} of {K}: {status.REASONS[code]}"
-        return out
+        return centre_reason_texts(self.centre_reason, self.centre_bad_corner, self.n_corners)
 
     def centre_ellipse(self, confidence: float | None = None):
         """``(semi_major_m, semi_minor_m, orientation_deg)`` of the centre covariance."""
 
         return ellipse_axes(self.centre_cov_m2, confidence=confidence)
+
+
+def centre_reason_texts(centre_reason: np.ndarray, centre_bad_corner: np.ndarray, n_corners: int) -> np.ndarray:
+    """Object array (N,) of human-readable reasons of centres ``centre_reason`` (N,) (status codes, 0: "ok") whose
+    first unusable corner is ``centre_bad_corner`` (N,) of ``n_corners``: :meth:`FootprintEstimate.centre_reason_text`
+    of an estimate's columns (:meth:`~footprint_uq.products.frame_processor.FrameProcessor.boxes2d_columns`)."""
+    out = np.empty(len(centre_reason), dtype=object)
+    for i, (code, k) in enumerate(zip(centre_reason.tolist(), centre_bad_corner.tolist(), strict=True)):
+        if code == status.OK:
+            out[i] = "ok"
+        elif code in _CENTRE_TEXT:
+            out[i] = _CENTRE_TEXT[code]
+        else:
+            out[i] = f"corner {k} of {n_corners}: {status.REASONS[code]}"
+    return out
 
 
 def mark_overflow(est: FootprintEstimate) -> FootprintEstimate:

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 import threading
+from typing import NamedTuple
 
 import numpy as np
 import pyarrow as pa
@@ -14,6 +15,7 @@ from .._checks import COV_PSD_RTOL, as_float, check_cov
 from .._notices import before_kernels
 from ..errors import InputError
 from ..fast import footprint_kernels as fk
+from ..fast import frame_columns as fc
 from ..fast.buffers import thread_buffer
 from ..fast.cov_checks import first_bad_cov2
 from ..uncertainty.budget import load_budget
@@ -21,7 +23,7 @@ from ..uncertainty.ellipse import ellipse_axes
 from ..uncertainty.propagation import (
     DEFAULT_LINEAR_THRESHOLD,
 )
-from .footprint_estimate import BOX3D_COLUMNS, V2X_SAMPLES, FootprintEstimate, mark_overflow
+from .footprint_estimate import BOX3D_COLUMNS, CONTACT_MODES, V2X_SAMPLES, FootprintEstimate, mark_overflow
 from .footprint_flags import apply_v2x_policy, check_flag_options
 from .footprint_geometry import (
     box2d_contact_points,
@@ -57,6 +59,26 @@ def reusable_allocator(max_bytes: int):
     itself when even the largest is below the pool's threshold (what :func:`empty_reusable` would choose
     for every one of them; ~0.4 us per array less), else :func:`empty_reusable`."""
     return np.empty if max_bytes < _POOL_MIN_BYTES else empty_reusable
+
+
+class FrameColumns(NamedTuple):
+    """The columns of a frame of 2-D boxes that a service record writes (:meth:`FrameProcessor.boxes2d_columns`):
+    the numbers of :meth:`FrameProcessor.boxes2d`'s estimate, not an estimate (no per-corner outputs, no
+    ellipse, no V2X source: every centre's V2X fields encode its linear covariance)."""
+
+    #: (5, N) float64: ``x_m, y_m, cov_xx_m2, cov_xy_m2, cov_yy_m2`` of each centre (``centre_xy_world_m``,
+    #: ``centre_cov_m2``; :data:`footprint_uq.fast.frame_columns.COLUMN_ROWS`)
+    values: np.ndarray
+    #: (7, N) int32, C-contiguous: ``v2x_codes`` transposed (rows :data:`.footprint_estimate.V2X_FIELDS`)
+    v2x_rows: np.ndarray
+    #: (N,) int64, int32, int64: ``largest_index``, ``centre_reason``, ``centre_bad_corner``
+    largest_index: np.ndarray
+    centre_reason: np.ndarray
+    centre_bad_corner: np.ndarray
+    #: corners per object (1: the bottom centre, 2: the bottom corners)
+    n_corners: int
+    #: how many centres are valid (``centre_reason == 0``)
+    n_valid: int
 
 
 class FrameProcessor:
@@ -120,11 +142,15 @@ class FrameProcessor:
         h = np.deg2rad(self.heading_offset_deg)
         self._ch, self._sh = (1.0, 0.0) if h == 0.0 else (float(np.cos(h)), float(np.sin(h)))
         self._no_det = np.zeros((1, 1, 2, 2))
+        self._no_cov = np.zeros((1, 2, 2))
         self._no_extra = np.zeros((0, 0), dtype=np.int8)
         self._no_boxes = np.zeros((0, 7))
         #: whether per-corner coordinates and covariances (and the largest point's covariance) are
         #: formed at all; the batch sets False when it writes no corner columns (leaner, faster)
         self.corner_outputs = True
+        #: the constants of :meth:`boxes2d_columns`' one call (the camera as fast.frame_columns.camera_parts)
+        self._columns_consts = (*fc.camera_parts(self._cam), self._dR, self._Lr, self._Lc, self._Lv, self._r,
+                                self._spx, self._no_det)
         self._kernels = False  # the compiled kernels run (footprint_uq._notices; asked until they do)
         self._last_scratch = (None, None)  # (thread id, its scratch) of the last frame (_scratch)
 
@@ -277,6 +303,51 @@ class FrameProcessor:
                 raise InputError("box_cov_px2", "given with pixel_cov_px2", "only one detector covariance")
             pixel_cov_px2 = box_cov_to_corners(box_cov_px2, A, corners.shape[0])
         return self._run(np.ascontiguousarray(corners), self._no_extra, pixel_cov_px2)
+
+    def boxes2d_columns(self, boxes_px: np.ndarray, pixel_cov_px2: np.ndarray | None = None, *,
+                        contact: str = "bottom-centre") -> FrameColumns | None:
+        """:meth:`boxes2d` of checked boxes as the columns a service frame writes, in ONE compiled call
+        (:func:`footprint_uq.fast.frame_columns.boxes2d_columns`: contact pixels, covariance check, the fused
+        kernel, the V2X policy's test), without an estimate: the same numbers (``tests/test_service_columnar.py``).
+
+        Parameters
+        ----------
+        boxes_px : (N, 4) float64
+            ``u_min, v_min, u_max, v_max`` (px), checked by the caller: finite, corners in order (the service's value
+            checks, as ``boxes2d(..., boxes_checked=True)``).
+        pixel_cov_px2 : (N, 2, 2) float64, optional
+            The detector's covariance per box (px^2); checked here (finite, symmetric, PSD).
+        contact : {"bottom-centre", "bottom-corners"}
+
+        Returns
+        -------
+        :class:`FrameColumns`, or None where :meth:`boxes2d` is needed for this frame: the kernels are not ready
+        (the numpy reference runs meanwhile), a covariance the check refuses (``boxes2d`` names it), an output that
+        overflowed (``mark_overflow``), a valid centre that is not ``linear_ok`` under a V2X policy other than
+        ``"linear"`` (its fields are the policy's: sampled or unavailable), arrays of another type or shape.
+        """
+        N = boxes_px.shape[0]
+        if contact not in CONTACT_MODES:
+            raise InputError("contact", contact, f"one of {CONTACT_MODES}")
+        has_cov = pixel_cov_px2 is not None
+        if not self._use_kernels() or type(boxes_px) is not np.ndarray or boxes_px.dtype != np.float64 or \
+                boxes_px.shape != (N, 4) or (has_cov and (type(pixel_cov_px2) is not np.ndarray or
+                                                          pixel_cov_px2.dtype != np.float64 or
+                                                          pixel_cov_px2.shape != (N, 2, 2))):
+            return None
+        if not boxes_px.flags.c_contiguous:  # (row-major always: one kernel signature)
+            boxes_px = np.ascontiguousarray(boxes_px)
+        if has_cov and not pixel_cov_px2.flags.c_contiguous:
+            pixel_cov_px2 = np.ascontiguousarray(pixel_cov_px2)
+        values, v2x = np.empty((5, N)), np.empty((7, N), np.int32)
+        li, creason, cbad = np.empty(N, np.int64), np.empty(N, np.int32), np.empty(N, np.int64)
+        bad, n_over, n_valid, n_flagged = fc.boxes2d_columns(
+            boxes_px, contact == "bottom-corners", pixel_cov_px2 if has_cov else self._no_cov, has_cov,
+            *self._columns_consts, self.allow_outside_image, self._ch, self._sh, self.linearity,
+            self.linear_threshold, COV_PSD_RTOL, values, v2x, li, creason, cbad, self._scratch())
+        if bad >= 0 or n_over or (n_flagged and self.v2x_policy != "linear"):
+            return None
+        return FrameColumns(values, v2x, li, creason, cbad, 2 if contact == "bottom-corners" else 1, n_valid)
 
     def boxes3d(self, boxes_world, *, yaw_unit: str = "rad", bottom_on_ground: bool = True,
                 pixel_cov_px2=None) -> FootprintEstimate:

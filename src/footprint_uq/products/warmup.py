@@ -43,6 +43,7 @@ from ..cameras.pantilt import PanTiltCamera
 from ..errors import InputError
 from ..fast import core
 from ..fast import footprint_kernels as fk
+from ..fast import frame_columns as fc
 from ..fast import map_kernels as mk
 from ..fast.cov_checks import first_bad_cov2
 from ..uncertainty.budget import load_budget
@@ -58,7 +59,7 @@ __all__ = ["GROUPS", "ABOUT_S", "MODES", "cold_groups", "compile_notice", "compi
 GROUPS = {
     "map": mk.MAP_KERNELS,
     "points": mk.POINT_KERNELS,
-    "objects": (fk.process_corners, fk.process_boxes3d, first_bad_cov2, fk.point_jacobian_into),
+    "objects": (fk.process_corners, fk.process_boxes3d, first_bad_cov2, fk.point_jacobian_into, fc.boxes2d_columns),
     "lens": (core.undistort_many,),
 }
 #: the notice's "about": a group's background compile on the 2-core VM of 2026-11-26, quiet (bench/bench_first_run.py
@@ -369,6 +370,7 @@ def _warm_objects(budget) -> None:
     for cam in _cameras():
         fp = FrameProcessor(cam, budget)
         fp.boxes2d(np.array([[100.0, 150.0, 140.0, 200.0]]))
+        fp.boxes2d_columns(np.array([[100.0, 150.0, 140.0, 200.0]]))  # (the service's untracked compact frame)
         fp.boxes3d(np.array([[0.0, 20.0, 0.8, 4.5, 1.8, 1.5, 0.3]]))
         fp.corners(np.array([[[100.0, 200.0], [140.0, 200.0], [140.0, 210.0], [100.0, 210.0]]]))
         kernel, args = fp.point_jacobian_kernel()  # (the tracker's B at its predicted positions)

@@ -39,6 +39,7 @@ from ..fast.footprint_kernels import OBJ_ROW
 from ..io.class_names import UNKNOWN_POLICIES, ClassNames, load_class_names
 from ..io.registry import load_registry
 from ..products import detection_columns as S
+from ..products.footprint_estimate import centre_reason_texts
 from ..products.footprints import CONTACT_MODES, V2X_FIELDS, V2X_POLICIES, FrameProcessor
 from ..products.geo import GeoReference
 from ..products.v2x import J2735_POSITION_CONFIDENCE_NAMES
@@ -389,6 +390,8 @@ class Service:
         if record not in RECORD_LAYOUTS:
             raise InputError("record", record, f"one of {RECORD_LAYOUTS}")
         self.record = record
+        #: frames of 2-D boxes take :meth:`_lean_frame` (the columns alone, one compiled call for the positions)
+        self._lean = record == "compact" and not tracks and uper_encoder == "fast"
         self.cameras: dict[str | None, CameraSetup] = self._camera_setups(
             camera, budget, registry, camera_id, station_id, allow_outside_image,
             dict(heading_offset_deg=heading_offset_deg, origin_lat_deg=origin_lat_deg, origin_lon_deg=origin_lon_deg))
@@ -510,6 +513,8 @@ class Service:
                             pass  # kernels ran all the same; real frames report their own errors)
             finally:
                 setup.tracker, setup.ids = saved
+            if self._lean:  # (the frames above are dicts: the lean path's kernel is loaded here)
+                setup.processor.boxes2d_columns(np.array([[box2d[k] for k in S.BOX2D_COLUMNS]]), contact=self.contact)
 
     # -- one frame ------------------------------------------------------------------------------------
     def process_frame(self, frame, *, source: str | None = None) -> dict:
@@ -596,14 +601,31 @@ class Service:
         if n > self.max_frame_detections:
             raise _FrameError("detections", f"{n} detections in one frame, more than the frame limit of "
                               f"{self.max_frame_detections} (split the frame)")
+        if scanned.values_checked and n and self._lean and self._columnar and scanned.int_ids is not None:
+            # (nothing for the value checks: the columns go to the lean path as they are)
+            ts = scanned.timestamp_s
+            out = self._lean_frame(setup, scanned.camera_id, scanned.frame, ts,
+                                   timestamp_its_ms(ts) if self.messages else None, scanned, scanned.int_ids, (), t0)
+            if out is not None:
+                return out
+            return self._frame(setup, scanned.camera_id, scanned.frame, ts, boxes2d_detections(
+                scanned.boxes, scanned.pixel_cov_px2, scanned.object_ids, scanned.classes, scanned.class_confidence,
+                scanned.int_ids, True), t0, lean=False)
         found = boxes2d_detections(scanned.boxes, scanned.pixel_cov_px2, scanned.object_ids, scanned.classes,
                                    scanned.class_confidence, scanned.int_ids, scanned.values_checked)
         return self._frame(setup, scanned.camera_id, scanned.frame, scanned.timestamp_s, found, t0)
 
-    def _frame(self, setup: CameraSetup, camera_id, fno: int, ts: float, found: FrameDetections, t0: float
-               ) -> FrameOutput:
-        """The record of a frame whose fields are checked and whose detections are in columns."""
+    def _frame(self, setup: CameraSetup, camera_id, fno: int, ts: float, found: FrameDetections, t0: float,
+               lean: bool = True) -> FrameOutput:
+        """The record of a frame whose fields are checked and whose detections are in columns (``lean``: by
+        :meth:`_lean_frame` where it takes the frame; False: it declined it already)."""
         ref_ms = timestamp_its_ms(ts) if self.messages else None
+        if lean and self._lean and self._columnar and found.family == "2d":
+            int_ids = found.int_ids if found.int_ids is not None else _int_ids(found.object_ids)
+            out = None if int_ids is None else self._lean_frame(setup, camera_id, fno, ts, ref_ms, found, int_ids,
+                                                                found.errors, t0)
+            if out is not None:
+                return out
         est, found = self._footprints(setup, found)
         ids, classes, class_p = found.object_ids, found.classes, found.class_confidence
         motion = self._motion(setup, est, ids, classes, ts, found.yaw_rad, found.family) if self.tracks else None
@@ -653,6 +675,54 @@ class Service:
         parts.append(b',"processing_us":{"footprints":%.1f,"records":%.1f,"messages":%.1f,"total":%.1f}}' % (
             1e6 * (t1 - t0), 1e6 * (t2 - t1), 1e6 * (t3 - t2), total))
         return FrameOutput(b"".join(parts), RECORD_FOOTPRINTS, camera_id, total, None, len(found.errors), cpm_uper)
+
+    def _lean_frame(self, setup: CameraSetup, camera_id, fno: int, ts: float, ref_ms: int | None, found,
+                    int_ids: np.ndarray, errors, t0: float) -> FrameOutput | None:
+        """:meth:`_frame`'s record of an untracked compact frame of 2-D boxes with integer ids, by the columns
+        alone: :meth:`~footprint_uq.products.frame_processor.FrameProcessor.boxes2d_columns` (one compiled call),
+        :meth:`_compact_text` and :func:`.frame_kernels.plain_cpm_uper` -- no estimate, the same bytes
+        (``tests/test_service_columnar.py``, ``tests/test_frame_columns.py``).  ``found``: the detections' columns
+        (a :class:`.detections.FrameDetections` of 2-D boxes, or the :class:`.frame_scan.ScannedFrame` itself when
+        its values are checked), ``int_ids`` its ids as int64 (every ``object_id`` an integer of 64 bits),
+        ``errors`` its bad detections.  None: a frame for :meth:`_frame`'s general path (the processor declines it
+        -- a covariance it refuses, an overflow, a centre the V2X policy samples -- or a value out of the CPM's
+        range, which the general writer names)."""
+        cols = setup.processor.boxes2d_columns(found.boxes, found.pixel_cov_px2, contact=self.contact)
+        if cols is None:
+            return None
+        t1 = time.perf_counter()
+        ids, N = found.object_ids, len(found.object_ids)
+        all_valid = cols.n_valid == N
+        valid = None if all_valid else cols.centre_reason == 0
+        status = None if all_valid else _compact_status_of(valid, cols.largest_index, centre_reason_texts(
+            cols.centre_reason, cols.centre_bad_corner, cols.n_corners))
+        co = self._compact_text(setup, ids, int_ids, found.classes, ts, cols.values, valid, all_valid, status, None)
+        t2 = time.perf_counter()
+        head = {"type": RECORD_FOOTPRINTS, "record": "compact", "camera_id": camera_id, "frame": fno,
+                "timestamp_s": ts, "station_id": setup.station_id,
+                "heading_offset_deg": setup.georef.heading_offset_deg, "n_objects": N,
+                "detection_errors": [e.as_dict() for e in errors]}
+        parts = [b"", b',"objects":', co.text]
+        cpm_uper = None
+        if self.messages:
+            head["cpm_cdd"] = self.cpm_cdd
+            cls = self._cls
+            cpm_uper = plain_cpm_uper(setup.uper, ref_ms, setup.world_to_enu(cols.values[:2].T),
+                                      co.ok_idx, found.class_confidence, co.msg_ids, cols.v2x_rows, _CPM_INDEX,
+                                      co.class_idx, _class_rows_of(co.classes), cls.bits_value, cls.bits_width,
+                                      cdd=self.cpm_cdd)
+            if cpm_uper is None:  # (a value out of range: the general path's writer names it)
+                return None
+            parts += [b',"cpm_uper_bytes":', b"%d" % len(cpm_uper)]
+            omitted = cols.n_valid - len(co.ok_idx)
+            if omitted:  # said, never silent: objects with a centre that did not fit in the messages
+                parts += [b',"objects_not_in_messages":', b"%d" % omitted]
+        parts[0] = orjson.dumps(head)[:-1]
+        t3 = time.perf_counter()
+        total = round(1e6 * (t3 - t0), 1)
+        parts.append(b',"processing_us":{"footprints":%.1f,"records":%.1f,"messages":%.1f,"total":%.1f}}' % (
+            1e6 * (t1 - t0), 1e6 * (t2 - t1), 1e6 * (t3 - t2), total))
+        return FrameOutput(b"".join(parts), RECORD_FOOTPRINTS, camera_id, total, None, len(errors), cpm_uper)
 
     def _footprints(self, setup: CameraSetup, found: FrameDetections) -> tuple:
         """The camera's kernel over the frame's good detections (in columns: :func:`.detections.parse_detections`,
@@ -747,28 +817,28 @@ class Service:
         untracked).  None: not this path's frame (no objects, an ``object_id`` that is not an integer of 64 bits,
         motion not in float64, or :attr:`_columnar` off: the reference path of the tests).  ``int_ids``: ``ids`` as
         int64 when the caller knows them all to be such integers (:attr:`.detections.FrameDetections.int_ids`)."""
-        N = len(ids)
-        if not self._columnar or N == 0 or (int_ids is None and set(map(type, ids)) != _INT_ONLY):
+        if not self._columnar or len(ids) == 0:
             return None
-        values = _compact_values(est, motion)
+        id_arr = int_ids if int_ids is not None else _int_ids(ids)
+        values = None if id_arr is None else _compact_values(est, motion)
         if values is None:
             return None
-        id_arr = int_ids
-        if id_arr is None:
-            try:
-                id_arr = np.array(ids, dtype=np.int64)
-            except OverflowError:  # (beyond int64: JSON allows up to 2**64 - 1)
-                return None
-        zeros = np.zeros(N, np.int64)  # (read only by the writer: the class and the status of a uniform frame)
-        if classes.count(classes[0]) == N:  # one class for the frame (or none): one entry
-            distinct, class_idx = [classes[0]], zeros
-        else:
-            first: dict = {}
-            class_idx = np.fromiter((first.setdefault(c, len(first)) for c in classes), np.int64, N)
-            distinct = list(first)
         valid = est.centre_valid
         all_valid = bool(valid.all())
-        status_idx, status_texts = (zeros, [_STATUS_ALL_OK_COMPACT]) if all_valid else _compact_status(est)
+        status = None if all_valid else _compact_status(est)
+        tid = None if motion is None else np.asarray(motion[0], dtype=np.int64)
+        return self._compact_text(setup, ids, id_arr, classes, ts, values, valid, all_valid, status, tid)
+
+    def _compact_text(self, setup: CameraSetup, ids: list, id_arr: np.ndarray, classes: list, ts: float,
+                      values: np.ndarray, valid: np.ndarray | None, all_valid: bool, status: tuple | None,
+                      tid: np.ndarray | None) -> _CompactObjects:
+        """:meth:`_compact_objects` from the columns: ``values`` (5 or 10, N) the record's floats, ``valid`` (N,)
+        the centres found (``all_valid``: every one), ``status`` :func:`_compact_status`'s pair (None: all ok),
+        ``tid`` the track ids (None: untracked); the message ids assigned here (with ``messages``).  ``valid`` is
+        read only when not ``all_valid`` (None then)."""
+        N = len(ids)
+        class_idx, distinct = _class_index(classes)
+        status_idx, status_texts = (_zeros(N), [_STATUS_ALL_OK_COMPACT]) if status is None else status
         ok_idx = msg_ids = mid = None
         if self.messages:  # (as _message_id_layout: the objects with a centre, at most 255)
             ok_idx = np.arange(min(N, MAX_MESSAGE_OBJECTS)) if all_valid else \
@@ -777,9 +847,8 @@ class Service:
             if len(ok_idx) < N:
                 mid = np.full(N, -1, np.int64)
                 mid[ok_idx] = msg_ids
-        tid = None if motion is None else np.asarray(motion[0], dtype=np.int64)
-        text = compact_objects_json(id_arr, class_idx, [orjson.dumps(c) for c in distinct], status_idx, status_texts,
-                                    values, mid, tid)
+        text = compact_objects_json(id_arr, class_idx, _class_texts(distinct), status_idx, status_texts, values, mid,
+                                    tid)
         return _CompactObjects(text, ok_idx, msg_ids, class_idx, distinct)
 
     def _plain_cpm_uper(self, setup: CameraSetup, est, class_p, co: _CompactObjects, ref_ms: int,
@@ -957,15 +1026,60 @@ def _confidence_levels(class_p: np.ndarray | None, rows: np.ndarray) -> tuple[np
 def _compact_status(est) -> tuple[np.ndarray, list]:
     """A compact record's ``status`` (and ``reason`` where it is not ``ok``) texts: each object's entry among the
     frame's distinct ones and those texts (:func:`_status_layout`'s bytes)."""
-    reasons = est.centre_reason_text()
+    return _compact_status_of(est.centre_valid, est.largest_index, est.centre_reason_text())
+
+
+def _compact_status_of(valid: np.ndarray, largest_index: np.ndarray, reasons) -> tuple[np.ndarray, list]:
+    """:func:`_compact_status` of the columns: ``valid`` (N,) bool, ``largest_index`` (N,) and the centres'
+    reason texts (:func:`~footprint_uq.products.footprint_estimate.centre_reason_texts`)."""
     seen: dict = {}
-    idx = np.empty(len(est), np.int64)
-    for r, (ok, j, why) in enumerate(zip(est.centre_valid.tolist(), est.largest_index.tolist(), reasons,
-                                         strict=True)):
+    idx = np.empty(len(valid), np.int64)
+    for r, (ok, j, why) in enumerate(zip(valid.tolist(), largest_index.tolist(), reasons, strict=True)):
         text = _STATUS_ALL_OK_COMPACT if ok else b',"status":%s,"reason":%s' % (
             orjson.dumps(S.STATUS_PARTIAL if j >= 0 else S.STATUS_ERROR), orjson.dumps(f"no centre: {why}"))
         idx[r] = seen.setdefault(text, len(seen))
     return idx, list(seen)
+
+
+def _class_index(classes: list) -> tuple[np.ndarray, list]:
+    """Each object's entry (int64) among the frame's distinct ``classes`` (str or None, in order of first
+    appearance) and those classes."""
+    N = len(classes)
+    if classes.count(classes[0]) == N:  # one class for the frame (or none): one entry
+        return _zeros(N), [classes[0]]
+    first: dict = {}
+    class_idx = np.fromiter((first.setdefault(c, len(first)) for c in classes), np.int64, N)
+    return class_idx, list(first)
+
+
+def _int_ids(ids: list) -> np.ndarray | None:
+    """``ids`` as int64 when every one is an integer (not a bool) of 64 bits, else None."""
+    if set(map(type, ids)) != _INT_ONLY:
+        return None
+    try:
+        return np.array(ids, dtype=np.int64)
+    except OverflowError:  # (beyond int64: JSON allows up to 2**64 - 1)
+        return None
+
+
+def _zeros(n: int) -> np.ndarray:
+    """``n`` int64 zeros, read only by the compiled writers (the class and status entries of a uniform frame)."""
+    return np.zeros(n, np.int64)
+
+
+_CLASS_TEXTS: dict = {}
+
+
+def _class_texts(distinct: list) -> list:
+    """The JSON texts of a frame's distinct classes, kept for the next frames (at most 256 lists)."""
+    key = tuple(distinct)
+    texts = _CLASS_TEXTS.get(key)
+    if texts is None:
+        texts = [orjson.dumps(c) for c in distinct]
+        if len(_CLASS_TEXTS) >= 256:
+            _CLASS_TEXTS.clear()
+        _CLASS_TEXTS[key] = texts
+    return texts
 
 
 def _compact_values(est, motion) -> np.ndarray | None:

@@ -55,6 +55,7 @@ the standard's bits); :func:`decode_cpm_uper` is its inverse and returns the sam
 
 from __future__ import annotations
 
+import bisect
 import functools
 import math
 
@@ -158,7 +159,7 @@ def timestamp_its_ms(unix_s: float) -> int:
     """
     if not (isinstance(unix_s, (int, float)) and math.isfinite(unix_s)) or unix_s < _UNIX_2004_S:
         raise InputError("timestamp_s", unix_s, "Unix time in seconds (UTC) on or after 2004-01-01 (TimestampIts)")
-    leap = sum(1 for t in _LEAP_SECONDS_UNIX_S if unix_s >= t)
+    leap = bisect.bisect_right(_LEAP_SECONDS_UNIX_S, unix_s)  # (the leap seconds at or before it: sorted)
     ms = int(round((unix_s - _UNIX_2004_S + leap) * 1000.0))
     if ms > TIMESTAMP_ITS_MAX:
         raise InputError("timestamp_s", unix_s, "a time TimestampIts can hold (before the year 2143)")

@@ -1,0 +1,193 @@
+"""The service's lean untracked frame (issue 31: the frame without the processor's Python).
+
+* :meth:`footprint_uq.products.frame_processor.FrameProcessor.boxes2d_columns` (one compiled call:
+  ``fast/frame_columns.py``) gives :meth:`~footprint_uq.products.frame_processor.FrameProcessor.boxes2d`'s numbers
+  bit for bit (Hypothesis: boxes across the image, beyond it, above the horizon, degenerate; with and without a
+  detector covariance; both contacts), and declines (None) exactly the frames it must leave to ``boxes2d``: a
+  covariance the check refuses, a centre the V2X policy samples;
+* :meth:`footprint_uq.service.Service._lean_frame` is the path an untracked compact frame takes (a spy, and a
+  broken column that reaches the record), and a frame it declines is the general path's record, byte for byte
+  (the general writers, ``Service._columnar = False``, are the reference: ``tests/test_service_columnar.py``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import orjson
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from footprint_uq import FrameProcessor, PanTiltCamera
+from footprint_uq.errors import InputError
+from footprint_uq.fast import frame_columns as fc
+from footprint_uq.products.footprint_estimate import centre_reason_texts
+from footprint_uq.service import Service
+
+T0 = 1714564800.0
+
+
+@pytest.fixture(scope="module")
+def camera():
+    return PanTiltCamera(focal_px=1400, image_size_px=(1920, 1080), height_m=8.0, pan_deg=30.0, tilt_deg=20.0)
+
+
+@pytest.fixture(scope="module")
+def procs(camera):
+    """The service's processor (policy "sampled") and one whose V2X policy is "linear" (declines nothing)."""
+    return {p: FrameProcessor(camera, "basler1", joint_cov=False, v2x_policy=p) for p in ("sampled", "linear")}
+
+
+def _boxes(rng, n: int) -> np.ndarray:
+    u, v = rng.uniform(-300, 2200, n), rng.uniform(-100, 1300, n)
+    w, h = rng.uniform(0, 200, n) * (rng.random(n) > 0.1), rng.uniform(0, 150, n) * (rng.random(n) > 0.1)
+    return np.column_stack([u, v - h, u + w, v])
+
+
+def _covariances(rng, n: int, kind: str) -> np.ndarray | None:
+    if kind == "none":
+        return None
+    a, d = rng.uniform(0.5, 30.0, n), rng.uniform(0.5, 30.0, n)
+    b = rng.uniform(-0.9, 0.9, n) * np.sqrt(a * d)
+    return np.ascontiguousarray(np.stack([np.stack([a, b], -1), np.stack([b, d], -1)], -2))
+
+
+def _same(cols, est) -> None:
+    """The columns are the estimate's, bit for bit."""
+    c, cov = est.centre_xy_world_m, est.centre_cov_m2
+    want = np.array([c[:, 0], c[:, 1], cov[:, 0, 0], cov[:, 0, 1], cov[:, 1, 1]])
+    for name, x, y in (("values", cols.values, want), ("v2x", cols.v2x_rows, est.v2x_codes.T),
+                       ("largest_index", cols.largest_index, est.largest_index),
+                       ("centre_reason", cols.centre_reason, est.centre_reason),
+                       ("centre_bad_corner", cols.centre_bad_corner, est.centre_bad_corner)):
+        assert x.shape == y.shape and x.dtype == y.dtype and x.tobytes() == np.ascontiguousarray(y).tobytes(), name
+    assert cols.n_valid == int(est.centre_valid.sum()) and cols.n_corners == est.corners_px.shape[1]
+    assert cols.v2x_rows.flags.c_contiguous
+    assert centre_reason_texts(cols.centre_reason, cols.centre_bad_corner, cols.n_corners).tolist() == \
+        est.centre_reason_text().tolist()
+
+
+@settings(max_examples=80, deadline=None)
+@given(st.integers(0, 40), st.integers(0, 2 ** 32 - 1), st.sampled_from(["bottom-centre", "bottom-corners"]),
+       st.sampled_from(["none", "random"]))
+def test_columns_are_the_estimate(procs, n, seed, contact, cov_kind):
+    rng = np.random.default_rng(seed)
+    boxes = _boxes(rng, n)
+    cov = _covariances(rng, n, cov_kind)
+    for policy, proc in procs.items():
+        est = proc.boxes2d(boxes, contact=contact, pixel_cov_px2=cov)
+        cols = proc.boxes2d_columns(boxes, cov, contact=contact)
+        flagged = bool(np.any(est.v2x_source != 0) & np.any(est.centre_valid & ~est.centre_linear_ok))
+        if policy == "linear":
+            assert cols is not None
+        if cols is None:  # (declined: a valid centre whose V2X fields the policy samples or leaves unavailable)
+            assert policy == "sampled" and flagged
+            continue
+        _same(cols, est)
+
+
+def test_columns_decline_what_boxes2d_must_do(procs, camera):
+    """A covariance the check refuses, and a valid centre that is not ``linear_ok`` under the sampling policy: None
+    (``boxes2d`` names the covariance; its estimate carries the sampled V2X fields); the linear policy's columns
+    of that frame are its estimate's."""
+    proc = procs["sampled"]
+    boxes = np.array([[900.0, 600.0, 1000.0, 700.0], [100.0, 800.0, 160.0, 860.0]])
+    bad = np.array([[[4.0, 0.0], [0.0, 9.0]], [[1.0, 5.0], [5.0, 1.0]]])  # (the second: not PSD)
+    assert proc.boxes2d_columns(boxes, bad) is None
+    with pytest.raises(InputError, match=r"pixel_cov_px2\[1"):
+        proc.boxes2d(boxes, pixel_cov_px2=bad)
+    far = np.array([[900.0, 600.0, 1000.0, 700.0], [950.0, 21.0, 990.0, 31.0]])  # (the second near the horizon)
+    est = proc.boxes2d(far)
+    assert est.centre_valid.all() and not est.centre_linear_ok[1] and est.v2x_source[1] != 0
+    assert proc.boxes2d_columns(far) is None
+    _same(procs["linear"].boxes2d_columns(far), procs["linear"].boxes2d(far))
+
+
+def test_columns_entry_checks(procs):
+    proc = procs["linear"]
+    with pytest.raises(InputError, match="contact"):
+        proc.boxes2d_columns(np.zeros((1, 4)), contact="top")
+    assert proc.boxes2d_columns(np.zeros((2, 4)), np.zeros((3, 2, 2))) is None  # (another shape: boxes2d's call)
+    assert proc.boxes2d_columns(np.zeros((1, 4), np.float32)) is None
+    boxes = np.array([[900.0, 600.0, 1000.0, 700.0], [100.0, 800.0, 160.0, 860.0]])
+    cov = np.array([[[4.0, 1.0], [1.0, 9.0]], [[2.0, 0.0], [0.0, 3.0]]])
+    want = proc.boxes2d_columns(boxes, cov)
+    got = proc.boxes2d_columns(np.asfortranarray(boxes), np.asfortranarray(cov))  # (copied to row-major)
+    assert all(np.array_equal(a, b) for a, b in zip(want, got, strict=True))
+
+
+def test_camera_parts_rebuild_the_camera(procs):
+    cam = procs["linear"]._cam
+    scalars, has_dist, dist, R, dom = fc.camera_parts(cam)
+    assert scalars.tolist() == [getattr(cam, k) for k in fc.CAMERA_SCALARS] and has_dist == cam.has_dist
+    assert dist is cam.dist and R is cam.R and dom is cam.dom
+    assert set(fc.CAMERA_SCALARS) | {"dist", "has_dist", "R", "dom"} == set(cam._fields)
+
+
+def _payload(rng, n: int, k: int, cov: bool = False) -> bytes:
+    u, v, w = rng.uniform(50, 1800, n), rng.uniform(420, 1070, n), rng.uniform(20, 120, n)
+    dets = [{"object_id": i, "class": "car" if i % 3 else "truck", "u_min_px": round(float(u[i]), 2),
+             "v_min_px": round(float(v[i] - 0.8 * w[i]), 2), "u_max_px": round(float(u[i] + w[i]), 2),
+             "v_max_px": round(float(v[i]), 2), **({"cov_uu_px2": 4.0, "cov_uv_px2": 1.0, "cov_vv_px2": 9.0}
+                                                    if cov else {})} for i in range(n)]
+    return orjson.dumps({"camera_id": "cam0", "frame": k, "timestamp_s": T0 + k / 30.0, "detections": dets})
+
+
+def _record(out) -> bytes:
+    return out.data[:out.data.rindex(b',"processing_us":')]
+
+
+def test_the_lean_path_is_the_one_taken(camera, monkeypatch):
+    """An untracked compact frame of 2-D boxes is written from the processor's columns, without an estimate: the
+    general ``_footprints`` is not called, and a column broken in the processor's answer reaches the record."""
+    svc = Service(camera, "basler1", record="compact")
+    payload = _payload(np.random.default_rng(5), 30, 0)
+    before = svc.process_frame_json(payload)
+    monkeypatch.setattr(Service, "_footprints", lambda *a, **k: pytest.fail("the general path was taken"))
+    assert _record(svc.process_frame_json(payload)) == _record(before)
+    monkeypatch.undo()
+    real = FrameProcessor.boxes2d_columns
+
+    def shifted(self, *a, **k):  # (every centre 1 m east)
+        cols = real(self, *a, **k)
+        cols.values[0] += 1.0
+        return cols
+
+    monkeypatch.setattr(FrameProcessor, "boxes2d_columns", shifted)
+    after = Service(camera, "basler1", record="compact").process_frame_json(payload)
+    assert _record(after) != _record(before) and after.cpm_uper != before.cpm_uper
+
+
+@pytest.mark.parametrize("case", ["bad-covariance", "flagged", "over-255", "no-centre"])
+def test_declined_and_odd_frames_are_the_general_paths_bytes(camera, case, monkeypatch):
+    """Frames the lean path declines (a covariance the kernel refuses: that detection's error entry; a centre the
+    V2X policy samples) or writes with its less usual branches (> 255 objects, objects without a centre) are the
+    general writers' record and CPM, byte for byte."""
+    fast, ref = Service(camera, "basler1", record="compact"), Service(camera, "basler1", record="compact")
+    ref._columnar = False
+    taken = []
+    real = FrameProcessor.boxes2d_columns
+    monkeypatch.setattr(FrameProcessor, "boxes2d_columns", lambda self, *a, **k: taken.append(real(self, *a, **k))
+                        or taken[-1])
+    rng = np.random.default_rng(11)
+    frame = orjson.loads(_payload(rng, 300 if case == "over-255" else 20, 0, cov=case == "bad-covariance"))
+    dets = frame["detections"]
+    if case == "bad-covariance":
+        dets[3].update(cov_uu_px2=1.0, cov_uv_px2=5.0, cov_vv_px2=1.0)  # (in range, not PSD)
+    if case == "flagged":
+        dets[4].update(u_min_px=950.0, v_min_px=21.0, u_max_px=990.0, v_max_px=31.0)  # (near the horizon)
+    if case == "no-centre":
+        dets[2].update(v_min_px=5.0, v_max_px=20.0)  # (above the horizon, v ~ 30 px)
+    for k in range(2):
+        frame["frame"], frame["timestamp_s"] = k, T0 + k / 30.0
+        a, b = fast.process_frame_json(orjson.dumps(frame)), ref.process_frame_json(orjson.dumps(frame))
+        assert a.type == b.type == "footprints" and _record(a) == _record(b) and a.cpm_uper == b.cpm_uper
+    # (the lean path declined the first two, wrote the others)
+    assert taken and all((c is None) == (case in ("bad-covariance", "flagged")) for c in taken)
+    rec = orjson.loads(a.data)
+    if case == "bad-covariance":
+        assert [e["index"] for e in rec["detection_errors"]] == [3]
+    if case == "over-255":
+        assert rec["objects_not_in_messages"] == 45
+    if case == "no-centre":
+        assert rec["objects"][2]["status"] == "error" and "reason" in rec["objects"][2]
