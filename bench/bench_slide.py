@@ -4,7 +4,7 @@ kernel against another tree's (e.g. main's), alternately in one run.
 Usage::
 
     PYTHONPATH=src .venv/bin/python bench/bench_slide.py [--against /work/main/src] [--rounds 6] \\
-        [--calls 3000] [--objects 100] [--out FILE]
+        [--calls 3000] [--objects 100] [--sizes 1,8,64,100,200,1000] [--out FILE]
 
 Inputs: the service bench's camera (``bench_service.CAMERA``, a pinhole) and the same camera with a distorting
 lens, ``--objects`` tracked contacts (the bottom-centre ground points of ``bench_service.make_detections``' boxes,
@@ -15,7 +15,8 @@ alike.  A worker times the compiled entry (``slide_kernels.MOMENTS_KERNELS``, as
 calls it) and ``ContactSlide.covariance`` on a ``TrackOutput``, the median of ``--calls`` calls after a
 warm-up (compilation not timed), and saves its outputs; the run reports the medians over rounds, the ratio
 against / this tree, and the largest difference of the two trees' outputs relative to each object's largest
-entry.  Nothing is asserted.
+entry.  ``--sizes``: then, in one worker of each tree, the pinhole kernel's median at each of these frame sizes
+(the first contacts of the same inputs; ``--rounds 0`` for these alone).  Nothing is asserted.
 """
 
 from __future__ import annotations
@@ -92,6 +93,24 @@ def worker(objects: int, calls: int, out_npz: str) -> dict:
     return res
 
 
+def sizes_worker(sizes: list[int], calls: int) -> dict:
+    """The pinhole kernel's median (us) at each frame size (the tree on ``sys.path``)."""
+    from footprint_uq.fast import slide_kernels
+    from footprint_uq.products.contact import class_size_priors
+    from footprint_uq.tracking import contact_slide as CS
+
+    cams, xy_all, v_all, _ = _inputs(max(sizes))
+    prm, R, dom, has_dist = CS.kernel_camera(cams["pinhole"])
+    kern = slide_kernels.MOMENTS_KERNELS[has_dist]
+    res = {}
+    for n in sizes:
+        xy, v = xy_all[:n].copy(), v_all[:n].copy()
+        mean, sig = class_size_priors(["car"] * n, n)
+        m, M = np.empty((n, 2)), np.empty((n, 2, 2))
+        res[str(n)] = _median_us(partial(kern, prm, R, dom, xy, v, mean, sig, CS._NODES, m, M), calls)
+    return res
+
+
 def _max_rel(a: np.ndarray, b: np.ndarray) -> float:
     a, b = a.reshape(len(a), -1), b.reshape(len(b), -1)
     if not np.array_equal(np.isnan(a), np.isnan(b)):
@@ -100,13 +119,14 @@ def _max_rel(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.nanmax(np.abs(a - b) / np.where(scale > 0, scale, 1.0), initial=0.0))
 
 
-def _run_worker(src: Path, a, tmp: Path, tag: str, rnd: int) -> tuple[dict, Path]:
+def _run_worker(src: Path, a, tmp: Path, tag: str, rnd: int, extra: tuple = ()) -> tuple[dict, Path]:
     env = dict(os.environ, PYTHONPATH=str(src))
     if src.resolve() != (ROOT / "src").resolve():
         env["NUMBA_CACHE_DIR"] = str(a.against_cache)   # (the other tree is only read)
     npz = tmp / f"{tag}-{rnd}.npz"
     p = subprocess.run([sys.executable, __file__, "--worker", "--objects", str(a.objects), "--calls",
-                        str(a.calls), "--npz", str(npz)], env=env, capture_output=True, text=True, check=True)
+                        str(a.calls), "--npz", str(npz), *extra], env=env, capture_output=True, text=True,
+                       check=True)
     return json.loads(p.stdout.strip().splitlines()[-1]), npz
 
 
@@ -118,12 +138,14 @@ def main(argv=None) -> int:
     ap.add_argument("--rounds", type=int, default=6)
     ap.add_argument("--calls", type=int, default=3000)
     ap.add_argument("--objects", type=int, default=100)
+    ap.add_argument("--sizes", help="comma-separated frame sizes: the pinhole kernel's median at each (per tree)")
     ap.add_argument("--out", type=Path)
     ap.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
     ap.add_argument("--npz", help=argparse.SUPPRESS)
     a = ap.parse_args(argv)
+    sizes = [int(k) for k in a.sizes.split(",")] if a.sizes else []
     if a.worker:
-        print(json.dumps(worker(a.objects, a.calls, a.npz)))
+        print(json.dumps(sizes_worker(sizes, a.calls) if sizes else worker(a.objects, a.calls, a.npz)))
         return 0
     trees = {"this": ROOT / "src"} | ({"against": a.against} if a.against else {})
     load0 = os.getloadavg()[0]
@@ -137,10 +159,13 @@ def main(argv=None) -> int:
                 print(f"round {rnd} {tag:7s} " + "  ".join(f"{c}: kernel {x['kernel_us']:.1f} us, covariance "
                                                           f"{x['covariance_us']:.1f} us" for c, x in r.items()),
                       flush=True)
-        last = {t: np.load(tmp / f"{t}-{a.rounds - 1}.npz") for t in trees}
         res = {"objects": a.objects, "calls": a.calls, "rounds": a.rounds, "trees": {t: str(p) for t, p in
                                                                                       trees.items()}}
-        for cam in runs["this"][0]:
+        for t in trees if sizes else ():
+            res[f"{t}_pinhole_kernel_us_by_size"] = _run_worker(trees[t], a, tmp, t, -1, ("--sizes", a.sizes))[0]
+            print(t, "pinhole kernel us by frame size", json.dumps(res[f"{t}_pinhole_kernel_us_by_size"]), flush=True)
+        last = {t: np.load(tmp / f"{t}-{a.rounds - 1}.npz") for t in trees} if a.rounds else {}
+        for cam in runs["this"][0] if a.rounds else ():
             row = {}
             for t in trees:
                 for f in ("kernel_us", "covariance_us"):

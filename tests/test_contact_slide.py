@@ -336,3 +336,103 @@ def test_priors_of_one_class_frames_follow_the_class_and_the_count():
         rm, rs = class_size_priors([c or "" for c in classes], len(classes))
         np.testing.assert_array_equal(mean, rm)
         np.testing.assert_array_equal(sig, rs)
+
+
+def _mixed_contacts(rng, n):
+    """``n`` contacts of every kind the tracker hands the slide term, in seeded random order: moving (any course,
+    0-25 m/s), behind the camera (the box does not render), a NaN velocity (both or one component), standing
+    (``+-0``), and long trucks close below the camera whose longest nodes do not render (the others do).  Returns
+    ``xy (n, 2)``, ``v (n, 2)``, ``size_mean``, ``size_sigma`` (n, 3) and the kinds (n,)."""
+    kind = rng.integers(0, 6, n)
+    xy = np.column_stack([rng.uniform(-15, 15, n), rng.uniform(15, 60, n)])
+    course, speed = rng.uniform(-np.pi, np.pi, n), rng.uniform(0.0, 25.0, n)
+    v = speed[:, None] * np.column_stack([np.cos(course), np.sin(course)])
+    mean, sig = class_size_priors([CLASSES[i] or "" for i in rng.integers(0, len(CLASSES), n)], n)
+    xy[kind == 1, 1] = -rng.uniform(5.0, 40.0, (kind == 1).sum())
+    v[kind == 2] = np.nan
+    v[kind == 3] = rng.choice([0.0, -0.0], ((kind == 3).sum(), 2))
+    v[kind == 4, rng.integers(0, 2)] = np.nan
+    trucks = kind == 5
+    xy[trucks] = np.column_stack([np.full(trucks.sum(), 0.5), rng.uniform(-3.0, 12.0, trucks.sum())])
+    v[trucks] = [0.3, 8.0]
+    mean[trucks], sig[trucks] = class_size_priors(["truck"], 1)[0], class_size_priors(["truck"], 1)[1] * [6, 1, 1]
+    return xy, v, mean, sig, kind
+
+
+@pytest.mark.parametrize("camera", sorted(CAMERAS))
+@pytest.mark.parametrize("n", [0, 1, 7, 8, 9, 63, 64, 65, 100, 129])
+def test_columnar_kernel_equals_the_reference_at_every_frame_size(camera, n):
+    """The pinhole's columnar kernel (blocks of 64 objects, passes over whole vectors of 8) and the lens's object
+    by object kernel equal the numpy closed form to rounding on frames of every size around the vector width and
+    the block (0, 1, 7, 8, 9, 63-65, 100, 129 objects) with every kind of contact (:func:`_mixed_contacts`): NaN
+    exactly where the reference has NaN, and each object's moments those of the object alone (no lane or block
+    leaks into another)."""
+    cam = CAMERAS[camera]
+    rng = np.random.default_rng(1000 + n)
+    xy, v, mean, sig, kind = _mixed_contacts(rng, n)
+    m, M = slide_moments(cam, xy, v, mean, sig)
+    mr, Mr = slide_moments_reference(cam, xy, v, mean, sig)
+    assert M.shape == (n, 2, 2) and m.shape == (n, 2)
+    np.testing.assert_array_equal(np.isnan(M), np.isnan(Mr))
+    np.testing.assert_array_equal(np.isnan(m), np.isnan(mr))
+    assert np.isnan(M[(kind == 1) | (kind == 2) | (kind == 4)]).all()
+    assert (M[kind == 3] == 0).all() and (m[kind == 3] == 0).all()
+    f = np.isfinite(Mr).all((1, 2))
+    scale = np.abs(Mr[f]).max((1, 2), initial=0.0)[:, None, None]
+    np.testing.assert_allclose(M[f], Mr[f], rtol=0, atol=1e-9 * scale.max(initial=0.0) + 1e-13)
+    np.testing.assert_allclose(m[f], mr[f], rtol=0, atol=1e-9 * np.sqrt(scale.max(initial=0.0)) + 1e-12)
+    for i in rng.choice(n, min(n, 12), replace=False):
+        mi, Mi = slide_moments(cam, xy[i:i + 1], v[i:i + 1], mean[i:i + 1], sig[i:i + 1])
+        np.testing.assert_allclose(Mi[0], M[i], rtol=1e-13, atol=1e-15)
+        np.testing.assert_allclose(mi[0], m[i], rtol=1e-13, atol=1e-15)
+    if n >= 63:  # (the sweep reaches the cases it names)
+        k = _nodes_rendered(cam, xy, v, mean, sig)
+        assert ((k > 0) & (k < 6)).any() and (k == 0).any() and (k == 6).any(), k
+
+
+@pytest.mark.parametrize("camera", sorted(CAMERAS))
+def test_kernels_take_any_number_of_nodes(camera):
+    """The kernels' node count is their argument's: the six nodes twice give the moments of the six (to
+    rounding), one node of the mean size gives ``u u^T`` of the mean box."""
+    from footprint_uq.fast import slide_kernels
+    from footprint_uq.tracking.contact_slide import kernel_camera
+
+    cam = CAMERAS[camera]
+    xy, v, mean, sig, _ = _mixed_contacts(np.random.default_rng(8), 70)
+    consts = kernel_camera(cam)
+
+    def moments(nodes):
+        m, M = np.empty((70, 2)), np.empty((70, 2, 2))
+        slide_kernels.slide_moments(*consts, xy, v, mean, sig, np.ascontiguousarray(nodes, dtype=np.float64), m, M)
+        return m, M
+
+    m6, M6 = moments(SIZE_NODES)
+    m12, M12 = moments(np.vstack([SIZE_NODES, SIZE_NODES]))
+    np.testing.assert_allclose(M12, M6, rtol=1e-14, atol=1e-15)
+    np.testing.assert_allclose(m12, m6, rtol=1e-14, atol=1e-15)
+    m1, M1 = moments(np.zeros((1, 3)))
+    ok = np.isfinite(m1).all(1)
+    assert ok.sum() > 20
+    np.testing.assert_allclose(M1[ok], np.einsum("ni,nj->nij", m1[ok], m1[ok]), rtol=1e-14, atol=1e-15)
+
+
+def test_columnar_passes_are_vectorised():
+    """The pinhole kernel's passes compile to packed vector divisions (AVX2 ``ymm`` or AVX-512 ``zmm``): a
+    branch, a library call or an aliasing doubt left in a pass would keep it scalar (~10x the time,
+    ``bench/bench_slide.py``).  Compiled afresh (numba does not show the code of a cached kernel)."""
+    import llvmlite.binding as llvm
+    import numba as nb
+    from numba import types
+
+    from footprint_uq.fast import slide_kernels as sk
+
+    if "+avx2" not in llvm.get_host_cpu_features().flatten():
+        pytest.skip("the host has no AVX2")
+    cam = types.UniTuple(types.float64, 22)
+    col = types.float64[::1]
+    for name, sig in [("_render_block", (col, cam, types.int64)), ("_block_start", (col, cam, types.int64)),
+                      ("_block_centre", (col, cam, types.int64)),
+                      ("_block_node", (col, cam, types.float64, types.float64, types.float64, types.int64))]:
+        fresh = nb.njit(sig, error_model="numpy", fastmath={"contract"})(getattr(sk, name).py_func)
+        asm = fresh.inspect_asm(fresh.signatures[0])
+        assert any("vdivpd" in line and ("%zmm" in line or "%ymm" in line) for line in asm.splitlines()), name

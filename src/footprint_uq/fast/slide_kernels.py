@@ -10,6 +10,19 @@ and ``v_max`` (every corner moves by the same camera-frame vector ``R^T (v_x, v_
 second: the box and its ground plane height), and the back-projection's derivative at that pixel; last the mean
 and second moment of ``u`` over the nodes that render.
 
+Two entries, by lens (:data:`MOMENTS_KERNELS`).  A distorting lens (``_moments_lens``, ~130 us per 100 objects)
+runs object by object (:func:`_moments`: its Newton inversion of the lens is a loop with exits).  A pinhole
+(``_moments_pinhole``, the common camera: ~5 us per 100 objects where the object-by-object form took ~54 us) runs
+*columnar*: per block of 64 objects, each step -- the inputs copied in, the course and the mean box, one render
+(the eight corners written out, the bounding box's extreme corners kept by selects, their pixel rates), the
+centre's fixed-point step, per node the box, one render and the moments' update -- is one pass over the block's
+objects on contiguous columns of a scratch array, branch-free (flags as 1.0 / 0.0, NaN where nothing renders
+carried as in the object-by-object form), with the camera's constants as scalars: LLVM vectorises each pass (8
+objects per AVX-512 instruction; ``tests/test_contact_slide.py`` checks that the render's pass uses vector
+instructions).  Same steps, same operations in the same order, so the same numbers to rounding (the course as
+``v / |v|`` with ``v`` scaled by its larger component, branch-free, in both entries: ``hypot`` is a library call
+that would keep the pass scalar).
+
 The camera travels as ``prm`` (22,), ``R`` = ``R_W_C`` (3, 3), the packed lens domain ``dom`` and ``has_dist``
 (the lens domain is checked, and the lens inverted, only for a distorting lens, as in
 :func:`footprint_uq.cameras.general.project` / ``backproject``).
@@ -20,6 +33,7 @@ from __future__ import annotations
 import math
 
 import numba as nb
+import numpy as np
 
 from .. import params as P
 from . import core
@@ -58,11 +72,15 @@ def _corner(q0, q1, q2, ol0, ol1, ol2, ow0, ow1, ow2, h0, h1, h2, j):
 @nb.njit(**_INL)
 def _heading(vx, vy):
     """``(cos, sin)`` of the course of the velocity (vx, vy) m/s as ``v / |v|`` (no angle): ``(1, 0)`` standing
-    (the course ``atan2(0, 0) = 0``), NaN for a NaN velocity."""
-    s = math.hypot(vx, vy)
-    if s == 0.0:
-        return 1.0, 0.0
-    return vx / s, vy / s
+    (the course ``atan2(0, 0) = 0``), NaN for a NaN velocity.  Branch-free and without ``hypot`` (a library
+    call, which would keep the object loop scalar): ``v`` is scaled by its larger component first (no overflow
+    or underflow of ``|v|``)."""
+    ax, ay = abs(vx), abs(vy)
+    m = ax if ax > ay else ay          # (NaN when vy is; vx NaN: NaN below)
+    t, w = vx / m, vy / m
+    s = math.sqrt(t * t + w * w)
+    standing = m == 0.0
+    return 1.0 if standing else t / s, 0.0 if standing else w / s
 
 
 @nb.njit(**_INL)
@@ -210,10 +228,230 @@ def _moments(prm, R, dom, has_dist, xy, v, size_mean, size_sigma, nodes, mean_ou
         second_out[i, 0, 1] = second_out[i, 1, 0] = m01 * w
 
 
+# -- the pinhole entry, columnar (module doc): per block of objects, each step a pass over the block's objects on
+# contiguous columns of one scratch array, branch-free, the loop over the objects innermost: LLVM vectorises it
+
+#: objects per block: the scratch (_NCOL columns of _BLOCK float64, 21 kB) stays in the L1 cache
+_BLOCK = 64
+#: a block's passes run over a whole number of vectors of this many objects (8 float64 in AVX-512; the lanes past
+#: the block's last object repeat its first, their results are not stored): no scalar remainder loop
+_LANES = 8
+# The scratch's columns: column k of the block is S[k * _BLOCK : (k + 1) * _BLOCK].  Constant offsets, so LLVM
+# sees that the columns do not overlap and needs no run-time check of the pointers.
+_X, _Y, _VX, _VY, _SM0, _SM1, _SM2, _SG0, _SG1, _SG2 = 0, 1, 2, 3, 4, 5, 6, 7, 8, 9   # the inputs (copied)
+_D0, _D1, _D2, _A0, _A1, _A2, _B0, _B1, _B2 = 10, 11, 12, 13, 14, 15, 16, 17, 18      # velocity, course (camera)
+_Q0, _Q1, _Q2, _OL0, _OL1, _OL2, _OW0, _OW1, _OW2, _OH0, _OH1, _OH2 = 19, 20, 21, 22, 23, 24, 25, 26, 27, 28, 29, 30
+_U, _V, _DU, _DV, _OK = 31, 32, 33, 34, 35                                              # a render's result
+_N, _S0, _S1, _M00, _M01, _M11 = 36, 37, 38, 39, 40, 41                                 # the running moments
+_NCOL = 42
+
+
+@nb.njit(**_INL)
+def _camera_scalars(prm, R):
+    """The pinhole camera as a tuple of 22 scalars: ``fx, fy, skew, cx, cy`` (px), ``1/fx, 1/fy`` (1/px),
+    ``X_m, Y_m, ground dz, slope x, slope y, h_m`` and ``R_W_C`` row by row (loaded once per call: an array
+    read in a loop could alias the outputs, and LLVM would reload it)."""
+    return (prm[P.FX], prm[P.FY], prm[P.SKEW], prm[P.CX], prm[P.CY], 1.0 / prm[P.FX], 1.0 / prm[P.FY],
+            prm[P.XM], prm[P.YM], prm[P.GDZ], prm[P.GSX], prm[P.GSY], prm[P.HM],
+            R[0, 0], R[0, 1], R[0, 2], R[1, 0], R[1, 1], R[1, 2], R[2, 0], R[2, 1], R[2, 2])
+
+
+@nb.njit(**_INL)
+def _offset_c(cam, x, y):
+    """:func:`_offset` with the camera's scalars (:func:`_camera_scalars`)."""
+    r00, r01, r02, r10, r11, r12, r20, r21, r22 = cam[13:22]
+    r0, r1 = x - cam[7], y - cam[8]
+    r2 = cam[9] + cam[10] * r0 + cam[11] * r1 - cam[12]
+    return (r00 * r0 + r10 * r1 + r20 * r2, r01 * r0 + r11 * r1 + r21 * r2, r02 * r0 + r12 * r1 + r22 * r2)
+
+
+@nb.njit(**_INL)
+def _ground_c(cam, u, v, du, dv):
+    """:func:`_ground` of a pinhole, branch-free: ``(x, y, dx, dy, ok)`` (m, m/s)."""
+    sk, ifx, ify, gsx, gsy = cam[2], cam[5], cam[6], cam[10], cam[11]
+    r00, r01, r02, r10, r11, r12, r20, r21, r22 = cam[13:22]
+    yd = (v - cam[4]) * ify
+    xd = (u - cam[3] - sk * yd) * ifx
+    dyd = dv * ify
+    dxd = (du - sk * dyd) * ifx
+    r0 = r00 * xd + r01 * yd + r02
+    r1 = r10 * xd + r11 * yd + r12
+    r2 = r20 * xd + r21 * yd + r22
+    e0, e1, e2 = r00 * dxd + r01 * dyd, r10 * dxd + r11 * dyd, r20 * dxd + r21 * dyd
+    num = cam[9] - cam[12]
+    den = r2 - gsx * r0 - gsy * r1
+    iden = 1.0 / den
+    lam = num * iden
+    ok = math.isfinite(u) & math.isfinite(v) & (den < 0.0) & (num < 0.0) & math.isfinite(lam)
+    dlam = -lam * (e2 - gsx * e0 - gsy * e1) * iden
+    return cam[7] + lam * r0, cam[8] + lam * r1, dlam * r0 + lam * e0, dlam * r1 + lam * e1, ok
+
+
+@nb.njit(**_INL)
+def _keep_corner(st, cam, p0, p1, p2):
+    """Corner (p0, p1, p2) (camera frame, m) into the running bounding box ``st`` = ``(u_min, x, y, 1/z of its
+    corner, u_max, ..., v_max, ..., every corner projects)`` (selects: the first corner kept on a tie, as
+    :func:`_render`)."""
+    iz = 1.0 / p2
+    xn, yn = p0 * iz, p1 * iz
+    ok = st[12] & (p2 > 0.0) & math.isfinite(xn) & math.isfinite(yn)
+    u = cam[0] * xn + cam[2] * yn + cam[3]
+    v = cam[1] * yn + cam[4]
+    lo, hi, lw = u < st[0], u > st[4], v > st[8]
+    return (u if lo else st[0], xn if lo else st[1], yn if lo else st[2], iz if lo else st[3],
+            u if hi else st[4], xn if hi else st[5], yn if hi else st[6], iz if hi else st[7],
+            v if lw else st[8], xn if lw else st[9], yn if lw else st[10], iz if lw else st[11], ok)
+
+
+@nb.njit(**_INL)
+def _corner_c(st, cam, S, j, c):
+    """Corner ``c`` (:func:`_corner`'s order and signs) of object ``j``'s box (columns _Q, _OL, _OW, _OH) into
+    ``st`` (:func:`_keep_corner`)."""
+    B = _BLOCK
+    p0, p1, p2 = _corner(S[_Q0 * B + j], S[_Q1 * B + j], S[_Q2 * B + j], S[_OL0 * B + j], S[_OL1 * B + j],
+                         S[_OL2 * B + j], S[_OW0 * B + j], S[_OW1 * B + j], S[_OW2 * B + j], S[_OH0 * B + j],
+                         S[_OH1 * B + j], S[_OH2 * B + j], c)
+    return _keep_corner(st, cam, p0, p1, p2)
+
+
+@nb.njit(**_JIT)
+def _render_block(S, cam, n_obj):
+    """:func:`_render` of the block's first ``n_obj`` boxes (columns _Q, _OL, _OW, _OH; velocity _D): the
+    bottom-centre pixel and its rate into _U, _V, _DU, _DV, whether every corner projects into _OK (1.0 / 0.0).
+    One pass over the objects, the eight corners written out (no loop inside it: LLVM vectorises it)."""
+    B, nan, inf = _BLOCK, math.nan, math.inf
+    fx, fy, sk = cam[0], cam[1], cam[2]
+    for j in range(n_obj):
+        st = (inf, nan, nan, nan, -inf, nan, nan, nan, -inf, nan, nan, nan, True)
+        st = _corner_c(st, cam, S, j, 0)
+        st = _corner_c(st, cam, S, j, 1)
+        st = _corner_c(st, cam, S, j, 2)
+        st = _corner_c(st, cam, S, j, 3)
+        st = _corner_c(st, cam, S, j, 4)
+        st = _corner_c(st, cam, S, j, 5)
+        st = _corner_c(st, cam, S, j, 6)
+        st = _corner_c(st, cam, S, j, 7)
+        d0, d1, d2 = S[_D0 * B + j], S[_D1 * B + j], S[_D2 * B + j]
+        exa, eya = (d0 - st[1] * d2) * st[3], (d1 - st[2] * d2) * st[3]
+        exb, eyb = (d0 - st[5] * d2) * st[7], (d1 - st[6] * d2) * st[7]
+        eyc = (d1 - st[10] * d2) * st[11]
+        S[_U * B + j], S[_V * B + j] = 0.5 * (st[0] + st[4]), st[8]
+        S[_DU * B + j] = 0.5 * (fx * exa + sk * eya) + 0.5 * (fx * exb + sk * eyb)
+        S[_DV * B + j], S[_OK * B + j] = fy * eyc, 1.0 if st[12] else 0.0
+
+
+@nb.njit(**_INL)
+def _box_columns(S, cam, j, L, W, H):
+    """The half-length, half-width and height vectors (camera frame, m) of object ``j``'s box of size (L, W, H)
+    m into _OL, _OW, _OH (its course's unit vectors _A, _B and the vertical ``R^T e_z`` scaled)."""
+    B = _BLOCK
+    S[_OL0 * B + j], S[_OL1 * B + j], S[_OL2 * B + j] = L * S[_A0 * B + j], L * S[_A1 * B + j], L * S[_A2 * B + j]
+    S[_OW0 * B + j], S[_OW1 * B + j], S[_OW2 * B + j] = W * S[_B0 * B + j], W * S[_B1 * B + j], W * S[_B2 * B + j]
+    S[_OH0 * B + j], S[_OH1 * B + j], S[_OH2 * B + j] = H * cam[19], H * cam[20], H * cam[21]
+
+
+@nb.njit(**_JIT)
+def _block_load(S, xy, v, size_mean, size_sigma, i0, n_obj, n_pass):
+    """Objects ``i0 .. i0 + n_obj`` of the call into the block's columns _X, _Y, _VX, _VY, _SM, _SG (a copy: the
+    passes after it read the scratch only, contiguous and known not to overlap what they write), and object
+    ``i0`` again up to ``n_pass`` (a whole number of vectors: the passes have no scalar remainder; those lanes'
+    results are not stored)."""
+    B = _BLOCK
+    for j in range(n_pass):
+        i = i0 + j if j < n_obj else i0
+        S[_X * B + j], S[_Y * B + j], S[_VX * B + j], S[_VY * B + j] = xy[i, 0], xy[i, 1], v[i, 0], v[i, 1]
+        S[_SM0 * B + j], S[_SM1 * B + j], S[_SM2 * B + j] = size_mean[i, 0], size_mean[i, 1], size_mean[i, 2]
+        S[_SG0 * B + j], S[_SG1 * B + j], S[_SG2 * B + j] = size_sigma[i, 0], size_sigma[i, 1], size_sigma[i, 2]
+
+
+@nb.njit(**_JIT)
+def _block_start(S, cam, n_obj):
+    """The block's velocity in the camera frame (_D), the course's half-length and half-width unit vectors (_A,
+    _B), the mean box (_OL, _OW, _OH) and the camera-frame vector to the contact (_Q); the running moments
+    zeroed."""
+    B = _BLOCK
+    r00, r01, r02, r10, r11, r12, r20, r21, r22 = cam[13:22]
+    for j in range(n_obj):
+        x, y, vx, vy = S[_X * B + j], S[_Y * B + j], S[_VX * B + j], S[_VY * B + j]
+        cs, sn = _heading(vx, vy)
+        vz = cam[10] * vx + cam[11] * vy
+        S[_D0 * B + j] = r00 * vx + r10 * vy + r20 * vz
+        S[_D1 * B + j] = r01 * vx + r11 * vy + r21 * vz
+        S[_D2 * B + j] = r02 * vx + r12 * vy + r22 * vz
+        S[_A0 * B + j], S[_A1 * B + j] = 0.5 * (r00 * cs + r10 * sn), 0.5 * (r01 * cs + r11 * sn)
+        S[_A2 * B + j] = 0.5 * (r02 * cs + r12 * sn)
+        S[_B0 * B + j], S[_B1 * B + j] = 0.5 * (r10 * cs - r00 * sn), 0.5 * (r11 * cs - r01 * sn)
+        S[_B2 * B + j] = 0.5 * (r12 * cs - r02 * sn)
+        _box_columns(S, cam, j, S[_SM0 * B + j], S[_SM1 * B + j], S[_SM2 * B + j])
+        S[_Q0 * B + j], S[_Q1 * B + j], S[_Q2 * B + j] = _offset_c(cam, x, y)
+        S[_N * B + j] = S[_S0 * B + j] = S[_S1 * B + j] = 0.0
+        S[_M00 * B + j] = S[_M01 * B + j] = S[_M11 * B + j] = 0.0
+
+
+@nb.njit(**_JIT)
+def _block_centre(S, cam, n_obj):
+    """The centre whose contact is the tracked one (one fixed-point step from the mean box's rendered contact,
+    NaN where it does not render): its camera-frame vector into _Q."""
+    B = _BLOCK
+    for j in range(n_obj):
+        gx, gy, _, _, ok = _ground_c(cam, S[_U * B + j], S[_V * B + j], 0.0, 0.0)
+        ok = ok & (S[_OK * B + j] != 0.0)
+        gx, gy = gx if ok else math.nan, gy if ok else math.nan
+        S[_Q0 * B + j], S[_Q1 * B + j], S[_Q2 * B + j] = _offset_c(cam, 2.0 * S[_X * B + j] - gx,
+                                                                   2.0 * S[_Y * B + j] - gy)
+
+
+@nb.njit(**_JIT)
+def _block_node(S, cam, n0, n1, n2, n_obj):
+    """One size node ``mean + (n0, n1, n2) * sigma`` (clipped below at :data:`MIN_SIZE_M`) of the block: its box
+    rendered at the centre, the slide ``u`` where it renders added to the running moments (selects)."""
+    B = _BLOCK
+    for j in range(n_obj):
+        _box_columns(S, cam, j, _clip(S[_SM0 * B + j] + n0 * S[_SG0 * B + j]),
+                     _clip(S[_SM1 * B + j] + n1 * S[_SG1 * B + j]), _clip(S[_SM2 * B + j] + n2 * S[_SG2 * B + j]))
+    _render_block(S, cam, n_obj)
+    for j in range(n_obj):
+        _, _, dgx, dgy, ok = _ground_c(cam, S[_U * B + j], S[_V * B + j], S[_DU * B + j], S[_DV * B + j])
+        ux, uy = dgx - S[_VX * B + j], dgy - S[_VY * B + j]
+        good = ok & (S[_OK * B + j] != 0.0) & math.isfinite(ux) & math.isfinite(uy)
+        ux, uy = ux if good else 0.0, uy if good else 0.0
+        S[_N * B + j] += 1.0 if good else 0.0
+        S[_S0 * B + j] += ux
+        S[_S1 * B + j] += uy
+        S[_M00 * B + j] += ux * ux
+        S[_M01 * B + j] += ux * uy
+        S[_M11 * B + j] += uy * uy
+
+
+@nb.njit(**_INL)
+def _clip(s):
+    """A node's size clipped below at :data:`MIN_SIZE_M` (NaN stays NaN), as :func:`_size`."""
+    return MIN_SIZE_M if s < MIN_SIZE_M else s
+
+
 @nb.njit(**_JIT)
 def _moments_pinhole(prm, R, dom, xy, v, size_mean, size_sigma, nodes, mean_out, second_out):
-    """:func:`_moments` of a lens without distortion (the lens code compiled out: 0.6 x the time)."""
-    _moments(prm, R, dom, False, xy, v, size_mean, size_sigma, nodes, mean_out, second_out)
+    """:func:`_moments` of a lens without distortion, columnar (module doc): per block of objects the mean box's
+    render and the centre, then per node a render and the moments' update, each step a vectorised pass (any
+    number of nodes; ``dom`` unused, as in :func:`_moments` without distortion)."""
+    cam = _camera_scalars(prm, R)
+    S = np.empty(_NCOL * _BLOCK)
+    B = _BLOCK
+    for i0 in range(0, xy.shape[0], B):
+        n_obj = min(B, xy.shape[0] - i0)
+        n_pass = (n_obj + _LANES - 1) // _LANES * _LANES
+        _block_load(S, xy, v, size_mean, size_sigma, i0, n_obj, n_pass)
+        _block_start(S, cam, n_pass)
+        _render_block(S, cam, n_pass)
+        _block_centre(S, cam, n_pass)
+        for n in range(nodes.shape[0]):
+            _block_node(S, cam, nodes[n, 0], nodes[n, 1], nodes[n, 2], n_pass)
+        for j in range(n_obj):
+            k = S[_N * B + j]
+            w = 1.0 / k if k > 0.0 else math.nan     # (NaN where no node renders)
+            mean_out[i0 + j, 0], mean_out[i0 + j, 1] = S[_S0 * B + j] * w, S[_S1 * B + j] * w
+            second_out[i0 + j, 0, 0], second_out[i0 + j, 1, 1] = S[_M00 * B + j] * w, S[_M11 * B + j] * w
+            second_out[i0 + j, 0, 1] = second_out[i0 + j, 1, 0] = S[_M01 * B + j] * w
 
 
 @nb.njit(**_JIT)
