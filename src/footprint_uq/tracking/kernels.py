@@ -20,10 +20,11 @@ import numpy as np
 from numba import njit
 
 from ..fast import core
+from ..fast.footprint_kernels import KernelCamera, point_jacobian_into
 from .kalman_kernels import pick_shared, schmidt_step, start_cov2
 
-__all__ = ["predict_update", "update_slots", "frame_rows", "frame_update", "initiate_row", "project_ground",
-           "motion_fields", "ROW_SKIP", "ROW_UPDATE", "ROW_START"]
+__all__ = ["predict_update", "update_slots", "frame_rows", "frame_rows_shared", "frame_update", "initiate_row",
+           "project_ground", "motion_fields", "ROW_SKIP", "ROW_UPDATE", "ROW_START"]
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -269,6 +270,26 @@ def frame_rows(slots, xy, cov, B, subtract, R, t, t_last, seen, stamp, X, act, o
         pred[k, 1] = X[s, 1] + h * X[s, 3]
         old[k] = i
         k += 1
+    return k, n_unknown
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def frame_rows_shared(slots, xy, cov, B, subtract, R, t, t_last, seen, stamp, X, act, old, pred, cam_fields, dR, Lr,
+                      Lc, Lv, uv, B_pred, S):  # pragma: no cover - compiled
+    """:func:`frame_rows` and then ``B`` at the k predicted positions in one call: ``pred[:k]`` into the image
+    (:func:`project_ground`, pixels into ``uv[:k]``) and through :func:`~footprint_uq.fast.footprint_kernels.
+    point_jacobian_into` into ``B_pred[:k] (k, 2, r)`` -- the same ``B`` to the bit as
+    :class:`~footprint_uq.tracking.table.SharedJacobianAt` at ``pred[:k]``.  ``cam_fields``: the camera's
+    :class:`~footprint_uq.fast.footprint_kernels.KernelCamera` as a plain tuple (numba types a plain tuple in
+    C, a named one in Python: ~1 us of dispatch less); ``dR, Lr, Lc, Lv``: the rest of the point kernel's inputs
+    (:meth:`~footprint_uq.products.frame_processor.FrameProcessor.point_jacobian_kernel`); ``uv (n, 2)``,
+    ``B_pred (n, 2, r)`` and ``S`` (``footprint_kernels.SCRATCH_SHAPE``) are the caller's.  Returns what
+    :func:`frame_rows` returns."""
+    k, n_unknown = frame_rows(slots, xy, cov, B, subtract, R, t, t_last, seen, stamp, X, act, old, pred)
+    if k:
+        cam = KernelCamera(*cam_fields)
+        project_ground(pred[:k], cam, uv[:k])
+        point_jacobian_into(uv[:k], cam, dR, Lr, Lc, Lv, B_pred[:k], S)
     return k, n_unknown
 
 

@@ -16,7 +16,7 @@ from ..fast.footprint_kernels import SCRATCH_SHAPE, camera_constants
 from ..products.footprints import FrameProcessor
 from .filter import Initiator, SplitMeasurement
 from .imm_kernels import frame_pass, scratch
-from .kernels import ROW_SKIP, ROW_START, frame_rows, frame_update, project_ground
+from .kernels import ROW_SKIP, ROW_START, frame_rows, frame_rows_shared, frame_update, project_ground
 from .models import ConstantVelocity
 
 __all__ = ["TrackerConfig", "TrackOutput", "TrackTable", "SharedJacobianAt", "CALIBRATION_MODES", "DEFAULT_GATE_CHI2"]
@@ -144,6 +144,16 @@ class TrackTable:
         self.shared_at = shared_at
         self._consider = self.config.calibration == "consider"
         self.rank = int(rank) if self._consider else 0
+        #: ``shared_at`` when it is a :class:`SharedJacobianAt` of this rank: ``B`` at the predicted positions is
+        #: then formed in the rows' compiled call (:func:`~footprint_uq.tracking.kernels.frame_rows_shared`, the
+        #: same ``B`` to the bit) instead of a call of ``shared_at`` (two compiled calls, their Python, ~4 us)
+        self._at = shared_at if (isinstance(shared_at, SharedJacobianAt) and self.rank
+                                 and shared_at.rank == self.rank) else None
+        #: whether the rows' call forms ``B`` (None: decided at the first frame): yes if ``B``'s kernels were ready
+        #: then (that call compiles, or loads from the cache, with the table's other kernels), later only once
+        #: the call is compiled in this process (:meth:`warm_up` compiles it): a service whose kernels compiled
+        #: in the background meanwhile does not stop a frame for its compile
+        self._fused = None if self._at is not None else False
         #: the modes the compiled update runs (its per-track step, in :func:`~footprint_uq.tracking.imm_kernels.
         #: frame_pass` and its reference :func:`~footprint_uq.tracking.kernels.frame_update`, is
         #: :class:`~footprint_uq.tracking.filter.InteractingModels` -- mixing, each mode's SchmidtPredictor +
@@ -284,14 +294,22 @@ class TrackTable:
         self._stamp += 1
         act, old, pred = np.empty(n, np.int8), np.empty(n, np.int64), np.empty((n, 2))
         R = np.empty((n, 2, 2)) if subtract else cov
-        k, n_unknown = frame_rows(slots, xy, cov, B, subtract, R, t, self._t_last, self._seen, self._stamp, self._x,
-                                  act, old, pred)
+        rows = (slots, xy, cov, B, subtract, R, t, self._t_last, self._seen, self._stamp, self._x, act, old, pred)
+        at = self._at  # B at the predicted positions (see the class doc): in the rows' call, or by shared_at
+        inputs = at.kernel_inputs() if at is not None else None
+        if self._fused is None:  # (decided at the first frame: see __init__)
+            self._fused = inputs is not None
+        if inputs is not None and (self._fused or frame_rows_shared.signatures) and at._busy.acquire(blocking=False):
+            try:
+                Bp = np.empty((n, 2, self.rank))  # (rows k and on are not read: frame_pass reads Bp[:k])
+                k, n_unknown = frame_rows_shared(*rows, *inputs, np.empty((n, 2)), Bp, at._scratch)
+            finally:
+                at._busy.release()
+        else:
+            k, n_unknown = frame_rows(*rows)
+            Bp = _c64(self.shared_at(pred[:k])) if self.shared_at is not None and self.rank and k else _NO_B
         if n_unknown:
             self._claim(ids, slots, act, old[n - n_unknown:][::-1].tolist())
-        if self.shared_at is not None and self.rank and k:  # B at the predicted positions (see the class doc)
-            Bp = _c64(self.shared_at(pred[:k]))
-        else:
-            Bp = _NO_B
         z, Rf, Bf = (xy, R, B) if self._consider else self._measurement(xy, R, B)  # (consider: the split as given)
         out = TrackOutput(np.empty(n, np.int64), np.empty(n, bool), np.empty(n, np.int64), np.empty(n),
                           np.empty((n, 2)), np.empty((n, 2, 2)), np.empty((n, 2)), np.empty((n, 2, 2)))
@@ -362,8 +380,21 @@ class SharedJacobianAt:
         #: the processor's compiled call (:meth:`FrameProcessor.point_jacobian_kernel`; None until its kernels
         #: are ready) and this object's own scratch for it, used by one thread at a time (``_busy``)
         self._kernel = None
+        self._inputs = None  # (kernel_inputs)
         self._scratch = np.empty(SCRATCH_SHAPE)
         self._busy = threading.Lock()
+
+    def kernel_inputs(self) -> tuple | None:
+        """The point kernel's inputs after the pixels, ``(cam_fields, dR, Lr, Lc, Lv)`` (the camera's
+        ``KernelCamera`` as a plain tuple), for :func:`~footprint_uq.tracking.kernels.frame_rows_shared` (which
+        takes this object's scratch under ``_busy``); None while the processor's kernels are not ready (ask
+        again later)."""
+        if self._kernel is None:
+            self._kernel = self.processor.point_jacobian_kernel()
+            if self._kernel is not None:
+                cam, *rest = self._kernel[1]
+                self._inputs = (tuple(cam), *rest)
+        return self._inputs
 
     def __call__(self, xy_m) -> np.ndarray:
         xy = np.ascontiguousarray(xy_m, dtype=np.float64).reshape(-1, 2)
@@ -372,7 +403,7 @@ class SharedJacobianAt:
         # the kernel called from here, not through the processor's method: the tracker's frame does not climb back
         # up from products/ (bench/frame_walk.py --tracks); another thread meanwhile takes the processor's path
         if self._kernel is None:
-            self._kernel = self.processor.point_jacobian_kernel()
+            self.kernel_inputs()
         if self._kernel is None or not self._busy.acquire(blocking=False):
             return self.processor.point_shared_jacobian(uv)
         try:
