@@ -12,6 +12,7 @@ import numpy as np
 
 from .._checks import as_float
 from ..errors import InputError
+from ..fast.buffers import thread_buffer
 from ..fast.footprint_kernels import SCRATCH_SHAPE, camera_constants
 from ..products.footprints import FrameProcessor
 from .filter import Initiator, SplitMeasurement
@@ -154,6 +155,7 @@ class TrackTable:
         #: the call is compiled in this process (:meth:`warm_up` compiles it): a service whose kernels compiled
         #: in the background meanwhile does not stop a frame for its compile
         self._fused = None if self._at is not None else False
+        self._last_scratch = (None, None)  # (_frame_scratch)
         #: the modes the compiled update runs (its per-track step, in :func:`~footprint_uq.tracking.imm_kernels.
         #: frame_pass` and its reference :func:`~footprint_uq.tracking.kernels.frame_update`, is
         #: :class:`~footprint_uq.tracking.filter.InteractingModels` -- mixing, each mode's SchmidtPredictor +
@@ -299,12 +301,9 @@ class TrackTable:
         inputs = at.kernel_inputs() if at is not None else None
         if self._fused is None:  # (decided at the first frame: see __init__)
             self._fused = inputs is not None
-        if inputs is not None and (self._fused or frame_rows_shared.signatures) and at._busy.acquire(blocking=False):
-            try:
-                Bp = np.empty((n, 2, self.rank))  # (rows k and on are not read: frame_pass reads Bp[:k])
-                k, n_unknown = frame_rows_shared(*rows, *inputs, np.empty((n, 2)), Bp, at._scratch)
-            finally:
-                at._busy.release()
+        if inputs is not None and (self._fused or frame_rows_shared.signatures):
+            Bp = np.empty((n, 2, self.rank))  # (rows k and on are not read: frame_pass reads Bp[:k])
+            k, n_unknown = frame_rows_shared(*rows, *inputs, np.empty((n, 2)), Bp, self._frame_scratch())
         else:
             k, n_unknown = frame_rows(*rows)
             Bp = _c64(self.shared_at(pred[:k])) if self.shared_at is not None and self.rank and k else _NO_B
@@ -322,6 +321,16 @@ class TrackTable:
         if t < self._oldest_s:  # (every row started or updated now has t_last = t)
             self._oldest_s = t
         return out
+
+    def _frame_scratch(self) -> np.ndarray:
+        """The point kernel's scratch for :func:`~footprint_uq.tracking.kernels.frame_rows_shared`: this thread's
+        buffer of the per-frame kernel (``fast.buffers.thread_buffer``, the one :class:`~footprint_uq.products.
+        frame_processor.FrameProcessor` uses: in cache after the frame's positions), the last thread's kept here."""
+        tid = threading.get_ident()
+        last = self._last_scratch  # (one tuple, read and replaced whole: safe under threads)
+        if last[0] != tid:
+            last = self._last_scratch = (tid, thread_buffer("frame_scratch", SCRATCH_SHAPE))
+        return last[1]
 
     def frame_nis(self) -> np.ndarray:
         """The normalised innovation squared ``y^T S^-1 y`` (2 dof; two modes: of the predicted mode mixture's
@@ -386,9 +395,8 @@ class SharedJacobianAt:
 
     def kernel_inputs(self) -> tuple | None:
         """The point kernel's inputs after the pixels, ``(cam_fields, dR, Lr, Lc, Lv)`` (the camera's
-        ``KernelCamera`` as a plain tuple), for :func:`~footprint_uq.tracking.kernels.frame_rows_shared` (which
-        takes this object's scratch under ``_busy``); None while the processor's kernels are not ready (ask
-        again later)."""
+        ``KernelCamera`` as a plain tuple), for :func:`~footprint_uq.tracking.kernels.frame_rows_shared`; None
+        while the processor's kernels are not ready (ask again later)."""
         if self._kernel is None:
             self._kernel = self.processor.point_jacobian_kernel()
             if self._kernel is not None:
