@@ -8,9 +8,13 @@ the two to 1e-9 over frame sequences.  What is different (the arithmetic, not th
 
 * two modes mix and combine in closed form: ``sum_i w_i (x_i - x)(x_i - x)^T = w_0 w_1 d d^T`` with
   ``d = x_0 - x_1`` (the weights sum to one), and only the 10 entries of each symmetric 4 x 4 are computed;
-* the consider columns (4 x r per mode) are walked once for both modes to mix, predict and accumulate
-  ``G = C_p B^T`` (the innovation's and the gain's share, 8 running sums per mode in registers) and ``B B^T``,
-  then once per mode to write the posterior ``C = C_p - K (H C_p + B)``; the reference's scratch copies and
+* the consider columns (4 x r per mode) of two modes are walked twice, and written once: the first walk reads
+  both stored modes' columns and accumulates ``D_i = C_i B^T`` (16 running sums in registers) and ``B B^T``, from
+  which ``G_j = C_p,j B^T = F (W_0j D_0 + W_1j D_1)`` (the innovation's and the gain's share; the mix and the
+  predict are linear); the second forms each column's two predicted columns again and writes both posteriors
+  ``C = C_p - K (H C_p + B)`` over the stored ones (2026-11-28, wave 9: before, the first walk wrote the predicted
+  columns to a scratch that the second read back, 16 loads and stores more per column; the pass ~22 -> ~20.5 us in
+  the bench's frame); one mode mixes and predicts into the scratch as before; the reference's scratch copies and
   per-mode zeroing are gone;
 * the mode likelihoods' ratio takes one ``log`` and one ``exp`` (the reference: four and two);
 * the table stores each mode's consider columns column by column (``Cm (cap, M, r, 4)``: a column's 4 entries
@@ -43,7 +47,8 @@ __all__ = ["frame_pass", "scratch"]
 
 def scratch(n_modes: int, rank: int) -> tuple:
     """The working arrays of :func:`frame_pass` for ``n_modes`` modes (1 or 2) and consider rank ``rank``
-    (allocated once per table: the pass itself allocates nothing)."""
+    (allocated once per table: the pass itself allocates nothing; the predicted columns ``(M, r, 4)`` are used by
+    one mode only)."""
     M = int(n_modes)
     return (np.empty((2, 2)), np.empty((M, 4)), np.empty((M, 4, 4)), np.empty((M, 4, 2)), np.empty((M, 4, 2)),
             np.empty((M, int(rank), 4)), np.empty((M, 3)))
@@ -364,8 +369,8 @@ def frame_pass(act, slots, old, n_old, X, P, Xm, Pm, Cm, mu, t_last, t_first, n_
                o_cv, W, xp, Pp, Kg, Cx, Cps, Sm, nis):  # pragma: no cover - compiled
     """:func:`~footprint_uq.tracking.kernels.frame_update` (same arguments, same results to rounding) with the
     caller's scratch (:func:`scratch`: ``W (2, 2)``, ``xp (M, 4)``, ``Pp (M, 4, 4)``, ``Kg, Cx (M, 4, 2)``,
-    ``Cps (M, r, 4)``, ``Sm (M, 3)``; compiled without numba's reference counting, it allocates nothing) and
-    ``nis (n,)``, which receives the NIS of each updated object's innovation (left as it is for the others;
+    ``Cps (M, r, 4)`` (one mode only), ``Sm (M, 3)``; compiled without numba's reference counting, it allocates
+    nothing) and ``nis (n,)``, which receives the NIS of each updated object's innovation (left as it is for the others;
     the on-line consistency check's statistic, :class:`~footprint_uq.tracking.consistency.NisMonitor`): the objects
     ``old[:n_old]`` get :func:`_track_step` (``B_pred[k]``, ``B`` at the k-th one's predicted position, where given
     and finite, else ``B_frame``); one beyond the gate becomes a start; then the starts and every object's

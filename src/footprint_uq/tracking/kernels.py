@@ -9,7 +9,9 @@ on (100, 4, 4) / (100, 4, r) stacks costs ~400 us of call overhead (several time
 
 :func:`frame_update` is the compiled reference of a frame's update, written as the numpy classes read;
 :class:`~footprint_uq.tracking.table.TrackTable` runs :func:`~footprint_uq.tracking.imm_kernels.frame_pass`, the
-same filter arranged for speed, held to it in ``tests/test_tracking_fast.py``.
+same filter arranged for speed, held to it in ``tests/test_tracking_fast.py``.  :func:`frame_rows_shared` is
+:func:`frame_rows` with ``B`` at the predicted positions formed in the same call (the table's path when its
+``shared_at`` is a :class:`~footprint_uq.tracking.table.SharedJacobianAt`).
 """
 
 from __future__ import annotations

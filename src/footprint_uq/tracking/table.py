@@ -156,6 +156,7 @@ class TrackTable:
         #: in the background meanwhile does not stop a frame for its compile
         self._fused = None if self._at is not None else False
         self._last_scratch = (None, None)  # (_frame_scratch)
+        self._work(128)
         #: the modes the compiled update runs (its per-track step, in :func:`~footprint_uq.tracking.imm_kernels.
         #: frame_pass` and its reference :func:`~footprint_uq.tracking.kernels.frame_update`, is
         #: :class:`~footprint_uq.tracking.filter.InteractingModels` -- mixing, each mode's SchmidtPredictor +
@@ -294,7 +295,9 @@ class TrackTable:
             self._delete_expired(t)
         slots = np.fromiter(map(self._index.get, ids, repeat(-1)), np.int64, n)
         self._stamp += 1
-        act, old, pred = np.empty(n, np.int8), np.empty(n, np.int64), np.empty((n, 2))
+        if n > self._old.shape[0]:  # (the step's working arrays, kept: nothing of them leaves the step)
+            self._work(n)
+        act, old, pred = np.empty(n, np.int8), self._old, self._pred
         R = np.empty((n, 2, 2)) if subtract else cov
         rows = (slots, xy, cov, B, subtract, R, t, self._t_last, self._seen, self._stamp, self._x, act, old, pred)
         at = self._at  # B at the predicted positions (see the class doc): in the rows' call, or by shared_at
@@ -302,13 +305,13 @@ class TrackTable:
         if self._fused is None:  # (decided at the first frame: see __init__)
             self._fused = inputs is not None
         if inputs is not None and (self._fused or frame_rows_shared.signatures):
-            Bp = np.empty((n, 2, self.rank))  # (rows k and on are not read: frame_pass reads Bp[:k])
-            k, n_unknown = frame_rows_shared(*rows, *inputs, np.empty((n, 2)), Bp, self._frame_scratch())
+            Bp = self._Bp  # (rows k and on are not read: frame_pass reads Bp[:k])
+            k, n_unknown = frame_rows_shared(*rows, *inputs, self._uv, Bp, self._frame_scratch())
         else:
             k, n_unknown = frame_rows(*rows)
             Bp = _c64(self.shared_at(pred[:k])) if self.shared_at is not None and self.rank and k else _NO_B
         if n_unknown:
-            self._claim(ids, slots, act, old[n - n_unknown:][::-1].tolist())
+            self._claim(ids, slots, act, old[n - n_unknown:n][::-1].tolist())
         z, Rf, Bf = (xy, R, B) if self._consider else self._measurement(xy, R, B)  # (consider: the split as given)
         out = TrackOutput(np.empty(n, np.int64), np.empty(n, bool), np.empty(n, np.int64), np.empty(n),
                           np.empty((n, 2)), np.empty((n, 2, 2)), np.empty((n, 2)), np.empty((n, 2, 2)))
@@ -321,6 +324,13 @@ class TrackTable:
         if t < self._oldest_s:  # (every row started or updated now has t_last = t)
             self._oldest_s = t
         return out
+
+    def _work(self, n: int) -> None:
+        """The step's working arrays for frames of up to ``n`` objects (the compiled calls read their first k or n
+        rows): the objects to update ``_old (n,)``, their predicted positions ``_pred (n, 2)``, pixels ``_uv (n,
+        2)`` and ``B`` there ``_Bp (n, 2, r)`` (:func:`~footprint_uq.tracking.kernels.frame_rows_shared`)."""
+        self._old, self._pred, self._uv = np.empty(n, np.int64), np.empty((n, 2)), np.empty((n, 2))
+        self._Bp = np.empty((n, 2, self.rank))
 
     def _frame_scratch(self) -> np.ndarray:
         """The point kernel's scratch for :func:`~footprint_uq.tracking.kernels.frame_rows_shared`: this thread's
