@@ -17,8 +17,9 @@ run, interleaved frame by frame (medians over ``frames`` frames after a warm-up 
 * ``total`` -- ``positions_split + track``: positions and motion of one frame; ``ratio`` = ``total / positions``
   (issue 31's target: <= 2);
 * ``step_python`` -- the Python of :meth:`TrackTable.step` alone (checks, id lookup, new ids' rows, allocations):
-  ``step`` minus its three compiled calls (``frame_rows``, ``shared_at``, ``frame_pass``), timed around them
-  (issue 31's target: < 20 us); ``frame_rows``, ``frame_pass`` and ``shared_at`` in the same frames.
+  ``step`` minus its two compiled calls (``frame_rows_shared``: the rows and ``B`` at the predicted positions;
+  ``frame_pass``), timed around them (issue 31's target: < 20 us); ``frame_rows_shared`` and ``frame_pass`` in
+  the same frames (before 2026-11-28 night, wave 9: three calls, ``frame_rows``, ``shared_at``, ``frame_pass``).
 
 :func:`monitor_cost` (a separate pass over the same frames, so as not to disturb the ratio's caches): ``monitor``,
 the on-line NIS check (:class:`~footprint_uq.tracking.consistency.NisMonitor`, as ``serve --tracks`` runs it by

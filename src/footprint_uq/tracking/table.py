@@ -114,9 +114,11 @@ class TrackTable:
     deleter); then every object whose id has a track is predicted to the frame's time and gated (a jump with
     ``y^T S^-1 y > gate_chi2`` restarts the track under a new ``track_id``), the others start tracks
     (the initiator).  Per frame, the ids are looked up in one pass over a dictionary (the only per-object Python
-    work; unknown ids, a few per frame, are then given rows); the rest is two compiled passes over the frame
-    (:func:`~footprint_uq.tracking.kernels.frame_rows`, :func:`~footprint_uq.tracking.kernels.frame_update`) and
-    one evaluation of ``shared_at`` at the predicted positions.  Each track runs the
+    work; unknown ids, a few per frame, are then given rows); the rest is two compiled passes over the frame:
+    :func:`~footprint_uq.tracking.kernels.frame_rows_shared` (the rows and ``B`` at the predicted positions, when
+    ``shared_at`` is a :class:`SharedJacobianAt`; else :func:`~footprint_uq.tracking.kernels.frame_rows` and one
+    evaluation of ``shared_at``) and :func:`~footprint_uq.tracking.imm_kernels.frame_pass` (the update, the
+    starts, the outputs).  Each track runs the
     interacting-multiple-model filter over :attr:`models` (a quiet and a manoeuvre constant-velocity mode; one
     mode if ``manoeuvre_accel_psd_m2ps3`` is None); its reported state is the modes' moment-matched combination,
     and the gate cuts a track only if the detection is beyond it for every mode.
