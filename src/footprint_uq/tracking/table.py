@@ -150,7 +150,7 @@ class TrackTable:
         #: ``shared_at`` when it is a :class:`SharedJacobianAt` of this rank: ``B`` at the predicted positions is
         #: then formed in the rows' compiled call (:func:`~footprint_uq.tracking.kernels.frame_rows_shared`, the
         #: same ``B`` to the bit) instead of a call of ``shared_at`` (two compiled calls, their Python, ~4 us)
-        self._at = shared_at if (isinstance(shared_at, SharedJacobianAt) and self.rank
+        self._at = shared_at if (type(shared_at) is SharedJacobianAt and self.rank  # (a subclass may change B)
                                  and shared_at.rank == self.rank) else None
         #: whether the rows' call forms ``B`` (None: decided at the first frame): yes if ``B``'s kernels were ready
         #: then (that call compiles, or loads from the cache, with the table's other kernels), later only once
