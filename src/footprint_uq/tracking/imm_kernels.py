@@ -13,9 +13,9 @@ the two to 1e-9 over frame sequences.  What is different (the arithmetic, not th
   which ``G_j = C_p,j B^T = F (W_0j D_0 + W_1j D_1)`` (the innovation's and the gain's share; the mix and the
   predict are linear); the second forms each column's two predicted columns again and writes both posteriors
   ``C = C_p - K (H C_p + B)`` over the stored ones (2026-11-28, wave 9: before, the first walk wrote the predicted
-  columns to a scratch that the second read back, 16 loads and stores more per column; the pass ~22 -> ~20.5 us in
-  the bench's frame); one mode mixes and predicts into the scratch as before; the reference's scratch copies and
-  per-mode zeroing are gone;
+  columns to a scratch that the second read back, 16 loads and stores more per column; in the bench's frame the
+  pass 21.0-22.7 us against main's 21.6-26.6 in the same sessions, ~0.5-1 us less); one mode mixes and predicts
+  into the scratch as before; the reference's scratch copies and per-mode zeroing are gone;
 * the mode likelihoods' ratio takes one ``log`` and one ``exp`` (the reference: four and two);
 * the table stores each mode's consider columns column by column (``Cm (cap, M, r, 4)``: a column's 4 entries
   adjacent), so each walk over the columns reads and writes whole columns (~3 us less per 100-object frame than the
