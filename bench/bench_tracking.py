@@ -17,8 +17,9 @@ run, interleaved frame by frame (medians over ``frames`` frames after a warm-up 
 * ``total`` -- ``positions_split + track``: positions and motion of one frame; ``ratio`` = ``total / positions``
   (issue 31's target: <= 2);
 * ``step_python`` -- the Python of :meth:`TrackTable.step` alone (checks, id lookup, new ids' rows, allocations):
-  ``step`` minus its three compiled calls (``frame_rows``, ``shared_at``, ``frame_pass``), timed around them
-  (issue 31's target: < 20 us); ``frame_rows``, ``frame_pass`` and ``shared_at`` in the same frames.
+  ``step`` minus its two compiled calls (``frame_rows_shared``: the rows and ``B`` at the predicted positions;
+  ``frame_pass``), timed around them (issue 31's target: < 20 us); ``frame_rows_shared`` and ``frame_pass`` in
+  the same frames (before 2026-11-28 night, wave 9: three calls, ``frame_rows``, ``shared_at``, ``frame_pass``).
 
 :func:`monitor_cost` (a separate pass over the same frames, so as not to disturb the ratio's caches): ``monitor``,
 the on-line NIS check (:class:`~footprint_uq.tracking.consistency.NisMonitor`, as ``serve --tracks`` runs it by
@@ -93,13 +94,14 @@ def step_python(n_objects: int = 100, frames: int = 300) -> dict:
     of :func:`run`: the module's ``frame_rows`` / ``frame_pass`` and the table's ``shared_at`` wrapped by timers."""
     cam = PanTiltCamera(**CAMERA)
     split = FrameProcessor(cam, BUDGET, joint_cov=False, linearity=False, v2x_policy="linear", shared_jacobian=True)
-    spent = {k: [0.0] for k in ("frame_rows", "frame_pass", "shared_at")}
+    spent = {k: [0.0] for k in ("frame_rows_shared", "frame_pass")}
     at = SharedJacobianAt(cam, BUDGET)
-    table = TrackTable(TrackerConfig(timeout_s=1e9), rank=at.rank, shared_at=_Timed(at, spent["shared_at"]))
+    table = TrackTable(TrackerConfig(timeout_s=1e9), rank=at.rank, shared_at=at)
     det = np.broadcast_to(np.eye(2), (n_objects, 2, 2))
-    saved = table_module.frame_rows, table_module.frame_pass
-    table_module.frame_rows, table_module.frame_pass = (_Timed(f, spent[k]) for f, k in zip(
-        saved, ("frame_rows", "frame_pass"), strict=True))
+    saved = table_module.frame_rows_shared, table_module.frame_pass
+    table_module.frame_rows_shared, table_module.frame_pass = (_Timed(f, spent[k]) for f, k in zip(
+        saved, ("frame_rows_shared", "frame_pass"), strict=True))
+    table_module.frame_rows_shared.signatures = saved[0].signatures
     times: dict = {k: [] for k in ("step", "step_python", *spent)}
     try:
         for k, (t, ids, boxes) in enumerate(_frames(cam, n_objects, frames + 30)):
@@ -115,7 +117,7 @@ def step_python(n_objects: int = 100, frames: int = 300) -> dict:
                 for key, v in spent.items():
                     times[key].append(v[0] * 1e6)
     finally:
-        table_module.frame_rows, table_module.frame_pass = saved
+        table_module.frame_rows_shared, table_module.frame_pass = saved
     return {k: round(statistics.median(v), 1) for k, v in times.items()}
 
 

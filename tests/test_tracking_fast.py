@@ -13,6 +13,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from footprint_uq.errors import InputError
+from footprint_uq.fast.footprint_kernels import SCRATCH_SHAPE
 from footprint_uq.tracking import TrackerConfig, TrackTable, object_motion
 from footprint_uq.tracking.imm_kernels import frame_pass, scratch
 from footprint_uq.tracking.kernels import ROW_START, ROW_UPDATE, frame_update
@@ -233,3 +234,56 @@ def test_nis_monitor_takes_the_tracks_own_nis_with_the_same_numbers(cfg, per_cla
     assert mon.status()["car"]["n_updates"] == bank.n_upd[bank.classes["car"]] > 300
     with pytest.raises(InputError, match="out"):  # a frame that is not the tracks' last one
         mon.observe(t + 0.05, out._replace(track_id=out.track_id[:3]), classes[:3])
+
+
+def test_b_formed_in_the_rows_call_is_shared_at_to_the_bit_over_classes():
+    """The table's fused path (``shared_at`` a SharedJacobianAt: ``kernels.frame_rows_shared`` forms ``B`` at the
+    predicted positions in the rows' call) against the same tables calling ``shared_at`` (the generic path): bit
+    for bit, output for output and row for row, over seeded frames with births, restarts beyond the gate,
+    timeouts, missed frames (NaN centres, objects absent), repeated / None ids and two classes with their own
+    motion models (a real camera: some predicted positions have no ground point, their B is the frame's).  Before
+    that, both paths' B at predicted positions is compared directly.  (The pass's agreement with the compiled
+    reference is :func:`test_track_table_equals_the_reference_pass_over_a_sequence`'s; over this longer sequence
+    with a real camera's B the two differ by rounding that grows past 1e-9 of a field's scale after ~25 frames, and
+    a detection near the gate can fall on either side of it.)"""
+    from footprint_uq import PanTiltCamera
+    from footprint_uq.tracking import SharedJacobianAt
+    from footprint_uq.tracking.classes import ClassTracks
+    from footprint_uq.tracking.kernels import frame_rows, frame_rows_shared
+
+    cam = PanTiltCamera(focal_px=1400.0, image_size_px=(1920, 1080), height_m=8.0, pan_deg=10.0, tilt_deg=20.0)
+    at = SharedJacobianAt(cam, "basler1@deg")
+    assert at.rank == 13 and at.kernel_inputs() is not None
+    rng = np.random.default_rng(5)
+    pred = np.column_stack([rng.uniform(-60.0, 60.0, 40), rng.uniform(-20.0, 120.0, 40)])  # (behind it too)
+    uv, Bp, S = np.empty((40, 2)), np.full((40, 2, 13), 7.0), np.empty(SCRATCH_SHAPE)
+    X = np.zeros((40, 4))
+    X[:, :2] = pred
+    args = (np.arange(40, dtype=np.int64), np.zeros((40, 2)), np.zeros((40, 2, 2)), np.zeros((40, 2, 13)), False,
+            np.zeros((40, 2, 2)), 1.0, np.zeros(40), np.zeros(40, np.int64), 1, X, np.empty(40, np.int8),
+            np.empty(40, np.int64), np.empty((40, 2)))
+    k, _ = frame_rows_shared(*args, *at.kernel_inputs(), uv, Bp, S)
+    want = at(args[13][:k])
+    assert k == 40 and np.isnan(want).any() and np.isfinite(want).any()
+    assert np.array_equal(Bp[:k], want, equal_nan=True)
+    args[8][:] = 0
+    assert frame_rows(*args)[0] == 40 and np.array_equal(args[13], pred)
+    per_class = {"truck": TrackerConfig(timeout_s=1.0, accel_psd_m2ps3=0.5, manoeuvre_accel_psd_m2ps3=None)}
+    cfg = TrackerConfig(timeout_s=1.0)
+    fused, generic = (ClassTracks(cfg, per_class, rank=13, shared_at=s) for s in (at, lambda xy: at(xy)))
+    kinds = set()
+    for f, (t, ids, xy, cov, B) in enumerate(_sequence(seed=11, n=30, frames=60)):
+        keep = np.flatnonzero(np.arange(len(ids)) % 9 != f % 9)  # one object in nine absent from each frame
+        ids, xy, cov, B = [ids[i] for i in keep], xy[keep], cov[keep], B[keep]
+        classes = ["truck" if i % 4 == 0 else "car" for i in keep]
+        a, b = (tr.step(t, ids, classes, xy, shared_m=B, cov_m2=cov) for tr in (fused, generic))
+        for name in a._fields:
+            assert np.array_equal(getattr(a, name), getattr(b, name), equal_nan=True), (t, name)
+        kinds.update({"new" if nw else "update" for nw, n_ in zip(a.new_track, a.n_updates, strict=True) if n_})
+        assert np.array_equal(fused.frame_nis(), generic.frame_nis(), equal_nan=True)
+    assert {"new", "update"} <= kinds
+    for ta, tb in zip(fused.tables, generic.tables, strict=True):
+        assert ta._fused is True and tb._fused is False and ta._index == tb._index
+        for name in ("_x", "_P", "_xm", "_Pm", "_Cm", "_mu", "_t_last", "_tid"):
+            assert np.array_equal(getattr(ta, name), getattr(tb, name), equal_nan=True), name
+    assert len(fused.tables[1]) > 0 and fused.tables[0]._next_id > 40  # both classes tracked, restarts, timeouts

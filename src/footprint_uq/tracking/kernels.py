@@ -9,7 +9,9 @@ on (100, 4, 4) / (100, 4, r) stacks costs ~400 us of call overhead (several time
 
 :func:`frame_update` is the compiled reference of a frame's update, written as the numpy classes read;
 :class:`~footprint_uq.tracking.table.TrackTable` runs :func:`~footprint_uq.tracking.imm_kernels.frame_pass`, the
-same filter arranged for speed, held to it in ``tests/test_tracking_fast.py``.
+same filter arranged for speed, held to it in ``tests/test_tracking_fast.py``.  :func:`frame_rows_shared` is
+:func:`frame_rows` with ``B`` at the predicted positions formed in the same call (the table's path when its
+``shared_at`` is a :class:`~footprint_uq.tracking.table.SharedJacobianAt`).
 """
 
 from __future__ import annotations
@@ -20,10 +22,11 @@ import numpy as np
 from numba import njit
 
 from ..fast import core
+from ..fast.footprint_kernels import KernelCamera, point_jacobian_into
 from .kalman_kernels import pick_shared, schmidt_step, start_cov2
 
-__all__ = ["predict_update", "update_slots", "frame_rows", "frame_update", "initiate_row", "project_ground",
-           "motion_fields", "ROW_SKIP", "ROW_UPDATE", "ROW_START"]
+__all__ = ["predict_update", "update_slots", "frame_rows", "frame_rows_shared", "frame_update", "initiate_row",
+           "project_ground", "motion_fields", "ROW_SKIP", "ROW_UPDATE", "ROW_START"]
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -269,6 +272,26 @@ def frame_rows(slots, xy, cov, B, subtract, R, t, t_last, seen, stamp, X, act, o
         pred[k, 1] = X[s, 1] + h * X[s, 3]
         old[k] = i
         k += 1
+    return k, n_unknown
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def frame_rows_shared(slots, xy, cov, B, subtract, R, t, t_last, seen, stamp, X, act, old, pred, cam_fields, dR, Lr,
+                      Lc, Lv, uv, B_pred, S):  # pragma: no cover - compiled
+    """:func:`frame_rows` and then ``B`` at the k predicted positions in one call: ``pred[:k]`` into the image
+    (:func:`project_ground`, pixels into ``uv[:k]``) and through :func:`~footprint_uq.fast.footprint_kernels.
+    point_jacobian_into` into ``B_pred[:k] (k, 2, r)`` -- the same ``B`` to the bit as
+    :class:`~footprint_uq.tracking.table.SharedJacobianAt` at ``pred[:k]``.  ``cam_fields``: the camera's
+    :class:`~footprint_uq.fast.footprint_kernels.KernelCamera` as a plain tuple (numba types a plain tuple in
+    C, a named one in Python: ~1 us of dispatch less); ``dR, Lr, Lc, Lv``: the rest of the point kernel's inputs
+    (:meth:`~footprint_uq.products.frame_processor.FrameProcessor.point_jacobian_kernel`); ``uv (n, 2)``,
+    ``B_pred (n, 2, r)`` and ``S`` (``footprint_kernels.SCRATCH_SHAPE``) are the caller's.  Returns what
+    :func:`frame_rows` returns."""
+    k, n_unknown = frame_rows(slots, xy, cov, B, subtract, R, t, t_last, seen, stamp, X, act, old, pred)
+    if k:
+        cam = KernelCamera(*cam_fields)
+        project_ground(pred[:k], cam, uv[:k])
+        point_jacobian_into(uv[:k], cam, dR, Lr, Lc, Lv, B_pred[:k], S)
     return k, n_unknown
 
 

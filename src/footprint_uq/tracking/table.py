@@ -12,11 +12,12 @@ import numpy as np
 
 from .._checks import as_float
 from ..errors import InputError
+from ..fast.buffers import thread_buffer
 from ..fast.footprint_kernels import SCRATCH_SHAPE, camera_constants
 from ..products.footprints import FrameProcessor
 from .filter import Initiator, SplitMeasurement
 from .imm_kernels import frame_pass, scratch
-from .kernels import ROW_SKIP, ROW_START, frame_rows, frame_update, project_ground
+from .kernels import ROW_SKIP, ROW_START, frame_rows, frame_rows_shared, frame_update, project_ground
 from .models import ConstantVelocity
 
 __all__ = ["TrackerConfig", "TrackOutput", "TrackTable", "SharedJacobianAt", "CALIBRATION_MODES", "DEFAULT_GATE_CHI2"]
@@ -113,9 +114,11 @@ class TrackTable:
     deleter); then every object whose id has a track is predicted to the frame's time and gated (a jump with
     ``y^T S^-1 y > gate_chi2`` restarts the track under a new ``track_id``), the others start tracks
     (the initiator).  Per frame, the ids are looked up in one pass over a dictionary (the only per-object Python
-    work; unknown ids, a few per frame, are then given rows); the rest is two compiled passes over the frame
-    (:func:`~footprint_uq.tracking.kernels.frame_rows`, :func:`~footprint_uq.tracking.kernels.frame_update`) and
-    one evaluation of ``shared_at`` at the predicted positions.  Each track runs the
+    work; unknown ids, a few per frame, are then given rows); the rest is two compiled passes over the frame:
+    :func:`~footprint_uq.tracking.kernels.frame_rows_shared` (the rows and ``B`` at the predicted positions, when
+    ``shared_at`` is a :class:`SharedJacobianAt`; else :func:`~footprint_uq.tracking.kernels.frame_rows` and one
+    evaluation of ``shared_at``) and :func:`~footprint_uq.tracking.imm_kernels.frame_pass` (the update, the
+    starts, the outputs).  Each track runs the
     interacting-multiple-model filter over :attr:`models` (a quiet and a manoeuvre constant-velocity mode; one
     mode if ``manoeuvre_accel_psd_m2ps3`` is None); its reported state is the modes' moment-matched combination,
     and the gate cuts a track only if the detection is beyond it for every mode.
@@ -144,6 +147,18 @@ class TrackTable:
         self.shared_at = shared_at
         self._consider = self.config.calibration == "consider"
         self.rank = int(rank) if self._consider else 0
+        #: ``shared_at`` when it is a :class:`SharedJacobianAt` of this rank: ``B`` at the predicted positions is
+        #: then formed in the rows' compiled call (:func:`~footprint_uq.tracking.kernels.frame_rows_shared`, the
+        #: same ``B`` to the bit) instead of a call of ``shared_at`` (two compiled calls, their Python, ~4 us)
+        self._at = shared_at if (type(shared_at) is SharedJacobianAt and self.rank  # (a subclass may change B)
+                                 and shared_at.rank == self.rank) else None
+        #: whether the rows' call forms ``B`` (None: decided at the first frame): yes if ``B``'s kernels were ready
+        #: then (that call compiles, or loads from the cache, with the table's other kernels), later only once
+        #: the call is compiled in this process (:meth:`warm_up` compiles it): a service whose kernels compiled
+        #: in the background meanwhile does not stop a frame for its compile
+        self._fused = None if self._at is not None else False
+        self._last_scratch = (None, None)  # (_frame_scratch)
+        self._work(128)
         #: the modes the compiled update runs (its per-track step, in :func:`~footprint_uq.tracking.imm_kernels.
         #: frame_pass` and its reference :func:`~footprint_uq.tracking.kernels.frame_update`, is
         #: :class:`~footprint_uq.tracking.filter.InteractingModels` -- mixing, each mode's SchmidtPredictor +
@@ -282,16 +297,23 @@ class TrackTable:
             self._delete_expired(t)
         slots = np.fromiter(map(self._index.get, ids, repeat(-1)), np.int64, n)
         self._stamp += 1
-        act, old, pred = np.empty(n, np.int8), np.empty(n, np.int64), np.empty((n, 2))
+        if n > self._old.shape[0]:  # (the step's working arrays, kept: nothing of them leaves the step)
+            self._work(n)
+        act, old, pred = np.empty(n, np.int8), self._old, self._pred
         R = np.empty((n, 2, 2)) if subtract else cov
-        k, n_unknown = frame_rows(slots, xy, cov, B, subtract, R, t, self._t_last, self._seen, self._stamp, self._x,
-                                  act, old, pred)
-        if n_unknown:
-            self._claim(ids, slots, act, old[n - n_unknown:][::-1].tolist())
-        if self.shared_at is not None and self.rank and k:  # B at the predicted positions (see the class doc)
-            Bp = _c64(self.shared_at(pred[:k]))
+        rows = (slots, xy, cov, B, subtract, R, t, self._t_last, self._seen, self._stamp, self._x, act, old, pred)
+        at = self._at  # B at the predicted positions (see the class doc): in the rows' call, or by shared_at
+        inputs = at.kernel_inputs() if at is not None else None
+        if self._fused is None:  # (decided at the first frame: see __init__)
+            self._fused = inputs is not None
+        if inputs is not None and (self._fused or frame_rows_shared.signatures):
+            Bp = self._Bp  # (rows k and on are not read: frame_pass reads Bp[:k])
+            k, n_unknown = frame_rows_shared(*rows, *inputs, self._uv, Bp, self._frame_scratch())
         else:
-            Bp = _NO_B
+            k, n_unknown = frame_rows(*rows)
+            Bp = _c64(self.shared_at(pred[:k])) if self.shared_at is not None and self.rank and k else _NO_B
+        if n_unknown:
+            self._claim(ids, slots, act, old[n - n_unknown:n][::-1].tolist())
         z, Rf, Bf = (xy, R, B) if self._consider else self._measurement(xy, R, B)  # (consider: the split as given)
         out = TrackOutput(np.empty(n, np.int64), np.empty(n, bool), np.empty(n, np.int64), np.empty(n),
                           np.empty((n, 2)), np.empty((n, 2, 2)), np.empty((n, 2)), np.empty((n, 2, 2)))
@@ -304,6 +326,23 @@ class TrackTable:
         if t < self._oldest_s:  # (every row started or updated now has t_last = t)
             self._oldest_s = t
         return out
+
+    def _work(self, n: int) -> None:
+        """The step's working arrays for frames of up to ``n`` objects (the compiled calls read their first k or n
+        rows): the objects to update ``_old (n,)``, their predicted positions ``_pred (n, 2)``, pixels ``_uv (n,
+        2)`` and ``B`` there ``_Bp (n, 2, r)`` (:func:`~footprint_uq.tracking.kernels.frame_rows_shared`)."""
+        self._old, self._pred, self._uv = np.empty(n, np.int64), np.empty((n, 2)), np.empty((n, 2))
+        self._Bp = np.empty((n, 2, self.rank))
+
+    def _frame_scratch(self) -> np.ndarray:
+        """The point kernel's scratch for :func:`~footprint_uq.tracking.kernels.frame_rows_shared`: this thread's
+        buffer of the per-frame kernel (``fast.buffers.thread_buffer``, the one :class:`~footprint_uq.products.
+        frame_processor.FrameProcessor` uses: in cache after the frame's positions), the last thread's kept here."""
+        tid = threading.get_ident()
+        last = self._last_scratch  # (one tuple, read and replaced whole: safe under threads)
+        if last[0] != tid:
+            last = self._last_scratch = (tid, thread_buffer("frame_scratch", SCRATCH_SHAPE))
+        return last[1]
 
     def frame_nis(self) -> np.ndarray:
         """The normalised innovation squared ``y^T S^-1 y`` (2 dof; two modes: of the predicted mode mixture's
@@ -362,8 +401,20 @@ class SharedJacobianAt:
         #: the processor's compiled call (:meth:`FrameProcessor.point_jacobian_kernel`; None until its kernels
         #: are ready) and this object's own scratch for it, used by one thread at a time (``_busy``)
         self._kernel = None
+        self._inputs = None  # (kernel_inputs)
         self._scratch = np.empty(SCRATCH_SHAPE)
         self._busy = threading.Lock()
+
+    def kernel_inputs(self) -> tuple | None:
+        """The point kernel's inputs after the pixels, ``(cam_fields, dR, Lr, Lc, Lv)`` (the camera's
+        ``KernelCamera`` as a plain tuple), for :func:`~footprint_uq.tracking.kernels.frame_rows_shared`; None
+        while the processor's kernels are not ready (ask again later)."""
+        if self._kernel is None:
+            self._kernel = self.processor.point_jacobian_kernel()
+            if self._kernel is not None:
+                cam, *rest = self._kernel[1]
+                self._inputs = (tuple(cam), *rest)
+        return self._inputs
 
     def __call__(self, xy_m) -> np.ndarray:
         xy = np.ascontiguousarray(xy_m, dtype=np.float64).reshape(-1, 2)
@@ -372,7 +423,7 @@ class SharedJacobianAt:
         # the kernel called from here, not through the processor's method: the tracker's frame does not climb back
         # up from products/ (bench/frame_walk.py --tracks); another thread meanwhile takes the processor's path
         if self._kernel is None:
-            self._kernel = self.processor.point_jacobian_kernel()
+            self.kernel_inputs()
         if self._kernel is None or not self._busy.acquire(blocking=False):
             return self.processor.point_shared_jacobian(uv)
         try:
