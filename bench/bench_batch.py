@@ -34,6 +34,7 @@ import pyarrow.parquet as pq
 
 from footprint_uq import PanTiltCamera
 from footprint_uq.batch.process import process_file
+from footprint_uq.io.atomic import atomic_write_text
 from footprint_uq.products.footprints import FrameProcessor, footprints_from_boxes2d, footprints_from_boxes3d
 
 TARGET_PER_S = 2_000_000
@@ -221,7 +222,7 @@ def main(argv=None) -> int:
     res = measure(a.rows, a.repeats, a.naive_rows, tuple(a.box_types.split(",")))
     print(report(res))
     if a.json:
-        Path(a.json).write_text(json.dumps(res, indent=2) + "\n")
+        atomic_write_text(a.json, json.dumps(res, indent=2) + "\n")
     return 0
 
 

@@ -26,6 +26,8 @@ import pyarrow.parquet as pq
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_batch import BUDGET, CAMERA, make_detections  # noqa: E402
 
+from footprint_uq.io.atomic import atomic_write_text
+
 
 def make_dataset(root: Path, cameras: int, files_per_camera: int, rows_per_file: int) -> tuple[Path, Path, int]:
     """(dataset folder, registry file, total rows); every camera is the bench camera (same geometry)."""
@@ -124,7 +126,7 @@ def main(argv=None) -> int:
     res = measure(a.cameras, a.files_per_camera, a.rows_per_file, a.workers, a.repeats)
     print(report(res))
     if a.json:
-        Path(a.json).write_text(json.dumps(res, indent=2) + "\n")
+        atomic_write_text(a.json, json.dumps(res, indent=2) + "\n")
     return 0
 
 

@@ -25,6 +25,8 @@ from pathlib import Path
 
 import numpy as np
 
+from footprint_uq.io.atomic import atomic_write_text
+
 EXE = str(Path(sys.executable).with_name("footprint-uq"))
 
 
@@ -98,7 +100,7 @@ def main(argv=None) -> dict:
     res = {"date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "cpus": os.cpu_count(), "mode": args.mode,
            "rows": rows}
     if args.out:
-        Path(args.out).write_text(json.dumps(res, indent=2) + "\n")
+        atomic_write_text(args.out, json.dumps(res, indent=2) + "\n")
     return res
 
 

@@ -29,6 +29,8 @@ import sys
 import time
 from pathlib import Path
 
+from footprint_uq.io.atomic import atomic_write_text
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
@@ -136,7 +138,7 @@ def main(argv=None) -> int:
     if a.job:
         rows = job([int(s) for s in a.sizes.split(",")], a.cameras)
         a.out.mkdir(parents=True, exist_ok=True)
-        (a.out / "bench_fit_job.json").write_text(json.dumps(rows, indent=2) + "\n")
+        atomic_write_text((a.out / "bench_fit_job.json"), json.dumps(rows, indent=2) + "\n")
         return 0
     rows = []
     for n in (int(s) for s in a.sizes.split(",")):
@@ -150,7 +152,7 @@ def main(argv=None) -> int:
               f"{r['peak_rss_fit_mb']:.0f} MB), converged {r['converged']}, load {r['load_avg']:.1f}")
     a.out.mkdir(parents=True, exist_ok=True)
     name = "bench_fit_dense.json" if a.dense else "bench_fit.json"
-    (a.out / name).write_text(json.dumps(rows, indent=2) + "\n")
+    atomic_write_text((a.out / name), json.dumps(rows, indent=2) + "\n")
     return 0
 
 

@@ -23,11 +23,11 @@ import os
 import statistics
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
 
 from footprint_uq import OpenCVCamera, PanTiltCamera
+from footprint_uq.io.atomic import atomic_write_text
 from footprint_uq.products.footprints import FrameProcessor, footprints_from_boxes3d
 
 TARGET_US = 100.0
@@ -130,7 +130,7 @@ def main(argv=None) -> int:
     res = run(a.objects, a.repeats, a.naive_repeats)
     print(report(res))
     if a.json:
-        Path(a.json).write_text(json.dumps(res, indent=2) + "\n")
+        atomic_write_text(a.json, json.dumps(res, indent=2) + "\n")
     return 0
 
 

@@ -29,6 +29,7 @@ import numpy as np
 from footprint_uq import PanTiltCamera
 from footprint_uq.cameras import general
 from footprint_uq.io import save_camera
+from footprint_uq.io.atomic import atomic_write_text
 
 SIZE = (1920, 1080)
 CAM = PanTiltCamera(focal_px=1500.0, image_size_px=SIZE, height_m=10.0, pan_deg=30.0, tilt_deg=20.0, roll_deg=1.0,
@@ -106,7 +107,7 @@ def main(argv=None) -> dict:
                   flush=True)
     res["load_average_1min_after"] = os.getloadavg()[0]
     if a.out:
-        Path(a.out).write_text(json.dumps(res, indent=2) + "\n")
+        atomic_write_text(a.out, json.dumps(res, indent=2) + "\n")
     return res
 
 

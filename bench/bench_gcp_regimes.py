@@ -27,6 +27,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
+from footprint_uq.io.atomic import atomic_write_text
 from gcp_campaigns import evaluate, table_row  # noqa: E402
 
 ROWS = (("documented", "documented", {}), ("corner", "corner", {}), ("clustered", "clustered", {}),
@@ -55,7 +56,7 @@ def main(argv=None) -> dict:
               f"{100 * row['pix_in_supported']:.1f} % ({row['pix_supported']}) / {100 * row['pix_in_all']:.1f} % | "
               f"{reasons} |", flush=True)
     if a.out:
-        Path(a.out).write_text(json.dumps(out, indent=2) + "\n")
+        atomic_write_text(a.out, json.dumps(out, indent=2) + "\n")
     return out
 
 

@@ -25,6 +25,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from footprint_uq.io.atomic import atomic_write_text
+
 ROOT = Path(__file__).resolve().parents[1]
 HZ, OBJECTS, HOUR_FRAMES = 30, 100, 108_000
 
@@ -136,7 +138,7 @@ def main(argv=None) -> int:
           f"{res['flat']['cpu_per_frame_max_over_min']:.2f}, RSS max/min {res['flat']['peak_rss_mb_max_over_min']:.2f}")
     out = Path(a.out) if a.out else ROOT / "bench" / "results" / (
         "bench_mcap_foxglove.json" if a.foxglove else "bench_mcap.json")
-    out.write_text(json.dumps(res, indent=2) + "\n")
+    atomic_write_text(out, json.dumps(res, indent=2) + "\n")
     return 0
 
 

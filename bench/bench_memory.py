@@ -25,6 +25,8 @@ from pathlib import Path
 
 import pyarrow.parquet as pq
 
+from footprint_uq.io.atomic import atomic_write_text
+
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_batch import BUDGET, CAMERA, make_detections  # noqa: E402
 
@@ -143,7 +145,7 @@ def main(argv=None) -> int:
     res = measure(a.rows, a.factor, a.chunk_rows, a.limit_mb)
     print(report(res))
     if a.json:
-        Path(a.json).write_text(json.dumps(res, indent=2) + "\n")
+        atomic_write_text(a.json, json.dumps(res, indent=2) + "\n")
     return 0
 
 

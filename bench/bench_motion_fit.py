@@ -33,6 +33,8 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from footprint_uq.io.atomic import atomic_write_text
+
 HOUR_DETECTIONS = 8 * 30 * 100 * 3600
 
 
@@ -117,7 +119,7 @@ def main(argv=None) -> None:
                            "one_hour_8x30hzx100_h": s * HOUR_DETECTIONS / n / 3600}
     print(json.dumps(res, indent=1))
     if a.json:
-        Path(a.json).write_text(json.dumps(res, indent=1) + "\n")
+        atomic_write_text(a.json, json.dumps(res, indent=1) + "\n")
 
 
 if __name__ == "__main__":

@@ -27,6 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
+from footprint_uq.io.atomic import atomic_write_text
 from footprint_uq.planning.coverage import evaluate_information
 from footprint_uq.planning.intersection import intersection_site_dict, naive_layout
 from footprint_uq.planning.optimise import layout_information, plan
@@ -94,7 +95,7 @@ def main():
     print(_table(r))
     out = Path(a.out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(r, indent=2) + "\n")
+    atomic_write_text(out, json.dumps(r, indent=2) + "\n")
     print(f"wrote {out}")
 
 

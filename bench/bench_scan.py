@@ -38,6 +38,7 @@ import numpy as np
 import orjson
 from bench_service import make_detections
 
+from footprint_uq.io.atomic import atomic_write_text
 from footprint_uq.service import core, frame_scan, jsonrows
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -200,7 +201,7 @@ def main(argv=None) -> int:
                              "rounds alternating new / reference kernels; medians of the rounds")
         out["load_average_1min_end"] = os.getloadavg()[0]
     if args.out:
-        args.out.write_text(json.dumps(out, indent=1) + "\n")
+        atomic_write_text(args.out, json.dumps(out, indent=1) + "\n")
     return 0
 
 

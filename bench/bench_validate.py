@@ -32,6 +32,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from footprint_uq.io import save_camera
+from footprint_uq.io.atomic import atomic_write_text
 from footprint_uq.uncertainty.budget import ErrorBudget
 from footprint_uq.validation.synthetic import campaign_table, random_cameras
 
@@ -134,7 +135,7 @@ def main(argv=None) -> int:
                   f"{r['peak_rss_mb_time_runs']:.0f} MB); load average {res['load_avg_start']:.1f} -> "
                   f"{res['load_avg_end']:.1f} on {res['cpus']} CPUs")
     if a.json:
-        a.json.write_text(json.dumps(res, indent=1))
+        atomic_write_text(a.json, json.dumps(res, indent=1))
     return 0
 
 

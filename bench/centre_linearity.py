@@ -34,6 +34,7 @@ import numpy as np
 
 from footprint_uq import ErrorBudget, OpenCVCamera, PanTiltCamera, ellipse_axes
 from footprint_uq import params as P
+from footprint_uq.io.atomic import atomic_write_text
 from footprint_uq.products.footprints import FrameProcessor, footprint_centre, polygon_centroid
 from footprint_uq.uncertainty.budget import load_budget
 from footprint_uq.uncertainty.propagation import sample_params
@@ -252,8 +253,8 @@ def main() -> int:
                 lowest_coverage_centre=sorted(ok, key=lambda r: r["coverage"])[:10],
                 worst_area_centroid=sorted((r for r in ok if r["kind"] == "3d"),
                                            key=lambda r: -abs(r["ratio_area_centroid"] - 1))[:10])
-    (args.out / "centre-linearity.json").write_text(json.dumps(keep, indent=1))
-    (args.out / "centre-linearity.md").write_text(md)
+    atomic_write_text((args.out / "centre-linearity.json"), json.dumps(keep, indent=1))
+    atomic_write_text((args.out / "centre-linearity.md"), md)
     print(f"{len(res['rows'])} objects in {time.perf_counter() - t0:.0f} s; wrote {args.out}/centre-linearity.*")
     return 0
 
