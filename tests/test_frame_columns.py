@@ -279,9 +279,9 @@ def test_the_lean_tracked_path_is_the_one_taken(camera, monkeypatch):
     monkeypatch.undo()
     real = FrameProcessor.boxes2d_columns
 
-    def scaled(self, *a, **k):  # (the calibration share of every centre doubled: the tracks then differ)
+    def scaled(self, *a, **k):  # (the calibration share of every centre halved: the tracks then differ)
         cols = real(self, *a, **k)
-        cols.centre_shared_m[...] *= 2.0
+        cols.centre_shared_m[...] *= 0.5
         return cols
 
     monkeypatch.setattr(FrameProcessor, "boxes2d_columns", scaled)
