@@ -234,7 +234,8 @@ def test_tracked_columns_are_the_estimate(tracked_procs, n, seed, contact, cov_k
 
 def test_untracked_columns_carry_no_jacobian(procs):
     cols = procs["linear"].boxes2d_columns(np.array([[900.0, 600.0, 1000.0, 700.0]]))
-    assert cols.centre_shared_m is None and cols.values.shape == (5, 1)
+    assert cols.centre_shared_m is None and cols.centre_xy_world_m is None and cols.centre_cov_m2 is None
+    assert cols.values.shape == (5, 1) and cols.object_rows.shape[1] == 1
 
 
 def _tracked_payloads(n: int, frames: int, cov: bool = False) -> list:

@@ -66,8 +66,9 @@ class FrameColumns(NamedTuple):
     the numbers of :meth:`FrameProcessor.boxes2d`'s estimate, not an estimate (no per-corner outputs, no
     ellipse, no V2X source: every centre's V2X fields encode its linear covariance)."""
 
-    #: (5, N) float64: ``x_m, y_m, cov_xx_m2, cov_xy_m2, cov_yy_m2`` of each centre (``centre_xy_world_m``,
-    #: ``centre_cov_m2``; :data:`footprint_uq.fast.frame_columns.COLUMN_ROWS`)
+    #: (q, N) float64 (q = ``boxes2d_columns``' ``value_rows``, 5 by default): ``x_m, y_m, cov_xx_m2, cov_xy_m2,
+    #: cov_yy_m2`` of each centre in the first five rows (``centre_xy_world_m``, ``centre_cov_m2``;
+    #: :data:`footprint_uq.fast.frame_columns.COLUMN_ROWS`), the rest not written (the caller's)
     values: np.ndarray
     #: (7, N) int32, C-contiguous: ``v2x_codes`` transposed (rows :data:`.footprint_estimate.V2X_FIELDS`)
     v2x_rows: np.ndarray
@@ -81,21 +82,13 @@ class FrameColumns(NamedTuple):
     n_valid: int
     #: (len(OBJ_ROWS), N) float64: the fused kernel's per-object rows (``FootprintEstimate.object_rows``)
     object_rows: np.ndarray | None = None
-    #: (N, 2, r) float64: ``centre_shared_m`` (NaN rows where no centre), with the processor's
-    #: ``shared_jacobian`` (the tracker's processors); else None
+    #: with the processor's ``shared_jacobian`` (the tracker's processors; else None): the tracker's input as
+    #: :meth:`FrameProcessor.boxes2d`'s estimate has it -- ``centre_xy_world_m`` (N, 2) m and ``centre_cov_m2``
+    #: (N, 2, 2) m^2, views of :attr:`object_rows` with the estimate's strides, and ``centre_shared_m`` (N, 2, r),
+    #: NaN rows where no centre
+    centre_xy_world_m: np.ndarray | None = None
+    centre_cov_m2: np.ndarray | None = None
     centre_shared_m: np.ndarray | None = None
-
-    @property
-    def centre_xy_world_m(self) -> np.ndarray:
-        """(N, 2) the centres in W, m: the estimate's view of :attr:`object_rows` (the same strides)."""
-        row = fk.OBJ_ROW
-        return self.object_rows[row["x_m"]:row["y_m"] + 1].T
-
-    @property
-    def centre_cov_m2(self) -> np.ndarray:
-        """(N, 2, 2) their covariances, m^2: the estimate's view of :attr:`object_rows` (the same strides)."""
-        row, obj = fk.OBJ_ROW, self.object_rows
-        return obj[row["cov_xx_m2"]:row["cov_yy_m2"] + 1].T.reshape(obj.shape[1], 2, 2)
 
 
 class FrameProcessor:
@@ -372,12 +365,14 @@ class FrameProcessor:
             self.linear_threshold, COV_PSD_RTOL, values, v2x, li, creason, cbad, obj, shared, self._scratch())
         if bad >= 0 or n_over or (n_flagged and self.v2x_policy != "linear"):
             return None
+        K = 2 if contact == "bottom-corners" else 1
         if not self.shared_jacobian:
-            shared = None
-        elif n_valid < N:  # (as _pack: no Jacobian where no centre)
+            return FrameColumns(values, v2x, li, creason, cbad, K, n_valid, obj)
+        if n_valid < N:  # (as _pack: no Jacobian where no centre)
             shared[creason != 0] = np.nan
-        return FrameColumns(values, v2x, li, creason, cbad, 2 if contact == "bottom-corners" else 1, n_valid, obj,
-                            shared)
+        row = fk.OBJ_ROW  # (the views as _pack makes them: the tracker reads the estimate's arrays)
+        return FrameColumns(values, v2x, li, creason, cbad, K, n_valid, obj, obj[row["x_m"]:row["y_m"] + 1].T,
+                            obj[row["cov_xx_m2"]:row["cov_yy_m2"] + 1].T.reshape(N, 2, 2), shared)
 
     def boxes3d(self, boxes_world, *, yaw_unit: str = "rad", bottom_on_ground: bool = True,
                 pixel_cov_px2=None) -> FootprintEstimate:
