@@ -411,7 +411,8 @@ class Service:
                     setup.tracker.warm_up()
 
         #: called after each tracked frame as ``on_tracked(camera_id, frame, timestamp_s, TrackOutput, estimate,
-        #: FrameDetections)`` (the CP service of ``serve --cp-service``: :mod:`.cp_serve`); None: nothing
+        #: FrameDetections)`` (the CP service of ``serve --cp-service``: :mod:`.cp_serve`); None: nothing.  Set, the
+        #: tracked frames take the general path (it forms the estimate; :meth:`_takes_lean`)
         self.on_tracked = None
         self.linearity = bool(linearity)
         self.linear_threshold = DEFAULT_LINEAR_THRESHOLD if linear_threshold is None else float(linear_threshold)
