@@ -9,6 +9,10 @@ in a ``perf_counter`` pair (~0.1 us each, counted in its part): the text read (`
 slide term (``ContactSlide.apply``), the motion fields (``object_motion``), the record's objects
 (``Service._compact_objects``), the UPER CPM (``Service._plain_cpm_uper``; inside it the message's motion codes,
 ``motion_rows``), and the rest of the frame (the total minus the parts: the glue between them, the record's head).
+A tree whose tracked compact frame takes the lean columns (``Service._lean_records``, wave 9 e) has no
+``_footprints`` / ``_compact_objects`` / ``_plain_cpm_uper`` call: its parts are then the processor's
+``boxes2d_columns`` (positions), ``Service._compact_text`` (record objects) and ``plain_cpm_uper`` (the UPER CPM,
+its motion codes ``motion_rows`` called before it, outside it: subtracted from the rest as a part of its own).
 ``FrameProcessor.boxes2d`` alone on the same boxes is timed in the same loop (issue 31's reference).  Nothing is
 asserted: the parts and the rest in us, and the sum of the parts that ``bench_frame.py``'s
 ``frame_bytes_minus_step_us`` counts.
@@ -70,7 +74,8 @@ def measure(objects: int, repeats: int) -> dict:
     setup = next(iter(svc.cameras.values()))
     tracker = setup.tracker
     _wrap(service_core, "_scan_text", got["scan"])
-    _wrap(svc, "_footprints", got["footprints"])
+    lean = hasattr(Service, "_lean_records")  # (wave 9 e: the tracked compact frame on the lean columns)
+    _wrap(setup.processor if lean else svc, "boxes2d_columns" if lean else "_footprints", got["footprints"])
     _wrap(tracker.tracks, "step", got["tracker_step"])
     _wrap(tracker.nis, "observe", got["nis_check"])
     _wrap(tracker.slide, "apply", got["slide_term"])
@@ -78,8 +83,8 @@ def measure(objects: int, repeats: int) -> dict:
     # (main before 2026-11-28 wave 9: motion_codes, then the rows copied in kernel_motion)
     _wrap(service_core, "motion_rows" if hasattr(service_core, "motion_rows") else "motion_codes",
           got["motion_codes"])
-    _wrap(svc, "_compact_objects", got["record_objects"])
-    _wrap(svc, "_plain_cpm_uper", got["uper_cpm"])
+    _wrap(svc, "_compact_text" if lean else "_compact_objects", got["record_objects"])
+    _wrap(service_core if lean else svc, "plain_cpm_uper" if lean else "_plain_cpm_uper", got["uper_cpm"])
     for _ in range(10):
         svc.process_frame_json(payload())
     for v in got.values():
@@ -99,8 +104,8 @@ def measure(objects: int, repeats: int) -> dict:
     per = {p: np.array(v) for p, v in got.items()}
     assert all(len(v) == repeats for v in per.values()), {p: len(v) for p, v in per.items()}
     frame_a = np.array(frame)
-    # (motion_codes runs inside uper_cpm: counted there, not twice in the rest)
-    rest = frame_a - sum(v for p, v in per.items() if p != "motion_codes")
+    # (motion_codes runs inside uper_cpm, except on the lean columns: counted there, not twice in the rest)
+    rest = frame_a - sum(v for p, v in per.items() if lean or p != "motion_codes")
     res = {f"{p}_us": 1e6 * float(np.median(v)) for p, v in per.items()}
     res["rest_us"] = 1e6 * float(np.median(rest))
     res["frame_us"] = 1e6 * float(np.median(frame_a))

@@ -191,3 +191,139 @@ def test_declined_and_odd_frames_are_the_general_paths_bytes(camera, case, monke
         assert rec["objects_not_in_messages"] == 45
     if case == "no-centre":
         assert rec["objects"][2]["status"] == "error" and "reason" in rec["objects"][2]
+
+
+# -- the tracked frame on the lean columns (wave 9 e) ------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def tracked_procs(camera):
+    """The tracked service's processors (``shared_jacobian``: the tracker's input), both policies."""
+    return {p: FrameProcessor(camera, "basler1", joint_cov=False, v2x_policy=p, shared_jacobian=True)
+            for p in ("sampled", "linear")}
+
+
+def _same_tracked(cols, est) -> None:
+    """The tracker's inputs of the columns are the estimate's, bit for bit and with the same strides (the
+    tracker reads the same arrays the same way)."""
+    _same(cols._replace(values=cols.values[:5]), est)
+    for name in ("centre_xy_world_m", "centre_cov_m2", "centre_shared_m"):
+        x, y = getattr(cols, name), getattr(est, name)
+        assert x.shape == y.shape and x.dtype == y.dtype and x.strides == y.strides, name
+        assert x.tobytes() == y.tobytes(), name  # (NaN rows included: no centre, no Jacobian)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(0, 40), st.integers(0, 2 ** 32 - 1), st.sampled_from(["bottom-centre", "bottom-corners"]),
+       st.sampled_from(["none", "random"]), st.sampled_from([5, 10]))
+def test_tracked_columns_are_the_estimate(tracked_procs, n, seed, contact, cov_kind, rows):
+    rng = np.random.default_rng(seed)
+    boxes = _boxes(rng, n)
+    cov = _covariances(rng, n, cov_kind)
+    for policy, proc in tracked_procs.items():
+        est = proc.boxes2d(boxes, contact=contact, pixel_cov_px2=cov)
+        cols = proc.boxes2d_columns(boxes, cov, contact=contact, value_rows=rows)
+        if policy == "linear":
+            assert cols is not None
+        if cols is None:
+            assert policy == "sampled"
+            continue
+        assert cols.values.shape == (rows, n)
+        _same_tracked(cols, est)
+
+
+def test_untracked_columns_carry_no_jacobian(procs):
+    cols = procs["linear"].boxes2d_columns(np.array([[900.0, 600.0, 1000.0, 700.0]]))
+    assert cols.centre_shared_m is None and cols.centre_xy_world_m is None and cols.centre_cov_m2 is None
+    assert cols.values.shape == (5, 1) and cols.object_rows.shape[1] == 1
+
+
+def _tracked_payloads(n: int, frames: int, cov: bool = False) -> list:
+    rng = np.random.default_rng(7)
+    u, v, w = rng.uniform(50, 1800, n), rng.uniform(420, 1070, n), rng.uniform(20, 120, n)
+    du, dv = rng.uniform(-15, 15, n), rng.uniform(-5, 5, n)
+    out = []
+    for k in range(frames):
+        uk, vk = u + k * du, v + k * dv
+        dets = [{"object_id": i, "class": "car" if i % 3 else "truck", "u_min_px": round(float(uk[i]), 2),
+                 "v_min_px": round(float(vk[i] - 0.8 * w[i]), 2), "u_max_px": round(float(uk[i] + w[i]), 2),
+                 "v_max_px": round(float(vk[i]), 2),
+                 **({"cov_uu_px2": 4.0, "cov_uv_px2": 1.0, "cov_vv_px2": 9.0} if cov else {})}
+                for i in range(n) if not (k == 2 and i % 5 == 1)]  # (a fifth missed in frame 2)
+        out.append({"camera_id": "cam0", "frame": k, "timestamp_s": T0 + k / 10.0, "detections": dets})
+    return out
+
+
+def _tracks_state(svc) -> bytes:
+    """The camera's tracks after the frames (ids, states, covariances), as bytes."""
+    (setup,) = svc.cameras.values()
+    t = setup.last_tracks
+    return b"".join(np.ascontiguousarray(getattr(t, f)).tobytes() for f in t._fields
+                    if isinstance(getattr(t, f), np.ndarray))
+
+
+def test_the_lean_tracked_path_is_the_one_taken(camera, monkeypatch):
+    """A tracked compact frame of 2-D boxes is written from the processor's columns and tracked on them, without
+    an estimate: neither ``_footprints`` nor ``boxes2d`` is called, the record, CPM and tracks are the general
+    path's; and a Jacobian column broken in the processor's answer reaches the tracks (the tracker reads it)."""
+    frames = [orjson.dumps(f) for f in _tracked_payloads(30, 4)]
+    ref = Service(camera, "basler1", record="compact", tracks=True)
+    ref._columnar = False
+    want = [ref.process_frame_json(f) for f in frames]
+    svc = Service(camera, "basler1", record="compact", tracks=True)
+    monkeypatch.setattr(Service, "_footprints", lambda *a, **k: pytest.fail("the general path was taken"))
+    monkeypatch.setattr(FrameProcessor, "boxes2d", lambda *a, **k: pytest.fail("an estimate was formed"))
+    got = [svc.process_frame_json(f) for f in frames]
+    for a, b in zip(got, want, strict=True):
+        assert _record(a) == _record(b) and a.cpm_uper == b.cpm_uper and b'"v_east_mps":' in a.data
+    assert _tracks_state(svc) == _tracks_state(ref)
+    monkeypatch.undo()
+    real = FrameProcessor.boxes2d_columns
+
+    def scaled(self, *a, **k):  # (the calibration share of every centre halved: the tracks then differ)
+        cols = real(self, *a, **k)
+        cols.centre_shared_m[...] *= 0.5
+        return cols
+
+    monkeypatch.setattr(FrameProcessor, "boxes2d_columns", scaled)
+    broken = Service(camera, "basler1", record="compact", tracks=True)
+    bad = [broken.process_frame_json(f) for f in frames]
+    assert _record(bad[-1]) != _record(want[-1]) and _tracks_state(broken) != _tracks_state(ref)
+
+
+@pytest.mark.parametrize("case", ["bad-covariance", "flagged", "over-255", "cpm-declined", "on-tracked"])
+def test_tracked_declined_frames_are_the_general_paths(camera, case, monkeypatch):
+    """Tracked frames the lean path declines before the tracker's step (a covariance the kernel refuses, a centre
+    the V2X policy samples), after it (the CPM writer declines: the general writers finish the frame, the tracks
+    stepped once), the > 255 objects' branch, and a service whose ``on_tracked`` takes the estimate (the general
+    path): the general path's record, CPM and tracks, frame after frame."""
+    from footprint_uq.service import core
+
+    frames = _tracked_payloads(300 if case == "over-255" else 20, 4, cov=case == "bad-covariance")
+    for f in frames:
+        if case == "bad-covariance":
+            f["detections"][3].update(cov_uu_px2=1.0, cov_uv_px2=5.0, cov_vv_px2=1.0)  # (in range, not PSD)
+        if case == "flagged":
+            f["detections"][4].update(u_min_px=950.0, v_min_px=21.0, u_max_px=990.0, v_max_px=31.0)
+    fast = Service(camera, "basler1", record="compact", tracks=True)
+    ref = Service(camera, "basler1", record="compact", tracks=True)
+    ref._columnar = False
+    estimates = []
+    if case == "on-tracked":
+        fast.on_tracked = lambda cid, fno, ts, tracks, est, found: estimates.append(est)
+    lean = []
+    real_records = Service._lean_records
+    monkeypatch.setattr(Service, "_lean_records", lambda *a, **k: lean.append(1) or real_records(*a, **k))
+    if case == "cpm-declined":
+        monkeypatch.setattr(core, "plain_cpm_uper", lambda *a, **k: None)
+    for f in frames:
+        a, b = fast.process_frame_json(orjson.dumps(f)), ref.process_frame_json(orjson.dumps(f))
+        assert a.type == b.type == "footprints" and _record(a) == _record(b) and a.cpm_uper == b.cpm_uper
+    assert _tracks_state(fast) == _tracks_state(ref)
+    assert bool(lean) == (case in ("over-255", "cpm-declined"))
+    assert len(estimates) == (len(frames) if case == "on-tracked" else 0)
+    rec = orjson.loads(a.data)
+    if case == "bad-covariance":
+        assert [e["index"] for e in rec["detection_errors"]] == [3]
+    if case == "over-255":
+        assert rec["objects_not_in_messages"] == 45

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import os
 import subprocess
 import sys
@@ -431,8 +432,9 @@ def test_warmup_compiles_every_signature_the_commands_use(tmp_path):
     service.process_frame({"camera_id": "cam1", "frame": 1, "timestamp_s": 1.0, "detections": [
         {"object_id": 7, "class": "car", "u_min_px": 900, "v_min_px": 600, "u_max_px": 1000, "v_max_px": 700}]})
     lean = Service(cam, "basler1", record="compact")  # (serve's default record: the lean frame's one kernel)
-    for cov in ("", ',"cov_uu_px2":4,"cov_uv_px2":1,"cov_vv_px2":9'):
-        out = lean.process_frame_json(b'{"camera_id":"c","frame":1,"timestamp_s":1.7e9,"detections":[{"object_id":7,'
+    tracked = Service(cam, "basler1", record="compact", tracks=True)  # (the tracked lean frame: the same kernel)
+    for svc, cov in itertools.product((lean, tracked), ("", ',"cov_uu_px2":4,"cov_uv_px2":1,"cov_vv_px2":9')):
+        out = svc.process_frame_json(b'{"camera_id":"c","frame":1,"timestamp_s":1.7e9,"detections":[{"object_id":7,'
                                       b'"class":"car","u_min_px":900,"v_min_px":600,"u_max_px":1000,"v_max_px":700'
                                       + cov.encode() + b'}]}')
         assert out.type == "footprints"

@@ -5,11 +5,12 @@ service frame writes coming back (:meth:`footprint_uq.products.frame_processor.F
 ``products.footprint_geometry.box2d_contact_points_checked``), checks the detector's 2x2 pixel covariances
 (:func:`.cov_checks.first_bad_cov2`), runs :func:`.footprint_kernels.process_corners` on output arrays it
 allocates itself (small: a frame's; the per-corner coordinates, covariances and the joint covariance are not
-formed), counts the centres whose V2X fields the policy would sample
-(:func:`.footprint_kernels.v2x_source_and_flagged`) and copies the record's five float columns (centre and
-covariance) into one ``(5, N)`` block.  The Python of one frame is then a handful of ``np.empty`` and one call
-(``process_corners`` itself: ~3 us of argument unboxing per call, its 13 output arrays and the camera's
-20-field structure among them; here the camera travels as four arrays and is put together inside).
+formed; the per-object rows and, for the tracker, the centres' shared Jacobians are the caller's arrays), counts
+the centres whose V2X fields the policy would sample (:func:`.footprint_kernels.v2x_source_and_flagged`) and
+copies the record's five float columns (centre and covariance) into the first rows of one ``(q, N)`` block.
+The Python of one frame is then a handful of ``np.empty`` and one call (``process_corners`` itself: ~3 us of
+argument unboxing per call, its 13 output arrays and the camera's 20-field structure among them; here the camera
+travels as four arrays and is put together inside).
 """
 
 from __future__ import annotations
@@ -18,14 +19,13 @@ import numpy as np
 from numba import njit
 
 from .cov_checks import first_bad_cov2
-from .footprint_kernels import OBJ_ROW, OBJ_ROWS, KernelCamera, process_corners
+from .footprint_kernels import OBJ_ROW, KernelCamera, process_corners
 
 __all__ = ["boxes2d_columns", "camera_parts", "COLUMN_ROWS", "CAMERA_SCALARS"]
 
 #: rows of :func:`boxes2d_columns`' ``values`` (m, m^2): what a compact record writes per object, in its order
 COLUMN_ROWS = ("x_m", "y_m", "cov_xx_m2", "cov_xy_m2", "cov_yy_m2")
 _VALUE_OBJ_ROWS = tuple(OBJ_ROW[k] for k in COLUMN_ROWS)
-_N_OBJ_ROWS = len(OBJ_ROWS)
 _O_NL = OBJ_ROW["nonlinearity"]
 #: the scalar fields of :class:`~.footprint_kernels.KernelCamera`, in the order of :func:`camera_parts`' vector
 CAMERA_SCALARS = ("fx", "fy", "cx", "cy", "skew", "ifx", "ify", "x0", "y0", "h", "gdz", "gsx", "gsy", "width_px",
@@ -70,7 +70,7 @@ def _contact_pixels(boxes, bottom_corners):  # pragma: no cover - compiled
 @njit(cache=True, error_model="numpy", nogil=True)
 def boxes2d_columns(boxes, bottom_corners, cov, has_cov, cam_f, has_dist, dist, R, dom, dR, Lr, Lc, Lv, r, spx,
                     no_det, allow_outside, ch, sh, flag, threshold, cov_tol, values, v2x, largest_index,
-                    centre_reason, centre_bad_corner, S):  # pragma: no cover - compiled
+                    centre_reason, centre_bad_corner, obj, shared, S):  # pragma: no cover - compiled
     """One frame of checked 2-D boxes (float64 ``(N, 4)``, finite, corners in order) through
     :func:`~.footprint_kernels.process_corners`, its columns into the caller's arrays.
 
@@ -91,12 +91,19 @@ def boxes2d_columns(boxes, bottom_corners, cov, has_cov, cam_f, has_dist, dist, 
         ``linear_ok`` = nonlinearity <= threshold (the V2X policy's test).
     cov_tol : float
         :func:`~.cov_checks.first_bad_cov2`'s relative tolerance.
-    values : (5, N) float64
-        Out: :data:`COLUMN_ROWS` of every centre (m, m^2).
+    values : (q, N) float64, q >= 5
+        Out: :data:`COLUMN_ROWS` of every centre (m, m^2) in its first five rows (the rest is the caller's: the
+        tracked record's motion columns).
     v2x : (7, N) int32
         Out: the V2X codes (``FootprintEstimate.v2x_codes`` transposed).
     largest_index, centre_reason, centre_bad_corner : (N,) int64, int32, int64
         Out: as the estimate's.
+    obj : (len(OBJ_ROWS), N) float64
+        Out: the fused kernel's per-object rows (``FootprintEstimate.object_rows``: the estimate's centre and
+        covariance are views of it).
+    shared : (N, 2, r) or (0, 2, 0) float64
+        Out: the centres' whitened parameter Jacobians ``centre_shared_m`` (the tracker's), as the kernel writes
+        them (rows of centres not found are not set to NaN here); ``(0, 2, 0)``: not formed.
     S : the per-thread scratch (``footprint_kernels.SCRATCH_SHAPE``).
 
     Returns
@@ -116,10 +123,9 @@ def boxes2d_columns(boxes, bottom_corners, cov, has_cov, cam_f, has_dist, dist, 
         det, mode = no_det, 0
     uv = _contact_pixels(boxes, bottom_corners)
     K = uv.shape[1]
-    obj = np.empty((_N_OBJ_ROWS, n))
     out = (np.empty((0, K, 2)), np.empty((0, K, 2, 2)), np.empty((0, 2 * K, 2 * K)), np.empty((n, K), np.int8),
            np.empty((n, K), np.bool_), largest_index, np.empty((0, 2, 2)), centre_reason, centre_bad_corner, obj, v2x,
-           np.empty((0, K)), np.empty((0, 2, 0)))
+           np.empty((0, K)), shared)
     cam = _camera(cam_f, has_dist, dist, R, dom)
     n_over = process_corners(uv, np.zeros((0, 0), np.int8), np.zeros((0, 7)), False, True, cam, dR, Lr, Lc, Lv, r,
                              spx, det, mode, allow_outside, ch, sh, flag, out, S)

@@ -66,8 +66,9 @@ class FrameColumns(NamedTuple):
     the numbers of :meth:`FrameProcessor.boxes2d`'s estimate, not an estimate (no per-corner outputs, no
     ellipse, no V2X source: every centre's V2X fields encode its linear covariance)."""
 
-    #: (5, N) float64: ``x_m, y_m, cov_xx_m2, cov_xy_m2, cov_yy_m2`` of each centre (``centre_xy_world_m``,
-    #: ``centre_cov_m2``; :data:`footprint_uq.fast.frame_columns.COLUMN_ROWS`)
+    #: (q, N) float64 (q = ``boxes2d_columns``' ``value_rows``, 5 by default): ``x_m, y_m, cov_xx_m2, cov_xy_m2,
+    #: cov_yy_m2`` of each centre in the first five rows (``centre_xy_world_m``, ``centre_cov_m2``;
+    #: :data:`footprint_uq.fast.frame_columns.COLUMN_ROWS`), the rest not written (the caller's)
     values: np.ndarray
     #: (7, N) int32, C-contiguous: ``v2x_codes`` transposed (rows :data:`.footprint_estimate.V2X_FIELDS`)
     v2x_rows: np.ndarray
@@ -79,6 +80,15 @@ class FrameColumns(NamedTuple):
     n_corners: int
     #: how many centres are valid (``centre_reason == 0``)
     n_valid: int
+    #: (len(OBJ_ROWS), N) float64: the fused kernel's per-object rows (``FootprintEstimate.object_rows``)
+    object_rows: np.ndarray | None = None
+    #: with the processor's ``shared_jacobian`` (the tracker's processors; else None): the tracker's input as
+    #: :meth:`FrameProcessor.boxes2d`'s estimate has it -- ``centre_xy_world_m`` (N, 2) m and ``centre_cov_m2``
+    #: (N, 2, 2) m^2, views of :attr:`object_rows` with the estimate's strides, and ``centre_shared_m`` (N, 2, r),
+    #: NaN rows where no centre
+    centre_xy_world_m: np.ndarray | None = None
+    centre_cov_m2: np.ndarray | None = None
+    centre_shared_m: np.ndarray | None = None
 
 
 class FrameProcessor:
@@ -143,6 +153,7 @@ class FrameProcessor:
         self._ch, self._sh = (1.0, 0.0) if h == 0.0 else (float(np.cos(h)), float(np.sin(h)))
         self._no_det = np.zeros((1, 1, 2, 2))
         self._no_cov = np.zeros((1, 2, 2))
+        self._no_shared = np.zeros((0, 2, 0))
         self._no_extra = np.zeros((0, 0), dtype=np.int8)
         self._no_boxes = np.zeros((0, 7))
         #: whether per-corner coordinates and covariances (and the largest point's covariance) are
@@ -305,7 +316,7 @@ class FrameProcessor:
         return self._run(np.ascontiguousarray(corners), self._no_extra, pixel_cov_px2)
 
     def boxes2d_columns(self, boxes_px: np.ndarray, pixel_cov_px2: np.ndarray | None = None, *,
-                        contact: str = "bottom-centre") -> FrameColumns | None:
+                        contact: str = "bottom-centre", value_rows: int = 5) -> FrameColumns | None:
         """:meth:`boxes2d` of checked boxes as the columns a service frame writes, in ONE compiled call
         (:func:`footprint_uq.fast.frame_columns.boxes2d_columns`: contact pixels, covariance check, the fused
         kernel, the V2X policy's test), without an estimate: the same numbers (``tests/test_service_columnar.py``).
@@ -318,13 +329,18 @@ class FrameProcessor:
         pixel_cov_px2 : (N, 2, 2) float64, optional
             The detector's covariance per box (px^2); checked here (finite, symmetric, PSD).
         contact : {"bottom-centre", "bottom-corners"}
+        value_rows : int
+            Rows of :attr:`FrameColumns.values` (>= 5): the five of the centres, then rows left for the caller
+            (10: the tracked record's motion columns, written after the tracker's step).
 
         Returns
         -------
-        :class:`FrameColumns`, or None where :meth:`boxes2d` is needed for this frame: the kernels are not ready
-        (the numpy reference runs meanwhile), a covariance the check refuses (``boxes2d`` names it), an output that
-        overflowed (``mark_overflow``), a valid centre that is not ``linear_ok`` under a V2X policy other than
-        ``"linear"`` (its fields are the policy's: sampled or unavailable), arrays of another type or shape.
+        :class:`FrameColumns` (with the processor's ``shared_jacobian``: also ``centre_shared_m``, the tracker's
+        input, as :meth:`boxes2d`'s estimate has it), or None where :meth:`boxes2d` is needed for this frame: the
+        kernels are not ready (the numpy reference runs meanwhile), a covariance the check refuses (``boxes2d``
+        names it), an output that overflowed (``mark_overflow``), a valid centre that is not ``linear_ok`` under a
+        V2X policy other than ``"linear"`` (its fields are the policy's: sampled or unavailable), arrays of another
+        type or shape.
         """
         N = boxes_px.shape[0]
         if contact not in CONTACT_MODES:
@@ -339,15 +355,24 @@ class FrameProcessor:
             boxes_px = np.ascontiguousarray(boxes_px)
         if has_cov and not pixel_cov_px2.flags.c_contiguous:
             pixel_cov_px2 = np.ascontiguousarray(pixel_cov_px2)
-        values, v2x = np.empty((5, N)), np.empty((7, N), np.int32)
+        values, v2x = np.empty((max(5, value_rows), N)), np.empty((7, N), np.int32)
         li, creason, cbad = np.empty(N, np.int64), np.empty(N, np.int32), np.empty(N, np.int64)
+        obj = np.empty((len(fk.OBJ_ROWS), N))
+        shared = np.empty((N, 2, self._r)) if self.shared_jacobian else self._no_shared
         bad, n_over, n_valid, n_flagged = fc.boxes2d_columns(
             boxes_px, contact == "bottom-corners", pixel_cov_px2 if has_cov else self._no_cov, has_cov,
             *self._columns_consts, self.allow_outside_image, self._ch, self._sh, self.linearity,
-            self.linear_threshold, COV_PSD_RTOL, values, v2x, li, creason, cbad, self._scratch())
+            self.linear_threshold, COV_PSD_RTOL, values, v2x, li, creason, cbad, obj, shared, self._scratch())
         if bad >= 0 or n_over or (n_flagged and self.v2x_policy != "linear"):
             return None
-        return FrameColumns(values, v2x, li, creason, cbad, 2 if contact == "bottom-corners" else 1, n_valid)
+        K = 2 if contact == "bottom-corners" else 1
+        if not self.shared_jacobian:
+            return FrameColumns(values, v2x, li, creason, cbad, K, n_valid, obj)
+        if n_valid < N:  # (as _pack: no Jacobian where no centre)
+            shared[creason != 0] = np.nan
+        row = fk.OBJ_ROW  # (the views as _pack makes them: the tracker reads the estimate's arrays)
+        return FrameColumns(values, v2x, li, creason, cbad, K, n_valid, obj, obj[row["x_m"]:row["y_m"] + 1].T,
+                            obj[row["cov_xx_m2"]:row["cov_yy_m2"] + 1].T.reshape(N, 2, 2), shared)
 
     def boxes3d(self, boxes_world, *, yaw_unit: str = "rad", bottom_on_ground: bool = True,
                 pixel_cov_px2=None) -> FootprintEstimate:

@@ -371,6 +371,9 @@ def _warm_objects(budget) -> None:
         fp = FrameProcessor(cam, budget)
         fp.boxes2d(np.array([[100.0, 150.0, 140.0, 200.0]]))
         fp.boxes2d_columns(np.array([[100.0, 150.0, 140.0, 200.0]]))  # (the service's untracked compact frame)
+        # (the tracked one: the centres' Jacobians too, the record's motion rows -- the same signature)
+        FrameProcessor(cam, budget, shared_jacobian=True).boxes2d_columns(np.array([[100.0, 150.0, 140.0, 200.0]]),
+                                                                          value_rows=10)
         fp.boxes3d(np.array([[0.0, 20.0, 0.8, 4.5, 1.8, 1.5, 0.3]]))
         fp.corners(np.array([[[100.0, 200.0], [140.0, 200.0], [140.0, 210.0], [100.0, 210.0]]]))
         kernel, args = fp.point_jacobian_kernel()  # (the tracker's B at its predicted positions)

@@ -390,8 +390,9 @@ class Service:
         if record not in RECORD_LAYOUTS:
             raise InputError("record", record, f"one of {RECORD_LAYOUTS}")
         self.record = record
-        #: frames of 2-D boxes take :meth:`_lean_frame` (the columns alone, one compiled call for the positions)
-        self._lean = record == "compact" and not tracks and uper_encoder == "fast"
+        #: frames of 2-D boxes take :meth:`_lean_frame` (the columns alone, one compiled call for the positions;
+        #: tracked too, unless :attr:`on_tracked` asks for the estimate: :meth:`_takes_lean`)
+        self._lean = record == "compact" and uper_encoder == "fast"
         self.cameras: dict[str | None, CameraSetup] = self._camera_setups(
             camera, budget, registry, camera_id, station_id, allow_outside_image,
             dict(heading_offset_deg=heading_offset_deg, origin_lat_deg=origin_lat_deg, origin_lon_deg=origin_lon_deg))
@@ -410,7 +411,8 @@ class Service:
                     setup.tracker.warm_up()
 
         #: called after each tracked frame as ``on_tracked(camera_id, frame, timestamp_s, TrackOutput, estimate,
-        #: FrameDetections)`` (the CP service of ``serve --cp-service``: :mod:`.cp_serve`); None: nothing
+        #: FrameDetections)`` (the CP service of ``serve --cp-service``: :mod:`.cp_serve`); None: nothing.  Set, the
+        #: tracked frames take the general path (it forms the estimate; :meth:`_takes_lean`)
         self.on_tracked = None
         self.linearity = bool(linearity)
         self.linear_threshold = DEFAULT_LINEAR_THRESHOLD if linear_threshold is None else float(linear_threshold)
@@ -514,7 +516,8 @@ class Service:
             finally:
                 setup.tracker, setup.ids = saved
             if self._lean:  # (the frames above are dicts: the lean path's kernel is loaded here)
-                setup.processor.boxes2d_columns(np.array([[box2d[k] for k in S.BOX2D_COLUMNS]]), contact=self.contact)
+                setup.processor.boxes2d_columns(np.array([[box2d[k] for k in S.BOX2D_COLUMNS]]), contact=self.contact,
+                                                value_rows=10 if self.tracks else 5)
 
     # -- one frame ------------------------------------------------------------------------------------
     def process_frame(self, frame, *, source: str | None = None) -> dict:
@@ -601,7 +604,7 @@ class Service:
         if n > self.max_frame_detections:
             raise _FrameError("detections", f"{n} detections in one frame, more than the frame limit of "
                               f"{self.max_frame_detections} (split the frame)")
-        if scanned.values_checked and n and self._lean and self._columnar and scanned.int_ids is not None:
+        if scanned.values_checked and n and self._takes_lean() and scanned.int_ids is not None:
             # (nothing for the value checks: the columns go to the lean path as they are)
             ts = scanned.timestamp_s
             out = self._lean_frame(setup, scanned.camera_id, scanned.frame, ts,
@@ -620,17 +623,29 @@ class Service:
         """The record of a frame whose fields are checked and whose detections are in columns (``lean``: by
         :meth:`_lean_frame` where it takes the frame; False: it declined it already)."""
         ref_ms = timestamp_its_ms(ts) if self.messages else None
-        if lean and self._lean and self._columnar and found.family == "2d":
+        if lean and found.family == "2d" and self._takes_lean():
             int_ids = found.int_ids if found.int_ids is not None else _int_ids(found.object_ids)
             out = None if int_ids is None else self._lean_frame(setup, camera_id, fno, ts, ref_ms, found, int_ids,
                                                                 found.errors, t0)
             if out is not None:
                 return out
         est, found = self._footprints(setup, found)
-        ids, classes, class_p = found.object_ids, found.classes, found.class_confidence
+        ids, classes = found.object_ids, found.classes
         motion = self._motion(setup, est, ids, classes, ts, found.yaw_rad, found.family) if self.tracks else None
         if self.on_tracked is not None and motion is not None:
             self.on_tracked(camera_id, fno, ts, setup.last_tracks, est, found)
+        return self._records(setup, camera_id, fno, ts, ref_ms, found, est, motion, t0)
+
+    def _takes_lean(self) -> bool:
+        """Whether a frame of 2-D boxes goes to :meth:`_lean_frame` first (compact records, the fast UPER
+        encoder, the columnar writers; tracked: no :attr:`on_tracked`, which takes the estimate)."""
+        return self._lean and self._columnar and (self.on_tracked is None or not self.tracks)
+
+    def _records(self, setup: CameraSetup, camera_id, fno: int, ts: float, ref_ms: int | None,
+                 found: FrameDetections, est, motion, t0: float) -> FrameOutput:
+        """:meth:`_frame`'s record (and CPM) of the frame's estimate ``est`` and its tracker's ``motion``
+        (:meth:`_motion`; None: untracked) by the general writers (the compact ones where they take it)."""
+        ids, classes, class_p = found.object_ids, found.classes, found.class_confidence
         t1 = time.perf_counter()
         compact = self.record == "compact"
         # the compact record: its objects (with the motion when tracked) from the columns in one compiled pass, and
@@ -678,25 +693,50 @@ class Service:
 
     def _lean_frame(self, setup: CameraSetup, camera_id, fno: int, ts: float, ref_ms: int | None, found,
                     int_ids: np.ndarray, errors, t0: float) -> FrameOutput | None:
-        """:meth:`_frame`'s record of an untracked compact frame of 2-D boxes with integer ids, by the columns
-        alone: :meth:`~footprint_uq.products.frame_processor.FrameProcessor.boxes2d_columns` (one compiled call),
-        :meth:`_compact_text` and :func:`.frame_kernels.plain_cpm_uper` -- no estimate, the same bytes
-        (``tests/test_service_columnar.py``, ``tests/test_frame_columns.py``).  ``found``: the detections' columns
-        (a :class:`.detections.FrameDetections` of 2-D boxes, or the :class:`.frame_scan.ScannedFrame` itself when
-        its values are checked), ``int_ids`` its ids as int64 (every ``object_id`` an integer of 64 bits),
-        ``errors`` its bad detections.  None: a frame for :meth:`_frame`'s general path (the processor declines it
-        -- a covariance it refuses, an overflow, a centre the V2X policy samples -- or a value out of the CPM's
-        range, which the general writer names)."""
-        cols = setup.processor.boxes2d_columns(found.boxes, found.pixel_cov_px2, contact=self.contact)
+        """:meth:`_frame`'s record of a compact frame of 2-D boxes with integer ids, by the columns alone:
+        :meth:`~footprint_uq.products.frame_processor.FrameProcessor.boxes2d_columns` (one compiled call), with
+        tracks the tracker's step on its centre columns (:meth:`_step_tracks`), then :meth:`_lean_records` -- no
+        estimate, the same bytes and tracks (``tests/test_service_columnar.py``, ``tests/test_frame_columns.py``).
+        ``found``: the detections' columns (a :class:`.detections.FrameDetections` of 2-D boxes, or the
+        :class:`.frame_scan.ScannedFrame` itself when its values are checked), ``int_ids`` its ids as int64 (every
+        ``object_id`` an integer of 64 bits), ``errors`` its bad detections.  None: a frame for :meth:`_frame`'s
+        general path (the processor declines it -- a covariance it refuses, an overflow, a centre the V2X policy
+        samples -- or, untracked, a value out of the CPM's range, which the general writer names).  A tracked
+        frame is never declined after the tracker's step: the general writers then finish it (:meth:`_records`
+        with the estimate formed again by ``boxes2d``: the same numbers), the tracks stepped once."""
+        cols = setup.processor.boxes2d_columns(found.boxes, found.pixel_cov_px2, contact=self.contact,
+                                               value_rows=10 if self.tracks else 5)
         if cols is None:
             return None
+        motion = None
+        if self.tracks:
+            motion = self._step_tracks(setup, cols.centre_xy_world_m, cols.centre_cov_m2, cols.centre_shared_m,
+                                       found.object_ids, found.classes, ts, None, True)
         t1 = time.perf_counter()
+        out = None if motion is not None and not _motion_values(cols.values, motion) else \
+            self._lean_records(setup, camera_id, fno, ts, ref_ms, found, int_ids, errors, cols, motion, t0, t1)
+        if out is None and motion is not None:  # (after the step: the general writers finish the frame)
+            if isinstance(found, ScannedFrame):
+                found = boxes2d_detections(found.boxes, found.pixel_cov_px2, found.object_ids, found.classes,
+                                           found.class_confidence, int_ids, True)
+            est = setup.processor.boxes2d(found.boxes, contact=self.contact, pixel_cov_px2=found.pixel_cov_px2,
+                                          boxes_checked=True)
+            return self._records(setup, camera_id, fno, ts, ref_ms, found, est, motion, t0)
+        return out
+
+    def _lean_records(self, setup: CameraSetup, camera_id, fno: int, ts: float, ref_ms: int | None, found,
+                      int_ids: np.ndarray, errors, cols, motion, t0: float, t1: float) -> FrameOutput | None:
+        """:meth:`_lean_frame`'s record and UPER CPM from the columns ``cols`` (a :class:`~footprint_uq.products.
+        frame_processor.FrameColumns`; tracked: its ``values`` rows 5-9 the motion's, ``motion`` the tracker's
+        ``(track_id, ObjectMotion)``) by :meth:`_compact_text` and :func:`.frame_kernels.plain_cpm_uper`.  None:
+        a value out of the CPM's range (the general writer names it)."""
         ids, N = found.object_ids, len(found.object_ids)
         all_valid = cols.n_valid == N
         valid = None if all_valid else cols.centre_reason == 0
         status = None if all_valid else _compact_status_of(valid, cols.largest_index, centre_reason_texts(
             cols.centre_reason, cols.centre_bad_corner, cols.n_corners))
-        co = self._compact_text(setup, ids, int_ids, found.classes, ts, cols.values, valid, all_valid, status, None)
+        tid = None if motion is None else np.asarray(motion[0], dtype=np.int64)
+        co = self._compact_text(setup, ids, int_ids, found.classes, ts, cols.values, valid, all_valid, status, tid)
         t2 = time.perf_counter()
         head = {"type": RECORD_FOOTPRINTS, "record": "compact", "camera_id": camera_id, "frame": fno,
                 "timestamp_s": ts, "station_id": setup.station_id,
@@ -707,10 +747,12 @@ class Service:
         if self.messages:
             head["cpm_cdd"] = self.cpm_cdd
             cls = self._cls
+            # (tracked: the message's objects' motion codes in one compiled call, as _plain_cpm_uper)
+            mc = None if motion is None else motion_rows(motion[1], N, None if len(co.ok_idx) == N else co.ok_idx)
             cpm_uper = plain_cpm_uper(setup.uper, ref_ms, setup.world_to_enu(cols.values[:2].T),
                                       co.ok_idx, found.class_confidence, co.msg_ids, cols.v2x_rows, _CPM_INDEX,
                                       co.class_idx, _class_rows_of(co.classes), cls.bits_value, cls.bits_width,
-                                      cdd=self.cpm_cdd)
+                                      cdd=self.cpm_cdd, motion=mc)
             if cpm_uper is None:  # (a value out of range: the general path's writer names it)
                 return None
             parts += [b',"cpm_uper_bytes":', b"%d" % len(cpm_uper)]
@@ -777,8 +819,17 @@ class Service:
         camera_tracker.CameraTracker.step_frame`: step, NIS check, slide term, motion): ``(track_id (N,),
         ObjectMotion)``; ``yaw_rad``: the 3-D boxes' yaw (None for other boxes); 2-D boxes (``family``) add their
         sliding contact's velocity term."""
-        f = setup.tracker.step_frame(ts, ids, classes, est.centre_xy_world_m, est.centre_cov_m2, est.centre_shared_m,
-                                     yaw_rad=yaw_rad, contact_2d=family == "2d")
+        return Service._step_tracks(setup, est.centre_xy_world_m, est.centre_cov_m2, est.centre_shared_m, ids,
+                                    classes, ts, yaw_rad, family == "2d")
+
+    @staticmethod
+    def _step_tracks(setup: CameraSetup, xy_world_m: np.ndarray, cov_m2: np.ndarray, shared_m: np.ndarray | None,
+                     ids: list, classes: list, ts: float, yaw_rad: np.ndarray | None, contact_2d: bool) -> tuple:
+        """:meth:`_motion` of the centres' columns ``xy_world_m`` (N, 2) m, ``cov_m2`` (N, 2, 2) m^2 and
+        ``shared_m`` (N, 2, r) (an estimate's, or the lean frame's :class:`~footprint_uq.products.frame_processor.
+        FrameColumns`): ``(track_id (N,), ObjectMotion)``."""
+        f = setup.tracker.step_frame(ts, ids, classes, xy_world_m, cov_m2, shared_m, yaw_rad=yaw_rad,
+                                     contact_2d=contact_2d)
         # what the CP service fuses (on_tracked): the tracks with the sliding contact's velocity term
         setup.last_tracks = f.tracks
         return f.track_id, f.motion
@@ -1093,19 +1144,27 @@ def _compact_values(est, motion) -> np.ndarray | None:
     out[0:2] = centre.T
     c = cov.reshape(n, 4)  # (xx, xy, yx, yy)
     out[2], out[3], out[4] = c[:, 0], c[:, 1], c[:, 3]
-    if motion is not None:
-        m = motion[1]
-        ve, vn, cv = m.v_east_mps, m.v_north_mps, m.cov_v_m2ps2
-        try:
-            f8 = ve.dtype == _F8 and vn.dtype == _F8 and cv.dtype == _F8
-        except AttributeError:  # (not arrays: as numpy reads them)
-            f8 = all(np.asarray(a).dtype == _F8 for a in (ve, vn, cv))
-        if not f8:
-            return None
-        out[5], out[6] = ve, vn
-        d = np.asarray(cv).reshape(n, 4)
-        out[7], out[8], out[9] = d[:, 0], d[:, 1], d[:, 3]
+    if motion is not None and not _motion_values(out, motion):
+        return None
     return out
+
+
+def _motion_values(out: np.ndarray, motion) -> bool:
+    """Rows 5-9 of the compact record's float columns ``out`` (10, N): the velocity (m/s) and its covariance
+    (m^2/s^2) of the tracker's ``motion`` ``(track_id, ObjectMotion)``.  False (``out`` not written): a motion
+    column not in float64 (the general writer's text of it would differ)."""
+    m = motion[1]
+    ve, vn, cv = m.v_east_mps, m.v_north_mps, m.cov_v_m2ps2
+    try:
+        f8 = ve.dtype == _F8 and vn.dtype == _F8 and cv.dtype == _F8
+    except AttributeError:  # (not arrays: as numpy reads them)
+        f8 = all(np.asarray(a).dtype == _F8 for a in (ve, vn, cv))
+    if not f8:
+        return False
+    out[5], out[6] = ve, vn
+    d = np.asarray(cv).reshape(out.shape[1], 4)
+    out[7], out[8], out[9] = d[:, 0], d[:, 1], d[:, 3]
+    return True
 
 
 _F8 = np.dtype(np.float64)
