@@ -7,7 +7,8 @@ run, interleaved frame by frame (medians over ``frames`` frames after a warm-up 
 * ``positions_split`` -- the same with ``shared_jacobian=True`` (the centre's whitened calibration Jacobian);
 * ``shared_at`` -- :class:`~footprint_uq.tracking.table.SharedJacobianAt` at the 100 predicted positions alone;
 * ``track`` -- :meth:`TrackTable.step` (deleter, ids, the per-frame covariance, predict, ``shared_at``, gate,
-  update, outputs; one dictionary pass over the ids and compiled passes over the objects) +
+  update, outputs; the ids looked up in one compiled call -- integer ids; since 2026-11-28 night, wave 9 f: before, a
+  dictionary pass -- and compiled passes over the objects) +
   :func:`~footprint_uq.tracking.motion.object_motion`, the default two-mode IMM filter, as the service calls them
   (``cov_m2=`` the estimate's whole covariance);
 * ``track_cv`` -- the same with the single constant-velocity mode (``manoeuvre_accel_psd_m2ps3=None``: the tracker

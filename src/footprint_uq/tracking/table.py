@@ -17,7 +17,18 @@ from ..fast.footprint_kernels import SCRATCH_SHAPE, camera_constants
 from ..products.footprints import FrameProcessor
 from .filter import Initiator, SplitMeasurement
 from .imm_kernels import frame_pass, scratch
-from .kernels import ROW_SKIP, ROW_START, frame_rows, frame_rows_shared, frame_update, project_ground
+from .kernels import (
+    ID_EMPTY,
+    ROW_SKIP,
+    ROW_START,
+    frame_rows,
+    frame_rows_shared,
+    frame_update,
+    id_delete,
+    id_insert,
+    id_lookup,
+    project_ground,
+)
 from .models import ConstantVelocity
 
 __all__ = ["TrackerConfig", "TrackOutput", "TrackTable", "SharedJacobianAt", "CALIBRATION_MODES", "DEFAULT_GATE_CHI2"]
@@ -174,6 +185,11 @@ class TrackTable:
         self.initiator = Initiator(self.config.sigma_v0_mps)
         self._var_v0 = self.initiator.sigma_v0_mps ** 2
         self._index: dict = {None: -2}  # object_id -> slot (-2: never tracked)
+        #: the compiled form of ``_index`` for frames whose ids are all int64 (:func:`~footprint_uq.tracking.kernels.
+        #: id_lookup`: keys, values, shift), kept while every id the table has seen is an integer of int64's range
+        #: (``_int_ids``; the first other id ends it for the table's life: its frames then take the dictionary)
+        self._int_ids = True
+        self._id_table(64)
         self._cap = 0
         self._grow(64)
         #: the compiled pass's working arrays (it allocates nothing itself)
@@ -237,7 +253,10 @@ class TrackTable:
     def _delete_expired(self, time_s: float) -> None:
         """The deleter: drop tracks whose last update is more than ``timeout_s`` before ``time_s`` (called when its
         sweep is due: :meth:`step` tests that first, two or more tracks and the oldest update expired)."""
-        for s in np.flatnonzero(time_s - self._t_last > self.config.timeout_s).tolist():  # (NaN: a free row)
+        gone = np.flatnonzero(time_s - self._t_last > self.config.timeout_s).tolist()  # (NaN: a free row)
+        if self._int_ids and gone:
+            id_delete(*self._ids, np.array([self._keys[s] for s in gone], dtype=np.int64))
+        for s in gone:
             del self._index[self._keys[s]]
             self._keys[s] = None
             self._t_last[s] = np.nan
@@ -274,7 +293,10 @@ class TrackTable:
         t = time_s if isinstance(time_s, float) and math.isfinite(time_s) else as_float("time_s", time_s)
         xy = _c64(xy_m).reshape(-1, 2)
         n = xy.shape[0]
-        ids = object_ids if isinstance(object_ids, list) else list(object_ids)
+        ids = object_ids if isinstance(object_ids, list | np.ndarray) else list(object_ids)
+        id64 = self._int64_ids(ids) if self._int_ids else None
+        if id64 is None and type(ids) is not list:
+            ids = list(ids)
         if len(ids) != n:
             raise InputError("object_ids", len(ids), f"{n} ids, one per object")
         B = _c64(shared_m)
@@ -295,7 +317,11 @@ class TrackTable:
         self._last_time = t
         if len(self._index) > 1 and t - self._oldest_s > self.config.timeout_s:  # (the deleter's sweep is due)
             self._delete_expired(t)
-        slots = np.fromiter(map(self._index.get, ids, repeat(-1)), np.int64, n)
+        if id64 is not None:  # (all ids int64: the compiled look-up)
+            slots = np.empty(n, np.int64)
+            id_lookup(*self._ids, id64, slots)
+        else:
+            slots = np.fromiter(map(self._index.get, ids, repeat(-1)), np.int64, n)
         self._stamp += 1
         if n > self._old.shape[0]:  # (the step's working arrays, kept: nothing of them leaves the step)
             self._work(n)
@@ -327,6 +353,42 @@ class TrackTable:
             self._oldest_s = t
         return out
 
+    @staticmethod
+    def _int64_ids(ids) -> np.ndarray | None:
+        """The frame's ids as an int64 array (n,) if every one is an integer numpy holds as int64 (a list of ints,
+        an int64 array), else None (the dictionary's look-up: None ids, strings, floats, tuples...)."""
+        if type(ids) is np.ndarray:
+            return ids if ids.dtype == np.int64 and ids.ndim == 1 else None
+        try:
+            a = np.array(ids)
+        except (ValueError, TypeError, OverflowError):  # (ragged tuples and the like: not integer ids)
+            return None
+        return a if a.dtype == np.int64 and a.ndim == 1 else None
+
+    def _id_table(self, cap: int) -> None:
+        """A fresh compiled id table of ``cap`` (a power of 2) entries holding ``_index``'s ids."""
+        keys, vals = np.zeros(cap, np.int64), np.full(cap, ID_EMPTY, np.int64)
+        self._ids = (keys, vals, 64 - (cap.bit_length() - 1))
+        items = [(k, s) for k, s in self._index.items() if k is not None]
+        if items:
+            id_insert(*self._ids, np.array([k for k, _ in items], np.int64), np.array([s for _, s in items], np.int64))
+
+    def _enter_ids(self, keys: list, rows: list) -> None:
+        """New ids with their rows into the compiled id table (grown to stay at most half full), or the table's
+        end if one of them is not an integer of int64's range."""
+        if not all(type(k) is int or isinstance(k, np.integer | bool) for k in keys) or not all(
+                -2 ** 63 <= int(k) < 2 ** 63 for k in keys):
+            self._int_ids = False
+            self._ids = None
+            return
+        cap = old = self._ids[0].shape[0]
+        while 2 * (len(self._index) - 1) > cap:  # (_index holds them already)
+            cap *= 2
+        if cap > old:
+            self._id_table(cap)
+        else:
+            id_insert(*self._ids, np.array(keys, np.int64), np.array(rows, np.int64))
+
     def _work(self, n: int) -> None:
         """The step's working arrays for frames of up to ``n`` objects (the compiled calls read their first k or n
         rows): the objects to update ``_old (n,)``, their predicted positions ``_pred (n, 2)``, pixels ``_uv (n,
@@ -357,6 +419,7 @@ class TrackTable:
         the first object of each with finite inputs (``act == ROW_START``) gets a free row (the table grows when
         none is left); a later object of the same id is not tracked (``act`` set to ``ROW_SKIP``)."""
         first: set = set()
+        new_keys, new_rows = [], []
         for i in miss:
             key = ids[i]
             if key in first:
@@ -369,6 +432,10 @@ class TrackTable:
                 slots[i] = s = self._free.pop()
                 self._keys[s] = key
                 self._index[key] = s
+                new_keys.append(key)
+                new_rows.append(s)
+        if self._int_ids and new_keys:
+            self._enter_ids(new_keys, new_rows)
 
 
 def _c64(a) -> np.ndarray:
