@@ -95,14 +95,14 @@ def object_motion(tracks: TrackOutput, *, heading_offset_deg: float = 0.0, yaw_r
     ratio = (heading_min_ratio if isinstance(heading_min_ratio, float) and math.isfinite(heading_min_ratio)
              and heading_min_ratio > 0.0 else as_float("heading_min_ratio", heading_min_ratio, positive=True))
     n = tracks.track_id.shape[0]
-    buf = np.empty(12 * n)  # (one allocation: the eight columns, then the covariances)
-    out, cov = buf[:8 * n].reshape(8, n), buf[8 * n:].reshape(n, 2, 2)
+    out = np.empty((8, n))
+    cov = np.empty((n, 2, 2))
     hr = math.radians(h)
     motion_fields(np.ascontiguousarray(tracks.v_mps, dtype=np.float64),
                   np.ascontiguousarray(tracks.cov_v_m2ps2, dtype=np.float64), math.cos(hr), math.sin(hr), ratio,
                   _NONE if yaw_rad is None else _column("yaw_rad", yaw_rad, n),
                   _NONE if sigma_yaw_rad is None else _column("sigma_yaw_rad", sigma_yaw_rad, n), h, out, cov)
-    return ObjectMotion(*out[:2], cov, *out[2:], tracks.age_s.copy())
+    return ObjectMotion(out[0], out[1], cov, out[2], out[3], out[4], out[5], out[6], out[7], tracks.age_s.copy())
 
 
 _NONE = np.empty(0)

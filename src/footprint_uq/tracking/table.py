@@ -34,6 +34,7 @@ from .models import ConstantVelocity
 __all__ = ["TrackerConfig", "TrackOutput", "TrackTable", "SharedJacobianAt", "CALIBRATION_MODES", "DEFAULT_GATE_CHI2"]
 
 _NO_B = np.zeros((0, 2, 0))
+_INT64_MIN, _INT64_MAX = -2 ** 63, 2 ** 63 - 1
 #: how the calibration error enters the filter: "consider" (the split model, the only honest one), "white" (the
 #: whole per-frame covariance as white noise) and "ignore" (only the per-frame part) are kept to show what goes
 #: wrong (docs/uncertainty-model.md)
@@ -293,7 +294,7 @@ class TrackTable:
         t = time_s if isinstance(time_s, float) and math.isfinite(time_s) else as_float("time_s", time_s)
         xy = _c64(xy_m).reshape(-1, 2)
         n = xy.shape[0]
-        ids = object_ids if isinstance(object_ids, list | np.ndarray) else list(object_ids)
+        ids = object_ids if isinstance(object_ids, list) or type(object_ids) is np.ndarray else list(object_ids)
         id64 = self._int64_ids(ids) if self._int_ids else None
         if id64 is None and type(ids) is not list:
             ids = list(ids)
@@ -376,11 +377,11 @@ class TrackTable:
     def _enter_ids(self, keys: list, rows: list) -> None:
         """New ids with their rows into the compiled id table (grown to stay at most half full), or the table's
         end if one of them is not an integer of int64's range."""
-        if not all(type(k) is int or isinstance(k, np.integer | bool) for k in keys) or not all(
-                -2 ** 63 <= int(k) < 2 ** 63 for k in keys):
-            self._int_ids = False
-            self._ids = None
-            return
+        for k in keys:
+            if not ((type(k) is int or isinstance(k, np.integer | bool)) and _INT64_MIN <= k <= _INT64_MAX):
+                self._int_ids = False
+                self._ids = None
+                return
         cap = old = self._ids[0].shape[0]
         while 2 * (len(self._index) - 1) > cap:  # (_index holds them already)
             cap *= 2
