@@ -112,7 +112,7 @@ def test_int_id_lookup_is_the_dictionary_over_frames_with_births_and_deaths(seed
             assert np.array_equal(g, w, equal_nan=g.dtype.kind == "f"), (t, name)
         assert len(fast) == len(slow)
         assert np.array_equal(np.nan_to_num(fast.frame_nis(), nan=-1.0), np.nan_to_num(slow.frame_nis(), nan=-1.0))
-    assert fast._int_ids  # (the frames went through the compiled look-up)
+    assert fast._int_ids and fast._ids is not None  # (the array frames went through the compiled look-up)
     keys = [k for k in fast._index if k is not None]
     got = np.empty(len(keys), np.int64)
     id_lookup(*fast._ids, np.array(keys, np.int64), got)

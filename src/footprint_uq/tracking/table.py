@@ -126,7 +126,9 @@ class TrackTable:
     deleter); then every object whose id has a track is predicted to the frame's time and gated (a jump with
     ``y^T S^-1 y > gate_chi2`` restarts the track under a new ``track_id``), the others start tracks
     (the initiator).  Per frame, the ids are looked up in one pass over a dictionary (the only per-object Python
-    work; unknown ids, a few per frame, are then given rows); the rest is two compiled passes over the frame:
+    work; unknown ids, a few per frame, are then given rows), or, when they come as an int64 array, in one compiled
+    call (:func:`~footprint_uq.tracking.kernels.id_lookup`, a hash table kept beside the dictionary); the rest is
+    two compiled passes over the frame:
     :func:`~footprint_uq.tracking.kernels.frame_rows_shared` (the rows and ``B`` at the predicted positions, when
     ``shared_at`` is a :class:`SharedJacobianAt`; else :func:`~footprint_uq.tracking.kernels.frame_rows` and one
     evaluation of ``shared_at``) and :func:`~footprint_uq.tracking.imm_kernels.frame_pass` (the update, the
@@ -186,11 +188,12 @@ class TrackTable:
         self.initiator = Initiator(self.config.sigma_v0_mps)
         self._var_v0 = self.initiator.sigma_v0_mps ** 2
         self._index: dict = {None: -2}  # object_id -> slot (-2: never tracked)
-        #: the compiled form of ``_index`` for frames whose ids are all int64 (:func:`~footprint_uq.tracking.kernels.
-        #: id_lookup`: keys, values, shift), kept while every id the table has seen is an integer of int64's range
-        #: (``_int_ids``; the first other id ends it for the table's life: its frames then take the dictionary)
+        #: the compiled form of ``_index`` for frames whose ids come as an int64 array (:func:`~footprint_uq.tracking.
+        #: kernels.id_lookup`: keys, values, shift; None until the first such frame: a list of ids takes the
+        #: dictionary, which is as fast as converting it), possible while every id the table has seen is an integer
+        #: of int64's range (``_int_ids``; the first other id ends it for the table's life)
         self._int_ids = True
-        self._id_table(64)
+        self._ids = None
         self._cap = 0
         self._grow(64)
         #: the compiled pass's working arrays (it allocates nothing itself)
@@ -255,7 +258,7 @@ class TrackTable:
         """The deleter: drop tracks whose last update is more than ``timeout_s`` before ``time_s`` (called when its
         sweep is due: :meth:`step` tests that first, two or more tracks and the oldest update expired)."""
         gone = np.flatnonzero(time_s - self._t_last > self.config.timeout_s).tolist()  # (NaN: a free row)
-        if self._int_ids and gone:
+        if self._ids is not None and gone:
             id_delete(*self._ids, np.array([self._keys[s] for s in gone], dtype=np.int64))
         for s in gone:
             del self._index[self._keys[s]]
@@ -294,10 +297,9 @@ class TrackTable:
         t = time_s if isinstance(time_s, float) and math.isfinite(time_s) else as_float("time_s", time_s)
         xy = _c64(xy_m).reshape(-1, 2)
         n = xy.shape[0]
-        ids = object_ids if isinstance(object_ids, list) or type(object_ids) is np.ndarray else list(object_ids)
-        id64 = self._int64_ids(ids) if self._int_ids else None
-        if id64 is None and type(ids) is not list:
-            ids = list(ids)
+        id64 = object_ids if (type(object_ids) is np.ndarray and object_ids.dtype == np.int64
+                              and object_ids.ndim == 1 and self._int_ids) else None
+        ids = object_ids if isinstance(object_ids, list) or id64 is not None else list(object_ids)
         if len(ids) != n:
             raise InputError("object_ids", len(ids), f"{n} ids, one per object")
         B = _c64(shared_m)
@@ -318,7 +320,9 @@ class TrackTable:
         self._last_time = t
         if len(self._index) > 1 and t - self._oldest_s > self.config.timeout_s:  # (the deleter's sweep is due)
             self._delete_expired(t)
-        if id64 is not None:  # (all ids int64: the compiled look-up)
+        if id64 is not None:  # (the ids an int64 array: the compiled look-up)
+            if self._ids is None:
+                self._id_table(64)
             slots = np.empty(n, np.int64)
             id_lookup(*self._ids, id64, slots)
         else:
@@ -354,20 +358,10 @@ class TrackTable:
             self._oldest_s = t
         return out
 
-    @staticmethod
-    def _int64_ids(ids) -> np.ndarray | None:
-        """The frame's ids as an int64 array (n,) if every one is an integer numpy holds as int64 (a list of ints,
-        an int64 array), else None (the dictionary's look-up: None ids, strings, floats, tuples...)."""
-        if type(ids) is np.ndarray:
-            return ids if ids.dtype == np.int64 and ids.ndim == 1 else None
-        try:
-            a = np.array(ids)
-        except (ValueError, TypeError, OverflowError):  # (ragged tuples and the like: not integer ids)
-            return None
-        return a if a.dtype == np.int64 and a.ndim == 1 else None
-
     def _id_table(self, cap: int) -> None:
         """A fresh compiled id table of ``cap`` (a power of 2) entries holding ``_index``'s ids."""
+        while 2 * (len(self._index) - 1) > cap:
+            cap *= 2
         keys, vals = np.zeros(cap, np.int64), np.full(cap, ID_EMPTY, np.int64)
         self._ids = (keys, vals, 64 - (cap.bit_length() - 1))
         items = [(k, s) for k, s in self._index.items() if k is not None]
@@ -375,17 +369,17 @@ class TrackTable:
             id_insert(*self._ids, np.array([k for k, _ in items], np.int64), np.array([s for _, s in items], np.int64))
 
     def _enter_ids(self, keys: list, rows: list) -> None:
-        """New ids with their rows into the compiled id table (grown to stay at most half full), or the table's
-        end if one of them is not an integer of int64's range."""
+        """New ids with their rows into the compiled id table if there is one (grown to stay at most half full), or
+        its end if one of them is not an integer of int64's range."""
         for k in keys:
             if not ((type(k) is int or isinstance(k, np.integer | bool)) and _INT64_MIN <= k <= _INT64_MAX):
                 self._int_ids = False
                 self._ids = None
                 return
-        cap = old = self._ids[0].shape[0]
-        while 2 * (len(self._index) - 1) > cap:  # (_index holds them already)
-            cap *= 2
-        if cap > old:
+        if self._ids is None:
+            return
+        cap = self._ids[0].shape[0]
+        if 2 * (len(self._index) - 1) > cap:  # (_index holds them already)
             self._id_table(cap)
         else:
             id_insert(*self._ids, np.array(keys, np.int64), np.array(rows, np.int64))
