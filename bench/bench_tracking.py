@@ -7,9 +7,13 @@ run, interleaved frame by frame (medians over ``frames`` frames after a warm-up 
 * ``positions_split`` -- the same with ``shared_jacobian=True`` (the centre's whitened calibration Jacobian);
 * ``shared_at`` -- :class:`~footprint_uq.tracking.table.SharedJacobianAt` at the 100 predicted positions alone;
 * ``track`` -- :meth:`TrackTable.step` (deleter, ids, the per-frame covariance, predict, ``shared_at``, gate,
-  update, outputs; one dictionary pass over the ids and compiled passes over the objects) +
+  update, outputs; the ids looked up in one compiled call -- integer ids; since 2026-11-28 night, wave 9 f: before, a
+  dictionary pass -- and compiled passes over the objects) +
   :func:`~footprint_uq.tracking.motion.object_motion`, the default two-mode IMM filter, as the service calls them
   (``cov_m2=`` the estimate's whole covariance);
+* ``track_int64`` -- ``track`` with the frame's ids handed as an int64 array (as the service's frame scanner
+  has them, ``FrameDetections.int_ids``), not a list: the compiled look-up without the list's conversion
+  (2026-11-28 night, wave 9 f); ``ratio_int64`` its ratio;
 * ``track_cv`` -- the same with the single constant-velocity mode (``manoeuvre_accel_psd_m2ps3=None``: the tracker
   before the IMM), on the same frames;
 * ``track_reference`` -- ``track`` with the update's compiled reference (:func:`~footprint_uq.tracking.kernels.
@@ -157,9 +161,11 @@ def run(n_objects: int = 100, frames: int = 300) -> dict:
     table_cv = TrackTable(TrackerConfig(timeout_s=1e9, manoeuvre_accel_psd_m2ps3=None), rank=at.rank, shared_at=at)
     table_ref = TrackTable(TrackerConfig(timeout_s=1e9), rank=at.rank, shared_at=at)
     table_ref._reference_pass = True
+    table_int = TrackTable(TrackerConfig(timeout_s=1e9), rank=at.rank, shared_at=at)
     det = np.broadcast_to(np.eye(2), (n_objects, 2, 2))
     restarts = 0
-    keys = ("positions", "positions_split", "shared_at", "track", "track_cv", "track_reference", "total")
+    keys = ("positions", "positions_split", "shared_at", "track", "track_cv", "track_reference", "total",
+            "track_int64", "total_int64")
     times = {k: [] for k in keys}
     for k, (t, ids, boxes) in enumerate(_frames(cam, n_objects, frames + 30)):
         t0 = time.perf_counter()
@@ -178,14 +184,20 @@ def run(n_objects: int = 100, frames: int = 300) -> dict:
         object_motion(table_ref.step(t, ids, est.centre_xy_world_m, shared_m=est.centre_shared_m,
                                      cov_m2=est.centre_cov_m2), yaw_rad=boxes[:, 6])
         t6 = time.perf_counter()
+        ids64 = np.array(ids, np.int64)  # (what the frame's scanner hands; not timed)
+        t7 = time.perf_counter()
+        object_motion(table_int.step(t, ids64, est.centre_xy_world_m, shared_m=est.centre_shared_m,
+                                     cov_m2=est.centre_cov_m2), yaw_rad=boxes[:, 6])
+        t8 = time.perf_counter()
         restarts += int(out.new_track.sum()) if k else 0
         if k >= 30:
             for key, dt in (("positions", t1 - t0), ("positions_split", t2 - t1), ("track", t3 - t2),
                             ("shared_at", t4 - t3), ("track_cv", t5 - t4), ("track_reference", t6 - t5),
-                            ("total", t3 - t1)):
+                            ("total", t3 - t1), ("track_int64", t8 - t7), ("total_int64", t2 - t1 + t8 - t7)):
                 times[key].append(dt * 1e6)
     res = {k: round(statistics.median(v), 1) for k, v in times.items()}
     res["ratio"] = round(statistics.median(np.divide(times["total"], times["positions"])), 2)
+    res["ratio_int64"] = round(statistics.median(np.divide(times["total_int64"], times["positions"])), 2)
     res["ratio_of_medians"] = round(res["total"] / res["positions"], 2)
     res.update(n_objects=n_objects, frames=frames, target_us=TARGET_US, tracked=int((out.n_updates > 1).sum()),
                new_tracks_after_first_frame=restarts)
@@ -223,7 +235,9 @@ def main(argv=None) -> None:
         for r in runs:
             print(f"total {r['total']:.1f} us (positions_split {r['positions_split']:.1f} + track {r['track']:.1f}); "
                   f"positions {r['positions']:.1f}; ratio {r['ratio']:.2f}; track_reference "
-                  f"{r['track_reference']:.1f}; monitor {r['monitor']['monitor']:.1f} (before: "
+                  f"{r['track_reference']:.1f}; ids as int64: track {r['track_int64']:.1f}, "
+                  f"ratio {r['ratio_int64']:.2f}; "
+                  f"monitor {r['monitor']['monitor']:.1f} (before: "
                   f"{r['monitor']['monitor_bank']:.1f}); step Python {r['python']['step_python']:.1f} us; "
                   f"load {r['load_average_1min_start']:.2f}")
         return
@@ -231,7 +245,8 @@ def main(argv=None) -> None:
     if a.json:
         print(json.dumps(res))
         return
-    for k in ("positions", "positions_split", "shared_at", "track", "track_cv", "track_reference", "total"):
+    for k in ("positions", "positions_split", "shared_at", "track", "track_cv", "track_reference", "total",
+              "track_int64"):
         print(f"{k:16s} {res[k]:8.1f} us per frame of {res['n_objects']} objects (median of {res['frames']})")
     print(f"target: total <= {TARGET_US:.0f} us -> {'met' if res['total'] <= TARGET_US else 'NOT met'}")
     print(f"ratio total / positions {res['ratio']:.2f} (issue 31: <= 2)")

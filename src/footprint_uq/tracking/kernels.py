@@ -26,7 +26,8 @@ from ..fast.footprint_kernels import KernelCamera, point_jacobian_into
 from .kalman_kernels import pick_shared, schmidt_step, start_cov2
 
 __all__ = ["predict_update", "update_slots", "frame_rows", "frame_rows_shared", "frame_update", "initiate_row",
-           "project_ground", "motion_fields", "ROW_SKIP", "ROW_UPDATE", "ROW_START"]
+           "project_ground", "motion_fields", "ROW_SKIP", "ROW_UPDATE", "ROW_START", "id_lookup", "id_insert",
+           "id_delete", "ID_EMPTY"]
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -214,6 +215,78 @@ def motion_fields(v, cov, ch, sh, ratio, yaw_rad, sigma_yaw_rad, heading_offset_
             out[5, i] = sh_ if sp >= ratio * smax else nan
         else:
             out[3, i], out[4, i], out[5, i] = nan, nan, nan
+
+
+#: an empty entry of an id table (:func:`id_lookup`): its value
+ID_EMPTY = -1
+_ID_MULT = np.uint64(0x9E3779B97F4A7C15)  # (2^64 / golden ratio, odd: Fibonacci hashing)
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _id_home(key, shift):  # pragma: no cover - compiled
+    """The home entry of the int64 ``key`` in an id table of ``2^(64 - shift)`` entries (its top bits after a
+    multiplication by :data:`_ID_MULT`, which spreads consecutive ids over the table)."""
+    return np.int64((np.uint64(key) * _ID_MULT) >> np.uint64(shift))
+
+
+@njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
+def id_lookup(keys, vals, shift, ids, slots):  # pragma: no cover - compiled
+    """The rows of the int64 ids ``ids (n,)`` in an id table into ``slots (n,)`` (-1 for an id not in it).
+
+    An id table is an open-addressing hash table with linear probing in two arrays of ``2^(64 - shift)`` entries,
+    ``keys`` (int64) and ``vals`` (int64, :data:`ID_EMPTY` for an empty entry): the compiled form of
+    :class:`~footprint_uq.tracking.table.TrackTable`'s dictionary for frames whose ids are all integers."""
+    mask = keys.shape[0] - 1
+    for i in range(ids.shape[0]):
+        key = ids[i]
+        j = _id_home(key, shift)
+        s = -1
+        while vals[j] != ID_EMPTY:
+            if keys[j] == key:
+                s = vals[j]
+                break
+            j = (j + 1) & mask
+        slots[i] = s
+
+
+@njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
+def id_insert(keys, vals, shift, new_keys, new_vals):  # pragma: no cover - compiled
+    """Enter ``new_keys (m,)`` with ``new_vals (m,)`` (>= 0) in an id table (:func:`id_lookup`; a key already in it
+    gets the new value).  The caller keeps the table at most half full."""
+    mask = keys.shape[0] - 1
+    for i in range(new_keys.shape[0]):
+        key = new_keys[i]
+        j = _id_home(key, shift)
+        while vals[j] != ID_EMPTY and keys[j] != key:
+            j = (j + 1) & mask
+        keys[j] = key
+        vals[j] = new_vals[i]
+
+
+@njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
+def id_delete(keys, vals, shift, old_keys):  # pragma: no cover - compiled
+    """Remove ``old_keys (m,)`` from an id table (:func:`id_lookup`; a key not in it is passed over), closing
+    each gap by moving later entries of its probe run back (no tombstones: the table never degrades)."""
+    mask = keys.shape[0] - 1
+    for m in range(old_keys.shape[0]):
+        key = old_keys[m]
+        i = _id_home(key, shift)
+        while vals[i] != ID_EMPTY and keys[i] != key:
+            i = (i + 1) & mask
+        if vals[i] == ID_EMPTY:
+            continue
+        vals[i] = ID_EMPTY
+        j = i
+        while True:  # entry j moves back to the gap i unless its home lies cyclically in (i, j]
+            j = (j + 1) & mask
+            if vals[j] == ID_EMPTY:
+                break
+            h = _id_home(keys[j], shift)
+            if (h <= j and (h > i or i > j)) or (h > j and h > i and i > j):
+                continue
+            keys[i], vals[i] = keys[j], vals[j]
+            vals[j] = ID_EMPTY
+            i = j
 
 
 #: row actions of :func:`frame_rows` / :func:`frame_update`: not tracked, update the row's track, start a track

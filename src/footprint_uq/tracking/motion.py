@@ -109,7 +109,10 @@ _NONE = np.empty(0)
 
 
 def _column(name: str, a, n: int) -> np.ndarray:
-    """``a`` as a contiguous float64 (n,) array (one compiled signature of motion_fields)."""
+    """``a`` as a float64 (n,) array: a float64 (n,) array as it is (a column of the frame's boxes, strided: no
+    copy; motion_fields has a signature for it), anything else as a contiguous copy."""
+    if type(a) is np.ndarray and a.dtype == np.float64 and a.shape == (n,):
+        return a
     a = np.ascontiguousarray(a, dtype=np.float64).reshape(-1)
     if a.shape[0] != n:
         raise InputError(name, a.shape, f"{n} values, one per object")

@@ -17,12 +17,24 @@ from ..fast.footprint_kernels import SCRATCH_SHAPE, camera_constants
 from ..products.footprints import FrameProcessor
 from .filter import Initiator, SplitMeasurement
 from .imm_kernels import frame_pass, scratch
-from .kernels import ROW_SKIP, ROW_START, frame_rows, frame_rows_shared, frame_update, project_ground
+from .kernels import (
+    ID_EMPTY,
+    ROW_SKIP,
+    ROW_START,
+    frame_rows,
+    frame_rows_shared,
+    frame_update,
+    id_delete,
+    id_insert,
+    id_lookup,
+    project_ground,
+)
 from .models import ConstantVelocity
 
 __all__ = ["TrackerConfig", "TrackOutput", "TrackTable", "SharedJacobianAt", "CALIBRATION_MODES", "DEFAULT_GATE_CHI2"]
 
 _NO_B = np.zeros((0, 2, 0))
+_INT64_MIN, _INT64_MAX = -2 ** 63, 2 ** 63 - 1
 #: how the calibration error enters the filter: "consider" (the split model, the only honest one), "white" (the
 #: whole per-frame covariance as white noise) and "ignore" (only the per-frame part) are kept to show what goes
 #: wrong (docs/uncertainty-model.md)
@@ -114,7 +126,9 @@ class TrackTable:
     deleter); then every object whose id has a track is predicted to the frame's time and gated (a jump with
     ``y^T S^-1 y > gate_chi2`` restarts the track under a new ``track_id``), the others start tracks
     (the initiator).  Per frame, the ids are looked up in one pass over a dictionary (the only per-object Python
-    work; unknown ids, a few per frame, are then given rows); the rest is two compiled passes over the frame:
+    work; unknown ids, a few per frame, are then given rows), or, when they come as an int64 array, in one compiled
+    call (:func:`~footprint_uq.tracking.kernels.id_lookup`, a hash table kept beside the dictionary); the rest is
+    two compiled passes over the frame:
     :func:`~footprint_uq.tracking.kernels.frame_rows_shared` (the rows and ``B`` at the predicted positions, when
     ``shared_at`` is a :class:`SharedJacobianAt`; else :func:`~footprint_uq.tracking.kernels.frame_rows` and one
     evaluation of ``shared_at``) and :func:`~footprint_uq.tracking.imm_kernels.frame_pass` (the update, the
@@ -174,6 +188,12 @@ class TrackTable:
         self.initiator = Initiator(self.config.sigma_v0_mps)
         self._var_v0 = self.initiator.sigma_v0_mps ** 2
         self._index: dict = {None: -2}  # object_id -> slot (-2: never tracked)
+        #: the compiled form of ``_index`` for frames whose ids come as an int64 array (:func:`~footprint_uq.tracking.
+        #: kernels.id_lookup`: keys, values, shift; None until the first such frame: a list of ids takes the
+        #: dictionary, which is as fast as converting it), possible while every id the table has seen is an integer
+        #: of int64's range (``_int_ids``; the first other id ends it for the table's life)
+        self._int_ids = True
+        self._ids = None
         self._cap = 0
         self._grow(64)
         #: the compiled pass's working arrays (it allocates nothing itself)
@@ -237,7 +257,10 @@ class TrackTable:
     def _delete_expired(self, time_s: float) -> None:
         """The deleter: drop tracks whose last update is more than ``timeout_s`` before ``time_s`` (called when its
         sweep is due: :meth:`step` tests that first, two or more tracks and the oldest update expired)."""
-        for s in np.flatnonzero(time_s - self._t_last > self.config.timeout_s).tolist():  # (NaN: a free row)
+        gone = np.flatnonzero(time_s - self._t_last > self.config.timeout_s).tolist()  # (NaN: a free row)
+        if self._ids is not None and gone:
+            id_delete(*self._ids, np.array([self._keys[s] for s in gone], dtype=np.int64))
+        for s in gone:
             del self._index[self._keys[s]]
             self._keys[s] = None
             self._t_last[s] = np.nan
@@ -274,7 +297,9 @@ class TrackTable:
         t = time_s if isinstance(time_s, float) and math.isfinite(time_s) else as_float("time_s", time_s)
         xy = _c64(xy_m).reshape(-1, 2)
         n = xy.shape[0]
-        ids = object_ids if isinstance(object_ids, list) else list(object_ids)
+        id64 = object_ids if (type(object_ids) is np.ndarray and object_ids.dtype == np.int64
+                              and object_ids.ndim == 1 and self._int_ids) else None
+        ids = object_ids if isinstance(object_ids, list) or id64 is not None else list(object_ids)
         if len(ids) != n:
             raise InputError("object_ids", len(ids), f"{n} ids, one per object")
         B = _c64(shared_m)
@@ -295,7 +320,13 @@ class TrackTable:
         self._last_time = t
         if len(self._index) > 1 and t - self._oldest_s > self.config.timeout_s:  # (the deleter's sweep is due)
             self._delete_expired(t)
-        slots = np.fromiter(map(self._index.get, ids, repeat(-1)), np.int64, n)
+        if id64 is not None:  # (the ids an int64 array: the compiled look-up)
+            if self._ids is None:
+                self._id_table(64)
+            slots = np.empty(n, np.int64)
+            id_lookup(*self._ids, id64, slots)
+        else:
+            slots = np.fromiter(map(self._index.get, ids, repeat(-1)), np.int64, n)
         self._stamp += 1
         if n > self._old.shape[0]:  # (the step's working arrays, kept: nothing of them leaves the step)
             self._work(n)
@@ -327,6 +358,32 @@ class TrackTable:
             self._oldest_s = t
         return out
 
+    def _id_table(self, cap: int) -> None:
+        """A fresh compiled id table of ``cap`` (a power of 2) entries holding ``_index``'s ids."""
+        while 2 * (len(self._index) - 1) > cap:
+            cap *= 2
+        keys, vals = np.zeros(cap, np.int64), np.full(cap, ID_EMPTY, np.int64)
+        self._ids = (keys, vals, 64 - (cap.bit_length() - 1))
+        items = [(k, s) for k, s in self._index.items() if k is not None]
+        if items:
+            id_insert(*self._ids, np.array([k for k, _ in items], np.int64), np.array([s for _, s in items], np.int64))
+
+    def _enter_ids(self, keys: list, rows: list) -> None:
+        """New ids with their rows into the compiled id table if there is one (grown to stay at most half full), or
+        its end if one of them is not an integer of int64's range."""
+        for k in keys:
+            if not ((type(k) is int or isinstance(k, np.integer | bool)) and _INT64_MIN <= k <= _INT64_MAX):
+                self._int_ids = False
+                self._ids = None
+                return
+        if self._ids is None:
+            return
+        cap = self._ids[0].shape[0]
+        if 2 * (len(self._index) - 1) > cap:  # (_index holds them already)
+            self._id_table(cap)
+        else:
+            id_insert(*self._ids, np.array(keys, np.int64), np.array(rows, np.int64))
+
     def _work(self, n: int) -> None:
         """The step's working arrays for frames of up to ``n`` objects (the compiled calls read their first k or n
         rows): the objects to update ``_old (n,)``, their predicted positions ``_pred (n, 2)``, pixels ``_uv (n,
@@ -357,6 +414,7 @@ class TrackTable:
         the first object of each with finite inputs (``act == ROW_START``) gets a free row (the table grows when
         none is left); a later object of the same id is not tracked (``act`` set to ``ROW_SKIP``)."""
         first: set = set()
+        new_keys, new_rows = [], []
         for i in miss:
             key = ids[i]
             if key in first:
@@ -369,6 +427,10 @@ class TrackTable:
                 slots[i] = s = self._free.pop()
                 self._keys[s] = key
                 self._index[key] = s
+                new_keys.append(key)
+                new_rows.append(s)
+        if self._int_ids and new_keys:
+            self._enter_ids(new_keys, new_rows)
 
 
 def _c64(a) -> np.ndarray:

@@ -1,0 +1,132 @@
+"""The compiled look-up of integer ids (tracking/kernels.id_lookup / id_insert / id_delete, the open-addressing
+table :class:`TrackTable` keeps beside its dictionary) against a dict: random insert / delete / look-up sequences
+on small, crowded tables (collisions, runs wrapping round the end, int64's extremes), and whole frame sequences
+through two tables -- one on the compiled look-up, one on the dictionary -- with births, deaths by timeout,
+repeated ids, None ids, NaN centres, ids as lists and as int64 arrays: output for output equal to the bit."""
+
+from __future__ import annotations
+
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from footprint_uq.tracking import TrackerConfig, TrackTable
+from footprint_uq.tracking.kernels import ID_EMPTY, id_delete, id_insert, id_lookup
+
+_EXTREMES = [-2 ** 63, 2 ** 63 - 1, -1, 0, 1]
+_MULT = 0x9E3779B97F4A7C15  # (the kernels' multiplier)
+
+
+def _keys_by_home(log_cap: int, per_home: int = 6) -> list:
+    """For each entry of a table of ``2^log_cap`` entries, ``per_home`` int64 keys whose home it is (computed here
+    in Python's integers: the top bits of ``key * _MULT mod 2^64``), so that a test can crowd chosen entries."""
+    homes: list = [[] for _ in range(2 ** log_cap)]
+    for k in _EXTREMES + list(range(-3000, 3000)):
+        h = ((k % 2 ** 64) * _MULT % 2 ** 64) >> (64 - log_cap)
+        if len(homes[h]) < per_home and k not in homes[h]:
+            homes[h].append(k)
+    assert all(len(h) == per_home for h in homes)
+    return homes
+
+
+_HOMES = {c: _keys_by_home(c) for c in (2, 3, 4)}
+
+
+@settings(max_examples=80, deadline=None)
+@given(log_cap=st.sampled_from([2, 3, 4]), ops=st.lists(st.tuples(
+    st.sampled_from(["insert", "insert", "delete"]), st.integers(0, 15), st.integers(0, 5)), min_size=1,
+    max_size=150))
+def test_id_table_equals_a_dict_over_random_inserts_and_deletes(log_cap, ops):
+    cap = 2 ** log_cap
+    keys, vals, shift = np.zeros(cap, np.int64), np.full(cap, ID_EMPTY, np.int64), 64 - log_cap
+    homes = _HOMES[log_cap]
+    ref: dict = {}
+    probe = np.array(sorted({k for h in homes for k in h}), np.int64)
+    for n_op, (op, home, rank) in enumerate(ops):
+        key = homes[home % cap][rank]  # (keys crowding a few entries: long probe runs, wrapping round the end)
+        a = np.array([key], np.int64)
+        if op == "insert":
+            if key not in ref and 2 * (len(ref) + 1) > cap:  # (the table is kept at most half full)
+                continue
+            ref[key] = n_op
+            id_insert(keys, vals, shift, a, np.array([n_op], np.int64))
+        else:
+            ref.pop(key, None)
+            id_delete(keys, vals, shift, a)
+        got = np.empty(probe.shape[0], np.int64)
+        id_lookup(keys, vals, shift, probe, got)
+        want = np.array([ref.get(int(k), -1) for k in probe.tolist()], np.int64)
+        assert np.array_equal(got, want), (op, key)
+        assert int((vals != ID_EMPTY).sum()) == len(ref)
+
+
+def test_a_deletion_keeps_an_entry_wrapped_round_the_end_reachable():
+    """Pinned: a table of 8 with A at its home 6, B and C homed at 7 (C wrapped to entry 0); deleting A must leave C
+    where it is (its home 7 lies between the gap 6 and C's entry 0, cyclically)."""
+    h = _HOMES[3]
+    keys, vals = np.zeros(8, np.int64), np.full(8, ID_EMPTY, np.int64)
+    A, B, C = h[6][0], h[7][0], h[7][1]
+    id_insert(keys, vals, 61, np.array([A, B, C], np.int64), np.array([10, 11, 12], np.int64))
+    assert vals.tolist() == [12, ID_EMPTY, ID_EMPTY, ID_EMPTY, ID_EMPTY, ID_EMPTY, 10, 11]
+    id_delete(keys, vals, 61, np.array([A], np.int64))
+    got = np.empty(3, np.int64)
+    id_lookup(keys, vals, 61, np.array([A, B, C], np.int64), got)
+    assert got.tolist() == [-1, 11, 12]
+
+
+def _frames(seed: int, count: int):
+    """Random frames: ids drawn from a small pool (repeats in a frame, ids coming back after a timeout), some None,
+    NaN centres, uneven time steps (gaps beyond the timeout), given as a list or as an int64 array."""
+    rng = np.random.default_rng(seed)
+    t = 0.0
+    pool = 12
+    for _ in range(count):
+        t += float(rng.choice([0.02, 0.04, 0.1, 0.7]))
+        n = int(rng.integers(0, 9))
+        ids = rng.integers(-3, pool, n).tolist()
+        xy = rng.normal(0.0, 3.0, (n, 2)) + np.array(ids, float).reshape(n, 1) * 10.0
+        xy[rng.random(n) < 0.1] = np.nan
+        if rng.random() < 0.15 and n:
+            ids[int(rng.integers(0, n))] = None
+        elif rng.random() < 0.5:
+            ids = np.array(ids, np.int64)
+        if rng.random() < 0.05:
+            pool += 1000  # (a burst of new ids: the compiled table grows)
+            ids = list(range(pool - 40, pool)) + list(ids)
+            xy = np.vstack([np.zeros((40, 2)), xy])
+        yield t, ids, xy
+
+
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 2 ** 31 - 1))
+def test_int_id_lookup_is_the_dictionary_over_frames_with_births_and_deaths(seed):
+    cfg = TrackerConfig(timeout_s=0.5)
+    fast, slow = TrackTable(cfg, rank=1), TrackTable(cfg, rank=1)
+    slow._int_ids, slow._ids = False, None  # (the dictionary's look-up for every frame)
+    for t, ids, xy in _frames(seed, 40):
+        n = xy.shape[0]
+        args = (np.repeat(np.eye(2)[None] * 0.04, n, 0), np.full((n, 2, 1), 0.01))
+        ids_slow = ids.tolist() if isinstance(ids, np.ndarray) else list(ids)
+        got, want = fast.step(t, ids, xy, *args), slow.step(t, ids_slow, xy, *args)
+        for name, g, w in zip(got._fields, got, want, strict=True):
+            assert np.array_equal(g, w, equal_nan=g.dtype.kind == "f"), (t, name)
+        assert len(fast) == len(slow)
+        assert np.array_equal(np.nan_to_num(fast.frame_nis(), nan=-1.0), np.nan_to_num(slow.frame_nis(), nan=-1.0))
+    assert fast._int_ids and fast._ids is not None  # (the array frames went through the compiled look-up)
+    keys = [k for k in fast._index if k is not None]
+    got = np.empty(len(keys), np.int64)
+    id_lookup(*fast._ids, np.array(keys, np.int64), got)
+    assert got.tolist() == [fast._index[k] for k in keys]
+
+
+def test_a_non_integer_id_ends_the_compiled_lookup_and_the_tracks_go_on():
+    table = TrackTable(TrackerConfig(), rank=0)
+    B = np.zeros((2, 2, 0))
+    cov = np.repeat(np.eye(2)[None], 2, 0)
+    first = table.step(0.0, [5, 7], np.array([[0.0, 0.0], [9.0, 9.0]]), cov, B)
+    assert table._int_ids
+    out = table.step(0.1, ["a", 7], np.array([[0.0, 0.0], [9.0, 9.1]]), cov, B)
+    assert not table._int_ids
+    assert out.track_id[1] == first.track_id[1] and out.new_track.tolist() == [True, False]
+    out = table.step(0.2, np.array([5, 7]), np.array([[0.0, 0.1], [9.0, 9.2]]), cov, B)
+    assert out.track_id.tolist() == first.track_id.tolist() and out.n_updates.tolist() == [2, 3]
