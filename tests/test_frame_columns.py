@@ -291,6 +291,28 @@ def test_the_lean_tracked_path_is_the_one_taken(camera, monkeypatch):
     assert _record(bad[-1]) != _record(want[-1]) and _tracks_state(broken) != _tracks_state(ref)
 
 
+def test_the_lean_tracked_path_hands_the_tracks_int64_ids(camera):
+    """A one-class tracked frame of integer ids steps its tracks with the ids as an int64 array (the table's
+    compiled id look-up, ``tracking/kernels.py`` ``id_lookup``), the general path with a list (the dictionary):
+    the same records, CPM and tracks, a missed object and the births of every frame included."""
+    payloads = _tracked_payloads(30, 4)
+    for f in payloads:
+        for d in f["detections"]:
+            d["class"] = "car"
+    frames = [orjson.dumps(f) for f in payloads]
+    ref = Service(camera, "basler1", record="compact", tracks=True)
+    ref._columnar = False
+    want = [ref.process_frame_json(f) for f in frames]
+    svc = Service(camera, "basler1", record="compact", tracks=True)
+    got = [svc.process_frame_json(f) for f in frames]
+    for a, b in zip(got, want, strict=True):
+        assert _record(a) == _record(b) and a.cpm_uper == b.cpm_uper
+    assert _tracks_state(svc) == _tracks_state(ref)
+    (table,) = next(iter(svc.cameras.values())).tracker.tracks.tables
+    (ref_table,) = next(iter(ref.cameras.values())).tracker.tracks.tables
+    assert table._ids is not None and ref_table._ids is None  # (the compiled look-up; the reference's dictionary)
+
+
 @pytest.mark.parametrize("case", ["bad-covariance", "flagged", "over-255", "cpm-declined", "on-tracked"])
 def test_tracked_declined_frames_are_the_general_paths(camera, case, monkeypatch):
     """Tracked frames the lean path declines before the tracker's step (a covariance the kernel refuses, a centre

@@ -710,8 +710,10 @@ class Service:
             return None
         motion = None
         if self.tracks:
+            # (the ids as int64 when every one is such an integer: the tracks' compiled id look-up)
             motion = self._step_tracks(setup, cols.centre_xy_world_m, cols.centre_cov_m2, cols.centre_shared_m,
-                                       found.object_ids, found.classes, ts, None, True)
+                                       found.object_ids if int_ids is None else int_ids, found.classes, ts, None,
+                                       True)
         t1 = time.perf_counter()
         out = None if motion is not None and not _motion_values(cols.values, motion) else \
             self._lean_records(setup, camera_id, fno, ts, ref_ms, found, int_ids, errors, cols, motion, t0, t1)
@@ -824,7 +826,8 @@ class Service:
 
     @staticmethod
     def _step_tracks(setup: CameraSetup, xy_world_m: np.ndarray, cov_m2: np.ndarray, shared_m: np.ndarray | None,
-                     ids: list, classes: list, ts: float, yaw_rad: np.ndarray | None, contact_2d: bool) -> tuple:
+                     ids: list | np.ndarray, classes: list, ts: float, yaw_rad: np.ndarray | None,
+                     contact_2d: bool) -> tuple:
         """:meth:`_motion` of the centres' columns ``xy_world_m`` (N, 2) m, ``cov_m2`` (N, 2, 2) m^2 and
         ``shared_m`` (N, 2, r) (an estimate's, or the lean frame's :class:`~footprint_uq.products.frame_processor.
         FrameColumns`): ``(track_id (N,), ObjectMotion)``."""
