@@ -130,3 +130,32 @@ def test_a_non_integer_id_ends_the_compiled_lookup_and_the_tracks_go_on():
     assert out.track_id[1] == first.track_id[1] and out.new_track.tolist() == [True, False]
     out = table.step(0.2, np.array([5, 7]), np.array([[0.0, 0.1], [9.0, 9.2]]), cov, B)
     assert out.track_id.tolist() == first.track_id.tolist() and out.n_updates.tolist() == [2, 3]
+
+
+def test_class_tracks_hand_each_table_its_part_of_an_int64_array():
+    """With a motion model per class (two tables), ids as an int64 array reach each table as its part of the array
+    (its compiled look-up), ids as a list as lists (the dictionary): the same outputs to the bit over frames with
+    both classes, absent objects, timeouts and births again."""
+    from footprint_uq.tracking.classes import ClassTracks
+    per_class = {"truck": TrackerConfig(timeout_s=0.5, accel_psd_m2ps3=0.5, manoeuvre_accel_psd_m2ps3=None)}
+    cfg = TrackerConfig(timeout_s=0.5)
+    arr, lst = (ClassTracks(cfg, per_class, rank=2) for _ in range(2))
+    rng = np.random.default_rng(3)
+    start, vel = rng.uniform(-20.0, 20.0, (40, 2)), rng.uniform(-5.0, 5.0, (40, 2))
+    for f in range(30):
+        t = 0.1 * f
+        keep = np.flatnonzero((np.arange(40) + f) % 7 != 0)  # (one in seven absent from each frame)
+        if 10 <= f < 18:
+            keep = keep[keep < 20]  # (half absent for 0.8 s: timeouts, then births again)
+        ids = (keep * 1000 - 7).astype(np.int64)
+        classes = ["truck" if i % 3 == 0 else "car" for i in keep]
+        xy = start[keep] + t * vel[keep] + rng.normal(0.0, 0.05, (len(keep), 2))
+        cov = np.tile(np.eye(2) * 0.04, (len(keep), 1, 1))
+        B = np.zeros((len(keep), 2, 2))
+        a = arr.step(t, ids, classes, xy, shared_m=B, cov_m2=cov)
+        b = lst.step(t, ids.tolist(), classes, xy, shared_m=B, cov_m2=cov)
+        for name in a._fields:
+            assert np.array_equal(getattr(a, name), getattr(b, name), equal_nan=True), (f, name)
+    assert all(len(t._index) > 1 and t._ids is not None for t in arr.tables)  # (both tables: the compiled look-up)
+    assert all(t._ids is None for t in lst.tables)
+    assert arr.tables[0]._next_id > 30 and arr.tables[1]._next_id > 10  # (births again after the timeouts)

@@ -93,7 +93,9 @@ class ClassTracks:
         and the result as :meth:`~footprint_uq.tracking.table.TrackTable.step`."""
         if len(self.tables) == 1:
             return self.tables[0].step(time_s, object_ids, xy_m, cov_frame_m2, shared_m, cov_m2=cov_m2)
-        ids = list(object_ids)
+        # (ids as an int64 array stay one: each table's part of it goes to the table's compiled id look-up)
+        int64 = type(object_ids) is np.ndarray and object_ids.dtype == np.int64 and object_ids.ndim == 1
+        ids = object_ids if int64 else list(object_ids)
         n = len(ids)
         which = self.table_index(classes, n)
         k = len(self.tables)
@@ -103,7 +105,7 @@ class ClassTracks:
             sel = np.flatnonzero(which == j)  # (every table steps, an empty part included: its clock and deleter)
             self._last_parts.append((sel, table))
             part = [None if a is None else np.asarray(a)[sel] for a in (xy_m, cov_frame_m2, shared_m, cov_m2)]
-            o = table.step(time_s, [ids[i] for i in sel.tolist()], *part[:3], cov_m2=part[3])
+            o = table.step(time_s, ids[sel] if int64 else [ids[i] for i in sel.tolist()], *part[:3], cov_m2=part[3])
             for f, v in zip(out, o, strict=True):
                 f[sel] = v
             out.track_id[sel] = np.where(o.track_id >= 0, o.track_id * k + j, -1)
