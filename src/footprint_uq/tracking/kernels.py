@@ -229,6 +229,17 @@ def _id_home(key, shift):  # pragma: no cover - compiled
     return np.int64((np.uint64(key) * _ID_MULT) >> np.uint64(shift))
 
 
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _id_entry(keys, vals, shift, key):  # pragma: no cover - compiled
+    """The entry of ``key`` in an id table (:func:`id_lookup`): where it is, or the empty entry that ends its probe
+    run (where it would go)."""
+    mask = keys.shape[0] - 1
+    j = _id_home(key, shift)
+    while vals[j] != ID_EMPTY and keys[j] != key:
+        j = (j + 1) & mask
+    return j
+
+
 @njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
 def id_lookup(keys, vals, shift, ids, slots):  # pragma: no cover - compiled
     """The rows of the int64 ids ``ids (n,)`` in an id table into ``slots (n,)`` (-1 for an id not in it).
@@ -236,29 +247,18 @@ def id_lookup(keys, vals, shift, ids, slots):  # pragma: no cover - compiled
     An id table is an open-addressing hash table with linear probing in two arrays of ``2^(64 - shift)`` entries,
     ``keys`` (int64) and ``vals`` (int64, :data:`ID_EMPTY` for an empty entry): the compiled form of
     :class:`~footprint_uq.tracking.table.TrackTable`'s dictionary for frames whose ids are all integers."""
-    mask = keys.shape[0] - 1
     for i in range(ids.shape[0]):
-        key = ids[i]
-        j = _id_home(key, shift)
-        s = -1
-        while vals[j] != ID_EMPTY:
-            if keys[j] == key:
-                s = vals[j]
-                break
-            j = (j + 1) & mask
-        slots[i] = s
+        j = _id_entry(keys, vals, shift, ids[i])
+        slots[i] = -1 if vals[j] == ID_EMPTY else vals[j]
 
 
 @njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
 def id_insert(keys, vals, shift, new_keys, new_vals):  # pragma: no cover - compiled
     """Enter ``new_keys (m,)`` with ``new_vals (m,)`` (>= 0) in an id table (:func:`id_lookup`; a key already in it
     gets the new value).  The caller keeps the table at most half full."""
-    mask = keys.shape[0] - 1
     for i in range(new_keys.shape[0]):
         key = new_keys[i]
-        j = _id_home(key, shift)
-        while vals[j] != ID_EMPTY and keys[j] != key:
-            j = (j + 1) & mask
+        j = _id_entry(keys, vals, shift, key)
         keys[j] = key
         vals[j] = new_vals[i]
 
@@ -269,10 +269,7 @@ def id_delete(keys, vals, shift, old_keys):  # pragma: no cover - compiled
     each gap by moving later entries of its probe run back (no tombstones: the table never degrades)."""
     mask = keys.shape[0] - 1
     for m in range(old_keys.shape[0]):
-        key = old_keys[m]
-        i = _id_home(key, shift)
-        while vals[i] != ID_EMPTY and keys[i] != key:
-            i = (i + 1) & mask
+        i = _id_entry(keys, vals, shift, old_keys[m])
         if vals[i] == ID_EMPTY:
             continue
         vals[i] = ID_EMPTY
