@@ -139,10 +139,9 @@ def test_compact_kernel_refuses_columns_of_another_length(tracked, n, position_n
     ftext = np.frombuffer(orjson.dumps(rows), np.uint8)
     ids = np.arange(n, dtype=np.int64)
     zeros = np.zeros(n, np.int64)
-    cb, ca = jsonrows._text_table([b"null"])
-    sb, sa = jsonrows._text_table([b""])
-    out = jsonrows._compact_rows(ftext, ids, zeros, cb, ca, zeros, sb, sa, ids, False, ids, tracked,
-                                 jsonrows._COMPACT_LIT, jsonrows._COMPACT_AT, 4096)
+    args = jsonrows._compact_args(ids, zeros, [b"null"], zeros, [b""], np.ones((10 if tracked else 5, n)), None,
+                                  ids if tracked else None)
+    out = jsonrows._compact_rows(ftext, *args[1:-1], 4096)
     right = position_n == n and (motion_n == n or not tracked)
     assert (len(out) > 0) == right
     if not tracked and not right:
@@ -285,7 +284,7 @@ def test_the_tracked_columnar_path_is_the_one_taken(camera, monkeypatch):
 
     def broken(ftext, ids, *rest):  # (the track ids one off: the record's track_id then differs)
         args = list(rest)
-        args[8] = args[8] + 1
+        args[4] = args[4] + 1
         return real(ftext, ids, *args)
 
     monkeypatch.setattr(jsonrows, "_compact_rows", broken)

@@ -12,13 +12,15 @@ values.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 import orjson
+from llvmlite import ir as llvm_ir
 from numba import njit, types
 from numba.core import cgutils
+from numba.cpython.unsafe.numbers import trailing_zeros
 from numba.extending import intrinsic
-
-from .bytewords import first_of_two, load8, store8
 
 __all__ = ["Table", "compact_objects_json"]
 
@@ -246,9 +248,77 @@ def _compile(layout: tuple):
 
 
 # -- the compact record's objects: one compiled pass ---------------------------------------------------------
+#: bytes per vector step of the compact writer (one 256-bit load, compare or store)
+_VEC = 32
+_VEC_TYPE = llvm_ir.VectorType(llvm_ir.IntType(8), _VEC)
+
+
+def _vector_pointer(context, builder, array_type, array, at):
+    data = context.make_array(array_type)(context, builder, array).data
+    return builder.bitcast(builder.gep(data, [at]), _VEC_TYPE.as_pointer())
+
+
+@intrinsic
+def _copy32(typingctx, dst, dst_at, src, src_at):
+    """``dst[dst_at:dst_at + 32] = src[src_at:src_at + 32]`` (C-contiguous uint8 arrays; the caller guarantees the
+    bounds): one unaligned vector load, then one store (so ``src`` may be ``dst``, the ranges overlapping)."""
+    if not (_bytes1d(dst) and _bytes1d(src)):
+        return None
+
+    def codegen(context, builder, signature, args):
+        word = builder.load(_vector_pointer(context, builder, signature.args[2], args[2], args[3]), align=1)
+        builder.store(word, _vector_pointer(context, builder, signature.args[0], args[0], args[1]), align=1)
+        return context.get_dummy_value()
+
+    return types.void(dst, types.intp, src, types.intp), codegen
+
+
+def _bytes1d(a) -> bool:
+    return isinstance(a, types.Array) and a.ndim == 1 and a.layout == "C" and a.dtype == types.uint8
+
+
+def _byte_mask(*wanted: int):
+    """An intrinsic ``mask(buf, at)``: bit ``i`` of the uint64 result set where ``buf[at + i]`` (``i`` < 32) is one of
+    the ``wanted`` bytes (one vector load and compare; the caller guarantees ``at + 32`` within ``buf``)."""
+
+    @intrinsic
+    def mask(typingctx, buf, at):
+        if not _bytes1d(buf):
+            return None
+
+        def codegen(context, builder, signature, args):
+            word = builder.load(_vector_pointer(context, builder, signature.args[0], args[0], args[1]), align=1)
+            hit = None
+            for b in wanted:
+                eq = builder.icmp_unsigned("==", word, llvm_ir.Constant(_VEC_TYPE, [b] * _VEC))
+                hit = eq if hit is None else builder.or_(hit, eq)
+            return builder.zext(builder.bitcast(hit, llvm_ir.IntType(_VEC)), llvm_ir.IntType(64))
+
+        return types.uint64(buf, types.intp), codegen
+
+    return mask
+
+
+_ends32 = _byte_mask(_COMMA, _RBRACKET)  # where a value of a numeric array's text ends
+_closes32 = _byte_mask(_RBRACKET)  # where an inner array ends
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _first_bit(mask):  # pragma: no cover - compiled
+    """The index (int64) of the lowest set bit of a non-zero uint64."""
+    return np.int64(trailing_zeros(mask))
+
+
+#: "00" "01" ... "99": two decimal digits per entry (a number is written two digits per division)
+_DIGIT_PAIRS = np.frombuffer(b"".join(b"%02d" % k for k in range(100)), np.uint8)
+#: 10 ** k (k = 0..19), every power of ten below 2 ** 64
+_POW10 = np.array([10 ** k for k in range(20)], np.uint64)
+
+
 @njit(cache=True, nogil=True, inline="always")
 def _put_int(out, p, v):  # pragma: no cover - compiled
-    """The decimal text of ``v`` (int64) at ``out[p]``; the index after it."""
+    """The decimal text of ``v`` (int64) at ``out[p]``; the index after it.  The digits are counted by comparisons
+    and written from the last, two per division by 100."""
     if v < 0:
         out[p] = 45
         p += 1
@@ -256,20 +326,34 @@ def _put_int(out, p, v):  # pragma: no cover - compiled
     else:
         m = np.uint64(v)
     n = 1
-    t = m
-    while t >= np.uint64(10):
-        t //= np.uint64(10)
+    while n < 20 and m >= _POW10[n]:
         n += 1
-    for q in range(p + n - 1, p - 1, -1):
-        out[q] = np.uint8(48) + np.uint8(m % np.uint64(10))
-        m //= np.uint64(10)
+    q = p + n
+    hundred = np.uint64(100)
+    while m >= hundred:
+        d = np.int64(m % hundred) * 2
+        m //= hundred
+        q -= 2
+        out[q] = _DIGIT_PAIRS[d]
+        out[q + 1] = _DIGIT_PAIRS[d + 1]
+    if m >= np.uint64(10):
+        d = np.int64(m) * 2
+        out[q - 2] = _DIGIT_PAIRS[d]
+        out[q - 1] = _DIGIT_PAIRS[d + 1]
+    else:
+        out[q - 1] = np.uint8(48) + np.uint8(m)
     return p + n
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _put_span(out, p, src, a, b):  # pragma: no cover - compiled
-    """``src[a:b]`` at ``out[p]``; the index after it."""
-    _copy_bytes(out, p, src, a, b - a)
+def _put_text(out, p, src, a, b):  # pragma: no cover - compiled
+    """``src[a:b]`` at ``out[p]``, 32 bytes at a time (``src`` readable up to ``b + 31``, ``out`` 32 bytes of room
+    past the text: the extra bytes are overwritten next); the index after it.  ``src`` may be ``out`` itself for a
+    text before ``p`` (each load precedes its store, and no store reaches below ``p``)."""
+    k = a
+    while k < b:
+        _copy32(out, p + (k - a), src, k)
+        k += _VEC
     return p + b - a
 
 
@@ -278,7 +362,7 @@ def _put_id(out, p, v, null_src, a, b):  # pragma: no cover - compiled
     """An id at ``out[p]``: ``v`` as an integer, or ``null_src[a:b]`` (the text ``null``) where ``v`` < 0 (none);
     the position after it."""
     if v < 0:
-        return _put_span(out, p, null_src, a, b)
+        return _put_text(out, p, null_src, a, b)
     return _put_int(out, p, v)
 
 
@@ -286,7 +370,7 @@ def _put_id(out, p, v, null_src, a, b):  # pragma: no cover - compiled
 def _column_bounds(ftext, nf):  # pragma: no cover - compiled
     """Where the ``nf`` inner arrays of orjson's text of a float array ``(nf, n)`` (numbers and ``null`` only)
     begin and end: ``(first (nf,), close (nf,), ok)`` -- per column the index of its first value and of its
-    ``]``; ``ok`` False: the text is not ``nf`` non-empty arrays in one.  The ``]`` is searched 8 bytes at a
+    ``]``; ``ok`` False: the text is not ``nf`` non-empty arrays in one.  The ``]`` is searched 32 bytes at a
     time."""
     first = np.zeros(nf, np.int64)
     close = np.zeros(nf, np.int64)
@@ -299,11 +383,12 @@ def _column_bounds(ftext, nf):  # pragma: no cover - compiled
             return first, close, False
         i += 1
         first[k] = i
-        while i + 8 <= L:
-            f = first_of_two(load8(ftext, i), _RBRACKETS, _RBRACKETS)
-            i += f
-            if f < 8:
+        while i + _VEC <= L:
+            m = _closes32(ftext, i)
+            if m != np.uint64(0):
+                i += _first_bit(m)
                 break
+            i += _VEC
         while i < L and ftext[i] != 93:
             i += 1
         if i >= L:
@@ -317,24 +402,20 @@ def _column_bounds(ftext, nf):  # pragma: no cover - compiled
     return first, close, i == L - 1 and ftext[i] == 93
 
 
-_COMMAS = np.uint64(0x2C2C2C2C2C2C2C2C)
-_RBRACKETS = np.uint64(0x5D5D5D5D5D5D5D5D)
-
-
 @njit(cache=True, nogil=True, inline="always")
 def _put_value(out, p, ftext, c):  # pragma: no cover - compiled
-    """The value at ``ftext[c]`` (up to the next ``,`` or ``]``) at ``out[p]``, searched and copied 8 bytes at a
-    time (``out`` keeps 8 bytes of room: a word's bytes past the value are overwritten next): ``(p, c)`` after
-    it -- ``ftext[c]`` is then its ``,`` or ``]``."""
+    """The value at ``ftext[c]`` (up to the next ``,`` or ``]``) at ``out[p]``, searched and copied 32 bytes at a
+    time (``out`` keeps 32 bytes of room: the bytes past the value are overwritten next): ``(p, c)`` after it --
+    ``ftext[c]`` is then its ``,`` or ``]``."""
     L = ftext.shape[0]
-    while c + 8 <= L:
-        w = load8(ftext, c)
-        store8(out, p, w)
-        f = first_of_two(w, _COMMAS, _RBRACKETS)
-        p += f
-        c += f
-        if f < 8:
-            return p, c
+    while c + _VEC <= L:
+        _copy32(out, p, ftext, c)
+        m = _ends32(ftext, c)
+        if m != np.uint64(0):
+            f = _first_bit(m)
+            return p + f, c + f
+        p += _VEC
+        c += _VEC
     while ftext[c] != 44 and ftext[c] != 93:  # (the text's last bytes: it ends with "]]")
         out[p] = ftext[c]
         p += 1
@@ -343,23 +424,24 @@ def _put_value(out, p, ftext, c):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
-def _compact_rows(ftext, ids, cls_idx, cls_buf, cls_at, st_idx, st_buf, st_at, mid, with_mid, tid, with_motion, lit,
-                  at, size):  # pragma: no cover - compiled
+def _compact_rows(ftext, ids, cls_idx, st_idx, mid, with_mid, tid, with_motion, texts, at, st_base,
+                  size):  # pragma: no cover - compiled
     """The compact record's ``objects`` text (see :func:`compact_objects_json`): per row the constant texts
-    ``lit[at[k]:at[k + 1]]`` (:data:`_COMPACT_PIECES`) around the id, the class and status texts of the row's
-    entries in their tables, the five float values (``ftext``: orjson's text of the (5, n) array, or (10, n) with
-    the motion), the motion (``with_motion``: the track id, negative: null, and the five motion values) and the
-    message id (``with_mid``; negative: null).  Empty: ``ftext`` does not hold 5 n (10 n) values.
+    ``texts[at[k]:at[k + 1]]`` (k < 19: :data:`_COMPACT_PIECES`) around the id, the row's class text (entry
+    ``19 + cls_idx[r]``) and status text (entry ``st_base + st_idx[r]``), the five float values (``ftext``:
+    orjson's text of the (5, n) array, or (10, n) with the motion), the motion (``with_motion``: the track id,
+    negative: null, and the five motion values) and the message id (``with_mid``; negative: null).  ``texts`` has
+    32 bytes of room past its last text (:func:`_row_texts`); ``size`` bounds the text's length.  Empty: ``ftext``
+    does not hold 5 n (10 n) values.
 
     One pass: a cursor per column of ``ftext`` (:func:`_column_bounds`) copies the row's value of that column
     straight into place (:func:`_put_value`); the column's ``n``-th value must end at its ``]``, the others
-    before it."""
+    before it.  Texts are copied 32 bytes at a time (:func:`_put_text`)."""
     n = ids.shape[0]
-    nf = 10 if with_motion else 5
-    cur, close, ok = _column_bounds(ftext, nf)
+    cur, close, ok = _column_bounds(ftext, 10 if with_motion else 5)
     if not ok:
         return np.zeros(0, np.uint8)
-    out = np.empty(size + 8, np.uint8)  # (8 bytes of room for the word copies)
+    out = np.empty(size + _VEC, np.uint8)  # (32 bytes of room for the vector copies)
     out[0] = 91
     p = 1
     s_xy = e_xy = 0
@@ -367,35 +449,36 @@ def _compact_rows(ftext, ids, cls_idx, cls_buf, cls_at, st_idx, st_buf, st_at, m
         if r:
             out[p] = 44
             p += 1
-        p = _put_span(out, p, lit, at[0], at[1])
+        p = _put_text(out, p, texts, at[0], at[1])
         p = _put_int(out, p, ids[r])
-        p = _put_span(out, p, lit, at[1], at[2])
-        j = cls_idx[r]
-        p = _put_span(out, p, cls_buf, cls_at[j], cls_at[j + 1])
-        j = st_idx[r]
-        p = _put_span(out, p, st_buf, st_at[j], st_at[j + 1])
+        j = 19 + cls_idx[r]
+        p = _put_text(out, p, texts, at[1], at[2])
+        p = _put_text(out, p, texts, at[j], at[j + 1])
+        j = st_base + st_idx[r]
+        p = _put_text(out, p, texts, at[j], at[j + 1])
         last = r == n - 1
         for g in range(2 if with_motion else 1):  # the position (x, y, cov), then the motion (v, cov_v)
             if g:
-                p = _put_span(out, p, lit, at[12], at[13])
-                p = _put_id(out, p, tid[r], lit, at[11], at[12])
+                p = _put_text(out, p, texts, at[12], at[13])
+                p = _put_id(out, p, tid[r], texts, at[11], at[12])
             base, t0 = 5 * g, 2 + 11 * g  # (the motion's texts: at[13..18], then "]]" at[8])
             for k in range(6):  # x, y, cxx, cxy, cxy, cyy (v_east, v_north, cvv_ee, cvv_en, cvv_en, cvv_nn)
-                p = _put_span(out, p, lit, at[t0 + k], at[t0 + 1 + k])
-                if k == 4:  # the off-diagonal once more: the span just written
-                    p = _put_span(out, p, ftext, s_xy, e_xy)
+                p = _put_text(out, p, texts, at[t0 + k], at[t0 + 1 + k])
+                if k == 4:  # the off-diagonal once more: the text just written (out[s_xy:e_xy])
+                    p = _put_text(out, p, out, s_xy, e_xy)
                     continue
                 q = base + (k if k < 4 else k - 1)
-                s_xy = cur[q]
-                p, e_xy = _put_value(out, p, ftext, s_xy)
-                if (e_xy == close[q]) != last:  # (a column with more or fewer than n values)
+                s_xy = p
+                p, c = _put_value(out, p, ftext, cur[q])
+                e_xy = p
+                if (c == close[q]) != last:  # (a column with more or fewer than n values)
                     return np.zeros(0, np.uint8)
-                cur[q] = e_xy + 1
-            p = _put_span(out, p, lit, at[8], at[9])
+                cur[q] = c + 1
+            p = _put_text(out, p, texts, at[8], at[9])
         if with_mid:
-            p = _put_span(out, p, lit, at[9], at[10])
-            p = _put_id(out, p, mid[r], lit, at[11], at[12])
-        p = _put_span(out, p, lit, at[10], at[11])
+            p = _put_text(out, p, texts, at[9], at[10])
+            p = _put_id(out, p, mid[r], texts, at[11], at[12])
+        p = _put_text(out, p, texts, at[10], at[11])
     out[p] = 93
     return out[:p + 1]
 
@@ -404,26 +487,53 @@ def _compact_rows(ftext, ids, cls_idx, cls_buf, cls_at, st_idx, st_buf, st_at, m
 _COMPACT_PIECES = (b'{"object_id":', b',"class":', b',"x_m":', b',"y_m":', b',"cov_m2":[[', b",", b"],[", b",", b"]]",
                    b',"message_object_id":', b"}", b"null", b',"track_id":', b',"v_east_mps":', b',"v_north_mps":',
                    b',"cov_v_m2ps2":[[', b",", b"],[", b",")
-_COMPACT_LIT = np.frombuffer(b"".join(_COMPACT_PIECES), np.uint8)
-_COMPACT_AT = np.cumsum([0] + [len(p) for p in _COMPACT_PIECES]).astype(np.int64)
+#: bytes of a row beside its floats and its class and status texts: the constant texts, 3 integers of at most
+#: 20 digits and a sign, the row's comma
+_ROW_BYTES = sum(map(len, _COMPACT_PIECES)) + 3 * 21 + 1
 
 
-def _text_table(texts: list) -> tuple[np.ndarray, np.ndarray]:
-    """Texts (bytes) as one byte array and their offsets ``(k + 1,)``; a frame's few class and status texts repeat
-    from frame to frame: up to 256 tables are kept (then forgotten at once; the kernels only read them)."""
-    key = tuple(texts)
-    table = _TEXT_TABLES.get(key)
+class _RowTexts(NamedTuple):
+    """:func:`_compact_rows`' texts of a frame's distinct classes and statuses: ``texts`` the constant pieces, the
+    class texts, the status texts and 32 bytes of room; ``at`` (19 + classes + statuses + 1,) their offsets;
+    ``st_base`` the status texts' first entry in ``at``; ``row_bytes`` a bound on a row's bytes beside its floats."""
+
+    texts: np.ndarray
+    at: np.ndarray
+    st_base: int
+    row_bytes: int
+
+
+def _row_texts(class_texts: list, status_texts: list) -> _RowTexts:
+    """The :class:`_RowTexts` of a frame's class and status texts (bytes); a frame's few texts repeat from frame
+    to frame: up to 256 tables are kept (then forgotten at once; the kernel only reads them)."""
+    key = (tuple(class_texts), tuple(status_texts))
+    table = _ROW_TEXTS.get(key)
     if table is None:
-        at = np.zeros(len(texts) + 1, np.int64)
-        np.cumsum([len(t) for t in texts], out=at[1:])
-        table = np.frombuffer(b"".join(texts), np.uint8), at
-        if len(_TEXT_TABLES) >= 256:
-            _TEXT_TABLES.clear()
-        _TEXT_TABLES[key] = table
+        pieces = (*_COMPACT_PIECES, *class_texts, *status_texts)
+        at = np.zeros(len(pieces) + 1, np.int64)
+        np.cumsum([len(t) for t in pieces], out=at[1:])
+        table = _RowTexts(np.frombuffer(b"".join(pieces) + bytes(_VEC), np.uint8), at,
+                          len(_COMPACT_PIECES) + len(class_texts),
+                          _ROW_BYTES + max(map(len, class_texts)) + max(map(len, status_texts)))
+        if len(_ROW_TEXTS) >= 256:
+            _ROW_TEXTS.clear()
+        _ROW_TEXTS[key] = table
     return table
 
 
-_TEXT_TABLES: dict = {}
+_ROW_TEXTS: dict = {}
+
+
+def _compact_args(ids: np.ndarray, class_idx: np.ndarray, class_texts: list, status_idx: np.ndarray,
+                  status_texts: list, values: np.ndarray, message_ids: np.ndarray | None = None,
+                  track_ids: np.ndarray | None = None) -> tuple:
+    """:func:`_compact_rows`' arguments for :func:`compact_objects_json`'s (``n`` > 0)."""
+    ftext = np.frombuffer(orjson.dumps(np.ascontiguousarray(values, dtype=np.float64), option=_NUMPY), np.uint8)
+    rt = _row_texts(class_texts, status_texts)
+    size = 2 + len(ids) * rt.row_bytes + 2 * len(ftext)  # (an upper bound: the off-diagonals are written twice)
+    with_mid, with_motion = message_ids is not None, track_ids is not None
+    return (ftext, ids, class_idx, status_idx, message_ids if with_mid else ids, with_mid,
+            track_ids if with_motion else ids, with_motion, rt.texts, rt.at, rt.st_base, size)
 
 
 def compact_objects_json(ids: np.ndarray, class_idx: np.ndarray, class_texts: list, status_idx: np.ndarray,
@@ -457,15 +567,9 @@ def compact_objects_json(ids: np.ndarray, class_idx: np.ndarray, class_texts: li
     n = len(ids)
     if n == 0:
         return b"[]"
-    ftext = np.frombuffer(orjson.dumps(np.ascontiguousarray(values, dtype=np.float64), option=_NUMPY), np.uint8)
-    cb, ca = _text_table(class_texts)
-    sb, sa = _text_table(status_texts)
-    # an upper bound: 20 digits and a sign per integer (3), "]]" and "null" twice, a float written twice
-    size = 2 + n * (len(_COMPACT_LIT) + 1 + 3 * 21 + 6 + max(map(len, class_texts)) +
-                    max(map(len, status_texts))) + 2 * len(ftext)
-    with_mid, with_motion = message_ids is not None, track_ids is not None
-    out = _compact_rows(ftext, ids, class_idx, cb, ca, status_idx, sb, sa, message_ids if with_mid else ids,
-                        with_mid, track_ids if with_motion else ids, with_motion, _COMPACT_LIT, _COMPACT_AT, size)
+    args = _compact_args(ids, class_idx, class_texts, status_idx, status_texts, values, message_ids, track_ids)
+    out = _compact_rows(*args)
     if len(out) == 0:
-        raise ValueError(f"values hold {len(ftext)} bytes of text, not {10 if with_motion else 5} x {n} numbers")
+        raise ValueError(f"values hold {len(args[0])} bytes of text, not {10 if track_ids is not None else 5} x {n} "
+                         "numbers")
     return out
