@@ -91,7 +91,10 @@ def compact_inputs(n: int, tracked: bool) -> tuple:
 
 
 def kernel_args(mod, args: tuple) -> tuple:
-    """The arguments compact_objects_json passes to ``_compact_rows`` (as the module computes them)."""
+    """The arguments compact_objects_json passes to ``_compact_rows`` (as the module computes them: since wave 10b
+    its ``_compact_args``)."""
+    if hasattr(mod, "_compact_args"):
+        return mod._compact_args(*args)
     ids, ci, ct, si, stx, v, mid, tid = args
     ftext = np.frombuffer(orjson.dumps(np.ascontiguousarray(v), option=_NUMPY), np.uint8)
     cb, ca = mod._text_table(ct)

@@ -94,6 +94,32 @@ def test_compact_writer_is_the_table_writers_bytes(case):
     assert json.loads(bytes(got))[0]["object_id"] == ids[0]
 
 
+_EDGE_INTS = st.sampled_from([0, 7, -1, 9, 10, 99999999, 10 ** 8, -(10 ** 8), 2 ** 63 - 1, -(2 ** 63)])
+#: floats at the edges of orjson's text: -0.0, subnormals, the longest texts (24 bytes), huge and tiny, non-finite
+_EDGE_FLOATS = st.sampled_from([-0.0, 5e-324, -2.2250738585072014e-308, 1.7976931348623157e308,
+                                -1.2345678901234567e-300, 1e16, 1e-7, np.nan, np.inf, -np.inf])
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.sampled_from([1, 2, 37, 300]).flatmap(lambda n: st.tuples(
+    st.lists(_INT64 | _EDGE_INTS, min_size=n, max_size=n),
+    st.lists(st.none() | st.text(max_size=40), min_size=n, max_size=n).map(lambda c: c[:1] * len(c) if len(c) > 3
+                                                                          else c) | st.lists(
+        st.sampled_from([None, "car", 'a"b\\c\n', "vélo \u2603"]), min_size=n, max_size=n),
+    st.lists(st.tuples(st.sampled_from(["ok", "partial", "error"]), st.text(max_size=80)), min_size=n, max_size=n),
+    st.lists(st.lists(_FLOAT | _EDGE_FLOATS, min_size=10, max_size=10), min_size=n, max_size=n),
+    st.none() | st.lists(st.integers(-1, 65535) | _EDGE_INTS.filter(lambda v: v >= -1), min_size=n, max_size=n),
+    st.none() | st.lists(st.integers(-1, 2 ** 63 - 1) | _EDGE_INTS.filter(lambda v: v >= -1), min_size=n,
+                         max_size=n))))
+def test_compact_writer_many_rows_long_texts_and_edge_numbers(case):
+    """The writer's bytes are the Table writer's for 1, 2, 37 and 300 rows (its 32-byte copies at every offset
+    and across the ends of its buffers), class texts with escapes and UTF-8 (one class per frame or several),
+    status texts longer than 32 bytes (a reason up to 80 characters), the integers where their formatting
+    changes (10 ** 8, the int64 ends, -1: null) and the floats of the longest texts (24 bytes), -0.0, subnormals,
+    huge values and non-finite ones (null)."""
+    test_compact_writer_is_the_table_writers_bytes.hypothesis.inner_test(case)
+
+
 def test_compact_writer_pins_a_hand_written_row():
     got = compact_objects_json(np.array([-12, 7], np.int64), np.array([0, 1]), [b'"car"', b"null"],
                                np.array([0, 0]), [b',"status":"ok"'],

@@ -22,6 +22,8 @@ from numba.core import cgutils
 from numba.cpython.unsafe.numbers import trailing_zeros
 from numba.extending import intrinsic
 
+from .bytewords import store8
+
 __all__ = ["Table", "compact_objects_json"]
 
 _NUMPY = orjson.OPT_SERIALIZE_NUMPY
@@ -288,19 +290,38 @@ def _byte_mask(*wanted: int):
 
         def codegen(context, builder, signature, args):
             word = builder.load(_vector_pointer(context, builder, signature.args[0], args[0], args[1]), align=1)
-            hit = None
-            for b in wanted:
-                eq = builder.icmp_unsigned("==", word, llvm_ir.Constant(_VEC_TYPE, [b] * _VEC))
-                hit = eq if hit is None else builder.or_(hit, eq)
-            return builder.zext(builder.bitcast(hit, llvm_ir.IntType(_VEC)), llvm_ir.IntType(64))
+            return _mask_of(builder, word, wanted)
 
         return types.uint64(buf, types.intp), codegen
 
     return mask
 
 
-_ends32 = _byte_mask(_COMMA, _RBRACKET)  # where a value of a numeric array's text ends
+def _mask_of(builder, word, wanted):
+    """The uint64 whose bit ``i`` says that byte ``i`` of the 32-byte vector ``word`` is one of ``wanted``."""
+    hit = None
+    for b in wanted:
+        eq = builder.icmp_unsigned("==", word, llvm_ir.Constant(_VEC_TYPE, [b] * _VEC))
+        hit = eq if hit is None else builder.or_(hit, eq)
+    return builder.zext(builder.bitcast(hit, llvm_ir.IntType(_VEC)), llvm_ir.IntType(64))
+
+
 _closes32 = _byte_mask(_RBRACKET)  # where an inner array ends
+
+
+@intrinsic
+def _copy32_ends(typingctx, dst, dst_at, src, src_at):
+    """:func:`_copy32` that also returns where the 32 bytes copied hold a ``,`` or a ``]`` (bit ``i``: byte ``i``;
+    uint64), from the same vector load: where a value of a numeric array's text ends."""
+    if not (_bytes1d(dst) and _bytes1d(src)):
+        return None
+
+    def codegen(context, builder, signature, args):
+        word = builder.load(_vector_pointer(context, builder, signature.args[2], args[2], args[3]), align=1)
+        builder.store(word, _vector_pointer(context, builder, signature.args[0], args[0], args[1]), align=1)
+        return _mask_of(builder, word, (_COMMA, _RBRACKET))
+
+    return types.uint64(dst, types.intp, src, types.intp), codegen
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -309,16 +330,24 @@ def _first_bit(mask):  # pragma: no cover - compiled
     return np.int64(trailing_zeros(mask))
 
 
-#: "00" "01" ... "99": two decimal digits per entry (a number is written two digits per division)
-_DIGIT_PAIRS = np.frombuffer(b"".join(b"%02d" % k for k in range(100)), np.uint8)
-#: 10 ** k (k = 0..19), every power of ten below 2 ** 64
-_POW10 = np.array([10 ** k for k in range(20)], np.uint64)
-
-
 @njit(cache=True, nogil=True, inline="always")
 def _put_int(out, p, v):  # pragma: no cover - compiled
-    """The decimal text of ``v`` (int64) at ``out[p]``; the index after it.  The digits are counted by comparisons
-    and written from the last, two per division by 100."""
+    """The decimal text of ``v`` (int64) at ``out[p]``; the index after it (``out`` keeps 8 bytes of room).  Below
+    10 ** 8 the digits are gathered in a word, stored at once; larger and negative numbers digit by digit.
+    (Measured: one digit per division by 10 is faster here than two per division by 100 from a table of digit
+    pairs, which also made the row loop's code larger.)"""
+    if v >= 0 and v < 100000000:
+        w = np.uint64(0)
+        n = 0
+        t = np.uint64(v)
+        while True:  # (the last digit found is the first written: the lowest byte)
+            w = (w << np.uint64(8)) | (np.uint64(48) + t % np.uint64(10))
+            t //= np.uint64(10)
+            n += 1
+            if t == np.uint64(0):
+                break
+        store8(out, p, w)
+        return p + n
     if v < 0:
         out[p] = 45
         p += 1
@@ -326,22 +355,13 @@ def _put_int(out, p, v):  # pragma: no cover - compiled
     else:
         m = np.uint64(v)
     n = 1
-    while n < 20 and m >= _POW10[n]:
+    t = m
+    while t >= np.uint64(10):
+        t //= np.uint64(10)
         n += 1
-    q = p + n
-    hundred = np.uint64(100)
-    while m >= hundred:
-        d = np.int64(m % hundred) * 2
-        m //= hundred
-        q -= 2
-        out[q] = _DIGIT_PAIRS[d]
-        out[q + 1] = _DIGIT_PAIRS[d + 1]
-    if m >= np.uint64(10):
-        d = np.int64(m) * 2
-        out[q - 2] = _DIGIT_PAIRS[d]
-        out[q - 1] = _DIGIT_PAIRS[d + 1]
-    else:
-        out[q - 1] = np.uint8(48) + np.uint8(m)
+    for q in range(p + n - 1, p - 1, -1):
+        out[q] = np.uint8(48) + np.uint8(m % np.uint64(10))
+        m //= np.uint64(10)
     return p + n
 
 
@@ -358,11 +378,22 @@ def _put_text(out, p, src, a, b):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _put_id(out, p, v, null_src, a, b):  # pragma: no cover - compiled
-    """An id at ``out[p]``: ``v`` as an integer, or ``null_src[a:b]`` (the text ``null``) where ``v`` < 0 (none);
-    the position after it."""
+def _put_piece(out, p, src, a, b):  # pragma: no cover - compiled
+    """:func:`_put_text` of a text of at most 32 bytes (a constant piece, a float's value): one vector copy."""
+    _copy32(out, p, src, a)
+    return p + b - a
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _put_id(out, p, v):  # pragma: no cover - compiled
+    """An id at ``out[p]``: ``v`` as an integer, or ``null`` where ``v`` < 0 (none); the position after it.  (The
+    four bytes stored one by one: a copy of the text from a table here made the whole row loop ~30 % slower.)"""
     if v < 0:
-        return _put_text(out, p, null_src, a, b)
+        out[p] = 110
+        out[p + 1] = 117
+        out[p + 2] = 108
+        out[p + 3] = 108
+        return p + 4
     return _put_int(out, p, v)
 
 
@@ -409,8 +440,7 @@ def _put_value(out, p, ftext, c):  # pragma: no cover - compiled
     ``ftext[c]`` is then its ``,`` or ``]``."""
     L = ftext.shape[0]
     while c + _VEC <= L:
-        _copy32(out, p, ftext, c)
-        m = _ends32(ftext, c)
+        m = _copy32_ends(out, p, ftext, c)
         if m != np.uint64(0):
             f = _first_bit(m)
             return p + f, c + f
@@ -426,17 +456,19 @@ def _put_value(out, p, ftext, c):  # pragma: no cover - compiled
 @njit(cache=True, nogil=True)
 def _compact_rows(ftext, ids, cls_idx, st_idx, mid, with_mid, tid, with_motion, texts, at, st_base,
                   size):  # pragma: no cover - compiled
-    """The compact record's ``objects`` text (see :func:`compact_objects_json`): per row the constant texts
-    ``texts[at[k]:at[k + 1]]`` (k < 19: :data:`_COMPACT_PIECES`) around the id, the row's class text (entry
-    ``19 + cls_idx[r]``) and status text (entry ``st_base + st_idx[r]``), the five float values (``ftext``:
+    """The compact record's ``objects`` text (see :func:`compact_objects_json`) from the texts
+    ``texts[at[k]:at[k + 1]]`` of :func:`_row_texts` (:func:`_pieces`, then the class texts from entry 16 and the
+    status texts from ``st_base``; 32 bytes of room past the last): per row the id, the row's class text (entry
+    ``16 + cls_idx[r]``) and status text (entry ``st_base + st_idx[r]``), the five float values (``ftext``:
     orjson's text of the (5, n) array, or (10, n) with the motion), the motion (``with_motion``: the track id,
-    negative: null, and the five motion values) and the message id (``with_mid``; negative: null).  ``texts`` has
-    32 bytes of room past its last text (:func:`_row_texts`); ``size`` bounds the text's length.  Empty: ``ftext``
-    does not hold 5 n (10 n) values.
+    negative: null, and the five motion values) and the message id (``with_mid``; negative: null).  ``size``
+    bounds the text's length.  Empty: ``ftext`` does not hold 5 n (10 n) values.
 
     One pass: a cursor per column of ``ftext`` (:func:`_column_bounds`) copies the row's value of that column
     straight into place (:func:`_put_value`); the column's ``n``-th value must end at its ``]``, the others
-    before it.  Texts are copied 32 bytes at a time (:func:`_put_text`)."""
+    before it.  Texts are copied 32 bytes at a time (:func:`_put_text`).  (The loops over the groups and their
+    values are kept as loops: the same code written out straight, or with more copies of the value's or the
+    id's code, measured up to 2x slower -- the loop's code no longer fits the CPU's decoded-instruction cache.)"""
     n = ids.shape[0]
     cur, close, ok = _column_bounds(ftext, 10 if with_motion else 5)
     if not ok:
@@ -446,56 +478,60 @@ def _compact_rows(ftext, ids, cls_idx, st_idx, mid, with_mid, tid, with_motion, 
     p = 1
     s_xy = e_xy = 0
     for r in range(n):
-        if r:
-            out[p] = 44
-            p += 1
-        p = _put_text(out, p, texts, at[0], at[1])
+        j = 1 if r else 0  # ('{"object_id":', after the first row '},{"object_id":')
+        p = _put_piece(out, p, texts, at[j], at[j + 1])
         p = _put_int(out, p, ids[r])
-        j = 19 + cls_idx[r]
-        p = _put_text(out, p, texts, at[1], at[2])
+        j = 16 + cls_idx[r]
         p = _put_text(out, p, texts, at[j], at[j + 1])
         j = st_base + st_idx[r]
         p = _put_text(out, p, texts, at[j], at[j + 1])
         last = r == n - 1
         for g in range(2 if with_motion else 1):  # the position (x, y, cov), then the motion (v, cov_v)
             if g:
-                p = _put_text(out, p, texts, at[12], at[13])
-                p = _put_id(out, p, tid[r], texts, at[11], at[12])
-            base, t0 = 5 * g, 2 + 11 * g  # (the motion's texts: at[13..18], then "]]" at[8])
+                p = _put_id(out, p, tid[r])
+            t0 = 2 + 7 * g
             for k in range(6):  # x, y, cxx, cxy, cxy, cyy (v_east, v_north, cvv_ee, cvv_en, cvv_en, cvv_nn)
-                p = _put_text(out, p, texts, at[t0 + k], at[t0 + 1 + k])
-                if k == 4:  # the off-diagonal once more: the text just written (out[s_xy:e_xy])
-                    p = _put_text(out, p, out, s_xy, e_xy)
+                p = _put_piece(out, p, texts, at[t0 + k], at[t0 + 1 + k])
+                if k == 4:  # the off-diagonal once more: the text just written (out[s_xy:e_xy], <= 32 bytes)
+                    p = _put_piece(out, p, out, s_xy, e_xy)
                     continue
-                q = base + (k if k < 4 else k - 1)
+                q = 5 * g + (k if k < 4 else k - 1)
                 s_xy = p
                 p, c = _put_value(out, p, ftext, cur[q])
                 e_xy = p
-                if (c == close[q]) != last:  # (a column with more or fewer than n values)
+                if (c == close[q]) != last or e_xy - s_xy > _VEC:  # (a column with more or fewer than n values;
+                    # a value longer than orjson writes for a float64, at most 24 bytes: not this kernel's text)
                     return np.zeros(0, np.uint8)
                 cur[q] = c + 1
-            p = _put_text(out, p, texts, at[8], at[9])
+            p = _put_piece(out, p, texts, at[t0 + 6], at[t0 + 7])  # (with the next field's name)
         if with_mid:
-            p = _put_text(out, p, texts, at[9], at[10])
-            p = _put_id(out, p, mid[r], texts, at[11], at[12])
-        p = _put_text(out, p, texts, at[10], at[11])
-    out[p] = 93
-    return out[:p + 1]
+            p = _put_id(out, p, mid[r])
+    out[p] = 125
+    out[p + 1] = 93
+    return out[:p + 2]
 
 
-#: the constant texts of a compact record's object (:func:`_compact_rows`' ``at`` indices 0..18; 12..18: the motion)
-_COMPACT_PIECES = (b'{"object_id":', b',"class":', b',"x_m":', b',"y_m":', b',"cov_m2":[[', b",", b"],[", b",", b"]]",
-                   b',"message_object_id":', b"}", b"null", b',"track_id":', b',"v_east_mps":', b',"v_north_mps":',
-                   b',"cov_v_m2ps2":[[', b",", b"],[", b",")
+def _pieces(with_mid: bool, with_motion: bool) -> tuple:
+    """The constant texts of a compact record's objects (:func:`_compact_rows`' ``at`` entries 0..15): a row's
+    opening (the first, then the others with the previous row's close); the texts before ``x`` (none: the status
+    text ends with the name), ``y``, ``xx``, ``xy``, ``xy``, ``yy`` of the position and the text after it (with the
+    next field's name: the track id, else the message id); the same seven of the motion."""
+    mid = b',"message_object_id":' if with_mid else b""
+    return (b'{"object_id":', b'},{"object_id":', b"", b',"y_m":', b',"cov_m2":[[', b",", b"],[", b",",
+            b']],"track_id":' if with_motion else b"]]" + mid, b',"v_east_mps":', b',"v_north_mps":',
+            b',"cov_v_m2ps2":[[', b",", b"],[", b",", b"]]" + mid)
+
+
 #: bytes of a row beside its floats and its class and status texts: the constant texts, 3 integers of at most
-#: 20 digits and a sign, the row's comma
-_ROW_BYTES = sum(map(len, _COMPACT_PIECES)) + 3 * 21 + 1
+#: 20 digits and a sign
+_ROW_BYTES = sum(map(len, _pieces(True, True))) + 3 * 21
 
 
 class _RowTexts(NamedTuple):
-    """:func:`_compact_rows`' texts of a frame's distinct classes and statuses: ``texts`` the constant pieces, the
-    class texts, the status texts and 32 bytes of room; ``at`` (19 + classes + statuses + 1,) their offsets;
-    ``st_base`` the status texts' first entry in ``at``; ``row_bytes`` a bound on a row's bytes beside its floats."""
+    """:func:`_compact_rows`' texts of a frame's distinct classes and statuses: ``texts`` the constant pieces
+    (:func:`_pieces`), the class texts (after ``,"class":``), the status texts (before ``,"x_m":``) and 32 bytes
+    of room; ``at`` (16 + classes + statuses + 1,) their offsets; ``st_base`` the status texts' first entry in
+    ``at``; ``row_bytes`` a bound on a row's bytes beside its floats."""
 
     texts: np.ndarray
     at: np.ndarray
@@ -503,18 +539,20 @@ class _RowTexts(NamedTuple):
     row_bytes: int
 
 
-def _row_texts(class_texts: list, status_texts: list) -> _RowTexts:
+def _row_texts(class_texts: list, status_texts: list, with_mid: bool, with_motion: bool) -> _RowTexts:
     """The :class:`_RowTexts` of a frame's class and status texts (bytes); a frame's few texts repeat from frame
     to frame: up to 256 tables are kept (then forgotten at once; the kernel only reads them)."""
-    key = (tuple(class_texts), tuple(status_texts))
+    key = (tuple(class_texts), tuple(status_texts), with_mid, with_motion)
     table = _ROW_TEXTS.get(key)
     if table is None:
-        pieces = (*_COMPACT_PIECES, *class_texts, *status_texts)
+        const = _pieces(with_mid, with_motion)
+        pieces = (*const, *(b',"class":' + t for t in class_texts), *(t + b',"x_m":' for t in status_texts))
         at = np.zeros(len(pieces) + 1, np.int64)
         np.cumsum([len(t) for t in pieces], out=at[1:])
         table = _RowTexts(np.frombuffer(b"".join(pieces) + bytes(_VEC), np.uint8), at,
-                          len(_COMPACT_PIECES) + len(class_texts),
-                          _ROW_BYTES + max(map(len, class_texts)) + max(map(len, status_texts)))
+                          len(const) + len(class_texts),
+                          _ROW_BYTES + max(map(len, pieces[len(const):len(const) + len(class_texts)])) +
+                          max(map(len, pieces[len(const) + len(class_texts):])))
         if len(_ROW_TEXTS) >= 256:
             _ROW_TEXTS.clear()
         _ROW_TEXTS[key] = table
@@ -529,11 +567,11 @@ def _compact_args(ids: np.ndarray, class_idx: np.ndarray, class_texts: list, sta
                   track_ids: np.ndarray | None = None) -> tuple:
     """:func:`_compact_rows`' arguments for :func:`compact_objects_json`'s (``n`` > 0)."""
     ftext = np.frombuffer(orjson.dumps(np.ascontiguousarray(values, dtype=np.float64), option=_NUMPY), np.uint8)
-    rt = _row_texts(class_texts, status_texts)
-    size = 2 + len(ids) * rt.row_bytes + 2 * len(ftext)  # (an upper bound: the off-diagonals are written twice)
     with_mid, with_motion = message_ids is not None, track_ids is not None
+    texts, at, st_base, row_bytes = _row_texts(class_texts, status_texts, with_mid, with_motion)
     return (ftext, ids, class_idx, status_idx, message_ids if with_mid else ids, with_mid,
-            track_ids if with_motion else ids, with_motion, rt.texts, rt.at, rt.st_base, size)
+            track_ids if with_motion else ids, with_motion, texts, at, st_base,
+            2 + len(ids) * row_bytes + 2 * len(ftext))  # (an upper bound: the off-diagonals are written twice)
 
 
 def compact_objects_json(ids: np.ndarray, class_idx: np.ndarray, class_texts: list, status_idx: np.ndarray,
