@@ -57,9 +57,12 @@ def reference_modules(commit: str):
         if not path.exists():
             text = subprocess.run(["git", "-C", str(ROOT), "show", f"{commit}:src/footprint_uq/service/{name}.py"],
                                   check=True, capture_output=True).stdout
+            # (relative imports of the package, as the copy is no part of it: its modules' absolute names)
+            text = text.replace(b"from ..", b"from footprint_uq.").replace(b"from .", b"from footprint_uq.service.")
             path.write_bytes(text)
         spec = importlib.util.spec_from_file_location(f"ref_{name}", path)
         mod = importlib.util.module_from_spec(spec)
+        sys.modules[spec.name] = mod  # (numba's cached kernels name their module: found again on a later run)
         spec.loader.exec_module(mod)
         mods.append(mod)
     return mods
