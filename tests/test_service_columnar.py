@@ -162,7 +162,7 @@ def test_compact_kernel_refuses_columns_of_another_length(tracked, n, position_n
     from footprint_uq.service import jsonrows
 
     rows = [[1.5] * position_n] * 5 + ([[2.5] * motion_n] * 5 if tracked else [])
-    ftext = np.frombuffer(orjson.dumps(rows), np.uint8)
+    ftext = orjson.dumps(rows)  # (bytes, as compact_objects_json hands them to the kernel)
     ids = np.arange(n, dtype=np.int64)
     zeros = np.zeros(n, np.int64)
     args = jsonrows._compact_args(ids, zeros, [b"null"], zeros, [b""], np.ones((10 if tracked else 5, n)), None,

@@ -276,7 +276,8 @@ def _copy32(typingctx, dst, dst_at, src, src_at):
 
 
 def _bytes1d(a) -> bool:
-    return isinstance(a, types.Array) and a.ndim == 1 and a.layout == "C" and a.dtype == types.uint8
+    """A C-contiguous 1-D uint8 array or ``bytes`` (its data pointer is the first byte)."""
+    return isinstance(a, types.Buffer) and a.ndim == 1 and a.layout == "C" and a.dtype == types.uint8
 
 
 def _byte_mask(*wanted: int):
@@ -405,7 +406,7 @@ def _column_bounds(ftext, nf):  # pragma: no cover - compiled
     time."""
     first = np.zeros(nf, np.int64)
     close = np.zeros(nf, np.int64)
-    L = ftext.shape[0]
+    L = len(ftext)
     i = 1
     if L < 2 or ftext[0] != 91:
         return first, close, False
@@ -438,7 +439,7 @@ def _put_value(out, p, ftext, c):  # pragma: no cover - compiled
     """The value at ``ftext[c]`` (up to the next ``,`` or ``]``) at ``out[p]``, searched and copied 32 bytes at a
     time (``out`` keeps 32 bytes of room: the bytes past the value are overwritten next): ``(p, c)`` after it --
     ``ftext[c]`` is then its ``,`` or ``]``."""
-    L = ftext.shape[0]
+    L = len(ftext)
     while c + _VEC <= L:
         m = _copy32_ends(out, p, ftext, c)
         if m != np.uint64(0):
@@ -460,9 +461,10 @@ def _compact_rows(ftext, ids, cls_idx, st_idx, mid, with_mid, tid, with_motion, 
     ``texts[at[k]:at[k + 1]]`` of :func:`_row_texts` (:func:`_pieces`, then the class texts from entry 16 and the
     status texts from ``st_base``; 32 bytes of room past the last): per row the id, the row's class text (entry
     ``16 + cls_idx[r]``) and status text (entry ``st_base + st_idx[r]``), the five float values (``ftext``:
-    orjson's text of the (5, n) array, or (10, n) with the motion), the motion (``with_motion``: the track id,
-    negative: null, and the five motion values) and the message id (``with_mid``; negative: null).  ``size``
-    bounds the text's length.  Empty: ``ftext`` does not hold 5 n (10 n) values.
+    orjson's text of the (5, n) array, or (10, n) with the motion: the ``bytes`` as they are), the motion
+    (``with_motion``: the track id, negative: null, and the five motion values) and the message id
+    (``with_mid``; negative: null).  ``size`` bounds the text's length.  Empty: ``ftext`` does not hold 5 n
+    (10 n) values.
 
     One pass: a cursor per column of ``ftext`` (:func:`_column_bounds`) copies the row's value of that column
     straight into place (:func:`_put_value`); the column's ``n``-th value must end at its ``]``, the others
@@ -566,7 +568,7 @@ def _compact_args(ids: np.ndarray, class_idx: np.ndarray, class_texts: list, sta
                   status_texts: list, values: np.ndarray, message_ids: np.ndarray | None = None,
                   track_ids: np.ndarray | None = None) -> tuple:
     """:func:`_compact_rows`' arguments for :func:`compact_objects_json`'s (``n`` > 0)."""
-    ftext = np.frombuffer(orjson.dumps(np.ascontiguousarray(values, dtype=np.float64), option=_NUMPY), np.uint8)
+    ftext = orjson.dumps(np.ascontiguousarray(values, dtype=np.float64), option=_NUMPY)  # (the kernel reads bytes)
     with_mid, with_motion = message_ids is not None, track_ids is not None
     texts, at, st_base, row_bytes = _row_texts(class_texts, status_texts, with_mid, with_motion)
     return (ftext, ids, class_idx, status_idx, message_ids if with_mid else ids, with_mid,
