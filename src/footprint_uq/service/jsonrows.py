@@ -470,7 +470,8 @@ def _compact_rows(ftext, ids, cls_idx, st_idx, mid, with_mid, tid, with_motion, 
     straight into place (:func:`_put_value`); the column's ``n``-th value must end at its ``]``, the others
     before it.  Texts are copied 32 bytes at a time (:func:`_put_text`).  (The loops over the groups and their
     values are kept as loops: the same code written out straight, or with more copies of the value's or the
-    id's code, measured up to 2x slower -- the loop's code no longer fits the CPU's decoded-instruction cache.)"""
+    id's code, measured up to 2x slower -- probably the loop's code no longer fitting the CPU's decoded-instruction
+    cache.)"""
     n = ids.shape[0]
     cur, close, ok = _column_bounds(ftext, 10 if with_motion else 5)
     if not ok:
