@@ -352,3 +352,14 @@ def test_the_lean_cpm_kernel_is_warm(camera):
         for p in _frames(np.random.default_rng(6), 2, 5):
             assert svc.process_frame_json(p).type == "footprints"
     assert set(fk._lean_cpm_kernel.signatures) == before
+
+
+@settings(max_examples=500, deadline=None)
+@given(st.one_of(st.floats(0.0, 1e6), st.floats(0.0, 1e14), st.integers(0, 10 ** 7).map(lambda k: k / 20 + 0.05)))
+def test_a_total_read_back_from_its_text_is_the_rounded_total(us):
+    """The lean record writes ``processing_us.total`` as ``"%.1f"`` of the time and hands ``float`` of that text as
+    ``FrameOutput.processing_us``: the same float as ``round(us, 1)`` (the value before), and the same text as
+    ``"%.1f"`` of that rounded value (ties included)."""
+    text = b"%.1f" % us
+    assert float(text) == round(us, 1)
+    assert b"%.1f" % round(us, 1) == text

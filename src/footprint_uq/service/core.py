@@ -766,11 +766,12 @@ class Service:
                 b',"cpm_uper_bytes":%d,"objects_not_in_messages":%d' % (len(cpm_uper), omitted)
         head = _lean_head(setup, camera_id, fno, ts, N, errors, self.cpm_cdd if self.messages else None)
         t3 = time.perf_counter()
-        total = round(1e6 * (t3 - t0), 1)
-        # (orjson's text of these rounded floats: one decimal, as "%.1f" writes them below 1e15)
-        data = b'%s,"objects":%s%s,"processing_us":{"footprints":%.1f,"records":%.1f,"messages":%.1f,"total":%.1f}}' % (
-            head, co.text, tail, 1e6 * (t1 - t0), 1e6 * (t2 - t1), 1e6 * (t3 - t2), total)
-        return FrameOutput(data, RECORD_FOOTPRINTS, camera_id, total, None, len(errors), cpm_uper)
+        # (orjson's text of the rounded floats: one decimal, as "%.1f" writes them below 1e15; the total's text read
+        # back is round(total, 1): _total_us)
+        total_text = b"%.1f" % (1e6 * (t3 - t0))
+        data = b'%s,"objects":%s%s,"processing_us":{"footprints":%.1f,"records":%.1f,"messages":%.1f,"total":%s}}' % (
+            head, co.text, tail, 1e6 * (t1 - t0), 1e6 * (t2 - t1), 1e6 * (t3 - t2), total_text)
+        return FrameOutput(data, RECORD_FOOTPRINTS, camera_id, float(total_text), None, len(errors), cpm_uper)
 
     def _lean_cpm(self, setup: CameraSetup, ref_ms: int, class_p, cols, co: _CompactObjects, motion,
                   N: int) -> bytes | None:

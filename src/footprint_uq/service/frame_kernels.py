@@ -18,11 +18,10 @@ from .messages.uper_cpm import (
     REFERENCE_TIME_AT,
     CpmUperWriter,
     container_constants,
-    container_size,
-    gather_columns,
     kernel_motion,
     plain_container_kernel,
-    write_container,
+    plain_objects_bits,
+    write_plain_objects,
 )
 
 __all__ = ["worst_usable", "cm_dm", "plain_cpm_container", "plain_cpm_uper", "LeanCpm", "lean_cpm_constants",
@@ -363,23 +362,21 @@ def _lean_cm_levels(ci, tie, values, rows, class_p):  # pragma: no cover - compi
 def _lean_cpm_kernel(ci, head, tie, ref, values, rows, class_p, object_ids, v2x, class_idx, class_row, motion,
                      with_motion):  # pragma: no cover - compiled
     """:func:`lean_cpm_uper` in one compiled call: the cm and levels (:func:`_lean_cm_levels`), the container's
-    columns gathered and checked, and the message -- the head, the reference time, the container's length
-    determinant and the container written in place after them (no container copied bit by bit).  Empty: declined
+    size and checks (:func:`~.messages.uper_cpm.plain_objects_bits`) and the message -- the head, the reference
+    time, the container's length determinant and the container written in place after them
+    (:func:`~.messages.uper_cpm.write_plain_objects`: no column table, no container copied bit by bit).  Empty: declined
     (a value out of range, a container of 16384 octets or more, motion rows of another shape)."""
     m = rows.shape[0]
     empty = np.zeros(0, np.uint8)
     if with_motion and (motion.shape[0] < 10 or motion.shape[1] != m):
         return empty
     cm, level = _lean_cm_levels(ci, tie, values, rows, class_p)
-    nc = ci[_CI_NCLASS]
-    cols, cv, cw = gather_columns(object_ids, cm, v2x, rows, ci[_CI_AT], class_idx, class_row,
-                                  ci[_CI_CLASS:_CI_CLASS + nc], ci[_CI_CLASS + nc:_CI_CLASS + 2 * nc], motion,
-                                  with_motion, _NCOLS)
-    sid_ptr, sid_val = np.zeros(m + 1, np.int64), np.zeros(0, np.int64)
-    nbits, col, _ = container_size(cols, ci[_CI_LO:_CI_HI], ci[_CI_HI:_CI_CLASS], cw, level, sid_ptr, sid_val,
-                                   ci[_CI_CORR_BITS])
+    nc, at = ci[_CI_NCLASS], ci[_CI_AT]
+    cv, cw = ci[_CI_CLASS:_CI_CLASS + nc], ci[_CI_CLASS + nc:_CI_CLASS + 2 * nc]
+    nbits = plain_objects_bits(object_ids, cm, v2x, rows, at, class_idx, class_row, cv, cw, level, motion,
+                               with_motion, ci[_CI_LO:_CI_HI], ci[_CI_HI:_CI_CLASS], ci[_CI_CORR_BITS])
     n = (nbits + 7) // 8
-    if col >= 0 or n >= 16384:
+    if nbits < 0 or n >= 16384:
         return empty
     hb, cid = ci[_CI_HEAD_BITS], ci[_CI_CID_M1]
     hdr = 12 if n < 128 else 20
@@ -388,8 +385,8 @@ def _lean_cpm_kernel(ci, head, tie, ref, values, rows, class_p, object_ids, v2x,
     _put_bits(out, ci[_CI_REF_AT], ref, 42)
     pos = _put_bits(out, hb, (cid << 8) | n if n < 128 else (cid << 16) | 0x8000 | n, hdr)
     lead = (np.int64(out[pos >> 3]) >> (8 - (pos & 7))) if pos & 7 else np.int64(0)
-    write_container(out, pos, lead, cols, cv, cw, level, sid_ptr, sid_val, min(m, 255), ci[_CI_CORR_PREFIX],
-                    ci[_CI_CORR_BITS])
+    write_plain_objects(out, pos, lead, object_ids, cm, v2x, rows, at, class_idx, class_row, cv, cw, level, motion,
+                        with_motion, ci[_CI_CORR_PREFIX], ci[_CI_CORR_BITS])
     return out
 
 
