@@ -744,8 +744,8 @@ class Service:
                       int_ids: np.ndarray, errors, cols, motion, t0: float, t1: float) -> FrameOutput | None:
         """:meth:`_lean_frame`'s record and UPER CPM from the columns ``cols`` (a :class:`~footprint_uq.products.
         frame_processor.FrameColumns`; tracked: its ``values`` rows 5-9 the motion's, ``motion`` the tracker's
-        ``(track_id, ObjectMotion)``) by :meth:`_compact_text` and :func:`.frame_kernels.plain_cpm_uper`.  None:
-        a value out of the CPM's range (the general writer names it)."""
+        ``(track_id, ObjectMotion)``) by :meth:`_compact_text` and :meth:`_lean_cpm`, its head by :func:`_lean_head`.
+        None: a value out of the CPM's range (the general writer names it)."""
         ids, N = found.object_ids, len(found.object_ids)
         all_valid = cols.n_valid == N
         valid = None if all_valid else cols.centre_reason == 0
@@ -767,7 +767,7 @@ class Service:
         head = _lean_head(setup, camera_id, fno, ts, N, errors, self.cpm_cdd if self.messages else None)
         t3 = time.perf_counter()
         # (orjson's text of the rounded floats: one decimal, as "%.1f" writes them below 1e15; the total's text read
-        # back is round(total, 1): _total_us)
+        # back is round(total, 1): tests/test_service_lean_cpm.py)
         total_text = b"%.1f" % (1e6 * (t3 - t0))
         data = b'%s,"objects":%s%s,"processing_us":{"footprints":%.1f,"records":%.1f,"messages":%.1f,"total":%s}}' % (
             head, co.text, tail, 1e6 * (t1 - t0), 1e6 * (t2 - t1), 1e6 * (t3 - t2), total_text)
