@@ -363,3 +363,31 @@ def test_a_total_read_back_from_its_text_is_the_rounded_total(us):
     text = b"%.1f" % us
     assert float(text) == round(us, 1)
     assert b"%.1f" % round(us, 1) == text
+
+
+def test_each_camera_of_a_registry_has_its_own_constants(camera, monkeypatch):
+    """A registry's cameras (each its own heading offset, origin and station): each one's lean CPM is the general
+    writers' (``_columnar = False``), through the one call (``plain_cpm_uper`` not called), frames interleaved."""
+    from footprint_uq.io.registry import RegistryEntry
+
+    reg = {"east": RegistryEntry("east", camera, "basler1", 95.0, 48.1, 11.5),
+           "west": RegistryEntry("west", camera, "basler1", -140.0, -33.9, 151.2),
+           "plain": RegistryEntry("plain", camera, "basler1")}
+    lean, ref = Service(registry=reg, record="compact"), Service(registry=reg, record="compact")
+    ref._columnar = False
+    if any(s.lean_cpm is None for s in lean.cameras.values()):
+        pytest.skip("numpy's product not matched on this machine")
+    ties = {cid: s.lean_cpm.tie.tobytes() for cid, s in lean.cameras.items()}
+    assert len(set(ties.values())) == 3
+    calls = []
+    real_plain = core.plain_cpm_uper
+    monkeypatch.setattr(core, "plain_cpm_uper", lambda *a, **k: calls.append(1) or real_plain(*a, **k))
+    for k, p in enumerate(_frames(np.random.default_rng(8), 6, 30)):
+        cid = ("east", "west", "plain")[k % 3]
+        p = p.replace(b'"camera_id": "cam"', b'"camera_id": "%s"' % cid.encode())
+        calls.clear()
+        a = lean.process_frame_json(p)
+        assert not calls and a.type == "footprints"
+        b = ref.process_frame_json(p)
+        assert a.data.split(b',"processing_us"')[0] == b.data.split(b',"processing_us"')[0]
+        assert a.cpm_uper == b.cpm_uper is not None
