@@ -337,6 +337,7 @@ def test_tracked_declined_frames_are_the_general_paths(camera, case, monkeypatch
     real_records = Service._lean_records
     monkeypatch.setattr(Service, "_lean_records", lambda *a, **k: lean.append(1) or real_records(*a, **k))
     if case == "cpm-declined":
+        monkeypatch.setattr(core, "lean_cpm_uper", lambda *a, **k: None)
         monkeypatch.setattr(core, "plain_cpm_uper", lambda *a, **k: None)
     for f in frames:
         a, b = fast.process_frame_json(orjson.dumps(f)), ref.process_frame_json(orjson.dumps(f))

@@ -320,27 +320,29 @@ def test_the_tracked_columnar_path_is_the_one_taken(camera, monkeypatch):
 
 
 def test_the_tracked_cpm_takes_the_columnar_writer(camera, monkeypatch):
-    """A tracked compact frame's UPER CPM comes from ``plain_cpm_uper`` (``service/frame_kernels.py``) with the
-    motion (not silently the general writer): its container replaced, the CPM changes; and the motion reaches it
-    (velocity present)."""
+    """A tracked compact frame's UPER CPM comes from ``lean_cpm_uper`` (``service/frame_kernels.py``; or, where the
+    camera has no packed constants, ``plain_cpm_uper``) with the motion (not silently the general writer): its
+    message replaced, the CPM changes; and the motion reaches it (velocity present)."""
     from footprint_uq.service import core
 
     frames = [orjson.dumps(_tracked_frame(k, variant="classes")) for k in range(3)]
     seen = []
-    real = core.plain_cpm_uper
+    svc = Service(camera, "basler1", record="compact", tracks=True)
+    lean = next(iter(svc.cameras.values())).lean_cpm is not None
+    name = "lean_cpm_uper" if lean else "plain_cpm_uper"
+    real = getattr(core, name)
 
     def spy(*a, **k):
         out = real(*a, **k)
-        seen.append((k.get("motion"), out))
+        seen.append((a[9] if lean else k.get("motion"), out))
         return out
 
-    monkeypatch.setattr(core, "plain_cpm_uper", spy)
-    svc = Service(camera, "basler1", record="compact", tracks=True)
+    monkeypatch.setattr(core, name, spy)
     before = [svc.process_frame_json(f).cpm_uper for f in frames][-1]
     motion, container = seen[-1]
     assert motion is not None and motion.shape[0] == 14 and motion[0].any()  # (motion_rows: row 0 velocity present)
     assert container is not None  # (its bytes, not None: the general writer's fallback)
-    monkeypatch.setattr(core, "plain_cpm_uper", lambda *a, **k: b"")
+    monkeypatch.setattr(core, name, lambda *a, **k: b"")
     svc = Service(camera, "basler1", record="compact", tracks=True)
     assert [svc.process_frame_json(f).cpm_uper for f in frames][-1] != before
 
@@ -354,9 +356,12 @@ def test_the_columnar_path_is_the_one_taken(camera, monkeypatch):
     frame = orjson.dumps(_frame(np.random.default_rng(3), 20, 0, variant="one-class"))
     before = _record(svc.process_frame_json(frame))
     monkeypatch.setattr(core, "compact_objects_json", lambda *a, **k: b"[]")
+    cpm = svc.process_frame_json(frame).cpm_uper
+    monkeypatch.setattr(core, "lean_cpm_uper", lambda *a, **k: b"")
     monkeypatch.setattr(core, "plain_cpm_uper", lambda *a, **k: b"")
     out = svc.process_frame_json(frame)
     assert b'"objects":[]' in _record(out) and before != _record(out)
+    assert cpm and out.cpm_uper == b""
 
 
 _IDS = st.tuples(st.lists(st.integers(0, 70), unique=True, max_size=24),

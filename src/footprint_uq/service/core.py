@@ -59,7 +59,7 @@ from .detections import (
     finite_number,
     parse_detections,
 )
-from .frame_kernels import cm_dm, plain_cpm_uper, worst_usable
+from .frame_kernels import LeanCpm, cm_dm, lean_cpm_constants, lean_cpm_uper, plain_cpm_uper, worst_usable
 from .frame_scan import ScannedFrame, scan_frame
 from .jsonrows import Table, compact_objects_json
 from .messages.asn1_cpm import DEFAULT_CDD
@@ -210,6 +210,11 @@ class CameraSetup:
     ids: MessageIdMap = field(default_factory=MessageIdMap)
     #: the tracker's output of the camera's latest frame (``tracks=True``; read by :attr:`Service.on_tracked`)
     last_tracks: object = None
+    #: the constants of its lean frame's CPM call (:func:`.frame_kernels.lean_cpm_uper`), packed once by the
+    #: service (None: not a lean service, or numpy's world -> ENU product not matched here: the numpy path)
+    lean_cpm: LeanCpm | None = None
+    #: camera_id -> the constant texts of its compact record's head (:func:`_lean_head`; at most 64 ids)
+    head_texts: dict = field(default_factory=dict, repr=False)
 
     #: the map tie's constants, read once (a frame calls no method of the GeoReference but ``to_wgs84``)
     has_origin: bool = False
@@ -397,6 +402,11 @@ class Service:
             camera, budget, registry, camera_id, station_id, allow_outside_image,
             dict(heading_offset_deg=heading_offset_deg, origin_lat_deg=origin_lat_deg, origin_lon_deg=origin_lon_deg))
         self._single = camera is not None
+        if self._lean and self.messages:  # (the lean frame's CPM: each camera's constants packed once)
+            cls = self._cls
+            for setup in self.cameras.values():
+                setup.lean_cpm = lean_cpm_constants(setup.uper, self.cpm_cdd, setup.enu_origin_m, setup.enu_rotation_t,
+                                                    _CPM_INDEX, cls.bits_value, cls.bits_width)
         self.tracks = bool(tracks)
         if self.tracks:
             cfg = tracker or TrackerConfig()
@@ -485,6 +495,10 @@ class Service:
             for setup in self.cameras.values():
                 plain_cpm_uper(setup.uper, 0, np.zeros((1, 2)), 0 * one, None, one, np.ones((7, 1), np.int32), 0,
                                0 * one, 0 * one, cls.bits_value, cls.bits_width, cdd=self.cpm_cdd)
+                if setup.lean_cpm is not None:  # (the lean frame's: untracked and tracked, one signature)
+                    for motion in (None, np.ones((14, 1), np.int64)):
+                        lean_cpm_uper(setup.lean_cpm, 0, np.zeros((5, 1)), 0 * one, None, one,
+                                      np.ones((7, 1), np.int32), 0 * one, 0 * one, motion)
         cm_dm(np.zeros((1, 2)), np.zeros(1, np.int64))
         scan_frame(b'{"camera_id":"c","frame":0,"timestamp_s":0,"detections":[{"object_id":1,"class":"car",'
                    b'"u_min_px":1,"v_min_px":1.5,"u_max_px":2,"v_max_px":3}]}')
@@ -730,8 +744,8 @@ class Service:
                       int_ids: np.ndarray, errors, cols, motion, t0: float, t1: float) -> FrameOutput | None:
         """:meth:`_lean_frame`'s record and UPER CPM from the columns ``cols`` (a :class:`~footprint_uq.products.
         frame_processor.FrameColumns`; tracked: its ``values`` rows 5-9 the motion's, ``motion`` the tracker's
-        ``(track_id, ObjectMotion)``) by :meth:`_compact_text` and :func:`.frame_kernels.plain_cpm_uper`.  None:
-        a value out of the CPM's range (the general writer names it)."""
+        ``(track_id, ObjectMotion)``) by :meth:`_compact_text` and :meth:`_lean_cpm`, its head by :func:`_lean_head`.
+        None: a value out of the CPM's range (the general writer names it)."""
         ids, N = found.object_ids, len(found.object_ids)
         all_valid = cols.n_valid == N
         valid = None if all_valid else cols.centre_reason == 0
@@ -740,33 +754,43 @@ class Service:
         tid = None if motion is None else np.asarray(motion[0], dtype=np.int64)
         co = self._compact_text(setup, ids, int_ids, found.classes, ts, cols.values, valid, all_valid, status, tid)
         t2 = time.perf_counter()
-        head = {"type": RECORD_FOOTPRINTS, "record": "compact", "camera_id": camera_id, "frame": fno,
-                "timestamp_s": ts, "station_id": setup.station_id,
-                "heading_offset_deg": setup.georef.heading_offset_deg, "n_objects": N,
-                "detection_errors": [e.as_dict() for e in errors]}
-        parts = [b"", b',"objects":', co.text]
+        tail = b""
         cpm_uper = None
         if self.messages:
-            head["cpm_cdd"] = self.cpm_cdd
-            cls = self._cls
-            # (tracked: the message's objects' motion codes in one compiled call, as _plain_cpm_uper)
-            mc = None if motion is None else motion_rows(motion[1], N, None if len(co.ok_idx) == N else co.ok_idx)
-            cpm_uper = plain_cpm_uper(setup.uper, ref_ms, setup.world_to_enu(cols.values[:2].T),
-                                      co.ok_idx, found.class_confidence, co.msg_ids, cols.v2x_rows, _CPM_INDEX,
-                                      co.class_idx, _class_rows_of(co.classes), cls.bits_value, cls.bits_width,
-                                      cdd=self.cpm_cdd, motion=mc)
+            cpm_uper = self._lean_cpm(setup, ref_ms, found.class_confidence, cols, co, motion, N)
             if cpm_uper is None:  # (a value out of range: the general path's writer names it)
                 return None
-            parts += [b',"cpm_uper_bytes":', b"%d" % len(cpm_uper)]
             omitted = cols.n_valid - len(co.ok_idx)
-            if omitted:  # said, never silent: objects with a centre that did not fit in the messages
-                parts += [b',"objects_not_in_messages":', b"%d" % omitted]
-        parts[0] = orjson.dumps(head)[:-1]
+            # (objects_not_in_messages: said, never silent: objects with a centre that did not fit in the messages)
+            tail = b',"cpm_uper_bytes":%d' % len(cpm_uper) if not omitted else \
+                b',"cpm_uper_bytes":%d,"objects_not_in_messages":%d' % (len(cpm_uper), omitted)
+        head = _lean_head(setup, camera_id, fno, ts, N, errors, self.cpm_cdd if self.messages else None)
         t3 = time.perf_counter()
-        total = round(1e6 * (t3 - t0), 1)
-        parts.append(b',"processing_us":{"footprints":%.1f,"records":%.1f,"messages":%.1f,"total":%.1f}}' % (
-            1e6 * (t1 - t0), 1e6 * (t2 - t1), 1e6 * (t3 - t2), total))
-        return FrameOutput(b"".join(parts), RECORD_FOOTPRINTS, camera_id, total, None, len(errors), cpm_uper)
+        # (orjson's text of the rounded floats: one decimal, as "%.1f" writes them below 1e15; the total's text read
+        # back is round(total, 1): tests/test_service_lean_cpm.py)
+        total_text = b"%.1f" % (1e6 * (t3 - t0))
+        data = b'%s,"objects":%s%s,"processing_us":{"footprints":%.1f,"records":%.1f,"messages":%.1f,"total":%s}}' % (
+            head, co.text, tail, 1e6 * (t1 - t0), 1e6 * (t2 - t1), 1e6 * (t3 - t2), total_text)
+        return FrameOutput(data, RECORD_FOOTPRINTS, camera_id, float(total_text), None, len(errors), cpm_uper)
+
+    def _lean_cpm(self, setup: CameraSetup, ref_ms: int, class_p, cols, co: _CompactObjects, motion,
+                  N: int) -> bytes | None:
+        """:meth:`_lean_records`' UPER CPM of the objects ``co.ok_idx`` from the columns ``cols`` (``motion``: the
+        tracker's; None: untracked): :func:`.frame_kernels.lean_cpm_uper` (one compiled call, the world -> ENU
+        transform inside) where it takes the frame, else :func:`.frame_kernels.plain_cpm_uper` on numpy's ENU
+        columns -- the same bytes.  None: a value out of range (the general writer names it)."""
+        # (tracked: the message's objects' motion codes in one compiled call, as _plain_cpm_uper)
+        mc = None if motion is None else motion_rows(motion[1], N, None if len(co.ok_idx) == N else co.ok_idx)
+        crow = _class_rows_of(co.classes)
+        if setup.lean_cpm is not None:
+            out = lean_cpm_uper(setup.lean_cpm, ref_ms, cols.values, co.ok_idx, class_p, co.msg_ids, cols.v2x_rows,
+                                co.class_idx, crow, mc)
+            if out is not None:
+                return out
+        cls = self._cls  # (declined, or no lean constants: the call before, which also names what it declines)
+        return plain_cpm_uper(setup.uper, ref_ms, setup.world_to_enu(cols.values[:2].T), co.ok_idx, class_p,
+                              co.msg_ids, cols.v2x_rows, _CPM_INDEX, co.class_idx, crow, cls.bits_value,
+                              cls.bits_width, cdd=self.cpm_cdd, motion=mc)
 
     def _footprints(self, setup: CameraSetup, found: FrameDetections) -> tuple:
         """The camera's kernel over the frame's good detections (in columns: :func:`.detections.parse_detections`,
@@ -1104,6 +1128,39 @@ def _class_index(classes: list) -> tuple[np.ndarray, list]:
     first: dict = {}
     class_idx = np.fromiter((first.setdefault(c, len(first)) for c in classes), np.int64, N)
     return class_idx, list(first)
+
+
+#: the 64-bit integers orjson writes (a frame number beyond them: its error, by the dict's text)
+_INT_MIN, _UINT_MAX = -(1 << 63), (1 << 64) - 1
+
+
+def _lean_head(setup: CameraSetup, camera_id, fno: int, ts: float, n_objects: int, errors, cdd: str | None) -> bytes:
+    """The compact record's head up to its ``objects`` (without the closing brace): ``orjson.dumps`` of the dict
+    ``{"type": "footprints", "record": "compact", "camera_id", "frame", "timestamp_s", "station_id",
+    "heading_offset_deg", "n_objects", "detection_errors"[, "cpm_cdd"]}`` to the byte, its constant texts kept per
+    camera and ``camera_id`` (``setup.head_texts``), the frame's values written in (floats and errors by orjson).
+    ``cdd``: None without messages (no ``cpm_cdd``)."""
+    texts = setup.head_texts.get(camera_id)
+    if texts is None or type(fno) is not int or not _INT_MIN <= fno <= _UINT_MAX:
+        if type(fno) is not int or not _INT_MIN <= fno <= _UINT_MAX:  # (orjson's error or text: the dict's)
+            head = {"type": RECORD_FOOTPRINTS, "record": "compact", "camera_id": camera_id, "frame": fno,
+                    "timestamp_s": ts, "station_id": setup.station_id,
+                    "heading_offset_deg": setup.georef.heading_offset_deg, "n_objects": n_objects,
+                    "detection_errors": [e.as_dict() for e in errors]}
+            if cdd is not None:
+                head["cpm_cdd"] = cdd
+            return orjson.dumps(head)[:-1]
+        texts = (b'{"type":%s,"record":"compact","camera_id":%s,"frame":' % (
+            orjson.dumps(RECORD_FOOTPRINTS), orjson.dumps(camera_id)),
+            b',"station_id":%s,"heading_offset_deg":%s,"n_objects":' % (
+            orjson.dumps(setup.station_id), orjson.dumps(setup.georef.heading_offset_deg)),
+            b"" if cdd is None else b',"cpm_cdd":%s' % orjson.dumps(cdd))
+        if len(setup.head_texts) >= 64:  # (a single camera answers to any id: a few are kept)
+            setup.head_texts.clear()
+        setup.head_texts[camera_id] = texts
+    a, b, c = texts
+    return b'%s%d,"timestamp_s":%s%s%d,"detection_errors":%s%s' % (
+        a, fno, orjson.dumps(ts), b, n_objects, orjson.dumps([e.as_dict() for e in errors]) if errors else b"[]", c)
 
 
 def _int_ids(ids: list) -> np.ndarray | None:

@@ -3,10 +3,13 @@ leave numba's cache of every kernel valid: the package's cache key covers every 
 
 from __future__ import annotations
 
+import functools
 import math
+from typing import NamedTuple
 
 import numpy as np
-from numba import njit
+from numba import njit, types
+from numba.extending import intrinsic
 
 from .messages.asn1_cpm import CONTAINER_ID_PERCEIVED_OBJECTS, DEFAULT_CDD
 from .messages.cpm import CONFIDENCE_LEVEL_UNAVAILABLE, COORD_GUARD_CM, COORD_MAX, COORD_MIN, TIMESTAMP_ITS_MAX
@@ -17,9 +20,12 @@ from .messages.uper_cpm import (
     container_constants,
     kernel_motion,
     plain_container_kernel,
+    plain_objects_bits,
+    write_plain_objects,
 )
 
-__all__ = ["worst_usable", "cm_dm", "plain_cpm_container", "plain_cpm_uper"]
+__all__ = ["worst_usable", "cm_dm", "plain_cpm_container", "plain_cpm_uper", "LeanCpm", "lean_cpm_constants",
+           "lean_cpm_uper", "enu_columns", "enu_modes", "ENU_PLAIN", "ENU_FMA_LAST", "ENU_FMA_FIRST", "ENU_GIVEN"]
 
 
 @njit(cache=True, nogil=True)
@@ -199,3 +205,218 @@ def plain_cpm_uper(writer: CpmUperWriter, reference_time_ms: int, en: np.ndarray
     container = plain_cpm_container(en, rows, class_p, object_ids, v2x, cpm_at, class_idx, class_row, class_value,
                                     class_width, cdd=cdd, motion=motion)
     return None if container is None else writer.encode(reference_time_ms, container)
+
+
+# -- the lean frame's CPM: one call of few arguments, the world -> ENU transform inside ------------------------------
+
+#: how a compiled pass forms east / north ``e_j = d0 Rt[0, j] + d1 Rt[1, j]`` of ``d = xy - origin`` (``Rt``: the map
+#: tie's rotation transposed) to the bit as numpy's ``d @ Rt`` does it here (BLAS: :func:`enu_modes` finds out):
+#: two products rounded, then added; ``fma(d1, Rt[1, j], round(d0 Rt[0, j]))``; ``fma(d0, Rt[0, j], round(d1
+#: Rt[1, j]))``; or the values are east / north already (numpy's product formed by the caller)
+ENU_PLAIN, ENU_FMA_LAST, ENU_FMA_FIRST, ENU_GIVEN = 0, 1, 2, 3
+
+
+@intrinsic
+def _fma(typingctx, a, b, c):
+    """``a * b + c`` rounded once (LLVM's ``llvm.fma.f64``: the FMA instruction, or libm's exact fma)."""
+    if not all(isinstance(t, types.Float) for t in (a, b, c)):
+        return None
+
+    def codegen(context, builder, signature, args):
+        return builder.fma(*args)
+
+    return types.float64(types.float64, types.float64, types.float64), codegen
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _enu_of(d0, d1, r0, r1, mode):  # pragma: no cover - compiled
+    """``d0 r0 + d1 r1`` with the roundings of ``mode`` (:data:`ENU_PLAIN` ...)."""
+    if mode == ENU_FMA_LAST:
+        return _fma(d1, r1, d0 * r0)
+    if mode == ENU_FMA_FIRST:
+        return _fma(d0, r0, d1 * r1)
+    return d0 * r0 + d1 * r1
+
+
+@njit(cache=True, nogil=True)
+def enu_columns(xy, tie, mode):  # pragma: no cover - compiled
+    """East / north ``(2, N)`` (m) of the world points ``xy (2, N)`` (m) under the map tie ``tie`` = (origin x, y,
+    ``Rt[0, 0], Rt[0, 1], Rt[1, 0], Rt[1, 1]``) with the roundings of ``mode`` (:data:`ENU_GIVEN`: a copy): what
+    the lean CPM's kernel computes, for :func:`enu_modes` and the tests."""
+    out = np.empty((2, xy.shape[1]))
+    for i in range(xy.shape[1]):
+        if mode == ENU_GIVEN:
+            out[0, i], out[1, i] = xy[0, i], xy[1, i]
+            continue
+        d0, d1 = xy[0, i] - tie[0], xy[1, i] - tie[1]
+        out[0, i] = _enu_of(d0, d1, tie[2], tie[4], mode)
+        out[1, i] = _enu_of(d0, d1, tie[3], tie[5], mode)
+    return out
+
+
+#: the frame sizes :func:`enu_modes` asks numpy about, in both layouts (one object: a vector-matrix product, asked
+#: 256 times; more: a matrix product, whose kernels differ in their tails and, for many rows, in their blocking)
+_PROBE_SIZES = ((1,) * 256, (2, 3, 5, 8, 17, 100, 255, 1001, 4099, 10000))
+
+
+@functools.cache
+def enu_modes() -> tuple[int, int] | None:
+    """Which :data:`ENU_PLAIN` / :data:`ENU_FMA_LAST` / :data:`ENU_FMA_FIRST` gives numpy's ``(xy - origin) @
+    Rt`` (the service's ``CameraSetup.world_to_enu``) to the bit on this machine, for one point and for more:
+    ``(mode_one, mode_many)``, found once by asking numpy (its BLAS picks its kernels by CPU: an FMA kernel sums
+    ``d1 Rt[1, j]`` into the rounded ``d0 Rt[0, j]``), over points in both memory layouts; None when no mode gives
+    every probe's bits (the caller then keeps numpy's product)."""
+    rng = np.random.default_rng(20261129)
+    c, s = math.cos(0.7), math.sin(0.7)
+    rt = np.array([[c, s], [-s, c]]).T  # (as GeoReference.R_enu_world.T: a transposed view)
+    origin = np.array([123.456, -78.9])
+    tie = np.array([origin[0], origin[1], rt[0, 0], rt[0, 1], rt[1, 0], rt[1, 1]])
+    modes = []
+    for sizes in _PROBE_SIZES:
+        probes = []
+        for n in sizes:
+            xy = rng.normal(size=(n, 2)) * rng.choice([1.0, 300.0, 4e4], size=(n, 1))
+            for pts in (xy, np.asfortranarray(xy)):
+                probes.append((np.ascontiguousarray(pts.T), ((pts - origin) @ rt).T))
+        found = [m for m in (ENU_FMA_LAST, ENU_FMA_FIRST, ENU_PLAIN)
+                 if all(np.array_equal(enu_columns(xy, tie, m), want) for xy, want in probes)]
+        if len(found) != 1:  # (none; or the probes did not tell the modes apart: numpy's product kept)
+            return None
+        modes.append(found[0])
+    return modes[0], modes[1]
+
+
+class LeanCpm(NamedTuple):
+    """A camera's constants of :func:`lean_cpm_uper`, packed once: ``ints`` (int64: the layout of :data:`_CI`, the
+    container's column ranges and the class tables), ``head`` (the station's fixed octets,
+    :attr:`~.messages.uper_cpm.CpmUperWriter.head`) and ``tie`` (float64 (6,): origin x, y (m), ``Rt``)."""
+
+    ints: np.ndarray
+    head: np.ndarray
+    tie: np.ndarray
+
+
+#: offsets in :attr:`LeanCpm.ints`: head bits, reference time's bit, container id - 1, the CPM's V2X row, the
+#: correlation's prefix and bits, the ENU modes (one point, more), the number of class-table rows, then the
+#: container's column ranges (lo, hi) and the class tables (values, widths)
+(_CI_HEAD_BITS, _CI_REF_AT, _CI_CID_M1, _CI_AT, _CI_CORR_PREFIX, _CI_CORR_BITS, _CI_ENU_ONE, _CI_ENU_MANY,
+ _CI_NCLASS, _CI_LO) = range(10)
+_NCOLS = container_constants()[0].shape[0]
+_CI_HI = _CI_LO + _NCOLS
+_CI_CLASS = _CI_HI + _NCOLS
+_CM_MIN, _CM_MAX = float(COORD_MIN), float(COORD_MAX)
+_NO_MOTION = kernel_motion(None, 0)[0]
+
+
+def lean_cpm_constants(writer: CpmUperWriter, cdd: str, origin_m: np.ndarray, rotation_t: np.ndarray, cpm_at: int,
+                       class_value: np.ndarray, class_width: np.ndarray) -> LeanCpm | None:
+    """A camera's :class:`LeanCpm`: its station's ``writer``, CDD release ``cdd``, map tie (``origin_m`` (2,) m and
+    ``rotation_t``, the world -> ENU rotation transposed: ``CameraSetup.world_to_enu``), the CPM's row
+    ``cpm_at`` of the V2X codes and the class tables (``class_value``, ``class_width``: one entry per row).  None
+    when numpy's world -> ENU product cannot be matched to the bit here (:func:`enu_modes`)."""
+    modes = enu_modes()
+    if modes is None:
+        return None
+    lo, hi, prefix, bits = container_constants(cdd)
+    ints = np.concatenate([
+        np.array([writer.head_bits, REFERENCE_TIME_AT, CONTAINER_ID_PERCEIVED_OBJECTS - 1, cpm_at, prefix, bits,
+                  *modes, len(class_value)], np.int64), lo, hi, np.asarray(class_value, np.int64),
+        np.asarray(class_width, np.int64)])
+    rt = np.asarray(rotation_t, np.float64)
+    tie = np.array([*np.asarray(origin_m, np.float64), rt[0, 0], rt[0, 1], rt[1, 0], rt[1, 1]])
+    return LeanCpm(ints, writer.head, tie)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _cm_of(v):  # pragma: no cover - compiled
+    """:func:`_cm_dm_kernel`'s cm of one coordinate (m)."""
+    if v != v:
+        v = 0.0
+    return int(min(max(np.ceil(v * 100.0 - COORD_GUARD_CM), _CM_MIN), _CM_MAX))
+
+
+@njit(cache=True, nogil=True)
+def _lean_cm_levels(ci, tie, values, rows, class_p):  # pragma: no cover - compiled
+    """The cm ``(2, m)`` of the objects ``rows`` (their world x / y in rows 0 and 1 of ``values``, made east / north
+    as numpy makes them: :func:`enu_columns`) and their ConfidenceLevels ``(m,)`` (as :func:`_plain_cpm_kernel`)."""
+    m = rows.shape[0]
+    mode = ci[_CI_ENU_ONE] if values.shape[1] == 1 else ci[_CI_ENU_MANY]
+    cm = np.empty((2, m), np.int64)
+    level = np.empty(m, np.int64)
+    for j in range(m):
+        r = rows[j]
+        e0, e1 = values[0, r], values[1, r]
+        if mode != ENU_GIVEN:
+            d0, d1 = e0 - tie[0], e1 - tie[1]
+            e0, e1 = _enu_of(d0, d1, tie[2], tie[4], mode), _enu_of(d0, d1, tie[3], tie[5], mode)
+        cm[0, j], cm[1, j] = _cm_of(e0), _cm_of(e1)
+        if class_p.shape[0] == 0:
+            level[j] = CONFIDENCE_LEVEL_UNAVAILABLE
+            continue
+        p = class_p[r]
+        level[j] = CONFIDENCE_LEVEL_UNAVAILABLE if p != p else int(max(1.0, np.ceil(100.0 * p - 1e-9)))
+    return cm, level
+
+
+@njit(cache=True, nogil=True)
+def _lean_cpm_kernel(ci, head, tie, ref, values, rows, class_p, object_ids, v2x, class_idx, class_row, motion,
+                     with_motion):  # pragma: no cover - compiled
+    """:func:`lean_cpm_uper` in one compiled call: the cm and levels (:func:`_lean_cm_levels`), the container's
+    size and checks (:func:`~.messages.uper_cpm.plain_objects_bits`) and the message -- the head, the reference
+    time, the container's length determinant and the container written in place after them
+    (:func:`~.messages.uper_cpm.write_plain_objects`: no column table, no container copied bit by bit).  Empty: declined
+    (a value out of range, a container of 16384 octets or more, motion rows of another shape)."""
+    m = rows.shape[0]
+    empty = np.zeros(0, np.uint8)
+    if with_motion and (motion.shape[0] < 10 or motion.shape[1] != m):
+        return empty
+    cm, level = _lean_cm_levels(ci, tie, values, rows, class_p)
+    nc, at = ci[_CI_NCLASS], ci[_CI_AT]
+    cv, cw = ci[_CI_CLASS:_CI_CLASS + nc], ci[_CI_CLASS + nc:_CI_CLASS + 2 * nc]
+    nbits = plain_objects_bits(object_ids, cm, v2x, rows, at, class_idx, class_row, cv, cw, level, motion,
+                               with_motion, ci[_CI_LO:_CI_HI], ci[_CI_HI:_CI_CLASS], ci[_CI_CORR_BITS])
+    n = (nbits + 7) // 8
+    if nbits < 0 or n >= 16384:
+        return empty
+    hb, cid = ci[_CI_HEAD_BITS], ci[_CI_CID_M1]
+    hdr = 12 if n < 128 else 20
+    out = np.zeros((hb + hdr + 8 * n + 7) // 8, np.uint8)
+    out[:(hb + 7) // 8] = head[:(hb + 7) // 8]
+    _put_bits(out, ci[_CI_REF_AT], ref, 42)
+    pos = _put_bits(out, hb, (cid << 8) | n if n < 128 else (cid << 16) | 0x8000 | n, hdr)
+    lead = (np.int64(out[pos >> 3]) >> (8 - (pos & 7))) if pos & 7 else np.int64(0)
+    write_plain_objects(out, pos, lead, object_ids, cm, v2x, rows, at, class_idx, class_row, cv, cw, level, motion,
+                        with_motion, ci[_CI_CORR_PREFIX], ci[_CI_CORR_BITS])
+    return out
+
+
+def lean_cpm_uper(consts: LeanCpm, reference_time_ms: int, values: np.ndarray, rows: np.ndarray,
+                  class_p: np.ndarray | None, object_ids: np.ndarray, v2x: np.ndarray, class_idx: np.ndarray,
+                  class_row: np.ndarray, motion: np.ndarray | None = None) -> bytes | None:
+    """:func:`plain_cpm_uper` of the service's lean frame in one compiled call of 13 arguments, the camera's
+    constants packed once (:func:`lean_cpm_constants`) and the world -> ENU transform inside: the same bytes.
+
+    Parameters
+    ----------
+    consts : LeanCpm
+    reference_time_ms : int
+        TimestampIts (ms).
+    values : ndarray (q >= 2, N) float64, C-contiguous
+        The frame's columns, world x / y of each object (m) in rows 0 and 1 (``FrameColumns.values``).
+    rows, class_p, object_ids, v2x, class_idx, class_row :
+        As :func:`plain_cpm_uper` (``v2x`` (7, N) int32, the CPM's rows at ``consts``' ``cpm_at``).
+    motion : ndarray (>= 10, m) int64, C-contiguous, optional
+        :func:`~.messages.motion.motion_rows`' codes of the m objects; None: no motion sent.
+
+    Returns
+    -------
+    The message's octets; None where this call declines (a reference time out of range, a value out of range,
+    a container too long, motion rows of another shape): :func:`plain_cpm_uper` then answers (None or the
+    writer's error), as before.
+    """
+    if not 0 <= reference_time_ms <= TIMESTAMP_ITS_MAX:
+        return None
+    out = _lean_cpm_kernel(consts.ints, consts.head, consts.tie, reference_time_ms, values, rows,
+                           _NO_CLASS_P if class_p is None else class_p, object_ids, v2x, class_idx, class_row,
+                           _NO_MOTION if motion is None else motion, motion is not None)
+    return out.tobytes() if out.size else None

@@ -61,13 +61,14 @@ class MessageIdMap:
         self._seen: dict = {}  # key -> frame time last seen
         self._now = -np.inf
         self._next_sweep = -np.inf
-        # integer ids 0..65535 (the usual detector's) also by array, for :meth:`assign`'s ``int_ids`` path (1.5 MB,
+        # integer ids 0..65535 (the usual detector's) also by array, for :meth:`assign`'s ``int_ids`` path (2 MB,
         # made on its first use): their numbers (-1: none), their latest frame time not yet written to ``_seen``
-        # and which ids those are (the writes are moved to ``_seen`` before anything reads or changes it: the same
-        # dicts, in the same order, as without the path)
+        # and which ids those are -- ``_pending[1:1 + _pending[0]]``, each once (``_dirty``: listed already) -- (the
+        # writes are moved to ``_seen`` before anything reads or changes it: the same dicts, in the same order, as
+        # without the path)
         self._small_num: np.ndarray | None = None
-        self._small_seen = self._mark = None
-        self._pending: list[np.ndarray] = []
+        self._small_seen = self._mark = self._dirty = None
+        self._pending = np.zeros(1, np.int64)
         self._frame_keys: list = []
 
     def __len__(self) -> int:
@@ -81,9 +82,11 @@ class MessageIdMap:
 
     def _sync(self) -> None:
         """The frame times of the ``int_ids`` path into ``_seen`` (its keys are there already)."""
-        if self._pending:
-            keys = np.unique(np.concatenate(self._pending))
-            self._pending = []
+        n = int(self._pending[0])
+        if n:
+            keys = self._pending[1:1 + n].copy()
+            self._pending[0] = 0
+            self._dirty[keys] = 0
             seen = self._seen
             for k, t in zip(keys.tolist(), self._small_seen[keys].tolist(), strict=True):
                 if k in seen:
@@ -161,6 +164,7 @@ class MessageIdMap:
         if self._small_num is None:  # (the ids the general path assigned so far, too)
             self._small_num, self._small_seen = np.full(_N, -1, np.int64), np.zeros(_N)
             self._mark = np.zeros(_N, np.int64)
+            self._dirty, self._pending = np.zeros(_N, np.uint8), np.zeros(1 + _N, np.int64)
             for key, num in self._num.items():
                 if type(key) is int and 0 <= key < _N:
                     self._small_num[key] = num
@@ -170,7 +174,8 @@ class MessageIdMap:
         if self._now >= self._next_sweep:
             self._sweep()
         nums = np.empty(m, np.int64)
-        n_new = _lookup_small(sel, self._small_num, self._mark, self._small_seen, t_s, nums)
+        n_new = _lookup_small(sel, self._small_num, self._mark, self._small_seen, t_s, nums, self._dirty,
+                              self._pending)
         if n_new < 0:  # ids out of 0..65535, or an id twice (its occurrences are other objects)
             return None
         if n_new:  # (their keys enter ``_seen`` in the frame's order, as the general path's update does)
@@ -182,16 +187,21 @@ class MessageIdMap:
             self._sync()
             self._seen.update(dict.fromkeys(sel[new].tolist(), t_s))
             self._small_seen[sel] = t_s
-        self._pending.append(sel.copy())
+            listed = sel[self._dirty[sel] == 0]  # (the frame's ids, distinct, into the pending list once each)
+            n = int(self._pending[0])
+            self._pending[1 + n:1 + n + len(listed)] = listed
+            self._pending[0] = n + len(listed)
+            self._dirty[listed] = 1
         return nums
 
 
 @njit(cache=True, nogil=True)
-def _lookup_small(sel, small_num, mark, small_seen, t_s, nums):  # pragma: no cover - compiled
+def _lookup_small(sel, small_num, mark, small_seen, t_s, nums, dirty, pending):  # pragma: no cover - compiled
     """:meth:`MessageIdMap._assign_small`'s look-up in one pass: -1 when an id of ``sel (m,)`` is outside 0..65535
     or there twice (``mark (65536,)``: scratch); else each id's number into ``nums`` (-1: new) and the count of
-    the new ones -- with none new, their frame time ``t_s`` into ``small_seen`` too (with some, the caller writes
-    it after assigning them)."""
+    the new ones -- with none new, their frame time ``t_s`` into ``small_seen`` too and each id not listed yet
+    (``dirty``) onto the pending list ``pending[1:1 + pending[0]]`` (with some new, the caller does both after
+    assigning them)."""
     m = sel.shape[0]
     for j in range(m):
         k = sel[j]
@@ -206,6 +216,13 @@ def _lookup_small(sel, small_num, mark, small_seen, t_s, nums):  # pragma: no co
         nums[j] = small_num[k]
         n_new += nums[j] < 0
     if n_new == 0:
+        n = pending[0]
         for j in range(m):
-            small_seen[sel[j]] = t_s
+            k = sel[j]
+            small_seen[k] = t_s
+            if dirty[k] == 0:
+                dirty[k] = 1
+                n += 1
+                pending[n] = k
+        pending[0] = n
     return n_new

@@ -79,7 +79,8 @@ from .motion import MOTION_ROWS, ObjectMotion, motion_rows
 
 __all__ = ["encode_cpm_uper_fast", "perceived_object_container_uper", "perceived_object_container_uper_arrays",
            "class_bits", "CpmUperWriter", "object_bits", "sensor_id_columns", "plain_container_uper",
-           "plain_container_kernel", "container_constants", "kernel_motion", "REFERENCE_TIME_AT"]
+           "plain_container_kernel", "container_constants", "kernel_motion", "REFERENCE_TIME_AT",
+           "gather_columns", "write_container", "container_size", "plain_objects_bits", "write_plain_objects"]
 
 _ALT_CONF = ("alt-000-01", "alt-000-02", "alt-000-05", "alt-000-10", "alt-000-20", "alt-000-50", "alt-001-00",
              "alt-002-00", "alt-005-00", "alt-010-00", "alt-020-00", "alt-050-00", "alt-100-00", "alt-200-00",
@@ -422,7 +423,7 @@ def _put(out, acc, nacc, k, v, w):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
-def _container_size(cols, lo, hi, cw, lv, sid_ptr, sid_val, corr_bits):  # pragma: no cover - compiled
+def container_size(cols, lo, hi, cw, lv, sid_ptr, sid_val, corr_bits):  # pragma: no cover - compiled
     """(bits of the container, error column, error object): the columns' ranges, the ConfidenceLevels, the
     sensorIdLists (0 or 1..128 ids of 0..255) checked; the error column is -1 when all is well."""
     n = cols.shape[1]
@@ -458,12 +459,24 @@ def _container_kernel(cols, lo, hi, cv, cw, lv, sid_ptr, sid_val, n_total, corr_
     """UPER octets of a PerceivedObjectContainer from the (19, n) columns (:data:`_COLUMN_RANGES`), the objects'
     sensorIdLists (``sid_val[sid_ptr[i]:sid_ptr[i + 1]]``, empty: not sent) and numberOfPerceivedObjects
     ``n_total``; or an error: (empty, column, object) -- see :data:`_ERR_LEVEL` and the next two."""
-    n = cols.shape[1]
-    nbits, col, bad = _container_size(cols, lo, hi, cw, lv, sid_ptr, sid_val, corr_bits)
+    nbits, col, bad = container_size(cols, lo, hi, cw, lv, sid_ptr, sid_val, corr_bits)
     if col >= 0:
         return np.zeros(0, np.uint8), col, bad
     out = np.zeros((nbits + 7) // 8, np.uint8)
-    acc, nacc, k = np.int64(0), 0, 0
+    write_container(out, 0, 0, cols, cv, cw, lv, sid_ptr, sid_val, n_total, corr_prefix, corr_bits)
+    return out, -1, -1
+
+
+@njit(cache=True, nogil=True)
+def write_container(out, pos, lead, cols, cv, cw, lv, sid_ptr, sid_val, n_total, corr_prefix,
+                    corr_bits):  # pragma: no cover - compiled
+    """The bits of :func:`_container_kernel`'s container (its columns checked by :func:`container_size`) written
+    into ``out`` (uint8, zero from bit ``pos`` on) from bit ``pos`` on, most significant first; ``lead``: the
+    ``pos % 8`` bits of ``out[pos // 8]`` before them (kept).  The bits after the last one stay zero (the octet
+    padding).  A compiled writer of a whole message puts the container right after its head this way
+    (``service/frame_kernels.py``), without a second copy shifted bit by bit."""
+    n = cols.shape[1]
+    acc, nacc, k = np.int64(lead), pos & 7, pos >> 3
     acc, nacc, k = _put(out, acc, nacc, k, (n_total << 9) | n, 18)  # extension 0, numberOf..., list ext 0, count
     for i in range(n):
         corr, cls = cols[5, i] != 101, cw[i] > 0
@@ -498,20 +511,30 @@ def _container_kernel(cols, lo, hi, cv, cw, lv, sid_ptr, sid_val, n_total, corr_
             acc, nacc, k = _put(out, acc, nacc, k, (cv[i] << 7) | (lv[i] - 1), cw[i] + 7)
     if nacc:
         out[k] = (acc << (8 - nacc)) & 0xFF
-    return out, -1, -1
-
 
 
 @njit(cache=True, nogil=True)
 def plain_container_kernel(object_ids, cm, v2x, rows, at, class_idx, class_row, cv_tab, cw_tab, level, motion,
                            with_motion, lo, hi, n_total, corr_prefix, corr_bits):  # pragma: no cover - compiled
-    """:func:`_container_kernel` of objects without sensors or quality, its columns gathered here: object
-    ``j`` is row ``rows[j]`` of the frame (``v2x`` (7, N): its x / y confidence and correlation at rows ``at``..
-    ``at + 2``; ``class_row[class_idx[r]]``: its row of the class tables ``cv_tab`` / ``cw_tab``), ``cm`` (>= 2, m):
-    its x / y in cm; ``motion`` (10, m): its motion rows (:func:`_motion_rows`) where ``with_motion``, else
-    none."""
+    """:func:`_container_kernel` of objects without sensors or quality, its columns gathered here
+    (:func:`gather_columns`)."""
     m = rows.shape[0]
-    cols = np.zeros((lo.shape[0], m), np.int64)
+    cols, cv, cw = gather_columns(object_ids, cm, v2x, rows, at, class_idx, class_row, cv_tab, cw_tab, motion,
+                                  with_motion, lo.shape[0])
+    return _container_kernel(cols, lo, hi, cv, cw, level, np.zeros(m + 1, np.int64), np.zeros(0, np.int64), n_total,
+                             corr_prefix, corr_bits)
+
+
+@njit(cache=True, nogil=True)
+def gather_columns(object_ids, cm, v2x, rows, at, class_idx, class_row, cv_tab, cw_tab, motion, with_motion,
+                   ncols):  # pragma: no cover - compiled
+    """The ``(ncols, m)`` columns of :func:`_container_kernel` and the class bits ``cv, cw (m,)`` of objects
+    without sensors or quality, gathered from the frame's columns: object ``j`` is row ``rows[j]`` of the frame
+    (``v2x`` (7, N): its x / y confidence and correlation at rows ``at``..``at + 2``; ``class_row[class_idx[r]]``:
+    its row of the class tables ``cv_tab`` / ``cw_tab``), ``cm`` (>= 2, m): its x / y in cm; ``motion`` (>= 10,
+    m): its motion rows (:func:`_motion_rows`) where ``with_motion``, else none."""
+    m = rows.shape[0]
+    cols = np.zeros((ncols, m), np.int64)
     cv = np.empty(m, np.int64)
     cw = np.empty(m, np.int64)
     for j in range(m):
@@ -525,8 +548,89 @@ def plain_container_kernel(object_ids, cm, v2x, rows, at, class_idx, class_row, 
             cols[8, j] = cols[10, j] = cols[13, j] = 1  # the confidences of absent motion (_NO_MOTION_ROWS)
         c = class_row[class_idx[r]]
         cv[j], cw[j] = cv_tab[c], cw_tab[c]
-    return _container_kernel(cols, lo, hi, cv, cw, level, np.zeros(m + 1, np.int64), np.zeros(0, np.int64), n_total,
-                             corr_prefix, corr_bits)
+    return cols, cv, cw
+
+
+@njit(cache=True, nogil=True)
+def plain_objects_bits(object_ids, cm, v2x, rows, at, class_idx, class_row, cv_tab, cw_tab, level, motion,
+                       with_motion, lo, hi, corr_bits):  # pragma: no cover - compiled
+    """:func:`container_size` of :func:`plain_container_kernel`'s container without gathering its columns: the
+    container's bits, or -1 when a value is out of its column's range (``lo``, ``hi``: :func:`container_constants`),
+    a classified object's ConfidenceLevel is not in 1..101 or there are more than 255 objects (the caller declines;
+    :func:`plain_container_kernel` names which)."""
+    m = rows.shape[0]
+    if m > 255:
+        return -1
+    nbits = 18
+    for j in range(m):
+        # (the fields as gather_columns gathers them: read here, not returned by an inlined helper -- its tuple of
+        # 19 made this loop four times slower)
+        r = rows[j]
+        oid, x, y = object_ids[j], cm[0, j], cm[1, j]
+        xc, yc, corr = np.int64(v2x[at, r]), np.int64(v2x[at + 1, r]), np.int64(v2x[at + 2, r])
+        vel, vx, vxc, vy, vyc, ang, z, zc, agp, age = 0, 0, 1, 0, 1, 0, 0, 1, 0, 0  # (no motion: _NO_MOTION_ROWS)
+        if with_motion:
+            vel, vx, vxc, vy, vyc = motion[0, j], motion[1, j], motion[2, j], motion[3, j], motion[4, j]
+            ang, z, zc, agp, age = motion[5, j], motion[6, j], motion[7, j], motion[8, j], motion[9, j]
+        c = class_row[class_idx[r]]
+        cw, lv = cw_tab[c], level[j]
+        bad = ((oid < lo[0]) | (oid > hi[0]) | (x < lo[1]) | (x > hi[1]) | (y < lo[2]) | (y > hi[2])
+               | (xc < lo[3]) | (xc > hi[3]) | (yc < lo[4]) | (yc > hi[4]) | (corr < lo[5]) | (corr > hi[5])
+               | (vel < lo[6]) | (vel > hi[6]) | (vx < lo[7]) | (vx > hi[7]) | (vxc < lo[8]) | (vxc > hi[8])
+               | (vy < lo[9]) | (vy > hi[9]) | (vyc < lo[10]) | (vyc > hi[10]) | (ang < lo[11]) | (ang > hi[11])
+               | (z < lo[12]) | (z > hi[12]) | (zc < lo[13]) | (zc > hi[13]) | (agp < lo[14]) | (agp > hi[14])
+               | (age < lo[15]) | (age > hi[15]) | ((cw > 0) & ((lv < 1) | (lv > 101))))
+        if bad:
+            return -1
+        nbits += 104 + 46 * vel + 21 * ang + 11 * agp
+        if corr != 101:
+            nbits += corr_bits
+        if cw > 0:
+            nbits += cw + 7
+    return nbits
+
+
+@njit(cache=True, nogil=True)
+def write_plain_objects(out, pos, lead, object_ids, cm, v2x, rows, at, class_idx, class_row, cv_tab, cw_tab, level,
+                        motion, with_motion, corr_prefix, corr_bits):  # pragma: no cover - compiled
+    """:func:`write_container` of :func:`plain_container_kernel`'s container (checked by :func:`plain_objects_bits`)
+    without gathering its columns: the same bits from bit ``pos`` of ``out`` on (``lead``: the bits of ``out[pos //
+    8]`` before them), a field group per put (objects without sensors or quality; measurementDeltaTime 0)."""
+    m = rows.shape[0]
+    acc, nacc, k = np.int64(lead), pos & 7, pos >> 3
+    acc, nacc, k = _put(out, acc, nacc, k, (m << 9) | m, 18)  # extension 0, numberOf..., list ext 0, count
+    for j in range(m):
+        # (the fields as gather_columns gathers them: read here, not returned by an inlined helper -- its tuple of
+        # 19 made this loop four times slower)
+        r = rows[j]
+        oid, x, y = object_ids[j], cm[0, j], cm[1, j]
+        xc, yc, corr = np.int64(v2x[at, r]), np.int64(v2x[at + 1, r]), np.int64(v2x[at + 2, r])
+        vel, vx, vxc, vy, vyc, ang, z, zc, agp, age = 0, 0, 1, 0, 1, 0, 0, 1, 0, 0  # (no motion: _NO_MOTION_ROWS)
+        if with_motion:
+            vel, vx, vxc, vy, vyc = motion[0, j], motion[1, j], motion[2, j], motion[3, j], motion[4, j]
+            ang, z, zc, agp, age = motion[5, j], motion[6, j], motion[7, j], motion[8, j], motion[9, j]
+        c = class_row[class_idx[r]]
+        cv, cw, lv = cv_tab[c], cw_tab[c], level[j]
+        pres = (0x2000 | (0x1000 if vel == 1 else 0) | (0x400 if ang == 1 else 0) | (0x100 if corr != 101 else 0)
+                | (0x10 if agp == 1 else 0) | (0x2 if cw > 0 else 0))
+        # extension 0 + 14 presence bits, objectId, measurementDeltaTime 0 (+ 2048)
+        acc, nacc, k = _put(out, acc, nacc, k, (pres << 28) | (oid << 12) | 2048, 43)
+        # x (the 0 bit before it: no zCoordinate), its confidence, y
+        acc, nacc, k = _put(out, acc, nacc, k, ((x + 131072) << 30) | ((xc - 1) << 18) | (y + 131072), 49)
+        acc, nacc, k = _put(out, acc, nacc, k, yc - 1, 12)
+        if vel == 1:  # CHOICE index 1 (cartesianVelocity), no zVelocity, x, y with their SpeedConfidence
+            acc, nacc, k = _put(out, acc, nacc, k, (((2 << 15) | (vx + 16383)) << 29) | ((vxc - 1) << 22)
+                                | ((vy + 16383) << 7) | (vyc - 1), 46)
+        if ang == 1:  # no yAngle, xAngle; zAngle value, AngleConfidence
+            acc, nacc, k = _put(out, acc, nacc, k, (z << 7) | (zc - 1), 21)
+        if corr != 101:
+            acc, nacc, k = _put(out, acc, nacc, k, (corr_prefix << 8) | (corr + 100), corr_bits)
+        if agp == 1:
+            acc, nacc, k = _put(out, acc, nacc, k, age, 11)
+        if cw > 0:
+            acc, nacc, k = _put(out, acc, nacc, k, (cv << 7) | (lv - 1), cw + 7)
+    if nacc:
+        out[k] = (acc << (8 - nacc)) & 0xFF
 
 
 def plain_container_uper(object_ids, cm, v2x, rows, cpm_at: int, class_idx, class_row, class_value, class_width,
