@@ -436,3 +436,79 @@ def test_columnar_passes_are_vectorised():
         fresh = nb.njit(sig, error_model="numpy", fastmath={"contract"})(getattr(sk, name).py_func)
         asm = fresh.inspect_asm(fresh.signatures[0])
         assert any("vdivpd" in line and ("%zmm" in line or "%ymm" in line) for line in asm.splitlines()), name
+
+
+def _tracker_output(rng, cam_name, n):
+    """A :class:`TrackOutput` of ``n`` mixed contacts (:func:`_mixed_contacts`) as the tracker hands it: its
+    ``cov_v_m2ps2`` random, NaN where no velocity, some entries ``-0.0``; and the objects' classes."""
+    xy, v, _, _, _ = _mixed_contacts(rng, n)
+    out = _output(xy, v)
+    a = rng.normal(0.0, 0.3, (n, 2, 2))
+    out.cov_v_m2ps2[:] = a @ a.transpose(0, 2, 1)
+    out.cov_v_m2ps2[~np.isfinite(v).all(1)] = np.nan
+    out.cov_v_m2ps2[rng.random((n, 2, 2)) < 0.05] = -0.0
+    classes = [CLASSES[i] for i in rng.integers(0, len(CLASSES), n)]
+    return out, classes
+
+
+@pytest.mark.parametrize("camera", sorted(CAMERAS))
+@pytest.mark.parametrize("n", [0, 1, 7, 8, 9, 63, 64, 65, 100, 129])
+def test_apply_is_the_sum_of_cov_v_and_the_term_to_the_bit(camera, n):
+    """`ContactSlide.apply` (one compiled call: moments, the zero term without a velocity, the sum) gives to the
+    bit -- the bytes, NaN and -0.0 included -- the numpy sum of the tracker's ``cov_v`` and
+    `ContactSlide.covariance` (the moments kernel and the mask in numpy), on frames of every kind of contact and
+    size around the vector width and the block; every other field is the input's own array, the input is not
+    changed."""
+    slide = ContactSlide(CAMERAS[camera])
+    out, classes = _tracker_output(np.random.default_rng(2000 + n), camera, n)
+    before = out.cov_v_m2ps2.copy()
+    got = slide.apply(out, classes)
+    want = out.cov_v_m2ps2 + slide.covariance(out, classes)
+    assert got.cov_v_m2ps2.shape == (n, 2, 2) and got.cov_v_m2ps2.tobytes() == want.tobytes()
+    assert out.cov_v_m2ps2.tobytes() == before.tobytes() and got.cov_v_m2ps2 is not out.cov_v_m2ps2
+    assert all(getattr(got, f) is getattr(out, f) for f in TrackOutput._fields[:-1])
+    if n >= 63:  # (the frame has rows of each case: a term, a zero term, NaN)
+        term = want - out.cov_v_m2ps2
+        assert (term == 0).all((1, 2)).any() and np.isnan(want).all((1, 2)).any() and (term > 0.0).any()
+
+
+def test_apply_takes_any_layout_and_names_a_wrong_shape():
+    """Rows not as the tracker gives them (strided, read-only, float32, a list) are copied as the kernel takes
+    them -- the same result; a field of the wrong shape is refused by name (the kernel reads one row per
+    object)."""
+    from footprint_uq.errors import InputError
+
+    slide = ContactSlide(CAM)
+    out, classes = _tracker_output(np.random.default_rng(11), "plain", 20)
+    want = slide.apply(out, classes).cov_v_m2ps2
+    wide = np.zeros((20, 4))
+    wide[:, ::2] = out.xy_m
+    ro = out.v_mps.copy()
+    ro.flags.writeable = False
+    odd = out._replace(xy_m=wide[:, ::2], v_mps=ro, cov_v_m2ps2=out.cov_v_m2ps2.tolist())
+    assert slide.apply(odd, classes).cov_v_m2ps2.tobytes() == want.tobytes()
+    f32 = out._replace(xy_m=out.xy_m.astype(np.float32))
+    np.testing.assert_array_equal(slide.apply(f32, classes).cov_v_m2ps2,
+                                  out.cov_v_m2ps2 + slide.covariance(f32, classes))
+    for field, bad in (("xy_m", out.xy_m[:19]), ("v_mps", out.v_mps.reshape(-1)),
+                       ("cov_v_m2ps2", out.cov_v_m2ps2[:, 0])):
+        with pytest.raises(InputError, match=f"out.{field}"):
+            slide.apply(out._replace(**{field: bad}), classes)
+
+
+def test_a_tracked_service_loads_the_slide_kernel_before_its_first_frame():
+    """The tracked service's warm frames call the term's compiled entry with the real frames' signature (a cold or
+    second signature would compile in the first frame, ~seconds)."""
+    from footprint_uq.fast import slide_kernels
+    from footprint_uq.service.core import Service
+
+    svc = Service(CAM, "basler1", camera_id="cam1", tracks=True, record="compact")
+    kernel = slide_kernels.ADDED_KERNELS[False]
+    before = set(kernel.signatures)
+    assert before
+    t, boxes = _boxes_of_a_diagonal_truck(3)
+    for k in range(3):
+        box = dict(zip(("u_min_px", "v_min_px", "u_max_px", "v_max_px"), map(float, boxes[k]), strict=True))
+        svc.process_frame({"camera_id": "cam1", "frame": k, "timestamp_s": 1.7e9 + float(t[k]),
+                           "detections": [{"object_id": 1, "class": "truck", **box}]})
+    assert set(kernel.signatures) == before

@@ -38,7 +38,7 @@ import numpy as np
 from .. import params as P
 from . import core
 
-__all__ = ["slide_moments", "MOMENTS_KERNELS", "MIN_SIZE_M"]
+__all__ = ["slide_moments", "slide_added", "MOMENTS_KERNELS", "ADDED_KERNELS", "MIN_SIZE_M"]
 
 _INL = dict(inline="always", cache=True, error_model="numpy", fastmath={"contract"})
 _JIT = dict(cache=True, error_model="numpy", fastmath={"contract"})
@@ -429,29 +429,71 @@ def _clip(s):
     return MIN_SIZE_M if s < MIN_SIZE_M else s
 
 
+@nb.njit(**_INL)
+def _pinhole_block(S, cam, xy, v, size_mean, size_sigma, nodes, i0, n_obj):
+    """The running moments (_N, _S, _M) of objects ``i0 .. i0 + n_obj`` (a block) of a pinhole: the mean box's
+    render and the centre, then per node a render and the moments' update, each step a vectorised pass."""
+    n_pass = (n_obj + _LANES - 1) // _LANES * _LANES
+    _block_load(S, xy, v, size_mean, size_sigma, i0, n_obj, n_pass)
+    _block_start(S, cam, n_pass)
+    _render_block(S, cam, n_pass)
+    _block_centre(S, cam, n_pass)
+    for n in range(nodes.shape[0]):
+        _block_node(S, cam, nodes[n, 0], nodes[n, 1], nodes[n, 2], n_pass)
+
+
+@nb.njit(**_INL)
+def _store_moments(S, i0, n_obj, mean_out, second_out):
+    """The block's mean and second moment (running sums over the count, NaN where no node renders) into rows
+    ``i0 ..`` of the outputs."""
+    B = _BLOCK
+    for j in range(n_obj):
+        k = S[_N * B + j]
+        w = 1.0 / k if k > 0.0 else math.nan     # (NaN where no node renders)
+        mean_out[i0 + j, 0], mean_out[i0 + j, 1] = S[_S0 * B + j] * w, S[_S1 * B + j] * w
+        second_out[i0 + j, 0, 0], second_out[i0 + j, 1, 1] = S[_M00 * B + j] * w, S[_M11 * B + j] * w
+        second_out[i0 + j, 0, 1] = second_out[i0 + j, 1, 0] = S[_M01 * B + j] * w
+
+
+@nb.njit(**_INL)
+def _store_added(S, xy, v, i0, n_obj, cov_v, cov_out):
+    """Rows ``i0 ..`` of ``cov_out = cov_v + E[u u^T]`` for the block's objects (the second moment as
+    :func:`_store_moments` forms it, added element by element): NaN where no node renders, except that a term
+    without a finite position and velocity is zero (the row's own ``cov_v`` then, plus 0.0)."""
+    B = _BLOCK
+    for j in range(n_obj):
+        i = i0 + j
+        k = S[_N * B + j]
+        w = 1.0 / k if k > 0.0 else math.nan
+        t00, t01, t11 = S[_M00 * B + j] * w, S[_M01 * B + j] * w, S[_M11 * B + j] * w
+        if k == 0.0 and not (math.isfinite(xy[i, 0]) and math.isfinite(xy[i, 1]) and math.isfinite(v[i, 0])
+                             and math.isfinite(v[i, 1])):
+            t00, t01, t11 = 0.0, 0.0, 0.0
+        cov_out[i, 0, 0], cov_out[i, 0, 1] = cov_v[i, 0, 0] + t00, cov_v[i, 0, 1] + t01
+        cov_out[i, 1, 0], cov_out[i, 1, 1] = cov_v[i, 1, 0] + t01, cov_v[i, 1, 1] + t11
+
+
 @nb.njit(**_JIT)
 def _moments_pinhole(prm, R, dom, xy, v, size_mean, size_sigma, nodes, mean_out, second_out):
-    """:func:`_moments` of a lens without distortion, columnar (module doc): per block of objects the mean box's
-    render and the centre, then per node a render and the moments' update, each step a vectorised pass (any
-    number of nodes; ``dom`` unused, as in :func:`_moments` without distortion)."""
+    """:func:`_moments` of a lens without distortion, columnar (module doc): per block of objects
+    :func:`_pinhole_block` (any number of nodes; ``dom`` unused, as in :func:`_moments` without distortion)."""
     cam = _camera_scalars(prm, R)
     S = np.empty(_NCOL * _BLOCK)
-    B = _BLOCK
-    for i0 in range(0, xy.shape[0], B):
-        n_obj = min(B, xy.shape[0] - i0)
-        n_pass = (n_obj + _LANES - 1) // _LANES * _LANES
-        _block_load(S, xy, v, size_mean, size_sigma, i0, n_obj, n_pass)
-        _block_start(S, cam, n_pass)
-        _render_block(S, cam, n_pass)
-        _block_centre(S, cam, n_pass)
-        for n in range(nodes.shape[0]):
-            _block_node(S, cam, nodes[n, 0], nodes[n, 1], nodes[n, 2], n_pass)
-        for j in range(n_obj):
-            k = S[_N * B + j]
-            w = 1.0 / k if k > 0.0 else math.nan     # (NaN where no node renders)
-            mean_out[i0 + j, 0], mean_out[i0 + j, 1] = S[_S0 * B + j] * w, S[_S1 * B + j] * w
-            second_out[i0 + j, 0, 0], second_out[i0 + j, 1, 1] = S[_M00 * B + j] * w, S[_M11 * B + j] * w
-            second_out[i0 + j, 0, 1] = second_out[i0 + j, 1, 0] = S[_M01 * B + j] * w
+    for i0 in range(0, xy.shape[0], _BLOCK):
+        n_obj = min(_BLOCK, xy.shape[0] - i0)
+        _pinhole_block(S, cam, xy, v, size_mean, size_sigma, nodes, i0, n_obj)
+        _store_moments(S, i0, n_obj, mean_out, second_out)
+
+
+@nb.njit(**_JIT)
+def _added_pinhole(prm, R, dom, xy, v, size_mean, size_sigma, nodes, cov_v, cov_out):
+    """:func:`_moments_pinhole`'s second moment added to ``cov_v`` into ``cov_out`` (:func:`_store_added`)."""
+    cam = _camera_scalars(prm, R)
+    S = np.empty(_NCOL * _BLOCK)
+    for i0 in range(0, xy.shape[0], _BLOCK):
+        n_obj = min(_BLOCK, xy.shape[0] - i0)
+        _pinhole_block(S, cam, xy, v, size_mean, size_sigma, nodes, i0, n_obj)
+        _store_added(S, xy, v, i0, n_obj, cov_v, cov_out)
 
 
 @nb.njit(**_JIT)
@@ -460,10 +502,27 @@ def _moments_lens(prm, R, dom, xy, v, size_mean, size_sigma, nodes, mean_out, se
     _moments(prm, R, dom, True, xy, v, size_mean, size_sigma, nodes, mean_out, second_out)
 
 
+@nb.njit(**_JIT)
+def _added_lens(prm, R, dom, xy, v, size_mean, size_sigma, nodes, cov_v, cov_out):
+    """:func:`_moments_lens`' second moment added to ``cov_v`` into ``cov_out`` (as :func:`_store_added`)."""
+    n = xy.shape[0]
+    m, M = np.empty((n, 2)), np.empty((n, 2, 2))
+    _moments(prm, R, dom, True, xy, v, size_mean, size_sigma, nodes, m, M)
+    for i in range(n):
+        t00, t01, t11 = M[i, 0, 0], M[i, 0, 1], M[i, 1, 1]
+        if math.isnan(t00) and not (math.isfinite(xy[i, 0]) and math.isfinite(xy[i, 1])
+                                    and math.isfinite(v[i, 0]) and math.isfinite(v[i, 1])):
+            t00, t01, t11 = 0.0, 0.0, 0.0
+        cov_out[i, 0, 0], cov_out[i, 0, 1] = cov_v[i, 0, 0] + t00, cov_v[i, 0, 1] + t01
+        cov_out[i, 1, 0], cov_out[i, 1, 1] = cov_v[i, 1, 0] + t01, cov_v[i, 1, 1] + t11
+
+
 #: the compiled entries of :func:`slide_moments` by ``has_dist``, each called with its arguments less ``has_dist``:
 #: a caller on a per-frame path looks its camera's entry up once and calls it itself (no Python frame of this
 #: layer per frame, ``tracking/contact_slide.py``; ``bench/frame_walk.py`` counts them)
 MOMENTS_KERNELS = {False: _moments_pinhole, True: _moments_lens}
+#: the same for :func:`slide_added` (``ContactSlide.apply``'s one call per frame)
+ADDED_KERNELS = {False: _added_pinhole, True: _added_lens}
 
 
 def slide_moments(prm, R, dom, has_dist, xy, v, size_mean, size_sigma, nodes, mean_out, second_out) -> None:
@@ -480,3 +539,16 @@ def slide_moments(prm, R, dom, has_dist, xy, v, size_mean, size_sigma, nodes, me
     Outputs (filled): ``mean_out`` (n, 2) m/s and ``second_out`` (n, 2, 2) m^2/s^2; NaN where no node renders.
     """
     MOMENTS_KERNELS[bool(has_dist)](prm, R, dom, xy, v, size_mean, size_sigma, nodes, mean_out, second_out)
+
+
+def slide_added(prm, R, dom, has_dist, xy, v, size_mean, size_sigma, nodes, cov_v, cov_out) -> None:
+    """A velocity covariance with the slide term added, in one pass: ``cov_out = cov_v + E[u u^T]``.
+
+    Parameters as :func:`slide_moments`, and ``cov_v`` (n, 2, 2) m^2/s^2, the tracker's velocity covariance.
+
+    Output (filled): ``cov_out`` (n, 2, 2) m^2/s^2, ``cov_v`` plus :func:`slide_moments`' second moment element by
+    element -- to the bit the numpy sum of the two -- where that moment is NaN (no node renders) and the row has no
+    finite position or velocity, ``cov_v + 0.0`` (the term of an object without a velocity is zero; one with a
+    velocity whose box does not render stays NaN: not reported with a covariance).
+    """
+    ADDED_KERNELS[bool(has_dist)](prm, R, dom, xy, v, size_mean, size_sigma, nodes, cov_v, cov_out)
