@@ -127,7 +127,7 @@ def _max_rel(a: np.ndarray, b: np.ndarray) -> float:
 
 def _run_worker(src: Path, a, tmp: Path, tag: str, rnd: int, extra: tuple = ()) -> tuple[dict, Path]:
     env = dict(os.environ, PYTHONPATH=str(src))
-    if src.resolve() != (ROOT / "src").resolve():
+    if src.resolve() != (ROOT / "src").resolve() and str(a.against_cache) != "none":
         env["NUMBA_CACHE_DIR"] = str(a.against_cache)   # (the other tree is only read)
     npz = tmp / f"{tag}-{rnd}.npz"
     p = subprocess.run([sys.executable, __file__, "--worker", "--objects", str(a.objects), "--calls",
@@ -140,7 +140,8 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--against", type=Path, help="another tree's src folder (e.g. /work/main/src)")
     ap.add_argument("--against-cache", type=Path, default=Path(tempfile.gettempdir()) / "bench_slide_numba_cache",
-                    help="the numba cache folder of the --against tree (kept between runs: compiled once)")
+                    help="the numba cache folder of the --against tree (kept between runs: compiled once); 'none': "
+                         "the tree's own (a writable copy of another tree, its caches with it)")
     ap.add_argument("--rounds", type=int, default=6)
     ap.add_argument("--calls", type=int, default=3000)
     ap.add_argument("--objects", type=int, default=100)
