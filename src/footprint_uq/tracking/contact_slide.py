@@ -19,10 +19,11 @@ On line (:func:`slide_moments`, :class:`ContactSlide`) the closed form runs comp
 (:func:`footprint_uq.fast.slide_kernels.slide_moments`): per size node one render of the box, the bottom-centre
 pixel's derivative along the path only (every corner moves by the same vector) and the back-projection's
 derivative at that pixel, seven renders per object (the mean size for the centre, then the six nodes) -- the same
-numbers as the numpy closed form (:func:`slide_moments_reference`) to rounding.  A pinhole camera's kernel runs
-columnar (the renders of 64 objects at a time, each step one vectorised pass over them): ~5 us per frame of 100
-tracked objects (was ~54 us object by object; 132 us with a distorting lens, still object by object),
-:meth:`ContactSlide.covariance` ~8 us with its Python (``bench/bench_slide.py``; docs/motion-fit.md, section 6).
+numbers as the numpy closed form (:func:`slide_moments_reference`) to rounding.  The kernels run columnar (the
+renders of 64 objects at a time, each step one vectorised pass over them): ~5 us per frame of 100 tracked objects
+for a pinhole camera (was ~54 us object by object), ~23 us with a distorting lens (was ~137 us object by object);
+:meth:`ContactSlide.apply` -- one compiled call, the term added to the tracker's ``cov_v`` -- ~7 us with its
+Python (``bench/bench_slide.py``; docs/motion-fit.md, section 6).
 :func:`slide_along_path` (a central difference of the rendered contact along the path, the earlier on-line form)
 stays as a check.
 
