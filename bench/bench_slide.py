@@ -12,11 +12,12 @@ class car, speeds 0-25 m/s in every direction, one in ten standing).  Each round
 tree (``--worker``, with that tree's ``src`` first on ``PYTHONPATH``; the other tree's numba cache goes to
 ``--against-cache``, its tree is only read), trees alternating, so that a change of the machine's load reaches both
 alike.  A worker times the compiled entry (``slide_kernels.MOMENTS_KERNELS``, as ``ContactSlide.covariance``
-calls it) and ``ContactSlide.covariance`` on a ``TrackOutput``, the median of ``--calls`` calls after a
-warm-up (compilation not timed), and saves its outputs; the run reports the medians over rounds, the ratio
-against / this tree, and the largest difference of the two trees' outputs relative to each object's largest
-entry.  ``--sizes``: then, in one worker of each tree, the pinhole kernel's median at each of these frame sizes
-(the first contacts of the same inputs; ``--rounds 0`` for these alone).  Nothing is asserted.
+calls it), ``ContactSlide.covariance`` and ``ContactSlide.apply`` (the tracker's per-frame call) on a
+``TrackOutput``, the median of ``--calls`` calls after a warm-up (compilation not timed), and saves its outputs;
+the run reports the medians over rounds, the ratio against / this tree, and the largest difference of the two
+trees' outputs relative to each object's largest entry.  ``--sizes``: then, in one worker of each tree, each
+camera's kernel median at each of these frame sizes (the first contacts of the same inputs; a tenth of the calls
+for the lens beyond 200 objects when it is the slow kernel; ``--rounds 0`` for these alone).  Nothing is asserted.
 """
 
 from __future__ import annotations
@@ -87,27 +88,32 @@ def worker(objects: int, calls: int, out_npz: str) -> dict:
         out.xy_m[:], out.v_mps[:] = xy, v
         slide = CS.ContactSlide(cam)
         res[name] = {"kernel_us": _median_us(partial(kern, prm, R, dom, xy, v, mean, sig, CS._NODES, m, M), calls),
-                     "covariance_us": _median_us(partial(slide.covariance, out, classes), calls)}
+                     "covariance_us": _median_us(partial(slide.covariance, out, classes), calls),
+                     "apply_us": _median_us(partial(slide.apply, out, classes), calls)}
         saved[name + "/mean"], saved[name + "/second"] = m.copy(), M.copy()
     np.savez(out_npz, **saved)
     return res
 
 
 def sizes_worker(sizes: list[int], calls: int) -> dict:
-    """The pinhole kernel's median (us) at each frame size (the tree on ``sys.path``)."""
+    """Per camera (pinhole, distorting lens), the moments kernel's median (us) at each frame size (the tree on
+    ``sys.path``)."""
     from footprint_uq.fast import slide_kernels
     from footprint_uq.products.contact import class_size_priors
     from footprint_uq.tracking import contact_slide as CS
 
     cams, xy_all, v_all, _ = _inputs(max(sizes))
-    prm, R, dom, has_dist = CS.kernel_camera(cams["pinhole"])
-    kern = slide_kernels.MOMENTS_KERNELS[has_dist]
-    res = {}
-    for n in sizes:
-        xy, v = xy_all[:n].copy(), v_all[:n].copy()
-        mean, sig = class_size_priors(["car"] * n, n)
-        m, M = np.empty((n, 2)), np.empty((n, 2, 2))
-        res[str(n)] = _median_us(partial(kern, prm, R, dom, xy, v, mean, sig, CS._NODES, m, M), calls)
+    res: dict = {}
+    for name, cam in cams.items():
+        prm, R, dom, has_dist = CS.kernel_camera(cam)
+        kern = slide_kernels.MOMENTS_KERNELS[has_dist]
+        res[name] = {}
+        for n in sizes:
+            xy, v = xy_all[:n].copy(), v_all[:n].copy()
+            mean, sig = class_size_priors(["car"] * n, n)
+            m, M = np.empty((n, 2)), np.empty((n, 2, 2))
+            res[name][str(n)] = _median_us(partial(kern, prm, R, dom, xy, v, mean, sig, CS._NODES, m, M),
+                                           calls if not has_dist or n <= 200 else max(calls // 10, 20))
     return res
 
 
@@ -121,7 +127,7 @@ def _max_rel(a: np.ndarray, b: np.ndarray) -> float:
 
 def _run_worker(src: Path, a, tmp: Path, tag: str, rnd: int, extra: tuple = ()) -> tuple[dict, Path]:
     env = dict(os.environ, PYTHONPATH=str(src))
-    if src.resolve() != (ROOT / "src").resolve():
+    if src.resolve() != (ROOT / "src").resolve() and str(a.against_cache) != "none":
         env["NUMBA_CACHE_DIR"] = str(a.against_cache)   # (the other tree is only read)
     npz = tmp / f"{tag}-{rnd}.npz"
     p = subprocess.run([sys.executable, __file__, "--worker", "--objects", str(a.objects), "--calls",
@@ -134,7 +140,8 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--against", type=Path, help="another tree's src folder (e.g. /work/main/src)")
     ap.add_argument("--against-cache", type=Path, default=Path(tempfile.gettempdir()) / "bench_slide_numba_cache",
-                    help="the numba cache folder of the --against tree (kept between runs: compiled once)")
+                    help="the numba cache folder of the --against tree (kept between runs: compiled once); 'none': "
+                         "the tree's own (a writable copy of another tree, its caches with it)")
     ap.add_argument("--rounds", type=int, default=6)
     ap.add_argument("--calls", type=int, default=3000)
     ap.add_argument("--objects", type=int, default=100)
@@ -157,22 +164,23 @@ def main(argv=None) -> int:
                 r, npz = _run_worker(trees[tag], a, tmp, tag, rnd)
                 runs[tag].append(r)
                 print(f"round {rnd} {tag:7s} " + "  ".join(f"{c}: kernel {x['kernel_us']:.1f} us, covariance "
-                                                          f"{x['covariance_us']:.1f} us" for c, x in r.items()),
-                      flush=True)
+                                                          f"{x['covariance_us']:.1f} us, apply {x['apply_us']:.1f} us"
+                                                          for c, x in r.items()), flush=True)
         res = {"objects": a.objects, "calls": a.calls, "rounds": a.rounds, "trees": {t: str(p) for t, p in
                                                                                       trees.items()}}
         for t in trees if sizes else ():
-            res[f"{t}_pinhole_kernel_us_by_size"] = _run_worker(trees[t], a, tmp, t, -1, ("--sizes", a.sizes))[0]
-            print(t, "pinhole kernel us by frame size", json.dumps(res[f"{t}_pinhole_kernel_us_by_size"]), flush=True)
+            res[f"{t}_kernel_us_by_size"] = _run_worker(trees[t], a, tmp, t, -1, ("--sizes", a.sizes))[0]
+            print(t, "kernel us by frame size", json.dumps(res[f"{t}_kernel_us_by_size"]), flush=True)
         last = {t: np.load(tmp / f"{t}-{a.rounds - 1}.npz") for t in trees} if a.rounds else {}
         for cam in runs["this"][0] if a.rounds else ():
             row = {}
             for t in trees:
-                for f in ("kernel_us", "covariance_us"):
+                for f in ("kernel_us", "covariance_us", "apply_us"):
                     row[f"{t}_{f}"] = float(np.median([r[cam][f] for r in runs[t]]))
             if "against" in trees:
                 row["kernel_ratio_against_over_this"] = row["against_kernel_us"] / row["this_kernel_us"]
                 row["covariance_ratio_against_over_this"] = row["against_covariance_us"] / row["this_covariance_us"]
+                row["apply_ratio_against_over_this"] = row["against_apply_us"] / row["this_apply_us"]
                 row["max_rel_diff"] = max(_max_rel(last["this"][f"{cam}/{k}"], last["against"][f"{cam}/{k}"])
                                           for k in ("mean", "second"))
             res[cam] = row

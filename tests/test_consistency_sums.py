@@ -80,3 +80,48 @@ def test_the_monitor_window_holds_the_frames_sums_pinned():
     tracks.nis = np.zeros(2)
     with pytest.raises(InputError, match="out"):
         mon.observe(1.3, _Out(3), ["car"] * 3)
+
+
+def _window(mon: NisMonitor) -> dict:
+    """The monitor's window as plain values: class -> (the frames' (time, sum, count), the totals)."""
+    return {c: (list(dq), tuple(mon._sums[c])) for c, dq in mon._frames.items()}
+
+
+@settings(max_examples=150, deadline=None)
+@given(st.lists(st.tuples(st.lists(_NIS, max_size=12), _CLASS, st.booleans(), st.sampled_from(["list", "tuple",
+                                                                                                "none"])),
+                min_size=1, max_size=25))
+def test_observe_of_one_class_frames_is_the_general_paths(frames):
+    """`NisMonitor.observe`'s one-class path (a list of one class or no classes: one compiled sum, no dictionary)
+    keeps the same window -- frames, sums to the bit, counts, expiry -- as the general path (the same frames with
+    their classes as a tuple, `_class_sums`), over frames of one class, of two, empty, and without classes."""
+    fast, general = _Tracks(), _Tracks()
+    mon_f = NisMonitor(fast, window_s=0.25, min_updates=1, max_updates=40)
+    mon_g = NisMonitor(general, window_s=0.25, min_updates=1, max_updates=40)
+    for k, (nis, cls, mixed, kind) in enumerate(frames):
+        classes = [cls] * len(nis)
+        if mixed and nis:
+            classes[-1] = "other"
+        fast.nis = general.nis = np.array(nis, dtype=float)
+        mon_f.observe(0.1 * k, _Out(len(nis)), None if kind == "none" else classes if kind == "list" else
+                      tuple(classes))
+        mon_g.observe(0.1 * k, _Out(len(nis)), None if kind == "none" else tuple(classes))
+        assert _window(mon_f) == _window(mon_g)
+    assert mon_f.status() == mon_g.status()
+
+
+def test_observe_of_one_class_frames_pinned():
+    """One-class frames by hand: the key of None is "", of 1 is "1"; a frame without a finite NIS adds no entry;
+    the sums leave the window after window_s; a strided or integer NIS array is read as float64."""
+    tracks = _Tracks()
+    mon = NisMonitor(tracks, window_s=1.0, min_updates=1)
+    for t, nis, classes in ((0.0, np.array([2.0, np.nan, 4.0]), ["car"] * 3), (0.2, np.array([1.0]), [None]),
+                            (0.4, np.arange(6)[::2], [1, 1, 1]), (0.6, np.array([np.nan, np.inf]), ["bus"] * 2),
+                            (0.8, np.array([0.5, 0.25]), None)):
+        tracks.nis = nis
+        mon.observe(t, _Out(len(nis)), classes)
+    assert _window(mon) == {"car": ([(0.0, 6.0, 2)], (6.0, 2)), "": ([(0.2, 1.0, 1), (0.8, 0.75, 2)], (1.75, 3)),
+                            "1": ([(0.4, 6.0, 3)], (6.0, 3))}
+    tracks.nis = np.array([3.0])
+    mon.observe(1.1, _Out(1), ["car"])
+    assert _window(mon)["car"] == ([(1.1, 3.0, 1)], (3.0, 1)) and _window(mon)[""][1] == (1.75, 3)

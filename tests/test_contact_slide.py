@@ -417,9 +417,10 @@ def test_kernels_take_any_number_of_nodes(camera):
 
 
 def test_columnar_passes_are_vectorised():
-    """The pinhole kernel's passes compile to packed vector divisions (AVX2 ``ymm`` or AVX-512 ``zmm``): a
-    branch, a library call or an aliasing doubt left in a pass would keep it scalar (~10x the time,
-    ``bench/bench_slide.py``).  Compiled afresh (numba does not show the code of a cached kernel)."""
+    """The kernels' passes (the pinhole's, and the lens's render and update) compile to packed vector divisions
+    (AVX2 ``ymm`` or AVX-512 ``zmm``): a branch, a library call or an aliasing doubt left in a pass would keep it
+    scalar (~10x the time, ``bench/bench_slide.py``).  Compiled afresh (numba does not show the code of a cached
+    kernel)."""
     import llvmlite.binding as llvm
     import numba as nb
     from numba import types
@@ -432,7 +433,165 @@ def test_columnar_passes_are_vectorised():
     col = types.float64[::1]
     for name, sig in [("_render_block", (col, cam, types.int64)), ("_block_start", (col, cam, types.int64)),
                       ("_block_centre", (col, cam, types.int64)),
-                      ("_block_node", (col, cam, types.float64, types.float64, types.float64, types.int64))]:
+                      ("_block_node", (col, cam, types.float64, types.float64, types.float64, types.int64)),
+                      ("_render_block_lens", (col, cam, types.UniTuple(types.float64, 8), types.float64,
+                                              types.float64, types.int64)),
+                      ("_block_update_lens", (col, cam, types.boolean[::1], types.int64))]:
         fresh = nb.njit(sig, error_model="numpy", fastmath={"contract"})(getattr(sk, name).py_func)
         asm = fresh.inspect_asm(fresh.signatures[0])
         assert any("vdivpd" in line and ("%zmm" in line or "%ymm" in line) for line in asm.splitlines()), name
+
+
+def _tracker_output(rng, cam_name, n):
+    """A :class:`TrackOutput` of ``n`` mixed contacts (:func:`_mixed_contacts`) as the tracker hands it: its
+    ``cov_v_m2ps2`` random, NaN where no velocity, some entries ``-0.0``; and the objects' classes."""
+    xy, v, _, _, _ = _mixed_contacts(rng, n)
+    out = _output(xy, v)
+    a = rng.normal(0.0, 0.3, (n, 2, 2))
+    out.cov_v_m2ps2[:] = a @ a.transpose(0, 2, 1)
+    out.cov_v_m2ps2[~np.isfinite(v).all(1)] = np.nan
+    out.cov_v_m2ps2[rng.random((n, 2, 2)) < 0.05] = -0.0
+    classes = [CLASSES[i] for i in rng.integers(0, len(CLASSES), n)]
+    return out, classes
+
+
+@pytest.mark.parametrize("camera", sorted(CAMERAS))
+@pytest.mark.parametrize("n", [0, 1, 7, 8, 9, 63, 64, 65, 100, 129])
+def test_apply_is_the_sum_of_cov_v_and_the_term_to_the_bit(camera, n):
+    """`ContactSlide.apply` (one compiled call: moments, the zero term without a velocity, the sum) gives to the
+    bit -- the bytes, NaN and -0.0 included -- the numpy sum of the tracker's ``cov_v`` and
+    `ContactSlide.covariance` (the moments kernel and the mask in numpy), on frames of every kind of contact and
+    size around the vector width and the block; every other field is the input's own array, the input is not
+    changed."""
+    slide = ContactSlide(CAMERAS[camera])
+    out, classes = _tracker_output(np.random.default_rng(2000 + n), camera, n)
+    before = out.cov_v_m2ps2.copy()
+    got = slide.apply(out, classes)
+    want = out.cov_v_m2ps2 + slide.covariance(out, classes)
+    assert got.cov_v_m2ps2.shape == (n, 2, 2) and got.cov_v_m2ps2.tobytes() == want.tobytes()
+    assert out.cov_v_m2ps2.tobytes() == before.tobytes() and got.cov_v_m2ps2 is not out.cov_v_m2ps2
+    assert all(getattr(got, f) is getattr(out, f) for f in TrackOutput._fields[:-1])
+    if n >= 63:  # (the frame has rows of each case: a term, a zero term, NaN)
+        term = want - out.cov_v_m2ps2
+        assert (term == 0).all((1, 2)).any() and np.isnan(want).all((1, 2)).any() and (term > 0.0).any()
+
+
+def test_apply_takes_any_layout_and_names_a_wrong_shape():
+    """Rows not as the tracker gives them (strided, read-only, float32, a list) are copied as the kernel takes
+    them -- the same result; a field of the wrong shape is refused by name (the kernel reads one row per
+    object)."""
+    from footprint_uq.errors import InputError
+
+    slide = ContactSlide(CAM)
+    out, classes = _tracker_output(np.random.default_rng(11), "plain", 20)
+    want = slide.apply(out, classes).cov_v_m2ps2
+    wide = np.zeros((20, 4))
+    wide[:, ::2] = out.xy_m
+    ro = out.v_mps.copy()
+    ro.flags.writeable = False
+    odd = out._replace(xy_m=wide[:, ::2], v_mps=ro, cov_v_m2ps2=out.cov_v_m2ps2.tolist())
+    assert slide.apply(odd, classes).cov_v_m2ps2.tobytes() == want.tobytes()
+    f32 = out._replace(xy_m=out.xy_m.astype(np.float32))
+    np.testing.assert_array_equal(slide.apply(f32, classes).cov_v_m2ps2,
+                                  out.cov_v_m2ps2 + slide.covariance(f32, classes))
+    for field, bad in (("xy_m", out.xy_m[:19]), ("v_mps", out.v_mps.reshape(-1)),
+                       ("cov_v_m2ps2", out.cov_v_m2ps2[:, 0])):
+        with pytest.raises(InputError, match=f"out.{field}"):
+            slide.apply(out._replace(**{field: bad}), classes)
+
+
+def test_a_tracked_service_loads_the_slide_kernel_before_its_first_frame():
+    """The tracked service's warm frames call the term's compiled entry with the real frames' signature (a cold or
+    second signature would compile in the first frame, ~seconds)."""
+    from footprint_uq.fast import slide_kernels
+    from footprint_uq.service.core import Service
+
+    svc = Service(CAM, "basler1", camera_id="cam1", tracks=True, record="compact")
+    kernel = slide_kernels.ADDED_KERNELS[False]
+    before = set(kernel.signatures)
+    assert before
+    t, boxes = _boxes_of_a_diagonal_truck(3)
+    for k in range(3):
+        box = dict(zip(("u_min_px", "v_min_px", "u_max_px", "v_max_px"), map(float, boxes[k]), strict=True))
+        svc.process_frame({"camera_id": "cam1", "frame": k, "timestamp_s": 1.7e9 + float(t[k]),
+                           "detections": [{"object_id": 1, "class": "truck", **box}]})
+    assert set(kernel.signatures) == before
+
+
+WIDE_LENS = _camera_with(k1=-0.25, p2=0.02)   # (the lens's domain: a ring of normalised radius 1.08-1.24)
+
+
+def _wide_contacts(rng, n):
+    """Contacts across and beside the view of :data:`WIDE_LENS` (corners of their boxes in its domain's ring,
+    beyond it, behind the camera), any course, cars to long trucks."""
+    xy = np.column_stack([rng.uniform(-45.0, 45.0, n), rng.uniform(-2.0, 40.0, n)])
+    course, speed = rng.uniform(-np.pi, np.pi, n), rng.uniform(0.0, 25.0, n)
+    v = speed[:, None] * np.column_stack([np.cos(course), np.sin(course)])
+    mean, sig = class_size_priors([("car", "truck", "bus", "pedestrian")[i] for i in rng.integers(0, 4, n)], n)
+    return xy, v, mean, sig * rng.uniform(1.0, 4.0, (n, 1))
+
+
+def test_lens_render_pass_is_the_object_by_object_render():
+    """The lens's columnar render (`_render_block_lens`, branch-free: the domain as its outer radius, the objects
+    with a corner in the ring between its radii flagged) then `_render_doubts` (those rendered again by `_render`,
+    the domain's table) equal `_render` object by object: the bottom-centre pixel, its rate, whether it renders,
+    the start of the undistortion -- over boxes of which some have corners in the ring (flagged), beyond it
+    and behind the camera."""
+    from footprint_uq.fast import slide_kernels as sk
+    from footprint_uq.tracking.contact_slide import kernel_camera
+
+    prm, R, dom, _ = kernel_camera(WIDE_LENS)
+    cam = sk._camera_scalars(prm, R)
+    k = prm[5:13].copy()
+    rng = np.random.default_rng(21)
+    B = sk._BLOCK
+    S = np.full(sk._NCOL_LENS * B, np.nan)
+    xy, v, mean, _ = _wide_contacts(rng, B)
+    for j in range(B):
+        q = sk._offset(prm, R, xy[j, 0], xy[j, 1])
+        cs, sn = np.cos(rng.uniform(-np.pi, np.pi)), 0.0
+        sn = np.sqrt(1.0 - cs * cs) * rng.choice([-1.0, 1.0])
+        a = 0.5 * mean[j, 0] * (R[0] * cs + R[1] * sn)
+        b = 0.5 * mean[j, 1] * (R[1] * cs - R[0] * sn)
+        h = mean[j, 2] * R[2]
+        d = R.T @ np.array([v[j, 0], v[j, 1], 0.0])
+        for col, val in zip((sk._Q0, sk._OL0, sk._OW0, sk._OH0, sk._D0), (q, a, b, h, d), strict=True):
+            S[col * B + j:(col + 3) * B + j:B] = val
+    in2, lim2 = dom[3], max(dom[3], dom[4])
+    kt = tuple(float(c) for c in k)
+    sk._render_block_lens(S, cam, kt, lim2, in2, B)
+    flagged = S[sk._DBT * B:(sk._DBT + 1) * B] != 0.0
+    sk._render_doubts(S, prm, dom, k, B)
+    ok = np.zeros(B, bool)
+
+    def col(c, j):
+        return tuple(float(S[(c + i) * B + j]) for i in range(3))
+
+    for j in range(B):
+        u, vv, du, dv, okj, x0, y0 = sk._render(prm, dom, True, k, col(sk._Q0, j), col(sk._OL0, j),
+                                                 col(sk._OW0, j), col(sk._OH0, j), *col(sk._D0, j))
+        ok[j] = okj
+        assert (S[sk._OK * B + j] != 0.0) == okj, j
+        if okj:
+            got = [S[c * B + j] for c in (sk._U, sk._V, sk._DU, sk._DV, sk._X0, sk._Y0)]
+            np.testing.assert_allclose(got, [u, vv, du, dv, x0, y0], rtol=1e-12, atol=1e-9)
+    assert flagged.sum() >= 3 and ok.sum() >= 10 and (~ok).sum() >= 3, (flagged.sum(), ok.sum())
+    assert (ok & flagged).any() and (~ok & flagged).any()
+
+
+@pytest.mark.parametrize("n", [1, 9, 64, 65, 129])
+def test_lens_kernel_equals_the_reference_where_the_domain_ring_is_reached(n):
+    """The lens's columnar kernel against the numpy closed form on contacts whose boxes reach the lens's domain
+    ring (some nodes render, others not): NaN where the reference has NaN, the moments to rounding."""
+    rng = np.random.default_rng(3000 + n)
+    xy, v, mean, sig = _wide_contacts(rng, n)
+    m, M = slide_moments(WIDE_LENS, xy, v, mean, sig)
+    mr, Mr = slide_moments_reference(WIDE_LENS, xy, v, mean, sig)
+    np.testing.assert_array_equal(np.isnan(M), np.isnan(Mr))
+    f = np.isfinite(Mr).all((1, 2))
+    scale = np.abs(Mr[f]).max(initial=0.0)
+    np.testing.assert_allclose(M[f], Mr[f], rtol=0, atol=1e-9 * scale + 1e-13)
+    np.testing.assert_allclose(m[f], mr[f], rtol=0, atol=1e-9 * np.sqrt(scale) + 1e-12)
+    if n >= 64:
+        k = _nodes_rendered(WIDE_LENS, xy, v, mean, sig)
+        assert ((k > 0) & (k < 6)).any() and (k == 0).any() and (k == 6).any(), k

@@ -39,6 +39,7 @@ DEFAULT_WINDOW_S = 30.0
 DEFAULT_ALPHA = 1e-4
 #: relative tolerance of the NIS sum (a model right to this is consistent)
 DEFAULT_TOLERANCE = 0.05
+_F64 = np.dtype(np.float64)
 
 
 class NisMonitor:
@@ -81,13 +82,29 @@ class NisMonitor:
         if nis.shape[0] != n:
             raise InputError("out", n, f"the output of the tracks' last step ({nis.shape[0]} objects)")
         now = float(time_s)
-        for cls, (s, k) in _class_sums(nis, classes, n).items():
-            dq = self._frames.setdefault(cls, collections.deque())
-            tot = self._sums.setdefault(cls, [0.0, 0])
-            dq.append((now, s, k))
-            tot[0] += s
-            tot[1] += k
-        self._expire(now)
+        if n and (classes is None or type(classes) is list and len(classes) == n and classes.count(classes[0]) == n):
+            # (a frame of one class, the common case: its sum in one compiled call, no dictionary of classes)
+            s, k = _finite_sum(nis if type(nis) is np.ndarray and nis.dtype is _F64 and nis.flags.c_contiguous
+                               else np.ascontiguousarray(nis, dtype=np.float64))
+            if k:
+                c = None if classes is None else classes[0]
+                self._add("" if c is None else str(c), now, s, k)
+        else:
+            for cls, (s, k) in _class_sums(nis, classes, n).items():
+                self._add(cls, now, s, k)
+        if self._frames:
+            self._expire(now)
+
+    def _add(self, cls: str, now_s: float, nis_sum: float, count: int) -> None:
+        """One frame's sum and count of class ``cls`` into its window."""
+        dq = self._frames.get(cls)
+        if dq is None:
+            dq = self._frames[cls] = collections.deque()
+            self._sums[cls] = [0.0, 0]
+        tot = self._sums[cls]
+        dq.append((now_s, nis_sum, count))
+        tot[0] += nis_sum
+        tot[1] += count
 
     def _expire(self, now_s: float) -> None:
         for cls, dq in self._frames.items():

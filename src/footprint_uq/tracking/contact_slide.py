@@ -19,10 +19,11 @@ On line (:func:`slide_moments`, :class:`ContactSlide`) the closed form runs comp
 (:func:`footprint_uq.fast.slide_kernels.slide_moments`): per size node one render of the box, the bottom-centre
 pixel's derivative along the path only (every corner moves by the same vector) and the back-projection's
 derivative at that pixel, seven renders per object (the mean size for the centre, then the six nodes) -- the same
-numbers as the numpy closed form (:func:`slide_moments_reference`) to rounding.  A pinhole camera's kernel runs
-columnar (the renders of 64 objects at a time, each step one vectorised pass over them): ~5 us per frame of 100
-tracked objects (was ~54 us object by object; 132 us with a distorting lens, still object by object),
-:meth:`ContactSlide.covariance` ~8 us with its Python (``bench/bench_slide.py``; docs/motion-fit.md, section 6).
+numbers as the numpy closed form (:func:`slide_moments_reference`) to rounding.  The kernels run columnar (the
+renders of 64 objects at a time, each step one vectorised pass over them): ~5 us per frame of 100 tracked objects
+for a pinhole camera (was ~54 us object by object), ~23 us with a distorting lens (was ~137 us object by object);
+:meth:`ContactSlide.apply` -- one compiled call, the term added to the tracker's ``cov_v`` -- ~7 us with its
+Python (``bench/bench_slide.py``; docs/motion-fit.md, section 6).
 :func:`slide_along_path` (a central difference of the rendered contact along the path, the earlier on-line form)
 stays as a check.
 
@@ -202,7 +203,8 @@ class ContactSlide:
         self.camera = camera
         self.size_priors = size_priors if isinstance(size_priors, tuple) else load_size_priors(size_priors)
         self._constants = None            # kernel_camera(camera) less has_dist, on first use
-        self._kernel = None               # its compiled entry (slide_kernels.MOMENTS_KERNELS), on first use
+        self._kernel = None               # its compiled entries (slide_kernels.MOMENTS_KERNELS, ADDED_KERNELS),
+        self._added = None                # on first use
         self._rows: dict = {}             # class name -> row of the prior tables
         self._lock = threading.Lock()
         self._mean, self._sigma = np.empty((0, 3)), np.empty((0, 3))
@@ -220,13 +222,13 @@ class ContactSlide:
 
         :func:`slide_moments` with the camera's compiled entry called from here (looked up once: a frame does not
         climb back up from ``fast/``, ``bench/frame_walk.py``); the tracker's rows as they come (C-contiguous
-        float64, :meth:`~footprint_uq.tracking.table.TrackTable.step`'s outputs) or copied as there."""
+        float64 of the frame's shape, :meth:`~footprint_uq.tracking.table.TrackTable.step`'s outputs) or copied
+        as such (:func:`_frame_rows`)."""
         n = out.track_id.shape[0]
         mean, sig = self._priors(classes, n)
         if self._kernel is None:
-            prm, R, dom, has_dist = kernel_camera(self.camera)
-            self._constants, self._kernel = (prm, R, dom), slide_kernels.MOMENTS_KERNELS[has_dist]
-        x, v = _rows_of(out.xy_m, 2), _rows_of(out.v_mps, 2)
+            self._load_kernels()
+        x, v = _frame_rows(out.xy_m, "out.xy_m", (n, 2)), _frame_rows(out.v_mps, "out.v_mps", (n, 2))
         m, M = np.empty((n, 2)), np.empty((n, 2, 2))
         self._kernel(*self._constants, x, v, mean, sig, _NODES, m, M)
         nan = np.isnan(M[:, 0, 0])   # (where no node renders; a row without a velocity or position is such a row)
@@ -234,6 +236,12 @@ class ContactSlide:
             rows = np.flatnonzero(nan)
             M[rows[~(np.isfinite(v[rows]).all(1) & np.isfinite(x[rows]).all(1))]] = 0.0
         return M
+
+    def _load_kernels(self) -> None:
+        """The camera's constants and its two compiled entries (``MOMENTS_KERNELS``, ``ADDED_KERNELS``)."""
+        prm, R, dom, has_dist = kernel_camera(self.camera)
+        self._constants = (prm, R, dom)
+        self._kernel, self._added = slide_kernels.MOMENTS_KERNELS[has_dist], slide_kernels.ADDED_KERNELS[has_dist]
 
     def _priors(self, classes, n: int) -> tuple[np.ndarray, np.ndarray]:
         """Per object, its class's size prior ``(mean_m (n, 3), sigma_m (n, 3))``; a class seen first is looked up
@@ -263,5 +271,38 @@ class ContactSlide:
             return self._last[1]
 
     def apply(self, out: TrackOutput, classes) -> TrackOutput:
-        """``out`` with the term added to ``cov_v_m2ps2`` (the track's own state is not changed)."""
-        return out._replace(cov_v_m2ps2=out.cov_v_m2ps2 + self.covariance(out, classes))
+        """``out`` with the term added to ``cov_v_m2ps2`` (the track's own state is not changed): a new
+        ``cov_v_m2ps2`` array, every other field ``out``'s own.
+
+        One compiled call (``slide_kernels.ADDED_KERNELS``: the moments, the zero term of a row without a velocity
+        or position, the sum), to the bit ``out.cov_v_m2ps2 + self.covariance(out, classes)``."""
+        n = out.track_id.shape[0]
+        mean, sig = self._priors(classes, n)
+        if self._added is None:
+            self._load_kernels()
+        cov = np.empty((n, 2, 2))
+        self._added(*self._constants, _frame_rows(out.xy_m, "out.xy_m", (n, 2)),
+                    _frame_rows(out.v_mps, "out.v_mps", (n, 2)), mean, sig, _NODES,
+                    _frame_rows(out.cov_v_m2ps2, "out.cov_v_m2ps2", (n, 2, 2)), cov)
+        return TrackOutput(*out[:_COV_V], cov)
+
+
+#: the position of ``cov_v_m2ps2`` in :class:`~footprint_uq.tracking.table.TrackOutput` (its last field: ``apply``
+#: builds the new output from the others and the new array, ~0.3 us less than ``_replace``)
+_COV_V = TrackOutput._fields.index("cov_v_m2ps2")
+if _COV_V != len(TrackOutput._fields) - 1:  # pragma: no cover - a change of TrackOutput's fields
+    raise ImportError("TrackOutput's last field is not cov_v_m2ps2: ContactSlide.apply builds it positionally")
+_F64 = np.dtype(np.float64)
+
+
+def _frame_rows(a, field: str, shape: tuple) -> np.ndarray:
+    """``a`` as the kernels take it: writeable C-contiguous float64 of exactly ``shape`` (the tracker's outputs
+    are such arrays: taken as they are; anything else is copied as such, a read-only array being another numba
+    type, a second compilation).  Another shape: InputError naming ``field`` (the kernels read one row per
+    object)."""
+    if type(a) is np.ndarray and a.dtype is _F64 and a.flags.carray and a.shape == shape:
+        return a
+    r = np.ascontiguousarray(np.asarray(a, dtype=np.float64))
+    if r.shape != shape:
+        raise InputError(field, r.shape, f"shape {shape}, one row per object of the frame")
+    return r if r.flags.writeable else r.copy()
