@@ -57,6 +57,8 @@ def reference_modules(commit: str):
         if not path.exists():
             text = subprocess.run(["git", "-C", str(ROOT), "show", f"{commit}:src/footprint_uq/service/{name}.py"],
                                   check=True, capture_output=True).stdout
+            # (outside the package: its relative imports made absolute)
+            text = text.replace(b"from ..", b"from footprint_uq.").replace(b"from .", b"from footprint_uq.service.")
             path.write_bytes(text)
         spec = importlib.util.spec_from_file_location(f"ref_{name}", path)
         mod = importlib.util.module_from_spec(spec)
