@@ -170,12 +170,15 @@ def test_decimal_texts_pinned(text):
                                                    math.copysign(1.0, want)), (text, got, want)
 
 
-def test_every_byte_of_a_templated_detections_constant_text_is_compared():
+@pytest.mark.parametrize("indent", [b"", b"\n      "])
+def test_every_byte_of_a_templated_detections_constant_text_is_compared(indent):
     """A later detection read by the first one's template (its keys, quotes, colons, commas, spacing compared
-    8 bytes at a time): any one byte of that text changed (to ``Q``: an unknown key or not JSON) is not read as
-    the template -- the frame is declined, never read with the first detection's keys."""
+    by words: two per piece up to 16 bytes, a loop of words beyond -- ``indent``: pretty-printed pieces): any one
+    byte of that text changed (to ``Q``: an unknown key or not JSON) is not read as the template -- the frame is
+    declined, never read with the first detection's keys."""
     det = (b'{"object_id": %d, "class":"car","u_min_px":1.5, "v_min_px" :2,"u_max_px":30.25,"v_max_px":40,'
            b'"cov_uu_px2":4.0,"cov_uv_px2":0.5,"cov_vv_px2":9.0,"class_confidence":0.75}')
+    det = det.replace(b',"', b"," + indent + b'"')
     head = b'{"camera_id":"c","frame":1,"timestamp_s":0,"detections":['
     second = det % 2
     assert scan_frame(head + det % 1 + b"," + second + b"," + det % 3 + b"]}") is not None

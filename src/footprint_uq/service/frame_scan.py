@@ -394,19 +394,16 @@ def _templated_run(buf, i, r, fv, iv, tpl, seen, spans, ns, pow10):  # pragma: n
             s, L, off = tpl[j, 0], tpl[j, 1] - tpl[j, 0], tpl[j, 3]
             if off >= 0 and i + 16 <= n:
                 d = ((load8(buf, i) ^ tw[j, 0]) & tw[j, 2]) | ((load8(buf, i + off) ^ tw[j, 1]) & tw[j, 3])
-            elif i + L > n:
-                good = False
-                break
-            else:  # (a long piece, or near the end: 8 bytes at a time, the tail's last 8 overlapping)
+            elif i + L <= n:  # (a long piece, or near the end: 8 bytes at a time, the tail's last 8 overlapping)
                 d, q = np.uint64(0), 0
                 while q + 8 <= L:
                     d |= load8(buf, i + q) ^ load8(buf, s + q)
                     q += 8
-                if L >= 8:
-                    d |= load8(buf, i + L - 8) ^ load8(buf, s + L - 8)
-                else:
-                    for t in range(L):
-                        d |= np.uint64(buf[i + t] ^ buf[s + t])
+                d |= load8(buf, i + L - 8) ^ load8(buf, s + L - 8) if L >= 8 else np.uint64(0)
+                for t in range(L if L < 8 else 0):
+                    d |= np.uint64(buf[i + t] ^ buf[s + t])
+            else:
+                d = np.uint64(1)  # (the text ends before the piece)
             if d != 0:
                 good = False
                 break
@@ -458,8 +455,7 @@ def _templated_run(buf, i, r, fv, iv, tpl, seen, spans, ns, pow10):  # pragma: n
             i, ns = _number_slow(buf, i, r, k, fv, iv, spans, ns, pow10)
         if not good:
             return start, r, ns0, True
-        iv[r, 3] = seen
-        r += 1
+        iv[r, 3], r = seen, r + 1
         i = _ws(buf, i)
         if i >= n or buf[i] != 44:
             return i, r, ns, False
