@@ -170,12 +170,15 @@ def test_decimal_texts_pinned(text):
                                                    math.copysign(1.0, want)), (text, got, want)
 
 
-def test_every_byte_of_a_templated_detections_constant_text_is_compared():
+@pytest.mark.parametrize("indent", [b"", b"\n      "])
+def test_every_byte_of_a_templated_detections_constant_text_is_compared(indent):
     """A later detection read by the first one's template (its keys, quotes, colons, commas, spacing compared
-    8 bytes at a time): any one byte of that text changed (to ``Q``: an unknown key or not JSON) is not read as
-    the template -- the frame is declined, never read with the first detection's keys."""
+    by words: two per piece up to 16 bytes, a loop of words beyond -- ``indent``: pretty-printed pieces): any one
+    byte of that text changed (to ``Q``: an unknown key or not JSON) is not read as the template -- the frame is
+    declined, never read with the first detection's keys."""
     det = (b'{"object_id": %d, "class":"car","u_min_px":1.5, "v_min_px" :2,"u_max_px":30.25,"v_max_px":40,'
            b'"cov_uu_px2":4.0,"cov_uv_px2":0.5,"cov_vv_px2":9.0,"class_confidence":0.75}')
+    det = det.replace(b',"', b"," + indent + b'"')
     head = b'{"camera_id":"c","frame":1,"timestamp_s":0,"detections":['
     second = det % 2
     assert scan_frame(head + det % 1 + b"," + second + b"," + det % 3 + b"]}") is not None
@@ -318,3 +321,116 @@ def test_scanned_flags_are_the_numpy_checks(n, seed, cov, one_class):
     assert s.values_checked == (in_order and in_range)
     assert s.int_ids.tolist() == s.object_ids and s.int_ids.dtype == np.int64
     assert s.classes == [d["class"] for d in dets]  # (a wrong one-class flag: every class the first one's)
+
+
+def _word(b: bytes) -> np.uint64:
+    return np.uint64(int.from_bytes(b, "little"))
+
+
+_WORD_BYTES = st.lists(st.sampled_from(list(b'0123456789.-+eE,}] "\\\x00\x1f\x7f\x80\xc3\xfa\xff:a/')), min_size=8,
+                       max_size=8).map(bytes)
+
+
+@settings(max_examples=400, deadline=None)
+@given(st.one_of(_WORD_BYTES, st.binary(min_size=8, max_size=8)))
+def test_word_helpers_are_the_bytewise_readings(b):
+    """The reader's word helpers (service/bytewords.py) against the same questions asked byte by byte: the
+    leading digits and their value for every count, the first quote / backslash / control character, the first
+    byte of a pattern (bytes >= 0xFA, whose carry crosses into the next byte, included)."""
+    from footprint_uq.service.bytewords import digits_value, first_of, leading_digits, string_stop
+
+    w = _word(b)
+    k = next((i for i, c in enumerate(b) if not 48 <= c <= 57), 8)
+    assert leading_digits(w) == k
+    for count in range(1, k + 1):
+        assert digits_value(w, count) == int(b[:count])
+    assert string_stop(w) == next((i for i, c in enumerate(b) if c in b'"\\' or c < 32), 8)
+    for c in (44, 125, 32, 34, b[3]):
+        at = b.find(bytes([c]))
+        assert first_of(w, np.uint64(c * 0x0101010101010101)) == (at if at >= 0 else 8)
+
+
+_BOX_KEYS = [b"u_min_px", b"v_min_px", b"u_max_px", b"v_max_px"]
+
+
+@settings(max_examples=500, deadline=None)
+@given(st.sampled_from([b"", b"-"]), st.text("0123456789", min_size=1, max_size=9), st.none() | st.text(
+    "0123456789", max_size=8), st.sampled_from(_BOX_KEYS + [b"object_id"]),
+    st.sampled_from([b",", b" ,", b"\n,", b"}"]), st.integers(0, 20))
+def test_numbers_in_the_template_read_by_words(sign, whole, frac, key, after, pad):
+    """A later detection's number read a word at a time: its end found at the next constant text's first byte (a
+    comma, a space, a newline, ``}``), near the text's end or not (``pad`` spaces before ``]``): the double of the
+    exact subset or declined, as ``_exact_subset`` says and as the same detection read first (in full) gives; an
+    ``object_id`` only as an integer."""
+    text = sign + whole.encode() + (b"" if frac is None else b"." + frac.encode())
+    keys = [b"object_id"] + _BOX_KEYS
+    if after == b"}":  # (the key last: its value ends the detection)
+        keys.remove(key)
+        keys.append(key)
+    gap = b"" if after == b"}" else after[:-1]
+
+    def det(v):
+        return b"{" + b",".join(b'"%s":%s' % (k, v + gap if k == key else b"7") for k in keys) + b"}"
+
+    head = b'{"camera_id":"c","frame":1,"timestamp_s":0,"detections":['
+    s = scan_frame(head + det(b"7") + b"," + det(text) + b" " * pad + b"]}")
+    want = _exact_subset(text)
+    if key == b"object_id" and want is not None and not re.fullmatch(rb"-?[0-9]+", text):
+        want = None
+    if want is None:
+        assert s is None, text
+        return
+    assert s is not None, text
+    got = s.int_ids[1] if key == b"object_id" else s.boxes[1, _BOX_KEYS.index(key)]
+    assert np.float64(got).tobytes() == np.float64(want).tobytes(), (text, got, want)
+    alone = scan_frame(head + det(text) + b"]}")  # (read in full: the first detection's reading)
+    assert alone is not None and alone.boxes.tobytes() == s.boxes[1:].tobytes() and alone.object_ids == s.object_ids[1:]
+
+
+_CLASS_TEXTS = ["car", "cars", "ca", "", "truck", "bus", "pedestrian", "Fahrrad-ü", "carX", "Xcar", "12345678",
+                "123456789", "12345679"]
+
+
+@settings(max_examples=150, deadline=None)
+@given(st.lists(st.sampled_from(_CLASS_TEXTS), min_size=1, max_size=30), st.integers(0, 2 ** 32 - 1))
+def test_class_texts_in_runs_and_mixed(names, seed):
+    """The classes as orjson reads them, in runs of one text (compared with the previous detection's, as one
+    word) and mixed: texts that share a prefix, differ in their last byte, are empty, longer than a word, UTF-8;
+    the one-class shortcut only where every text is the first one's."""
+    dets = _dets(np.random.default_rng(seed), len(names))
+    for d, name in zip(dets, names, strict=True):
+        d["class"] = name
+    text = _frame(dets)
+    s = scan_frame(text)
+    assert s is not None
+    assert s.classes == [d["class"] for d in orjson.loads(text)["detections"]]
+
+
+def test_the_smallest_detections_fit_the_rows():
+    """The rows are sized from the text's length (a detection the columns take is >= 53 bytes): a frame of the
+    smallest such detections is read; more detections than that bound in the same text have a shorter one, which
+    the general path names (declined: None)."""
+    det = b'{"u_min_px":0,"v_min_px":0,"u_max_px":0,"v_max_px":0}'
+    assert len(det) == 53
+    head = b'{"camera_id":"c","frame":1,"timestamp_s":0,"detections":['
+    for n in (1, 2, 300):
+        s = scan_frame(head + b",".join([det] * n) + b"]}")
+        assert s is not None and s.boxes.shape == (n, 4) and s.object_ids == list(range(n))
+    assert scan_frame(head + b",".join([det] * 299 + [b'{"u_min_px":0}'] * 50) + b"]}") is None
+
+
+def test_each_frame_gets_its_own_columns():
+    """The columns are new arrays per frame (views of the pass's two blocks): reading the next frame leaves the
+    last frame's values as they were; their types as the service takes them."""
+    rng = np.random.default_rng(5)
+    a_text, b_text = _frame(_dets(rng, 20, cov=True, conf=True)), _frame(_dets(rng, 30, cov=True, conf=True))
+    a = scan_frame(a_text)
+    kept = [a.boxes.copy(), a.pixel_cov_px2.copy(), a.class_confidence.copy(), a.int_ids.copy()]
+    b = scan_frame(b_text)
+    for got, want in zip([a.boxes, a.pixel_cov_px2, a.class_confidence, a.int_ids], kept, strict=True):
+        assert got.tobytes() == want.tobytes()
+    assert not np.shares_memory(a.boxes, b.boxes) and not np.shares_memory(a.int_ids, b.int_ids)
+    assert (type(b.frame), type(b.timestamp_s), type(b.values_checked)) == (int, float, bool)
+    for arr, shape, dtype in [(b.boxes, (30, 4), np.float64), (b.pixel_cov_px2, (30, 2, 2), np.float64),
+                              (b.class_confidence, (30,), np.float64), (b.int_ids, (30,), np.int64)]:
+        assert arr.shape == shape and arr.dtype == dtype and arr.flags.c_contiguous

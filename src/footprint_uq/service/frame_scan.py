@@ -38,7 +38,7 @@ import numpy as np
 from numba import njit
 
 from ..products.detection_columns import MAX_PIXEL_VAR_PX2
-from .bytewords import load8
+from .bytewords import digits_value, first_of, leading_digits, load8, string_stop
 
 __all__ = ["ScannedFrame", "scan_frame"]
 
@@ -244,8 +244,9 @@ def _value(buf, i, r, k, fv, iv, pow10):  # pragma: no cover - compiled
 def _detection(buf, i, r, fv, iv, pow10, dk, dk_at, tpl):  # pragma: no cover - compiled
     """The detection object opening at ``buf[i]`` into row ``r`` of ``fv (cap, 8)`` and ``iv (cap, 4)`` (object id,
     class start, class end, seen-keys mask): the index after its ``}``, or -1 (not in the subset).  Its text as a
-    template into ``tpl (11, 3)``: per value the constant text before it (start, end in ``buf``) and its key, then
-    the text after the last value (start, end, -1); ``tpl[10, 2]``: the number of values."""
+    template into ``tpl``: per value the constant text before it (start, end in ``buf``) and its key, then
+    the text after the last value (start, end, -1); ``tpl[10, 2]``: the number of values (``tpl (11, 4)``: its
+    last column is :func:`_template_words`')."""
     if buf[i] != 123:
         return -1
     lit = i
@@ -305,49 +306,121 @@ def _number_chars_end(buf, i):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
+def _template_words(buf, tpl, tw):  # pragma: no cover - compiled
+    """The words the constant pieces of the template ``tpl`` (its ``tpl[10, 2] + 1`` pieces) are compared by, into
+    ``tw (11, 5)`` uint64: per piece its first 8 bytes, the 8 bytes from ``tpl[j, 3]`` (its last 8; a piece under
+    8 bytes: 0, its first again), the masks of the piece's bytes in each, and its first byte in all 8 places (the
+    byte that ends the value before it).  ``tpl[j, 3]`` -1: a piece over 16 bytes or near the end, compared 8
+    bytes at a time by a loop."""
+    n = buf.shape[0]
+    for j in range(tpl[10, 2] + 1):
+        s, L = tpl[j, 0], tpl[j, 1] - tpl[j, 0]
+        tw[j, 4] = np.uint64(buf[s]) * np.uint64(0x0101010101010101)
+        if L > 16 or s + 16 > n:
+            tpl[j, 3] = -1
+            continue
+        off = max(L - 8, 0)
+        mask = np.uint64(0xFFFFFFFFFFFFFFFF) if L >= 8 else (np.uint64(1) << np.uint64(8 * L)) - np.uint64(1)
+        tw[j, 0], tw[j, 1], tw[j, 2], tw[j, 3] = load8(buf, s), load8(buf, s + off), mask, mask
+        tpl[j, 3] = off
+
+
+@njit(cache=True, nogil=True)
+def _number_slow(buf, i, r, k, fv, iv, spans, ns, pow10):  # pragma: no cover - compiled
+    """A number at ``buf[i]`` that :func:`_templated_run`'s word reading did not take, read byte by byte into row
+    ``r``: ``(end, ns)``.  At most 18 digits, no exponent, and the next byte not one a number can hold: an
+    integer, or ``m / 10^f`` with ``m <= 2^53`` and ``f <= 22`` fraction digits (Clinger's exact case, one
+    correctly rounded division by an exact power of ten); any other (an exponent, more digits, not JSON) goes
+    by its span to :func:`_read_numbers` (``spans[ns]``: start, end, row, key), which reads it or declines."""
+    n = buf.shape[0]
+    e = i
+    neg = e < n and buf[e] == 45
+    e += 1 if neg else 0
+    st = e
+    m = 0
+    while e < n and 48 <= buf[e] <= 57 and e - st < 18:  # (18 digits: m < 10^18, no int64 wrap)
+        m = m * 10 + (np.int64(buf[e]) - 48)
+        e += 1
+    n_int, n_frac = e - st, -1  # (n_frac -1: no point)
+    if e < n and buf[e] == 46:
+        e += 1
+        fs = e
+        while e < n and 48 <= buf[e] <= 57 and e - fs + n_int < 18:
+            m = m * 10 + (np.int64(buf[e]) - 48)
+            e += 1
+        n_frac = e - fs
+    c = buf[e] if e < n else np.uint8(32)
+    fast = (1 <= n_int and (n_int == 1 or buf[st] != 48) and n_frac != 0 and n_int + max(n_frac, 0) <= 18
+            and not (48 <= c <= 57 or c == 46 or c == 101 or c == 69 or c == 43 or c == 45))
+    if fast and n_frac < 0:  # an integer
+        if k == _K_OBJECT_ID:
+            iv[r, 0] = -m if neg else m
+        else:
+            fv[r, k] = float(-m if neg else m)
+    elif fast and k != _K_OBJECT_ID and m <= 9007199254740992 and n_frac <= 22:
+        v = float(m) / pow10[n_frac]
+        fv[r, k] = -v if neg else v
+    else:  # the number's extent (its grammar and value: _read_numbers)
+        e = _number_chars_end(buf, i)
+        spans[ns, 0], spans[ns, 1], spans[ns, 2], spans[ns, 3] = i, e, r, k
+        ns += 1
+    return e, ns
+
+
+@njit(cache=True, nogil=True)
 def _templated_run(buf, i, r, fv, iv, tpl, seen, spans, ns, pow10):  # pragma: no cover - compiled
     """Detections from ``buf[i]`` (row ``r`` on) read as the first one's template ``tpl`` (the same constant text
     byte for byte: the same keys in the same order, the same spacing), as long as they follow it: ``(i, r, ns,
     stopped)`` -- the index after the last one read (and its separator), the next row, the spans of the numbers
     left to :func:`_read_numbers` (``spans (ns, 4)``: start, end, row, key) and whether a detection did not
-    follow the template (it opens at ``i``: read it in full).  One loop without calls (a compiled call per
-    value, or per inlined helper taking the text, costs ~10 ns in reference counting: more than its work).
+    follow the template (it opens at ``i``: read it in full).  One loop; its helpers take words, not the text (a
+    compiled call per value, or per inlined helper taking the text, costs ~10 ns in reference counting).
 
-    The constant text is compared 8 bytes at a time.  A number of at most 18 digits, without exponent, whose
-    next byte cannot continue a number is read here, in the same pass: an integer, or ``m / 10^f`` with
-    ``m <= 2^53`` and ``f <= 22`` fraction digits (Clinger's exact case, one correctly rounded division by an
-    exact power of ten), the double :func:`_read_numbers` gives; any other (an exponent, more digits, not in
-    the exact subset or not JSON) goes by its span to :func:`_read_numbers`, which reads it or declines."""
+    The constant text is compared by two words (:func:`_template_words`).  A value ends at the first byte of the
+    next constant piece (a comma, ``}``, a space; a class: its closing quote), found in one word; a number of at
+    most 7 bytes there (sign apart) is then checked and read from that word alone: digits, or digits, a point and
+    digits (its value ``m / 10^f``, one correctly rounded division by an exact power of ten, the double
+    :func:`_number_slow` and :func:`_read_numbers` give), which keeps the next value's position off the digits'
+    arithmetic.  Any other number goes to :func:`_number_slow`."""
     n = buf.shape[0]
     nv = tpl[10, 2]
+    tw = np.empty((11, 5), np.uint64)
+    _template_words(buf, tpl, tw)
     while r < iv.shape[0]:
         start, ns0 = i, ns
         iv[r, 1], iv[r, 2] = -1, -1
         good = True
         for j in range(nv + 1):
-            s = tpl[j, 0]
-            L = tpl[j, 1] - s
-            if i + L > n:
-                good = False
-                break
-            d, q = np.uint64(0), 0
-            while q + 8 <= L:
-                d |= load8(buf, i + q) ^ load8(buf, s + q)
-                q += 8
-            if L >= 8:  # the tail: the last 8 bytes (overlapping the words above)
-                d |= load8(buf, i + L - 8) ^ load8(buf, s + L - 8)
-            else:
-                for t in range(q, L):
+            s, L, off = tpl[j, 0], tpl[j, 1] - tpl[j, 0], tpl[j, 3]
+            if off >= 0 and i + 16 <= n:
+                d = ((load8(buf, i) ^ tw[j, 0]) & tw[j, 2]) | ((load8(buf, i + off) ^ tw[j, 1]) & tw[j, 3])
+            elif i + L <= n:  # (a long piece, or near the end: 8 bytes at a time, the tail's last 8 overlapping)
+                d, q = np.uint64(0), 0
+                while q + 8 <= L:
+                    d |= load8(buf, i + q) ^ load8(buf, s + q)
+                    q += 8
+                d |= load8(buf, i + L - 8) ^ load8(buf, s + L - 8) if L >= 8 else np.uint64(0)
+                for t in range(L if L < 8 else 0):
                     d |= np.uint64(buf[i + t] ^ buf[s + t])
+            else:
+                d = np.uint64(1)  # (the text ends before the piece)
             if d != 0:
                 good = False
                 break
             i += L
             if j == nv:
                 break
-            k = tpl[j, 2]
-            e = i
-            if k == _K_CLASS:  # a plain string up to its closing quote
+            k, end = tpl[j, 2], tw[j + 1, 4]
+            if k == _K_CLASS:  # a plain string up to its closing quote (the next piece's first byte)
+                e = i
+                while e + 8 <= n:
+                    w = load8(buf, e)
+                    z = first_of(w, end)
+                    if string_stop(w) != z:  # (an escape or a control character before the quote)
+                        break
+                    e += z
+                    if z < 8:
+                        break
                 while e < n and buf[e] != 34 and buf[e] != 92 and buf[e] >= 32:
                     e += 1
                 if e >= n or buf[e] != 34:
@@ -356,41 +429,33 @@ def _templated_run(buf, i, r, fv, iv, tpl, seen, spans, ns, pow10):  # pragma: n
                 iv[r, 1], iv[r, 2] = i, e
                 i = e
                 continue
-            neg = e < n and buf[e] == 45
-            e += 1 if neg else 0
-            st = e
-            m = 0
-            while e < n and 48 <= buf[e] <= 57 and e - st < 18:  # (18 digits: m < 10^18, no int64 wrap)
-                m = m * 10 + (np.int64(buf[e]) - 48)
-                e += 1
-            n_int, n_frac = e - st, -1  # (n_frac -1: no point)
-            if e < n and buf[e] == 46:
-                e += 1
-                fs = e
-                while e < n and 48 <= buf[e] <= 57 and e - fs + n_int < 18:
-                    m = m * 10 + (np.int64(buf[e]) - 48)
-                    e += 1
-                n_frac = e - fs
-            c = buf[e] if e < n else np.uint8(32)
-            fast = (1 <= n_int and (n_int == 1 or buf[st] != 48) and n_frac != 0 and n_int + max(n_frac, 0) <= 18
-                    and not (48 <= c <= 57 or c == 46 or c == 101 or c == 69 or c == 43 or c == 45))
-            if fast and n_frac < 0:  # an integer
-                if k == _K_OBJECT_ID:
-                    iv[r, 0] = -m if neg else m
-                else:
-                    fv[r, k] = float(-m if neg else m)
-            elif fast and k != _K_OBJECT_ID and m <= 9007199254740992 and n_frac <= 22:
-                v = float(m) / pow10[n_frac]
-                fv[r, k] = -v if neg else v
-            else:  # the number's extent (its grammar and value: _read_numbers)
-                e = _number_chars_end(buf, i)
-                spans[ns, 0], spans[ns, 1], spans[ns, 2], spans[ns, 3] = i, e, r, k
-                ns += 1
-            i = e
+            if i + 8 <= n:
+                w = load8(buf, i)
+                e = i + first_of(w, end)  # (the number's end, its sign included: the next value's position)
+                neg = (w & np.uint64(0xFF)) == np.uint64(45)
+                w = w >> np.uint64(8) if neg else w
+                p, k1 = e - i - (1 if neg else 0), leading_digits(w)  # (its length, sign apart; integer digits)
+                if 1 <= k1 and e - i <= 7 and (k1 == 1 or (w & np.uint64(0xFF)) != np.uint64(48)):
+                    if k1 == p:  # an integer
+                        m = digits_value(w, k1)
+                        if k == _K_OBJECT_ID:
+                            iv[r, 0] = -m if neg else m
+                        else:
+                            fv[r, k] = float(-m if neg else m)
+                        i = e
+                        continue
+                    low = (np.uint64(1) << np.uint64(8 * k1)) - np.uint64(1)
+                    w2 = (w & low) | ((w >> np.uint64(8)) & ~low)  # (the point taken out: the mantissa's digits)
+                    if (k != _K_OBJECT_ID and ((w >> np.uint64(8 * k1)) & np.uint64(0xFF)) == np.uint64(46)
+                            and k1 + 1 < p and leading_digits(w2) == p - 1):
+                        v = float(digits_value(w2, p - 1)) / pow10[p - 1 - k1]
+                        fv[r, k] = -v if neg else v
+                        i = e
+                        continue
+            i, ns = _number_slow(buf, i, r, k, fv, iv, spans, ns, pow10)
         if not good:
             return start, r, ns0, True
-        iv[r, 3] = seen
-        r += 1
+        iv[r, 3], r = seen, r + 1
         i = _ws(buf, i)
         if i >= n or buf[i] != 44:
             return i, r, ns, False
@@ -463,9 +528,10 @@ def _detections(buf, i, fv, iv, pow10, dk, dk_at):  # pragma: no cover - compile
     i = _ws(buf, i + 1)
     if i < buf.shape[0] and buf[i] == 93:
         return i + 1, 0
-    tpl = np.zeros((11, 3), np.int64)
-    scratch = np.zeros((11, 3), np.int64)
-    spans = np.empty((fv.shape[0] * 9, 4), np.int64)
+    tpl = np.zeros((11, 4), np.int64)
+    scratch = np.zeros((11, 4), np.int64)
+    # (every number left to _read_numbers follows its key: >= 12 bytes each, '"u_min_px":0')
+    spans = np.empty((buf.shape[0] // 12 + 1, 4), np.int64)
     fv[:, 7] = np.nan  # (class_confidence: NaN where absent)
     r = ns = 0
     while True:
@@ -491,15 +557,15 @@ def _scan(buf, pow10, fk, fk_at, dk, dk_at):  # pragma: no cover - compiled
     """The frame in ``buf``: ``(ok, head (6,) int64, timestamp_s, fv (n, 8), iv (n, 4), class_first (n,))``; head:
     count, camera_id start and end (-1: absent), frame number, keys seen (bits of _FRAME_KEYS); ``class_first``:
     per detection the first detection with the same class text (-1: no class)."""
-    cap = 0
-    for c in buf:
-        cap += c == 123
+    # rows: a detection the columns take holds the four box keys, >= 53 bytes ({"u_min_px":0,...,"v_max_px":0});
+    # a frame with more detections than this has a shorter one, which the columns refuse anyway
+    cap = buf.shape[0] // 53 + 1
     fv = np.empty((cap, N_VALUES))
-    iv = np.zeros((cap, 4), np.int64)
+    iv = np.empty((cap, 4), np.int64)
     head = np.zeros(7, np.int64)
     head[1], head[2], head[5], head[6] = -1, -1, -1, -1
     ts = 0.0
-    bad = (False, head, ts, fv[:0], iv[:0], np.zeros(0, np.int64))
+    bad = (False, head, ts, fv[:0], iv[:0], head[:0])
     i = _ws(buf, 0)
     if i >= buf.shape[0] or buf[i] != 123:
         return bad
@@ -559,22 +625,28 @@ def _scan(buf, pow10, fk, fk_at, dk, dk_at):  # pragma: no cover - compiled
     return True, head, ts, fv[:n], iv[:n], _class_first(buf, iv[:n])
 
 
+#: :func:`_scan_columns`' head: ok, n, camera_id start and end, frame, timestamp_s text start and end (-1: read by
+#: the pass), has_cov, has_conf, one_class, values_ok, the first detection's class start and end (-1: none)
+_H = 13
+
+
 @njit(cache=True, nogil=True)
-def _columns(fv, iv, first, max_var):  # pragma: no cover - compiled
-    """The detections' columns as the service takes them, and whether they are the common layout: ``(ok, boxes
-    (n, 4), pixel covariances (n, 2, 2), ids (n,), has_cov, has_conf, one_class, values_ok)``.  ``ok`` False: a
-    detection without a complete 2-D box, some with a covariance and some without (or one incomplete), a confidence
-    outside [0, 1] -- cases whose error entries the general path writes.  Absent object ids: the detection's index.
-    ``one_class``: every detection's class text the first one's, or none has one (``first`` (n,):
-    :func:`_class_first`); ``values_ok``: every box's corners in order and every pixel covariance entry within
-    ``max_var`` (px^2) -- :func:`.detections.boxes2d_detections`' value checks, nothing for them to mark."""
+def _columns(ok, head, ts, fv, iv, first, max_var):  # pragma: no cover - compiled
+    """The detections' columns as the service takes them, in two blocks (two arrays handed back, not eight):
+    ``ib`` int64 = the head (``_H``) | ids (n) | ``first`` (n) | class starts (n) | class ends (n), and ``fb``
+    float64 = boxes (n, 4) | pixel covariances (n, 2, 2) | class confidences (n,) | ``timestamp_s``.  The head's
+    ok is False also for a detection without a complete 2-D box, some with a covariance and some without (or one
+    incomplete), a confidence outside [0, 1] -- cases whose error entries the general path writes.  Absent object
+    ids: the detection's index.  ``one_class``: every detection's class text the first one's, or none has one
+    (``first`` (n,): :func:`_class_first`); ``values_ok``: every box's corners in order and every pixel covariance
+    entry within ``max_var`` (px^2) -- :func:`.detections.boxes2d_detections`' value checks, nothing for them to
+    mark."""
     n = fv.shape[0]
-    boxes = np.empty((n, 4))
-    cov = np.empty((n, 2, 2))
-    ids = np.empty(n, np.int64)
+    ib = np.empty(_H + 4 * n, np.int64)
+    fb = np.empty(9 * n + 1)
     n_cov = 0
     has_conf = False
-    ok = True
+    one_class = values_ok = True
     for r in range(n):
         mask = iv[r, 3]
         ok &= (mask & _ALL_BOX) == _ALL_BOX
@@ -583,41 +655,44 @@ def _columns(fv, iv, first, max_var):  # pragma: no cover - compiled
         n_cov += c == _ALL_COV
         if (mask >> 7) & 1:
             has_conf = True
-            p = fv[r, 7]
-            ok &= (p >= 0.0) & (p <= 1.0)
-        ids[r] = iv[r, 0] if (mask >> _K_OBJECT_ID) & 1 else r
+            ok &= (fv[r, 7] >= 0.0) & (fv[r, 7] <= 1.0)
+        ib[_H + r] = iv[r, 0] if (mask >> _K_OBJECT_ID) & 1 else r
+        ib[_H + n + r], ib[_H + 2 * n + r], ib[_H + 3 * n + r] = first[r], iv[r, 1], iv[r, 2]
         for q in range(4):
-            boxes[r, q] = fv[r, q]
-        cov[r, 0, 0], cov[r, 0, 1], cov[r, 1, 0], cov[r, 1, 1] = fv[r, 4], fv[r, 5], fv[r, 5], fv[r, 6]
-    ok &= (n_cov == 0) | (n_cov == n)
-    one_class = values_ok = True
-    for r in range(n):
+            fb[4 * r + q] = fv[r, q]
+        a = 4 * (n + r)
+        fb[a], fb[a + 1], fb[a + 2], fb[a + 3] = fv[r, 4], fv[r, 5], fv[r, 5], fv[r, 6]
+        fb[8 * n + r] = fv[r, 7]
         one_class &= first[r] == first[0]
         values_ok &= (fv[r, 0] <= fv[r, 2]) & (fv[r, 1] <= fv[r, 3])
-        if n_cov > 0:
+    ok &= (n_cov == 0) | (n_cov == n)
+    if n_cov > 0:
+        for r in range(n):
             for q in range(4, 7):
                 values_ok &= abs(fv[r, q]) <= max_var
-    return ok, boxes, cov, ids, n_cov > 0, has_conf, one_class, values_ok
+    fb[9 * n] = ts
+    ib[0], ib[1], ib[2], ib[3], ib[4], ib[5], ib[6] = ok, n, head[1], head[2], head[3], head[5], head[6]
+    ib[7], ib[8], ib[9], ib[10] = n_cov > 0, has_conf, one_class, values_ok
+    ib[11], ib[12] = (iv[0, 1], iv[0, 2]) if n > 0 else (-1, -1)
+    return ib, fb
 
 
 @njit(cache=True, nogil=True)
-def _scan_columns(buf, pow10, fk, fk_at, dk, dk_at, max_var):  # pragma: no cover - compiled
-    """:func:`_scan` and :func:`_columns` in one call (one dispatch, the rows not boxed in between): ``(ok, head,
-    timestamp_s, boxes (n, 4), pixel covariances (n, 2, 2), ids (n,), class confidences (n,), has_cov, has_conf,
-    iv (n, 4), class_first (n,), one_class, values_ok)`` (the last two as :func:`_columns` says, ``max_var`` in
-    px^2); ``ok`` False: not in the subset, a frame field missing or not the common layout (:func:`scan_frame`
+def _scan_columns(buf):  # pragma: no cover - compiled
+    """:func:`_scan` and :func:`_columns` in one call (one dispatch of one argument -- the key tables and the
+    limit are the module's constants --, the rows not boxed in between): ``(ib, fb)`` as :func:`_columns` says;
+    the head's ok False: not in the subset, a frame field missing or not the common layout (:func:`scan_frame`
     then declines)."""
-    ok, head, ts, fv, iv, first = _scan(buf, pow10, fk, fk_at, dk, dk_at)
-    ok &= head[4] == 0b1111  # (a frame field missing: the general path's frame error)
-    good, boxes, cov, ids, has_cov, has_conf, one_class, values_ok = _columns(fv, iv, first, max_var)
-    return (ok and good, head, ts, boxes, cov, ids, fv[:, 7].copy(), has_cov, has_conf, iv, first, one_class,
-            values_ok)
+    ok, head, ts, fv, iv, first = _scan(buf, _POW10, _FK, _FK_AT, _DK, _DK_AT)
+    return _columns(ok and head[4] == 0b1111, head, ts, fv, iv, first, MAX_PIXEL_VAR_PX2)
 
 
 @njit(cache=True, nogil=True)
 def _class_first(buf, iv):  # pragma: no cover - compiled
-    """Per detection, the first detection whose class text is the same bytes (-1: no class)."""
-    n = iv.shape[0]
+    """Per detection, the first detection whose class text is the same bytes (-1: no class).  A text is compared
+    with the previous detection's first (a frame's detections come in runs of one class; texts of up to 8 bytes
+    as one masked word), then with each distinct text before it."""
+    n, nb = iv.shape[0], buf.shape[0]
     first = np.full(n, -1, np.int64)
     uniq = np.empty(n, np.int64)
     u = 0
@@ -625,6 +700,12 @@ def _class_first(buf, iv):  # pragma: no cover - compiled
         s, e = iv[r, 1], iv[r, 2]
         if s < 0:
             continue
+        if r > 0 and iv[r - 1, 1] >= 0 and iv[r - 1, 2] - iv[r - 1, 1] == e - s and e - s <= 8 and s + 8 <= nb \
+                and iv[r - 1, 1] + 8 <= nb:
+            mask = np.uint64(0xFFFFFFFFFFFFFFFF) >> np.uint64(64 - 8 * (e - s)) if e > s else np.uint64(0)
+            if ((load8(buf, s) ^ load8(buf, iv[r - 1, 1])) & mask) == np.uint64(0):
+                first[r] = first[r - 1]
+                continue
         for q in range(u):
             j = uniq[q]
             s2, e2 = iv[j, 1], iv[j, 2]
@@ -663,37 +744,42 @@ class ScannedFrame(NamedTuple):
 def scan_frame(text) -> ScannedFrame | None:
     """One frame's JSON text (bytes-like) read into columns, or None when it is not in the subset this pass reads
     (see the module doc): then parse it in full (orjson) and read its detections with
-    :func:`.detections.parse_detections`."""
+    :func:`.detections.parse_detections`.  The columns are views of the pass's two new arrays (nothing shared
+    with another frame)."""
     buf = np.frombuffer(text, np.uint8)
     if buf.size == 0:
         return None
-    ok, head, ts, boxes, cov, ids, conf, has_cov, has_conf, iv, first, one_class, values_ok = _scan_columns(
-        buf, _POW10, _FK, _FK_AT, _DK, _DK_AT, MAX_PIXEL_VAR_PX2)
-    if not ok:
+    ib, fb = _scan_columns(buf)
+    h = ib[:_H].tolist()
+    if not h[0]:
         return None
+    n = h[1]
     raw = text if type(text) is bytes else bytes(buf)  # (decoded only where a string is)
     try:
-        camera = raw[head[1]:head[2]].decode("utf-8")
-        classes = _classes(raw, iv, first, one_class)
+        camera = raw[h[2]:h[3]].decode("utf-8")
+        if h[9]:  # one class for all (or none): one text decoded, no per-detection work
+            classes = [None if h[11] < 0 else raw[h[11]:h[12]].decode("utf-8")] * n
+        else:
+            classes = _classes(raw, ib, n)
     except UnicodeDecodeError:
         return None
-    if head[6] >= 0:  # a time stamp beyond the exact subset: Python's correctly rounded float of its JSON text
-        ts = float(raw[head[5]:head[6]])
+    if h[6] >= 0:  # a time stamp beyond the exact subset: Python's correctly rounded float of its JSON text
+        ts = float(raw[h[5]:h[6]])
         if not math.isfinite(ts):
             return None
-    return ScannedFrame(camera, int(head[3]), ts, boxes, cov if has_cov else None, ids.tolist(), classes,
-                        conf if has_conf else None, ids, bool(values_ok))
+    else:
+        ts = float(fb[9 * n])
+    ids = ib[_H:_H + n]
+    return ScannedFrame(camera, h[4], ts, fb[:4 * n].reshape(n, 4), fb[4 * n:8 * n].reshape(n, 2, 2) if h[7] else None,
+                        ids.tolist(), classes, fb[8 * n:9 * n] if h[8] else None, ids, h[10] == 1)
 
 
-def _classes(raw: bytes, iv: np.ndarray, first: np.ndarray, one_class: bool) -> list:
-    """The detections' class strings: each distinct text decoded once (``one_class``: one text for all, or none)."""
-    n = len(first)
-    if n == 0:
-        return []
-    f0 = int(first[0])
-    if one_class:  # one class for all (or none): no per-detection work
-        return [None if f0 < 0 else raw[iv[0, 1]:iv[0, 2]].decode("utf-8")] * n
+def _classes(raw: bytes, ib: np.ndarray, n: int) -> list:
+    """The detections' class strings of a frame of several class texts (``ib``: :func:`_columns`' int block):
+    each distinct text decoded once."""
+    first = ib[_H + n:_H + 2 * n]
+    starts, ends = ib[_H + 2 * n:_H + 3 * n], ib[_H + 3 * n:_H + 4 * n]
     names = np.empty(n + 1, dtype=object)  # (the last entry: None, for -1)
     for r in np.flatnonzero(first == np.arange(n)).tolist():
-        names[r] = raw[iv[r, 1]:iv[r, 2]].decode("utf-8")
+        names[r] = raw[starts[r]:ends[r]].decode("utf-8")
     return names[first].tolist()
