@@ -94,15 +94,28 @@ def object_motion(tracks: TrackOutput, *, heading_offset_deg: float = 0.0, yaw_r
          else as_float("heading_offset_deg", heading_offset_deg))
     ratio = (heading_min_ratio if isinstance(heading_min_ratio, float) and math.isfinite(heading_min_ratio)
              and heading_min_ratio > 0.0 else as_float("heading_min_ratio", heading_min_ratio, positive=True))
+    v, cov_v, age = tracks.v_mps, tracks.cov_v_m2ps2, tracks.age_s
     n = tracks.track_id.shape[0]
     out = np.empty((8, n))
     cov = np.empty((n, 2, 2))
     hr = math.radians(h)
-    motion_fields(np.ascontiguousarray(tracks.v_mps, dtype=np.float64),
-                  np.ascontiguousarray(tracks.cov_v_m2ps2, dtype=np.float64), math.cos(hr), math.sin(hr), ratio,
-                  _NONE if yaw_rad is None else _column("yaw_rad", yaw_rad, n),
+    ch, sh = math.cos(hr), math.sin(hr)
+    motion_fields(_c64(v), _c64(cov_v), ch, sh, ratio, _NONE if yaw_rad is None else _column("yaw_rad", yaw_rad, n),
                   _NONE if sigma_yaw_rad is None else _column("sigma_yaw_rad", sigma_yaw_rad, n), h, out, cov)
-    return ObjectMotion(out[0], out[1], cov, out[2], out[3], out[4], out[5], out[6], out[7], tracks.age_s.copy())
+    ve, vn, sp, ssp, hd, shd, yw, syw = out  # (the rows as views, in one unpacking)
+    return _new_motion(ObjectMotion, (ve, vn, cov, sp, ssp, hd, shd, yw, syw, age.copy()))
+
+
+#: a tuple of :class:`ObjectMotion`'s ten fields made an ObjectMotion without the named tuple's ``__new__``
+_new_motion = tuple.__new__
+_F8 = np.dtype(np.float64)
+
+
+def _c64(a) -> np.ndarray:
+    """``a`` as a C-contiguous float64 array: a tracker's output as it is (the kernel's one signature)."""
+    if type(a) is np.ndarray and a.dtype == _F8 and a.flags.c_contiguous:
+        return a
+    return np.ascontiguousarray(a, dtype=np.float64)
 
 
 _NONE = np.empty(0)
