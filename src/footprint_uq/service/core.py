@@ -80,9 +80,11 @@ from .messages.motion import (
     SDSM_HEADING_UNAVAILABLE,
     SDSM_SPEED_UNAVAILABLE,
     SPEED_CONFIDENCE_NAMES,
+    CodedMotion,
     ObjectMotion,
     motion_codes,
     motion_rows,
+    motion_values,
 )
 from .messages.sdsm import SDSM_OBJECT_TYPES, build_sdsm
 from .messages.uper_cpm import (
@@ -835,7 +837,8 @@ class Service:
                                      contact_2d=contact_2d)
         # what the CP service fuses (on_tracked): the tracks with the sliding contact's velocity term
         setup.last_tracks = f.tracks
-        return f.track_id, f.motion
+        # (a CodedMotion: _motion_values computes the message codes in its pass, motion_rows then takes them)
+        return f.track_id, CodedMotion.of(f.motion)
 
     def _objects_json(self, setup: CameraSetup, est, ids: list, classes: list, ts: float = 0.0,
                       motion=None) -> tuple[bytes, np.ndarray, list]:
@@ -1154,8 +1157,10 @@ def _compact_values(est, motion) -> np.ndarray | None:
 
 def _motion_values(out: np.ndarray, motion) -> bool:
     """Rows 5-9 of the compact record's float columns ``out`` (10, N): the velocity (m/s) and its covariance
-    (m^2/s^2) of the tracker's ``motion`` ``(track_id, ObjectMotion)``.  False (``out`` not written): a motion
-    column not in float64 (the general writer's text of it would differ)."""
+    (m^2/s^2) of the tracker's ``motion`` ``(track_id, ObjectMotion)``; the tracker's motion (a
+    :class:`.messages.motion.CodedMotion`, :meth:`Service._step_tracks`) in one compiled pass with the messages'
+    motion codes of every object, kept for the frame's ``motion_rows`` (:func:`.messages.motion.motion_values`).
+    False (``out`` not written): a motion column not in float64 (the general writer's text of it would differ)."""
     m = motion[1]
     ve, vn, cv = m.v_east_mps, m.v_north_mps, m.cov_v_m2ps2
     try:
@@ -1164,6 +1169,9 @@ def _motion_values(out: np.ndarray, motion) -> bool:
         f8 = all(np.asarray(a).dtype == _F8 for a in (ve, vn, cv))
     if not f8:
         return False
+    if type(m) is CodedMotion and out.flags.c_contiguous:
+        motion_values(m, out.shape[1], out[5:10])
+        return True
     out[5], out[6] = ve, vn
     d = np.asarray(cv).reshape(out.shape[1], 4)
     out[7], out[8], out[9] = d[:, 0], d[:, 1], d[:, 3]
