@@ -19,6 +19,7 @@ from footprint_uq.service.messages.motion import (
     MOTION_ROWS,
     CodedMotion,
     ObjectMotion,
+    coded_motion,
     motion_codes,
     motion_codes_reference,
     motion_rows,
@@ -315,6 +316,45 @@ def test_motion_values_writes_the_record_rows_and_keeps_the_codes_for_one_motion
     np.testing.assert_array_equal(motion_rows(bad, 4, np.array([3, 0])), _reference_rows(bad.take([3, 0]), 2))
     with pytest.raises(InputError, match="values"):
         motion_values(CodedMotion.of(plain), 4, np.empty((4, 5)))
+
+
+def test_coded_motion_is_object_motion_to_the_bit_and_keeps_its_codes():
+    """coded_motion (the service's tracked frame: the motion fields and the messages' codes in one compiled call)
+    gives object_motion's ten arrays bit for bit -- tracks with and without a velocity, velocities at zero, heading
+    offsets, 3-D boxes' yaw as a strided column or none -- and keeps the codes motion_rows gives object_motion's
+    motion; a track output with a bad value keeps none, and motion_rows names it as for the plain motion."""
+    from footprint_uq.tracking import object_motion
+    from footprint_uq.tracking.table import TrackOutput
+
+    rng = np.random.default_rng(21)
+    n = 90
+    a = rng.normal(0.0, 0.7, (n, 2, 2))
+    cov = a @ np.swapaxes(a, 1, 2)
+    v = rng.normal(0.0, 6.0, (n, 2))
+    v[rng.random(n) < 0.2] = np.nan  # (no velocity yet)
+    v[:5] = 0.0
+    cov[np.isnan(v[:, 0])] = np.nan
+    age = rng.uniform(0.0, 4.0, n)
+    tracks = TrackOutput(np.arange(n), np.zeros(n, bool), np.full(n, 3), age, rng.normal(0.0, 9.0, (n, 2)),
+                         cov.copy(), v, cov)
+    boxes = rng.normal(0.0, 1.0, (n, 7))
+    for h in (0.0, 12.5, -123.25):
+        for yaw in (None, boxes[:, 6]):
+            want = object_motion(tracks, heading_offset_deg=h, yaw_rad=yaw)
+            got = coded_motion(tracks, heading_offset_deg=h, yaw_rad=yaw)
+            assert type(got) is CodedMotion
+            for name, g, w in zip(want._fields, got, want, strict=True):
+                assert g.shape == w.shape and np.array_equal(_bits(g), _bits(w)), (h, name)
+            assert got.age_s is not tracks.age_s and np.array_equal(got.codes, motion_rows(want, n))
+            np.testing.assert_array_equal(motion_rows(got, n, np.array([4, 0, 4])), motion_rows(want, n)[:, [4, 0, 4]])
+    bad = tracks._replace(age_s=np.where(np.arange(n) == 7, -1.0, age))
+    got = coded_motion(bad, heading_offset_deg=3.0)
+    assert got.codes is None
+    with pytest.raises(InputError) as e1:
+        motion_rows(got, n)
+    with pytest.raises(InputError) as e2:
+        motion_rows(object_motion(bad, heading_offset_deg=3.0), n)
+    assert str(e1.value) == str(e2.value) and "motion.age_s" in str(e1.value)
 
 
 def test_the_container_kernel_takes_motion_rows_as_they_are():

@@ -26,7 +26,7 @@ from .kernels import motion_fields
 from .table import TrackOutput
 
 __all__ = ["ObjectMotion", "MotionArrays", "MOTION_FIELDS", "object_motion", "DEFAULT_HEADING_MIN_RATIO",
-           "yaw_compass_deg"]
+           "yaw_compass_deg", "motion_arguments", "motion_of"]
 
 #: heading sigma only where speed >= this many sigma of the velocity's largest semi-axis
 DEFAULT_HEADING_MIN_RATIO = 3.0
@@ -89,21 +89,37 @@ def object_motion(tracks: TrackOutput, *, heading_offset_deg: float = 0.0, yaw_r
     heading_min_ratio : float
         Speed / largest velocity sigma below which the heading's sigma is NaN.
     """
+    args = motion_arguments(tracks, heading_offset_deg=heading_offset_deg, yaw_rad=yaw_rad,
+                            sigma_yaw_rad=sigma_yaw_rad, heading_min_ratio=heading_min_ratio)
+    motion_fields(*args)
+    return motion_of(args, tracks.age_s.copy())
+
+
+def motion_arguments(tracks: TrackOutput, *, heading_offset_deg: float = 0.0, yaw_rad=None, sigma_yaw_rad=None,
+                     heading_min_ratio: float = DEFAULT_HEADING_MIN_RATIO) -> tuple:
+    """:func:`object_motion`'s inputs checked and its outputs allocated, as the arguments of its compiled pass
+    (:func:`~footprint_uq.tracking.kernels.motion_fields`: ``(v (n, 2), cov (n, 2, 2), cos, sin, ratio, yaw (n,)
+    or (0,), sigma_yaw (n,) or (0,), heading_offset_deg, out (8, n), cov_out (n, 2, 2))``), for a caller that
+    runs that pass inside its own compiled call (the service: with the messages' codes); :func:`motion_of` then
+    makes the :class:`ObjectMotion`."""
     # (finite floats pass without a call into _checks, as in TrackTable.step: the frame's walk stays in tracking/)
     h = (heading_offset_deg if isinstance(heading_offset_deg, float) and math.isfinite(heading_offset_deg)
          else as_float("heading_offset_deg", heading_offset_deg))
     ratio = (heading_min_ratio if isinstance(heading_min_ratio, float) and math.isfinite(heading_min_ratio)
              and heading_min_ratio > 0.0 else as_float("heading_min_ratio", heading_min_ratio, positive=True))
-    v, cov_v, age = tracks.v_mps, tracks.cov_v_m2ps2, tracks.age_s
     n = tracks.track_id.shape[0]
-    out = np.empty((8, n))
-    cov = np.empty((n, 2, 2))
     hr = math.radians(h)
-    ch, sh = math.cos(hr), math.sin(hr)
-    motion_fields(_c64(v), _c64(cov_v), ch, sh, ratio, _NONE if yaw_rad is None else _column("yaw_rad", yaw_rad, n),
-                  _NONE if sigma_yaw_rad is None else _column("sigma_yaw_rad", sigma_yaw_rad, n), h, out, cov)
-    ve, vn, sp, ssp, hd, shd, yw, syw = out  # (the rows as views, in one unpacking)
-    return _new_motion(ObjectMotion, (ve, vn, cov, sp, ssp, hd, shd, yw, syw, age.copy()))
+    return (_c64(tracks.v_mps), _c64(tracks.cov_v_m2ps2), math.cos(hr), math.sin(hr), ratio,
+            _NONE if yaw_rad is None else _column("yaw_rad", yaw_rad, n),
+            _NONE if sigma_yaw_rad is None else _column("sigma_yaw_rad", sigma_yaw_rad, n), h, np.empty((8, n)),
+            np.empty((n, 2, 2)))
+
+
+def motion_of(args: tuple, age_s: np.ndarray) -> ObjectMotion:
+    """The :class:`ObjectMotion` of :func:`motion_arguments`' ``args`` once their pass has run (its rows as views,
+    its covariance) with the ages ``age_s (n,)`` (taken as they are)."""
+    ve, vn, sp, ssp, hd, shd, yw, syw = args[8]  # (the rows as views, in one unpacking)
+    return _new_motion(ObjectMotion, (ve, vn, args[9], sp, ssp, hd, shd, yw, syw, age_s))
 
 
 #: a tuple of :class:`ObjectMotion`'s ten fields made an ObjectMotion without the named tuple's ``__new__``
