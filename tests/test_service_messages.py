@@ -19,7 +19,8 @@ from footprint_uq.service.messages.motion import (
     MOTION_ROWS,
     CodedMotion,
     ObjectMotion,
-    coded_motion,
+    coded,
+    codes_pass,
     motion_codes,
     motion_codes_reference,
     motion_rows,
@@ -318,11 +319,12 @@ def test_motion_values_writes_the_record_rows_and_keeps_the_codes_for_one_motion
         motion_values(CodedMotion.of(plain), 4, np.empty((4, 5)))
 
 
-def test_coded_motion_is_object_motion_to_the_bit_and_keeps_its_codes():
-    """coded_motion (the service's tracked frame: the motion fields and the messages' codes in one compiled call)
-    gives object_motion's ten arrays bit for bit -- tracks with and without a velocity, velocities at zero, heading
-    offsets, 3-D boxes' yaw as a strided column or none -- and keeps the codes motion_rows gives object_motion's
-    motion; a track output with a bad value keeps none, and motion_rows names it as for the plain motion."""
+def test_the_codes_pass_gives_object_motion_to_the_bit_and_keeps_its_codes():
+    """object_motion with codes_pass' motion_pass (the service's tracked frame, through CameraTracker.step_frame:
+    the motion fields and the messages' codes in one compiled call) gives object_motion's ten arrays bit for bit --
+    tracks with and without a velocity, velocities at zero, heading offsets, 3-D boxes' yaw as a strided column or
+    none -- and coded() keeps the codes motion_rows gives the plain motion; a track output with a bad value keeps
+    none, and motion_rows names it as for the plain motion; a pass of another size keeps none."""
     from footprint_uq.tracking import object_motion
     from footprint_uq.tracking.table import TrackOutput
 
@@ -341,20 +343,24 @@ def test_coded_motion_is_object_motion_to_the_bit_and_keeps_its_codes():
     for h in (0.0, 12.5, -123.25):
         for yaw in (None, boxes[:, 6]):
             want = object_motion(tracks, heading_offset_deg=h, yaw_rad=yaw)
-            got = coded_motion(tracks, heading_offset_deg=h, yaw_rad=yaw)
+            p = codes_pass(n)
+            got = coded(object_motion(tracks, heading_offset_deg=h, yaw_rad=yaw, motion_pass=p), p)
             assert type(got) is CodedMotion
             for name, g, w in zip(want._fields, got, want, strict=True):
                 assert g.shape == w.shape and np.array_equal(_bits(g), _bits(w)), (h, name)
             assert got.age_s is not tracks.age_s and np.array_equal(got.codes, motion_rows(want, n))
             np.testing.assert_array_equal(motion_rows(got, n, np.array([4, 0, 4])), motion_rows(want, n)[:, [4, 0, 4]])
     bad = tracks._replace(age_s=np.where(np.arange(n) == 7, -1.0, age))
-    got = coded_motion(bad, heading_offset_deg=3.0)
+    p = codes_pass(n)
+    got = coded(object_motion(bad, heading_offset_deg=3.0, motion_pass=p), p)
     assert got.codes is None
     with pytest.raises(InputError) as e1:
         motion_rows(got, n)
     with pytest.raises(InputError) as e2:
         motion_rows(object_motion(bad, heading_offset_deg=3.0), n)
     assert str(e1.value) == str(e2.value) and "motion.age_s" in str(e1.value)
+    p = codes_pass(n - 1)
+    assert coded(object_motion(tracks, motion_pass=p), p).codes is None
 
 
 def test_the_container_kernel_takes_motion_rows_as_they_are():

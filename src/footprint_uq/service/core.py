@@ -82,7 +82,8 @@ from .messages.motion import (
     SPEED_CONFIDENCE_NAMES,
     CodedMotion,
     ObjectMotion,
-    coded_motion,
+    coded,
+    codes_pass,
     motion_codes,
     motion_rows,
     motion_values,
@@ -834,14 +835,14 @@ class Service:
         """:meth:`_motion` of the centres' columns ``xy_world_m`` (N, 2) m, ``cov_m2`` (N, 2, 2) m^2 and
         ``shared_m`` (N, 2, r) (an estimate's, or the lean frame's :class:`~footprint_uq.products.frame_processor.
         FrameColumns`): ``(track_id (N,), ObjectMotion)``."""
-        tracker = setup.tracker
-        f = tracker.step_frame(ts, ids, classes, xy_world_m, cov_m2, shared_m, yaw_rad=yaw_rad, contact_2d=contact_2d,
-                               motion=False)
+        # (the motion fields -- object_motion's, to the bit -- and the messages' codes in one compiled call, the
+        # codes kept for the frame's motion_rows)
+        motion_pass = codes_pass(len(ids))
+        f = setup.tracker.step_frame(ts, ids, classes, xy_world_m, cov_m2, shared_m, yaw_rad=yaw_rad,
+                                     contact_2d=contact_2d, motion_pass=motion_pass)
         # what the CP service fuses (on_tracked): the tracks with the sliding contact's velocity term
         setup.last_tracks = f.tracks
-        # the motion fields (object_motion's, to the bit) and the messages' codes in one compiled call, the codes
-        # kept for the frame's motion_rows
-        return f.track_id, coded_motion(f.tracks, heading_offset_deg=tracker.heading_offset_deg, yaw_rad=yaw_rad)
+        return f.track_id, coded(f.motion, motion_pass)
 
     def _objects_json(self, setup: CameraSetup, est, ids: list, classes: list, ts: float = 0.0,
                       motion=None) -> tuple[bytes, np.ndarray, list]:

@@ -39,14 +39,13 @@ class FrameMotion(NamedTuple):
     """One frame's objects through a :class:`CameraTracker` (n objects, in frame order).
 
     track_id : (n,) int64      the object's track (-1: not tracked)
-    motion : ObjectMotion      velocity, speed, heading, yaw, their sigmas, age (true east / north; NaN: unknown);
-                               None when :meth:`CameraTracker.step_frame` was asked for none
+    motion : ObjectMotion      velocity, speed, heading, yaw, their sigmas, age (true east / north; NaN: unknown)
     tracks : TrackOutput       the tracker's output, with the sliding contact's term in ``cov_v_m2ps2`` for 2-D
                                boxes (frame W)
     """
 
     track_id: np.ndarray
-    motion: ObjectMotion | None
+    motion: ObjectMotion
     tracks: TrackOutput
 
 
@@ -101,7 +100,7 @@ class CameraTracker:
         self.tracks.warm_up()
 
     def step_frame(self, time_s: float, object_ids, classes, xy_m, cov_m2, shared_m=None, *, yaw_rad=None,
-                   contact_2d: bool = False, motion: bool = True) -> FrameMotion:
+                   contact_2d: bool = False, motion_pass: tuple | None = None) -> FrameMotion:
         """One frame of n objects: the tracks' step, the NIS check, the slide term (``contact_2d``) and the motion.
 
         Parameters
@@ -119,10 +118,9 @@ class CameraTracker:
             3-D boxes' yaw (W, counter-clockwise from +x): the motion's ``yaw_deg``.
         contact_2d : bool
             The centres are 2-D boxes' contact points: add the sliding contact's velocity term.
-        motion : bool
-            False: step 4 left to the caller (``FrameMotion.motion`` None), who runs :func:`~footprint_uq.tracking.
-            motion.object_motion`'s pass on ``FrameMotion.tracks`` within its own (the service: with the messages'
-            codes, ``service/messages/motion.py`` ``coded_motion``).
+        motion_pass : (kernel, extra), optional
+            Step 4's compiled call (:func:`~footprint_uq.tracking.motion.object_motion`'s ``motion_pass``: its pass
+            and more in one call; the service: the messages' codes, ``service/messages/motion.py`` ``codes_pass``).
         """
         if shared_m is None:
             shared_m = np.full((len(object_ids), 2, self._rank), math.nan)
@@ -132,5 +130,6 @@ class CameraTracker:
                 self.nis.observe(time_s, out, classes)  # (the NIS of the step's own innovations)
         if contact_2d and self.slide is not None:
             out = self.slide.apply(out, classes)
-        fields = object_motion(out, heading_offset_deg=self.heading_offset_deg, yaw_rad=yaw_rad) if motion else None
-        return FrameMotion(out.track_id, fields, out)
+        motion = object_motion(out, heading_offset_deg=self.heading_offset_deg, yaw_rad=yaw_rad,
+                               motion_pass=motion_pass)
+        return FrameMotion(out.track_id, motion, out)

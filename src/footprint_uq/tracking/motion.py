@@ -75,7 +75,8 @@ def yaw_compass_deg(yaw_rad, heading_offset_deg: float = 0.0) -> np.ndarray:
 
 
 def object_motion(tracks: TrackOutput, *, heading_offset_deg: float = 0.0, yaw_rad=None, sigma_yaw_rad=None,
-                  heading_min_ratio: float = DEFAULT_HEADING_MIN_RATIO) -> ObjectMotion:
+                  heading_min_ratio: float = DEFAULT_HEADING_MIN_RATIO, motion_pass: tuple | None = None
+                  ) -> ObjectMotion:
     """The motion fields of a frame's objects from the tracker's output (see the module doc for the policies).
 
     Parameters
@@ -88,20 +89,28 @@ def object_motion(tracks: TrackOutput, *, heading_offset_deg: float = 0.0, yaw_r
         3-D boxes' yaw (W, counter-clockwise from +x, rad) and its sigma if the detector gives one (else NaN).
     heading_min_ratio : float
         Speed / largest velocity sigma below which the heading's sigma is NaN.
+    motion_pass : (kernel, extra), optional
+        A compiled call to run instead of :func:`~footprint_uq.tracking.kernels.motion_fields`, as
+        ``kernel(*motion_fields' arguments, age_s (n,), *extra)``: it runs that pass (whose outputs are the
+        motion's) and whatever else it does with them in the same call (the service: the messages' codes,
+        ``service/messages/motion.py`` ``codes_pass``).
     """
     args = motion_arguments(tracks, heading_offset_deg=heading_offset_deg, yaw_rad=yaw_rad,
                             sigma_yaw_rad=sigma_yaw_rad, heading_min_ratio=heading_min_ratio)
-    motion_fields(*args)
-    return motion_of(args, tracks.age_s.copy())
+    age = tracks.age_s.copy()
+    if motion_pass is None:
+        motion_fields(*args)
+    else:
+        motion_pass[0](*args, age, *motion_pass[1])
+    return motion_of(args, age)
 
 
 def motion_arguments(tracks: TrackOutput, *, heading_offset_deg: float = 0.0, yaw_rad=None, sigma_yaw_rad=None,
                      heading_min_ratio: float = DEFAULT_HEADING_MIN_RATIO) -> tuple:
     """:func:`object_motion`'s inputs checked and its outputs allocated, as the arguments of its compiled pass
     (:func:`~footprint_uq.tracking.kernels.motion_fields`: ``(v (n, 2), cov (n, 2, 2), cos, sin, ratio, yaw (n,)
-    or (0,), sigma_yaw (n,) or (0,), heading_offset_deg, out (8, n), cov_out (n, 2, 2))``), for a caller that
-    runs that pass inside its own compiled call (the service: with the messages' codes); :func:`motion_of` then
-    makes the :class:`ObjectMotion`."""
+    or (0,), sigma_yaw (n,) or (0,), heading_offset_deg, out (8, n), cov_out (n, 2, 2))``); :func:`motion_of`
+    then makes the :class:`ObjectMotion`."""
     # (finite floats pass without a call into _checks, as in TrackTable.step: the frame's walk stays in tracking/)
     h = (heading_offset_deg if isinstance(heading_offset_deg, float) and math.isfinite(heading_offset_deg)
          else as_float("heading_offset_deg", heading_offset_deg))

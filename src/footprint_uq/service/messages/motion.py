@@ -57,11 +57,10 @@ from numba import njit
 
 from ...errors import InputError
 from ...tracking.kernels import motion_fields
-from ...tracking.motion import DEFAULT_HEADING_MIN_RATIO, ObjectMotion, motion_arguments, motion_of
-from ...tracking.table import TrackOutput
+from ...tracking.motion import ObjectMotion
 
 __all__ = ["ObjectMotion", "MotionCodes", "motion_codes", "motion_rows", "MOTION_ROWS", "motion_codes_reference",
-           "CodedMotion", "motion_values", "coded_motion",
+           "CodedMotion", "motion_values", "codes_pass", "coded",
            "unknown_motion", "SPEED_CONFIDENCE_NAMES", "HEADING_CONFIDENCE_NAMES", "SPEED_CONFIDENCE_MPS",
            "HEADING_CONFIDENCE_DEG"]
 
@@ -256,25 +255,25 @@ class CodedMotion(ObjectMotion):
         return codes if codes is not None and codes.shape[1] == n else None
 
 
-def coded_motion(tracks: TrackOutput, *, heading_offset_deg: float = 0.0, yaw_rad=None,
-                 heading_min_ratio: float = DEFAULT_HEADING_MIN_RATIO) -> CodedMotion:
-    """:func:`~footprint_uq.tracking.motion.object_motion` of the tracker's output ``tracks`` (n objects; the same
-    arguments, the same arrays to the bit: its compiled pass, :func:`~footprint_uq.tracking.kernels.
-    motion_fields`) with the messages' codes of every object in the same compiled call (:func:`_fields_and_codes`),
-    kept for the next :func:`motion_rows` (when every object passes its checks; a bad value is named by that
-    call).  The service's tracked frame (``Service._step_tracks``)."""
-    args = motion_arguments(tracks, heading_offset_deg=heading_offset_deg, yaw_rad=yaw_rad,
-                            heading_min_ratio=heading_min_ratio)
-    age = tracks.age_s.copy()
-    n = age.shape[0]
-    if age.dtype != _F8 or age.shape != args[9].shape[:1]:
-        raise InputError("tracks.age_s", (age.dtype.name, age.shape), f"float64 of shape ({args[9].shape[0]},)")
-    codes = np.empty((14, n), np.int64)
-    bad = _fields_and_codes(*args, age, codes)
-    motion = CodedMotion.of(motion_of(args, age))
-    if bad < 0:
-        motion.codes = codes
-    return motion
+def codes_pass(n: int) -> tuple:
+    """``(kernel, (codes (14, n), status (1,)))``: :func:`~footprint_uq.tracking.motion.object_motion`'s
+    ``motion_pass`` (through :meth:`~footprint_uq.tracking.camera_tracker.CameraTracker.step_frame`) that runs its
+    pass (:func:`~footprint_uq.tracking.kernels.motion_fields`, called as it is: the same arrays to the bit) and
+    then the messages' codes of every object of the motion into ``codes``, in one compiled call
+    (:func:`_fields_and_codes`); :func:`coded` then keeps them.  The service's tracked frame
+    (``Service._step_tracks``)."""
+    return _fields_and_codes, (np.empty((14, n), np.int64), np.full(1, -2, np.int64))
+
+
+def coded(motion: ObjectMotion, motion_pass: tuple) -> CodedMotion:
+    """``motion`` (made by :func:`codes_pass`' ``motion_pass``) as a :class:`CodedMotion` keeping the pass's codes
+    for the next :func:`motion_rows` when every object passed the checks (a bad value: none kept; that call names
+    it)."""
+    codes, status = motion_pass[1]
+    m = CodedMotion.of(motion)
+    if status[0] == -1 and codes.shape == (14, len(m.age_s)):
+        m.codes = codes
+    return m
 
 
 def motion_values(motion: ObjectMotion, n: int, values: np.ndarray) -> None:
@@ -418,14 +417,16 @@ def _rows_kernel(ve, vn, cov, sp, ssp, hd, shd, yw, syw, age, rows, every, out,
 
 @njit(cache=True, nogil=True)
 def _fields_and_codes(v, cov, ch, sh, ratio, yaw_rad, sigma_yaw_rad, heading_offset_deg, out, cov_out, age,
-                      codes):  # pragma: no cover - compiled
+                      codes, status):  # pragma: no cover - compiled
     """:func:`~footprint_uq.tracking.kernels.motion_fields` (its arguments, called: compiled as it is, the same
-    bits) and then :func:`_rows_kernel` of its outputs and ``age (n,)`` into ``codes (14, n)``, every object:
-    returns the first bad field's index (-1: none)."""
+    bits) and then :func:`_rows_kernel` of its outputs and ``age (n,)`` into ``codes (14, n)``, every object (not
+    written if ``codes`` is not ``(14, n)``); ``status[0]`` receives the first bad field's index (-1: none)."""
     motion_fields(v, cov, ch, sh, ratio, yaw_rad, sigma_yaw_rad, heading_offset_deg, out, cov_out)
-    bad, _ = _rows_kernel(out[0], out[1], cov_out, out[2], out[3], out[4], out[5], out[6], out[7], age,
-                          np.empty(0, np.int64), True, codes, np.empty((0, 0)))
-    return bad
+    if codes.shape[1] != age.shape[0] or age.shape[0] != out.shape[1]:
+        status[0] = -2
+        return
+    status[0], _ = _rows_kernel(out[0], out[1], cov_out, out[2], out[3], out[4], out[5], out[6], out[7], age,
+                                np.empty(0, np.int64), True, codes, np.empty((0, 0)))
 
 
 def motion_codes_reference(motion: ObjectMotion, n: int) -> MotionCodes:
