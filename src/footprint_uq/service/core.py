@@ -1177,9 +1177,8 @@ def _motion_values(out: np.ndarray, motion) -> bool:
         motion_values(m, out.shape[1], out[5:10])
         return True
     out[5], out[6] = ve, vn
-    d = np.asarray(cv).reshape(out.shape[1], 4).T
-    out[7:9] = d[0:2]
-    out[9] = d[3]
+    d = np.asarray(cv).reshape(out.shape[1], 4)
+    out[7], out[8], out[9] = d[:, 0], d[:, 1], d[:, 3]
     return True
 
 

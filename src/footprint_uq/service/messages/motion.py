@@ -262,7 +262,7 @@ def codes_pass(n: int) -> tuple:
     then the messages' codes of every object of the motion into ``codes``, in one compiled call
     (:func:`_fields_and_codes`); :func:`coded` then keeps them.  The service's tracked frame
     (``Service._step_tracks``)."""
-    return _fields_and_codes, (np.empty((14, n), np.int64), np.full(1, -2, np.int64))
+    return _fields_and_codes, (np.empty((14, n), np.int64), _NOT_RUN.copy())
 
 
 def coded(motion: ObjectMotion, motion_pass: tuple) -> CodedMotion:
@@ -270,10 +270,13 @@ def coded(motion: ObjectMotion, motion_pass: tuple) -> CodedMotion:
     for the next :func:`motion_rows` when every object passed the checks (a bad value: none kept; that call names
     it)."""
     codes, status = motion_pass[1]
-    m = CodedMotion.of(motion)
-    if status[0] == -1 and codes.shape == (14, len(m.age_s)):
+    m = tuple.__new__(CodedMotion, motion)
+    if status[0] == -1:  # (-2: the pass did not run, or its codes were not of the motion's size)
         m.codes = codes
     return m
+
+
+_NOT_RUN = np.full(1, -2, np.int64)
 
 
 def motion_values(motion: ObjectMotion, n: int, values: np.ndarray) -> None:
