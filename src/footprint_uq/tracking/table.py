@@ -466,6 +466,11 @@ class TrackTable:
             return
         del free[len(free) - m:]
         index, keys = self._index, self._keys
+        if m == 1:  # (the common case: one new id in the frame)
+            s = int(rows[0])
+            keys[s] = key = int(id64[claimed[0]])
+            index[key] = s
+            return
         for key, s in zip(id64[claimed[:m]].tolist(), rows[:m].tolist(), strict=True):
             keys[s] = key
             index[key] = s
