@@ -17,10 +17,14 @@ from footprint_uq.service.messages.cpm import CPM_CLASSES_BY_CDD, coordinate_cm
 from footprint_uq.service.messages.ids import MESSAGE_ID_HOLD_S, MessageIdMap, preferred_number
 from footprint_uq.service.messages.motion import (
     MOTION_ROWS,
+    CodedMotion,
     ObjectMotion,
+    coded,
+    codes_pass,
     motion_codes,
     motion_codes_reference,
     motion_rows,
+    motion_values,
     unknown_motion,
 )
 
@@ -266,6 +270,97 @@ def test_motion_rows_name_the_first_bad_field_of_the_objects_it_codes():
         motion_rows(m, 6, np.array([0, 6]))
     with pytest.raises(InputError, match="rows"):
         motion_rows(m, 6, np.array([-1]))
+
+
+def _bits(a: np.ndarray) -> np.ndarray:
+    return np.ascontiguousarray(a, dtype=np.float64).view(np.int64)
+
+
+def test_motion_values_writes_the_record_rows_and_keeps_the_codes_for_one_motion_rows(monkeypatch):
+    """motion_values (the service's tracked frame: the record's velocity rows in the codes' pass) writes v_east,
+    v_north and the covariance's three entries bit for bit; a CodedMotion then hands the next motion_rows the codes
+    an ObjectMotion of the same arrays gets -- every object, a subset, repeats, none; C-contiguous int64 -- without a
+    second pass (the kernel made to fail), once (the call after computes them again); a plain ObjectMotion keeps
+    nothing.  A motion with a bad value keeps nothing: motion_rows names it as for any motion, and codes objects
+    outside it unchecked."""
+    from footprint_uq.service.messages import motion as mm
+
+    def no_pass(*args):
+        raise AssertionError("a second pass over the motion")
+
+    rng = np.random.default_rng(12)
+    for k in range(12):
+        m = _random_motion(rng, 150)
+        rows = None if k % 3 == 0 else rng.permutation(150)[:rng.integers(0, 150)] if k % 3 == 1 else \
+            rng.integers(0, 150, 200)
+        want = motion_rows(m, 150, rows)
+        coded, values = CodedMotion.of(m), np.full((5, 150), 7.0)
+        motion_values(coded, 150, values)
+        cov = m.cov_v_m2ps2
+        expected = np.array([m.v_east_mps, m.v_north_mps, cov[:, 0, 0], cov[:, 0, 1], cov[:, 1, 1]])
+        assert np.array_equal(_bits(values), _bits(expected)) and coded == m and coded.codes is not None
+        with monkeypatch.context() as mp:
+            mp.setattr(mm, "_rows_kernel", no_pass)
+            got = motion_rows(coded, 150, rows)
+        assert got.dtype == np.int64 and got.flags.c_contiguous and np.array_equal(got, want)
+        assert coded.codes is None
+        np.testing.assert_array_equal(motion_rows(coded, 150, rows), want)
+    plain = _random_motion(rng, 4)
+    motion_values(plain, 4, np.empty((5, 4)))
+    assert not hasattr(plain, "codes")
+    bad = CodedMotion.of(plain._replace(age_s=np.array([0.0, 0.0, -2.0, 0.0])))
+    values = np.empty((5, 4))
+    motion_values(bad, 4, values)
+    assert bad.codes is None and np.array_equal(_bits(values[0]), _bits(plain.v_east_mps))
+    with pytest.raises(InputError, match="motion.age_s"):
+        motion_rows(bad, 4)
+    np.testing.assert_array_equal(motion_rows(bad, 4, np.array([3, 0])), _reference_rows(bad.take([3, 0]), 2))
+    with pytest.raises(InputError, match="values"):
+        motion_values(CodedMotion.of(plain), 4, np.empty((4, 5)))
+
+
+def test_the_codes_pass_gives_object_motion_to_the_bit_and_keeps_its_codes():
+    """object_motion with codes_pass' motion_pass (the service's tracked frame, through CameraTracker.step_frame:
+    the motion fields and the messages' codes in one compiled call) gives object_motion's ten arrays bit for bit --
+    tracks with and without a velocity, velocities at zero, heading offsets, 3-D boxes' yaw as a strided column or
+    none -- and coded() keeps the codes motion_rows gives the plain motion; a track output with a bad value keeps
+    none, and motion_rows names it as for the plain motion; a pass of another size keeps none."""
+    from footprint_uq.tracking import object_motion
+    from footprint_uq.tracking.table import TrackOutput
+
+    rng = np.random.default_rng(21)
+    n = 90
+    a = rng.normal(0.0, 0.7, (n, 2, 2))
+    cov = a @ np.swapaxes(a, 1, 2)
+    v = rng.normal(0.0, 6.0, (n, 2))
+    v[rng.random(n) < 0.2] = np.nan  # (no velocity yet)
+    v[:5] = 0.0
+    cov[np.isnan(v[:, 0])] = np.nan
+    age = rng.uniform(0.0, 4.0, n)
+    tracks = TrackOutput(np.arange(n), np.zeros(n, bool), np.full(n, 3), age, rng.normal(0.0, 9.0, (n, 2)),
+                         cov.copy(), v, cov)
+    boxes = rng.normal(0.0, 1.0, (n, 7))
+    for h in (0.0, 12.5, -123.25):
+        for yaw in (None, boxes[:, 6]):
+            want = object_motion(tracks, heading_offset_deg=h, yaw_rad=yaw)
+            p = codes_pass(n)
+            got = coded(object_motion(tracks, heading_offset_deg=h, yaw_rad=yaw, motion_pass=p), p)
+            assert type(got) is CodedMotion
+            for name, g, w in zip(want._fields, got, want, strict=True):
+                assert g.shape == w.shape and np.array_equal(_bits(g), _bits(w)), (h, name)
+            assert got.age_s is not tracks.age_s and np.array_equal(got.codes, motion_rows(want, n))
+            np.testing.assert_array_equal(motion_rows(got, n, np.array([4, 0, 4])), motion_rows(want, n)[:, [4, 0, 4]])
+    bad = tracks._replace(age_s=np.where(np.arange(n) == 7, -1.0, age))
+    p = codes_pass(n)
+    got = coded(object_motion(bad, heading_offset_deg=3.0, motion_pass=p), p)
+    assert got.codes is None
+    with pytest.raises(InputError) as e1:
+        motion_rows(got, n)
+    with pytest.raises(InputError) as e2:
+        motion_rows(object_motion(bad, heading_offset_deg=3.0), n)
+    assert str(e1.value) == str(e2.value) and "motion.age_s" in str(e1.value)
+    p = codes_pass(n - 1)
+    assert coded(object_motion(tracks, motion_pass=p), p).codes is None
 
 
 def test_the_container_kernel_takes_motion_rows_as_they_are():

@@ -259,15 +259,15 @@ def test_b_formed_in_the_rows_call_is_shared_at_to_the_bit_over_classes():
     uv, Bp, S = np.empty((40, 2)), np.full((40, 2, 13), 7.0), np.empty(SCRATCH_SHAPE)
     X = np.zeros((40, 4))
     X[:, :2] = pred
-    args = (np.arange(40, dtype=np.int64), np.zeros((40, 2)), np.zeros((40, 2, 2)), np.zeros((40, 2, 13)), False,
-            np.zeros((40, 2, 2)), 1.0, np.zeros(40), np.zeros(40, np.int64), 1, X, np.empty(40, np.int8),
-            np.empty(40, np.int64), np.empty((40, 2)))
+    args = (np.arange(40, dtype=np.int64), np.zeros((2, 40)), np.zeros((2, 2, 40)), np.zeros((40, 2, 13)), False,
+            np.empty((40, 2)), np.empty((40, 2, 2)), 1.0, np.zeros(40), np.zeros(40, np.int64), 1, X,
+            np.empty(40, np.int8), np.empty(40, np.int64), np.empty((40, 2)))
     k, _ = frame_rows_shared(*args, *at.kernel_inputs(), uv, Bp, S)
-    want = at(args[13][:k])
+    want = at(args[14][:k])
     assert k == 40 and np.isnan(want).any() and np.isfinite(want).any()
     assert np.array_equal(Bp[:k], want, equal_nan=True)
-    args[8][:] = 0
-    assert frame_rows(*args)[0] == 40 and np.array_equal(args[13], pred)
+    args[9][:] = 0
+    assert frame_rows(*args)[0] == 40 and np.array_equal(args[14], pred)
     per_class = {"truck": TrackerConfig(timeout_s=1.0, accel_psd_m2ps3=0.5, manoeuvre_accel_psd_m2ps3=None)}
     cfg = TrackerConfig(timeout_s=1.0)
     fused, generic = (ClassTracks(cfg, per_class, rank=13, shared_at=s) for s in (at, lambda xy: at(xy)))

@@ -80,9 +80,13 @@ from .messages.motion import (
     SDSM_HEADING_UNAVAILABLE,
     SDSM_SPEED_UNAVAILABLE,
     SPEED_CONFIDENCE_NAMES,
+    CodedMotion,
     ObjectMotion,
+    coded,
+    codes_pass,
     motion_codes,
     motion_rows,
+    motion_values,
 )
 from .messages.sdsm import SDSM_OBJECT_TYPES, build_sdsm
 from .messages.uper_cpm import (
@@ -855,11 +859,14 @@ class Service:
         """:meth:`_motion` of the centres' columns ``xy_world_m`` (N, 2) m, ``cov_m2`` (N, 2, 2) m^2 and
         ``shared_m`` (N, 2, r) (an estimate's, or the lean frame's :class:`~footprint_uq.products.frame_processor.
         FrameColumns`): ``(track_id (N,), ObjectMotion)``."""
+        # (the motion fields -- object_motion's, to the bit -- and the messages' codes in one compiled call, the
+        # codes kept for the frame's motion_rows)
+        motion_pass = codes_pass(len(ids))
         f = setup.tracker.step_frame(ts, ids, classes, xy_world_m, cov_m2, shared_m, yaw_rad=yaw_rad,
-                                     contact_2d=contact_2d)
+                                     contact_2d=contact_2d, motion_pass=motion_pass)
         # what the CP service fuses (on_tracked): the tracks with the sliding contact's velocity term
         setup.last_tracks = f.tracks
-        return f.track_id, f.motion
+        return f.track_id, coded(f.motion, motion_pass)
 
     def _objects_json(self, setup: CameraSetup, est, ids: list, classes: list, ts: float = 0.0,
                       motion=None) -> tuple[bytes, np.ndarray, list]:
@@ -1211,8 +1218,10 @@ def _compact_values(est, motion) -> np.ndarray | None:
 
 def _motion_values(out: np.ndarray, motion) -> bool:
     """Rows 5-9 of the compact record's float columns ``out`` (10, N): the velocity (m/s) and its covariance
-    (m^2/s^2) of the tracker's ``motion`` ``(track_id, ObjectMotion)``.  False (``out`` not written): a motion
-    column not in float64 (the general writer's text of it would differ)."""
+    (m^2/s^2) of the tracker's ``motion`` ``(track_id, ObjectMotion)``, copied; a
+    :class:`.messages.motion.CodedMotion` whose codes are not kept yet in one compiled pass with them, kept for the
+    frame's ``motion_rows`` (:func:`.messages.motion.motion_values`; :meth:`Service._step_tracks` keeps them).
+    False (``out`` not written): a motion column not in float64 (the general writer's text of it would differ)."""
     m = motion[1]
     ve, vn, cv = m.v_east_mps, m.v_north_mps, m.cov_v_m2ps2
     try:
@@ -1221,6 +1230,9 @@ def _motion_values(out: np.ndarray, motion) -> bool:
         f8 = all(np.asarray(a).dtype == _F8 for a in (ve, vn, cv))
     if not f8:
         return False
+    if type(m) is CodedMotion and m.codes is None and out.flags.c_contiguous:  # (codes not kept yet: with them)
+        motion_values(m, out.shape[1], out[5:10])
+        return True
     out[5], out[6] = ve, vn
     d = np.asarray(cv).reshape(out.shape[1], 4)
     out[7], out[8], out[9] = d[:, 0], d[:, 1], d[:, 3]

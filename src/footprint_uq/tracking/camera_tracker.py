@@ -100,7 +100,7 @@ class CameraTracker:
         self.tracks.warm_up()
 
     def step_frame(self, time_s: float, object_ids, classes, xy_m, cov_m2, shared_m=None, *, yaw_rad=None,
-                   contact_2d: bool = False) -> FrameMotion:
+                   contact_2d: bool = False, motion_pass: tuple | None = None) -> FrameMotion:
         """One frame of n objects: the tracks' step, the NIS check, the slide term (``contact_2d``) and the motion.
 
         Parameters
@@ -118,6 +118,9 @@ class CameraTracker:
             3-D boxes' yaw (W, counter-clockwise from +x): the motion's ``yaw_deg``.
         contact_2d : bool
             The centres are 2-D boxes' contact points: add the sliding contact's velocity term.
+        motion_pass : (kernel, extra), optional
+            Step 4's compiled call (:func:`~footprint_uq.tracking.motion.object_motion`'s ``motion_pass``: its pass
+            and more in one call; the service: the messages' codes, ``service/messages/motion.py`` ``codes_pass``).
         """
         if shared_m is None:
             shared_m = np.full((len(object_ids), 2, self._rank), math.nan)
@@ -127,5 +130,6 @@ class CameraTracker:
                 self.nis.observe(time_s, out, classes)  # (the NIS of the step's own innovations)
         if contact_2d and self.slide is not None:
             out = self.slide.apply(out, classes)
-        motion = object_motion(out, heading_offset_deg=self.heading_offset_deg, yaw_rad=yaw_rad)
+        motion = object_motion(out, heading_offset_deg=self.heading_offset_deg, yaw_rad=yaw_rad,
+                               motion_pass=motion_pass)
         return FrameMotion(out.track_id, motion, out)

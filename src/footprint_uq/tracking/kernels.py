@@ -27,7 +27,7 @@ from .kalman_kernels import pick_shared, schmidt_step, start_cov2
 
 __all__ = ["predict_update", "update_slots", "frame_rows", "frame_rows_shared", "frame_update", "initiate_row",
            "project_ground", "motion_fields", "ROW_SKIP", "ROW_UPDATE", "ROW_START", "id_lookup", "id_insert",
-           "id_delete", "ID_EMPTY"]
+           "id_delete", "ID_EMPTY", "claim_rows"]
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -286,17 +286,54 @@ def id_delete(keys, vals, shift, old_keys):  # pragma: no cover - compiled
             i = j
 
 
+@njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
+def claim_rows(ids, old, u, act, slots, free_rows, keys, vals, shift, claimed):  # pragma: no cover - compiled
+    """Rows for the unknown int64 ids of a frame of n objects, in place (:meth:`~footprint_uq.tracking.table.
+    TrackTable._claim`'s rule, compiled): the u objects listed at the end of ``old`` in reverse frame order (as
+    :func:`frame_rows` leaves them) are taken in frame order; the first object of each id among them gets, if
+    ``act`` says :data:`ROW_START`, the next row of ``free_rows`` (in its order) in ``slots`` and its id enters
+    the id table ``keys, vals, shift`` (:func:`id_lookup`; the caller has made room for u more); a later object of
+    an id met before among them gets :data:`ROW_SKIP`.  ``claimed`` receives the objects that got a row, in
+    order; returns their count."""
+    n = ids.shape[0]
+    m = 0
+    for q in range(u):
+        i = old[n - 1 - q]
+        key = ids[i]
+        seen = False
+        for p in range(q):  # (u is small: the frame's new ids)
+            if ids[old[n - 1 - p]] == key:
+                seen = True
+                break
+        if seen:
+            act[i] = ROW_SKIP
+            continue
+        if act[i] == ROW_START:
+            s = free_rows[m]
+            slots[i] = s
+            j = _id_entry(keys, vals, shift, key)
+            keys[j] = key
+            vals[j] = s
+            claimed[m] = i
+            m += 1
+    return m
+
+
 #: row actions of :func:`frame_rows` / :func:`frame_update`: not tracked, update the row's track, start a track
 ROW_SKIP, ROW_UPDATE, ROW_START = 0, 1, 2
 
 
 @njit(cache=True, nogil=True, error_model="numpy", _nrt=False)  # (no refcounting: it allocates nothing)
-def frame_rows(slots, xy, cov, B, subtract, R, t, t_last, seen, stamp, X, act, old,
+def frame_rows(slots, xy_rows, cov_rows, B, subtract, z, R, t, t_last, seen, stamp, X, act, old,
                pred):  # pragma: no cover - compiled
     """First pass of a frame of n objects over a table's storage: what to do with each object.
 
-    ``subtract``: ``cov (n, 2, 2)`` is each centre's whole covariance and ``R (n, 2, 2)`` receives its per-frame
-    part ``cov - B B^T``; else ``cov`` is the per-frame part already (``R`` is not written).
+    The centres come as rows, ``xy_rows (2, n)`` (x, y) and ``cov_rows (2, 2, n)`` (the layout of an estimate's
+    columns: ``FootprintEstimate.centre_xy_world_m.T`` and ``centre_cov_m2.transpose(1, 2, 0)`` are C-contiguous,
+    no copy is needed to hand them over), and are written per object into ``z (n, 2)`` and ``R (n, 2, 2)``, what
+    the update pass reads.  ``subtract``: ``cov_rows`` holds each centre's whole covariance and ``R`` receives its
+    per-frame part ``cov - B B^T`` (symmetrised from its upper entry); else ``cov_rows`` is the per-frame part
+    already and ``R`` receives it as given.
 
     ``slots (n,)`` are the objects' rows in the storage from the id lookup (-1: an unknown id, -2: an id that is
     never tracked).  ``act (n,)`` receives :data:`ROW_UPDATE` for the first object of a known id with a finite
@@ -310,19 +347,23 @@ def frame_rows(slots, xy, cov, B, subtract, R, t, t_last, seen, stamp, X, act, o
     n_unknown = 0
     r = B.shape[2]
     for i in range(slots.shape[0]):
+        z[i, 0], z[i, 1] = xy_rows[0, i], xy_rows[1, i]
         if subtract:
             for a in range(2):
                 for b in range(a, 2):
                     acc = 0.0
                     for c in range(r):
                         acc += B[i, a, c] * B[i, b, c]
-                    R[i, a, b] = cov[i, a, b] - acc
+                    R[i, a, b] = cov_rows[a, b, i] - acc
             R[i, 1, 0] = R[i, 0, 1]
+        else:
+            R[i, 0, 0], R[i, 0, 1] = cov_rows[0, 0, i], cov_rows[0, 1, i]
+            R[i, 1, 0], R[i, 1, 1] = cov_rows[1, 0, i], cov_rows[1, 1, i]
         s = slots[i]
-        ok = math.isfinite(xy[i, 0]) and math.isfinite(xy[i, 1])
+        ok = math.isfinite(z[i, 0]) and math.isfinite(z[i, 1])
         for a in range(2):
             for b in range(2):
-                ok = ok and math.isfinite(R[i, a, b] if subtract else cov[i, a, b])
+                ok = ok and math.isfinite(R[i, a, b])
             for c in range(r):
                 ok = ok and math.isfinite(B[i, a, c])
         if s < 0:
@@ -345,21 +386,31 @@ def frame_rows(slots, xy, cov, B, subtract, R, t, t_last, seen, stamp, X, act, o
     return k, n_unknown
 
 
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _camera(f, has_dist, dist, R, dom):  # pragma: no cover - compiled
+    """The :class:`~footprint_uq.fast.footprint_kernels.KernelCamera` of :func:`~footprint_uq.fast.frame_columns.
+    camera_parts`' pieces (the same values, the same numba type; as ``fast/frame_columns.py`` puts it together)."""
+    return KernelCamera(f[0], f[1], f[2], f[3], f[4], f[5], f[6], dist, has_dist, f[7], f[8], f[9], f[10], f[11],
+                        f[12], R, f[13], f[14], f[15], dom)
+
+
 @njit(cache=True, nogil=True, error_model="numpy")
-def frame_rows_shared(slots, xy, cov, B, subtract, R, t, t_last, seen, stamp, X, act, old, pred, cam_fields, dR, Lr,
-                      Lc, Lv, uv, B_pred, S):  # pragma: no cover - compiled
+def frame_rows_shared(slots, xy_rows, cov_rows, B, subtract, z, R, t, t_last, seen, stamp, X, act, old, pred,
+                      cam_f, has_dist, dist, cam_R, dom, dR, Lr, Lc, Lv, uv, B_pred, S):  # pragma: no cover - compiled
     """:func:`frame_rows` and then ``B`` at the k predicted positions in one call: ``pred[:k]`` into the image
     (:func:`project_ground`, pixels into ``uv[:k]``) and through :func:`~footprint_uq.fast.footprint_kernels.
     point_jacobian_into` into ``B_pred[:k] (k, 2, r)`` -- the same ``B`` to the bit as
-    :class:`~footprint_uq.tracking.table.SharedJacobianAt` at ``pred[:k]``.  ``cam_fields``: the camera's
-    :class:`~footprint_uq.fast.footprint_kernels.KernelCamera` as a plain tuple (numba types a plain tuple in
-    C, a named one in Python: ~1 us of dispatch less); ``dR, Lr, Lc, Lv``: the rest of the point kernel's inputs
+    :class:`~footprint_uq.tracking.table.SharedJacobianAt` at ``pred[:k]``.  ``cam_f, has_dist, dist, cam_R,
+    dom``: the camera's :class:`~footprint_uq.fast.footprint_kernels.KernelCamera` as :func:`~footprint_uq.fast.
+    frame_columns.camera_parts` gives it (four arrays and a flag: unboxed in a fraction of the 20-field
+    structure's ~1 us per call; put together inside); ``dR, Lr, Lc, Lv``: the rest of the point kernel's inputs
     (:meth:`~footprint_uq.products.frame_processor.FrameProcessor.point_jacobian_kernel`); ``uv (n, 2)``,
     ``B_pred (n, 2, r)`` and ``S`` (``footprint_kernels.SCRATCH_SHAPE``) are the caller's.  Returns what
     :func:`frame_rows` returns."""
-    k, n_unknown = frame_rows(slots, xy, cov, B, subtract, R, t, t_last, seen, stamp, X, act, old, pred)
+    k, n_unknown = frame_rows(slots, xy_rows, cov_rows, B, subtract, z, R, t, t_last, seen, stamp, X, act, old,
+                              pred)
     if k:
-        cam = KernelCamera(*cam_fields)
+        cam = _camera(cam_f, has_dist, dist, cam_R, dom)
         project_ground(pred[:k], cam, uv[:k])
         point_jacobian_into(uv[:k], cam, dR, Lr, Lc, Lv, B_pred[:k], S)
     return k, n_unknown

@@ -26,7 +26,7 @@ from .kernels import motion_fields
 from .table import TrackOutput
 
 __all__ = ["ObjectMotion", "MotionArrays", "MOTION_FIELDS", "object_motion", "DEFAULT_HEADING_MIN_RATIO",
-           "yaw_compass_deg"]
+           "yaw_compass_deg", "motion_arguments", "motion_of"]
 
 #: heading sigma only where speed >= this many sigma of the velocity's largest semi-axis
 DEFAULT_HEADING_MIN_RATIO = 3.0
@@ -75,7 +75,8 @@ def yaw_compass_deg(yaw_rad, heading_offset_deg: float = 0.0) -> np.ndarray:
 
 
 def object_motion(tracks: TrackOutput, *, heading_offset_deg: float = 0.0, yaw_rad=None, sigma_yaw_rad=None,
-                  heading_min_ratio: float = DEFAULT_HEADING_MIN_RATIO) -> ObjectMotion:
+                  heading_min_ratio: float = DEFAULT_HEADING_MIN_RATIO, motion_pass: tuple | None = None
+                  ) -> ObjectMotion:
     """The motion fields of a frame's objects from the tracker's output (see the module doc for the policies).
 
     Parameters
@@ -88,21 +89,58 @@ def object_motion(tracks: TrackOutput, *, heading_offset_deg: float = 0.0, yaw_r
         3-D boxes' yaw (W, counter-clockwise from +x, rad) and its sigma if the detector gives one (else NaN).
     heading_min_ratio : float
         Speed / largest velocity sigma below which the heading's sigma is NaN.
+    motion_pass : (kernel, extra), optional
+        A compiled call to run instead of :func:`~footprint_uq.tracking.kernels.motion_fields`, as
+        ``kernel(*motion_fields' arguments, age_s (n,), *extra)``: it runs that pass (whose outputs are the
+        motion's) and whatever else it does with them in the same call (the service: the messages' codes,
+        ``service/messages/motion.py`` ``codes_pass``).
     """
+    args = motion_arguments(tracks, heading_offset_deg=heading_offset_deg, yaw_rad=yaw_rad,
+                            sigma_yaw_rad=sigma_yaw_rad, heading_min_ratio=heading_min_ratio)
+    age = tracks.age_s.copy()
+    if motion_pass is None:
+        motion_fields(*args)
+    else:
+        motion_pass[0](*args, age, *motion_pass[1])
+    return motion_of(args, age)
+
+
+def motion_arguments(tracks: TrackOutput, *, heading_offset_deg: float = 0.0, yaw_rad=None, sigma_yaw_rad=None,
+                     heading_min_ratio: float = DEFAULT_HEADING_MIN_RATIO) -> tuple:
+    """:func:`object_motion`'s inputs checked and its outputs allocated, as the arguments of its compiled pass
+    (:func:`~footprint_uq.tracking.kernels.motion_fields`: ``(v (n, 2), cov (n, 2, 2), cos, sin, ratio, yaw (n,)
+    or (0,), sigma_yaw (n,) or (0,), heading_offset_deg, out (8, n), cov_out (n, 2, 2))``); :func:`motion_of`
+    then makes the :class:`ObjectMotion`."""
     # (finite floats pass without a call into _checks, as in TrackTable.step: the frame's walk stays in tracking/)
     h = (heading_offset_deg if isinstance(heading_offset_deg, float) and math.isfinite(heading_offset_deg)
          else as_float("heading_offset_deg", heading_offset_deg))
     ratio = (heading_min_ratio if isinstance(heading_min_ratio, float) and math.isfinite(heading_min_ratio)
              and heading_min_ratio > 0.0 else as_float("heading_min_ratio", heading_min_ratio, positive=True))
     n = tracks.track_id.shape[0]
-    out = np.empty((8, n))
-    cov = np.empty((n, 2, 2))
     hr = math.radians(h)
-    motion_fields(np.ascontiguousarray(tracks.v_mps, dtype=np.float64),
-                  np.ascontiguousarray(tracks.cov_v_m2ps2, dtype=np.float64), math.cos(hr), math.sin(hr), ratio,
-                  _NONE if yaw_rad is None else _column("yaw_rad", yaw_rad, n),
-                  _NONE if sigma_yaw_rad is None else _column("sigma_yaw_rad", sigma_yaw_rad, n), h, out, cov)
-    return ObjectMotion(out[0], out[1], cov, out[2], out[3], out[4], out[5], out[6], out[7], tracks.age_s.copy())
+    return (_c64(tracks.v_mps), _c64(tracks.cov_v_m2ps2), math.cos(hr), math.sin(hr), ratio,
+            _NONE if yaw_rad is None else _column("yaw_rad", yaw_rad, n),
+            _NONE if sigma_yaw_rad is None else _column("sigma_yaw_rad", sigma_yaw_rad, n), h, np.empty((8, n)),
+            np.empty((n, 2, 2)))
+
+
+def motion_of(args: tuple, age_s: np.ndarray) -> ObjectMotion:
+    """The :class:`ObjectMotion` of :func:`motion_arguments`' ``args`` once their pass has run (its rows as views,
+    its covariance) with the ages ``age_s (n,)`` (taken as they are)."""
+    ve, vn, sp, ssp, hd, shd, yw, syw = args[8]  # (the rows as views, in one unpacking)
+    return _new_motion(ObjectMotion, (ve, vn, args[9], sp, ssp, hd, shd, yw, syw, age_s))
+
+
+#: a tuple of :class:`ObjectMotion`'s ten fields made an ObjectMotion without the named tuple's ``__new__``
+_new_motion = tuple.__new__
+_F8 = np.dtype(np.float64)
+
+
+def _c64(a) -> np.ndarray:
+    """``a`` as a C-contiguous float64 array: a tracker's output as it is (the kernel's one signature)."""
+    if type(a) is np.ndarray and a.dtype == _F8 and a.flags.c_contiguous:
+        return a
+    return np.ascontiguousarray(a, dtype=np.float64)
 
 
 _NONE = np.empty(0)

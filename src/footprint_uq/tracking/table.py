@@ -14,6 +14,7 @@ from .._checks import as_float
 from ..errors import InputError
 from ..fast.buffers import thread_buffer
 from ..fast.footprint_kernels import SCRATCH_SHAPE, camera_constants
+from ..fast.frame_columns import camera_parts
 from ..products.footprints import FrameProcessor
 from .filter import Initiator, SplitMeasurement
 from .imm_kernels import frame_pass, scratch
@@ -21,6 +22,7 @@ from .kernels import (
     ID_EMPTY,
     ROW_SKIP,
     ROW_START,
+    claim_rows,
     frame_rows,
     frame_rows_shared,
     frame_update,
@@ -213,12 +215,14 @@ class TrackTable:
         return len(self._index) - 1  # (the entry of None)
 
     def warm_up(self) -> None:
-        """Load the compiled steps (numba's cache, or compile them) without touching the tracks: two frames of one
-        object through a scratch table of the same configuration (a start, then an update)."""
+        """Load the compiled steps (numba's cache, or compile them) without touching the tracks: two frames through
+        a scratch table of the same configuration -- one object's start with its id in an int64 array (the
+        compiled id look-up and claim), then its update and a second start with the ids as a list (the
+        dictionary; the new id into the compiled table)."""
         scratch = TrackTable(self.config, rank=self.rank, shared_at=self.shared_at)
         meas = (np.zeros((1, 2)), np.eye(2)[None].copy(), np.zeros((1, 2, self.rank)))
-        scratch.step(0.0, [0], *meas)
-        scratch.step(0.1, [0], *meas)
+        scratch.step(0.0, np.zeros(1, np.int64), *meas)
+        scratch.step(0.1, [0, 1], *(np.repeat(a, 2, 0) for a in meas))
 
     def _grow(self, cap: int) -> None:
         old = self._cap
@@ -295,8 +299,9 @@ class TrackTable:
         """
         # (a finite float passes without a call into _checks: one climb less per frame; anything else gets its check)
         t = time_s if isinstance(time_s, float) and math.isfinite(time_s) else as_float("time_s", time_s)
-        xy = _c64(xy_m).reshape(-1, 2)
-        n = xy.shape[0]
+        xy_rows = _rows(xy_m, 2) if type(xy_m) is np.ndarray and xy_m.ndim == 2 and xy_m.shape[1] == 2 else \
+            np.ascontiguousarray(_c64(xy_m).reshape(-1, 2).T)  # (2, n): the kernel's layout, an estimate's as is
+        n = xy_rows.shape[1]
         id64 = object_ids if (type(object_ids) is np.ndarray and object_ids.dtype == np.int64
                               and object_ids.ndim == 1 and self._int_ids) else None
         ids = object_ids if isinstance(object_ids, list) or id64 is not None else list(object_ids)
@@ -310,9 +315,12 @@ class TrackTable:
             raise InputError("cov_frame_m2/cov_m2", "both" if cov_m2 is not None else "neither",
                              "exactly one of the per-frame or the whole covariance")
         subtract = cov_m2 is not None
-        cov = _c64(cov_m2 if subtract else cov_frame_m2)
+        cov = cov_m2 if subtract else cov_frame_m2
+        if type(cov) is not np.ndarray:
+            cov = np.asarray(cov, dtype=np.float64)
         if cov.shape != (n, 2, 2):
             raise InputError("cov_m2" if subtract else "cov_frame_m2", cov.shape, f"shape ({n}, 2, 2)")
+        cov_rows = _rows(cov, 3)  # (2, 2, n)
         if t < self._last_time:
             self.n_stale_frames += 1
             self._nis = np.full(n, np.nan)
@@ -331,8 +339,9 @@ class TrackTable:
         if n > self._old.shape[0]:  # (the step's working arrays, kept: nothing of them leaves the step)
             self._work(n)
         act, old, pred = np.empty(n, np.int8), self._old, self._pred
-        R = np.empty((n, 2, 2)) if subtract else cov
-        rows = (slots, xy, cov, B, subtract, R, t, self._t_last, self._seen, self._stamp, self._x, act, old, pred)
+        xy, R = np.empty((n, 2)), np.empty((n, 2, 2))  # (the centres and R per object, written by the rows' call)
+        rows = (slots, xy_rows, cov_rows, B, subtract, xy, R, t, self._t_last, self._seen, self._stamp, self._x, act,
+                old, pred)
         at = self._at  # B at the predicted positions (see the class doc): in the rows' call, or by shared_at
         inputs = at.kernel_inputs() if at is not None else None
         if self._fused is None:  # (decided at the first frame: see __init__)
@@ -343,7 +352,9 @@ class TrackTable:
         else:
             k, n_unknown = frame_rows(*rows)
             Bp = _c64(self.shared_at(pred[:k])) if self.shared_at is not None and self.rank and k else _NO_B
-        if n_unknown:
+        if n_unknown and id64 is not None:
+            self._claim_int(id64, slots, act, n_unknown)
+        elif n_unknown:
             self._claim(ids, slots, act, old[n - n_unknown:n][::-1].tolist())
         z, Rf, Bf = (xy, R, B) if self._consider else self._measurement(xy, R, B)  # (consider: the split as given)
         out = TrackOutput(np.empty(n, np.int64), np.empty(n, bool), np.empty(n, np.int64), np.empty(n),
@@ -432,11 +443,61 @@ class TrackTable:
         if self._int_ids and new_keys:
             self._enter_ids(new_keys, new_rows)
 
+    def _claim_int(self, id64: np.ndarray, slots: np.ndarray, act: np.ndarray, n_unknown: int) -> None:
+        """:meth:`_claim` of a frame whose ids are an int64 array (its compiled id table exists: :meth:`step` made
+        it before the look-up), in one compiled call (:func:`~footprint_uq.tracking.kernels.claim_rows`: the same
+        rows in the same order, the same objects skipped) with room made first -- free rows for every unknown id
+        (the table grows now rather than midway: the rows are taken in the same order) and the id table at most
+        half full with them; then the new ids into the dictionary, as Python ints (equal, and of equal hash, to
+        the array's scalars)."""
+        free = self._free
+        while len(free) < n_unknown:
+            self._grow(2 * self._cap)
+            free = self._free
+        cap = cap0 = self._ids[0].shape[0]
+        while 2 * (len(self._index) - 1 + n_unknown) > cap:
+            cap *= 2
+        if cap != cap0:
+            self._id_table(cap)
+        rows = np.array(free[:len(free) - n_unknown - 1:-1] if len(free) > n_unknown else free[::-1], np.int64)
+        claimed = np.empty(n_unknown, np.int64)
+        m = claim_rows(id64, self._old, n_unknown, act, slots, rows, *self._ids, claimed)
+        if not m:
+            return
+        del free[len(free) - m:]
+        index, keys = self._index, self._keys
+        if m == 1:  # (the common case: one new id in the frame)
+            s = int(rows[0])
+            keys[s] = key = int(id64[claimed[0]])
+            index[key] = s
+            return
+        for key, s in zip(id64[claimed[:m]].tolist(), rows[:m].tolist(), strict=True):
+            keys[s] = key
+            index[key] = s
+
+
+_F8 = np.dtype(np.float64)
+_TRANSPOSE = {2: (1, 0), 3: (1, 2, 0)}
+
+
+def _rows(a: np.ndarray, ndim: int) -> np.ndarray:
+    """The ``(n, ...)`` array ``a`` (2 or 3 dimensions) with its first axis moved last, as a C-contiguous, writable
+    float64 array: an estimate's centre columns (``centre_xy_world_m``, ``centre_cov_m2``: views of row blocks)
+    are that already, their transposes taken as they are; anything else is copied."""
+    t = a.transpose(_TRANSPOSE[ndim])
+    if t.dtype == _F8:
+        flags = t.flags
+        if flags.c_contiguous and flags.writeable:
+            return t
+    return np.ascontiguousarray(t, dtype=np.float64)
+
 
 def _c64(a) -> np.ndarray:
     """``a`` as a C-contiguous, writable float64 array (a copy only if it is not one): one compiled signature."""
-    a = np.asarray(a, dtype=np.float64)
-    return a if a.flags.c_contiguous and a.flags.writeable else np.array(a, order="C")
+    if type(a) is not np.ndarray or a.dtype != _F8:
+        a = np.asarray(a, dtype=np.float64)
+    flags = a.flags
+    return a if flags.c_contiguous and flags.writeable else a.copy()
 
 
 class SharedJacobianAt:
@@ -468,14 +529,15 @@ class SharedJacobianAt:
         self._busy = threading.Lock()
 
     def kernel_inputs(self) -> tuple | None:
-        """The point kernel's inputs after the pixels, ``(cam_fields, dR, Lr, Lc, Lv)`` (the camera's
-        ``KernelCamera`` as a plain tuple), for :func:`~footprint_uq.tracking.kernels.frame_rows_shared`; None
-        while the processor's kernels are not ready (ask again later)."""
+        """The point kernel's inputs after the pixels, ``(cam_f, has_dist, dist, R, dom, dR, Lr, Lc, Lv)`` (the
+        camera's ``KernelCamera`` in :func:`~footprint_uq.fast.frame_columns.camera_parts`' pieces), for
+        :func:`~footprint_uq.tracking.kernels.frame_rows_shared`; None while the processor's kernels are not ready
+        (ask again later)."""
         if self._kernel is None:
             self._kernel = self.processor.point_jacobian_kernel()
             if self._kernel is not None:
                 cam, *rest = self._kernel[1]
-                self._inputs = (tuple(cam), *rest)
+                self._inputs = (*camera_parts(cam), *rest)
         return self._inputs
 
     def __call__(self, xy_m) -> np.ndarray:

@@ -56,9 +56,11 @@ import numpy as np
 from numba import njit
 
 from ...errors import InputError
+from ...tracking.kernels import motion_fields
 from ...tracking.motion import ObjectMotion
 
 __all__ = ["ObjectMotion", "MotionCodes", "motion_codes", "motion_rows", "MOTION_ROWS", "motion_codes_reference",
+           "CodedMotion", "motion_values", "codes_pass", "coded",
            "unknown_motion", "SPEED_CONFIDENCE_NAMES", "HEADING_CONFIDENCE_NAMES", "SPEED_CONFIDENCE_MPS",
            "HEADING_CONFIDENCE_DEG"]
 
@@ -188,6 +190,7 @@ def _motion_arrays(motion: ObjectMotion, n: int) -> tuple:
 _F8 = np.dtype(np.float64)
 _STRIDE_1D, _STRIDE_COV = (8,), (32, 16, 8)
 _ALL_ROWS = np.zeros(0, np.int64)
+_NO_VALUES = np.zeros((0, 0))
 #: :func:`motion_rows`' rows: the CPM PerceivedObject's 10 motion rows (velocity present, x, x confidence, y,
 #: y confidence, angles present, zAngle, its confidence, objectAge present, objectAge), then the SDSM's 4
 #: (speed, its confidence, heading, its confidence)
@@ -203,16 +206,21 @@ def motion_rows(motion: ObjectMotion, n: int, rows: np.ndarray | None = None) ->
 
     Checked as :func:`motion_codes` (shapes ``(n,)`` / ``(n, 2, 2)``; sigmas, speeds, ages >= 0 and values not
     infinite in the objects ``rows``): :class:`~footprint_uq.errors.InputError` naming the field, the first in
-    the order of the checks with a bad object, and that object's value."""
-    ve, vn, cov, sp, ssp, hd, shd, yw, syw, age = cols = _motion_arrays(motion, n)
+    the order of the checks with a bad object, and that object's value.  A :class:`CodedMotion` whose codes
+    :func:`motion_values` kept gives them up instead (the objects ``rows`` of them; no second pass)."""
+    kept = motion.take_codes(n) if type(motion) is CodedMotion else None
+    if kept is None:
+        ve, vn, cov, sp, ssp, hd, shd, yw, syw, age = cols = _motion_arrays(motion, n)
     every = rows is None
     sel = _ALL_ROWS if every else np.ascontiguousarray(rows, dtype=np.int64)
     if not every and sel.ndim != 1:
         raise InputError("rows", sel.shape, "a 1-D array of object indices")
     if not every and sel.size and (sel.min() < 0 or sel.max() >= n):
         raise InputError("rows", int(sel.min() if sel.min() < 0 else sel.max()), f"object indices in [0, {n})")
+    if kept is not None:  # (computed with the record's rows, every object checked: the objects rows of them)
+        return kept if every else np.ascontiguousarray(kept.take(sel, axis=1))
     out = np.empty((14, n if every else sel.shape[0]), np.int64)
-    bad, row = _rows_kernel(ve, vn, cov, sp, ssp, hd, shd, yw, syw, age, sel, every, out)
+    bad, row = _rows_kernel(ve, vn, cov, sp, ssp, hd, shd, yw, syw, age, sel, every, out, _NO_VALUES)
     if bad >= 0:
         i = row if every else int(sel[row])
         if bad >= len(_NONNEGATIVE):
@@ -222,6 +230,69 @@ def motion_rows(motion: ObjectMotion, n: int, rows: np.ndarray | None = None) ->
         value = (ssp[i], shd[i], syw[i], age[i], sp[i], cov[i, 0, 0], cov[i, 1, 1])[bad]
         raise InputError(f"motion.{_NONNEGATIVE[bad]}", float(value), "a standard deviation >= 0 (NaN = unknown)")
     return out
+
+
+class CodedMotion(ObjectMotion):
+    """An :class:`ObjectMotion` that keeps its message codes for one use: :func:`motion_values` computes them for
+    every object in the pass that writes the record's velocity rows, and the next :func:`motion_rows` (or
+    :func:`motion_codes`) of the same ``n`` objects takes them -- the objects it asks for -- instead of a second
+    pass over the same columns; then they are gone (a later call computes them again).  The service's tracked
+    frame: ``Service._step_tracks`` makes the tracker's motion one (:meth:`of`), ``_motion_values`` fills it.
+    The codes are those of the arrays as :func:`motion_values` read them: an array changed in between is not
+    seen (the service changes none).  Kept only when every object passed the checks: a bad value is named by
+    the pass that needs the codes, as for any :class:`ObjectMotion`."""
+
+    codes = None  #: (14, n) int64 or None (:func:`motion_values`, :meth:`take_codes`)
+
+    @classmethod
+    def of(cls, motion: ObjectMotion) -> CodedMotion:
+        """``motion``'s arrays (not copied) as a CodedMotion without codes."""
+        return tuple.__new__(cls, motion)
+
+    def take_codes(self, n: int) -> np.ndarray | None:
+        """The kept codes of ``n`` objects (None: none kept, or of another count), given up."""
+        codes, self.codes = self.codes, None
+        return codes if codes is not None and codes.shape[1] == n else None
+
+
+def codes_pass(n: int) -> tuple:
+    """``(kernel, (codes (14, n), status (1,)))``: :func:`~footprint_uq.tracking.motion.object_motion`'s
+    ``motion_pass`` (through :meth:`~footprint_uq.tracking.camera_tracker.CameraTracker.step_frame`) that runs its
+    pass (:func:`~footprint_uq.tracking.kernels.motion_fields`, called as it is: the same arrays to the bit) and
+    then the messages' codes of every object of the motion into ``codes``, in one compiled call
+    (:func:`_fields_and_codes`); :func:`coded` then keeps them.  The service's tracked frame
+    (``Service._step_tracks``)."""
+    return _fields_and_codes, (np.empty((14, n), np.int64), _NOT_RUN.copy())
+
+
+def coded(motion: ObjectMotion, motion_pass: tuple) -> CodedMotion:
+    """``motion`` (made by :func:`codes_pass`' ``motion_pass``) as a :class:`CodedMotion` keeping the pass's codes
+    for the next :func:`motion_rows` when every object passed the checks (a bad value: none kept; that call names
+    it)."""
+    codes, status = motion_pass[1]
+    m = tuple.__new__(CodedMotion, motion)
+    if status[0] == -1:  # (-2: the pass did not run, or its codes were not of the motion's size)
+        m.codes = codes
+    return m
+
+
+_NOT_RUN = np.full(1, -2, np.int64)
+
+
+def motion_values(motion: ObjectMotion, n: int, values: np.ndarray) -> None:
+    """Write the velocity (m/s) and its covariance (m^2/s^2) of ``motion`` (n objects) into ``values`` ``(5, n)``
+    (a C-contiguous float64 block: v_east, v_north, cov[0, 0], cov[0, 1], cov[1, 1] -- the compact record's motion
+    floats), in the compiled pass of :func:`motion_rows` over every object: for a :class:`CodedMotion` its codes are
+    kept for the next :func:`motion_rows` (when every object passes the checks; a bad value is written as it is,
+    and named by that call)."""
+    cols = _motion_arrays(motion, n)
+    if not (type(values) is np.ndarray and values.dtype == _F8 and values.shape == (5, n)
+            and values.flags.c_contiguous):
+        raise InputError("values", getattr(values, "shape", None), f"a C-contiguous float64 array of shape (5, {n})")
+    out = np.empty((14, n), np.int64)
+    bad, _ = _rows_kernel(*cols, _ALL_ROWS, True, out, values)
+    if bad < 0 and type(motion) is CodedMotion:
+        motion.codes = out
 
 
 def motion_codes(motion: ObjectMotion, n: int, rows: np.ndarray | None = None) -> MotionCodes:
@@ -302,17 +373,22 @@ def _first_bad_k(ssp, shd, syw, age, sp, c00, c11, ve, vn, hd, yw):  # pragma: n
 
 
 @njit(cache=True, nogil=True)
-def _rows_kernel(ve, vn, cov, sp, ssp, hd, shd, yw, syw, age, rows, every, out):  # pragma: no cover - compiled
+def _rows_kernel(ve, vn, cov, sp, ssp, hd, shd, yw, syw, age, rows, every, out,
+                 values):  # pragma: no cover - compiled
     """:func:`motion_codes_reference`'s arithmetic in one pass into ``out (14, m)`` (:data:`MOTION_ROWS`) for the
-    objects ``rows`` (``every``: all, in order).  Returns ``(field, j)``: the first field (an index of
-    ``_NONNEGATIVE + _FINITE``, checked field by field) with a bad object and the first such object ``j`` (of
-    the m), ``(-1, -1)`` if none -- one pass: an object's own first bad field, kept where it is earlier than
-    every earlier object's."""
+    objects ``rows`` (``every``: all, in order), and, if ``values`` is ``(5, m)`` (``every`` only), each object's
+    v_east, v_north, cov[0, 0], cov[0, 1], cov[1, 1] into its column (:func:`motion_values`).  Returns ``(field,
+    j)``: the first field (an index of ``_NONNEGATIVE + _FINITE``, checked field by field) with a bad object and
+    the first such object ``j`` (of the m), ``(-1, -1)`` if none -- one pass: an object's own first bad field,
+    kept where it is earlier than every earlier object's."""
     m = out.shape[1]
     bad_f, bad_j = 11, -1
+    write = values.shape[0] == 5
     for j in range(m):
         i = j if every else rows[j]
         vei, vni, c00, c11, spi, sspi = ve[i], vn[i], cov[i, 0, 0], cov[i, 1, 1], sp[i], ssp[i]
+        if write:
+            values[0, j], values[1, j], values[2, j], values[3, j], values[4, j] = vei, vni, c00, cov[i, 0, 1], c11
         hdi, shdi, ywi, sywi, a = hd[i], shd[i], yw[i], syw[i], age[i]
         f = _first_bad_k(sspi, shdi, sywi, a, spi, c00, c11, vei, vni, hdi, ywi)
         if f < bad_f:
@@ -340,6 +416,20 @@ def _rows_kernel(ve, vn, cov, sp, ssp, hd, shd, yw, syw, age, rows, every, out):
     if bad_j >= 0:
         return bad_f, bad_j
     return -1, -1
+
+
+@njit(cache=True, nogil=True)
+def _fields_and_codes(v, cov, ch, sh, ratio, yaw_rad, sigma_yaw_rad, heading_offset_deg, out, cov_out, age,
+                      codes, status):  # pragma: no cover - compiled
+    """:func:`~footprint_uq.tracking.kernels.motion_fields` (its arguments, called: compiled as it is, the same
+    bits) and then :func:`_rows_kernel` of its outputs and ``age (n,)`` into ``codes (14, n)``, every object (not
+    written if ``codes`` is not ``(14, n)``); ``status[0]`` receives the first bad field's index (-1: none)."""
+    motion_fields(v, cov, ch, sh, ratio, yaw_rad, sigma_yaw_rad, heading_offset_deg, out, cov_out)
+    if codes.shape[1] != age.shape[0] or age.shape[0] != out.shape[1]:
+        status[0] = -2
+        return
+    status[0], _ = _rows_kernel(out[0], out[1], cov_out, out[2], out[3], out[4], out[5], out[6], out[7], age,
+                                np.empty(0, np.int64), True, codes, np.empty((0, 0)))
 
 
 def motion_codes_reference(motion: ObjectMotion, n: int) -> MotionCodes:
