@@ -457,18 +457,28 @@ def _tracker_output(rng, cam_name, n):
 
 @pytest.mark.parametrize("camera", sorted(CAMERAS))
 @pytest.mark.parametrize("n", [0, 1, 7, 8, 9, 63, 64, 65, 100, 129])
-def test_apply_is_the_sum_of_cov_v_and_the_term_to_the_bit(camera, n):
-    """`ContactSlide.apply` (one compiled call: moments, the zero term without a velocity, the sum) gives to the
-    bit -- the bytes, NaN and -0.0 included -- the numpy sum of the tracker's ``cov_v`` and
-    `ContactSlide.covariance` (the moments kernel and the mask in numpy), on frames of every kind of contact and
+def test_apply_is_the_sum_of_cov_v_and_the_term(camera, n):
+    """`ContactSlide.apply` (one compiled call: moments, the zero term without a velocity, the sum) gives the
+    numpy sum of the tracker's ``cov_v`` and `ContactSlide.covariance` -- the bytes where the term is zero or NaN
+    (-0.0 and NaN included), to 1e-12 of the object's largest entry elsewhere -- (the moments kernel and the mask in numpy), on frames of every kind of contact and
     size around the vector width and the block; every other field is the input's own array, the input is not
     changed."""
     slide = ContactSlide(CAMERAS[camera])
     out, classes = _tracker_output(np.random.default_rng(2000 + n), camera, n)
     before = out.cov_v_m2ps2.copy()
     got = slide.apply(out, classes)
-    want = out.cov_v_m2ps2 + slide.covariance(out, classes)
-    assert got.cov_v_m2ps2.shape == (n, 2, 2) and got.cov_v_m2ps2.tobytes() == want.tobytes()
+    term = slide.covariance(out, classes)
+    want = out.cov_v_m2ps2 + term
+    assert got.cov_v_m2ps2.shape == (n, 2, 2)
+    # Where the term is zero or NaN: the bytes (-0.0 kept, NaN where no velocity).  Elsewhere to 1e-12 of the
+    # object's largest entry: `apply`'s kernel and the moments kernel are compiled apart, with FMA contraction
+    # allowed, and whether LLVM fuses across a callee (the lens's `core.undistort_vec`: its Newton steps) depends on
+    # whether that callee was compiled in the same process or loaded from numba's cache -- a fresh `pytest -n 2`
+    # run showed differences of 6-126 ulp (~3e-14 relative) on the lens cameras; one process gives equal bytes.
+    exact = (term == 0.0) | np.isnan(want)
+    assert got.cov_v_m2ps2[exact].tobytes() == want[exact].tobytes()
+    scale = np.broadcast_to(np.nanmax(np.abs(want), axis=(1, 2), initial=0.0)[:, None, None], want.shape)
+    assert (np.abs(got.cov_v_m2ps2 - want)[~exact] <= 1e-12 * scale[~exact]).all()
     assert out.cov_v_m2ps2.tobytes() == before.tobytes() and got.cov_v_m2ps2 is not out.cov_v_m2ps2
     assert all(getattr(got, f) is getattr(out, f) for f in TrackOutput._fields[:-1])
     if n >= 63:  # (the frame has rows of each case: a term, a zero term, NaN)
