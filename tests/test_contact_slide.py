@@ -460,7 +460,8 @@ def _tracker_output(rng, cam_name, n):
 def test_apply_is_the_sum_of_cov_v_and_the_term(camera, n):
     """`ContactSlide.apply` (one compiled call: moments, the zero term without a velocity, the sum) gives the
     numpy sum of the tracker's ``cov_v`` and `ContactSlide.covariance` -- the bytes where the term is zero or NaN
-    (-0.0 and NaN included), to 1e-12 of the object's largest entry elsewhere -- (the moments kernel and the mask in numpy), on frames of every kind of contact and
+    (-0.0 and NaN included), to 1e-12 of the object's largest entry elsewhere -- (the moments kernel and the mask
+    in numpy), on frames of every kind of contact and
     size around the vector width and the block; every other field is the input's own array, the input is not
     changed."""
     slide = ContactSlide(CAMERAS[camera])
