@@ -11,7 +11,8 @@ slide term (``ContactSlide.apply``), the motion fields (``object_motion``), the 
 ``motion_rows``), and the rest of the frame (the total minus the parts: the glue between them, the record's head).
 A tree whose tracked compact frame takes the lean columns (``Service._lean_records``, wave 9 e) has no
 ``_footprints`` / ``_compact_objects`` / ``_plain_cpm_uper`` call: its parts are then the processor's
-``boxes2d_columns`` (positions), ``Service._compact_text`` (record objects) and ``plain_cpm_uper`` (the UPER CPM,
+``boxes2d_columns`` (positions), ``Service._compact_text`` (record objects) and ``lean_cpm_uper`` (the UPER CPM;
+``plain_cpm_uper`` before 2026-11-29, wave 10 c,
 its motion codes ``motion_rows`` called before it, outside it: subtracted from the rest as a part of its own).
 ``FrameProcessor.boxes2d`` alone on the same boxes is timed in the same loop (issue 31's reference).  Nothing is
 asserted: the parts and the rest in us, and the sum of the parts that ``bench_frame.py``'s
@@ -84,7 +85,9 @@ def measure(objects: int, repeats: int) -> dict:
     _wrap(service_core, "motion_rows" if hasattr(service_core, "motion_rows") else "motion_codes",
           got["motion_codes"])
     _wrap(svc, "_compact_text" if lean else "_compact_objects", got["record_objects"])
-    _wrap(service_core if lean else svc, "plain_cpm_uper" if lean else "_plain_cpm_uper", got["uper_cpm"])
+    # (since 2026-11-29, wave 10 c: the lean frame's CPM by lean_cpm_uper, plain_cpm_uper only where it declines)
+    cpm = "lean_cpm_uper" if hasattr(service_core, "lean_cpm_uper") else "plain_cpm_uper"
+    _wrap(service_core if lean else svc, cpm if lean else "_plain_cpm_uper", got["uper_cpm"])
     for _ in range(10):
         svc.process_frame_json(payload())
     for v in got.values():
