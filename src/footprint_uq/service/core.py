@@ -1147,16 +1147,16 @@ def _lean_head(setup: CameraSetup, camera_id, fno: int, ts: float, n_objects: in
     "heading_offset_deg", "n_objects", "detection_errors"[, "cpm_cdd"]}`` to the byte, its constant texts kept per
     camera and ``camera_id`` (``setup.head_texts``), the frame's values written in (floats and errors by orjson).
     ``cdd``: None without messages (no ``cpm_cdd``)."""
+    if type(fno) is not int or not _INT_MIN <= fno <= _UINT_MAX:  # (orjson's error or text: the dict's)
+        head = {"type": RECORD_FOOTPRINTS, "record": "compact", "camera_id": camera_id, "frame": fno,
+                "timestamp_s": ts, "station_id": setup.station_id,
+                "heading_offset_deg": setup.georef.heading_offset_deg, "n_objects": n_objects,
+                "detection_errors": [e.as_dict() for e in errors]}
+        if cdd is not None:
+            head["cpm_cdd"] = cdd
+        return orjson.dumps(head)[:-1]
     texts = setup.head_texts.get(camera_id)
-    if texts is None or type(fno) is not int or not _INT_MIN <= fno <= _UINT_MAX:
-        if type(fno) is not int or not _INT_MIN <= fno <= _UINT_MAX:  # (orjson's error or text: the dict's)
-            head = {"type": RECORD_FOOTPRINTS, "record": "compact", "camera_id": camera_id, "frame": fno,
-                    "timestamp_s": ts, "station_id": setup.station_id,
-                    "heading_offset_deg": setup.georef.heading_offset_deg, "n_objects": n_objects,
-                    "detection_errors": [e.as_dict() for e in errors]}
-            if cdd is not None:
-                head["cpm_cdd"] = cdd
-            return orjson.dumps(head)[:-1]
+    if texts is None:
         texts = (b'{"type":%s,"record":"compact","camera_id":%s,"frame":' % (
             orjson.dumps(RECORD_FOOTPRINTS), orjson.dumps(camera_id)),
             b',"station_id":%s,"heading_offset_deg":%s,"n_objects":' % (
