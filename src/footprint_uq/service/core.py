@@ -842,31 +842,29 @@ class Service:
         worst_usable(est.corners_nonlinearity, est.corner_usable, self.linear_threshold, worst, ok)
         return worst, ok
 
-    @staticmethod
-    def _motion(setup: CameraSetup, est, ids: list, classes: list, ts: float, yaw_rad: np.ndarray | None,
+    def _motion(self, setup: CameraSetup, est, ids: list, classes: list, ts: float, yaw_rad: np.ndarray | None,
                 family: str | None = None):
         """The frame's objects through the camera's tracker, one call (:meth:`~footprint_uq.tracking.
         camera_tracker.CameraTracker.step_frame`: step, NIS check, slide term, motion): ``(track_id (N,),
         ObjectMotion)``; ``yaw_rad``: the 3-D boxes' yaw (None for other boxes); 2-D boxes (``family``) add their
         sliding contact's velocity term."""
-        return Service._step_tracks(setup, est.centre_xy_world_m, est.centre_cov_m2, est.centre_shared_m, ids,
-                                    classes, ts, yaw_rad, family == "2d")
+        return self._step_tracks(setup, est.centre_xy_world_m, est.centre_cov_m2, est.centre_shared_m, ids,
+                                 classes, ts, yaw_rad, family == "2d")
 
-    @staticmethod
-    def _step_tracks(setup: CameraSetup, xy_world_m: np.ndarray, cov_m2: np.ndarray, shared_m: np.ndarray | None,
-                     ids: list | np.ndarray, classes: list, ts: float, yaw_rad: np.ndarray | None,
-                     contact_2d: bool) -> tuple:
+    def _step_tracks(self, setup: CameraSetup, xy_world_m: np.ndarray, cov_m2: np.ndarray,
+                     shared_m: np.ndarray | None, ids: list | np.ndarray, classes: list, ts: float,
+                     yaw_rad: np.ndarray | None, contact_2d: bool) -> tuple:
         """:meth:`_motion` of the centres' columns ``xy_world_m`` (N, 2) m, ``cov_m2`` (N, 2, 2) m^2 and
         ``shared_m`` (N, 2, r) (an estimate's, or the lean frame's :class:`~footprint_uq.products.frame_processor.
         FrameColumns`): ``(track_id (N,), ObjectMotion)``."""
-        # (the motion fields -- object_motion's, to the bit -- and the messages' codes in one compiled call, the
-        # codes kept for the frame's motion_rows)
-        motion_pass = codes_pass(len(ids))
+        # (with messages: the motion fields -- object_motion's, to the bit -- and the messages' codes in one
+        # compiled call, the codes kept for the frame's motion_rows; without, no codes are computed)
+        motion_pass = codes_pass(len(ids)) if self.messages else None
         f = setup.tracker.step_frame(ts, ids, classes, xy_world_m, cov_m2, shared_m, yaw_rad=yaw_rad,
                                      contact_2d=contact_2d, motion_pass=motion_pass)
         # what the CP service fuses (on_tracked): the tracks with the sliding contact's velocity term
         setup.last_tracks = f.tracks
-        return f.track_id, coded(f.motion, motion_pass)
+        return f.track_id, f.motion if motion_pass is None else coded(f.motion, motion_pass)
 
     def _objects_json(self, setup: CameraSetup, est, ids: list, classes: list, ts: float = 0.0,
                       motion=None) -> tuple[bytes, np.ndarray, list]:
