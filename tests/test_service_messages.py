@@ -24,7 +24,6 @@ from footprint_uq.service.messages.motion import (
     motion_codes,
     motion_codes_reference,
     motion_rows,
-    motion_values,
     unknown_motion,
 )
 
@@ -276,13 +275,11 @@ def _bits(a: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(a, dtype=np.float64).view(np.int64)
 
 
-def test_motion_values_writes_the_record_rows_and_keeps_the_codes_for_one_motion_rows(monkeypatch):
-    """motion_values (the service's tracked frame: the record's velocity rows in the codes' pass) writes v_east,
-    v_north and the covariance's three entries bit for bit; a CodedMotion then hands the next motion_rows the codes
-    an ObjectMotion of the same arrays gets -- every object, a subset, repeats, none; C-contiguous int64 -- without a
-    second pass (the kernel made to fail), once (the call after computes them again); a plain ObjectMotion keeps
-    nothing.  A motion with a bad value keeps nothing: motion_rows names it as for any motion, and codes objects
-    outside it unchecked."""
+def test_a_coded_motion_gives_its_codes_to_one_motion_rows(monkeypatch):
+    """A CodedMotion keeping the codes of its arrays (as coded() keeps the codes pass's) hands the next motion_rows
+    the codes an ObjectMotion of the same arrays gets -- every object, a subset, repeats, none; C-contiguous int64
+    -- without a second pass (the kernel made to fail), once (the call after computes them again); codes of
+    another count are not taken; a CodedMotion without codes is checked as any motion (a bad value named)."""
     from footprint_uq.service.messages import motion as mm
 
     def no_pass(*args):
@@ -294,29 +291,23 @@ def test_motion_values_writes_the_record_rows_and_keeps_the_codes_for_one_motion
         rows = None if k % 3 == 0 else rng.permutation(150)[:rng.integers(0, 150)] if k % 3 == 1 else \
             rng.integers(0, 150, 200)
         want = motion_rows(m, 150, rows)
-        coded, values = CodedMotion.of(m), np.full((5, 150), 7.0)
-        motion_values(coded, 150, values)
-        cov = m.cov_v_m2ps2
-        expected = np.array([m.v_east_mps, m.v_north_mps, cov[:, 0, 0], cov[:, 0, 1], cov[:, 1, 1]])
-        assert np.array_equal(_bits(values), _bits(expected)) and coded == m and coded.codes is not None
+        kept = CodedMotion.of(m)
+        kept.codes = motion_rows(m, 150)
+        assert kept == m
         with monkeypatch.context() as mp:
             mp.setattr(mm, "_rows_kernel", no_pass)
-            got = motion_rows(coded, 150, rows)
+            got = motion_rows(kept, 150, rows)
         assert got.dtype == np.int64 and got.flags.c_contiguous and np.array_equal(got, want)
-        assert coded.codes is None
-        np.testing.assert_array_equal(motion_rows(coded, 150, rows), want)
+        assert kept.codes is None
+        np.testing.assert_array_equal(motion_rows(kept, 150, rows), want)
     plain = _random_motion(rng, 4)
-    motion_values(plain, 4, np.empty((5, 4)))
-    assert not hasattr(plain, "codes")
+    other = CodedMotion.of(plain)
+    other.codes = np.zeros((14, 3), np.int64)  # (of 3 objects: not these 4)
+    np.testing.assert_array_equal(motion_rows(other, 4), motion_rows(plain, 4))
     bad = CodedMotion.of(plain._replace(age_s=np.array([0.0, 0.0, -2.0, 0.0])))
-    values = np.empty((5, 4))
-    motion_values(bad, 4, values)
-    assert bad.codes is None and np.array_equal(_bits(values[0]), _bits(plain.v_east_mps))
     with pytest.raises(InputError, match="motion.age_s"):
         motion_rows(bad, 4)
     np.testing.assert_array_equal(motion_rows(bad, 4, np.array([3, 0])), _reference_rows(bad.take([3, 0]), 2))
-    with pytest.raises(InputError, match="values"):
-        motion_values(CodedMotion.of(plain), 4, np.empty((4, 5)))
 
 
 def test_the_codes_pass_gives_object_motion_to_the_bit_and_keeps_its_codes():

@@ -80,13 +80,11 @@ from .messages.motion import (
     SDSM_HEADING_UNAVAILABLE,
     SDSM_SPEED_UNAVAILABLE,
     SPEED_CONFIDENCE_NAMES,
-    CodedMotion,
     ObjectMotion,
     coded,
     codes_pass,
     motion_codes,
     motion_rows,
-    motion_values,
 )
 from .messages.sdsm import SDSM_OBJECT_TYPES, build_sdsm
 from .messages.uper_cpm import (
@@ -1216,10 +1214,8 @@ def _compact_values(est, motion) -> np.ndarray | None:
 
 def _motion_values(out: np.ndarray, motion) -> bool:
     """Rows 5-9 of the compact record's float columns ``out`` (10, N): the velocity (m/s) and its covariance
-    (m^2/s^2) of the tracker's ``motion`` ``(track_id, ObjectMotion)``, copied; a
-    :class:`.messages.motion.CodedMotion` whose codes are not kept yet in one compiled pass with them, kept for the
-    frame's ``motion_rows`` (:func:`.messages.motion.motion_values`; :meth:`Service._step_tracks` keeps them).
-    False (``out`` not written): a motion column not in float64 (the general writer's text of it would differ)."""
+    (m^2/s^2) of the tracker's ``motion`` ``(track_id, ObjectMotion)``, copied.  False (``out`` not written): a
+    motion column not in float64 (the general writer's text of it would differ)."""
     m = motion[1]
     ve, vn, cv = m.v_east_mps, m.v_north_mps, m.cov_v_m2ps2
     try:
@@ -1228,9 +1224,6 @@ def _motion_values(out: np.ndarray, motion) -> bool:
         f8 = all(np.asarray(a).dtype == _F8 for a in (ve, vn, cv))
     if not f8:
         return False
-    if type(m) is CodedMotion and m.codes is None and out.flags.c_contiguous:  # (codes not kept yet: with them)
-        motion_values(m, out.shape[1], out[5:10])
-        return True
     out[5], out[6] = ve, vn
     d = np.asarray(cv).reshape(out.shape[1], 4)
     out[7], out[8], out[9] = d[:, 0], d[:, 1], d[:, 3]

@@ -60,7 +60,7 @@ from ...tracking.kernels import motion_fields
 from ...tracking.motion import ObjectMotion
 
 __all__ = ["ObjectMotion", "MotionCodes", "motion_codes", "motion_rows", "MOTION_ROWS", "motion_codes_reference",
-           "CodedMotion", "motion_values", "codes_pass", "coded",
+           "CodedMotion", "codes_pass", "coded",
            "unknown_motion", "SPEED_CONFIDENCE_NAMES", "HEADING_CONFIDENCE_NAMES", "SPEED_CONFIDENCE_MPS",
            "HEADING_CONFIDENCE_DEG"]
 
@@ -190,7 +190,6 @@ def _motion_arrays(motion: ObjectMotion, n: int) -> tuple:
 _F8 = np.dtype(np.float64)
 _STRIDE_1D, _STRIDE_COV = (8,), (32, 16, 8)
 _ALL_ROWS = np.zeros(0, np.int64)
-_NO_VALUES = np.zeros((0, 0))
 #: :func:`motion_rows`' rows: the CPM PerceivedObject's 10 motion rows (velocity present, x, x confidence, y,
 #: y confidence, angles present, zAngle, its confidence, objectAge present, objectAge), then the SDSM's 4
 #: (speed, its confidence, heading, its confidence)
@@ -206,8 +205,8 @@ def motion_rows(motion: ObjectMotion, n: int, rows: np.ndarray | None = None) ->
 
     Checked as :func:`motion_codes` (shapes ``(n,)`` / ``(n, 2, 2)``; sigmas, speeds, ages >= 0 and values not
     infinite in the objects ``rows``): :class:`~footprint_uq.errors.InputError` naming the field, the first in
-    the order of the checks with a bad object, and that object's value.  A :class:`CodedMotion` whose codes
-    :func:`motion_values` kept gives them up instead (the objects ``rows`` of them; no second pass)."""
+    the order of the checks with a bad object, and that object's value.  A :class:`CodedMotion` that keeps codes
+    (:func:`coded`) gives them up instead (the objects ``rows`` of them; no second pass)."""
     kept = motion.take_codes(n) if type(motion) is CodedMotion else None
     if kept is None:
         ve, vn, cov, sp, ssp, hd, shd, yw, syw, age = cols = _motion_arrays(motion, n)
@@ -220,7 +219,7 @@ def motion_rows(motion: ObjectMotion, n: int, rows: np.ndarray | None = None) ->
     if kept is not None:  # (computed with the record's rows, every object checked: the objects rows of them)
         return kept if every else np.ascontiguousarray(kept.take(sel, axis=1))
     out = np.empty((14, n if every else sel.shape[0]), np.int64)
-    bad, row = _rows_kernel(ve, vn, cov, sp, ssp, hd, shd, yw, syw, age, sel, every, out, _NO_VALUES)
+    bad, row = _rows_kernel(ve, vn, cov, sp, ssp, hd, shd, yw, syw, age, sel, every, out)
     if bad >= 0:
         i = row if every else int(sel[row])
         if bad >= len(_NONNEGATIVE):
@@ -233,16 +232,16 @@ def motion_rows(motion: ObjectMotion, n: int, rows: np.ndarray | None = None) ->
 
 
 class CodedMotion(ObjectMotion):
-    """An :class:`ObjectMotion` that keeps its message codes for one use: :func:`motion_values` computes them for
-    every object in the pass that writes the record's velocity rows, and the next :func:`motion_rows` (or
+    """An :class:`ObjectMotion` that keeps its message codes for one use: :func:`codes_pass` computes them for
+    every object in the pass that makes the motion's fields, and the next :func:`motion_rows` (or
     :func:`motion_codes`) of the same ``n`` objects takes them -- the objects it asks for -- instead of a second
     pass over the same columns; then they are gone (a later call computes them again).  The service's tracked
-    frame: ``Service._step_tracks`` makes the tracker's motion one (:meth:`of`), ``_motion_values`` fills it.
-    The codes are those of the arrays as :func:`motion_values` read them: an array changed in between is not
-    seen (the service changes none).  Kept only when every object passed the checks: a bad value is named by
-    the pass that needs the codes, as for any :class:`ObjectMotion`."""
+    frame with messages: ``Service._step_tracks`` makes the tracker's motion one (:func:`coded`).  The codes are
+    those of the arrays as the pass made them: an array changed in between is not seen (the service changes
+    none).  Kept only when every object passed the checks: a bad value is named by the pass that needs the codes,
+    as for any :class:`ObjectMotion`."""
 
-    codes = None  #: (14, n) int64 or None (:func:`motion_values`, :meth:`take_codes`)
+    codes = None  #: (14, n) int64 or None (:func:`coded`, :meth:`take_codes`)
 
     @classmethod
     def of(cls, motion: ObjectMotion) -> CodedMotion:
@@ -270,29 +269,13 @@ def coded(motion: ObjectMotion, motion_pass: tuple) -> CodedMotion:
     for the next :func:`motion_rows` when every object passed the checks (a bad value: none kept; that call names
     it)."""
     codes, status = motion_pass[1]
-    m = tuple.__new__(CodedMotion, motion)
+    m = CodedMotion.of(motion)
     if status[0] == -1:  # (-2: the pass did not run, or its codes were not of the motion's size)
         m.codes = codes
     return m
 
 
 _NOT_RUN = np.full(1, -2, np.int64)
-
-
-def motion_values(motion: ObjectMotion, n: int, values: np.ndarray) -> None:
-    """Write the velocity (m/s) and its covariance (m^2/s^2) of ``motion`` (n objects) into ``values`` ``(5, n)``
-    (a C-contiguous float64 block: v_east, v_north, cov[0, 0], cov[0, 1], cov[1, 1] -- the compact record's motion
-    floats), in the compiled pass of :func:`motion_rows` over every object: for a :class:`CodedMotion` its codes are
-    kept for the next :func:`motion_rows` (when every object passes the checks; a bad value is written as it is,
-    and named by that call)."""
-    cols = _motion_arrays(motion, n)
-    if not (type(values) is np.ndarray and values.dtype == _F8 and values.shape == (5, n)
-            and values.flags.c_contiguous):
-        raise InputError("values", getattr(values, "shape", None), f"a C-contiguous float64 array of shape (5, {n})")
-    out = np.empty((14, n), np.int64)
-    bad, _ = _rows_kernel(*cols, _ALL_ROWS, True, out, values)
-    if bad < 0 and type(motion) is CodedMotion:
-        motion.codes = out
 
 
 def motion_codes(motion: ObjectMotion, n: int, rows: np.ndarray | None = None) -> MotionCodes:
@@ -373,22 +356,17 @@ def _first_bad_k(ssp, shd, syw, age, sp, c00, c11, ve, vn, hd, yw):  # pragma: n
 
 
 @njit(cache=True, nogil=True)
-def _rows_kernel(ve, vn, cov, sp, ssp, hd, shd, yw, syw, age, rows, every, out,
-                 values):  # pragma: no cover - compiled
+def _rows_kernel(ve, vn, cov, sp, ssp, hd, shd, yw, syw, age, rows, every, out):  # pragma: no cover - compiled
     """:func:`motion_codes_reference`'s arithmetic in one pass into ``out (14, m)`` (:data:`MOTION_ROWS`) for the
-    objects ``rows`` (``every``: all, in order), and, if ``values`` is ``(5, m)`` (``every`` only), each object's
-    v_east, v_north, cov[0, 0], cov[0, 1], cov[1, 1] into its column (:func:`motion_values`).  Returns ``(field,
-    j)``: the first field (an index of ``_NONNEGATIVE + _FINITE``, checked field by field) with a bad object and
-    the first such object ``j`` (of the m), ``(-1, -1)`` if none -- one pass: an object's own first bad field,
-    kept where it is earlier than every earlier object's."""
+    objects ``rows`` (``every``: all, in order).  Returns ``(field, j)``: the first field (an index of
+    ``_NONNEGATIVE + _FINITE``, checked field by field) with a bad object and the first such object ``j`` (of
+    the m), ``(-1, -1)`` if none -- one pass: an object's own first bad field, kept where it is earlier than
+    every earlier object's."""
     m = out.shape[1]
     bad_f, bad_j = 11, -1
-    write = values.shape[0] == 5
     for j in range(m):
         i = j if every else rows[j]
         vei, vni, c00, c11, spi, sspi = ve[i], vn[i], cov[i, 0, 0], cov[i, 1, 1], sp[i], ssp[i]
-        if write:
-            values[0, j], values[1, j], values[2, j], values[3, j], values[4, j] = vei, vni, c00, cov[i, 0, 1], c11
         hdi, shdi, ywi, sywi, a = hd[i], shd[i], yw[i], syw[i], age[i]
         f = _first_bad_k(sspi, shdi, sywi, a, spi, c00, c11, vei, vni, hdi, ywi)
         if f < bad_f:
@@ -429,7 +407,7 @@ def _fields_and_codes(v, cov, ch, sh, ratio, yaw_rad, sigma_yaw_rad, heading_off
         status[0] = -2
         return
     status[0], _ = _rows_kernel(out[0], out[1], cov_out, out[2], out[3], out[4], out[5], out[6], out[7], age,
-                                np.empty(0, np.int64), True, codes, np.empty((0, 0)))
+                                np.empty(0, np.int64), True, codes)
 
 
 def motion_codes_reference(motion: ObjectMotion, n: int) -> MotionCodes:
