@@ -275,7 +275,9 @@ class ContactSlide:
         ``cov_v_m2ps2`` array, every other field ``out``'s own.
 
         One compiled call (``slide_kernels.ADDED_KERNELS``: the moments, the zero term of a row without a velocity
-        or position, the sum), to the bit ``out.cov_v_m2ps2 + self.covariance(out, classes)``."""
+        or position, the sum): ``out.cov_v_m2ps2 + self.covariance(out, classes)`` -- the same bytes where the
+        term is zero or NaN, to rounding elsewhere (~3e-14 relative: the two kernels are compiled apart, with FMA
+        contraction allowed; ``tests/test_contact_slide.py``)."""
         n = out.track_id.shape[0]
         mean, sig = self._priors(classes, n)
         if self._added is None:
