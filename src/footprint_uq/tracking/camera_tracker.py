@@ -29,7 +29,7 @@ from .._checks import as_float
 from .classes import ClassTracks, tracker_configs
 from .consistency import DEFAULT_WINDOW_S, NisMonitor
 from .contact_slide import ContactSlide
-from .motion import ObjectMotion, object_motion
+from .motion import DEFAULT_HEADING_MIN_RATIO, ObjectMotion, motion_with_age
 from .table import SharedJacobianAt, TrackerConfig, TrackOutput
 
 __all__ = ["CameraTracker", "FrameMotion"]
@@ -39,7 +39,8 @@ class FrameMotion(NamedTuple):
     """One frame's objects through a :class:`CameraTracker` (n objects, in frame order).
 
     track_id : (n,) int64      the object's track (-1: not tracked)
-    motion : ObjectMotion      velocity, speed, heading, yaw, their sigmas, age (true east / north; NaN: unknown)
+    motion : ObjectMotion      velocity, speed, heading, yaw, their sigmas, age (true east / north; NaN: unknown);
+                               its ``age_s`` is ``tracks.age_s`` (one array: neither is written after the step)
     tracks : TrackOutput       the tracker's output, with the sliding contact's term in ``cov_v_m2ps2`` for 2-D
                                boxes (frame W)
     """
@@ -47,6 +48,10 @@ class FrameMotion(NamedTuple):
     track_id: np.ndarray
     motion: ObjectMotion
     tracks: TrackOutput
+
+
+#: a tuple of :class:`FrameMotion`'s three fields made a FrameMotion without the named tuple's ``__new__``
+_new_frame = tuple.__new__
 
 
 class CameraTracker:
@@ -130,6 +135,7 @@ class CameraTracker:
                 self.nis.observe(time_s, out, classes)  # (the NIS of the step's own innovations)
         if contact_2d and self.slide is not None:
             out = self.slide.apply(out, classes)
-        motion = object_motion(out, heading_offset_deg=self.heading_offset_deg, yaw_rad=yaw_rad,
-                               motion_pass=motion_pass)
-        return FrameMotion(out.track_id, motion, out)
+        # (object_motion's, its age_s the step's own array: this frame's tracks, read by the caller, written by none)
+        motion = motion_with_age(out, out.age_s, self.heading_offset_deg, yaw_rad, None, DEFAULT_HEADING_MIN_RATIO,
+                                 motion_pass)
+        return _new_frame(FrameMotion, (out.track_id, motion, out))
