@@ -80,9 +80,7 @@ def measure(objects: int, repeats: int) -> dict:
     _wrap(tracker.tracks, "step", got["tracker_step"])
     _wrap(tracker.nis, "observe", got["nis_check"])
     _wrap(tracker.slide, "apply", got["slide_term"])
-    # (since 2026-11-29, wave 11 d: step_frame calls motion_with_age, object_motion's body with the step's ages)
-    _wrap(camera_tracker, "motion_with_age" if hasattr(camera_tracker, "motion_with_age") else "object_motion",
-          got["object_motion"])
+    _wrap(camera_tracker, "object_motion", got["object_motion"])
     # (main before 2026-11-28 wave 9: motion_codes, then the rows copied in kernel_motion)
     _wrap(service_core, "motion_rows" if hasattr(service_core, "motion_rows") else "motion_codes",
           got["motion_codes"])

@@ -96,6 +96,7 @@ def test_step_frame_is_the_sequence_of_calls(family):
             _equal(a, b)
         for a, b in zip(got.motion, motion, strict=True):
             _equal(a, b)
+        assert got.motion.age_s is got.tracks.age_s  # (the step's own ages: no copy)
         seen["new"] += int(got.tracks.new_track.sum())
         seen["untracked"] += int((got.track_id < 0).sum())
         seen["velocity"] += int(np.isfinite(got.motion.speed_mps).sum())

@@ -29,7 +29,7 @@ from .._checks import as_float
 from .classes import ClassTracks, tracker_configs
 from .consistency import DEFAULT_WINDOW_S, NisMonitor
 from .contact_slide import ContactSlide
-from .motion import DEFAULT_HEADING_MIN_RATIO, ObjectMotion, motion_with_age
+from .motion import ObjectMotion, object_motion
 from .table import SharedJacobianAt, TrackerConfig, TrackOutput
 
 __all__ = ["CameraTracker", "FrameMotion"]
@@ -135,7 +135,7 @@ class CameraTracker:
                 self.nis.observe(time_s, out, classes)  # (the NIS of the step's own innovations)
         if contact_2d and self.slide is not None:
             out = self.slide.apply(out, classes)
-        # (object_motion's, its age_s the step's own array: this frame's tracks, read by the caller, written by none)
-        motion = motion_with_age(out, out.age_s, self.heading_offset_deg, yaw_rad, None, DEFAULT_HEADING_MIN_RATIO,
-                                 motion_pass)
+        # (the motion's age_s the step's own array: this frame's tracks, read by the caller, written by none)
+        motion = object_motion(out, heading_offset_deg=self.heading_offset_deg, yaw_rad=yaw_rad,
+                               motion_pass=motion_pass, age_s=out.age_s)
         return _new_frame(FrameMotion, (out.track_id, motion, out))

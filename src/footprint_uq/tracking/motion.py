@@ -26,8 +26,7 @@ from .kernels import motion_fields
 from .table import TrackOutput
 
 __all__ = ["ObjectMotion", "MotionArrays", "MOTION_FIELDS", "object_motion", "DEFAULT_HEADING_MIN_RATIO",
-           "yaw_compass_deg", "motion_arguments", "motion_of",
-           "motion_with_age"]
+           "yaw_compass_deg"]
 
 #: heading sigma only where speed >= this many sigma of the velocity's largest semi-axis
 DEFAULT_HEADING_MIN_RATIO = 3.0
@@ -76,8 +75,8 @@ def yaw_compass_deg(yaw_rad, heading_offset_deg: float = 0.0) -> np.ndarray:
 
 
 def object_motion(tracks: TrackOutput, *, heading_offset_deg: float = 0.0, yaw_rad=None, sigma_yaw_rad=None,
-                  heading_min_ratio: float = DEFAULT_HEADING_MIN_RATIO, motion_pass: tuple | None = None
-                  ) -> ObjectMotion:
+                  heading_min_ratio: float = DEFAULT_HEADING_MIN_RATIO, motion_pass: tuple | None = None,
+                  age_s: np.ndarray | None = None) -> ObjectMotion:
     """The motion fields of a frame's objects from the tracker's output (see the module doc for the policies).
 
     Parameters
@@ -95,41 +94,14 @@ def object_motion(tracks: TrackOutput, *, heading_offset_deg: float = 0.0, yaw_r
         ``kernel(*motion_fields' arguments, age_s (n,), *extra)``: it runs that pass (whose outputs are the
         motion's) and whatever else it does with them in the same call (the service: the messages' codes,
         ``service/messages/motion.py`` ``codes_pass``).
-
-    The motion's ``age_s`` is a copy of ``tracks.age_s`` (:func:`motion_with_age`: the tracks' own array, for a
-    caller that owns them).
+    age_s : (n,), optional
+        The motion's ``age_s``, a float64 array taken as it is (:meth:`~footprint_uq.tracking.camera_tracker.
+        CameraTracker.step_frame`: its own step's ``tracks.age_s``, which nothing writes); None: a copy of
+        ``tracks.age_s``.
     """
-    return motion_with_age(tracks, tracks.age_s.copy(), heading_offset_deg, yaw_rad, sigma_yaw_rad,
-                           heading_min_ratio, motion_pass)
-
-
-def motion_with_age(tracks: TrackOutput, age_s: np.ndarray, heading_offset_deg: float = 0.0, yaw_rad=None,
-                    sigma_yaw_rad=None, heading_min_ratio: float = DEFAULT_HEADING_MIN_RATIO,
-                    motion_pass: tuple | None = None) -> ObjectMotion:
-    """:func:`object_motion` (the same parameters, positional) whose ``age_s`` is the given ``(n,)`` float64
-    array, taken as it is: :meth:`~footprint_uq.tracking.camera_tracker.CameraTracker.step_frame` hands its own
-    step's ``tracks.age_s`` (nothing writes into either; one copy less per frame)."""
-    args = _arguments(tracks, heading_offset_deg, yaw_rad, sigma_yaw_rad, heading_min_ratio)
-    if motion_pass is None:
-        motion_fields(*args)
-    else:
-        motion_pass[0](*args, age_s, *motion_pass[1])
-    return motion_of(args, age_s)
-
-
-def motion_arguments(tracks: TrackOutput, *, heading_offset_deg: float = 0.0, yaw_rad=None, sigma_yaw_rad=None,
-                     heading_min_ratio: float = DEFAULT_HEADING_MIN_RATIO) -> tuple:
-    """:func:`object_motion`'s inputs checked and its outputs allocated, as the arguments of its compiled pass
-    (:func:`~footprint_uq.tracking.kernels.motion_fields`: ``(v (n, 2), cov (n, 2, 2), cos, sin, ratio, yaw (n,)
-    or (0,), sigma_yaw (n,) or (0,), heading_offset_deg, out (8, n), cov_out (n, 2, 2))``); :func:`motion_of`
-    then makes the :class:`ObjectMotion`."""
-    return _arguments(tracks, heading_offset_deg, yaw_rad, sigma_yaw_rad, heading_min_ratio)
-
-
-def _arguments(tracks: TrackOutput, h, yaw_rad, sigma_yaw_rad, ratio) -> tuple:
-    """:func:`motion_arguments`, positional.  What the tracker hands (finite floats, C-contiguous float64 rows, a
-    float64 yaw column of n) passes a few attribute tests without a call: ~1 us of a 5 us frame (the walk stays in
-    tracking/, as in TrackTable.step); anything else takes the checks and copies."""
+    # (what the tracker hands -- finite floats, C-contiguous float64 rows, float64 columns of n -- passes a few
+    # attribute tests without a call, as in TrackTable.step: the frame's walk stays in tracking/)
+    h, ratio = heading_offset_deg, heading_min_ratio
     if not (isinstance(h, float) and math.isfinite(h)):
         h = as_float("heading_offset_deg", h)
     if not (isinstance(ratio, float) and math.isfinite(ratio) and ratio > 0.0):
@@ -139,20 +111,18 @@ def _arguments(tracks: TrackOutput, h, yaw_rad, sigma_yaw_rad, ratio) -> tuple:
     if not (v.__class__ is _ND and cov.__class__ is _ND and v.dtype is _F8 and cov.dtype is _F8
             and v.flags.c_contiguous and cov.flags.c_contiguous):
         v, cov = _c64(v), _c64(cov)
-    if yaw_rad is None:
-        yaw_rad = _NONE
-    elif not (yaw_rad.__class__ is _ND and yaw_rad.dtype is _F8 and yaw_rad.ndim == 1 and len(yaw_rad) == n):
-        yaw_rad = _column("yaw_rad", yaw_rad, n)
-    sigma_yaw_rad = _NONE if sigma_yaw_rad is None else _column("sigma_yaw_rad", sigma_yaw_rad, n)
+    age = tracks.age_s.copy() if age_s is None else _column("age_s", age_s, n)
     hr = math.radians(h)
-    return v, cov, math.cos(hr), math.sin(hr), ratio, yaw_rad, sigma_yaw_rad, h, np.empty((8, n)), np.empty((n, 2, 2))
-
-
-def motion_of(args: tuple, age_s: np.ndarray) -> ObjectMotion:
-    """The :class:`ObjectMotion` of :func:`motion_arguments`' ``args`` once their pass has run (its rows as views,
-    its covariance) with the ages ``age_s (n,)`` (taken as they are)."""
-    o = args[8]  # (eight views by index: ~0.2 us less than unpacking the array's rows through its iterator)
-    return _new_motion(ObjectMotion, (o[0], o[1], args[9], o[2], o[3], o[4], o[5], o[6], o[7], age_s))
+    out, cov_out = np.empty((8, n)), np.empty((n, 2, 2))
+    yaw = _NONE if yaw_rad is None else _column("yaw_rad", yaw_rad, n, True)
+    sigma_yaw = _NONE if sigma_yaw_rad is None else _column("sigma_yaw_rad", sigma_yaw_rad, n)
+    args = (v, cov, math.cos(hr), math.sin(hr), ratio, yaw, sigma_yaw, h, out, cov_out)
+    if motion_pass is None:
+        motion_fields(*args)
+    else:
+        motion_pass[0](*args, age, *motion_pass[1])
+    # (its rows as views by index: ~0.2 us less than unpacking the array through its iterator)
+    return _new_motion(ObjectMotion, (out[0], out[1], cov_out, out[2], out[3], out[4], out[5], out[6], out[7], age))
 
 
 #: a tuple of :class:`ObjectMotion`'s ten fields made an ObjectMotion without the named tuple's ``__new__``
@@ -171,10 +141,11 @@ def _c64(a) -> np.ndarray:
 _NONE = np.empty(0)
 
 
-def _column(name: str, a, n: int) -> np.ndarray:
-    """``a`` as a float64 (n,) array: a float64 (n,) array as it is (a column of the frame's boxes, strided: no
-    copy; motion_fields has a signature for it), anything else as a contiguous copy."""
-    if type(a) is np.ndarray and a.dtype == np.float64 and a.shape == (n,):
+def _column(name: str, a, n: int, strided: bool = False) -> np.ndarray:
+    """``a`` as a float64 (n,) array: a C-contiguous float64 (n,) array as it is, and a strided one where
+    ``strided`` (a column of the frame's boxes, the yaw: motion_fields has a signature for it); anything else as a
+    contiguous copy (a compiled pass of the signatures it has, nothing compiled in a frame)."""
+    if a.__class__ is _ND and a.dtype is _F8 and a.ndim == 1 and len(a) == n and (strided or a.flags.c_contiguous):
         return a
     a = np.ascontiguousarray(a, dtype=np.float64).reshape(-1)
     if a.shape[0] != n:
