@@ -401,3 +401,23 @@ def test_the_array_writer_takes_object_motion_or_its_codes():
     with_motion = perceived_object_container_uper_arrays(*cols, motion=m)
     assert with_motion == perceived_object_container_uper_arrays(*cols, motion=motion_codes(m, n))
     assert len(with_motion) > len(perceived_object_container_uper_arrays(*cols))  # 78 more bits per object
+
+
+def test_the_codes_wrap_as_np_mod_does():
+    """The codes' pass wraps headings and yaws by a branch where the value is in [0, period) already (_wrap_k):
+    np.mod's value everywhere (its -0.0 kept as -0.0, which a code's int makes 0 as np.mod's +0.0), so the codes are
+    the reference's at the wrap's edges, their neighbours and far outside."""
+    from footprint_uq.service.messages.motion import _wrap_k
+
+    edges = [0.0, -0.0, 5e-324, -5e-324, 0.0125, 359.99375, 359.995, 360.0, -360.0, 720.0, 1e17, -1e17]
+    xs = np.array(edges + [np.nextafter(e, d) for e in edges for d in (-np.inf, np.inf)] + [np.nan, np.inf, -np.inf])
+    for period in (360.0, 3600.0, 28800.0):
+        for x in xs:
+            with np.errstate(invalid="ignore"):
+                got, want = _wrap_k(x, period), np.mod(x, period)
+            assert (got == want or np.isnan(got) and np.isnan(want)) and (x == 0.0 or np.signbit(got) == np.signbit(
+                want)), (x, period)
+    n = len(xs) - 2  # (the infinite ones are bad values: named, not coded)
+    m = ObjectMotion(*(np.full(n, 1.0) for _ in range(2)), np.zeros((n, 2, 2)), np.full(n, 1.0), np.full(n, 0.1),
+                     xs[:n], np.full(n, 0.5), 90.0 - xs[:n], np.full(n, 0.5), np.full(n, 1.0))
+    np.testing.assert_array_equal(motion_rows(m, n), _reference_rows(m, n))

@@ -327,6 +327,14 @@ def _level_k(c95, levels):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True, inline="always")
+def _wrap_k(x, period):  # pragma: no cover - compiled
+    """``np.mod(x, period)`` (``period > 0``), the same bits, without its division where ``x`` is in ``[0, period)``
+    already (the pass's headings and codes, nearly always: ``np.mod`` would give ``x`` itself, and for ``-0.0``
+    the ``+0.0`` that a code's ``int`` makes 0 as well): four of them were a third of the codes' pass."""
+    return x if 0.0 <= x < period else np.mod(x, period)
+
+
+@njit(cache=True, nogil=True, inline="always")
 def _first_bad_k(ssp, shd, syw, age, sp, c00, c11, ve, vn, hd, yw):  # pragma: no cover - compiled
     """The first check an object's values fail, as an index of ``_NONNEGATIVE + _FINITE`` (11: none).  Scalars
     only (a function of the arrays, even inlined, cost ~0.2 us per object in reference counts)."""
@@ -378,9 +386,9 @@ def _rows_kernel(ve, vn, cov, sp, ssp, hd, shd, yw, syw, age, rows, every, out):
         if math.isnan(ywi):
             out[5, j], out[6, j] = 0, ANGLE_UNAVAILABLE
         else:
-            z = np.mod(90.0 - ywi, 360.0)
+            z = _wrap_k(90.0 - ywi, 360.0)
             out[5, j] = 1
-            out[6, j] = ANGLE_UNAVAILABLE if math.isnan(z) else int(np.mod(_ceil_k(z * 10.0), 3600.0))
+            out[6, j] = ANGLE_UNAVAILABLE if math.isnan(z) else int(_wrap_k(_ceil_k(z * 10.0), 3600.0))
         out[7, j] = _conf_k(sywi, 0.1, 12.5)
         if math.isnan(a):
             out[8, j], out[9, j] = 0, 0
@@ -389,7 +397,7 @@ def _rows_kernel(ve, vn, cov, sp, ssp, hd, shd, yw, syw, age, rows, every, out):
         out[10, j] = SDSM_SPEED_UNAVAILABLE if math.isnan(spi) else int(min(np.rint(spi / 0.02), 8190.0))
         out[11, j] = _level_k(Z95 * sspi, SPEED_CONFIDENCE_MPS)
         out[12, j] = (SDSM_HEADING_UNAVAILABLE if math.isnan(hdi)
-                      else int(np.mod(np.rint(np.mod(hdi, 360.0) / 0.0125), 28800.0)))
+                      else int(_wrap_k(np.rint(_wrap_k(hdi, 360.0) / 0.0125), 28800.0)))
         out[13, j] = _level_k(Z95 * shdi, HEADING_CONFIDENCE_DEG)
     if bad_j >= 0:
         return bad_f, bad_j
