@@ -330,7 +330,8 @@ def _level_k(c95, levels):  # pragma: no cover - compiled
 def _wrap_k(x, period):  # pragma: no cover - compiled
     """``np.mod(x, period)`` (``period > 0``), the same bits, without its division where ``x`` is in ``[0, period)``
     already (the pass's headings and codes, nearly always: ``np.mod`` would give ``x`` itself, and for ``-0.0``
-    the ``+0.0`` that a code's ``int`` makes 0 as well): four of them were a third of the codes' pass."""
+    the ``+0.0`` that a code's ``int`` makes 0 as well).  The heading's two were a third of the pass (100 moving
+    objects: 3.5 -> 2.4 us)."""
     return x if 0.0 <= x < period else np.mod(x, period)
 
 
