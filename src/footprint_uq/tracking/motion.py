@@ -95,9 +95,10 @@ def object_motion(tracks: TrackOutput, *, heading_offset_deg: float = 0.0, yaw_r
         motion's) and whatever else it does with them in the same call (the service: the messages' codes,
         ``service/messages/motion.py`` ``codes_pass``).
     age_s : (n,), optional
-        The motion's ``age_s``, a float64 array taken as it is (:meth:`~footprint_uq.tracking.camera_tracker.
-        CameraTracker.step_frame`: its own step's ``tracks.age_s``, which nothing writes); None: a copy of
-        ``tracks.age_s``.
+        The motion's ``age_s``: a C-contiguous float64 array is taken as it is, not copied
+        (:meth:`~footprint_uq.tracking.camera_tracker.CameraTracker.step_frame`: its own step's ``tracks.age_s``,
+        which nothing writes), anything else converted (another length: :class:`~footprint_uq.errors.InputError`);
+        None: a copy of ``tracks.age_s``.
     """
     # (what the tracker hands -- finite floats, C-contiguous float64 rows, float64 columns of n -- passes a few
     # attribute tests without a call, as in TrackTable.step: the frame's walk stays in tracking/)
