@@ -9,8 +9,8 @@ formed; the per-object rows and, for the tracker, the centres' shared Jacobians 
 a frame with a centre whose V2X fields the policy would sample (:func:`.footprint_kernels.v2x_source_and_flagged`'s
 test) and
 copies the record's five float columns (centre and covariance) into the first rows of a ``(q + R, N)`` block
-whose last R rows are the per-object rows.  The Python of one frame is then three ``np.empty`` (a float64, an
-int32 and an int64 block: every output a view of one of them) and one call of 11 arguments: the processor's
+followed by the per-object rows and two int64 rows.  The Python of one frame is then two ``np.empty`` (a float64
+and an int32 block: every output a view of one of them) and one call of 10 arguments: the processor's
 constants travel as two arrays packed once (:func:`columns_constants`; a numba call costs ~40 ns per argument,
 and ``process_corners`` called from Python ~3 us of argument unboxing, its 13 output arrays and the camera's
 20-field structure among them), taken apart inside (:func:`unpack_constants`: views of the same types).
@@ -25,18 +25,19 @@ from .cov_checks import first_bad_cov2
 from .footprint_kernels import OBJ_ROW, KernelCamera, process_corners
 
 __all__ = ["boxes2d_columns", "camera_parts", "columns_constants", "unpack_constants", "COLUMN_ROWS",
-           "CAMERA_SCALARS", "N_OBJ_ROWS", "INT32_ROWS", "INT64_ROWS"]
+           "CAMERA_SCALARS", "N_OBJ_ROWS", "TAIL_ROWS", "INT32_ROWS"]
 
 #: rows of :func:`boxes2d_columns`' ``values`` (m, m^2): what a compact record writes per object, in its order
 COLUMN_ROWS = ("x_m", "y_m", "cov_xx_m2", "cov_xy_m2", "cov_yy_m2")
 _VALUE_OBJ_ROWS = tuple(OBJ_ROW[k] for k in COLUMN_ROWS)
 _O_NL = OBJ_ROW["nonlinearity"]
-#: rows of the fused kernel's per-object block (``OBJ_ROWS``): the last rows of :func:`boxes2d_columns`' ``floats``
+#: rows of the fused kernel's per-object block (``OBJ_ROWS``)
 N_OBJ_ROWS = len(OBJ_ROW)
+#: rows of :func:`boxes2d_columns`' ``floats`` after the caller's q value rows: the per-object rows, then
+#: ``largest_index`` and ``centre_bad_corner`` (int64, stored in a float64 row each: the same width, one block)
+TAIL_ROWS = N_OBJ_ROWS + 2
 #: rows of :func:`boxes2d_columns`' int32 block: the seven V2X code rows, then ``centre_reason``
 INT32_ROWS = 8
-#: rows of its int64 block: ``largest_index``, ``centre_bad_corner``
-INT64_ROWS = 2
 #: the scalar fields of :class:`~.footprint_kernels.KernelCamera`, in the order of :func:`camera_parts`' vector
 CAMERA_SCALARS = ("fx", "fy", "cx", "cy", "skew", "ifx", "ify", "x0", "y0", "h", "gdz", "gsx", "gsy", "width_px",
                   "height_px", "ground_z_m")
@@ -133,10 +134,9 @@ def unpack_constants(cf, ci):  # pragma: no cover - compiled
 
 
 @njit(cache=True, error_model="numpy", nogil=True)
-def boxes2d_columns(boxes, bottom_corners, cov, has_cov, cf, ci, floats, ints32, ints64, shared,
-                    S):  # pragma: no cover - compiled
+def boxes2d_columns(boxes, bottom_corners, cov, has_cov, cf, ci, floats, ints32, shared, S):  # pragma: no cover
     """One frame of checked 2-D boxes (float64 ``(N, 4)``, finite, corners in order) through
-    :func:`~.footprint_kernels.process_corners`, its columns into the caller's three blocks.
+    :func:`~.footprint_kernels.process_corners`, its columns into the caller's two blocks.
 
     Parameters
     ----------
@@ -148,15 +148,14 @@ def boxes2d_columns(boxes, bottom_corners, cov, has_cov, cf, ci, floats, ints32,
         The detector's pixel covariance per box (px^2); ``has_cov`` False: none (``cov`` is not read).
     cf, ci : (F,) float64, (I,) int64
         :func:`columns_constants` of the processor.
-    floats : (q + N_OBJ_ROWS, N) float64, q >= 5, C-contiguous
+    floats : (q + TAIL_ROWS, N) float64, q >= 5, C-contiguous
         Out: :data:`COLUMN_ROWS` of every centre (m, m^2) in its first five rows (rows 5 to q - 1 are the
-        caller's: the tracked record's motion columns), the fused kernel's per-object rows (``OBJ_ROWS``:
-        ``FootprintEstimate.object_rows``) in its last ``N_OBJ_ROWS``.
+        caller's: the tracked record's motion columns), then the fused kernel's per-object rows (``OBJ_ROWS``:
+        ``FootprintEstimate.object_rows``), then ``largest_index`` and ``centre_bad_corner`` as the estimate's
+        (int64: each row read as int64).
     ints32 : (INT32_ROWS, N) int32, C-contiguous
         Out: the V2X codes (``FootprintEstimate.v2x_codes`` transposed) in its first seven rows, then
         ``centre_reason``.
-    ints64 : (INT64_ROWS, N) int64, C-contiguous
-        Out: ``largest_index``, ``centre_bad_corner``, as the estimate's.
     shared : (N, 2, r) or (0, 2, 0) float64
         Out: the centres' whitened parameter Jacobians ``centre_shared_m`` (the tracker's), NaN where no centre
         (as ``FrameProcessor._pack``); ``(0, 2, 0)``: not formed.
@@ -179,11 +178,12 @@ def boxes2d_columns(boxes, bottom_corners, cov, has_cov, cf, ci, floats, ints32,
         det, mode = no_det, 0
     uv = _contact_pixels(boxes, bottom_corners)
     K = uv.shape[1]
-    obj = floats[floats.shape[0] - N_OBJ_ROWS:]
+    t = floats.shape[0] - TAIL_ROWS
+    obj = floats[t:t + N_OBJ_ROWS]
     centre_reason = ints32[INT32_ROWS - 1]
     out = (np.empty((0, K, 2)), np.empty((0, K, 2, 2)), np.empty((0, 2 * K, 2 * K)), np.empty((n, K), np.int8),
-           np.empty((n, K), np.bool_), ints64[0], np.empty((0, 2, 2)), centre_reason, ints64[1], obj,
-           ints32[:INT32_ROWS - 1], np.empty((0, K)), shared)
+           np.empty((n, K), np.bool_), floats[t + N_OBJ_ROWS].view(np.int64), np.empty((0, 2, 2)), centre_reason,
+           floats[t + N_OBJ_ROWS + 1].view(np.int64), obj, ints32[:INT32_ROWS - 1], np.empty((0, K)), shared)
     if process_corners(uv, np.zeros((0, 0), np.int8), np.zeros((0, 7)), False, True, cam, dR, Lr, Lc, Lv, r, spx,
                        det, mode, allow_outside, ch, sh, flag, out, S):
         return -1

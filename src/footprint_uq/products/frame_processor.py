@@ -68,8 +68,8 @@ class FrameColumns(NamedTuple):
     the numbers of :meth:`FrameProcessor.boxes2d`'s estimate, not an estimate (no per-corner outputs, no
     ellipse, no V2X source: every centre's V2X fields encode its linear covariance).
 
-    Every array is a view of one of three blocks the compiled call fills (``floats``, ``ints32``, ``ints64``);
-    the two a record always reads are fields, the others properties (a view made only when read)."""
+    Every array is a view of one of the two blocks the compiled call fills (``floats``, ``ints32``); the two a
+    record always reads are fields, the others properties (a view made only when read)."""
 
     #: (q, N) float64, C-contiguous (q = ``boxes2d_columns``' ``value_rows``, 5 by default): ``x_m, y_m, cov_xx_m2,
     #: cov_xy_m2, cov_yy_m2`` of each centre in the first five rows (``centre_xy_world_m``, ``centre_cov_m2``;
@@ -81,12 +81,11 @@ class FrameColumns(NamedTuple):
     n_corners: int
     #: how many centres are valid (``centre_reason == 0``)
     n_valid: int
-    #: (q + len(OBJ_ROWS), N) float64: ``values``, then the fused kernel's per-object rows (:attr:`object_rows`)
+    #: (q + ``fast.frame_columns.TAIL_ROWS``, N) float64: ``values``, the fused kernel's per-object rows
+    #: (:attr:`object_rows`), then :attr:`largest_index` and :attr:`centre_bad_corner` (int64 in a float64 row each)
     floats: np.ndarray
     #: (8, N) int32: ``v2x_rows``, then :attr:`centre_reason`
     ints32: np.ndarray
-    #: (2, N) int64: :attr:`largest_index`, :attr:`centre_bad_corner`
-    ints64: np.ndarray
     #: with the processor's ``shared_jacobian`` (the tracker's processors; else None): the tracker's input as
     #: :meth:`FrameProcessor.boxes2d`'s estimate has it -- ``centre_xy_world_m`` (N, 2) m and ``centre_cov_m2``
     #: (N, 2, 2) m^2, views of :attr:`object_rows` with the estimate's strides, and ``centre_shared_m`` (N, 2, r),
@@ -98,7 +97,8 @@ class FrameColumns(NamedTuple):
     @property
     def object_rows(self) -> np.ndarray:
         """(len(OBJ_ROWS), N) float64: the fused kernel's per-object rows (``FootprintEstimate.object_rows``)."""
-        return self.floats[self.floats.shape[0] - fc.N_OBJ_ROWS:]
+        t = self.floats.shape[0] - fc.TAIL_ROWS
+        return self.floats[t:t + fc.N_OBJ_ROWS]
 
     @property
     def centre_reason(self) -> np.ndarray:
@@ -108,12 +108,12 @@ class FrameColumns(NamedTuple):
     @property
     def largest_index(self) -> np.ndarray:
         """(N,) int64: as the estimate's."""
-        return self.ints64[0]
+        return self.floats[-2].view(np.int64)
 
     @property
     def centre_bad_corner(self) -> np.ndarray:
         """(N,) int64: as the estimate's."""
-        return self.ints64[1]
+        return self.floats[-1].view(np.int64)
 
 
 class FrameProcessor:
@@ -384,20 +384,19 @@ class FrameProcessor:
         if has_cov and not pixel_cov_px2.flags.c_contiguous:
             pixel_cov_px2 = np.ascontiguousarray(pixel_cov_px2)
         q = max(5, value_rows)
-        floats, ints32, ints64 = np.empty((q + fc.N_OBJ_ROWS, N)), np.empty((fc.INT32_ROWS, N), np.int32), \
-            np.empty((fc.INT64_ROWS, N), np.int64)
+        floats, ints32 = np.empty((q + fc.TAIL_ROWS, N)), np.empty((fc.INT32_ROWS, N), np.int32)
         shared = np.empty((N, 2, self._r)) if self.shared_jacobian else self._no_shared
         cf, ci = self._columns_consts
         n_valid = fc.boxes2d_columns(boxes_px, contact == "bottom-corners", pixel_cov_px2 if has_cov else self._no_cov,
-                                     has_cov, cf, ci, floats, ints32, ints64, shared, self._scratch())
+                                     has_cov, cf, ci, floats, ints32, shared, self._scratch())
         if n_valid < 0:
             return None
         K = 2 if contact == "bottom-corners" else 1
         if not self.shared_jacobian:
-            return FrameColumns(floats[:q], ints32[:_N_V2X], K, n_valid, floats, ints32, ints64)
+            return FrameColumns(floats[:q], ints32[:_N_V2X], K, n_valid, floats, ints32)
         obj, row = floats[q:], fk.OBJ_ROW  # (the views as _pack makes them: the tracker reads the estimate's arrays)
         centre, cov = obj[row["x_m"]:row["y_m"] + 1].T, obj[row["cov_xx_m2"]:row["cov_yy_m2"] + 1].T.reshape(N, 2, 2)
-        return FrameColumns(floats[:q], ints32[:_N_V2X], K, n_valid, floats, ints32, ints64, centre, cov, shared)
+        return FrameColumns(floats[:q], ints32[:_N_V2X], K, n_valid, floats, ints32, centre, cov, shared)
 
     def boxes3d(self, boxes_world, *, yaw_unit: str = "rad", bottom_on_ground: bool = True,
                 pixel_cov_px2=None) -> FootprintEstimate:

@@ -544,7 +544,7 @@ class _RowTexts(NamedTuple):
 def _row_texts(class_texts: list, status_texts: list, with_mid: bool, with_motion: bool) -> _RowTexts:
     """The :class:`_RowTexts` of a frame's class and status texts (bytes); a frame's few texts repeat from frame
     to frame: up to 256 tables are kept (then forgotten at once; the kernel only reads them)."""
-    key = (tuple(class_texts), tuple(status_texts), with_mid, with_motion)
+    key = (*class_texts, None, *status_texts, with_mid, with_motion)  # (None: between the texts, which are bytes)
     table = _ROW_TEXTS.get(key)
     if table is None:
         const = _pieces(with_mid, with_motion)
