@@ -62,7 +62,8 @@ def _same(cols, est) -> None:
                        ("centre_bad_corner", cols.centre_bad_corner, est.centre_bad_corner)):
         assert x.shape == y.shape and x.dtype == y.dtype and x.tobytes() == np.ascontiguousarray(y).tobytes(), name
     assert cols.n_valid == int(est.centre_valid.sum()) and cols.n_corners == est.corners_px.shape[1]
-    assert cols.v2x_rows.flags.c_contiguous
+    assert cols.v2x_rows.flags.c_contiguous and cols.values.flags.c_contiguous
+    assert cols.object_rows.tobytes() == est.object_rows.tobytes()
     assert centre_reason_texts(cols.centre_reason, cols.centre_bad_corner, cols.n_corners).tolist() == \
         est.centre_reason_text().tolist()
 
@@ -113,7 +114,8 @@ def test_columns_entry_checks(procs):
     cov = np.array([[[4.0, 1.0], [1.0, 9.0]], [[2.0, 0.0], [0.0, 3.0]]])
     want = proc.boxes2d_columns(boxes, cov)
     got = proc.boxes2d_columns(np.asfortranarray(boxes), np.asfortranarray(cov))  # (copied to row-major)
-    assert all(np.array_equal(a, b) for a, b in zip(want, got, strict=True))
+    assert all(a.tobytes() == b.tobytes() if isinstance(a, np.ndarray) else a == b  # (bits: a block holds int64 rows)
+               for a, b in zip(want, got, strict=True))
 
 
 def test_camera_parts_rebuild_the_camera(procs):
@@ -122,6 +124,41 @@ def test_camera_parts_rebuild_the_camera(procs):
     assert scalars.tolist() == [getattr(cam, k) for k in fc.CAMERA_SCALARS] and has_dist == cam.has_dist
     assert dist is cam.dist and R is cam.R and dom is cam.dom
     assert set(fc.CAMERA_SCALARS) | {"dist", "has_dist", "R", "dom"} == set(cam._fields)
+
+
+@pytest.mark.parametrize("kind", ["pantilt", "opencv"])
+def test_packed_constants_are_the_processors(procs, random_opencv_camera, kind):
+    """``columns_constants`` packs a processor's constants and settings into two arrays and ``unpack_constants``
+    (the kernel's) gives them back: the same values, and the camera the same numba type as the processor's own
+    (``process_corners`` is compiled once for both paths); a camera with distortion and a lens domain, and one
+    with a heading offset, no linearity and the linear policy (every setting away from the other's)."""
+    from numba import typeof
+
+    from footprint_uq._checks import COV_PSD_RTOL
+
+    if kind == "pantilt":
+        proc = procs["sampled"]
+    else:
+        proc = FrameProcessor(random_opencv_camera(np.random.default_rng(3)), "basler1", joint_cov=False,
+                              heading_offset_deg=31.0, linearity=False, v2x_policy="linear", allow_outside_image=True,
+                              linear_threshold=0.07)
+    assert proc._cam.dom.shape[0] > 0 and (kind == "pantilt" or proc._cam.has_dist)
+    cam, dR, Lr, Lc, Lv, r, spx, no_det, allow_outside, ch, sh, flag, threshold, cov_tol, decline = \
+        fc.unpack_constants(*proc._columns_consts)
+    for name in proc._cam._fields:
+        a, b = getattr(cam, name), getattr(proc._cam, name)
+        assert np.array_equal(a, b) and np.asarray(a).dtype == np.asarray(b).dtype, name
+    assert typeof(cam) == typeof(proc._cam)
+    for a, b in ((dR, proc._dR), (Lr, proc._Lr), (Lc, proc._Lc), (Lv, proc._Lv), (spx, proc._spx),
+                 (no_det, proc._no_det)):
+        assert a.shape == b.shape and a.dtype == b.dtype and np.array_equal(a, b) and typeof(a) == typeof(b)
+    assert (r, allow_outside, ch, sh, flag, threshold, cov_tol, decline) == (
+        proc._r, proc.allow_outside_image, proc._ch, proc._sh, proc.linearity, proc.linear_threshold, COV_PSD_RTOL,
+        proc.v2x_policy != "linear")
+    with pytest.raises(ValueError, match="Lr"):
+        fc.columns_constants(proc._cam, proc._dR, proc._Lr[:-1], proc._Lc, proc._Lv, proc._r, proc._spx,
+                             allow_outside=False, ch=1.0, sh=0.0, flag=True, threshold=0.1, cov_tol=1e-9,
+                             decline_flagged=True)
 
 
 def _payload(rng, n: int, k: int, cov: bool = False) -> bytes:

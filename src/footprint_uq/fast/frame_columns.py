@@ -5,12 +5,15 @@ service frame writes coming back (:meth:`footprint_uq.products.frame_processor.F
 ``products.footprint_geometry.box2d_contact_points_checked``), checks the detector's 2x2 pixel covariances
 (:func:`.cov_checks.first_bad_cov2`), runs :func:`.footprint_kernels.process_corners` on output arrays it
 allocates itself (small: a frame's; the per-corner coordinates, covariances and the joint covariance are not
-formed; the per-object rows and, for the tracker, the centres' shared Jacobians are the caller's arrays), counts
-the centres whose V2X fields the policy would sample (:func:`.footprint_kernels.v2x_source_and_flagged`) and
-copies the record's five float columns (centre and covariance) into the first rows of one ``(q, N)`` block.
-The Python of one frame is then a handful of ``np.empty`` and one call (``process_corners`` itself: ~3 us of
-argument unboxing per call, its 13 output arrays and the camera's 20-field structure among them; here the camera
-travels as four arrays and is put together inside).
+formed; the per-object rows and, for the tracker, the centres' shared Jacobians are the caller's arrays), declines
+a frame with a centre whose V2X fields the policy would sample (:func:`.footprint_kernels.v2x_source_and_flagged`'s
+test) and
+copies the record's five float columns (centre and covariance) into the first rows of a ``(q + R, N)`` block
+followed by the per-object rows and two int64 rows.  The Python of one frame is then two ``np.empty`` (a float64
+and an int32 block: every output a view of one of them) and one call of 10 arguments: the processor's
+constants travel as two arrays packed once (:func:`columns_constants`; a numba call costs ~40 ns per argument,
+and ``process_corners`` called from Python ~3 us of argument unboxing, its 13 output arrays and the camera's
+20-field structure among them), taken apart inside (:func:`unpack_constants`: views of the same types).
 """
 
 from __future__ import annotations
@@ -21,12 +24,20 @@ from numba import njit
 from .cov_checks import first_bad_cov2
 from .footprint_kernels import OBJ_ROW, KernelCamera, process_corners
 
-__all__ = ["boxes2d_columns", "camera_parts", "COLUMN_ROWS", "CAMERA_SCALARS"]
+__all__ = ["boxes2d_columns", "camera_parts", "columns_constants", "unpack_constants", "COLUMN_ROWS",
+           "CAMERA_SCALARS", "N_OBJ_ROWS", "TAIL_ROWS", "INT32_ROWS"]
 
 #: rows of :func:`boxes2d_columns`' ``values`` (m, m^2): what a compact record writes per object, in its order
 COLUMN_ROWS = ("x_m", "y_m", "cov_xx_m2", "cov_xy_m2", "cov_yy_m2")
 _VALUE_OBJ_ROWS = tuple(OBJ_ROW[k] for k in COLUMN_ROWS)
 _O_NL = OBJ_ROW["nonlinearity"]
+#: rows of the fused kernel's per-object block (``OBJ_ROWS``)
+N_OBJ_ROWS = len(OBJ_ROW)
+#: rows of :func:`boxes2d_columns`' ``floats`` after the caller's q value rows: the per-object rows, then
+#: ``largest_index`` and ``centre_bad_corner`` (int64, stored in a float64 row each: the same width, one block)
+TAIL_ROWS = N_OBJ_ROWS + 2
+#: rows of :func:`boxes2d_columns`' int32 block: the seven V2X code rows, then ``centre_reason``
+INT32_ROWS = 8
 #: the scalar fields of :class:`~.footprint_kernels.KernelCamera`, in the order of :func:`camera_parts`' vector
 CAMERA_SCALARS = ("fx", "fy", "cx", "cy", "skew", "ifx", "ify", "x0", "y0", "h", "gdz", "gsx", "gsy", "width_px",
                   "height_px", "ground_z_m")
@@ -67,12 +78,65 @@ def _contact_pixels(boxes, bottom_corners):  # pragma: no cover - compiled
     return uv
 
 
+# :func:`columns_constants`' layout.  floats: the camera's scalars (CAMERA_SCALARS), then the processor's scalars,
+# the budget's pixel covariance (2x2), "no detector covariance" (1x1x2x2 zeros), R (9), dR (3x3x3), then the
+# variable parts: the distortion (n_dist), the factor's values Lv (nnz) and the lens domain (the rest).
+_F_CH, _F_SH, _F_THRESHOLD, _F_COV_TOL = 16, 17, 18, 19
+_F_SPX, _F_NO_DET, _F_R, _F_DR, _F_DIST = 20, 24, 28, 37, 64
+# ints: the flags and sizes, then the factor's row and column indices Lr, Lc (nnz each)
+_I_HAS_DIST, _I_RANK, _I_ALLOW_OUTSIDE, _I_FLAG, _I_DECLINE_FLAGGED, _I_NNZ, _I_NDIST, _I_L = range(8)
+
+
+def columns_constants(cam: KernelCamera, dR: np.ndarray, Lr: np.ndarray, Lc: np.ndarray, Lv: np.ndarray, r: int,
+                      spx: np.ndarray, *, allow_outside: bool, ch: float, sh: float, flag: bool, threshold: float,
+                      cov_tol: float, decline_flagged: bool) -> tuple[np.ndarray, np.ndarray]:
+    """A processor's constants as :func:`boxes2d_columns` takes them: ``(floats, ints)``, two arrays packed once
+    (a numba call costs ~40 ns per argument: 2 arguments for these 18; :func:`unpack_constants` takes them apart
+    inside the kernel, the same values and numba types).
+
+    Parameters
+    ----------
+    cam, dR, Lr, Lc, Lv, r, spx, allow_outside, ch, sh, flag :
+        As :func:`~.footprint_kernels.process_corners` takes them (the camera structure, its rotation's
+        derivatives (3, 3, 3), the parameter covariance's sparse factor: int64 rows and columns, float64 values,
+        its rank; the budget's pixel covariance (2, 2) px^2; the heading offset's cos / sin; the linearity flag).
+    threshold : float
+        ``linear_ok`` = nonlinearity <= threshold (the V2X policy's test).
+    cov_tol : float
+        :func:`~.cov_checks.first_bad_cov2`'s relative tolerance.
+    decline_flagged : bool
+        Decline a frame with a valid centre that is not ``linear_ok`` (a V2X policy other than "linear").
+    """
+    nnz = Lv.shape[0]
+    if Lr.shape != (nnz,) or Lc.shape != (nnz,) or cam.R.shape != (9,) or dR.shape != (3, 3, 3):
+        raise ValueError(f"constants of other sizes than the layout's: Lr {Lr.shape}, Lc {Lc.shape}, Lv {Lv.shape}, "
+                         f"R {cam.R.shape}, dR {dR.shape}")
+    floats = np.concatenate([camera_parts(cam)[0], [ch, sh, threshold, cov_tol], np.ravel(spx), np.zeros(4),
+                             np.ravel(cam.R), np.ravel(dR), cam.dist, Lv, cam.dom]).astype(np.float64)
+    ints = np.concatenate([[cam.has_dist, r, allow_outside, flag, decline_flagged, nnz, cam.dist.shape[0]],
+                           Lr, Lc]).astype(np.int64)
+    return floats, ints
+
+
+@njit(cache=True, nogil=True, inline="always")
+def unpack_constants(cf, ci):  # pragma: no cover - compiled
+    """:func:`columns_constants`' arrays taken apart (views, no copies): ``(cam, dR, Lr, Lc, Lv, r, spx, no_det,
+    allow_outside, ch, sh, flag, threshold, cov_tol, decline_flagged)``, of the types
+    :func:`~.footprint_kernels.process_corners` is compiled for."""
+    nd, nnz = ci[_I_NDIST], ci[_I_NNZ]
+    a = _F_DIST + nd
+    b = a + nnz
+    cam = _camera(cf, ci[_I_HAS_DIST] != 0, cf[_F_DIST:a], cf[_F_R:_F_DR], cf[b:])
+    return (cam, cf[_F_DR:_F_DIST].reshape((3, 3, 3)), ci[_I_L:_I_L + nnz], ci[_I_L + nnz:_I_L + 2 * nnz], cf[a:b],
+            ci[_I_RANK], cf[_F_SPX:_F_NO_DET].reshape((2, 2)), cf[_F_NO_DET:_F_R].reshape((1, 1, 2, 2)),
+            ci[_I_ALLOW_OUTSIDE] != 0, cf[_F_CH], cf[_F_SH], ci[_I_FLAG] != 0, cf[_F_THRESHOLD], cf[_F_COV_TOL],
+            ci[_I_DECLINE_FLAGGED] != 0)
+
+
 @njit(cache=True, error_model="numpy", nogil=True)
-def boxes2d_columns(boxes, bottom_corners, cov, has_cov, cam_f, has_dist, dist, R, dom, dR, Lr, Lc, Lv, r, spx,
-                    no_det, allow_outside, ch, sh, flag, threshold, cov_tol, values, v2x, largest_index,
-                    centre_reason, centre_bad_corner, obj, shared, S):  # pragma: no cover - compiled
+def boxes2d_columns(boxes, bottom_corners, cov, has_cov, cf, ci, floats, ints32, shared, S):  # pragma: no cover
     """One frame of checked 2-D boxes (float64 ``(N, 4)``, finite, corners in order) through
-    :func:`~.footprint_kernels.process_corners`, its columns into the caller's arrays.
+    :func:`~.footprint_kernels.process_corners`, its columns into the caller's two blocks.
 
     Parameters
     ----------
@@ -82,60 +146,55 @@ def boxes2d_columns(boxes, bottom_corners, cov, has_cov, cam_f, has_dist, dist, 
         The contact: the bottom corners (K = 2), else the bottom centre (K = 1).
     cov, has_cov : (N, 2, 2) float64 C-contiguous, bool
         The detector's pixel covariance per box (px^2); ``has_cov`` False: none (``cov`` is not read).
-    cam_f, has_dist, dist, R, dom :
-        :func:`camera_parts` of the processor's camera.
-    dR, Lr, Lc, Lv, r, spx, allow_outside, ch, sh, flag :
-        As :func:`~.footprint_kernels.process_corners` takes them; ``no_det`` its 4-D array for "no detector
-        covariance".
-    threshold : float
-        ``linear_ok`` = nonlinearity <= threshold (the V2X policy's test).
-    cov_tol : float
-        :func:`~.cov_checks.first_bad_cov2`'s relative tolerance.
-    values : (q, N) float64, q >= 5
-        Out: :data:`COLUMN_ROWS` of every centre (m, m^2) in its first five rows (the rest is the caller's: the
-        tracked record's motion columns).
-    v2x : (7, N) int32
-        Out: the V2X codes (``FootprintEstimate.v2x_codes`` transposed).
-    largest_index, centre_reason, centre_bad_corner : (N,) int64, int32, int64
-        Out: as the estimate's.
-    obj : (len(OBJ_ROWS), N) float64
-        Out: the fused kernel's per-object rows (``FootprintEstimate.object_rows``: the estimate's centre and
-        covariance are views of it).
+    cf, ci : (F,) float64, (I,) int64
+        :func:`columns_constants` of the processor.
+    floats : (q + TAIL_ROWS, N) float64, q >= 5, C-contiguous
+        Out: :data:`COLUMN_ROWS` of every centre (m, m^2) in its first five rows (rows 5 to q - 1 are the
+        caller's: the tracked record's motion columns), then the fused kernel's per-object rows (``OBJ_ROWS``:
+        ``FootprintEstimate.object_rows``), then ``largest_index`` and ``centre_bad_corner`` as the estimate's
+        (int64: each row read as int64).
+    ints32 : (INT32_ROWS, N) int32, C-contiguous
+        Out: the V2X codes (``FootprintEstimate.v2x_codes`` transposed) in its first seven rows, then
+        ``centre_reason``.
     shared : (N, 2, r) or (0, 2, 0) float64
-        Out: the centres' whitened parameter Jacobians ``centre_shared_m`` (the tracker's), as the kernel writes
-        them (rows of centres not found are not set to NaN here); ``(0, 2, 0)``: not formed.
+        Out: the centres' whitened parameter Jacobians ``centre_shared_m`` (the tracker's), NaN where no centre
+        (as ``FrameProcessor._pack``); ``(0, 2, 0)``: not formed.
     S : the per-thread scratch (``footprint_kernels.SCRATCH_SHAPE``).
 
     Returns
     -------
-    ``(bad_cov, n_over, n_valid, n_flagged)``: the first covariance :func:`first_bad_cov2` refuses (-1: none;
-    then nothing else is computed), the number of computed values that are not finite (``mark_overflow``'s
-    work, almost always 0), the centres found, the valid centres that are not ``linear_ok`` (NaN counts; 0
-    without ``flag``).
+    The number of centres found (>= 0), or -1: the frame is declined (the caller's ``boxes2d`` is needed) -- a
+    covariance :func:`first_bad_cov2` refuses (then nothing else is computed), a computed value that is not finite
+    (``mark_overflow``'s work), or, with ``decline_flagged``, a valid centre that is not ``linear_ok`` (NaN counts).
     """
     n = boxes.shape[0]
+    cam, dR, Lr, Lc, Lv, r, spx, no_det, allow_outside, ch, sh, flag, threshold, cov_tol, decline_flagged = \
+        unpack_constants(cf, ci)
     if has_cov:
-        bad = first_bad_cov2(cov, cov_tol)
-        if bad >= 0:
-            return bad, 0, 0, 0
+        if first_bad_cov2(cov, cov_tol) >= 0:
+            return -1
         det, mode = cov.reshape((n, 1, 2, 2)), 1
     else:
         det, mode = no_det, 0
     uv = _contact_pixels(boxes, bottom_corners)
     K = uv.shape[1]
+    t = floats.shape[0] - TAIL_ROWS
+    obj = floats[t:t + N_OBJ_ROWS]
+    centre_reason = ints32[INT32_ROWS - 1]
     out = (np.empty((0, K, 2)), np.empty((0, K, 2, 2)), np.empty((0, 2 * K, 2 * K)), np.empty((n, K), np.int8),
-           np.empty((n, K), np.bool_), largest_index, np.empty((0, 2, 2)), centre_reason, centre_bad_corner, obj, v2x,
-           np.empty((0, K)), shared)
-    cam = _camera(cam_f, has_dist, dist, R, dom)
-    n_over = process_corners(uv, np.zeros((0, 0), np.int8), np.zeros((0, 7)), False, True, cam, dR, Lr, Lc, Lv, r,
-                             spx, det, mode, allow_outside, ch, sh, flag, out, S)
-    n_valid = n_flagged = 0
+           np.empty((n, K), np.bool_), floats[t + N_OBJ_ROWS].view(np.int64), np.empty((0, 2, 2)), centre_reason,
+           floats[t + N_OBJ_ROWS + 1].view(np.int64), obj, ints32[:INT32_ROWS - 1], np.empty((0, K)), shared)
+    if process_corners(uv, np.zeros((0, 0), np.int8), np.zeros((0, 7)), False, True, cam, dR, Lr, Lc, Lv, r, spx,
+                       det, mode, allow_outside, ch, sh, flag, out, S):
+        return -1
+    n_valid = 0
     for i in range(n):
         for q in range(5):
-            values[q, i] = obj[_VALUE_OBJ_ROWS[q], i]
+            floats[q, i] = obj[_VALUE_OBJ_ROWS[q], i]
         if centre_reason[i] == 0:
             n_valid += 1
-            if flag and not obj[_O_NL, i] <= threshold:
-                n_flagged += 1
-    return -1, n_over, n_valid, n_flagged
-
+            if flag and decline_flagged and not obj[_O_NL, i] <= threshold:
+                return -1
+        elif shared.shape[0] == n:
+            shared[i] = np.nan
+    return n_valid

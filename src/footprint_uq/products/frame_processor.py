@@ -36,6 +36,8 @@ from .footprint_reference import footprints_from_boxes3d, footprints_from_corner
 # -- the per-frame fast path ---------------------------------------------------------------------
 #: outputs of at least this many bytes come from pyarrow's memory pool (see :func:`empty_reusable`)
 _POOL_MIN_BYTES = 1 << 20
+_F64 = np.dtype(np.float64)  # (a dtype compared with a dtype: ~3x faster than with the type np.float64)
+_N_V2X = fc.INT32_ROWS - 1  # (the V2X code rows of boxes2d_columns' int32 block, then centre_reason)
 
 
 def empty_reusable(shape, dtype=np.float64) -> np.ndarray:
@@ -64,24 +66,26 @@ def reusable_allocator(max_bytes: int):
 class FrameColumns(NamedTuple):
     """The columns of a frame of 2-D boxes that a service record writes (:meth:`FrameProcessor.boxes2d_columns`):
     the numbers of :meth:`FrameProcessor.boxes2d`'s estimate, not an estimate (no per-corner outputs, no
-    ellipse, no V2X source: every centre's V2X fields encode its linear covariance)."""
+    ellipse, no V2X source: every centre's V2X fields encode its linear covariance).
 
-    #: (q, N) float64 (q = ``boxes2d_columns``' ``value_rows``, 5 by default): ``x_m, y_m, cov_xx_m2, cov_xy_m2,
-    #: cov_yy_m2`` of each centre in the first five rows (``centre_xy_world_m``, ``centre_cov_m2``;
+    Every array is a view of one of the two blocks the compiled call fills (``floats``, ``ints32``); the two a
+    record always reads are fields, the others properties (a view made only when read)."""
+
+    #: (q, N) float64, C-contiguous (q = ``boxes2d_columns``' ``value_rows``, 5 by default): ``x_m, y_m, cov_xx_m2,
+    #: cov_xy_m2, cov_yy_m2`` of each centre in the first five rows (``centre_xy_world_m``, ``centre_cov_m2``;
     #: :data:`footprint_uq.fast.frame_columns.COLUMN_ROWS`), the rest not written (the caller's)
     values: np.ndarray
     #: (7, N) int32, C-contiguous: ``v2x_codes`` transposed (rows :data:`.footprint_estimate.V2X_FIELDS`)
     v2x_rows: np.ndarray
-    #: (N,) int64, int32, int64: ``largest_index``, ``centre_reason``, ``centre_bad_corner``
-    largest_index: np.ndarray
-    centre_reason: np.ndarray
-    centre_bad_corner: np.ndarray
     #: corners per object (1: the bottom centre, 2: the bottom corners)
     n_corners: int
     #: how many centres are valid (``centre_reason == 0``)
     n_valid: int
-    #: (len(OBJ_ROWS), N) float64: the fused kernel's per-object rows (``FootprintEstimate.object_rows``)
-    object_rows: np.ndarray | None = None
+    #: (q + ``fast.frame_columns.TAIL_ROWS``, N) float64: ``values``, the fused kernel's per-object rows
+    #: (:attr:`object_rows`), then :attr:`largest_index` and :attr:`centre_bad_corner` (int64 in a float64 row each)
+    floats: np.ndarray
+    #: (8, N) int32: ``v2x_rows``, then :attr:`centre_reason`
+    ints32: np.ndarray
     #: with the processor's ``shared_jacobian`` (the tracker's processors; else None): the tracker's input as
     #: :meth:`FrameProcessor.boxes2d`'s estimate has it -- ``centre_xy_world_m`` (N, 2) m and ``centre_cov_m2``
     #: (N, 2, 2) m^2, views of :attr:`object_rows` with the estimate's strides, and ``centre_shared_m`` (N, 2, r),
@@ -89,6 +93,27 @@ class FrameColumns(NamedTuple):
     centre_xy_world_m: np.ndarray | None = None
     centre_cov_m2: np.ndarray | None = None
     centre_shared_m: np.ndarray | None = None
+
+    @property
+    def object_rows(self) -> np.ndarray:
+        """(len(OBJ_ROWS), N) float64: the fused kernel's per-object rows (``FootprintEstimate.object_rows``)."""
+        t = self.floats.shape[0] - fc.TAIL_ROWS
+        return self.floats[t:t + fc.N_OBJ_ROWS]
+
+    @property
+    def centre_reason(self) -> np.ndarray:
+        """(N,) int32: as the estimate's ``centre_reason`` (0: a valid centre)."""
+        return self.ints32[fc.INT32_ROWS - 1]
+
+    @property
+    def largest_index(self) -> np.ndarray:
+        """(N,) int64: as the estimate's."""
+        return self.floats[-2].view(np.int64)
+
+    @property
+    def centre_bad_corner(self) -> np.ndarray:
+        """(N,) int64: as the estimate's."""
+        return self.floats[-1].view(np.int64)
 
 
 class FrameProcessor:
@@ -159,9 +184,12 @@ class FrameProcessor:
         #: whether per-corner coordinates and covariances (and the largest point's covariance) are
         #: formed at all; the batch sets False when it writes no corner columns (leaner, faster)
         self.corner_outputs = True
-        #: the constants of :meth:`boxes2d_columns`' one call (the camera as fast.frame_columns.camera_parts)
-        self._columns_consts = (*fc.camera_parts(self._cam), self._dR, self._Lr, self._Lc, self._Lv, self._r,
-                                self._spx, self._no_det)
+        #: the constants and settings of :meth:`boxes2d_columns`' one call, packed in two arrays (fixed here, as
+        #: every constant of the processor)
+        self._columns_consts = fc.columns_constants(
+            self._cam, self._dR, self._Lr, self._Lc, self._Lv, self._r, self._spx,
+            allow_outside=self.allow_outside_image, ch=self._ch, sh=self._sh, flag=self.linearity,
+            threshold=self.linear_threshold, cov_tol=COV_PSD_RTOL, decline_flagged=self.v2x_policy != "linear")
         self._kernels = False  # the compiled kernels run (footprint_uq._notices; asked until they do)
         self._last_scratch = (None, None)  # (thread id, its scratch) of the last frame (_scratch)
 
@@ -346,33 +374,29 @@ class FrameProcessor:
         if contact not in CONTACT_MODES:
             raise InputError("contact", contact, f"one of {CONTACT_MODES}")
         has_cov = pixel_cov_px2 is not None
-        if not self._use_kernels() or type(boxes_px) is not np.ndarray or boxes_px.dtype != np.float64 or \
+        if not self._use_kernels() or type(boxes_px) is not np.ndarray or boxes_px.dtype != _F64 or \
                 boxes_px.shape != (N, 4) or (has_cov and (type(pixel_cov_px2) is not np.ndarray or
-                                                          pixel_cov_px2.dtype != np.float64 or
+                                                          pixel_cov_px2.dtype != _F64 or
                                                           pixel_cov_px2.shape != (N, 2, 2))):
             return None
         if not boxes_px.flags.c_contiguous:  # (row-major always: one kernel signature)
             boxes_px = np.ascontiguousarray(boxes_px)
         if has_cov and not pixel_cov_px2.flags.c_contiguous:
             pixel_cov_px2 = np.ascontiguousarray(pixel_cov_px2)
-        values, v2x = np.empty((max(5, value_rows), N)), np.empty((7, N), np.int32)
-        li, creason, cbad = np.empty(N, np.int64), np.empty(N, np.int32), np.empty(N, np.int64)
-        obj = np.empty((len(fk.OBJ_ROWS), N))
+        q = max(5, value_rows)
+        floats, ints32 = np.empty((q + fc.TAIL_ROWS, N)), np.empty((fc.INT32_ROWS, N), np.int32)
         shared = np.empty((N, 2, self._r)) if self.shared_jacobian else self._no_shared
-        bad, n_over, n_valid, n_flagged = fc.boxes2d_columns(
-            boxes_px, contact == "bottom-corners", pixel_cov_px2 if has_cov else self._no_cov, has_cov,
-            *self._columns_consts, self.allow_outside_image, self._ch, self._sh, self.linearity,
-            self.linear_threshold, COV_PSD_RTOL, values, v2x, li, creason, cbad, obj, shared, self._scratch())
-        if bad >= 0 or n_over or (n_flagged and self.v2x_policy != "linear"):
+        cf, ci = self._columns_consts
+        n_valid = fc.boxes2d_columns(boxes_px, contact == "bottom-corners", pixel_cov_px2 if has_cov else self._no_cov,
+                                     has_cov, cf, ci, floats, ints32, shared, self._scratch())
+        if n_valid < 0:
             return None
         K = 2 if contact == "bottom-corners" else 1
         if not self.shared_jacobian:
-            return FrameColumns(values, v2x, li, creason, cbad, K, n_valid, obj)
-        if n_valid < N:  # (as _pack: no Jacobian where no centre)
-            shared[creason != 0] = np.nan
-        row = fk.OBJ_ROW  # (the views as _pack makes them: the tracker reads the estimate's arrays)
-        return FrameColumns(values, v2x, li, creason, cbad, K, n_valid, obj, obj[row["x_m"]:row["y_m"] + 1].T,
-                            obj[row["cov_xx_m2"]:row["cov_yy_m2"] + 1].T.reshape(N, 2, 2), shared)
+            return FrameColumns(floats[:q], ints32[:_N_V2X], K, n_valid, floats, ints32)
+        obj, row = floats[q:], fk.OBJ_ROW  # (the views as _pack makes them: the tracker reads the estimate's arrays)
+        centre, cov = obj[row["x_m"]:row["y_m"] + 1].T, obj[row["cov_xx_m2"]:row["cov_yy_m2"] + 1].T.reshape(N, 2, 2)
+        return FrameColumns(floats[:q], ints32[:_N_V2X], K, n_valid, floats, ints32, centre, cov, shared)
 
     def boxes3d(self, boxes_world, *, yaw_unit: str = "rad", bottom_on_ground: bool = True,
                 pixel_cov_px2=None) -> FootprintEstimate:

@@ -455,16 +455,15 @@ def _put_value(out, p, ftext, c):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
-def _compact_rows(ftext, ids, cls_idx, st_idx, mid, with_mid, tid, with_motion, texts, at, st_base,
-                  size):  # pragma: no cover - compiled
-    """The compact record's ``objects`` text (see :func:`compact_objects_json`) from the texts
-    ``texts[at[k]:at[k + 1]]`` of :func:`_row_texts` (:func:`_pieces`, then the class texts from entry 16 and the
-    status texts from ``st_base``; 32 bytes of room past the last): per row the id, the row's class text (entry
-    ``16 + cls_idx[r]``) and status text (entry ``st_base + st_idx[r]``), the five float values (``ftext``:
-    orjson's text of the (5, n) array, or (10, n) with the motion: the ``bytes`` as they are), the motion
-    (``with_motion``: the track id, negative: null, and the five motion values) and the message id
-    (``with_mid``; negative: null).  ``size`` bounds the text's length.  Empty: ``ftext`` does not hold 5 n
-    (10 n) values.
+def _compact_rows(ftext, ids, cls_idx, st_idx, mid, tid, texts, at, st_base, out):  # pragma: no cover - compiled
+    """The compact record's ``objects`` text (see :func:`compact_objects_json`) written into ``out`` (uint8, at
+    least the text's length and 32 bytes more), from the texts ``texts[at[k]:at[k + 1]]`` of :func:`_row_texts`
+    (:func:`_pieces`, then the class texts from entry 16 and the status texts from ``st_base``; 32 bytes of room
+    past the last): per row the id, the row's class text (entry ``16 + cls_idx[r]``) and status text (entry
+    ``st_base + st_idx[r]``), the five float values (``ftext``: orjson's text of the (5, n) array, or (10, n) with
+    the motion: the ``bytes`` as they are), the motion (``tid`` not empty: the track id, negative: null, and the
+    five motion values) and the message id (``mid`` not empty; negative: null).  Returns the text's length;
+    -1: ``ftext`` does not hold 5 n (10 n) values (the caller's ``out`` of no use then).
 
     One pass: a cursor per column of ``ftext`` (:func:`_column_bounds`) copies the row's value of that column
     straight into place (:func:`_put_value`); the column's ``n``-th value must end at its ``]``, the others
@@ -473,10 +472,10 @@ def _compact_rows(ftext, ids, cls_idx, st_idx, mid, with_mid, tid, with_motion, 
     id's code, measured up to 2x slower -- probably the loop's code no longer fitting the CPU's decoded-instruction
     cache.)"""
     n = ids.shape[0]
+    with_mid, with_motion = mid.shape[0] != 0, tid.shape[0] != 0
     cur, close, ok = _column_bounds(ftext, 10 if with_motion else 5)
     if not ok:
-        return np.zeros(0, np.uint8)
-    out = np.empty(size + _VEC, np.uint8)  # (32 bytes of room for the vector copies)
+        return -1
     out[0] = 91
     p = 1
     s_xy = e_xy = 0
@@ -504,14 +503,14 @@ def _compact_rows(ftext, ids, cls_idx, st_idx, mid, with_mid, tid, with_motion, 
                 e_xy = p
                 if (c == close[q]) != last or e_xy - s_xy > _VEC:  # (a column with more or fewer than n values;
                     # a value longer than orjson writes for a float64, at most 24 bytes: not this kernel's text)
-                    return np.zeros(0, np.uint8)
+                    return -1
                 cur[q] = c + 1
             p = _put_piece(out, p, texts, at[t0 + 6], at[t0 + 7])  # (with the next field's name)
         if with_mid:
             p = _put_id(out, p, mid[r])
     out[p] = 125
     out[p + 1] = 93
-    return out[:p + 2]
+    return p + 2
 
 
 def _pieces(with_mid: bool, with_motion: bool) -> tuple:
@@ -545,7 +544,7 @@ class _RowTexts(NamedTuple):
 def _row_texts(class_texts: list, status_texts: list, with_mid: bool, with_motion: bool) -> _RowTexts:
     """The :class:`_RowTexts` of a frame's class and status texts (bytes); a frame's few texts repeat from frame
     to frame: up to 256 tables are kept (then forgotten at once; the kernel only reads them)."""
-    key = (tuple(class_texts), tuple(status_texts), with_mid, with_motion)
+    key = (*class_texts, None, *status_texts, with_mid, with_motion)  # (None: between the texts, which are bytes)
     table = _ROW_TEXTS.get(key)
     if table is None:
         const = _pieces(with_mid, with_motion)
@@ -568,13 +567,18 @@ _ROW_TEXTS: dict = {}
 def _compact_args(ids: np.ndarray, class_idx: np.ndarray, class_texts: list, status_idx: np.ndarray,
                   status_texts: list, values: np.ndarray, message_ids: np.ndarray | None = None,
                   track_ids: np.ndarray | None = None) -> tuple:
-    """:func:`_compact_rows`' arguments for :func:`compact_objects_json`'s (``n`` > 0)."""
+    """:func:`_compact_rows`' arguments for :func:`compact_objects_json`'s (``n`` > 0), its output buffer last
+    (uninitialised: a bound on the text's length and 32 bytes of room)."""
     ftext = orjson.dumps(np.ascontiguousarray(values, dtype=np.float64), option=_NUMPY)  # (the kernel reads bytes)
     with_mid, with_motion = message_ids is not None, track_ids is not None
     texts, at, st_base, row_bytes = _row_texts(class_texts, status_texts, with_mid, with_motion)
-    return (ftext, ids, class_idx, status_idx, message_ids if with_mid else ids, with_mid,
-            track_ids if with_motion else ids, with_motion, texts, at, st_base,
-            2 + len(ids) * row_bytes + 2 * len(ftext))  # (an upper bound: the off-diagonals are written twice)
+    # (the bound: the off-diagonals are written twice)
+    out = np.empty(2 + len(ids) * row_bytes + 2 * len(ftext) + _VEC, np.uint8)
+    return (ftext, ids, class_idx, status_idx, message_ids if with_mid else _NO_IDS,
+            track_ids if with_motion else _NO_IDS, texts, at, st_base, out)
+
+
+_NO_IDS = np.zeros(0, np.int64)  # (no message ids, no track ids: only its length is read)
 
 
 def compact_objects_json(ids: np.ndarray, class_idx: np.ndarray, class_texts: list, status_idx: np.ndarray,
@@ -609,8 +613,8 @@ def compact_objects_json(ids: np.ndarray, class_idx: np.ndarray, class_texts: li
     if n == 0:
         return b"[]"
     args = _compact_args(ids, class_idx, class_texts, status_idx, status_texts, values, message_ids, track_ids)
-    out = _compact_rows(*args)
-    if len(out) == 0:
+    size = _compact_rows(*args)
+    if size < 0:
         raise ValueError(f"values hold {len(args[0])} bytes of text, not {10 if track_ids is not None else 5} x {n} "
                          "numbers")
-    return out
+    return args[-1][:size]
