@@ -616,11 +616,11 @@ class Service:
         """A frame read by :func:`.frame_scan.scan_frame` (its fields of the right types already): the same checks
         and record as :meth:`_process`."""
         setup = self._setup(scanned.camera_id)
-        n = len(scanned.object_ids)
+        n = len(scanned.int_ids)
         if n > self.max_frame_detections:
             raise _FrameError("detections", f"{n} detections in one frame, more than the frame limit of "
                               f"{self.max_frame_detections} (split the frame)")
-        if scanned.values_checked and n and self._takes_lean() and scanned.int_ids is not None:
+        if scanned.values_checked and n and self._takes_lean():
             # (nothing for the value checks: the columns go to the lean path as they are)
             ts = scanned.timestamp_s
             out = self._lean_frame(setup, scanned.camera_id, scanned.frame, ts,
@@ -748,13 +748,14 @@ class Service:
         frame_processor.FrameColumns`; tracked: its ``values`` rows 5-9 the motion's, ``motion`` the tracker's
         ``(track_id, ObjectMotion)``) by :meth:`_compact_text` and :meth:`_lean_cpm`, its head by :func:`_lean_head`.
         None: a value out of the CPM's range (the general writer names it)."""
-        ids, N = found.object_ids, len(found.object_ids)
+        N = len(int_ids)
         all_valid = cols.n_valid == N
         valid = None if all_valid else cols.centre_reason == 0
         status = None if all_valid else _compact_status_of(valid, cols.largest_index, centre_reason_texts(
             cols.centre_reason, cols.centre_bad_corner, cols.n_corners))
         tid = None if motion is None else np.asarray(motion[0], dtype=np.int64)
-        co = self._compact_text(setup, ids, int_ids, found.classes, ts, cols.values, valid, all_valid, status, tid)
+        class_idx, distinct = _classes_of(found)
+        co = self._compact_text(setup, int_ids, class_idx, distinct, ts, cols.values, valid, all_valid, status, tid)
         t2 = time.perf_counter()
         tail = b""
         cpm_uper = None
@@ -783,7 +784,7 @@ class Service:
         columns -- the same bytes.  None: a value out of range (the general writer names it)."""
         # (tracked: the message's objects' motion codes in one compiled call, as _plain_cpm_uper)
         mc = None if motion is None else motion_rows(motion[1], N, None if len(co.ok_idx) == N else co.ok_idx)
-        crow = _class_rows_of(co.classes)
+        crow = co.class_rows
         if setup.lean_cpm is not None:
             out = lean_cpm_uper(setup.lean_cpm, ref_ms, cols.values, co.ok_idx, class_p, co.msg_ids, cols.v2x_rows,
                                 co.class_idx, crow, mc)
@@ -908,29 +909,30 @@ class Service:
         all_valid = bool(valid.all())
         status = None if all_valid else _compact_status(est)
         tid = None if motion is None else np.asarray(motion[0], dtype=np.int64)
-        return self._compact_text(setup, ids, id_arr, classes, ts, values, valid, all_valid, status, tid)
-
-    def _compact_text(self, setup: CameraSetup, ids: list, id_arr: np.ndarray, classes: list, ts: float,
-                      values: np.ndarray, valid: np.ndarray | None, all_valid: bool, status: tuple | None,
-                      tid: np.ndarray | None) -> _CompactObjects:
-        """:meth:`_compact_objects` from the columns: ``values`` (5 or 10, N) the record's floats, ``valid`` (N,)
-        the centres found (``all_valid``: every one), ``status`` :func:`_compact_status`'s pair (None: all ok),
-        ``tid`` the track ids (None: untracked); the message ids assigned here (with ``messages``).  ``valid`` is
-        read only when not ``all_valid`` (None then)."""
-        N = len(ids)
         class_idx, distinct = _class_index(classes)
-        status_idx, status_texts = (_zeros(N), [_STATUS_ALL_OK_COMPACT]) if status is None else status
+        return self._compact_text(setup, id_arr, class_idx, distinct, ts, values, valid, all_valid, status, tid)
+
+    def _compact_text(self, setup: CameraSetup, id_arr: np.ndarray, class_idx: np.ndarray, distinct: list,
+                      ts: float, values: np.ndarray, valid: np.ndarray | None, all_valid: bool,
+                      status: tuple | None, tid: np.ndarray | None) -> _CompactObjects:
+        """:meth:`_compact_objects` from the columns: ``id_arr`` (N,) int64 the object ids, ``class_idx`` (N,) int64
+        each object's entry among the frame's ``distinct`` classes (:func:`_class_index`), ``values`` (5 or 10, N)
+        the record's floats, ``valid`` (N,) the centres found (``all_valid``: every one), ``status``
+        :func:`_compact_status`'s pair (None: all ok), ``tid`` the track ids (None: untracked); the message ids
+        assigned here (with ``messages``).  ``valid`` is read only when not ``all_valid`` (None then)."""
+        N = len(id_arr)
+        zeros, first_rows = _kept_rows(N)
+        status_idx, status_texts = (zeros, [_STATUS_ALL_OK_COMPACT]) if status is None else status
         ok_idx = msg_ids = mid = None
         if self.messages:  # (as _message_id_layout: the objects with a centre, at most 255)
-            ok_idx = np.arange(min(N, MAX_MESSAGE_OBJECTS)) if all_valid else \
-                np.flatnonzero(valid)[:MAX_MESSAGE_OBJECTS]
-            msg_ids = mid = setup.ids.assign(ids, ok_idx, ts, int_ids=id_arr)
+            ok_idx = first_rows if all_valid else np.flatnonzero(valid)[:MAX_MESSAGE_OBJECTS]
+            msg_ids = mid = setup.ids.assign(None, ok_idx, ts, int_ids=id_arr)
             if len(ok_idx) < N:
                 mid = np.full(N, -1, np.int64)
                 mid[ok_idx] = msg_ids
-        text = compact_objects_json(id_arr, class_idx, _class_texts(distinct), status_idx, status_texts, values, mid,
-                                    tid)
-        return _CompactObjects(text, ok_idx, msg_ids, class_idx, distinct)
+        class_texts, class_rows = _class_consts(distinct)
+        text = compact_objects_json(id_arr, class_idx, class_texts, status_idx, status_texts, values, mid, tid)
+        return _CompactObjects(text, ok_idx, msg_ids, class_idx, class_rows)
 
     def _plain_cpm_uper(self, setup: CameraSetup, est, class_p, co: _CompactObjects, ref_ms: int,
                         motion: ObjectMotion | None = None) -> bytes | None:
@@ -944,7 +946,7 @@ class Service:
         mc = None if motion is None else motion_rows(motion, n, None if len(co.ok_idx) == n else co.ok_idx)
         return plain_cpm_uper(setup.uper, ref_ms, setup.world_to_enu(est.centre_xy_world_m), co.ok_idx, class_p,
                               co.msg_ids, np.ascontiguousarray(est.v2x_codes.T, dtype=np.int32), _CPM_INDEX,
-                              co.class_idx, _class_rows_of(co.classes), cls.bits_value, cls.bits_width,
+                              co.class_idx, co.class_rows, cls.bits_value, cls.bits_width,
                               cdd=self.cpm_cdd, motion=mc)
 
     def _full_object_layout(self, setup: CameraSetup, t: Table, est, cxx, cxy, cyy) -> list:
@@ -1052,13 +1054,13 @@ class Service:
 class _CompactObjects(NamedTuple):
     """An untracked compact record's objects (:meth:`Service._compact_objects`): their JSON text, the rows in the
     messages and their message ids (None without messages), each row's class among the frame's distinct
-    ``classes``."""
+    classes and those classes' rows of the class tables (:func:`_class_rows_of`)."""
 
     text: object
     ok_idx: np.ndarray | None
     msg_ids: np.ndarray | None
     class_idx: np.ndarray
-    classes: list
+    class_rows: np.ndarray
 
 
 class _MessageColumns(NamedTuple):
@@ -1127,7 +1129,7 @@ def _class_index(classes: list) -> tuple[np.ndarray, list]:
     appearance) and those classes."""
     N = len(classes)
     if classes.count(classes[0]) == N:  # one class for the frame (or none): one entry
-        return _zeros(N), [classes[0]]
+        return _kept_rows(N)[0], [classes[0]]
     first: dict = {}
     class_idx = np.fromiter((first.setdefault(c, len(first)) for c in classes), np.int64, N)
     return class_idx, list(first)
@@ -1176,24 +1178,45 @@ def _int_ids(ids: list) -> np.ndarray | None:
         return None
 
 
-def _zeros(n: int) -> np.ndarray:
-    """``n`` int64 zeros, read only by the compiled writers (the class and status entries of a uniform frame)."""
-    return np.zeros(n, np.int64)
+_KEPT_ROWS: dict = {}
 
 
-_CLASS_TEXTS: dict = {}
+def _kept_rows(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """``n`` int64 zeros and the rows ``0 .. min(n, 255) - 1`` (int64), made once per ``n`` (at most 1024 sizes kept)
+    and shared by the frames: read only, by the compiled writers and the message ids (the class and status
+    entries of a uniform frame; the messages' rows of a frame whose centres are all found).
+    ``tests/test_service_columnar.py`` checks that frames leave them as they are."""
+    kept = _KEPT_ROWS.get(n)
+    if kept is None:
+        if len(_KEPT_ROWS) >= 1024:
+            _KEPT_ROWS.clear()
+        kept = _KEPT_ROWS[n] = (np.zeros(n, np.int64), np.arange(min(n, MAX_MESSAGE_OBJECTS), dtype=np.int64))
+    return kept
 
 
-def _class_texts(distinct: list) -> list:
-    """The JSON texts of a frame's distinct classes, kept for the next frames (at most 256 lists)."""
+def _classes_of(found) -> tuple[np.ndarray, list]:
+    """:func:`_class_index` of a lean frame's detections: a :class:`.frame_scan.ScannedFrame`'s own columns (no list
+    of classes made), else of the ``classes`` list of :class:`.detections.FrameDetections`."""
+    if type(found) is ScannedFrame:
+        idx = found.class_index
+        return (_kept_rows(len(found.int_ids))[0] if idx is None else idx), found.distinct_classes
+    return _class_index(found.classes)
+
+
+_CLASS_CONSTS: dict = {}
+
+
+def _class_consts(distinct: list) -> tuple[list, np.ndarray]:
+    """The JSON texts of a frame's distinct classes and their class-table rows (:func:`_class_rows_of`), kept for
+    the next frames (at most 256 lists)."""
     key = tuple(distinct)
-    texts = _CLASS_TEXTS.get(key)
-    if texts is None:
-        texts = [orjson.dumps(c) for c in distinct]
-        if len(_CLASS_TEXTS) >= 256:
-            _CLASS_TEXTS.clear()
-        _CLASS_TEXTS[key] = texts
-    return texts
+    kept = _CLASS_CONSTS.get(key)
+    if kept is None:
+        kept = ([orjson.dumps(c) for c in distinct], _class_rows_of(distinct))
+        if len(_CLASS_CONSTS) >= 256:
+            _CLASS_CONSTS.clear()
+        _CLASS_CONSTS[key] = kept
+    return kept
 
 
 def _compact_values(est, motion) -> np.ndarray | None:
