@@ -373,14 +373,14 @@ def test_scanned_frames_take_the_scanners_class_columns(camera, variant, tracks,
     class, several, none, some detections without one); and the frames leave the shared rows (``_kept_rows``: the
     uniform frame's class and status entries, the messages' rows) as they were."""
     from footprint_uq.service import core
-    from footprint_uq.service.frame_scan import ScannedFrame
 
     kw = dict(record="compact", tracks=tracks)
     fast, ref = Service(camera, "basler1", **kw), Service(camera, "basler1", **kw)
     ref._columnar = False
     taken = []
-    real = core._classes_of
-    monkeypatch.setattr(core, "_classes_of", lambda found: taken.append(type(found)) or real(found))
+    real = Service._compact_text
+    monkeypatch.setattr(Service, "_compact_text", lambda *a: taken.append(a[3]) or real(*a))  # (a[3]: class_idx)
+    monkeypatch.setattr(core, "_class_index", lambda *a: pytest.fail("a list of classes indexed"))
     for k in range(4):
         frame = _frame(np.random.default_rng(40 + k), 30 if k < 3 else 300, k,
                        variant="classes" if variant == "some-without-class" else variant)
@@ -392,7 +392,7 @@ def test_scanned_frames_take_the_scanners_class_columns(camera, variant, tracks,
         a, b = fast.process_frame_json(orjson.dumps(frame)), ref.process_frame_json(orjson.dumps(frame))
         assert a.type == b.type == "footprints" and not json.loads(a.data)["detection_errors"]
         assert _record(a) == _record(b) and a.cpm_uper == b.cpm_uper
-    assert taken == [ScannedFrame] * 4
+    assert len(taken) == 4 and all(t is None for t in taken) == (variant in ("one-class", "no-class"))
     for n, (zeros, rows) in core._KEPT_ROWS.items():
         assert zeros.tolist() == [0] * n and rows.tolist() == list(range(min(n, 255)))
 

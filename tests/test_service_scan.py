@@ -415,7 +415,7 @@ def test_class_texts_in_runs_and_mixed(names, seed):
     index, distinct = _class_index(want)
     assert s.distinct_classes == distinct
     if s.class_index is None:
-        assert len(distinct) == 1
+        assert index is None and len(distinct) == 1
     else:
         assert s.class_index.dtype == np.int64 and s.class_index.tolist() == index.tolist() and len(distinct) > 1
 
