@@ -789,8 +789,10 @@ def scan_frame(text) -> ScannedFrame | None:
             return None
     else:
         ts = fb.item(9 * n)
-    return ScannedFrame(camera, h[4], ts, fb[:4 * n].reshape(n, 4), fb[4 * n:8 * n].reshape(n, 2, 2) if h[7] else None,
-                        fb[8 * n:9 * n] if h[8] else None, ib[_H:_H + n], h[10] == 1, distinct, class_index)
+    # (every field in order, without the NamedTuple's Python-level __new__: ~0.15 us a frame)
+    return tuple.__new__(ScannedFrame, (
+        camera, h[4], ts, fb[:4 * n].reshape(n, 4), fb[4 * n:8 * n].reshape(n, 2, 2) if h[7] else None,
+        fb[8 * n:9 * n] if h[8] else None, ib[_H:_H + n], h[10] == 1, distinct, class_index))
 
 
 def _classes(raw: bytes, ib: np.ndarray, n: int) -> tuple[list, np.ndarray]:
