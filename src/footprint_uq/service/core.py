@@ -412,7 +412,8 @@ class Service:
         self.cameras: dict[str | None, CameraSetup] = self._camera_setups(
             camera, budget, registry, camera_id, station_id, allow_outside_image,
             dict(heading_offset_deg=heading_offset_deg, origin_lat_deg=origin_lat_deg, origin_lon_deg=origin_lon_deg))
-        self._single = camera is not None
+        #: the one camera's ``(id, CameraSetup)`` (None: a registry)
+        self._single = next(iter(self.cameras.items())) if camera is not None else None
         if self._lean and self.messages:  # (the lean frame's CPM: each camera's constants packed once)
             cls = self._cls
             for setup in self.cameras.values():
@@ -597,8 +598,8 @@ class Service:
     def _setup(self, camera_id) -> CameraSetup:
         if camera_id is not None and not isinstance(camera_id, str):
             raise _FrameError("camera_id", f"camera_id is not a string: {camera_id!r}")
-        if self._single:
-            (key, setup), = self.cameras.items()
+        if self._single is not None:
+            key, setup = self._single
             if key is not None and camera_id != key:
                 raise _FrameError("camera_id", f"camera_id {camera_id!r} is not this service's camera {key!r}")
             return setup

@@ -758,7 +758,7 @@ class ScannedFrame(_ScannedColumns):
         """The n detections' classes (str or None)."""
         if self.class_index is None:
             return self.distinct_classes * len(self.int_ids)
-        return [self.distinct_classes[k] for k in self.class_index.tolist()]
+        return np.array(self.distinct_classes, dtype=object)[self.class_index].tolist()
 
 
 def scan_frame(text) -> ScannedFrame | None:
