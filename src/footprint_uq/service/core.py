@@ -938,7 +938,7 @@ class Service:
         ``status`` :func:`_compact_status`'s pair (None: all ok), ``tid`` the track ids (None: untracked); the
         message ids assigned here (with ``messages``).  ``valid`` is read only when not ``all_valid`` (None then)."""
         N = len(id_arr)
-        zeros, first_rows = _kept_rows(N)
+        zeros, first_rows = _KEPT_ROWS.get(N) or _kept_rows(N)  # (the look-up inline: the usual frame's sizes)
         if class_idx is None:
             class_idx = zeros
         status_idx, status_texts = (zeros, [_STATUS_ALL_OK_COMPACT]) if status is None else status
@@ -949,7 +949,7 @@ class Service:
             if len(ok_idx) < N:
                 mid = np.full(N, -1, np.int64)
                 mid[ok_idx] = msg_ids
-        class_texts, class_rows = _class_consts(distinct)
+        class_texts, class_rows = _CLASS_CONSTS.get(tuple(distinct)) or _class_consts(distinct)
         text = compact_objects_json(id_arr, class_idx, class_texts, status_idx, status_texts, values, mid, tid)
         return _made(_CompactObjects, (text, ok_idx, msg_ids, class_idx, class_rows))
 
