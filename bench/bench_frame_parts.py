@@ -4,7 +4,7 @@
 
 The frame of ``bench/bench_frame.py``'s case ``tracked-compact`` (a warmed ``Service(tracks=True,
 record="compact")``, the bench camera, 100 2-D boxes, ``process_frame_json(payload bytes)``), with each part wrapped
-in a ``perf_counter`` pair (~0.1 us each, counted in its part): the text read (``_scan_text``), the positions
+in a ``perf_counter`` pair (~0.1 us each, counted in its part): the text read (``scan_frame``), the positions
 (``Service._footprints``), the tracker's step (``ClassTracks.step``), its NIS check (``NisMonitor.observe``), the
 slide term (``ContactSlide.apply``), the motion fields (``object_motion``), the record's objects
 (``Service._compact_objects``), the UPER CPM (``Service._plain_cpm_uper``; inside it the message's motion codes,
@@ -74,7 +74,9 @@ def measure(objects: int, repeats: int) -> dict:
     got: dict[str, list] = {p: [] for p in PARTS}
     setup = next(iter(svc.cameras.values()))
     tracker = setup.tracker
-    _wrap(service_core, "_scan_text", got["scan"])
+    # (core's scan_frame: since 2026-11-29, wave 11 a, a frame's bytes go to it without _scan_text; before, _scan_text
+    # called it)
+    _wrap(service_core, "scan_frame", got["scan"])
     lean = hasattr(Service, "_lean_records")  # (wave 9 e: the tracked compact frame on the lean columns)
     _wrap(setup.processor if lean else svc, "boxes2d_columns" if lean else "_footprints", got["footprints"])
     _wrap(tracker.tracks, "step", got["tracker_step"])

@@ -68,6 +68,39 @@ def test_timestamp_its_counts_tai_milliseconds_since_2004():
         timestamp_its_ms(1e9)  # 2001
 
 
+def _timestamp_by_lookup(unix_s: float) -> int:
+    """TimestampIts by the leap-second look-up alone (the general branch of ``timestamp_its_ms``)."""
+    import bisect
+
+    from footprint_uq.service.messages import cpm
+
+    leap = bisect.bisect_right(cpm._LEAP_SECONDS_UNIX_S, unix_s)
+    return int(round((unix_s - cpm._UNIX_2004_S + leap) * 1000.0))
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.one_of(st.floats(1.0e9, 5.5e9), st.floats(1483228799.0, 1483228801.0), st.floats(3.9999e9, 4.0001e9),
+                 st.sampled_from([1483228800.0, 1483228799.9995, 1483228800.0005, 4.0e9, 1072915200.0005, T0,
+                                  1.7e9 + 1 / 30, 5470961706.1025, 5470961706.1035]),
+                 st.integers(1_100_000_000, 5_000_000_000)))
+def test_timestamp_its_shortcut_is_the_lookups(unix_s):
+    """The shortcut for times after the last leap second (the usual frame's) gives the look-up's milliseconds, to
+    the one: at and around the last leap second, the shortcut's end, half milliseconds, integers (not taken by the
+    shortcut), and the range's ends and errors as before."""
+    from footprint_uq.service.messages import cpm
+
+    try:
+        want = _timestamp_by_lookup(unix_s) if unix_s >= cpm._UNIX_2004_S else None
+    except OverflowError:
+        want = None
+    if want is None or want > cpm.TIMESTAMP_ITS_MAX:
+        with pytest.raises(ValueError, match="timestamp_s"):
+            timestamp_its_ms(unix_s)
+        return
+    got = timestamp_its_ms(unix_s)
+    assert type(got) is int and got == want
+
+
 # -- UPER: hand-derived bits ----------------------------------------------------------------------------
 def _bits(v: int, n: int) -> str:
     assert 0 <= v < 2 ** n

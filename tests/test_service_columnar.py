@@ -362,6 +362,39 @@ def test_the_columnar_path_is_the_one_taken(camera, monkeypatch):
     assert cpm and out.cpm_uper == b""
 
 
+@pytest.mark.parametrize("variant", ["one-class", "classes", "no-class", "some-without-class"])
+@pytest.mark.parametrize("tracks", [False, True])
+def test_scanned_frames_take_the_scanners_class_columns(camera, variant, tracks, monkeypatch):
+    """A frame the scanner reads whole (no bad detection: its ``ScannedFrame`` goes to the lean path as it is) is
+    written from the scanner's class columns -- the distinct classes and each detection's entry, no list of
+    classes made -- to the general writers' bytes, record and CPM, frame after frame, untracked and tracked (one
+    class, several, none, some detections without one); and the frames leave the shared rows (``_kept_rows``: the
+    uniform frame's class and status entries, the messages' rows) as they were."""
+    from footprint_uq.service import core
+
+    kw = dict(record="compact", tracks=tracks)
+    fast, ref = Service(camera, "basler1", **kw), Service(camera, "basler1", **kw)
+    ref._columnar = False
+    taken = []
+    real = Service._compact_text
+    monkeypatch.setattr(Service, "_compact_text", lambda *a: taken.append(a[3]) or real(*a))  # (a[3]: class_idx)
+    monkeypatch.setattr(core, "_class_index", lambda *a: pytest.fail("a list of classes indexed"))
+    for k in range(4):
+        frame = _frame(np.random.default_rng(40 + k), 30 if k < 3 else 300, k,
+                       variant="classes" if variant == "some-without-class" else variant)
+        for i, d in enumerate(frame["detections"]):
+            if d["u_min_px"] > d["u_max_px"]:  # (no reversed box: the scanner's frame goes to the lean path whole)
+                d["u_min_px"], d["u_max_px"] = d["u_max_px"], d["u_min_px"]
+            if variant == "some-without-class" and i % 4 == 1:
+                del d["class"]
+        a, b = fast.process_frame_json(orjson.dumps(frame)), ref.process_frame_json(orjson.dumps(frame))
+        assert a.type == b.type == "footprints" and not json.loads(a.data)["detection_errors"]
+        assert _record(a) == _record(b) and a.cpm_uper == b.cpm_uper
+    assert len(taken) == 4 and all(t is None for t in taken) == (variant in ("one-class", "no-class"))
+    for n, (zeros, rows) in core._KEPT_ROWS.items():
+        assert zeros.tolist() == [0] * n and rows.tolist() == list(range(min(n, 255)))
+
+
 _IDS = st.tuples(st.lists(st.integers(0, 70), unique=True, max_size=24),
                  st.sampled_from([None, None, None, None, "a", "7", 2 ** 40, -3, 5])).map(
     lambda c: c[0] if c[1] is None else c[0] + [c[1]])  # (mostly distinct ints: the path by array)
@@ -378,15 +411,19 @@ def test_message_ids_by_array_are_the_general_paths(frames, hold_s):
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(ids_mod, "_N", 64)
         _same_ids(ids_mod.MessageIdMap(hold_s), ids_mod.MessageIdMap(hold_s), frames)
+        _same_ids(ids_mod.MessageIdMap(hold_s), ids_mod.MessageIdMap(hold_s), frames, lazy=True)
 
 
-def _same_ids(fast, ref, frames) -> None:
+def _same_ids(fast, ref, frames, lazy: bool = False) -> None:
+    """``lazy``: the integer ids' frames given to ``fast`` as the array alone (``ids`` None: the list made only
+    where the array path declines them -- an id twice, or beyond the table)."""
     t = T0
     for ids, dt, pick in frames:
         t += dt
         rows = np.array([i for i in range(len(ids)) if (pick >> i) & 1], np.int64)
         ints = None if set(map(type, ids)) - {int} else np.array(ids, np.int64)
-        assert fast.assign(ids, rows, t, int_ids=ints).tolist() == ref.assign(ids, rows, t).tolist()
+        given = None if lazy and ints is not None else ids
+        assert fast.assign(given, rows, t, int_ids=ints).tolist() == ref.assign(ids, rows, t).tolist()
     fast._sync()
     assert fast._num == ref._num and fast._owner == ref._owner
     assert list(fast._seen.items()) == list(ref._seen.items())

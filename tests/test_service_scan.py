@@ -392,18 +392,32 @@ _CLASS_TEXTS = ["car", "cars", "ca", "", "truck", "bus", "pedestrian", "Fahrrad-
 
 
 @settings(max_examples=150, deadline=None)
-@given(st.lists(st.sampled_from(_CLASS_TEXTS), min_size=1, max_size=30), st.integers(0, 2 ** 32 - 1))
+@given(st.lists(st.sampled_from(_CLASS_TEXTS + [None]), min_size=1, max_size=30), st.integers(0, 2 ** 32 - 1))
 def test_class_texts_in_runs_and_mixed(names, seed):
     """The classes as orjson reads them, in runs of one text (compared with the previous detection's, as one
-    word) and mixed: texts that share a prefix, differ in their last byte, are empty, longer than a word, UTF-8;
-    the one-class shortcut only where every text is the first one's."""
+    word) and mixed: texts that share a prefix, differ in their last byte, are empty, longer than a word, UTF-8,
+    and detections without a class (None); the one-class shortcut only where every text is the first one's.  The
+    columns the lean frame takes instead of the list -- the distinct classes in order of first appearance and each
+    detection's entry among them (None: one class) -- are the service's ``_class_index`` of that list."""
+    from footprint_uq.service.core import _class_index
+
     dets = _dets(np.random.default_rng(seed), len(names))
     for d, name in zip(dets, names, strict=True):
-        d["class"] = name
+        if name is None:
+            del d["class"]
+        else:
+            d["class"] = name
     text = _frame(dets)
     s = scan_frame(text)
     assert s is not None
-    assert s.classes == [d["class"] for d in orjson.loads(text)["detections"]]
+    want = [d.get("class") for d in orjson.loads(text)["detections"]]
+    assert s.classes == want
+    index, distinct = _class_index(want)
+    assert s.distinct_classes == distinct
+    if s.class_index is None:
+        assert index is None and len(distinct) == 1
+    else:
+        assert s.class_index.dtype == np.int64 and s.class_index.tolist() == index.tolist() and len(distinct) > 1
 
 
 def test_the_smallest_detections_fit_the_rows():

@@ -151,6 +151,11 @@ class FrameOutput(NamedTuple):
     cpm_uper: bytes | None = None
 
 
+#: ``_made(T, (every field in order))``: the NamedTuple ``T`` without its Python-level ``__new__`` (~0.15 us less a
+#: call; the lean frame's outputs)
+_made = tuple.__new__
+
+
 def _parse_frame_text(text) -> object:
     """A frame's JSON text (bytes or str) parsed by orjson, as the MQTT path does (strict JSON: no NaN literals,
     integers within 64 bits); bytes that are not UTF-8 or text that is not JSON -> a frame error."""
@@ -165,6 +170,10 @@ def _parse_frame_text(text) -> object:
             except UnicodeDecodeError as u:
                 raise _FrameError(None, f"frame is not UTF-8 text: {u}") from None
         raise _FrameError(None, f"invalid JSON: {e}") from None
+
+
+#: a frame given as its JSON text (:meth:`Service.process_frame_json`)
+_TEXT_TYPES = (bytes, bytearray, memoryview, str)
 
 
 def _scan_text(text) -> ScannedFrame | None:
@@ -403,7 +412,8 @@ class Service:
         self.cameras: dict[str | None, CameraSetup] = self._camera_setups(
             camera, budget, registry, camera_id, station_id, allow_outside_image,
             dict(heading_offset_deg=heading_offset_deg, origin_lat_deg=origin_lat_deg, origin_lon_deg=origin_lon_deg))
-        self._single = camera is not None
+        #: the one camera's ``(id, CameraSetup)`` (None: a registry)
+        self._single = next(iter(self.cameras.items())) if camera is not None else None
         if self._lean and self.messages:  # (the lean frame's CPM: each camera's constants packed once)
             cls = self._cls
             for setup in self.cameras.values():
@@ -557,12 +567,17 @@ class Service:
         t0 = time.perf_counter()
         camera_id = frame_no = None
         try:
-            if isinstance(frame, (bytes, bytearray, memoryview, str, ScannedFrame)):
-                # the common layout, read by one compiled pass (frame_scan); a transport may have read it already
-                scanned = frame if isinstance(frame, ScannedFrame) else _scan_text(frame)
-                if scanned is not None:
-                    camera_id, frame_no = scanned.camera_id, scanned.frame
-                    return self._process_scanned(scanned, t0)
+            # the common layout, read by one compiled pass (frame_scan); a transport may have read it already
+            if type(frame) is bytes:
+                scanned = scan_frame(frame)
+            elif isinstance(frame, ScannedFrame):
+                scanned = frame
+            else:
+                scanned = _scan_text(frame) if isinstance(frame, _TEXT_TYPES) else None
+            if scanned is not None:
+                camera_id, frame_no = scanned.camera_id, scanned.frame
+                return self._process_scanned(scanned, t0)
+            if isinstance(frame, _TEXT_TYPES):
                 frame = _parse_frame_text(frame)
             if not isinstance(frame, dict):
                 raise _FrameError(None, f"frame is not a JSON object: {type(frame).__name__}")
@@ -583,8 +598,8 @@ class Service:
     def _setup(self, camera_id) -> CameraSetup:
         if camera_id is not None and not isinstance(camera_id, str):
             raise _FrameError("camera_id", f"camera_id is not a string: {camera_id!r}")
-        if self._single:
-            (key, setup), = self.cameras.items()
+        if self._single is not None:
+            key, setup = self._single
             if key is not None and camera_id != key:
                 raise _FrameError("camera_id", f"camera_id {camera_id!r} is not this service's camera {key!r}")
             return setup
@@ -616,11 +631,11 @@ class Service:
         """A frame read by :func:`.frame_scan.scan_frame` (its fields of the right types already): the same checks
         and record as :meth:`_process`."""
         setup = self._setup(scanned.camera_id)
-        n = len(scanned.object_ids)
+        n = len(scanned.int_ids)
         if n > self.max_frame_detections:
             raise _FrameError("detections", f"{n} detections in one frame, more than the frame limit of "
                               f"{self.max_frame_detections} (split the frame)")
-        if scanned.values_checked and n and self._takes_lean() and scanned.int_ids is not None:
+        if scanned.values_checked and n and self._takes_lean():
             # (nothing for the value checks: the columns go to the lean path as they are)
             ts = scanned.timestamp_s
             out = self._lean_frame(setup, scanned.camera_id, scanned.frame, ts,
@@ -748,13 +763,16 @@ class Service:
         frame_processor.FrameColumns`; tracked: its ``values`` rows 5-9 the motion's, ``motion`` the tracker's
         ``(track_id, ObjectMotion)``) by :meth:`_compact_text` and :meth:`_lean_cpm`, its head by :func:`_lean_head`.
         None: a value out of the CPM's range (the general writer names it)."""
-        ids, N = found.object_ids, len(found.object_ids)
+        N = len(int_ids)
         all_valid = cols.n_valid == N
         valid = None if all_valid else cols.centre_reason == 0
         status = None if all_valid else _compact_status_of(valid, cols.largest_index, centre_reason_texts(
             cols.centre_reason, cols.centre_bad_corner, cols.n_corners))
         tid = None if motion is None else np.asarray(motion[0], dtype=np.int64)
-        co = self._compact_text(setup, ids, int_ids, found.classes, ts, cols.values, valid, all_valid, status, tid)
+        # (the classes as _class_index gives them: the scanner's own columns, no list of classes made)
+        class_idx, distinct = (found.class_index, found.distinct_classes) if type(found) is ScannedFrame else \
+            _class_index(found.classes)
+        co = self._compact_text(setup, int_ids, class_idx, distinct, ts, cols.values, valid, all_valid, status, tid)
         t2 = time.perf_counter()
         tail = b""
         cpm_uper = None
@@ -771,9 +789,11 @@ class Service:
         # (orjson's text of the rounded floats: one decimal, as "%.1f" writes them below 1e15; the total's text read
         # back is round(total, 1): tests/test_service_lean_cpm.py)
         total_text = b"%.1f" % (1e6 * (t3 - t0))
-        data = b'%s,"objects":%s%s,"processing_us":{"footprints":%.1f,"records":%.1f,"messages":%.1f,"total":%s}}' % (
-            head, co.text, tail, 1e6 * (t1 - t0), 1e6 * (t2 - t1), 1e6 * (t3 - t2), total_text)
-        return FrameOutput(data, RECORD_FOOTPRINTS, camera_id, float(total_text), None, len(errors), cpm_uper)
+        # (joined: the objects' text copied once -- a "%s" of it copies it twice)
+        data = b"".join((head, b',"objects":', co.text, b'%s,"processing_us":{"footprints":%.1f,"records":%.1f,'
+                         b'"messages":%.1f,"total":%s}}' % (tail, 1e6 * (t1 - t0), 1e6 * (t2 - t1), 1e6 * (t3 - t2),
+                                                            total_text)))
+        return _made(FrameOutput, (data, RECORD_FOOTPRINTS, camera_id, float(total_text), None, len(errors), cpm_uper))
 
     def _lean_cpm(self, setup: CameraSetup, ref_ms: int, class_p, cols, co: _CompactObjects, motion,
                   N: int) -> bytes | None:
@@ -783,7 +803,7 @@ class Service:
         columns -- the same bytes.  None: a value out of range (the general writer names it)."""
         # (tracked: the message's objects' motion codes in one compiled call, as _plain_cpm_uper)
         mc = None if motion is None else motion_rows(motion[1], N, None if len(co.ok_idx) == N else co.ok_idx)
-        crow = _class_rows_of(co.classes)
+        crow = co.class_rows
         if setup.lean_cpm is not None:
             out = lean_cpm_uper(setup.lean_cpm, ref_ms, cols.values, co.ok_idx, class_p, co.msg_ids, cols.v2x_rows,
                                 co.class_idx, crow, mc)
@@ -908,29 +928,32 @@ class Service:
         all_valid = bool(valid.all())
         status = None if all_valid else _compact_status(est)
         tid = None if motion is None else np.asarray(motion[0], dtype=np.int64)
-        return self._compact_text(setup, ids, id_arr, classes, ts, values, valid, all_valid, status, tid)
-
-    def _compact_text(self, setup: CameraSetup, ids: list, id_arr: np.ndarray, classes: list, ts: float,
-                      values: np.ndarray, valid: np.ndarray | None, all_valid: bool, status: tuple | None,
-                      tid: np.ndarray | None) -> _CompactObjects:
-        """:meth:`_compact_objects` from the columns: ``values`` (5 or 10, N) the record's floats, ``valid`` (N,)
-        the centres found (``all_valid``: every one), ``status`` :func:`_compact_status`'s pair (None: all ok),
-        ``tid`` the track ids (None: untracked); the message ids assigned here (with ``messages``).  ``valid`` is
-        read only when not ``all_valid`` (None then)."""
-        N = len(ids)
         class_idx, distinct = _class_index(classes)
-        status_idx, status_texts = (_zeros(N), [_STATUS_ALL_OK_COMPACT]) if status is None else status
+        return self._compact_text(setup, id_arr, class_idx, distinct, ts, values, valid, all_valid, status, tid)
+
+    def _compact_text(self, setup: CameraSetup, id_arr: np.ndarray, class_idx: np.ndarray | None, distinct: list,
+                      ts: float, values: np.ndarray, valid: np.ndarray | None, all_valid: bool,
+                      status: tuple | None, tid: np.ndarray | None) -> _CompactObjects:
+        """:meth:`_compact_objects` from the columns: ``id_arr`` (N,) int64 the object ids, ``class_idx`` (N,) int64
+        each object's entry among the frame's ``distinct`` classes (None: one class; :func:`_class_index`),
+        ``values`` (5 or 10, N) the record's floats, ``valid`` (N,) the centres found (``all_valid``: every one),
+        ``status`` :func:`_compact_status`'s pair (None: all ok), ``tid`` the track ids (None: untracked); the
+        message ids assigned here (with ``messages``).  ``valid`` is read only when not ``all_valid`` (None then)."""
+        N = len(id_arr)
+        zeros, first_rows = _KEPT_ROWS.get(N) or _kept_rows(N)  # (the look-up inline: the usual frame's sizes)
+        if class_idx is None:
+            class_idx = zeros
+        status_idx, status_texts = (zeros, [_STATUS_ALL_OK_COMPACT]) if status is None else status
         ok_idx = msg_ids = mid = None
         if self.messages:  # (as _message_id_layout: the objects with a centre, at most 255)
-            ok_idx = np.arange(min(N, MAX_MESSAGE_OBJECTS)) if all_valid else \
-                np.flatnonzero(valid)[:MAX_MESSAGE_OBJECTS]
-            msg_ids = mid = setup.ids.assign(ids, ok_idx, ts, int_ids=id_arr)
+            ok_idx = first_rows if all_valid else np.flatnonzero(valid)[:MAX_MESSAGE_OBJECTS]
+            msg_ids = mid = setup.ids.assign(None, ok_idx, ts, int_ids=id_arr)
             if len(ok_idx) < N:
                 mid = np.full(N, -1, np.int64)
                 mid[ok_idx] = msg_ids
-        text = compact_objects_json(id_arr, class_idx, _class_texts(distinct), status_idx, status_texts, values, mid,
-                                    tid)
-        return _CompactObjects(text, ok_idx, msg_ids, class_idx, distinct)
+        class_texts, class_rows = _CLASS_CONSTS.get(tuple(distinct)) or _class_consts(distinct)
+        text = compact_objects_json(id_arr, class_idx, class_texts, status_idx, status_texts, values, mid, tid)
+        return _made(_CompactObjects, (text, ok_idx, msg_ids, class_idx, class_rows))
 
     def _plain_cpm_uper(self, setup: CameraSetup, est, class_p, co: _CompactObjects, ref_ms: int,
                         motion: ObjectMotion | None = None) -> bytes | None:
@@ -944,7 +967,7 @@ class Service:
         mc = None if motion is None else motion_rows(motion, n, None if len(co.ok_idx) == n else co.ok_idx)
         return plain_cpm_uper(setup.uper, ref_ms, setup.world_to_enu(est.centre_xy_world_m), co.ok_idx, class_p,
                               co.msg_ids, np.ascontiguousarray(est.v2x_codes.T, dtype=np.int32), _CPM_INDEX,
-                              co.class_idx, _class_rows_of(co.classes), cls.bits_value, cls.bits_width,
+                              co.class_idx, co.class_rows, cls.bits_value, cls.bits_width,
                               cdd=self.cpm_cdd, motion=mc)
 
     def _full_object_layout(self, setup: CameraSetup, t: Table, est, cxx, cxy, cyy) -> list:
@@ -1052,13 +1075,13 @@ class Service:
 class _CompactObjects(NamedTuple):
     """An untracked compact record's objects (:meth:`Service._compact_objects`): their JSON text, the rows in the
     messages and their message ids (None without messages), each row's class among the frame's distinct
-    ``classes``."""
+    classes and those classes' rows of the class tables (:func:`_class_rows_of`)."""
 
     text: object
     ok_idx: np.ndarray | None
     msg_ids: np.ndarray | None
     class_idx: np.ndarray
-    classes: list
+    class_rows: np.ndarray
 
 
 class _MessageColumns(NamedTuple):
@@ -1122,12 +1145,13 @@ def _compact_status_of(valid: np.ndarray, largest_index: np.ndarray, reasons) ->
     return idx, list(seen)
 
 
-def _class_index(classes: list) -> tuple[np.ndarray, list]:
-    """Each object's entry (int64) among the frame's distinct ``classes`` (str or None, in order of first
-    appearance) and those classes."""
+def _class_index(classes: list) -> tuple[np.ndarray | None, list]:
+    """Each object's entry (int64; None: one class for the frame, every entry 0) among the frame's distinct
+    ``classes`` (str or None, in order of first appearance) and those classes (as the scanner's
+    :attr:`.frame_scan.ScannedFrame.class_index` and ``distinct_classes``)."""
     N = len(classes)
     if classes.count(classes[0]) == N:  # one class for the frame (or none): one entry
-        return _zeros(N), [classes[0]]
+        return None, [classes[0]]
     first: dict = {}
     class_idx = np.fromiter((first.setdefault(c, len(first)) for c in classes), np.int64, N)
     return class_idx, list(first)
@@ -1176,24 +1200,36 @@ def _int_ids(ids: list) -> np.ndarray | None:
         return None
 
 
-def _zeros(n: int) -> np.ndarray:
-    """``n`` int64 zeros, read only by the compiled writers (the class and status entries of a uniform frame)."""
-    return np.zeros(n, np.int64)
+_KEPT_ROWS: dict = {}
 
 
-_CLASS_TEXTS: dict = {}
+def _kept_rows(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """``n`` int64 zeros and the rows ``0 .. min(n, 255) - 1`` (int64), made once per ``n`` (at most 1024 sizes kept)
+    and shared by the frames: read only, by the compiled writers and the message ids (the class and status
+    entries of a uniform frame; the messages' rows of a frame whose centres are all found).
+    ``tests/test_service_columnar.py`` checks that frames leave them as they are."""
+    kept = _KEPT_ROWS.get(n)
+    if kept is None:
+        if len(_KEPT_ROWS) >= 1024:
+            _KEPT_ROWS.clear()
+        kept = _KEPT_ROWS[n] = (np.zeros(n, np.int64), np.arange(min(n, MAX_MESSAGE_OBJECTS), dtype=np.int64))
+    return kept
 
 
-def _class_texts(distinct: list) -> list:
-    """The JSON texts of a frame's distinct classes, kept for the next frames (at most 256 lists)."""
+_CLASS_CONSTS: dict = {}
+
+
+def _class_consts(distinct: list) -> tuple[list, np.ndarray]:
+    """The JSON texts of a frame's distinct classes and their class-table rows (:func:`_class_rows_of`), kept for
+    the next frames (at most 256 lists)."""
     key = tuple(distinct)
-    texts = _CLASS_TEXTS.get(key)
-    if texts is None:
-        texts = [orjson.dumps(c) for c in distinct]
-        if len(_CLASS_TEXTS) >= 256:
-            _CLASS_TEXTS.clear()
-        _CLASS_TEXTS[key] = texts
-    return texts
+    kept = _CLASS_CONSTS.get(key)
+    if kept is None:
+        kept = ([orjson.dumps(c) for c in distinct], _class_rows_of(distinct))
+        if len(_CLASS_CONSTS) >= 256:
+            _CLASS_CONSTS.clear()
+        _CLASS_CONSTS[key] = kept
+    return kept
 
 
 def _compact_values(est, motion) -> np.ndarray | None:

@@ -149,6 +149,9 @@ _UNIX_2004_S = 1072915200.0
 #: TAI - UTC leap seconds inserted after 2004-01-01 (Unix time at which each took effect)
 _LEAP_SECONDS_UNIX_S = (1136073600.0, 1230768000.0, 1341100800.0, 1435708800.0, 1483228800.0)
 TIMESTAMP_ITS_MAX = 4398046511103
+_N_LEAP_SECONDS = len(_LEAP_SECONDS_UNIX_S)
+#: the end of :func:`timestamp_its_ms`' shortcut (2096-10-02 UTC; far below TimestampIts' range)
+_ITS_AFTER_LAST_LEAP_END_S = 4.0e9
 
 
 def timestamp_its_ms(unix_s: float) -> int:
@@ -157,6 +160,9 @@ def timestamp_its_ms(unix_s: float) -> int:
     Leap seconds inserted since 2004 (five, the last at the start of 2017) are added, as the
     CDD defines the count in TAI.
     """
+    if type(unix_s) is float and _LEAP_SECONDS_UNIX_S[-1] <= unix_s < _ITS_AFTER_LAST_LEAP_END_S:
+        # (the usual frame's time: after the last leap second known here; the look-up's count, the same bits)
+        return round((unix_s - _UNIX_2004_S + _N_LEAP_SECONDS) * 1000.0)
     if not (isinstance(unix_s, (int, float)) and math.isfinite(unix_s)) or unix_s < _UNIX_2004_S:
         raise InputError("timestamp_s", unix_s, "Unix time in seconds (UTC) on or after 2004-01-01 (TimestampIts)")
     leap = bisect.bisect_right(_LEAP_SECONDS_UNIX_S, unix_s)  # (the leap seconds at or before it: sorted)

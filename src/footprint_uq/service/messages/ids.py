@@ -61,13 +61,13 @@ class MessageIdMap:
         self._seen: dict = {}  # key -> frame time last seen
         self._now = -np.inf
         self._next_sweep = -np.inf
-        # integer ids 0..65535 (the usual detector's) also by array, for :meth:`assign`'s ``int_ids`` path (2 MB,
+        # integer ids 0..65535 (the usual detector's) also by array, for :meth:`assign`'s ``int_ids`` path (2.6 MB,
         # made on its first use): their numbers (-1: none), their latest frame time not yet written to ``_seen``
         # and which ids those are -- ``_pending[1:1 + _pending[0]]``, each once (``_dirty``: listed already) -- (the
         # writes are moved to ``_seen`` before anything reads or changes it: the same dicts, in the same order, as
-        # without the path)
-        self._small_num: np.ndarray | None = None
-        self._small_seen = self._mark = self._dirty = None
+        # without the path).  The int64 ones are rows of one array, ``_state`` (:func:`_lookup_small`'s argument)
+        self._state: np.ndarray | None = None
+        self._small_num = self._small_seen = self._mark = self._dirty = None
         self._pending = np.zeros(1, np.int64)
         self._frame_keys: list = []
 
@@ -115,17 +115,20 @@ class MessageIdMap:
             self._small_num[key] = num
         return num
 
-    def assign(self, ids: list, rows, t_s: float, int_ids: np.ndarray | None = None) -> np.ndarray:
+    def assign(self, ids: list | None, rows, t_s: float, int_ids: np.ndarray | None = None) -> np.ndarray:
         """Message ids (int64, one per entry of ``rows``: sorted, distinct indices) of the objects ``ids[rows]`` of a
         frame at time ``t_s`` (s).
 
-        ``int_ids``: the frame's ids as int64 (``ids`` all Python ints; the caller's promise): a frame of distinct ids
-        in 0..65535 is then assigned by array, its ids known before looked up in one step, only its new ids one by
-        one -- the same numbers and the same tables as without it (``tests/test_service_columnar.py``)."""
+        ``int_ids``: the frame's ids as int64 (``ids`` all Python ints; the caller's promise; ``ids`` None: they are
+        ``int_ids.tolist()``, made only if needed): a frame of distinct ids in 0..65535 is then assigned by array,
+        its ids known before looked up in one step, only its new ids one by one -- the same numbers and the same
+        tables as without it (``tests/test_service_columnar.py``)."""
         if int_ids is not None:
             nums = self._assign_small(int_ids if len(rows) == len(int_ids) else int_ids[rows], rows, t_s)
             if nums is not None:
                 return nums
+            if ids is None:
+                ids = int_ids.tolist()
         rows = np.asarray(rows, dtype=np.int64).tolist()
         sel = ids if len(rows) == len(ids) else [ids[i] for i in rows]  # (rows are sorted and unique)
         occ = None  # occurrence of each id in the frame (None: every id once, none null)
@@ -161,10 +164,11 @@ class MessageIdMap:
         m = len(sel)
         if m == 0:
             return None
-        if self._small_num is None:  # (the ids the general path assigned so far, too)
-            self._small_num, self._small_seen = np.full(_N, -1, np.int64), np.zeros(_N)
-            self._mark = np.zeros(_N, np.int64)
-            self._dirty, self._pending = np.zeros(_N, np.uint8), np.zeros(1 + _N, np.int64)
+        if self._state is None:  # (the ids the general path assigned so far, too)
+            self._state, self._small_seen = np.zeros((4, 1 + _N), np.int64), np.zeros(_N)
+            self._small_num, self._mark, self._dirty = self._state[0, :_N], self._state[1, :_N], self._state[2, :_N]
+            self._pending = self._state[3]
+            self._small_num[:] = -1
             for key, num in self._num.items():
                 if type(key) is int and 0 <= key < _N:
                     self._small_num[key] = num
@@ -174,8 +178,7 @@ class MessageIdMap:
         if self._now >= self._next_sweep:
             self._sweep()
         nums = np.empty(m, np.int64)
-        n_new = _lookup_small(sel, self._small_num, self._mark, self._small_seen, t_s, nums, self._dirty,
-                              self._pending)
+        n_new = _lookup_small(sel, self._state, self._small_seen, t_s, nums)
         if n_new < 0:  # ids out of 0..65535, or an id twice (its occurrences are other objects)
             return None
         if n_new:  # (their keys enter ``_seen`` in the frame's order, as the general path's update does)
@@ -196,16 +199,17 @@ class MessageIdMap:
 
 
 @njit(cache=True, nogil=True)
-def _lookup_small(sel, small_num, mark, small_seen, t_s, nums, dirty, pending):  # pragma: no cover - compiled
-    """:meth:`MessageIdMap._assign_small`'s look-up in one pass: -1 when an id of ``sel (m,)`` is outside 0..65535
-    or there twice (``mark (65536,)``: scratch); else each id's number into ``nums`` (-1: new) and the count of
-    the new ones -- with none new, their frame time ``t_s`` into ``small_seen`` too and each id not listed yet
-    (``dirty``) onto the pending list ``pending[1:1 + pending[0]]`` (with some new, the caller does both after
-    assigning them)."""
+def _lookup_small(sel, state, small_seen, t_s, nums):  # pragma: no cover - compiled
+    """:meth:`MessageIdMap._assign_small`'s look-up in one pass (``state`` (4, 65537) int64: the rows
+    ``small_num``, ``mark``, ``dirty``, ``pending``): -1 when an id of ``sel (m,)`` is outside 0..65535 or there
+    twice (``mark``: scratch); else each id's number into ``nums`` (-1: new) and the count of the new ones --
+    with none new, their frame time ``t_s`` into ``small_seen`` too and each id not listed yet (``dirty``) onto
+    the pending list ``pending[1:1 + pending[0]]`` (with some new, the caller does both after assigning them)."""
+    small_num, mark, dirty, pending = state[0], state[1], state[2], state[3]
     m = sel.shape[0]
     for j in range(m):
         k = sel[j]
-        if k < 0 or k >= small_num.shape[0]:
+        if k < 0 or k >= small_seen.shape[0]:
             return -1
         mark[k] = j
     n_new = 0
