@@ -190,7 +190,9 @@ def test_the_frame_in_one_compiled_call_is_the_four_calls_to_the_bit(seed):
     one, four = (TrackTable(cfg, rank=at.rank, shared_at=at) for _ in range(2))
     four._rows_call = lambda: table_module._ROWS_SHARED  # (the generic order of calls)
     rng = np.random.default_rng(seed)
-    for t, ids, xy in _frames(seed, 40):
+    for f, (t, ids, xy) in enumerate(_frames(seed, 40)):
+        if f == 20:  # (a burst of new int64 ids beyond the free rows: the one call stops, the table grows)
+            ids, xy = np.arange(5000, 5070), np.zeros((70, 2))
         n = xy.shape[0]
         xy = np.column_stack([xy[:, 0] * 0.2, 25.0 + xy[:, 1]])  # (in front of the camera, some out of its view)
         B = rng.normal(0.0, 0.05, (n, 2, at.rank))
