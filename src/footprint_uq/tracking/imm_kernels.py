@@ -432,9 +432,10 @@ def _starts_and_outputs(act, slots, X, P, Xm, Pm, Cm, mu, t_last, t_first, n_upd
     return next_id
 
 
-# (with numba's reference counting: the rows' call allocates its point kernel's scratch, and a callee compiles with
-# its caller's setting unless it sets its own -- frame_pass does)
-@njit(cache=True, nogil=True, error_model="numpy")
+# (no reference counting: with it, each of its ~60 array arguments is unboxed into a new meminfo, ~3 us a call; its
+# callees set their own -- frame_rows_shared keeps it for its point kernel's scratch; no fastmath: a callee that
+# does not set its own inherits it, and the rows' arithmetic stays that of the calls it replaces, to the bit)
+@njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
 def frame_step(ids, slots, xy_rows, cov_rows, B, subtract, t, stamp, n_free, next_id, S, o_tid, o_new, o_n, o_age,
                o_xy, o_cxy, o_v, o_cv, nis, id_keys, id_vals, id_shift, free_rows, z, R, act, old, pred, uv, B_pred,
                claimed, cam_f, has_dist, dist, cam_R, dom, dR, Lr, Lc, Lv, X, P, Xm, Pm, Cm, mu, t_last, t_first,

@@ -138,7 +138,9 @@ class TrackTable:
     :func:`~footprint_uq.tracking.kernels.frame_rows_shared` (the rows and ``B`` at the predicted positions, when
     ``shared_at`` is a :class:`SharedJacobianAt`; else :func:`~footprint_uq.tracking.kernels.frame_rows` and one
     evaluation of ``shared_at``) and :func:`~footprint_uq.tracking.imm_kernels.frame_pass` (the update, the
-    starts, the outputs).  Each track runs the
+    starts, the outputs).  With a :class:`SharedJacobianAt` (the consider mode, the compiled pass) the four are one
+    compiled call, :func:`~footprint_uq.tracking.imm_kernels.frame_step`, unless new ids need the Python claim (new
+    ids of a list; more new int64 ids than free rows: the call then stops after the rows).  Each track runs the
     interacting-multiple-model filter over :attr:`models` (a quiet and a manoeuvre constant-velocity mode; one
     mode if ``manoeuvre_accel_psd_m2ps3`` is None); its reported state is the modes' moment-matched combination,
     and the gate cuts a track only if the detection is beyond it for every mode.
@@ -327,9 +329,10 @@ class TrackTable:
         self._stamp += 1
         if n > self._old.shape[0]:  # (the step's working arrays, kept: nothing of them leaves the step)
             self._work(n)
-        out = TrackOutput(np.empty(n, np.int64), np.empty(n, bool), np.empty(n, np.int64), np.empty(n),
-                          np.empty((n, 2)), np.empty((n, 2, 2)), np.empty((n, 2)), np.empty((n, 2, 2)))
-        self._nis = nis = np.empty(n)
+        empty = np.empty
+        out = TrackOutput(empty(n, np.int64), empty(n, bool), empty(n, np.int64), empty(n), empty((n, 2)),
+                          empty((n, 2, 2)), empty((n, 2)), empty((n, 2, 2)))
+        self._nis = nis = empty(n)
         rows = self._rows_call()
         slots = self._slots if id64 is not None else np.fromiter(map(self._index.get, ids, repeat(-1)), np.int64, n)
         if rows == _ONE_CALL:  # (the whole step in one compiled call, frame_step, unless new ids need Python)
@@ -360,6 +363,10 @@ class TrackTable:
         n = xy_rows.shape[1]
         id64 = object_ids if (type(object_ids) is np.ndarray and object_ids.dtype == np.int64
                               and object_ids.ndim == 1 and self._int_ids) else None
+        if id64 is not None:
+            flags = id64.flags
+            if not (flags.c_contiguous and flags.writeable):
+                id64 = id64.copy()  # (one compiled signature: a strided or read-only array would compile another)
         ids = object_ids if isinstance(object_ids, list) or id64 is not None else list(object_ids)
         if len(ids) != n:
             raise InputError("object_ids", len(ids), f"{n} ids, one per object")
