@@ -361,18 +361,12 @@ class TrackTable:
         xy_rows = _rows(xy_m, 2) if type(xy_m) is np.ndarray and xy_m.ndim == 2 and xy_m.shape[1] == 2 else \
             np.ascontiguousarray(_c64(xy_m).reshape(-1, 2).T)  # (2, n): the kernel's layout, an estimate's as is
         n = xy_rows.shape[1]
-        id64 = object_ids if (type(object_ids) is np.ndarray and object_ids.dtype == np.int64
-                              and object_ids.ndim == 1 and self._int_ids) else None
-        if id64 is not None:
-            flags = id64.flags
-            if not (flags.c_contiguous and flags.writeable):
-                id64 = id64.copy()  # (one compiled signature: a strided or read-only array would compile another)
-        ids = object_ids if isinstance(object_ids, list) or id64 is not None else list(object_ids)
+        id64 = _int64_ids(object_ids) if self._int_ids else None
+        ids = object_ids if id64 is not None or isinstance(object_ids, list) else list(object_ids)
         if len(ids) != n:
             raise InputError("object_ids", len(ids), f"{n} ids, one per object")
         B = _c64(shared_m)
-        if B.shape != (n, 2, B.shape[2] if B.ndim == 3 else -1) or (self.config.calibration == "consider"
-                                                                    and B.shape[2] != self.rank):
+        if B.shape != (n, 2, self.rank) and (self._consider or B.ndim != 3 or B.shape[:2] != (n, 2)):
             raise InputError("shared_m", B.shape, f"shape ({n}, 2, {self.rank})")
         if (cov_frame_m2 is None) == (cov_m2 is None):
             raise InputError("cov_frame_m2/cov_m2", "both" if cov_m2 is not None else "neither",
@@ -569,7 +563,7 @@ class TrackTable:
             index[key] = s
 
 
-_F8 = np.dtype(np.float64)
+_F8, _I8 = np.dtype(np.float64), np.dtype(np.int64)
 _TRANSPOSE = {2: (1, 0), 3: (1, 2, 0)}
 
 
@@ -583,6 +577,15 @@ def _rows(a: np.ndarray, ndim: int) -> np.ndarray:
         if flags.c_contiguous and flags.writeable:
             return t
     return np.ascontiguousarray(t, dtype=np.float64)
+
+
+def _int64_ids(ids) -> np.ndarray | None:
+    """``ids`` if they are a 1-d int64 array (a copy if it is strided or read-only: one compiled signature), else
+    None."""
+    if type(ids) is not np.ndarray or ids.ndim != 1 or (ids.dtype is not _I8 and ids.dtype != _I8):
+        return None
+    flags = ids.flags
+    return ids if flags.c_contiguous and flags.writeable else ids.copy()
 
 
 def _c64(a) -> np.ndarray:
