@@ -175,12 +175,13 @@ _AT: list = []  # (one SharedJacobianAt for the module: its processor's set-up i
 @settings(max_examples=15, deadline=None)
 @given(seed=st.integers(0, 2 ** 31 - 1))
 def test_the_frame_in_one_compiled_call_is_the_four_calls_to_the_bit(seed):
-    """A table whose ``shared_at`` forms ``B`` in the rows' call runs a frame in one compiled call
+    """A table whose ``shared_at`` forms ``B`` in the rows' call runs a frame of int64 ids in one compiled call
     (``imm_kernels.frame_step``: the id look-up, the rows, the new ids' rows, the update); the same table made to
-    take the four calls (id look-up, ``frame_rows_shared``, ``claim_rows`` / the dictionary's claim, ``frame_pass``)
-    gives the same outputs, NIS, rows and ids to the bit over frames with births, deaths by timeout, repeated and
-    None ids, NaN centres, ids as lists and as int64 arrays, and bursts of new ids beyond the free rows and the id
-    table's room (the one call stops after the rows, the rest is claimed in Python)."""
+    take the four calls (``id_lookup``, ``frame_rows_shared``, ``claim_rows``, ``frame_pass``) gives the same
+    outputs, NIS, rows and ids to the bit over frames with births, deaths by timeout, repeated ids, NaN centres,
+    ids as int64 arrays and as lists (with None: both tables take the dictionary and the two calls), and a burst of
+    new ids beyond the free rows and the id table's room (the one call stops after the rows, the rest is claimed in
+    Python)."""
     from footprint_uq.tracking import table as table_module
 
     if not _AT:
@@ -188,7 +189,7 @@ def test_the_frame_in_one_compiled_call_is_the_four_calls_to_the_bit(seed):
     at = _AT[0]
     cfg = TrackerConfig(timeout_s=0.5)
     one, four = (TrackTable(cfg, rank=at.rank, shared_at=at) for _ in range(2))
-    four._rows_call = lambda: table_module._ROWS_SHARED  # (the generic order of calls)
+    four._rows_call = lambda int_ids: table_module._ROWS_SHARED  # (the generic order of calls)
     rng = np.random.default_rng(seed)
     for f, (t, ids, xy) in enumerate(_frames(seed, 40)):
         if f == 20:  # (a burst of new int64 ids beyond the free rows: the one call stops, the table grows)

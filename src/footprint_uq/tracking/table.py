@@ -38,8 +38,6 @@ __all__ = ["TrackerConfig", "TrackOutput", "TrackTable", "SharedJacobianAt", "CA
 _NO_B = np.zeros((0, 2, 0))
 #: the compiled call that forms a frame's rows (TrackTable._rows_call): frame_rows, frame_rows_shared, frame_step
 _ROWS, _ROWS_SHARED, _ONE_CALL = 0, 1, 2
-_NO_IDS = np.zeros(0, np.int64)  # (frame_step: the rows are the dictionary's)
-_NO_ID_TABLE = (np.zeros(1, np.int64), np.full(1, ID_EMPTY, np.int64), 63)  # (and it reads no id table)
 _INT64_MIN, _INT64_MAX = -2 ** 63, 2 ** 63 - 1
 #: how the calibration error enters the filter: "consider" (the split model, the only honest one), "white" (the
 #: whole per-frame covariance as white noise) and "ignore" (only the per-frame part) are kept to show what goes
@@ -333,12 +331,10 @@ class TrackTable:
         out = TrackOutput(empty(n, np.int64), empty(n, bool), empty(n, np.int64), empty(n), empty((n, 2)),
                           empty((n, 2, 2)), empty((n, 2)), empty((n, 2, 2)))
         self._nis = nis = empty(n)
-        rows = self._rows_call()
-        slots = self._slots if id64 is not None else np.fromiter(map(self._index.get, ids, repeat(-1)), np.int64, n)
-        if rows == _ONE_CALL:  # (the whole step in one compiled call, frame_step, unless new ids need Python)
-            k, n_unknown, m, next_id = frame_step(_NO_IDS if id64 is None else id64, slots, xy_rows, cov_rows, B,
-                                                  subtract, t, self._stamp, self._n_free, self._next_id,
-                                                  self._frame_scratch(), *out, nis,
+        rows = self._rows_call(id64 is not None)
+        if rows == _ONE_CALL:  # (the whole step in one compiled call, frame_step, if there is room for new ids)
+            k, n_unknown, m, next_id = frame_step(id64, xy_rows, cov_rows, B, subtract, t, self._stamp, self._n_free,
+                                                  self._next_id, self._frame_scratch(), *out, nis,
                                                   *(self._step_args or self._one_call_args()))
             if m >= 0:  # (the new ids claimed and the update passed)
                 self._next_id = next_id
@@ -346,10 +342,13 @@ class TrackTable:
                 if t < self._oldest_s:  # (every row started or updated now has t_last = t)
                     self._oldest_s = t
                 return out
-            Bp = self._Bp  # (new ids of a list, or no room for them: frame_step stopped after the rows)
+            work, Bp = (self._slots[:n], self._act[:n], self._z[:n], self._R[:n]), self._Bp  # (stopped after the rows)
         else:
-            k, n_unknown, Bp = self._frame_rows(rows, t, id64, slots[:n], xy_rows, cov_rows, B, subtract)
-        self._update(t, id64, ids, slots[:n], B, k, n_unknown, Bp, out, nis)
+            work = (np.empty(n, np.int64) if id64 is not None else np.fromiter(map(self._index.get, ids, repeat(-1)),
+                                                                                np.int64, n),
+                    empty(n, np.int8), empty((n, 2)), empty((n, 2, 2)))  # (slots, act, z, R)
+            k, n_unknown, Bp = self._frame_rows(rows, t, id64, work, xy_rows, cov_rows, B, subtract)
+        self._update(t, id64, ids, work, B, k, n_unknown, Bp, out, nis)
         return out
 
     def _frame_inputs(self, time_s, object_ids, xy_m, cov_frame_m2, shared_m, cov_m2) -> tuple:
@@ -379,34 +378,34 @@ class TrackTable:
             raise InputError("cov_m2" if subtract else "cov_frame_m2", cov.shape, f"shape ({n}, 2, 2)")
         return t, id64, ids, xy_rows, _rows(cov, 3), B, subtract
 
-    def _rows_call(self) -> int:
-        """Which compiled call forms this frame's rows: :data:`_ONE_CALL` (:func:`~footprint_uq.tracking.
-        imm_kernels.frame_step`, the whole step, for int64 ids; else ``frame_rows_shared``), :data:`_ROWS_SHARED`
+    def _rows_call(self, int_ids: bool) -> int:
+        """Which compiled call forms this frame's rows: :data:`_ONE_CALL` (:func:`~footprint_uq.tracking.imm_kernels.
+        frame_step`, the whole step; ids as an int64 array, the consider mode, the compiled pass), :data:`_ROWS_SHARED`
         (:func:`~footprint_uq.tracking.kernels.frame_rows_shared`: ``B`` at the predicted positions in the same call)
         or :data:`_ROWS` (:func:`~footprint_uq.tracking.kernels.frame_rows` and one call of ``shared_at``).  A call
         that forms ``B`` is taken if ``B``'s kernels were ready at the table's first frame (it compiles, or loads
         from the cache, with the table's other kernels), later only once it is compiled in this process (see
-        ``__init__``)."""
+        ``__init__``).  (A list of ids takes the two calls: its new ids are claimed in Python between them.)"""
         ready = self._at is not None and self._at.kernel_inputs() is not None
         if self._fused is None:  # (decided at the first frame: see __init__)
             self._fused = ready
         if not ready:
             return _ROWS
-        if self._consider and not self._reference_pass and (self._fused or frame_step.signatures):
+        if int_ids and self._consider and not self._reference_pass and (self._fused or frame_step.signatures):
             return _ONE_CALL
         return _ROWS_SHARED if (self._fused or frame_rows_shared.signatures) else _ROWS
 
-    def _frame_rows(self, rows: int, t: float, id64, slots, xy_rows, cov_rows, B, subtract) -> tuple:
-        """The rows of the ids ``id64`` (an int64 array: by the compiled id table into ``slots (n,)``; None:
-        ``slots`` holds the dictionary's) and the rows' compiled call (:meth:`_rows_call`); returns ``(k,
-        n_unknown, B_pred)`` (what :func:`~footprint_uq.tracking.kernels.frame_rows` returns; ``B`` at the k
-        predicted positions, ``(0, 2, 0)`` if none)."""
-        n = xy_rows.shape[1]
+    def _frame_rows(self, rows: int, t: float, id64, work: tuple, xy_rows, cov_rows, B, subtract) -> tuple:
+        """The rows of the ids ``id64`` (an int64 array: by the compiled id table into ``work``'s slots; None: the
+        slots are the dictionary's already) and the rows' compiled call (:meth:`_rows_call`) into ``work = (slots,
+        act, z, R)`` (n rows each); returns ``(k, n_unknown, B_pred)`` (what :func:`~footprint_uq.tracking.kernels.
+        frame_rows` returns; ``B`` at the k predicted positions, ``(0, 2, 0)`` if none)."""
+        slots, act, z, R = work
         if id64 is not None:
             id_lookup(*self._ids, id64, slots)
         pred = self._pred
-        args = (slots, xy_rows, cov_rows, B, subtract, self._z[:n], self._R[:n], t, self._t_last, self._seen,
-                self._stamp, self._x, self._act[:n], self._old, pred)
+        args = (slots, xy_rows, cov_rows, B, subtract, z, R, t, self._t_last, self._seen, self._stamp, self._x, act,
+                self._old, pred)
         if rows != _ROWS:
             Bp = self._Bp  # (rows k and on are not read: frame_pass reads Bp[:k])
             k, n_unknown = frame_rows_shared(*args, *self._at.kernel_inputs(), self._uv, Bp, self._frame_scratch())
@@ -415,11 +414,14 @@ class TrackTable:
         Bp = _c64(self.shared_at(pred[:k])) if self.shared_at is not None and self.rank and k else _NO_B
         return k, n_unknown, Bp
 
-    def _update(self, t: float, id64, ids, slots, B, k: int, n_unknown: int, Bp, out: TrackOutput, nis) -> None:
-        """The rest of a frame after its rows: the unknown ids' rows (:meth:`_claim_int`, :meth:`_claim`) and the
-        compiled update, starts and outputs into ``out`` and ``nis``."""
+    def _update(self, t: float, id64, ids, work: tuple, B, k: int, n_unknown: int, Bp, out: TrackOutput,
+                nis) -> None:
+        """The rest of a frame after its rows (``work = (slots, act, z, R)``, :meth:`_frame_rows`): the unknown ids'
+        rows (:meth:`_claim_int`, :meth:`_claim`) and the compiled update, starts and outputs into ``out`` and
+        ``nis``."""
         n = B.shape[0]
-        act, old, xy, R = self._act[:n], self._old, self._z[:n], self._R[:n]
+        slots, act, xy, R = work
+        old = self._old
         if n_unknown and id64 is not None:
             self._claim_int(id64, slots, act, n_unknown)
         elif n_unknown:
@@ -438,7 +440,7 @@ class TrackTable:
         the free rows, the working arrays, the camera's and ``B``'s kernel inputs, the tracks' storage, the filter's
         constants and scratch; kept in ``_step_args`` until one of them is replaced (:meth:`_grow`, :meth:`_work`,
         :meth:`_id_table`)."""
-        self._step_args = (*(self._ids or _NO_ID_TABLE), self._free, self._z, self._R, self._act, self._old, self._pred,
+        self._step_args = (*self._ids, self._free, self._slots, self._z, self._R, self._act, self._old, self._pred,
                            self._uv, self._Bp, self._claimed, *self._at.kernel_inputs(), self._x, self._P, self._xm,
                            self._Pm, self._Cm, self._mu, self._t_last, self._t_first, self._n, self._tid, self._seen,
                            self._qs, self._rates, self.mu0, self._var_v0, self.config.gate_chi2, *self._scratch)
