@@ -234,3 +234,25 @@ def test_an_int64_frame_with_room_is_one_compiled_call(monkeypatch):
     out = table.step(0.2, np.arange(100, 100 + n), np.zeros((n, 2)) + [0.0, 20.0], shared_m=np.zeros((n, 2, at.rank)),
                      cov_m2=np.repeat(np.eye(2)[None], n, 0))
     assert out.new_track.all() and len(table) == 4 + n and table._cap == 128
+
+
+def test_strided_and_read_only_int64_ids_take_the_same_compiled_call():
+    """int64 ids in a strided view or a read-only array (a scanner's buffer) are copied, not compiled for: the one
+    call keeps its one signature, and the tracks are those of the same ids in a plain array."""
+    from footprint_uq.tracking.imm_kernels import frame_step
+
+    if not _AT:
+        _AT.append(_at())
+    at = _AT[0]
+    plain, other = (TrackTable(TrackerConfig(), rank=at.rank, shared_at=at) for _ in range(2))
+    B = np.zeros((3, 2, at.rank))
+    cov = np.repeat(np.eye(2)[None] * 0.04, 3, 0)
+    xy = np.array([[0.0, 20.0], [2.0, 25.0], [-3.0, 30.0]])
+    read_only = np.array([4, 5, 6])
+    read_only.flags.writeable = False
+    for k, ids in enumerate((np.array([4, 0, 5, 0, 6])[::2], read_only)):
+        got = other.step(0.1 * k, ids, xy + 0.1 * k, shared_m=B, cov_m2=cov)
+        want = plain.step(0.1 * k, np.array([4, 5, 6]), xy + 0.1 * k, shared_m=B, cov_m2=cov)
+        for name, g, w in zip(got._fields, got, want, strict=True):
+            assert np.array_equal(g, w, equal_nan=g.dtype.kind == "f"), (k, name)
+    assert got.n_updates.tolist() == [2, 2, 2] and len(frame_step.signatures) == 1

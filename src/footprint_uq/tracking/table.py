@@ -360,7 +360,7 @@ class TrackTable:
         xy_rows = _rows(xy_m, 2) if type(xy_m) is np.ndarray and xy_m.ndim == 2 and xy_m.shape[1] == 2 else \
             np.ascontiguousarray(_c64(xy_m).reshape(-1, 2).T)  # (2, n): the kernel's layout, an estimate's as is
         n = xy_rows.shape[1]
-        id64 = _int64_ids(object_ids) if self._int_ids else None
+        id64 = _int64_ids(object_ids) if self._int_ids and type(object_ids) is np.ndarray else None
         ids = object_ids if id64 is not None or isinstance(object_ids, list) else list(object_ids)
         if len(ids) != n:
             raise InputError("object_ids", len(ids), f"{n} ids, one per object")
@@ -581,10 +581,10 @@ def _rows(a: np.ndarray, ndim: int) -> np.ndarray:
     return np.ascontiguousarray(t, dtype=np.float64)
 
 
-def _int64_ids(ids) -> np.ndarray | None:
-    """``ids`` if they are a 1-d int64 array (a copy if it is strided or read-only: one compiled signature), else
-    None."""
-    if type(ids) is not np.ndarray or ids.ndim != 1 or (ids.dtype is not _I8 and ids.dtype != _I8):
+def _int64_ids(ids: np.ndarray) -> np.ndarray | None:
+    """The array ``ids`` if it is a 1-d int64 array (a copy if it is strided or read-only: one compiled signature),
+    else None."""
+    if ids.ndim != 1 or (ids.dtype is not _I8 and ids.dtype != _I8):
         return None
     flags = ids.flags
     return ids if flags.c_contiguous and flags.writeable else ids.copy()
