@@ -179,9 +179,9 @@ def test_the_frame_in_one_compiled_call_is_the_four_calls_to_the_bit(seed):
     (``imm_kernels.frame_step``: the id look-up, the rows, the new ids' rows, the update); the same table made to
     take the four calls (``id_lookup``, ``frame_rows_shared``, ``claim_rows``, ``frame_pass``) gives the same
     outputs, NIS, rows and ids to the bit over frames with births, deaths by timeout, repeated ids, NaN centres,
-    ids as int64 arrays and as lists (with None: both tables take the dictionary and the two calls), and a burst of
-    new ids beyond the free rows and the id table's room (the one call stops after the rows, the rest is claimed in
-    Python)."""
+    ids as int64 arrays and as lists (with None; a list with new ids takes the dictionary and two calls, one
+    without takes the one call with the dictionary's rows), and a burst of new ids beyond the free rows and the id
+    table's room (the one call stops after the rows, the rest is claimed in Python)."""
     from footprint_uq.tracking import table as table_module
 
     if not _AT:
@@ -213,7 +213,8 @@ def test_the_frame_in_one_compiled_call_is_the_four_calls_to_the_bit(seed):
 
 def test_an_int64_frame_with_room_is_one_compiled_call(monkeypatch):
     """With free rows and room in the id table, a frame of int64 ids (new ones among them) calls nothing but
-    ``frame_step``; one with more new ids than free rows grows the table and claims them after the call."""
+    ``frame_step``, nor does a list of ids that all have rows (None among them); a list with a new id takes the
+    two calls; a frame with more new ids than free rows grows the table and claims them after the call."""
     from footprint_uq.tracking import table as table_module
 
     if not _AT:
@@ -229,11 +230,18 @@ def test_an_int64_frame_with_room_is_one_compiled_call(monkeypatch):
         monkeypatch.setattr(table_module, name, lambda *a, _n=name: calls.append(_n))
     out = table.step(0.1, np.array([4, 7, 6]), xy + 0.1, shared_m=B, cov_m2=cov)
     assert calls == [] and out.new_track.tolist() == [False, True, False] and out.n_updates.tolist() == [2, 1, 2]
+    out = table.step(0.2, [4, None, 6], xy + 0.2, shared_m=B, cov_m2=cov)
+    assert calls == [] and out.n_updates.tolist() == [3, 0, 3] and out.track_id[1] == -1
+    monkeypatch.undo()
+    calls_pass = []
+    monkeypatch.setattr(table_module, "frame_pass", lambda *a: calls_pass.append(1) or 9)
+    table.step(0.3, [4, 8, 6], xy + 0.3, shared_m=B, cov_m2=cov)  # (a new id in a list: claimed in Python)
+    assert calls_pass == [1]
     monkeypatch.undo()
     n = table._n_free + 1
-    out = table.step(0.2, np.arange(100, 100 + n), np.zeros((n, 2)) + [0.0, 20.0], shared_m=np.zeros((n, 2, at.rank)),
+    out = table.step(0.4, np.arange(100, 100 + n), np.zeros((n, 2)) + [0.0, 20.0], shared_m=np.zeros((n, 2, at.rank)),
                      cov_m2=np.repeat(np.eye(2)[None], n, 0))
-    assert out.new_track.all() and len(table) == 4 + n and table._cap == 128
+    assert out.new_track.all() and len(table) == 5 + n and table._cap == 128
 
 
 def test_strided_and_read_only_int64_ids_take_the_same_compiled_call():

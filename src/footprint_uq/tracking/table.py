@@ -5,7 +5,6 @@ from __future__ import annotations
 import math
 import threading
 from dataclasses import dataclass
-from itertools import repeat
 from typing import NamedTuple
 
 import numpy as np
@@ -38,6 +37,19 @@ __all__ = ["TrackerConfig", "TrackOutput", "TrackTable", "SharedJacobianAt", "CA
 _NO_B = np.zeros((0, 2, 0))
 #: the compiled call that forms a frame's rows (TrackTable._rows_call): frame_rows, frame_rows_shared, frame_step
 _ROWS, _ROWS_SHARED, _ONE_CALL = 0, 1, 2
+_NO_IDS = np.zeros(0, np.int64)  # (frame_step: the rows are the dictionary's)
+_NO_ID_TABLE = (np.zeros(1, np.int64), np.full(1, ID_EMPTY, np.int64), 63)  # (and it reads no id table)
+
+
+class _Index(dict):
+    """The table's dictionary ``object_id -> row``, counting the ids it did not find (``misses``: reset by the
+    caller, one Python call per miss, none per hit): a list frame without new ids takes the one compiled call."""
+
+    __slots__ = ("misses",)
+
+    def __missing__(self, key) -> int:
+        self.misses += 1
+        return -1
 _INT64_MIN, _INT64_MAX = -2 ** 63, 2 ** 63 - 1
 #: how the calibration error enters the filter: "consider" (the split model, the only honest one), "white" (the
 #: whole per-frame covariance as white noise) and "ignore" (only the per-frame part) are kept to show what goes
@@ -193,7 +205,8 @@ class TrackTable:
         self.mu0 = (1.0 / self._rates) / (1.0 / self._rates).sum()
         self.initiator = Initiator(self.config.sigma_v0_mps)
         self._var_v0 = self.initiator.sigma_v0_mps ** 2
-        self._index: dict = {None: -2}  # object_id -> slot (-2: never tracked)
+        self._index = _Index({None: -2})  # object_id -> slot (-2: never tracked)
+        self._index.misses = 0
         #: the compiled form of ``_index`` for frames whose ids come as an int64 array (:func:`~footprint_uq.tracking.
         #: kernels.id_lookup`: keys, values, shift; None until the first such frame: a list of ids takes the
         #: dictionary, which is as fast as converting it), possible while every id the table has seen is an integer
@@ -331,10 +344,17 @@ class TrackTable:
         out = TrackOutput(empty(n, np.int64), empty(n, bool), empty(n, np.int64), empty(n), empty((n, 2)),
                           empty((n, 2, 2)), empty((n, 2)), empty((n, 2, 2)))
         self._nis = nis = empty(n)
-        rows = self._rows_call(id64 is not None)
+        slots = None
+        if id64 is None:  # (a list: the dictionary's rows, its misses -- the new ids -- counted)
+            index = self._index
+            index.misses = 0
+            slots = np.fromiter(map(index.__getitem__, ids), np.int64, n)
+        rows = self._rows_call(id64 is not None or not self._index.misses)
         if rows == _ONE_CALL:  # (the whole step in one compiled call, frame_step, if there is room for new ids)
-            k, n_unknown, m, next_id = frame_step(id64, xy_rows, cov_rows, B, subtract, t, self._stamp, self._n_free,
-                                                  self._next_id, self._frame_scratch(), *out, nis,
+            k, n_unknown, m, next_id = frame_step(_NO_IDS if id64 is None else id64,
+                                                  self._slots if slots is None else slots, xy_rows, cov_rows, B,
+                                                  subtract, t, self._stamp, self._n_free, self._next_id,
+                                                  self._frame_scratch(), *out, nis,
                                                   *(self._step_args or self._one_call_args()))
             if m >= 0:  # (the new ids claimed and the update passed)
                 self._next_id = next_id
@@ -344,9 +364,8 @@ class TrackTable:
                 return out
             work, Bp = (self._slots[:n], self._act[:n], self._z[:n], self._R[:n]), self._Bp  # (stopped after the rows)
         else:
-            work = (np.empty(n, np.int64) if id64 is not None else np.fromiter(map(self._index.get, ids, repeat(-1)),
-                                                                                np.int64, n),
-                    empty(n, np.int8), empty((n, 2)), empty((n, 2, 2)))  # (slots, act, z, R)
+            work = (np.empty(n, np.int64) if slots is None else slots, empty(n, np.int8), empty((n, 2)),
+                    empty((n, 2, 2)))  # (slots, act, z, R)
             k, n_unknown, Bp = self._frame_rows(rows, t, id64, work, xy_rows, cov_rows, B, subtract)
         self._update(t, id64, ids, work, B, k, n_unknown, Bp, out, nis)
         return out
@@ -378,20 +397,21 @@ class TrackTable:
             raise InputError("cov_m2" if subtract else "cov_frame_m2", cov.shape, f"shape ({n}, 2, 2)")
         return t, id64, ids, xy_rows, _rows(cov, 3), B, subtract
 
-    def _rows_call(self, int_ids: bool) -> int:
+    def _rows_call(self, one_call: bool) -> int:
         """Which compiled call forms this frame's rows: :data:`_ONE_CALL` (:func:`~footprint_uq.tracking.imm_kernels.
-        frame_step`, the whole step; ids as an int64 array, the consider mode, the compiled pass), :data:`_ROWS_SHARED`
+        frame_step`, the whole step, if ``one_call`` -- ids as an int64 array, or a list whose ids all have rows --,
+        the consider mode and the compiled pass), :data:`_ROWS_SHARED`
         (:func:`~footprint_uq.tracking.kernels.frame_rows_shared`: ``B`` at the predicted positions in the same call)
         or :data:`_ROWS` (:func:`~footprint_uq.tracking.kernels.frame_rows` and one call of ``shared_at``).  A call
         that forms ``B`` is taken if ``B``'s kernels were ready at the table's first frame (it compiles, or loads
         from the cache, with the table's other kernels), later only once it is compiled in this process (see
-        ``__init__``).  (A list of ids takes the two calls: its new ids are claimed in Python between them.)"""
+        ``__init__``).  (A list of ids with new ones takes two calls: they are claimed in Python between them.)"""
         ready = self._at is not None and self._at.kernel_inputs() is not None
         if self._fused is None:  # (decided at the first frame: see __init__)
             self._fused = ready
         if not ready:
             return _ROWS
-        if int_ids and self._consider and not self._reference_pass and (self._fused or frame_step.signatures):
+        if one_call and self._consider and not self._reference_pass and (self._fused or frame_step.signatures):
             return _ONE_CALL
         return _ROWS_SHARED if (self._fused or frame_rows_shared.signatures) else _ROWS
 
@@ -440,7 +460,7 @@ class TrackTable:
         the free rows, the working arrays, the camera's and ``B``'s kernel inputs, the tracks' storage, the filter's
         constants and scratch; kept in ``_step_args`` until one of them is replaced (:meth:`_grow`, :meth:`_work`,
         :meth:`_id_table`)."""
-        self._step_args = (*self._ids, self._free, self._slots, self._z, self._R, self._act, self._old, self._pred,
+        self._step_args = (*(self._ids or _NO_ID_TABLE), self._free, self._z, self._R, self._act, self._old, self._pred,
                            self._uv, self._Bp, self._claimed, *self._at.kernel_inputs(), self._x, self._P, self._xm,
                            self._Pm, self._Cm, self._mu, self._t_last, self._t_first, self._n, self._tid, self._seen,
                            self._qs, self._rates, self.mu0, self._var_v0, self.config.gate_chi2, *self._scratch)
