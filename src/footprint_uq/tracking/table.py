@@ -538,8 +538,8 @@ class TrackTable:
             if act[i] == ROW_START:
                 if not self._n_free:
                     self._grow(2 * self._cap)
-                self._n_free -= 1
-                slots[i] = s = int(self._free[self._n_free])
+                self._n_free = n_free = self._n_free - 1
+                slots[i] = s = int(self._free[n_free])
                 self._keys[s] = key
                 self._index[key] = s
                 new_keys.append(key)
