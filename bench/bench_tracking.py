@@ -21,8 +21,8 @@ run, interleaved frame by frame (medians over ``frames`` frames after a warm-up 
 * ``total`` -- ``positions_split + track``: positions and motion of one frame; ``ratio`` = ``total / positions``
   (issue 31's target: <= 2);
 * ``step_python`` -- the Python of :meth:`TrackTable.step` alone (checks, id lookup, new ids' rows, allocations):
-  ``step`` minus its compiled calls (``frame_step``: the whole frame in one call; where new ids of a list need the
-  Python claim, it stops after the rows and ``frame_pass`` follows), timed around them (issue 31's target: < 20
+  ``step`` minus its compiled calls (``frame_step``: the whole frame in one call; a list with new ids:
+  ``frame_rows_shared`` and ``frame_pass`` around the Python claim), timed around them (issue 31's target: < 20
   us); ``_int64``: the same with the ids as an int64 array (before 2026-11-29, wave 11 c: ``frame_rows_shared``,
   the rows and ``B`` at the predicted positions, then ``frame_pass``; before 2026-11-28 night, wave 9: three calls,
   ``frame_rows``, ``shared_at``, ``frame_pass``).
@@ -99,8 +99,9 @@ def step_python(n_objects: int = 100, frames: int = 300) -> dict:
     """Medians (us) of :meth:`TrackTable.step`'s own Python per frame and of its compiled calls, on the frames of
     :func:`run`, the ids as a list (``step``, ``step_python``) and as an int64 array (``step_int64``,
     ``step_python_int64``, a second table on the same frames): the module's ``frame_step`` / ``frame_rows_shared``
-    / ``frame_pass`` wrapped by timers (since 2026-11-29, wave 11 c, a frame is one call of ``frame_step`` unless
-    new ids of a list, or more of them than free rows, need the Python claim and ``frame_pass`` after it)."""
+    / ``frame_pass`` wrapped by timers (since 2026-11-29, wave 11 c, a frame is one call of ``frame_step``, unless
+    a list has new ids -- ``frame_rows_shared``, the claim in Python, ``frame_pass`` -- or there are more new ids
+    than free rows -- ``frame_step`` stops after the rows, ``frame_pass`` follows the claim)."""
     cam = PanTiltCamera(**CAMERA)
     split = FrameProcessor(cam, BUDGET, joint_cov=False, linearity=False, v2x_policy="linear", shared_jacobian=True)
     names = ("frame_step", "frame_rows_shared", "frame_pass")
