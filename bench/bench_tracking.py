@@ -21,9 +21,11 @@ run, interleaved frame by frame (medians over ``frames`` frames after a warm-up 
 * ``total`` -- ``positions_split + track``: positions and motion of one frame; ``ratio`` = ``total / positions``
   (issue 31's target: <= 2);
 * ``step_python`` -- the Python of :meth:`TrackTable.step` alone (checks, id lookup, new ids' rows, allocations):
-  ``step`` minus its two compiled calls (``frame_rows_shared``: the rows and ``B`` at the predicted positions;
-  ``frame_pass``), timed around them (issue 31's target: < 20 us); ``frame_rows_shared`` and ``frame_pass`` in
-  the same frames (before 2026-11-28 night, wave 9: three calls, ``frame_rows``, ``shared_at``, ``frame_pass``).
+  ``step`` minus its compiled calls (``frame_step``: the whole frame in one call; a list with new ids:
+  ``frame_rows_shared`` and ``frame_pass`` around the Python claim), timed around them (issue 31's target: < 20
+  us); ``_int64``: the same with the ids as an int64 array (before 2026-11-29, wave 11 c: ``frame_rows_shared``,
+  the rows and ``B`` at the predicted positions, then ``frame_pass``; before 2026-11-28 night, wave 9: three calls,
+  ``frame_rows``, ``shared_at``, ``frame_pass``).
 
 :func:`monitor_cost` (a separate pass over the same frames, so as not to disturb the ratio's caches): ``monitor``,
 the on-line NIS check (:class:`~footprint_uq.tracking.consistency.NisMonitor`, as ``serve --tracks`` runs it by
@@ -94,34 +96,43 @@ class _Timed:
 
 
 def step_python(n_objects: int = 100, frames: int = 300) -> dict:
-    """Medians (us) of :meth:`TrackTable.step`'s own Python per frame and of its three compiled calls, on the frames
-    of :func:`run`: the module's ``frame_rows`` / ``frame_pass`` and the table's ``shared_at`` wrapped by timers."""
+    """Medians (us) of :meth:`TrackTable.step`'s own Python per frame and of its compiled calls, on the frames of
+    :func:`run`, the ids as a list (``step``, ``step_python``) and as an int64 array (``step_int64``,
+    ``step_python_int64``, a second table on the same frames): the module's ``frame_step`` / ``frame_rows_shared``
+    / ``frame_pass`` wrapped by timers (since 2026-11-29, wave 11 c, a frame is one call of ``frame_step``, unless
+    a list has new ids -- ``frame_rows_shared``, the claim in Python, ``frame_pass`` -- or there are more new ids
+    than free rows -- ``frame_step`` stops after the rows, ``frame_pass`` follows the claim)."""
     cam = PanTiltCamera(**CAMERA)
     split = FrameProcessor(cam, BUDGET, joint_cov=False, linearity=False, v2x_policy="linear", shared_jacobian=True)
-    spent = {k: [0.0] for k in ("frame_rows_shared", "frame_pass")}
+    names = ("frame_step", "frame_rows_shared", "frame_pass")
+    spent = {k: [0.0] for k in names}
     at = SharedJacobianAt(cam, BUDGET)
-    table = TrackTable(TrackerConfig(timeout_s=1e9), rank=at.rank, shared_at=at)
+    tables = {kind: TrackTable(TrackerConfig(timeout_s=1e9), rank=at.rank, shared_at=at) for kind in ("", "_int64")}
     det = np.broadcast_to(np.eye(2), (n_objects, 2, 2))
-    saved = table_module.frame_rows_shared, table_module.frame_pass
-    table_module.frame_rows_shared, table_module.frame_pass = (_Timed(f, spent[k]) for f, k in zip(
-        saved, ("frame_rows_shared", "frame_pass"), strict=True))
-    table_module.frame_rows_shared.signatures = saved[0].signatures
-    times: dict = {k: [] for k in ("step", "step_python", *spent)}
+    saved = tuple(getattr(table_module, k) for k in names)
+    for f, k in zip(saved, names, strict=True):
+        timed = _Timed(f, spent[k])
+        timed.signatures = f.signatures
+        setattr(table_module, k, timed)
+    times: dict = {k + kind: [] for kind in tables for k in ("step", "step_python", *names)}
     try:
         for k, (t, ids, boxes) in enumerate(_frames(cam, n_objects, frames + 30)):
             est = split.boxes3d(boxes, pixel_cov_px2=det)
-            for v in spent.values():
-                v[0] = 0.0
-            t0 = time.perf_counter()
-            table.step(t, ids, est.centre_xy_world_m, shared_m=est.centre_shared_m, cov_m2=est.centre_cov_m2)
-            dt = time.perf_counter() - t0
-            if k >= 30:
-                times["step"].append(dt * 1e6)
-                times["step_python"].append((dt - sum(v[0] for v in spent.values())) * 1e6)
-                for key, v in spent.items():
-                    times[key].append(v[0] * 1e6)
+            for kind, table in tables.items():
+                frame_ids = np.array(ids, np.int64) if kind else ids
+                for v in spent.values():
+                    v[0] = 0.0
+                t0 = time.perf_counter()
+                table.step(t, frame_ids, est.centre_xy_world_m, shared_m=est.centre_shared_m, cov_m2=est.centre_cov_m2)
+                dt = time.perf_counter() - t0
+                if k >= 30:
+                    times["step" + kind].append(dt * 1e6)
+                    times["step_python" + kind].append((dt - sum(v[0] for v in spent.values())) * 1e6)
+                    for key, v in spent.items():
+                        times[key + kind].append(v[0] * 1e6)
     finally:
-        table_module.frame_rows_shared, table_module.frame_pass = saved
+        for f, k in zip(saved, names, strict=True):
+            setattr(table_module, k, f)
     return {k: round(statistics.median(v), 1) for k, v in times.items()}
 
 

@@ -159,3 +159,108 @@ def test_class_tracks_hand_each_table_its_part_of_an_int64_array():
     assert all(len(t._index) > 1 and t._ids is not None for t in arr.tables)  # (both tables: the compiled look-up)
     assert all(t._ids is None for t in lst.tables)
     assert arr.tables[0]._next_id > 30 and arr.tables[1]._next_id > 10  # (births again after the timeouts)
+
+
+def _at():
+    from footprint_uq import PanTiltCamera
+    from footprint_uq.tracking import SharedJacobianAt
+
+    cam = PanTiltCamera(focal_px=1400.0, image_size_px=(1920, 1080), height_m=8.0, pan_deg=0.0, tilt_deg=20.0)
+    return SharedJacobianAt(cam, "basler1@deg")
+
+
+_AT: list = []  # (one SharedJacobianAt for the module: its processor's set-up is the costly part)
+
+
+@settings(max_examples=15, deadline=None)
+@given(seed=st.integers(0, 2 ** 31 - 1))
+def test_the_frame_in_one_compiled_call_is_the_four_calls_to_the_bit(seed):
+    """A table whose ``shared_at`` forms ``B`` in the rows' call runs a frame of int64 ids in one compiled call
+    (``imm_kernels.frame_step``: the id look-up, the rows, the new ids' rows, the update); the same table made to
+    take the four calls (``id_lookup``, ``frame_rows_shared``, ``claim_rows``, ``frame_pass``) gives the same
+    outputs, NIS, rows and ids to the bit over frames with births, deaths by timeout, repeated ids, NaN centres,
+    ids as int64 arrays and as lists (with None; a list with new ids takes the dictionary and two calls, one
+    without takes the one call with the dictionary's rows), and a burst of new ids beyond the free rows and the id
+    table's room (the one call stops after the rows, the rest is claimed in Python)."""
+    from footprint_uq.tracking import table as table_module
+
+    if not _AT:
+        _AT.append(_at())
+    at = _AT[0]
+    cfg = TrackerConfig(timeout_s=0.5)
+    one, four = (TrackTable(cfg, rank=at.rank, shared_at=at) for _ in range(2))
+    four._rows_call = lambda int_ids: table_module._ROWS_SHARED  # (the generic order of calls)
+    rng = np.random.default_rng(seed)
+    for f, (t, ids, xy) in enumerate(_frames(seed, 40)):
+        if f == 20:  # (a burst of new int64 ids beyond the free rows: the one call stops, the table grows)
+            ids, xy = np.arange(5000, 5070), np.zeros((70, 2))
+        n = xy.shape[0]
+        xy = np.column_stack([xy[:, 0] * 0.2, 25.0 + xy[:, 1]])  # (in front of the camera, some out of its view)
+        B = rng.normal(0.0, 0.05, (n, 2, at.rank))
+        cov = np.repeat(np.eye(2)[None] * 0.04, n, 0) + B @ np.swapaxes(B, 1, 2)
+        got = one.step(t, ids, xy, shared_m=B, cov_m2=cov)
+        want = four.step(t, ids.copy() if isinstance(ids, np.ndarray) else list(ids), xy, shared_m=B, cov_m2=cov)
+        for name, g, w in zip(got._fields, got, want, strict=True):
+            assert np.array_equal(g, w, equal_nan=g.dtype.kind == "f"), (t, name)
+        assert np.array_equal(one.frame_nis(), four.frame_nis(), equal_nan=True)
+        assert one._index == four._index and one._next_id == four._next_id and one._n_free == four._n_free
+    assert one._ids is not None and one._cap == four._cap > 64  # (int64 frames, and the table grew)
+    keys = [k for k in one._index if k is not None]
+    got = np.empty(len(keys), np.int64)
+    id_lookup(*one._ids, np.array(keys, np.int64), got)
+    assert got.tolist() == [one._index[k] for k in keys]
+
+
+def test_an_int64_frame_with_room_is_one_compiled_call(monkeypatch):
+    """With free rows and room in the id table, a frame of int64 ids (new ones among them) calls nothing but
+    ``frame_step``, nor does a list of ids that all have rows (None among them); a list with a new id takes the
+    two calls; a frame with more new ids than free rows grows the table and claims them after the call."""
+    from footprint_uq.tracking import table as table_module
+
+    if not _AT:
+        _AT.append(_at())
+    at = _AT[0]
+    table = TrackTable(TrackerConfig(), rank=at.rank, shared_at=at)
+    B = np.zeros((3, 2, at.rank))
+    cov = np.repeat(np.eye(2)[None] * 0.04, 3, 0)
+    xy = np.array([[0.0, 20.0], [2.0, 25.0], [-3.0, 30.0]])
+    table.step(0.0, np.array([4, 5, 6]), xy, shared_m=B, cov_m2=cov)
+    calls = []
+    for name in ("frame_pass", "frame_rows_shared", "claim_rows", "id_lookup"):
+        monkeypatch.setattr(table_module, name, lambda *a, _n=name: calls.append(_n))
+    out = table.step(0.1, np.array([4, 7, 6]), xy + 0.1, shared_m=B, cov_m2=cov)
+    assert calls == [] and out.new_track.tolist() == [False, True, False] and out.n_updates.tolist() == [2, 1, 2]
+    out = table.step(0.2, [4, None, 6], xy + 0.2, shared_m=B, cov_m2=cov)
+    assert calls == [] and out.n_updates.tolist() == [3, 0, 3] and out.track_id[1] == -1
+    monkeypatch.undo()
+    calls_pass = []
+    monkeypatch.setattr(table_module, "frame_pass", lambda *a: calls_pass.append(1) or 9)
+    table.step(0.3, [4, 8, 6], xy + 0.3, shared_m=B, cov_m2=cov)  # (a new id in a list: claimed in Python)
+    assert calls_pass == [1]
+    monkeypatch.undo()
+    n = table._n_free + 1
+    out = table.step(0.4, np.arange(100, 100 + n), np.zeros((n, 2)) + [0.0, 20.0], shared_m=np.zeros((n, 2, at.rank)),
+                     cov_m2=np.repeat(np.eye(2)[None], n, 0))
+    assert out.new_track.all() and len(table) == 5 + n and table._cap == 128
+
+
+def test_strided_and_read_only_int64_ids_take_the_same_compiled_call():
+    """int64 ids in a strided view or a read-only array (a scanner's buffer) are copied, not compiled for: the one
+    call keeps its one signature, and the tracks are those of the same ids in a plain array."""
+    from footprint_uq.tracking.imm_kernels import frame_step
+
+    if not _AT:
+        _AT.append(_at())
+    at = _AT[0]
+    plain, other = (TrackTable(TrackerConfig(), rank=at.rank, shared_at=at) for _ in range(2))
+    B = np.zeros((3, 2, at.rank))
+    cov = np.repeat(np.eye(2)[None] * 0.04, 3, 0)
+    xy = np.array([[0.0, 20.0], [2.0, 25.0], [-3.0, 30.0]])
+    read_only = np.array([4, 5, 6])
+    read_only.flags.writeable = False
+    for k, ids in enumerate((np.array([4, 0, 5, 0, 6])[::2], read_only)):
+        got = other.step(0.1 * k, ids, xy + 0.1 * k, shared_m=B, cov_m2=cov)
+        want = plain.step(0.1 * k, np.array([4, 5, 6]), xy + 0.1 * k, shared_m=B, cov_m2=cov)
+        for name, g, w in zip(got._fields, got, want, strict=True):
+            assert np.array_equal(g, w, equal_nan=g.dtype.kind == "f"), (k, name)
+    assert got.n_updates.tolist() == [2, 2, 2] and len(frame_step.signatures) == 1

@@ -27,6 +27,10 @@ the two to 1e-9 over frame sequences.  What is different (the arithmetic, not th
   arguments were an atomic increment and decrement each, ~25 arrays per track, ~160 ns of the ~430 ns a track
   cost (measured on the 2-core VM, 87 tracks of a 100-object frame: 38 us with, 24 us without).
 
+:func:`frame_step` is a table's whole frame in one compiled call when its ``shared_at`` forms ``B`` in the rows' call
+(the id look-up, :func:`~footprint_uq.tracking.kernels.frame_rows_shared`, the new ids' rows and :func:`frame_pass`;
+before 2026-11-29, wave 11 c, four calls with the table's Python between them; docs/service.md has the figures).
+
 Measured on the frame it was built for (``bench/bench_tracking.py``'s 100 objects, 87 of them updated, r = 13, on
 the 2-core VM, one process): the reference pass 67 us; the same arithmetic without per-mode views, scratch copies
 and zeroing 55 us (of which the 7 transcendental calls per track ~5 us); the closed forms, upper triangles and
@@ -40,9 +44,9 @@ import math
 import numpy as np
 from numba import njit
 
-from .kernels import ROW_SKIP, ROW_START, initiate_row
+from .kernels import ROW_SKIP, ROW_START, claim_rows, frame_rows_shared, id_lookup, initiate_row
 
-__all__ = ["frame_pass", "scratch"]
+__all__ = ["frame_pass", "frame_step", "scratch"]
 
 
 def scratch(n_modes: int, rank: int) -> tuple:
@@ -426,3 +430,51 @@ def _starts_and_outputs(act, slots, X, P, Xm, Pm, Cm, mu, t_last, t_first, n_upd
         o_cv[i, 0, 0], o_cv[i, 0, 1] = (P[s, 2, 2], P[s, 2, 3]) if velocity else (nan, nan)
         o_cv[i, 1, 0], o_cv[i, 1, 1] = (P[s, 3, 2], P[s, 3, 3]) if velocity else (nan, nan)
     return next_id
+
+
+# (no reference counting: with it, each of its ~60 array arguments is unboxed into a new meminfo, ~3 us a call; its
+# callees set their own -- frame_rows_shared keeps it for its point kernel's scratch; no fastmath: a callee that
+# does not set its own inherits it, and the rows' arithmetic stays that of the calls it replaces, to the bit)
+@njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
+def frame_step(ids, slots, xy_rows, cov_rows, B, subtract, t, stamp, n_free, next_id, S, o_tid, o_new, o_n, o_age,
+               o_xy, o_cxy, o_v, o_cv, nis, id_keys, id_vals, id_shift, free_rows, z, R, act, old, pred, uv, B_pred,
+               claimed, cam_f, has_dist, dist, cam_R, dom, dR, Lr, Lc, Lv, X, P, Xm, Pm, Cm, mu, t_last, t_first,
+               n_upd, tid, seen, qs, rates, mu0, var_v0, gate, W, xp, Pp, Kg, Cx, Cps, Sm):  # pragma: no cover
+    """A frame of n objects through a :class:`~footprint_uq.tracking.table.TrackTable` whose ``B`` at the predicted
+    positions is formed in the rows' call, in one call: the ids' rows, :func:`~footprint_uq.tracking.kernels.
+    frame_rows_shared`, the new ids' rows (:func:`~footprint_uq.tracking.kernels.claim_rows`) and
+    :func:`frame_pass` -- what the table otherwise does in four calls, the same numbers to the bit.
+
+    ``ids (n,)`` int64: looked up in the id table ``id_keys, id_vals, id_shift`` (:func:`~footprint_uq.tracking.
+    kernels.id_lookup`) into ``slots``; ``(0,)``: ``slots[:n]`` holds the rows already (the table's dictionary,
+    which found every id).  The frame: ``xy_rows (2, n)``, ``cov_rows (2, 2, n)``, ``B (n, 2, r)``, ``subtract``,
+    ``t``, ``stamp``, as :func:`~footprint_uq.tracking.kernels.frame_rows` takes them, ``S`` the point kernel's
+    scratch; its outputs ``o_tid ... o_cv`` and ``nis (n,)`` (NaN where not updated) as :func:`frame_pass` writes
+    them.  The new ids' rows come from the top of the free stack ``free_rows[:n_free]`` (the last first);
+    ``claimed`` receives the objects given them.  The working arrays ``z, R, act, old, pred, uv, B_pred, claimed``
+    have at least n rows; the camera's and ``B``'s inputs ``cam_f ... Lv`` are :func:`~footprint_uq.tracking.
+    kernels.frame_rows_shared`'s, the storage ``X ... tid`` and the rest :func:`frame_pass`'s, ``seen``
+    :func:`~footprint_uq.tracking.kernels.frame_rows`'.
+
+    Returns ``(k, u, m, next_id)``: the tracks to update and the unknown ids (what ``frame_rows`` returns), the
+    rows taken from the free stack and the next free track id.  ``m == -1``: unknown ids without ``ids`` to claim
+    them by, or more of them than free rows or than the id table has room for (it is kept at most half full): it
+    stopped after the rows, nothing claimed, nothing passed; the caller makes room, claims their rows and runs
+    :func:`frame_pass` on ``slots[:n]``, ``act[:n]``, ``z[:n]``, ``R[:n]``, ``old`` and ``B_pred``."""
+    n = xy_rows.shape[1]
+    sl, ac, zn, Rn = slots[:n], act[:n], z[:n], R[:n]
+    if ids.shape[0]:
+        id_lookup(id_keys, id_vals, id_shift, ids, sl)
+    k, u = frame_rows_shared(sl, xy_rows, cov_rows, B, subtract, zn, Rn, t, t_last, seen, stamp, X, ac, old, pred,
+                             cam_f, has_dist, dist, cam_R, dom, dR, Lr, Lc, Lv, uv, B_pred, S)
+    m = 0
+    if u:
+        if not ids.shape[0] or u > n_free or 2 * (t_last.shape[0] - n_free + u) > id_keys.shape[0]:
+            return k, u, -1, next_id
+        m = claim_rows(ids, old, u, ac, sl, free_rows[n_free - u:n_free][::-1], id_keys, id_vals, id_shift, claimed)
+    for i in range(n):
+        nis[i] = math.nan
+    next_id = frame_pass(ac, sl, old, k, X, P, Xm, Pm, Cm, mu, t_last, t_first, n_upd, tid, next_id, t, qs, rates,
+                         mu0, var_v0, zn, Rn, B_pred, B, gate, o_tid, o_new, o_n, o_age, o_xy, o_cxy, o_v, o_cv, W,
+                         xp, Pp, Kg, Cx, Cps, Sm, nis)
+    return k, u, m, next_id

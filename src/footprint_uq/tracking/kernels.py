@@ -394,7 +394,9 @@ def _camera(f, has_dist, dist, R, dom):  # pragma: no cover - compiled
                         f[12], R, f[13], f[14], f[15], dom)
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+# (numba's reference counting set, not inherited: point_jacobian_into allocates, and a caller without it --
+# imm_kernels.frame_step -- would otherwise compile it without)
+@njit(cache=True, nogil=True, error_model="numpy", _nrt=True)
 def frame_rows_shared(slots, xy_rows, cov_rows, B, subtract, z, R, t, t_last, seen, stamp, X, act, old, pred,
                       cam_f, has_dist, dist, cam_R, dom, dR, Lr, Lc, Lv, uv, B_pred, S):  # pragma: no cover - compiled
     """:func:`frame_rows` and then ``B`` at the k predicted positions in one call: ``pred[:k]`` into the image

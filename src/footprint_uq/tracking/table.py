@@ -5,7 +5,6 @@ from __future__ import annotations
 import math
 import threading
 from dataclasses import dataclass
-from itertools import repeat
 from typing import NamedTuple
 
 import numpy as np
@@ -17,7 +16,7 @@ from ..fast.footprint_kernels import SCRATCH_SHAPE, camera_constants
 from ..fast.frame_columns import camera_parts
 from ..products.footprints import FrameProcessor
 from .filter import Initiator, SplitMeasurement
-from .imm_kernels import frame_pass, scratch
+from .imm_kernels import frame_pass, frame_step, scratch
 from .kernels import (
     ID_EMPTY,
     ROW_SKIP,
@@ -36,6 +35,21 @@ from .models import ConstantVelocity
 __all__ = ["TrackerConfig", "TrackOutput", "TrackTable", "SharedJacobianAt", "CALIBRATION_MODES", "DEFAULT_GATE_CHI2"]
 
 _NO_B = np.zeros((0, 2, 0))
+#: the compiled call that forms a frame's rows (TrackTable._rows_call): frame_rows, frame_rows_shared, frame_step
+_ROWS, _ROWS_SHARED, _ONE_CALL = 0, 1, 2
+_NO_IDS = np.zeros(0, np.int64)  # (frame_step: the rows are the dictionary's)
+_NO_ID_TABLE = (np.zeros(1, np.int64), np.full(1, ID_EMPTY, np.int64), 63)  # (and it reads no id table)
+
+
+class _Index(dict):
+    """The table's dictionary ``object_id -> row``, counting the ids it did not find (``misses``: reset by the
+    caller, one Python call per miss, none per hit): a list frame without new ids takes the one compiled call."""
+
+    __slots__ = ("misses",)
+
+    def __missing__(self, key) -> int:
+        self.misses += 1
+        return -1
 _INT64_MIN, _INT64_MAX = -2 ** 63, 2 ** 63 - 1
 #: how the calibration error enters the filter: "consider" (the split model, the only honest one), "white" (the
 #: whole per-frame covariance as white noise) and "ignore" (only the per-frame part) are kept to show what goes
@@ -134,7 +148,9 @@ class TrackTable:
     :func:`~footprint_uq.tracking.kernels.frame_rows_shared` (the rows and ``B`` at the predicted positions, when
     ``shared_at`` is a :class:`SharedJacobianAt`; else :func:`~footprint_uq.tracking.kernels.frame_rows` and one
     evaluation of ``shared_at``) and :func:`~footprint_uq.tracking.imm_kernels.frame_pass` (the update, the
-    starts, the outputs).  Each track runs the
+    starts, the outputs).  With a :class:`SharedJacobianAt` (the consider mode, the compiled pass) the four are one
+    compiled call, :func:`~footprint_uq.tracking.imm_kernels.frame_step`, unless new ids need the Python claim (new
+    ids of a list; more new int64 ids than free rows: the call then stops after the rows).  Each track runs the
     interacting-multiple-model filter over :attr:`models` (a quiet and a manoeuvre constant-velocity mode; one
     mode if ``manoeuvre_accel_psd_m2ps3`` is None); its reported state is the modes' moment-matched combination,
     and the gate cuts a track only if the detection is beyond it for every mode.
@@ -189,7 +205,8 @@ class TrackTable:
         self.mu0 = (1.0 / self._rates) / (1.0 / self._rates).sum()
         self.initiator = Initiator(self.config.sigma_v0_mps)
         self._var_v0 = self.initiator.sigma_v0_mps ** 2
-        self._index: dict = {None: -2}  # object_id -> slot (-2: never tracked)
+        self._index = _Index({None: -2})  # object_id -> slot (-2: never tracked)
+        self._index.misses = 0
         #: the compiled form of ``_index`` for frames whose ids come as an int64 array (:func:`~footprint_uq.tracking.
         #: kernels.id_lookup`: keys, values, shift; None until the first such frame: a list of ids takes the
         #: dictionary, which is as fast as converting it), possible while every id the table has seen is an integer
@@ -215,14 +232,17 @@ class TrackTable:
         return len(self._index) - 1  # (the entry of None)
 
     def warm_up(self) -> None:
-        """Load the compiled steps (numba's cache, or compile them) without touching the tracks: two frames through
-        a scratch table of the same configuration -- one object's start with its id in an int64 array (the
-        compiled id look-up and claim), then its update and a second start with the ids as a list (the
-        dictionary; the new id into the compiled table)."""
+        """Load the compiled steps (numba's cache, or compile them) without touching the tracks: three frames
+        through a scratch table of the same configuration -- one object's start with its id in an int64 array (the
+        compiled id look-up and claim; with a :class:`SharedJacobianAt`, the one call of the whole frame), then
+        its update and a second start with the ids as a list (the dictionary; the new id into the compiled table),
+        then more new int64 ids than the table has free rows (the rows claimed after a growth)."""
         scratch = TrackTable(self.config, rank=self.rank, shared_at=self.shared_at)
         meas = (np.zeros((1, 2)), np.eye(2)[None].copy(), np.zeros((1, 2, self.rank)))
         scratch.step(0.0, np.zeros(1, np.int64), *meas)
         scratch.step(0.1, [0, 1], *(np.repeat(a, 2, 0) for a in meas))
+        n = scratch._n_free + 1
+        scratch.step(0.2, np.arange(2, 2 + n, dtype=np.int64), *(np.repeat(a, n, 0) for a in meas))
 
     def _grow(self, cap: int) -> None:
         old = self._cap
@@ -255,8 +275,15 @@ class TrackTable:
         if old:
             keys[:old] = self._keys
         self._keys = keys
-        self._free = list(range(cap - 1, old - 1, -1)) + getattr(self, "_free", [])
+        # the free rows, a stack (top: the last of the first ``_n_free``): the new rows under the old free ones
+        free = np.empty(cap, np.int64)
+        free[:cap - old] = np.arange(cap - 1, old - 1, -1)
+        n_free = getattr(self, "_n_free", 0)
+        if n_free:
+            free[cap - old:cap - old + n_free] = self._free[:n_free]
+        self._free, self._n_free = free, cap - old + n_free
         self._cap = cap
+        self._step_args = None  # (new state arrays: _one_call_args)
 
     def _delete_expired(self, time_s: float) -> None:
         """The deleter: drop tracks whose last update is more than ``timeout_s`` before ``time_s`` (called when its
@@ -268,7 +295,8 @@ class TrackTable:
             del self._index[self._keys[s]]
             self._keys[s] = None
             self._t_last[s] = np.nan
-            self._free.append(s)
+            self._free[self._n_free] = s
+            self._n_free += 1
         live = self._t_last[np.isfinite(self._t_last)]
         self._oldest_s = float(live.min()) if live.size else math.inf
 
@@ -297,19 +325,66 @@ class TrackTable:
             per-frame part ``cov_m2 - B B^T`` is then taken in the compiled pass (what
             ``FootprintEstimate.centre_cov_frame_m2`` gives, without its dozen numpy calls).
         """
+        t, id64, ids, xy_rows, cov_rows, B, subtract = self._frame_inputs(time_s, object_ids, xy_m, cov_frame_m2,
+                                                                          shared_m, cov_m2)
+        n = xy_rows.shape[1]
+        if t < self._last_time:
+            self.n_stale_frames += 1
+            self._nis = np.full(n, np.nan)
+            return TrackOutput.untracked(n)
+        self._last_time = t
+        if len(self._index) > 1 and t - self._oldest_s > self.config.timeout_s:  # (the deleter's sweep is due)
+            self._delete_expired(t)
+        if id64 is not None and self._ids is None:
+            self._id_table(64)
+        self._stamp += 1
+        if n > self._old.shape[0]:  # (the step's working arrays, kept: nothing of them leaves the step)
+            self._work(n)
+        empty = np.empty
+        out = TrackOutput(empty(n, np.int64), empty(n, bool), empty(n, np.int64), empty(n), empty((n, 2)),
+                          empty((n, 2, 2)), empty((n, 2)), empty((n, 2, 2)))
+        self._nis = nis = empty(n)
+        slots = None
+        if id64 is None:  # (a list: the dictionary's rows, its misses -- the new ids -- counted)
+            index = self._index
+            index.misses = 0
+            slots = np.fromiter(map(index.__getitem__, ids), np.int64, n)
+        rows = self._rows_call(id64 is not None or not self._index.misses)
+        if rows == _ONE_CALL:  # (the whole step in one compiled call, frame_step, if there is room for new ids)
+            k, n_unknown, m, next_id = frame_step(_NO_IDS if id64 is None else id64,
+                                                  self._slots if slots is None else slots, xy_rows, cov_rows, B,
+                                                  subtract, t, self._stamp, self._n_free, self._next_id,
+                                                  self._frame_scratch(), *out, nis,
+                                                  *(self._step_args or self._one_call_args()))
+            if m >= 0:  # (the new ids claimed and the update passed)
+                self._next_id = next_id
+                self._enter_claimed(id64, self._claimed, m)
+                if t < self._oldest_s:  # (every row started or updated now has t_last = t)
+                    self._oldest_s = t
+                return out
+            work, Bp = (self._slots[:n], self._act[:n], self._z[:n], self._R[:n]), self._Bp  # (stopped after the rows)
+        else:
+            work = (np.empty(n, np.int64) if slots is None else slots, empty(n, np.int8), empty((n, 2)),
+                    empty((n, 2, 2)))  # (slots, act, z, R)
+            k, n_unknown, Bp = self._frame_rows(rows, t, id64, work, xy_rows, cov_rows, B, subtract)
+        self._update(t, id64, ids, work, B, k, n_unknown, Bp, out, nis)
+        return out
+
+    def _frame_inputs(self, time_s, object_ids, xy_m, cov_frame_m2, shared_m, cov_m2) -> tuple:
+        """:meth:`step`'s arguments checked and in the compiled calls' forms: ``(t, id64, ids, xy_rows (2, n),
+        cov_rows (2, 2, n), B (n, 2, r), subtract)`` (``id64``: the ids when they are an int64 array the compiled
+        id table takes, else None; ``ids``: the ids as a list or that array)."""
         # (a finite float passes without a call into _checks: one climb less per frame; anything else gets its check)
         t = time_s if isinstance(time_s, float) and math.isfinite(time_s) else as_float("time_s", time_s)
         xy_rows = _rows(xy_m, 2) if type(xy_m) is np.ndarray and xy_m.ndim == 2 and xy_m.shape[1] == 2 else \
             np.ascontiguousarray(_c64(xy_m).reshape(-1, 2).T)  # (2, n): the kernel's layout, an estimate's as is
         n = xy_rows.shape[1]
-        id64 = object_ids if (type(object_ids) is np.ndarray and object_ids.dtype == np.int64
-                              and object_ids.ndim == 1 and self._int_ids) else None
-        ids = object_ids if isinstance(object_ids, list) or id64 is not None else list(object_ids)
+        id64 = _int64_ids(object_ids) if self._int_ids and type(object_ids) is np.ndarray else None
+        ids = object_ids if id64 is not None or isinstance(object_ids, list) else list(object_ids)
         if len(ids) != n:
             raise InputError("object_ids", len(ids), f"{n} ids, one per object")
         B = _c64(shared_m)
-        if B.shape != (n, 2, B.shape[2] if B.ndim == 3 else -1) or (self.config.calibration == "consider"
-                                                                    and B.shape[2] != self.rank):
+        if B.shape != (n, 2, self.rank) and (self._consider or B.ndim != 3 or B.shape[:2] != (n, 2)):
             raise InputError("shared_m", B.shape, f"shape ({n}, 2, {self.rank})")
         if (cov_frame_m2 is None) == (cov_m2 is None):
             raise InputError("cov_frame_m2/cov_m2", "both" if cov_m2 is not None else "neither",
@@ -320,54 +395,76 @@ class TrackTable:
             cov = np.asarray(cov, dtype=np.float64)
         if cov.shape != (n, 2, 2):
             raise InputError("cov_m2" if subtract else "cov_frame_m2", cov.shape, f"shape ({n}, 2, 2)")
-        cov_rows = _rows(cov, 3)  # (2, 2, n)
-        if t < self._last_time:
-            self.n_stale_frames += 1
-            self._nis = np.full(n, np.nan)
-            return TrackOutput.untracked(n)
-        self._last_time = t
-        if len(self._index) > 1 and t - self._oldest_s > self.config.timeout_s:  # (the deleter's sweep is due)
-            self._delete_expired(t)
-        if id64 is not None:  # (the ids an int64 array: the compiled look-up)
-            if self._ids is None:
-                self._id_table(64)
-            slots = np.empty(n, np.int64)
-            id_lookup(*self._ids, id64, slots)
-        else:
-            slots = np.fromiter(map(self._index.get, ids, repeat(-1)), np.int64, n)
-        self._stamp += 1
-        if n > self._old.shape[0]:  # (the step's working arrays, kept: nothing of them leaves the step)
-            self._work(n)
-        act, old, pred = np.empty(n, np.int8), self._old, self._pred
-        xy, R = np.empty((n, 2)), np.empty((n, 2, 2))  # (the centres and R per object, written by the rows' call)
-        rows = (slots, xy_rows, cov_rows, B, subtract, xy, R, t, self._t_last, self._seen, self._stamp, self._x, act,
-                old, pred)
-        at = self._at  # B at the predicted positions (see the class doc): in the rows' call, or by shared_at
-        inputs = at.kernel_inputs() if at is not None else None
+        return t, id64, ids, xy_rows, _rows(cov, 3), B, subtract
+
+    def _rows_call(self, one_call: bool) -> int:
+        """Which compiled call forms this frame's rows: :data:`_ONE_CALL` (:func:`~footprint_uq.tracking.imm_kernels.
+        frame_step`, the whole step, if ``one_call`` -- ids as an int64 array, or a list whose ids all have rows --,
+        the consider mode and the compiled pass), :data:`_ROWS_SHARED`
+        (:func:`~footprint_uq.tracking.kernels.frame_rows_shared`: ``B`` at the predicted positions in the same call)
+        or :data:`_ROWS` (:func:`~footprint_uq.tracking.kernels.frame_rows` and one call of ``shared_at``).  A call
+        that forms ``B`` is taken if ``B``'s kernels were ready at the table's first frame (it compiles, or loads
+        from the cache, with the table's other kernels), later only once it is compiled in this process (see
+        ``__init__``).  (A list of ids with new ones takes two calls: they are claimed in Python between them.)"""
+        ready = self._at is not None and self._at.kernel_inputs() is not None
         if self._fused is None:  # (decided at the first frame: see __init__)
-            self._fused = inputs is not None
-        if inputs is not None and (self._fused or frame_rows_shared.signatures):
+            self._fused = ready
+        if not ready:
+            return _ROWS
+        if one_call and self._consider and not self._reference_pass and (self._fused or frame_step.signatures):
+            return _ONE_CALL
+        return _ROWS_SHARED if (self._fused or frame_rows_shared.signatures) else _ROWS
+
+    def _frame_rows(self, rows: int, t: float, id64, work: tuple, xy_rows, cov_rows, B, subtract) -> tuple:
+        """The rows of the ids ``id64`` (an int64 array: by the compiled id table into ``work``'s slots; None: the
+        slots are the dictionary's already) and the rows' compiled call (:meth:`_rows_call`) into ``work = (slots,
+        act, z, R)`` (n rows each); returns ``(k, n_unknown, B_pred)`` (what :func:`~footprint_uq.tracking.kernels.
+        frame_rows` returns; ``B`` at the k predicted positions, ``(0, 2, 0)`` if none)."""
+        slots, act, z, R = work
+        if id64 is not None:
+            id_lookup(*self._ids, id64, slots)
+        pred = self._pred
+        args = (slots, xy_rows, cov_rows, B, subtract, z, R, t, self._t_last, self._seen, self._stamp, self._x, act,
+                self._old, pred)
+        if rows != _ROWS:
             Bp = self._Bp  # (rows k and on are not read: frame_pass reads Bp[:k])
-            k, n_unknown = frame_rows_shared(*rows, *inputs, self._uv, Bp, self._frame_scratch())
-        else:
-            k, n_unknown = frame_rows(*rows)
-            Bp = _c64(self.shared_at(pred[:k])) if self.shared_at is not None and self.rank and k else _NO_B
+            k, n_unknown = frame_rows_shared(*args, *self._at.kernel_inputs(), self._uv, Bp, self._frame_scratch())
+            return k, n_unknown, Bp
+        k, n_unknown = frame_rows(*args)
+        Bp = _c64(self.shared_at(pred[:k])) if self.shared_at is not None and self.rank and k else _NO_B
+        return k, n_unknown, Bp
+
+    def _update(self, t: float, id64, ids, work: tuple, B, k: int, n_unknown: int, Bp, out: TrackOutput,
+                nis) -> None:
+        """The rest of a frame after its rows (``work = (slots, act, z, R)``, :meth:`_frame_rows`): the unknown ids'
+        rows (:meth:`_claim_int`, :meth:`_claim`) and the compiled update, starts and outputs into ``out`` and
+        ``nis``."""
+        n = B.shape[0]
+        slots, act, xy, R = work
+        old = self._old
         if n_unknown and id64 is not None:
             self._claim_int(id64, slots, act, n_unknown)
         elif n_unknown:
             self._claim(ids, slots, act, old[n - n_unknown:n][::-1].tolist())
         z, Rf, Bf = (xy, R, B) if self._consider else self._measurement(xy, R, B)  # (consider: the split as given)
-        out = TrackOutput(np.empty(n, np.int64), np.empty(n, bool), np.empty(n, np.int64), np.empty(n),
-                          np.empty((n, 2)), np.empty((n, 2, 2)), np.empty((n, 2)), np.empty((n, 2, 2)))
         args = (act, slots, old, k, self._x, self._P, self._xm, self._Pm, self._Cm, self._mu, self._t_last,
                 self._t_first, self._n, self._tid, self._next_id, t, self._qs, self._rates, self.mu0, self._var_v0,
                 z, Rf, Bp, Bf, self.config.gate_chi2, *out)
-        self._nis = nis = np.empty(n)
         nis.fill(math.nan)
         self._next_id = frame_update(*args) if self._reference_pass else frame_pass(*args, *self._scratch, nis)
         if t < self._oldest_s:  # (every row started or updated now has t_last = t)
             self._oldest_s = t
-        return out
+
+    def _one_call_args(self) -> tuple:
+        """:func:`~footprint_uq.tracking.imm_kernels.frame_step`'s arguments after the frame's own: the id table,
+        the free rows, the working arrays, the camera's and ``B``'s kernel inputs, the tracks' storage, the filter's
+        constants and scratch; kept in ``_step_args`` until one of them is replaced (:meth:`_grow`, :meth:`_work`,
+        :meth:`_id_table`)."""
+        self._step_args = (*(self._ids or _NO_ID_TABLE), self._free, self._z, self._R, self._act, self._old, self._pred,
+                           self._uv, self._Bp, self._claimed, *self._at.kernel_inputs(), self._x, self._P, self._xm,
+                           self._Pm, self._Cm, self._mu, self._t_last, self._t_first, self._n, self._tid, self._seen,
+                           self._qs, self._rates, self.mu0, self._var_v0, self.config.gate_chi2, *self._scratch)
+        return self._step_args
 
     def _id_table(self, cap: int) -> None:
         """A fresh compiled id table of ``cap`` (a power of 2) entries holding ``_index``'s ids."""
@@ -375,6 +472,7 @@ class TrackTable:
             cap *= 2
         keys, vals = np.zeros(cap, np.int64), np.full(cap, ID_EMPTY, np.int64)
         self._ids = (keys, vals, 64 - (cap.bit_length() - 1))
+        self._step_args = None
         items = [(k, s) for k, s in self._index.items() if k is not None]
         if items:
             id_insert(*self._ids, np.array([k for k, _ in items], np.int64), np.array([s for _, s in items], np.int64))
@@ -385,7 +483,7 @@ class TrackTable:
         for k in keys:
             if not ((type(k) is int or isinstance(k, np.integer | bool)) and _INT64_MIN <= k <= _INT64_MAX):
                 self._int_ids = False
-                self._ids = None
+                self._ids = self._step_args = None
                 return
         if self._ids is None:
             return
@@ -397,10 +495,15 @@ class TrackTable:
 
     def _work(self, n: int) -> None:
         """The step's working arrays for frames of up to ``n`` objects (the compiled calls read their first k or n
-        rows): the objects to update ``_old (n,)``, their predicted positions ``_pred (n, 2)``, pixels ``_uv (n,
-        2)`` and ``B`` there ``_Bp (n, 2, r)`` (:func:`~footprint_uq.tracking.kernels.frame_rows_shared`)."""
+        rows): the objects' rows ``_slots (n,)``, actions ``_act (n,)``, centres ``_z (n, 2)`` and per-frame
+        covariances ``_R (n, 2, 2)``, the objects to update ``_old (n,)``, their predicted positions ``_pred (n,
+        2)``, pixels ``_uv (n, 2)`` and ``B`` there ``_Bp (n, 2, r)`` (:func:`~footprint_uq.tracking.kernels.
+        frame_rows_shared`), the objects given rows ``_claimed (n,)``."""
+        self._slots, self._act, self._claimed = np.empty(n, np.int64), np.empty(n, np.int8), np.empty(n, np.int64)
+        self._z, self._R = np.empty((n, 2)), np.empty((n, 2, 2))
         self._old, self._pred, self._uv = np.empty(n, np.int64), np.empty((n, 2)), np.empty((n, 2))
         self._Bp = np.empty((n, 2, self.rank))
+        self._step_args = None
 
     def _frame_scratch(self) -> np.ndarray:
         """The point kernel's scratch for :func:`~footprint_uq.tracking.kernels.frame_rows_shared`: this thread's
@@ -433,9 +536,10 @@ class TrackTable:
                 continue
             first.add(key)
             if act[i] == ROW_START:
-                if not self._free:
+                if not self._n_free:
                     self._grow(2 * self._cap)
-                slots[i] = s = self._free.pop()
+                self._n_free = n_free = self._n_free - 1
+                slots[i] = s = int(self._free[n_free])
                 self._keys[s] = key
                 self._index[key] = s
                 new_keys.append(key)
@@ -450,33 +554,38 @@ class TrackTable:
         (the table grows now rather than midway: the rows are taken in the same order) and the id table at most
         half full with them; then the new ids into the dictionary, as Python ints (equal, and of equal hash, to
         the array's scalars)."""
-        free = self._free
-        while len(free) < n_unknown:
+        while self._n_free < n_unknown:
             self._grow(2 * self._cap)
-            free = self._free
         cap = cap0 = self._ids[0].shape[0]
         while 2 * (len(self._index) - 1 + n_unknown) > cap:
             cap *= 2
         if cap != cap0:
             self._id_table(cap)
-        rows = np.array(free[:len(free) - n_unknown - 1:-1] if len(free) > n_unknown else free[::-1], np.int64)
+        rows = self._free[self._n_free - n_unknown:self._n_free][::-1].copy()
         claimed = np.empty(n_unknown, np.int64)
         m = claim_rows(id64, self._old, n_unknown, act, slots, rows, *self._ids, claimed)
+        self._enter_claimed(id64, claimed, m)
+
+    def _enter_claimed(self, id64: np.ndarray, claimed: np.ndarray, m: int) -> None:
+        """The ``m`` new ids of a frame's int64 ids (``id64[claimed[:m]]``, given the top ``m`` free rows in that
+        order by :func:`~footprint_uq.tracking.kernels.claim_rows`) off the free stack and into the dictionary,
+        as Python ints (equal, and of equal hash, to the array's scalars)."""
         if not m:
             return
-        del free[len(free) - m:]
+        self._n_free -= m
+        rows = self._free[self._n_free:self._n_free + m]
         index, keys = self._index, self._keys
         if m == 1:  # (the common case: one new id in the frame)
             s = int(rows[0])
             keys[s] = key = int(id64[claimed[0]])
             index[key] = s
             return
-        for key, s in zip(id64[claimed[:m]].tolist(), rows[:m].tolist(), strict=True):
+        for key, s in zip(id64[claimed[:m]].tolist(), rows[::-1].tolist(), strict=True):
             keys[s] = key
             index[key] = s
 
 
-_F8 = np.dtype(np.float64)
+_F8, _I8 = np.dtype(np.float64), np.dtype(np.int64)
 _TRANSPOSE = {2: (1, 0), 3: (1, 2, 0)}
 
 
@@ -490,6 +599,15 @@ def _rows(a: np.ndarray, ndim: int) -> np.ndarray:
         if flags.c_contiguous and flags.writeable:
             return t
     return np.ascontiguousarray(t, dtype=np.float64)
+
+
+def _int64_ids(ids: np.ndarray) -> np.ndarray | None:
+    """The array ``ids`` if it is a 1-d int64 array (a copy if it is strided or read-only: one compiled signature),
+    else None."""
+    if ids.ndim != 1 or (ids.dtype is not _I8 and ids.dtype != _I8):
+        return None
+    flags = ids.flags
+    return ids if flags.c_contiguous and flags.writeable else ids.copy()
 
 
 def _c64(a) -> np.ndarray:
