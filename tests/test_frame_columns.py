@@ -104,6 +104,22 @@ def test_columns_decline_what_boxes2d_must_do(procs, camera):
     _same(procs["linear"].boxes2d_columns(far), procs["linear"].boxes2d(far))
 
 
+def test_settings_set_after_construction_reach_the_columns(camera):
+    """The settings packed into ``boxes2d_columns``' constants (linearity, threshold, V2X policy, outside image)
+    set again on a processor: its columns follow them, as ``boxes2d`` does (not the values packed at
+    construction)."""
+    far = np.array([[900.0, 600.0, 1000.0, 700.0], [950.0, 21.0, 990.0, 31.0], [-80.0, 500.0, -20.0, 560.0]])
+    proc = FrameProcessor(camera, "basler1", joint_cov=False, v2x_policy="sampled")
+    assert proc.boxes2d_columns(far) is None  # (a valid centre that is not linear_ok: sampled)
+    proc.v2x_policy = "linear"
+    _same(proc.boxes2d_columns(far), proc.boxes2d(far))
+    for name, value in (("linear_threshold", 1e9), ("linearity", False), ("allow_outside_image", True)):
+        setattr(proc, name, value)
+        cols, est = proc.boxes2d_columns(far), proc.boxes2d(far)
+        _same(cols, est)
+    assert proc.boxes2d_columns(far).n_valid == 3  # (the third box outside the image: allowed now)
+
+
 def test_columns_entry_checks(procs):
     proc = procs["linear"]
     with pytest.raises(InputError, match="contact"):

@@ -38,6 +38,8 @@ from .footprint_reference import footprints_from_boxes3d, footprints_from_corner
 _POOL_MIN_BYTES = 1 << 20
 _F64 = np.dtype(np.float64)  # (a dtype compared with a dtype: ~3x faster than with the type np.float64)
 _N_V2X = fc.INT32_ROWS - 1  # (the V2X code rows of boxes2d_columns' int32 block, then centre_reason)
+#: the settings :meth:`FrameProcessor.boxes2d_columns` reads from its packed constants
+_PACKED_SETTINGS = frozenset({"allow_outside_image", "linearity", "linear_threshold", "v2x_policy"})
 
 
 def empty_reusable(shape, dtype=np.float64) -> np.ndarray:
@@ -184,14 +186,25 @@ class FrameProcessor:
         #: whether per-corner coordinates and covariances (and the largest point's covariance) are
         #: formed at all; the batch sets False when it writes no corner columns (leaner, faster)
         self.corner_outputs = True
-        #: the constants and settings of :meth:`boxes2d_columns`' one call, packed in two arrays (fixed here, as
-        #: every constant of the processor)
+        self._pack_columns()
+        self._kernels = False  # the compiled kernels run (footprint_uq._notices; asked until they do)
+        self._last_scratch = (None, None)  # (thread id, its scratch) of the last frame (_scratch)
+
+    def __setattr__(self, name: str, value) -> None:
+        # a setting packed into boxes2d_columns' constants, set again after construction: packed again (reads of
+        # every attribute stay plain; only these few writes pay)
+        object.__setattr__(self, name, value)
+        if name in _PACKED_SETTINGS and "_columns_consts" in self.__dict__:
+            self._pack_columns()
+
+    def _pack_columns(self) -> None:
+        """:meth:`boxes2d_columns`' constants and settings in two arrays (:func:`~footprint_uq.fast.frame_columns.
+        columns_constants`), packed at construction and again when a packed setting is set."""
+        #: the constants and settings of boxes2d_columns' one call
         self._columns_consts = fc.columns_constants(
             self._cam, self._dR, self._Lr, self._Lc, self._Lv, self._r, self._spx,
             allow_outside=self.allow_outside_image, ch=self._ch, sh=self._sh, flag=self.linearity,
             threshold=self.linear_threshold, cov_tol=COV_PSD_RTOL, decline_flagged=self.v2x_policy != "linear")
-        self._kernels = False  # the compiled kernels run (footprint_uq._notices; asked until they do)
-        self._last_scratch = (None, None)  # (thread id, its scratch) of the last frame (_scratch)
 
     def _use_kernels(self) -> bool:
         """Whether this call runs the compiled kernel (else the numpy reference: a command line whose kernels
