@@ -7,6 +7,7 @@ repeated ids, None ids, NaN centres, ids as lists and as int64 arrays: output fo
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -134,12 +135,14 @@ def test_a_non_integer_id_ends_the_compiled_lookup_and_the_tracks_go_on():
 
 def test_class_tracks_hand_each_table_its_part_of_an_int64_array():
     """With a motion model per class (two tables), ids as an int64 array reach each table as its part of the array
-    (its compiled look-up), ids as a list as lists (the dictionary): the same outputs to the bit over frames with
-    both classes, absent objects, timeouts and births again."""
+    (its compiled look-up), ids as a list as lists (the dictionary's look-up, forced): the same outputs to the bit
+    over frames with both classes, absent objects, timeouts and births again."""
     from footprint_uq.tracking.classes import ClassTracks
     per_class = {"truck": TrackerConfig(timeout_s=0.5, accel_psd_m2ps3=0.5, manoeuvre_accel_psd_m2ps3=None)}
     cfg = TrackerConfig(timeout_s=0.5)
     arr, lst = (ClassTracks(cfg, per_class, rank=2) for _ in range(2))
+    for table in lst.tables:  # (the dictionary's look-up: a list of integers would be made an int64 array)
+        table._int_ids = False
     rng = np.random.default_rng(3)
     start, vel = rng.uniform(-20.0, 20.0, (40, 2)), rng.uniform(-5.0, 5.0, (40, 2))
     for f in range(30):
@@ -213,8 +216,9 @@ def test_the_frame_in_one_compiled_call_is_the_four_calls_to_the_bit(seed):
 
 def test_an_int64_frame_with_room_is_one_compiled_call(monkeypatch):
     """With free rows and room in the id table, a frame of int64 ids (new ones among them) calls nothing but
-    ``frame_step``, nor does a list of ids that all have rows (None among them); a list with a new id takes the
-    two calls; a frame with more new ids than free rows grows the table and claims them after the call."""
+    ``frame_step``, nor does a list of ids that all have rows (None among them) or a list of integers (an int64
+    array then); a list with a new id among ids that are not all integers takes the two calls; a frame with more
+    new ids than free rows grows the table and claims them after the call."""
     from footprint_uq.tracking import table as table_module
 
     if not _AT:
@@ -232,16 +236,18 @@ def test_an_int64_frame_with_room_is_one_compiled_call(monkeypatch):
     assert calls == [] and out.new_track.tolist() == [False, True, False] and out.n_updates.tolist() == [2, 1, 2]
     out = table.step(0.2, [4, None, 6], xy + 0.2, shared_m=B, cov_m2=cov)
     assert calls == [] and out.n_updates.tolist() == [3, 0, 3] and out.track_id[1] == -1
+    out = table.step(0.25, [4, 9, 6], xy + 0.25, shared_m=B, cov_m2=cov)  # (a list of ints: an int64 array)
+    assert calls == [] and out.new_track.tolist() == [False, True, False]
     monkeypatch.undo()
     calls_pass = []
     monkeypatch.setattr(table_module, "frame_pass", lambda *a: calls_pass.append(1) or 9)
-    table.step(0.3, [4, 8, 6], xy + 0.3, shared_m=B, cov_m2=cov)  # (a new id in a list: claimed in Python)
+    table.step(0.3, [4, 8, None], xy + 0.3, shared_m=B, cov_m2=cov)  # (a new id in a list of other ids: Python's)
     assert calls_pass == [1]
     monkeypatch.undo()
     n = table._n_free + 1
     out = table.step(0.4, np.arange(100, 100 + n), np.zeros((n, 2)) + [0.0, 20.0], shared_m=np.zeros((n, 2, at.rank)),
                      cov_m2=np.repeat(np.eye(2)[None], n, 0))
-    assert out.new_track.all() and len(table) == 5 + n and table._cap == 128
+    assert out.new_track.all() and len(table) == 6 + n and table._cap == 128
 
 
 def test_strided_and_read_only_int64_ids_take_the_same_compiled_call():
@@ -264,3 +270,16 @@ def test_strided_and_read_only_int64_ids_take_the_same_compiled_call():
         for name, g, w in zip(got._fields, got, want, strict=True):
             assert np.array_equal(g, w, equal_nan=g.dtype.kind == "f"), (k, name)
     assert got.n_updates.tolist() == [2, 2, 2] and len(frame_step.signatures) == 1
+
+
+@pytest.mark.parametrize("ids, made", [
+    ([3, 4, 5], True), ([np.int64(3), 4], True), ([True, 4], True),  # (a bool: the integer's key, as in the dict)
+    ([3, None], False), ([3, 4.0], False), ([3, "a"], False), ([2 ** 63, 1], False), ([-1, 2 ** 63], False),
+    ([3, [4]], False)])
+def test_a_list_of_integers_is_made_the_int64_ids_and_nothing_else(ids, made):
+    from footprint_uq.tracking.table import _list_int64
+
+    got = _list_int64(ids)
+    assert (got is not None) == made
+    if made:
+        assert got.dtype == np.int64 and got.tolist() == [int(i) for i in ids]

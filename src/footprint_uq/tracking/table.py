@@ -208,8 +208,8 @@ class TrackTable:
         self._index = _Index({None: -2})  # object_id -> slot (-2: never tracked)
         self._index.misses = 0
         #: the compiled form of ``_index`` for frames whose ids come as an int64 array (:func:`~footprint_uq.tracking.
-        #: kernels.id_lookup`: keys, values, shift; None until the first such frame: a list of ids takes the
-        #: dictionary, which is as fast as converting it), possible while every id the table has seen is an integer
+        #: kernels.id_lookup`: keys, values, shift; None until the first such frame; a list of integers is made an
+        #: int64 array for it, :func:`_list_int64`), possible while every id the table has seen is an integer
         #: of int64's range (``_int_ids``; the first other id ends it for the table's life)
         self._int_ids = True
         self._ids = None
@@ -379,7 +379,12 @@ class TrackTable:
         xy_rows = _rows(xy_m, 2) if type(xy_m) is np.ndarray and xy_m.ndim == 2 and xy_m.shape[1] == 2 else \
             np.ascontiguousarray(_c64(xy_m).reshape(-1, 2).T)  # (2, n): the kernel's layout, an estimate's as is
         n = xy_rows.shape[1]
-        id64 = _int64_ids(object_ids) if self._int_ids and type(object_ids) is np.ndarray else None
+        id64 = None
+        if self._int_ids:  # (the compiled id table: an int64 array, or a list of Python ints made one)
+            if type(object_ids) is np.ndarray:
+                id64 = _int64_ids(object_ids)
+            elif type(object_ids) is list and object_ids and type(object_ids[0]) is int:
+                id64 = _list_int64(object_ids)
         ids = object_ids if id64 is not None or isinstance(object_ids, list) else list(object_ids)
         if len(ids) != n:
             raise InputError("object_ids", len(ids), f"{n} ids, one per object")
@@ -608,6 +613,18 @@ def _int64_ids(ids: np.ndarray) -> np.ndarray | None:
         return None
     flags = ids.flags
     return ids if flags.c_contiguous and flags.writeable else ids.copy()
+
+
+def _list_int64(ids: list) -> np.ndarray | None:
+    """A list of ids as an int64 array when numpy makes it one (every id a Python or numpy integer of int64's range,
+    or a bool: equal, and of equal hash, to the integer, as the dictionary takes them), else None (None, a float,
+    a string, an integer beyond int64 among them: the dictionary's look-up).  ~1.7 us for 100 ids, less than the
+    dictionary's, and the frame then takes the compiled id table and its claim of new ids (one compiled call)."""
+    try:
+        a = np.array(ids)
+    except (ValueError, OverflowError, TypeError):  # (e.g. ids of uneven nesting)
+        return None
+    return a if a.dtype == _I8 and a.ndim == 1 else None
 
 
 def _c64(a) -> np.ndarray:
