@@ -13,7 +13,11 @@ run, interleaved frame by frame (medians over ``frames`` frames after a warm-up 
   (``cov_m2=`` the estimate's whole covariance);
 * ``track_int64`` -- ``track`` with the frame's ids handed as an int64 array (as the service's frame scanner
   has them, ``FrameDetections.int_ids``), not a list: the compiled look-up without the list's conversion
-  (2026-11-28 night, wave 9 f); ``ratio_int64`` its ratio;
+  (2026-11-28 night, wave 9 f; since 2026-11-29, wave 11, a list of ints is made such an array in the step);
+  ``ratio_int64`` its ratio.  ``track`` and ``track_int64`` take turns (seeded coin flips) right after the positions,
+  as the service runs its step, and each figure is the median over the frames where it ran there (half the
+  frames each): a step after another table's step pays ~3 us less (its code and arrays warm), which flattered
+  ``track_int64`` (always run fourth) before 2026-11-29 wave 11;
 * ``track_cv`` -- the same with the single constant-velocity mode (``manoeuvre_accel_psd_m2ps3=None``: the tracker
   before the IMM), on the same frames;
 * ``track_reference`` -- ``track`` with the update's compiled reference (:func:`~footprint_uq.tracking.kernels.
@@ -178,12 +182,25 @@ def run(n_objects: int = 100, frames: int = 300) -> dict:
     keys = ("positions", "positions_split", "shared_at", "track", "track_cv", "track_reference", "total",
             "track_int64", "total_int64")
     times = {k: [] for k in keys}
+    ratios: dict = {"ratio": [], "ratio_int64": []}
+    order = np.random.default_rng(7).random(frames + 30) < 0.5  # (which id form steps first: seeded coin flips,
+    # not the frame's parity, which the objects' births could follow)
     for k, (t, ids, boxes) in enumerate(_frames(cam, n_objects, frames + 30)):
+        ids64 = np.array(ids, np.int64)  # (what the frame's scanner hands; not timed)
+        # the list's table and the int64 ids' take turns right after the positions (as the service runs its step):
+        # a step there pays ~3 us more than one after another table's step (its code and the tracks' arrays cold)
+        int64_first = bool(order[k])
         t0 = time.perf_counter()
         plain.boxes3d(boxes, pixel_cov_px2=det)
         t1 = time.perf_counter()
         est = split.boxes3d(boxes, pixel_cov_px2=det)
         t2 = time.perf_counter()
+        if int64_first:
+            t7 = t2
+            object_motion(table_int.step(t, ids64, est.centre_xy_world_m, shared_m=est.centre_shared_m,
+                                         cov_m2=est.centre_cov_m2), yaw_rad=boxes[:, 6])
+            t8 = time.perf_counter()
+        ta = time.perf_counter()
         out = table.step(t, ids, est.centre_xy_world_m, shared_m=est.centre_shared_m, cov_m2=est.centre_cov_m2)
         object_motion(out, yaw_rad=boxes[:, 6])
         t3 = time.perf_counter()
@@ -195,20 +212,24 @@ def run(n_objects: int = 100, frames: int = 300) -> dict:
         object_motion(table_ref.step(t, ids, est.centre_xy_world_m, shared_m=est.centre_shared_m,
                                      cov_m2=est.centre_cov_m2), yaw_rad=boxes[:, 6])
         t6 = time.perf_counter()
-        ids64 = np.array(ids, np.int64)  # (what the frame's scanner hands; not timed)
-        t7 = time.perf_counter()
-        object_motion(table_int.step(t, ids64, est.centre_xy_world_m, shared_m=est.centre_shared_m,
-                                     cov_m2=est.centre_cov_m2), yaw_rad=boxes[:, 6])
-        t8 = time.perf_counter()
+        if not int64_first:
+            t7 = time.perf_counter()
+            object_motion(table_int.step(t, ids64, est.centre_xy_world_m, shared_m=est.centre_shared_m,
+                                         cov_m2=est.centre_cov_m2), yaw_rad=boxes[:, 6])
+            t8 = time.perf_counter()
         restarts += int(out.new_track.sum()) if k else 0
         if k >= 30:
-            for key, dt in (("positions", t1 - t0), ("positions_split", t2 - t1), ("track", t3 - t2),
-                            ("shared_at", t4 - t3), ("track_cv", t5 - t4), ("track_reference", t6 - t5),
-                            ("total", t3 - t1), ("track_int64", t8 - t7), ("total_int64", t2 - t1 + t8 - t7)):
+            for key, dt in (("positions", t1 - t0), ("positions_split", t2 - t1), ("shared_at", t4 - t3),
+                            ("track_cv", t5 - t4), ("track_reference", t6 - t5)):
                 times[key].append(dt * 1e6)
+            # (each id form's figures from the frames where its step came right after the positions)
+            first, tk, total, ratio = (t8 - t7, "track_int64", "total_int64", "ratio_int64") if int64_first else \
+                (t3 - ta, "track", "total", "ratio")
+            times[tk].append(first * 1e6)
+            times[total].append((t2 - t1 + first) * 1e6)
+            ratios[ratio].append((t2 - t1 + first) / (t1 - t0))
     res = {k: round(statistics.median(v), 1) for k, v in times.items()}
-    res["ratio"] = round(statistics.median(np.divide(times["total"], times["positions"])), 2)
-    res["ratio_int64"] = round(statistics.median(np.divide(times["total_int64"], times["positions"])), 2)
+    res.update({k: round(statistics.median(v), 2) for k, v in ratios.items()})
     res["ratio_of_medians"] = round(res["total"] / res["positions"], 2)
     res.update(n_objects=n_objects, frames=frames, target_us=TARGET_US, tracked=int((out.n_updates > 1).sum()),
                new_tracks_after_first_frame=restarts)
