@@ -93,8 +93,14 @@ def test_nan_and_bad_options_are_named_on_the_fast_path():
             object_motion(tracks, heading_min_ratio=bad)
 
 
+def _read_only(a: np.ndarray) -> np.ndarray:
+    a = a.copy()
+    a.flags.writeable = False
+    return a
+
+
 def test_converted_inputs_reach_the_kernel_as_the_tracker_hands_them():
-    """Rows that are not C-contiguous float64 are copied before the compiled pass: no new specialisation of
+    """Rows that are not C-contiguous, writable float64 are copied before the compiled pass: no new specialisation of
     motion_fields is compiled in a frame (the kernel's signatures: C rows, a yaw column strided or not)."""
     from footprint_uq.tracking.kernels import motion_fields
 
@@ -107,7 +113,8 @@ def test_converted_inputs_reach_the_kernel_as_the_tracker_hands_them():
     before = set(motion_fields.signatures)
     odd = (_converted(tracks), tracks._replace(v_mps=tracks.v_mps.astype(np.float32)),
            tracks._replace(cov_v_m2ps2=tracks.cov_v_m2ps2.astype(np.float32)),
-           tracks._replace(v_mps=tracks.v_mps.tolist(), cov_v_m2ps2=tracks.cov_v_m2ps2.tolist()))
+           tracks._replace(v_mps=tracks.v_mps.tolist(), cov_v_m2ps2=tracks.cov_v_m2ps2.tolist()),
+           tracks._replace(v_mps=_read_only(tracks.v_mps), cov_v_m2ps2=_read_only(tracks.cov_v_m2ps2)))
     for t in odd:
         for yaw in (None, boxes[:, 6]):
             object_motion(t, yaw_rad=yaw, sigma_yaw_rad=np.full(n, 0.1)[::-1])

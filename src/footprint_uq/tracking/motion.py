@@ -23,7 +23,7 @@ import numpy as np
 from .._checks import as_float
 from ..errors import InputError
 from .kernels import motion_fields
-from .table import TrackOutput
+from .table import TrackOutput, _c64
 
 __all__ = ["ObjectMotion", "MotionArrays", "MOTION_FIELDS", "object_motion", "DEFAULT_HEADING_MIN_RATIO",
            "yaw_compass_deg"]
@@ -108,10 +108,7 @@ def object_motion(tracks: TrackOutput, *, heading_offset_deg: float = 0.0, yaw_r
     if not (isinstance(ratio, float) and math.isfinite(ratio) and ratio > 0.0):
         ratio = as_float("heading_min_ratio", ratio, positive=True)
     n = len(tracks.track_id)
-    v, cov = tracks.v_mps, tracks.cov_v_m2ps2
-    if not (v.__class__ is _ND and cov.__class__ is _ND and v.dtype is _F8 and cov.dtype is _F8
-            and v.flags.c_contiguous and cov.flags.c_contiguous):
-        v, cov = _c64(v), _c64(cov)
+    v, cov = _c64(tracks.v_mps), _c64(tracks.cov_v_m2ps2)
     age = tracks.age_s.copy() if age_s is None else _column("age_s", age_s, n)
     hr = math.radians(h)
     out, cov_out = np.empty((8, n)), np.empty((n, 2, 2))
@@ -130,13 +127,6 @@ def object_motion(tracks: TrackOutput, *, heading_offset_deg: float = 0.0, yaw_r
 _new_motion = tuple.__new__
 _F8 = np.dtype(np.float64)
 _ND = np.ndarray
-
-
-def _c64(a) -> np.ndarray:
-    """``a`` as a C-contiguous float64 array: a tracker's output as it is (the kernel's one signature)."""
-    if type(a) is np.ndarray and a.dtype == _F8 and a.flags.c_contiguous:
-        return a
-    return np.ascontiguousarray(a, dtype=np.float64)
 
 
 _NONE = np.empty(0)
