@@ -23,7 +23,7 @@ import numpy as np
 from .._checks import as_float
 from ..errors import InputError
 from .kernels import motion_fields
-from .table import TrackOutput, _c64
+from .table import TrackOutput, c_float64
 
 __all__ = ["ObjectMotion", "MotionArrays", "MOTION_FIELDS", "object_motion", "DEFAULT_HEADING_MIN_RATIO",
            "yaw_compass_deg"]
@@ -108,7 +108,7 @@ def object_motion(tracks: TrackOutput, *, heading_offset_deg: float = 0.0, yaw_r
     if not (isinstance(ratio, float) and math.isfinite(ratio) and ratio > 0.0):
         ratio = as_float("heading_min_ratio", ratio, positive=True)
     n = len(tracks.track_id)
-    v, cov = _c64(tracks.v_mps), _c64(tracks.cov_v_m2ps2)
+    v, cov = c_float64(tracks.v_mps), c_float64(tracks.cov_v_m2ps2)
     age = tracks.age_s.copy() if age_s is None else _column("age_s", age_s, n)
     hr = math.radians(h)
     out, cov_out = np.empty((8, n)), np.empty((n, 2, 2))

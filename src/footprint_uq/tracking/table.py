@@ -377,7 +377,7 @@ class TrackTable:
         # (a finite float passes without a call into _checks: one climb less per frame; anything else gets its check)
         t = time_s if isinstance(time_s, float) and math.isfinite(time_s) else as_float("time_s", time_s)
         xy_rows = _rows(xy_m, 2) if type(xy_m) is np.ndarray and xy_m.ndim == 2 and xy_m.shape[1] == 2 else \
-            np.ascontiguousarray(_c64(xy_m).reshape(-1, 2).T)  # (2, n): the kernel's layout, an estimate's as is
+            np.ascontiguousarray(c_float64(xy_m).reshape(-1, 2).T)  # (2, n): the kernel's layout, an estimate's as is
         n = xy_rows.shape[1]
         id64 = None
         if self._int_ids:  # (the compiled id table: an int64 array, or a list of Python ints made one)
@@ -388,7 +388,7 @@ class TrackTable:
         ids = object_ids if id64 is not None or isinstance(object_ids, list) else list(object_ids)
         if len(ids) != n:
             raise InputError("object_ids", len(ids), f"{n} ids, one per object")
-        B = _c64(shared_m)
+        B = c_float64(shared_m)
         if B.shape != (n, 2, self.rank) and (self._consider or B.ndim != 3 or B.shape[:2] != (n, 2)):
             raise InputError("shared_m", B.shape, f"shape ({n}, 2, {self.rank})")
         if (cov_frame_m2 is None) == (cov_m2 is None):
@@ -436,7 +436,7 @@ class TrackTable:
             k, n_unknown = frame_rows_shared(*args, *self._at.kernel_inputs(), self._uv, Bp, self._frame_scratch())
             return k, n_unknown, Bp
         k, n_unknown = frame_rows(*args)
-        Bp = _c64(self.shared_at(pred[:k])) if self.shared_at is not None and self.rank and k else _NO_B
+        Bp = c_float64(self.shared_at(pred[:k])) if self.shared_at is not None and self.rank and k else _NO_B
         return k, n_unknown, Bp
 
     def _update(self, t: float, id64, ids, work: tuple, B, k: int, n_unknown: int, Bp, out: TrackOutput,
@@ -627,7 +627,7 @@ def _list_int64(ids: list) -> np.ndarray | None:
     return a if a.dtype == _I8 and a.ndim == 1 else None
 
 
-def _c64(a) -> np.ndarray:
+def c_float64(a) -> np.ndarray:
     """``a`` as a C-contiguous, writable float64 array (a copy only if it is not one): one compiled signature."""
     if type(a) is not np.ndarray or a.dtype != _F8:
         a = np.asarray(a, dtype=np.float64)
