@@ -69,6 +69,7 @@ def test_frame_pass_equals_the_reference_on_random_steps(seed, M, r, h, with_pre
     B_pred = B_frame[old] + rng.normal(0.0, 0.05, (n - 1, 2, r)) if with_pred else np.zeros((0, 2, 0))
     if with_pred and r:
         B_pred[2, 1, 0] = np.nan  # no B at this predicted position: the frame's B
+        B_pred[3, 0, r - 1] = np.inf  # (nor at this one: its last entry infinite)
     qs, rates, mu0 = np.array([1.5, 30.0])[:M], np.array([1 / 3, 1.0])[:M], np.full(M, 1.0 / M)
     runs = []
     for fast in (True, False):

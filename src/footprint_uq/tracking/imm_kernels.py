@@ -122,16 +122,18 @@ def _columns_mix_predict(s, j, h, Cm, W, B, bi, Cps):  # pragma: no cover - comp
 
 @njit(**_INL)
 def _columns_shares(s, h, Cm, W, B, bi):  # pragma: no cover - compiled
-    """Both modes' ``G_j = C_p,j B^T`` (4 x 2, row-major, 8 floats each) and ``B B^T``'s 3 entries, from one walk
-    over the stored columns that writes nothing: ``D_i = C_i B^T`` of each stored mode (16 running sums), then
-    ``G_j = F (W[0, j] D_0 + W[1, j] D_1)`` (the mix and the predict are linear: ``C_p,j = F sum_i W[i, j] C_i``).
-    The predicted columns themselves are formed again in :func:`_columns_posterior`, column by column."""
+    """Both modes' ``G_j = C_p,j B^T`` (4 x 2, row-major, 8 floats each), ``B B^T``'s 3 entries and whether every
+    entry of ``B[bi]`` is finite, from one walk over the stored columns that writes nothing: ``D_i = C_i B^T`` of
+    each stored mode (16 running sums), then ``G_j = F (W[0, j] D_0 + W[1, j] D_1)`` (the mix and the predict are
+    linear: ``C_p,j = F sum_i W[i, j] C_i``).  The predicted columns themselves are formed again in
+    :func:`_columns_posterior`, column by column."""
     r = Cm.shape[2]
     a00 = a01 = a10 = a11 = a20 = a21 = a30 = a31 = 0.0
     d00 = d01 = d10 = d11 = d20 = d21 = d30 = d31 = 0.0
-    bb00 = bb01 = bb11 = 0.0
+    bb00 = bb01 = bb11 = fin = 0.0
     for c in range(r):
         b0, b1 = B[bi, 0, c], B[bi, 1, c]
+        fin += (b0 - b0) + (b1 - b1)  # (0 if both finite, else NaN: stays 0 only if all are)
         bb00 += b0 * b0
         bb01 += b0 * b1
         bb11 += b1 * b1
@@ -157,7 +159,7 @@ def _columns_shares(s, h, Cm, W, B, bi):  # pragma: no cover - compiled
                          d30, d31),
             _mixed_share(W[0, 1], W[1, 1], h, a00, a01, a10, a11, a20, a21, a30, a31, d00, d01, d10, d11, d20, d21,
                          d30, d31),
-            (bb00, bb01, bb11))
+            (bb00, bb01, bb11), fin == 0.0)
 
 
 @njit(**_INL)
@@ -324,9 +326,10 @@ def _combine(s, X, P, Xm, Pm, mu):  # pragma: no cover - compiled
 
 
 @njit(**_INL)
-def _track_step(s, X, P, Xm, Pm, Cm, mu, t_last, n_upd, t, e, qs, rates, z, R, zi, B, bi, gate, W, xp, Pp, Kg, Cx,
-                Cps, Sm, nis):  # pragma: no cover - compiled
-    """One track's IMM Schmidt step (storage row ``s``, measurement ``z[zi]``, ``R[zi]``, ``B[bi]``), in place if
+def _track_step(s, X, P, Xm, Pm, Cm, mu, t_last, n_upd, t, e, qs, rates, z, R, zi, B, bi, B_frame, gate, W, xp, Pp,
+                Kg, Cx, Cps, Sm, nis):  # pragma: no cover - compiled
+    """One track's IMM Schmidt step (storage row ``s``, measurement ``z[zi]``, ``R[zi]``, ``B[bi]``; two modes: if
+    ``B[bi]`` is not all finite, ``B_frame[zi]``, found in the shares' walk), in place if
     the smallest of its modes' squared Mahalanobis distances is ``<= gate`` (returned; NaN if a mode's is not
     finite: the track is then left as it was, as one beyond the gate), with its innovation's NIS (one mode: the
     distance; two: :func:`_mixture_nis`) into ``nis[zi]``.  The rest are scratch."""
@@ -334,7 +337,10 @@ def _track_step(s, X, P, Xm, Pm, Cm, mu, t_last, n_upd, t, e, qs, rates, z, R, z
     h = t - t_last[s]
     cb0, cb1 = _weights(s, e, mu, rates, W)
     if M == 2:
-        G0, G1, bb = _columns_shares(s, h, Cm, W, B, bi)
+        G0, G1, bb, finite = _columns_shares(s, h, Cm, W, B, bi)
+        if not finite:  # (B at the predicted position unknown: the frame's B, as frame_update picks it)
+            B, bi = B_frame, zi
+            G0, G1, bb, finite = _columns_shares(s, h, Cm, W, B, bi)
         _mode_predict(s, 0, h, qs[0], Xm, Pm, W, xp, Pp)
         m0, det0 = _mode_gain(0, G0, bb, R, z, zi, xp, Pp, Kg, Cx, Sm)
         _mode_predict(s, 1, h, qs[1], Xm, Pm, W, xp, Pp)
@@ -388,12 +394,12 @@ def frame_pass(act, slots, old, n_old, X, P, Xm, Pm, Cm, mu, t_last, t_first, n_
         if h != h_last:  # (most tracks of a frame share their step: one expm1 per distinct one)
             h_last, e = h, _switching(h, rates)
         use_pred = has_pred
-        if has_pred:
-            for c in range(r):
+        if has_pred and Xm.shape[1] == 1:  # (two modes: B_pred's finiteness is summed in the shares' walk, ~2 us
+            for c in range(r):  # less a frame than this loop before it)
                 use_pred &= math.isfinite(B_pred[k, 0, c]) & math.isfinite(B_pred[k, 1, c])
         Bs, bi = (B_pred, k) if use_pred else (B_frame, i)
-        d2 = _track_step(slots[i], X, P, Xm, Pm, Cm, mu, t_last, n_upd, t, e, qs, rates, z, R, i, Bs, bi, gate, W,
-                         xp, Pp, Kg, Cx, Cps, Sm, nis)
+        d2 = _track_step(slots[i], X, P, Xm, Pm, Cm, mu, t_last, n_upd, t, e, qs, rates, z, R, i, Bs, bi, B_frame, gate,
+                         W, xp, Pp, Kg, Cx, Cps, Sm, nis)
         if not d2 <= gate:  # NaN (a singular S) fails the gate too
             act[i] = ROW_START
     return _starts_and_outputs(act, slots, X, P, Xm, Pm, Cm, mu, t_last, t_first, n_upd, tid, next_id, t, mu0,
