@@ -6,18 +6,24 @@ run, interleaved frame by frame (medians over ``frames`` frames after a warm-up 
 * ``positions`` -- :meth:`FrameProcessor.boxes3d` as the service runs it without tracks (the reference);
 * ``positions_split`` -- the same with ``shared_jacobian=True`` (the centre's whitened calibration Jacobian);
 * ``shared_at`` -- :class:`~footprint_uq.tracking.table.SharedJacobianAt` at the 100 predicted positions alone;
-* ``track`` -- :meth:`TrackTable.step` (deleter, ids, the per-frame covariance, predict, ``shared_at``, gate,
-  update, outputs; the ids looked up in one compiled call -- integer ids; since 2026-11-28 night, wave 9 f: before, a
-  dictionary pass -- and compiled passes over the objects) +
-  :func:`~footprint_uq.tracking.motion.object_motion`, the default two-mode IMM filter, as the service calls them
-  (``cov_m2=`` the estimate's whole covariance);
+* ``track`` -- :func:`~footprint_uq.tracking.motion.track_motion`: :meth:`TrackTable.step` (deleter, ids, the
+  per-frame covariance, predict, ``shared_at``, gate, update, outputs; the ids looked up in one compiled call --
+  integer ids; since 2026-11-28 night, wave 9 f: before, a dictionary pass -- and compiled passes over the objects)
+  and the motion fields of :func:`~footprint_uq.tracking.motion.object_motion` in the step's compiled call, the
+  default two-mode IMM filter (``cov_m2=`` the estimate's whole covariance), the ids a list of ints (before
+  2026-11-29, wave 12: ``step`` then ``object_motion``, two calls);
 * ``track_int64`` -- ``track`` with the frame's ids handed as an int64 array (as the service's frame scanner
   has them, ``FrameDetections.int_ids``), not a list: the compiled look-up without the list's conversion
   (2026-11-28 night, wave 9 f; since 2026-11-29, wave 11, a list of ints is made such an array in the step);
-  ``ratio_int64`` its ratio.  ``track`` and ``track_int64`` take turns (seeded coin flips) right after the positions,
-  as the service runs its step, and each figure is the median over the frames where it ran there (half the
-  frames each): a step after another table's step pays ~3 us less (its code and arrays warm), which flattered
-  ``track_int64`` (always run fourth) before 2026-11-29 wave 11;
+  ``ratio_int64`` its ratio;
+* ``track_two_calls`` -- ``track_int64`` as two calls, :meth:`TrackTable.step` then
+  :func:`~footprint_uq.tracking.motion.object_motion` (what ``track_int64`` was before wave 12; the service's
+  :class:`~footprint_uq.tracking.camera_tracker.CameraTracker` still takes them apart: the slide term of 2-D boxes
+  and the NIS check come between); ``ratio_two_calls`` its ratio.  ``track``, ``track_int64`` and
+  ``track_two_calls`` take turns (seeded draws) right after the positions, as the service runs its step, and
+  each figure is the median over the frames where it ran there (a third of the frames each): a step after another
+  table's step pays ~2-3 us less (its code and arrays warm), which flattered ``track_int64`` (always run fourth)
+  before 2026-11-29 wave 11;
 * ``track_cv`` -- the same with the single constant-velocity mode (``manoeuvre_accel_psd_m2ps3=None``: the tracker
   before the IMM), on the same frames;
 * ``track_reference`` -- ``track`` with the update's compiled reference (:func:`~footprint_uq.tracking.kernels.
@@ -55,7 +61,7 @@ import numpy as np
 
 from footprint_uq import PanTiltCamera
 from footprint_uq.products.footprints import FrameProcessor
-from footprint_uq.tracking import SharedJacobianAt, TrackerConfig, TrackTable, object_motion
+from footprint_uq.tracking import SharedJacobianAt, TrackerConfig, TrackTable, object_motion, track_motion
 from footprint_uq.tracking import table as table_module
 from footprint_uq.tracking.classes import ClassTracks
 from footprint_uq.tracking.consistency import NisMonitor
@@ -167,6 +173,19 @@ def monitor_cost(n_objects: int = 100, frames: int = 300) -> dict:
     return {k: round(statistics.median(v), 1) for k, v in times.items()}
 
 
+#: the tracker's ways from the centres to the motion timed right after the positions, in turns (see the module doc)
+VARIANTS = ("track", "track_int64", "track_two_calls")
+
+
+def _track_variant(name: str, table: TrackTable, t: float, ids, xy, B, cov, yaw):
+    """One frame's step and motion the way ``name`` says; returns the step's output."""
+    if name == "track_two_calls":
+        tracks = table.step(t, ids, xy, shared_m=B, cov_m2=cov)
+        object_motion(tracks, yaw_rad=yaw)
+        return tracks
+    return track_motion(table, t, ids, xy, shared_m=B, cov_m2=cov, yaw_rad=yaw)[0]
+
+
 def run(n_objects: int = 100, frames: int = 300) -> dict:
     cam = PanTiltCamera(**CAMERA)
     plain = FrameProcessor(cam, BUDGET, joint_cov=False, linearity=False, v2x_policy="linear")
@@ -176,58 +195,54 @@ def run(n_objects: int = 100, frames: int = 300) -> dict:
     table_cv = TrackTable(TrackerConfig(timeout_s=1e9, manoeuvre_accel_psd_m2ps3=None), rank=at.rank, shared_at=at)
     table_ref = TrackTable(TrackerConfig(timeout_s=1e9), rank=at.rank, shared_at=at)
     table_ref._reference_pass = True
-    table_int = TrackTable(TrackerConfig(timeout_s=1e9), rank=at.rank, shared_at=at)
+    tables = {"track": table, **{v: TrackTable(TrackerConfig(timeout_s=1e9), rank=at.rank, shared_at=at)
+                                 for v in VARIANTS[1:]}}
     det = np.broadcast_to(np.eye(2), (n_objects, 2, 2))
     restarts = 0
     keys = ("positions", "positions_split", "shared_at", "track", "track_cv", "track_reference", "total",
-            "track_int64", "total_int64")
+            "track_int64", "total_int64", "track_two_calls", "total_two_calls")
     times = {k: [] for k in keys}
-    ratios: dict = {"ratio": [], "ratio_int64": []}
-    order = np.random.default_rng(7).random(frames + 30) < 0.5  # (which id form steps first: seeded coin flips,
-    # not the frame's parity, which the objects' births could follow)
+    ratios: dict = {"ratio": [], "ratio_int64": [], "ratio_two_calls": []}
+    # (which variant steps first, right after the positions: seeded draws, not the frame's parity, which the
+    # objects' births could follow)
+    order = np.random.default_rng(7).integers(0, 3, frames + 30)
     for k, (t, ids, boxes) in enumerate(_frames(cam, n_objects, frames + 30)):
         ids64 = np.array(ids, np.int64)  # (what the frame's scanner hands; not timed)
-        # the list's table and the int64 ids' take turns right after the positions (as the service runs its step):
-        # a step there pays ~3 us more than one after another table's step (its code and the tracks' arrays cold)
-        int64_first = bool(order[k])
+        yaw = boxes[:, 6]
         t0 = time.perf_counter()
         plain.boxes3d(boxes, pixel_cov_px2=det)
         t1 = time.perf_counter()
         est = split.boxes3d(boxes, pixel_cov_px2=det)
         t2 = time.perf_counter()
-        if int64_first:
-            t7 = t2
-            object_motion(table_int.step(t, ids64, est.centre_xy_world_m, shared_m=est.centre_shared_m,
-                                         cov_m2=est.centre_cov_m2), yaw_rad=boxes[:, 6])
-            t8 = time.perf_counter()
-        ta = time.perf_counter()
-        out = table.step(t, ids, est.centre_xy_world_m, shared_m=est.centre_shared_m, cov_m2=est.centre_cov_m2)
-        object_motion(out, yaw_rad=boxes[:, 6])
+        xy, B, cov = est.centre_xy_world_m, est.centre_shared_m, est.centre_cov_m2
+        # the list's table, the int64 ids' and the two calls' take turns right after the positions (as the service
+        # runs its step): a step there pays ~2-3 us more than one after another table's step (code and arrays cold)
+        first = VARIANTS[order[k]]
+        spent = {}
+        for name in (first, *(v for v in VARIANTS if v != first)):
+            ta = time.perf_counter()
+            res = _track_variant(name, tables[name], t, ids64 if name != "track" else ids, xy, B, cov, yaw)
+            spent[name] = time.perf_counter() - ta
+            if name == "track":
+                out = res
         t3 = time.perf_counter()
         at(est.centre_xy_world_m)
         t4 = time.perf_counter()
-        object_motion(table_cv.step(t, ids, est.centre_xy_world_m, shared_m=est.centre_shared_m,
-                                    cov_m2=est.centre_cov_m2), yaw_rad=boxes[:, 6])
+        track_motion(table_cv, t, ids, xy, shared_m=B, cov_m2=cov, yaw_rad=yaw)
         t5 = time.perf_counter()
-        object_motion(table_ref.step(t, ids, est.centre_xy_world_m, shared_m=est.centre_shared_m,
-                                     cov_m2=est.centre_cov_m2), yaw_rad=boxes[:, 6])
+        track_motion(table_ref, t, ids, xy, shared_m=B, cov_m2=cov, yaw_rad=yaw)
         t6 = time.perf_counter()
-        if not int64_first:
-            t7 = time.perf_counter()
-            object_motion(table_int.step(t, ids64, est.centre_xy_world_m, shared_m=est.centre_shared_m,
-                                         cov_m2=est.centre_cov_m2), yaw_rad=boxes[:, 6])
-            t8 = time.perf_counter()
         restarts += int(out.new_track.sum()) if k else 0
         if k >= 30:
             for key, dt in (("positions", t1 - t0), ("positions_split", t2 - t1), ("shared_at", t4 - t3),
                             ("track_cv", t5 - t4), ("track_reference", t6 - t5)):
                 times[key].append(dt * 1e6)
-            # (each id form's figures from the frames where its step came right after the positions)
-            first, tk, total, ratio = (t8 - t7, "track_int64", "total_int64", "ratio_int64") if int64_first else \
-                (t3 - ta, "track", "total", "ratio")
-            times[tk].append(first * 1e6)
-            times[total].append((t2 - t1 + first) * 1e6)
-            ratios[ratio].append((t2 - t1 + first) / (t1 - t0))
+            # (each variant's figures from the frames where its step came right after the positions)
+            dt = spent[first]
+            suffix = first[len("track"):]
+            times[first].append(dt * 1e6)
+            times["total" + suffix].append((t2 - t1 + dt) * 1e6)
+            ratios["ratio" + suffix].append((t2 - t1 + dt) / (t1 - t0))
     res = {k: round(statistics.median(v), 1) for k, v in times.items()}
     res.update({k: round(statistics.median(v), 2) for k, v in ratios.items()})
     res["ratio_of_medians"] = round(res["total"] / res["positions"], 2)
@@ -268,7 +283,8 @@ def main(argv=None) -> None:
             print(f"total {r['total']:.1f} us (positions_split {r['positions_split']:.1f} + track {r['track']:.1f}); "
                   f"positions {r['positions']:.1f}; ratio {r['ratio']:.2f}; track_reference "
                   f"{r['track_reference']:.1f}; ids as int64: track {r['track_int64']:.1f}, "
-                  f"ratio {r['ratio_int64']:.2f}; "
+                  f"ratio {r['ratio_int64']:.2f}; two calls: track {r['track_two_calls']:.1f}, "
+                  f"ratio {r['ratio_two_calls']:.2f}; "
                   f"monitor {r['monitor']['monitor']:.1f} (before: "
                   f"{r['monitor']['monitor_bank']:.1f}); step Python {r['python']['step_python']:.1f} us; "
                   f"load {r['load_average_1min_start']:.2f}")
@@ -278,10 +294,11 @@ def main(argv=None) -> None:
         print(json.dumps(res))
         return
     for k in ("positions", "positions_split", "shared_at", "track", "track_cv", "track_reference", "total",
-              "track_int64"):
+              "track_int64", "track_two_calls"):
         print(f"{k:16s} {res[k]:8.1f} us per frame of {res['n_objects']} objects (median of {res['frames']})")
     print(f"target: total <= {TARGET_US:.0f} us -> {'met' if res['total'] <= TARGET_US else 'NOT met'}")
-    print(f"ratio total / positions {res['ratio']:.2f} (issue 31: <= 2)")
+    print(f"ratio total / positions {res['ratio']:.2f} (issue 31: <= 2); int64 ids {res['ratio_int64']:.2f}; "
+          f"int64 ids, step + object_motion {res['ratio_two_calls']:.2f}")
     for k, v in step_python(a.objects, a.frames).items():
         print(f"{k:16s} {v:8.1f} us (TrackTable.step and its parts)")
     for k, v in monitor_cost(a.objects, a.frames).items():

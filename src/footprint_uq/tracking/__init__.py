@@ -13,7 +13,8 @@ Small components in the spirit of Stone Soup (docs/uncertainty-model.md, "Motion
 * :class:`~footprint_uq.tracking.table.TrackTable` -- one camera's tracks keyed by ``object_id``, with the
   deleter (timeout) and the gate (a jump inconsistent with the track starts a new one);
 * :func:`~footprint_uq.tracking.motion.object_motion` -- velocity, speed, heading, yaw, their sigmas and the
-  object's age as the arrays of the V2X messages' motion fields;
+  object's age as the arrays of the V2X messages' motion fields; :func:`~footprint_uq.tracking.motion.track_motion`
+  -- a table's step and those fields in one call;
 * :class:`~footprint_uq.tracking.rsu_fusion.RsuFusion` -- the roadside unit's one object list from its cameras'
   tracks (docs/rsu-fusion.md).
 """
@@ -28,12 +29,12 @@ from .filter import (
     mode_switch_probabilities,
 )
 from .models import ConstantVelocity
-from .motion import MOTION_FIELDS, MotionArrays, ObjectMotion, object_motion
+from .motion import MOTION_FIELDS, MotionArrays, ObjectMotion, object_motion, track_motion
 from .rsu_fusion import FrameFusion, FusedObjects, RsuFusion, RsuFusionConfig
 from .table import CALIBRATION_MODES, SharedJacobianAt, TrackerConfig, TrackOutput, TrackTable
 
 __all__ = ["ConstantVelocity", "SchmidtPredictor", "SchmidtUpdater", "Initiator", "SplitMeasurement", "TrackState",
            "InteractingModels", "mode_switch_probabilities",
            "TrackTable", "SharedJacobianAt", "TrackerConfig", "TrackOutput", "CALIBRATION_MODES", "MotionArrays",
-           "ObjectMotion", "MOTION_FIELDS", "object_motion", "RsuFusion", "RsuFusionConfig", "FrameFusion",
-           "FusedObjects"]
+           "ObjectMotion", "MOTION_FIELDS", "object_motion", "track_motion", "RsuFusion", "RsuFusionConfig",
+           "FrameFusion", "FusedObjects"]

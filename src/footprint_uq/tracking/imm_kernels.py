@@ -44,7 +44,7 @@ import math
 import numpy as np
 from numba import njit
 
-from .kernels import ROW_SKIP, ROW_START, claim_rows, frame_rows_shared, id_lookup, initiate_row
+from .kernels import ROW_SKIP, ROW_START, claim_rows, frame_rows_shared, id_lookup, initiate_row, motion_fields
 
 __all__ = ["frame_pass", "frame_step", "scratch"]
 
@@ -445,7 +445,8 @@ def _starts_and_outputs(act, slots, X, P, Xm, Pm, Cm, mu, t_last, t_first, n_upd
 def frame_step(ids, slots, xy_rows, cov_rows, B, subtract, t, stamp, n_free, next_id, S, o_tid, o_new, o_n, o_age,
                o_xy, o_cxy, o_v, o_cv, nis, id_keys, id_vals, id_shift, free_rows, z, R, act, old, pred, uv, B_pred,
                claimed, cam_f, has_dist, dist, cam_R, dom, dR, Lr, Lc, Lv, X, P, Xm, Pm, Cm, mu, t_last, t_first,
-               n_upd, tid, seen, qs, rates, mu0, var_v0, gate, W, xp, Pp, Kg, Cx, Cps, Sm):  # pragma: no cover
+               n_upd, tid, seen, qs, rates, mu0, var_v0, gate, W, xp, Pp, Kg, Cx, Cps, Sm, m_ch, m_sh, m_ratio, m_yaw,
+               m_syaw, m_h, m_out, m_cov):  # pragma: no cover
     """A frame of n objects through a :class:`~footprint_uq.tracking.table.TrackTable` whose ``B`` at the predicted
     positions is formed in the rows' call, in one call: the ids' rows, :func:`~footprint_uq.tracking.kernels.
     frame_rows_shared`, the new ids' rows (:func:`~footprint_uq.tracking.kernels.claim_rows`) and
@@ -460,7 +461,10 @@ def frame_step(ids, slots, xy_rows, cov_rows, B, subtract, t, stamp, n_free, nex
     ``claimed`` receives the objects given them.  The working arrays ``z, R, act, old, pred, uv, B_pred, claimed``
     have at least n rows; the camera's and ``B``'s inputs ``cam_f ... Lv`` are :func:`~footprint_uq.tracking.
     kernels.frame_rows_shared`'s, the storage ``X ... tid`` and the rest :func:`frame_pass`'s, ``seen``
-    :func:`~footprint_uq.tracking.kernels.frame_rows`'.
+    :func:`~footprint_uq.tracking.kernels.frame_rows`'.  ``m_ch ... m_cov``:
+    :func:`~footprint_uq.tracking.kernels.motion_fields`' arguments after the velocities (``m_out (8, n)``), run
+    on the outputs ``o_v, o_cv`` at the end of a frame that passed (:func:`~footprint_uq.tracking.motion.
+    track_motion`: the motion fields in the step's call); ``m_out (8, 0)``: not run.
 
     Returns ``(k, u, m, next_id)``: the tracks to update and the unknown ids (what ``frame_rows`` returns), the
     rows taken from the free stack and the next free track id.  ``m == -1``: unknown ids without ``ids`` to claim
@@ -483,4 +487,6 @@ def frame_step(ids, slots, xy_rows, cov_rows, B, subtract, t, stamp, n_free, nex
     next_id = frame_pass(ac, sl, old, k, X, P, Xm, Pm, Cm, mu, t_last, t_first, n_upd, tid, next_id, t, qs, rates,
                          mu0, var_v0, zn, Rn, B_pred, B, gate, o_tid, o_new, o_n, o_age, o_xy, o_cxy, o_v, o_cv, W,
                          xp, Pp, Kg, Cx, Cps, Sm, nis)
+    if m_out.shape[1] == n:  # (the motion fields of the outputs, as object_motion's pass: the same to the bit)
+        motion_fields(o_v, o_cv, m_ch, m_sh, m_ratio, m_yaw, m_syaw, m_h, m_out, m_cov)
     return k, u, m, next_id

@@ -23,10 +23,10 @@ import numpy as np
 from .._checks import as_float
 from ..errors import InputError
 from .kernels import motion_fields
-from .table import TrackOutput, c_float64
+from .table import TrackOutput, TrackTable, c_float64
 
-__all__ = ["ObjectMotion", "MotionArrays", "MOTION_FIELDS", "object_motion", "DEFAULT_HEADING_MIN_RATIO",
-           "yaw_compass_deg"]
+__all__ = ["ObjectMotion", "MotionArrays", "MOTION_FIELDS", "object_motion", "track_motion",
+           "DEFAULT_HEADING_MIN_RATIO", "yaw_compass_deg"]
 
 #: heading sigma only where speed >= this many sigma of the velocity's largest semi-axis
 DEFAULT_HEADING_MIN_RATIO = 3.0
@@ -121,6 +121,41 @@ def object_motion(tracks: TrackOutput, *, heading_offset_deg: float = 0.0, yaw_r
         motion_pass[0](*args, age, *motion_pass[1])
     # (its rows as views by index: ~0.2 us less than unpacking the array through its iterator)
     return _new_motion(ObjectMotion, (out[0], out[1], cov_out, out[2], out[3], out[4], out[5], out[6], out[7], age))
+
+
+def track_motion(table: TrackTable, time_s: float, object_ids, xy_m, cov_frame_m2=None, shared_m=None, *,
+                 cov_m2=None, heading_offset_deg: float = 0.0, yaw_rad=None, sigma_yaw_rad=None,
+                 heading_min_ratio: float = DEFAULT_HEADING_MIN_RATIO) -> tuple[TrackOutput, ObjectMotion]:
+    """A frame through ``table`` and the motion fields of its objects: :meth:`~footprint_uq.tracking.table.
+    TrackTable.step` then :func:`object_motion` (same arguments, the same numbers to the bit), the fields formed in
+    the step's compiled call where the step is one (:func:`~footprint_uq.tracking.imm_kernels.frame_step`: one
+    call from the centres to the motion, ~3 us less per 100-object frame than the two calls).
+
+    The motion's ``age_s`` is the output's own ``age_s`` array (one array: neither is written after the step).
+    Bad motion arguments (heading, ratio, yaws of another length) raise :class:`~footprint_uq.errors.InputError`
+    before the step, so the tracks are left as they were.
+
+    Returns
+    -------
+    (TrackOutput, ObjectMotion)
+        The step's output and the motion of the frame's objects, in frame order.
+    """
+    h, ratio = heading_offset_deg, heading_min_ratio
+    if not (isinstance(h, float) and math.isfinite(h)):
+        h = as_float("heading_offset_deg", h)
+    if not (isinstance(ratio, float) and math.isfinite(ratio) and ratio > 0.0):
+        ratio = as_float("heading_min_ratio", ratio, positive=True)
+    n = xy_m.shape[0] if type(xy_m) is _ND and xy_m.ndim == 2 else c_float64(xy_m).reshape(-1, 2).shape[0]
+    # (the yaws contiguous, unlike object_motion's: frame_step has one signature, its compile is long)
+    yaw = _NONE if yaw_rad is None else _column("yaw_rad", yaw_rad, n)
+    sigma_yaw = _NONE if sigma_yaw_rad is None else _column("sigma_yaw_rad", sigma_yaw_rad, n)
+    hr = math.radians(h)
+    out, cov_out = np.empty((8, n)), np.empty((n, 2, 2))
+    tracks = table.step(time_s, object_ids, xy_m, cov_frame_m2, shared_m, cov_m2=cov_m2,
+                        motion=(math.cos(hr), math.sin(hr), ratio, yaw, sigma_yaw, h, out, cov_out))
+    age = tracks.age_s
+    return tracks, _new_motion(ObjectMotion, (out[0], out[1], cov_out, out[2], out[3], out[4], out[5], out[6], out[7],
+                                              age))
 
 
 #: a tuple of :class:`ObjectMotion`'s ten fields made an ObjectMotion without the named tuple's ``__new__``

@@ -28,6 +28,7 @@ from .kernels import (
     id_delete,
     id_insert,
     id_lookup,
+    motion_fields,
     project_ground,
 )
 from .models import ConstantVelocity
@@ -39,6 +40,8 @@ _NO_B = np.zeros((0, 2, 0))
 _ROWS, _ROWS_SHARED, _ONE_CALL = 0, 1, 2
 _NO_IDS = np.zeros(0, np.int64)  # (frame_step: the rows are the dictionary's)
 _NO_ID_TABLE = (np.zeros(1, np.int64), np.full(1, ID_EMPTY, np.int64), 63)  # (and it reads no id table)
+#: frame_step's motion arguments when the step is not asked for the motion fields (``m_out (8, 0)``: not run)
+_NO_MOTION = (1.0, 0.0, 1.0, np.zeros(0), np.zeros(0), 0.0, np.zeros((8, 0)), np.zeros((0, 2, 2)))
 
 
 class _Index(dict):
@@ -307,7 +310,7 @@ class TrackTable:
         return SplitMeasurement(xy_m, R, np.zeros((xy_m.shape[0], 2, 0)))
 
     def step(self, time_s: float, object_ids, xy_m, cov_frame_m2=None, shared_m=None, *,
-             cov_m2=None) -> TrackOutput:
+             cov_m2=None, motion: tuple | None = None) -> TrackOutput:
         """One frame of n objects: update their tracks and return their motion (:class:`TrackOutput`).
 
         Parameters
@@ -324,6 +327,13 @@ class TrackTable:
             Instead of ``cov_frame_m2``: their whole covariance (``FootprintEstimate.centre_cov_m2``); the
             per-frame part ``cov_m2 - B B^T`` is then taken in the compiled pass (what
             ``FootprintEstimate.centre_cov_frame_m2`` gives, without its dozen numpy calls).
+        motion : tuple, optional
+            The motion fields of the step's output in the same compiled call, where the step is one
+            (:func:`~footprint_uq.tracking.motion.track_motion` makes it): :func:`~footprint_uq.tracking.kernels.
+            motion_fields`' arguments after the velocities, ``(cos_h, sin_h, ratio, yaw_rad, sigma_yaw_rad,
+            heading_offset_deg, out (8, n), cov_out (n, 2, 2))`` (yaws C-contiguous float64, ``(n,)`` or
+            ``(0,)``); ``out`` and ``cov_out`` receive the fields whichever way the step goes (else one call of
+            ``motion_fields`` after it).
         """
         t, id64, ids, xy_rows, cov_rows, B, subtract = self._frame_inputs(time_s, object_ids, xy_m, cov_frame_m2,
                                                                           shared_m, cov_m2)
@@ -331,7 +341,7 @@ class TrackTable:
         if t < self._last_time:
             self.n_stale_frames += 1
             self._nis = np.full(n, np.nan)
-            return TrackOutput.untracked(n)
+            return self._with_motion(TrackOutput.untracked(n), motion)
         self._last_time = t
         if len(self._index) > 1 and t - self._oldest_s > self.config.timeout_s:  # (the deleter's sweep is due)
             self._delete_expired(t)
@@ -355,7 +365,7 @@ class TrackTable:
                                                   self._slots if slots is None else slots, xy_rows, cov_rows, B,
                                                   subtract, t, self._stamp, self._n_free, self._next_id,
                                                   self._frame_scratch(), *out, nis,
-                                                  *(self._step_args or self._one_call_args()))
+                                                  *(self._step_args or self._one_call_args()), *(motion or _NO_MOTION))
             if m >= 0:  # (the new ids claimed and the update passed)
                 self._next_id = next_id
                 self._enter_claimed(id64, self._claimed, m)
@@ -368,6 +378,14 @@ class TrackTable:
                     empty((n, 2, 2)))  # (slots, act, z, R)
             k, n_unknown, Bp = self._frame_rows(rows, t, id64, work, xy_rows, cov_rows, B, subtract)
         self._update(t, id64, ids, work, B, k, n_unknown, Bp, out, nis)
+        return self._with_motion(out, motion)
+
+    @staticmethod
+    def _with_motion(out: TrackOutput, motion: tuple | None) -> TrackOutput:
+        """``out``, with :meth:`step`'s ``motion`` fields of it formed by one call of :func:`~footprint_uq.tracking.
+        kernels.motion_fields` if asked (a step that did not run them in its compiled call)."""
+        if motion is not None:
+            motion_fields(out.v_mps, out.cov_v_m2ps2, *motion)
         return out
 
     def _frame_inputs(self, time_s, object_ids, xy_m, cov_frame_m2, shared_m, cov_m2) -> tuple:
