@@ -119,3 +119,23 @@ def test_bad_motion_arguments_are_named_before_the_step(bad):
         track_motion(table, 0.1, np.array([4, 5, 6]), xy, shared_m=B, cov_m2=cov, **bad)
     assert next(iter(bad)) in str(err.value)
     assert len(table) == 3 and table._last_time == 0.0  # (the tracks as they were)
+
+
+def test_read_only_and_listed_yaws_compile_nothing_new():
+    """Yaws as a read-only array, a list or a strided column reach ``frame_step`` as the one signature it has (a
+    read-only array would be a new specialisation, compiled mid-frame)."""
+    from footprint_uq.tracking.imm_kernels import frame_step
+
+    at = _at()
+    table = TrackTable(TrackerConfig(), rank=at.rank, shared_at=at)
+    B, cov = np.zeros((3, 2, at.rank)), np.repeat(np.eye(2)[None] * 0.04, 3, 0)
+    xy = np.array([[0.0, 20.0], [2.0, 25.0], [-3.0, 30.0]])
+    track_motion(table, 0.0, np.array([4, 5, 6]), xy, shared_m=B, cov_m2=cov, yaw_rad=np.zeros(3))
+    known = len(frame_step.signatures)
+    ro = np.array([0.1, 0.2, 0.3])
+    ro.flags.writeable = False
+    for k, yaw in enumerate((ro, [0.1, 0.2, 0.3], np.zeros((3, 4))[:, 1], np.arange(3))):
+        _, motion = track_motion(table, 0.1 * (k + 1), np.array([4, 5, 6]), xy, shared_m=B, cov_m2=cov, yaw_rad=yaw,
+                                 sigma_yaw_rad=ro)
+        assert np.allclose(motion.sigma_yaw_deg, np.rad2deg(ro))
+    assert len(frame_step.signatures) == known
