@@ -81,6 +81,16 @@ def test_columns_of_another_length_are_named_whichever_way_they_come():
                                   object_motion(tracks, yaw_rad=np.zeros(n)).yaw_deg)
 
 
+def test_velocity_rows_of_another_shape_are_named_not_read_past_their_end():
+    """A malformed tracker output (velocities or their covariances not one per object) is refused by name: the
+    compiled pass reads n rows of each."""
+    tracks = _tracks(np.random.default_rng(4), 6)
+    for field, wrong in (("v_mps", tracks.v_mps[:3]), ("v_mps", np.zeros((6, 3))), ("v_mps", np.zeros(12)),
+                         ("cov_v_m2ps2", tracks.cov_v_m2ps2[:5]), ("cov_v_m2ps2", np.zeros((6, 4)))):
+        with pytest.raises(InputError, match=field):
+            object_motion(tracks._replace(**{field: wrong}))
+
+
 def test_nan_and_bad_options_are_named_on_the_fast_path():
     tracks = _tracks(np.random.default_rng(5), 4)
     for bad in (float("nan"), float("inf"), -float("inf"), np.float64("nan"), None, "north"):

@@ -114,6 +114,11 @@ def object_motion(tracks: TrackOutput, *, heading_offset_deg: float = 0.0, yaw_r
     out, cov_out = np.empty((8, n)), np.empty((n, 2, 2))
     yaw = _NONE if yaw_rad is None else _column("yaw_rad", yaw_rad, n, True)
     sigma_yaw = _NONE if sigma_yaw_rad is None else _column("sigma_yaw_rad", sigma_yaw_rad, n)
+    if v.shape != (n, 2) or cov.shape != (n, 2, 2):  # (the kernel reads n rows of each: a malformed output's
+        # shorter rows would be read past their end)
+        bad = ("tracks.v_mps", v.shape, f"shape ({n}, 2)") if v.shape != (n, 2) else \
+            ("tracks.cov_v_m2ps2", cov.shape, f"shape ({n}, 2, 2)")
+        raise InputError(*bad)
     args = (v, cov, math.cos(hr), math.sin(hr), ratio, yaw, sigma_yaw, h, out, cov_out)
     if motion_pass is None:
         motion_fields(*args)
