@@ -778,6 +778,40 @@ def _stage_whiten(S, m, nob, K, Lr, Lc, Lv, keep_aw, shared, n0):
 
 
 @njit(**_STAGE)
+def _stage_whiten_b(S, m, Lr, Lc, Lv, shared, n0):
+    """:func:`_stage_whiten`'s ``B`` alone, for one-corner objects (``K = 1``; :func:`point_jacobian_into`): each
+    column ``c`` of ``J L`` formed as there (the same products, sums and order), then ``G (J L)_c`` straight into
+    ``shared[n0 + j, :, c]`` -- without the corners' and the centres' covariance sums (C3, E) and the rows T, B
+    that a one-corner sum only copies."""
+    ne = Lr.shape[0]
+    mu = np.uint64(m)
+    g0, g1 = np.uint64(_G * _ST), np.uint64((_G + 1) * _ST)
+    g2, g3 = np.uint64((_G + 2) * _ST), np.uint64((_G + 3) * _ST)
+    for e in range(ne):
+        c, p, val = Lc[e], Lr[e], Lv[e]
+        first = e == 0 or Lc[e - 1] != c
+        last = e == ne - 1 or Lc[e + 1] != c
+        o0, o1 = np.uint64((_AW + 2 * c) * _ST), np.uint64((_AW + 2 * c + 1) * _ST)
+        i0, i1 = np.uint64((_JP + p) * _ST), np.uint64((_JP + 22 + p) * _ST)
+        if not last:
+            if first:
+                for j in range(mu):
+                    S[o0 + j] = S[i0 + j] * val
+                    S[o1 + j] = S[i1 + j] * val
+            else:
+                for j in range(mu):
+                    S[o0 + j] += S[i0 + j] * val
+                    S[o1 + j] += S[i1 + j] * val
+            continue
+        w = 0.0 if first else 1.0
+        for j in range(mu):
+            a0 = (S[o0 + j] if w != 0.0 else 0.0) + S[i0 + j] * val
+            a1 = (S[o1 + j] if w != 0.0 else 0.0) + S[i1 + j] * val
+            shared[n0 + j, 0, c] = S[g0 + j] * a0 + S[g1 + j] * a1
+            shared[n0 + j, 1, c] = S[g2 + j] * a0 + S[g3 + j] * a1
+
+
+@njit(**_STAGE)
 def _stage_corner_cov(S, m):
     """Per corner: covariance C3 + J_uv P J_uv^T and its semi-major axis (rows CC, SSEL); NaN where
     the corner could not be computed, SSEL -1 where it is not usable."""
@@ -1398,10 +1432,10 @@ def point_jacobian_into(uv, cam, dR, Lr, Lc, Lv, shared, S):
     """:func:`point_shared_jacobian` without the rest of a footprint: ``B`` (N, 2, r) of the ground points of
     pixels ``uv`` (N, 2) (pixels outside the image included) into ``shared`` (N, 2, r), NaN where a pixel has no
     ground point.  Only the stages of :func:`process_corners` that form ``B`` run, in its chunks and order
-    (pixels, undistortion, ground and Jacobians, the codes, the centre's Jacobian, the whitening), so ``B`` is
-    the same to the bit; the covariances, ellipses, flags and V2X codes of a one-point footprint, and the outputs
-    :func:`point_outputs` allocated for them, are not formed (the tracker asks for ``B`` at every track's
-    predicted position in every frame).  ``S``: :func:`scratch`."""
+    (pixels, undistortion, ground and Jacobians, the codes, the centre's Jacobian, the whitening -- of ``B``
+    alone, :func:`_stage_whiten_b`), so ``B`` is the same to the bit; the covariances, ellipses, flags and V2X
+    codes of a one-point footprint, and the outputs :func:`point_outputs` allocated for them, are not formed (the
+    tracker asks for ``B`` at every track's predicted position in every frame).  ``S``: :func:`scratch`."""
     N = uv.shape[0]
     Jd, Jk = np.empty((2, 2)), np.empty((2, 8))
     need = _needed_params(Lr)
@@ -1414,7 +1448,7 @@ def point_jacobian_into(uv, cam, dR, Lr, Lc, Lv, shared, S):
         _stage_ground(S, nob, cam, dR, need)
         _stage_corner_flags(S, nob, cam.width_px, cam.height_px, True)
         _stage_centroid(S, nob, 1)
-        _stage_whiten(S, nob, nob, 1, Lr, Lc, Lv, False, shared, n0)
+        _stage_whiten_b(S, nob, Lr, Lc, Lv, shared, n0)  # (B alone: ~0.8 us less per 87 points)
         for i in range(nob):
             if S[_US * _ST + i] == 0.0:  # (one corner: the centre's code is the corner's; usable = OK or outside)
                 for a in range(2):
