@@ -705,6 +705,30 @@ def _stage_corner_flags(S, m, W, Himg, allow_outside):
 
 
 @njit(**_STAGE)
+def _whiten_entry(S, e, mu, Lr, Lc, Lv):
+    """Entry ``e`` of the factor (:func:`_stage_whiten`): its column ``c`` and value, whether it is the column's
+    first and last entry, the rows ``o0, o1`` of ``J L``'s column ``c`` and ``i0, i1`` of ``J``'s parameter; an
+    entry that is not its column's last is added into rows ``o0, o1`` over the ``mu`` corners here (the column's
+    first entry written), the last is left to the caller."""
+    ne = Lr.shape[0]
+    c, p, val = Lc[e], Lr[e], Lv[e]
+    first = e == 0 or Lc[e - 1] != c
+    last = e == ne - 1 or Lc[e + 1] != c
+    o0, o1 = np.uint64((_AW + 2 * c) * _ST), np.uint64((_AW + 2 * c + 1) * _ST)
+    i0, i1 = np.uint64((_JP + p) * _ST), np.uint64((_JP + 22 + p) * _ST)
+    if not last:
+        if first:
+            for j in range(mu):
+                S[o0 + j] = S[i0 + j] * val
+                S[o1 + j] = S[i1 + j] * val
+        else:
+            for j in range(mu):
+                S[o0 + j] += S[i0 + j] * val
+                S[o1 + j] += S[i1 + j] * val
+    return c, val, first, last, o0, o1, i0, i1
+
+
+@njit(**_STAGE)
 def _stage_whiten(S, m, nob, K, Lr, Lc, Lv, keep_aw, shared, n0):
     """Rows AW = J L (row ``2 c + i``; single-entry columns only with ``keep_aw``, for the joint
     covariance), C3 (3 rows) = the parameter part (J L)(J L)^T of each corner's
@@ -729,20 +753,8 @@ def _stage_whiten(S, m, nob, K, Lr, Lc, Lv, keep_aw, shared, n0):
     g0, g1 = np.uint64(_G * _ST), np.uint64((_G + 1) * _ST)
     g2, g3 = np.uint64((_G + 2) * _ST), np.uint64((_G + 3) * _ST)
     for e in range(ne):
-        c, p, val = Lc[e], Lr[e], Lv[e]
-        first = e == 0 or Lc[e - 1] != c
-        last = e == ne - 1 or Lc[e + 1] != c
-        o0, o1 = np.uint64((_AW + 2 * c) * _ST), np.uint64((_AW + 2 * c + 1) * _ST)
-        i0, i1 = np.uint64((_JP + p) * _ST), np.uint64((_JP + 22 + p) * _ST)
+        c, val, first, last, o0, o1, i0, i1 = _whiten_entry(S, e, mu, Lr, Lc, Lv)
         if not last:
-            if first:
-                for j in range(mu):
-                    S[o0 + j] = S[i0 + j] * val
-                    S[o1 + j] = S[i1 + j] * val
-            else:
-                for j in range(mu):
-                    S[o0 + j] += S[i0 + j] * val
-                    S[o1 + j] += S[i1 + j] * val
             continue
         # the last entry completes column c: in one pass, add it to C3 and form G_k (J_k L)_c (a
         # single-entry column, the common case, keeps J L in registers unless the joint needs it)
@@ -788,20 +800,8 @@ def _stage_whiten_b(S, m, Lr, Lc, Lv, shared, n0):
     g0, g1 = np.uint64(_G * _ST), np.uint64((_G + 1) * _ST)
     g2, g3 = np.uint64((_G + 2) * _ST), np.uint64((_G + 3) * _ST)
     for e in range(ne):
-        c, p, val = Lc[e], Lr[e], Lv[e]
-        first = e == 0 or Lc[e - 1] != c
-        last = e == ne - 1 or Lc[e + 1] != c
-        o0, o1 = np.uint64((_AW + 2 * c) * _ST), np.uint64((_AW + 2 * c + 1) * _ST)
-        i0, i1 = np.uint64((_JP + p) * _ST), np.uint64((_JP + 22 + p) * _ST)
+        c, val, first, last, o0, o1, i0, i1 = _whiten_entry(S, e, mu, Lr, Lc, Lv)
         if not last:
-            if first:
-                for j in range(mu):
-                    S[o0 + j] = S[i0 + j] * val
-                    S[o1 + j] = S[i1 + j] * val
-            else:
-                for j in range(mu):
-                    S[o0 + j] += S[i0 + j] * val
-                    S[o1 + j] += S[i1 + j] * val
             continue
         w = 0.0 if first else 1.0
         for j in range(mu):
