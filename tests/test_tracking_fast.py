@@ -184,6 +184,32 @@ def test_repeated_unknown_ids_the_first_object_decides():
     assert o.track_id.tolist() == [3, 0, -1] and o.n_updates.tolist() == [1, 2, 0]
 
 
+@pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
+@pytest.mark.parametrize("whole", [True, False], ids=["cov_m2", "cov_frame_m2"])
+def test_an_object_with_one_non_finite_b_entry_is_not_tracked(bad, whole):
+    """The rows' pass takes an object only if every entry of its ``B`` is finite (one test of the entries' sum of
+    ``b - b``): one bad entry anywhere -- the first column, a middle one, the last, either row -- leaves that object
+    untracked (known id: its track waits; new id: no track), the others go on."""
+    r = 13
+    tab = TrackTable(rank=r)
+    xy = np.array([[0.0, 10.0], [5.0, 10.0], [10.0, 10.0], [15.0, 10.0], [20.0, 10.0]])
+    cov = np.broadcast_to(0.05 * np.eye(2), (5, 2, 2)).copy()
+    B = np.full((5, 2, r), 0.01)
+    kw = (lambda B: dict(cov_m2=cov + B @ np.swapaxes(B, 1, 2))) if whole else (lambda B: dict(cov_frame_m2=cov))
+    tab.step(0.0, [1, 2, 3, 4, 5], xy, shared_m=B, **kw(B))
+    Bb = B.copy()
+    Bb[0, 0, 0] = Bb[1, 1, 6] = Bb[2, 0, r - 1] = Bb[3, 1, r - 1] = bad  # (objects 0-3; object 4 untouched)
+    with np.errstate(invalid="ignore"):
+        o = tab.step(0.1, [1, 2, 3, 4, 9], xy + [0.1, 0.0], shared_m=Bb, **kw(np.nan_to_num(Bb, posinf=0.0,
+                                                                                             neginf=0.0)))
+    assert o.track_id.tolist() == [-1, -1, -1, -1, 5] and o.n_updates.tolist() == [0, 0, 0, 0, 1]
+    Bb[4, 0, 3] = bad  # (a new id with one bad entry: no track)
+    with np.errstate(invalid="ignore"):
+        o = tab.step(0.2, [1, 2, 3, 4, 10], xy + [0.2, 0.0], shared_m=np.where(np.arange(5)[:, None, None] < 4,
+                                                                               B, Bb), **kw(B))
+    assert o.track_id.tolist() == [0, 1, 2, 3, -1] and o.n_updates.tolist() == [2, 2, 2, 2, 0]
+
+
 _TRUCKS = {"truck": TrackerConfig(timeout_s=1.0, accel_psd_m2ps3=0.5, manoeuvre_accel_psd_m2ps3=None)}
 
 
