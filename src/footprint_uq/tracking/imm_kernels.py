@@ -44,7 +44,7 @@ import math
 import numpy as np
 from numba import njit
 
-from .kernels import ROW_SKIP, ROW_START, claim_rows, frame_rows_shared, id_lookup, initiate_row, motion_fields
+from .kernels import ROW_START, claim_rows, frame_rows_shared, id_lookup, motion_fields, starts_and_outputs
 
 __all__ = ["frame_pass", "frame_step", "scratch"]
 
@@ -403,40 +403,8 @@ def frame_pass(act, slots, old, n_old, X, P, Xm, Pm, Cm, mu, t_last, t_first, n_
                          W, xp, Pp, Kg, Cx, Cps, Sm, nis)
         if not d2 <= gate:  # NaN (a singular S) fails the gate too
             act[i] = ROW_START
-    return _starts_and_outputs(act, slots, X, P, Xm, Pm, Cm, mu, t_last, t_first, n_upd, tid, next_id, t, mu0,
-                               var_v0, z, R, B_frame, o_tid, o_new, o_n, o_age, o_xy, o_cxy, o_v, o_cv)
-
-
-@njit(**_INL)
-def _starts_and_outputs(act, slots, X, P, Xm, Pm, Cm, mu, t_last, t_first, n_upd, tid, next_id, t, mu0, var_v0, z,
-                        R, B_frame, o_tid, o_new, o_n, o_age, o_xy, o_cxy, o_v, o_cv):  # pragma: no cover - compiled
-    """In frame order: the starts (:func:`~footprint_uq.tracking.kernels.initiate_row`, track ids ``next_id, ...``) and
-    every object's outputs (:class:`~footprint_uq.tracking.table.TrackOutput`); returns the next free track id."""
-    nan = math.nan
-    for i in range(act.shape[0]):
-        s = slots[i]
-        if act[i] == ROW_SKIP:
-            o_tid[i], o_new[i], o_n[i], o_age[i] = -1, False, 0, nan
-            o_xy[i, 0] = o_xy[i, 1] = o_v[i, 0] = o_v[i, 1] = nan
-            for a in range(2):
-                for b in range(2):
-                    o_cxy[i, a, b] = o_cv[i, a, b] = nan
-            continue
-        started = act[i] == ROW_START
-        if started:
-            initiate_row(s, X, P, Xm, Pm, Cm, mu, mu0, var_v0, z[i], R[i], B_frame[i])
-            t_last[s] = t_first[s] = t
-            n_upd[s] = 1
-            tid[s] = next_id
-            next_id += 1
-        o_tid[i], o_new[i], o_n[i], o_age[i] = tid[s], started, n_upd[s], t - t_first[s]
-        o_xy[i, 0], o_xy[i, 1] = X[s, 0], X[s, 1]
-        o_cxy[i, 0, 0], o_cxy[i, 0, 1], o_cxy[i, 1, 0], o_cxy[i, 1, 1] = P[s, 0, 0], P[s, 0, 1], P[s, 1, 0], P[s, 1, 1]
-        velocity = n_upd[s] >= 2
-        o_v[i, 0], o_v[i, 1] = (X[s, 2], X[s, 3]) if velocity else (nan, nan)
-        o_cv[i, 0, 0], o_cv[i, 0, 1] = (P[s, 2, 2], P[s, 2, 3]) if velocity else (nan, nan)
-        o_cv[i, 1, 0], o_cv[i, 1, 1] = (P[s, 3, 2], P[s, 3, 3]) if velocity else (nan, nan)
-    return next_id
+    return starts_and_outputs(act, slots, X, P, Xm, Pm, Cm, mu, t_last, t_first, n_upd, tid, next_id, t, mu0,
+                              var_v0, z, R, B_frame, o_tid, o_new, o_n, o_age, o_xy, o_cxy, o_v, o_cv)
 
 
 # (no reference counting: with it, each of its ~60 array arguments is unboxed into a new meminfo, ~3 us a call; its

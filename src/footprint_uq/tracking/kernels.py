@@ -27,7 +27,7 @@ from .kalman_kernels import pick_shared, schmidt_step, start_cov2
 
 __all__ = ["predict_update", "update_slots", "frame_rows", "frame_rows_shared", "frame_update", "initiate_row",
            "project_ground", "motion_fields", "ROW_SKIP", "ROW_UPDATE", "ROW_START", "id_lookup", "id_insert",
-           "id_delete", "ID_EMPTY", "claim_rows"]
+           "id_delete", "ID_EMPTY", "claim_rows", "starts_and_outputs"]
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -444,6 +444,40 @@ def initiate_row(s, X, P, Xm, Pm, Cm, mu, mu0, var_v0, z, R, B):  # pragma: no c
                 Cm[s, j, c, a] = -B[a, c] if a < 2 else 0.0
 
 
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def starts_and_outputs(act, slots, X, P, Xm, Pm, Cm, mu, t_last, t_first, n_upd, tid, next_id, t, mu0, var_v0, z, R,
+                       B_frame, o_tid, o_new, o_n, o_age, o_xy, o_cxy, o_v, o_cv):  # pragma: no cover - compiled
+    """The end of a frame's update pass (:func:`frame_update`, :func:`~footprint_uq.tracking.imm_kernels.frame_pass`),
+    in frame order: the starts (:func:`initiate_row`, track ids ``next_id, next_id + 1, ...``) and every object's
+    outputs (:class:`~footprint_uq.tracking.table.TrackOutput`: -1 / False / 0 / NaN for :data:`ROW_SKIP`; the
+    velocity from the second update on).  Returns the next free track id."""
+    nan = math.nan
+    for i in range(act.shape[0]):
+        s = slots[i]
+        if act[i] == ROW_SKIP:
+            o_tid[i], o_new[i], o_n[i], o_age[i] = -1, False, 0, nan
+            o_xy[i, 0] = o_xy[i, 1] = o_v[i, 0] = o_v[i, 1] = nan
+            for a in range(2):
+                for b in range(2):
+                    o_cxy[i, a, b] = o_cv[i, a, b] = nan
+            continue
+        started = act[i] == ROW_START
+        if started:
+            initiate_row(s, X, P, Xm, Pm, Cm, mu, mu0, var_v0, z[i], R[i], B_frame[i])
+            t_last[s] = t_first[s] = t
+            n_upd[s] = 1
+            tid[s] = next_id
+            next_id += 1
+        o_tid[i], o_new[i], o_n[i], o_age[i] = tid[s], started, n_upd[s], t - t_first[s]
+        o_xy[i, 0], o_xy[i, 1] = X[s, 0], X[s, 1]
+        o_cxy[i, 0, 0], o_cxy[i, 0, 1], o_cxy[i, 1, 0], o_cxy[i, 1, 1] = P[s, 0, 0], P[s, 0, 1], P[s, 1, 0], P[s, 1, 1]
+        velocity = n_upd[s] >= 2
+        o_v[i, 0], o_v[i, 1] = (X[s, 2], X[s, 3]) if velocity else (nan, nan)
+        o_cv[i, 0, 0], o_cv[i, 0, 1] = (P[s, 2, 2], P[s, 2, 3]) if velocity else (nan, nan)
+        o_cv[i, 1, 0], o_cv[i, 1, 1] = (P[s, 3, 2], P[s, 3, 3]) if velocity else (nan, nan)
+    return next_id
+
+
 @njit(cache=True, nogil=True, error_model="numpy")
 def frame_update(act, slots, old, n_old, X, P, Xm, Pm, Cm, mu, t_last, t_first, n_upd, tid, next_id, t, qs, rates,
                  mu0, var_v0, z, R, B_pred, B_frame, gate, o_tid, o_new, o_n, o_age, o_xy, o_cxy, o_v,
@@ -466,32 +500,5 @@ def frame_update(act, slots, old, n_old, X, P, Xm, Pm, Cm, mu, t_last, t_first, 
                       pick_shared(B_pred, k, B_frame, i), gate, Pp, Cp, K, cross, xs, Ps, Cs, pij, cbar, lik)
         if not d2 <= gate:  # NaN (a singular S) fails the gate too
             act[i] = ROW_START
-    nan = math.nan
-    for i in range(act.shape[0]):
-        s = slots[i]
-        if act[i] == ROW_SKIP:
-            o_tid[i], o_new[i], o_n[i], o_age[i] = -1, False, 0, nan
-            o_xy[i, 0] = o_xy[i, 1] = o_v[i, 0] = o_v[i, 1] = nan
-            for a in range(2):
-                for b in range(2):
-                    o_cxy[i, a, b] = o_cv[i, a, b] = nan
-            continue
-        started = act[i] == ROW_START
-        if started:
-            initiate_row(s, X, P, Xm, Pm, Cm, mu, mu0, var_v0, z[i], R[i], B_frame[i])
-            t_last[s] = t_first[s] = t
-            n_upd[s] = 1
-            tid[s] = next_id
-            next_id += 1
-        o_tid[i], o_new[i], o_n[i], o_age[i] = tid[s], started, n_upd[s], t - t_first[s]
-        o_xy[i, 0], o_xy[i, 1] = X[s, 0], X[s, 1]
-        o_cxy[i, 0, 0], o_cxy[i, 0, 1], o_cxy[i, 1, 0], o_cxy[i, 1, 1] = P[s, 0, 0], P[s, 0, 1], P[s, 1, 0], P[s, 1, 1]
-        if n_upd[s] >= 2:
-            o_v[i, 0], o_v[i, 1] = X[s, 2], X[s, 3]
-            o_cv[i, 0, 0], o_cv[i, 0, 1], o_cv[i, 1, 0], o_cv[i, 1, 1] = P[s, 2, 2], P[s, 2, 3], P[s, 3, 2], P[s, 3, 3]
-        else:
-            o_v[i, 0] = o_v[i, 1] = nan
-            for a in range(2):
-                for b in range(2):
-                    o_cv[i, a, b] = nan
-    return next_id
+    return starts_and_outputs(act, slots, X, P, Xm, Pm, Cm, mu, t_last, t_first, n_upd, tid, next_id, t, mu0,
+                              var_v0, z, R, B_frame, o_tid, o_new, o_n, o_age, o_xy, o_cxy, o_v, o_cv)
