@@ -729,6 +729,23 @@ def _whiten_entry(S, e, mu, Lr, Lc, Lv):
 
 
 @njit(**_STAGE)
+def _column_at(S, j, first, o0, o1, i0, i1, val):
+    """Column ``c`` of ``J L`` at corner ``j`` once its last entry (value ``val``, parameter rows ``i0, i1``) is
+    added: that entry's products alone for a single-entry column (``first``), else the sum so far in rows ``o0,
+    o1`` (:func:`_whiten_entry`) plus them."""
+    if first:
+        return S[i0 + j] * val, S[i1 + j] * val
+    return S[o0 + j] + S[i0 + j] * val, S[o1 + j] + S[i1 + j] * val
+
+
+@njit(**_STAGE)
+def _g_times(S, j, g0, g1, g2, g3, a0, a1):
+    """``G_j (a0, a1)``: corner ``j``'s centroid weights (rows ``g0 .. g3``, :func:`_stage_centroid`) times a column
+    of ``J L`` at it."""
+    return S[g0 + j] * a0 + S[g1 + j] * a1, S[g2 + j] * a0 + S[g3 + j] * a1
+
+
+@njit(**_STAGE)
 def _stage_whiten(S, m, nob, K, Lr, Lc, Lv, keep_aw, shared, n0):
     """Rows AW = J L (row ``2 c + i``; single-entry columns only with ``keep_aw``, for the joint
     covariance), C3 (3 rows) = the parameter part (J L)(J L)^T of each corner's
@@ -761,12 +778,11 @@ def _stage_whiten(S, m, nob, K, Lr, Lc, Lv, keep_aw, shared, n0):
         w = 0.0 if first else 1.0
         if first and not keep_aw:
             for j in range(mu):
-                a0, a1 = S[i0 + j] * val, S[i1 + j] * val
+                a0, a1 = _column_at(S, j, True, o0, o1, i0, i1, val)
                 S[c0 + j] += a0 * a0
                 S[c1 + j] += a0 * a1
                 S[c2 + j] += a1 * a1
-                S[t0 + j] = S[g0 + j] * a0 + S[g1 + j] * a1
-                S[t1 + j] = S[g2 + j] * a0 + S[g3 + j] * a1
+                S[t0 + j], S[t1 + j] = _g_times(S, j, g0, g1, g2, g3, a0, a1)
         else:
             for j in range(mu):
                 a0 = (S[o0 + j] if w != 0.0 else 0.0) + S[i0 + j] * val
@@ -775,8 +791,7 @@ def _stage_whiten(S, m, nob, K, Lr, Lc, Lv, keep_aw, shared, n0):
                 S[c0 + j] += a0 * a0
                 S[c1 + j] += a0 * a1
                 S[c2 + j] += a1 * a1
-                S[t0 + j] = S[g0 + j] * a0 + S[g1 + j] * a1
-                S[t1 + j] = S[g2 + j] * a0 + S[g3 + j] * a1
+                S[t0 + j], S[t1 + j] = _g_times(S, j, g0, g1, g2, g3, a0, a1)
         _sum_corners(S, _T0, _B0, nob, K)
         _sum_corners(S, _T1, _B1, nob, K)
         for i in range(nob):
@@ -792,9 +807,9 @@ def _stage_whiten(S, m, nob, K, Lr, Lc, Lv, keep_aw, shared, n0):
 @njit(**_STAGE)
 def _stage_whiten_b(S, m, Lr, Lc, Lv, shared, n0):
     """:func:`_stage_whiten`'s ``B`` alone, for one-corner objects (``K = 1``; :func:`point_jacobian_into`): each
-    column ``c`` of ``J L`` formed as there (the same products, sums and order), then ``G (J L)_c`` straight into
-    ``shared[n0 + j, :, c]`` -- without the corners' and the centres' covariance sums (C3, E) and the rows T, B
-    that a one-corner sum only copies."""
+    column ``c`` of ``J L`` formed as there without the joint's rows (:func:`_column_at`: the same products, sums
+    and order), then ``G (J L)_c`` (:func:`_g_times`) straight into ``shared[n0 + j, :, c]`` -- without the
+    corners' and the centres' covariance sums (C3, E) and the rows T, B that a one-corner sum only copies."""
     ne = Lr.shape[0]
     mu = np.uint64(m)
     g0, g1 = np.uint64(_G * _ST), np.uint64((_G + 1) * _ST)
@@ -803,12 +818,9 @@ def _stage_whiten_b(S, m, Lr, Lc, Lv, shared, n0):
         c, val, first, last, o0, o1, i0, i1 = _whiten_entry(S, e, mu, Lr, Lc, Lv)
         if not last:
             continue
-        w = 0.0 if first else 1.0
         for j in range(mu):
-            a0 = (S[o0 + j] if w != 0.0 else 0.0) + S[i0 + j] * val
-            a1 = (S[o1 + j] if w != 0.0 else 0.0) + S[i1 + j] * val
-            shared[n0 + j, 0, c] = S[g0 + j] * a0 + S[g1 + j] * a1
-            shared[n0 + j, 1, c] = S[g2 + j] * a0 + S[g3 + j] * a1
+            a0, a1 = _column_at(S, j, first, o0, o1, i0, i1, val)
+            shared[n0 + j, 0, c], shared[n0 + j, 1, c] = _g_times(S, j, g0, g1, g2, g3, a0, a1)
 
 
 @njit(**_STAGE)
