@@ -102,11 +102,7 @@ def object_motion(tracks: TrackOutput, *, heading_offset_deg: float = 0.0, yaw_r
     """
     # (what the tracker hands -- finite floats, C-contiguous float64 rows, float64 columns of n -- passes a few
     # attribute tests without a call, as in TrackTable.step: the frame's walk stays in tracking/)
-    h, ratio = heading_offset_deg, heading_min_ratio
-    if not (isinstance(h, float) and math.isfinite(h)):
-        h = as_float("heading_offset_deg", h)
-    if not (isinstance(ratio, float) and math.isfinite(ratio) and ratio > 0.0):
-        ratio = as_float("heading_min_ratio", ratio, positive=True)
+    h, ratio = _options(heading_offset_deg, heading_min_ratio)
     n = len(tracks.track_id)
     v, cov = c_float64(tracks.v_mps), c_float64(tracks.cov_v_m2ps2)
     age = tracks.age_s.copy() if age_s is None else _column("age_s", age_s, n)
@@ -145,11 +141,7 @@ def track_motion(table: TrackTable, time_s: float, object_ids, xy_m, cov_frame_m
     (TrackOutput, ObjectMotion)
         The step's output and the motion of the frame's objects, in frame order.
     """
-    h, ratio = heading_offset_deg, heading_min_ratio
-    if not (isinstance(h, float) and math.isfinite(h)):
-        h = as_float("heading_offset_deg", h)
-    if not (isinstance(ratio, float) and math.isfinite(ratio) and ratio > 0.0):
-        ratio = as_float("heading_min_ratio", ratio, positive=True)
+    h, ratio = _options(heading_offset_deg, heading_min_ratio)
     n = xy_m.shape[0] if type(xy_m) is _ND and xy_m.ndim == 2 else c_float64(xy_m).reshape(-1, 2).shape[0]
     # (the yaws contiguous, unlike object_motion's: frame_step has one signature, its compile is long; a float64
     # column of n, as a frame's boxes hand it, copied without _column's conversions, ~0.4 us less)
@@ -163,6 +155,16 @@ def track_motion(table: TrackTable, time_s: float, object_ids, xy_m, cov_frame_m
     return tracks, _new_motion(ObjectMotion, (out[0], out[1], cov_out, out[2], out[3], out[4], out[5], out[6], out[7],
                                               age))
 
+
+
+def _options(h, ratio) -> tuple[float, float]:
+    """``heading_offset_deg`` and ``heading_min_ratio`` checked: finite floats pass without a call into ``_checks``
+    (the tracker's frames), anything else is converted or named."""
+    if not (isinstance(h, float) and math.isfinite(h)):
+        h = as_float("heading_offset_deg", h)
+    if not (isinstance(ratio, float) and math.isfinite(ratio) and ratio > 0.0):
+        ratio = as_float("heading_min_ratio", ratio, positive=True)
+    return h, ratio
 
 #: a tuple of :class:`ObjectMotion`'s ten fields made an ObjectMotion without the named tuple's ``__new__``
 _new_motion = tuple.__new__
