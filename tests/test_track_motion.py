@@ -139,3 +139,20 @@ def test_read_only_and_listed_yaws_compile_nothing_new():
                                  sigma_yaw_rad=ro)
         assert np.allclose(motion.sigma_yaw_deg, np.rad2deg(ro))
     assert len(frame_step.signatures) == known
+
+
+def test_motion_arrays_of_another_size_are_refused_by_the_step():
+    """TrackTable.step's ``motion`` arrays are written and read over the frame's n objects in compiled code: other
+    sizes are named before anything runs (the tracks as they were)."""
+    at = _at()
+    table = TrackTable(TrackerConfig(), rank=at.rank, shared_at=at)
+    B, cov = np.zeros((3, 2, at.rank)), np.repeat(np.eye(2)[None] * 0.04, 3, 0)
+    xy = np.array([[0.0, 20.0], [2.0, 25.0], [-3.0, 30.0]])
+    e = np.zeros(0)
+    for bad in ((1.0, 0.0, 3.0, e, e, 0.0, np.empty((8, 2)), np.empty((3, 2, 2))),
+                (1.0, 0.0, 3.0, e, e, 0.0, np.empty((8, 3)), np.empty((4, 2, 2))),
+                (1.0, 0.0, 3.0, np.zeros(2), e, 0.0, np.empty((8, 3)), np.empty((3, 2, 2))),
+                (1.0, 0.0, 3.0, e, e, 0.0, np.empty((8, 3)))):
+        with pytest.raises(InputError, match="motion"):
+            table.step(0.0, np.array([4, 5, 6]), xy, shared_m=B, cov_m2=cov, motion=bad)
+    assert len(table) == 0 and table.n_stale_frames == 0

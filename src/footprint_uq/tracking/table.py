@@ -338,6 +338,8 @@ class TrackTable:
         t, id64, ids, xy_rows, cov_rows, B, subtract = self._frame_inputs(time_s, object_ids, xy_m, cov_frame_m2,
                                                                           shared_m, cov_m2)
         n = xy_rows.shape[1]
+        if motion is not None:
+            _check_motion(motion, n)
         if t < self._last_time:
             self.n_stale_frames += 1
             self._nis = np.full(n, np.nan)
@@ -611,6 +613,18 @@ class TrackTable:
 _F8, _I8 = np.dtype(np.float64), np.dtype(np.int64)
 _TRANSPOSE = {2: (1, 0), 3: (1, 2, 0)}
 
+
+def _check_motion(motion: tuple, n: int) -> None:
+    """:meth:`TrackTable.step`'s ``motion`` arguments of a frame of n objects, their arrays' shapes checked (the
+    compiled pass writes n rows of ``out`` and ``cov_out`` and reads n yaws: another size would be read or written
+    past its end)."""
+    if len(motion) != 8:
+        raise InputError("motion", f"{len(motion)} entries", "motion_fields' 8 arguments after the velocities")
+    yaw, sigma_yaw, out, cov_out = motion[3], motion[4], motion[6], motion[7]
+    if out.shape != (8, n) or cov_out.shape != (n, 2, 2) or yaw.shape[0] not in (0, n) \
+            or sigma_yaw.shape[0] not in (0, n):
+        raise InputError("motion", f"out {out.shape}, cov_out {cov_out.shape}, yaws {yaw.shape} / {sigma_yaw.shape}",
+                         f"out (8, {n}), cov_out ({n}, 2, 2), yaws ({n},) or (0,)")
 
 def _rows(a: np.ndarray, ndim: int) -> np.ndarray:
     """The ``(n, ...)`` array ``a`` (2 or 3 dimensions) with its first axis moved last, as a C-contiguous, writable
