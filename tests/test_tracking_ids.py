@@ -12,7 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from footprint_uq.tracking import TrackerConfig, TrackTable
-from footprint_uq.tracking.kernels import ID_EMPTY, id_delete, id_insert, id_lookup
+from footprint_uq.tracking.kernels import ID_EMPTY, expire_rows, id_delete, id_insert, id_lookup
 
 _EXTREMES = [-2 ** 63, 2 ** 63 - 1, -1, 0, 1]
 _MULT = 0x9E3779B97F4A7C15  # (the kernels' multiplier)
@@ -73,6 +73,65 @@ def test_a_deletion_keeps_an_entry_wrapped_round_the_end_reachable():
     got = np.empty(3, np.int64)
     id_lookup(keys, vals, 61, np.array([A, B, C], np.int64), got)
     assert got.tolist() == [-1, 11, 12]
+
+
+_T_LAST = st.one_of(st.floats(-5.0, 5.0), st.just(float("nan")), st.sampled_from([float("inf"), -float("inf")]))
+
+
+@settings(max_examples=120, deadline=None)
+@given(t_last=st.lists(_T_LAST, min_size=1, max_size=40), t=st.floats(-6.0, 12.0),
+       timeout_s=st.sampled_from([0.0, 0.5, 1.0, 3.0, float("inf")]), table=st.booleans(), data=st.data())
+def test_the_deleters_compiled_sweep_is_the_numpy_sweep(t_last, t, timeout_s, table, data):
+    """expire_rows against the deleter's numpy form (before 2026-11-29, wave 13): the same rows gone, in row order,
+    pushed on the free stack in that order, their t_last NaN, their ids out of the id table (every other id still
+    found at its row), and the earliest finite t_last left (inf if none); NaN (free) rows never expire."""
+    t_last = np.array(t_last)
+    cap = t_last.shape[0]
+    live = np.flatnonzero(~np.isnan(t_last))
+    ids = np.array(data.draw(st.lists(st.integers(-2 ** 63, 2 ** 63 - 1), min_size=live.size, max_size=live.size,
+                                      unique=True)), np.int64)
+    size = 1 << max(2, (2 * cap).bit_length())
+    id_table = (np.zeros(size, np.int64), np.full(size, ID_EMPTY, np.int64), 64 - (size.bit_length() - 1))
+    if table:
+        id_insert(*id_table, ids, live.astype(np.int64))
+    n_free = data.draw(st.integers(0, cap - live.size))
+    free = np.full(cap, -7, np.int64)
+    free[:n_free] = np.flatnonzero(np.isnan(t_last))[:n_free]
+    want_gone = np.flatnonzero(t - t_last > timeout_s)
+    left = np.delete(t_last, want_gone)
+    want_oldest = float(left[np.isfinite(left)].min()) if np.isfinite(left).any() else np.inf
+    gone, gone_keys = np.full(cap, -9, np.int64), np.empty(cap, np.int64)
+    before = t_last.copy()
+    m, n_free_after, oldest = expire_rows(t, timeout_s, t_last, free, n_free, gone, gone_keys,
+                                          *(id_table if table else (np.zeros(1, np.int64),
+                                                                    np.full(1, ID_EMPTY, np.int64), 63)))
+    assert gone[:m].tolist() == want_gone.tolist()
+    assert n_free_after == n_free + m and free[n_free:n_free_after].tolist() == want_gone.tolist()
+    assert np.isnan(t_last[want_gone]).all()
+    kept = np.setdiff1d(np.arange(cap), want_gone)
+    assert np.array_equal(t_last[kept], before[kept], equal_nan=True)
+    assert oldest == want_oldest
+    if table:
+        got = np.empty(ids.shape[0], np.int64)
+        id_lookup(*id_table, ids, got)
+        expired = np.isin(live, want_gone)
+        assert got.tolist() == np.where(expired, -1, live).tolist()
+        assert int((id_table[1] != ID_EMPTY).sum()) == live.size - int(expired.sum())
+
+
+def test_the_deleters_sweep_pinned():
+    """Pinned by hand: rows 0..4 last updated at 0.0, 2.5, NaN (free), 1.2, -inf; at t = 3.0 with a 1.5 s timeout
+    rows 0 (3.0 s ago), 3 (1.8 s) and 4 (-inf) expire; row 1 (0.5 s) stays and is the earliest left."""
+    t_last = np.array([0.0, 2.5, np.nan, 1.2, -np.inf])
+    free = np.array([2, -1, -1, -1, -1], np.int64)
+    gone, gk = np.empty(5, np.int64), np.empty(5, np.int64)
+    keys, vals = np.zeros(16, np.int64), np.full(16, ID_EMPTY, np.int64)
+    id_insert(keys, vals, 60, np.array([70, 71, 73, 74], np.int64), np.array([0, 1, 3, 4], np.int64))
+    assert expire_rows(3.0, 1.5, t_last, free, 1, gone, gk, keys, vals, 60) == (3, 4, 2.5)
+    assert gone[:3].tolist() == [0, 3, 4] and free.tolist() == [2, 0, 3, 4, -1]
+    got = np.empty(4, np.int64)
+    id_lookup(keys, vals, 60, np.array([70, 71, 73, 74], np.int64), got)
+    assert got.tolist() == [-1, 1, -1, -1]
 
 
 def _frames(seed: int, count: int):

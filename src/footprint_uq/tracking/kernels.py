@@ -319,6 +319,40 @@ def claim_rows(ids, old, u, act, slots, free_rows, keys, vals, shift, claimed): 
     return m
 
 
+@njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
+def expire_rows(t, timeout_s, t_last, free, n_free, gone, gone_keys, keys, vals, shift):  # pragma: no cover
+    """The deleter's sweep at time ``t`` in one pass (:meth:`~footprint_uq.tracking.table.TrackTable.
+    _delete_expired`): the rows whose last update ``t_last`` is more than ``timeout_s`` before ``t`` (a free row's
+    NaN never is) listed in ``gone`` in row order, their ids removed from the id table ``keys, vals, shift``
+    (:func:`id_lookup`; every entry pointing at one of them, collected in ``gone_keys`` first; a ``(1,)`` table
+    of one empty entry: none), ``t_last`` set to NaN and the rows pushed on the free stack ``free[n_free:]`` in
+    that order.  ``gone`` and ``gone_keys`` have room for every row.  Returns ``(m, n_free, oldest)``: the rows
+    gone, the free stack's new height and the earliest ``t_last`` of the rows left (finite ones; inf if none)."""
+    m = 0
+    oldest = math.inf
+    for s in range(t_last.shape[0]):
+        ts = t_last[s]
+        if t - ts > timeout_s:
+            gone[m] = s
+            m += 1
+        elif ts < oldest and math.isfinite(ts):
+            oldest = ts
+    if m:
+        k = 0
+        for j in range(vals.shape[0]):  # (before t_last changes: the entries of the expired rows)
+            s = vals[j]
+            if s != ID_EMPTY and t - t_last[s] > timeout_s:
+                gone_keys[k] = keys[j]
+                k += 1
+        id_delete(keys, vals, shift, gone_keys[:k])
+        for q in range(m):
+            s = gone[q]
+            t_last[s] = math.nan
+            free[n_free] = s
+            n_free += 1
+    return m, n_free, oldest
+
+
 #: row actions of :func:`frame_rows` / :func:`frame_update`: not tracked, update the row's track, start a track
 ROW_SKIP, ROW_UPDATE, ROW_START = 0, 1, 2
 
