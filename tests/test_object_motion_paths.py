@@ -129,3 +129,63 @@ def test_converted_inputs_reach_the_kernel_as_the_tracker_hands_them():
         for yaw in (None, boxes[:, 6]):
             object_motion(t, yaw_rad=yaw, sigma_yaw_rad=np.full(n, 0.1)[::-1])
     assert set(motion_fields.signatures) == before
+
+
+def _fields_with_hypot(v, cov, h_deg, ratio):
+    """motion_fields' speed, sigmas and heading-sigma gate written out with numpy's float64 scalars and ``hypot``
+    (the kernel's form before 2026-11-29, wave 13, when its two norms became a guarded ``sqrt(x^2 + y^2)``)."""
+    f = np.float64
+    ch, sh = f(np.cos(np.radians(h_deg))), f(np.sin(np.radians(h_deg)))
+    rows = []
+    for (vx, vy), c in zip(v.tolist(), cov.tolist(), strict=True):
+        vx, vy, c00, c01, c11 = f(vx), f(vy), f(c[0][0]), f(c[0][1]), f(c[1][1])
+        ve, vn = ch * vx + sh * vy, -sh * vx + ch * vy
+        a = ch * ch * c00 + 2.0 * ch * sh * c01 + sh * sh * c11
+        b = -ch * sh * c00 + (ch * ch - sh * sh) * c01 + ch * sh * c11
+        d = sh * sh * c00 - 2.0 * ch * sh * c01 + ch * ch * c11
+        sp = np.hypot(ve, vn)
+        if not sp > 0.0:
+            rows.append((sp, np.nan, np.nan))
+            continue
+        s_sp = np.sqrt(ve * ve * a + 2.0 * ve * vn * b + vn * vn * d) / sp
+        smax = np.sqrt(0.5 * (a + d) + np.hypot(0.5 * (a - d), b))
+        s_h = np.degrees(np.sqrt(vn * vn * a - 2.0 * ve * vn * b + ve * ve * d) / (sp * sp))
+        rows.append((sp, s_sp, s_h if sp >= ratio * smax else np.nan))
+    return np.array(rows, dtype=np.float64).reshape(-1, 3)
+
+
+_COMPONENT = st.one_of(st.floats(-50.0, 50.0), st.sampled_from([0.0, -0.0, 1e-170, -3e-160, 1e-150, 2e150, -1e200,
+                                                                   1e308, float("inf"), -float("inf"),
+                                                                   float("nan")]))
+
+
+@settings(max_examples=150, deadline=None)
+@given(v=st.lists(st.tuples(_COMPONENT, _COMPONENT), min_size=1, max_size=12), seed=st.integers(0, 2**32 - 1),
+       scale=st.sampled_from([1e-320, 1e-150, 1e-4, 1.0, 1e150, 1e300]), h=st.sampled_from([0.0, 30.0, -123.25]))
+def test_the_speed_and_its_sigma_are_hypots_whatever_the_sizes(v, seed, scale, h):
+    """The kernel's norms (a guarded sqrt of the squares' sum, hypot where that would overflow or underflow) give
+    hypot's speed, sigmas and heading-sigma gate within a few ulps over the whole float range, and its answers --
+    inf, NaN, 0, a tiny or huge finite speed -- exactly where the squares would leave the range."""
+    from footprint_uq.tracking.kernels import motion_fields
+
+    rng = np.random.default_rng(seed)
+    v = np.array(v, dtype=np.float64)
+    n = v.shape[0]
+    a = rng.normal(0.0, 1.0, (n, 2, 2))
+    cov = (a @ np.swapaxes(a, 1, 2)) * scale
+    cov[rng.random(n) < 0.2, 0, 1] = 0.0  # (isotropic-ish: the eigen-norm's zero entries)
+    cov[:, 1, 0] = cov[:, 0, 1]
+    out, cov_out = np.empty((8, n)), np.empty((n, 2, 2))
+    hr = np.radians(h)
+    with np.errstate(all="ignore"):
+        motion_fields(v, cov, np.cos(hr), np.sin(hr), 1.0, np.empty(0), np.empty(0), h, out, cov_out)
+        want = _fields_with_hypot(v, cov, h, 1.0)
+    got = np.column_stack([out[2], out[3], out[5]])
+    for j, name in enumerate(("speed", "sigma_speed", "sigma_heading")):
+        g, w = got[:, j], want[:, j]
+        assert np.array_equal(np.isnan(g), np.isnan(w)), name
+        ok = ~np.isnan(w)
+        assert np.array_equal(np.isinf(g[ok]), np.isinf(w[ok])), name
+        fin = ok & np.isfinite(w)
+        np.testing.assert_allclose(g[fin], w[fin], rtol=1e-14, atol=0.0, err_msg=name)
+    assert np.array_equal(out[2] == 0.0, want[:, 0] == 0.0)

@@ -183,6 +183,16 @@ def project_ground(xy, cam, uv):  # pragma: no cover - compiled
         uv[i, 1] = cam.fy * yd + cam.cy if ok else math.nan
 
 
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _norm(x, y):  # pragma: no cover - compiled
+    """``hypot(x, y)``: ``sqrt(x^2 + y^2)`` where the squares' sum neither overflows nor loses digits to
+    underflow (within an ulp of ``hypot``, ~3 ns less: ~0.6 us of :func:`motion_fields`' ~2.4 per 100 objects),
+    else ``hypot`` itself (zero -- the squares of 1e-170 are zero too --, tiny, huge, inf and NaN entries: its
+    answers)."""
+    s = x * x + y * y
+    return math.sqrt(s) if 1e-290 < s < 1e290 else math.hypot(x, y)
+
+
 @njit(cache=True, nogil=True, error_model="numpy")
 def motion_fields(v, cov, ch, sh, ratio, yaw_rad, sigma_yaw_rad, heading_offset_deg, out,
                   cov_out):  # pragma: no cover - compiled
@@ -204,13 +214,13 @@ def motion_fields(v, cov, ch, sh, ratio, yaw_rad, sigma_yaw_rad, heading_offset_
         b = -ch * sh * c00 + (ch * ch - sh * sh) * c01 + ch * sh * c11
         d = sh * sh * c00 - 2.0 * ch * sh * c01 + ch * ch * c11
         cov_out[i, 0, 0], cov_out[i, 0, 1], cov_out[i, 1, 0], cov_out[i, 1, 1] = a, b, b, d
-        sp = math.hypot(ve, vn)
+        sp = _norm(ve, vn)
         out[0, i], out[1, i], out[2, i] = ve, vn, sp
         if sp > 0.0:
             out[3, i] = math.sqrt(ve * ve * a + 2.0 * ve * vn * b + vn * vn * d) / sp
             hd = math.degrees(math.atan2(ve, vn))
             out[4, i] = hd + 360.0 if hd < 0.0 else hd
-            smax = math.sqrt(0.5 * (a + d) + math.hypot(0.5 * (a - d), b))
+            smax = math.sqrt(0.5 * (a + d) + _norm(0.5 * (a - d), b))
             sh_ = math.degrees(math.sqrt(vn * vn * a - 2.0 * ve * vn * b + ve * ve * d) / (sp * sp))
             out[5, i] = sh_ if sp >= ratio * smax else nan
         else:
