@@ -342,3 +342,37 @@ def test_a_list_of_integers_is_made_the_int64_ids_and_nothing_else(ids, made):
     assert (got is not None) == made
     if made:
         assert got.dtype == np.int64 and got.tolist() == [int(i) for i in ids]
+
+
+@pytest.mark.parametrize("ids, made", [
+    (np.array([3, -4], np.int32), True), (np.array([3, 4], np.uint8), True), (np.array([3, 4], np.int16), True),
+    (np.array([3, 2 ** 63 - 1], np.uint64), True), (np.array([3, 2 ** 63], np.uint64), False),
+    (np.array([], np.uint64), True), (np.array([3.0, 4.0]), False), (np.array([True, False]), False),
+    (np.array([[3, 4]]), False), (np.array(["3", "4"]), False)])
+def test_an_integer_array_of_any_width_takes_the_compiled_look_up(ids, made):
+    """A reader's int32 (or uint8 ...) ids become the int64 ids (values equal, hashes equal: the same keys as the
+    dictionary's), not a list for the dictionary; uint64 beyond int64's range, floats, bools, 2-d or text do not."""
+    from footprint_uq.tracking.table import _int64_ids
+
+    got = _int64_ids(ids)
+    assert (got is not None) == made
+    if made:
+        assert got.dtype == np.int64 and got.flags.c_contiguous and got.tolist() == [int(i) for i in ids]
+
+
+def test_int32_ids_and_a_list_of_numpy_integers_track_as_the_int64_ids():
+    """The same frames with the ids as int64, int32 and a list of numpy int64 scalars: the same outputs, and the
+    compiled id table holds them (no dictionary frames)."""
+    tables = [TrackTable(TrackerConfig(timeout_s=0.5), rank=1) for _ in range(3)]
+    for t, ids, xy in _frames(11, 30):
+        ids = [i for i in (ids.tolist() if isinstance(ids, np.ndarray) else ids) if i is not None]
+        xy = xy[:len(ids)]
+        n = len(ids)
+        args = (np.repeat(np.eye(2)[None] * 0.04, n, 0), np.full((n, 2, 1), 0.01))
+        a64 = np.array(ids, np.int64)
+        outs = [tab.step(t, form, xy, *args) for tab, form in zip(tables, (a64, a64.astype(np.int32),
+                                                                         list(a64)), strict=True)]
+        for o in outs[1:]:
+            for name, g, w in zip(o._fields, o, outs[0], strict=True):
+                assert np.array_equal(g, w, equal_nan=g.dtype.kind == "f"), (t, name)
+    assert all(tab._int_ids and tab._ids is not None for tab in tables)

@@ -406,7 +406,8 @@ class TrackTable:
         if self._int_ids:  # (the compiled id table: an int64 array, or a list of Python ints made one)
             if type(object_ids) is np.ndarray:
                 id64 = _int64_ids(object_ids)
-            elif type(object_ids) is list and object_ids and type(object_ids[0]) is int:
+            elif type(object_ids) is list and object_ids and (type(object_ids[0]) is int or
+                                                             isinstance(object_ids[0], np.integer)):
                 id64 = _list_int64(object_ids)
         ids = object_ids if id64 is not None or isinstance(object_ids, list) else list(object_ids)
         if len(ids) != n:
@@ -643,9 +644,14 @@ def _rows(a: np.ndarray, ndim: int) -> np.ndarray:
 
 def _int64_ids(ids: np.ndarray) -> np.ndarray | None:
     """The array ``ids`` if it is a 1-d int64 array (a copy if it is strided or read-only: one compiled signature),
-    else None."""
-    if ids.ndim != 1 or (ids.dtype is not _I8 and ids.dtype != _I8):
+    a 1-d array of another integer type as an int64 copy (every value of int64's range: equal, and of equal hash,
+    to the int64 -- a reader's int32 ids, say, take the compiled look-up, not the dictionary), else None."""
+    if ids.ndim != 1:
         return None
+    dt = ids.dtype
+    if dt is not _I8 and dt != _I8:
+        fits = dt.kind == "i" or (dt.kind == "u" and (dt.itemsize < 8 or not ids.size or ids.max() <= _INT64_MAX))
+        return ids.astype(np.int64) if fits else None
     flags = ids.flags
     return ids if flags.c_contiguous and flags.writeable else ids.copy()
 
