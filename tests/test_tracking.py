@@ -573,6 +573,31 @@ def test_batch_tracks_columns_and_equal_to_the_service(camera, tmp_path):
     assert out.column("track_id")[2].as_py() is None and out.column("status")[2].as_py() == "ok"
 
 
+def test_batch_tracks_integer_ids_as_the_same_ids_in_text(camera):
+    """The batch hands an integer id column without nulls to the tracker as int64 arrays (the compiled look-up),
+    text or a column with nulls as Python values: the same tracks either way (int32, uint64 and int64 columns,
+    the ids as text); a null id is not tracked, the others go on."""
+    import pyarrow as pa
+
+    from footprint_uq.batch.process import _track_ids
+
+    cols = _batch_table(_frames(5))
+    cols["object_id"] = [{"7": "7", "p": "9"}[i] for i in cols["object_id"]]  # (two integer ids, as text)
+    text = process_table(camera, "basler1@deg", cols, tracks=True)
+    assert text.column("track_id").null_count == 0
+    for typ in (pa.int32(), pa.uint64(), pa.int64()):
+        ints = dict(cols, object_id=pa.array([int(i) for i in cols["object_id"]], typ))
+        got = process_table(camera, "basler1@deg", ints, tracks=True)
+        assert got.column("track_id").to_pylist() == text.column("track_id").to_pylist(), typ
+        assert isinstance(_track_ids(pa.chunked_array([ints["object_id"]])), np.ndarray)
+    nulls = dict(cols, object_id=pa.array([None if k == 3 else int(i) for k, i in enumerate(cols["object_id"])]))
+    got = process_table(camera, "basler1@deg", nulls, tracks=True)
+    assert got.column("track_id")[3].as_py() is None and got.column("track_id")[0].as_py() is not None
+    assert isinstance(_track_ids(pa.chunked_array([nulls["object_id"]])), list)
+    big = pa.chunked_array([pa.array([1, 2 ** 63], pa.uint64())])
+    assert _track_ids(big) == [1, 2 ** 63]
+
+
 def test_objects_cli_tracks(camera, tmp_path):
     import pyarrow as pa
     import pyarrow.csv as pcsv

@@ -541,7 +541,7 @@ class BatchProcessor:
         :class:`~footprint_uq.tracking.table.TrackTable` per motion model of the budget's motion section)."""
         n = res.n
         t = _column_float(table, "timestamp_s")
-        ids = table.column("object_id").to_pylist()
+        ids = _track_ids(table.column("object_id"))
         cams = table.column("camera_id").to_pylist() if "camera_id" in table.column_names else [None] * n
         classes = table.column("class").to_pylist() if "class" in table.column_names else [None] * n
         o = res.obj
@@ -965,3 +965,15 @@ def process_file(camera, budget, detections, out, *, chunk_rows: int = S.DEFAULT
     if summary:
         atomic_write_text(summary_path(out), json.dumps(summ.to_dict(), indent=2) + "\n", fsync=fsync)
     return summ
+
+
+def _track_ids(column: pa.ChunkedArray):
+    """A chunk's object ids for the tracker: an integer column without nulls as one int64 array (each frame's
+    slice of it goes to the table's compiled id look-up as it is, not a list made an array again frame by frame),
+    anything else -- text, nulls (not tracked), uint64 beyond int64 -- as Python values."""
+    t = column.type
+    if not pa.types.is_integer(t) or column.null_count:
+        return column.to_pylist()
+    if pa.types.is_uint64(t) and len(column) and pc.max(column).as_py() > 2 ** 63 - 1:
+        return column.to_pylist()
+    return np.array(column.to_numpy(), dtype=np.int64)

@@ -248,7 +248,7 @@ def camera_frames(n_frames: int = 300, *, rate_hz: float = 10.0, seed: int = 0, 
             stamp = t[k] + cam.offset_s
             if relabel_rate > 0.0:
                 label[j] += churn.random(n_veh) < relabel_rate
-            out = cam.table.step(stamp, (idx + n_veh * label[j, idx]).tolist(), est.centre_xy_world_m,
+            out = cam.table.step(stamp, (idx + n_veh * label[j, idx]).astype(np.int64), est.centre_xy_world_m,
                                  est.centre_cov_frame_m2, est.centre_shared_m)
             for i, tid in zip(idx.tolist(), out.track_id.tolist(), strict=True):
                 cam.track_truth[tid] = i

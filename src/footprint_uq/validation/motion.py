@@ -95,8 +95,9 @@ def score_rows(camera, budget, time_s, object_id, cls, xy_m, cov_object_m2, dxy_
     starts = np.flatnonzero(np.r_[True, ts[1:] != ts[:-1]])
     for a, b in zip(starts, np.r_[starts[1:], n], strict=True):
         rows = order[a:b]
-        o = tracks.step(float(ts[a]), list(object_id[rows]), list(cls[rows]), xy_m[rows], cov_object_m2[rows],
-                        B[rows])
+        ids = object_id[rows]  # (integer ids as an array: the tables' compiled look-up; others as a list)
+        o = tracks.step(float(ts[a]), ids if ids.dtype.kind in "iu" else list(ids), list(cls[rows]), xy_m[rows],
+                        cov_object_m2[rows], B[rows])
         mo = object_motion(o)
         out["track_id"][rows] = o.track_id
         out["v_x_mps"][rows], out["v_y_mps"][rows] = o.v_mps[:, 0], o.v_mps[:, 1]
