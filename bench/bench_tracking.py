@@ -92,6 +92,17 @@ def _frames(camera, n: int, count: int, seed: int = 0, life_s: float = 3.0):
         yield t, ids, np.column_stack([xy0 + v * age[:, None], size, course])
 
 
+#: the tracks' timeout: the tracker's default (TrackerConfig().timeout_s, 1 s: the service's), so the deleter sweeps
+#: as it does in the service -- a scene whose objects come and go (~1 a frame here) has an expired track on about
+#: two frames in three.  Before 2026-11-29, wave 13: 1e9 s (no track ever deleted: the sweep never ran, ~6.5 us a
+#: frame it took then, and the table grew to ~1,130 rows); ``--timeout-s 1e9`` gives that setting again.
+TIMEOUT_S = TrackerConfig().timeout_s
+
+
+def _timeout(timeout_s: float | None) -> float:
+    return TIMEOUT_S if timeout_s is None else float(timeout_s)
+
+
 class _Timed:
     """A callable that adds the time of each call of ``fn`` to ``spent[0]`` (s)."""
 
@@ -105,7 +116,7 @@ class _Timed:
         return res
 
 
-def step_python(n_objects: int = 100, frames: int = 300) -> dict:
+def step_python(n_objects: int = 100, frames: int = 300, timeout_s: float | None = None) -> dict:
     """Medians (us) of :meth:`TrackTable.step`'s own Python per frame and of its compiled calls, on the frames of
     :func:`run`, the ids as a list (``step``, ``step_python``) and as an int64 array (``step_int64``,
     ``step_python_int64``, a second table on the same frames): the module's ``frame_step`` / ``frame_rows_shared``
@@ -117,7 +128,8 @@ def step_python(n_objects: int = 100, frames: int = 300) -> dict:
     names = ("frame_step", "frame_rows_shared", "frame_pass")
     spent = {k: [0.0] for k in names}
     at = SharedJacobianAt(cam, BUDGET)
-    tables = {kind: TrackTable(TrackerConfig(timeout_s=1e9), rank=at.rank, shared_at=at) for kind in ("", "_int64")}
+    cfg = TrackerConfig(timeout_s=_timeout(timeout_s))
+    tables = {kind: TrackTable(cfg, rank=at.rank, shared_at=at) for kind in ("", "_int64")}
     det = np.broadcast_to(np.eye(2), (n_objects, 2, 2))
     saved = tuple(getattr(table_module, k) for k in names)
     for f, k in zip(saved, names, strict=True):
@@ -146,15 +158,15 @@ def step_python(n_objects: int = 100, frames: int = 300) -> dict:
     return {k: round(statistics.median(v), 1) for k, v in times.items()}
 
 
-def monitor_cost(n_objects: int = 100, frames: int = 300) -> dict:
+def monitor_cost(n_objects: int = 100, frames: int = 300, timeout_s: float | None = None) -> dict:
     """Medians (us) of the on-line NIS check per frame, now (``monitor``) and its path before (``monitor_bank``),
     after the same tracks' step on the frames of :func:`run`."""
     cam = PanTiltCamera(**CAMERA)
     split = FrameProcessor(cam, BUDGET, joint_cov=False, linearity=False, v2x_policy="linear", shared_jacobian=True)
     at = SharedJacobianAt(cam, BUDGET)
-    tracks = ClassTracks(TrackerConfig(timeout_s=1e9), rank=at.rank, shared_at=at)
+    tracks = ClassTracks(TrackerConfig(timeout_s=_timeout(timeout_s)), rank=at.rank, shared_at=at)
     mon = NisMonitor(tracks)
-    bank = MotionBank(members_of(tracks.configs), rank=at.rank, shared_at=at, timeout_s=1e9)
+    bank = MotionBank(members_of(tracks.configs), rank=at.rank, shared_at=at, timeout_s=_timeout(timeout_s))
     det = np.broadcast_to(np.eye(2), (n_objects, 2, 2))
     classes = ["car"] * n_objects
     times: dict = {"monitor": [], "monitor_bank": []}
@@ -186,16 +198,18 @@ def _track_variant(name: str, table: TrackTable, t: float, ids, xy, B, cov, yaw)
     return track_motion(table, t, ids, xy, shared_m=B, cov_m2=cov, yaw_rad=yaw)[0]
 
 
-def run(n_objects: int = 100, frames: int = 300) -> dict:
+def run(n_objects: int = 100, frames: int = 300, timeout_s: float | None = None) -> dict:
     cam = PanTiltCamera(**CAMERA)
     plain = FrameProcessor(cam, BUDGET, joint_cov=False, linearity=False, v2x_policy="linear")
     split = FrameProcessor(cam, BUDGET, joint_cov=False, linearity=False, v2x_policy="linear", shared_jacobian=True)
     at = SharedJacobianAt(cam, BUDGET)
-    table = TrackTable(TrackerConfig(timeout_s=1e9), rank=at.rank, shared_at=at)
-    table_cv = TrackTable(TrackerConfig(timeout_s=1e9, manoeuvre_accel_psd_m2ps3=None), rank=at.rank, shared_at=at)
-    table_ref = TrackTable(TrackerConfig(timeout_s=1e9), rank=at.rank, shared_at=at)
+    cfg = TrackerConfig(timeout_s=_timeout(timeout_s))
+    table = TrackTable(cfg, rank=at.rank, shared_at=at)
+    table_cv = TrackTable(TrackerConfig(timeout_s=cfg.timeout_s, manoeuvre_accel_psd_m2ps3=None), rank=at.rank,
+                          shared_at=at)
+    table_ref = TrackTable(cfg, rank=at.rank, shared_at=at)
     table_ref._reference_pass = True
-    tables = {"track": table, **{v: TrackTable(TrackerConfig(timeout_s=1e9), rank=at.rank, shared_at=at)
+    tables = {"track": table, **{v: TrackTable(cfg, rank=at.rank, shared_at=at)
                                  for v in VARIANTS[1:]}}
     det = np.broadcast_to(np.eye(2), (n_objects, 2, 2))
     restarts = 0
@@ -257,14 +271,16 @@ def main(argv=None) -> None:
     ap.add_argument("--frames", type=int, default=300)
     ap.add_argument("--json", action="store_true")
     ap.add_argument("--runs", type=int, default=1, help="runs written to --out")
+    ap.add_argument("--timeout-s", type=float, default=TIMEOUT_S, help="the tracks' timeout (default: the tracker's)")
     ap.add_argument("--out", type=Path, help="write the runs (with the load averages) to this JSON file")
     a = ap.parse_args(argv)
     if a.out is not None:
         runs = []
         for _ in range(a.runs):
             load0 = os.getloadavg()[0]
-            runs.append({**run(a.objects, a.frames), "python": step_python(a.objects, a.frames),
-                         "monitor": monitor_cost(a.objects, a.frames),
+            runs.append({**run(a.objects, a.frames, a.timeout_s),
+                         "python": step_python(a.objects, a.frames, a.timeout_s),
+                         "monitor": monitor_cost(a.objects, a.frames, a.timeout_s), "timeout_s": a.timeout_s,
                          "load_average_1min_start": round(load0, 2),
                          "load_average_1min_end": round(os.getloadavg()[0], 2)})
         doc = {"note": f"bench/bench_tracking.py --frames {a.frames} --runs {a.runs} --out {a.out}; track = IMM "
@@ -289,7 +305,7 @@ def main(argv=None) -> None:
                   f"{r['monitor']['monitor_bank']:.1f}); step Python {r['python']['step_python']:.1f} us; "
                   f"load {r['load_average_1min_start']:.2f}")
         return
-    res = run(a.objects, a.frames)
+    res = run(a.objects, a.frames, a.timeout_s)
     if a.json:
         print(json.dumps(res))
         return
