@@ -238,8 +238,9 @@ _AT: list = []  # (one SharedJacobianAt for the module: its processor's set-up i
 @given(seed=st.integers(0, 2 ** 31 - 1))
 def test_the_frame_in_one_compiled_call_is_the_four_calls_to_the_bit(seed):
     """A table whose ``shared_at`` forms ``B`` in the rows' call runs a frame of int64 ids in one compiled call
-    (``imm_kernels.frame_step``: the id look-up, the rows, the new ids' rows, the update); the same table made to
-    take the four calls (``id_lookup``, ``frame_rows_shared``, ``claim_rows``, ``frame_pass``) gives the same
+    (``imm_kernels.frame_step``: the deleter's sweep, the id look-up, the rows, the new ids' rows, the update); the
+    same table made to take the separate calls (``expire_rows``, ``id_lookup``, ``frame_rows_shared``,
+    ``claim_rows``, ``frame_pass``) gives the same
     outputs, NIS, rows and ids to the bit over frames with births, deaths by timeout, repeated ids, NaN centres,
     ids as int64 arrays and as lists (with None; a list with new ids takes the dictionary and two calls, one
     without takes the one call with the dictionary's rows), and a burst of new ids beyond the free rows and the id
@@ -252,6 +253,10 @@ def test_the_frame_in_one_compiled_call_is_the_four_calls_to_the_bit(seed):
     cfg = TrackerConfig(timeout_s=0.5)
     one, four = (TrackTable(cfg, rank=at.rank, shared_at=at) for _ in range(2))
     four._rows_call = lambda int_ids: table_module._ROWS_SHARED  # (the generic order of calls)
+    sweeps = {"alone": 0, "all": 0}  # (the deleter's: alone, or in the one call -- for int64 ids)
+    alone, swept = one._delete_expired, one._swept
+    one._delete_expired = lambda t: sweeps.__setitem__("alone", sweeps["alone"] + 1) or alone(t)
+    one._swept = lambda *a: sweeps.__setitem__("all", sweeps["all"] + 1) or swept(*a)
     rng = np.random.default_rng(seed)
     for f, (t, ids, xy) in enumerate(_frames(seed, 40)):
         if f == 20:  # (a burst of new int64 ids beyond the free rows: the one call stops, the table grows)
@@ -267,6 +272,7 @@ def test_the_frame_in_one_compiled_call_is_the_four_calls_to_the_bit(seed):
         assert np.array_equal(one.frame_nis(), four.frame_nis(), equal_nan=True)
         assert one._index == four._index and one._next_id == four._next_id and one._n_free == four._n_free
     assert one._ids is not None and one._cap == four._cap > 64  # (int64 frames, and the table grew)
+    assert sweeps["all"] > sweeps["alone"]  # (sweeps in the one call; alone before the dictionary's look-up)
     keys = [k for k in one._index if k is not None]
     got = np.empty(len(keys), np.int64)
     id_lookup(*one._ids, np.array(keys, np.int64), got)

@@ -44,7 +44,15 @@ import math
 import numpy as np
 from numba import njit
 
-from .kernels import ROW_START, claim_rows, frame_rows_shared, id_lookup, motion_fields, starts_and_outputs
+from .kernels import (
+    ROW_START,
+    claim_rows,
+    expire_rows,
+    frame_rows_shared,
+    id_lookup,
+    motion_fields,
+    starts_and_outputs,
+)
 
 __all__ = ["frame_pass", "frame_step", "scratch"]
 
@@ -411,22 +419,26 @@ def frame_pass(act, slots, old, n_old, X, P, Xm, Pm, Cm, mu, t_last, t_first, n_
 # callees set their own -- frame_rows_shared keeps it for its point kernel's scratch; no fastmath: a callee that
 # does not set its own inherits it, and the rows' arithmetic stays that of the calls it replaces, to the bit)
 @njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
-def frame_step(ids, slots, xy_rows, cov_rows, B, subtract, t, stamp, n_free, next_id, S, o_tid, o_new, o_n, o_age,
-               o_xy, o_cxy, o_v, o_cv, nis, id_keys, id_vals, id_shift, free_rows, z, R, act, old, pred, uv, B_pred,
-               claimed, cam_f, has_dist, dist, cam_R, dom, dR, Lr, Lc, Lv, X, P, Xm, Pm, Cm, mu, t_last, t_first,
-               n_upd, tid, seen, qs, rates, mu0, var_v0, gate, W, xp, Pp, Kg, Cx, Cps, Sm, m_ch, m_sh, m_ratio, m_yaw,
-               m_syaw, m_h, m_out, m_cov):  # pragma: no cover
+def frame_step(ids, slots, xy_rows, cov_rows, B, subtract, t, stamp, n_free, next_id, sweep, S, o_tid, o_new, o_n,
+               o_age, o_xy, o_cxy, o_v, o_cv, nis, id_keys, id_vals, id_shift, free_rows, timeout_s, gone, gone_keys,
+               z, R, act, old, pred, uv, B_pred, claimed, cam_f, has_dist, dist, cam_R, dom, dR, Lr, Lc, Lv, X, P,
+               Xm, Pm, Cm, mu, t_last, t_first, n_upd, tid, seen, qs, rates, mu0, var_v0, gate, W, xp, Pp, Kg, Cx, Cps,
+               Sm, m_ch, m_sh, m_ratio, m_yaw, m_syaw, m_h, m_out, m_cov):  # pragma: no cover
     """A frame of n objects through a :class:`~footprint_uq.tracking.table.TrackTable` whose ``B`` at the predicted
-    positions is formed in the rows' call, in one call: the ids' rows, :func:`~footprint_uq.tracking.kernels.
-    frame_rows_shared`, the new ids' rows (:func:`~footprint_uq.tracking.kernels.claim_rows`) and
-    :func:`frame_pass` -- what the table otherwise does in four calls, the same numbers to the bit.
+    positions is formed in the rows' call, in one call: the deleter's sweep if due, the ids' rows,
+    :func:`~footprint_uq.tracking.kernels.frame_rows_shared`, the new ids' rows (:func:`~footprint_uq.tracking.
+    kernels.claim_rows`) and :func:`frame_pass` -- what the table otherwise does in five calls, the same numbers to
+    the bit.
 
-    ``ids (n,)`` int64: looked up in the id table ``id_keys, id_vals, id_shift`` (:func:`~footprint_uq.tracking.
-    kernels.id_lookup`) into ``slots``; ``(0,)``: ``slots[:n]`` holds the rows already (the table's dictionary,
-    which found every id).  The frame: ``xy_rows (2, n)``, ``cov_rows (2, 2, n)``, ``B (n, 2, r)``, ``subtract``,
-    ``t``, ``stamp``, as :func:`~footprint_uq.tracking.kernels.frame_rows` takes them, ``S`` the point kernel's
-    scratch; its outputs ``o_tid ... o_cv`` and ``nis (n,)`` (NaN where not updated) as :func:`frame_pass` writes
-    them.  The new ids' rows come from the top of the free stack ``free_rows[:n_free]`` (the last first);
+    ``sweep``: the deleter's sweep is due (:func:`~footprint_uq.tracking.kernels.expire_rows` with ``timeout_s``,
+    the free stack ``free_rows[:n_free]``, ``gone`` and ``gone_keys``), run before the ids are looked up (an id
+    whose track expires now starts a new one); False where the caller's dictionary looked the ids up (it swept
+    before).  ``ids (n,)`` int64: looked up in the id table ``id_keys, id_vals, id_shift`` (:func:`~footprint_uq.
+    tracking.kernels.id_lookup`) into ``slots``; ``(0,)``: ``slots[:n]`` holds the rows already (the table's
+    dictionary, which found every id).  The frame: ``xy_rows (2, n)``, ``cov_rows (2, 2, n)``, ``B (n, 2, r)``,
+    ``subtract``, ``t``, ``stamp``, as :func:`~footprint_uq.tracking.kernels.frame_rows` takes them, ``S`` the
+    point kernel's scratch; its outputs ``o_tid ... o_cv`` and ``nis (n,)`` (NaN where not updated) as
+    :func:`frame_pass` writes them.  The new ids' rows come from the top of the free stack (the last first);
     ``claimed`` receives the objects given them.  The working arrays ``z, R, act, old, pred, uv, B_pred, claimed``
     have at least n rows; the camera's and ``B``'s inputs ``cam_f ... Lv`` are :func:`~footprint_uq.tracking.
     kernels.frame_rows_shared`'s, the storage ``X ... tid`` and the rest :func:`frame_pass`'s, ``seen``
@@ -435,13 +447,20 @@ def frame_step(ids, slots, xy_rows, cov_rows, B, subtract, t, stamp, n_free, nex
     on the outputs ``o_v, o_cv`` at the end of a frame that passed (:func:`~footprint_uq.tracking.motion.
     track_motion`: the motion fields in the step's call); ``m_out (8, 0)``: not run.
 
-    Returns ``(k, u, m, next_id)``: the tracks to update and the unknown ids (what ``frame_rows`` returns), the
-    rows taken from the free stack and the next free track id.  ``m == -1``: unknown ids without ``ids`` to claim
-    them by, or more of them than free rows or than the id table has room for (it is kept at most half full): it
-    stopped after the rows, nothing claimed, nothing passed; the caller makes room, claims their rows and runs
-    :func:`frame_pass` on ``slots[:n]``, ``act[:n]``, ``z[:n]``, ``R[:n]``, ``old`` and ``B_pred``."""
+    Returns ``(k, u, m, next_id, n_gone, n_free, oldest)``: the tracks to update and the unknown ids (what
+    ``frame_rows`` returns), the rows taken from the free stack, the next free track id; the sweep's rows gone
+    (``gone[:n_gone]``), the free stack's height after it (before the claim of the m rows) and the earliest update
+    left (``expire_rows``' answers; without a sweep: 0, the ``n_free`` given, inf).  ``m == -1``: unknown ids
+    without ``ids`` to claim them by, or more of them than free rows or than the id table has room for (it is
+    kept at most half full): it stopped after the rows (and the sweep), nothing claimed, nothing passed; the caller
+    makes room, claims their rows and runs :func:`frame_pass` on ``slots[:n]``, ``act[:n]``, ``z[:n]``, ``R[:n]``,
+    ``old`` and ``B_pred``."""
     n = xy_rows.shape[1]
     sl, ac, zn, Rn = slots[:n], act[:n], z[:n], R[:n]
+    n_gone, oldest = 0, math.inf
+    if sweep:  # (the deleter's, before the ids are looked up: an id whose track expired now starts a new one)
+        n_gone, n_free, oldest = expire_rows(t, timeout_s, t_last, free_rows, n_free, gone, gone_keys, id_keys,
+                                             id_vals, id_shift)
     if ids.shape[0]:
         id_lookup(id_keys, id_vals, id_shift, ids, sl)
     k, u = frame_rows_shared(sl, xy_rows, cov_rows, B, subtract, zn, Rn, t, t_last, seen, stamp, X, ac, old, pred,
@@ -449,7 +468,7 @@ def frame_step(ids, slots, xy_rows, cov_rows, B, subtract, t, stamp, n_free, nex
     m = 0
     if u:
         if not ids.shape[0] or u > n_free or 2 * (t_last.shape[0] - n_free + u) > id_keys.shape[0]:
-            return k, u, -1, next_id
+            return k, u, -1, next_id, n_gone, n_free, oldest
         m = claim_rows(ids, old, u, ac, sl, free_rows[n_free - u:n_free][::-1], id_keys, id_vals, id_shift, claimed)
     for i in range(n):
         nis[i] = math.nan
@@ -458,4 +477,4 @@ def frame_step(ids, slots, xy_rows, cov_rows, B, subtract, t, stamp, n_free, nex
                          xp, Pp, Kg, Cx, Cps, Sm, nis)
     if m_out.shape[1] == n:  # (the motion fields of the outputs, as object_motion's pass: the same to the bit)
         motion_fields(o_v, o_cv, m_ch, m_sh, m_ratio, m_yaw, m_syaw, m_h, m_out, m_cov)
-    return k, u, m, next_id
+    return k, u, m, next_id, n_gone, n_free, oldest

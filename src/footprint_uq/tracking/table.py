@@ -297,9 +297,14 @@ class TrackTable:
         the free stack, the compiled id table and the earliest update left in one compiled pass
         (:func:`~footprint_uq.tracking.kernels.expire_rows`: ~1 us; before 2026-11-29, wave 13, ~6.5 us of numpy
         and Python, on about two frames in three of a scene whose objects come and go); the dictionary here."""
-        m, self._n_free, self._oldest_s = expire_rows(time_s, self.config.timeout_s, self._t_last, self._free,
-                                                      self._n_free, self._gone, self._gone_keys,
-                                                      *(self._ids or _NO_ID_TABLE))
+        self._swept(*expire_rows(time_s, self.config.timeout_s, self._t_last, self._free, self._n_free, self._gone,
+                                 self._gone_keys, *(self._ids or _NO_ID_TABLE)))
+
+    def _swept(self, m: int, n_free: int, oldest: float) -> None:
+        """After the deleter's compiled sweep (:func:`~footprint_uq.tracking.kernels.expire_rows`, alone or in
+        :func:`~footprint_uq.tracking.imm_kernels.frame_step`): the free stack's height, the earliest update left,
+        and the ``m`` rows gone (``_gone[:m]``) out of the dictionary."""
+        self._n_free, self._oldest_s = n_free, oldest
         if m:
             index, keys = self._index, self._keys
             for s in self._gone[:m].tolist():
@@ -348,8 +353,10 @@ class TrackTable:
             self._nis = np.full(n, np.nan)
             return self._with_motion(TrackOutput.untracked(n), motion)
         self._last_time = t
-        if len(self._index) > 1 and t - self._oldest_s > self.config.timeout_s:  # (the deleter's sweep is due)
+        sweep = len(self._index) > 1 and t - self._oldest_s > self.config.timeout_s  # (the deleter's sweep is due)
+        if sweep and id64 is None:  # (before the dictionary's look-up; int64 ids: in the rows' compiled call)
             self._delete_expired(t)
+            sweep = False
         if id64 is not None and self._ids is None:
             self._id_table(64)
         self._stamp += 1
@@ -366,11 +373,12 @@ class TrackTable:
             slots = np.fromiter(map(index.__getitem__, ids), np.int64, n)
         rows = self._rows_call(id64 is not None or not self._index.misses)
         if rows == _ONE_CALL:  # (the whole step in one compiled call, frame_step, if there is room for new ids)
-            k, n_unknown, m, next_id = frame_step(_NO_IDS if id64 is None else id64,
-                                                  self._slots if slots is None else slots, xy_rows, cov_rows, B,
-                                                  subtract, t, self._stamp, self._n_free, self._next_id,
-                                                  self._frame_scratch(), *out, nis,
-                                                  *(self._step_args or self._one_call_args()), *(motion or _NO_MOTION))
+            k, n_unknown, m, next_id, n_gone, n_free, oldest = frame_step(
+                _NO_IDS if id64 is None else id64, self._slots if slots is None else slots, xy_rows, cov_rows, B,
+                subtract, t, self._stamp, self._n_free, self._next_id, sweep, self._frame_scratch(), *out, nis,
+                *(self._step_args or self._one_call_args()), *(motion or _NO_MOTION))
+            if sweep:
+                self._swept(n_gone, n_free, oldest)
             if m >= 0:  # (the new ids claimed and the update passed)
                 self._next_id = next_id
                 self._enter_claimed(id64, self._claimed, m)
@@ -379,6 +387,8 @@ class TrackTable:
                 return out
             work, Bp = (self._slots[:n], self._act[:n], self._z[:n], self._R[:n]), self._Bp  # (stopped after the rows)
         else:
+            if sweep:
+                self._delete_expired(t)
             work = (np.empty(n, np.int64) if slots is None else slots, empty(n, np.int8), empty((n, 2)),
                     empty((n, 2, 2)))  # (slots, act, z, R)
             k, n_unknown, Bp = self._frame_rows(rows, t, id64, work, xy_rows, cov_rows, B, subtract)
@@ -489,7 +499,8 @@ class TrackTable:
         the free rows, the working arrays, the camera's and ``B``'s kernel inputs, the tracks' storage, the filter's
         constants and scratch; kept in ``_step_args`` until one of them is replaced (:meth:`_grow`, :meth:`_work`,
         :meth:`_id_table`)."""
-        self._step_args = (*(self._ids or _NO_ID_TABLE), self._free, self._z, self._R, self._act, self._old, self._pred,
+        self._step_args = (*(self._ids or _NO_ID_TABLE), self._free, self.config.timeout_s, self._gone,
+                           self._gone_keys, self._z, self._R, self._act, self._old, self._pred,
                            self._uv, self._Bp, self._claimed, *self._at.kernel_inputs(), self._x, self._P, self._xm,
                            self._Pm, self._Cm, self._mu, self._t_last, self._t_first, self._n, self._tid, self._seen,
                            self._qs, self._rates, self.mu0, self._var_v0, self.config.gate_chi2, *self._scratch)
