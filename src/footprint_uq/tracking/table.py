@@ -142,18 +142,19 @@ class TrackTable:
     """The tracks of one camera, keyed by ``object_id`` (any hashable; None is never tracked).
 
     Each :meth:`step` takes one frame: tracks not updated for longer than ``timeout_s`` are deleted first (the
-    deleter); then every object whose id has a track is predicted to the frame's time and gated (a jump with
-    ``y^T S^-1 y > gate_chi2`` restarts the track under a new ``track_id``), the others start tracks
-    (the initiator).  Per frame, the ids are looked up in one pass over a dictionary (the only per-object Python
-    work; unknown ids, a few per frame, are then given rows), or, when they come as an int64 array, in one compiled
-    call (:func:`~footprint_uq.tracking.kernels.id_lookup`, a hash table kept beside the dictionary); the rest is
-    two compiled passes over the frame:
+    deleter, compiled: :func:`~footprint_uq.tracking.kernels.expire_rows`); then every object whose id has a track
+    is predicted to the frame's time and gated (a jump with ``y^T S^-1 y > gate_chi2`` restarts the track under a
+    new ``track_id``), the others start tracks (the initiator).  Per frame, the ids are looked up in one pass over
+    a dictionary (the only per-object Python work; unknown ids, a few per frame, are then given rows), or, when
+    they come as an integer array, in one compiled call (:func:`~footprint_uq.tracking.kernels.id_lookup`, a hash
+    table kept beside the dictionary); the rest is two compiled passes over the frame:
     :func:`~footprint_uq.tracking.kernels.frame_rows_shared` (the rows and ``B`` at the predicted positions, when
     ``shared_at`` is a :class:`SharedJacobianAt`; else :func:`~footprint_uq.tracking.kernels.frame_rows` and one
     evaluation of ``shared_at``) and :func:`~footprint_uq.tracking.imm_kernels.frame_pass` (the update, the
-    starts, the outputs).  With a :class:`SharedJacobianAt` (the consider mode, the compiled pass) the four are one
-    compiled call, :func:`~footprint_uq.tracking.imm_kernels.frame_step`, unless new ids need the Python claim (new
-    ids of a list; more new int64 ids than free rows: the call then stops after the rows).  Each track runs the
+    starts, the outputs).  With a :class:`SharedJacobianAt` (the consider mode, the compiled pass) these and the
+    deleter's sweep are one compiled call, :func:`~footprint_uq.tracking.imm_kernels.frame_step`, unless new ids
+    need the Python claim (new ids of a list; more new int64 ids than free rows: the call then stops after the
+    rows).  Each track runs the
     interacting-multiple-model filter over :attr:`models` (a quiet and a manoeuvre constant-velocity mode; one
     mode if ``manoeuvre_accel_psd_m2ps3`` is None); its reported state is the modes' moment-matched combination,
     and the gate cuts a track only if the detection is beyond it for every mode.
@@ -224,7 +225,8 @@ class TrackTable:
         self._next_id = 0
         self._last_time: float = -math.inf
         #: a lower bound of every live track's last update time (no track can have expired while
-        #: ``time_s - _oldest_s <= timeout_s``: the deleter's sweep runs about once per timeout, not every frame)
+        #: ``time_s - _oldest_s <= timeout_s``: the deleter sweeps only when a track may have expired -- about once
+        #: per timeout in a still scene, on about two frames in three when ~1 object a frame leaves it)
         self._oldest_s = math.inf
         #: frames not tracked because their time was earlier than the previous frame's
         self.n_stale_frames = 0
@@ -295,8 +297,10 @@ class TrackTable:
         """The deleter: drop tracks whose last update is more than ``timeout_s`` before ``time_s`` (called when its
         sweep is due: :meth:`step` tests that first, two or more tracks and the oldest update expired).  The rows,
         the free stack, the compiled id table and the earliest update left in one compiled pass
-        (:func:`~footprint_uq.tracking.kernels.expire_rows`: ~1 us; before 2026-11-29, wave 13, ~6.5 us of numpy
-        and Python, on about two frames in three of a scene whose objects come and go); the dictionary here."""
+        (:func:`~footprint_uq.tracking.kernels.expire_rows`: ~2 us with this call; before 2026-11-29, wave 13,
+        ~6.5 us of numpy and Python), the dictionary in :meth:`_swept`.  Called alone before the dictionary looks
+        a list's ids up, or before the separate calls; a frame of int64 ids sweeps in its one compiled call
+        (:func:`~footprint_uq.tracking.imm_kernels.frame_step`)."""
         self._swept(*expire_rows(time_s, self.config.timeout_s, self._t_last, self._free, self._n_free, self._gone,
                                  self._gone_keys, *(self._ids or _NO_ID_TABLE)))
 
@@ -640,6 +644,7 @@ def _check_motion(motion: tuple, n: int) -> None:
             or sigma_yaw.shape[0] not in (0, n):
         raise InputError("motion", f"out {out.shape}, cov_out {cov_out.shape}, yaws {yaw.shape} / {sigma_yaw.shape}",
                          f"out (8, {n}), cov_out ({n}, 2, 2), yaws ({n},) or (0,)")
+
 
 def _rows(a: np.ndarray, ndim: int) -> np.ndarray:
     """The ``(n, ...)`` array ``a`` (2 or 3 dimensions) with its first axis moved last, as a C-contiguous, writable
