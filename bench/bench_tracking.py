@@ -30,8 +30,10 @@ run, interleaved frame by frame (medians over ``frames`` frames after a warm-up 
   frame_update`, the pass the table ran before :func:`~footprint_uq.tracking.imm_kernels.frame_pass`), same frames;
 * ``total`` -- ``positions_split + track``: positions and motion of one frame; ``ratio`` = ``total / positions``
   (issue 31's target: <= 2);
-* ``step_python`` -- the Python of :meth:`TrackTable.step` alone (checks, id lookup, new ids' rows, allocations):
-  ``step`` minus its compiled calls (``frame_step``: the whole frame in one call; a list with new ids:
+* ``step_python`` -- the Python of :meth:`TrackTable.step` alone (checks, id lookup, new ids' rows, allocations,
+  the dictionary's share of the deleter -- since 2026-11-29, wave 13, with the tracks' timeout the tracker's
+  default, :data:`TIMEOUT_S` -- and, for a list looked up in the dictionary, its sweep's compiled call): ``step``
+  minus its compiled calls (``frame_step``: the whole frame in one call; a list with new ids:
   ``frame_rows_shared`` and ``frame_pass`` around the Python claim), timed around them (issue 31's target: < 20
   us); ``_int64``: the same with the ids as an int64 array (before 2026-11-29, wave 11 c: ``frame_rows_shared``,
   the rows and ``B`` at the predicted positions, then ``frame_pass``; before 2026-11-28 night, wave 9: three calls,
