@@ -295,7 +295,7 @@ class TrackTable:
 
     def _delete_expired(self, time_s: float) -> None:
         """The deleter: drop tracks whose last update is more than ``timeout_s`` before ``time_s`` (called when its
-        sweep is due: :meth:`step` tests that first, two or more tracks and the oldest update expired).  The rows,
+        sweep is due: :meth:`step` tests that first, a track and the oldest update expired).  The rows,
         the free stack, the compiled id table and the earliest update left in one compiled pass
         (:func:`~footprint_uq.tracking.kernels.expire_rows`: ~2 us with this call; before 2026-11-29, wave 13,
         ~6.5 us of numpy and Python), the dictionary in :meth:`_swept`.  Called alone before the dictionary looks
